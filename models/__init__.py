@@ -1,0 +1,1 @@
+"""Robot models shipped with pinobs (installed as ``pinobs._models``); see README.md."""

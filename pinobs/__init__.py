@@ -1,0 +1,54 @@
+"""pinobs: velocity observers for any URDF robot, on Pinocchio's dynamics.
+
+>>> import pinobs
+>>> robot = pinobs.load("cartpole")
+>>> obs = pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
+"""
+
+from pinobs.errors import (
+    ConfigurationError,
+    DimensionError,
+    GainError,
+    ModelFileError,
+    NonFiniteError,
+    NotResetError,
+    ObserverDiverged,
+    OptionError,
+    PinobsError,
+    TimestampError,
+    UnknownNameError,
+    UnsupportedRobotError,
+)
+from pinobs.evaluation import Metrics, evaluate
+from pinobs.model import Robot, load, robot_names
+from pinobs.observers import Estimate, Observer, make_observer, observer_names
+from pinobs.simulation import Result, Sensor, simulate
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ConfigurationError",
+    "DimensionError",
+    "Estimate",
+    "GainError",
+    "Metrics",
+    "ModelFileError",
+    "NonFiniteError",
+    "NotResetError",
+    "Observer",
+    "ObserverDiverged",
+    "OptionError",
+    "PinobsError",
+    "Result",
+    "Robot",
+    "Sensor",
+    "TimestampError",
+    "UnknownNameError",
+    "UnsupportedRobotError",
+    "evaluate",
+    "load",
+    "make_observer",
+    "observer_names",
+    "robot_names",
+    "simulate",
+]

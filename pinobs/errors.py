@@ -1,0 +1,87 @@
+"""The one exception tree of pinobs.
+
+Every error pinobs raises on purpose derives from :class:`PinobsError` and
+also from the builtin a caller would catch for the same mistake, so
+``except ValueError`` keeps working for code that does not know pinobs.
+Messages name the bad value and say what would be accepted.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = [
+    "ConfigurationError",
+    "DimensionError",
+    "GainError",
+    "ModelFileError",
+    "NonFiniteError",
+    "NotResetError",
+    "ObserverDiverged",
+    "OptionError",
+    "PinobsError",
+    "TimestampError",
+    "UnknownNameError",
+    "UnsupportedRobotError",
+]
+
+
+class PinobsError(Exception):
+    """Root of every error pinobs raises on purpose."""
+
+
+class UnknownNameError(PinobsError, KeyError):
+    """A robot, observer or scenario name that is not registered."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class ModelFileError(PinobsError, FileNotFoundError):
+    """A model file that is missing or cannot be parsed."""
+
+
+class DimensionError(PinobsError, ValueError):
+    """An array of the wrong shape."""
+
+
+class NonFiniteError(PinobsError, ValueError):
+    """An input containing NaN or infinity."""
+
+
+class TimestampError(PinobsError, ValueError):
+    """A timestamp that is not finite or not strictly increasing."""
+
+
+class ConfigurationError(PinobsError, ValueError):
+    """A configuration off its manifold (e.g. a quaternion far from unit norm)."""
+
+
+class GainError(PinobsError, ValueError):
+    """A gain or option outside its valid range."""
+
+
+class OptionError(PinobsError, TypeError):
+    """An option name an observer does not accept."""
+
+
+class NotResetError(PinobsError, RuntimeError):
+    """``update`` called before ``reset``."""
+
+
+class UnsupportedRobotError(PinobsError, ValueError):
+    """An observer asked to run on a robot it is not built for."""
+
+
+class ObserverDiverged(PinobsError, ArithmeticError):
+    """An observer produced a non-finite estimate.
+
+    Attributes:
+        t: time of the update that diverged [s].
+        last_estimate: the last finite estimate, or ``None``.
+    """
+
+    def __init__(self, message: str, *, t: float, last_estimate: Any = None) -> None:
+        super().__init__(message)
+        self.t = t
+        self.last_estimate = last_estimate

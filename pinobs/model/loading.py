@@ -1,0 +1,312 @@
+"""Find and load robots: the project's ``models/``, example-robot-data, or a file.
+
+The example-robot-data wheel installs URDFs and meshes under its cmeel prefix
+(``<site-packages>/cmeel.prefix/share/example-robot-data/robots``) and no
+Python loader, so the table below maps its robot names to files.  Meshes are
+resolved through the ``package://example-robot-data/...`` URIs with the
+prefix's ``share`` folder as package directory.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import importlib.resources
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import Literal
+
+import pinocchio as pin
+
+from pinobs.errors import GainError, ModelFileError, UnknownNameError
+from pinobs.model.robot import Robot
+
+__all__ = ["RobotEntry", "load", "robot_entries", "robot_names"]
+
+RootJoint = Literal["fixed", "spherical", "freeflyer", "planar"]
+_ROOT_JOINTS: dict[str, type | None] = {
+    "fixed": None,
+    "spherical": pin.JointModelSpherical,
+    "freeflyer": pin.JointModelFreeFlyer,
+    "planar": pin.JointModelPlanar,
+}
+
+
+@dataclass(frozen=True)
+class RobotEntry:
+    """One registered robot.
+
+    Attributes:
+        name: registry name.
+        origin: ``"pinobs"`` (the project's ``models/``) or ``"example-robot-data"``.
+        file: path of the URDF relative to its collection.
+        root_joint: root joint used when ``load`` is given none.
+        description: one line for ``pinobs list``.
+    """
+
+    name: str
+    origin: str
+    file: str
+    root_joint: str
+    description: str
+
+
+_PINOBS = "pinobs"
+_ERD = "example-robot-data"
+
+_ENTRIES: tuple[RobotEntry, ...] = (
+    RobotEntry("cartpole", _PINOBS, "cartpole.urdf", "fixed", "pendulum on a cart, nv = 2"),
+    RobotEntry("pendulum", _PINOBS, "pendulum.urdf", "fixed", "simple pendulum, nv = 1"),
+    RobotEntry("planar_3r", _PINOBS, "planar_3r.urdf", "fixed", "3-link planar arm, nv = 3"),
+    RobotEntry("rigid_body", _PINOBS, "rigid_body.urdf", "freeflyer", "free rigid body, SE(3)"),
+    RobotEntry("top", _PINOBS, "top.urdf", "spherical", "axisymmetric heavy top, SO(3)"),
+    # example-robot-data (names follow its own loader where it has one)
+    RobotEntry("a1", _ERD, "a1_description/urdf/a1.urdf", "freeflyer", "Unitree A1 quadruped"),
+    RobotEntry(
+        "anymal",
+        _ERD,
+        "anymal_b_simple_description/robots/anymal.urdf",
+        "freeflyer",
+        "ANYmal B quadruped",
+    ),
+    RobotEntry(
+        "anymal_c",
+        _ERD,
+        "anymal_c_simple_description/urdf/anymal.urdf",
+        "freeflyer",
+        "ANYmal C quadruped",
+    ),
+    RobotEntry(
+        "asr_twodof", _ERD, "asr_twodof_description/urdf/TwoDofs.urdf", "fixed", "2-DOF planar arm"
+    ),
+    RobotEntry("b1", _ERD, "b1_description/urdf/b1.urdf", "freeflyer", "Unitree B1 quadruped"),
+    RobotEntry(
+        "baxter", _ERD, "baxter_description/urdf/baxter.urdf", "fixed", "Rethink Baxter, two arms"
+    ),
+    RobotEntry("bolt", _ERD, "bolt_description/robots/bolt.urdf", "freeflyer", "ODRI Bolt biped"),
+    RobotEntry(
+        "double_pendulum",
+        _ERD,
+        "double_pendulum_description/urdf/double_pendulum.urdf",
+        "fixed",
+        "double pendulum",
+    ),
+    RobotEntry(
+        "double_pendulum_continuous",
+        _ERD,
+        "double_pendulum_description/urdf/double_pendulum_continuous.urdf",
+        "fixed",
+        "double pendulum, continuous joints",
+    ),
+    RobotEntry(
+        "double_pendulum_simple",
+        _ERD,
+        "double_pendulum_description/urdf/double_pendulum_simple.urdf",
+        "fixed",
+        "double pendulum, simple shapes",
+    ),
+    RobotEntry(
+        "finger_edu",
+        _ERD,
+        "finger_edu_description/robots/finger_edu.urdf",
+        "fixed",
+        "ODRI finger, 3 DOF",
+    ),
+    RobotEntry(
+        "g1",
+        _ERD,
+        "g1_description/urdf/g1_29dof_rev_1_0.urdf",
+        "freeflyer",
+        "Unitree G1 humanoid, 29 DOF",
+    ),
+    RobotEntry("go1", _ERD, "go1_description/urdf/go1.urdf", "freeflyer", "Unitree Go1 quadruped"),
+    RobotEntry("go2", _ERD, "go2_description/urdf/go2.urdf", "freeflyer", "Unitree Go2 quadruped"),
+    RobotEntry(
+        "hyq", _ERD, "hyq_description/robots/hyq_no_sensors.urdf", "freeflyer", "IIT HyQ quadruped"
+    ),
+    RobotEntry(
+        "icub_reduced",
+        _ERD,
+        "icub_description/robots/icub_reduced.urdf",
+        "freeflyer",
+        "iCub humanoid, reduced",
+    ),
+    RobotEntry("kinova", _ERD, "kinova_description/robots/kinova.urdf", "fixed", "Kinova arm"),
+    RobotEntry(
+        "laikago",
+        _ERD,
+        "laikago_description/urdf/laikago.urdf",
+        "freeflyer",
+        "Unitree Laikago quadruped",
+    ),
+    RobotEntry(
+        "panda", _ERD, "panda_description/urdf/panda.urdf", "fixed", "Franka Panda arm with gripper"
+    ),
+    RobotEntry(
+        "pr2",
+        _ERD,
+        "pr2_description/urdf/pr2.urdf",
+        "fixed",
+        "Willow Garage PR2 (continuous joints)",
+    ),
+    RobotEntry(
+        "romeo_small",
+        _ERD,
+        "romeo_description/urdf/romeo_small.urdf",
+        "freeflyer",
+        "Aldebaran Romeo humanoid",
+    ),
+    RobotEntry(
+        "simple_humanoid",
+        _ERD,
+        "simple_humanoid_description/urdf/simple_humanoid.urdf",
+        "freeflyer",
+        "simple humanoid",
+    ),
+    RobotEntry("so100", _ERD, "so_arm_description/urdf/so100.urdf", "fixed", "SO-100 low-cost arm"),
+    RobotEntry("so101", _ERD, "so_arm_description/urdf/so101.urdf", "fixed", "SO-101 low-cost arm"),
+    RobotEntry(
+        "solo8", _ERD, "solo_description/robots/solo.urdf", "freeflyer", "ODRI Solo 8 quadruped"
+    ),
+    RobotEntry(
+        "solo12", _ERD, "solo_description/robots/solo12.urdf", "freeflyer", "ODRI Solo 12 quadruped"
+    ),
+    RobotEntry(
+        "talos",
+        _ERD,
+        "talos_data/robots/talos_reduced.urdf",
+        "freeflyer",
+        "PAL Talos humanoid, reduced",
+    ),
+    RobotEntry(
+        "talos_arm", _ERD, "talos_data/robots/talos_left_arm.urdf", "fixed", "PAL Talos left arm"
+    ),
+    RobotEntry(
+        "tiago",
+        _ERD,
+        "tiago_description/robots/tiago.urdf",
+        "fixed",
+        "PAL TIAGo mobile manipulator",
+    ),
+    RobotEntry("ur3", _ERD, "ur_description/urdf/ur3_robot.urdf", "fixed", "Universal Robots UR3"),
+    RobotEntry("ur5", _ERD, "ur_description/urdf/ur5_robot.urdf", "fixed", "Universal Robots UR5"),
+    RobotEntry(
+        "ur10", _ERD, "ur_description/urdf/ur10_robot.urdf", "fixed", "Universal Robots UR10"
+    ),
+    RobotEntry("xarm7", _ERD, "xarm_description/urdf/xarm7.urdf", "fixed", "UFACTORY xArm 7"),
+    RobotEntry("z1", _ERD, "z1_description/urdf/z1.urdf", "fixed", "Unitree Z1 arm"),
+)
+_BY_NAME = {e.name: e for e in _ENTRIES}
+
+
+def robot_entries() -> tuple[RobotEntry, ...]:
+    """Every registered robot, sorted by name."""
+    return tuple(sorted(_ENTRIES, key=lambda e: e.name))
+
+
+def robot_names() -> list[str]:
+    """Names accepted by :func:`load`, sorted."""
+    return sorted(_BY_NAME)
+
+
+def _models_dir() -> Path:
+    """The project's ``models/`` folder (shipped as package data ``pinobs._models``)."""
+    return Path(str(importlib.resources.files("pinobs._models")))
+
+
+@cache
+def _erd_share_dir() -> Path:
+    """``<prefix>/share`` of the example-robot-data wheel (holds ``example-robot-data/robots``)."""
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError as exc:
+        raise ModelFileError(
+            "example-robot-data is not installed; `pip install example-robot-data` provides "
+            "its robots (pinobs' own models need nothing)"
+        ) from exc
+    for f in dist.files or ():
+        parts = Path(str(f)).parts
+        if "example-robot-data" in parts and "share" in parts:
+            i = parts.index("share")
+            return Path(str(dist.locate_file(Path(*parts[: i + 1]))))
+    raise ModelFileError("example-robot-data is installed but ships no share/ folder")
+
+
+def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
+    """Return (file, package dirs, default root joint, display name) for ``source``."""
+    entry = _BY_NAME.get(str(source))
+    if entry is not None:
+        if entry.origin == _PINOBS:
+            folder = _models_dir()
+            return folder / entry.file, [folder], entry.root_joint, entry.name
+        share = _erd_share_dir()
+        path = share / "example-robot-data" / "robots" / entry.file
+        return path, [share], entry.root_joint, entry.name
+    path = Path(source)
+    looks_like_path = path.suffix.lower() in (".urdf", ".xml", ".mjcf") or len(path.parts) > 1
+    if not looks_like_path:
+        raise UnknownNameError(
+            f"unknown robot {str(source)!r}; give a path to a URDF/MJCF file or one of: "
+            + ", ".join(robot_names())
+        )
+    if not path.is_file():
+        raise ModelFileError(
+            f"robot file {str(path)!r} does not exist; give an existing URDF/MJCF file "
+            "or one of the robot names: " + ", ".join(robot_names())
+        )
+    return path, [path.parent], "fixed", path.stem
+
+
+def load(source: str | Path, *, root_joint: str | None = None) -> Robot:
+    """Load a robot by registry name or file path.
+
+    Args:
+        source: a name from :func:`robot_names` (the project's ``models/`` or
+            example-robot-data), or a path to a URDF (``.urdf``) or MJCF
+            (``.xml``/``.mjcf``) file.
+        root_joint: ``None`` (the registry's default: free-flyer for legged
+            robots and the rigid body, spherical for the top, fixed otherwise;
+            fixed for files), ``"fixed"``, ``"spherical"``, ``"freeflyer"`` or
+            ``"planar"``.
+
+    Raises:
+        UnknownNameError: ``source`` is neither a registered name nor a path.
+        ModelFileError: the file is missing or cannot be parsed.
+        GainError: ``root_joint`` is not one of the accepted values.
+    """
+    path, package_dirs, default_root, name = _resolve(source)
+    root = default_root if root_joint is None else root_joint
+    if root not in _ROOT_JOINTS:
+        raise GainError(
+            f"root_joint={root_joint!r} is not accepted; use None, "
+            + ", ".join(repr(k) for k in _ROOT_JOINTS)
+        )
+    joint_type = _ROOT_JOINTS[root]
+    dirs = [str(d) for d in package_dirs]
+    try:
+        if path.suffix.lower() == ".urdf":
+            args = (joint_type(),) if joint_type is not None else ()
+            model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs, *args)
+        else:
+            if joint_type is not None:
+                model = pin.buildModelFromMJCF(str(path), joint_type())
+            else:
+                model = pin.buildModelFromMJCF(str(path))
+            collision = visual = None
+            try:
+                visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
+            except (RuntimeError, ValueError):
+                visual = None
+    except (RuntimeError, ValueError, OSError) as exc:
+        raise ModelFileError(
+            f"cannot parse robot file {str(path)!r} (from source {str(source)!r}): {exc}. "
+            "Known robot names: " + ", ".join(robot_names())
+        ) from exc
+    if model.nv == 0:
+        raise ModelFileError(
+            f"robot {str(source)!r} has no moving joint; a single rigid body needs "
+            "root_joint='spherical' or 'freeflyer'"
+        )
+    return Robot(
+        model, name=name, source=str(source), visual_model=visual, collision_model=collision
+    )

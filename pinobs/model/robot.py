@@ -1,0 +1,403 @@
+"""A Pinocchio model with its dynamics and the geometry of its kinetic-energy metric.
+
+This module is the only code in pinobs that calls Pinocchio's dynamics.
+
+Conventions (Pinocchio's, see ``../shared/MATH.md`` §1-3):
+
+* ``q`` has ``nq`` entries, ``v`` and every tangent vector ``nv``; quaternions
+  are ``x, y, z, w``; a free-flyer's velocity is ``[linear; angular]`` in the
+  body frame.
+* ``integrate(q, v) = q ⊕ v = q · exp(v)``, ``difference(q0, q1) = log(q0⁻¹ q1)``.
+* Tangent vectors are expressed in the frame ``{E_i}`` Pinocchio uses for
+  ``v``.  For frame-constant fields X, Y the Levi-Civita connection is::
+
+      ∇_X Y = ω(X, Y) = Γs(q)(X, Y) + ½ [X, Y]                    (MATH §2)
+
+  with ``Γs(X, X) = M(q)⁻¹ c(q, X)`` (the geodesic spray) and ``[X, Y]`` the
+  bracket of the frame fields (nonzero inside spherical, free-flyer and
+  planar joints only).
+* Directional derivatives are taken along the group exponential:
+  ``D_X f(q) = d/dε f(integrate(q, εX))|₀`` (Pinocchio's own convention for
+  its analytic derivatives).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from pinobs.errors import ConfigurationError, DimensionError, NonFiniteError
+from pinobs.tolerances import QUATERNION_NORM_TOL
+
+__all__ = ["JointBlock", "Robot"]
+
+Vector = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class JointBlock:
+    """Where one joint sits in ``q`` and ``v``, and what group it lives on.
+
+    Attributes:
+        name: joint name in the model.
+        kind: ``"vector"`` (revolute, prismatic, and any joint whose velocity is
+            the time derivative of its coordinates), ``"circle"`` (continuous
+            joint, ``q = (cos, sin)``), ``"so3"`` (spherical, quaternion),
+            ``"se3"`` (free-flyer), ``"se2"`` (planar).
+        idx_q: first index in ``q``.
+        nq: number of entries in ``q``.
+        idx_v: first index in ``v``.
+        nv: number of entries in ``v``.
+    """
+
+    name: str
+    kind: str
+    idx_q: int
+    nq: int
+    idx_v: int
+    nv: int
+
+
+_KIND_BY_SHORTNAME = {
+    "JointModelSpherical": "so3",
+    "JointModelFreeFlyer": "se3",
+    "JointModelPlanar": "se2",
+}
+
+
+def _joint_kind(joint: Any) -> str:
+    short = joint.shortname()
+    if short in _KIND_BY_SHORTNAME:
+        return _KIND_BY_SHORTNAME[short]
+    if short.startswith("JointModelRUB"):  # continuous joint: SO(2), abelian
+        return "circle"
+    return "vector"
+
+
+class Robot:
+    """A rigid multibody system: Pinocchio model, dynamics and metric geometry.
+
+    Build one with :func:`pinobs.load`.  Each ``Robot`` owns its ``pin.Data``;
+    use :meth:`copy` to give another consumer (the simulated plant, an
+    observer) its own.
+
+    Attributes:
+        model: the Pinocchio model (gravity included).
+        name: short name (registry name or file stem).
+        source: where the model came from (registry name or file path).
+        visual_model: Pinocchio visual geometry, or ``None``.
+        collision_model: Pinocchio collision geometry, or ``None``.
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        *,
+        name: str,
+        source: str,
+        visual_model: pin.GeometryModel | None = None,
+        collision_model: pin.GeometryModel | None = None,
+    ) -> None:
+        self.model = model
+        self.name = name
+        self.source = source
+        self.visual_model = visual_model
+        self.collision_model = collision_model
+        self._data = model.createData()
+        # Zero-gravity copy: aba(q, v, 0) on it is -M⁻¹ c(q, v), the geodesic spray.
+        self._free = model.copy()
+        self._free.gravity.setZero()
+        self._free_data = self._free.createData()
+        self.joints: tuple[JointBlock, ...] = tuple(
+            JointBlock(
+                name=model.names[i],
+                kind=_joint_kind(j),
+                idx_q=j.idx_q,
+                nq=j.nq,
+                idx_v=j.idx_v,
+                nv=j.nv,
+            )
+            for i, j in enumerate(model.joints)
+            if i > 0 and j.nv > 0
+        )
+        self._quat_slices = tuple(
+            slice(b.idx_q + (3 if b.kind == "se3" else 0), b.idx_q + b.nq)
+            for b in self.joints
+            if b.kind in ("so3", "se3")
+        )
+        self._circle_slices = tuple(
+            slice(b.idx_q, b.idx_q + 2) for b in self.joints if b.kind == "circle"
+        )
+        self._bracket_blocks = tuple(b for b in self.joints if b.kind in ("so3", "se3", "se2"))
+
+    # ------------------------------------------------------------------ basics
+    def __repr__(self) -> str:
+        return f"Robot({self.name!r}, nq={self.nq}, nv={self.nv})"
+
+    @property
+    def nq(self) -> int:
+        """Number of configuration coordinates."""
+        return int(self.model.nq)
+
+    @property
+    def nv(self) -> int:
+        """Dimension of the tangent space (number of velocities)."""
+        return int(self.model.nv)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """Names of the joints that move, in model order."""
+        return tuple(b.name for b in self.joints)
+
+    @property
+    def is_vector_space(self) -> bool:
+        """True when every joint is revolute/prismatic (``q`` lives in Rⁿ, nq = nv)."""
+        return all(b.kind == "vector" for b in self.joints)
+
+    @property
+    def has_lie_group_joints(self) -> bool:
+        """True when some joint's frame fields do not commute (spherical, free-flyer, planar)."""
+        return bool(self._bracket_blocks)
+
+    def copy(self) -> Robot:
+        """The same model with fresh ``pin.Data`` (for another consumer)."""
+        return Robot(
+            self.model.copy(),
+            name=self.name,
+            source=self.source,
+            visual_model=self.visual_model,
+            collision_model=self.collision_model,
+        )
+
+    # ------------------------------------------------------------- validation
+    def check_configuration(self, q: ArrayLike, *, what: str = "q") -> Vector:
+        """Return ``q`` as a float array after checking shape, finiteness and unit quaternions.
+
+        Quaternions (and continuous-joint ``(cos, sin)`` pairs) must have unit
+        norm within :data:`pinobs.tolerances.QUATERNION_NORM_TOL`; they are
+        then renormalised exactly.
+
+        Raises:
+            DimensionError: ``q`` does not have shape ``(nq,)``.
+            NonFiniteError: ``q`` has NaN or infinite entries.
+            ConfigurationError: a quaternion is not of unit norm.
+        """
+        arr = self.check_vector(q, self.nq, what=what)
+        for s in self._quat_slices + self._circle_slices:
+            norm = float(np.linalg.norm(arr[s]))
+            if abs(norm - 1.0) > QUATERNION_NORM_TOL:
+                raise ConfigurationError(
+                    f"{what}[{s.start}:{s.stop}] = {arr[s].tolist()} has norm {norm:.6g}; "
+                    f"unit quaternions and (cos, sin) pairs must have norm 1 "
+                    f"within {QUATERNION_NORM_TOL:g}"
+                )
+            arr[s] /= norm
+        return arr
+
+    @staticmethod
+    def check_vector(x: ArrayLike, n: int, *, what: str) -> Vector:
+        """Return ``x`` as a fresh float array of shape ``(n,)``, or raise.
+
+        Raises:
+            DimensionError: wrong shape or not numeric.
+            NonFiniteError: NaN or infinite entries.
+        """
+        try:
+            arr = np.array(x, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise DimensionError(
+                f"{what} must be a numeric array of shape ({n},), got {x!r}"
+            ) from exc
+        if arr.shape != (n,):
+            raise DimensionError(f"{what} must have shape ({n},), got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            bad = np.flatnonzero(~np.isfinite(arr)).tolist()
+            raise NonFiniteError(f"{what} has non-finite entries at indices {bad}: {arr.tolist()}")
+        return arr
+
+    # ------------------------------------------------------------- Lie groups
+    def neutral(self) -> Vector:
+        """The neutral configuration (identity of every joint group)."""
+        return np.asarray(pin.neutral(self.model), dtype=float)
+
+    def random_configuration(self, rng: np.random.Generator, *, scale: float = 1.0) -> Vector:
+        """A configuration ``neutral ⊕ ξ`` with ξ uniform in ``[-scale, scale]^nv`` [rad or m].
+
+        Uses the caller's generator (Pinocchio's own sampler uses a global seed).
+        """
+        return self.integrate(self.neutral(), rng.uniform(-scale, scale, self.nv))
+
+    def integrate(self, q: Vector, v: Vector) -> Vector:
+        """``q ⊕ v = q · exp(v)``: move from ``q`` along tangent vector ``v`` for unit time."""
+        return np.asarray(pin.integrate(self.model, q, v), dtype=float)
+
+    def difference(self, q0: Vector, q1: Vector) -> Vector:
+        """``log(q0⁻¹ q1) ∈ T_{q0}``: the tangent vector with ``q0 ⊕ difference = q1``."""
+        return np.asarray(pin.difference(self.model, q0, q1), dtype=float)
+
+    def integrate_jacobian(self, q: Vector, xi: Vector) -> Vector:
+        """``∂(q ⊕ ξ)/∂ξ``: the right Jacobian of the exponential, in the frame at ``q ⊕ ξ``.
+
+        The identity for vector and continuous joints; block-diagonal otherwise.
+        """
+        return np.array(pin.dIntegrate(self.model, q, xi, pin.ArgumentPosition.ARG1), dtype=float)
+
+    def normalize(self, q: Vector) -> Vector:
+        """``q`` with its quaternions and ``(cos, sin)`` pairs projected to unit norm."""
+        out = np.array(q, dtype=float)
+        for s in self._quat_slices + self._circle_slices:
+            out[s] /= np.linalg.norm(out[s])
+        return out
+
+    def bracket(self, x: Vector, y: Vector) -> Vector:
+        """``[X, Y]``: Lie bracket of the frame fields through ``x`` and ``y``.
+
+        Zero between different joints and inside vector/continuous joints; the
+        so(3) cross product inside a spherical joint; ``ad_x y`` of se(3)
+        (``pin.Motion(x).cross(pin.Motion(y))``, linear first) inside a
+        free-flyer; the se(2) bracket inside a planar joint.  (MATH §2)
+        """
+        out = np.zeros(self.nv)
+        for b in self._bracket_blocks:
+            s = slice(b.idx_v, b.idx_v + b.nv)
+            xs, ys = x[s], y[s]
+            if b.kind == "so3":
+                out[s] = np.cross(xs, ys)
+            elif b.kind == "se3":
+                out[s] = pin.Motion(xs).cross(pin.Motion(ys)).vector
+            else:  # se2, v = (vx, vy, w): [(u, a), (u', b)] = (a J u' - b J u, 0), J = rot(π/2)
+                ax, ay = xs[2], ys[2]
+                out[b.idx_v] = -ax * ys[1] + ay * xs[1]
+                out[b.idx_v + 1] = ax * ys[0] - ay * xs[0]
+        return out
+
+    # --------------------------------------------------------------- dynamics
+    def mass_matrix(self, q: Vector) -> Vector:
+        """``M(q)``, symmetric positive definite, shape ``(nv, nv)`` [kg, kg·m, kg·m²]."""
+        m = pin.crba(self.model, self._data, q)
+        return np.asarray(0.5 * (m + m.T), dtype=float)
+
+    def gravity(self, q: Vector) -> Vector:
+        """``g(q)``: generalised gravity torque [N·m or N]."""
+        return np.array(pin.computeGeneralizedGravity(self.model, self._data, q), dtype=float)
+
+    def coriolis(self, q: Vector, v: Vector) -> Vector:
+        """``c(q, v)``: Coriolis and centrifugal torque, quadratic in ``v``."""
+        return np.array(pin.rnea(self._free, self._free_data, q, v, np.zeros(self.nv)), dtype=float)
+
+    def coriolis_matrix(self, q: Vector, v: Vector) -> Vector:
+        """``C(q, v)`` with ``C(q, v) v = c(q, v)`` (Pinocchio's factorisation, ``Ṁ - 2C`` skew)."""
+        return np.array(pin.computeCoriolisMatrix(self.model, self._data, q, v), dtype=float)
+
+    def nonlinear_effects(self, q: Vector, v: Vector) -> Vector:
+        """``c(q, v) + g(q)``."""
+        return np.array(pin.nonLinearEffects(self.model, self._data, q, v), dtype=float)
+
+    def forward_dynamics(self, q: Vector, v: Vector, tau: Vector) -> Vector:
+        """``v̇ = M⁻¹(τ - c(q, v) - g(q))`` by the articulated-body algorithm."""
+        return np.array(pin.aba(self.model, self._data, q, v, tau), dtype=float)
+
+    def forward_dynamics_derivatives(
+        self, q: Vector, v: Vector, tau: Vector
+    ) -> tuple[Vector, Vector, Vector]:
+        """``(∂v̇/∂q, ∂v̇/∂v, M⁻¹)`` of :meth:`forward_dynamics` (∂q along ``integrate``)."""
+        dq, dv, minv = pin.computeABADerivatives(self.model, self._data, q, v, tau)
+        minv = np.triu(minv) + np.triu(minv, 1).T  # Pinocchio fills the upper triangle
+        return np.array(dq), np.array(dv), np.array(minv)
+
+    def inverse_dynamics(self, q: Vector, v: Vector, a: Vector) -> Vector:
+        """``τ = M a + c(q, v) + g(q)`` by recursive Newton-Euler."""
+        return np.array(pin.rnea(self.model, self._data, q, v, a), dtype=float)
+
+    def kinetic_energy(self, q: Vector, v: Vector) -> float:
+        """``½ vᵀ M(q) v`` [J]."""
+        return float(pin.computeKineticEnergy(self.model, self._data, q, v))
+
+    def potential_energy(self, q: Vector) -> float:
+        """Gravitational potential energy [J] (zero at the world origin)."""
+        return float(pin.computePotentialEnergy(self.model, self._data, q))
+
+    def force_per_metric(self, q: Vector, tau: Vector) -> Vector:
+        """``S = M⁻¹(τ - g(q))``: the applied force raised with the metric (MATH §4).
+
+        Free motion is ``v̇ = -Γs(v, v) + S``.
+        """
+        return np.array(
+            pin.aba(self._free, self._free_data, q, np.zeros(self.nv), tau - self.gravity(q)),
+            dtype=float,
+        )
+
+    # --------------------------------------------------------------- geometry
+    def metric(self, q: Vector, x: Vector, y: Vector) -> float:
+        """``⟨x, y⟩_q = xᵀ M(q) y``: the kinetic-energy metric (twice the kinetic energy)."""
+        return float(x @ self.mass_matrix(q) @ y)
+
+    def geodesic_spray(self, q: Vector, x: Vector) -> Vector:
+        """``Γs(q)(x, x) = M⁻¹ c(q, x)``: one zero-gravity ABA call (MATH §2)."""
+        return -np.asarray(
+            pin.aba(self._free, self._free_data, q, x, np.zeros(self.nv)), dtype=float
+        )
+
+    def christoffel(self, q: Vector, x: Vector, y: Vector) -> Vector:
+        """``Γs(q)(x, y)``, the symmetric part of the connection, shape ``(nv,)``.
+
+        By polarisation of the spray (MATH §2):
+        ``Γs(x, y) = ¼ (Γs(x+y, x+y) - Γs(x-y, x-y))``; two ABA calls.
+        For vector joints this is ``Γ^k_ij x^i y^j`` of ``M``.
+        """
+        return 0.25 * (self.geodesic_spray(q, x + y) - self.geodesic_spray(q, x - y))
+
+    def connection(self, q: Vector, x: Vector, y: Vector) -> Vector:
+        """``ω(x, y) = Γs(q)(x, y) + ½ [x, y]``: ``∇_X Y`` for frame-constant fields (MATH §2)."""
+        return self.christoffel(q, x, y) + 0.5 * self.bracket(x, y)
+
+    def spray_derivative(self, q: Vector, x: Vector) -> Vector:
+        """``∂/∂q Γs(q)(x, x)``, shape ``(nv, nv)``: column j is ``D_{E_j} Γs(x, x)``.
+
+        Analytic, from ``pin.computeABADerivatives`` on the zero-gravity model.
+        """
+        dq, _, _ = pin.computeABADerivatives(self._free, self._free_data, q, x, np.zeros(self.nv))
+        return -np.array(dq, dtype=float)
+
+    def christoffel_derivative(self, q: Vector, x: Vector, y: Vector, z: Vector) -> Vector:
+        """``D_z[Γs(q)(x, y)]``: derivative of the symmetric part along ``z`` (two ABA derivative calls)."""
+        return 0.25 * (self.spray_derivative(q, x + y) - self.spray_derivative(q, x - y)) @ z
+
+    def curvature(self, q: Vector, x: Vector, y: Vector, z: Vector) -> Vector:
+        """``R(x, y) z``, the Riemann curvature as a contraction, shape ``(nv,)``.
+
+        For frame-constant fields (MATH §3)::
+
+            R(X,Y)Z = D_X[ω(Y,Z)] - D_Y[ω(X,Z)] + ω(X, ω(Y,Z)) - ω(Y, ω(X,Z)) - ω([X,Y], Z)
+
+        Convention ``R(X,Y) = ∇_X∇_Y - ∇_Y∇_X - ∇_[X,Y]`` (Maithripala eq. 5), so the
+        sectional curvature is ``⟨R(X,Y)Y, X⟩ / (|X|²|Y|² - ⟨X,Y⟩²)``.
+        Cost: four ABA-derivative calls and ten ABA calls, never the n⁴ tensor.
+        """
+        w_yz = self.connection(q, y, z)
+        w_xz = self.connection(q, x, z)
+        return (
+            self.christoffel_derivative(q, y, z, x)
+            - self.christoffel_derivative(q, x, z, y)
+            + self.connection(q, x, w_yz)
+            - self.connection(q, y, w_xz)
+            - self.connection(q, self.bracket(x, y), z)
+        )
+
+    def sectional_curvature(self, q: Vector, x: Vector, y: Vector) -> float:
+        """``K(x, y) = ⟨R(x,y)y, x⟩ / (|x|²|y|² - ⟨x,y⟩²)`` [1/(kg·m²)]."""
+        m = self.mass_matrix(q)
+        area2 = (x @ m @ x) * (y @ m @ y) - (x @ m @ y) ** 2
+        return float(self.curvature(q, x, y, y) @ m @ x / area2)
+
+
+def stack(vectors: Sequence[Vector]) -> Vector:
+    """Stack equally shaped vectors into a read-only 2-D array (time first)."""
+    out = np.array(vectors, dtype=float)
+    out.setflags(write=False)
+    return out

@@ -1,0 +1,32 @@
+"""Observer layer: the protocol, the registry and one module per family.
+
+Every module in this package other than ``base`` is a family; importing the
+package imports them all, and each registers itself with ``@register``.
+"""
+
+import importlib
+import pkgutil
+
+from pinobs.observers.base import (
+    Estimate,
+    Observer,
+    make_observer,
+    observer_class,
+    observer_names,
+    positive,
+    register,
+)
+
+for _info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+    if _info.name != "base" and not _info.name.startswith("_"):
+        importlib.import_module(f"{__name__}.{_info.name}")
+
+__all__ = [
+    "Estimate",
+    "Observer",
+    "make_observer",
+    "observer_class",
+    "observer_names",
+    "positive",
+    "register",
+]

@@ -1,0 +1,299 @@
+"""What every observer shares: the sampled-data contract, input checks, the registry.
+
+The contract (``../shared/MATH.md`` §7).  Samples arrive at times ``t_k``.
+The torque passed with ``update(t_k, q_k, τ_k)`` is the one applied *from*
+``t_k`` on, held until the next sample (zero-order hold).  So the step to
+``t_k`` propagates with the torque stored at the previous call, then corrects
+with ``q_k``, then stores ``τ_k``.  ``reset(t0, q0, v0=None, tau0=None)``
+stores the first torque (zero if not given).
+
+A family implements only its mathematics, as pure functions of an immutable
+state: :meth:`Observer._initial_state`, :meth:`Observer._step` and
+:meth:`Observer._output`.  The base validates every input before anything
+changes, checks the new estimate is finite, and commits the new state only
+then, so a rejected call leaves the observer exactly as it was.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar, Generic, TypeVar, final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pinobs.errors import (
+    GainError,
+    NotResetError,
+    ObserverDiverged,
+    OptionError,
+    TimestampError,
+    UnknownNameError,
+)
+from pinobs.model import Robot
+from pinobs.tolerances import TIME_EPS
+
+__all__ = [
+    "Estimate",
+    "Observer",
+    "make_observer",
+    "observer_class",
+    "observer_names",
+    "positive",
+    "register",
+]
+
+Vector = NDArray[np.float64]
+State = TypeVar("State")
+
+
+def _frozen(x: Vector) -> Vector:
+    out = np.array(x, dtype=float)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """An observer's estimate at one time.
+
+    Attributes:
+        t: time [s].
+        q: estimated configuration, shape ``(nq,)`` (read-only).
+        v: estimated velocity, shape ``(nv,)`` (read-only), Pinocchio's tangent frame.
+    """
+
+    t: float
+    q: Vector
+    v: Vector
+
+
+def positive(
+    name: str, value: float | None, *, allow_none: bool = False, allow_zero: bool = False
+) -> float | None:
+    """Validate a gain or option: a finite real number > 0 (or >= 0), or ``None`` if allowed.
+
+    Raises:
+        GainError: naming the option, the value and the accepted range.
+    """
+    if value is None:
+        if allow_none:
+            return None
+        raise GainError(f"{name} is required: give a finite number > 0")
+    try:
+        x = float(value)
+    except (TypeError, ValueError) as exc:
+        raise GainError(f"{name}={value!r} is not a number; give a finite number > 0") from exc
+    ok = math.isfinite(x) and (x >= 0 if allow_zero else x > 0)
+    if not ok:
+        bound = ">= 0" if allow_zero else "> 0"
+        raise GainError(f"{name}={value!r} is out of range; give a finite number {bound}")
+    return x
+
+
+class Observer(ABC, Generic[State]):
+    """Base class of every observer.
+
+    Args:
+        robot: the model the observer uses (copied: the observer owns its ``pin.Data``).
+        rate: sensor sample rate [Hz], a hint for default gains.
+        noise_std: standard deviation of the position noise [rad or m], a hint
+            for default gains.
+
+    Class attributes set by each family:
+        name: registry name.
+        summary: one line for ``pinobs list`` and the README table.
+    """
+
+    name: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+
+    def __init__(
+        self, robot: Robot, *, rate: float | None = None, noise_std: float | None = None
+    ) -> None:
+        self.robot = robot.copy()
+        self.rate = positive("rate", rate, allow_none=True)
+        self.noise_std = positive("noise_std", noise_std, allow_none=True, allow_zero=True)
+        self._state: State | None = None
+        self._t = -math.inf
+        self._tau = np.zeros(self.robot.nv)
+        self._last: Estimate | None = None
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.robot.name!r})"
+
+    # ----------------------------------------------------------- public API
+    @final
+    def reset(
+        self,
+        t0: float,
+        q0: ArrayLike,
+        v0: ArrayLike | None = None,
+        tau0: ArrayLike | None = None,
+    ) -> Estimate:
+        """Start (or restart) the observer at time ``t0`` [s] from ``q0`` (and ``v0``, zero if not given).
+
+        ``tau0`` is the torque applied from ``t0`` on (zero if not given).
+        """
+        t = self._check_time(t0, previous=None)
+        q = self.robot.check_configuration(q0, what="q0")
+        v = (
+            np.zeros(self.robot.nv)
+            if v0 is None
+            else self.robot.check_vector(v0, self.robot.nv, what="v0")
+        )
+        tau = self._check_tau(tau0, what="tau0")
+        state = self._initial_state(q, v)
+        estimate = self._make_estimate(t, state)
+        self._state, self._t, self._tau, self._last = state, t, tau, estimate
+        return estimate
+
+    @final
+    def update(self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None = None) -> Estimate:
+        """Advance to time ``t`` [s] and correct with the measured configuration.
+
+        Args:
+            t: sample time [s], strictly after the previous one.
+            q_meas: measured configuration, shape ``(nq,)``; ``None`` means no
+                sample this tick (the observer only propagates).
+            tau: joint torque [N·m or N] applied from ``t`` on (zero-order
+                hold), shape ``(nv,)``; ``None`` means zero.
+
+        Raises:
+            NotResetError: ``reset`` was never called.
+            TimestampError: ``t`` is not finite or not after the previous time.
+            DimensionError, NonFiniteError, ConfigurationError: bad ``q_meas`` or ``tau``.
+            ObserverDiverged: the estimate became non-finite (state kept as it was).
+        """
+        if self._state is None:
+            raise NotResetError(f"{self!r}: call reset(t0, q0) before update()")
+        t_new = self._check_time(t, previous=self._t)
+        q = None if q_meas is None else self.robot.check_configuration(q_meas, what="q_meas")
+        tau_new = self._check_tau(tau, what="tau")
+        # MATH §7: propagate with the torque held since the previous call, then correct.
+        state = self._step(self._state, t_new - self._t, q, self._tau)
+        estimate = self._make_estimate(t_new, state)
+        if not (np.all(np.isfinite(estimate.q)) and np.all(np.isfinite(estimate.v))):
+            raise ObserverDiverged(
+                f"{self!r} diverged at t = {t_new:.6g} s (non-finite estimate); "
+                f"the last finite estimate is at t = {self._t:.6g} s. Lower the gains "
+                "or check the model and the torques.",
+                t=t_new,
+                last_estimate=self._last,
+            )
+        self._state, self._t, self._tau, self._last = state, t_new, tau_new, estimate
+        return estimate
+
+    @property
+    def estimate(self) -> Estimate:
+        """The latest estimate."""
+        if self._last is None:
+            raise NotResetError(f"{self!r}: call reset(t0, q0) first")
+        return self._last
+
+    @property
+    def options(self) -> dict[str, Any]:
+        """The resolved options (gains chosen from ``rate``/``noise_std`` included), for reports."""
+        return {"rate": self.rate, "noise_std": self.noise_std}
+
+    # ------------------------------------------------------ family interface
+    @abstractmethod
+    def _initial_state(self, q0: Vector, v0: Vector) -> State:
+        """The state at reset.  Must not keep references to mutable inputs."""
+
+    @abstractmethod
+    def _step(self, state: State, dt: float, q_meas: Vector | None, tau: Vector) -> State:
+        """Propagate ``state`` over ``dt`` [s] with torque ``tau`` held, then correct with ``q_meas``.
+
+        Must return a new state and leave ``state`` untouched.
+        """
+
+    @abstractmethod
+    def _output(self, state: State) -> tuple[Vector, Vector]:
+        """``(q̂, v̂)`` of a state."""
+
+    # -------------------------------------------------------------- helpers
+    def _make_estimate(self, t: float, state: State) -> Estimate:
+        q, v = self._output(state)
+        return Estimate(t=t, q=_frozen(q), v=_frozen(v))
+
+    def _check_tau(self, tau: ArrayLike | None, *, what: str) -> Vector:
+        if tau is None:
+            return np.zeros(self.robot.nv)
+        return self.robot.check_vector(tau, self.robot.nv, what=what)
+
+    @staticmethod
+    def _check_time(t: float, *, previous: float | None) -> float:
+        try:
+            x = float(t)
+        except (TypeError, ValueError) as exc:
+            raise TimestampError(f"time {t!r} is not a number") from exc
+        if not math.isfinite(x):
+            raise TimestampError(f"time {t!r} is not finite")
+        if previous is not None and not x > previous + TIME_EPS:
+            raise TimestampError(
+                f"time t = {x!r} s is not after the previous sample at t = {previous!r} s; "
+                "timestamps must be strictly increasing"
+            )
+        return x
+
+
+# ------------------------------------------------------------------ registry
+_REGISTRY: dict[str, type[Observer[Any]]] = {}
+
+ObserverType = TypeVar("ObserverType", bound=type[Observer[Any]])
+
+
+def register(cls: ObserverType) -> ObserverType:
+    """Class decorator: add an observer family to the registry under ``cls.name``."""
+    if not cls.name or cls.name in _REGISTRY:
+        raise ValueError(f"observer name {cls.name!r} is empty or already registered")
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def observer_names() -> list[str]:
+    """Registered observer names, sorted."""
+    return sorted(_REGISTRY)
+
+
+def observer_class(name: str) -> type[Observer[Any]]:
+    """The class registered under ``name``.
+
+    Raises:
+        UnknownNameError: listing the registered names.
+    """
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise UnknownNameError(
+            f"unknown observer {name!r}; available: {', '.join(observer_names())}"
+        ) from None
+
+
+def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
+    """Build the observer registered as ``name`` on ``robot``.
+
+    Options are the keyword arguments of the family's constructor (every
+    family accepts ``rate`` [Hz] and ``noise_std`` [rad or m]).
+
+    Raises:
+        UnknownNameError: unknown ``name``.
+        OptionError: an option the family does not accept (the message lists them).
+        GainError: an option out of range.
+    """
+    cls = observer_class(name)
+    accepted = [
+        p.name
+        for p in inspect.signature(cls.__init__).parameters.values()
+        if p.kind is inspect.Parameter.KEYWORD_ONLY
+    ]
+    unknown = sorted(set(options) - set(accepted))
+    if unknown:
+        raise OptionError(
+            f"observer {name!r} does not accept option(s) {unknown}; accepted: {accepted}"
+        )
+    return cls(robot, **options)

@@ -1,0 +1,28 @@
+"""Simulation layer: ground truth on the manifold, inputs, sensors, the result type."""
+
+from pinobs.simulation.inputs import (
+    INPUT_NAMES,
+    InputProfile,
+    MultiSine,
+    PDTracking,
+    Zero,
+    make_input,
+)
+from pinobs.simulation.result import ObserverTrace, Result
+from pinobs.simulation.run import default_input, perturb, simulate
+from pinobs.simulation.sensors import Sensor
+
+__all__ = [
+    "INPUT_NAMES",
+    "InputProfile",
+    "MultiSine",
+    "ObserverTrace",
+    "PDTracking",
+    "Result",
+    "Sensor",
+    "Zero",
+    "default_input",
+    "make_input",
+    "perturb",
+    "simulate",
+]

@@ -1,0 +1,179 @@
+"""Drive observers sample by sample against a simulated plant.
+
+The plant is integrated on its configuration manifold with RKMK4
+(:func:`pinobs.model.lie_rk4`) at ``substeps`` steps per sample, the torque
+held over each sample interval (MATH §7).  Accuracy, measured in
+``tests/simulation``: order 4; on a UR5 at 1 kHz the energy of a free motion
+drifts by less than 1e-9 J over 2 s.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from pinobs.errors import ObserverDiverged
+from pinobs.model import Robot, lie_rk4
+from pinobs.model.robot import Vector
+from pinobs.observers import Observer, make_observer
+from pinobs.simulation.inputs import InputProfile, make_input
+from pinobs.simulation.result import ObserverTrace, Result
+from pinobs.simulation.sensors import Sensor
+
+__all__ = ["default_input", "perturb", "simulate"]
+
+Progress = Callable[[int, int], None]
+
+
+def default_input(robot: Robot) -> str:
+    """``pd`` tracking for fixed-base robots, ``multisine`` torques when the root is a Lie group."""
+    root = robot.joints[0].kind if robot.joints else "vector"
+    return "multisine" if root in ("so3", "se3", "se2") else "pd"
+
+
+def perturb(
+    robot: Robot, q: Vector, v: Vector, dq: float, dv: float, rng: np.random.Generator
+) -> tuple[Vector, Vector]:
+    """``(q ⊕ dq·u₁, v + dv·u₂)`` with ``u₁, u₂`` random unit vectors (norms ``dq`` [rad], ``dv`` [rad/s])."""
+    u1 = rng.standard_normal(robot.nv)
+    u2 = rng.standard_normal(robot.nv)
+    u1 /= np.linalg.norm(u1)
+    u2 /= np.linalg.norm(u2)
+    return robot.integrate(q, dq * u1), v + dv * u2
+
+
+def _plant_step(
+    plant: Robot, q: Vector, v: Vector, tau: Vector, h: float, n: int
+) -> tuple[Vector, Vector]:
+    def rhs(qq: Vector, vv: Vector) -> tuple[Vector, Vector]:
+        return vv, plant.forward_dynamics(qq, vv, tau)
+
+    for _ in range(n):
+        q, v = lie_rk4(plant, q, v, h / n, rhs)
+    return q, v
+
+
+def simulate(
+    robot: Robot,
+    observers: Sequence[str] | Mapping[str, Observer[Any]],
+    *,
+    duration: float = 5.0,
+    sensor: Sensor | None = None,
+    inputs: str | InputProfile | None = None,
+    q0: Vector | None = None,
+    v0: Vector | None = None,
+    perturb_q: float = 0.0,
+    perturb_v: float = 0.0,
+    seed: int = 0,
+    substeps: int = 1,
+    plant: Robot | None = None,
+    progress: Progress | None = None,
+) -> Result:
+    """Simulate ``robot`` and run every observer on its sampled, noisy positions.
+
+    Args:
+        robot: the model the observers use (each builds its own copy).
+        observers: registry names (built with the sensor's ``rate`` and
+            ``noise_std`` as hints) or a mapping label -> observer instance.
+        duration: simulated time [s].
+        sensor: sample rate, noise, quantization, delay, dropouts (default: 1 kHz, no noise).
+        inputs: ``"zero"``, ``"multisine"``, ``"pd"``, an :class:`InputProfile`,
+            or ``None`` (:func:`default_input`).
+        q0, v0: true initial state (default: a seeded configuration near the
+            neutral one, zero velocity).
+        perturb_q, perturb_v: norm of the initial estimation error in
+            configuration [rad] and velocity [rad/s] (same draw for every observer).
+        seed: seed of every random draw of the run.
+        substeps: plant integration steps per sample.
+        plant: the truth's model if it differs from ``robot`` (model mismatch).
+        progress: called as ``progress(k, n)`` after sample ``k`` of ``n``.
+    """
+    sensor = sensor or Sensor()
+    rng = np.random.default_rng(seed)
+    truth = (plant or robot).copy()
+    n = round(duration * sensor.rate) + 1
+    h = sensor.period
+    if q0 is None:
+        q0 = truth.random_configuration(rng, scale=0.3)
+    q0 = truth.check_configuration(q0, what="q0")
+    v0 = np.zeros(truth.nv) if v0 is None else truth.check_vector(v0, truth.nv, what="v0")
+    if not isinstance(inputs, InputProfile):
+        inputs = make_input(inputs or default_input(truth), truth, rng=rng, center=q0)
+    if isinstance(observers, Mapping):
+        obs = dict(observers)
+    else:
+        obs = {
+            name: make_observer(name, robot, rate=sensor.rate, noise_std=sensor.noise_std)
+            for name in observers
+        }
+    q_hat0, v_hat0 = perturb(truth, q0, v0, perturb_q, perturb_v, rng)
+
+    t = np.arange(n) * h
+    Q = np.empty((n, truth.nq))
+    V = np.empty((n, truth.nv))
+    TAU = np.empty((n, truth.nv))
+    QM = np.full((n, truth.nq), np.nan)
+    est_q = {k: np.full((n, truth.nq), np.nan) for k in obs}
+    est_v = {k: np.full((n, truth.nv), np.nan) for k in obs}
+    wall = {k: np.full(n, np.nan) for k in obs}
+    diverged: dict[str, float | None] = dict.fromkeys(obs)
+    history: deque[Vector] = deque(maxlen=sensor.delay + 1)
+
+    q, v = q0, v0
+    for k in range(n):
+        if k > 0:
+            q, v = _plant_step(truth, q, v, TAU[k - 1], h, substeps)
+        tau = inputs.torque(t[k], q, v)
+        Q[k], V[k], TAU[k] = q, v, tau
+        history.append(q)
+        meas = sensor.measure(truth, history[0], rng) if k > 0 else None
+        if meas is not None:
+            QM[k] = meas
+        for name, ob in obs.items():
+            if diverged[name] is not None:
+                continue
+            start = time.perf_counter()
+            try:
+                if k == 0:
+                    est = ob.reset(t[0], q_hat0, v_hat0, tau)
+                else:
+                    est = ob.update(t[k], meas, tau)
+            except ObserverDiverged as exc:
+                diverged[name] = exc.t
+                continue
+            wall[name][k] = time.perf_counter() - start
+            est_q[name][k], est_v[name][k] = est.q, est.v
+        if progress is not None:
+            progress(k + 1, n)
+
+    traces = tuple(
+        ObserverTrace(
+            name=name,
+            q=est_q[name],
+            v=est_v[name],
+            update_time=wall[name],
+            options=ob.options,
+            diverged_at=diverged[name],
+        )
+        for name, ob in obs.items()
+    )
+    meta = {
+        "robot": robot.name,
+        "duration": duration,
+        "rate": sensor.rate,
+        "noise_std": sensor.noise_std,
+        "bits": sensor.bits,
+        "delay": sensor.delay,
+        "dropout": sensor.dropout,
+        "input": inputs.name,
+        "seed": seed,
+        "perturb_q": perturb_q,
+        "perturb_v": perturb_v,
+        "substeps": substeps,
+        "plant": truth.name if plant is not None else None,
+    }
+    return Result(robot=robot.name, t=t, q=Q, v=V, tau=TAU, q_meas=QM, traces=traces, meta=meta)

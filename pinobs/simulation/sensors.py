@@ -1,0 +1,73 @@
+"""Position sensors: sample rate, Gaussian noise, encoder quantization, delay, dropouts.
+
+A measurement is ``q_meas = Q(q(t − d)) ⊕ n`` with ``n ~ N(0, σ² I)`` in the
+tangent space (so quaternions stay unit), ``Q`` rounding each vector-joint
+coordinate (and each continuous joint's angle) to the encoder resolution
+``2π / 2^bits``, ``d`` a whole number of samples.  Lie-group joints
+(spherical, free-flyer, planar) are not quantized (a motion-capture or IMU
+attitude, not an encoder).  A dropped sample is ``None``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pinobs.model import Robot
+from pinobs.model.robot import Vector
+from pinobs.observers.base import positive
+
+__all__ = ["Sensor"]
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """Position sensor model.
+
+    Attributes:
+        rate: sample rate [Hz], > 0.
+        noise_std: Gaussian noise standard deviation [rad or m], >= 0.
+        bits: encoder resolution in bits per turn (``None``: no quantization).
+        delay: measurement delay in samples, >= 0.
+        dropout: probability that a sample is lost, in [0, 1).
+    """
+
+    rate: float = 1000.0
+    noise_std: float = 0.0
+    bits: int | None = None
+    delay: int = 0
+    dropout: float = 0.0
+
+    def __post_init__(self) -> None:
+        positive("rate", self.rate)
+        positive("noise_std", self.noise_std, allow_zero=True)
+        if self.bits is not None:
+            positive("bits", self.bits)
+        positive("delay", self.delay, allow_zero=True)
+        positive("dropout", self.dropout, allow_zero=True)
+        if self.dropout >= 1.0:
+            positive("1 - dropout", 1.0 - self.dropout)
+
+    @property
+    def period(self) -> float:
+        """Sample period [s]."""
+        return 1.0 / self.rate
+
+    def measure(self, robot: Robot, q: Vector, rng: np.random.Generator) -> Vector | None:
+        """One measurement of configuration ``q`` (``None`` if dropped)."""
+        if self.dropout and rng.random() < self.dropout:
+            return None
+        out = np.array(q, dtype=float)
+        if self.bits is not None:
+            res = 2.0 * np.pi / 2**self.bits
+            for b in robot.joints:
+                if b.kind == "vector":
+                    s = slice(b.idx_q, b.idx_q + b.nq)
+                    out[s] = np.round(out[s] / res) * res
+                elif b.kind == "circle":
+                    angle = np.round(np.arctan2(out[b.idx_q + 1], out[b.idx_q]) / res) * res
+                    out[b.idx_q : b.idx_q + 2] = (np.cos(angle), np.sin(angle))
+        if self.noise_std > 0.0:
+            out = robot.integrate(out, rng.normal(0.0, self.noise_std, robot.nv))
+        return out

@@ -1,0 +1,17 @@
+"""Numerical tolerances, defined once.
+
+Every threshold pinobs applies to user input or uses to pick a numerical
+branch lives here, so that a reader can see them together.
+"""
+
+from __future__ import annotations
+
+__all__ = ["QUATERNION_NORM_TOL", "TIME_EPS"]
+
+#: A measured quaternion (or continuous-joint ``(cos, sin)`` pair) whose norm is
+#: further than this from 1 is rejected; closer ones are renormalised.  Loose
+#: enough for float32 logs, tight enough to catch a raw ``w, x, y, z`` mix-up.
+QUATERNION_NORM_TOL = 1e-4
+
+#: Two timestamps closer than this [s] count as duplicates.
+TIME_EPS = 1e-12

@@ -6,7 +6,7 @@ branch lives here, so that a reader can see them together.
 
 from __future__ import annotations
 
-__all__ = ["QUATERNION_NORM_TOL", "TIME_EPS"]
+__all__ = ["LEFT_INVARIANT_INERTIA_TOL", "QUATERNION_NORM_TOL", "TIME_EPS"]
 
 #: A measured quaternion (or continuous-joint ``(cos, sin)`` pair) whose norm is
 #: further than this from 1 is rejected; closer ones are renormalised.  Loose
@@ -15,3 +15,8 @@ QUATERNION_NORM_TOL = 1e-4
 
 #: Two timestamps closer than this [s] count as duplicates.
 TIME_EPS = 1e-12
+
+#: The Lie-group observer accepts a robot when its mass matrix, sampled at a few
+#: configurations, varies by less than this (relative, max-norm): the kinetic
+#: energy is then left-invariant (a single rigid body on SO(3) or SE(3)).
+LEFT_INVARIANT_INERTIA_TOL = 1e-9

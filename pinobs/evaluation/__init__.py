@@ -1,5 +1,6 @@
 """Evaluation layer: metrics and tables of simulation results."""
 
 from pinobs.evaluation.metrics import Metrics, convergence_time, evaluate
+from pinobs.evaluation.report import format_table
 
-__all__ = ["Metrics", "convergence_time", "evaluate"]
+__all__ = ["Metrics", "convergence_time", "evaluate", "format_table"]

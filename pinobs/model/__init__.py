@@ -3,5 +3,15 @@
 from pinobs.model.integrators import lie_rk4
 from pinobs.model.loading import RobotEntry, load, robot_entries, robot_names
 from pinobs.model.robot import JointBlock, Robot
+from pinobs.model.timing import aba_time
 
-__all__ = ["JointBlock", "Robot", "RobotEntry", "lie_rk4", "load", "robot_entries", "robot_names"]
+__all__ = [
+    "JointBlock",
+    "Robot",
+    "RobotEntry",
+    "aba_time",
+    "lie_rk4",
+    "load",
+    "robot_entries",
+    "robot_names",
+]

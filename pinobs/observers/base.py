@@ -46,7 +46,7 @@ __all__ = [
     "register",
 ]
 
-Vector = NDArray[np.float64]
+Vector = NDArray[np.floating[Any]]
 State = TypeVar("State")
 
 
@@ -119,7 +119,7 @@ class Observer(ABC, Generic[State]):
         self.noise_std = positive("noise_std", noise_std, allow_none=True, allow_zero=True)
         self._state: State | None = None
         self._t = -math.inf
-        self._tau = np.zeros(self.robot.nv)
+        self._tau: Vector = np.zeros(self.robot.nv)
         self._last: Estimate | None = None
 
     def __repr__(self) -> str:
@@ -176,7 +176,7 @@ class Observer(ABC, Generic[State]):
         # MATH §7: propagate with the torque held since the previous call, then correct.
         state = self._step(self._state, t_new - self._t, q, self._tau)
         estimate = self._make_estimate(t_new, state)
-        if not (np.all(np.isfinite(estimate.q)) and np.all(np.isfinite(estimate.v))):
+        if not (math.isfinite(estimate.q.sum()) and math.isfinite(estimate.v.sum())):
             raise ObserverDiverged(
                 f"{self!r} diverged at t = {t_new:.6g} s (non-finite estimate); "
                 f"the last finite estimate is at t = {self._t:.6g} s. Lower the gains "

@@ -93,7 +93,8 @@ class ConstantAccelerationKF(Observer[_State]):
         noise_std: float | None = None,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
-        self.v0_std = positive("v0_std", v0_std)
+        positive("v0_std", v0_std)
+        self.v0_std = float(v0_std)
         self.gains = KFGains(jerk_psd=jerk_psd, meas_std=self.noise_std or _NOISE_FLOOR)
 
     @property
@@ -101,7 +102,7 @@ class ConstantAccelerationKF(Observer[_State]):
         return {**super().options, "jerk_psd": self.gains.jerk_psd, "meas_std": self.gains.meas_std}
 
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:
-        P = np.diag([self.gains.meas_std**2, self.v0_std**2, (10.0 * self.v0_std) ** 2])
+        P = np.diag(np.array([self.gains.meas_std**2, self.v0_std**2, (10.0 * self.v0_std) ** 2]))
         return _State(q0.copy(), v0.copy(), np.zeros_like(v0), P)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:

@@ -3,8 +3,9 @@
 The plant is integrated on its configuration manifold with RKMK4
 (:func:`pinobs.model.lie_rk4`) at ``substeps`` steps per sample, the torque
 held over each sample interval (MATH §7).  Accuracy, measured in
-``tests/simulation``: order 4; on a UR5 at 1 kHz the energy of a free motion
-drifts by less than 1e-9 J over 2 s.
+``tests/simulation``: order 4 on every joint group; on a UR5 at 1 kHz
+(one step per sample) the energy of a free motion at 1 rad/s per joint
+drifts by 9.6e-8 J out of 33.4 J (3e-9 relative) over 2 s.
 """
 
 from __future__ import annotations

@@ -1,0 +1,274 @@
+"""The ``pinobs`` command: a thin shell over the library.
+
+pinobs list                                  robots and observers
+pinobs run --robot R --observer O [...]      one simulation, a results table, JSON
+pinobs demo [--quick]                        the main job on a built-in default
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Callable, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from pinobs.errors import PinobsError, UnsupportedRobotError
+from pinobs.evaluation import evaluate, format_table
+from pinobs.model import Robot, aba_time, load, robot_entries
+from pinobs.observers import Observer, make_observer, observer_class, observer_names
+from pinobs.simulation import INPUT_NAMES, Result, Sensor, simulate
+
+__all__ = ["main", "observer_table"]
+
+DEMO_ROBOTS = ("cartpole", "ur5")
+
+
+# ----------------------------------------------------------------- helpers
+@contextmanager
+def _progress(label: str, enabled: bool) -> Any:
+    """A rich progress bar on an interactive terminal; nothing otherwise."""
+    if not enabled or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    with Progress(
+        TextColumn("{task.description}"), BarColumn(), TimeRemainingColumn(), transient=True
+    ) as bar:
+        task = bar.add_task(label, total=None)
+
+        def update(k: int, n: int) -> None:
+            if k % 100 == 0 or k == n:
+                bar.update(task, completed=k, total=n)
+
+        yield update
+
+
+def _observer_list(spec: Sequence[str]) -> list[str]:
+    names: list[str] = []
+    for item in spec:
+        for name in item.split(","):
+            name = name.strip()
+            if name == "all":
+                names.extend(observer_names())
+            elif name:
+                observer_class(name)  # raises UnknownNameError listing the names
+                names.append(name)
+    return list(dict.fromkeys(names))
+
+
+def _build(
+    robot: Robot, names: Sequence[str], sensor: Sensor, *, strict: bool
+) -> tuple[dict[str, Observer[Any]], dict[str, str]]:
+    """Observers by name; with ``strict=False`` those that refuse the robot are skipped with the reason."""
+    built: dict[str, Observer[Any]] = {}
+    skipped: dict[str, str] = {}
+    for name in names:
+        try:
+            built[name] = make_observer(name, robot, rate=sensor.rate, noise_std=sensor.noise_std)
+        except UnsupportedRobotError as exc:
+            if strict:
+                raise
+            skipped[name] = str(exc).split(";")[0]
+    return built, skipped
+
+
+def _run_one(
+    robot: Robot, names: Sequence[str], args: argparse.Namespace, *, strict: bool
+) -> tuple[Result, dict[str, Any], str]:
+    sensor = Sensor(rate=args.rate, noise_std=args.noise, bits=args.bits)
+    observers, skipped = _build(robot, names, sensor, strict=strict)
+    with _progress(f"{robot.name}: simulating", not args.no_progress) as progress:
+        result = simulate(
+            robot,
+            observers,
+            duration=args.duration,
+            sensor=sensor,
+            inputs=args.input,
+            perturb_q=args.perturb_q,
+            perturb_v=args.perturb_v,
+            seed=args.seed,
+            progress=progress,
+        )
+    metrics = evaluate(result, robot)
+    aba = aba_time(robot)
+    title = (
+        f"{robot.name} (nv = {robot.nv}): {args.duration:g} s at {args.rate:g} Hz, "
+        f"noise {args.noise:g}, input {result.meta['input']}, seed {args.seed}, "
+        f"start error |dq| = {args.perturb_q:g}, |dv| = {args.perturb_v:g}; "
+        f"one pin.aba = {aba * 1e6:.2f} us"
+    )
+    table = format_table(metrics, aba_seconds=aba, title=title)
+    if skipped:
+        table += "\n" + "\n".join(f"skipped {k}: {v}" for k, v in skipped.items())
+    report = {
+        "robot": robot.name,
+        "nv": robot.nv,
+        "meta": result.meta,
+        "aba_seconds": aba,
+        "skipped": skipped,
+        "rms_v_error": {m.observer: m.rms_v_error for m in metrics},
+        "observers": [
+            {
+                **m.as_dict(),
+                "cost_in_aba": m.time_per_update / aba,
+                "options": result.trace(m.observer).options,
+            }
+            for m in metrics
+        ],
+    }
+    return result, report, table
+
+
+def _json_safe(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None if math.isnan(x) else ("inf" if x > 0 else "-inf")
+    if isinstance(x, dict):
+        return {k: _json_safe(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_json_safe(v) for v in x]
+    return x
+
+
+def _write_json(path: str | Path, payload: Any) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(_json_safe(payload), indent=2, default=float) + "\n")
+    return path
+
+
+def observer_table() -> str:
+    """The README's observer table, generated from the registry."""
+    lines = ["| name | what it is |", "|---|---|"]
+    lines += [f"| `{n}` | {observer_class(n).summary} |" for n in observer_names()]
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------- subcommands
+def _cmd_list(args: argparse.Namespace) -> int:
+    print("Robots (pinobs.load(name); root joint in brackets):")
+    for e in robot_entries():
+        print(f"  {e.name:28s} {e.description} [{e.root_joint}] ({e.origin})")
+    print("\nObservers (pinobs.make_observer(name, robot, ...)):")
+    for name in observer_names():
+        print(f"  {name:10s} {observer_class(name).summary}")
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    robot = load(args.robot, root_joint=args.root_joint)
+    names = _observer_list(args.observer)
+    result, report, table = _run_one(
+        robot, names, args, strict=not any(n == "all" for n in args.observer)
+    )
+    print(table)
+    if args.json:
+        print(f"wrote {_write_json(args.json, report)}")
+    if args.save:
+        print(f"wrote {result.save(args.save)}")
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    reports = []
+    for name in DEMO_ROBOTS:
+        robot = load(name)
+        _, report, table = _run_one(robot, observer_names(), args, strict=False)
+        print(table + "\n")
+        reports.append(report)
+    path = _write_json(out / "demo.json", {"runs": reports})
+    print(f"wrote {path}")
+    return 0
+
+
+# ------------------------------------------------------------------ parser
+def _add_sim_options(p: argparse.ArgumentParser, *, duration: float) -> None:
+    p.add_argument(
+        "--duration", type=float, default=duration, help="simulated time [s] (default %(default)s)"
+    )
+    p.add_argument(
+        "--rate", type=float, default=1000.0, help="sample rate [Hz] (default %(default)s)"
+    )
+    p.add_argument(
+        "--noise",
+        type=float,
+        default=1e-4,
+        help="position noise std [rad or m] (default %(default)s)",
+    )
+    p.add_argument(
+        "--bits", type=int, default=None, help="encoder resolution [bits/turn] (default: none)"
+    )
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of every random draw (default %(default)s)"
+    )
+    p.add_argument(
+        "--input",
+        choices=INPUT_NAMES,
+        default=None,
+        help="input profile (default: pd for fixed-base robots, multisine otherwise)",
+    )
+    p.add_argument(
+        "--perturb-q",
+        type=float,
+        default=0.05,
+        help="initial configuration error [rad] (default %(default)s)",
+    )
+    p.add_argument(
+        "--perturb-v",
+        type=float,
+        default=0.5,
+        help="initial velocity error [rad/s] (default %(default)s)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="pinobs", description="Velocity observers for any URDF robot."
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("list", help="list robots and observers")
+    p.set_defaults(func=_cmd_list)
+
+    p = sub.add_parser("run", help="simulate a robot and compare observers")
+    p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF/MJCF path")
+    p.add_argument(
+        "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
+    )
+    p.add_argument(
+        "--observer",
+        action="append",
+        required=True,
+        help="observer name, comma list, or 'all' (repeatable)",
+    )
+    p.add_argument("--json", default=None, help="write the metrics to this JSON file")
+    p.add_argument("--save", default=None, help="write the whole result to this .npz file")
+    _add_sim_options(p, duration=3.0)
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("demo", help="every observer on the cart-pole and a UR5: tables, JSON")
+    p.add_argument("--out", default="out", help="output folder (default %(default)s)")
+    _add_sim_options(p, duration=3.0)
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``pinobs`` command; returns the exit code."""
+    args = _parser().parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return func(args)
+    except PinobsError as exc:
+        print(f"pinobs: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,37 @@
+"""The Pinocchio reference call every cost is quoted against.
+
+Machines are noisy, so pinobs never quotes a bare time: it quotes the ratio
+to one ``pin.aba`` call on the same robot, measured in the same run.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from pinobs.model.robot import Robot
+
+__all__ = ["aba_time"]
+
+
+def aba_time(robot: Robot, *, repeats: int = 2000, rounds: int = 5, seed: int = 0) -> float:
+    """Median wall time [s] of one ``pin.aba`` call from Python on ``robot``.
+
+    Python call overhead is included, as it is in every observer update it is
+    compared with.  The median over ``rounds`` rounds of ``repeats`` calls.
+    """
+    rng = np.random.default_rng(seed)
+    model = robot.model
+    data = model.createData()
+    q = robot.random_configuration(rng)
+    v = rng.standard_normal(robot.nv)
+    tau = rng.standard_normal(robot.nv)
+    samples = []
+    for _ in range(rounds):
+        start = time.perf_counter()
+        for _ in range(repeats):
+            pin.aba(model, data, q, v, tau)
+        samples.append((time.perf_counter() - start) / repeats)
+    return float(np.median(samples))

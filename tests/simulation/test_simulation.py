@@ -1,0 +1,142 @@
+"""Ground truth, sensors, inputs and the result type."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.model import lie_rk4
+from pinobs.simulation import PDTracking, Sensor, make_input, simulate
+
+
+@pytest.mark.parametrize("name", ["ur5", "top", "rigid_body"])
+def test_plant_integrator_is_fourth_order_on_every_joint_group(name: str) -> None:
+    robot = pinobs.load(name)
+    rng = np.random.default_rng(1)
+    q0, v0 = robot.random_configuration(rng), 2 * rng.standard_normal(robot.nv)
+
+    def rhs(q, v):
+        return v, robot.forward_dynamics(q, v, np.zeros(robot.nv))
+
+    def run(h: float):
+        q, v = q0, v0
+        for _ in range(round(0.5 / h)):
+            q, v = lie_rk4(robot, q, v, h, rhs)
+        return q, v
+
+    qr, vr = run(2.5e-4)
+    errs = []
+    for h in (1e-2, 5e-3):
+        q, v = run(h)
+        errs.append(np.linalg.norm(robot.difference(qr, q)) + np.linalg.norm(v - vr))
+    assert 3.5 < np.log2(errs[0] / errs[1]) < 4.6
+
+
+def test_free_motion_conserves_energy_on_a_ur5() -> None:
+    robot = pinobs.load("ur5")
+    res = simulate(robot, [], duration=2.0, inputs="zero", v0=np.full(6, 1.0), seed=0)
+    energy = [
+        robot.kinetic_energy(q, v) + robot.potential_energy(q)
+        for q, v in zip(res.q, res.v, strict=True)
+    ]
+    # measured: 9.6e-8 J drift on 33.4 J (2.9e-9 relative) over 2 s at 1 kHz
+    assert np.ptp(energy) / np.mean(energy) < 1e-8
+
+
+def test_sensor_noise_has_the_requested_standard_deviation() -> None:
+    robot = pinobs.load("planar_3r")
+    rng = np.random.default_rng(0)
+    s = Sensor(rate=100.0, noise_std=1e-3)
+    q = robot.neutral()
+    samples = np.array([robot.difference(q, s.measure(robot, q, rng)) for _ in range(4000)])
+    assert np.std(samples) == pytest.approx(1e-3, rel=0.05)
+    assert abs(np.mean(samples)) < 1e-4
+
+
+def test_quantization_rounds_vector_joints_to_the_encoder_grid() -> None:
+    robot = pinobs.load("planar_3r")
+    s = Sensor(bits=12)
+    res = 2 * np.pi / 4096
+    q = np.array([0.1234, -0.5, 2.0])
+    m = s.measure(robot, q, np.random.default_rng(0))
+    np.testing.assert_allclose(m / res, np.round(q / res), atol=1e-9)
+    assert np.abs(m - q).max() <= res / 2
+
+
+def test_quaternion_stays_unit_under_noise() -> None:
+    robot = pinobs.load("top")
+    m = Sensor(noise_std=0.1).measure(robot, robot.neutral(), np.random.default_rng(0))
+    assert np.linalg.norm(m) == pytest.approx(1.0, abs=1e-14)
+
+
+def test_dropouts_and_delay_are_applied() -> None:
+    robot = pinobs.load("pendulum")
+    res = simulate(
+        robot,
+        ["kf"],
+        duration=1.0,
+        sensor=Sensor(rate=1000.0, dropout=0.3, delay=2),
+        inputs="pd",
+        seed=2,
+    )
+    dropped = np.isnan(res.q_meas[1:, 0])
+    assert 0.25 < dropped.mean() < 0.35
+    k = np.flatnonzero(~dropped)[10] + 1
+    np.testing.assert_allclose(res.q_meas[k], res.q[k - 2])
+    assert np.all(np.isfinite(res.trace("kf").v))
+
+
+def test_pd_tracking_follows_its_reference() -> None:
+    robot = pinobs.load("ur5")
+    res = simulate(robot, [], duration=3.0, inputs="pd", seed=0)
+    profile = make_input("pd", robot, rng=np.random.default_rng(0), center=res.q[0])
+    assert isinstance(profile, PDTracking)
+    # the run's own reference: rebuild it with the run's generator state is not possible; check tracking
+    # of a freshly made profile instead
+    res2 = simulate(
+        robot,
+        [],
+        duration=3.0,
+        inputs=profile,
+        q0=profile.reference(0.0)[0],
+        v0=profile.reference(0.0)[1],
+    )
+    err = [
+        np.linalg.norm(robot.difference(q, profile.reference(t)[0]))
+        for t, q in zip(res2.t, res2.q, strict=True)
+    ]
+    assert max(err[1000:]) < 0.05
+
+
+def test_result_round_trips_through_a_file_and_is_read_only(tmp_path: Path) -> None:
+    robot = pinobs.load("cartpole")
+    res = simulate(
+        robot, ["fd", "kf"], duration=0.3, sensor=Sensor(noise_std=1e-4, dropout=0.1), seed=4
+    )
+    back = pinobs.Result.load(res.save(tmp_path / "r.npz"))
+    for k in ("t", "q", "v", "tau", "q_meas"):
+        np.testing.assert_array_equal(getattr(back, k), getattr(res, k))
+    assert back.observer_names == ["fd", "kf"]
+    np.testing.assert_array_equal(back.trace("kf").v, res.trace("kf").v)
+    assert back.meta == res.meta and back.trace("fd").options == res.trace("fd").options
+    with pytest.raises(ValueError, match="read-only"):
+        res.v[0, 0] = 1.0
+    assert res.t.shape == (301,) and res.q.shape == (301, 2) and res.trace("kf").v.shape == (301, 2)
+
+
+def test_same_seed_same_run_other_seed_other_run() -> None:
+    robot = pinobs.load("cartpole")
+    kw = dict(duration=0.2, sensor=Sensor(noise_std=1e-3), perturb_v=0.5)
+    a, b, c = (simulate(robot, ["kf"], seed=s, **kw) for s in (1, 1, 2))
+    np.testing.assert_array_equal(a.trace("kf").v, b.trace("kf").v)
+    assert not np.array_equal(a.q_meas[1:], c.q_meas[1:])
+
+
+def test_observers_own_their_data_and_do_not_disturb_the_truth() -> None:
+    robot = pinobs.load("ur5")
+    alone = simulate(robot, [], duration=0.2, seed=5)
+    with_obs = simulate(robot, ["fd", "kf"], duration=0.2, seed=5)
+    np.testing.assert_array_equal(alone.q, with_obs.q)

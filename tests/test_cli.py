@@ -1,0 +1,72 @@
+"""The command line, called as ``main([...])``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from pinobs.cli import main
+
+
+def test_list_prints_robots_and_observers(capsys) -> None:
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert "cartpole" in out and "ur5" in out and "kf" in out and "fd" in out
+
+
+def test_run_prints_a_table_and_writes_json_with_rms_v_error(tmp_path: Path, capsys) -> None:
+    path = tmp_path / "r.json"
+    code = main(
+        [
+            "run",
+            "--robot",
+            "cartpole",
+            "--observer",
+            "fd,kf",
+            "--duration",
+            "0.5",
+            "--json",
+            str(path),
+            "--save",
+            str(tmp_path / "r.npz"),
+        ]
+    )
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "rms v err" in out and "x aba" in out
+    report = json.loads(path.read_text())
+    assert set(report["rms_v_error"]) == {"fd", "kf"}
+    assert all(0 < v < 1 for v in report["rms_v_error"].values())
+    assert report["observers"][0]["cost_in_aba"] > 0
+    assert (tmp_path / "r.npz").is_file()
+
+
+def test_unknown_robot_is_an_error_message_not_a_traceback(capsys) -> None:
+    assert main(["run", "--robot", "nosuchbot", "--observer", "kf", "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown robot 'nosuchbot'" in err and "ur5" in err
+
+
+def test_unknown_observer_is_an_error_message(capsys) -> None:
+    assert main(["run", "--robot", "cartpole", "--observer", "nosuchobs", "--duration", "0.1"]) == 2
+    assert "unknown observer 'nosuchobs'" in capsys.readouterr().err
+
+
+def test_bad_option_value_is_an_error_message(capsys) -> None:
+    assert main(["run", "--robot", "cartpole", "--observer", "kf", "--rate", "-5"]) == 2
+    assert "rate=-5" in capsys.readouterr().err
+
+
+def test_demo_prints_tables_for_cartpole_and_ur5_and_writes_json(tmp_path: Path, capsys) -> None:
+    assert main(["demo", "--duration", "0.3", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "cartpole (nv = 2)" in out and "ur5 (nv = 6)" in out
+    runs = json.loads((tmp_path / "demo.json").read_text())["runs"]
+    assert [r["robot"] for r in runs] == ["cartpole", "ur5"]
+
+
+def test_missing_subcommand_exits_with_usage() -> None:
+    with pytest.raises(SystemExit):
+        main([])

@@ -106,10 +106,13 @@ class Observer(ABC, Generic[State]):
     Class attributes set by each family:
         name: registry name.
         summary: one line for ``pinobs list`` and the README table.
+        uses_torque: whether the observer uses the torque (model-based) or not.
     """
 
     name: ClassVar[str] = ""
     summary: ClassVar[str] = ""
+    #: False for model-free observers, which ignore the torque.
+    uses_torque: ClassVar[bool] = True
 
     def __init__(
         self, robot: Robot, *, rate: float | None = None, noise_std: float | None = None

@@ -76,6 +76,7 @@ class FiniteDifference(Observer[_State]):
 
     name = "fd"
     summary = "backward difference + first-order low-pass (model-free baseline)"
+    uses_torque = False
 
     def __init__(
         self,

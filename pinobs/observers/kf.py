@@ -82,6 +82,7 @@ class ConstantAccelerationKF(Observer[_State]):
 
     name = "kf"
     summary = "per-joint constant-acceleration Kalman filter (model-free baseline)"
+    uses_torque = False
 
     def __init__(
         self,

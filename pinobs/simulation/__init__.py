@@ -8,6 +8,7 @@ from pinobs.simulation.inputs import (
     Zero,
     make_input,
 )
+from pinobs.simulation.logs import Log, LogRun, estimate_log, read_log, write_estimates, write_log
 from pinobs.simulation.result import ObserverTrace, Result
 from pinobs.simulation.run import default_input, perturb, simulate
 from pinobs.simulation.sensors import Sensor
@@ -15,6 +16,8 @@ from pinobs.simulation.sensors import Sensor
 __all__ = [
     "INPUT_NAMES",
     "InputProfile",
+    "Log",
+    "LogRun",
     "MultiSine",
     "ObserverTrace",
     "PDTracking",
@@ -22,7 +25,11 @@ __all__ = [
     "Sensor",
     "Zero",
     "default_input",
+    "estimate_log",
     "make_input",
     "perturb",
+    "read_log",
     "simulate",
+    "write_estimates",
+    "write_log",
 ]

@@ -1,0 +1,124 @@
+"""Recorded logs: reading, bad rows, round trips through the CLI."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.cli import main
+from pinobs.simulation import estimate_log, read_log, write_log
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "ur5_log.csv"
+
+
+def _log(tmp_path: Path, *, tau: bool = True, n: int = 300) -> tuple[Path, pinobs.Result]:
+    robot = pinobs.load("ur5")
+    res = pinobs.simulate(robot, [], duration=n / 1000, sensor=pinobs.Sensor(1000.0, 1e-4), seed=1)
+    # row 0 of a simulation has no measurement (NaN): the log starts at the first sample
+    path = write_log(tmp_path / "log.csv", res.t[1:], res.q_meas[1:], res.tau[1:] if tau else None)
+    return path, res
+
+
+def test_cli_round_trips_a_ur5_csv_log_with_the_same_row_count(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "est.csv"
+    assert (
+        main(
+            [
+                "estimate",
+                "--robot",
+                "ur5",
+                "--observer",
+                "kf",
+                "--log",
+                str(EXAMPLE),
+                "--out",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
+    est = np.genfromtxt(out, delimiter=",", names=True)
+    log = np.genfromtxt(EXAMPLE, delimiter=",", names=True)
+    assert est.size == log.size
+    assert est.dtype.names == ("t", *(f"q{i}" for i in range(6)), *(f"v{i}" for i in range(6)))
+    np.testing.assert_array_equal(est["t"], log["t"])
+    assert "200 rows, 200 estimated, 0 bad" in capsys.readouterr().out
+
+
+def test_estimates_from_a_log_match_the_live_loop(tmp_path: Path) -> None:
+    path, res = _log(tmp_path)
+    robot = pinobs.load("ur5")
+    run = estimate_log(pinobs.make_observer("kf", robot, noise_std=1e-4), read_log(path, robot))
+    live = pinobs.make_observer("kf", robot, noise_std=1e-4)
+    est = live.reset(res.t[1], res.q_meas[1], None, res.tau[1])
+    for k in range(2, 51):
+        est = live.update(res.t[k], res.q_meas[k], res.tau[k])
+    np.testing.assert_allclose(run.v[49], est.v, rtol=1e-12, atol=1e-12)
+
+
+def test_bad_rows_are_reported_and_the_rest_is_processed(tmp_path: Path) -> None:
+    path, _ = _log(tmp_path, n=100)
+    lines = path.read_text().splitlines()
+    lines[10] = lines[10].replace(lines[10].split(",")[2], "abc", 1)  # unreadable q1 (line 11)
+    cells = lines[20].split(",")
+    cells[1] = "nan"  # non-finite q0 (line 21)
+    lines[20] = ",".join(cells)
+    cells = lines[30].split(",")
+    cells[0] = lines[29].split(",")[0]  # duplicated timestamp (line 31)
+    lines[30] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    robot = pinobs.load("ur5")
+    run = estimate_log(pinobs.make_observer("kf", robot, noise_std=1e-4), read_log(path, robot))
+    bad = dict(run.bad_rows)
+    assert set(bad) == {11, 21, 31}
+    assert "'q1' unreadable" in bad[11]
+    assert "non-finite" in bad[21] and "dropped sample" in bad[21]
+    assert "not after the previous sample" in bad[31]
+    assert run.v.shape == (100, 6)
+    finite_rows = np.isfinite(run.v[:, 0])
+    assert finite_rows.sum() == 99  # only the duplicated-time row has no estimate
+    assert not finite_rows[31 - 2]
+
+
+def test_log_without_torques_warns_model_based_observers_only(tmp_path: Path) -> None:
+    path, _ = _log(tmp_path, tau=False, n=50)
+    robot = pinobs.load("ur5")
+    log = read_log(path, robot)
+    assert log.tau is None
+    assert estimate_log(pinobs.make_observer("kf", robot), log).warnings == []
+    model_based = [
+        n for n in pinobs.observer_names() if pinobs.observers.observer_class(n).uses_torque
+    ]
+    for name in model_based:
+        try:
+            ob = pinobs.make_observer(name, robot, rate=1000.0, noise_std=1e-4)
+        except pinobs.UnsupportedRobotError:
+            continue
+        warnings = estimate_log(ob, log).warnings
+        assert warnings and "no torque columns" in warnings[0]
+
+
+def test_npz_log_is_read_like_csv(tmp_path: Path) -> None:
+    path, _ = _log(tmp_path, n=40)
+    robot = pinobs.load("ur5")
+    csv_log = read_log(path, robot)
+    np.savez(tmp_path / "log.npz", t=csv_log.t, q=csv_log.q, tau=csv_log.tau)
+    npz_log = read_log(tmp_path / "log.npz", robot)
+    np.testing.assert_array_equal(npz_log.q, csv_log.q)
+    np.testing.assert_array_equal(npz_log.tau, csv_log.tau)
+
+
+def test_log_columns_that_do_not_fit_the_robot_are_rejected(tmp_path: Path) -> None:
+    path, _ = _log(tmp_path, n=10)
+    with pytest.raises(pinobs.DimensionError, match=r"lacks columns \['q6'"):
+        read_log(path, pinobs.load("panda"))
+    with pytest.raises(pinobs.ModelFileError, match="does not exist") as info:
+        read_log(tmp_path / "missing.csv", pinobs.load("ur5"))
+    assert isinstance(info.value, FileNotFoundError)
+    np.savez(tmp_path / "bad.npz", t=np.zeros(3), q=np.zeros((3, 5)))
+    with pytest.raises(pinobs.DimensionError, match=r"needs q of shape \(N, 6\)"):
+        read_log(tmp_path / "bad.npz", pinobs.load("ur5"))

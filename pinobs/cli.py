@@ -220,6 +220,23 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from pinobs.evaluation.bench import BenchConfig, format_bench, run_bench
+
+    cfg = BenchConfig.quick() if args.quick else BenchConfig()
+    print(
+        f"pinobs bench ({'quick' if args.quick else 'full'}): robots {', '.join(cfg.robots)}; timing also {', '.join(cfg.cost_robots)}"
+    )
+    report = run_bench(cfg, log=lambda msg: print(msg, flush=True))
+    print(format_bench(report))
+    print(
+        f"\nbench took {report['seconds']:.0f} s on {report['machine']['processor']} ({report['machine']['system']})"
+    )
+    if args.json:
+        print(f"wrote {_write_json(args.json, report)}")
+    return 0
+
+
 # ------------------------------------------------------------------ parser
 def _add_sim_options(p: argparse.ArgumentParser, *, duration: float) -> None:
     p.add_argument(
@@ -308,6 +325,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_estimate)
+
+    p = sub.add_parser("bench", help="accuracy and cost of every observer against the baselines")
+    p.add_argument("--quick", action="store_true", help="two robots, short runs: under two minutes")
+    p.add_argument("--json", default=None, help="write the full report to this JSON file")
+    p.set_defaults(func=_cmd_bench)
 
     p = sub.add_parser("demo", help="every observer on the cart-pole and a UR5: tables, JSON")
     p.add_argument("--out", default="out", help="output folder (default %(default)s)")

@@ -3,7 +3,7 @@
 from pinobs.model.integrators import lie_rk4
 from pinobs.model.loading import RobotEntry, load, robot_entries, robot_names
 from pinobs.model.robot import JointBlock, Robot
-from pinobs.model.timing import aba_time
+from pinobs.model.timing import aba_time, pinocchio_version
 
 __all__ = [
     "JointBlock",
@@ -11,6 +11,7 @@ __all__ = [
     "RobotEntry",
     "aba_time",
     "lie_rk4",
+    "pinocchio_version",
     "load",
     "robot_entries",
     "robot_names",

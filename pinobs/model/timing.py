@@ -13,7 +13,7 @@ import pinocchio as pin
 
 from pinobs.model.robot import Robot
 
-__all__ = ["aba_time"]
+__all__ = ["aba_time", "pinocchio_version"]
 
 
 def aba_time(robot: Robot, *, repeats: int = 2000, rounds: int = 5, seed: int = 0) -> float:
@@ -35,3 +35,8 @@ def aba_time(robot: Robot, *, repeats: int = 2000, rounds: int = 5, seed: int = 
             pin.aba(model, data, q, v, tau)
         samples.append((time.perf_counter() - start) / repeats)
     return float(np.median(samples))
+
+
+def pinocchio_version() -> str:
+    """The installed Pinocchio's version, for benchmark reports."""
+    return str(pin.__version__)

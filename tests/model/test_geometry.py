@@ -16,6 +16,7 @@ import pytest
 
 import pinobs
 from pinobs.model import Robot
+from pinobs.model.reference import fd_curvature, koszul_connection, mass_matrix_derivative_fd
 
 ROBOTS = [
     "cartpole",
@@ -56,34 +57,6 @@ def _point(robot: Robot, seed: int) -> tuple[np.ndarray, ...]:
     q = robot.random_configuration(rng)
     x, y, z, w = rng.standard_normal((4, robot.nv))
     return q, x, y, z, w
-
-
-def _dM(robot: Robot, q: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """D_x M(q) by central differences along integrate."""
-    return (
-        robot.mass_matrix(robot.integrate(q, EPS * x))
-        - robot.mass_matrix(robot.integrate(q, -EPS * x))
-    ) / (2 * EPS)
-
-
-def koszul_connection(robot: Robot, q: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """∇_X Y for frame-constant X, Y from the Koszul formula:
-    2⟨∇_X Y, Z⟩ = X⟨Y,Z⟩ + Y⟨X,Z⟩ − Z⟨X,Y⟩ + ⟨[X,Y],Z⟩ − ⟨[X,Z],Y⟩ − ⟨[Y,Z],X⟩."""
-    n = robot.nv
-    m = robot.mass_matrix(q)
-    rhs = np.empty(n)
-    for k in range(n):
-        e = np.zeros(n)
-        e[k] = 1.0
-        rhs[k] = 0.5 * (
-            y @ _dM(robot, q, x) @ e
-            + x @ _dM(robot, q, y) @ e
-            - x @ _dM(robot, q, e) @ y
-            + robot.bracket(x, y) @ m @ e
-            - robot.bracket(x, e) @ m @ y
-            - robot.bracket(y, e) @ m @ x
-        )
-    return np.linalg.solve(m, rhs)
 
 
 @pytest.mark.parametrize("name", ROBOTS)
@@ -134,7 +107,7 @@ def test_connection_is_torsion_free_and_metric_compatible(name: str) -> None:
         robot.connection(q, x, y) - robot.connection(q, y, x), robot.bracket(x, y), atol=1e-10
     )
     m = robot.mass_matrix(q)
-    lhs = y @ _dM(robot, q, x) @ z  # X⟨Y, Z⟩ for frame-constant Y, Z
+    lhs = y @ mass_matrix_derivative_fd(robot, q, x) @ z  # X⟨Y, Z⟩ for frame-constant Y, Z
     rhs = robot.connection(q, x, y) @ m @ z + y @ m @ robot.connection(q, x, z)
     assert abs(lhs - rhs) <= 1e-7 * (1 + abs(lhs))
 
@@ -143,21 +116,7 @@ def test_connection_is_torsion_free_and_metric_compatible(name: str) -> None:
 def test_curvature_matches_finite_differences_of_the_koszul_connection(name: str) -> None:
     robot = _robot(name)
     q, x, y, z, _ = _point(robot, 5)
-    h = 1e-4
-
-    def w(qq: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return koszul_connection(robot, qq, a, b)
-
-    def d(a: np.ndarray, f) -> np.ndarray:
-        return (f(robot.integrate(q, h * a)) - f(robot.integrate(q, -h * a))) / (2 * h)
-
-    ref = (
-        d(x, lambda qq: w(qq, y, z))
-        - d(y, lambda qq: w(qq, x, z))
-        + w(q, x, w(q, y, z))
-        - w(q, y, w(q, x, z))
-        - w(q, robot.bracket(x, y), z)
-    )
+    ref = fd_curvature(robot, q, x, y, z)
     got = robot.curvature(q, x, y, z)
     assert np.linalg.norm(got - ref) <= 2e-4 * (1 + np.linalg.norm(ref))
 

@@ -220,6 +220,15 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_check(args: argparse.Namespace) -> int:
+    from pinobs.observers.ii import check_assumption1
+
+    robot = load(args.robot, root_joint=args.root_joint)
+    report = check_assumption1(robot)
+    print(report.format())
+    return 0 if report.holds else 1
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     from pinobs.evaluation.bench import BenchConfig, format_bench, run_bench
 
@@ -325,6 +334,18 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_estimate)
+
+    p = sub.add_parser(
+        "check", help="check an observer's assumptions on a robot (ii: Assumption 1)"
+    )
+    p.add_argument(
+        "which", choices=["ii"], help="ii: does the Cholesky factor of M^-1 satisfy D_T = 0?"
+    )
+    p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF/MJCF path")
+    p.add_argument(
+        "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
+    )
+    p.set_defaults(func=_cmd_check)
 
     p = sub.add_parser("bench", help="accuracy and cost of every observer against the baselines")
     p.add_argument("--quick", action="store_true", help="two robots, short runs: under two minutes")

@@ -70,3 +70,11 @@ def test_demo_prints_tables_for_cartpole_and_ur5_and_writes_json(tmp_path: Path,
 def test_missing_subcommand_exits_with_usage() -> None:
     with pytest.raises(SystemExit):
         main([])
+
+
+def test_check_ii_reports_the_working_ordering_on_the_cartpole_and_fails_on_a_panda(capsys) -> None:
+    assert main(["check", "ii", "--robot", "cartpole"]) == 0
+    out = capsys.readouterr().out
+    assert "HOLDS" in out and "(pole_theta, cart_x)" in out
+    assert main(["check", "ii", "--robot", "panda"]) == 1
+    assert "FAILS" in capsys.readouterr().out

@@ -279,18 +279,18 @@ def time_geometry(
         aba = aba_time(robot)
         q = robot.random_configuration(rng)
         x, y, z = rng.standard_normal((3, robot.nv))
-        calls: dict[str, Callable[[], object]] = {
-            "christoffel": lambda r=robot, q=q, x=x, y=y: r.christoffel(q, x, y),
-            "connection": lambda r=robot, q=q, x=x, y=y: r.connection(q, x, y),
-            "curvature": lambda r=robot, q=q, x=x, y=y, z=z: r.curvature(q, x, y, z),
+        calls: dict[str, tuple[Callable[..., object], tuple[Any, ...]]] = {
+            "christoffel": (robot.christoffel, (q, x, y)),
+            "connection": (robot.connection, (q, x, y)),
+            "curvature": (robot.curvature, (q, x, y, z)),
         }
         row: dict[str, Any] = {"robot": name, "nv": robot.nv, "aba_seconds": aba}
-        for key, fn in calls.items():
+        for key, (fn, fn_args) in calls.items():
             samples = []
             for _ in range(5):
                 start = time.perf_counter()
                 for _ in range(repeats):
-                    fn()
+                    fn(*fn_args)
                 samples.append((time.perf_counter() - start) / repeats)
             row[key] = float(np.median(samples)) / aba
         out.append(row)

@@ -374,6 +374,27 @@ class Robot:
         dq, _, _ = pin.computeABADerivatives(self._free, self._free_data, q, x, np.zeros(self.nv))
         return -np.array(dq, dtype=float)
 
+    def spray_jacobians(self, q: Vector, x: Vector) -> tuple[Vector, Vector, Vector]:
+        """``(Γs(x, x), ∂/∂q Γs(x, x), ∂/∂x Γs(x, x))`` from one analytic ABA-derivatives call.
+
+        ``∂/∂x Γs(x, x) = 2 Γs(x, ·)``, so the third matrix gives ``Γs(x, y)``
+        for every ``y`` at no further cost; the second has columns
+        ``D_{E_j} Γs(x, x)`` (as :meth:`spray_derivative`).
+        """
+        zero = np.zeros(self.nv)
+        dq, dx, _ = pin.computeABADerivatives(self._free, self._free_data, q, x, zero)
+        return -np.array(self._free_data.ddq), -np.array(dq), -np.array(dx)
+
+    def forward_dynamics_jacobians(
+        self, q: Vector, v: Vector, tau: Vector
+    ) -> tuple[Vector, Vector, Vector]:
+        """``(v̇, ∂v̇/∂q, ∂v̇/∂v)`` of :meth:`forward_dynamics` from one analytic call (no ``M⁻¹`` copy).
+
+        ``∂v̇/∂v = −2Γs(v, ·)``; ``∂q`` along ``integrate``.
+        """
+        dq, dv, _ = pin.computeABADerivatives(self.model, self._data, q, v, tau)
+        return np.array(self._data.ddq), np.array(dq), np.array(dv)
+
     def christoffel_derivative(self, q: Vector, x: Vector, y: Vector, z: Vector) -> Vector:
         """``D_z[Γs(q)(x, y)]``: derivative of the symmetric part along ``z`` (two ABA derivative calls)."""
         return 0.25 * (self.spray_derivative(q, x + y) - self.spray_derivative(q, x - y)) @ z

@@ -7,6 +7,7 @@ branch lives here, so that a reader can see them together.
 from __future__ import annotations
 
 __all__ = [
+    "COULOMB_SMOOTHING_VELOCITY",
     "II_ASSUMPTION1_TOL",
     "JACOBI_FD_STEP",
     "LEFT_INVARIANT_INERTIA_TOL",
@@ -37,3 +38,7 @@ II_ASSUMPTION1_TOL = 1e-6
 #: observer's Jacobi operator ``R(v, ·)v`` (``ε|v|``): truncation ~ε², rounding
 #: ~1e-16/ε; 1e-5 balances them near 1e-10 relative.
 JACOBI_FD_STEP = 1e-5
+
+#: Coulomb friction ``F_c sign(v)`` is smoothed as ``F_c tanh(v / v_s)`` with this
+#: ``v_s`` [rad/s or m/s]: 95 % of the full friction at 2 v_s = 0.02 rad/s.
+COULOMB_SMOOTHING_VELOCITY = 1e-2

@@ -266,6 +266,13 @@ class AnalyticMetric:
         """``τ = M a + c + g``."""
         return np.asarray(self.mass_matrix(q) @ a + self.nonlinear_effects(q, v))
 
+    #: An analytic metric has no joint friction (the interface of :class:`Robot`).
+    has_friction = False
+
+    def friction_torque(self, v: Vector) -> Vector:
+        """Zero: an analytic metric carries no joint friction."""
+        return np.zeros(self.nv)
+
     def force_per_metric(self, q: Vector, tau: Vector) -> Vector:
         """``S = M⁻¹(τ − g)``."""
         return np.asarray(np.linalg.solve(self.mass_matrix(q), tau - self.gravity(q)))

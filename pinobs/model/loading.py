@@ -257,7 +257,7 @@ def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
     return path, [path.parent], "fixed", path.stem
 
 
-def load(source: str | Path, *, root_joint: str | None = None) -> Robot:
+def load(source: str | Path, *, root_joint: str | None = None, friction: bool = False) -> Robot:
     """Load a robot by registry name or file path.
 
     Args:
@@ -268,6 +268,10 @@ def load(source: str | Path, *, root_joint: str | None = None) -> Robot:
             robots and the rigid body, spherical for the top, fixed otherwise;
             fixed for files), ``"fixed"``, ``"spherical"``, ``"freeflyer"`` or
             ``"planar"``.
+        friction: include the joint friction of the URDF's ``<dynamics damping
+            friction>`` tags in the dynamics (:meth:`Robot.friction_torque`).
+            Off by default: many published URDFs carry placeholder values
+            (pr2's torso has 20000 N·s/m); switch it on when yours are identified.
 
     Raises:
         UnknownNameError: ``source`` is neither a registered name nor a path.
@@ -308,5 +312,11 @@ def load(source: str | Path, *, root_joint: str | None = None) -> Robot:
             "root_joint='spherical' or 'freeflyer'"
         )
     return Robot(
-        model, name=name, source=str(source), visual_model=visual, collision_model=collision
+        model,
+        name=name,
+        source=str(source),
+        visual_model=visual,
+        collision_model=collision,
+        friction=friction,
+        root_joint=root,
     )

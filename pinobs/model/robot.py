@@ -33,7 +33,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import ConfigurationError, DimensionError, NonFiniteError
-from pinobs.tolerances import QUATERNION_NORM_TOL
+from pinobs.tolerances import COULOMB_SMOOTHING_VELOCITY, QUATERNION_NORM_TOL
 
 __all__ = ["JointBlock", "Robot"]
 
@@ -93,6 +93,11 @@ class Robot:
         source: where the model came from (registry name or file path).
         visual_model: Pinocchio visual geometry, or ``None``.
         collision_model: Pinocchio collision geometry, or ``None``.
+        friction: whether the model's joint friction (URDF ``<dynamics>``) is
+            part of the dynamics (:meth:`friction_torque`).
+        has_friction: whether that friction is nonzero.
+        root_joint: the root joint :func:`pinobs.load` added (``"fixed"``,
+            ``"spherical"``, ``"freeflyer"``, ``"planar"``), or ``None`` if unknown.
     """
 
     def __init__(
@@ -103,13 +108,22 @@ class Robot:
         source: str,
         visual_model: pin.GeometryModel | None = None,
         collision_model: pin.GeometryModel | None = None,
+        friction: bool = False,
+        root_joint: str | None = None,
     ) -> None:
         self.model = model
+        self.root_joint = root_joint
         self.name = name
         self.source = source
         self.visual_model = visual_model
         self.collision_model = collision_model
         self._data = model.createData()
+        # Joint friction from the URDF <dynamics damping="…" friction="…"/> tags (Pinocchio
+        # loads them into model.damping / model.friction but its ABA ignores them).
+        self.friction = bool(friction)
+        self._damping = np.array(model.damping, dtype=float) if friction else np.zeros(model.nv)
+        self._coulomb = np.array(model.friction, dtype=float) if friction else np.zeros(model.nv)
+        self.has_friction = bool(np.any(self._damping) or np.any(self._coulomb))
         # Zero-gravity copy: aba(q, v, 0) on it is -M⁻¹ c(q, v), the geodesic spray.
         self._free = model.copy()
         self._free.gravity.setZero()
@@ -173,6 +187,67 @@ class Robot:
             source=self.source,
             visual_model=self.visual_model,
             collision_model=self.collision_model,
+            friction=self.friction,
+            root_joint=self.root_joint,
+        )
+
+    def perturbed(
+        self,
+        *,
+        name: str | None = None,
+        inertia_scale: ArrayLike | None = None,
+        payload: tuple[float, ArrayLike] | None = None,
+        damping: ArrayLike | None = None,
+        coulomb: ArrayLike | None = None,
+    ) -> Robot:
+        """A copy of the robot with its dynamics changed (model-mismatch studies).
+
+        Args:
+            name: name of the copy (default: ``<name>~``).
+            inertia_scale: one factor per moving body (``nv`` joints order, one
+                per joint with ``nv > 0``): mass and rotational inertia scaled
+                together, centre of mass kept, so the inertia stays physical.
+            payload: ``(mass [kg], offset [m] in the last body's frame)``: a
+                point mass added to the last body (the end effector of an arm).
+            damping, coulomb: viscous [N·m·s/rad] and Coulomb [N·m] friction per
+                velocity coordinate, replacing the model's (friction switched on).
+        """
+        model = self.model.copy()
+        if inertia_scale is not None:
+            scale = np.asarray(inertia_scale, dtype=float)
+            ids = [i for i, j in enumerate(model.joints) if i > 0 and j.nv > 0]
+            if scale.shape != (len(ids),) or np.any(scale <= 0):
+                raise DimensionError(
+                    f"inertia_scale needs {len(ids)} positive factors, got {scale.tolist()}"
+                )
+            for f, i in zip(scale, ids, strict=True):
+                inertia = model.inertias[i]
+                model.inertias[i] = pin.Inertia(
+                    f * inertia.mass, inertia.lever, f * inertia.inertia
+                )
+        if payload is not None:
+            mass, offset = payload
+            last = max(i for i, j in enumerate(model.joints) if i > 0 and j.nv > 0)
+            model.inertias[last] = model.inertias[last] + pin.Inertia(
+                float(mass), np.asarray(offset, dtype=float), np.zeros((3, 3))
+            )
+        friction = self.friction
+        if damping is not None or coulomb is not None:
+            model.damping = np.asarray(
+                damping if damping is not None else np.zeros(self.nv), dtype=float
+            )
+            model.friction = np.asarray(
+                coulomb if coulomb is not None else np.zeros(self.nv), dtype=float
+            )
+            friction = True
+        return Robot(
+            model,
+            name=name or f"{self.name}~",
+            source=self.source,
+            visual_model=self.visual_model,
+            collision_model=self.collision_model,
+            friction=friction,
+            root_joint=self.root_joint,
         )
 
     # ------------------------------------------------------------- validation
@@ -308,17 +383,44 @@ class Robot:
         """``c(q, v) + g(q)``."""
         return np.array(pin.nonLinearEffects(self.model, self._data, q, v), dtype=float)
 
+    def friction_torque(self, v: Vector) -> Vector:
+        """Joint friction torque ``τ_f(v) = −D v − F_c tanh(v / v_s)`` [N·m or N].
+
+        ``D`` (viscous) and ``F_c`` (Coulomb) from the URDF ``<dynamics damping
+        friction>`` tags; the Coulomb step is smoothed over
+        ``v_s`` = :data:`pinobs.tolerances.COULOMB_SMOOTHING_VELOCITY` so the
+        dynamics stay smooth (integrators and Jacobians need it).  Zero when
+        the robot was built with ``friction=False``.
+        """
+        if not self.has_friction:
+            return np.zeros(self.nv)
+        return -self._damping * v - self._coulomb * np.tanh(v / COULOMB_SMOOTHING_VELOCITY)
+
+    def friction_derivative(self, v: Vector) -> Vector:
+        """``∂τ_f/∂v``, diagonal, returned as its diagonal, shape ``(nv,)``."""
+        if not self.has_friction:
+            return np.zeros(self.nv)
+        vs = COULOMB_SMOOTHING_VELOCITY
+        return -self._damping - self._coulomb / vs / np.cosh(v / vs) ** 2
+
     def forward_dynamics(self, q: Vector, v: Vector, tau: Vector) -> Vector:
-        """``v̇ = M⁻¹(τ - c(q, v) - g(q))`` by the articulated-body algorithm."""
+        """``v̇ = M⁻¹(τ + τ_f(v) − c(q, v) − g(q))`` by the articulated-body algorithm."""
+        if self.has_friction:
+            tau = tau + self.friction_torque(v)
         return np.array(pin.aba(self.model, self._data, q, v, tau), dtype=float)
 
     def forward_dynamics_derivatives(
         self, q: Vector, v: Vector, tau: Vector
     ) -> tuple[Vector, Vector, Vector]:
-        """``(∂v̇/∂q, ∂v̇/∂v, M⁻¹)`` of :meth:`forward_dynamics` (∂q along ``integrate``)."""
+        """``(∂v̇/∂q, ∂v̇/∂v, M⁻¹)`` of :meth:`forward_dynamics` (∂q along ``integrate``; friction included)."""
+        if self.has_friction:
+            tau = tau + self.friction_torque(v)
         dq, dv, minv = pin.computeABADerivatives(self.model, self._data, q, v, tau)
         minv = np.triu(minv) + np.triu(minv, 1).T  # Pinocchio fills the upper triangle
-        return np.array(dq), np.array(dv), np.array(minv)
+        dv = np.array(dv)
+        if self.has_friction:
+            dv += minv * self.friction_derivative(v)
+        return np.array(dq), dv, np.array(minv)
 
     def inverse_dynamics(self, q: Vector, v: Vector, a: Vector) -> Vector:
         """``τ = M a + c(q, v) + g(q)`` by recursive Newton-Euler."""
@@ -388,9 +490,12 @@ class Robot:
     def forward_dynamics_jacobians(
         self, q: Vector, v: Vector, tau: Vector
     ) -> tuple[Vector, Vector, Vector]:
-        """``(v̇, ∂v̇/∂q, ∂v̇/∂v)`` of :meth:`forward_dynamics` from one analytic call (no ``M⁻¹`` copy).
+        """``(v̇, ∂v̇/∂q, ∂v̇/∂v)`` of the rigid-body dynamics ``M⁻¹(τ − c − g)``, one analytic call.
 
-        ``∂v̇/∂v = −2Γs(v, ·)``; ``∂q`` along ``integrate``.
+        Joint friction is *not* included (unlike :meth:`forward_dynamics`):
+        callers use this with other vectors than a velocity in the ``v`` slot
+        (``∂v̇/∂v = −2Γs(v, ·)``); add ``M⁻¹ τ_f`` themselves.  ``∂q`` along
+        ``integrate``.
         """
         dq, dv, _ = pin.computeABADerivatives(self.model, self._data, q, v, tau)
         return np.array(self._data.ddq), np.array(dq), np.array(dv)

@@ -871,9 +871,10 @@ class IIObserver(Observer[_State]):
             t, c = self.factor.frame(q), None
         return _Stage(t, beta, pt, self.robot.gravity(q), c)
 
-    @staticmethod
-    def _eta_dot(st: _Stage, eta: Vector, tau: Vector) -> Vector:
+    def _eta_dot(self, st: _Stage, eta: Vector, tau: Vector) -> Vector:
         p_hat = st.beta - eta
+        if self.robot.has_friction:  # the model's joint friction, a known torque at v̂ = T P̂
+            tau = tau + self.robot.friction_torque(st.t @ p_hat)
         out = st.pt @ p_hat - st.t.T @ (tau - st.g)  # Sarras et al. eq. (30), input τ added
         if st.c is not None:
             out -= momentum_residual(

@@ -498,6 +498,7 @@ class RiemannianObserver(Observer[_State]):
         r = self.robot
         zeta = geodesic_error(r, q_hat, q_meas)
         alpha, beta, c = self._gains_at(q_hat, zeta, v_hat)
+        tau = tau + r.friction_torque(v_hat)  # the model's joint friction (zero if none), at v̂
         s_par = transport_first_order(r, q_hat, zeta, r.force_per_metric(q_meas, tau))
         q_dot = v_hat - 2.0 * alpha * zeta  # Maithripala et al. eq. (17)
         v_dot = -r.connection(q_hat, q_dot, v_hat) + s_par - beta * zeta  # eq. (18)

@@ -89,6 +89,7 @@ class Result:
     def save(self, path: str | Path) -> Path:
         """Write the result to a ``.npz`` file; :meth:`load` reads it back."""
         path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
         arrays: dict[str, Any] = {k: getattr(self, k) for k in ("t", "q", "v", "tau", "q_meas")}
         header = {
             "robot": self.robot,

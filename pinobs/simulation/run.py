@@ -164,6 +164,8 @@ def simulate(
     )
     meta = {
         "robot": robot.name,
+        "robot_source": getattr(robot, "source", robot.name),
+        "root_joint": getattr(robot, "root_joint", None),
         "duration": duration,
         "rate": sensor.rate,
         "noise_std": sensor.noise_std,

@@ -1,0 +1,212 @@
+"""Ibrir's differentiators (Theorems 2.1 and 2.2): gains, transfer functions, invariance, noise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.errors import GainError
+from pinobs.evaluation import evaluate
+from pinobs.observers import make_observer
+from pinobs.observers.differentiators import (
+    chain_matrix,
+    gain_riccati_rhs,
+    steady_gain_matrix,
+    steady_gains,
+    transfer_function,
+)
+from pinobs.simulation import Sensor, simulate
+
+
+# ---------------------------------------------------------------- algebra
+@pytest.mark.parametrize("n", [2, 3, 4, 5])
+def test_steady_gain_matrix_solves_eq9_and_gives_the_binomial_gains(n: int) -> None:
+    gamma = 7.5
+    L = steady_gain_matrix(n, gamma)
+    assert np.abs(gain_riccati_rhs(L, gamma)).max() < 1e-12  # eq. (9)
+    gains = np.linalg.solve(L, np.eye(n)[:, 0])
+    expected = [math.comb(n, k) * gamma**k for k in range(1, n + 1)]  # Remark 2.1
+    np.testing.assert_allclose(gains, expected, rtol=1e-10)
+    np.testing.assert_allclose(steady_gains(n, gamma), expected, rtol=1e-15)
+
+
+@pytest.mark.parametrize("n", [2, 3, 4])
+def test_eq13_equals_the_state_space_transfer_function_eq10(n: int) -> None:
+    gamma = 3.0
+    A = chain_matrix(n)
+    C = np.eye(n)[:1]
+    Linv = np.linalg.inv(steady_gain_matrix(n, gamma))
+    for s in [0.3j, 1.0 + 2.0j, 17.0j, -0.5 + 0.1j]:
+        eq10 = np.linalg.solve(s * np.eye(n) - A + Linv @ C.T @ C, Linv @ C.T).ravel()
+        np.testing.assert_allclose(transfer_function(n, gamma, s), eq10, rtol=1e-12)
+    # eq. (14): X̂_j → s^{j−1} as γ → ∞
+    s = 2.0j
+    np.testing.assert_allclose(transfer_function(n, 1e5, s), s ** np.arange(n), rtol=1e-3)
+
+
+# ---------------------------------------------------------------- highgain
+def test_dynamic_gain_L_of_t_ramps_up_to_the_steady_gains() -> None:
+    robot = pinobs.load("pendulum")
+    gamma, n = 100.0, 3
+    ob = make_observer("highgain", robot, order=n, gamma=gamma, gain_ramp=10.0)
+    ob.reset(0.0, np.zeros(1))
+    g0 = ob.gain()
+    np.testing.assert_allclose(g0, steady_gains(n, gamma / 10.0), rtol=1e-12)
+    history = []
+    for k in range(1, 301):
+        ob.update(k * 1e-3, np.zeros(1))
+        history.append(ob.gain()[0])
+    # after 0.3 s = 30/γ the gain is the steady one (measured relative error 1e-9)
+    np.testing.assert_allclose(ob.gain(), steady_gains(n, gamma), rtol=1e-6)
+    assert np.all(np.linalg.eigvalsh(ob.gain_matrix()) > 0)
+    assert history[0] < history[-1]
+
+
+def test_highgain_vector_field_is_exact_on_polynomials_of_degree_below_n() -> None:
+    """On y = polynomial of degree n − 1 with x̂ = its derivatives, eq. (7) is the chain."""
+    robot = pinobs.load("pendulum")
+    n, gamma = 4, 30.0
+    ob = make_observer("highgain", robot, order=n, gamma=gamma)
+    derivs = np.array([0.3, -1.2, 0.7, 2.5])  # y, ẏ, ÿ, d³y/dt³ at t
+    L = steady_gain_matrix(n, gamma) * 3.0  # any L(t)
+    u, X_dot, L_dot = ob.vector_field(derivs[:1], derivs[1:, None], L, derivs[:1])
+    np.testing.assert_allclose(u, derivs[1:2], atol=1e-15)
+    np.testing.assert_allclose(X_dot[:, 0], [derivs[2], derivs[3], 0.0], atol=1e-15)
+    np.testing.assert_allclose(L_dot, gain_riccati_rhs(L, gamma), atol=1e-15)
+
+
+def test_sampled_highgain_reproduces_the_eq13_frequency_response() -> None:
+    """y = a sin ωt at 1 kHz: every steady state x̂_j is Re(H_j(jω) a e^{jωt}) of eq. (13)."""
+    robot = pinobs.load("pendulum")
+    n, gamma, a, w, h = 3, 100.0, 0.5, 2.0 * math.pi, 1e-3
+    ob = make_observer("highgain", robot, order=n, gamma=gamma, gain_ramp=1.0, rate=1 / h)
+    ob.reset(0.0, np.zeros(1))
+    H = transfer_function(n, gamma, 1j * w)
+    worst = 0.0
+    for k in range(1, 2001):
+        t = k * h
+        est = ob.update(t, np.array([a * math.sin(w * t)]))
+        if t > 1.0:
+            states = np.concatenate([est.q, ob.derivatives()[:, 0]])
+            predicted = np.imag(H * a * np.exp(1j * w * t))
+            scale = a * w ** np.arange(n)
+            worst = max(worst, float(np.max(np.abs(states - predicted) / scale)))
+    assert worst < 1e-3  # measured 2e-5 of each derivative's amplitude
+
+
+@pytest.mark.parametrize("name", ["highgain", "sliding"])
+@pytest.mark.parametrize("order", [2, 4])
+def test_differentiators_track_a_constant_body_velocity_on_so3_exactly(
+    name: str, order: int
+) -> None:
+    """Lie-group joints differentiate the group error: q(t) = q₀ exp(ωt) gives v̂ → ω exactly."""
+    robot = pinobs.load("top")
+    rng = np.random.default_rng(0)
+    q0 = robot.random_configuration(rng)
+    w = np.array([0.7, -1.2, 2.0])
+    ob = make_observer(name, robot, order=order, rate=1000)
+    ob.reset(0.0, robot.integrate(q0, np.array([0.05, 0.0, 0.0])))
+    for k in range(1, 1001):
+        est = ob.update(k * 1e-3, robot.integrate(q0, w * k * 1e-3))
+    assert np.abs(est.v - w).max() < 1e-9  # measured 6e-14 (highgain), 6e-13 (sliding)
+    assert np.abs(robot.difference(est.q, robot.integrate(q0, w))).max() < 1e-12
+
+
+# measured max velocity error after 0.5 s, noise-free, 1 kHz, default gains:
+# highgain (γ = 200, order 4): cartpole 1.6e-4, ur5 1.4e-4 — the lag of eq. (13);
+# sliding (γ = 500, order 4): cartpole 7.1e-6, ur5 5.9e-6.
+_LAG = {"highgain": 5e-4, "sliding": 2e-5}
+
+
+@pytest.mark.parametrize("name", ["highgain", "sliding"])
+@pytest.mark.parametrize("robot_name", ["cartpole", "ur5"])
+def test_differentiator_started_on_the_truth_stays_within_its_lag(
+    name: str, robot_name: str
+) -> None:
+    robot = pinobs.load(robot_name)
+    res = simulate(robot, [name], sensor=Sensor(1000, 0.0), inputs="pd", duration=1.0, seed=1)
+    err = np.abs(res.trace(name).v - res.v)
+    assert err[res.t > 0.5].max() < _LAG[name]
+
+
+@pytest.mark.parametrize("name", ["highgain", "sliding"])
+@pytest.mark.parametrize("robot_name", ["cartpole", "ur5"])
+def test_differentiator_converges_from_a_perturbed_start(name: str, robot_name: str) -> None:
+    robot = pinobs.load(robot_name)
+    res = simulate(
+        robot,
+        [name],
+        sensor=Sensor(1000, 0.0),
+        inputs="pd",
+        duration=1.0,
+        perturb_q=0.1,
+        perturb_v=0.5,
+        seed=2,
+    )
+    err = np.abs(res.trace(name).v - res.v)
+    assert err[0].max() > 0.1
+    assert err[res.t > 0.5].max() < _LAG[name]
+
+
+# ------------------------------------------------------------------ sliding
+def test_implicit_sliding_does_not_chatter_and_explicit_does() -> None:
+    """Noise-free sine at 1 kHz: implicit lands on the sliding surface, explicit sign chatters."""
+    robot = pinobs.load("pendulum")
+    err, jump = {}, {}
+    for disc in ("implicit", "explicit"):
+        ob = make_observer("sliding", robot, order=3, gamma=100.0, discretization=disc, rate=1000)
+        ob.reset(0.0, np.zeros(1), np.array([math.pi]))
+        e = []
+        for k in range(1, 1001):
+            t = k * 1e-3
+            est = ob.update(t, np.array([0.5 * math.sin(2 * math.pi * t)]))
+            e.append(est.v[0] - math.pi * math.cos(2 * math.pi * t))
+        tail = np.array(e[500:])
+        err[disc] = np.abs(tail).max()
+        jump[disc] = np.abs(np.diff(tail)).max()
+    lag = 0.5 * (2 * math.pi) ** 3 / 100.0**2  # max |d³y/dt³| / γ², the reduced chain's lag
+    # measured: implicit error 1.11e-2 (lag bound 1.24e-2), sample-to-sample change 7e-5;
+    # explicit error 10.7 rad/s, sample-to-sample jumps of 21 rad/s (±h k₂ square wave)
+    assert err["implicit"] < lag
+    assert jump["implicit"] < 1e-4
+    assert jump["explicit"] > 1.0
+
+
+def test_sliding_rejects_an_unknown_discretization() -> None:
+    with pytest.raises(GainError, match="discretization"):
+        make_observer("sliding", pinobs.load("pendulum"), discretization="trapezoid")
+
+
+def test_differentiators_reject_order_one() -> None:
+    with pytest.raises(GainError, match="order"):
+        make_observer("highgain", pinobs.load("pendulum"), order=1)
+
+
+# ---------------------------------------------------------------- with noise
+def test_differentiators_against_the_best_per_joint_kalman_filter_on_a_noisy_ur5() -> None:
+    """1 kHz, σ = 1e-4 rad, UR5 tracking: highgain within 1.5× of the best kf (issue 6).
+
+    The best ``kf`` over jerk_psd ∈ {0.1, 1, 3, 10, 30, 1e2, 1e3, 1e4} is 10
+    (5.2e-3 rad/s on a 2 s run).  Measured (2 s): highgain 4.2e-3 (0.81×),
+    sliding 1.0e-2 (1.9×: the sliding differentiator does not filter the position;
+    it misses the 1.5× target, see the module docstring).
+    """
+    robot = pinobs.load("ur5")
+    res = simulate(
+        robot,
+        {
+            "kf": make_observer("kf", robot, rate=1000, noise_std=1e-4, jerk_psd=10.0),
+            "highgain": make_observer("highgain", robot, rate=1000, noise_std=1e-4),
+            "sliding": make_observer("sliding", robot, rate=1000, noise_std=1e-4),
+        },
+        sensor=Sensor(1000, 1e-4),
+        inputs="pd",
+        duration=2.0,
+        seed=0,
+    )
+    m = {x.observer: x.rms_v_error for x in evaluate(res, robot)}
+    assert m["highgain"] < 1.5 * m["kf"]
+    assert m["sliding"] < 2.2 * m["kf"]

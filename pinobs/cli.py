@@ -1,8 +1,13 @@
 """The ``pinobs`` command: a thin shell over the library.
 
-pinobs list                                  robots and observers
-pinobs run --robot R --observer O [...]      one simulation, a results table, JSON
-pinobs demo [--quick]                        the main job on a built-in default
+pinobs list                                    robots and observers
+pinobs run --robot R --observer O [...]        one simulation: a results table, JSON
+    [--html FILE.html] [--plot FILE.png] [--meshcat]      watch it: 3D playback, plot
+pinobs play RESULT.npz [--html F] [--plot F]   watch a saved run
+pinobs demo                                    the main job on a built-in default
+pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
+pinobs check ii --robot R                      I&I Assumption 1 on the model
+pinobs bench [--quick] [--json FILE]           accuracy and cost against the baselines
 """
 
 from __future__ import annotations
@@ -151,6 +156,26 @@ def _write_json(path: str | Path, payload: Any) -> Path:
     return path
 
 
+def _watch(result: Result, robot: Robot, args: argparse.Namespace) -> None:
+    """``--html`` / ``--plot`` / ``--meshcat``: the visualization layer, imported only when asked."""
+    from pinobs.visualization import plot, serve, write_html
+
+    if args.html:
+        with _progress(f"{robot.name}: playback", not args.no_progress) as progress:
+            path = write_html(result, robot, args.html, progress=progress)
+        print(
+            f"wrote {path} (open it in a browser; Open Controls -> Animations: play, pause, time)"
+        )
+    if args.plot:
+        print(f"wrote {plot(result, robot, args.plot)}")
+    if args.meshcat:
+        with serve(result, robot):
+            try:
+                input("meshcat is serving the playback; press Enter to stop\n")
+            except (EOFError, KeyboardInterrupt):
+                pass
+
+
 def observer_table() -> str:
     """The README's observer table, generated from the registry."""
     lines = ["| name | what it is |", "|---|---|"]
@@ -180,19 +205,51 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(f"wrote {_write_json(args.json, report)}")
     if args.save:
         print(f"wrote {result.save(args.save)}")
+    _watch(result, robot, args)
     return 0
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    from pinobs.visualization import write_html
+
     out = Path(args.out)
     reports = []
+    pages = []
     for name in DEMO_ROBOTS:
         robot = load(name)
-        _, report, table = _run_one(robot, observer_names(), args, strict=False)
+        result, report, table = _run_one(robot, observer_names(), args, strict=False)
         print(table + "\n")
         reports.append(report)
+        # ghosts for the three most accurate observers that did not diverge
+        ranked = sorted(
+            (o for o in report["observers"] if o["diverged_at"] is None),
+            key=lambda o: o["rms_v_error"],
+        )
+        with _progress(f"{name}: playback", not args.no_progress) as progress:
+            pages.append(
+                write_html(
+                    result,
+                    robot,
+                    out / f"{name}_playback.html",
+                    observers=[o["observer"] for o in ranked[:3]],
+                    progress=progress,
+                )
+            )
     path = _write_json(out / "demo.json", {"runs": reports})
     print(f"wrote {path}")
+    for page in pages:
+        print(f"playback: open {page} in a browser (the robot, and the 3 best estimates as ghosts)")
+    return 0
+
+
+def _cmd_play(args: argparse.Namespace) -> int:
+    result = Result.load(args.result)
+    source = args.robot or result.meta.get("robot_source") or result.robot
+    root = args.root_joint or result.meta.get("root_joint")
+    robot = load(source, root_joint=root)
+    if not (args.html or args.plot or args.meshcat):
+        args.html = str(Path(args.result).with_suffix(".html"))
+    _watch(result, robot, args)
     return 0
 
 
@@ -213,6 +270,13 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     if len(run.bad_rows) > args.max_reports:
         print(f"... and {len(run.bad_rows) - args.max_reports} more bad rows", file=sys.stderr)
     path = write_estimates(args.out, run)
+    if args.html:
+        from pinobs.visualization import log_result, write_html
+
+        page = write_html(
+            log_result(robot, log, {observer.name: run}), robot, args.html, truth_label="measured"
+        )
+        print(f"wrote {page} (the logged motion, and the estimate as a ghost)")
     used = int(np.sum(np.isfinite(run.v[:, 0])))
     print(
         f"{observer.name} on {robot.name}: {log.t.size} rows, {used} estimated, {len(run.bad_rows)} bad; wrote {path}"
@@ -309,8 +373,29 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", default=None, help="write the metrics to this JSON file")
     p.add_argument("--save", default=None, help="write the whole result to this .npz file")
+    p.add_argument(
+        "--html", default=None, help="write a self-contained 3D playback (meshcat) to this file"
+    )
+    p.add_argument(
+        "--meshcat", action="store_true", help="serve the playback on a local meshcat server"
+    )
+    p.add_argument(
+        "--plot", default=None, help="write true vs estimated velocities to this PNG (matplotlib)"
+    )
     _add_sim_options(p, duration=3.0)
     p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("play", help="watch a result saved by run --save (3D playback, plot)")
+    p.add_argument("result", help=".npz file written by pinobs run --save")
+    p.add_argument("--robot", default=None, help="robot (default: the one stored in the result)")
+    p.add_argument(
+        "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
+    )
+    p.add_argument("--html", default=None, help="playback page (default: RESULT.html)")
+    p.add_argument("--meshcat", action="store_true", help="serve it on a local meshcat server")
+    p.add_argument("--plot", default=None, help="write true vs estimated velocities to this PNG")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_play)
 
     p = sub.add_parser("estimate", help="run one observer over a recorded log (CSV or NPZ)")
     p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF/MJCF path")
@@ -322,6 +407,9 @@ def _parser() -> argparse.ArgumentParser:
         "--log", required=True, help="log file: CSV with header t,q0..,tau0.. or NPZ with t, q, tau"
     )
     p.add_argument("--out", required=True, help="CSV file for the estimates: t, q0.., v0..")
+    p.add_argument(
+        "--html", default=None, help="also write a 3D playback of the log and the estimate"
+    )
     p.add_argument(
         "--rate",
         type=float,

@@ -60,11 +60,14 @@ def test_bad_option_value_is_an_error_message(capsys) -> None:
 
 
 def test_demo_prints_tables_for_cartpole_and_ur5_and_writes_json(tmp_path: Path, capsys) -> None:
-    assert main(["demo", "--duration", "0.3", "--out", str(tmp_path)]) == 0
+    assert main(["demo", "--duration", "0.3", "--out", str(tmp_path), "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "cartpole (nv = 2)" in out and "ur5 (nv = 6)" in out
     runs = json.loads((tmp_path / "demo.json").read_text())["runs"]
     assert [r["robot"] for r in runs] == ["cartpole", "ur5"]
+    for name in ("cartpole", "ur5"):
+        assert (tmp_path / f"{name}_playback.html").stat().st_size > 10_000
+    assert "playback: open" in out
 
 
 def test_missing_subcommand_exits_with_usage() -> None:
@@ -78,3 +81,54 @@ def test_check_ii_reports_the_working_ordering_on_the_cartpole_and_fails_on_a_pa
     assert "HOLDS" in out and "(pole_theta, cart_x)" in out
     assert main(["check", "ii", "--robot", "panda"]) == 1
     assert "FAILS" in capsys.readouterr().out
+
+
+def test_run_writes_a_playback_page_and_a_plot_and_play_rereads_a_saved_run(
+    tmp_path: Path, capsys
+) -> None:
+    html, png, npz = tmp_path / "p.html", tmp_path / "p.png", tmp_path / "sub" / "r.npz"
+    args = ["run", "--robot", "top", "--observer", "kf", "--duration", "0.3", "--no-progress"]
+    assert main([*args, "--html", str(html), "--plot", str(png), "--save", str(npz)]) == 0
+    assert html.stat().st_size > 10_000 and png.stat().st_size > 10_000
+    assert (
+        main(["play", str(npz), "--no-progress"]) == 0
+    )  # robot and root joint read from the result
+    assert (tmp_path / "sub" / "r.html").is_file()
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_meshcat_flag_serves_and_stops_on_end_of_input(monkeypatch, tmp_path: Path, capsys) -> None:
+    import pinobs.visualization
+
+    served = []
+
+    class FakeViewer:
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            served.append("closed")
+
+    monkeypatch.setattr(
+        pinobs.visualization,
+        "serve",
+        lambda result, robot: served.append(robot.name) or FakeViewer(),
+    )
+    monkeypatch.setattr("builtins.input", lambda prompt="": (_ for _ in ()).throw(EOFError))
+    assert (
+        main(
+            [
+                "run",
+                "--robot",
+                "pendulum",
+                "--observer",
+                "kf",
+                "--duration",
+                "0.1",
+                "--no-progress",
+                "--meshcat",
+            ]
+        )
+        == 0
+    )
+    assert served == ["pendulum", "closed"]

@@ -1,0 +1,886 @@
+"""Meshcat playback of a run: the true robot and each observer's estimate as a ghost.
+
+The truth is drawn as the model describes it (URDF colours and meshes, loaded
+by :class:`pinocchio.visualize.MeshcatVisualizer`); each observer's estimate
+``q̂(t)`` is a translucent ghost of the same robot in its own warm colour.
+Robots without visual geometry get a stick figure (a sphere per joint, a rod
+per link).  A floating base (free-flyer or planar root) is followed: the
+scene and floor grid move so that the true base stays in view.  The motion is
+one meshcat ``Animation`` keyframed at ``fps``
+frames per second of simulated time, so meshcat's own timeline (Open Controls
+→ Animations: play, pause, reset, time slider, time scale) plays, pauses and
+scrubs it.
+
+Two ways to watch:
+
+* :func:`write_html` writes one self-contained HTML file (meshcat's viewer,
+  the scene and the animation embedded; no network needed).  Scene commands
+  are recorded in-process by a window object standing in for meshcat's
+  server, and ``Visualizer.static_html()`` turns them into the page, so no
+  server is started and no port is opened.  The page shows a legend (an HTML
+  overlay, top left: the truth and one colour swatch per observer) and the
+  current time.  Opening it as ``file.html#t=1.5`` pauses the animation at
+  ``t = 1.5 s`` (used by the tests to screenshot two instants); ``#paused``
+  opens it paused at the start, ``&nolegend`` hides the legend.
+* :func:`serve` sends the same scene to a live meshcat server (started on
+  127.0.0.1 by ``meshcat.Visualizer()``) and prints its URL.
+"""
+
+from __future__ import annotations
+
+import base64
+import functools
+import html
+import json
+import math
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from pinobs.errors import DimensionError, GainError, UnknownNameError
+from pinobs.model import Robot
+from pinobs.model.robot import Vector
+from pinobs.simulation import Log, LogRun, ObserverTrace, Result
+from pinobs.visualization._deps import require
+
+__all__ = [
+    "GHOST_COLOURS",
+    "LegendEntry",
+    "LiveViewer",
+    "build_scene",
+    "frame_indices",
+    "ghost_colour",
+    "log_result",
+    "serve",
+    "write_html",
+    "write_html_from_file",
+]
+
+#: Warm colours given to the observers' ghosts in run order (name, RGB in [0, 1]).
+GHOST_COLOURS: tuple[tuple[str, tuple[float, float, float]], ...] = (
+    ("orange", (1.0, 0.5, 0.0)),
+    ("crimson", (0.86, 0.08, 0.24)),
+    ("gold", (1.0, 0.8, 0.0)),
+    ("deep pink", (1.0, 0.08, 0.58)),
+    ("sienna", (0.63, 0.32, 0.18)),
+    ("coral", (1.0, 0.5, 0.31)),
+)
+
+#: Opacity of a ghost (0 invisible, 1 opaque).
+GHOST_OPACITY = 0.5
+
+_BACKGROUND = [1.0, 1.0, 1.0]
+_CAMERA_FOV_DEG = 75.0  # meshcat's default perspective camera (vertical field of view)
+_REPEAT = 1_000_000  # "loop forever": THREE.LoopRepeat needs a finite count
+#: Mesh files (Collada, STL, OBJ) up to this total size are sent as they are
+#: for the truth; above it the truth gets the same decimated triangles as the ghosts.
+_MAX_MESH_FILE_BYTES = 4_000_000
+
+#: ``progress(k, n)`` is called after frame ``k`` of ``n`` (as in :func:`pinobs.simulate`).
+Progress = Callable[[int, int], None]
+
+
+def ghost_colour(i: int) -> tuple[str, tuple[float, float, float]]:
+    """Name and RGB of the ``i``-th ghost (the palette repeats after six)."""
+    return GHOST_COLOURS[i % len(GHOST_COLOURS)]
+
+
+def _hex(rgb: Sequence[float]) -> str:
+    return "#" + "".join(f"{round(255 * float(c)):02x}" for c in rgb[:3])
+
+
+def _int_colour(rgb: Sequence[float]) -> int:
+    """``0xRRGGBB`` of an RGB triple in [0, 1] (meshcat's material colour)."""
+    r, g, b = (round(255 * float(c)) for c in rgb[:3])
+    return r * 65536 + g * 256 + b
+
+
+@dataclass(frozen=True)
+class LegendEntry:
+    """One line of the legend.
+
+    Attributes:
+        label: observer label (or ``"truth"``).
+        colour: CSS colour (``#rrggbb``) of its swatch, or ``None`` for the truth's own colours.
+        colour_name: human name of the colour (``"model colours"`` for the truth).
+        node: meshcat path of its scene node under ``/meshcat``.
+        diverged_at: time of divergence [s], or ``None``.
+    """
+
+    label: str
+    colour: str | None
+    colour_name: str
+    node: str
+    diverged_at: float | None = None
+
+
+# ----------------------------------------------------------------- recording
+
+
+class _RecordingWindow:
+    """Stand-in for meshcat's ``ViewerWindow``: records commands instead of sending them.
+
+    ``meshcat.Visualizer(window=_RecordingWindow(...))`` behaves like a
+    visualizer connected to a server; :meth:`get_scene` (what
+    ``Visualizer.static_html()`` calls) returns the standalone page with every
+    recorded command replayed in order.
+    """
+
+    web_url: str | None = None
+
+    def __init__(self, overlay: str = "") -> None:
+        self.commands: list[bytes] = []
+        self.overlay = overlay
+
+    def send(self, command: Any) -> None:
+        umsgpack = require("umsgpack", "meshcat playback")
+        data = command.lower()
+        self.commands.append(umsgpack.packb(data))
+
+    def get_scene(self) -> str:
+        viewer_js = _viewer_js()
+        cmds = ",\n".join(f'"{base64.b64encode(c).decode("ascii")}"' for c in self.commands)
+        return _PAGE.format(mainminjs=viewer_js, commands=cmds, overlay=self.overlay)
+
+    def open(self) -> _RecordingWindow:
+        return self
+
+    def close(self) -> None:
+        return None
+
+
+def _viewer_js() -> str:
+    meshcat = require("meshcat", "meshcat playback")
+    path = Path(str(meshcat.__file__)).parent / "viewer" / "dist" / "main.min.js"
+    return path.read_text(encoding="utf-8")
+
+
+# The page meshcat's server builds for static_html(), with commands replayed
+# synchronously (meshcat's own page fetches data: URLs, in no guaranteed order)
+# and our overlay added.  "</script" cannot occur in base64 or in main.min.js'
+# string literals used here.
+_PAGE = """<!DOCTYPE html>
+<html>
+<head><meta charset="utf-8"><title>pinobs playback</title></head>
+<body>
+<div id="meshcat-pane"></div>
+<script>
+{mainminjs}
+</script>
+<script>
+var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
+var pinobsCommands = [
+{commands}
+];
+for (const b64 of pinobsCommands) {{
+  const s = atob(b64);
+  const bytes = new Uint8Array(s.length);
+  for (let i = 0; i < s.length; i++) bytes[i] = s.charCodeAt(i);
+  viewer.handle_command_bytearray(bytes);
+}}
+</script>
+<style>
+body {{ margin: 0; }}
+#meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}
+</style>
+{overlay}
+</body>
+</html>
+"""
+
+_OVERLAY = """<div id="pinobs-legend" style="position:absolute;left:10px;top:10px;
+ font:13px/1.45 system-ui,sans-serif;background:rgba(255,255,255,0.85);
+ border:1px solid #bbb;border-radius:6px;padding:8px 10px;color:#222;pointer-events:none">
+<div style="font-weight:600">{title}</div>
+{rows}
+<div id="pinobs-time" style="margin-top:4px;font-variant-numeric:tabular-nums">t = {t0:.2f} s</div>
+<div style="color:#666;font-size:11px">Open Controls → Animations: play, pause, time</div>
+</div>
+<script>
+(function () {{
+  const t0 = {t0!r};
+  const anim = viewer.animator;
+  const label = document.getElementById("pinobs-time");
+  function clipTime() {{
+    return anim.actions.length ? anim.actions[0].time : 0;
+  }}
+  function applyHash() {{
+    const m = /[#&]t=([0-9.eE+-]+)/.exec(window.location.hash);
+    if (m) {{
+      const t = Math.max(0, parseFloat(m[1]) - t0);
+      anim.pause();
+      anim.seek(t);
+      anim.display_progress(t);
+    }} else if (/[#&]paused/.test(window.location.hash)) {{
+      anim.pause();
+    }}
+  }}
+  function applyLegend() {{
+    const hide = /[#&]nolegend/.test(window.location.hash);
+    document.getElementById("pinobs-legend").style.display = hide ? "none" : "block";
+  }}
+  applyHash();
+  applyLegend();
+  window.addEventListener("hashchange", applyLegend);
+  window.addEventListener("hashchange", applyHash);
+  function tick() {{
+    label.textContent = "t = " + (t0 + clipTime()).toFixed(2) + " s";
+    requestAnimationFrame(tick);
+  }}
+  tick();
+}})();
+</script>
+"""
+
+
+def _overlay(title: str, entries: Sequence[LegendEntry], t0: float) -> str:
+    rows = []
+    for e in entries:
+        if e.colour is None:
+            swatch = (
+                '<span style="display:inline-block;width:12px;height:12px;margin-right:6px;'
+                'border:1px solid #555;background:linear-gradient(135deg,#888 50%,#36c 50%)"></span>'
+            )
+        else:
+            swatch = (
+                '<span style="display:inline-block;width:12px;height:12px;margin-right:6px;'
+                f'border:1px solid #555;background:{e.colour};opacity:0.8"></span>'
+            )
+        note = "" if e.diverged_at is None else f" (diverged at {e.diverged_at:.3g} s)"
+        what = "estimate"
+        if e.colour is None:
+            what = "true motion" if e.label == "truth" else "recorded motion"
+        rows.append(
+            f'<div class="pinobs-entry" data-label="{html.escape(e.label)}">{swatch}'
+            f"<b>{html.escape(e.label)}</b> · {what}{html.escape(note)}</div>"
+        )
+    return _OVERLAY.format(title=html.escape(title), rows="\n".join(rows), t0=float(t0))
+
+
+# ------------------------------------------------------------------ geometry
+
+
+def _stick_figure(model: pin.Model) -> pin.GeometryModel:
+    """Simple shapes for a robot without visual geometry: a sphere per joint, a rod per link."""
+    coal = require("coal", "stick figures of robots without meshes")
+    geom = pin.GeometryModel()
+    lengths = [
+        float(np.linalg.norm(model.jointPlacements[j].translation)) for j in range(1, model.njoints)
+    ]
+    scale = max([x for x in lengths if x > 1e-6], default=0.5)
+    radius = max(0.02, 0.08 * scale)
+    for j in range(1, model.njoints):
+        name = model.names[j]
+        geom.addGeometryObject(
+            pin.GeometryObject(f"{name}_joint", j, pin.SE3.Identity(), coal.Sphere(radius))
+        )
+        parent = model.parents[j]
+        offset = model.jointPlacements[j].translation
+        length = float(np.linalg.norm(offset))
+        if parent > 0 and length > 1e-6:
+            # a rod from the parent joint to this one, in the parent's frame
+            axis = offset / length
+            rot = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), axis).toRotationMatrix()
+            placement = pin.SE3(rot, 0.5 * offset)
+            geom.addGeometryObject(
+                pin.GeometryObject(
+                    f"{name}_rod", parent, placement, coal.Cylinder(0.4 * radius, length)
+                )
+            )
+        leaf = j not in model.parents[j + 1 :]
+        tip = 2.0 * model.inertias[j].lever
+        if leaf and np.linalg.norm(tip) > 1e-6:  # the last link: a rod through its centre of mass
+            rot = pin.Quaternion.FromTwoVectors(
+                np.array([0.0, 0.0, 1.0]), tip / np.linalg.norm(tip)
+            ).toRotationMatrix()
+            geom.addGeometryObject(
+                pin.GeometryObject(
+                    f"{name}_tip",
+                    j,
+                    pin.SE3(rot, 0.5 * tip),
+                    coal.Cylinder(0.4 * radius, float(np.linalg.norm(tip))),
+                )
+            )
+    for go in geom.geometryObjects:
+        go.meshColor = np.array([0.45, 0.45, 0.5, 1.0])
+    return geom
+
+
+def _visual_model(robot: Robot) -> pin.GeometryModel:
+    vm = robot.visual_model
+    if vm is None or vm.ngeoms == 0:
+        return _stick_figure(robot.model)
+    return vm
+
+
+def _decimate(
+    vertices: Vector, faces: NDArray[np.int64], max_triangles: int
+) -> tuple[Vector, NDArray[np.int64]]:
+    """Vertex clustering: merge vertices on a grid until at most ``max_triangles`` remain.
+
+    The grid cell starts at 1/400 of the mesh's bounding-box diagonal and
+    doubles until the budget is met; degenerate and repeated triangles are
+    dropped.  Shapes keep their outline (what a playback needs), not their detail.
+    """
+    if len(faces) <= max_triangles:
+        return vertices, faces
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    cell = float(np.linalg.norm(hi - lo)) / 400.0 or 1e-3
+    while True:
+        keys = np.floor((vertices - lo) / cell).astype(np.int64)
+        _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+        inverse = inverse.reshape(-1)
+        merged = np.zeros((counts.size, 3))
+        np.add.at(merged, inverse, vertices)
+        merged /= counts[:, None]
+        f = inverse[faces]
+        f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+        _, first = np.unique(np.sort(f, axis=1), axis=0, return_index=True)
+        f = f[np.sort(first)]
+        if len(f) <= max_triangles:
+            return merged, f
+        cell *= 2.0
+
+
+def _triangles(go: pin.GeometryObject) -> tuple[Vector, NDArray[np.int64]] | None:
+    """Vertices (already scaled by ``meshScale``) and triangles of a mesh geometry, or ``None``."""
+    coal = require("coal", "meshcat playback")
+    g = go.geometry
+    if isinstance(g, coal.BVHModelBase) and g.num_tris > 0:
+        vertices = np.array(g.vertices(), dtype=float)
+        faces = np.array(
+            [[t[0], t[1], t[2]] for t in (g.tri_indices(k) for k in range(g.num_tris))],
+            dtype=np.int64,
+        )
+        if np.prod(go.meshScale) < 0:  # a mirrored mesh: restore outward winding
+            faces = faces[:, [0, 2, 1]]
+        return vertices, faces
+    if isinstance(g, coal.Convex) and g.num_polygons > 0:
+        vertices = np.array(g.points(), dtype=float)
+        faces = np.array(
+            [[t[0], t[1], t[2]] for t in (g.polygons(k) for k in range(g.num_polygons))],
+            dtype=np.int64,
+        )
+        return vertices, faces
+    return None
+
+
+def _mesh_file_bytes(geom: pin.GeometryModel) -> int:
+    total = 0
+    for go in geom.geometryObjects:
+        p = Path(go.meshPath) if go.meshPath else None
+        if p is not None and p.suffix.lower() in (".dae", ".stl", ".obj") and p.is_file():
+            total += p.stat().st_size
+    return total
+
+
+def _bounding_radius(go: pin.GeometryObject) -> float:
+    geometry = go.geometry
+    try:
+        geometry.computeLocalAABB()
+        r = float(geometry.aabb_radius) + float(np.linalg.norm(geometry.aabb_center))
+    except (AttributeError, RuntimeError):
+        return 0.05
+    return r * float(np.max(np.abs(go.meshScale))) if np.isfinite(r) else 0.05
+
+
+# -------------------------------------------------------------------- frames
+
+
+def frame_indices(t: Vector, fps: float) -> Vector:
+    """Indices of the samples shown at ``fps`` frames per second of simulated time.
+
+    Frame ``k`` shows the sample nearest to ``t[0] + k / fps``; the last frame
+    is the last sample.
+    """
+    t = np.asarray(t, dtype=float)
+    if not (math.isfinite(fps) and fps > 0):
+        raise GainError(f"fps={fps!r} must be a positive frame rate [1/s], e.g. 30")
+    if t.ndim != 1 or t.size == 0:
+        raise DimensionError(f"t must be a non-empty 1-D array of times, got shape {t.shape}")
+    n = max(1, math.floor((t[-1] - t[0]) * fps + 1e-9) + 1)
+    want = t[0] + np.arange(n) / fps
+    idx = np.clip(np.searchsorted(t, want), 0, t.size - 1)
+    left = np.clip(idx - 1, 0, t.size - 1)
+    idx = np.where(np.abs(t[left] - want) <= np.abs(t[idx] - want), left, idx)
+    return idx.astype(int)
+
+
+def _forward_fill(q: Vector, fallback: Vector) -> Vector:
+    """Rows with NaN (after a divergence) replaced by the last finite row (or ``fallback``)."""
+    out = np.array(q, dtype=float)
+    last = fallback
+    for k in range(out.shape[0]):
+        if np.all(np.isfinite(out[k])):
+            last = out[k]
+        else:
+            out[k] = last
+    return out
+
+
+def _placements(
+    model: pin.Model, data: pin.Data, geom: pin.GeometryModel, gdata: pin.GeometryData, q: Vector
+) -> list[pin.SE3]:
+    pin.framesForwardKinematics(model, data, q)
+    pin.updateGeometryPlacements(model, data, geom, gdata)
+    return [gdata.oMg[i].copy() for i in range(geom.ngeoms)]
+
+
+def _camera(points: Vector, radii: Vector) -> tuple[Vector, Vector]:
+    """Target and camera offset [m] framing every point (with its radius) of the truth's motion."""
+    lo = np.min(points - radii[:, None], axis=0)
+    hi = np.max(points + radii[:, None], axis=0)
+    centre = 0.5 * (lo + hi)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.2)
+    spread = points - points.mean(axis=0)
+    direction = np.array([1.0, -1.3, 0.8])
+    if len(points) >= 3 and np.any(spread):
+        _, s, vt = np.linalg.svd(spread, full_matrices=False)
+        if s[-1] < 0.15 * s[0]:  # motion in a plane: look at the plane
+            normal = vt[-1]
+            if abs(normal[2]) > 0.9:  # horizontal plane: look from above, slightly tilted
+                normal = np.sign(normal[2]) * normal + np.array([0.0, -0.4, 0.0])
+            else:
+                if normal @ np.array([0.2, -1.0, 0.0]) < 0:
+                    normal = -normal
+                normal = normal + np.array([0.0, 0.0, 0.35])
+            direction = normal
+    direction = direction / np.linalg.norm(direction)
+    # the bounding sphere would just fit at R / sin(fov / 2); it overestimates boxes: go closer
+    distance = 0.8 * radius / math.sin(math.radians(_CAMERA_FOV_DEG) / 2)
+    return centre, distance * direction
+
+
+# --------------------------------------------------------------------- scene
+
+
+def _same(value: Any, _go: pin.GeometryObject) -> Any:
+    return value
+
+
+def _safe(label: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", label) or "observer"
+
+
+def build_scene(
+    vis: Any,
+    result: Result,
+    robot: Robot,
+    *,
+    fps: float = 30.0,
+    observers: Sequence[str] | None = None,
+    opacity: float = GHOST_OPACITY,
+    play: bool = True,
+    max_triangles: int = 60_000,
+    truth_label: str = "truth",
+    progress: Progress | None = None,
+) -> list[LegendEntry]:
+    """Load the truth and one ghost per observer into ``vis`` and animate them.
+
+    Args:
+        vis: a ``meshcat.Visualizer`` (live, or recording for :func:`write_html`).
+        result: the run to play back.
+        robot: the model the run used (``result.robot`` names it).
+        fps: keyframes per second of simulated time [1/s].
+        observers: labels to show (default: every observer of the run).
+        opacity: ghost opacity in (0, 1].
+        play: start playing when the page loads.
+        max_triangles: triangle budget of one robot copy; larger meshes are
+            decimated by vertex clustering (keeps files small: a Go1 is 3 MB
+            instead of 115 MB).
+        truth_label: legend name of ``result.q`` (``"measured"`` for a log).
+        progress: called as ``progress(k, n)`` after frame ``k`` of ``n``.
+
+    Returns:
+        The legend: the truth, then one entry per ghost.
+
+    Raises:
+        DimensionError: the result's arrays do not fit ``robot``.
+        UnknownNameError: an observer label is not in the result.
+        GainError: ``fps`` or ``opacity`` out of range.
+    """
+    viz_mod = require("pinocchio.visualize.meshcat_visualizer", "meshcat playback")
+    mg = require("meshcat.geometry", "meshcat playback")
+    animation = require("meshcat.animation", "meshcat playback")
+    coal = require("coal", "meshcat playback")
+    if result.q.shape[1:] != (robot.nq,):
+        raise DimensionError(
+            f"result of robot {result.robot!r} has q of shape {result.q.shape}, robot "
+            f"{robot.name!r} has nq = {robot.nq}; play it back with the robot it was run on"
+        )
+    if not (0.0 < opacity <= 1.0):
+        raise GainError(f"opacity={opacity!r} must be in (0, 1]")
+    labels = list(result.observer_names if observers is None else observers)
+    for name in labels:
+        if name not in result.observer_names:
+            raise UnknownNameError(
+                f"no observer {name!r} in this result; have {result.observer_names}"
+            )
+    idx = frame_indices(result.t, fps)
+    model = robot.model
+    geom = _visual_model(robot)
+
+    # Scene dressing: white background, no axes, camera framed on the truth.
+    vis["/Background"].set_property("top_color", _BACKGROUND)
+    vis["/Background"].set_property("bottom_color", _BACKGROUND)
+    vis["/Axes"].set_property("visible", False)
+
+    # Meshes are sent as (decimated) triangle lists, except the truth's mesh
+    # files when they are small: those go through Pinocchio's visualizer as is
+    # (textures and per-part colours of Collada files kept).
+    meshes = {}
+    for go in geom.geometryObjects:
+        tri = _triangles(go) if not isinstance(go.geometry, coal.ShapeBase) else None
+        if tri is not None:
+            meshes[go.name] = tri
+    total = sum(len(f) for _, f in meshes.values())
+    for key, (v, f) in meshes.items():
+        budget = max(200, int(max_triangles * len(f) / total)) if total > max_triangles else len(f)
+        v, f = _decimate(v, f, budget)
+        meshes[key] = (v, f)
+    truth = viz_mod.MeshcatVisualizer(model, None, geom)
+    truth.initViewer(viewer=vis)
+
+    def load_copy(node: str, material_of: Callable[[pin.GeometryObject], Any]) -> None:
+        for go in geom.geometryObjects:
+            if isinstance(go.geometry, coal.ShapeBase):
+                obj = truth.loadPrimitive(go)
+            elif go.name in meshes:
+                obj = mg.TriangularMeshGeometry(*meshes[go.name])  # meshScale already applied
+            else:
+                obj = None
+            if obj is not None:
+                vis[f"{node}/{go.name}"].set_object(obj, material_of(go))
+
+    nodes: dict[str, list[str]] = {}
+    scaled: dict[str, Vector] = {}
+    if _mesh_file_bytes(geom) <= _MAX_MESH_FILE_BYTES:
+        # The truth, as the model describes it, through Pinocchio's visualizer.
+        truth.loadViewerModel(rootNodeName="truth")
+        nodes["truth"] = [f"truth/visuals/{go.name}" for go in geom.geometryObjects]
+        # mesh-file objects drawn by Pinocchio carry meshScale in their node's scale
+        scaled = {
+            go.name: np.asarray(go.meshScale, dtype=float)
+            for go in geom.geometryObjects
+            if viz_mod.hasMeshFileInfo(go) and not isinstance(go.geometry, coal.ShapeBase)
+        }
+    else:
+        load_copy(
+            "truth",
+            lambda go: mg.MeshPhongMaterial(color=_int_colour(go.meshColor[:3])),
+        )
+        nodes["truth"] = [f"truth/{go.name}" for go in geom.geometryObjects]
+    legend = [LegendEntry(truth_label, None, "model colours", "truth")]
+
+    # Ghosts: the same shapes, one flat translucent colour each.
+    for i, name in enumerate(labels):
+        colour_name, rgb = ghost_colour(i)
+        node = f"ghost_{i}_{_safe(name)}"
+        # Front faces only, no depth writes, pushed slightly away from the camera:
+        # the truth always shows in full, a ghost shows where it differs from the
+        # truth and vanishes into it when it has converged; ghosts on each other
+        # blend instead of z-fighting (mirrored meshes have their winding restored).
+        material = mg.MeshPhongMaterial(
+            color=_int_colour(rgb),
+            transparent=opacity < 1.0,
+            opacity=opacity,
+            side=0,
+            depthWrite=opacity >= 1.0,
+            polygonOffset=True,
+            polygonOffsetFactor=1.0,
+            polygonOffsetUnits=4.0,
+        )
+        load_copy(node, functools.partial(_same, material))
+        nodes[name] = [f"{node}/{go.name}" for go in geom.geometryObjects]
+        legend.append(
+            LegendEntry(name, _hex(rgb), colour_name, node, result.trace(name).diverged_at)
+        )
+
+    # Configurations shown, one row per frame.
+    shown = {"truth": result.q[idx]}
+    for name in labels:
+        shown[name] = _forward_fill(result.trace(name).q, result.q[0])[idx]
+
+    data = model.createData()
+    gdata = pin.GeometryData(geom)
+    anim = animation.Animation(default_framerate=fps)
+    points: list[Vector] = []
+    radii_one = np.array([_bounding_radius(go) for go in geom.geometryObjects])
+    radii: list[Vector] = []
+    n_frames = len(idx)
+    # A floating base (free-flyer, planar root) is followed: the scene moves so
+    # that the true base stays in view; a fixed base is framed once.
+    follow = bool(robot.joints) and robot.joints[0].kind in ("se3", "se2")
+    shift = np.zeros((n_frames, 3))
+    total = n_frames * len(shown)
+    done = 0
+    for who, qs in shown.items():
+        for k in range(n_frames):
+            done += 1
+            if progress is not None:
+                progress(done, total)
+            oMg = _placements(model, data, geom, gdata, qs[k])
+            if who == "truth":
+                if follow:
+                    shift[k] = data.oMi[1].translation
+                points.extend(M.translation - shift[k] for M in oMg)
+                radii.append(radii_one)
+            if k == 0:  # a static pose too (with the mesh scale), for viewers without animation
+                for go, path, M in zip(geom.geometryObjects, nodes[who], oMg, strict=True):
+                    T = M.homogeneous
+                    if who == "truth" and go.name in scaled:
+                        T = T @ np.diag([*scaled[go.name], 1.0])
+                    vis[path].set_transform(T)
+            with anim.at_frame(vis, k) as frame:
+                for path, M in zip(nodes[who], oMg, strict=True):
+                    quat = pin.Quaternion(M.rotation).coeffs()  # x, y, z, w
+                    frame[path].set_property("position", "vector3", M.translation.tolist())
+                    frame[path].set_property("quaternion", "quaternion", quat.tolist())
+
+    centre, offset = _camera(np.array(points), np.concatenate(radii))
+    # meshcat's orbit controls look at the world origin: move the scene (and the
+    # grid, the floor) so that the motion is centred there.
+    vis.set_transform(_translation(-centre - shift[0]))
+    vis["/Grid"].set_transform(_translation(-centre - shift[0]))
+    if follow:
+        for k in range(n_frames):
+            with anim.at_frame(vis, k) as frame:
+                for node in (frame, frame["/Grid"]):
+                    node.set_property("position", "vector3", (-centre - shift[k]).tolist())
+    # meshcat's camera sits in a frame rotated by +90° about x: world (x, y, z) = local (x, -z, y)
+    local = [float(offset[0]), float(offset[2]), float(-offset[1])]
+    vis["/Cameras/default/rotated/<object>"].set_property("position", local)
+    vis.set_animation(anim, play=play, repetitions=_REPEAT)
+    return legend
+
+
+def _translation(p: Vector) -> Vector:
+    T = np.eye(4)
+    T[:3, 3] = p
+    return T
+
+
+# ------------------------------------------------------------------ entry points
+
+
+def write_html(
+    result: Result,
+    robot: Robot,
+    path: str | Path,
+    *,
+    fps: float = 30.0,
+    observers: Sequence[str] | None = None,
+    opacity: float = GHOST_OPACITY,
+    title: str | None = None,
+    truth_label: str = "truth",
+    progress: Progress | None = None,
+) -> Path:
+    """Write a self-contained HTML playback of ``result`` (opens offline in any browser).
+
+    The page holds meshcat's viewer, the truth, one ghost per observer (legend
+    top left), and the animation (Open Controls → Animations: play, pause,
+    time slider).  ``page.html#t=1.5`` opens paused at ``t = 1.5 s``.
+
+    Args:
+        result: the run (``pinobs.simulate`` or ``Result.load``).
+        robot: the robot it was run on.
+        path: output ``.html`` file (parent folders are created).
+        fps: keyframes per second of simulated time [1/s].
+        observers: labels to show (default: all).
+        opacity: ghost opacity in (0, 1].
+        title: legend title (default: robot name and duration).
+        truth_label: legend name of ``result.q`` (``"measured"`` for :func:`log_result`).
+        progress: called as ``progress(k, n)`` after frame ``k`` of ``n``.
+
+    Returns:
+        The path written.
+    """
+    meshcat = require("meshcat", "meshcat playback")
+    path = Path(path)
+    window = _RecordingWindow()
+    vis = meshcat.Visualizer(window=window)
+    legend = build_scene(
+        vis,
+        result,
+        robot,
+        fps=fps,
+        observers=observers,
+        opacity=opacity,
+        truth_label=truth_label,
+        progress=progress,
+    )
+    if title is None:
+        title = f"pinobs · {robot.name} · {result.t[-1] - result.t[0]:.3g} s"
+    window.overlay = _overlay(title, legend, float(result.t[0]))
+    page = vis.static_html()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(page, encoding="utf-8")
+    return path
+
+
+def write_html_from_file(
+    result_path: str | Path,
+    path: str | Path,
+    *,
+    robot: Robot | None = None,
+    fps: float = 30.0,
+    progress: Progress | None = None,
+) -> Path:
+    """Playback of a saved run (``Result.save``): load it, then :func:`write_html`.
+
+    ``robot`` defaults to ``pinobs.load(result.robot)`` (registry name or file
+    path recorded in the result; pass the robot if it was built otherwise).
+    """
+    from pinobs.model import load
+
+    result = Result.load(result_path)
+    if robot is None:
+        root = result.meta.get("root_joint") if isinstance(result.meta, dict) else None
+        robot = load(result.robot, root_joint=root)
+    return write_html(result, robot, path, fps=fps, progress=progress)
+
+
+def log_result(robot: Robot, log: Log, runs: Mapping[str, LogRun]) -> Result:
+    """A :class:`Result` for playing back a recorded log and observers run over it.
+
+    The "truth" is the logged configuration (show it with
+    ``write_html(..., truth_label="measured")``); its velocity is unknown
+    (NaN).  Rows whose time is unreadable or not increasing are left out; an
+    unreadable configuration is replaced by the previous readable one (the
+    first readable one at the start).
+
+    Args:
+        robot: the robot of the log.
+        log: from :func:`pinobs.simulation.read_log`.
+        runs: label -> :func:`pinobs.simulation.estimate_log` output over ``log``.
+    """
+    t = np.asarray(log.t, dtype=float)
+    keep = np.isfinite(t)
+    keep &= np.concatenate([[True], t[1:] > np.maximum.accumulate(np.where(keep, t, -np.inf))[:-1]])
+    if keep.sum() < 1:
+        raise DimensionError("the log has no row with a readable time")
+    for name, run in runs.items():
+        if run.q.shape != log.q.shape:
+            raise DimensionError(
+                f"estimates {name!r} have shape {run.q.shape}, the log's q has {log.q.shape}"
+            )
+    q_log = np.asarray(log.q, dtype=float)[keep]
+    readable = np.flatnonzero(np.all(np.isfinite(q_log), axis=1))
+    q = _forward_fill(q_log, q_log[readable[0]] if readable.size else robot.neutral())
+    n = int(keep.sum())
+    tau = np.zeros((n, robot.nv)) if log.tau is None else np.nan_to_num(log.tau[keep])
+    traces = tuple(
+        ObserverTrace(
+            name=name,
+            q=_forward_fill(run.q[keep], q[0]),
+            v=run.v[keep],
+            update_time=np.full(n, np.nan),
+        )
+        for name, run in runs.items()
+    )
+    return Result(
+        robot=robot.name,
+        t=t[keep],
+        q=q,
+        v=np.full((n, robot.nv), np.nan),
+        tau=tau,
+        q_meas=np.asarray(log.q, dtype=float)[keep],
+        traces=traces,
+        meta={"source": "log"},
+    )
+
+
+@dataclass
+class LiveViewer:
+    """A playback on a live meshcat server (from :func:`serve`).
+
+    Attributes:
+        url: the page to open [http://127.0.0.1:…].
+        vis: the ``meshcat.Visualizer`` (send more to it if you like).
+        legend: what each colour is.
+    """
+
+    url: str
+    vis: Any
+    legend: list[LegendEntry]
+
+    def close(self) -> None:
+        """Close the connection and stop the server if :func:`serve` started it."""
+        window = self.vis.window
+        socket = getattr(window, "zmq_socket", None)
+        if socket is not None:
+            socket.close(linger=0)
+        proc = getattr(window, "server_proc", None)
+        if proc is not None:
+            proc.kill()
+            proc.wait()
+            for pipe in (proc.stdout, proc.stderr):
+                if pipe is not None:
+                    pipe.close()
+            window.server_proc = None
+
+    def __enter__(self) -> LiveViewer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def serve(
+    result: Result,
+    robot: Robot,
+    *,
+    fps: float = 30.0,
+    observers: Sequence[str] | None = None,
+    opacity: float = GHOST_OPACITY,
+    zmq_url: str | None = None,
+    open_browser: bool = False,
+    progress: Progress | None = None,
+    echo: Callable[[str], None] = print,
+) -> LiveViewer:
+    """Send the playback to a live meshcat server and print its URL and legend.
+
+    ``zmq_url=None`` starts a server (``meshcat-server``, listening on
+    127.0.0.1 only) that lives until :meth:`LiveViewer.close` or the end of
+    the process; give ``tcp://127.0.0.1:6000`` to use a running one.  The
+    legend is printed (meshcat's own page has no overlay).
+
+    Returns:
+        The :class:`LiveViewer` (``with serve(...) as viewer: ...`` closes it).
+    """
+    meshcat = require("meshcat", "live meshcat playback")
+    vis = meshcat.Visualizer(zmq_url=zmq_url)
+    vis.delete()
+    legend = build_scene(
+        vis, result, robot, fps=fps, observers=observers, opacity=opacity, progress=progress
+    )
+    url = str(vis.url())
+    echo(f"meshcat playback of {robot.name}: {url}")
+    for e in legend:
+        what = "model colours" if e.colour is None else f"estimate, {e.colour_name}"
+        echo(f"  {e.label}: {what}")
+    echo("  (Open Controls → Animations: play, pause, time)")
+    if open_browser:
+        vis.open()
+    return LiveViewer(url=url, vis=vis, legend=legend)
+
+
+def legend_json(entries: Sequence[LegendEntry]) -> str:
+    """The legend as JSON (label, colour, colour name, diverged_at), for scripts."""
+    return json.dumps(
+        [
+            {
+                "label": e.label,
+                "colour": e.colour,
+                "colour_name": e.colour_name,
+                "diverged_at": e.diverged_at,
+            }
+            for e in entries
+        ]
+    )

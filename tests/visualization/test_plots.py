@@ -1,0 +1,97 @@
+"""Plots: a velocity panel per coordinate, and the error norm with convergence times."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.errors import UnknownNameError
+from pinobs.visualization import MissingDependencyError, figure, plot
+from pinobs.visualization.playback import GHOST_COLOURS
+from pinobs.visualization.plots import velocity_labels
+
+
+@pytest.fixture(scope="module")
+def run() -> dict[str, Any]:
+    robot = pinobs.load("cartpole")
+    result = pinobs.simulate(
+        robot,
+        ["kf", "fd"],
+        duration=1.0,
+        sensor=pinobs.Sensor(rate=200.0, noise_std=1e-4),
+        perturb_q=0.3,
+        perturb_v=1.0,
+        seed=5,
+    )
+    return {"robot": robot, "result": result}
+
+
+def test_png_is_written_and_not_blank(run: dict[str, Any], tmp_path: Path) -> None:
+    from matplotlib.image import imread
+
+    path = plot(run["result"], run["robot"], tmp_path / "sub" / "plot.png")
+    img = imread(path)
+    assert img.ndim == 3 and img.shape[0] > 300 and img.shape[1] > 300
+    assert np.mean(img[..., :3] < 0.5) > 0.005  # ink on the page
+
+
+def test_one_panel_per_velocity_then_the_error_panel(run: dict[str, Any]) -> None:
+    fig = figure(run["result"], run["robot"])
+    assert len(fig.axes) == run["robot"].nv + 1
+    truth_line = fig.axes[0].get_lines()[0]
+    assert truth_line.get_color() == "black"
+    np.testing.assert_array_equal(truth_line.get_ydata(), run["result"].v[:, 0])
+    colours = [line.get_color() for line in fig.axes[0].get_lines()[1:]]
+    assert colours == [
+        "#{:02x}{:02x}{:02x}".format(*(round(255 * c) for c in rgb)) for _, rgb in GHOST_COLOURS[:2]
+    ]
+
+
+def test_error_panel_is_logarithmic_and_marks_the_convergence_time(run: dict[str, Any]) -> None:
+    fig = figure(run["result"], run["robot"])
+    err_ax = fig.axes[-1]
+    assert err_ax.get_yscale() == "log"
+    metrics = pinobs.evaluate(run["result"], run["robot"])
+    marked = sorted(
+        float(line.get_xdata()[0]) for line in err_ax.get_lines() if line.get_linestyle() == "--"
+    )
+    expected = sorted(m.convergence_time for m in metrics if np.isfinite(m.convergence_time))
+    assert expected and marked == expected
+    kf = err_ax.get_lines()[0]
+    np.testing.assert_allclose(
+        kf.get_ydata(), np.linalg.norm(run["result"].trace("kf").v - run["result"].v, axis=1)
+    )
+
+
+def test_large_robots_show_the_first_coordinates_only() -> None:
+    robot = pinobs.load("rigid_body")
+    result = pinobs.simulate(robot, ["fd"], duration=0.2, sensor=pinobs.Sensor(rate=100.0), seed=1)
+    fig = figure(result, robot, max_joints=4)
+    assert len(fig.axes) == 5
+    assert "first 4 of 6" in fig.get_suptitle()
+
+
+def test_velocity_labels_name_lie_group_components() -> None:
+    assert velocity_labels(pinobs.load("top")) == [f"root_joint ω{c}" for c in "xyz"]
+    ff = velocity_labels(pinobs.load("rigid_body"))
+    assert ff[:3] == [f"root_joint v{c}" for c in "xyz"]
+    assert ff[3:] == [f"root_joint ω{c}" for c in "xyz"]
+    assert velocity_labels(pinobs.load("cartpole")) == ["cart_x", "pole_theta"]
+
+
+def test_unknown_observer_is_rejected(run: dict[str, Any], tmp_path: Path) -> None:
+    with pytest.raises(UnknownNameError, match="no observer 'ukf'"):
+        plot(run["result"], run["robot"], tmp_path / "x.png", observers=["ukf"])
+
+
+def test_missing_matplotlib_names_the_install_command(
+    run: dict[str, Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    with pytest.raises(MissingDependencyError, match="pip install matplotlib"):
+        plot(run["result"], run["robot"], tmp_path / "x.png")

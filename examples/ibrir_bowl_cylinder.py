@@ -37,39 +37,13 @@ from pathlib import Path
 
 import numpy as np
 
-from pinobs.model import AnalyticMetric, lie_rk4
+from pinobs.model import lie_rk4
+from pinobs.model.paper_systems import BOWL, bowl_and_cylinder
 from pinobs.observers import make_observer
 
-M_EQ, LAM, J_EQ, K_SPRING, G = 2.0, 0.25, 0.1875, 10.0, 9.81
+M_EQ, LAM, J_EQ, K_SPRING, G = (BOWL[n] for n in ("M_eq", "lam", "J_eq", "k", "g"))
 X0 = np.array([0.0, 0.4, 0.0, 0.0])
 XHAT0 = np.array([15.0, 20.0, -10.0, -2.0])
-
-
-def bowl_and_cylinder() -> AnalyticMetric:
-    """The analytic model of Ibrir §4 with the parameters above (q = (x, θ))."""
-
-    def mass(q: np.ndarray) -> np.ndarray:
-        s = LAM * math.sin(q[1])
-        return np.array([[M_EQ, s], [s, J_EQ]])
-
-    def dmass(q: np.ndarray, x: np.ndarray) -> np.ndarray:
-        c = LAM * math.cos(q[1]) * x[1]
-        return np.array([[0.0, c], [c, 0.0]])
-
-    def grad_v(q: np.ndarray) -> np.ndarray:
-        return np.array([K_SPRING * q[0], LAM * G * math.sin(q[1])])
-
-    def potential(q: np.ndarray) -> float:
-        return 0.5 * K_SPRING * q[0] ** 2 - LAM * G * math.cos(q[1])
-
-    return AnalyticMetric(
-        mass,
-        n=2,
-        mass_matrix_derivative=dmass,
-        gravity=grad_v,
-        potential=potential,
-        name="bowl_cylinder",
-    )
 
 
 def paper_accelerations(q: np.ndarray, v: np.ndarray, u: float) -> np.ndarray:

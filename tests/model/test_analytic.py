@@ -10,6 +10,7 @@ import pytest
 
 import pinobs
 from pinobs.model import AnalyticMetric, Robot
+from pinobs.model.paper_systems import sarras_eq21
 
 # Methods the observers and the simulation call on a Robot: AnalyticMetric must offer them all.
 GEOMETRY_INTERFACE = [
@@ -37,24 +38,6 @@ def _as_analytic(robot: Robot, *, exact_derivative: bool) -> AnalyticMetric:
         gravity=r.gravity,
         potential=r.potential_energy,
         name="planar_3r_analytic",
-    )
-
-
-def sarras_eq21() -> AnalyticMetric:
-    """Sarras et al. eq. (21): ``M⁻¹`` on R³, depending on q₂ only, with its exact derivative."""
-
-    def minv(q: np.ndarray) -> np.ndarray:
-        a = 1.0 + q[1] ** 2
-        s = q[1] * np.sqrt(a)
-        return np.array([[a, 0.0, s], [0.0, a * a, 0.0], [s, 0.0, a]])
-
-    def dminv(q: np.ndarray, x: np.ndarray) -> np.ndarray:
-        a = 1.0 + q[1] ** 2
-        ds = np.sqrt(a) + q[1] ** 2 / np.sqrt(a)
-        return x[1] * np.array([[2 * q[1], 0.0, ds], [0.0, 4 * q[1] * a, 0.0], [ds, 0.0, 2 * q[1]]])
-
-    return AnalyticMetric.from_inverse(
-        minv, n=3, inverse_mass_matrix_derivative=dminv, name="sarras_eq21"
     )
 
 

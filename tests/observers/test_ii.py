@@ -12,7 +12,8 @@ import pytest
 
 import pinobs
 from pinobs.errors import GainError, PinobsError, UnsupportedRobotError
-from pinobs.model import AnalyticMetric, Robot
+from pinobs.model import Robot
+from pinobs.model.paper_systems import sarras_eq21
 from pinobs.observers import make_observer
 from pinobs.observers.ii import (
     CholeskyFactor,
@@ -51,24 +52,6 @@ CARTPOLES = {
     "heavy_short": lambda: cartpole_variant(3.0, 0.8, 0.5),
     "light_long": lambda: cartpole_variant(0.5, 0.3, 2.0),
 }
-
-
-def sarras_eq21() -> AnalyticMetric:
-    """Sarras et al. eq. (21), with its exact derivative."""
-
-    def minv(q: np.ndarray) -> np.ndarray:
-        a = 1.0 + q[1] ** 2
-        s = q[1] * np.sqrt(a)
-        return np.array([[a, 0.0, s], [0.0, a * a, 0.0], [s, 0.0, a]])
-
-    def dminv(q: np.ndarray, x: np.ndarray) -> np.ndarray:
-        a = 1.0 + q[1] ** 2
-        ds = np.sqrt(a) + q[1] ** 2 / np.sqrt(a)
-        return x[1] * np.array([[2 * q[1], 0.0, ds], [0.0, 4 * q[1] * a, 0.0], [ds, 0.0, 2 * q[1]]])
-
-    return AnalyticMetric.from_inverse(
-        minv, n=3, inverse_mass_matrix_derivative=dminv, name="sarras_eq21"
-    )
 
 
 def sarras_eq23(q: np.ndarray) -> np.ndarray:

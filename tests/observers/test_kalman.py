@@ -10,31 +10,16 @@ import pytest
 import pinobs
 from pinobs.errors import GainError
 from pinobs.evaluation import evaluate
-from pinobs.model import AnalyticMetric, lie_rk4
+from pinobs.model import lie_rk4
+from pinobs.model.paper_systems import BOWL, bowl_and_cylinder
 from pinobs.observers import make_observer
 from pinobs.simulation import Sensor, simulate
 
-# Ibrir §4 with the parameters of examples/ibrir_bowl_cylinder.py
-M_EQ, LAM, J_EQ, K_SPRING, G = 2.0, 0.25, 0.1875, 10.0, 9.81
+M_EQ, LAM, J_EQ, K_SPRING, G = (BOWL[n] for n in ("M_eq", "lam", "J_eq", "k", "g"))
 
 
-def _bowl() -> AnalyticMetric:
-    def mass(q: np.ndarray) -> np.ndarray:
-        s = LAM * math.sin(q[1])
-        return np.array([[M_EQ, s], [s, J_EQ]])
-
-    def dmass(q: np.ndarray, x: np.ndarray) -> np.ndarray:
-        c = LAM * math.cos(q[1]) * x[1]
-        return np.array([[0.0, c], [c, 0.0]])
-
-    def grad_v(q: np.ndarray) -> np.ndarray:
-        return np.array([K_SPRING * q[0], LAM * G * math.sin(q[1])])
-
-    return AnalyticMetric(mass, n=2, mass_matrix_derivative=dmass, gravity=grad_v, name="bowl")
-
-
-def test_state_affine_form_is_ibrir_eqs_16_and_17_on_the_bowl() -> None:
-    ob = make_observer("kalman", _bowl())
+def test_state_affine_form_is_ibrir_eqs_16_and_17_on_thebowl_and_cylinder() -> None:
+    ob = make_observer("kalman", bowl_and_cylinder())
     rng = np.random.default_rng(0)
     for _ in range(5):
         y, yd, u = rng.normal(0, 1, 2), rng.normal(0, 1, 2), float(rng.normal())
@@ -125,7 +110,7 @@ def test_kalman_converges_from_a_perturbed_start(robot_name: str) -> None:
 
 def _bowl_run(ob: pinobs.Observer, duration: float, rate: float) -> np.ndarray:
     """Ibrir §4: x₀ = (0, 0.4, 0, 0), x̂₀ = (15, 20, −10, −2), u = 2 sin t; returns |v̂ − v|."""
-    robot = _bowl()
+    robot = bowl_and_cylinder()
     h = 1.0 / rate
     q, v = np.array([0.0, 0.4]), np.zeros(2)
     errs = []
@@ -150,7 +135,7 @@ def test_ibrir_section4_bowl_and_cylinder_estimates_converge() -> None:
     rate = 250.0
     paper = make_observer(
         "kalman",
-        _bowl(),
+        bowl_and_cylinder(),
         form="paper",
         output_weight=1.0,
         q0_std=10.0,
@@ -159,7 +144,7 @@ def test_ibrir_section4_bowl_and_cylinder_estimates_converge() -> None:
         diff_gamma=50.0,
         rate=rate,
     )
-    practical = make_observer("kalman", _bowl(), q0_std=10.0, v0_std=10.0, rate=rate)
+    practical = make_observer("kalman", bowl_and_cylinder(), q0_std=10.0, v0_std=10.0, rate=rate)
     e_paper = _bowl_run(paper, 5.0, rate)
     e_practical = _bowl_run(practical, 5.0, rate)
     assert e_paper[0] == pytest.approx(10.0)

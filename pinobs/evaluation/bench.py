@@ -20,6 +20,13 @@ Every other observer runs with the gains it picks from ``rate`` and
 
 The scaling study times one update against ``nv`` and fits
 ``time ∝ nv^p`` by least squares on the log-log points.
+
+The mismatch study (:data:`pinobs.simulation.MISMATCH_SCENARIOS`) runs the
+truth on a perturbed copy of the robot while every observer keeps the nominal
+model, and reports the velocity RMS error and the bias (RMS over joints of
+the time-mean error after the transient).  It adds the mitigation rows
+``ekf+d`` (the EKF with a joint-torque offset state, ``disturbance_psd`` = 1)
+and ``ekf~`` (the EKF with raised process noise, ``accel_psd`` = 1e-2).
 """
 
 from __future__ import annotations
@@ -37,7 +44,7 @@ from pinobs.errors import PinobsError, UnsupportedRobotError
 from pinobs.evaluation.metrics import Metrics, evaluate
 from pinobs.model import Robot, aba_time, load, pinocchio_version
 from pinobs.observers import Observer, make_observer, observer_names
-from pinobs.simulation import Sensor, simulate
+from pinobs.simulation import MISMATCH_SCENARIOS, Sensor, mismatched_plant, simulate
 
 __all__ = [
     "BenchConfig",
@@ -70,6 +77,7 @@ class BenchConfig:
     """
 
     robots: tuple[str, ...] = ("cartpole", "ur5", "panda", "go1")
+    mismatch_robots: tuple[str, ...] = ("ur5", "panda")
     cost_robots: tuple[str, ...] = ("pendulum", "planar_3r", "talos")
     duration: float = 4.0
     rate: float = 1000.0
@@ -84,7 +92,11 @@ class BenchConfig:
     def quick(cls) -> BenchConfig:
         """Under two minutes: two robots, short runs, a small scaling set."""
         return cls(
-            robots=("cartpole", "ur5"), cost_robots=("panda",), duration=1.5, timing_updates=100
+            robots=("cartpole", "ur5"),
+            mismatch_robots=("ur5",),
+            cost_robots=("panda",),
+            duration=1.5,
+            timing_updates=100,
         )
 
 
@@ -195,6 +207,7 @@ def run_bench(cfg: BenchConfig, *, log: Callable[[str], None] = print) -> dict[s
                         else f"diverged at {m.diverged_at:.3g} s",
                     )
                 )
+    mismatch = _mismatch(cfg, log=log)
     scaling = _scaling(cfg, log=log)
     geometry = time_geometry(tuple(dict.fromkeys((*cfg.robots, *cfg.cost_robots))))
     return {
@@ -205,7 +218,57 @@ def run_bench(cfg: BenchConfig, *, log: Callable[[str], None] = print) -> dict[s
         "skipped": skipped_all,
         "scaling": scaling,
         "geometry": geometry,
+        "mismatch": mismatch,
     }
+
+
+def _mismatch(cfg: BenchConfig, *, log: Callable[[str], None]) -> list[dict[str, Any]]:
+    """Every observer (nominal model) against perturbed truths (module docstring)."""
+    out: list[dict[str, Any]] = []
+    sensor = Sensor(cfg.rate, cfg.noise_std)
+    for robot_name in cfg.mismatch_robots:
+        robot = load(robot_name)
+        for scenario in MISMATCH_SCENARIOS:
+            obs, _ = _candidates(robot, cfg.rate, cfg.noise_std)
+            obs["ekf+d"] = make_observer(
+                "ekf", robot, rate=cfg.rate, noise_std=cfg.noise_std, disturbance_psd=1.0
+            )
+            obs["ekf~"] = make_observer(
+                "ekf", robot, rate=cfg.rate, noise_std=cfg.noise_std, accel_psd=1e-2
+            )
+            t0 = time.perf_counter()
+            result = simulate(
+                robot,
+                obs,
+                duration=cfg.duration,
+                sensor=sensor,
+                inputs="pd",
+                perturb_q=cfg.perturb_q,
+                perturb_v=cfg.perturb_v,
+                seed=cfg.seed,
+                plant=mismatched_plant(robot, scenario, seed=cfg.seed),
+            )
+            metrics = {m.observer: m for m in evaluate(result, robot)}
+            after = result.t >= result.t[0] + 0.25 * (result.t[-1] - result.t[0])
+            fd_key, _ = _best(metrics, "fd")
+            kf_key, _ = _best(metrics, "kf")
+            names = {n: n for n in obs if "@" not in n}
+            names.update({"fd*": fd_key, "kf*": kf_key})
+            for label, key in names.items():
+                err = result.trace(key).v[after] - result.v[after]
+                finite = bool(np.all(np.isfinite(err)))
+                bias = float(np.sqrt(np.mean(np.mean(err, axis=0) ** 2))) if finite else math.inf
+                out.append(
+                    {
+                        "robot": robot_name,
+                        "scenario": scenario,
+                        "observer": label,
+                        "rms_v_error": metrics[key].rms_v_error,
+                        "bias": bias,
+                    }
+                )
+            log(f"  mismatch {robot_name:6s} {scenario:18s} in {time.perf_counter() - t0:.1f} s")
+    return out
 
 
 def _machine() -> dict[str, str]:
@@ -318,6 +381,7 @@ def format_bench(report: dict[str, Any]) -> str:
                 f"| `{r['observer']}` | {r['rms_v_error']:.3g} | {r['convergence_time']:.3g} | "
                 f"{r['time_per_update'] * 1e6:.1f} | {r['cost_in_aba']:.1f} | {r['note']} |"
             )
+    lines += _format_mismatch(report.get("mismatch", []))
     lines += ["", "**Cost scaling** (median update time; fitted `time ∝ nv^p`)", ""]
     sc = report["scaling"]
     nvs = sorted({p["nv"] for s in sc.values() for p in s["points"]})
@@ -335,3 +399,31 @@ def format_bench(report: dict[str, Any]) -> str:
             f"| {g['robot']} | {g['nv']} | {g['christoffel']:.1f} | {g['connection']:.1f} | {g['curvature']:.1f} |"
         )
     return "\n".join(lines)
+
+
+def _format_mismatch(rows: list[dict[str, Any]]) -> list[str]:
+    """Markdown: per robot, observers × scenarios, ``rms (bias)`` in rad/s."""
+    if not rows:
+        return []
+    lines: list[str] = []
+    scenarios = list(dict.fromkeys(r["scenario"] for r in rows))
+    for robot in dict.fromkeys(r["robot"] for r in rows):
+        sel = [r for r in rows if r["robot"] == robot]
+        cell = {(r["observer"], r["scenario"]): r for r in sel}
+        order = sorted(
+            dict.fromkeys(r["observer"] for r in sel),
+            key=lambda o: cell[(o, scenarios[0])]["rms_v_error"],
+        )
+        lines += [
+            "",
+            f"**Model mismatch, {robot}**: velocity RMS error (bias) [rad/s]; observers keep the nominal model",
+            "",
+            "| observer | " + " | ".join(scenarios) + " |",
+            "|---|" + "---:|" * len(scenarios),
+        ]
+        for o in order:
+            cells = [
+                f"{cell[(o, s)]['rms_v_error']:.2g} ({cell[(o, s)]['bias']:.1g})" for s in scenarios
+            ]
+            lines.append(f"| `{o}` | " + " | ".join(cells) + " |")
+    return lines

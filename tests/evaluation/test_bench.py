@@ -18,7 +18,11 @@ def test_scaling_exponent_recovers_a_power_law() -> None:
 
 def test_bench_reports_every_observer_and_the_tuned_baselines(capsys) -> None:
     cfg = BenchConfig(
-        robots=("cartpole",), cost_robots=("pendulum", "planar_3r"), duration=0.4, timing_updates=20
+        robots=("cartpole",),
+        mismatch_robots=("cartpole",),
+        cost_robots=("pendulum", "planar_3r"),
+        duration=0.4,
+        timing_updates=20,
     )
     report = run_bench(cfg, log=lambda _: None)
     rows = report["rows"]
@@ -31,8 +35,14 @@ def test_bench_reports_every_observer_and_the_tuned_baselines(capsys) -> None:
     assert all(r["cost_in_aba"] > 0 for r in rows)
     assert {g["robot"] for g in report["geometry"]} == {"cartpole", "pendulum", "planar_3r"}
     assert report["scaling"]["kf"]["points"] and math.isfinite(report["scaling"]["kf"]["exponent"])
+    mism = {(r["observer"], r["scenario"]): r for r in report["mismatch"]}
+    assert {s for _, s in mism} == {"exact", "inertia5", "inertia20_payload", "friction"}
+    assert {"ekf+d", "ekf~", "kf*", "fd*"} <= {o for o, _ in mism}
+    # a model-free filter does not use the model: its error barely moves with the truth's model
+    assert mism[("kf*", "friction")]["rms_v_error"] < 3 * mism[("kf*", "exact")]["rms_v_error"]
     text = format_bench(report)
     assert "**cartpole** (nv = 2), gauss 0.0001" in text and "Cost scaling" in text
+    assert "**Model mismatch, cartpole**" in text
 
 
 def test_bench_command_is_registered(capsys) -> None:

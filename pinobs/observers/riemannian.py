@@ -97,6 +97,17 @@ same default and meaning as the ``ekf`` observer's (trust an exact model); at
 1 kHz and σ = 1e-4 rad that gives α = 4.0 /s, β = 31.6 /s² (slow transients,
 lowest noise); raise it when the model is uncertain or transients matter
 (1e-4: α = 40, β = 3162).  Else ``alpha = 60``, ``beta = 900`` [1/s, 1/s²].
+
+Gain schedule (``gain_schedule``, with the Kalman rule).  ``"riccati"``
+(default): the same double-integrator filter run in time, not only at its
+steady state: a 2×2 covariance ``P``, shared by every tangent direction (as
+in ``kf``), starts at ``diag(q0_std², v0_std²)`` (defaults 0.1 rad, 1 rad/s,
+as the ``ekf``'s) and follows ``P⁻ = F P Fᵀ + Q``, ``K = P⁻[:, 0] / (P⁻₀₀ + σ²)``,
+Joseph update, over the interval since the last correction; the correction
+uses ``k₁ = K₀``, ``k₂ = K₁``.  Large gains while the estimate is uncertain,
+the steady-state gains above once it has converged: fast transients without
+giving up the noise level.  Started on the truth, ζ ≡ 0 and the gains do not
+matter.  ``"steady"``: the constant steady-state gains.
 """
 
 from __future__ import annotations
@@ -382,6 +393,7 @@ class _State(NamedTuple):
     elapsed: float  # [s] since the last correction
     jacobi: Vector | None  # cached R(v̂, ·)v̂ (nv × nv), or None
     age: int  # corrections since the cache was computed
+    P: Vector | None = None  # 2×2 covariance of the gain schedule (module docstring), or None
 
 
 @register
@@ -402,6 +414,10 @@ class RiemannianObserver(Observer[_State]):
             constant it stands for.
         accel_psd: white-acceleration density [rad²/s³] of the gain rule used
             when ``alpha``/``beta`` are not given and ``rate`` is.
+        gain_schedule: ``"riccati"`` (time-varying Kalman gains from the rule's
+            double-integrator model) or ``"steady"`` (its steady state); only
+            with the rule (module docstring).
+        q0_std, v0_std: initial standard deviations of the schedule [rad], [rad/s].
         rate: sample rate [Hz] (gain rule).
         noise_std: position noise standard deviation [rad or m] (gain rule).
 
@@ -424,11 +440,19 @@ class RiemannianObserver(Observer[_State]):
         gain_c: GainFunction | None = None,
         curvature_every: int = 10,
         accel_psd: float = 1e-8,
+        gain_schedule: str = "riccati",
+        q0_std: float = 0.1,
+        v0_std: float = 1.0,
         rate: float | None = None,
         noise_std: float | None = None,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.accel_psd = positive("accel_psd", accel_psd)
+        if gain_schedule not in ("riccati", "steady"):
+            raise GainError(f"gain_schedule={gain_schedule!r}; give 'riccati' or 'steady'")
+        positive("q0_std", q0_std)
+        positive("v0_std", v0_std)
+        self._p0 = np.diag([float(q0_std) ** 2, float(v0_std) ** 2])
         if (
             isinstance(curvature_every, bool)
             or not isinstance(curvature_every, int)
@@ -471,6 +495,13 @@ class RiemannianObserver(Observer[_State]):
             gain_c=gain_c,
         )
         self._lie = not self.robot.is_vector_space  # brackets or unit-norm blocks to keep
+        # the Riccati schedule replaces (α, β) only when they came from the Kalman rule
+        self.gain_schedule = (
+            gain_schedule
+            if self.gain_rule == "kalman" and not self.gains.state_dependent
+            else "steady"
+        )
+        self._sigma2 = (self.noise_std or _NOISE_FLOOR) ** 2
 
     @property
     def options(self) -> dict[str, Any]:
@@ -484,6 +515,7 @@ class RiemannianObserver(Observer[_State]):
             "curvature_every": self.curvature_every,
             "accel_psd": self.accel_psd,
             "gain_rule": self.gain_rule,
+            "gain_schedule": self.gain_schedule,
         }
 
     # ------------------------------------------------------ continuous time
@@ -508,7 +540,8 @@ class RiemannianObserver(Observer[_State]):
 
     # ------------------------------------------------------------ sampled
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:
-        return _State(q0.copy(), v0.copy(), 0.0, None, 0)
+        p0 = self._p0.copy() if self.gain_schedule == "riccati" else None
+        return _State(q0.copy(), v0.copy(), 0.0, None, 0, p0)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         r = self.robot
@@ -533,7 +566,16 @@ class RiemannianObserver(Observer[_State]):
         g_dd = -0.5 * (a_v @ delta)  # Γs(δ, δ)
         zeta = -(delta + 0.5 * g_dd)  # second-order −log_q̂(q) (MATH §4)
         alpha, beta, c = self._gains_at(q, zeta, v)
-        k1, k2 = discrete_gains(alpha, beta, h)
+        P = state.P
+        if P is None:
+            k1, k2 = discrete_gains(alpha, beta, h)
+        else:  # Riccati schedule of the double-integrator error model (module docstring)
+            F = np.array([[1.0, h], [0.0, 1.0]])
+            P = F @ P @ F.T + self.accel_psd * np.array([[h**3 / 3, h**2 / 2], [h**2 / 2, h]])
+            K = P[:, 0] / (P[0, 0] + self._sigma2)
+            k1, k2 = float(K[0]), float(K[1])
+            ikh = np.array([[1.0 - K[0], 0.0], [-K[1], 1.0]])
+            P = ikh @ P @ ikh.T + self._sigma2 * np.outer(K, K)  # Joseph form
         ds = a_q @ delta  # S(q) − S(q̂) + O(δ²): ∂_q Γs(δ,δ) is O(δ²)
         s_meas = acc + g_dd + ds  # S = M⁻¹(τ − g) at q, to first order
         w = k1 * v - h * s_meas
@@ -550,7 +592,7 @@ class RiemannianObserver(Observer[_State]):
         q_new = r.integrate(q, -k1 * zeta)
         if self._lie:
             q_new = r.normalize(q_new)
-        return _State(q_new, v + dv, 0.0, jac, age)
+        return _State(q_new, v + dv, 0.0, jac, age, P)
 
     def _gains_at(self, q: Vector, zeta: Vector, v: Vector) -> tuple[float, float, float]:
         g = self.gains

@@ -23,6 +23,14 @@ Rhs = Callable[[Vector, Vector], tuple[Vector, Vector]]
 
 def lie_rk4(robot: Robot, q: Vector, x: Vector, h: float, rhs: Rhs) -> tuple[Vector, Vector]:
     """Advance ``(q, x)`` by ``h`` [s] under ``rhs(q, x) -> (u, ẋ)`` (RKMK4, module docstring)."""
+    if robot.is_vector_space:  # ⊕ is +: classical RK4, without the group bookkeeping
+        u1, f1 = rhs(q, x)
+        u2, f2 = rhs(q + (0.5 * h) * u1, x + (0.5 * h) * f1)
+        u3, f3 = rhs(q + (0.5 * h) * u2, x + (0.5 * h) * f2)
+        u4, f4 = rhs(q + h * u3, x + h * f3)
+        return q + (h / 6.0) * (u1 + 2.0 * (u2 + u3) + u4), x + (h / 6.0) * (
+            f1 + 2.0 * (f2 + f3) + f4
+        )
     exact_frame = not robot.has_lie_group_joints
 
     def xi_dot(xi: Vector, u: Vector) -> Vector:

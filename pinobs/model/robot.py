@@ -149,6 +149,7 @@ class Robot:
             slice(b.idx_q, b.idx_q + 2) for b in self.joints if b.kind == "circle"
         )
         self._bracket_blocks = tuple(b for b in self.joints if b.kind in ("so3", "se3", "se2"))
+        self._vector_space = model.nq == model.nv and all(b.kind == "vector" for b in self.joints)
 
     # ------------------------------------------------------------------ basics
     def __repr__(self) -> str:
@@ -171,8 +172,8 @@ class Robot:
 
     @property
     def is_vector_space(self) -> bool:
-        """True when every joint is revolute/prismatic (``q`` lives in Rⁿ, nq = nv)."""
-        return all(b.kind == "vector" for b in self.joints)
+        """True when every joint is revolute/prismatic (``q`` lives in Rⁿ, nq = nv, ``⊕`` is ``+``)."""
+        return self._vector_space
 
     @property
     def has_lie_group_joints(self) -> bool:
@@ -291,7 +292,7 @@ class Robot:
             ) from exc
         if arr.shape != (n,):
             raise DimensionError(f"{what} must have shape ({n},), got shape {arr.shape}")
-        if not math.isfinite(arr.sum()) and not np.all(np.isfinite(arr)):  # sum: fast path
+        if not math.isfinite(arr.dot(arr)) and not np.all(np.isfinite(arr)):  # dot: fast path
             bad = np.flatnonzero(~np.isfinite(arr)).tolist()
             raise NonFiniteError(f"{what} has non-finite entries at indices {bad}: {arr.tolist()}")
         return arr
@@ -407,7 +408,7 @@ class Robot:
         """``v̇ = M⁻¹(τ + τ_f(v) − c(q, v) − g(q))`` by the articulated-body algorithm."""
         if self.has_friction:
             tau = tau + self.friction_torque(v)
-        return np.array(pin.aba(self.model, self._data, q, v, tau), dtype=float)
+        return pin.aba(self.model, self._data, q, v, tau)  # a fresh array (checked)
 
     def forward_dynamics_derivatives(
         self, q: Vector, v: Vector, tau: Vector

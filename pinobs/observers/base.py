@@ -179,14 +179,18 @@ class Observer(ABC, Generic[State]):
         # MATH §7: propagate with the torque held since the previous call, then correct.
         state = self._step(self._state, t_new - self._t, q, self._tau)
         estimate = self._make_estimate(t_new, state)
-        if not (math.isfinite(estimate.q.sum()) and math.isfinite(estimate.v.sum())):
-            raise ObserverDiverged(
-                f"{self!r} diverged at t = {t_new:.6g} s (non-finite estimate); "
-                f"the last finite estimate is at t = {self._t:.6g} s. Lower the gains "
-                "or check the model and the torques.",
-                t=t_new,
-                last_estimate=self._last,
-            )
+        if not (
+            math.isfinite(estimate.q.dot(estimate.q)) and math.isfinite(estimate.v.dot(estimate.v))
+        ):
+            # (a dot product overflowing to inf also lands here: then check entry by entry)
+            if not (np.all(np.isfinite(estimate.q)) and np.all(np.isfinite(estimate.v))):
+                raise ObserverDiverged(
+                    f"{self!r} diverged at t = {t_new:.6g} s (non-finite estimate); "
+                    f"the last finite estimate is at t = {self._t:.6g} s. Lower the gains "
+                    "or check the model and the torques.",
+                    t=t_new,
+                    last_estimate=self._last,
+                )
         self._state, self._t, self._tau, self._last = state, t_new, tau_new, estimate
         return estimate
 

@@ -393,7 +393,7 @@ class _State(NamedTuple):
     elapsed: float  # [s] since the last correction
     jacobi: Vector | None  # cached R(v̂, ·)v̂ (nv × nv), or None
     age: int  # corrections since the cache was computed
-    P: Vector | None = None  # 2×2 covariance of the gain schedule (module docstring), or None
+    P: tuple[float, float, float] | None = None  # (P₀₀, P₀₁, P₁₁) of the gain schedule, or None
 
 
 @register
@@ -447,7 +447,8 @@ class RiemannianObserver(Observer[_State]):
         noise_std: float | None = None,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
-        self.accel_psd = positive("accel_psd", accel_psd)
+        positive("accel_psd", accel_psd)
+        self.accel_psd = float(accel_psd)
         if gain_schedule not in ("riccati", "steady"):
             raise GainError(f"gain_schedule={gain_schedule!r}; give 'riccati' or 'steady'")
         positive("q0_std", q0_std)
@@ -540,7 +541,7 @@ class RiemannianObserver(Observer[_State]):
 
     # ------------------------------------------------------------ sampled
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:
-        p0 = self._p0.copy() if self.gain_schedule == "riccati" else None
+        p0 = (self._p0[0, 0], 0.0, self._p0[1, 1]) if self.gain_schedule == "riccati" else None
         return _State(q0.copy(), v0.copy(), 0.0, None, 0, p0)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
@@ -570,12 +571,17 @@ class RiemannianObserver(Observer[_State]):
         if P is None:
             k1, k2 = discrete_gains(alpha, beta, h)
         else:  # Riccati schedule of the double-integrator error model (module docstring)
-            F = np.array([[1.0, h], [0.0, 1.0]])
-            P = F @ P @ F.T + self.accel_psd * np.array([[h**3 / 3, h**2 / 2], [h**2 / 2, h]])
-            K = P[:, 0] / (P[0, 0] + self._sigma2)
-            k1, k2 = float(K[0]), float(K[1])
-            ikh = np.array([[1.0 - K[0], 0.0], [-K[1], 1.0]])
-            P = ikh @ P @ ikh.T + self._sigma2 * np.outer(K, K)  # Joseph form
+            p00, p01, p11 = P  # 2×2 symmetric, in scalars: this runs every sample
+            qa, r2 = self.accel_psd, self._sigma2
+            p00 += 2.0 * h * p01 + h * h * p11 + qa * h**3 / 3.0  # P⁻ = F P Fᵀ + Q
+            p01 += h * p11 + qa * h * h / 2.0
+            p11 += qa * h
+            k1, k2 = p00 / (p00 + r2), p01 / (p00 + r2)  # K = P⁻Hᵀ (H P⁻Hᵀ + σ²)⁻¹
+            P = (  # Joseph form (I − KH) P⁻ (I − KH)ᵀ + K σ² Kᵀ
+                (1.0 - k1) ** 2 * p00 + r2 * k1 * k1,
+                (1.0 - k1) * (p01 - k2 * p00) + r2 * k1 * k2,
+                k2 * k2 * p00 - 2.0 * k2 * p01 + p11 + r2 * k2 * k2,
+            )
         ds = a_q @ delta  # S(q) − S(q̂) + O(δ²): ∂_q Γs(δ,δ) is O(δ²)
         s_meas = acc + g_dd + ds  # S = M⁻¹(τ − g) at q, to first order
         w = k1 * v - h * s_meas

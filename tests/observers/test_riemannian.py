@@ -423,7 +423,10 @@ def test_riccati_schedule_settles_on_the_steady_state_kalman_gains() -> None:
     ob.reset(0.0, np.zeros(1))
     for k in range(1, 20001):
         ob.update(k * 1e-3, np.zeros(1))
-    P = ob._state.P  # the posterior covariance after 20 s: the next gain is the steady one
+    p00, p01, p11 = (
+        ob._state.P
+    )  # the posterior covariance after 20 s: the next gain is the steady one
+    P = np.array([[p00, p01], [p01, p11]])
     alpha, beta = gains_from_noise(1000.0, 1e-4, 1e-8)
     k1, k2 = discrete_gains(alpha, beta, 1e-3)
     h, q = 1e-3, 1e-8

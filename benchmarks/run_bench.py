@@ -38,8 +38,8 @@ if __name__ == "__main__":
     header = (
         f"Made by `{cmd}` on {m['date']} in {report['seconds']:.0f} s; {m['processor']}, {m['system']}, "
         f"Python {m['python']}, Pinocchio {m['pinocchio']}, NumPy {m['numpy']}. "
-        f"{cfg.duration:g} s per run at {cfg.rate:g} Hz, PD tracking of a multi-sine (multi-sine torques on "
-        f"floating bases), start error |dq| = {cfg.perturb_q:g} rad, |dv| = {cfg.perturb_v:g} rad/s, seed {cfg.seed}; "
+        f"{cfg.duration:g} s per run at {cfg.rate:g} Hz, PD tracking of a multi-sine reference (the base "
+        f"of a floating robot actuated too), start error |dq| = {cfg.perturb_q:g} rad, |dv| = {cfg.perturb_v:g} rad/s, seed {cfg.seed}; "
         "RMS after the first quarter of the run. `x aba` is the update time over one `pin.aba` call on the same "
         "robot in the same run. Rows sorted by error; `fd*`, `kf*` are tuned on the run itself (optimistic).\n"
     )

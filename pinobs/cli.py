@@ -334,7 +334,7 @@ def _add_sim_options(p: argparse.ArgumentParser, *, duration: float) -> None:
         "--input",
         choices=INPUT_NAMES,
         default=None,
-        help="input profile (default: pd for fixed-base robots, multisine otherwise)",
+        help="input profile (default: pd, tracking a multi-sine reference)",
     )
     p.add_argument(
         "--perturb-q",

@@ -167,7 +167,7 @@ def run_bench(cfg: BenchConfig, *, log: Callable[[str], None] = print) -> dict[s
                 obs,
                 duration=cfg.duration,
                 sensor=sensor,
-                inputs="pd" if not robot.has_lie_group_joints else "multisine",
+                inputs="pd",
                 perturb_q=cfg.perturb_q,
                 perturb_v=cfg.perturb_v,
                 seed=cfg.seed,

@@ -292,7 +292,8 @@ class Robot:
             ) from exc
         if arr.shape != (n,):
             raise DimensionError(f"{what} must have shape ({n},), got shape {arr.shape}")
-        if not math.isfinite(arr.dot(arr)) and not np.all(np.isfinite(arr)):  # dot: fast path
+        # fast path: a Python sum is finite iff every entry is (overflow: checked entry by entry)
+        if not math.isfinite(sum(arr.tolist())) and not np.all(np.isfinite(arr)):
             bad = np.flatnonzero(~np.isfinite(arr)).tolist()
             raise NonFiniteError(f"{what} has non-finite entries at indices {bad}: {arr.tolist()}")
         return arr

@@ -180,9 +180,9 @@ class Observer(ABC, Generic[State]):
         state = self._step(self._state, t_new - self._t, q, self._tau)
         estimate = self._make_estimate(t_new, state)
         if not (
-            math.isfinite(estimate.q.dot(estimate.q)) and math.isfinite(estimate.v.dot(estimate.v))
+            math.isfinite(sum(estimate.q.tolist())) and math.isfinite(sum(estimate.v.tolist()))
         ):
-            # (a dot product overflowing to inf also lands here: then check entry by entry)
+            # (a sum overflowing to inf also lands here: then check entry by entry)
             if not (np.all(np.isfinite(estimate.q)) and np.all(np.isfinite(estimate.v))):
                 raise ObserverDiverged(
                     f"{self!r} diverged at t = {t_new:.6g} s (non-finite estimate); "

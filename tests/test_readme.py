@@ -41,3 +41,10 @@ def test_readme_states_the_two_commands_and_ci_runs_the_test_command() -> None:
     assert test_cmd in text
     ci = (README.parent / ".ci" / "run").read_text()
     assert test_cmd in ci
+
+
+def test_readme_benchmark_section_is_the_committed_results_file() -> None:
+    m = re.search(r"<!-- bench: benchmarks/results.md -->\n(.*?)<!-- end bench -->", _text(), re.S)
+    assert m is not None
+    results = (README.parent / "benchmarks" / "results.md").read_text()
+    assert m.group(1) == results, "paste benchmarks/results.md into the README's benchmark section"

@@ -432,6 +432,7 @@ class LieGroupObserver(Observer[_State]):
         """
         geo, g = self.geometry, self.gains
         zeta_e = self.error(q_meas, q_hat)
+        tau = tau + self.robot.friction_torque(v_hat)  # the model's joint friction (zero if none)
         u = v_hat - 2.0 * g.alpha * zeta_e  # Maithripala et al. eq. (20)
         v_dot = (
             -geo.connection(u, v_hat)  # eq. (21): I⁻¹(ad*…) + α[ζ_e, ζ̃]
@@ -442,8 +443,8 @@ class LieGroupObserver(Observer[_State]):
         return u, v_dot
 
     def model_vector_field(self, q: Vector, v: Vector, tau: Vector) -> tuple[Vector, Vector]:
-        """The system itself, eqs. (15)–(16): ``(ζ, −ω(ζ, ζ) + S(g))``."""
-        return v, self.geometry.euler(v) + self.force(q, tau)
+        """The system itself, eqs. (15)–(16): ``(ζ, −ω(ζ, ζ) + S(g))``, joint friction included."""
+        return v, self.geometry.euler(v) + self.force(q, tau + self.robot.friction_torque(v))
 
     # ------------------------------------------------------- sampled data
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:

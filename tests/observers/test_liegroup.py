@@ -42,8 +42,8 @@ def heavy_top() -> Robot:
 
     m = 1 kg, centre of mass l = 0.05 m up the symmetry axis e₃, principal
     moments about the centre of mass I₁ = I₂ = 0.01, I₃ = 0.02 kg·m², so about
-    the pivot I = diag(0.0125, 0.0125, 0.02) kg·m² (the project's ``top``, with
-    l = 0.1 m, is isotropic about its pivot: ω would be ½C only).
+    the pivot I = diag(0.0125, 0.0125, 0.02) kg·m² (the project's ``top`` has
+    the same parameters).
     """
     model = pin.Model()
     j = model.addJoint(0, pin.JointModelSpherical(), pin.SE3.Identity(), "pivot")
@@ -53,6 +53,19 @@ def heavy_top() -> Robot:
         pin.SE3.Identity(),
     )
     return Robot(model, name="heavy_top", source="tests")
+
+
+@cache
+def isotropic_top() -> Robot:
+    """A top isotropic about its pivot (l = 0.1 m: I = 0.02·1 kg·m²): a bi-invariant metric."""
+    model = pin.Model()
+    j = model.addJoint(0, pin.JointModelSpherical(), pin.SE3.Identity(), "pivot")
+    model.appendBodyToJoint(
+        j,
+        pin.Inertia(1.0, np.array([0.0, 0.0, 0.1]), np.diag([0.01, 0.01, 0.02])),
+        pin.SE3.Identity(),
+    )
+    return Robot(model, name="isotropic_top", source="tests")
 
 
 @cache
@@ -196,8 +209,8 @@ def test_printed_eq8_with_its_extra_bracket_term_disagrees_with_the_curvature(
 
 
 def test_isotropic_top_has_sectional_curvature_one_over_four_c(rng) -> None:
-    """The project's top is isotropic about its pivot, c = 0.02 kg·m²: K = 1/(4c) = 12.5 (MATH §3)."""
-    geo = pinobs.make_observer("liegroup", pinobs.load("top")).geometry
+    """A top isotropic about its pivot, c = 0.02 kg·m²: K = 1/(4c) = 12.5 (MATH §3)."""
+    geo = pinobs.make_observer("liegroup", isotropic_top()).geometry
     np.testing.assert_allclose(geo.inertia, 0.02 * np.eye(3), atol=1e-15)
     for _ in range(5):
         x, y = rng.standard_normal((2, 3))
@@ -517,7 +530,7 @@ def _pair(robot: Robot, **gains):
 @needs_riemannian
 def test_vector_field_equals_the_riemannian_observers_on_the_bi_invariant_top(rng) -> None:
     """Isotropic inertia about the pivot: the group log is the Riemannian log, the two are one observer."""
-    robot = pinobs.load("top")
+    robot = isotropic_top()
     lg, rm = _pair(robot, alpha=10.0, beta=10.0)
     for _ in range(10):
         q = robot.random_configuration(rng)

@@ -127,7 +127,17 @@ def test_log_columns_that_do_not_fit_the_robot_are_rejected(tmp_path: Path) -> N
 def test_cli_round_trips_a_ur5_csv_log_with_the_riemannian_observer(tmp_path: Path, capsys) -> None:
     path, res = _log(tmp_path, n=400)
     out = tmp_path / "est.csv"
-    args = ["estimate", "--robot", "ur5", "--observer", "riemannian", "--log", str(path), "--out", str(out)]
+    args = [
+        "estimate",
+        "--robot",
+        "ur5",
+        "--observer",
+        "riemannian",
+        "--log",
+        str(path),
+        "--out",
+        str(out),
+    ]
     assert main([*args, "--noise", "1e-4", "--no-progress"]) == 0
     est = np.genfromtxt(out, delimiter=",", names=True)
     assert est.size == 400

@@ -88,7 +88,8 @@ def _build(
         except UnsupportedRobotError as exc:
             if strict:
                 raise
-            skipped[name] = str(exc).split(";")[0]
+            reason = str(exc).split(";")[0]
+            skipped[name] = reason if len(reason) <= 110 else reason[:107] + "..."
     return built, skipped
 
 

@@ -44,7 +44,7 @@ from pinobs.errors import PinobsError, UnsupportedRobotError
 from pinobs.evaluation.metrics import Metrics, evaluate
 from pinobs.model import Robot, aba_time, load, pinocchio_version
 from pinobs.observers import Observer, make_observer, observer_names
-from pinobs.simulation import MISMATCH_SCENARIOS, Sensor, mismatched_plant, simulate
+from pinobs.simulation import MISMATCH_SCENARIOS, Result, Sensor, mismatched_plant, simulate
 
 __all__ = [
     "BenchConfig",
@@ -144,6 +144,27 @@ def _candidates(
     return obs, skipped
 
 
+def _simulate(
+    cfg: BenchConfig,
+    robot: Robot,
+    obs: dict[str, Observer[Any]],
+    sensor: Sensor,
+    plant: Robot | None = None,
+) -> Result:
+    """One benchmark run: PD tracking, the configured start error and seed."""
+    return simulate(
+        robot,
+        obs,
+        duration=cfg.duration,
+        sensor=sensor,
+        inputs="pd",
+        perturb_q=cfg.perturb_q,
+        perturb_v=cfg.perturb_v,
+        seed=cfg.seed,
+        plant=plant,
+    )
+
+
 def _best(metrics: dict[str, Metrics], prefix: str) -> tuple[str, Metrics]:
     grid = {k: m for k, m in metrics.items() if k.startswith(prefix + "@")}
     key = min(grid, key=lambda k: grid[k].rms_v_error)
@@ -162,16 +183,7 @@ def run_bench(cfg: BenchConfig, *, log: Callable[[str], None] = print) -> dict[s
             obs, skipped = _candidates(robot, cfg.rate, noise)
             skipped_all[robot_name] = skipped
             t0 = time.perf_counter()
-            result = simulate(
-                robot,
-                obs,
-                duration=cfg.duration,
-                sensor=sensor,
-                inputs="pd",
-                perturb_q=cfg.perturb_q,
-                perturb_v=cfg.perturb_v,
-                seed=cfg.seed,
-            )
+            result = _simulate(cfg, robot, obs, sensor)
             metrics = {m.observer: m for m in evaluate(result, robot)}
             log(
                 f"  {robot_name:10s} {label:12s} {len(obs)} observers in {time.perf_counter() - t0:.1f} s"
@@ -237,16 +249,8 @@ def _mismatch(cfg: BenchConfig, *, log: Callable[[str], None]) -> list[dict[str,
                 "ekf", robot, rate=cfg.rate, noise_std=cfg.noise_std, accel_psd=1e-2
             )
             t0 = time.perf_counter()
-            result = simulate(
-                robot,
-                obs,
-                duration=cfg.duration,
-                sensor=sensor,
-                inputs="pd",
-                perturb_q=cfg.perturb_q,
-                perturb_v=cfg.perturb_v,
-                seed=cfg.seed,
-                plant=mismatched_plant(robot, scenario, seed=cfg.seed),
+            result = _simulate(
+                cfg, robot, obs, sensor, mismatched_plant(robot, scenario, seed=cfg.seed)
             )
             metrics = {m.observer: m for m in evaluate(result, robot)}
             after = result.t >= result.t[0] + 0.25 * (result.t[-1] - result.t[0])

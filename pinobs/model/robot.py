@@ -24,7 +24,6 @@ Conventions (Pinocchio's, see ``../shared/MATH.md`` §1-3):
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from pinobs.errors import ConfigurationError, DimensionError, NonFiniteError
 from pinobs.tolerances import COULOMB_SMOOTHING_VELOCITY, QUATERNION_NORM_TOL
 
-__all__ = ["JointBlock", "Robot"]
+__all__ = ["JointBlock", "Robot", "read_only"]
 
 Vector = NDArray[np.floating[Any]]
 
@@ -534,8 +533,8 @@ class Robot:
         return float(self.curvature(q, x, y, y) @ m @ x / area2)
 
 
-def stack(vectors: Sequence[Vector]) -> Vector:
-    """Stack equally shaped vectors into a read-only 2-D array (time first)."""
-    out = np.array(vectors, dtype=float)
+def read_only(x: ArrayLike) -> Vector:
+    """A float copy of ``x`` that cannot be written to (estimates and results hand these out)."""
+    out = np.array(x, dtype=float)
     out.setflags(write=False)
     return out

@@ -34,6 +34,7 @@ from pinobs.errors import (
     UnknownNameError,
 )
 from pinobs.model import Robot
+from pinobs.model.robot import read_only
 from pinobs.tolerances import TIME_EPS
 
 __all__ = [
@@ -48,12 +49,6 @@ __all__ = [
 
 Vector = NDArray[np.floating[Any]]
 State = TypeVar("State")
-
-
-def _frozen(x: Vector) -> Vector:
-    out = np.array(x, dtype=float)
-    out.setflags(write=False)
-    return out
 
 
 @dataclass(frozen=True)
@@ -225,7 +220,7 @@ class Observer(ABC, Generic[State]):
     # -------------------------------------------------------------- helpers
     def _make_estimate(self, t: float, state: State) -> Estimate:
         q, v = self._output(state)
-        return Estimate(t=t, q=_frozen(q), v=_frozen(v))
+        return Estimate(t=t, q=read_only(q), v=read_only(v))
 
     def _check_tau(self, tau: ArrayLike | None, *, what: str) -> Vector:
         if tau is None:

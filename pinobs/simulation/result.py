@@ -10,15 +10,9 @@ from typing import Any
 import numpy as np
 
 from pinobs.errors import ModelFileError, UnknownNameError
-from pinobs.model.robot import Vector
+from pinobs.model.robot import Vector, read_only
 
 __all__ = ["ObserverTrace", "Result"]
-
-
-def _ro(x: Any) -> Vector:
-    out = np.array(x, dtype=float)
-    out.setflags(write=False)
-    return out
 
 
 @dataclass(frozen=True)
@@ -44,7 +38,7 @@ class ObserverTrace:
 
     def __post_init__(self) -> None:
         for k in ("q", "v", "update_time"):
-            object.__setattr__(self, k, _ro(getattr(self, k)))
+            object.__setattr__(self, k, read_only(getattr(self, k)))
 
 
 @dataclass(frozen=True)
@@ -72,7 +66,7 @@ class Result:
 
     def __post_init__(self) -> None:
         for k in ("t", "q", "v", "tau", "q_meas"):
-            object.__setattr__(self, k, _ro(getattr(self, k)))
+            object.__setattr__(self, k, read_only(getattr(self, k)))
 
     @property
     def observer_names(self) -> list[str]:

@@ -196,17 +196,46 @@ _ENTRIES: tuple[RobotEntry, ...] = (
     RobotEntry("xarm7", _ERD, "xarm_description/urdf/xarm7.urdf", "fixed", "UFACTORY xArm 7"),
     RobotEntry("z1", _ERD, "z1_description/urdf/z1.urdf", "fixed", "Unitree Z1 arm"),
 )
-_BY_NAME = {e.name: e for e in _ENTRIES}
+
+
+@cache
+def _all_entries() -> dict[str, RobotEntry]:
+    """The table above plus every other URDF the example-robot-data wheel ships.
+
+    The others get the file's stem as name (lower case, ``-`` → ``_``, a trailing
+    ``_robot`` dropped; the folder's name in front where two files share a stem)
+    (``.`` too) and a fixed root: pass ``root_joint`` for a floating base.
+    """
+    entries = {e.name: e for e in _ENTRIES}
+    try:
+        robots = _erd_share_dir() / "example-robot-data" / "robots"
+    except ModelFileError:
+        return entries
+    known = {e.file for e in _ENTRIES if e.origin == _ERD}
+    files = sorted(str(f.relative_to(robots)) for f in robots.glob("*/*/*.urdf"))
+    stems: dict[str, int] = {}
+    for f in files:
+        stems[Path(f).stem] = stems.get(Path(f).stem, 0) + 1
+    for f in files:
+        if f in known:
+            continue
+        stem = Path(f).stem
+        name = stem.lower().replace("-", "_").replace(".", "_").removesuffix("_robot")
+        if stems[stem] > 1 or name in entries:
+            name = f"{Path(f).parts[0].removesuffix('_description')}_{name}"
+        if name not in entries:
+            entries[name] = RobotEntry(name, _ERD, f, "fixed", f"example-robot-data {f}")
+    return entries
 
 
 def robot_entries() -> tuple[RobotEntry, ...]:
-    """Every registered robot, sorted by name."""
-    return tuple(sorted(_ENTRIES, key=lambda e: e.name))
+    """Every robot :func:`load` knows by name, sorted by name."""
+    return tuple(sorted(_all_entries().values(), key=lambda e: e.name))
 
 
 def robot_names() -> list[str]:
     """Names accepted by :func:`load`, sorted."""
-    return sorted(_BY_NAME)
+    return sorted(_all_entries())
 
 
 def _models_dir() -> Path:
@@ -234,7 +263,7 @@ def _erd_share_dir() -> Path:
 
 def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
     """Return (file, package dirs, default root joint, display name) for ``source``."""
-    entry = _BY_NAME.get(str(source))
+    entry = _all_entries().get(str(source))
     if entry is not None:
         if entry.origin == _PINOBS:
             folder = _models_dir()

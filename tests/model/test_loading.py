@@ -116,3 +116,21 @@ def test_check_configuration_rejects_non_unit_quaternions_and_renormalises_close
     far[s] *= 1.1
     with pytest.raises(pinobs.ConfigurationError, match=r"norm 1\.1"):
         robot.check_configuration(far)
+
+
+def test_every_urdf_the_example_robot_data_wheel_ships_has_a_name() -> None:
+    from pinobs.model.loading import _erd_share_dir
+
+    robots = _erd_share_dir() / "example-robot-data" / "robots"
+    files = {str(f.relative_to(robots)) for f in robots.glob("*/*/*.urdf")}
+    named = {e.file for e in robot_entries() if e.origin == "example-robot-data"}
+    assert files and files <= named
+    assert all(n.isidentifier() for n in pinobs.robot_names())
+
+
+@pytest.mark.parametrize(
+    ("name", "nv"), [("ur5_gripper", 6), ("allegro_right_hand", 16), ("iris", 4)]
+)
+def test_robots_found_in_the_wheel_but_not_in_the_table_load(name: str, nv: int) -> None:
+    robot = pinobs.load(name)
+    assert robot.nv == nv and robot.root_joint == "fixed"

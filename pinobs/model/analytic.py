@@ -262,6 +262,22 @@ class AnalyticMetric:
         )
         return dq, dv, np.asarray(np.linalg.inv(self.mass_matrix(q)), dtype=np.float64)
 
+    def forward_dynamics_jacobians(
+        self, q: Vector, v: Vector, tau: Vector
+    ) -> tuple[Vector, Vector, Vector]:
+        """``(v̇, ∂v̇/∂q, ∂v̇/∂v)``, the interface of :meth:`Robot.forward_dynamics_jacobians`."""
+        dq, dv, _ = self.forward_dynamics_derivatives(q, v, tau)
+        return self.forward_dynamics(q, v, tau), dq, dv
+
+    def spray_jacobians(self, q: Vector, x: Vector) -> tuple[Vector, Vector, Vector]:
+        """``(Γs(x, x), ∂_q Γs(x, x), ∂_x Γs(x, x) = 2 Γs(x, ·))``, as :meth:`Robot.spray_jacobians`."""
+        dx = 2.0 * np.column_stack([self.christoffel(q, x, e) for e in np.eye(self._n)])
+        return self.geodesic_spray(q, x), self.spray_derivative(q, x), dx
+
+    def friction_derivative(self, v: Vector) -> Vector:
+        """Zero: an analytic metric carries no joint friction."""
+        return np.zeros(self.nv)
+
     def inverse_dynamics(self, q: Vector, v: Vector, a: Vector) -> Vector:
         """``τ = M a + c + g``."""
         return np.asarray(self.mass_matrix(q) @ a + self.nonlinear_effects(q, v))

@@ -14,7 +14,6 @@ import importlib.resources
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import Literal
 
 import pinocchio as pin
 
@@ -23,7 +22,6 @@ from pinobs.model.robot import Robot
 
 __all__ = ["RobotEntry", "load", "robot_entries", "robot_names"]
 
-RootJoint = Literal["fixed", "spherical", "freeflyer", "planar"]
 _ROOT_JOINTS: dict[str, type | None] = {
     "fixed": None,
     "spherical": pin.JointModelSpherical,

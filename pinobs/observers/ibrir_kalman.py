@@ -238,12 +238,10 @@ class IbrirKalman(Observer[_State]):
         robot's own joint friction (URDF ``<dynamics>``), ``τ₀`` the rest, so
         ``F x + G`` equals the model exactly at ``v = ẏ``.
         """
-        friction = getattr(self.robot, "friction_torque", None)
-        slope = getattr(self.robot, "friction_derivative", None)
-        if friction is None or slope is None or not getattr(self.robot, "has_friction", False):
+        if not self.robot.has_friction:
             return self.viscous, np.zeros(self.robot.nv)
-        d = -np.asarray(slope(y_dot), dtype=float)
-        return self.viscous + d, np.asarray(friction(y_dot), dtype=float) + d * y_dot
+        d = -self.robot.friction_derivative(y_dot)
+        return self.viscous + d, self.robot.friction_torque(y_dot) + d * y_dot
 
     def vector_field(
         self, q_hat: Vector, v_hat: Vector, y: Vector, y_dot: Vector, tau: Vector, P: Vector

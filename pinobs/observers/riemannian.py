@@ -278,27 +278,6 @@ def gains_from_noise(rate: float, noise_std: float, accel_psd: float) -> tuple[f
 
 
 # --------------------------------------------------------------- geometry
-def _spray_jacobians(robot: Robot, q: Vector, x: Vector) -> tuple[Vector, Vector, Vector]:
-    """``(Γs(x,x), ∂_q Γs(x,x), ∂_x Γs(x,x))``; one analytic call on a Pinocchio robot."""
-    fn = getattr(robot, "spray_jacobians", None)
-    if fn is not None:
-        return fn(q, x)  # type: ignore[no-any-return]
-    eye = np.eye(robot.nv)  # a model without it (e.g. an analytic metric): slower, same values
-    dx = 2.0 * np.column_stack([robot.christoffel(q, x, e) for e in eye])
-    return robot.geodesic_spray(q, x), robot.spray_derivative(q, x), dx
-
-
-def _dynamics_jacobians(
-    robot: Robot, q: Vector, v: Vector, tau: Vector
-) -> tuple[Vector, Vector, Vector]:
-    """``(v̇, ∂v̇/∂q, ∂v̇/∂v)`` of the forward dynamics; one analytic call on a Pinocchio robot."""
-    fn = getattr(robot, "forward_dynamics_jacobians", None)
-    if fn is not None:
-        return fn(q, v, tau)  # type: ignore[no-any-return]
-    dq, dv, _ = robot.forward_dynamics_derivatives(q, v, tau)
-    return robot.forward_dynamics(q, v, tau), dq, dv
-
-
 def jacobi_term(
     robot: Robot,
     q: Vector,
@@ -320,9 +299,9 @@ def jacobi_term(
     ``at_z`` passes the call at ``(q, z)`` when the caller already has it.
     Equals :meth:`Robot.curvature` ``(q, v, z, v)`` to rounding (tests).
     """
-    g_vv, p_v, b_v = _spray_jacobians(robot, q, v)
-    _, p_z, b_z = at_z if at_z is not None else _spray_jacobians(robot, q, z)
-    _, p_vz, _ = _spray_jacobians(robot, q, v + z)
+    g_vv, p_v, b_v = robot.spray_jacobians(q, v)
+    _, p_z, b_z = at_z if at_z is not None else robot.spray_jacobians(q, z)
+    _, p_vz, _ = robot.spray_jacobians(q, v + z)
     br = robot.bracket
     dv_gzv = 0.5 * ((p_vz - p_v - p_z) @ v)  # D_v Γs(z, v)
     dz_gvv = p_v @ z  # D_z Γs(v, v)
@@ -358,11 +337,11 @@ def jacobi_operator(robot: Robot, q: Vector, v: Vector) -> Vector:
     speed = float(np.linalg.norm(v))
     if speed == 0.0:
         return np.zeros((n, n))
-    g_vv, p_v, b_v = _spray_jacobians(robot, q, v)
-    _, _, b_g = _spray_jacobians(robot, q, g_vv)
+    g_vv, p_v, b_v = robot.spray_jacobians(q, v)
+    _, _, b_g = robot.spray_jacobians(q, g_vv)
     eps = JACOBI_FD_STEP / speed
-    _, _, b_plus = _spray_jacobians(robot, robot.integrate(q, eps * v), v)
-    _, _, b_minus = _spray_jacobians(robot, robot.integrate(q, -eps * v), v)
+    _, _, b_plus = robot.spray_jacobians(robot.integrate(q, eps * v), v)
+    _, _, b_minus = robot.spray_jacobians(robot.integrate(q, -eps * v), v)
     dv_bv = (b_plus - b_minus) / (2.0 * eps)
     ad_v = _ad_matrix(robot, v)
     ad_g = _ad_matrix(robot, g_vv)
@@ -563,7 +542,7 @@ class RiemannianObserver(Observer[_State]):
         r = self.robot
         delta = r.difference(q, q_meas)
         # One analytic call at (q̂⁻, δ, τ): a = S(q̂) − Γs(δ,δ), ∂a/∂q, ∂a/∂v = −2Γs(δ, ·).
-        acc, a_q, a_v = _dynamics_jacobians(r, q, delta, tau)
+        acc, a_q, a_v = r.forward_dynamics_jacobians(q, delta, tau)
         g_dd = -0.5 * (a_v @ delta)  # Γs(δ, δ)
         zeta = -(delta + 0.5 * g_dd)  # second-order −log_q̂(q) (MATH §4)
         alpha, beta, c = self._gains_at(q, zeta, v)

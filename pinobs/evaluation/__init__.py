@@ -2,5 +2,6 @@
 
 from pinobs.evaluation.metrics import Metrics, convergence_time, evaluate
 from pinobs.evaluation.report import format_table
+from pinobs.evaluation.timing import measure_cost
 
-__all__ = ["Metrics", "convergence_time", "evaluate", "format_table"]
+__all__ = ["Metrics", "convergence_time", "evaluate", "format_table", "measure_cost"]

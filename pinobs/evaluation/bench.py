@@ -42,6 +42,7 @@ import numpy as np
 
 from pinobs.errors import PinobsError, UnsupportedRobotError
 from pinobs.evaluation.metrics import Metrics, evaluate
+from pinobs.evaluation.timing import measure_cost
 from pinobs.model import Robot, aba_time, load, pinocchio_version
 from pinobs.observers import Observer, make_observer, observer_names
 from pinobs.simulation import MISMATCH_SCENARIOS, Result, Sensor, mismatched_plant, simulate
@@ -286,35 +287,20 @@ def _machine() -> dict[str, str]:
     }
 
 
-def _time_updates(ob: Observer[Any], robot: Robot, n: int, rng: np.random.Generator) -> float:
-    """Median time [s] of ``update`` on a slow motion with small noise."""
-    q0 = robot.random_configuration(rng, scale=0.3)
-    v = 0.2 * rng.standard_normal(robot.nv)
-    ob.reset(0.0, q0)
-    h = 1e-3
-    times = []
-    for k in range(1, n + 1):
-        q = robot.integrate(q0, k * h * v + rng.normal(0.0, 1e-4, robot.nv))
-        start = time.perf_counter()
-        ob.update(k * h, q, np.zeros(robot.nv))
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
-
-
 def _scaling(cfg: BenchConfig, *, log: Callable[[str], None]) -> dict[str, Any]:
     names = sorted({*cfg.robots, *cfg.cost_robots}, key=lambda n: load(n).nv)
-    rng = np.random.default_rng(cfg.seed)
     points: dict[str, list[tuple[int, float, float]]] = {}
     for robot_name in names:
         robot = load(robot_name)
-        aba = aba_time(robot)
         for name in observer_names():
             try:
                 ob = make_observer(name, robot, rate=cfg.rate, noise_std=cfg.noise_std)
-                t = _time_updates(ob, robot, cfg.timing_updates, rng)
+                cost = measure_cost(
+                    ob, samples=cfg.timing_updates, rounds=4, rate=cfg.rate, seed=cfg.seed
+                )
             except (UnsupportedRobotError, PinobsError):
                 continue
-            points.setdefault(name, []).append((robot.nv, t, t / aba))
+            points.setdefault(name, []).append((robot.nv, cost["update_s"], cost["ratio"]))
         log(f"  timed {robot_name} (nv = {robot.nv})")
     return {
         name: {

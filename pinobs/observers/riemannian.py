@@ -83,7 +83,7 @@ needs; :func:`transport_first_order` is the exact-S version used by
 through the Jacobi operator ``R(v̂, ·)v̂`` (:func:`jacobi_operator`, four
 ABA-derivatives calls), recomputed every ``curvature_every`` samples (default
 10: it moves with ``q̂, v̂``, not with the noise in ζ) and applied as a matrix
-in between.  :func:`measure_cost` reports ``time(update) / time(pin.aba)``.
+in between.  :func:`pinobs.evaluation.measure_cost` reports ``time(update) / time(pin.aba)``.
 
 Default gains (rule).  Given ``alpha`` and ``beta``: used as given.  Else,
 with ``rate`` given, the gains are those of the steady-state Kalman filter of
@@ -113,7 +113,6 @@ matter.  ``"steady"``: the constant steady-state gains.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -135,7 +134,6 @@ __all__ = [
     "gains_from_noise",
     "jacobi_operator",
     "jacobi_term",
-    "measure_cost",
     "transport_first_order",
 ]
 
@@ -590,53 +588,3 @@ class RiemannianObserver(Observer[_State]):
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v
-
-
-def measure_cost(
-    observer: Observer[Any],
-    *,
-    samples: int = 2000,
-    rounds: int = 10,
-    rate: float = 1000.0,
-    seed: int = 0,
-) -> dict[str, float]:
-    """``time(update) / time(pin.aba)`` of ``observer`` on its robot, measured in the same run.
-
-    Feeds ``samples`` updates along a slow motion from a slightly wrong start
-    (every correction term is computed), in ``rounds`` blocks; after each
-    block, times ``pin.aba`` (:func:`pinobs.model.aba_time`) on the same
-    robot, so both see the same machine load.  The ratio is the median over
-    the blocks of ``median update time / aba time`` (medians: robust to a
-    process being preempted on a loaded machine).
-
-    Returns:
-        ``{"update_s": ..., "aba_s": ..., "ratio": ...}`` (medians).
-    """
-    from pinobs.model.timing import aba_time  # local: only this helper needs it
-
-    robot = observer.robot
-    rng = np.random.default_rng(seed)
-    q0 = robot.random_configuration(rng, scale=0.5)
-    vel = 0.3 * rng.standard_normal(robot.nv)
-    tau = robot.gravity(q0)  # hold the start: light links do not fling off
-    h = 1.0 / rate
-    block = max(samples // rounds, 1)
-    meas = [robot.integrate(q0, (k + 1) * h * vel) for k in range(block)]
-    updates, abas = [], []
-    for _ in range(rounds):
-        # each block restarts near the path: a constant-velocity path is not a
-        # motion of the model, so long blocks would measure a diverging estimate
-        observer.reset(0.0, robot.integrate(q0, 1e-4 * rng.standard_normal(robot.nv)), vel, tau)
-        times = []
-        for k in range(block):
-            t0 = time.perf_counter()
-            observer.update((k + 1) * h, meas[k], tau)
-            times.append(time.perf_counter() - t0)
-        updates.append(float(np.median(times)))  # the median ignores preempted updates
-        abas.append(aba_time(robot, repeats=100, rounds=5, seed=seed))
-    ratios = np.array(updates) / np.array(abas)
-    return {
-        "update_s": float(np.median(updates)),
-        "aba_s": float(np.median(abas)),
-        "ratio": float(np.median(ratios)),
-    }

@@ -9,6 +9,7 @@ import pytest
 import scipy.linalg
 
 import pinobs
+from pinobs.evaluation import measure_cost
 from pinobs.model import lie_rk4
 from pinobs.model.sphere import (
     anisi_hamberg_potential,
@@ -27,7 +28,6 @@ from pinobs.observers.riemannian import (
     geodesic_error,
     jacobi_operator,
     jacobi_term,
-    measure_cost,
     transport_first_order,
 )
 from pinobs.simulation import InputProfile, Sensor, simulate

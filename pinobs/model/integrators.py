@@ -6,17 +6,34 @@ and ``ẋ = f(q, x)``.  Runge-Kutta-Munthe-Kaas, order 4: write
 of the exponential (:meth:`Robot.integrate_jacobian`), and classical RK4 runs
 on ``(ξ, x)`` in a vector space.  For vector and continuous joints ``J_r = I``
 and this is plain RK4.
+
+:func:`dynamics_rk4` is the step every user of the model's dynamics takes
+(``q̇ = v``, ``v̇ = M⁻¹(τ − c − g)``, τ held): the truth in the simulator
+and the prediction of the model-based observers.  On a vector space its four
+stages are linear combinations of ``(q, v, a₁, a₂, a₃, a₄)``, ``a_i`` the
+stage accelerations::
+
+    q₂ = q + ½h v,          v₂ = v + ½h a₁
+    q₃ = q + ½h v + ¼h² a₁, v₃ = v + ½h a₂
+    q₄ = q + h v + ½h² a₂,  v₄ = v + h a₃
+    q⁺ = q + h v + ⅙h² (a₁ + a₂ + a₃),  v⁺ = v + ⅙h (a₁ + 2a₂ + 2a₃ + a₄)
+
+(classical RK4 with ``k_q = v_i``, ``k_v = a_i``), each pair one product of a
+2 × k coefficient matrix with the stacked vectors: six NumPy calls instead
+of two dozen, so the four ABA calls dominate the step.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import lru_cache, partial
 
 import numpy as np
+import pinocchio as pin
 
 from pinobs.model.robot import Robot, Vector
 
-__all__ = ["lie_rk4"]
+__all__ = ["dynamics_rk4", "lie_rk4"]
 
 Rhs = Callable[[Vector, Vector], tuple[Vector, Vector]]
 
@@ -53,3 +70,50 @@ def lie_rk4(robot: Robot, q: Vector, x: Vector, h: float, rhs: Rhs) -> tuple[Vec
     xi = (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
     x_new = x + (h / 6.0) * (f1 + 2.0 * f2 + 2.0 * f3 + f4)
     return robot.normalize(robot.integrate(q, xi)), x_new
+
+
+@lru_cache(maxsize=16)
+def _rk4_stage_matrices(h: float) -> tuple[Vector, Vector, Vector, Vector]:
+    """Rows ``(q_i, v_i)`` of the stages in the basis ``(q, v, a₁, a₂, a₃, a₄)`` (module docstring)."""
+    hh, h2 = 0.5 * h, h * h
+    out = (
+        np.array([[1.0, hh, 0.0], [0.0, 1.0, hh]]),  # (q₂, v₂)
+        np.array([[1.0, hh, 0.25 * h2, 0.0], [0.0, 1.0, 0.0, hh]]),  # (q₃, v₃)
+        np.array([[1.0, h, 0.0, 0.5 * h2, 0.0], [0.0, 1.0, 0.0, 0.0, h]]),  # (q₄, v₄)
+        np.array(
+            [
+                [1.0, h, h2 / 6.0, h2 / 6.0, h2 / 6.0, 0.0],
+                [0.0, 1.0, h / 6.0, h / 3.0, h / 3.0, h / 6.0],
+            ]
+        ),  # (q⁺, v⁺)
+    )
+    for m in out:
+        m.setflags(write=False)
+    return out
+
+
+def dynamics_rk4(
+    robot: Robot, q: Vector, v: Vector, tau: Vector, h: float
+) -> tuple[Vector, Vector]:
+    """One RKMK4 step of ``q̇ = v``, ``v̇ = robot.forward_dynamics(q, v, tau)`` over ``h`` [s], τ held.
+
+    Same result as :func:`lie_rk4` with that right-hand side (to rounding);
+    on a vector space, the stacked form of the module docstring.
+    """
+    fd = robot.forward_dynamics
+    if not robot.is_vector_space:
+        return lie_rk4(robot, q, v, h, lambda qq, vv: (vv, fd(qq, vv, tau)))
+    if isinstance(robot, Robot) and not robot.has_friction:  # the call, without the method
+        fd = partial(pin.aba, robot.model, robot._data)  # the robot's own data (same layer)
+    c2, c3, c4, c_out = _rk4_stage_matrices(float(h))
+    b = np.empty((6, q.shape[0]))
+    b[0], b[1] = q, v
+    b[2] = fd(q, v, tau)
+    s = c2.dot(b[:3])
+    b[3] = fd(s[0], s[1], tau)
+    s = c3.dot(b[:4])
+    b[4] = fd(s[0], s[1], tau)
+    s = c4.dot(b[:5])
+    b[5] = fd(s[0], s[1], tau)
+    out = c_out.dot(b)
+    return out[0], out[1]

@@ -127,6 +127,8 @@ class Robot:
         self._free = model.copy()
         self._free.gravity.setZero()
         self._free_data = self._free.createData()
+        self._zero_nv = np.zeros(model.nv)
+        self._zero_nv.setflags(write=False)
         self.joints: tuple[JointBlock, ...] = tuple(
             JointBlock(
                 name=model.names[i],
@@ -147,6 +149,7 @@ class Robot:
         self._circle_slices = tuple(
             slice(b.idx_q, b.idx_q + 2) for b in self.joints if b.kind == "circle"
         )
+        self._unit_slices = self._quat_slices + self._circle_slices  # unit-norm blocks of q
         self._bracket_blocks = tuple(b for b in self.joints if b.kind in ("so3", "se3", "se2"))
         self._vector_space = model.nq == model.nv and all(b.kind == "vector" for b in self.joints)
 
@@ -264,7 +267,7 @@ class Robot:
             ConfigurationError: a quaternion is not of unit norm.
         """
         arr = self.check_vector(q, self.nq, what=what)
-        for s in self._quat_slices + self._circle_slices:
+        for s in self._unit_slices:
             norm = float(np.linalg.norm(arr[s]))
             if abs(norm - 1.0) > QUATERNION_NORM_TOL:
                 raise ConfigurationError(
@@ -327,7 +330,7 @@ class Robot:
     def normalize(self, q: Vector) -> Vector:
         """``q`` with its quaternions and ``(cos, sin)`` pairs projected to unit norm."""
         out = np.array(q, dtype=float)
-        for s in self._quat_slices + self._circle_slices:
+        for s in self._unit_slices:
             out[s] /= np.linalg.norm(out[s])
         return out
 
@@ -484,9 +487,9 @@ class Robot:
         for every ``y`` at no further cost; the second has columns
         ``D_{E_j} Γs(x, x)`` (as :meth:`spray_derivative`).
         """
-        zero = np.zeros(self.nv)
-        dq, dx, _ = pin.computeABADerivatives(self._free, self._free_data, q, x, zero)
-        return -np.array(self._free_data.ddq), -np.array(dq), -np.array(dx)
+        d = self._free_data
+        dq, dx, _ = pin.computeABADerivatives(self._free, d, q, x, self._zero_nv)
+        return np.negative(d.ddq), np.negative(dq), np.negative(dx)  # fresh arrays
 
     def forward_dynamics_jacobians(
         self, q: Vector, v: Vector, tau: Vector

@@ -5,7 +5,7 @@ the tangent space, ``q = q̂ ⊕ δq``, ``v = v̂ + δv``, ``δx = (δq, δv) �
 with covariance ``P`` (2nv × 2nv).
 
 Prediction over a sample interval ``h`` with the torque ``τ`` held (MATH §7):
-the mean by one RKMK4 step (:func:`pinobs.model.lie_rk4`) of
+the mean by one RKMK4 step (:func:`pinobs.model.dynamics_rk4`) of
 
     q̇ = q · v,   v̇ = a(q, v, τ) = M⁻¹(q)(τ + τ_f(v) − c(q, v) − g(q)),
 
@@ -87,7 +87,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pinobs.model import Robot, lie_rk4
+from pinobs.model import Robot, dynamics_rk4
 from pinobs.observers.base import Observer, Vector, positive, register
 
 __all__ = [
@@ -264,11 +264,7 @@ class ExtendedKalmanFilter(Observer[_State]):
         d = state.d
         tau_in = tau if d is None else tau + d  # the offset acts as a torque (module docstring)
         Phi = transition_matrix(self.error_jacobian(state.q, state.v, tau_in), dt)
-
-        def rhs(q: Vector, v: Vector) -> tuple[Vector, Vector]:
-            return self.vector_field(q, v, tau_in)
-
-        q, v = lie_rk4(self.robot, state.q, state.v, dt, rhs)
+        q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt)  # RKMK4 of vector_field
         Q = double_integrator_noise(nv, dt, self.gains.accel_psd)
         if d is not None and state.d_psd is not None:
             Q = np.block(

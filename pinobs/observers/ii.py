@@ -91,7 +91,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import GainError, UnsupportedRobotError
-from pinobs.model import Robot, lie_rk4
+from pinobs.model import Robot, dynamics_rk4
 from pinobs.observers.base import Observer, Vector, positive, register
 from pinobs.tolerances import II_ASSUMPTION1_TOL
 
@@ -913,13 +913,10 @@ class IIObserver(Observer[_State]):
         h = dt / n_sub
 
         # (1) predict the plant from the estimate, torque held (MATH §7)
-        def plant(qq: Vector, vv: Vector) -> tuple[Vector, Vector]:
-            return vv, robot.forward_dynamics(qq, vv, tau)
-
         _, v_hat = self._output(state)
         nodes_q, nodes_v = [state.q], [v_hat]
         for _ in range(n_sub):
-            qn, vn = lie_rk4(robot, nodes_q[-1], nodes_v[-1], h, plant)
+            qn, vn = dynamics_rk4(robot, nodes_q[-1], nodes_v[-1], tau, h)
             nodes_q.append(qn)
             nodes_v.append(vn)
         q_end = nodes_q[-1] if q_meas is None else q_meas

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import pinobs
-from pinobs.model import lie_rk4
+from pinobs.model import dynamics_rk4, lie_rk4
 from pinobs.simulation import PDTracking, Sensor, make_input, simulate
 
 
@@ -33,6 +33,23 @@ def test_plant_integrator_is_fourth_order_on_every_joint_group(name: str) -> Non
         q, v = run(h)
         errs.append(np.linalg.norm(robot.difference(qr, q)) + np.linalg.norm(v - vr))
     assert 3.5 < np.log2(errs[0] / errs[1]) < 4.6
+
+
+@pytest.mark.parametrize(
+    "name", ["ur5", "panda", "top", "rigid_body", "double_pendulum_continuous"]
+)
+@pytest.mark.parametrize("friction", [False, True])
+def test_dynamics_step_is_the_generic_rkmk4_step(name: str, friction: bool) -> None:
+    """The stacked vector-space form of ``dynamics_rk4`` is classical RK4, to rounding."""
+    robot = pinobs.load(name, friction=friction)
+    rng = np.random.default_rng(2)
+    q, v = robot.random_configuration(rng), rng.standard_normal(robot.nv)
+    tau = rng.standard_normal(robot.nv)
+    for h in (1e-3, 0.05):
+        q1, v1 = dynamics_rk4(robot, q, v, tau, h)
+        q2, v2 = lie_rk4(robot, q, v, h, lambda qq, vv: (vv, robot.forward_dynamics(qq, vv, tau)))
+        assert np.abs(robot.difference(q2, q1)).max() <= 1e-14 * max(1.0, np.abs(v).max())
+        assert np.abs(v1 - v2).max() <= 1e-13 * max(1.0, np.abs(v2).max())
 
 
 def test_free_motion_conserves_energy_on_a_ur5() -> None:

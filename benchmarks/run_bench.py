@@ -40,8 +40,10 @@ if __name__ == "__main__":
         f"Python {m['python']}, Pinocchio {m['pinocchio']}, NumPy {m['numpy']}. "
         f"{cfg.duration:g} s per run at {cfg.rate:g} Hz, PD tracking of a multi-sine reference (the base "
         f"of a floating robot actuated too), start error |dq| = {cfg.perturb_q:g} rad, |dv| = {cfg.perturb_v:g} rad/s, seed {cfg.seed}; "
-        "RMS after the first quarter of the run. `x aba` is the update time over one `pin.aba` call on the same "
-        "robot in the same run. Rows sorted by error; `fd*`, `kf*` are tuned on the run itself (optimistic).\n"
+        "RMS after the first quarter of the run. `update` and `x aba` are one update's time and its ratio to one "
+        "`pin.aba` call on the same robot, both from the cost measurement below (the observer alone, chunks of "
+        "updates each followed by as many `pin.aba` calls; `fd*`, `kf*` and `diff` cost what `fd` and `kf` do). "
+        "Rows sorted by error; `fd*`, `kf*` are tuned on the run itself (optimistic).\n"
     )
     (out / "results.md").write_text(header + format_bench(report) + "\n")
     print(format_bench(report))

@@ -210,3 +210,28 @@ def test_differentiators_against_the_best_per_joint_kalman_filter_on_a_noisy_ur5
     m = {x.observer: x.rms_v_error for x in evaluate(res, robot)}
     assert m["highgain"] < 1.5 * m["kf"]
     assert m["sliding"] < 2.2 * m["kf"]
+
+
+def test_sliding_regimes() -> None:
+    """The two regimes of the implicit sliding step on noisy data (module docstring).
+
+    Sliding (default γ, ``hγ ≫ σ``): ``x̂₁ = y_k`` at almost every sample and the
+    velocity error is well above the best ``kf``'s.  Not sliding (γ = 0.03,
+    ``hγ < σ``): ``x̂₁`` is filtered and the error is within 1.5× of the ``kf``'s.
+    """
+    robot = pinobs.load("ur5")
+    obs = {
+        "kf": make_observer("kf", robot, rate=1000, noise_std=1e-4, jerk_psd=10.0),
+        "sliding": make_observer("sliding", robot, rate=1000, noise_std=1e-4),
+        "linear": make_observer("sliding", robot, gamma=0.03, lam=70.0),
+    }
+    res = simulate(robot, obs, sensor=Sensor(1000, 1e-4), inputs="pd", duration=2.0, seed=0)
+    m = {x.observer: x.rms_v_error for x in evaluate(res, robot)}
+    after = res.t >= 0.5
+    on_sample = {
+        tr.name: float(np.mean(np.all(tr.q[after] == res.q_meas[after], axis=1)))
+        for tr in res.traces
+    }
+    assert obs["sliding"].gains.gamma * 1e-3 > 10 * 1e-4
+    assert on_sample["sliding"] > 0.99 and m["sliding"] > 1.5 * m["kf"]
+    assert on_sample["linear"] < 0.01 and m["linear"] < 1.5 * m["kf"]

@@ -31,7 +31,12 @@ def _num(x: float, fmt: str) -> str:
 def format_table(
     metrics: Sequence[Metrics], *, aba_seconds: float | None = None, title: str = ""
 ) -> str:
-    """A fixed-width table, one row per observer; ``x aba`` is ``time_per_update / aba_seconds``."""
+    """A fixed-width table, one row per observer; ``x aba`` is ``time_per_update / aba_seconds``.
+
+    A footnote says what the time is: the mean inside the run's loop, where
+    the observers interleave (each evicts the others from the caches), not
+    the observer's own cost, which ``pinobs bench`` measures.
+    """
     rows = []
     for m in metrics:
         name = (
@@ -68,5 +73,10 @@ def format_table(
                 c.ljust(w) if i == 0 else c.rjust(w)
                 for i, (c, w) in enumerate(zip(r, widths, strict=True))
             )
+        )
+    if len(rows) > 1:
+        lines.append(
+            f"(update: mean time inside this run's loop, {len(rows)} observers interleaved; "
+            "each observer's own cost is in `pinobs bench`)"
         )
     return "\n".join(lines)

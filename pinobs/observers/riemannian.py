@@ -321,9 +321,7 @@ def jacobi_term(
 
 
 def _ad_matrix(robot: Robot, x: Vector) -> Vector:
-    """``ad_x`` as a matrix: column j is ``[x, E_j]`` (zero without Lie-group joints)."""
-    if not robot.has_lie_group_joints:
-        return np.zeros((robot.nv, robot.nv))
+    """``ad_x`` as a matrix: column j is ``[x, E_j]`` (used where there are Lie-group joints)."""
     return np.column_stack([robot.bracket(x, e) for e in np.eye(robot.nv)])
 
 

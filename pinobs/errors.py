@@ -14,6 +14,7 @@ __all__ = [
     "ConfigurationError",
     "DimensionError",
     "GainError",
+    "IdentificationError",
     "ModelFileError",
     "NonFiniteError",
     "NotResetError",
@@ -71,6 +72,10 @@ class NotResetError(PinobsError, RuntimeError):
 
 class UnsupportedRobotError(PinobsError, ValueError):
     """An observer asked to run on a robot it is not built for."""
+
+
+class IdentificationError(PinobsError, ValueError):
+    """Identification is impossible or would be unreliable (no torques, too short, not excited)."""
 
 
 class ObserverDiverged(PinobsError, ArithmeticError):

@@ -221,6 +221,10 @@ class ExtendedKalmanFilter(Observer[_State]):
         }
 
     # ------------------------------------------------------------ the model
+    def _replace_robot(self, robot: Robot) -> None:
+        """Swap the process model between updates (an observer that learns its model does this)."""
+        self.robot = robot
+
     def vector_field(self, q: Vector, v: Vector, tau: Vector) -> tuple[Vector, Vector]:
         """``(q̇, v̇) = (v, a(q, v, τ))`` of the mean between samples (body-frame ``q̇``)."""
         return v, self.robot.forward_dynamics(q, v, tau)

@@ -87,6 +87,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pinobs.errors import DimensionError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.observers.base import Observer, Vector, positive, register
 
@@ -260,6 +261,19 @@ class ExtendedKalmanFilter(Observer[_State]):
         return _State(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+        pred, _ = self._predict(state, dt, tau)
+        if q_meas is None:
+            return pred._replace(P=0.5 * (pred.P + pred.P.T))
+        return self._correct(pred, q_meas)
+
+    def _predict(self, state: _State, dt: float, tau: Vector) -> tuple[_State, Vector]:
+        """Prediction over ``dt`` [s] with ``tau`` held: ``(state⁻, Φ)``.
+
+        Mean by one RKMK4 step of :meth:`vector_field` (with ``τ + d``), covariance
+        ``P⁻ = Φ P Φᵀ + Q_d`` (module docstring; symmetric to rounding, not
+        symmetrised: :meth:`_correct` and :meth:`_step` do that).  ``Φ`` is
+        returned for smoothers (Rauch-Tung-Striebel needs it).
+        """
         nv = self.robot.nv
         d = state.d
         tau_in = tau if d is None else tau + d  # the offset acts as a torque (module docstring)
@@ -274,14 +288,32 @@ class ExtendedKalmanFilter(Observer[_State]):
                 ]
             )
         P = Phi @ state.P @ Phi.T + Q
-        if q_meas is not None:
-            e = self.robot.difference(q, q_meas)
-            dx, P = joseph_update(P, e, self.gains.meas_std**2)
-            q = self.robot.integrate(q, dx[:nv])
-            v = v + dx[nv : 2 * nv]
-            if d is not None:
-                d = d + dx[2 * nv :]
+        return _State(q, v, P, d, state.d_psd), Phi
+
+    def _correct(self, state: _State, q_meas: Vector) -> _State:
+        """Correction of a predicted state with the measured ``q_meas`` (Joseph form, module docstring)."""
+        nv = self.robot.nv
+        q, v, d, P = state.q, state.v, state.d, state.P
+        e = self.robot.difference(q, q_meas)
+        dx, P = joseph_update(P, e, self.gains.meas_std**2)
+        q = self.robot.integrate(q, dx[:nv])
+        v = v + dx[nv : 2 * nv]
+        if d is not None:
+            d = d + dx[2 * nv :]
         return _State(q, v, 0.5 * (P + P.T), d, state.d_psd)
+
+    def _replace_robot(self, robot: Robot) -> None:
+        """Swap the filter's model between updates (an adaptive subclass's identified model).
+
+        The state is kept; the next prediction uses ``robot``'s dynamics.  ``robot``
+        must have the same configuration space (``nq``, ``nv``).
+        """
+        if (robot.nq, robot.nv) != (self.robot.nq, self.robot.nv):
+            raise DimensionError(
+                f"the new model has (nq, nv) = ({robot.nq}, {robot.nv}); "
+                f"the filter's has ({self.robot.nq}, {self.robot.nv})"
+            )
+        self.robot = robot
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v

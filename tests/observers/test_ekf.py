@@ -149,3 +149,47 @@ def test_disturbance_augmented_ekf_learns_a_constant_unmodelled_torque() -> None
     np.testing.assert_allclose(np.mean(d_hat[-2000:], axis=0), offset, atol=0.05)
     # measured: 0.37 rad/s without the offset state, 2.9e-3 with it
     assert np.mean(err_aug[-1000:]) < 0.05 * np.mean(err_plain[-1000:])
+
+
+@pytest.mark.parametrize("disturbance_psd", [None, 1.0])
+def test_step_is_the_correction_of_the_prediction(
+    ur5: pinobs.Robot, disturbance_psd: float | None
+) -> None:
+    """``_step = _correct ∘ _predict``; the prediction's Φ is the transition of the error Jacobian."""
+    ekf = ExtendedKalmanFilter(ur5, noise_std=1e-4, disturbance_psd=disturbance_psd)
+    rng = np.random.default_rng(5)
+    q = ur5.random_configuration(rng)
+    v = rng.normal(0.0, 0.5, ur5.nv)
+    tau = ur5.gravity(q)
+    ekf.reset(0.0, q, v, tau)
+    state = ekf._state
+    assert state is not None
+    q_meas = ur5.integrate(q, 1e-3 * v + rng.normal(0.0, 1e-4, ur5.nv))
+    pred, Phi = ekf._predict(state, 1e-3, tau)
+    stepped = ekf._step(state, 1e-3, q_meas, tau)
+    corrected = ekf._correct(pred, q_meas)
+    for a, b in zip(stepped, corrected, strict=True):
+        np.testing.assert_array_equal(a, b)
+    A = ekf.error_jacobian(q, v, tau)
+    np.testing.assert_allclose(Phi, transition_matrix(A, 1e-3), rtol=0, atol=1e-12)
+    # without a sample the step is the prediction (P symmetrised)
+    only = ekf._step(state, 1e-3, None, tau)
+    np.testing.assert_array_equal(only.v, pred.v)
+    np.testing.assert_array_equal(only.P, only.P.T)
+
+
+def test_replacing_the_robot_by_a_copy_changes_nothing_and_a_wrong_size_is_refused(
+    ur5: pinobs.Robot,
+) -> None:
+    res = simulate(ur5, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=0.05, seed=3)
+    plain = make_observer("ekf", ur5, rate=1000, noise_std=1e-4)
+    ekf = make_observer("ekf", ur5, rate=1000, noise_std=1e-4)
+    for ob in (plain, ekf):
+        ob.reset(res.t[0], res.q[0], res.v[0], res.tau[0])
+    for k in range(1, len(res.t)):
+        if k == 20:
+            ekf._replace_robot(ur5.copy())  # type: ignore[attr-defined]
+        est = ekf.update(res.t[k], res.q_meas[k], res.tau[k])
+        np.testing.assert_array_equal(est.v, plain.update(res.t[k], res.q_meas[k], res.tau[k]).v)
+    with pytest.raises(pinobs.DimensionError, match="nv"):
+        ekf._replace_robot(pinobs.load("cartpole"))  # type: ignore[attr-defined]

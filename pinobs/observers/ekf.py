@@ -82,8 +82,9 @@ friction, vary as fast as the motion).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -95,6 +96,7 @@ __all__ = [
     "EKFGains",
     "ExtendedKalmanFilter",
     "ad_matrix",
+    "cholesky_solve",
     "double_integrator_noise",
     "joseph_update",
     "transition_matrix",
@@ -108,36 +110,92 @@ def ad_matrix(robot: Robot, v: Vector) -> Vector:
     nv = robot.nv
     if not robot.has_lie_group_joints:
         return np.zeros((nv, nv))
+    if isinstance(robot, Robot):
+        return robot.bracket_matrix(v)
     eye = np.eye(nv)
     return np.column_stack([robot.bracket(v, eye[:, j]) for j in range(nv)])
 
 
+@functools.lru_cache(maxsize=8)
+def _eye(n: int) -> Vector:
+    eye = np.eye(n)
+    eye.setflags(write=False)
+    return eye
+
+
 def transition_matrix(A: Vector, h: float) -> Vector:
-    """``exp(A h)`` to third order, ``I + Ah(I + Ah/2 (I + Ah/3))`` (module docstring)."""
+    """``exp(A h)`` to third order, ``I + Ah(I + Ah/2 (I + Ah/3))`` (module docstring), a new array."""
     Ah = A * h
-    eye = np.eye(A.shape[0])
-    return eye + Ah @ (eye + 0.5 * Ah @ (eye + Ah / 3.0))
+    eye = _eye(A.shape[0])
+    inner = Ah / 3.0
+    inner += eye
+    mid = (0.5 * Ah).dot(inner)
+    mid += eye
+    out = Ah.dot(mid)
+    out += eye
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _double_integrator_noise(nv: int, h: float, psd: float) -> Vector:
+    eye = np.eye(nv)
+    out = psd * np.block([[h**3 / 3 * eye, h**2 / 2 * eye], [h**2 / 2 * eye, h * eye]])
+    out.setflags(write=False)
+    return out
 
 
 def double_integrator_noise(nv: int, h: float, psd: float) -> Vector:
-    """``Q_d`` of white acceleration noise of density ``psd`` [rad²/s³] over ``h`` [s] (module docstring)."""
-    eye = np.eye(nv)
-    return psd * np.block([[h**3 / 3 * eye, h**2 / 2 * eye], [h**2 / 2 * eye, h * eye]])
+    """``Q_d`` of white acceleration noise of density ``psd`` [rad²/s³] over ``h`` [s] (module docstring).
+
+    Read-only, cached on ``(nv, h, psd)``: sample intervals repeat (to the bit,
+    a handful of values at a fixed rate), so it is built once per value.
+    """
+    return _double_integrator_noise(nv, float(h), float(psd))
+
+
+@functools.cache
+def _posv() -> Any:
+    """LAPACK ``dposv`` (Cholesky solve), imported on first use: ``scipy.linalg`` costs
+    0.2 s at import, and ``np.linalg.solve`` 5× more per call on these small systems."""
+    from scipy.linalg.lapack import dposv  # lazy: start-up time
+
+    return dposv
+
+
+def cholesky_solve(S: Vector, B: Vector) -> tuple[Vector, bool]:
+    """``(S⁻¹ B, ok)`` for a symmetric positive definite ``S`` (LAPACK ``dposv``, upper triangle).
+
+    ``ok`` is False when ``S`` is not positive definite; the result then comes
+    from the general ``np.linalg.solve``.
+    """
+    _, x, info = _posv()(S, B)
+    if info != 0:
+        return np.linalg.solve(S, B), False
+    return x, True
 
 
 def joseph_update(P: Vector, e: Vector, meas_var: float) -> tuple[Vector, Vector]:
     """Kalman update for ``H = [I 0]`` and ``R = meas_var · I``: returns ``(K e, P⁺)``.
 
-    Joseph form ``P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ``, symmetrised.
+    ``S = P_qq + R`` (symmetric positive definite, solved by Cholesky),
+    ``K = P Hᵀ S⁻¹``, and the Joseph form ``P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ``,
+    symmetrised, evaluated as ``C = P − K P_q·``, ``P⁺ = C − (C_·q − R K) Kᵀ``
+    (the same expression: ``(I − KH) P = C``, ``C (I − KH)ᵀ = C − C_·q Kᵀ``),
+    two products of ``(n × nv)(nv × n)`` instead of two of ``n × n``.
     """
-    n2 = P.shape[0]
     nv = e.shape[0]
-    S = P[:nv, :nv] + meas_var * np.eye(nv)
-    K = np.linalg.solve(S, P[:nv, :]).T  # P Hᵀ S⁻¹ (S symmetric)
-    IKH = np.eye(n2)
-    IKH[:, :nv] -= K
-    P_new = IKH @ P @ IKH.T + meas_var * (K @ K.T)
-    return K @ e, 0.5 * (P_new + P_new.T)
+    B = P[:nv]  # H P
+    S = B[:, :nv].copy()
+    S.flat[:: nv + 1] += meas_var
+    Kt, _ = cholesky_solve(S, B)  # Kᵀ = S⁻¹ H P
+    K = Kt.T
+    C = P - K.dot(B)
+    Y = K * -meas_var
+    Y += C[:, :nv]
+    P_new = C - Y.dot(Kt)
+    P_new += P_new.T
+    P_new *= 0.5
+    return K.dot(e), P_new
 
 
 @dataclass(frozen=True)
@@ -208,6 +266,8 @@ class ExtendedKalmanFilter(Observer[_State]):
         self.gains = EKFGains(accel_psd=accel_psd, meas_std=sigma, q0_std=q0_std, v0_std=v0_std)
         self.disturbance_psd = positive("disturbance_psd", disturbance_psd, allow_none=True)
         self.d0_std = float(positive("d0_std", d0_std) or 0.0)
+        self._scratch_A: Vector | None = None  # A's buffer (_jacobian)
+        _posv()  # import LAPACK now, not in the first update
 
     @property
     def options(self) -> dict[str, object]:
@@ -228,19 +288,34 @@ class ExtendedKalmanFilter(Observer[_State]):
 
     def error_jacobian(self, q: Vector, v: Vector, tau: Vector) -> Vector:
         """``A = [[−ad_v, I], [∂a/∂q, ∂a/∂v]]`` of the error dynamics (module docstring);
-        with the disturbance, ``[[−ad_v, I, 0], [∂a/∂q, ∂a/∂v, M⁻¹], [0, 0, 0]]``."""
-        nv = self.robot.nv
-        da_dq, da_dv, minv = self.robot.forward_dynamics_derivatives(q, v, tau)
-        if self.disturbance_psd is None:
-            return np.block([[-ad_matrix(self.robot, v), np.eye(nv)], [da_dq, da_dv]])
-        zero = np.zeros((nv, nv))
-        return np.block(
-            [
-                [-ad_matrix(self.robot, v), np.eye(nv), zero],
-                [da_dq, da_dv, minv],
-                [zero, zero, zero],
-            ]
-        )
+        with the disturbance, ``[[−ad_v, I, 0], [∂a/∂q, ∂a/∂v, M⁻¹], [0, 0, 0]]``.  A new array."""
+        return np.array(self._jacobian(q, v, tau)[0])
+
+    def _jacobian(self, q: Vector, v: Vector, tau: Vector) -> tuple[Vector, Vector | None]:
+        """``(A, a(q, v, τ))`` from one derivatives call; ``A`` is the filter's scratch buffer
+        (overwritten by the next call), ``a`` a view into the robot's data (or ``None``
+        for a model without that call)."""
+        r, nv = self.robot, self.robot.nv
+        A = self._scratch_A
+        if A is None:  # the constant blocks are written once
+            n = (2 if self.disturbance_psd is None else 3) * nv
+            A = self._scratch_A = np.zeros((n, n))
+            A[:nv, nv : 2 * nv] = _eye(nv)
+        with_d = self.disturbance_psd is not None
+        if isinstance(r, Robot):
+            acc, da_dq, da_dv, minv = r.forward_dynamics_with_derivatives(
+                q, v, tau, full_minv=with_d
+            )
+        else:  # a Robot-like model (pinobs.model.AnalyticMetric)
+            acc = None
+            da_dq, da_dv, minv = r.forward_dynamics_derivatives(q, v, tau)
+        if r.has_lie_group_joints:
+            np.negative(ad_matrix(r, v), out=A[:nv, :nv])
+        A[nv : 2 * nv, :nv] = da_dq
+        A[nv : 2 * nv, nv : 2 * nv] = da_dv
+        if with_d:
+            A[nv : 2 * nv, 2 * nv :] = minv
+        return A, acc
 
     @property
     def disturbance(self) -> Vector | None:
@@ -271,23 +346,22 @@ class ExtendedKalmanFilter(Observer[_State]):
 
         Mean by one RKMK4 step of :meth:`vector_field` (with ``τ + d``), covariance
         ``P⁻ = Φ P Φᵀ + Q_d`` (module docstring; symmetric to rounding, not
-        symmetrised: :meth:`_correct` and :meth:`_step` do that).  ``Φ`` is
-        returned for smoothers (Rauch-Tung-Striebel needs it).
+        symmetrised: :meth:`_correct` and :meth:`_step` do that).  ``Φ`` (a new
+        array) is returned for smoothers (Rauch-Tung-Striebel needs it).  One
+        ``computeABADerivatives`` gives ``A`` and the first RK stage, three ABA
+        calls the others.
         """
         nv = self.robot.nv
         d = state.d
         tau_in = tau if d is None else tau + d  # the offset acts as a torque (module docstring)
-        Phi = transition_matrix(self.error_jacobian(state.q, state.v, tau_in), dt)
-        q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt)  # RKMK4 of vector_field
-        Q = double_integrator_noise(nv, dt, self.gains.accel_psd)
-        if d is not None and state.d_psd is not None:
-            Q = np.block(
-                [
-                    [Q, np.zeros((2 * nv, nv))],
-                    [np.zeros((nv, 2 * nv)), np.diag(state.d_psd * dt)],
-                ]
-            )
-        P = Phi @ state.P @ Phi.T + Q
+        A, acc = self._jacobian(state.q, state.v, tau_in)
+        Phi = transition_matrix(A, dt)
+        # RKMK4 of vector_field; its first stage is the derivatives call's v̇
+        q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt, acc0=acc)
+        P = Phi.dot(state.P).dot(Phi.T)
+        P[: 2 * nv, : 2 * nv] += double_integrator_noise(nv, dt, self.gains.accel_psd)
+        if d is not None and state.d_psd is not None:  # Q_d's offset block, diag(psd_τ h)
+            P[2 * nv :, 2 * nv :].flat[:: nv + 1] += state.d_psd * dt
         return _State(q, v, P, d, state.d_psd), Phi
 
     def _correct(self, state: _State, q_meas: Vector) -> _State:
@@ -300,7 +374,7 @@ class ExtendedKalmanFilter(Observer[_State]):
         v = v + dx[nv : 2 * nv]
         if d is not None:
             d = d + dx[2 * nv :]
-        return _State(q, v, 0.5 * (P + P.T), d, state.d_psd)
+        return _State(q, v, P, d, state.d_psd)  # P symmetric (joseph_update)
 
     def _replace_robot(self, robot: Robot) -> None:
         """Swap the filter's model between updates (an adaptive subclass's identified model).
@@ -314,6 +388,7 @@ class ExtendedKalmanFilter(Observer[_State]):
                 f"the filter's has ({self.robot.nq}, {self.robot.nv})"
             )
         self.robot = robot
+        self._scratch_A = None  # sized by the robot
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v

@@ -379,8 +379,9 @@ class Robot:
     # --------------------------------------------------------------- dynamics
     def mass_matrix(self, q: Vector) -> Vector:
         """``M(q)``, symmetric positive definite, shape ``(nv, nv)`` [kg, kg·m, kg·m²]."""
-        m = pin.crba(self.model, self._data, q)
-        return np.asarray(0.5 * (m + m.T), dtype=float)
+        m = np.array(pin.crba(self.model, self._data, q))
+        m[self._lower] = m.T[self._lower]  # Pinocchio < 4 fills only the upper triangle
+        return m
 
     def gravity(self, q: Vector) -> Vector:
         """``g(q)``: generalised gravity torque [N·m or N]."""

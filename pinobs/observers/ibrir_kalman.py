@@ -313,8 +313,17 @@ class IbrirKalman(Observer[_State]):
                 a = np.linalg.solve(r.mass_matrix(y), rhs_)
             return v, np.concatenate([a, [1.0]])
 
-        q, x = lie_rk4(r, state.q, np.concatenate([state.v, [0.0]]), dt, rhs)
-        v = x[:nv]
+        if use_estimate and r.is_vector_space:  # the same RK4, without its generic bookkeeping
+            v0, visc, h2 = state.v, self.viscous, 0.5 * dt
+            v2 = v0 + h2 * (a1 := r.forward_dynamics(y0, v0, tau - visc * v0))
+            v3 = v0 + h2 * (a2 := r.forward_dynamics(y_at[0.5], v2, tau - visc * v2))
+            v4 = v0 + dt * (a3 := r.forward_dynamics(y_at[0.5], v3, tau - visc * v3))
+            a4 = r.forward_dynamics(y_at[1.0], v4, tau - visc * v4)
+            q = state.q + (dt / 6.0) * (v0 + 2.0 * (v2 + v3) + v4)
+            v = v0 + (dt / 6.0) * (a1 + 2.0 * (a2 + a3) + a4)
+        else:
+            q, x = lie_rk4(r, state.q, np.concatenate([state.v, [0.0]]), dt, rhs)
+            v = x[:nv]
         y_dot_mid = 0.5 * (state.v + v) if use_estimate else 0.5 * (yd0 + yd1)
         Phi = transition_matrix(self._state_matrix(y_at[0.5], y_dot_mid), dt)
         P = Phi.dot(state.P).dot(Phi.T)

@@ -26,6 +26,31 @@ the covariance by the linearised error dynamics, to first order in ``δx``:
 ``Q_d`` is the white-acceleration covariance of a double integrator, the
 leading term of Van Loan's integral when ``‖A h‖ ≪ 1``.
 
+Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
+``τ_f = −D v − F_c tanh(v/v_s)``) makes the error dynamics stiff near ``v = 0``:
+its slope ``−F_c/v_s`` (200 N·m·s/rad for 2 N·m at v_s = 0.01 rad/s) enters
+``∂a/∂v`` as ``−M⁻¹ F_c/v_s``, so ``λ h`` reaches 55 on a Panda's wrist at
+1 kHz (``λ = (M⁻¹)ᵢᵢ F_c/v_s``).  The third-order series above is then
+meaningless (it grows like ``(λh)³/6``) and so is one RK4 step (stable for
+``λh < 2.785``): before this treatment the filter ended at 4 rad/s RMS on a
+Panda with F_c = 1–3 N·m in both truth and model.  With friction the model
+is kept as it is (no slope dropped) and both steps are made valid:
+
+* the mean takes ``n`` RK4 substeps, ``n = ⌈λ h / 2.5⌉`` with ``λ`` the
+  largest ``(M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|`` at the velocity nearest zero each joint
+  can reach in the step, ``max(|vᵢ| − |aᵢ| h, 0)``
+  (:func:`friction_substeps`; one substep away from zero velocity);
+* ``Φ = exp(A h)`` by scaling and squaring (:func:`stiff_transition_matrix`:
+  the series on ``A h / 2ˢ``, squared ``s`` times, ``‖A h‖∞ / 2ˢ ≤ 1/4``),
+  which contracts the velocity covariance of a sticking joint as the
+  friction does.
+
+Measured (Panda, F_c uniform in 1–3 N·m (seeded), pd tracking, 1 kHz,
+σ = 1e-4 rad, 3 s, the truth integrated with 40 substeps, RMS after 0.75 s):
+``ekf`` 9.1e-5 → 3.9e-5 (seed 0), 6.0e-5 → 3.4e-5 (seed 1) without → with
+friction: friction makes sticking joints easier, not harder.  The cost grows
+only in the samples where a joint can reach zero velocity.
+
 Update with ``q_meas = q ⊕ n``, ``n ~ N(0, σ² I)``: innovation
 ``e = difference(q̂⁻, q_meas) ≈ δq + n`` (so ``H = [I 0]``), gain
 ``K = P⁻Hᵀ(H P⁻Hᵀ + σ² I)⁻¹``, ``(δq, δv) = K e``, ``q̂ = q̂⁻ ⊕ δq``,
@@ -83,6 +108,7 @@ friction, vary as fast as the motion).
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -98,11 +124,15 @@ __all__ = [
     "ad_matrix",
     "cholesky_solve",
     "double_integrator_noise",
+    "friction_substeps",
     "joseph_update",
+    "stiff_transition_matrix",
     "transition_matrix",
 ]
 
 _NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std (or 0) is given
+_SERIES_NORM = 0.25  # ‖A h‖∞ up to which the third-order series is used as it is (error < 1e-4)
+_RK4_STIFFNESS = 2.5  # λ h kept below RK4's stability limit on the negative real axis, 2.785
 
 
 def ad_matrix(robot: Robot, v: Vector) -> Vector:
@@ -136,6 +166,35 @@ def transition_matrix(A: Vector, h: float) -> Vector:
     return out
 
 
+def stiff_transition_matrix(A: Vector, h: float) -> Vector:
+    """``exp(A h)`` for any ``‖A h‖``: the third-order series of :func:`transition_matrix` on
+    ``A h / 2ˢ`` squared ``s`` times, ``s`` the least with ``‖A h‖∞ / 2ˢ ≤ 1/4``
+    (Moler & Van Loan 2003, "Nineteen dubious ways", method 3: scaling and squaring).
+
+    Needed where the smoothed Coulomb friction makes ``A`` stiff (module docstring);
+    equal to :func:`transition_matrix` when ``‖A h‖∞ ≤ 1/4``.
+    """
+    norm = float(np.abs(A).sum(axis=1).max()) * h
+    s = 0 if norm <= _SERIES_NORM else math.ceil(math.log2(norm / _SERIES_NORM))
+    Phi = transition_matrix(A, h / 2**s)
+    for _ in range(s):
+        Phi = Phi.dot(Phi)
+    return Phi
+
+
+def friction_substeps(robot: Robot, v: Vector, acc: Vector, minv_diag: Vector, dt: float) -> int:
+    """RK4 substeps over ``dt`` [s] keeping ``λ h_sub ≤ 2.5`` under joint friction (module docstring).
+
+    ``λ = maxᵢ (M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|`` at the velocity nearest zero that joint
+    ``i`` can reach in the step, ``max(|vᵢ| − |aᵢ| dt, 0)`` (the smoothed
+    Coulomb slope ``F_c / v_s`` peaks at ``v = 0``); ``acc`` [rad/s²] the
+    acceleration at the start, ``minv_diag`` the diagonal of ``M⁻¹``.
+    """
+    v_near = np.maximum(np.abs(v) - np.abs(acc) * dt, 0.0)
+    lam = float(np.max(minv_diag * -robot.friction_derivative(v_near)))
+    return max(1, math.ceil(lam * dt / _RK4_STIFFNESS))
+
+
 @functools.lru_cache(maxsize=64)
 def _double_integrator_noise(nv: int, h: float, psd: float) -> Vector:
     eye = np.eye(nv)
@@ -166,12 +225,16 @@ def cholesky_solve(S: Vector, B: Vector) -> tuple[Vector, bool]:
     """``(S⁻¹ B, ok)`` for a symmetric positive definite ``S`` (LAPACK ``dposv``, upper triangle).
 
     ``ok`` is False when ``S`` is not positive definite; the result then comes
-    from the general ``np.linalg.solve``.
+    from the general ``np.linalg.solve``, or is NaN if ``S`` is singular (a
+    diverged filter, which :meth:`Observer.update` reports).
     """
     _, x, info = _posv()(S, B)
-    if info != 0:
+    if info == 0:
+        return x, True
+    try:
         return np.linalg.solve(S, B), False
-    return x, True
+    except np.linalg.LinAlgError:  # singular or not finite: NaN, reported by the caller
+        return np.full(B.shape, np.nan), False
 
 
 def joseph_update(P: Vector, e: Vector, meas_var: float) -> tuple[Vector, Vector]:
@@ -291,10 +354,11 @@ class ExtendedKalmanFilter(Observer[_State]):
         with the disturbance, ``[[−ad_v, I, 0], [∂a/∂q, ∂a/∂v, M⁻¹], [0, 0, 0]]``.  A new array."""
         return np.array(self._jacobian(q, v, tau)[0])
 
-    def _jacobian(self, q: Vector, v: Vector, tau: Vector) -> tuple[Vector, Vector | None]:
-        """``(A, a(q, v, τ))`` from one derivatives call; ``A`` is the filter's scratch buffer
-        (overwritten by the next call), ``a`` a view into the robot's data (or ``None``
-        for a model without that call)."""
+    def _jacobian(self, q: Vector, v: Vector, tau: Vector) -> tuple[Vector, Vector | None, Vector]:
+        """``(A, a(q, v, τ), M⁻¹)`` from one derivatives call; ``A`` is the filter's scratch
+        buffer (overwritten by the next call), ``a`` and ``M⁻¹`` views into the robot's data
+        (``a`` is ``None`` for a model without that call; ``M⁻¹`` symmetric with friction or
+        the disturbance, else only its upper triangle is meaningful)."""
         r, nv = self.robot, self.robot.nv
         A = self._scratch_A
         if A is None:  # the constant blocks are written once
@@ -315,7 +379,7 @@ class ExtendedKalmanFilter(Observer[_State]):
         A[nv : 2 * nv, nv : 2 * nv] = da_dv
         if with_d:
             A[nv : 2 * nv, 2 * nv :] = minv
-        return A, acc
+        return A, acc, minv
 
     @property
     def disturbance(self) -> Vector | None:
@@ -354,10 +418,17 @@ class ExtendedKalmanFilter(Observer[_State]):
         nv = self.robot.nv
         d = state.d
         tau_in = tau if d is None else tau + d  # the offset acts as a torque (module docstring)
-        A, acc = self._jacobian(state.q, state.v, tau_in)
-        Phi = transition_matrix(A, dt)
-        # RKMK4 of vector_field; its first stage is the derivatives call's v̇
-        q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt, acc0=acc)
+        A, acc, minv = self._jacobian(state.q, state.v, tau_in)
+        if not self.robot.has_friction:
+            Phi = transition_matrix(A, dt)
+            # RKMK4 of vector_field; its first stage is the derivatives call's v̇
+            q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt, acc0=acc)
+        else:  # stiff near v = 0: Φ by scaling and squaring, the mean in substeps
+            Phi = stiff_transition_matrix(A, dt)
+            n = 1 if acc is None else friction_substeps(self.robot, state.v, acc, np.diag(minv), dt)
+            q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt / n, acc0=acc)
+            for _ in range(n - 1):
+                q, v = dynamics_rk4(self.robot, q, v, tau_in, dt / n)
         P = Phi.dot(state.P).dot(Phi.T)
         P[: 2 * nv, : 2 * nv] += double_integrator_noise(nv, dt, self.gains.accel_psd)
         if d is not None and state.d_psd is not None:  # Q_d's offset block, diag(psd_τ h)

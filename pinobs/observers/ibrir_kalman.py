@@ -84,7 +84,9 @@ from pinobs.observers.ekf import (
     ad_matrix,
     cholesky_solve,
     double_integrator_noise,
+    friction_substeps,
     joseph_update,
+    stiff_transition_matrix,
     transition_matrix,
 )
 
@@ -313,7 +315,14 @@ class IbrirKalman(Observer[_State]):
                 a = np.linalg.solve(r.mass_matrix(y), rhs_)
             return v, np.concatenate([a, [1.0]])
 
-        if use_estimate and r.is_vector_space:  # the same RK4, without its generic bookkeeping
+        q: Vector
+        v: Vector
+        n = 1
+        if r.has_friction:  # stiff near v = 0 (smoothed Coulomb): substeps, as the EKF
+            a0 = r.forward_dynamics(y0, state.v, tau - self.viscous * state.v)
+            minv_diag = np.diag(np.linalg.inv(r.mass_matrix(y0)))
+            n = friction_substeps(r, state.v, a0, minv_diag, dt)
+        if n == 1 and use_estimate and r.is_vector_space:  # RK4 without lie_rk4's bookkeeping
             v0, visc, h2 = state.v, self.viscous, 0.5 * dt
             v2 = v0 + h2 * (a1 := r.forward_dynamics(y0, v0, tau - visc * v0))
             v3 = v0 + h2 * (a2 := r.forward_dynamics(y_at[0.5], v2, tau - visc * v2))
@@ -322,10 +331,13 @@ class IbrirKalman(Observer[_State]):
             q = state.q + (dt / 6.0) * (v0 + 2.0 * (v2 + v3) + v4)
             v = v0 + (dt / 6.0) * (a1 + 2.0 * (a2 + a3) + a4)
         else:
-            q, x = lie_rk4(r, state.q, np.concatenate([state.v, [0.0]]), dt, rhs)
+            q, x = state.q, np.concatenate([state.v, [0.0]])
+            for _ in range(n):  # x[nv] carries the time since the interval's start
+                q, x = lie_rk4(r, q, x, dt / n, rhs)
             v = x[:nv]
         y_dot_mid = 0.5 * (state.v + v) if use_estimate else 0.5 * (yd0 + yd1)
-        Phi = transition_matrix(self._state_matrix(y_at[0.5], y_dot_mid), dt)
+        F = self._state_matrix(y_at[0.5], y_dot_mid)
+        Phi = stiff_transition_matrix(F, dt) if r.has_friction else transition_matrix(F, dt)
         P = Phi.dot(state.P).dot(Phi.T)
         if g.form == "practical":
             P += double_integrator_noise(nv, dt, g.accel_psd)

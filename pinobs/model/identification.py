@@ -505,11 +505,10 @@ def _solve(
     base = tuple(reg.names[i] for i in piv[:rank])
     sv = np.linalg.svd(As[:, piv[:rank]], compute_uv=False)
     condition = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
-    lam_max = float(sv[0]) ** 2
     w = np.ones(A.shape[0])
     eye = np.eye(reg.size)
     # first pass: σ from an almost unregularised fit
-    u = np.linalg.solve(gram + 1e-12 * lam_max * eye, As.T @ r0)
+    u = np.linalg.lstsq(As, r0, rcond=None)[0]
     prec_u = eye
     for it in range(irls + 1):
         res = As @ u - r0

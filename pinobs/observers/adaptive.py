@@ -60,7 +60,7 @@ from numpy.typing import NDArray
 from pinobs.errors import IdentificationError, UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.model.identification import MomentumRegressor, ParameterSet, smooth_path, solve
-from pinobs.observers.base import Vector, positive, register
+from pinobs.observers.base import Consistency, Vector, positive, register
 from pinobs.observers.ekf import ExtendedKalmanFilter
 from pinobs.observers.ekf import _State as _EKFState
 from pinobs.observers.kf import ConstantAccelerationKF
@@ -110,6 +110,9 @@ class _Learner:
         self.condition = np.nan
         self.rank = 0
         self.solves = 0
+        self.installs = 0
+        self.validated = False  # a solve has checked the current model against the data
+        self.last_drop = np.nan
         self.rejected: list[str] = []
 
     def add(self, t: float, q: Vector | None, tau: Vector) -> bool:
@@ -162,9 +165,33 @@ class _Learner:
             if np.linalg.eigvalsh(robot.mass_matrix(q))[0] <= 0:
                 self.rejected.append(f"M(q) not positive definite in solve {self.solves + 1}")
                 return False
-        self.theta, self.std, self.excited = theta, sol.std, sol.excited
+        # Model selection: keep the current model unless the new one explains the rows better
+        # than fitting noise would (robust loss drop above rank + 3√rank, in units of ½χ²).
+        current = self.reg.nominal() if self.theta is None else self.theta
+        drop = _huber_loss(A @ current - y, sol.sigma) - _huber_loss(A @ theta - y, sol.sigma)
         self.solves += 1
+        self.validated = True
+        self.std, self.excited = sol.std, sol.excited
+        if drop <= sol.rank + 3.0 * np.sqrt(sol.rank):
+            self.last_drop = float(drop)
+            if self.theta is None:
+                self.theta = current
+            return False
+        self.last_drop = float(drop)
+        self.theta = theta
+        self.installs += 1
         return True
+
+
+#: Mean NIS per degree of freedom up to which the model-based filter is trusted outright by the
+#: blend (twice the consistent value); the blame on the model ramps up to full at twice this.
+_NIS_TRUSTED = 2.0
+
+
+def _huber_loss(r: Vector, sigma: float, c: float = 1.345) -> float:
+    """``Σ ρ(rᵢ/σ)`` with Huber's ρ (½z² inside ``c``, ``c|z| − ½c²`` outside)."""
+    z = np.abs(r) / sigma
+    return float(np.sum(np.where(z <= c, 0.5 * z * z, c * z - 0.5 * c * c)))
 
 
 @register
@@ -186,6 +213,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         blend_time: averaging time of the disagreement [s].
         jerk_psd: the ``kf``'s white-jerk density [rad²/s⁵].
         q0_std, v0_std, d0_std: initial standard deviations (as in ``ekf``).
+        outlier_probability: the outlier gate (as in ``ekf``; the ``kf`` skips what it rejects).
         rate: sample rate [Hz] (needed: the identification windows are counted in samples).
         noise_std: position noise standard deviation [rad or m].
     """
@@ -213,6 +241,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         q0_std: float = 0.1,
         v0_std: float = 1.0,
         d0_std: float = 1.0,
+        outlier_probability: float | None = 1e-6,
         rate: float | None = None,
         noise_std: float | None = None,
     ) -> None:
@@ -223,6 +252,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             v0_std=v0_std,
             disturbance_psd=disturbance_psd,
             d0_std=d0_std,
+            outlier_probability=outlier_probability,
             rate=rate,
             noise_std=noise_std,
         )
@@ -287,11 +317,16 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             return ParameterSet(reg.names, nominal, prior, nominal, np.zeros(reg.size, bool))
         return ParameterSet(reg.names, lr.theta.copy(), lr.std.copy(), nominal, lr.excited.copy())
 
-    def consistency(self) -> dict[str, Any]:
-        """What the learner did: solves, the regressor's condition number and rank, rejected solves."""
+    def consistency(self) -> Consistency:
+        """The NIS test of the base class, with what the learner did in ``details``:
+        solves, the regressor's condition number and rank, rejected solves (a
+        failed re-solve keeps the last model and is listed here), the blend weights."""
         lr = self._learner
-        return {
+        base = super().consistency()
+        details = {
             "solves": lr.solves,
+            "installs": lr.installs,
+            "last_loss_drop": lr.last_drop,
             "condition": float(lr.condition),
             "rank": lr.rank,
             "n_parameters": lr.reg.size,
@@ -300,6 +335,14 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             "warming_up": lr.theta is None,
             "blend_weight": None if self._state is None else self._weights(self._state).tolist(),  # type: ignore[arg-type]
         }
+        return replace(base, details=details)
+
+    def _trust(self, state: _EKFState) -> _EKFState:
+        """Leave the warm-up: the model's process noise and offset density drop."""
+        self.gains = replace(self.gains, accel_psd=self._accel_psd)
+        if state.d_psd is None or self.disturbance_psd is None:
+            return state
+        return state._replace(d_psd=state.d_psd * (self._learned_d_psd / self.disturbance_psd))
 
     def _install(self, state: _EKFState) -> _EKFState:
         lr = self._learner
@@ -307,14 +350,10 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         self._replace_robot(lr.reg.with_parameters(lr.theta, name=f"{self._nominal.name}~learned"))
         self._offset = lr.reg.offsets(lr.theta)
         if self.gains.accel_psd != self._accel_psd:
-            self.gains = replace(self.gains, accel_psd=self._accel_psd)
-        if state.d is None or state.d_psd is None or self.disturbance_psd is None:
+            state = self._trust(state)
+        if state.d is None:
             return state
-        if lr.solves > 1:  # the density was lowered at the first install
-            return state._replace(d=np.zeros_like(state.d))
-        # the new model explains what d absorbed; the offset now only tracks what is left
-        d_psd = state.d_psd * (self._learned_d_psd / self.disturbance_psd)
-        return state._replace(d=np.zeros_like(state.d), d_psd=d_psd)
+        return state._replace(d=np.zeros_like(state.d))  # the new model explains what d absorbed
 
     # ------------------------------------------------------------------ filter
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:  # type: ignore[override]
@@ -338,21 +377,31 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         ekf = state.ekf
         if state.pending is not None and self._learner.add(*state.pending):
             ekf = self._install(ekf)
+        elif self._learner.validated and self.gains.accel_psd != self._accel_psd:
+            ekf = self._trust(ekf)  # the nominal model explains the data: leave the warm-up
         ekf = super()._step(ekf, dt, q_meas, tau + self._offset)
-        kf = self._kf._step(state.kf, dt, q_meas, tau)
+        kf = self._kf._step(state.kf, dt, None if ekf.gated else q_meas, tau)  # one gate for both
         s = state.s
         if self.blend:
             e = ekf.v - kf.v
             lam = min(1.0, dt / self.blend_time)
-            s = s + lam * (np.maximum(e * e - kf.P[1, 1], 0.0) - s)
+            # disagreement is the model's fault only when its innovations say so (NIS̄ > 2 nv)
+            nv = self.robot.nv
+            level = float(nv) if ekf.nis_level is None else ekf.nis_level
+            blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
+            s = s + lam * (blame * np.maximum(e * e - kf.P[1, 1], 0.0) - s)
         t = state.t + dt
-        new = _State(ekf, kf, t, s, ekf.q, ekf.v, (t, q_meas, tau))
+        learn_q = None if ekf.gated else q_meas  # an outlier teaches nothing
+        new = _State(ekf, kf, t, s, ekf.q, ekf.v, (t, learn_q, tau))
         if self.blend:
             w = self._weights(new)
             v = w * ekf.v + (1.0 - w) * kf.v
             q = self.robot.integrate(ekf.q, (1.0 - w) * self.robot.difference(ekf.q, kf.q))
             new = new._replace(q=q, v=v)
         return new
+
+    def _innovation(self, state: _State) -> tuple[float | None, bool]:  # type: ignore[override]
+        return state.ekf.nis, state.ekf.gated
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:  # type: ignore[override]
         return state.q, state.v

@@ -19,7 +19,8 @@ from __future__ import annotations
 import inspect
 import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Generic, TypeVar, final
 
 import numpy as np
@@ -38,6 +39,7 @@ from pinobs.model.robot import read_only
 from pinobs.tolerances import TIME_EPS
 
 __all__ = [
+    "Consistency",
     "Estimate",
     "Observer",
     "make_observer",
@@ -59,11 +61,76 @@ class Estimate:
         t: time [s].
         q: estimated configuration, shape ``(nq,)`` (read-only).
         v: estimated velocity, shape ``(nv,)`` (read-only), Pinocchio's tangent frame.
+        nis: normalized innovation squared ``eᵀ S⁻¹ e`` of this sample's
+            measurement (``S`` the predicted innovation covariance; χ² with
+            ``nv`` degrees of freedom when the model and noise level are
+            right), or ``None`` (no covariance, or no measurement).
+        gated: the measurement was rejected as an outlier (the estimate is the prediction).
     """
 
     t: float
     q: Vector
     v: Vector
+    nis: float | None = None
+    gated: bool = False
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """Does the model explain the data?  A windowed test of the normalized innovation squared.
+
+    Over the last ``samples`` measurements the mean NIS of a consistent filter
+    is χ²(n·nv)/n: expectation ``expected`` (= nv), standard deviation
+    ``√(2 nv / n)``.  ``verdict`` is ``"consistent"`` below ``bound`` (the
+    expectation plus five standard deviations, plus 50 %: filters are tuned,
+    not exact), ``"inconsistent"`` above it, ``"unknown"`` without a covariance
+    or with fewer than 50 samples.
+
+    Attributes:
+        samples: measurements in the window.
+        mean_nis: their mean NIS (NaN if none).
+        expected: its expectation for a consistent filter (``nv``).
+        bound: the threshold of the verdict.
+        verdict: ``"consistent"``, ``"inconsistent"`` or ``"unknown"``.
+        gated: measurements rejected as outliers since the reset.
+        causes: what usually makes a model-based filter inconsistent (when it is).
+        details: family-specific diagnostics (an adaptive observer's learning).
+    """
+
+    samples: int
+    mean_nis: float
+    expected: float
+    bound: float
+    verdict: str
+    gated: int = 0
+    causes: tuple[str, ...] = ()
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values, for JSON."""
+        return {
+            "samples": self.samples,
+            "mean_nis": self.mean_nis,
+            "expected": self.expected,
+            "bound": self.bound,
+            "verdict": self.verdict,
+            "gated": self.gated,
+            "causes": list(self.causes),
+            **self.details,
+        }
+
+
+#: What to check when a model-based filter's innovations are too large (Consistency.causes).
+LIKELY_CAUSES = (
+    "link masses or inertias (a payload, CAD values): try `pinobs identify` or the adaptive observer",
+    "joint friction not in the model (URDF <dynamics>, load(..., friction=True))",
+    "torque units or scale (gear ratios, motor constants, N·m vs mN·m), or a torque offset",
+    "a measurement latency (give latency= if it is known)",
+    "the noise level (noise_std smaller than the sensor's)",
+)
+
+#: Measurements in the consistency window.
+CONSISTENCY_WINDOW = 1000
 
 
 def positive(
@@ -119,6 +186,8 @@ class Observer(ABC, Generic[State]):
         self._t = -math.inf
         self._tau: Vector = np.zeros(self.robot.nv)
         self._last: Estimate | None = None
+        self._nis: deque[float] = deque(maxlen=CONSISTENCY_WINDOW)
+        self._gated = 0
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.robot.name!r})"
@@ -147,6 +216,8 @@ class Observer(ABC, Generic[State]):
         state = self._initial_state(q, v)
         estimate = self._make_estimate(t, state)
         self._state, self._t, self._tau, self._last = state, t, tau, estimate
+        self._nis.clear()
+        self._gated = 0
         return estimate
 
     @final
@@ -187,6 +258,9 @@ class Observer(ABC, Generic[State]):
                     last_estimate=self._last,
                 )
         self._state, self._t, self._tau, self._last = state, t_new, tau_new, estimate
+        if estimate.nis is not None:
+            self._nis.append(estimate.nis)
+            self._gated += estimate.gated
         return estimate
 
     @property
@@ -195,6 +269,21 @@ class Observer(ABC, Generic[State]):
         if self._last is None:
             raise NotResetError(f"{self!r}: call reset(t0, q0) first")
         return self._last
+
+    def consistency(self) -> Consistency:
+        """Whether the model explains the recent data (see :class:`Consistency`)."""
+        n = len(self._nis)
+        dof = float(self.robot.nv)
+        bound = 1.5 * (dof + 5.0 * math.sqrt(2.0 * dof / max(n, 1)))
+        if n == 0:
+            return Consistency(0, math.nan, dof, bound, "unknown", self._gated)
+        mean = float(np.mean(self._nis))
+        if n < 50:
+            verdict = "unknown"
+        else:
+            verdict = "consistent" if mean <= bound else "inconsistent"
+        causes = LIKELY_CAUSES if verdict == "inconsistent" else ()
+        return Consistency(n, mean, dof, bound, verdict, self._gated, causes)
 
     @property
     def options(self) -> dict[str, Any]:
@@ -218,9 +307,14 @@ class Observer(ABC, Generic[State]):
         """``(q̂, v̂)`` of a state."""
 
     # -------------------------------------------------------------- helpers
+    def _innovation(self, state: State) -> tuple[float | None, bool]:
+        """``(NIS, gated)`` of the measurement that made ``state`` (families with a covariance)."""
+        return None, False
+
     def _make_estimate(self, t: float, state: State) -> Estimate:
         q, v = self._output(state)
-        return Estimate(t=t, q=read_only(q), v=read_only(v))
+        nis, gated = self._innovation(state)
+        return Estimate(t=t, q=read_only(q), v=read_only(v), nis=nis, gated=gated)
 
     def _check_tau(self, tau: ArrayLike | None, *, what: str) -> Vector:
         if tau is None:

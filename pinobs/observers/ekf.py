@@ -110,11 +110,12 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from pinobs.errors import DimensionError
+from pinobs.errors import DimensionError, GainError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.observers.base import Observer, Vector, positive, register
 
@@ -130,7 +131,29 @@ __all__ = [
     "transition_matrix",
 ]
 
-_NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std (or 0) is given
+_NOISE_FLOOR = 1e-6
+
+#: Consecutive measurements the outlier gate may reject before it accepts one whatever its NIS.
+MAX_GATE_RUN = 1
+
+#: Weight of each accepted NIS in the running mean that scales the gate.
+_NIS_AVERAGING = 0.01
+
+
+def chi2_quantile(dof: int, p: float) -> float:
+    """The χ² quantile with upper tail ``p`` by Wilson-Hilferty (above the exact one: +4 % at dof 6, +15 % at dof 1, p = 1e-6).
+
+    ``χ²_k(1 − p) ≈ k (1 − 2/(9k) + z √(2/(9k)))³``, ``z`` the normal quantile
+    (Wilson & Hilferty 1931); the standard library's ``NormalDist`` keeps
+    ``scipy.stats`` out of the import.
+    """
+    z = NormalDist().inv_cdf(1.0 - p)
+    c = 2.0 / (9.0 * dof)
+    return float(
+        dof * (1.0 - c + z * math.sqrt(c)) ** 3
+    )  # [rad] σ assumed when no noise_std (or 0) is given
+
+
 _SERIES_NORM = 0.25  # ‖A h‖∞ up to which the third-order series is used as it is (error < 1e-4)
 _RK4_STIFFNESS = 2.5  # λ h kept below RK4's stability limit on the negative real axis, 2.785
 
@@ -290,6 +313,10 @@ class _State(NamedTuple):
     P: Vector  # covariance of (δq, δv) or, with the disturbance, of (δq, δv, δd)
     d: Vector | None = None  # estimated joint-torque offset [N·m or N]
     d_psd: Vector | None = None  # its random-walk density per joint [N²·m²/s]
+    nis: float | None = None  # normalized innovation squared of the last measurement
+    gated: bool = False  # that measurement was rejected as an outlier
+    gate_run: int = 0  # consecutive rejected measurements
+    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
 
 
 @register
@@ -305,6 +332,8 @@ class ExtendedKalmanFilter(Observer[_State]):
             with the state, as an acceleration density [rad²/s⁵] scaled by the
             nominal inertia (module docstring); ``None``: no offset.
         d0_std: initial standard deviation of that offset [N·m or N].
+        outlier_probability: false-alarm probability ``p`` of the outlier gate
+            (:meth:`_correct`); ``None`` switches the gate off.
         rate: sample rate hint [Hz] (not needed: the filter uses the actual intervals).
         noise_std: position noise standard deviation [rad or m], the measurement noise.
     """
@@ -321,10 +350,16 @@ class ExtendedKalmanFilter(Observer[_State]):
         v0_std: float = 1.0,
         disturbance_psd: float | None = None,
         d0_std: float = 1.0,
+        outlier_probability: float | None = 1e-6,
         rate: float | None = None,
         noise_std: float | None = None,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
+        p = positive("outlier_probability", outlier_probability, allow_none=True)
+        if p is not None and p >= 0.5:
+            raise GainError(f"outlier_probability={p!r} must be in (0, 0.5) (or None: no gate)")
+        self.outlier_probability = p
+        self._gate = math.inf if p is None else chi2_quantile(robot.nv, p)
         sigma = self.noise_std or _NOISE_FLOOR
         self.gains = EKFGains(accel_psd=accel_psd, meas_std=sigma, q0_std=q0_std, v0_std=v0_std)
         self.disturbance_psd = positive("disturbance_psd", disturbance_psd, allow_none=True)
@@ -342,13 +377,10 @@ class ExtendedKalmanFilter(Observer[_State]):
             "q0_std": g.q0_std,
             "v0_std": g.v0_std,
             "disturbance_psd": self.disturbance_psd,
+            "outlier_probability": self.outlier_probability,
         }
 
     # ------------------------------------------------------------ the model
-    def _replace_robot(self, robot: Robot) -> None:
-        """Swap the process model between updates (an observer that learns its model does this)."""
-        self.robot = robot
-
     def vector_field(self, q: Vector, v: Vector, tau: Vector) -> tuple[Vector, Vector]:
         """``(q̇, v̇) = (v, a(q, v, τ))`` of the mean between samples (body-frame ``q̇``)."""
         return v, self.robot.forward_dynamics(q, v, tau)
@@ -406,7 +438,7 @@ class ExtendedKalmanFilter(Observer[_State]):
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         pred, _ = self._predict(state, dt, tau)
         if q_meas is None:
-            return pred._replace(P=0.5 * (pred.P + pred.P.T))
+            return pred._replace(P=0.5 * (pred.P + pred.P.T), nis=None, gated=False)
         return self._correct(pred, q_meas)
 
     def _predict(self, state: _State, dt: float, tau: Vector) -> tuple[_State, Vector]:
@@ -437,19 +469,51 @@ class ExtendedKalmanFilter(Observer[_State]):
         P[: 2 * nv, : 2 * nv] += double_integrator_noise(nv, dt, self.gains.accel_psd)
         if d is not None and state.d_psd is not None:  # Q_d's offset block, diag(psd_τ h)
             P[2 * nv :, 2 * nv :].flat[:: nv + 1] += state.d_psd * dt
-        return _State(q, v, P, d, state.d_psd), Phi
+        return state._replace(q=q, v=v, P=P), Phi  # the gate's bookkeeping carries over
 
     def _correct(self, state: _State, q_meas: Vector) -> _State:
-        """Correction of a predicted state with the measured ``q_meas`` (Joseph form, module docstring)."""
+        """Correction of a predicted state with the measured ``q_meas`` (Joseph form, module docstring).
+
+        The normalized innovation squared ``NIS = eᵀ S⁻¹ e`` comes free:
+        ``K_q = P_qq S⁻¹ = I − R S⁻¹``, so ``S⁻¹ e = (e − K_q e) / R``.  Outlier gate:
+        a measurement whose NIS exceeds ``χ²_nv(1 − p) · max(1, NIS̄ / nv)``
+        (``NIS̄`` a running mean of accepted NIS, so a filter whose model is
+        off does not gate everything) is not used: the estimate is the
+        prediction.  After :data:`MAX_GATE_RUN` consecutive rejections the
+        next measurement is used whatever its NIS (a real jump, or a
+        prediction gone wrong, not a spike), and the gate's level is raised to it.
+        Measured: with ten allowed rejections, a Panda whose model has stiff
+        Coulomb friction lost track (prediction errors near v = 0 were gated
+        while the prediction drifted); with one it does not.
+        """
         nv = self.robot.nv
         q, v, d, P = state.q, state.v, state.d, state.P
+        R = self.gains.meas_std**2
         e = self.robot.difference(q, q_meas)
-        dx, P = joseph_update(P, e, self.gains.meas_std**2)
+        dx, P_new = joseph_update(P, e, R)
+        nis = float(e @ (e - dx[:nv])) / R
+        level = float(nv) if state.nis_level is None else state.nis_level
+        if nis > self._gate * max(1.0, level / nv) and state.gate_run < MAX_GATE_RUN:
+            return state._replace(
+                P=0.5 * (P + P.T),
+                nis=nis,
+                gated=True,
+                gate_run=state.gate_run + 1,
+                nis_level=level,
+            )
         q = self.robot.integrate(q, dx[:nv])
         v = v + dx[nv : 2 * nv]
         if d is not None:
             d = d + dx[2 * nv :]
-        return _State(q, v, P, d, state.d_psd)  # P symmetric (joseph_update)
+        if state.gate_run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
+            level = max(level, nis * nv / self._gate)
+        level += _NIS_AVERAGING * (min(nis, 100.0 * level) - level)
+        return _State(
+            q, v, P_new, d, state.d_psd, nis, False, 0, level
+        )  # P symmetric (joseph_update)
+
+    def _innovation(self, state: _State) -> tuple[float | None, bool]:
+        return state.nis, state.gated
 
     def _replace_robot(self, robot: Robot) -> None:
         """Swap the filter's model between updates (an adaptive subclass's identified model).

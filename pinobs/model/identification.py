@@ -496,7 +496,6 @@ def _solve(
     As = A * s  # columns in prior units: u = (θ − θ₀)/s
     r0 = y - A @ theta0
     # identifiable combinations: pivoted QR of the prior-scaled rows
-    gram = As.T @ As
     _, R, piv = qr(As, mode="economic", pivoting=True)
     diag = np.abs(np.diag(R))
     if diag.size == 0 or diag[0] == 0.0:

@@ -81,7 +81,7 @@ def test_a_single_spike_is_gated_and_moves_nothing_beyond_the_noise(name: str, s
 
 def test_the_gate_can_be_switched_off_and_rejects_bad_values() -> None:
     robot = pinobs.load("cartpole")
-    res, out = _run(
+    _, out = _run(
         robot,
         None,
         ["ekf"],

@@ -30,6 +30,7 @@ from pinobs.visualization import (
 )
 from pinobs.visualization import playback as pb
 from pinobs.visualization.browser import find_chromium
+from pinobs.visualization.palette import PALETTE, hex_colour
 
 DURATION = 1.5  # [s]
 FPS = 30.0
@@ -95,7 +96,7 @@ def test_page_is_self_contained_with_a_legend(cartpole_run: dict[str, Any]) -> N
     assert "MeshCat.Viewer" in text
     legend = text[text.index('id="pinobs-legend"') :]
     assert 'data-label="truth"' in legend and 'data-label="kf"' in legend
-    assert pb._hex(pb.GHOST_COLOURS[0][1]) in legend  # the ghost's swatch colour
+    assert hex_colour(PALETTE[0][1]) in legend  # the ghost's swatch colour
 
 
 def test_timeline_has_one_keyframe_per_frame_for_truth_and_ghost(
@@ -299,7 +300,7 @@ def test_serve_prints_the_url_and_legend(
     viewer = serve(cartpole_run["result"], cartpole_run["robot"], echo=lines.append)
     assert viewer.url == "http://127.0.0.1:7000/static/"
     assert lines[0].endswith("http://127.0.0.1:7000/static/")
-    assert any("kf: estimate, orange" in line for line in lines)
+    assert any(f"kf: estimate, {PALETTE[0][0]}" in line for line in lines)
     assert any(umsgpack.unpackb(c)["type"] == "set_animation" for c in window.commands)
 
 
@@ -310,12 +311,24 @@ chromium = pytest.mark.skipif(
 )
 
 
-def colour_masks(png: Path) -> dict[str, np.ndarray]:
-    """Pixels of the ghost's orange, the truth's blue pole and anything not white."""
-    from matplotlib.colors import rgb_to_hsv
+def chart_top(height: int) -> int:
+    """First pixel row of the chart under the 3-D view (the page's CSS:
+    ``--pinobs-chart-height: clamp(170px, 34vh, 340px)``)."""
+    return height - round(min(max(170.0, 0.34 * height), 340.0))
+
+
+def image(png: Path) -> np.ndarray:
     from PIL import Image
 
-    rgb = np.asarray(Image.open(png).convert("RGB"), dtype=float) / 255.0
+    return np.asarray(Image.open(png).convert("RGB"), dtype=float)
+
+
+def colour_masks(png: Path) -> dict[str, np.ndarray]:
+    """In the 3-D view: pixels of the ghost's vermillion, the truth's blue pole, anything not white."""
+    from matplotlib.colors import rgb_to_hsv
+
+    rgb = image(png) / 255.0
+    rgb = rgb[: chart_top(rgb.shape[0])]
     hsv = rgb_to_hsv(rgb)
     h, s, v = hsv[..., 0] * 360.0, hsv[..., 1], hsv[..., 2]
     return {

@@ -3,7 +3,7 @@
 Two panels drawn on one ``<canvas>`` by plain JavaScript embedded in the page
 (no library, nothing fetched): on the left one velocity coordinate (chosen
 in a drop-down; the default is the one where the estimates are furthest
-off), the truth in black and each estimate in its colour
+off), the truth as a thin black line on top of each estimate in its colour
 (:mod:`pinobs.visualization.palette`); on the right ``|v̂(t) − v(t)|₂`` on a
 log axis.  A cursor (a dark grey vertical line, with a dot on each curve) sits at the
 animation's current time; dragging on the chart pauses the animation and
@@ -250,16 +250,16 @@ _JS = r"""
       g.rect(p.x0, p.y0, p.x1 - p.x0, p.y1 - p.y0);
       g.clip();
       g.lineJoin = "round";
-      if (p === pv) {
-        g.strokeStyle = D.truth_colour;
-        g.lineWidth = 2.5;
-        curve(g, p, D.truth[joint], yLin);
-      }
       D.obs.forEach(function (o) {
         g.strokeStyle = o.colour;
-        g.lineWidth = 1.6;
+        g.lineWidth = 2.2;
         if (p === pv) curve(g, p, o.v[joint], yLin); else curve(g, p, o.err, yLog);
       });
+      if (p === pv) {  // the truth on top, thinner: a converged estimate shows as its rim
+        g.strokeStyle = D.truth_colour;
+        g.lineWidth = 1.2;
+        curve(g, p, D.truth[joint], yLin);
+      }
       g.restore();
     });
   }

@@ -716,11 +716,11 @@ def build_scene(
 def _floor(points: Vector, radii: Vector, shift: Vector, centre: Vector, offset: Vector) -> Vector:
     """End points (pairs of rows, world frame [m]) of a square floor grid under the truth's motion.
 
-    The floor is the plane ``z = 0`` unless the robot reaches below it (a
-    hanging pendulum), then just under its lowest part.  It covers the
-    motion's footprint with a margin, but stops short of the camera so no
-    line passes behind it.  Spacing: 1, 2 or 5 × 10ᵏ m, about ten squares
-    across.
+    The floor is the world plane ``z = 0``: where a fixed base is mounted and
+    a legged robot stands (an arm reaching below its mounting plane shows
+    through the lines).  It covers the motion's footprint with a margin, but
+    stops short of the camera so no line passes behind it.  Spacing: 1, 2 or
+    5 × 10ᵏ m, about ten squares across.
 
     Args:
         points: geometry origins of every frame, relative to the followed base ``shift`` [m].
@@ -729,10 +729,7 @@ def _floor(points: Vector, radii: Vector, shift: Vector, centre: Vector, offset:
         centre: centre of the framed motion, relative to ``shift[0]`` [m].
         offset: camera position relative to ``centre`` [m].
     """
-    per_frame = len(points) // max(len(shift), 1)
-    world = points + np.repeat(shift, per_frame, axis=0)[: len(points)]
-    low = world[:, 2] - radii
-    z = 0.0 if np.all(world[:, 2] >= -1e-9) else float(low.min())
+    z = 0.0
     lo = np.min(points[:, :2] - radii[:, None], axis=0)
     hi = np.max(points[:, :2] + radii[:, None], axis=0)
     half = max(0.75 * float(np.max(hi - lo)), 0.3)

@@ -374,3 +374,149 @@ def test_browser_ghost_moves_onto_the_truth_along_the_timeline(
     assert gap_early < 0.7 * gap_start
     assert end["ghost"].sum() < 0.02 * start["ghost"].sum()  # converged: inside the truth
     assert end["truth"].sum() > 0.8 * start["truth"].sum()
+
+
+# ------------------------------------------------------------------ chart and floor
+
+
+def chart_json(html: Path) -> dict[str, Any]:
+    import json
+
+    text = html.read_text(encoding="utf-8")
+    start = text.index('<script id="pinobs-chart-data" type="application/json">')
+    body = text[text.index(">", start) + 1 : text.index("</script>", start)]
+    return dict(json.loads(body))
+
+
+def test_page_embeds_the_chart_data_in_the_legend_colours(cartpole_run: dict[str, Any]) -> None:
+    html, result = cartpole_run["html"], cartpole_run["result"]
+    text = html.read_text(encoding="utf-8")
+    assert 'id="pinobs-chart"' in text and "<canvas" in text
+    data = chart_json(html)
+    assert data["joints"] == ["cart_x", "pole_theta"] and data["units"] == ["m/s", "rad/s"]
+    (kf,) = data["obs"]
+    assert kf["colour"] == hex_colour(PALETTE[0][1])
+    t = np.array(data["t"])
+    assert t[0] == result.t[0] and t[-1] == pytest.approx(result.t[-1], abs=1e-12)
+    assert len(t) <= 800
+    k = np.searchsorted(result.t, t)  # the embedded samples are samples of the run
+    err = np.linalg.norm(result.trace("kf").v - result.v, axis=1)[k]
+    np.testing.assert_allclose(np.array(kf["err"], dtype=float), err, rtol=1e-3)
+    np.testing.assert_allclose(np.array(data["truth"][1], dtype=float), result.v[k, 1], atol=1e-3)
+
+
+def test_floor_grid_lies_under_the_ur5_and_ends_before_the_camera(tmp_path: Path) -> None:
+    robot = pinobs.load("ur5")
+    result = pinobs.simulate(robot, ["kf"], duration=0.3, sensor=pinobs.Sensor(rate=100.0), seed=1)
+    cmds = commands(write_html(result, robot, tmp_path / "ur5.html"))
+    (floor,) = [c for c in cmds if c["type"] == "set_object" and c["path"] == "/meshcat/floor"]
+    geometry = floor["object"]["geometries"][0]["data"]["attributes"]["position"]
+    xyz = np.frombuffer(geometry["array"].data, dtype=np.float32).reshape(
+        -1, 3
+    )  # msgpack ext: raw float32
+    assert np.all(xyz[:, 2] == 0.0)  # the plane the base stands on
+    lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
+    assert np.all(lo < 0.0) and np.all(hi > 0.0)  # under the base
+    hidden = [c for c in cmds if c["type"] == "set_property" and c["path"] == "/Grid"]
+    assert hidden and hidden[-1]["value"] is False  # meshcat's own grid is off
+    (cam,) = [c for c in cmds if c["path"] == "/Cameras/default/rotated/<object>"]
+    (scene,) = [c for c in cmds if c["type"] == "set_transform" and c["path"] == "/meshcat"]
+    centre = -np.array(scene["matrix"], dtype=float).reshape(4, 4).T[:3, 3]
+    x, y_up, minus_y = cam["value"]  # meshcat's camera frame: world (x, y, z) = (x, -z, y)
+    camera = centre + np.array([x, -minus_y, y_up])
+    assert not (lo[0] <= camera[0] <= hi[0] and lo[1] <= camera[1] <= hi[1])
+
+
+@pytest.fixture(scope="module")
+def payload_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """A cart-pole carrying a payload its observers do not know: at t = 1 s the EKF (model-based,
+    nominal model) is far off, kf and fd (model-free) are close (seeded; measured errors at 1 s:
+    ekf 0.66, fd 0.05, kf 0.01)."""
+    from pinobs.simulation import mismatched_plant
+
+    robot = pinobs.load("cartpole")
+    result = pinobs.simulate(
+        robot,
+        ["kf", "ekf", "fd"],
+        duration=1.5,
+        sensor=pinobs.Sensor(rate=500.0, noise_std=1e-4),
+        plant=mismatched_plant(robot, "inertia20_payload", seed=0),
+        perturb_q=0.05,
+        perturb_v=0.5,
+        seed=0,
+    )
+    html = write_html(result, robot, tmp_path_factory.mktemp("payload") / "payload.html")
+    return {"robot": robot, "result": result, "html": html}
+
+
+def near(img: np.ndarray, hex_rgb: str, tol: float = 25.0) -> np.ndarray:
+    rgb = np.array([int(hex_rgb[i : i + 2], 16) for i in (1, 3, 5)], dtype=float)
+    return np.linalg.norm(img - rgb, axis=-1) < tol
+
+
+def chart_cursor_columns(img: np.ndarray) -> list[int]:
+    """Columns of the chart where the cursor colour (#444444) runs down most of the panel."""
+    chart = img[chart_top(img.shape[0]) :]
+    cursor = near(chart, "#444444", tol=20.0)
+    return [int(c) for c in np.flatnonzero(cursor.sum(axis=0) > 0.5 * chart.shape[0])]
+
+
+@chromium
+def test_browser_chart_is_drawn_with_one_colour_per_observer(
+    payload_run: dict[str, Any], tmp_path: Path
+) -> None:
+    img = image(screenshot(payload_run["html"], tmp_path / "c.png", t=1.0, legend=False))
+    chart = img[chart_top(img.shape[0]) + 25 :]  # below the chart's header line
+    w = chart.shape[1]
+    assert near(chart[:, : w // 2], "#000000", tol=60.0).sum() > 300  # the truth, left panel
+    colours = [o["colour"] for o in chart_json(payload_run["html"])["obs"]]
+    assert len(set(colours)) == 3
+    for c in colours:  # each estimate is drawn, in both panels, in its own colour
+        assert near(chart[:, : w // 2], c).sum() > 30
+        assert near(chart[:, w // 2 :], c).sum() > 100
+
+
+@chromium
+def test_browser_chart_cursor_follows_the_animation_time(
+    payload_run: dict[str, Any], tmp_path: Path
+) -> None:
+    """Paused at 0.25, 0.5 and 1 s: one cursor per panel, moving right in proportion to time."""
+    xs = []
+    for i, t in enumerate((0.25, 0.5, 1.0)):
+        img = image(screenshot(payload_run["html"], tmp_path / f"{i}.png", t=t, legend=False))
+        cols = chart_cursor_columns(img)
+        w = img.shape[1]
+        left = [c for c in cols if c < w // 2]
+        right = [c for c in cols if c >= w // 2]
+        assert left and right and max(left) - min(left) <= 2 and max(right) - min(right) <= 2
+        xs.append((np.mean(left), np.mean(right)))
+    x = np.array(xs)
+    assert np.all(np.diff(x, axis=0) > 20)  # [px]
+    # equal time steps, equal moves: x(1.0) - x(0.5) = 2 (x(0.5) - x(0.25))
+    np.testing.assert_allclose(x[2] - x[1], 2 * (x[1] - x[0]), atol=3.0)
+
+
+@chromium
+def test_browser_screenshot_at_one_second_shows_which_estimate_is_worst(
+    payload_run: dict[str, Any], tmp_path: Path
+) -> None:
+    """On the error panel, at the cursor, the worst estimate's dot is the highest (log axis):
+    the one a person would point at.  The data's worst at t = 1 s is checked independently."""
+    result = payload_run["result"]
+    k = int(np.argmin(np.abs(result.t - 1.0)))
+    errors = {
+        n: float(np.linalg.norm(result.trace(n).v[k] - result.v[k])) for n in ("kf", "ekf", "fd")
+    }
+    worst = max(errors, key=errors.__getitem__)
+    img = image(screenshot(payload_run["html"], tmp_path / "w.png", t=1.0, legend=False))
+    (x,) = [c for c in chart_cursor_columns(img) if c >= img.shape[1] // 2][:1]
+    top = chart_top(img.shape[0]) + 25
+    band = img[top:, x - 6 : x + 8]
+    rows = {}
+    for o in chart_json(payload_run["html"])["obs"]:
+        hit = np.flatnonzero(near(band, o["colour"]).any(axis=1))
+        assert hit.size, o["name"]
+        rows[o["name"]] = float(np.median(hit))
+    assert min(rows, key=rows.__getitem__) == worst == "ekf"
+    others = [r for n, r in rows.items() if n != worst]
+    assert min(others) - rows[worst] > 30  # [px]: clearly apart

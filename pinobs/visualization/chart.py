@@ -30,7 +30,7 @@ from pinobs.evaluation import convergence_time
 from pinobs.model import Robot
 from pinobs.simulation import Result
 from pinobs.visualization.axes import clip_start, velocity_labels, velocity_range, velocity_units
-from pinobs.visualization.palette import TRUTH_LINE, colour, hex_colour
+from pinobs.visualization.palette import TRUTH_LINE
 
 __all__ = ["MAX_POINTS", "chart_data", "chart_html"]
 
@@ -43,8 +43,16 @@ def _numbers(a: ArrayLike) -> list[float | None]:
     return [float(f"{x:.4g}") if math.isfinite(x) else None for x in np.asarray(a, float).ravel()]
 
 
-def chart_data(result: Result, robot: Robot, observers: Sequence[str]) -> dict[str, Any]:
+def chart_data(
+    result: Result, robot: Robot, observers: Sequence[str], colours: Sequence[str]
+) -> dict[str, Any]:
     """What the chart draws, as plain JSON-able data.
+
+    Args:
+        result: the run.
+        robot: the robot it was run on.
+        observers: labels to chart.
+        colours: their CSS colours (``#rrggbb``), as in the 3-D view's legend.
 
     Returns:
         ``t`` [s]; per velocity coordinate its label, unit, y-range and whether
@@ -94,7 +102,7 @@ def chart_data(result: Result, robot: Robot, observers: Sequence[str]) -> dict[s
         "obs": [
             {
                 "name": name,
-                "colour": hex_colour(colour(k)[1]),
+                "colour": colours[k],
                 "v": [_numbers(result.trace(name).v[keep, i]) for i in range(robot.nv)],
                 "err": _numbers(np.where(errors[name] > 0, errors[name], np.nan)[keep]),
             }

@@ -49,7 +49,7 @@ from pinobs.model.robot import Vector
 from pinobs.simulation import Log, LogRun, ObserverTrace, Result
 from pinobs.visualization._deps import require
 from pinobs.visualization.chart import chart_data, chart_html
-from pinobs.visualization.palette import colour, hex_colour
+from pinobs.visualization.palette import hex_colour, observer_colours
 
 __all__ = [
     "LegendEntry",
@@ -58,6 +58,7 @@ __all__ = [
     "frame_indices",
     "log_result",
     "serve",
+    "truth_colours",
     "write_html",
     "write_html_from_file",
 ]
@@ -133,6 +134,13 @@ def _model_colours(
             counts[key] = counts.get(key, 0) + 1
     ranked = sorted(counts, key=lambda k: -counts[k])
     return tuple(ranked[:most])
+
+
+def truth_colours(robot: Robot) -> tuple[str, ...]:
+    """CSS colours the truth's body renders in, in a playback of ``robot`` (most used first);
+    observers' colours keep away from them (:func:`~pinobs.visualization.palette.observer_colours`)."""
+    geom = _visual_model(robot)
+    return _model_colours(geom, collada_materials=_mesh_file_bytes(geom) <= _MAX_MESH_FILE_BYTES)
 
 
 # ----------------------------------------------------------------- recording
@@ -615,19 +623,13 @@ def build_scene(
             lambda go: mg.MeshPhongMaterial(color=_int_colour(go.meshColor[:3])),
         )
         nodes["truth"] = [f"truth/{go.name}" for go in geom.geometryObjects]
-    legend = [
-        LegendEntry(
-            truth_label,
-            None,
-            "model colours",
-            "truth",
-            model_colours=_model_colours(geom, collada_materials=as_is),
-        )
-    ]
+    truth_swatch = _model_colours(geom, collada_materials=as_is)
+    legend = [LegendEntry(truth_label, None, "model colours", "truth", model_colours=truth_swatch)]
+    colours = observer_colours(len(labels), truth_swatch)
 
     # Ghosts: the same shapes, one flat translucent colour each.
     for i, name in enumerate(labels):
-        colour_name, rgb = colour(i)
+        colour_name, rgb = colours[i]
         node = f"ghost_{i}_{_safe(name)}"
         # Front faces only, no depth writes, pushed slightly away from the camera:
         # the truth always shows in full, a ghost shows where it differs from the
@@ -806,10 +808,11 @@ def write_html(
     )
     if title is None:
         title = f"pinobs · {robot.name} · {result.t[-1] - result.t[0]:.3g} s"
-    shown = [e.label for e in legend[1:]]
-    window.overlay = _overlay(title, legend, float(result.t[0])) + chart_html(
-        chart_data(result, robot, shown)
+    ghosts = legend[1:]
+    data = chart_data(
+        result, robot, [e.label for e in ghosts], [e.colour or "#000000" for e in ghosts]
     )
+    window.overlay = _overlay(title, legend, float(result.t[0])) + chart_html(data)
     page = vis.static_html()
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(page, encoding="utf-8")

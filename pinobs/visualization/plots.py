@@ -26,7 +26,8 @@ from pinobs.model import Robot
 from pinobs.simulation import Result
 from pinobs.visualization._deps import require
 from pinobs.visualization.axes import clip_start, velocity_labels, velocity_range, velocity_units
-from pinobs.visualization.palette import TRUTH_LINE, colour, hex_colour
+from pinobs.visualization.palette import TRUTH_LINE, hex_colour, observer_colours
+from pinobs.visualization.playback import truth_colours
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -90,7 +91,9 @@ def figure(
                 f"no observer {name!r} in this result; have {result.observer_names}"
             )
     metrics = {m.observer: m for m in evaluate(result, robot, transient=transient)}
-    colours = {name: hex_colour(colour(k)[1]) for k, name in enumerate(names)}  # as the page
+    # the page's colours: the palette in this order, away from the truth's model colours
+    picked = observer_colours(len(names), truth_colours(robot))
+    colours = {name: hex_colour(rgb) for name, (_, rgb) in zip(names, picked, strict=True)}
     labels = velocity_labels(robot)
     units = velocity_units(robot)
     shown = min(robot.nv, max_joints)

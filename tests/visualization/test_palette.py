@@ -10,7 +10,14 @@ import numpy as np
 import pinobs
 from pinobs.visualization import figure, write_html
 from pinobs.visualization.axes import clip_start, velocity_range, velocity_units
-from pinobs.visualization.palette import PALETTE, colour, hex_colour
+from pinobs.visualization.palette import (
+    MIN_DISTANCE,
+    PALETTE,
+    colour,
+    hex_colour,
+    observer_colours,
+)
+from pinobs.visualization.playback import truth_colours
 
 
 def test_ten_observers_get_ten_colours_at_least_60_apart_in_rgb() -> None:
@@ -36,7 +43,7 @@ def test_page_and_plot_give_each_observer_the_same_colour(tmp_path: Path) -> Non
     text = write_html(result, robot, tmp_path / "p.html", observers=shown).read_text("utf-8")
     fig = figure(result, robot, observers=shown)
     plot_colours = [line.get_color() for line in fig.axes[0].get_lines()[1:]]
-    assert plot_colours == [hex_colour(PALETTE[0][1]), hex_colour(PALETTE[1][1])]
+    assert plot_colours == [hex_colour(rgb) for _, rgb in observer_colours(2, truth_colours(robot))]
     for name, c in zip(shown, plot_colours, strict=True):
         row = text[text.index(f'data-label="{name}"') :]
         assert f"background:{c}" in row[: row.index("</div>")]
@@ -67,3 +74,19 @@ def test_velocity_range_keeps_the_truth_and_drops_the_estimates_transient() -> N
     assert hi < 1.3  # the transient is left out (10 % margin)
     assert clip_start(t, [0.3, np.inf, 0.1]) == 0.3
     assert clip_start(t, [1.7]) == 1.0  # at most the middle of the run
+
+
+def test_observer_colours_keep_away_from_the_truths_colours() -> None:
+    cartpole = truth_colours(pinobs.load("cartpole"))
+    assert cartpole == ("#80808c", "#3366cc")  # a grey cart, a blue pole
+    picked = observer_colours(10, cartpole)
+    assert PALETTE[1] not in picked  # blue: 58 from the pole
+    assert PALETTE[7] not in picked  # purple: 59 from the cart
+    assert picked[:2] == [PALETTE[0], PALETTE[2]]
+    assert picked[8] == picked[0]  # eight left, then they repeat
+    rgb = [np.array(c) * 255.0 for _, c in picked[:8]]
+    for truth in cartpole:
+        t = np.array([int(truth[i : i + 2], 16) for i in (1, 3, 5)], dtype=float)
+        assert min(np.linalg.norm(c - t) for c in rgb) >= MIN_DISTANCE
+    assert observer_colours(3) == list(PALETTE[:3])
+    assert truth_colours(pinobs.load("ur5")) == ("#e6e6e6",)  # drawn from meshColor: white

@@ -13,7 +13,7 @@ import pinobs
 from pinobs.errors import UnknownNameError
 from pinobs.visualization import MissingDependencyError, figure, plot
 from pinobs.visualization.axes import velocity_labels
-from pinobs.visualization.palette import PALETTE, TRUTH_LINE
+from pinobs.visualization.palette import PALETTE, TRUTH_LINE, hex_colour
 
 
 @pytest.fixture(scope="module")
@@ -47,9 +47,8 @@ def test_one_panel_per_velocity_then_the_error_panel(run: dict[str, Any]) -> Non
     assert truth_line.get_color() == TRUTH_LINE
     np.testing.assert_array_equal(truth_line.get_ydata(), run["result"].v[:, 0])
     colours = [line.get_color() for line in fig.axes[0].get_lines()[1:]]
-    assert colours == [
-        "#{:02x}{:02x}{:02x}".format(*(round(255 * c) for c in rgb)) for _, rgb in PALETTE[:2]
-    ]
+    # the palette in order, without the blue of the cart-pole's pole (the truth)
+    assert colours == [hex_colour(PALETTE[0][1]), hex_colour(PALETTE[2][1])]
 
 
 def test_error_panel_is_logarithmic_and_marks_the_convergence_time(run: dict[str, Any]) -> None:

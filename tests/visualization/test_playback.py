@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import base64
 import dataclasses
+import math
 import re
 import sys
 from pathlib import Path
@@ -477,26 +478,6 @@ def test_browser_chart_is_drawn_with_one_colour_per_observer(
 
 
 @chromium
-def test_browser_chart_cursor_follows_the_animation_time(
-    payload_run: dict[str, Any], tmp_path: Path
-) -> None:
-    """Paused at 0.25, 0.5 and 1 s: one cursor per panel, moving right in proportion to time."""
-    xs = []
-    for i, t in enumerate((0.25, 0.5, 1.0)):
-        img = image(screenshot(payload_run["html"], tmp_path / f"{i}.png", t=t, legend=False))
-        cols = chart_cursor_columns(img)
-        w = img.shape[1]
-        left = [c for c in cols if c < w // 2]
-        right = [c for c in cols if c >= w // 2]
-        assert left and right and max(left) - min(left) <= 2 and max(right) - min(right) <= 2
-        xs.append((np.mean(left), np.mean(right)))
-    x = np.array(xs)
-    assert np.all(np.diff(x, axis=0) > 20)  # [px]
-    # equal time steps, equal moves: x(1.0) - x(0.5) = 2 (x(0.5) - x(0.25))
-    np.testing.assert_allclose(x[2] - x[1], 2 * (x[1] - x[0]), atol=3.0)
-
-
-@chromium
 def test_browser_screenshot_at_one_second_shows_which_estimate_is_worst(
     payload_run: dict[str, Any], tmp_path: Path
 ) -> None:
@@ -520,3 +501,225 @@ def test_browser_screenshot_at_one_second_shows_which_estimate_is_worst(
     assert min(rows, key=rows.__getitem__) == worst == "ekf"
     others = [r for n, r in rows.items() if n != worst]
     assert min(others) - rows[worst] > 30  # [px]: clearly apart
+
+
+class Browser:
+    """Headless Chromium driven over the DevTools protocol on a pipe (``--remote-debugging-pipe``:
+    JSON messages ending in NUL; the browser reads fd 3 and writes fd 4).  Test-only."""
+
+    def __init__(self, url: str, size: tuple[int, int] = (800, 600)) -> None:
+        import os
+        import subprocess
+        import tempfile
+
+        exe = find_chromium()
+        assert exe is not None
+        to_child, self._out = os.pipe()
+        self._in, from_child = os.pipe()
+        high = [os.dup(to_child), os.dup(from_child)]  # out of the way of fds 3 and 4
+
+        def wire() -> None:
+            os.dup2(high[0], 3)
+            os.dup2(high[1], 4)
+
+        self._profile = tempfile.TemporaryDirectory(prefix="pinobs-cdp-")
+        self.proc = subprocess.Popen(
+            [
+                exe,
+                "--headless",
+                "--no-sandbox",
+                "--use-gl=swiftshader",
+                "--enable-unsafe-swiftshader",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--remote-debugging-pipe",
+                f"--user-data-dir={self._profile.name}",
+                f"--window-size={size[0]},{size[1]}",
+                "about:blank",
+            ],
+            preexec_fn=wire,
+            close_fds=False,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        for fd in (to_child, from_child, *high):
+            os.close(fd)
+        self._id = 0
+        self._buf = b""
+        target = self.call("Target.createTarget", url=url)["targetId"]
+        self.session = self.call("Target.attachToTarget", targetId=target, flatten=True)[
+            "sessionId"
+        ]
+        self.call(  # the viewport itself (the window size includes the browser's frame)
+            "Emulation.setDeviceMetricsOverride",
+            session=self.session,
+            width=size[0],
+            height=size[1],
+            deviceScaleFactor=1,
+            mobile=False,
+        )
+
+    def call(self, method: str, session: str | None = None, **params: Any) -> dict[str, Any]:
+        import json
+        import os
+
+        self._id += 1
+        msg: dict[str, Any] = {"id": self._id, "method": method, "params": params}
+        if session:
+            msg["sessionId"] = session
+        os.write(self._out, json.dumps(msg).encode() + b"\0")
+        while True:
+            while b"\0" not in self._buf:
+                chunk = os.read(self._in, 1 << 16)
+                if not chunk:
+                    raise RuntimeError("Chromium closed the DevTools pipe")
+                self._buf += chunk
+            raw, self._buf = self._buf.split(b"\0", 1)
+            reply = json.loads(raw)
+            if reply.get("id") == self._id:
+                if "error" in reply:
+                    raise RuntimeError(reply["error"])
+                return dict(reply["result"])
+
+    def js(self, expression: str) -> Any:
+        out = self.call(
+            "Runtime.evaluate",
+            session=self.session,
+            expression=expression,
+            returnByValue=True,
+            awaitPromise=True,
+        )
+        return out["result"].get("value")
+
+    def mouse(self, kind: str, x: float, y: float, buttons: int) -> None:
+        self.call(
+            "Input.dispatchMouseEvent",
+            session=self.session,
+            type=kind,
+            x=x,
+            y=y,
+            button="left",
+            buttons=buttons,
+            clickCount=1,
+        )
+
+    def wait_for_page(self, timeout: float = 60.0) -> None:
+        """Until the viewer has its animation and the chart its size."""
+        import time
+
+        deadline = time.monotonic() + timeout
+        while not self.js(
+            "typeof viewer !== 'undefined' && viewer.animator.actions.length > 0 && "
+            "document.getElementById('pinobs-chart-canvas').clientWidth > 0"
+        ):
+            assert time.monotonic() < deadline, "the page did not load"
+            time.sleep(0.2)
+
+    def screenshot(self) -> np.ndarray:
+        """The page as RGB pixels (0–255)."""
+        import io
+
+        from PIL import Image
+
+        data = self.call("Page.captureScreenshot", session=self.session, format="png")["data"]
+        png = Image.open(io.BytesIO(base64.b64decode(data))).convert("RGB")
+        return np.asarray(png, dtype=float)
+
+    def close(self) -> None:
+        import os
+
+        self.proc.kill()
+        self.proc.wait()
+        os.close(self._out)
+        os.close(self._in)
+        self._profile.cleanup()
+
+
+@chromium
+def test_browser_dragging_on_the_chart_moves_the_animation_and_the_cursor(
+    payload_run: dict[str, Any],
+) -> None:
+    """A real pointer drag on the chart (DevTools Input events): the animation pauses at the
+    time under the pointer, the legend's clock shows it, the chart's cursor follows it, and
+    the 3-D view shows that frame (a ghost node's keyframed position at that time)."""
+    import time
+
+    browser = Browser(payload_run["html"].as_uri())
+    try:
+        browser.wait_for_page()
+        box = browser.js(
+            "(() => { const r = document.getElementById('pinobs-chart-canvas')"
+            ".getBoundingClientRect(); return [r.left, r.top, r.width, r.height]; })()"
+        )
+        left, top, width, height = box
+        y = top + height / 2
+        times = []
+        for frac in (0.6, 0.85):  # on the error panel (the right half)
+            x0, x1 = left + 0.55 * width, left + frac * width
+            browser.mouse("mousePressed", x0, y, 1)
+            browser.mouse("mouseMoved", (x0 + x1) / 2, y, 1)
+            browser.mouse("mouseMoved", x1, y, 1)
+            browser.mouse("mouseReleased", x1, y, 0)
+            time.sleep(0.3)  # a few animation frames
+            t = browser.js("viewer.animator.actions[0].time")
+            paused = browser.js("!viewer.animator.playing")
+            clock = browser.js("document.getElementById('pinobs-time').textContent")
+            readout = browser.js("document.getElementById('pinobs-readout').textContent")
+            assert paused
+            assert clock == f"t = {t:.2f} s"
+            assert readout.startswith(f"at t = {t:.2f} s")
+            right = [c for c in chart_cursor_columns(browser.screenshot()) if c > x0]
+            assert right and abs(np.mean(right) - x1) <= 2.0  # the cursor is under the pointer
+            times.append(t)
+            # the 3-D view shows that instant: the ekf ghost's pole where its clip has it at t
+            name = payload_run["robot"].visual_model.geometryObjects[1].name
+            shown = browser.js(
+                f"viewer.scene_tree.find(['meshcat', 'ghost_1_ekf', '{name}']).object.position"
+                ".toArray()"
+            )
+            (track,) = [
+                tr
+                for tr in clips(payload_run["html"])[f"/meshcat/ghost_1_ekf/{name}"]["tracks"]
+                if tr["name"] == ".position"
+            ]
+            keys = np.array([k["value"] for k in track["keys"]])
+            expected = [np.interp(t * FPS, np.arange(len(keys)), keys[:, i]) for i in range(3)]
+            np.testing.assert_allclose(shown, expected, atol=1e-4)
+        t_a, t_b = times
+        duration = float(payload_run["result"].t[-1])
+        # the right panel spans [half + 58, width - 12] px of the canvas (chart.py's layout)
+        for frac, t in zip((0.6, 0.85), times, strict=True):
+            x = frac * width
+            x0, x1 = math.floor(width / 2) + 58, width - 12
+            assert t == pytest.approx((x - x0) / (x1 - x0) * duration, abs=0.02)
+        assert t_b > t_a + 0.2
+    finally:
+        browser.close()
+
+
+@chromium
+def test_browser_chart_cursor_follows_the_animation_time(payload_run: dict[str, Any]) -> None:
+    """Paused at 0.25, 0.5 and 1 s (``#t=``, as meshcat's time slider does: ``seek``): one
+    cursor per panel, moving right in proportion to time."""
+    import time
+
+    browser = Browser(payload_run["html"].as_uri())
+    try:
+        browser.wait_for_page()
+        xs = []
+        for t in (0.25, 0.5, 1.0):
+            browser.js(f"window.location.hash = 't={t}&nolegend'")
+            time.sleep(0.3)  # a few animation frames
+            img = browser.screenshot()
+            cols = chart_cursor_columns(img)
+            w = img.shape[1]
+            left = [c for c in cols if c < w // 2]
+            right = [c for c in cols if c >= w // 2]
+            assert left and right and max(left) - min(left) <= 2 and max(right) - min(right) <= 2
+            xs.append((np.mean(left), np.mean(right)))
+    finally:
+        browser.close()
+    x = np.array(xs)
+    assert np.all(np.diff(x, axis=0) > 20)  # [px]
+    # equal time steps, equal moves: x(1.0) - x(0.5) = 2 (x(0.5) - x(0.25))
+    np.testing.assert_allclose(x[2] - x[1], 2 * (x[1] - x[0]), atol=3.0)

@@ -125,7 +125,7 @@ def chart_html(data: dict[str, Any]) -> str:
 _CHART = """<div id="pinobs-chart">
 <div class="pinobs-chart-bar">
 <label>velocity <select id="pinobs-joint"></select></label>
-<span class="pinobs-key"><i style="background:@TRUTH@"></i>truth</span>
+<span class="pinobs-key" id="pinobs-truth-key"><i style="background:@TRUTH@"></i>truth</span>
 <span id="pinobs-readout"></span>
 </div>
 <canvas id="pinobs-chart-canvas"></canvas>
@@ -156,6 +156,9 @@ _JS = r"""
     select.appendChild(o);
   });
   select.value = String(joint);
+  if (!D.truth.some(function (v) { return v.some(function (x) { return x !== null; }); })) {
+    document.getElementById("pinobs-truth-key").style.display = "none";  // a recorded log
+  }
   select.addEventListener("change", function () {
     joint = parseInt(select.value, 10);
     dirty = true;
@@ -250,7 +253,10 @@ _JS = r"""
     const decades = [];
     const every = Math.max(1, Math.ceil((Math.floor(HI) - Math.ceil(LO) + 1) / 6));
     for (let e = Math.ceil(LO); e <= Math.floor(HI); e += every) decades.push(Math.pow(10, e));
-    axes(g, pe, "error |v\u0302 \u2212 v|\u2082 [" + D.err_unit + "], log scale", decades, yLog,
+    const known = D.obs.some(function (o) { return o.err.some(function (e) { return e !== null; }); });
+    const errTitle = known ? "error |v\u0302 \u2212 v|\u2082 [" + D.err_unit + "], log scale"
+      : "error: unknown (no true velocity, e.g. a recorded log)";
+    axes(g, pe, errTitle, known ? decades : [], yLog,
       function (v) { return v.toExponential(0); });
     [pv, pe].forEach(function (p) {
       g.save();
@@ -310,7 +316,7 @@ _JS = r"""
     now.sort(function (a, b) { return b.err[k] - a.err[k]; });
     readout.textContent = "";
     readout.appendChild(document.createTextNode(
-      "at t = " + t.toFixed(2) + " s, error (worst first): "));
+      "at t = " + t.toFixed(2) + " s" + (now.length ? ", error (worst first): " : "")));
     now.forEach(function (o, i) {
       const s = document.createElement("span");
       s.className = "pinobs-key";

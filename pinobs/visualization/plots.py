@@ -5,7 +5,7 @@ the true velocity in black and each observer in its playback colour
 (:mod:`pinobs.visualization.palette`), and a bottom panel with
 ``|v̂(t) − v(t)|₂`` on a log scale, each observer's convergence time
 (:func:`pinobs.evaluation.evaluate`) marked by a dashed line and quoted in the
-legend.  Every axis names its unit.  The velocity panels' y-range is the
+legend (one for the figure, under the panels).  Every axis names its unit.  The velocity panels' y-range is the
 truth's whole run and the estimates after the slowest convergence time
 (:func:`pinobs.visualization.axes.velocity_range`): the start transient, which
 can be far larger than the motion, is clipped, shaded and said so in the title.
@@ -106,10 +106,11 @@ def figure(
     clipped = False
     for i in range(shown):
         ax = fig.add_subplot(grid[i // ncols, i % ncols])
-        ax.plot(t, result.v[:, i], color=TRUTH_LINE, lw=1.4, label="truth")
+        # the truth thin and on top: a converged estimate shows as its coloured rim
+        ax.plot(t, result.v[:, i], color=TRUTH_LINE, lw=0.9, label="truth", zorder=3)
         estimates = np.column_stack([result.trace(n).v[:, i] for n in names] or [t * np.nan])
         for k, name in enumerate(names):
-            ax.plot(t, estimates[:, k], color=colours[name], lw=1.0, label=name)
+            ax.plot(t, estimates[:, k], color=colours[name], lw=1.6, label=name)
         lo, hi = velocity_range(t, result.v[:, i], estimates, start)
         with np.errstate(invalid="ignore"):
             outside = bool(np.any((estimates < lo) | (estimates > hi)))
@@ -121,8 +122,6 @@ def figure(
         ax.set_xlabel("t [s]", fontsize=7, labelpad=1)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-        if i == 0:
-            ax.legend(fontsize=7, loc="upper right", ncols=min(4, 1 + len(names)))
     title = f"{robot.name}: true (black) and estimated velocity"
     if shown < robot.nv:
         title += f" (first {shown} of {robot.nv} coordinates)"
@@ -151,6 +150,12 @@ def figure(
     ax.set_ylabel(f"|v̂ − v|₂ [{unit}]")
     ax.grid(alpha=0.3, which="both")
     ax.set_title("velocity error, log scale (dashed: convergence time)", fontsize=9)
-    if names:
-        ax.legend(fontsize=7, loc="upper right")
+    # one legend for every panel, under them, where it hides no curve
+    handles = [
+        fig.axes[0].get_lines()[0],
+        *(line for line in ax.get_lines() if line.get_label()[0] != "_"),
+    ]
+    fig.legend(
+        handles=handles, loc="outside lower center", ncols=min(ncols, len(handles)), fontsize=7
+    )
     return fig

@@ -133,10 +133,14 @@ def test_error_panel_labels_do_not_overlap(run: dict[str, Any]) -> None:
     FigureCanvasAgg(fig).draw()
     ax = fig.axes[-1]
     texts = [t for t in ax.texts if t.get_visible()]
-    texts += [*ax.get_legend().get_texts(), ax.title]
+    (legend,) = fig.legends
+    texts += [*legend.get_texts(), ax.title, ax.xaxis.label]
     boxes = [t.get_window_extent() for t in texts if t.get_text()]
     for i, a in enumerate(boxes):
         for b in boxes[i + 1 :]:
             assert not a.overlaps(b)
-    legend = [t.get_text() for t in ax.get_legend().get_texts()]
-    assert all("converged at" in line for line in legend)
+    assert not legend.get_window_extent().overlaps(ax.get_window_extent())  # hides no curve
+    assert fig.bbox.contains(*legend.get_window_extent().p0)  # and is not cut off
+    assert fig.bbox.contains(*legend.get_window_extent().p1)
+    lines = [t.get_text() for t in legend.get_texts()]
+    assert lines[0] == "truth" and all("converged at" in line for line in lines[1:])

@@ -153,7 +153,7 @@ def figure(
     # one legend for every panel, under them, where it hides no curve
     handles = [
         fig.axes[0].get_lines()[0],
-        *(line for line in ax.get_lines() if line.get_label()[0] != "_"),
+        *(line for line in ax.get_lines() if not str(line.get_label()).startswith("_")),
     ]
     fig.legend(
         handles=handles, loc="outside lower center", ncols=min(ncols, len(handles)), fontsize=7

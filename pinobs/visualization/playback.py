@@ -2,10 +2,13 @@
 
 The truth is drawn as the model describes it (URDF colours and meshes, loaded
 by :class:`pinocchio.visualize.MeshcatVisualizer`); each observer's estimate
-``q̂(t)`` is a translucent ghost of the same robot in its own warm colour.
+``q̂(t)`` is a translucent ghost of the same robot in its own colour
+(:func:`pinobs.visualization.palette.observer_colours`: a colour-blind-safe
+palette, away from the robot's own colours; the plots use the same).
 Robots without visual geometry get a stick figure (a sphere per joint, a rod
-per link).  A floating base (free-flyer or planar root) is followed: the
-scene and floor grid move so that the true base stays in view.  The motion is
+per link).  A floor grid lies on the plane ``z = 0`` under the motion.  A
+floating base (free-flyer or planar root) is followed: the scene, floor
+included, moves so that the true base stays in view.  The motion is
 one meshcat ``Animation`` keyframed at ``fps``
 frames per second of simulated time, so meshcat's own timeline (Open Controls
 → Animations: play, pause, reset, time slider, time scale) plays, pauses and
@@ -18,8 +21,10 @@ Two ways to watch:
   are recorded in-process by a window object standing in for meshcat's
   server, and ``Visualizer.static_html()`` turns them into the page, so no
   server is started and no port is opened.  The page shows a legend (an HTML
-  overlay, top left: the truth and one colour swatch per observer) and the
-  current time.  Opening it as ``file.html#t=1.5`` pauses the animation at
+  overlay, top left: the truth in its model colours and one colour swatch per
+  observer), the current time, and under the 3-D view a chart of true against
+  estimated velocity whose cursor follows the animation
+  (:mod:`pinobs.visualization.chart`).  Opening it as ``file.html#t=1.5`` pauses the animation at
   ``t = 1.5 s`` (used by the tests to screenshot two instants); ``#paused``
   opens it paused at the start, ``&nolegend`` hides the legend.
 * :func:`serve` sends the same scene to a live meshcat server (started on
@@ -775,8 +780,11 @@ def write_html(
     """Write a self-contained HTML playback of ``result`` (opens offline in any browser).
 
     The page holds meshcat's viewer, the truth, one ghost per observer (legend
-    top left), and the animation (Open Controls → Animations: play, pause,
-    time slider).  ``page.html#t=1.5`` opens paused at ``t = 1.5 s``.
+    top left), the animation (Open Controls → Animations: play, pause, time
+    slider) and, under the 3-D view, the velocity chart (element
+    ``#pinobs-chart``: true and estimated velocity of one joint, the error
+    norm on a log axis, a cursor at the animation time; dragging on it
+    scrubs).  ``page.html#t=1.5`` opens paused at ``t = 1.5 s``.
 
     Args:
         result: the run (``pinobs.simulate`` or ``Result.load``).

@@ -352,7 +352,7 @@ def test_browser_shows_truth_and_ghost_in_their_colours(
     total = m["ink"].size
     assert m["ink"].sum() > 0.01 * total  # not blank
     assert m["truth"].sum() > 500  # the blue pole (true motion)
-    assert m["ghost"].sum() > 500  # the orange ghost (estimate)
+    assert m["ghost"].sum() > 500  # the vermillion ghost (estimate)
 
 
 @chromium

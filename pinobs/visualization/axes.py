@@ -56,7 +56,7 @@ def velocity_units(robot: Robot) -> list[str]:
 
 
 def velocity_range(
-    t: ArrayLike, truth: ArrayLike, estimates: ArrayLike, start: float
+    t: ArrayLike, truth: ArrayLike, estimates: Sequence[ArrayLike], start: float
 ) -> tuple[float, float]:
     """y-range of one velocity axis: the truth over the whole run and the estimates from
     ``start`` on [s], plus a 10 % margin (same unit as the curves).
@@ -69,12 +69,15 @@ def velocity_range(
     Args:
         t: sample times [s], shape ``(n,)``.
         truth: true velocity, shape ``(n,)``.
-        estimates: estimated velocities, shape ``(n,)`` or ``(n, m)`` (one column each).
+        estimates: estimated velocities, each of shape ``(n,)``.
         start: time from which the estimates count [s].
     """
     t = np.asarray(t, dtype=float)
-    est = np.asarray(estimates, dtype=float).reshape(t.size, -1)[t >= start]
-    y = np.concatenate([np.asarray(truth, dtype=float).ravel(), est.ravel()])
+    late = t >= start
+    y = np.concatenate(
+        [np.asarray(truth, dtype=float).ravel()]
+        + [np.asarray(e, dtype=float).ravel()[late] for e in estimates]
+    )
     y = y[np.isfinite(y)]
     if y.size == 0:
         return -1.0, 1.0

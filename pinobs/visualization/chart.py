@@ -67,10 +67,12 @@ def chart_data(
     errors = {name: np.linalg.norm(result.trace(name).v - result.v, axis=1) for name in observers}
     start = clip_start(t, [convergence_time(t, errors[name]) for name in observers])
     after = t >= start
+    # a diverged estimate does not set the range (it is clipped, and the legend says it diverged)
+    sane = [o for o in observers if result.trace(o).diverged_at is None]
     ranges, clipped, worst = [], [], []
     for i in range(robot.nv):
         est = np.column_stack([result.trace(o).v[:, i] for o in observers] or [t * np.nan])
-        lo, hi = velocity_range(t, result.v[:, i], est, start)
+        lo, hi = velocity_range(t, result.v[:, i], [result.trace(o).v[:, i] for o in sane], start)
         ranges.append([lo, hi])
         with np.errstate(invalid="ignore"):
             clipped.append(bool(np.any((est < lo) | (est > hi))))

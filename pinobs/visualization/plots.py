@@ -104,6 +104,8 @@ def figure(
     t = result.t
     start = clip_start(t, [metrics[n].convergence_time for n in names])
     clipped = False
+    # a diverged estimate does not set the range (it is clipped, and the legend says it diverged)
+    sane = [n for n in names if metrics[n].diverged_at is None]
     for i in range(shown):
         ax = fig.add_subplot(grid[i // ncols, i % ncols])
         # the truth thin and on top: a converged estimate shows as its coloured rim
@@ -111,7 +113,7 @@ def figure(
         estimates = np.column_stack([result.trace(n).v[:, i] for n in names] or [t * np.nan])
         for k, name in enumerate(names):
             ax.plot(t, estimates[:, k], color=colours[name], lw=1.6, label=name)
-        lo, hi = velocity_range(t, result.v[:, i], estimates, start)
+        lo, hi = velocity_range(t, result.v[:, i], [result.trace(n).v[:, i] for n in sane], start)
         with np.errstate(invalid="ignore"):
             outside = bool(np.any((estimates < lo) | (estimates > hi)))
         ax.set_ylim(lo, hi)

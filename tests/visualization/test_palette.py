@@ -69,7 +69,7 @@ def test_velocity_range_keeps_the_truth_and_drops_the_estimates_transient() -> N
     t = np.linspace(0.0, 2.0, 201)
     truth = np.sin(3 * t)
     estimate = truth + 50.0 * np.exp(-t / 0.02)  # a start 50 off, converged by 0.2 s
-    lo, hi = velocity_range(t, truth, estimate, 0.5)
+    lo, hi = velocity_range(t, truth, [estimate], 0.5)
     assert lo < -0.99 and hi > 0.99  # the whole truth
     assert hi < 1.3  # the transient is left out (10 % margin)
     assert clip_start(t, [0.3, np.inf, 0.1]) == 0.3

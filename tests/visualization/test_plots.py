@@ -144,3 +144,23 @@ def test_error_panel_labels_do_not_overlap(run: dict[str, Any]) -> None:
     assert fig.bbox.contains(*legend.get_window_extent().p1)
     lines = [t.get_text() for t in legend.get_texts()]
     assert lines[0] == "truth" and all("converged at" in line for line in lines[1:])
+
+
+def test_a_diverged_estimate_does_not_set_the_y_range(run: dict[str, Any]) -> None:
+    import dataclasses
+
+    result = run["result"]
+    fd = result.trace("fd")
+    v = np.array(fd.v)
+    half = len(result.t) // 2
+    v[half:] = 1e6  # blows up, as a diverging observer does before its NaN
+    broken = dataclasses.replace(
+        result,
+        traces=(
+            result.trace("kf"),
+            dataclasses.replace(fd, v=v, diverged_at=float(result.t[half])),
+        ),
+    )
+    lo, hi = figure(broken, run["robot"]).axes[0].get_ylim()
+    assert hi - lo < 10.0  # [m/s]: the cart's motion, not the 1e6
+    assert lo < result.v[:, 0].min() and result.v[:, 0].max() < hi

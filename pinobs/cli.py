@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from pinobs.errors import PinobsError, UnsupportedRobotError
+from pinobs.errors import OutputExistsError, PinobsError, UnsupportedRobotError
 from pinobs.evaluation import evaluate, format_table
 from pinobs.model import Robot, aba_time, load, robot_entries
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
@@ -307,6 +307,84 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _identify_report(ident: Any) -> str:
+    """The identification report as text tables (``pinobs identify``)."""
+    rep = ident.report
+    lines = [
+        f"rows {rep['rows']} fitted, {rep['holdout_rows']} held out; "
+        f"{rep['rank']} identifiable combinations of {rep['n_parameters']} parameters; "
+        f"condition number {rep['condition']:.3g}"
+        + ("; physical consistency enforced" if rep["projected"] else ""),
+        "",
+        "torque residual RMS per joint (rows weighted by M⁻¹/Δt, rad/s²-like)",
+        f"{'joint':24s} {'fit before':>11s} {'fit after':>11s} {'held-out before':>16s} {'held-out after':>15s}",
+    ]
+    for j, name in enumerate(rep["joints"]):
+        lines.append(
+            f"{name:24s} {rep['residual_before'][j]:11.4g} {rep['residual_after'][j]:11.4g} "
+            f"{rep['holdout_before'][j]:16.4g} {rep['holdout_after'][j]:15.4g}"
+        )
+    lines += ["", f"{'parameter':32s} {'nominal':>12s} {'identified':>12s} {'std':>10s}"]
+    for name, value, std, nominal, excited in ident.parameters.as_rows():
+        if excited:
+            lines.append(f"{name:32s} {nominal:12.5g} {value:12.5g} {std:10.2g}")
+    n_not = len(rep["not_excited"])
+    if n_not:
+        lines.append(
+            f"({n_not} parameters not excited by this log stay near their nominal values: "
+            + ", ".join(rep["not_excited"][:6])
+            + (", ..." if n_not > 6 else "")
+            + ")"
+        )
+    if np.any(ident.offset):
+        lines.append(
+            "torque offset per joint [N·m] (not stored in the URDF; subtract it from the torques "
+            "or let the observer estimate it): " + ", ".join(f"{b:.4g}" for b in ident.offset)
+        )
+    return "\n".join(lines)
+
+
+def _cmd_identify(args: argparse.Namespace) -> int:
+    from pinobs.model.identification import identify
+
+    robot = load(args.robot, root_joint=args.root_joint)
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
+    if out.resolve() == Path(args.log).resolve():
+        raise OutputExistsError(f"--out {str(out)!r} is the log itself")
+    log = read_log(args.log, robot)
+    ident = identify(
+        robot, log, friction=not args.no_friction, offset=not args.no_offset, holdout=args.holdout
+    )
+    print(_identify_report(ident))
+    path = ident.save(str(out))
+    print(f"wrote {path}: load it with pinobs.load({path!r}, friction=True)")
+    return 0
+
+
+def _cmd_excite(args: argparse.Namespace) -> int:
+    from pinobs.model.excitation import excite
+
+    robot = load(args.robot, root_joint=args.root_joint)
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
+    exc = excite(robot, duration=args.duration, rate=args.rate, seed=args.seed)
+    names = exc.joint_names
+    header = ["t"] + [f"{k}.{n}" for k in ("q", "v", "a", "tau") for n in names]
+    table = np.column_stack([exc.t, exc.q, exc.v, exc.a, exc.tau])
+    tmp = out.with_name(out.name + ".tmp")
+    np.savetxt(tmp, table, delimiter=",", header=",".join(header), comments="", fmt="%.10g")
+    tmp.replace(out)
+    print(
+        f"wrote {out}: {exc.t.size} samples over {args.duration:g} s, regressor condition number "
+        f"{exc.condition:.3g}; peak |v| {np.abs(exc.v).max():.3g} rad/s, peak |tau| "
+        f"{np.abs(exc.tau).max():.3g} N·m (nominal model)"
+    )
+    return 0
+
+
 def _cmd_check(args: argparse.Namespace) -> int:
     from pinobs.observers.ii import check_assumption1
 
@@ -457,6 +535,38 @@ def _parser() -> argparse.ArgumentParser:
         "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
     )
     p.set_defaults(func=_cmd_check)
+
+    p = sub.add_parser(
+        "identify", help="identify inertias and friction from a log; write a calibrated URDF"
+    )
+    p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF path")
+    p.add_argument(
+        "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
+    )
+    p.add_argument("--log", required=True, help="log with t, q and tau columns (CSV or NPZ)")
+    p.add_argument("--out", required=True, help="the calibrated URDF to write")
+    p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
+    p.add_argument("--no-offset", action="store_true", help="do not identify a torque offset")
+    p.add_argument(
+        "--holdout",
+        type=float,
+        default=0.2,
+        help="fraction of the log (its end) kept out of the fit for the report (default %(default)s)",
+    )
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser("excite", help="write an excitation trajectory for identification")
+    p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF path")
+    p.add_argument("--root-joint", default=None, choices=["fixed"])
+    p.add_argument("--duration", type=float, default=20.0, help="length [s] (default %(default)s)")
+    p.add_argument(
+        "--rate", type=float, default=100.0, help="samples per second (default %(default)s)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the search (default %(default)s)")
+    p.add_argument("--out", required=True, help="CSV to write (t, q.*, v.*, a.*, tau.*)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=_cmd_excite)
 
     p = sub.add_parser("bench", help="accuracy and cost of every observer against the baselines")
     p.add_argument("--quick", action="store_true", help="two robots, short runs: under two minutes")

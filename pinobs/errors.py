@@ -20,6 +20,7 @@ __all__ = [
     "NotResetError",
     "ObserverDiverged",
     "OptionError",
+    "OutputExistsError",
     "PinobsError",
     "TimestampError",
     "UnknownNameError",
@@ -72,6 +73,10 @@ class NotResetError(PinobsError, RuntimeError):
 
 class UnsupportedRobotError(PinobsError, ValueError):
     """An observer asked to run on a robot it is not built for."""
+
+
+class OutputExistsError(PinobsError, FileExistsError):
+    """An output file exists (and overwriting was not asked for) or is an input."""
 
 
 class IdentificationError(PinobsError, ValueError):

@@ -14,8 +14,10 @@ from pinobs.simulation import Sensor, write_log
 def planar_log(tmp_path_factory):
     robot = pinobs.load("planar_3r")
     truth = robot.perturbed(
-        inertia_scale=[1.2, 0.8, 1.1], payload=(0.5, [0.05, 0.0, 0.0]),
-        damping=[0.2, 0.1, 0.05], coulomb=[0.1, 0.05, 0.02],
+        inertia_scale=[1.2, 0.8, 1.1],
+        payload=(0.5, [0.05, 0.0, 0.0]),
+        damping=[0.2, 0.1, 0.05],
+        coulomb=[0.1, 0.05, 0.02],
     )
     res = pinobs.simulate(
         robot, [], duration=8.0, sensor=Sensor(rate=1000.0, noise_std=1e-5), seed=1, plant=truth
@@ -27,7 +29,9 @@ def planar_log(tmp_path_factory):
     return path, truth
 
 
-def test_identify_writes_a_calibrated_urdf_closer_to_the_truth(planar_log, tmp_path, capsys) -> None:
+def test_identify_writes_a_calibrated_urdf_closer_to_the_truth(
+    planar_log, tmp_path, capsys
+) -> None:
     log, truth = planar_log
     out = tmp_path / "calibrated.urdf"
     assert main(["identify", "--robot", "planar_3r", "--log", str(log), "--out", str(out)]) == 0
@@ -39,9 +43,10 @@ def test_identify_writes_a_calibrated_urdf_closer_to_the_truth(planar_log, tmp_p
     for _ in range(10):
         q = nominal.random_configuration(rng)
         m = truth.mass_matrix(q)
-        assert np.abs(calibrated.mass_matrix(q) - m).max() < 0.2 * np.abs(
-            nominal.mass_matrix(q) - m
-        ).max()
+        assert (
+            np.abs(calibrated.mass_matrix(q) - m).max()
+            < 0.2 * np.abs(nominal.mass_matrix(q) - m).max()
+        )
     # refuses to overwrite without --force, and refuses a log without torques
     assert main(["identify", "--robot", "planar_3r", "--log", str(log), "--out", str(out)]) == 2
     assert "exists" in capsys.readouterr().err

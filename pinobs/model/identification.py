@@ -748,7 +748,8 @@ def identify(
     Args:
         robot: the nominal model (the prior).
         log: anything with arrays ``t`` ``(N,)``, ``q`` ``(N, nq)``, ``tau``
-            ``(N, nv)`` (a ``Log``, a ``Result``) or a tuple ``(t, q, tau)``.
+            ``(N, nv)`` (a ``Log``), a simulation ``Result`` (its measured
+            ``q_meas`` is used, never the truth), or a tuple ``(t, q, tau)``.
             Rows with NaN are skipped; windows never straddle a gap.
         friction, offset: identify viscous/Coulomb friction and a torque offset.
         holdout: fraction of the log (its end) kept out of the fit to report
@@ -769,8 +770,9 @@ def identify(
     """
     if isinstance(log, tuple):
         t, q, tau = log
-    else:
-        t, q, tau = log.t, log.q, getattr(log, "tau", None)
+    else:  # a simulation Result carries the truth in q: identify from what was measured
+        t, tau = log.t, getattr(log, "tau", None)
+        q = log.q_meas if hasattr(log, "q_meas") else log.q
     if tau is None:
         raise IdentificationError("the log has no torques: identification needs tau columns")
     t = np.asarray(t, dtype=float)

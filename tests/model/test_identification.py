@@ -169,3 +169,13 @@ def test_saved_urdf_reloads_with_the_same_dynamics(tmp_path, rng: np.random.Gene
         np.testing.assert_allclose(
             back.forward_dynamics(q, v, tau), truth.forward_dynamics(q, v, tau), atol=1e-12
         )
+
+
+def test_identify_uses_the_measurements_of_a_result_never_the_truth() -> None:
+    robot = pinobs.load("planar_3r")
+    res = pinobs.simulate(
+        robot, [], duration=3.0, sensor=Sensor(rate=1000.0, noise_std=1e-3), seed=1
+    )
+    from_result = identify(robot, res, holdout=0.0)
+    from_arrays = identify(robot, (res.t, res.q_meas, res.tau), holdout=0.0)
+    np.testing.assert_array_equal(from_result.parameters.values, from_arrays.parameters.values)

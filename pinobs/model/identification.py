@@ -670,7 +670,7 @@ class Identification:
 
     def save(self, path: str) -> str:
         """Write the calibrated robot as a URDF (:func:`pinobs.model.urdf.write_urdf`); returns the path."""
-        from pinobs.model.urdf import write_urdf
+        from pinobs.model.urdf_writer import write_urdf
 
         return write_urdf(self.robot, path)
 

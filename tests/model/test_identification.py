@@ -16,7 +16,7 @@ from pinobs.model.identification import (
     smooth_path,
     solve,
 )
-from pinobs.model.urdf import write_urdf
+from pinobs.model.urdf_writer import write_urdf
 from pinobs.simulation import Sensor
 
 ROBOTS = ["cartpole", "planar_3r", "ur5"]

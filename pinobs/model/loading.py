@@ -11,14 +11,25 @@ from __future__ import annotations
 
 import importlib.metadata
 import importlib.resources
+import warnings
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
 import pinocchio as pin
+from pinocchio.robot_wrapper import RobotWrapper
 
-from pinobs.errors import GainError, ModelFileError, UnknownNameError
+from pinobs.errors import (
+    GainError,
+    ModelFileError,
+    ModelTypeError,
+    ModelWarning,
+    UnknownNameError,
+)
 from pinobs.model.robot import Robot
+from pinobs.model.urdf import UrdfFacts, read_urdf
 
 __all__ = ["RobotEntry", "load", "robot_entries", "robot_names"]
 
@@ -281,31 +292,117 @@ def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
             f"robot file {str(path)!r} does not exist; give an existing URDF/MJCF file "
             "or one of the robot names: " + ", ".join(robot_names())
         )
-    return path, [path.parent], "fixed", path.stem
+    return path, [], "fixed", path.stem
 
 
-def load(source: str | Path, *, root_joint: str | None = None, friction: bool = False) -> Robot:
-    """Load a robot by registry name or file path.
+def _from_pinocchio(
+    source: pin.Model | RobotWrapper, root_joint: str | None, friction: bool | None
+) -> Robot:
+    """A :class:`Robot` around a ``pin.Model`` or a ``RobotWrapper`` (models copied, not shared)."""
+    if root_joint is not None:
+        raise GainError(
+            f"root_joint={root_joint!r} applies to files and registry names only; a "
+            "pin.Model or RobotWrapper already has its root joint: pass root_joint=None"
+        )
+    if isinstance(source, RobotWrapper):
+        model, visual, collision = source.model, source.visual_model, source.collision_model
+    else:
+        model, visual, collision = source, None, None
+    if model.nv == 0:
+        raise ModelFileError(f"the pin.Model {model.name!r} has no moving joint (nv = 0)")
+    name = model.name or "model"
+    return Robot(
+        model.copy(),
+        name=name,
+        source=f"<{type(source).__name__} {name}>",
+        visual_model=visual.copy() if visual is not None else None,
+        collision_model=collision.copy() if collision is not None else None,
+        friction=bool(friction),
+        root_joint=None,
+    )
+
+
+def _load_urdf(
+    path: Path, package_dirs: list[str | Path], joint_type: type | None
+) -> tuple[pin.Model, pin.GeometryModel | None, pin.GeometryModel | None, UrdfFacts]:
+    """Model and geometries of a URDF, meshes resolved as :mod:`pinobs.model.urdf` says.
+
+    When meshes are missing or cannot be read, the dynamics load alone and one
+    :class:`~pinobs.errors.ModelWarning` says which meshes (the playback then
+    draws a stick figure).
+    """
+    facts = read_urdf(path, package_dirs)
+    args = (joint_type(),) if joint_type is not None else ()
+    model = pin.buildModelFromXML(facts.xml, *args)
+    visual = collision = None
+    problem = ""
+    if facts.missing_meshes:
+        shown = ", ".join(facts.missing_meshes[:3])
+        more = len(facts.missing_meshes) - 3
+        problem = (
+            f"{len(facts.missing_meshes)} mesh(es) not found ({shown}{', …' if more > 0 else ''})"
+        )
+    else:
+        try:
+            visual = pin.buildGeomFromUrdfString(model, facts.xml, pin.GeometryType.VISUAL)
+            collision = pin.buildGeomFromUrdfString(model, facts.xml, pin.GeometryType.COLLISION)
+        except (RuntimeError, ValueError) as exc:
+            visual = collision = None
+            problem = f"its geometry could not be read ({exc})"
+    if problem:
+        warnings.warn(
+            f"{path}: {problem}; the dynamics are loaded without geometry (the playback draws "
+            "a stick figure). Pass package_dirs=[folder that contains the package folder], or "
+            "set ROS_PACKAGE_PATH / AMENT_PREFIX_PATH, to find package:// meshes",
+            ModelWarning,
+            stacklevel=3,
+        )
+    return model, visual, collision, facts
+
+
+def load(
+    source: str | Path | pin.Model | RobotWrapper,
+    *,
+    root_joint: str | None = None,
+    friction: bool | None = None,
+    package_dirs: Sequence[str | Path] | None = None,
+) -> Robot:
+    """Load a robot by registry name, file path, ``pin.Model`` or ``RobotWrapper``.
 
     Args:
         source: a name from :func:`robot_names` (the project's ``models/`` or
-            example-robot-data), or a path to a URDF (``.urdf``) or MJCF
-            (``.xml``/``.mjcf``) file.
+            example-robot-data), a path to a URDF (``.urdf``) or MJCF
+            (``.xml``/``.mjcf``) file, or a Pinocchio ``Model`` or
+            ``RobotWrapper`` (copied; its geometry, if any, kept).
         root_joint: ``None`` (the registry's default: free-flyer for legged
             robots and the rigid body, spherical for the top, fixed otherwise;
-            fixed for files), ``"fixed"``, ``"spherical"``, ``"freeflyer"`` or
-            ``"planar"``.
+            fixed for files; the model's own for a ``pin.Model``), ``"fixed"``,
+            ``"spherical"``, ``"freeflyer"`` or ``"planar"``.
         friction: include the joint friction of the URDF's ``<dynamics damping
             friction>`` tags in the dynamics (:meth:`Robot.friction_torque`).
-            Off by default: many published URDFs carry placeholder values
+            ``None`` means off: many published URDFs carry placeholder values
             (pr2's torso has 20000 N·s/m); switch it on when yours are identified.
+        package_dirs: folders searched for ``package://pkg/…`` mesh URIs (each
+            holding the folder ``pkg``, or being it), before ``ROS_PACKAGE_PATH``,
+            ``AMENT_PREFIX_PATH`` and the file's parent folders
+            (:mod:`pinobs.model.urdf`).  Meshes still missing: the dynamics
+            load without geometry and a :class:`~pinobs.errors.ModelWarning` says so.
 
     Raises:
         UnknownNameError: ``source`` is neither a registered name nor a path.
         ModelFileError: the file is missing or cannot be parsed.
+        ModelTypeError: ``source`` is of another type.
         GainError: ``root_joint`` is not one of the accepted values.
     """
-    path, package_dirs, default_root, name = _resolve(source)
+    if isinstance(source, pin.Model | RobotWrapper):
+        return _from_pinocchio(source, root_joint, friction)
+    if not isinstance(source, str | Path):
+        raise ModelTypeError(
+            f"cannot load a robot from a {type(source).__name__} ({source!r}); give a registry "
+            "name (pinobs.robot_names()), a path to a URDF/MJCF file, a pinocchio.Model or a "
+            "pinocchio.RobotWrapper"
+        )
+    path, default_dirs, default_root, name = _resolve(source)
     root = default_root if root_joint is None else root_joint
     if root not in _ROOT_JOINTS:
         raise GainError(
@@ -313,11 +410,10 @@ def load(source: str | Path, *, root_joint: str | None = None, friction: bool = 
             + ", ".join(repr(k) for k in _ROOT_JOINTS)
         )
     joint_type = _ROOT_JOINTS[root]
-    dirs = [str(d) for d in package_dirs]
+    dirs: list[str | Path] = [*(package_dirs or ()), *default_dirs]
     try:
         if path.suffix.lower() == ".urdf":
-            args = (joint_type(),) if joint_type is not None else ()
-            model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs, *args)
+            model, visual, collision, _ = _load_urdf(path, dirs, joint_type)
         else:
             if joint_type is not None:
                 model = pin.buildModelFromMJCF(str(path), joint_type())
@@ -328,7 +424,7 @@ def load(source: str | Path, *, root_joint: str | None = None, friction: bool = 
                 visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
             except (RuntimeError, ValueError):
                 visual = None
-    except (RuntimeError, ValueError, OSError) as exc:
+    except (RuntimeError, ValueError, OSError, ET.ParseError) as exc:
         raise ModelFileError(
             f"cannot parse robot file {str(path)!r} (from source {str(source)!r}): {exc}. "
             "Known robot names: " + ", ".join(robot_names())
@@ -344,6 +440,6 @@ def load(source: str | Path, *, root_joint: str | None = None, friction: bool = 
         source=str(source),
         visual_model=visual,
         collision_model=collision,
-        friction=friction,
+        friction=bool(friction),
         root_joint=root,
     )

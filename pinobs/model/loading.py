@@ -29,6 +29,7 @@ from pinobs.errors import (
     UnknownNameError,
 )
 from pinobs.model.robot import Robot
+from pinobs.model.sanity import check_model, check_urdf
 from pinobs.model.urdf import UrdfFacts, read_urdf
 
 __all__ = ["RobotEntry", "load", "robot_entries", "robot_names"]
@@ -366,6 +367,8 @@ def load(
     root_joint: str | None = None,
     friction: bool | None = None,
     package_dirs: Sequence[str | Path] | None = None,
+    mimic: str | None = None,
+    check: bool = True,
 ) -> Robot:
     """Load a robot by registry name, file path, ``pin.Model`` or ``RobotWrapper``.
 
@@ -387,15 +390,31 @@ def load(
             ``AMENT_PREFIX_PATH`` and the file's parent folders
             (:mod:`pinobs.model.urdf`).  Meshes still missing: the dynamics
             load without geometry and a :class:`~pinobs.errors.ModelWarning` says so.
+        mimic: what to do with URDF ``<mimic>`` joints, which Pinocchio's
+            forward dynamics cannot couple: ``"error"`` (refuse, naming the
+            joint) or ``"independent"`` (each a joint of its own).  ``None``:
+            ``"independent"`` for registry names (panda's and talos' grippers),
+            ``"error"`` for files.
+        check: refuse models whose dynamics cannot be right
+            (:mod:`pinobs.model.sanity`): non-finite, negative or dropped
+            masses, impossible inertias, a mass matrix singular or indefinite
+            at sampled configurations.  ``False`` skips these checks.
 
     Raises:
         UnknownNameError: ``source`` is neither a registered name nor a path.
         ModelFileError: the file is missing or cannot be parsed.
         ModelTypeError: ``source`` is of another type.
+        ModelError: the model fails a check (``check=True``) or has mimic joints
+            (``mimic="error"``); the message names the body or joint.
         GainError: ``root_joint`` is not one of the accepted values.
     """
+    if mimic not in (None, "error", "independent"):
+        raise GainError(f"mimic={mimic!r} is not accepted; use None, 'error' or 'independent'")
     if isinstance(source, pin.Model | RobotWrapper):
-        return _from_pinocchio(source, root_joint, friction)
+        robot = _from_pinocchio(source, root_joint, friction)
+        if check:
+            check_model(robot.model)
+        return robot
     if not isinstance(source, str | Path):
         raise ModelTypeError(
             f"cannot load a robot from a {type(source).__name__} ({source!r}); give a registry "
@@ -411,9 +430,10 @@ def load(
         )
     joint_type = _ROOT_JOINTS[root]
     dirs: list[str | Path] = [*(package_dirs or ()), *default_dirs]
+    facts: UrdfFacts | None = None
     try:
         if path.suffix.lower() == ".urdf":
-            model, visual, collision, _ = _load_urdf(path, dirs, joint_type)
+            model, visual, collision, facts = _load_urdf(path, dirs, joint_type)
         else:
             if joint_type is not None:
                 model = pin.buildModelFromMJCF(str(path), joint_type())
@@ -434,6 +454,11 @@ def load(
             f"robot {str(source)!r} has no moving joint; a single rigid body needs "
             "root_joint='spherical' or 'freeflyer'"
         )
+    if facts is not None:
+        default = "error" if str(source) not in _all_entries() else "independent"
+        check_urdf(facts, mimic=mimic or default, inertials=check)
+    if check:
+        check_model(model)
     return Robot(
         model,
         name=name,

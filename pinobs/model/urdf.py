@@ -48,15 +48,12 @@ class UrdfFacts:
         mimics: ``(joint, mimicked joint, multiplier, offset)`` per ``<mimic>`` tag.
         bad_inertials: ``(link, attribute, text)`` for each ``<inertial>`` value
             that is not a finite number (urdfdom drops such an inertial).
-        masses: link name → mass written in its ``<inertial>`` [kg] (links
-            without an inertial are absent).
     """
 
     xml: str
     missing_meshes: tuple[str, ...]
     mimics: tuple[tuple[str, str, float, float], ...]
     bad_inertials: tuple[tuple[str, str, str], ...]
-    masses: dict[str, float]
 
 
 def _search_dirs(package_dirs: Sequence[str | Path]) -> list[Path]:
@@ -134,7 +131,6 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
                 )
             )
     bad: list[tuple[str, str, str]] = []
-    masses: dict[str, float] = {}
     for link in root.findall("link"):
         name = link.get("name", "?")
         inertial = link.find("inertial")
@@ -142,11 +138,8 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
             continue
         mass = inertial.find("mass")
         mass_text = mass.get("value") if mass is not None else None
-        value = _number(mass_text, 0.0)
-        if value is None:
+        if _number(mass_text, 0.0) is None:
             bad.append((name, "mass", str(mass_text)))
-        else:
-            masses[name] = value
         inertia = inertial.find("inertia")
         for attr in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
             t = inertia.get(attr) if inertia is not None else None
@@ -157,5 +150,4 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
         missing_meshes=tuple(dict.fromkeys(missing)),
         mimics=tuple(mimics),
         bad_inertials=tuple(bad),
-        masses=masses,
     )

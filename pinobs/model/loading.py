@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 import pinocchio as pin
 from pinocchio.robot_wrapper import RobotWrapper
@@ -26,8 +27,10 @@ from pinobs.errors import (
     ModelFileError,
     ModelTypeError,
     ModelWarning,
+    PinobsError,
     UnknownNameError,
 )
+from pinobs.model.mjcf import MujocoMap, build_from_mujoco, cross_check
 from pinobs.model.robot import Robot
 from pinobs.model.sanity import check_model, check_urdf
 from pinobs.model.urdf import UrdfFacts, read_urdf
@@ -361,6 +364,47 @@ def _load_urdf(
     return model, visual, collision, facts
 
 
+def _load_mjcf(
+    path: Path, joint_type: type | None, root: str
+) -> tuple[
+    pin.Model, pin.GeometryModel | None, pin.GeometryModel | None, tuple[Any, MujocoMap] | None
+]:
+    """An MJCF model built from MuJoCo's compiled model, or from Pinocchio's parser without MuJoCo.
+
+    Through MuJoCo (:mod:`pinobs.model.mjcf`) the root joint is the file's
+    own (declare a ``<freejoint/>`` in it) and there is no geometry yet (the
+    playback draws a stick figure).  Without MuJoCo one
+    :class:`~pinobs.errors.ModelWarning` says what Pinocchio's parser misses.
+    """
+    try:
+        import mujoco  # noqa: F401  (optional extra pinobs[mujoco])
+    except ImportError:
+        warnings.warn(
+            f"{path}: MuJoCo is not installed (pip install 'pinobs[mujoco]'), so Pinocchio's "
+            "MJCF parser reads the file: it ignores geom masses set in <default> classes "
+            "(density is used instead), settotalmass and joint stiffness, keeps only the first "
+            "body tree, and MuJoCo's M(q) cannot be cross-checked",
+            ModelWarning,
+            stacklevel=3,
+        )
+        if joint_type is not None:
+            model = pin.buildModelFromMJCF(str(path), joint_type())
+        else:
+            model = pin.buildModelFromMJCF(str(path))
+        try:
+            visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
+        except (RuntimeError, ValueError):
+            visual = None
+        return model, visual, None, None
+    if root != "fixed":
+        raise GainError(
+            f"root_joint={root!r}: an MJCF file loaded through MuJoCo keeps its own root; "
+            "declare <freejoint/> (or <joint type='ball'/>) in its top body instead"
+        )
+    model, mj, mapping = build_from_mujoco(path)
+    return model, None, None, (mj, mapping)
+
+
 def load(
     source: str | Path | pin.Model | RobotWrapper,
     *,
@@ -375,7 +419,9 @@ def load(
     Args:
         source: a name from :func:`robot_names` (the project's ``models/`` or
             example-robot-data), a path to a URDF (``.urdf``) or MJCF
-            (``.xml``/``.mjcf``) file, or a Pinocchio ``Model`` or
+            (``.xml``/``.mjcf``; compiled by MuJoCo when installed, the model
+            built from it and ``M(q)`` cross-checked with ``mj_fullM``:
+            :mod:`pinobs.model.mjcf`) file, or a Pinocchio ``Model`` or
             ``RobotWrapper`` (copied; its geometry, if any, kept).
         root_joint: ``None`` (the registry's default: free-flyer for legged
             robots and the rigid body, spherical for the top, fixed otherwise;
@@ -383,8 +429,10 @@ def load(
             ``"spherical"``, ``"freeflyer"`` or ``"planar"``.
         friction: include the joint friction of the URDF's ``<dynamics damping
             friction>`` tags in the dynamics (:meth:`Robot.friction_torque`).
-            ``None`` means off: many published URDFs carry placeholder values
-            (pr2's torso has 20000 N·s/m); switch it on when yours are identified.
+            ``None`` means off for URDFs (many published ones carry placeholder
+            values: pr2's torso has 20000 N·s/m; switch it on when yours are
+            identified) and on for MJCF files loaded through MuJoCo (their
+            ``damping`` and ``frictionloss``, which MJCF authors mean).
         package_dirs: folders searched for ``package://pkg/…`` mesh URIs (each
             holding the folder ``pkg``, or being it), before ``ROS_PACKAGE_PATH``,
             ``AMENT_PREFIX_PATH`` and the file's parent folders
@@ -404,8 +452,9 @@ def load(
         UnknownNameError: ``source`` is neither a registered name nor a path.
         ModelFileError: the file is missing or cannot be parsed.
         ModelTypeError: ``source`` is of another type.
-        ModelError: the model fails a check (``check=True``) or has mimic joints
-            (``mimic="error"``); the message names the body or joint.
+        ModelError: the model fails a check (``check=True``), has mimic joints
+            (``mimic="error"``), or (MJCF) its mass or ``M(q)`` differs from
+            MuJoCo's; the message names the body or joint.
         GainError: ``root_joint`` is not one of the accepted values.
     """
     if mimic not in (None, "error", "independent"):
@@ -431,19 +480,16 @@ def load(
     joint_type = _ROOT_JOINTS[root]
     dirs: list[str | Path] = [*(package_dirs or ()), *default_dirs]
     facts: UrdfFacts | None = None
+    compiled: tuple[Any, MujocoMap] | None = None
     try:
         if path.suffix.lower() == ".urdf":
             model, visual, collision, facts = _load_urdf(path, dirs, joint_type)
         else:
-            if joint_type is not None:
-                model = pin.buildModelFromMJCF(str(path), joint_type())
-            else:
-                model = pin.buildModelFromMJCF(str(path))
-            collision = visual = None
-            try:
-                visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
-            except (RuntimeError, ValueError):
-                visual = None
+            model, visual, collision, compiled = _load_mjcf(path, joint_type, root)
+            if friction is None and compiled is not None:
+                friction = True  # MJCF authors mean their damping (unlike URDF placeholders)
+    except PinobsError:
+        raise
     except (RuntimeError, ValueError, OSError, ET.ParseError) as exc:
         raise ModelFileError(
             f"cannot parse robot file {str(path)!r} (from source {str(source)!r}): {exc}. "
@@ -457,6 +503,8 @@ def load(
     if facts is not None:
         default = "error" if str(source) not in _all_entries() else "independent"
         check_urdf(facts, mimic=mimic or default, inertials=check)
+    if compiled is not None:
+        cross_check(model, *compiled)
     if check:
         check_model(model)
     return Robot(

@@ -268,6 +268,8 @@ def cross_check(
     total_pin = float(sum(i.mass for i in model.inertias))
     if abs(total_pin - total_mj) > MASS_MATRIX_RTOL * max(total_mj, 1e-300):
         raise ModelError(f"total mass: Pinocchio {total_pin!r} kg, MuJoCo {total_mj!r} kg")
+    if mj.nv == 0:
+        return 0.0
     data = mujoco.MjData(mj)
     pdata = model.createData()
     rng = np.random.default_rng(seed)

@@ -173,3 +173,41 @@ def test_without_mujoco_pinocchios_parser_loads_with_a_warning_saying_what_it_mi
         robot = pinobs.load(_models_dir() / "mjcf_acrobot.xml", check=False)
     # what the warning is about: Pinocchio's parser weighs the capsules by density
     assert sum(i.mass for i in robot.model.inertias) > 10.0
+
+
+DM_CONTROL_SUITE = [
+    "acrobot",
+    "ball_in_cup",
+    "cartpole",
+    "cheetah",
+    "dog",
+    "finger",
+    "fish",
+    "hopper",
+    "humanoid",
+    "humanoid_CMU",
+    "manipulator",
+    "pendulum",
+    "point_mass",
+    "quadruped",
+    "reacher",
+    "stacker",
+    "swimmer",
+    "walker",
+]
+
+
+@pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::pinobs.errors.ModelWarning")  # springs, tendons: named
+@pytest.mark.parametrize("name", DM_CONTROL_SUITE)
+def test_dm_control_suite_as_shipped_matches_mujoco(name: str) -> None:
+    """Every model of dm_control's suite (its XML files; ``pip install --no-deps dm_control``)."""
+    import importlib.resources
+
+    pytest.importorskip("dm_control")
+    path = Path(str(importlib.resources.files("dm_control") / "suite" / f"{name}.xml"))
+    model, mj, mapping = build_from_mujoco(path)
+    total = sum(i.mass for i in model.inertias)
+    assert total == pytest.approx(float(mj.body_mass.sum()), rel=1e-9, abs=0)
+    assert cross_check(model, mj, mapping, samples=20, seed=2) < MASS_MATRIX_RTOL
+    assert pinobs.load(path).nv == mj.nv  # the sanity checks pass too

@@ -69,6 +69,13 @@ _ERD = "example-robot-data"
 
 _ENTRIES: tuple[RobotEntry, ...] = (
     RobotEntry("cartpole", _PINOBS, "cartpole.urdf", "fixed", "pendulum on a cart, nv = 2"),
+    RobotEntry(
+        "cartpole_continuous",
+        _PINOBS,
+        "cartpole_continuous.urdf",
+        "fixed",
+        "the cart-pole with a continuous pole joint, nq = 3, nv = 2",
+    ),
     RobotEntry("pendulum", _PINOBS, "pendulum.urdf", "fixed", "simple pendulum, nv = 1"),
     RobotEntry("planar_3r", _PINOBS, "planar_3r.urdf", "fixed", "3-link planar arm, nv = 3"),
     RobotEntry("rigid_body", _PINOBS, "rigid_body.urdf", "freeflyer", "free rigid body, SE(3)"),

@@ -211,3 +211,21 @@ def test_dm_control_suite_as_shipped_matches_mujoco(name: str) -> None:
     assert total == pytest.approx(float(mj.body_mass.sum()), rel=1e-9, abs=0)
     assert cross_check(model, mj, mapping, samples=20, seed=2) < MASS_MATRIX_RTOL
     assert pinobs.load(path).nv == mj.nv  # the sanity checks pass too
+
+
+def test_the_ur5_mjcf_is_the_urdfs_ur5_plus_its_armature(rng: np.random.Generator) -> None:
+    """``models/mjcf_ur5.xml`` (written by ``benchmarks/mujoco_truth.py --write-ur5``)."""
+    mjcf, urdf = pinobs.load(_models_dir() / "mjcf_ur5.xml"), pinobs.load("ur5")
+    np.testing.assert_array_equal(mjcf.model.armature, np.full(6, 0.1))
+    np.testing.assert_array_equal(mjcf.model.damping, np.full(6, 0.5))
+    for _ in range(5):
+        q, v = urdf.random_configuration(rng, scale=np.pi), rng.normal(size=6)
+        np.testing.assert_allclose(
+            mjcf.mass_matrix(q), urdf.mass_matrix(q) + 0.1 * np.eye(6), rtol=0, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            mjcf.inverse_dynamics(q, v, np.zeros(6)),
+            urdf.inverse_dynamics(q, v, np.zeros(6)),
+            rtol=0,
+            atol=1e-12,
+        )

@@ -405,7 +405,9 @@ class Robot:
         if not self.has_friction:
             return np.zeros(self.nv)
         vs = COULOMB_SMOOTHING_VELOCITY
-        return -self._damping - self._coulomb / vs / np.cosh(v / vs) ** 2
+        return -self._damping - self._coulomb / vs * (
+            1.0 - np.tanh(v / vs) ** 2
+        )  # sech², no overflow
 
     def forward_dynamics(self, q: Vector, v: Vector, tau: Vector) -> Vector:
         """``v̇ = M⁻¹(τ + τ_f(v) − c(q, v) − g(q))`` by the articulated-body algorithm."""

@@ -229,3 +229,10 @@ def test_the_ur5_mjcf_is_the_urdfs_ur5_plus_its_armature(rng: np.random.Generato
             rtol=0,
             atol=1e-12,
         )
+
+
+def test_friction_derivative_stays_finite_and_silent_at_high_speed() -> None:
+    """MJCF damping switches friction on; |v| ≫ v_s must not overflow sech² (warnings are errors)."""
+    robot = pinobs.load(_models_dir() / "mjcf_acrobot.xml")
+    d = robot.friction_derivative(np.array([50.0, -80.0]))
+    np.testing.assert_array_equal(d, -robot.model.damping)

@@ -236,3 +236,13 @@ def test_friction_derivative_stays_finite_and_silent_at_high_speed() -> None:
     robot = pinobs.load(_models_dir() / "mjcf_acrobot.xml")
     d = robot.friction_derivative(np.array([50.0, -80.0]))
     np.testing.assert_array_equal(d, -robot.model.damping)
+
+
+def test_readme_mujoco_benchmark_table_is_the_committed_results() -> None:
+    import re
+
+    root = Path(__file__).resolve().parents[2]
+    readme = (root / "README.md").read_text()
+    m = re.search(r"<!-- mujoco-bench: [^>]*-->\n(.*?)<!-- end mujoco-bench -->", readme, re.S)
+    assert m is not None
+    assert m.group(1) in (root / "benchmarks" / "mujoco_truth.md").read_text()

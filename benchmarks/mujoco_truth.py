@@ -15,8 +15,9 @@ parameter from a grid, chosen on the run itself (optimistic); `ekf (pin parser)`
 on the model Pinocchio's own MJCF parser reads from the same file.
 
 Systems: `models/mjcf_cartpole.xml` and `models/mjcf_acrobot.xml` (dm_control style, written
-for pinobs), dm_control's `cartpole.xml` and `acrobot.xml` as shipped (when dm_control's files
-are installed: `pip install --no-deps dm_control`), and `models/mjcf_ur5.xml` (the UR5 of
+for pinobs), dm_control's `cartpole.xml`, `acrobot.xml`, `pendulum.xml` and `walker.xml` as
+shipped (when dm_control's files are installed: `pip install --no-deps dm_control`; the walker
+without its ground contacts, so it falls while its legs are driven), and `models/mjcf_ur5.xml` (the UR5 of
 example-robot-data with an armature and damping; `--write-ur5` regenerates it).
 
     python benchmarks/mujoco_truth.py [--duration 4] [--seed 0]
@@ -92,8 +93,8 @@ def systems() -> dict[str, Path]:
     }
     try:
         suite = Path(str(importlib.resources.files("dm_control") / "suite"))
-        out["cartpole (dm_control)"] = suite / "cartpole.xml"
-        out["acrobot (dm_control)"] = suite / "acrobot.xml"
+        for name in ("cartpole", "acrobot", "pendulum", "walker"):
+            out[f"{name} (dm_control)"] = suite / f"{name}.xml"
     except ModuleNotFoundError:
         print("dm_control's files are not installed: its rows are skipped")
     out["ur5 (MJCF, armature, damping)"] = _models_dir() / "mjcf_ur5.xml"
@@ -103,7 +104,7 @@ def systems() -> dict[str, Path]:
 def simulate_mujoco(path: Path, duration: float, seed: int) -> dict[str, Any]:
     """Truth from MuJoCo: RK4 at 0.1 ms, controls held between 1 kHz samples, τ = qfrc_actuator."""
     robot = pinobs.load(path)
-    _, mj, mapping = build_from_mujoco(path)
+    _, mj, mapping, _ = build_from_mujoco(path)
     mj.opt.timestep = 1e-4
     mj.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
     mj.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)

@@ -379,8 +379,8 @@ def _load_mjcf(
     """An MJCF model built from MuJoCo's compiled model, or from Pinocchio's parser without MuJoCo.
 
     Through MuJoCo (:mod:`pinobs.model.mjcf`) the root joint is the file's
-    own (declare a ``<freejoint/>`` in it) and there is no geometry yet (the
-    playback draws a stick figure).  Without MuJoCo one
+    own (declare a ``<freejoint/>`` in it) and the visual geometry is MuJoCo's
+    primitive geoms (no meshes).  Without MuJoCo one
     :class:`~pinobs.errors.ModelWarning` says what Pinocchio's parser misses.
     """
     try:
@@ -408,8 +408,8 @@ def _load_mjcf(
             f"root_joint={root!r}: an MJCF file loaded through MuJoCo keeps its own root; "
             "declare <freejoint/> (or <joint type='ball'/>) in its top body instead"
         )
-    model, mj, mapping = build_from_mujoco(path)
-    return model, None, None, (mj, mapping)
+    model, mj, mapping, visual = build_from_mujoco(path)
+    return model, visual, None, (mj, mapping)
 
 
 def load(

@@ -142,11 +142,47 @@ class MujocoMap:
         return np.linalg.solve(self.velocity_jacobian(q), qvel)
 
 
-def build_from_mujoco(path: Path) -> tuple[pin.Model, Any, MujocoMap]:
+def _geometry(mj: Any, where: dict[int, tuple[int, pin.SE3]], name: Any) -> pin.GeometryModel:
+    """MuJoCo's primitive geoms (box, sphere, capsule, cylinder, ellipsoid) as visual geometry.
+
+    A geom sits at ``geom_pos``/``geom_quat`` in its body, so at
+    ``X_body · X_geom`` in its body's joint frame; ``size`` holds half-sizes
+    (MuJoCo) where coal takes full lengths.  Planes, meshes and height fields
+    are left out.
+    """
+    import coal  # ships with Pinocchio
+
+    import mujoco
+
+    geom = pin.GeometryModel()
+    for g in range(mj.ngeom):
+        kind, size = int(mj.geom_type[g]), np.asarray(mj.geom_size[g], dtype=float)
+        shape: Any
+        if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+            shape = coal.Sphere(size[0])
+        elif kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+            shape = coal.Capsule(size[0], 2.0 * size[1])
+        elif kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
+            shape = coal.Cylinder(size[0], 2.0 * size[1])
+        elif kind == mujoco.mjtGeom.mjGEOM_BOX:
+            shape = coal.Box(*(2.0 * size))
+        elif kind == mujoco.mjtGeom.mjGEOM_ELLIPSOID:
+            shape = coal.Ellipsoid(*size)
+        else:
+            continue
+        joint, body_place = where[int(mj.geom_bodyid[g])]
+        place = body_place * pin.SE3(_rotation(mj.geom_quat[g]), mj.geom_pos[g].copy())
+        obj = pin.GeometryObject(name(mujoco.mjtObj.mjOBJ_GEOM, g, "geom"), joint, place, shape)
+        obj.meshColor = np.asarray(mj.geom_rgba[g], dtype=float).copy()
+        geom.addGeometryObject(obj)
+    return geom
+
+
+def build_from_mujoco(path: Path) -> tuple[pin.Model, Any, MujocoMap, pin.GeometryModel]:
     """Compile ``path`` with MuJoCo and build the Pinocchio model (module docstring).
 
     Returns:
-        ``(model, mj_model, map)``.
+        ``(model, mj_model, map, visual geometry)``.
 
     Raises:
         ImportError: MuJoCo is not installed.
@@ -237,7 +273,7 @@ def build_from_mujoco(path: Path) -> tuple[pin.Model, Any, MujocoMap]:
         np.array(mj.qpos0, dtype=float),
         int(mj.nv),
     )
-    return model, mj, mapping
+    return model, mj, mapping, _geometry(mj, where, name)
 
 
 def _full_mass_matrix(mujoco: Any, mj: Any, data: Any, out: Vector) -> None:

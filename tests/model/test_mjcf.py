@@ -82,7 +82,7 @@ def test_mass_matrix_equals_mj_full_m_at_20_random_configurations(
     name: str, tmp_path: Path
 ) -> None:
     path = _file(tmp_path, TREES) if name == "trees" else _models_dir() / f"{name}.xml"
-    model, mj, mapping = build_from_mujoco(path)
+    model, mj, mapping, _ = build_from_mujoco(path)
     assert model.nv == mj.nv
     worst = cross_check(model, mj, mapping, samples=20, seed=1)
     assert worst < MASS_MATRIX_RTOL
@@ -100,7 +100,7 @@ def test_forward_dynamics_with_damping_equal_mujocos_on_every_joint_type(
 ) -> None:
     path = _file(tmp_path, TREES)
     robot = pinobs.load(path)
-    _, mj, mapping = build_from_mujoco(path)
+    _, mj, mapping, _ = build_from_mujoco(path)
     assert robot.nv == 6 + 3 + 3 + 2 and robot.nq == 7 + 3 + 4 + 2
     for _ in range(5):
         q = robot.random_configuration(rng, scale=np.pi)
@@ -119,7 +119,7 @@ def test_configuration_maps_round_trip_and_convert_quaternion_order(
     tmp_path: Path, rng: np.random.Generator
 ) -> None:
     robot = pinobs.load(_file(tmp_path, TREES))
-    _, _, mapping = build_from_mujoco(_file(tmp_path, TREES))
+    _, _, mapping, _ = build_from_mujoco(_file(tmp_path, TREES))
     q = robot.random_configuration(rng)
     qpos = mapping.qpos_from_q(q)
     np.testing.assert_allclose(mapping.q_from_qpos(qpos), q, rtol=0, atol=1e-15)
@@ -133,14 +133,14 @@ def test_configuration_maps_round_trip_and_convert_quaternion_order(
 
 
 def test_a_disagreement_with_mujoco_names_the_body_and_both_values(tmp_path: Path) -> None:
-    model, mj, mapping = build_from_mujoco(_models_dir() / "mjcf_acrobot.xml")
+    model, mj, mapping, _ = build_from_mujoco(_models_dir() / "mjcf_acrobot.xml")
     model.armature[1] += 1e-3
     with pytest.raises(
         pinobs.ModelError,
         match=r"M\(q\)\[1, 1\] \(dof of body 'lower_arm'\).*Pinocchio .*MuJoCo mj_fullM",
     ):
         cross_check(model, mj, mapping)
-    model, mj, mapping = build_from_mujoco(_models_dir() / "mjcf_acrobot.xml")
+    model, mj, mapping, _ = build_from_mujoco(_models_dir() / "mjcf_acrobot.xml")
     model.inertias[2] = model.inertias[2] + model.inertias[2]
     with pytest.raises(pinobs.ModelError, match=r"total mass: Pinocchio 3\.0 kg, MuJoCo 2\.0 kg"):
         cross_check(model, mj, mapping)
@@ -206,7 +206,7 @@ def test_dm_control_suite_as_shipped_matches_mujoco(name: str) -> None:
 
     pytest.importorskip("dm_control")
     path = Path(str(importlib.resources.files("dm_control") / "suite" / f"{name}.xml"))
-    model, mj, mapping = build_from_mujoco(path)
+    model, mj, mapping, _ = build_from_mujoco(path)
     total = sum(i.mass for i in model.inertias)
     assert total == pytest.approx(float(mj.body_mass.sum()), rel=1e-9, abs=0)
     assert cross_check(model, mj, mapping, samples=20, seed=2) < MASS_MATRIX_RTOL
@@ -246,3 +246,26 @@ def test_readme_mujoco_benchmark_table_is_the_committed_results() -> None:
     m = re.search(r"<!-- mujoco-bench: [^>]*-->\n(.*?)<!-- end mujoco-bench -->", readme, re.S)
     assert m is not None
     assert m.group(1) in (root / "benchmarks" / "mujoco_truth.md").read_text()
+
+
+def test_visual_geoms_sit_where_mujoco_puts_them(tmp_path: Path, rng: np.random.Generator) -> None:
+    """Every primitive geom's world pose equals MuJoCo's ``geom_xpos``/``geom_xmat``."""
+    import pinocchio as pin
+
+    path = _file(tmp_path, TREES)
+    robot = pinobs.load(path)
+    _, mj, mapping, _ = build_from_mujoco(path)
+    vm = robot.visual_model
+    assert vm is not None and vm.ngeoms == mj.ngeom  # every geom of TREES is a primitive
+    data = mujoco.MjData(mj)
+    for _ in range(3):
+        q = robot.random_configuration(rng, scale=np.pi)
+        data.qpos[:] = mapping.qpos_from_q(q)
+        mujoco.mj_forward(mj, data)
+        gdata = pin.GeometryData(vm)
+        pin.updateGeometryPlacements(robot.model, robot.model.createData(), vm, gdata, q)
+        for g in range(mj.ngeom):
+            np.testing.assert_allclose(gdata.oMg[g].translation, data.geom_xpos[g], atol=1e-12)
+            np.testing.assert_allclose(
+                gdata.oMg[g].rotation, data.geom_xmat[g].reshape(3, 3), atol=1e-12
+            )

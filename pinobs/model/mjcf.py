@@ -151,7 +151,6 @@ def _geometry(mj: Any, where: dict[int, tuple[int, pin.SE3]], name: Any) -> pin.
     are left out.
     """
     import coal  # ships with Pinocchio
-
     import mujoco
 
     geom = pin.GeometryModel()

@@ -118,6 +118,8 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
 
     xml = _MESH_ATTR.sub(_sub, text)
     root = ET.fromstring(text)
+    live = {m.get("filename") for m in root.iter("mesh")}  # not those in comments
+    missing = [uri for uri in missing if uri in live]
     mimics = []
     for joint in root.iter("joint"):
         mimic = joint.find("mimic")

@@ -116,3 +116,19 @@ def test_other_sources_raise_a_type_error_saying_what_is_accepted() -> None:
     assert isinstance(info.value, TypeError)
     with pytest.raises(pinobs.ModelFileError, match="no moving joint"):
         pinobs.load(pin.Model())
+
+
+def test_meshes_in_comments_do_not_count_as_missing(tmp_path: Path) -> None:
+    urdf = tmp_path / "one.urdf"
+    urdf.write_text(
+        """<robot name="one"><link name="base"/>
+        <joint name="j" type="revolute"><parent link="base"/><child link="arm"/>
+          <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+        <link name="arm"><inertial><mass value="1"/>
+          <inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>
+          <!-- <visual><geometry><mesh filename="package://gone/arm.stl"/></geometry></visual> -->
+          <visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual>
+        </link></robot>"""
+    )
+    robot = pinobs.load(urdf)  # no warning (they are errors here)
+    assert robot.visual_model is not None and robot.visual_model.ngeoms == 1

@@ -64,6 +64,13 @@ def test_package_dirs_resolve_meshes_kept_apart_from_the_urdf(
     assert all(pkgs in f.parents for f in _mesh_files(robot))
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(pkgs))
     assert all(pkgs in f.parents for f in _mesh_files(pinobs.load(urdf)))
+    monkeypatch.delenv("ROS_PACKAGE_PATH")
+    prefix = tmp_path / "install"
+    (prefix / "share").mkdir(parents=True)
+    (prefix / "share" / "example-robot-data").symlink_to(pkgs / "example-robot-data")
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(prefix))
+    files = _mesh_files(pinobs.load(urdf))
+    assert len(files) == 7 and all(f.is_file() for f in files)
 
 
 def test_without_meshes_the_dynamics_are_those_of_the_full_model(

@@ -134,3 +134,9 @@ def test_romeo_small_warns_about_its_shoulder_inertia_but_loads() -> None:
         robot = pinobs.load("romeo_small")
     q = robot.random_configuration(np.random.default_rng(0))
     assert np.linalg.eigvalsh(robot.mass_matrix(q))[0] > 0
+
+
+def test_full_romeo_is_refused_for_its_massless_fingers_and_loads_unchecked() -> None:
+    with pytest.raises(pinobs.ModelError, match=r"mass matrix is singular.*along joint '.*Finger"):
+        pinobs.load("romeo")
+    assert pinobs.load("romeo", check=False).nv > 0

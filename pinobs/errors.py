@@ -15,13 +15,17 @@ __all__ = [
     "DimensionError",
     "GainError",
     "IdentificationError",
+    "ModelError",
     "ModelFileError",
+    "ModelTypeError",
+    "ModelWarning",
     "NonFiniteError",
     "NotResetError",
     "ObserverDiverged",
     "OptionError",
     "OutputExistsError",
     "PinobsError",
+    "PinobsWarning",
     "TimestampError",
     "UnknownNameError",
     "UnsupportedRobotError",
@@ -41,6 +45,15 @@ class UnknownNameError(PinobsError, KeyError):
 
 class ModelFileError(PinobsError, FileNotFoundError):
     """A model file that is missing or cannot be parsed."""
+
+
+class ModelTypeError(PinobsError, TypeError):
+    """A robot source that is neither a name, a path, a ``pin.Model`` nor a ``RobotWrapper``."""
+
+
+class ModelError(PinobsError, ValueError):
+    """A model whose dynamics are wrong or unusable (NaN or negative mass, impossible
+    inertia, singular or indefinite mass matrix, mimic joints, a dropped inertial)."""
 
 
 class DimensionError(PinobsError, ValueError):
@@ -95,3 +108,11 @@ class ObserverDiverged(PinobsError, ArithmeticError):
         super().__init__(message)
         self.t = t
         self.last_estimate = last_estimate
+
+
+class PinobsWarning(UserWarning):
+    """Root of every warning pinobs issues on purpose."""
+
+
+class ModelWarning(PinobsWarning):
+    """A model that loads and is usable but not all of it (meshes missing, parser limits)."""

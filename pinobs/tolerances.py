@@ -9,8 +9,11 @@ from __future__ import annotations
 __all__ = [
     "COULOMB_SMOOTHING_VELOCITY",
     "II_ASSUMPTION1_TOL",
+    "INERTIA_TRIANGLE_TOL",
     "JACOBI_FD_STEP",
     "LEFT_INVARIANT_INERTIA_TOL",
+    "MASS_MATRIX_SINGULAR_TOL",
+    "NEGLIGIBLE_MASS_FRACTION",
     "QUATERNION_NORM_TOL",
     "TIME_EPS",
 ]
@@ -42,3 +45,17 @@ JACOBI_FD_STEP = 1e-5
 #: Coulomb friction ``F_c sign(v)`` is smoothed as ``F_c tanh(v / v_s)`` with this
 #: ``v_s`` [rad/s or m/s]: 95 % of the full friction at 2 v_s = 0.02 rad/s.
 COULOMB_SMOOTHING_VELOCITY = 1e-2
+
+#: A body's principal moments may break ``I₃ ≤ I₁ + I₂`` (or dip below zero) by
+#: this fraction of ``I₃`` before :func:`pinobs.load` refuses it: published
+#: inertias are rounded to 3-6 digits, and flat plates sit exactly on the bound.
+INERTIA_TRIANGLE_TOL = 1e-3
+
+#: Bodies lighter than this fraction of the robot's total mass are placeholders
+#: (1 mg dummy links): the inertia-shape checks skip them.
+NEGLIGIBLE_MASS_FRACTION = 1e-6
+
+#: ``M(q)`` counts as singular when ``λ_min ≤`` this ``· λ_max``.  Every
+#: example-robot-data robot that loads has ``λ_min/λ_max ≥ 5e-8`` at random
+#: configurations; a joint moving only massless links gives ~1e-17.
+MASS_MATRIX_SINGULAR_TOL = 1e-12

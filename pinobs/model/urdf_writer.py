@@ -66,8 +66,8 @@ def write_urdf(robot: Robot, path: str | Path) -> str:
     """
     tree = ET.parse(_source_urdf(robot))
     root = tree.getroot()
-    links = {link.get("name"): link for link in root.iter("link")}
-    joints = {joint.get("name"): joint for joint in root.iter("joint")}
+    links = {link.get("name"): link for link in root.findall("link")}
+    joints = {joint.get("name"): joint for joint in root.findall("joint")}  # not <transmission>s
     model = robot.model
     for i in range(1, model.njoints):
         frames = [f for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == i]

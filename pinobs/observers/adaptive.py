@@ -76,7 +76,7 @@ class _State(NamedTuple):
     s: Vector  # estimated model-based velocity error variance per coordinate [rad²/s²]
     q: Vector  # blended output
     v: Vector
-    pending: tuple[float, Vector | None, Vector] | None  # last committed sample
+    pending: tuple[float, Vector | None] | None  # last committed sample, taught with the next torque
 
 
 class _Learner:
@@ -113,14 +113,16 @@ class _Learner:
         self.installs = 0
         self.validated = False  # a solve has checked the current model against the data
         self.last_drop = np.nan
+        self.history: list[tuple[float, float]] = []  # (loss of the current model, of the solve)
         self.rejected: list[str] = []
 
     def add(self, t: float, q: Vector | None, tau: Vector) -> bool:
-        """Add one sample; returns True when a new model was solved for."""
-        if q is None or (self.buf and abs(t - self.buf[-1][0] - self.h) > 0.1 * self.h):
+        """Add the sample ``q`` taken at ``t`` and the torque ``tau`` applied from ``t`` on
+        (``q`` None: no sample, nothing added); returns True when a new model was solved for."""
+        if q is None:
+            return False  # a lost sample shows as a gap in the times below
+        if self.buf and abs(t - self.buf[-1][0] - self.h) > 0.1 * self.h:
             self.buf.clear()  # a gap: windows never straddle one
-            if q is None:
-                return False
         self.buf.append((t, q, tau))
         need = self.win + 2 * self.hw + 1
         if len(self.buf) >= need:
@@ -168,7 +170,10 @@ class _Learner:
         # Model selection: keep the current model unless the new one explains the rows better
         # than fitting noise would (robust loss drop above rank + 3√rank, in units of ½χ²).
         current = self.reg.nominal() if self.theta is None else self.theta
-        drop = _huber_loss(A @ current - y, sol.sigma) - _huber_loss(A @ theta - y, sol.sigma)
+        loss_cur = _huber_loss(A @ current - y, sol.sigma)
+        loss_new = _huber_loss(A @ theta - y, sol.sigma)
+        drop = loss_cur - loss_new
+        self.history.append((loss_cur, loss_new))
         self.solves += 1
         self.validated = True
         self.std, self.excited = sol.std, sol.excited
@@ -375,7 +380,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
         ekf = state.ekf
-        if state.pending is not None and self._learner.add(*state.pending):
+        # the pending sample's torque is the one held from it on: this step's (MATH §7)
+        if state.pending is not None and self._learner.add(*state.pending, tau):
             ekf = self._install(ekf)
         elif self._learner.validated and self.gains.accel_psd != self._accel_psd:
             ekf = self._trust(ekf)  # the nominal model explains the data: leave the warm-up
@@ -392,7 +398,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             s = s + lam * (blame * np.maximum(e * e - kf.P[1, 1], 0.0) - s)
         t = state.t + dt
         learn_q = None if ekf.gated else q_meas  # an outlier teaches nothing
-        new = _State(ekf, kf, t, s, ekf.q, ekf.v, (t, learn_q, tau))
+        new = _State(ekf, kf, t, s, ekf.q, ekf.v, (t, learn_q))
         if self.blend:
             w = self._weights(new)
             v = w * ekf.v + (1.0 - w) * kf.v

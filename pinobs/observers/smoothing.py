@@ -63,7 +63,6 @@ from pinobs.observers.base import Vector, make_observer, observer_class, observe
 
 __all__ = [
     "DEFAULT_ACCEL_PSD",
-    "DEFAULT_OVERLAP",
     "LogLike",
     "SmoothableFilter",
     "Smoothed",
@@ -76,8 +75,8 @@ DEFAULT_ACCEL_PSD = 1e-8
 #: Log-likelihood margin [nats] of :func:`select_accel_psd`: χ²₁(0.95)/2.
 LIKELIHOOD_MARGIN = 1.92
 
-#: Default overlap of the chunked smoother [s] (see :func:`smooth` for the agreement it gives).
-DEFAULT_OVERLAP = 0.5
+#: Relative agreement the default overlap aims at: ``|v_chunked − v_whole| ≤ CHUNK_TOL · v_std``.
+CHUNK_TOL = 1e-6
 
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -206,13 +205,32 @@ def _backward(
         emit(i, q_s, x_s[:nv], np.diag(P_s))
 
 
+def default_overlap(accel_psd: float, meas_std: float, dt: float, tol: float = CHUNK_TOL) -> float:
+    """The overlap [s] after which a window's start-up error has decayed to ``tol`` of ``v_std``.
+
+    The filter of a double integrator with white acceleration ``q_w``
+    [rad²/s³] measured with noise ``σ`` every ``h`` [s] has the bandwidth
+    ``ω = (q_w / r)^{1/4}`` [rad/s], ``r = σ² h`` the density of the noise and poles ``ω e^{±3iπ/4}`` (damping
+    1/√2); the smoother's backward recursion forgets its end condition at the
+    same rate ``ω/√2``, hence ``overlap = √2 ln(1/tol) / ω``.  A robot's
+    dynamics shift the poles little at the gains where this matters (tested
+    against the whole-log smoother: :mod:`tests.observers.test_smoothing`).
+    """
+    omega = (accel_psd / (meas_std**2 * dt)) ** 0.25
+    return math.sqrt(2.0) * math.log(1.0 / tol) / omega
+
+
 def _samples(seconds: float, dt: float, what: str) -> int:
     positive(what, seconds)
     return max(1, math.ceil(seconds / dt - 1e-9))
 
 
 class LogLike(Protocol):
-    """Anything with a log's arrays (:class:`pinobs.simulation.Log`, :class:`pinobs.Result`)."""
+    """Anything with a log's arrays ``t``, ``q`` (measured), ``tau``: :class:`pinobs.simulation.Log`.
+
+    (Not a :class:`pinobs.Result`, whose ``q`` is the truth: pass
+    ``(res.t, res.q_meas, res.tau)``.)
+    """
 
     @property
     def t(self) -> Vector: ...
@@ -265,6 +283,10 @@ def _log_arrays(
     return t_arr, q_arr, tau_arr
 
 
+def _smoothable(cls: type) -> bool:
+    return all(callable(getattr(cls, m, None)) for m in ("_predict", "_correct"))
+
+
 def _make_filter(
     robot: Robot,
     observer: str,
@@ -273,9 +295,8 @@ def _make_filter(
     disturbance_psd: float | None,
     filter_options: Mapping[str, Any] | None,
 ) -> SmoothableFilter:
-    cls = observer_class(observer)
-    if not all(hasattr(cls, m) for m in ("_predict", "_correct")):
-        smoothable = [n for n in observer_names() if hasattr(observer_class(n), "_correct")]
+    if not _smoothable(observer_class(observer)):
+        smoothable = [n for n in observer_names() if _smoothable(observer_class(n))]
         raise OptionError(
             f"observer {observer!r} keeps no error-state covariance to smooth; "
             f"smoothable: {smoothable}"
@@ -359,8 +380,7 @@ def smooth(
     Args:
         robot: the model (the filter's process model).
         log: ``(t, q)`` or ``(t, q, tau)`` arrays, or an object with ``t``,
-            ``q``, ``tau`` attributes (:class:`pinobs.simulation.Log`,
-            :class:`pinobs.Result`): times [s] ``(N,)`` strictly increasing;
+            ``q``, ``tau`` attributes (:class:`pinobs.simulation.Log`): times [s] ``(N,)`` strictly increasing;
             measured configurations ``(N, nq)``, a row with a non-finite entry
             being a dropped sample (predicted over, not corrected with; rows
             before the first good one get NaN); torques applied from each
@@ -374,7 +394,8 @@ def smooth(
         chunk: memory bound: the backward pass runs on windows of ``chunk``
             seconds (``None``: the whole log at once).
         overlap: seconds of later samples each window's backward pass starts
-            from (default :data:`DEFAULT_OVERLAP`).
+            from (default :func:`default_overlap`: agreement with the whole-log
+            smoother to :data:`CHUNK_TOL` of ``v_std``).
         lag: fixed-lag mode [s]: chunks of ``lag`` with ``lag`` of overlap
             (exclusive with ``chunk`` and ``overlap``).
         filter_options: further options of the filter (``q0_std``, ``v0_std``, ...).
@@ -397,7 +418,10 @@ def smooth(
         n_chunk = n_over = _samples(lag, dt, "lag")
     elif chunk is not None:
         n_chunk = _samples(chunk, dt, "chunk")
-        n_over = _samples(DEFAULT_OVERLAP if overlap is None else overlap, dt, "overlap")
+        if overlap is None:
+            gains = cast(Any, filt).gains
+            overlap = default_overlap(gains.accel_psd, gains.meas_std, dt)
+        n_over = _samples(overlap, dt, "overlap")
     else:
         if overlap is not None:
             positive("overlap", overlap)

@@ -6,6 +6,7 @@ pinobs run --robot R --observer O [...]        one simulation: a results table, 
 pinobs play RESULT.npz [--html F] [--plot F]   watch a saved run
 pinobs demo                                    the main job on a built-in default
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
+    [--smooth [--lag S] [--accel-psd P|auto]]             RTS smoother over the ekf, v_std0.. columns
 pinobs check ii --robot R                      I&I Assumption 1 on the model
 pinobs bench [--quick] [--json FILE]           accuracy and cost against the baselines
 """
@@ -23,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from pinobs.errors import PinobsError, UnsupportedRobotError
+from pinobs.errors import GainError, PinobsError, UnsupportedRobotError
 from pinobs.evaluation import evaluate, format_table
 from pinobs.model import Robot, aba_time, load, robot_entries
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
@@ -255,6 +256,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
+    if args.smooth:
+        return _estimate_smoothed(args)
     robot = load(args.robot, root_joint=args.root_joint)
     log = read_log(args.log, robot)
     dt = float(np.nanmedian(np.diff(log.t))) if log.t.size > 1 else math.nan
@@ -282,6 +285,53 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     print(
         f"{observer.name} on {robot.name}: {log.t.size} rows, {used} estimated, {len(run.bad_rows)} bad; wrote {path}"
     )
+    return 0
+
+
+# ------------------------------------------------- estimate --smooth (issue 19)
+def _estimate_smoothed(args: argparse.Namespace) -> int:
+    """``estimate --smooth``: the RTS smoother over the log; ``estimate``'s columns plus ``v_std0..``."""
+    from pinobs.observers.smoothing import select_accel_psd, smooth
+
+    robot = load(args.robot, root_joint=args.root_joint)
+    log = read_log(args.log, robot)
+    for line, reason in log.problems[: args.max_reports]:
+        print(f"{args.log}:{line}: {reason} (row used as a dropped sample)", file=sys.stderr)
+    if log.tau is None:
+        print(
+            "warning: the log has no torque columns: the smoother assumes zero torque",
+            file=sys.stderr,
+        )
+    if args.noise is None:
+        raise GainError(
+            "--smooth needs --noise: the position noise standard deviation [rad or m], > 0"
+        )
+    if args.accel_psd == "auto":
+        psd = select_accel_psd(robot, log, noise_std=args.noise, observer=args.observer)
+        print(f"accel_psd = {psd:g} rad²/s³ (largest the log does not reject)", file=sys.stderr)
+    else:
+        psd = float(args.accel_psd)
+    res = smooth(
+        robot, log, observer=args.observer, noise_std=args.noise, accel_psd=psd, lag=args.lag
+    )
+    header = [
+        "t",
+        *(f"q{i}" for i in range(robot.nq)),
+        *(f"v{i}" for i in range(robot.nv)),
+        *(f"v_std{i}" for i in range(robot.nv)),
+    ]
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.savetxt(
+        out,
+        np.column_stack([res.t, res.q, res.v, res.v_std]),
+        delimiter=",",
+        header=",".join(header),
+        comments="",
+        fmt="%.17g",
+    )
+    mode = "whole log" if args.lag is None else f"lag {args.lag:g} s"
+    print(f"smoothed {args.observer} on {robot.name} ({mode}): {log.t.size} rows; wrote {out}")
     return 0
 
 
@@ -422,6 +472,19 @@ def _parser() -> argparse.ArgumentParser:
         "--max-reports", type=int, default=20, help="bad rows listed at most (default %(default)s)"
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--smooth",
+        action="store_true",
+        help="RTS smoother (uses the whole log); adds v_std0.. columns; needs --noise",
+    )
+    p.add_argument(
+        "--lag", type=float, default=None, help="with --smooth: fixed-lag mode, S seconds"
+    )
+    p.add_argument(
+        "--accel-psd",
+        default="1e-8",
+        help="with --smooth: process noise [rad²/s³], or 'auto' (likelihood); default %(default)s",
+    )
     p.set_defaults(func=_cmd_estimate)
 
     p = sub.add_parser(

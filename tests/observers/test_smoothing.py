@@ -223,3 +223,33 @@ def test_smoother_targets_on_exact_model_logs(name: str, sigma: float) -> None:
     cover = np.mean(np.abs(s.v - res.v)[late] <= 2 * s.v_std[late])
     assert rms_f / rms_s >= 3.0
     assert 0.90 <= cover <= 0.98
+
+
+def test_cli_estimate_smooth_writes_estimate_columns_plus_v_std(tmp_path, ur5_log) -> None:
+    from pinobs.cli import main
+    from pinobs.simulation import write_log
+
+    rows = slice(1, 301)
+    log = write_log(tmp_path / "log.csv", ur5_log.t[rows], ur5_log.q_meas[rows], ur5_log.tau[rows])
+    out = tmp_path / "est.csv"
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log), "--out", str(out)]
+    assert main([*argv, "--smooth", "--noise", "1e-4", "--lag", "0.05", "--accel-psd", "1e-4"]) == 0
+    header = out.read_text().splitlines()[0].split(",")
+    assert header == [
+        "t",
+        *(f"q{i}" for i in range(6)),
+        *(f"v{i}" for i in range(6)),
+        *(f"v_std{i}" for i in range(6)),
+    ]
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert data.shape == (300, 19)
+    want = smooth(
+        cached_robot("ur5"),
+        (ur5_log.t[rows], ur5_log.q_meas[rows], ur5_log.tau[rows]),
+        noise_std=1e-4,
+        accel_psd=1e-4,
+        lag=0.05,
+    )
+    np.testing.assert_allclose(data[:, 7:13], want.v, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(data[:, 13:], want.v_std, rtol=0, atol=1e-15)
+    assert main([*argv, "--smooth"]) != 0  # no --noise: refused with a message

@@ -119,15 +119,15 @@ def main(out: Path, repeats: int, duration: float) -> str:
         )
     text = "\n".join(
         [
-            "## Accuracy (velocity RMS [rad/s], t > 0.5 s)",
+            "#### Accuracy (velocity RMS [rad/s], t > 0.5 s)",
             "",
             *acc,
             "",
-            "## Fixed lag against the whole-log smoother (rts (auto))",
+            "#### Fixed lag against the whole-log smoother (rts (auto))",
             "",
             *lag_rows,
             "",
-            f"## Cost (median of {repeats} interleaved runs; shared, loaded machine)",
+            f"#### Cost (median of {repeats} interleaved runs; shared, loaded machine)",
             "",
             *cost_rows,
             "",

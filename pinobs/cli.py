@@ -289,9 +289,18 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------- estimate --smooth (issue 19)
+def _psd_or_auto(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number [rad²/s³] or 'auto'") from None
+
+
 def _estimate_smoothed(args: argparse.Namespace) -> int:
     """``estimate --smooth``: the RTS smoother over the log; ``estimate``'s columns plus ``v_std0..``."""
-    from pinobs.observers.smoothing import select_accel_psd, smooth
+    from pinobs.observers.smoothing import smooth
 
     robot = load(args.robot, root_joint=args.root_joint)
     log = read_log(args.log, robot)
@@ -306,14 +315,19 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
         raise GainError(
             "--smooth needs --noise: the position noise standard deviation [rad or m], > 0"
         )
-    if args.accel_psd == "auto":
-        psd = select_accel_psd(robot, log, noise_std=args.noise, observer=args.observer)
-        print(f"accel_psd = {psd:g} rad²/s³ (largest the log does not reject)", file=sys.stderr)
-    else:
-        psd = float(args.accel_psd)
     res = smooth(
-        robot, log, observer=args.observer, noise_std=args.noise, accel_psd=psd, lag=args.lag
+        robot,
+        log,
+        observer=args.observer,
+        noise_std=args.noise,
+        accel_psd=args.accel_psd,
+        lag=args.lag,
     )
+    if args.accel_psd == "auto":
+        print(
+            f"accel_psd = {res.options['accel_psd']:g} rad²/s³ (chosen from the log)",
+            file=sys.stderr,
+        )
     header = [
         "t",
         *(f"q{i}" for i in range(robot.nq)),
@@ -482,8 +496,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--accel-psd",
-        default="1e-8",
-        help="with --smooth: process noise [rad²/s³], or 'auto' (likelihood); default %(default)s",
+        type=_psd_or_auto,
+        default=1e-8,
+        help="with --smooth: process noise [rad²/s³], or 'auto' (chosen by likelihood); default %(default)s",
     )
     p.set_defaults(func=_cmd_estimate)
 

@@ -253,3 +253,23 @@ def test_cli_estimate_smooth_writes_estimate_columns_plus_v_std(tmp_path, ur5_lo
     np.testing.assert_allclose(data[:, 7:13], want.v, rtol=0, atol=1e-12)
     np.testing.assert_allclose(data[:, 13:], want.v_std, rtol=0, atol=1e-15)
     assert main([*argv, "--smooth"]) != 0  # no --noise: refused with a message
+
+
+def test_readme_smoothing_table_is_the_committed_benchmark_file() -> None:
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "README.md").read_text()
+    start = text.index("<!-- bench: benchmarks/smoothing.md -->\n") + len(
+        "<!-- bench: benchmarks/smoothing.md -->\n"
+    )
+    shown = text[start : text.index("<!-- end smoothing bench -->")]
+    assert shown == (root / "benchmarks" / "smoothing.md").read_text()
+
+
+def test_auto_accel_psd_needs_the_noise_and_strings_other_than_auto_are_refused(ur5_log) -> None:
+    robot = cached_robot("ur5")
+    with pytest.raises(GainError, match="needs noise_std"):
+        smooth(robot, _log(ur5_log), accel_psd="auto")
+    with pytest.raises(GainError, match="or 'auto'"):
+        smooth(robot, _log(ur5_log), noise_std=1e-4, accel_psd="big")  # type: ignore[arg-type]

@@ -83,11 +83,15 @@ from pinobs.model.robot import read_only
 from pinobs.observers.base import Vector, make_observer, observer_class, observer_names, positive
 
 __all__ = [
+    "CHUNK_TOL",
     "DEFAULT_ACCEL_PSD",
     "DEFAULT_GRID",
+    "LIKELIHOOD_MARGIN",
     "LogLike",
     "SmoothableFilter",
     "Smoothed",
+    "default_overlap",
+    "select_accel_psd",
     "smooth",
 ]
 
@@ -105,17 +109,6 @@ CHUNK_TOL = 1e-6
 
 
 _LOG_2PI = math.log(2.0 * math.pi)
-
-
-class _GaussState(Protocol):
-    """What the smoother reads from a filter state: the mean and the error covariance."""
-
-    @property
-    def q(self) -> Vector: ...
-    @property
-    def v(self) -> Vector: ...
-    @property
-    def P(self) -> Vector: ...
 
 
 class SmoothableFilter(Protocol):
@@ -234,9 +227,9 @@ def default_overlap(accel_psd: float, meas_std: float, dt: float, tol: float = C
     """The overlap [s] after which a window's start-up error has decayed to ``tol`` of ``v_std``.
 
     The filter of a double integrator with white acceleration ``q_w``
-    [rad²/s³] measured with noise ``σ`` every ``h`` [s] has the bandwidth
-    ``ω = (q_w / r)^{1/4}`` [rad/s], ``r = σ² h`` the density of the noise and poles ``ω e^{±3iπ/4}`` (damping
-    1/√2); the smoother's backward recursion forgets its end condition at the
+    [rad²/s³] measured with noise ``σ`` [rad] every ``h`` [s] (a noise
+    density ``r = σ² h``) has the bandwidth ``ω = (q_w / r)^{1/4}`` [rad/s]
+    and the poles ``ω e^{±3iπ/4}`` (damping 1/√2); the smoother's backward recursion forgets its end condition at the
     same rate ``ω/√2``, hence ``overlap = √2 ln(1/tol) / ω``.  A robot's
     dynamics shift the poles little at the gains where this matters (tested
     against the whole-log smoother: :mod:`tests.observers.test_smoothing`).
@@ -253,8 +246,8 @@ def _samples(seconds: float, dt: float, what: str) -> int:
 class LogLike(Protocol):
     """Anything with a log's arrays ``t``, ``q`` (measured), ``tau``: :class:`pinobs.simulation.Log`.
 
-    (Not a :class:`pinobs.Result`, whose ``q`` is the truth: pass
-    ``(res.t, res.q_meas, res.tau)``.)
+    An object that also has ``q_meas`` (a :class:`pinobs.Result`, whose ``q`` is
+    the truth) is read through ``q_meas``.
     """
 
     @property
@@ -274,7 +267,8 @@ def _log_arrays(
             raise DimensionError(f"log is a tuple of {len(log)} arrays; give (t, q) or (t, q, tau)")
         t, q, tau = (*log, None)[:3]
     else:
-        t, q, tau = log.t, log.q, log.tau
+        # a Result's q is the truth: its measurements are q_meas
+        t, q, tau = log.t, getattr(log, "q_meas", log.q), log.tau
     t_arr = np.asarray(t, dtype=float)
     q_arr = np.asarray(q, dtype=float)
     if t_arr.ndim != 1 or t_arr.size < 2:
@@ -405,7 +399,8 @@ def smooth(
     Args:
         robot: the model (the filter's process model).
         log: ``(t, q)`` or ``(t, q, tau)`` arrays, or an object with ``t``,
-            ``q``, ``tau`` attributes (:class:`pinobs.simulation.Log`): times [s] ``(N,)`` strictly increasing;
+            ``q``, ``tau`` attributes (:class:`pinobs.simulation.Log`; a
+            :class:`pinobs.Result` is read through its ``q_meas``): times [s] ``(N,)`` strictly increasing;
             measured configurations ``(N, nq)``, a row with a non-finite entry
             being a dropped sample (predicted over, not corrected with; rows
             before the first good one get NaN); torques applied from each

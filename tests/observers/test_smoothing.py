@@ -301,3 +301,11 @@ def test_auto_accel_psd_needs_the_noise_and_strings_other_than_auto_are_refused(
         smooth(robot, _log(ur5_log), accel_psd="auto")
     with pytest.raises(GainError, match="or 'auto'"):
         smooth(robot, _log(ur5_log), noise_std=1e-4, accel_psd="big")  # type: ignore[arg-type]
+
+
+def test_a_result_is_read_through_its_measurements_not_its_truth(ur5_log) -> None:
+    robot = cached_robot("ur5")
+    from_result = smooth(robot, ur5_log, noise_std=1e-4, accel_psd=1e-2)
+    from_log = smooth(robot, _log(ur5_log), noise_std=1e-4, accel_psd=1e-2)
+    np.testing.assert_array_equal(from_result.v, from_log.v)
+    assert np.isnan(from_result.v[0, 0])  # sample 0 is not measured (its truth is known)

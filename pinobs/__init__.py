@@ -26,6 +26,7 @@ from pinobs.errors import (
 from pinobs.evaluation import Metrics, evaluate
 from pinobs.model import Robot, load, robot_names
 from pinobs.observers import Estimate, Observer, make_observer, observer_names
+from pinobs.observers.smoothing import Smoothed, smooth
 from pinobs.simulation import Result, Sensor, simulate
 
 __version__ = "0.1.0"
@@ -50,6 +51,7 @@ __all__ = [
     "Result",
     "Robot",
     "Sensor",
+    "Smoothed",
     "TimestampError",
     "UnknownNameError",
     "UnsupportedRobotError",
@@ -59,4 +61,5 @@ __all__ = [
     "observer_names",
     "robot_names",
     "simulate",
+    "smooth",
 ]

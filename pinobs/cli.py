@@ -6,6 +6,7 @@ pinobs run --robot R --observer O [...]        one simulation: a results table, 
 pinobs play RESULT.npz [--html F] [--plot F]   watch a saved run
 pinobs demo                                    the main job on a built-in default
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
+    [--smooth [--lag S] [--accel-psd P|auto]]             RTS smoother over the ekf, v_std0.. columns
 pinobs check ii --robot R                      I&I Assumption 1 on the model
 pinobs bench [--quick] [--json FILE]           accuracy and cost against the baselines
 """
@@ -23,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from pinobs.errors import OutputExistsError, PinobsError, UnsupportedRobotError
+from pinobs.errors import GainError, OutputExistsError, PinobsError, UnsupportedRobotError
 from pinobs.evaluation import evaluate, format_table
 from pinobs.model import Robot, aba_time, load, robot_entries
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
@@ -277,6 +278,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
+    if args.smooth:
+        return _estimate_smoothed(args)
     robot = load(args.robot, root_joint=args.root_joint)
     log = read_log(args.log, robot)
     dt = float(np.nanmedian(np.diff(log.t))) if log.t.size > 1 else math.nan
@@ -382,6 +385,67 @@ def _cmd_excite(args: argparse.Namespace) -> int:
         f"{exc.condition:.3g}; peak |v| {np.abs(exc.v).max():.3g} rad/s, peak |tau| "
         f"{np.abs(exc.tau).max():.3g} N·m (nominal model)"
     )
+    return 0
+
+
+# ------------------------------------------------- estimate --smooth (issue 19)
+def _psd_or_auto(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number [rad²/s³] or 'auto'") from None
+
+
+def _estimate_smoothed(args: argparse.Namespace) -> int:
+    """``estimate --smooth``: the RTS smoother over the log; ``estimate``'s columns plus ``v_std0..``."""
+    from pinobs.observers.smoothing import smooth
+
+    robot = load(args.robot, root_joint=args.root_joint)
+    log = read_log(args.log, robot)
+    for line, reason in log.problems[: args.max_reports]:
+        print(f"{args.log}:{line}: {reason} (row used as a dropped sample)", file=sys.stderr)
+    if log.tau is None:
+        print(
+            "warning: the log has no torque columns: the smoother assumes zero torque",
+            file=sys.stderr,
+        )
+    if args.noise is None:
+        raise GainError(
+            "--smooth needs --noise: the position noise standard deviation [rad or m], > 0"
+        )
+    res = smooth(
+        robot,
+        log,
+        observer=args.observer,
+        noise_std=args.noise,
+        accel_psd=args.accel_psd,
+        lag=args.lag,
+    )
+    if args.accel_psd == "auto":
+        print(
+            f"accel_psd = {res.options['accel_psd']:g} rad²/s³ (chosen from the log)",
+            file=sys.stderr,
+        )
+    header = [
+        "t",
+        *(f"q{i}" for i in range(robot.nq)),
+        *(f"v{i}" for i in range(robot.nv)),
+        *(f"v_std{i}" for i in range(robot.nv)),
+    ]
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.savetxt(
+        out,
+        np.column_stack([res.t, res.q, res.v, res.v_std]),
+        delimiter=",",
+        header=",".join(header),
+        comments="",
+        fmt="%.17g",
+    )
+    mode = "whole log" if args.lag is None else f"lag {args.lag:g} s"
+    print(f"smoothed {args.observer} on {robot.name} ({mode}): {log.t.size} rows; wrote {out}")
     return 0
 
 
@@ -522,6 +586,20 @@ def _parser() -> argparse.ArgumentParser:
         "--max-reports", type=int, default=20, help="bad rows listed at most (default %(default)s)"
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--smooth",
+        action="store_true",
+        help="RTS smoother (uses the whole log); adds v_std0.. columns; needs --noise",
+    )
+    p.add_argument(
+        "--lag", type=float, default=None, help="with --smooth: fixed-lag mode, S seconds"
+    )
+    p.add_argument(
+        "--accel-psd",
+        type=_psd_or_auto,
+        default=1e-8,
+        help="with --smooth: process noise [rad²/s³], or 'auto' (chosen by likelihood); default %(default)s",
+    )
     p.set_defaults(func=_cmd_estimate)
 
     p = sub.add_parser(

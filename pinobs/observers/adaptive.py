@@ -76,7 +76,9 @@ class _State(NamedTuple):
     s: Vector  # estimated model-based velocity error variance per coordinate [rad²/s²]
     q: Vector  # blended output
     v: Vector
-    pending: tuple[float, Vector | None] | None  # last committed sample, taught with the next torque
+    pending: (
+        tuple[float, Vector | None] | None
+    )  # last committed sample, taught with the next torque
 
 
 class _Learner:
@@ -224,6 +226,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     """
 
     name = "adaptive"
+    #: not for :func:`pinobs.smooth` (yet): its model changes between re-solves
+    smoothable = False
     summary = "EKF that identifies its model online, blended with kf: never behind it (model-based)"
 
     def __init__(

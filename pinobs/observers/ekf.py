@@ -339,6 +339,8 @@ class ExtendedKalmanFilter(Observer[_State]):
     """
 
     name = "ekf"
+    #: :func:`pinobs.smooth` can run its backward pass over this filter's states.
+    smoothable = True
     summary = "extended Kalman filter on the manifold, exact model (model-based baseline)"
 
     def __init__(

@@ -28,9 +28,7 @@ def test_given_latency_restores_the_no_latency_accuracy(name: str) -> None:
     unknown, 3.0e-5 with latency=1e-3 given (3 ms: 1.25e-2 and 3.0e-5)."""
     robot = pinobs.load("ur5")
     clean = pinobs.simulate(robot, [], duration=3.0, sensor=Sensor(noise_std=1e-4), seed=1)
-    late = pinobs.simulate(
-        robot, [], duration=3.0, sensor=Sensor(noise_std=1e-4, delay=2), seed=1
-    )
+    late = pinobs.simulate(robot, [], duration=3.0, sensor=Sensor(noise_std=1e-4, delay=2), seed=1)
     base, _ = _rms(robot, clean, name)
     unknown, _ = _rms(robot, late, name)
     given, _ = _rms(robot, late, name, latency=2e-3)

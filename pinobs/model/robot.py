@@ -24,6 +24,7 @@ Conventions (Pinocchio's, see ``../shared/MATH.md`` §1-3):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,6 +38,10 @@ from pinobs.tolerances import COULOMB_SMOOTHING_VELOCITY, QUATERNION_NORM_TOL
 __all__ = ["JointBlock", "Robot", "read_only"]
 
 Vector = NDArray[np.floating[Any]]
+#: Builds ``(visual, collision)`` geometry for a model, on demand (a picklable callable).
+GeometryLoader = Callable[
+    [pin.Model], tuple["pin.GeometryModel | None", "pin.GeometryModel | None"]
+]
 
 
 @dataclass(frozen=True)
@@ -90,8 +95,10 @@ class Robot:
         model: the Pinocchio model (gravity included).
         name: short name (registry name or file stem).
         source: where the model came from (registry name or file path).
-        visual_model: Pinocchio visual geometry, or ``None``.
-        collision_model: Pinocchio collision geometry, or ``None``.
+        visual_model: Pinocchio visual geometry, or ``None``; built on first
+            access when the robot came with a ``geometry`` loader (meshes are
+            slow to load and large: only drawing needs them).
+        collision_model: Pinocchio collision geometry, or ``None`` (same).
         friction: whether the model's joint friction (URDF ``<dynamics>``) is
             part of the dynamics (:meth:`friction_torque`).
         has_friction: whether that friction is nonzero.
@@ -109,13 +116,16 @@ class Robot:
         collision_model: pin.GeometryModel | None = None,
         friction: bool = False,
         root_joint: str | None = None,
+        geometry: GeometryLoader | None = None,
     ) -> None:
         self.model = model
         self.root_joint = root_joint
         self.name = name
         self.source = source
-        self.visual_model = visual_model
-        self.collision_model = collision_model
+        self._geometry_loader = geometry
+        self._geometry: tuple[Any, Any] | None = None  # (visual, collision) once built or given
+        if visual_model is not None or collision_model is not None or geometry is None:
+            self._geometry = (visual_model, collision_model)
         self._data = model.createData()
         # Joint friction from the URDF <dynamics damping="…" friction="…"/> tags (Pinocchio
         # loads them into model.damping / model.friction but its ABA ignores them).
@@ -154,6 +164,56 @@ class Robot:
         self._vector_space = model.nq == model.nv and all(b.kind == "vector" for b in self.joints)
         self._lower = np.tril_indices(model.nv, -1)  # where Pinocchio may leave M⁻¹ unfilled
 
+    # ---------------------------------------------------------------- geometry
+    @property
+    def visual_model(self) -> Any:
+        """Pinocchio visual geometry (``pin.GeometryModel``) or ``None``, built on first access."""
+        return self._geometry_models()[0]
+
+    @visual_model.setter
+    def visual_model(self, value: Any) -> None:
+        self._geometry = (value, self._geometry_models()[1])
+
+    @property
+    def collision_model(self) -> Any:
+        """Pinocchio collision geometry (``pin.GeometryModel``) or ``None``, built on first access."""
+        return self._geometry_models()[1]
+
+    @collision_model.setter
+    def collision_model(self, value: Any) -> None:
+        self._geometry = (self._geometry_models()[0], value)
+
+    def _geometry_models(self) -> tuple[Any, Any]:
+        if self._geometry is None:
+            loader = self._geometry_loader
+            self._geometry = (None, None) if loader is None else loader(self.model)
+        return self._geometry
+
+    def _geometry_kwargs(self) -> dict[str, Any]:
+        """What a copy needs to share this robot's geometry, loaded or not."""
+        if self._geometry is None:
+            return {"geometry": self._geometry_loader}
+        return {
+            "visual_model": self._geometry[0],
+            "collision_model": self._geometry[1],
+            "geometry": self._geometry_loader,
+        }
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without ``pin.Data`` (rebuilt) and, when a loader can rebuild it, without
+        the geometry (meshes: a UR5's is 187 MB): it is reloaded on first access."""
+        state = self.__dict__.copy()
+        for k in ("_data", "_free_data"):
+            del state[k]
+        if self._geometry_loader is not None:
+            state["_geometry"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._data = self.model.createData()
+        self._free_data = self._free.createData()
+
     # ------------------------------------------------------------------ basics
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, nq={self.nq}, nv={self.nv})"
@@ -189,10 +249,9 @@ class Robot:
             self.model.copy(),
             name=self.name,
             source=self.source,
-            visual_model=self.visual_model,
-            collision_model=self.collision_model,
             friction=self.friction,
             root_joint=self.root_joint,
+            **self._geometry_kwargs(),
         )
 
     def perturbed(
@@ -248,10 +307,9 @@ class Robot:
             model,
             name=name or f"{self.name}~",
             source=self.source,
-            visual_model=self.visual_model,
-            collision_model=self.collision_model,
             friction=friction,
             root_joint=self.root_joint,
+            **self._geometry_kwargs(),
         )
 
     # ------------------------------------------------------------- validation

@@ -51,8 +51,10 @@ def lie_rk4(robot: Robot, q: Vector, x: Vector, h: float, rhs: Rhs) -> tuple[Vec
     exact_frame = not robot.has_lie_group_joints
 
     def xi_dot(xi: Vector, u: Vector) -> Vector:
-        if exact_frame or not np.any(xi):
+        if exact_frame or not xi.any():
             return u
+        if isinstance(robot, Robot):  # joint by joint, closed forms
+            return robot.integrate_jacobian_solve(q, xi, u)
         return np.linalg.solve(robot.integrate_jacobian(q, xi), u)
 
     zero = np.zeros(robot.nv)

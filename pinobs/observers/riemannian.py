@@ -323,6 +323,8 @@ def jacobi_term(
 
 def _ad_matrix(robot: Robot, x: Vector) -> Vector:
     """``ad_x`` as a matrix: column j is ``[x, E_j]`` (used where there are Lie-group joints)."""
+    if isinstance(robot, Robot):
+        return robot.bracket_matrix(x)  # block by block, no loop over the columns
     return np.column_stack([robot.bracket(x, e) for e in np.eye(robot.nv)])
 
 

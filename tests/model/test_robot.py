@@ -71,3 +71,14 @@ def test_loading_builds_no_geometry_until_it_is_asked_for() -> None:
     assert robot.copy()._geometry is None
     assert robot.collision_model.ngeoms > 0
     assert robot.copy().collision_model is robot.collision_model  # copies share what is loaded
+
+
+@pytest.mark.parametrize(("name", "root"), [("top", None), ("go1", None), ("planar_3r", "planar")])
+def test_integrate_jacobian_solve_is_the_dense_solve(name: str, root: str | None) -> None:
+    robot = pinobs.load(name, root_joint=root)
+    rng = np.random.default_rng(3)
+    q = robot.random_configuration(rng)
+    for scale in (1e-3, 0.5):
+        xi, u = scale * rng.normal(size=robot.nv), rng.normal(size=robot.nv)
+        dense = np.linalg.solve(robot.integrate_jacobian(q, xi), u)
+        np.testing.assert_allclose(robot.integrate_jacobian_solve(q, xi, u), dense, atol=1e-12)

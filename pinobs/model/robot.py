@@ -390,20 +390,21 @@ class Robot:
         """``(∂(q ⊕ ξ)/∂ξ)⁻¹ u``, the solve of :meth:`integrate_jacobian`, joint by joint.
 
         The Jacobian is the identity outside spherical, free-flyer and planar
-        joints; inside them its inverse is ``Jlog(exp ξ)`` (Pinocchio's
-        ``Jlog3``/``Jlog6``, valid for rotation angles below π), and planar
-        blocks are solved.  One small call per such joint instead of an
-        ``nv × nv`` solve (go1: 18 × 18).
+        joints; inside them it is the block ``Jexp(ξ)`` (Pinocchio's
+        ``Jexp3``/``Jexp6``), solved block by block: small solves instead of
+        one ``nv × nv`` solve (go1: 18 × 18).  (``Jlog(exp ξ)`` would avoid
+        the solve but Pinocchio's loses up to 1e-9 near small angles.)
         """
         out = np.array(u, dtype=float)
         for b in self._bracket_blocks:
             s = slice(b.idx_v, b.idx_v + b.nv)
             if b.kind == "so3":
-                out[s] = pin.Jlog3(pin.exp3(xi[s])) @ u[s]
+                jac = pin.Jexp3(xi[s])
             elif b.kind == "se3":
-                out[s] = pin.Jlog6(pin.exp6(xi[s])) @ u[s]
+                jac = pin.Jexp6(xi[s])
             else:
-                out[s] = np.linalg.solve(self.integrate_jacobian(q, xi)[s, s], u[s])
+                jac = self.integrate_jacobian(q, xi)[s, s]
+            out[s] = np.linalg.solve(jac, u[s])
         return out
 
     def normalize(self, q: Vector) -> Vector:

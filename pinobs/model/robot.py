@@ -245,11 +245,19 @@ class Robot:
 
     def copy(self) -> Robot:
         """The same model with fresh ``pin.Data`` (for another consumer)."""
+        return self.with_model(self.model.copy())
+
+    def with_model(
+        self, model: pin.Model, *, name: str | None = None, friction: bool | None = None
+    ) -> Robot:
+        """This robot on another ``pin.Model`` of the same tree (perturbed or identified
+        parameters): same source, root joint and geometry (shared, loaded or not: building
+        one never loads meshes); friction as this robot's unless given."""
         return Robot(
-            self.model.copy(),
-            name=self.name,
+            model,
+            name=self.name if name is None else name,
             source=self.source,
-            friction=self.friction,
+            friction=self.friction if friction is None else friction,
             root_joint=self.root_joint,
             **self._geometry_kwargs(),
         )
@@ -303,14 +311,7 @@ class Robot:
                 coulomb if coulomb is not None else np.zeros(self.nv), dtype=float
             )
             friction = True
-        return Robot(
-            model,
-            name=name or f"{self.name}~",
-            source=self.source,
-            friction=friction,
-            root_joint=self.root_joint,
-            **self._geometry_kwargs(),
-        )
+        return self.with_model(model, name=name or f"{self.name}~", friction=friction)
 
     # ------------------------------------------------------------- validation
     def check_configuration(self, q: ArrayLike, *, what: str = "q") -> Vector:

@@ -82,3 +82,10 @@ def test_integrate_jacobian_solve_is_the_dense_solve(name: str, root: str | None
         xi, u = scale * rng.normal(size=robot.nv), rng.normal(size=robot.nv)
         dense = np.linalg.solve(robot.integrate_jacobian(q, xi), u)
         np.testing.assert_allclose(robot.integrate_jacobian_solve(q, xi, u), dense, atol=1e-14)
+
+
+def test_a_robot_on_another_model_shares_the_geometry_without_loading_it() -> None:
+    robot = pinobs.load("ur5")
+    other = robot.with_model(robot.model.copy(), name="ur5*")
+    assert other.name == "ur5*" and other._geometry is None and robot._geometry is None
+    assert robot.perturbed(payload=(1.0, [0, 0, 0.1]))._geometry is None

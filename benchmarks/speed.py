@@ -132,7 +132,7 @@ if __name__ == "__main__":
         "",
         *cost_table(robots, repeats, 600),
         "",
-        *blas_rows("talos" if args.quick else "romeo", repeats, 200),
+        *blas_rows("talos", repeats, 200),
         "",
         "Start-up, in fresh processes (build: `make_observer`, which imports what the "
         "observer needs and loads compiled code; first update: the first `update` after `reset`):",

@@ -153,6 +153,13 @@ def _eye(n: int) -> Vector:
     return eye
 
 
+@functools.lru_cache(maxsize=32)
+def _scaled_eye(n: int, scale: float) -> Vector:
+    out = scale * np.eye(n)
+    out.setflags(write=False)
+    return out
+
+
 def transition_matrix(A: Vector, h: float) -> Vector:
     """``exp(A h)`` to third order, ``I + Ah(I + Ah/2 (I + Ah/3))`` (module docstring), a new array."""
     Ah = A * h
@@ -248,8 +255,7 @@ def joseph_update(P: Vector, e: Vector, meas_var: float) -> tuple[Vector, Vector
     """
     nv = e.shape[0]
     B = P[:nv]  # H P
-    S = B[:, :nv].copy()
-    S.flat[:: nv + 1] += meas_var
+    S = B[:, :nv] + _scaled_eye(nv, meas_var)
     Kt, _ = cholesky_solve(S, B)  # Kᵀ = S⁻¹ H P
     K = Kt.T
     C = P - K.dot(B)

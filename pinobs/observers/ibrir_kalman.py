@@ -78,6 +78,7 @@ import numpy as np
 
 from pinobs.errors import GainError
 from pinobs.model import Robot, lie_rk4
+from pinobs.model.integrators import rk4_stage_matrices
 from pinobs.observers.base import Observer, Vector, positive, register
 from pinobs.observers.differentiators import HighGainDifferentiator
 from pinobs.observers.ekf import (
@@ -324,7 +325,7 @@ class IbrirKalman(Observer[_State]):
             minv_diag = np.diag(np.linalg.inv(r.mass_matrix(y0)))
             n = friction_substeps(r, state.v, a0, minv_diag, dt)
         if n == 1 and use_estimate and r.is_vector_space:  # RK4 without lie_rk4's bookkeeping
-            v0, visc, h2 = state.v, self.viscous, 0.5 * dt
+            v0, visc = state.v, self.viscous
             if not np.any(visc):  # C_f v = 0: τ as it is (the same numbers)
 
                 def fd(y: Vector, v: Vector) -> Vector:
@@ -334,12 +335,15 @@ class IbrirKalman(Observer[_State]):
                 def fd(y: Vector, v: Vector) -> Vector:
                     return r.forward_dynamics(y, v, tau - visc * v)
 
-            v2 = v0 + h2 * (a1 := fd(y0, v0))
-            v3 = v0 + h2 * (a2 := fd(y_at[0.5], v2))
-            v4 = v0 + dt * (a3 := fd(y_at[0.5], v3))
-            a4 = fd(y_at[1.0], v4)
-            q = state.q + (dt / 6.0) * (v0 + 2.0 * (v2 + v3) + v4)
-            v = v0 + (dt / 6.0) * (a1 + 2.0 * (a2 + a3) + a4)
+            # classical RK4 stacked as in dynamics_rk4: rows (q, v, a₁, a₂, a₃, a₄)
+            c2, c3, c4, c_out = rk4_stage_matrices(float(dt))
+            b = np.empty((6, nv))
+            b[0], b[1] = state.q, v0
+            b[2] = fd(y0, v0)
+            b[3] = fd(y_at[0.5], c2[1].dot(b[:3]))
+            b[4] = fd(y_at[0.5], c3[1].dot(b[:4]))
+            b[5] = fd(y_at[1.0], c4[1].dot(b[:5]))
+            q, v = c_out.dot(b)
         else:
             q, x = state.q, np.concatenate([state.v, [0.0]])
             for _ in range(n):  # x[nv] carries the time since the interval's start

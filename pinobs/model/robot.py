@@ -213,6 +213,7 @@ class Robot:
         self.__dict__.update(state)
         self._data = self.model.createData()
         self._free_data = self._free.createData()
+        self._zero_nv.setflags(write=False)  # (pickle does not keep the flag)
 
     # ------------------------------------------------------------------ basics
     def __repr__(self) -> str:

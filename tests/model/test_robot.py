@@ -57,6 +57,7 @@ def test_a_pickled_robot_is_small_has_the_same_dynamics_and_reloads_its_visuals(
     assert len(blob) < 1_000_000  # measured 39 kB (187 MB with the meshes)
     back = pickle.loads(blob)
     assert back._geometry is None  # not loaded until something draws
+    assert not back._zero_nv.flags.writeable
     rng = np.random.default_rng(2)
     q, v, tau = robot.random_configuration(rng), rng.normal(size=6), rng.normal(size=6)
     np.testing.assert_array_equal(

@@ -89,6 +89,7 @@ from pinobs.observers.ekf import (
     joseph_update,
     stiff_transition_matrix,
     transition_matrix,
+    warm_linear_algebra,
 )
 
 __all__ = ["IbrirKalman", "IbrirKalmanGains"]
@@ -198,6 +199,7 @@ class IbrirKalman(Observer[_State]):
             )
         self.velocity_source = velocity_source
         self._scratch_F: Vector | None = None  # F's buffer (_state_matrix)
+        warm_linear_algebra(self.robot.nv)  # LAPACK and the compiled update, now
         self.differentiator = HighGainDifferentiator(
             self.robot, order=diff_order, gamma=diff_gamma, rate=rate, noise_std=noise_std
         )

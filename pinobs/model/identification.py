@@ -599,7 +599,7 @@ def _consistent(reg: MomentumRegressor, theta: Vector, prec_u: Vector, s: Vector
             except np.linalg.LinAlgError:
                 return None
             val -= 2.0 * float(np.sum(np.log(np.diag(c))))
-            Ji = np.linalg.inv(J)
+            Ji = np.linalg.inv(c).T @ np.linalg.inv(c)  # J⁻¹ from the factor (J ≻ 0 here)
             JE = np.einsum("ab,ibc->iac", Ji, E[k])  # J⁻¹ E_i
             sl = slice(10 * k, 10 * k + 10)
             grad[sl] -= np.einsum("iaa->i", JE)  # −tr(J⁻¹E_i)

@@ -9,6 +9,7 @@ from pinobs.errors import (
     ConfigurationError,
     DimensionError,
     GainError,
+    IdentificationError,
     ModelError,
     ModelFileError,
     ModelTypeError,
@@ -17,6 +18,7 @@ from pinobs.errors import (
     NotResetError,
     ObserverDiverged,
     OptionError,
+    OutputExistsError,
     PinobsError,
     PinobsWarning,
     TimestampError,
@@ -25,7 +27,8 @@ from pinobs.errors import (
 )
 from pinobs.evaluation import Metrics, evaluate
 from pinobs.model import Robot, load, robot_names
-from pinobs.observers import Estimate, Observer, make_observer, observer_names
+from pinobs.model.identification import Identification, identify
+from pinobs.observers import Consistency, Estimate, Observer, make_observer, observer_names
 from pinobs.observers.smoothing import Smoothed, smooth
 from pinobs.simulation import Result, Sensor, simulate
 
@@ -33,9 +36,12 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ConfigurationError",
+    "Consistency",
     "DimensionError",
     "Estimate",
     "GainError",
+    "Identification",
+    "IdentificationError",
     "Metrics",
     "ModelError",
     "ModelFileError",
@@ -46,6 +52,7 @@ __all__ = [
     "Observer",
     "ObserverDiverged",
     "OptionError",
+    "OutputExistsError",
     "PinobsError",
     "PinobsWarning",
     "Result",
@@ -56,6 +63,7 @@ __all__ = [
     "UnknownNameError",
     "UnsupportedRobotError",
     "evaluate",
+    "identify",
     "load",
     "make_observer",
     "observer_names",

@@ -284,8 +284,8 @@ class MomentumRegressor:
     def offsets(self, theta: Vector) -> Vector:
         """The torque offset ``b`` per velocity coordinate (zero where none is identified)."""
         out = np.zeros(self.robot.nv)
-        if self.offset:
-            out[list(self.actuated)] = theta[-self.n_joint :]
+        if self.offset and self.n_joint:
+            out[list(self.actuated)] = theta[len(theta) - self.n_joint :]
         return out
 
     # ---------------------------------------------------------------- rows

@@ -92,15 +92,14 @@ from pinobs.model.identification import MomentumRegressor, ParameterSet, smooth_
 from pinobs.observers.base import Consistency, Vector, positive, register
 from pinobs.observers.ekf import ExtendedKalmanFilter
 from pinobs.observers.ekf import _State as _EKFState
-from pinobs.observers.kf import ConstantAccelerationKF
-from pinobs.observers.kf import _State as _KFState
+from pinobs.observers.kf import BankState, KFBank
 
 __all__ = ["AdaptiveEKF"]
 
 
 class _State(NamedTuple):
     ekf: _EKFState
-    kf: tuple[_KFState, ...]  # one per white-jerk density of the bank
+    kf: BankState  # one filter per white-jerk density of the bank
     score: Vector  # (filters, nv): running mean squared innovation of each kf per coordinate
     t: float
     s: Vector  # estimated model-based velocity error variance per coordinate [rad²/s²]
@@ -340,9 +339,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             raise GainError(f"jerk_psd={jerk_psd!r} must be a sequence of numbers > 0") from None
         if not jerks:
             raise GainError("jerk_psd needs at least one density")
-        self._kfs = tuple(
-            ConstantAccelerationKF(robot, jerk_psd=j, rate=rate, noise_std=noise_std) for j in jerks
-        )
+        self._bank = KFBank(self.robot, jerks, self.gains.meas_std)
         self._offset: Vector = np.zeros(self.robot.nv)
         self._warmup_psd = float(warmup_accel_psd)
         self._learned_d_psd = float(learned_disturbance_psd)
@@ -366,7 +363,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             "validated_disturbance_psd": self._regimes["nominal"][1],
             "blend": self.blend,
             "blend_time": self.blend_time,
-            "jerk_psd": [k.gains.jerk_psd for k in self._kfs],
+            "jerk_psd": self._bank.jerk.tolist(),
         }
 
     # ---------------------------------------------------------------- learning
@@ -435,8 +432,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         self.regime = "warmup"
         self._m_bar2 = np.diag(self._nominal.mass_matrix(q0)) ** 2
         ekf = super()._initial_state(q0, v0)
-        kf = tuple(k._initial_state(q0, v0) for k in self._kfs)
-        score = np.zeros((len(kf), self.robot.nv))
+        kf = self._bank.initial(q0, v0, self.gains.v0_std)
+        score = np.zeros((self._bank.jerk.size, self.robot.nv))
         s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
         return _State(ekf, kf, score, 0.0, s, q0.copy(), v0.copy())
 
@@ -445,9 +442,13 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         ``(its v, its velocity variance, its tangent offset from the EKF's q̂)``."""
         best = np.argmin(state.score, axis=0)
         cols = np.arange(self.robot.nv)
-        v = np.array([k.v for k in state.kf])[best, cols]
-        p = np.array([k.P[1, 1] for k in state.kf])[best]
-        dq = np.array([self.robot.difference(state.ekf.q, k.q) for k in state.kf])[best, cols]
+        bank = state.kf
+        v = bank.v[best, cols]
+        p = bank.P[best, 1, 1]
+        if self.robot.is_vector_space:
+            dq = bank.q[best, cols] - state.ekf.q
+        else:
+            dq = np.array([self.robot.difference(state.ekf.q, x) for x in bank.q])[best, cols]
         return v, p, dq
 
     def _weights(self, state: _State) -> Vector:
@@ -463,16 +464,11 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         if not self.blend:
             return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v)
         meas = None if ekf.gated else q_meas  # one gate for every filter
-        kf = tuple(k._step(x, dt, meas, tau) for k, x in zip(self._kfs, state.kf, strict=True))
+        kf = self._bank.step(state.kf, dt, meas)
         score = state.score
         lam = min(1.0, dt / self.blend_time)
-        if meas is not None:
-            # innovation from the corrected state: r = (1 − K₀) e, and K₀ = P⁺₀₀ / R
-            r_var = self._kfs[0].gains.meas_std ** 2
-            e = np.array(
-                [self.robot.difference(x.q, meas) / max(1.0 - x.P[0, 0] / r_var, 1e-12) for x in kf]
-            )
-            score = score + lam * (e * e - score)
+        if kf.innovation is not None:
+            score = score + lam * (kf.innovation**2 - score)
         new = _State(ekf, kf, score, t, state.s, ekf.q, ekf.v)
         v_kf, p_kf, dq_kf = self._model_free(new)
         # disagreement is the model's fault only when its innovations say so (NIS̄ > 2 nv)

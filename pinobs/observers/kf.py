@@ -26,7 +26,7 @@ import numpy as np
 from pinobs.model import Robot
 from pinobs.observers.base import Observer, Vector, positive, register
 
-__all__ = ["ConstantAccelerationKF", "KFGains"]
+__all__ = ["BankState", "ConstantAccelerationKF", "KFBank", "KFGains"]
 
 _NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std is given
 
@@ -125,3 +125,70 @@ class ConstantAccelerationKF(Observer[_State]):
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v
+
+
+class BankState(NamedTuple):
+    """States of a bank of ``F`` per-joint filters (:class:`KFBank`): rows are filters."""
+
+    q: Vector  # (F, nq)
+    v: Vector  # (F, nv)
+    a: Vector  # (F, nv)
+    P: Vector  # (F, 3, 3)
+    innovation: Vector | None  # (F, nv): each filter's innovation at the last sample
+
+
+class KFBank:
+    """Several :class:`ConstantAccelerationKF` filters with different ``jerk_psd``, stepped together.
+
+    The same equations as the family (module docstring), one filter per row
+    of the arrays, so a bank costs about one filter's NumPy calls (on robots
+    whose joints are all vector joints; otherwise the configuration part
+    goes filter by filter through ``integrate``/``difference``).  Each step
+    also returns every filter's innovation ``e = difference(q̂⁻, q_meas)``,
+    which the adaptive observer uses to pick the best filter per joint.
+    """
+
+    def __init__(self, robot: Robot, jerk_psd: tuple[float, ...], meas_std: float) -> None:
+        self.robot = robot
+        self.jerk = np.array([float(positive("jerk_psd", j) or 0.0) for j in jerk_psd])
+        self.meas_var = float(positive("meas_std", meas_std) or 0.0) ** 2
+        self._cache: tuple[float, Vector, Vector] | None = None
+
+    def initial(self, q0: Vector, v0: Vector, v0_std: float) -> BankState:
+        n = self.jerk.size
+        P = np.diag([self.meas_var, v0_std**2, (10.0 * v0_std) ** 2])
+        return BankState(
+            np.tile(q0, (n, 1)), np.tile(v0, (n, 1)), np.zeros((n, v0.size)),
+            np.tile(P, (n, 1, 1)), None,
+        )  # fmt: skip
+
+    def step(self, state: BankState, dt: float, q_meas: Vector | None) -> BankState:
+        if self._cache is None or self._cache[0] != dt:
+            F, Q = transition(dt, 1.0)
+            self._cache = (dt, F, self.jerk[:, None, None] * Q)
+        _, F, Q = self._cache
+        r = self.robot
+        step = state.v * dt + 0.5 * dt * dt * state.a
+        if r.is_vector_space:
+            q = state.q + step
+        else:
+            q = np.array([r.integrate(x, s) for x, s in zip(state.q, step, strict=True)])
+        v = state.v + dt * state.a
+        a = state.a
+        P = F @ state.P @ F.T + Q
+        if q_meas is None:
+            return BankState(q, v, a, P, None)
+        if r.is_vector_space:
+            e = q_meas - q
+        else:
+            e = np.array([r.difference(x, q_meas) for x in q])
+        K = P[:, :, 0] / (P[:, 0, 0] + self.meas_var)[:, None]  # (F, 3)
+        if r.is_vector_space:
+            q = q + K[:, :1] * e
+        else:
+            q = np.array([r.integrate(x, k * y) for x, k, y in zip(q, K[:, 0], e, strict=True)])
+        v = v + K[:, 1:2] * e
+        a = a + K[:, 2:3] * e
+        IKH = np.eye(3) - K[:, :, None] * np.array([1.0, 0.0, 0.0])  # Joseph form, per filter
+        P = IKH @ P @ IKH.transpose(0, 2, 1) + self.meas_var * K[:, :, None] * K[:, None, :]
+        return BankState(q, v, a, 0.5 * (P + P.transpose(0, 2, 1)), e)

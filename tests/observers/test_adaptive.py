@@ -109,3 +109,26 @@ def test_a_failed_solve_keeps_the_last_model_and_says_so(monkeypatch) -> None:
 def test_out_of_range_options_raise_gain_error(option: str, value: object) -> None:
     with pytest.raises(pinobs.GainError):
         make_observer("adaptive", pinobs.load("cartpole"), rate=1000.0, **{option: value})
+
+
+@pytest.mark.parametrize("name", ["ur5", "top"])
+def test_the_kf_bank_equals_separate_kf_filters(name: str) -> None:
+    from pinobs.observers.kf import KFBank
+
+    robot = pinobs.load(name)
+    res = pinobs.simulate(
+        robot, [], duration=0.5, sensor=Sensor(rate=1000.0, noise_std=1e-4, dropout=0.1), seed=0
+    )
+    jerks = (1e1, 1e3, 1e5)
+    bank = KFBank(robot, jerks, 1e-4)
+    state = bank.initial(res.q[0], res.v[0], 1.0)
+    singles = [make_observer("kf", robot, jerk_psd=j, noise_std=1e-4) for j in jerks]
+    for ob in singles:
+        ob.reset(0.0, res.q[0], res.v[0])
+    for k in range(1, len(res.t)):
+        qm = None if np.isnan(res.q_meas[k]).any() else res.q_meas[k]
+        state = bank.step(state, res.t[k] - res.t[k - 1], qm)
+        for i, ob in enumerate(singles):
+            est = ob.update(res.t[k], qm)
+            np.testing.assert_allclose(state.v[i], est.v, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(state.q[i], est.q, rtol=0, atol=1e-12)

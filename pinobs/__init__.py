@@ -9,17 +9,20 @@ from pinobs.errors import (
     ConfigurationError,
     DimensionError,
     GainError,
+    LogFormatError,
     ModelFileError,
     NonFiniteError,
     NotResetError,
     ObserverDiverged,
     OptionError,
+    OutputExistsError,
     PinobsError,
     TimestampError,
     UnknownNameError,
     UnsupportedRobotError,
 )
 from pinobs.evaluation import Metrics, evaluate
+from pinobs.io import estimate
 from pinobs.model import Robot, load, robot_names
 from pinobs.observers import Estimate, Observer, make_observer, observer_names
 from pinobs.simulation import Result, Sensor, simulate
@@ -31,6 +34,7 @@ __all__ = [
     "DimensionError",
     "Estimate",
     "GainError",
+    "LogFormatError",
     "Metrics",
     "ModelFileError",
     "NonFiniteError",
@@ -38,6 +42,7 @@ __all__ = [
     "Observer",
     "ObserverDiverged",
     "OptionError",
+    "OutputExistsError",
     "PinobsError",
     "Result",
     "Robot",
@@ -45,6 +50,7 @@ __all__ = [
     "TimestampError",
     "UnknownNameError",
     "UnsupportedRobotError",
+    "estimate",
     "evaluate",
     "load",
     "make_observer",

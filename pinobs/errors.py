@@ -14,11 +14,13 @@ __all__ = [
     "ConfigurationError",
     "DimensionError",
     "GainError",
+    "LogFormatError",
     "ModelFileError",
     "NonFiniteError",
     "NotResetError",
     "ObserverDiverged",
     "OptionError",
+    "OutputExistsError",
     "PinobsError",
     "TimestampError",
     "UnknownNameError",
@@ -39,6 +41,14 @@ class UnknownNameError(PinobsError, KeyError):
 
 class ModelFileError(PinobsError, FileNotFoundError):
     """A model file that is missing or cannot be parsed."""
+
+
+class LogFormatError(PinobsError, ValueError):
+    """A log file that cannot be parsed (encoding, truncation, wrong container); names the line."""
+
+
+class OutputExistsError(PinobsError, FileExistsError):
+    """An output file that exists already (pass ``force``) or that is one of the inputs."""
 
 
 class DimensionError(PinobsError, ValueError):

@@ -7,10 +7,15 @@ branch lives here, so that a reader can see them together.
 from __future__ import annotations
 
 __all__ = [
+    "ABSURD_LIMIT_FACTOR",
+    "ABSURD_VALUE",
     "COULOMB_SMOOTHING_VELOCITY",
+    "GAP_PERIODS",
     "II_ASSUMPTION1_TOL",
     "JACOBI_FD_STEP",
     "LEFT_INVARIANT_INERTIA_TOL",
+    "LIMIT_WARN_FRACTION",
+    "MAX_GAP_SUBSTEPS",
     "QUATERNION_NORM_TOL",
     "TIME_EPS",
 ]
@@ -42,3 +47,23 @@ JACOBI_FD_STEP = 1e-5
 #: Coulomb friction ``F_c sign(v)`` is smoothed as ``F_c tanh(v / v_s)`` with this
 #: ``v_s`` [rad/s or m/s]: 95 % of the full friction at 2 v_s = 0.02 rad/s.
 COULOMB_SMOOTHING_VELOCITY = 1e-2
+
+#: A logged position (torque) further outside the joint's URDF range than this
+#: many ranges (effort limits) is absurd: the row's value is rejected.  A log in
+#: degrees stays below it (it is warned about: :data:`LIMIT_WARN_FRACTION`).
+ABSURD_LIMIT_FACTOR = 100.0
+
+#: Without a finite URDF limit, a logged |position| [rad or m] or |torque|
+#: [N·m or N] above this is absurd.
+ABSURD_VALUE = 1e6
+
+#: Positions further outside the URDF limits than this fraction of the joint's
+#: range get a warning naming the joint (a log in degrees?).
+LIMIT_WARN_FRACTION = 0.5
+
+#: A gap between two log rows longer than this many nominal sample periods is
+#: propagated in sub-steps no longer than one period.
+GAP_PERIODS = 3.0
+
+#: A gap needing more sub-steps than this re-initialises the observer instead.
+MAX_GAP_SUBSTEPS = 100_000

@@ -15,7 +15,7 @@ __all__ = [
     "JACOBI_FD_STEP",
     "LEFT_INVARIANT_INERTIA_TOL",
     "LIMIT_WARN_FRACTION",
-    "MAX_GAP_SUBSTEPS",
+    "MAX_GAP_PERIODS",
     "QUATERNION_NORM_TOL",
     "TIME_EPS",
 ]
@@ -65,5 +65,11 @@ LIMIT_WARN_FRACTION = 0.5
 #: propagated in sub-steps no longer than one period.
 GAP_PERIODS = 3.0
 
-#: A gap needing more sub-steps than this re-initialises the observer instead.
-MAX_GAP_SUBSTEPS = 100_000
+#: A gap longer than this many nominal periods re-initialises the observer at the
+#: next row (position from the row, zero velocity) instead of being propagated:
+#: open-loop propagation with the torque held through a long gap drifts, and
+#: the model-based observers then recover more slowly than from a restart
+#: (UR5, PD input, 1 kHz, σ = 1e-4 rad: after a 0.1 s gap the ekf's velocity
+#: error 50 ms later is 0.21 rad/s sub-stepped, 0.0017 rad/s re-initialised;
+#: after 20 ms, 0.009 vs 0.001; the kf is the same either way).
+MAX_GAP_PERIODS = 10.0

@@ -36,6 +36,7 @@ log; NPZ files are loaded whole.
 from __future__ import annotations
 
 import csv
+import io
 import zipfile
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -198,7 +199,7 @@ def _numeric(frame: pd.DataFrame, lines: Any, problems: list[tuple[int, str]]) -
         if s.dtype.kind == "b":
             frame[col] = s.astype(float)
             continue
-        text = s.astype("string").str.strip().str.strip('"')
+        text = s.astype("string").str.strip().str.replace(r'^"(.*)"$', r"\1", regex=True)
         num = pd.to_numeric(text, errors="coerce")
         unreadable = num.isna() & text.notna() & (text != "")
         for i in np.flatnonzero(unreadable.to_numpy()):
@@ -291,16 +292,11 @@ def _csv_chunks(
         sep = "\t"
     header = _clean_header(next(csv.reader([first], delimiter=sep)), columns)
     layout = _layout(header, robot, f"log {str(path)!r}")
-    positions = {name: i for i, name in enumerate(header)}
-    usecols = sorted({positions[c] for c in layout.used})
-    names = [header[i] for i in usecols]
     reader = pd.read_csv(
         path,
         sep=sep,
         header=None,
         skiprows=1,
-        usecols=usecols,
-        names=None,
         encoding="utf-8-sig",
         quoting=csv.QUOTE_NONE,
         skipinitialspace=True,
@@ -311,7 +307,11 @@ def _csv_chunks(
     start = 0
     try:
         for chunk in reader:
-            chunk.columns = names
+            if chunk.shape[1] != len(header):  # short rows are NaN-padded, long ones raise
+                raise LogFormatError(
+                    f"log {str(path)!r}: {chunk.shape[1]} columns, the header has {len(header)}"
+                )
+            chunk.columns = header
             lines = np.arange(start, start + len(chunk)) + 2  # line 1 is the header
             start += len(chunk)
             blank = chunk.isna().all(axis=1).to_numpy()
@@ -373,7 +373,8 @@ def _parquet_chunks(
 # ---------------------------------------------------------------------- NPZ
 def _npz_log(path: Path, robot: Robot) -> Log:
     try:
-        loaded = np.load(path, allow_pickle=False)
+        with path.open("rb") as fh:
+            loaded = np.load(io.BytesIO(fh.read()), allow_pickle=False)
     except (zipfile.BadZipFile, EOFError, OSError, ValueError) as exc:
         raise LogFormatError(
             f"log {str(path)!r} is not a readable .npz archive ({type(exc).__name__}: {exc}); "

@@ -11,10 +11,12 @@ median interval of the first chunk unless given):
   skipped (NaN), alone.  A row more than ``GAP_PERIODS`` periods ahead whose
   *next* row comes back before it (``t_k > t_{k+1}``) is a glitch: skipped
   alone, the rows after it are kept.
-- **gap**: a true gap ``Δt > GAP_PERIODS·T`` is propagated in ``⌈Δt/T⌉``
-  sub-steps ``update(t_j, None, τ_held)`` of at most ``T`` each (the
-  sub-step estimates are not output), never in one giant step; a gap needing
-  more than ``MAX_GAP_SUBSTEPS`` re-initialises the observer at the row.
+- **gap**: a true gap ``GAP_PERIODS·T < Δt ≤ MAX_GAP_PERIODS·T`` is
+  propagated in ``⌈Δt/T⌉`` sub-steps ``update(t_j, None, τ_held)`` of at
+  most ``T`` each (the sub-step estimates are not output), never in one giant
+  step; a longer gap re-initialises the observer at the row (its position,
+  zero velocity), which recovers faster than a long open-loop propagation
+  with a held torque (measured: :data:`pinobs.tolerances.MAX_GAP_PERIODS`).
 - **position** unreadable, non-finite, off its manifold or absurd (further
   outside the URDF range than ``ABSURD_LIMIT_FACTOR`` ranges): the row is a
   dropped sample (propagate only, the estimate is output).
@@ -57,7 +59,7 @@ from pinobs.tolerances import (
     ABSURD_VALUE,
     GAP_PERIODS,
     LIMIT_WARN_FRACTION,
-    MAX_GAP_SUBSTEPS,
+    MAX_GAP_PERIODS,
     TIME_EPS,
 )
 
@@ -339,11 +341,8 @@ class LogEstimator:
         try:
             if period is not None and gap > GAP_PERIODS * period:
                 steps = math.ceil(gap / period - 1e-9)
-                if steps > MAX_GAP_SUBSTEPS:
-                    notes.append(
-                        f"gap of {gap:.6g} s ({gap / period:.0f} periods) before this row: "
-                        "observer re-initialised here"
-                    )
+                if gap > MAX_GAP_PERIODS * period:
+                    notes.append(f"gap of {gap:.6g} s ({gap / period:.0f} periods) before this row")
                     return self._restart(t, q, tau, notes)
                 for j in range(1, steps):  # sub-steps of gap/steps <= period; not output
                     ob.update(self._t + gap * j / steps, None, held)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import numbers
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar, Generic, TypeVar, final
@@ -78,10 +79,10 @@ def positive(
         if allow_none:
             return None
         raise GainError(f"{name} is required: give a finite number > 0")
-    try:
-        x = float(value)
-    except (TypeError, ValueError) as exc:
-        raise GainError(f"{name}={value!r} is not a number; give a finite number > 0") from exc
+    if isinstance(value, (str, bytes, bool)) or not isinstance(value, numbers.Real):
+        # a string would pass float() here and crash the first update (issue 17)
+        raise GainError(f"{name}={value!r} is not a number; give a finite number > 0")
+    x = float(value)
     ok = math.isfinite(x) and (x >= 0 if allow_zero else x > 0)
     if not ok:
         bound = ">= 0" if allow_zero else "> 0"

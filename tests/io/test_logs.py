@@ -46,7 +46,10 @@ def test_cli_round_trips_a_ur5_csv_log_with_the_same_row_count(tmp_path: Path, c
     assert est.size == log.size
     assert est.dtype.names == ("t", *(f"q{i}" for i in range(6)), *(f"v{i}" for i in range(6)))
     np.testing.assert_array_equal(est["t"], log["t"])
-    assert "200 rows: 200 estimated (200 with their measurement, 0 propagated only), 0 without an estimate; 0 rows reported" in capsys.readouterr().out
+    assert (
+        "200 rows: 200 estimated (200 with their measurement, 0 propagated only), 0 without an estimate; 0 rows reported"
+        in capsys.readouterr().out
+    )
 
 
 def test_estimates_from_a_log_match_the_live_loop(tmp_path: Path) -> None:
@@ -145,4 +148,7 @@ def test_cli_round_trips_a_ur5_csv_log_with_the_riemannian_observer(tmp_path: Pa
     # the log starts at the truth's configuration at rest; after 0.2 s the estimate has converged
     err = np.abs(v_hat[200:] - res.v[201:]).max()
     assert err < 5e-3  # measured 3e-4 rad/s
-    assert "400 rows: 400 estimated (400 with their measurement, 0 propagated only), 0 without an estimate; 0 rows reported" in capsys.readouterr().out
+    assert (
+        "400 rows: 400 estimated (400 with their measurement, 0 propagated only), 0 without an estimate; 0 rows reported"
+        in capsys.readouterr().out
+    )

@@ -266,3 +266,13 @@ def test_summary_counts_rows_not_reports(tmp_path, sim, capsys) -> None:
 def test_make_observer_rejects_a_non_numeric_option_at_construction(ur5) -> None:
     with pytest.raises(pinobs.GainError, match=r"accel_psd='10' is not a number"):
         pinobs.make_observer("ekf", ur5, accel_psd="10")
+
+
+def test_planar_root_cos_sin_pair_is_validated_like_a_continuous_joint() -> None:
+    robot = pinobs.load("cartpole", root_joint="planar")
+    q = robot.neutral()
+    q[2:4] = [2.0, 0.0]  # (cos θ, sin θ) of the planar root, off the unit circle
+    with pytest.raises(pinobs.ConfigurationError, match=r"q\[2:4\] = \[2.0, 0.0\] has norm 2"):
+        robot.check_configuration(q)
+    q[2:4] = np.array([np.cos(0.3), np.sin(0.3)]) * (1 + 1e-6)  # within tolerance: renormalised
+    np.testing.assert_allclose(np.linalg.norm(robot.check_configuration(q)[2:4]), 1.0, rtol=1e-15)

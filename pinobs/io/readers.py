@@ -469,6 +469,11 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
             tau = np.full(robot.nv, np.nan)
             where = {n: i for i, n in enumerate(names)}
             lacking = [n for n in index if n not in where or where[n] >= pos.size]
+            if number == 0 and len(lacking) == len(index):
+                raise DimensionError(
+                    f"bag {str(path)!r}, topic {topic!r}: the JointState joints {names} include "
+                    f"none of {robot.name!r}'s joints {list(index)}"
+                )
             if lacking:
                 problems.append((number, f"no position for joints {lacking}"))
             for jname, b in index.items():

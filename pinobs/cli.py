@@ -263,7 +263,7 @@ def _column_map(items: Sequence[str] | None) -> dict[str, str] | None:
 
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
-    robot = load(args.robot, root_joint=args.root_joint)
+    robot = load(args.robot, root_joint=args.root_joint, geometry=bool(args.html))
     columns = _column_map(args.map)
     keep = bool(args.html)
     with _progress(f"{robot.name}: {args.observer}", not args.no_progress) as progress:

@@ -80,18 +80,26 @@ class EstimateWriter:
             dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".part"
         )
         self._tmp = Path(tmp)
-        self._fh = os.fdopen(fd, "w", newline="")
-        self._fh.write(",".join(self.columns) + "\n")
+        self._fh = os.fdopen(fd, "wb")
+        self._fh.write((",".join(self.columns) + "\n").encode())
 
     def write(self, t: Vector, q: Vector, v: Vector) -> None:
         """Append rows (``t`` (n,), ``q`` (n, nq), ``v`` (n, nv)); shortest round-trip floats."""
         if not len(t):
             return
-        import pandas as pd
+        data = np.column_stack([t, q, v])
+        try:
+            import pyarrow as pa
+            import pyarrow.csv as pa_csv
+        except ImportError:  # pragma: no cover - pyarrow is in the io and test extras
+            import pandas as pd
 
-        pd.DataFrame(np.column_stack([t, q, v])).to_csv(
-            self._fh, header=False, index=False, lineterminator="\n"
-        )
+            text = pd.DataFrame(data).to_csv(header=False, index=False, lineterminator="\n")
+            self._fh.write(text.encode())
+            return
+        # Arrow's C++ writer: shortest round-trip floats, ~5x faster than pandas' to_csv
+        table = pa.table({c: data[:, i] for i, c in enumerate(self.columns)})
+        pa_csv.write_csv(table, self._fh, pa_csv.WriteOptions(include_header=False))
 
     def close(self) -> Path:
         """Finish the file and move it into place."""

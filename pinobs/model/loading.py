@@ -284,7 +284,13 @@ def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
     return path, [path.parent], "fixed", path.stem
 
 
-def load(source: str | Path, *, root_joint: str | None = None, friction: bool = False) -> Robot:
+def load(
+    source: str | Path,
+    *,
+    root_joint: str | None = None,
+    friction: bool = False,
+    geometry: bool = True,
+) -> Robot:
     """Load a robot by registry name or file path.
 
     Args:
@@ -299,6 +305,8 @@ def load(source: str | Path, *, root_joint: str | None = None, friction: bool = 
             friction>`` tags in the dynamics (:meth:`Robot.friction_torque`).
             Off by default: many published URDFs carry placeholder values
             (pr2's torso has 20000 N·s/m); switch it on when yours are identified.
+        geometry: also load the visual and collision meshes (for playback);
+            ``False`` skips them (a UR5's meshes hold ~70 MB).
 
     Raises:
         UnknownNameError: ``source`` is neither a registered name nor a path.
@@ -317,7 +325,10 @@ def load(source: str | Path, *, root_joint: str | None = None, friction: bool = 
     try:
         if path.suffix.lower() == ".urdf":
             args = (joint_type(),) if joint_type is not None else ()
-            model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs, *args)
+            if geometry:
+                model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs, *args)
+            else:
+                model, collision, visual = pin.buildModelFromUrdf(str(path), *args), None, None
         else:
             if joint_type is not None:
                 model = pin.buildModelFromMJCF(str(path), joint_type())
@@ -325,7 +336,8 @@ def load(source: str | Path, *, root_joint: str | None = None, friction: bool = 
                 model = pin.buildModelFromMJCF(str(path))
             collision = visual = None
             try:
-                visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
+                if geometry:
+                    visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
             except (RuntimeError, ValueError):
                 visual = None
     except (RuntimeError, ValueError, OSError) as exc:

@@ -8,7 +8,7 @@ Writes a CSV log of MINUTES minutes at 1 kHz (smooth multi-sine joint motion,
 torques from inverse dynamics, σ = 1e-3 rad noise, seed 0), then
 
 1. runs `pinobs estimate --robot ur5 --observer O --log LOG --out EST.csv` in a
-   child process and reads its peak resident memory (``ru_maxrss``), next to
+   child process and reads its peak resident memory (``VmHWM``), next to
    that of a child that only imports pinobs;
 2. times, in this process, reading the log (`pinobs.io.iter_log`), the
    observer loop over the rows read (`pinobs.io.LogEstimator`) and writing the
@@ -56,15 +56,18 @@ def make_log(path: Path, minutes: float, seed: int = 0) -> int:
 
 
 def peak_rss_mb(args: list[str]) -> float:
+    # VmHWM of the child's own address space (ru_maxrss would carry over the
+    # parent's peak across fork + exec on Linux)
     code = (
-        "import resource, sys\n"
+        "import re, sys\n"
         "from pinobs.cli import main\n"
         f"rc = main({args!r}) if {bool(args)} else 0\n"
-        "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+        "status = open('/proc/self/status').read()\n"
+        "print(re.search(r'VmHWM:\\s+(\\d+)', status).group(1))\n"
         "sys.exit(rc)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    return int(out.stdout.strip().splitlines()[-1]) / 1024.0  # ru_maxrss is in KiB on Linux
+    return int(out.stdout.strip().splitlines()[-1]) / 1024.0  # VmHWM is in kB
 
 
 def split_times(log: Path, name: str, folder: Path) -> dict[str, float]:
@@ -136,5 +139,5 @@ if __name__ == "__main__":
                 f"{(r + w) / lp:.0%} |"
             )
     print(
-        f"(peak RSS from ru_maxrss of the child process; timings on a shared, loaded machine; {time.strftime('%Y-%m-%d')})"
+        f"(peak RSS: VmHWM of the child process; timings on a shared, loaded machine; {time.strftime('%Y-%m-%d')})"
     )

@@ -493,11 +493,11 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
             buf_q.append(q)
             buf_tau.append(tau)
             if len(buf_t) == chunk_rows:
-                yield _bag_log(buf_t, buf_q, buf_tau, start, problems, any_tau)
+                yield _bag_log(buf_t, buf_q, buf_tau, start, problems, any_tau, robot.nq, robot.nv)
                 start += len(buf_t)
                 buf_t, buf_q, buf_tau, problems = [], [], [], []
         if buf_t or start == 0:
-            yield _bag_log(buf_t, buf_q, buf_tau, start, problems, any_tau)
+            yield _bag_log(buf_t, buf_q, buf_tau, start, problems, any_tau, robot.nq, robot.nv)
     finally:
         reader.close()
 
@@ -509,13 +509,14 @@ def _bag_log(
     start: int,
     problems: list[tuple[int, str]],
     any_tau: bool,
+    nq: int,
+    nv: int,
 ) -> Log:
     n = len(t)
-    q_arr = np.array(q, dtype=float).reshape(n, -1) if n else np.empty((0, 0))
     return Log(
         t=np.array(t, dtype=float),
-        q=q_arr,
-        tau=np.array(tau, dtype=float).reshape(n, -1) if any_tau else None,
+        q=np.array(q, dtype=float).reshape(n, nq),
+        tau=np.array(tau, dtype=float).reshape(n, nv) if any_tau else None,
         problems=tuple(problems),
         lines=np.arange(start, start + n),
         unit="message",

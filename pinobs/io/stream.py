@@ -164,7 +164,6 @@ class LogEstimator:
     Args:
         observer: the observer (``reset``/``update``, see :class:`ObserverLike`).
         period: nominal sample period [s] (default: the median interval of the first chunk).
-        has_tau: whether the log has torques (default: from the first chunk).
     """
 
     def __init__(self, observer: ObserverLike, *, period: float | None = None) -> None:

@@ -49,8 +49,8 @@ def _progress(label: str, enabled: bool) -> Any:
         task = bar.add_task(label, total=None)
 
         def update(k: int, n: int) -> None:
-            if k % 100 == 0 or k == n:
-                bar.update(task, completed=k, total=n)
+            if k % 100 == 0 or k == n or not n:
+                bar.update(task, completed=k, total=n or None)  # n = 0: unknown length
 
         yield update
 
@@ -278,7 +278,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             topic=args.topic,
             rate=args.rate,
             noise_std=args.noise,
-            progress=None if progress is None else (lambda k, _n: progress(k, 0)),
+            progress=progress,
         )
     for w in run.warnings:
         print(f"warning: {w}", file=sys.stderr)

@@ -55,7 +55,7 @@ if TYPE_CHECKING:
 __all__ = ["CHUNK_ROWS", "Log", "LogSource", "iter_log", "read_log"]
 
 #: Rows per chunk when streaming a log.
-CHUNK_ROWS = 50_000
+CHUNK_ROWS = 10_000
 
 LogSource = Any  # str | Path | pandas.DataFrame (pandas is optional)
 

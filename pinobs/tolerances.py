@@ -58,8 +58,9 @@ ABSURD_LIMIT_FACTOR = 100.0
 ABSURD_VALUE = 1e6
 
 #: Positions further outside the URDF limits than this fraction of the joint's
-#: range get a warning naming the joint (a log in degrees?).
-LIMIT_WARN_FRACTION = 0.5
+#: range get a warning naming the joint (a log in degrees?).  Not less than 1:
+#: simulated and real robots do stray somewhat past their URDF limits.
+LIMIT_WARN_FRACTION = 1.0
 
 #: A gap between two log rows longer than this many nominal sample periods is
 #: propagated in sub-steps no longer than one period.

@@ -137,6 +137,8 @@ def _absurd_bounds(robot: Robot) -> tuple[Vector, Vector, Vector, Vector, Vector
     """Per q coordinate: (absurd low, absurd high, warn low, warn high); per v: |τ| bound."""
     lo = np.array(robot.model.lowerPositionLimit, dtype=float)
     hi = np.array(robot.model.upperPositionLimit, dtype=float)
+    # a joint without limits has ±1.8e308 in Pinocchio: clip before any arithmetic
+    lo, hi = np.maximum(lo, -2 * ABSURD_VALUE), np.minimum(hi, 2 * ABSURD_VALUE)
     rng = hi - lo
     limited = np.isfinite(rng) & (rng > 0) & (rng < ABSURD_VALUE)
     pad = np.where(limited, ABSURD_LIMIT_FACTOR * rng, np.inf)
@@ -144,7 +146,7 @@ def _absurd_bounds(robot: Robot) -> tuple[Vector, Vector, Vector, Vector, Vector
     a_hi = np.where(limited, hi + pad, ABSURD_VALUE)
     w_lo = np.where(limited, lo - LIMIT_WARN_FRACTION * rng, -np.inf)
     w_hi = np.where(limited, hi + LIMIT_WARN_FRACTION * rng, np.inf)
-    eff = np.array(robot.model.effortLimit, dtype=float)
+    eff = np.minimum(np.array(robot.model.effortLimit, dtype=float), 2 * ABSURD_VALUE)
     ok = np.isfinite(eff) & (eff > 0) & (eff < ABSURD_VALUE)
     tau_max = np.where(ok, ABSURD_LIMIT_FACTOR * eff, ABSURD_VALUE)
     return a_lo, a_hi, w_lo, w_hi, tau_max
@@ -190,7 +192,7 @@ class LogEstimator:
 
         Returns ``(t, q, v)`` of the rows done, in order: over all calls, one row per input row.
         """
-        if chunk.tau is None and self.observer.uses_torque and not self._tau_warned:
+        if len(chunk) and chunk.tau is None and self.observer.uses_torque and not self._tau_warned:
             self._tau_warned = True
             self.warnings.append(
                 f"the log has no torque columns: {self.observer.name!r} uses the model's dynamics "

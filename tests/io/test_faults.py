@@ -276,3 +276,39 @@ def test_planar_root_cos_sin_pair_is_validated_like_a_continuous_joint() -> None
         robot.check_configuration(q)
     q[2:4] = np.array([np.cos(0.3), np.sin(0.3)]) * (1 + 1e-6)  # within tolerance: renormalised
     np.testing.assert_allclose(np.linalg.norm(robot.check_configuration(q)[2:4]), 1.0, rtol=1e-15)
+
+
+def test_an_observer_failing_on_a_row_is_reinitialised_there_not_aborted(sim, ur5) -> None:
+    # before: on go1 a raw LinAlgError aborted the command
+    ob = _kf(ur5)
+    calls = {"n": 0}
+
+    class Failing:
+        robot, name, uses_torque = ob.robot, ob.name, ob.uses_torque
+
+        def reset(self, *a):
+            return ob.reset(*a)
+
+        def update(self, *a):
+            calls["n"] += 1
+            if calls["n"] == 100:
+                raise np.linalg.LinAlgError("Singular matrix")
+            return ob.update(*a)
+
+    run = estimate_log(Failing(), Log(sim.t[1:201], sim.q_meas[1:201], sim.tau[1:201]))
+    ((row, reason),) = run.bad_rows
+    assert row == 100 and "LinAlgError: Singular matrix" in reason and "re-initialised" in reason
+    assert run.estimated == 200 and np.isfinite(run.v).all()
+
+
+def test_a_floating_base_log_with_a_gap_runs_without_overflow_or_abort() -> None:
+    # go1: a free-flyer whose translation has no limits (±1.8e308 in Pinocchio)
+    robot = pinobs.load("go1")
+    res = pinobs.simulate(robot, [], duration=0.25, sensor=pinobs.Sensor(1000.0, 1e-4), seed=1)
+    t, q, tau = res.t[1:], res.q_meas[1:], res.tau[1:]
+    keep = (t < 0.1) | (t >= 0.2)
+    ob = pinobs.make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
+    run = estimate_log(ob, Log(t[keep], q[keep], tau[keep]))
+    ((row, reason),) = run.bad_rows
+    assert row == 99 and "re-initialised" in reason
+    assert run.estimated == keep.sum() and run.warnings == []

@@ -17,6 +17,7 @@ __all__ = [
     "LIMIT_WARN_FRACTION",
     "MAX_GAP_PERIODS",
     "QUATERNION_NORM_TOL",
+    "TIME_BACK_ROWS",
     "TIME_EPS",
 ]
 
@@ -74,3 +75,8 @@ GAP_PERIODS = 3.0
 #: error 50 ms later is 0.21 rad/s sub-stepped, 0.0017 rad/s re-initialised;
 #: after 20 ms, 0.009 vs 0.001; the kf is the same either way).
 MAX_GAP_PERIODS = 10.0
+
+#: Log rows whose time is not after the previous accepted row are skipped one
+#: by one; when this many in a row go on increasing among themselves (a clock
+#: reset, or earlier rows stamped ahead), the observer restarts at the next one.
+TIME_BACK_ROWS = 5

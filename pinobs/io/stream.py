@@ -8,7 +8,9 @@ could not be placed in time.  Per row (``T`` the nominal sample period, the
 median interval of the first chunk unless given):
 
 - **time** unreadable or not after the previous accepted row: the row is
-  skipped (NaN), alone.  A row more than ``GAP_PERIODS`` periods ahead whose
+  skipped (NaN), alone; after ``TIME_BACK_ROWS`` such rows that increase
+  among themselves (a clock reset, a burst of stamps ahead) the observer
+  re-initialises at the next one.  A row more than ``GAP_PERIODS`` periods ahead whose
   *next* row comes back before it (``t_k > t_{k+1}``) is a glitch: skipped
   alone, the rows after it are kept.
 - **gap**: a true gap ``GAP_PERIODS·T < Δt ≤ MAX_GAP_PERIODS·T`` is
@@ -60,6 +62,7 @@ from pinobs.tolerances import (
     GAP_PERIODS,
     LIMIT_WARN_FRACTION,
     MAX_GAP_PERIODS,
+    TIME_BACK_ROWS,
     TIME_EPS,
 )
 
@@ -184,6 +187,8 @@ class LogEstimator:
         self._started = False
         self._t = -math.inf
         self._held: Vector | None = None
+        self._back = 0  # consecutive rows behind the previous accepted time, increasing
+        self._back_t = -math.inf
         self._tau_warned = False
 
     # ---------------------------------------------------------------- API
@@ -257,15 +262,26 @@ class LogEstimator:
                 self._report(lines[k], [*notes, f"time {t!r} unreadable: row skipped"])
                 continue
             if self._started and not t > self._t + TIME_EPS:
-                self._report(
-                    lines[k],
-                    [
-                        *notes,
-                        f"t = {t!r} s is not after the previous sample at t = {self._t!r} s: "
-                        "row skipped",
-                    ],
+                # rows that go back in time together (a clock reset, a burst of stamps
+                # ahead) would otherwise all be skipped: after TIME_BACK_ROWS, restart
+                self._back = self._back + 1 if t > self._back_t + TIME_EPS else 1
+                self._back_t = t
+                if self._back <= TIME_BACK_ROWS:
+                    self._report(
+                        lines[k],
+                        [
+                            *notes,
+                            f"t = {t!r} s is not after the previous sample at t = {self._t!r} s: "
+                            "row skipped",
+                        ],
+                    )
+                    continue
+                notes.append(
+                    f"time went back to t = {t!r} s (previous sample at t = {self._t!r} s) and "
+                    f"stayed there for {TIME_BACK_ROWS} rows: observer re-initialised here"
                 )
-                continue
+                self._started = False
+            self._back = 0
             if (
                 self._started
                 and period is not None

@@ -312,3 +312,17 @@ def test_a_floating_base_log_with_a_gap_runs_without_overflow_or_abort() -> None
     ((row, reason),) = run.bad_rows
     assert row == 99 and "re-initialised" in reason
     assert run.estimated == keep.sum() and run.warnings == []
+
+
+def test_two_timestamps_far_ahead_cost_a_few_rows_not_the_rest(tmp_path, sim, ur5) -> None:
+    path, lines = _lines(tmp_path, sim, n=200)
+    _set(lines, 51, 0, "51")
+    _set(lines, 52, 0, "51.001")  # the look-ahead cannot see past two
+    path.write_text("\n".join(lines) + "\n")
+    run = estimate_log(_kf(ur5), read_log(path, ur5))
+    reported = [line for line, _ in run.bad_rows]
+    # 51: a 51 s gap (re-initialised), 52 kept, 53-57 behind it (skipped), 58 restarts
+    assert reported == [51, *range(53, 59)]
+    assert "re-initialised" in dict(run.bad_rows)[58] and "time went back" in dict(run.bad_rows)[58]
+    assert np.isfinite(run.v).all(axis=1).sum() == 200 - 5
+    assert np.isfinite(run.v[58 - 2 :]).all()

@@ -152,3 +152,12 @@ def test_cli_round_trips_a_ur5_csv_log_with_the_riemannian_observer(tmp_path: Pa
         "400 rows: 400 estimated (400 with their measurement, 0 propagated only), 0 without an estimate; 0 rows reported"
         in capsys.readouterr().out
     )
+
+
+def test_cli_estimate_writes_a_playback_of_the_log(tmp_path: Path, capsys) -> None:
+    path, _ = _log(tmp_path, n=60)
+    out, html = tmp_path / "est.csv", tmp_path / "play.html"
+    args = ["estimate", "--robot", "ur5", "--observer", "kf", "--log", str(path)]
+    assert main([*args, "--out", str(out), "--html", str(html), "--no-progress"]) == 0
+    assert html.stat().st_size > 10_000 and "wrote" in capsys.readouterr().out
+    assert len(np.genfromtxt(out, delimiter=",", names=True)) == 60

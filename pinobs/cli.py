@@ -267,19 +267,23 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     columns = _column_map(args.map)
     keep = bool(args.html)
     with _progress(f"{robot.name}: {args.observer}", not args.no_progress) as progress:
-        run = process_log(
-            args.log,
-            robot,
-            args.observer,
-            out=args.out,
-            force=args.force,
-            keep=keep,
-            columns=columns,
-            topic=args.topic,
-            rate=args.rate,
-            noise_std=args.noise,
-            progress=progress,
-        )
+        try:
+            run = process_log(
+                args.log,
+                robot,
+                args.observer,
+                out=args.out,
+                force=args.force,
+                keep=keep,
+                columns=columns,
+                topic=args.topic,
+                rate=args.rate,
+                noise_std=args.noise,
+                progress=progress,
+            )
+        except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
+            print(f"pinobs: error: {exc}", file=sys.stderr)
+            return 2
     for w in run.warnings:
         print(f"warning: {w}", file=sys.stderr)
     where = f"{args.log}:" if run.unit == "line" else f"{args.log}: {run.unit} "

@@ -474,8 +474,7 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
                     f"bag {str(path)!r}, topic {topic!r}: the JointState joints {names} include "
                     f"none of {robot.name!r}'s joints {list(index)}"
                 )
-            if lacking:
-                problems.append((number, f"no position for joints {lacking}"))
+            notes = [f"no position for joints {lacking}"] if lacking else []
             for jname, b in index.items():
                 i = where.get(jname)
                 if i is None:
@@ -489,7 +488,9 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
                     tau[b.idx_v] = eff[i]
             any_tau = any_tau or eff.size > 0
             if eff.size and np.isnan(tau).any():
-                problems.append((number, "effort lacks some joints"))
+                notes.append("effort lacks some joints")
+            if notes:
+                problems.append((number, "; ".join(notes)))
             buf_q.append(q)
             buf_tau.append(tau)
             if len(buf_t) == chunk_rows:

@@ -252,6 +252,8 @@ class LogEstimator:
             problems.setdefault(pos, []).append(reason)
         lines = log.lines
         unit = log.unit
+        # a bag's messages are named by number and stamp, file rows by their line
+        stamps: list[float | None] = t_all.tolist() if unit == "message" else [None] * n
         period = self.period
         for k in range(n):
             t = float(t_all[k])
@@ -259,7 +261,7 @@ class LogEstimator:
             notes: list[str] = list(why)
             # ---- time
             if not math.isfinite(t):
-                self._report(lines[k], [*notes, f"time {t!r} unreadable: row skipped"])
+                self._report(lines[k], stamps[k], [*notes, f"time {t!r} unreadable: row skipped"])
                 continue
             if self._started and not t > self._t + TIME_EPS:
                 # rows that go back in time together (a clock reset, a burst of stamps
@@ -269,6 +271,7 @@ class LogEstimator:
                 if self._back <= TIME_BACK_ROWS:
                     self._report(
                         lines[k],
+                        stamps[k],
                         [
                             *notes,
                             f"t = {t!r} s is not after the previous sample at t = {self._t!r} s: "
@@ -292,6 +295,7 @@ class LogEstimator:
             ):
                 self._report(
                     lines[k],
+                    stamps[k],
                     [
                         *notes,
                         f"t = {t!r} s is far ahead of the next {unit} (t = {float(t_all[k + 1])!r} s): "
@@ -319,13 +323,13 @@ class LogEstimator:
             # ---- estimate
             est = self._estimate(t, q_all[k] if q_ok else None, tau, notes, held)
             if est is None:
-                self._report(lines[k], notes)
+                self._report(lines[k], stamps[k], notes)
                 continue
             out_q[k], out_v[k] = est[0].q, est[0].v
             self.estimated += 1
             self.measured += int(est[1])
             if notes:
-                self._report(lines[k], notes)
+                self._report(lines[k], stamps[k], notes)
         self.rows += n
         return t_all[:n], out_q, out_v
 
@@ -392,9 +396,10 @@ class LogEstimator:
         notes.append("observer re-initialised here")
         return self._estimate(t, q, tau, notes)
 
-    def _report(self, line: Any, notes: list[str]) -> None:
+    def _report(self, line: Any, stamp: float | None, notes: list[str]) -> None:
         if notes:
-            self.bad_rows.append((int(line), "; ".join(notes)))
+            head = [] if stamp is None else [f"stamp {stamp:.9f} s"]
+            self.bad_rows.append((int(line), "; ".join(head + notes)))
 
 
 def _median_period(t: Vector) -> float | None:

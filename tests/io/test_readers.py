@@ -122,7 +122,9 @@ def test_estimate_api_returns_a_dataframe_with_one_row_per_log_row(ur5, data) ->
 
 
 # ------------------------------------------------------------------ ROS bags
-def _write_bag(path: Path, robot: pinobs.Robot, t, q, tau, *, kind: str, rng) -> None:
+def _write_bag(
+    path: Path, robot: pinobs.Robot, t, q, tau, *, kind: str, rng, short_at: int = -1
+) -> None:
     pytest.importorskip("rosbags")
     from rosbags.typesys import Stores, get_typestore
 
@@ -136,6 +138,8 @@ def _write_bag(path: Path, robot: pinobs.Robot, t, q, tau, *, kind: str, rng) ->
     def messages():
         for k in range(len(t)):
             order = rng.permutation(len(names))  # shuffled joint order, per message
+            if k == short_at:
+                order = order[:-1]  # this message lacks one joint
             sec, nsec = 1_700_000_000 + int(t[k]), round((t[k] % 1) * 1e9)
             extra = {"seq": k} if kind == "ros1" else {}
             msg = js(
@@ -196,3 +200,26 @@ def test_bag_topic_is_chosen_and_a_missing_joint_is_reported(tmp_path, ur5, data
         read_log(bag, ur5, topic="/nope")
     with pytest.raises(pinobs.DimensionError, match="panda_joint1"):
         read_log(bag, pinobs.load("panda"))  # the bag lacks the panda's joints: every row says so
+
+
+def test_a_bag_message_lacking_a_joint_is_reported_with_its_stamp(tmp_path, ur5, data) -> None:
+    t, q, tau = data
+    bag = tmp_path / "b"
+    _write_bag(
+        bag,
+        ur5,
+        t[:40],
+        q[:40],
+        tau[:40],
+        kind="sqlite3",
+        rng=np.random.default_rng(2),
+        short_at=20,
+    )
+    log = read_log(bag, ur5)
+    ((number, reason),) = log.problems
+    assert number == 20 and reason.startswith("no position for joints [")
+    assert reason.endswith("]; effort lacks some joints")
+    run = pinobs.io.estimate_log(pinobs.make_observer("kf", ur5, rate=1000.0, noise_std=1e-4), log)
+    ((number, reason),) = run.bad_rows
+    assert number == 20 and reason.startswith(f"stamp {1_700_000_000 + t[20]:.9f} s; no position")
+    assert "dropped sample" in reason and run.estimated == 40

@@ -491,7 +491,7 @@ def process_log(
                 noise_std = float(np.median(sigma_joint))
                 warnings.append(
                     f"no noise level given: estimated σ = {noise_std:.3g} (median over joints; "
-                    f"per joint {np.array2string(sigma_joint, precision=2)}) from the log's first "
+                    f"per joint {np.array2string(sigma_joint, formatter={'float_kind': '{:.2e}'.format})}) from the log's first "
                     "second; pass noise_std (--noise) to override"
                 )
             else:

@@ -290,8 +290,12 @@ def _csv_chunks(
         raise LogFormatError(f"log {str(path)!r} is empty or its line 1 (the header) is blank")
     if sep == "," and "\t" in first and "," not in first:
         sep = "\t"
+    elif sep == "\t" and "," in first and "\t" not in first:
+        sep = ","
     header = _clean_header(next(csv.reader([first], delimiter=sep)), columns)
     layout = _layout(header, robot, f"log {str(path)!r}")
+    if not _has_data_after_header(path):
+        return
     reader = pd.read_csv(
         path,
         sep=sep,
@@ -326,6 +330,12 @@ def _csv_chunks(
         raise LogFormatError(f"log {str(path)!r}: {str(exc).strip()}") from None
     finally:
         reader.close()
+
+
+def _has_data_after_header(path: Path) -> bool:
+    with path.open("rb") as fh:
+        fh.readline()
+        return any(line.strip() for line in iter(fh.readline, b""))
 
 
 def _has_binary_head(path: Path) -> bool:

@@ -326,3 +326,14 @@ def test_two_timestamps_far_ahead_cost_a_few_rows_not_the_rest(tmp_path, sim, ur
     assert "re-initialised" in dict(run.bad_rows)[58] and "time went back" in dict(run.bad_rows)[58]
     assert np.isfinite(run.v).all(axis=1).sum() == 200 - 5
     assert np.isfinite(run.v[58 - 2 :]).all()
+
+
+def test_a_header_only_log_exits_1_and_an_empty_file_is_an_error(tmp_path, sim, capsys) -> None:
+    path, lines = _lines(tmp_path, sim, n=3)
+    path.write_text(lines[0] + "\n\n")
+    args = ["estimate", "--robot", "ur5", "--observer", "kf", "--log", str(path), "--no-progress"]
+    assert main([*args, "--out", str(tmp_path / "o.csv")]) == 1
+    assert "0 rows: 0 estimated" in capsys.readouterr().out
+    path.write_text("")
+    assert main([*args, "--out", str(tmp_path / "o2.csv")]) == 2
+    assert "is empty" in capsys.readouterr().err

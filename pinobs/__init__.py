@@ -10,13 +10,17 @@ from pinobs.errors import (
     DimensionError,
     GainError,
     LogFormatError,
+    ModelError,
     ModelFileError,
+    ModelTypeError,
+    ModelWarning,
     NonFiniteError,
     NotResetError,
     ObserverDiverged,
     OptionError,
     OutputExistsError,
     PinobsError,
+    PinobsWarning,
     TimestampError,
     UnknownNameError,
     UnsupportedRobotError,
@@ -25,6 +29,7 @@ from pinobs.evaluation import Metrics, evaluate
 from pinobs.io import estimate
 from pinobs.model import Robot, load, robot_names
 from pinobs.observers import Estimate, Observer, make_observer, observer_names
+from pinobs.observers.smoothing import Smoothed, smooth
 from pinobs.simulation import Result, Sensor, simulate
 
 __version__ = "0.1.0"
@@ -36,7 +41,10 @@ __all__ = [
     "GainError",
     "LogFormatError",
     "Metrics",
+    "ModelError",
     "ModelFileError",
+    "ModelTypeError",
+    "ModelWarning",
     "NonFiniteError",
     "NotResetError",
     "Observer",
@@ -44,9 +52,11 @@ __all__ = [
     "OptionError",
     "OutputExistsError",
     "PinobsError",
+    "PinobsWarning",
     "Result",
     "Robot",
     "Sensor",
+    "Smoothed",
     "TimestampError",
     "UnknownNameError",
     "UnsupportedRobotError",
@@ -57,4 +67,5 @@ __all__ = [
     "observer_names",
     "robot_names",
     "simulate",
+    "smooth",
 ]

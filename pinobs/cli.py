@@ -7,6 +7,7 @@ pinobs play RESULT.npz [--html F] [--plot F]   watch a saved run
 pinobs demo                                    the main job on a built-in default
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
     [--force --map COL=NAME --topic T --noise STD]   (CSV/TSV, Parquet, NPZ, ROS bags)
+    [--smooth [--lag S] [--accel-psd P|auto]]             RTS smoother over the ekf, v_std0.. columns
 pinobs check ii --robot R                      I&I Assumption 1 on the model
 pinobs bench [--quick] [--json FILE]           accuracy and cost against the baselines
 """
@@ -22,16 +23,30 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from pinobs.errors import DimensionError, PinobsError, UnsupportedRobotError
+import numpy as np
+
+from pinobs.errors import (
+    DimensionError,
+    GainError,
+    OutputExistsError,
+    PinobsError,
+    UnsupportedRobotError,
+)
 from pinobs.evaluation import evaluate, format_table
 from pinobs.io import process_log, read_log
 from pinobs.model import Robot, aba_time, load, robot_entries
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
-from pinobs.simulation import INPUT_NAMES, Result, Sensor, simulate
+from pinobs.simulation import INPUT_NAMES, Result, Sensor, mismatched_plant, simulate
 
 __all__ = ["main", "observer_table"]
 
 DEMO_ROBOTS = ("cartpole", "ur5")
+#: The UR5 of the demo carries a payload its observers do not know about
+#: (:func:`pinobs.simulation.mismatched_plant`), and its playback shows these
+#: observers side by side: the model-free Kalman filter, the EKF on the nominal
+#: model, and the adaptive observer once it is registered.
+DEMO_MISMATCH = {"ur5": "inertia20_payload"}
+DEMO_GHOSTS = ("kf", "ekf", *(("adaptive",) if "adaptive" in observer_names() else ()))
 
 
 # ----------------------------------------------------------------- helpers
@@ -86,9 +101,15 @@ def _build(
 
 
 def _run_one(
-    robot: Robot, names: Sequence[str], args: argparse.Namespace, *, strict: bool
+    robot: Robot,
+    names: Sequence[str],
+    args: argparse.Namespace,
+    *,
+    strict: bool,
+    mismatch: str | None = None,
 ) -> tuple[Result, dict[str, Any], str]:
     sensor = Sensor(rate=args.rate, noise_std=args.noise, bits=args.bits)
+    plant = None if mismatch is None else mismatched_plant(robot, mismatch, seed=args.seed)
     observers, skipped = _build(robot, names, sensor, strict=strict)
     with _progress(f"{robot.name}: simulating", not args.no_progress) as progress:
         result = simulate(
@@ -100,6 +121,7 @@ def _run_one(
             perturb_q=args.perturb_q,
             perturb_v=args.perturb_v,
             seed=args.seed,
+            plant=plant,
             progress=progress,
         )
     metrics = evaluate(result, robot)
@@ -110,6 +132,8 @@ def _run_one(
         f"start error |dq| = {args.perturb_q:g}, |dv| = {args.perturb_v:g}; "
         f"one pin.aba = {aba * 1e6:.2f} us"
     )
+    if mismatch is not None:
+        title += f"; the truth is the {mismatch} model, the observers know the nominal one"
     table = format_table(metrics, aba_seconds=aba, title=title)
     if skipped:
         table += "\n" + "\n".join(f"skipped {k}: {v}" for k, v in skipped.items())
@@ -210,28 +234,34 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     pages = []
     for name in DEMO_ROBOTS:
         robot = load(name)
-        result, report, table = _run_one(robot, observer_names(), args, strict=False)
+        mismatch = DEMO_MISMATCH.get(name)
+        result, report, table = _run_one(
+            robot, observer_names(), args, strict=False, mismatch=mismatch
+        )
         print(table + "\n")
         reports.append(report)
-        # ghosts for the three most accurate observers that did not diverge
-        ranked = sorted(
-            (o for o in report["observers"] if o["diverged_at"] is None),
-            key=lambda o: o["rms_v_error"],
-        )
-        with _progress(f"{name}: playback", not args.no_progress) as progress:
-            pages.append(
-                write_html(
-                    result,
-                    robot,
-                    out / f"{name}_playback.html",
-                    observers=[o["observer"] for o in ranked[:3]],
-                    progress=progress,
-                )
+        if mismatch is None:  # ghosts for the three most accurate observers that did not diverge
+            ranked = sorted(
+                (o for o in report["observers"] if o["diverged_at"] is None),
+                key=lambda o: o["rms_v_error"],
             )
+            ghosts = [o["observer"] for o in ranked[:3]]
+            what = "the 3 best estimates"
+        else:
+            ghosts = [g for g in DEMO_GHOSTS if g in result.observer_names]
+            what = f"{', '.join(ghosts)} (the truth carries a payload their model lacks)"
+        with _progress(f"{name}: playback", not args.no_progress) as progress:
+            page = write_html(
+                result, robot, out / f"{name}_playback.html", observers=ghosts, progress=progress
+            )
+        pages.append((page, what))
     path = _write_json(out / "demo.json", {"runs": reports})
     print(f"wrote {path}")
-    for page in pages:
-        print(f"playback: open {page} in a browser (the robot, and the 3 best estimates as ghosts)")
+    for page, what in pages:
+        print(
+            f"playback: open {page} in a browser (the robot, {what} as ghosts; "
+            "true and estimated velocity charted below)"
+        )
     return 0
 
 
@@ -263,6 +293,8 @@ def _column_map(items: Sequence[str] | None) -> dict[str, str] | None:
 
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
+    if args.smooth:
+        return _estimate_smoothed(args)
     robot = load(args.robot, root_joint=args.root_joint, geometry=bool(args.html))
     columns = _column_map(args.map)
     keep = bool(args.html)
@@ -307,6 +339,145 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     if run.estimated == 0:
         print("pinobs: error: no row of the log could be estimated", file=sys.stderr)
         return 1
+    return 0
+
+
+def _identify_report(ident: Any) -> str:
+    """The identification report as text tables (``pinobs identify``)."""
+    rep = ident.report
+    lines = [
+        f"rows {rep['rows']} fitted, {rep['holdout_rows']} held out; "
+        f"{rep['rank']} identifiable combinations of {rep['n_parameters']} parameters; "
+        f"condition number {rep['condition']:.3g}"
+        + ("; physical consistency enforced" if rep["projected"] else ""),
+        "",
+        "torque residual RMS per joint (rows weighted by M⁻¹/Δt, rad/s²-like)",
+        f"{'joint':24s} {'fit before':>11s} {'fit after':>11s} {'held-out before':>16s} {'held-out after':>15s}",
+    ]
+    for j, name in enumerate(rep["joints"]):
+        lines.append(
+            f"{name:24s} {rep['residual_before'][j]:11.4g} {rep['residual_after'][j]:11.4g} "
+            f"{rep['holdout_before'][j]:16.4g} {rep['holdout_after'][j]:15.4g}"
+        )
+    lines += ["", f"{'parameter':32s} {'nominal':>12s} {'identified':>12s} {'std':>10s}"]
+    for name, value, std, nominal, excited in ident.parameters.as_rows():
+        if excited:
+            lines.append(f"{name:32s} {nominal:12.5g} {value:12.5g} {std:10.2g}")
+    n_not = len(rep["not_excited"])
+    if n_not:
+        lines.append(
+            f"({n_not} parameters not excited by this log stay near their nominal values: "
+            + ", ".join(rep["not_excited"][:6])
+            + (", ..." if n_not > 6 else "")
+            + ")"
+        )
+    if np.any(ident.offset):
+        lines.append(
+            "torque offset per joint [N·m] (not stored in the URDF; subtract it from the torques "
+            "or let the observer estimate it): " + ", ".join(f"{b:.4g}" for b in ident.offset)
+        )
+    return "\n".join(lines)
+
+
+def _cmd_identify(args: argparse.Namespace) -> int:
+    from pinobs.model.identification import identify
+
+    robot = load(args.robot, root_joint=args.root_joint)
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
+    if out.resolve() == Path(args.log).resolve():
+        raise OutputExistsError(f"--out {str(out)!r} is the log itself")
+    log = read_log(args.log, robot)
+    ident = identify(
+        robot, log, friction=not args.no_friction, offset=not args.no_offset, holdout=args.holdout
+    )
+    print(_identify_report(ident))
+    path = ident.save(str(out))
+    print(f"wrote {path}: load it with pinobs.load({path!r}, friction=True)")
+    return 0
+
+
+def _cmd_excite(args: argparse.Namespace) -> int:
+    from pinobs.model.excitation import excite
+
+    robot = load(args.robot, root_joint=args.root_joint)
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
+    exc = excite(robot, duration=args.duration, rate=args.rate, seed=args.seed)
+    names = exc.joint_names
+    header = ["t"] + [f"{k}.{n}" for k in ("q", "v", "a", "tau") for n in names]
+    table = np.column_stack([exc.t, exc.q, exc.v, exc.a, exc.tau])
+    tmp = out.with_name(out.name + ".tmp")
+    np.savetxt(tmp, table, delimiter=",", header=",".join(header), comments="", fmt="%.10g")
+    tmp.replace(out)
+    print(
+        f"wrote {out}: {exc.t.size} samples over {args.duration:g} s, regressor condition number "
+        f"{exc.condition:.3g}; peak |v| {np.abs(exc.v).max():.3g} rad/s, peak |tau| "
+        f"{np.abs(exc.tau).max():.3g} N·m (nominal model)"
+    )
+    return 0
+
+
+# ------------------------------------------------- estimate --smooth (issue 19)
+def _psd_or_auto(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number [rad²/s³] or 'auto'") from None
+
+
+def _estimate_smoothed(args: argparse.Namespace) -> int:
+    """``estimate --smooth``: the RTS smoother over the log; ``estimate``'s columns plus ``v_std0..``."""
+    from pinobs.observers.smoothing import smooth
+
+    robot = load(args.robot, root_joint=args.root_joint)
+    log = read_log(args.log, robot)
+    for line, reason in log.problems[: args.max_reports]:
+        print(f"{args.log}:{line}: {reason} (row used as a dropped sample)", file=sys.stderr)
+    if log.tau is None:
+        print(
+            "warning: the log has no torque columns: the smoother assumes zero torque",
+            file=sys.stderr,
+        )
+    if args.noise is None:
+        raise GainError(
+            "--smooth needs --noise: the position noise standard deviation [rad or m], > 0"
+        )
+    res = smooth(
+        robot,
+        log,
+        observer=args.observer,
+        noise_std=args.noise,
+        accel_psd=args.accel_psd,
+        lag=args.lag,
+    )
+    if args.accel_psd == "auto":
+        print(
+            f"accel_psd = {res.options['accel_psd']:g} rad²/s³ (chosen from the log)",
+            file=sys.stderr,
+        )
+    header = [
+        "t",
+        *(f"q{i}" for i in range(robot.nq)),
+        *(f"v{i}" for i in range(robot.nv)),
+        *(f"v_std{i}" for i in range(robot.nv)),
+    ]
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.savetxt(
+        out,
+        np.column_stack([res.t, res.q, res.v, res.v_std]),
+        delimiter=",",
+        header=",".join(header),
+        comments="",
+        fmt="%.17g",
+    )
+    mode = "whole log" if args.lag is None else f"lag {args.lag:g} s"
+    print(f"smoothed {args.observer} on {robot.name} ({mode}): {log.t.size} rows; wrote {out}")
     return 0
 
 
@@ -471,6 +642,20 @@ def _parser() -> argparse.ArgumentParser:
         help="reported rows listed at most (default %(default)s)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--smooth",
+        action="store_true",
+        help="RTS smoother (uses the whole log); adds v_std0.. columns; needs --noise",
+    )
+    p.add_argument(
+        "--lag", type=float, default=None, help="with --smooth: fixed-lag mode, S seconds"
+    )
+    p.add_argument(
+        "--accel-psd",
+        type=_psd_or_auto,
+        default=1e-8,
+        help="with --smooth: process noise [rad²/s³], or 'auto' (chosen by likelihood); default %(default)s",
+    )
     p.set_defaults(func=_cmd_estimate)
 
     p = sub.add_parser(
@@ -485,14 +670,49 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_check)
 
+    p = sub.add_parser(
+        "identify", help="identify inertias and friction from a log; write a calibrated URDF"
+    )
+    p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF path")
+    p.add_argument(
+        "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
+    )
+    p.add_argument("--log", required=True, help="log with t, q and tau columns (CSV or NPZ)")
+    p.add_argument("--out", required=True, help="the calibrated URDF to write")
+    p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
+    p.add_argument("--no-offset", action="store_true", help="do not identify a torque offset")
+    p.add_argument(
+        "--holdout",
+        type=float,
+        default=0.2,
+        help="fraction of the log (its end) kept out of the fit for the report (default %(default)s)",
+    )
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser("excite", help="write an excitation trajectory for identification")
+    p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF path")
+    p.add_argument("--root-joint", default=None, choices=["fixed"])
+    p.add_argument("--duration", type=float, default=20.0, help="length [s] (default %(default)s)")
+    p.add_argument(
+        "--rate", type=float, default=100.0, help="samples per second (default %(default)s)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the search (default %(default)s)")
+    p.add_argument("--out", required=True, help="CSV to write (t, q.*, v.*, a.*, tau.*)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=_cmd_excite)
+
     p = sub.add_parser("bench", help="accuracy and cost of every observer against the baselines")
     p.add_argument("--quick", action="store_true", help="two robots, short runs: under two minutes")
     p.add_argument("--json", default=None, help="write the full report to this JSON file")
     p.set_defaults(func=_cmd_bench)
 
-    p = sub.add_parser("demo", help="every observer on the cart-pole and a UR5: tables, JSON")
+    p = sub.add_parser(
+        "demo",
+        help="every observer on the cart-pole and a UR5 with an unknown payload: tables, JSON, playback",
+    )
     p.add_argument("--out", default="out", help="output folder (default %(default)s)")
-    _add_sim_options(p, duration=3.0)
+    _add_sim_options(p, duration=5.0)
     p.set_defaults(func=_cmd_demo)
     return parser
 

@@ -14,14 +14,19 @@ __all__ = [
     "ConfigurationError",
     "DimensionError",
     "GainError",
+    "IdentificationError",
     "LogFormatError",
+    "ModelError",
     "ModelFileError",
+    "ModelTypeError",
+    "ModelWarning",
     "NonFiniteError",
     "NotResetError",
     "ObserverDiverged",
     "OptionError",
     "OutputExistsError",
     "PinobsError",
+    "PinobsWarning",
     "TimestampError",
     "UnknownNameError",
     "UnsupportedRobotError",
@@ -47,8 +52,13 @@ class LogFormatError(PinobsError, ValueError):
     """A log file that cannot be parsed (encoding, truncation, wrong container); names the line."""
 
 
-class OutputExistsError(PinobsError, FileExistsError):
-    """An output file that exists already (pass ``force``) or that is one of the inputs."""
+class ModelTypeError(PinobsError, TypeError):
+    """A robot source that is neither a name, a path, a ``pin.Model`` nor a ``RobotWrapper``."""
+
+
+class ModelError(PinobsError, ValueError):
+    """A model whose dynamics are wrong or unusable (NaN or negative mass, impossible
+    inertia, singular or indefinite mass matrix, mimic joints, a dropped inertial)."""
 
 
 class DimensionError(PinobsError, ValueError):
@@ -83,6 +93,14 @@ class UnsupportedRobotError(PinobsError, ValueError):
     """An observer asked to run on a robot it is not built for."""
 
 
+class OutputExistsError(PinobsError, FileExistsError):
+    """An output file exists (and overwriting was not asked for) or is an input."""
+
+
+class IdentificationError(PinobsError, ValueError):
+    """Identification is impossible or would be unreliable (no torques, too short, not excited)."""
+
+
 class ObserverDiverged(PinobsError, ArithmeticError):
     """An observer produced a non-finite estimate.
 
@@ -95,3 +113,11 @@ class ObserverDiverged(PinobsError, ArithmeticError):
         super().__init__(message)
         self.t = t
         self.last_estimate = last_estimate
+
+
+class PinobsWarning(UserWarning):
+    """Root of every warning pinobs issues on purpose."""
+
+
+class ModelWarning(PinobsWarning):
+    """A model that loads and is usable but not all of it (meshes missing, parser limits)."""

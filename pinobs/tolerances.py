@@ -12,10 +12,13 @@ __all__ = [
     "COULOMB_SMOOTHING_VELOCITY",
     "GAP_PERIODS",
     "II_ASSUMPTION1_TOL",
+    "INERTIA_TRIANGLE_TOL",
     "JACOBI_FD_STEP",
     "LEFT_INVARIANT_INERTIA_TOL",
     "LIMIT_WARN_FRACTION",
+    "MASS_MATRIX_SINGULAR_TOL",
     "MAX_GAP_PERIODS",
+    "NEGLIGIBLE_MASS_FRACTION",
     "QUATERNION_NORM_TOL",
     "TIME_BACK_ROWS",
     "TIME_EPS",
@@ -80,3 +83,17 @@ MAX_GAP_PERIODS = 10.0
 #: by one; when this many in a row go on increasing among themselves (a clock
 #: reset, or earlier rows stamped ahead), the observer restarts at the next one.
 TIME_BACK_ROWS = 5
+
+#: A body's principal moments may break ``I₃ ≤ I₁ + I₂`` (or dip below zero) by
+#: this fraction of ``I₃`` before :func:`pinobs.load` refuses it: published
+#: inertias are rounded to 3-6 digits, and flat plates sit exactly on the bound.
+INERTIA_TRIANGLE_TOL = 1e-3
+
+#: Bodies lighter than this fraction of the robot's total mass are placeholders
+#: (1 mg dummy links): the inertia-shape checks skip them.
+NEGLIGIBLE_MASS_FRACTION = 1e-6
+
+#: ``M(q)`` counts as singular when ``λ_min ≤`` this ``· λ_max``.  Every
+#: example-robot-data robot that loads has ``λ_min/λ_max ≥ 5e-8`` at random
+#: configurations; a joint moving only massless links gives ~1e-17.
+MASS_MATRIX_SINGULAR_TOL = 1e-12

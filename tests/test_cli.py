@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
 
-from pinobs.cli import main
+from pinobs.cli import DEMO_GHOSTS, main
+from pinobs.observers import observer_names
 
 
 def test_list_prints_robots_and_observers(capsys) -> None:
@@ -68,6 +70,12 @@ def test_demo_prints_tables_for_cartpole_and_ur5_and_writes_json(tmp_path: Path,
     for name in ("cartpole", "ur5"):
         assert (tmp_path / f"{name}_playback.html").stat().st_size > 10_000
     assert "playback: open" in out
+    # the UR5 carries a payload its observers lack; its page shows the demo's ghosts
+    assert "the truth is the inertia20_payload model" in out
+    page = (tmp_path / "ur5_playback.html").read_text(encoding="utf-8")
+    legend = page[page.index('id="pinobs-legend"') : page.index('id="pinobs-time"')]
+    assert re.findall(r'data-label="([^"]+)"', legend) == ["truth", *DEMO_GHOSTS]
+    assert "adaptive" not in observer_names() or "adaptive" in DEMO_GHOSTS
 
 
 def test_missing_subcommand_exits_with_usage() -> None:

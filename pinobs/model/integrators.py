@@ -93,22 +93,30 @@ def _rk4_stage_matrices(h: float) -> tuple[Vector, Vector, Vector, Vector]:
 
 
 def dynamics_rk4(
-    robot: Robot, q: Vector, v: Vector, tau: Vector, h: float
+    robot: Robot, q: Vector, v: Vector, tau: Vector, h: float, *, acc0: Vector | None = None
 ) -> tuple[Vector, Vector]:
     """One RKMK4 step of ``q̇ = v``, ``v̇ = robot.forward_dynamics(q, v, tau)`` over ``h`` [s], τ held.
 
     Same result as :func:`lie_rk4` with that right-hand side (to rounding);
-    on a vector space, the stacked form of the module docstring.
+    on a vector space, the stacked form of the module docstring.  ``acc0``:
+    the first stage's ``v̇`` at ``(q, v)`` if the caller has it already (an
+    EKF gets it with its Jacobians), saving one ABA call; read before any
+    other dynamics call, so it may be a view into the robot's ``pin.Data``.
     """
     fd = robot.forward_dynamics
     if not robot.is_vector_space:
-        return lie_rk4(robot, q, v, h, lambda qq, vv: (vv, fd(qq, vv, tau)))
+        first = [] if acc0 is None else [np.array(acc0)]  # a copy: acc0 may be a view
+
+        def rhs(qq: Vector, vv: Vector) -> tuple[Vector, Vector]:
+            return vv, (first.pop() if first else fd(qq, vv, tau))
+
+        return lie_rk4(robot, q, v, h, rhs)
     if isinstance(robot, Robot) and not robot.has_friction:  # the call, without the method
         fd = partial(pin.aba, robot.model, robot._data)  # the robot's own data (same layer)
     c2, c3, c4, c_out = _rk4_stage_matrices(float(h))
     b = np.empty((6, q.shape[0]))
     b[0], b[1] = q, v
-    b[2] = fd(q, v, tau)
+    b[2] = fd(q, v, tau) if acc0 is None else acc0
     s = c2.dot(b[:3])
     b[3] = fd(s[0], s[1], tau)
     s = c3.dot(b[:4])

@@ -11,14 +11,29 @@ from __future__ import annotations
 
 import importlib.metadata
 import importlib.resources
+import warnings
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 import pinocchio as pin
+from pinocchio.robot_wrapper import RobotWrapper
 
-from pinobs.errors import GainError, ModelFileError, UnknownNameError
+from pinobs.errors import (
+    GainError,
+    ModelFileError,
+    ModelTypeError,
+    ModelWarning,
+    PinobsError,
+    UnknownNameError,
+)
+from pinobs.model.mjcf import MujocoMap, build_from_mujoco, cross_check
 from pinobs.model.robot import Robot
+from pinobs.model.sanity import check_model, check_urdf
+from pinobs.model.urdf import UrdfFacts, read_urdf
 
 __all__ = ["RobotEntry", "load", "robot_entries", "robot_names"]
 
@@ -54,6 +69,13 @@ _ERD = "example-robot-data"
 
 _ENTRIES: tuple[RobotEntry, ...] = (
     RobotEntry("cartpole", _PINOBS, "cartpole.urdf", "fixed", "pendulum on a cart, nv = 2"),
+    RobotEntry(
+        "cartpole_continuous",
+        _PINOBS,
+        "cartpole_continuous.urdf",
+        "fixed",
+        "the cart-pole with a continuous pole joint, nq = 3, nv = 2",
+    ),
     RobotEntry("pendulum", _PINOBS, "pendulum.urdf", "fixed", "simple pendulum, nv = 1"),
     RobotEntry("planar_3r", _PINOBS, "planar_3r.urdf", "fixed", "3-link planar arm, nv = 3"),
     RobotEntry("rigid_body", _PINOBS, "rigid_body.urdf", "freeflyer", "free rigid body, SE(3)"),
@@ -281,39 +303,186 @@ def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
             f"robot file {str(path)!r} does not exist; give an existing URDF/MJCF file "
             "or one of the robot names: " + ", ".join(robot_names())
         )
-    return path, [path.parent], "fixed", path.stem
+    return path, [], "fixed", path.stem
+
+
+def _from_pinocchio(
+    source: pin.Model | RobotWrapper, root_joint: str | None, friction: bool | None
+) -> Robot:
+    """A :class:`Robot` around a ``pin.Model`` or a ``RobotWrapper`` (models copied, not shared)."""
+    if root_joint is not None:
+        raise GainError(
+            f"root_joint={root_joint!r} applies to files and registry names only; a "
+            "pin.Model or RobotWrapper already has its root joint: pass root_joint=None"
+        )
+    if isinstance(source, RobotWrapper):
+        model, visual, collision = source.model, source.visual_model, source.collision_model
+    else:
+        model, visual, collision = source, None, None
+    if model.nv == 0:
+        raise ModelFileError(f"the pin.Model {model.name!r} has no moving joint (nv = 0)")
+    name = model.name or "model"
+    return Robot(
+        model.copy(),
+        name=name,
+        source=f"<{type(source).__name__} {name}>",
+        visual_model=visual.copy() if visual is not None else None,
+        collision_model=collision.copy() if collision is not None else None,
+        friction=bool(friction),
+        root_joint=None,
+    )
+
+
+def _load_urdf(
+    path: Path, package_dirs: list[str | Path], joint_type: type | None, *, geometry: bool = True
+) -> tuple[pin.Model, pin.GeometryModel | None, pin.GeometryModel | None, UrdfFacts]:
+    """Model and geometries of a URDF, meshes resolved as :mod:`pinobs.model.urdf` says.
+
+    When meshes are missing or cannot be read, the dynamics load alone and one
+    :class:`~pinobs.errors.ModelWarning` says which meshes (the playback then
+    draws a stick figure).
+    """
+    facts = read_urdf(path, package_dirs)
+    args = (joint_type(),) if joint_type is not None else ()
+    model = pin.buildModelFromXML(facts.xml, *args)
+    visual = collision = None
+    problem = ""
+    if not geometry:
+        return model, visual, collision, facts
+    if facts.missing_meshes:
+        shown = ", ".join(facts.missing_meshes[:3])
+        more = len(facts.missing_meshes) - 3
+        problem = (
+            f"{len(facts.missing_meshes)} mesh(es) not found ({shown}{', …' if more > 0 else ''})"
+        )
+    else:
+        try:
+            visual = pin.buildGeomFromUrdfString(model, facts.xml, pin.GeometryType.VISUAL)
+            collision = pin.buildGeomFromUrdfString(model, facts.xml, pin.GeometryType.COLLISION)
+        except (RuntimeError, ValueError) as exc:
+            visual = collision = None
+            problem = f"its geometry could not be read ({exc})"
+    if problem:
+        warnings.warn(
+            f"{path}: {problem}; the dynamics are loaded without geometry (the playback draws "
+            "a stick figure). Pass package_dirs=[folder that contains the package folder], or "
+            "set ROS_PACKAGE_PATH / AMENT_PREFIX_PATH, to find package:// meshes",
+            ModelWarning,
+            stacklevel=3,
+        )
+    return model, visual, collision, facts
+
+
+def _load_mjcf(
+    path: Path, joint_type: type | None, root: str
+) -> tuple[
+    pin.Model, pin.GeometryModel | None, pin.GeometryModel | None, tuple[Any, MujocoMap] | None
+]:
+    """An MJCF model built from MuJoCo's compiled model, or from Pinocchio's parser without MuJoCo.
+
+    Through MuJoCo (:mod:`pinobs.model.mjcf`) the root joint is the file's
+    own (declare a ``<freejoint/>`` in it) and the visual geometry is MuJoCo's
+    primitive geoms (no meshes).  Without MuJoCo one
+    :class:`~pinobs.errors.ModelWarning` says what Pinocchio's parser misses.
+    """
+    try:
+        import mujoco  # noqa: F401  (optional extra pinobs[mujoco])
+    except ImportError:
+        warnings.warn(
+            f"{path}: MuJoCo is not installed (pip install 'pinobs[mujoco]'), so Pinocchio's "
+            "MJCF parser reads the file: it ignores geom masses set in <default> classes "
+            "(density is used instead), settotalmass and joint stiffness, keeps only the first "
+            "body tree, and MuJoCo's M(q) cannot be cross-checked",
+            ModelWarning,
+            stacklevel=3,
+        )
+        if joint_type is not None:
+            model = pin.buildModelFromMJCF(str(path), joint_type())
+        else:
+            model = pin.buildModelFromMJCF(str(path))
+        try:
+            visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
+        except (RuntimeError, ValueError):
+            visual = None
+        return model, visual, None, None
+    if root != "fixed":
+        raise GainError(
+            f"root_joint={root!r}: an MJCF file loaded through MuJoCo keeps its own root; "
+            "declare <freejoint/> (or <joint type='ball'/>) in its top body instead"
+        )
+    model, mj, mapping, visual = build_from_mujoco(path)
+    return model, visual, None, (mj, mapping)
 
 
 def load(
-    source: str | Path,
+    source: str | Path | pin.Model | RobotWrapper,
     *,
     root_joint: str | None = None,
-    friction: bool = False,
+    friction: bool | None = None,
+    package_dirs: Sequence[str | Path] | None = None,
+    mimic: str | None = None,
+    check: bool = True,
     geometry: bool = True,
 ) -> Robot:
-    """Load a robot by registry name or file path.
+    """Load a robot by registry name, file path, ``pin.Model`` or ``RobotWrapper``.
 
     Args:
         source: a name from :func:`robot_names` (the project's ``models/`` or
-            example-robot-data), or a path to a URDF (``.urdf``) or MJCF
-            (``.xml``/``.mjcf``) file.
+            example-robot-data), a path to a URDF (``.urdf``) or MJCF
+            (``.xml``/``.mjcf``; compiled by MuJoCo when installed, the model
+            built from it and ``M(q)`` cross-checked with ``mj_fullM``:
+            :mod:`pinobs.model.mjcf`) file, or a Pinocchio ``Model`` or
+            ``RobotWrapper`` (copied; its geometry, if any, kept).
         root_joint: ``None`` (the registry's default: free-flyer for legged
             robots and the rigid body, spherical for the top, fixed otherwise;
-            fixed for files), ``"fixed"``, ``"spherical"``, ``"freeflyer"`` or
-            ``"planar"``.
+            fixed for files; the model's own for a ``pin.Model``), ``"fixed"``,
+            ``"spherical"``, ``"freeflyer"`` or ``"planar"``.
         friction: include the joint friction of the URDF's ``<dynamics damping
             friction>`` tags in the dynamics (:meth:`Robot.friction_torque`).
-            Off by default: many published URDFs carry placeholder values
-            (pr2's torso has 20000 N·s/m); switch it on when yours are identified.
-        geometry: also load the visual and collision meshes (for playback);
-            ``False`` skips them (a UR5's meshes hold ~70 MB).
+            ``None`` means off for URDFs (many published ones carry placeholder
+            values: pr2's torso has 20000 N·s/m; switch it on when yours are
+            identified) and on for MJCF files loaded through MuJoCo (their
+            ``damping`` and ``frictionloss``, which MJCF authors mean).
+        package_dirs: folders searched for ``package://pkg/…`` mesh URIs (each
+            holding the folder ``pkg``, or being it), before ``ROS_PACKAGE_PATH``,
+            ``AMENT_PREFIX_PATH`` and the file's parent folders
+            (:mod:`pinobs.model.urdf`).  Meshes still missing: the dynamics
+            load without geometry and a :class:`~pinobs.errors.ModelWarning` says so.
+        mimic: what to do with URDF ``<mimic>`` joints, which Pinocchio's
+            forward dynamics cannot couple: ``"error"`` (refuse, naming the
+            joint) or ``"independent"`` (each a joint of its own).  ``None``:
+            ``"independent"`` for registry names (panda's and talos' grippers),
+            ``"error"`` for files.
+        check: refuse models whose dynamics cannot be right
+            (:mod:`pinobs.model.sanity`): non-finite, negative or dropped
+            masses, impossible inertias, a mass matrix singular or indefinite
+            at sampled configurations.  ``False`` skips these checks.
+        geometry: also load a URDF's visual and collision meshes (for
+            playback); ``False`` skips them (a UR5's hold ~70 MB of memory).
 
     Raises:
         UnknownNameError: ``source`` is neither a registered name nor a path.
         ModelFileError: the file is missing or cannot be parsed.
+        ModelTypeError: ``source`` is of another type.
+        ModelError: the model fails a check (``check=True``), has mimic joints
+            (``mimic="error"``), or (MJCF) its mass or ``M(q)`` differs from
+            MuJoCo's; the message names the body or joint.
         GainError: ``root_joint`` is not one of the accepted values.
     """
-    path, package_dirs, default_root, name = _resolve(source)
+    if mimic not in (None, "error", "independent"):
+        raise GainError(f"mimic={mimic!r} is not accepted; use None, 'error' or 'independent'")
+    if isinstance(source, pin.Model | RobotWrapper):
+        robot = _from_pinocchio(source, root_joint, friction)
+        if check:
+            check_model(robot.model)
+        return robot
+    if not isinstance(source, str | Path):
+        raise ModelTypeError(
+            f"cannot load a robot from a {type(source).__name__} ({source!r}); give a registry "
+            "name (pinobs.robot_names()), a path to a URDF/MJCF file, a pinocchio.Model or a "
+            "pinocchio.RobotWrapper"
+        )
+    path, default_dirs, default_root, name = _resolve(source)
     root = default_root if root_joint is None else root_joint
     if root not in _ROOT_JOINTS:
         raise GainError(
@@ -321,26 +490,19 @@ def load(
             + ", ".join(repr(k) for k in _ROOT_JOINTS)
         )
     joint_type = _ROOT_JOINTS[root]
-    dirs = [str(d) for d in package_dirs]
+    dirs: list[str | Path] = [*(package_dirs or ()), *default_dirs]
+    facts: UrdfFacts | None = None
+    compiled: tuple[Any, MujocoMap] | None = None
     try:
         if path.suffix.lower() == ".urdf":
-            args = (joint_type(),) if joint_type is not None else ()
-            if geometry:
-                model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs, *args)
-            else:
-                model, collision, visual = pin.buildModelFromUrdf(str(path), *args), None, None
+            model, visual, collision, facts = _load_urdf(path, dirs, joint_type, geometry=geometry)
         else:
-            if joint_type is not None:
-                model = pin.buildModelFromMJCF(str(path), joint_type())
-            else:
-                model = pin.buildModelFromMJCF(str(path))
-            collision = visual = None
-            try:
-                if geometry:
-                    visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
-            except (RuntimeError, ValueError):
-                visual = None
-    except (RuntimeError, ValueError, OSError) as exc:
+            model, visual, collision, compiled = _load_mjcf(path, joint_type, root)
+            if friction is None and compiled is not None:
+                friction = True  # MJCF authors mean their damping (unlike URDF placeholders)
+    except PinobsError:
+        raise
+    except (RuntimeError, ValueError, OSError, ET.ParseError) as exc:
         raise ModelFileError(
             f"cannot parse robot file {str(path)!r} (from source {str(source)!r}): {exc}. "
             "Known robot names: " + ", ".join(robot_names())
@@ -350,12 +512,19 @@ def load(
             f"robot {str(source)!r} has no moving joint; a single rigid body needs "
             "root_joint='spherical' or 'freeflyer'"
         )
+    if facts is not None:
+        default = "error" if str(source) not in _all_entries() else "independent"
+        check_urdf(facts, mimic=mimic or default, inertials=check)
+    if compiled is not None:
+        cross_check(model, *compiled)
+    if check:
+        check_model(model)
     return Robot(
         model,
         name=name,
         source=str(source),
         visual_model=visual,
         collision_model=collision,
-        friction=friction,
+        friction=bool(friction),
         root_joint=root,
     )

@@ -153,6 +153,7 @@ class Robot:
         self._unit_slices = self._quat_slices + self._circle_slices  # unit-norm blocks of q
         self._bracket_blocks = tuple(b for b in self.joints if b.kind in ("so3", "se3", "se2"))
         self._vector_space = model.nq == model.nv and all(b.kind == "vector" for b in self.joints)
+        self._lower = np.tril_indices(model.nv, -1)  # where Pinocchio may leave M⁻¹ unfilled
 
     # ------------------------------------------------------------------ basics
     def __repr__(self) -> str:
@@ -357,11 +358,31 @@ class Robot:
                 out[b.idx_v + 1] = ax * ys[0] - ay * xs[0]
         return out
 
+    def bracket_matrix(self, x: Vector) -> Vector:
+        """The matrix of ``y ↦ [x, y]`` (``ad_x``), shape ``(nv, nv)``, block-diagonal.
+
+        ``skew(x)`` inside a spherical joint, se(3)'s ``ad_x`` (``pin.Motion(x).action``,
+        linear first) inside a free-flyer, the se(2) bracket inside a planar joint
+        (as :meth:`bracket`); zero elsewhere.
+        """
+        out = np.zeros((self.nv, self.nv))
+        for b in self._bracket_blocks:
+            i, xs = b.idx_v, x[b.idx_v : b.idx_v + b.nv]
+            if b.kind == "so3":
+                out[i : i + 3, i : i + 3] = pin.skew(xs)
+            elif b.kind == "se3":
+                out[i : i + 6, i : i + 6] = pin.Motion(xs).action
+            else:  # se2: [x, y] = (x_w J y_u − y_w J x_u, 0), J = rot(π/2)
+                out[i, i + 1], out[i, i + 2] = -xs[2], xs[1]
+                out[i + 1, i], out[i + 1, i + 2] = xs[2], -xs[0]
+        return out
+
     # --------------------------------------------------------------- dynamics
     def mass_matrix(self, q: Vector) -> Vector:
         """``M(q)``, symmetric positive definite, shape ``(nv, nv)`` [kg, kg·m, kg·m²]."""
-        m = pin.crba(self.model, self._data, q)
-        return np.asarray(0.5 * (m + m.T), dtype=float)
+        m = np.array(pin.crba(self.model, self._data, q))
+        m[self._lower] = m.T[self._lower]  # Pinocchio < 4 fills only the upper triangle
+        return m
 
     def gravity(self, q: Vector) -> Vector:
         """``g(q)``: generalised gravity torque [N·m or N]."""
@@ -406,7 +427,9 @@ class Robot:
         if not self.has_friction:
             return np.zeros(self.nv)
         vs = COULOMB_SMOOTHING_VELOCITY
-        return -self._damping - self._coulomb / vs / np.cosh(v / vs) ** 2
+        return -self._damping - self._coulomb / vs * (
+            1.0 - np.tanh(v / vs) ** 2
+        )  # sech², no overflow
 
     def forward_dynamics(self, q: Vector, v: Vector, tau: Vector) -> Vector:
         """``v̇ = M⁻¹(τ + τ_f(v) − c(q, v) − g(q))`` by the articulated-body algorithm."""
@@ -418,14 +441,32 @@ class Robot:
         self, q: Vector, v: Vector, tau: Vector
     ) -> tuple[Vector, Vector, Vector]:
         """``(∂v̇/∂q, ∂v̇/∂v, M⁻¹)`` of :meth:`forward_dynamics` (∂q along ``integrate``; friction included)."""
+        _, dq, dv, minv = self.forward_dynamics_with_derivatives(q, v, tau, full_minv=True)
+        return np.array(dq), np.array(dv), np.array(minv)
+
+    def forward_dynamics_with_derivatives(
+        self, q: Vector, v: Vector, tau: Vector, *, full_minv: bool = False
+    ) -> tuple[Vector, Vector, Vector, Vector]:
+        """``(v̇, ∂v̇/∂q, ∂v̇/∂v, M⁻¹)`` of :meth:`forward_dynamics`, from one analytic call.
+
+        One ``pin.computeABADerivatives`` (which also runs ABA, hence ``v̇``);
+        friction included, ``∂τ_f/∂v`` entering as ``M⁻¹ diag(∂τ_f/∂v)``.  The
+        arrays are *views into the robot's* ``pin.Data``, overwritten by its
+        next dynamics call: copy what you keep.  ``M⁻¹`` is made symmetric
+        (its lower triangle copied from the upper one Pinocchio fills) when
+        ``full_minv`` or when friction needs it; otherwise only its upper
+        triangle is meaningful.
+        """
         if self.has_friction:
             tau = tau + self.friction_torque(v)
-        dq, dv, minv = pin.computeABADerivatives(self.model, self._data, q, v, tau)
-        minv = np.triu(minv) + np.triu(minv, 1).T  # Pinocchio fills the upper triangle
-        dv = np.array(dv)
+        d = self._data
+        pin.computeABADerivatives(self.model, d, q, v, tau)
+        minv, dv = d.Minv, d.ddq_dv
+        if full_minv or self.has_friction:
+            minv[self._lower] = minv.T[self._lower]
         if self.has_friction:
             dv += minv * self.friction_derivative(v)
-        return np.array(dq), dv, np.array(minv)
+        return d.ddq, d.ddq_dq, dv, minv
 
     def inverse_dynamics(self, q: Vector, v: Vector, a: Vector) -> Vector:
         """``τ = M a + c(q, v) + g(q)`` by recursive Newton-Euler."""

@@ -8,6 +8,7 @@ import importlib
 import pkgutil
 
 from pinobs.observers.base import (
+    Consistency,
     Estimate,
     Observer,
     make_observer,
@@ -22,6 +23,7 @@ for _info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
         importlib.import_module(f"{__name__}.{_info.name}")
 
 __all__ = [
+    "Consistency",
     "Estimate",
     "Observer",
     "make_observer",

@@ -17,10 +17,12 @@ then, so a rejected call leaves the observer exactly as it was.
 from __future__ import annotations
 
 import inspect
+import itertools
 import math
 import numbers
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Generic, TypeVar, final
 
 import numpy as np
@@ -39,6 +41,7 @@ from pinobs.model.robot import read_only
 from pinobs.tolerances import TIME_EPS
 
 __all__ = [
+    "Consistency",
     "Estimate",
     "Observer",
     "make_observer",
@@ -60,11 +63,76 @@ class Estimate:
         t: time [s].
         q: estimated configuration, shape ``(nq,)`` (read-only).
         v: estimated velocity, shape ``(nv,)`` (read-only), Pinocchio's tangent frame.
+        nis: normalized innovation squared ``eᵀ S⁻¹ e`` of this sample's
+            measurement (``S`` the predicted innovation covariance; χ² with
+            ``nv`` degrees of freedom when the model and noise level are
+            right), or ``None`` (no covariance, or no measurement).
+        gated: the measurement was rejected as an outlier (the estimate is the prediction).
     """
 
     t: float
     q: Vector
     v: Vector
+    nis: float | None = None
+    gated: bool = False
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """Does the model explain the data?  A windowed test of the normalized innovation squared.
+
+    Over the last ``samples`` measurements the mean NIS of a consistent filter
+    is χ²(n·nv)/n: expectation ``expected`` (= nv), standard deviation
+    ``√(2 nv / n)``.  ``verdict`` is ``"consistent"`` below ``bound`` (the
+    expectation plus five standard deviations, plus 50 %: filters are tuned,
+    not exact), ``"inconsistent"`` above it, ``"unknown"`` without a covariance
+    or with fewer than 50 samples.
+
+    Attributes:
+        samples: measurements in the window.
+        mean_nis: their mean NIS (NaN if none).
+        expected: its expectation for a consistent filter (``nv``).
+        bound: the threshold of the verdict.
+        verdict: ``"consistent"``, ``"inconsistent"`` or ``"unknown"``.
+        gated: measurements rejected as outliers since the reset.
+        causes: what usually makes a model-based filter inconsistent (when it is).
+        details: family-specific diagnostics (an adaptive observer's learning).
+    """
+
+    samples: int
+    mean_nis: float
+    expected: float
+    bound: float
+    verdict: str
+    gated: int = 0
+    causes: tuple[str, ...] = ()
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values, for JSON."""
+        return {
+            "samples": self.samples,
+            "mean_nis": self.mean_nis,
+            "expected": self.expected,
+            "bound": self.bound,
+            "verdict": self.verdict,
+            "gated": self.gated,
+            "causes": list(self.causes),
+            **self.details,
+        }
+
+
+#: What to check when a model-based filter's innovations are too large (Consistency.causes).
+LIKELY_CAUSES = (
+    "link masses or inertias (a payload, CAD values): try `pinobs identify` or the adaptive observer",
+    "joint friction not in the model (URDF <dynamics>, load(..., friction=True))",
+    "torque units or scale (gear ratios, motor constants, N·m vs mN·m), or a torque offset",
+    "a measurement latency (give latency= if it is known)",
+    "the noise level (noise_std smaller than the sensor's)",
+)
+
+#: Measurements in the consistency window.
+CONSISTENCY_WINDOW = 1000
 
 
 def positive(
@@ -120,6 +188,11 @@ class Observer(ABC, Generic[State]):
         self._t = -math.inf
         self._tau: Vector = np.zeros(self.robot.nv)
         self._last: Estimate | None = None
+        self._nis: deque[float] = deque(maxlen=CONSISTENCY_WINDOW)
+        self._gated = 0
+        self.latency = 0.0  # [s]; set_latency()
+        self._ts = -math.inf  # time of the state (t − latency once delayed samples arrive)
+        self._torques: list[tuple[float, Vector]] = []  # (applied from [s], τ), for latency
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.robot.name!r})"
@@ -148,6 +221,9 @@ class Observer(ABC, Generic[State]):
         state = self._initial_state(q, v)
         estimate = self._make_estimate(t, state)
         self._state, self._t, self._tau, self._last = state, t, tau, estimate
+        self._ts, self._torques = t, [(t, tau)]
+        self._nis.clear()
+        self._gated = 0
         return estimate
 
     @final
@@ -172,9 +248,13 @@ class Observer(ABC, Generic[State]):
         t_new = self._check_time(t, previous=self._t)
         q = None if q_meas is None else self.robot.check_configuration(q_meas, what="q_meas")
         tau_new = self._check_tau(tau, what="tau")
-        # MATH §7: propagate with the torque held since the previous call, then correct.
-        state = self._step(self._state, t_new - self._t, q, self._tau)
-        estimate = self._make_estimate(t_new, state)
+        if self.latency > 0.0:
+            state, t_state, estimate = self._delayed(t_new, q)
+        else:
+            # MATH §7: propagate with the torque held since the previous call, then correct.
+            state = self._step(self._state, t_new - self._t, q, self._tau)
+            t_state = t_new
+            estimate = self._make_estimate(t_new, state)
         if not (
             math.isfinite(sum(estimate.q.tolist())) and math.isfinite(sum(estimate.v.tolist()))
         ):
@@ -188,6 +268,15 @@ class Observer(ABC, Generic[State]):
                     last_estimate=self._last,
                 )
         self._state, self._t, self._tau, self._last = state, t_new, tau_new, estimate
+        self._ts = t_state
+        self._torques = [
+            x
+            for i, x in enumerate(self._torques)
+            if i + 1 == len(self._torques) or self._torques[i + 1][0] > t_state
+        ] + [(t_new, tau_new)]
+        if estimate.nis is not None:
+            self._nis.append(estimate.nis)
+            self._gated += estimate.gated
         return estimate
 
     @property
@@ -196,6 +285,65 @@ class Observer(ABC, Generic[State]):
         if self._last is None:
             raise NotResetError(f"{self!r}: call reset(t0, q0) first")
         return self._last
+
+    def set_latency(self, latency: float) -> None:
+        """Declare a known measurement latency [s]: the sample given at ``t`` was taken at ``t − latency``.
+
+        The state is then kept at the measurement time: each update propagates
+        it from the previous measurement time to ``t − latency`` with the
+        torques that were applied over that interval (their own stamps, zero-
+        order hold), corrects it with the sample, and delivers the estimate at
+        ``t`` by predicting it ``latency`` ahead with the torques applied since
+        (a prediction that is not kept).  Up to three model steps per update.
+        A sample taken before the state's time is not used.  Must be called
+        before :meth:`reset`.
+        """
+        positive("latency", latency, allow_zero=True)
+        self.latency = float(latency)
+
+    def _advance(self, state: State, t_from: float, t_to: float, q: Vector | None) -> State:
+        """Propagate ``state`` from ``t_from`` to ``t_to`` through the torque history, correcting with ``q`` at the end."""
+        cuts = [
+            t_from,
+            *(tk for tk, _ in self._torques if t_from + TIME_EPS < tk < t_to - TIME_EPS),
+        ]
+        cuts.append(t_to)
+        for i, (a, b) in enumerate(itertools.pairwise(cuts)):
+            tau = next(tk_tau for tk, tk_tau in reversed(self._torques) if tk <= a + TIME_EPS)
+            last = i == len(cuts) - 2
+            state = self._step(state, b - a, q if last else None, tau)
+        return state
+
+    def _delayed(self, t_new: float, q: Vector | None) -> tuple[State, float, Estimate]:
+        """One update under a known latency (:meth:`set_latency`): ``(state, its time, estimate at t_new)``."""
+        assert self._state is not None
+        s = t_new - self.latency
+        if s > self._ts + TIME_EPS:
+            state, t_state = self._advance(self._state, self._ts, s, q), s
+        else:  # the sample predates the state: keep the state
+            state, t_state = self._state, self._ts
+        ahead = self._advance(state, t_state, t_new, None) if t_new > t_state + TIME_EPS else state
+        q_hat, v_hat = self._output(ahead)
+        nis, gated = (
+            self._innovation(state) if s > self._ts + TIME_EPS and q is not None else (None, False)
+        )
+        estimate = Estimate(t=t_new, q=read_only(q_hat), v=read_only(v_hat), nis=nis, gated=gated)
+        return state, t_state, estimate
+
+    def consistency(self) -> Consistency:
+        """Whether the model explains the recent data (see :class:`Consistency`)."""
+        n = len(self._nis)
+        dof = float(self.robot.nv)
+        bound = 1.5 * (dof + 5.0 * math.sqrt(2.0 * dof / max(n, 1)))
+        if n == 0:
+            return Consistency(0, math.nan, dof, bound, "unknown", self._gated)
+        mean = float(np.mean(self._nis))
+        if n < 50:
+            verdict = "unknown"
+        else:
+            verdict = "consistent" if mean <= bound else "inconsistent"
+        causes = LIKELY_CAUSES if verdict == "inconsistent" else ()
+        return Consistency(n, mean, dof, bound, verdict, self._gated, causes)
 
     @property
     def options(self) -> dict[str, Any]:
@@ -219,9 +367,14 @@ class Observer(ABC, Generic[State]):
         """``(q̂, v̂)`` of a state."""
 
     # -------------------------------------------------------------- helpers
+    def _innovation(self, state: State) -> tuple[float | None, bool]:
+        """``(NIS, gated)`` of the measurement that made ``state`` (families with a covariance)."""
+        return None, False
+
     def _make_estimate(self, t: float, state: State) -> Estimate:
         q, v = self._output(state)
-        return Estimate(t=t, q=read_only(q), v=read_only(v))
+        nis, gated = self._innovation(state)
+        return Estimate(t=t, q=read_only(q), v=read_only(v), nis=nis, gated=gated)
 
     def _check_tau(self, tau: ArrayLike | None, *, what: str) -> Vector:
         if tau is None:
@@ -281,7 +434,8 @@ def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
     """Build the observer registered as ``name`` on ``robot``.
 
     Options are the keyword arguments of the family's constructor (every
-    family accepts ``rate`` [Hz] and ``noise_std`` [rad or m]).
+    family accepts ``rate`` [Hz] and ``noise_std`` [rad or m]), and
+    ``latency`` [s] for every family (:meth:`Observer.set_latency`).
 
     Raises:
         UnknownNameError: unknown ``name``.
@@ -294,9 +448,13 @@ def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
         for p in inspect.signature(cls.__init__).parameters.values()
         if p.kind is inspect.Parameter.KEYWORD_ONLY
     ]
+    latency = options.pop("latency", None)
     unknown = sorted(set(options) - set(accepted))
     if unknown:
         raise OptionError(
             f"observer {name!r} does not accept option(s) {unknown}; accepted: {accepted}"
         )
-    return cls(robot, **options)
+    observer = cls(robot, **options)
+    if latency is not None:
+        observer.set_latency(latency)
+    return observer

@@ -26,6 +26,31 @@ the covariance by the linearised error dynamics, to first order in ``δx``:
 ``Q_d`` is the white-acceleration covariance of a double integrator, the
 leading term of Van Loan's integral when ``‖A h‖ ≪ 1``.
 
+Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
+``τ_f = −D v − F_c tanh(v/v_s)``) makes the error dynamics stiff near ``v = 0``:
+its slope ``−F_c/v_s`` (200 N·m·s/rad for 2 N·m at v_s = 0.01 rad/s) enters
+``∂a/∂v`` as ``−M⁻¹ F_c/v_s``, so ``λ h`` reaches 55 on a Panda's wrist at
+1 kHz (``λ = (M⁻¹)ᵢᵢ F_c/v_s``).  The third-order series above is then
+meaningless (it grows like ``(λh)³/6``) and so is one RK4 step (stable for
+``λh < 2.785``): before this treatment the filter ended at 4 rad/s RMS on a
+Panda with F_c = 1–3 N·m in both truth and model.  With friction the model
+is kept as it is (no slope dropped) and both steps are made valid:
+
+* the mean takes ``n`` RK4 substeps, ``n = ⌈λ h / 2.5⌉`` with ``λ`` the
+  largest ``(M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|`` at the velocity nearest zero each joint
+  can reach in the step, ``max(|vᵢ| − |aᵢ| h, 0)``
+  (:func:`friction_substeps`; one substep away from zero velocity);
+* ``Φ = exp(A h)`` by scaling and squaring (:func:`stiff_transition_matrix`:
+  the series on ``A h / 2ˢ``, squared ``s`` times, ``‖A h‖∞ / 2ˢ ≤ 1/4``),
+  which contracts the velocity covariance of a sticking joint as the
+  friction does.
+
+Measured (Panda, F_c uniform in 1–3 N·m (seeded), pd tracking, 1 kHz,
+σ = 1e-4 rad, 3 s, the truth integrated with 40 substeps, RMS after 0.75 s):
+``ekf`` 9.1e-5 → 3.9e-5 (seed 0), 6.0e-5 → 3.4e-5 (seed 1) without → with
+friction: friction makes sticking joints easier, not harder.  The cost grows
+only in the samples where a joint can reach zero velocity.
+
 Update with ``q_meas = q ⊕ n``, ``n ~ N(0, σ² I)``: innovation
 ``e = difference(q̂⁻, q_meas) ≈ δq + n`` (so ``H = [I 0]``), gain
 ``K = P⁻Hᵀ(H P⁻Hᵀ + σ² I)⁻¹``, ``(δq, δv) = K e``, ``q̂ = q̂⁻ ⊕ δq``,
@@ -82,11 +107,15 @@ friction, vary as fast as the motion).
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from statistics import NormalDist
+from typing import Any, NamedTuple
 
 import numpy as np
 
+from pinobs.errors import DimensionError, GainError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.observers.base import Observer, Vector, positive, register
 
@@ -94,12 +123,39 @@ __all__ = [
     "EKFGains",
     "ExtendedKalmanFilter",
     "ad_matrix",
+    "cholesky_solve",
     "double_integrator_noise",
+    "friction_substeps",
     "joseph_update",
+    "stiff_transition_matrix",
     "transition_matrix",
 ]
 
-_NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std (or 0) is given
+_NOISE_FLOOR = 1e-6
+
+#: Consecutive measurements the outlier gate may reject before it accepts one whatever its NIS.
+MAX_GATE_RUN = 1
+
+#: Weight of each accepted NIS in the running mean that scales the gate.
+_NIS_AVERAGING = 0.01
+
+
+def chi2_quantile(dof: int, p: float) -> float:
+    """The χ² quantile with upper tail ``p`` by Wilson-Hilferty (above the exact one: +4 % at dof 6, +15 % at dof 1, p = 1e-6).
+
+    ``χ²_k(1 − p) ≈ k (1 − 2/(9k) + z √(2/(9k)))³``, ``z`` the normal quantile
+    (Wilson & Hilferty 1931); the standard library's ``NormalDist`` keeps
+    ``scipy.stats`` out of the import.
+    """
+    z = NormalDist().inv_cdf(1.0 - p)
+    c = 2.0 / (9.0 * dof)
+    return float(
+        dof * (1.0 - c + z * math.sqrt(c)) ** 3
+    )  # [rad] σ assumed when no noise_std (or 0) is given
+
+
+_SERIES_NORM = 0.25  # ‖A h‖∞ up to which the third-order series is used as it is (error < 1e-4)
+_RK4_STIFFNESS = 2.5  # λ h kept below RK4's stability limit on the negative real axis, 2.785
 
 
 def ad_matrix(robot: Robot, v: Vector) -> Vector:
@@ -107,36 +163,125 @@ def ad_matrix(robot: Robot, v: Vector) -> Vector:
     nv = robot.nv
     if not robot.has_lie_group_joints:
         return np.zeros((nv, nv))
+    if isinstance(robot, Robot):
+        return robot.bracket_matrix(v)
     eye = np.eye(nv)
     return np.column_stack([robot.bracket(v, eye[:, j]) for j in range(nv)])
 
 
+@functools.lru_cache(maxsize=8)
+def _eye(n: int) -> Vector:
+    eye = np.eye(n)
+    eye.setflags(write=False)
+    return eye
+
+
 def transition_matrix(A: Vector, h: float) -> Vector:
-    """``exp(A h)`` to third order, ``I + Ah(I + Ah/2 (I + Ah/3))`` (module docstring)."""
+    """``exp(A h)`` to third order, ``I + Ah(I + Ah/2 (I + Ah/3))`` (module docstring), a new array."""
     Ah = A * h
-    eye = np.eye(A.shape[0])
-    return eye + Ah @ (eye + 0.5 * Ah @ (eye + Ah / 3.0))
+    eye = _eye(A.shape[0])
+    inner = Ah / 3.0
+    inner += eye
+    mid = (0.5 * Ah).dot(inner)
+    mid += eye
+    out = Ah.dot(mid)
+    out += eye
+    return out
+
+
+def stiff_transition_matrix(A: Vector, h: float) -> Vector:
+    """``exp(A h)`` for any ``‖A h‖``: the third-order series of :func:`transition_matrix` on
+    ``A h / 2ˢ`` squared ``s`` times, ``s`` the least with ``‖A h‖∞ / 2ˢ ≤ 1/4``
+    (Moler & Van Loan 2003, "Nineteen dubious ways", method 3: scaling and squaring).
+
+    Needed where the smoothed Coulomb friction makes ``A`` stiff (module docstring);
+    equal to :func:`transition_matrix` when ``‖A h‖∞ ≤ 1/4``.
+    """
+    norm = float(np.abs(A).sum(axis=1).max()) * h
+    s = 0 if norm <= _SERIES_NORM else math.ceil(math.log2(norm / _SERIES_NORM))
+    Phi = transition_matrix(A, h / 2**s)
+    for _ in range(s):
+        Phi = Phi.dot(Phi)
+    return Phi
+
+
+def friction_substeps(robot: Robot, v: Vector, acc: Vector, minv_diag: Vector, dt: float) -> int:
+    """RK4 substeps over ``dt`` [s] keeping ``λ h_sub ≤ 2.5`` under joint friction (module docstring).
+
+    ``λ = maxᵢ (M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|`` at the velocity nearest zero that joint
+    ``i`` can reach in the step, ``max(|vᵢ| − |aᵢ| dt, 0)`` (the smoothed
+    Coulomb slope ``F_c / v_s`` peaks at ``v = 0``); ``acc`` [rad/s²] the
+    acceleration at the start, ``minv_diag`` the diagonal of ``M⁻¹``.
+    """
+    v_near = np.maximum(np.abs(v) - np.abs(acc) * dt, 0.0)
+    lam = float(np.max(minv_diag * -robot.friction_derivative(v_near)))
+    return max(1, math.ceil(lam * dt / _RK4_STIFFNESS))
+
+
+@functools.lru_cache(maxsize=64)
+def _double_integrator_noise(nv: int, h: float, psd: float) -> Vector:
+    eye = np.eye(nv)
+    out = psd * np.block([[h**3 / 3 * eye, h**2 / 2 * eye], [h**2 / 2 * eye, h * eye]])
+    out.setflags(write=False)
+    return out
 
 
 def double_integrator_noise(nv: int, h: float, psd: float) -> Vector:
-    """``Q_d`` of white acceleration noise of density ``psd`` [rad²/s³] over ``h`` [s] (module docstring)."""
-    eye = np.eye(nv)
-    return psd * np.block([[h**3 / 3 * eye, h**2 / 2 * eye], [h**2 / 2 * eye, h * eye]])
+    """``Q_d`` of white acceleration noise of density ``psd`` [rad²/s³] over ``h`` [s] (module docstring).
+
+    Read-only, cached on ``(nv, h, psd)``: sample intervals repeat (to the bit,
+    a handful of values at a fixed rate), so it is built once per value.
+    """
+    return _double_integrator_noise(nv, float(h), float(psd))
+
+
+@functools.cache
+def _posv() -> Any:
+    """LAPACK ``dposv`` (Cholesky solve), imported on first use: ``scipy.linalg`` costs
+    0.2 s at import, and ``np.linalg.solve`` 5× more per call on these small systems."""
+    from scipy.linalg.lapack import dposv  # lazy: start-up time
+
+    return dposv
+
+
+def cholesky_solve(S: Vector, B: Vector) -> tuple[Vector, bool]:
+    """``(S⁻¹ B, ok)`` for a symmetric positive definite ``S`` (LAPACK ``dposv``, upper triangle).
+
+    ``ok`` is False when ``S`` is not positive definite; the result then comes
+    from the general ``np.linalg.solve``, or is NaN if ``S`` is singular (a
+    diverged filter, which :meth:`Observer.update` reports).
+    """
+    _, x, info = _posv()(S, B)
+    if info == 0:
+        return x, True
+    try:
+        return np.linalg.solve(S, B), False
+    except np.linalg.LinAlgError:  # singular or not finite: NaN, reported by the caller
+        return np.full(B.shape, np.nan), False
 
 
 def joseph_update(P: Vector, e: Vector, meas_var: float) -> tuple[Vector, Vector]:
     """Kalman update for ``H = [I 0]`` and ``R = meas_var · I``: returns ``(K e, P⁺)``.
 
-    Joseph form ``P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ``, symmetrised.
+    ``S = P_qq + R`` (symmetric positive definite, solved by Cholesky),
+    ``K = P Hᵀ S⁻¹``, and the Joseph form ``P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ``,
+    symmetrised, evaluated as ``C = P − K P_q·``, ``P⁺ = C − (C_·q − R K) Kᵀ``
+    (the same expression: ``(I − KH) P = C``, ``C (I − KH)ᵀ = C − C_·q Kᵀ``),
+    two products of ``(n × nv)(nv × n)`` instead of two of ``n × n``.
     """
-    n2 = P.shape[0]
     nv = e.shape[0]
-    S = P[:nv, :nv] + meas_var * np.eye(nv)
-    K = np.linalg.solve(S, P[:nv, :]).T  # P Hᵀ S⁻¹ (S symmetric)
-    IKH = np.eye(n2)
-    IKH[:, :nv] -= K
-    P_new = IKH @ P @ IKH.T + meas_var * (K @ K.T)
-    return K @ e, 0.5 * (P_new + P_new.T)
+    B = P[:nv]  # H P
+    S = B[:, :nv].copy()
+    S.flat[:: nv + 1] += meas_var
+    Kt, _ = cholesky_solve(S, B)  # Kᵀ = S⁻¹ H P
+    K = Kt.T
+    C = P - K.dot(B)
+    Y = K * -meas_var
+    Y += C[:, :nv]
+    P_new = C - Y.dot(Kt)
+    P_new += P_new.T
+    P_new *= 0.5
+    return K.dot(e), P_new
 
 
 @dataclass(frozen=True)
@@ -168,6 +313,10 @@ class _State(NamedTuple):
     P: Vector  # covariance of (δq, δv) or, with the disturbance, of (δq, δv, δd)
     d: Vector | None = None  # estimated joint-torque offset [N·m or N]
     d_psd: Vector | None = None  # its random-walk density per joint [N²·m²/s]
+    nis: float | None = None  # normalized innovation squared of the last measurement
+    gated: bool = False  # that measurement was rejected as an outlier
+    gate_run: int = 0  # consecutive rejected measurements
+    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
 
 
 @register
@@ -183,11 +332,15 @@ class ExtendedKalmanFilter(Observer[_State]):
             with the state, as an acceleration density [rad²/s⁵] scaled by the
             nominal inertia (module docstring); ``None``: no offset.
         d0_std: initial standard deviation of that offset [N·m or N].
+        outlier_probability: false-alarm probability ``p`` of the outlier gate
+            (:meth:`_correct`); ``None`` switches the gate off.
         rate: sample rate hint [Hz] (not needed: the filter uses the actual intervals).
         noise_std: position noise standard deviation [rad or m], the measurement noise.
     """
 
     name = "ekf"
+    #: :func:`pinobs.smooth` can run its backward pass over this filter's states.
+    smoothable = True
     summary = "extended Kalman filter on the manifold, exact model (model-based baseline)"
 
     def __init__(
@@ -199,14 +352,22 @@ class ExtendedKalmanFilter(Observer[_State]):
         v0_std: float = 1.0,
         disturbance_psd: float | None = None,
         d0_std: float = 1.0,
+        outlier_probability: float | None = 1e-6,
         rate: float | None = None,
         noise_std: float | None = None,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
+        p = positive("outlier_probability", outlier_probability, allow_none=True)
+        if p is not None and p >= 0.5:
+            raise GainError(f"outlier_probability={p!r} must be in (0, 0.5) (or None: no gate)")
+        self.outlier_probability = p
+        self._gate = math.inf if p is None else chi2_quantile(robot.nv, p)
         sigma = self.noise_std or _NOISE_FLOOR
         self.gains = EKFGains(accel_psd=accel_psd, meas_std=sigma, q0_std=q0_std, v0_std=v0_std)
         self.disturbance_psd = positive("disturbance_psd", disturbance_psd, allow_none=True)
         self.d0_std = float(positive("d0_std", d0_std) or 0.0)
+        self._scratch_A: Vector | None = None  # A's buffer (_jacobian)
+        _posv()  # import LAPACK now, not in the first update
 
     @property
     def options(self) -> dict[str, object]:
@@ -218,6 +379,7 @@ class ExtendedKalmanFilter(Observer[_State]):
             "q0_std": g.q0_std,
             "v0_std": g.v0_std,
             "disturbance_psd": self.disturbance_psd,
+            "outlier_probability": self.outlier_probability,
         }
 
     # ------------------------------------------------------------ the model
@@ -227,19 +389,35 @@ class ExtendedKalmanFilter(Observer[_State]):
 
     def error_jacobian(self, q: Vector, v: Vector, tau: Vector) -> Vector:
         """``A = [[−ad_v, I], [∂a/∂q, ∂a/∂v]]`` of the error dynamics (module docstring);
-        with the disturbance, ``[[−ad_v, I, 0], [∂a/∂q, ∂a/∂v, M⁻¹], [0, 0, 0]]``."""
-        nv = self.robot.nv
-        da_dq, da_dv, minv = self.robot.forward_dynamics_derivatives(q, v, tau)
-        if self.disturbance_psd is None:
-            return np.block([[-ad_matrix(self.robot, v), np.eye(nv)], [da_dq, da_dv]])
-        zero = np.zeros((nv, nv))
-        return np.block(
-            [
-                [-ad_matrix(self.robot, v), np.eye(nv), zero],
-                [da_dq, da_dv, minv],
-                [zero, zero, zero],
-            ]
-        )
+        with the disturbance, ``[[−ad_v, I, 0], [∂a/∂q, ∂a/∂v, M⁻¹], [0, 0, 0]]``.  A new array."""
+        return np.array(self._jacobian(q, v, tau)[0])
+
+    def _jacobian(self, q: Vector, v: Vector, tau: Vector) -> tuple[Vector, Vector | None, Vector]:
+        """``(A, a(q, v, τ), M⁻¹)`` from one derivatives call; ``A`` is the filter's scratch
+        buffer (overwritten by the next call), ``a`` and ``M⁻¹`` views into the robot's data
+        (``a`` is ``None`` for a model without that call; ``M⁻¹`` symmetric with friction or
+        the disturbance, else only its upper triangle is meaningful)."""
+        r, nv = self.robot, self.robot.nv
+        A = self._scratch_A
+        if A is None:  # the constant blocks are written once
+            n = (2 if self.disturbance_psd is None else 3) * nv
+            A = self._scratch_A = np.zeros((n, n))
+            A[:nv, nv : 2 * nv] = _eye(nv)
+        with_d = self.disturbance_psd is not None
+        if isinstance(r, Robot):
+            acc, da_dq, da_dv, minv = r.forward_dynamics_with_derivatives(
+                q, v, tau, full_minv=with_d
+            )
+        else:  # a Robot-like model (pinobs.model.AnalyticMetric)
+            acc = None
+            da_dq, da_dv, minv = r.forward_dynamics_derivatives(q, v, tau)
+        if r.has_lie_group_joints:
+            np.negative(ad_matrix(r, v), out=A[:nv, :nv])
+        A[nv : 2 * nv, :nv] = da_dq
+        A[nv : 2 * nv, nv : 2 * nv] = da_dv
+        if with_d:
+            A[nv : 2 * nv, 2 * nv :] = minv
+        return A, acc, minv
 
     @property
     def disturbance(self) -> Vector | None:
@@ -260,28 +438,98 @@ class ExtendedKalmanFilter(Observer[_State]):
         return _State(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+        pred, _ = self._predict(state, dt, tau)
+        if q_meas is None:
+            return pred._replace(P=0.5 * (pred.P + pred.P.T), nis=None, gated=False)
+        return self._correct(pred, q_meas)
+
+    def _predict(self, state: _State, dt: float, tau: Vector) -> tuple[_State, Vector]:
+        """Prediction over ``dt`` [s] with ``tau`` held: ``(state⁻, Φ)``.
+
+        Mean by one RKMK4 step of :meth:`vector_field` (with ``τ + d``), covariance
+        ``P⁻ = Φ P Φᵀ + Q_d`` (module docstring; symmetric to rounding, not
+        symmetrised: :meth:`_correct` and :meth:`_step` do that).  ``Φ`` (a new
+        array) is returned for smoothers (Rauch-Tung-Striebel needs it).  One
+        ``computeABADerivatives`` gives ``A`` and the first RK stage, three ABA
+        calls the others.
+        """
         nv = self.robot.nv
         d = state.d
         tau_in = tau if d is None else tau + d  # the offset acts as a torque (module docstring)
-        Phi = transition_matrix(self.error_jacobian(state.q, state.v, tau_in), dt)
-        q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt)  # RKMK4 of vector_field
-        Q = double_integrator_noise(nv, dt, self.gains.accel_psd)
-        if d is not None and state.d_psd is not None:
-            Q = np.block(
-                [
-                    [Q, np.zeros((2 * nv, nv))],
-                    [np.zeros((nv, 2 * nv)), np.diag(state.d_psd * dt)],
-                ]
+        A, acc, minv = self._jacobian(state.q, state.v, tau_in)
+        if not self.robot.has_friction:
+            Phi = transition_matrix(A, dt)
+            # RKMK4 of vector_field; its first stage is the derivatives call's v̇
+            q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt, acc0=acc)
+        else:  # stiff near v = 0: Φ by scaling and squaring, the mean in substeps
+            Phi = stiff_transition_matrix(A, dt)
+            n = 1 if acc is None else friction_substeps(self.robot, state.v, acc, np.diag(minv), dt)
+            q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt / n, acc0=acc)
+            for _ in range(n - 1):
+                q, v = dynamics_rk4(self.robot, q, v, tau_in, dt / n)
+        P = Phi.dot(state.P).dot(Phi.T)
+        P[: 2 * nv, : 2 * nv] += double_integrator_noise(nv, dt, self.gains.accel_psd)
+        if d is not None and state.d_psd is not None:  # Q_d's offset block, diag(psd_τ h)
+            P[2 * nv :, 2 * nv :].flat[:: nv + 1] += state.d_psd * dt
+        return state._replace(q=q, v=v, P=P), Phi  # the gate's bookkeeping carries over
+
+    def _correct(self, state: _State, q_meas: Vector) -> _State:
+        """Correction of a predicted state with the measured ``q_meas`` (Joseph form, module docstring).
+
+        The normalized innovation squared ``NIS = eᵀ S⁻¹ e`` comes free:
+        ``K_q = P_qq S⁻¹ = I − R S⁻¹``, so ``S⁻¹ e = (e − K_q e) / R``.  Outlier gate:
+        a measurement whose NIS exceeds ``χ²_nv(1 − p) · max(1, NIS̄ / nv)``
+        (``NIS̄`` a running mean of accepted NIS, so a filter whose model is
+        off does not gate everything) is not used: the estimate is the
+        prediction.  After :data:`MAX_GATE_RUN` consecutive rejections the
+        next measurement is used whatever its NIS (a real jump, or a
+        prediction gone wrong, not a spike), and the gate's level is raised to it.
+        Measured: with ten allowed rejections, a Panda whose model has stiff
+        Coulomb friction lost track (prediction errors near v = 0 were gated
+        while the prediction drifted); with one it does not.
+        """
+        nv = self.robot.nv
+        q, v, d, P = state.q, state.v, state.d, state.P
+        R = self.gains.meas_std**2
+        e = self.robot.difference(q, q_meas)
+        dx, P_new = joseph_update(P, e, R)
+        nis = float(e @ (e - dx[:nv])) / R
+        level = float(nv) if state.nis_level is None else state.nis_level
+        if nis > self._gate * max(1.0, level / nv) and state.gate_run < MAX_GATE_RUN:
+            return state._replace(
+                P=0.5 * (P + P.T),
+                nis=nis,
+                gated=True,
+                gate_run=state.gate_run + 1,
+                nis_level=level,
             )
-        P = Phi @ state.P @ Phi.T + Q
-        if q_meas is not None:
-            e = self.robot.difference(q, q_meas)
-            dx, P = joseph_update(P, e, self.gains.meas_std**2)
-            q = self.robot.integrate(q, dx[:nv])
-            v = v + dx[nv : 2 * nv]
-            if d is not None:
-                d = d + dx[2 * nv :]
-        return _State(q, v, 0.5 * (P + P.T), d, state.d_psd)
+        q = self.robot.integrate(q, dx[:nv])
+        v = v + dx[nv : 2 * nv]
+        if d is not None:
+            d = d + dx[2 * nv :]
+        if state.gate_run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
+            level = max(level, nis * nv / self._gate)
+        level += _NIS_AVERAGING * (min(nis, 100.0 * level) - level)
+        return _State(
+            q, v, P_new, d, state.d_psd, nis, False, 0, level
+        )  # P symmetric (joseph_update)
+
+    def _innovation(self, state: _State) -> tuple[float | None, bool]:
+        return state.nis, state.gated
+
+    def _replace_robot(self, robot: Robot) -> None:
+        """Swap the filter's model between updates (an adaptive subclass's identified model).
+
+        The state is kept; the next prediction uses ``robot``'s dynamics.  ``robot``
+        must have the same configuration space (``nq``, ``nv``).
+        """
+        if (robot.nq, robot.nv) != (self.robot.nq, self.robot.nv):
+            raise DimensionError(
+                f"the new model has (nq, nv) = ({robot.nq}, {robot.nv}); "
+                f"the filter's has ({self.robot.nq}, {self.robot.nv})"
+            )
+        self.robot = robot
+        self._scratch_A = None  # sized by the robot
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v

@@ -82,8 +82,11 @@ from pinobs.observers.base import Observer, Vector, positive, register
 from pinobs.observers.differentiators import HighGainDifferentiator
 from pinobs.observers.ekf import (
     ad_matrix,
+    cholesky_solve,
     double_integrator_noise,
+    friction_substeps,
     joseph_update,
+    stiff_transition_matrix,
     transition_matrix,
 )
 
@@ -192,6 +195,7 @@ class IbrirKalman(Observer[_State]):
                 "use 'differentiator' or 'estimate'"
             )
         self.velocity_source = velocity_source
+        self._scratch_F: Vector | None = None  # F's buffer (_state_matrix)
         self.differentiator = HighGainDifferentiator(
             self.robot, order=diff_order, gamma=diff_gamma, rate=rate, noise_std=noise_std
         )
@@ -223,13 +227,33 @@ class IbrirKalman(Observer[_State]):
         rhs = np.column_stack(
             [r.coriolis_matrix(y, y_dot) + np.diag(damp), tau - r.gravity(y) + offset]
         )
-        sol = np.linalg.solve(M, rhs)  # M⁻¹ [C + C_f, τ − g (+ friction offset)]
+        sol, _ = cholesky_solve(M, rhs)  # M⁻¹ [C + C_f, τ − g (+ friction offset)]
         F = np.zeros((2 * nv, 2 * nv))
         F[:nv, :nv] = -ad_matrix(r, y_dot)
         F[:nv, nv:] = np.eye(nv)
         F[nv:, nv:] = -sol[:, :nv]  # Ibrir eq. (3)
         G = np.concatenate([np.zeros(nv), sol[:, nv]])  # Ibrir eq. (3), τ(q, u)
         return F, G
+
+    def _state_matrix(self, y: Vector, y_dot: Vector) -> Vector:
+        """``F(y, ẏ)`` of :meth:`state_affine` alone, in the filter's scratch buffer.
+
+        ``F₂₂ = −M⁻¹(y)(C(y, ẏ) + C_f)`` by a Cholesky solve (``M`` symmetric
+        positive definite); ``G`` (and so ``g(y)``) is not needed by the covariance.
+        """
+        r, nv = self.robot, self.robot.nv
+        F = self._scratch_F
+        if F is None:
+            F = self._scratch_F = np.zeros((2 * nv, 2 * nv))
+            F[:nv, nv:] = np.eye(nv)
+        if r.has_lie_group_joints:
+            np.negative(ad_matrix(r, y_dot), out=F[:nv, :nv])
+        damp, _ = self.friction_affine(y_dot)
+        rhs = r.coriolis_matrix(y, y_dot)
+        rhs.flat[:: nv + 1] += damp
+        sol, _ = cholesky_solve(r.mass_matrix(y), rhs)
+        np.negative(sol, out=F[nv:, nv:])  # Ibrir eq. (3)
+        return F
 
     def friction_affine(self, y_dot: Vector) -> tuple[Vector, Vector]:
         """``(C_f, τ₀)`` with friction ``≈ −C_f v + τ₀`` near ``v = ẏ`` (diagonal ``C_f``).
@@ -276,10 +300,12 @@ class IbrirKalman(Observer[_State]):
         if d0 is not None and d1 is not None:
             yd0, yd1 = d0.X[0], d1.X[0]
         use_estimate = self.velocity_source == "estimate"
+        # y at the RK4 stages: s = 0, ½, ½, 1 (the stage times, exact in binary)
+        y_at = {0.0: y0, 0.5: r.integrate(y0, 0.5 * dy), 1.0: r.integrate(y0, dy)}
 
         def rhs(q: Vector, x: Vector) -> tuple[Vector, Vector]:
             v, s = x[:nv], x[nv] / dt
-            y = r.integrate(y0, s * dy)
+            y = y_at[s] if s in y_at else r.integrate(y0, s * dy)
             if use_estimate:  # ẏ = v̂: C(y, v̂) v̂ = c(y, v̂), one ABA call
                 a = r.forward_dynamics(y, v, tau - self.viscous * v)
             else:  # Ibrir eq. (3) with ẏ = ξ̂₂
@@ -289,15 +315,32 @@ class IbrirKalman(Observer[_State]):
                 a = np.linalg.solve(r.mass_matrix(y), rhs_)
             return v, np.concatenate([a, [1.0]])
 
-        q, x = lie_rk4(r, state.q, np.concatenate([state.v, [0.0]]), dt, rhs)
-        v = x[:nv]
-        y_mid = r.integrate(y0, 0.5 * dy)
+        q: Vector
+        v: Vector
+        n = 1
+        if r.has_friction:  # stiff near v = 0 (smoothed Coulomb): substeps, as the EKF
+            a0 = r.forward_dynamics(y0, state.v, tau - self.viscous * state.v)
+            minv_diag = np.diag(np.linalg.inv(r.mass_matrix(y0)))
+            n = friction_substeps(r, state.v, a0, minv_diag, dt)
+        if n == 1 and use_estimate and r.is_vector_space:  # RK4 without lie_rk4's bookkeeping
+            v0, visc, h2 = state.v, self.viscous, 0.5 * dt
+            v2 = v0 + h2 * (a1 := r.forward_dynamics(y0, v0, tau - visc * v0))
+            v3 = v0 + h2 * (a2 := r.forward_dynamics(y_at[0.5], v2, tau - visc * v2))
+            v4 = v0 + dt * (a3 := r.forward_dynamics(y_at[0.5], v3, tau - visc * v3))
+            a4 = r.forward_dynamics(y_at[1.0], v4, tau - visc * v4)
+            q = state.q + (dt / 6.0) * (v0 + 2.0 * (v2 + v3) + v4)
+            v = v0 + (dt / 6.0) * (a1 + 2.0 * (a2 + a3) + a4)
+        else:
+            q, x = state.q, np.concatenate([state.v, [0.0]])
+            for _ in range(n):  # x[nv] carries the time since the interval's start
+                q, x = lie_rk4(r, q, x, dt / n, rhs)
+            v = x[:nv]
         y_dot_mid = 0.5 * (state.v + v) if use_estimate else 0.5 * (yd0 + yd1)
-        F, _ = self.state_affine(y_mid, y_dot_mid, tau)
-        Phi = transition_matrix(F, dt)
-        P = Phi @ state.P @ Phi.T
+        F = self._state_matrix(y_at[0.5], y_dot_mid)
+        Phi = stiff_transition_matrix(F, dt) if r.has_friction else transition_matrix(F, dt)
+        P = Phi.dot(state.P).dot(Phi.T)
         if g.form == "practical":
-            P = P + double_integrator_noise(nv, dt, g.accel_psd)
+            P += double_integrator_noise(nv, dt, g.accel_psd)
         if q_meas is not None:
             e = r.difference(q, q_meas)
             dx, P = joseph_update(P, e, 1.0 / (g.output_weight * dt))

@@ -1,7 +1,13 @@
 """Immersion & Invariance reduced-order momentum observer (Sarras, Venkatraman, Ortega, van der Schaft).
 
-Vector joints only (revolute, prismatic): I&I lives in coordinates.  Lie-group
-joints belong to the ``liegroup`` / ``riemannian`` observers.  (MATH §5)
+Revolute, prismatic and continuous joints: I&I lives in coordinates.  A
+continuous joint (``q = (cos θ, sin θ)``) is run in its angle chart
+(:class:`pinobs.model.chart.AngleChart`: the same robot with a revolute joint,
+identical ``M``, ``c``, ``g`` at ``θ``), ``θ`` unwrapped along the measured
+path: each measurement's ``atan2(sin, cos)`` is taken on the ``2π``-branch
+nearest the step's prediction, so the chart never jumps while the joint
+turns less than ``π`` per sample.  Lie-group joints belong to the
+``liegroup`` / ``riemannian`` observers.  (MATH §5)
 
 Coordinates.  ``M⁻¹(q) = T(q) T(q)ᵀ`` (Sarras et al. eq. 16) with ``T`` a
 Cholesky factor taken in a joint ordering ``p``: ``L`` is the lower Cholesky
@@ -92,6 +98,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import GainError, UnsupportedRobotError
 from pinobs.model import Robot, dynamics_rk4
+from pinobs.model.chart import AngleChart
 from pinobs.observers.base import Observer, Vector, positive, register
 from pinobs.tolerances import II_ASSUMPTION1_TOL
 
@@ -397,13 +404,20 @@ class Assumption1Report:
 
 
 def _require_vector_joints(robot: Robot) -> None:
-    kinds = sorted({b.kind for b in robot.joints if b.kind != "vector"})
+    kinds = sorted({b.kind for b in robot.joints if b.kind not in ("vector", "circle")})
     if kinds:
         raise UnsupportedRobotError(
-            f"the I&I observer ('ii') needs vector joints only (revolute, prismatic); "
+            f"the I&I observer ('ii') needs revolute, prismatic or continuous joints; "
             f"{robot.name!r} has {', '.join(kinds)} joints. Use the 'liegroup' or "
             "'riemannian' observer for Lie-group joints."
         )
+
+
+def _in_chart(robot: Robot) -> Robot:
+    """``robot`` itself, or its angle chart when it has continuous joints (module docstring)."""
+    if isinstance(robot, Robot) and any(b.kind == "circle" for b in robot.joints):
+        return AngleChart(robot).chart
+    return robot  # vector joints, or an AnalyticMetric
 
 
 def _candidate_orderings(n: int) -> tuple[list[tuple[int, ...]], str]:
@@ -460,6 +474,7 @@ def check_assumption1(
         UnsupportedRobotError: the robot has Lie-group joints.
     """
     _require_vector_joints(robot)
+    robot = _in_chart(robot)
     samples = int(positive("samples", samples) or 1)
     n = robot.nv
     rng = np.random.default_rng(seed)
@@ -719,6 +734,12 @@ class IIObserver(Observer[_State]):
     ) -> None:
         _require_vector_joints(robot)
         super().__init__(robot, rate=rate, noise_std=noise_std)
+        # continuous joints: the observer runs in the angle chart, unwrapped along the path
+        self.chart: AngleChart | None = None
+        self.plant = self.robot
+        if isinstance(self.robot, Robot) and any(b.kind == "circle" for b in self.robot.joints):
+            self.chart = AngleChart(self.robot)
+            self.plant = self.chart.chart
         self.gains = IIGains(gain=gain, nodes=nodes, region=region)
         self.substeps = None if substeps is None else int(positive("substeps", substeps) or 1)
         self.seed = int(seed)
@@ -729,13 +750,13 @@ class IIObserver(Observer[_State]):
             if factor.n != n:
                 raise GainError(f"factor has dimension {factor.n}, the robot {n}")
             self._check_custom_factor(factor)
-            report = check_assumption1(self.robot, samples=check_samples, seed=seed, factor=factor)
+            report = check_assumption1(self.plant, samples=check_samples, seed=seed, factor=factor)
         else:
             orderings = None if ordering is None else [self._resolve_ordering(ordering)]
             report = check_assumption1(
-                self.robot, samples=check_samples, seed=seed, orderings=orderings
+                self.plant, samples=check_samples, seed=seed, orderings=orderings
             )
-            factor = CholeskyFactor(self.robot, report.best.ordering or tuple(range(n)))
+            factor = CholeskyFactor(self.plant, report.best.ordering or tuple(range(n)))
         self.report = report
         best = report.best
         if not best.holds and not unguaranteed:
@@ -822,9 +843,9 @@ class IIObserver(Observer[_State]):
     def _check_custom_factor(self, factor: Factor) -> None:
         rng = np.random.default_rng(self.seed)
         for _ in range(3):
-            q = self.robot.random_configuration(rng)
+            q = self.plant.random_configuration(rng)
             t = factor.frame(q)
-            minv = np.linalg.inv(self.robot.mass_matrix(q))
+            minv = np.linalg.inv(self.plant.mass_matrix(q))
             err = float(np.abs(t @ t.T - minv).max() / np.abs(minv).max())
             if not err < 1e-8:
                 raise GainError(
@@ -869,12 +890,12 @@ class IIObserver(Observer[_State]):
             c: Vector | None = structure_functions(t, dts)[0]
         else:
             t, c = self.factor.frame(q), None
-        return _Stage(t, beta, pt, self.robot.gravity(q), c)
+        return _Stage(t, beta, pt, self.plant.gravity(q), c)
 
     def _eta_dot(self, st: _Stage, eta: Vector, tau: Vector) -> Vector:
         p_hat = st.beta - eta
-        if self.robot.has_friction:  # the model's joint friction, a known torque at v̂ = T P̂
-            tau = tau + self.robot.friction_torque(st.t @ p_hat)
+        if self.plant.has_friction:  # the model's joint friction, a known torque at v̂ = T P̂
+            tau = tau + self.plant.friction_torque(st.t @ p_hat)
         out = st.pt @ p_hat - st.t.T @ (tau - st.g)  # Sarras et al. eq. (30), input τ added
         if st.c is not None:
             out -= momentum_residual(
@@ -883,11 +904,19 @@ class IIObserver(Observer[_State]):
         return out
 
     def momentum(self, q: Vector, v: Vector) -> Vector:
-        """``P = T(q)⁻¹ v`` (``|P|² = 2 × kinetic energy`` [J])."""
-        return np.asarray(np.linalg.solve(self.factor.frame(q), v))
+        """``P = T(q)⁻¹ v`` (``|P|² = 2 × kinetic energy`` [J]); ``q`` the robot's (``nq``)."""
+        x = q if self.chart is None else self.chart.to_chart(q)
+        return self._momentum(x, v)
+
+    def _momentum(self, x: Vector, v: Vector) -> Vector:
+        """``P = T(x)⁻¹ v`` at chart coordinates ``x``."""
+        return np.asarray(np.linalg.solve(self.factor.frame(x), v))
 
     # ------------------------------------------------------ family interface
+    # The state lives in the chart (θ unwrapped for continuous joints); q in and out is the robot's.
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:
+        if self.chart is not None:
+            q0 = self.chart.to_chart(q0)
         q_ref = q0.copy()
         if self.construction == "potential":
             beta = np.zeros_like(q0)
@@ -901,25 +930,34 @@ class IIObserver(Observer[_State]):
                 seed=self.seed,
                 nodes=self.gains.nodes,
             )
-        eta = beta - self.momentum(q0, v0)  # P̂(0) = β − η = T⁻¹ v0
+        eta = beta - self._momentum(q0, v0)  # P̂(0) = β − η = T⁻¹ v0
         return _State(q0.copy(), eta, beta, q_ref)
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
-        return state.q, self.factor.frame(state.q) @ (state.beta - state.eta)
+        v_hat = self.factor.frame(state.q) @ (state.beta - state.eta)
+        if self.chart is not None:
+            return self.chart.from_chart(state.q), v_hat
+        return state.q, v_hat
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
-        robot = self.robot
+        robot = self.plant
         n_sub = self.substeps or max(1, math.ceil(self.gains.gain * dt / _STEP_KH))
         h = dt / n_sub
 
         # (1) predict the plant from the estimate, torque held (MATH §7)
-        _, v_hat = self._output(state)
-        nodes_q, nodes_v = [state.q], [v_hat]
+        v_hat = self.factor.frame(state.q) @ (state.beta - state.eta)
+        nodes_q: list[Vector] = [state.q]
+        nodes_v: list[Vector] = [v_hat]
         for _ in range(n_sub):
             qn, vn = dynamics_rk4(robot, nodes_q[-1], nodes_v[-1], tau, h)
             nodes_q.append(qn)
             nodes_v.append(vn)
-        q_end = nodes_q[-1] if q_meas is None else q_meas
+        if q_meas is None:
+            q_end = nodes_q[-1]
+        elif self.chart is not None:  # θ unwrapped: the 2π-branch nearest the prediction
+            q_end = self.chart.to_chart(q_meas, near=nodes_q[-1])
+        else:
+            q_end = q_meas
         shift = q_end - nodes_q[-1]
 
         # (2) the path: Hermite interpolant of the prediction, corrected to end on q_meas

@@ -7,8 +7,8 @@ install hint if missing (:class:`MissingDependencyError`).
 
 from pinobs.visualization._deps import MissingDependencyError
 from pinobs.visualization.browser import screenshot
+from pinobs.visualization.palette import PALETTE
 from pinobs.visualization.playback import (
-    GHOST_COLOURS,
     LegendEntry,
     LiveViewer,
     build_scene,
@@ -20,7 +20,7 @@ from pinobs.visualization.playback import (
 from pinobs.visualization.plots import figure, plot
 
 __all__ = [
-    "GHOST_COLOURS",
+    "PALETTE",
     "LegendEntry",
     "LiveViewer",
     "MissingDependencyError",

@@ -2,10 +2,13 @@
 
 The truth is drawn as the model describes it (URDF colours and meshes, loaded
 by :class:`pinocchio.visualize.MeshcatVisualizer`); each observer's estimate
-``q̂(t)`` is a translucent ghost of the same robot in its own warm colour.
+``q̂(t)`` is a translucent ghost of the same robot in its own colour
+(:func:`pinobs.visualization.palette.observer_colours`: a colour-blind-safe
+palette, away from the robot's own colours; the plots use the same).
 Robots without visual geometry get a stick figure (a sphere per joint, a rod
-per link).  A floating base (free-flyer or planar root) is followed: the
-scene and floor grid move so that the true base stays in view.  The motion is
+per link).  A floor grid lies on the plane ``z = 0`` under the motion.  A
+floating base (free-flyer or planar root) is followed: the scene, floor
+included, moves so that the true base stays in view.  The motion is
 one meshcat ``Animation`` keyframed at ``fps``
 frames per second of simulated time, so meshcat's own timeline (Open Controls
 → Animations: play, pause, reset, time slider, time scale) plays, pauses and
@@ -18,8 +21,10 @@ Two ways to watch:
   are recorded in-process by a window object standing in for meshcat's
   server, and ``Visualizer.static_html()`` turns them into the page, so no
   server is started and no port is opened.  The page shows a legend (an HTML
-  overlay, top left: the truth and one colour swatch per observer) and the
-  current time.  Opening it as ``file.html#t=1.5`` pauses the animation at
+  overlay, top left: the truth in its model colours and one colour swatch per
+  observer), the current time, and under the 3-D view a chart of true against
+  estimated velocity whose cursor follows the animation
+  (:mod:`pinobs.visualization.chart`).  Opening it as ``file.html#t=1.5`` pauses the animation at
   ``t = 1.5 s`` (used by the tests to screenshot two instants); ``#paused``
   opens it paused at the start, ``&nolegend`` hides the legend.
 * :func:`serve` sends the same scene to a live meshcat server (started on
@@ -49,29 +54,20 @@ from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.simulation import ObserverTrace, Result
 from pinobs.visualization._deps import require
+from pinobs.visualization.chart import chart_data, chart_html
+from pinobs.visualization.palette import hex_colour, observer_colours
 
 __all__ = [
-    "GHOST_COLOURS",
     "LegendEntry",
     "LiveViewer",
     "build_scene",
     "frame_indices",
-    "ghost_colour",
     "log_result",
     "serve",
+    "truth_colours",
     "write_html",
     "write_html_from_file",
 ]
-
-#: Warm colours given to the observers' ghosts in run order (name, RGB in [0, 1]).
-GHOST_COLOURS: tuple[tuple[str, tuple[float, float, float]], ...] = (
-    ("orange", (1.0, 0.5, 0.0)),
-    ("crimson", (0.86, 0.08, 0.24)),
-    ("gold", (1.0, 0.8, 0.0)),
-    ("deep pink", (1.0, 0.08, 0.58)),
-    ("sienna", (0.63, 0.32, 0.18)),
-    ("coral", (1.0, 0.5, 0.31)),
-)
 
 #: Opacity of a ghost (0 invisible, 1 opaque).
 GHOST_OPACITY = 0.5
@@ -85,15 +81,6 @@ _MAX_MESH_FILE_BYTES = 4_000_000
 
 #: ``progress(k, n)`` is called after frame ``k`` of ``n`` (as in :func:`pinobs.simulate`).
 Progress = Callable[[int, int], None]
-
-
-def ghost_colour(i: int) -> tuple[str, tuple[float, float, float]]:
-    """Name and RGB of the ``i``-th ghost (the palette repeats after six)."""
-    return GHOST_COLOURS[i % len(GHOST_COLOURS)]
-
-
-def _hex(rgb: Sequence[float]) -> str:
-    return "#" + "".join(f"{round(255 * float(c)):02x}" for c in rgb[:3])
 
 
 def _int_colour(rgb: Sequence[float]) -> int:
@@ -112,6 +99,8 @@ class LegendEntry:
         colour_name: human name of the colour (``"model colours"`` for the truth).
         node: meshcat path of its scene node under ``/meshcat``.
         diverged_at: time of divergence [s], or ``None``.
+        model_colours: for the truth, the CSS colours its body renders in (the
+            visual model's ``meshColor``, most used first); empty for a ghost.
     """
 
     label: str
@@ -119,6 +108,45 @@ class LegendEntry:
     colour_name: str
     node: str
     diverged_at: float | None = None
+    model_colours: tuple[str, ...] = ()
+
+
+def _model_colours(
+    geom: pin.GeometryModel, *, collada_materials: bool, most: int = 3
+) -> tuple[str, ...]:
+    """The ``most`` colours the truth is drawn in, by number of geometries.
+
+    A geometry is painted in its ``meshColor``, except a Collada file sent as
+    it is (``collada_materials``: Pinocchio's visualizer, without
+    ``overrideMaterial``), which keeps its own materials: their diffuse colours
+    are read from the file.
+    """
+    counts: dict[str, int] = {}
+    for go in geom.geometryObjects:
+        found: list[str] = []
+        path = Path(go.meshPath) if go.meshPath else None
+        if (
+            collada_materials
+            and not go.overrideMaterial
+            and path is not None
+            and path.suffix.lower() == ".dae"
+            and path.is_file()
+        ):
+            text = path.read_text(encoding="utf-8", errors="replace")
+            for m in re.finditer(r"<diffuse>\s*<color[^>]*>([^<]+)</color>", text):
+                rgb = [float(x) for x in m.group(1).split()[:3]]
+                found.append(hex_colour([min(max(c, 0.0), 1.0) for c in rgb]))
+        for key in found or [hex_colour(go.meshColor[:3])]:
+            counts[key] = counts.get(key, 0) + 1
+    ranked = sorted(counts, key=lambda k: -counts[k])
+    return tuple(ranked[:most])
+
+
+def truth_colours(robot: Robot) -> tuple[str, ...]:
+    """CSS colours the truth's body renders in, in a playback of ``robot`` (most used first);
+    observers' colours keep away from them (:func:`~pinobs.visualization.palette.observer_colours`)."""
+    geom = _visual_model(robot)
+    return _model_colours(geom, collada_materials=_mesh_file_bytes(geom) <= _MAX_MESH_FILE_BYTES)
 
 
 # ----------------------------------------------------------------- recording
@@ -170,12 +198,33 @@ _PAGE = """<!DOCTYPE html>
 <html>
 <head><meta charset="utf-8"><title>pinobs playback</title></head>
 <body>
+<style>
+:root {{ --pinobs-chart-height: clamp(170px, 34vh, 340px); }}
+html, body {{ margin: 0; height: 100%; overflow: hidden; }}
+#meshcat-pane {{ width: 100vw; height: calc(100vh - var(--pinobs-chart-height)); overflow: hidden; }}
+#pinobs-chart {{ height: var(--pinobs-chart-height); display: flex; flex-direction: column;
+  border-top: 1px solid #ccc; background: #fff; color: #222; font: 12px/1.3 system-ui, sans-serif; }}
+.pinobs-chart-bar {{ padding: 3px 8px; white-space: nowrap; overflow: hidden; }}
+.pinobs-chart-bar > * {{ margin-right: 10px; }}
+.pinobs-key i {{ display: inline-block; width: 10px; height: 10px; margin: 0 3px 0 0;
+  vertical-align: -1px; border: 1px solid #555; }}
+.pinobs-hint {{ color: #777; }}
+#pinobs-chart-canvas {{ flex: 1; min-height: 0; width: 100%; display: block; cursor: ew-resize; }}
+</style>
 <div id="meshcat-pane"></div>
 <script>
 {mainminjs}
 </script>
 <script>
-var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
+var pinobsPane = document.getElementById("meshcat-pane");
+var viewer = new MeshCat.Viewer(pinobsPane);
+// meshcat sizes its canvas to the window's height; the chart takes the bottom of it
+var pinobsPaneSize = viewer.set_3d_pane_size.bind(viewer);
+viewer.set_3d_pane_size = function (w, h) {{
+  pinobsPaneSize(w === undefined ? pinobsPane.offsetWidth : w,
+                 h === undefined ? pinobsPane.offsetHeight : h);
+}};
+viewer.set_3d_pane_size();
 var pinobsCommands = [
 {commands}
 ];
@@ -186,10 +235,6 @@ for (const b64 of pinobsCommands) {{
   viewer.handle_command_bytearray(bytes);
 }}
 </script>
-<style>
-body {{ margin: 0; }}
-#meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}
-</style>
 {overlay}
 </body>
 </html>
@@ -201,7 +246,8 @@ _OVERLAY = """<div id="pinobs-legend" style="position:absolute;left:10px;top:10p
 <div style="font-weight:600">{title}</div>
 {rows}
 <div id="pinobs-time" style="margin-top:4px;font-variant-numeric:tabular-nums">t = {t0:.2f} s</div>
-<div style="color:#666;font-size:11px">Open Controls → Animations: play, pause, time</div>
+<div style="color:#666;font-size:11px">Open Controls → Animations: play, pause, time;<br>
+drag on the chart below to scrub</div>
 </div>
 <script>
 (function () {{
@@ -244,9 +290,14 @@ def _overlay(title: str, entries: Sequence[LegendEntry], t0: float) -> str:
     rows = []
     for e in entries:
         if e.colour is None:
+            cs = e.model_colours or ("#cccccc",)
+            stops = ",".join(
+                f"{c} {100 * k / len(cs):.0f}% {100 * (k + 1) / len(cs):.0f}%"
+                for k, c in enumerate(cs)
+            )
             swatch = (
                 '<span style="display:inline-block;width:12px;height:12px;margin-right:6px;'
-                'border:1px solid #555;background:linear-gradient(135deg,#888 50%,#36c 50%)"></span>'
+                f'border:1px solid #555;background:linear-gradient(135deg,{stops})"></span>'
             )
         else:
             swatch = (
@@ -561,7 +612,8 @@ def build_scene(
 
     nodes: dict[str, list[str]] = {}
     scaled: dict[str, Vector] = {}
-    if _mesh_file_bytes(geom) <= _MAX_MESH_FILE_BYTES:
+    as_is = _mesh_file_bytes(geom) <= _MAX_MESH_FILE_BYTES
+    if as_is:
         # The truth, as the model describes it, through Pinocchio's visualizer.
         truth.loadViewerModel(rootNodeName="truth")
         nodes["truth"] = [f"truth/visuals/{go.name}" for go in geom.geometryObjects]
@@ -577,11 +629,13 @@ def build_scene(
             lambda go: mg.MeshPhongMaterial(color=_int_colour(go.meshColor[:3])),
         )
         nodes["truth"] = [f"truth/{go.name}" for go in geom.geometryObjects]
-    legend = [LegendEntry(truth_label, None, "model colours", "truth")]
+    truth_swatch = _model_colours(geom, collada_materials=as_is)
+    legend = [LegendEntry(truth_label, None, "model colours", "truth", model_colours=truth_swatch)]
+    colours = observer_colours(len(labels), truth_swatch)
 
     # Ghosts: the same shapes, one flat translucent colour each.
     for i, name in enumerate(labels):
-        colour_name, rgb = ghost_colour(i)
+        colour_name, rgb = colours[i]
         node = f"ghost_{i}_{_safe(name)}"
         # Front faces only, no depth writes, pushed slightly away from the camera:
         # the truth always shows in full, a ghost shows where it differs from the
@@ -600,7 +654,7 @@ def build_scene(
         load_copy(node, functools.partial(_same, material))
         nodes[name] = [f"{node}/{go.name}" for go in geom.geometryObjects]
         legend.append(
-            LegendEntry(name, _hex(rgb), colour_name, node, result.trace(name).diverged_at)
+            LegendEntry(name, hex_colour(rgb), colour_name, node, result.trace(name).diverged_at)
         )
 
     # Configurations shown, one row per frame.
@@ -644,21 +698,63 @@ def build_scene(
                     frame[path].set_property("position", "vector3", M.translation.tolist())
                     frame[path].set_property("quaternion", "quaternion", quat.tolist())
 
-    centre, offset = _camera(np.array(points), np.concatenate(radii))
+    pts, rad = np.array(points), np.concatenate(radii)
+    centre, offset = _camera(pts, rad)
     # meshcat's orbit controls look at the world origin: move the scene (and the
-    # grid, the floor) so that the motion is centred there.
+    # floor with it) so that the motion is centred there.
     vis.set_transform(_translation(-centre - shift[0]))
-    vis["/Grid"].set_transform(_translation(-centre - shift[0]))
     if follow:
         for k in range(n_frames):
             with anim.at_frame(vis, k) as frame:
-                for node in (frame, frame["/Grid"]):
-                    node.set_property("position", "vector3", (-centre - shift[k]).tolist())
+                frame.set_property("position", "vector3", (-centre - shift[k]).tolist())
+    # meshcat's 20 m grid reaches behind the camera (and software renderers drop
+    # lines that cross the camera plane); our own floor lies under the motion.
+    vis["/Grid"].set_property("visible", False)
+    vertices = _floor(pts, rad, shift, centre, offset)
+    vis["floor"].set_object(
+        mg.LineSegments(mg.PointsGeometry(vertices.T), mg.LineBasicMaterial(color=0xB4B4B4))
+    )
     # meshcat's camera sits in a frame rotated by +90° about x: world (x, y, z) = local (x, -z, y)
     local = [float(offset[0]), float(offset[2]), float(-offset[1])]
     vis["/Cameras/default/rotated/<object>"].set_property("position", local)
     vis.set_animation(anim, play=play, repetitions=_REPEAT)
     return legend
+
+
+def _floor(points: Vector, radii: Vector, shift: Vector, centre: Vector, offset: Vector) -> Vector:
+    """End points (pairs of rows, world frame [m]) of a square floor grid under the truth's motion.
+
+    The floor is the world plane ``z = 0``: where a fixed base is mounted and
+    a legged robot stands (an arm reaching below its mounting plane shows
+    through the lines).  It covers the motion's footprint with a margin, but
+    stops short of the camera so no line passes behind it.  Spacing: 1, 2 or
+    5 × 10ᵏ m, about ten squares across.
+
+    Args:
+        points: geometry origins of every frame, relative to the followed base ``shift`` [m].
+        radii: bounding radius of each point [m].
+        shift: followed base position of each frame [m] (zeros for a fixed base).
+        centre: centre of the framed motion, relative to ``shift[0]`` [m].
+        offset: camera position relative to ``centre`` [m].
+    """
+    z = 0.0
+    lo = np.min(points[:, :2] - radii[:, None], axis=0)
+    hi = np.max(points[:, :2] + radii[:, None], axis=0)
+    half = max(0.75 * float(np.max(hi - lo)), 0.3)
+    reach = float(np.linalg.norm(offset[:2]))
+    if reach > 0.3 * float(np.linalg.norm(offset)):  # the camera is off to the side
+        half = min(half, 0.85 * reach)
+    raw = 2.0 * half / 10.0
+    mag = 10.0 ** math.floor(math.log10(raw))
+    step = next(m * mag for m in (1.0, 2.0, 5.0, 10.0) if m * mag >= raw)
+    c = np.round((centre[:2] + shift[0][:2]) / step) * step
+    ticks = np.arange(-math.floor(half / step), math.floor(half / step) + 1) * step
+    a, b = ticks[0], ticks[-1]
+    segments = []
+    for u in ticks:
+        segments += [[c[0] + u, c[1] + a, z], [c[0] + u, c[1] + b, z]]
+        segments += [[c[0] + a, c[1] + u, z], [c[0] + b, c[1] + u, z]]
+    return np.array(segments, dtype=float)
 
 
 def _translation(p: Vector) -> Vector:
@@ -685,8 +781,11 @@ def write_html(
     """Write a self-contained HTML playback of ``result`` (opens offline in any browser).
 
     The page holds meshcat's viewer, the truth, one ghost per observer (legend
-    top left), and the animation (Open Controls → Animations: play, pause,
-    time slider).  ``page.html#t=1.5`` opens paused at ``t = 1.5 s``.
+    top left), the animation (Open Controls → Animations: play, pause, time
+    slider) and, under the 3-D view, the velocity chart (element
+    ``#pinobs-chart``: true and estimated velocity of one joint, the error
+    norm on a log axis, a cursor at the animation time; dragging on it
+    scrubs).  ``page.html#t=1.5`` opens paused at ``t = 1.5 s``.
 
     Args:
         result: the run (``pinobs.simulate`` or ``Result.load``).
@@ -718,7 +817,11 @@ def write_html(
     )
     if title is None:
         title = f"pinobs · {robot.name} · {result.t[-1] - result.t[0]:.3g} s"
-    window.overlay = _overlay(title, legend, float(result.t[0]))
+    ghosts = legend[1:]
+    data = chart_data(
+        result, robot, [e.label for e in ghosts], [e.colour or "#000000" for e in ghosts]
+    )
+    window.overlay = _overlay(title, legend, float(result.t[0])) + chart_html(data)
     page = vis.static_html()
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(page, encoding="utf-8")

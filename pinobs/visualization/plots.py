@@ -1,9 +1,14 @@
 """Plots of a run: true and estimated velocities per joint, and the error norm.
 
 One PNG (matplotlib, the ``plot`` extra): a panel per velocity coordinate with
-the true velocity in black and each observer in its playback colour, and a
-bottom panel with ``|v̂(t) − v(t)|₂`` on a log scale, each observer's
-convergence time (:func:`pinobs.evaluation.evaluate`) marked by a dashed line.
+the true velocity in black and each observer in its playback colour
+(:mod:`pinobs.visualization.palette`), and a bottom panel with
+``|v̂(t) − v(t)|₂`` on a log scale, each observer's convergence time
+(:func:`pinobs.evaluation.evaluate`) marked by a dashed line and quoted in the
+legend (one for the figure, under the panels).  Every axis names its unit.  The velocity panels' y-range is the
+truth's whole run and the estimates after the slowest convergence time
+(:func:`pinobs.visualization.axes.velocity_range`): the start transient, which
+can be far larger than the motion, is clipped, shaded and said so in the title.
 """
 
 from __future__ import annotations
@@ -20,32 +25,14 @@ from pinobs.evaluation import evaluate
 from pinobs.model import Robot
 from pinobs.simulation import Result
 from pinobs.visualization._deps import require
-from pinobs.visualization.playback import _hex, ghost_colour
+from pinobs.visualization.axes import clip_start, velocity_labels, velocity_range, velocity_units
+from pinobs.visualization.palette import TRUTH_LINE, hex_colour, observer_colours
+from pinobs.visualization.playback import truth_colours
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["figure", "plot", "velocity_labels"]
-
-_COMPONENTS = {
-    "so3": ("ωx", "ωy", "ωz"),
-    "se3": ("vx", "vy", "vz", "ωx", "ωy", "ωz"),
-    "se2": ("vx", "vy", "ω"),
-}
-
-
-def velocity_labels(robot: Robot) -> list[str]:
-    """One label per velocity coordinate: the joint name, with the component for multi-DOF joints."""
-    labels = [""] * robot.nv
-    for j in robot.joints:
-        comps = _COMPONENTS.get(j.kind)
-        for k in range(j.nv):
-            if j.nv == 1:
-                labels[j.idx_v] = j.name
-            else:
-                comp = comps[k] if comps is not None and k < len(comps) else str(k)
-                labels[j.idx_v + k] = f"{j.name} {comp}"
-    return labels
+__all__ = ["figure", "plot"]
 
 
 def plot(
@@ -104,53 +91,73 @@ def figure(
                 f"no observer {name!r} in this result; have {result.observer_names}"
             )
     metrics = {m.observer: m for m in evaluate(result, robot, transient=transient)}
-    colours = {name: _hex(ghost_colour(result.observer_names.index(name))[1]) for name in names}
+    # the page's colours: the palette in this order, away from the truth's model colours
+    picked = observer_colours(len(names), truth_colours(robot))
+    colours = {name: hex_colour(rgb) for name, (_, rgb) in zip(names, picked, strict=True)}
     labels = velocity_labels(robot)
+    units = velocity_units(robot)
     shown = min(robot.nv, max_joints)
     ncols = 1 if shown <= 3 else 2 if shown <= 8 else 3
     nrows = math.ceil(shown / ncols)
-    fig = Figure(figsize=(4.6 * ncols, 1.9 * nrows + 2.8), dpi=dpi, layout="constrained")
+    fig = Figure(figsize=(4.6 * ncols, 2.0 * nrows + 3.0), dpi=dpi, layout="constrained")
     grid = fig.add_gridspec(nrows + 1, ncols, height_ratios=[1.0] * nrows + [1.6])
     t = result.t
+    start = clip_start(t, [metrics[n].convergence_time for n in names])
+    clipped = False
+    # a diverged estimate does not set the range (it is clipped, and the legend says it diverged)
+    sane = [n for n in names if metrics[n].diverged_at is None]
     for i in range(shown):
         ax = fig.add_subplot(grid[i // ncols, i % ncols])
-        ax.plot(t, result.v[:, i], color="black", lw=1.4, label="truth")
-        for name in names:
-            ax.plot(t, result.trace(name).v[:, i], color=colours[name], lw=1.0, label=name)
-        ax.set_ylabel(labels[i], fontsize=8)
+        # the truth thin and on top: a converged estimate shows as its coloured rim
+        ax.plot(t, result.v[:, i], color=TRUTH_LINE, lw=0.9, label="truth", zorder=3)
+        estimates = np.column_stack([result.trace(n).v[:, i] for n in names] or [t * np.nan])
+        for k, name in enumerate(names):
+            ax.plot(t, estimates[:, k], color=colours[name], lw=1.6, label=name)
+        lo, hi = velocity_range(t, result.v[:, i], [result.trace(n).v[:, i] for n in sane], start)
+        with np.errstate(invalid="ignore"):
+            outside = bool(np.any((estimates < lo) | (estimates > hi)))
+        ax.set_ylim(lo, hi)
+        if outside:
+            clipped = True
+            ax.axvspan(t[0], start, color="0.88", lw=0, zorder=0)
+        ax.set_ylabel(f"{labels[i]} [{units[i]}]", fontsize=8)
+        ax.set_xlabel("t [s]", fontsize=7, labelpad=1)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-        if i == 0:
-            ax.legend(fontsize=7, loc="upper right", ncols=min(4, 1 + len(names)))
     title = f"{robot.name}: true (black) and estimated velocity"
     if shown < robot.nv:
         title += f" (first {shown} of {robot.nv} coordinates)"
+    if clipped:
+        title += f"\nstart transient clipped (shaded): y-range from t = {start:.3g} s"
     fig.suptitle(title, fontsize=10)
 
     ax = fig.add_subplot(grid[nrows, :])
-    for rank, name in enumerate(names):
+    for name in names:
         err = np.linalg.norm(result.trace(name).v - result.v, axis=1)
         err = np.where(err > 0, err, np.nan)  # log scale: an exact zero is not drawn
         m = metrics[name]
-        ax.plot(t, err, color=colours[name], lw=1.0, label=f"{name}: RMS {m.rms_v_error:.3g}")
+        label = f"{name}: RMS {m.rms_v_error:.3g}"
+        if math.isfinite(m.convergence_time):
+            label += f", converged at {m.convergence_time:.3g} s"
+        if m.diverged_at is not None:
+            label += f", diverged at {m.diverged_at:.3g} s"
+        ax.plot(t, err, color=colours[name], lw=1.0, label=label)
         if math.isfinite(m.convergence_time):
             ax.axvline(m.convergence_time, color=colours[name], ls="--", lw=1.0)
-            ax.annotate(
-                f"{m.convergence_time:.3g} s",
-                (m.convergence_time, 1.0),
-                xycoords=("data", "axes fraction"),
-                xytext=(3, -10 - 10 * rank),
-                textcoords="offset points",
-                color=colours[name],
-                fontsize=7,
-            )
         if m.diverged_at is not None:
             ax.axvline(m.diverged_at, color=colours[name], ls=":", lw=1.5)
     ax.set_yscale("log")
     ax.set_xlabel("t [s]")
-    ax.set_ylabel("|v̂ − v|₂ [rad/s, m/s]")
+    unit = units[0] if len(set(units)) == 1 else "rad/s and m/s mixed"
+    ax.set_ylabel(f"|v̂ − v|₂ [{unit}]")
     ax.grid(alpha=0.3, which="both")
-    ax.set_title("velocity error norm (dashed: convergence time)", fontsize=9)
-    if names:
-        ax.legend(fontsize=7, loc="upper right")
+    ax.set_title("velocity error, log scale (dashed: convergence time)", fontsize=9)
+    # one legend for every panel, under them, where it hides no curve
+    handles = [
+        fig.axes[0].get_lines()[0],
+        *(line for line in ax.get_lines() if not str(line.get_label()).startswith("_")),
+    ]
+    fig.legend(
+        handles=handles, loc="outside lower center", ncols=min(ncols, len(handles)), fontsize=7
+    )
     return fig

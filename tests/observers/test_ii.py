@@ -311,6 +311,8 @@ def test_unguaranteed_runs_on_panda_labelled_and_stays_on_the_truth() -> None:
 def test_lie_group_joints_are_rejected_with_a_pointer_to_the_right_observer() -> None:
     with pytest.raises(UnsupportedRobotError, match="liegroup"):
         make_observer("ii", _load("top"))
+    with pytest.raises(UnsupportedRobotError, match="so3"):
+        check_assumption1(_load("top"))
 
 
 def test_ordering_option_accepts_joint_names_and_rejects_non_permutations() -> None:
@@ -370,3 +372,56 @@ def test_assumption2_is_checked_at_reset_and_its_failure_is_labelled() -> None:
         label = str(ob.options["label"])
         assert label.startswith("guaranteed" if region == 0.5 else "UNGUARANTEED (Assumption 2")
     assert eps[0.5] > 0 > eps[2.0]  # measured 18.5 and −11.7 /s (2k = 20)
+
+
+# ------------------------------------------- continuous joints (angle chart)
+def test_continuous_cartpole_stays_on_the_truth_as_the_revolute_one_does() -> None:
+    robot = _load("cartpole_continuous")
+    assert (robot.nq, robot.nv) == (3, 2)
+    ob = make_observer("ii", robot, gain=GAIN)
+    assert ob.options["construction"] == "potential"
+    result = simulate(robot, {"ii": ob}, duration=1.0, inputs="pd", seed=1)
+    assert np.abs(result.trace("ii").v - result.v).max() < INVARIANCE_TOL
+    assert np.abs(result.trace("ii").q - result.q).max() < INVARIANCE_TOL
+
+
+def test_continuous_pole_spinning_through_many_turns_runs_as_the_revolute_one() -> None:
+    """A free spin at 30 rad/s (4.8 turns in 1 s, 0.03 rad per sample), both cart-poles.
+
+    The unwrapped chart gives the revolute observer's estimates (measured to
+    4e-13 rad/s); at this speed both leave the truth by 1.39e-8 rad/s (the
+    sampled-data floor grows with the speed; 1e-10 under the PD input).
+    """
+    runs = {}
+    for name in ("cartpole", "cartpole_continuous"):
+        robot = _load(name)
+        ob = make_observer("ii", robot, gain=GAIN)
+        runs[name] = simulate(
+            robot,
+            {"ii": ob},
+            duration=1.0,
+            inputs="zero",
+            q0=robot.neutral(),
+            v0=np.array([0.0, 30.0]),
+            seed=2,
+        )
+    cont, rev = runs["cartpole_continuous"], runs["cartpole"]
+    theta = np.unwrap(np.arctan2(cont.q[:, 2], cont.q[:, 1]))
+    assert abs(theta[-1] - theta[0]) > 4 * 2 * np.pi  # it did turn
+    np.testing.assert_allclose(theta, rev.q[:, 1], rtol=0, atol=1e-11)
+    assert np.abs(cont.trace("ii").v - rev.trace("ii").v).max() < 1e-11
+    for r in (cont, rev):
+        assert np.abs(r.trace("ii").v - r.v).max() < 2e-8
+
+
+@pytest.mark.parametrize("name", ["cartpole", "cartpole_continuous"])
+def test_continuous_and_revolute_cartpoles_decay_at_the_same_rate(name: str) -> None:
+    robot = _load(name)
+    ob = make_observer("ii", robot, gain=GAIN)
+    result = simulate(robot, {"ii": ob}, duration=1.0, inputs="pd", seed=1, perturb_v=1.0)
+    z = np.linalg.norm(_momentum_error(ob, result), axis=1)
+    bound = np.exp(-GAIN * result.t) * z[0]
+    assert np.all(z <= bound * (1.0 + 1e-6) + INVARIANCE_TOL)
+    window = z > 1e-4 * z[0]
+    rate = -np.log(z[window][1:] / z[0]) / result.t[window][1:]
+    assert np.allclose(rate, GAIN, rtol=1e-5)

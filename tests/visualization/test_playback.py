@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import base64
 import dataclasses
+import math
 import re
 import sys
 from pathlib import Path
@@ -30,6 +31,7 @@ from pinobs.visualization import (
 )
 from pinobs.visualization import playback as pb
 from pinobs.visualization.browser import find_chromium
+from pinobs.visualization.palette import PALETTE, hex_colour
 
 DURATION = 1.5  # [s]
 FPS = 30.0
@@ -95,7 +97,7 @@ def test_page_is_self_contained_with_a_legend(cartpole_run: dict[str, Any]) -> N
     assert "MeshCat.Viewer" in text
     legend = text[text.index('id="pinobs-legend"') :]
     assert 'data-label="truth"' in legend and 'data-label="kf"' in legend
-    assert pb._hex(pb.GHOST_COLOURS[0][1]) in legend  # the ghost's swatch colour
+    assert hex_colour(PALETTE[0][1]) in legend  # the ghost's swatch colour
 
 
 def test_timeline_has_one_keyframe_per_frame_for_truth_and_ghost(
@@ -299,7 +301,7 @@ def test_serve_prints_the_url_and_legend(
     viewer = serve(cartpole_run["result"], cartpole_run["robot"], echo=lines.append)
     assert viewer.url == "http://127.0.0.1:7000/static/"
     assert lines[0].endswith("http://127.0.0.1:7000/static/")
-    assert any("kf: estimate, orange" in line for line in lines)
+    assert any(f"kf: estimate, {PALETTE[0][0]}" in line for line in lines)
     assert any(umsgpack.unpackb(c)["type"] == "set_animation" for c in window.commands)
 
 
@@ -310,12 +312,24 @@ chromium = pytest.mark.skipif(
 )
 
 
-def colour_masks(png: Path) -> dict[str, np.ndarray]:
-    """Pixels of the ghost's orange, the truth's blue pole and anything not white."""
-    from matplotlib.colors import rgb_to_hsv
+def chart_top(height: int) -> int:
+    """First pixel row of the chart under the 3-D view (the page's CSS:
+    ``--pinobs-chart-height: clamp(170px, 34vh, 340px)``)."""
+    return height - round(min(max(170.0, 0.34 * height), 340.0))
+
+
+def image(png: Path) -> np.ndarray:
     from PIL import Image
 
-    rgb = np.asarray(Image.open(png).convert("RGB"), dtype=float) / 255.0
+    return np.asarray(Image.open(png).convert("RGB"), dtype=float)
+
+
+def colour_masks(png: Path) -> dict[str, np.ndarray]:
+    """In the 3-D view: pixels of the ghost's vermillion, the truth's blue pole, anything not white."""
+    from matplotlib.colors import rgb_to_hsv
+
+    rgb = image(png) / 255.0
+    rgb = rgb[: chart_top(rgb.shape[0])]
     hsv = rgb_to_hsv(rgb)
     h, s, v = hsv[..., 0] * 360.0, hsv[..., 1], hsv[..., 2]
     return {
@@ -338,7 +352,7 @@ def test_browser_shows_truth_and_ghost_in_their_colours(
     total = m["ink"].size
     assert m["ink"].sum() > 0.01 * total  # not blank
     assert m["truth"].sum() > 500  # the blue pole (true motion)
-    assert m["ghost"].sum() > 500  # the orange ghost (estimate)
+    assert m["ghost"].sum() > 500  # the vermillion ghost (estimate)
 
 
 @chromium
@@ -361,3 +375,351 @@ def test_browser_ghost_moves_onto_the_truth_along_the_timeline(
     assert gap_early < 0.7 * gap_start
     assert end["ghost"].sum() < 0.02 * start["ghost"].sum()  # converged: inside the truth
     assert end["truth"].sum() > 0.8 * start["truth"].sum()
+
+
+# ------------------------------------------------------------------ chart and floor
+
+
+def chart_json(html: Path) -> dict[str, Any]:
+    import json
+
+    text = html.read_text(encoding="utf-8")
+    start = text.index('<script id="pinobs-chart-data" type="application/json">')
+    body = text[text.index(">", start) + 1 : text.index("</script>", start)]
+    return dict(json.loads(body))
+
+
+def test_page_embeds_the_chart_data_in_the_legend_colours(cartpole_run: dict[str, Any]) -> None:
+    html, result = cartpole_run["html"], cartpole_run["result"]
+    text = html.read_text(encoding="utf-8")
+    assert 'id="pinobs-chart"' in text and "<canvas" in text
+    data = chart_json(html)
+    assert data["joints"] == ["cart_x", "pole_theta"] and data["units"] == ["m/s", "rad/s"]
+    (kf,) = data["obs"]
+    assert kf["colour"] == hex_colour(PALETTE[0][1])
+    t = np.array(data["t"])
+    assert t[0] == result.t[0] and t[-1] == pytest.approx(result.t[-1], abs=1e-12)
+    assert len(t) <= 800
+    k = np.searchsorted(result.t, t)  # the embedded samples are samples of the run
+    err = np.linalg.norm(result.trace("kf").v - result.v, axis=1)[k]
+    np.testing.assert_allclose(np.array(kf["err"], dtype=float), err, rtol=1e-3)
+    np.testing.assert_allclose(np.array(data["truth"][1], dtype=float), result.v[k, 1], atol=1e-3)
+
+
+def test_floor_grid_lies_under_the_ur5_and_ends_before_the_camera(tmp_path: Path) -> None:
+    robot = pinobs.load("ur5")
+    result = pinobs.simulate(robot, ["kf"], duration=0.3, sensor=pinobs.Sensor(rate=100.0), seed=1)
+    cmds = commands(write_html(result, robot, tmp_path / "ur5.html"))
+    (floor,) = [c for c in cmds if c["type"] == "set_object" and c["path"] == "/meshcat/floor"]
+    geometry = floor["object"]["geometries"][0]["data"]["attributes"]["position"]
+    xyz = np.frombuffer(geometry["array"].data, dtype=np.float32).reshape(
+        -1, 3
+    )  # msgpack ext: raw float32
+    assert np.all(xyz[:, 2] == 0.0)  # the plane the base stands on
+    lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
+    assert np.all(lo < 0.0) and np.all(hi > 0.0)  # under the base
+    hidden = [c for c in cmds if c["type"] == "set_property" and c["path"] == "/Grid"]
+    assert hidden and hidden[-1]["value"] is False  # meshcat's own grid is off
+    (cam,) = [c for c in cmds if c["path"] == "/Cameras/default/rotated/<object>"]
+    (scene,) = [c for c in cmds if c["type"] == "set_transform" and c["path"] == "/meshcat"]
+    centre = -np.array(scene["matrix"], dtype=float).reshape(4, 4).T[:3, 3]
+    x, y_up, minus_y = cam["value"]  # meshcat's camera frame: world (x, y, z) = (x, -z, y)
+    camera = centre + np.array([x, -minus_y, y_up])
+    assert not (lo[0] <= camera[0] <= hi[0] and lo[1] <= camera[1] <= hi[1])
+
+
+@pytest.fixture(scope="module")
+def payload_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """A cart-pole carrying a payload its observers do not know: at t = 1 s the EKF (model-based,
+    nominal model) is far off, kf and fd (model-free) are close (seeded; measured errors at 1 s:
+    ekf 0.66, fd 0.05, kf 0.01)."""
+    from pinobs.simulation import mismatched_plant
+
+    robot = pinobs.load("cartpole")
+    result = pinobs.simulate(
+        robot,
+        ["kf", "ekf", "fd"],
+        duration=1.5,
+        sensor=pinobs.Sensor(rate=500.0, noise_std=1e-4),
+        plant=mismatched_plant(robot, "inertia20_payload", seed=0),
+        perturb_q=0.05,
+        perturb_v=0.5,
+        seed=0,
+    )
+    html = write_html(result, robot, tmp_path_factory.mktemp("payload") / "payload.html")
+    return {"robot": robot, "result": result, "html": html}
+
+
+def near(img: np.ndarray, hex_rgb: str, tol: float = 25.0) -> np.ndarray:
+    rgb = np.array([int(hex_rgb[i : i + 2], 16) for i in (1, 3, 5)], dtype=float)
+    return np.linalg.norm(img - rgb, axis=-1) < tol
+
+
+def chart_cursor_columns(img: np.ndarray) -> list[int]:
+    """Columns of the chart where the cursor colour (#444444) runs down most of the panel."""
+    chart = img[chart_top(img.shape[0]) :]
+    cursor = near(chart, "#444444", tol=20.0)
+    return [int(c) for c in np.flatnonzero(cursor.sum(axis=0) > 0.5 * chart.shape[0])]
+
+
+@chromium
+def test_browser_chart_is_drawn_with_one_colour_per_observer(
+    payload_run: dict[str, Any], tmp_path: Path
+) -> None:
+    img = image(screenshot(payload_run["html"], tmp_path / "c.png", t=1.0, legend=False))
+    chart = img[chart_top(img.shape[0]) + 25 :]  # below the chart's header line
+    w = chart.shape[1]
+    assert near(chart[:, : w // 2], "#000000", tol=60.0).sum() > 300  # the truth, left panel
+    colours = [o["colour"] for o in chart_json(payload_run["html"])["obs"]]
+    assert len(set(colours)) == 3
+    for c in colours:  # each estimate is drawn, in both panels, in its own colour
+        assert near(chart[:, : w // 2], c).sum() > 30
+        assert near(chart[:, w // 2 :], c).sum() > 100
+
+
+@chromium
+def test_browser_screenshot_at_one_second_shows_which_estimate_is_worst(
+    payload_run: dict[str, Any], tmp_path: Path
+) -> None:
+    """On the error panel, at the cursor, the worst estimate's dot is the highest (log axis):
+    the one a person would point at.  The data's worst at t = 1 s is checked independently."""
+    result = payload_run["result"]
+    k = int(np.argmin(np.abs(result.t - 1.0)))
+    errors = {
+        n: float(np.linalg.norm(result.trace(n).v[k] - result.v[k])) for n in ("kf", "ekf", "fd")
+    }
+    worst = max(errors, key=errors.__getitem__)
+    img = image(screenshot(payload_run["html"], tmp_path / "w.png", t=1.0, legend=False))
+    (x,) = [c for c in chart_cursor_columns(img) if c >= img.shape[1] // 2][:1]
+    top = chart_top(img.shape[0]) + 25
+    band = img[top:, x - 6 : x + 8]
+    rows = {}
+    for o in chart_json(payload_run["html"])["obs"]:
+        hit = np.flatnonzero(near(band, o["colour"]).any(axis=1))
+        assert hit.size, o["name"]
+        rows[o["name"]] = float(np.median(hit))
+    assert min(rows, key=rows.__getitem__) == worst == "ekf"
+    others = [r for n, r in rows.items() if n != worst]
+    assert min(others) - rows[worst] > 30  # [px]: clearly apart
+
+
+class Browser:
+    """Headless Chromium driven over the DevTools protocol on a pipe (``--remote-debugging-pipe``:
+    JSON messages ending in NUL; the browser reads fd 3 and writes fd 4).  Test-only."""
+
+    def __init__(self, url: str, size: tuple[int, int] = (800, 600)) -> None:
+        import os
+        import subprocess
+        import tempfile
+
+        exe = find_chromium()
+        assert exe is not None
+        to_child, self._out = os.pipe()
+        self._in, from_child = os.pipe()
+        high = [os.dup(to_child), os.dup(from_child)]  # out of the way of fds 3 and 4
+
+        def wire() -> None:
+            os.dup2(high[0], 3)
+            os.dup2(high[1], 4)
+
+        self._profile = tempfile.TemporaryDirectory(prefix="pinobs-cdp-")
+        self.proc = subprocess.Popen(
+            [
+                exe,
+                "--headless",
+                "--no-sandbox",
+                "--use-gl=swiftshader",
+                "--enable-unsafe-swiftshader",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--remote-debugging-pipe",
+                f"--user-data-dir={self._profile.name}",
+                f"--window-size={size[0]},{size[1]}",
+                "about:blank",
+            ],
+            preexec_fn=wire,
+            close_fds=False,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        for fd in (to_child, from_child, *high):
+            os.close(fd)
+        self._id = 0
+        self._buf = b""
+        target = self.call("Target.createTarget", url=url)["targetId"]
+        self.session = self.call("Target.attachToTarget", targetId=target, flatten=True)[
+            "sessionId"
+        ]
+        self.call(  # the viewport itself (the window size includes the browser's frame)
+            "Emulation.setDeviceMetricsOverride",
+            session=self.session,
+            width=size[0],
+            height=size[1],
+            deviceScaleFactor=1,
+            mobile=False,
+        )
+
+    def call(self, method: str, session: str | None = None, **params: Any) -> dict[str, Any]:
+        import json
+        import os
+
+        self._id += 1
+        msg: dict[str, Any] = {"id": self._id, "method": method, "params": params}
+        if session:
+            msg["sessionId"] = session
+        os.write(self._out, json.dumps(msg).encode() + b"\0")
+        while True:
+            while b"\0" not in self._buf:
+                chunk = os.read(self._in, 1 << 16)
+                if not chunk:
+                    raise RuntimeError("Chromium closed the DevTools pipe")
+                self._buf += chunk
+            raw, self._buf = self._buf.split(b"\0", 1)
+            reply = json.loads(raw)
+            if reply.get("id") == self._id:
+                if "error" in reply:
+                    raise RuntimeError(reply["error"])
+                return dict(reply["result"])
+
+    def js(self, expression: str) -> Any:
+        out = self.call(
+            "Runtime.evaluate",
+            session=self.session,
+            expression=expression,
+            returnByValue=True,
+            awaitPromise=True,
+        )
+        return out["result"].get("value")
+
+    def mouse(self, kind: str, x: float, y: float, buttons: int) -> None:
+        self.call(
+            "Input.dispatchMouseEvent",
+            session=self.session,
+            type=kind,
+            x=x,
+            y=y,
+            button="left",
+            buttons=buttons,
+            clickCount=1,
+        )
+
+    def wait_for_page(self, timeout: float = 60.0) -> None:
+        """Until the viewer has its animation and the chart its size."""
+        import time
+
+        deadline = time.monotonic() + timeout
+        while not self.js(
+            "typeof viewer !== 'undefined' && viewer.animator.actions.length > 0 && "
+            "document.getElementById('pinobs-chart-canvas').clientWidth > 0"
+        ):
+            assert time.monotonic() < deadline, "the page did not load"
+            time.sleep(0.2)
+
+    def screenshot(self) -> np.ndarray:
+        """The page as RGB pixels (0–255)."""
+        import io
+
+        from PIL import Image
+
+        data = self.call("Page.captureScreenshot", session=self.session, format="png")["data"]
+        png = Image.open(io.BytesIO(base64.b64decode(data))).convert("RGB")
+        return np.asarray(png, dtype=float)
+
+    def close(self) -> None:
+        import os
+
+        self.proc.kill()
+        self.proc.wait()
+        os.close(self._out)
+        os.close(self._in)
+        self._profile.cleanup()
+
+
+@chromium
+def test_browser_dragging_on_the_chart_moves_the_animation_and_the_cursor(
+    payload_run: dict[str, Any],
+) -> None:
+    """A real pointer drag on the chart (DevTools Input events): the animation pauses at the
+    time under the pointer, the legend's clock shows it, the chart's cursor follows it, and
+    the 3-D view shows that frame (a ghost node's keyframed position at that time)."""
+    import time
+
+    browser = Browser(payload_run["html"].as_uri())
+    try:
+        browser.wait_for_page()
+        box = browser.js(
+            "(() => { const r = document.getElementById('pinobs-chart-canvas')"
+            ".getBoundingClientRect(); return [r.left, r.top, r.width, r.height]; })()"
+        )
+        left, top, width, height = box
+        y = top + height / 2
+        times = []
+        for frac in (0.6, 0.85):  # on the error panel (the right half)
+            x0, x1 = left + 0.55 * width, left + frac * width
+            browser.mouse("mousePressed", x0, y, 1)
+            browser.mouse("mouseMoved", (x0 + x1) / 2, y, 1)
+            browser.mouse("mouseMoved", x1, y, 1)
+            browser.mouse("mouseReleased", x1, y, 0)
+            time.sleep(0.3)  # a few animation frames
+            t = browser.js("viewer.animator.actions[0].time")
+            paused = browser.js("!viewer.animator.playing")
+            clock = browser.js("document.getElementById('pinobs-time').textContent")
+            readout = browser.js("document.getElementById('pinobs-readout').textContent")
+            assert paused
+            assert clock == f"t = {t:.2f} s"
+            assert readout.startswith(f"at t = {t:.2f} s")
+            right = [c for c in chart_cursor_columns(browser.screenshot()) if c > x0]
+            assert right and abs(np.mean(right) - x1) <= 2.0  # the cursor is under the pointer
+            times.append(t)
+            # the 3-D view shows that instant: the ekf ghost's pole where its clip has it at t
+            name = payload_run["robot"].visual_model.geometryObjects[1].name
+            shown = browser.js(
+                f"viewer.scene_tree.find(['meshcat', 'ghost_1_ekf', '{name}']).object.position"
+                ".toArray()"
+            )
+            (track,) = [
+                tr
+                for tr in clips(payload_run["html"])[f"/meshcat/ghost_1_ekf/{name}"]["tracks"]
+                if tr["name"] == ".position"
+            ]
+            keys = np.array([k["value"] for k in track["keys"]])
+            expected = [np.interp(t * FPS, np.arange(len(keys)), keys[:, i]) for i in range(3)]
+            np.testing.assert_allclose(shown, expected, atol=1e-4)
+        t_a, t_b = times
+        duration = float(payload_run["result"].t[-1])
+        # the right panel spans [half + 58, width - 12] px of the canvas (chart.py's layout)
+        for frac, t in zip((0.6, 0.85), times, strict=True):
+            x = frac * width
+            x0, x1 = math.floor(width / 2) + 58, width - 12
+            assert t == pytest.approx((x - x0) / (x1 - x0) * duration, abs=0.02)
+        assert t_b > t_a + 0.2
+    finally:
+        browser.close()
+
+
+@chromium
+def test_browser_chart_cursor_follows_the_animation_time(payload_run: dict[str, Any]) -> None:
+    """Paused at 0.25, 0.5 and 1 s (``#t=``, as meshcat's time slider does: ``seek``): one
+    cursor per panel, moving right in proportion to time."""
+    import time
+
+    browser = Browser(payload_run["html"].as_uri())
+    try:
+        browser.wait_for_page()
+        xs = []
+        for t in (0.25, 0.5, 1.0):
+            browser.js(f"window.location.hash = 't={t}&nolegend'")
+            time.sleep(0.3)  # a few animation frames
+            img = browser.screenshot()
+            cols = chart_cursor_columns(img)
+            w = img.shape[1]
+            left = [c for c in cols if c < w // 2]
+            right = [c for c in cols if c >= w // 2]
+            assert left and right and max(left) - min(left) <= 2 and max(right) - min(right) <= 2
+            xs.append((np.mean(left), np.mean(right)))
+    finally:
+        browser.close()
+    x = np.array(xs)
+    assert np.all(np.diff(x, axis=0) > 20)  # [px]
+    # equal time steps, equal moves: x(1.0) - x(0.5) = 2 (x(0.5) - x(0.25))
+    np.testing.assert_allclose(x[2] - x[1], 2 * (x[1] - x[0]), atol=3.0)

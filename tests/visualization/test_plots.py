@@ -12,8 +12,8 @@ import pytest
 import pinobs
 from pinobs.errors import UnknownNameError
 from pinobs.visualization import MissingDependencyError, figure, plot
-from pinobs.visualization.playback import GHOST_COLOURS
-from pinobs.visualization.plots import velocity_labels
+from pinobs.visualization.axes import velocity_labels
+from pinobs.visualization.palette import PALETTE, TRUTH_LINE, hex_colour
 
 
 @pytest.fixture(scope="module")
@@ -44,12 +44,11 @@ def test_one_panel_per_velocity_then_the_error_panel(run: dict[str, Any]) -> Non
     fig = figure(run["result"], run["robot"])
     assert len(fig.axes) == run["robot"].nv + 1
     truth_line = fig.axes[0].get_lines()[0]
-    assert truth_line.get_color() == "black"
+    assert truth_line.get_color() == TRUTH_LINE
     np.testing.assert_array_equal(truth_line.get_ydata(), run["result"].v[:, 0])
     colours = [line.get_color() for line in fig.axes[0].get_lines()[1:]]
-    assert colours == [
-        "#{:02x}{:02x}{:02x}".format(*(round(255 * c) for c in rgb)) for _, rgb in GHOST_COLOURS[:2]
-    ]
+    # the palette in order, without the blue of the cart-pole's pole (the truth)
+    assert colours == [hex_colour(PALETTE[0][1]), hex_colour(PALETTE[2][1])]
 
 
 def test_error_panel_is_logarithmic_and_marks_the_convergence_time(run: dict[str, Any]) -> None:
@@ -95,3 +94,73 @@ def test_missing_matplotlib_names_the_install_command(
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     with pytest.raises(MissingDependencyError, match="pip install matplotlib"):
         plot(run["result"], run["robot"], tmp_path / "x.png")
+
+
+def test_every_axis_names_its_unit(run: dict[str, Any]) -> None:
+    fig = figure(run["result"], run["robot"])
+    ylabels = [ax.get_ylabel() for ax in fig.axes]
+    assert ylabels[:2] == ["cart_x [m/s]", "pole_theta [rad/s]"]
+    assert ylabels[-1] == "|v̂ − v|₂ [rad/s and m/s mixed]"
+    assert all(ax.get_xlabel() == "t [s]" for ax in fig.axes)
+
+
+def test_y_range_is_the_motion_after_the_transient_and_the_clipping_is_said(
+    run: dict[str, Any],
+) -> None:
+    """The estimates start 1 rad/s off: their transient would set the y-range; it is clipped."""
+    result = run["result"]
+    fig = figure(result, run["robot"])
+    metrics = pinobs.evaluate(result, run["robot"])
+    start = max(m.convergence_time for m in metrics)
+    for i, ax in enumerate(fig.axes[:-1]):
+        lo, hi = ax.get_ylim()
+        truth = result.v[:, i]
+        assert lo < truth.min() and truth.max() < hi  # the truth is never clipped
+        late = np.concatenate([result.trace(n).v[result.t >= start, i] for n in ("kf", "fd")])
+        assert lo <= late.min() and late.max() <= hi
+    worst = max(
+        float(np.max(np.abs(result.trace(n).v[:, 1] - result.v[:, 1]))) for n in ("kf", "fd")
+    )
+    lo, hi = fig.axes[1].get_ylim()
+    assert worst > hi - lo  # the transient does leave the range
+    assert "start transient clipped (shaded)" in fig.get_suptitle()
+
+
+def test_error_panel_labels_do_not_overlap(run: dict[str, Any]) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = figure(run["result"], run["robot"])
+    FigureCanvasAgg(fig).draw()
+    ax = fig.axes[-1]
+    texts = [t for t in ax.texts if t.get_visible()]
+    (legend,) = fig.legends
+    texts += [*legend.get_texts(), ax.title, ax.xaxis.label]
+    boxes = [t.get_window_extent() for t in texts if t.get_text()]
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1 :]:
+            assert not a.overlaps(b)
+    assert not legend.get_window_extent().overlaps(ax.get_window_extent())  # hides no curve
+    assert fig.bbox.contains(*legend.get_window_extent().p0)  # and is not cut off
+    assert fig.bbox.contains(*legend.get_window_extent().p1)
+    lines = [t.get_text() for t in legend.get_texts()]
+    assert lines[0] == "truth" and all("converged at" in line for line in lines[1:])
+
+
+def test_a_diverged_estimate_does_not_set_the_y_range(run: dict[str, Any]) -> None:
+    import dataclasses
+
+    result = run["result"]
+    fd = result.trace("fd")
+    v = np.array(fd.v)
+    half = len(result.t) // 2
+    v[half:] = 1e6  # blows up, as a diverging observer does before its NaN
+    broken = dataclasses.replace(
+        result,
+        traces=(
+            result.trace("kf"),
+            dataclasses.replace(fd, v=v, diverged_at=float(result.t[half])),
+        ),
+    )
+    lo, hi = figure(broken, run["robot"]).axes[0].get_ylim()
+    assert hi - lo < 10.0  # [m/s]: the cart's motion, not the 1e6
+    assert lo < result.v[:, 0].min() and result.v[:, 0].max() < hi

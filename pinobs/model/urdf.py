@@ -1,0 +1,155 @@
+"""What a URDF file says before Pinocchio reads it: meshes, inertials, mimic joints.
+
+Pinocchio's URDF parser (urdfdom underneath) fails on a mesh it cannot find,
+drops an ``<inertial>`` whose mass is not a number with only a message on
+stderr, and either ignores ``<mimic>`` or builds a mimic joint its dynamics
+algorithms refuse.  This module reads the XML itself so :func:`pinobs.load`
+can resolve meshes, warn once when some are missing, and name the link or
+joint at fault.
+
+Mesh URIs are resolved as follows (first hit wins):
+
+* ``package://pkg/rel``: ``d/pkg/rel`` and, when ``d`` is itself the folder
+  ``pkg``, ``d/rel``, for ``d`` in the caller's ``package_dirs``, then the
+  entries of ``ROS_PACKAGE_PATH``, then ``<prefix>/share`` for the prefixes of
+  ``AMENT_PREFIX_PATH``; then the URDF file's parent folders (up to
+  :data:`ANCESTOR_LEVELS` up), tried as package directories and as the
+  package's own folder with ``rel``'s leading folders dropped one at a time
+  (so a copy of ``ur_description/{urdf,meshes}`` finds
+  ``package://example-robot-data/robots/ur_description/meshes/…``);
+* ``file://path`` and plain paths: absolute, or relative to the URDF's folder.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["ANCESTOR_LEVELS", "UrdfFacts", "read_urdf", "resolve_mesh"]
+
+#: How many parent folders of a URDF file are searched for its meshes.
+ANCESTOR_LEVELS = 4
+
+_MESH_ATTR = re.compile(r"(<mesh\b[^>]*?\bfilename\s*=\s*)([\"'])(.*?)\2", re.DOTALL)
+
+
+@dataclass(frozen=True)
+class UrdfFacts:
+    """A URDF's text with its meshes resolved, and what Pinocchio would lose reading it.
+
+    Attributes:
+        xml: the file's text, every resolvable mesh URI replaced by an absolute path.
+        missing_meshes: mesh URIs that resolved to no existing file.
+        mimics: ``(joint, mimicked joint, multiplier, offset)`` per ``<mimic>`` tag.
+        bad_inertials: ``(link, attribute, text)`` for each ``<inertial>`` value
+            that is not a finite number (urdfdom drops such an inertial).
+    """
+
+    xml: str
+    missing_meshes: tuple[str, ...]
+    mimics: tuple[tuple[str, str, float, float], ...]
+    bad_inertials: tuple[tuple[str, str, str], ...]
+
+
+def _search_dirs(package_dirs: Sequence[str | Path]) -> list[Path]:
+    dirs = [Path(d) for d in package_dirs]
+    dirs += [Path(p) for p in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if p]
+    dirs += [
+        Path(p) / "share" for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p
+    ]
+    return dirs
+
+
+def resolve_mesh(uri: str, urdf_file: Path, package_dirs: Sequence[str | Path]) -> Path | None:
+    """The existing file a mesh URI of ``urdf_file`` names, or ``None`` (order: module docstring)."""
+    base = urdf_file.resolve().parent
+    if uri.startswith("package://"):
+        pkg, _, rel = uri[len("package://") :].partition("/")
+        for d in _search_dirs(package_dirs):
+            for cand in (d / pkg / rel, d / rel if d.name == pkg else None):
+                if cand is not None and cand.is_file():
+                    return cand.resolve()
+        parts = Path(rel).parts
+        for anc in [base, *base.parents][: ANCESTOR_LEVELS + 1]:
+            if (anc / pkg / rel).is_file():
+                return (anc / pkg / rel).resolve()
+            for k in range(len(parts) - (2 if len(parts) > 1 else 1) + 1):
+                cand = anc.joinpath(*parts[k:])
+                if cand.is_file():
+                    return cand.resolve()
+        return None
+    path = Path(uri[len("file://") :] if uri.startswith("file://") else uri)
+    cand = path if path.is_absolute() else base / path
+    return cand.resolve() if cand.is_file() else None
+
+
+def _number(text: str | None, default: float) -> float | None:
+    """``float(text)`` if it is a finite number, ``default`` if absent, else ``None``."""
+    if text is None:
+        return default
+    try:
+        x = float(text)
+    except ValueError:
+        return None
+    return x if math.isfinite(x) else None
+
+
+def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
+    """Read ``path``: resolve its meshes and list its mimic joints and unreadable inertials.
+
+    Raises:
+        xml.etree.ElementTree.ParseError: the file is not well-formed XML.
+        OSError: the file cannot be read.
+    """
+    text = path.read_text()
+    missing: list[str] = []
+
+    def _sub(m: re.Match[str]) -> str:
+        found = resolve_mesh(m.group(3), path, package_dirs)
+        if found is None:
+            missing.append(m.group(3))
+            return m.group(0)
+        return f"{m.group(1)}{m.group(2)}{found}{m.group(2)}"
+
+    xml = _MESH_ATTR.sub(_sub, text)
+    root = ET.fromstring(text)
+    live = {m.get("filename") for m in root.iter("mesh")}  # not those in comments
+    missing = [uri for uri in missing if uri in live]
+    mimics = []
+    for joint in root.iter("joint"):
+        mimic = joint.find("mimic")
+        if mimic is not None:
+            mimics.append(
+                (
+                    joint.get("name", "?"),
+                    mimic.get("joint", "?"),
+                    _number(mimic.get("multiplier"), 1.0) or 0.0,
+                    _number(mimic.get("offset"), 0.0) or 0.0,
+                )
+            )
+    bad: list[tuple[str, str, str]] = []
+    for link in root.findall("link"):
+        name = link.get("name", "?")
+        inertial = link.find("inertial")
+        if inertial is None:
+            continue
+        mass = inertial.find("mass")
+        mass_text = mass.get("value") if mass is not None else None
+        if _number(mass_text, 0.0) is None:
+            bad.append((name, "mass", str(mass_text)))
+        inertia = inertial.find("inertia")
+        for attr in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
+            t = inertia.get(attr) if inertia is not None else None
+            if _number(t, 0.0) is None:
+                bad.append((name, attr, str(t)))
+    return UrdfFacts(
+        xml=xml,
+        missing_meshes=tuple(dict.fromkeys(missing)),
+        mimics=tuple(mimics),
+        bad_inertials=tuple(bad),
+    )

@@ -1,0 +1,430 @@
+"""Adaptive EKF: learns the robot's dynamics online and never falls behind a model-free filter.
+
+Three parts, each on code shared with the rest of pinobs:
+
+1. **The filter** is :class:`~pinobs.observers.ekf.ExtendedKalmanFilter` with
+   its joint-torque offset state ``d`` (``disturbance_psd``), run on the
+   current learned model ``θ̂`` and the learned torque offset ``b̂``::
+
+       v̇ = M_θ̂⁻¹(q)(τ + b̂ + d + τ_f,θ̂(v) − c_θ̂(q, v) − g_θ̂(q)),   ḋ = w_d.
+
+   Until the first identification (the warm-up) the white-acceleration
+   density is ``warmup_accel_psd`` (high: the nominal model is not trusted);
+   afterwards ``accel_psd``.
+
+2. **The identification** (:mod:`pinobs.model.identification`, the same
+   machinery as ``pinobs identify``): every committed sample joins a buffer;
+   each ``window`` seconds of data (plus the half-width of the zero-phase
+   smoother, so velocities are centred fits) give ``nv`` momentum-form rows
+
+       [Y_M(q₂,v₂) − Y_M(q₁,v₁) − ∫Y_G dt] π + D∫v + F_c∫tanh(v/v_s) − b Δt = ∫τ dt     (MATH §9)
+
+   kept for the last ``horizon`` seconds.  Every ``resolve_every`` seconds
+   the rows are solved (nominal prior, robust reweighting; identifiable
+   base parameters by pivoted QR, the regressor's condition number
+   reported).  A solve is installed only if the learned masses are positive
+   and ``M_θ̂(q) ≻ 0`` at configurations sampled from the buffer; otherwise
+   the last model is kept and :meth:`consistency` says so.  When a model is
+   installed the offset state ``d`` is set to zero (the new model explains
+   what it was absorbing).  A trajectory that does not excite a parameter
+   cannot teach it: such parameters stay at their nominal values
+   (:meth:`parameters` marks them).
+
+3. **Never behind**: a per-joint constant-acceleration Kalman filter
+   (:class:`~pinobs.observers.kf.ConstantAccelerationKF`) runs beside it.
+   Per velocity coordinate ``i`` its variance ``P_kf`` is known (its
+   covariance); the model-based error variance is estimated from the recent
+   disagreement ``e = v̂_model − v̂_kf``,
+   ``s_i ← s_i + (h/T_b)(max(e_i² − P_kf, 0) − s_i)`` (``T_b`` = ``blend_time``),
+   and the output is the inverse-variance blend
+
+       v̂ = w v̂_model + (1 − w) v̂_kf,   w = P_kf / (P_kf + s),
+
+   (``q̂`` likewise, in the tangent space at ``q̂_model``).  With an exact
+   model ``e² ≈ P_kf`` and ``w → 1``; with a wrong one ``w → 0``.
+
+Learning happens only from samples the base class has committed: a sample
+is handed to the identification at the start of the *next* update, so a
+rejected update never teaches the model anything.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import replace
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pinobs.errors import IdentificationError, UnsupportedRobotError
+from pinobs.model import Robot
+from pinobs.model.identification import MomentumRegressor, ParameterSet, smooth_path, solve
+from pinobs.observers.base import Consistency, Vector, positive, register
+from pinobs.observers.ekf import ExtendedKalmanFilter
+from pinobs.observers.ekf import _State as _EKFState
+from pinobs.observers.kf import ConstantAccelerationKF
+from pinobs.observers.kf import _State as _KFState
+
+__all__ = ["AdaptiveEKF"]
+
+
+class _State(NamedTuple):
+    ekf: _EKFState
+    kf: _KFState
+    t: float
+    s: Vector  # estimated model-based velocity error variance per coordinate [rad²/s²]
+    q: Vector  # blended output
+    v: Vector
+    pending: (
+        tuple[float, Vector | None] | None
+    )  # last committed sample, taught with the next torque
+
+
+class _Learner:
+    """Sliding-window momentum-form identification fed one committed sample at a time."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        *,
+        window: float,
+        half_window: float,
+        horizon: float,
+        resolve_every: float,
+        friction: bool,
+        offset: bool,
+        rate: float,
+    ) -> None:
+        self.reg = MomentumRegressor(robot, friction=friction, offset=offset)
+        h = 1.0 / rate
+        self.stride = max(1, round(0.002 / h))
+        self.win = max(self.stride, round(window / h / self.stride) * self.stride)
+        self.hw = max(2, round(half_window / h))
+        self.h = h
+        self.buf: deque[tuple[float, Vector, Vector]] = deque()
+        self.rows: deque[tuple[Vector, Vector]] = deque(maxlen=max(1, round(horizon / window)))
+        self.resolve_every = resolve_every
+        self.next_solve = resolve_every
+        self.theta: Vector | None = None
+        self.std: Vector | None = None
+        self.excited: NDArray[np.bool_] | None = None
+        self.condition = np.nan
+        self.rank = 0
+        self.solves = 0
+        self.installs = 0
+        self.validated = False  # a solve has checked the current model against the data
+        self.last_drop = np.nan
+        self.history: list[tuple[float, float]] = []  # (loss of the current model, of the solve)
+        self.rejected: list[str] = []
+
+    def add(self, t: float, q: Vector | None, tau: Vector) -> bool:
+        """Add the sample ``q`` taken at ``t`` and the torque ``tau`` applied from ``t`` on
+        (``q`` None: no sample, nothing added); returns True when a new model was solved for."""
+        if q is None:
+            return False  # a lost sample shows as a gap in the times below
+        if self.buf and abs(t - self.buf[-1][0] - self.h) > 0.1 * self.h:
+            self.buf.clear()  # a gap: windows never straddle one
+        self.buf.append((t, q, tau))
+        need = self.win + 2 * self.hw + 1
+        if len(self.buf) >= need:
+            items = list(self.buf)[:need]
+            t_arr = np.array([x[0] for x in items])
+            q_arr = np.array([x[1] for x in items])
+            tau_arr = np.array([x[2] for x in items])
+            q_s, v = smooth_path(self.reg.robot, t_arr, q_arr, half_window=self.hw)
+            k = slice(self.hw, self.hw + self.win + 1)
+            A, y = self.reg.system(
+                t_arr[k], q_s[k], v[k], tau_arr[k], window=self.win, stride=self.stride
+            )
+            self.rows.append((A, y))
+            for _ in range(self.win):
+                self.buf.popleft()
+        if t >= self.next_solve and len(self.rows) >= 2:
+            self.next_solve = t + self.resolve_every
+            return self._solve()
+        return False
+
+    def _solve(self) -> bool:
+        A = np.vstack([r[0] for r in self.rows])
+        y = np.concatenate([r[1] for r in self.rows])
+        try:
+            sol = solve(self.reg, A, y, consistent=False)
+        except (IdentificationError, np.linalg.LinAlgError) as exc:
+            self.rejected.append(f"solve failed: {exc}")
+            return False
+        self.condition, self.rank = sol.condition, sol.rank
+        theta = sol.theta
+        n = self.reg.n_inertial
+        masses = theta[0:n:10]
+        if np.any(masses <= 0):
+            self.rejected.append(f"non-positive mass in solve {self.solves + 1}")
+            return False
+        if self.reg.friction and np.any(theta[n : n + 2 * self.reg.n_joint] < 0):
+            theta = theta.copy()
+            f = slice(n, n + 2 * self.reg.n_joint)
+            theta[f] = np.maximum(theta[f], 0.0)  # friction never feeds energy in
+        robot = self.reg.with_parameters(theta)
+        for _, q, _ in list(self.buf)[:: max(1, len(self.buf) // 4)] or []:
+            if np.linalg.eigvalsh(robot.mass_matrix(q))[0] <= 0:
+                self.rejected.append(f"M(q) not positive definite in solve {self.solves + 1}")
+                return False
+        # Model selection: keep the current model unless the new one explains the rows better
+        # than fitting noise would (robust loss drop above rank + 3√rank, in units of ½χ²).
+        current = self.reg.nominal() if self.theta is None else self.theta
+        loss_cur = _huber_loss(A @ current - y, sol.sigma)
+        loss_new = _huber_loss(A @ theta - y, sol.sigma)
+        drop = loss_cur - loss_new
+        self.history.append((loss_cur, loss_new))
+        self.solves += 1
+        self.validated = True
+        self.std, self.excited = sol.std, sol.excited
+        if drop <= sol.rank + 3.0 * np.sqrt(sol.rank):
+            self.last_drop = float(drop)
+            if self.theta is None:
+                self.theta = current
+            return False
+        self.last_drop = float(drop)
+        self.theta = theta
+        self.installs += 1
+        return True
+
+
+#: Mean NIS per degree of freedom up to which the model-based filter is trusted outright by the
+#: blend (twice the consistent value); the blame on the model ramps up to full at twice this.
+_NIS_TRUSTED = 2.0
+
+
+def _huber_loss(r: Vector, sigma: float, c: float = 1.345) -> float:
+    """``Σ ρ(rᵢ/σ)`` with Huber's ρ (½z² inside ``c``, ``c|z| − ½c²`` outside)."""
+    z = np.abs(r) / sigma
+    return float(np.sum(np.where(z <= c, 0.5 * z * z, c * z - 0.5 * c * c)))
+
+
+@register
+class AdaptiveEKF(ExtendedKalmanFilter):
+    """EKF that identifies its model online and blends with a model-free filter (module docstring).
+
+    Args:
+        robot: the nominal model (the identification's prior).
+        window: identification window [s] (one block of ``nv`` rows each).
+        half_window: half-width of the zero-phase smoother of the measured path [s].
+        horizon: rows kept for the solve [s] (a sliding window).
+        resolve_every: time between solves [s].
+        friction, offset: learn joint friction and a torque offset.
+        accel_psd: white-acceleration density once a model is learned [rad²/s³].
+        warmup_accel_psd: the same before the first solve.
+        disturbance_psd: density of the torque-offset state (as in ``ekf``) before the first solve [rad²/s⁵].
+        learned_disturbance_psd: the same once a model is learned.
+        blend: blend with the model-free ``kf`` (never behind it).
+        blend_time: averaging time of the disagreement [s].
+        jerk_psd: the ``kf``'s white-jerk density [rad²/s⁵].
+        q0_std, v0_std, d0_std: initial standard deviations (as in ``ekf``).
+        outlier_probability: the outlier gate (as in ``ekf``; the ``kf`` skips what it rejects).
+        rate: sample rate [Hz] (needed: the identification windows are counted in samples).
+        noise_std: position noise standard deviation [rad or m].
+    """
+
+    name = "adaptive"
+    #: not for :func:`pinobs.smooth` (yet): its model changes between re-solves
+    smoothable = False
+    summary = "EKF that identifies its model online, blended with kf: never behind it (model-based)"
+
+    def __init__(
+        self,
+        robot: Robot,
+        *,
+        window: float = 0.1,
+        half_window: float = 0.05,
+        horizon: float = 10.0,
+        resolve_every: float = 0.5,
+        friction: bool = True,
+        offset: bool = True,
+        accel_psd: float = 1e-6,
+        warmup_accel_psd: float = 1e-2,
+        disturbance_psd: float = 1.0,
+        learned_disturbance_psd: float = 1e-2,
+        blend: bool = True,
+        blend_time: float = 0.2,
+        jerk_psd: float = 1e3,
+        q0_std: float = 0.1,
+        v0_std: float = 1.0,
+        d0_std: float = 1.0,
+        outlier_probability: float | None = 1e-6,
+        rate: float | None = None,
+        noise_std: float | None = None,
+    ) -> None:
+        super().__init__(
+            robot,
+            accel_psd=warmup_accel_psd,
+            q0_std=q0_std,
+            v0_std=v0_std,
+            disturbance_psd=disturbance_psd,
+            d0_std=d0_std,
+            outlier_probability=outlier_probability,
+            rate=rate,
+            noise_std=noise_std,
+        )
+        for key, val in (
+            ("window", window),
+            ("half_window", half_window),
+            ("horizon", horizon),
+            ("resolve_every", resolve_every),
+            ("accel_psd", accel_psd),
+            ("blend_time", blend_time),
+            ("learned_disturbance_psd", learned_disturbance_psd),
+        ):
+            positive(key, val)
+        if horizon < 2 * window:
+            positive("horizon - 2 window", horizon - 2 * window)
+        self._nominal = self.robot
+        self._accel_psd = float(accel_psd)
+        self._learn_options = dict(
+            window=float(window),
+            half_window=float(half_window),
+            horizon=float(horizon),
+            resolve_every=float(resolve_every),
+            friction=bool(friction),
+            offset=bool(offset),
+            rate=float(self.rate or 1000.0),
+        )
+        self._learner = _Learner(self._nominal, **self._learn_options)  # type: ignore[arg-type]
+        if self._learner.reg.size == 0:
+            raise UnsupportedRobotError(f"robot {robot.name!r} has no dynamic parameter to learn")
+        self.blend = bool(blend)
+        self.blend_time = float(blend_time)
+        self._kf = ConstantAccelerationKF(robot, jerk_psd=jerk_psd, rate=rate, noise_std=noise_std)
+        self._offset: Vector = np.zeros(self.robot.nv)
+        self._warmup_psd = float(warmup_accel_psd)
+        self._learned_d_psd = float(learned_disturbance_psd)
+
+    @property
+    def options(self) -> dict[str, Any]:
+        return {
+            **super().options,
+            **self._learn_options,
+            "accel_psd": self._accel_psd,
+            "warmup_accel_psd": self._warmup_psd,
+            "learned_disturbance_psd": self._learned_d_psd,
+            "blend": self.blend,
+            "blend_time": self.blend_time,
+            "jerk_psd": self._kf.gains.jerk_psd,
+        }
+
+    # ---------------------------------------------------------------- learning
+    def learned_robot(self) -> Robot:
+        """A :class:`Robot` carrying the current estimate (friction included; the nominal one before the first solve)."""
+        return self.robot.copy()
+
+    def parameters(self) -> ParameterSet:
+        """The learned parameters with names and standard deviations (nominal before the first solve)."""
+        lr = self._learner
+        reg = lr.reg
+        nominal = reg.nominal()
+        if lr.theta is None or lr.std is None or lr.excited is None:
+            prior = reg.prior_std()
+            return ParameterSet(reg.names, nominal, prior, nominal, np.zeros(reg.size, bool))
+        return ParameterSet(reg.names, lr.theta.copy(), lr.std.copy(), nominal, lr.excited.copy())
+
+    def consistency(self) -> Consistency:
+        """The NIS test of the base class, with what the learner did in ``details``:
+        solves, the regressor's condition number and rank, rejected solves (a
+        failed re-solve keeps the last model and is listed here), the blend weights."""
+        lr = self._learner
+        base = super().consistency()
+        details = {
+            "solves": lr.solves,
+            "installs": lr.installs,
+            "last_loss_drop": lr.last_drop,
+            "condition": float(lr.condition),
+            "rank": lr.rank,
+            "n_parameters": lr.reg.size,
+            "rows": sum(r[0].shape[0] for r in lr.rows),
+            "rejected": list(lr.rejected),
+            "warming_up": lr.theta is None,
+            "blend_weight": None if self._state is None else self._weights(self._state).tolist(),  # type: ignore[arg-type]
+        }
+        return replace(base, details=details)
+
+    def _trust(self, state: _EKFState) -> _EKFState:
+        """Leave the warm-up: the model's process noise and offset density drop."""
+        self.gains = replace(self.gains, accel_psd=self._accel_psd)
+        if state.d_psd is None or self.disturbance_psd is None:
+            return state
+        return state._replace(d_psd=state.d_psd * (self._learned_d_psd / self.disturbance_psd))
+
+    def _install(self, state: _EKFState) -> _EKFState:
+        lr = self._learner
+        assert lr.theta is not None
+        self._replace_robot(lr.reg.with_parameters(lr.theta, name=f"{self._nominal.name}~learned"))
+        self._offset = lr.reg.offsets(lr.theta)
+        if self.gains.accel_psd != self._accel_psd:
+            state = self._trust(state)
+        if state.d is None:
+            return state
+        return state._replace(d=np.zeros_like(state.d))  # the new model explains what d absorbed
+
+    # ------------------------------------------------------------------ filter
+    def _initial_state(self, q0: Vector, v0: Vector) -> _State:  # type: ignore[override]
+        # a reset starts learning afresh from the nominal model
+        self._replace_robot(self._nominal.copy())
+        self._learner = _Learner(self._nominal, **self._learn_options)  # type: ignore[arg-type]
+        self._offset = np.zeros(self.robot.nv)
+        self.gains = replace(self.gains, accel_psd=self._warmup_psd)
+        ekf = super()._initial_state(q0, v0)
+        kf = self._kf._initial_state(q0, v0)
+        s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
+        return _State(ekf, kf, 0.0, s, q0.copy(), v0.copy(), None)
+
+    def _weights(self, state: _State) -> Vector:
+        if not self.blend:
+            return np.ones(self.robot.nv)
+        p_kf = state.kf.P[1, 1]
+        return p_kf / (p_kf + state.s + 1e-300)
+
+    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
+        ekf = state.ekf
+        # the pending sample's torque is the one held from it on: this step's (MATH §7)
+        if state.pending is not None and self._learner.add(*state.pending, tau):
+            ekf = self._install(ekf)
+        elif self._learner.validated and self.gains.accel_psd != self._accel_psd:
+            ekf = self._trust(ekf)  # the nominal model explains the data: leave the warm-up
+        ekf = super()._step(ekf, dt, q_meas, tau + self._offset)
+        kf = self._kf._step(state.kf, dt, None if ekf.gated else q_meas, tau)  # one gate for both
+        s = state.s
+        if self.blend:
+            e = ekf.v - kf.v
+            lam = min(1.0, dt / self.blend_time)
+            # disagreement is the model's fault only when its innovations say so (NIS̄ > 2 nv)
+            nv = self.robot.nv
+            level = float(nv) if ekf.nis_level is None else ekf.nis_level
+            blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
+            s = s + lam * (blame * np.maximum(e * e - kf.P[1, 1], 0.0) - s)
+        t = state.t + dt
+        learn_q = None if ekf.gated else q_meas  # an outlier teaches nothing
+        new = _State(ekf, kf, t, s, ekf.q, ekf.v, (t, learn_q))
+        if self.blend:
+            w = self._weights(new)
+            v = w * ekf.v + (1.0 - w) * kf.v
+            q = self.robot.integrate(ekf.q, (1.0 - w) * self.robot.difference(ekf.q, kf.q))
+            new = new._replace(q=q, v=v)
+        return new
+
+    def _innovation(self, state: _State) -> tuple[float | None, bool]:  # type: ignore[override]
+        return state.ekf.nis, state.ekf.gated
+
+    def _output(self, state: _State) -> tuple[Vector, Vector]:  # type: ignore[override]
+        return state.q, state.v
+
+    @property
+    def disturbance(self) -> Vector | None:
+        """The EKF's estimated joint-torque offset ``d`` beyond the learned offset [N·m or N]."""
+        if self._state is None or self._state.ekf.d is None:  # type: ignore[attr-defined]
+            return None
+        return np.array(self._state.ekf.d)  # type: ignore[attr-defined]
+
+    def covariance(self) -> Vector:
+        """The EKF's covariance of ``(δq, δv, δd)`` (before the blend), a copy."""
+        if self._state is None:
+            return super().covariance()
+        return np.array(self._state.ekf.P)  # type: ignore[attr-defined]

@@ -1,0 +1,513 @@
+"""Offline smoothing of a recorded log: the Rauch–Tung–Striebel smoother on the manifold.
+
+A causal filter estimates ``x_k`` from the samples up to ``t_k``; a log has the
+later samples too.  The fixed-interval smoother runs the filter forward
+(:class:`pinobs.observers.ekf.ExtendedKalmanFilter`, whose ``_predict`` and
+``_correct`` it calls), stores at every sample the filtered mean and
+covariance ``(x⁺_k, P⁺_k)``, the predicted ones ``(x⁻_{k+1}, P⁻_{k+1})`` and
+the transition Jacobian ``Φ_k`` of the error state, then runs backward
+(Rauch, Tung, Striebel 1965; Särkkä, *Bayesian Filtering and Smoothing*, 2013,
+Theorem 8.2, and its extended form in Ch. 9)::
+
+    G_k   = P⁺_k Φ_kᵀ (P⁻_{k+1})⁻¹                          smoother gain
+    δ_k   = G_k · (x^s_{k+1} ⊖ x⁻_{k+1})                      error-state correction
+    x^s_k = x⁺_k ⊕ δ_k
+    P^s_k = P⁺_k + G_k (P^s_{k+1} − P⁻_{k+1}) G_kᵀ
+
+started from the filter at the last sample, ``x^s_N = x⁺_N``, ``P^s_N = P⁺_N``.
+On the manifold ``x ⊖ y`` and ``x ⊕ δ`` are the error-state maps of the EKF:
+``difference(q⁻, q^s)`` and ``integrate(q⁺, δq)`` for the configuration
+(``q^s = q⁻ ⊕ e`` ⇔ ``e = difference(q⁻, q^s)``), plain differences and sums
+for the velocity (and the EKF's torque offset ``d`` when it has one).
+
+What is approximated: the covariances ``P⁺_k`` (in the tangent space at
+``q⁺_k``), ``P⁻_{k+1}`` and ``P^s_{k+1}`` (at ``q⁻_{k+1}`` and ``q^s_{k+1}``) are
+combined as if those tangent spaces were one, i.e. the transport of the
+covariance between them (``J_r`` of the differences, identity + ``O(|δq|)``)
+is neglected, as the EKF neglects it at its reset.  On robots whose joints
+are all revolute or prismatic (UR5, Panda) ``⊕``/``⊖`` are sums and
+differences and the smoother is the exact extended RTS smoother of the EKF's
+linearisation.
+
+Process noise, and what "calibrated" asks of it.  The smoother's ``v_std``
+is honest only if ``accel_psd`` matches the model error.  With the same
+``accel_psd`` in both, the steady-state smoother of a position-measured
+double integrator has a velocity standard deviation 2.0× below the filter's
+(the variance ratio is 4; computed from the discrete Riccati equations at
+1 kHz for ``q_w/σ²`` from 1e-2 to 1e4 s⁻³: 1.98–2.00).  A log of an exact
+model has no process noise at all; the EKF's default ``accel_psd`` (1e-8)
+then overstates it and the band is too wide.  :func:`select_accel_psd`
+picks ``accel_psd`` from the log alone (no truth): the largest value whose
+innovation likelihood is within 1.92 nats of the best on a decade grid.
+Measured on 3 s logs (``benchmarks/smoothing.py``, README): it picks
+1e-10 to 1e-8 on a UR5 and 1e-11 to 1e-9 on a Panda (σ = 1e-4 and 1e-3),
+and the ±2σ band then covers the truth at 95–98 % of samples on the seed-0
+logs, 88–100 % on seeds 1–3 (one log holds few independent values of a
+slowly varying error); at the default 1e-8 it covers 98.5 % (UR5, σ = 1e-4,
+seed 0) with an RMS 1.9× larger.  On short logs the choice is larger, so
+conservative (0.7 s, UR5, σ = 1e-4: 1e-7).
+
+Memory: the whole-log smoother stores ``3 (2nv)²`` numbers per sample.  With
+``chunk`` the forward pass still runs once, but the backward pass runs on
+windows of ``chunk + overlap`` seconds started from the *filtered* estimate at
+the window's end (the best available without later data) and keeps only the
+first ``chunk`` seconds; the error this makes decays backward at the
+filter's bandwidth, so an overlap of a few time constants reproduces the
+whole-log smoother (:func:`default_overlap`: aimed at 1e-6 of ``v_std``,
+measured 1.7e-6 to 1.8e-6, tested below 1e-5).  The smaller ``accel_psd``,
+the longer the memory: 11 s at ``accel_psd`` = 1e-10 and σ = 1e-4 rad.
+``lag`` is the near-real-time form: chunks of ``lag`` with an overlap of
+``lag``, so every estimate uses at least ``lag`` seconds of later samples and
+is available at most ``2 lag`` after its sample; a lag shorter than the
+memory gives a result between the filter's and the whole-log smoother's.
+
+The observers that can be smoothed are those that keep an error-state
+Gaussian: ``ekf`` now.  Another family qualifies by offering the same
+methods (:class:`SmoothableFilter`: ``_initial_state``, ``_predict``
+returning ``Φ``, ``_correct``) and a state with ``q``, ``v``, ``P`` (and
+optionally ``d``); an adaptive EKF whose model is learned online would be
+smoothed with its model as it was at each step (not yet: that observer does
+not exist in this tree).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal, NamedTuple, Protocol, cast
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from pinobs.errors import DimensionError, GainError, NonFiniteError, OptionError, TimestampError
+from pinobs.model import Robot
+from pinobs.model.robot import read_only
+from pinobs.observers.base import Vector, make_observer, observer_class, observer_names, positive
+
+__all__ = [
+    "CHUNK_TOL",
+    "DEFAULT_ACCEL_PSD",
+    "DEFAULT_GRID",
+    "LIKELIHOOD_MARGIN",
+    "LogLike",
+    "SmoothableFilter",
+    "Smoothed",
+    "default_overlap",
+    "select_accel_psd",
+    "smooth",
+]
+
+#: Default white-acceleration density of the smoothed filter [rad²/s³] (module docstring).
+DEFAULT_ACCEL_PSD = 1e-8
+
+#: Candidates of :func:`select_accel_psd` [rad²/s³]: every decade from 1e-14 to 1.
+DEFAULT_GRID: tuple[float, ...] = tuple(float(10.0**e) for e in range(-14, 1))
+
+#: Log-likelihood margin [nats] of :func:`select_accel_psd`: χ²₁(0.95)/2.
+LIKELIHOOD_MARGIN = 1.92
+
+#: Relative agreement the default overlap aims at: ``|v_chunked − v_whole| ≤ CHUNK_TOL · v_std``.
+CHUNK_TOL = 1e-6
+
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+class SmoothableFilter(Protocol):
+    """What the smoother needs from a filter: an error-state Gaussian, predicted and corrected apart.
+
+    ``_predict(state, dt, tau) -> (state⁻, Φ)`` propagates over ``dt`` [s]
+    with ``tau`` held and returns the transition Jacobian of the error state;
+    ``_correct(state⁻, q_meas) -> state⁺`` fuses one measured configuration.
+    """
+
+    robot: Robot
+
+    def _initial_state(self, q0: Vector, v0: Vector) -> Any: ...
+    def _predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]: ...
+    def _correct(self, state: Any, q_meas: Vector) -> Any: ...
+
+
+@dataclass(frozen=True)
+class Smoothed:
+    """Smoothed estimates, one row per log sample (read-only arrays).
+
+    Attributes:
+        t: sample times [s], shape ``(N,)``.
+        q: smoothed configurations, shape ``(N, nq)``.
+        v: smoothed velocities [rad/s or m/s], shape ``(N, nv)``.
+        v_std: their standard deviations ``sqrt(diag P^s)`` [rad/s or m/s], shape ``(N, nv)``.
+        log_likelihood: ``log p(q_1..q_N)`` of the measurements under the filter's
+            model, the sum of the innovations' Gaussian log densities [nats]
+            (for choosing ``accel_psd``: :func:`select_accel_psd`).
+        options: the filter's resolved options and the smoother's (chunk, overlap, lag).
+    """
+
+    t: Vector
+    q: Vector
+    v: Vector
+    v_std: Vector
+    log_likelihood: float
+    options: dict[str, Any]
+
+    def __post_init__(self) -> None:
+        for k in ("t", "q", "v", "v_std"):
+            object.__setattr__(self, k, read_only(getattr(self, k)))
+
+
+class _Step(NamedTuple):
+    """What the backward pass keeps of one sample."""
+
+    filt: Any  # x⁺_k (a filter state: q, v, P[, d])
+    pred: Any  # x⁻_{k+1} (None at the last sample seen so far)
+    Phi: Any  # Φ_k (None likewise)
+
+
+def _forward(
+    filt: SmoothableFilter, t: Vector, q: Vector, tau: Vector, good: Vector, k0: int
+) -> Iterator[tuple[int, Any | None, Vector | None, Any, float]]:
+    """The filter over a log from its first good sample (``k0`` in the caller's numbering).
+
+    Yields ``(k, x⁻_k, Φ_{k−1}, x⁺_k, log N(e_k; 0, S_k))`` (``None, None, ·, 0``
+    at ``k = 0``; ``x⁺_k = x⁻_k`` and 0 at a dropped sample), where
+    ``e_k = q_k ⊖ q⁻_k`` and ``S_k = P⁻_qq + σ² I`` are the innovation and its
+    covariance (the prediction-error decomposition of the likelihood,
+    Schweppe 1965, "Evaluation of likelihood functions for Gaussian signals").
+    """
+    model = filt.robot
+    nv = model.nv
+    meas_var = cast(Any, filt).gains.meas_std ** 2
+    state = filt._initial_state(model.check_configuration(q[0], what=f"q[{k0}]"), np.zeros(nv))
+    yield 0, None, None, state, 0.0
+    for k in range(1, t.size):
+        pred, Phi = filt._predict(state, float(t[k] - t[k - 1]), tau[k - 1])
+        ll = 0.0
+        if good[k]:
+            q_meas = model.check_configuration(q[k], what=f"q[{k0 + k}]")
+            e = model.difference(pred.q, q_meas)
+            chol = np.linalg.cholesky(pred.P[:nv, :nv] + meas_var * np.eye(nv))
+            z = np.linalg.solve(chol, e)
+            ll = -(0.5 * (z @ z) + np.log(np.diag(chol)).sum() + 0.5 * nv * _LOG_2PI)
+            state = filt._correct(pred, q_meas)
+        else:
+            state = pred
+        yield k, pred, Phi, state, ll
+
+
+def _plain(state: Any) -> Vector:
+    """The vector-space part of the error state: ``v`` (and the torque offset ``d``)."""
+    d = getattr(state, "d", None)
+    return state.v if d is None else np.concatenate([state.v, d])
+
+
+def _backward(
+    robot: Robot, steps: Sequence[_Step], emit: Callable[[int, Vector, Vector, Vector], None]
+) -> None:
+    """RTS backward pass over ``steps`` (module docstring), from the last one's filtered state.
+
+    Calls ``emit(i, q^s_i, v^s_i, diag P^s_i)`` for every index, last first.
+    """
+    nv = robot.nv
+    last = steps[-1].filt
+    q_s, x_s, P_s = last.q, _plain(last), last.P
+    emit(len(steps) - 1, q_s, x_s[:nv], np.diag(P_s))
+    for i in range(len(steps) - 2, -1, -1):
+        filt, pred, Phi = steps[i]
+        # G_k = P⁺_k Φ_kᵀ (P⁻_{k+1})⁻¹, as (P⁻⁻¹ Φ P⁺)ᵀ (P symmetric)  [Särkkä 2013, Thm 8.2]
+        G = np.linalg.solve(pred.P, Phi @ filt.P).T
+        # δ_k = G_k (x^s_{k+1} ⊖ x⁻_{k+1}); x^s_k = x⁺_k ⊕ δ_k  [ibid., mean on the manifold]
+        delta = G @ np.concatenate([robot.difference(pred.q, q_s), x_s - _plain(pred)])
+        q_s = robot.integrate(filt.q, delta[:nv])
+        x_s = _plain(filt) + delta[nv:]
+        # P^s_k = P⁺_k + G_k (P^s_{k+1} − P⁻_{k+1}) G_kᵀ  [ibid.]
+        P_s = filt.P + G @ (P_s - pred.P) @ G.T
+        P_s = 0.5 * (P_s + P_s.T)
+        emit(i, q_s, x_s[:nv], np.diag(P_s))
+
+
+def default_overlap(accel_psd: float, meas_std: float, dt: float, tol: float = CHUNK_TOL) -> float:
+    """The overlap [s] after which a window's start-up error has decayed to ``tol`` of ``v_std``.
+
+    The filter of a double integrator with white acceleration ``q_w``
+    [rad²/s³] measured with noise ``σ`` [rad] every ``h`` [s] (a noise
+    density ``r = σ² h``) has the bandwidth ``ω = (q_w / r)^{1/4}`` [rad/s]
+    and the poles ``ω e^{±3iπ/4}`` (damping 1/√2); the smoother's backward recursion forgets its end condition at the
+    same rate ``ω/√2``, hence ``overlap = √2 ln(1/tol) / ω``.  A robot's
+    dynamics shift the poles little at the gains where this matters (tested
+    against the whole-log smoother: :mod:`tests.observers.test_smoothing`).
+    """
+    omega = (accel_psd / (meas_std**2 * dt)) ** 0.25
+    return math.sqrt(2.0) * math.log(1.0 / tol) / omega
+
+
+def _samples(seconds: float, dt: float, what: str) -> int:
+    positive(what, seconds)
+    return max(1, math.ceil(seconds / dt - 1e-9))
+
+
+class LogLike(Protocol):
+    """Anything with a log's arrays ``t``, ``q`` (measured), ``tau``: :class:`pinobs.simulation.Log`.
+
+    An object that also has ``q_meas`` (a :class:`pinobs.Result`, whose ``q`` is
+    the truth) is read through ``q_meas``.
+    """
+
+    @property
+    def t(self) -> Vector: ...
+    @property
+    def q(self) -> Vector: ...
+    @property
+    def tau(self) -> Vector | None: ...
+
+
+def _log_arrays(
+    robot: Robot, log: LogLike | tuple[ArrayLike, ...]
+) -> tuple[Vector, Vector, Vector]:
+    """``(t, q, tau)`` of a log, checked (``tau`` zero when the log has none)."""
+    if isinstance(log, tuple):
+        if len(log) not in (2, 3):
+            raise DimensionError(f"log is a tuple of {len(log)} arrays; give (t, q) or (t, q, tau)")
+        t, q, tau = (*log, None)[:3]
+    else:
+        # a Result's q is the truth: its measurements are q_meas
+        t, q, tau = log.t, getattr(log, "q_meas", log.q), log.tau
+    t_arr = np.asarray(t, dtype=float)
+    q_arr = np.asarray(q, dtype=float)
+    if t_arr.ndim != 1 or t_arr.size < 2:
+        raise DimensionError(f"t has shape {t_arr.shape}; give a 1-D array of at least 2 times [s]")
+    n = t_arr.size
+    if q_arr.shape != (n, robot.nq):
+        raise DimensionError(
+            f"q has shape {q_arr.shape}; robot {robot.name!r} with {n} times needs ({n}, {robot.nq})"
+        )
+    if not np.all(np.isfinite(t_arr)):
+        bad = int(np.flatnonzero(~np.isfinite(t_arr))[0])
+        raise TimestampError(f"t[{bad}] = {t_arr[bad]!r} is not finite; every time must be")
+    steps = np.diff(t_arr)
+    if np.any(steps <= 0):
+        bad = int(np.flatnonzero(steps <= 0)[0]) + 1
+        raise TimestampError(
+            f"t[{bad}] = {t_arr[bad]!r} s is not after t[{bad - 1}] = {t_arr[bad - 1]!r} s; "
+            "timestamps must be strictly increasing"
+        )
+    if tau is None:
+        tau_arr = np.zeros((n, robot.nv))
+    else:
+        tau_arr = np.asarray(tau, dtype=float)
+        if tau_arr.shape != (n, robot.nv):
+            raise DimensionError(
+                f"tau has shape {tau_arr.shape}; robot {robot.name!r} with {n} times needs ({n}, {robot.nv})"
+            )
+        if not np.all(np.isfinite(tau_arr)):
+            bad = int(np.flatnonzero(~np.all(np.isfinite(tau_arr), axis=1))[0])
+            raise NonFiniteError(f"tau[{bad}] = {tau_arr[bad].tolist()} is not finite")
+    return t_arr, q_arr, tau_arr
+
+
+def _smoothable(cls: type) -> bool:
+    """A family that says so (``smoothable = True``) and has the filter's two halves."""
+    return bool(getattr(cls, "smoothable", False)) and all(
+        callable(getattr(cls, m, None)) for m in ("_predict", "_correct")
+    )
+
+
+def _make_filter(
+    robot: Robot,
+    observer: str,
+    noise_std: float | None,
+    accel_psd: float,
+    disturbance_psd: float | None,
+    filter_options: Mapping[str, Any] | None,
+) -> SmoothableFilter:
+    if not _smoothable(observer_class(observer)):
+        smoothable = [n for n in observer_names() if _smoothable(observer_class(n))]
+        raise OptionError(
+            f"observer {observer!r} keeps no error-state covariance to smooth; "
+            f"smoothable: {smoothable}"
+        )
+    filt = make_observer(
+        observer,
+        robot,
+        noise_std=noise_std,
+        accel_psd=accel_psd,
+        disturbance_psd=disturbance_psd,
+        **dict(filter_options or {}),
+    )
+    return cast(SmoothableFilter, filt)
+
+
+def _first_good(q: Vector) -> tuple[int, Vector]:
+    """Index of the first finite row of ``q`` and the finite-row mask from there on."""
+    good = np.all(np.isfinite(q), axis=1)
+    if not np.any(good):
+        raise NonFiniteError("no row of q is finite: nothing to smooth")
+    k0 = int(np.argmax(good))  # the filter starts at the first good sample
+    return k0, good[k0:]
+
+
+def select_accel_psd(
+    robot: Robot,
+    log: LogLike | tuple[ArrayLike, ...],
+    *,
+    noise_std: float,
+    grid: Sequence[float] = DEFAULT_GRID,
+    threshold: float = LIKELIHOOD_MARGIN,
+    observer: str = "ekf",
+    disturbance_psd: float | None = None,
+    filter_options: Mapping[str, Any] | None = None,
+) -> float:
+    """The largest ``accel_psd`` [rad²/s³] of ``grid`` the log does not reject.
+
+    For each candidate the filter runs forward once and sums the innovation
+    log densities, ``ℓ(psd) = Σ_k log N(e_k; 0, S_k)`` (the
+    prediction-error decomposition, Schweppe 1965); the choice is the largest candidate with
+    ``ℓ ≥ max ℓ − threshold``, the upper end of the profile-likelihood
+    interval (``threshold`` = 1.92 = χ²₁(0.95)/2: a 95 % interval).  Not the
+    maximum itself: with an exact model the truth has no process noise and
+    ``ℓ`` keeps rising, ever more slowly, as ``accel_psd → 0`` (a smoother
+    that claims a perfect model is overconfident), so the maximiser is the
+    grid's lower end and says nothing.  Uses no ground truth.  Costs one
+    forward pass per candidate (no backward pass).
+
+    Raises:
+        GainError: an empty grid, a non-positive candidate or threshold.
+    """
+    candidates = sorted(float(positive("grid value", g) or 0.0) for g in grid)
+    if not candidates:
+        raise GainError("grid is empty; give accel_psd candidates > 0 [rad²/s³]")
+    positive("threshold", threshold)
+    t, q, tau = _log_arrays(robot, log)
+    k0, good = _first_good(q)
+    lls = []
+    for psd in candidates:
+        filt = _make_filter(robot, observer, noise_std, psd, disturbance_psd, filter_options)
+        lls.append(sum(ll for *_, ll in _forward(filt, t[k0:], q[k0:], tau[k0:], good, k0)))
+    best = max(lls)
+    return max(p for p, ll in zip(candidates, lls, strict=True) if ll >= best - threshold)
+
+
+def smooth(
+    robot: Robot,
+    log: LogLike | tuple[ArrayLike, ...],
+    *,
+    observer: str = "ekf",
+    noise_std: float | None = None,
+    accel_psd: float | Literal["auto"] = DEFAULT_ACCEL_PSD,
+    disturbance_psd: float | None = None,
+    chunk: float | None = None,
+    overlap: float | None = None,
+    lag: float | None = None,
+    filter_options: Mapping[str, Any] | None = None,
+) -> Smoothed:
+    """Fixed-interval RTS smoothing of a log on the manifold (module docstring for the equations).
+
+    Args:
+        robot: the model (the filter's process model).
+        log: ``(t, q)`` or ``(t, q, tau)`` arrays, or an object with ``t``,
+            ``q``, ``tau`` attributes (:class:`pinobs.simulation.Log`; a
+            :class:`pinobs.Result` is read through its ``q_meas``): times [s] ``(N,)`` strictly increasing;
+            measured configurations ``(N, nq)``, a row with a non-finite entry
+            being a dropped sample (predicted over, not corrected with; rows
+            before the first good one get NaN); torques applied from each
+            sample on [N·m or N] ``(N, nv)`` (zero-order hold, MATH §7;
+            ``None``: zero).
+        observer: the filter smoothed (``"ekf"``; see :class:`SmoothableFilter`).
+        noise_std: position noise standard deviation [rad or m].
+        accel_psd: white-acceleration density of the filter [rad²/s³]
+            (default :data:`DEFAULT_ACCEL_PSD`, the ekf's), or ``"auto"``:
+            :func:`select_accel_psd` on this log (calibrated ``v_std``;
+            costs one forward pass per grid value; module docstring).
+        disturbance_psd: the EKF's joint-torque offset density [rad²/s⁵], or ``None``.
+        chunk: memory bound: the backward pass runs on windows of ``chunk``
+            seconds (``None``: the whole log at once).
+        overlap: seconds of later samples each window's backward pass starts
+            from (default :func:`default_overlap`: agreement with the whole-log
+            smoother to :data:`CHUNK_TOL` of ``v_std``).
+        lag: fixed-lag mode [s]: chunks of ``lag`` with ``lag`` of overlap
+            (exclusive with ``chunk`` and ``overlap``).
+        filter_options: further options of the filter (``q0_std``, ``v0_std``, ...).
+
+    Raises:
+        UnknownNameError, OptionError: ``observer`` is unknown or cannot be smoothed.
+        GainError: a non-positive ``chunk``, ``overlap`` or ``lag``, or a bad filter option.
+        DimensionError, TimestampError, NonFiniteError: malformed log arrays.
+    """
+    if lag is not None and (chunk is not None or overlap is not None):
+        raise OptionError(
+            f"lag={lag!r} sets the chunk and the overlap; give lag alone, or chunk and overlap"
+        )
+    t_all, q_all, tau_all = _log_arrays(robot, log)
+    if accel_psd == "auto":
+        if noise_std is None:
+            raise GainError("accel_psd='auto' needs noise_std [rad or m], > 0")
+        accel_psd = select_accel_psd(
+            robot,
+            (t_all, q_all, tau_all),
+            noise_std=noise_std,
+            observer=observer,
+            disturbance_psd=disturbance_psd,
+            filter_options=filter_options,
+        )
+    elif isinstance(accel_psd, str):
+        raise GainError(f"accel_psd={accel_psd!r}: give a number > 0 [rad²/s³] or 'auto'")
+    filt = _make_filter(robot, observer, noise_std, accel_psd, disturbance_psd, filter_options)
+    model = filt.robot
+    nv = model.nv
+    dt = float(np.median(np.diff(t_all)))
+    if lag is not None:
+        n_chunk = n_over = _samples(lag, dt, "lag")
+    elif chunk is not None:
+        n_chunk = _samples(chunk, dt, "chunk")
+        if overlap is None:
+            gains = cast(Any, filt).gains
+            overlap = default_overlap(gains.accel_psd, gains.meas_std, dt)
+        n_over = _samples(overlap, dt, "overlap")
+    else:
+        if overlap is not None:
+            positive("overlap", overlap)
+        n_chunk, n_over = t_all.size, 0
+    out_q = np.full((t_all.size, model.nq), np.nan)
+    out_v = np.full((t_all.size, nv), np.nan)
+    out_var = np.full((t_all.size, nv), np.nan)
+    k0, good = _first_good(q_all)
+    t_arr, q_arr, tau_arr = t_all[k0:], q_all[k0:], tau_all[k0:]
+    n = t_arr.size
+
+    loglik = 0.0
+    buf: list[_Step] = []
+    start = 0  # sample index of buf[0]
+
+    def emit(i: int, qs: Vector, vs: Vector, var: Vector) -> None:
+        if i < n_chunk or start + len(buf) == n:
+            k = k0 + start + i
+            out_q[k], out_v[k], out_var[k] = qs, vs, var[nv : 2 * nv]
+
+    for k, pred, Phi, state, ll in _forward(filt, t_arr, q_arr, tau_arr, good, k0):
+        loglik += ll
+        if pred is not None:
+            buf[-1] = _Step(buf[-1].filt, pred, Phi)
+        buf.append(_Step(state, None, None))
+        if len(buf) == n_chunk + n_over or k == n - 1:
+            _backward(model, buf, emit)
+            del buf[: min(n_chunk, len(buf))]
+            start += n_chunk
+    if not (np.all(np.isfinite(out_v[k0:])) and np.all(np.isfinite(out_var[k0:]))):
+        raise NonFiniteError(
+            "the smoothed estimate is not finite; check the model, the torques and noise_std"
+        )
+    opts = {
+        **cast(Any, filt).options,
+        "observer": observer,
+        "chunk": None if chunk is None and lag is None else n_chunk * dt,
+        "overlap": n_over * dt if n_over else None,
+        "lag": lag,
+    }
+    return Smoothed(
+        t=t_all,
+        q=out_q,
+        v=out_v,
+        v_std=np.sqrt(np.maximum(out_var, 0.0)),
+        log_likelihood=loglik,
+        options=opts,
+    )

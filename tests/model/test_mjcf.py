@@ -1,0 +1,271 @@
+"""MJCF files compiled by MuJoCo and rebuilt in Pinocchio, checked against MuJoCo itself."""
+
+from __future__ import annotations
+
+import builtins
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.model.loading import _models_dir
+from pinobs.model.mjcf import MASS_MATRIX_RTOL, build_from_mujoco, cross_check
+
+mujoco = pytest.importorskip("mujoco")
+
+# every joint type, several joints in one body with off-centre anchors, a joint
+# reference, unaligned axes, rotated bodies and inertias, default-class masses,
+# armature and damping, and a second body tree
+TREES = """<mujoco model="trees">
+  <option><flag contact="disable"/></option>
+  <default>
+    <joint armature="0.02" damping="0.1"/>
+    <geom mass="0.7"/>
+    <default class="light"><geom mass="0.05"/></default>
+  </default>
+  <worldbody>
+    <body name="base" pos="0.1 -0.2 1" euler="10 20 30">
+      <freejoint name="root"/>
+      <geom type="box" size="0.3 0.2 0.1" mass="3"/>
+      <body name="wrist" pos="0.3 0 0" quat="0.9 0.1 -0.3 0.2">
+        <joint name="rx" type="hinge" axis="1 0 0" pos="0 0.05 0" ref="0.4"/>
+        <joint name="ry" type="hinge" axis="0.3 1 -0.2" pos="0.02 0 0.1"/>
+        <joint name="sz" type="slide" axis="0 0.2 1" pos="0.5 0.5 0.5"/>
+        <geom type="capsule" fromto="0 0 0 0.4 0.1 -0.2" size="0.03"/>
+        <geom type="sphere" pos="0.4 0.1 -0.2" size="0.05" class="light"/>
+        <body name="ball" pos="0.4 0.1 -0.2" axisangle="0 1 1 0.7">
+          <joint name="sph" type="ball" pos="0.01 -0.02 0.03"/>
+          <geom type="ellipsoid" size="0.1 0.05 0.02" pos="0.1 0 0" euler="0 40 10"/>
+        </body>
+      </body>
+    </body>
+    <body name="arm" pos="2 0 0.5">
+      <joint name="shoulder" type="hinge" axis="0 0 1"/>
+      <geom type="capsule" fromto="0 0 0 0.5 0 0" size="0.04"/>
+      <body name="forearm" pos="0.5 0 0">
+        <joint name="elbow" type="hinge" axis="0 0 -1" ref="-0.3"/>
+        <geom type="capsule" fromto="0 0 0 0.4 0 0.05" size="0.03" class="light"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def _file(tmp_path: Path, text: str, name: str = "model.xml") -> Path:
+    f = tmp_path / name
+    f.write_text(text)
+    return f
+
+
+@pytest.mark.parametrize(("name", "mass"), [("mjcf_cartpole", 1.1), ("mjcf_acrobot", 2.0)])
+def test_dm_control_style_files_keep_mujocos_masses_armature_and_damping(
+    name: str, mass: float
+) -> None:
+    path = _models_dir() / f"{name}.xml"
+    robot = pinobs.load(path)
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    total = sum(i.mass for i in robot.model.inertias)
+    assert total == pytest.approx(mass, rel=1e-12) and total == pytest.approx(
+        float(mj.body_mass.sum()), rel=1e-9
+    )
+    np.testing.assert_array_equal(robot.model.armature, mj.dof_armature)
+    np.testing.assert_array_equal(robot.model.damping, mj.dof_damping)
+    assert robot.friction and robot.has_friction  # MJCF damping used by default
+    assert not pinobs.load(path, friction=False).has_friction
+
+
+@pytest.mark.parametrize("name", ["mjcf_cartpole", "mjcf_acrobot", "trees"])
+def test_mass_matrix_equals_mj_full_m_at_20_random_configurations(
+    name: str, tmp_path: Path
+) -> None:
+    path = _file(tmp_path, TREES) if name == "trees" else _models_dir() / f"{name}.xml"
+    model, mj, mapping, _ = build_from_mujoco(path)
+    assert model.nv == mj.nv
+    worst = cross_check(model, mj, mapping, samples=20, seed=1)
+    assert worst < MASS_MATRIX_RTOL
+
+
+def _mujoco_qacc(mj: Any, qpos: np.ndarray, qvel: np.ndarray, qfrc: np.ndarray) -> np.ndarray:
+    data = mujoco.MjData(mj)
+    data.qpos[:], data.qvel[:], data.qfrc_applied[:] = qpos, qvel, qfrc
+    mujoco.mj_forward(mj, data)
+    return np.array(data.qacc)
+
+
+def test_forward_dynamics_with_damping_equal_mujocos_on_every_joint_type(
+    tmp_path: Path, rng: np.random.Generator
+) -> None:
+    path = _file(tmp_path, TREES)
+    robot = pinobs.load(path)
+    _, mj, mapping, _ = build_from_mujoco(path)
+    assert robot.nv == 6 + 3 + 3 + 2 and robot.nq == 7 + 3 + 4 + 2
+    for _ in range(5):
+        q = robot.random_configuration(rng, scale=np.pi)
+        v, tau = rng.normal(size=robot.nv), rng.normal(size=robot.nv)
+        jac = mapping.velocity_jacobian(q)
+        qacc = _mujoco_qacc(mj, mapping.qpos_from_q(q), jac @ v, np.linalg.solve(jac.T, tau))
+        a = robot.forward_dynamics(q, v, tau)
+        # qvel = J v, so qacc = J a + J̇ v; J̇ v = [R (ω × v_lin); 0] on the free joint
+        rot = jac[:3, :3]
+        expected = jac @ a
+        expected[:3] += rot @ np.cross(v[3:6], v[:3])
+        np.testing.assert_allclose(qacc, expected, rtol=1e-9, atol=1e-9 * np.abs(qacc).max())
+
+
+def test_configuration_maps_round_trip_and_convert_quaternion_order(
+    tmp_path: Path, rng: np.random.Generator
+) -> None:
+    robot = pinobs.load(_file(tmp_path, TREES))
+    _, _, mapping, _ = build_from_mujoco(_file(tmp_path, TREES))
+    q = robot.random_configuration(rng)
+    qpos = mapping.qpos_from_q(q)
+    np.testing.assert_allclose(mapping.q_from_qpos(qpos), q, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(qpos[3:7], [q[6], *q[3:6]])  # MuJoCo w, x, y, z
+    # hinge "rx" measured from ref = 0.4 (MJCF angles are in degrees by default)
+    assert qpos[7] == pytest.approx(q[7] + np.deg2rad(0.4), rel=1e-15)
+    # MuJoCo's qpos0 is the neutral configuration but for the free body's pose in the file
+    q0 = mapping.q_from_qpos(mapping.qpos0)
+    np.testing.assert_array_equal(q0[7:], robot.neutral()[7:])
+    np.testing.assert_array_equal(q0[:3], [0.1, -0.2, 1.0])
+
+
+def test_a_disagreement_with_mujoco_names_the_body_and_both_values(tmp_path: Path) -> None:
+    model, mj, mapping, _ = build_from_mujoco(_models_dir() / "mjcf_acrobot.xml")
+    model.armature[1] += 1e-3
+    with pytest.raises(
+        pinobs.ModelError,
+        match=r"M\(q\)\[1, 1\] \(dof of body 'lower_arm'\).*Pinocchio .*MuJoCo mj_fullM",
+    ):
+        cross_check(model, mj, mapping)
+    model, mj, mapping, _ = build_from_mujoco(_models_dir() / "mjcf_acrobot.xml")
+    model.inertias[2] = model.inertias[2] + model.inertias[2]
+    with pytest.raises(pinobs.ModelError, match=r"total mass: Pinocchio 3\.0 kg, MuJoCo 2\.0 kg"):
+        cross_check(model, mj, mapping)
+
+
+def test_joint_stiffness_is_named_in_a_warning(tmp_path: Path) -> None:
+    text = (_models_dir() / "mjcf_acrobot.xml").read_text()
+    text = text.replace('<joint damping=".05"', '<joint stiffness="3" damping=".05"')
+    with pytest.warns(pinobs.ModelWarning, match=r"stiffness \(springs\) of shoulder, elbow"):
+        pinobs.load(_file(tmp_path, text))
+
+
+def test_a_root_joint_cannot_be_added_to_an_mjcf_file(tmp_path: Path) -> None:
+    with pytest.raises(pinobs.GainError, match="declare <freejoint/>"):
+        pinobs.load(_models_dir() / "mjcf_acrobot.xml", root_joint="freeflyer")
+
+
+def test_without_mujoco_pinocchios_parser_loads_with_a_warning_saying_what_it_misses(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    real_import = builtins.__import__
+
+    def no_mujoco(name: str, *args: Any, **kwargs: Any) -> Any:
+        if name == "mujoco":
+            raise ImportError("no mujoco")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_mujoco)
+    with pytest.warns(pinobs.ModelWarning, match=r"MuJoCo is not installed.*<default> classes"):
+        robot = pinobs.load(_models_dir() / "mjcf_acrobot.xml", check=False)
+    # what the warning is about: Pinocchio's parser weighs the capsules by density
+    assert sum(i.mass for i in robot.model.inertias) > 10.0
+
+
+DM_CONTROL_SUITE = [
+    "acrobot",
+    "ball_in_cup",
+    "cartpole",
+    "cheetah",
+    "dog",
+    "finger",
+    "fish",
+    "hopper",
+    "humanoid",
+    "humanoid_CMU",
+    "manipulator",
+    "pendulum",
+    "point_mass",
+    "quadruped",
+    "reacher",
+    "stacker",
+    "swimmer",
+    "walker",
+]
+
+
+@pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::pinobs.errors.ModelWarning")  # springs, tendons: named
+@pytest.mark.parametrize("name", DM_CONTROL_SUITE)
+def test_dm_control_suite_as_shipped_matches_mujoco(name: str) -> None:
+    """Every model of dm_control's suite (its XML files; ``pip install --no-deps dm_control``)."""
+    import importlib.resources
+
+    pytest.importorskip("dm_control")
+    path = Path(str(importlib.resources.files("dm_control") / "suite" / f"{name}.xml"))
+    model, mj, mapping, _ = build_from_mujoco(path)
+    total = sum(i.mass for i in model.inertias)
+    assert total == pytest.approx(float(mj.body_mass.sum()), rel=1e-9, abs=0)
+    assert cross_check(model, mj, mapping, samples=20, seed=2) < MASS_MATRIX_RTOL
+    assert pinobs.load(path).nv == mj.nv  # the sanity checks pass too
+
+
+def test_the_ur5_mjcf_is_the_urdfs_ur5_plus_its_armature(rng: np.random.Generator) -> None:
+    """``models/mjcf_ur5.xml`` (written by ``benchmarks/mujoco_truth.py --write-ur5``)."""
+    mjcf, urdf = pinobs.load(_models_dir() / "mjcf_ur5.xml"), pinobs.load("ur5")
+    np.testing.assert_array_equal(mjcf.model.armature, np.full(6, 0.1))
+    np.testing.assert_array_equal(mjcf.model.damping, np.full(6, 0.5))
+    for _ in range(5):
+        q, v = urdf.random_configuration(rng, scale=np.pi), rng.normal(size=6)
+        np.testing.assert_allclose(
+            mjcf.mass_matrix(q), urdf.mass_matrix(q) + 0.1 * np.eye(6), rtol=0, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            mjcf.inverse_dynamics(q, v, np.zeros(6)),
+            urdf.inverse_dynamics(q, v, np.zeros(6)),
+            rtol=0,
+            atol=1e-12,
+        )
+
+
+def test_friction_derivative_stays_finite_and_silent_at_high_speed() -> None:
+    """MJCF damping switches friction on; |v| ≫ v_s must not overflow sech² (warnings are errors)."""
+    robot = pinobs.load(_models_dir() / "mjcf_acrobot.xml")
+    d = robot.friction_derivative(np.array([50.0, -80.0]))
+    np.testing.assert_array_equal(d, -robot.model.damping)
+
+
+def test_readme_mujoco_benchmark_table_is_the_committed_results() -> None:
+    import re
+
+    root = Path(__file__).resolve().parents[2]
+    readme = (root / "README.md").read_text()
+    m = re.search(r"<!-- mujoco-bench: [^>]*-->\n(.*?)<!-- end mujoco-bench -->", readme, re.S)
+    assert m is not None
+    assert m.group(1) in (root / "benchmarks" / "mujoco_truth.md").read_text()
+
+
+def test_visual_geoms_sit_where_mujoco_puts_them(tmp_path: Path, rng: np.random.Generator) -> None:
+    """Every primitive geom's world pose equals MuJoCo's ``geom_xpos``/``geom_xmat``."""
+    import pinocchio as pin
+
+    path = _file(tmp_path, TREES)
+    robot = pinobs.load(path)
+    _, mj, mapping, _ = build_from_mujoco(path)
+    vm = robot.visual_model
+    assert vm is not None and vm.ngeoms == mj.ngeom  # every geom of TREES is a primitive
+    data = mujoco.MjData(mj)
+    for _ in range(3):
+        q = robot.random_configuration(rng, scale=np.pi)
+        data.qpos[:] = mapping.qpos_from_q(q)
+        mujoco.mj_forward(mj, data)
+        gdata = pin.GeometryData(vm)
+        pin.updateGeometryPlacements(robot.model, robot.model.createData(), vm, gdata, q)
+        for g in range(mj.ngeom):
+            np.testing.assert_allclose(gdata.oMg[g].translation, data.geom_xpos[g], atol=1e-12)
+            np.testing.assert_allclose(
+                gdata.oMg[g].rotation, data.geom_xmat[g].reshape(3, 3), atol=1e-12
+            )

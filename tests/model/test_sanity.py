@@ -1,0 +1,142 @@
+"""Degenerate models: each gets its outcome (error naming the body, warning, or silence)."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pinobs
+
+ARM = """<?xml version="1.0"?>
+<robot name="arm">
+  <link name="base"/>
+  <joint name="j1" type="revolute">
+    <parent link="base"/><child link="upper"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="10" velocity="10"/>
+  </joint>
+  <link name="upper">
+    <inertial><origin xyz="0 0 -0.25"/><mass value="1.0"/>
+      <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.001"/></inertial>
+  </link>
+  <joint name="j2" type="revolute">
+    <parent link="upper"/><child link="lower"/><origin xyz="0 0 -0.5"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="10" velocity="10"/>{mimic}
+  </joint>
+  <link name="lower">
+    <inertial><origin xyz="0 0 -0.25"/><mass value="{mass}"/>
+      <inertia ixx="{ixx}" ixy="0" ixz="0" iyy="{iyy}" iyz="0" izz="{izz}"/></inertial>
+  </link>
+  <joint name="tool_mount" type="fixed">
+    <parent link="lower"/><child link="tool"/><origin xyz="0 0 -0.5"/>
+  </joint>
+  <link name="tool"/>
+</robot>
+"""
+
+
+def _arm(tmp_path: Path, *, mimic: str = "", **inertial: str) -> Path:
+    values = {"mass": "0.5", "ixx": "0.01", "iyy": "0.01", "izz": "0.0005"} | inertial
+    f = tmp_path / "arm.urdf"
+    f.write_text(ARM.format(mimic=mimic, **values))
+    return f
+
+
+def test_a_sound_arm_with_a_massless_tool_frame_loads_silently(tmp_path: Path) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        robot = pinobs.load(_arm(tmp_path))
+    assert robot.nv == 2
+
+
+@pytest.mark.parametrize("text", ["nan", "abc"])
+def test_an_unreadable_mass_is_an_error_naming_the_link_and_the_text(
+    tmp_path: Path, text: str
+) -> None:
+    with pytest.raises(pinobs.ModelError, match=rf"link 'lower'.*mass='{text}'.*massless"):
+        pinobs.load(_arm(tmp_path, mass=text))
+
+
+def test_an_unreadable_inertia_entry_is_an_error_naming_it(tmp_path: Path) -> None:
+    with pytest.raises(pinobs.ModelError, match=r"link 'lower'.*iyy='1e-2x'"):
+        pinobs.load(_arm(tmp_path, iyy="1e-2x"))
+
+
+def test_a_negative_mass_is_an_error_naming_the_body(tmp_path: Path) -> None:
+    with pytest.raises(
+        pinobs.ModelError, match=r"body 'lower \(body of joint j2\)' has a negative mass -0\.5 kg"
+    ):
+        pinobs.load(_arm(tmp_path, mass="-0.5"))
+
+
+def test_a_negative_principal_moment_is_an_error(tmp_path: Path) -> None:
+    with pytest.raises(
+        pinobs.ModelError, match=r"body 'lower \(body of joint j2\)'.*negative principal moment"
+    ):
+        pinobs.load(_arm(tmp_path, ixx="-0.01"))
+
+
+def test_a_broken_triangle_inequality_warns_naming_the_body_and_still_loads(
+    tmp_path: Path,
+) -> None:
+    with pytest.warns(
+        pinobs.ModelWarning,
+        match=r"triangle inequality.*'lower \(body of joint j2\)' \[0\.0005, 0\.01, 0\.1\]",
+    ):
+        robot = pinobs.load(_arm(tmp_path, izz="0.1", iyy="0.0005"))
+    assert robot.nv == 2
+
+
+def test_a_joint_moving_only_massless_links_makes_m_singular_and_is_an_error(
+    tmp_path: Path,
+) -> None:
+    f = _arm(tmp_path, mass="0", ixx="0", iyy="0", izz="0")
+    with pytest.raises(
+        pinobs.ModelError, match=r"mass matrix is singular.*along joint 'j2'.*lower"
+    ):
+        pinobs.load(f)
+    assert pinobs.load(f, check=False).nv == 2  # the escape hatch
+
+
+def test_a_mimic_joint_in_a_file_is_refused_unless_declared_independent(tmp_path: Path) -> None:
+    f = _arm(tmp_path, mimic='\n    <mimic joint="j1" multiplier="-2" offset="0.1"/>')
+    with pytest.raises(pinobs.ModelError, match=r"joint 'j2' mimics 'j1' \(q = -2·q_j1 \+ 0\.1"):
+        pinobs.load(f)
+    assert pinobs.load(f, mimic="independent").nv == 2
+    with pytest.raises(pinobs.GainError, match="mimic='couple'"):
+        pinobs.load(f, mimic="couple")
+
+
+def test_registry_robots_with_mimic_grippers_load_them_as_independent_joints() -> None:
+    assert pinobs.load("panda").nv == 9
+    with pytest.raises(pinobs.ModelError, match="panda_finger_joint2"):
+        pinobs.load("panda", mimic="error")
+
+
+def test_a_pin_model_is_checked_too() -> None:
+    model = pinobs.load("cartpole").model.copy()
+    model.armature[:] = [0.0, -1.0]  # negative armature: M indefinite
+    with pytest.raises(pinobs.ModelError, match=r"mass matrix is indefinite.*joint 'pole_theta'"):
+        pinobs.load(model)
+    model = pinobs.load("cartpole").model.copy()
+    inertia = model.inertias[2]
+    model.inertias[2] = type(inertia)(float("nan"), inertia.lever, inertia.inertia)
+    with pytest.raises(pinobs.ModelError, match=r"'pole \(body of joint pole_theta\)'.*non-finite"):
+        pinobs.load(model)
+
+
+def test_romeo_small_warns_about_its_shoulder_inertia_but_loads() -> None:
+    with pytest.warns(
+        pinobs.ModelWarning, match=r"'RShoulderYawLink \(body of joint RShoulderYaw\)'"
+    ):
+        robot = pinobs.load("romeo_small")
+    q = robot.random_configuration(np.random.default_rng(0))
+    assert np.linalg.eigvalsh(robot.mass_matrix(q))[0] > 0
+
+
+def test_full_romeo_is_refused_for_its_massless_fingers_and_loads_unchecked() -> None:
+    with pytest.raises(pinobs.ModelError, match=r"mass matrix is singular.*along joint '.*Finger"):
+        pinobs.load("romeo")
+    assert pinobs.load("romeo", check=False).nv > 0

@@ -1,0 +1,311 @@
+"""The RTS smoother: a closed form on a linear model, the filter it starts from, chunks, calibration."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.errors import DimensionError, GainError, OptionError, TimestampError
+from pinobs.io import Log, estimate_log
+from pinobs.observers import make_observer
+from pinobs.observers.smoothing import (
+    _backward,
+    _Step,
+    default_overlap,
+    select_accel_psd,
+    smooth,
+)
+from pinobs.simulation import Sensor, simulate
+from tests.conftest import cached_robot
+
+
+def _log(res: pinobs.Result) -> Log:
+    """The log a run records: times, *measured* configurations, torques."""
+    return Log(t=res.t, q=res.q_meas, tau=res.tau)
+
+
+class _LinState(NamedTuple):
+    q: np.ndarray
+    v: np.ndarray
+    P: np.ndarray
+
+
+def test_backward_pass_equals_batch_conditioning_on_a_linear_gaussian_model(rng) -> None:
+    """On a linear model (UR5: q ⊕ δ = q + δ) the RTS means and covariances are those of the
+    joint Gaussian of all states conditioned on all measurements (computed directly)."""
+    robot = cached_robot("ur5")
+    nv, n, r = robot.nv, 6, 0.3
+    m = 2 * nv
+    Phis = [np.eye(m) + 0.2 * rng.standard_normal((m, m)) for _ in range(n - 1)]
+    Qs = [(lambda a: a @ a.T + 0.1 * np.eye(m))(rng.standard_normal((m, m))) for _ in range(n - 1)]
+    H = np.hstack([np.eye(nv), np.zeros((nv, nv))])
+    m0 = rng.standard_normal(m)
+    P0 = np.eye(m)
+    ys = [None] + [rng.standard_normal(nv) for _ in range(n - 1)]
+    # forward Kalman filter (measurement from sample 1 on)
+    steps: list[_Step] = []
+    x, P = m0, P0
+    for k in range(n):
+        if k > 0:
+            xp, Pp = Phis[k - 1] @ x, Phis[k - 1] @ P @ Phis[k - 1].T + Qs[k - 1]
+            steps[-1] = _Step(steps[-1].filt, _LinState(xp[:nv], xp[nv:], Pp), Phis[k - 1])
+            S = H @ Pp @ H.T + r * np.eye(nv)
+            K = Pp @ H.T @ np.linalg.inv(S)
+            x, P = xp + K @ (ys[k] - H @ xp), (np.eye(m) - K @ H) @ Pp
+        steps.append(_Step(_LinState(x[:nv], x[nv:], P), None, None))
+    got_v = np.empty((n, nv))
+    got_var = np.empty((n, m))
+
+    def emit(i: int, q: np.ndarray, v: np.ndarray, var: np.ndarray) -> None:
+        got_v[i], got_var[i] = v, var
+
+    _backward(robot, steps, emit)
+    # batch: X = T z with z = (x0, w1..w_{n-1}); Y = C X + noise
+    T = np.zeros((n * m, n * m))
+    for k in range(n):
+        for j in range(k + 1):
+            A = np.eye(m)
+            for i in range(j, k):
+                A = Phis[i] @ A
+            T[k * m : (k + 1) * m, j * m : (j + 1) * m] = A
+    cov_z = np.zeros((n * m, n * m))
+    cov_z[:m, :m] = P0
+    for k in range(1, n):
+        cov_z[k * m : (k + 1) * m, k * m : (k + 1) * m] = Qs[k - 1]
+    mean_x = T[:, :m] @ m0
+    cov_x = T @ cov_z @ T.T
+    C = np.zeros(((n - 1) * nv, n * m))
+    for k in range(1, n):
+        C[(k - 1) * nv : k * nv, k * m : k * m + nv] = np.eye(nv)
+    y = np.concatenate(ys[1:])
+    S = C @ cov_x @ C.T + r * np.eye((n - 1) * nv)
+    gain = cov_x @ C.T @ np.linalg.inv(S)
+    post_mean = mean_x + gain @ (y - C @ mean_x)
+    post_cov = cov_x - gain @ C @ cov_x
+    want = post_mean.reshape(n, m)
+    np.testing.assert_allclose(got_v, want[:, nv:], atol=1e-10)
+    np.testing.assert_allclose(got_var, np.diag(post_cov).reshape(n, m), atol=1e-10)
+
+
+@pytest.fixture(scope="module")
+def ur5_log() -> pinobs.Result:
+    robot = cached_robot("ur5")
+    return simulate(robot, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=0.6, seed=4)
+
+
+def test_last_sample_is_the_causal_filter_and_earlier_ones_differ(ur5_log) -> None:
+    robot = cached_robot("ur5")
+    res = ur5_log
+    log = Log(t=res.t, q=res.q_meas, tau=res.tau)
+    ekf = make_observer("ekf", robot, noise_std=1e-4, accel_psd=1e-4)
+    causal = estimate_log(ekf, Log(t=res.t[1:], q=res.q_meas[1:], tau=res.tau[1:]))
+    s = smooth(robot, log, noise_std=1e-4, accel_psd=1e-4)
+    assert np.all(np.isnan(s.v[0]))  # the simulator does not measure sample 0
+    np.testing.assert_allclose(s.v[-1], causal.v[-1], rtol=0, atol=1e-12)
+    assert np.abs(s.v[1:-1] - causal.v[:-1]).max() > 1e-4
+
+
+@pytest.mark.parametrize("name", ["ur5", "top", "rigid_body"])
+def test_smoother_removes_the_filters_start_up_transient_on_noise_free_data(name: str) -> None:
+    """The filter starts at v = 0 (error ≈ 0.5 rad/s); the smoother uses the later samples.
+    On the top (SO(3)) and a free body (SE(3)) this exercises ⊕/⊖ on the manifold."""
+    robot = cached_robot(name)
+    res = simulate(
+        robot,
+        [],
+        sensor=Sensor(1000, 0.0),
+        inputs="pd",
+        duration=0.5,
+        seed=5,
+        v0=np.full(robot.nv, 0.5),
+    )
+    s = smooth(robot, _log(res), noise_std=1e-6, accel_psd=1e-6)
+    ekf = make_observer("ekf", robot, noise_std=1e-6, accel_psd=1e-6)
+    causal = estimate_log(ekf, Log(t=res.t[1:], q=res.q_meas[1:], tau=res.tau[1:]))
+    err_s = np.abs(s.v[1:] - res.v[1:]).max(axis=1)
+    err_f = np.abs(causal.v - res.v[1:]).max(axis=1)
+    assert err_f[0] > 0.4
+    # the extended smoother linearises along the filter's wrong start: not exact there
+    assert err_s[0] < 1e-2 * err_f[0]  # measured 9.1e-4, 2.2e-4, 3.0e-4 (filter 0.48-0.59)
+    assert err_s[res.t[1:] > 0.05].max() < 1e-6  # measured 1.2e-8, 2.4e-9, 2.7e-9
+
+
+def test_smoother_over_the_disturbance_state_ends_on_the_filter_and_beats_it() -> None:
+    """With ``disturbance_psd`` the error state is (δq, δv, δd): 3nv, d smoothed as a vector."""
+    robot = cached_robot("top")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=0.4, seed=5)
+    opts = {"noise_std": 1e-4, "accel_psd": 1e-4, "disturbance_psd": 1.0}
+    s = smooth(robot, _log(res), **opts)  # type: ignore[arg-type]
+    ekf = make_observer("ekf", robot, **opts)
+    causal = estimate_log(ekf, Log(t=res.t[1:], q=res.q_meas[1:], tau=res.tau[1:]))
+    np.testing.assert_allclose(s.v[-1], causal.v[-1], rtol=0, atol=1e-12)
+    rms_s = np.sqrt(np.mean((s.v - res.v)[200:] ** 2))
+    rms_f = np.sqrt(np.mean((causal.v - res.v[1:])[199:] ** 2))
+    assert rms_s < 0.5 * rms_f  # measured 5.4e-4 vs 2.3e-3
+
+
+def test_smoother_beats_the_filter_on_a_lie_group_robot() -> None:
+    """The top (SO(3)): ⊕/⊖ are exp/log; smoothed RMS below the causal filter's."""
+    robot = cached_robot("top")
+    res = simulate(robot, ["ekf"], sensor=Sensor(1000, 1e-3), inputs="pd", duration=0.6, seed=6)
+    s = smooth(robot, _log(res), noise_std=1e-3, accel_psd=1e-8)
+    late = res.t > 0.2
+    rms_s = np.sqrt(np.mean((s.v - res.v)[late] ** 2))
+    rms_f = np.sqrt(np.mean((res.trace("ekf").v - res.v)[late] ** 2))
+    # measured 7.7e-4 vs 1.14e-3 (1.5×; the steady-state double integrator gives 2×)
+    assert rms_s < 0.8 * rms_f
+
+
+@pytest.mark.parametrize(("name", "sigma", "psd"), [("ur5", 1e-4, 1e-4), ("panda", 1e-3, 1e-2)])
+def test_chunked_smoother_equals_the_whole_log_one_to_the_stated_tolerance(
+    name: str, sigma: float, psd: float
+) -> None:
+    robot = cached_robot(name)
+    res = simulate(robot, [], sensor=Sensor(1000, sigma), inputs="pd", duration=1.0, seed=7)
+    whole = smooth(robot, _log(res), noise_std=sigma, accel_psd=psd)
+    chunked = smooth(robot, _log(res), noise_std=sigma, accel_psd=psd, chunk=0.2)
+    overlap = default_overlap(psd, sigma, 1e-3)
+    assert chunked.options["overlap"] == pytest.approx(overlap, abs=1e-3)
+    assert 0.2 + overlap < 0.6  # the windows do not all reach the log's end
+    rel = np.nanmax(np.abs(chunked.v - whole.v) / whole.v_std)
+    assert rel < 1e-5  # CHUNK_TOL = 1e-6 aimed at; measured 1.8e-6 (panda), 1.7e-6 (ur5)
+    np.testing.assert_allclose(chunked.v_std[1:], whole.v_std[1:], rtol=1e-9)
+
+
+def test_fixed_lag_uses_later_samples_and_short_lags_lose_accuracy(ur5_log) -> None:
+    robot = cached_robot("ur5")
+    res = ur5_log
+    whole = smooth(robot, _log(res), noise_std=1e-4, accel_psd=1e-2)
+    rel = {}
+    for lag in (0.02, 0.1):
+        lagged = smooth(robot, _log(res), noise_std=1e-4, accel_psd=1e-2, lag=lag)
+        assert lagged.options["chunk"] == pytest.approx(lag)
+        rel[lag] = np.nanmax(np.abs(lagged.v - whole.v) / whole.v_std)
+    # bandwidth ω = 178 rad/s: 0.1 s is 12/ω, 0.02 s is 2.5/ω
+    assert rel[0.1] < 1e-4  # measured 8.0e-6
+    assert rel[0.02] > 1e-2  # measured 0.13
+
+
+def test_dropped_samples_are_predicted_over_and_get_a_wider_band(ur5_log) -> None:
+    robot = cached_robot("ur5")
+    q = np.array(ur5_log.q_meas)
+    q[300:340] = np.nan
+    s = smooth(robot, (ur5_log.t, q, ur5_log.tau), noise_std=1e-4, accel_psd=1e-2)
+    assert np.all(np.isfinite(s.v[1:]))
+    assert s.v_std[320].max() > 1.2 * s.v_std[200].max()  # measured 1.35×
+    assert not s.v.flags.writeable and not s.v_std.flags.writeable
+
+
+def test_likelihood_choice_of_accel_psd_is_the_largest_the_data_do_not_reject(ur5_log) -> None:
+    robot = cached_robot("ur5")
+    grid = (1e-10, 1e-6, 1e-2)
+    lls = [smooth(robot, _log(ur5_log), noise_std=1e-4, accel_psd=p).log_likelihood for p in grid]
+    chosen = select_accel_psd(robot, _log(ur5_log), noise_std=1e-4, grid=grid)
+    best = max(lls)
+    ok = [p for p, ll in zip(grid, lls, strict=True) if ll >= best - 1.92]
+    assert chosen == max(ok)
+
+
+def test_bad_inputs_are_rejected_with_what_would_be_valid(ur5_log) -> None:
+    robot = cached_robot("ur5")
+    t, q, tau = ur5_log.t, ur5_log.q_meas, ur5_log.tau
+    with pytest.raises(OptionError, match="smoothable: \\['ekf'\\]"):
+        smooth(robot, (t, q, tau), observer="kf")
+    with pytest.raises(OptionError, match="give lag alone"):
+        smooth(robot, (t, q, tau), lag=0.1, chunk=0.2)
+    with pytest.raises(DimensionError, match=r"needs \(601, 6\)"):
+        smooth(robot, (t, q[:, :5], tau))
+    t_bad = np.array(t)
+    t_bad[10] = t_bad[9]
+    with pytest.raises(TimestampError, match="strictly increasing"):
+        smooth(robot, (t_bad, q, tau))
+    with pytest.raises(GainError, match="lag"):
+        smooth(robot, (t, q, tau), lag=-1.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "sigma"), [("ur5", 1e-4), ("ur5", 1e-3), ("panda", 1e-4), ("panda", 1e-3)]
+)
+def test_smoother_targets_on_exact_model_logs(name: str, sigma: float) -> None:
+    """Targets of issue 19 with accel_psd chosen by likelihood (no truth used):
+    RMS ≥ 3× below the causal ekf (default options), ±2σ covers 90–98 %.
+
+    Seed 0 is the log the README's table reports (measured 3.1–10.3×, 95.4–97.6 %).
+    Not every log meets them: on seeds 1–3 (README, "Other logs") the ratio is
+    2.4–7.7× (UR5 at σ = 1e-3 below 3× on all three) and one log's coverage
+    87.8–100 %, because the smoothed error of an exact-model log is a slowly
+    varying curve with few independent values."""
+    robot = cached_robot(name)
+    res = simulate(robot, ["ekf"], sensor=Sensor(1000, sigma), inputs="pd", duration=3.0, seed=0)
+    psd = select_accel_psd(
+        robot, _log(res), noise_std=sigma, grid=tuple(10.0 ** np.arange(-14, -3))
+    )
+    s = smooth(robot, _log(res), noise_std=sigma, accel_psd=psd)
+    late = res.t > 0.5
+    rms_s = np.sqrt(np.mean((s.v - res.v)[late] ** 2))
+    rms_f = np.sqrt(np.mean((res.trace("ekf").v - res.v)[late] ** 2))
+    cover = np.mean(np.abs(s.v - res.v)[late] <= 2 * s.v_std[late])
+    assert rms_f / rms_s >= 3.0
+    assert 0.90 <= cover <= 0.98
+
+
+def test_cli_estimate_smooth_writes_estimate_columns_plus_v_std(tmp_path, ur5_log) -> None:
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    rows = slice(1, 301)
+    log = write_log(tmp_path / "log.csv", ur5_log.t[rows], ur5_log.q_meas[rows], ur5_log.tau[rows])
+    out = tmp_path / "est.csv"
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log), "--out", str(out)]
+    assert main([*argv, "--smooth", "--noise", "1e-4", "--lag", "0.05", "--accel-psd", "1e-4"]) == 0
+    header = out.read_text().splitlines()[0].split(",")
+    assert header == [
+        "t",
+        *(f"q{i}" for i in range(6)),
+        *(f"v{i}" for i in range(6)),
+        *(f"v_std{i}" for i in range(6)),
+    ]
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert data.shape == (300, 19)
+    want = smooth(
+        cached_robot("ur5"),
+        (ur5_log.t[rows], ur5_log.q_meas[rows], ur5_log.tau[rows]),
+        noise_std=1e-4,
+        accel_psd=1e-4,
+        lag=0.05,
+    )
+    np.testing.assert_allclose(data[:, 7:13], want.v, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(data[:, 13:], want.v_std, rtol=0, atol=1e-15)
+    assert main([*argv, "--smooth"]) != 0  # no --noise: refused with a message
+
+
+def test_readme_smoothing_table_is_the_committed_benchmark_file() -> None:
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "README.md").read_text()
+    start = text.index("<!-- bench: benchmarks/smoothing.md -->\n") + len(
+        "<!-- bench: benchmarks/smoothing.md -->\n"
+    )
+    shown = text[start : text.index("<!-- end smoothing bench -->")]
+    assert shown == (root / "benchmarks" / "smoothing.md").read_text()
+
+
+def test_auto_accel_psd_needs_the_noise_and_strings_other_than_auto_are_refused(ur5_log) -> None:
+    robot = cached_robot("ur5")
+    with pytest.raises(GainError, match="needs noise_std"):
+        smooth(robot, _log(ur5_log), accel_psd="auto")
+    with pytest.raises(GainError, match="or 'auto'"):
+        smooth(robot, _log(ur5_log), noise_std=1e-4, accel_psd="big")  # type: ignore[arg-type]
+
+
+def test_a_result_is_read_through_its_measurements_not_its_truth(ur5_log) -> None:
+    robot = cached_robot("ur5")
+    from_result = smooth(robot, ur5_log, noise_std=1e-4, accel_psd=1e-2)
+    from_log = smooth(robot, _log(ur5_log), noise_std=1e-4, accel_psd=1e-2)
+    np.testing.assert_array_equal(from_result.v, from_log.v)
+    assert np.isnan(from_result.v[0, 0])  # sample 0 is not measured (its truth is known)

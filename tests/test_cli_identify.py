@@ -1,0 +1,84 @@
+"""pinobs identify and pinobs excite, end to end through main()."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.cli import main
+from pinobs.io import write_log
+from pinobs.simulation import Sensor
+
+
+@pytest.fixture(scope="module")
+def planar_log(tmp_path_factory):
+    robot = pinobs.load("planar_3r")
+    truth = robot.perturbed(
+        inertia_scale=[1.2, 0.8, 1.1],
+        payload=(0.5, [0.05, 0.0, 0.0]),
+        damping=[0.2, 0.1, 0.05],
+        coulomb=[0.1, 0.05, 0.02],
+    )
+    res = pinobs.simulate(
+        robot, [], duration=8.0, sensor=Sensor(rate=1000.0, noise_std=1e-5), seed=1, plant=truth
+    )
+    q = np.array(res.q_meas)
+    q[0] = res.q[0]
+    path = tmp_path_factory.mktemp("logs") / "planar.csv"
+    write_log(path, res.t, q, res.tau)
+    return path, truth
+
+
+def test_identify_writes_a_calibrated_urdf_closer_to_the_truth(
+    planar_log, tmp_path, capsys
+) -> None:
+    log, truth = planar_log
+    out = tmp_path / "calibrated.urdf"
+    assert main(["identify", "--robot", "planar_3r", "--log", str(log), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "condition number" in text and "held-out" in text and "joint1.damping" in text
+    calibrated = pinobs.load(out, friction=True)
+    nominal = pinobs.load("planar_3r")
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        q = nominal.random_configuration(rng)
+        m = truth.mass_matrix(q)
+        assert (
+            np.abs(calibrated.mass_matrix(q) - m).max()
+            < 0.2 * np.abs(nominal.mass_matrix(q) - m).max()
+        )
+    # refuses to overwrite without --force, and refuses a log without torques
+    assert main(["identify", "--robot", "planar_3r", "--log", str(log), "--out", str(out)]) == 2
+    assert "exists" in capsys.readouterr().err
+
+
+def test_identify_refuses_a_log_without_torques_and_writes_nothing(tmp_path, capsys) -> None:
+    robot = pinobs.load("planar_3r")
+    res = pinobs.simulate(robot, [], duration=2.0, seed=0)
+    log = tmp_path / "no_tau.csv"
+    write_log(log, res.t, res.q)
+    out = tmp_path / "x.urdf"
+    assert main(["identify", "--robot", "planar_3r", "--log", str(log), "--out", str(out)]) == 2
+    assert "no torques" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_excite_writes_a_trajectory_within_the_limits_starting_at_rest(tmp_path, capsys) -> None:
+    out = tmp_path / "traj.csv"
+    assert main(["excite", "--robot", "planar_3r", "--duration", "6", "--out", str(out)]) == 0
+    assert "condition number" in capsys.readouterr().out
+    table = np.loadtxt(out, delimiter=",", skiprows=1)
+    header = out.read_text().splitlines()[0].split(",")
+    assert header[:2] == ["t", "q.joint1"] and table.shape == (601, 13)
+    robot = pinobs.load("planar_3r")
+    v = table[:, 4:7]
+    np.testing.assert_allclose(v[0], 0.0, atol=1e-9)
+    lo, hi = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+    q = table[:, 1:4]
+    assert np.all(q >= lo) and np.all(q <= hi)
+    assert np.all(np.abs(v) <= robot.model.velocityLimit)
+    with pytest.raises(pinobs.UnsupportedRobotError):
+        from pinobs.model.excitation import excite
+
+        excite(pinobs.load("top"))

@@ -100,6 +100,23 @@ def _build(
     return built, skipped
 
 
+def _consistency_warnings(observers: dict[str, Observer[Any]]) -> list[str]:
+    """One line per observer whose innovations say the model does not explain the data,
+    and per observer that rejected outlier samples."""
+    out = []
+    for name, ob in observers.items():
+        c = ob.consistency()
+        if c.verdict == "inconsistent":
+            out.append(
+                f"warning: {name}: the model does not explain the data (mean NIS "
+                f"{c.mean_nis:.3g} over the last {c.samples} samples, expected {c.expected:g}); "
+                "check " + "; ".join(c.causes)
+            )
+        if c.gated:
+            out.append(f"note: {name} rejected {c.gated} outlier sample(s)")
+    return out
+
+
 def _run_one(
     robot: Robot,
     names: Sequence[str],
@@ -137,12 +154,16 @@ def _run_one(
     table = format_table(metrics, aba_seconds=aba, title=title)
     if skipped:
         table += "\n" + "\n".join(f"skipped {k}: {v}" for k, v in skipped.items())
+    warnings = _consistency_warnings(observers)
+    if warnings:
+        table += "\n" + "\n".join(warnings)
     report = {
         "robot": robot.name,
         "nv": robot.nv,
         "meta": result.meta,
         "aba_seconds": aba,
         "skipped": skipped,
+        "consistency": {k: ob.consistency().as_dict() for k, ob in observers.items()},
         "rms_v_error": {m.observer: m.rms_v_error for m in metrics},
         "observers": [
             {

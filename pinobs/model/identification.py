@@ -73,7 +73,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
-from scipy.linalg import cho_factor, cho_solve, qr
+from scipy.linalg import qr
 from scipy.signal import savgol_filter
 from threadpoolctl import threadpool_limits
 
@@ -515,10 +515,13 @@ def _solve(
         z = np.abs(res) / sigma
         w = np.where(z <= huber, 1.0, huber / np.maximum(z, 1e-300))
         Aw = As * (w / sigma**2)[:, None]
-        prec_u = Aw.T @ As + eye  # posterior precision in u-units
+        prec_u = Aw.T @ As + eye  # posterior precision in u-units (≥ I)
+        prec_u = 0.5 * (prec_u + prec_u.T)
+        lam, vec = np.linalg.eigh(prec_u)  # by eigenvalues: huge row weights make it stiff
+        lam = np.maximum(lam, 1.0)
         if it < irls:
-            u = np.linalg.solve(prec_u, Aw.T @ r0)
-    cov_u = cho_solve(cho_factor(prec_u), eye)
+            u = vec @ ((vec.T @ (Aw.T @ r0)) / lam)
+    cov_u = (vec / lam) @ vec.T
     std = s * np.sqrt(np.diag(cov_u))
     theta = theta0 + s * u
     theta_c = _consistent(reg, theta, prec_u, s) if consistent else theta

@@ -248,6 +248,7 @@ class Observer(ABC, Generic[State]):
         t_new = self._check_time(t, previous=self._t)
         q = None if q_meas is None else self.robot.check_configuration(q_meas, what="q_meas")
         tau_new = self._check_tau(tau, what="tau")
+        ts_before = self._ts
         if self.latency > 0.0:
             state, t_state, estimate = self._delayed(t_new, q)
         else:
@@ -274,6 +275,9 @@ class Observer(ABC, Generic[State]):
             for i, x in enumerate(self._torques)
             if i + 1 == len(self._torques) or self._torques[i + 1][0] > t_state
         ] + [(t_new, tau_new)]
+        held = next(x for tk, x in reversed(self._torques) if tk <= t_state + TIME_EPS)
+        used = q if t_state > ts_before + TIME_EPS and not estimate.gated else None
+        self._state = self._after_commit(state, t_state, used, held)
         if estimate.nis is not None:
             self._nis.append(estimate.nis)
             self._gated += estimate.gated
@@ -367,6 +371,13 @@ class Observer(ABC, Generic[State]):
         """``(q̂, v̂)`` of a state."""
 
     # -------------------------------------------------------------- helpers
+    def _after_commit(self, state: State, t: float, q: Vector | None, tau: Vector) -> State:
+        """Called once a state is committed: ``t`` its time, ``q`` the sample it used (``None``
+        if none or gated), ``tau`` the torque applied from ``t`` on.  Families that learn from
+        the data do it here (never in :meth:`_step`, which also runs for predictions that are
+        not kept); may return a replacement state.  Default: the state unchanged."""
+        return state
+
     def _innovation(self, state: State) -> tuple[float | None, bool]:
         """``(NIS, gated)`` of the measurement that made ``state`` (families with a covariance)."""
         return None, False

@@ -220,17 +220,30 @@ def _from_frame(
     """A :class:`Log` chunk from a table whose columns follow ``layout``."""
     frame = frame[layout.used].copy()
     _numeric(frame, lines, problems)
-    n = len(frame)
+    arrays = {c: frame[c].to_numpy(dtype=float) for c in layout.used}
+    return _from_arrays(arrays, len(frame), layout, robot, lines, unit, problems)
+
+
+def _from_arrays(
+    arrays: Mapping[str, Vector],
+    n: int,
+    layout: _Layout,
+    robot: Robot,
+    lines: Any,
+    unit: str,
+    problems: list[tuple[int, str]],
+) -> Log:
+    """A :class:`Log` chunk from float columns named as ``layout`` says."""
     q = np.empty((n, robot.nq))
     for cols, angle, sl in zip(layout.q, layout.q_angle, layout.q_slices, strict=True):
         if angle:
-            a = frame[cols[0]].to_numpy(dtype=float)
+            a = arrays[cols[0]]
             q[:, sl] = np.column_stack([np.cos(a), np.sin(a)])
         else:
-            q[:, sl] = frame[list(cols)].to_numpy(dtype=float)
-    tau = None if layout.tau is None else frame[list(layout.tau)].to_numpy(dtype=float)
+            q[:, sl] = np.column_stack([arrays[c] for c in cols])
+    tau = None if layout.tau is None else np.column_stack([arrays[c] for c in layout.tau])
     return Log(
-        t=frame[layout.t].to_numpy(dtype=float),
+        t=np.asarray(arrays[layout.t], dtype=float),
         q=q,
         tau=tau,
         problems=tuple(problems),
@@ -270,10 +283,91 @@ def _undecodable_line(path: Path) -> tuple[int, str]:
     return 0, hint
 
 
+class _Fallback(Exception):
+    """The fast reader met a row it cannot parse: the careful one takes over from ``rows``."""
+
+    def __init__(self, rows: int) -> None:
+        super().__init__(rows)
+        self.rows = rows
+
+
+def _float_column(col: Any) -> Vector:
+    """An Arrow float64 array as a NumPy array, nulls as NaN.
+
+    Read from its buffers: Arrow's own ``to_numpy`` imports pandas (~60 MB).
+    """
+    validity, data = col.buffers()
+    x = np.frombuffer(data, dtype=np.float64, count=len(col), offset=col.offset * 8).copy()
+    if col.null_count:
+        bits = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")
+        x[bits[col.offset : col.offset + len(col)] == 0] = np.nan
+    return x
+
+
+def _open_arrow_csv(
+    pa: Any, pa_csv: Any, path: Path, names: list[str], used: list[str], sep: str, chunk_rows: int
+) -> Any:
+    return pa_csv.open_csv(
+        path,
+        read_options=pa_csv.ReadOptions(
+            column_names=names,
+            skip_rows=1,
+            block_size=max(chunk_rows * 160, 1 << 16),
+            use_threads=False,
+        ),
+        parse_options=pa_csv.ParseOptions(
+            delimiter=sep, quote_char=False, ignore_empty_lines=False
+        ),
+        convert_options=pa_csv.ConvertOptions(
+            column_types={c: pa.float64() for c in used}, include_columns=used
+        ),
+    )
+
+
+def _arrow_csv_chunks(
+    path: Path, header: list[str], layout: _Layout, robot: Robot, sep: str, chunk_rows: int
+) -> Iterator[Log]:
+    """Clean CSV through Arrow's streaming reader (typed float columns, no pandas).
+
+    Any row it cannot parse as numbers (a stray quote, a bad cell, a blank line,
+    a wrong cell count) raises :class:`_Fallback` with the rows already yielded,
+    and :func:`_csv_chunks` re-reads from there with pandas, which reports the
+    cell or names the line.
+    """
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pa_csv
+    except ImportError:  # pragma: no cover - pyarrow is in the io and test extras
+        raise _Fallback(0) from None
+    used = list(dict.fromkeys(layout.used))
+    names = [f"{c}\x00{i}" if c not in used else c for i, c in enumerate(header)]
+    try:
+        reader = _open_arrow_csv(pa, pa_csv, path, names, used, sep, chunk_rows)
+    except (pa.ArrowException, UnicodeDecodeError):
+        raise _Fallback(0) from None
+    start = 0
+    try:
+        while True:
+            try:
+                batch = reader.read_next_batch()
+            except StopIteration:
+                return
+            except (pa.ArrowException, UnicodeDecodeError):
+                raise _Fallback(start) from None
+            for a in range(0, batch.num_rows, chunk_rows):
+                part = batch.slice(a, chunk_rows)
+                n = part.num_rows
+                arrays = {c: _float_column(part.column(c)) for c in used}
+                lines = np.arange(start, start + n) + 2  # line 1 is the header
+                start += n
+                yield _from_arrays(arrays, n, layout, robot, lines, "line", [])
+    finally:
+        reader.close()
+
+
 def _csv_chunks(
     path: Path, robot: Robot, columns: Mapping[str, str] | None, chunk_rows: int
 ) -> Iterator[Log]:
-    pd = _require_pandas()
     line, hint = _undecodable_line(path) if _has_binary_head(path) else (0, "")
     if line:
         raise LogFormatError(f"log {str(path)!r}: line {line} is not UTF-8 text{hint}")
@@ -296,11 +390,18 @@ def _csv_chunks(
     layout = _layout(header, robot, f"log {str(path)!r}")
     if not _has_data_after_header(path):
         return
+    start = 0
+    try:
+        yield from _arrow_csv_chunks(path, header, layout, robot, sep, chunk_rows)
+        return
+    except _Fallback as fb:
+        start = fb.rows
+    pd = _require_pandas()
     reader = pd.read_csv(
         path,
         sep=sep,
         header=None,
-        skiprows=1,
+        skiprows=1 + start,
         encoding="utf-8-sig",
         quoting=csv.QUOTE_NONE,
         skipinitialspace=True,
@@ -308,7 +409,6 @@ def _csv_chunks(
         chunksize=chunk_rows,
         engine="c",
     )
-    start = 0
     try:
         for chunk in reader:
             if chunk.shape[1] != len(header):  # short rows are NaN-padded, long ones raise

@@ -25,6 +25,10 @@ Formats (chosen from the source):
   JointState topic), joints matched by name in any order, ``position`` as q,
   ``effort`` as τ, the header stamp as t.
 
+A clean CSV/TSV is read by Arrow's streaming CSV reader straight into NumPy
+(fast, and without importing pandas); from the first row it cannot parse as
+numbers on, pandas reads the rest and says what is wrong with each row.
+
 Nothing is dropped while reading: a cell that cannot be read becomes NaN and
 is reported in :attr:`Log.problems` with its line (CSV) or row / message
 number (the others); a file that cannot be parsed at all raises

@@ -36,7 +36,7 @@ from pinobs.model import aba_time
 
 
 def make_log(path: Path, minutes: float, seed: int = 0) -> int:
-    robot = pinobs.load("ur5", geometry=False)
+    robot = pinobs.load("ur5")
     rng = np.random.default_rng(seed)
     n = round(minutes * 60 * 1000)
     t = np.arange(1, n + 1) * 1e-3
@@ -74,7 +74,7 @@ def split_times(log: Path, name: str, folder: Path) -> dict[str, float]:
     import pandas  # noqa: F401  (imported before the clock starts)
     import pyarrow.csv  # noqa: F401
 
-    robot = pinobs.load("ur5", geometry=False)
+    robot = pinobs.load("ur5")
     start = time.perf_counter()
     chunks = list(iter_log(log, robot))
     read = time.perf_counter() - start

@@ -36,7 +36,7 @@ if __name__ == "__main__":
     )
     parser.add_argument("--quick", action="store_true", help="kf only")
     args = parser.parse_args()
-    robot = pinobs.load("ur5", geometry=False)
+    robot = pinobs.load("ur5")
     res = pinobs.simulate(robot, [], duration=4.0, sensor=pinobs.Sensor(1000.0, args.sigma), seed=5)
     t, q, tau, v = res.t[1:], res.q_meas[1:], res.tau[1:], res.v[1:]
     df = pd.DataFrame({"t": t, **{f"q{i}": q[:, i] for i in range(6)}})

@@ -9,6 +9,7 @@ from pinobs.errors import (
     ConfigurationError,
     DimensionError,
     GainError,
+    IdentificationError,
     LogFormatError,
     ModelError,
     ModelFileError,
@@ -28,7 +29,8 @@ from pinobs.errors import (
 from pinobs.evaluation import Metrics, evaluate
 from pinobs.io import estimate
 from pinobs.model import Robot, load, robot_names
-from pinobs.observers import Estimate, Observer, make_observer, observer_names
+from pinobs.model.identification import Identification, identify
+from pinobs.observers import Consistency, Estimate, Observer, make_observer, observer_names
 from pinobs.observers.smoothing import Smoothed, smooth
 from pinobs.simulation import Result, Sensor, simulate
 
@@ -36,9 +38,12 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ConfigurationError",
+    "Consistency",
     "DimensionError",
     "Estimate",
     "GainError",
+    "Identification",
+    "IdentificationError",
     "LogFormatError",
     "Metrics",
     "ModelError",
@@ -62,6 +67,7 @@ __all__ = [
     "UnsupportedRobotError",
     "estimate",
     "evaluate",
+    "identify",
     "load",
     "make_observer",
     "observer_names",

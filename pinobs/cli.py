@@ -28,6 +28,7 @@ import numpy as np
 from pinobs.errors import (
     DimensionError,
     GainError,
+    OptionError,
     OutputExistsError,
     PinobsError,
     UnsupportedRobotError,
@@ -36,7 +37,14 @@ from pinobs.evaluation import evaluate, format_table
 from pinobs.io import process_log, read_log
 from pinobs.model import Robot, aba_time, load, robot_entries
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
-from pinobs.simulation import INPUT_NAMES, Result, Sensor, mismatched_plant, simulate
+from pinobs.simulation import (
+    INPUT_NAMES,
+    MISMATCH_SCENARIOS,
+    Result,
+    Sensor,
+    mismatched_plant,
+    simulate,
+)
 
 __all__ = ["main", "observer_table"]
 
@@ -316,7 +324,7 @@ def _column_map(items: Sequence[str] | None) -> dict[str, str] | None:
 def _cmd_estimate(args: argparse.Namespace) -> int:
     if args.smooth:
         return _estimate_smoothed(args)
-    robot = load(args.robot, root_joint=args.root_joint, geometry=bool(args.html))
+    robot = load(args.robot, root_joint=args.root_joint)
     columns = _column_map(args.map)
     keep = bool(args.html)
     with _progress(f"{robot.name}: {args.observer}", not args.no_progress) as progress:
@@ -528,6 +536,70 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _parse_seeds(spec: str) -> list[int]:
+    """``"0-4"`` -> 0..4, ``"0,3,7"`` -> those."""
+    seeds: list[int] = []
+    for part in spec.split(","):
+        lo, _, hi = part.strip().partition("-")
+        try:
+            seeds.extend(range(int(lo), int(hi or lo) + 1))
+        except ValueError:
+            raise OptionError(f"--seeds {spec!r}: give '0-9' or '0,3,7'") from None
+    return seeds
+
+
+def _parse_sweep_observers(spec: str) -> dict[str, tuple[str, dict[str, Any]]]:
+    """``"kf,ekf+d=ekf:disturbance_psd=1"``: a name, or ``label=name:key=value;key=value``."""
+    out: dict[str, tuple[str, dict[str, Any]]] = {}
+    for item in spec.split(","):
+        label, eq, rest = item.strip().partition("=")
+        name, _, opts = (rest if eq else label).partition(":")
+        options: dict[str, Any] = {}
+        for kv in filter(None, opts.split(";")):
+            key, _, value = kv.partition("=")
+            try:
+                options[key] = float(value)
+            except ValueError:
+                options[key] = value
+        observer_class(name)  # an unknown name: UnknownNameError listing the registered ones
+        out[label] = (name, options)
+    return out
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from pinobs.evaluation.distributed import sweep, sweep_tasks, write_sweep
+
+    tasks = sweep_tasks(
+        [r.strip() for r in args.robots.split(",")],
+        [s.strip() for s in args.scenarios.split(",")],
+        _parse_seeds(args.seeds),
+        _parse_sweep_observers(args.observers),
+        duration=args.duration,
+        rate=args.rate,
+        noise_std=args.noise,
+    )
+    where = args.scheduler or f"a local cluster ({args.workers or 'one worker per core'})"
+    print(f"pinobs sweep: {len(tasks)} runs on {where}")
+    with _progress("sweep", not args.no_progress) as progress:
+        # _progress redraws every 100th step: count in hundredths of a run
+        step = None if progress is None else (lambda k, n: progress(100 * k, 100 * n))
+        table = sweep(tasks, scheduler=args.scheduler, workers=args.workers, progress=step)
+    failed = table[table["error"].notna()]
+    for _, row in failed.drop_duplicates(["robot", "scenario", "seed"]).iterrows():
+        print(f"failed: {row['robot']} {row['scenario']} seed {row['seed']}: {row['error']}")
+    summary = (
+        table[table["error"].isna()]
+        .groupby(["robot", "scenario", "observer"])["rms_v_error"]
+        .median()
+        .unstack("observer")
+    )
+    print("median RMS velocity error [rad/s] over seeds:")
+    print(summary.to_string(float_format=lambda x: f"{x:.3g}"))
+    for path in write_sweep(table, args.out):
+        print(f"wrote {path}")
+    return 0 if failed.empty else 1
+
+
 # ------------------------------------------------------------------ parser
 def _add_sim_options(p: argparse.ArgumentParser, *, duration: float) -> None:
     p.add_argument(
@@ -727,6 +799,37 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="two robots, short runs: under two minutes")
     p.add_argument("--json", default=None, help="write the full report to this JSON file")
     p.set_defaults(func=_cmd_bench)
+
+    p = sub.add_parser(
+        "sweep",
+        help="robots × scenarios × seeds × observer options on Dask: a tidy table and a plot",
+    )
+    p.add_argument("--robots", default="ur5", help="comma-separated (default %(default)s)")
+    p.add_argument(
+        "--scenarios",
+        default="exact",
+        help="mismatch scenarios, comma-separated: " + ", ".join(MISMATCH_SCENARIOS),
+    )
+    p.add_argument("--seeds", default="0-4", help="'0-9' or '0,3,7' (default %(default)s)")
+    p.add_argument(
+        "--observers",
+        default="ekf,kf",
+        help="names, or label=name:key=value;key=value (e.g. 'ekf+d=ekf:disturbance_psd=1')",
+    )
+    p.add_argument("--out", default="sweep", help="output folder (default %(default)s)")
+    p.add_argument("--workers", type=int, default=None, help="local worker processes")
+    p.add_argument(
+        "--scheduler", default=None, help="address of a running Dask scheduler (tcp://host:8786)"
+    )
+    p.add_argument("--duration", type=float, default=3.0, help="per run [s] (default %(default)s)")
+    p.add_argument(
+        "--rate", type=float, default=1000.0, help="sample rate [Hz] (default %(default)s)"
+    )
+    p.add_argument(
+        "--noise", type=float, default=1e-4, help="position noise std (default %(default)s)"
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_sweep)
 
     p = sub.add_parser(
         "demo",

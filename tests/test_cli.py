@@ -140,3 +140,30 @@ def test_meshcat_flag_serves_and_stops_on_end_of_input(monkeypatch, tmp_path: Pa
         == 0
     )
     assert served == ["pendulum", "closed"]
+
+
+def test_sweep_writes_a_table_and_reports_a_failed_run(tmp_path, capsys) -> None:
+    pytest.importorskip("dask.distributed")
+    pytest.importorskip("pandas")
+    code = main(
+        [
+            "sweep",
+            "--robots",
+            "pendulum,no_such_robot",
+            "--seeds",
+            "0-1",
+            "--observers",
+            "kf,ekf+d=ekf:disturbance_psd=1",
+            "--duration",
+            "0.2",
+            "--workers",
+            "1",
+            "--no-progress",
+            "--out",
+            str(tmp_path),
+        ]
+    )
+    out = capsys.readouterr().out
+    assert code == 1  # one robot does not exist: its runs fail alone, the others are reported
+    assert "failed: no_such_robot exact seed 0" in out and "ekf+d" in out
+    assert any(p.name.startswith("sweep.") for p in tmp_path.iterdir())

@@ -48,3 +48,12 @@ def test_readme_benchmark_section_is_the_committed_results_file() -> None:
     assert m is not None
     results = (README.parent / "benchmarks" / "results.md").read_text()
     assert m.group(1) == results, "paste benchmarks/results.md into the README's benchmark section"
+
+
+def test_readme_learning_section_is_the_committed_results_file() -> None:
+    m = re.search(
+        r"<!-- learning: benchmarks/learning.md -->\n(.*?)<!-- end learning -->", _text(), re.S
+    )
+    assert m is not None
+    results = (README.parent / "benchmarks" / "learning.md").read_text()
+    assert m.group(1) == results, "paste benchmarks/learning.md into the README's learning section"

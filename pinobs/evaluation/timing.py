@@ -6,6 +6,7 @@ import time
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from pinobs.model import aba_call
 from pinobs.observers import Observer
@@ -13,6 +14,7 @@ from pinobs.observers import Observer
 __all__ = ["measure_cost"]
 
 
+@threadpool_limits.wrap(limits=1, user_api="blas")  # as simulate: small matrices
 def measure_cost(
     observer: Observer[Any],
     *,
@@ -32,7 +34,8 @@ def measure_cost(
     under the same machine load, a millisecond apart.  A chunk's time is a
     mean, so work an observer does every k-th sample (k dividing ``chunk``;
     ``riemannian``'s Jacobi operator, every 10th) counts at its amortised
-    share.  The reported ratio is the median over the chunks.
+    share.  The reported ratio is the median over the chunks.  BLAS runs on
+    one thread during the measurement (as in :func:`pinobs.simulate`).
 
     Returns:
         ``{"update_s": ..., "aba_s": ..., "ratio": ...}`` (medians over the chunks).

@@ -73,9 +73,6 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
-from scipy.linalg import qr
-from scipy.signal import savgol_filter
-from threadpoolctl import threadpool_limits
 
 from pinobs.errors import DimensionError, IdentificationError
 from pinobs.model.robot import Robot, Vector
@@ -281,21 +278,14 @@ class MomentumRegressor:
             coulomb[list(self.actuated)] = theta[n0 + n : n0 + 2 * n]
             model.damping, model.friction = damping, coulomb
             friction = True
-        return Robot(
-            model,
-            name=name or f"{self.robot.name}*",
-            source=self.robot.source,
-            visual_model=self.robot.visual_model,
-            collision_model=self.robot.collision_model,
-            friction=friction,
-            root_joint=self.robot.root_joint,
-        )
+        # same geometry, shared and never loaded here (with_model)
+        return self.robot.with_model(model, name=name or f"{self.robot.name}*", friction=friction)
 
     def offsets(self, theta: Vector) -> Vector:
         """The torque offset ``b`` per velocity coordinate (zero where none is identified)."""
         out = np.zeros(self.robot.nv)
-        if self.offset:
-            out[list(self.actuated)] = theta[-self.n_joint :]
+        if self.offset and self.n_joint:
+            out[list(self.actuated)] = theta[len(theta) - self.n_joint :]
         return out
 
     # ---------------------------------------------------------------- rows
@@ -402,6 +392,8 @@ def smooth_path(
     (``scipy.signal.savgol_filter``), giving ``v = u̇`` and
     ``q_s = q_k ⊕ (û_k − u_k)``.  Near the ends the fit is the edge polynomial.
     """
+    from scipy.signal import savgol_filter  # lazily: import pinobs stays light
+
     n = t.shape[0]
     length = 2 * half_window + 1
     if n < length:
@@ -476,6 +468,8 @@ def solve(
     """
     if A.shape[0] == 0:
         raise IdentificationError("no complete window of data: the log is too short")
+    from threadpoolctl import threadpool_limits  # lazily: import pinobs stays light
+
     # small dense problems: one BLAS thread is 4x faster than two fighting over a busy machine
     with threadpool_limits(1):
         return _solve(reg, A, y, theta0, prior_std, irls, huber, consistent)
@@ -495,6 +489,8 @@ def _solve(
     s = reg.prior_std() if prior_std is None else prior_std
     As = A * s  # columns in prior units: u = (θ − θ₀)/s
     r0 = y - A @ theta0
+    from scipy.linalg import qr  # lazily: import pinobs stays light
+
     # identifiable combinations: pivoted QR of the prior-scaled rows
     _, R, piv = qr(As, mode="economic", pivoting=True)
     diag = np.abs(np.diag(R))
@@ -603,7 +599,7 @@ def _consistent(reg: MomentumRegressor, theta: Vector, prec_u: Vector, s: Vector
             except np.linalg.LinAlgError:
                 return None
             val -= 2.0 * float(np.sum(np.log(np.diag(c))))
-            Ji = np.linalg.inv(J)
+            Ji = np.linalg.inv(c).T @ np.linalg.inv(c)  # J⁻¹ from the factor (J ≻ 0 here)
             JE = np.einsum("ab,ibc->iac", Ji, E[k])  # J⁻¹ E_i
             sl = slice(10 * k, 10 * k + 10)
             grad[sl] -= np.einsum("iaa->i", JE)  # −tr(J⁻¹E_i)

@@ -33,7 +33,7 @@ import pinocchio as pin
 
 from pinobs.model.robot import Robot, Vector
 
-__all__ = ["dynamics_rk4", "lie_rk4"]
+__all__ = ["dynamics_rk4", "lie_rk4", "rk4_stage_matrices"]
 
 Rhs = Callable[[Vector, Vector], tuple[Vector, Vector]]
 
@@ -51,8 +51,10 @@ def lie_rk4(robot: Robot, q: Vector, x: Vector, h: float, rhs: Rhs) -> tuple[Vec
     exact_frame = not robot.has_lie_group_joints
 
     def xi_dot(xi: Vector, u: Vector) -> Vector:
-        if exact_frame or not np.any(xi):
+        if exact_frame or not xi.any():
             return u
+        if isinstance(robot, Robot):  # joint by joint, closed forms
+            return robot.integrate_jacobian_solve(q, xi, u)
         return np.linalg.solve(robot.integrate_jacobian(q, xi), u)
 
     zero = np.zeros(robot.nv)
@@ -73,7 +75,7 @@ def lie_rk4(robot: Robot, q: Vector, x: Vector, h: float, rhs: Rhs) -> tuple[Vec
 
 
 @lru_cache(maxsize=16)
-def _rk4_stage_matrices(h: float) -> tuple[Vector, Vector, Vector, Vector]:
+def rk4_stage_matrices(h: float) -> tuple[Vector, Vector, Vector, Vector]:
     """Rows ``(q_i, v_i)`` of the stages in the basis ``(q, v, a₁, a₂, a₃, a₄)`` (module docstring)."""
     hh, h2 = 0.5 * h, h * h
     out = (
@@ -113,7 +115,7 @@ def dynamics_rk4(
         return lie_rk4(robot, q, v, h, rhs)
     if isinstance(robot, Robot) and not robot.has_friction:  # the call, without the method
         fd = partial(pin.aba, robot.model, robot._data)  # the robot's own data (same layer)
-    c2, c3, c4, c_out = _rk4_stage_matrices(float(h))
+    c2, c3, c4, c_out = rk4_stage_matrices(float(h))
     b = np.empty((6, q.shape[0]))
     b[0], b[1] = q, v
     b[2] = fd(q, v, tau) if acc0 is None else acc0

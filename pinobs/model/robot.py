@@ -24,6 +24,7 @@ Conventions (Pinocchio's, see ``../shared/MATH.md`` §1-3):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,6 +38,10 @@ from pinobs.tolerances import COULOMB_SMOOTHING_VELOCITY, QUATERNION_NORM_TOL
 __all__ = ["JointBlock", "Robot", "read_only"]
 
 Vector = NDArray[np.floating[Any]]
+#: Builds ``(visual, collision)`` geometry for a model, on demand (a picklable callable).
+GeometryLoader = Callable[
+    [pin.Model], tuple["pin.GeometryModel | None", "pin.GeometryModel | None"]
+]
 
 
 @dataclass(frozen=True)
@@ -90,8 +95,10 @@ class Robot:
         model: the Pinocchio model (gravity included).
         name: short name (registry name or file stem).
         source: where the model came from (registry name or file path).
-        visual_model: Pinocchio visual geometry, or ``None``.
-        collision_model: Pinocchio collision geometry, or ``None``.
+        visual_model: Pinocchio visual geometry, or ``None``; built on first
+            access when the robot came with a ``geometry`` loader (meshes are
+            slow to load and large: only drawing needs them).
+        collision_model: Pinocchio collision geometry, or ``None`` (same).
         friction: whether the model's joint friction (URDF ``<dynamics>``) is
             part of the dynamics (:meth:`friction_torque`).
         has_friction: whether that friction is nonzero.
@@ -109,13 +116,16 @@ class Robot:
         collision_model: pin.GeometryModel | None = None,
         friction: bool = False,
         root_joint: str | None = None,
+        geometry: GeometryLoader | None = None,
     ) -> None:
         self.model = model
         self.root_joint = root_joint
         self.name = name
         self.source = source
-        self.visual_model = visual_model
-        self.collision_model = collision_model
+        self._geometry_loader = geometry
+        self._geometry: tuple[Any, Any] | None = None  # (visual, collision) once built or given
+        if visual_model is not None or collision_model is not None or geometry is None:
+            self._geometry = (visual_model, collision_model)
         self._data = model.createData()
         # Joint friction from the URDF <dynamics damping="…" friction="…"/> tags (Pinocchio
         # loads them into model.damping / model.friction but its ABA ignores them).
@@ -155,6 +165,57 @@ class Robot:
         self._vector_space = model.nq == model.nv and all(b.kind == "vector" for b in self.joints)
         self._lower = np.tril_indices(model.nv, -1)  # where Pinocchio may leave M⁻¹ unfilled
 
+    # ---------------------------------------------------------------- geometry
+    @property
+    def visual_model(self) -> Any:
+        """Pinocchio visual geometry (``pin.GeometryModel``) or ``None``, built on first access."""
+        return self._geometry_models()[0]
+
+    @visual_model.setter
+    def visual_model(self, value: Any) -> None:
+        self._geometry = (value, self._geometry_models()[1])
+
+    @property
+    def collision_model(self) -> Any:
+        """Pinocchio collision geometry (``pin.GeometryModel``) or ``None``, built on first access."""
+        return self._geometry_models()[1]
+
+    @collision_model.setter
+    def collision_model(self, value: Any) -> None:
+        self._geometry = (self._geometry_models()[0], value)
+
+    def _geometry_models(self) -> tuple[Any, Any]:
+        if self._geometry is None:
+            loader = self._geometry_loader
+            self._geometry = (None, None) if loader is None else loader(self.model)
+        return self._geometry
+
+    def _geometry_kwargs(self) -> dict[str, Any]:
+        """What a copy needs to share this robot's geometry, loaded or not."""
+        if self._geometry is None:
+            return {"geometry": self._geometry_loader}
+        return {
+            "visual_model": self._geometry[0],
+            "collision_model": self._geometry[1],
+            "geometry": self._geometry_loader,
+        }
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without ``pin.Data`` (rebuilt) and, when a loader can rebuild it, without
+        the geometry (meshes: a UR5's is 187 MB): it is reloaded on first access."""
+        state = self.__dict__.copy()
+        for k in ("_data", "_free_data"):
+            del state[k]
+        if self._geometry_loader is not None:
+            state["_geometry"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._data = self.model.createData()
+        self._free_data = self._free.createData()
+        self._zero_nv.setflags(write=False)  # (pickle does not keep the flag)
+
     # ------------------------------------------------------------------ basics
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, nq={self.nq}, nv={self.nv})"
@@ -186,14 +247,21 @@ class Robot:
 
     def copy(self) -> Robot:
         """The same model with fresh ``pin.Data`` (for another consumer)."""
+        return self.with_model(self.model.copy())
+
+    def with_model(
+        self, model: pin.Model, *, name: str | None = None, friction: bool | None = None
+    ) -> Robot:
+        """This robot on another ``pin.Model`` of the same tree (perturbed or identified
+        parameters): same source, root joint and geometry (shared, loaded or not: building
+        one never loads meshes); friction as this robot's unless given."""
         return Robot(
-            self.model.copy(),
-            name=self.name,
+            model,
+            name=self.name if name is None else name,
             source=self.source,
-            visual_model=self.visual_model,
-            collision_model=self.collision_model,
-            friction=self.friction,
+            friction=self.friction if friction is None else friction,
             root_joint=self.root_joint,
+            **self._geometry_kwargs(),
         )
 
     def perturbed(
@@ -245,15 +313,7 @@ class Robot:
                 coulomb if coulomb is not None else np.zeros(self.nv), dtype=float
             )
             friction = True
-        return Robot(
-            model,
-            name=name or f"{self.name}~",
-            source=self.source,
-            visual_model=self.visual_model,
-            collision_model=self.collision_model,
-            friction=friction,
-            root_joint=self.root_joint,
-        )
+        return self.with_model(model, name=name or f"{self.name}~", friction=friction)
 
     # ------------------------------------------------------------- validation
     def check_configuration(self, q: ArrayLike, *, what: str = "q") -> Vector:
@@ -328,6 +388,27 @@ class Robot:
         The identity for vector and continuous joints; block-diagonal otherwise.
         """
         return np.array(pin.dIntegrate(self.model, q, xi, pin.ArgumentPosition.ARG1), dtype=float)
+
+    def integrate_jacobian_solve(self, q: Vector, xi: Vector, u: Vector) -> Vector:
+        """``(∂(q ⊕ ξ)/∂ξ)⁻¹ u``, the solve of :meth:`integrate_jacobian`, joint by joint.
+
+        The Jacobian is the identity outside spherical, free-flyer and planar
+        joints; inside them it is the block ``Jexp(ξ)`` (Pinocchio's
+        ``Jexp3``/``Jexp6``), solved block by block: small solves instead of
+        one ``nv × nv`` solve (go1: 18 × 18).  (``Jlog(exp ξ)`` would avoid
+        the solve but Pinocchio's loses up to 1e-9 near small angles.)
+        """
+        out = np.array(u, dtype=float)
+        for b in self._bracket_blocks:
+            s = slice(b.idx_v, b.idx_v + b.nv)
+            if b.kind == "so3":
+                jac = pin.Jexp3(xi[s])
+            elif b.kind == "se3":
+                jac = pin.Jexp6(xi[s])
+            else:
+                jac = self.integrate_jacobian(q, xi)[s, s]
+            out[s] = np.linalg.solve(jac, u[s])
+        return out
 
     def normalize(self, q: Vector) -> Vector:
         """``q`` with its quaternions and ``(cos, sin)`` pairs projected to unit norm."""

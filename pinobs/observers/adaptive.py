@@ -38,17 +38,25 @@ Three parts, each on code shared with the rest of pinobs:
    explains the rows better than the current model by more than fitting
    noise would: the robust (Huber) loss must drop by more than
    ``r + 3√r`` (``r`` the number of identifiable combinations; the expected
-   drop from fitting pure noise is ``r/2``).  When a model is
+   drop from fitting pure noise is ``r/2``), and only if the filter's
+   innovations say the current model does not explain the data (running
+   mean NIS above twice its expectation; a model that explains the data is
+   not replaced: velocities smoothed from the samples carry a bias that a
+   fit would otherwise chase).  When a model is
    installed the offset state ``d`` is set to zero (the new model explains
    what it was absorbing).  A trajectory that does not excite a parameter
    cannot teach it: such parameters stay at their nominal values
    (:meth:`parameters` marks them).
 
-3. **Never behind**: a per-joint constant-acceleration Kalman filter
-   (:class:`~pinobs.observers.kf.ConstantAccelerationKF`) runs beside it.
-   Per velocity coordinate ``i`` its variance ``P_kf`` is known (its
-   covariance); the model-based error variance is estimated from the recent
-   disagreement ``e = v̂_model − v̂_kf``,
+3. **Never behind**: a bank of per-joint constant-acceleration Kalman filters
+   (:class:`~pinobs.observers.kf.ConstantAccelerationKF`, white-jerk
+   densities ``jerk_psd`` = 1e1 … 1e5, the range a user would tune over)
+   runs beside it; per velocity coordinate the one with the smallest running
+   mean squared innovation (the one-step prediction error, which the best
+   model minimises; averaged over ``blend_time``) is the model-free estimate
+   ``v̂_kf``, and its covariance gives its variance ``P_kf``.  The
+   model-based error variance is estimated from the recent disagreement
+   ``e = v̂_model − v̂_kf``,
    ``s_i ← s_i + (h/T_b)(max(e_i² − P_kf, 0) − s_i)`` (``T_b`` = ``blend_time``),
    and the output is the inverse-variance blend
 
@@ -76,7 +84,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from pinobs.errors import IdentificationError, UnsupportedRobotError
+from pinobs.errors import GainError, IdentificationError, UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.model.identification import MomentumRegressor, ParameterSet, smooth_path, solve
 from pinobs.observers.base import Consistency, Vector, positive, register
@@ -90,7 +98,8 @@ __all__ = ["AdaptiveEKF"]
 
 class _State(NamedTuple):
     ekf: _EKFState
-    kf: _KFState
+    kf: tuple[_KFState, ...]  # one per white-jerk density of the bank
+    score: Vector  # (filters, nv): running mean squared innovation of each kf per coordinate
     t: float
     s: Vector  # estimated model-based velocity error variance per coordinate [rad²/s²]
     q: Vector  # blended output
@@ -134,9 +143,11 @@ class _Learner:
         self.history: list[tuple[float, float]] = []  # (loss of the current model, of the solve)
         self.rejected: list[str] = []
 
-    def add(self, t: float, q: Vector | None, tau: Vector) -> bool:
+    def add(self, t: float, q: Vector | None, tau: Vector, *, explained: bool = False) -> bool:
         """Add the sample ``q`` taken at ``t`` and the torque ``tau`` applied from ``t`` on
-        (``q`` None: no sample, nothing added); returns True when a new model was solved for."""
+        (``q`` None: no sample, nothing added); returns True when a new model was solved for.
+        ``explained``: the filter's innovations say the current model explains the data
+        (then a solve only validates it)."""
         if q is None:
             return False  # a lost sample shows as a gap in the times below
         if self.buf and abs(t - self.buf[-1][0] - self.h) > 0.1 * self.h:
@@ -158,10 +169,10 @@ class _Learner:
                 self.buf.popleft()
         if t >= self.next_solve and len(self.rows) >= 2:
             self.next_solve = t + self.resolve_every
-            return self._solve()
+            return self._solve(explained)
         return False
 
-    def _solve(self) -> bool:
+    def _solve(self, explained: bool = False) -> bool:
         A = np.vstack([r[0] for r in self.rows])
         y = np.concatenate([r[1] for r in self.rows])
         try:
@@ -195,7 +206,7 @@ class _Learner:
         self.solves += 1
         self.validated = True
         self.std, self.excited = sol.std, sol.excited
-        if drop <= sol.rank + 3.0 * np.sqrt(sol.rank):
+        if explained or drop <= sol.rank + 3.0 * np.sqrt(sol.rank):
             self.last_drop = float(drop)
             if self.theta is None:
                 self.theta = current
@@ -236,7 +247,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             nothing better than the nominal model (the exact-model regime of ``ekf``).
         blend: blend with the model-free ``kf`` (never behind it).
         blend_time: averaging time of the disagreement [s].
-        jerk_psd: the ``kf``'s white-jerk density [rad²/s⁵].
+        jerk_psd: the white-jerk densities of the ``kf`` bank [rad²/s⁵] (module docstring).
         q0_std, v0_std, d0_std: initial standard deviations (as in ``ekf``).
         outlier_probability: the outlier gate (as in ``ekf``; the ``kf`` skips what it rejects).
         rate: sample rate [Hz] (needed: the identification windows are counted in samples).
@@ -266,7 +277,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         validated_disturbance_psd: float = 1e-8,
         blend: bool = True,
         blend_time: float = 0.2,
-        jerk_psd: float = 1e3,
+        jerk_psd: tuple[float, ...] = (1e1, 1e2, 1e3, 1e4, 1e5),
         q0_std: float = 0.1,
         v0_std: float = 1.0,
         d0_std: float = 1.0,
@@ -315,7 +326,15 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             raise UnsupportedRobotError(f"robot {robot.name!r} has no dynamic parameter to learn")
         self.blend = bool(blend)
         self.blend_time = float(blend_time)
-        self._kf = ConstantAccelerationKF(robot, jerk_psd=jerk_psd, rate=rate, noise_std=noise_std)
+        try:
+            jerks = tuple(float(positive("jerk_psd", j) or 0.0) for j in jerk_psd)
+        except TypeError:
+            raise GainError(f"jerk_psd={jerk_psd!r} must be a sequence of numbers > 0") from None
+        if not jerks:
+            raise GainError("jerk_psd needs at least one density")
+        self._kfs = tuple(
+            ConstantAccelerationKF(robot, jerk_psd=j, rate=rate, noise_std=noise_std) for j in jerks
+        )
         self._offset: Vector = np.zeros(self.robot.nv)
         self._warmup_psd = float(warmup_accel_psd)
         self._learned_d_psd = float(learned_disturbance_psd)
@@ -339,7 +358,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             "validated_disturbance_psd": self._regimes["nominal"][1],
             "blend": self.blend,
             "blend_time": self.blend_time,
-            "jerk_psd": self._kf.gains.jerk_psd,
+            "jerk_psd": [k.gains.jerk_psd for k in self._kfs],
         }
 
     # ---------------------------------------------------------------- learning
@@ -408,43 +427,69 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         self.regime = "warmup"
         self._m_bar2 = np.diag(self._nominal.mass_matrix(q0)) ** 2
         ekf = super()._initial_state(q0, v0)
-        kf = self._kf._initial_state(q0, v0)
+        kf = tuple(k._initial_state(q0, v0) for k in self._kfs)
+        score = np.zeros((len(kf), self.robot.nv))
         s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
-        return _State(ekf, kf, 0.0, s, q0.copy(), v0.copy())
+        return _State(ekf, kf, score, 0.0, s, q0.copy(), v0.copy())
+
+    def _model_free(self, state: _State) -> tuple[Vector, Vector, Vector]:
+        """Per coordinate, the bank's ``kf`` with the smallest running innovation:
+        ``(its v, its velocity variance, its tangent offset from the EKF's q̂)``."""
+        best = np.argmin(state.score, axis=0)
+        cols = np.arange(self.robot.nv)
+        v = np.array([k.v for k in state.kf])[best, cols]
+        p = np.array([k.P[1, 1] for k in state.kf])[best]
+        dq = np.array([self.robot.difference(state.ekf.q, k.q) for k in state.kf])[best, cols]
+        return v, p, dq
 
     def _weights(self, state: _State) -> Vector:
         if not self.blend:
             return np.ones(self.robot.nv)
-        p_kf = state.kf.P[1, 1]
+        p_kf = self._model_free(state)[1]
         return p_kf / (p_kf + state.s + 1e-300)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
         ekf = state.ekf
         ekf = super()._step(ekf, dt, q_meas, tau + self._offset)
-        kf = self._kf._step(state.kf, dt, None if ekf.gated else q_meas, tau)  # one gate for both
-        s = state.s
-        if self.blend:
-            e = ekf.v - kf.v
-            lam = min(1.0, dt / self.blend_time)
-            # disagreement is the model's fault only when its innovations say so (NIS̄ > 2 nv)
-            nv = self.robot.nv
-            level = float(nv) if ekf.nis_level is None else ekf.nis_level
-            blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
-            s = s + lam * (blame * np.maximum(e * e - kf.P[1, 1], 0.0) - s)
         t = state.t + dt
-        new = _State(ekf, kf, t, s, ekf.q, ekf.v)
-        if self.blend:
-            w = self._weights(new)
-            v = w * ekf.v + (1.0 - w) * kf.v
-            q = self.robot.integrate(ekf.q, (1.0 - w) * self.robot.difference(ekf.q, kf.q))
-            new = new._replace(q=q, v=v)
-        return new
+        if not self.blend:
+            return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v)
+        meas = None if ekf.gated else q_meas  # one gate for every filter
+        kf = tuple(k._step(x, dt, meas, tau) for k, x in zip(self._kfs, state.kf, strict=True))
+        score = state.score
+        lam = min(1.0, dt / self.blend_time)
+        if meas is not None:
+            # innovation from the corrected state: r = (1 − K₀) e, and K₀ = P⁺₀₀ / R
+            r_var = self._kfs[0].gains.meas_std ** 2
+            e = np.array(
+                [self.robot.difference(x.q, meas) / max(1.0 - x.P[0, 0] / r_var, 1e-12) for x in kf]
+            )
+            score = score + lam * (e * e - score)
+        new = _State(ekf, kf, score, t, state.s, ekf.q, ekf.v)
+        v_kf, p_kf, dq_kf = self._model_free(new)
+        # disagreement is the model's fault only when its innovations say so (NIS̄ > 2 nv)
+        nv = self.robot.nv
+        level = float(nv) if ekf.nis_level is None else ekf.nis_level
+        blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
+        d = ekf.v - v_kf
+        s = state.s + lam * (blame * np.maximum(d * d - p_kf, 0.0) - state.s)
+        w = p_kf / (p_kf + s + 1e-300)
+        v = w * ekf.v + (1.0 - w) * v_kf
+        q = self.robot.integrate(ekf.q, (1.0 - w) * dq_kf)
+        return new._replace(s=s, q=q, v=v)
 
     def _after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
         """Teach the learner the committed sample (with the torque held from it on, MATH §7);
         install a new model or leave the warm-up when a solve says so."""
         ekf = state.ekf
-        if self._learner.add(t, q, tau):
+        level = float(self.robot.nv) if ekf.nis_level is None else ekf.nis_level
+        # the first solve only ends the warm-up: the nominal model gets its chance with the
+        # exact-model densities, and its innovations decide at the next solve
+        # (a learned model is refined at every solve; only the nominal one is protected)
+        explained = self.regime == "warmup" or (
+            self.regime == "nominal" and level <= _NIS_TRUSTED * self.robot.nv
+        )
+        if self._learner.add(t, q, tau, explained=explained):
             ekf = self._install(ekf)
         elif self._learner.validated and self.regime == "warmup":
             ekf = self._set_regime(ekf, "nominal")  # the nominal model explains the data

@@ -113,7 +113,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg import expm, solve_continuous_lyapunov
 
 from pinobs.errors import GainError
 from pinobs.model import Robot, lie_rk4
@@ -186,6 +185,8 @@ def _velocity_noise_coefficient(n: int) -> float:
     A = chain_matrix(n)
     g = steady_gains(n, 1.0)
     F = A - np.outer(g, np.eye(n)[0])
+    from scipy.linalg import solve_continuous_lyapunov  # lazy: 0.2 s at import
+
     X = solve_continuous_lyapunov(F, -np.outer(g, g))
     return float(X[1, 1])
 
@@ -308,6 +309,7 @@ class HighGainDifferentiator(Observer[_HGState]):
         self._L_scale = float(np.max(np.abs(self._L_inf)))
         self._k_inf = np.linalg.solve(self._L_inf, self._c)
         self._foh_cache: dict[float, tuple[Vector, Vector, Vector]] = {}
+        import scipy.linalg  # noqa: F401  (lazy for `import pinobs`, here for the first update)
 
     @property
     def options(self) -> dict[str, object]:
@@ -418,6 +420,8 @@ class HighGainDifferentiator(Observer[_HGState]):
             aug[:n, :n] = chain_matrix(n) - np.outer(self._k_inf, self._c)
             aug[:n, n] = self._k_inf
             aug[n, n + 1] = 1.0
+            from scipy.linalg import expm  # lazy (imported by the constructor already)
+
             E = expm(aug * dt)
             cached = (E[:n, :n], E[:n, n], E[:n, n + 1])
             if len(self._foh_cache) >= 16:

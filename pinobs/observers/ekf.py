@@ -26,6 +26,15 @@ the covariance by the linearised error dynamics, to first order in ``δx``:
 ``Q_d`` is the white-acceleration covariance of a double integrator, the
 leading term of Van Loan's integral when ``‖A h‖ ≪ 1``.
 
+Implementation (issue 18).  One ``pin.computeABADerivatives`` per update gives
+``A`` and the first RK4 stage; ``A`` lives in a preallocated buffer whose
+constant blocks are written once; ``Q_d`` is cached per sample interval.  For
+``nv ≤ 12`` the Joseph update and ``Φ`` are one compiled loop each (numba,
+imported and loaded by the constructor; compiled once per installation with
+``cache=True``), where NumPy would spend its time dispatching a dozen
+12 × 12 operations; above, NumPy (BLAS products, a LAPACK Cholesky).  Both
+paths are tested equal to the dense pre-optimisation implementation to 1e-12.
+
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
 ``τ_f = −D v − F_c tanh(v/v_s)``) makes the error dynamics stiff near ``v = 0``:
 its slope ``−F_c/v_s`` (200 N·m·s/rad for 2 N·m at v_s = 0.01 rad/s) enters
@@ -109,6 +118,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from statistics import NormalDist
 from typing import Any, NamedTuple
@@ -129,6 +139,7 @@ __all__ = [
     "joseph_update",
     "stiff_transition_matrix",
     "transition_matrix",
+    "warm_linear_algebra",
 ]
 
 _NOISE_FLOOR = 1e-6
@@ -176,8 +187,41 @@ def _eye(n: int) -> Vector:
     return eye
 
 
+@functools.lru_cache(maxsize=32)
+def _scaled_eye(n: int, scale: float) -> Vector:
+    out = scale * np.eye(n)
+    out.setflags(write=False)
+    return out
+
+
+def _transition_loops(A: Vector, h: float, out: Vector) -> None:
+    """:func:`transition_matrix` in loops (compiled by numba for small matrices)."""
+    n = A.shape[0]
+    inner = np.empty((n, n))  # I + Ah/3
+    for i in range(n):
+        for j in range(n):
+            inner[i, j] = A[i, j] * h / 3.0 + (1.0 if i == j else 0.0)
+    mid = np.empty((n, n))  # I + (Ah/2)(I + Ah/3)
+    for i in range(n):
+        for j in range(n):
+            t = 0.0
+            for k in range(n):
+                t += A[i, k] * inner[k, j]
+            mid[i, j] = 0.5 * h * t + (1.0 if i == j else 0.0)
+    for i in range(n):
+        for j in range(n):
+            t = 0.0
+            for k in range(n):
+                t += A[i, k] * mid[k, j]
+            out[i, j] = h * t + (1.0 if i == j else 0.0)
+
+
 def transition_matrix(A: Vector, h: float) -> Vector:
     """``exp(A h)`` to third order, ``I + Ah(I + Ah/2 (I + Ah/3))`` (module docstring), a new array."""
+    if A.shape[0] <= 2 * _KERNEL_MAX_NV and _transition_kernel.compiled is not None:
+        out = np.empty_like(A)
+        _transition_kernel.compiled(A, float(h), out)
+        return out
     Ah = A * h
     eye = _eye(A.shape[0])
     inner = Ah / 3.0
@@ -260,6 +304,99 @@ def cholesky_solve(S: Vector, B: Vector) -> tuple[Vector, bool]:
         return np.full(B.shape, np.nan), False
 
 
+def _joseph_loops(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bool:
+    """:func:`joseph_update`'s arithmetic in loops (compiled by numba for small ``nv``).
+
+    Cholesky ``S = L Lᵀ`` of ``S = P_qq + r I`` (lower triangle of ``P``),
+    ``Kᵀ = S⁻¹ P_q·`` by two triangular solves, then ``C = P − K P_q·``,
+    ``P⁺ = sym(C − (C_·q − r K) Kᵀ)`` and ``dx = K e`` into ``dx`` and ``out``.
+    Returns False (outputs undefined) when ``S`` is not positive definite.
+    """
+    n, nv = P.shape[0], e.shape[0]
+    L = np.zeros((nv, nv))
+    for j in range(nv):
+        d = P[j, j] + r
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return False
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, nv):
+            t = P[i, j]
+            for k in range(j):
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t / L[j, j]
+    Kt = np.empty((nv, n))
+    for c in range(n):  # L y = B[:, c], then Lᵀ x = y
+        for i in range(nv):
+            t = P[i, c]
+            for k in range(i):
+                t -= L[i, k] * Kt[k, c]
+            Kt[i, c] = t / L[i, i]
+        for i in range(nv - 1, -1, -1):
+            t = Kt[i, c]
+            for k in range(i + 1, nv):
+                t -= L[k, i] * Kt[k, c]
+            Kt[i, c] = t / L[i, i]
+    C = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            t = P[i, j]
+            for k in range(nv):
+                t -= Kt[k, i] * P[k, j]
+            C[i, j] = t
+    for i in range(n):
+        for j in range(n):
+            t = C[i, j]
+            for k in range(nv):
+                t -= (C[i, k] - r * Kt[k, i]) * Kt[k, j]
+            out[i, j] = t
+    for i in range(n):
+        for j in range(i):
+            m = 0.5 * (out[i, j] + out[j, i])
+            out[i, j] = m
+            out[j, i] = m
+        t = 0.0
+        for k in range(nv):
+            t += Kt[k, i] * e[k]
+        dx[i] = t
+    return True
+
+
+class _LazyKernel:
+    """A numba-compiled function, built on :meth:`load` (``import pinobs`` does not import
+    numba); ``compiled`` is ``None`` until then.  ``cache=True``: compiled once per
+    installation, then loaded from numba's cache."""
+
+    def __init__(self, fn: Callable[..., Any], *warm_args: Any) -> None:
+        self.fn, self.warm_args = fn, warm_args
+        self.compiled: Callable[..., Any] | None = None
+
+    def load(self) -> None:
+        if self.compiled is None:
+            import numba  # lazy: start-up time
+
+            kernel = numba.njit(cache=True)(self.fn)
+            kernel(*self.warm_args)  # load (or compile) the float64 signature now
+            self.compiled = kernel
+
+
+_KERNEL_MAX_NV = 12  # above, the NumPy path (BLAS products) is faster than the loops
+_joseph_kernel = _LazyKernel(
+    _joseph_loops, np.eye(2), np.zeros(1), 1.0, np.zeros(2), np.zeros((2, 2))
+)
+_transition_kernel = _LazyKernel(_transition_loops, np.eye(2), 1.0, np.zeros((2, 2)))
+
+
+def warm_linear_algebra(nv: int) -> None:
+    """Import LAPACK and load the compiled :func:`joseph_update` for ``nv`` (a filter's
+    constructor calls this, so that its first update does not pay for it)."""
+    _posv()
+    if nv <= _KERNEL_MAX_NV:
+        _joseph_kernel.load()
+        _transition_kernel.load()
+
+
 def joseph_update(P: Vector, e: Vector, meas_var: float) -> tuple[Vector, Vector]:
     """Kalman update for ``H = [I 0]`` and ``R = meas_var · I``: returns ``(K e, P⁺)``.
 
@@ -270,9 +407,13 @@ def joseph_update(P: Vector, e: Vector, meas_var: float) -> tuple[Vector, Vector
     two products of ``(n × nv)(nv × n)`` instead of two of ``n × n``.
     """
     nv = e.shape[0]
+    if nv <= _KERNEL_MAX_NV and _joseph_kernel.compiled is not None:
+        dx = np.empty(P.shape[0])
+        P_new = np.empty_like(P)
+        if _joseph_kernel.compiled(P, e, float(meas_var), dx, P_new):
+            return dx, P_new
     B = P[:nv]  # H P
-    S = B[:, :nv].copy()
-    S.flat[:: nv + 1] += meas_var
+    S = B[:, :nv] + _scaled_eye(nv, meas_var)
     Kt, _ = cholesky_solve(S, B)  # Kᵀ = S⁻¹ H P
     K = Kt.T
     C = P - K.dot(B)
@@ -367,7 +508,7 @@ class ExtendedKalmanFilter(Observer[_State]):
         self.disturbance_psd = positive("disturbance_psd", disturbance_psd, allow_none=True)
         self.d0_std = float(positive("d0_std", d0_std) or 0.0)
         self._scratch_A: Vector | None = None  # A's buffer (_jacobian)
-        _posv()  # import LAPACK now, not in the first update
+        warm_linear_algebra(self.robot.nv)  # LAPACK and the compiled update, now
 
     @property
     def options(self) -> dict[str, object]:

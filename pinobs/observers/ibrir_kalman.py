@@ -78,6 +78,7 @@ import numpy as np
 
 from pinobs.errors import GainError
 from pinobs.model import Robot, lie_rk4
+from pinobs.model.integrators import rk4_stage_matrices
 from pinobs.observers.base import Observer, Vector, positive, register
 from pinobs.observers.differentiators import HighGainDifferentiator
 from pinobs.observers.ekf import (
@@ -88,6 +89,7 @@ from pinobs.observers.ekf import (
     joseph_update,
     stiff_transition_matrix,
     transition_matrix,
+    warm_linear_algebra,
 )
 
 __all__ = ["IbrirKalman", "IbrirKalmanGains"]
@@ -184,6 +186,7 @@ class IbrirKalman(Observer[_State]):
         if not np.all(np.isfinite(cf)) or np.any(cf < 0):
             raise GainError(f"viscous={viscous!r} must be finite and >= 0")
         self.viscous = cf
+        self._damped = bool(np.any(cf)) or self.robot.has_friction  # C_f ≠ 0 somewhere
         if schedule not in ("filtered", "measured"):
             raise GainError(f"schedule={schedule!r} is not accepted; use 'filtered' or 'measured'")
         self.schedule = schedule
@@ -196,6 +199,7 @@ class IbrirKalman(Observer[_State]):
             )
         self.velocity_source = velocity_source
         self._scratch_F: Vector | None = None  # F's buffer (_state_matrix)
+        warm_linear_algebra(self.robot.nv)  # LAPACK and the compiled update, now
         self.differentiator = HighGainDifferentiator(
             self.robot, order=diff_order, gamma=diff_gamma, rate=rate, noise_std=noise_std
         )
@@ -248,9 +252,9 @@ class IbrirKalman(Observer[_State]):
             F[:nv, nv:] = np.eye(nv)
         if r.has_lie_group_joints:
             np.negative(ad_matrix(r, y_dot), out=F[:nv, :nv])
-        damp, _ = self.friction_affine(y_dot)
         rhs = r.coriolis_matrix(y, y_dot)
-        rhs.flat[:: nv + 1] += damp
+        if self._damped:
+            rhs.flat[:: nv + 1] += self.friction_affine(y_dot)[0]
         sol, _ = cholesky_solve(r.mass_matrix(y), rhs)
         np.negative(sol, out=F[nv:, nv:])  # Ibrir eq. (3)
         return F
@@ -323,13 +327,25 @@ class IbrirKalman(Observer[_State]):
             minv_diag = np.diag(np.linalg.inv(r.mass_matrix(y0)))
             n = friction_substeps(r, state.v, a0, minv_diag, dt)
         if n == 1 and use_estimate and r.is_vector_space:  # RK4 without lie_rk4's bookkeeping
-            v0, visc, h2 = state.v, self.viscous, 0.5 * dt
-            v2 = v0 + h2 * (a1 := r.forward_dynamics(y0, v0, tau - visc * v0))
-            v3 = v0 + h2 * (a2 := r.forward_dynamics(y_at[0.5], v2, tau - visc * v2))
-            v4 = v0 + dt * (a3 := r.forward_dynamics(y_at[0.5], v3, tau - visc * v3))
-            a4 = r.forward_dynamics(y_at[1.0], v4, tau - visc * v4)
-            q = state.q + (dt / 6.0) * (v0 + 2.0 * (v2 + v3) + v4)
-            v = v0 + (dt / 6.0) * (a1 + 2.0 * (a2 + a3) + a4)
+            v0, visc = state.v, self.viscous
+            if not np.any(visc):  # C_f v = 0: τ as it is (the same numbers)
+
+                def fd(y: Vector, v: Vector) -> Vector:
+                    return r.forward_dynamics(y, v, tau)
+            else:
+
+                def fd(y: Vector, v: Vector) -> Vector:
+                    return r.forward_dynamics(y, v, tau - visc * v)
+
+            # classical RK4 stacked as in dynamics_rk4: rows (q, v, a₁, a₂, a₃, a₄)
+            c2, c3, c4, c_out = rk4_stage_matrices(float(dt))
+            b = np.empty((6, nv))
+            b[0], b[1] = state.q, v0
+            b[2] = fd(y0, v0)
+            b[3] = fd(y_at[0.5], c2[1].dot(b[:3]))
+            b[4] = fd(y_at[0.5], c3[1].dot(b[:4]))
+            b[5] = fd(y_at[1.0], c4[1].dot(b[:5]))
+            q, v = c_out.dot(b)
         else:
             q, x = state.q, np.concatenate([state.v, [0.0]])
             for _ in range(n):  # x[nv] carries the time since the interval's start
@@ -346,8 +362,10 @@ class IbrirKalman(Observer[_State]):
             dx, P = joseph_update(P, e, 1.0 / (g.output_weight * dt))
             q = r.integrate(q, dx[:nv])
             v = v + dx[nv:]
+        else:
+            P = 0.5 * (P + P.T)  # (joseph_update returns it symmetric)
         y_prev = None if q_meas is None else q_meas.copy()
-        return _State(q, v, 0.5 * (P + P.T), d1, y_prev)
+        return _State(q, v, P, d1, y_prev)
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v

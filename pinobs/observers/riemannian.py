@@ -120,14 +120,13 @@ matter.  ``"steady"``: the constant steady-state gains.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-import numba
 import numpy as np
-import scipy.linalg
 
 from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
@@ -274,7 +273,9 @@ def gains_from_noise(rate: float, noise_std: float, accel_psd: float) -> tuple[f
     F = np.array([[1.0, h], [0.0, 1.0]])
     Q = accel_psd * np.array([[h**3 / 3, h**2 / 2], [h**2 / 2, h]])
     Hm = np.array([[1.0, 0.0]])
-    P = scipy.linalg.solve_discrete_are(F.T, Hm.T, Q, np.array([[noise_std**2]]))
+    from scipy.linalg import solve_discrete_are  # lazy: scipy.linalg costs 0.2 s at import
+
+    P = solve_discrete_are(F.T, Hm.T, Q, np.array([[noise_std**2]]))
     K = P[:, 0] / (P[0, 0] + noise_std**2)  # gain on the predicted error
     closed = (np.eye(2) - np.outer(K, [1.0, 0.0])) @ F
     lam = np.linalg.eigvals(closed).astype(complex)
@@ -322,6 +323,8 @@ def jacobi_term(
 
 def _ad_matrix(robot: Robot, x: Vector) -> Vector:
     """``ad_x`` as a matrix: column j is ``[x, E_j]`` (used where there are Lie-group joints)."""
+    if isinstance(robot, Robot):
+        return robot.bracket_matrix(x)  # block by block, no loop over the columns
     return np.column_stack([robot.bracket(x, e) for e in np.eye(robot.nv)])
 
 
@@ -372,7 +375,21 @@ def transport_first_order(robot: Robot, q_hat: Vector, zeta: Vector, s: Vector) 
     return s - robot.connection(q_hat, zeta, s)
 
 
-@numba.njit(cache=True)  # type: ignore[misc]
+@functools.cache
+def _compiled_correction() -> Callable[..., tuple[Vector, Vector]]:
+    """:func:`_vector_space_correction` compiled by numba, on first use (``import pinobs``
+    does not import numba, 0.2 s).  ``cache=True``: compiled once per installation (about
+    2 s), then loaded from numba's cache (``__pycache__`` next to this file, or
+    ``NUMBA_CACHE_DIR``).  :class:`RiemannianObserver` calls this when it is built, so
+    its first update does not pay for it."""
+    import numba  # lazy: start-up time
+
+    kernel = numba.njit(cache=True)(_vector_space_correction)
+    one, eye = np.zeros(1), np.zeros((1, 1))  # load (or compile) the float64 signature now
+    kernel(one, one, one, eye, eye, one, eye, 0.0, 0.0, 0.0, 0.0)
+    return kernel  # type: ignore[no-any-return]
+
+
 def _vector_space_correction(
     q: Vector,
     v: Vector,
@@ -537,6 +554,8 @@ class RiemannianObserver(Observer[_State]):
         )
         self._zero_nn = np.zeros((self.robot.nv, self.robot.nv))  # J when C = 0
         self._lie = not self.robot.is_vector_space  # brackets or unit-norm blocks to keep
+        if not self._lie:
+            _compiled_correction()  # numba imported and the kernel loaded now, not in an update
         # the Riccati schedule replaces (α, β) only when they came from the Kalman rule
         self.gain_schedule = (
             gain_schedule
@@ -673,7 +692,7 @@ class RiemannianObserver(Observer[_State]):
         jac, age = state.jacobi, state.age + 1
         if c != 0.0:
             jac, age = self._jacobi(state, q, v)
-        q_new, v_new = _vector_space_correction(
+        q_new, v_new = _compiled_correction()(
             q, v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, k1, k2, h, c * h
         )
         return _State(q_new, v_new, 0.0, jac, age, P)

@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from pinobs.errors import ObserverDiverged, PinobsError
 from pinobs.model import Robot, dynamics_rk4
@@ -58,6 +59,10 @@ def _plant_step(
     return q, v
 
 
+# The observers' matrices are small (2nv ≤ 256): BLAS threads only contend (an ekf at
+# nv = 64 on a busy 2-core machine: 3.3 ms per 128×128 product with two threads,
+# 0.47 ms with one).  Set for the duration of the call (3 µs).
+@threadpool_limits.wrap(limits=1, user_api="blas")
 def simulate(
     robot: Robot,
     observers: Sequence[str] | Mapping[str, Observer[Any]],

@@ -46,3 +46,47 @@ def test_one_derivatives_call_gives_the_dynamics_and_its_jacobians_with_friction
         ]
     )
     np.testing.assert_allclose(dv, fd, rtol=1e-5, atol=1e-5)
+
+
+def test_a_pickled_robot_is_small_has_the_same_dynamics_and_reloads_its_visuals() -> None:
+    import pickle
+
+    robot = pinobs.load("ur5")
+    robot.visual_model  # noqa: B018  (loaded before pickling: still left out)
+    blob = pickle.dumps(robot)
+    assert len(blob) < 1_000_000  # measured 39 kB (187 MB with the meshes)
+    back = pickle.loads(blob)
+    assert back._geometry is None  # not loaded until something draws
+    assert not back._zero_nv.flags.writeable
+    rng = np.random.default_rng(2)
+    q, v, tau = robot.random_configuration(rng), rng.normal(size=6), rng.normal(size=6)
+    np.testing.assert_array_equal(
+        back.forward_dynamics(q, v, tau), robot.forward_dynamics(q, v, tau)
+    )
+    assert back.visual_model.ngeoms == robot.visual_model.ngeoms > 0
+
+
+def test_loading_builds_no_geometry_until_it_is_asked_for() -> None:
+    robot = pinobs.load("ur5")
+    assert robot._geometry is None
+    assert robot.copy()._geometry is None
+    assert robot.collision_model.ngeoms > 0
+    assert robot.copy().collision_model is robot.collision_model  # copies share what is loaded
+
+
+@pytest.mark.parametrize(("name", "root"), [("top", None), ("go1", None), ("planar_3r", "planar")])
+def test_integrate_jacobian_solve_is_the_dense_solve(name: str, root: str | None) -> None:
+    robot = pinobs.load(name, root_joint=root)
+    rng = np.random.default_rng(3)
+    q = robot.random_configuration(rng)
+    for scale in (1e-6, 1e-4, 1e-3, 1e-2, 0.5):
+        xi, u = scale * rng.normal(size=robot.nv), rng.normal(size=robot.nv)
+        dense = np.linalg.solve(robot.integrate_jacobian(q, xi), u)
+        np.testing.assert_allclose(robot.integrate_jacobian_solve(q, xi, u), dense, atol=1e-14)
+
+
+def test_a_robot_on_another_model_shares_the_geometry_without_loading_it() -> None:
+    robot = pinobs.load("ur5")
+    other = robot.with_model(robot.model.copy(), name="ur5*")
+    assert other.name == "ur5*" and other._geometry is None and robot._geometry is None
+    assert robot.perturbed(payload=(1.0, [0, 0, 0.1]))._geometry is None

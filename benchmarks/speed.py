@@ -1,0 +1,147 @@
+# /// script
+# requires-python = ">=3.10"
+# dependencies = ["pinobs"]
+# ///
+"""Issue 18's numbers: update cost (× one ``pin.aba`` call), start-up, pickles, BLAS threads.
+
+Writes ``benchmarks/speed.md``.  Costs are :func:`pinobs.evaluation.measure_cost`
+ratios (chunks of updates each followed by as many ``pin.aba`` calls, same
+process); the spread is min / median / max over ``--repeats`` measurements
+with different seeds.  Quote the machine's load next to them: on a shared
+machine the spread is wide.
+
+    python benchmarks/speed.py             # about 5 minutes
+    python benchmarks/speed.py --quick     # UR5 only, two repeats
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import pickle
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import pinobs
+from pinobs.evaluation import measure_cost
+
+OBSERVERS = ("ekf", "kalman", "riemannian", "kf")
+ROBOTS = ("ur5", "panda", "go1", "talos")
+
+_FIRST_UPDATE = """
+import sys, time
+c0 = time.process_time()
+import pinobs
+import_cpu = time.process_time() - c0
+import numpy as np
+robot = pinobs.load(sys.argv[2])
+t = time.perf_counter()
+ob = pinobs.make_observer(sys.argv[1], robot, rate=1000.0, noise_std=1e-4)
+make = time.perf_counter() - t
+ob.reset(0.0, robot.neutral())
+t = time.perf_counter()
+ob.update(1e-3, robot.neutral(), np.zeros(robot.nv))
+print(import_cpu, make, time.perf_counter() - t)
+"""
+
+
+def cost_table(robots: tuple[str, ...], repeats: int, samples: int) -> list[str]:
+    rows = ["| robot (nv) | " + " | ".join(OBSERVERS) + " |", "|---" * (len(OBSERVERS) + 1) + "|"]
+    for name in robots:
+        robot = pinobs.load(name)
+        cells = []
+        for obs in OBSERVERS:
+            ob = pinobs.make_observer(obs, robot, rate=1000.0, noise_std=1e-4)
+            r = [
+                measure_cost(ob, samples=samples, rounds=5, seed=s)["ratio"] for s in range(repeats)
+            ]
+            cells.append(f"{np.median(r):.1f} ({min(r):.1f}–{max(r):.1f})")
+        rows.append(f"| {name} ({robot.nv}) | " + " | ".join(cells) + " |")
+        print(rows[-1], flush=True)
+    return rows
+
+
+def blas_rows(name: str, repeats: int, samples: int) -> list[str]:
+    """``ekf`` on a large robot with BLAS limited to one thread (the default now) and not."""
+    robot = pinobs.load(name)
+    ob = pinobs.make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
+    one = [measure_cost(ob, samples=samples, rounds=5, seed=s)["ratio"] for s in range(repeats)]
+    free = [
+        measure_cost.__wrapped__(ob, samples=samples, rounds=5, seed=s)["ratio"]  # type: ignore[attr-defined]
+        for s in range(repeats)
+    ]
+    return [
+        f"`ekf` on {name} (nv = {robot.nv}, P is {2 * robot.nv}²): "
+        f"one BLAS thread {np.median(one):.0f}× aba ({min(one):.0f}–{max(one):.0f}), "
+        f"default threads {np.median(free):.0f}× ({min(free):.0f}–{max(free):.0f})."
+    ]
+
+
+def startup_rows(robots: tuple[str, ...]) -> list[str]:
+    rows = [
+        "| observer | robot | `import pinobs` CPU [s] | build [ms] | first update [ms] |",
+        "|---|---|---|---|---|",
+    ]
+    for obs in pinobs.observer_names():
+        for name in robots:
+            out = subprocess.run(
+                [sys.executable, "-c", _FIRST_UPDATE, obs, name], capture_output=True, text=True
+            )
+            if out.returncode != 0:
+                continue  # an observer that does not run on this robot (ii, liegroup)
+            imp, make, first = (float(x) for x in out.stdout.split())
+            rows.append(f"| {obs} | {name} | {imp:.2f} | {1e3 * make:.0f} | {1e3 * first:.2f} |")
+            break
+    return rows
+
+
+def pickle_rows() -> list[str]:
+    rows = []
+    for name in ("ur5", "go1"):
+        t = time.perf_counter()
+        robot = pinobs.load(name)
+        load = time.perf_counter() - t
+        size = len(pickle.dumps(robot))
+        rows.append(f"`pinobs.load({name!r})` {load:.3f} s; pickled `Robot` {size / 1e3:.0f} kB.")
+    return rows
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--out", default=str(Path(__file__).parent / "speed.md"))
+    args = parser.parse_args()
+    robots = ("ur5",) if args.quick else ROBOTS
+    repeats = 2 if args.quick else args.repeats
+    start = time.time()
+    load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
+    lines = [
+        f"Made by `python benchmarks/speed.py{' --quick' if args.quick else ''}` "
+        f"(load average at start {load} on {os.cpu_count()} CPUs: a shared machine, "
+        "so read the spreads).",
+        "",
+        "Cost per update, × one `pin.aba` call (median, min–max over "
+        f"{repeats} seeds; 1 kHz, σ = 1e-4 rad):",
+        "",
+        *cost_table(robots, repeats, 600),
+        "",
+        *blas_rows("talos", repeats, 200),
+        "",
+        "Start-up, in fresh processes (build: `make_observer`, which imports what the "
+        "observer needs and loads compiled code; first update: the first `update` after `reset`):",
+        "",
+        *startup_rows(("ur5", "top", "pendulum")),
+        "",
+        *pickle_rows(),
+        "",
+        f"({time.time() - start:.0f} s)",
+    ]
+    Path(args.out).write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))

@@ -1,0 +1,16 @@
+"""Start-up: ``import pinobs`` stays light (issue 18)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+
+def test_import_pinobs_imports_no_numba_scipy_linalg_or_meshcat() -> None:
+    code = (
+        "import sys, pinobs; "
+        "print(sorted(m for m in ('numba', 'scipy.linalg', 'meshcat', 'matplotlib') "
+        "if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -423,7 +423,12 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     )
     print(_identify_report(ident))
     path = ident.save(str(out))
+    opts = ", ".join(f"{k}={v:g}" for k, v in ident.report["observer_options"].items())
     print(f"wrote {path}: load it with pinobs.load({path!r}, friction=True)")
+    print(
+        f"run ekf on it with {opts} (a calibrated model is good, not exact), or adaptive "
+        "starting from it"
+    )
     return 0
 
 

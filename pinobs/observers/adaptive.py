@@ -42,7 +42,9 @@ Three parts, each on code shared with the rest of pinobs:
    innovations say the current model does not explain the data (running
    mean NIS above twice its expectation; a model that explains the data is
    not replaced: velocities smoothed from the samples carry a bias that a
-   fit would otherwise chase).  When a model is
+   fit would otherwise chase).  Trust in the nominal model is revoked at
+   once, between solves, when the running NIS exceeds ten times its
+   expectation: the latest solve is installed (or the warm-up resumes).  When a model is
    installed the offset state ``d`` is set to zero (the new model explains
    what it was absorbing).  A trajectory that does not excite a parameter
    cannot teach it: such parameters stay at their nominal values
@@ -140,7 +142,8 @@ class _Learner:
         self.installs = 0
         self.validated = False  # a solve has checked the current model against the data
         self.last_drop = np.nan
-        self.history: list[tuple[float, float]] = []  # (loss of the current model, of the solve)
+        self.history: list[tuple[float, float]] = []
+        self.candidate: Vector | None = None  # (loss of the current model, of the solve)
         self.rejected: list[str] = []
 
     def add(self, t: float, q: Vector | None, tau: Vector, *, explained: bool = False) -> bool:
@@ -198,6 +201,7 @@ class _Learner:
                 return False
         # Model selection: keep the current model unless the new one explains the rows better
         # than fitting noise would (robust loss drop above rank + 3√rank, in units of ½χ²).
+        self.candidate = theta  # the latest consistent solve, installed or not
         current = self.reg.nominal() if self.theta is None else self.theta
         loss_cur = _huber_loss(A @ current - y, sol.sigma)
         loss_new = _huber_loss(A @ theta - y, sol.sigma)
@@ -220,6 +224,10 @@ class _Learner:
 #: Mean NIS per degree of freedom up to which the model-based filter is trusted outright by the
 #: blend (twice the consistent value); the blame on the model ramps up to full at twice this.
 _NIS_TRUSTED = 2.0
+
+
+#: Mean NIS per degree of freedom above which the nominal model's trust is revoked at once.
+_NIS_REVOKED = 10.0
 
 
 def _huber_loss(r: Vector, sigma: float, c: float = 1.345) -> float:
@@ -489,8 +497,17 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         explained = self.regime == "warmup" or (
             self.regime == "nominal" and level <= _NIS_TRUSTED * self.robot.nv
         )
-        if self._learner.add(t, q, tau, explained=explained):
+        lr = self._learner
+        if lr.add(t, q, tau, explained=explained):
             ekf = self._install(ekf)
+        elif self.regime == "nominal" and level > _NIS_REVOKED * self.robot.nv:
+            # the nominal model stopped explaining the data between solves: do not wait
+            if lr.candidate is not None:
+                lr.theta = lr.candidate
+                lr.installs += 1
+                ekf = self._install(ekf)
+            else:
+                ekf = self._set_regime(ekf, "warmup")
         elif self._learner.validated and self.regime == "warmup":
             ekf = self._set_regime(ekf, "nominal")  # the nominal model explains the data
         return state if ekf is state.ekf else state._replace(ekf=ekf)

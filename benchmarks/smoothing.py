@@ -36,10 +36,11 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 import pinobs
+from pinobs.io import Log, estimate_log
 from pinobs.model import aba_time
 from pinobs.observers import make_observer
 from pinobs.observers.smoothing import select_accel_psd, smooth
-from pinobs.simulation import Log, Sensor, estimate_log, simulate
+from pinobs.simulation import Sensor, simulate
 
 CASES = (("ur5", 1e-4), ("ur5", 1e-3), ("panda", 1e-4), ("panda", 1e-3))
 GRID = tuple(10.0 ** np.arange(-14, -3))

@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 
 import pinobs
-from pinobs.simulation import write_log
+from pinobs.io import write_log
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(

@@ -10,6 +10,7 @@ from pinobs.errors import (
     DimensionError,
     GainError,
     IdentificationError,
+    LogFormatError,
     ModelError,
     ModelFileError,
     ModelTypeError,
@@ -26,6 +27,7 @@ from pinobs.errors import (
     UnsupportedRobotError,
 )
 from pinobs.evaluation import Metrics, evaluate
+from pinobs.io import estimate
 from pinobs.model import Robot, load, robot_names
 from pinobs.model.identification import Identification, identify
 from pinobs.observers import Consistency, Estimate, Observer, make_observer, observer_names
@@ -42,6 +44,7 @@ __all__ = [
     "GainError",
     "Identification",
     "IdentificationError",
+    "LogFormatError",
     "Metrics",
     "ModelError",
     "ModelFileError",
@@ -62,6 +65,7 @@ __all__ = [
     "TimestampError",
     "UnknownNameError",
     "UnsupportedRobotError",
+    "estimate",
     "evaluate",
     "identify",
     "load",

@@ -6,6 +6,7 @@ pinobs run --robot R --observer O [...]        one simulation: a results table, 
 pinobs play RESULT.npz [--html F] [--plot F]   watch a saved run
 pinobs demo                                    the main job on a built-in default
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
+    [--force --map COL=NAME --topic T --noise STD]   (CSV/TSV, Parquet, NPZ, ROS bags)
     [--smooth [--lag S] [--accel-psd P|auto]]             RTS smoother over the ekf, v_std0.. columns
 pinobs check ii --robot R                      I&I Assumption 1 on the model
 pinobs bench [--quick] [--json FILE]           accuracy and cost against the baselines
@@ -25,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from pinobs.errors import (
+    DimensionError,
     GainError,
     OptionError,
     OutputExistsError,
@@ -32,6 +34,7 @@ from pinobs.errors import (
     UnsupportedRobotError,
 )
 from pinobs.evaluation import evaluate, format_table
+from pinobs.io import process_log, read_log
 from pinobs.model import Robot, aba_time, load, robot_entries
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
 from pinobs.simulation import (
@@ -39,11 +42,8 @@ from pinobs.simulation import (
     MISMATCH_SCENARIOS,
     Result,
     Sensor,
-    estimate_log,
     mismatched_plant,
-    read_log,
     simulate,
-    write_estimates,
 )
 
 __all__ = ["main", "observer_table"]
@@ -72,8 +72,8 @@ def _progress(label: str, enabled: bool) -> Any:
         task = bar.add_task(label, total=None)
 
         def update(k: int, n: int) -> None:
-            if k % 100 == 0 or k == n:
-                bar.update(task, completed=k, total=n)
+            if k % 100 == 0 or k == n or not n:
+                bar.update(task, completed=k, total=n or None)  # n = 0: unknown length
 
         yield update
 
@@ -305,36 +305,69 @@ def _cmd_play(args: argparse.Namespace) -> int:
     return 0
 
 
+def _column_map(items: Sequence[str] | None) -> dict[str, str] | None:
+    """``--map COL=NAME[,COL=NAME]`` -> ``{COL: NAME}``."""
+    if not items:
+        return None
+    out: dict[str, str] = {}
+    for item in items:
+        for pair in item.split(","):
+            col, sep, name = pair.partition("=")
+            if not sep or not col.strip() or not name.strip():
+                raise DimensionError(
+                    f"--map {pair!r}: give COLUMN=NAME, NAME one of t, q.<joint>, tau.<joint>, q3, tau3"
+                )
+            out[col.strip()] = name.strip()
+    return out
+
+
 def _cmd_estimate(args: argparse.Namespace) -> int:
     if args.smooth:
         return _estimate_smoothed(args)
     robot = load(args.robot, root_joint=args.root_joint)
-    log = read_log(args.log, robot)
-    dt = float(np.nanmedian(np.diff(log.t))) if log.t.size > 1 else math.nan
-    rate = args.rate or (1.0 / dt if math.isfinite(dt) and dt > 0 else None)
-    observer = make_observer(args.observer, robot, rate=rate, noise_std=args.noise)
+    columns = _column_map(args.map)
+    keep = bool(args.html)
     with _progress(f"{robot.name}: {args.observer}", not args.no_progress) as progress:
-        run = estimate_log(
-            observer, log, first_line=2 if Path(args.log).suffix != ".npz" else 0, progress=progress
-        )
+        try:
+            run = process_log(
+                args.log,
+                robot,
+                args.observer,
+                out=args.out,
+                force=args.force,
+                keep=keep,
+                columns=columns,
+                topic=args.topic,
+                rate=args.rate,
+                noise_std=args.noise,
+                progress=progress,
+            )
+        except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
+            print(f"pinobs: error: {exc}", file=sys.stderr)
+            return 2
     for w in run.warnings:
         print(f"warning: {w}", file=sys.stderr)
+    where = f"{args.log}:" if run.unit == "line" else f"{args.log}: {run.unit} "
     for line, reason in run.bad_rows[: args.max_reports]:
-        print(f"{args.log}:{line}: {reason}", file=sys.stderr)
+        print(f"{where}{line}: {reason}", file=sys.stderr)
     if len(run.bad_rows) > args.max_reports:
-        print(f"... and {len(run.bad_rows) - args.max_reports} more bad rows", file=sys.stderr)
-    path = write_estimates(args.out, run)
-    if args.html:
+        print(
+            f"... and {len(run.bad_rows) - args.max_reports} more reported rows "
+            f"(--max-reports N to list more)",
+            file=sys.stderr,
+        )
+    if args.html and run.estimated:
         from pinobs.visualization import log_result, write_html
 
+        log = read_log(args.log, robot, columns=columns, topic=args.topic)
         page = write_html(
-            log_result(robot, log, {observer.name: run}), robot, args.html, truth_label="measured"
+            log_result(robot, log, {args.observer: run}), robot, args.html, truth_label="measured"
         )
         print(f"wrote {page} (the logged motion, and the estimate as a ghost)")
-    used = int(np.sum(np.isfinite(run.v[:, 0])))
-    print(
-        f"{observer.name} on {robot.name}: {log.t.size} rows, {used} estimated, {len(run.bad_rows)} bad; wrote {path}"
-    )
+    print(f"{args.observer} on {robot.name}: {run.summary()}; wrote {args.out}")
+    if run.estimated == 0:
+        print("pinobs: error: no row of the log could be estimated", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -659,16 +692,32 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_play)
 
-    p = sub.add_parser("estimate", help="run one observer over a recorded log (CSV or NPZ)")
+    p = sub.add_parser(
+        "estimate", help="run one observer over a recorded log (CSV/TSV, Parquet, NPZ, ROS bag)"
+    )
     p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF/MJCF path")
     p.add_argument(
         "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
     )
     p.add_argument("--observer", required=True, help="observer name (pinobs list)")
     p.add_argument(
-        "--log", required=True, help="log file: CSV with header t,q0..,tau0.. or NPZ with t, q, tau"
+        "--log",
+        required=True,
+        help="log: CSV/TSV with columns t, q0.. or q.<joint>, tau0.. or tau.<joint>; Parquet; "
+        "NPZ with t, q, tau; a ROS 1/2 bag (sensor_msgs/JointState)",
     )
     p.add_argument("--out", required=True, help="CSV file for the estimates: t, q0.., v0..")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out")
+    p.add_argument(
+        "--map",
+        action="append",
+        default=None,
+        metavar="COL=NAME",
+        help="rename log columns: NAME is t, q.<joint>, tau.<joint>, q3 or tau3 (repeatable)",
+    )
+    p.add_argument(
+        "--topic", default=None, help="JointState topic of a bag (default: the only one)"
+    )
     p.add_argument(
         "--html", default=None, help="also write a 3D playback of the log and the estimate"
     )
@@ -676,11 +725,19 @@ def _parser() -> argparse.ArgumentParser:
         "--rate",
         type=float,
         default=None,
-        help="sample rate hint [Hz] (default: from the log's median interval)",
+        help="sample rate [Hz] (default: from the log's median interval)",
     )
-    p.add_argument("--noise", type=float, default=None, help="position noise hint [rad or m]")
     p.add_argument(
-        "--max-reports", type=int, default=20, help="bad rows listed at most (default %(default)s)"
+        "--noise",
+        type=float,
+        default=None,
+        help="position noise std [rad or m] (default: estimated from the log's first second)",
+    )
+    p.add_argument(
+        "--max-reports",
+        type=int,
+        default=20,
+        help="reported rows listed at most (default %(default)s)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument(

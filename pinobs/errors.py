@@ -15,6 +15,7 @@ __all__ = [
     "DimensionError",
     "GainError",
     "IdentificationError",
+    "LogFormatError",
     "ModelError",
     "ModelFileError",
     "ModelTypeError",
@@ -45,6 +46,10 @@ class UnknownNameError(PinobsError, KeyError):
 
 class ModelFileError(PinobsError, FileNotFoundError):
     """A model file that is missing or cannot be parsed."""
+
+
+class LogFormatError(PinobsError, ValueError):
+    """A log file that cannot be parsed (encoding, truncation, wrong container); names the line."""
 
 
 class ModelTypeError(PinobsError, TypeError):

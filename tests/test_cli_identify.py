@@ -7,7 +7,8 @@ import pytest
 
 import pinobs
 from pinobs.cli import main
-from pinobs.simulation import Sensor, write_log
+from pinobs.io import write_log
+from pinobs.simulation import Sensor
 
 
 @pytest.fixture(scope="module")

@@ -156,9 +156,10 @@ class Robot:
             for b in self.joints
             if b.kind in ("so3", "se3")
         )
+        # (cos, sin) pairs: a continuous joint's q, and a planar joint's q[2:4] after (x, y)
         self._circle_slices = tuple(
             slice(b.idx_q, b.idx_q + 2) for b in self.joints if b.kind == "circle"
-        )
+        ) + tuple(slice(b.idx_q + 2, b.idx_q + 4) for b in self.joints if b.kind == "se2")
         self._unit_slices = self._quat_slices + self._circle_slices  # unit-norm blocks of q
         self._bracket_blocks = tuple(b for b in self.joints if b.kind in ("so3", "se3", "se2"))
         self._vector_space = model.nq == model.nv and all(b.kind == "vector" for b in self.joints)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import inspect
 import itertools
 import math
+import numbers
 from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass, field
@@ -146,10 +147,10 @@ def positive(
         if allow_none:
             return None
         raise GainError(f"{name} is required: give a finite number > 0")
-    try:
-        x = float(value)
-    except (TypeError, ValueError) as exc:
-        raise GainError(f"{name}={value!r} is not a number; give a finite number > 0") from exc
+    if isinstance(value, (str, bytes, bool)) or not isinstance(value, numbers.Real):
+        # a string would pass float() here and crash the first update (issue 17)
+        raise GainError(f"{name}={value!r} is not a number; give a finite number > 0")
+    x = float(value)
     ok = math.isfinite(x) and (x >= 0 if allow_zero else x > 0)
     if not ok:
         bound = ">= 0" if allow_zero else "> 0"

@@ -8,7 +8,6 @@ from pinobs.simulation.inputs import (
     Zero,
     make_input,
 )
-from pinobs.simulation.logs import Log, LogRun, estimate_log, read_log, write_estimates, write_log
 from pinobs.simulation.mismatch import MISMATCH_SCENARIOS, mismatched_plant
 from pinobs.simulation.result import ObserverTrace, Result
 from pinobs.simulation.run import default_input, perturb, simulate
@@ -18,8 +17,6 @@ __all__ = [
     "INPUT_NAMES",
     "MISMATCH_SCENARIOS",
     "InputProfile",
-    "Log",
-    "LogRun",
     "MultiSine",
     "ObserverTrace",
     "PDTracking",
@@ -27,12 +24,8 @@ __all__ = [
     "Sensor",
     "Zero",
     "default_input",
-    "estimate_log",
     "make_input",
     "mismatched_plant",
     "perturb",
-    "read_log",
     "simulate",
-    "write_estimates",
-    "write_log",
 ]

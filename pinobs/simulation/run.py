@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from pinobs.errors import ObserverDiverged
+from pinobs.errors import ObserverDiverged, PinobsError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.robot import Vector
 from pinobs.observers import Observer, make_observer
@@ -97,6 +97,10 @@ def simulate(
         substeps: plant integration steps per sample.
         plant: the truth's model if it differs from ``robot`` (model mismatch).
         progress: called as ``progress(k, n)`` after sample ``k`` of ``n``.
+
+    An observer that fails (diverges, a singular matrix, a rejected input)
+    stops there: its trace is NaN from then on, ``diverged_at`` is set and the
+    reason is in ``meta["failures"]``; the other observers run on.
     """
     sensor = sensor or Sensor()
     rng = np.random.default_rng(seed)
@@ -127,6 +131,7 @@ def simulate(
     est_v = {k: np.full((n, truth.nv), np.nan) for k in obs}
     wall = {k: np.full(n, np.nan) for k in obs}
     diverged: dict[str, float | None] = dict.fromkeys(obs)
+    failures: dict[str, str] = {}
     history: deque[Vector] = deque(maxlen=sensor.delay + 1)
 
     q, v = q0, v0
@@ -150,6 +155,12 @@ def simulate(
                     est = ob.update(t[k], meas, tau)
             except ObserverDiverged as exc:
                 diverged[name] = exc.t
+                failures[name] = str(exc)
+                continue
+            except (ArithmeticError, np.linalg.LinAlgError, PinobsError) as exc:
+                # one failing observer must not take the others' results with it
+                diverged[name] = float(t[k])
+                failures[name] = f"{type(exc).__name__} at t = {t[k]:.6g} s: {exc}"
                 continue
             wall[name][k] = time.perf_counter() - start
             est_q[name][k], est_v[name][k] = est.q, est.v
@@ -183,5 +194,6 @@ def simulate(
         "perturb_v": perturb_v,
         "substeps": substeps,
         "plant": truth.name if plant is not None else None,
+        "failures": failures,
     }
     return Result(robot=robot.name, t=t, q=Q, v=V, tau=TAU, q_meas=QM, traces=traces, meta=meta)

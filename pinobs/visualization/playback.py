@@ -49,9 +49,10 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from pinobs.errors import DimensionError, GainError, UnknownNameError
+from pinobs.io import Log, LogRun
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
-from pinobs.simulation import Log, LogRun, ObserverTrace, Result
+from pinobs.simulation import ObserverTrace, Result
 from pinobs.visualization._deps import require
 from pinobs.visualization.chart import chart_data, chart_html
 from pinobs.visualization.palette import hex_colour, observer_colours
@@ -860,8 +861,8 @@ def log_result(robot: Robot, log: Log, runs: Mapping[str, LogRun]) -> Result:
 
     Args:
         robot: the robot of the log.
-        log: from :func:`pinobs.simulation.read_log`.
-        runs: label -> :func:`pinobs.simulation.estimate_log` output over ``log``.
+        log: from :func:`pinobs.io.read_log`.
+        runs: label -> :func:`pinobs.io.estimate_log` output over ``log``.
     """
     t = np.asarray(log.t, dtype=float)
     keep = np.isfinite(t)

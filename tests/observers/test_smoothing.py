@@ -9,6 +9,7 @@ import pytest
 
 import pinobs
 from pinobs.errors import DimensionError, GainError, OptionError, TimestampError
+from pinobs.io import Log, estimate_log
 from pinobs.observers import make_observer
 from pinobs.observers.smoothing import (
     _backward,
@@ -17,8 +18,7 @@ from pinobs.observers.smoothing import (
     select_accel_psd,
     smooth,
 )
-from pinobs.simulation import Sensor, estimate_log, simulate
-from pinobs.simulation.logs import Log
+from pinobs.simulation import Sensor, simulate
 from tests.conftest import cached_robot
 
 
@@ -255,7 +255,7 @@ def test_smoother_targets_on_exact_model_logs(name: str, sigma: float) -> None:
 
 def test_cli_estimate_smooth_writes_estimate_columns_plus_v_std(tmp_path, ur5_log) -> None:
     from pinobs.cli import main
-    from pinobs.simulation import write_log
+    from pinobs.io import write_log
 
     rows = slice(1, 301)
     log = write_log(tmp_path / "log.csv", ur5_log.t[rows], ur5_log.q_meas[rows], ur5_log.tau[rows])

@@ -251,7 +251,7 @@ def test_saved_result_plays_back_the_same_motion(
 def test_recorded_log_plays_back_measured_motion_and_estimate(
     cartpole_run: dict[str, Any], tmp_path: Path
 ) -> None:
-    from pinobs.simulation import estimate_log, read_log, write_log
+    from pinobs.io import estimate_log, read_log, write_log
 
     robot, result = cartpole_run["robot"], cartpole_run["result"]
     path = write_log(tmp_path / "log.csv", result.t, result.q_meas, result.tau)

@@ -9,7 +9,7 @@ import pytest
 
 import pinobs
 from pinobs.cli import main
-from pinobs.simulation import estimate_log, read_log, write_log
+from pinobs.io import estimate_log, read_log, write_log
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "ur5_log.csv"
 
@@ -46,7 +46,10 @@ def test_cli_round_trips_a_ur5_csv_log_with_the_same_row_count(tmp_path: Path, c
     assert est.size == log.size
     assert est.dtype.names == ("t", *(f"q{i}" for i in range(6)), *(f"v{i}" for i in range(6)))
     np.testing.assert_array_equal(est["t"], log["t"])
-    assert "200 rows, 200 estimated, 0 bad" in capsys.readouterr().out
+    assert (
+        "200 rows: 200 estimated (200 with their measurement, 0 propagated only), 0 without an estimate; 0 rows reported"
+        in capsys.readouterr().out
+    )
 
 
 def test_estimates_from_a_log_match_the_live_loop(tmp_path: Path) -> None:
@@ -114,7 +117,7 @@ def test_npz_log_is_read_like_csv(tmp_path: Path) -> None:
 
 def test_log_columns_that_do_not_fit_the_robot_are_rejected(tmp_path: Path) -> None:
     path, _ = _log(tmp_path, n=10)
-    with pytest.raises(pinobs.DimensionError, match=r"lacks columns \['q6'"):
+    with pytest.raises(pinobs.DimensionError, match=r"lack \['q6 or q.panda_joint7'"):
         read_log(path, pinobs.load("panda"))
     with pytest.raises(pinobs.ModelFileError, match="does not exist") as info:
         read_log(tmp_path / "missing.csv", pinobs.load("ur5"))
@@ -145,4 +148,16 @@ def test_cli_round_trips_a_ur5_csv_log_with_the_riemannian_observer(tmp_path: Pa
     # the log starts at the truth's configuration at rest; after 0.2 s the estimate has converged
     err = np.abs(v_hat[200:] - res.v[201:]).max()
     assert err < 5e-3  # measured 3e-4 rad/s
-    assert "400 rows, 400 estimated, 0 bad" in capsys.readouterr().out
+    assert (
+        "400 rows: 400 estimated (400 with their measurement, 0 propagated only), 0 without an estimate; 0 rows reported"
+        in capsys.readouterr().out
+    )
+
+
+def test_cli_estimate_writes_a_playback_of_the_log(tmp_path: Path, capsys) -> None:
+    path, _ = _log(tmp_path, n=60)
+    out, html = tmp_path / "est.csv", tmp_path / "play.html"
+    args = ["estimate", "--robot", "ur5", "--observer", "kf", "--log", str(path)]
+    assert main([*args, "--out", str(out), "--html", str(html), "--no-progress"]) == 0
+    assert html.stat().st_size > 10_000 and "wrote" in capsys.readouterr().out
+    assert len(np.genfromtxt(out, delimiter=",", names=True)) == 60

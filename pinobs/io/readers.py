@@ -1,0 +1,762 @@
+"""Readers: a recorded log, from any of its formats, as chunks of ``t, q, tau`` rows.
+
+Formats (chosen from the source):
+
+- CSV (``.csv``, ``.txt``) and TSV (``.tsv``, ``.tab``): a header row, then one
+  row per sample.  UTF-8 (a byte-order mark is accepted).  The columns are
+  found by name (any order, extra columns ignored):
+
+  - ``t``: time [s];
+  - positional ``q0 .. q{nq-1}`` and ``tau0 .. tau{nv-1}`` (Pinocchio's order,
+    quaternions ``x, y, z, w``), or named ``q.<joint>`` / ``tau.<joint>``
+    (``q.<joint>.<k>`` / ``tau.<joint>.<k>`` for a joint with several
+    coordinates); a continuous joint (``cos, sin`` in Pinocchio) may also be
+    given as one angle column ``q.<joint>`` [rad];
+  - ``columns`` maps other column names to these (``{"pos_1": "q.elbow"}``).
+
+  The torque columns are optional (every torque then reads as zero, and a
+  model-based observer is warned).
+- Parquet (``.parquet``, ``.pq``): the same columns.
+- NPZ (``.npz``): arrays ``t`` (N,), ``q`` (N, nq), optionally ``tau`` (N, nv).
+- A pandas ``DataFrame``: the same columns as a CSV.
+- ROS bags (a rosbag2 directory with sqlite3 or MCAP storage, a ``.mcap`` or
+  ``.db3`` file, a ROS 1 ``.bag``), read with the ``rosbags`` library:
+  ``sensor_msgs/JointState`` messages on ``topic`` (default: the only
+  JointState topic), joints matched by name in any order, ``position`` as q,
+  ``effort`` as τ, the header stamp as t.
+
+A clean CSV/TSV is read by Arrow's streaming CSV reader straight into NumPy
+(fast, and without importing pandas); from the first row it cannot parse as
+numbers on, pandas reads the rest and says what is wrong with each row.
+
+Nothing is dropped while reading: a cell that cannot be read becomes NaN and
+is reported in :attr:`Log.problems` with its line (CSV) or row / message
+number (the others); a file that cannot be parsed at all raises
+:class:`~pinobs.errors.LogFormatError` naming the line.  CSV, TSV, Parquet and
+bags are read in chunks (:func:`iter_log`), so memory does not grow with the
+log; NPZ files are loaded whole.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import zipfile
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pinobs.errors import DimensionError, LogFormatError, ModelFileError
+from pinobs.model import Robot
+from pinobs.model.robot import Vector
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+__all__ = ["CHUNK_ROWS", "Log", "LogSource", "iter_log", "read_log"]
+
+#: Rows per chunk when streaming a log.
+CHUNK_ROWS = 10_000
+
+LogSource = Any  # str | Path | pandas.DataFrame (pandas is optional)
+
+_CSV = {".csv", ".txt", ".tsv", ".tab"}
+_PARQUET = {".parquet", ".pq"}
+_BAG_FILES = {".bag", ".mcap", ".db3"}
+_JOINT_STATE = ("sensor_msgs/msg/JointState", "sensor_msgs/JointState")
+_INSTALL_IO = 'pip install "pinobs[io]"'
+
+
+@dataclass(frozen=True)
+class Log:
+    """A recorded log, or one chunk of it: raw rows (NaN where a cell was unreadable).
+
+    Attributes:
+        t: times [s], shape ``(N,)``.
+        q: configurations, shape ``(N, nq)``.
+        tau: torques [N·m or N], shape ``(N, nv)``, or ``None`` when the log has none.
+        problems: ``(position, reason)`` for cells that could not be read.
+        lines: where each row is in the source, shape ``(N,)`` (what it counts: ``unit``).
+        unit: ``"line"`` (file line of a CSV, from 1), ``"row"`` (NPZ, Parquet,
+            DataFrame, from 0) or ``"message"`` (a bag, from 0).
+    """
+
+    t: Vector
+    q: Vector
+    tau: Vector | None
+    problems: tuple[tuple[int, str], ...] = ()
+    lines: Any = None
+    unit: str = "row"
+
+    def __post_init__(self) -> None:
+        if self.lines is None:
+            object.__setattr__(self, "lines", np.arange(self.t.size))
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+# ------------------------------------------------------------------ columns
+@dataclass(frozen=True)
+class _Layout:
+    """Where the robot's ``t``, ``q`` and ``tau`` are among a table's columns."""
+
+    t: str
+    q: tuple[tuple[str, ...], ...]  # per q block: its columns (one angle column for a circle)
+    q_angle: tuple[bool, ...]  # per q block: given as an angle
+    q_slices: tuple[slice, ...]
+    tau: tuple[str, ...] | None
+
+    @property
+    def used(self) -> list[str]:
+        cols = [self.t, *(c for block in self.q for c in block)]
+        return cols + list(self.tau or ())
+
+
+def _blocks(robot: Robot) -> list[tuple[str, str, int, int, int, int]]:
+    """``(name, kind, idx_q, nq, idx_v, nv)`` of every joint."""
+    return [(b.name, b.kind, b.idx_q, b.nq, b.idx_v, b.nv) for b in robot.joints]
+
+
+def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
+    """Match column names to the robot (module docstring); raise naming what is missing."""
+    names = set(header)
+
+    def one(candidates: list[str], what: str) -> str | None:
+        found = [c for c in candidates if c in names]
+        if len(found) > 1:
+            raise DimensionError(f"{where}: columns {found} all give {what}; keep one")
+        return found[0] if found else None
+
+    t = one(["t"], "t")
+    q_cols: list[tuple[str, ...]] = []
+    q_angle: list[bool] = []
+    q_slices: list[slice] = []
+    missing: list[str] = []
+    for name, kind, iq, nq, _, _ in _blocks(robot):
+        q_slices.append(slice(iq, iq + nq))
+        cols: list[str] = []
+        for k in range(nq):
+            named = f"q.{name}" if nq == 1 else f"q.{name}.{k}"
+            cols.append(one([f"q{iq + k}", named], f"q{iq + k}") or "")
+        if all(cols):
+            q_cols.append(tuple(cols))
+            q_angle.append(False)
+        elif kind == "circle" and not any(cols) and f"q.{name}" in names:
+            q_cols.append((f"q.{name}",))
+            q_angle.append(True)
+        else:
+            missing += [
+                f"q{iq + k} or q.{name}" + ("" if nq == 1 else f".{k}")
+                for k, c in enumerate(cols)
+                if not c
+            ]
+            q_cols.append(tuple(cols))
+            q_angle.append(False)
+    tau_cols: list[str | None] = []
+    for name, _, _, _, iv, nv in _blocks(robot):
+        for k in range(nv):
+            named = f"tau.{name}" if nv == 1 else f"tau.{name}.{k}"
+            tau_cols.append(one([f"tau{iv + k}", named], f"tau{iv + k}"))
+    if t is None or missing:
+        raise DimensionError(
+            f"{where}: columns {list(header)} lack {(['t'] if t is None else []) + missing}; "
+            f"robot {robot.name!r} needs t, then q0..q{robot.nq - 1} (nq = {robot.nq}) or "
+            f"q.<joint> for joints {list(robot.joint_names)}, and optionally "
+            f"tau0..tau{robot.nv - 1} or tau.<joint> (or map other names with columns=...)"
+        )
+    tau: tuple[str, ...] | None = None
+    if any(c is not None for c in tau_cols):
+        absent = [f"tau{i}" for i, c in enumerate(tau_cols) if c is None]
+        if absent:
+            raise DimensionError(
+                f"{where}: has some torque columns but lacks {absent} (nv = {robot.nv})"
+            )
+        tau = tuple(c for c in tau_cols if c is not None)
+    return _Layout(t, tuple(q_cols), tuple(q_angle), tuple(q_slices), tau)
+
+
+def _clean_header(header: Sequence[Any], columns: Mapping[str, str] | None) -> list[str]:
+    out = [str(h).strip().strip('"').strip("'").strip() for h in header]
+    if columns:
+        unknown = sorted(set(columns) - set(out))
+        if unknown:
+            raise DimensionError(
+                f"columns mapping names {unknown}, which the log does not have; it has {out}"
+            )
+        out = [columns.get(h, h) for h in out]
+    return out
+
+
+def _numeric(frame: pd.DataFrame, lines: Any, problems: list[tuple[int, str]]) -> None:
+    """Convert every column to float in place; unreadable cells -> NaN, reported once per row."""
+    import pandas as pd
+
+    bad: dict[int, list[str]] = {}
+    for col in frame.columns:
+        s = frame[col]
+        if s.dtype.kind in "fiu":
+            continue
+        if s.dtype.kind == "b":
+            frame[col] = s.astype(float)
+            continue
+        text = s.astype("string").str.strip().str.replace(r'^"(.*)"$', r"\1", regex=True)
+        num = pd.to_numeric(text, errors="coerce")
+        unreadable = num.isna() & text.notna() & (text != "")
+        for i in np.flatnonzero(unreadable.to_numpy()):
+            bad.setdefault(int(lines[i]), []).append(f"{col!r} unreadable: {s.iloc[i]!r}")
+        frame[col] = num.astype(float)
+    for line in sorted(bad):
+        problems.append((line, "; ".join(bad[line])))
+
+
+def _from_frame(
+    frame: pd.DataFrame,
+    layout: _Layout,
+    robot: Robot,
+    lines: Any,
+    unit: str,
+    problems: list[tuple[int, str]],
+) -> Log:
+    """A :class:`Log` chunk from a table whose columns follow ``layout``."""
+    frame = frame[layout.used].copy()
+    _numeric(frame, lines, problems)
+    arrays = {c: frame[c].to_numpy(dtype=float) for c in layout.used}
+    return _from_arrays(arrays, len(frame), layout, robot, lines, unit, problems)
+
+
+def _from_arrays(
+    arrays: Mapping[str, Vector],
+    n: int,
+    layout: _Layout,
+    robot: Robot,
+    lines: Any,
+    unit: str,
+    problems: list[tuple[int, str]],
+) -> Log:
+    """A :class:`Log` chunk from float columns named as ``layout`` says."""
+    q = np.empty((n, robot.nq))
+    for cols, angle, sl in zip(layout.q, layout.q_angle, layout.q_slices, strict=True):
+        if angle:
+            a = arrays[cols[0]]
+            q[:, sl] = np.column_stack([np.cos(a), np.sin(a)])
+        else:
+            q[:, sl] = np.column_stack([arrays[c] for c in cols])
+    tau = None if layout.tau is None else np.column_stack([arrays[c] for c in layout.tau])
+    return Log(
+        t=np.asarray(arrays[layout.t], dtype=float),
+        q=q,
+        tau=tau,
+        problems=tuple(problems),
+        lines=lines,
+        unit=unit,
+    )
+
+
+def _require_pandas() -> Any:
+    try:
+        import pandas as pd
+    except ImportError as exc:  # pragma: no cover - pandas is in the io and test extras
+        raise ModuleNotFoundError(f"reading CSV/Parquet logs needs pandas: {_INSTALL_IO}") from exc
+    return pd
+
+
+# ---------------------------------------------------------------------- CSV
+def _undecodable_line(path: Path) -> tuple[int, str]:
+    """The first line of ``path`` that is not UTF-8, and a hint about what the file is."""
+    with path.open("rb") as fh:
+        head = fh.read(8)
+    hint = ""
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")):
+        hint = " (it starts with a UTF-16 byte-order mark: re-save it as UTF-8)"
+    elif head.startswith(b"PK"):
+        hint = " (it is a zip archive: an .npz log must be named .npz)"
+    elif head.startswith(b"\x93NUMPY"):
+        hint = " (it is a .npy array: save the log with np.savez(path, t=..., q=..., tau=...))"
+    with path.open("rb") as fh:
+        for number, raw in enumerate(fh, start=1):
+            if number == 1 and raw.startswith(b"\xef\xbb\xbf"):
+                raw = raw[3:]
+            try:
+                raw.decode("utf-8")
+            except UnicodeDecodeError:
+                return number, hint
+    return 0, hint
+
+
+class _Fallback(Exception):
+    """The fast reader met a row it cannot parse: the careful one takes over from ``rows``."""
+
+    def __init__(self, rows: int) -> None:
+        super().__init__(rows)
+        self.rows = rows
+
+
+def _float_column(col: Any) -> Vector:
+    """An Arrow float64 array as a NumPy array, nulls as NaN.
+
+    Read from its buffers: Arrow's own ``to_numpy`` imports pandas (~60 MB).
+    """
+    validity, data = col.buffers()
+    x = np.frombuffer(data, dtype=np.float64, count=len(col), offset=col.offset * 8).copy()
+    if col.null_count:
+        bits = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")
+        x[bits[col.offset : col.offset + len(col)] == 0] = np.nan
+    return x
+
+
+def _open_arrow_csv(
+    pa: Any, pa_csv: Any, path: Path, names: list[str], used: list[str], sep: str
+) -> Any:
+    return pa_csv.open_csv(
+        path,
+        read_options=pa_csv.ReadOptions(
+            column_names=names,
+            skip_rows=1,
+            block_size=1 << 18,  # Arrow's RSS grows ~20x the block: 256 kB costs ~15 MB
+            use_threads=False,
+        ),
+        parse_options=pa_csv.ParseOptions(
+            delimiter=sep, quote_char=False, ignore_empty_lines=False
+        ),
+        convert_options=pa_csv.ConvertOptions(
+            column_types={c: pa.float64() for c in used}, include_columns=used
+        ),
+        memory_pool=pa.system_memory_pool(),
+    )
+
+
+def _arrow_csv_chunks(
+    path: Path, header: list[str], layout: _Layout, robot: Robot, sep: str, chunk_rows: int
+) -> Iterator[Log]:
+    """Clean CSV through Arrow's streaming reader (typed float columns, no pandas).
+
+    Any row it cannot parse as numbers (a stray quote, a bad cell, a blank line,
+    a wrong cell count) raises :class:`_Fallback` with the rows already yielded,
+    and :func:`_csv_chunks` re-reads from there with pandas, which reports the
+    cell or names the line.
+    """
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pa_csv
+    except ImportError:  # pragma: no cover - pyarrow is in the io and test extras
+        raise _Fallback(0) from None
+    used = list(dict.fromkeys(layout.used))
+    names = [f"{c}\x00{i}" if c not in used else c for i, c in enumerate(header)]
+    try:
+        reader = _open_arrow_csv(pa, pa_csv, path, names, used, sep)
+    except (pa.ArrowException, UnicodeDecodeError):
+        raise _Fallback(0) from None
+    start = 0  # rows yielded
+    pending: list[dict[str, Vector]] = []
+    rows = 0
+
+    def flush() -> Log:
+        nonlocal start, pending, rows
+        arrays = {c: np.concatenate([p[c] for p in pending]) for c in used}
+        lines = np.arange(start, start + rows) + 2  # line 1 is the header
+        log = _from_arrays(arrays, rows, layout, robot, lines, "line", [])
+        start, pending, rows = start + rows, [], 0
+        return log
+
+    try:
+        while True:
+            try:
+                batch = reader.read_next_batch()
+            except StopIteration:
+                break
+            except (pa.ArrowException, UnicodeDecodeError):
+                raise _Fallback(start) from None
+            off = 0
+            while off < batch.num_rows:
+                take = min(chunk_rows - rows, batch.num_rows - off)
+                part = batch.slice(off, take)
+                pending.append({c: _float_column(part.column(c)) for c in used})
+                rows, off = rows + take, off + take
+                if rows == chunk_rows:
+                    yield flush()
+        if rows:
+            yield flush()
+    finally:
+        reader.close()
+
+
+def _csv_chunks(
+    path: Path, robot: Robot, columns: Mapping[str, str] | None, chunk_rows: int
+) -> Iterator[Log]:
+    line, hint = _undecodable_line(path) if _has_binary_head(path) else (0, "")
+    if line:
+        raise LogFormatError(f"log {str(path)!r}: line {line} is not UTF-8 text{hint}")
+    sep = "\t" if path.suffix.lower() in (".tsv", ".tab") else ","
+    with path.open(encoding="utf-8-sig", errors="strict") as fh:
+        try:
+            first = fh.readline()
+        except UnicodeDecodeError:
+            line, hint = _undecodable_line(path)
+            raise LogFormatError(
+                f"log {str(path)!r}: line {line or 1} is not UTF-8 text{hint}"
+            ) from None
+    if not first.strip():
+        raise LogFormatError(f"log {str(path)!r} is empty or its line 1 (the header) is blank")
+    if sep == "," and "\t" in first and "," not in first:
+        sep = "\t"
+    elif sep == "\t" and "," in first and "\t" not in first:
+        sep = ","
+    header = _clean_header(next(csv.reader([first], delimiter=sep)), columns)
+    layout = _layout(header, robot, f"log {str(path)!r}")
+    if not _has_data_after_header(path):
+        return
+    start = 0
+    try:
+        yield from _arrow_csv_chunks(path, header, layout, robot, sep, chunk_rows)
+        return
+    except _Fallback as fb:
+        start = fb.rows
+    pd = _require_pandas()
+    reader = pd.read_csv(
+        path,
+        sep=sep,
+        header=None,
+        skiprows=1 + start,
+        encoding="utf-8-sig",
+        quoting=csv.QUOTE_NONE,
+        skipinitialspace=True,
+        skip_blank_lines=False,
+        chunksize=chunk_rows,
+        engine="c",
+    )
+    try:
+        for chunk in reader:
+            if chunk.shape[1] != len(header):  # short rows are NaN-padded, long ones raise
+                raise LogFormatError(
+                    f"log {str(path)!r}: {chunk.shape[1]} columns, the header has {len(header)}"
+                )
+            chunk.columns = header
+            lines = np.arange(start, start + len(chunk)) + 2  # line 1 is the header
+            start += len(chunk)
+            blank = chunk.isna().all(axis=1).to_numpy()
+            if blank.any():  # blank lines are not rows
+                chunk, lines = chunk[~blank], lines[~blank]
+            if len(chunk):
+                yield _from_frame(chunk, layout, robot, lines, "line", [])
+    except UnicodeDecodeError:
+        line, hint = _undecodable_line(path)
+        raise LogFormatError(f"log {str(path)!r}: line {line} is not UTF-8 text{hint}") from None
+    except pd.errors.ParserError as exc:
+        raise LogFormatError(f"log {str(path)!r}: {str(exc).strip()}") from None
+    finally:
+        reader.close()
+
+
+def _has_data_after_header(path: Path) -> bool:
+    with path.open("rb") as fh:
+        fh.readline()
+        return any(line.strip() for line in iter(fh.readline, b""))
+
+
+def _has_binary_head(path: Path) -> bool:
+    with path.open("rb") as fh:
+        head = fh.read(4096)
+    if head.startswith(b"\xef\xbb\xbf"):
+        head = head[3:]
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return exc.start < len(head) - 4  # not just a character cut by the 4096-byte window
+    return b"\x00" in head
+
+
+# ------------------------------------------------------------------ Parquet
+def _parquet_chunks(
+    path: Path, robot: Robot, columns: Mapping[str, str] | None, chunk_rows: int
+) -> Iterator[Log]:
+    _require_pandas()
+    try:
+        import pyarrow.parquet as pq
+        from pyarrow import ArrowException
+    except ImportError as exc:  # pragma: no cover - pyarrow is in the io and test extras
+        raise ModuleNotFoundError(f"reading Parquet logs needs pyarrow: {_INSTALL_IO}") from exc
+    try:
+        pf = pq.ParquetFile(path)
+    except (ArrowException, OSError) as exc:
+        raise LogFormatError(f"log {str(path)!r} is not a readable Parquet file: {exc}") from None
+    raw = list(pf.schema_arrow.names)
+    header = _clean_header(raw, columns)
+    layout = _layout(header, robot, f"log {str(path)!r}")
+    back = dict(zip(header, raw, strict=True))
+    start = 0
+    try:
+        for batch in pf.iter_batches(batch_size=chunk_rows, columns=[back[c] for c in layout.used]):
+            frame = batch.to_pandas()
+            frame.columns = [columns.get(c, c) if columns else c for c in frame.columns]
+            lines = np.arange(start, start + len(frame))
+            start += len(frame)
+            yield _from_frame(frame, layout, robot, lines, "row", [])
+    except (ArrowException, OSError) as exc:
+        raise LogFormatError(f"log {str(path)!r}: unreadable after row {start}: {exc}") from None
+
+
+# ---------------------------------------------------------------------- NPZ
+def _npz_log(path: Path, robot: Robot) -> Log:
+    try:
+        with path.open("rb") as fh:
+            loaded = np.load(io.BytesIO(fh.read()), allow_pickle=False)
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as exc:
+        raise LogFormatError(
+            f"log {str(path)!r} is not a readable .npz archive ({type(exc).__name__}: {exc}); "
+            "a truncated copy? write one with np.savez(path, t=..., q=..., tau=...)"
+        ) from None
+    if isinstance(loaded, np.ndarray):
+        raise LogFormatError(
+            f"log {str(path)!r} holds one .npy array of shape {loaded.shape}, not an .npz "
+            "archive with arrays t, q (and tau): write one with np.savez(path, t=..., q=..., tau=...)"
+        )
+    with loaded as z:
+        keys = list(z.keys())
+        if "t" not in keys or "q" not in keys:
+            raise LogFormatError(
+                f"log {str(path)!r} has arrays {keys}; a log needs t, q (and optionally tau)"
+            )
+        try:
+            t = np.asarray(z["t"], dtype=float)
+            q = np.asarray(z["q"], dtype=float)
+            tau = np.asarray(z["tau"], dtype=float) if "tau" in keys else None
+        except (zipfile.BadZipFile, EOFError, OSError, ValueError) as exc:
+            raise LogFormatError(
+                f"log {str(path)!r}: an array cannot be read ({type(exc).__name__}: {exc}); "
+                "a truncated copy?"
+            ) from None
+    if (
+        t.ndim != 1
+        or q.shape != (t.size, robot.nq)
+        or (tau is not None and tau.shape != (t.size, robot.nv))
+    ):
+        raise DimensionError(
+            f"log {str(path)!r}: t {t.shape}, q {q.shape}, tau {None if tau is None else tau.shape}; "
+            f"robot {robot.name!r} needs q of shape (N, {robot.nq}) and tau of shape (N, {robot.nv})"
+        )
+    return Log(t=t, q=q, tau=tau, unit="row")
+
+
+# ---------------------------------------------------------------- ROS bags
+def _is_bag(path: Path) -> bool:
+    return (path.is_dir() and (path / "metadata.yaml").is_file()) or (
+        path.suffix.lower() in _BAG_FILES
+    )
+
+
+def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) -> Iterator[Log]:
+    try:
+        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError as exc:
+        raise ModuleNotFoundError(f"reading ROS bags needs rosbags: {_INSTALL_IO}") from exc
+    for name, kind, *_ in _blocks(robot):
+        if kind not in ("vector", "circle"):
+            raise DimensionError(
+                f"joint {name!r} of {robot.name!r} is a {kind} joint, which "
+                "sensor_msgs/JointState cannot carry; load the robot with a fixed root"
+            )
+    index = {b.name: b for b in robot.joints}
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        reader.open()
+    except (AnyReaderError, OSError) as exc:
+        raise LogFormatError(f"bag {str(path)!r} cannot be opened: {exc}") from None
+    try:
+        states = [c for c in reader.connections if c.msgtype in _JOINT_STATE]
+        topics = sorted({c.topic for c in states})
+        if topic is None:
+            if len(topics) != 1:
+                raise DimensionError(
+                    f"bag {str(path)!r} has {len(topics)} sensor_msgs/JointState topics "
+                    f"{topics}; choose one with topic=... (--topic)"
+                )
+            topic = topics[0]
+        if topic not in topics:
+            raise DimensionError(
+                f"bag {str(path)!r} has no sensor_msgs/JointState topic {topic!r}; "
+                f"its JointState topics: {topics}"
+            )
+        conns = [c for c in states if c.topic == topic]
+        buf_t: list[float] = []
+        buf_q: list[Vector] = []
+        buf_tau: list[Vector] = []
+        problems: list[tuple[int, str]] = []
+        start = 0
+        any_tau = False
+        for number, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
+            msg: Any = reader.deserialize(raw, conn.msgtype)
+            buf_t.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+            names = list(msg.name)
+            pos = np.asarray(msg.position, dtype=float)
+            eff = np.asarray(msg.effort, dtype=float)
+            q = np.full(robot.nq, np.nan)
+            tau = np.full(robot.nv, np.nan)
+            where = {n: i for i, n in enumerate(names)}
+            lacking = [n for n in index if n not in where or where[n] >= pos.size]
+            if number == 0 and len(lacking) == len(index):
+                raise DimensionError(
+                    f"bag {str(path)!r}, topic {topic!r}: the JointState joints {names} include "
+                    f"none of {robot.name!r}'s joints {list(index)}"
+                )
+            notes = [f"no position for joints {lacking}"] if lacking else []
+            for jname, b in index.items():
+                i = where.get(jname)
+                if i is None:
+                    continue
+                if i < pos.size:
+                    if b.kind == "circle":
+                        q[b.idx_q : b.idx_q + 2] = np.cos(pos[i]), np.sin(pos[i])
+                    else:
+                        q[b.idx_q] = pos[i]
+                if i < eff.size:
+                    tau[b.idx_v] = eff[i]
+            any_tau = any_tau or eff.size > 0
+            if eff.size and np.isnan(tau).any():
+                notes.append("effort lacks some joints")
+            if notes:
+                problems.append((number, "; ".join(notes)))
+            buf_q.append(q)
+            buf_tau.append(tau)
+            if len(buf_t) == chunk_rows:
+                yield _bag_log(buf_t, buf_q, buf_tau, start, problems, any_tau, robot.nq, robot.nv)
+                start += len(buf_t)
+                buf_t, buf_q, buf_tau, problems = [], [], [], []
+        if buf_t or start == 0:
+            yield _bag_log(buf_t, buf_q, buf_tau, start, problems, any_tau, robot.nq, robot.nv)
+    finally:
+        reader.close()
+
+
+def _bag_log(
+    t: list[float],
+    q: list[Vector],
+    tau: list[Vector],
+    start: int,
+    problems: list[tuple[int, str]],
+    any_tau: bool,
+    nq: int,
+    nv: int,
+) -> Log:
+    n = len(t)
+    return Log(
+        t=np.array(t, dtype=float),
+        q=np.array(q, dtype=float).reshape(n, nq),
+        tau=np.array(tau, dtype=float).reshape(n, nv) if any_tau else None,
+        problems=tuple(problems),
+        lines=np.arange(start, start + n),
+        unit="message",
+    )
+
+
+# ------------------------------------------------------------------- public
+def iter_log(
+    source: LogSource,
+    robot: Robot,
+    *,
+    columns: Mapping[str, str] | None = None,
+    topic: str | None = None,
+    chunk_rows: int = CHUNK_ROWS,
+) -> Iterator[Log]:
+    """Read a log chunk by chunk (formats and columns: module docstring).
+
+    Args:
+        source: a file or bag path, or a pandas ``DataFrame``.
+        robot: the robot the log is of (its joints name the columns).
+        columns: other column names -> ``t`` / ``q.<joint>`` / ``q3`` / ``tau.<joint>`` ...
+        topic: the ``sensor_msgs/JointState`` topic of a bag.
+        chunk_rows: rows per chunk (> 0).
+
+    Yields:
+        :class:`Log` chunks, in order; the first one is yielded even when empty.
+
+    Raises:
+        ModelFileError: the file is missing (a ``FileNotFoundError``).
+        LogFormatError: the file cannot be parsed; the message names the line.
+        DimensionError: the columns do not match the robot.
+    """
+    if chunk_rows < 1:
+        raise DimensionError(f"chunk_rows={chunk_rows} must be >= 1")
+    if type(source).__name__ == "DataFrame":
+        yield _frame_log(source, robot, columns)
+        return
+    path = Path(source)
+    if not path.exists():
+        raise ModelFileError(f"log {str(path)!r} does not exist")
+    suffix = path.suffix.lower()
+    if _is_bag(path):
+        yield from _bag_chunks(path, robot, topic, chunk_rows)
+    elif path.is_dir():
+        raise ModelFileError(f"log {str(path)!r} is a folder but not a rosbag2 (no metadata.yaml)")
+    elif suffix in (".npz", ".npy"):
+        log = _npz_log(path, robot)
+        for s in range(0, max(len(log), 1), chunk_rows):
+            sl = slice(s, s + chunk_rows)
+            tau = None if log.tau is None else log.tau[sl]
+            yield Log(log.t[sl], log.q[sl], tau, lines=np.arange(log.t.size)[sl], unit="row")
+    elif suffix in _PARQUET:
+        first = True
+        for chunk in _parquet_chunks(path, robot, columns, chunk_rows):
+            first = False
+            yield chunk
+        if first:
+            yield _empty(robot)
+    else:
+        first = True
+        for chunk in _csv_chunks(path, robot, columns, chunk_rows):
+            first = False
+            yield chunk
+        if first:
+            yield _empty(robot)
+
+
+def _empty(robot: Robot) -> Log:
+    return Log(np.empty(0), np.empty((0, robot.nq)), None, unit="row")
+
+
+def _frame_log(frame: Any, robot: Robot, columns: Mapping[str, str] | None) -> Log:
+    header = _clean_header([str(c) for c in frame.columns], None)
+    frame = frame.set_axis(header, axis=1)
+    if columns:
+        header = _clean_header(header, columns)
+        frame = frame.set_axis(header, axis=1)
+    layout = _layout(header, robot, "DataFrame")
+    return _from_frame(frame, layout, robot, np.arange(len(frame)), "row", [])
+
+
+def read_log(
+    source: LogSource,
+    robot: Robot,
+    *,
+    columns: Mapping[str, str] | None = None,
+    topic: str | None = None,
+) -> Log:
+    """Read a whole log into memory (:func:`iter_log` streams it).
+
+    Args and raises as :func:`iter_log`.  Returns one :class:`Log` with every
+    row, in order, and every cell that could not be read in ``problems``.
+    """
+    chunks = list(iter_log(source, robot, columns=columns, topic=topic))
+    if len(chunks) == 1:
+        return chunks[0]
+    taus = [c.tau for c in chunks]
+    tau = None
+    if any(x is not None for x in taus):
+        tau = np.concatenate(
+            [
+                x if x is not None else np.full((len(c), robot.nv), np.nan)
+                for c, x in zip(chunks, taus, strict=True)
+            ]
+        )
+    return Log(
+        t=np.concatenate([c.t for c in chunks]),
+        q=np.concatenate([c.q for c in chunks]),
+        tau=tau,
+        problems=tuple(p for c in chunks for p in c.problems),
+        lines=np.concatenate([c.lines for c in chunks]),
+        unit=chunks[0].unit,
+    )

@@ -1,0 +1,640 @@
+"""The estimate over a log: one output row per input row, every fault reported once.
+
+:class:`LogEstimator` feeds log chunks to an observer-like object (anything
+with ``robot``, ``name``, ``uses_torque``, ``reset(t, q, v, tau)`` and
+``update(t, q_or_None, tau)``, MATH §7's sampled-data contract) and returns,
+for every row, in order, the estimate at that row's time, or NaN when the row
+could not be placed in time.  Per row (``T`` the nominal sample period, the
+median interval of the first chunk unless given):
+
+- **time** unreadable or not after the previous accepted row: the row is
+  skipped (NaN), alone; after ``TIME_BACK_ROWS`` such rows that increase
+  among themselves (a clock reset, a burst of stamps ahead) the observer
+  re-initialises at the next one.  A row more than ``GAP_PERIODS`` periods ahead whose
+  *next* row comes back before it (``t_k > t_{k+1}``) is a glitch: skipped
+  alone, the rows after it are kept.
+- **gap**: a true gap ``GAP_PERIODS·T < Δt ≤ MAX_GAP_PERIODS·T`` is
+  propagated in ``⌈Δt/T⌉`` sub-steps ``update(t_j, None, τ_held)`` of at
+  most ``T`` each (the sub-step estimates are not output), never in one giant
+  step; a longer gap re-initialises the observer at the row (its position,
+  zero velocity), which recovers faster than a long open-loop propagation
+  with a held torque (measured: :data:`pinobs.tolerances.MAX_GAP_PERIODS`).
+- **position** unreadable, non-finite, off its manifold or absurd (further
+  outside the URDF range than ``ABSURD_LIMIT_FACTOR`` ranges): the row is a
+  dropped sample (propagate only, the estimate is output).
+- **torque** unreadable, non-finite or absurd (beyond ``ABSURD_LIMIT_FACTOR``
+  times the URDF effort limit): the previously accepted torque is held; a
+  rejected torque never reaches the observer.
+- an observer that fails on a row (``ObserverDiverged``, a singular matrix)
+  is re-initialised at the next row with a usable position.
+
+Each such row is reported once, ``(position, reason)``, with the reasons of
+the row joined; positions are file lines (CSV) or row / message numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pinobs.errors import (
+    ConfigurationError,
+    DimensionError,
+    NonFiniteError,
+    ObserverDiverged,
+    PinobsError,
+)
+from pinobs.io.noise import estimate_noise_std
+from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, iter_log
+from pinobs.io.writers import EstimateWriter
+from pinobs.model import Robot
+from pinobs.model.robot import Vector
+from pinobs.observers import Estimate, make_observer
+from pinobs.tolerances import (
+    ABSURD_LIMIT_FACTOR,
+    ABSURD_VALUE,
+    GAP_PERIODS,
+    LIMIT_WARN_FRACTION,
+    MAX_GAP_PERIODS,
+    TIME_BACK_ROWS,
+    TIME_EPS,
+)
+
+__all__ = [
+    "LogEstimator",
+    "LogRun",
+    "ObserverLike",
+    "estimate",
+    "estimate_log",
+    "process_log",
+]
+
+
+class ObserverLike(Protocol):
+    """What :class:`LogEstimator` needs of an observer (an :class:`~pinobs.Observer` is one)."""
+
+    robot: Robot
+
+    @property
+    def name(self) -> str: ...  # pragma: no cover
+
+    @property
+    def uses_torque(self) -> bool: ...  # pragma: no cover
+
+    def reset(
+        self, t0: float, q0: Any, v0: Any = None, tau0: Any = None
+    ) -> Estimate: ...  # pragma: no cover
+
+    def update(self, t: float, q_meas: Any, tau: Any = None) -> Estimate: ...  # pragma: no cover
+
+
+@dataclass
+class LogRun:
+    """Estimates over a log, one row per log row (NaN where the row could not be placed in time).
+
+    Attributes:
+        t: the log's times [s] (as read).  Empty when the run was streamed to a file.
+        q: estimated configurations ``(N, nq)``.
+        v: estimated velocities ``(N, nv)``.
+        bad_rows: ``(position, reason)``, once for every row dropped or repaired, in order.
+        warnings: what the run could not do or found suspicious.
+        rows: rows in the log.
+        estimated: rows with an estimate (finite output).
+        measured: rows whose position corrected the estimate.
+        unit: what the positions of ``bad_rows`` count (``"line"``, ``"row"``, ``"message"``).
+        noise_std: the σ the observer was built with [rad or m] (``None``: its default).
+        noise_std_per_joint: σ per velocity coordinate estimated from the log, or ``None``.
+        period: the nominal sample period [s] used for gaps.
+    """
+
+    t: Vector
+    q: Vector
+    v: Vector
+    bad_rows: list[tuple[int, str]] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    rows: int = 0
+    estimated: int = 0
+    measured: int = 0
+    unit: str = "line"
+    noise_std: float | None = None
+    noise_std_per_joint: Vector | None = None
+    period: float | None = None
+
+    def summary(self) -> str:
+        """One line: rows in, rows estimated (with / without their measurement), rows reported."""
+        return (
+            f"{self.rows} rows: {self.estimated} estimated ({self.measured} with their "
+            f"measurement, {self.estimated - self.measured} propagated only), "
+            f"{self.rows - self.estimated} without an estimate; {len(self.bad_rows)} rows reported"
+        )
+
+
+# ------------------------------------------------------------------ screening
+def _absurd_bounds(robot: Robot) -> tuple[Vector, Vector, Vector, Vector, Vector]:
+    """Per q coordinate: (absurd low, absurd high, warn low, warn high); per v: |τ| bound."""
+    lo = np.array(robot.model.lowerPositionLimit, dtype=float)
+    hi = np.array(robot.model.upperPositionLimit, dtype=float)
+    # a joint without limits has ±1.8e308 in Pinocchio: clip before any arithmetic
+    lo, hi = np.maximum(lo, -2 * ABSURD_VALUE), np.minimum(hi, 2 * ABSURD_VALUE)
+    rng = hi - lo
+    limited = np.isfinite(rng) & (rng > 0) & (rng < ABSURD_VALUE)
+    pad = np.where(limited, ABSURD_LIMIT_FACTOR * rng, np.inf)
+    a_lo = np.where(limited, lo - pad, -ABSURD_VALUE)
+    a_hi = np.where(limited, hi + pad, ABSURD_VALUE)
+    w_lo = np.where(limited, lo - LIMIT_WARN_FRACTION * rng, -np.inf)
+    w_hi = np.where(limited, hi + LIMIT_WARN_FRACTION * rng, np.inf)
+    eff = np.minimum(np.array(robot.model.effortLimit, dtype=float), 2 * ABSURD_VALUE)
+    ok = np.isfinite(eff) & (eff > 0) & (eff < ABSURD_VALUE)
+    tau_max = np.where(ok, ABSURD_LIMIT_FACTOR * eff, ABSURD_VALUE)
+    return a_lo, a_hi, w_lo, w_hi, tau_max
+
+
+def _coordinate_names(robot: Robot) -> list[str]:
+    names = [""] * robot.nq
+    for b in robot.joints:
+        for k in range(b.nq):
+            names[b.idx_q + k] = b.name if b.nq == 1 else f"{b.name}[{k}]"
+    return names
+
+
+class LogEstimator:
+    """Run an observer-like object over log chunks (rules: module docstring).
+
+    Args:
+        observer: the observer (``reset``/``update``, see :class:`ObserverLike`).
+        period: nominal sample period [s] (default: the median interval of the first chunk).
+    """
+
+    def __init__(self, observer: ObserverLike, *, period: float | None = None) -> None:
+        self.observer = observer
+        self.robot = observer.robot
+        self.period = period
+        self.bad_rows: list[tuple[int, str]] = []
+        self.warnings: list[str] = []
+        self.rows = 0
+        self.estimated = 0
+        self.measured = 0
+        self._bounds = _absurd_bounds(self.robot)
+        self._names = _coordinate_names(self.robot)
+        self._outside: dict[int, float] = {}
+        self._pending: Log | None = None
+        self._started = False
+        self._t = -math.inf
+        self._held: Vector | None = None
+        self._back = 0  # consecutive rows behind the previous accepted time, increasing
+        self._back_t = -math.inf
+        self._tau_warned = False
+
+    # ---------------------------------------------------------------- API
+    def feed(self, chunk: Log, *, last: bool = False) -> tuple[Vector, Vector, Vector]:
+        """Estimate the rows of ``chunk`` (one row is held back for the look-ahead unless ``last``).
+
+        Returns ``(t, q, v)`` of the rows done, in order: over all calls, one row per input row.
+        """
+        if len(chunk) and chunk.tau is None and self.observer.uses_torque and not self._tau_warned:
+            self._tau_warned = True
+            self.warnings.append(
+                f"the log has no torque columns: {self.observer.name!r} uses the model's dynamics "
+                "and now assumes zero applied torque (gravity stays modelled); its estimates carry "
+                "the effect of the missing inputs. Add tau columns (or JointState effort), or use a "
+                "model-free observer (fd, kf)."
+            )
+        log = chunk if self._pending is None else _concat(self._pending, chunk, self.robot.nv)
+        if self.period is None:
+            self.period = _median_period(log.t)
+        n = len(log) if last else max(len(log) - 1, 0)
+        self._pending = None if n == len(log) else _slice(log, n, len(log))
+        return self._run(log, n)
+
+    def finish(self) -> tuple[Vector, Vector, Vector]:
+        """The held-back row, and the limit warning (call once, after the last chunk)."""
+        out = self.feed(_empty_like(self.robot), last=True)
+        if self._outside:
+            joints = ", ".join(
+                f"{self._names[i]} (|q| up to {m:.4g})" for i, m in sorted(self._outside.items())
+            )
+            self.warnings.append(
+                f"positions far outside the URDF limits on joints {joints}: a log in degrees? "
+                "pinobs expects radians (and metres)"
+            )
+        return out
+
+    # ------------------------------------------------------------ the loop
+    def _run(self, log: Log, n: int) -> tuple[Vector, Vector, Vector]:
+        robot = self.robot
+        out_q = np.full((n, robot.nq), np.nan)
+        out_v = np.full((n, robot.nv), np.nan)
+        if n == 0:
+            return log.t[:0], out_q, out_v
+        a_lo, a_hi, w_lo, w_hi, tau_max = self._bounds
+        q_all, t_all = log.q, log.t
+        finite_q: NDArray[np.bool_] = np.asarray(np.isfinite(q_all).all(axis=1))
+        absurd_q: NDArray[np.bool_] = np.asarray(
+            finite_q & ((q_all < a_lo) | (q_all > a_hi)).any(axis=1)
+        )
+        outside = (q_all < w_lo) | (q_all > w_hi)
+        for i in np.flatnonzero(outside[:n].any(axis=0)):
+            worst = float(np.nanmax(np.abs(q_all[:n, i][outside[:n, i]])))
+            self._outside[int(i)] = max(self._outside.get(int(i), 0.0), worst)
+        tau_all = log.tau
+        if tau_all is not None:
+            bad_tau: NDArray[np.bool_] = np.asarray(
+                ~np.isfinite(tau_all).all(axis=1) | (np.abs(tau_all) > tau_max).any(axis=1)
+            )
+        problems: dict[int, list[str]] = {}
+        for pos, reason in log.problems:
+            problems.setdefault(pos, []).append(reason)
+        lines = log.lines
+        unit = log.unit
+        # a bag's messages are named by number and stamp, file rows by their line
+        stamps: list[float | None] = t_all.tolist() if unit == "message" else [None] * n
+        period = self.period
+        for k in range(n):
+            t = float(t_all[k])
+            why = problems.get(int(lines[k]), [])
+            notes: list[str] = list(why)
+            # ---- time
+            if not math.isfinite(t):
+                self._report(lines[k], stamps[k], [*notes, f"time {t!r} unreadable: row skipped"])
+                continue
+            if self._started and not t > self._t + TIME_EPS:
+                # rows that go back in time together (a clock reset, a burst of stamps
+                # ahead) would otherwise all be skipped: after TIME_BACK_ROWS, restart
+                self._back = self._back + 1 if t > self._back_t + TIME_EPS else 1
+                self._back_t = t
+                if self._back <= TIME_BACK_ROWS:
+                    self._report(
+                        lines[k],
+                        stamps[k],
+                        [
+                            *notes,
+                            f"t = {t!r} s is not after the previous sample at t = {self._t!r} s: "
+                            "row skipped",
+                        ],
+                    )
+                    continue
+                notes.append(
+                    f"time went back to t = {t!r} s (previous sample at t = {self._t!r} s) and "
+                    f"stayed there for {TIME_BACK_ROWS} rows: observer re-initialised here"
+                )
+                self._started = False
+            self._back = 0
+            if (
+                self._started
+                and period is not None
+                and t - self._t > GAP_PERIODS * period
+                and k + 1 < len(log)
+                and math.isfinite(float(t_all[k + 1]))
+                and self._t < float(t_all[k + 1]) < t
+            ):
+                self._report(
+                    lines[k],
+                    stamps[k],
+                    [
+                        *notes,
+                        f"t = {t!r} s is far ahead of the next {unit} (t = {float(t_all[k + 1])!r} s): "
+                        "timestamp out of order, row skipped",
+                    ],
+                )
+                continue
+            # ---- values
+            q_ok = bool(finite_q[k]) and not bool(absurd_q[k])
+            if finite_q[k] and absurd_q[k]:
+                notes.append(f"position {q_all[k].tolist()} absurd for the joint ranges")
+            elif not finite_q[k] and not why:
+                notes.append(f"non-finite position {q_all[k].tolist()}")
+            tau: Vector | None = None
+            held = self._held
+            if tau_all is not None:
+                if bad_tau[k]:
+                    if not why or np.isfinite(tau_all[k]).all():
+                        notes.append(f"torque {tau_all[k].tolist()} non-finite or absurd")
+                    notes.append("previous torque held")
+                    tau = self._held
+                else:
+                    tau = tau_all[k]
+                    self._held = tau
+            # ---- estimate
+            est = self._estimate(t, q_all[k] if q_ok else None, tau, notes, held)
+            if est is None:
+                self._report(lines[k], stamps[k], notes)
+                continue
+            out_q[k], out_v[k] = est[0].q, est[0].v
+            self.estimated += 1
+            self.measured += int(est[1])
+            if notes:
+                self._report(lines[k], stamps[k], notes)
+        self.rows += n
+        return t_all[:n], out_q, out_v
+
+    def _estimate(
+        self,
+        t: float,
+        q: Vector | None,
+        tau: Vector | None,
+        notes: list[str],
+        held: Vector | None = None,
+    ) -> tuple[Estimate, bool] | None:
+        """The estimate at ``t`` and whether ``q`` corrected it; ``None``: no estimate.
+
+        ``held`` is the torque the observer holds from the previous row (for gap sub-steps).
+        """
+        ob = self.observer
+        if not self._started:
+            if q is None:
+                notes.append("no usable position yet: no estimate")
+                return None
+            try:
+                est = ob.reset(t, q, None, tau)
+            except (ConfigurationError, NonFiniteError, DimensionError) as exc:
+                notes.append(f"{exc}: no estimate")
+                return None
+            self._started, self._t = True, t
+            return est, True
+        period = self.period
+        gap = t - self._t
+        try:
+            if period is not None and gap > GAP_PERIODS * period:
+                steps = math.ceil(gap / period - 1e-9)
+                if gap > MAX_GAP_PERIODS * period:
+                    notes.append(f"gap of {gap:.6g} s ({gap / period:.0f} periods) before this row")
+                    return self._restart(t, q, tau, notes)
+                for j in range(1, steps):  # sub-steps of gap/steps <= period; not output
+                    ob.update(self._t + gap * j / steps, None, held)
+                notes.append(
+                    f"gap of {gap:.6g} s ({gap / period:.1f} periods) before this row: "
+                    f"propagated in {steps} steps of {gap / steps:.3g} s"
+                )
+            if q is not None:
+                try:
+                    est = ob.update(t, q, tau)
+                    self._t = t
+                    return est, True
+                except (ConfigurationError, NonFiniteError, DimensionError) as exc:
+                    notes.append(f"{exc}")
+            notes.append("used as a dropped sample (propagated only)")
+            est = ob.update(t, None, tau)
+            self._t = t
+            return est, False
+        except (ObserverDiverged, ArithmeticError, np.linalg.LinAlgError, PinobsError) as exc:
+            notes.append(f"observer failed ({type(exc).__name__}: {exc})")
+            return self._restart(t, q, tau, notes)
+
+    def _restart(
+        self, t: float, q: Vector | None, tau: Vector | None, notes: list[str]
+    ) -> tuple[Estimate, bool] | None:
+        self._started = False
+        if q is None:
+            notes.append("no usable position here: no estimate until the next one")
+            return None
+        notes.append("observer re-initialised here")
+        return self._estimate(t, q, tau, notes)
+
+    def _report(self, line: Any, stamp: float | None, notes: list[str]) -> None:
+        if notes:
+            head = [] if stamp is None else [f"stamp {stamp:.9f} s"]
+            self.bad_rows.append((int(line), "; ".join(head + notes)))
+
+
+def _median_period(t: Vector) -> float | None:
+    d = np.diff(t[np.isfinite(t)])
+    d = d[d > 0]
+    return float(np.median(d)) if d.size else None
+
+
+def _slice(log: Log, a: int, b: int) -> Log:
+    lines = log.lines[a:b]
+    keep = set(int(x) for x in lines)
+    return Log(
+        t=log.t[a:b],
+        q=log.q[a:b],
+        tau=None if log.tau is None else log.tau[a:b],
+        problems=tuple(p for p in log.problems if p[0] in keep),
+        lines=lines,
+        unit=log.unit,
+    )
+
+
+def _concat(a: Log, b: Log, nv: int) -> Log:
+    if a.tau is None and b.tau is None:
+        tau = None
+    else:
+        tau = np.concatenate(
+            [x.tau if x.tau is not None else np.full((len(x), nv), np.nan) for x in (a, b)]
+        )
+    return Log(
+        t=np.concatenate([a.t, b.t]),
+        q=np.concatenate([a.q, b.q]),
+        tau=tau,
+        problems=a.problems + b.problems,
+        lines=np.concatenate([a.lines, b.lines]),
+        unit=a.unit if len(a) else b.unit,
+    )
+
+
+def _empty_like(robot: Robot) -> Log:
+    return Log(np.empty(0), np.empty((0, robot.nq)), None, lines=np.empty(0, dtype=int))
+
+
+# --------------------------------------------------------------- whole runs
+Builder = Callable[[float | None, float | None], ObserverLike]
+
+
+def process_log(
+    source: LogSource,
+    robot: Robot,
+    observer: str | ObserverLike,
+    *,
+    out: str | Path | None = None,
+    force: bool = False,
+    keep: bool = True,
+    columns: Mapping[str, str] | None = None,
+    topic: str | None = None,
+    rate: float | None = None,
+    noise_std: float | None = None,
+    options: Mapping[str, Any] | None = None,
+    chunk_rows: int = CHUNK_ROWS,
+    progress: Callable[[int, int], None] | None = None,
+) -> LogRun:
+    """Read, estimate and (optionally) write a log chunk by chunk.
+
+    Args:
+        source: log path or DataFrame (:func:`pinobs.io.iter_log`).
+        robot: the robot of the log.
+        observer: a registry name (built with ``rate``, ``noise_std`` and
+            ``options``) or a ready observer-like object.
+        out: CSV file for the estimates (written through a temporary file).
+        force: overwrite an existing ``out``.
+        keep: keep the estimates in the returned run (``False``: memory stays flat).
+        columns, topic: as :func:`pinobs.io.iter_log`.
+        rate: sample rate [Hz] (default: from the log's median interval).
+        noise_std: position noise σ [rad or m]; ``None`` with a name: estimated
+            from the log's first second (:func:`pinobs.io.estimate_noise_std`) and reported.
+        options: further observer options (with a name).
+        progress: called as ``progress(rows_done, 0)`` after each chunk.
+    """
+    chunks = iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows)
+    first = next(chunks)
+    period = 1.0 / rate if rate else _median_period(first.t)
+    sigma_joint = None
+    warnings: list[str] = []
+    if isinstance(observer, str):
+        if noise_std is None:
+            sigma_joint = estimate_noise_std(first.t, first.q, robot)
+            if sigma_joint is not None:
+                noise_std = float(np.median(sigma_joint))
+                warnings.append(
+                    f"no noise level given: estimated σ = {noise_std:.3g} (median over joints; "
+                    f"per joint {np.array2string(sigma_joint, formatter={'float_kind': '{:.2e}'.format})}) from the log's first "
+                    "second; pass noise_std (--noise) to override"
+                )
+            else:
+                warnings.append(
+                    "no noise level given and the log is too short to estimate it: the "
+                    "observer's default σ is used; pass noise_std (--noise)"
+                )
+        ob: ObserverLike = make_observer(
+            observer,
+            robot,
+            rate=(1.0 / period) if period else None,
+            noise_std=noise_std,
+            **dict(options or {}),
+        )
+    else:
+        ob = observer
+    est = LogEstimator(ob, period=period)
+    writer = (
+        None
+        if out is None
+        else EstimateWriter(
+            out, robot, force=force, inputs=[] if type(source).__name__ == "DataFrame" else [source]
+        )
+    )
+    parts: list[tuple[Vector, Vector, Vector]] = []
+    unit = first.unit
+    try:
+        for chunk in _chain(first, chunks):
+            part = est.feed(chunk)
+            if writer is not None:
+                writer.write(*part)
+            if keep:
+                parts.append(part)
+            if progress is not None:
+                progress(est.rows, 0)
+        part = est.finish()
+        if writer is not None:
+            writer.write(*part)
+            writer.close()
+        if keep:
+            parts.append(part)
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
+    run = LogRun(
+        t=np.concatenate([p[0] for p in parts]) if parts else np.empty(0),
+        q=np.concatenate([p[1] for p in parts]) if parts else np.empty((0, robot.nq)),
+        v=np.concatenate([p[2] for p in parts]) if parts else np.empty((0, robot.nv)),
+        bad_rows=est.bad_rows,
+        warnings=warnings + est.warnings,
+        rows=est.rows,
+        estimated=est.estimated,
+        measured=est.measured,
+        unit=unit,
+        noise_std=noise_std if isinstance(observer, str) else getattr(ob, "noise_std", None),
+        noise_std_per_joint=sigma_joint,
+        period=period,
+    )
+    return run
+
+
+def _chain(first: Log, rest: Iterator[Log]) -> Iterator[Log]:
+    yield first
+    yield from rest
+
+
+def estimate_log(observer: ObserverLike, log: Log, *, period: float | None = None) -> LogRun:
+    """Run ``observer`` over a log held in memory (rules: module docstring)."""
+    est = LogEstimator(observer, period=period)
+    a = est.feed(log)
+    b = est.finish()
+    return LogRun(
+        t=np.concatenate([a[0], b[0]]),
+        q=np.concatenate([a[1], b[1]]),
+        v=np.concatenate([a[2], b[2]]),
+        bad_rows=est.bad_rows,
+        warnings=est.warnings,
+        rows=est.rows,
+        estimated=est.estimated,
+        measured=est.measured,
+        unit=log.unit,
+        noise_std=getattr(observer, "noise_std", None),
+        period=est.period,
+    )
+
+
+def estimate(
+    observer: str | ObserverLike,
+    data: LogSource,
+    *,
+    robot: Robot | str | None = None,
+    columns: Mapping[str, str] | None = None,
+    topic: str | None = None,
+    rate: float | None = None,
+    noise_std: float | None = None,
+    options: Mapping[str, Any] | None = None,
+) -> Any:
+    """Estimates over a log as a pandas ``DataFrame``: ``t, q0.., v0..``, one row per log row.
+
+    >>> import pinobs
+    >>> df = pinobs.estimate("kf", "examples/ur5_log.csv", robot="ur5")  # doctest: +SKIP
+
+    Args:
+        observer: a registry name or an observer (then ``robot`` defaults to its robot).
+        data: a DataFrame or a log path (any format of :func:`pinobs.io.iter_log`).
+        robot: a :class:`~pinobs.Robot` or a registry name; required with a name.
+        columns, topic, rate, noise_std, options: as :func:`process_log`.
+
+    Returns:
+        The DataFrame; ``df.attrs`` holds ``bad_rows``, ``warnings``, ``summary``
+        and ``noise_std``.
+    """
+    import pandas as pd
+
+    from pinobs.model import load
+
+    if isinstance(robot, str):
+        robot = load(robot)
+    if robot is None:
+        if isinstance(observer, str):
+            raise DimensionError(
+                f"estimate({observer!r}, ...) needs robot=... (a Robot or a registry name)"
+            )
+        robot = observer.robot
+    run = process_log(
+        data,
+        robot,
+        observer,
+        columns=columns,
+        topic=topic,
+        rate=rate,
+        noise_std=noise_std,
+        options=options,
+    )
+    df = pd.DataFrame(
+        np.column_stack([run.t, run.q, run.v]),
+        columns=["t", *(f"q{i}" for i in range(robot.nq)), *(f"v{i}" for i in range(robot.nv))],
+    )
+    df.attrs.update(
+        bad_rows=run.bad_rows,
+        warnings=run.warnings,
+        summary=run.summary(),
+        noise_std=run.noise_std,
+    )
+    return df

@@ -1,0 +1,225 @@
+"""Readers: named columns, TSV, Parquet, DataFrames and ROS bags all give the same rows."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.cli import main
+from pinobs.io import iter_log, read_log
+
+pd = pytest.importorskip("pandas")
+
+N = 120
+
+
+@pytest.fixture(scope="module")
+def ur5() -> pinobs.Robot:
+    return pinobs.load("ur5")
+
+
+@pytest.fixture(scope="module")
+def data(ur5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    res = pinobs.simulate(ur5, [], duration=N / 1000, sensor=pinobs.Sensor(1000.0, 1e-4), seed=3)
+    return res.t[1:], res.q_meas[1:], res.tau[1:]
+
+
+def _named_frame(robot: pinobs.Robot, t, q, tau, order: np.ndarray) -> pd.DataFrame:
+    cols = {"t": t}
+    for i in order:
+        name = robot.joint_names[i]
+        cols[f"tau.{name}"] = tau[:, i]
+        cols[f"q.{name}"] = q[:, i]
+    cols["comment"] = ["x"] * len(t)  # extra columns are ignored
+    return pd.DataFrame(cols)
+
+
+def test_named_columns_in_any_order_read_as_the_positional_format(tmp_path, ur5, data) -> None:
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.random.default_rng(0).permutation(6))
+    frame.to_csv(tmp_path / "named.csv", index=False)
+    frame.to_csv(tmp_path / "named.tsv", index=False, sep="\t")
+    for path in ("named.csv", "named.tsv"):
+        log = read_log(tmp_path / path, ur5)
+        np.testing.assert_array_equal(log.t, t)
+        np.testing.assert_array_equal(log.q, q)  # shortest round-trip floats: exact
+        np.testing.assert_array_equal(log.tau, tau)
+        assert not log.problems and log.unit == "line"
+
+
+def test_a_column_map_renames_columns_to_joints(tmp_path, ur5, data) -> None:
+    t, q, _ = data
+    frame = pd.DataFrame({"stamp": t, **{f"pos_{i}": q[:, i] for i in range(6)}})
+    frame.to_csv(tmp_path / "m.csv", index=False)
+    mapping = {"stamp": "t", **{f"pos_{i}": f"q.{ur5.joint_names[i]}" for i in range(6)}}
+    log = read_log(tmp_path / "m.csv", ur5, columns=mapping)
+    np.testing.assert_array_equal(log.q, q)
+    assert log.tau is None
+    with pytest.raises(pinobs.DimensionError, match=r"lack \['t'"):
+        read_log(tmp_path / "m.csv", ur5)
+    out = tmp_path / "est.csv"
+    args = ["estimate", "--robot", "ur5", "--observer", "kf", "--log", str(tmp_path / "m.csv")]
+    args += ["--out", str(out), "--no-progress", "--map", "stamp=t"]
+    args += ["--map", ",".join(f"pos_{i}=q{i}" for i in range(6))]
+    assert main(args) == 0
+    assert len(pd.read_csv(out)) == N
+
+
+def test_continuous_joint_given_as_one_angle_column() -> None:
+    robot = pinobs.load("double_pendulum_continuous")
+    names = robot.joint_names
+    angles = np.array([[0.1, -0.2], [0.2, -0.3]])
+    frame = pd.DataFrame(
+        {"t": [0.0, 0.001], **{f"q.{n}": angles[:, i] for i, n in enumerate(names)}}
+    )
+    log = read_log(frame, robot)
+    np.testing.assert_allclose(
+        log.q[:, :2], np.column_stack([np.cos(angles[:, 0]), np.sin(angles[:, 0])])
+    )
+
+
+def test_parquet_dataframe_and_npz_read_the_same_rows(tmp_path, ur5, data) -> None:
+    pytest.importorskip("pyarrow")
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.arange(6)[::-1])
+    frame.to_parquet(tmp_path / "log.parquet")
+    np.savez(tmp_path / "log.npz", t=t, q=q, tau=tau)
+    logs = [
+        read_log(tmp_path / "log.parquet", ur5),
+        read_log(frame, ur5),
+        read_log(tmp_path / "log.npz", ur5),
+    ]
+    for log in logs:
+        np.testing.assert_array_equal(log.q, q)
+        np.testing.assert_array_equal(log.tau, tau)
+        assert log.unit == "row"
+
+
+def test_chunked_reading_gives_the_same_rows_and_line_numbers(tmp_path, ur5, data) -> None:
+    t, q, tau = data
+    _named_frame(ur5, t, q, tau, np.arange(6)).to_csv(tmp_path / "log.csv", index=False)
+    chunks = list(iter_log(tmp_path / "log.csv", ur5, chunk_rows=50))
+    assert [len(c) for c in chunks] == [50, 50, 20]
+    np.testing.assert_array_equal(np.concatenate([c.q for c in chunks]), q)
+    np.testing.assert_array_equal(np.concatenate([c.lines for c in chunks]), np.arange(N) + 2)
+
+
+def test_estimate_api_returns_a_dataframe_with_one_row_per_log_row(ur5, data) -> None:
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.arange(6))
+    df = pinobs.estimate("kf", frame, robot="ur5", noise_std=1e-4)
+    assert list(df.columns) == ["t", *(f"q{i}" for i in range(6)), *(f"v{i}" for i in range(6))]
+    assert len(df) == N and np.isfinite(df.to_numpy()).all()
+    assert df.attrs["bad_rows"] == [] and df.attrs["noise_std"] == 1e-4
+    ob = pinobs.make_observer("kf", ur5, rate=1000.0, noise_std=1e-4)
+    again = pinobs.estimate(ob, frame)  # the observer brings its robot
+    np.testing.assert_allclose(again.to_numpy(), df.to_numpy(), rtol=1e-12, atol=1e-12)
+    with pytest.raises(pinobs.DimensionError, match="needs robot="):
+        pinobs.estimate("kf", frame)
+
+
+# ------------------------------------------------------------------ ROS bags
+def _write_bag(
+    path: Path, robot: pinobs.Robot, t, q, tau, *, kind: str, rng, short_at: int = -1
+) -> None:
+    pytest.importorskip("rosbags")
+    from rosbags.typesys import Stores, get_typestore
+
+    store = Stores.ROS1_NOETIC if kind == "ros1" else Stores.ROS2_HUMBLE
+    ts = get_typestore(store)
+    js = ts.types["sensor_msgs/msg/JointState"]
+    header = ts.types["std_msgs/msg/Header"]
+    stamp = ts.types["builtin_interfaces/msg/Time"]
+    names = list(robot.joint_names)
+
+    def messages():
+        for k in range(len(t)):
+            order = rng.permutation(len(names))  # shuffled joint order, per message
+            if k == short_at:
+                order = order[:-1]  # this message lacks one joint
+            sec, nsec = 1_700_000_000 + int(t[k]), round((t[k] % 1) * 1e9)
+            extra = {"seq": k} if kind == "ros1" else {}
+            msg = js(
+                header=header(**extra, stamp=stamp(sec=sec, nanosec=nsec), frame_id=""),
+                name=[names[i] for i in order],
+                position=q[k, order],
+                velocity=np.empty(0),
+                effort=tau[k, order],
+            )
+            yield (sec * 10**9 + nsec), msg
+
+    if kind == "ros1":
+        from rosbags.rosbag1 import Writer as Writer1
+
+        with Writer1(path) as w:
+            conn = w.add_connection("/joint_states", js.__msgtype__, typestore=ts)
+            for ns, msg in messages():
+                w.write(conn, ns, ts.serialize_ros1(msg, js.__msgtype__))
+        return
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=9, storage_plugin=plugin) as w:
+        conn = w.add_connection("/joint_states", js.__msgtype__, typestore=ts)
+        other = w.add_connection("/other", "std_msgs/msg/Header", typestore=ts)
+        for ns, msg in messages():
+            w.write(conn, ns, ts.serialize_cdr(msg, js.__msgtype__))
+            w.write(other, ns, ts.serialize_cdr(msg.header, "std_msgs/msg/Header"))
+
+
+@pytest.mark.parametrize("kind", ["sqlite3", "mcap", "ros1"])
+def test_ros_bag_round_trips_through_pinobs_estimate_one_row_per_message(
+    tmp_path, ur5, data, kind, capsys
+) -> None:
+    t, q, tau = data
+    bag = tmp_path / ("log.bag" if kind == "ros1" else "log_bag")
+    _write_bag(bag, ur5, t, q, tau, kind=kind, rng=np.random.default_rng(1))
+    log = read_log(bag, ur5)
+    assert log.unit == "message" and not log.problems
+    np.testing.assert_array_equal(log.q, q)  # matched by name, whatever the order
+    np.testing.assert_array_equal(log.tau, tau)
+    np.testing.assert_allclose(log.t - 1_700_000_000, t, atol=1e-6)  # header stamps, ns
+    out = tmp_path / "est.csv"
+    args = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(bag), "--out", str(out)]
+    assert main([*args, "--no-progress", "--noise", "1e-4"]) == 0
+    est = pd.read_csv(out)
+    assert len(est) == N and np.isfinite(est.to_numpy()).all()
+    assert f"{N} rows: {N} estimated ({N} with their measurement" in capsys.readouterr().out
+
+
+def test_bag_topic_is_chosen_and_a_missing_joint_is_reported(tmp_path, ur5, data) -> None:
+    t, q, tau = data
+    bag = tmp_path / "b"
+    _write_bag(bag, ur5, t[:5], q[:5], tau[:5], kind="mcap", rng=np.random.default_rng(2))
+    with pytest.raises(
+        pinobs.DimensionError, match=r"no sensor_msgs/JointState topic '/nope'.*\['/joint_states'\]"
+    ):
+        read_log(bag, ur5, topic="/nope")
+    with pytest.raises(pinobs.DimensionError, match="panda_joint1"):
+        read_log(bag, pinobs.load("panda"))  # the bag lacks the panda's joints: every row says so
+
+
+def test_a_bag_message_lacking_a_joint_is_reported_with_its_stamp(tmp_path, ur5, data) -> None:
+    t, q, tau = data
+    bag = tmp_path / "b"
+    _write_bag(
+        bag,
+        ur5,
+        t[:40],
+        q[:40],
+        tau[:40],
+        kind="sqlite3",
+        rng=np.random.default_rng(2),
+        short_at=20,
+    )
+    log = read_log(bag, ur5)
+    ((number, reason),) = log.problems
+    assert number == 20 and reason.startswith("no position for joints [")
+    assert reason.endswith("]; effort lacks some joints")
+    run = pinobs.io.estimate_log(pinobs.make_observer("kf", ur5, rate=1000.0, noise_std=1e-4), log)
+    ((number, reason),) = run.bad_rows
+    assert number == 20 and reason.startswith(f"stamp {1_700_000_000 + t[20]:.9f} s; no position")
+    assert "dropped sample" in reason and run.estimated == 40

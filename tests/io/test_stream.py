@@ -1,0 +1,101 @@
+"""Streaming: chunk boundaries change nothing; the output is written atomically and never clobbers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.cli import main
+from pinobs.io import estimate_log, process_log, read_log, write_log
+
+pd = pytest.importorskip("pandas")
+
+
+@pytest.fixture(scope="module")
+def log_path(tmp_path_factory):
+    robot = pinobs.load("ur5")
+    res = pinobs.simulate(robot, [], duration=0.3, sensor=pinobs.Sensor(1000.0, 1e-4), seed=2)
+    path = tmp_path_factory.mktemp("logs") / "log.csv"
+    lines = write_log(path, res.t[1:], res.q_meas[1:], res.tau[1:]).read_text().splitlines()
+    cells = lines[50].split(",")
+    cells[0] = "51"  # a timestamp far ahead, right at a chunk boundary (rows 49/50/51)
+    lines[50] = ",".join(cells)
+    cells = lines[120].split(",")
+    cells[3] = "nan"
+    lines[120] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("chunk_rows", [7, 49, 50, 1000])
+def test_chunk_boundaries_change_nothing(log_path, chunk_rows) -> None:
+    robot = pinobs.load("ur5")
+    whole = estimate_log(
+        pinobs.make_observer("ekf", robot, rate=1000.0, noise_std=1e-4), read_log(log_path, robot)
+    )
+    streamed = process_log(
+        log_path, robot, "ekf", rate=1000.0, noise_std=1e-4, chunk_rows=chunk_rows
+    )
+    np.testing.assert_array_equal(streamed.v, whole.v)
+    assert streamed.bad_rows == whole.bad_rows
+    assert [line for line, _ in whole.bad_rows] == [51, 121]
+    assert streamed.rows == 300 and streamed.estimated == 299
+
+
+def _args(log, out, *extra):
+    return [
+        "estimate",
+        "--robot",
+        "ur5",
+        "--observer",
+        "kf",
+        "--log",
+        str(log),
+        "--out",
+        str(out),
+        "--no-progress",
+        "--noise",
+        "1e-4",
+        *extra,
+    ]
+
+
+def test_out_equal_to_the_log_is_refused_and_the_log_kept(log_path, capsys) -> None:
+    before = log_path.read_bytes()
+    assert main(_args(log_path, log_path)) == 2
+    assert "is the input log" in capsys.readouterr().err
+    assert log_path.read_bytes() == before
+
+
+def test_an_existing_output_needs_force(tmp_path, log_path, capsys) -> None:
+    out = tmp_path / "est.csv"
+    out.write_text("keep me\n")
+    assert main(_args(log_path, out)) == 2
+    assert "exists; pass --force" in capsys.readouterr().err
+    assert out.read_text() == "keep me\n"
+    assert main(_args(log_path, out, "--force")) == 0
+    assert len(pd.read_csv(out)) == 300
+
+
+def test_a_failed_run_leaves_no_partial_output(tmp_path, log_path) -> None:
+    robot = pinobs.load("ur5")
+    ob = pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
+
+    class Crashing:
+        robot, name, uses_torque = ob.robot, ob.name, ob.uses_torque
+        calls = 0
+
+        def reset(self, *a):
+            return ob.reset(*a)
+
+        def update(self, *a):
+            Crashing.calls += 1
+            if Crashing.calls > 120:
+                raise RuntimeError("disk full (simulated)")
+            return ob.update(*a)
+
+    out = tmp_path / "est.csv"
+    with pytest.raises(RuntimeError, match="disk full"):
+        process_log(log_path, robot, Crashing(), out=out, chunk_rows=50)
+    assert list(tmp_path.iterdir()) == []  # neither est.csv nor its temporary file

@@ -50,7 +50,9 @@ Three parts, each on code shared with the rest of pinobs:
    cannot teach it: such parameters stay at their nominal values
    (:meth:`parameters` marks them).
 
-3. **Never behind**: a bank of per-joint constant-acceleration Kalman filters
+3. **Never behind** (and never lost: should the model-based filter's estimate
+   or covariance stop being finite, it restarts on the model-free estimate
+   in the warm-up regime, and :meth:`consistency` counts it): a bank of per-joint constant-acceleration Kalman filters
    (:class:`~pinobs.observers.kf.ConstantAccelerationKF`, white-jerk
    densities ``jerk_psd`` = 1e1 … 1e5, the range a user would tune over)
    runs beside it; per velocity coordinate the one with the smallest running
@@ -349,6 +351,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             "learned": (float(accel_psd), float(learned_disturbance_psd)),
         }
         self.regime = "warmup"
+        self.restarts = 0  # times the model-based filter was lost and restarted
+        self._restarted = False
         self._m_bar2: Vector = np.zeros(self.robot.nv)
 
     @property
@@ -398,6 +402,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             "rejected": list(lr.rejected),
             "warming_up": lr.theta is None,
             "regime": self.regime,
+            "restarts": self.restarts,
             "blend_weight": None if self._state is None else self._weights(self._state).tolist(),  # type: ignore[arg-type]
         }
         return replace(base, details=details)
@@ -430,6 +435,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         self._offset = np.zeros(self.robot.nv)
         self.gains = replace(self.gains, accel_psd=self._warmup_psd)
         self.regime = "warmup"
+        self.restarts, self._restarted = 0, False
         self._m_bar2 = np.diag(self._nominal.mass_matrix(q0)) ** 2
         ekf = super()._initial_state(q0, v0)
         kf = self._bank.initial(q0, v0, self.gains.v0_std)
@@ -458,9 +464,18 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         return p_kf / (p_kf + state.s + 1e-300)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
-        ekf = state.ekf
-        ekf = super()._step(ekf, dt, q_meas, tau + self._offset)
+        with np.errstate(over="ignore", invalid="ignore"):  # a lost filter is handled below
+            ekf = super()._step(state.ekf, dt, q_meas, tau + self._offset)
         t = state.t + dt
+        if self.blend and not (np.all(np.isfinite(ekf.v)) and np.all(np.isfinite(ekf.P))):
+            # the model-based filter is lost (a learned model that does not hold): restart it
+            # on the model-free estimate, in the warm-up regime, rather than fail
+            v_kf, _, dq_kf = self._model_free(state)
+            restart = super()._initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
+            ekf = super()._step(self._set_regime(restart, "warmup"), dt, q_meas, tau + self._offset)
+            self._learner.rejected.append(f"model-based filter restarted at t = {t:.6g} s")
+            self.restarts += 1
+            self._restarted = True  # the next solve must beat the current model to end it
         if not self.blend:
             return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v)
         meas = None if ekf.gated else q_meas  # one gate for every filter
@@ -490,12 +505,13 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         # the first solve only ends the warm-up: the nominal model gets its chance with the
         # exact-model densities, and its innovations decide at the next solve
         # (a learned model is refined at every solve; only the nominal one is protected)
-        explained = self.regime == "warmup" or (
+        explained = (self.regime == "warmup" and not self._restarted) or (
             self.regime == "nominal" and level <= _NIS_TRUSTED * self.robot.nv
         )
         lr = self._learner
         if lr.add(t, q, tau, explained=explained):
             ekf = self._install(ekf)
+            self._restarted = False
         elif self.regime == "nominal" and level > _NIS_REVOKED * self.robot.nv:
             # the nominal model stopped explaining the data between solves: do not wait
             if lr.candidate is not None:
@@ -504,8 +520,9 @@ class AdaptiveEKF(ExtendedKalmanFilter):
                 ekf = self._install(ekf)
             else:
                 ekf = self._set_regime(ekf, "warmup")
-        elif self._learner.validated and self.regime == "warmup":
-            ekf = self._set_regime(ekf, "nominal")  # the nominal model explains the data
+        elif self._learner.validated and self.regime == "warmup" and not self._restarted:
+            # the nominal model explains the data (a learned one, after a restart)
+            ekf = self._set_regime(ekf, "learned" if lr.installs else "nominal")
         return state if ekf is state.ekf else state._replace(ekf=ekf)
 
     def _innovation(self, state: _State) -> tuple[float | None, bool]:  # type: ignore[override]

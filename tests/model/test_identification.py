@@ -177,3 +177,15 @@ def test_saved_urdf_reloads_with_the_same_dynamics(name, tmp_path, rng) -> None:
         np.testing.assert_allclose(
             back.forward_dynamics(q, v, tau), truth.forward_dynamics(q, v, tau), atol=1e-12
         )
+
+
+def test_calibrated_mass_matrix_is_positive_definite_at_a_thousand_configurations() -> None:
+    robot = pinobs.load("ur5")
+    truth = robot.perturbed(inertia_scale=np.linspace(0.8, 1.2, 6), payload=(1.0, [0.0, 0.0, 0.05]))
+    ident = identify(robot, _log(robot, truth, 6.0, 1e-4, 2))
+    rng = np.random.default_rng(5)
+    smallest = min(
+        np.linalg.eigvalsh(ident.robot.mass_matrix(robot.random_configuration(rng, scale=np.pi)))[0]
+        for _ in range(1000)
+    )
+    assert smallest > 0

@@ -108,12 +108,13 @@ def _build(
     return built, skipped
 
 
-def _consistency_warnings(observers: dict[str, Observer[Any]]) -> list[str]:
+def _consistency_warnings(reports: dict[str, Any]) -> list[str]:
     """One line per observer whose innovations say the model does not explain the data,
-    and per observer that rejected outlier samples."""
+    and per observer that rejected outlier samples (``reports``: name -> Consistency)."""
     out = []
-    for name, ob in observers.items():
-        c = ob.consistency()
+    for name, c in reports.items():
+        if c is None:
+            continue
         if c.verdict == "inconsistent":
             out.append(
                 f"warning: {name}: the model does not explain the data (mean NIS "
@@ -162,7 +163,7 @@ def _run_one(
     table = format_table(metrics, aba_seconds=aba, title=title)
     if skipped:
         table += "\n" + "\n".join(f"skipped {k}: {v}" for k, v in skipped.items())
-    warnings = _consistency_warnings(observers)
+    warnings = _consistency_warnings({k: ob.consistency() for k, ob in observers.items()})
     if warnings:
         table += "\n" + "\n".join(warnings)
     report = {
@@ -347,6 +348,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             return 2
     for w in run.warnings:
         print(f"warning: {w}", file=sys.stderr)
+    for w in _consistency_warnings({args.observer: run.consistency}):
+        print(w, file=sys.stderr)
     where = f"{args.log}:" if run.unit == "line" else f"{args.log}: {run.unit} "
     for line, reason in run.bad_rows[: args.max_reports]:
         print(f"{where}{line}: {reason}", file=sys.stderr)

@@ -82,3 +82,29 @@ def test_excite_writes_a_trajectory_within_the_limits_starting_at_rest(tmp_path,
         from pinobs.model.excitation import excite
 
         excite(pinobs.load("top"))
+
+
+def test_estimate_warns_when_the_model_does_not_explain_the_log(tmp_path, capsys) -> None:
+    from pinobs.simulation.mismatch import mismatched_plant
+
+    robot = pinobs.load("planar_3r")
+    plant = mismatched_plant(robot, "inertia20_payload", seed=0)
+    res = pinobs.simulate(
+        robot, [], duration=2.0, sensor=Sensor(rate=1000.0, noise_std=1e-4), seed=1, plant=plant
+    )
+    q = np.array(res.q_meas)
+    q[0] = res.q[0]
+    log = tmp_path / "log.csv"
+    write_log(log, res.t, q, res.tau)
+    args = ["estimate", "--robot", "planar_3r", "--log", str(log), "--noise", "1e-4"]
+    assert main([*args, "--observer", "ekf", "--out", str(tmp_path / "a.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "does not explain the data" in err and "payload" in err
+    exact = tmp_path / "exact.csv"
+    res = pinobs.simulate(robot, [], duration=2.0, sensor=Sensor(noise_std=1e-4), seed=1)
+    q = np.array(res.q_meas)
+    q[0] = res.q[0]
+    write_log(exact, res.t, q, res.tau)
+    args = ["estimate", "--robot", "planar_3r", "--log", str(exact), "--noise", "1e-4"]
+    assert main([*args, "--observer", "ekf", "--out", str(tmp_path / "b.csv")]) == 0
+    assert "does not explain" not in capsys.readouterr().err

@@ -111,6 +111,9 @@ class LogRun:
         noise_std: the σ the observer was built with [rad or m] (``None``: its default).
         noise_std_per_joint: σ per velocity coordinate estimated from the log, or ``None``.
         period: the nominal sample period [s] used for gaps.
+        consistency: the observer's innovation test at the end of the run
+            (:meth:`pinobs.Observer.consistency`), or ``None`` for an observer-like
+            object without one.
     """
 
     t: Vector
@@ -125,6 +128,7 @@ class LogRun:
     noise_std: float | None = None
     noise_std_per_joint: Vector | None = None
     period: float | None = None
+    consistency: Any = None
 
     def summary(self) -> str:
         """One line: rows in, rows estimated (with / without their measurement), rows reported."""
@@ -550,8 +554,14 @@ def process_log(
         noise_std=noise_std if isinstance(observer, str) else getattr(ob, "noise_std", None),
         noise_std_per_joint=sigma_joint,
         period=period,
+        consistency=_consistency(est.observer),
     )
     return run
+
+
+def _consistency(observer: Any) -> Any:
+    check = getattr(observer, "consistency", None)
+    return check() if callable(check) else None
 
 
 def _chain(first: Log, rest: Iterator[Log]) -> Iterator[Log]:
@@ -576,6 +586,7 @@ def estimate_log(observer: ObserverLike, log: Log, *, period: float | None = Non
         unit=log.unit,
         noise_std=getattr(observer, "noise_std", None),
         period=est.period,
+        consistency=_consistency(observer),
     )
 
 

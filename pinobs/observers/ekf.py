@@ -120,14 +120,13 @@ import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from statistics import NormalDist
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from pinobs.errors import DimensionError, GainError
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.observers.base import Observer, Vector, positive, register
+from pinobs.observers.base import Observer, Vector, chi2_quantile, outlier_gate, positive, register
 
 __all__ = [
     "EKFGains",
@@ -142,27 +141,7 @@ __all__ = [
     "warm_linear_algebra",
 ]
 
-_NOISE_FLOOR = 1e-6
-
-#: Consecutive measurements the outlier gate may reject before it accepts one whatever its NIS.
-MAX_GATE_RUN = 1
-
-#: Weight of each accepted NIS in the running mean that scales the gate.
-_NIS_AVERAGING = 0.01
-
-
-def chi2_quantile(dof: int, p: float) -> float:
-    """The χ² quantile with upper tail ``p`` by Wilson-Hilferty (above the exact one: +4 % at dof 6, +15 % at dof 1, p = 1e-6).
-
-    ``χ²_k(1 − p) ≈ k (1 − 2/(9k) + z √(2/(9k)))³``, ``z`` the normal quantile
-    (Wilson & Hilferty 1931); the standard library's ``NormalDist`` keeps
-    ``scipy.stats`` out of the import.
-    """
-    z = NormalDist().inv_cdf(1.0 - p)
-    c = 2.0 / (9.0 * dof)
-    return float(
-        dof * (1.0 - c + z * math.sqrt(c)) ** 3
-    )  # [rad] σ assumed when no noise_std (or 0) is given
+_NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std (or 0) is given
 
 
 _SERIES_NORM = 0.25  # ‖A h‖∞ up to which the third-order series is used as it is (error < 1e-4)
@@ -618,16 +597,9 @@ class ExtendedKalmanFilter(Observer[_State]):
         """Correction of a predicted state with the measured ``q_meas`` (Joseph form, module docstring).
 
         The normalized innovation squared ``NIS = eᵀ S⁻¹ e`` comes free:
-        ``K_q = P_qq S⁻¹ = I − R S⁻¹``, so ``S⁻¹ e = (e − K_q e) / R``.  Outlier gate:
-        a measurement whose NIS exceeds ``χ²_nv(1 − p) · max(1, NIS̄ / nv)``
-        (``NIS̄`` a running mean of accepted NIS, so a filter whose model is
-        off does not gate everything) is not used: the estimate is the
-        prediction.  After :data:`MAX_GATE_RUN` consecutive rejections the
-        next measurement is used whatever its NIS (a real jump, or a
-        prediction gone wrong, not a spike), and the gate's level is raised to it.
-        Measured: with ten allowed rejections, a Panda whose model has stiff
-        Coulomb friction lost track (prediction errors near v = 0 were gated
-        while the prediction drifted); with one it does not.
+        ``K_q = P_qq S⁻¹ = I − R S⁻¹``, so ``S⁻¹ e = (e − K_q e) / R``.  A
+        measurement the outlier gate rejects (:func:`pinobs.observers.base.outlier_gate`,
+        threshold ``χ²_nv(1 − p)``) is not used: the estimate is the prediction.
         """
         nv = self.robot.nv
         q, v, d, P = state.q, state.v, state.d, state.P
@@ -635,22 +607,15 @@ class ExtendedKalmanFilter(Observer[_State]):
         e = self.robot.difference(q, q_meas)
         dx, P_new = joseph_update(P, e, R)
         nis = float(e @ (e - dx[:nv])) / R
-        level = float(nv) if state.nis_level is None else state.nis_level
-        if nis > self._gate * max(1.0, level / nv) and state.gate_run < MAX_GATE_RUN:
+        reject, level = outlier_gate(nis, state.nis_level, state.gate_run, self._gate, nv)
+        if reject:
             return state._replace(
-                P=0.5 * (P + P.T),
-                nis=nis,
-                gated=True,
-                gate_run=state.gate_run + 1,
-                nis_level=level,
+                P=0.5 * (P + P.T), nis=nis, gated=True, gate_run=state.gate_run + 1, nis_level=level
             )
         q = self.robot.integrate(q, dx[:nv])
         v = v + dx[nv : 2 * nv]
         if d is not None:
             d = d + dx[2 * nv :]
-        if state.gate_run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
-            level = max(level, nis * nv / self._gate)
-        level += _NIS_AVERAGING * (min(nis, 100.0 * level) - level)
         return _State(
             q, v, P_new, d, state.d_psd, nis, False, 0, level
         )  # P symmetric (joseph_update)

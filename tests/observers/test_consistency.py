@@ -7,7 +7,7 @@ import pytest
 
 import pinobs
 from pinobs.observers import make_observer
-from pinobs.observers.ekf import chi2_quantile
+from pinobs.observers.base import chi2_quantile
 from pinobs.simulation import Sensor
 from pinobs.simulation.mismatch import mismatched_plant
 

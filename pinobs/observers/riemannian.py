@@ -130,7 +130,14 @@ import numpy as np
 
 from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.observers.base import Observer, Vector, positive, register
+from pinobs.observers.base import (
+    Observer,
+    Vector,
+    chi2_quantile,
+    outlier_gate,
+    positive,
+    register,
+)
 from pinobs.tolerances import JACOBI_FD_STEP
 
 __all__ = [
@@ -451,6 +458,10 @@ class _State(NamedTuple):
     jacobi: Vector | None  # cached R(v̂, ·)v̂ (nv × nv), or None
     age: int  # corrections since the cache was computed
     P: tuple[float, float, float] | None = None  # (P₀₀, P₀₁, P₁₁) of the gain schedule, or None
+    nis: float | None = None  # normalized innovation squared of the last sample (Riccati schedule)
+    gated: bool = False  # that sample was rejected as an outlier
+    gate_run: int = 0  # consecutive rejected samples
+    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
 
 
 @register
@@ -500,10 +511,16 @@ class RiemannianObserver(Observer[_State]):
         gain_schedule: str = "riccati",
         q0_std: float = 0.1,
         v0_std: float = 1.0,
+        outlier_probability: float | None = 1e-6,
         rate: float | None = None,
         noise_std: float | None = None,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
+        p_out = positive("outlier_probability", outlier_probability, allow_none=True)
+        if p_out is not None and p_out >= 0.5:
+            raise GainError(f"outlier_probability={p_out!r} must be in (0, 0.5) (or None: no gate)")
+        self.outlier_probability = p_out
+        self._gate = math.inf if p_out is None else chi2_quantile(robot.nv, p_out)
         positive("accel_psd", accel_psd)
         self.accel_psd = float(accel_psd)
         if gain_schedule not in ("riccati", "steady"):
@@ -577,6 +594,7 @@ class RiemannianObserver(Observer[_State]):
             "accel_psd": self.accel_psd,
             "gain_rule": self.gain_rule,
             "gain_schedule": self.gain_schedule,
+            "outlier_probability": self.outlier_probability,
         }
 
     # ------------------------------------------------------ continuous time
@@ -600,6 +618,9 @@ class RiemannianObserver(Observer[_State]):
         return q_dot, v_dot
 
     # ------------------------------------------------------------ sampled
+    def _innovation(self, state: _State) -> tuple[float | None, bool]:
+        return state.nis, state.gated
+
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:
         p0 = (self._p0[0, 0], 0.0, self._p0[1, 1]) if self.gain_schedule == "riccati" else None
         return _State(q0.copy(), v0.copy(), 0.0, None, 0, p0)
@@ -608,7 +629,22 @@ class RiemannianObserver(Observer[_State]):
         q, v = dynamics_rk4(self.robot, state.q, state.v, tau, dt)  # the prediction (MATH §7)
         elapsed = state.elapsed + dt
         if q_meas is None:
-            return state._replace(q=q, v=v, elapsed=elapsed)
+            return state._replace(q=q, v=v, elapsed=elapsed, nis=None, gated=False)
+        if state.P is not None:
+            # the schedule's innovation variance per joint, S = P⁻₀₀ + σ² (same for every
+            # joint): NIS = |e|² / S and the outlier gate of the filters (base.outlier_gate)
+            p00, p01, p11 = state.P
+            h = elapsed
+            s_inn = p00 + h * (2.0 * p01 + h * p11 + self.accel_psd * h * h / 3.0) + self._sigma2
+            e = self.robot.difference(q, q_meas)
+            nis = float(e @ e) / s_inn
+            reject, level = outlier_gate(nis, state.nis_level, state.gate_run, self._gate, e.size)
+            if reject:  # the estimate is the prediction; the next correction spans the gap
+                return state._replace(
+                    q=q, v=v, elapsed=elapsed, nis=nis, gated=True,
+                    gate_run=state.gate_run + 1, nis_level=level,
+                )  # fmt: skip
+            state = state._replace(nis=nis, gated=False, gate_run=0, nis_level=level)
         if self._lie:
             return self._correct(state, q, v, q_meas, tau, elapsed)
         return self._correct_vector_space(state, q, v, q_meas, tau, elapsed)
@@ -674,7 +710,7 @@ class RiemannianObserver(Observer[_State]):
             jac, age = self._jacobi(state, q, v)
             dv = dv + (c * h) * (jac @ zeta)  # Anisi–Hamberg eq. (6): C·R(v̂, ζ)v̂
         q_new = r.normalize(r.integrate(q, -k1 * zeta))
-        return _State(q_new, v + dv, 0.0, jac, age, P)
+        return state._replace(q=q_new, v=v + dv, elapsed=0.0, jacobi=jac, age=age, P=P)
 
     def _correct_vector_space(
         self, state: _State, q: Vector, v: Vector, q_meas: Vector, tau: Vector, h: float
@@ -695,7 +731,7 @@ class RiemannianObserver(Observer[_State]):
         q_new, v_new = _compiled_correction()(
             q, v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, k1, k2, h, c * h
         )
-        return _State(q_new, v_new, 0.0, jac, age, P)
+        return state._replace(q=q_new, v=v_new, elapsed=0.0, jacobi=jac, age=age, P=P)
 
     def _gains_at(self, q: Vector, zeta: Vector | None, v: Vector) -> tuple[float, float, float]:
         g = self.gains

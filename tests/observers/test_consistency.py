@@ -62,10 +62,11 @@ def test_model_free_observers_report_no_innovation() -> None:
     assert out["kf"][0].consistency().verdict == "unknown"
 
 
-@pytest.mark.parametrize("name", ["ekf", "adaptive"])
+@pytest.mark.parametrize("name", ["ekf", "adaptive", "riemannian"])
 @pytest.mark.parametrize("size", [10.0, 1000.0])
 def test_a_single_spike_is_gated_and_moves_nothing_beyond_the_noise(name: str, size: float) -> None:
-    """Before the gate a +10 rad spike corrupted ekf for 1.5 s and +1000 rad never recovered."""
+    """Before the gate a +10 rad spike corrupted ekf and riemannian for 1.5 s and +1000 rad
+    never recovered."""
     robot = pinobs.load("ur5")
     k_spike = 1000
     res, clean = _run(robot, None, [name], duration=2.5)

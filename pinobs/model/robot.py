@@ -280,8 +280,9 @@ class Robot:
             inertia_scale: one factor per moving body (``nv`` joints order, one
                 per joint with ``nv > 0``): mass and rotational inertia scaled
                 together, centre of mass kept, so the inertia stays physical.
-            payload: ``(mass [kg], offset [m] in the last body's frame)``: a
-                point mass added to the last body (the end effector of an arm).
+            payload: ``(mass [kg], offset [m] in the tool body's frame)``: a
+                point mass added to the last moving body, passing over prismatic
+                joints after it (a Panda's fingers): the end effector of an arm.
             damping, coulomb: viscous [N·m·s/rad] and Coulomb [N·m] friction per
                 velocity coordinate, replacing the model's (friction switched on).
         """
@@ -300,7 +301,10 @@ class Robot:
                 )
         if payload is not None:
             mass, offset = payload
-            last = max(i for i, j in enumerate(model.joints) if i > 0 and j.nv > 0)
+            # the tool: the last moving body, passing over prismatic gripper fingers
+            moving = [i for i, j in enumerate(model.joints) if i > 0 and j.nv > 0]
+            tools = [i for i in moving if not model.joints[i].shortname().startswith("JointModelP")]
+            last = (tools or moving)[-1]
             model.inertias[last] = model.inertias[last] + pin.Inertia(
                 float(mass), np.asarray(offset, dtype=float), np.zeros((3, 3))
             )

@@ -6,7 +6,8 @@ matrix at the neutral configuration, the inertia each joint drives):
 * ``exact`` — the truth is the nominal model;
 * ``inertia5`` — every link's mass and inertia scaled by 1 ± 5 % (random sign);
 * ``inertia20_payload`` — 1 ± 20 % and a point payload of 10 % of the moving
-  mass, 5 cm out along the last body's z axis (an unknown tool);
+  mass, 5 cm out along the z axis of the tool body (the last moving body,
+  passing over prismatic gripper fingers: on the Panda, link 7) — an unknown tool;
 * ``friction`` — unmodelled joint friction: viscous ``D = 2 M̄ᵢ`` [N·m·s/rad]
   (a 0.5 s time constant on each joint alone) and Coulomb ``F = 0.5 M̄ᵢ``
   [N·m] (half a rad/s² of stiction-like resistance), smoothed as in

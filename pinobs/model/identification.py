@@ -536,10 +536,10 @@ def _solve(
     )
 
 
-def _is_consistent(reg: MomentumRegressor, theta: Vector, margin: float = 0.0) -> bool:
+def _is_consistent(reg: MomentumRegressor, theta: Vector) -> bool:
     for k in range(reg.n_inertial // 10):
         J = pseudo_inertia(theta[10 * k : 10 * k + 10])
-        if np.linalg.eigvalsh(J)[0] < margin * max(J[3, 3], 0.0) or J[3, 3] <= 0:
+        if np.linalg.eigvalsh(J)[0] < 0.0 or J[3, 3] <= 0:
             return False
     if reg.friction:
         f = theta[reg.n_inertial : reg.n_inertial + 2 * reg.n_joint]

@@ -320,7 +320,6 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         if horizon < 2 * window:
             positive("horizon - 2 window", horizon - 2 * window)
         self._nominal = self.robot
-        self._accel_psd = float(accel_psd)
         self._learn_options = dict(
             window=float(window),
             half_window=float(half_window),
@@ -343,8 +342,6 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             raise GainError("jerk_psd needs at least one density")
         self._bank = KFBank(self.robot, jerks, self.gains.meas_std)
         self._offset: Vector = np.zeros(self.robot.nv)
-        self._warmup_psd = float(warmup_accel_psd)
-        self._learned_d_psd = float(learned_disturbance_psd)
         self._regimes = {  # (accel_psd, disturbance density) per regime
             "warmup": (float(warmup_accel_psd), float(disturbance_psd)),
             "nominal": (float(validated_accel_psd), float(validated_disturbance_psd)),
@@ -360,9 +357,9 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         return {
             **super().options,
             **self._learn_options,
-            "accel_psd": self._accel_psd,
-            "warmup_accel_psd": self._warmup_psd,
-            "learned_disturbance_psd": self._learned_d_psd,
+            "accel_psd": self._regimes["learned"][0],
+            "warmup_accel_psd": self._regimes["warmup"][0],
+            "learned_disturbance_psd": self._regimes["learned"][1],
             "validated_accel_psd": self._regimes["nominal"][0],
             "validated_disturbance_psd": self._regimes["nominal"][1],
             "blend": self.blend,
@@ -433,7 +430,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         self._replace_robot(self._nominal.copy())
         self._learner = _Learner(self._nominal, **self._learn_options)  # type: ignore[arg-type]
         self._offset = np.zeros(self.robot.nv)
-        self.gains = replace(self.gains, accel_psd=self._warmup_psd)
+        self.gains = replace(self.gains, accel_psd=self._regimes["warmup"][0])
         self.regime = "warmup"
         self.restarts, self._restarted = 0, False
         self._m_bar2 = np.diag(self._nominal.mass_matrix(q0)) ** 2

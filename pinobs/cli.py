@@ -649,6 +649,14 @@ def _add_sim_options(p: argparse.ArgumentParser, *, duration: float) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
+def _add_robot_options(p: argparse.ArgumentParser, files: str = "URDF/MJCF") -> None:
+    """``--robot`` and ``--root-joint``, the options of every subcommand that loads a robot."""
+    p.add_argument("--robot", required=True, help=f"robot name (pinobs list) or {files} path")
+    p.add_argument(
+        "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
+    )
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="pinobs", description="Velocity observers for any URDF robot."
@@ -659,10 +667,7 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_list)
 
     p = sub.add_parser("run", help="simulate a robot and compare observers")
-    p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF/MJCF path")
-    p.add_argument(
-        "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
-    )
+    _add_robot_options(p, "URDF/MJCF")
     p.add_argument(
         "--observer",
         action="append",
@@ -698,10 +703,7 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "estimate", help="run one observer over a recorded log (CSV/TSV, Parquet, NPZ, ROS bag)"
     )
-    p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF/MJCF path")
-    p.add_argument(
-        "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
-    )
+    _add_robot_options(p, "URDF/MJCF")
     p.add_argument("--observer", required=True, help="observer name (pinobs list)")
     p.add_argument(
         "--log",
@@ -765,19 +767,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "which", choices=["ii"], help="ii: does the Cholesky factor of M^-1 satisfy D_T = 0?"
     )
-    p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF/MJCF path")
-    p.add_argument(
-        "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
-    )
+    _add_robot_options(p, "URDF/MJCF")
     p.set_defaults(func=_cmd_check)
 
     p = sub.add_parser(
         "identify", help="identify inertias and friction from a log; write a calibrated URDF"
     )
-    p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF path")
-    p.add_argument(
-        "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
-    )
+    _add_robot_options(p, "URDF")
     p.add_argument("--log", required=True, help="log with t, q and tau columns (CSV or NPZ)")
     p.add_argument("--out", required=True, help="the calibrated URDF to write")
     p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")

@@ -46,6 +46,7 @@ __all__ = [
     "Estimate",
     "Observer",
     "chi2_quantile",
+    "gate_threshold",
     "make_observer",
     "observer_class",
     "observer_names",
@@ -154,6 +155,21 @@ def chi2_quantile(dof: int, p: float) -> float:
     z = NormalDist().inv_cdf(1.0 - p)
     c = 2.0 / (9.0 * dof)
     return float(dof * (1.0 - c + z * math.sqrt(c)) ** 3)
+
+
+def gate_threshold(outlier_probability: float | None, dof: int) -> tuple[float | None, float]:
+    """Validate the ``outlier_probability`` option: ``(p, χ²_dof(1 − p))``; ``(None, inf)`` switches
+    the gate off.
+
+    Raises:
+        GainError: ``p`` not a number in (0, 0.5).
+    """
+    p = positive("outlier_probability", outlier_probability, allow_none=True)
+    if p is None:
+        return None, math.inf
+    if p >= 0.5:
+        raise GainError(f"outlier_probability={p!r} must be in (0, 0.5) (or None: no gate)")
+    return p, chi2_quantile(dof, p)
 
 
 def outlier_gate(

@@ -124,9 +124,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from pinobs.errors import DimensionError, GainError
+from pinobs.errors import DimensionError
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.observers.base import Observer, Vector, chi2_quantile, outlier_gate, positive, register
+from pinobs.observers.base import Observer, Vector, gate_threshold, outlier_gate, positive, register
 
 __all__ = [
     "EKFGains",
@@ -477,11 +477,7 @@ class ExtendedKalmanFilter(Observer[_State]):
         noise_std: float | None = None,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
-        p = positive("outlier_probability", outlier_probability, allow_none=True)
-        if p is not None and p >= 0.5:
-            raise GainError(f"outlier_probability={p!r} must be in (0, 0.5) (or None: no gate)")
-        self.outlier_probability = p
-        self._gate = math.inf if p is None else chi2_quantile(robot.nv, p)
+        self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
         sigma = self.noise_std or _NOISE_FLOOR
         self.gains = EKFGains(accel_psd=accel_psd, meas_std=sigma, q0_std=q0_std, v0_std=v0_std)
         self.disturbance_psd = positive("disturbance_psd", disturbance_psd, allow_none=True)

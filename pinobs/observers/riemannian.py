@@ -133,7 +133,7 @@ from pinobs.model import Robot, dynamics_rk4
 from pinobs.observers.base import (
     Observer,
     Vector,
-    chi2_quantile,
+    gate_threshold,
     outlier_gate,
     positive,
     register,
@@ -516,11 +516,7 @@ class RiemannianObserver(Observer[_State]):
         noise_std: float | None = None,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
-        p_out = positive("outlier_probability", outlier_probability, allow_none=True)
-        if p_out is not None and p_out >= 0.5:
-            raise GainError(f"outlier_probability={p_out!r} must be in (0, 0.5) (or None: no gate)")
-        self.outlier_probability = p_out
-        self._gate = math.inf if p_out is None else chi2_quantile(robot.nv, p_out)
+        self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
         positive("accel_psd", accel_psd)
         self.accel_psd = float(accel_psd)
         if gain_schedule not in ("riccati", "steady"):

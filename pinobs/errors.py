@@ -20,6 +20,7 @@ __all__ = [
     "ModelFileError",
     "ModelTypeError",
     "ModelWarning",
+    "NoiseWarning",
     "NonFiniteError",
     "NotResetError",
     "ObserverDiverged",
@@ -117,6 +118,10 @@ class ObserverDiverged(PinobsError, ArithmeticError):
 
 class PinobsWarning(UserWarning):
     """Root of every warning pinobs issues on purpose."""
+
+
+class NoiseWarning(PinobsWarning):
+    """An observer built without ``noise_std`` estimated σ from its data and retuned itself."""
 
 
 class ModelWarning(PinobsWarning):

@@ -50,12 +50,12 @@ from pinobs.errors import (
     ObserverDiverged,
     PinobsError,
 )
-from pinobs.io.noise import estimate_noise_std
 from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, iter_log
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers import Estimate, make_observer
+from pinobs.observers.noise import estimate_noise_std
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
     ABSURD_VALUE,

@@ -20,6 +20,7 @@ import inspect
 import itertools
 import math
 import numbers
+import warnings
 from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import (
     GainError,
+    NoiseWarning,
     NotResetError,
     ObserverDiverged,
     OptionError,
@@ -39,6 +41,7 @@ from pinobs.errors import (
 )
 from pinobs.model import Robot
 from pinobs.model.robot import read_only
+from pinobs.observers.noise import estimate_noise_std
 from pinobs.tolerances import TIME_EPS
 
 __all__ = [
@@ -57,6 +60,13 @@ __all__ = [
 
 Vector = NDArray[np.floating[Any]]
 State = TypeVar("State")
+
+#: Seconds of samples (and at least :data:`NOISE_MIN_SAMPLES`) from which an
+#: observer built without ``noise_std`` estimates σ (:class:`Observer`).
+NOISE_WINDOW = 1.0
+NOISE_MIN_SAMPLES = 200
+#: [rad or m] σ̂ at or below this is taken for noise-free data: nothing is retuned.
+NOISE_FLOOR = 1e-6
 
 
 @dataclass(frozen=True)
@@ -230,12 +240,34 @@ class Observer(ABC, Generic[State]):
         name: registry name.
         summary: one line for ``pinobs list`` and the README table.
         uses_torque: whether the observer uses the torque (model-based) or not.
+        uses_noise_std: whether its default gains depend on ``noise_std``.
+
+    **σ from the data, live.**  Built without ``noise_std`` (``None``; ``0``
+    means noise-free and is kept), an observer whose gains depend on it starts
+    from its family's default σ and keeps its updates for the first
+    :data:`NOISE_WINDOW` seconds after :meth:`reset`.  Then it estimates σ
+    from those samples (the robust third-difference estimator of
+    :func:`pinobs.observers.noise.estimate_noise_std`, median over joints),
+    rebuilds itself with ``noise_std = σ̂`` and the same arguments, replays the
+    kept updates, and warns once (:class:`~pinobs.errors.NoiseWarning`): from
+    then on its estimates are those it would give had σ̂ been passed at
+    construction.  Nothing changes when σ̂ ≤ :data:`NOISE_FLOOR` (noise-free
+    data) or when its gains were given explicitly.  The replay costs the first
+    second's updates once more.
     """
 
     name: ClassVar[str] = ""
     summary: ClassVar[str] = ""
     #: False for model-free observers, which ignore the torque.
     uses_torque: ClassVar[bool] = True
+    #: Whether its default gains depend on ``noise_std`` (σ is then learnt from the data).
+    uses_noise_std: ClassVar[bool] = False
+    _init_args: tuple[tuple[Any, ...], dict[str, Any]]  # set by __new__
+
+    def __new__(cls, *args: Any, **kwargs: Any) -> Observer[Any]:
+        self = super().__new__(cls)
+        self._init_args = (args, kwargs)  # to rebuild with σ from the data (_learn_noise)
+        return self
 
     def __init__(
         self, robot: Robot, *, rate: float | None = None, noise_std: float | None = None
@@ -252,6 +284,11 @@ class Observer(ABC, Generic[State]):
         self.latency = 0.0  # [s]; set_latency()
         self._ts = -math.inf  # time of the state (t − latency once delayed samples arrive)
         self._torques: list[tuple[float, Vector]] = []  # (applied from [s], τ), for latency
+        # updates (t, q, τ) kept while σ is unknown, for σ from the data; then None
+        self._noise_samples: list[tuple[float, Vector | None, Vector]] | None = (
+            [] if noise_std is None and self.uses_noise_std else None
+        )
+        self._reset_args: tuple[Any, ...] = ()
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.robot.name!r})"
@@ -283,6 +320,9 @@ class Observer(ABC, Generic[State]):
         self._ts, self._torques = t, [(t, tau)]
         self._nis.clear()
         self._gated = 0
+        self._reset_args = (t0, q0, v0, tau0)
+        if self._noise_samples is not None:
+            self._noise_samples = []  # σ from the samples after this reset
         return estimate
 
     @final
@@ -340,6 +380,8 @@ class Observer(ABC, Generic[State]):
         if estimate.nis is not None:
             self._nis.append(estimate.nis)
             self._gated += estimate.gated
+        if self._noise_samples is not None and self._learn_noise(t_new, q, tau_new):
+            return self.estimate  # rebuilt with σ from the data, replayed up to t_new
         return estimate
 
     @property
@@ -412,6 +454,44 @@ class Observer(ABC, Generic[State]):
     def options(self) -> dict[str, Any]:
         """The resolved options (gains chosen from ``rate``/``noise_std`` included), for reports."""
         return {"rate": self.rate, "noise_std": self.noise_std}
+
+    def _learn_noise(self, t: float, q: Vector | None, tau: Vector) -> bool:
+        """Keep the update until :data:`NOISE_WINDOW` s (and :data:`NOISE_MIN_SAMPLES`
+        samples) are in; then σ̂ from them (class docstring) and, if it is above the floor
+        and changes the gains, rebuild with it and replay the kept updates (warned once).
+        Returns whether the observer was rebuilt (its latest estimate is then the replay's)."""
+        assert self._noise_samples is not None
+        self._noise_samples.append((t, q, tau))
+        ts = [x[0] for x in self._noise_samples if x[1] is not None]
+        if len(ts) < NOISE_MIN_SAMPLES or ts[-1] - ts[0] < NOISE_WINDOW:
+            return False
+        kept, self._noise_samples = self._noise_samples, None
+        qs = np.array([x[1] for x in kept if x[1] is not None])
+        sigma_joint = estimate_noise_std(np.array(ts), qs, self.robot, window=NOISE_WINDOW)
+        if sigma_joint is None or not float(np.median(sigma_joint)) > NOISE_FLOOR:
+            return False
+        sigma = float(np.median(sigma_joint))
+        args, kwargs = self._init_args
+        fresh = type(self)(*args, **{**kwargs, "noise_std": sigma})
+        if {k: v for k, v in fresh.options.items() if k != "noise_std"} == {
+            k: v for k, v in self.options.items() if k != "noise_std"
+        }:
+            return False  # its gains were given: σ changes nothing
+        fresh.set_latency(self.latency)
+        fresh.reset(*self._reset_args)
+        for tk, qk, tauk in kept:  # the same updates, as if σ̂ had been given from the start
+            fresh.update(tk, qk, tauk)
+        self.__dict__ = fresh.__dict__
+        warnings.warn(
+            NoiseWarning(
+                f"{self.name}: built without noise_std; estimated σ = {sigma:.3g} from its "
+                f"first {ts[-1] - ts[0]:.3g} s of samples (median over joints; per joint "
+                f"{np.array2string(sigma_joint, precision=3)}), rebuilt with it and replayed "
+                "them; pass noise_std to set it yourself"
+            ),
+            stacklevel=3,
+        )
+        return True
 
     # ------------------------------------------------------ family interface
     @abstractmethod

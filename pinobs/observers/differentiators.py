@@ -287,6 +287,7 @@ class HighGainDifferentiator(Observer[_HGState]):
     name = "highgain"
     uses_torque = False  # model-free: the torque is not used
     summary = "Ibrir's dynamic-gain differentiator, Thm 2.1 (model-free)"
+    uses_noise_std = True
 
     def __init__(
         self,
@@ -459,6 +460,7 @@ class SlidingDifferentiator(Observer[_SMState]):
     name = "sliding"
     uses_torque = False  # model-free: the torque is not used
     summary = "Ibrir's sliding-mode differentiator, Thm 2.2, implicit (model-free)"
+    uses_noise_std = True
 
     def __init__(
         self,

@@ -459,6 +459,7 @@ class ExtendedKalmanFilter(Observer[_State]):
     """
 
     name = "ekf"
+    uses_noise_std = True
     #: :func:`pinobs.smooth` can run its backward pass over this filter's states.
     smoothable = True
     summary = "extended Kalman filter on the manifold, exact model (model-based baseline)"

@@ -77,6 +77,7 @@ class FiniteDifference(Observer[_State]):
     name = "fd"
     summary = "backward difference + first-order low-pass (model-free baseline)"
     uses_torque = False
+    uses_noise_std = True
 
     def __init__(
         self,

@@ -155,6 +155,7 @@ class IbrirKalman(Observer[_State]):
     """
 
     name = "kalman"
+    uses_noise_std = True
     summary = "Ibrir's Kalman observer on the state-affine form, Thm 3.1 (model-based)"
 
     def __init__(

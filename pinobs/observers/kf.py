@@ -83,6 +83,7 @@ class ConstantAccelerationKF(Observer[_State]):
     name = "kf"
     summary = "per-joint constant-acceleration Kalman filter (model-free baseline)"
     uses_torque = False
+    uses_noise_std = True
 
     def __init__(
         self,

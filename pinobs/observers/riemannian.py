@@ -494,6 +494,7 @@ class RiemannianObserver(Observer[_State]):
     """
 
     name = "riemannian"
+    uses_noise_std = True
     summary = "intrinsic Riemannian observer with curvature term (Aghannan–Rouchon, Anisi–Hamberg)"
 
     def __init__(

@@ -1,4 +1,4 @@
-"""The position noise level of a log, estimated from the log itself.
+"""The position noise level of recorded samples, estimated from the samples themselves.
 
 For samples ``y_k = x(t_k) + e_k`` of a smooth motion ``x`` with white noise
 ``e_k ~ N(0, σ²)``, the third difference

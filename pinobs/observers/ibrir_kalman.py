@@ -79,7 +79,14 @@ import numpy as np
 from pinobs.errors import GainError
 from pinobs.model import Robot, lie_rk4
 from pinobs.model.integrators import rk4_stage_matrices
-from pinobs.observers.base import Observer, Vector, positive, register
+from pinobs.observers.base import (
+    Observer,
+    Vector,
+    gate_threshold,
+    outlier_gate,
+    positive,
+    register,
+)
 from pinobs.observers.differentiators import HighGainDifferentiator
 from pinobs.observers.ekf import (
     ad_matrix,
@@ -130,7 +137,11 @@ class _State(NamedTuple):
     v: Vector
     P: Vector  # (2nv, 2nv)
     diff: Any  # the differentiator's state (ξ̂ of Theorem 3.1), None when unused
-    y_prev: Vector | None  # the sample of the previous call (None: there was none)
+    y_prev: Vector | None  # the sample of the previous call (None: there was none, or gated)
+    nis: float | None = None  # normalized innovation squared of the last measurement
+    gated: bool = False  # that measurement was rejected as an outlier
+    gate_run: int = 0  # consecutive rejected measurements
+    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
 
 
 @register
@@ -150,6 +161,8 @@ class IbrirKalman(Observer[_State]):
         schedule: ``"measured"`` (the paper's y) or ``"filtered"`` (the differentiator's ŷ).
         velocity_source: ``"differentiator"`` (the paper's ẏ) or ``"estimate"`` (v̂);
             default: the former for ``form="paper"``, the latter otherwise.
+        outlier_probability: false-alarm probability ``p`` of the outlier gate
+            (module docstring); ``None`` switches the gate off.
         rate: sample rate hint [Hz].
         noise_std: position noise standard deviation [rad or m].
     """
@@ -171,10 +184,12 @@ class IbrirKalman(Observer[_State]):
         diff_gamma: float | None = None,
         schedule: str = "measured",
         velocity_source: str | None = None,
+        outlier_probability: float | None = 1e-6,
         rate: float | None = None,
         noise_std: float | None = None,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
+        self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
         sigma = self.noise_std or _NOISE_FLOOR
         R = output_weight
         if R is None:
@@ -186,7 +201,9 @@ class IbrirKalman(Observer[_State]):
         if not np.all(np.isfinite(cf)) or np.any(cf < 0):
             raise GainError(f"viscous={viscous!r} must be finite and >= 0")
         self.viscous = cf
-        self._damped = bool(np.any(cf)) or self.robot.has_friction  # C_f ≠ 0 somewhere
+        self._viscous = bool(np.any(cf))  # (read every update: once here)
+        self._damped = self._viscous or self.robot.has_friction  # C_f ≠ 0 somewhere
+        self._vector_space = self.robot.is_vector_space
         if schedule not in ("filtered", "measured"):
             raise GainError(f"schedule={schedule!r} is not accepted; use 'filtered' or 'measured'")
         self.schedule = schedule
@@ -217,6 +234,7 @@ class IbrirKalman(Observer[_State]):
             "v0_std": g.v0_std,
             "diff_order": d.order,
             "diff_gamma": d.gamma,
+            "outlier_probability": self.outlier_probability,
         }
 
     # ------------------------------------------------------- state-affine form
@@ -289,15 +307,49 @@ class IbrirKalman(Observer[_State]):
         return _State(q0.copy(), v0.copy(), np.diag(std**2), diff, None)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+        """Prediction over ``dt`` [s] (scheduled on ``q_meas``), then the gated Kalman correction.
+
+        ``NIS = eᵀ S⁻¹ e`` with ``S = P⁻_qq + 1/(R h)`` comes free from the update
+        (``S⁻¹ e = (e − K_q e) R h``, as in :meth:`ExtendedKalmanFilter._correct`).  A
+        measurement the gate rejects (:func:`pinobs.observers.base.outlier_gate`) is used
+        nowhere: the step is redone as if there were no sample (the schedule ``y(t)`` and
+        the differentiator had read it too), and the estimate is that prediction.
+        """
+        q, v, P, d1 = self._predict(state, dt, q_meas, tau)
+        if q_meas is None:
+            return _State(q, v, 0.5 * (P + P.T), d1, None)  # (joseph_update symmetrises)
+        r, nv = self.robot, self.robot.nv
+        e = q_meas - q if self._vector_space else r.difference(q, q_meas)
+        meas_var = 1.0 / (self.gains.output_weight * dt)
+        dx, P = joseph_update(P, e, meas_var)
+        dq = dx[:nv]
+        nis = float(e.dot(e - dq)) / meas_var
+        reject, level = outlier_gate(nis, state.nis_level, state.gate_run, self._gate, nv)
+        if reject:
+            return self._step(state, dt, None, tau)._replace(
+                nis=nis, gated=True, gate_run=state.gate_run + 1, nis_level=level
+            )
+        q = q + dq if self._vector_space else r.integrate(q, dq)
+        return _State(q, v + dx[nv:], P, d1, q_meas.copy(), nis, False, 0, level)
+
+    def _innovation(self, state: _State) -> tuple[float | None, bool]:
+        return state.nis, state.gated
+
+    def _predict(
+        self, state: _State, dt: float, q_meas: Vector | None, tau: Vector
+    ) -> tuple[Vector, Vector, Vector, Any]:
+        """``(q̂⁻, v̂⁻, P⁻, ξ̂)`` over ``dt`` [s] with ``tau`` held, ``y(t)`` ending on ``q_meas``
+        (module docstring); ``P⁻`` symmetric to rounding only."""
         r, nv, g = self.robot, self.robot.nv, self.gains
         d0 = state.diff
         d1 = None if d0 is None else self.differentiator._step(d0, dt, q_meas, tau)  # ξ̂
         # scheduling output y(s) on the interval, s ∈ [0, dt]: y0 ⊕ (s/dt) dy
+        vector_space = self._vector_space  # ⊕ is +, ⊖ is −: NumPy, not a Pinocchio call
         if self.schedule == "filtered" and d0 is not None and d1 is not None:
             y0, dy = d0.q, r.difference(d0.q, d1.q)
         elif q_meas is not None:  # the paper's y; from q̂ when no sample opened the interval
             y0 = state.q if state.y_prev is None else state.y_prev
-            dy = r.difference(y0, q_meas)
+            dy = q_meas - y0 if vector_space else r.difference(y0, q_meas)
         else:  # no sample at either end: the prediction's own path
             y0, dy = state.q, dt * state.v
         yd0 = yd1 = state.v
@@ -305,7 +357,10 @@ class IbrirKalman(Observer[_State]):
             yd0, yd1 = d0.X[0], d1.X[0]
         use_estimate = self.velocity_source == "estimate"
         # y at the RK4 stages: s = 0, ½, ½, 1 (the stage times, exact in binary)
-        y_at = {0.0: y0, 0.5: r.integrate(y0, 0.5 * dy), 1.0: r.integrate(y0, dy)}
+        if vector_space:
+            y_at = {0.0: y0, 0.5: y0 + 0.5 * dy, 1.0: y0 + dy}
+        else:
+            y_at = {0.0: y0, 0.5: r.integrate(y0, 0.5 * dy), 1.0: r.integrate(y0, dy)}
 
         def rhs(q: Vector, x: Vector) -> tuple[Vector, Vector]:
             v, s = x[:nv], x[nv] / dt
@@ -326,25 +381,24 @@ class IbrirKalman(Observer[_State]):
             a0 = r.forward_dynamics(y0, state.v, tau - self.viscous * state.v)
             minv_diag = np.diag(np.linalg.inv(r.mass_matrix(y0)))
             n = friction_substeps(r, state.v, a0, minv_diag, dt)
-        if n == 1 and use_estimate and r.is_vector_space:  # RK4 without lie_rk4's bookkeeping
-            v0, visc = state.v, self.viscous
-            if not np.any(visc):  # C_f v = 0: τ as it is (the same numbers)
-
-                def fd(y: Vector, v: Vector) -> Vector:
-                    return r.forward_dynamics(y, v, tau)
-            else:
-
-                def fd(y: Vector, v: Vector) -> Vector:
-                    return r.forward_dynamics(y, v, tau - visc * v)
-
+        if n == 1 and use_estimate and vector_space:  # RK4 without lie_rk4's bookkeeping
             # classical RK4 stacked as in dynamics_rk4: rows (q, v, a₁, a₂, a₃, a₄)
             c2, c3, c4, c_out = rk4_stage_matrices(float(dt))
-            b = np.empty((6, nv))
-            b[0], b[1] = state.q, v0
-            b[2] = fd(y0, v0)
-            b[3] = fd(y_at[0.5], c2[1].dot(b[:3]))
-            b[4] = fd(y_at[0.5], c3[1].dot(b[:4]))
-            b[5] = fd(y_at[1.0], c4[1].dot(b[:5]))
+            fd, b = r.forward_dynamics, np.empty((6, nv))
+            b[0], b[1] = state.q, state.v
+            y_half = y_at[0.5]
+            if not self._viscous:  # C_f v = 0: τ as it is (the same numbers)
+                b[2] = fd(y0, b[1], tau)
+                b[3] = fd(y_half, c2[1].dot(b[:3]), tau)
+                b[4] = fd(y_half, c3[1].dot(b[:4]), tau)
+                b[5] = fd(y_at[1.0], c4[1].dot(b[:5]), tau)
+            else:
+                visc = self.viscous
+                for i, (y, c) in enumerate(
+                    ((y0, None), (y_half, c2), (y_half, c3), (y_at[1.0], c4))
+                ):
+                    v_i = b[1] if c is None else c[1].dot(b[: i + 2])
+                    b[i + 2] = fd(y, v_i, tau - visc * v_i)
             q, v = c_out.dot(b)
         else:
             q, x = state.q, np.concatenate([state.v, [0.0]])
@@ -357,15 +411,7 @@ class IbrirKalman(Observer[_State]):
         P = Phi.dot(state.P).dot(Phi.T)
         if g.form == "practical":
             P += double_integrator_noise(nv, dt, g.accel_psd)
-        if q_meas is not None:
-            e = r.difference(q, q_meas)
-            dx, P = joseph_update(P, e, 1.0 / (g.output_weight * dt))
-            q = r.integrate(q, dx[:nv])
-            v = v + dx[nv:]
-        else:
-            P = 0.5 * (P + P.T)  # (joseph_update returns it symmetric)
-        y_prev = None if q_meas is None else q_meas.copy()
-        return _State(q, v, P, d1, y_prev)
+        return q, v, P, d1
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v

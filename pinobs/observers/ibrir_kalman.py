@@ -444,7 +444,8 @@ class IbrirKalman(Observer[_State]):
         q, v, mid, d1 = self._predict(state, dt, q_meas, tau)
         if q_meas is None:
             P = self._covariance(self._state_matrix(*mid), dt, state.P)
-            return _State(q, v, 0.5 * (P + P.T), d1, None)  # (joseph_update symmetrises)
+            P = 0.5 * (P + P.T)  # (joseph_update symmetrises)
+            return _State(q, v, P, d1, None, None, False, state.gate_run, state.nis_level)
         r, nv = self.robot, self.robot.nv
         e = q_meas - q if self._vector_space else r.difference(q, q_meas)
         meas_var = 1.0 / (self.gains.output_weight * dt)

@@ -172,3 +172,24 @@ def test_the_gate_can_be_switched_off_and_rejects_bad_values() -> None:
     for bad in (0.0, 0.7, -1.0, "x"):
         with pytest.raises(pinobs.GainError, match="outlier_probability"):
             make_observer("ekf", robot, outlier_probability=bad)
+
+
+@pytest.mark.parametrize(
+    ("name", "robot_name"), [("kalman", "ur5"), ("liegroup", "top"), ("ii", "cartpole")]
+)
+def test_every_gate_option_is_validated_and_can_be_switched_off(name: str, robot_name: str) -> None:
+    robot = pinobs.load(robot_name)
+    for bad in (0.0, 0.7, -1.0, "x"):
+        with pytest.raises(pinobs.GainError, match="outlier_probability"):
+            make_observer(name, robot, outlier_probability=bad)
+    ob = make_observer(name, robot, outlier_probability=None)
+    assert ob.options["outlier_probability"] is None
+    _, out = _run(
+        robot,
+        None,
+        [name],
+        duration=1.1,
+        spikes=[(1000, 0, 10.0)],
+        **{name: {"outlier_probability": None}},
+    )
+    assert not any(e.gated for e in out[name][1])

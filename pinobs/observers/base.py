@@ -16,6 +16,7 @@ then, so a rejected call leaves the observer exactly as it was.
 
 from __future__ import annotations
 
+import functools
 import inspect
 import itertools
 import math
@@ -56,6 +57,7 @@ __all__ = [
     "outlier_gate",
     "positive",
     "register",
+    "steady_innovation_variance",
 ]
 
 Vector = NDArray[np.floating[Any]]
@@ -202,6 +204,32 @@ def outlier_gate(
     if run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
         lvl = max(lvl, nis * dof / threshold)
     return False, lvl + NIS_AVERAGING * (min(nis, 100.0 * lvl) - lvl)
+
+
+@functools.lru_cache(maxsize=64)
+def steady_innovation_variance(k1: float, k2: float, h: float, meas_var: float) -> float:
+    """Innovation variance of a fixed-gain observer of a double integrator, noise-driven, at steady state.
+
+    One tangent direction, error ``e = (δq, δv)``, a sample every ``h`` [s] with
+    noise of variance ``meas_var`` [rad²], the correction ``e⁺ = e⁻ − K (δq⁻ − n)``
+    with the observer's own gains ``K = (k1, k2)`` [1, 1/s], the prediction
+    ``e⁻ = D e``, ``D = [[1, h], [0, 1]]`` (no process noise: an exact model)::
+
+        P = A P Aᵀ + meas_var K Kᵀ,   A = (I − K H) D,   H = [1 0]      (discrete Lyapunov)
+        S = (D P Dᵀ)₀₀ + meas_var
+
+    (solved as ``(I − A ⊗ A) vec P = meas_var vec(K Kᵀ)``).  The innovation
+    ``δq⁻ − n`` is then Gaussian with variance ``S``, so ``|e|²/S`` over ``nv``
+    such directions is χ²(nv).  ``inf`` if ``A`` is not stable (no steady state).
+    """
+    D = np.array([[1.0, h], [0.0, 1.0]])
+    K = np.array([[k1], [k2]])
+    A = (np.eye(2) - K @ np.array([[1.0, 0.0]])) @ D
+    if not float(np.max(np.abs(np.linalg.eigvals(A)))) < 1.0:
+        return math.inf
+    vec_p = np.linalg.solve(np.eye(4) - np.kron(A, A), meas_var * (K @ K.T).ravel())
+    P = vec_p.reshape(2, 2)
+    return float((D @ P @ D.T)[0, 0] + meas_var)
 
 
 def positive(

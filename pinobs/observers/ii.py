@@ -76,6 +76,27 @@ velocity, the fitted decay rate of ``|z|`` is k to within 7e-8 relative and
 ``|z_k|`` exceeds the bound ``e^{−kt}|z₀|`` by at most 5e-10 (the invariance
 floor).  ``tests/observers/test_ii.py``, ``examples/ii_cartpole.py``.
 
+Consistency and outliers.  The observer has no covariance; the innovation
+``e = q_meas − q̂⁻`` (the sample against the step's prediction ``q̂⁻``, which
+starts from the previous sample) gets a variance from the observer's own
+error dynamics.  Per joint, flat case, white noise ``n`` of variance σ²
+(σ = ``noise_std``, 1e-6 if not given): ``e = n_{k+1} − n_k − h(v̂ − v) + O(h²)``,
+and ``P̂ = β(q_meas) − η`` carries the noise into the velocity as
+``v̂ − v ≈ k(n_k − n̄_k) + T z`` (``n̄`` the noise low-passed at ``k``, ``z`` the
+momentum error of eq. 33), so to first order in ``kh``::
+
+    S = σ² (2 + 2kh) + h² v0_std² e^{−ε t}
+
+the last term the start-up error, ``|v̂(0) − v(0)|`` of standard deviation
+``v0_std`` per joint decaying as the I&I bound guarantees (``ε`` of
+Assumption 2, ``2k`` for the potential construction; ``2k`` assumed where
+nothing is guaranteed).  ``NIS = |e|²/S`` is then χ²(nv) to that order, with
+an exact model (a model error adds ``h Δa/k`` to ``e``: the velocity bias it
+causes).  Successive innovations share ``n_k`` (correlation ≈ −½), which
+does not change the mean NIS but widens its spread over a window by about
+√1.5.  A sample the gate rejects (:func:`pinobs.observers.base.outlier_gate`)
+is not used: the path and ``q̂`` are the prediction, as without a sample.
+
 Unguaranteed mode (``unguaranteed=True``, Assumption 1 fails).  The observer
 then adds the certainty-equivalent term ``−D_T(q, P̂)`` to η̇, so that
 ``ż = −𝒫Tz − (D_T(q, P) − D_T(q, P̂))``: the manifold stays invariant (started
@@ -99,7 +120,14 @@ from numpy.typing import ArrayLike, NDArray
 from pinobs.errors import GainError, UnsupportedRobotError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.chart import AngleChart
-from pinobs.observers.base import Observer, Vector, positive, register
+from pinobs.observers.base import (
+    Observer,
+    Vector,
+    gate_threshold,
+    outlier_gate,
+    positive,
+    register,
+)
 from pinobs.tolerances import II_ASSUMPTION1_TOL
 
 __all__ = [
@@ -124,6 +152,7 @@ _FULL_SEARCH_MAX_N = 5  # all n! orderings up to n = 5 (120); a heuristic subset
 _GL_SHORT = np.polynomial.legendre.leggauss(3)
 _GL_SEGMENT = np.polynomial.legendre.leggauss(6)
 _SHORT_SEGMENT = 0.02  # [rad or m]: 3-node error ~ (0.02)^7 |∂⁶ T⁻¹| / 2e6, below 1e-17
+_NOISE_FLOOR = 1e-6  # [rad or m] σ assumed when no noise_std (or 0) is given, as the filters'
 _STEP_KH = 0.25  # sub-steps so that k·h_sub <= 0.25 (RK4 factor within (kh)⁵/120 = 8e-6 of e^{−kh})
 
 
@@ -679,6 +708,11 @@ class _State(NamedTuple):
     eta: Vector  # η
     beta: Vector  # β(q)
     q_ref: Vector  # homotopy reference (the configuration at reset)
+    age: float = 0.0  # [s] since the reset (the prior's decay in the NIS)
+    nis: float | None = None  # normalized innovation squared of the last sample
+    gated: bool = False  # that sample was rejected as an outlier
+    gate_run: int = 0  # consecutive rejected samples
+    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
 
 
 @register
@@ -703,8 +737,13 @@ class IIObserver(Observer[_State]):
             Assumption 2 is checked [rad or m] (homotopy β only).
         substeps: RK4 steps per sample interval; ``None``: enough that
             ``k·h ≤ 0.25`` per step.
+        v0_std: standard deviation of the initial velocity error [rad/s or m/s],
+            for the NIS only (module docstring).
+        outlier_probability: false-alarm probability ``p`` of the outlier gate
+            (module docstring); ``None`` switches the gate off.
         rate: sample rate hint [Hz] (unused: the observer uses the actual intervals).
-        noise_std: position noise hint [rad or m] (unused).
+        noise_std: position noise standard deviation [rad or m]: the observer ignores
+            it, the NIS divides by it (1e-6 if not given, as the filters').
 
     Raises:
         UnsupportedRobotError: Lie-group joints, or Assumption 1 fails and
@@ -729,11 +768,16 @@ class IIObserver(Observer[_State]):
         nodes: int = 6,
         region: float = 0.5,
         substeps: int | None = None,
+        v0_std: float = 1.0,
+        outlier_probability: float | None = 1e-6,
         rate: float | None = None,
         noise_std: float | None = None,
     ) -> None:
         _require_vector_joints(robot)
         super().__init__(robot, rate=rate, noise_std=noise_std)
+        self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
+        self.v0_std = float(positive("v0_std", v0_std) or 0.0)
+        self._sigma2 = (self.noise_std or _NOISE_FLOOR) ** 2
         # continuous joints: the observer runs in the angle chart, unwrapped along the path
         self.chart: AngleChart | None = None
         self.plant = self.robot
@@ -821,6 +865,8 @@ class IIObserver(Observer[_State]):
             "nodes": self.gains.nodes,
             "region": self.gains.region,
             "substeps": self.substeps,
+            "v0_std": self.v0_std,
+            "outlier_probability": self.outlier_probability,
         }
 
     # ------------------------------------------------------------- helpers
@@ -952,12 +998,20 @@ class IIObserver(Observer[_State]):
             qn, vn = dynamics_rk4(robot, nodes_q[-1], nodes_v[-1], tau, h)
             nodes_q.append(qn)
             nodes_v.append(vn)
+        nis, gated, run, level = None, False, state.gate_run, state.nis_level
         if q_meas is None:
             q_end = nodes_q[-1]
         elif self.chart is not None:  # θ unwrapped: the 2π-branch nearest the prediction
             q_end = self.chart.to_chart(q_meas, near=nodes_q[-1])
         else:
             q_end = q_meas
+        if q_meas is not None:  # the innovation, its NIS and the filters' outlier gate
+            e = q_end - nodes_q[-1]
+            nis = float(e.dot(e)) / self.innovation_variance(state.age, dt)
+            gated, level = outlier_gate(nis, level, run, self._gate, e.size)
+            run = run + 1 if gated else 0
+            if gated:  # not used: the path and q̂ are the prediction's
+                q_end = nodes_q[-1]
         shift = q_end - nodes_q[-1]
 
         # (2) the path: Hermite interpolant of the prediction, corrected to end on q_meas
@@ -984,4 +1038,20 @@ class IIObserver(Observer[_State]):
             eta = eta + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
             cur = _State(qb, eta, sb.beta, state.q_ref)
             sa = sb
-        return _State(q_end.copy(), eta, cur.beta, state.q_ref)
+        return _State(
+            q_end.copy(), eta, cur.beta, state.q_ref, state.age + dt, nis, gated, run, level
+        )
+
+    def innovation_variance(self, age: float, h: float) -> float:
+        """``S`` [rad² or m²] per joint of the innovation ``q_meas − q̂⁻`` after ``age`` [s]
+        since the reset, over an interval ``h`` [s] (module docstring, "Consistency")::
+
+            S = σ² (2 + 2kh) + h² v0_std² e^{−ε age}
+        """
+        a2 = self.assumption2
+        eps = a2.epsilon if a2 is not None and a2.epsilon > 0.0 else 2.0 * self.gains.gain
+        k = self.gains.gain
+        return self._sigma2 * (2.0 + 2.0 * k * h) + (h * self.v0_std) ** 2 * math.exp(-eps * age)
+
+    def _innovation(self, state: _State) -> tuple[float | None, bool]:
+        return state.nis, state.gated

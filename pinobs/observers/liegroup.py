@@ -90,6 +90,26 @@ dynamics, inside the unit circle for every ``α, β > 0`` and every ``h``
 (stable for large gains, e.g. ``αh ≫ 1``).  Started on the truth without noise,
 ``ζ_e`` is the RK4 error of one step, so the estimate stays on the truth.
 
+Consistency and outliers.  The observer has no covariance; its innovation
+covariance is derived from the same flat error map, per tangent direction,
+driven by the sensor noise ``n ~ N(0, σ² I)`` (σ = ``noise_std``, 1e-6 if not
+given) and nothing else (an exact model has no process noise): ``ζ_e = δg̃⁻ − n``,
+``e⁺ = (I − K H) D e + K n`` with ``K = (ℓ₁, βτ_v)``, ``D = [[1, h], [0, 1]]``,
+whose steady-state covariance solves a 2 × 2 discrete Lyapunov equation
+(:func:`pinobs.observers.base.steady_innovation_variance`), giving
+``S = (D P Dᵀ)₀₀ + σ²`` (``1.010 σ²`` for the default gains at 1 kHz: the
+noise-driven error is small beside the noise).  ``NIS = |ζ_e|²/S`` is then
+χ²(nv) to first order in ``ζ_e`` while the estimate is converged and the
+model exact; the neglected couplings (the force-error stiffness, Coriolis and
+curvature terms) change ``S`` by ``O(αh)`` only.  It is a *steady-state*
+approximation: during a transient from a wrong start the NIS is large (the
+verdict says so until the estimate has converged).  So the first sample after
+a reset is accepted whatever its NIS and sets the gate's level, as a sample
+after a rejection does (:func:`pinobs.observers.base.outlier_gate`): the
+level, a running mean of the NIS, then follows the transient down.
+A sample the gate rejects is not used (the estimate is the prediction; the
+next correction spans the gap, as after a dropout).
+
 Every term linear in ``ζ_e`` that acts as a stiffness (``−βζ_e``, the force
 error ``Γ(S(g), ζ_e) − S(g̃⁻)`` of the prediction, the curvature term) gets
 the same weight ``τ_v``.  This matters for the curvature term at high spin:
@@ -112,7 +132,16 @@ import numpy as np
 
 from pinobs.errors import GainError, UnsupportedRobotError
 from pinobs.model import Robot, lie_rk4
-from pinobs.observers.base import Observer, Vector, positive, register
+from pinobs.observers.base import (
+    MAX_GATE_RUN,
+    Observer,
+    Vector,
+    gate_threshold,
+    outlier_gate,
+    positive,
+    register,
+    steady_innovation_variance,
+)
 from pinobs.tolerances import LEFT_INVARIANT_INERTIA_TOL
 
 __all__ = [
@@ -129,6 +158,7 @@ __all__ = [
 
 _DEFAULT_ALPHA = 10.0  # [1/s]   Maithripala et al. §IV-A
 _DEFAULT_BETA = 10.0  # [1/s²]  Maithripala et al. §IV-A
+_NOISE_FLOOR = 1e-6  # [rad or m] σ assumed when no noise_std (or 0) is given, as the filters'
 
 
 # ----------------------------------------------------------------- Lie algebra
@@ -359,6 +389,10 @@ class _State(NamedTuple):
     q: Vector  # g̃, Pinocchio configuration (unit quaternion inside)
     v: Vector  # ζ̃, body velocity in the Lie-algebra basis
     elapsed: float  # [s] since the last correction (longer than one interval after dropouts)
+    nis: float | None = None  # normalized innovation squared of the last sample
+    gated: bool = False  # that sample was rejected as an outlier
+    gate_run: int = 0  # consecutive rejected samples
+    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
 
 
 @register
@@ -372,8 +406,11 @@ class LieGroupObserver(Observer[_State]):
         beta: velocity gain β [1/s²] (default 10, the paper's).
         curvature_gain: ``c`` in ``c·R(ζ̃, ζ_e)ζ̃`` (default −1; +1 as printed,
             module docstring).
+        outlier_probability: false-alarm probability ``p`` of the outlier gate
+            (:meth:`_step`); ``None`` switches the gate off.
         rate: sample rate hint [Hz] (unused: the gains are the paper's unless given).
-        noise_std: position noise hint [rad or m] (unused).
+        noise_std: position noise standard deviation [rad or m]: the gains ignore it,
+            the NIS divides by it (1e-6 if not given, as the filters').
 
     Raises:
         UnsupportedRobotError: any other robot (use ``riemannian``).
@@ -390,11 +427,14 @@ class LieGroupObserver(Observer[_State]):
         alpha: float = _DEFAULT_ALPHA,
         beta: float = _DEFAULT_BETA,
         curvature_gain: float = -1.0,
+        outlier_probability: float | None = 1e-6,
         rate: float | None = None,
         noise_std: float | None = None,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.gains = LieGroupGains(alpha=alpha, beta=beta, curvature_gain=curvature_gain)
+        self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
+        self._sigma2 = (self.noise_std or _NOISE_FLOOR) ** 2
         self.geometry = _geometry_of(self.robot)
 
     @property
@@ -405,6 +445,7 @@ class LieGroupObserver(Observer[_State]):
             "alpha": g.alpha,
             "beta": g.beta,
             "curvature_gain": g.curvature_gain,
+            "outlier_probability": self.outlier_probability,
         }
 
     # ------------------------------------------------------------ the paper
@@ -448,7 +489,8 @@ class LieGroupObserver(Observer[_State]):
 
     # ------------------------------------------------------- sampled data
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:
-        return _State(q0.copy(), v0.copy(), 0.0)
+        # the first sample is accepted whatever its NIS (a start-up transient, not a spike)
+        return _State(q0.copy(), v0.copy(), 0.0, gate_run=MAX_GATE_RUN)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         q, v = lie_rk4(
@@ -456,10 +498,17 @@ class LieGroupObserver(Observer[_State]):
         )
         h = state.elapsed + dt
         if q_meas is None:
-            return _State(q, v, h)
+            return state._replace(q=q, v=v, elapsed=h, nis=None, gated=False)
         geo, g = self.geometry, self.gains
         l1, tau_v = correction_weights(g.alpha, g.beta, h)
         zeta_e = self.error(q_meas, q)
+        # NIS of the flat, noise-driven error at steady state (module docstring) and the
+        # filters' outlier gate (base.outlier_gate)
+        s_inn = steady_innovation_variance(l1, g.beta * tau_v, h, self._sigma2)
+        nis = float(zeta_e.dot(zeta_e)) / s_inn
+        reject, level = outlier_gate(nis, state.nis_level, state.gate_run, self._gate, zeta_e.size)
+        if reject:  # the estimate is the prediction; the next correction spans the gap
+            return _State(q, v, h, nis, True, state.gate_run + 1, level)
         jump = -l1 * zeta_e  # exact flow of eq. (20)'s −2α ζ_e over h
         v_new = (
             v
@@ -472,7 +521,11 @@ class LieGroupObserver(Observer[_State]):
                 - g.beta * zeta_e  # poles matched
             )
         )
-        return _State(self.robot.normalize(self.robot.integrate(q, jump)), v_new, 0.0)
+        q_new = self.robot.normalize(self.robot.integrate(q, jump))
+        return _State(q_new, v_new, 0.0, nis, False, 0, level)
+
+    def _innovation(self, state: _State) -> tuple[float | None, bool]:
+        return state.nis, state.gated
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q.copy(), state.v.copy()

@@ -279,6 +279,8 @@ def test_momentum_error_obeys_the_exponential_bound_at_every_sample(variant: str
     ob = make_observer("ii", robot, gain=GAIN)
     assert ob.options["assumption2_epsilon"] == 2 * GAIN
     result = simulate(robot, {"ii": ob}, duration=1.0, inputs="pd", seed=1, perturb_v=1.0)
+    # the NIS's start-up term (v0_std, decaying at ε) keeps the transient from being gated
+    assert ob.consistency().gated == 0
     z = np.linalg.norm(_momentum_error(ob, result), axis=1)
     eps = ob.options["assumption2_epsilon"]
     bound = np.exp(-0.5 * eps * result.t) * z[0]
@@ -313,6 +315,12 @@ def test_lie_group_joints_are_rejected_with_a_pointer_to_the_right_observer() ->
         make_observer("ii", _load("top"))
     with pytest.raises(UnsupportedRobotError, match="so3"):
         check_assumption1(_load("top"))
+
+
+def test_v0_std_must_be_a_positive_number() -> None:
+    for bad in (0.0, -1.0, "1"):
+        with pytest.raises(GainError, match="v0_std"):
+            make_observer("ii", _load("cartpole"), v0_std=bad)
 
 
 def test_ordering_option_accepts_joint_names_and_rejects_non_permutations() -> None:

@@ -16,6 +16,7 @@ then, so a rejected call leaves the observer exactly as it was.
 
 from __future__ import annotations
 
+import copy
 import functools
 import inspect
 import itertools
@@ -268,7 +269,8 @@ class Observer(ABC, Generic[State]):
         name: registry name.
         summary: one line for ``pinobs list`` and the README table.
         uses_torque: whether the observer uses the torque (model-based) or not.
-        uses_noise_std: whether its default gains depend on ``noise_std``.
+        uses_noise_std: whether it uses ``noise_std`` (gains or NIS).
+        noise_in_gains: whether its gains depend on it (else only its NIS).
 
     **σ from the data, live.**  Built without ``noise_std`` (``None``; ``0``
     means noise-free and is kept), an observer whose gains depend on it starts
@@ -281,15 +283,19 @@ class Observer(ABC, Generic[State]):
     then on its estimates are those it would give had σ̂ been passed at
     construction.  Nothing changes when σ̂ ≤ :data:`NOISE_FLOOR` (noise-free
     data) or when its gains were given explicitly.  The replay costs the first
-    second's updates once more.
+    second's updates once more.  The estimator sees ``h³ x⃛`` too: at low
+    rates and fast motions it overestimates σ (noise-free samples of a top
+    spinning at 30 rad/s at 100 Hz give 2e-4 rad); pass ``noise_std`` there.
     """
 
     name: ClassVar[str] = ""
     summary: ClassVar[str] = ""
     #: False for model-free observers, which ignore the torque.
     uses_torque: ClassVar[bool] = True
-    #: Whether its default gains depend on ``noise_std`` (σ is then learnt from the data).
+    #: Whether it uses ``noise_std`` at all (σ is then learnt from the data if not given) ...
     uses_noise_std: ClassVar[bool] = False
+    #: ... and whether in its gains (else only in ``_sigma2``, its NIS's measurement variance).
+    noise_in_gains: ClassVar[bool] = True
     _init_args: tuple[tuple[Any, ...], dict[str, Any]]  # set by __new__
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Observer[Any]:
@@ -499,11 +505,8 @@ class Observer(ABC, Generic[State]):
         if sigma_joint is None or not float(np.median(sigma_joint)) > NOISE_FLOOR:
             return False
         sigma = float(np.median(sigma_joint))
-        args, kwargs = self._init_args
-        fresh = type(self)(*args, **{**kwargs, "noise_std": sigma})
-        if {k: v for k, v in fresh.options.items() if k != "noise_std"} == {
-            k: v for k, v in self.options.items() if k != "noise_std"
-        }:
+        fresh = self._with_noise_std(sigma)
+        if fresh is None:
             return False  # its gains were given: σ changes nothing
         fresh.set_latency(self.latency)
         fresh.reset(*self._reset_args)
@@ -520,6 +523,25 @@ class Observer(ABC, Generic[State]):
             stacklevel=3,
         )
         return True
+
+    def _with_noise_std(self, sigma: float) -> Observer[Any] | None:
+        """This observer built with ``noise_std = sigma`` (not reset), or ``None`` if that
+        changes none of its options.  Families whose gains ignore σ
+        (``noise_in_gains = False``) use it only in ``_sigma2``, the measurement
+        variance of their NIS: a copy with that replaced (no costly rebuild)."""
+        if not self.noise_in_gains:
+            twin = copy.copy(self)
+            twin.noise_std = sigma
+            twin.__dict__["_sigma2"] = sigma**2  # the family's NIS measurement variance
+            return twin
+        args, kwargs = self._init_args
+        fresh = type(self)(*args, **{**kwargs, "noise_std": sigma})
+        options = {k: v for k, v in fresh.options.items() if k != "noise_std"}
+        return (
+            None
+            if options == {k: v for k, v in self.options.items() if k != "noise_std"}
+            else fresh
+        )
 
     # ------------------------------------------------------ family interface
     @abstractmethod

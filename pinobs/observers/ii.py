@@ -751,6 +751,8 @@ class IIObserver(Observer[_State]):
     """
 
     name = "ii"
+    uses_noise_std = True
+    noise_in_gains = False  # σ only in the NIS (_sigma2)
     summary = (
         "Immersion & Invariance reduced-order observer, Cholesky factor of M⁻¹ (Sarras et al.)"
     )

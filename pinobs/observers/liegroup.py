@@ -418,6 +418,8 @@ class LieGroupObserver(Observer[_State]):
     """
 
     name = "liegroup"
+    uses_noise_std = True
+    noise_in_gains = False  # σ only in the NIS (_sigma2)
     summary = "intrinsic observer on SO(3)/SE(3) from structure constants (Maithripala et al.)"
 
     def __init__(

@@ -84,9 +84,25 @@ def test_given_sigma_and_sigma_free_families_keep_nothing(
         warnings.simplefilter("error")
         _feed(given, run)
     assert given._noise_samples is None
-    # the families whose gains ignore σ do not collect anything
-    free = {n for n in pinobs.observer_names() if not observer_class(n).uses_noise_std}
-    assert free == {"ii", "liegroup"}
+    # every family uses σ (in its gains, or in its NIS and outlier gate)
+    assert all(observer_class(n).uses_noise_std for n in pinobs.observer_names())
+
+
+@pytest.mark.parametrize("name", ["ii", "liegroup"])
+def test_nis_only_families_learn_sigma_for_their_gate(name: str) -> None:
+    """σ enters only their NIS: with the default 1e-6 on σ = 1e-3 data the gate would reject
+    every other sample; after the first second they are the observer built with σ̂."""
+    robot = pinobs.load("cartpole" if name == "ii" else "top")
+    res = pinobs.simulate(robot, [], duration=1.6, sensor=pinobs.Sensor(1000.0, SIGMA), seed=3)
+    ob = pinobs.make_observer(name, robot, rate=1000.0)
+    with pytest.warns(NoiseWarning):
+        v_live = _feed(ob, res)
+    assert ob.noise_std is not None and abs(ob.noise_std / SIGMA - 1.0) < 0.15
+    given = pinobs.make_observer(name, robot, rate=1000.0, noise_std=ob.noise_std)
+    v_given = _feed(given, res)
+    k = int(np.searchsorted(res.t[2:], res.t[2] + NOISE_WINDOW - 1e-9))
+    np.testing.assert_array_equal(v_live[k:], v_given[k:])
+    assert ob.consistency().gated == given.consistency().gated
 
 
 def test_pickled_mid_window_resumes_identically(robot: pinobs.Robot, run: pinobs.Result) -> None:

@@ -614,7 +614,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     print(
         f"pinobs bench ({'quick' if args.quick else 'full'}): robots {', '.join(cfg.robots)}; timing also {', '.join(cfg.cost_robots)}"
     )
-    report = run_bench(cfg, log=lambda msg: print(msg, flush=True))
+    print(f"independent runs on {_cluster(args)}")
+    report = run_bench(
+        cfg,
+        log=lambda msg: print(msg, flush=True),
+        scheduler=args.scheduler,
+        workers=None if args.scheduler else args.workers,
+    )
     print(format_bench(report))
     print(
         f"\nbench took {report['seconds']:.0f} s on {report['machine']['processor']} ({report['machine']['system']})"
@@ -901,6 +907,12 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="accuracy and cost of every observer against the baselines")
     p.add_argument("--quick", action="store_true", help="two robots, short runs: under two minutes")
     p.add_argument("--json", default=None, help="write the full report to this JSON file")
+    _add_cluster_options(
+        p,
+        "its independent runs on a local Dask cluster of N processes (default %(default)s: "
+        "one after the other in this process; workers load each other's timings)",
+        workers=0,
+    )
     p.set_defaults(func=_cmd_bench)
 
     p = sub.add_parser(

@@ -8,8 +8,12 @@ pinobs demo                                    the main job on a built-in defaul
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
     [--force --map COL=NAME --topic T --noise STD]   (CSV/TSV, Parquet, NPZ, ROS bags)
     [--smooth [--lag S] [--accel-psd P|auto]]             RTS smoother over the ekf, v_std0.. columns
+pinobs estimate --robot R --observer O --log 'GLOB'|FOLDER --out-dir OUT   many logs on Dask
+    [--workers N | --scheduler tcp://host:8786]          one estimates file per log, a summary table
 pinobs check ii --robot R                      I&I Assumption 1 on the model
 pinobs bench [--quick] [--json FILE]           accuracy and cost against the baselines
+    [--workers N | --scheduler tcp://host:8786]          its independent runs on Dask
+pinobs sweep --robots R1,R2 --seeds 0-9 ...     robots × scenarios × seeds on Dask: a table, a plot
 """
 
 from __future__ import annotations

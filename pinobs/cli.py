@@ -8,8 +8,12 @@ pinobs demo                                    the main job on a built-in defaul
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
     [--force --map COL=NAME --topic T --noise STD]   (CSV/TSV, Parquet, NPZ, ROS bags)
     [--smooth [--lag S] [--accel-psd P|auto]]             RTS smoother over the ekf, v_std0.. columns
+pinobs estimate --robot R --observer O --log 'GLOB'|FOLDER --out-dir OUT   many logs on Dask
+    [--workers N | --scheduler tcp://host:8786]          one estimates file per log, a summary table
 pinobs check ii --robot R                      I&I Assumption 1 on the model
 pinobs bench [--quick] [--json FILE]           accuracy and cost against the baselines
+    [--workers N | --scheduler tcp://host:8786]          its independent runs on Dask
+pinobs sweep --robots R1,R2 --seeds 0-9 ...     robots × scenarios × seeds on Dask: a table, a plot
 """
 
 from __future__ import annotations
@@ -76,6 +80,23 @@ def _progress(label: str, enabled: bool) -> Any:
                 bar.update(task, completed=k, total=n or None)  # n = 0: unknown length
 
         yield update
+
+
+@contextmanager
+def _task_progress(label: str, enabled: bool) -> Any:
+    """:func:`_progress` for whole tasks (Dask runs): redrawn after every task."""
+    with _progress(label, enabled) as progress:
+        # _progress redraws every 100th step: count in hundredths of a task
+        yield None if progress is None else (lambda k, n: progress(100 * k, 100 * n))
+
+
+def _cluster(args: argparse.Namespace) -> str:
+    """Where ``--workers`` / ``--scheduler`` run the tasks, in words."""
+    if args.scheduler:
+        return f"the Dask cluster at {args.scheduler}"
+    if args.workers == 0:
+        return "this process"
+    return f"a local Dask cluster ({args.workers or 'one worker per core'})"
 
 
 def _observer_list(spec: Sequence[str]) -> list[str]:
@@ -323,6 +344,8 @@ def _column_map(items: Sequence[str] | None) -> dict[str, str] | None:
 
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
+    if args.out_dir is not None:
+        return _estimate_many(args)
     if args.smooth:
         return _estimate_smoothed(args)
     robot = load(args.robot, root_joint=args.root_joint)
@@ -372,6 +395,67 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         print("pinobs: error: no row of the log could be estimated", file=sys.stderr)
         return 1
     return 0
+
+
+def _estimate_many(args: argparse.Namespace) -> int:
+    """``estimate --log GLOB|FOLDER --out-dir OUT``: every log on Dask, a summary table."""
+    from pinobs.evaluation.distributed import estimate_logs, log_tasks, write_table
+    from pinobs.io import find_logs
+
+    for flag, given in (("--smooth", args.smooth), ("--html", args.html)):
+        if given:
+            raise OptionError(f"{flag} is for one log (--out FILE), not with --out-dir")
+    observer_class(args.observer)  # an unknown name: UnknownNameError listing the registered ones
+    load(args.robot, root_joint=args.root_joint)  # a bad robot fails here, not once per log
+    tasks = log_tasks(
+        find_logs(args.log),
+        args.out_dir,
+        robot=args.robot,
+        observer=args.observer,
+        root_joint=args.root_joint,
+        force=args.force,
+        columns=_column_map(args.map),
+        topic=args.topic,
+        rate=args.rate,
+        noise_std=args.noise,
+    )
+    print(f"pinobs estimate: {len(tasks)} logs, {args.observer} on {_cluster(args)}")
+    with _task_progress("estimate", not args.no_progress) as step:
+        table = estimate_logs(tasks, scheduler=args.scheduler, workers=args.workers, progress=step)
+    _print_summary(table, f"{args.observer} on {args.robot}")
+    path = write_table(table, Path(args.out_dir) / "summary")
+    failed = table[table["error"].notna()]
+    print(f"wrote {len(table) - len(failed)} estimates files and {path}")
+    for _, row in failed.iterrows():
+        print(f"failed: {row['log']}: {row['error']}", file=sys.stderr)
+    if len(failed):
+        print(f"pinobs: error: {len(failed)} of {len(table)} logs failed", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _print_summary(table: Any, title: str) -> None:
+    """The batch summary (without the output paths) as a rich table; errors cut to
+    60 characters (they are printed in full below it)."""
+    import pandas as pd
+    from rich.console import Console
+    from rich.table import Table
+
+    shown = table.drop(columns="out")
+    formats = {"sigma": "{:.3g}", "seconds": "{:.1f}"}
+    out = Table(title=title)
+    for col in shown.columns:
+        out.add_column(col, justify="left" if col in ("log", "consistency", "error") else "right")
+    for rec in shown.itertuples(index=False):
+        cells = [
+            "" if pd.isna(x) else formats.get(col, "{}").format(x)
+            for col, x in zip(shown.columns, rec, strict=True)
+        ]
+        if len(cells[-1]) > 60:
+            cells[-1] = cells[-1][:59] + "…"
+        out.add_row(*cells)
+    console = Console()
+    Console(width=console.width if console.is_terminal else 160).print(out)
 
 
 def _identify_report(ident: Any) -> str:
@@ -534,7 +618,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     print(
         f"pinobs bench ({'quick' if args.quick else 'full'}): robots {', '.join(cfg.robots)}; timing also {', '.join(cfg.cost_robots)}"
     )
-    report = run_bench(cfg, log=lambda msg: print(msg, flush=True))
+    print(f"independent runs on {_cluster(args)}")
+    report = run_bench(
+        cfg,
+        log=lambda msg: print(msg, flush=True),
+        scheduler=args.scheduler,
+        workers=None if args.scheduler else args.workers,
+    )
     print(format_bench(report))
     print(
         f"\nbench took {report['seconds']:.0f} s on {report['machine']['processor']} ({report['machine']['system']})"
@@ -586,11 +676,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         rate=args.rate,
         noise_std=args.noise,
     )
-    where = args.scheduler or f"a local cluster ({args.workers or 'one worker per core'})"
-    print(f"pinobs sweep: {len(tasks)} runs on {where}")
-    with _progress("sweep", not args.no_progress) as progress:
-        # _progress redraws every 100th step: count in hundredths of a run
-        step = None if progress is None else (lambda k, n: progress(100 * k, 100 * n))
+    print(f"pinobs sweep: {len(tasks)} runs on {_cluster(args)}")
+    with _task_progress("sweep", not args.no_progress) as step:
         table = sweep(tasks, scheduler=args.scheduler, workers=args.workers, progress=step)
     failed = table[table["error"].notna()]
     for _, row in failed.drop_duplicates(["robot", "scenario", "seed"]).iterrows():
@@ -657,6 +744,18 @@ def _add_robot_options(p: argparse.ArgumentParser, files: str = "URDF/MJCF") -> 
     )
 
 
+def _add_cluster_options(
+    p: argparse.ArgumentParser, workers_help: str, workers: int | None = None
+) -> None:
+    """``--workers`` and ``--scheduler``: where independent tasks run (Dask)."""
+    p.add_argument("--workers", type=int, default=workers, help=workers_help)
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        help="address of a running Dask scheduler (tcp://host:8786), instead of a local cluster",
+    )
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="pinobs", description="Velocity observers for any URDF robot."
@@ -711,7 +810,14 @@ def _parser() -> argparse.ArgumentParser:
         help="log: CSV/TSV with columns t, q0.. or q.<joint>, tau0.. or tau.<joint>; Parquet; "
         "NPZ with t, q, tau; a ROS 1/2 bag (sensor_msgs/JointState)",
     )
-    p.add_argument("--out", required=True, help="CSV file for the estimates: t, q0.., v0..")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", help="CSV file for the estimates: t, q0.., v0..")
+    where.add_argument(
+        "--out-dir",
+        default=None,
+        help="many logs (--log a folder or a quoted glob 'logs/*.csv'): one estimates CSV per "
+        "log in this folder and summary.parquet; on Dask (--workers, --scheduler)",
+    )
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
     p.add_argument(
         "--map",
@@ -759,6 +865,9 @@ def _parser() -> argparse.ArgumentParser:
         default=1e-8,
         help="with --smooth: process noise [rad²/s³], or 'auto' (chosen by likelihood); default %(default)s",
     )
+    _add_cluster_options(
+        p, "with --out-dir: local worker processes (0: this process; default: one per core)"
+    )
     p.set_defaults(func=_cmd_estimate)
 
     p = sub.add_parser(
@@ -802,6 +911,12 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="accuracy and cost of every observer against the baselines")
     p.add_argument("--quick", action="store_true", help="two robots, short runs: under two minutes")
     p.add_argument("--json", default=None, help="write the full report to this JSON file")
+    _add_cluster_options(
+        p,
+        "its independent runs on a local Dask cluster of N processes (default %(default)s: "
+        "one after the other in this process; workers load each other's timings)",
+        workers=0,
+    )
     p.set_defaults(func=_cmd_bench)
 
     p = sub.add_parser(
@@ -821,10 +936,7 @@ def _parser() -> argparse.ArgumentParser:
         help="names, or label=name:key=value;key=value (e.g. 'ekf+d=ekf:disturbance_psd=1')",
     )
     p.add_argument("--out", default="sweep", help="output folder (default %(default)s)")
-    p.add_argument("--workers", type=int, default=None, help="local worker processes")
-    p.add_argument(
-        "--scheduler", default=None, help="address of a running Dask scheduler (tcp://host:8786)"
-    )
+    _add_cluster_options(p, "local worker processes (0: this process; default: one per core)")
     p.add_argument("--duration", type=float, default=3.0, help="per run [s] (default %(default)s)")
     p.add_argument(
         "--rate", type=float, default=1000.0, help="sample rate [Hz] (default %(default)s)"

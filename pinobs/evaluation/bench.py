@@ -38,12 +38,12 @@ import math
 import platform
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from pinobs.errors import PinobsError, UnsupportedRobotError
+from pinobs.errors import OptionError, PinobsError, UnsupportedRobotError
 from pinobs.evaluation.metrics import Metrics, evaluate
 from pinobs.evaluation.timing import measure_cost
 from pinobs.model import Robot, aba_time, load, pinocchio_version
@@ -53,8 +53,11 @@ from pinobs.simulation import MISMATCH_SCENARIOS, Result, Sensor, mismatched_pla
 __all__ = [
     "BenchConfig",
     "BenchRow",
+    "BenchTask",
+    "bench_tasks",
     "format_bench",
     "run_bench",
+    "run_bench_task",
     "scaling_exponent",
     "time_geometry",
 ]
@@ -176,64 +179,111 @@ def _best(metrics: dict[str, Metrics], prefix: str) -> tuple[str, Metrics]:
     return key, grid[key]
 
 
-def run_bench(cfg: BenchConfig, *, log: Callable[[str], None] = print) -> dict[str, Any]:
-    """Run the benchmark; returns a JSON-ready dict (rows, geometry costs, scaling, machine)."""
+@dataclass(frozen=True)
+class BenchTask:
+    """One independent piece of the benchmark: ``kind`` is ``"scaling"`` (time every
+    observer on ``robot``), ``"accuracy"`` (one simulation with sensor ``variant``),
+    ``"mismatch"`` (one simulation against scenario ``variant``) or ``"geometry"``."""
+
+    kind: str
+    robot: str
+    variant: str
+    cfg: BenchConfig
+
+
+def bench_tasks(cfg: BenchConfig) -> list[BenchTask]:
+    """Every task of :func:`run_bench`, in the order the serial run does them."""
+    by_nv = sorted({*cfg.robots, *cfg.cost_robots}, key=lambda n: load(n).nv)
+    return [
+        *(BenchTask("scaling", r, "", cfg) for r in by_nv),
+        *(BenchTask("accuracy", r, s, cfg) for r in cfg.robots for s in _sensors(cfg)),
+        *(
+            BenchTask("mismatch", r, s, cfg)
+            for r in cfg.mismatch_robots
+            for s in MISMATCH_SCENARIOS
+        ),
+        *(
+            BenchTask("geometry", r, "", cfg)
+            for r in dict.fromkeys((*cfg.robots, *cfg.cost_robots))
+        ),
+    ]
+
+
+def run_bench_task(task: BenchTask) -> tuple[Any, str]:
+    """One :class:`BenchTask`: its result and a line for the log."""
+    cfg = task.cfg
+    if task.kind == "scaling":
+        return _scaling_points(cfg, task.robot)
+    if task.kind == "accuracy":
+        return _accuracy(cfg, task.robot, task.variant)
+    if task.kind == "mismatch":
+        return _mismatch(cfg, task.robot, task.variant)
+    if task.kind == "geometry":
+        return time_geometry((task.robot,))[0], f"  geometry calls timed on {task.robot}"
+    raise OptionError(
+        f"bench task kind {task.kind!r}: give scaling, accuracy, mismatch or geometry"
+    )
+
+
+def run_bench(
+    cfg: BenchConfig,
+    *,
+    log: Callable[[str], None] = print,
+    scheduler: str | None = None,
+    workers: int | None = 0,
+    processes: bool = True,
+) -> dict[str, Any]:
+    """Run the benchmark; returns a JSON-ready dict (rows, geometry costs, scaling, machine).
+
+    The independent runs (:func:`bench_tasks`) go through
+    :func:`pinobs.evaluation.distributed.run_tasks`: ``workers=0`` (default)
+    one after the other in this process, else on a local Dask cluster of
+    ``workers`` processes or the cluster at ``scheduler``.  The accuracy and
+    mismatch numbers do not depend on where they ran (seeded runs); the costs
+    are ratios to ``pin.aba`` in the same worker, but workers sharing cores
+    load each other.
+
+    Raises:
+        PinobsError: a task failed (its error).
+    """
+    from pinobs.evaluation.distributed import run_tasks
+
     started = time.perf_counter()
-    scaling = _scaling(cfg, log=log)
-    cost = {
-        (name, p["robot"]): (p["seconds"], p["cost_in_aba"])
-        for name, s in scaling.items()
-        for p in s["points"]
+    outcomes = run_tasks(
+        run_bench_task,
+        bench_tasks(cfg),
+        scheduler=scheduler,
+        workers=workers,
+        processes=processes,
+        on_result=lambda o: log(o.value[1]) if o.error is None else None,
+    )
+    failed = [o for o in outcomes if o.error is not None]
+    if failed:
+        t = failed[0].task
+        raise PinobsError(f"bench: {t.kind} on {t.robot} {t.variant}: {failed[0].error}".strip())
+    parts: dict[str, list[Any]] = {"scaling": [], "accuracy": [], "mismatch": [], "geometry": []}
+    for o in outcomes:
+        parts[o.task.kind].append(o.value[0])
+    points: dict[str, list[tuple[str, int, float, float]]] = {}
+    for found in parts["scaling"]:
+        for name, point in found.items():
+            points.setdefault(name, []).append(point)
+    scaling = {
+        name: {
+            "points": [{"robot": b, "nv": n, "seconds": t, "cost_in_aba": r} for b, n, t, r in pts],
+            "exponent": scaling_exponent([p[1] for p in pts], [p[2] for p in pts]),
+        }
+        for name, pts in points.items()
     }
+    cost = {(name, p[0]): (p[2], p[3]) for name, pts in points.items() for p in pts}
     rows: list[BenchRow] = []
     skipped_all: dict[str, dict[str, str]] = {}
-    for robot_name in cfg.robots:
-        robot = load(robot_name)
-        for label, (sensor, noise) in _sensors(cfg).items():
-            obs, skipped = _candidates(robot, cfg.rate, noise)
-            skipped_all[robot_name] = skipped
-            t0 = time.perf_counter()
-            result = _simulate(cfg, robot, obs, sensor)
-            metrics = {m.observer: m for m in evaluate(result, robot)}
-            log(
-                f"  {robot_name:10s} {label:12s} {len(obs)} observers in {time.perf_counter() - t0:.1f} s"
-            )
-            fd_key, fd_best = _best(metrics, "fd")
-            kf_key, kf_best = _best(metrics, "kf")
-            picked = {
-                **{n: (metrics[n], "") for n in obs if "@" not in n and n not in ("fd", "kf")},
-                "fd*": (fd_best, f"best cut-off {fd_key.split('@')[1]} Hz"),
-                "kf*": (kf_best, f"best jerk_psd {kf_key.split('@')[1]}"),
-                "fd": (metrics["fd"], "default cut-off rule"),
-                "kf": (metrics["kf"], "default jerk_psd"),
-            }
-            for name, (m, note) in picked.items():
-                options = result.trace(m.observer).options
-                timed = {"fd*": "fd", "kf*": "kf", "diff": "fd"}.get(name, name)
-                seconds, ratio = cost.get((timed, robot_name), (math.nan, math.nan))
-                rows.append(
-                    BenchRow(
-                        robot=robot_name,
-                        nv=robot.nv,
-                        sensor=label,
-                        observer=name,
-                        rms_v_error=m.rms_v_error,
-                        convergence_time=m.convergence_time,
-                        time_per_update=seconds,
-                        cost_in_aba=ratio,
-                        time_in_loop=m.time_per_update,
-                        options={
-                            k: v
-                            for k, v in options.items()
-                            if isinstance(v, int | float | str | bool | None)
-                        },
-                        note=note
-                        if m.diverged_at is None
-                        else f"diverged at {m.diverged_at:.3g} s",
-                    )
-                )
-    mismatch = _mismatch(cfg, log=log)
-    geometry = time_geometry(tuple(dict.fromkeys((*cfg.robots, *cfg.cost_robots))))
+    for found, skipped in parts["accuracy"]:
+        for row in found:
+            timed = {"fd*": "fd", "kf*": "kf", "diff": "fd"}.get(row.observer, row.observer)
+            seconds, ratio = cost.get((timed, row.robot), (math.nan, math.nan))
+            rows.append(replace(row, time_per_update=seconds, cost_in_aba=ratio))
+            skipped_all[row.robot] = skipped
     return {
         "config": asdict(cfg),
         "machine": _machine(),
@@ -241,50 +291,92 @@ def run_bench(cfg: BenchConfig, *, log: Callable[[str], None] = print) -> dict[s
         "rows": [asdict(r) for r in rows],
         "skipped": skipped_all,
         "scaling": scaling,
-        "geometry": geometry,
-        "mismatch": mismatch,
+        "geometry": parts["geometry"],
+        "mismatch": [r for found in parts["mismatch"] for r in found],
     }
 
 
-def _mismatch(cfg: BenchConfig, *, log: Callable[[str], None]) -> list[dict[str, Any]]:
-    """Every observer (nominal model) against perturbed truths (module docstring)."""
-    out: list[dict[str, Any]] = []
+def _accuracy(
+    cfg: BenchConfig, robot_name: str, label: str
+) -> tuple[tuple[list[BenchRow], dict[str, str]], str]:
+    """Every observer and baseline on one robot and sensor variant (costs filled in later)."""
+    robot = load(robot_name)
+    sensor, noise = _sensors(cfg)[label]
+    obs, skipped = _candidates(robot, cfg.rate, noise)
+    t0 = time.perf_counter()
+    result = _simulate(cfg, robot, obs, sensor)
+    metrics = {m.observer: m for m in evaluate(result, robot)}
+    message = (
+        f"  {robot_name:10s} {label:12s} {len(obs)} observers in {time.perf_counter() - t0:.1f} s"
+    )
+    fd_key, fd_best = _best(metrics, "fd")
+    kf_key, kf_best = _best(metrics, "kf")
+    picked = {
+        **{n: (metrics[n], "") for n in obs if "@" not in n and n not in ("fd", "kf")},
+        "fd*": (fd_best, f"best cut-off {fd_key.split('@')[1]} Hz"),
+        "kf*": (kf_best, f"best jerk_psd {kf_key.split('@')[1]}"),
+        "fd": (metrics["fd"], "default cut-off rule"),
+        "kf": (metrics["kf"], "default jerk_psd"),
+    }
+    rows = []
+    for name, (m, note) in picked.items():
+        options = result.trace(m.observer).options
+        rows.append(
+            BenchRow(
+                robot=robot_name,
+                nv=robot.nv,
+                sensor=label,
+                observer=name,
+                rms_v_error=m.rms_v_error,
+                convergence_time=m.convergence_time,
+                time_per_update=math.nan,
+                cost_in_aba=math.nan,
+                time_in_loop=m.time_per_update,
+                options={
+                    k: v
+                    for k, v in options.items()
+                    if isinstance(v, int | float | str | bool | None)
+                },
+                note=note if m.diverged_at is None else f"diverged at {m.diverged_at:.3g} s",
+            )
+        )
+    return (rows, skipped), message
+
+
+def _mismatch(cfg: BenchConfig, robot_name: str, scenario: str) -> tuple[list[dict[str, Any]], str]:
+    """Every observer (nominal model) against one perturbed truth (module docstring)."""
     sensor = Sensor(cfg.rate, cfg.noise_std)
-    for robot_name in cfg.mismatch_robots:
-        robot = load(robot_name)
-        for scenario in MISMATCH_SCENARIOS:
-            obs, _ = _candidates(robot, cfg.rate, cfg.noise_std)
-            obs["ekf+d"] = make_observer(
-                "ekf", robot, rate=cfg.rate, noise_std=cfg.noise_std, disturbance_psd=1.0
-            )
-            obs["ekf~"] = make_observer(
-                "ekf", robot, rate=cfg.rate, noise_std=cfg.noise_std, accel_psd=1e-2
-            )
-            t0 = time.perf_counter()
-            result = _simulate(
-                cfg, robot, obs, sensor, mismatched_plant(robot, scenario, seed=cfg.seed)
-            )
-            metrics = {m.observer: m for m in evaluate(result, robot)}
-            after = result.t >= result.t[0] + 0.25 * (result.t[-1] - result.t[0])
-            fd_key, _ = _best(metrics, "fd")
-            kf_key, _ = _best(metrics, "kf")
-            names = {n: n for n in obs if "@" not in n}
-            names.update({"fd*": fd_key, "kf*": kf_key})
-            for label, key in names.items():
-                err = result.trace(key).v[after] - result.v[after]
-                finite = bool(np.all(np.isfinite(err)))
-                bias = float(np.sqrt(np.mean(np.mean(err, axis=0) ** 2))) if finite else math.inf
-                out.append(
-                    {
-                        "robot": robot_name,
-                        "scenario": scenario,
-                        "observer": label,
-                        "rms_v_error": metrics[key].rms_v_error,
-                        "bias": bias,
-                    }
-                )
-            log(f"  mismatch {robot_name:6s} {scenario:18s} in {time.perf_counter() - t0:.1f} s")
-    return out
+    robot = load(robot_name)
+    obs, _ = _candidates(robot, cfg.rate, cfg.noise_std)
+    obs["ekf+d"] = make_observer(
+        "ekf", robot, rate=cfg.rate, noise_std=cfg.noise_std, disturbance_psd=1.0
+    )
+    obs["ekf~"] = make_observer(
+        "ekf", robot, rate=cfg.rate, noise_std=cfg.noise_std, accel_psd=1e-2
+    )
+    t0 = time.perf_counter()
+    result = _simulate(cfg, robot, obs, sensor, mismatched_plant(robot, scenario, seed=cfg.seed))
+    metrics = {m.observer: m for m in evaluate(result, robot)}
+    after = result.t >= result.t[0] + 0.25 * (result.t[-1] - result.t[0])
+    fd_key, _ = _best(metrics, "fd")
+    kf_key, _ = _best(metrics, "kf")
+    names = {n: n for n in obs if "@" not in n}
+    names.update({"fd*": fd_key, "kf*": kf_key})
+    out: list[dict[str, Any]] = []
+    for label, key in names.items():
+        err = result.trace(key).v[after] - result.v[after]
+        finite = bool(np.all(np.isfinite(err)))
+        bias = float(np.sqrt(np.mean(np.mean(err, axis=0) ** 2))) if finite else math.inf
+        out.append(
+            {
+                "robot": robot_name,
+                "scenario": scenario,
+                "observer": label,
+                "rms_v_error": metrics[key].rms_v_error,
+                "bias": bias,
+            }
+        )
+    return out, f"  mismatch {robot_name:6s} {scenario:18s} in {time.perf_counter() - t0:.1f} s"
 
 
 def _machine() -> dict[str, str]:
@@ -298,30 +390,22 @@ def _machine() -> dict[str, str]:
     }
 
 
-def _scaling(cfg: BenchConfig, *, log: Callable[[str], None]) -> dict[str, Any]:
-    names = sorted({*cfg.robots, *cfg.cost_robots}, key=lambda n: load(n).nv)
-    points: dict[str, list[tuple[str, int, float, float]]] = {}
-    for robot_name in names:
-        robot = load(robot_name)
-        for name in observer_names():
-            try:
-                ob = make_observer(name, robot, rate=cfg.rate, noise_std=cfg.noise_std)
-                cost = measure_cost(
-                    ob, samples=cfg.timing_updates, rounds=4, rate=cfg.rate, seed=cfg.seed
-                )
-            except (UnsupportedRobotError, PinobsError):
-                continue
-            points.setdefault(name, []).append(
-                (robot_name, robot.nv, cost["update_s"], cost["ratio"])
+def _scaling_points(
+    cfg: BenchConfig, robot_name: str
+) -> tuple[dict[str, tuple[str, int, float, float]], str]:
+    """Every observer's cost on one robot: name -> (robot, nv, seconds, x aba)."""
+    robot = load(robot_name)
+    points: dict[str, tuple[str, int, float, float]] = {}
+    for name in observer_names():
+        try:
+            ob = make_observer(name, robot, rate=cfg.rate, noise_std=cfg.noise_std)
+            cost = measure_cost(
+                ob, samples=cfg.timing_updates, rounds=4, rate=cfg.rate, seed=cfg.seed
             )
-        log(f"  timed {robot_name} (nv = {robot.nv})")
-    return {
-        name: {
-            "points": [{"robot": b, "nv": n, "seconds": t, "cost_in_aba": r} for b, n, t, r in pts],
-            "exponent": scaling_exponent([p[1] for p in pts], [p[2] for p in pts]),
-        }
-        for name, pts in points.items()
-    }
+        except (UnsupportedRobotError, PinobsError):
+            continue
+        points[name] = (robot_name, robot.nv, cost["update_s"], cost["ratio"])
+    return points, f"  timed {robot_name} (nv = {robot.nv})"
 
 
 def scaling_exponent(nv: Sequence[int], seconds: Sequence[float]) -> float:

@@ -1,4 +1,4 @@
-"""Many independent runs on a Dask cluster: ``run_tasks`` and the robustness ``sweep``.
+"""Many independent runs on a Dask cluster: ``run_tasks``, the robustness ``sweep``, many logs.
 
 A lab with a fleet of robots, or a robustness study over thousands of runs,
 outgrows one process.  The runs are independent, so they go to
@@ -13,21 +13,42 @@ fails alone: its error is reported in its row and the others go on.
 combination) and returns a tidy table (one row per run and observer) that
 :func:`write_sweep` saves as Parquet (or CSV) with a plot.
 
+:func:`estimate_logs` runs :func:`pinobs.io.process_log` over many logs (the
+tasks of :func:`log_tasks`, one per log): one estimates file per log, written
+by the single-log writer (atomic, never over an existing file without
+``force``), and a summary table, one row per log (:data:`SUMMARY_COLUMNS`).
+
 Dask, pandas and pyarrow are the ``dask`` extra: ``pip install "pinobs[dask]"``.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
+import os
+import time
 import traceback
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pinobs.errors import OptionError
+from pinobs.errors import OptionError, OutputExistsError
 
-__all__ = ["SweepTask", "TaskOutcome", "run_tasks", "sweep", "sweep_tasks", "write_sweep"]
+__all__ = [
+    "SUMMARY_COLUMNS",
+    "LogTask",
+    "SweepTask",
+    "TaskOutcome",
+    "estimate_logs",
+    "log_tasks",
+    "run_log_task",
+    "run_tasks",
+    "sweep",
+    "sweep_tasks",
+    "write_sweep",
+    "write_table",
+]
 
 
 @dataclass(frozen=True)
@@ -65,6 +86,7 @@ def run_tasks(
     workers: int | None = None,
     processes: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    on_result: Callable[[TaskOutcome], None] | None = None,
 ) -> list[TaskOutcome]:
     """``fn(task)`` for every task on a Dask cluster, in the order of ``tasks``.
 
@@ -73,13 +95,40 @@ def run_tasks(
         tasks: picklable task descriptions.
         scheduler: address of an existing scheduler (``tcp://host:8786``);
             ``None``: a local cluster, closed at the end.
-        workers: local worker processes (default: Dask's choice, one per core).
+        workers: local worker processes (default: Dask's choice, one per core);
+            ``0``: no cluster, the tasks run one after the other in this
+            process (Dask not needed).
         processes: local workers as processes (``False``: threads, for tests).
         progress: called as ``progress(done, total)`` after each task.
+        on_result: called with each :class:`TaskOutcome` as it completes
+            (completion order).
 
     Returns:
         One :class:`TaskOutcome` per task; a task that raised has ``error`` set.
+
+    Raises:
+        OptionError: ``workers`` is negative, or given with ``scheduler``.
     """
+    if workers is not None and workers < 0:
+        raise OptionError(f"workers={workers}: give 0 (this process) or more local workers")
+    if scheduler is not None and workers is not None:
+        raise OptionError(
+            f"workers={workers} with scheduler={scheduler!r}: the scheduler's cluster "
+            "has its own workers; give one or the other"
+        )
+
+    def report(done: int, outcome: TaskOutcome) -> None:
+        if on_result is not None:
+            on_result(outcome)
+        if progress is not None:
+            progress(done, len(tasks))
+
+    if scheduler is None and workers == 0:
+        serial = []
+        for done, task in enumerate(tasks, start=1):
+            serial.append(_guarded(fn, task))
+            report(done, serial[-1])
+        return serial
     dd = _dask()
     if scheduler is not None:
         client = dd.Client(scheduler)
@@ -94,9 +143,9 @@ def run_tasks(
         index = {f.key: i for i, f in enumerate(futures)}
         out: list[TaskOutcome | None] = [None] * len(tasks)
         for done, fut in enumerate(dd.as_completed(futures), start=1):
-            out[index[fut.key]] = fut.result()
-            if progress is not None:
-                progress(done, len(tasks))
+            outcome = fut.result()
+            out[index[fut.key]] = outcome
+            report(done, outcome)
         return [o for o in out if o is not None]
     finally:
         client.close()
@@ -228,20 +277,32 @@ def sweep(
     return pd.DataFrame(rows)
 
 
+def write_table(table: Any, stem: str | Path) -> Path:
+    """A DataFrame to ``stem.parquet`` (``stem.csv`` without pyarrow), through a
+    temporary file renamed at the end: a failed write leaves no truncated table."""
+    stem = Path(stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    parquet = importlib.util.find_spec("pyarrow") is not None
+    path = stem.with_name(stem.name + (".parquet" if parquet else ".csv"))
+    tmp = path.with_name(f".{path.name}.part")
+    try:
+        if parquet:
+            table.to_parquet(tmp, index=False)
+        else:
+            table.to_csv(tmp, index=False)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
 def write_sweep(table: Any, out_dir: str | Path, *, plot: bool = True) -> list[Path]:
     """Save a :func:`sweep` table as ``sweep.parquet`` (``sweep.csv`` without pyarrow) and,
     with matplotlib, ``sweep.png`` (RMS velocity error per observer, one panel per robot
     and scenario, one dot per seed, log scale)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    written = []
-    try:
-        path = out / "sweep.parquet"
-        table.to_parquet(path, index=False)
-    except ImportError:
-        path = out / "sweep.csv"
-        table.to_csv(path, index=False)
-    written.append(path)
+    written = [write_table(table, out / "sweep")]
     if plot:
         try:
             import matplotlib
@@ -269,3 +330,199 @@ def write_sweep(table: Any, out_dir: str | Path, *, plot: bool = True) -> list[P
         plt.close(fig)
         written.append(png)
     return written
+
+
+# ---------------------------------------------------------------- many logs
+#: The columns of :func:`estimate_logs`'s summary: the log (as found), its
+#: estimates file, rows read, rows with an estimate, rows reported (dropped or
+#: repaired), the noise σ used [rad or m], the innovation test's verdict
+#: (``consistent`` / ``inconsistent`` / ``unknown``: too few samples or an
+#: observer without the test), wall-clock seconds in the worker, and the error of a log
+#: that failed (empty otherwise).
+SUMMARY_COLUMNS = (
+    "log",
+    "out",
+    "rows",
+    "estimated",
+    "bad_rows",
+    "sigma",
+    "consistency",
+    "seconds",
+    "error",
+)
+SUMMARY_STEM = "summary"
+
+
+@dataclass(frozen=True)
+class LogTask:
+    """One log of a batch: where it is and where its estimates go (absolute paths,
+    so workers elsewhere on a shared file system find them), how to estimate."""
+
+    name: str  # the log as the user named or globbed it (the summary's ``log``)
+    log: str
+    out: str
+    robot: str
+    observer: str
+    root_joint: str | None = None
+    force: bool = False
+    columns: tuple[tuple[str, str], ...] = ()
+    topic: str | None = None
+    rate: float | None = None
+    noise_std: float | None = None
+
+
+def log_tasks(
+    logs: Sequence[str | Path],
+    out_dir: str | Path,
+    *,
+    robot: str,
+    observer: str,
+    root_joint: str | None = None,
+    force: bool = False,
+    columns: Mapping[str, str] | None = None,
+    topic: str | None = None,
+    rate: float | None = None,
+    noise_std: float | None = None,
+) -> list[LogTask]:
+    """One :class:`LogTask` per log; the estimates of ``logs/a/run.parquet`` go to
+    ``out_dir/a/run.csv`` (the log's path below the logs' common folder, suffix
+    ``.csv``).
+
+    Args:
+        logs: log files or rosbag2 folders (:func:`pinobs.io.find_logs`).
+        out_dir: folder of the estimates and the summary.
+        robot: a registry name or a URDF/MJCF path.
+        observer: a registry name.
+        root_joint, columns, topic, rate, noise_std: as :func:`pinobs.io.process_log`
+            (``noise_std=None``: estimated from each log's first second).
+        force: overwrite existing estimates and summary.
+
+    Raises:
+        OptionError: no logs, or two logs whose estimates would share a file.
+        OutputExistsError: the summary exists and not ``force`` (checked before any work).
+    """
+    if not logs:
+        raise OptionError("no logs given: give at least one log file or rosbag2 folder")
+    paths = [Path(p).resolve() for p in logs]
+    base = Path(os.path.commonpath([str(p.parent) for p in paths]))
+    out = Path(out_dir).resolve()
+    targets = [out / p.relative_to(base).with_suffix(".csv") for p in paths]
+    seen: dict[Path, str | Path] = {}
+    for name, target in zip(logs, targets, strict=True):
+        if target in seen:
+            raise OptionError(
+                f"logs {str(seen[target])!r} and {str(name)!r} would both write {str(target)!r}: "
+                "rename one, or run them separately"
+            )
+        if target.parent == out and target.stem == SUMMARY_STEM:
+            raise OptionError(
+                f"log {str(name)!r} would write {str(target)!r}, the summary's name: rename it"
+            )
+        seen[target] = name
+    for suffix in (".parquet", ".csv"):
+        summary = out / (SUMMARY_STEM + suffix)
+        if summary.exists() and not force:
+            raise OutputExistsError(
+                f"summary {str(summary)!r} exists; pass --force (force=True) to overwrite "
+                "it and the estimates"
+            )
+    robot_source = str(Path(robot).resolve()) if Path(robot).is_file() else robot
+    return [
+        LogTask(
+            name=str(name),
+            log=str(path),
+            out=str(target),
+            robot=robot_source,
+            observer=observer,
+            root_joint=root_joint,
+            force=force,
+            columns=tuple(sorted((columns or {}).items())),
+            topic=topic,
+            rate=rate,
+            noise_std=noise_std,
+        )
+        for name, path, target in zip(logs, paths, targets, strict=True)
+    ]
+
+
+def run_log_task(task: LogTask) -> dict[str, Any]:
+    """One log through :func:`pinobs.io.process_log` (streamed to its file); its summary row.
+
+    A log where no row could be estimated keeps its (all-NaN) file and has ``error`` set.
+    """
+    from pinobs.io import process_log
+    from pinobs.model import load
+
+    start = time.perf_counter()
+    robot = load(task.robot, root_joint=task.root_joint)
+    run = process_log(
+        task.log,
+        robot,
+        task.observer,
+        out=task.out,
+        force=task.force,
+        keep=False,
+        columns=dict(task.columns) or None,
+        topic=task.topic,
+        rate=task.rate,
+        noise_std=task.noise_std,
+    )
+    return {
+        "log": task.name,
+        "out": task.out,
+        "rows": run.rows,
+        "estimated": run.estimated,
+        "bad_rows": len(run.bad_rows),
+        "sigma": float("nan") if run.noise_std is None else float(run.noise_std),
+        "consistency": None if run.consistency is None else run.consistency.verdict,
+        "seconds": time.perf_counter() - start,
+        "error": None if run.estimated else "no row of the log could be estimated",
+    }
+
+
+def estimate_logs(
+    tasks: Sequence[LogTask],
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    processes: bool = True,
+    progress: Callable[[int, int], None] | None = None,
+) -> Any:
+    """Run the logs on Dask (``workers=0``: here, one after the other); the summary as a
+    ``pandas.DataFrame``, one row per log in the order of ``tasks`` (:data:`SUMMARY_COLUMNS`).
+
+    A log that raised (unreadable, wrong columns, an existing output without
+    ``force``) fails alone: its row has ``error`` set (the exception's last
+    line) and NaN counts, and no estimates file.
+    """
+    import pandas as pd
+
+    rows: list[dict[str, Any]] = []
+    for o in run_tasks(
+        run_log_task,
+        tasks,
+        scheduler=scheduler,
+        workers=workers,
+        processes=processes,
+        progress=progress,
+    ):
+        t: LogTask = o.task
+        if o.error is None:
+            rows.append(o.value)
+            continue
+        nan = float("nan")
+        rows.append(
+            {
+                "log": t.name,
+                "out": None,
+                "rows": nan,
+                "estimated": nan,
+                "bad_rows": nan,
+                "sigma": nan,
+                "consistency": None,
+                "seconds": nan,
+                "error": o.error,
+            }
+        )
+    counts = {"rows": "Int64", "estimated": "Int64", "bad_rows": "Int64"}  # NA where it failed
+    return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS)).astype(counts)

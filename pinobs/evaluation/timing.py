@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -23,6 +24,7 @@ def measure_cost(
     rate: float = 1000.0,
     seed: int = 0,
     chunk: int = 20,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> dict[str, float]:
     """``time(update) / time(pin.aba)`` of ``observer`` on its robot, measured in the same run.
 
@@ -36,6 +38,12 @@ def measure_cost(
     ``riemannian``'s Jacobi operator, every 10th) counts at its amortised
     share.  The reported ratio is the median over the chunks.  BLAS runs on
     one thread during the measurement (as in :func:`pinobs.simulate`).
+
+    ``clock`` reads the chunks' times [s]: wall time by default; on a loaded
+    machine ``time.thread_time`` (this thread's CPU time) leaves out the time
+    the process waited for a core, which lands mostly in the long update
+    chunks and inflates their ratio (go1 ``riemannian`` at load average 5 on
+    2 cores: 63–69× aba by wall time, 27–29× by CPU time, measured interleaved).
 
     Returns:
         ``{"update_s": ..., "aba_s": ..., "ratio": ...}`` (medians over the chunks).
@@ -56,13 +64,13 @@ def measure_cost(
         observer.reset(0.0, robot.integrate(q0, 1e-4 * rng.standard_normal(robot.nv)), vel, tau)
         observer.update(h, meas[0], tau)  # first call: caches warm
         for k0 in range(1, block, chunk):
-            t0 = time.perf_counter()
+            t0 = clock()
             for k in range(k0, k0 + chunk):
                 observer.update((k + 1) * h, meas[k], tau)
-            t1 = time.perf_counter()
+            t1 = clock()
             for _ in range(chunk):
                 aba()
-            t2 = time.perf_counter()
+            t2 = clock()
             updates.append((t1 - t0) / chunk)
             abas.append((t2 - t1) / chunk)
     ratios = np.array(updates) / np.array(abas)

@@ -8,7 +8,7 @@ row, every fault reported once; :func:`process_log` streams a log from file to
 file; :func:`estimate` returns a DataFrame.
 """
 
-from pinobs.io.readers import CHUNK_ROWS, Log, iter_log, read_log
+from pinobs.io.readers import CHUNK_ROWS, Log, find_logs, iter_log, read_log
 from pinobs.io.stream import LogEstimator, LogRun, ObserverLike, estimate, estimate_log, process_log
 from pinobs.io.writers import EstimateWriter, write_estimates, write_log
 from pinobs.observers.noise import estimate_noise_std
@@ -23,6 +23,7 @@ __all__ = [
     "estimate",
     "estimate_log",
     "estimate_noise_std",
+    "find_logs",
     "iter_log",
     "process_log",
     "read_log",

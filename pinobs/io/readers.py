@@ -40,6 +40,7 @@ log; NPZ files are loaded whole.
 from __future__ import annotations
 
 import csv
+import glob
 import io
 import zipfile
 from collections.abc import Iterator, Mapping, Sequence
@@ -56,7 +57,7 @@ from pinobs.model.robot import Vector
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["CHUNK_ROWS", "Log", "LogSource", "iter_log", "read_log"]
+__all__ = ["CHUNK_ROWS", "Log", "LogSource", "find_logs", "iter_log", "read_log"]
 
 #: Rows per chunk when streaming a log.
 CHUNK_ROWS = 10_000
@@ -760,3 +761,42 @@ def read_log(
         lines=np.concatenate([c.lines for c in chunks]),
         unit=chunks[0].unit,
     )
+
+
+def find_logs(spec: str | Path) -> list[Path]:
+    """The logs a path, folder or glob pattern names, sorted.
+
+    - a pattern (``*``, ``?``, ``[``; ``**`` descends into folders): every
+      match that is a log (a file of a format read here, or a rosbag2 folder);
+    - a rosbag2 folder (with ``metadata.yaml``) or a file: itself;
+    - any other folder: the logs directly in it (files with a suffix read here,
+      rosbag2 folders), not its subfolders.
+
+    Raises:
+        ModelFileError: nothing there, or no log among what is there (the
+            message lists the suffixes read).
+    """
+    text = str(spec)
+    path = Path(text)
+
+    def is_log(p: Path) -> bool:
+        return _is_bag(p) or (
+            p.is_file() and p.suffix.lower() in _CSV | _PARQUET | {".npz", ".npy"}
+        )
+
+    if any(c in text for c in "*?["):
+        found = [Path(p) for p in glob.glob(text, recursive=True)]
+        logs = sorted(p for p in found if is_log(p))
+    elif _is_bag(path) or path.is_file():
+        return [path]
+    elif path.is_dir():
+        logs = sorted(p for p in path.iterdir() if is_log(p))
+    else:
+        raise ModelFileError(f"log {text!r} does not exist")
+    if not logs:
+        suffixes = ", ".join(sorted(_CSV | _PARQUET | _BAG_FILES | {".npz"}))
+        raise ModelFileError(
+            f"no log in {text!r}: give a file, a folder or a pattern matching files "
+            f"ending in {suffixes} or rosbag2 folders"
+        )
+    return logs

@@ -106,6 +106,8 @@ def dynamics_rk4(
     other dynamics call, so it may be a view into the robot's ``pin.Data``.
     """
     fd = robot.forward_dynamics
+    if isinstance(robot, Robot) and robot.has_lie_group_joints:
+        return _dynamics_rkmk4(robot, q, v, tau, h, acc0)
     if not robot.is_vector_space:
         first = [] if acc0 is None else [np.array(acc0)]  # a copy: acc0 may be a view
 
@@ -127,3 +129,37 @@ def dynamics_rk4(
     b[5] = fd(s[0], s[1], tau)
     out = c_out.dot(b)
     return out[0], out[1]
+
+
+def _dynamics_rkmk4(
+    robot: Robot, q: Vector, v: Vector, tau: Vector, h: float, acc0: Vector | None
+) -> tuple[Vector, Vector]:
+    """:func:`lie_rk4` of ``q̇ = v``, ``v̇ = M⁻¹(τ − c − g)``, written out (the same
+    operations in the same order, so the same bits) where there are Lie-group joints.
+
+    Stage ``i`` at ``q ⊕ ξᵢ``: ``ξ₁ = 0`` (``J_r(0) = I``, so ``k₁ = v``),
+    ``ξ₂ = ½h k₁``, ``ξ₃ = ½h k₂``, ``ξ₄ = h k₃`` with ``kᵢ = J_r(ξᵢ)⁻¹ vᵢ``
+    (:meth:`Robot.integrate_jacobian_solve`); ``v₂ = v + ½h a₁``, ``v₃ = v + ½h a₂``,
+    ``v₄ = v + h a₃``, ``aᵢ`` the stage accelerations; then
+    ``q⁺ = q ⊕ ⅙h (k₁ + 2k₂ + 2k₃ + k₄)``, ``v⁺ = v + ⅙h (a₁ + 2a₂ + 2a₃ + a₄)``
+    (Munthe-Kaas, module docstring).  Without :func:`lie_rk4`'s closure and
+    its per-stage zero tests.
+    """
+    fd, solve, integrate = robot.forward_dynamics, robot.integrate_jacobian_solve, robot.integrate
+    hh = 0.5 * h
+    a1 = fd(q, v, tau) if acc0 is None else np.array(acc0)  # a copy: acc0 may be a view
+    xi2 = hh * v
+    v2 = v + hh * a1
+    a2 = fd(integrate(q, xi2), v2, tau)
+    k2 = solve(q, xi2, v2)
+    xi3 = hh * k2
+    v3 = v + hh * a2
+    a3 = fd(integrate(q, xi3), v3, tau)
+    k3 = solve(q, xi3, v3)
+    xi4 = h * k3
+    v4 = v + h * a3
+    a4 = fd(integrate(q, xi4), v4, tau)
+    k4 = solve(q, xi4, v4)
+    xi = (h / 6.0) * (v + 2.0 * k2 + 2.0 * k3 + k4)
+    v_new = v + (h / 6.0) * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+    return robot.normalize(integrate(q, xi)), v_new

@@ -49,3 +49,29 @@ def test_bench_command_is_registered(capsys) -> None:
     with pytest.raises(SystemExit):
         main(["bench", "--help"])
     assert "--quick" in capsys.readouterr().out
+
+
+def test_bench_on_a_dask_cluster_gives_the_serial_accuracy_numbers() -> None:
+    pytest.importorskip("dask.distributed")
+    cfg = BenchConfig(
+        robots=("pendulum",),
+        mismatch_robots=("pendulum",),
+        cost_robots=(),
+        duration=0.05,
+        timing_updates=20,
+    )
+    serial = run_bench(cfg, log=lambda _: None)
+    lines: list[str] = []
+    dask = run_bench(cfg, log=lines.append, workers=2, processes=False)
+    timing = ("time_per_update", "cost_in_aba", "time_in_loop")
+
+    def accuracy(report):
+        return [{k: v for k, v in r.items() if k not in timing} for r in report["rows"]]
+
+    assert accuracy(dask) == accuracy(serial) and len(serial["rows"]) > 10
+    assert dask["mismatch"] == serial["mismatch"] and len(serial["mismatch"]) == 4 * (
+        len({r["observer"] for r in serial["mismatch"]})
+    )
+    assert dask["scaling"].keys() == serial["scaling"].keys()
+    assert all(r["cost_in_aba"] > 0 for r in dask["rows"])
+    assert len(lines) == 1 + 2 + 4 + 1  # timed, two sensors, four scenarios, geometry

@@ -58,3 +58,99 @@ def test_sweep_gives_one_row_per_run_and_observer_and_reports_a_bad_run(tmp_path
     assert first == direct
     paths = write_sweep(table, tmp_path)
     assert paths[0].exists() and paths[0].stat().st_size > 0
+
+
+# ------------------------------------------------------------------ many logs
+def _logs(folder, n: int = 200) -> list:
+    """Two good logs of the pendulum (CSV, NPZ) and, with ``pandas``, a Parquet one; plus a
+    corrupt CSV (a header without the position column)."""
+    import numpy as np
+
+    import pinobs
+    from pinobs.io import write_log
+
+    robot = pinobs.load("pendulum")
+    folder.mkdir()
+    paths = []
+    for seed, suffix in enumerate((".csv", ".npz", ".parquet")):
+        res = pinobs.simulate(
+            robot, [], duration=n / 1000, sensor=pinobs.Sensor(1000.0, 1e-4), seed=seed
+        )
+        t, q, tau = res.t[1:], res.q_meas[1:], res.tau[1:]
+        path = folder / f"run{seed}{suffix}"
+        if suffix == ".csv":
+            write_log(path, t, q, tau)
+        elif suffix == ".npz":
+            np.savez(path, t=t, q=q, tau=tau)
+        else:
+            pd.DataFrame({"t": t, "q0": q[:, 0], "tau0": tau[:, 0]}).to_parquet(path)
+        paths.append(path)
+    bad = folder / "broken.csv"
+    bad.write_text("t,tau0\n0.001,0.5\n")
+    return [*paths, bad]
+
+
+def test_many_logs_one_estimates_file_each_equal_to_the_single_log_path_and_a_bad_log_fails_alone(
+    tmp_path, capsys
+) -> None:
+    from pinobs.cli import main
+
+    logs = _logs(tmp_path / "logs")
+    out = tmp_path / "out"
+    common = ["--robot", "pendulum", "--observer", "kf", "--noise", "1e-4", "--no-progress"]
+    many = ["--log", str(tmp_path / "logs"), "--out-dir", str(out), "--workers", "0"]
+    code = main(["estimate", *common, *many])
+    captured = capsys.readouterr()
+    assert code == 1  # one log failed, and only that one
+    assert "failed: " in captured.err and "broken.csv" in captured.err
+    assert "1 of 4 logs failed" in captured.err
+    summary = pd.read_parquet(out / "summary.parquet")
+    assert list(summary["log"]) == [str(p) for p in sorted(logs)]
+    by = summary.set_index(summary["log"].map(lambda s: s.rsplit("/", 1)[-1]))
+    assert "DimensionError" in by.loc["broken.csv", "error"] and pd.isna(
+        by.loc["broken.csv", "rows"]
+    )
+    assert not (out / "broken.csv").exists()
+    for good in logs[:3]:
+        row = by.loc[good.name]
+        assert pd.isna(row["error"]) and row["rows"] == row["estimated"] == 200
+        assert row["bad_rows"] == 0 and row["sigma"] == 1e-4 and row["seconds"] > 0
+        single = tmp_path / f"single_{good.stem}.csv"
+        assert main(["estimate", *common, "--log", str(good), "--out", str(single)]) == 0
+        assert (out / f"{good.stem}.csv").read_bytes() == single.read_bytes()
+    # the outputs exist: refused without --force, before any work
+    again = ["estimate", *common, "--log", str(tmp_path / "logs" / "run*")]
+    assert main([*again, "--out-dir", str(out), "--workers", "0"]) == 2
+    assert "exists; pass --force" in capsys.readouterr().err
+    assert main([*again, "--out-dir", str(out), "--workers", "0", "--force"]) == 0
+    assert len(pd.read_parquet(out / "summary.parquet")) == 3
+
+
+def test_many_logs_on_a_dask_cluster_give_the_serial_results(tmp_path) -> None:
+    from pinobs.evaluation.distributed import estimate_logs, log_tasks
+
+    logs = _logs(tmp_path / "logs", n=100)
+    kw = {"robot": "pendulum", "observer": "ekf", "noise_std": 1e-4}
+    serial = estimate_logs(log_tasks(logs, tmp_path / "a", **kw), workers=0)
+    dask = estimate_logs(log_tasks(logs, tmp_path / "b", **kw), workers=2, processes=False)
+    same = ["log", "rows", "estimated", "bad_rows", "sigma", "consistency", "error"]
+    pd.testing.assert_frame_equal(serial[same], dask[same])
+    for p in logs[:3]:
+        name = p.with_suffix(".csv").name
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+
+
+def test_log_tasks_mirror_subfolders_and_refuse_two_logs_for_one_file(tmp_path) -> None:
+    from pinobs.errors import OptionError
+    from pinobs.evaluation.distributed import log_tasks
+
+    a, b = tmp_path / "r1" / "run.csv", tmp_path / "r2" / "run.csv"
+    tasks = log_tasks([a, b], tmp_path / "out", robot="pendulum", observer="kf")
+    assert [t.out for t in tasks] == [
+        str((tmp_path / "out" / "r1" / "run.csv").resolve()),
+        str((tmp_path / "out" / "r2" / "run.csv").resolve()),
+    ]
+    with pytest.raises(OptionError, match="would both write"):
+        log_tasks([a, a.with_suffix(".npz")], tmp_path / "out", robot="pendulum", observer="kf")
+    with pytest.raises(OptionError, match="no logs given"):
+        log_tasks([], tmp_path / "out", robot="pendulum", observer="kf")

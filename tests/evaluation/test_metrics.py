@@ -53,3 +53,21 @@ def test_rms_is_computed_after_the_transient_only() -> None:
     assert late < early
     e = res.trace("kf").v - res.v
     assert late == pytest.approx(np.sqrt(np.mean(e[res.t >= 0.5] ** 2)))
+
+
+def test_measure_cost_reads_the_given_clock_around_every_chunk() -> None:
+    import time
+
+    import pinobs
+    from pinobs.evaluation import measure_cost
+
+    reads: list[float] = []
+
+    def clock() -> float:
+        reads.append(time.thread_time())
+        return reads[-1]
+
+    ob = pinobs.make_observer("kf", pinobs.load("pendulum"), rate=1000.0, noise_std=1e-4)
+    cost = measure_cost(ob, samples=200, rounds=2, chunk=20, clock=clock)
+    assert len(reads) == 3 * 2 * (200 // (2 * 20))  # three reads per chunk, five chunks a round
+    assert cost["ratio"] > 0 and cost["update_s"] > 0 and cost["aba_s"] > 0

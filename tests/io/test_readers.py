@@ -223,3 +223,23 @@ def test_a_bag_message_lacking_a_joint_is_reported_with_its_stamp(tmp_path, ur5,
     ((number, reason),) = run.bad_rows
     assert number == 20 and reason.startswith(f"stamp {1_700_000_000 + t[20]:.9f} s; no position")
     assert "dropped sample" in reason and run.estimated == 40
+
+
+def test_find_logs_takes_a_file_a_folder_or_a_pattern(tmp_path) -> None:
+    from pinobs.io import find_logs
+
+    for name in ("b.csv", "a.parquet", "c.npz", "notes.md"):
+        (tmp_path / name).write_text("")
+    bag = tmp_path / "bag2"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "d.tsv").write_text("")
+    assert [p.name for p in find_logs(tmp_path)] == ["a.parquet", "b.csv", "bag2", "c.npz"]
+    assert [p.name for p in find_logs(str(tmp_path / "*.csv"))] == ["b.csv"]
+    assert [p.name for p in find_logs(str(tmp_path / "**" / "*.tsv"))] == ["d.tsv"]
+    assert find_logs(bag) == [bag] and find_logs(tmp_path / "notes.md") == [tmp_path / "notes.md"]
+    with pytest.raises(pinobs.ModelFileError, match=r"no log in .*\.bag, \.csv"):
+        find_logs(str(tmp_path / "*.md"))
+    with pytest.raises(pinobs.ModelFileError, match="does not exist"):
+        find_logs(tmp_path / "missing")

@@ -236,6 +236,42 @@ def test_update_costs_the_counted_dynamics_calls(monkeypatch) -> None:
     assert math.isfinite(ratio) and ratio > 1.0
 
 
+def test_free_flyer_run_equals_the_dense_solve_and_numpy_norm_to_1e_12(monkeypatch) -> None:
+    """go1: the run with the Lie-group RK's LAPACK block solves and the cheaper quaternion
+    normalisation equals, to 1e-12, the run with the dense ``np.linalg.solve`` of the
+    exponential's Jacobian and ``np.linalg.norm`` (the implementation before)."""
+    from pinobs.model.robot import Robot
+
+    robot = pinobs.load("go1")
+    res = simulate(robot, [], duration=0.3, sensor=Sensor(1000.0, 1e-4), seed=2)
+
+    def run() -> tuple[np.ndarray, np.ndarray]:
+        ob = RiemannianObserver(robot, rate=1000.0, noise_std=1e-4)
+        ob.reset(res.t[0], robot.integrate(res.q[0], np.full(robot.nv, 1e-3)), None, res.tau[0])
+        rows = zip(res.t[1:], res.q_meas[1:], res.tau[1:], strict=True)
+        est = [ob.update(t, q, tau) for t, q, tau in rows]
+        return np.array([e.q for e in est]), np.array([e.v for e in est])
+
+    q_new, v_new = run()
+
+    def dense_solve(self, q, xi, u):
+        return np.linalg.solve(self.integrate_jacobian(q, xi), u)
+
+    def numpy_norm(self, q):
+        out = np.array(q, dtype=float)
+        for s in self._unit_slices:
+            out[s] /= np.linalg.norm(out[s])
+        return out
+
+    monkeypatch.setattr(Robot, "integrate_jacobian_solve", dense_solve)
+    monkeypatch.setattr(Robot, "normalize", numpy_norm)
+    q_old, v_old = run()
+    # a run that does something: from a 1e-3 start error, the velocity error falls 100-fold
+    assert np.abs(v_new[-100:] - res.v[-100:]).max() < 0.01 * np.abs(v_new[:10] - res.v[1:11]).max()
+    np.testing.assert_allclose(q_new, q_old, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(v_new, v_old, rtol=0, atol=1e-12 * np.abs(v_old).max())
+
+
 # ------------------------------------------------------- continuous time
 
 

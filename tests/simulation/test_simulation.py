@@ -52,6 +52,23 @@ def test_dynamics_step_is_the_generic_rkmk4_step(name: str, friction: bool) -> N
         assert np.abs(v1 - v2).max() <= 1e-13 * max(1.0, np.abs(v2).max())
 
 
+@pytest.mark.parametrize(("name", "root"), [("go1", None), ("top", None), ("planar_3r", "planar")])
+def test_lie_group_dynamics_step_is_lie_rk4_bit_for_bit(name: str, root: str | None) -> None:
+    """Where there are Lie-group joints ``dynamics_rk4`` writes out ``lie_rk4``'s stages:
+    the same bits, at rest too (``J_r(0) = I``) and with the first stage given (``acc0``)."""
+    robot = pinobs.load(name, root_joint=root)
+    rng = np.random.default_rng(4)
+    for speed in (0.0, 1.0, 30.0):
+        q, v = robot.random_configuration(rng), speed * rng.standard_normal(robot.nv)
+        tau = rng.standard_normal(robot.nv)
+        q2, v2 = lie_rk4(
+            robot, q, v, 1e-3, lambda qq, vv, tau=tau: (vv, robot.forward_dynamics(qq, vv, tau))
+        )
+        for acc0 in (None, robot.forward_dynamics(q, v, tau)):
+            q1, v1 = dynamics_rk4(robot, q, v, tau, 1e-3, acc0=acc0)
+            assert np.array_equal(q1, q2) and np.array_equal(v1, v2)
+
+
 def test_free_motion_conserves_energy_on_a_ur5() -> None:
     robot = pinobs.load("ur5")
     res = simulate(robot, [], duration=2.0, inputs="zero", v0=np.full(6, 1.0), seed=0)

@@ -412,7 +412,7 @@ def _identify_report(ident: Any) -> str:
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
-    from pinobs.model.identification import identify
+    from pinobs.observers.calibration import identify
 
     robot = load(args.robot, root_joint=args.root_joint)
     out = Path(args.out)

@@ -86,6 +86,7 @@ __all__ = [
     "Solution",
     "identify",
     "pseudo_inertia",
+    "segments",
     "smooth_path",
     "solve",
 ]
@@ -689,7 +690,7 @@ class Identification:
         return write_urdf(self.robot, path)
 
 
-def _segments(t: Vector, q: Vector, tau: Vector) -> list[slice]:
+def segments(t: Vector, q: Vector, tau: Vector) -> list[slice]:
     """Contiguous stretches of finite rows sampled at the median period (±10 %)."""
     good = np.isfinite(t) & np.all(np.isfinite(q), axis=1) & np.all(np.isfinite(tau), axis=1)
     if good.sum() < 2:
@@ -729,10 +730,11 @@ def build_rows(
         half_window: half-width of the Savitzky–Golay fit of :func:`smooth_path` [s].
         quadrature: longest trapezoid step of the regressor integrals [s].
         path: estimated ``(q, v)`` at every sample, ``(N, nq)`` and ``(N, nv)``
-            (e.g. a model-based smoother's), used instead of :func:`smooth_path`.
+            (e.g. a model-based smoother's), used instead of :func:`smooth_path`
+            on every stretch where it is finite.
     """
     As, ys, ends = [], [], []
-    for seg in _segments(t, q, tau):
+    for seg in segments(t, q, tau):
         ts, qs, taus = t[seg], q[seg], tau[seg]
         h = float(np.median(np.diff(ts)))
         stride = max(1, round(quadrature / h))
@@ -740,10 +742,10 @@ def build_rows(
         hw = max(2, round(half_window / h))
         if ts.shape[0] < max(win + 1, 2 * hw + 1):
             continue
-        if path is None:
-            q_s, v = smooth_path(reg.robot, ts, qs, half_window=hw)
-        else:
+        if path is not None and np.all(np.isfinite(path[1][seg])):
             q_s, v = path[0][seg], path[1][seg]
+        else:  # no estimate given, or none for this stretch
+            q_s, v = smooth_path(reg.robot, ts, qs, half_window=hw)
         A, y = reg.system(ts, q_s, v, taus, window=win, stride=stride)
         As.append(A)
         ys.append(y)

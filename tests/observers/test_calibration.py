@@ -41,7 +41,7 @@ def test_smoothed_velocities_identify_closer_to_the_truth_than_savitzky_golay(
         coulomb=[0.1, 0.05, 0.02],
     )
     res = pinobs.simulate(
-        robot, [], duration=6.0, sensor=Sensor(rate=1000.0, noise_std=1e-4), seed=1, plant=truth
+        robot, [], duration=4.0, sensor=Sensor(rate=1000.0, noise_std=1e-4), seed=1, plant=truth
     )
     sg = identify(robot, res, refine=())
     refined = identify(robot, res)

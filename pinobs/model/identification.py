@@ -34,7 +34,9 @@ with ``v`` held, by a central difference of step
 ``∫ τ dt`` is exact for a zero-order-hold torque (MATH §7); the other
 integrals use the trapezoidal rule on every ``stride``-th sample.  ``v`` and a
 smoothed ``q`` come from a zero-phase Savitzky–Golay fit of the measured
-path (:func:`smooth_path`).  Each window's ``nv`` rows are weighted by
+path (:func:`smooth_path`), or are given (``identify(..., path=(q, v))``;
+``pinobs.identify`` gives a model-based smoother's:
+:mod:`pinobs.observers.calibration`).  Each window's ``nv`` rows are weighted by
 ``M₀(q_mid)⁻¹ / (t₂ − t₁)`` (an acceleration-like residual, so every joint
 counts alike; ``M₀`` the nominal mass matrix).
 

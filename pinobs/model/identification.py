@@ -797,7 +797,8 @@ def identify(
     ``holdout_after`` (on the held-out end), ``condition``, ``rank``,
     ``base`` (names of the identifiable combinations' pivots),
     ``not_excited`` (parameters left near nominal), ``projected`` (physical
-    consistency moved the solution), ``rows``, and ``observer_options``:
+    consistency moved the solution), ``rows``, ``fit_end`` (the last time of
+    the fitted part [s]), and ``observer_options``:
     what to give ``ekf`` on the calibrated model (``accel_psd=1e-6``,
     ``disturbance_psd=1e-4``: a calibrated model is good, not exact; the
     default ``ekf`` trusts it as if it were exact, and was 1.3–30× less
@@ -882,6 +883,7 @@ def identify(
         "projected": sol.projected,
         "rows": sol.n_rows,
         "holdout_rows": int(A_h.shape[0]),
+        "fit_end": split,
         "sigma": sol.sigma,
         "joints": list(robot.joint_names),
         # a calibrated model is good, not exact: run ekf with these (adaptive's learned-model

@@ -38,6 +38,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pinobs.errors import IdentificationError, NonFiniteError, ObserverDiverged
 from pinobs.model import Robot
@@ -144,8 +145,11 @@ def identify(
         return current
     t, q, tau = _arrays(robot, log)
     sigma = noise_std if noise_std is not None else estimate_noise_std(robot, t, q)
-    for psd in refine:
-        path = _smoothed_path(current, t, q, tau, accel_psd=psd, noise_std=sigma)
+    for i, psd in enumerate(refine):
+        # a pass before the last one only feeds the next fit: its held-out end needs no smoothing
+        last = i == len(refine) - 1
+        rows = np.ones(t.shape, bool) if last else t <= current.report["fit_end"]
+        path = _smoothed_path(current, t, q, tau, rows, accel_psd=psd, noise_std=sigma)
         current = ident_model.identify(robot, (t, q, tau), path=path, **opts)
         current.report["velocities"] = f"rts(accel_psd={psd:g})"
     current.report["noise_std"] = sigma
@@ -166,13 +170,24 @@ def _arrays(robot: Robot, log: Any) -> tuple[Vector, Vector, Vector]:
 
 
 def _smoothed_path(
-    ident: Identification, t: Vector, q: Vector, tau: Vector, *, accel_psd: float, noise_std: float
+    ident: Identification,
+    t: Vector,
+    q: Vector,
+    tau: Vector,
+    rows: NDArray[np.bool_],
+    *,
+    accel_psd: float,
+    noise_std: float,
 ) -> tuple[Vector, Vector]:
-    """RTS-smoothed ``(q, v)`` of every contiguous stretch on the identified model (NaN elsewhere)."""
+    """RTS-smoothed ``(q, v)`` of every contiguous stretch of ``rows`` on the identified model.
+
+    NaN elsewhere (where the model layer falls back on Savitzky–Golay).
+    """
     robot = ident.robot
     q_out = np.full(q.shape, np.nan)
     v_out = np.full(tau.shape, np.nan)
-    for seg in segments(t, q, tau):
+    t_rows = np.where(rows, t, np.nan)  # rows left out break the stretches
+    for seg in segments(t_rows, q, tau):
         if seg.stop - seg.start < 3:
             continue
         try:

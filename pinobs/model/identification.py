@@ -87,6 +87,7 @@ __all__ = [
     "ParameterSet",
     "Solution",
     "identify",
+    "log_arrays",
     "pseudo_inertia",
     "segments",
     "smooth_path",
@@ -757,6 +758,35 @@ def build_rows(
     return np.vstack(As), np.concatenate(ys), ends
 
 
+def log_arrays(robot: Robot, log: Any) -> tuple[Vector, Vector, Vector]:
+    """``(t, q, tau)`` of a log as :func:`identify` reads it, checked against ``robot``.
+
+    ``log``: a tuple ``(t, q, tau)``, or an object with ``t``, ``q``, ``tau``
+    (a ``Log``); a simulation ``Result`` is read through its measured
+    ``q_meas``, never its true ``q``.
+
+    Raises:
+        IdentificationError: no torques.
+        DimensionError: shapes that do not fit ``robot``.
+    """
+    if isinstance(log, tuple):
+        t, q, tau = log
+    else:  # a simulation Result carries the truth in q: identify from what was measured
+        t, tau = log.t, getattr(log, "tau", None)
+        q = log.q_meas if hasattr(log, "q_meas") else log.q
+    if tau is None:
+        raise IdentificationError("the log has no torques: identification needs tau columns")
+    t = np.asarray(t, dtype=float)
+    q = np.asarray(q, dtype=float)
+    tau = np.asarray(tau, dtype=float)
+    if q.ndim != 2 or q.shape != (t.shape[0], robot.nq) or tau.shape != (t.shape[0], robot.nv):
+        raise DimensionError(
+            f"log shapes t {t.shape}, q {q.shape}, tau {tau.shape} do not fit robot "
+            f"{robot.name!r} (nq = {robot.nq}, nv = {robot.nv})"
+        )
+    return t, q, tau
+
+
 def _rows_of(
     path: tuple[Vector, Vector] | None, rows: NDArray[np.bool_]
 ) -> tuple[Vector, Vector] | None:
@@ -808,21 +838,7 @@ def identify(
         IdentificationError: no torques, too short, never moves, or not
             exciting enough (condition number above ``max_condition``).
     """
-    if isinstance(log, tuple):
-        t, q, tau = log
-    else:  # a simulation Result carries the truth in q: identify from what was measured
-        t, tau = log.t, getattr(log, "tau", None)
-        q = log.q_meas if hasattr(log, "q_meas") else log.q
-    if tau is None:
-        raise IdentificationError("the log has no torques: identification needs tau columns")
-    t = np.asarray(t, dtype=float)
-    q = np.asarray(q, dtype=float)
-    tau = np.asarray(tau, dtype=float)
-    if q.ndim != 2 or q.shape != (t.shape[0], robot.nq) or tau.shape != (t.shape[0], robot.nv):
-        raise DimensionError(
-            f"log shapes t {t.shape}, q {q.shape}, tau {tau.shape} do not fit robot "
-            f"{robot.name!r} (nq = {robot.nq}, nv = {robot.nv})"
-        )
+    t, q, tau = log_arrays(robot, log)
     if not 0.0 <= holdout < 1.0:
         raise DimensionError(f"holdout={holdout!r} must be in [0, 1)")
     est: tuple[Vector, Vector] | None = None

@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 from pinobs.errors import IdentificationError, NonFiniteError, ObserverDiverged
 from pinobs.model import Robot
 from pinobs.model import identification as ident_model
-from pinobs.model.identification import MAX_CONDITION, Identification, segments
+from pinobs.model.identification import MAX_CONDITION, Identification, log_arrays, segments
 from pinobs.observers.base import Vector, positive
 from pinobs.observers.smoothing import smooth
 
@@ -143,7 +143,7 @@ def identify(
     if not refine:
         current.report["velocities"] = "savgol"
         return current
-    t, q, tau = _arrays(robot, log)
+    t, q, tau = log_arrays(robot, log)
     sigma = noise_std if noise_std is not None else estimate_noise_std(robot, t, q)
     for i, psd in enumerate(refine):
         # a pass before the last one only feeds the next fit: its held-out end needs no smoothing
@@ -157,16 +157,6 @@ def identify(
     # 1.1-5x more accurate than with the model-error densities the one-pass fit recommends
     current.report["observer_options"] = {}
     return current
-
-
-def _arrays(robot: Robot, log: Any) -> tuple[Vector, Vector, Vector]:
-    """``(t, q, tau)`` of a log as the model layer reads it (a ``Result`` through ``q_meas``)."""
-    if isinstance(log, tuple):
-        t, q, tau = log
-    else:
-        t, tau = log.t, log.tau
-        q = log.q_meas if hasattr(log, "q_meas") else log.q
-    return np.asarray(t, float), np.asarray(q, float), np.asarray(tau, float)
 
 
 def _smoothed_path(

@@ -8,9 +8,12 @@ average out.  A Savitzky–Golay fit of the measured positions
 on the 15 s logs of ``benchmarks/learning.py`` (σ = 1e-4 rad) its held-out
 residual equals that of the *true* parameters evaluated on the same
 velocities (the floor it sets), and the default ``ekf`` on the model
-identified from it was 0.15–0.79× the best tuned model-free filter.
-With the truth's own velocities the same identification reaches
-0.007–0.04× (measured; seeds in the README).
+identified from it was 0.15–0.79× the best tuned model-free filter, varying
+with the noise's seed (UR5: 0.15 with seed 3, 0.62 with seed 4).  With the
+truth's own velocities the same identification reaches 0.007× (UR5) and
+0.02–0.04× (z1); with noise-free positions and Savitzky–Golay 0.007× and
+0.07×: noise, not the fit's lag, is most of the error (log seed 3,
+validation seed 7 of ``benchmarks/learning.py``).
 
 So the velocities are re-estimated with the model just identified, and the
 identification repeated (a fixed-point iteration)::
@@ -24,7 +27,9 @@ The smoother runs the EKF with a white-acceleration density ``refine[i−1]``
 then 1e-7 by default) and a torque-offset state (``disturbance_psd`` =
 1e-4 rad²/s⁵) that absorbs what the model still misses, fed ``τ + b``
 (``b`` the offset identified so far).  Each contiguous stretch of the log
-(:func:`pinobs.model.identification.segments`) is smoothed on its own.  The
+(:func:`pinobs.model.identification.segments`) is smoothed on its own (a
+pass before the last one only over the fitted part: its held-out end is not
+used).  The
 position noise the smoother needs is the log's own (``noise_std``) or, when
 not given, estimated from it (:func:`estimate_noise_std`).
 

@@ -10,8 +10,10 @@ says, carrying an unknown payload (``pinobs.simulation.mismatch``,
 positions (σ = 1e-4 rad, 1 kHz) and the commanded torques:
 
 1. trust the URDF: ``ekf`` and ``riemannian`` on the nominal model;
-2. identify first: ``pinobs.identify`` on a 15 s log, save the calibrated
-   URDF, run ``ekf`` and ``riemannian`` on it over a *different* trajectory;
+2. identify first: ``pinobs.identify`` on a 15 s log (a fit on Savitzky–Golay
+   velocities, then two on the RTS smoother's velocities over the model just
+   fitted), save the calibrated URDF, run ``ekf`` and ``riemannian`` with
+   their default options on it over a *different* trajectory;
 3. learn online: ``adaptive`` from the nominal URDF.
 
 ``kf*`` is the per-joint Kalman filter with its jerk density tuned on the

@@ -29,8 +29,9 @@ from pinobs.errors import (
 from pinobs.evaluation import Metrics, evaluate
 from pinobs.io import estimate
 from pinobs.model import Robot, load, robot_names
-from pinobs.model.identification import Identification, identify
+from pinobs.model.identification import Identification
 from pinobs.observers import Consistency, Estimate, Observer, make_observer, observer_names
+from pinobs.observers.calibration import identify
 from pinobs.observers.smoothing import Smoothed, smooth
 from pinobs.simulation import Result, Sensor, simulate
 

@@ -496,7 +496,7 @@ def _identify_report(ident: Any) -> str:
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
-    from pinobs.model.identification import identify
+    from pinobs.observers.calibration import identify
 
     robot = load(args.robot, root_joint=args.root_joint)
     out = Path(args.out)
@@ -506,14 +506,14 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         raise OutputExistsError(f"--out {str(out)!r} is the log itself")
     log = read_log(args.log, robot)
     ident = identify(
-        robot, log, friction=not args.no_friction, offset=not args.no_offset, holdout=args.holdout
+        robot, log, friction=not args.no_friction, offset=args.offset, holdout=args.holdout
     )
     print(_identify_report(ident))
     path = ident.save(str(out))
     opts = ", ".join(f"{k}={v:g}" for k, v in ident.report["observer_options"].items())
     print(f"wrote {path}: load it with pinobs.load({path!r}, friction=True)")
     print(
-        f"run ekf on it with {opts} (a calibrated model is good, not exact), or adaptive "
+        f"run ekf or riemannian on it with {opts or 'their default options'}, or adaptive "
         "starting from it"
     )
     return 0
@@ -886,7 +886,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--log", required=True, help="log with t, q and tau columns (CSV or NPZ)")
     p.add_argument("--out", required=True, help="the calibrated URDF to write")
     p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
-    p.add_argument("--no-offset", action="store_true", help="do not identify a torque offset")
+    p.add_argument(
+        "--offset",
+        action="store_true",
+        help="also identify a torque offset per joint (a biased torque sensor; not in the URDF)",
+    )
     p.add_argument(
         "--holdout",
         type=float,

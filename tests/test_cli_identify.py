@@ -108,3 +108,22 @@ def test_estimate_warns_when_the_model_does_not_explain_the_log(tmp_path, capsys
     args = ["estimate", "--robot", "planar_3r", "--log", str(exact), "--noise", "1e-4"]
     assert main([*args, "--observer", "ekf", "--out", str(tmp_path / "b.csv")]) == 0
     assert "does not explain" not in capsys.readouterr().err
+
+
+def test_identify_with_offset_finds_a_known_torque_sensor_bias(tmp_path, capsys) -> None:
+    robot = pinobs.load("planar_3r")
+    truth = robot.perturbed(inertia_scale=[1.2, 0.8, 1.1])
+    res = pinobs.simulate(
+        robot, [], duration=4.0, sensor=Sensor(rate=1000.0, noise_std=1e-5), seed=1, plant=truth
+    )
+    q = np.array(res.q_meas)
+    q[0] = res.q[0]
+    bias = np.array([0.3, -0.2, 0.1])  # the sensor reads τ − b: the model's offset is +b
+    log = tmp_path / "biased.csv"
+    write_log(log, res.t, q, np.array(res.tau) - bias)
+    out = tmp_path / "calibrated.urdf"
+    args = ["identify", "--robot", "planar_3r", "--log", str(log), "--out", str(out), "--offset"]
+    assert main(args) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("torque offset"))
+    found = np.array([float(x) for x in line.split(":")[-1].split(",")])
+    np.testing.assert_allclose(found, bias, atol=0.02)

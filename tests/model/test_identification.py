@@ -189,3 +189,56 @@ def test_calibrated_mass_matrix_is_positive_definite_at_a_thousand_configuration
         for _ in range(1000)
     )
     assert smallest > 0
+
+
+def test_consistency_step_is_optimal_under_a_metric_spanning_fifteen_decades() -> None:
+    """A nearly noise-free log's posterior precision spans ~1e15 (UR5, measured): the
+    closest consistent point must still beat any other consistent point, e.g. the truth."""
+    robot = pinobs.load("ur5")
+    reg = MomentumRegressor(robot, friction=True, offset=False)
+    s = reg.prior_std()
+    rng = np.random.default_rng(3)
+    truth = MomentumRegressor(
+        robot.perturbed(inertia_scale=np.linspace(0.8, 1.2, 6), payload=(1.0, [0.0, 0.0, 0.05])),
+        friction=True,
+        offset=False,
+    ).nominal()
+    truth[reg.n_inertial :] = 0.1 * s[reg.n_inertial :]  # strictly positive friction
+    basis, _ = np.linalg.qr(rng.normal(size=(reg.size, reg.size)))
+    lam = np.logspace(0, 15, reg.size)
+    prec = (basis * lam) @ basis.T
+    # the unconstrained estimate: the truth moved far along the weakly seen directions
+    theta_hat = truth + s * (basis @ (rng.normal(size=reg.size) * 3.0 / np.sqrt(lam)))
+    assert not _is_consistent(reg, theta_hat)
+    fixed = _consistent(reg, theta_hat, prec, s)
+    assert _is_consistent(reg, fixed)
+
+    def cost(theta: np.ndarray) -> float:
+        d = (theta - theta_hat) / s
+        return float(d @ prec @ d)
+
+    assert cost(fixed) <= cost(truth)
+
+
+def test_identify_with_the_true_path_finds_the_true_dynamics(rng: np.random.Generator) -> None:
+    """Given exact velocities (errors-in-variables removed), the fit reaches the truth."""
+    robot = pinobs.load("planar_3r")
+    truth = robot.perturbed(inertia_scale=[1.2, 0.8, 1.1], payload=(0.5, [0.05, 0.0, 0.0]))
+    res = pinobs.simulate(
+        robot, [], duration=6.0, sensor=Sensor(rate=1000.0, noise_std=1e-4), seed=1, plant=truth
+    )
+    sg = identify(robot, res, friction=False, offset=False)
+    exact = identify(robot, res, friction=False, offset=False, path=(res.q, res.v))
+
+    def acc_error(model: pinobs.Robot) -> float:
+        errs = []
+        for _ in range(50):
+            q, v = robot.random_configuration(rng), rng.normal(size=robot.nv)
+            tau = rng.normal(size=robot.nv)
+            errs.append(model.forward_dynamics(q, v, tau) - truth.forward_dynamics(q, v, tau))
+        return float(np.sqrt(np.mean(np.square(errs))))
+
+    assert acc_error(exact.robot) < 0.1 * acc_error(sg.robot)
+    assert max(exact.report["holdout_after"]) < 0.1 * max(sg.report["holdout_after"])
+    with pytest.raises(pinobs.DimensionError, match="path shapes"):
+        identify(robot, res, path=(res.q[:10], res.v[:10]))

@@ -1,0 +1,72 @@
+"""Identification with model-based (RTS-smoothed) velocities, against known truths."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.observers.calibration import estimate_noise_std, identify
+from pinobs.simulation import Sensor
+
+
+def _acc_error(model: pinobs.Robot, truth: pinobs.Robot, rng: np.random.Generator) -> float:
+    """RMS of the error in ``M(q)⁻¹(τ − h(q, v))`` at random states [rad/s²]."""
+    errs = []
+    for _ in range(50):
+        q, v = truth.random_configuration(rng), rng.normal(size=truth.nv)
+        tau = rng.normal(size=truth.nv)
+        errs.append(model.forward_dynamics(q, v, tau) - truth.forward_dynamics(q, v, tau))
+    return float(np.sqrt(np.mean(np.square(errs))))
+
+
+@pytest.mark.parametrize("sigma", [1e-5, 1e-4, 1e-3])
+def test_estimated_noise_std_matches_the_simulated_sensor(sigma: float) -> None:
+    robot = pinobs.load("planar_3r")
+    res = pinobs.simulate(
+        robot, [], duration=2.0, sensor=Sensor(rate=1000.0, noise_std=sigma), seed=2
+    )
+    q = np.array(res.q_meas)
+    assert estimate_noise_std(robot, res.t, q) == pytest.approx(sigma, rel=0.1)
+
+
+def test_smoothed_velocities_identify_closer_to_the_truth_than_savitzky_golay(
+    rng: np.random.Generator,
+) -> None:
+    robot = pinobs.load("planar_3r")
+    truth = robot.perturbed(
+        inertia_scale=[1.2, 0.8, 1.1],
+        payload=(0.5, [0.05, 0.0, 0.0]),
+        damping=[0.2, 0.1, 0.05],
+        coulomb=[0.1, 0.05, 0.02],
+    )
+    res = pinobs.simulate(
+        robot, [], duration=4.0, sensor=Sensor(rate=1000.0, noise_std=1e-4), seed=1, plant=truth
+    )
+    sg = identify(robot, res, refine=())
+    refined = identify(robot, res)
+    assert sg.report["velocities"] == "savgol"
+    assert refined.report["velocities"] == "rts(accel_psd=1e-07)"
+    assert refined.report["noise_std"] == pytest.approx(1e-4, rel=0.1)
+    assert _acc_error(refined.robot, truth, rng) < 0.5 * _acc_error(sg.robot, truth, rng)
+    assert max(refined.report["holdout_after"]) < 0.5 * max(sg.report["holdout_after"])
+
+
+def test_refinement_keeps_the_savitzky_golay_velocities_across_a_gap() -> None:
+    """A stretch too short to smooth, or a gap of NaN rows, leaves the rest of the log usable."""
+    robot = pinobs.load("planar_3r")
+    truth = robot.perturbed(inertia_scale=[1.2, 0.8, 1.1])
+    res = pinobs.simulate(
+        robot, [], duration=4.0, sensor=Sensor(rate=1000.0, noise_std=1e-4), seed=4, plant=truth
+    )
+    q = np.array(res.q_meas)
+    q[1500:1510] = np.nan
+    ident = identify(robot, (res.t, q, np.array(res.tau)), friction=False)
+    assert ident.report["rows"] > 0 and ident.report["velocities"].startswith("rts")
+
+
+def test_refine_rejects_a_non_positive_density() -> None:
+    robot = pinobs.load("planar_3r")
+    t = np.arange(3000) * 1e-3
+    with pytest.raises(pinobs.GainError, match="refine"):
+        identify(robot, (t, np.zeros((t.size, 3)), np.zeros((t.size, 3))), refine=(0.0,))

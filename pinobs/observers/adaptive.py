@@ -81,6 +81,7 @@ a prediction that is not kept (under a known latency) teaches nothing.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import replace
 from typing import Any, NamedTuple
@@ -92,7 +93,7 @@ from pinobs.errors import GainError, IdentificationError, UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.model.identification import MomentumRegressor, ParameterSet, smooth_path, solve
 from pinobs.observers.base import Consistency, Vector, positive, register
-from pinobs.observers.ekf import ExtendedKalmanFilter
+from pinobs.observers.ekf import ExtendedKalmanFilter, _LazyKernel
 from pinobs.observers.ekf import _State as _EKFState
 from pinobs.observers.kf import BankState, KFBank
 
@@ -125,6 +126,7 @@ class _Learner:
         rate: float,
     ) -> None:
         self.reg = MomentumRegressor(robot, friction=friction, offset=offset)
+        self.nominal = self.reg.nominal()
         h = 1.0 / rate
         self.stride = max(1, round(0.002 / h))
         self.win = max(self.stride, round(window / h / self.stride) * self.stride)
@@ -191,10 +193,15 @@ class _Learner:
         if np.any(masses <= 0):
             self.rejected.append(f"non-positive mass in solve {self.solves + 1}")
             return False
-        if self.reg.friction and np.any(theta[n : n + 2 * self.reg.n_joint] < 0):
+        if self.reg.friction:
             theta = theta.copy()
             f = slice(n, n + 2 * self.reg.n_joint)
             theta[f] = np.maximum(theta[f], 0.0)  # friction never feeds energy in
+            # friction the data do not show (within _FRICTION_SIGMAS σ of nominal) stays nominal:
+            # a learned friction makes every prediction pay for it (ekf's stiff path)
+            nominal = self.nominal[f]
+            weak = np.abs(theta[f] - nominal) <= _FRICTION_SIGMAS * sol.std[f]
+            theta[f] = np.where(weak, nominal, theta[f])
         robot = self.reg.with_parameters(theta)
         for _, q, _ in list(self.buf)[:: max(1, len(self.buf) // 4)] or []:
             if np.linalg.eigvalsh(robot.mass_matrix(q))[0] <= 0:
@@ -203,7 +210,7 @@ class _Learner:
         # Model selection: keep the current model unless the new one explains the rows better
         # than fitting noise would (robust loss drop above rank + 3√rank, in units of ½χ²).
         self.candidate = theta  # the latest consistent solve, installed or not
-        current = self.reg.nominal() if self.theta is None else self.theta
+        current = self.nominal if self.theta is None else self.theta
         loss_cur = _huber_loss(A @ current - y, sol.sigma)
         loss_new = _huber_loss(A @ theta - y, sol.sigma)
         drop = loss_cur - loss_new
@@ -222,6 +229,11 @@ class _Learner:
         return True
 
 
+#: Friction parameters within this many standard deviations of their nominal values are kept
+#: nominal (the significance of a learned viscous or Coulomb coefficient).
+_FRICTION_SIGMAS = 3.0
+
+
 #: Mean NIS per degree of freedom up to which the model-based filter is trusted outright by the
 #: blend (twice the consistent value); the blame on the model ramps up to full at twice this.
 _NIS_TRUSTED = 2.0
@@ -229,6 +241,57 @@ _NIS_TRUSTED = 2.0
 
 #: Mean NIS per degree of freedom above which the nominal model's trust is revoked at once.
 _NIS_REVOKED = 10.0
+
+
+def _blend_loops(
+    score: Vector,
+    innovation: Vector,
+    measured: bool,
+    lam: float,
+    bank_q: Vector,
+    bank_v: Vector,
+    bank_P: Vector,
+    q: Vector,
+    v: Vector,
+    s: Vector,
+    blame: float,
+) -> tuple[Vector, Vector, Vector, Vector]:
+    """The blend of :meth:`AdaptiveEKF._step` on vector joints, in loops (compiled by numba).
+
+    Per coordinate ``i``: the scores ``score ← score + λ(e² − score)`` (if ``measured``),
+    the filter ``b`` of the least score, ``v_kf = v_b``, ``P_kf = P_b,11``,
+    ``s ← s + λ(blame · max((v − v_kf)² − P_kf, 0) − s)``, ``w = P_kf / (P_kf + s)``,
+    ``v̂ = w v + (1 − w) v_kf``, ``q̂ = q + (1 − w)(q_b − q)`` (module docstring).
+    Returns new arrays ``(score, s, q̂, v̂)``.
+    """
+    nf, nv = score.shape
+    score_out = score.copy()
+    if measured:
+        for f in range(nf):
+            for i in range(nv):
+                score_out[f, i] = score[f, i] + lam * (innovation[f, i] ** 2 - score[f, i])
+    s_out = np.empty(nv)
+    q_out = np.empty(nv)
+    v_out = np.empty(nv)
+    for i in range(nv):
+        b = 0
+        for f in range(1, nf):
+            if score_out[f, i] < score_out[b, i]:
+                b = f
+        p_kf = bank_P[b, 1, 1]
+        d = v[i] - bank_v[b, i]
+        s_out[i] = s[i] + lam * (blame * max(d * d - p_kf, 0.0) - s[i])
+        w = p_kf / (p_kf + s_out[i] + 1e-300)
+        v_out[i] = w * v[i] + (1.0 - w) * bank_v[b, i]
+        q_out[i] = q[i] + (1.0 - w) * (bank_q[b, i] - q[i])
+    return score_out, s_out, q_out, v_out
+
+
+_blend_kernel = _LazyKernel(
+    _blend_loops,
+    np.zeros((1, 1)), np.zeros((1, 1)), True, 0.5, np.zeros((1, 1)), np.zeros((1, 1)),
+    np.tile(np.eye(3), (1, 1, 1)), np.zeros(1), np.zeros(1), np.zeros(1), 0.5,
+)  # fmt: skip
 
 
 def _huber_loss(r: Vector, sigma: float, c: float = 1.345) -> float:
@@ -341,6 +404,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         if not jerks:
             raise GainError("jerk_psd needs at least one density")
         self._bank = KFBank(self.robot, jerks, self.gains.meas_std)
+        if self.blend and self.robot.is_vector_space:
+            _blend_kernel.load()
         self._offset: Vector = np.zeros(self.robot.nv)
         self._regimes = {  # (accel_psd, disturbance density) per regime
             "warmup": (float(warmup_accel_psd), float(disturbance_psd)),
@@ -464,7 +529,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         with np.errstate(over="ignore", invalid="ignore"):  # a lost filter is handled below
             ekf = super()._step(state.ekf, dt, q_meas, tau + self._offset)
         t = state.t + dt
-        if self.blend and not (np.all(np.isfinite(ekf.v)) and np.all(np.isfinite(ekf.P))):
+        if self.blend and not math.isfinite(ekf.v.sum() + ekf.P.sum()):  # NaN or ±inf in either
             # the model-based filter is lost (a learned model that does not hold): restart it
             # on the model-free estimate, in the warm-up regime, rather than fail
             v_kf, _, dq_kf = self._model_free(state)
@@ -472,21 +537,32 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             ekf = super()._step(self._set_regime(restart, "warmup"), dt, q_meas, tau + self._offset)
             self._learner.rejected.append(f"model-based filter restarted at t = {t:.6g} s")
             self.restarts += 1
+            # the blend's error variance of the lost filter overflowed with it: the restarted
+            # one starts with its initial velocity variance (the blend follows the kf first)
+            state = state._replace(s=np.full(self.robot.nv, self.gains.v0_std**2))
             self._restarted = True  # the next solve must beat the current model to end it
         if not self.blend:
             return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v)
         meas = None if ekf.gated else q_meas  # one gate for every filter
         kf = self._bank.step(state.kf, dt, meas)
-        score = state.score
         lam = min(1.0, dt / self.blend_time)
-        if kf.innovation is not None:
-            score = score + lam * (kf.innovation**2 - score)
-        new = _State(ekf, kf, score, t, state.s, ekf.q, ekf.v)
-        v_kf, p_kf, dq_kf = self._model_free(new)
         # disagreement is the model's fault only when its innovations say so (NIS̄ > 2 nv)
         nv = self.robot.nv
         level = float(nv) if ekf.nis_level is None else ekf.nis_level
         blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
+        if self._restarted:  # the model was lost and not replaced since: it is to blame
+            blame = 1.0
+        if self.robot.is_vector_space and _blend_kernel.compiled is not None:
+            score, s, q, v = _blend_kernel.compiled(
+                state.score, kf.v if kf.innovation is None else kf.innovation,
+                kf.innovation is not None, lam, kf.q, kf.v, kf.P, ekf.q, ekf.v, state.s, blame,
+            )  # fmt: skip
+            return _State(ekf, kf, score, t, s, q, v)
+        score = state.score
+        if kf.innovation is not None:
+            score = score + lam * (kf.innovation**2 - score)
+        new = _State(ekf, kf, score, t, state.s, ekf.q, ekf.v)
+        v_kf, p_kf, dq_kf = self._model_free(new)
         d = ekf.v - v_kf
         s = state.s + lam * (blame * np.maximum(d * d - p_kf, 0.0) - state.s)
         w = p_kf / (p_kf + s + 1e-300)

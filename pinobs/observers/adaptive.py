@@ -165,7 +165,7 @@ class _Learner:
             t_arr = np.array([x[0] for x in items])
             q_arr = np.array([x[1] for x in items])
             tau_arr = np.array([x[2] for x in items])
-            q_s, v = smooth_path(self.reg.robot, t_arr, q_arr, half_window=self.hw)
+            q_s, v = smooth_path(self.reg.robot, t_arr, q_arr, half_window=self.hw, edges=False)
             k = slice(self.hw, self.hw + self.win + 1)
             A, y = self.reg.system(
                 t_arr[k], q_s[k], v[k], tau_arr[k], window=self.win, stride=self.stride

@@ -180,3 +180,18 @@ def test_the_compiled_bank_and_blend_equal_the_numpy_ones(monkeypatch) -> None:
     monkeypatch.setattr(adaptive._blend_kernel, "compiled", None)
     monkeypatch.setattr(kf._bank_kernel, "compiled", None)
     np.testing.assert_allclose(compiled, run(), rtol=0, atol=1e-12)
+
+
+def test_the_learners_edgeless_smoothing_equals_the_full_one_inside() -> None:
+    """The learner keeps only samples ``half_window`` from both ends of what it smooths, so it
+    skips the edge polynomial fits (``edges=False``); inside, the results are the same."""
+    from pinobs.model.identification import smooth_path
+
+    robot = pinobs.load("ur5")
+    res = pinobs.simulate(robot, [], duration=0.2, sensor=Sensor(rate=1000.0), seed=0)
+    q = res.q + 1e-4 * np.random.default_rng(0).standard_normal(res.q.shape)
+    full = smooth_path(robot, res.t, q, half_window=50)
+    inner = smooth_path(robot, res.t, q, half_window=50, edges=False)
+    for a, b in zip(full, inner, strict=True):
+        np.testing.assert_allclose(a[50:-50], b[50:-50], rtol=0, atol=1e-12)
+        assert not np.allclose(a[:50], b[:50])  # the edges differ: the option does something

@@ -416,13 +416,31 @@ def smooth_path(
         steps = np.array([robot.difference(q[k - 1], q[k]) for k in range(1, n)])
         u = np.concatenate([np.zeros((1, robot.nv)), np.cumsum(steps, axis=0)])
     order = min(order, length - 1)
-    mode = "interp" if edges else "nearest"
-    v = savgol_filter(u, length, order, deriv=1, delta=h, axis=0, mode=mode)
-    u_s = savgol_filter(u, length, order, axis=0, mode=mode)
+    if edges:
+        v = savgol_filter(u, length, order, deriv=1, delta=h, axis=0, mode="interp")
+        u_s = savgol_filter(u, length, order, axis=0, mode="interp")
+    else:  # savgol_filter's convolutions, their coefficients computed once
+        from scipy.ndimage import convolve1d  # lazily: import pinobs stays light
+
+        c_v, c_u = _savgol_coefficients(length, order, h)
+        v = convolve1d(u, c_v, axis=0, mode="nearest")
+        u_s = convolve1d(u, c_u, axis=0, mode="nearest")
     if robot.is_vector_space:
         return q[0] + u_s, v
     q_s = np.array([robot.integrate(q[k], u_s[k] - u[k]) for k in range(n)])
     return q_s, v
+
+
+@functools.lru_cache(maxsize=16)
+def _savgol_coefficients(length: int, order: int, h: float) -> tuple[Vector, Vector]:
+    """Savitzky–Golay convolution coefficients of ``u̇`` and ``u`` (:func:`smooth_path`)."""
+    from scipy.signal import savgol_coeffs  # lazily: import pinobs stays light
+
+    c_v = savgol_coeffs(length, order, deriv=1, delta=h)
+    c_u = savgol_coeffs(length, order)
+    c_v.setflags(write=False)
+    c_u.setflags(write=False)
+    return c_v, c_u
 
 
 # --------------------------------------------------------------------- solve

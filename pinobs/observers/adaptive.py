@@ -128,7 +128,7 @@ class _Learner:
         self.reg = MomentumRegressor(robot, friction=friction, offset=offset)
         self.nominal = self.reg.nominal()
         h = 1.0 / rate
-        self.stride = max(1, round(0.002 / h))
+        self.stride = max(1, round(0.004 / h))
         self.win = max(self.stride, round(window / h / self.stride) * self.stride)
         self.hw = max(2, round(half_window / h))
         self.h = h
@@ -146,7 +146,8 @@ class _Learner:
         self.validated = False  # a solve has checked the current model against the data
         self.last_drop = np.nan
         self.history: list[tuple[float, float]] = []
-        self.candidate: Vector | None = None  # (loss of the current model, of the solve)
+        self.candidate: Vector | None = None  # the latest consistent solve
+        self.minv_max: Vector = np.zeros(robot.nv)  # its largest (M⁻¹)ᵢᵢ at the checked q
         self.rejected: list[str] = []
 
     def add(self, t: float, q: Vector | None, tau: Vector, *, explained: bool = False) -> bool:
@@ -203,10 +204,14 @@ class _Learner:
             weak = np.abs(theta[f] - nominal) <= _FRICTION_SIGMAS * sol.std[f]
             theta[f] = np.where(weak, nominal, theta[f])
         robot = self.reg.with_parameters(theta)
+        minv_max = np.zeros(robot.nv)
         for _, q, _ in list(self.buf)[:: max(1, len(self.buf) // 4)] or []:
-            if np.linalg.eigvalsh(robot.mass_matrix(q))[0] <= 0:
+            m = robot.mass_matrix(q)
+            if np.linalg.eigvalsh(m)[0] <= 0:
                 self.rejected.append(f"M(q) not positive definite in solve {self.solves + 1}")
                 return False
+            minv_max = np.maximum(minv_max, np.diag(np.linalg.inv(m)))
+        self.minv_max = minv_max  # of the latest consistent solve (the candidate)
         # Model selection: keep the current model unless the new one explains the rows better
         # than fitting noise would (robust loss drop above rank + 3√rank, in units of ½χ²).
         self.candidate = theta  # the latest consistent solve, installed or not
@@ -232,6 +237,15 @@ class _Learner:
 #: Friction parameters within this many standard deviations of their nominal values are kept
 #: nominal (the significance of a learned viscous or Coulomb coefficient).
 _FRICTION_SIGMAS = 3.0
+
+
+#: ``λ h`` up to which a learned joint friction is a held input of the filter rather than part
+#: of its model (``λ = (M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|``, largest over the configurations the learner
+#: checked): explicit Euler on the friction term is stable below 2 and its local error,
+#: ``(λh)²/2``, is 0.5 % of the step's friction change at 0.1; the 20× margin covers
+#: configurations the check did not sample.  Stiffer friction stays in the model (``ekf``'s
+#: stiff-friction path, which costs its substeps and ``exp(Ah)`` by squaring).
+_HELD_FRICTION_STIFFNESS = 0.1
 
 
 #: Mean NIS per degree of freedom up to which the model-based filter is trusted outright by the
@@ -407,6 +421,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         if self.blend and self.robot.is_vector_space:
             _blend_kernel.load()
         self._offset: Vector = np.zeros(self.robot.nv)
+        self._learned = self._nominal  # the learned model, all its friction included
+        self._held_friction: Vector | None = None  # 1 where it is a held input (_install)
         self._regimes = {  # (accel_psd, disturbance density) per regime
             "warmup": (float(warmup_accel_psd), float(disturbance_psd)),
             "nominal": (float(validated_accel_psd), float(validated_disturbance_psd)),
@@ -435,7 +451,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     # ---------------------------------------------------------------- learning
     def learned_robot(self) -> Robot:
         """A :class:`Robot` carrying the current estimate (friction included; the nominal one before the first solve)."""
-        return self.robot.copy()
+        return self._learned.copy()
 
     def parameters(self) -> ParameterSet:
         """The learned parameters with names and standard deviations (nominal before the first solve)."""
@@ -480,9 +496,26 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         return state._replace(d_psd=dist * self._m_bar2)  # per joint, as ekf: psd · M̄ᵢᵢ²
 
     def _install(self, state: _EKFState) -> _EKFState:
+        """Install the learner's model: friction that cannot be stiff (``λᵢ h ≤``
+        :data:`_HELD_FRICTION_STIFFNESS`) as a held input, the rest in the filter's model."""
         lr = self._learner
         assert lr.theta is not None
-        self._replace_robot(lr.reg.with_parameters(lr.theta, name=f"{self._nominal.name}~learned"))
+        name = f"{self._nominal.name}~learned"
+        self._learned = lr.reg.with_parameters(lr.theta, name=name)
+        theta = lr.theta
+        self._held_friction = None
+        if lr.reg.friction and self._learned.has_friction:
+            # λᵢ = max (M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v| (its largest slope is at v = 0)
+            lam = lr.minv_max * np.abs(self._learned.friction_derivative(np.zeros(self.robot.nv)))
+            held = lam * lr.h <= _HELD_FRICTION_STIFFNESS
+            if np.any(held & (lam > 0)):
+                n, nj = lr.reg.n_inertial, lr.reg.n_joint
+                cols = held[list(lr.reg.actuated)]
+                theta = theta.copy()
+                theta[n : n + nj][cols] = 0.0
+                theta[n + nj : n + 2 * nj][cols] = 0.0
+                self._held_friction = held.astype(float)
+        self._replace_robot(lr.reg.with_parameters(theta, name=name))
         self._offset = lr.reg.offsets(lr.theta)
         state = self._set_regime(state, "learned")
         if state.d is None:
@@ -493,6 +526,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:  # type: ignore[override]
         # a reset starts learning afresh from the nominal model
         self._replace_robot(self._nominal.copy())
+        self._learned = self._nominal
+        self._held_friction = None
         self._learner = _Learner(self._nominal, **self._learn_options)  # type: ignore[arg-type]
         self._offset = np.zeros(self.robot.nv)
         self.gains = replace(self.gains, accel_psd=self._regimes["warmup"][0])
@@ -525,16 +560,24 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         p_kf = self._model_free(state)[1]
         return p_kf / (p_kf + state.s + 1e-300)
 
+    def _torque(self, v: Vector, tau: Vector) -> Vector:
+        """The torque the filter's model is given over the next step: ``τ + b̂``, plus the
+        held friction ``τ_f,θ̂(v)`` of the joints where it is an input (:meth:`_install`)."""
+        if self._held_friction is None:
+            return tau + self._offset
+        return tau + self._offset + self._held_friction * self._learned.friction_torque(v)
+
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
         with np.errstate(over="ignore", invalid="ignore"):  # a lost filter is handled below
-            ekf = super()._step(state.ekf, dt, q_meas, tau + self._offset)
+            ekf = super()._step(state.ekf, dt, q_meas, self._torque(state.ekf.v, tau))
         t = state.t + dt
         if self.blend and not math.isfinite(ekf.v.sum() + ekf.P.sum()):  # NaN or ±inf in either
             # the model-based filter is lost (a learned model that does not hold): restart it
             # on the model-free estimate, in the warm-up regime, rather than fail
             v_kf, _, dq_kf = self._model_free(state)
             restart = super()._initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
-            ekf = super()._step(self._set_regime(restart, "warmup"), dt, q_meas, tau + self._offset)
+            restart = self._set_regime(restart, "warmup")
+            ekf = super()._step(restart, dt, q_meas, self._torque(v_kf, tau))
             self._learner.rejected.append(f"model-based filter restarted at t = {t:.6g} s")
             self.restarts += 1
             # the blend's error variance of the lost filter overflowed with it: the restarted

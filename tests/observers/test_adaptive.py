@@ -137,7 +137,10 @@ def test_the_kf_bank_equals_separate_kf_filters(name: str) -> None:
 def test_a_lost_model_based_filter_restarts_instead_of_failing() -> None:
     """Learning without friction columns on a truth with strong friction: the learned model
     cannot hold, and its EKF diverged (ObserverDiverged at 4.2 s on the UR5, seed 1) before
-    the restart rule; now it restarts on the kf bank and the estimate stays finite."""
+    the restart rule; now it restarts on the kf bank and the estimate stays finite.  After a
+    restart the blend follows the kf until a solve replaces the model: before that rule the
+    estimate reached 1.1 rad/s of error at the restart at 4.19 s, and with the compiled bank's
+    different rounding the blend itself overflowed (5.5 s); now 0.04 rad/s at most after 1 s."""
     robot = pinobs.load("ur5")
     plant = mismatched_plant(robot, "friction", seed=0)
     ob = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4, friction=False)
@@ -153,6 +156,8 @@ def test_a_lost_model_based_filter_restarts_instead_of_failing() -> None:
     assert trace.diverged_at is None and np.all(np.isfinite(trace.v))
     assert ob.consistency().details["restarts"] >= 1
     assert _rms_after(res, trace, 1.0) < 0.05
+    k = int(np.searchsorted(res.t, 1.0))
+    assert np.abs(trace.v[k:] - res.v[k:]).max() < 0.1
 
 
 def test_the_compiled_bank_and_blend_equal_the_numpy_ones(monkeypatch) -> None:

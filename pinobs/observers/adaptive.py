@@ -27,7 +27,8 @@ Three parts, each on code shared with the rest of pinobs:
    |∂τ_f,ᵢ/∂v|`` over the configurations the consistency check sampled (the
    slope peaks at ``v = 0``), is a torque held over each step, evaluated at
    the mid-step velocity extrapolated from the last step,
-   ``τ_f,θ̂(v̂ + (h/2)(v̂ − v̂₋)/h₋)`` (second order), and left out of the
+   ``τ_f,θ̂(v̂ + (h/2)(v̂ − v̂₋)/h₋)`` (second order; for a linear friction a
+   two-step Adams–Bashforth step, stable for ``λh < 1``), and left out of the
    filter's model; stiffer friction stays in the model, where ``ekf``'s
    stiff-friction path (substeps, ``exp(Ah)`` by squaring) handles it at
    about 17 ``pin.aba`` calls more per update on a UR5 (measured on a loaded
@@ -264,10 +265,10 @@ _FRICTION_SIGMAS = 3.0
 
 #: ``λ h`` up to which a learned joint friction is a held input of the filter rather than part
 #: of its model (``λ = (M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|``, largest over the configurations the learner
-#: checked): explicit Euler on the friction term is stable below 2 and its local error,
-#: ``(λh)²/2``, is 0.5 % of the step's friction change at 0.1; the 20× margin covers
-#: configurations the check did not sample.  Stiffer friction stays in the model (``ekf``'s
-#: stiff-friction path, which costs its substeps and ``exp(Ah)`` by squaring).
+#: checked): the friction held at the extrapolated mid-step velocity (:meth:`AdaptiveEKF._torque`)
+#: is, for a linear friction, a two-step Adams–Bashforth step, stable for ``λh < 1``; the 10×
+#: margin covers configurations the check did not sample.  Stiffer friction stays in the
+#: model (``ekf``'s stiff-friction path, which costs its substeps and ``exp(Ah)`` by squaring).
 _HELD_FRICTION_STIFFNESS = 0.1
 
 

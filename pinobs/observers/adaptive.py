@@ -131,7 +131,8 @@ class _State(NamedTuple):
     s: Vector  # estimated model-based velocity error variance per coordinate [rad²/s²]
     q: Vector  # blended output
     v: Vector
-    accel: Vector  # the EKF's (v̂ − v̂₋)/h over the last step [rad/s²] (held friction, _torque)
+    v_prev: Vector  # the EKF's v̂ at the start of the last step (held friction, _torque)
+    dt_prev: float  # that step [s] (0: none yet)
 
 
 class _Learner:
@@ -562,7 +563,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         kf = self._bank.initial(q0, v0, self.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
-        return _State(ekf, kf, score, 0.0, s, q0.copy(), v0.copy(), np.zeros(self.robot.nv))
+        return _State(ekf, kf, score, 0.0, s, q0.copy(), v0.copy(), ekf.v, 0.0)
 
     def _model_free(self, state: _State) -> tuple[Vector, Vector, Vector]:
         """Per coordinate, the bank's ``kf`` with the smallest running innovation:
@@ -587,13 +588,15 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     def _torque(self, state: _State, dt: float, tau: Vector) -> Vector:
         """The torque the filter's model is given over the next step of ``dt`` [s]: ``τ + b̂``,
         plus, on the joints where it is an input (:meth:`_install`), the learned friction at
-        the mid-step velocity extrapolated from the last step, ``τ_f,θ̂(v̂ + (h/2) ā)``
-        (``ā`` = :attr:`_State.accel`).  Held at ``v̂`` alone, its error would be first order,
+        the mid-step velocity extrapolated from the last step, ``τ_f,θ̂(v̂ + (h/2)(v̂ − v̂₋)/h₋)``
+        (``v̂₋``, ``h₋``: :attr:`_State.v_prev`, :attr:`_State.dt_prev`; no extrapolation before
+        a first step).  Held at ``v̂`` alone, its error would be first order,
         ``h |∂τ_f/∂v| |a| h/2`` per step (7e-4 rad/s on a UR5 started on a noise-free truth);
         extrapolated, second order (tested)."""
         if self._held_friction is None:
             return tau + self._offset
-        v_mid = state.ekf.v + 0.5 * dt * state.accel
+        v = state.ekf.v
+        v_mid = v + (0.5 * dt / state.dt_prev) * (v - state.v_prev) if state.dt_prev > 0 else v
         return tau + self._offset + self._held_friction * self._learned.friction_torque(v_mid)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
@@ -606,7 +609,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             v_kf, _, dq_kf = self._model_free(state)
             restart = super()._initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
             restart = self._set_regime(restart, "warmup")
-            state = state._replace(ekf=restart, accel=np.zeros(self.robot.nv))
+            state = state._replace(ekf=restart, dt_prev=0.0)
             ekf = super()._step(restart, dt, q_meas, self._torque(state, dt, tau))
             self._learner.rejected.append(f"model-based filter restarted at t = {t:.6g} s")
             self.restarts += 1
@@ -614,9 +617,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             # one starts with its initial velocity variance (the blend follows the kf first)
             state = state._replace(s=np.full(self.robot.nv, self.gains.v0_std**2))
             self._restarted = True  # the next solve must beat the current model to end it
-        accel = (ekf.v - state.ekf.v) / dt
         if not self.blend:
-            return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v, accel=accel)
+            return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v, v_prev=state.ekf.v, dt_prev=dt)
         meas = None if ekf.gated else q_meas  # one gate for every filter
         kf = self._bank.step(state.kf, dt, meas)
         lam = min(1.0, dt / self.blend_time)
@@ -631,11 +633,11 @@ class AdaptiveEKF(ExtendedKalmanFilter):
                 state.score, kf.v if kf.innovation is None else kf.innovation,
                 kf.innovation is not None, lam, kf.q, kf.v, kf.P, ekf.q, ekf.v, state.s, blame,
             )  # fmt: skip
-            return _State(ekf, kf, score, t, s, q, v, accel)
+            return _State(ekf, kf, score, t, s, q, v, state.ekf.v, dt)
         score = state.score
         if kf.innovation is not None:
             score = score + lam * (kf.innovation**2 - score)
-        new = _State(ekf, kf, score, t, state.s, ekf.q, ekf.v, accel)
+        new = _State(ekf, kf, score, t, state.s, ekf.q, ekf.v, state.ekf.v, dt)
         v_kf, p_kf, dq_kf = self._model_free(new)
         d = ekf.v - v_kf
         s = state.s + lam * (blame * np.maximum(d * d - p_kf, 0.0) - state.s)

@@ -68,6 +68,7 @@ was tried first: non-convex, and Levenberg-Marquardt stalled on it.)
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -389,7 +390,13 @@ def _body_name(model: pin.Model, joint: int) -> str:
 
 # ---------------------------------------------------------------- velocities
 def smooth_path(
-    robot: Robot, t: Vector, q: Vector, *, half_window: int, order: int = 4
+    robot: Robot,
+    t: Vector,
+    q: Vector,
+    *,
+    half_window: int,
+    order: int = 4,
+    edges: bool = True,
 ) -> tuple[Vector, Vector]:
     """Zero-phase Savitzky–Golay estimates ``(q_s, v)`` of a uniformly sampled path.
 
@@ -397,7 +404,9 @@ def smooth_path(
     (for vector joints ``u = q − q₀``); ``u`` is fitted by a polynomial of
     degree ``order`` over ``2·half_window + 1`` samples around each one
     (``scipy.signal.savgol_filter``), giving ``v = u̇`` and
-    ``q_s = q_k ⊕ (û_k − u_k)``.  Near the ends the fit is the edge polynomial.
+    ``q_s = q_k ⊕ (û_k − u_k)``.  Near the ends the fit is the edge polynomial;
+    ``edges=False`` skips those fits (the first and last ``half_window`` samples are
+    then not meaningful, the others are the same: the online learner keeps only them).
     """
     from scipy.signal import savgol_filter  # lazily: import pinobs stays light
 
@@ -414,12 +423,31 @@ def smooth_path(
         steps = np.array([robot.difference(q[k - 1], q[k]) for k in range(1, n)])
         u = np.concatenate([np.zeros((1, robot.nv)), np.cumsum(steps, axis=0)])
     order = min(order, length - 1)
-    v = savgol_filter(u, length, order, deriv=1, delta=h, axis=0, mode="interp")
-    u_s = savgol_filter(u, length, order, axis=0, mode="interp")
+    if edges:
+        v = savgol_filter(u, length, order, deriv=1, delta=h, axis=0, mode="interp")
+        u_s = savgol_filter(u, length, order, axis=0, mode="interp")
+    else:  # savgol_filter's convolutions, their coefficients computed once
+        from scipy.ndimage import convolve1d  # lazily: import pinobs stays light
+
+        c_v, c_u = _savgol_coefficients(length, order, h)
+        v = convolve1d(u, c_v, axis=0, mode="nearest")
+        u_s = convolve1d(u, c_u, axis=0, mode="nearest")
     if robot.is_vector_space:
         return q[0] + u_s, v
     q_s = np.array([robot.integrate(q[k], u_s[k] - u[k]) for k in range(n)])
     return q_s, v
+
+
+@functools.lru_cache(maxsize=16)
+def _savgol_coefficients(length: int, order: int, h: float) -> tuple[Vector, Vector]:
+    """Savitzky–Golay convolution coefficients of ``u̇`` and ``u`` (:func:`smooth_path`)."""
+    from scipy.signal import savgol_coeffs  # lazily: import pinobs stays light
+
+    c_v = savgol_coeffs(length, order, deriv=1, delta=h)
+    c_u = savgol_coeffs(length, order)
+    c_v.setflags(write=False)
+    c_u.setflags(write=False)
+    return c_v, c_u
 
 
 # --------------------------------------------------------------------- solve
@@ -475,11 +503,19 @@ def solve(
     """
     if A.shape[0] == 0:
         raise IdentificationError("no complete window of data: the log is too short")
-    from threadpoolctl import threadpool_limits  # lazily: import pinobs stays light
-
     # small dense problems: one BLAS thread is 4x faster than two fighting over a busy machine
-    with threadpool_limits(1):
+    with _blas_controller().limit(limits=1):
         return _solve(reg, A, y, theta0, prior_std, irls, huber, consistent)
+
+
+@functools.cache
+def _blas_controller() -> Any:
+    """threadpoolctl's view of the loaded BLAS libraries, scanned once (a scan costs about
+    2 ms, which the online learner would pay at every solve)."""
+    import scipy.linalg  # noqa: F401  (its BLAS loaded before the scan)
+    from threadpoolctl import ThreadpoolController  # lazily: import pinobs stays light
+
+    return ThreadpoolController()
 
 
 def _solve(

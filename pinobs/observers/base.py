@@ -403,12 +403,15 @@ class Observer(ABC, Generic[State]):
                 )
         self._state, self._t, self._tau, self._last = state, t_new, tau_new, estimate
         self._ts = t_state
-        self._torques = [
-            x
-            for i, x in enumerate(self._torques)
-            if i + 1 == len(self._torques) or self._torques[i + 1][0] > t_state
-        ] + [(t_new, tau_new)]
-        held = next(x for tk, x in reversed(self._torques) if tk <= t_state + TIME_EPS)
+        if self.latency > 0.0:  # the torques applied since the state's time, for the next steps
+            self._torques = [
+                x
+                for i, x in enumerate(self._torques)
+                if i + 1 == len(self._torques) or self._torques[i + 1][0] > t_state
+            ] + [(t_new, tau_new)]
+            held = next(x for tk, x in reversed(self._torques) if tk <= t_state + TIME_EPS)
+        else:  # the state is at t_new: only the torque applied from t_new on matters
+            self._torques, held = [(t_new, tau_new)], tau_new
         used = q if t_state > ts_before + TIME_EPS and not estimate.gated else None
         self._state = self._after_commit(state, t_state, used, held)
         if estimate.nis is not None:

@@ -282,8 +282,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     """
 
     name = "adaptive"
-    #: not for :func:`pinobs.smooth` (yet): its model changes between re-solves
-    smoothable = False
+    #: :func:`pinobs.smooth` smooths its model-based filter, the learned model frozen per window
+    smoothable = True
     summary = "EKF that identifies its model online, blended with kf: never behind it (model-based)"
 
     def __init__(

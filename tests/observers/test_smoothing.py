@@ -283,6 +283,77 @@ def test_cli_estimate_smooth_writes_estimate_columns_plus_v_std(tmp_path, ur5_lo
     assert main([*argv, "--smooth"]) != 0  # no --noise: refused with a message
 
 
+def test_cli_estimate_smooth_writes_through_the_io_writer_and_refuses_to_overwrite(
+    tmp_path, ur5_log
+) -> None:
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    rows = slice(1, 201)
+    log = write_log(tmp_path / "log.csv", ur5_log.t[rows], ur5_log.q_meas[rows], ur5_log.tau[rows])
+    out = tmp_path / "est.csv"
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log)]
+    smooth_args = ["--smooth", "--noise", "1e-4", "--lag", "0.05"]
+    assert main([*argv, "--out", str(out), *smooth_args]) == 0
+    first = out.read_text()
+    assert main([*argv, "--out", str(out), *smooth_args, "--accel-psd", "1e-4"]) == 2
+    assert out.read_text() == first  # refused: exists, no --force
+    assert main([*argv, "--out", str(out), *smooth_args, "--accel-psd", "1e-4", "--force"]) == 0
+    assert out.read_text() != first
+    assert main([*argv, "--out", str(log), *smooth_args, "--force"]) == 2  # the input itself
+    assert not list(tmp_path.glob(".*.part"))  # no temporary file left behind
+
+
+def test_cli_estimate_smooth_screens_rows_like_estimate_and_reads_every_format(
+    tmp_path, ur5_log, capsys
+) -> None:
+    """One output row per log row: an unreadable row is a dropped sample, a row back in time
+    is skipped (NaN, reported); a Parquet copy of the log gives the same numbers."""
+    pd = pytest.importorskip("pandas")
+    pytest.importorskip("pyarrow")
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    rows = slice(1, 201)
+    t, q, tau = ur5_log.t[rows].copy(), ur5_log.q_meas[rows].copy(), ur5_log.tau[rows]
+    t[120] = t[100]  # back in time: skipped
+    log = write_log(tmp_path / "log.csv", t, q, tau)
+    text = log.read_text().splitlines()
+    text[51] = text[51].replace(text[51].split(",")[3], "oops", 1)  # row 50: q2 unreadable
+    log.write_text("\n".join(text) + "\n")
+    out = tmp_path / "est.csv"
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--out", str(out)]
+    assert main([*argv, "--log", str(log), "--smooth", "--noise", "1e-4"]) == 0
+    err = capsys.readouterr()
+    assert "not after the previous sample" in err.err and "oops" in err.err.lower()
+    assert "200 rows: 199 estimated (198 with their measurement" in err.out
+    got = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert got.shape == (200, 19)
+    assert np.all(np.isnan(got[120, 7:])) and np.all(np.isfinite(got[50, 7:]))
+    frame = pd.read_csv(log)
+    frame["q2"] = pd.to_numeric(frame["q2"], errors="coerce")
+    frame.to_parquet(tmp_path / "log.parquet")
+    out2 = tmp_path / "est2.csv"
+    argv[-1] = str(out2)
+    assert main([*argv, "--log", str(tmp_path / "log.parquet"), "--smooth", "--noise", "1e-4"]) == 0
+    np.testing.assert_allclose(np.loadtxt(out2, delimiter=",", skiprows=1), got, rtol=0, atol=1e-12)
+
+
+def test_cli_estimate_smooth_over_adaptive_says_how_its_model_was_frozen(
+    tmp_path, ur5_log, capsys
+) -> None:
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    rows = slice(1, 301)
+    log = write_log(tmp_path / "log.csv", ur5_log.t[rows], ur5_log.q_meas[rows], ur5_log.tau[rows])
+    out = tmp_path / "est.csv"
+    argv = ["estimate", "--robot", "ur5", "--observer", "adaptive", "--log", str(log)]
+    assert main([*argv, "--out", str(out), "--smooth", "--noise", "1e-4"]) == 0
+    assert "learned model frozen per 10 s window" in capsys.readouterr().err
+    assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))
+
+
 def test_readme_smoothing_table_is_the_committed_benchmark_file() -> None:
     from pathlib import Path
 

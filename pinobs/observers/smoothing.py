@@ -43,7 +43,8 @@ Measured on 3 s logs (``benchmarks/smoothing.py``, README): it picks
 1e-10 to 1e-8 on a UR5 and 1e-11 to 1e-9 on a Panda (σ = 1e-4 and 1e-3),
 and the ±2σ band then covers the truth at 95–98 % of samples on the seed-0
 logs, 88–100 % on seeds 1–3 (one log holds few independent values of a
-slowly varying error); at the default 1e-8 it covers 98.5 % (UR5, σ = 1e-4,
+slowly varying error; README: on 3 s at σ = 1e-3 the likelihood cannot
+resolve densities below 1e-8, on 10 s logs it picks 1e-11); at the default 1e-8 it covers 98.5 % (UR5, σ = 1e-4,
 seed 0) with an RMS 1.9× larger.  On short logs the choice is larger, so
 conservative (0.7 s, UR5, σ = 1e-4: 1e-7).
 
@@ -86,11 +87,11 @@ every window's density and scales the offset's with it; ``"auto"`` chooses it
 by the likelihood rule below on the frozen-model filter (the learning pass
 runs once).  Measured (``benchmarks/smoothing.py``, 12 s logs of
 ``benchmarks/learning.py``'s model-error scenarios, σ = 1e-4, seed 1): the
-regimes' own densities are the likelihood's choice, the RMS falls 4–6×
+regimes' own densities are the likelihood's choice, the RMS falls 4.1–5.6×
 below causal ``adaptive`` (README), but the ±2σ band is too wide, covering
-99–100 % of samples: the learned model's error is smooth in time, not the
-white noise the densities stand for, so the band is conservative, not
-calibrated.
+96.8–100 % of samples (99.8–100 % but under friction): the learned model's
+error is smooth in time, not the white noise the densities stand for, so the
+band is conservative, not calibrated.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ pinobs play RESULT.npz [--html F] [--plot F]   watch a saved run
 pinobs demo                                    the main job on a built-in default
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
     [--force --map COL=NAME --topic T --noise STD]   (CSV/TSV, Parquet, NPZ, ROS bags)
-    [--smooth [--lag S] [--accel-psd P|auto]]      RTS smoother over ekf or adaptive, v_std0..
+    [--smooth [--lag S|--chunk S] [--accel-psd P|auto]]   RTS smoother (ekf, adaptive), v_std0..
 pinobs check ii --robot R                      I&I Assumption 1 on the model
 pinobs bench [--quick] [--json FILE]           accuracy and cost against the baselines
 """
@@ -486,6 +486,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             noise_std=args.noise,
             accel_psd=args.accel_psd,
             lag=args.lag,
+            chunk=args.chunk,
             force=args.force,
             columns=_column_map(args.map),
             topic=args.topic,
@@ -517,6 +518,8 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
     mode = "whole log" if args.lag is None else f"lag {args.lag:g} s"
+    if args.chunk is not None:
+        mode = f"chunks of {args.chunk:g} s"
     print(f"smoothed {args.observer} on {robot.name} ({mode}): {run.summary()}; wrote {args.out}")
     if run.estimated == 0:
         print("pinobs: error: no row of the log could be smoothed", file=sys.stderr)
@@ -759,6 +762,13 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--lag", type=float, default=None, help="with --smooth: fixed-lag mode, S seconds"
+    )
+    p.add_argument(
+        "--chunk",
+        type=float,
+        default=None,
+        help="with --smooth: memory bound, backward passes over S seconds (+ overlap); "
+        "same result as the whole log to 1e-5 of v_std",
     )
     p.add_argument(
         "--accel-psd",

@@ -302,6 +302,13 @@ def test_cli_estimate_smooth_writes_through_the_io_writer_and_refuses_to_overwri
     assert main([*argv, "--out", str(out), *smooth_args, "--accel-psd", "1e-4", "--force"]) == 0
     assert out.read_text() != first
     assert main([*argv, "--out", str(log), *smooth_args, "--force"]) == 2  # the input itself
+    # --chunk: the whole-log smoother's result in bounded memory
+    whole, chunked = tmp_path / "whole.csv", tmp_path / "chunked.csv"
+    psd = ["--smooth", "--noise", "1e-4", "--accel-psd", "1e-2"]  # overlap 0.11 s of 0.2 s
+    assert main([*argv, "--out", str(whole), *psd]) == 0
+    assert main([*argv, "--out", str(chunked), *psd, "--chunk", "0.05"]) == 0
+    a, b = (np.loadtxt(f, delimiter=",", skiprows=1) for f in (whole, chunked))
+    assert np.max(np.abs(a[:, 7:13] - b[:, 7:13]) / a[:, 13:]) < 1e-5
     assert not list(tmp_path.glob(".*.part"))  # no temporary file left behind
 
 

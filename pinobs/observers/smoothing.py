@@ -97,6 +97,7 @@ band is conservative, not calibrated.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal, NamedTuple, Protocol, cast
@@ -119,6 +120,7 @@ __all__ = [
     "LogLike",
     "SmoothableFilter",
     "Smoothed",
+    "Smoother",
     "default_overlap",
     "select_accel_psd",
     "smooth",
@@ -191,9 +193,10 @@ class _Step(NamedTuple):
 
 
 def _forward(
-    filt: SmoothableFilter, t: Vector, q: Vector, tau: Vector, good: Vector, k0: int
+    filt: SmoothableFilter, rows: Iterator[tuple[float, Vector | None, Vector]], k0: int
 ) -> Iterator[tuple[int, Any | None, Vector | None, Any, float]]:
-    """The filter over a log from its first good sample (``k0`` in the caller's numbering).
+    """The filter over a log's rows ``(t, q or None, tau)`` from its first good sample
+    (``k0`` in the caller's numbering); pulls one row per value yielded.
 
     Yields ``(k, x⁻_k, Φ_{k−1}, x⁺_k, log N(e_k; 0, S_k))`` (``None, None, ·, 0``
     at ``k = 0``; ``x⁺_k = x⁻_k`` and 0 at a dropped sample), where
@@ -204,13 +207,16 @@ def _forward(
     model = filt.robot
     nv = model.nv
     meas_var = cast(Any, filt).gains.meas_std ** 2
-    state = filt._initial_state(model.check_configuration(q[0], what=f"q[{k0}]"), np.zeros(nv))
+    t_prev, q0, tau_prev = next(rows)
+    if q0 is None:
+        raise NonFiniteError(f"sample {k0} has no configuration; the smoother starts on one")
+    state = filt._initial_state(model.check_configuration(q0, what=f"q[{k0}]"), np.zeros(nv))
     yield 0, None, None, state, 0.0
-    for k in range(1, t.size):
-        pred, Phi = filt._predict(state, float(t[k] - t[k - 1]), tau[k - 1])
+    for k, (t, q, tau) in enumerate(rows, start=1):
+        pred, Phi = filt._predict(state, float(t - t_prev), tau_prev)
         ll = 0.0
-        if good[k]:
-            q_meas = model.check_configuration(q[k], what=f"q[{k0 + k}]")
+        if q is not None:
+            q_meas = model.check_configuration(q, what=f"q[{k0 + k}]")
             e = model.difference(pred.q, q_meas)
             chol = np.linalg.cholesky(pred.P[:nv, :nv] + meas_var * np.eye(nv))
             z = np.linalg.solve(chol, e)
@@ -218,7 +224,86 @@ def _forward(
             state = filt._correct(pred, q_meas)
         else:
             state = pred
+        t_prev, tau_prev = t, tau
         yield k, pred, Phi, state, ll
+
+
+def _rows(
+    t: Vector, q: Vector, tau: Vector, good: Vector
+) -> Iterator[tuple[float, Vector | None, Vector]]:
+    return ((float(t[k]), q[k] if good[k] else None, tau[k]) for k in range(t.size))
+
+
+class _Fed:
+    """An iterator over a queue the caller fills before each pull (push-driven :func:`_forward`)."""
+
+    def __init__(self) -> None:
+        self.queue: deque[tuple[float, Vector | None, Vector]] = deque()
+
+    def __iter__(self) -> _Fed:
+        return self
+
+    def __next__(self) -> tuple[float, Vector | None, Vector]:
+        if not self.queue:
+            raise StopIteration
+        return self.queue.popleft()
+
+
+class Smoother:
+    """The smoother fed one sample at a time (what :func:`smooth` runs on arrays).
+
+    :meth:`push` runs the filter one step and, each time ``chunk + overlap``
+    samples are buffered, the backward pass over them, returning the first
+    ``chunk`` samples smoothed; :meth:`close` smooths the rest.  Memory: the
+    buffered samples' states.  Samples are numbered from 0 (the first pushed,
+    which must carry a configuration); each result is
+    ``(k, q^s_k, v^s_k, var v^s_k)``, in order.
+
+    Args:
+        filt: the filter (a :class:`SmoothableFilter`).
+        chunk, overlap: in samples (``chunk=None``: everything at :meth:`close`).
+    """
+
+    def __init__(self, filt: SmoothableFilter, chunk: int | None, overlap: int) -> None:
+        self._fed = _Fed()
+        self._gen = _forward(filt, self._fed, 0)
+        self._model = filt.robot
+        self._chunk, self._over = chunk, overlap
+        self._buf: list[_Step] = []
+        self._start = 0
+        self.log_likelihood = 0.0
+
+    def push(
+        self, t: float, q: Vector | None, tau: Vector
+    ) -> list[tuple[int, Vector, Vector, Vector]]:
+        """One sample: ``t`` [s], measured ``q`` (``None``: dropped), ``tau`` held from ``t``."""
+        self._fed.queue.append((t, q, tau))
+        _, pred, Phi, state, ll = next(self._gen)
+        self.log_likelihood += ll
+        if pred is not None:
+            self._buf[-1] = _Step(self._buf[-1].filt, pred, Phi)
+        self._buf.append(_Step(state, None, None))
+        if self._chunk is not None and len(self._buf) == self._chunk + self._over:
+            return self._back(self._chunk)
+        return []
+
+    def close(self) -> list[tuple[int, Vector, Vector, Vector]]:
+        """Smooth the samples still buffered (the log's end: no later samples)."""
+        return self._back(len(self._buf)) if self._buf else []
+
+    def _back(self, keep: int) -> list[tuple[int, Vector, Vector, Vector]]:
+        nv = self._model.nv
+        out: list[tuple[int, Vector, Vector, Vector]] = []
+
+        def emit(i: int, qs: Vector, vs: Vector, var: Vector) -> None:
+            if i < keep:
+                out.append((self._start + i, qs, vs, var[nv : 2 * nv]))
+
+        _backward(self._model, self._buf, emit)
+        del self._buf[:keep]
+        self._start += keep
+        out.reverse()
+        return out
 
 
 def _plain(state: Any) -> Vector:
@@ -533,7 +618,7 @@ def _select(
     if not candidates:
         raise GainError("grid is empty; give accel_psd candidates > 0 [rad²/s³]")
     positive("threshold", threshold)
-    lls = [sum(ll for *_, ll in _forward(make(psd), *arrays, k0)) for psd in candidates]
+    lls = [sum(ll for *_, ll in _forward(make(psd), _rows(*arrays), k0)) for psd in candidates]
     best = max(lls)
     return max(p for p, ll in zip(candidates, lls, strict=True) if ll >= best - threshold)
 
@@ -684,26 +769,15 @@ def smooth(
     out_q = np.full((t_all.size, model.nq), np.nan)
     out_v = np.full((t_all.size, nv), np.nan)
     out_var = np.full((t_all.size, nv), np.nan)
-    n = arrays[0].size
+    smoother = Smoother(filt, None if n_over == 0 else n_chunk, n_over)
+    def keep(done: list[tuple[int, Vector, Vector, Vector]]) -> None:
+        for k, qs, vs, var in done:
+            out_q[k0 + k], out_v[k0 + k], out_var[k0 + k] = qs, vs, var
 
-    loglik = 0.0
-    buf: list[_Step] = []
-    start = 0  # sample index of buf[0]
-
-    def emit(i: int, qs: Vector, vs: Vector, var: Vector) -> None:
-        if i < n_chunk or start + len(buf) == n:
-            k = k0 + start + i
-            out_q[k], out_v[k], out_var[k] = qs, vs, var[nv : 2 * nv]
-
-    for k, pred, Phi, state, ll in _forward(filt, *arrays, k0):
-        loglik += ll
-        if pred is not None:
-            buf[-1] = _Step(buf[-1].filt, pred, Phi)
-        buf.append(_Step(state, None, None))
-        if len(buf) == n_chunk + n_over or k == n - 1:
-            _backward(model, buf, emit)
-            del buf[: min(n_chunk, len(buf))]
-            start += n_chunk
+    for row in _rows(*arrays):
+        keep(smoother.push(*row))
+    keep(smoother.close())
+    loglik = smoother.log_likelihood
     if not (np.all(np.isfinite(out_v[k0:])) and np.all(np.isfinite(out_var[k0:]))):
         raise NonFiniteError(
             "the smoothed estimate is not finite; check the model, the torques and noise_std"

@@ -124,6 +124,7 @@ __all__ = [
     "default_overlap",
     "select_accel_psd",
     "smooth",
+    "streaming_smoother",
 ]
 
 #: Default white-acceleration density of the smoothed filter [rad²/s³] (module docstring).
@@ -672,6 +673,88 @@ def _filter_maker(
     return make, {}
 
 
+def _windows(
+    filt: SmoothableFilter,
+    extra: Mapping[str, Any],
+    accel_psd: float | str | None,
+    chunk: float | None,
+    overlap: float | None,
+    lag: float | None,
+    dt: float,
+) -> tuple[int | None, int]:
+    """``(chunk, overlap)`` in samples of ``dt`` [s] (``(None, 0)``: the whole log at once)."""
+    if lag is not None and (chunk is not None or overlap is not None):
+        raise OptionError(
+            f"lag={lag!r} sets the chunk and the overlap; give lag alone, or chunk and overlap"
+        )
+    if lag is not None:
+        n = _samples(lag, dt, "lag")
+        return n, n
+    if chunk is None:
+        if overlap is not None:
+            positive("overlap", overlap)
+        return None, 0
+    if overlap is None:  # the longest memory: the smallest densities (adaptive: any window's)
+        gains = cast(Any, filt).gains
+        pairs = extra.get("model_densities") or [(gains.accel_psd, cast(Any, filt).disturbance_psd)]
+        if isinstance(accel_psd, float):  # it replaces each window's, the offset's scaled
+            pairs = [(accel_psd, None if d is None else d * accel_psd / a) for a, d in pairs]
+        overlap = max(default_overlap(a, gains.meas_std, dt, disturbance_psd=d) for a, d in pairs)
+    return _samples(chunk, dt, "chunk"), _samples(overlap, dt, "overlap")
+
+
+def streaming_smoother(
+    robot: Robot,
+    *,
+    dt: float,
+    observer: str = "ekf",
+    noise_std: float | None = None,
+    accel_psd: float | None = None,
+    disturbance_psd: float | None = None,
+    chunk: float | None = None,
+    overlap: float | None = None,
+    lag: float | None = None,
+    filter_options: Mapping[str, Any] | None = None,
+) -> tuple[Callable[[], Smoother], dict[str, Any]]:
+    """A maker of :class:`Smoother` for a log read as it goes (memory bounded by ``chunk`` or
+    ``lag``), and the options to report; the arguments as :func:`smooth`, ``dt`` the
+    nominal sample period [s] (the chunks are counted in samples of it).
+
+    Not for ``accel_psd="auto"`` or ``adaptive``: both pass over the log more than once.
+
+    Raises:
+        OptionError: those two, or neither ``chunk`` nor ``lag`` (the whole log is not a stream).
+    """
+    cls = observer_class(observer)
+    if accel_psd == "auto" or issubclass(cls, AdaptiveEKF) or (chunk is None and lag is None):
+        raise OptionError(
+            f"a streamed smoother needs chunk or lag, a given accel_psd and a filter with one "
+            f"model (got observer={observer!r}, accel_psd={accel_psd!r}, chunk={chunk!r}, "
+            f"lag={lag!r}); use smooth() on the whole log"
+        )
+    positive("dt", dt)
+    empty = np.empty(0)
+    make, extra = _filter_maker(
+        robot,
+        observer,
+        (empty, empty, empty, empty),
+        noise_std,
+        disturbance_psd,
+        filter_options,
+        None,
+    )
+    filt = make(accel_psd)
+    n_chunk, n_over = _windows(filt, extra, accel_psd, chunk, overlap, lag, dt)
+    opts = {
+        **cast(Any, filt).options,
+        "observer": observer,
+        "chunk": None if n_chunk is None else n_chunk * dt,
+        "overlap": n_over * dt if n_over else None,
+        "lag": lag,
+    }
+    return (lambda: Smoother(make(accel_psd), n_chunk, n_over)), opts
+
+
 def smooth(
     robot: Robot,
     log: LogLike | tuple[ArrayLike, ...],
@@ -747,29 +830,13 @@ def smooth(
     model = filt.robot
     nv = model.nv
     dt = float(np.median(np.diff(t_all)))
-    if lag is not None:
-        n_chunk = n_over = _samples(lag, dt, "lag")
-    elif chunk is not None:
-        n_chunk = _samples(chunk, dt, "chunk")
-        if overlap is None:  # the longest memory: the smallest densities (adaptive: any window's)
-            gains = cast(Any, filt).gains
-            pairs = extra.get("model_densities") or [
-                (gains.accel_psd, cast(Any, filt).disturbance_psd)
-            ]
-            if isinstance(accel_psd, float):  # it replaces each window's, the offset's scaled
-                pairs = [(accel_psd, None if d is None else d * accel_psd / a) for a, d in pairs]
-            overlap = max(
-                default_overlap(a, gains.meas_std, dt, disturbance_psd=d) for a, d in pairs
-            )
-        n_over = _samples(overlap, dt, "overlap")
-    else:
-        if overlap is not None:
-            positive("overlap", overlap)
-        n_chunk, n_over = t_all.size, 0
+    n_chunk, n_over = _windows(filt, extra, accel_psd, chunk, overlap, lag, dt)
+    n_chunk = t_all.size if n_chunk is None else n_chunk
     out_q = np.full((t_all.size, model.nq), np.nan)
     out_v = np.full((t_all.size, nv), np.nan)
     out_var = np.full((t_all.size, nv), np.nan)
     smoother = Smoother(filt, None if n_over == 0 else n_chunk, n_over)
+
     def keep(done: list[tuple[int, Vector, Vector, Vector]]) -> None:
         for k, qs, vs, var in done:
             out_q[k0 + k], out_v[k0 + k], out_var[k0 + k] = qs, vs, var

@@ -347,6 +347,37 @@ def test_cli_estimate_smooth_screens_rows_like_estimate_and_reads_every_format(
     np.testing.assert_allclose(np.loadtxt(out2, delimiter=",", skiprows=1), got, rtol=0, atol=1e-12)
 
 
+def test_streamed_smoothing_of_a_log_file_equals_the_recorded_one_through_gaps_and_restarts(
+    tmp_path, ur5_log
+) -> None:
+    """Read 37 rows at a time; an unreadable row, a row back in time, a 5-period gap
+    (propagated in sub-steps) and a 20-period gap (a restart: two stretches).  Streaming
+    keeps only chunk + overlap samples and gives the numbers of smoothing at the end."""
+    from pinobs.io import write_log
+    from pinobs.io.smoothing import smooth_log
+
+    keep = np.r_[1:100, 104:250, 270:601]  # gaps of 5 and 21 periods
+    t, q, tau = ur5_log.t[keep].copy(), ur5_log.q_meas[keep].copy(), ur5_log.tau[keep]
+    t[150] = t[140]  # back in time: skipped
+    q[50, 2] = np.nan  # unreadable: a dropped sample
+    log = write_log(tmp_path / "log.csv", t, q, tau)
+    opts = {"noise_std": 1e-4, "accel_psd": 1e-4, "lag": 0.03, "chunk_rows": 37}
+    robot = cached_robot("ur5")
+    run_s, _ = smooth_log(log, robot, tmp_path / "s.csv", **opts)  # type: ignore[arg-type]
+    run_r, o_r = smooth_log(log, robot, tmp_path / "r.csv", stream=False, **opts)  # type: ignore[arg-type]
+    a, b = (np.loadtxt(tmp_path / f, delimiter=",", skiprows=1) for f in ("s.csv", "r.csv"))
+    assert a.shape == b.shape == (len(keep), 19)
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    assert np.all(np.isnan(a[150, 7:])) and np.all(np.isfinite(a[50, 7:]))
+    assert len(o_r) == 2  # the restart after the long gap
+    assert (run_s.rows, run_s.estimated, run_s.bad_rows) == (
+        run_r.rows,
+        run_r.estimated,
+        run_r.bad_rows,
+    )
+    assert run_s.estimated == len(keep) - 1 and run_s.t.size == 0  # streamed: nothing kept
+
+
 def test_cli_estimate_smooth_over_adaptive_says_how_its_model_was_frozen(
     tmp_path, ur5_log, capsys
 ) -> None:

@@ -56,10 +56,13 @@ class _Recorder:
     def _keep(self, t: float, q: Any, tau: Any) -> Estimate:
         tau_arr = np.zeros(self.robot.nv) if tau is None else np.asarray(tau, dtype=float)
         q_arr = None if q is None else self.robot.check_configuration(q, what="q")
-        self.segments[-1].append((float(t), q_arr, tau_arr))
+        self._take(float(t), q_arr, tau_arr)
         self._n += 1
         shown = self.robot.neutral() if q_arr is None else q_arr
         return Estimate(float(t), shown, np.full(self.robot.nv, float(self._n - 1)))
+
+    def _take(self, t: float, q: Vector | None, tau: Vector) -> None:
+        self.segments[-1].append((t, q, tau))
 
     def reset(self, t0: float, q0: Any, v0: Any = None, tau0: Any = None) -> Estimate:
         self.segments.append([])
@@ -80,19 +83,14 @@ class _Streamer(_Recorder):
         self._first = 0  # number of the stretch's first sample
         self.finished: deque[tuple[int, Vector, Vector, Vector]] = deque()
 
-    def _keep(self, t: float, q: Any, tau: Any) -> Estimate:
-        tau_arr = np.zeros(self.robot.nv) if tau is None else np.asarray(tau, dtype=float)
-        q_arr = None if q is None else self.robot.check_configuration(q, what="q")
+    def _take(self, t: float, q: Vector | None, tau: Vector) -> None:
         assert self._sm is not None  # reset comes first (LogEstimator)
-        done = self._sm.push(float(t), q_arr, tau_arr)
+        done = self._sm.push(t, q, tau)
         self.finished.extend((self._first + k, *rest) for k, *rest in done)  # type: ignore[misc]
-        self._n += 1
-        shown = self.robot.neutral() if q_arr is None else q_arr
-        return Estimate(float(t), shown, np.full(self.robot.nv, float(self._n - 1)))
 
     def reset(self, t0: float, q0: Any, v0: Any = None, tau0: Any = None) -> Estimate:
         self.flush()
-        self._sm, self._first = self._new(), self._n
+        self._sm, self._first = self._new(), self._n  # no segment list: nothing is kept
         try:
             return self._keep(t0, q0, tau0)
         except Exception:

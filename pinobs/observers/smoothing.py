@@ -61,6 +61,10 @@ the longer the memory: 11 s at ``accel_psd`` = 1e-10 and σ = 1e-4 rad.
 ``lag``, so every estimate uses at least ``lag`` seconds of later samples and
 is available at most ``2 lag`` after its sample; a lag shorter than the
 memory gives a result between the filter's and the whole-log smoother's.
+:class:`Smoother` is the same loop fed one sample at a time (finished
+samples out as each window closes; :func:`streaming_smoother` builds one), so
+a log read as it goes (:func:`pinobs.io.smoothing.smooth_log`) never needs
+more than ``chunk + overlap`` samples' states.
 
 The observers that can be smoothed are those that keep an error-state
 Gaussian: ``ekf``, and ``adaptive`` through its model-based filter.  Another

@@ -7,7 +7,7 @@ pinobs play RESULT.npz [--html F] [--plot F]   watch a saved run
 pinobs demo                                    the main job on a built-in default
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
     [--force --map COL=NAME --topic T --noise STD]   (CSV/TSV, Parquet, NPZ, ROS bags)
-    [--smooth [--lag S] [--accel-psd P|auto]]             RTS smoother over the ekf, v_std0.. columns
+    [--smooth [--lag S|--chunk S] [--accel-psd P|auto]]   RTS smoother (ekf, adaptive), v_std0..
 pinobs estimate --robot R --observer O --log 'GLOB'|FOLDER --out-dir OUT   many logs on Dask
     [--workers N | --scheduler tcp://host:8786]          one estimates file per log, a summary table
 pinobs check ii --robot R                      I&I Assumption 1 on the model
@@ -552,53 +552,62 @@ def _psd_or_auto(text: str) -> float | str:
 
 
 def _estimate_smoothed(args: argparse.Namespace) -> int:
-    """``estimate --smooth``: the RTS smoother over the log; ``estimate``'s columns plus ``v_std0..``."""
-    from pinobs.observers.smoothing import smooth
+    """``estimate --smooth``: the RTS smoother over the log (read and screened as ``estimate``
+    reads it, written atomically by the io writer); ``estimate``'s columns plus ``v_std0..``."""
+    from pinobs.io.smoothing import smooth_log
 
-    robot = load(args.robot, root_joint=args.root_joint)
-    log = read_log(args.log, robot)
-    for line, reason in log.problems[: args.max_reports]:
-        print(f"{args.log}:{line}: {reason} (row used as a dropped sample)", file=sys.stderr)
-    if log.tau is None:
-        print(
-            "warning: the log has no torque columns: the smoother assumes zero torque",
-            file=sys.stderr,
-        )
     if args.noise is None:
         raise GainError(
             "--smooth needs --noise: the position noise standard deviation [rad or m], > 0"
         )
-    res = smooth(
-        robot,
-        log,
-        observer=args.observer,
-        noise_std=args.noise,
-        accel_psd=args.accel_psd,
-        lag=args.lag,
-    )
-    if args.accel_psd == "auto":
+    robot = load(args.robot, root_joint=args.root_joint)
+    try:
+        run, stretches = smooth_log(
+            args.log,
+            robot,
+            args.out,
+            observer=args.observer,
+            noise_std=args.noise,
+            accel_psd=args.accel_psd,
+            lag=args.lag,
+            chunk=args.chunk,
+            force=args.force,
+            columns=_column_map(args.map),
+            topic=args.topic,
+            rate=args.rate,
+        )
+    except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
+        print(f"pinobs: error: {exc}", file=sys.stderr)
+        return 2
+    for w in run.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    where = f"{args.log}:" if run.unit == "line" else f"{args.log}: {run.unit} "
+    for line, reason in run.bad_rows[: args.max_reports]:
+        print(f"{where}{line}: {reason}", file=sys.stderr)
+    if len(run.bad_rows) > args.max_reports:
         print(
-            f"accel_psd = {res.options['accel_psd']:g} rad²/s³ (chosen from the log)",
+            f"... and {len(run.bad_rows) - args.max_reports} more reported rows "
+            f"(--max-reports N to list more)",
             file=sys.stderr,
         )
-    header = [
-        "t",
-        *(f"q{i}" for i in range(robot.nq)),
-        *(f"v{i}" for i in range(robot.nv)),
-        *(f"v_std{i}" for i in range(robot.nv)),
-    ]
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(
-        out,
-        np.column_stack([res.t, res.q, res.v, res.v_std]),
-        delimiter=",",
-        header=",".join(header),
-        comments="",
-        fmt="%.17g",
-    )
+    for opts in stretches:
+        if args.accel_psd == "auto" and opts["accel_psd"] is not None:
+            print(
+                f"accel_psd = {opts['accel_psd']:g} rad²/s³ (chosen from the log)", file=sys.stderr
+            )
+        if "model_window" in opts:
+            print(
+                f"{args.observer}: learned model frozen per {opts['model_window']:g} s window "
+                f"(the model held at each window's end; regimes {'/'.join(opts['model_regimes'])})",
+                file=sys.stderr,
+            )
     mode = "whole log" if args.lag is None else f"lag {args.lag:g} s"
-    print(f"smoothed {args.observer} on {robot.name} ({mode}): {log.t.size} rows; wrote {out}")
+    if args.chunk is not None:
+        mode = f"chunks of {args.chunk:g} s"
+    print(f"smoothed {args.observer} on {robot.name} ({mode}): {run.summary()}; wrote {args.out}")
+    if run.estimated == 0:
+        print("pinobs: error: no row of the log could be smoothed", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -854,16 +863,25 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--smooth",
         action="store_true",
-        help="RTS smoother (uses the whole log); adds v_std0.. columns; needs --noise",
+        help="RTS smoother over ekf or adaptive (uses the whole log); adds v_std0.. columns; "
+        "needs --noise",
     )
     p.add_argument(
         "--lag", type=float, default=None, help="with --smooth: fixed-lag mode, S seconds"
     )
     p.add_argument(
+        "--chunk",
+        type=float,
+        default=None,
+        help="with --smooth: memory bound, backward passes over S seconds (+ overlap); "
+        "same result as the whole log to 1e-5 of v_std",
+    )
+    p.add_argument(
         "--accel-psd",
         type=_psd_or_auto,
-        default=1e-8,
-        help="with --smooth: process noise [rad²/s³], or 'auto' (chosen by likelihood); default %(default)s",
+        default=None,
+        help="with --smooth: process noise [rad²/s³], or 'auto' (chosen by likelihood); "
+        "default: the observer's (ekf 1e-8; adaptive: each window's regime)",
     )
     _add_cluster_options(
         p, "with --out-dir: local worker processes (0: this process; default: one per core)"

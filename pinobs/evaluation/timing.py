@@ -56,7 +56,10 @@ def measure_cost(
     tau = robot.gravity(q0)  # hold the start: light links do not fling off
     h = 1.0 / rate
     block = 1 + chunk * max(1, samples // (rounds * chunk))  # a warm-up call, whole chunks
-    meas, q, v = [], q0, vel  # the model's own motion (an outlier gate has nothing to reject)
+    # the model's own motion (an outlier gate has nothing to reject)
+    meas: list[Any] = []
+    q: Any = q0
+    v: Any = vel
     for _ in range(block):
         q, v = dynamics_rk4(robot, q, v, tau, h)
         meas.append(q)

@@ -55,6 +55,7 @@ class EstimateWriter:
         *,
         force: bool = False,
         inputs: Iterable[str | Path] = (),
+        extra_columns: Iterable[str] = (),
     ) -> None:
         self.path = Path(path)
         for src in inputs:
@@ -75,6 +76,7 @@ class EstimateWriter:
             "t",
             *(f"q{i}" for i in range(robot.nq)),
             *(f"v{i}" for i in range(robot.nv)),
+            *extra_columns,
         ]
         fd, tmp = tempfile.mkstemp(
             dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".part"
@@ -83,11 +85,12 @@ class EstimateWriter:
         self._fh = os.fdopen(fd, "wb")
         self._fh.write((",".join(self.columns) + "\n").encode())
 
-    def write(self, t: Vector, q: Vector, v: Vector) -> None:
-        """Append rows (``t`` (n,), ``q`` (n, nq), ``v`` (n, nv)); shortest round-trip floats."""
+    def write(self, t: Vector, q: Vector, v: Vector, *extra: Vector) -> None:
+        """Append rows (``t`` (n,), ``q`` (n, nq), ``v`` (n, nv), then the arrays of the
+        ``extra_columns``, e.g. ``v_std`` (n, nv)); shortest round-trip floats."""
         if not len(t):
             return
-        data = np.column_stack([t, q, v])
+        data = np.column_stack([t, q, v, *extra])
         try:
             import pyarrow as pa
             import pyarrow.csv as pa_csv

@@ -120,7 +120,25 @@ from pinobs.observers.ekf import ExtendedKalmanFilter, _LazyKernel
 from pinobs.observers.ekf import _State as _EKFState
 from pinobs.observers.kf import BankState, KFBank
 
-__all__ = ["AdaptiveEKF"]
+__all__ = ["AdaptiveEKF", "ModelSnapshot"]
+
+
+class ModelSnapshot(NamedTuple):
+    """The model-based filter's model as it stands (for :func:`pinobs.smooth`, which freezes it).
+
+    Attributes:
+        robot: the learned model (the nominal one before any install), a copy.
+        offset: the learned joint-torque offset added to ``tau`` [N·m or N].
+        regime: ``"warmup"``, ``"nominal"`` or ``"learned"`` (module docstring).
+        accel_psd: that regime's white-acceleration density [rad²/s³].
+        disturbance_psd: that regime's offset density per joint, ``psd · M̄ᵢᵢ²`` [N²·m²/s].
+    """
+
+    robot: Robot
+    offset: Vector
+    regime: str
+    accel_psd: float
+    disturbance_psd: Vector
 
 
 class _State(NamedTuple):
@@ -366,8 +384,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     """
 
     name = "adaptive"
-    #: not for :func:`pinobs.smooth` (yet): its model changes between re-solves
-    smoothable = False
+    #: :func:`pinobs.smooth` smooths its model-based filter, the learned model frozen per window
+    smoothable = True
     summary = "EKF that identifies its model online, blended with kf: never behind it (model-based)"
 
     def __init__(
@@ -477,6 +495,13 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     def learned_robot(self) -> Robot:
         """A :class:`Robot` carrying the current estimate (friction included; the nominal one before the first solve)."""
         return self._learned.copy()
+
+    def snapshot(self) -> ModelSnapshot:
+        """The learned model, offset and regime densities now (read only: the filter is unchanged)."""
+        accel, dist = self._regimes[self.regime]
+        return ModelSnapshot(
+            self.robot.copy(), self._offset.copy(), self.regime, accel, dist * self._m_bar2
+        )
 
     def parameters(self) -> ParameterSet:
         """The learned parameters with names and standard deviations (nominal before the first solve)."""

@@ -43,7 +43,8 @@ Measured on 3 s logs (``benchmarks/smoothing.py``, README): it picks
 1e-10 to 1e-8 on a UR5 and 1e-11 to 1e-9 on a Panda (σ = 1e-4 and 1e-3),
 and the ±2σ band then covers the truth at 95–98 % of samples on the seed-0
 logs, 88–100 % on seeds 1–3 (one log holds few independent values of a
-slowly varying error); at the default 1e-8 it covers 98.5 % (UR5, σ = 1e-4,
+slowly varying error; README: on 3 s at σ = 1e-3 the likelihood cannot
+resolve densities below 1e-8, on 10 s logs it picks 1e-11); at the default 1e-8 it covers 98.5 % (UR5, σ = 1e-4,
 seed 0) with an RMS 1.9× larger.  On short logs the choice is larger, so
 conservative (0.7 s, UR5, σ = 1e-4: 1e-7).
 
@@ -60,21 +61,49 @@ the longer the memory: 11 s at ``accel_psd`` = 1e-10 and σ = 1e-4 rad.
 ``lag``, so every estimate uses at least ``lag`` seconds of later samples and
 is available at most ``2 lag`` after its sample; a lag shorter than the
 memory gives a result between the filter's and the whole-log smoother's.
+:class:`Smoother` is the same loop fed one sample at a time (finished
+samples out as each window closes; :func:`streaming_smoother` builds one), so
+a log read as it goes (:func:`pinobs.io.smoothing.smooth_log`) never needs
+more than ``chunk + overlap`` samples' states.
 
 The observers that can be smoothed are those that keep an error-state
-Gaussian: ``ekf`` now.  Another family qualifies by offering the same
-methods (:class:`SmoothableFilter`: ``_initial_state``, ``_predict``
-returning ``Φ``, ``_correct``) and a state with ``q``, ``v``, ``P`` (and
-optionally ``d``); an adaptive EKF whose model is learned online would be
-smoothed with its model as it was at each step (not yet: that observer does
-not exist in this tree).
+Gaussian: ``ekf``, and ``adaptive`` through its model-based filter.  Another
+family qualifies by offering the same methods (:class:`SmoothableFilter`:
+``_initial_state``, ``_predict`` returning ``Φ``, ``_correct``) and a state
+with ``q``, ``v``, ``P`` (and optionally ``d``).
+
+``adaptive`` learns its model online, so its causal steps are not one model's
+filter.  The smoother runs it causally once over the log (the learning pass,
+unchanged), keeps the model it holds at the end of each ``model_window``
+(default its ``horizon``, 10 s: :meth:`AdaptiveEKF.snapshot`: learned
+dynamics, torque offset, the regime's two densities), then smooths the EKF
+with the offset state (``δq, δv, δd``) in which each window's samples are
+predicted with *that window's end model*.  Chosen over the model the causal
+pass held at each step because a window's end model was fitted on the
+window's own samples (the learner keeps the last ``horizon`` seconds of
+rows), so it is the best model the log offers for them, and the early
+samples the causal pass ran with the nominal model (or in its warm-up) get
+the learned one; within a window the model is one, so the backward pass is
+that model's exact extended RTS smoother, and at a window boundary ``d``
+absorbs the switch.  The blend with the model-free ``kf`` is not smoothed
+(the output is the model-based smoother's).  ``accel_psd`` given replaces
+every window's density and scales the offset's with it; ``"auto"`` chooses it
+by the likelihood rule below on the frozen-model filter (the learning pass
+runs once).  Measured (``benchmarks/smoothing.py``, 12 s logs of
+``benchmarks/learning.py``'s model-error scenarios, σ = 1e-4, seed 1): the
+regimes' own densities are the likelihood's choice, the RMS falls 4.1–5.6×
+below causal ``adaptive`` (README), but the ±2σ band is too wide, covering
+96.8–100 % of samples (99.8–100 % but under friction): the learned model's
+error is smooth in time, not the white noise the densities stand for, so the
+band is conservative, not calibrated.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal, NamedTuple, Protocol, cast
 
 import numpy as np
@@ -83,7 +112,9 @@ from numpy.typing import ArrayLike
 from pinobs.errors import DimensionError, GainError, NonFiniteError, OptionError, TimestampError
 from pinobs.model import Robot
 from pinobs.model.robot import read_only
+from pinobs.observers.adaptive import AdaptiveEKF, ModelSnapshot
 from pinobs.observers.base import Vector, make_observer, observer_class, observer_names, positive
+from pinobs.observers.ekf import ExtendedKalmanFilter
 
 __all__ = [
     "CHUNK_TOL",
@@ -93,9 +124,11 @@ __all__ = [
     "LogLike",
     "SmoothableFilter",
     "Smoothed",
+    "Smoother",
     "default_overlap",
     "select_accel_psd",
     "smooth",
+    "streaming_smoother",
 ]
 
 #: Default white-acceleration density of the smoothed filter [rad²/s³] (module docstring).
@@ -165,9 +198,10 @@ class _Step(NamedTuple):
 
 
 def _forward(
-    filt: SmoothableFilter, t: Vector, q: Vector, tau: Vector, good: Vector, k0: int
+    filt: SmoothableFilter, rows: Iterator[tuple[float, Vector | None, Vector]], k0: int
 ) -> Iterator[tuple[int, Any | None, Vector | None, Any, float]]:
-    """The filter over a log from its first good sample (``k0`` in the caller's numbering).
+    """The filter over a log's rows ``(t, q or None, tau)`` from its first good sample
+    (``k0`` in the caller's numbering); pulls one row per value yielded.
 
     Yields ``(k, x⁻_k, Φ_{k−1}, x⁺_k, log N(e_k; 0, S_k))`` (``None, None, ·, 0``
     at ``k = 0``; ``x⁺_k = x⁻_k`` and 0 at a dropped sample), where
@@ -178,13 +212,16 @@ def _forward(
     model = filt.robot
     nv = model.nv
     meas_var = cast(Any, filt).gains.meas_std ** 2
-    state = filt._initial_state(model.check_configuration(q[0], what=f"q[{k0}]"), np.zeros(nv))
+    t_prev, q0, tau_prev = next(rows)
+    if q0 is None:
+        raise NonFiniteError(f"sample {k0} has no configuration; the smoother starts on one")
+    state = filt._initial_state(model.check_configuration(q0, what=f"q[{k0}]"), np.zeros(nv))
     yield 0, None, None, state, 0.0
-    for k in range(1, t.size):
-        pred, Phi = filt._predict(state, float(t[k] - t[k - 1]), tau[k - 1])
+    for k, (t, q, tau) in enumerate(rows, start=1):
+        pred, Phi = filt._predict(state, float(t - t_prev), tau_prev)
         ll = 0.0
-        if good[k]:
-            q_meas = model.check_configuration(q[k], what=f"q[{k0 + k}]")
+        if q is not None:
+            q_meas = model.check_configuration(q, what=f"q[{k0 + k}]")
             e = model.difference(pred.q, q_meas)
             chol = np.linalg.cholesky(pred.P[:nv, :nv] + meas_var * np.eye(nv))
             z = np.linalg.solve(chol, e)
@@ -192,7 +229,86 @@ def _forward(
             state = filt._correct(pred, q_meas)
         else:
             state = pred
+        t_prev, tau_prev = t, tau
         yield k, pred, Phi, state, ll
+
+
+def _rows(
+    t: Vector, q: Vector, tau: Vector, good: Vector
+) -> Iterator[tuple[float, Vector | None, Vector]]:
+    return ((float(t[k]), q[k] if good[k] else None, tau[k]) for k in range(t.size))
+
+
+class _Fed:
+    """An iterator over a queue the caller fills before each pull (push-driven :func:`_forward`)."""
+
+    def __init__(self) -> None:
+        self.queue: deque[tuple[float, Vector | None, Vector]] = deque()
+
+    def __iter__(self) -> _Fed:
+        return self
+
+    def __next__(self) -> tuple[float, Vector | None, Vector]:
+        if not self.queue:
+            raise StopIteration
+        return self.queue.popleft()
+
+
+class Smoother:
+    """The smoother fed one sample at a time (what :func:`smooth` runs on arrays).
+
+    :meth:`push` runs the filter one step and, each time ``chunk + overlap``
+    samples are buffered, the backward pass over them, returning the first
+    ``chunk`` samples smoothed; :meth:`close` smooths the rest.  Memory: the
+    buffered samples' states.  Samples are numbered from 0 (the first pushed,
+    which must carry a configuration); each result is
+    ``(k, q^s_k, v^s_k, var v^s_k)``, in order.
+
+    Args:
+        filt: the filter (a :class:`SmoothableFilter`).
+        chunk, overlap: in samples (``chunk=None``: everything at :meth:`close`).
+    """
+
+    def __init__(self, filt: SmoothableFilter, chunk: int | None, overlap: int) -> None:
+        self._fed = _Fed()
+        self._gen = _forward(filt, self._fed, 0)
+        self._model = filt.robot
+        self._chunk, self._over = chunk, overlap
+        self._buf: list[_Step] = []
+        self._start = 0
+        self.log_likelihood = 0.0
+
+    def push(
+        self, t: float, q: Vector | None, tau: Vector
+    ) -> list[tuple[int, Vector, Vector, Vector]]:
+        """One sample: ``t`` [s], measured ``q`` (``None``: dropped), ``tau`` held from ``t``."""
+        self._fed.queue.append((t, q, tau))
+        _, pred, Phi, state, ll = next(self._gen)
+        self.log_likelihood += ll
+        if pred is not None:
+            self._buf[-1] = _Step(self._buf[-1].filt, pred, Phi)
+        self._buf.append(_Step(state, None, None))
+        if self._chunk is not None and len(self._buf) == self._chunk + self._over:
+            return self._back(self._chunk)
+        return []
+
+    def close(self) -> list[tuple[int, Vector, Vector, Vector]]:
+        """Smooth the samples still buffered (the log's end: no later samples)."""
+        return self._back(len(self._buf)) if self._buf else []
+
+    def _back(self, keep: int) -> list[tuple[int, Vector, Vector, Vector]]:
+        nv = self._model.nv
+        out: list[tuple[int, Vector, Vector, Vector]] = []
+
+        def emit(i: int, qs: Vector, vs: Vector, var: Vector) -> None:
+            if i < keep:
+                out.append((self._start + i, qs, vs, var[nv : 2 * nv]))
+
+        _backward(self._model, self._buf, emit)
+        del self._buf[:keep]
+        self._start += keep
+        out.reverse()
+        return out
 
 
 def _plain(state: Any) -> Vector:
@@ -226,19 +342,34 @@ def _backward(
         emit(i, q_s, x_s[:nv], np.diag(P_s))
 
 
-def default_overlap(accel_psd: float, meas_std: float, dt: float, tol: float = CHUNK_TOL) -> float:
+def default_overlap(
+    accel_psd: float,
+    meas_std: float,
+    dt: float,
+    tol: float = CHUNK_TOL,
+    *,
+    disturbance_psd: float | None = None,
+) -> float:
     """The overlap [s] after which a window's start-up error has decayed to ``tol`` of ``v_std``.
 
     The filter of a double integrator with white acceleration ``q_w``
     [rad²/s³] measured with noise ``σ`` [rad] every ``h`` [s] (a noise
     density ``r = σ² h``) has the bandwidth ``ω = (q_w / r)^{1/4}`` [rad/s]
     and the poles ``ω e^{±3iπ/4}`` (damping 1/√2); the smoother's backward recursion forgets its end condition at the
-    same rate ``ω/√2``, hence ``overlap = √2 ln(1/tol) / ω``.  A robot's
-    dynamics shift the poles little at the gains where this matters (tested
-    against the whole-log smoother: :mod:`tests.observers.test_smoothing`).
+    same rate ``ω/√2``, hence ``overlap = √2 ln(1/tol) / ω``.  With the EKF's
+    torque-offset state (``disturbance_psd`` ``q_d`` [rad²/s⁵], a random walk
+    acting as an acceleration) the slowest mode is that of a triple
+    integrator: bandwidth ``ω_d = (q_d / r)^{1/6}``, third-order Butterworth
+    poles, the slowest decaying at ``ω_d/2``, hence ``2 ln(1/tol) / ω_d``; the
+    overlap is the longer of the two.  A robot's dynamics shift the poles
+    little at the gains where this matters (tested against the whole-log
+    smoother: :mod:`tests.observers.test_smoothing`).
     """
-    omega = (accel_psd / (meas_std**2 * dt)) ** 0.25
-    return math.sqrt(2.0) * math.log(1.0 / tol) / omega
+    r = meas_std**2 * dt
+    overlap = math.sqrt(2.0) * math.log(1.0 / tol) / (accel_psd / r) ** 0.25
+    if disturbance_psd is not None:
+        overlap = max(overlap, 2.0 * math.log(1.0 / tol) / (disturbance_psd / r) ** (1.0 / 6.0))
+    return overlap
 
 
 def _samples(seconds: float, dt: float, what: str) -> int:
@@ -312,29 +443,119 @@ def _smoothable(cls: type) -> bool:
     )
 
 
-def _make_filter(
+class _FrozenModels:
+    """``adaptive``'s model-based filter replayed with its learned model frozen per window.
+
+    ``snapshots[j]`` is the model (:class:`~pinobs.observers.adaptive.ModelSnapshot`)
+    the causal pass held at the end of window ``j``; the prediction from sample
+    ``k`` uses ``snapshots[which[k]]``: its dynamics, its torque offset (added to
+    ``tau``) and its regime's densities (``accel_psd`` replaced by the smoother's
+    when given).  The torque-offset state ``d`` carries over a model switch (it
+    is a random walk, so the backward pass sees the switch as a step it absorbs).
+    """
+
+    def __init__(
+        self,
+        ekf: ExtendedKalmanFilter,
+        snapshots: Sequence[ModelSnapshot],
+        which: Vector,
+        accel_psd: float | None,
+    ) -> None:
+        self._ekf, self._snaps, self._which, self._accel = ekf, snapshots, which, accel_psd
+        self._k, self._j = 0, -1
+        self.robot = ekf.robot
+
+    @property
+    def gains(self) -> Any:
+        return self._ekf.gains
+
+    @property
+    def options(self) -> dict[str, Any]:
+        return self._ekf.options
+
+    def _use(self, state: Any, j: int) -> Any:
+        snap = self._snaps[j]
+        self._ekf._replace_robot(snap.robot)
+        scale = 1.0 if self._accel is None else self._accel / snap.accel_psd
+        self._ekf.gains = replace(self._ekf.gains, accel_psd=scale * snap.accel_psd)
+        self._j, self.robot = j, snap.robot
+        return state._replace(d_psd=scale * snap.disturbance_psd)
+
+    def _initial_state(self, q0: Vector, v0: Vector) -> Any:
+        self._k, self._j = 0, -1
+        state = self._ekf._initial_state(q0, v0)
+        return self._use(state, int(self._which[0]))
+
+    def _predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]:
+        j = int(self._which[self._k])
+        if j != self._j:
+            state = self._use(state, j)
+        self._k += 1
+        return self._ekf._predict(state, dt, tau + self._snaps[j].offset)
+
+    def _correct(self, state: Any, q_meas: Vector) -> Any:
+        return self._ekf._correct(state, q_meas)
+
+
+def _learn(
     robot: Robot,
-    observer: str,
+    t: Vector,
+    q: Vector,
+    tau: Vector,
+    good: Vector,
     noise_std: float | None,
-    accel_psd: float,
-    disturbance_psd: float | None,
-    filter_options: Mapping[str, Any] | None,
-) -> SmoothableFilter:
-    if not _smoothable(observer_class(observer)):
-        smoothable = [n for n in observer_names() if _smoothable(observer_class(n))]
-        raise OptionError(
-            f"observer {observer!r} keeps no error-state covariance to smooth; "
-            f"smoothable: {smoothable}"
-        )
-    filt = make_observer(
-        observer,
-        robot,
-        noise_std=noise_std,
-        accel_psd=accel_psd,
-        disturbance_psd=disturbance_psd,
-        **dict(filter_options or {}),
+    options: Mapping[str, Any],
+    model_window: float | None,
+) -> tuple[Callable[[float | None], _FrozenModels], dict[str, Any]]:
+    """The causal ``adaptive`` over the log (from its first good sample), its model kept per window.
+
+    Returns a maker of the frozen-model filter (given an ``accel_psd`` or ``None``:
+    each window's regime density) and the options to report.
+    """
+    dt = float(np.median(np.diff(t)))
+    obs = cast(
+        AdaptiveEKF, make_observer("adaptive", robot, noise_std=noise_std, rate=1.0 / dt, **options)
     )
-    return cast(SmoothableFilter, filt)
+    window = float(obs.options["horizon"] if model_window is None else model_window)
+    positive("model_window", window)
+    which = ((t - t[0]) // window).astype(int)
+    which[0] = which[1]  # sample 0 is never a window of its own (nothing learned before it)
+    which = np.unique(which, return_inverse=True)[1].astype(float)  # empty windows (gaps) dropped
+    obs.reset(float(t[0]), q[0], None, tau[0])
+    snapshots: list[ModelSnapshot] = []
+    for k in range(1, t.size):
+        obs.update(float(t[k]), q[k] if good[k] else None, tau[k])
+        if k == t.size - 1 or which[k + 1] != which[k]:
+            snapshots.append(obs.snapshot())  # the model held at the window's last sample
+    opts = obs.options
+    ekf = ExtendedKalmanFilter(
+        snapshots[0].robot,
+        accel_psd=snapshots[0].accel_psd,
+        q0_std=opts["q0_std"],
+        v0_std=opts["v0_std"],
+        disturbance_psd=1.0,  # the state gets each window's own density (_FrozenModels._use)
+        d0_std=obs.d0_std,
+        outlier_probability=opts["outlier_probability"],
+        noise_std=noise_std,
+    )
+    densities = {
+        "warmup": opts["disturbance_psd"],
+        "nominal": opts["validated_disturbance_psd"],
+        "learned": opts["learned_disturbance_psd"],
+    }
+    report = {
+        **opts,
+        "model_window": window,
+        "model_regimes": [s.regime for s in snapshots],
+        "model_accel_psd": [s.accel_psd for s in snapshots],
+        # (accel_psd [rad²/s³], offset density [rad²/s⁵]) of each window's regime
+        "model_densities": [(s.accel_psd, densities[s.regime]) for s in snapshots],
+    }
+
+    def make(accel_psd: float | None) -> _FrozenModels:
+        return _FrozenModels(ekf, snapshots, which, accel_psd)
+
+    return make, report
 
 
 def _first_good(q: Vector) -> tuple[int, Vector]:
@@ -356,6 +577,7 @@ def select_accel_psd(
     observer: str = "ekf",
     disturbance_psd: float | None = None,
     filter_options: Mapping[str, Any] | None = None,
+    model_window: float | None = None,
 ) -> float:
     """The largest ``accel_psd`` [rad²/s³] of ``grid`` the log does not reject.
 
@@ -368,23 +590,173 @@ def select_accel_psd(
     ``ℓ`` keeps rising, ever more slowly, as ``accel_psd → 0`` (a smoother
     that claims a perfect model is overconfident), so the maximiser is the
     grid's lower end and says nothing.  Uses no ground truth.  Costs one
-    forward pass per candidate (no backward pass).
+    forward pass per candidate (no backward pass).  For ``adaptive`` the
+    candidate replaces every window's ``accel_psd`` of the frozen-model
+    filter (:func:`smooth`; the learning pass runs once).
 
     Raises:
         GainError: an empty grid, a non-positive candidate or threshold.
     """
+    t, q, tau = _log_arrays(robot, log)
+    k0, good = _first_good(q)
+    make = _filter_maker(
+        robot,
+        observer,
+        (t[k0:], q[k0:], tau[k0:], good),
+        noise_std,
+        disturbance_psd,
+        filter_options,
+        model_window,
+    )[0]
+    return _select(make, (t[k0:], q[k0:], tau[k0:], good), k0, grid, threshold)
+
+
+def _select(
+    make: Callable[[float | None], SmoothableFilter],
+    arrays: tuple[Vector, Vector, Vector, Vector],
+    k0: int,
+    grid: Sequence[float],
+    threshold: float,
+) -> float:
+    """:func:`select_accel_psd` on checked arrays (from the first good sample) and a filter maker."""
     candidates = sorted(float(positive("grid value", g) or 0.0) for g in grid)
     if not candidates:
         raise GainError("grid is empty; give accel_psd candidates > 0 [rad²/s³]")
     positive("threshold", threshold)
-    t, q, tau = _log_arrays(robot, log)
-    k0, good = _first_good(q)
-    lls = []
-    for psd in candidates:
-        filt = _make_filter(robot, observer, noise_std, psd, disturbance_psd, filter_options)
-        lls.append(sum(ll for *_, ll in _forward(filt, t[k0:], q[k0:], tau[k0:], good, k0)))
+    lls = [sum(ll for *_, ll in _forward(make(psd), _rows(*arrays), k0)) for psd in candidates]
     best = max(lls)
     return max(p for p, ll in zip(candidates, lls, strict=True) if ll >= best - threshold)
+
+
+def _filter_maker(
+    robot: Robot,
+    observer: str,
+    arrays: tuple[Vector, Vector, Vector, Vector],
+    noise_std: float | None,
+    disturbance_psd: float | None,
+    filter_options: Mapping[str, Any] | None,
+    model_window: float | None,
+) -> tuple[Callable[[float | None], SmoothableFilter], dict[str, Any]]:
+    """``make(accel_psd)`` -> the filter the smoother runs (``None``: the observer's own density),
+    and the options to report beyond the filter's (``adaptive``: after its learning pass)."""
+    cls = observer_class(observer)
+    if not _smoothable(cls):
+        smoothable = [n for n in observer_names() if _smoothable(observer_class(n))]
+        raise OptionError(
+            f"observer {observer!r} keeps no error-state covariance to smooth; "
+            f"smoothable: {smoothable}"
+        )
+    if issubclass(cls, AdaptiveEKF):
+        if disturbance_psd is not None:
+            raise OptionError(
+                f"disturbance_psd={disturbance_psd!r}: adaptive's densities are its regimes' "
+                "(give them in filter_options: disturbance_psd, learned_disturbance_psd, ...)"
+            )
+        t, q, tau, good = arrays
+        return _learn(robot, t, q, tau, good, noise_std, dict(filter_options or {}), model_window)
+    if model_window is not None:
+        raise OptionError(
+            f"model_window={model_window!r} is for a filter that learns its model (adaptive), "
+            f"not {observer!r}"
+        )
+
+    def make(accel_psd: float | None) -> SmoothableFilter:
+        extra = {} if accel_psd is None else {"accel_psd": accel_psd}
+        return cast(
+            SmoothableFilter,
+            make_observer(
+                observer,
+                robot,
+                noise_std=noise_std,
+                disturbance_psd=disturbance_psd,
+                **extra,
+                **dict(filter_options or {}),
+            ),
+        )
+
+    return make, {}
+
+
+def _windows(
+    filt: SmoothableFilter,
+    extra: Mapping[str, Any],
+    accel_psd: float | str | None,
+    chunk: float | None,
+    overlap: float | None,
+    lag: float | None,
+    dt: float,
+) -> tuple[int | None, int]:
+    """``(chunk, overlap)`` in samples of ``dt`` [s] (``(None, 0)``: the whole log at once)."""
+    if lag is not None and (chunk is not None or overlap is not None):
+        raise OptionError(
+            f"lag={lag!r} sets the chunk and the overlap; give lag alone, or chunk and overlap"
+        )
+    if lag is not None:
+        n = _samples(lag, dt, "lag")
+        return n, n
+    if chunk is None:
+        if overlap is not None:
+            positive("overlap", overlap)
+        return None, 0
+    if overlap is None:  # the longest memory: the smallest densities (adaptive: any window's)
+        gains = cast(Any, filt).gains
+        pairs = extra.get("model_densities") or [(gains.accel_psd, cast(Any, filt).disturbance_psd)]
+        if isinstance(accel_psd, float):  # it replaces each window's, the offset's scaled
+            pairs = [(accel_psd, None if d is None else d * accel_psd / a) for a, d in pairs]
+        overlap = max(default_overlap(a, gains.meas_std, dt, disturbance_psd=d) for a, d in pairs)
+    return _samples(chunk, dt, "chunk"), _samples(overlap, dt, "overlap")
+
+
+def streaming_smoother(
+    robot: Robot,
+    *,
+    dt: float,
+    observer: str = "ekf",
+    noise_std: float | None = None,
+    accel_psd: float | None = None,
+    disturbance_psd: float | None = None,
+    chunk: float | None = None,
+    overlap: float | None = None,
+    lag: float | None = None,
+    filter_options: Mapping[str, Any] | None = None,
+) -> tuple[Callable[[], Smoother], dict[str, Any]]:
+    """A maker of :class:`Smoother` for a log read as it goes (memory bounded by ``chunk`` or
+    ``lag``), and the options to report; the arguments as :func:`smooth`, ``dt`` the
+    nominal sample period [s] (the chunks are counted in samples of it).
+
+    Not for ``accel_psd="auto"`` or ``adaptive``: both pass over the log more than once.
+
+    Raises:
+        OptionError: those two, or neither ``chunk`` nor ``lag`` (the whole log is not a stream).
+    """
+    cls = observer_class(observer)
+    if accel_psd == "auto" or issubclass(cls, AdaptiveEKF) or (chunk is None and lag is None):
+        raise OptionError(
+            f"a streamed smoother needs chunk or lag, a given accel_psd and a filter with one "
+            f"model (got observer={observer!r}, accel_psd={accel_psd!r}, chunk={chunk!r}, "
+            f"lag={lag!r}); use smooth() on the whole log"
+        )
+    positive("dt", dt)
+    empty = np.empty(0)
+    make, extra = _filter_maker(
+        robot,
+        observer,
+        (empty, empty, empty, empty),
+        noise_std,
+        disturbance_psd,
+        filter_options,
+        None,
+    )
+    filt = make(accel_psd)
+    n_chunk, n_over = _windows(filt, extra, accel_psd, chunk, overlap, lag, dt)
+    opts = {
+        **cast(Any, filt).options,
+        "observer": observer,
+        "chunk": None if n_chunk is None else n_chunk * dt,
+        "overlap": n_over * dt if n_over else None,
+        "lag": lag,
+    }
+    return (lambda: Smoother(make(accel_psd), n_chunk, n_over)), opts
 
 
 def smooth(
@@ -393,17 +765,18 @@ def smooth(
     *,
     observer: str = "ekf",
     noise_std: float | None = None,
-    accel_psd: float | Literal["auto"] = DEFAULT_ACCEL_PSD,
+    accel_psd: float | Literal["auto"] | None = None,
     disturbance_psd: float | None = None,
     chunk: float | None = None,
     overlap: float | None = None,
     lag: float | None = None,
+    model_window: float | None = None,
     filter_options: Mapping[str, Any] | None = None,
 ) -> Smoothed:
     """Fixed-interval RTS smoothing of a log on the manifold (module docstring for the equations).
 
     Args:
-        robot: the model (the filter's process model).
+        robot: the model (the filter's process model; ``adaptive``'s nominal model).
         log: ``(t, q)`` or ``(t, q, tau)`` arrays, or an object with ``t``,
             ``q``, ``tau`` attributes (:class:`pinobs.simulation.Log`; a
             :class:`pinobs.Result` is read through its ``q_meas``): times [s] ``(N,)`` strictly increasing;
@@ -412,13 +785,16 @@ def smooth(
             before the first good one get NaN); torques applied from each
             sample on [N·m or N] ``(N, nv)`` (zero-order hold, MATH §7;
             ``None``: zero).
-        observer: the filter smoothed (``"ekf"``; see :class:`SmoothableFilter`).
+        observer: the filter smoothed: ``"ekf"``, or ``"adaptive"`` (its learned
+            model frozen per ``model_window``: module docstring).
         noise_std: position noise standard deviation [rad or m].
-        accel_psd: white-acceleration density of the filter [rad²/s³]
-            (default :data:`DEFAULT_ACCEL_PSD`, the ekf's), or ``"auto"``:
+        accel_psd: white-acceleration density of the filter [rad²/s³];
+            ``None``: the observer's own (``ekf``: :data:`DEFAULT_ACCEL_PSD`;
+            ``adaptive``: each window's regime's); ``"auto"``:
             :func:`select_accel_psd` on this log (calibrated ``v_std``;
             costs one forward pass per grid value; module docstring).
-        disturbance_psd: the EKF's joint-torque offset density [rad²/s⁵], or ``None``.
+        disturbance_psd: the EKF's joint-torque offset density [rad²/s⁵], or ``None``
+            (not for ``adaptive``: its regimes set it).
         chunk: memory bound: the backward pass runs on windows of ``chunk``
             seconds (``None``: the whole log at once).
         overlap: seconds of later samples each window's backward pass starts
@@ -426,78 +802,64 @@ def smooth(
             smoother to :data:`CHUNK_TOL` of ``v_std``).
         lag: fixed-lag mode [s]: chunks of ``lag`` with ``lag`` of overlap
             (exclusive with ``chunk`` and ``overlap``).
-        filter_options: further options of the filter (``q0_std``, ``v0_std``, ...).
+        model_window: ``adaptive`` only: the window [s] over which its learned model
+            is frozen (default: its ``horizon``, 10 s: module docstring).
+        filter_options: further options of the filter (``q0_std``, ``v0_std``, ...;
+            for ``adaptive``, those of its causal learning pass).
 
     Raises:
-        UnknownNameError, OptionError: ``observer`` is unknown or cannot be smoothed.
-        GainError: a non-positive ``chunk``, ``overlap`` or ``lag``, or a bad filter option.
+        UnknownNameError, OptionError: ``observer`` is unknown or cannot be smoothed,
+            or an option it does not take.
+        GainError: a non-positive ``chunk``, ``overlap``, ``lag`` or ``model_window``,
+            or a bad filter option.
         DimensionError, TimestampError, NonFiniteError: malformed log arrays.
     """
     if lag is not None and (chunk is not None or overlap is not None):
         raise OptionError(
             f"lag={lag!r} sets the chunk and the overlap; give lag alone, or chunk and overlap"
         )
-    t_all, q_all, tau_all = _log_arrays(robot, log)
-    if accel_psd == "auto":
-        if noise_std is None:
-            raise GainError("accel_psd='auto' needs noise_std [rad or m], > 0")
-        accel_psd = select_accel_psd(
-            robot,
-            (t_all, q_all, tau_all),
-            noise_std=noise_std,
-            observer=observer,
-            disturbance_psd=disturbance_psd,
-            filter_options=filter_options,
-        )
-    elif isinstance(accel_psd, str):
+    if isinstance(accel_psd, str) and accel_psd != "auto":
         raise GainError(f"accel_psd={accel_psd!r}: give a number > 0 [rad²/s³] or 'auto'")
-    filt = _make_filter(robot, observer, noise_std, accel_psd, disturbance_psd, filter_options)
+    if accel_psd == "auto" and noise_std is None:
+        raise GainError("accel_psd='auto' needs noise_std [rad or m], > 0")
+    t_all, q_all, tau_all = _log_arrays(robot, log)
+    k0, good = _first_good(q_all)
+    arrays = (t_all[k0:], q_all[k0:], tau_all[k0:], good)
+    make, extra = _filter_maker(
+        robot, observer, arrays, noise_std, disturbance_psd, filter_options, model_window
+    )
+    if accel_psd == "auto":
+        accel_psd = _select(make, arrays, k0, DEFAULT_GRID, LIKELIHOOD_MARGIN)
+    filt = make(None if isinstance(accel_psd, str) else accel_psd)
     model = filt.robot
     nv = model.nv
     dt = float(np.median(np.diff(t_all)))
-    if lag is not None:
-        n_chunk = n_over = _samples(lag, dt, "lag")
-    elif chunk is not None:
-        n_chunk = _samples(chunk, dt, "chunk")
-        if overlap is None:
-            gains = cast(Any, filt).gains
-            overlap = default_overlap(gains.accel_psd, gains.meas_std, dt)
-        n_over = _samples(overlap, dt, "overlap")
-    else:
-        if overlap is not None:
-            positive("overlap", overlap)
-        n_chunk, n_over = t_all.size, 0
+    n_chunk, n_over = _windows(filt, extra, accel_psd, chunk, overlap, lag, dt)
+    n_chunk = t_all.size if n_chunk is None else n_chunk
     out_q = np.full((t_all.size, model.nq), np.nan)
     out_v = np.full((t_all.size, nv), np.nan)
     out_var = np.full((t_all.size, nv), np.nan)
-    k0, good = _first_good(q_all)
-    t_arr, q_arr, tau_arr = t_all[k0:], q_all[k0:], tau_all[k0:]
-    n = t_arr.size
+    smoother = Smoother(filt, None if n_over == 0 else n_chunk, n_over)
 
-    loglik = 0.0
-    buf: list[_Step] = []
-    start = 0  # sample index of buf[0]
+    def keep(done: list[tuple[int, Vector, Vector, Vector]]) -> None:
+        for k, qs, vs, var in done:
+            out_q[k0 + k], out_v[k0 + k], out_var[k0 + k] = qs, vs, var
 
-    def emit(i: int, qs: Vector, vs: Vector, var: Vector) -> None:
-        if i < n_chunk or start + len(buf) == n:
-            k = k0 + start + i
-            out_q[k], out_v[k], out_var[k] = qs, vs, var[nv : 2 * nv]
-
-    for k, pred, Phi, state, ll in _forward(filt, t_arr, q_arr, tau_arr, good, k0):
-        loglik += ll
-        if pred is not None:
-            buf[-1] = _Step(buf[-1].filt, pred, Phi)
-        buf.append(_Step(state, None, None))
-        if len(buf) == n_chunk + n_over or k == n - 1:
-            _backward(model, buf, emit)
-            del buf[: min(n_chunk, len(buf))]
-            start += n_chunk
+    for row in _rows(*arrays):
+        keep(smoother.push(*row))
+    keep(smoother.close())
+    loglik = smoother.log_likelihood
     if not (np.all(np.isfinite(out_v[k0:])) and np.all(np.isfinite(out_var[k0:]))):
         raise NonFiniteError(
             "the smoothed estimate is not finite; check the model, the torques and noise_std"
         )
     opts = {
         **cast(Any, filt).options,
+        **extra,
+        # adaptive without a given density: each window's regime's (extra["model_accel_psd"])
+        "accel_psd": accel_psd
+        if isinstance(accel_psd, float)
+        else (None if extra else cast(Any, filt).gains.accel_psd),
         "observer": observer,
         "chunk": None if chunk is None and lag is None else n_chunk * dt,
         "overlap": n_over * dt if n_over else None,

@@ -212,7 +212,7 @@ def test_likelihood_choice_of_accel_psd_is_the_largest_the_data_do_not_reject(ur
 def test_bad_inputs_are_rejected_with_what_would_be_valid(ur5_log) -> None:
     robot = cached_robot("ur5")
     t, q, tau = ur5_log.t, ur5_log.q_meas, ur5_log.tau
-    with pytest.raises(OptionError, match="smoothable: \\['ekf'\\]"):
+    with pytest.raises(OptionError, match="smoothable: \\['adaptive', 'ekf'\\]"):
         smooth(robot, (t, q, tau), observer="kf")
     with pytest.raises(OptionError, match="give lag alone"):
         smooth(robot, (t, q, tau), lag=0.1, chunk=0.2)
@@ -235,8 +235,9 @@ def test_smoother_targets_on_exact_model_logs(name: str, sigma: float) -> None:
     RMS ≥ 3× below the causal ekf (default options), ±2σ covers 90–98 %.
 
     Seed 0 is the log the README's table reports (measured 3.1–10.3×, 95.4–97.6 %).
-    Not every log meets them: on seeds 1–3 (README, "Other logs") the ratio is
-    2.4–7.7× (UR5 at σ = 1e-3 below 3× on all three) and one log's coverage
+    Not every log meets them: on seeds 1–3 (README, "Seeds 0 to 3") the ratio is
+    2.4–7.7× (UR5 at σ = 1e-3: 2.4× and 2.5× on seeds 1 and 3; 5.1–11.3× on 10 s
+    logs of seeds 0–3, where the likelihood resolves 1e-11) and one log's coverage
     87.8–100 %, because the smoothed error of an exact-model log is a slowly
     varying curve with few independent values."""
     robot = cached_robot(name)
@@ -283,6 +284,115 @@ def test_cli_estimate_smooth_writes_estimate_columns_plus_v_std(tmp_path, ur5_lo
     assert main([*argv, "--smooth"]) != 0  # no --noise: refused with a message
 
 
+def test_cli_estimate_smooth_writes_through_the_io_writer_and_refuses_to_overwrite(
+    tmp_path, ur5_log
+) -> None:
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    rows = slice(1, 201)
+    log = write_log(tmp_path / "log.csv", ur5_log.t[rows], ur5_log.q_meas[rows], ur5_log.tau[rows])
+    out = tmp_path / "est.csv"
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log)]
+    smooth_args = ["--smooth", "--noise", "1e-4", "--lag", "0.05"]
+    assert main([*argv, "--out", str(out), *smooth_args]) == 0
+    first = out.read_text()
+    assert main([*argv, "--out", str(out), *smooth_args, "--accel-psd", "1e-4"]) == 2
+    assert out.read_text() == first  # refused: exists, no --force
+    assert main([*argv, "--out", str(out), *smooth_args, "--accel-psd", "1e-4", "--force"]) == 0
+    assert out.read_text() != first
+    assert main([*argv, "--out", str(log), *smooth_args, "--force"]) == 2  # the input itself
+    # --chunk: the whole-log smoother's result in bounded memory
+    whole, chunked = tmp_path / "whole.csv", tmp_path / "chunked.csv"
+    psd = ["--smooth", "--noise", "1e-4", "--accel-psd", "1e-2"]  # overlap 0.11 s of 0.2 s
+    assert main([*argv, "--out", str(whole), *psd]) == 0
+    assert main([*argv, "--out", str(chunked), *psd, "--chunk", "0.05"]) == 0
+    a, b = (np.loadtxt(f, delimiter=",", skiprows=1) for f in (whole, chunked))
+    assert np.max(np.abs(a[:, 7:13] - b[:, 7:13]) / a[:, 13:]) < 1e-5
+    assert not list(tmp_path.glob(".*.part"))  # no temporary file left behind
+
+
+def test_cli_estimate_smooth_screens_rows_like_estimate_and_reads_every_format(
+    tmp_path, ur5_log, capsys
+) -> None:
+    """One output row per log row: an unreadable row is a dropped sample, a row back in time
+    is skipped (NaN, reported); a Parquet copy of the log gives the same numbers."""
+    pd = pytest.importorskip("pandas")
+    pytest.importorskip("pyarrow")
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    rows = slice(1, 201)
+    t, q, tau = ur5_log.t[rows].copy(), ur5_log.q_meas[rows].copy(), ur5_log.tau[rows]
+    t[120] = t[100]  # back in time: skipped
+    log = write_log(tmp_path / "log.csv", t, q, tau)
+    text = log.read_text().splitlines()
+    text[51] = text[51].replace(text[51].split(",")[3], "oops", 1)  # row 50: q2 unreadable
+    log.write_text("\n".join(text) + "\n")
+    out = tmp_path / "est.csv"
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--out", str(out)]
+    assert main([*argv, "--log", str(log), "--smooth", "--noise", "1e-4"]) == 0
+    err = capsys.readouterr()
+    assert "not after the previous sample" in err.err and "oops" in err.err.lower()
+    assert "200 rows: 199 estimated (198 with their measurement" in err.out
+    got = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert got.shape == (200, 19)
+    assert np.all(np.isnan(got[120, 7:])) and np.all(np.isfinite(got[50, 7:]))
+    frame = pd.read_csv(log)
+    frame["q2"] = pd.to_numeric(frame["q2"], errors="coerce")
+    frame.to_parquet(tmp_path / "log.parquet")
+    out2 = tmp_path / "est2.csv"
+    argv[-1] = str(out2)
+    assert main([*argv, "--log", str(tmp_path / "log.parquet"), "--smooth", "--noise", "1e-4"]) == 0
+    np.testing.assert_allclose(np.loadtxt(out2, delimiter=",", skiprows=1), got, rtol=0, atol=1e-12)
+
+
+def test_streamed_smoothing_of_a_log_file_equals_the_recorded_one_through_gaps_and_restarts(
+    tmp_path, ur5_log
+) -> None:
+    """Read 37 rows at a time; an unreadable row, a row back in time, a 5-period gap
+    (propagated in sub-steps) and a 20-period gap (a restart: two stretches).  Streaming
+    keeps only chunk + overlap samples and gives the numbers of smoothing at the end."""
+    from pinobs.io import write_log
+    from pinobs.io.smoothing import smooth_log
+
+    keep = np.r_[1:100, 104:250, 270:601]  # gaps of 5 and 21 periods
+    t, q, tau = ur5_log.t[keep].copy(), ur5_log.q_meas[keep].copy(), ur5_log.tau[keep]
+    t[150] = t[140]  # back in time: skipped
+    q[50, 2] = np.nan  # unreadable: a dropped sample
+    log = write_log(tmp_path / "log.csv", t, q, tau)
+    opts = {"noise_std": 1e-4, "accel_psd": 1e-4, "lag": 0.03, "chunk_rows": 37}
+    robot = cached_robot("ur5")
+    run_s, _ = smooth_log(log, robot, tmp_path / "s.csv", **opts)  # type: ignore[arg-type]
+    run_r, o_r = smooth_log(log, robot, tmp_path / "r.csv", stream=False, **opts)  # type: ignore[arg-type]
+    a, b = (np.loadtxt(tmp_path / f, delimiter=",", skiprows=1) for f in ("s.csv", "r.csv"))
+    assert a.shape == b.shape == (len(keep), 19)
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    assert np.all(np.isnan(a[150, 7:])) and np.all(np.isfinite(a[50, 7:]))
+    assert len(o_r) == 2  # the restart after the long gap
+    assert (run_s.rows, run_s.estimated, run_s.bad_rows) == (
+        run_r.rows,
+        run_r.estimated,
+        run_r.bad_rows,
+    )
+    assert run_s.estimated == len(keep) - 1 and run_s.t.size == 0  # streamed: nothing kept
+
+
+def test_cli_estimate_smooth_over_adaptive_says_how_its_model_was_frozen(
+    tmp_path, ur5_log, capsys
+) -> None:
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    rows = slice(1, 301)
+    log = write_log(tmp_path / "log.csv", ur5_log.t[rows], ur5_log.q_meas[rows], ur5_log.tau[rows])
+    out = tmp_path / "est.csv"
+    argv = ["estimate", "--robot", "ur5", "--observer", "adaptive", "--log", str(log)]
+    assert main([*argv, "--out", str(out), "--smooth", "--noise", "1e-4"]) == 0
+    assert "learned model frozen per 10 s window" in capsys.readouterr().err
+    assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))
+
+
 def test_readme_smoothing_table_is_the_committed_benchmark_file() -> None:
     from pathlib import Path
 
@@ -309,3 +419,73 @@ def test_a_result_is_read_through_its_measurements_not_its_truth(ur5_log) -> Non
     from_log = smooth(robot, _log(ur5_log), noise_std=1e-4, accel_psd=1e-2)
     np.testing.assert_array_equal(from_result.v, from_log.v)
     assert np.isnan(from_result.v[0, 0])  # sample 0 is not measured (its truth is known)
+
+
+# ------------------------------------------------------------- adaptive, model frozen per window
+def _mismatched_log(name: str, scenario: str, duration: float, seed: int = 1) -> pinobs.Result:
+    from pinobs.simulation.mismatch import mismatched_plant
+
+    robot = cached_robot(name)
+    plant = mismatched_plant(robot, scenario, seed=0)
+    return simulate(robot, [], sensor=Sensor(1000, 1e-4), duration=duration, seed=seed, plant=plant)
+
+
+def test_adaptive_is_smoothed_with_its_model_frozen_per_window_and_chunks_change_nothing() -> None:
+    """The learning pass runs once; each window's model is the one the causal pass held at the
+    window's end (its regime reported).  Chunking is a memory device only: it does not change
+    the windows, so chunked equals whole-log to the stated tolerance."""
+    robot = cached_robot("planar_3r")
+    res = _mismatched_log("planar_3r", "inertia20_payload", 1.2)
+    # accel_psd replaces every window's density, the offset's scaled with it (short memory)
+    opts = {"observer": "adaptive", "noise_std": 1e-4, "model_window": 0.5, "accel_psd": 1e-2}
+    whole = smooth(robot, _log(res), **opts)  # type: ignore[arg-type]
+    assert whole.options["model_window"] == 0.5
+    assert len(whole.options["model_regimes"]) == 3  # [0, 0.5), [0.5, 1), [1, 1.2]
+    assert set(whole.options["model_regimes"]) <= {"warmup", "nominal", "learned"}
+    assert np.all(np.isfinite(whole.v[1:])) and np.all(whole.v_std[1:] > 0)
+    chunked = smooth(robot, _log(res), chunk=0.1, **opts)  # type: ignore[arg-type]
+    # the default overlap: the longest memory of any window's densities
+    want = max(
+        default_overlap(1e-2, 1e-4, 1e-3, disturbance_psd=d * 1e-2 / a)
+        for a, d in whole.options["model_densities"]
+    )
+    assert chunked.options["overlap"] == pytest.approx(want, abs=1e-3)
+    assert 0.1 + want < 1.1  # the windows do not all reach the log's end
+    # with the offset state the first 0.1 s agree less well (measured 1.4e-2 of v_std), where
+    # the filter starts with v0_std = 1 rad/s, d0_std = 1 N·m and P⁻ is ill-conditioned
+    after = res.t > 0.1
+    rel = np.max(np.abs(chunked.v - whole.v)[after] / whole.v_std[after])
+    assert rel < 1e-5  # CHUNK_TOL = 1e-6 aimed at; measured 2.2e-6
+    np.testing.assert_allclose(chunked.v_std[after], whole.v_std[after], rtol=1e-6)
+
+
+def test_adaptive_smoothing_options_that_do_not_apply_are_refused(ur5_log) -> None:
+    robot = cached_robot("ur5")
+    with pytest.raises(OptionError, match=r"model_window=1\.0 is for a filter that learns"):
+        smooth(robot, _log(ur5_log), noise_std=1e-4, model_window=1.0)
+    with pytest.raises(OptionError, match="adaptive's densities are its regimes'"):
+        smooth(robot, _log(ur5_log), observer="adaptive", noise_std=1e-4, disturbance_psd=1.0)
+    with pytest.raises(GainError, match="model_window"):
+        smooth(robot, _log(ur5_log), observer="adaptive", noise_std=1e-4, model_window=-1.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+@pytest.mark.parametrize("scenario", ["inertia20_payload", "torque_scale", "friction"])
+def test_adaptive_smoother_targets_under_model_error(name: str, scenario: str) -> None:
+    """Issue 19 under the learning benchmark's model errors (``benchmarks/learning.py``: 12 s,
+    σ = 1e-4, seed 1, RMS after 5 s): ≥ 2× below causal ``adaptive``, which is fed the same
+    samples.  The ±2σ band is wide here, not calibrated: coverage 96.8–100 % against the
+    90–98 % target (README, benchmarks/smoothing.md), so only its lower end is asserted."""
+    robot = cached_robot(name)
+    res = _mismatched_log(name, "exact" if scenario == "torque_scale" else scenario, 12.0)
+    tau = 0.9 * res.tau + 0.3 if scenario == "torque_scale" else np.array(res.tau)
+    log = Log(t=res.t, q=res.q_meas, tau=tau)
+    ad = make_observer("adaptive", robot, noise_std=1e-4, rate=1000.0)
+    causal = estimate_log(ad, Log(t=res.t[1:], q=res.q_meas[1:], tau=tau[1:]))
+    s = smooth(robot, log, observer="adaptive", noise_std=1e-4)
+    late = res.t > 5.0
+    rms_s = np.sqrt(np.mean((s.v - res.v)[late] ** 2))
+    rms_c = np.sqrt(np.mean((causal.v - res.v[1:])[late[1:]] ** 2))
+    assert rms_c / rms_s >= 2.0
+    assert np.mean(np.abs(s.v - res.v)[late] <= 2 * s.v_std[late]) >= 0.90

@@ -1,0 +1,322 @@
+"""Offline smoothing of a log file: the io readers' screening and row accounting, the io writer.
+
+:func:`smooth_log` runs :func:`pinobs.smooth` over a log read chunk by chunk
+with :func:`pinobs.io.iter_log` (every format), through the same screening as
+``pinobs estimate`` (:class:`~pinobs.io.LogEstimator`: unreadable or absurd
+rows, time going back, gaps propagated over in sub-steps, restarts after a
+long gap, every fault reported once): a recorder stands in for the observer
+and keeps the samples the estimator would feed it, then each stretch between
+restarts is smoothed and written with :class:`~pinobs.io.EstimateWriter`
+(atomic; no overwrite without ``force``; never over an input), one row per
+log row, ``t, q0.., v0.., v_std0..``.
+
+Memory: with ``chunk`` or ``lag`` and a given ``accel_psd`` over ``ekf``, the
+log streams: each sample goes to a :class:`~pinobs.observers.smoothing.Smoother`
+as the estimator screens it, finished samples are written as soon as every
+row before them is, and only ``chunk + overlap`` samples' states (and the rows
+waiting for them) are held.  Otherwise (the whole log at once,
+``accel_psd="auto"``, which passes over the log once per candidate, or
+``adaptive``, whose learning pass comes first) the screened samples,
+``1 + nq + nv`` floats per row, are kept and smoothed at the end.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from pinobs.io.readers import CHUNK_ROWS, LogSource, iter_log
+from pinobs.io.stream import LogEstimator, LogRun, _chain, _median_period
+from pinobs.io.writers import EstimateWriter
+from pinobs.model import Robot
+from pinobs.model.robot import Vector
+from pinobs.observers.base import Estimate
+from pinobs.observers.smoothing import Smoother, smooth, streaming_smoother
+
+__all__ = ["smooth_log"]
+
+
+class _Recorder:
+    """Observer-like stand-in for :class:`LogEstimator`: keeps what it is fed, one list of
+    ``(t, q or None, tau)`` per start (a restart begins a new one); its estimate's ``v``
+    holds the running sample number, so each output row finds its smoothed sample."""
+
+    def __init__(self, robot: Robot, name: str) -> None:
+        self.robot = robot
+        self.name = name
+        self.uses_torque = True
+        self.segments: list[list[tuple[float, Vector | None, Vector]]] = []
+        self._n = 0
+
+    def _keep(self, t: float, q: Any, tau: Any) -> Estimate:
+        tau_arr = np.zeros(self.robot.nv) if tau is None else np.asarray(tau, dtype=float)
+        q_arr = None if q is None else self.robot.check_configuration(q, what="q")
+        self._take(float(t), q_arr, tau_arr)
+        self._n += 1
+        shown = self.robot.neutral() if q_arr is None else q_arr
+        return Estimate(float(t), shown, np.full(self.robot.nv, float(self._n - 1)))
+
+    def _take(self, t: float, q: Vector | None, tau: Vector) -> None:
+        self.segments[-1].append((t, q, tau))
+
+    def reset(self, t0: float, q0: Any, v0: Any = None, tau0: Any = None) -> Estimate:
+        self.segments.append([])
+        return self._keep(t0, q0, tau0)
+
+    def update(self, t: float, q_meas: Any, tau: Any = None) -> Estimate:
+        return self._keep(t, q_meas, tau)
+
+
+class _Streamer(_Recorder):
+    """The recorder's interface, each sample smoothed as it comes: a stretch (between
+    restarts) is one :class:`Smoother`; finished samples wait in :attr:`finished`."""
+
+    def __init__(self, robot: Robot, name: str, new: Callable[[], Smoother]) -> None:
+        super().__init__(robot, name)
+        self._new = new
+        self._sm: Smoother | None = None
+        self._first = 0  # number of the stretch's first sample
+        self.finished: deque[tuple[int, Vector, Vector, Vector]] = deque()
+
+    def _take(self, t: float, q: Vector | None, tau: Vector) -> None:
+        assert self._sm is not None  # reset comes first (LogEstimator)
+        done = self._sm.push(t, q, tau)
+        self.finished.extend((self._first + k, *rest) for k, *rest in done)  # type: ignore[misc]
+
+    def reset(self, t0: float, q0: Any, v0: Any = None, tau0: Any = None) -> Estimate:
+        self.flush()
+        self._sm, self._first = self._new(), self._n  # no segment list: nothing is kept
+        try:
+            return self._keep(t0, q0, tau0)
+        except Exception:
+            self._sm = None
+            raise
+
+    def flush(self) -> None:
+        """Smooth what the stretch still holds (a restart, or the log's end)."""
+        if self._sm is not None:
+            done = self._sm.close()
+            if self._n - self._first > 1:  # one sample: no velocity to smooth
+                self.finished.extend((self._first + k, *rest) for k, *rest in done)  # type: ignore[misc]
+            self._sm = None
+
+
+def smooth_log(
+    source: LogSource,
+    robot: Robot,
+    out: str | Path,
+    *,
+    observer: str = "ekf",
+    noise_std: float,
+    accel_psd: float | Literal["auto"] | None = None,
+    lag: float | None = None,
+    chunk: float | None = None,
+    force: bool = False,
+    columns: Mapping[str, str] | None = None,
+    topic: str | None = None,
+    rate: float | None = None,
+    options: Mapping[str, Any] | None = None,
+    chunk_rows: int = CHUNK_ROWS,
+    stream: bool = True,
+) -> tuple[LogRun, list[dict[str, Any]]]:
+    """Smooth a log file into ``out`` (module docstring); returns the row accounting and
+    the smoother's options of each stretch.
+
+    Args:
+        source: log path or DataFrame (:func:`pinobs.io.iter_log`).
+        robot: the robot of the log.
+        out: CSV file ``t, q0.., v0.., v_std0..`` (refused if it exists, unless ``force``,
+            or if it is ``source``).
+        observer, noise_std, accel_psd, lag, chunk: as :func:`pinobs.smooth`.
+        columns, topic: as :func:`pinobs.io.iter_log`.
+        rate: sample rate [Hz] (default: from the log's median interval).
+        options: further options of the filter (``filter_options`` of :func:`pinobs.smooth`).
+        chunk_rows: rows read at a time (:func:`pinobs.io.iter_log`).
+        stream: stream when possible (module docstring); ``False``: keep the samples and
+            smooth at the end (the same numbers, more memory).
+
+    Raises:
+        OutputExistsError: ``out`` exists (without ``force``) or is the input.
+        and what :func:`pinobs.smooth` and :func:`pinobs.io.iter_log` raise.
+    """
+    inputs = [] if type(source).__name__ == "DataFrame" else [source]
+    writer = EstimateWriter(
+        out, robot, force=force, inputs=inputs, extra_columns=[f"v_std{i}" for i in range(robot.nv)]
+    )
+    stream = (
+        stream
+        and (chunk is not None or lag is not None)
+        and accel_psd != "auto"
+        and observer == "ekf"
+    )
+    try:
+        chunks = iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows)
+        first = next(chunks)
+        period = 1.0 / rate if rate else _median_period(first.t)
+        if stream and period is not None:
+            run, stretches = _streamed(
+                first, chunks, robot, writer, period, observer, noise_std,
+                accel_psd if accel_psd != "auto" else None, lag, chunk, options,
+            )  # fmt: skip
+        else:
+            run, stretches = _recorded(
+                first, chunks, robot, writer, period, observer, noise_std, accel_psd, lag, chunk,
+                options,
+            )  # fmt: skip
+        writer.close()
+    except BaseException:
+        writer.abort()
+        raise
+    return run, stretches
+
+
+def _streamed(
+    first: Any,
+    chunks: Any,
+    robot: Robot,
+    writer: EstimateWriter,
+    period: float,
+    observer: str,
+    noise_std: float,
+    accel_psd: float | None,
+    lag: float | None,
+    chunk: float | None,
+    options: Mapping[str, Any] | None,
+) -> tuple[LogRun, list[dict[str, Any]]]:
+    """Rows in, smoothed rows out as soon as they and every row before them are done."""
+    new, opts = streaming_smoother(
+        robot,
+        dt=period,
+        observer=observer,
+        noise_std=noise_std,
+        accel_psd=accel_psd,
+        chunk=chunk,
+        lag=lag,
+        filter_options=options,
+    )
+    rec = _Streamer(robot, observer, new)
+    est = LogEstimator(rec, period=period)
+    pending: deque[tuple[float, float]] = deque()  # (t, sample number or NaN) of unwritten rows
+    estimated = 0
+    nan_q, nan_v = np.full(robot.nq, np.nan), np.full(robot.nv, np.nan)
+
+    def drain(final: bool) -> None:
+        nonlocal estimated
+        rows: list[tuple[float, Vector, Vector, Vector]] = []
+        done = rec.finished
+        while pending:
+            t, idx = pending[0]
+            if math.isnan(idx):
+                rows.append((t, nan_q, nan_v, nan_v))
+            else:
+                while done and done[0][0] < idx:
+                    done.popleft()  # gap sub-steps: no row of their own
+                if done and done[0][0] == idx:
+                    _, qs, vs, var = done[0]
+                    rows.append((t, qs, vs, np.sqrt(np.maximum(var, 0.0))))
+                    estimated += int(np.all(np.isfinite(vs)))
+                elif final:
+                    rows.append((t, nan_q, nan_v, nan_v))  # a one-sample stretch
+                else:
+                    break
+            pending.popleft()
+        if rows:
+            writer.write(*(np.array(c) for c in zip(*rows, strict=True)))
+
+    for c in _chain(first, chunks):
+        t, _, idx = est.feed(c)
+        pending.extend(zip(t.tolist(), idx[:, 0].tolist(), strict=True))
+        drain(False)
+    t, _, idx = est.finish()
+    pending.extend(zip(t.tolist(), idx[:, 0].tolist(), strict=True))
+    rec.flush()
+    drain(True)
+    empty = np.empty(0)
+    run = LogRun(
+        t=empty,
+        q=np.empty((0, robot.nq)),
+        v=np.empty((0, robot.nv)),
+        bad_rows=est.bad_rows,
+        warnings=est.warnings,
+        rows=est.rows,
+        estimated=estimated,
+        measured=est.measured,
+        unit=first.unit,
+        noise_std=noise_std,
+        period=period,
+    )
+    return run, [opts]
+
+
+def _recorded(
+    first: Any,
+    chunks: Any,
+    robot: Robot,
+    writer: EstimateWriter,
+    period: float | None,
+    observer: str,
+    noise_std: float,
+    accel_psd: float | Literal["auto"] | None,
+    lag: float | None,
+    chunk: float | None,
+    options: Mapping[str, Any] | None,
+) -> tuple[LogRun, list[dict[str, Any]]]:
+    """Every screened sample kept, each stretch smoothed at the end."""
+    rec = _Recorder(robot, observer)
+    est = LogEstimator(rec, period=period)
+    parts = [est.feed(c) for c in _chain(first, chunks)]
+    parts.append(est.finish())
+    t = np.concatenate([p[0] for p in parts])
+    idx = np.concatenate([p[2][:, 0] for p in parts])  # sample number, NaN: no estimate
+    nv = robot.nv
+    q_s = np.full((len(t), robot.nq), np.nan)
+    v_s = np.full((len(t), nv), np.nan)
+    std_s = np.full((len(t), nv), np.nan)
+    samples_q = np.full((rec._n, robot.nq), np.nan)
+    samples_v = np.full((rec._n, nv), np.nan)
+    samples_std = np.full((rec._n, nv), np.nan)
+    stretches: list[dict[str, Any]] = []
+    first_k = 0
+    for seg in rec.segments:
+        k = slice(first_k, first_k + len(seg))
+        first_k += len(seg)
+        if len(seg) < 2:
+            continue  # one sample: no velocity to smooth
+        seg_t = np.array([s[0] for s in seg])
+        seg_q = np.array([np.full(robot.nq, np.nan) if s[1] is None else s[1] for s in seg])
+        seg_tau = np.array([s[2] for s in seg])
+        res = smooth(
+            robot,
+            (seg_t, seg_q, seg_tau),
+            observer=observer,
+            noise_std=noise_std,
+            accel_psd=accel_psd,
+            lag=lag,
+            chunk=chunk,
+            filter_options=options,
+        )
+        samples_q[k], samples_v[k], samples_std[k] = res.q, res.v, res.v_std
+        stretches.append(res.options)
+    ok = np.isfinite(idx)
+    rows = idx[ok].astype(int)
+    q_s[ok], v_s[ok], std_s[ok] = samples_q[rows], samples_v[rows], samples_std[rows]
+    writer.write(t, q_s, v_s, std_s)
+    run = LogRun(
+        t=t,
+        q=q_s,
+        v=v_s,
+        bad_rows=est.bad_rows,
+        warnings=est.warnings,
+        rows=est.rows,
+        estimated=int(np.all(np.isfinite(v_s), axis=1).sum()),
+        measured=est.measured,
+        unit=first.unit,
+        noise_std=noise_std,
+        period=period,
+    )
+    return run, stretches

@@ -497,10 +497,14 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         return self._learned.copy()
 
     def snapshot(self) -> ModelSnapshot:
-        """The learned model, offset and regime densities now (read only: the filter is unchanged)."""
+        """The learned model, offset and regime densities now (read only: the filter is unchanged).
+
+        The model is the filter's, with the learned friction it takes as a held input
+        (:meth:`_install`) put back: the learned model whole."""
         accel, dist = self._regimes[self.regime]
+        robot = self.robot if self._held_friction is None else self._learned
         return ModelSnapshot(
-            self.robot.copy(), self._offset.copy(), self.regime, accel, dist * self._m_bar2
+            robot.copy(), self._offset.copy(), self.regime, accel, dist * self._m_bar2
         )
 
     def parameters(self) -> ParameterSet:

@@ -31,7 +31,7 @@ then 1e-7 by default) and a torque-offset state (``disturbance_psd`` =
 pass before the last one only over the fitted part: its held-out end is not
 used).  The
 position noise the smoother needs is the log's own (``noise_std``) or, when
-not given, estimated from it (:func:`estimate_noise_std`).
+not given, estimated from it (:func:`pinobs.observers.noise.estimate_noise_std`).
 
 The model layer cannot import the smoother (layers run one way), hence this
 thin wrapper one layer up; the machinery is the model layer's, written once.
@@ -50,9 +50,10 @@ from pinobs.model import Robot
 from pinobs.model import identification as ident_model
 from pinobs.model.identification import MAX_CONDITION, Identification, log_arrays, segments
 from pinobs.observers.base import Vector, positive
+from pinobs.observers.noise import estimate_noise_std
 from pinobs.observers.smoothing import smooth
 
-__all__ = ["REFINE_ACCEL_PSD", "REFINE_DISTURBANCE_PSD", "estimate_noise_std", "identify"]
+__all__ = ["REFINE_ACCEL_PSD", "REFINE_DISTURBANCE_PSD", "identify"]
 
 #: White-acceleration densities [rad²/s³] of the successive smoother passes (module docstring).
 REFINE_ACCEL_PSD: tuple[float, ...] = (1e-6, 1e-7)
@@ -61,33 +62,13 @@ REFINE_ACCEL_PSD: tuple[float, ...] = (1e-6, 1e-7)
 REFINE_DISTURBANCE_PSD = 1e-4
 
 
-def estimate_noise_std(robot: Robot, t: Vector, q: Vector) -> float:
-    """The position noise σ [rad or m] of a log, from its third differences.
-
-    On a path sampled much faster than it moves, ``Δ³u_k`` (``u`` the path
-    developed in the tangent space) is noise: ``Δ³`` of white noise of
-    standard deviation σ has the standard deviation ``σ √20`` (the sum of
-    the squared binomial coefficients 1, 3, 3, 1), while the path contributes
-    ``h³ u⃛``, 1e-8 rad for a jerk of 10 rad/s³ at 1 kHz.  Robust:
-    ``σ = 1.4826 · median|Δ³u| / √20`` per coordinate, the median over
-    coordinates (the EKF takes one σ).  A noise-free log gives a tiny σ,
-    floored at 1e-9.
-    """
-    values = []
-    for seg in segments(t, q, np.zeros((t.shape[0], robot.nv))):
-        qs = q[seg]
-        if qs.shape[0] < 4:
-            continue
-        steps = (
-            np.diff(qs, axis=0)
-            if robot.is_vector_space
-            else np.array([robot.difference(qs[k - 1], qs[k]) for k in range(1, qs.shape[0])])
-        )
-        values.append(np.diff(steps, n=2, axis=0))
-    if not values:
-        raise IdentificationError("no stretch of 4 contiguous finite samples to measure noise on")
-    d3 = np.vstack(values)
-    sigma = 1.4826 * np.median(np.abs(d3), axis=0) / np.sqrt(20.0)
+def _noise_std(robot: Robot, t: Vector, q: Vector) -> float:
+    """The log's position noise σ [rad or m]: the median over joints of
+    :func:`pinobs.observers.noise.estimate_noise_std` (robust third differences over
+    its first second), floored at 1e-9 (a noise-free log)."""
+    sigma = estimate_noise_std(t, q, robot)
+    if sigma is None:
+        raise IdentificationError("fewer than 12 finite samples to measure the noise on")
     return max(float(np.median(sigma)), 1e-9)
 
 
@@ -122,7 +103,7 @@ def identify(
             (module docstring); ``()`` keeps the Savitzky–Golay velocities
             (one pass, the cheapest).
         noise_std: the log's position noise [rad or m] (default: estimated,
-            :func:`estimate_noise_std`).
+            :func:`pinobs.observers.noise.estimate_noise_std`).
 
     ``report["velocities"]`` says which velocities the last pass used
     (``"savgol"`` or ``"rts(accel_psd=…)"``) and ``report["noise_std"]`` the σ
@@ -149,7 +130,7 @@ def identify(
         current.report["velocities"] = "savgol"
         return current
     t, q, tau = log_arrays(robot, log)
-    sigma = noise_std if noise_std is not None else estimate_noise_std(robot, t, q)
+    sigma = noise_std if noise_std is not None else _noise_std(robot, t, q)
     for i, psd in enumerate(refine):
         # a pass before the last one only feeds the next fit: its held-out end needs no smoothing
         last = i == len(refine) - 1

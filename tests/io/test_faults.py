@@ -38,6 +38,12 @@ def _kf(robot: pinobs.Robot) -> pinobs.Observer:
     return pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
 
 
+def _estimate_kf(path: Path, out: Path) -> int:
+    """``pinobs estimate`` with ``kf`` on the UR5 over ``path`` (σ given): the exit code."""
+    args = ["--robot", "ur5", "--observer", "kf", "--log", str(path), "--out", str(out)]
+    return main(["estimate", *args, "--no-progress", "--noise", "1e-4"])
+
+
 def _set(lines: list[str], line: int, col: int, value: str) -> None:
     """Set column ``col`` of file line ``line`` (1-based, the header is line 1)."""
     cells = lines[line - 1].split(",")
@@ -212,22 +218,7 @@ def test_every_row_bad_exits_1(tmp_path, sim, capsys) -> None:
     path, lines = _lines(tmp_path, sim, n=20)
     lines = [lines[0]] + [",".join(["x"] * 13) for _ in lines[1:]]
     path.write_text("\n".join(lines) + "\n")
-    code = main(
-        [
-            "estimate",
-            "--robot",
-            "ur5",
-            "--observer",
-            "kf",
-            "--log",
-            str(path),
-            "--out",
-            str(tmp_path / "o.csv"),
-            "--no-progress",
-            "--noise",
-            "1e-4",
-        ]
-    )
+    code = _estimate_kf(path, tmp_path / "o.csv")
     err = capsys.readouterr().err
     assert code == 1 and "no row of the log could be estimated" in err
 
@@ -238,22 +229,7 @@ def test_summary_counts_rows_not_reports(tmp_path, sim, capsys) -> None:
     _set(lines, 11, 2, "abc")  # two bad cells, one row
     _set(lines, 21, 0, lines[19].split(",")[0])  # duplicated time
     path.write_text("\n".join(lines) + "\n")
-    code = main(
-        [
-            "estimate",
-            "--robot",
-            "ur5",
-            "--observer",
-            "kf",
-            "--log",
-            str(path),
-            "--out",
-            str(tmp_path / "o.csv"),
-            "--no-progress",
-            "--noise",
-            "1e-4",
-        ]
-    )
+    code = _estimate_kf(path, tmp_path / "o.csv")
     out = capsys.readouterr()
     assert code == 0
     assert (

@@ -555,6 +555,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
     """``estimate --smooth``: the RTS smoother over the log (read and screened as ``estimate``
     reads it, written atomically by the io writer); ``estimate``'s columns plus ``v_std0..``."""
     from pinobs.io.smoothing import smooth_log
+    from pinobs.observers.smoothing import AUTO_WHITE_SCALE
 
     if args.noise is None:
         raise GainError(
@@ -591,6 +592,17 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     for opts in stretches:
+        print(
+            f"filter–smoother consistency ρ = {opts['consistency']:.2f} (about 1: the densities "
+            "explain the log; ≫ 1: too small, the band is too narrow; < 1: too large)",
+            file=sys.stderr,
+        )
+        if opts.get("offset_scale") is not None:
+            print(
+                f"densities chosen from the log (ρ = 1): offset × {opts['offset_scale']:.3g}, "
+                f"white acceleration × {AUTO_WHITE_SCALE:g} of each window's regime's",
+                file=sys.stderr,
+            )
         if args.accel_psd == "auto" and opts["accel_psd"] is not None:
             print(
                 f"accel_psd = {opts['accel_psd']:g} rad²/s³ (chosen from the log)", file=sys.stderr

@@ -82,6 +82,7 @@ class _Streamer(_Recorder):
         self._sm: Smoother | None = None
         self._first = 0  # number of the stretch's first sample
         self.finished: deque[tuple[int, Vector, Vector, Vector]] = deque()
+        self.rho = [0.0, 0]  # the stretches' filter–smoother consistency terms (sum, count)
 
     def _take(self, t: float, q: Vector | None, tau: Vector) -> None:
         assert self._sm is not None  # reset comes first (LogEstimator)
@@ -103,6 +104,8 @@ class _Streamer(_Recorder):
             done = self._sm.close()
             if self._n - self._first > 1:  # one sample: no velocity to smooth
                 self.finished.extend((self._first + k, *rest) for k, *rest in done)  # type: ignore[misc]
+            self.rho[0] += self._sm._rho_sum
+            self.rho[1] += self._sm._rho_n
             self._sm = None
 
 
@@ -125,7 +128,8 @@ def smooth_log(
     stream: bool = True,
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Smooth a log file into ``out`` (module docstring); returns the row accounting and
-    the smoother's options of each stretch.
+    the smoother's options of each stretch (with its ``consistency``,
+    :attr:`pinobs.observers.smoothing.Smoother.consistency`).
 
     Args:
         source: log path or DataFrame (:func:`pinobs.io.iter_log`).
@@ -250,7 +254,8 @@ def _streamed(
         noise_std=noise_std,
         period=period,
     )
-    return run, [opts]
+    rho_sum, rho_n = rec.rho
+    return run, [{**opts, "consistency": rho_sum / rho_n if rho_n else math.nan}]
 
 
 def _recorded(
@@ -301,7 +306,7 @@ def _recorded(
             filter_options=options,
         )
         samples_q[k], samples_v[k], samples_std[k] = res.q, res.v, res.v_std
-        stretches.append(res.options)
+        stretches.append({**res.options, "consistency": res.consistency})
     ok = np.isfinite(idx)
     rows = idx[ok].astype(int)
     q_s[ok], v_s[ok], std_s[ok] = samples_q[rows], samples_v[rows], samples_std[rows]

@@ -87,15 +87,38 @@ the learned one; within a window the model is one, so the backward pass is
 that model's exact extended RTS smoother, and at a window boundary ``d``
 absorbs the switch.  The blend with the model-free ``kf`` is not smoothed
 (the output is the model-based smoother's).  ``accel_psd`` given replaces
-every window's density and scales the offset's with it; ``"auto"`` chooses it
-by the likelihood rule below on the frozen-model filter (the learning pass
-runs once).  Measured (``benchmarks/smoothing.py``, 12 s logs of
-``benchmarks/learning.py``'s model-error scenarios, σ = 1e-4, seed 1): the
-regimes' own densities are the likelihood's choice, the RMS falls 4.1–5.6×
-below causal ``adaptive`` (README), but the ±2σ band is too wide, covering
-96.8–100 % of samples (99.8–100 % but under friction): the learned model's
-error is smooth in time, not the white noise the densities stand for, so the
-band is conservative, not calibrated.
+every window's density and scales the offset's with it; ``None`` keeps the
+regimes' densities; ``"auto"`` sets them from the log by the consistency rule
+below (the learning pass runs once).
+
+Consistency without the truth.  Under the filter's model ``x⁺ − x^s`` has
+covariance ``P⁺ − P^s`` (the smoothed error is uncorrelated with the data),
+so ``ρ``, the mean of ``(v^s − v⁺)ᵢ² / (P⁺ − P^s)_{vᵢvᵢ}``
+(:attr:`Smoother.consistency`, :attr:`Smoothed.consistency`), is about 1
+when the densities explain the log (tested on double integrators: 0.99–1.02
+with the true density, 57–61 with 100× less, 0.45 with 100× more).  Over
+``adaptive`` the regimes' densities (white acceleration 1e-6 rad²/s³, offset
+1e-4 rad²/s⁵ once learned) are what the likelihood keeps on the learning
+benchmark's 12 s model-error logs, yet the band covers 98.1–100 % of
+samples (target 90–98 %).  A sweep of the two densities apart
+(``benchmarks/smoothing_densities.py``) shows why: the learned model's
+residual error is smooth in time, not white; the likelihood still keeps
+the white acceleration, which helps the causal filter follow it, and while
+``ρ`` follows the *filter's* calibration (``ρ`` ≈ its ``z²``, the mean squared
+error over the claimed variance), the smoother's ``z²`` is only 0.2–0.7 of
+the filter's when white acceleration carries the model error (the regimes'
+white density, an offset density at or below theirs), because the forward
+and backward filters lag the smooth error in opposite directions and their
+errors cancel in the smoother.  Carried by the offset state instead (white
+acceleration at 1e-2 or 1e-3 of the regimes', offset 0.1–10× theirs) the
+smoother's ``z²`` is 0.6–1.1 of the filter's.  So ``"auto"`` over ``adaptive`` keeps the white
+acceleration small and sets the offset density so that ``ρ = 1``
+(:func:`consistent_offset_scale`, bisection, eight smoother passes): on the
+learning benchmark's six scenarios at seeds 1 and 2 the band then covers
+96.4–99.5 % of samples, within 90–98 % on 7 of 12 logs (regimes' densities:
+98.1–100 %), with an RMS 0.80–1.10× the regimes' (README).  Designed on three of those
+logs (UR5 payload and Panda friction at seed 1, UR5 torque scale at seed 2);
+still conservative where the smoother gains more than its model says.
 """
 
 from __future__ import annotations
@@ -117,14 +140,17 @@ from pinobs.observers.base import Vector, make_observer, observer_class, observe
 from pinobs.observers.ekf import ExtendedKalmanFilter
 
 __all__ = [
+    "AUTO_WHITE_SCALE",
     "CHUNK_TOL",
     "DEFAULT_ACCEL_PSD",
     "DEFAULT_GRID",
     "LIKELIHOOD_MARGIN",
+    "OFFSET_SCALE_RANGE",
     "LogLike",
     "SmoothableFilter",
     "Smoothed",
     "Smoother",
+    "consistent_offset_scale",
     "default_overlap",
     "select_accel_psd",
     "smooth",
@@ -139,6 +165,13 @@ DEFAULT_GRID: tuple[float, ...] = tuple(float(10.0**e) for e in range(-14, 1))
 
 #: Log-likelihood margin [nats] of :func:`select_accel_psd`: χ²₁(0.95)/2.
 LIKELIHOOD_MARGIN = 1.92
+
+#: ``adaptive`` with ``accel_psd="auto"``: the white-acceleration density, as a fraction of each
+#: window's regime's (the offset's is then set by :func:`consistent_offset_scale`).
+AUTO_WHITE_SCALE = 1e-2
+
+#: The range searched by :func:`consistent_offset_scale` (factors of the regimes' offset density).
+OFFSET_SCALE_RANGE = (1e-3, 1e2)
 
 #: Relative agreement the default overlap aims at: ``|v_chunked − v_whole| ≤ CHUNK_TOL · v_std``.
 CHUNK_TOL = 1e-6
@@ -174,6 +207,10 @@ class Smoothed:
         log_likelihood: ``log p(q_1..q_N)`` of the measurements under the filter's
             model, the sum of the innovations' Gaussian log densities [nats]
             (for choosing ``accel_psd``: :func:`select_accel_psd`).
+        consistency: the filter–smoother velocity consistency ``ρ``
+            (:attr:`Smoother.consistency`, no ground truth): about 1 when the
+            densities explain the log, ≫ 1 when they are too small (the band is
+            too narrow), < 1 when too large; NaN with nothing to compare.
         options: the filter's resolved options and the smoother's (chunk, overlap, lag).
     """
 
@@ -182,6 +219,7 @@ class Smoothed:
     v: Vector
     v_std: Vector
     log_likelihood: float
+    consistency: float
     options: dict[str, Any]
 
     def __post_init__(self) -> None:
@@ -264,6 +302,20 @@ class Smoother:
     which must carry a configuration); each result is
     ``(k, q^s_k, v^s_k, var v^s_k)``, in order.
 
+    Attributes:
+        log_likelihood: the innovations' summed log densities so far [nats].
+        consistency: ``ρ``, the mean over the samples smoothed so far and their
+            velocity coordinates of ``(v^s_k − v⁺_k)ᵢ² / (P⁺_k − P^s_k)_{vᵢvᵢ}``
+            (NaN before any).  Under the filter's model the smoothed error
+            ``x^s − x`` is uncorrelated with every measurement, hence with
+            ``x⁺ − x^s`` (a function of them), so ``P⁺ = Cov(x⁺ − x^s) + P^s``:
+            ``x⁺ − x^s`` has covariance ``P⁺ − P^s`` and ``E[ρ] = 1``, a check of the
+            densities from the log alone (tested on a linear Gaussian model).  ``ρ ≫ 1``: the model
+            error is larger than the densities say (bands too narrow); ``ρ < 1``:
+            smaller.  It tests the filter's covariance, which the smoother's
+            inherits; measured under a learned model's smooth residual error
+            (module docstring) the smoother's band is wider than ``ρ`` says.
+
     Args:
         filt: the filter (a :class:`SmoothableFilter`).
         chunk, overlap: in samples (``chunk=None``: everything at :meth:`close`).
@@ -277,6 +329,12 @@ class Smoother:
         self._buf: list[_Step] = []
         self._start = 0
         self.log_likelihood = 0.0
+        self._rho_sum, self._rho_n = 0.0, 0
+
+    @property
+    def consistency(self) -> float:
+        """``ρ`` over the samples smoothed so far (class docstring); NaN before any."""
+        return self._rho_sum / self._rho_n if self._rho_n else math.nan
 
     def push(
         self, t: float, q: Vector | None, tau: Vector
@@ -305,6 +363,14 @@ class Smoother:
                 out.append((self._start + i, qs, vs, var[nv : 2 * nv]))
 
         _backward(self._model, self._buf, emit)
+        if out:  # ρ's terms (v^s − v⁺)² / (P⁺ − P^s)_vv, where that variance is not ~0
+            filt = [step.filt for step in reversed(self._buf[:keep])]  # out's order: last first
+            var_f = np.array([f.P.diagonal()[nv : 2 * nv] for f in filt])
+            dvar = var_f - np.array([o[3] for o in out])
+            diff = np.array([o[2] for o in out]) - np.array([f.v for f in filt])
+            ok = dvar > 1e-9 * var_f  # not at the last sample (the smoother is the filter there)
+            self._rho_sum += float(np.sum(diff[ok] ** 2 / dvar[ok]))
+            self._rho_n += int(np.count_nonzero(ok))
         del self._buf[:keep]
         self._start += keep
         out.reverse()
@@ -450,8 +516,11 @@ class _FrozenModels:
     the causal pass held at the end of window ``j``; the prediction from sample
     ``k`` uses ``snapshots[which[k]]``: its dynamics, its torque offset (added to
     ``tau``) and its regime's densities (``accel_psd`` replaced by the smoother's
-    when given).  The torque-offset state ``d`` carries over a model switch (it
-    is a random walk, so the backward pass sees the switch as a step it absorbs).
+    when given, the offset's scaled with it; with ``offset_scale``, the white
+    acceleration at :data:`AUTO_WHITE_SCALE` of the regime's and the offset's
+    at ``offset_scale`` times the regime's: :func:`consistent_offset_scale`).
+    The torque-offset state ``d`` carries over a model switch (it is a random
+    walk, so the backward pass sees the switch as a step it absorbs).
     """
 
     def __init__(
@@ -460,8 +529,10 @@ class _FrozenModels:
         snapshots: Sequence[ModelSnapshot],
         which: Vector,
         accel_psd: float | None,
+        offset_scale: float | None = None,
     ) -> None:
         self._ekf, self._snaps, self._which, self._accel = ekf, snapshots, which, accel_psd
+        self._offset_scale = offset_scale
         self._k, self._j = 0, -1
         self.robot = ekf.robot
 
@@ -477,9 +548,12 @@ class _FrozenModels:
         snap = self._snaps[j]
         self._ekf._replace_robot(snap.robot)
         scale = 1.0 if self._accel is None else self._accel / snap.accel_psd
+        d_scale = scale
+        if self._offset_scale is not None:
+            scale, d_scale = AUTO_WHITE_SCALE, self._offset_scale
         self._ekf.gains = replace(self._ekf.gains, accel_psd=scale * snap.accel_psd)
         self._j, self.robot = j, snap.robot
-        return state._replace(d_psd=scale * snap.disturbance_psd)
+        return state._replace(d_psd=d_scale * snap.disturbance_psd)
 
     def _initial_state(self, q0: Vector, v0: Vector) -> Any:
         self._k, self._j = 0, -1
@@ -506,11 +580,12 @@ def _learn(
     noise_std: float | None,
     options: Mapping[str, Any],
     model_window: float | None,
-) -> tuple[Callable[[float | None], _FrozenModels], dict[str, Any]]:
+) -> tuple[Callable[..., _FrozenModels], dict[str, Any]]:
     """The causal ``adaptive`` over the log (from its first good sample), its model kept per window.
 
     Returns a maker of the frozen-model filter (given an ``accel_psd`` or ``None``:
-    each window's regime density) and the options to report.
+    each window's regime density; and optionally an ``offset_scale``) and the
+    options to report.
     """
     dt = float(np.median(np.diff(t)))
     obs = cast(
@@ -552,8 +627,8 @@ def _learn(
         "model_densities": [(s.accel_psd, densities[s.regime]) for s in snapshots],
     }
 
-    def make(accel_psd: float | None) -> _FrozenModels:
-        return _FrozenModels(ekf, snapshots, which, accel_psd)
+    def make(accel_psd: float | None, offset_scale: float | None = None) -> _FrozenModels:
+        return _FrozenModels(ekf, snapshots, which, accel_psd, offset_scale)
 
     return make, report
 
@@ -609,6 +684,58 @@ def select_accel_psd(
         model_window,
     )[0]
     return _select(make, (t[k0:], q[k0:], tau[k0:], good), k0, grid, threshold)
+
+
+def consistent_offset_scale(
+    robot: Robot,
+    log: LogLike | tuple[ArrayLike, ...],
+    *,
+    noise_std: float,
+    steps: int = 8,
+    filter_options: Mapping[str, Any] | None = None,
+    model_window: float | None = None,
+) -> float:
+    """The offset-density factor at which the smoother over ``adaptive`` has ``ρ = 1``.
+
+    With the white acceleration at :data:`AUTO_WHITE_SCALE` of each window's
+    regime density, the torque-offset density is ``s`` times the regime's, and
+    ``s`` solves ``ρ(s) = 1`` (:attr:`Smoother.consistency`, whose expectation is
+    1 when the densities explain the log) by bisection of ``log s`` over
+    :data:`OFFSET_SCALE_RANGE` (``ρ`` falls as ``s`` grows), ``steps`` halvings
+    (8: 0.02 decade).  A method of moments, not the likelihood: the learned
+    model's residual error lies outside the filter's noise family, where the
+    likelihood keeps a white acceleration that widens the smoother's band
+    (module docstring, ``benchmarks/smoothing_densities.md``).  Uses no ground
+    truth; costs one learning pass and ``steps`` smoother passes.
+
+    Raises:
+        GainError: ``steps`` < 1, or a bad filter option.
+    """
+    if steps < 1:
+        raise GainError(f"steps={steps!r}: give at least 1 bisection step")
+    t, q, tau = _log_arrays(robot, log)
+    k0, good = _first_good(q)
+    arrays = (t[k0:], q[k0:], tau[k0:], good)
+    make, _ = _learn(robot, *arrays, noise_std, dict(filter_options or {}), model_window)
+    return _consistent(make, arrays, steps)
+
+
+def _consistent(
+    make: Callable[..., SmoothableFilter], arrays: tuple[Vector, Vector, Vector, Vector], steps: int
+) -> float:
+    """:func:`consistent_offset_scale` on checked arrays and ``adaptive``'s frozen-model maker."""
+    lo, hi = (math.log10(b) for b in OFFSET_SCALE_RANGE)
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        smoother = Smoother(make(None, 10.0**mid), None, 0)
+        for row in _rows(*arrays):
+            smoother.push(*row)
+        smoother.close()
+        if smoother.consistency > 1.0:  # model error beyond the densities: more offset noise
+            lo = mid
+        else:
+            hi = mid
+    return float(10.0 ** (0.5 * (lo + hi)))
 
 
 def _select(
@@ -790,9 +917,11 @@ def smooth(
         noise_std: position noise standard deviation [rad or m].
         accel_psd: white-acceleration density of the filter [rad²/s³];
             ``None``: the observer's own (``ekf``: :data:`DEFAULT_ACCEL_PSD`;
-            ``adaptive``: each window's regime's); ``"auto"``:
-            :func:`select_accel_psd` on this log (calibrated ``v_std``;
-            costs one forward pass per grid value; module docstring).
+            ``adaptive``: each window's regime's); ``"auto"``: chosen from
+            this log, for ``ekf`` by :func:`select_accel_psd` (one forward
+            pass per grid value), for ``adaptive`` by
+            :func:`consistent_offset_scale` (``ρ = 1``; eight smoother
+            passes); module docstring.
         disturbance_psd: the EKF's joint-torque offset density [rad²/s⁵], or ``None``
             (not for ``adaptive``: its regimes set it).
         chunk: memory bound: the backward pass runs on windows of ``chunk``
@@ -828,9 +957,22 @@ def smooth(
     make, extra = _filter_maker(
         robot, observer, arrays, noise_std, disturbance_psd, filter_options, model_window
     )
-    if accel_psd == "auto":
-        accel_psd = _select(make, arrays, k0, DEFAULT_GRID, LIKELIHOOD_MARGIN)
-    filt = make(None if isinstance(accel_psd, str) else accel_psd)
+    offset_scale = None
+    if accel_psd == "auto" and issubclass(observer_class(observer), AdaptiveEKF):
+        offset_scale = _consistent(make, arrays, 8)  # ρ = 1 (consistent_offset_scale)
+        extra = {
+            **extra,
+            "offset_scale": offset_scale,
+            "model_accel_psd": [AUTO_WHITE_SCALE * a for a in extra["model_accel_psd"]],
+            "model_densities": [
+                (AUTO_WHITE_SCALE * a, offset_scale * d) for a, d in extra["model_densities"]
+            ],
+        }
+        filt = cast(Any, make)(None, offset_scale)
+    else:
+        if accel_psd == "auto":
+            accel_psd = _select(make, arrays, k0, DEFAULT_GRID, LIKELIHOOD_MARGIN)
+        filt = make(None if isinstance(accel_psd, str) else accel_psd)
     model = filt.robot
     nv = model.nv
     dt = float(np.median(np.diff(t_all)))
@@ -871,5 +1013,6 @@ def smooth(
         v=out_v,
         v_std=np.sqrt(np.maximum(out_var, 0.0)),
         log_likelihood=loglik,
+        consistency=smoother.consistency,
         options=opts,
     )

@@ -113,10 +113,10 @@ errors cancel in the smoother.  Carried by the offset state instead (white
 acceleration at 1e-2 or 1e-3 of the regimes', offset 0.1–10× theirs) the
 smoother's ``z²`` is 0.6–1.1 of the filter's.  So ``"auto"`` over ``adaptive`` keeps the white
 acceleration small and sets the offset density so that ``ρ = 1``
-(:func:`consistent_offset_scale`, bisection, eight smoother passes): on the
+(:func:`consistent_offset_scale`, secant, 3–7 smoother passes): on the
 learning benchmark's six scenarios at seeds 1 and 2 the band then covers
-96.4–99.5 % of samples, within 90–98 % on 7 of 12 logs (regimes' densities:
-98.1–100 %), with an RMS 0.80–1.10× the regimes' (README).  Designed on three of those
+96.5–99.5 % of samples, within 90–98 % on 7 of 12 logs (regimes' densities:
+98.1–100 %), with an RMS 0.80–1.11× the regimes' (README).  Designed on three of those
 logs (UR5 payload and Panda friction at seed 1, UR5 torque scale at seed 2);
 still conservative where the smoother gains more than its model says.
 """
@@ -691,7 +691,8 @@ def consistent_offset_scale(
     log: LogLike | tuple[ArrayLike, ...],
     *,
     noise_std: float,
-    steps: int = 8,
+    tol: float = 0.02,
+    max_passes: int = 8,
     filter_options: Mapping[str, Any] | None = None,
     model_window: float | None = None,
 ) -> float:
@@ -700,42 +701,67 @@ def consistent_offset_scale(
     With the white acceleration at :data:`AUTO_WHITE_SCALE` of each window's
     regime density, the torque-offset density is ``s`` times the regime's, and
     ``s`` solves ``ρ(s) = 1`` (:attr:`Smoother.consistency`, whose expectation is
-    1 when the densities explain the log) by bisection of ``log s`` over
-    :data:`OFFSET_SCALE_RANGE` (``ρ`` falls as ``s`` grows), ``steps`` halvings
-    (8: 0.02 decade).  A method of moments, not the likelihood: the learned
-    model's residual error lies outside the filter's noise family, where the
-    likelihood keeps a white acceleration that widens the smoother's band
-    (module docstring, ``benchmarks/smoothing_densities.md``).  Uses no ground
-    truth; costs one learning pass and ``steps`` smoother passes.
+    1 when the densities explain the log).  ``ρ`` falls as ``s`` grows, about as
+    a power of it (exponent −0.5 to −0.75 in ``benchmarks/smoothing_densities.md``),
+    so the root of ``f(x) = log ρ(10ˣ)`` is found by the secant method from
+    ``x = 0`` (the regimes' density) and a first step of slope −0.6, kept
+    inside the bracket once the sign has changed (Illinois' false position)
+    and inside :data:`OFFSET_SCALE_RANGE`; it stops at ``|log ρ| ≤ tol`` or
+    after ``max_passes`` smoother passes and returns the best ``s`` seen.
+    A method of moments, not the likelihood: the learned model's residual
+    error lies outside the filter's noise family, where the likelihood keeps a
+    white acceleration that widens the smoother's band (module docstring).
+    Uses no ground truth; costs one learning pass and 3–7 smoother passes
+    (measured on the README's twelve model-error logs).
 
     Raises:
-        GainError: ``steps`` < 1, or a bad filter option.
+        GainError: ``tol`` ≤ 0, ``max_passes`` < 1, or a bad filter option.
     """
-    if steps < 1:
-        raise GainError(f"steps={steps!r}: give at least 1 bisection step")
+    positive("tol", tol)
+    if max_passes < 1:
+        raise GainError(f"max_passes={max_passes!r}: give at least 1 smoother pass")
     t, q, tau = _log_arrays(robot, log)
     k0, good = _first_good(q)
     arrays = (t[k0:], q[k0:], tau[k0:], good)
     make, _ = _learn(robot, *arrays, noise_std, dict(filter_options or {}), model_window)
-    return _consistent(make, arrays, steps)
+    return _consistent(make, arrays, tol, max_passes)
 
 
 def _consistent(
-    make: Callable[..., SmoothableFilter], arrays: tuple[Vector, Vector, Vector, Vector], steps: int
+    make: Callable[..., SmoothableFilter],
+    arrays: tuple[Vector, Vector, Vector, Vector],
+    tol: float = 0.02,
+    max_passes: int = 8,
 ) -> float:
     """:func:`consistent_offset_scale` on checked arrays and ``adaptive``'s frozen-model maker."""
     lo, hi = (math.log10(b) for b in OFFSET_SCALE_RANGE)
-    for _ in range(steps):
-        mid = 0.5 * (lo + hi)
-        smoother = Smoother(make(None, 10.0**mid), None, 0)
+
+    def f(x: float) -> float:  # log ρ at s = 10ˣ: one smoother pass
+        smoother = Smoother(make(None, 10.0**x), None, 0)
         for row in _rows(*arrays):
             smoother.push(*row)
         smoother.close()
-        if smoother.consistency > 1.0:  # model error beyond the densities: more offset noise
-            lo = mid
-        else:
-            hi = mid
-    return float(10.0 ** (0.5 * (lo + hi)))
+        return math.log(smoother.consistency)
+
+    seen = [(0.0, f(0.0))]
+    x = min(max(seen[0][1] / 0.6, lo), hi)  # a first step along ρ ∝ s^−0.6
+    below: tuple[float, float] | None = None  # the bracket's ends: f > 0 (x too small)...
+    above: tuple[float, float] | None = None  # ... and f < 0
+    for _ in range(max_passes - 1):
+        if min(abs(p[1]) for p in seen) <= tol:
+            break
+        seen.append((x, f(x)))
+        for p in seen[-2:]:
+            if p[1] > 0 and (below is None or p[0] > below[0]):
+                below = p
+            if p[1] <= 0 and (above is None or p[0] < above[0]):
+                above = p
+        (x0, f0), (x1, f1) = seen[-2], seen[-1]
+        x = x1 - f1 * (x1 - x0) / (f1 - f0) if f1 != f0 else x1 + (1.0 if f1 > 0 else -1.0)
+        if below is not None and above is not None and not below[0] < x < above[0]:
+            x = below[0] - below[1] * (above[0] - below[0]) / (above[1] - below[1])
+        x = min(max(x, lo), hi)
+    return float(10.0 ** min(seen, key=lambda p: abs(p[1]))[0])
 
 
 def _select(
@@ -920,7 +946,7 @@ def smooth(
             ``adaptive``: each window's regime's); ``"auto"``: chosen from
             this log, for ``ekf`` by :func:`select_accel_psd` (one forward
             pass per grid value), for ``adaptive`` by
-            :func:`consistent_offset_scale` (``ρ = 1``; eight smoother
+            :func:`consistent_offset_scale` (``ρ = 1``; 3–7 smoother
             passes); module docstring.
         disturbance_psd: the EKF's joint-torque offset density [rad²/s⁵], or ``None``
             (not for ``adaptive``: its regimes set it).
@@ -959,7 +985,7 @@ def smooth(
     )
     offset_scale = None
     if accel_psd == "auto" and issubclass(observer_class(observer), AdaptiveEKF):
-        offset_scale = _consistent(make, arrays, 8)  # ρ = 1 (consistent_offset_scale)
+        offset_scale = _consistent(make, arrays)  # ρ = 1 (consistent_offset_scale)
         extra = {
             **extra,
             "offset_scale": offset_scale,

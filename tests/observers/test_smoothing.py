@@ -545,7 +545,7 @@ def test_adaptive_is_smoothed_with_its_model_frozen_per_window_and_chunks_change
 
 def test_auto_densities_over_adaptive_make_the_filter_smoother_consistency_one() -> None:
     """``accel_psd="auto"`` over ``adaptive``: white acceleration at AUTO_WHITE_SCALE of the
-    regimes', the offset density scaled until ρ = 1 (bisection; ρ falls as the scale grows)."""
+    regimes', the offset density scaled until ρ = 1 (secant; ρ falls as the scale grows)."""
     robot = cached_robot("planar_3r")
     res = _mismatched_log("planar_3r", "inertia20_payload", 2.0)
     opts = {"observer": "adaptive", "noise_std": 1e-4, "model_window": 1.0}
@@ -557,8 +557,10 @@ def test_auto_densities_over_adaptive_make_the_filter_smoother_consistency_one()
     regime = smooth(robot, _log(res), **opts)  # type: ignore[arg-type]
     white = [AUTO_WHITE_SCALE * a for a in regime.options["model_accel_psd"]]
     assert auto.options["model_accel_psd"] == pytest.approx(white)
-    with pytest.raises(GainError, match="at least 1 bisection step"):
-        consistent_offset_scale(robot, _log(res), noise_std=1e-4, steps=0)
+    with pytest.raises(GainError, match="at least 1 smoother pass"):
+        consistent_offset_scale(robot, _log(res), noise_std=1e-4, max_passes=0)
+    with pytest.raises(GainError, match="tol"):
+        consistent_offset_scale(robot, _log(res), noise_std=1e-4, tol=0.0)
 
 
 def test_adaptive_smoothing_options_that_do_not_apply_are_refused(ur5_log) -> None:

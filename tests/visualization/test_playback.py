@@ -615,6 +615,20 @@ class Browser:
             assert time.monotonic() < deadline, "the page did not load"
             time.sleep(0.2)
 
+    def settle(self, read: Any, ready: Any, timeout: float = 10.0) -> Any:
+        """``read()`` again every 50 ms until ``ready(value)`` or ``timeout`` [s]; the last value.
+
+        The page redraws on animation frames, which a loaded machine delays: the
+        assertions then run on a settled page (no fixed sleep), unchanged."""
+        import time
+
+        deadline = time.monotonic() + timeout
+        value = read()
+        while not ready(value) and time.monotonic() < deadline:
+            time.sleep(0.05)
+            value = read()
+        return value
+
     def screenshot(self) -> np.ndarray:
         """The page as RGB pixels (0–255)."""
         import io
@@ -642,7 +656,6 @@ def test_browser_dragging_on_the_chart_moves_the_animation_and_the_cursor(
     """A real pointer drag on the chart (DevTools Input events): the animation pauses at the
     time under the pointer, the legend's clock shows it, the chart's cursor follows it, and
     the 3-D view shows that frame (a ghost node's keyframed position at that time)."""
-    import time
 
     browser = Browser(payload_run["html"].as_uri())
     try:
@@ -660,15 +673,30 @@ def test_browser_dragging_on_the_chart_moves_the_animation_and_the_cursor(
             browser.mouse("mouseMoved", (x0 + x1) / 2, y, 1)
             browser.mouse("mouseMoved", x1, y, 1)
             browser.mouse("mouseReleased", x1, y, 0)
-            time.sleep(0.3)  # a few animation frames
-            t = browser.js("viewer.animator.actions[0].time")
-            paused = browser.js("!viewer.animator.playing")
-            clock = browser.js("document.getElementById('pinobs-time').textContent")
-            readout = browser.js("document.getElementById('pinobs-readout').textContent")
+
+            def read(x0: float = x0) -> tuple[Any, ...]:
+                return (
+                    browser.js("viewer.animator.actions[0].time"),
+                    browser.js("!viewer.animator.playing"),
+                    browser.js("document.getElementById('pinobs-time').textContent"),
+                    browser.js("document.getElementById('pinobs-readout').textContent"),
+                    [c for c in chart_cursor_columns(browser.screenshot()) if c > x0],
+                )
+
+            def ready(v: tuple[Any, ...], x1: float = x1) -> bool:
+                t, paused, clock, readout, right = v
+                return bool(
+                    paused
+                    and clock == f"t = {t:.2f} s"
+                    and readout.startswith(f"at t = {t:.2f} s")
+                    and right
+                    and abs(np.mean(right) - x1) <= 2.0
+                )
+
+            t, paused, clock, readout, right = browser.settle(read, ready)
             assert paused
             assert clock == f"t = {t:.2f} s"
             assert readout.startswith(f"at t = {t:.2f} s")
-            right = [c for c in chart_cursor_columns(browser.screenshot()) if c > x0]
             assert right and abs(np.mean(right) - x1) <= 2.0  # the cursor is under the pointer
             times.append(t)
             # the 3-D view shows that instant: the ekf ghost's pole where its clip has it at t
@@ -701,7 +729,6 @@ def test_browser_dragging_on_the_chart_moves_the_animation_and_the_cursor(
 def test_browser_chart_cursor_follows_the_animation_time(payload_run: dict[str, Any]) -> None:
     """Paused at 0.25, 0.5 and 1 s (``#t=``, as meshcat's time slider does: ``seek``): one
     cursor per panel, moving right in proportion to time."""
-    import time
 
     browser = Browser(payload_run["html"].as_uri())
     try:
@@ -709,12 +736,19 @@ def test_browser_chart_cursor_follows_the_animation_time(payload_run: dict[str, 
         xs = []
         for t in (0.25, 0.5, 1.0):
             browser.js(f"window.location.hash = 't={t}&nolegend'")
-            time.sleep(0.3)  # a few animation frames
-            img = browser.screenshot()
-            cols = chart_cursor_columns(img)
-            w = img.shape[1]
-            left = [c for c in cols if c < w // 2]
-            right = [c for c in cols if c >= w // 2]
+
+            def halves() -> tuple[float, list[float], list[float]]:
+                shown = browser.js("viewer.animator.actions[0].time")
+                img = browser.screenshot()
+                cols, w = chart_cursor_columns(img), img.shape[1]
+                return shown, [c for c in cols if c < w // 2], [c for c in cols if c >= w // 2]
+
+            def one_each(v: tuple[float, list[float], list[float]], t: float = t) -> bool:
+                shown, left, right = v  # at t, and (after the first) drawn right of the last
+                moved = not xs or (bool(right) and np.mean(right) > xs[-1][1] + 1.0)
+                return bool(abs(shown - t) < 1e-6 and left and right and moved)
+
+            _, left, right = browser.settle(halves, one_each)
             assert left and right and max(left) - min(left) <= 2 and max(right) - min(right) <= 2
             xs.append((np.mean(left), np.mean(right)))
     finally:

@@ -29,8 +29,8 @@ state) with the learned model frozen per 10 s window, once with the regimes'
 densities and once with ``accel_psd="auto"`` (white acceleration at 1e-2 of
 the regimes', the offset density set so that ρ = 1:
 :func:`pinobs.observers.smoothing.consistent_offset_scale`); RMS after 5 s; the
-CPU times of the smoother (its learning pass and, for ``auto``, its eight
-bisection passes included) over the causal run's, one run each.  ``lag`` rows give the fixed-lag smoother against the
+CPU times of the smoother (its learning pass and, for ``auto``, its search
+passes included) over the causal run's, one run each.  ``lag`` rows give the fixed-lag smoother against the
 whole-log one.  ``cost`` is the smoother's wall time over the causal filter's
 on the same log, the two runs interleaved ``--repeats`` times (median ratio),
 and each as a multiple of ``pin.aba`` timed in the same run; the machine

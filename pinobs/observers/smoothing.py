@@ -707,7 +707,8 @@ def consistent_offset_scale(
     ``x = 0`` (the regimes' density) and a first step of slope −0.6, kept
     inside the bracket once the sign has changed (Illinois' false position)
     and inside :data:`OFFSET_SCALE_RANGE`; it stops at ``|log ρ| ≤ tol`` or
-    after ``max_passes`` smoother passes and returns the best ``s`` seen.
+    after ``max_passes`` smoother passes and returns the best ``s`` seen (1, the
+    regimes' density, when the log is too short to give a ``ρ``).
     A method of moments, not the likelihood: the learned model's residual
     error lies outside the filter's noise family, where the likelihood keeps a
     white acceleration that widens the smoother's band (module docstring).
@@ -741,7 +742,8 @@ def _consistent(
         for row in _rows(*arrays):
             smoother.push(*row)
         smoother.close()
-        return math.log(smoother.consistency)
+        rho = smoother.consistency
+        return math.log(rho) if math.isfinite(rho) and rho > 0 else 0.0  # nothing to test: as is
 
     seen = [(0.0, f(0.0))]
     x = min(max(seen[0][1] / 0.6, lo), hi)  # a first step along ρ ∝ s^−0.6

@@ -892,7 +892,8 @@ def _parser() -> argparse.ArgumentParser:
         "--accel-psd",
         type=_psd_or_auto,
         default=None,
-        help="with --smooth: process noise [rad²/s³], or 'auto' (chosen by likelihood); "
+        help="with --smooth: process noise [rad²/s³], or 'auto' (from the log: ekf by "
+        "likelihood, adaptive by the consistency ρ = 1); "
         "default: the observer's (ekf 1e-8; adaptive: each window's regime)",
     )
     _add_cluster_options(

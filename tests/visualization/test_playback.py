@@ -538,6 +538,7 @@ class Browser:
                 "about:blank",
             ],
             preexec_fn=wire,
+            start_new_session=True,  # its helper processes share the session: close() ends them
             close_fds=False,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
@@ -640,9 +641,26 @@ class Browser:
         return np.asarray(png, dtype=float)
 
     def close(self) -> None:
+        """Chromium asked to quit (it ends its helpers and lets go of the profile), then
+        whatever is left of its session killed, then the profile removed.  Killing only
+        the main process left helpers writing into the profile as it was removed
+        (``OSError: Directory not empty`` once, in a CI rehearsal)."""
         import os
+        import signal
+        import subprocess
 
-        self.proc.kill()
+        try:
+            self.call("Browser.close")
+        except (RuntimeError, OSError):
+            pass  # the pipe closed first: it is quitting
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            pass
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
         self.proc.wait()
         os.close(self._out)
         os.close(self._in)

@@ -9,17 +9,13 @@ import pinobs
 from pinobs.cli import main
 from pinobs.io import write_log
 from pinobs.simulation import Sensor
+from tests.conftest import planar_3r_truth
 
 
 @pytest.fixture(scope="module")
 def planar_log(tmp_path_factory):
     robot = pinobs.load("planar_3r")
-    truth = robot.perturbed(
-        inertia_scale=[1.2, 0.8, 1.1],
-        payload=(0.5, [0.05, 0.0, 0.0]),
-        damping=[0.2, 0.1, 0.05],
-        coulomb=[0.1, 0.05, 0.02],
-    )
+    truth = planar_3r_truth(robot)
     res = pinobs.simulate(
         robot, [], duration=8.0, sensor=Sensor(rate=1000.0, noise_std=1e-5), seed=1, plant=truth
     )

@@ -18,6 +18,7 @@ from pinobs.model.identification import (
 )
 from pinobs.model.urdf_writer import write_urdf
 from pinobs.simulation import Sensor
+from tests.conftest import planar_3r_truth
 
 ROBOTS = ["cartpole", "planar_3r", "ur5"]
 
@@ -111,12 +112,7 @@ def _log(robot: pinobs.Robot, plant: pinobs.Robot, duration: float, noise: float
 
 def test_identify_recovers_a_payload_and_friction_on_planar_3r(rng: np.random.Generator) -> None:
     robot = pinobs.load("planar_3r")
-    truth = robot.perturbed(
-        inertia_scale=[1.2, 0.8, 1.1],
-        payload=(0.5, [0.05, 0.0, 0.0]),
-        damping=[0.2, 0.1, 0.05],
-        coulomb=[0.1, 0.05, 0.02],
-    )
+    truth = planar_3r_truth(robot)
     ident = identify(robot, _log(robot, truth, 8.0, 1e-5, 1))
     rep = ident.report
     assert rep["condition"] < 1e6 and 0 < rep["rank"] <= rep["n_parameters"]

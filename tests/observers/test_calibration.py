@@ -9,6 +9,7 @@ import pinobs
 from pinobs.observers.calibration import identify
 from pinobs.observers.noise import estimate_noise_std
 from pinobs.simulation import Sensor
+from tests.conftest import planar_3r_truth
 
 
 def _acc_error(model: pinobs.Robot, truth: pinobs.Robot, rng: np.random.Generator) -> float:
@@ -37,12 +38,7 @@ def test_smoothed_velocities_identify_closer_to_the_truth_than_savitzky_golay(
     rng: np.random.Generator,
 ) -> None:
     robot = pinobs.load("planar_3r")
-    truth = robot.perturbed(
-        inertia_scale=[1.2, 0.8, 1.1],
-        payload=(0.5, [0.05, 0.0, 0.0]),
-        damping=[0.2, 0.1, 0.05],
-        coulomb=[0.1, 0.05, 0.02],
-    )
+    truth = planar_3r_truth(robot)
     res = pinobs.simulate(
         robot, [], duration=4.0, sensor=Sensor(rate=1000.0, noise_std=1e-4), seed=1, plant=truth
     )

@@ -70,13 +70,13 @@ def sweep(name: str, scenario: str, seed: int) -> list[str]:
             for _, pred, Phi, state, lk in S._forward(filt, S._rows(*arrays), k0):
                 ll += lk
                 if pred is not None:
-                    steps[-1] = S._Step(steps[-1].filt, pred, Phi)
+                    steps[-1] = steps[-1]._replace(pred=pred, Phi=Phi)
                 steps.append(S._Step(state, None, None))
             n = len(steps)
             v_s, var_s = np.empty((n, nv)), np.empty((n, nv))
 
             def emit(
-                i: int, qs: Any, vs: Any, var: Any, v_s: Any = v_s, var_s: Any = var_s
+                i: int, qs: Any, vs: Any, var: Any, _: Any, v_s: Any = v_s, var_s: Any = var_s
             ) -> None:
                 v_s[i], var_s[i] = vs, var[nv : 2 * nv]
 

@@ -7,7 +7,8 @@ pinobs play RESULT.npz [--html F] [--plot F]   watch a saved run
 pinobs demo                                    the main job on a built-in default
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
     [--force --map COL=NAME --topic T --noise STD]   (CSV/TSV, Parquet, NPZ, ROS bags)
-    [--smooth [--lag S|--chunk S] [--accel-psd P|auto]]   RTS smoother (ekf, adaptive), v_std0..
+    [--smooth [--lag S|--chunk S] [--accel-psd P|auto] [--band model|noise]]
+                                                 RTS smoother (ekf, adaptive), v_std0..
 pinobs estimate --robot R --observer O --log 'GLOB'|FOLDER --out-dir OUT   many logs on Dask
     [--workers N | --scheduler tcp://host:8786]          one estimates file per log, a summary table
 pinobs check ii --robot R                      I&I Assumption 1 on the model
@@ -576,6 +577,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             columns=_column_map(args.map),
             topic=args.topic,
             rate=args.rate,
+            band=args.band,
         )
     except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
         print(f"pinobs: error: {exc}", file=sys.stderr)
@@ -597,6 +599,12 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             "explain the log; ≫ 1: too small, the band is too narrow; < 1: too large)",
             file=sys.stderr,
         )
+        if opts.get("band") == "noise":
+            print(
+                "v_std: the smoothed error driven by the measurement noise alone (--band noise; "
+                "a model error that is smooth in time cancels in the smoother)",
+                file=sys.stderr,
+            )
         if opts.get("offset_scale") is not None:
             print(
                 f"densities chosen from the log (ρ = 1): offset × {opts['offset_scale']:.3g}, "
@@ -895,6 +903,14 @@ def _parser() -> argparse.ArgumentParser:
         help="with --smooth: process noise [rad²/s³], or 'auto' (from the log: ekf by "
         "likelihood, adaptive by the consistency ρ = 1); "
         "default: the observer's (ekf 1e-8; adaptive: each window's regime)",
+    )
+    p.add_argument(
+        "--band",
+        choices=("model", "noise"),
+        default=None,
+        help="with --smooth: what v_std states: 'model', the smoother's covariance under the "
+        "filter's noise model; 'noise', its error driven by the measurement noise alone "
+        "(a smooth model error cancels); default: noise over adaptive, model over ekf",
     )
     _add_cluster_options(
         p, "with --out-dir: local worker processes (0: this process; default: one per core)"

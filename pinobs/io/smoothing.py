@@ -126,6 +126,7 @@ def smooth_log(
     options: Mapping[str, Any] | None = None,
     chunk_rows: int = CHUNK_ROWS,
     stream: bool = True,
+    band: str | None = None,
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Smooth a log file into ``out`` (module docstring); returns the row accounting and
     the smoother's options of each stretch (with its ``consistency``,
@@ -136,7 +137,7 @@ def smooth_log(
         robot: the robot of the log.
         out: CSV file ``t, q0.., v0.., v_std0..`` (refused if it exists, unless ``force``,
             or if it is ``source``).
-        observer, noise_std, accel_psd, lag, chunk: as :func:`pinobs.smooth`.
+        observer, noise_std, accel_psd, lag, chunk, band: as :func:`pinobs.smooth`.
         columns, topic: as :func:`pinobs.io.iter_log`.
         rate: sample rate [Hz] (default: from the log's median interval).
         options: further options of the filter (``filter_options`` of :func:`pinobs.smooth`).
@@ -165,12 +166,12 @@ def smooth_log(
         if stream and period is not None:
             run, stretches = _streamed(
                 first, chunks, robot, writer, period, observer, noise_std,
-                accel_psd if accel_psd != "auto" else None, lag, chunk, options,
+                accel_psd if accel_psd != "auto" else None, lag, chunk, options, band or "model",
             )  # fmt: skip
         else:
             run, stretches = _recorded(
                 first, chunks, robot, writer, period, observer, noise_std, accel_psd, lag, chunk,
-                options,
+                options, band,
             )  # fmt: skip
         writer.close()
     except BaseException:
@@ -191,6 +192,7 @@ def _streamed(
     lag: float | None,
     chunk: float | None,
     options: Mapping[str, Any] | None,
+    band: str,
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Rows in, smoothed rows out as soon as they and every row before them are done."""
     new, opts = streaming_smoother(
@@ -202,6 +204,7 @@ def _streamed(
         chunk=chunk,
         lag=lag,
         filter_options=options,
+        band=band,
     )
     rec = _Streamer(robot, observer, new)
     est = LogEstimator(rec, period=period)
@@ -270,6 +273,7 @@ def _recorded(
     lag: float | None,
     chunk: float | None,
     options: Mapping[str, Any] | None,
+    band: str | None,
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Every screened sample kept, each stretch smoothed at the end."""
     rec = _Recorder(robot, observer)
@@ -304,6 +308,7 @@ def _recorded(
             lag=lag,
             chunk=chunk,
             filter_options=options,
+            band=band,
         )
         samples_q[k], samples_v[k], samples_std[k] = res.q, res.v, res.v_std
         stretches.append({**res.options, "consistency": res.consistency})

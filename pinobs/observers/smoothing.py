@@ -119,6 +119,23 @@ learning benchmark's six scenarios at seeds 1 and 2 the band then covers
 98.1–100 %), with an RMS 0.80–1.11× the regimes' (README).  Designed on three of those
 logs (UR5 payload and Panda friction at seed 1, UR5 torque scale at seed 2);
 still conservative where the smoother gains more than its model says.
+
+Two bands (``band``).  ``"model"``: ``v_std = sqrt(diag P^s)``, the posterior
+under the filter's noise model, honest when the densities describe the
+error (an exact model with ``accel_psd`` chosen by likelihood).  ``"noise"``:
+the covariance of the *same* estimate's error driven by the measurement
+noise alone, ``Pⁿˢ`` (:func:`_noise_step` forward, :func:`_backward`'s
+``B, U`` recursion backward; on a linear model it equals the batch
+estimate's ``(I − W C) T₀ P₀ T₀ᵀ (I − W C)ᵀ + σ² W Wᵀ``, tested): the error
+a model error adds is left out, because a smooth one cancels between the
+forward and backward passes (above; for a double integrator the filter's
+velocity lags a slowly varying acceleration error ``w`` by about
+``√2 w/ω`` and the smoother's by ``ẇ/ω²``, at the filter's bandwidth
+``ω``).  It costs a few more products per sample and is the default over
+``adaptive`` with its regimes' densities, which are tuned for the causal
+filter's tracking, not fitted to the log; a model error with fast content
+(Coulomb friction at velocity reversals) is not smooth, and the noise band
+is then too narrow (README).
 """
 
 from __future__ import annotations
@@ -137,10 +154,11 @@ from pinobs.model import Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.adaptive import AdaptiveEKF, ModelSnapshot
 from pinobs.observers.base import Vector, make_observer, observer_class, observer_names, positive
-from pinobs.observers.ekf import ExtendedKalmanFilter
+from pinobs.observers.ekf import ExtendedKalmanFilter, _LazyKernel, _posv, cholesky_solve
 
 __all__ = [
     "AUTO_WHITE_SCALE",
+    "BANDS",
     "CHUNK_TOL",
     "DEFAULT_ACCEL_PSD",
     "DEFAULT_GRID",
@@ -172,6 +190,10 @@ AUTO_WHITE_SCALE = 1e-2
 
 #: The range searched by :func:`consistent_offset_scale` (factors of the regimes' offset density).
 OFFSET_SCALE_RANGE = (1e-3, 1e2)
+
+#: What ``v_std`` states (:func:`smooth`'s ``band``): the smoother's posterior covariance under the
+#: filter's noise model, or the covariance of its error driven by the measurement noise alone.
+BANDS = ("model", "noise")
 
 #: Relative agreement the default overlap aims at: ``|v_chunked − v_whole| ≤ CHUNK_TOL · v_std``.
 CHUNK_TOL = 1e-6
@@ -233,6 +255,195 @@ class _Step(NamedTuple):
     filt: Any  # x⁺_k (a filter state: q, v, P[, d])
     pred: Any  # x⁻_{k+1} (None at the last sample seen so far)
     Phi: Any  # Φ_k (None likewise)
+    noise: Any = None  # band="noise": (Pⁿ_k, K_k or None), the noise-driven covariance and gain
+
+
+def _noise_step(
+    prev: tuple[Vector, Vector | None] | None,
+    pred: Any,
+    Phi: Any,
+    state: Any,
+    nv: int,
+    meas_var: float,
+) -> tuple[Vector, Vector | None]:
+    """``(Pⁿ⁺_k, K_k)``: the filter's error covariance driven by the measurement noise alone.
+
+    The filter's estimate is linear in the measurements (to first order); its
+    error, under the model's own dynamics with no process noise, obeys (the
+    actual covariance of a filter whose gains were designed for another noise
+    model: Gelb, *Applied Optimal Estimation*, 1974, §7.2)::
+
+        Pⁿ⁺_k = (I − K_k H) Φ_{k−1} Pⁿ⁺_{k−1} Φ_{k−1}ᵀ (I − K_k H)ᵀ + σ² K_k K_kᵀ
+
+    with ``K_k = P⁻_k Hᵀ (H P⁻_k Hᵀ + σ² I)⁻¹ = P⁺_k Hᵀ / σ²`` the filter's own
+    gain (``H = [I 0]``; the second form, free, holds for the Kalman gain:
+    ``P⁺Hᵀ = P⁻Hᵀ − K (S − σ² I) = σ² K``; ``K = None`` at a dropped or gated
+    sample, where ``Pⁿ⁺_k = Φ Pⁿ⁺_{k−1} Φᵀ``) and ``Pⁿ⁺_0 = P⁺_0`` (the start's
+    uncertainty is kept).  Evaluated as ``Y = X − K X_q·``,
+    ``Pⁿ⁺ = Y − (Y_·q − σ² K) Kᵀ`` with ``X = Φ Pⁿ⁺ Φᵀ`` (as
+    :func:`pinobs.observers.ekf.joseph_update`).
+    """
+    if prev is None:
+        return state.P.copy(), None
+    if state is pred or getattr(state, "gated", False):  # predicted over, not corrected
+        return _noise_forward(prev[0], Phi, None, meas_var), None
+    K = state.P[:, :nv] / meas_var
+    return _noise_forward(prev[0], Phi, K, meas_var), K
+
+
+def _noise_forward_loops(Pn: Vector, Phi: Vector, K: Vector, r: float, out: Vector) -> None:
+    """:func:`_noise_forward` in loops (compiled by numba for small matrices); ``K`` with no
+    columns: no correction."""
+    m, nv = Pn.shape[0], K.shape[1]
+    T = np.zeros((m, m))  # Φ Pn (Φ is sparse: its zeros skipped)
+    for i in range(m):
+        for k in range(m):
+            a = Phi[i, k]
+            if a != 0.0:
+                for j in range(m):
+                    T[i, j] += a * Pn[k, j]
+    X = np.zeros((m, m))  # T Φᵀ
+    for j in range(m):
+        for k in range(m):
+            a = Phi[j, k]
+            if a != 0.0:
+                for i in range(m):
+                    X[i, j] += T[i, k] * a
+    for i in range(m):  # Y = X − K X_q·, then out = Y − (Y_·q − r K) Kᵀ
+        for j in range(m):
+            t = X[i, j]
+            for k in range(nv):
+                t -= K[i, k] * X[k, j]
+            T[i, j] = t
+    for i in range(m):
+        for j in range(m):
+            t = T[i, j]
+            for k in range(nv):
+                t -= (T[i, k] - r * K[i, k]) * K[j, k]
+            out[i, j] = t
+
+
+def _noise_forward(Pn: Vector, Phi: Vector, K: Vector | None, r: float) -> Vector:
+    """``(I − K H) Φ Pn Φᵀ (I − K H)ᵀ + r K Kᵀ`` (``K = None``: ``Φ Pn Φᵀ``), evaluated as
+    ``X = Φ Pn Φᵀ``, ``Y = X − K X_q·``, ``Y − (Y_·q − r K) Kᵀ`` (as
+    :func:`pinobs.observers.ekf.joseph_update`)."""
+    m = Pn.shape[0]
+    if m <= _NOISE_KERNEL_MAX and _noise_forward_kernel.compiled is not None:
+        out = np.empty((m, m))
+        k = _NO_GAIN if K is None else K
+        _noise_forward_kernel.compiled(Pn, np.ascontiguousarray(Phi), k, r, out)
+        return out
+    X = Phi @ Pn @ Phi.T
+    if K is None:
+        return X
+    nv = K.shape[1]
+    Y = X - K @ X[:nv]
+    return Y - (Y[:, :nv] - r * K) @ K.T
+
+
+def _noise_backward_loops(
+    B: Vector, U: Vector, G: Vector, Phi: Vector, K: Vector, Pn: Vector, r: float, var: Vector
+) -> None:
+    """:func:`_noise_backward` in loops, ``B`` and ``U`` updated in place (compiled by numba
+    for small matrices); ``K`` with no columns: no correction at the later sample."""
+    m, nk, nv = B.shape[0], K.shape[1], var.shape[0]
+    D = np.zeros((m, m))  # B Φ − Φ, then − (B K) Φ_q·
+    for i in range(m):
+        for k in range(m):
+            a = B[i, k]
+            if a != 0.0:
+                for j in range(m):
+                    D[i, j] += a * Phi[k, j]
+    D -= Phi
+    if nk > 0:
+        BK = np.zeros((m, nk))
+        for i in range(m):
+            for k in range(m):
+                a = B[i, k]
+                for j in range(nk):
+                    BK[i, j] += a * K[k, j]
+        for i in range(m):
+            for k in range(nk):
+                a = BK[i, k]
+                for j in range(m):
+                    D[i, j] -= a * Phi[k, j]
+        for i in range(m):
+            for j in range(m):
+                t = 0.0
+                for k in range(nk):
+                    t += BK[i, k] * BK[j, k]
+                U[i, j] += r * t
+    T = np.zeros((m, m))  # U ← G U Gᵀ
+    for i in range(m):
+        for k in range(m):
+            a = G[i, k]
+            for j in range(m):
+                T[i, j] += a * U[k, j]
+    for i in range(m):
+        for j in range(m):
+            t = 0.0
+            for k in range(m):
+                t += T[i, k] * G[j, k]
+            U[i, j] = t
+    for i in range(m):  # B ← G D + I
+        for j in range(m):
+            t = 1.0 if i == j else 0.0
+            for k in range(m):
+                t += G[i, k] * D[k, j]
+            B[i, j] = t
+    for i in range(nv):  # (B Pn Bᵀ + U) at the velocity rows nv..2nv
+        row = nv + i
+        t = U[row, row]
+        for j in range(m):
+            a = 0.0
+            for k in range(m):
+                a += Pn[j, k] * B[row, k]
+            t += B[row, j] * a
+        var[i] = t
+
+
+def _noise_backward(
+    B: Vector, U: Vector, G: Vector, Phi: Vector, K: Vector | None, Pn: Vector, r: float, nv: int
+) -> tuple[Vector, Vector, Vector]:
+    """One step of :func:`_backward`'s ``B, U`` recursion: ``(B_k, U_k, var)`` from
+    ``B_{k+1}, U_{k+1}`` (``K = K_{k+1}``, ``Pn = Pⁿ⁺_k``), ``var`` the velocity entries of
+    ``B_k Pn B_kᵀ + U_k``."""
+    m = B.shape[0]
+    if m <= _NOISE_KERNEL_MAX and _noise_backward_kernel.compiled is not None:
+        B, U, var = B.copy(), U.copy(), np.empty(nv)
+        k = _NO_GAIN if K is None else K
+        _noise_backward_kernel.compiled(
+            B, U, np.ascontiguousarray(G), np.ascontiguousarray(Phi), k, Pn, r, var
+        )
+        return B, U, var
+    BAPhi = B @ Phi
+    if K is not None:
+        BK = B @ K
+        BAPhi -= BK @ Phi[:nv]  # B (I − K H) Φ, H Φ = Φ's first nv rows
+        U = U + r * (BK @ BK.T)
+    U = G @ U @ G.T
+    B = G @ (BAPhi - Phi)
+    B.flat[:: m + 1] += 1.0
+    Bv = B[nv : 2 * nv]
+    return B, U, np.einsum("ij,ij->i", Bv @ Pn, Bv) + U.diagonal()[nv : 2 * nv]
+
+
+_NOISE_KERNEL_MAX = 36  # states (nv ≤ 12 with the offset): above, NumPy's BLAS products win
+_NO_GAIN = np.empty((0, 0))
+_noise_forward_kernel = _LazyKernel(
+    _noise_forward_loops, np.eye(2), np.eye(2), np.zeros((2, 1)), 1.0, np.zeros((2, 2))
+)
+_noise_backward_kernel = _LazyKernel(
+    _noise_backward_loops,
+    np.eye(2),
+    np.eye(2),
+    np.eye(2),
+    np.eye(2),
+    np.zeros((2, 1)),
+    np.eye(2),
+    1.0,
+    np.zeros(1),
+)
 
 
 def _forward(
@@ -261,9 +472,13 @@ def _forward(
         if q is not None:
             q_meas = model.check_configuration(q, what=f"q[{k0 + k}]")
             e = model.difference(pred.q, q_meas)
-            chol = np.linalg.cholesky(pred.P[:nv, :nv] + meas_var * np.eye(nv))
-            z = np.linalg.solve(chol, e)
-            ll = -(0.5 * (z @ z) + np.log(np.diag(chol)).sum() + 0.5 * nv * _LOG_2PI)
+            # S = U'U (LAPACK dposv: the factor and S⁻¹e at once); log det S = 2 Σ log Uᵢᵢ
+            chol, s_inv_e, info = _posv()(pred.P[:nv, :nv] + meas_var * np.eye(nv), e)
+            if info != 0:
+                raise NonFiniteError(
+                    f"sample {k0 + k}: the innovation covariance is not positive definite"
+                )
+            ll = -(0.5 * (e @ s_inv_e) + np.log(np.diagonal(chol)).sum() + 0.5 * nv * _LOG_2PI)
             state = filt._correct(pred, q_meas)
         else:
             state = pred
@@ -321,11 +536,21 @@ class Smoother:
         chunk, overlap: in samples (``chunk=None``: everything at :meth:`close`).
     """
 
-    def __init__(self, filt: SmoothableFilter, chunk: int | None, overlap: int) -> None:
+    def __init__(
+        self, filt: SmoothableFilter, chunk: int | None, overlap: int, band: str = "model"
+    ) -> None:
+        if band not in BANDS:
+            raise OptionError(f"band={band!r}: give one of {list(BANDS)}")
         self._fed = _Fed()
         self._gen = _forward(filt, self._fed, 0)
         self._model = filt.robot
         self._chunk, self._over = chunk, overlap
+        self._meas_var = float(cast(Any, filt).gains.meas_std ** 2)
+        self._noise: tuple[Vector, Vector | None] | None = None  # band="noise": (Pⁿ⁺, K) last
+        if band == "noise" and 2 * self._model.nv <= _NOISE_KERNEL_MAX:
+            _noise_forward_kernel.load()
+            _noise_backward_kernel.load()
+        self._band = band
         self._buf: list[_Step] = []
         self._start = 0
         self.log_likelihood = 0.0
@@ -343,9 +568,12 @@ class Smoother:
         self._fed.queue.append((t, q, tau))
         _, pred, Phi, state, ll = next(self._gen)
         self.log_likelihood += ll
+        if self._band == "noise":
+            nv = self._model.nv
+            self._noise = _noise_step(self._noise, pred, Phi, state, nv, self._meas_var)
         if pred is not None:
-            self._buf[-1] = _Step(self._buf[-1].filt, pred, Phi)
-        self._buf.append(_Step(state, None, None))
+            self._buf[-1] = self._buf[-1]._replace(pred=pred, Phi=Phi)
+        self._buf.append(_Step(state, None, None, self._noise))
         if self._chunk is not None and len(self._buf) == self._chunk + self._over:
             return self._back(self._chunk)
         return []
@@ -358,15 +586,19 @@ class Smoother:
         nv = self._model.nv
         out: list[tuple[int, Vector, Vector, Vector]] = []
 
-        def emit(i: int, qs: Vector, vs: Vector, var: Vector) -> None:
-            if i < keep:
-                out.append((self._start + i, qs, vs, var[nv : 2 * nv]))
+        var_s: list[Vector] = []  # diag P^s, for ρ
 
-        _backward(self._model, self._buf, emit)
+        def emit(i: int, qs: Vector, vs: Vector, var: Vector, var_n: Vector | None) -> None:
+            if i < keep:
+                band = var if var_n is None else var_n
+                out.append((self._start + i, qs, vs, band[nv : 2 * nv]))
+                var_s.append(var[nv : 2 * nv])
+
+        _backward(self._model, self._buf, emit, self._meas_var)
         if out:  # ρ's terms (v^s − v⁺)² / (P⁺ − P^s)_vv, where that variance is not ~0
             filt = [step.filt for step in reversed(self._buf[:keep])]  # out's order: last first
             var_f = np.array([f.P.diagonal()[nv : 2 * nv] for f in filt])
-            dvar = var_f - np.array([o[3] for o in out])
+            dvar = var_f - np.array(var_s)
             diff = np.array([o[2] for o in out]) - np.array([f.v for f in filt])
             ok = dvar > 1e-9 * var_f  # not at the last sample (the smoother is the filter there)
             self._rho_sum += float(np.sum(diff[ok] ** 2 / dvar[ok]))
@@ -384,20 +616,44 @@ def _plain(state: Any) -> Vector:
 
 
 def _backward(
-    robot: Robot, steps: Sequence[_Step], emit: Callable[[int, Vector, Vector, Vector], None]
+    robot: Robot,
+    steps: Sequence[_Step],
+    emit: Callable[[int, Vector, Vector, Vector, Vector | None], None],
+    meas_var: float = 0.0,
 ) -> None:
     """RTS backward pass over ``steps`` (module docstring), from the last one's filtered state.
 
-    Calls ``emit(i, q^s_i, v^s_i, diag P^s_i)`` for every index, last first.
+    Calls ``emit(i, q^s_i, v^s_i, diag P^s_i, diag Pⁿˢ_i)`` for every index, last
+    first; ``Pⁿˢ`` (``None`` unless the steps carry :func:`_noise_step`'s
+    covariances; its velocity entries only, the others NaN) is the smoothed
+    error's covariance driven by the measurement noise alone.  The smoothed error obeys
+    ``e^s_k = e⁺_k + G_k (e^s_{k+1} − Φ_k e⁺_k)`` with
+    ``e⁺_{k+1} = A_{k+1} Φ_k e⁺_k + K_{k+1} n_{k+1}`` (``A = I − K H``, no process
+    noise), so ``e^s_k = B_k e⁺_k + u_k`` with ``u_k`` independent of ``e⁺_k``::
+
+        B_k = I + G_k (B_{k+1} A_{k+1} Φ_k − Φ_k)                 B_N = I
+        U_k = G_k (σ² B_{k+1} K_{k+1} K_{k+1}ᵀ B_{k+1}ᵀ + U_{k+1}) G_kᵀ   U_N = 0
+        Pⁿˢ_k = B_k Pⁿ⁺_k B_kᵀ + U_k
+
+    (at the window's end the smoother is the filter: ``B = I``, ``U = 0``).
     """
     nv = robot.nv
-    last = steps[-1].filt
-    q_s, x_s, P_s = last.q, _plain(last), last.P
-    emit(len(steps) - 1, q_s, x_s[:nv], np.diag(P_s))
+    last = steps[-1]
+    q_s, x_s, P_s = last.filt.q, _plain(last.filt), last.filt.P
+    noise = last.noise is not None
+    if noise:
+        m = P_s.shape[0]
+        B: Vector = np.eye(m)
+        U: Vector = np.zeros((m, m))
+    var_n = None
+    if noise:
+        var_n = np.full(m, np.nan)
+        var_n[nv : 2 * nv] = last.noise[0].diagonal()[nv : 2 * nv]
+    emit(len(steps) - 1, q_s, x_s[:nv], np.diag(P_s), var_n)
     for i in range(len(steps) - 2, -1, -1):
-        filt, pred, Phi = steps[i]
+        filt, pred, Phi, pn_k = steps[i]
         # G_k = P⁺_k Φ_kᵀ (P⁻_{k+1})⁻¹, as (P⁻⁻¹ Φ P⁺)ᵀ (P symmetric)  [Särkkä 2013, Thm 8.2]
-        G = np.linalg.solve(pred.P, Phi @ filt.P).T
+        G = cholesky_solve(pred.P, Phi @ filt.P)[0].T
         # δ_k = G_k (x^s_{k+1} ⊖ x⁻_{k+1}); x^s_k = x⁺_k ⊕ δ_k  [ibid., mean on the manifold]
         delta = G @ np.concatenate([robot.difference(pred.q, q_s), x_s - _plain(pred)])
         q_s = robot.integrate(filt.q, delta[:nv])
@@ -405,7 +661,13 @@ def _backward(
         # P^s_k = P⁺_k + G_k (P^s_{k+1} − P⁻_{k+1}) G_kᵀ  [ibid.]
         P_s = filt.P + G @ (P_s - pred.P) @ G.T
         P_s = 0.5 * (P_s + P_s.T)
-        emit(i, q_s, x_s[:nv], np.diag(P_s))
+        var_n = None
+        if noise:  # the docstring's B, U recursion
+            var_n = np.full(m, np.nan)  # the velocity entries: all that v_std needs
+            B, U, var_n[nv : 2 * nv] = _noise_backward(
+                B, U, G, Phi, steps[i + 1].noise[1], pn_k[0], meas_var, nv
+            )
+        emit(i, q_s, x_s[:nv], np.diag(P_s), var_n)
 
 
 def default_overlap(
@@ -874,6 +1136,7 @@ def streaming_smoother(
     overlap: float | None = None,
     lag: float | None = None,
     filter_options: Mapping[str, Any] | None = None,
+    band: str = "model",
 ) -> tuple[Callable[[], Smoother], dict[str, Any]]:
     """A maker of :class:`Smoother` for a log read as it goes (memory bounded by ``chunk`` or
     ``lag``), and the options to report; the arguments as :func:`smooth`, ``dt`` the
@@ -891,6 +1154,8 @@ def streaming_smoother(
             f"model (got observer={observer!r}, accel_psd={accel_psd!r}, chunk={chunk!r}, "
             f"lag={lag!r}); use smooth() on the whole log"
         )
+    if band not in BANDS:
+        raise OptionError(f"band={band!r}: give one of {list(BANDS)}")
     positive("dt", dt)
     empty = np.empty(0)
     make, extra = _filter_maker(
@@ -910,8 +1175,9 @@ def streaming_smoother(
         "chunk": None if n_chunk is None else n_chunk * dt,
         "overlap": n_over * dt if n_over else None,
         "lag": lag,
+        "band": band,
     }
-    return (lambda: Smoother(make(accel_psd), n_chunk, n_over)), opts
+    return (lambda: Smoother(make(accel_psd), n_chunk, n_over, band)), opts
 
 
 def smooth(
@@ -927,6 +1193,7 @@ def smooth(
     lag: float | None = None,
     model_window: float | None = None,
     filter_options: Mapping[str, Any] | None = None,
+    band: str | None = None,
 ) -> Smoothed:
     """Fixed-interval RTS smoothing of a log on the manifold (module docstring for the equations).
 
@@ -963,6 +1230,16 @@ def smooth(
             is frozen (default: its ``horizon``, 10 s: module docstring).
         filter_options: further options of the filter (``q0_std``, ``v0_std``, ...;
             for ``adaptive``, those of its causal learning pass).
+        band: what ``v_std`` states (:data:`BANDS`): ``"model"``, the smoother's
+            covariance ``P^s`` under the filter's noise model (white acceleration
+            and offset as modelled); ``"noise"``, the covariance of the same
+            estimate's error driven by the measurement noise alone
+            (:func:`_backward`), for a model error that is smooth in time, which
+            the forward and backward passes lag in opposite directions and the
+            smoother cancels (module docstring); ``None``: ``"noise"`` over
+            ``adaptive`` with its regimes' densities (tuned for the causal
+            filter's tracking, not fitted to the log), ``"model"`` otherwise
+            (``ekf``; densities given or chosen from the log).
 
     Raises:
         UnknownNameError, OptionError: ``observer`` is unknown or cannot be smoothed,
@@ -979,6 +1256,11 @@ def smooth(
         raise GainError(f"accel_psd={accel_psd!r}: give a number > 0 [rad²/s³] or 'auto'")
     if accel_psd == "auto" and noise_std is None:
         raise GainError("accel_psd='auto' needs noise_std [rad or m], > 0")
+    if band is None:  # the noise band where the densities are adaptive's causal regimes'
+        adaptive = issubclass(observer_class(observer), AdaptiveEKF)
+        band = "noise" if adaptive and accel_psd is None else "model"
+    if band not in BANDS:
+        raise OptionError(f"band={band!r}: give one of {list(BANDS)}")
     t_all, q_all, tau_all = _log_arrays(robot, log)
     k0, good = _first_good(q_all)
     arrays = (t_all[k0:], q_all[k0:], tau_all[k0:], good)
@@ -1009,7 +1291,7 @@ def smooth(
     out_q = np.full((t_all.size, model.nq), np.nan)
     out_v = np.full((t_all.size, nv), np.nan)
     out_var = np.full((t_all.size, nv), np.nan)
-    smoother = Smoother(filt, None if n_over == 0 else n_chunk, n_over)
+    smoother = Smoother(filt, None if n_over == 0 else n_chunk, n_over, band)
 
     def keep(done: list[tuple[int, Vector, Vector, Vector]]) -> None:
         for k, qs, vs, var in done:
@@ -1034,6 +1316,7 @@ def smooth(
         "chunk": None if chunk is None and lag is None else n_chunk * dt,
         "overlap": n_over * dt if n_over else None,
         "lag": lag,
+        "band": band,
     }
     return Smoothed(
         t=t_all,

@@ -48,7 +48,8 @@ resolve densities below 1e-8, on 10 s logs it picks 1e-11); at the default 1e-8 
 seed 0) with an RMS 1.9× larger.  On short logs the choice is larger, so
 conservative (0.7 s, UR5, σ = 1e-4: 1e-7).
 
-Memory: the whole-log smoother stores ``3 (2nv)²`` numbers per sample.  With
+Memory: the whole-log smoother stores ``3 m²`` numbers per sample (``m`` = 2nv, or
+3nv with the torque offset; ``band="noise"``: ``m² + m nv`` more, ``Pⁿ⁺`` and ``K``).  With
 ``chunk`` the forward pass still runs once, but the backward pass runs on
 windows of ``chunk + overlap`` seconds started from the *filtered* estimate at
 the window's end (the best available without later data) and keeps only the

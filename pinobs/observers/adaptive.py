@@ -507,6 +507,12 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             robot.copy(), self._offset.copy(), self.regime, accel, dist * self._m_bar2
         )
 
+    def lost(self) -> bool:
+        """Whether the model-based filter's estimate or covariance is not finite (with the
+        blend, the next update restarts it; without, it stays lost)."""
+        ekf = self._state.ekf if self._state is not None else None  # type: ignore[attr-defined]
+        return ekf is not None and not math.isfinite(ekf.v.sum() + ekf.P.sum())
+
     def parameters(self) -> ParameterSet:
         """The learned parameters with names and standard deviations (nominal before the first solve)."""
         lr = self._learner

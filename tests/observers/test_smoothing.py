@@ -600,6 +600,60 @@ def test_adaptive_is_smoothed_with_its_model_frozen_per_window_and_chunks_change
     np.testing.assert_allclose(chunked.v_std[after], whole.v_std[after], rtol=1e-6)
 
 
+def _snapshots(monkeypatch, robot, res, bank: bool | None, **options) -> tuple[list, list[bool]]:
+    """The learning pass's snapshots, and the ``blend`` of each observer it made (``bank``:
+    forced on or off; ``None``: as :func:`smoothing._learn` chooses)."""
+    made: list[bool] = []
+
+    def make(name, robot, **kw):  # type: ignore[no-untyped-def]
+        if bank is not None:
+            kw["blend"] = bank
+        made.append(kw["blend"])
+        return make_observer(name, robot, **kw)
+
+    monkeypatch.setattr(smoothing, "make_observer", make)
+    t, q, tau = res.t[1:], res.q_meas[1:], res.tau[1:]  # sample 0 is not measured
+    maker, _ = smoothing._learn(robot, t, q, tau, np.ones(t.size, bool), 1e-4, options, 0.5)
+    monkeypatch.undo()
+    return list(maker(None)._snaps), made
+
+
+def _same_snapshots(a: list, b: list, robot: pinobs.Robot) -> None:
+    rng = np.random.default_rng(0)
+    q, v = robot.random_configuration(rng), rng.normal(size=robot.nv)
+    acc = rng.normal(size=robot.nv)
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        assert (x.regime, x.accel_psd) == (y.regime, y.accel_psd)
+        np.testing.assert_array_equal(x.offset, y.offset)
+        np.testing.assert_array_equal(x.disturbance_psd, y.disturbance_psd)
+        for f in (lambda r: r.inverse_dynamics(q, v, acc), lambda r: r.friction_torque(v)):
+            np.testing.assert_array_equal(f(x.robot), f(y.robot))
+
+
+def test_the_learning_pass_runs_without_the_bank_and_learns_the_same_models(monkeypatch) -> None:
+    """The learning pass leaves out the blend's model-free bank (it costs ~10 %): the models
+    learned do not depend on it.  Where the bank matters, a lost model-based filter that it
+    would restart (the adaptive test's friction log), the pass is run again with it."""
+    robot = cached_robot("planar_3r")
+    res = _mismatched_log("planar_3r", "inertia20_payload", 1.2)
+    plain, made = _snapshots(monkeypatch, robot, res, None)
+    assert made == [False]  # one pass, no bank
+    with_bank, _ = _snapshots(monkeypatch, robot, res, True)
+    assert {s.regime for s in plain} != {"warmup"}  # something was learned
+    _same_snapshots(plain, with_bank, robot)
+
+    robot = cached_robot("ur5")
+    res = _mismatched_log("ur5", "friction", 5.6)  # lost at 5.47 s without friction columns
+    plain, made = _snapshots(monkeypatch, robot, res, None, friction=False)
+    assert made == [False, True]  # lost without the bank: run again with it
+    with_bank, _ = _snapshots(monkeypatch, robot, res, True, friction=False)
+    _same_snapshots(plain, with_bank, robot)
+    # the user's blend=False is the user's filter: lost, it is not rerun with a bank
+    with pytest.raises(pinobs.errors.ObserverDiverged):
+        _snapshots(monkeypatch, robot, res, None, friction=False, blend=False)
+
+
 def test_auto_densities_over_adaptive_make_the_filter_smoother_consistency_one() -> None:
     """``accel_psd="auto"`` over ``adaptive``: white acceleration at AUTO_WHITE_SCALE of the
     regimes', the offset density scaled until ρ = 1 (secant; ρ falls as the scale grows)."""

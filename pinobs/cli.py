@@ -595,7 +595,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
         )
     for opts in stretches:
         print(
-            f"filter–smoother consistency ρ = {opts['consistency']:.2f} (about 1: the densities "
+            f"filter–smoother consistency ρ = {opts['consistency']:.3g} (about 1: the densities "
             "explain the log; ≫ 1: too small, the band is too narrow; < 1: too large)",
             file=sys.stderr,
         )

@@ -18,6 +18,9 @@ Formats (chosen from the source):
   model-based observer is warned).
 - Parquet (``.parquet``, ``.pq``): the same columns.
 - NPZ (``.npz``): arrays ``t`` (N,), ``q`` (N, nq), optionally ``tau`` (N, nv).
+  A result saved by ``pinobs run --save`` (:meth:`pinobs.Result.save`) is read
+  as the log its sensor recorded: its measurements ``q_meas`` (a NaN row: a
+  dropped sample) are the log's ``q``, not its simulated truth ``q``.
 - A pandas ``DataFrame``: the same columns as a CSV.
 - ROS bags (a rosbag2 directory with sqlite3 or MCAP storage, a ``.mcap`` or
   ``.db3`` file, a ROS 1 ``.bag``), read with the ``rosbags`` library:
@@ -523,7 +526,8 @@ def _npz_log(path: Path, robot: Robot) -> Log:
             )
         try:
             t = np.asarray(z["t"], dtype=float)
-            q = np.asarray(z["q"], dtype=float)
+            # a saved simulation result: what its sensor measured, not the truth
+            q = np.asarray(z["q_meas" if "q_meas" in keys else "q"], dtype=float)
             tau = np.asarray(z["tau"], dtype=float) if "tau" in keys else None
         except (zipfile.BadZipFile, EOFError, OSError, ValueError) as exc:
             raise LogFormatError(

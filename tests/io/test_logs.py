@@ -115,6 +115,18 @@ def test_npz_log_is_read_like_csv(tmp_path: Path) -> None:
     np.testing.assert_array_equal(npz_log.tau, csv_log.tau)
 
 
+def test_a_saved_run_is_read_as_what_its_sensor_measured(tmp_path: Path) -> None:
+    """``pinobs run --save`` writes the truth ``q`` and the measurements ``q_meas``; read as a
+    log it is the measurements (row 0, never measured, a dropped sample), not the truth an
+    observer would then track perfectly (ρ ≈ 1e-20 from the smoother before this was fixed)."""
+    _, res = _log(tmp_path, n=40)
+    path = res.save(tmp_path / "run.npz")
+    log = read_log(path, pinobs.load("ur5"))
+    np.testing.assert_array_equal(log.q, res.q_meas)
+    assert np.isnan(log.q[0]).all() and not np.array_equal(log.q[1:], res.q[1:])
+    np.testing.assert_array_equal(log.tau, res.tau)
+
+
 def test_log_columns_that_do_not_fit_the_robot_are_rejected(tmp_path: Path) -> None:
     path, _ = _log(tmp_path, n=10)
     with pytest.raises(pinobs.DimensionError, match=r"lack \['q6 or q.panda_joint7'"):

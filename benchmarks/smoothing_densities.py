@@ -67,7 +67,7 @@ def sweep(name: str, scenario: str, seed: int) -> list[str]:
             ]
             steps: list[S._Step] = []
             ll = 0.0
-            for _, pred, Phi, state, lk in S._forward(filt, S._rows(*arrays), k0):
+            for _, pred, Phi, state, lk, _ in S._forward(filt, S._rows(*arrays), k0):
                 ll += lk
                 if pred is not None:
                     steps[-1] = steps[-1]._replace(pred=pred, Phi=Phi)

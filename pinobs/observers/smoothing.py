@@ -134,7 +134,24 @@ a model error adds is left out, because a smooth one cancels between the
 forward and backward passes (above; for a double integrator the filter's
 velocity lags a slowly varying acceleration error ``w`` by about
 ``√2 w/ω`` and the smoother's by ``ẇ/ω²``, at the filter's bandwidth
-``ω``).  It costs a few more products per sample and is the default over
+``ω``).  The error moves by the Jacobian ``F`` of the filter's mean step,
+which the filter's ``Φ`` (``A`` at the step's start) only approximates:
+``F = exp(h Ā)``, ``Ā`` the mean of ``A`` at the step's two ends
+(:meth:`~pinobs.observers.ekf.ExtendedKalmanFilter._predict_flow`, one
+derivatives call more per sample; ``O(h³)``, 670× closer than ``Φ`` on a Panda
+at 1 kHz).  With ``Φ`` in its place the band was too narrow on the Panda's
+exact-model logs: over 20 noise draws on one 10 s log (seed 3, density
+1e-12) the mean squared error was 1.31 of the band's variance (1.53–1.71 on
+joints 1–3), 0.94 with ``F`` (tested on a linear model with ``F ≠ Φ``, where
+the band equals the error covariance computed directly).  Over ``adaptive``
+the error is propagated with ``Φ``: its regimes' densities give the filter a
+short memory (bandwidth ``(q_w / σ² h)^{1/4}``: 18 rad/s learned, 5.6
+nominal, at σ = 1e-4 and 1 kHz; 0.56 rad/s at the exact-model density
+1e-12), over which ``Φ``'s error does not build up; with ``F`` the coverage
+of the benchmark's 12 model-error logs was the same to 0.1 %, and the
+smoother cost 2.13–2.93× the causal run (medians of 5 pairs, three logs)
+instead of 1.85–2.37×.  The band costs a few more products per sample (and over
+``ekf`` that derivatives call) and is the default over
 ``adaptive`` with its regimes' densities, which are tuned for the causal
 filter's tracking, not fitted to the log; a model error with fast content
 (Coulomb friction at velocity reversals) is not smooth, and the noise band
@@ -218,6 +235,10 @@ class SmoothableFilter(Protocol):
     ``_predict(state, dt, tau) -> (state⁻, Φ)`` propagates over ``dt`` [s]
     with ``tau`` held and returns the transition Jacobian of the error state;
     ``_correct(state⁻, q_meas) -> state⁺`` fuses one measured configuration.
+    Optionally ``_predict_flow(state, dt, tau) -> (state⁻, Φ, F)`` also returns
+    the Jacobian ``F`` of the mean's step, where ``Φ`` is only the filter's
+    approximation of it (``band="noise"`` propagates the error with ``F``;
+    without the method, with ``Φ``).
     """
 
     robot: Robot
@@ -266,12 +287,13 @@ class _Step(NamedTuple):
     pred: Any  # x⁻_{k+1} (None at the last sample seen so far)
     Phi: Any  # Φ_k (None likewise)
     noise: Any = None  # band="noise": (Pⁿ_k, K_k or None), the noise-driven covariance and gain
+    F: Any = None  # band="noise": F_k, the Jacobian of the mean's step (None likewise)
 
 
 def _noise_step(
     prev: tuple[Vector, Vector | None] | None,
     pred: Any,
-    Phi: Any,
+    F: Any,
     state: Any,
     nv: int,
     meas_var: float,
@@ -283,22 +305,24 @@ def _noise_step(
     actual covariance of a filter whose gains were designed for another noise
     model: Gelb, *Applied Optimal Estimation*, 1974, §7.2)::
 
-        Pⁿ⁺_k = (I − K_k H) Φ_{k−1} Pⁿ⁺_{k−1} Φ_{k−1}ᵀ (I − K_k H)ᵀ + σ² K_k K_kᵀ
+        Pⁿ⁺_k = (I − K_k H) F_{k−1} Pⁿ⁺_{k−1} F_{k−1}ᵀ (I − K_k H)ᵀ + σ² K_k K_kᵀ
 
-    with ``K_k = P⁻_k Hᵀ (H P⁻_k Hᵀ + σ² I)⁻¹ = P⁺_k Hᵀ / σ²`` the filter's own
-    gain (``H = [I 0]``; the second form, free, holds for the Kalman gain:
-    ``P⁺Hᵀ = P⁻Hᵀ − K (S − σ² I) = σ² K``; ``K = None`` at a dropped or gated
-    sample, where ``Pⁿ⁺_k = Φ Pⁿ⁺_{k−1} Φᵀ``) and ``Pⁿ⁺_0 = P⁺_0`` (the start's
-    uncertainty is kept).  Evaluated as ``Y = X − K X_q·``,
-    ``Pⁿ⁺ = Y − (Y_·q − σ² K) Kᵀ`` with ``X = Φ Pⁿ⁺ Φᵀ`` (as
-    :func:`pinobs.observers.ekf.joseph_update`).
+    with ``F_{k−1}`` the Jacobian of the mean's step, by which the error
+    propagates (the filter's ``Φ`` only approximates it; ``F = Φ`` for a
+    filter without ``_predict_flow``), ``K_k = P⁻_k Hᵀ (H P⁻_k Hᵀ + σ² I)⁻¹ =
+    P⁺_k Hᵀ / σ²`` the filter's own gain (``H = [I 0]``; the second form, free,
+    holds for the Kalman gain: ``P⁺Hᵀ = P⁻Hᵀ − K (S − σ² I) = σ² K``;
+    ``K = None`` at a dropped or gated sample, where ``Pⁿ⁺_k = F Pⁿ⁺_{k−1} Fᵀ``)
+    and ``Pⁿ⁺_0 = P⁺_0`` (the start's uncertainty is kept).  Evaluated as
+    ``Y = X − K X_q·``, ``Pⁿ⁺ = Y − (Y_·q − σ² K) Kᵀ`` with ``X = F Pⁿ⁺ Fᵀ``
+    (as :func:`pinobs.observers.ekf.joseph_update`).
     """
     if prev is None:
         return state.P.copy(), None
     if state is pred or getattr(state, "gated", False):  # predicted over, not corrected
-        return _noise_forward(prev[0], Phi, None, meas_var), None
+        return _noise_forward(prev[0], F, None, meas_var), None
     K = state.P[:, :nv] / meas_var
-    return _noise_forward(prev[0], Phi, K, meas_var), K
+    return _noise_forward(prev[0], F, K, meas_var), K
 
 
 def _noise_forward_loops(Pn: Vector, Phi: Vector, K: Vector, r: float, out: Vector) -> None:
@@ -457,13 +481,18 @@ _noise_backward_kernel = _LazyKernel(
 
 
 def _forward(
-    filt: SmoothableFilter, rows: Iterator[tuple[float, Vector | None, Vector]], k0: int
-) -> Iterator[tuple[int, Any | None, Vector | None, Any, float]]:
+    filt: SmoothableFilter,
+    rows: Iterator[tuple[float, Vector | None, Vector]],
+    k0: int,
+    flow: bool = False,
+) -> Iterator[tuple[int, Any | None, Vector | None, Any, float, Vector | None]]:
     """The filter over a log's rows ``(t, q or None, tau)`` from its first good sample
     (``k0`` in the caller's numbering); pulls one row per value yielded.
 
-    Yields ``(k, x⁻_k, Φ_{k−1}, x⁺_k, log N(e_k; 0, S_k))`` (``None, None, ·, 0``
-    at ``k = 0``; ``x⁺_k = x⁻_k`` and 0 at a dropped sample), where
+    Yields ``(k, x⁻_k, Φ_{k−1}, x⁺_k, log N(e_k; 0, S_k), F_{k−1})`` (``None, None,
+    ·, 0, None`` at ``k = 0``; ``x⁺_k = x⁻_k`` and 0 at a dropped sample; ``F`` the
+    Jacobian of the mean's step with ``flow`` (:class:`SmoothableFilter`), else
+    ``None``), where
     ``e_k = q_k ⊖ q⁻_k`` and ``S_k = P⁻_qq + σ² I`` are the innovation and its
     covariance (the prediction-error decomposition of the likelihood,
     Schweppe 1965, "Evaluation of likelihood functions for Gaussian signals").
@@ -475,9 +504,15 @@ def _forward(
     if q0 is None:
         raise NonFiniteError(f"sample {k0} has no configuration; the smoother starts on one")
     state = filt._initial_state(model.check_configuration(q0, what=f"q[{k0}]"), np.zeros(nv))
-    yield 0, None, None, state, 0.0
+    yield 0, None, None, state, 0.0, None
+    predict_flow = getattr(filt, "_predict_flow", None) if flow else None
     for k, (t, q, tau) in enumerate(rows, start=1):
-        pred, Phi = filt._predict(state, float(t - t_prev), tau_prev)
+        F = None
+        if predict_flow is not None:
+            pred, Phi, F = predict_flow(state, float(t - t_prev), tau_prev)
+        else:
+            pred, Phi = filt._predict(state, float(t - t_prev), tau_prev)
+            F = Phi if flow else None
         ll = 0.0
         if q is not None:
             q_meas = model.check_configuration(q, what=f"q[{k0 + k}]")
@@ -493,7 +528,7 @@ def _forward(
         else:
             state = pred
         t_prev, tau_prev = t, tau
-        yield k, pred, Phi, state, ll
+        yield k, pred, Phi, state, ll, F
 
 
 def _rows(
@@ -552,7 +587,7 @@ class Smoother:
         if band not in BANDS:
             raise OptionError(f"band={band!r}: give one of {list(BANDS)}")
         self._fed = _Fed()
-        self._gen = _forward(filt, self._fed, 0)
+        self._gen = _forward(filt, self._fed, 0, flow=band == "noise")
         self._model = filt.robot
         self._chunk, self._over = chunk, overlap
         self._meas_var = float(cast(Any, filt).gains.meas_std ** 2)
@@ -576,13 +611,13 @@ class Smoother:
     ) -> list[tuple[int, Vector, Vector, Vector]]:
         """One sample: ``t`` [s], measured ``q`` (``None``: dropped), ``tau`` held from ``t``."""
         self._fed.queue.append((t, q, tau))
-        _, pred, Phi, state, ll = next(self._gen)
+        _, pred, Phi, state, ll, F = next(self._gen)
         self.log_likelihood += ll
         if self._band == "noise":
             nv = self._model.nv
-            self._noise = _noise_step(self._noise, pred, Phi, state, nv, self._meas_var)
+            self._noise = _noise_step(self._noise, pred, F, state, nv, self._meas_var)
         if pred is not None:
-            self._buf[-1] = self._buf[-1]._replace(pred=pred, Phi=Phi)
+            self._buf[-1] = self._buf[-1]._replace(pred=pred, Phi=Phi, F=F)
         self._buf.append(_Step(state, None, None, self._noise))
         if self._chunk is not None and len(self._buf) == self._chunk + self._over:
             return self._back(self._chunk)
@@ -637,11 +672,13 @@ def _backward(
     first; ``Pⁿˢ`` (``None`` unless the steps carry :func:`_noise_step`'s
     covariances; its velocity entries only, the others NaN) is the smoothed
     error's covariance driven by the measurement noise alone.  The smoothed error obeys
-    ``e^s_k = e⁺_k + G_k (e^s_{k+1} − Φ_k e⁺_k)`` with
-    ``e⁺_{k+1} = A_{k+1} Φ_k e⁺_k + K_{k+1} n_{k+1}`` (``A = I − K H``, no process
-    noise), so ``e^s_k = B_k e⁺_k + u_k`` with ``u_k`` independent of ``e⁺_k``::
+    ``e^s_k = e⁺_k + G_k (e^s_{k+1} − F_k e⁺_k)`` with
+    ``e⁺_{k+1} = A_{k+1} F_k e⁺_k + K_{k+1} n_{k+1}`` (``A = I − K H``, no process
+    noise; ``F_k`` the Jacobian of the mean's step, :func:`_noise_step`, while
+    ``G_k`` is the smoother's, from ``Φ_k``), so ``e^s_k = B_k e⁺_k + u_k`` with
+    ``u_k`` independent of ``e⁺_k``::
 
-        B_k = I + G_k (B_{k+1} A_{k+1} Φ_k − Φ_k)                 B_N = I
+        B_k = I + G_k (B_{k+1} A_{k+1} F_k − F_k)                 B_N = I
         U_k = G_k (σ² B_{k+1} K_{k+1} K_{k+1}ᵀ B_{k+1}ᵀ + U_{k+1}) G_kᵀ   U_N = 0
         Pⁿˢ_k = B_k Pⁿ⁺_k B_kᵀ + U_k
 
@@ -661,7 +698,7 @@ def _backward(
         var_n[nv : 2 * nv] = last.noise[0].diagonal()[nv : 2 * nv]
     emit(len(steps) - 1, q_s, x_s[:nv], np.diag(P_s), var_n)
     for i in range(len(steps) - 2, -1, -1):
-        filt, pred, Phi, pn_k = steps[i]
+        filt, pred, Phi, pn_k, F = steps[i]
         # G_k = P⁺_k Φ_kᵀ (P⁻_{k+1})⁻¹, as (P⁻⁻¹ Φ P⁺)ᵀ (P symmetric)  [Särkkä 2013, Thm 8.2]
         G = cholesky_solve(pred.P, Phi @ filt.P)[0].T
         # δ_k = G_k (x^s_{k+1} ⊖ x⁻_{k+1}); x^s_k = x⁺_k ⊕ δ_k  [ibid., mean on the manifold]
@@ -675,7 +712,7 @@ def _backward(
         if noise:  # the docstring's B, U recursion
             var_n = np.full(m, np.nan)  # the velocity entries: all that v_std needs
             B, U, var_n[nv : 2 * nv] = _noise_backward(
-                B, U, G, Phi, steps[i + 1].noise[1], pn_k[0], meas_var, nv
+                B, U, G, F, steps[i + 1].noise[1], pn_k[0], meas_var, nv
             )
         emit(i, q_s, x_s[:nv], np.diag(P_s), var_n)
 
@@ -832,6 +869,7 @@ class _FrozenModels:
         state = self._ekf._initial_state(q0, v0)
         return self._use(state, int(self._which[0]))
 
+    # No _predict_flow: the noise band propagates the error with Φ (module docstring, "Two bands")
     def _predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]:
         j = int(self._which[self._k])
         if j != self._j:
@@ -1077,7 +1115,7 @@ def _select(
     if not candidates:
         raise GainError("grid is empty; give accel_psd candidates > 0 [rad²/s³]")
     positive("threshold", threshold)
-    lls = [sum(ll for *_, ll in _forward(make(psd), _rows(*arrays), k0)) for psd in candidates]
+    lls = [sum(ll for *_, ll, _ in _forward(make(psd), _rows(*arrays), k0)) for psd in candidates]
     best = max(lls)
     return max(p for p, ll in zip(candidates, lls, strict=True) if ll >= best - threshold)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import numpy as np
@@ -39,6 +40,39 @@ class _LinState(NamedTuple):
     P: np.ndarray
 
 
+def _linear_rts(robot, Phis, Fs, Qs, P0, m0, ys, r) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped-def]
+    """A linear Kalman filter (measurements ``ys[k]`` of the first ``nv`` states, ``None``:
+    dropped; none at sample 0) whose mean moves by ``Fs`` and covariance by ``Phis`` (the
+    EKF's mean step and its approximate Jacobian), then :func:`_backward`: ``(v^s, diag
+    P^s, noise band)`` per sample (the band's entries other than velocities are NaN)."""
+    nv, n, m = robot.nv, len(ys), P0.shape[0]
+    H = np.hstack([np.eye(nv), np.zeros((nv, m - nv))])
+    steps: list[_Step] = []
+    x, P = m0, P0
+    noise = None
+    for k in range(n):
+        pred = F = None
+        if k > 0:
+            xp, Pp = Fs[k - 1] @ x, Phis[k - 1] @ P @ Phis[k - 1].T + Qs[k - 1]
+            pred, F = _LinState(xp[:nv], xp[nv:], Pp), Fs[k - 1]
+            steps[-1] = steps[-1]._replace(pred=pred, Phi=Phis[k - 1], F=F)
+            x, P = xp, Pp
+            if ys[k] is not None:
+                S = H @ Pp @ H.T + r * np.eye(nv)
+                K = Pp @ H.T @ np.linalg.inv(S)
+                x, P = xp + K @ (ys[k] - H @ xp), (np.eye(m) - K @ H) @ Pp
+        state = _LinState(x[:nv], x[nv:], P) if ys[k] is not None or k == 0 else pred
+        noise = _noise_step(noise, pred, F, state, nv, r)
+        steps.append(_Step(state, None, None, noise))
+    got_v, got_var, got_noise = np.empty((n, nv)), np.empty((n, m)), np.empty((n, m))
+
+    def emit(i: int, q: np.ndarray, v: np.ndarray, var: np.ndarray, var_n: np.ndarray) -> None:
+        got_v[i], got_var[i], got_noise[i] = v, var, var_n
+
+    _backward(robot, steps, emit, r)
+    return got_v, got_var, got_noise
+
+
 @pytest.mark.parametrize("path", ["compiled", "numpy"])
 def test_backward_pass_equals_batch_conditioning_on_a_linear_gaussian_model(
     rng, path: str, monkeypatch
@@ -59,36 +93,10 @@ def test_backward_pass_equals_batch_conditioning_on_a_linear_gaussian_model(
     m = 2 * nv
     Phis = [np.eye(m) + 0.2 * rng.standard_normal((m, m)) for _ in range(n - 1)]
     Qs = [(lambda a: a @ a.T + 0.1 * np.eye(m))(rng.standard_normal((m, m))) for _ in range(n - 1)]
-    H = np.hstack([np.eye(nv), np.zeros((nv, nv))])
     m0 = rng.standard_normal(m)
     P0 = np.eye(m)
     ys = [None] + [None if k == 3 else rng.standard_normal(nv) for k in range(1, n)]
-    # forward Kalman filter (measurement from sample 1 on)
-    steps: list[_Step] = []
-    x, P = m0, P0
-    noise = None
-    for k in range(n):
-        pred = Phi = None
-        if k > 0:
-            xp, Pp = Phis[k - 1] @ x, Phis[k - 1] @ P @ Phis[k - 1].T + Qs[k - 1]
-            pred, Phi = _LinState(xp[:nv], xp[nv:], Pp), Phis[k - 1]
-            steps[-1] = steps[-1]._replace(pred=pred, Phi=Phi)
-            x, P = xp, Pp
-            if ys[k] is not None:
-                S = H @ Pp @ H.T + r * np.eye(nv)
-                K = Pp @ H.T @ np.linalg.inv(S)
-                x, P = xp + K @ (ys[k] - H @ xp), (np.eye(m) - K @ H) @ Pp
-        state = _LinState(x[:nv], x[nv:], P) if ys[k] is not None or k == 0 else pred
-        noise = _noise_step(noise, pred, Phi, state, nv, r)
-        steps.append(_Step(state, None, None, noise))
-    got_v = np.empty((n, nv))
-    got_var = np.empty((n, m))
-    got_noise = np.empty((n, m))
-
-    def emit(i: int, q: np.ndarray, v: np.ndarray, var: np.ndarray, var_n: np.ndarray) -> None:
-        got_v[i], got_var[i], got_noise[i] = v, var, var_n
-
-    _backward(robot, steps, emit, r)
+    got_v, got_var, got_noise = _linear_rts(robot, Phis, Phis, Qs, P0, m0, ys, r)
     # batch: X = T z with z = (x0, w1..w_{n-1}); Y = C X + noise
     T = np.zeros((n * m, n * m))
     for k in range(n):
@@ -122,6 +130,54 @@ def test_backward_pass_equals_batch_conditioning_on_a_linear_gaussian_model(
     vel = np.diag(cov_noise).reshape(n, m)[:, nv:]  # v_std's entries (the others are NaN)
     np.testing.assert_allclose(got_noise[:, nv:], vel, atol=1e-10)
     assert np.all(got_noise[:, nv:] < got_var[:, nv:])  # the process noise's share is left out
+
+
+@pytest.mark.parametrize("path", ["compiled", "numpy"])
+def test_noise_band_propagates_the_error_by_the_mean_steps_jacobian(
+    rng, path: str, monkeypatch
+) -> None:
+    """The EKF's ``Φ`` only approximates the Jacobian ``F`` of its mean's step
+    (:meth:`ExtendedKalmanFilter._predict_flow`); the truth's error moves by ``F``.  On a
+    linear model whose mean moves by ``F`` and covariance by ``Φ ≠ F``, the noise band is
+    the covariance of the smoothed velocity's error computed directly: the estimate is
+    linear in the prior mean and the measurements (its matrices by superposition), the
+    truth ``x_k = F_{k−1} ⋯ F_0 x_0`` with ``x_0 ~ N(m_0, P_0)``.  Sample 3 is dropped."""
+    for kernel in (smoothing._noise_forward_kernel, smoothing._noise_backward_kernel):
+        if path == "compiled":
+            kernel.load()
+        else:
+            monkeypatch.setattr(kernel, "compiled", None)
+    robot = cached_robot("ur5")
+    nv, n, r = robot.nv, 6, 0.3
+    m = 2 * nv
+    Phis = [np.eye(m) + 0.2 * rng.standard_normal((m, m)) for _ in range(n - 1)]
+    Fs = [phi + 0.05 * rng.standard_normal((m, m)) for phi in Phis]
+    Qs = [(lambda a: a @ a.T + 0.1 * np.eye(m))(rng.standard_normal((m, m))) for _ in range(n - 1)]
+    P0 = np.eye(m)
+    measured = [k for k in range(1, n) if k != 3]
+
+    def v_s(m0: np.ndarray, y: np.ndarray) -> np.ndarray:  # the smoothed velocities, stacked
+        ys: list[np.ndarray | None] = [None] * n
+        for row, k in enumerate(measured):
+            ys[k] = y[row * nv : (row + 1) * nv]
+        return _linear_rts(robot, Phis, Fs, Qs, P0, m0, ys, r)[0].ravel()
+
+    ny = len(measured) * nv
+    L_m = np.column_stack([v_s(e, np.zeros(ny)) for e in np.eye(m)])
+    L_y = np.column_stack([v_s(np.zeros(m), e) for e in np.eye(ny)])
+    # the truth from x_0: T_F (stacked states), C (the measured positions), V (velocities)
+    T_F = np.vstack([functools.reduce(np.matmul, Fs[:k][::-1], np.eye(m)) for k in range(n)])
+    C = np.vstack([T_F[k * m : k * m + nv] for k in measured])
+    V = np.vstack([T_F[k * m + nv : (k + 1) * m] for k in range(n)])
+    M = L_y @ C - V  # the error's map from x_0: e = (L_m + M) m_0 + M δ + L_y n
+    np.testing.assert_allclose(L_m + M, 0.0, atol=1e-10)  # unbiased: no noise, no error
+    want = np.diag(M @ P0 @ M.T + r * L_y @ L_y.T).reshape(n, nv)
+    ys = [rng.standard_normal(nv) if k in measured else None for k in range(n)]  # any values
+    got = _linear_rts(robot, Phis, Fs, Qs, P0, m0=np.zeros(m), ys=ys, r=r)[2]
+    np.testing.assert_allclose(got[:, nv:], want, rtol=1e-9, atol=1e-12)
+    # with Φ in its place (the band before F) the answer is measurably different
+    wrong = _linear_rts(robot, Phis, Phis, Qs, P0, m0=np.zeros(m), ys=ys, r=r)[2]
+    assert np.max(np.abs(wrong[:, nv:] / want - 1.0)) > 1e-2
 
 
 class _Gains(NamedTuple):

@@ -40,6 +40,27 @@ class _LinState(NamedTuple):
     P: np.ndarray
 
 
+@pytest.fixture(params=["compiled", "numpy"])
+def noise_path(request, monkeypatch) -> str:  # type: ignore[no-untyped-def]
+    """The noise recursion's path: the compiled loops (small state) or NumPy's products."""
+    for kernel in (smoothing._noise_forward_kernel, smoothing._noise_backward_kernel):
+        if request.param == "compiled":
+            kernel.load()
+        else:
+            monkeypatch.setattr(kernel, "compiled", None)
+    return str(request.param)
+
+
+def _random_linear_model(rng) -> tuple:  # type: ignore[no-untyped-def,type-arg]
+    """UR5-sized (``q ⊕ δ = q + δ``) random linear model: ``robot, nv, n, r, m, Φs, Qs``."""
+    robot = cached_robot("ur5")
+    nv, n, r = robot.nv, 6, 0.3
+    m = 2 * nv
+    Phis = [np.eye(m) + 0.2 * rng.standard_normal((m, m)) for _ in range(n - 1)]
+    Qs = [(lambda a: a @ a.T + 0.1 * np.eye(m))(rng.standard_normal((m, m))) for _ in range(n - 1)]
+    return robot, nv, n, r, m, Phis, Qs
+
+
 def _linear_rts(robot, Phis, Fs, Qs, P0, m0, ys, r) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped-def]
     """A linear Kalman filter (measurements ``ys[k]`` of the first ``nv`` states, ``None``:
     dropped; none at sample 0) whose mean moves by ``Fs`` and covariance by ``Phis`` (the
@@ -73,9 +94,8 @@ def _linear_rts(robot, Phis, Fs, Qs, P0, m0, ys, r) -> tuple[np.ndarray, ...]:  
     return got_v, got_var, got_noise
 
 
-@pytest.mark.parametrize("path", ["compiled", "numpy"])
 def test_backward_pass_equals_batch_conditioning_on_a_linear_gaussian_model(
-    rng, path: str, monkeypatch
+    rng, noise_path: str
 ) -> None:
     """On a linear model (UR5: q ⊕ δ = q + δ) the RTS means and covariances are those of the
     joint Gaussian of all states conditioned on all measurements (computed directly), and the
@@ -83,16 +103,7 @@ def test_backward_pass_equals_batch_conditioning_on_a_linear_gaussian_model(
     states move without process noise: ``(I − W C) T₀ P₀ T₀ᵀ (I − W C)ᵀ + r W Wᵀ``, with ``W``
     the batch gain.  Sample 3 is dropped (predicted over).  Both paths of the noise recursion:
     the compiled loops (small state) and NumPy's products."""
-    for kernel in (smoothing._noise_forward_kernel, smoothing._noise_backward_kernel):
-        if path == "compiled":
-            kernel.load()
-        else:
-            monkeypatch.setattr(kernel, "compiled", None)
-    robot = cached_robot("ur5")
-    nv, n, r = robot.nv, 6, 0.3
-    m = 2 * nv
-    Phis = [np.eye(m) + 0.2 * rng.standard_normal((m, m)) for _ in range(n - 1)]
-    Qs = [(lambda a: a @ a.T + 0.1 * np.eye(m))(rng.standard_normal((m, m))) for _ in range(n - 1)]
+    robot, nv, n, r, m, Phis, Qs = _random_linear_model(rng)
     m0 = rng.standard_normal(m)
     P0 = np.eye(m)
     ys = [None] + [None if k == 3 else rng.standard_normal(nv) for k in range(1, n)]
@@ -132,27 +143,15 @@ def test_backward_pass_equals_batch_conditioning_on_a_linear_gaussian_model(
     assert np.all(got_noise[:, nv:] < got_var[:, nv:])  # the process noise's share is left out
 
 
-@pytest.mark.parametrize("path", ["compiled", "numpy"])
-def test_noise_band_propagates_the_error_by_the_mean_steps_jacobian(
-    rng, path: str, monkeypatch
-) -> None:
+def test_noise_band_propagates_the_error_by_the_mean_steps_jacobian(rng, noise_path: str) -> None:
     """The EKF's ``Φ`` only approximates the Jacobian ``F`` of its mean's step
     (:meth:`ExtendedKalmanFilter._predict_flow`); the truth's error moves by ``F``.  On a
     linear model whose mean moves by ``F`` and covariance by ``Φ ≠ F``, the noise band is
     the covariance of the smoothed velocity's error computed directly: the estimate is
     linear in the prior mean and the measurements (its matrices by superposition), the
     truth ``x_k = F_{k−1} ⋯ F_0 x_0`` with ``x_0 ~ N(m_0, P_0)``.  Sample 3 is dropped."""
-    for kernel in (smoothing._noise_forward_kernel, smoothing._noise_backward_kernel):
-        if path == "compiled":
-            kernel.load()
-        else:
-            monkeypatch.setattr(kernel, "compiled", None)
-    robot = cached_robot("ur5")
-    nv, n, r = robot.nv, 6, 0.3
-    m = 2 * nv
-    Phis = [np.eye(m) + 0.2 * rng.standard_normal((m, m)) for _ in range(n - 1)]
+    robot, nv, n, r, m, Phis, Qs = _random_linear_model(rng)
     Fs = [phi + 0.05 * rng.standard_normal((m, m)) for phi in Phis]
-    Qs = [(lambda a: a @ a.T + 0.1 * np.eye(m))(rng.standard_normal((m, m))) for _ in range(n - 1)]
     P0 = np.eye(m)
     measured = [k for k in range(1, n) if k != 3]
 

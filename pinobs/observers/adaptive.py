@@ -300,6 +300,11 @@ _NIS_TRUSTED = 2.0
 _NIS_REVOKED = 10.0
 
 
+def _lost(ekf: _EKFState) -> bool:
+    """Whether a model-based filter state's estimate or covariance holds NaN or ±inf."""
+    return not math.isfinite(ekf.v.sum() + ekf.P.sum())
+
+
 def _blend_loops(
     score: Vector,
     innovation: Vector,
@@ -510,8 +515,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     def lost(self) -> bool:
         """Whether the model-based filter's estimate or covariance is not finite (with the
         blend, the next update restarts it; without, it stays lost)."""
-        ekf = self._state.ekf if self._state is not None else None  # type: ignore[attr-defined]
-        return ekf is not None and not math.isfinite(ekf.v.sum() + ekf.P.sum())
+        return self._state is not None and _lost(self._state.ekf)  # type: ignore[attr-defined]
 
     def parameters(self) -> ParameterSet:
         """The learned parameters with names and standard deviations (nominal before the first solve)."""
@@ -638,7 +642,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         with np.errstate(over="ignore", invalid="ignore"):  # a lost filter is handled below
             ekf = super()._step(state.ekf, dt, q_meas, self._torque(state, dt, tau))
         t = state.t + dt
-        if self.blend and not math.isfinite(ekf.v.sum() + ekf.P.sum()):  # NaN or ±inf in either
+        if self.blend and _lost(ekf):
             # the model-based filter is lost (a learned model that does not hold): restart it
             # on the model-free estimate, in the warm-up regime, rather than fail
             v_kf, _, dq_kf = self._model_free(state)

@@ -77,9 +77,10 @@ with ``q``, ``v``, ``P`` (and optionally ``d``).
 filter.  The smoother runs it causally once over the log (the learning pass,
 unchanged but for the blend's model-free bank, which the models learned do not
 depend on: it is left out, and the pass is rerun with it only should the
-model-based filter be lost, which the bank restarts), keeps the model it holds at the end of each ``model_window``
-(default its ``horizon``, 10 s: :meth:`AdaptiveEKF.snapshot`: learned
-dynamics, torque offset, the regime's two densities), then smooths the EKF
+model-based filter be lost, which the bank restarts), keeps the model it holds
+at the end of each ``model_window`` (default its ``horizon``, 10 s:
+:meth:`AdaptiveEKF.snapshot`: learned dynamics, torque offset, the regime's
+two densities), then smooths the EKF
 with the offset state (``δq, δv, δd``) in which each window's samples are
 predicted with *that window's end model*.  Chosen over the model the causal
 pass held at each step because a window's end model was fitted on the
@@ -507,7 +508,6 @@ def _forward(
     yield 0, None, None, state, 0.0, None
     predict_flow = getattr(filt, "_predict_flow", None) if flow else None
     for k, (t, q, tau) in enumerate(rows, start=1):
-        F = None
         if predict_flow is not None:
             pred, Phi, F = predict_flow(state, float(t - t_prev), tau_prev)
         else:

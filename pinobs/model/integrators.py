@@ -105,7 +105,7 @@ def dynamics_rk4(
     EKF gets it with its Jacobians), saving one ABA call; read before any
     other dynamics call, so it may be a view into the robot's ``pin.Data``.
     """
-    fd = robot.forward_dynamics
+    fd: Callable[[Vector, Vector, Vector], Vector] = robot.forward_dynamics
     if isinstance(robot, Robot) and robot.has_lie_group_joints:
         return _dynamics_rkmk4(robot, q, v, tau, h, acc0)
     if not robot.is_vector_space:
@@ -115,8 +115,9 @@ def dynamics_rk4(
             return vv, (first.pop() if first else fd(qq, vv, tau))
 
         return lie_rk4(robot, q, v, h, rhs)
-    if isinstance(robot, Robot) and not robot.has_friction:  # the call, without the method
-        fd = partial(pin.aba, robot.model, robot._data)  # the robot's own data (same layer)
+    if isinstance(robot, Robot):  # the call, without the method
+        aba = partial(pin.aba, robot.model, robot._data)  # the robot's own data (same layer)
+        fd = aba if not robot.has_friction else _with_friction(aba, robot.friction_torque)
     c2, c3, c4, c_out = rk4_stage_matrices(float(h))
     b = np.empty((6, q.shape[0]))
     b[0], b[1] = q, v
@@ -129,6 +130,17 @@ def dynamics_rk4(
     b[5] = fd(s[0], s[1], tau)
     out = c_out.dot(b)
     return out[0], out[1]
+
+
+def _with_friction(
+    aba: Callable[[Vector, Vector, Vector], Vector], friction: Callable[[Vector], Vector]
+) -> Callable[[Vector, Vector, Vector], Vector]:
+    """``(q, v, τ) ↦ aba(q, v, τ + τ_f(v))``: :meth:`Robot.forward_dynamics` without its checks."""
+
+    def fd(q: Vector, v: Vector, tau: Vector) -> Vector:
+        return aba(q, v, tau + friction(v))
+
+    return fd
 
 
 def _dynamics_rkmk4(

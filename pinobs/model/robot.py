@@ -134,6 +134,9 @@ class Robot:
         self._damping = np.array(model.damping, dtype=float) if friction else np.zeros(model.nv)
         self._coulomb = np.array(model.friction, dtype=float) if friction else np.zeros(model.nv)
         self.has_friction = bool(np.any(self._damping) or np.any(self._coulomb))
+        self._has_coulomb = bool(np.any(self._coulomb))  # else τ_f is linear: no tanh to take
+        self._neg_damping = -self._damping
+        self._neg_damping.setflags(write=False)
         # Zero-gravity copy: aba(q, v, 0) on it is -M⁻¹ c(q, v), the geodesic spray.
         self._free = model.copy()
         self._free.gravity.setZero()
@@ -164,7 +167,8 @@ class Robot:
         self._unit_slices = self._quat_slices + self._circle_slices  # unit-norm blocks of q
         self._bracket_blocks = tuple(b for b in self.joints if b.kind in ("so3", "se3", "se2"))
         self._vector_space = model.nq == model.nv and all(b.kind == "vector" for b in self.joints)
-        self._lower = np.tril_indices(model.nv, -1)  # where Pinocchio may leave M⁻¹ unfilled
+        # where Pinocchio may leave M and M⁻¹ unfilled
+        self._lower_mask = np.tril(np.ones((model.nv, model.nv), dtype=bool), -1)
 
     # ---------------------------------------------------------------- geometry
     @property
@@ -472,7 +476,7 @@ class Robot:
     def mass_matrix(self, q: Vector) -> Vector:
         """``M(q)``, symmetric positive definite, shape ``(nv, nv)`` [kg, kg·m, kg·m²]."""
         m = np.array(pin.crba(self.model, self._data, q))
-        m[self._lower] = m.T[self._lower]  # Pinocchio < 4 fills only the upper triangle
+        np.copyto(m, m.T, where=self._lower_mask)  # Pinocchio < 4 fills only the upper triangle
         return m
 
     def gravity(self, q: Vector) -> Vector:
@@ -511,14 +515,19 @@ class Robot:
         """
         if not self.has_friction:
             return np.zeros(self.nv)
-        return -self._damping * v - self._coulomb * np.tanh(v / COULOMB_SMOOTHING_VELOCITY)
+        tau_f = self._neg_damping * v
+        if self._has_coulomb:  # (a viscous-only friction skips the zero Coulomb term's tanh)
+            tau_f -= self._coulomb * np.tanh(v / COULOMB_SMOOTHING_VELOCITY)
+        return tau_f
 
     def friction_derivative(self, v: Vector) -> Vector:
         """``∂τ_f/∂v``, diagonal, returned as its diagonal, shape ``(nv,)``."""
         if not self.has_friction:
             return np.zeros(self.nv)
+        if not self._has_coulomb:
+            return self._neg_damping.copy()
         vs = COULOMB_SMOOTHING_VELOCITY
-        return -self._damping - self._coulomb / vs * (
+        return self._neg_damping - self._coulomb / vs * (
             1.0 - np.tanh(v / vs) ** 2
         )  # sech², no overflow
 
@@ -554,7 +563,7 @@ class Robot:
         pin.computeABADerivatives(self.model, d, q, v, tau)
         minv, dv = d.Minv, d.ddq_dv
         if full_minv or self.has_friction:
-            minv[self._lower] = minv.T[self._lower]
+            np.copyto(minv, minv.T, where=self._lower_mask)  # reads only the upper triangle
         if self.has_friction:
             dv += minv * self.friction_derivative(v)
         return d.ddq, d.ddq_dq, dv, minv

@@ -32,7 +32,6 @@ import numpy as np
 
 from pinobs.errors import (
     DimensionError,
-    GainError,
     OptionError,
     OutputExistsError,
     PinobsError,
@@ -558,10 +557,6 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
     from pinobs.io.smoothing import smooth_log
     from pinobs.observers.smoothing import AUTO_WHITE_SCALE
 
-    if args.noise is None:
-        raise GainError(
-            "--smooth needs --noise: the position noise standard deviation [rad or m], > 0"
-        )
     robot = load(args.robot, root_joint=args.root_joint)
     try:
         run, stretches = smooth_log(
@@ -884,7 +879,7 @@ def _parser() -> argparse.ArgumentParser:
         "--smooth",
         action="store_true",
         help="RTS smoother over ekf or adaptive (uses the whole log); adds v_std0.. columns; "
-        "needs --noise",
+        "σ from --noise, else estimated from the log's first second (reported)",
     )
     p.add_argument(
         "--lag", type=float, default=None, help="with --smooth: fixed-lag mode, S seconds"

@@ -30,12 +30,14 @@ from typing import Any, Literal
 
 import numpy as np
 
+from pinobs.errors import GainError
 from pinobs.io.readers import CHUNK_ROWS, LogSource, iter_log
 from pinobs.io.stream import LogEstimator, LogRun, _chain, _median_period
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
-from pinobs.observers.base import Estimate
+from pinobs.observers.base import NOISE_FLOOR, Estimate
+from pinobs.observers.noise import noise_from_log
 from pinobs.observers.smoothing import Smoother, smooth, streaming_smoother
 
 __all__ = ["smooth_log"]
@@ -115,7 +117,7 @@ def smooth_log(
     out: str | Path,
     *,
     observer: str = "ekf",
-    noise_std: float,
+    noise_std: float | None = None,
     accel_psd: float | Literal["auto"] | None = None,
     lag: float | None = None,
     chunk: float | None = None,
@@ -137,7 +139,10 @@ def smooth_log(
         robot: the robot of the log.
         out: CSV file ``t, q0.., v0.., v_std0..`` (refused if it exists, unless ``force``,
             or if it is ``source``).
-        observer, noise_std, accel_psd, lag, chunk, band: as :func:`pinobs.smooth`.
+        observer, accel_psd, lag, chunk, band: as :func:`pinobs.smooth`.
+        noise_std: position noise σ [rad or m]; ``None``: estimated from the log's first
+            second as :func:`pinobs.smooth` does, reported in the run's ``warnings``,
+            ``noise_std`` and ``noise_std_per_joint``.
         columns, topic: as :func:`pinobs.io.iter_log`.
         rate: sample rate [Hz] (default: from the log's median interval).
         options: further options of the filter (``filter_options`` of :func:`pinobs.smooth`).
@@ -147,6 +152,7 @@ def smooth_log(
 
     Raises:
         OutputExistsError: ``out`` exists (without ``force``) or is the input.
+        GainError: no ``noise_std`` and too few finite rows at the log's start to estimate it.
         and what :func:`pinobs.smooth` and :func:`pinobs.io.iter_log` raise.
     """
     inputs = [] if type(source).__name__ == "DataFrame" else [source]
@@ -163,6 +169,16 @@ def smooth_log(
         chunks = iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows)
         first = next(chunks)
         period = 1.0 / rate if rate else _median_period(first.t)
+        said, sigma_joint = [], None
+        if noise_std is None:  # as pinobs.smooth (the same floor), from the first chunk
+            found = noise_from_log(first.t, first.q, robot, floor=NOISE_FLOOR)
+            if found is None:
+                raise GainError(
+                    "the log has too few finite rows at its start to estimate its noise; "
+                    "give noise_std (--noise)"
+                )
+            noise_std, sigma_joint, message = found
+            said.append(message)
         if stream and period is not None:
             run, stretches = _streamed(
                 first, chunks, robot, writer, period, observer, noise_std,
@@ -177,6 +193,8 @@ def smooth_log(
     except BaseException:
         writer.abort()
         raise
+    run.warnings[:0] = said
+    run.noise_std_per_joint = sigma_joint
     return run, stretches
 
 

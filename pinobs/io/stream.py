@@ -55,7 +55,7 @@ from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers import Estimate, make_observer
-from pinobs.observers.noise import estimate_noise_std
+from pinobs.observers.noise import noise_from_log
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
     ABSURD_VALUE,
@@ -490,14 +490,10 @@ def process_log(
     warnings: list[str] = []
     if isinstance(observer, str):
         if noise_std is None:
-            sigma_joint = estimate_noise_std(first.t, first.q, robot)
-            if sigma_joint is not None:
-                noise_std = float(np.median(sigma_joint))
-                warnings.append(
-                    f"no noise level given: estimated σ = {noise_std:.3g} (median over joints; "
-                    f"per joint {np.array2string(sigma_joint, formatter={'float_kind': '{:.2e}'.format})}) from the log's first "
-                    "second; pass noise_std (--noise) to override"
-                )
+            found = noise_from_log(first.t, first.q, robot)
+            if found is not None:
+                noise_std, sigma_joint, said = found
+                warnings.append(said)
             else:
                 warnings.append(
                     "no noise level given and the log is too short to estimate it: the "

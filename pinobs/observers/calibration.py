@@ -50,7 +50,7 @@ from pinobs.model import Robot
 from pinobs.model import identification as ident_model
 from pinobs.model.identification import MAX_CONDITION, Identification, log_arrays, segments
 from pinobs.observers.base import Vector, positive
-from pinobs.observers.noise import estimate_noise_std
+from pinobs.observers.noise import noise_from_log
 from pinobs.observers.smoothing import smooth
 
 __all__ = ["REFINE_ACCEL_PSD", "REFINE_DISTURBANCE_PSD", "identify"]
@@ -63,13 +63,13 @@ REFINE_DISTURBANCE_PSD = 1e-4
 
 
 def _noise_std(robot: Robot, t: Vector, q: Vector) -> float:
-    """The log's position noise σ [rad or m]: the median over joints of
-    :func:`pinobs.observers.noise.estimate_noise_std` (robust third differences over
-    its first second), floored at 1e-9 (a noise-free log)."""
-    sigma = estimate_noise_std(t, q, robot)
-    if sigma is None:
+    """The log's position noise σ [rad or m]: :func:`pinobs.observers.noise.noise_from_log`
+    (the median over joints of robust third differences over its first second), floored at
+    1e-9 (a noise-free log)."""
+    found = noise_from_log(t, q, robot, floor=1e-9)
+    if found is None:
         raise IdentificationError("fewer than 12 finite samples to measure the noise on")
-    return max(float(np.median(sigma)), 1e-9)
+    return found[0]
 
 
 def identify(

@@ -27,7 +27,7 @@ import numpy as np
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 
-__all__ = ["estimate_noise_std"]
+__all__ = ["estimate_noise_std", "noise_from_log"]
 
 #: Median of a χ² variable with one degree of freedom.
 _CHI2_1_MEDIAN = 0.454936423119572
@@ -72,3 +72,27 @@ def estimate_noise_std(
     d = x[3:] - 3.0 * x[2:-1] + 3.0 * x[1:-2] - x[:-3]  # Gasser et al. (1986), order 3
     var = np.median(d**2, axis=0) / (_THIRD_DIFF_GAIN * _CHI2_1_MEDIAN)
     return np.sqrt(var)
+
+
+def noise_from_log(
+    t: Vector, q: Vector, robot: Robot, *, floor: float = 0.0
+) -> tuple[float, Vector, str] | None:
+    """The one σ [rad or m] an observer takes when none is given: ``(σ̂, σ̂ per joint, a
+    sentence reporting them)``, or ``None`` when the log has fewer than 12 usable rows.
+
+    ``σ̂`` is the median over joints of :func:`estimate_noise_std` (the log's first
+    second), at least ``floor`` (a noise-free log: the sentence says so); the sentence
+    also says how to give σ instead.
+    """
+    sigma_joint = estimate_noise_std(t, q, robot)
+    if sigma_joint is None:
+        return None
+    sigma = float(np.median(sigma_joint))
+    joints = np.array2string(sigma_joint, formatter={"float_kind": "{:.2e}".format})
+    said = (
+        f"no noise level given: estimated σ = {sigma:.3g} (median over joints; per joint "
+        f"{joints}) from the log's first second"
+    )
+    if sigma < floor:
+        said += f" (below {floor:g}: taken as noise-free, σ = {floor:g} used)"
+    return max(sigma, floor), sigma_joint, said + "; pass noise_std (--noise) to override"

@@ -162,6 +162,7 @@ is then too narrow (README).
 from __future__ import annotations
 
 import math
+import warnings
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -173,6 +174,7 @@ from numpy.typing import ArrayLike
 from pinobs.errors import (
     DimensionError,
     GainError,
+    NoiseWarning,
     NonFiniteError,
     ObserverDiverged,
     OptionError,
@@ -181,8 +183,16 @@ from pinobs.errors import (
 from pinobs.model import Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.adaptive import AdaptiveEKF, ModelSnapshot
-from pinobs.observers.base import Vector, make_observer, observer_class, observer_names, positive
+from pinobs.observers.base import (
+    NOISE_FLOOR,
+    Vector,
+    make_observer,
+    observer_class,
+    observer_names,
+    positive,
+)
 from pinobs.observers.ekf import ExtendedKalmanFilter, _LazyKernel, _posv, cholesky_solve
+from pinobs.observers.noise import noise_from_log
 
 __all__ = [
     "AUTO_WHITE_SCALE",
@@ -1120,6 +1130,18 @@ def _select(
     return max(p for p, ll in zip(candidates, lls, strict=True) if ll >= best - threshold)
 
 
+def _smoothable_class(observer: str) -> type:
+    """The class of ``observer``, if a smoother can run it (else :class:`OptionError`)."""
+    cls = observer_class(observer)
+    if not _smoothable(cls):
+        smoothable = [n for n in observer_names() if _smoothable(observer_class(n))]
+        raise OptionError(
+            f"observer {observer!r} keeps no error-state covariance to smooth; "
+            f"smoothable: {smoothable}"
+        )
+    return cls
+
+
 def _filter_maker(
     robot: Robot,
     observer: str,
@@ -1131,13 +1153,7 @@ def _filter_maker(
 ) -> tuple[Callable[[float | None], SmoothableFilter], dict[str, Any]]:
     """``make(accel_psd)`` -> the filter the smoother runs (``None``: the observer's own density),
     and the options to report beyond the filter's (``adaptive``: after its learning pass)."""
-    cls = observer_class(observer)
-    if not _smoothable(cls):
-        smoothable = [n for n in observer_names() if _smoothable(observer_class(n))]
-        raise OptionError(
-            f"observer {observer!r} keeps no error-state covariance to smooth; "
-            f"smoothable: {smoothable}"
-        )
+    cls = _smoothable_class(observer)
     if issubclass(cls, AdaptiveEKF):
         if disturbance_psd is not None:
             raise OptionError(
@@ -1255,6 +1271,17 @@ def streaming_smoother(
     return (lambda: Smoother(make(accel_psd), n_chunk, n_over, band)), opts
 
 
+def _noise_std(robot: Robot, t: Vector, q: Vector) -> float:
+    """σ [rad or m] from the log (:func:`pinobs.observers.noise.noise_from_log`: the median
+    over joints, the log's first second, at least :data:`~pinobs.observers.base.NOISE_FLOOR`,
+    the filters' default σ), warned (:class:`~pinobs.errors.NoiseWarning`)."""
+    found = noise_from_log(t, q, robot, floor=NOISE_FLOOR)
+    if found is None:
+        raise GainError("the log has too few finite rows to estimate its noise; give noise_std")
+    warnings.warn(NoiseWarning(found[2]), stacklevel=3)
+    return found[0]
+
+
 def smooth(
     robot: Robot,
     log: LogLike | tuple[ArrayLike, ...],
@@ -1284,7 +1311,12 @@ def smooth(
             ``None``: zero).
         observer: the filter smoothed: ``"ekf"``, or ``"adaptive"`` (its learned
             model frozen per ``model_window``: module docstring).
-        noise_std: position noise standard deviation [rad or m].
+        noise_std: position noise standard deviation [rad or m]; ``None``: the
+            median over joints of its estimate from the log's first second
+            (:func:`pinobs.observers.noise.noise_from_log`; at least
+            :data:`~pinobs.observers.base.NOISE_FLOOR`), warned
+            (:class:`~pinobs.errors.NoiseWarning`) and reported in ``options``
+            (``noise_std``, ``noise_std_from_log``).
         accel_psd: white-acceleration density of the filter [rad²/s³];
             ``None``: the observer's own (``ekf``: :data:`DEFAULT_ACCEL_PSD`;
             ``adaptive``: each window's regime's); ``"auto"``: chosen from
@@ -1320,7 +1352,7 @@ def smooth(
         UnknownNameError, OptionError: ``observer`` is unknown or cannot be smoothed,
             or an option it does not take.
         GainError: a non-positive ``chunk``, ``overlap``, ``lag`` or ``model_window``,
-            or a bad filter option.
+            a bad filter option, or no ``noise_std`` and too few finite rows to estimate it.
         DimensionError, TimestampError, NonFiniteError: malformed log arrays.
     """
     if lag is not None and (chunk is not None or overlap is not None):
@@ -1329,21 +1361,24 @@ def smooth(
         )
     if isinstance(accel_psd, str) and accel_psd != "auto":
         raise GainError(f"accel_psd={accel_psd!r}: give a number > 0 [rad²/s³] or 'auto'")
-    if accel_psd == "auto" and noise_std is None:
-        raise GainError("accel_psd='auto' needs noise_std [rad or m], > 0")
+    for name, seconds in (("chunk", chunk), ("overlap", overlap), ("lag", lag)):
+        positive(name, seconds, allow_none=True)  # before any pass over the log
+    adaptive = issubclass(_smoothable_class(observer), AdaptiveEKF)
     if band is None:  # the noise band where the densities are adaptive's causal regimes'
-        adaptive = issubclass(observer_class(observer), AdaptiveEKF)
         band = "noise" if adaptive and accel_psd is None else "model"
     if band not in BANDS:
         raise OptionError(f"band={band!r}: give one of {list(BANDS)}")
     t_all, q_all, tau_all = _log_arrays(robot, log)
     k0, good = _first_good(q_all)
     arrays = (t_all[k0:], q_all[k0:], tau_all[k0:], good)
+    noise_from_data = noise_std is None
+    if noise_std is None:
+        noise_std = _noise_std(robot, t_all, q_all)
     make, extra = _filter_maker(
         robot, observer, arrays, noise_std, disturbance_psd, filter_options, model_window
     )
     offset_scale = None
-    if accel_psd == "auto" and issubclass(observer_class(observer), AdaptiveEKF):
+    if accel_psd == "auto" and adaptive:
         offset_scale = _consistent(make, arrays)  # ρ = 1 (consistent_offset_scale)
         extra = {
             **extra,
@@ -1392,6 +1427,8 @@ def smooth(
         "overlap": n_over * dt if n_over else None,
         "lag": lag,
         "band": band,
+        "noise_std": noise_std,
+        "noise_std_from_log": noise_from_data,
     }
     return Smoothed(
         t=t_all,

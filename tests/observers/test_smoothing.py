@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 import pinobs
-from pinobs.errors import DimensionError, GainError, OptionError, TimestampError
+from pinobs.errors import DimensionError, GainError, NoiseWarning, OptionError, TimestampError
 from pinobs.io import Log, estimate_log
 from pinobs.observers import make_observer, smoothing
+from pinobs.observers.base import NOISE_FLOOR
 from pinobs.observers.smoothing import (
     AUTO_WHITE_SCALE,
     OFFSET_SCALE_RANGE,
@@ -565,6 +566,33 @@ def test_streamed_smoothing_of_a_log_file_equals_the_recorded_one_through_gaps_a
     assert run_s.estimated == len(keep) - 1 and run_s.t.size == 0  # streamed: nothing kept
 
 
+def test_smooth_log_and_the_cli_estimate_the_noise_when_none_is_given(
+    tmp_path, ur5_log, capsys
+) -> None:
+    """``smooth_log`` (and ``estimate --smooth`` without ``--noise``): σ̂ from the first
+    chunk's first second, as :func:`pinobs.smooth` takes it, reported in the run."""
+    from pinobs.cli import main
+    from pinobs.io import write_log
+    from pinobs.io.smoothing import smooth_log
+
+    robot = cached_robot("ur5")
+    log = write_log(tmp_path / "log.csv", ur5_log.t[1:], ur5_log.q_meas[1:], ur5_log.tau[1:])
+    with pytest.warns(NoiseWarning):
+        direct = smooth(robot, _log(ur5_log), accel_psd=1e-4)
+    run, stretches = smooth_log(log, robot, tmp_path / "s.csv", accel_psd=1e-4)
+    assert run.noise_std == stretches[0]["noise_std"] == direct.options["noise_std"]
+    assert run.noise_std == pytest.approx(1e-4, rel=0.1)  # the simulated σ
+    assert run.noise_std_per_joint is not None and run.noise_std_per_joint.shape == (robot.nv,)
+    assert "estimated σ = " in run.warnings[0]
+    est = np.loadtxt(tmp_path / "s.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(est[:, 7:13], direct.v[1:])
+    out = tmp_path / "cli.csv"
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log), "--out"]
+    assert main([*argv, str(out), "--smooth", "--accel-psd", "1e-4"]) == 0
+    assert "warning: no noise level given: estimated σ = " in capsys.readouterr().err
+    np.testing.assert_array_equal(np.loadtxt(out, delimiter=",", skiprows=1), est)
+
+
 def test_cli_estimate_smooth_over_adaptive_says_how_its_model_was_frozen(
     tmp_path, ur5_log, capsys
 ) -> None:
@@ -601,12 +629,44 @@ def test_readme_smoothing_table_is_the_committed_benchmark_file() -> None:
     assert shown == (root / "benchmarks" / "smoothing.md").read_text()
 
 
-def test_auto_accel_psd_needs_the_noise_and_strings_other_than_auto_are_refused(ur5_log) -> None:
+def test_strings_other_than_auto_are_refused(ur5_log) -> None:
     robot = cached_robot("ur5")
-    with pytest.raises(GainError, match="needs noise_std"):
-        smooth(robot, _log(ur5_log), accel_psd="auto")
     with pytest.raises(GainError, match="or 'auto'"):
         smooth(robot, _log(ur5_log), noise_std=1e-4, accel_psd="big")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("observer", ["ekf", "adaptive"])
+def test_without_noise_std_sigma_is_estimated_from_the_log_warned_and_used(observer) -> None:
+    """No ``noise_std``: σ̂ from the log's first second (median over joints), warned, reported,
+    and used by every filter the smoother runs (before, the smoother's ``ekf`` took its
+    default 1e-6: on this log ``adaptive``'s RMS was 15× the one with σ given, silently)."""
+    robot = cached_robot("ur5")
+    sigma = 1e-3
+    res = simulate(robot, [], sensor=Sensor(1000, sigma), inputs="pd", duration=1.5, seed=2)
+    opts = {"observer": observer, "accel_psd": 1e-6 if observer == "ekf" else None}
+    with pytest.warns(NoiseWarning, match=r"estimated σ = .* from the log's first second"):
+        found = smooth(robot, _log(res), **opts)  # type: ignore[arg-type]
+    sigma_hat = found.options["noise_std"]
+    assert found.options["noise_std_from_log"] is True
+    assert sigma_hat == pytest.approx(sigma, rel=0.1)  # the truth's σ
+    given = smooth(robot, _log(res), noise_std=sigma_hat, **opts)  # type: ignore[arg-type]
+    assert given.options["noise_std_from_log"] is False
+    np.testing.assert_array_equal(found.v, given.v)  # σ̂ is what every pass used
+    np.testing.assert_array_equal(found.v_std, given.v_std)
+    late = res.t > 0.5
+    truth = smooth(robot, _log(res), noise_std=sigma, **opts)  # type: ignore[arg-type]
+    rms = [float(np.sqrt(np.mean((s.v - res.v)[late] ** 2))) for s in (found, truth)]
+    assert rms[0] < 1.1 * rms[1], rms
+
+
+def test_without_noise_std_a_noise_free_log_takes_the_floor_and_a_short_one_is_refused() -> None:
+    robot = cached_robot("ur5")
+    res = simulate(robot, [], sensor=Sensor(1000, 0.0), inputs="pd", duration=0.3, seed=2)
+    with pytest.warns(NoiseWarning, match="taken as noise-free, σ = 1e-06 used"):
+        s = smooth(robot, _log(res), accel_psd=1e-6)
+    assert s.options["noise_std"] == NOISE_FLOOR
+    with pytest.raises(GainError, match="too few finite rows"):
+        smooth(robot, (res.t[:11], res.q_meas[:11], res.tau[:11]), accel_psd=1e-6)
 
 
 def test_a_result_is_read_through_its_measurements_not_its_truth(ur5_log) -> None:

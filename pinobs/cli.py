@@ -10,7 +10,7 @@ pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a
     [--smooth [--lag S|--chunk S] [--accel-psd P|auto] [--band model|noise]]
                                                  RTS smoother (ekf, adaptive), v_std0..
 pinobs estimate --robot R --observer O --log 'GLOB'|FOLDER --out-dir OUT   many logs on Dask
-    [--workers N | --scheduler tcp://host:8786]          one estimates file per log, a summary table
+    [--workers N | --scheduler tcp://host:8786] [--smooth ...]   one file per log, a summary
 pinobs check ii --robot R                      I&I Assumption 1 on the model
 pinobs bench [--quick] [--json FILE]           accuracy and cost against the baselines
     [--workers N | --scheduler tcp://host:8786]          its independent runs on Dask
@@ -344,6 +344,11 @@ def _column_map(items: Sequence[str] | None) -> dict[str, str] | None:
 
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
+    if not args.smooth:  # the smoother's options, given without it, would be ignored
+        given = [f for f in ("lag", "chunk", "accel_psd", "band") if getattr(args, f) is not None]
+        if given:
+            flags = ", ".join("--" + f.replace("_", "-") for f in given)
+            raise OptionError(f"{flags}: options of the smoother; add --smooth")
     if args.out_dir is not None:
         return _estimate_many(args)
     if args.smooth:
@@ -402,9 +407,8 @@ def _estimate_many(args: argparse.Namespace) -> int:
     from pinobs.evaluation.distributed import estimate_logs, log_tasks, write_table
     from pinobs.io import find_logs
 
-    for flag, given in (("--smooth", args.smooth), ("--html", args.html)):
-        if given:
-            raise OptionError(f"{flag} is for one log (--out FILE), not with --out-dir")
+    if args.html:
+        raise OptionError("--html is for one log (--out FILE), not with --out-dir")
     observer_class(args.observer)  # an unknown name: UnknownNameError listing the registered ones
     load(args.robot, root_joint=args.root_joint)  # a bad robot fails here, not once per log
     tasks = log_tasks(
@@ -418,11 +422,15 @@ def _estimate_many(args: argparse.Namespace) -> int:
         topic=args.topic,
         rate=args.rate,
         noise_std=args.noise,
+        smooth=None
+        if not args.smooth
+        else {"lag": args.lag, "chunk": args.chunk, "accel_psd": args.accel_psd, "band": args.band},
     )
-    print(f"pinobs estimate: {len(tasks)} logs, {args.observer} on {_cluster(args)}")
+    what = f"{args.observer}{' smoothed' if args.smooth else ''}"
+    print(f"pinobs estimate: {len(tasks)} logs, {what} on {_cluster(args)}")
     with _task_progress("estimate", not args.no_progress) as step:
         table = estimate_logs(tasks, scheduler=args.scheduler, workers=args.workers, progress=step)
-    _print_summary(table, f"{args.observer} on {args.robot}")
+    _print_summary(table, f"{what} on {args.robot}")
     path = write_table(table, Path(args.out_dir) / "summary")
     failed = table[table["error"].notna()]
     print(f"wrote {len(table) - len(failed)} estimates files and {path}")
@@ -442,7 +450,11 @@ def _print_summary(table: Any, title: str) -> None:
     from rich.table import Table
 
     shown = table.drop(columns="out")
-    formats = {"sigma": "{:.3g}", "seconds": "{:.1f}"}
+    if table["rho"].isna().all():
+        shown = shown.drop(columns="rho")  # filtered logs: no smoother
+    if table["consistency"].isna().all():
+        shown = shown.drop(columns="consistency")  # smoothed logs: ρ instead
+    formats = {"sigma": "{:.3g}", "rho": "{:.3g}", "seconds": "{:.1f}"}
     out = Table(title=title)
     for col in shown.columns:
         out.add_column(col, justify="left" if col in ("log", "consistency", "error") else "right")
@@ -878,8 +890,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--smooth",
         action="store_true",
-        help="RTS smoother over ekf or adaptive (uses the whole log); adds v_std0.. columns; "
-        "σ from --noise, else estimated from the log's first second (reported)",
+        help="RTS smoother over ekf or adaptive (uses the whole log; with --out-dir, each "
+        "log's); adds v_std0.. columns; σ from --noise, else estimated from the log's first "
+        "second (reported)",
     )
     p.add_argument(
         "--lag", type=float, default=None, help="with --smooth: fixed-lag mode, S seconds"

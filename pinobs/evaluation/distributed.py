@@ -14,7 +14,9 @@ combination) and returns a tidy table (one row per run and observer) that
 :func:`write_sweep` saves as Parquet (or CSV) with a plot.
 
 :func:`estimate_logs` runs :func:`pinobs.io.process_log` over many logs (the
-tasks of :func:`log_tasks`, one per log): one estimates file per log, written
+tasks of :func:`log_tasks`, one per log), or with ``smooth`` the RTS smoother
+(:func:`pinobs.io.smoothing.smooth_log`, which costs a few times the filter,
+so the logs gain more from the cluster): one estimates file per log, written
 by the single-log writer (atomic, never over an existing file without
 ``force``), and a summary table, one row per log (:data:`SUMMARY_COLUMNS`).
 
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import importlib.util
 import itertools
+import math
 import os
 import time
 import traceback
@@ -342,8 +345,10 @@ def write_sweep(table: Any, out_dir: str | Path, *, plot: bool = True) -> list[P
 #: estimates file, rows read, rows with an estimate, rows reported (dropped or
 #: repaired), the noise σ used [rad or m], the innovation test's verdict
 #: (``consistent`` / ``inconsistent`` / ``unknown``: too few samples or an
-#: observer without the test), wall-clock seconds in the worker, and the error of a log
-#: that failed (empty otherwise).
+#: observer without the test; empty for a smoothed log), the filter–smoother
+#: consistency ``ρ`` of a smoothed log (:attr:`pinobs.observers.smoothing.Smoother.consistency`,
+#: over all its stretches; NaN when filtered), wall-clock seconds in the worker,
+#: and the error of a log that failed (empty otherwise).
 SUMMARY_COLUMNS = (
     "log",
     "out",
@@ -352,6 +357,7 @@ SUMMARY_COLUMNS = (
     "bad_rows",
     "sigma",
     "consistency",
+    "rho",
     "seconds",
     "error",
 )
@@ -374,6 +380,9 @@ class LogTask:
     topic: str | None = None
     rate: float | None = None
     noise_std: float | None = None
+    #: ``None``: filtered (:func:`pinobs.io.process_log`); else smoothed, with these options
+    #: of :func:`pinobs.io.smoothing.smooth_log` (``lag``, ``chunk``, ``accel_psd``, ``band``)
+    smooth: tuple[tuple[str, Any], ...] | None = None
 
 
 def log_tasks(
@@ -388,6 +397,7 @@ def log_tasks(
     topic: str | None = None,
     rate: float | None = None,
     noise_std: float | None = None,
+    smooth: Mapping[str, Any] | None = None,
 ) -> list[LogTask]:
     """One :class:`LogTask` per log; the estimates of ``logs/a/run.parquet`` go to
     ``out_dir/a/run.csv`` (the log's path below the logs' common folder, suffix
@@ -401,6 +411,9 @@ def log_tasks(
         root_joint, columns, topic, rate, noise_std: as :func:`pinobs.io.process_log`
             (``noise_std=None``: estimated from each log's first second).
         force: overwrite existing estimates and summary.
+        smooth: smooth each log instead of filtering it, with these options of
+            :func:`pinobs.io.smoothing.smooth_log` (``{}``: its defaults; ``lag``,
+            ``chunk``, ``accel_psd``, ``band``); the estimates files get ``v_std0..``.
 
     Raises:
         OptionError: no logs, or two logs whose estimates would share a file.
@@ -445,33 +458,40 @@ def log_tasks(
             topic=topic,
             rate=rate,
             noise_std=noise_std,
+            smooth=None if smooth is None else tuple(sorted(smooth.items())),
         )
         for name, path, target in zip(logs, paths, targets, strict=True)
     ]
 
 
 def run_log_task(task: LogTask) -> dict[str, Any]:
-    """One log through :func:`pinobs.io.process_log` (streamed to its file); its summary row.
+    """One log through :func:`pinobs.io.process_log` (streamed to its file), or with
+    ``task.smooth`` :func:`pinobs.io.smoothing.smooth_log`; its summary row.
 
     A log where no row could be estimated keeps its (all-NaN) file and has ``error`` set.
     """
     from pinobs.io import process_log
+    from pinobs.io.smoothing import smooth_log
     from pinobs.model import load
 
     start = time.perf_counter()
     robot = load(task.robot, root_joint=task.root_joint)
-    run = process_log(
-        task.log,
-        robot,
-        task.observer,
-        out=task.out,
-        force=task.force,
-        keep=False,
-        columns=dict(task.columns) or None,
-        topic=task.topic,
-        rate=task.rate,
-        noise_std=task.noise_std,
-    )
+    common: dict[str, Any] = {
+        "force": task.force,
+        "columns": dict(task.columns) or None,
+        "topic": task.topic,
+        "rate": task.rate,
+        "noise_std": task.noise_std,
+    }
+    verdict, rho = None, math.nan
+    if task.smooth is None:
+        run = process_log(task.log, robot, task.observer, out=task.out, keep=False, **common)
+        verdict = None if run.consistency is None else run.consistency.verdict
+    else:
+        run, stretches = smooth_log(
+            task.log, robot, task.out, observer=task.observer, **common, **dict(task.smooth)
+        )
+        rho = _pooled_rho(stretches)
     return {
         "log": task.name,
         "out": task.out,
@@ -479,10 +499,18 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         "estimated": run.estimated,
         "bad_rows": len(run.bad_rows),
         "sigma": float("nan") if run.noise_std is None else float(run.noise_std),
-        "consistency": None if run.consistency is None else run.consistency.verdict,
+        "consistency": verdict,
+        "rho": rho,
         "seconds": time.perf_counter() - start,
         "error": None if run.estimated else "no row of the log could be estimated",
     }
+
+
+def _pooled_rho(stretches: Sequence[Mapping[str, Any]]) -> float:
+    """``ρ`` of a log smoothed in stretches: their values weighted by their terms' counts."""
+    terms = [(s["consistency"], s["consistency_terms"]) for s in stretches]
+    n = sum(k for _, k in terms)
+    return sum(rho * k for rho, k in terms if k) / n if n else math.nan
 
 
 def estimate_logs(

@@ -107,7 +107,7 @@ class _Streamer(_Recorder):
             if self._n - self._first > 1:  # one sample: no velocity to smooth
                 self.finished.extend((self._first + k, *rest) for k, *rest in done)  # type: ignore[misc]
             self.rho[0] += self._sm._rho_sum
-            self.rho[1] += self._sm._rho_n
+            self.rho[1] += self._sm.consistency_terms
             self._sm = None
 
 
@@ -132,7 +132,8 @@ def smooth_log(
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Smooth a log file into ``out`` (module docstring); returns the row accounting and
     the smoother's options of each stretch (with its ``consistency``,
-    :attr:`pinobs.observers.smoothing.Smoother.consistency`).
+    :attr:`pinobs.observers.smoothing.Smoother.consistency`, and ``consistency_terms``, how
+    many terms it averages; streamed: one, over every stretch).
 
     Args:
         source: log path or DataFrame (:func:`pinobs.io.iter_log`).
@@ -276,7 +277,9 @@ def _streamed(
         period=period,
     )
     rho_sum, rho_n = rec.rho
-    return run, [{**opts, "consistency": rho_sum / rho_n if rho_n else math.nan}]
+    return run, [
+        {**opts, "consistency": rho_sum / rho_n if rho_n else math.nan, "consistency_terms": rho_n}
+    ]
 
 
 def _recorded(

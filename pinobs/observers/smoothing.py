@@ -616,6 +616,11 @@ class Smoother:
         """``ρ`` over the samples smoothed so far (class docstring); NaN before any."""
         return self._rho_sum / self._rho_n if self._rho_n else math.nan
 
+    @property
+    def consistency_terms(self) -> int:
+        """How many (sample, joint) terms :attr:`consistency` averages (to pool logs' ``ρ``)."""
+        return self._rho_n
+
     def push(
         self, t: float, q: Vector | None, tau: Vector
     ) -> list[tuple[int, Vector, Vector, Vector]]:
@@ -1427,6 +1432,7 @@ def smooth(
         "overlap": n_over * dt if n_over else None,
         "lag": lag,
         "band": band,
+        "consistency_terms": smoother.consistency_terms,
         "noise_std": noise_std,
         "noise_std_from_log": noise_from_data,
     }

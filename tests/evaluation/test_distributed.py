@@ -126,18 +126,65 @@ def test_many_logs_one_estimates_file_each_equal_to_the_single_log_path_and_a_ba
     assert len(pd.read_parquet(out / "summary.parquet")) == 3
 
 
-def test_many_logs_on_a_dask_cluster_give_the_serial_results(tmp_path) -> None:
+@pytest.mark.parametrize("smooth", [None, {"accel_psd": 1e-4}], ids=["filtered", "smoothed"])
+def test_many_logs_on_a_dask_cluster_give_the_serial_results(tmp_path, smooth) -> None:
     from pinobs.evaluation.distributed import estimate_logs, log_tasks
 
     logs = _logs(tmp_path / "logs", n=100)
-    kw = {"robot": "pendulum", "observer": "ekf", "noise_std": 1e-4}
+    kw = {"robot": "pendulum", "observer": "ekf", "noise_std": 1e-4, "smooth": smooth}
     serial = estimate_logs(log_tasks(logs, tmp_path / "a", **kw), workers=0)
     dask = estimate_logs(log_tasks(logs, tmp_path / "b", **kw), workers=2, processes=False)
-    same = ["log", "rows", "estimated", "bad_rows", "sigma", "consistency", "error"]
+    same = ["log", "rows", "estimated", "bad_rows", "sigma", "consistency", "rho", "error"]
     pd.testing.assert_frame_equal(serial[same], dask[same])
     for p in logs[:3]:
         name = p.with_suffix(".csv").name
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+
+
+def test_many_logs_smoothed_each_equal_to_the_single_log_smoother_with_its_rho(
+    tmp_path, capsys
+) -> None:
+    """``estimate --smooth --out-dir``: one file per log, byte-equal to ``--smooth --out``
+    on that log; the summary gives ρ (the smoother's check) instead of the NIS verdict."""
+    from pinobs.cli import main
+    from pinobs.io.smoothing import smooth_log
+    from pinobs.model import load
+
+    logs = _logs(tmp_path / "logs")
+    out = tmp_path / "out"
+    common = ["--robot", "pendulum", "--observer", "ekf", "--noise", "1e-4", "--no-progress"]
+    smooth = ["--smooth", "--accel-psd", "1e-4", "--lag", "0.05"]
+    many = ["--log", str(tmp_path / "logs"), "--out-dir", str(out), "--workers", "0"]
+    assert main(["estimate", *common, *smooth, *many]) == 1  # broken.csv fails alone
+    captured = capsys.readouterr()
+    assert "ekf smoothed on" in captured.out and "broken.csv" in captured.err
+    summary = pd.read_parquet(out / "summary.parquet")
+    by = summary.set_index(summary["log"].map(lambda s: s.rsplit("/", 1)[-1]))
+    for good in logs[:3]:
+        row = by.loc[good.name]
+        assert pd.isna(row["error"]) and row["rows"] == row["estimated"] == 200
+        assert pd.isna(row["consistency"])
+        _, stretches = smooth_log(
+            good, load("pendulum"), tmp_path / f"api_{good.stem}.csv", noise_std=1e-4,
+            accel_psd=1e-4, lag=0.05,
+        )  # fmt: skip
+        assert row["rho"] == stretches[0]["consistency"] and 0.1 < row["rho"] < 10
+        single = tmp_path / f"single_{good.stem}.csv"
+        argv = ["estimate", *common, *smooth, "--log", str(good), "--out", str(single)]
+        assert main(argv) == 0
+        written = (out / f"{good.stem}.csv").read_bytes()
+        assert written == single.read_bytes()
+        assert written.splitlines()[0].decode().endswith("v0,v_std0")
+
+
+def test_smoother_options_without_smooth_are_refused(tmp_path, capsys) -> None:
+    from pinobs.cli import main
+
+    logs = _logs(tmp_path / "logs")
+    argv = ["estimate", "--robot", "pendulum", "--observer", "ekf", "--log", str(logs[0])]
+    assert main([*argv, "--out", str(tmp_path / "e.csv"), "--lag", "0.1", "--band", "noise"]) == 2
+    assert "--lag, --band: options of the smoother; add --smooth" in capsys.readouterr().err
+    assert not (tmp_path / "e.csv").exists()
 
 
 def test_log_tasks_mirror_subfolders_and_refuse_two_logs_for_one_file(tmp_path) -> None:

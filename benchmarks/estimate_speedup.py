@@ -15,8 +15,13 @@ as a child process, REPEATS times per worker count, interleaved (0, 1, 2, 0, 1, 
 process, no Dask).  Prints every wall time, the medians, the speed-ups over the
 serial medians, and the load average before each run: on a shared machine, read it.
 
+With ``--smooth`` the command smooths each log instead (``--smooth --lag 1
+--accel-psd 1e-8``: the fixed-lag smoother over ``ekf``, which streams, so a
+worker's memory stays bounded whatever the log's length).
+
     python benchmarks/estimate_speedup.py                       # riemannian and ekf, 4 logs of 1 min
     python benchmarks/estimate_speedup.py --observers kf --repeats 5
+    python benchmarks/estimate_speedup.py --observers ekf --workers 0,2 --smooth
 """
 
 from __future__ import annotations
@@ -42,7 +47,9 @@ if __name__ == "__main__":
     parser.add_argument("--workers", default="0,1,2")
     parser.add_argument("--observers", default="riemannian,ekf")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--smooth", action="store_true", help="smooth each log (ekf)")
     args = parser.parse_args()
+    smooth = ["--smooth", "--lag", "1", "--accel-psd", "1e-8"] if args.smooth else []
     counts = [int(w) for w in args.workers.split(",")]
     with tempfile.TemporaryDirectory() as tmp:
         logs = Path(tmp) / "logs"
@@ -58,12 +65,14 @@ if __name__ == "__main__":
                     cmd += ["--observer", observer]
                     cmd += ["--log", str(logs), "--out-dir", str(Path(tmp) / "out")]
                     cmd += ["--workers", str(n), "--force", "--no-progress", "--noise", "1e-3"]
+                    cmd += smooth
                     load = os.getloadavg()[0]
                     start = time.perf_counter()
                     subprocess.run(cmd, check=True, capture_output=True)
                     walls[n].append(time.perf_counter() - start)
                     print(
-                        f"  {observer} --workers {n}: {walls[n][-1]:.1f} s (load average {load:.1f})",
+                        f"  {observer}{' smoothed' if smooth else ''} --workers {n}: "
+                        f"{walls[n][-1]:.1f} s (load average {load:.1f})",
                         flush=True,
                     )
             serial = statistics.median(walls[counts[0]])

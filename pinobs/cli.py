@@ -388,18 +388,23 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     if args.html and run.estimated:
-        from pinobs.visualization import log_result, write_html
-
-        log = read_log(args.log, robot, columns=columns, topic=args.topic)
-        page = write_html(
-            log_result(robot, log, {args.observer: run}), robot, args.html, truth_label="measured"
-        )
-        print(f"wrote {page} (the logged motion, and the estimate as a ghost)")
+        _log_playback(args, robot, run, args.observer)
     print(f"{args.observer} on {robot.name}: {run.summary()}; wrote {args.out}")
     if run.estimated == 0:
         print("pinobs: error: no row of the log could be estimated", file=sys.stderr)
         return 1
     return 0
+
+
+def _log_playback(args: argparse.Namespace, robot: Robot, run: Any, label: str) -> None:
+    """``estimate --html``: the logged motion, and the estimates (kept in ``run``) as a ghost."""
+    from pinobs.visualization import log_result, write_html
+
+    log = read_log(args.log, robot, columns=_column_map(args.map), topic=args.topic)
+    page = write_html(
+        log_result(robot, log, {label: run}), robot, args.html, truth_label="measured"
+    )
+    print(f"wrote {page} (the logged motion, and the estimate as a ghost)")
 
 
 def _estimate_many(args: argparse.Namespace) -> int:
@@ -585,6 +590,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             topic=args.topic,
             rate=args.rate,
             band=args.band,
+            stream=not args.html,  # the playback needs the estimates kept
         )
     except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
         print(f"pinobs: error: {exc}", file=sys.stderr)
@@ -631,6 +637,8 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
     mode = "whole log" if args.lag is None else f"lag {args.lag:g} s"
     if args.chunk is not None:
         mode = f"chunks of {args.chunk:g} s"
+    if args.html and run.estimated:
+        _log_playback(args, robot, run, f"{args.observer} smoothed")
     print(f"smoothed {args.observer} on {robot.name} ({mode}): {run.summary()}; wrote {args.out}")
     if run.estimated == 0:
         print("pinobs: error: no row of the log could be smoothed", file=sys.stderr)

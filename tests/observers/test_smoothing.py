@@ -593,6 +593,26 @@ def test_smooth_log_and_the_cli_estimate_the_noise_when_none_is_given(
     np.testing.assert_array_equal(np.loadtxt(out, delimiter=",", skiprows=1), est)
 
 
+def test_cli_estimate_smooth_writes_the_playback_of_the_smoothed_estimate(
+    tmp_path, ur5_log, capsys
+) -> None:
+    """``--smooth --html``: the logged motion and the smoothed estimate (it was ignored);
+    the estimates kept for it are those the streamed run writes."""
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    log = write_log(tmp_path / "log.csv", ur5_log.t[1:], ur5_log.q_meas[1:], ur5_log.tau[1:])
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log), "--noise"]
+    argv += ["1e-4", "--smooth", "--lag", "0.05", "--accel-psd", "1e-4", "--out"]
+    html = tmp_path / "play.html"
+    assert main([*argv, str(tmp_path / "a.csv"), "--html", str(html)]) == 0
+    assert "(the logged motion, and the estimate as a ghost)" in capsys.readouterr().out
+    assert html.stat().st_size > 10_000 and "ekf smoothed" in html.read_text()
+    assert main([*argv, str(tmp_path / "b.csv")]) == 0  # streamed, nothing kept
+    a, b = (np.loadtxt(tmp_path / f, delimiter=",", skiprows=1) for f in ("a.csv", "b.csv"))
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
 def test_cli_estimate_smooth_over_adaptive_says_how_its_model_was_frozen(
     tmp_path, ur5_log, capsys
 ) -> None:

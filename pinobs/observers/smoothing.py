@@ -1239,9 +1239,12 @@ def streaming_smoother(
     nominal sample period [s] (the chunks are counted in samples of it).
 
     Not for ``accel_psd="auto"`` or ``adaptive``: both pass over the log more than once.
+    ``noise_std`` is required: a stream has no log to estimate it from
+    (:func:`pinobs.io.smoothing.smooth_log` estimates it from the log's first chunk).
 
     Raises:
         OptionError: those two, or neither ``chunk`` nor ``lag`` (the whole log is not a stream).
+        GainError: no ``noise_std``.
     """
     cls = observer_class(observer)
     if accel_psd == "auto" or issubclass(cls, AdaptiveEKF) or (chunk is None and lag is None):
@@ -1253,6 +1256,10 @@ def streaming_smoother(
     if band not in BANDS:
         raise OptionError(f"band={band!r}: give one of {list(BANDS)}")
     positive("dt", dt)
+    if noise_std is None:  # the filter's default σ would be used, silently
+        raise GainError(
+            "a streamed smoother needs noise_std [rad or m]: it has no log to estimate it from"
+        )
     empty = np.empty(0)
     make, extra = _filter_maker(
         robot,

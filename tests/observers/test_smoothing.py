@@ -337,6 +337,8 @@ def test_noise_band_is_chunked_like_the_estimate_and_chosen_per_observer(ur5_log
         smooth(robot, _log(ur5_log), band="wide", **opts)  # type: ignore[arg-type]
     with pytest.raises(OptionError, match="band="):
         streaming_smoother(robot, dt=1e-3, noise_std=1e-4, accel_psd=1e-2, lag=0.1, band="x")
+    with pytest.raises(GainError, match="needs noise_std"):
+        streaming_smoother(robot, dt=1e-3, accel_psd=1e-2, lag=0.1)
 
 
 def test_fixed_lag_uses_later_samples_and_short_lags_lose_accuracy(ur5_log) -> None:

@@ -30,15 +30,13 @@ from typing import Any, Literal
 
 import numpy as np
 
-from pinobs.errors import GainError
 from pinobs.io.readers import CHUNK_ROWS, LogSource, iter_log
 from pinobs.io.stream import LogEstimator, LogRun, _chain, _median_period
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
-from pinobs.observers.base import NOISE_FLOOR, Estimate
-from pinobs.observers.noise import noise_from_log
-from pinobs.observers.smoothing import Smoother, smooth, streaming_smoother
+from pinobs.observers.base import Estimate
+from pinobs.observers.smoothing import Smoother, log_noise_std, smooth, streaming_smoother
 
 __all__ = ["smooth_log"]
 
@@ -171,14 +169,8 @@ def smooth_log(
         first = next(chunks)
         period = 1.0 / rate if rate else _median_period(first.t)
         said, sigma_joint = [], None
-        if noise_std is None:  # as pinobs.smooth (the same floor), from the first chunk
-            found = noise_from_log(first.t, first.q, robot, floor=NOISE_FLOOR)
-            if found is None:
-                raise GainError(
-                    "the log has too few finite rows at its start to estimate its noise; "
-                    "give noise_std (--noise)"
-                )
-            noise_std, sigma_joint, message = found
+        if noise_std is None:  # as pinobs.smooth, from the first chunk
+            noise_std, sigma_joint, message = log_noise_std(robot, first.t, first.q)
             said.append(message)
         if stream and period is not None:
             run, stretches = _streamed(

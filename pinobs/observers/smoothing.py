@@ -208,6 +208,7 @@ __all__ = [
     "Smoother",
     "consistent_offset_scale",
     "default_overlap",
+    "log_noise_std",
     "select_accel_psd",
     "smooth",
     "streaming_smoother",
@@ -1283,15 +1284,19 @@ def streaming_smoother(
     return (lambda: Smoother(make(accel_psd), n_chunk, n_over, band)), opts
 
 
-def _noise_std(robot: Robot, t: Vector, q: Vector) -> float:
-    """σ [rad or m] from the log (:func:`pinobs.observers.noise.noise_from_log`: the median
-    over joints, the log's first second, at least :data:`~pinobs.observers.base.NOISE_FLOOR`,
-    the filters' default σ), warned (:class:`~pinobs.errors.NoiseWarning`)."""
+def log_noise_std(robot: Robot, t: Vector, q: Vector) -> tuple[float, Vector, str]:
+    """The σ [rad or m] the smoother takes when none is given: ``(σ̂, σ̂ per joint, a sentence
+    reporting them)`` from :func:`pinobs.observers.noise.noise_from_log` (the median over
+    joints, the log's first second), at least :data:`~pinobs.observers.base.NOISE_FLOOR`
+    (the filters' default σ).
+
+    Raises:
+        GainError: fewer than 12 finite rows to estimate it from.
+    """
     found = noise_from_log(t, q, robot, floor=NOISE_FLOOR)
     if found is None:
         raise GainError("the log has too few finite rows to estimate its noise; give noise_std")
-    warnings.warn(NoiseWarning(found[2]), stacklevel=3)
-    return found[0]
+    return found
 
 
 def smooth(
@@ -1385,7 +1390,8 @@ def smooth(
     arrays = (t_all[k0:], q_all[k0:], tau_all[k0:], good)
     noise_from_data = noise_std is None
     if noise_std is None:
-        noise_std = _noise_std(robot, t_all, q_all)
+        noise_std, _, said = log_noise_std(robot, t_all, q_all)
+        warnings.warn(NoiseWarning(said), stacklevel=2)
     make, extra = _filter_maker(
         robot, observer, arrays, noise_std, disturbance_psd, filter_options, model_window
     )

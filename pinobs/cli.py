@@ -612,10 +612,16 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             "explain the log; ≫ 1: too small, the band is too narrow; < 1: too large)",
             file=sys.stderr,
         )
-        if opts.get("band") == "noise":
+        if opts.get("band") in ("noise", "inflated"):
+            scaled = (
+                f", times √max(1, ρ) = {opts['band_scale']:.3g} for the model error ρ shows"
+                if opts["band"] == "inflated"
+                else ""
+            )
             print(
-                "v_std: the smoothed error driven by the measurement noise alone (--band noise; "
-                "a model error that is smooth in time cancels in the smoother)",
+                f"v_std: the smoothed error driven by the measurement noise alone{scaled} "
+                f"(--band {opts['band']}; a model error that is smooth in time cancels in the "
+                "smoother)",
                 file=sys.stderr,
             )
         if opts.get("offset_scale") is not None:
@@ -922,11 +928,13 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--band",
-        choices=("model", "noise"),
+        choices=("model", "noise", "inflated"),
         default=None,
         help="with --smooth: what v_std states: 'model', the smoother's covariance under the "
         "filter's noise model; 'noise', its error driven by the measurement noise alone "
-        "(a smooth model error cancels); default: noise over adaptive, model over ekf",
+        "(a smooth model error cancels); 'inflated', the noise band times √max(1, ρ), "
+        "widened by the model error the log shows; default: inflated over adaptive, model "
+        "over ekf",
     )
     _add_cluster_options(
         p, "with --out-dir: local worker processes (0: this process; default: one per core)"

@@ -15,8 +15,9 @@ log streams: each sample goes to a :class:`~pinobs.observers.smoothing.Smoother`
 as the estimator screens it, finished samples are written as soon as every
 row before them is, and only ``chunk + overlap`` samples' states (and the rows
 waiting for them) are held.  Otherwise (the whole log at once,
-``accel_psd="auto"``, which passes over the log once per candidate, or
-``adaptive``, whose learning pass comes first) the screened samples,
+``accel_psd="auto"``, which passes over the log once per candidate,
+``adaptive``, whose learning pass comes first, or ``band="inflated"``, scaled by
+the whole log's ``ρ``) the screened samples,
 ``1 + nq + nv`` floats per row, are kept and smoothed at the end.
 """
 
@@ -163,6 +164,7 @@ def smooth_log(
         and (chunk is not None or lag is not None)
         and accel_psd != "auto"
         and observer == "ekf"
+        and band != "inflated"  # scaled by the whole log's ρ
     )
     try:
         chunks = iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows)

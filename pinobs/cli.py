@@ -7,7 +7,7 @@ pinobs play RESULT.npz [--html F] [--plot F]   watch a saved run
 pinobs demo                                    the main job on a built-in default
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
     [--force --map COL=NAME --topic T --noise STD]   (CSV/TSV, Parquet, NPZ, ROS bags)
-    [--smooth [--lag S|--chunk S] [--accel-psd P|auto] [--band model|noise]]
+    [--smooth [--lag S|--chunk S] [--accel-psd P|auto] [--band model|noise|inflated]]
                                                  RTS smoother (ekf, adaptive), v_std0..
 pinobs estimate --robot R --observer O --log 'GLOB'|FOLDER --out-dir OUT   many logs on Dask
     [--workers N | --scheduler tcp://host:8786] [--smooth ...]   one file per log, a summary

@@ -12,6 +12,7 @@ from typing import Any
 
 __all__ = [
     "ConfigurationError",
+    "ConsistencyWarning",
     "DimensionError",
     "GainError",
     "IdentificationError",
@@ -122,6 +123,10 @@ class PinobsWarning(UserWarning):
 
 class NoiseWarning(PinobsWarning):
     """An observer built without ``noise_std`` estimated σ from its data and retuned itself."""
+
+
+class ConsistencyWarning(PinobsWarning):
+    """An estimate whose own residuals say the model does not explain the data."""
 
 
 class ModelWarning(PinobsWarning):

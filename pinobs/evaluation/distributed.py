@@ -345,9 +345,11 @@ def write_sweep(table: Any, out_dir: str | Path, *, plot: bool = True) -> list[P
 #: estimates file, rows read, rows with an estimate, rows reported (dropped or
 #: repaired), the noise σ used [rad or m], the innovation test's verdict
 #: (``consistent`` / ``inconsistent`` / ``unknown``: too few samples or an
-#: observer without the test; empty for a smoothed log), the filter–smoother
-#: consistency ``ρ`` of a smoothed log (:attr:`pinobs.observers.smoothing.Smoother.consistency`,
-#: over all its stretches; NaN when filtered), wall-clock seconds in the worker,
+#: observer without the test; for a smoothed log, ``inconsistent`` when a stretch is
+#: what :func:`pinobs.smooth` warns of, :func:`pinobs.observers.smoothing.smoothing_warnings`),
+#: the filter–smoother consistency ``ρ`` of a smoothed log
+#: (:attr:`pinobs.observers.smoothing.Smoother.consistency`, over all its stretches; NaN
+#: when filtered), wall-clock seconds in the worker,
 #: and the error of a log that failed (empty otherwise).
 SUMMARY_COLUMNS = (
     "log",
@@ -473,6 +475,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
     from pinobs.io import process_log
     from pinobs.io.smoothing import smooth_log
     from pinobs.model import load
+    from pinobs.observers.smoothing import smoothing_warnings
 
     start = time.perf_counter()
     robot = load(task.robot, root_joint=task.root_joint)
@@ -492,6 +495,9 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
             task.log, robot, task.out, observer=task.observer, **common, **dict(task.smooth)
         )
         rho = _pooled_rho(stretches)
+        auto = dict(task.smooth).get("accel_psd") == "auto"
+        said = any(smoothing_warnings(s["consistency"], s, auto) for s in stretches)
+        verdict = "inconsistent" if said else ("consistent" if math.isfinite(rho) else "unknown")
     return {
         "log": task.name,
         "out": task.out,

@@ -37,7 +37,13 @@ from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers.base import Estimate
-from pinobs.observers.smoothing import Smoother, log_noise_std, smooth, streaming_smoother
+from pinobs.observers.smoothing import (
+    Smoother,
+    _smooth,
+    log_noise_std,
+    smoothing_warnings,
+    streaming_smoother,
+)
 
 __all__ = ["smooth_log"]
 
@@ -132,7 +138,10 @@ def smooth_log(
     """Smooth a log file into ``out`` (module docstring); returns the row accounting and
     the smoother's options of each stretch (with its ``consistency``,
     :attr:`pinobs.observers.smoothing.Smoother.consistency`, and ``consistency_terms``, how
-    many terms it averages; streamed: one, over every stretch).
+    many terms it averages; streamed: one, over every stretch).  A stretch whose ``ρ``
+    exceeds :data:`~pinobs.observers.smoothing.RHO_WARN` (or whose ``"auto"`` density is the
+    grid's largest) adds what :func:`pinobs.smooth` would warn
+    (:func:`~pinobs.observers.smoothing.smoothing_warnings`) to the run's ``warnings``.
 
     Args:
         source: log path or DataFrame (:func:`pinobs.io.iter_log`).
@@ -189,6 +198,9 @@ def smooth_log(
         writer.abort()
         raise
     run.warnings[:0] = said
+    for i, opts in enumerate(stretches):  # what pinobs.smooth warns, per stretch
+        for told in smoothing_warnings(opts["consistency"], opts, accel_psd == "auto"):
+            run.warnings.append(told if len(stretches) == 1 else f"stretch {i + 1}: {told}")
     run.noise_std_per_joint = sigma_joint
     return run, stretches
 
@@ -314,7 +326,7 @@ def _recorded(
         seg_t = np.array([s[0] for s in seg])
         seg_q = np.array([np.full(robot.nq, np.nan) if s[1] is None else s[1] for s in seg])
         seg_tau = np.array([s[2] for s in seg])
-        res = smooth(
+        res = _smooth(  # the consistency is reported in the run's warnings (smooth_log)
             robot,
             (seg_t, seg_q, seg_tau),
             observer=observer,

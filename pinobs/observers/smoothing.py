@@ -184,6 +184,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pinobs.errors import (
+    ConsistencyWarning,
     DimensionError,
     GainError,
     NoiseWarning,
@@ -214,6 +215,7 @@ __all__ = [
     "DEFAULT_GRID",
     "LIKELIHOOD_MARGIN",
     "OFFSET_SCALE_RANGE",
+    "RHO_WARN",
     "LogLike",
     "SmoothableFilter",
     "Smoothed",
@@ -223,6 +225,7 @@ __all__ = [
     "log_noise_std",
     "select_accel_psd",
     "smooth",
+    "smoothing_warnings",
     "streaming_smoother",
 ]
 
@@ -246,6 +249,13 @@ OFFSET_SCALE_RANGE = (1e-3, 1e2)
 #: filter's noise model, the covariance of its error driven by the measurement noise alone, or
 #: that noise band scaled by the log's consistency, ``√max(1, ρ)`` (:func:`smooth`).
 BANDS = ("model", "noise", "inflated")
+
+#: ``ρ`` (:attr:`Smoother.consistency`) above which :func:`smooth` says the model does not
+#: explain the log (:func:`smoothing_warnings`).  Measured (README): 0.68–1.17 on exact-model
+#: logs with ``accel_psd="auto"``, 0.53–4.34 over ``adaptive`` under the learning benchmark's
+#: model errors (README); over ``ekf`` on those logs (seed 1), 3e8 to 3e9 at the default
+#: density and 95 at 1e-2 (UR5, 20 % inertia error and a payload).
+RHO_WARN = 10.0
 
 #: Relative agreement the default overlap aims at: ``|v_chunked − v_whole| ≤ CHUNK_TOL · v_std``.
 CHUNK_TOL = 1e-6
@@ -545,7 +555,10 @@ def _forward(
             chol, s_inv_e, info = _posv()(pred.P[:nv, :nv] + meas_var * np.eye(nv), e)
             if info != 0:
                 raise NonFiniteError(
-                    f"sample {k0 + k}: the innovation covariance is not positive definite"
+                    f"sample {k0 + k} (t = {t:.6g} s): the filter is lost (its innovation "
+                    "covariance is not positive definite): the model does not explain the log "
+                    "at these densities; check the model and the torques, or smooth with "
+                    "accel_psd='auto' or observer='adaptive'"
                 )
             ll = -(0.5 * (e @ s_inv_e) + np.log(np.diagonal(chol)).sum() + 0.5 * nv * _LOG_2PI)
             state = filt._correct(pred, q_meas)
@@ -1144,9 +1157,28 @@ def _select(
     if not candidates:
         raise GainError("grid is empty; give accel_psd candidates > 0 [rad²/s³]")
     positive("threshold", threshold)
-    lls = [sum(ll for *_, ll, _ in _forward(make(psd), _rows(*arrays), k0)) for psd in candidates]
+    lls = [_log_likelihood(make(psd), arrays, k0) for psd in candidates]
     best = max(lls)
+    if not math.isfinite(best):
+        raise NonFiniteError(
+            f"the filter is lost on this log at every accel_psd of the grid ({candidates[0]:g} to "
+            f"{candidates[-1]:g} rad²/s³); check the model, the torques and noise_std"
+        )
     return max(p for p, ll in zip(candidates, lls, strict=True) if ll >= best - threshold)
+
+
+def _log_likelihood(
+    filt: SmoothableFilter, arrays: tuple[Vector, Vector, Vector, Vector], k0: int
+) -> float:
+    """``ℓ`` of :func:`select_accel_psd` for one filter; ``−∞`` if the filter is lost on the log
+    (its covariance or estimate stops being finite: under a model error a small density
+    makes the filter overconfident until it diverges), which rejects the candidate."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        try:
+            ll = sum(ll for *_, ll, _ in _forward(filt, _rows(*arrays), k0))
+        except (NonFiniteError, ObserverDiverged, np.linalg.LinAlgError):
+            return -math.inf
+    return ll if math.isfinite(ll) else -math.inf
 
 
 def _smoothable_class(observer: str) -> type:
@@ -1300,6 +1332,44 @@ def streaming_smoother(
     return (lambda: Smoother(make(accel_psd), n_chunk, n_over, band)), opts
 
 
+def smoothing_warnings(consistency: float, options: Mapping[str, Any], auto: bool) -> list[str]:
+    """What :func:`smooth` warns of its result (:class:`~pinobs.errors.ConsistencyWarning`),
+    from its ``consistency`` ``ρ`` and ``options`` (``auto``: ``accel_psd="auto"`` was asked):
+
+    * ``ρ`` above :data:`RHO_WARN`: the model does not explain the log, so the estimate
+      follows a model error, and a band that ``ρ`` does not scale is too narrow;
+    * ``"auto"`` over ``ekf`` chose the grid's largest density: the likelihood still rises
+      there, so the model explains the log no better than white acceleration does, and the
+      smoother is model-free (measured on the learning benchmark's six model-error logs of
+      seed 1, 12 s: ``"auto"`` chose 1 rad²/s³ on every one, RMS 1.24e-2 to 1.26e-2 rad/s,
+      98–126× the smoother over ``adaptive``'s; at the default 1e-8, 0.25–2.4 rad/s with
+      ``ρ`` 3e8 to 3e9 and a model band that covers none of the truth).
+    """
+    said = []
+    band = options.get("band")
+    if auto and options.get("accel_psd") == DEFAULT_GRID[-1]:
+        said.append(
+            f"accel_psd='auto' chose {DEFAULT_GRID[-1]:g} rad²/s³, the largest it tries: the "
+            "model explains the log no better than white acceleration does (the smoother is "
+            "model-free); check the model and the torques, or smooth with observer='adaptive'"
+        )
+    if math.isfinite(consistency) and consistency > RHO_WARN:
+        scale = math.sqrt(consistency)
+        widened = (
+            f"the band is widened by √ρ = {scale:.3g}"
+            if band == "inflated"
+            else f"the {band} band is too narrow, by about √ρ = {scale:.3g} (band='inflated' "
+            "scales it)"
+        )
+        said.append(
+            f"the model does not explain the log: filter–smoother consistency ρ = "
+            f"{consistency:.3g} (about 1 when it does; above {RHO_WARN:g}, the estimate follows "
+            f"a model error); {widened}; check the model, the torques and noise_std, or smooth "
+            "with accel_psd='auto' or observer='adaptive'"
+        )
+    return said
+
+
 def log_noise_std(robot: Robot, t: Vector, q: Vector) -> tuple[float, Vector, str]:
     """The σ [rad or m] the smoother takes when none is given: ``(σ̂, σ̂ per joint, a sentence
     reporting them)`` from :func:`pinobs.observers.noise.noise_from_log` (the median over
@@ -1390,7 +1460,50 @@ def smooth(
         GainError: a non-positive ``chunk``, ``overlap``, ``lag`` or ``model_window``,
             a bad filter option, or no ``noise_std`` and too few finite rows to estimate it.
         DimensionError, TimestampError, NonFiniteError: malformed log arrays.
+
+    Warns:
+        NoiseWarning: ``noise_std`` not given (σ estimated from the log).
+        ConsistencyWarning: ``ρ`` (:attr:`Smoothed.consistency`) above :data:`RHO_WARN`,
+            or ``"auto"`` at the grid's largest density: the model does not explain the
+            log (:func:`smoothing_warnings`).
     """
+    result = _smooth(
+        robot,
+        log,
+        observer=observer,
+        noise_std=noise_std,
+        accel_psd=accel_psd,
+        disturbance_psd=disturbance_psd,
+        chunk=chunk,
+        overlap=overlap,
+        lag=lag,
+        model_window=model_window,
+        filter_options=filter_options,
+        band=band,
+    )
+    for said in smoothing_warnings(result.consistency, result.options, accel_psd == "auto"):
+        warnings.warn(ConsistencyWarning(said), stacklevel=2)
+    return result
+
+
+def _smooth(
+    robot: Robot,
+    log: LogLike | tuple[ArrayLike, ...],
+    *,
+    observer: str = "ekf",
+    noise_std: float | None = None,
+    accel_psd: float | Literal["auto"] | None = None,
+    disturbance_psd: float | None = None,
+    chunk: float | None = None,
+    overlap: float | None = None,
+    lag: float | None = None,
+    model_window: float | None = None,
+    filter_options: Mapping[str, Any] | None = None,
+    band: str | None = None,
+) -> Smoothed:
+    """:func:`smooth` without its :class:`~pinobs.errors.ConsistencyWarning`, for callers
+    that report the consistency their own way (a log file's run, the identification's
+    refinement)."""
     if lag is not None and (chunk is not None or overlap is not None):
         raise OptionError(
             f"lag={lag!r} sets the chunk and the overlap; give lag alone, or chunk and overlap"
@@ -1410,7 +1523,7 @@ def smooth(
     noise_from_data = noise_std is None
     if noise_std is None:
         noise_std, _, said = log_noise_std(robot, t_all, q_all)
-        warnings.warn(NoiseWarning(said), stacklevel=2)
+        warnings.warn(NoiseWarning(said), stacklevel=3)  # the caller of smooth()
     make, extra = _filter_maker(
         robot, observer, arrays, noise_std, disturbance_psd, filter_options, model_window
     )
@@ -1456,7 +1569,8 @@ def smooth(
     out_var *= scale**2
     if not (np.all(np.isfinite(out_v[k0:])) and np.all(np.isfinite(out_var[k0:]))):
         raise NonFiniteError(
-            "the smoothed estimate is not finite; check the model, the torques and noise_std"
+            "the smoothed estimate is not finite (the filter is lost): check the model, the "
+            "torques and noise_std, or smooth with accel_psd='auto' or observer='adaptive'"
         )
     opts = {
         **cast(Any, filt).options,

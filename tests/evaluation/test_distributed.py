@@ -145,8 +145,13 @@ def test_many_logs_smoothed_each_equal_to_the_single_log_smoother_with_its_rho(
     tmp_path, capsys
 ) -> None:
     """``estimate --smooth --out-dir``: one file per log, byte-equal to ``--smooth --out``
-    on that log; the summary gives ρ (the smoother's check) instead of the NIS verdict."""
+    on that log; the summary gives ρ (the smoother's check) and its verdict (inconsistent
+    where pinobs.smooth would warn) instead of the NIS test's."""
+    import numpy as np
+
     from pinobs.cli import main
+    from pinobs.evaluation.distributed import estimate_logs, log_tasks
+    from pinobs.io import write_log
     from pinobs.io.smoothing import smooth_log
     from pinobs.model import load
 
@@ -163,7 +168,7 @@ def test_many_logs_smoothed_each_equal_to_the_single_log_smoother_with_its_rho(
     for good in logs[:3]:
         row = by.loc[good.name]
         assert pd.isna(row["error"]) and row["rows"] == row["estimated"] == 200
-        assert pd.isna(row["consistency"])
+        assert row["consistency"] == "consistent"
         _, stretches = smooth_log(
             good, load("pendulum"), tmp_path / f"api_{good.stem}.csv", noise_std=1e-4,
             accel_psd=1e-4, lag=0.05,
@@ -175,6 +180,13 @@ def test_many_logs_smoothed_each_equal_to_the_single_log_smoother_with_its_rho(
         written = (out / f"{good.stem}.csv").read_bytes()
         assert written == single.read_bytes()
         assert written.splitlines()[0].decode().endswith("v0,v_std0")
+    # a log the model does not explain: the first one's torques off by 1 N·m (ρ ≈ 1e5)
+    t, q, tau = np.loadtxt(logs[0], delimiter=",", skiprows=1).T
+    off = write_log(tmp_path / "off.csv", t, q[:, None], tau[:, None] + 1.0)
+    off_task = log_tasks([off], tmp_path / "off_out", robot="pendulum", observer="ekf",
+                         noise_std=1e-4, smooth={"accel_psd": 1e-4, "lag": 0.05})  # fmt: skip
+    (row,) = estimate_logs(off_task, workers=0).to_dict("records")
+    assert row["consistency"] == "inconsistent" and row["rho"] > 1e3, row
 
 
 def test_smoother_options_without_smooth_are_refused(tmp_path, capsys) -> None:

@@ -3,13 +3,21 @@
 from __future__ import annotations
 
 import functools
+import warnings
 from typing import NamedTuple
 
 import numpy as np
 import pytest
 
 import pinobs
-from pinobs.errors import DimensionError, GainError, NoiseWarning, OptionError, TimestampError
+from pinobs.errors import (
+    ConsistencyWarning,
+    DimensionError,
+    GainError,
+    NoiseWarning,
+    OptionError,
+    TimestampError,
+)
 from pinobs.io import Log, estimate_log
 from pinobs.observers import make_observer, smoothing
 from pinobs.observers.base import NOISE_FLOOR
@@ -377,12 +385,16 @@ def test_inflated_band_is_the_noise_band_scaled_by_the_logs_consistency_never_na
     robot = cached_robot("planar_3r")
     res = _mismatched_log("planar_3r", "inertia20_payload", 1.2)
     adaptive = {"observer": "adaptive", "noise_std": 1e-4, "model_window": 0.5}
-    default = smooth(robot, _log(res), **adaptive)  # type: ignore[arg-type]
+    with pytest.warns(ConsistencyWarning, match="widened by"):  # 1.2 s: too short to learn
+        default = smooth(robot, _log(res), **adaptive)  # type: ignore[arg-type]
     assert default.options["band"] == "inflated"
-    for psd in (1e-12, 1e2):  # ekf on the nominal model: ρ ≫ 1, then ρ < 1
+    for psd in (1e-12, 1e2):  # ekf on the nominal model: ρ ≫ 1 (said), then ρ < 1
         opts = {"noise_std": 1e-4, "accel_psd": psd}
-        inflated = smooth(robot, _log(res), band="inflated", **opts)  # type: ignore[arg-type]
-        noise = smooth(robot, _log(res), band="noise", **opts)  # type: ignore[arg-type]
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            inflated = smooth(robot, _log(res), band="inflated", **opts)  # type: ignore[arg-type]
+            noise = smooth(robot, _log(res), band="noise", **opts)  # type: ignore[arg-type]
+        assert [type(w.message) for w in said] == [ConsistencyWarning] * (2 if psd < 1 else 0)
         np.testing.assert_array_equal(inflated.v, noise.v)
         rho = inflated.consistency
         assert (rho > 10.0) if psd == 1e-12 else (rho < 1.0), rho
@@ -709,6 +721,42 @@ def test_readme_smoothing_table_is_the_committed_benchmark_file() -> None:
     assert shown == (root / "benchmarks" / "smoothing.md").read_text()
 
 
+def test_a_log_the_model_does_not_explain_is_said_and_auto_skips_densities_that_lose_the_filter(
+    tmp_path, monkeypatch, capsys
+) -> None:
+    """A UR5 log with 20 % inertia error and a payload (nominal model, 4.5 s).  At small
+    densities the filter is lost (1e-13: at 4.09 s): ``"auto"`` rejects such a candidate
+    instead of failing.  At the default density the estimate follows the model error with
+    a band far too narrow, which is said (ρ ≫ RHO_WARN); ``"auto"`` at its grid's largest
+    density is said too (the model explains the log no better than white acceleration)."""
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    robot = cached_robot("ur5")
+    res = _mismatched_log("ur5", "inertia20_payload", 4.5)
+    with pytest.raises(
+        pinobs.errors.NonFiniteError, match=r"\(t = 4.09\d* s\): the filter is lost"
+    ):
+        smooth(robot, _log(res), noise_std=1e-4, accel_psd=1e-13)
+    assert select_accel_psd(robot, _log(res), noise_std=1e-4, grid=(1e-13, 1e-2)) == 1e-2
+    with pytest.warns(ConsistencyWarning, match="does not explain the log") as said:
+        default = smooth(robot, _log(res), noise_std=1e-4)
+    assert default.consistency > 1e6 and len(said) == 1
+    assert "model band is too narrow, by about √ρ" in str(said[0].message)
+    late = res.t > 1.0
+    cover = np.mean(np.abs(default.v - res.v)[late] <= 2 * default.v_std[late])
+    assert cover < 0.1  # why it is said
+    monkeypatch.setattr(smoothing, "DEFAULT_GRID", (1e-13, 1e-2, 1.0))
+    with pytest.warns(ConsistencyWarning, match="chose 1 rad²/s³, the largest it tries"):
+        auto = smooth(robot, _log(res), noise_std=1e-4, accel_psd="auto")
+    assert auto.options["accel_psd"] == 1.0
+    log = write_log(tmp_path / "log.csv", res.t[1:], res.q_meas[1:], res.tau[1:])
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log)]
+    argv += ["--out", str(tmp_path / "s.csv")]
+    assert main([*argv, "--smooth", "--noise", "1e-4"]) == 0
+    assert "warning: the model does not explain the log: filter–smoother" in capsys.readouterr().err
+
+
 def test_strings_other_than_auto_are_refused(ur5_log) -> None:
     robot = cached_robot("ur5")
     with pytest.raises(GainError, match="or 'auto'"):
@@ -766,6 +814,7 @@ def _mismatched_log(name: str, scenario: str, duration: float, seed: int = 1) ->
     return simulate(robot, [], sensor=Sensor(1000, 1e-4), duration=duration, seed=seed, plant=plant)
 
 
+@pytest.mark.filterwarnings("ignore::pinobs.errors.ConsistencyWarning")  # 1.2 s: ρ = 133
 def test_adaptive_is_smoothed_with_its_model_frozen_per_window_and_chunks_change_nothing() -> None:
     """The learning pass runs once; each window's model is the one the causal pass held at the
     window's end (its regime reported).  Chunking is a memory device only: it does not change

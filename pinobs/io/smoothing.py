@@ -174,6 +174,7 @@ def smooth_log(
         and accel_psd != "auto"
         and observer == "ekf"
         and band != "inflated"  # scaled by the whole log's ρ
+        and not (options or {}).get("latency")  # re-timed as a whole (pinobs.smooth)
     )
     try:
         chunks = iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows)

@@ -70,7 +70,9 @@ more than ``chunk + overlap`` samples' states.
 A known measurement latency (``filter_options={"latency": d}``) re-times the log
 (:func:`_retimed`): each sample at the time it was taken, ``t − d``, each torque
 switching at its stamped time, the estimates read at the stamped times; it is then
-an ordinary log with dropped samples, which the filter predicts over.
+an ordinary log with dropped samples, which the filter predicts over.  An unknown
+one (``"latency": "auto"``) is the likeliest on the log (:func:`select_latency`: the
+innovation likelihood over whole sample intervals, then two halvings).
 
 The observers that can be smoothed are those that keep an error-state
 Gaussian: ``ekf``, and ``adaptive`` through its model-based filter.  Another
@@ -219,6 +221,7 @@ __all__ = [
     "CHUNK_TOL",
     "DEFAULT_ACCEL_PSD",
     "DEFAULT_GRID",
+    "LATENCY_INTERVALS",
     "LIKELIHOOD_MARGIN",
     "OFFSET_SCALE_RANGE",
     "RHO_WARN",
@@ -230,6 +233,7 @@ __all__ = [
     "default_overlap",
     "log_noise_std",
     "select_accel_psd",
+    "select_latency",
     "smooth",
     "smoothing_warnings",
     "streaming_smoother",
@@ -1076,8 +1080,73 @@ def _latency(filter_options: Mapping[str, Any] | None) -> tuple[float, dict[str,
     """``filter_options``' ``latency`` [s] (0 if none) and the other options."""
     options = dict(filter_options or {})
     latency = options.pop("latency", None)
+    if isinstance(latency, str):
+        raise OptionError(
+            f"latency={latency!r}: give a number >= 0 [s] (pinobs.smooth alone takes 'auto': "
+            "select_latency over the whole log)"
+        )
     positive("latency", latency, allow_zero=True, allow_none=True)
     return float(latency or 0.0), options
+
+
+#: :func:`select_latency`'s range: latencies up to this many sample intervals.
+LATENCY_INTERVALS = 3
+
+
+def select_latency(
+    robot: Robot,
+    log: LogLike | tuple[ArrayLike, ...],
+    *,
+    noise_std: float,
+    observer: str = "ekf",
+    accel_psd: float | None = None,
+    disturbance_psd: float | None = None,
+    filter_options: Mapping[str, Any] | None = None,
+    model_window: float | None = None,
+    intervals: int = LATENCY_INTERVALS,
+) -> tuple[float, list[tuple[float, float]]]:
+    """The measurement latency [s] under which the log's innovations are most likely.
+
+    For a candidate ``d`` the filter runs over the log re-timed by ``d``
+    (:func:`_retimed`; ``adaptive``: its learning pass under ``latency=d``, then
+    the frozen-model filter) and sums the innovation log densities,
+    ``ℓ(d) = Σ_k log N(e_k; 0, S_k)`` (as :func:`select_accel_psd`; every
+    candidate has the same measurements, so the sums compare).  The search: every
+    whole sample interval ``h`` (the median) from 0 to ``intervals · h``, then around
+    the best two halvings, ``±h/2`` and ``±h/4`` (at most ``intervals + 5``
+    passes); a latency is a delay, so never below 0.  The maximiser, not an
+    interval's end (unlike ``accel_psd``, a latency has no side to err on).  A
+    candidate at which the filter is lost is rejected.  Uses no ground truth.
+    Returns ``d`` and every ``(candidate, ℓ)`` evaluated, in the order tried.
+
+    Raises:
+        GainError: ``intervals`` < 0.
+        NonFiniteError: the filter is lost at every candidate.
+    """
+    if intervals < 0:
+        raise GainError(f"intervals={intervals!r}: give a whole number of sample intervals >= 0")
+    t, q, tau = _log_arrays(robot, log)
+    h = float(np.median(np.diff(t)))
+    tried: dict[float, float] = {}
+
+    def ll(d: float) -> float:
+        if d not in tried:
+            opts = {**dict(filter_options or {}), "latency": d}
+            arrays, k0, _, make, _ = _prepare(
+                robot, t, q, tau, observer, noise_std, disturbance_psd, opts, model_window
+            )
+            tried[d] = _log_likelihood(make(accel_psd), arrays, k0)
+        return tried[d]
+
+    best = max((k * h for k in range(intervals + 1)), key=ll)
+    for step in (h / 2, h / 4):
+        best = max([best, *(d for d in (best - step, best + step) if d >= 0.0)], key=ll)
+    if not math.isfinite(tried[best]):
+        raise NonFiniteError(
+            f"the filter is lost on this log at every latency tried (0 to "
+            f"{max(tried):g} s); check the model, the torques and noise_std"
+        )
+    return best, list(tried.items())
 
 
 def _prepare(
@@ -1471,8 +1540,8 @@ def smoothing_warnings(consistency: float, options: Mapping[str, Any], auto: boo
             f"the model does not explain the log: filter–smoother consistency ρ = "
             f"{consistency:.3g} (about 1 when it does; above {RHO_WARN:g}, the estimate follows "
             f"a model error); {widened}; check the model, the torques, a measurement latency "
-            "(filter_options={'latency': …}) and noise_std, or smooth with accel_psd='auto' "
-            "or observer='adaptive'"
+            "(filter_options={'latency': 'auto'} finds one) and noise_std, or smooth with "
+            "accel_psd='auto' or observer='adaptive'"
         )
     return said
 
@@ -1551,7 +1620,10 @@ def smooth(
             ``t − latency``, as :meth:`pinobs.observers.base.Observer.set_latency`):
             the log is smoothed on the times its samples were taken, the torque
             switching at the stamped times, and the estimate given at the stamped
-            times (:func:`_retimed`; reported in ``options["latency"]``).
+            times (:func:`_retimed`; reported in ``options["latency"]``);
+            ``"auto"``: the likeliest latency from the log (:func:`select_latency`,
+            at ``accel_psd`` if a number is given, else the observer's own density;
+            ``options["latency_from_log"]``).
         band: what ``v_std`` states (:data:`BANDS`): ``"model"``, the smoother's
             covariance ``P^s`` under the filter's noise model (white acceleration
             and offset as modelled); ``"noise"``, the covariance of the same
@@ -1634,6 +1706,20 @@ def _smooth(
     if noise_std is None:
         noise_std, _, said = log_noise_std(robot, t_all, q_all)
         warnings.warn(NoiseWarning(said), stacklevel=3)  # the caller of smooth()
+    latency_from_log = (filter_options or {}).get("latency") == "auto"
+    if latency_from_log:  # the likeliest latency (select_latency), then smoothed under it
+        rest = {k: v for k, v in dict(filter_options or {}).items() if k != "latency"}
+        found, _ = select_latency(
+            robot,
+            (t_all, q_all, tau_all),
+            noise_std=noise_std,
+            observer=observer,
+            accel_psd=accel_psd if isinstance(accel_psd, float) else None,
+            disturbance_psd=disturbance_psd,
+            filter_options=rest,
+            model_window=model_window,
+        )
+        filter_options = {**rest, "latency": found}
     arrays, k0, rows, make, extra = _prepare(
         robot,
         t_all,
@@ -1710,6 +1796,8 @@ def _smooth(
         "consistency_terms": smoother.consistency_terms,
         "noise_std": noise_std,
         "noise_std_from_log": noise_from_data,
+        "latency": float(extra.get("latency", 0.0)),
+        "latency_from_log": latency_from_log,
     }
     return Smoothed(
         t=t_all,

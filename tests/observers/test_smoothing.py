@@ -31,6 +31,7 @@ from pinobs.observers.smoothing import (
     consistent_offset_scale,
     default_overlap,
     select_accel_psd,
+    select_latency,
     smooth,
     streaming_smoother,
 )
@@ -829,6 +830,19 @@ def test_a_known_latency_is_smoothed_on_the_times_the_samples_were_taken() -> No
         )  # fmt: skip
     with pytest.raises(GainError, match="latency"):
         smooth(robot, (t, q, tau), filter_options={"latency": -1e-3}, **opts)  # type: ignore[arg-type]
+    # unknown: the likeliest of 0..3 intervals, then ±h/2, ±h/4 (no truth used)
+    found, tried = select_latency(robot, (t, q, tau), noise_std=1e-4, accel_psd=1e-10)
+    assert found == pytest.approx(0.5e-3, abs=1e-12) and len(tried) == 8
+    assert max(tried, key=lambda p: p[1])[0] == found
+    auto = smooth(robot, (t, q, tau), filter_options={"latency": "auto"}, **opts)  # type: ignore[arg-type]
+    assert auto.options["latency_from_log"] and auto.options["latency"] == found
+    np.testing.assert_allclose(auto.v, given.v, rtol=0, atol=1e-12)
+    assert given.options["latency_from_log"] is False
+    with pytest.raises(OptionError, match="latency='auto'"):
+        streaming_smoother(
+            robot, dt=1e-3, noise_std=1e-4, accel_psd=1e-10, lag=0.1,
+            filter_options={"latency": "auto"},
+        )  # fmt: skip
 
 
 def test_adaptive_with_a_known_latency_learns_and_smooths_on_the_sample_times() -> None:
@@ -847,6 +861,22 @@ def test_adaptive_with_a_known_latency_learns_and_smooths_on_the_sample_times() 
         blind = smooth(robot, (t, q, tau), **opts)  # type: ignore[arg-type]
     assert rms < 0.1 * np.sqrt(np.mean((blind.v - v)[late] ** 2)), rms
     assert 0.90 <= np.mean(np.abs(given.v - v)[late] <= 2 * given.v_std[late]) <= 0.98
+
+
+@pytest.mark.slow
+def test_adaptive_finds_an_unknown_latency_from_the_log() -> None:
+    """``filter_options={"latency": "auto"}`` over ``adaptive``: a learning pass and a
+    frozen-model pass per candidate (8 here); the one 1 ms latency found, and the
+    estimate as with the latency given.  Measured: 1 ms found; RMS after 3 s 1.7e-5."""
+    robot = cached_robot("ur5")
+    t, q, tau, v = _late_log(1, 1000.0, 6.0)
+    late = t > 3.0
+    opts = {"observer": "adaptive", "noise_std": 1e-4, "model_window": 3.0}
+    auto = smooth(robot, (t, q, tau), filter_options={"latency": "auto"}, **opts)  # type: ignore[arg-type]
+    assert auto.options["latency"] == pytest.approx(1e-3, abs=1e-12)
+    given = smooth(robot, (t, q, tau), filter_options={"latency": 1e-3}, **opts)  # type: ignore[arg-type]
+    np.testing.assert_allclose(auto.v[late], given.v[late], rtol=0, atol=1e-9)
+    assert np.sqrt(np.mean((auto.v - v)[late] ** 2)) < 3e-5
 
 
 def test_strings_other_than_auto_are_refused(ur5_log) -> None:

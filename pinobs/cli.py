@@ -6,8 +6,9 @@ pinobs run --robot R --observer O [...]        one simulation: a results table, 
 pinobs play RESULT.npz [--html F] [--plot F]   watch a saved run
 pinobs demo                                    the main job on a built-in default
 pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a recorded log
-    [--force --map COL=NAME --topic T --noise STD]   (CSV/TSV, Parquet, NPZ, ROS bags)
-    [--smooth [--lag S|--chunk S] [--accel-psd P|auto] [--band model|noise|inflated]]
+    [--force --map COL=NAME --topic T --noise STD --latency S]   (CSV/TSV, Parquet, NPZ, ROS bags)
+    [--smooth [--lag S|--chunk S] [--accel-psd P|auto] [--band model|noise|inflated]
+     [--latency S|auto]]
                                                  RTS smoother (ekf, adaptive), v_std0..
 pinobs estimate --robot R --observer O --log 'GLOB'|FOLDER --out-dir OUT   many logs on Dask
     [--workers N | --scheduler tcp://host:8786] [--smooth ...]   one file per log, a summary
@@ -369,6 +370,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
                 topic=args.topic,
                 rate=args.rate,
                 noise_std=args.noise,
+                options=_observer_options(args),
                 progress=progress,
             )
         except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
@@ -427,6 +429,7 @@ def _estimate_many(args: argparse.Namespace) -> int:
         topic=args.topic,
         rate=args.rate,
         noise_std=args.noise,
+        options=_observer_options(args),
         smooth=None
         if not args.smooth
         else {"lag": args.lag, "chunk": args.chunk, "accel_psd": args.accel_psd, "band": args.band},
@@ -568,6 +571,27 @@ def _psd_or_auto(text: str) -> float | str:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number [rad²/s³] or 'auto'") from None
 
 
+def _latency_or_auto(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a latency [s] or 'auto'") from None
+
+
+def _observer_options(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The observer's options ``estimate`` gives (``--latency``), or ``None``."""
+    if args.latency is None:
+        return None
+    if args.latency == "auto" and not args.smooth:
+        raise OptionError(
+            "--latency auto is chosen from the whole log by the smoother: add --smooth, or "
+            "give the latency in seconds"
+        )
+    return {"latency": args.latency}
+
+
 def _estimate_smoothed(args: argparse.Namespace) -> int:
     """``estimate --smooth``: the RTS smoother over the log (read and screened as ``estimate``
     reads it, written atomically by the io writer); ``estimate``'s columns plus ``v_std0..``."""
@@ -590,6 +614,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             topic=args.topic,
             rate=args.rate,
             band=args.band,
+            options=_observer_options(args),
             stream=not args.html,  # the playback needs the estimates kept
         )
     except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
@@ -630,6 +655,8 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
                 f"white acceleration × {AUTO_WHITE_SCALE:g} of each window's regime's",
                 file=sys.stderr,
             )
+        if opts.get("latency_from_log"):
+            print(f"latency = {opts['latency']:.6g} s (chosen from the log)", file=sys.stderr)
         if args.accel_psd == "auto" and opts["accel_psd"] is not None:
             print(
                 f"accel_psd = {opts['accel_psd']:g} rad²/s³ (chosen from the log)", file=sys.stderr
@@ -917,6 +944,13 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         help="with --smooth: memory bound, backward passes over S seconds (+ overlap); "
         "same result as the whole log to 1e-5 of v_std",
+    )
+    p.add_argument(
+        "--latency",
+        type=_latency_or_auto,
+        default=None,
+        help="measurement latency [s]: the row stamped t was measured at t - LATENCY "
+        "(the observer's latency=); with --smooth also 'auto' (the likeliest from the log)",
     )
     p.add_argument(
         "--accel-psd",

@@ -385,6 +385,8 @@ class LogTask:
     #: ``None``: filtered (:func:`pinobs.io.process_log`); else smoothed, with these options
     #: of :func:`pinobs.io.smoothing.smooth_log` (``lag``, ``chunk``, ``accel_psd``, ``band``)
     smooth: tuple[tuple[str, Any], ...] | None = None
+    #: further options of the observer (``latency``), filtered or smoothed
+    options: tuple[tuple[str, Any], ...] = ()
 
 
 def log_tasks(
@@ -400,6 +402,7 @@ def log_tasks(
     rate: float | None = None,
     noise_std: float | None = None,
     smooth: Mapping[str, Any] | None = None,
+    options: Mapping[str, Any] | None = None,
 ) -> list[LogTask]:
     """One :class:`LogTask` per log; the estimates of ``logs/a/run.parquet`` go to
     ``out_dir/a/run.csv`` (the log's path below the logs' common folder, suffix
@@ -416,6 +419,8 @@ def log_tasks(
         smooth: smooth each log instead of filtering it, with these options of
             :func:`pinobs.io.smoothing.smooth_log` (``{}``: its defaults; ``lag``,
             ``chunk``, ``accel_psd``, ``band``); the estimates files get ``v_std0..``.
+        options: further options of the observer, filtered or smoothed (``latency`` [s];
+            smoothed, also ``"auto"``: :func:`pinobs.smooth`).
 
     Raises:
         OptionError: no logs, or two logs whose estimates would share a file.
@@ -461,6 +466,7 @@ def log_tasks(
             rate=rate,
             noise_std=noise_std,
             smooth=None if smooth is None else tuple(sorted(smooth.items())),
+            options=tuple(sorted((options or {}).items())),
         )
         for name, path, target in zip(logs, paths, targets, strict=True)
     ]
@@ -485,6 +491,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         "topic": task.topic,
         "rate": task.rate,
         "noise_std": task.noise_std,
+        "options": dict(task.options) or None,
     }
     verdict, rho = None, math.nan
     if task.smooth is None:

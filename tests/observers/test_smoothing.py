@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import warnings
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -861,6 +862,46 @@ def test_adaptive_with_a_known_latency_learns_and_smooths_on_the_sample_times() 
         blind = smooth(robot, (t, q, tau), **opts)  # type: ignore[arg-type]
     assert rms < 0.1 * np.sqrt(np.mean((blind.v - v)[late] ** 2)), rms
     assert 0.90 <= np.mean(np.abs(given.v - v)[late] <= 2 * given.v_std[late]) <= 0.98
+
+
+def test_cli_estimate_takes_a_latency_filtered_smoothed_and_over_many_logs(
+    tmp_path, capsys
+) -> None:
+    """``estimate --latency S`` (the causal observer's ``latency=``), ``--smooth --latency
+    S|auto`` (the smoother re-times the log), and with ``--out-dir`` every log gets it.
+    UR5, positions 1 ms late."""
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    t, q, tau, v = _late_log(1, 1000.0, 3.0)
+    (tmp_path / "logs").mkdir()
+    log = write_log(tmp_path / "logs" / "late.csv", t[1:], q[1:], tau[1:])
+    late = t[1:] > 0.5
+    base = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log)]
+    base += ["--noise", "1e-4", "--no-progress"]
+
+    def rms(path: Path) -> float:
+        est = np.loadtxt(path, delimiter=",", skiprows=1)
+        return float(np.sqrt(np.mean((est[:, 7:13] - v[1:])[late] ** 2)))
+
+    runs = {
+        "blind": [],
+        "given": ["--latency", "1e-3"],
+        "smoothed": ["--smooth", "--accel-psd", "1e-10", "--latency", "auto"],
+    }
+    for name, extra in runs.items():
+        assert main([*base, "--out", str(tmp_path / f"{name}.csv"), *extra]) == 0, name
+    assert "latency = 0.001 s (chosen from the log)" in capsys.readouterr().err
+    assert rms(tmp_path / "given.csv") < 0.05 * rms(tmp_path / "blind.csv")
+    assert rms(tmp_path / "smoothed.csv") < rms(tmp_path / "given.csv")
+    assert main([*base, "--out", str(tmp_path / "x.csv"), "--latency", "auto"]) == 2
+    assert "--latency auto is chosen from the whole log by the smoother" in capsys.readouterr().err
+    many = [*base[:5], "--log", str(tmp_path / "logs"), "--noise", "1e-4", "--no-progress"]
+    assert (
+        main([*many, "--out-dir", str(tmp_path / "out"), "--workers", "0", "--latency", "1e-3"])
+        == 0
+    )
+    assert (tmp_path / "out" / "late.csv").read_bytes() == (tmp_path / "given.csv").read_bytes()
 
 
 @pytest.mark.slow

@@ -562,22 +562,18 @@ def _cmd_excite(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------- estimate --smooth (issue 19)
-def _psd_or_auto(text: str) -> float | str:
-    if text == "auto":
-        return text
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number [rad²/s³] or 'auto'") from None
+def _number_or_auto(what: str) -> Callable[[str], float | str]:
+    """An argparse type: a number (``what`` names it in the error) or ``"auto"``."""
 
+    def parse(text: str) -> float | str:
+        if text == "auto":
+            return text
+        try:
+            return float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {what} or 'auto'") from None
 
-def _latency_or_auto(text: str) -> float | str:
-    if text == "auto":
-        return text
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a latency [s] or 'auto'") from None
+    return parse
 
 
 def _observer_options(args: argparse.Namespace) -> dict[str, Any] | None:
@@ -947,14 +943,14 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--latency",
-        type=_latency_or_auto,
+        type=_number_or_auto("a latency [s]"),
         default=None,
         help="measurement latency [s]: the row stamped t was measured at t - LATENCY "
         "(the observer's latency=); with --smooth also 'auto' (the likeliest from the log)",
     )
     p.add_argument(
         "--accel-psd",
-        type=_psd_or_auto,
+        type=_number_or_auto("a number [rad²/s³]"),
         default=None,
         help="with --smooth: process noise [rad²/s³], or 'auto' (from the log: ekf by "
         "likelihood, adaptive by the consistency ρ = 1); "

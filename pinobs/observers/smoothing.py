@@ -1132,10 +1132,14 @@ def select_latency(
     def ll(d: float) -> float:
         if d not in tried:
             opts = {**dict(filter_options or {}), "latency": d}
-            arrays, k0, _, make, _ = _prepare(
-                robot, t, q, tau, observer, noise_std, disturbance_psd, opts, model_window
-            )
-            tried[d] = _log_likelihood(make(accel_psd), arrays, k0)
+            try:  # adaptive's learning pass can be lost too: the candidate is then rejected
+                arrays, k0, _, make, _ = _prepare(
+                    robot, t, q, tau, observer, noise_std, disturbance_psd, opts, model_window
+                )
+            except (NonFiniteError, ObserverDiverged, np.linalg.LinAlgError):
+                tried[d] = -math.inf
+            else:
+                tried[d] = _log_likelihood(make(accel_psd), arrays, k0)
         return tried[d]
 
     best = max((k * h for k in range(intervals + 1)), key=ll)

@@ -1418,8 +1418,11 @@ def _windows(
     overlap: float | None,
     lag: float | None,
     dt: float,
+    meas_dt: float | None = None,
 ) -> tuple[int | None, int]:
-    """``(chunk, overlap)`` in samples of ``dt`` [s] (``(None, 0)``: the whole log at once)."""
+    """``(chunk, overlap)`` in samples of ``dt`` [s] (``(None, 0)``: the whole log at once);
+    the default overlap from the measurement interval ``meas_dt`` (default ``dt``; a re-timed
+    log has rows between its measurements: :func:`_retimed`)."""
     if lag is not None and (chunk is not None or overlap is not None):
         raise OptionError(
             f"lag={lag!r} sets the chunk and the overlap; give lag alone, or chunk and overlap"
@@ -1436,7 +1439,8 @@ def _windows(
         pairs = extra.get("model_densities") or [(gains.accel_psd, cast(Any, filt).disturbance_psd)]
         if isinstance(accel_psd, float):  # it replaces each window's, the offset's scaled
             pairs = [(accel_psd, None if d is None else d * accel_psd / a) for a, d in pairs]
-        overlap = max(default_overlap(a, gains.meas_std, dt, disturbance_psd=d) for a, d in pairs)
+        h = dt if meas_dt is None else meas_dt
+        overlap = max(default_overlap(a, gains.meas_std, h, disturbance_psd=d) for a, d in pairs)
     return _samples(chunk, dt, "chunk"), _samples(overlap, dt, "overlap")
 
 
@@ -1755,10 +1759,10 @@ def _smooth(
     nv = model.nv
     run_t = arrays[0]
     n_run = k0 + run_t.size  # the rows the filter runs over (the log's, or re-timed: _prepare)
-    dt = float(np.median(np.diff(t_all)))
+    dt = meas_dt = float(np.median(np.diff(t_all)))
     if "latency" in extra and run_t.size > 1:  # re-timed rows: their mean interval
         dt = float(run_t[-1] - run_t[0]) / (run_t.size - 1)
-    n_chunk, n_over = _windows(filt, extra, accel_psd, chunk, overlap, lag, dt)
+    n_chunk, n_over = _windows(filt, extra, accel_psd, chunk, overlap, lag, dt, meas_dt)
     n_chunk = n_run if n_chunk is None else n_chunk
     out_q = np.full((n_run, model.nq), np.nan)
     out_v = np.full((n_run, nv), np.nan)

@@ -502,8 +502,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
             task.log, robot, task.out, observer=task.observer, **common, **dict(task.smooth)
         )
         rho = _pooled_rho(stretches)
-        auto = dict(task.smooth).get("accel_psd") == "auto"
-        said = any(smoothing_warnings(s["consistency"], s, auto) for s in stretches)
+        said = any(smoothing_warnings(s["consistency"], s) for s in stretches)
         verdict = "inconsistent" if said else ("consistent" if math.isfinite(rho) else "unknown")
     return {
         "log": task.name,

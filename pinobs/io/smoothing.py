@@ -200,7 +200,7 @@ def smooth_log(
         raise
     run.warnings[:0] = said
     for i, opts in enumerate(stretches):  # what pinobs.smooth warns, per stretch
-        for told in smoothing_warnings(opts["consistency"], opts, accel_psd == "auto"):
+        for told in smoothing_warnings(opts["consistency"], opts):
             run.warnings.append(told if len(stretches) == 1 else f"stretch {i + 1}: {told}")
     run.noise_std_per_joint = sigma_joint
     return run, stretches

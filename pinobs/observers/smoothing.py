@@ -1515,9 +1515,9 @@ def streaming_smoother(
     return (lambda: Smoother(make(accel_psd), n_chunk, n_over, band)), opts
 
 
-def smoothing_warnings(consistency: float, options: Mapping[str, Any], auto: bool) -> list[str]:
+def smoothing_warnings(consistency: float, options: Mapping[str, Any]) -> list[str]:
     """What :func:`smooth` warns of its result (:class:`~pinobs.errors.ConsistencyWarning`),
-    from its ``consistency`` ``ρ`` and ``options`` (``auto``: ``accel_psd="auto"`` was asked):
+    from its ``consistency`` ``ρ`` and ``options`` (``accel_psd_from_log``: ``"auto"`` was asked):
 
     * ``ρ`` above :data:`RHO_WARN`: the model does not explain the log, so the estimate
       follows a model error, and a band that ``ρ`` does not scale is too narrow;
@@ -1530,7 +1530,7 @@ def smoothing_warnings(consistency: float, options: Mapping[str, Any], auto: boo
     """
     said = []
     band = options.get("band")
-    if auto and options.get("accel_psd") == DEFAULT_GRID[-1]:
+    if options.get("accel_psd_from_log") and options.get("accel_psd") == DEFAULT_GRID[-1]:
         said.append(
             f"accel_psd='auto' chose {DEFAULT_GRID[-1]:g} rad²/s³, the largest it tries: the "
             "model explains the log no better than white acceleration does (the smoother is "
@@ -1610,7 +1610,8 @@ def smooth(
             this log, for ``ekf`` by :func:`select_accel_psd` (one forward
             pass per grid value), for ``adaptive`` by
             :func:`consistent_offset_scale` (``ρ = 1``; 3–7 smoother
-            passes); module docstring.
+            passes); module docstring.  Reported in ``options`` (``accel_psd``,
+            ``accel_psd_from_log``).
         disturbance_psd: the EKF's joint-torque offset density [rad²/s⁵], or ``None``
             (not for ``adaptive``: its regimes set it).
         chunk: memory bound: the backward pass runs on windows of ``chunk``
@@ -1673,7 +1674,7 @@ def smooth(
         filter_options=filter_options,
         band=band,
     )
-    for said in smoothing_warnings(result.consistency, result.options, accel_psd == "auto"):
+    for said in smoothing_warnings(result.consistency, result.options):
         warnings.warn(ConsistencyWarning(said), stacklevel=2)
     return result
 
@@ -1740,6 +1741,7 @@ def _smooth(
         model_window,
     )
     offset_scale = None
+    accel_from_log = accel_psd == "auto"
     if accel_psd == "auto" and adaptive:
         offset_scale = _consistent(make, arrays)  # ρ = 1 (consistent_offset_scale)
         extra = {
@@ -1804,6 +1806,7 @@ def _smooth(
         "consistency_terms": smoother.consistency_terms,
         "noise_std": noise_std,
         "noise_std_from_log": noise_from_data,
+        "accel_psd_from_log": accel_from_log,
         "latency": float(extra.get("latency", 0.0)),
         "latency_from_log": latency_from_log,
     }

@@ -9,7 +9,7 @@ pinobs estimate --robot R --observer O --log FILE --out FILE    estimates over a
     [--force --map COL=NAME --topic T --noise STD --latency S]   (CSV/TSV, Parquet, NPZ, ROS bags)
     [--smooth [--lag S|--chunk S] [--accel-psd P|auto] [--band model|noise|inflated]
      [--latency S|auto]]
-                                                 RTS smoother (ekf, adaptive), v_std0..
+                                                 RTS smoother (ekf, adaptive, kf), v_std0..
 pinobs estimate --robot R --observer O --log 'GLOB'|FOLDER --out-dir OUT   many logs on Dask
     [--workers N | --scheduler tcp://host:8786] [--smooth ...]   one file per log, a summary
 pinobs check ii --robot R                      I&I Assumption 1 on the model
@@ -350,6 +350,11 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         if given:
             flags = ", ".join("--" + f.replace("_", "-") for f in given)
             raise OptionError(f"{flags}: options of the smoother; add --smooth")
+    if args.smooth and args.observer == "kf" and args.accel_psd not in (None, "auto"):
+        raise OptionError(
+            f"--accel-psd {args.accel_psd:g}: kf has no white acceleration; its white-jerk "
+            "density is its own (1e3 rad²/s⁵) or, with --accel-psd auto, chosen from the log"
+        )
     if args.out_dir is not None:
         return _estimate_many(args)
     if args.smooth:
@@ -657,6 +662,10 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             print(
                 f"accel_psd = {opts['accel_psd']:g} rad²/s³ (chosen from the log)", file=sys.stderr
             )
+        if args.accel_psd == "auto" and args.observer == "kf":
+            print(
+                f"jerk_psd = {opts['jerk_psd']:.3g} rad²/s⁵ (chosen from the log)", file=sys.stderr
+            )
         if "model_window" in opts:
             print(
                 f"{args.observer}: learned model frozen per {opts['model_window']:g} s window "
@@ -927,7 +936,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--smooth",
         action="store_true",
-        help="RTS smoother over ekf or adaptive (uses the whole log; with --out-dir, each "
+        help="RTS smoother over ekf, adaptive or the model-free kf (uses the whole log; with "
+        "--out-dir, each "
         "log's); adds v_std0.. columns; σ from --noise, else estimated from the log's first "
         "second (reported)",
     )
@@ -953,8 +963,8 @@ def _parser() -> argparse.ArgumentParser:
         type=_number_or_auto("a number [rad²/s³]"),
         default=None,
         help="with --smooth: process noise [rad²/s³], or 'auto' (from the log: ekf by "
-        "likelihood, adaptive by the consistency ρ = 1); "
-        "default: the observer's (ekf 1e-8; adaptive: each window's regime)",
+        "likelihood, adaptive by the consistency ρ = 1, kf its white jerk by likelihood); "
+        "default: the observer's (ekf 1e-8; adaptive: each window's regime; kf 1e3 rad²/s⁵)",
     )
     p.add_argument(
         "--band",
@@ -963,8 +973,8 @@ def _parser() -> argparse.ArgumentParser:
         help="with --smooth: what v_std states: 'model', the smoother's covariance under the "
         "filter's noise model; 'noise', its error driven by the measurement noise alone "
         "(a smooth model error cancels); 'inflated', the noise band times √max(1, ρ), "
-        "widened by the model error the log shows; default: inflated over adaptive, model "
-        "over ekf",
+        "widened by the model error the log shows; default: inflated over adaptive and kf, "
+        "model over ekf",
     )
     _add_cluster_options(
         p, "with --out-dir: local worker processes (0: this process; default: one per core)"

@@ -18,8 +18,9 @@ tune it with ``pinobs bench``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -27,7 +28,14 @@ from pinobs.model import Robot
 from pinobs.observers.base import Observer, Vector, positive, register
 from pinobs.observers.ekf import _LazyKernel
 
-__all__ = ["BankState", "ConstantAccelerationKF", "KFBank", "KFGains"]
+__all__ = [
+    "BankState",
+    "ConstantAccelerationKF",
+    "ErrorState",
+    "KFBank",
+    "KFGains",
+    "WhiteJerkFilter",
+]
 
 _NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std is given
 
@@ -69,6 +77,25 @@ def transition(h: float, jerk_psd: float) -> tuple[Vector, Vector]:
     return F, Q
 
 
+def _predicted(
+    robot: Robot, q: Vector, v: Vector, a: Vector, P: Vector, F: Vector, Q: Vector, h: float
+) -> tuple[Vector, Vector, Vector, Vector]:
+    """The prediction over ``h``: ``q ⊕ (v h + a h²/2)``, ``v + a h``, ``a``, ``F P Fᵀ + Q``."""
+    return robot.integrate(q, v * h + 0.5 * h * h * a), v + h * a, a, F @ P @ F.T + Q
+
+
+def _corrected(
+    robot: Robot, q: Vector, v: Vector, a: Vector, P: Vector, r: float, q_meas: Vector
+) -> tuple[Vector, Vector, Vector, Vector]:
+    """The update with ``q_meas``: per direction the shared gain ``K = P[:, 0] / (P₀₀ + r)``, the
+    innovation ``e = difference(q, q_meas)``, and ``P`` in the Joseph form (not symmetrised)."""
+    K = P[:, 0] / (P[0, 0] + r)
+    e = robot.difference(q, q_meas)
+    IKH = np.eye(3) - np.outer(K, [1.0, 0.0, 0.0])
+    P = IKH @ P @ IKH.T + r * np.outer(K, K)
+    return robot.integrate(q, K[0] * e), v + K[1] * e, a + K[2] * e, P
+
+
 @register
 class ConstantAccelerationKF(Observer[_State]):
     """Per-joint Kalman filter on a constant-acceleration (white-jerk) model.
@@ -85,6 +112,9 @@ class ConstantAccelerationKF(Observer[_State]):
     summary = "per-joint constant-acceleration Kalman filter (model-free baseline)"
     uses_torque = False
     uses_noise_std = True
+    #: :func:`pinobs.smooth` can run its backward pass over this filter (through
+    #: :meth:`smoothing_filter`: the model-free smoother).
+    smoothable = True
 
     def __init__(
         self,
@@ -110,23 +140,81 @@ class ConstantAccelerationKF(Observer[_State]):
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         F, Q = transition(dt, self.gains.jerk_psd)
-        q = self.robot.integrate(state.q, state.v * dt + 0.5 * dt * dt * state.a)
-        v = state.v + dt * state.a
-        a = state.a
-        P = F @ state.P @ F.T + Q
+        q, v, a, P = _predicted(self.robot, state.q, state.v, state.a, state.P, F, Q, dt)
         if q_meas is not None:
-            s = P[0, 0] + self.gains.meas_std**2
-            K = P[:, 0] / s
-            e = self.robot.difference(q, q_meas)
-            q = self.robot.integrate(q, K[0] * e)
-            v = v + K[1] * e
-            a = a + K[2] * e
-            IKH = np.eye(3) - np.outer(K, [1.0, 0.0, 0.0])
-            P = IKH @ P @ IKH.T + self.gains.meas_std**2 * np.outer(K, K)  # Joseph form
+            q, v, a, P = _corrected(self.robot, q, v, a, P, self.gains.meas_std**2, q_meas)
         return _State(q, v, a, 0.5 * (P + P.T))
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v
+
+    def smoothing_filter(self) -> WhiteJerkFilter:
+        """This filter as :func:`pinobs.smooth` runs it (:class:`WhiteJerkFilter`)."""
+        return WhiteJerkFilter(self.robot, self.gains, self.v0_std)
+
+
+def _kron_eye(A: Vector, eye: Vector) -> Vector:
+    """``A ⊗ I`` (a broadcast product: ``np.kron`` costs 10× more at these sizes)."""
+    n = A.shape[0] * eye.shape[0]
+    return (A[:, None, :, None] * eye[:, None]).reshape(n, n)
+
+
+class ErrorState(NamedTuple):
+    """:class:`WhiteJerkFilter`'s state: the mean, and the covariance of the error state
+    ``(δq, δv, δa)`` (each block ``nv`` long)."""
+
+    q: Vector
+    v: Vector
+    d: Vector  # the acceleration a, named as the smoother's further vector part (the EKF's d)
+    P: Vector  # (3nv, 3nv): P₃ ⊗ I, the directions' shared 3×3 covariance
+    P3: Vector  # that 3×3 covariance
+
+
+class WhiteJerkFilter:
+    """:class:`ConstantAccelerationKF` with its predict and correct apart, for the RTS
+    smoother (:class:`pinobs.observers.smoothing.SmoothableFilter`): the model-free smoother.
+
+    The same equations (module docstring), stated for the whole error state
+    ``x = (δq, δv, δa)`` of ``3 nv`` coordinates: every direction has the same
+    ``F(h)``, ``Q(h)`` and ``R``, and the measurement ``H = [I 0 0]``, so the covariance is
+    ``P = P₃ ⊗ I`` and the transition ``Φ = F(h) ⊗ I`` (the Kronecker product keeps the
+    ``δq, δv, δa`` blocks in that order); the filter runs on ``P₃`` as the causal one does,
+    and its states carry ``P`` for the smoother's backward pass.  ``a`` is the state's
+    ``d``, the part after ``v`` that the smoother treats as a vector.  Takes no torque.
+    """
+
+    def __init__(self, robot: Robot, gains: KFGains, v0_std: float) -> None:
+        self.robot, self.gains, self.v0_std = robot, gains, float(v0_std)
+        self._cache: tuple[float, Vector, Vector, Vector] | None = None
+        self._eye = np.eye(robot.nv)
+
+    @property
+    def options(self) -> dict[str, object]:
+        return {"jerk_psd": self.gains.jerk_psd, "meas_std": self.gains.meas_std}
+
+    def _full(self, q: Vector, v: Vector, a: Vector, P3: Vector) -> ErrorState:
+        return ErrorState(q, v, a, _kron_eye(P3, self._eye), P3)
+
+    def _initial_state(self, q0: Vector, v0: Vector) -> ErrorState:
+        """As :meth:`ConstantAccelerationKF._initial_state`."""
+        P3 = np.diag([self.gains.meas_std**2, self.v0_std**2, (10.0 * self.v0_std) ** 2])
+        return self._full(q0.copy(), v0.copy(), np.zeros_like(v0), P3)
+
+    def _predict(self, state: ErrorState, dt: float, tau: Vector) -> tuple[ErrorState, Vector]:
+        """``(state⁻, Φ)`` (``tau`` is not used)."""
+        if self._cache is None or self._cache[0] != dt:
+            F, Q = transition(dt, self.gains.jerk_psd)
+            self._cache = (dt, F, Q, _kron_eye(F, self._eye))
+        _, F, Q, Phi = self._cache
+        return self._full(
+            *_predicted(self.robot, state.q, state.v, state.d, state.P3, F, Q, dt)
+        ), Phi.copy()
+
+    def _correct(self, state: ErrorState, q_meas: Vector) -> ErrorState:
+        q, v, a, P = _corrected(
+            self.robot, state.q, state.v, state.d, state.P3, self.gains.meas_std**2, q_meas
+        )
+        return self._full(q, v, a, 0.5 * (P + P.T))
 
 
 class BankState(NamedTuple):
@@ -261,6 +349,28 @@ class KFBank:
             np.tile(q0, (n, 1)), np.tile(v0, (n, 1)), np.zeros((n, v0.size)),
             np.tile(P, (n, 1, 1)), None,
         )  # fmt: skip
+
+    def log_likelihoods(self, t: Vector, q: Vector, good: Vector, v0_std: float) -> Vector:
+        """Each filter's innovation log-likelihood over a log, in one pass: ``Σ_k log N(e_k;
+        0, S_k I)`` over the measured samples ``k ≥ 1`` (``good[k]``), ``S_k = P⁻₀₀ + σ²``
+        (the prediction-error decomposition, Schweppe 1965), started at ``q[0]`` with
+        ``v = 0`` (:meth:`initial`); what :func:`pinobs.observers.smoothing.select_accel_psd`
+        computes for ``kf`` filter by filter (tested equal)."""
+        nv = self.robot.nv
+        state = self.initial(q[0], np.zeros(nv), v0_std)
+        ll = np.zeros(self.jerk.size)
+        h_prev, F0, q00 = math.nan, np.empty(3), 0.0
+        for k in range(1, t.size):
+            h = float(t[k] - t[k - 1])
+            if h != h_prev:
+                F, Q = transition(h, 1.0)
+                h_prev, F0, q00 = h, F[0], float(Q[0, 0])
+            S = np.einsum("j,fjk,k->f", F0, state.P, F0) + self.jerk * q00 + self.meas_var
+            state = self.step(state, h, q[k] if good[k] else None)
+            if good[k]:
+                e = cast(Vector, state.innovation)
+                ll -= 0.5 * (np.einsum("fi,fi->f", e, e) / S + nv * np.log(2.0 * math.pi * S))
+        return ll
 
     def step(self, state: BankState, dt: float, q_meas: Vector | None) -> BankState:
         r = self.robot

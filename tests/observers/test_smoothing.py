@@ -446,8 +446,8 @@ def test_likelihood_choice_of_accel_psd_is_the_largest_the_data_do_not_reject(ur
 def test_bad_inputs_are_rejected_with_what_would_be_valid(ur5_log) -> None:
     robot = cached_robot("ur5")
     t, q, tau = ur5_log.t, ur5_log.q_meas, ur5_log.tau
-    with pytest.raises(OptionError, match="smoothable: \\['adaptive', 'ekf'\\]"):
-        smooth(robot, (t, q, tau), observer="kf")
+    with pytest.raises(OptionError, match="smoothable: \\['adaptive', 'ekf', 'kf'\\]"):
+        smooth(robot, (t, q, tau), observer="fd")
     with pytest.raises(OptionError, match="give lag alone"):
         smooth(robot, (t, q, tau), lag=0.1, chunk=0.2)
     with pytest.raises(DimensionError, match=r"needs \(601, 6\)"):

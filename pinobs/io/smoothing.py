@@ -36,7 +36,7 @@ from pinobs.io.stream import LogEstimator, LogRun, _chain, _median_period
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
-from pinobs.observers.base import Estimate
+from pinobs.observers.base import Estimate, observer_class
 from pinobs.observers.smoothing import (
     Smoother,
     _smooth,
@@ -56,7 +56,7 @@ class _Recorder:
     def __init__(self, robot: Robot, name: str) -> None:
         self.robot = robot
         self.name = name
-        self.uses_torque = True
+        self.uses_torque = observer_class(name).uses_torque  # kf: no torque, no warning
         self.segments: list[list[tuple[float, Vector | None, Vector]]] = []
         self._n = 0
 

@@ -1614,12 +1614,20 @@ def smoothing_warnings(consistency: float, options: Mapping[str, Any]) -> list[s
             else f"the {band} band is too narrow, by about √ρ = {scale:.3g} (band='inflated' "
             "scales it)"
         )
+        check = (
+            "check the model, the torques, a measurement latency (filter_options={'latency': "
+            "'auto'} finds one) and noise_std, or smooth with accel_psd='auto', "
+            "observer='adaptive' (learns the model) or observer='kf' (model-free)"
+        )
+        if options.get("observer") == "kf":  # no model: its white jerk is too small
+            check = (
+                "the motion has more jerk than jerk_psd says: smooth with accel_psd='auto' "
+                "(chosen from the log), or check noise_std"
+            )
         said.append(
             f"the model does not explain the log: filter–smoother consistency ρ = "
             f"{consistency:.3g} (about 1 when it does; above {RHO_WARN:g}, the estimate follows "
-            f"a model error); {widened}; check the model, the torques, a measurement latency "
-            "(filter_options={'latency': 'auto'} finds one) and noise_std, or smooth with "
-            "accel_psd='auto' or observer='adaptive'"
+            f"a model error); {widened}; {check}"
         )
     return said
 

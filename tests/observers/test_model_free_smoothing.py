@@ -222,3 +222,22 @@ def test_cli_estimate_smooths_over_kf_and_says_the_jerk_it_chose(tmp_path, capsy
     assert f"jerk_psd = {want.options['jerk_psd']:.3g} rad²/s⁵" in capsys.readouterr().err
     assert main([*argv, "--smooth", "--noise", "1e-4", "--accel-psd", "1e3", "--force"]) == 2
     assert "kf has no white acceleration" in capsys.readouterr().err
+
+
+def test_a_log_without_torques_is_smoothed_over_kf_without_the_torque_warning(tmp_path) -> None:
+    """``kf`` takes no torque: a log with no torque columns gets no warning that the model
+    now assumes zero torque (which ``ekf`` does get, and which used to be said for ``kf``
+    too); the estimate is the one from arrays without torques."""
+    from pinobs.io import write_log
+    from pinobs.io.smoothing import smooth_log
+
+    robot = cached_robot("ur5")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=0.3, seed=4)
+    log = write_log(tmp_path / "log.csv", res.t[1:], res.q_meas[1:], None)
+    run, _ = smooth_log(log, robot, tmp_path / "kf.csv", observer="kf", noise_std=1e-4)
+    assert not any("torque" in w for w in run.warnings)
+    want = smooth(robot, (res.t[1:], res.q_meas[1:]), observer="kf", noise_std=1e-4)
+    data = np.loadtxt(tmp_path / "kf.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(data[:, 7:13], want.v, rtol=0, atol=1e-12)
+    run, _ = smooth_log(log, robot, tmp_path / "ekf.csv", observer="ekf", noise_std=1e-4)
+    assert any("no torque columns: 'ekf'" in w for w in run.warnings)

@@ -713,7 +713,11 @@ def test_cli_estimate_smooth_over_adaptive_says_how_its_model_was_frozen(
 
 @pytest.mark.parametrize(
     ("name", "end"),
-    [("smoothing", "smoothing bench"), ("smoothing_scenarios", "smoothing scenarios")],
+    [
+        ("smoothing", "smoothing bench"),
+        ("smoothing_scenarios", "smoothing scenarios"),
+        ("smoothing_model_free", "smoothing model free"),
+    ],
 )
 def test_readme_smoothing_table_is_the_committed_benchmark_file(name: str, end: str) -> None:
     from pathlib import Path

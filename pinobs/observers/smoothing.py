@@ -1147,13 +1147,18 @@ def select_latency(
     (:func:`_retimed`; ``adaptive``: its learning pass under ``latency=d``, then
     the frozen-model filter) and sums the innovation log densities,
     ``ℓ(d) = Σ_k log N(e_k; 0, S_k)`` (as :func:`select_accel_psd`; every
-    candidate has the same measurements, so the sums compare).  The search: every
-    whole sample interval ``h`` (the median) from 0 to ``intervals · h``, then around
-    the best two halvings, ``±h/2`` and ``±h/4`` (at most ``intervals + 5``
-    passes); a latency is a delay, so never below 0.  The maximiser, not an
-    interval's end (unlike ``accel_psd``, a latency has no side to err on).  A
-    candidate at which the filter is lost is rejected.  Uses no ground truth.
-    Returns ``d`` and every ``(candidate, ℓ)`` evaluated, in the order tried.
+    candidate has the same measurements, so the sums compare).  The search: whole
+    sample intervals ``h`` (the median) from 0, 1 and 2, further up to
+    ``intervals · h`` while ``ℓ`` still rises; then the vertex of the parabola through
+    the best whole interval and its two neighbours, rounded to ``h/4`` (``ℓ`` is
+    quadratic in ``d`` near its peak: on the UR5 logs of the tests, 0.5, 0.75 and 1 ms
+    late at 1 kHz, the vertex fell within 0.002 ``h`` of the latency); should the
+    parabola not open downward (a lost filter among its points), two halvings around
+    the best, ``±h/2`` and ``±h/4``, as before.  3–4 passes on those logs (8 before);
+    a latency is a delay, so never below 0.  The maximiser, not an interval's end
+    (unlike ``accel_psd``, a latency has no side to err on).  A candidate at which
+    the filter is lost is rejected.  Uses no ground truth.  Returns ``d`` and every
+    ``(candidate, ℓ)`` evaluated, in the order tried.
 
     Raises:
         GainError: ``intervals`` < 0.
@@ -1178,9 +1183,23 @@ def select_latency(
                 tried[d] = _log_likelihood(make(accel_psd), arrays, k0)
         return tried[d]
 
-    best = max((k * h for k in range(intervals + 1)), key=ll)
-    for step in (h / 2, h / 4):
-        best = max([best, *(d for d in (best - step, best + step) if d >= 0.0)], key=ll)
+    top = 0  # the whole intervals tried: 0..top
+    for k in range(intervals + 1):
+        if k >= 3 and ll((k - 1) * h) < ll((k - 2) * h):  # past the peak
+            break
+        ll(k * h)
+        top = k
+    best = max((k * h for k in range(top + 1)), key=ll)
+    c = min(max(round(best / h), 1), top - 1)  # the parabola's middle interval
+    l0, l1, l2 = (tried[(c + i) * h] for i in (-1, 0, 1)) if top >= 2 else (math.nan,) * 3
+    curve = l0 - 2.0 * l1 + l2
+    if math.isfinite(curve) and curve < 0.0:  # ℓ ≈ l1 + (l2 − l0) x/2 + curve x²/2
+        x = c + 0.5 * (l0 - l2) / curve
+        ll(min(max(round(4.0 * x) / 4.0, 0.0), float(top)) * h)
+    else:
+        for step in (h / 2, h / 4):
+            best = max([best, *(d for d in (best - step, best + step) if d >= 0.0)], key=ll)
+    best = max(tried, key=tried.__getitem__)
     if not math.isfinite(tried[best]):
         raise NonFiniteError(
             f"the filter is lost on this log at every latency tried (0 to "

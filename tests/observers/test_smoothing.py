@@ -842,9 +842,10 @@ def test_a_known_latency_is_smoothed_on_the_times_the_samples_were_taken() -> No
         )  # fmt: skip
     with pytest.raises(GainError, match="latency"):
         smooth(robot, (t, q, tau), filter_options={"latency": -1e-3}, **opts)  # type: ignore[arg-type]
-    # unknown: the likeliest of 0..3 intervals, then ±h/2, ±h/4 (no truth used)
+    # unknown: the likeliest of 0, 1, 2 intervals (ℓ falls from 1 on), then the parabola's
+    # vertex, 0.5 intervals (no truth used): 4 passes (8 with the halvings before)
     found, tried = select_latency(robot, (t, q, tau), noise_std=1e-4, accel_psd=1e-10)
-    assert found == pytest.approx(0.5e-3, abs=1e-12) and len(tried) == 8
+    assert found == pytest.approx(0.5e-3, abs=1e-12) and len(tried) == 4
     assert max(tried, key=lambda p: p[1])[0] == found
     auto = smooth(robot, (t, q, tau), filter_options={"latency": "auto"}, **opts)  # type: ignore[arg-type]
     assert auto.options["latency_from_log"] and auto.options["latency"] == found
@@ -918,7 +919,7 @@ def test_cli_estimate_takes_a_latency_filtered_smoothed_and_over_many_logs(
 @pytest.mark.slow
 def test_adaptive_finds_an_unknown_latency_from_the_log() -> None:
     """``filter_options={"latency": "auto"}`` over ``adaptive``: a learning pass and a
-    frozen-model pass per candidate (8 here); the one 1 ms latency found, and the
+    frozen-model pass per candidate (3 here: 0, 1, 2 ms, the vertex at 1); the 1 ms found, and the
     estimate as with the latency given.  Measured: 1 ms found; RMS after 3 s 1.7e-5."""
     robot = cached_robot("ur5")
     t, q, tau, v = _late_log(1, 1000.0, 6.0)

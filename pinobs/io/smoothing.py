@@ -111,8 +111,9 @@ class _Streamer(_Recorder):
             done = self._sm.close()
             if self._n - self._first > 1:  # one sample: no velocity to smooth
                 self.finished.extend((self._first + k, *rest) for k, *rest in done)  # type: ignore[misc]
-            self.rho[0] += self._sm._rho_sum
-            self.rho[1] += self._sm.consistency_terms
+            n = self._sm.consistency_terms  # ρ is a mean over n terms: the stretches pool
+            self.rho[0] += self._sm.consistency * n if n else 0.0
+            self.rho[1] += n
             self._sm = None
 
 

@@ -72,7 +72,7 @@ A known measurement latency (``filter_options={"latency": d}``) re-times the log
 switching at its stamped time, the estimates read at the stamped times; it is then
 an ordinary log with dropped samples, which the filter predicts over.  An unknown
 one (``"latency": "auto"``) is the likeliest on the log (:func:`select_latency`: the
-innovation likelihood over whole sample intervals, then two halvings).
+innovation likelihood over whole sample intervals, then a parabola's vertex).
 
 The observers that can be smoothed are those that keep an error-state
 Gaussian: ``ekf``, ``adaptive`` through its model-based filter, and the

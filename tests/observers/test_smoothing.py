@@ -621,8 +621,13 @@ def test_streamed_smoothing_of_a_log_file_equals_the_recorded_one_through_gaps_a
     log = write_log(tmp_path / "log.csv", t, q, tau)
     opts = {"noise_std": 1e-4, "accel_psd": 1e-4, "lag": 0.03, "chunk_rows": 37}
     robot = cached_robot("ur5")
-    run_s, _ = smooth_log(log, robot, tmp_path / "s.csv", **opts)  # type: ignore[arg-type]
+    run_s, o_s = smooth_log(log, robot, tmp_path / "s.csv", **opts)  # type: ignore[arg-type]
     run_r, o_r = smooth_log(log, robot, tmp_path / "r.csv", stream=False, **opts)  # type: ignore[arg-type]
+    # one ρ for the stream: the stretches' terms pooled
+    pooled = sum(o["consistency"] * o["consistency_terms"] for o in o_r)
+    n = sum(o["consistency_terms"] for o in o_r)
+    assert o_s[0]["consistency_terms"] == n > 0
+    assert o_s[0]["consistency"] == pytest.approx(pooled / n, rel=1e-12)
     a, b = (np.loadtxt(tmp_path / f, delimiter=",", skiprows=1) for f in ("s.csv", "r.csv"))
     assert a.shape == b.shape == (len(keep), 19)
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)

@@ -1183,6 +1183,21 @@ def select_latency(
                 tried[d] = _log_likelihood(make(accel_psd), arrays, k0)
         return tried[d]
 
+    _latency_search(ll, h, intervals)
+    best = max(tried, key=tried.__getitem__)
+    if not math.isfinite(tried[best]):
+        raise NonFiniteError(
+            f"the filter is lost on this log at every latency tried (0 to "
+            f"{max(tried):g} s); check the model, the torques and noise_std"
+        )
+    return best, list(tried.items())
+
+
+def _latency_search(ll: Callable[[float], float], h: float, intervals: int) -> None:
+    """:func:`select_latency`'s search: calls ``ll(d)`` (which records and caches) on whole
+    intervals ``k h`` from 0 (0, 1, 2, further up to ``intervals`` while ``ℓ`` rises), then
+    on the vertex of the parabola through the best and its neighbours rounded to ``h/4``,
+    or, should it not open downward, on two halvings around the best."""
     top = 0  # the whole intervals tried: 0..top
     for k in range(intervals + 1):
         if k >= 3 and ll((k - 1) * h) < ll((k - 2) * h):  # past the peak
@@ -1191,21 +1206,14 @@ def select_latency(
         top = k
     best = max((k * h for k in range(top + 1)), key=ll)
     c = min(max(round(best / h), 1), top - 1)  # the parabola's middle interval
-    l0, l1, l2 = (tried[(c + i) * h] for i in (-1, 0, 1)) if top >= 2 else (math.nan,) * 3
+    l0, l1, l2 = (ll((c + i) * h) for i in (-1, 0, 1)) if top >= 2 else (math.nan,) * 3
     curve = l0 - 2.0 * l1 + l2
     if math.isfinite(curve) and curve < 0.0:  # ℓ ≈ l1 + (l2 − l0) x/2 + curve x²/2
         x = c + 0.5 * (l0 - l2) / curve
         ll(min(max(round(4.0 * x) / 4.0, 0.0), float(top)) * h)
-    else:
-        for step in (h / 2, h / 4):
-            best = max([best, *(d for d in (best - step, best + step) if d >= 0.0)], key=ll)
-    best = max(tried, key=tried.__getitem__)
-    if not math.isfinite(tried[best]):
-        raise NonFiniteError(
-            f"the filter is lost on this log at every latency tried (0 to "
-            f"{max(tried):g} s); check the model, the torques and noise_std"
-        )
-    return best, list(tried.items())
+        return
+    for step in (h / 2, h / 4):
+        best = max([best, *(d for d in (best - step, best + step) if d >= 0.0)], key=ll)
 
 
 def _prepare(

@@ -1145,3 +1145,35 @@ def test_adaptive_smoother_targets_under_model_error(name: str, scenario: str) -
     assert cover["auto", "model"] <= cover[None, "model"]
     assert cover[None, "inflated"] < cover[None, "model"]
     assert 0.90 <= cover[None, "inflated"] <= 0.98
+
+
+@pytest.mark.parametrize(
+    ("peak", "lost", "want", "passes"),
+    [
+        (0.5, (), 0.5, 4),  # 0, 1, 2 then the vertex
+        (1.0, (), 1.0, 3),  # the vertex is a whole interval: cached
+        (0.8, (), 0.75, 4),  # the vertex rounded to h/4
+        (2.6, (), 2.5, 5),  # ℓ still rises at 2: 3 tried, then the vertex
+        (9.0, (), 3.0, 4),  # beyond the range: its end
+        (1.0, (2.0,), 1.0, 7),  # a lost filter at 2: no parabola, the halvings
+    ],
+)
+def test_latency_search_finds_a_quadratic_peak_in_few_passes(
+    peak: float, lost: tuple[float, ...], want: float, passes: int
+) -> None:
+    """:func:`select_latency`'s search on a synthetic ``ℓ(d) = −(d − peak)²`` (in intervals
+    of h = 1 ms; ``−∞`` where the filter is lost)."""
+    from pinobs.observers.smoothing import _latency_search
+
+    h, tried = 1e-3, {}
+
+    def ll(d: float) -> float:
+        if d not in tried:
+            x = d / h
+            lost_here = any(abs(x - b) < 1e-9 for b in lost)
+            tried[d] = -np.inf if lost_here else -((x - peak) ** 2)
+        return tried[d]
+
+    _latency_search(ll, h, 3)
+    assert max(tried, key=tried.__getitem__) == pytest.approx(want * h, abs=1e-12)
+    assert len(tried) == passes

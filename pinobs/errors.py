@@ -129,5 +129,9 @@ class ConsistencyWarning(PinobsWarning):
     """An estimate whose own residuals say the model does not explain the data."""
 
 
+class LatencyWarning(PinobsWarning):
+    """A measurement latency that was not given was found from the data and used."""
+
+
 class ModelWarning(PinobsWarning):
     """A model that loads and is usable but not all of it (meshes missing, parser limits)."""

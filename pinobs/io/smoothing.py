@@ -40,6 +40,7 @@ from pinobs.observers.base import Estimate, observer_class
 from pinobs.observers.smoothing import (
     Smoother,
     _smooth,
+    latency_note,
     log_noise_std,
     smoothing_warnings,
     streaming_smoother,
@@ -142,7 +143,10 @@ def smooth_log(
     many terms it averages; streamed: one, over every stretch).  A stretch whose ``ρ``
     exceeds :data:`~pinobs.observers.smoothing.RHO_WARN` (or whose ``"auto"`` density is the
     grid's largest) adds what :func:`pinobs.smooth` would warn
-    (:func:`~pinobs.observers.smoothing.smoothing_warnings`) to the run's ``warnings``.
+    (:func:`~pinobs.observers.smoothing.smoothing_warnings`) to the run's ``warnings``, and
+    so does a latency found for a stretch the model did not explain as stamped
+    (:func:`~pinobs.observers.smoothing.latency_note`; not when streamed: the search passes
+    over the whole log).
 
     Args:
         source: log path or DataFrame (:func:`pinobs.io.iter_log`).
@@ -201,7 +205,10 @@ def smooth_log(
         raise
     run.warnings[:0] = said
     for i, opts in enumerate(stretches):  # what pinobs.smooth warns, per stretch
-        for told in smoothing_warnings(opts["consistency"], opts):
+        note = latency_note(opts)
+        for told in ([] if note is None else [note]) + smoothing_warnings(
+            opts["consistency"], opts
+        ):
             run.warnings.append(told if len(stretches) == 1 else f"stretch {i + 1}: {told}")
     run.noise_std_per_joint = sigma_joint
     return run, stretches
@@ -338,6 +345,7 @@ def _recorded(
             chunk=chunk,
             filter_options=options,
             band=band,
+            find_latency=True,  # as pinobs.smooth: a latency found is said (smooth_log)
         )
         samples_q[k], samples_v[k], samples_std[k] = res.q, res.v, res.v_std
         stretches.append({**res.options, "consistency": res.consistency})

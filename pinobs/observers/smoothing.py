@@ -217,6 +217,7 @@ from pinobs.errors import (
     ConsistencyWarning,
     DimensionError,
     GainError,
+    LatencyWarning,
     NoiseWarning,
     NonFiniteError,
     ObserverDiverged,
@@ -256,6 +257,7 @@ __all__ = [
     "Smoother",
     "consistent_offset_scale",
     "default_overlap",
+    "latency_note",
     "log_noise_std",
     "select_accel_psd",
     "select_latency",
@@ -1641,9 +1643,15 @@ def smoothing_warnings(consistency: float, options: Mapping[str, Any]) -> list[s
             else f"the {band} band is too narrow, by about √ρ = {scale:.3g} (band='inflated' "
             "scales it)"
         )
+        latency = (
+            f"no measurement latency of up to {LATENCY_INTERVALS} sample intervals explains it "
+            "(searched); check the model, the torques"
+            if options.get("latency_searched")
+            else "check the model, the torques, a measurement latency (filter_options="
+            "{'latency': 'auto'} finds one)"
+        )
         check = (
-            "check the model, the torques, a measurement latency (filter_options={'latency': "
-            "'auto'} finds one) and noise_std, or smooth with accel_psd='auto', "
+            f"{latency} and noise_std, or smooth with accel_psd='auto', "
             "observer='adaptive' (learns the model) or observer='kf' (model-free)"
         )
         if options.get("observer") == "kf":  # no model: its white jerk is too small
@@ -1657,6 +1665,23 @@ def smoothing_warnings(consistency: float, options: Mapping[str, Any]) -> list[s
             f"a model error); {widened}; {check}"
         )
     return said
+
+
+def latency_note(options: Mapping[str, Any]) -> str | None:
+    """What :func:`smooth` says (:class:`~pinobs.errors.LatencyWarning`) when it smoothed under
+    a latency it found because the log, as stamped, was not explained (``options`` of its
+    result), else ``None``."""
+    if not (options.get("latency_searched") and options.get("latency_from_log")):
+        return None
+    d = options["latency"]
+    return (
+        f"the model explains the log only with a measurement latency: its positions are "
+        f"{1e3 * d:.3g} ms late (found from the log: ρ = "
+        f"{options['consistency_without_latency']:.3g} without it), so it was smoothed with "
+        f"them at the times they were taken and the estimates given at the stamped times; give "
+        f"filter_options={{'latency': {d:.6g}}} (estimate --latency) if that is right, or "
+        "{'latency': 0} to smooth the log as stamped"
+    )
 
 
 def log_noise_std(robot: Robot, t: Vector, q: Vector) -> tuple[float, Vector, str]:
@@ -1783,7 +1808,11 @@ def smooth(
         model_window=model_window,
         filter_options=filter_options,
         band=band,
+        find_latency=True,
     )
+    note = latency_note(result.options)
+    if note is not None:
+        warnings.warn(LatencyWarning(note), stacklevel=2)
     for said in smoothing_warnings(result.consistency, result.options):
         warnings.warn(ConsistencyWarning(said), stacklevel=2)
     return result
@@ -1803,10 +1832,12 @@ def _smooth(
     model_window: float | None = None,
     filter_options: Mapping[str, Any] | None = None,
     band: str | None = None,
+    find_latency: bool = False,
 ) -> Smoothed:
-    """:func:`smooth` without its :class:`~pinobs.errors.ConsistencyWarning`, for callers
-    that report the consistency their own way (a log file's run, the identification's
-    refinement)."""
+    """:func:`smooth` without its warnings, for callers that report the consistency their
+    own way (a log file's run, the identification's refinement); ``find_latency``: a log the
+    model does not explain, with no latency given, is searched for one (:func:`smooth`)."""
+    asked_psd = accel_psd
     if lag is not None and (chunk is not None or overlap is not None):
         raise OptionError(
             f"lag={lag!r} sets the chunk and the overlap; give lag alone, or chunk and overlap"
@@ -1929,8 +1960,9 @@ def _smooth(
         "accel_psd_from_log": accel_from_log,
         "latency": float(extra.get("latency", 0.0)),
         "latency_from_log": latency_from_log,
+        "latency_searched": False,
     }
-    return Smoothed(
+    result = Smoothed(
         t=t_all,
         q=out_q[rows],  # each log sample's row (re-timed under a latency: _retimed)
         v=out_v[rows],
@@ -1939,3 +1971,54 @@ def _smooth(
         consistency=smoother.consistency,
         options=opts,
     )
+    if not (
+        find_latency
+        and "latency" not in dict(filter_options or {})
+        and not model_free  # without a model a late log is as likely: nothing to find
+        and math.isfinite(rho)
+        and rho > RHO_WARN
+    ):
+        return result
+    # The model does not explain the log: a measurement latency might (module docstring).
+    # Adopted only if the log smoothed under it is consistent (ρ ≤ RHO_WARN).
+    found = 0.0
+    try:
+        found, _ = select_latency(
+            robot,
+            (t_all, q_all, tau_all),
+            noise_std=noise_std,
+            observer=observer,
+            accel_psd=asked_psd if isinstance(asked_psd, float) else None,
+            disturbance_psd=disturbance_psd,
+            filter_options=filter_options,
+            model_window=model_window,
+        )
+    except (NonFiniteError, ObserverDiverged):
+        pass  # lost at every latency: nothing found
+    said = {"latency_searched": True, "consistency_without_latency": rho, "latency_found": found}
+    if found > 0.0:
+        retry = _smooth(
+            robot,
+            (t_all, q_all, tau_all),
+            observer=observer,
+            noise_std=noise_std,
+            accel_psd=asked_psd,
+            disturbance_psd=disturbance_psd,
+            chunk=chunk,
+            overlap=overlap,
+            lag=lag,
+            model_window=model_window,
+            filter_options={**dict(filter_options or {}), "latency": found},
+            band=band,
+        )
+        if retry.consistency <= RHO_WARN:
+            return replace(
+                retry,
+                options={
+                    **retry.options,
+                    **said,
+                    "latency_from_log": True,
+                    "noise_std_from_log": noise_from_data,
+                },
+            )
+    return replace(result, options={**result.options, **said})

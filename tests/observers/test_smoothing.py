@@ -15,6 +15,7 @@ from pinobs.errors import (
     ConsistencyWarning,
     DimensionError,
     GainError,
+    LatencyWarning,
     NoiseWarning,
     OptionError,
     TimestampError,
@@ -756,6 +757,9 @@ def test_a_log_the_model_does_not_explain_is_said_and_auto_skips_densities_that_
         default = smooth(robot, _log(res), noise_std=1e-4)
     assert default.consistency > 1e6 and len(said) == 1
     assert "model band is too narrow, by about √ρ" in str(said[0].message)
+    # a latency was searched for (none was given) and none explains the log: kept as stamped
+    assert default.options["latency_searched"] and default.options["latency"] == 0.0
+    assert "no measurement latency of up to 3 sample intervals explains it" in str(said[0].message)
     late = res.t > 1.0
     cover = np.mean(np.abs(default.v - res.v)[late] <= 2 * default.v_std[late])
     assert cover < 0.1  # why it is said
@@ -831,8 +835,16 @@ def test_a_known_latency_is_smoothed_on_the_times_the_samples_were_taken() -> No
     assert 0.90 <= np.mean(err <= 2 * given.v_std[late]) <= 0.98  # measured 95.2 %
     assert given.consistency < 2.0  # measured 0.79
     with pytest.warns(ConsistencyWarning, match="does not explain the log"):
-        blind = smooth(robot, (t, q, tau), **opts)  # type: ignore[arg-type]
+        blind = smooth(robot, (t, q, tau), filter_options={"latency": 0.0}, **opts)  # type: ignore[arg-type]
     assert np.sqrt(np.mean((blind.v - v)[late] ** 2)) > 20 * np.sqrt(np.mean(err**2))
+    # none given: the log as stamped is not explained (ρ 3.8e3), so the latency is searched,
+    # found, adopted (ρ with it below RHO_WARN) and said
+    with pytest.warns(LatencyWarning, match="0.5 ms late"):
+        found = smooth(robot, (t, q, tau), **opts)  # type: ignore[arg-type]
+    assert found.options["latency"] == pytest.approx(0.5e-3, abs=1e-12)
+    assert found.options["latency_from_log"] and found.options["latency_searched"]
+    assert found.options["consistency_without_latency"] > 1e3
+    np.testing.assert_allclose(found.v, given.v, rtol=0, atol=1e-12)
     # chunked equals whole to the stated tolerance (the overlap from the measurement interval,
     # not the re-timed rows'; measured 2.3e-6, 1.0e-5 when it took the rows')
     short = {"noise_std": 1e-4, "accel_psd": 1e-6, "filter_options": {"latency": 0.5e-3}}
@@ -876,7 +888,7 @@ def test_adaptive_with_a_known_latency_learns_and_smooths_on_the_sample_times() 
     assert given.options["latency"] == 1e-3 and given.options["blend"] is True
     rms = np.sqrt(np.mean((given.v - v)[late] ** 2))
     with pytest.warns(ConsistencyWarning):
-        blind = smooth(robot, (t, q, tau), **opts)  # type: ignore[arg-type]
+        blind = smooth(robot, (t, q, tau), filter_options={"latency": 0.0}, **opts)  # type: ignore[arg-type]
     assert rms < 0.1 * np.sqrt(np.mean((blind.v - v)[late] ** 2)), rms
     assert 0.90 <= np.mean(np.abs(given.v - v)[late] <= 2 * given.v_std[late]) <= 0.98
 
@@ -919,13 +931,28 @@ def test_cli_estimate_takes_a_latency_filtered_smoothed_and_over_many_logs(
         == 0
     )
     assert (tmp_path / "out" / "late.csv").read_bytes() == (tmp_path / "given.csv").read_bytes()
+    # --smooth with no --latency: found (the log as stamped is not explained) and said; the
+    # summary calls the log consistent (with the latency it is)
+    capsys.readouterr()
+    smoothed = [*base, "--out", str(tmp_path / "found.csv"), "--smooth", "--accel-psd", "1e-10"]
+    assert main(smoothed) == 0
+    said = capsys.readouterr().err
+    assert "warning: the model explains the log only with a measurement latency: its " in said
+    assert "1 ms late" in said
+    assert rms(tmp_path / "found.csv") == rms(tmp_path / "smoothed.csv")
+    out = tmp_path / "out_smoothed"
+    many += ["--smooth", "--accel-psd", "1e-10", "--workers", "0", "--out-dir", str(out)]
+    assert main(many) == 0
+    summary = pytest.importorskip("pandas").read_parquet(out / "summary.parquet")
+    assert summary["consistency"].tolist() == ["consistent"] and summary["rho"][0] < 2.0
 
 
 @pytest.mark.slow
 def test_adaptive_finds_an_unknown_latency_from_the_log() -> None:
     """``filter_options={"latency": "auto"}`` over ``adaptive``: a learning pass and a
     frozen-model pass per candidate (3 here: 0, 1, 2 ms, the vertex at 1); the 1 ms found, and the
-    estimate as with the latency given.  Measured: 1 ms found; RMS after 3 s 1.7e-5."""
+    estimate as with the latency given; so too with no latency given (found because the log as
+    stamped is not explained).  Measured: 1 ms found; RMS after 3 s 1.7e-5."""
     robot = cached_robot("ur5")
     t, q, tau, v = _late_log(1, 1000.0, 6.0)
     late = t > 3.0
@@ -934,6 +961,10 @@ def test_adaptive_finds_an_unknown_latency_from_the_log() -> None:
     assert auto.options["latency"] == pytest.approx(1e-3, abs=1e-12)
     given = smooth(robot, (t, q, tau), filter_options={"latency": 1e-3}, **opts)  # type: ignore[arg-type]
     np.testing.assert_allclose(auto.v[late], given.v[late], rtol=0, atol=1e-9)
+    # none given: the log as stamped is not explained (ρ 24), so the same search runs
+    with pytest.warns(LatencyWarning, match="1 ms late"):
+        found = smooth(robot, (t, q, tau), **opts)  # type: ignore[arg-type]
+    np.testing.assert_allclose(found.v[late], given.v[late], rtol=0, atol=1e-9)
     assert np.sqrt(np.mean((auto.v - v)[late] ** 2)) < 3e-5
 
 

@@ -1995,7 +1995,11 @@ def _smooth(
         )
     except (NonFiniteError, ObserverDiverged):
         pass  # lost at every latency: nothing found
-    said = {"latency_searched": True, "consistency_without_latency": rho, "latency_found": found}
+    searched = {
+        "latency_searched": True,
+        "consistency_without_latency": rho,
+        "latency_found": found,
+    }
     if found > 0.0:
         retry = _smooth(
             robot,
@@ -2016,9 +2020,9 @@ def _smooth(
                 retry,
                 options={
                     **retry.options,
-                    **said,
+                    **searched,
                     "latency_from_log": True,
                     "noise_std_from_log": noise_from_data,
                 },
             )
-    return replace(result, options={**result.options, **said})
+    return replace(result, options={**result.options, **searched})

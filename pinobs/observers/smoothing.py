@@ -72,7 +72,14 @@ A known measurement latency (``filter_options={"latency": d}``) re-times the log
 switching at its stamped time, the estimates read at the stamped times; it is then
 an ordinary log with dropped samples, which the filter predicts over.  An unknown
 one (``"latency": "auto"``) is the likeliest on the log (:func:`select_latency`: the
-innovation likelihood over whole sample intervals, then a parabola's vertex).
+innovation likelihood over whole sample intervals, then a parabola's vertex).  With no
+latency given, a log the model does not explain as stamped (``ρ`` above :data:`RHO_WARN`)
+is searched the same way, and the latency found is used if the log smoothed under it is
+explained (``ρ`` at most :data:`RHO_WARN`), which :func:`smooth` says
+(:class:`~pinobs.errors.LatencyWarning`).  A model error of another kind can pass that
+test only if a latency happens to explain it (on the UR5 payload log of the tests none of up
+to three intervals did); a latency so adopted is said all the same.  ``{"latency": 0}``
+smooths the log as stamped.
 
 The observers that can be smoothed are those that keep an error-state
 Gaussian: ``ekf``, ``adaptive`` through its model-based filter, and the
@@ -1766,7 +1773,11 @@ def smooth(
             times (:func:`_retimed`; reported in ``options["latency"]``);
             ``"auto"``: the likeliest latency from the log (:func:`select_latency`,
             at ``accel_psd`` if a number is given, else the observer's own density;
-            ``options["latency_from_log"]``).
+            ``options["latency_from_log"]``).  Not given: 0, unless the model does not
+            explain the log as stamped (``ρ`` > :data:`RHO_WARN`), which is then searched
+            as with ``"auto"`` and smoothed under the latency found if that explains it
+            (``ρ`` ≤ :data:`RHO_WARN`; ``options["latency_searched"]``,
+            ``"consistency_without_latency"``; module docstring); ``0``: as stamped.
         band: what ``v_std`` states (:data:`BANDS`): ``"model"``, the smoother's
             covariance ``P^s`` under the filter's noise model (white acceleration
             and offset as modelled); ``"noise"``, the covariance of the same
@@ -1791,6 +1802,8 @@ def smooth(
 
     Warns:
         NoiseWarning: ``noise_std`` not given (σ estimated from the log).
+        LatencyWarning: no latency given, and the log explained only with one found in it
+            (:func:`latency_note`).
         ConsistencyWarning: ``ρ`` (:attr:`Smoothed.consistency`) above :data:`RHO_WARN`,
             or ``"auto"`` at the grid's largest density: the model does not explain the
             log (:func:`smoothing_warnings`).

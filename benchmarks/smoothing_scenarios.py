@@ -10,8 +10,11 @@ other three, built as there (12 s, 1 kHz, σ = 1e-4 rad, PD tracking, truth seed
 the causal ``adaptive`` started from the same perturbed state; RMS and coverage after 5 s):
 
 * ``latency``: positions measured 1 ms (one sample) late, unknown to both; smoothed
-  twice, with the smoother's defaults and with ``filter_options={"latency": "auto"}``
-  (the likeliest latency from the log, ``select_latency``: row ``latency (auto)``);
+  three times: with the smoother's defaults (no latency given: the log as stamped is not
+  explained, so a latency is searched for and used if it explains it), as stamped
+  (``filter_options={"latency": 0}``: row ``latency (as stamped)``) and with
+  ``filter_options={"latency": "auto"}`` (the likeliest latency from the log,
+  ``select_latency``: row ``latency (auto)``);
 * ``latency_given``: the same with ``latency=1e-3`` given (the causal observer's option;
   the smoother's ``filter_options={"latency": 1e-3}``, which re-times the log);
 * ``stale``: the model identified offline under one payload (``pinobs identify``, 15 s,
@@ -19,9 +22,10 @@ the causal ``adaptive`` started from the same perturbed state; RMS and coverage 
 
 Columns: the causal ``adaptive``'s RMS, the smoother's (``pinobs.smooth(...,
 observer="adaptive")``, its defaults: the inflated band), their ratio, the band's
-coverage of the truth, ``ρ``, whether ``pinobs.smooth`` warned that the model does not
-explain the log (``ConsistencyWarning``), the latency the smoother used [ms], and its CPU
-time over the causal run's (one run each).
+coverage of the truth, ``ρ``, what ``pinobs.smooth`` warned (``yes``: the model does not
+explain the log, ``ConsistencyWarning``; ``latency``: it does with a latency found in the
+log, ``LatencyWarning``), the latency the smoother used [ms], and its CPU time over the
+causal run's (one run each).
 
     python benchmarks/smoothing_scenarios.py --out benchmarks
 """
@@ -36,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 import pinobs
-from pinobs.errors import ConsistencyWarning
+from pinobs.errors import ConsistencyWarning, LatencyWarning
 from pinobs.io import Log
 from pinobs.observers import make_observer
 from pinobs.observers.smoothing import smooth
@@ -76,17 +80,23 @@ def main(out: Path, seeds: tuple[int, ...]) -> str:
                 log = Log(t=res.t, q=res.q_meas, tau=np.array(res.tau))
                 runs = [(scenario, options)]
                 if scenario == "latency":
+                    runs.append(("latency (as stamped)", {"latency": 0.0}))
                     runs.append(("latency (auto)", {"latency": "auto"}))
                 for label, smoothed in runs:
                     with warnings.catch_warnings(record=True) as said:
                         warnings.simplefilter("always", ConsistencyWarning)
+                        warnings.simplefilter("always", LatencyWarning)
                         t0 = time.process_time()
                         s = smooth(
                             model, log, observer="adaptive", noise_std=NOISE,
                             filter_options=smoothed,
                         )  # fmt: skip
                         cpu = time.process_time() - t0
-                    warned = any(issubclass(w.category, ConsistencyWarning) for w in said)
+                    warned = "no"
+                    if any(issubclass(w.category, LatencyWarning) for w in said):
+                        warned = "latency"
+                    if any(issubclass(w.category, ConsistencyWarning) for w in said):
+                        warned = "yes"
                     late = res.t > 5.0
                     err = np.abs(s.v - res.v)[late]
                     e_s = rms_after(res, np.array(s.v), 5.0)
@@ -94,7 +104,7 @@ def main(out: Path, seeds: tuple[int, ...]) -> str:
                     rows.append(
                         f"| {name} | {label} | {seed} | {e_ad:.2e} | {e_s:.2e} "
                         f"| {e_ad / e_s:.2f} | {cover:.1f} % | {s.consistency:.3g} "
-                        f"| {'yes' if warned else 'no'} | {1e3 * s.options['latency']:.3g} "
+                        f"| {warned} | {1e3 * s.options['latency']:.3g} "
                         f"| {cpu / cpu_ad:.1f} |"
                     )
                     print(rows[-1], flush=True)

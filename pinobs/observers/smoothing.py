@@ -1175,20 +1175,53 @@ def select_latency(
     """
     if intervals < 0:
         raise GainError(f"intervals={intervals!r}: give a whole number of sample intervals >= 0")
-    t, q, tau = _log_arrays(robot, log)
+    return _select_latency(
+        robot,
+        _log_arrays(robot, log),
+        noise_std,
+        observer,
+        accel_psd,
+        disturbance_psd,
+        filter_options,
+        model_window,
+        intervals,
+    )
+
+
+def _select_latency(
+    robot: Robot,
+    log: tuple[Vector, Vector, Vector],
+    noise_std: float,
+    observer: str,
+    accel_psd: float | None,
+    disturbance_psd: float | None,
+    filter_options: Mapping[str, Any] | None,
+    model_window: float | None,
+    intervals: int = LATENCY_INTERVALS,
+    prepared: dict[float, Any] | None = None,
+    tried: dict[float, float] | None = None,
+) -> tuple[float, list[tuple[float, float]]]:
+    """:func:`select_latency` on checked arrays; ``prepared`` (latency → :func:`_prepare`'s
+    result) and ``tried`` (latency → ``ℓ``) are read and filled, so that a caller that has
+    run a candidate (:func:`_smooth`: the log as stamped, the latency then smoothed under)
+    does not run it twice: ``adaptive``'s learning pass costs about the causal run."""
+    t, q, tau = log
     h = float(np.median(np.diff(t)))
-    tried: dict[float, float] = {}
+    prepared = {} if prepared is None else prepared
+    tried = {} if tried is None else tried
 
     def ll(d: float) -> float:
         if d not in tried:
             opts = {**dict(filter_options or {}), "latency": d}
             try:  # adaptive's learning pass can be lost too: the candidate is then rejected
-                arrays, k0, _, make, _ = _prepare(
-                    robot, t, q, tau, observer, noise_std, disturbance_psd, opts, model_window
-                )
+                if d not in prepared:
+                    prepared[d] = _prepare(
+                        robot, t, q, tau, observer, noise_std, disturbance_psd, opts, model_window
+                    )
             except (NonFiniteError, ObserverDiverged, np.linalg.LinAlgError):
                 tried[d] = -math.inf
             else:
+                arrays, k0, _, make, _ = prepared[d]
                 tried[d] = _log_likelihood(make(accel_psd), arrays, k0)
         return tried[d]
 
@@ -1846,11 +1879,14 @@ def _smooth(
     filter_options: Mapping[str, Any] | None = None,
     band: str | None = None,
     find_latency: bool = False,
+    _prepared: dict[float, Any] | None = None,
 ) -> Smoothed:
     """:func:`smooth` without its warnings, for callers that report the consistency their
     own way (a log file's run, the identification's refinement); ``find_latency``: a log the
-    model does not explain, with no latency given, is searched for one (:func:`smooth`)."""
+    model does not explain, with no latency given, is searched for one (:func:`smooth`).
+    ``_prepared``: :func:`_prepare`'s results by latency, shared with the latency search."""
     asked_psd = accel_psd
+    prepared: dict[float, Any] = {} if _prepared is None else _prepared
     if lag is not None and (chunk is not None or overlap is not None):
         raise OptionError(
             f"lag={lag!r} sets the chunk and the overlap; give lag alone, or chunk and overlap"
@@ -1879,28 +1915,32 @@ def _smooth(
     latency_from_log = (filter_options or {}).get("latency") == "auto"
     if latency_from_log:  # the likeliest latency (select_latency), then smoothed under it
         rest = {k: v for k, v in dict(filter_options or {}).items() if k != "latency"}
-        found, _ = select_latency(
+        found, _ = _select_latency(
             robot,
             (t_all, q_all, tau_all),
-            noise_std=noise_std,
-            observer=observer,
-            accel_psd=accel_psd if isinstance(accel_psd, float) else None,
-            disturbance_psd=disturbance_psd,
-            filter_options=rest,
-            model_window=model_window,
+            noise_std,
+            observer,
+            accel_psd if isinstance(accel_psd, float) else None,
+            disturbance_psd,
+            rest,
+            model_window,
+            prepared=prepared,
         )
         filter_options = {**rest, "latency": found}
-    arrays, k0, rows, make, extra = _prepare(
-        robot,
-        t_all,
-        q_all,
-        tau_all,
-        observer,
-        noise_std,
-        disturbance_psd,
-        filter_options,
-        model_window,
-    )
+    latency = _latency(filter_options)[0]
+    if latency not in prepared:  # (adaptive: the learning pass)
+        prepared[latency] = _prepare(
+            robot,
+            t_all,
+            q_all,
+            tau_all,
+            observer,
+            noise_std,
+            disturbance_psd,
+            filter_options,
+            model_window,
+        )
+    arrays, k0, rows, make, extra = prepared[latency]
     offset_scale = None
     accel_from_log = accel_psd == "auto"
     if accel_psd == "auto" and adaptive:
@@ -1995,16 +2035,21 @@ def _smooth(
     # The model does not explain the log: a measurement latency might (module docstring).
     # Adopted only if the log smoothed under it is consistent (ρ ≤ RHO_WARN).
     found = 0.0
+    # the log as stamped is the search's first candidate: its learning pass is done, and so
+    # is its likelihood when the density is the one the search takes (not chosen by "auto")
+    tried = {} if accel_from_log else {0.0: loglik}
     try:
-        found, _ = select_latency(
+        found, _ = _select_latency(
             robot,
             (t_all, q_all, tau_all),
-            noise_std=noise_std,
-            observer=observer,
-            accel_psd=asked_psd if isinstance(asked_psd, float) else None,
-            disturbance_psd=disturbance_psd,
-            filter_options=filter_options,
-            model_window=model_window,
+            noise_std,
+            observer,
+            asked_psd if isinstance(asked_psd, float) else None,
+            disturbance_psd,
+            filter_options,
+            model_window,
+            prepared=prepared,
+            tried=tried,
         )
     except (NonFiniteError, ObserverDiverged):
         pass  # lost at every latency: nothing found
@@ -2027,6 +2072,7 @@ def _smooth(
             model_window=model_window,
             filter_options={**dict(filter_options or {}), "latency": found},
             band=band,
+            _prepared=prepared,
         )
         if retry.consistency <= RHO_WARN:
             return replace(

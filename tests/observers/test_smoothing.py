@@ -1208,3 +1208,30 @@ def test_latency_search_finds_a_quadratic_peak_in_few_passes(
     _latency_search(ll, h, 3)
     assert max(tried, key=tried.__getitem__) == pytest.approx(want * h, abs=1e-12)
     assert len(tried) == passes
+
+
+def test_the_latency_search_runs_no_candidate_twice(monkeypatch) -> None:
+    """A log not explained as stamped (UR5, 0.5 ms late): the first pass is the search's
+    candidate 0 (its preparation, over ``adaptive`` the learning pass, and its likelihood),
+    and the latency found is smoothed from the search's preparation: each latency prepared
+    once, and a likelihood pass for each candidate but 0."""
+    robot = cached_robot("ur5")
+    t, q, tau, _ = _late_log(1, 2000.0, 1.0)
+    prepared: list[float] = []
+    passes: list[int] = []
+    real_prepare, real_ll = smoothing._prepare, smoothing._log_likelihood
+
+    def prepare(*args, **kwargs):  # type: ignore[no-untyped-def]
+        prepared.append(smoothing._latency(args[7])[0])
+        return real_prepare(*args, **kwargs)
+
+    def ll(*args, **kwargs):  # type: ignore[no-untyped-def]
+        passes.append(1)
+        return real_ll(*args, **kwargs)
+
+    monkeypatch.setattr(smoothing, "_prepare", prepare)
+    monkeypatch.setattr(smoothing, "_log_likelihood", ll)
+    with pytest.warns(LatencyWarning, match="0.5 ms late"):
+        found = smooth(robot, (t, q, tau), noise_std=1e-4, accel_psd=1e-10)
+    assert sorted(prepared) == pytest.approx([0.0, 0.5e-3, 1e-3, 2e-3], abs=1e-12)
+    assert len(passes) == 3 and found.options["latency_found"] == pytest.approx(0.5e-3)

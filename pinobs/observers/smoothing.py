@@ -1912,21 +1912,26 @@ def _smooth(
     if noise_std is None:
         noise_std, _, said = log_noise_std(robot, t_all, q_all)
         warnings.warn(NoiseWarning(said), stacklevel=3)  # the caller of smooth()
+
+    def find(options: Mapping[str, Any] | None, tried: dict[float, float] | None = None) -> float:
+        """:func:`select_latency` on this log, its passes shared through ``prepared``."""
+        return _select_latency(
+            robot,
+            (t_all, q_all, tau_all),
+            cast(float, noise_std),
+            observer,
+            asked_psd if isinstance(asked_psd, float) else None,
+            disturbance_psd,
+            options,
+            model_window,
+            prepared=prepared,
+            tried=tried,
+        )[0]
+
     latency_from_log = (filter_options or {}).get("latency") == "auto"
     if latency_from_log:  # the likeliest latency (select_latency), then smoothed under it
         rest = {k: v for k, v in dict(filter_options or {}).items() if k != "latency"}
-        found, _ = _select_latency(
-            robot,
-            (t_all, q_all, tau_all),
-            noise_std,
-            observer,
-            accel_psd if isinstance(accel_psd, float) else None,
-            disturbance_psd,
-            rest,
-            model_window,
-            prepared=prepared,
-        )
-        filter_options = {**rest, "latency": found}
+        filter_options = {**rest, "latency": find(rest)}
     latency = _latency(filter_options)[0]
     if latency not in prepared:  # (adaptive: the learning pass)
         prepared[latency] = _prepare(
@@ -2039,18 +2044,7 @@ def _smooth(
     # is its likelihood when the density is the one the search takes (not chosen by "auto")
     tried = {} if accel_from_log else {0.0: loglik}
     try:
-        found, _ = _select_latency(
-            robot,
-            (t_all, q_all, tau_all),
-            noise_std,
-            observer,
-            asked_psd if isinstance(asked_psd, float) else None,
-            disturbance_psd,
-            filter_options,
-            model_window,
-            prepared=prepared,
-            tried=tried,
-        )
+        found = find(filter_options, tried)
     except (NonFiniteError, ObserverDiverged):
         pass  # lost at every latency: nothing found
     searched = {

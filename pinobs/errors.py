@@ -16,6 +16,7 @@ __all__ = [
     "DimensionError",
     "GainError",
     "IdentificationError",
+    "LatencyWarning",
     "LogFormatError",
     "ModelError",
     "ModelFileError",

@@ -1319,7 +1319,10 @@ def select_accel_psd(
     grid's lower end and says nothing.  Uses no ground truth.  Costs one
     forward pass per candidate (no backward pass).  For ``adaptive`` the
     candidate replaces every window's ``accel_psd`` of the frozen-model
-    filter (:func:`smooth`; the learning pass runs once).
+    filter (:func:`smooth`; the learning pass runs once).  For ``kf`` every
+    candidate's ``ℓ`` comes from one pass of a bank of filters
+    (:meth:`~pinobs.observers.kf.KFBank.log_likelihoods`), and the rule is applied
+    once more with the half-decades either side of its choice added (module docstring).
 
     Raises:
         GainError: an empty grid, a non-positive candidate or threshold.

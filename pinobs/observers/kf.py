@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import NamedTuple, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pinobs.model import Robot
 from pinobs.observers.base import Observer, Vector, positive, register
@@ -227,97 +228,119 @@ class BankState(NamedTuple):
     innovation: Vector | None  # (F, nv): each filter's innovation at the last sample
 
 
-def _bank_loops(
+def _bank_rows_loops(
     q: Vector,
     v: Vector,
     a: Vector,
     P: Vector,
-    h: float,
+    t: Vector,
+    q_meas: Vector,
+    measured: NDArray[np.bool_],
     jerk: Vector,
     meas_var: float,
-    q_meas: Vector,
-    measured: bool,
-) -> tuple[Vector, Vector, Vector, Vector, Vector]:
-    """One step of a bank of filters on vector joints, in loops (compiled by numba).
+    ll: Vector,
+    e: Vector,
+    X: Vector,
+    PX: Vector,
+) -> None:
+    """A bank of filters on vector joints over rows ``1..`` of ``(t, q_meas, measured)``, from
+    its state at ``t[0]``, in loops (compiled by numba); the state arrays updated in place.
 
-    The equations of the module docstring per filter ``f`` (row): predict with ``F(h)``
-    and ``Q(h) = jerk[f] · Q₁(h)``, then, if ``measured``, the gain ``K = P⁻[:, 0] / (P⁻₀₀ + σ²)``,
-    the innovation ``e = q_meas − q⁻`` per joint and the Joseph form
-    ``P = (I − K e₀ᵀ) P⁻ (I − K e₀ᵀ)ᵀ + σ² K Kᵀ``, symmetrised.  Returns new arrays
-    ``(q, v, a, P, e)`` (``e`` undefined when not ``measured``).
+    The equations of the module docstring per filter ``f`` (row) and row ``k``, with
+    ``h = t[k] − t[k−1]``: predict with ``F(h)`` and ``Q(h) = jerk[f] · Q₁(h)``, then, if
+    ``measured[k]``, the gain ``K = P⁻[:, 0] / S`` with ``S = P⁻₀₀ + σ²``, the innovation
+    ``e = q_meas[k] − q⁻`` per joint, the Joseph form
+    ``P = (I − K e₀ᵀ) P⁻ (I − K e₀ᵀ)ᵀ + σ² K Kᵀ`` (symmetrised), and
+    ``ll[f] += log N(e; 0, S I)`` (the prediction-error decomposition, Schweppe 1965).  ``e``
+    receives the innovations of the last row, when it is measured.  When ``X`` has rows,
+    ``X[k] = (q, v, a)`` and ``PX[k] = P`` of filter 0 at every row ``k`` (row 0 included).
     """
     nf, nv = v.shape
-    q_out = np.empty_like(q)
-    v_out = np.empty_like(v)
-    a_out = np.empty_like(a)
-    P_out = np.empty_like(P)
-    e_out = np.empty_like(v)
-    F = np.array([[1.0, h, 0.5 * h * h], [0.0, 1.0, h], [0.0, 0.0, 1.0]])
-    Q1 = np.array(
-        [
-            [h**5 / 20, h**4 / 8, h**3 / 6],
-            [h**4 / 8, h**3 / 3, h**2 / 2],
-            [h**3 / 6, h**2 / 2, h],
-        ]
-    )
+    store = X.shape[0] > 0
+    F = np.eye(3)
+    Q1 = np.zeros((3, 3))
     FP = np.empty((3, 3))
     Pp = np.empty((3, 3))
     C = np.empty((3, 3))
     K = np.empty(3)
-    for f in range(nf):
-        for i in range(3):  # FP = F P
-            for j in range(3):
-                t = 0.0
-                for k in range(3):
-                    t += F[i, k] * P[f, k, j]
-                FP[i, j] = t
-        for i in range(3):  # P⁻ = F P Fᵀ + Q
-            for j in range(3):
-                t = 0.0
-                for k in range(3):
-                    t += FP[i, k] * F[j, k]
-                Pp[i, j] = t + jerk[f] * Q1[i, j]
-        for i in range(nv):
-            q_out[f, i] = q[f, i] + v[f, i] * h + 0.5 * h * h * a[f, i]
-            v_out[f, i] = v[f, i] + h * a[f, i]
-            a_out[f, i] = a[f, i]
-        if not measured:
+    h_prev = math.nan
+    for k in range(t.size):
+        if k > 0:
+            h = t[k] - t[k - 1]
+            if h != h_prev:
+                F[0, 1], F[0, 2], F[1, 2] = h, 0.5 * h * h, h
+                Q1[0, 0], Q1[0, 1], Q1[0, 2] = h**5 / 20, h**4 / 8, h**3 / 6
+                Q1[1, 1], Q1[1, 2], Q1[2, 2] = h**3 / 3, h**2 / 2, h
+                Q1[1, 0], Q1[2, 0], Q1[2, 1] = Q1[0, 1], Q1[0, 2], Q1[1, 2]
+                h_prev = h
+            for f in range(nf):
+                for i in range(3):  # FP = F P
+                    for j in range(3):
+                        s = 0.0
+                        for m in range(3):
+                            s += F[i, m] * P[f, m, j]
+                        FP[i, j] = s
+                for i in range(3):  # P⁻ = F P Fᵀ + Q
+                    for j in range(3):
+                        s = 0.0
+                        for m in range(3):
+                            s += FP[i, m] * F[j, m]
+                        Pp[i, j] = s + jerk[f] * Q1[i, j]
+                for i in range(nv):
+                    q[f, i] = q[f, i] + v[f, i] * h + 0.5 * h * h * a[f, i]
+                    v[f, i] = v[f, i] + h * a[f, i]
+                if not measured[k]:
+                    for i in range(3):
+                        for j in range(3):
+                            P[f, i, j] = Pp[i, j]
+                    continue
+                s = Pp[0, 0] + meas_var
+                for i in range(3):
+                    K[i] = Pp[i, 0] / s
+                sq = 0.0
+                for i in range(nv):
+                    ei = q_meas[k, i] - q[f, i]
+                    e[f, i] = ei
+                    sq += ei * ei
+                    q[f, i] += K[0] * ei
+                    v[f, i] += K[1] * ei
+                    a[f, i] += K[2] * ei
+                ll[f] -= 0.5 * (sq / s + nv * math.log(2.0 * math.pi * s))
+                for i in range(3):  # C = (I − K e₀ᵀ) P⁻
+                    for j in range(3):
+                        C[i, j] = Pp[i, j] - K[i] * Pp[0, j]
+                for i in range(3):  # C (I − K e₀ᵀ)ᵀ + σ² K Kᵀ
+                    for j in range(3):
+                        Pp[i, j] = C[i, j] - C[i, 0] * K[j] + meas_var * K[i] * K[j]
+                for i in range(3):
+                    for j in range(3):
+                        P[f, i, j] = 0.5 * (Pp[i, j] + Pp[j, i])
+        if store:
+            for i in range(nv):
+                X[k, 0, i], X[k, 1, i], X[k, 2, i] = q[0, i], v[0, i], a[0, i]
             for i in range(3):
                 for j in range(3):
-                    P_out[f, i, j] = Pp[i, j]
-            continue
-        s = Pp[0, 0] + meas_var
-        for i in range(3):
-            K[i] = Pp[i, 0] / s
-        for i in range(nv):
-            e = q_meas[i] - q_out[f, i]
-            e_out[f, i] = e
-            q_out[f, i] += K[0] * e
-            v_out[f, i] += K[1] * e
-            a_out[f, i] += K[2] * e
-        for i in range(3):  # C = (I − K e₀ᵀ) P⁻
-            for j in range(3):
-                C[i, j] = Pp[i, j] - K[i] * Pp[0, j]
-        for i in range(3):  # C (I − K e₀ᵀ)ᵀ + σ² K Kᵀ
-            for j in range(3):
-                Pp[i, j] = C[i, j] - C[i, 0] * K[j] + meas_var * K[i] * K[j]
-        for i in range(3):
-            for j in range(3):
-                P_out[f, i, j] = 0.5 * (Pp[i, j] + Pp[j, i])
-    return q_out, v_out, a_out, P_out, e_out
+                    PX[k, i, j] = P[0, i, j]
 
 
+_NO_STORE = np.empty((0, 3, 0))
+_NO_PX = np.empty((0, 3, 3))
+_ROW_MEASURED = (np.array([False, False]), np.array([False, True]))  # KFBank.step's rows
 _bank_kernel = _LazyKernel(
-    _bank_loops,
+    _bank_rows_loops,
     np.zeros((1, 1)),
     np.zeros((1, 1)),
     np.zeros((1, 1)),
     np.tile(np.eye(3), (1, 1, 1)),
-    1e-3,
+    np.array([0.0, 1e-3]),
+    np.zeros((2, 1)),
+    np.array([False, True]),
     np.ones(1),
     1.0,
     np.zeros(1),
-    True,
+    np.zeros((1, 1)),
+    np.zeros((2, 3, 1)),
+    np.zeros((2, 3, 3)),
 )
 
 
@@ -326,7 +349,7 @@ class KFBank:
 
     The same equations as the family (module docstring), one filter per row
     of the arrays.  On robots whose joints are all vector joints a step is one
-    compiled loop (:func:`_bank_loops`, numba; a NumPy step cost about 15 ``pin.aba``
+    compiled loop (:func:`_bank_rows_loops`, numba; a NumPy step cost about 15 ``pin.aba``
     calls on a UR5, mostly in dispatching small-array operations); otherwise NumPy
     arrays, the configuration part filter by filter through ``integrate``/``difference``.
     Both paths are tested equal to separate :class:`ConstantAccelerationKF` filters.
@@ -339,6 +362,7 @@ class KFBank:
         self.jerk = np.array([float(positive("jerk_psd", j) or 0.0) for j in jerk_psd])
         self.meas_var = float(positive("meas_std", meas_std) or 0.0) ** 2
         self._cache: tuple[float, Vector, Vector] | None = None
+        self._ll = np.zeros(self.jerk.size)  # step's scratch (its log-likelihood is not kept)
         if robot.is_vector_space:
             _bank_kernel.load()
 
@@ -356,29 +380,58 @@ class KFBank:
         (the prediction-error decomposition, Schweppe 1965), started at ``q[0]`` with
         ``v = 0`` (:meth:`initial`); what :func:`pinobs.observers.smoothing.select_accel_psd`
         computes for ``kf`` filter by filter (tested equal)."""
+        return self.run(t, q, good, v0_std, store=False)[0]
+
+    def run(
+        self, t: Vector, q: Vector, good: Vector, v0_std: float, *, store: bool = True
+    ) -> tuple[Vector, Vector, Vector]:
+        """The bank over a log from :meth:`initial` at ``q[0]`` with ``v = 0``: each filter's
+        innovation log-likelihood (:meth:`log_likelihoods`) and, with ``store``, the first
+        filter's state at every row, ``X[k] = (q, v, a)`` of shape ``(3, nv)`` and its 3×3
+        covariance ``PX[k]`` (``X`` and ``PX`` empty without).  On vector joints one compiled
+        pass (:func:`_bank_rows_loops`), otherwise :meth:`step` row by row."""
         nv = self.robot.nv
         state = self.initial(q[0], np.zeros(nv), v0_std)
         ll = np.zeros(self.jerk.size)
+        n = t.size if store else 0
+        X, PX = np.empty((n, 3, nv)), np.empty((n, 3, 3))
+        if self.robot.is_vector_space and _bank_kernel.compiled is not None:
+            q_meas = np.ascontiguousarray(np.where(good[:, None], q, 0.0), dtype=float)
+            _bank_kernel.compiled(
+                *(np.array(x) for x in state[:4]), np.ascontiguousarray(t, dtype=float), q_meas,
+                np.ascontiguousarray(good, dtype=bool), self.jerk, self.meas_var, ll,
+                np.empty((self.jerk.size, nv)), X if store else _NO_STORE, PX,
+            )  # fmt: skip
+            return ll, X, PX
         h_prev, F0, q00 = math.nan, np.empty(3), 0.0
-        for k in range(1, t.size):
-            h = float(t[k] - t[k - 1])
-            if h != h_prev:
-                F, Q = transition(h, 1.0)
-                h_prev, F0, q00 = h, F[0], float(Q[0, 0])
-            S = np.einsum("j,fjk,k->f", F0, state.P, F0) + self.jerk * q00 + self.meas_var
-            state = self.step(state, h, q[k] if good[k] else None)
-            if good[k]:
-                e = cast(Vector, state.innovation)
-                ll -= 0.5 * (np.einsum("fi,fi->f", e, e) / S + nv * np.log(2.0 * math.pi * S))
-        return ll
+        for k in range(t.size):
+            if k > 0:
+                h = float(t[k] - t[k - 1])
+                if h != h_prev:
+                    F, Q = transition(h, 1.0)
+                    h_prev, F0, q00 = h, F[0], float(Q[0, 0])
+                S = np.einsum("j,fjk,k->f", F0, state.P, F0) + self.jerk * q00 + self.meas_var
+                state = self.step(state, h, q[k] if good[k] else None)
+                if good[k]:
+                    e = cast(Vector, state.innovation)
+                    ll -= 0.5 * (np.einsum("fi,fi->f", e, e) / S + nv * np.log(2.0 * math.pi * S))
+            if store:
+                X[k] = state.q[0], state.v[0], state.a[0]
+                PX[k] = state.P[0]
+        return ll, X, PX
 
     def step(self, state: BankState, dt: float, q_meas: Vector | None) -> BankState:
         r = self.robot
         if r.is_vector_space and _bank_kernel.compiled is not None:
             measured = q_meas is not None
-            q, v, a, P, e = _bank_kernel.compiled(
-                state.q, state.v, state.a, state.P, float(dt), self.jerk, self.meas_var,
-                state.q[0] if q_meas is None else q_meas, measured,
+            q, v, a, P = state.q.copy(), state.v.copy(), state.a.copy(), state.P.copy()
+            e = np.empty_like(v)
+            rows = np.empty((2, v.shape[1]))
+            if measured:
+                rows[1] = q_meas
+            _bank_kernel.compiled(
+                q, v, a, P, np.array([0.0, dt]), rows, _ROW_MEASURED[measured], self.jerk,
+                self.meas_var, self._ll, e, _NO_STORE, _NO_PX,
             )  # fmt: skip
             return BankState(q, v, a, P, e if measured else None)
         if self._cache is None or self._cache[0] != dt:

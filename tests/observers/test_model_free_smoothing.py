@@ -7,13 +7,18 @@ import pytest
 
 from pinobs.errors import ConsistencyWarning, OptionError
 from pinobs.io import Log, estimate_log
+from pinobs.observers import kf as kf_module
 from pinobs.observers import make_observer
 from pinobs.observers.kf import KFBank, transition
 from pinobs.observers.smoothing import (
     JERK_GRID,
+    Smoother,
+    _first_good,
     _log_arrays,
     _log_likelihood,
     _prepare,
+    _rows,
+    _white_jerk_smooth,
     default_overlap,
     select_accel_psd,
     smooth,
@@ -130,6 +135,45 @@ def test_model_free_smoother_chunks_and_streams_like_the_whole_log() -> None:
     for i, _, v, _ in smoother.close():
         got[i + 1] = v
     np.testing.assert_allclose(np.array([got[k] for k in sorted(got)]), chunked.v[1:], atol=1e-12)
+
+
+@pytest.mark.parametrize(("chunk", "overlap"), [(None, 0), (400, 5), (250, 250)])
+@pytest.mark.parametrize("band", ["model", "noise"])
+def test_compiled_model_free_smoother_is_the_smoother(chunk, overlap, band, monkeypatch) -> None:
+    """On vector joints :func:`smooth` runs ``kf``'s smoother in compiled passes
+    (:func:`_white_jerk_smooth`: 3×3 factors of ``P₃ ⊗ I``); it gives what :class:`Smoother`
+    gives over the same filter: estimates, band, likelihood and ``ρ``, whole or in windows (a
+    short overlap, so that the windows show), with uneven intervals and dropped samples (three
+    in a row).  The bank's NumPy pass stores the same states as its compiled one."""
+    robot = cached_robot("ur5")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=1.2, seed=1)
+    rng = np.random.default_rng(0)
+    t = res.t + np.r_[0.0, rng.uniform(-2e-4, 2e-4, res.t.size - 1)]
+    q = np.array(res.q_meas)
+    q[[5, 300, 301, 302, 900]] = np.nan
+    k0, good = _first_good(q)
+    arrays = (t[k0:], q[k0:], np.zeros((t.size - k0, robot.nv)), good)
+    filt = make_observer("kf", robot, noise_std=1e-4, jerk_psd=300.0).smoothing_filter()
+    smoother, n = Smoother(filt, chunk, overlap, band), t.size - k0
+    want = np.full((3, n, robot.nv), np.nan)
+    for row in _rows(*arrays):
+        for k, qs, vs, var in smoother.push(*row):
+            want[:, k] = qs, vs, var
+    for k, qs, vs, var in smoother.close():
+        want[:, k] = qs, vs, var
+    q_s, v_s, var_s, ll, rho_sum, terms = _white_jerk_smooth(filt, arrays, chunk, overlap, band)
+    np.testing.assert_allclose(q_s, want[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(v_s, want[1], rtol=0, atol=1e-11 * np.abs(want[1]).max())
+    np.testing.assert_allclose(var_s, want[2], rtol=1e-10)
+    assert ll == pytest.approx(smoother.log_likelihood, rel=1e-12)
+    assert terms == smoother.consistency_terms
+    assert rho_sum / terms == pytest.approx(smoother.consistency, rel=1e-10)
+    bank = KFBank(robot, (300.0,), 1e-4)
+    compiled = bank.run(arrays[0], arrays[1], good, 1.0)
+    monkeypatch.setattr(kf_module._bank_kernel, "compiled", None)
+    numpy = bank.run(arrays[0], arrays[1], good, 1.0)
+    for a, b in zip(compiled, numpy, strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-10)  # (q + v h) + a h²/2, or q + (…)
 
 
 def test_model_free_smoother_is_the_floor_where_the_model_is_wrong() -> None:

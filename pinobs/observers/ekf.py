@@ -648,6 +648,12 @@ class ExtendedKalmanFilter(Observer[_State]):
     def _innovation(self, state: _State) -> tuple[float | None, bool]:
         return state.nis, state.gated
 
+    def _gate_nis(self, state: _State) -> float:
+        """The NIS above which :meth:`_correct` rejected ``state``'s measurement: the gate's
+        threshold at its level (:func:`pinobs.observers.base.outlier_gate`)."""
+        nv = self.robot.nv
+        return self._gate * max(1.0, (nv if state.nis_level is None else state.nis_level) / nv)
+
     def _replace_robot(self, robot: Robot) -> None:
         """Swap the filter's model between updates (an adaptive subclass's identified model).
 

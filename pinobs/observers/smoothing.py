@@ -589,6 +589,12 @@ def _forward(
     ``e_k = q_k ⊖ q⁻_k`` and ``S_k = P⁻_qq + σ² I`` are the innovation and its
     covariance (the prediction-error decomposition of the likelihood,
     Schweppe 1965, "Evaluation of likelihood functions for Gaussian signals").
+    A sample the filter's outlier gate rejects (``NIS = eᵀ S⁻¹ e`` above the gate's ``g``)
+    counts as at the gate, ``NIS`` replaced by ``g``: the log-density of the contaminated
+    Gaussian ``(1 − ε) N(e; 0, S) + ε u`` (Huber 1964, "Robust estimation of a location
+    parameter") by its larger component, ``u`` level with ``N`` at the gate, so that one
+    glitch does not decide a density or a latency (it did: one sample 1 rad off moved
+    ``"auto"`` from 1e-9 to 1 on a 2 s UR5 log, the RMS from 1.4e-5 to 1.3e-2 rad/s).
     """
     model = filt.robot
     nv = model.nv
@@ -618,8 +624,11 @@ def _forward(
                     "at these densities; check the model and the torques, or smooth with "
                     "accel_psd='auto' or observer='adaptive'"
                 )
-            ll = -(0.5 * (e @ s_inv_e) + np.log(np.diagonal(chol)).sum() + 0.5 * nv * _LOG_2PI)
+            nis = float(e @ s_inv_e)
             state = filt._correct(pred, q_meas)
+            if getattr(state, "gated", False):  # rejected by the filter's outlier gate
+                nis = min(nis, cast(Any, filt)._gate_nis(state))
+            ll = -(0.5 * nis + np.log(np.diagonal(chol)).sum() + 0.5 * nv * _LOG_2PI)
         else:
             state = pred
         t_prev, tau_prev = t, tau
@@ -1248,6 +1257,9 @@ class _FrozenModels:
 
     def _correct(self, state: Any, q_meas: Vector) -> Any:
         return self._ekf._correct(state, q_meas)
+
+    def _gate_nis(self, state: Any) -> float:
+        return self._ekf._gate_nis(state)
 
 
 def _learn(

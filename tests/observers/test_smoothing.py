@@ -444,6 +444,29 @@ def test_likelihood_choice_of_accel_psd_is_the_largest_the_data_do_not_reject(ur
     assert chosen == max(ok)
 
 
+def test_a_sample_the_gate_rejects_decides_neither_the_density_nor_the_latency() -> None:
+    """One glitch (a joint 1 rad off, or 1e6) is rejected by the EKF's outlier gate, and the
+    likelihood counts it at the gate (:func:`smoothing._forward`): ``"auto"`` and the latency
+    search choose on the glitched log what they choose on the clean one (before: 1 instead of
+    1e-9 rad²/s³, an RMS 900× larger; 1 ms found on a log without latency), and the
+    likelihood moves by less than the gate's half (χ²₆(1 − 1e-6)/2 ≈ 20 nats)."""
+    robot = cached_robot("ur5")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=2.0, seed=0)
+    clean = Log(t=res.t, q=res.q_meas, tau=res.tau)
+    for glitch in (1.0, 1e6):
+        q = np.array(res.q_meas)
+        q[500, 2] += glitch
+        log = Log(t=res.t, q=q, tau=res.tau)
+        for opts in ({"accel_psd": "auto"}, {"filter_options": {"latency": "auto"}}):
+            want = smooth(robot, clean, noise_std=1e-4, **opts)  # type: ignore[arg-type]
+            got = smooth(robot, log, noise_std=1e-4, **opts)  # type: ignore[arg-type]
+            assert got.options["accel_psd"] == want.options["accel_psd"]
+            assert got.options["latency"] == want.options["latency"] == 0.0
+            assert abs(got.log_likelihood - want.log_likelihood) < 25.0
+            rms = [np.sqrt(np.nanmean((x.v - res.v) ** 2)) for x in (got, want)]
+            assert rms[0] < 1.05 * rms[1]  # measured 1.4e-5 and 2.1e-5 rad/s, both logs
+
+
 def test_bad_inputs_are_rejected_with_what_would_be_valid(ur5_log) -> None:
     robot = cached_robot("ur5")
     t, q, tau = ur5_log.t, ur5_log.q_meas, ur5_log.tau

@@ -24,6 +24,7 @@ import argparse
 import json
 import math
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -36,6 +37,7 @@ from pinobs.errors import (
     OptionError,
     OutputExistsError,
     PinobsError,
+    PinobsWarning,
     UnsupportedRobotError,
 )
 from pinobs.evaluation import evaluate, format_table
@@ -1077,10 +1079,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
     try:
-        return func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return func(args)
     except PinobsError as exc:
         print(f"pinobs: error: {exc}", file=sys.stderr)
         return 2
+
+
+def _show_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: Any = None,
+    line: str | None = None,
+) -> None:
+    """A pinobs warning as ``warning: …`` (as a run's own warnings; not Python's file and
+    line); others as usual."""
+    if issubclass(category, PinobsWarning):
+        print(f"warning: {message}", file=sys.stderr)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -13,6 +13,7 @@ from typing import Any
 __all__ = [
     "ConfigurationError",
     "ConsistencyWarning",
+    "CostWarning",
     "DimensionError",
     "GainError",
     "IdentificationError",
@@ -132,6 +133,11 @@ class ConsistencyWarning(PinobsWarning):
 
 class LatencyWarning(PinobsWarning):
     """A measurement latency that was not given was found from the data and used."""
+
+
+class CostWarning(PinobsWarning):
+    """Options that make a run far costlier than needed for what they ask (a memory bound
+    that bounds nothing)."""
 
 
 class ModelWarning(PinobsWarning):

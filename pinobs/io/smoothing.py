@@ -36,7 +36,7 @@ from pinobs.io.stream import LogEstimator, LogRun, _chain, _median_period
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
-from pinobs.observers.base import Estimate, observer_class
+from pinobs.observers.base import Estimate, observer_class, positive
 from pinobs.observers.smoothing import (
     Smoother,
     _smooth,
@@ -60,11 +60,16 @@ class _Recorder:
         self.uses_torque = observer_class(name).uses_torque  # kf: no torque, no warning
         self.segments: list[list[tuple[float, Vector | None, Vector]]] = []
         self._n = 0
+        # whether each sample from number `had_q_from` on had its measurement (the rows'
+        # "with their measurement" count; a stream pops what it has written)
+        self.had_q: deque[bool] = deque()
+        self.had_q_from = 0
 
     def _keep(self, t: float, q: Any, tau: Any) -> Estimate:
         tau_arr = np.zeros(self.robot.nv) if tau is None else np.asarray(tau, dtype=float)
         q_arr = None if q is None else self.robot.check_configuration(q, what="q")
         self._take(float(t), q_arr, tau_arr)
+        self.had_q.append(q_arr is not None)
         self._n += 1
         shown = self.robot.neutral() if q_arr is None else q_arr
         return Estimate(float(t), shown, np.full(self.robot.nv, float(self._n - 1)))
@@ -169,6 +174,7 @@ def smooth_log(
         GainError: no ``noise_std`` and too few finite rows at the log's start to estimate it.
         and what :func:`pinobs.smooth` and :func:`pinobs.io.iter_log` raise.
     """
+    positive("rate", rate, allow_none=True)  # (0 or less: not "from the log")
     inputs = [] if type(source).__name__ == "DataFrame" else [source]
     writer = EstimateWriter(
         out, robot, force=force, inputs=inputs, extra_columns=[f"v_std{i}" for i in range(robot.nv)]
@@ -243,11 +249,11 @@ def _streamed(
     rec = _Streamer(robot, observer, new)
     est = LogEstimator(rec, period=period)
     pending: deque[tuple[float, float]] = deque()  # (t, sample number or NaN) of unwritten rows
-    estimated = 0
+    estimated = measured = 0
     nan_q, nan_v = np.full(robot.nq, np.nan), np.full(robot.nv, np.nan)
 
     def drain(final: bool) -> None:
-        nonlocal estimated
+        nonlocal estimated, measured
         rows: list[tuple[float, Vector, Vector, Vector]] = []
         done = rec.finished
         while pending:
@@ -260,7 +266,12 @@ def _streamed(
                 if done and done[0][0] == idx:
                     _, qs, vs, var = done[0]
                     rows.append((t, qs, vs, np.sqrt(np.maximum(var, 0.0))))
-                    estimated += int(np.all(np.isfinite(vs)))
+                    if np.all(np.isfinite(vs)):
+                        estimated += 1
+                        while rec.had_q_from < idx:  # samples no row will ask for again
+                            rec.had_q.popleft()
+                            rec.had_q_from += 1
+                        measured += rec.had_q[0]
                 elif final:
                     rows.append((t, nan_q, nan_v, nan_v))  # a one-sample stretch
                 else:
@@ -286,7 +297,7 @@ def _streamed(
         warnings=est.warnings,
         rows=est.rows,
         estimated=estimated,
-        measured=est.measured,
+        measured=measured,  # rows estimated with their measurement (not est's: rows fed)
         unit=first.unit,
         noise_std=noise_std,
         period=period,
@@ -352,6 +363,7 @@ def _recorded(
     ok = np.isfinite(idx)
     rows = idx[ok].astype(int)
     q_s[ok], v_s[ok], std_s[ok] = samples_q[rows], samples_v[rows], samples_std[rows]
+    done = np.all(np.isfinite(v_s[ok]), axis=1)  # the rows estimated, among those with a sample
     writer.write(t, q_s, v_s, std_s)
     run = LogRun(
         t=t,
@@ -361,7 +373,7 @@ def _recorded(
         warnings=est.warnings,
         rows=est.rows,
         estimated=int(np.all(np.isfinite(v_s), axis=1).sum()),
-        measured=est.measured,
+        measured=int(np.sum(np.array(rec.had_q, dtype=bool)[rows][done])),
         unit=first.unit,
         noise_std=noise_std,
         period=period,

@@ -229,6 +229,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import (
     ConsistencyWarning,
+    CostWarning,
     DimensionError,
     GainError,
     LatencyWarning,
@@ -258,6 +259,7 @@ __all__ = [
     "AUTO_WHITE_SCALE",
     "BANDS",
     "CHUNK_TOL",
+    "COST_WARN",
     "DEFAULT_ACCEL_PSD",
     "DEFAULT_GRID",
     "JERK_GRID",
@@ -289,6 +291,10 @@ DEFAULT_GRID: tuple[float, ...] = tuple(float(10.0**e) for e in range(-14, 1))
 #: Candidates of :func:`select_accel_psd` for the model-free ``kf`` (its white-jerk density
 #: ``jerk_psd`` [rad²/s⁵]): every decade from 1e-4 to 1e8.
 JERK_GRID: tuple[float, ...] = tuple(float(10.0**e) for e in range(-4, 9))
+
+#: :func:`smooth` warns (:class:`~pinobs.errors.CostWarning`) when the overlap is more than this
+#: many chunks: the backward pass then runs more than ``COST_WARN + 1`` times over each sample.
+COST_WARN = 10
 
 #: Log-likelihood margin [nats] of :func:`select_accel_psd`: χ²₁(0.95)/2.
 LIKELIHOOD_MARGIN = 1.92
@@ -1144,16 +1150,25 @@ class LogLike(Protocol):
 
 
 def _log_arrays(
-    robot: Robot, log: LogLike | tuple[ArrayLike, ...]
+    robot: Robot, log: LogLike | Sequence[ArrayLike] | Mapping[str, ArrayLike]
 ) -> tuple[Vector, Vector, Vector]:
     """``(t, q, tau)`` of a log, checked (``tau`` zero when the log has none)."""
-    if isinstance(log, tuple):
+    if isinstance(log, (tuple, list)):
         if len(log) not in (2, 3):
             raise DimensionError(f"log is a tuple of {len(log)} arrays; give (t, q) or (t, q, tau)")
         t, q, tau = (*log, None)[:3]
-    else:
+    elif isinstance(log, Mapping):
+        if not {"t", "q"} <= set(log):
+            raise DimensionError(f"log has the keys {sorted(log)}; give 't', 'q' (and 'tau')")
+        t, q, tau = log["t"], log["q"], log.get("tau")
+    elif hasattr(log, "t") and hasattr(log, "q"):
         # a Result's q is the truth: its measurements are q_meas
-        t, q, tau = log.t, getattr(log, "q_meas", log.q), log.tau
+        t, q, tau = log.t, getattr(log, "q_meas", log.q), getattr(log, "tau", None)
+    else:
+        raise DimensionError(
+            f"log is a {type(log).__name__}; give a pinobs.io.Log, a pinobs.Result, (t, q) or "
+            "(t, q, tau) arrays, or a mapping with 't', 'q' (and 'tau')"
+        )
     t_arr = np.asarray(t, dtype=float)
     q_arr = np.asarray(q, dtype=float)
     if t_arr.ndim != 1 or t_arr.size < 2:
@@ -1388,7 +1403,9 @@ def _retimed(
     n = t.size
     times = np.concatenate([t - latency, t])
     order = np.argsort(times, kind="stable")
-    eps = 1e-6 * float(np.median(np.diff(t))) if n > 1 else 0.0
+    # merged below 1e-6 of an interval, or a few float64 steps of the times (about 2e-7 s at
+    # Unix times, 1.7e9 s: 1e-6 of a 1 ms interval would merge nothing there)
+    eps = max(1e-6 * float(np.median(np.diff(t))) if n > 1 else 0.0, 4.0 * _spacing(t))
     new = np.concatenate([[True], np.diff(times[order]) > eps])
     group = np.cumsum(new) - 1  # the row of each sorted time
     row_of = np.empty(2 * n, dtype=np.intp)
@@ -1400,6 +1417,11 @@ def _retimed(
     rows_t[row_of[n:]] = t  # a row with a stamped time keeps it exactly (the output rows)
     latest = np.searchsorted(t, rows_t + eps, side="right") - 1
     return rows_t, rows_q, tau[np.maximum(latest, 0)], row_of[n:]
+
+
+def _spacing(t: Vector) -> float:
+    """The float64 step at the log's largest time magnitude [s]."""
+    return float(np.spacing(np.abs(t).max())) if t.size else 0.0
 
 
 def _latency(filter_options: Mapping[str, Any] | None) -> tuple[float, dict[str, Any]]:
@@ -1492,6 +1514,8 @@ def _select_latency(
     tried = {} if tried is None else tried
 
     def ll(d: float) -> float:
+        if d not in tried and d >= t[-1] - t[0]:  # no sample taken within the log
+            tried[d] = -math.inf
         if d not in tried:
             opts = {**dict(filter_options or {}), "latency": d}
             try:  # adaptive's learning pass can be lost too: the candidate is then rejected
@@ -1556,6 +1580,11 @@ def _prepare(
     learning pass then runs on the log as stamped, with the latency (its own handling), and
     its windows' models are mapped onto the re-timed rows."""
     latency, options = _latency(filter_options)
+    if latency >= t[-1] - t[0]:
+        raise GainError(
+            f"latency={latency!r} s is not shorter than the log ({t[-1] - t[0]:.6g} s): no sample "
+            "would have been taken within it; give the measurement latency in seconds"
+        )
     rows = np.arange(t.size)
     run_t, run_q, run_tau = t, q, tau
     if latency > 0.0:
@@ -1847,7 +1876,10 @@ def _windows(
         return n, n
     if chunk is None:
         if overlap is not None:
-            positive("overlap", overlap)
+            raise OptionError(
+                f"overlap={overlap!r} without chunk: the whole log is smoothed at once; give "
+                "chunk too (or lag)"
+            )
         return None, 0
     if overlap is None:  # the longest memory: the smallest densities (adaptive: any window's)
         gains = cast(Any, filt).gains
@@ -1862,7 +1894,18 @@ def _windows(
             pairs = [(accel_psd, None if d is None else d * accel_psd / a) for a, d in pairs]
         h = dt if meas_dt is None else meas_dt
         overlap = max(default_overlap(a, gains.meas_std, h, disturbance_psd=d) for a, d in pairs)
-    return _samples(chunk, dt, "chunk"), _samples(overlap, dt, "overlap")
+    n_chunk, n_over = _samples(chunk, dt, "chunk"), _samples(overlap, dt, "overlap")
+    if n_over > COST_WARN * n_chunk:  # every window's backward pass runs over its overlap
+        warnings.warn(
+            CostWarning(
+                f"chunk={chunk!r} s with an overlap of {n_over * dt:.3g} s: the backward pass runs "
+                f"{(n_chunk + n_over) / n_chunk:.0f}× over each sample, and the memory is set by "
+                f"chunk + overlap anyway (a chunk as long as the overlap: 2×, at most twice the "
+                "memory); give a longer chunk, or lag"
+            ),
+            stacklevel=4,
+        )
+    return n_chunk, n_over
 
 
 def streaming_smoother(
@@ -2148,6 +2191,25 @@ def smooth(
     return result
 
 
+def _filter_options(options: Any) -> dict[str, Any]:
+    """``filter_options`` as a dict, or :class:`OptionError` (not a mapping, or an option
+    :func:`smooth` takes itself)."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise OptionError(
+            f"filter_options is a {type(options).__name__}; give a mapping of option names to "
+            "values, e.g. {'latency': 0.001}"
+        )
+    for name, why in (
+        ("noise_std", "give noise_std= to smooth()"),
+        ("rate", "the log's times set it"),
+    ):
+        if name in options:
+            raise OptionError(f"filter_options[{name!r}]: not a filter option here ({why})")
+    return dict(options)
+
+
 def _smooth(
     robot: Robot,
     log: LogLike | tuple[ArrayLike, ...],
@@ -2169,6 +2231,10 @@ def _smooth(
     own way (a log file's run, the identification's refinement); ``find_latency``: a log the
     model does not explain, with no latency given, is searched for one (:func:`smooth`).
     ``_prepared``: :func:`_prepare`'s results by latency, shared with the latency search."""
+    if accel_psd is not None and not isinstance(accel_psd, str):  # a float from here on
+        accel_psd = positive("accel_psd", accel_psd)
+    positive("noise_std", noise_std, allow_none=True)  # (a filter would floor 0 to NOISE_FLOOR)
+    filter_options = _filter_options(filter_options)
     asked_psd = accel_psd
     prepared: dict[float, Any] = {} if _prepared is None else _prepared
     if lag is not None and (chunk is not None or overlap is not None):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import json
 import warnings
 from pathlib import Path
 from typing import NamedTuple
@@ -13,6 +14,7 @@ import pytest
 import pinobs
 from pinobs.errors import (
     ConsistencyWarning,
+    CostWarning,
     DimensionError,
     GainError,
     LatencyWarning,
@@ -482,6 +484,56 @@ def test_bad_inputs_are_rejected_with_what_would_be_valid(ur5_log) -> None:
         smooth(robot, (t_bad, q, tau))
     with pytest.raises(GainError, match="lag"):
         smooth(robot, (t, q, tau), lag=-1.0)
+    with pytest.raises(OptionError, match=r"overlap=0\.5 without chunk"):
+        smooth(robot, (t, q, tau), noise_std=1e-4, overlap=0.5)  # (was ignored)
+    with pytest.raises(GainError, match="noise_std=0 is out of range"):
+        smooth(robot, (t, q, tau), noise_std=0)  # (was floored to 1e-6, then blamed the model)
+    with pytest.raises(OptionError, match=r"filter_options\['noise_std'\]"):
+        smooth(robot, (t, q, tau), noise_std=1e-4, filter_options={"noise_std": 1e-3})
+    with pytest.raises(OptionError, match="filter_options is a list"):
+        smooth(robot, (t, q, tau), noise_std=1e-4, filter_options=[("latency", 1e-3)])  # type: ignore[arg-type]
+    with pytest.raises(GainError, match="not shorter than the log"):
+        smooth(robot, (t, q, tau), noise_std=1e-4, filter_options={"latency": 10.0})
+    with pytest.raises(DimensionError, match=r"give a pinobs\.io\.Log"):
+        smooth(robot, np.zeros((3, 6)), noise_std=1e-4)  # type: ignore[arg-type]
+
+
+def test_a_log_and_a_density_are_taken_in_any_of_their_natural_forms(ur5_log) -> None:
+    """A list or a mapping of the arrays is the tuple; an int or NumPy density is the float
+    (the latency search and ``adaptive`` took an int for no density; a ``np.float32`` left the
+    options unserialisable); Unix times (1.7e9 s) re-time under a latency as relative ones
+    (the merge tolerance was finer than their float64 step: a NaN row appeared)."""
+    robot = cached_robot("ur5")
+    t, q, tau = ur5_log.t, ur5_log.q_meas, ur5_log.tau
+    want = smooth(robot, (t, q, tau), noise_std=1e-4, accel_psd=1e-6)
+    for log in ([t, q, tau], {"t": t, "q": q, "tau": tau}):
+        got = smooth(robot, log, noise_std=1e-4, accel_psd=1e-6)  # type: ignore[arg-type]
+        np.testing.assert_array_equal(got.v, want.v)
+    for psd in (1, np.float32(1.0), np.int64(1)):
+        got = smooth(robot, (t, q, tau), noise_std=1e-4, accel_psd=psd)  # type: ignore[arg-type]
+        assert type(got.options["accel_psd"]) is float and got.options["accel_psd"] == 1.0
+        assert got.options["accel_psd_from_log"] is False
+        json.dumps({k: v for k, v in got.options.items() if not isinstance(v, np.ndarray)})
+    late = np.vstack([np.full((1, robot.nq), np.nan), q[:-1]])  # 1 ms late
+    opts = {"noise_std": 1e-4, "filter_options": {"latency": 1e-3}}
+    stamps = np.round(1.7e9 + t, 6)  # on float64's 2.4e-7 s grid there
+    rel = smooth(robot, (t, late, tau), **opts)  # type: ignore[arg-type]
+    unix = smooth(robot, (stamps, late, tau), **opts)  # type: ignore[arg-type]
+    assert np.array_equal(np.isnan(unix.v), np.isnan(rel.v))
+    for times in (t, stamps):  # each measurement on the stamp before it: no row of its own
+        assert smoothing._retimed(times, late, tau, 1e-3)[0].size == t.size + 1
+
+
+def test_a_chunk_far_shorter_than_its_overlap_is_warned(ur5_log) -> None:
+    """A chunk a tenth of the overlap or less makes every window's backward pass mostly
+    overlap (at 2 ms against 0.3 s, 150× the whole log's) for no memory saved: warned; a lag
+    (chunk = overlap) is not."""
+    robot = cached_robot("ur5")
+    opts = {"noise_std": 1e-4, "accel_psd": 1e-4}
+    with pytest.warns(CostWarning, match=r"chunk=0.002 s with an overlap of 0.3 s: .* 151×"):
+        smooth(robot, _log(ur5_log), chunk=0.002, overlap=0.3, **opts)  # type: ignore[arg-type]
+    smooth(robot, _log(ur5_log), lag=0.3, **opts)  # type: ignore[arg-type]
+    smooth(robot, _log(ur5_log), chunk=0.03, overlap=0.3, **opts)  # type: ignore[arg-type]
 
 
 @pytest.mark.slow
@@ -663,6 +715,49 @@ def test_streamed_smoothing_of_a_log_file_equals_the_recorded_one_through_gaps_a
         run_r.bad_rows,
     )
     assert run_s.estimated == len(keep) - 1 and run_s.t.size == 0  # streamed: nothing kept
+
+
+@pytest.mark.parametrize("stream", [False, True])
+def test_smoothed_rows_with_their_measurement_are_counted_among_the_estimated(
+    tmp_path, ur5_log, stream: bool
+) -> None:
+    """A stretch of one sample (a restart right after the first row) gets no estimate, and is
+    not counted as estimated with its measurement (the summary said "-1 propagated only")."""
+    from pinobs.io import write_log
+    from pinobs.io.smoothing import smooth_log
+
+    robot = cached_robot("ur5")
+    t = np.array(ur5_log.t[1:])
+    t[1:] += 100.0  # a restart after the first row
+    log = write_log(tmp_path / "log.csv", t, ur5_log.q_meas[1:], ur5_log.tau[1:])
+    run, _ = smooth_log(
+        log, robot, tmp_path / "s.csv", noise_std=1e-4, accel_psd=1e-4,
+        **({"lag": 0.1} if stream else {}),
+    )  # fmt: skip
+    assert (run.rows, run.estimated, run.measured) == (t.size, t.size - 1, t.size - 1)
+    assert "0 propagated only" in run.summary()
+
+
+def test_cli_estimate_smooth_checks_the_rate_and_says_pinobs_warnings_plainly(
+    tmp_path, ur5_log, capsys
+) -> None:
+    """``--rate`` is checked with ``--smooth`` as without (a negative rate flagged every row
+    as a gap and wrote NaN; 0 meant "from the log"); a pinobs warning prints as
+    ``warning: …`` (as the run's own warnings), not as Python's file and line."""
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    log = write_log(tmp_path / "log.csv", ur5_log.t[1:], ur5_log.q_meas[1:], ur5_log.tau[1:])
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log), "--noise", "1e-4"]
+    argv += ["--smooth"]
+    for rate in ("-5", "0"):
+        assert main([*argv, "--out", str(tmp_path / "r.csv"), "--rate", rate]) == 2
+        assert f"rate={float(rate)!r} is out of range" in capsys.readouterr().err
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", CostWarning)
+        assert main([*argv, "--out", str(tmp_path / "c.csv"), "--chunk", "0.002"]) == 0
+    err = capsys.readouterr().err
+    assert "\nwarning: chunk=0.002 s with an overlap of" in f"\n{err}" and ".py:" not in err
 
 
 def test_smooth_log_and_the_cli_estimate_the_noise_when_none_is_given(

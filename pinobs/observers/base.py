@@ -51,6 +51,7 @@ __all__ = [
     "Estimate",
     "Observer",
     "chi2_quantile",
+    "gate_nis",
     "gate_threshold",
     "make_observer",
     "observer_class",
@@ -185,6 +186,12 @@ def gate_threshold(outlier_probability: float | None, dof: int) -> tuple[float |
     return p, chi2_quantile(dof, p)
 
 
+def gate_nis(threshold: float, level: float | None, dof: int) -> float:
+    """The NIS above which :func:`outlier_gate` rejects a measurement at ``level``
+    (``threshold · max(1, NIS̄ / dof)``; ``level`` ``None``: ``dof``)."""
+    return threshold * max(1.0, (float(dof) if level is None else level) / dof)
+
+
 def outlier_gate(
     nis: float, level: float | None, run: int, threshold: float, dof: int
 ) -> tuple[bool, float]:
@@ -200,7 +207,7 @@ def outlier_gate(
     gated while the prediction drifted); with one it does not.
     """
     lvl = float(dof) if level is None else level
-    if nis > threshold * max(1.0, lvl / dof) and run < MAX_GATE_RUN:
+    if nis > gate_nis(threshold, lvl, dof) and run < MAX_GATE_RUN:
         return True, lvl
     if run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
         lvl = max(lvl, nis * dof / threshold)

@@ -126,7 +126,15 @@ import numpy as np
 
 from pinobs.errors import DimensionError
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.observers.base import Observer, Vector, gate_threshold, outlier_gate, positive, register
+from pinobs.observers.base import (
+    Observer,
+    Vector,
+    gate_nis,
+    gate_threshold,
+    outlier_gate,
+    positive,
+    register,
+)
 
 __all__ = [
     "EKFGains",
@@ -651,8 +659,7 @@ class ExtendedKalmanFilter(Observer[_State]):
     def _gate_nis(self, state: _State) -> float:
         """The NIS above which :meth:`_correct` rejected ``state``'s measurement: the gate's
         threshold at its level (:func:`pinobs.observers.base.outlier_gate`)."""
-        nv = self.robot.nv
-        return self._gate * max(1.0, (nv if state.nis_level is None else state.nis_level) / nv)
+        return gate_nis(self._gate, state.nis_level, self.robot.nv)
 
     def _replace_robot(self, robot: Robot) -> None:
         """Swap the filter's model between updates (an adaptive subclass's identified model).

@@ -834,8 +834,9 @@ def _backward(
 
 def _jerk_noise_loops(PX: Vector, t: Vector, measured: Vector, r: float, Pn: Vector) -> None:
     """:func:`_noise_step` for the white-jerk filter on its 3×3 factor (``P = P₃ ⊗ I``, so
-    ``Pⁿ = Pⁿ₃ ⊗ I``), every row: ``Pⁿ₀ = P⁺₀``, then ``X = F Pⁿ_{k−1} Fᵀ`` and, at a measured
-    row, ``K = P⁺_k[:, 0] / σ²``, ``Y = X − K X₀·``, ``Pⁿ_k = Y − (Y·₀ − σ² K) Kᵀ``."""
+    ``Pⁿ = Pⁿ₃ ⊗ I``), every row: ``Pⁿ₀ = P⁺₀``, then ``X = F Pⁿ_{k−1} Fᵀ`` and, at a row
+    corrected with its measurement (``measured``: neither dropped nor gated), ``K = P⁺_k[:, 0] /
+    σ²``, ``Y = X − K X₀·``, ``Pⁿ_k = Y − (Y·₀ − σ² K) Kᵀ``."""
     F, T, X, K = np.eye(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
     for i in range(3):
         for j in range(3):
@@ -895,7 +896,8 @@ def _jerk_backward_loops(
     ``start..start+keep−1``: ``qs``, ``vs`` and ``var`` (the velocity variance of the model band,
     or of the noise band with ``noise``; one per row, every direction's), and adds ``ρ``'s sum
     and count to ``rho``.  ``X[k] = (q, v, a)`` and ``PX[k]`` the filter's (from
-    :meth:`pinobs.observers.kf.KFBank.run`), ``Pn`` :func:`_jerk_noise_loops`'."""
+    :meth:`pinobs.observers.kf.KFBank.run`, ``measured`` its rows corrected), ``Pn``
+    :func:`_jerk_noise_loops`'."""
     nv = X.shape[2]
     F, Q, W, Pp, L = (
         np.eye(3),
@@ -1068,9 +1070,9 @@ def _white_jerk_smooth(
     :class:`Smoother` (which costs about 4–7× the causal ``kf``)."""
     t, q, _, good = arrays
     gains = filt.gains
-    ll, X, PX = KFBank(filt.robot, (gains.jerk_psd,), gains.meas_std).run(t, q, good, filt.v0_std)
+    bank = KFBank(filt.robot, (gains.jerk_psd,), gains.meas_std, gains.outlier_probability)
+    ll, X, PX, used = bank.run(t, q, good, filt.v0_std)  # used: corrected (measured, not gated)
     t = np.ascontiguousarray(t, dtype=float)
-    good = np.ascontiguousarray(good, dtype=bool)
     r, n, nv = gains.meas_std**2, t.size, filt.robot.nv
     noise = band == "noise"
     _jerk_backward_kernel.load()
@@ -1078,7 +1080,7 @@ def _white_jerk_smooth(
     if noise:
         _jerk_noise_kernel.load()
         Pn = np.empty_like(PX)
-        cast(Any, _jerk_noise_kernel.compiled)(PX, t, good, r, Pn)
+        cast(Any, _jerk_noise_kernel.compiled)(PX, t, used, r, Pn)
     qs, vs, var, rho = np.empty((n, nv)), np.empty((n, nv)), np.empty(n), np.zeros(2)
     chunk = n if chunk is None else chunk
     windows, start = [], 0
@@ -1089,7 +1091,7 @@ def _white_jerk_smooth(
         windows.append((start, n, n - start))
     for start, stop, keep in windows:
         cast(Any, _jerk_backward_kernel.compiled)(
-            X, PX, Pn, t, good, gains.jerk_psd, r, start, stop, keep, noise, qs, vs, var, rho
+            X, PX, Pn, t, used, gains.jerk_psd, r, start, stop, keep, noise, qs, vs, var, rho
         )
     return qs, vs, np.repeat(var[:, None], nv, axis=1), float(ll[0]), float(rho[0]), int(rho[1])
 
@@ -1759,7 +1761,8 @@ def _select(
         if not model_free:
             return [_log_likelihood(make(psd), arrays, k0) for psd in psds]
         filt = cast(WhiteJerkFilter, make(None))
-        bank = KFBank(filt.robot, tuple(psds), filt.gains.meas_std)
+        gains = filt.gains
+        bank = KFBank(filt.robot, tuple(psds), gains.meas_std, gains.outlier_probability)
         with np.errstate(over="ignore", invalid="ignore"):
             lls = bank.log_likelihoods(arrays[0], arrays[1], arrays[3], filt.v0_std)
         return [float(ll) if math.isfinite(ll) else -math.inf for ll in lls]

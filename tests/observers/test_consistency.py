@@ -1,4 +1,4 @@
-"""Innovation consistency (NIS) and the outlier gate of the model-based filters (issue 14 item 3)."""
+"""Innovation consistency (NIS) and the outlier gate of the filters with a covariance (issue 14 item 3; ``kf`` too)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import pytest
 import pinobs
 from pinobs.observers import make_observer
 from pinobs.observers.base import chi2_quantile
+from pinobs.observers.kf import KF_CAUSES
 from pinobs.simulation import Sensor
 from pinobs.simulation.mismatch import mismatched_plant
 
@@ -55,11 +56,20 @@ def test_exact_model_is_consistent_and_a_payload_is_not() -> None:
     assert any("payload" in c for c in report.causes)
 
 
-def test_model_free_observers_report_no_innovation() -> None:
+def test_model_free_observers_report_no_innovation_but_kf_its_white_jerk_one() -> None:
+    """``fd`` has no covariance: no NIS.  ``kf`` tests its white-jerk model: consistent at its
+    default density on a UR5 (mean NIS 5.6 for 6 expected), not at 1e-2 rad²/s⁵ (186), with
+    a model-free filter's causes (not the model-based ones)."""
     robot = pinobs.load("cartpole")
-    _, out = _run(robot, None, ["kf"], duration=0.2)
-    assert out["kf"][1][-1].nis is None
-    assert out["kf"][0].consistency().verdict == "unknown"
+    _, out = _run(robot, None, ["fd"], duration=0.2)
+    assert out["fd"][1][-1].nis is None
+    assert out["fd"][0].consistency().verdict == "unknown"
+    robot = pinobs.load("ur5")
+    _, out = _run(robot, None, ["kf"])
+    assert out["kf"][1][-1].nis is not None and out["kf"][0].consistency().verdict == "consistent"
+    _, out = _run(robot, None, ["kf"], kf={"jerk_psd": 1e-2})
+    report = out["kf"][0].consistency()
+    assert report.verdict == "inconsistent" and report.causes == KF_CAUSES
 
 
 @pytest.mark.parametrize(
@@ -132,6 +142,8 @@ def test_steady_innovation_variance_matches_a_simulated_fixed_gain_observer() ->
         ("kalman", "ur5"),
         ("liegroup", "top"),
         ("ii", "cartpole"),
+        ("kf", "ur5"),
+        ("kf", "top"),
     ],
 )
 @pytest.mark.parametrize("size", [10.0, 1000.0])
@@ -175,7 +187,8 @@ def test_the_gate_can_be_switched_off_and_rejects_bad_values() -> None:
 
 
 @pytest.mark.parametrize(
-    ("name", "robot_name"), [("kalman", "ur5"), ("liegroup", "top"), ("ii", "cartpole")]
+    ("name", "robot_name"),
+    [("kalman", "ur5"), ("liegroup", "top"), ("ii", "cartpole"), ("kf", "ur5")],
 )
 def test_every_gate_option_is_validated_and_can_be_switched_off(name: str, robot_name: str) -> None:
     robot = pinobs.load(robot_name)

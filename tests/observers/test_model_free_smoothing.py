@@ -176,6 +176,34 @@ def test_compiled_model_free_smoother_is_the_smoother(chunk, overlap, band, monk
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-10)  # (q + v h) + a h²/2, or q + (…)
 
 
+def test_kf_gates_a_glitch_causal_and_smoothed() -> None:
+    """``kf`` has the outlier gate of the EKF family (``outlier_probability``): one sample
+    1 rad off is skipped.  Smoothed, the estimate moves by 5e-4 rad/s at most (6.8 rad/s
+    without the gate) and ρ, so the inflated band, is the clean log's (4.3e3 without: every
+    ``v_std`` 65× wider); causal, 8e-3 rad/s (75 rad/s without)."""
+    robot = cached_robot("ur5")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=2.0, seed=0)
+    q = np.array(res.q_meas)
+    bad = q.copy()
+    bad[500, 2] += 1.0
+    clean = smooth(robot, (res.t, q), observer="kf", noise_std=1e-4)
+    got = smooth(robot, (res.t, bad), observer="kf", noise_std=1e-4)
+    assert np.nanmax(np.abs(got.v - clean.v)) < 1e-3  # measured 4.95e-4
+    assert got.consistency == pytest.approx(clean.consistency, rel=1e-3)
+    ratio = (got.v_std / clean.v_std)[1:]  # the same but around the skipped sample
+    assert np.median(ratio) == pytest.approx(1.0, abs=1e-9) and np.abs(ratio - 1).max() < 0.05
+    log = {"t": res.t[1:], "tau": None}
+    for p, bound in ((1e-6, 1e-2), (None, 10.0)):  # measured 7.9e-3 and 75
+        a, b = (
+            estimate_log(
+                make_observer("kf", robot, noise_std=1e-4, outlier_probability=p),
+                Log(q=x[1:], **log),  # type: ignore[arg-type]
+            )
+            for x in (q, bad)
+        )
+        assert (np.abs(b.v - a.v).max() < bound) == (p is not None)
+
+
 def test_model_free_smoother_is_the_floor_where_the_model_is_wrong() -> None:
     """Under a payload the model does not have, the smoother over ``ekf`` with ``auto`` ends at
     its grid's top (warned: model-free, pointing to ``kf``); over ``kf`` with its jerk chosen
@@ -223,7 +251,7 @@ def test_one_bank_pass_gives_each_jerk_densitys_likelihood(name: str) -> None:
     )
     jerks = (1.0, 1e2, 1e4)
     each = [_log_likelihood(make(j), arrays, k0) for j in jerks]
-    bank = KFBank(robot, jerks, 1e-4).log_likelihoods(arrays[0], arrays[1], arrays[3], 1.0)
+    bank = KFBank(robot, jerks, 1e-4, 1e-6).log_likelihoods(arrays[0], arrays[1], arrays[3], 1.0)
     np.testing.assert_allclose(bank, each, rtol=1e-12)
 
 

@@ -2088,8 +2088,9 @@ def smooth(
 
     Args:
         robot: the model (the filter's process model; ``adaptive``'s nominal model).
-        log: ``(t, q)`` or ``(t, q, tau)`` arrays, or an object with ``t``,
-            ``q``, ``tau`` attributes (:class:`pinobs.simulation.Log`; a
+        log: ``(t, q)`` or ``(t, q, tau)`` arrays (a tuple or a list, or a mapping with
+            those keys), or an object with ``t``, ``q``, ``tau`` attributes
+            (:class:`pinobs.simulation.Log`; a
             :class:`pinobs.Result` is read through its ``q_meas``): times [s] ``(N,)`` strictly increasing;
             measured configurations ``(N, nq)``, a row with a non-finite entry
             being a dropped sample (predicted over, not corrected with; rows
@@ -2158,13 +2159,17 @@ def smooth(
 
     Raises:
         UnknownNameError, OptionError: ``observer`` is unknown or cannot be smoothed,
-            or an option it does not take.
-        GainError: a non-positive ``chunk``, ``overlap``, ``lag`` or ``model_window``,
-            a bad filter option, or no ``noise_std`` and too few finite rows to estimate it.
+            or an option it does not take; ``overlap`` without ``chunk``; ``filter_options``
+            not a mapping, or with ``noise_std`` or ``rate`` (given to :func:`smooth` or set
+            by the log).
+        GainError: a non-positive ``noise_std``, ``chunk``, ``overlap``, ``lag`` or
+            ``model_window``, a latency not shorter than the log, a bad filter option, or no
+            ``noise_std`` and too few finite rows to estimate it.
         DimensionError, TimestampError, NonFiniteError: malformed log arrays.
 
     Warns:
         NoiseWarning: ``noise_std`` not given (σ estimated from the log).
+        CostWarning: a ``chunk`` more than :data:`COST_WARN` times shorter than its overlap.
         LatencyWarning: no latency given, and the log explained only with one found in it
             (:func:`latency_note`).
         ConsistencyWarning: ``ρ`` (:attr:`Smoothed.consistency`) above :data:`RHO_WARN`,

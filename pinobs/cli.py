@@ -44,6 +44,7 @@ from pinobs.evaluation import evaluate, format_table
 from pinobs.io import process_log, read_log
 from pinobs.model import Robot, aba_time, load, robot_entries
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
+from pinobs.observers.base import positive
 from pinobs.simulation import (
     INPUT_NAMES,
     MISMATCH_SCENARIOS,
@@ -346,7 +347,24 @@ def _column_map(items: Sequence[str] | None) -> dict[str, str] | None:
     return out
 
 
+def _add_log_columns(p: argparse.ArgumentParser) -> None:
+    """``--map`` and ``--topic``: which columns, or which bag topic, a log is read from."""
+    p.add_argument(
+        "--map",
+        action="append",
+        default=None,
+        metavar="COL=NAME",
+        help="rename log columns: NAME is t, q.<joint>, tau.<joint>, q3 or tau3 (repeatable)",
+    )
+    p.add_argument(
+        "--topic", default=None, help="JointState topic of a bag (default: the only one)"
+    )
+
+
 def _cmd_estimate(args: argparse.Namespace) -> int:
+    positive("rate", args.rate, allow_none=True)  # (inf divided by zero, 0 meant "from the log")
+    if args.max_reports < 0:
+        raise OptionError(f"--max-reports {args.max_reports}: give a count >= 0")
     if not args.smooth:  # the smoother's options, given without it, would be ignored
         given = [f for f in ("lag", "chunk", "accel_psd", "band") if getattr(args, f) is not None]
         if given:
@@ -516,7 +534,7 @@ def _identify_report(ident: Any) -> str:
         )
     if np.any(ident.offset):
         lines.append(
-            "torque offset per joint [N·m] (not stored in the URDF; subtract it from the torques "
+            "torque offset b per joint [N·m] (not stored in the URDF; the model is driven by tau + b: add it to the torques "
             "or let the observer estimate it): " + ", ".join(f"{b:.4g}" for b in ident.offset)
         )
     return "\n".join(lines)
@@ -527,11 +545,13 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
     robot = load(args.robot, root_joint=args.root_joint)
     out = Path(args.out)
+    if out.is_dir():
+        raise OutputExistsError(f"--out {str(out)!r} is a directory; give a file name")
     if out.exists() and not args.force:
         raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
     if out.resolve() == Path(args.log).resolve():
         raise OutputExistsError(f"--out {str(out)!r} is the log itself")
-    log = read_log(args.log, robot)
+    log = read_log(args.log, robot, columns=_column_map(args.map), topic=args.topic)
     ident = identify(
         robot, log, friction=not args.no_friction, offset=args.offset, holdout=args.holdout
     )
@@ -903,16 +923,7 @@ def _parser() -> argparse.ArgumentParser:
         "log in this folder and summary.parquet; on Dask (--workers, --scheduler)",
     )
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
-    p.add_argument(
-        "--map",
-        action="append",
-        default=None,
-        metavar="COL=NAME",
-        help="rename log columns: NAME is t, q.<joint>, tau.<joint>, q3 or tau3 (repeatable)",
-    )
-    p.add_argument(
-        "--topic", default=None, help="JointState topic of a bag (default: the only one)"
-    )
+    _add_log_columns(p)
     p.add_argument(
         "--html", default=None, help="also write a 3D playback of the log and the estimate"
     )
@@ -996,7 +1007,12 @@ def _parser() -> argparse.ArgumentParser:
         "identify", help="identify inertias and friction from a log; write a calibrated URDF"
     )
     _add_robot_options(p, "URDF")
-    p.add_argument("--log", required=True, help="log with t, q and tau columns (CSV or NPZ)")
+    p.add_argument(
+        "--log",
+        required=True,
+        help="log with t, q and tau columns (CSV, Parquet, NPZ or a ROS bag, as estimate reads)",
+    )
+    _add_log_columns(p)
     p.add_argument("--out", required=True, help="the calibrated URDF to write")
     p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
     p.add_argument(

@@ -123,3 +123,60 @@ def test_identify_with_offset_finds_a_known_torque_sensor_bias(tmp_path, capsys)
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("torque offset"))
     found = np.array([float(x) for x in line.split(":")[-1].split(",")])
     np.testing.assert_allclose(found, bias, atol=0.02)
+    assert "add it to the torques" in line  # (it said "subtract": the bias then doubled)
+
+
+def test_identify_takes_irregular_logs_and_says_what_it_cannot(
+    planar_log, tmp_path, capsys
+) -> None:
+    """Found by a sweep: a row alone between two dropped ones, two swapped rows or a log in
+    milliseconds crashed ``identify`` with a raw ``ValueError`` (a one-row stretch has no
+    interval; a lost refinement filter's NaN Jacobian); repeated stamps with a
+    ``ZeroDivisionError``.  Now the first three identify, the last is refused; ``--map`` and
+    ``--topic`` are taken as by ``estimate``; ``--out`` a directory is refused before the
+    work (with ``--force`` it failed after it)."""
+    path, _ = planar_log
+    log = pinobs.io.read_log(path, pinobs.load("planar_3r"))
+    t, q, tau = np.array(log.t), np.array(log.q), np.array(log.tau)
+    base = ["identify", "--robot", "planar_3r", "--no-friction"]
+    cases = {"isolated": (t, q.copy(), tau), "swapped": (t.copy(), q, tau), "ms": (1e3 * t, q, tau)}
+    cases["isolated"][1][[1000, 1002]] = np.nan
+    cases["swapped"][0][[2000, 2001]] = t[[2001, 2000]]
+    for name, (tt, qq, uu) in cases.items():
+        write_log(tmp_path / f"{name}.csv", tt, qq, uu)
+        out = ["--log", str(tmp_path / f"{name}.csv"), "--out", str(tmp_path / f"{name}.urdf")]
+        assert main([*base, *out]) == (2 if name == "ms" else 0), name
+    assert "does not excite the dynamics" in capsys.readouterr().err  # ms: a pinobs error
+    write_log(tmp_path / "dup.csv", np.repeat(t[:2000:2], 2), q[:2000], tau[:2000])
+    assert main([*base, "--log", str(tmp_path / "dup.csv"), "--out", str(tmp_path / "d.urdf")]) == 2
+    assert "timestamps repeat" in capsys.readouterr().err
+    renamed = tmp_path / "renamed.csv"
+    write_log(renamed, t, q, tau)
+    text = renamed.read_text().replace("t,", "time,", 1)
+    renamed.write_text(text)
+    out = str(tmp_path / "m.urdf")
+    assert main([*base, "--log", str(renamed), "--map", "time=t", "--out", out]) == 0
+    assert main([*base, "--log", str(path), "--out", str(tmp_path), "--force"]) == 2
+    assert "is a directory" in capsys.readouterr().err
+    with pytest.raises(pinobs.DimensionError, match="read_log"):
+        pinobs.identify(pinobs.load("planar_3r"), str(path))
+
+
+def test_estimate_refuses_a_rate_or_a_report_count_it_cannot_use(
+    planar_log, tmp_path, capsys
+) -> None:
+    """``--rate inf`` divided by zero on every row (each "re-initialised", v = 0, exit 0) and
+    ``--rate 0`` meant "from the log"; ``--max-reports -1`` miscounted; ``--out`` a directory
+    failed after the work."""
+    path, _ = planar_log
+    base = ["estimate", "--robot", "planar_3r", "--observer", "kf", "--log", str(path)]
+    out = ["--out", str(tmp_path / "o.csv")]
+    for extra, said in (
+        (["--rate", "inf"], "rate=inf is out of range"),
+        (["--rate", "0"], "rate=0.0 is out of range"),
+        (["--max-reports", "-1"], "--max-reports -1"),
+    ):
+        assert main([*base, *out, *extra]) == 2
+        assert said in capsys.readouterr().err
+    assert main([*base, "--out", str(tmp_path), "--force"]) == 2
+    assert "is a directory" in capsys.readouterr().err

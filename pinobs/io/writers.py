@@ -67,6 +67,8 @@ class EstimateWriter:
                 raise OutputExistsError(
                     f"output {str(self.path)!r} is the input log: choose another --out"
                 )
+        if self.path.is_dir():  # (--force would only fail on it, after the work)
+            raise OutputExistsError(f"output {str(self.path)!r} is a directory; give a file name")
         if self.path.exists() and not force:
             raise OutputExistsError(
                 f"output {str(self.path)!r} exists; pass --force (force=True) to overwrite it"

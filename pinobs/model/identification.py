@@ -70,7 +70,9 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from os import PathLike
 from typing import Any
 
 import numpy as np
@@ -730,11 +732,21 @@ class Identification:
 
 
 def segments(t: Vector, q: Vector, tau: Vector) -> list[slice]:
-    """Contiguous stretches of finite rows sampled at the median period (±10 %)."""
+    """Contiguous stretches of finite rows sampled at the median period (±10 %), of two rows
+    or more (a row alone between gaps, a step back or a jitter beyond 10 % has no interval).
+
+    Raises:
+        IdentificationError: the median interval is not positive (timestamps repeated).
+    """
     good = np.isfinite(t) & np.all(np.isfinite(q), axis=1) & np.all(np.isfinite(tau), axis=1)
     if good.sum() < 2:
         return []
     h = float(np.median(np.diff(t[good])))
+    if not h > 0.0:
+        raise IdentificationError(
+            f"the log's median sample interval is {h:g} s: its timestamps repeat; give each "
+            "sample its own time"
+        )
     out, start = [], None
     for k in range(t.shape[0]):
         ok = bool(good[k]) and (
@@ -748,7 +760,7 @@ def segments(t: Vector, q: Vector, tau: Vector) -> list[slice]:
             start = k if good[k] else None
     if start is not None:
         out.append(slice(start, t.shape[0]))
-    return out
+    return [seg for seg in out if seg.stop - seg.start >= 2]
 
 
 def build_rows(
@@ -805,11 +817,28 @@ def log_arrays(robot: Robot, log: Any) -> tuple[Vector, Vector, Vector]:
         IdentificationError: no torques.
         DimensionError: shapes that do not fit ``robot``.
     """
-    if isinstance(log, tuple):
+    if isinstance(log, (tuple, list)):
+        if len(log) != 3:
+            raise DimensionError(
+                f"log is a sequence of {len(log)} arrays; identification needs (t, q, tau)"
+            )
         t, q, tau = log
-    else:  # a simulation Result carries the truth in q: identify from what was measured
+    elif isinstance(log, Mapping) and {"t", "q"} <= set(log):
+        t, q, tau = log["t"], log["q"], log.get("tau")
+    elif hasattr(log, "t") and hasattr(log, "q"):
+        # a simulation Result carries the truth in q: identify from what was measured
         t, tau = log.t, getattr(log, "tau", None)
         q = log.q_meas if hasattr(log, "q_meas") else log.q
+    else:
+        read = (
+            " (read a file with pinobs.io.read_log(path, robot))"
+            if isinstance(log, (str, PathLike)) or hasattr(log, "columns")
+            else ""
+        )
+        raise DimensionError(
+            f"log is a {type(log).__name__}; give a pinobs.io.Log, a pinobs.Result, (t, q, tau) "
+            f"arrays or a mapping with 't', 'q', 'tau'{read}"
+        )
     if tau is None:
         raise IdentificationError("the log has no torques: identification needs tau columns")
     t = np.asarray(t, dtype=float)

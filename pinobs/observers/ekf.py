@@ -229,6 +229,8 @@ def stiff_transition_matrix(A: Vector, h: float) -> Vector:
     equal to :func:`transition_matrix` when ``‖A h‖∞ ≤ 1/4``.
     """
     norm = float(np.abs(A).sum(axis=1).max()) * h
+    if not math.isfinite(norm):  # a lost filter's Jacobian: NaN, reported by its caller
+        return np.full_like(A, np.nan)
     s = 0 if norm <= _SERIES_NORM else math.ceil(math.log2(norm / _SERIES_NORM))
     Phi = transition_matrix(A, h / 2**s)
     for _ in range(s):
@@ -246,6 +248,8 @@ def friction_substeps(robot: Robot, v: Vector, acc: Vector, minv_diag: Vector, d
     """
     v_near = np.maximum(np.abs(v) - np.abs(acc) * dt, 0.0)
     lam = float(np.max(minv_diag * -robot.friction_derivative(v_near)))
+    if not math.isfinite(lam):  # a lost filter's state: one step, its NaN reported by the caller
+        return 1
     return max(1, math.ceil(lam * dt / _RK4_STIFFNESS))
 
 

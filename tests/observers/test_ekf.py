@@ -361,3 +361,16 @@ def test_coulomb_friction_in_the_model_keeps_the_accuracy(name: str) -> None:
 def test_coulomb_friction_in_the_model_keeps_the_accuracy_over_seeds(name: str, seed: int) -> None:
     plain, friction = _coulomb_ratio(name, 3.0, seed)
     assert friction < 2.0 * plain
+
+
+def test_a_lost_filters_nan_state_gives_nan_steps_not_a_raw_error() -> None:
+    """A filter lost on a log in wrong units (torques ×100, time in ms, degrees) reached
+    ``stiff_transition_matrix`` and ``friction_substeps`` with NaN and raised a raw
+    ``ValueError`` (``math.ceil`` of NaN) through ``pinobs identify``'s refinement; they now
+    give NaN and one step, which the callers report as a lost filter."""
+    from pinobs.observers.ekf import friction_substeps, stiff_transition_matrix
+
+    assert np.all(np.isnan(stiff_transition_matrix(np.full((4, 4), np.nan), 1e-3)))
+    robot = pinobs.load("ur5", friction=True)
+    nan = np.full(robot.nv, np.nan)
+    assert friction_substeps(robot, nan, nan, np.ones(robot.nv), 1e-3) == 1

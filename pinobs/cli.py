@@ -267,7 +267,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    robot = load(args.robot, root_joint=args.root_joint)
+    robot = _load(args)
     names = _observer_list(args.observer)
     result, report, table = _run_one(
         robot, names, args, strict=not any(n == "all" for n in args.observer)
@@ -379,7 +379,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         return _estimate_many(args)
     if args.smooth:
         return _estimate_smoothed(args)
-    robot = load(args.robot, root_joint=args.root_joint)
+    robot = _load(args)
     columns = _column_map(args.map)
     keep = bool(args.html)
     with _progress(f"{robot.name}: {args.observer}", not args.no_progress) as progress:
@@ -442,13 +442,14 @@ def _estimate_many(args: argparse.Namespace) -> int:
     if args.html:
         raise OptionError("--html is for one log (--out FILE), not with --out-dir")
     observer_class(args.observer)  # an unknown name: UnknownNameError listing the registered ones
-    load(args.robot, root_joint=args.root_joint)  # a bad robot fails here, not once per log
+    _load(args)  # a bad robot fails here, not once per log
     tasks = log_tasks(
         find_logs(args.log),
         args.out_dir,
         robot=args.robot,
         observer=args.observer,
         root_joint=args.root_joint,
+        friction=True if args.friction else None,
         force=args.force,
         columns=_column_map(args.map),
         topic=args.topic,
@@ -543,7 +544,7 @@ def _identify_report(ident: Any) -> str:
 def _cmd_identify(args: argparse.Namespace) -> int:
     from pinobs.observers.calibration import identify
 
-    robot = load(args.robot, root_joint=args.root_joint)
+    robot = _load(args)
     out = Path(args.out)
     if out.is_dir():
         raise OutputExistsError(f"--out {str(out)!r} is a directory; give a file name")
@@ -558,7 +559,10 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     print(_identify_report(ident))
     path = ident.save(str(out))
     opts = ", ".join(f"{k}={v:g}" for k, v in ident.report["observer_options"].items())
-    print(f"wrote {path}: load it with pinobs.load({path!r}, friction=True)")
+    root = robot.root_joint if robot.root_joint not in (None, "fixed") else None
+    how = f"{path!r}, friction=True" + ("" if root is None else f", root_joint={root!r}")
+    cli = f"--robot {path} --friction" + ("" if root is None else f" --root-joint {root}")
+    print(f"wrote {path}: load it with pinobs.load({how}) (pinobs estimate: {cli})")
     print(
         f"run ekf or riemannian on it with {opts or 'their default options'}, or adaptive "
         "starting from it"
@@ -569,7 +573,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 def _cmd_excite(args: argparse.Namespace) -> int:
     from pinobs.model.excitation import excite
 
-    robot = load(args.robot, root_joint=args.root_joint)
+    robot = _load(args)
     out = Path(args.out)
     if out.exists() and not args.force:
         raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
@@ -621,7 +625,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
     from pinobs.io.smoothing import smooth_log
     from pinobs.observers.smoothing import AUTO_WHITE_SCALE
 
-    robot = load(args.robot, root_joint=args.root_joint)
+    robot = _load(args)
     try:
         run, stretches = smooth_log(
             args.log,
@@ -709,7 +713,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
 def _cmd_check(args: argparse.Namespace) -> int:
     from pinobs.observers.ii import check_assumption1
 
-    robot = load(args.robot, root_joint=args.root_joint)
+    robot = _load(args)
     report = check_assumption1(robot)
     print(report.format())
     return 0 if report.holds else 1
@@ -846,6 +850,18 @@ def _add_robot_options(p: argparse.ArgumentParser, files: str = "URDF/MJCF") -> 
     p.add_argument(
         "--root-joint", default=None, choices=["fixed", "spherical", "freeflyer", "planar"]
     )
+    p.add_argument(
+        "--friction",
+        action="store_true",
+        help="the URDF's joint friction (<dynamics damping friction>, as pinobs identify "
+        "writes it) in the dynamics (default: off for URDFs)",
+    )
+
+
+def _load(args: argparse.Namespace) -> Robot:
+    """The robot of ``--robot``, ``--root-joint`` and ``--friction``."""
+    friction = True if getattr(args, "friction", False) else None
+    return load(args.robot, root_joint=args.root_joint, friction=friction)
 
 
 def _add_cluster_options(

@@ -44,6 +44,16 @@ def test_identify_writes_a_calibrated_urdf_closer_to_the_truth(
             np.abs(calibrated.mass_matrix(q) - m).max()
             < 0.2 * np.abs(nominal.mass_matrix(q) - m).max()
         )
+    assert f"(pinobs estimate: --robot {out} --friction)" in text
+    # estimate --friction runs on the identified friction (it could not load it: a model
+    # without it ran, silently)
+    est = ["estimate", "--robot", str(out), "--observer", "ekf", "--log", str(log)]
+    for extra, name in (([], "plain.csv"), (["--friction"], "friction.csv")):
+        assert main([*est, "--noise", "1e-5", "--out", str(tmp_path / name), *extra]) == 0
+    plain, rubbed = (
+        np.loadtxt(tmp_path / n, delimiter=",", skiprows=1) for n in ("plain.csv", "friction.csv")
+    )
+    assert np.nanmax(np.abs(plain[:, 4:] - rubbed[:, 4:])) > 1e-6
     # refuses to overwrite without --force, and refuses a log without torques
     assert main(["identify", "--robot", "planar_3r", "--log", str(log), "--out", str(out)]) == 2
     assert "exists" in capsys.readouterr().err
@@ -180,3 +190,27 @@ def test_estimate_refuses_a_rate_or_a_report_count_it_cannot_use(
         assert said in capsys.readouterr().err
     assert main([*base, "--out", str(tmp_path), "--force"]) == 2
     assert "is a directory" in capsys.readouterr().err
+
+
+def test_a_floating_robot_is_written_with_how_to_load_it_floating(tmp_path, capsys) -> None:
+    """The load hint said ``pinobs.load(path, friction=True)``, which loads a free-flyer's
+    calibrated URDF fixed (the go1 then ran as 12 joints on its base's columns); it now gives
+    the root joint, and a log with positional columns beyond the robot's is refused (they
+    were ignored: a log of another robot ran on this one's first columns)."""
+    robot = pinobs.load("rigid_body")
+    res = pinobs.simulate(
+        robot, [], duration=2.0, sensor=Sensor(rate=1000.0, noise_std=1e-5), seed=1
+    )
+    q = np.array(res.q_meas)
+    q[0] = res.q[0]
+    write_log(tmp_path / "rb.csv", res.t, q, res.tau)
+    out = tmp_path / "rb.urdf"
+    assert main(["identify", "--robot", "rigid_body", "--log", str(tmp_path / "rb.csv"),
+                 "--out", str(out)]) == 0  # fmt: skip
+    said = capsys.readouterr().out
+    assert f"pinobs.load({str(out)!r}, friction=True, root_joint='freeflyer')" in said
+    wrong = pinobs.load(str(out), root_joint="planar")  # nq = 4: a log of 7 q columns
+    with pytest.raises(
+        pinobs.DimensionError, match=r"\['q4', 'q5', 'q6', 'tau3', 'tau4', 'tau5'\] are beyond"
+    ):
+        pinobs.io.read_log(tmp_path / "rb.csv", wrong)

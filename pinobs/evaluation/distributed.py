@@ -377,6 +377,7 @@ class LogTask:
     robot: str
     observer: str
     root_joint: str | None = None
+    friction: bool | None = None  # pinobs.load's friction
     force: bool = False
     columns: tuple[tuple[str, str], ...] = ()
     topic: str | None = None
@@ -396,6 +397,7 @@ def log_tasks(
     robot: str,
     observer: str,
     root_joint: str | None = None,
+    friction: bool | None = None,
     force: bool = False,
     columns: Mapping[str, str] | None = None,
     topic: str | None = None,
@@ -415,6 +417,7 @@ def log_tasks(
         observer: a registry name.
         root_joint, columns, topic, rate, noise_std: as :func:`pinobs.io.process_log`
             (``noise_std=None``: estimated from each log's first second).
+        friction: :func:`pinobs.load`'s (the URDF's joint friction in the dynamics).
         force: overwrite existing estimates and summary.
         smooth: smooth each log instead of filtering it, with these options of
             :func:`pinobs.io.smoothing.smooth_log` (``{}``: its defaults; ``lag``,
@@ -460,6 +463,7 @@ def log_tasks(
             robot=robot_source,
             observer=observer,
             root_joint=root_joint,
+            friction=friction,
             force=force,
             columns=tuple(sorted((columns or {}).items())),
             topic=topic,
@@ -484,7 +488,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
     from pinobs.observers.smoothing import smoothing_warnings
 
     start = time.perf_counter()
-    robot = load(task.robot, root_joint=task.root_joint)
+    robot = load(task.robot, root_joint=task.root_joint, friction=task.friction)
     common: dict[str, Any] = {
         "force": task.force,
         "columns": dict(task.columns) or None,

@@ -165,6 +165,18 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
         for k in range(nv):
             named = f"tau.{name}" if nv == 1 else f"tau.{name}.{k}"
             tau_cols.append(one([f"tau{iv + k}", named], f"tau{iv + k}"))
+    beyond = [
+        c
+        for c in header
+        for kind, n in (("q", robot.nq), ("tau", robot.nv))
+        if c.startswith(kind) and c[len(kind) :].isdigit() and int(c[len(kind) :]) >= n
+    ]
+    if beyond:  # another robot's log (or this one loaded without its root joint)
+        raise DimensionError(
+            f"{where}: columns {beyond} are beyond robot {robot.name!r}'s nq = {robot.nq}, "
+            f"nv = {robot.nv}: the log of another robot, or a floating base loaded fixed "
+            "(root_joint=...)? Drop or rename them (columns=...) if they are not its own"
+        )
     if t is None or missing:
         raise DimensionError(
             f"{where}: columns {list(header)} lack {(['t'] if t is None else []) + missing}; "

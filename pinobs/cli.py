@@ -516,7 +516,7 @@ def _identify_report(ident: Any) -> str:
         "torque residual RMS per joint (rows weighted by M⁻¹/Δt, rad/s²-like)",
         f"{'joint':24s} {'fit before':>11s} {'fit after':>11s} {'held-out before':>16s} {'held-out after':>15s}",
     ]
-    for j, name in enumerate(rep["joints"]):
+    for j, name in enumerate(rep["coordinates"]):
         lines.append(
             f"{name:24s} {rep['residual_before'][j]:11.4g} {rep['residual_after'][j]:11.4g} "
             f"{rep['holdout_before'][j]:16.4g} {rep['holdout_after'][j]:15.4g}"
@@ -533,6 +533,7 @@ def _identify_report(ident: Any) -> str:
             + (", ..." if n_not > 6 else "")
             + ")"
         )
+    lines += [f"warning: {w}" for w in rep.get("warnings", [])]
     if np.any(ident.offset):
         lines.append(
             "torque offset b per joint [N·m] (not stored in the URDF; the model is driven by tau + b: add it to the torques "

@@ -46,6 +46,7 @@ import csv
 import glob
 import io
 import zipfile
+from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -128,11 +129,17 @@ def _blocks(robot: Robot) -> list[tuple[str, str, int, int, int, int]]:
 def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
     """Match column names to the robot (module docstring); raise naming what is missing."""
     names = set(header)
+    counts = Counter(header)
 
     def one(candidates: list[str], what: str) -> str | None:
         found = [c for c in candidates if c in names]
         if len(found) > 1:
             raise DimensionError(f"{where}: columns {found} all give {what}; keep one")
+        if found and counts[found[0]] > 1:  # (the first was used, silently)
+            raise DimensionError(
+                f"{where}: {counts[found[0]]} columns are named {found[0]!r} (after columns=..., "
+                "if given); keep one"
+            )
         return found[0] if found else None
 
     t = one(["t"], "t")

@@ -68,6 +68,25 @@ def test_a_column_map_renames_columns_to_joints(tmp_path, ur5, data) -> None:
     assert len(pd.read_csv(out)) == N
 
 
+def test_a_column_named_twice_or_beyond_the_robot_is_refused(tmp_path, ur5, data) -> None:
+    """Found by a sweep: two ``t`` columns, or ``--map enc1=q1`` on a log that has ``q1``, read
+    the first silently; positional columns beyond the robot's were ignored (another robot's
+    log ran on its first columns)."""
+    t, q, _ = data
+    frame = pd.DataFrame({"t": t, **{f"q{i}": q[:, i] for i in range(6)}, "enc1": q[:, 1]})
+    frame.to_csv(tmp_path / "a.csv", index=False)
+    with pytest.raises(pinobs.DimensionError, match="2 columns are named 'q1'"):
+        read_log(tmp_path / "a.csv", ur5, columns={"enc1": "q1"})
+    text = (tmp_path / "a.csv").read_text().replace("enc1", "t", 1)
+    (tmp_path / "b.csv").write_text(text)
+    with pytest.raises(pinobs.DimensionError, match="2 columns are named 't'"):
+        read_log(tmp_path / "b.csv", ur5)
+    frame["q6"] = 0.0
+    frame.drop(columns="enc1").to_csv(tmp_path / "c.csv", index=False)
+    with pytest.raises(pinobs.DimensionError, match=r"\['q6'\] are beyond robot"):
+        read_log(tmp_path / "c.csv", ur5)
+
+
 def test_continuous_joint_given_as_one_angle_column() -> None:
     robot = pinobs.load("double_pendulum_continuous")
     names = robot.joint_names

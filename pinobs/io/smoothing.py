@@ -247,7 +247,7 @@ def _streamed(
         band=band,
     )
     rec = _Streamer(robot, observer, new)
-    est = LogEstimator(rec, period=period)
+    est = LogEstimator(rec, period=period, check_v=False)
     pending: deque[tuple[float, float]] = deque()  # (t, sample number or NaN) of unwritten rows
     estimated = measured = 0
     nan_q, nan_v = np.full(robot.nq, np.nan), np.full(robot.nv, np.nan)
@@ -324,7 +324,7 @@ def _recorded(
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Every screened sample kept, each stretch smoothed at the end."""
     rec = _Recorder(robot, observer)
-    est = LogEstimator(rec, period=period)
+    est = LogEstimator(rec, period=period, check_v=False)
     parts = [est.feed(c) for c in _chain(first, chunks)]
     parts.append(est.finish())
     t = np.concatenate([p[0] for p in parts])

@@ -25,8 +25,11 @@ median interval of the first chunk unless given):
 - **torque** unreadable, non-finite or absurd (beyond ``ABSURD_LIMIT_FACTOR``
   times the URDF effort limit): the previously accepted torque is held; a
   rejected torque never reaches the observer.
-- an observer that fails on a row (``ObserverDiverged``, a singular matrix)
-  is re-initialised at the next row with a usable position.
+- an observer that fails on a row (``ObserverDiverged``, a singular matrix), or
+  whose velocity estimate is absurd (beyond ``ABSURD_LIMIT_FACTOR`` times the
+  URDF velocity limit: a diverged filter stays finite for a while, up to 4e203
+  rad/s on a UR5 log with torques ×50, which counted as estimated), is
+  re-initialised at the next row with a usable position.
 
 Each such row is reported once, ``(position, reason)``, with the reasons of
 the row joined; positions are file lines (CSV) or row / message numbers.
@@ -173,9 +176,13 @@ class LogEstimator:
     Args:
         observer: the observer (``reset``/``update``, see :class:`ObserverLike`).
         period: nominal sample period [s] (default: the median interval of the first chunk).
+        check_v: re-initialise an observer whose velocity estimate is absurd (module
+            docstring); off for an observer-like whose estimates carry no velocity.
     """
 
-    def __init__(self, observer: ObserverLike, *, period: float | None = None) -> None:
+    def __init__(
+        self, observer: ObserverLike, *, period: float | None = None, check_v: bool = True
+    ) -> None:
         self.observer = observer
         self.robot = observer.robot
         self.period = period
@@ -185,6 +192,11 @@ class LogEstimator:
         self.estimated = 0
         self.measured = 0
         self._bounds = _absurd_bounds(self.robot)
+        vel = np.minimum(np.array(self.robot.model.velocityLimit, dtype=float), 2 * ABSURD_VALUE)
+        ok = np.isfinite(vel) & (vel > 0) & (vel < ABSURD_VALUE)
+        # (check_v=False: an observer-like whose estimates carry no velocity, the smoother's
+        # recorder: pinobs.io.smoothing)
+        self._v_max = np.where(ok, ABSURD_LIMIT_FACTOR * vel, ABSURD_VALUE) if check_v else np.inf
         self._names = _coordinate_names(self.robot)
         self._outside: dict[int, float] = {}
         self._pending: Log | None = None
@@ -379,16 +391,28 @@ class LogEstimator:
                 try:
                     est = ob.update(t, q, tau)
                     self._t = t
-                    return est, True
+                    return self._sane(est, t), True
                 except (ConfigurationError, NonFiniteError, DimensionError) as exc:
                     notes.append(f"{exc}")
             notes.append("used as a dropped sample (propagated only)")
             est = ob.update(t, None, tau)
             self._t = t
-            return est, False
+            return self._sane(est, t), False
         except (ObserverDiverged, ArithmeticError, np.linalg.LinAlgError, PinobsError) as exc:
             notes.append(f"observer failed ({type(exc).__name__}: {exc})")
             return self._restart(t, q, tau, notes)
+
+    def _sane(self, est: Estimate, t: float) -> Estimate:
+        """``est``, or :class:`ObserverDiverged` if a velocity is absurd (module docstring)."""
+        bad = np.abs(est.v) > self._v_max
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            raise ObserverDiverged(
+                f"v[{i}] = {est.v[i]:.3g} is beyond {ABSURD_LIMIT_FACTOR:g}× the velocity limit "
+                "(the observer diverged: its model does not explain the log)",
+                t=t,
+            )
+        return est
 
     def _restart(
         self, t: float, q: Vector | None, tau: Vector | None, notes: list[str]

@@ -313,3 +313,21 @@ def test_a_header_only_log_exits_1_and_an_empty_file_is_an_error(tmp_path, sim, 
     path.write_text("")
     assert main([*args, "--out", str(tmp_path / "o2.csv")]) == 2
     assert "is empty" in capsys.readouterr().err
+
+
+def test_an_absurd_velocity_estimate_restarts_the_observer_and_is_reported(sim, ur5) -> None:
+    """Found by a sweep: an EKF diverging on torques ×50 stayed finite for a while, up to
+    3.8e203 rad/s on a UR5 (limit 3.15), and every row counted as estimated.  A velocity
+    beyond ``ABSURD_LIMIT_FACTOR`` × the URDF limit now restarts it, reported."""
+    from pinobs.tolerances import ABSURD_LIMIT_FACTOR
+
+    log = Log(t=sim.t[1:], q=sim.q_meas[1:], tau=50.0 * np.array(sim.tau[1:]))
+    run = estimate_log(pinobs.make_observer("ekf", ur5, noise_std=1e-4), log)
+    limit = np.array(ur5.model.velocityLimit)
+    assert np.all(np.abs(run.v) <= ABSURD_LIMIT_FACTOR * limit * (1 + 1e-9))
+    assert any("beyond 100× the velocity limit" in why for _, why in run.bad_rows)
+    clean = estimate_log(
+        pinobs.make_observer("ekf", ur5, noise_std=1e-4),
+        Log(t=sim.t[1:], q=sim.q_meas[1:], tau=sim.tau[1:]),
+    )
+    assert not clean.bad_rows

@@ -121,25 +121,34 @@ def _predicted(
 
 
 def _corrected(
-    robot: Robot, state: _State | ErrorState, P: Vector, r: float, gate: float, q_meas: Vector
+    robot: Robot,
+    q: Vector,
+    v: Vector,
+    a: Vector,
+    P: Vector,
+    run: int,
+    level: float | None,
+    r: float,
+    gate: float,
+    q_meas: Vector,
 ) -> _State:
-    """The update of the predicted ``state`` (``q, v`` and ``a`` or ``d``; ``P`` its 3×3
-    covariance) with ``q_meas``: the innovation ``e = difference(q, q_meas)``, ``S = P₀₀ + r``,
-    the outlier gate on ``NIS = |e|² / S`` (:func:`pinobs.observers.base.outlier_gate`,
-    threshold ``gate``: a rejected measurement leaves the prediction), else per direction the
-    shared gain ``K = P[:, 0] / S`` and ``P`` in the Joseph form (not symmetrised)."""
-    q, v, a = state[:3]
+    """The update of the prediction ``q, v, a, P`` (``P`` its 3×3 covariance; ``run`` and
+    ``level`` the gate's state) with ``q_meas``: the innovation ``e = difference(q, q_meas)``,
+    ``S = P₀₀ + r``, the outlier gate on ``NIS = |e|² / S``
+    (:func:`pinobs.observers.base.outlier_gate`, threshold ``gate``: a rejected measurement
+    leaves the prediction), else per direction the shared gain ``K = P[:, 0] / S`` and ``P`` in
+    the Joseph form; ``P`` symmetrised."""
     s = P[0, 0] + r
     e = robot.difference(q, q_meas)
-    nis = float(e @ e) / s
-    reject, level = outlier_gate(nis, state.nis_level, state.gate_run, gate, e.size)
+    nis = float(e.dot(e)) / s
+    reject, level = outlier_gate(nis, level, run, gate, e.size)
     if reject:
-        return _State(q, v, a, P, nis, True, state.gate_run + 1, level)
+        return _State(q, v, a, 0.5 * (P + P.T), nis, True, run + 1, level)
     K = P[:, 0] / s
     IKH = np.eye(3) - np.outer(K, [1.0, 0.0, 0.0])
     P = IKH @ P @ IKH.T + r * np.outer(K, K)
     q = robot.integrate(q, K[0] * e)
-    return _State(q, v + K[1] * e, a + K[2] * e, P, nis, False, 0, level)
+    return _State(q, v + K[1] * e, a + K[2] * e, 0.5 * (P + P.T), nis, False, 0, level)
 
 
 @register
@@ -191,10 +200,11 @@ class ConstantAccelerationKF(Observer[_State]):
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         F, Q = transition(dt, self.gains.jerk_psd)
         q, v, a, P = _predicted(self.robot, state.q, state.v, state.a, state.P, F, Q, dt)
-        pred = state._replace(q=q, v=v, a=a, P=P, nis=None, gated=False)
-        if q_meas is not None:
-            pred = _corrected(self.robot, pred, P, self.gains.meas_std**2, self._gate, q_meas)
-        return pred._replace(P=0.5 * (pred.P + pred.P.T))
+        run, level = state.gate_run, state.nis_level
+        if q_meas is None:
+            return _State(q, v, a, 0.5 * (P + P.T), None, False, run, level)
+        r = self.gains.meas_std**2
+        return _corrected(self.robot, q, v, a, P, run, level, r, self._gate, q_meas)
 
     def _innovation(self, state: _State) -> tuple[float | None, bool]:
         return state.nis, state.gated
@@ -282,10 +292,15 @@ class WhiteJerkFilter:
         return self._full(q, v, a, P3, None, False, state.gate_run, state.nis_level), Phi.copy()
 
     def _correct(self, state: ErrorState, q_meas: Vector) -> ErrorState:
-        new = _corrected(self.robot, state, state.P3, self.gains.meas_std**2, self._gate, q_meas)
+        q, v, a, P3, run, level = (*state[:3], state.P3, state.gate_run, state.nis_level)
+        new = _corrected(
+            self.robot, q, v, a, P3, run, level, self.gains.meas_std**2, self._gate, q_meas
+        )
         if new.gated:  # the prediction, as it is
-            return state._replace(nis=new.nis, gated=True, gate_run=new.gate_run)
-        return self._full(new.q, new.v, new.a, 0.5 * (new.P + new.P.T), *new[4:])
+            return state._replace(
+                nis=new.nis, gated=True, gate_run=new.gate_run, nis_level=new.nis_level
+            )
+        return self._full(*new)
 
     def _gate_nis(self, state: ErrorState) -> float:
         """The NIS above which :meth:`_correct` rejected ``state``'s measurement."""
@@ -532,11 +547,13 @@ class KFBank:
                     one = one._replace(q=qk, v=vk, a=ak, P=Pk, nis=None, gated=False)
                     if good[k]:
                         s = Pk[0, 0] + self.meas_var
-                        one = _corrected(self.robot, one, Pk, self.meas_var, self.gate, q[k])
+                        one = _corrected(
+                            self.robot, qk, vk, ak, Pk, one.gate_run, one.nis_level,
+                            self.meas_var, self.gate, q[k],
+                        )  # fmt: skip
                         cap = gate_nis(self.gate, one.nis_level, nv) if one.gated else math.inf
                         nis = min(cast(float, one.nis), cap)
                         ll[f] -= 0.5 * (nis + nv * math.log(2.0 * math.pi * s))
-                        one = one._replace(P=0.5 * (one.P + one.P.T))
                 if store and f == 0:
                     X[k], PX[k], used[k] = (
                         (one.q, one.v, one.a),

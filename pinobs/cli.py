@@ -514,11 +514,13 @@ def _identify_report(ident: Any) -> str:
         + ("; physical consistency enforced" if rep["projected"] else ""),
         "",
         "torque residual RMS per joint (rows weighted by M⁻¹/Δt, rad/s²-like)",
-        f"{'joint':24s} {'fit before':>11s} {'fit after':>11s} {'held-out before':>16s} {'held-out after':>15s}",
+        f"{'joint':24s} {'fit before':>11s} {'fit after':>11s} {'unexplained':>12s} "
+        f"{'held-out before':>16s} {'held-out after':>15s}",
     ]
     for j, name in enumerate(rep["coordinates"]):
         lines.append(
             f"{name:24s} {rep['residual_before'][j]:11.4g} {rep['residual_after'][j]:11.4g} "
+            f"{100 * rep['unexplained'][j]:10.3g} % "
             f"{rep['holdout_before'][j]:16.4g} {rep['holdout_after'][j]:15.4g}"
         )
     lines += ["", f"{'parameter':32s} {'nominal':>12s} {'identified':>12s} {'std':>10s}"]

@@ -222,7 +222,7 @@ def test_identify_warns_when_its_held_out_end_says_the_fit_does_not_hold(
     """Cross-validation in the report: nothing held out (0.45 s: a 2 kg link fitted to 38 kg
     unchecked), or a joint whose held-out residual the fit makes more than twice the nominal
     model's, is warned; the 8 s calibration log is not."""
-    from pinobs.model.identification import _holdout_warnings
+    from pinobs.model.identification import _fit_warnings
 
     path, _ = planar_log
     assert main(["identify", "--robot", "planar_3r", "--log", str(path),
@@ -234,7 +234,38 @@ def test_identify_warns_when_its_held_out_end_says_the_fit_does_not_hold(
     assert main(["identify", "--robot", "planar_3r", "--log", str(short),
                  "--out", str(tmp_path / "b.urdf")]) == 0  # fmt: skip
     assert "warning: nothing was held out" in capsys.readouterr().out
-    report = {"holdout_rows": 10, "coordinates": ["a", "b"], "holdout_before": [1.0, 1.0]}
-    assert _holdout_warnings({**report, "holdout_after": [1.9, 0.5]}) == []
-    (said,) = _holdout_warnings({**report, "holdout_after": [2.1, 0.5]})
+    report = {
+        "holdout_rows": 10,
+        "coordinates": ["a", "b"],
+        "holdout_before": [1.0, 1.0],
+        "unexplained": [0.01, 0.5],
+    }
+    assert _fit_warnings({**report, "holdout_after": [1.9, 0.5]}) == []
+    (said,) = _fit_warnings({**report, "holdout_after": [2.1, 0.5]})
     assert "worse than the nominal one on a (1 → 2.1)" in said
+
+
+def test_identify_warns_when_no_parameters_explain_the_torques(
+    planar_log, tmp_path, capsys
+) -> None:
+    """A log whose torques are negated, ×100 or zero is written out with a warning naming
+    the coordinates whose torque side the fit leaves mostly unexplained (it was written
+    without a word); ×3 (a common scale) is absorbed and not warned."""
+    from pinobs.model.identification import UNEXPLAINED_WARN
+
+    path, _ = planar_log
+    robot = pinobs.load("planar_3r")
+    log = pinobs.io.read_log(path, robot)
+    for factor, warned in ((1.0, False), (3.0, False), (-1.0, True), (100.0, True), (0.0, True)):
+        ident = pinobs.identify(robot, (log.t, log.q, factor * log.tau))
+        unexplained = np.array(ident.report["unexplained"])
+        assert (unexplained.max() > UNEXPLAINED_WARN) == warned, (factor, unexplained)
+        said = [w for w in ident.report["warnings"] if "unexplained" in w]
+        assert bool(said) == warned, (factor, ident.report["warnings"])
+    bad = tmp_path / "negated.csv"
+    write_log(bad, log.t, log.q, -log.tau)
+    assert main(["identify", "--robot", "planar_3r", "--log", str(bad),
+                 "--out", str(tmp_path / "n.urdf")]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "warning: the fit leaves most of the torques unexplained on" in out
+    assert any(line.startswith("joint") and "unexplained" in line for line in out.splitlines())

@@ -423,6 +423,17 @@ class Robot:
             out[s] = x
         return out
 
+    def off_unit_rows(self, qs: ArrayLike) -> NDArray[np.bool_]:
+        """Which rows of ``qs`` ``(N, nq)`` have a quaternion or ``(cos, sin)`` pair off unit
+        norm by more than :data:`pinobs.tolerances.QUATERNION_NORM_TOL` (what
+        :meth:`check_configuration` refuses; rows with NaN are not counted)."""
+        qs = np.asarray(qs, dtype=float)
+        off = np.zeros(qs.shape[0], dtype=bool)
+        with np.errstate(invalid="ignore"):
+            for s in self._unit_slices:
+                off |= np.abs(np.linalg.norm(qs[:, s], axis=1) - 1.0) > QUATERNION_NORM_TOL
+        return off
+
     def normalize(self, q: Vector) -> Vector:
         """``q`` with its quaternions and ``(cos, sin)`` pairs projected to unit norm."""
         out = np.array(q, dtype=float)

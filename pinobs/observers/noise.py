@@ -22,7 +22,10 @@ count as angles.
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
+from numpy.typing import NDArray
 
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
@@ -53,16 +56,9 @@ def estimate_noise_std(
         σ̂ per joint velocity coordinate, shape ``(nv,)``, or ``None`` with fewer
         than 12 usable rows.
     """
-    t = np.asarray(t, dtype=float)
     q = np.asarray(q, dtype=float)
-    ok = np.isfinite(t) & np.isfinite(q).all(axis=1)
-    idx = np.flatnonzero(ok)
-    if idx.size < _MIN_ROWS:
-        return None
-    t0 = t[idx[0]]
-    inside = idx[t[idx] <= t0 + window]
-    idx = inside if inside.size >= min_rows else idx[:min_rows]
-    if idx.size < _MIN_ROWS:
+    idx = _rows(t, q, window, min_rows)
+    if idx is None:
         return None
     if robot.is_vector_space:
         x = q[idx]
@@ -72,6 +68,19 @@ def estimate_noise_std(
     d = x[3:] - 3.0 * x[2:-1] + 3.0 * x[1:-2] - x[:-3]  # Gasser et al. (1986), order 3
     var = np.median(d**2, axis=0) / (_THIRD_DIFF_GAIN * _CHI2_1_MEDIAN)
     return np.sqrt(var)
+
+
+def _rows(t: Vector, q: Vector, window: float, min_rows: int) -> NDArray[np.intp] | None:
+    """The rows :func:`estimate_noise_std` uses: the finite ones within ``window`` s of the
+    first finite one (at least ``min_rows``), or ``None`` when fewer than 12."""
+    t = np.asarray(t, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(q).all(axis=1)
+    idx = np.flatnonzero(ok)
+    if idx.size < _MIN_ROWS:
+        return None
+    inside = idx[t[idx] <= t[idx[0]] + window]
+    idx = inside if inside.size >= min_rows else idx[:min_rows]
+    return idx if idx.size >= _MIN_ROWS else None
 
 
 def noise_from_log(
@@ -87,11 +96,15 @@ def noise_from_log(
     sigma_joint = estimate_noise_std(t, q, robot)
     if sigma_joint is None:
         return None
+    used = cast(NDArray[np.intp], _rows(t, np.asarray(q, dtype=float), 1.0, 200))
     sigma = float(np.median(sigma_joint))
     joints = np.array2string(sigma_joint, formatter={"float_kind": "{:.2e}".format})
+    # the rows' times: the first second of finite rows need not be the log's (a sweep found
+    # the sentence saying "first second" of a log whose first second was NaN)
     said = (
         f"no noise level given: estimated σ = {sigma:.3g} (median over joints; per joint "
-        f"{joints}) from the log's first second"
+        f"{joints}) from the log's first second of finite rows ({used.size} rows, "
+        f"t = {t[used[0]]:.6g} to {t[used[-1]]:.6g} s)"
     )
     if sigma < floor:
         said += f" (below {floor:g}: taken as noise-free, σ = {floor:g} used)"

@@ -228,6 +228,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import (
+    ConfigurationError,
     ConsistencyWarning,
     CostWarning,
     DimensionError,
@@ -253,7 +254,7 @@ from pinobs.observers.base import (
 from pinobs.observers.ekf import ExtendedKalmanFilter, _LazyKernel, _posv, cholesky_solve
 from pinobs.observers.kf import ConstantAccelerationKF, KFBank, KFGains, WhiteJerkFilter
 from pinobs.observers.noise import noise_from_log
-from pinobs.tolerances import TIME_EPS
+from pinobs.tolerances import QUATERNION_NORM_TOL, TIME_EPS
 
 __all__ = [
     "AUTO_WHITE_SCALE",
@@ -1189,6 +1190,14 @@ def _log_arrays(
         raise TimestampError(
             f"t[{bad}] = {t_arr[bad]!r} s is not after t[{bad - 1}] = {t_arr[bad - 1]!r} s; "
             "timestamps must be strictly increasing"
+        )
+    off = np.flatnonzero(robot.off_unit_rows(q_arr))
+    if off.size:  # refused before the passes, not at the row, after minutes (a sweep found it)
+        rows = ", ".join(map(str, off[:5])) + (", …" if off.size > 5 else "")
+        raise ConfigurationError(
+            f"{off.size} rows of q have a quaternion or (cos, sin) pair off unit norm by more "
+            f"than {QUATERNION_NORM_TOL:g} (rows {rows}; row {off[0]}: {q_arr[off[0]].tolist()}); "
+            "set such rows to NaN to smooth over them as dropped samples"
         )
     if tau is None:
         tau_arr = np.zeros((n, robot.nv))
@@ -2166,6 +2175,8 @@ def smooth(
             ``model_window``, a latency not shorter than the log, a bad filter option, or no
             ``noise_std`` and too few finite rows to estimate it.
         DimensionError, TimestampError, NonFiniteError: malformed log arrays.
+        ConfigurationError: rows with a quaternion or ``(cos, sin)`` pair off unit norm
+            (before any pass; NaN such rows to smooth over them).
 
     Warns:
         NoiseWarning: ``noise_std`` not given (σ estimated from the log).

@@ -38,6 +38,22 @@ def test_glitches_do_not_inflate_sigma() -> None:
     assert est is not None and est[2] < 1.3e-3
 
 
+def test_the_report_names_the_rows_it_used_when_the_log_starts_with_nan() -> None:
+    """The sentence said "the log's first second" of a log whose first second was NaN; it
+    now gives the rows' times."""
+    from pinobs.observers.noise import noise_from_log
+
+    robot = pinobs.load("ur5")
+    res = pinobs.simulate(robot, [], duration=2.5, sensor=pinobs.Sensor(1000.0, 1e-3), seed=4)
+    q = res.q_meas.copy()
+    q[: int(np.searchsorted(res.t, 1.0))] = np.nan
+    found = noise_from_log(res.t, q, robot)
+    assert found is not None
+    sigma, _, said = found
+    assert abs(sigma - 1e-3) < 0.2e-3
+    assert "first second of finite rows (1001 rows, t = 1 to 2 s)" in said
+
+
 def test_too_short_a_log_gives_no_estimate() -> None:
     robot = pinobs.load("ur5")
     assert estimate_noise_std(np.arange(5) * 1e-3, np.zeros((5, 6)), robot) is None

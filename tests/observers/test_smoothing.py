@@ -13,6 +13,7 @@ import pytest
 
 import pinobs
 from pinobs.errors import (
+    ConfigurationError,
     ConsistencyWarning,
     CostWarning,
     DimensionError,
@@ -317,6 +318,22 @@ def test_smoother_removes_the_filters_start_up_transient_on_noise_free_data(name
     # the extended smoother linearises along the filter's wrong start: not exact there
     assert err_s[0] < 1e-2 * err_f[0]  # measured 9.1e-4, 2.2e-4, 3.0e-4 (filter 0.48-0.59)
     assert err_s[res.t[1:] > 0.05].max() < 1e-6  # measured 1.2e-8, 2.4e-9, 2.7e-9
+
+
+def test_a_quaternion_off_unit_norm_is_refused_before_the_passes_and_nan_smooths_over_it() -> None:
+    """One bad quaternion row stopped the smoother at that row (after the passes before it);
+    it is refused up front, naming the rows, and the row set to NaN is a dropped sample."""
+    robot = cached_robot("rigid_body")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=0.3, seed=5)
+    t, q = res.t[1:], res.q_meas[1:].copy()
+    q[100, 3:7] = [0.0, 0.0, 0.0, 0.5]
+    q[150, 3:7] *= 1.01
+    with pytest.raises(ConfigurationError, match=r"2 rows of q .* \(rows 100, 150; row 100: "):
+        smooth(robot, (t, q, res.tau[1:]), noise_std=1e-4)
+    q[[100, 150]] = np.nan
+    s = smooth(robot, (t, q, res.tau[1:]), noise_std=1e-4)
+    assert np.all(np.isfinite(s.v)) and s.v.shape == (t.size, robot.nv)
+    assert not robot.off_unit_rows(res.q_meas[1:]).any()
 
 
 def test_smoother_over_the_disturbance_state_ends_on_the_filter_and_beats_it() -> None:

@@ -288,6 +288,15 @@ def _require_pandas() -> Any:
 
 
 # ---------------------------------------------------------------------- CSV
+#: Magic bytes of compressed files, their kind and a command that decompresses them.
+_COMPRESSED = (
+    (b"\x1f\x8b", "gzip", "gunzip -k"),
+    (b"BZh", "bzip2", "bunzip2 -k"),
+    (b"\xfd7zXZ\x00", "xz", "unxz -k"),
+    (b"\x28\xb5\x2f\xfd", "zstd", "unzstd"),
+)
+
+
 def _undecodable_line(path: Path) -> tuple[int, str]:
     """The first line of ``path`` that is not UTF-8, and a hint about what the file is."""
     with path.open("rb") as fh:
@@ -299,6 +308,10 @@ def _undecodable_line(path: Path) -> tuple[int, str]:
         hint = " (it is a zip archive: an .npz log must be named .npz)"
     elif head.startswith(b"\x93NUMPY"):
         hint = " (it is a .npy array: save the log with np.savez(path, t=..., q=..., tau=...))"
+    else:  # compressed text: a sweep found a .csv.gz refused with no word of why
+        for magic, kind, tool in _COMPRESSED:
+            if head.startswith(magic):
+                hint = f" (it is {kind}-compressed: decompress it first, e.g. `{tool} {path}`)"
     with path.open("rb") as fh:
         for number, raw in enumerate(fh, start=1):
             if number == 1 and raw.startswith(b"\xef\xbb\xbf"):
@@ -316,6 +329,17 @@ class _Fallback(Exception):
     def __init__(self, rows: int) -> None:
         super().__init__(rows)
         self.rows = rows
+
+
+def _all_nan_row(cols: list[Vector]) -> bool:
+    """Whether some row is NaN in every column (the first column's NaN rows checked in the
+    others: no copy of a clean batch)."""
+    rows = np.flatnonzero(np.isnan(cols[0]))
+    for c in cols[1:]:
+        if not rows.size:
+            break
+        rows = rows[np.isnan(c[rows])]
+    return bool(rows.size)
 
 
 def _float_column(col: Any) -> Vector:
@@ -397,7 +421,13 @@ def _arrow_csv_chunks(
             while off < batch.num_rows:
                 take = min(chunk_rows - rows, batch.num_rows - off)
                 part = batch.slice(off, take)
-                pending.append({c: _float_column(part.column(c)) for c in used})
+                cols = {c: _float_column(part.column(c)) for c in used}
+                if _all_nan_row(list(cols.values())):
+                    # a blank line (Arrow: a row of nulls): pandas's, which are not rows (a
+                    # sweep found them rows here, NaN and unreported, and dropped after a
+                    # fallback: one log read two ways)
+                    raise _Fallback(start)
+                pending.append(cols)
                 rows, off = rows + take, off + take
                 if rows == chunk_rows:
                     yield flush()

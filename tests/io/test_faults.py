@@ -91,6 +91,41 @@ def test_utf16_and_binary_files_are_errors_naming_the_line(tmp_path, sim, ur5) -
         read_log(npy, ur5)
 
 
+def test_blank_lines_are_not_rows_whichever_reader_takes_them(tmp_path, sim, ur5) -> None:
+    """A blank line was a NaN row, unreported, in the fast (Arrow) reader, and not a row
+    after a fallback to pandas: one log read two ways.  Now never a row, in either."""
+    path, lines = _lines(tmp_path, sim, n=40)
+    blank = tmp_path / "blank.csv"
+    blank.write_text("\n".join([*lines[:10], "", *lines[10:30], "", *lines[30:]]) + "\n\n")
+    log = read_log(blank, ur5)
+    assert len(log) == 40 and not log.problems
+    np.testing.assert_array_equal(log.q, read_log(path, ur5).q)
+    assert log.lines[8:10].tolist() == [10, 12]  # the lines they are on (11 is blank)
+    bad = lines[20].split(",")
+    bad[2] = "abc"  # a bad cell between the blank lines: the careful reader from there on
+    mixed = tmp_path / "mixed.csv"
+    mixed.write_text(
+        "\n".join([*lines[:10], "", *lines[10:20], ",".join(bad), *lines[21:30], "", *lines[30:]])
+    )
+    log = read_log(mixed, ur5)
+    assert len(log) == 40 and [line for line, _ in log.problems] == [22]
+    assert np.isnan(log.q).any(axis=1).sum() == 1
+
+
+@pytest.mark.parametrize("kind", ["gzip", "bz2", "lzma"])
+def test_a_compressed_log_is_an_error_saying_so(tmp_path, sim, ur5, kind) -> None:
+    """A .csv.gz was refused as "line 1 is not UTF-8 text" with no word of why."""
+    import importlib
+
+    path, _ = _lines(tmp_path, sim, n=20)
+    packed = tmp_path / f"log.csv.{kind}"
+    packed.write_bytes(importlib.import_module(kind).compress(path.read_bytes()))
+    tool = {"gzip": "gunzip -k", "bz2": "bunzip2 -k", "lzma": "unxz -k"}[kind]
+    name = {"gzip": "gzip", "bz2": "bzip2", "lzma": "xz"}[kind]
+    with pytest.raises(pinobs.LogFormatError, match=rf"it is {name}-compressed: .*`{tool} "):
+        read_log(packed, ur5)
+
+
 def test_truncated_npz_and_renamed_npy_are_clear_errors(tmp_path, sim, ur5) -> None:
     good = tmp_path / "log.npz"
     np.savez(good, t=sim.t[1:50], q=sim.q_meas[1:50], tau=sim.tau[1:50])

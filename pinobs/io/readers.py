@@ -26,7 +26,8 @@ Formats (chosen from the source):
   ``.db3`` file, a ROS 1 ``.bag``), read with the ``rosbags`` library:
   ``sensor_msgs/JointState`` messages on ``topic`` (default: the only
   JointState topic), joints matched by name in any order, ``position`` as q,
-  ``effort`` as τ, the header stamp as t.
+  ``effort`` as τ, the header stamp as t (the bag's receive time when the first
+  message's stamp is unset, 0: said in :attr:`Log.problems`).
 
 A clean CSV/TSV is read by Arrow's streaming CSV reader straight into NumPy
 (fast, and without importing pandas); from the first row it cannot parse as
@@ -642,9 +643,21 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
         problems: list[tuple[int, str]] = []
         start = 0
         any_tau = False
-        for number, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
+        receive_time = False  # the header stamps are t, unless the publisher left them unset
+        for number, (conn, received, raw) in enumerate(reader.messages(connections=conns)):
             msg: Any = reader.deserialize(raw, conn.msgtype)
-            buf_t.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+            stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+            notes = []
+            if number == 0 and stamp == 0.0:
+                # a sweep found such a bag read as one row at t = 0 and the rest repeats of it
+                receive_time = True
+                notes.append(
+                    "header stamps unset (0): the bag's receive times are used as t for "
+                    "every message"
+                )
+            elif stamp == 0.0 and not receive_time:
+                notes.append("header stamp unset (0)")
+            buf_t.append(1e-9 * received if receive_time else stamp)
             names = list(msg.name)
             pos = np.asarray(msg.position, dtype=float)
             eff = np.asarray(msg.effort, dtype=float)
@@ -657,7 +670,8 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
                     f"bag {str(path)!r}, topic {topic!r}: the JointState joints {names} include "
                     f"none of {robot.name!r}'s joints {list(index)}"
                 )
-            notes = [f"no position for joints {lacking}"] if lacking else []
+            if lacking:
+                notes.append(f"no position for joints {lacking}")
             for jname, b in index.items():
                 i = where.get(jname)
                 if i is None:

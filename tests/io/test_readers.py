@@ -142,7 +142,16 @@ def test_estimate_api_returns_a_dataframe_with_one_row_per_log_row(ur5, data) ->
 
 # ------------------------------------------------------------------ ROS bags
 def _write_bag(
-    path: Path, robot: pinobs.Robot, t, q, tau, *, kind: str, rng, short_at: int = -1
+    path: Path,
+    robot: pinobs.Robot,
+    t,
+    q,
+    tau,
+    *,
+    kind: str,
+    rng,
+    short_at: int = -1,
+    unstamped: bool = False,
 ) -> None:
     pytest.importorskip("rosbags")
     from rosbags.typesys import Stores, get_typestore
@@ -161,8 +170,9 @@ def _write_bag(
                 order = order[:-1]  # this message lacks one joint
             sec, nsec = 1_700_000_000 + int(t[k]), round((t[k] % 1) * 1e9)
             extra = {"seq": k} if kind == "ros1" else {}
+            at = stamp(sec=0, nanosec=0) if unstamped else stamp(sec=sec, nanosec=nsec)
             msg = js(
-                header=header(**extra, stamp=stamp(sec=sec, nanosec=nsec), frame_id=""),
+                header=header(**extra, stamp=at, frame_id=""),
                 name=[names[i] for i in order],
                 position=q[k, order],
                 velocity=np.empty(0),
@@ -242,6 +252,25 @@ def test_a_bag_message_lacking_a_joint_is_reported_with_its_stamp(tmp_path, ur5,
     ((number, reason),) = run.bad_rows
     assert number == 20 and reason.startswith(f"stamp {1_700_000_000 + t[20]:.9f} s; no position")
     assert "dropped sample" in reason and run.estimated == 40
+
+
+@pytest.mark.parametrize("kind", ["mcap", "ros1"])
+def test_a_bag_whose_header_stamps_are_unset_is_timed_by_its_receive_times(
+    tmp_path, ur5, data, kind
+) -> None:
+    """Header stamps all 0 (a publisher that does not stamp): read as one row at t = 0 and
+    repeats of it, without a hint; now the bag's receive times, said on message 0."""
+    t, q, tau = data
+    bag = tmp_path / ("log.bag" if kind == "ros1" else "log_bag")
+    _write_bag(
+        bag, ur5, t[:50], q[:50], tau[:50], kind=kind, rng=np.random.default_rng(3), unstamped=True
+    )
+    log = read_log(bag, ur5)
+    np.testing.assert_allclose(log.t - 1_700_000_000, t[:50], atol=1e-6)  # receive times
+    ((number, reason),) = log.problems
+    assert number == 0 and "header stamps unset (0): the bag's receive times are used" in reason
+    run = pinobs.io.estimate_log(pinobs.make_observer("kf", ur5, rate=1000.0, noise_std=1e-4), log)
+    assert run.estimated == 50
 
 
 def test_find_logs_takes_a_file_a_folder_or_a_pattern(tmp_path) -> None:

@@ -19,6 +19,7 @@ __all__ = [
     "MASS_MATRIX_SINGULAR_TOL",
     "MAX_GAP_PERIODS",
     "NEGLIGIBLE_MASS_FRACTION",
+    "PAUSE_RESTART",
     "QUATERNION_NORM_TOL",
     "TIME_BACK_ROWS",
     "TIME_EPS",
@@ -78,6 +79,15 @@ GAP_PERIODS = 3.0
 #: error 50 ms later is 0.21 rad/s sub-stepped, 0.0017 rad/s re-initialised;
 #: after 20 ms, 0.009 vs 0.001; the kf is the same either way).
 MAX_GAP_PERIODS = 10.0
+
+#: A live update more than this many seconds (and ``MAX_GAP_PERIODS`` periods) after the
+#: previous one restarts the observer's state at its sample (position, zero velocity;
+#: what it learned kept).  Shorter pauses are propagated in sub-steps of one period: a
+#: restart starts from zero velocity, which after 12–50 ms on a UR5 (1 kHz, PD input)
+#: costs more at the first sample (1.2–1.3 rad/s) than propagating (0.002–0.033), and
+#: after 0.2 s less (0.88 against 0.54 at the first sample, but 1.3e-3 against 0.44 rad/s
+#: 50 ms later; :meth:`pinobs.observers.base.Observer._after_pause`).
+PAUSE_RESTART = 0.1
 
 #: Log rows whose time is not after the previous accepted row are skipped one
 #: by one; when this many in a row go on increasing among themselves (a clock

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pinobs.model.robot import JointBlock, Robot
+from pinobs.tolerances import ABSURD_VALUE
 
 __all__ = ["AnalyticMetric"]
 
@@ -112,6 +113,12 @@ class AnalyticMetric:
     def nv(self) -> int:
         """Number of velocities (``n``)."""
         return self._n
+
+    @property
+    def absurd_torque(self) -> Vector:
+        """The |τ| beyond which a torque is absurd (no effort limits: :data:`ABSURD_VALUE`;
+        see :attr:`Robot.absurd_torque`)."""
+        return np.full(self._n, ABSURD_VALUE)
 
     @property
     def joint_names(self) -> tuple[str, ...]:

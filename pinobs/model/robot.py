@@ -34,7 +34,12 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import ConfigurationError, DimensionError, NonFiniteError
-from pinobs.tolerances import COULOMB_SMOOTHING_VELOCITY, QUATERNION_NORM_TOL
+from pinobs.tolerances import (
+    ABSURD_LIMIT_FACTOR,
+    ABSURD_VALUE,
+    COULOMB_SMOOTHING_VELOCITY,
+    QUATERNION_NORM_TOL,
+)
 
 __all__ = ["JointBlock", "Robot", "read_only"]
 
@@ -422,6 +427,15 @@ class Robot:
                 x = np.full(b.nv, np.nan)
             out[s] = x
         return out
+
+    @functools.cached_property
+    def absurd_torque(self) -> Vector:
+        """Per velocity coordinate, the |τ| [N·m or N] beyond which a torque is absurd:
+        :data:`~pinobs.tolerances.ABSURD_LIMIT_FACTOR` times the URDF effort limit, or
+        :data:`~pinobs.tolerances.ABSURD_VALUE` without a finite positive one (read only)."""
+        eff = np.minimum(np.array(self.model.effortLimit, dtype=float), 2 * ABSURD_VALUE)
+        ok = np.isfinite(eff) & (eff > 0) & (eff < ABSURD_VALUE)
+        return read_only(np.where(ok, ABSURD_LIMIT_FACTOR * eff, ABSURD_VALUE))
 
     def off_unit_rows(self, qs: ArrayLike) -> NDArray[np.bool_]:
         """Which rows of ``qs`` ``(N, nq)`` have a quaternion or ``(cos, sin)`` pair off unit

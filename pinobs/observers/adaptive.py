@@ -119,6 +119,7 @@ from pinobs.observers.base import Consistency, Vector, positive, register
 from pinobs.observers.ekf import ExtendedKalmanFilter, _LazyKernel
 from pinobs.observers.ekf import _State as _EKFState
 from pinobs.observers.kf import BankState, KFBank
+from pinobs.tolerances import TIME_EPS
 
 __all__ = ["AdaptiveEKF", "ModelSnapshot"]
 
@@ -166,19 +167,22 @@ class _Learner:
         resolve_every: float,
         friction: bool,
         offset: bool,
-        rate: float,
+        rate: float | None,
     ) -> None:
         self.reg = MomentumRegressor(robot, friction=friction, offset=offset)
         self.nominal = self.reg.nominal()
-        h = 1.0 / rate
-        self.stride = max(1, round(0.004 / h))
-        self.win = max(self.stride, round(window / h / self.stride) * self.stride)
-        self.hw = max(2, round(half_window / h))
-        self.h = h
+        self.window, self.half_window = window, half_window
+        self.rate_given = rate
+        self.h = math.nan  # the sample interval: 1/rate, or the first one seen (_interval)
+        if rate is not None:
+            self._counts(1.0 / rate)
         self.buf: deque[tuple[float, Vector, Vector]] = deque()
         self.rows: deque[tuple[Vector, Vector]] = deque(maxlen=max(1, round(horizon / window)))
         self.resolve_every = resolve_every
-        self.next_solve = resolve_every
+        # the first solve resolve_every after the reset, wherever the clock starts (:meth:`start`;
+        # it was at t = resolve_every: a clock 100 s behind never solved, 3 s behind, 3.5 s late)
+        self.next_solve = math.nan
+        self._off_run: list[float] = []  # the latest consecutive intervals off h
         self.theta: Vector | None = None
         self.std: Vector | None = None
         self.excited: NDArray[np.bool_] | None = None
@@ -200,9 +204,25 @@ class _Learner:
         (then a solve only validates it)."""
         if q is None:
             return False  # a lost sample shows as a gap in the times below
-        if self.buf and abs(t - self.buf[-1][0] - self.h) > 0.1 * self.h:
-            self.buf.clear()  # a gap: windows never straddle one
+        if self.buf:
+            dt = t - self.buf[-1][0]
+            if math.isnan(self.h):
+                self._counts(dt)  # no rate given: the stream's own interval
+            # a gap (a lost sample: 2h) or a doubled sample: windows never straddle one.
+            # Jitter is not a gap: the rows integrate over the samples' own times (MATH §9);
+            # at ±0.1 h this test cleared the windows at every other sample and the learner
+            # never solved, silently (a sweep found it, and a 500 Hz stream without rate)
+            if abs(dt - self.h) > _GAP_FRACTION * self.h:
+                self.buf.clear()
+                self._off_run.append(dt)
+                if len(self._off_run) == _INTERVAL_CHECK:
+                    self._interval(self._off_run)
+                    self._off_run = []
+            else:
+                self._off_run = []
         self.buf.append((t, q, tau))
+        if math.isnan(self.h):
+            return False  # one sample: no interval yet
         need = self.win + 2 * self.hw + 1
         if len(self.buf) >= need:
             items = list(self.buf)[:need]
@@ -217,10 +237,35 @@ class _Learner:
             self.rows.append((A, y))
             for _ in range(self.win):
                 self.buf.popleft()
-        if t >= self.next_solve and len(self.rows) >= 2:
+        if t >= self.next_solve - TIME_EPS and len(self.rows) >= 2:  # (t₀ + kT: rounding)
             self.next_solve = t + self.resolve_every
             return self._solve(explained)
         return False
+
+    def _counts(self, h: float) -> None:
+        """The windows in samples for the interval ``h`` [s]."""
+        self.h = h
+        self.stride = max(1, round(0.004 / h))
+        self.win = max(self.stride, round(self.window / h / self.stride) * self.stride)
+        self.hw = max(2, round(self.half_window / h))
+
+    def start(self, t0: float) -> None:
+        """Begin at the reset time ``t0`` [s]: the first solve comes ``resolve_every`` after it."""
+        self.next_solve = t0 + self.resolve_every
+
+    def _interval(self, run: list[float]) -> None:
+        """:data:`_INTERVAL_CHECK` consecutive intervals off ``h`` that agree among themselves:
+        the stream is not at ``rate`` (or its first interval was not its own); their median
+        becomes ``h``, said in ``rejected``.  A 500 Hz stream taken for 1 kHz (the default
+        without ``rate``) never solved, silently."""
+        h = float(np.median(run))
+        if all(abs(d - h) <= _GAP_FRACTION * h for d in run):
+            given = f"rate = {self.rate_given:g} Hz" if self.rate_given else "its first interval"
+            self.rejected.append(
+                f"the samples come every {h:.6g} s, not {self.h:.6g} s ({given}): the "
+                "identification windows are counted on the samples' interval from here"
+            )
+            self._counts(h)
 
     def _solve(self, explained: bool = False) -> bool:
         A = np.vstack([r[0] for r in self.rows])
@@ -276,6 +321,13 @@ class _Learner:
         self.installs += 1
         return True
 
+
+#: A sample interval further than this fraction of ``h`` from it is a gap for the learner
+#: (a lost sample is ``2h``): its windows restart after it.
+_GAP_FRACTION = 0.5
+
+#: Consecutive off-interval samples after which the learner takes their median as ``h``.
+_INTERVAL_CHECK = 10
 
 #: Friction parameters within this many standard deviations of their nominal values are kept
 #: nominal (the significance of a learned viscous or Coulomb coefficient).
@@ -384,7 +436,11 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         jerk_psd: the white-jerk densities of the ``kf`` bank [rad²/s⁵] (module docstring).
         q0_std, v0_std, d0_std: initial standard deviations (as in ``ekf``).
         outlier_probability: the outlier gate (as in ``ekf``; the ``kf`` skips what it rejects).
-        rate: sample rate [Hz] (needed: the identification windows are counted in samples).
+        rate: sample rate [Hz]: the identification windows are counted in samples of
+            ``1/rate``; not given, of the stream's first interval.  Either way, ten
+            consecutive intervals off it by more than half (that agree among themselves)
+            replace it, said in ``consistency().details["rejected"]``.  Jitter within
+            ±h/2 is not a gap.
         noise_std: position noise standard deviation [rad or m].
     """
 
@@ -452,7 +508,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             resolve_every=float(resolve_every),
             friction=bool(friction),
             offset=bool(offset),
-            rate=float(self.rate or 1000.0),
+            rate=None if self.rate is None else float(self.rate),
         )
         self._learner = _Learner(self._nominal, **self._learn_options)  # type: ignore[arg-type]
         if self._learner.reg.size == 0:
@@ -513,9 +569,13 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         )
 
     def lost(self) -> bool:
-        """Whether the model-based filter's estimate or covariance is not finite (with the
-        blend, the next update restarts it; without, it stays lost)."""
-        return self._state is not None and _lost(self._state.ekf)  # type: ignore[attr-defined]
+        """Whether the model-based filter's estimate or covariance is not finite, or its
+        latest update diverged (with the blend, the next update restarts it; without, it
+        stays lost: every update raises ``ObserverDiverged`` until :meth:`reset`).  A
+        diverged update keeps the last finite state, so this said ``False`` then (a sweep)."""
+        if self._state is None:
+            return False
+        return self._diverged or _lost(self._state.ekf)  # type: ignore[attr-defined]
 
     def parameters(self) -> ParameterSet:
         """The learned parameters with names and standard deviations (nominal before the first solve)."""
@@ -603,6 +663,15 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
         return _State(ekf, kf, score, 0.0, s, q0.copy(), v0.copy(), ekf.v, 0.0)
+
+    def _restart_state(self, state: _State, q: Vector) -> _State:  # type: ignore[override]
+        """After a pause: the filter and the bank afresh at ``q`` (zero velocity), in the
+        current regime; the learned model, offset and learner kept (a reset would relearn)."""
+        zero = np.zeros(self.robot.nv)
+        ekf = self._set_regime(super()._initial_state(q, zero), self.regime)
+        kf = self._bank.initial(q, zero, self.gains.v0_std)
+        score = np.zeros((self._bank.jerk.size, self.robot.nv))
+        return _State(ekf, kf, score, state.t, zero.copy(), q.copy(), zero.copy(), ekf.v, 0.0)
 
     def _model_free(self, state: _State) -> tuple[Vector, Vector, Vector]:
         """Per coordinate, the bank's ``kf`` with the smallest running innovation:
@@ -697,6 +766,8 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             self.regime == "nominal" and level <= _NIS_TRUSTED * self.robot.nv
         )
         lr = self._learner
+        if math.isnan(lr.next_solve):
+            lr.start(float(self._reset_args[0]))
         if lr.add(t, q, tau, explained=explained):
             ekf = self._install(ekf)
             self._restarted = False

@@ -1324,7 +1324,12 @@ def _learn(
     obs = observer(False)
     window = float(obs.options["horizon"] if model_window is None else model_window)
     positive("model_window", window)
-    which = ((t - t[0]) // window).astype(int)
+    # windows (t₀ + jW, t₀ + (j+1)W]: each ends on the sample where the learner's solve
+    # falls when W is a multiple of its resolve_every (both count from the reset at t₀), so
+    # the window's model includes it.  Half-open the other way, a solve landing on a window's
+    # first sample was left out of the window before it: a payload log smoothed with its
+    # first window frozen in the nominal regime, ρ = 72.
+    which = np.maximum(np.ceil((t - t[0]) / window - 1e-6).astype(int) - 1, 0)
     which[0] = which[1]  # sample 0 is never a window of its own (nothing learned before it)
     which = np.unique(which, return_inverse=True)[1].astype(float)  # empty windows (gaps) dropped
     frozen = which

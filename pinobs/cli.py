@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -219,6 +220,25 @@ def _json_safe(x: Any) -> Any:
     if isinstance(x, list | tuple):
         return [_json_safe(v) for v in x]
     return x
+
+
+def _check_output(flag: str, path: str | Path, *, folder: bool = False) -> None:
+    """Refuse an output path that cannot be written, before the work: a file where a
+    folder is wanted or the reverse, a parent that is a file, a parent not writable."""
+    path = Path(path)
+    if path.is_dir() and not folder:
+        raise OutputExistsError(f"{flag} {str(path)!r} is a directory; give a file name")
+    if path.exists() and folder and not path.is_dir():
+        raise OutputExistsError(f"{flag} {str(path)!r} is a file; give a folder")
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise OutputExistsError(
+            f"{flag} {str(path)!r}: {str(parent)!r} is a file, not a folder; give another path"
+        )
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputExistsError(f"{flag} {str(path)!r}: {str(parent)!r} is not writable")
 
 
 def _write_json(path: str | Path, payload: Any) -> Path:
@@ -578,9 +598,11 @@ def _cmd_excite(args: argparse.Namespace) -> int:
 
     robot = _load(args)
     out = Path(args.out)
+    _check_output("--out", out)
     if out.exists() and not args.force:
         raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
     exc = excite(robot, duration=args.duration, rate=args.rate, seed=args.seed)
+    out.parent.mkdir(parents=True, exist_ok=True)  # as run and sweep do
     names = exc.joint_names
     header = ["t"] + [f"{k}.{n}" for k in ("q", "v", "a", "tau") for n in names]
     table = np.column_stack([exc.t, exc.q, exc.v, exc.a, exc.tau])

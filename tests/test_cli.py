@@ -167,3 +167,47 @@ def test_sweep_writes_a_table_and_reports_a_failed_run(tmp_path, capsys) -> None
     assert code == 1  # one robot does not exist: its runs fail alone, the others are reported
     assert "failed: no_such_robot exact seed 0" in out and "ekf+d" in out
     assert any(p.name.startswith("sweep.") for p in tmp_path.iterdir())
+
+
+# ------------------------------------------------------- excite (sweep findings)
+def test_excite_writes_a_trajectory_for_a_one_dof_robot(tmp_path: Path, capsys) -> None:
+    # Pinocchio's joint-torque regressor is a 1-D row when nv = 1: hstack used to raise
+    out = tmp_path / "e.csv"
+    assert main(["excite", "--robot", "pendulum", "--duration", "2", "--out", str(out)]) == 0
+    lines = out.read_text().splitlines()
+    assert lines[0] == "t,q.theta,v.theta,a.theta,tau.theta"
+    assert len(lines) == 1 + 201
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "match"),
+    [
+        ("--rate", "0", "rate=0.0 is out of range"),
+        ("--rate", "-100", "rate=-100.0 is out of range"),
+        ("--rate", "1", "cannot sample the trajectory's highest harmonic"),
+        ("--duration", "-1", "duration=-1.0 is out of range"),
+        ("--duration", "0", "duration=0.0 is out of range"),
+        ("--duration", "inf", "duration=inf is out of range"),
+        ("--seed", "-1", "seed=-1: give an integer >= 0"),
+    ],
+)
+def test_excite_refuses_bad_values_before_writing_anything(
+    tmp_path: Path, capsys, option: str, value: str, match: str
+) -> None:
+    out = tmp_path / "e.csv"
+    argv = ["excite", "--robot", "pendulum", "--duration", "2", "--out", str(out)]
+    assert main([*argv, option, value]) == 2
+    assert match in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_excite_refuses_a_directory_and_creates_missing_parents(tmp_path: Path, capsys) -> None:
+    argv = ["excite", "--robot", "pendulum", "--duration", "2", "--out"]
+    assert main([*argv, str(tmp_path), "--force"]) == 2
+    assert "is a directory; give a file name" in capsys.readouterr().err
+    (tmp_path / "afile").write_text("x")
+    assert main([*argv, str(tmp_path / "afile" / "e.csv")]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
+    out = tmp_path / "missing" / "parent" / "e.csv"
+    assert main([*argv, str(out)]) == 0
+    assert out.exists()

@@ -768,31 +768,97 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def _parse_seeds(spec: str) -> list[int]:
-    """``"0-4"`` -> 0..4, ``"0,3,7"`` -> those."""
+    """``"0-4"`` -> 0..4, ``"0,3,7"`` -> those; seeds >= 0, each once, ranges not empty."""
     seeds: list[int] = []
     for part in spec.split(","):
-        lo, _, hi = part.strip().partition("-")
-        try:
-            seeds.extend(range(int(lo), int(hi or lo) + 1))
-        except ValueError:
-            raise OptionError(f"--seeds {spec!r}: give '0-9' or '0,3,7'") from None
+        part = part.strip()
+        lo, dash, hi = part.partition("-")
+        if not lo.isdigit() or (dash and not hi.isdigit()):  # '5-', '0--2', '-1', 'x'
+            raise OptionError(
+                f"--seeds {spec!r}: {part!r} is not a seed or a range; give seeds >= 0 as "
+                "'0-9' or '0,3,7'"
+            )
+        first, last = int(lo), int(hi if dash else lo)
+        if first > last:
+            raise OptionError(f"--seeds {spec!r}: the range {part!r} is empty; give LOW-HIGH")
+        seeds.extend(range(first, last + 1))
+    repeated = sorted({k for k in seeds if seeds.count(k) > 1})
+    if repeated:
+        raise OptionError(
+            f"--seeds {spec!r} names seed(s) {', '.join(map(str, repeated))} more than once; "
+            "each would run the same simulation again"
+        )
     return seeds
 
 
+def _unique_list(flag: str, spec: str) -> list[str]:
+    """A comma list of names; refused when empty or when a name repeats (a repeated run)."""
+    items = [x.strip() for x in spec.split(",")]
+    if not all(items):
+        raise OptionError(f"{flag} {spec!r}: an empty name; give a comma-separated list")
+    repeated = sorted({x for x in items if items.count(x) > 1})
+    if repeated:
+        raise OptionError(
+            f"{flag} {spec!r} names {', '.join(repeated)} more than once; each would run the "
+            "same simulations again"
+        )
+    return items
+
+
+def _option_value(text: str) -> Any:
+    """A sweep option's value: an int, a float, true/false, or the string itself."""
+    low = text.strip().lower()
+    if low in ("true", "false"):
+        return low == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text.strip()
+
+
+#: Options every sweep observer gets from the sweep's own flags.
+_SWEEP_SHARED = {"rate": "--rate", "noise_std": "--noise"}
+
+
 def _parse_sweep_observers(spec: str) -> dict[str, tuple[str, dict[str, Any]]]:
-    """``"kf,ekf+d=ekf:disturbance_psd=1"``: a name, or ``label=name:key=value;key=value``."""
+    """``"kf,ekf+d=ekf:disturbance_psd=1"``: a name, or ``label=name:key=value;key=value``.
+
+    Values are ints, floats, ``true``/``false`` or strings; labels are unique.
+    """
     out: dict[str, tuple[str, dict[str, Any]]] = {}
     for item in spec.split(","):
-        label, eq, rest = item.strip().partition("=")
-        name, _, opts = (rest if eq else label).partition(":")
-        options: dict[str, Any] = {}
-        for kv in filter(None, opts.split(";")):
-            key, _, value = kv.partition("=")
-            try:
-                options[key] = float(value)
-            except ValueError:
-                options[key] = value
+        item = item.strip()
+        if not item:
+            raise OptionError(f"--observers {spec!r}: an empty entry; give a comma-separated list")
+        head, _, opts = item.partition(":")
+        label, eq, name = head.partition("=")
+        if not eq:
+            label = name = head
+        label, name = label.strip(), name.strip()
+        if not label or not name:
+            raise OptionError(
+                f"--observers {item!r}: give NAME, NAME:key=value or LABEL=NAME:key=value"
+            )
         observer_class(name)  # an unknown name: UnknownNameError listing the registered ones
+        options: dict[str, Any] = {}
+        for kv in filter(None, (x.strip() for x in opts.split(";"))):
+            key, sep, value = kv.partition("=")
+            key = key.strip()
+            if not sep or not key or not value.strip():
+                raise OptionError(f"--observers {item!r}: option {kv!r} is not key=value")
+            if key in _SWEEP_SHARED:
+                raise OptionError(
+                    f"--observers {item!r}: {key} is the same for every observer of a sweep; "
+                    f"give {_SWEEP_SHARED[key]}"
+                )
+            options[key] = _option_value(value)
+        if label in out:
+            raise OptionError(
+                f"--observers {spec!r}: the label {label!r} is used twice; give each entry its "
+                "own label (LABEL=NAME:key=value)"
+            )
         out[label] = (name, options)
     return out
 
@@ -800,11 +866,33 @@ def _parse_sweep_observers(spec: str) -> dict[str, tuple[str, dict[str, Any]]]:
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from pinobs.evaluation.distributed import sweep, sweep_tasks, write_sweep
 
+    # everything a run would refuse, refused here once rather than in every task
+    positive("--duration", args.duration)
+    positive("--rate", args.rate)
+    positive("--noise", args.noise, allow_zero=True)
+    robots = _unique_list("--robots", args.robots)
+    scenarios = _unique_list("--scenarios", args.scenarios)
+    unknown = [s for s in scenarios if s not in MISMATCH_SCENARIOS]
+    if unknown:
+        raise OptionError(
+            f"--scenarios: unknown {', '.join(map(repr, unknown))}; give some of "
+            + ", ".join(MISMATCH_SCENARIOS)
+        )
+    seeds = _parse_seeds(args.seeds)
+    observers = _parse_sweep_observers(args.observers)
+    for robot_name in robots:  # a bad robot or observer option fails here, not once per task
+        robot = load(robot_name)
+        for name, options in observers.values():
+            try:
+                make_observer(name, robot, rate=args.rate, noise_std=args.noise, **options)
+            except UnsupportedRobotError:
+                pass  # reported per run, as a failed run
+    _check_output("--out", args.out, folder=True)
     tasks = sweep_tasks(
-        [r.strip() for r in args.robots.split(",")],
-        [s.strip() for s in args.scenarios.split(",")],
-        _parse_seeds(args.seeds),
-        _parse_sweep_observers(args.observers),
+        robots,
+        scenarios,
+        seeds,
+        observers,
         duration=args.duration,
         rate=args.rate,
         noise_std=args.noise,
@@ -815,14 +903,17 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     failed = table[table["error"].notna()]
     for _, row in failed.drop_duplicates(["robot", "scenario", "seed"]).iterrows():
         print(f"failed: {row['robot']} {row['scenario']} seed {row['seed']}: {row['error']}")
-    summary = (
-        table[table["error"].isna()]
-        .groupby(["robot", "scenario", "observer"])["rms_v_error"]
-        .median()
-        .unstack("observer")
-    )
-    print("median RMS velocity error [rad/s] over seeds:")
-    print(summary.to_string(float_format=lambda x: f"{x:.3g}"))
+    ok = table[table["error"].isna()]
+    if ok.empty:
+        print(f"pinobs: error: none of the {len(tasks)} runs succeeded", file=sys.stderr)
+    else:
+        summary = (
+            ok.groupby(["robot", "scenario", "observer"])["rms_v_error"]
+            .median()
+            .unstack("observer")
+        )
+        print("median RMS velocity error [rad/s] over seeds:")
+        print(summary.to_string(float_format=lambda x: f"{x:.3g}"))
     for path in write_sweep(table, args.out):
         print(f"wrote {path}")
     return 0 if failed.empty else 1

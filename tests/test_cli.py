@@ -149,11 +149,13 @@ def test_sweep_writes_a_table_and_reports_a_failed_run(tmp_path, capsys) -> None
         [
             "sweep",
             "--robots",
-            "pendulum,no_such_robot",
+            "pendulum,cartpole",
+            "--scenarios",
+            "exact",
             "--seeds",
             "0-1",
             "--observers",
-            "kf,ekf+d=ekf:disturbance_psd=1",
+            "kf,ekf+d=ekf:disturbance_psd=1,lg=liegroup",
             "--duration",
             "0.2",
             "--workers",
@@ -164,8 +166,8 @@ def test_sweep_writes_a_table_and_reports_a_failed_run(tmp_path, capsys) -> None
         ]
     )
     out = capsys.readouterr().out
-    assert code == 1  # one robot does not exist: its runs fail alone, the others are reported
-    assert "failed: no_such_robot exact seed 0" in out and "ekf+d" in out
+    assert code == 1  # liegroup refuses both robots: those runs fail alone and are reported
+    assert "failed: pendulum exact seed 0" in out and "ekf+d" not in out
     assert any(p.name.startswith("sweep.") for p in tmp_path.iterdir())
 
 
@@ -211,3 +213,83 @@ def test_excite_refuses_a_directory_and_creates_missing_parents(tmp_path: Path, 
     out = tmp_path / "missing" / "parent" / "e.csv"
     assert main([*argv, str(out)]) == 0
     assert out.exists()
+
+
+# ------------------------------------------------------- sweep options (sweep findings)
+def test_sweep_observer_options_are_typed_ints_floats_and_booleans() -> None:
+    from pinobs.cli import _parse_sweep_observers
+
+    parsed = _parse_sweep_observers(
+        "a=adaptive:friction=False,h=highgain:order=3,ekf:disturbance_psd=1e-2,r=riemannian:x=true"
+    )
+    assert parsed["a"] == ("adaptive", {"friction": False})  # was the string 'False', read as True
+    assert parsed["h"] == ("highgain", {"order": 3}) and type(parsed["h"][1]["order"]) is int
+    assert parsed["ekf"] == ("ekf", {"disturbance_psd": 0.01})  # was "unknown observer '1'"
+    assert parsed["r"] == ("riemannian", {"x": True})
+
+
+@pytest.mark.parametrize(
+    ("spec", "match"),
+    [
+        ("e=ekf:rate=10", "rate is the same for every observer of a sweep; give --rate"),
+        ("e=ekf:noise_std=0.1", "give --noise"),
+        ("a=kf,a=fd", "the label 'a' is used twice"),
+        ("kf,,fd", "an empty entry"),
+        ("e=ekf:disturbance_psd", "is not key=value"),
+        ("=kf", "give NAME, NAME:key=value or LABEL=NAME:key=value"),
+    ],
+)
+def test_sweep_refuses_bad_observer_specs_before_running(
+    tmp_path: Path, capsys, spec: str, match: str
+) -> None:
+    code = main(
+        ["sweep", "--robots", "pendulum", "--observers", spec, "--out", str(tmp_path / "s")]
+    )
+    assert code == 2
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "match"),
+    [
+        ("--seeds", "3-1", "the range '3-1' is empty"),
+        ("--seeds", "0--2", "is not a seed or a range"),
+        ("--seeds", "5-", "is not a seed or a range"),
+        ("--seeds", "0-2,1", "names seed(s) 1 more than once"),
+        ("--robots", "pendulum,pendulum", "names pendulum more than once"),
+        ("--robots", "no_such_robot", "no_such_robot"),
+        ("--scenarios", "exact,nope", "unknown 'nope'"),
+        ("--scenarios", "exact,exact", "names exact more than once"),
+        ("--duration", "0", "--duration=0.0 is out of range"),
+        ("--rate", "nan", "--rate=nan is out of range"),
+        ("--observers", "h=highgain:no_such_option=1", "no_such_option"),
+    ],
+)
+def test_sweep_refuses_bad_options_up_front(
+    tmp_path: Path, capsys, option: str, value: str, match: str
+) -> None:
+    code = main(["sweep", "--robots", "pendulum", option, value, "--out", str(tmp_path / "s")])
+    assert code == 2
+    captured = capsys.readouterr()
+    assert match in captured.err and "runs on" not in captured.out
+    assert not (tmp_path / "s").exists()
+
+
+def test_sweep_where_no_run_succeeds_says_so_and_writes_the_table(tmp_path, capsys) -> None:
+    pytest.importorskip("pandas")
+    argv = ["sweep", "--robots", "pendulum", "--seeds", "0", "--observers", "liegroup"]
+    code = main([*argv, "--duration", "0.1", "--workers", "0", "--out", str(tmp_path)])
+    assert code == 1  # was: ValueError: Data cannot be log-scaled, from the plot
+    captured = capsys.readouterr()
+    assert "none of the 1 runs succeeded" in captured.err
+    assert [p.name for p in tmp_path.iterdir() if p.suffix == ".png"] == []
+
+
+def test_sweep_tasks_make_robot_file_paths_absolute(tmp_path, monkeypatch) -> None:
+    from pinobs.evaluation.distributed import sweep_tasks
+
+    (tmp_path / "arm.urdf").write_text("<robot/>")
+    monkeypatch.chdir(tmp_path)
+    tasks = sweep_tasks(["arm.urdf", "pendulum"], ["exact"], [0], {"kf": ("kf", {})})
+    assert [t.robot for t in tasks] == [str(tmp_path / "arm.urdf"), "pendulum"]

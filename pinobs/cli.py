@@ -35,6 +35,7 @@ import numpy as np
 
 from pinobs.errors import (
     DimensionError,
+    GainError,
     OptionError,
     OutputExistsError,
     PinobsError,
@@ -161,6 +162,8 @@ def _run_one(
     mismatch: str | None = None,
 ) -> tuple[Result, dict[str, Any], str]:
     sensor = Sensor(rate=args.rate, noise_std=args.noise, bits=args.bits)
+    if args.seed < 0:  # before the plant draws with it
+        raise GainError(f"--seed {args.seed}: give an integer >= 0")
     plant = None if mismatch is None else mismatched_plant(robot, mismatch, seed=args.seed)
     observers, skipped = _build(robot, names, sensor, strict=strict)
     with _progress(f"{robot.name}: simulating", not args.no_progress) as progress:

@@ -293,3 +293,28 @@ def test_sweep_tasks_make_robot_file_paths_absolute(tmp_path, monkeypatch) -> No
     monkeypatch.chdir(tmp_path)
     tasks = sweep_tasks(["arm.urdf", "pendulum"], ["exact"], [0], {"kf": ("kf", {})})
     assert [t.robot for t in tasks] == [str(tmp_path / "arm.urdf"), "pendulum"]
+
+
+# ------------------------------------------------- run / demo values (sweep findings)
+@pytest.mark.parametrize(
+    ("option", "match"),
+    [
+        ("--duration=-1", "duration=-1.0 is out of range"),
+        ("--duration=inf", "duration=inf is out of range"),
+        ("--duration=nan", "duration=nan is out of range"),
+        ("--duration=0", "duration=0.0 is out of range"),
+        ("--seed=-1", "--seed -1: give an integer >= 0"),
+        ("--perturb-q=nan", "perturb_q=nan is out of range"),
+        ("--perturb-q=inf", "perturb_q=inf is out of range"),
+        ("--perturb-q=-0.1", "perturb_q=-0.1 is out of range"),
+    ],
+)
+def test_run_refuses_bad_simulation_values_with_one_line(capsys, option: str, match: str) -> None:
+    assert main(["run", "--robot", "pendulum", "--observer", "kf", option]) == 2
+    err = capsys.readouterr().err
+    assert match in err and "Traceback" not in err
+
+
+def test_demo_refuses_a_negative_seed_before_simulating(tmp_path: Path, capsys) -> None:
+    assert main(["demo", "--seed=-1", "--out", str(tmp_path / "d")]) == 2
+    assert "--seed -1: give an integer >= 0" in capsys.readouterr().err

@@ -289,7 +289,26 @@ def _cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_outputs(args: argparse.Namespace, flags: Sequence[str]) -> None:
+    """The output files of ``flags`` (those given): writable, distinct, a plot's format known."""
+    given = {f: getattr(args, f) for f in flags if getattr(args, f, None)}
+    seen: dict[Path, str] = {}
+    for flag, value in given.items():
+        _check_output(f"--{flag}", value)
+        path = Path(value).resolve()
+        if flag == "plot":
+            from pinobs.visualization.plots import plot_path
+
+            path = plot_path(path)  # .png added when no suffix; a format matplotlib lacks refused
+        if path in seen:
+            raise OutputExistsError(
+                f"--{seen[path]} and --{flag} are the same file {value!r}; give each its own"
+            )
+        seen[path] = flag
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
+    _check_outputs(args, ("json", "save", "html", "plot"))
     robot = _load(args)
     names = _observer_list(args.observer)
     result, report, table = _run_one(
@@ -308,6 +327,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from pinobs.visualization import write_html
 
     out = Path(args.out)
+    _check_output("--out", out, folder=True)
     reports = []
     pages = []
     for name in DEMO_ROBOTS:
@@ -344,6 +364,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_play(args: argparse.Namespace) -> int:
+    _check_outputs(args, ("html", "plot"))
     result = Result.load(args.result)
     source = args.robot or result.meta.get("robot_source") or result.robot
     root = args.root_joint or result.meta.get("root_joint")
@@ -1236,6 +1257,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except PinobsError as exc:
         print(f"pinobs: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # an output the system refused (a full disk, permissions, ...)
+        print(f"pinobs: error: {exc}", file=sys.stderr)
+        return 1
 
 
 def _show_warning(

@@ -318,3 +318,71 @@ def test_run_refuses_bad_simulation_values_with_one_line(capsys, option: str, ma
 def test_demo_refuses_a_negative_seed_before_simulating(tmp_path: Path, capsys) -> None:
     assert main(["demo", "--seed=-1", "--out", str(tmp_path / "d")]) == 2
     assert "--seed -1: give an integer >= 0" in capsys.readouterr().err
+
+
+# ------------------------------------------------------- outputs (sweep findings)
+@pytest.mark.parametrize(
+    ("flag", "target", "match"),
+    [
+        ("--json", "adir", "--json '{}' is a directory; give a file name"),
+        ("--save", "afile/x.npz", "'{}' is a file, not a folder"),
+        ("--html", "adir", "--html '{}' is a directory"),
+        ("--plot", "r/p.txt", "matplotlib cannot write '.txt' files"),
+    ],
+)
+def test_run_refuses_unwritable_outputs_before_simulating(
+    tmp_path: Path, capsys, monkeypatch, flag: str, target: str, match: str
+) -> None:
+    import pinobs.cli
+
+    (tmp_path / "adir").mkdir()
+    (tmp_path / "afile").write_text("x")
+    monkeypatch.setattr(pinobs.cli, "simulate", None)  # calling it would raise TypeError
+    path = tmp_path / target
+    shown = path.parent if target.startswith("afile") else path
+    code = main(["run", "--robot", "pendulum", "--observer", "kf", flag, str(path)])
+    assert code == 2
+    assert match.format(shown) in capsys.readouterr().err
+
+
+def test_run_refuses_the_same_file_for_json_and_save(tmp_path: Path, capsys) -> None:
+    same = str(tmp_path / "x")
+    assert (
+        main(["run", "--robot", "pendulum", "--observer", "kf", "--json", same, "--save", same])
+        == 2
+    )
+    assert "--json and --save are the same file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", [["demo"], ["sweep", "--robots", "pendulum"]])
+def test_demo_and_sweep_refuse_a_file_as_their_output_folder(
+    tmp_path: Path, capsys, command: list[str]
+) -> None:
+    (tmp_path / "afile").write_text("x")
+    assert main([*command, "--out", str(tmp_path / "afile")]) == 2
+    assert "is a file; give a folder" in capsys.readouterr().err
+
+
+def test_an_os_error_while_writing_is_one_line_and_exit_1(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    from pinobs.simulation import Result
+
+    def full(self, path):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(Result, "save", full)
+    argv = ["run", "--robot", "pendulum", "--observer", "kf", "--duration", "0.1"]
+    assert main([*argv, "--save", str(tmp_path / "r.npz")]) == 1
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("pinobs: error: [Errno 28] No space left on device")
+        and "Traceback" not in err
+    )
+
+
+def test_run_plot_reports_the_file_it_wrote(tmp_path: Path, capsys) -> None:
+    pytest.importorskip("matplotlib")
+    argv = ["run", "--robot", "pendulum", "--observer", "kf", "--duration", "0.2"]
+    assert main([*argv, "--plot", str(tmp_path / "p")]) == 0
+    assert f"wrote {tmp_path / 'p.png'}" in capsys.readouterr().out

@@ -369,6 +369,16 @@ def _cmd_play(args: argparse.Namespace) -> int:
     source = args.robot or result.meta.get("robot_source") or result.robot
     root = args.root_joint or result.meta.get("root_joint")
     robot = load(source, root_joint=root)
+    if robot.name != result.robot and not args.force:
+        raise UnsupportedRobotError(
+            f"{args.result!r} is a run of {result.robot!r}, not of {robot.name!r}; leave out "
+            "--robot, or give --force to play it on this robot"
+        )
+    if (robot.nq, robot.nv) != (result.q.shape[1], result.v.shape[1]):
+        raise DimensionError(
+            f"{args.result!r} has nq = {result.q.shape[1]}, nv = {result.v.shape[1]}; robot "
+            f"{robot.name!r} has nq = {robot.nq}, nv = {robot.nv}"
+        )
     if not (args.html or args.plot or args.meshcat):
         args.html = str(Path(args.result).with_suffix(".html"))
     _watch(result, robot, args)
@@ -1056,6 +1066,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--html", default=None, help="playback page (default: RESULT.html)")
     p.add_argument("--meshcat", action="store_true", help="serve it on a local meshcat server")
     p.add_argument("--plot", default=None, help="write true vs estimated velocities to this PNG")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="play it on a --robot of another name (same nq and nv)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_play)
 

@@ -386,3 +386,23 @@ def test_run_plot_reports_the_file_it_wrote(tmp_path: Path, capsys) -> None:
     argv = ["run", "--robot", "pendulum", "--observer", "kf", "--duration", "0.2"]
     assert main([*argv, "--plot", str(tmp_path / "p")]) == 0
     assert f"wrote {tmp_path / 'p.png'}" in capsys.readouterr().out
+
+
+def test_play_refuses_a_result_of_another_robot_unless_forced(tmp_path: Path, capsys) -> None:
+    pytest.importorskip("matplotlib")
+    saved = tmp_path / "cp.npz"
+    argv = ["run", "--robot", "cartpole", "--observer", "kf", "--duration", "0.2"]
+    assert main([*argv, "--save", str(saved)]) == 0
+    play = ["play", str(saved), "--robot", "double_pendulum", "--plot", str(tmp_path / "p.png")]
+    assert main(play) == 2  # was: cart-pole data drawn on a double pendulum (same nq)
+    assert "is a run of 'cartpole', not of 'double_pendulum'" in capsys.readouterr().err
+    assert main([*play, "--force"]) == 0
+    assert main(["play", str(saved), "--robot", "pendulum", "--force"]) == 2
+    assert "has nq = 2, nv = 2; robot 'pendulum' has nq = 1" in capsys.readouterr().err
+
+
+def test_play_of_a_file_that_is_not_a_result_is_one_line(tmp_path: Path, capsys) -> None:
+    (tmp_path / "notes.txt").write_text("x\n")
+    assert main(["play", str(tmp_path / "notes.txt")]) == 2
+    err = capsys.readouterr().err
+    assert "is not a result saved by pinobs" in err and "Traceback" not in err

@@ -14,6 +14,7 @@ import numbers
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -59,6 +60,14 @@ def _plant_step(
     for _ in range(n):
         q, v = dynamics_rk4(plant, q, v, tau, h / n)
     return q, v
+
+
+def _portable_source(source: Any) -> Any:
+    """A robot file's path made absolute (a saved result is played from anywhere); a
+    registry name as it is."""
+    if isinstance(source, str) and Path(source).is_file():
+        return str(Path(source).resolve())
+    return source
 
 
 def _is_int(x: Any) -> bool:
@@ -238,7 +247,7 @@ def simulate(
     )
     meta = {
         "robot": robot.name,
-        "robot_source": getattr(robot, "source", robot.name),
+        "robot_source": _portable_source(getattr(robot, "source", robot.name)),
         "root_joint": getattr(robot, "root_joint", None),
         "duration": duration,
         "rate": sensor.rate,

@@ -216,3 +216,42 @@ def test_simulate_refuses_bad_arguments_with_a_pinobs_error(kwargs, error, match
 def test_sensor_refuses_fractional_delays_and_bits(kwargs, match) -> None:
     with pytest.raises(pinobs.errors.GainError, match=match):
         Sensor(**kwargs)
+
+
+# ------------------------------------------------------------ saved results
+def test_result_load_refuses_files_that_are_not_saved_results(tmp_path: Path) -> None:
+    import json
+
+    from pinobs.errors import LogFormatError
+
+    (tmp_path / "text.npz").write_text("not a result\n")
+    np.savez(tmp_path / "other.npz", a=np.zeros(2))
+    np.savez(tmp_path / "list.npz", header=np.array("[1, 2]"))
+    np.savez(tmp_path / "short.npz", header=np.array(json.dumps({"robot": "x", "traces": []})))
+    for name, match in [
+        ("text.npz", "it is not an .npz archive"),
+        ("other.npz", "it has no header"),
+        ("list.npz", "its header is not a result's"),
+        ("short.npz", "KeyError"),
+    ]:
+        with pytest.raises(LogFormatError, match="is not a result saved by pinobs.*" + match):
+            pinobs.Result.load(tmp_path / name)
+
+
+def test_result_saves_its_format_version_and_refuses_a_newer_one(tmp_path: Path) -> None:
+    import json
+
+    from pinobs.errors import LogFormatError
+    from pinobs.simulation.result import RESULT_FORMAT
+
+    res = simulate(pinobs.load("pendulum"), ["kf"], duration=0.05)
+    path = res.save(tmp_path / "r.npz")
+    with np.load(path) as z:
+        header = json.loads(str(z["header"]))
+        arrays = {k: z[k] for k in z.files}
+    assert header["format"] == RESULT_FORMAT == 1
+    assert pinobs.Result.load(path).meta == res.meta
+    header["format"] = RESULT_FORMAT + 1
+    np.savez(tmp_path / "new.npz", **{**arrays, "header": np.array(json.dumps(header))})
+    with pytest.raises(LogFormatError, match="saved in result format 2; this pinobs reads"):
+        pinobs.Result.load(tmp_path / "new.npz")

@@ -106,6 +106,7 @@ def _cluster(args: argparse.Namespace) -> str:
 
 
 def _observer_list(spec: Sequence[str]) -> list[str]:
+    """``--observer`` values: names, comma lists, ``all``; at least one name."""
     names: list[str] = []
     for item in spec:
         for name in item.split(","):
@@ -115,7 +116,16 @@ def _observer_list(spec: Sequence[str]) -> list[str]:
             elif name:
                 observer_class(name)  # raises UnknownNameError listing the names
                 names.append(name)
+    if not names:
+        raise OptionError(
+            f"--observer {','.join(spec)!r} names no observer; give names (pinobs list) or 'all'"
+        )
     return list(dict.fromkeys(names))
+
+
+def _asks_all(spec: Sequence[str]) -> bool:
+    """``all`` among the ``--observer`` values (then observers that refuse the robot are skipped)."""
+    return any(name.strip() == "all" for item in spec for name in item.split(","))
 
 
 def _build(
@@ -192,6 +202,9 @@ def _run_one(
     table = format_table(metrics, aba_seconds=aba, title=title)
     if skipped:
         table += "\n" + "\n".join(f"skipped {k}: {v}" for k, v in skipped.items())
+    failures = result.meta.get("failures", {})
+    if failures:  # why an observer stopped (the table says only when)
+        table += "\n" + "\n".join(f"failed {k}: {v}" for k, v in failures.items())
     warnings = _consistency_warnings({k: ob.consistency() for k, ob in observers.items()})
     if warnings:
         table += "\n" + "\n".join(warnings)
@@ -311,9 +324,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     _check_outputs(args, ("json", "save", "html", "plot"))
     robot = _load(args)
     names = _observer_list(args.observer)
-    result, report, table = _run_one(
-        robot, names, args, strict=not any(n == "all" for n in args.observer)
-    )
+    result, report, table = _run_one(robot, names, args, strict=not _asks_all(args.observer))
     print(table)
     if args.json:
         print(f"wrote {_write_json(args.json, report)}")

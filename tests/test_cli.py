@@ -406,3 +406,36 @@ def test_play_of_a_file_that_is_not_a_result_is_one_line(tmp_path: Path, capsys)
     assert main(["play", str(tmp_path / "notes.txt")]) == 2
     err = capsys.readouterr().err
     assert "is not a result saved by pinobs" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("spec", ["", ",,", " , "])
+def test_run_refuses_an_observer_list_without_a_name(capsys, monkeypatch, spec: str) -> None:
+    import pinobs.cli
+
+    monkeypatch.setattr(pinobs.cli, "simulate", None)  # was: the whole run, then a TypeError
+    assert main(["run", "--robot", "pendulum", "--observer", spec]) == 2
+    assert "names no observer; give names (pinobs list) or 'all'" in capsys.readouterr().err
+
+
+def test_run_all_in_a_list_skips_observers_that_refuse_the_robot(capsys) -> None:
+    argv = ["run", "--robot", "pendulum", "--duration", "0.2", "--observer", "all,kf"]
+    assert main(argv) == 0  # was: UnsupportedRobotError from liegroup, which 'all' alone skips
+    assert "skipped liegroup:" in capsys.readouterr().out
+
+
+def test_run_prints_why_an_observer_failed(capsys, monkeypatch) -> None:
+    import dataclasses
+
+    import pinobs.cli
+
+    real = pinobs.cli.simulate
+
+    def failing(*args, **kwargs):
+        res = real(*args, **kwargs)
+        tr = dataclasses.replace(res.traces[0], diverged_at=0.0)
+        meta = {**res.meta, "failures": {"kf": "NonFiniteError at t = 0 s: q is nan"}}
+        return dataclasses.replace(res, traces=(tr,), meta=meta)
+
+    monkeypatch.setattr(pinobs.cli, "simulate", failing)
+    assert main(["run", "--robot", "pendulum", "--observer", "kf", "--duration", "0.1"]) == 0
+    assert "failed kf: NonFiniteError at t = 0 s: q is nan" in capsys.readouterr().out

@@ -80,3 +80,7 @@ def test_evaluate_refuses_a_transient_outside_the_run(transient: float) -> None:
     with pytest.raises(pinobs.errors.GainError, match=r"transient=.* is out of range"):
         pinobs.evaluate(res, robot, transient=transient)
     assert pinobs.evaluate(res, robot, transient=0.0)[0].rms_v_error < 1.0
+
+
+def test_format_table_of_no_observers_is_the_header() -> None:
+    assert format_table([]).splitlines()[0].split()[0] == "observer"

@@ -915,6 +915,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     positive("--duration", args.duration)
     positive("--rate", args.rate)
     positive("--noise", args.noise, allow_zero=True)
+    if args.duration * args.rate < 1.0:
+        raise GainError(
+            f"--duration {args.duration:g} s is shorter than one sample at {args.rate:g} Hz"
+        )
+    _check_output("--out", args.out, folder=True)
     robots = _unique_list("--robots", args.robots)
     scenarios = _unique_list("--scenarios", args.scenarios)
     unknown = [s for s in scenarios if s not in MISMATCH_SCENARIOS]
@@ -932,7 +937,6 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
                 make_observer(name, robot, rate=args.rate, noise_std=args.noise, **options)
             except UnsupportedRobotError:
                 pass  # reported per run, as a failed run
-    _check_output("--out", args.out, folder=True)
     tasks = sweep_tasks(
         robots,
         scenarios,

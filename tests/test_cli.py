@@ -262,6 +262,7 @@ def test_sweep_refuses_bad_observer_specs_before_running(
         ("--scenarios", "exact,nope", "unknown 'nope'"),
         ("--scenarios", "exact,exact", "names exact more than once"),
         ("--duration", "0", "--duration=0.0 is out of range"),
+        ("--duration", "1e-4", "shorter than one sample at 1000 Hz"),
         ("--rate", "nan", "--rate=nan is out of range"),
         ("--observers", "h=highgain:no_such_option=1", "no_such_option"),
     ],

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -34,6 +35,7 @@ import numpy as np
 
 from pinobs.errors import (
     DimensionError,
+    GainError,
     OptionError,
     OutputExistsError,
     PinobsError,
@@ -104,6 +106,7 @@ def _cluster(args: argparse.Namespace) -> str:
 
 
 def _observer_list(spec: Sequence[str]) -> list[str]:
+    """``--observer`` values: names, comma lists, ``all``; at least one name."""
     names: list[str] = []
     for item in spec:
         for name in item.split(","):
@@ -113,7 +116,16 @@ def _observer_list(spec: Sequence[str]) -> list[str]:
             elif name:
                 observer_class(name)  # raises UnknownNameError listing the names
                 names.append(name)
+    if not names:
+        raise OptionError(
+            f"--observer {','.join(spec)!r} names no observer; give names (pinobs list) or 'all'"
+        )
     return list(dict.fromkeys(names))
+
+
+def _asks_all(spec: Sequence[str]) -> bool:
+    """``all`` among the ``--observer`` values (then observers that refuse the robot are skipped)."""
+    return any(name.strip() == "all" for item in spec for name in item.split(","))
 
 
 def _build(
@@ -160,6 +172,8 @@ def _run_one(
     mismatch: str | None = None,
 ) -> tuple[Result, dict[str, Any], str]:
     sensor = Sensor(rate=args.rate, noise_std=args.noise, bits=args.bits)
+    if args.seed < 0:  # before the plant draws with it
+        raise GainError(f"--seed {args.seed}: give an integer >= 0")
     plant = None if mismatch is None else mismatched_plant(robot, mismatch, seed=args.seed)
     observers, skipped = _build(robot, names, sensor, strict=strict)
     with _progress(f"{robot.name}: simulating", not args.no_progress) as progress:
@@ -188,6 +202,9 @@ def _run_one(
     table = format_table(metrics, aba_seconds=aba, title=title)
     if skipped:
         table += "\n" + "\n".join(f"skipped {k}: {v}" for k, v in skipped.items())
+    failures = result.meta.get("failures", {})
+    if failures:  # why an observer stopped (the table says only when)
+        table += "\n" + "\n".join(f"failed {k}: {v}" for k, v in failures.items())
     warnings = _consistency_warnings({k: ob.consistency() for k, ob in observers.items()})
     if warnings:
         table += "\n" + "\n".join(warnings)
@@ -219,6 +236,25 @@ def _json_safe(x: Any) -> Any:
     if isinstance(x, list | tuple):
         return [_json_safe(v) for v in x]
     return x
+
+
+def _check_output(flag: str, path: str | Path, *, folder: bool = False) -> None:
+    """Refuse an output path that cannot be written, before the work: a file where a
+    folder is wanted or the reverse, a parent that is a file, a parent not writable."""
+    path = Path(path)
+    if path.is_dir() and not folder:
+        raise OutputExistsError(f"{flag} {str(path)!r} is a directory; give a file name")
+    if path.exists() and folder and not path.is_dir():
+        raise OutputExistsError(f"{flag} {str(path)!r} is a file; give a folder")
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise OutputExistsError(
+            f"{flag} {str(path)!r}: {str(parent)!r} is a file, not a folder; give another path"
+        )
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputExistsError(f"{flag} {str(path)!r}: {str(parent)!r} is not writable")
 
 
 def _write_json(path: str | Path, payload: Any) -> Path:
@@ -266,12 +302,29 @@ def _cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_outputs(args: argparse.Namespace, flags: Sequence[str]) -> None:
+    """The output files of ``flags`` (those given): writable, distinct, a plot's format known."""
+    given = {f: getattr(args, f) for f in flags if getattr(args, f, None)}
+    seen: dict[Path, str] = {}
+    for flag, value in given.items():
+        _check_output(f"--{flag}", value)
+        path = Path(value).resolve()
+        if flag == "plot":
+            from pinobs.visualization.plots import plot_path
+
+            path = plot_path(path)  # .png added when no suffix; a format matplotlib lacks refused
+        if path in seen:
+            raise OutputExistsError(
+                f"--{seen[path]} and --{flag} are the same file {value!r}; give each its own"
+            )
+        seen[path] = flag
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
+    _check_outputs(args, ("json", "save", "html", "plot"))
     robot = _load(args)
     names = _observer_list(args.observer)
-    result, report, table = _run_one(
-        robot, names, args, strict=not any(n == "all" for n in args.observer)
-    )
+    result, report, table = _run_one(robot, names, args, strict=not _asks_all(args.observer))
     print(table)
     if args.json:
         print(f"wrote {_write_json(args.json, report)}")
@@ -285,6 +338,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from pinobs.visualization import write_html
 
     out = Path(args.out)
+    _check_output("--out", out, folder=True)
     reports = []
     pages = []
     for name in DEMO_ROBOTS:
@@ -321,10 +375,21 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_play(args: argparse.Namespace) -> int:
+    _check_outputs(args, ("html", "plot"))
     result = Result.load(args.result)
     source = args.robot or result.meta.get("robot_source") or result.robot
     root = args.root_joint or result.meta.get("root_joint")
     robot = load(source, root_joint=root)
+    if robot.name != result.robot and not args.force:
+        raise UnsupportedRobotError(
+            f"{args.result!r} is a run of {result.robot!r}, not of {robot.name!r}; leave out "
+            "--robot, or give --force to play it on this robot"
+        )
+    if (robot.nq, robot.nv) != (result.q.shape[1], result.v.shape[1]):
+        raise DimensionError(
+            f"{args.result!r} has nq = {result.q.shape[1]}, nv = {result.v.shape[1]}; robot "
+            f"{robot.name!r} has nq = {robot.nq}, nv = {robot.nv}"
+        )
     if not (args.html or args.plot or args.meshcat):
         args.html = str(Path(args.result).with_suffix(".html"))
     _watch(result, robot, args)
@@ -578,9 +643,11 @@ def _cmd_excite(args: argparse.Namespace) -> int:
 
     robot = _load(args)
     out = Path(args.out)
+    _check_output("--out", out)
     if out.exists() and not args.force:
         raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
     exc = excite(robot, duration=args.duration, rate=args.rate, seed=args.seed)
+    out.parent.mkdir(parents=True, exist_ok=True)  # as run and sweep do
     names = exc.joint_names
     header = ["t"] + [f"{k}.{n}" for k in ("q", "v", "a", "tau") for n in names]
     table = np.column_stack([exc.t, exc.q, exc.v, exc.a, exc.tau])
@@ -746,31 +813,97 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def _parse_seeds(spec: str) -> list[int]:
-    """``"0-4"`` -> 0..4, ``"0,3,7"`` -> those."""
+    """``"0-4"`` -> 0..4, ``"0,3,7"`` -> those; seeds >= 0, each once, ranges not empty."""
     seeds: list[int] = []
     for part in spec.split(","):
-        lo, _, hi = part.strip().partition("-")
-        try:
-            seeds.extend(range(int(lo), int(hi or lo) + 1))
-        except ValueError:
-            raise OptionError(f"--seeds {spec!r}: give '0-9' or '0,3,7'") from None
+        part = part.strip()
+        lo, dash, hi = part.partition("-")
+        if not lo.isdigit() or (dash and not hi.isdigit()):  # '5-', '0--2', '-1', 'x'
+            raise OptionError(
+                f"--seeds {spec!r}: {part!r} is not a seed or a range; give seeds >= 0 as "
+                "'0-9' or '0,3,7'"
+            )
+        first, last = int(lo), int(hi if dash else lo)
+        if first > last:
+            raise OptionError(f"--seeds {spec!r}: the range {part!r} is empty; give LOW-HIGH")
+        seeds.extend(range(first, last + 1))
+    repeated = sorted({k for k in seeds if seeds.count(k) > 1})
+    if repeated:
+        raise OptionError(
+            f"--seeds {spec!r} names seed(s) {', '.join(map(str, repeated))} more than once; "
+            "each would run the same simulation again"
+        )
     return seeds
 
 
+def _unique_list(flag: str, spec: str) -> list[str]:
+    """A comma list of names; refused when empty or when a name repeats (a repeated run)."""
+    items = [x.strip() for x in spec.split(",")]
+    if not all(items):
+        raise OptionError(f"{flag} {spec!r}: an empty name; give a comma-separated list")
+    repeated = sorted({x for x in items if items.count(x) > 1})
+    if repeated:
+        raise OptionError(
+            f"{flag} {spec!r} names {', '.join(repeated)} more than once; each would run the "
+            "same simulations again"
+        )
+    return items
+
+
+def _option_value(text: str) -> Any:
+    """A sweep option's value: an int, a float, true/false, or the string itself."""
+    low = text.strip().lower()
+    if low in ("true", "false"):
+        return low == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text.strip()
+
+
+#: Options every sweep observer gets from the sweep's own flags.
+_SWEEP_SHARED = {"rate": "--rate", "noise_std": "--noise"}
+
+
 def _parse_sweep_observers(spec: str) -> dict[str, tuple[str, dict[str, Any]]]:
-    """``"kf,ekf+d=ekf:disturbance_psd=1"``: a name, or ``label=name:key=value;key=value``."""
+    """``"kf,ekf+d=ekf:disturbance_psd=1"``: a name, or ``label=name:key=value;key=value``.
+
+    Values are ints, floats, ``true``/``false`` or strings; labels are unique.
+    """
     out: dict[str, tuple[str, dict[str, Any]]] = {}
     for item in spec.split(","):
-        label, eq, rest = item.strip().partition("=")
-        name, _, opts = (rest if eq else label).partition(":")
-        options: dict[str, Any] = {}
-        for kv in filter(None, opts.split(";")):
-            key, _, value = kv.partition("=")
-            try:
-                options[key] = float(value)
-            except ValueError:
-                options[key] = value
+        item = item.strip()
+        if not item:
+            raise OptionError(f"--observers {spec!r}: an empty entry; give a comma-separated list")
+        head, _, opts = item.partition(":")
+        label, eq, name = head.partition("=")
+        if not eq:
+            label = name = head
+        label, name = label.strip(), name.strip()
+        if not label or not name:
+            raise OptionError(
+                f"--observers {item!r}: give NAME, NAME:key=value or LABEL=NAME:key=value"
+            )
         observer_class(name)  # an unknown name: UnknownNameError listing the registered ones
+        options: dict[str, Any] = {}
+        for kv in filter(None, (x.strip() for x in opts.split(";"))):
+            key, sep, value = kv.partition("=")
+            key = key.strip()
+            if not sep or not key or not value.strip():
+                raise OptionError(f"--observers {item!r}: option {kv!r} is not key=value")
+            if key in _SWEEP_SHARED:
+                raise OptionError(
+                    f"--observers {item!r}: {key} is the same for every observer of a sweep; "
+                    f"give {_SWEEP_SHARED[key]}"
+                )
+            options[key] = _option_value(value)
+        if label in out:
+            raise OptionError(
+                f"--observers {spec!r}: the label {label!r} is used twice; give each entry its "
+                "own label (LABEL=NAME:key=value)"
+            )
         out[label] = (name, options)
     return out
 
@@ -778,11 +911,37 @@ def _parse_sweep_observers(spec: str) -> dict[str, tuple[str, dict[str, Any]]]:
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from pinobs.evaluation.distributed import sweep, sweep_tasks, write_sweep
 
+    # everything a run would refuse, refused here once rather than in every task
+    positive("--duration", args.duration)
+    positive("--rate", args.rate)
+    positive("--noise", args.noise, allow_zero=True)
+    if args.duration * args.rate < 1.0:
+        raise GainError(
+            f"--duration {args.duration:g} s is shorter than one sample at {args.rate:g} Hz"
+        )
+    _check_output("--out", args.out, folder=True)
+    robots = _unique_list("--robots", args.robots)
+    scenarios = _unique_list("--scenarios", args.scenarios)
+    unknown = [s for s in scenarios if s not in MISMATCH_SCENARIOS]
+    if unknown:
+        raise OptionError(
+            f"--scenarios: unknown {', '.join(map(repr, unknown))}; give some of "
+            + ", ".join(MISMATCH_SCENARIOS)
+        )
+    seeds = _parse_seeds(args.seeds)
+    observers = _parse_sweep_observers(args.observers)
+    for robot_name in robots:  # a bad robot or observer option fails here, not once per task
+        robot = load(robot_name)
+        for name, options in observers.values():
+            try:
+                make_observer(name, robot, rate=args.rate, noise_std=args.noise, **options)
+            except UnsupportedRobotError:
+                pass  # reported per run, as a failed run
     tasks = sweep_tasks(
-        [r.strip() for r in args.robots.split(",")],
-        [s.strip() for s in args.scenarios.split(",")],
-        _parse_seeds(args.seeds),
-        _parse_sweep_observers(args.observers),
+        robots,
+        scenarios,
+        seeds,
+        observers,
         duration=args.duration,
         rate=args.rate,
         noise_std=args.noise,
@@ -793,14 +952,17 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     failed = table[table["error"].notna()]
     for _, row in failed.drop_duplicates(["robot", "scenario", "seed"]).iterrows():
         print(f"failed: {row['robot']} {row['scenario']} seed {row['seed']}: {row['error']}")
-    summary = (
-        table[table["error"].isna()]
-        .groupby(["robot", "scenario", "observer"])["rms_v_error"]
-        .median()
-        .unstack("observer")
-    )
-    print("median RMS velocity error [rad/s] over seeds:")
-    print(summary.to_string(float_format=lambda x: f"{x:.3g}"))
+    ok = table[table["error"].isna()]
+    if ok.empty:
+        print(f"pinobs: error: none of the {len(tasks)} runs succeeded", file=sys.stderr)
+    else:
+        summary = (
+            ok.groupby(["robot", "scenario", "observer"])["rms_v_error"]
+            .median()
+            .unstack("observer")
+        )
+        print("median RMS velocity error [rad/s] over seeds:")
+        print(summary.to_string(float_format=lambda x: f"{x:.3g}"))
     for path in write_sweep(table, args.out):
         print(f"wrote {path}")
     return 0 if failed.empty else 1
@@ -919,6 +1081,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--html", default=None, help="playback page (default: RESULT.html)")
     p.add_argument("--meshcat", action="store_true", help="serve it on a local meshcat server")
     p.add_argument("--plot", default=None, help="write true vs estimated velocities to this PNG")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="play it on a --robot of another name (same nq and nv)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_play)
 
@@ -1120,6 +1287,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except PinobsError as exc:
         print(f"pinobs: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # an output the system refused (a full disk, permissions, ...)
+        print(f"pinobs: error: {exc}", file=sys.stderr)
+        return 1
 
 
 def _show_warning(

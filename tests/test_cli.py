@@ -149,11 +149,13 @@ def test_sweep_writes_a_table_and_reports_a_failed_run(tmp_path, capsys) -> None
         [
             "sweep",
             "--robots",
-            "pendulum,no_such_robot",
+            "pendulum,cartpole",
+            "--scenarios",
+            "exact",
             "--seeds",
             "0-1",
             "--observers",
-            "kf,ekf+d=ekf:disturbance_psd=1",
+            "kf,ekf+d=ekf:disturbance_psd=1,lg=liegroup",
             "--duration",
             "0.2",
             "--workers",
@@ -164,6 +166,277 @@ def test_sweep_writes_a_table_and_reports_a_failed_run(tmp_path, capsys) -> None
         ]
     )
     out = capsys.readouterr().out
-    assert code == 1  # one robot does not exist: its runs fail alone, the others are reported
-    assert "failed: no_such_robot exact seed 0" in out and "ekf+d" in out
+    assert code == 1  # liegroup refuses both robots: those runs fail alone and are reported
+    assert "failed: pendulum exact seed 0" in out and "ekf+d" not in out
     assert any(p.name.startswith("sweep.") for p in tmp_path.iterdir())
+
+
+# ------------------------------------------------------- excite (sweep findings)
+def test_excite_writes_a_trajectory_for_a_one_dof_robot(tmp_path: Path, capsys) -> None:
+    # Pinocchio's joint-torque regressor is a 1-D row when nv = 1: hstack used to raise
+    out = tmp_path / "e.csv"
+    assert main(["excite", "--robot", "pendulum", "--duration", "2", "--out", str(out)]) == 0
+    lines = out.read_text().splitlines()
+    assert lines[0] == "t,q.theta,v.theta,a.theta,tau.theta"
+    assert len(lines) == 1 + 201
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "match"),
+    [
+        ("--rate", "0", "rate=0.0 is out of range"),
+        ("--rate", "-100", "rate=-100.0 is out of range"),
+        ("--rate", "1", "cannot sample the trajectory's highest harmonic"),
+        ("--duration", "-1", "duration=-1.0 is out of range"),
+        ("--duration", "0", "duration=0.0 is out of range"),
+        ("--duration", "inf", "duration=inf is out of range"),
+        ("--seed", "-1", "seed=-1: give an integer >= 0"),
+    ],
+)
+def test_excite_refuses_bad_values_before_writing_anything(
+    tmp_path: Path, capsys, option: str, value: str, match: str
+) -> None:
+    out = tmp_path / "e.csv"
+    argv = ["excite", "--robot", "pendulum", "--duration", "2", "--out", str(out)]
+    assert main([*argv, option, value]) == 2
+    assert match in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_excite_refuses_a_directory_and_creates_missing_parents(tmp_path: Path, capsys) -> None:
+    argv = ["excite", "--robot", "pendulum", "--duration", "2", "--out"]
+    assert main([*argv, str(tmp_path), "--force"]) == 2
+    assert "is a directory; give a file name" in capsys.readouterr().err
+    (tmp_path / "afile").write_text("x")
+    assert main([*argv, str(tmp_path / "afile" / "e.csv")]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
+    out = tmp_path / "missing" / "parent" / "e.csv"
+    assert main([*argv, str(out)]) == 0
+    assert out.exists()
+
+
+# ------------------------------------------------------- sweep options (sweep findings)
+def test_sweep_observer_options_are_typed_ints_floats_and_booleans() -> None:
+    from pinobs.cli import _parse_sweep_observers
+
+    parsed = _parse_sweep_observers(
+        "a=adaptive:friction=False,h=highgain:order=3,ekf:disturbance_psd=1e-2,r=riemannian:x=true"
+    )
+    assert parsed["a"] == ("adaptive", {"friction": False})  # was the string 'False', read as True
+    assert parsed["h"] == ("highgain", {"order": 3}) and type(parsed["h"][1]["order"]) is int
+    assert parsed["ekf"] == ("ekf", {"disturbance_psd": 0.01})  # was "unknown observer '1'"
+    assert parsed["r"] == ("riemannian", {"x": True})
+
+
+@pytest.mark.parametrize(
+    ("spec", "match"),
+    [
+        ("e=ekf:rate=10", "rate is the same for every observer of a sweep; give --rate"),
+        ("e=ekf:noise_std=0.1", "give --noise"),
+        ("a=kf,a=fd", "the label 'a' is used twice"),
+        ("kf,,fd", "an empty entry"),
+        ("e=ekf:disturbance_psd", "is not key=value"),
+        ("=kf", "give NAME, NAME:key=value or LABEL=NAME:key=value"),
+    ],
+)
+def test_sweep_refuses_bad_observer_specs_before_running(
+    tmp_path: Path, capsys, spec: str, match: str
+) -> None:
+    code = main(
+        ["sweep", "--robots", "pendulum", "--observers", spec, "--out", str(tmp_path / "s")]
+    )
+    assert code == 2
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "match"),
+    [
+        ("--seeds", "3-1", "the range '3-1' is empty"),
+        ("--seeds", "0--2", "is not a seed or a range"),
+        ("--seeds", "5-", "is not a seed or a range"),
+        ("--seeds", "0-2,1", "names seed(s) 1 more than once"),
+        ("--robots", "pendulum,pendulum", "names pendulum more than once"),
+        ("--robots", "no_such_robot", "no_such_robot"),
+        ("--scenarios", "exact,nope", "unknown 'nope'"),
+        ("--scenarios", "exact,exact", "names exact more than once"),
+        ("--duration", "0", "--duration=0.0 is out of range"),
+        ("--duration", "1e-4", "shorter than one sample at 1000 Hz"),
+        ("--rate", "nan", "--rate=nan is out of range"),
+        ("--observers", "h=highgain:no_such_option=1", "no_such_option"),
+    ],
+)
+def test_sweep_refuses_bad_options_up_front(
+    tmp_path: Path, capsys, option: str, value: str, match: str
+) -> None:
+    code = main(["sweep", "--robots", "pendulum", option, value, "--out", str(tmp_path / "s")])
+    assert code == 2
+    captured = capsys.readouterr()
+    assert match in captured.err and "runs on" not in captured.out
+    assert not (tmp_path / "s").exists()
+
+
+def test_sweep_where_no_run_succeeds_says_so_and_writes_the_table(tmp_path, capsys) -> None:
+    pytest.importorskip("pandas")
+    argv = ["sweep", "--robots", "pendulum", "--seeds", "0", "--observers", "liegroup"]
+    code = main([*argv, "--duration", "0.1", "--workers", "0", "--out", str(tmp_path)])
+    assert code == 1  # was: ValueError: Data cannot be log-scaled, from the plot
+    captured = capsys.readouterr()
+    assert "none of the 1 runs succeeded" in captured.err
+    assert [p.name for p in tmp_path.iterdir() if p.suffix == ".png"] == []
+
+
+def test_sweep_tasks_make_robot_file_paths_absolute(tmp_path, monkeypatch) -> None:
+    from pinobs.evaluation.distributed import sweep_tasks
+
+    (tmp_path / "arm.urdf").write_text("<robot/>")
+    monkeypatch.chdir(tmp_path)
+    tasks = sweep_tasks(["arm.urdf", "pendulum"], ["exact"], [0], {"kf": ("kf", {})})
+    assert [t.robot for t in tasks] == [str(tmp_path / "arm.urdf"), "pendulum"]
+
+
+# ------------------------------------------------- run / demo values (sweep findings)
+@pytest.mark.parametrize(
+    ("option", "match"),
+    [
+        ("--duration=-1", "duration=-1.0 is out of range"),
+        ("--duration=inf", "duration=inf is out of range"),
+        ("--duration=nan", "duration=nan is out of range"),
+        ("--duration=0", "duration=0.0 is out of range"),
+        ("--seed=-1", "--seed -1: give an integer >= 0"),
+        ("--perturb-q=nan", "perturb_q=nan is out of range"),
+        ("--perturb-q=inf", "perturb_q=inf is out of range"),
+        ("--perturb-q=-0.1", "perturb_q=-0.1 is out of range"),
+    ],
+)
+def test_run_refuses_bad_simulation_values_with_one_line(capsys, option: str, match: str) -> None:
+    assert main(["run", "--robot", "pendulum", "--observer", "kf", option]) == 2
+    err = capsys.readouterr().err
+    assert match in err and "Traceback" not in err
+
+
+def test_demo_refuses_a_negative_seed_before_simulating(tmp_path: Path, capsys) -> None:
+    assert main(["demo", "--seed=-1", "--out", str(tmp_path / "d")]) == 2
+    assert "--seed -1: give an integer >= 0" in capsys.readouterr().err
+
+
+# ------------------------------------------------------- outputs (sweep findings)
+@pytest.mark.parametrize(
+    ("flag", "target", "match"),
+    [
+        ("--json", "adir", "--json '{}' is a directory; give a file name"),
+        ("--save", "afile/x.npz", "'{}' is a file, not a folder"),
+        ("--html", "adir", "--html '{}' is a directory"),
+        ("--plot", "r/p.txt", "matplotlib cannot write '.txt' files"),
+    ],
+)
+def test_run_refuses_unwritable_outputs_before_simulating(
+    tmp_path: Path, capsys, monkeypatch, flag: str, target: str, match: str
+) -> None:
+    import pinobs.cli
+
+    (tmp_path / "adir").mkdir()
+    (tmp_path / "afile").write_text("x")
+    monkeypatch.setattr(pinobs.cli, "simulate", None)  # calling it would raise TypeError
+    path = tmp_path / target
+    shown = path.parent if target.startswith("afile") else path
+    code = main(["run", "--robot", "pendulum", "--observer", "kf", flag, str(path)])
+    assert code == 2
+    assert match.format(shown) in capsys.readouterr().err
+
+
+def test_run_refuses_the_same_file_for_json_and_save(tmp_path: Path, capsys) -> None:
+    same = str(tmp_path / "x")
+    assert (
+        main(["run", "--robot", "pendulum", "--observer", "kf", "--json", same, "--save", same])
+        == 2
+    )
+    assert "--json and --save are the same file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", [["demo"], ["sweep", "--robots", "pendulum"]])
+def test_demo_and_sweep_refuse_a_file_as_their_output_folder(
+    tmp_path: Path, capsys, command: list[str]
+) -> None:
+    (tmp_path / "afile").write_text("x")
+    assert main([*command, "--out", str(tmp_path / "afile")]) == 2
+    assert "is a file; give a folder" in capsys.readouterr().err
+
+
+def test_an_os_error_while_writing_is_one_line_and_exit_1(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    from pinobs.simulation import Result
+
+    def full(self, path):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(Result, "save", full)
+    argv = ["run", "--robot", "pendulum", "--observer", "kf", "--duration", "0.1"]
+    assert main([*argv, "--save", str(tmp_path / "r.npz")]) == 1
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("pinobs: error: [Errno 28] No space left on device")
+        and "Traceback" not in err
+    )
+
+
+def test_run_plot_reports_the_file_it_wrote(tmp_path: Path, capsys) -> None:
+    pytest.importorskip("matplotlib")
+    argv = ["run", "--robot", "pendulum", "--observer", "kf", "--duration", "0.2"]
+    assert main([*argv, "--plot", str(tmp_path / "p")]) == 0
+    assert f"wrote {tmp_path / 'p.png'}" in capsys.readouterr().out
+
+
+def test_play_refuses_a_result_of_another_robot_unless_forced(tmp_path: Path, capsys) -> None:
+    pytest.importorskip("matplotlib")
+    saved = tmp_path / "cp.npz"
+    argv = ["run", "--robot", "cartpole", "--observer", "kf", "--duration", "0.2"]
+    assert main([*argv, "--save", str(saved)]) == 0
+    play = ["play", str(saved), "--robot", "double_pendulum", "--plot", str(tmp_path / "p.png")]
+    assert main(play) == 2  # was: cart-pole data drawn on a double pendulum (same nq)
+    assert "is a run of 'cartpole', not of 'double_pendulum'" in capsys.readouterr().err
+    assert main([*play, "--force"]) == 0
+    assert main(["play", str(saved), "--robot", "pendulum", "--force"]) == 2
+    assert "has nq = 2, nv = 2; robot 'pendulum' has nq = 1" in capsys.readouterr().err
+
+
+def test_play_of_a_file_that_is_not_a_result_is_one_line(tmp_path: Path, capsys) -> None:
+    (tmp_path / "notes.txt").write_text("x\n")
+    assert main(["play", str(tmp_path / "notes.txt")]) == 2
+    err = capsys.readouterr().err
+    assert "is not a result saved by pinobs" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("spec", ["", ",,", " , "])
+def test_run_refuses_an_observer_list_without_a_name(capsys, monkeypatch, spec: str) -> None:
+    import pinobs.cli
+
+    monkeypatch.setattr(pinobs.cli, "simulate", None)  # was: the whole run, then a TypeError
+    assert main(["run", "--robot", "pendulum", "--observer", spec]) == 2
+    assert "names no observer; give names (pinobs list) or 'all'" in capsys.readouterr().err
+
+
+def test_run_all_in_a_list_skips_observers_that_refuse_the_robot(capsys) -> None:
+    argv = ["run", "--robot", "pendulum", "--duration", "0.2", "--observer", "all,kf"]
+    assert main(argv) == 0  # was: UnsupportedRobotError from liegroup, which 'all' alone skips
+    assert "skipped liegroup:" in capsys.readouterr().out
+
+
+def test_run_prints_why_an_observer_failed(capsys, monkeypatch) -> None:
+    import dataclasses
+
+    import pinobs.cli
+
+    real = pinobs.cli.simulate
+
+    def failing(*args, **kwargs):
+        res = real(*args, **kwargs)
+        tr = dataclasses.replace(res.traces[0], diverged_at=0.0)
+        meta = {**res.meta, "failures": {"kf": "NonFiniteError at t = 0 s: q is nan"}}
+        return dataclasses.replace(res, traces=(tr,), meta=meta)
+
+    monkeypatch.setattr(pinobs.cli, "simulate", failing)
+    assert main(["run", "--robot", "pendulum", "--observer", "kf", "--duration", "0.1"]) == 0
+    assert "failed kf: NonFiniteError at t = 0 s: q is nan" in capsys.readouterr().out

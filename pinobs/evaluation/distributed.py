@@ -193,6 +193,8 @@ def sweep_tasks(
     obs = tuple(
         (label, name, tuple(sorted(opts.items()))) for label, (name, opts) in observers.items()
     )
+    # a robot file's path made absolute: a worker may run in another directory
+    robots = [str(Path(r).resolve()) if Path(r).is_file() else r for r in robots]
     return [
         SweepTask(r, s, int(k), obs, duration, rate, noise_std)
         for r, s, k in itertools.product(robots, scenarios, seeds)
@@ -307,10 +309,15 @@ def write_table(table: Any, stem: str | Path) -> Path:
 def write_sweep(table: Any, out_dir: str | Path, *, plot: bool = True) -> list[Path]:
     """Save a :func:`sweep` table as ``sweep.parquet`` (``sweep.csv`` without pyarrow) and,
     with matplotlib, ``sweep.png`` (RMS velocity error per observer, one panel per robot
-    and scenario, one dot per seed, log scale)."""
+    and scenario, one dot per seed, log scale; no plot when no run succeeded)."""
+    import numpy as np
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = [write_table(table, out / "sweep")]
+    finite = table["rms_v_error"].to_numpy(dtype=float) if len(table) else np.zeros(0)
+    if not np.any(np.isfinite(finite) & (finite > 0)):
+        plot = False  # no run succeeded: nothing to draw on a log scale
     if plot:
         try:
             import matplotlib
@@ -326,7 +333,8 @@ def write_sweep(table: Any, out_dir: str | Path, *, plot: bool = True) -> list[P
         for ax, ((robot, scenario), g) in zip(axes[0], groups, strict=True):
             labels = list(dict.fromkeys(g["observer"]))
             for i, label in enumerate(labels):
-                y = g.loc[g["observer"] == label, "rms_v_error"]
+                y = g.loc[g["observer"] == label, "rms_v_error"].to_numpy(dtype=float)
+                y = y[np.isfinite(y) & (y > 0)]  # failed runs (NaN) are listed, not drawn
                 ax.plot([i] * len(y), y, "o", alpha=0.6)
             ax.set_xticks(range(len(labels)), labels, rotation=45, ha="right")
             ax.set_yscale("log")

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from pinobs.errors import GainError
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.simulation import Result
@@ -79,9 +80,21 @@ def convergence_time(t: Vector, err: Vector) -> float:
 
 
 def evaluate(result: Result, robot: Robot, *, transient: float | None = None) -> list[Metrics]:
-    """Metrics of every observer in ``result`` (``robot`` supplies the configuration difference)."""
+    """Metrics of every observer in ``result`` (``robot`` supplies the configuration difference).
+
+    Raises:
+        GainError: ``transient`` [s] not finite, negative, or not shorter than the run.
+    """
     t = result.t
-    t_tr = 0.25 * float(t[-1] - t[0]) if transient is None else transient
+    span = float(t[-1] - t[0])
+    if transient is not None and not (
+        isinstance(transient, int | float) and math.isfinite(transient) and 0 <= transient < span
+    ):
+        raise GainError(
+            f"transient={transient!r} is out of range; give a time [s] >= 0 and shorter than "
+            f"the run ({span:g} s)"
+        )
+    t_tr = 0.25 * span if transient is None else transient
     after = t >= t[0] + t_tr
     out = []
     for tr in result.traces:

@@ -56,7 +56,7 @@ def format_table(
                 _num(ratio, ".1f"),
             )
         )
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(_HEADER)]
+    widths = [max([len(h), *(len(r[i]) for r in rows)]) for i, h in enumerate(_HEADER)]
     lines = []
     if title:
         lines.append(title)

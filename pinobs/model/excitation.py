@@ -27,12 +27,14 @@ decision) and each evaluation costs a few milliseconds.
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
-from pinobs.errors import IdentificationError, UnsupportedRobotError
+from pinobs.errors import GainError, IdentificationError, UnsupportedRobotError
 from pinobs.model.identification import MomentumRegressor
 from pinobs.model.robot import Robot, Vector
 from pinobs.tolerances import COULOMB_SMOOTHING_VELOCITY
@@ -110,9 +112,31 @@ def excite(
         seed: seed of the search.
 
     Raises:
+        GainError: ``duration`` or ``rate`` not a finite number > 0, a rate too low to
+            sample the highest harmonic (at most ``2 · harmonics · f``), a negative seed.
         UnsupportedRobotError: a joint is not revolute or prismatic (a floating base cannot follow a reference).
         IdentificationError: no candidate fits the limits.
     """
+    for name, value in (("duration", duration), ("rate", rate)):
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, numbers.Real)
+            or not (math.isfinite(value) and value > 0)
+        ):
+            raise GainError(f"{name}={value!r} is out of range; give a finite number > 0")
+    if base_frequency is not None and not (math.isfinite(base_frequency) and base_frequency > 0):
+        raise GainError(
+            f"base_frequency={base_frequency!r} is out of range; give a finite number > 0"
+        )
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
+        raise GainError(f"seed={seed!r}: give an integer >= 0")
+    f_top = harmonics * (base_frequency or 2.0 / duration)
+    if rate <= 2.0 * f_top:  # Nyquist: the samples would miss (or alias) the motion
+        raise GainError(
+            f"rate={rate:g} Hz cannot sample the trajectory's highest harmonic "
+            f"({f_top:g} Hz = {harmonics} harmonics of {f_top / harmonics:g} Hz); give a rate "
+            f"> {2.0 * f_top:g} Hz or a longer duration"
+        )
     if not robot.is_vector_space:
         raise UnsupportedRobotError(
             f"robot {robot.name!r} has joints that are not revolute or prismatic; "
@@ -157,7 +181,9 @@ def excite(
         q, v, acc = _series(coef, t_eval, omega, center)
         rows = []
         for k in range(len(q)):
+            # (nv, n) always: Pinocchio returns a 1-D row when nv = 1
             y = np.array(pin.computeJointTorqueRegressor(model, data, q[k], v[k], acc[k]))
+            y = y.reshape(nv, -1)
             block = [y]
             if reg.friction:
                 block.append(np.diag(v[k]))

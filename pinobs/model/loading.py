@@ -281,6 +281,28 @@ def _erd_share_dir() -> Path:
     raise ModelFileError("example-robot-data is installed but ships no share/ folder")
 
 
+_SUFFIXES = (".urdf", ".xml", ".mjcf")
+
+
+def _root_tag(path: Path) -> str | None:
+    """The root element's tag of an XML file, or ``None`` if it is not XML."""
+    try:
+        for _, element in ET.iterparse(path, events=("start",)):
+            return str(element.tag)
+    except (ET.ParseError, OSError, UnicodeDecodeError):
+        return None
+    return None
+
+
+def _is_urdf(path: Path) -> bool:
+    """``.urdf`` files, and files of another suffix (not ``.xml``/``.mjcf``) whose root
+    element is ``<robot>`` (a copy such as ``arm.urdf.bak``)."""
+    suffix = path.suffix.lower()
+    if suffix in _SUFFIXES:
+        return suffix == ".urdf"
+    return _root_tag(path) == "robot"
+
+
 def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
     """Return (file, package dirs, default root joint, display name) for ``source``."""
     entry = _all_entries().get(str(source))
@@ -292,6 +314,17 @@ def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
         path = share / "example-robot-data" / "robots" / entry.file
         return path, [share], entry.root_joint, entry.name
     path = Path(source)
+    if path.is_dir():
+        raise ModelFileError(
+            f"robot {str(path)!r} is a directory; give a URDF/MJCF file in it or a robot name"
+        )
+    if path.is_file():  # an existing file is a file whatever its suffix (arm.urdf.bak)
+        if path.suffix.lower() not in _SUFFIXES and _root_tag(path) not in ("robot", "mujoco"):
+            raise ModelFileError(
+                f"robot file {str(path)!r} is neither a URDF (<robot>) nor an MJCF (<mujoco>) "
+                "file; give one, or a robot name (pinobs list)"
+            )
+        return path, [], "fixed", path.stem
     looks_like_path = path.suffix.lower() in (".urdf", ".xml", ".mjcf") or len(path.parts) > 1
     if not looks_like_path:
         raise UnknownNameError(
@@ -478,7 +511,7 @@ def load(
     facts: UrdfFacts | None = None
     compiled: tuple[Any, MujocoMap] | None = None
     try:
-        if path.suffix.lower() == ".urdf":
+        if _is_urdf(path):
             model, geometry, facts = _load_urdf(path, dirs, joint_type)
         else:
             model, visual, _, compiled = _load_mjcf(path, joint_type, root)

@@ -3,16 +3,22 @@
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pinobs.errors import ModelFileError, UnknownNameError
+from pinobs.errors import LogFormatError, ModelFileError, UnknownNameError
 from pinobs.model.robot import Vector, read_only
 
-__all__ = ["ObserverTrace", "Result"]
+__all__ = ["RESULT_FORMAT", "ObserverTrace", "Result"]
+
+#: Version of the ``.npz`` layout :meth:`Result.save` writes (``header["format"]``);
+#: :meth:`Result.load` reads it and every older one (files without it are version 1)
+#: and refuses a newer one.
+RESULT_FORMAT = 1
 
 
 @dataclass(frozen=True)
@@ -86,6 +92,7 @@ class Result:
         path.parent.mkdir(parents=True, exist_ok=True)
         arrays: dict[str, Any] = {k: getattr(self, k) for k in ("t", "q", "v", "tau", "q_meas")}
         header = {
+            "format": RESULT_FORMAT,
             "robot": self.robot,
             "meta": self.meta,
             "traces": [
@@ -104,30 +111,59 @@ class Result:
 
     @classmethod
     def load(cls, path: str | Path) -> Result:
-        """Read a result written by :meth:`save`."""
+        """Read a result written by :meth:`save`.
+
+        Raises:
+            ModelFileError: no such file.
+            LogFormatError: the file is not a saved result (not an ``.npz``, no header,
+                arrays missing) or was written by a newer pinobs (its format version).
+        """
         path = Path(path)
         if not path.is_file():
             raise ModelFileError(f"result file {str(path)!r} does not exist")
-        with np.load(path, allow_pickle=False) as z:
-            header = json.loads(str(z["header"]))
-            traces = tuple(
-                ObserverTrace(
-                    name=h["name"],
-                    q=z[f"trace{i}_q"],
-                    v=z[f"trace{i}_v"],
-                    update_time=z[f"trace{i}_update_time"],
-                    options=h["options"],
-                    diverged_at=h["diverged_at"],
+        what = f"{str(path)!r} is not a result saved by pinobs (Result.save, pinobs run --save)"
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if not hasattr(z, "files") or "header" not in z.files:
+                    raise LogFormatError(f"{what}: it has no header")
+                header = json.loads(str(z["header"]))
+                version = header.get("format", 1) if isinstance(header, dict) else None
+                if not isinstance(version, int) or isinstance(version, bool):
+                    raise LogFormatError(f"{what}: its header is not a result's")
+                if version > RESULT_FORMAT:
+                    raise LogFormatError(
+                        f"{str(path)!r} was saved in result format {version}; this pinobs "
+                        f"reads formats up to {RESULT_FORMAT}: upgrade pinobs to read it"
+                    )
+                traces = tuple(
+                    ObserverTrace(
+                        name=h["name"],
+                        q=z[f"trace{i}_q"],
+                        v=z[f"trace{i}_v"],
+                        update_time=z[f"trace{i}_update_time"],
+                        options=h["options"],
+                        diverged_at=h["diverged_at"],
+                    )
+                    for i, h in enumerate(header["traces"])
                 )
-                for i, h in enumerate(header["traces"])
-            )
-            return cls(
-                robot=header["robot"],
-                t=z["t"],
-                q=z["q"],
-                v=z["v"],
-                tau=z["tau"],
-                q_meas=z["q_meas"],
-                traces=traces,
-                meta=header["meta"],
-            )
+                result = cls(
+                    robot=header["robot"],
+                    t=z["t"],
+                    q=z["q"],
+                    v=z["v"],
+                    tau=z["tau"],
+                    q_meas=z["q_meas"],
+                    traces=traces,
+                    meta=header["meta"],
+                )
+        except LogFormatError:
+            raise
+        except (KeyError, TypeError, IndexError) as exc:
+            raise LogFormatError(f"{what}: {type(exc).__name__} {exc}") from None
+        except (ValueError, OSError, zipfile.BadZipFile, EOFError):  # not an .npz
+            raise LogFormatError(f"{what}: it is not an .npz archive") from None
+        if result.t.ndim != 1 or any(
+            a.shape[0] != result.t.shape[0] for a in (result.q, result.v, result.tau)
+        ):
+            raise LogFormatError(f"{what}: its arrays do not have one row per time")
+        return result

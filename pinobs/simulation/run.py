@@ -10,18 +10,21 @@ drifts by 9.6e-8 J out of 33.4 J (3e-9 relative) over 2 s.
 
 from __future__ import annotations
 
+import numbers
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from pinobs.errors import ObserverDiverged, PinobsError
+from pinobs.errors import DimensionError, GainError, ObserverDiverged, OptionError, PinobsError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.robot import Vector
 from pinobs.observers import Observer, make_observer
+from pinobs.observers.base import positive
 from pinobs.simulation.inputs import InputProfile, make_input
 from pinobs.simulation.result import ObserverTrace, Result
 from pinobs.simulation.sensors import Sensor
@@ -57,6 +60,61 @@ def _plant_step(
     for _ in range(n):
         q, v = dynamics_rk4(plant, q, v, tau, h / n)
     return q, v
+
+
+def _portable_source(source: Any) -> Any:
+    """A robot file's path made absolute (a saved result is played from anywhere); a
+    registry name as it is."""
+    if isinstance(source, str) and Path(source).is_file():
+        return str(Path(source).resolve())
+    return source
+
+
+def _is_int(x: Any) -> bool:
+    return isinstance(x, numbers.Integral) and not isinstance(x, bool)
+
+
+def _check_run(
+    robot: Robot,
+    observers: Any,
+    duration: float,
+    sensor: Sensor,
+    perturb_q: float,
+    perturb_v: float,
+    seed: int,
+    substeps: int,
+    plant: Robot | None,
+) -> None:
+    """:func:`simulate`'s arguments, refused before any work (its ``Raises``)."""
+    positive("duration", duration)
+    if duration * sensor.rate < 1.0:
+        raise GainError(
+            f"duration={duration!r} s is shorter than one sample period at {sensor.rate:g} Hz; "
+            f"give a duration >= {sensor.period:g} s"
+        )
+    positive("perturb_q", perturb_q, allow_zero=True)
+    positive("perturb_v", perturb_v, allow_zero=True)
+    if not _is_int(seed) or seed < 0:
+        raise GainError(f"seed={seed!r}: give an integer >= 0")
+    if not _is_int(substeps) or substeps < 1:
+        raise GainError(f"substeps={substeps!r}: give an integer >= 1 (plant steps per sample)")
+    if isinstance(observers, str | bytes):
+        raise OptionError(
+            f"observers={observers!r}: give a list of names ([{observers!r}]) or a mapping "
+            "label -> observer"
+        )
+    if isinstance(observers, Mapping):
+        wrong = {k: type(v).__name__ for k, v in observers.items() if not isinstance(v, Observer)}
+        if wrong:
+            raise OptionError(
+                f"observers: {wrong} are not observers; a mapping gives label -> observer "
+                "(pinobs.make_observer(name, robot)); give names as a list"
+            )
+    if plant is not None and (plant.nq, plant.nv) != (robot.nq, robot.nv):
+        raise DimensionError(
+            f"plant {plant.name!r} has nq = {plant.nq}, nv = {plant.nv}; the observers' robot "
+            f"{robot.name!r} has nq = {robot.nq}, nv = {robot.nv}: give a plant of the same robot"
+        )
 
 
 # The observers' matrices are small (2nv ≤ 256): BLAS threads only contend (an ekf at
@@ -101,8 +159,17 @@ def simulate(
     An observer that fails (diverges, a singular matrix, a rejected input)
     stops there: its trace is NaN from then on, ``diverged_at`` is set and the
     reason is in ``meta["failures"]``; the other observers run on.
+
+    Raises:
+        GainError: ``duration`` not finite or shorter than one sample period,
+            ``perturb_q``/``perturb_v`` not finite >= 0, ``seed`` not an integer
+            >= 0, ``substeps`` not an integer >= 1.
+        OptionError: ``observers`` a single string, or a mapping to something
+            other than observers.
+        DimensionError: a ``plant`` with another ``nq``/``nv`` than ``robot``.
     """
     sensor = sensor or Sensor()
+    _check_run(robot, observers, duration, sensor, perturb_q, perturb_v, seed, substeps, plant)
     rng = np.random.default_rng(seed)
     truth = (plant or robot).copy()
     n = round(duration * sensor.rate) + 1
@@ -180,7 +247,7 @@ def simulate(
     )
     meta = {
         "robot": robot.name,
-        "robot_source": getattr(robot, "source", robot.name),
+        "robot_source": _portable_source(getattr(robot, "source", robot.name)),
         "root_joint": getattr(robot, "root_joint", None),
         "duration": duration,
         "rate": sensor.rate,

@@ -10,15 +10,21 @@ attitude, not an encoder).  A dropped sample is ``None``.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
 
+from pinobs.errors import GainError
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers.base import positive
 
 __all__ = ["Sensor"]
+
+
+def _is_int(x: object) -> bool:
+    return isinstance(x, numbers.Integral) and not isinstance(x, bool)
 
 
 @dataclass(frozen=True)
@@ -42,9 +48,10 @@ class Sensor:
     def __post_init__(self) -> None:
         positive("rate", self.rate)
         positive("noise_std", self.noise_std, allow_zero=True)
-        if self.bits is not None:
-            positive("bits", self.bits)
-        positive("delay", self.delay, allow_zero=True)
+        if self.bits is not None and (not _is_int(self.bits) or self.bits < 1):
+            raise GainError(f"bits={self.bits!r}: give an integer >= 1 (bits per turn) or None")
+        if not _is_int(self.delay) or self.delay < 0:
+            raise GainError(f"delay={self.delay!r}: give a whole number of samples >= 0")
         positive("dropout", self.dropout, allow_zero=True)
         if self.dropout >= 1.0:
             positive("1 - dropout", 1.0 - self.dropout)

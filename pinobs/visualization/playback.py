@@ -838,15 +838,17 @@ def write_html_from_file(
 ) -> Path:
     """Playback of a saved run (``Result.save``): load it, then :func:`write_html`.
 
-    ``robot`` defaults to ``pinobs.load(result.robot)`` (registry name or file
-    path recorded in the result; pass the robot if it was built otherwise).
+    ``robot`` defaults to ``pinobs.load(source)``, ``source`` the registry name or
+    file path recorded in the result (``meta["robot_source"]``, else its robot's
+    name); pass the robot if it was built otherwise.
     """
     from pinobs.model import load
 
     result = Result.load(result_path)
     if robot is None:
-        root = result.meta.get("root_joint") if isinstance(result.meta, dict) else None
-        robot = load(result.robot, root_joint=root)
+        meta = result.meta if isinstance(result.meta, dict) else {}
+        source = meta.get("robot_source") or result.robot
+        robot = load(source, root_joint=meta.get("root_joint"))
     return write_html(result, robot, path, fps=fps, progress=progress)
 
 

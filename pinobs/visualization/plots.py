@@ -32,7 +32,7 @@ from pinobs.visualization.playback import truth_colours
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["figure", "plot"]
+__all__ = ["figure", "plot", "plot_path"]
 
 
 def plot(
@@ -50,12 +50,33 @@ def plot(
     Same arguments as :func:`figure`, plus ``path``, the output ``.png``
     (parent folders are created).  Returns the path written.
     """
+    path = plot_path(path)
     fig = figure(
         result, robot, observers=observers, max_joints=max_joints, transient=transient, dpi=dpi
     )
-    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
+    return path
+
+
+def plot_path(path: str | Path) -> Path:
+    """The file :func:`plot` writes for ``path``: ``.png`` added when it has no suffix.
+
+    Raises:
+        GainError: a suffix matplotlib cannot write (names the ones it can).
+    """
+    require("matplotlib", "plots")
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    path = Path(path)
+    if not path.suffix:
+        return path.with_name(path.name + ".png")  # as matplotlib would, said in the path
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if path.suffix[1:].lower() not in formats:
+        raise GainError(
+            f"plot {str(path)!r}: matplotlib cannot write {path.suffix!r} files; give one of "
+            + ", ".join("." + f for f in sorted(formats))
+        )
     return path
 
 
@@ -146,7 +167,11 @@ def figure(
             ax.axvline(m.convergence_time, color=colours[name], ls="--", lw=1.0)
         if m.diverged_at is not None:
             ax.axvline(m.diverged_at, color=colours[name], ls=":", lw=1.5)
-    ax.set_yscale("log")
+    finite = [np.linalg.norm(result.trace(n).v - result.v, axis=1) for n in names]
+    if any(np.any(np.isfinite(e) & (e > 0)) for e in finite):
+        ax.set_yscale("log")
+    else:  # every estimate diverged at once (or is exact): nothing to draw on a log scale
+        ax.text(0.5, 0.5, "no finite velocity error to plot", ha="center", transform=ax.transAxes)
     ax.set_xlabel("t [s]")
     unit = units[0] if len(set(units)) == 1 else "rad/s and m/s mixed"
     ax.set_ylabel(f"|v̂ − v|₂ [{unit}]")

@@ -71,3 +71,16 @@ def test_measure_cost_reads_the_given_clock_around_every_chunk() -> None:
     cost = measure_cost(ob, samples=200, rounds=2, chunk=20, clock=clock)
     assert len(reads) == 3 * 2 * (200 // (2 * 20))  # three reads per chunk, five chunks a round
     assert cost["ratio"] > 0 and cost["update_s"] > 0 and cost["aba_s"] > 0
+
+
+@pytest.mark.parametrize("transient", [-1.0, math.nan, math.inf, 0.1, 0.2])
+def test_evaluate_refuses_a_transient_outside_the_run(transient: float) -> None:
+    robot = pinobs.load("pendulum")
+    res = pinobs.simulate(robot, ["kf"], duration=0.1)
+    with pytest.raises(pinobs.errors.GainError, match=r"transient=.* is out of range"):
+        pinobs.evaluate(res, robot, transient=transient)
+    assert pinobs.evaluate(res, robot, transient=0.0)[0].rms_v_error < 1.0
+
+
+def test_format_table_of_no_observers_is_the_header() -> None:
+    assert format_table([]).splitlines()[0].split()[0] == "observer"

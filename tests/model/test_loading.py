@@ -148,3 +148,25 @@ def test_every_urdf_the_example_robot_data_wheel_ships_has_a_name() -> None:
 def test_robots_found_in_the_wheel_but_not_in_the_table_load(name: str, nv: int) -> None:
     robot = pinobs.load(name)
     assert robot.nv == nv and robot.root_joint == "fixed"
+
+
+def test_an_existing_urdf_with_another_suffix_loads_as_a_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from pinobs.model.loading import _models_dir
+
+    (tmp_path / "pendulum.urdf.bak").write_text((_models_dir() / "pendulum.urdf").read_text())
+    (tmp_path / "pendulum_copy").write_text((_models_dir() / "pendulum.urdf").read_text())
+    monkeypatch.chdir(tmp_path)
+    for source in ("./pendulum.urdf.bak", "pendulum.urdf.bak", "pendulum_copy"):
+        robot = pinobs.load(source)  # was: "unknown robot" (judged a name by its suffix)
+        assert (robot.nq, robot.nv) == (1, 1)
+
+
+def test_a_directory_or_a_non_robot_file_is_refused_saying_what_it_is(tmp_path: Path) -> None:
+    with pytest.raises(pinobs.errors.ModelFileError, match="is a directory; give a URDF/MJCF"):
+        pinobs.load(tmp_path)  # was: "does not exist"
+    notes = tmp_path / "notes.txt"
+    notes.write_text("hello\n")
+    with pytest.raises(pinobs.errors.ModelFileError, match=r"neither a URDF \(<robot>\) nor"):
+        pinobs.load(notes)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -174,3 +175,83 @@ def test_observers_own_their_data_and_do_not_disturb_the_truth() -> None:
     alone = simulate(robot, [], duration=0.2, seed=5)
     with_obs = simulate(robot, ["fd", "kf"], duration=0.2, seed=5)
     np.testing.assert_array_equal(alone.q, with_obs.q)
+
+
+# ------------------------------------------------ arguments refused before any work
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"duration": -1.0}, pinobs.errors.GainError, "duration=-1.0 is out of range"),
+        ({"duration": math.inf}, pinobs.errors.GainError, "duration=inf is out of range"),
+        ({"duration": math.nan}, pinobs.errors.GainError, "duration=nan is out of range"),
+        ({"duration": 1e-4}, pinobs.errors.GainError, "shorter than one sample period"),
+        ({"perturb_q": math.nan}, pinobs.errors.GainError, "perturb_q=nan is out of range"),
+        ({"perturb_q": -0.1}, pinobs.errors.GainError, "perturb_q=-0.1 is out of range"),
+        ({"perturb_v": math.inf}, pinobs.errors.GainError, "perturb_v=inf is out of range"),
+        ({"seed": -1}, pinobs.errors.GainError, "seed=-1: give an integer >= 0"),
+        ({"substeps": 0}, pinobs.errors.GainError, "substeps=0: give an integer >= 1"),
+        ({"observers": "kf"}, pinobs.errors.OptionError, r"give a list of names \(\['kf'\]\)"),
+        ({"observers": {"a": "kf"}}, pinobs.errors.OptionError, "are not observers"),
+        ({"plant": "double_pendulum"}, pinobs.errors.DimensionError, "has nq = 2, nv = 2"),
+    ],
+)
+def test_simulate_refuses_bad_arguments_with_a_pinobs_error(kwargs, error, match) -> None:
+    robot = pinobs.load("pendulum")
+    kwargs = {"observers": ["kf"], "duration": 0.1, **kwargs}
+    if kwargs.get("plant") == "double_pendulum":
+        kwargs["plant"] = pinobs.load("double_pendulum")
+    observers = kwargs.pop("observers")
+    with pytest.raises(error, match=match):
+        simulate(robot, observers, **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"delay": 1.5}, r"delay=1.5: give a whole number of samples >= 0"),
+        ({"delay": -1}, r"delay=-1: give a whole number"),
+        ({"bits": 12.5}, r"bits=12.5: give an integer >= 1"),
+    ],
+)
+def test_sensor_refuses_fractional_delays_and_bits(kwargs, match) -> None:
+    with pytest.raises(pinobs.errors.GainError, match=match):
+        Sensor(**kwargs)
+
+
+# ------------------------------------------------------------ saved results
+def test_result_load_refuses_files_that_are_not_saved_results(tmp_path: Path) -> None:
+    import json
+
+    from pinobs.errors import LogFormatError
+
+    (tmp_path / "text.npz").write_text("not a result\n")
+    np.savez(tmp_path / "other.npz", a=np.zeros(2))
+    np.savez(tmp_path / "list.npz", header=np.array("[1, 2]"))
+    np.savez(tmp_path / "short.npz", header=np.array(json.dumps({"robot": "x", "traces": []})))
+    for name, match in [
+        ("text.npz", "it is not an .npz archive"),
+        ("other.npz", "it has no header"),
+        ("list.npz", "its header is not a result's"),
+        ("short.npz", "KeyError"),
+    ]:
+        with pytest.raises(LogFormatError, match="is not a result saved by pinobs.*" + match):
+            pinobs.Result.load(tmp_path / name)
+
+
+def test_result_saves_its_format_version_and_refuses_a_newer_one(tmp_path: Path) -> None:
+    import json
+
+    from pinobs.errors import LogFormatError
+    from pinobs.simulation.result import RESULT_FORMAT
+
+    res = simulate(pinobs.load("pendulum"), ["kf"], duration=0.05)
+    path = res.save(tmp_path / "r.npz")
+    with np.load(path) as z:
+        header = json.loads(str(z["header"]))
+        arrays = {k: z[k] for k in z.files}
+    assert header["format"] == RESULT_FORMAT == 1
+    assert pinobs.Result.load(path).meta == res.meta
+    header["format"] = RESULT_FORMAT + 1
+    np.savez(tmp_path / "new.npz", **{**arrays, "header": np.array(json.dumps(header))})
+    with pytest.raises(LogFormatError, match="saved in result format 2; this pinobs reads"):
+        pinobs.Result.load(tmp_path / "new.npz")

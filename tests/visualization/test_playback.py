@@ -775,3 +775,34 @@ def test_browser_chart_cursor_follows_the_animation_time(payload_run: dict[str, 
     assert np.all(np.diff(x, axis=0) > 20)  # [px]
     # equal time steps, equal moves: x(1.0) - x(0.5) = 2 (x(0.5) - x(0.25))
     np.testing.assert_allclose(x[2] - x[1], 2 * (x[1] - x[0]), atol=3.0)
+
+
+def test_saved_result_of_a_robot_file_plays_back_from_another_directory(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # robot_source was stored relative to the cwd, and write_html_from_file ignored it
+    (tmp_path / "arm").mkdir()
+    urdf = tmp_path / "arm" / "myarm.urdf"
+    urdf.write_text(ARM_URDF)
+    monkeypatch.chdir(tmp_path / "arm")
+    robot = pinobs.load("myarm.urdf")
+    result = pinobs.simulate(robot, ["kf"], duration=0.1)
+    assert result.meta["robot_source"] == str(urdf)
+    saved = result.save(tmp_path / "my.npz")
+    monkeypatch.chdir(tmp_path)
+    assert write_html_from_file(saved, tmp_path / "my.html").is_file()
+
+
+ARM_URDF = """<?xml version="1.0"?>
+<robot name="myarm">
+  <link name="world"/>
+  <joint name="j" type="revolute">
+    <parent link="world"/><child link="rod"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="100" velocity="10"/>
+  </joint>
+  <link name="rod">
+    <inertial><origin xyz="0 0 0.5"/><mass value="1"/>
+      <inertia ixx="0.08" ixy="0" ixz="0" iyy="0.08" iyz="0" izz="0.001"/></inertial>
+  </link>
+</robot>
+"""

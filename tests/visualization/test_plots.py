@@ -164,3 +164,28 @@ def test_a_diverged_estimate_does_not_set_the_y_range(run: dict[str, Any]) -> No
     lo, hi = figure(broken, run["robot"]).axes[0].get_ylim()
     assert hi - lo < 10.0  # [m/s]: the cart's motion, not the 1e6
     assert lo < result.v[:, 0].min() and result.v[:, 0].max() < hi
+
+
+def test_plot_returns_the_file_it_wrote_and_refuses_unknown_formats(run, tmp_path) -> None:
+    pytest.importorskip("matplotlib")
+    written = plot(run["result"], run["robot"], tmp_path / "adir")
+    assert written == tmp_path / "adir.png" and written.is_file()  # was reported as 'adir'
+    with pytest.raises(pinobs.errors.GainError, match=r"cannot write '\.txt' files"):
+        plot(run["result"], run["robot"], tmp_path / "p.txt")
+    assert not (tmp_path / "p.txt").exists()
+
+
+def test_plot_of_a_run_where_every_observer_diverged_is_written(run, tmp_path) -> None:
+    pytest.importorskip("matplotlib")
+    import dataclasses
+
+    res = run["result"]
+    nan = tuple(
+        dataclasses.replace(
+            tr, q=np.full_like(tr.q, np.nan), v=np.full_like(tr.v, np.nan), diverged_at=0.0
+        )
+        for tr in res.traces
+    )
+    # was: ValueError: Data cannot be log-scaled (no finite error to draw)
+    path = plot(dataclasses.replace(res, traces=nan), run["robot"], tmp_path / "d.png")
+    assert path.stat().st_size > 0

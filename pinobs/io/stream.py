@@ -69,6 +69,11 @@ from pinobs.tolerances import (
     TIME_EPS,
 )
 
+#: A median sample period [s] at or beyond these is said to be in another unit
+#: (:func:`time_unit_warning`): 10 Hz and 1 MHz.
+MAX_PLAUSIBLE_PERIOD = 0.1
+MIN_PLAUSIBLE_PERIOD = 1e-6
+
 __all__ = [
     "LogEstimator",
     "LogRun",
@@ -206,6 +211,7 @@ class LogEstimator:
         self._back = 0  # consecutive rows behind the previous accepted time, increasing
         self._back_t = -math.inf
         self._tau_warned = False
+        self._unit_checked = False
 
     # ---------------------------------------------------------------- API
     def feed(self, chunk: Log, *, last: bool = False) -> tuple[Vector, Vector, Vector]:
@@ -224,6 +230,11 @@ class LogEstimator:
         log = chunk if self._pending is None else _concat(self._pending, chunk, self.robot.nv)
         if self.period is None:
             self.period = _median_period(log.t)
+        if not self._unit_checked and len(log) > 1:
+            self._unit_checked = True
+            said = time_unit_warning(_median_period(log.t))
+            if said is not None:
+                self.warnings.append(said)
         n = len(log) if last else max(len(log) - 1, 0)
         self._pending = None if n == len(log) else _slice(log, n, len(log))
         return self._run(log, n)
@@ -428,6 +439,25 @@ class LogEstimator:
         if notes:
             head = [] if stamp is None else [f"stamp {stamp:.9f} s"]
             self.bad_rows.append((int(line), "; ".join(head + notes)))
+
+
+def time_unit_warning(period: float | None) -> str | None:
+    """What to say of a log whose median sample period [s] is implausible (``None``: nothing).
+
+    A log timed in milliseconds or nanoseconds reads as seconds 1000x or 1e9x too long:
+    its velocities come out that many times too small (a sweep found a kf median |v| of
+    6.7e-4 rad/s for 0.67, and ekf re-initialised at every row of a ns log).
+    """
+    if period is None or MIN_PLAUSIBLE_PERIOD < period < MAX_PLAUSIBLE_PERIOD:
+        return None
+    if period >= MAX_PLAUSIBLE_PERIOD:
+        unit = "milliseconds, microseconds or nanoseconds (t / 1000, t * 1e-6, t * 1e-9)"
+    else:
+        unit = "a unit larger than seconds"
+    return (
+        f"the median sample period is {period:.6g} s ({1 / period:.6g} Hz): is t in {unit}? "
+        "give t in seconds: velocities are per second of t, so they are off by the same factor"
+    )
 
 
 def _median_period(t: Vector) -> float | None:

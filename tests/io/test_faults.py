@@ -366,3 +366,28 @@ def test_an_absurd_velocity_estimate_restarts_the_observer_and_is_reported(sim, 
         Log(t=sim.t[1:], q=sim.q_meas[1:], tau=sim.tau[1:]),
     )
     assert not clean.bad_rows
+
+
+@pytest.mark.parametrize(("scale", "unit"), [(1e3, "milliseconds"), (1e9, "nanoseconds")])
+def test_time_in_another_unit_warns_to_give_seconds(sim, ur5, scale, unit) -> None:
+    # before: accepted silently, velocities 1000x (1e9x) too small
+    t, q, tau = sim.t[1:201], sim.q_meas[1:201], sim.tau[1:201]
+    run = estimate_log(_kf(ur5), Log(t * scale, q, tau))
+    assert sum(unit in w and "give t in seconds" in w for w in run.warnings) == 1
+    assert not any("sample period" in w for w in estimate_log(_kf(ur5), Log(t, q, tau)).warnings)
+
+
+def test_time_in_a_larger_unit_warns(sim, ur5) -> None:
+    t, q, tau = sim.t[1:201], sim.q_meas[1:201], sim.tau[1:201]
+    run = estimate_log(_kf(ur5), Log(t * 1e-4, q, tau))
+    assert any("larger than seconds" in w for w in run.warnings)
+
+
+def test_smoothing_a_log_in_milliseconds_fails_naming_the_unit(tmp_path, sim, ur5) -> None:
+    # before: "the filter is lost" alone
+    from pinobs.errors import PinobsError
+    from pinobs.io.smoothing import smooth_log
+
+    path = write_log(tmp_path / "ms.csv", sim.t[1:401] * 1e3, sim.q_meas[1:401], sim.tau[1:401])
+    with pytest.raises(PinobsError, match="is t in milliseconds"):
+        smooth_log(path, ur5, tmp_path / "o.csv", observer="ekf", noise_std=1e-4)

@@ -237,6 +237,27 @@ def _numeric(frame: pd.DataFrame, lines: Any, problems: list[tuple[int, str]]) -
         problems.append((line, "; ".join(bad[line])))
 
 
+def _time_in_seconds(frame: pd.DataFrame, t: str, problems: list[tuple[int, str]]) -> None:
+    """A datetime or timedelta ``t`` column as seconds, in place, said on row 0 in ``problems``.
+
+    (A sweep found every row of such a log reported as "'t' unreadable".)
+    """
+    import pandas as pd
+
+    s = frame[t]
+    kind = s.dtype.kind
+    if kind == "M":
+        tz = getattr(s.dtype, "tz", None)
+        frame[t] = (s - pd.Timestamp(0, tz=tz)).dt.total_seconds()
+        said = "t is a date-time column: read as seconds since 1970-01-01 UTC"
+    elif kind == "m":
+        frame[t] = s.dt.total_seconds()
+        said = "t is a duration column: read as seconds"
+    else:
+        return
+    problems.append((0, said))
+
+
 def _from_frame(
     frame: pd.DataFrame,
     layout: _Layout,
@@ -541,14 +562,21 @@ def _parquet_chunks(
     header = _clean_header(raw, columns)
     layout = _layout(header, robot, f"log {str(path)!r}")
     back = dict(zip(header, raw, strict=True))
+    named = dict(zip(raw, header, strict=True))
     start = 0
     try:
         for batch in pf.iter_batches(batch_size=chunk_rows, columns=[back[c] for c in layout.used]):
-            frame = batch.to_pandas()
-            frame.columns = [columns.get(c, c) if columns else c for c in frame.columns]
+            # the columns as stored: pandas' metadata would make a DataFrame index of a
+            # column written as one (a sweep found `t` so lost: KeyError)
+            frame = batch.to_pandas(ignore_metadata=True)
+            # by the names as cleaned and mapped (a sweep found ' t' or '"t"' a KeyError)
+            frame.columns = [named[c] for c in batch.schema.names]
             lines = np.arange(start, start + len(frame))
+            problems: list[tuple[int, str]] = []
+            if len(frame):
+                _time_in_seconds(frame, layout.t, problems if start == 0 else [])
             start += len(frame)
-            yield _from_frame(frame, layout, robot, lines, "row", [])
+            yield _from_frame(frame, layout, robot, lines, "row", problems)
     except (ArrowException, OSError) as exc:
         raise LogFormatError(f"log {str(path)!r}: unreadable after row {start}: {exc}") from None
 
@@ -793,7 +821,11 @@ def _frame_log(frame: Any, robot: Robot, columns: Mapping[str, str] | None) -> L
         header = _clean_header(header, columns)
         frame = frame.set_axis(header, axis=1)
     layout = _layout(header, robot, "DataFrame")
-    return _from_frame(frame, layout, robot, np.arange(len(frame)), "row", [])
+    frame = frame[layout.used].copy()
+    problems: list[tuple[int, str]] = []
+    if len(frame):
+        _time_in_seconds(frame, layout.t, problems)
+    return _from_frame(frame, layout, robot, np.arange(len(frame)), "row", problems)
 
 
 def read_log(

@@ -291,3 +291,47 @@ def test_find_logs_takes_a_file_a_folder_or_a_pattern(tmp_path) -> None:
         find_logs(str(tmp_path / "*.md"))
     with pytest.raises(pinobs.ModelFileError, match="does not exist"):
         find_logs(tmp_path / "missing")
+
+
+@pytest.mark.parametrize("dress", [" {} ", '"{}"'])
+def test_parquet_with_padded_or_quoted_column_names_reads_as_clean(
+    tmp_path, ur5, data, dress
+) -> None:
+    # before: KeyError (renamed from the raw names, looked up by the cleaned ones)
+    pytest.importorskip("pyarrow")
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.arange(6))
+    frame.columns = [dress.format(c) for c in frame.columns]
+    frame.to_parquet(tmp_path / "log.parquet")
+    log = read_log(tmp_path / "log.parquet", ur5)
+    np.testing.assert_array_equal(log.q, q)
+    np.testing.assert_array_equal(log.tau, tau)
+
+
+@pytest.mark.parametrize("name", ["t", "time"])
+def test_parquet_written_with_t_as_the_pandas_index_reads_t(tmp_path, ur5, data, name) -> None:
+    # before: KeyError "['t'] not in index" (pandas' metadata made the column an index)
+    pytest.importorskip("pyarrow")
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.arange(6)).rename(columns={"t": name})
+    frame.set_index(name).to_parquet(tmp_path / "log.parquet")
+    log = read_log(tmp_path / "log.parquet", ur5, columns={"time": "t"} if name == "time" else None)
+    np.testing.assert_array_equal(log.t, t)
+    np.testing.assert_array_equal(log.q, q)
+
+
+@pytest.mark.parametrize("kind", ["datetime", "timedelta"])
+def test_datetime_or_timedelta_t_reads_as_seconds_and_says_so(tmp_path, ur5, data, kind) -> None:
+    # before: every row reported "'t' unreadable", exit 1
+    pytest.importorskip("pyarrow")
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.arange(6))
+    start = pd.Timestamp("2026-12-01 12:00:00") if kind == "datetime" else pd.Timedelta(0)
+    frame["t"] = start + pd.to_timedelta(np.round(t * 1e9).astype("int64"), unit="ns")
+    frame.to_parquet(tmp_path / "log.parquet")
+    for source in (tmp_path / "log.parquet", frame):
+        log = read_log(source, ur5)
+        offset = start.timestamp() if kind == "datetime" else 0.0
+        np.testing.assert_allclose(log.t - offset, t, atol=1e-6)
+        ((row, said),) = log.problems
+        assert row == 0 and "read as seconds" in said

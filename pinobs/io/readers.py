@@ -527,9 +527,19 @@ def _csv_chunks(
 
 
 def _has_data_after_header(path: Path) -> bool:
+    """Whether anything but white space follows line 1, whatever the line ends (``\n``,
+    ``\r\n`` or a lone ``\r``: a sweep found every row of a CR-only file lost)."""
+    header = True
     with path.open("rb") as fh:
-        fh.readline()
-        return any(line.strip() for line in iter(fh.readline, b""))
+        for block in iter(lambda: fh.read(1 << 16), b""):
+            if header:
+                ends = [i for i in (block.find(b"\n"), block.find(b"\r")) if i >= 0]
+                if not ends:
+                    continue
+                block, header = block[min(ends) + 1 :], False
+            if block.strip():
+                return True
+    return False
 
 
 def _has_binary_head(path: Path) -> bool:

@@ -335,3 +335,22 @@ def test_datetime_or_timedelta_t_reads_as_seconds_and_says_so(tmp_path, ur5, dat
         np.testing.assert_allclose(log.t - offset, t, atol=1e-6)
         ((row, said),) = log.problems
         assert row == 0 and "read as seconds" in said
+
+
+@pytest.mark.parametrize("bad", [False, True])
+def test_cr_only_line_ends_read_the_rows_of_the_lf_file(tmp_path, ur5, data, bad) -> None:
+    # before: the header parsed, then "0 rows" (every row lost silently)
+    t, q, tau = data
+    lf = tmp_path / "lf.csv"
+    _named_frame(ur5, t, q, tau, np.arange(6)).to_csv(lf, index=False)
+    lines = lf.read_text().splitlines()
+    if bad:  # a bad cell: the careful reader (pandas) takes over
+        lines[10] = "x" + lines[10][lines[10].index(",") :]
+    lf.write_text("\n".join(lines) + "\n")
+    cr = tmp_path / "cr.csv"
+    cr.write_bytes(lf.read_bytes().replace(b"\n", b"\r"))
+    a, b = read_log(lf, ur5), read_log(cr, ur5)
+    assert len(b) == N
+    np.testing.assert_array_equal(b.q, a.q)
+    np.testing.assert_array_equal(b.lines, a.lines)
+    assert b.problems == a.problems and len(a.problems) == bad

@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pinobs.errors import DimensionError, LogFormatError, ModelFileError
+from pinobs.errors import DimensionError, LogFormatError, ModelFileError, OptionError
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 
@@ -788,12 +788,19 @@ def iter_log(
     if chunk_rows < 1:
         raise DimensionError(f"chunk_rows={chunk_rows} must be >= 1")
     if type(source).__name__ == "DataFrame":
+        _refuse_ignored("DataFrame", columns=None, topic=topic)
         yield _frame_log(source, robot, columns)
         return
     path = Path(source)
     if not path.exists():
         raise ModelFileError(f"log {str(path)!r} does not exist")
     suffix = path.suffix.lower()
+    # (a sweep found --map ignored for bags and NPZ, --topic for the others, silently)
+    if _is_bag(path):
+        _refuse_ignored(f"bag {str(path)!r}", columns=columns, topic=None)
+    else:
+        npz = suffix in (".npz", ".npy")
+        _refuse_ignored(f"log {str(path)!r}", columns=columns if npz else None, topic=topic)
     if _is_bag(path):
         yield from _bag_chunks(path, robot, topic, chunk_rows)
     elif path.is_dir():
@@ -818,6 +825,20 @@ def iter_log(
             yield chunk
         if first:
             yield _empty(robot)
+
+
+def _refuse_ignored(what: str, *, columns: Mapping[str, str] | None, topic: str | None) -> None:
+    """Refuse an option ``what`` would ignore: ``columns`` (a bag, an NPZ), ``topic`` (not a bag)."""
+    if columns:
+        raise OptionError(
+            f"{what}: columns=... (--map) renames the columns of a CSV, Parquet or DataFrame "
+            f"log; this one has none to rename ({dict(columns)})"
+        )
+    if topic is not None:
+        raise OptionError(
+            f"{what}: topic=... (--topic {topic}) chooses the JointState topic of a ROS bag; "
+            "this log is not a bag"
+        )
 
 
 def _empty(robot: Robot) -> Log:

@@ -354,3 +354,20 @@ def test_cr_only_line_ends_read_the_rows_of_the_lf_file(tmp_path, ur5, data, bad
     np.testing.assert_array_equal(b.q, a.q)
     np.testing.assert_array_equal(b.lines, a.lines)
     assert b.problems == a.problems and len(a.problems) == bad
+
+
+def test_an_option_the_format_would_ignore_is_refused(tmp_path, ur5, data) -> None:
+    # before: --map ignored for bags and NPZ, --topic for CSV/Parquet/NPZ, silently
+    t, q, tau = data
+    np.savez(tmp_path / "log.npz", t=t, q=q, tau=tau)
+    _named_frame(ur5, t, q, tau, np.arange(6)).to_csv(tmp_path / "log.csv", index=False)
+    with pytest.raises(pinobs.OptionError, match="--map"):
+        read_log(tmp_path / "log.npz", ur5, columns={"time": "t"})
+    with pytest.raises(pinobs.OptionError, match="not a bag"):
+        read_log(tmp_path / "log.csv", ur5, topic="/joint_states")
+    with pytest.raises(pinobs.OptionError, match="not a bag"):
+        read_log(_named_frame(ur5, t, q, tau, np.arange(6)), ur5, topic="/joint_states")
+    bag = tmp_path / "b"
+    _write_bag(bag, ur5, t[:5], q[:5], tau[:5], kind="mcap", rng=np.random.default_rng(2))
+    with pytest.raises(pinobs.OptionError, match="--map"):
+        read_log(bag, ur5, columns={"time": "t"})

@@ -88,6 +88,8 @@ class Log:
         lines: where each row is in the source, shape ``(N,)`` (what it counts: ``unit``).
         unit: ``"line"`` (file line of a CSV, from 1), ``"row"`` (NPZ, Parquet,
             DataFrame, from 0) or ``"message"`` (a bag, from 0).
+        notes: what the reader says of the log as a whole, not of a row (bag messages
+            skipped); :class:`~pinobs.io.LogEstimator` adds them to its warnings.
     """
 
     t: Vector
@@ -96,6 +98,7 @@ class Log:
     problems: tuple[tuple[int, str], ...] = ()
     lines: Any = None
     unit: str = "row"
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.lines is None:
@@ -678,15 +681,28 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
         buf_t: list[float] = []
         buf_q: list[Vector] = []
         buf_tau: list[Vector] = []
+        buf_n: list[int] = []  # message numbers (messages of another publisher are skipped)
         problems: list[tuple[int, str]] = []
         start = 0
+        skipped: list[int] = []
+        others: set[str] = set()
         any_tau = False
         receive_time = False  # the header stamps are t, unless the publisher left them unset
         for number, (conn, received, raw) in enumerate(reader.messages(connections=conns)):
             msg: Any = reader.deserialize(raw, conn.msgtype)
+            names = list(msg.name)
+            pos = np.asarray(msg.position, dtype=float)
+            where = {n: i for i, n in enumerate(names)}
+            lacking = [n for n in index if n not in where or where[n] >= pos.size]
+            if len(lacking) == len(index):
+                # another publisher on the topic (a gripper's JointState): not a row of this
+                # robot (a sweep found it refused at message 0, or every one a dropped row)
+                skipped.append(number)
+                others.update(names)
+                continue
             stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
             notes = []
-            if number == 0 and stamp == 0.0:
+            if not buf_n and start == 0 and stamp == 0.0:
                 # a sweep found such a bag read as one row at t = 0 and the rest repeats of it
                 receive_time = True
                 notes.append(
@@ -696,18 +712,10 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
             elif stamp == 0.0 and not receive_time:
                 notes.append("header stamp unset (0)")
             buf_t.append(1e-9 * received if receive_time else stamp)
-            names = list(msg.name)
-            pos = np.asarray(msg.position, dtype=float)
+            buf_n.append(number)
             eff = np.asarray(msg.effort, dtype=float)
             q = np.full(robot.nq, np.nan)
             tau = np.full(robot.nv, np.nan)
-            where = {n: i for i, n in enumerate(names)}
-            lacking = [n for n in index if n not in where or where[n] >= pos.size]
-            if number == 0 and len(lacking) == len(index):
-                raise DimensionError(
-                    f"bag {str(path)!r}, topic {topic!r}: the JointState joints {names} include "
-                    f"none of {robot.name!r}'s joints {list(index)}"
-                )
             if lacking:
                 notes.append(f"no position for joints {lacking}")
             for jname, b in index.items():
@@ -729,11 +737,25 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
             buf_q.append(q)
             buf_tau.append(tau)
             if len(buf_t) == chunk_rows:
-                yield _bag_log(buf_t, buf_q, buf_tau, start, problems, any_tau, robot.nq, robot.nv)
+                yield _bag_log(buf_t, buf_q, buf_tau, buf_n, problems, any_tau, robot.nq, robot.nv)
                 start += len(buf_t)
-                buf_t, buf_q, buf_tau, problems = [], [], [], []
-        if buf_t or start == 0:
-            yield _bag_log(buf_t, buf_q, buf_tau, start, problems, any_tau, robot.nq, robot.nv)
+                buf_t, buf_q, buf_tau, buf_n, problems = [], [], [], [], []
+        if skipped and not start and not buf_t:
+            raise DimensionError(
+                f"bag {str(path)!r}, topic {topic!r}: the JointState joints {sorted(others)} "
+                f"include none of robot {robot.name!r}'s joints {list(index)}"
+            )
+        said: tuple[str, ...] = ()
+        if skipped:
+            said = (
+                f"{len(skipped)} messages on {topic!r} (the first: message {skipped[0]}) carry "
+                f"none of robot {robot.name!r}'s joints (they name {sorted(others)}: another "
+                "publisher on the topic?): skipped, not rows",
+            )
+        if buf_t or start == 0 or said:
+            yield _bag_log(
+                buf_t, buf_q, buf_tau, buf_n, problems, any_tau, robot.nq, robot.nv, said
+            )
     finally:
         reader.close()
 
@@ -742,11 +764,12 @@ def _bag_log(
     t: list[float],
     q: list[Vector],
     tau: list[Vector],
-    start: int,
+    numbers: list[int],
     problems: list[tuple[int, str]],
     any_tau: bool,
     nq: int,
     nv: int,
+    notes: tuple[str, ...] = (),
 ) -> Log:
     n = len(t)
     return Log(
@@ -754,8 +777,9 @@ def _bag_log(
         q=np.array(q, dtype=float).reshape(n, nq),
         tau=np.array(tau, dtype=float).reshape(n, nv) if any_tau else None,
         problems=tuple(problems),
-        lines=np.arange(start, start + n),
+        lines=np.array(numbers, dtype=int),
         unit="message",
+        notes=notes,
     )
 
 
@@ -890,6 +914,7 @@ def read_log(
         problems=tuple(p for c in chunks for p in c.problems),
         lines=np.concatenate([c.lines for c in chunks]),
         unit=chunks[0].unit,
+        notes=tuple(n for c in chunks for n in c.notes),
     )
 
 

@@ -227,6 +227,7 @@ class LogEstimator:
                 "the effect of the missing inputs. Add tau columns (or JointState effort), or use a "
                 "model-free observer (fd, kf)."
             )
+        self.warnings.extend(n for n in chunk.notes if n not in self.warnings)
         log = chunk if self._pending is None else _concat(self._pending, chunk, self.robot.nv)
         if self.period is None:
             self.period = _median_period(log.t)

@@ -152,7 +152,10 @@ def _write_bag(
     rng,
     short_at: int = -1,
     unstamped: bool = False,
+    gripper: str = "",
 ) -> None:
+    """``gripper``: a second publisher on the topic, a one-joint JointState ``"before"`` or
+    ``"after"`` each of the robot's."""
     pytest.importorskip("rosbags")
     from rosbags.typesys import Stores, get_typestore
 
@@ -178,7 +181,18 @@ def _write_bag(
                 velocity=np.empty(0),
                 effort=tau[k, order],
             )
+            grip = js(
+                header=header(**extra, stamp=at, frame_id=""),
+                name=["gripper_finger"],
+                position=np.zeros(1),
+                velocity=np.empty(0),
+                effort=np.zeros(1),
+            )
+            if gripper == "before":
+                yield (sec * 10**9 + nsec), grip
             yield (sec * 10**9 + nsec), msg
+            if gripper == "after":
+                yield (sec * 10**9 + nsec), grip
 
     if kind == "ros1":
         from rosbags.rosbag1 import Writer as Writer1
@@ -371,3 +385,25 @@ def test_an_option_the_format_would_ignore_is_refused(tmp_path, ur5, data) -> No
     _write_bag(bag, ur5, t[:5], q[:5], tau[:5], kind="mcap", rng=np.random.default_rng(2))
     with pytest.raises(pinobs.OptionError, match="--map"):
         read_log(bag, ur5, columns={"time": "t"})
+
+
+@pytest.mark.parametrize("gripper", ["before", "after"])
+def test_messages_of_another_publisher_on_the_topic_are_skipped_and_said_once(
+    tmp_path, ur5, data, gripper
+) -> None:
+    # before: refused when the gripper's came first; otherwise 2N rows, N "dropped samples"
+    t, q, tau = data
+    bag = tmp_path / "b"
+    _write_bag(bag, ur5, t, q, tau, kind="mcap", rng=np.random.default_rng(4), gripper=gripper)
+    log = read_log(bag, ur5)
+    assert len(log) == N and not log.problems
+    np.testing.assert_array_equal(log.q, q)
+    np.testing.assert_array_equal(log.lines, 2 * np.arange(N) + (gripper == "before"))
+    (note,) = log.notes
+    assert f"{N} messages" in note and "gripper_finger" in note and "skipped" in note
+    for chunk_rows in (7, N):
+        run = pinobs.io.process_log(
+            bag, ur5, "kf", rate=1000.0, noise_std=1e-4, chunk_rows=chunk_rows
+        )
+        assert run.rows == run.estimated == N and not run.bad_rows
+        assert run.warnings == [note]

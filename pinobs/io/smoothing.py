@@ -33,7 +33,14 @@ import numpy as np
 
 from pinobs.errors import PinobsError
 from pinobs.io.readers import CHUNK_ROWS, LogSource, iter_log
-from pinobs.io.stream import LogEstimator, LogRun, _chain, _median_period, time_unit_warning
+from pinobs.io.stream import (
+    LogEstimator,
+    LogRun,
+    _chain,
+    _median_period,
+    time_screened,
+    time_unit_warning,
+)
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
@@ -196,7 +203,8 @@ def smooth_log(
         unit = time_unit_warning(_median_period(first.t))
         said, sigma_joint = [], None
         if noise_std is None:  # as pinobs.smooth, from the first chunk
-            noise_std, sigma_joint, message = log_noise_std(robot, first.t, first.q)
+            timed = time_screened(first.t)
+            noise_std, sigma_joint, message = log_noise_std(robot, first.t[timed], first.q[timed])
             said.append(message)
         if stream and period is not None:
             run, stretches = _streamed(

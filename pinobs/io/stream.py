@@ -461,6 +461,16 @@ def time_unit_warning(period: float | None) -> str | None:
     )
 
 
+def time_screened(t: Vector) -> NDArray[np.bool_]:
+    """Rows whose time is finite and after the previous row's: those the noise estimate
+    may use (a sweep found duplicated rows, zero third differences beside jumps, estimate
+    σ 3.71e-4 for 9.77e-5)."""
+    t = np.asarray(t, dtype=float)
+    keep = np.isfinite(t)
+    keep[1:] &= t[1:] > t[:-1] + TIME_EPS
+    return keep
+
+
 def _median_period(t: Vector) -> float | None:
     d = np.diff(t[np.isfinite(t)])
     d = d[d > 0]
@@ -545,7 +555,8 @@ def process_log(
     warnings: list[str] = []
     if isinstance(observer, str):
         if noise_std is None:
-            found = noise_from_log(first.t, first.q, robot)
+            timed = time_screened(first.t)
+            found = noise_from_log(first.t[timed], first.q[timed], robot)
             if found is not None:
                 noise_std, sigma_joint, said = found
                 warnings.append(said)

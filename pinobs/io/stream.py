@@ -210,7 +210,12 @@ class LogEstimator:
         self._held: Vector | None = None
         self._back = 0  # consecutive rows behind the previous accepted time, increasing
         self._back_t = -math.inf
-        self._tau_warned = False
+        self._any_tau = False  # a chunk with torques was fed
+        # rows before the first usable torque (zero torque used): count, first and last
+        # position (a sweep found them "previous torque held" though none was, and for a bag
+        # the reports depended on where its chunks began)
+        self._untorqued: list[int] = [0, 0, 0]
+        self._unit = "line"
         self._unit_checked = False
 
     # ---------------------------------------------------------------- API
@@ -219,14 +224,7 @@ class LogEstimator:
 
         Returns ``(t, q, v)`` of the rows done, in order: over all calls, one row per input row.
         """
-        if len(chunk) and chunk.tau is None and self.observer.uses_torque and not self._tau_warned:
-            self._tau_warned = True
-            self.warnings.append(
-                f"the log has no torque columns: {self.observer.name!r} uses the model's dynamics "
-                "and now assumes zero applied torque (gravity stays modelled); its estimates carry "
-                "the effect of the missing inputs. Add tau columns (or JointState effort), or use a "
-                "model-free observer (fd, kf)."
-            )
+        self._any_tau = self._any_tau or (len(chunk) > 0 and chunk.tau is not None)
         self.warnings.extend(n for n in chunk.notes if n not in self.warnings)
         log = chunk if self._pending is None else _concat(self._pending, chunk, self.robot.nv)
         if self.period is None:
@@ -243,6 +241,20 @@ class LogEstimator:
     def finish(self) -> tuple[Vector, Vector, Vector]:
         """The held-back row, and the limit warning (call once, after the last chunk)."""
         out = self.feed(_empty_like(self.robot), last=True)
+        n, first, last = self._untorqued
+        if self.observer.uses_torque and n and not self._any_tau:
+            self.warnings.append(
+                f"the log has no torque columns: {self.observer.name!r} uses the model's dynamics "
+                "and now assumes zero applied torque (gravity stays modelled); its estimates carry "
+                "the effect of the missing inputs. Add tau columns (or JointState effort), or use a "
+                "model-free observer (fd, kf)."
+            )
+        elif self.observer.uses_torque and n:
+            self.warnings.append(
+                f"{n} rows before the first usable torque ({self._unit} {first} to {last}) have "
+                f"none: {self.observer.name!r} assumed zero applied torque there (gravity stays "
+                "modelled), so its estimates on them carry the effect of the missing inputs"
+            )
         if self._outside:
             joints = ", ".join(
                 f"{self._names[i]} (|q| up to {m:.4g})" for i, m in sorted(self._outside.items())
@@ -280,6 +292,7 @@ class LogEstimator:
             problems.setdefault(pos, []).append(reason)
         lines = log.lines
         unit = log.unit
+        self._unit = unit
         # a bag's messages are named by number and stamp, file rows by their line
         stamps: list[float | None] = t_all.tolist() if unit == "message" else [None] * n
         period = self.period
@@ -339,15 +352,20 @@ class LogEstimator:
                 notes.append(f"non-finite position {q_all[k].tolist()}")
             tau: Vector | None = None
             held = self._held
-            if tau_all is not None:
-                if bad_tau[k]:
-                    if not why or np.isfinite(tau_all[k]).all():
-                        notes.append(f"torque {tau_all[k].tolist()} non-finite or absurd")
-                    notes.append("previous torque held")
-                    tau = self._held
-                else:
-                    tau = tau_all[k]
-                    self._held = tau
+            if tau_all is None or (held is None and bad_tau[k] and np.isnan(tau_all[k]).all()):
+                if held is None:  # none yet: zero torque, counted (said once, by finish)
+                    if not self._untorqued[0]:
+                        self._untorqued[1] = int(lines[k])
+                    self._untorqued[0] += 1
+                    self._untorqued[2] = int(lines[k])
+            elif bad_tau[k]:
+                if not why or np.isfinite(tau_all[k]).all():
+                    notes.append(f"torque {tau_all[k].tolist()} non-finite or absurd")
+                notes.append("previous torque held" if held is not None else "zero torque used")
+                tau = self._held
+            else:
+                tau = tau_all[k]
+                self._held = tau
             # ---- estimate
             est = self._estimate(t, q_all[k] if q_ok else None, tau, notes, held)
             if est is None:

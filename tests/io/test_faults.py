@@ -406,3 +406,21 @@ def test_duplicated_rows_do_not_change_the_noise_estimate(tmp_path, sim, ur5) ->
     sa, _ = smooth_log(clean, ur5, tmp_path / "a.csv", observer="kf")
     sb, _ = smooth_log(dup, ur5, tmp_path / "b.csv", observer="kf")
     assert sb.noise_std == sa.noise_std
+
+
+def test_rows_before_the_first_torque_are_said_once_whatever_the_chunks(sim, ur5) -> None:
+    # before: each such row "previous torque held" (none was: zero used), no warning; a bag's
+    # reports depended on whether its first chunk had any effort
+    from pinobs.io import LogEstimator
+
+    t, q, tau = sim.t[1:201], sim.q_meas[1:201], sim.tau[1:201].copy()
+    tau[:50] = np.nan
+    whole = estimate_log(pinobs.make_observer("ekf", ur5, rate=1e3, noise_std=1e-4), Log(t, q, tau))
+    est = LogEstimator(pinobs.make_observer("ekf", ur5, rate=1e3, noise_std=1e-4))
+    est.feed(Log(t[:30], q[:30], None))  # a bag chunk before any effort
+    est.feed(Log(t[30:], q[30:], tau[30:], lines=np.arange(30, 200)))
+    est.finish()
+    for bad_rows, warnings in ((whole.bad_rows, whole.warnings), (est.bad_rows, est.warnings)):
+        assert not any("torque" in reason for _, reason in bad_rows)
+        (said,) = [w for w in warnings if "torque" in w]
+        assert said.startswith("50 rows before the first usable torque (row 0 to 49)")

@@ -278,10 +278,10 @@ class LogEstimator:
         absurd_q: NDArray[np.bool_] = np.asarray(
             finite_q & ((q_all < a_lo) | (q_all > a_hi)).any(axis=1)
         )
+        # rows far outside the limits (the degrees warning of finish): only usable positions
+        # of rows placed in time (a sweep found an inf cell said as "|q| up to inf")
         outside = (q_all < w_lo) | (q_all > w_hi)
-        for i in np.flatnonzero(outside[:n].any(axis=0)):
-            worst = float(np.nanmax(np.abs(q_all[:n, i][outside[:n, i]])))
-            self._outside[int(i)] = max(self._outside.get(int(i), 0.0), worst)
+        outside_rows = (outside.any(axis=1) & finite_q & ~absurd_q).tolist()
         tau_all = log.tau
         if tau_all is not None:
             bad_tau: NDArray[np.bool_] = np.asarray(
@@ -346,6 +346,9 @@ class LogEstimator:
                 continue
             # ---- values
             q_ok = bool(finite_q[k]) and not bool(absurd_q[k])
+            if outside_rows[k]:
+                for i in np.flatnonzero(outside[k]).tolist():
+                    self._outside[i] = max(self._outside.get(i, 0.0), abs(float(q_all[k, i])))
             if finite_q[k] and absurd_q[k]:
                 notes.append(f"position {q_all[k].tolist()} absurd for the joint ranges")
             elif not finite_q[k] and not why:

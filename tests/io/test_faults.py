@@ -424,3 +424,16 @@ def test_rows_before_the_first_torque_are_said_once_whatever_the_chunks(sim, ur5
         assert not any("torque" in reason for _, reason in bad_rows)
         (said,) = [w for w in warnings if "torque" in w]
         assert said.startswith("50 rows before the first usable torque (row 0 to 49)")
+
+
+@pytest.mark.parametrize("cell", ["inf", "1e9"])
+def test_a_bad_cell_or_a_row_skipped_for_time_does_not_make_the_degrees_warning(
+    sim, ur5, cell
+) -> None:
+    # before: "|q| up to inf: a log in degrees?" from one inf cell
+    t, q, tau = sim.t[1:201].copy(), sim.q_meas[1:201].copy(), sim.tau[1:201]
+    q[50, 2] = float(cell)  # a non-finite or absurd position: a dropped sample
+    q[80, 1], t[80] = 50.0, t[79]  # far outside, on a row skipped for its time
+    run = estimate_log(_kf(ur5), Log(t, q, tau))
+    assert len(run.bad_rows) == 2
+    assert not any("URDF limits" in w for w in run.warnings)

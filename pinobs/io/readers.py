@@ -322,6 +322,18 @@ _COMPRESSED = (
 )
 
 
+def _zip_hint(path: Path) -> str:
+    """What a zip archive read as text is: an .npz misnamed, or a zipped log to unzip."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = z.namelist()
+    except (zipfile.BadZipFile, OSError):
+        names = []
+    if names and all(n.endswith(".npy") for n in names):
+        return " (it is an .npz archive of arrays: name it .npz)"
+    return f" (it is a zip archive of {names}: unzip it first, e.g. `unzip {path}`)"
+
+
 def _undecodable_line(path: Path) -> tuple[int, str]:
     """The first line of ``path`` that is not UTF-8, and a hint about what the file is."""
     with path.open("rb") as fh:
@@ -330,7 +342,12 @@ def _undecodable_line(path: Path) -> tuple[int, str]:
     if head.startswith((b"\xff\xfe", b"\xfe\xff")):
         hint = " (it starts with a UTF-16 byte-order mark: re-save it as UTF-8)"
     elif head.startswith(b"PK"):
-        hint = " (it is a zip archive: an .npz log must be named .npz)"
+        hint = _zip_hint(path)
+    elif head.startswith((b"ARROW1", b"FEA1")):  # (a sweep found it "not UTF-8", no more)
+        hint = (
+            " (it is a Feather / Arrow IPC file, which pinobs does not read: convert it to "
+            "Parquet, e.g. pandas.read_feather(path).to_parquet('log.parquet'))"
+        )
     elif head.startswith(b"\x93NUMPY"):
         hint = " (it is a .npy array: save the log with np.savez(path, t=..., q=..., tau=...))"
     else:  # compressed text: a sweep found a .csv.gz refused with no word of why
@@ -618,7 +635,8 @@ def _npz_log(path: Path, robot: Robot) -> Log:
         try:
             t = np.asarray(z["t"], dtype=float)
             # a saved simulation result: what its sensor measured, not the truth
-            q = np.asarray(z["q_meas" if "q_meas" in keys else "q"], dtype=float)
+            q_name = "q_meas" if "q_meas" in keys else "q"
+            q = np.asarray(z[q_name], dtype=float)
             tau = np.asarray(z["tau"], dtype=float) if "tau" in keys else None
         except (zipfile.BadZipFile, EOFError, OSError, ValueError) as exc:
             raise LogFormatError(
@@ -631,8 +649,11 @@ def _npz_log(path: Path, robot: Robot) -> Log:
         or (tau is not None and tau.shape != (t.size, robot.nv))
     ):
         raise DimensionError(
-            f"log {str(path)!r}: t {t.shape}, q {q.shape}, tau {None if tau is None else tau.shape}; "
-            f"robot {robot.name!r} needs q of shape (N, {robot.nq}) and tau of shape (N, {robot.nv})"
+            f"log {str(path)!r}: t {t.shape}, {q_name} {q.shape}, "
+            f"tau {None if tau is None else tau.shape}; "
+            f"robot {robot.name!r} needs {q_name} of shape (N, {robot.nq}) and tau of shape "
+            f"(N, {robot.nv})"
+            + (" (q_meas is read as the log's q when present)" if q_name != "q" else "")
         )
     return Log(t=t, q=q, tau=tau, unit="row")
 
@@ -665,6 +686,11 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
     try:
         states = [c for c in reader.connections if c.msgtype in _JOINT_STATE]
         topics = sorted({c.topic for c in states})
+        if not topics:  # (a sweep found "0 topics []", nothing on what the bag holds)
+            present = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections})
+            raise DimensionError(
+                f"bag {str(path)!r} has no sensor_msgs/JointState topic; its topics: {present}"
+            )
         if topic is None:
             if len(topics) != 1:
                 raise DimensionError(

@@ -44,7 +44,7 @@ from pinobs.io.stream import (
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
-from pinobs.observers.base import Estimate, observer_class, positive
+from pinobs.observers.base import NOISE_FLOOR, Estimate, observer_class, positive
 from pinobs.observers.smoothing import (
     Smoother,
     _smooth,
@@ -202,7 +202,9 @@ def smooth_log(
         period = 1.0 / rate if rate else _median_period(first.t)
         unit = time_unit_warning(_median_period(first.t))
         said, sigma_joint = [], None
-        if noise_std is None:  # as pinobs.smooth, from the first chunk
+        if noise_std is None and not len(first):  # (a sweep found an empty log "give noise_std")
+            noise_std = NOISE_FLOOR
+        elif noise_std is None:  # as pinobs.smooth, from the first chunk
             timed = time_screened(first.t)
             noise_std, sigma_joint, message = log_noise_std(robot, first.t[timed], first.q[timed])
             said.append(message)

@@ -216,6 +216,7 @@ class LogEstimator:
         # the reports depended on where its chunks began)
         self._untorqued: list[int] = [0, 0, 0]
         self._unit = "line"
+        self._time_skipped = 0  # rows skipped for a time not after the previous row's
         self._unit_checked = False
 
     # ---------------------------------------------------------------- API
@@ -241,6 +242,13 @@ class LogEstimator:
     def finish(self) -> tuple[Vector, Vector, Vector]:
         """The held-back row, and the limit warning (call once, after the last chunk)."""
         out = self.feed(_empty_like(self.robot), last=True)
+        if self.rows >= 10 and 2 * self._time_skipped > self.rows:
+            # (a sweep found a reversed log estimated on 1 row of 2001, exit 0, no hint)
+            self.warnings.append(
+                f"{self._time_skipped} of {self.rows} rows were skipped because their t is not "
+                "after the previous row's: is the log in reverse order, or is t not its time "
+                "column? Sort it by t"
+            )
         n, first, last = self._untorqued
         if self.observer.uses_torque and n and not self._any_tau:
             self.warnings.append(
@@ -310,6 +318,7 @@ class LogEstimator:
                 self._back = self._back + 1 if t > self._back_t + TIME_EPS else 1
                 self._back_t = t
                 if self._back <= TIME_BACK_ROWS:
+                    self._time_skipped += 1
                     self._report(
                         lines[k],
                         stamps[k],

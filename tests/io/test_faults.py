@@ -437,3 +437,23 @@ def test_a_bad_cell_or_a_row_skipped_for_time_does_not_make_the_degrees_warning(
     run = estimate_log(_kf(ur5), Log(t, q, tau))
     assert len(run.bad_rows) == 2
     assert not any("URDF limits" in w for w in run.warnings)
+
+
+def test_a_reversed_log_warns_to_sort_it(sim, ur5) -> None:
+    # before: 1 row of 200 estimated, no word of why but 199 row reports
+    t, q, tau = sim.t[1:201], sim.q_meas[1:201], sim.tau[1:201]
+    run = estimate_log(_kf(ur5), Log(t[::-1], q[::-1], tau[::-1]))
+    assert run.estimated == 1
+    assert any(
+        w.startswith("199 of 200 rows were skipped") and "Sort it" in w for w in run.warnings
+    )
+    assert not any("skipped" in w for w in estimate_log(_kf(ur5), Log(t, q, tau)).warnings)
+
+
+def test_smoothing_a_log_of_no_rows_says_so_not_to_give_noise_std(tmp_path, ur5, capsys) -> None:
+    # before: "the log has too few finite rows to estimate its noise; give noise_std"
+    path = tmp_path / "h.csv"
+    path.write_text("t," + ",".join(f"q{i}" for i in range(6)) + "\n")
+    args = ["estimate", "--robot", "ur5", "--observer", "kf", "--smooth", "--log", str(path)]
+    assert main([*args, "--out", str(tmp_path / "o.csv"), "--no-progress"]) == 1
+    assert "no row of the log could be smoothed" in capsys.readouterr().err

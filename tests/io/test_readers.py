@@ -407,3 +407,39 @@ def test_messages_of_another_publisher_on_the_topic_are_skipped_and_said_once(
         )
         assert run.rows == run.estimated == N and not run.bad_rows
         assert run.warnings == [note]
+
+
+def test_a_file_of_another_kind_is_named_with_what_to_do(tmp_path, ur5, data) -> None:
+    # before: a zipped CSV "an .npz must be named .npz", Feather "not UTF-8" alone, an NPZ's
+    # q_meas called q, a bag without JointState "0 topics []"
+    import zipfile
+
+    t, q, tau = data
+    _named_frame(ur5, t, q, tau, np.arange(6)).to_csv(tmp_path / "log.csv", index=False)
+    with zipfile.ZipFile(tmp_path / "log.csv.zip", "w") as z:
+        z.write(tmp_path / "log.csv", "log.csv")
+    with pytest.raises(pinobs.LogFormatError, match=r"zip archive of \['log.csv'\]: unzip it"):
+        read_log(tmp_path / "log.csv.zip", ur5)
+    pytest.importorskip("pyarrow")
+    from pyarrow import feather
+
+    feather.write_feather(pd.DataFrame({"t": t}), str(tmp_path / "log.feather"))
+    with pytest.raises(pinobs.LogFormatError, match=r"Feather / Arrow IPC.*Parquet"):
+        read_log(tmp_path / "log.feather", ur5)
+    np.savez(tmp_path / "res.npz", t=t, q=q, q_meas=q[:, :3])
+    with pytest.raises(pinobs.DimensionError, match=r"q_meas \(120, 3\)"):
+        read_log(tmp_path / "res.npz", ur5)
+
+
+def test_a_bag_without_joint_states_lists_its_topics(tmp_path) -> None:
+    pytest.importorskip("rosbags")
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    text = ts.types["std_msgs/msg/String"]
+    with Writer(tmp_path / "b", version=9) as w:
+        conn = w.add_connection("/chatter", text.__msgtype__, typestore=ts)
+        w.write(conn, 1, ts.serialize_cdr(text(data="hi"), text.__msgtype__))
+    with pytest.raises(pinobs.DimensionError, match=r"its topics: \['/chatter \(std_msgs"):
+        read_log(tmp_path / "b", pinobs.load("ur5"))

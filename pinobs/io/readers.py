@@ -31,7 +31,12 @@ Formats (chosen from the source):
 
 A clean CSV/TSV is read by Arrow's streaming CSV reader straight into NumPy
 (fast, and without importing pandas); from the first row it cannot parse as
-numbers on, pandas reads the rest and says what is wrong with each row.
+numbers on, a careful reader takes the rest record by record and says what is
+wrong with each row.  Both read standard CSV double-quoting, as the header is
+read (``"moving, fast"``, ``""`` for a quote, a quoted field over several lines:
+its row named by its first line); a quote that makes no such field (a stray one)
+is a character of its cell, which then cannot be read.  A short row is said as
+such (``row has 5 of 13 cells``); a long one is an error naming its line.
 
 Nothing is dropped while reading: a cell that cannot be read becomes NaN and
 is reported in :attr:`Log.problems` with its line (CSV) or row / message
@@ -218,6 +223,13 @@ def _clean_header(header: Sequence[Any], columns: Mapping[str, str] | None) -> l
     return out
 
 
+#: Cells that read as a missing value, not as an unreadable one (pandas' ``na_values``).
+_NA_TEXT = [
+    *("", "nan", "-nan", "na", "n/a", "null", "none", "<na>", "#n/a", "#na"),
+    *("#n/a n/a", "-1.#ind", "1.#ind", "-1.#qnan", "1.#qnan"),
+]
+
+
 def _numeric(frame: pd.DataFrame, lines: Any, problems: list[tuple[int, str]]) -> None:
     """Convert every column to float in place; unreadable cells -> NaN, reported once per row."""
     import pandas as pd
@@ -232,7 +244,7 @@ def _numeric(frame: pd.DataFrame, lines: Any, problems: list[tuple[int, str]]) -
             continue
         text = s.astype("string").str.strip().str.replace(r'^"(.*)"$', r"\1", regex=True)
         num = pd.to_numeric(text, errors="coerce")
-        unreadable = num.isna() & text.notna() & (text != "")
+        unreadable = num.isna() & text.notna() & ~text.str.lower().isin(_NA_TEXT)
         for i in np.flatnonzero(unreadable.to_numpy()):
             bad.setdefault(int(lines[i]), []).append(f"{col!r} unreadable: {s.iloc[i]!r}")
         frame[col] = num.astype(float)
@@ -425,8 +437,10 @@ def _arrow_csv_chunks(
 
     Any row it cannot parse as numbers (a stray quote, a bad cell, a blank line,
     a wrong cell count) raises :class:`_Fallback` with the rows already yielded,
-    and :func:`_csv_chunks` re-reads from there with pandas, which reports the
-    cell or names the line.
+    and :func:`_csv_chunks` re-reads from there with :func:`_careful_chunks`, which
+    reports the cell or names the line.  (Quoting is off here: a quoted field with a
+    separator or a line break makes a wrong cell count, so the careful reader, which
+    reads quoting and counts lines, takes over.)
     """
     try:
         import pyarrow as pa
@@ -510,40 +524,109 @@ def _csv_chunks(
         return
     except _Fallback as fb:
         start = fb.rows
-    pd = _require_pandas()
-    reader = pd.read_csv(
-        path,
-        sep=sep,
-        header=None,
-        skiprows=1 + start,
-        encoding="utf-8-sig",
-        quoting=csv.QUOTE_NONE,
-        skipinitialspace=True,
-        skip_blank_lines=False,
-        chunksize=chunk_rows,
-        engine="c",
-    )
-    try:
-        for chunk in reader:
-            if chunk.shape[1] != len(header):  # short rows are NaN-padded, long ones raise
+    yield from _careful_chunks(path, header, layout, robot, sep, start, chunk_rows)
+
+
+#: Physical lines a quoted field may span before its opening quote counts as a stray one.
+_MAX_FIELD_LINES = 100
+
+
+def _careful_records(
+    path: Path, sep: str, ncols: int, skip: int
+) -> Iterator[tuple[int, list[str], str | None]]:
+    """``(line, cells, problem)`` of every record after line ``1 + skip``, blank lines left out.
+
+    Standard CSV quoting (``"a, b"``, ``""`` for a quote, a quoted field over several
+    lines: its record named by its first line), as the header is read; a quote that does
+    not make such a field (a stray one) is a character of its cell, which then cannot be
+    read: that row alone is lost (a sweep found a quoted comma fail the whole log and a
+    quoted line break shift the cells of an extra row).  A short row is padded with empty
+    cells and said; a long one raises :class:`LogFormatError`.
+    """
+    with path.open(encoding="utf-8-sig", errors="strict", newline=None) as fh:
+        for _ in range(1 + skip):
+            fh.readline()
+        number = 1 + skip
+        pending: list[str] = []  # lines read ahead while looking for a field's closing quote
+        while True:
+            line = pending.pop(0) if pending else fh.readline()
+            if not line:
+                return
+            number += 1
+            at = number  # a record is named by its first line
+            if not line.strip():
+                continue
+            if '"' not in line:
+                cells = line.rstrip("\n").split(sep)
+            else:
+                text, extra = line, 0
+                while text.count('"') % 2 and extra < _MAX_FIELD_LINES:
+                    more = pending[extra] if extra < len(pending) else fh.readline()
+                    if not more:
+                        break
+                    if extra >= len(pending):
+                        pending.append(more)
+                    text, extra = text + more, extra + 1
+                try:
+                    parsed = next(csv.reader([text], delimiter=sep, skipinitialspace=True), [])
+                except csv.Error:  # (a line break outside quotes: lines joined past a stray one)
+                    parsed = []
+                if text.count('"') % 2 == 0 and len(parsed) == ncols:
+                    cells = parsed
+                    del pending[:extra]
+                    number += extra
+                else:  # a stray quote: a character of its cell, this line alone
+                    cells = line.rstrip("\n").split(sep)
+            if len(cells) > ncols:
                 raise LogFormatError(
-                    f"log {str(path)!r}: {chunk.shape[1]} columns, the header has {len(header)}"
+                    f"log {str(path)!r}: line {at} has {len(cells)} cells, the header {ncols}"
                 )
-            chunk.columns = header
-            lines = np.arange(start, start + len(chunk)) + 2  # line 1 is the header
-            start += len(chunk)
-            blank = chunk.isna().all(axis=1).to_numpy()
-            if blank.any():  # blank lines are not rows
-                chunk, lines = chunk[~blank], lines[~blank]
-            if len(chunk):
-                yield _from_frame(chunk, layout, robot, lines, "line", [])
+            said = None
+            if len(cells) < ncols:
+                said = f"row has {len(cells)} of {ncols} cells"
+                cells = cells + [""] * (ncols - len(cells))
+            yield at, cells, said
+
+
+def _careful_chunks(
+    path: Path,
+    header: list[str],
+    layout: _Layout,
+    robot: Robot,
+    sep: str,
+    start: int,
+    chunk_rows: int,
+) -> Iterator[Log]:
+    """The rows after the first ``start`` (one line each), read record by record (
+    :func:`_careful_records`), every cell that cannot be read reported with its line."""
+    pd = _require_pandas()
+    used = list(dict.fromkeys(layout.used))
+    where = [header.index(c) for c in used]
+    rows: list[list[str]] = []
+    lines: list[int] = []
+    problems: list[tuple[int, str]] = []
+
+    def flush() -> Log:
+        frame = pd.DataFrame(rows, columns=used, dtype=object)
+        log = _from_frame(frame, layout, robot, np.array(lines), "line", problems)
+        rows.clear()
+        lines.clear()
+        return log
+
+    try:
+        for number, cells, said in _careful_records(path, sep, len(header), start):
+            rows.append([cells[i] for i in where])
+            lines.append(number)
+            if said is not None:
+                problems.append((number, said))
+            if len(rows) == chunk_rows:
+                yield flush()
+                problems = []
+        if rows:
+            yield flush()
     except UnicodeDecodeError:
         line, hint = _undecodable_line(path)
         raise LogFormatError(f"log {str(path)!r}: line {line} is not UTF-8 text{hint}") from None
-    except pd.errors.ParserError as exc:
-        raise LogFormatError(f"log {str(path)!r}: {str(exc).strip()}") from None
-    finally:
-        reader.close()
 
 
 def _has_data_after_header(path: Path) -> bool:

@@ -457,3 +457,15 @@ def test_smoothing_a_log_of_no_rows_says_so_not_to_give_noise_std(tmp_path, ur5,
     args = ["estimate", "--robot", "ur5", "--observer", "kf", "--smooth", "--log", str(path)]
     assert main([*args, "--out", str(tmp_path / "o.csv"), "--no-progress"]) == 1
     assert "no row of the log could be smoothed" in capsys.readouterr().err
+
+
+def test_two_stray_quotes_cost_their_two_rows_only(tmp_path, sim, ur5) -> None:
+    # quoting now read as standard CSV: the text between two stray quotes is no field
+    path, lines = _lines(tmp_path, sim)
+    _set(lines, 52, 3, '"' + lines[51].split(",")[3])
+    _set(lines, 80, 5, lines[79].split(",")[5] + '"')
+    path.write_text("\n".join(lines) + "\n")
+    log = read_log(path, ur5)
+    assert len(log) == N
+    assert [line for line, _ in log.problems] == [52, 80]
+    assert np.isnan(log.q[[50, 78]]).any(axis=1).all() and np.isfinite(log.q[51:78]).all()

@@ -443,3 +443,33 @@ def test_a_bag_without_joint_states_lists_its_topics(tmp_path) -> None:
         w.write(conn, 1, ts.serialize_cdr(text(data="hi"), text.__msgtype__))
     with pytest.raises(pinobs.DimensionError, match=r"its topics: \['/chatter \(std_msgs"):
         read_log(tmp_path / "b", pinobs.load("ur5"))
+
+
+def test_quoted_fields_read_as_standard_csv_with_their_lines(tmp_path, ur5, data) -> None:
+    # before: a quoted comma failed the whole log; a quoted line break made an extra row
+    # and shifted the cells of the next
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.arange(6))
+    frame["comment"] = ["still"] * N
+    frame.loc[30, "comment"] = "moving, fast"
+    frame.loc[60, "comment"] = 'a "quoted" word'
+    frame.loc[90, "comment"] = "two\nlines"
+    frame.to_csv(tmp_path / "log.csv", index=False)  # pandas quotes the three as needed
+    log = read_log(tmp_path / "log.csv", ur5)
+    assert len(log) == N and not log.problems
+    np.testing.assert_array_equal(log.q, q)
+    np.testing.assert_array_equal(log.t, t)
+    want = np.arange(N) + 2
+    want[91:] += 1  # the row after the two-line field starts a line later
+    np.testing.assert_array_equal(log.lines, want)
+
+
+def test_a_short_row_is_said_as_such(tmp_path, ur5, data) -> None:
+    # before: "non-finite position [..., nan, nan]"
+    t, q, tau = data
+    _named_frame(ur5, t, q, tau, np.arange(6)).to_csv(tmp_path / "log.csv", index=False)
+    lines = (tmp_path / "log.csv").read_text().splitlines()
+    lines[20] = ",".join(lines[20].split(",")[:5])
+    (tmp_path / "log.csv").write_text("\n".join(lines) + "\n")
+    log = read_log(tmp_path / "log.csv", ur5)
+    assert len(log) == N and log.problems == ((21, "row has 5 of 14 cells"),)

@@ -852,13 +852,13 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
         if skipped and not start and not buf_t:
             raise DimensionError(
                 f"bag {str(path)!r}, topic {topic!r}: the JointState joints {sorted(others)} "
-                f"include none of robot {robot.name!r}'s joints {list(index)}"
+                f"include none of the joints of robot {robot.name!r}, {list(index)}"
             )
         said: tuple[str, ...] = ()
         if skipped:
             said = (
                 f"{len(skipped)} messages on {topic!r} (the first: message {skipped[0]}) carry "
-                f"none of robot {robot.name!r}'s joints (they name {sorted(others)}: another "
+                f"none of the joints of robot {robot.name!r} (they name {sorted(others)}: another "
                 "publisher on the topic?): skipped, not rows",
             )
         if buf_t or start == 0 or said:

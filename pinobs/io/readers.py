@@ -31,7 +31,12 @@ Formats (chosen from the source):
 
 A clean CSV/TSV is read by Arrow's streaming CSV reader straight into NumPy
 (fast, and without importing pandas); from the first row it cannot parse as
-numbers on, pandas reads the rest and says what is wrong with each row.
+numbers on, a careful reader takes the rest record by record and says what is
+wrong with each row.  Both read standard CSV double-quoting, as the header is
+read (``"moving, fast"``, ``""`` for a quote, a quoted field over several lines:
+its row named by its first line); a quote that makes no such field (a stray one)
+is a character of its cell, which then cannot be read.  A short row is said as
+such (``row has 5 of 13 cells``); a long one is an error naming its line.
 
 Nothing is dropped while reading: a cell that cannot be read becomes NaN and
 is reported in :attr:`Log.problems` with its line (CSV) or row / message
@@ -55,7 +60,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pinobs.errors import DimensionError, LogFormatError, ModelFileError
+from pinobs.errors import DimensionError, LogFormatError, ModelFileError, OptionError
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 
@@ -88,6 +93,8 @@ class Log:
         lines: where each row is in the source, shape ``(N,)`` (what it counts: ``unit``).
         unit: ``"line"`` (file line of a CSV, from 1), ``"row"`` (NPZ, Parquet,
             DataFrame, from 0) or ``"message"`` (a bag, from 0).
+        notes: what the reader says of the log as a whole, not of a row (bag messages
+            skipped); :class:`~pinobs.io.LogEstimator` adds them to its warnings.
     """
 
     t: Vector
@@ -96,6 +103,7 @@ class Log:
     problems: tuple[tuple[int, str], ...] = ()
     lines: Any = None
     unit: str = "row"
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.lines is None:
@@ -215,6 +223,13 @@ def _clean_header(header: Sequence[Any], columns: Mapping[str, str] | None) -> l
     return out
 
 
+#: Cells that read as a missing value, not as an unreadable one (pandas' ``na_values``).
+_NA_TEXT = [
+    *("", "nan", "-nan", "na", "n/a", "null", "none", "<na>", "#n/a", "#na"),
+    *("#n/a n/a", "-1.#ind", "1.#ind", "-1.#qnan", "1.#qnan"),
+]
+
+
 def _numeric(frame: pd.DataFrame, lines: Any, problems: list[tuple[int, str]]) -> None:
     """Convert every column to float in place; unreadable cells -> NaN, reported once per row."""
     import pandas as pd
@@ -229,12 +244,33 @@ def _numeric(frame: pd.DataFrame, lines: Any, problems: list[tuple[int, str]]) -
             continue
         text = s.astype("string").str.strip().str.replace(r'^"(.*)"$', r"\1", regex=True)
         num = pd.to_numeric(text, errors="coerce")
-        unreadable = num.isna() & text.notna() & (text != "")
+        unreadable = num.isna() & text.notna() & ~text.str.lower().isin(_NA_TEXT)
         for i in np.flatnonzero(unreadable.to_numpy()):
             bad.setdefault(int(lines[i]), []).append(f"{col!r} unreadable: {s.iloc[i]!r}")
         frame[col] = num.astype(float)
     for line in sorted(bad):
         problems.append((line, "; ".join(bad[line])))
+
+
+def _time_in_seconds(frame: pd.DataFrame, t: str, problems: list[tuple[int, str]]) -> None:
+    """A datetime or timedelta ``t`` column as seconds, in place, said on row 0 in ``problems``.
+
+    (A sweep found every row of such a log reported as "'t' unreadable".)
+    """
+    import pandas as pd
+
+    s = frame[t]
+    kind = s.dtype.kind
+    if kind == "M":
+        tz = getattr(s.dtype, "tz", None)
+        frame[t] = (s - pd.Timestamp(0, tz=tz)).dt.total_seconds()
+        said = "t is a date-time column: read as seconds since 1970-01-01 UTC"
+    elif kind == "m":
+        frame[t] = s.dt.total_seconds()
+        said = "t is a duration column: read as seconds"
+    else:
+        return
+    problems.append((0, said))
 
 
 def _from_frame(
@@ -298,6 +334,18 @@ _COMPRESSED = (
 )
 
 
+def _zip_hint(path: Path) -> str:
+    """What a zip archive read as text is: an .npz misnamed, or a zipped log to unzip."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = z.namelist()
+    except (zipfile.BadZipFile, OSError):
+        names = []
+    if names and all(n.endswith(".npy") for n in names):
+        return " (it is an .npz archive of arrays: name it .npz)"
+    return f" (it is a zip archive of {names}: unzip it first, e.g. `unzip {path}`)"
+
+
 def _undecodable_line(path: Path) -> tuple[int, str]:
     """The first line of ``path`` that is not UTF-8, and a hint about what the file is."""
     with path.open("rb") as fh:
@@ -306,7 +354,12 @@ def _undecodable_line(path: Path) -> tuple[int, str]:
     if head.startswith((b"\xff\xfe", b"\xfe\xff")):
         hint = " (it starts with a UTF-16 byte-order mark: re-save it as UTF-8)"
     elif head.startswith(b"PK"):
-        hint = " (it is a zip archive: an .npz log must be named .npz)"
+        hint = _zip_hint(path)
+    elif head.startswith((b"ARROW1", b"FEA1")):  # (a sweep found it "not UTF-8", no more)
+        hint = (
+            " (it is a Feather / Arrow IPC file, which pinobs does not read: convert it to "
+            "Parquet, e.g. pandas.read_feather(path).to_parquet('log.parquet'))"
+        )
     elif head.startswith(b"\x93NUMPY"):
         hint = " (it is a .npy array: save the log with np.savez(path, t=..., q=..., tau=...))"
     else:  # compressed text: a sweep found a .csv.gz refused with no word of why
@@ -384,8 +437,10 @@ def _arrow_csv_chunks(
 
     Any row it cannot parse as numbers (a stray quote, a bad cell, a blank line,
     a wrong cell count) raises :class:`_Fallback` with the rows already yielded,
-    and :func:`_csv_chunks` re-reads from there with pandas, which reports the
-    cell or names the line.
+    and :func:`_csv_chunks` re-reads from there with :func:`_careful_chunks`, which
+    reports the cell or names the line.  (Quoting is off here: a quoted field with a
+    separator or a line break makes a wrong cell count, so the careful reader, which
+    reads quoting and counts lines, takes over.)
     """
     try:
         import pyarrow as pa
@@ -469,46 +524,125 @@ def _csv_chunks(
         return
     except _Fallback as fb:
         start = fb.rows
-    pd = _require_pandas()
-    reader = pd.read_csv(
-        path,
-        sep=sep,
-        header=None,
-        skiprows=1 + start,
-        encoding="utf-8-sig",
-        quoting=csv.QUOTE_NONE,
-        skipinitialspace=True,
-        skip_blank_lines=False,
-        chunksize=chunk_rows,
-        engine="c",
-    )
-    try:
-        for chunk in reader:
-            if chunk.shape[1] != len(header):  # short rows are NaN-padded, long ones raise
+    yield from _careful_chunks(path, header, layout, robot, sep, start, chunk_rows)
+
+
+#: Physical lines a quoted field may span before its opening quote counts as a stray one.
+_MAX_FIELD_LINES = 100
+
+
+def _careful_records(
+    path: Path, sep: str, ncols: int, skip: int
+) -> Iterator[tuple[int, list[str], str | None]]:
+    """``(line, cells, problem)`` of every record after line ``1 + skip``, blank lines left out.
+
+    Standard CSV quoting (``"a, b"``, ``""`` for a quote, a quoted field over several
+    lines: its record named by its first line), as the header is read; a quote that does
+    not make such a field (a stray one) is a character of its cell, which then cannot be
+    read: that row alone is lost (a sweep found a quoted comma fail the whole log and a
+    quoted line break shift the cells of an extra row).  A short row is padded with empty
+    cells and said; a long one raises :class:`LogFormatError`.
+    """
+    with path.open(encoding="utf-8-sig", errors="strict", newline=None) as fh:
+        for _ in range(1 + skip):
+            fh.readline()
+        number = 1 + skip
+        pending: list[str] = []  # lines read ahead while looking for a field's closing quote
+        while True:
+            line = pending.pop(0) if pending else fh.readline()
+            if not line:
+                return
+            number += 1
+            at = number  # a record is named by its first line
+            if not line.strip():
+                continue
+            if '"' not in line:
+                cells = line.rstrip("\n").split(sep)
+            else:
+                text, extra = line, 0
+                while text.count('"') % 2 and extra < _MAX_FIELD_LINES:
+                    more = pending[extra] if extra < len(pending) else fh.readline()
+                    if not more:
+                        break
+                    if extra >= len(pending):
+                        pending.append(more)
+                    text, extra = text + more, extra + 1
+                try:
+                    parsed = next(csv.reader([text], delimiter=sep, skipinitialspace=True), [])
+                except csv.Error:  # (a line break outside quotes: lines joined past a stray one)
+                    parsed = []
+                if text.count('"') % 2 == 0 and len(parsed) == ncols:
+                    cells = parsed
+                    del pending[:extra]
+                    number += extra
+                else:  # a stray quote: a character of its cell, this line alone
+                    cells = line.rstrip("\n").split(sep)
+            if len(cells) > ncols:
                 raise LogFormatError(
-                    f"log {str(path)!r}: {chunk.shape[1]} columns, the header has {len(header)}"
+                    f"log {str(path)!r}: line {at} has {len(cells)} cells, the header {ncols}"
                 )
-            chunk.columns = header
-            lines = np.arange(start, start + len(chunk)) + 2  # line 1 is the header
-            start += len(chunk)
-            blank = chunk.isna().all(axis=1).to_numpy()
-            if blank.any():  # blank lines are not rows
-                chunk, lines = chunk[~blank], lines[~blank]
-            if len(chunk):
-                yield _from_frame(chunk, layout, robot, lines, "line", [])
+            said = None
+            if len(cells) < ncols:
+                said = f"row has {len(cells)} of {ncols} cells"
+                cells = cells + [""] * (ncols - len(cells))
+            yield at, cells, said
+
+
+def _careful_chunks(
+    path: Path,
+    header: list[str],
+    layout: _Layout,
+    robot: Robot,
+    sep: str,
+    start: int,
+    chunk_rows: int,
+) -> Iterator[Log]:
+    """The rows after the first ``start`` (one line each), read record by record (
+    :func:`_careful_records`), every cell that cannot be read reported with its line."""
+    pd = _require_pandas()
+    used = list(dict.fromkeys(layout.used))
+    where = [header.index(c) for c in used]
+    rows: list[list[str]] = []
+    lines: list[int] = []
+    problems: list[tuple[int, str]] = []
+
+    def flush() -> Log:
+        frame = pd.DataFrame(rows, columns=used, dtype=object)
+        log = _from_frame(frame, layout, robot, np.array(lines), "line", problems)
+        rows.clear()
+        lines.clear()
+        return log
+
+    try:
+        for number, cells, said in _careful_records(path, sep, len(header), start):
+            rows.append([cells[i] for i in where])
+            lines.append(number)
+            if said is not None:
+                problems.append((number, said))
+            if len(rows) == chunk_rows:
+                yield flush()
+                problems = []
+        if rows:
+            yield flush()
     except UnicodeDecodeError:
         line, hint = _undecodable_line(path)
         raise LogFormatError(f"log {str(path)!r}: line {line} is not UTF-8 text{hint}") from None
-    except pd.errors.ParserError as exc:
-        raise LogFormatError(f"log {str(path)!r}: {str(exc).strip()}") from None
-    finally:
-        reader.close()
 
 
 def _has_data_after_header(path: Path) -> bool:
+    """Whether anything but white space follows line 1, whatever the line ends (``\n``,
+    ``\r\n`` or a lone ``\r``: a sweep found every row of a CR-only file lost)."""
+    header = True
     with path.open("rb") as fh:
-        fh.readline()
-        return any(line.strip() for line in iter(fh.readline, b""))
+        for block in iter(lambda: fh.read(1 << 16), b""):
+            if header:
+                ends = [i for i in (block.find(b"\n"), block.find(b"\r")) if i >= 0]
+                if not ends:
+                    continue
+                block, header = block[min(ends) + 1 :], False
+            if block.strip():
+                return True
+    return False
 
 
 def _has_binary_head(path: Path) -> bool:
@@ -541,14 +675,21 @@ def _parquet_chunks(
     header = _clean_header(raw, columns)
     layout = _layout(header, robot, f"log {str(path)!r}")
     back = dict(zip(header, raw, strict=True))
+    named = dict(zip(raw, header, strict=True))
     start = 0
     try:
         for batch in pf.iter_batches(batch_size=chunk_rows, columns=[back[c] for c in layout.used]):
-            frame = batch.to_pandas()
-            frame.columns = [columns.get(c, c) if columns else c for c in frame.columns]
+            # the columns as stored: pandas' metadata would make a DataFrame index of a
+            # column written as one (a sweep found `t` so lost: KeyError)
+            frame = batch.to_pandas(ignore_metadata=True)
+            # by the names as cleaned and mapped (a sweep found ' t' or '"t"' a KeyError)
+            frame.columns = [named[c] for c in batch.schema.names]
             lines = np.arange(start, start + len(frame))
+            problems: list[tuple[int, str]] = []
+            if len(frame):
+                _time_in_seconds(frame, layout.t, problems if start == 0 else [])
             start += len(frame)
-            yield _from_frame(frame, layout, robot, lines, "row", [])
+            yield _from_frame(frame, layout, robot, lines, "row", problems)
     except (ArrowException, OSError) as exc:
         raise LogFormatError(f"log {str(path)!r}: unreadable after row {start}: {exc}") from None
 
@@ -577,7 +718,8 @@ def _npz_log(path: Path, robot: Robot) -> Log:
         try:
             t = np.asarray(z["t"], dtype=float)
             # a saved simulation result: what its sensor measured, not the truth
-            q = np.asarray(z["q_meas" if "q_meas" in keys else "q"], dtype=float)
+            q_name = "q_meas" if "q_meas" in keys else "q"
+            q = np.asarray(z[q_name], dtype=float)
             tau = np.asarray(z["tau"], dtype=float) if "tau" in keys else None
         except (zipfile.BadZipFile, EOFError, OSError, ValueError) as exc:
             raise LogFormatError(
@@ -590,8 +732,11 @@ def _npz_log(path: Path, robot: Robot) -> Log:
         or (tau is not None and tau.shape != (t.size, robot.nv))
     ):
         raise DimensionError(
-            f"log {str(path)!r}: t {t.shape}, q {q.shape}, tau {None if tau is None else tau.shape}; "
-            f"robot {robot.name!r} needs q of shape (N, {robot.nq}) and tau of shape (N, {robot.nv})"
+            f"log {str(path)!r}: t {t.shape}, {q_name} {q.shape}, "
+            f"tau {None if tau is None else tau.shape}; "
+            f"robot {robot.name!r} needs {q_name} of shape (N, {robot.nq}) and tau of shape "
+            f"(N, {robot.nv})"
+            + (" (q_meas is read as the log's q when present)" if q_name != "q" else "")
         )
     return Log(t=t, q=q, tau=tau, unit="row")
 
@@ -624,6 +769,11 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
     try:
         states = [c for c in reader.connections if c.msgtype in _JOINT_STATE]
         topics = sorted({c.topic for c in states})
+        if not topics:  # (a sweep found "0 topics []", nothing on what the bag holds)
+            present = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections})
+            raise DimensionError(
+                f"bag {str(path)!r} has no sensor_msgs/JointState topic; its topics: {present}"
+            )
         if topic is None:
             if len(topics) != 1:
                 raise DimensionError(
@@ -640,15 +790,28 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
         buf_t: list[float] = []
         buf_q: list[Vector] = []
         buf_tau: list[Vector] = []
+        buf_n: list[int] = []  # message numbers (messages of another publisher are skipped)
         problems: list[tuple[int, str]] = []
         start = 0
+        skipped: list[int] = []
+        others: set[str] = set()
         any_tau = False
         receive_time = False  # the header stamps are t, unless the publisher left them unset
         for number, (conn, received, raw) in enumerate(reader.messages(connections=conns)):
             msg: Any = reader.deserialize(raw, conn.msgtype)
+            names = list(msg.name)
+            pos = np.asarray(msg.position, dtype=float)
+            where = {n: i for i, n in enumerate(names)}
+            lacking = [n for n in index if n not in where or where[n] >= pos.size]
+            if len(lacking) == len(index):
+                # another publisher on the topic (a gripper's JointState): not a row of this
+                # robot (a sweep found it refused at message 0, or every one a dropped row)
+                skipped.append(number)
+                others.update(names)
+                continue
             stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
             notes = []
-            if number == 0 and stamp == 0.0:
+            if not buf_n and start == 0 and stamp == 0.0:
                 # a sweep found such a bag read as one row at t = 0 and the rest repeats of it
                 receive_time = True
                 notes.append(
@@ -658,18 +821,10 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
             elif stamp == 0.0 and not receive_time:
                 notes.append("header stamp unset (0)")
             buf_t.append(1e-9 * received if receive_time else stamp)
-            names = list(msg.name)
-            pos = np.asarray(msg.position, dtype=float)
+            buf_n.append(number)
             eff = np.asarray(msg.effort, dtype=float)
             q = np.full(robot.nq, np.nan)
             tau = np.full(robot.nv, np.nan)
-            where = {n: i for i, n in enumerate(names)}
-            lacking = [n for n in index if n not in where or where[n] >= pos.size]
-            if number == 0 and len(lacking) == len(index):
-                raise DimensionError(
-                    f"bag {str(path)!r}, topic {topic!r}: the JointState joints {names} include "
-                    f"none of {robot.name!r}'s joints {list(index)}"
-                )
             if lacking:
                 notes.append(f"no position for joints {lacking}")
             for jname, b in index.items():
@@ -691,11 +846,25 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
             buf_q.append(q)
             buf_tau.append(tau)
             if len(buf_t) == chunk_rows:
-                yield _bag_log(buf_t, buf_q, buf_tau, start, problems, any_tau, robot.nq, robot.nv)
+                yield _bag_log(buf_t, buf_q, buf_tau, buf_n, problems, any_tau, robot.nq, robot.nv)
                 start += len(buf_t)
-                buf_t, buf_q, buf_tau, problems = [], [], [], []
-        if buf_t or start == 0:
-            yield _bag_log(buf_t, buf_q, buf_tau, start, problems, any_tau, robot.nq, robot.nv)
+                buf_t, buf_q, buf_tau, buf_n, problems = [], [], [], [], []
+        if skipped and not start and not buf_t:
+            raise DimensionError(
+                f"bag {str(path)!r}, topic {topic!r}: the JointState joints {sorted(others)} "
+                f"include none of the joints of robot {robot.name!r}, {list(index)}"
+            )
+        said: tuple[str, ...] = ()
+        if skipped:
+            said = (
+                f"{len(skipped)} messages on {topic!r} (the first: message {skipped[0]}) carry "
+                f"none of the joints of robot {robot.name!r} (they name {sorted(others)}: another "
+                "publisher on the topic?): skipped, not rows",
+            )
+        if buf_t or start == 0 or said:
+            yield _bag_log(
+                buf_t, buf_q, buf_tau, buf_n, problems, any_tau, robot.nq, robot.nv, said
+            )
     finally:
         reader.close()
 
@@ -704,11 +873,12 @@ def _bag_log(
     t: list[float],
     q: list[Vector],
     tau: list[Vector],
-    start: int,
+    numbers: list[int],
     problems: list[tuple[int, str]],
     any_tau: bool,
     nq: int,
     nv: int,
+    notes: tuple[str, ...] = (),
 ) -> Log:
     n = len(t)
     return Log(
@@ -716,8 +886,9 @@ def _bag_log(
         q=np.array(q, dtype=float).reshape(n, nq),
         tau=np.array(tau, dtype=float).reshape(n, nv) if any_tau else None,
         problems=tuple(problems),
-        lines=np.arange(start, start + n),
+        lines=np.array(numbers, dtype=int),
         unit="message",
+        notes=notes,
     )
 
 
@@ -750,12 +921,19 @@ def iter_log(
     if chunk_rows < 1:
         raise DimensionError(f"chunk_rows={chunk_rows} must be >= 1")
     if type(source).__name__ == "DataFrame":
+        _refuse_ignored("DataFrame", columns=None, topic=topic)
         yield _frame_log(source, robot, columns)
         return
     path = Path(source)
     if not path.exists():
         raise ModelFileError(f"log {str(path)!r} does not exist")
     suffix = path.suffix.lower()
+    # (a sweep found --map ignored for bags and NPZ, --topic for the others, silently)
+    if _is_bag(path):
+        _refuse_ignored(f"bag {str(path)!r}", columns=columns, topic=None)
+    else:
+        npz = suffix in (".npz", ".npy")
+        _refuse_ignored(f"log {str(path)!r}", columns=columns if npz else None, topic=topic)
     if _is_bag(path):
         yield from _bag_chunks(path, robot, topic, chunk_rows)
     elif path.is_dir():
@@ -782,6 +960,20 @@ def iter_log(
             yield _empty(robot)
 
 
+def _refuse_ignored(what: str, *, columns: Mapping[str, str] | None, topic: str | None) -> None:
+    """Refuse an option ``what`` would ignore: ``columns`` (a bag, an NPZ), ``topic`` (not a bag)."""
+    if columns:
+        raise OptionError(
+            f"{what}: columns=... (--map) renames the columns of a CSV, Parquet or DataFrame "
+            f"log; this one has none to rename ({dict(columns)})"
+        )
+    if topic is not None:
+        raise OptionError(
+            f"{what}: topic=... (--topic {topic}) chooses the JointState topic of a ROS bag; "
+            "this log is not a bag"
+        )
+
+
 def _empty(robot: Robot) -> Log:
     return Log(np.empty(0), np.empty((0, robot.nq)), None, unit="row")
 
@@ -793,7 +985,11 @@ def _frame_log(frame: Any, robot: Robot, columns: Mapping[str, str] | None) -> L
         header = _clean_header(header, columns)
         frame = frame.set_axis(header, axis=1)
     layout = _layout(header, robot, "DataFrame")
-    return _from_frame(frame, layout, robot, np.arange(len(frame)), "row", [])
+    frame = frame[layout.used].copy()
+    problems: list[tuple[int, str]] = []
+    if len(frame):
+        _time_in_seconds(frame, layout.t, problems)
+    return _from_frame(frame, layout, robot, np.arange(len(frame)), "row", problems)
 
 
 def read_log(
@@ -827,6 +1023,7 @@ def read_log(
         problems=tuple(p for c in chunks for p in c.problems),
         lines=np.concatenate([c.lines for c in chunks]),
         unit=chunks[0].unit,
+        notes=tuple(n for c in chunks for n in c.notes),
     )
 
 

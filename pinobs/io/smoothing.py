@@ -31,12 +31,20 @@ from typing import Any, Literal
 
 import numpy as np
 
+from pinobs.errors import PinobsError
 from pinobs.io.readers import CHUNK_ROWS, LogSource, iter_log
-from pinobs.io.stream import LogEstimator, LogRun, _chain, _median_period
+from pinobs.io.stream import (
+    LogEstimator,
+    LogRun,
+    _chain,
+    _median_period,
+    time_screened,
+    time_unit_warning,
+)
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
-from pinobs.observers.base import Estimate, observer_class, positive
+from pinobs.observers.base import NOISE_FLOOR, Estimate, observer_class, positive
 from pinobs.observers.smoothing import (
     Smoother,
     _smooth,
@@ -187,13 +195,18 @@ def smooth_log(
         and band != "inflated"  # scaled by the whole log's ρ
         and not (options or {}).get("latency")  # re-timed as a whole (pinobs.smooth)
     )
+    unit: str | None = None  # t in another unit than seconds: said with any failure
     try:
         chunks = iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows)
         first = next(chunks)
         period = 1.0 / rate if rate else _median_period(first.t)
+        unit = time_unit_warning(_median_period(first.t))
         said, sigma_joint = [], None
-        if noise_std is None:  # as pinobs.smooth, from the first chunk
-            noise_std, sigma_joint, message = log_noise_std(robot, first.t, first.q)
+        if noise_std is None and not len(first):  # (a sweep found an empty log "give noise_std")
+            noise_std = NOISE_FLOOR
+        elif noise_std is None:  # as pinobs.smooth, from the first chunk
+            timed = time_screened(first.t)
+            noise_std, sigma_joint, message = log_noise_std(robot, first.t[timed], first.q[timed])
             said.append(message)
         if stream and period is not None:
             run, stretches = _streamed(
@@ -206,6 +219,12 @@ def smooth_log(
                 options, band,
             )  # fmt: skip
         writer.close()
+    except PinobsError as exc:
+        writer.abort()
+        if unit is not None and exc.args and isinstance(exc.args[0], str):
+            # (a sweep found a log in ms fail here saying only "the filter is lost")
+            exc.args = (f"{exc.args[0]} (and {unit})", *exc.args[1:])
+        raise
     except BaseException:
         writer.abort()
         raise

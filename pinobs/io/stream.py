@@ -69,6 +69,11 @@ from pinobs.tolerances import (
     TIME_EPS,
 )
 
+#: A median sample period [s] at or beyond these is said to be in another unit
+#: (:func:`time_unit_warning`): 10 Hz and 1 MHz.
+MAX_PLAUSIBLE_PERIOD = 0.1
+MIN_PLAUSIBLE_PERIOD = 1e-6
+
 __all__ = [
     "LogEstimator",
     "LogRun",
@@ -205,7 +210,14 @@ class LogEstimator:
         self._held: Vector | None = None
         self._back = 0  # consecutive rows behind the previous accepted time, increasing
         self._back_t = -math.inf
-        self._tau_warned = False
+        self._any_tau = False  # a chunk with torques was fed
+        # rows before the first usable torque (zero torque used): count, first and last
+        # position (a sweep found them "previous torque held" though none was, and for a bag
+        # the reports depended on where its chunks began)
+        self._untorqued: list[int] = [0, 0, 0]
+        self._unit = "line"
+        self._time_skipped = 0  # rows skipped for a time not after the previous row's
+        self._unit_checked = False
 
     # ---------------------------------------------------------------- API
     def feed(self, chunk: Log, *, last: bool = False) -> tuple[Vector, Vector, Vector]:
@@ -213,17 +225,16 @@ class LogEstimator:
 
         Returns ``(t, q, v)`` of the rows done, in order: over all calls, one row per input row.
         """
-        if len(chunk) and chunk.tau is None and self.observer.uses_torque and not self._tau_warned:
-            self._tau_warned = True
-            self.warnings.append(
-                f"the log has no torque columns: {self.observer.name!r} uses the model's dynamics "
-                "and now assumes zero applied torque (gravity stays modelled); its estimates carry "
-                "the effect of the missing inputs. Add tau columns (or JointState effort), or use a "
-                "model-free observer (fd, kf)."
-            )
+        self._any_tau = self._any_tau or (len(chunk) > 0 and chunk.tau is not None)
+        self.warnings.extend(n for n in chunk.notes if n not in self.warnings)
         log = chunk if self._pending is None else _concat(self._pending, chunk, self.robot.nv)
         if self.period is None:
             self.period = _median_period(log.t)
+        if not self._unit_checked and len(log) > 1:
+            self._unit_checked = True
+            said = time_unit_warning(_median_period(log.t))
+            if said is not None:
+                self.warnings.append(said)
         n = len(log) if last else max(len(log) - 1, 0)
         self._pending = None if n == len(log) else _slice(log, n, len(log))
         return self._run(log, n)
@@ -231,6 +242,27 @@ class LogEstimator:
     def finish(self) -> tuple[Vector, Vector, Vector]:
         """The held-back row, and the limit warning (call once, after the last chunk)."""
         out = self.feed(_empty_like(self.robot), last=True)
+        if self.rows >= 10 and 2 * self._time_skipped > self.rows:
+            # (a sweep found a reversed log estimated on 1 row of 2001, exit 0, no hint)
+            self.warnings.append(
+                f"{self._time_skipped} of {self.rows} rows were skipped because their t is not "
+                "after the previous row's: is the log in reverse order, or is t not its time "
+                "column? Sort it by t"
+            )
+        n, first, last = self._untorqued
+        if self.observer.uses_torque and n and not self._any_tau:
+            self.warnings.append(
+                f"the log has no torque columns: {self.observer.name!r} uses the model's dynamics "
+                "and now assumes zero applied torque (gravity stays modelled); its estimates carry "
+                "the effect of the missing inputs. Add tau columns (or JointState effort), or use a "
+                "model-free observer (fd, kf)."
+            )
+        elif self.observer.uses_torque and n:
+            self.warnings.append(
+                f"{n} rows before the first usable torque ({self._unit} {first} to {last}) have "
+                f"none: {self.observer.name!r} assumed zero applied torque there (gravity stays "
+                "modelled), so its estimates on them carry the effect of the missing inputs"
+            )
         if self._outside:
             joints = ", ".join(
                 f"{self._names[i]} (|q| up to {m:.4g})" for i, m in sorted(self._outside.items())
@@ -254,10 +286,10 @@ class LogEstimator:
         absurd_q: NDArray[np.bool_] = np.asarray(
             finite_q & ((q_all < a_lo) | (q_all > a_hi)).any(axis=1)
         )
+        # rows far outside the limits (the degrees warning of finish): only usable positions
+        # of rows placed in time (a sweep found an inf cell said as "|q| up to inf")
         outside = (q_all < w_lo) | (q_all > w_hi)
-        for i in np.flatnonzero(outside[:n].any(axis=0)):
-            worst = float(np.nanmax(np.abs(q_all[:n, i][outside[:n, i]])))
-            self._outside[int(i)] = max(self._outside.get(int(i), 0.0), worst)
+        outside_rows = (outside.any(axis=1) & finite_q & ~absurd_q).tolist()
         tau_all = log.tau
         if tau_all is not None:
             bad_tau: NDArray[np.bool_] = np.asarray(
@@ -268,6 +300,7 @@ class LogEstimator:
             problems.setdefault(pos, []).append(reason)
         lines = log.lines
         unit = log.unit
+        self._unit = unit
         # a bag's messages are named by number and stamp, file rows by their line
         stamps: list[float | None] = t_all.tolist() if unit == "message" else [None] * n
         period = self.period
@@ -285,6 +318,7 @@ class LogEstimator:
                 self._back = self._back + 1 if t > self._back_t + TIME_EPS else 1
                 self._back_t = t
                 if self._back <= TIME_BACK_ROWS:
+                    self._time_skipped += 1
                     self._report(
                         lines[k],
                         stamps[k],
@@ -321,21 +355,29 @@ class LogEstimator:
                 continue
             # ---- values
             q_ok = bool(finite_q[k]) and not bool(absurd_q[k])
+            if outside_rows[k]:
+                for i in np.flatnonzero(outside[k]).tolist():
+                    self._outside[i] = max(self._outside.get(i, 0.0), abs(float(q_all[k, i])))
             if finite_q[k] and absurd_q[k]:
                 notes.append(f"position {q_all[k].tolist()} absurd for the joint ranges")
             elif not finite_q[k] and not why:
                 notes.append(f"non-finite position {q_all[k].tolist()}")
             tau: Vector | None = None
             held = self._held
-            if tau_all is not None:
-                if bad_tau[k]:
-                    if not why or np.isfinite(tau_all[k]).all():
-                        notes.append(f"torque {tau_all[k].tolist()} non-finite or absurd")
-                    notes.append("previous torque held")
-                    tau = self._held
-                else:
-                    tau = tau_all[k]
-                    self._held = tau
+            if tau_all is None or (held is None and bad_tau[k] and np.isnan(tau_all[k]).all()):
+                if held is None:  # none yet: zero torque, counted (said once, by finish)
+                    if not self._untorqued[0]:
+                        self._untorqued[1] = int(lines[k])
+                    self._untorqued[0] += 1
+                    self._untorqued[2] = int(lines[k])
+            elif bad_tau[k]:
+                if not why or np.isfinite(tau_all[k]).all():
+                    notes.append(f"torque {tau_all[k].tolist()} non-finite or absurd")
+                notes.append("previous torque held" if held is not None else "zero torque used")
+                tau = self._held
+            else:
+                tau = tau_all[k]
+                self._held = tau
             # ---- estimate
             est = self._estimate(t, q_all[k] if q_ok else None, tau, notes, held)
             if est is None:
@@ -430,6 +472,35 @@ class LogEstimator:
             self.bad_rows.append((int(line), "; ".join(head + notes)))
 
 
+def time_unit_warning(period: float | None) -> str | None:
+    """What to say of a log whose median sample period [s] is implausible (``None``: nothing).
+
+    A log timed in milliseconds or nanoseconds reads as seconds 1000x or 1e9x too long:
+    its velocities come out that many times too small (a sweep found a kf median |v| of
+    6.7e-4 rad/s for 0.67, and ekf re-initialised at every row of a ns log).
+    """
+    if period is None or MIN_PLAUSIBLE_PERIOD < period < MAX_PLAUSIBLE_PERIOD:
+        return None
+    if period >= MAX_PLAUSIBLE_PERIOD:
+        unit = "milliseconds, microseconds or nanoseconds (t / 1000, t * 1e-6, t * 1e-9)"
+    else:
+        unit = "a unit larger than seconds"
+    return (
+        f"the median sample period is {period:.6g} s ({1 / period:.6g} Hz): is t in {unit}? "
+        "give t in seconds: velocities are per second of t, so they are off by the same factor"
+    )
+
+
+def time_screened(t: Vector) -> NDArray[np.bool_]:
+    """Rows whose time is finite and after the previous row's: those the noise estimate
+    may use (a sweep found duplicated rows, zero third differences beside jumps, estimate
+    σ 3.71e-4 for 9.77e-5)."""
+    t = np.asarray(t, dtype=float)
+    keep = np.isfinite(t)
+    keep[1:] &= t[1:] > t[:-1] + TIME_EPS
+    return keep
+
+
 def _median_period(t: Vector) -> float | None:
     d = np.diff(t[np.isfinite(t)])
     d = d[d > 0]
@@ -514,7 +585,8 @@ def process_log(
     warnings: list[str] = []
     if isinstance(observer, str):
         if noise_std is None:
-            found = noise_from_log(first.t, first.q, robot)
+            timed = time_screened(first.t)
+            found = noise_from_log(first.t[timed], first.q[timed], robot)
             if found is not None:
                 noise_std, sigma_joint, said = found
                 warnings.append(said)

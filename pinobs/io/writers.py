@@ -26,6 +26,9 @@ if TYPE_CHECKING:
 
 __all__ = ["EstimateWriter", "write_estimates", "write_log"]
 
+#: Output suffixes of other formats: the estimates are CSV text, refused under these names.
+_NOT_CSV = {".parquet", ".pq", ".npz", ".npy", ".feather", ".arrow", ".bag", ".mcap", ".db3"}
+
 
 class _HasDims(Protocol):
     """Anything with ``nq`` and ``nv`` (a :class:`~pinobs.Robot`)."""
@@ -67,22 +70,40 @@ class EstimateWriter:
                 raise OutputExistsError(
                     f"output {str(self.path)!r} is the input log: choose another --out"
                 )
+            if s.is_dir() and self.path.resolve().is_relative_to(s.resolve()):
+                # a rosbag2 folder: its files are the input (a sweep found --out
+                # bag/bag.db3 overwrite the bag it was reading)
+                raise OutputExistsError(
+                    f"output {str(self.path)!r} is inside the input bag folder {str(s)!r}: "
+                    "choose an --out outside it"
+                )
+        if self.path.suffix.lower() in _NOT_CSV:
+            raise OutputExistsError(
+                f"output {str(self.path)!r}: the estimates are written as CSV text, not "
+                f"{self.path.suffix}; name the output .csv"
+            )
         if self.path.is_dir():  # (--force would only fail on it, after the work)
             raise OutputExistsError(f"output {str(self.path)!r} is a directory; give a file name")
         if self.path.exists() and not force:
             raise OutputExistsError(
                 f"output {str(self.path)!r} exists; pass --force (force=True) to overwrite it"
             )
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:  # (a sweep found a raw FileExistsError / PermissionError traceback here)
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(
+                dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".part"
+            )
+        except OSError as exc:
+            raise OutputExistsError(
+                f"output {str(self.path)!r} cannot be written ({type(exc).__name__}: "
+                f"{exc.strerror or exc}): choose another --out"
+            ) from None
         self.columns = [
             "t",
             *(f"q{i}" for i in range(robot.nq)),
             *(f"v{i}" for i in range(robot.nv)),
             *extra_columns,
         ]
-        fd, tmp = tempfile.mkstemp(
-            dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".part"
-        )
         self._tmp = Path(tmp)
         self._fh = os.fdopen(fd, "wb")
         self._fh.write((",".join(self.columns) + "\n").encode())

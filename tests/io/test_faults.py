@@ -366,3 +366,106 @@ def test_an_absurd_velocity_estimate_restarts_the_observer_and_is_reported(sim, 
         Log(t=sim.t[1:], q=sim.q_meas[1:], tau=sim.tau[1:]),
     )
     assert not clean.bad_rows
+
+
+@pytest.mark.parametrize(("scale", "unit"), [(1e3, "milliseconds"), (1e9, "nanoseconds")])
+def test_time_in_another_unit_warns_to_give_seconds(sim, ur5, scale, unit) -> None:
+    # before: accepted silently, velocities 1000x (1e9x) too small
+    t, q, tau = sim.t[1:201], sim.q_meas[1:201], sim.tau[1:201]
+    run = estimate_log(_kf(ur5), Log(t * scale, q, tau))
+    assert sum(unit in w and "give t in seconds" in w for w in run.warnings) == 1
+    assert not any("sample period" in w for w in estimate_log(_kf(ur5), Log(t, q, tau)).warnings)
+
+
+def test_time_in_a_larger_unit_warns(sim, ur5) -> None:
+    t, q, tau = sim.t[1:201], sim.q_meas[1:201], sim.tau[1:201]
+    run = estimate_log(_kf(ur5), Log(t * 1e-4, q, tau))
+    assert any("larger than seconds" in w for w in run.warnings)
+
+
+def test_smoothing_a_log_in_milliseconds_fails_naming_the_unit(tmp_path, sim, ur5) -> None:
+    # before: "the filter is lost" alone
+    from pinobs.errors import PinobsError
+    from pinobs.io.smoothing import smooth_log
+
+    path = write_log(tmp_path / "ms.csv", sim.t[1:401] * 1e3, sim.q_meas[1:401], sim.tau[1:401])
+    with pytest.raises(PinobsError, match="is t in milliseconds"):
+        smooth_log(path, ur5, tmp_path / "o.csv", observer="ekf", noise_std=1e-4)
+
+
+def test_duplicated_rows_do_not_change_the_noise_estimate(tmp_path, sim, ur5) -> None:
+    # before: σ 3.71e-4 for 9.77e-5 (the estimate ran on unscreened rows)
+    from pinobs.io.smoothing import smooth_log
+
+    t, q, tau = sim.t[1:1501], sim.q_meas[1:1501], sim.tau[1:1501]
+    clean = write_log(tmp_path / "clean.csv", t, q, tau)
+    dup = write_log(tmp_path / "dup.csv", *(np.repeat(x, 2, axis=0) for x in (t, q, tau)))
+    a = pinobs.io.process_log(clean, ur5, "kf", keep=False)
+    b = pinobs.io.process_log(dup, ur5, "kf", keep=False)
+    assert b.noise_std == a.noise_std
+    sa, _ = smooth_log(clean, ur5, tmp_path / "a.csv", observer="kf")
+    sb, _ = smooth_log(dup, ur5, tmp_path / "b.csv", observer="kf")
+    assert sb.noise_std == sa.noise_std
+
+
+def test_rows_before_the_first_torque_are_said_once_whatever_the_chunks(sim, ur5) -> None:
+    # before: each such row "previous torque held" (none was: zero used), no warning; a bag's
+    # reports depended on whether its first chunk had any effort
+    from pinobs.io import LogEstimator
+
+    t, q, tau = sim.t[1:201], sim.q_meas[1:201], sim.tau[1:201].copy()
+    tau[:50] = np.nan
+    whole = estimate_log(pinobs.make_observer("ekf", ur5, rate=1e3, noise_std=1e-4), Log(t, q, tau))
+    est = LogEstimator(pinobs.make_observer("ekf", ur5, rate=1e3, noise_std=1e-4))
+    est.feed(Log(t[:30], q[:30], None))  # a bag chunk before any effort
+    est.feed(Log(t[30:], q[30:], tau[30:], lines=np.arange(30, 200)))
+    est.finish()
+    for bad_rows, warnings in ((whole.bad_rows, whole.warnings), (est.bad_rows, est.warnings)):
+        assert not any("torque" in reason for _, reason in bad_rows)
+        (said,) = [w for w in warnings if "torque" in w]
+        assert said.startswith("50 rows before the first usable torque (row 0 to 49)")
+
+
+@pytest.mark.parametrize("cell", ["inf", "1e9"])
+def test_a_bad_cell_or_a_row_skipped_for_time_does_not_make_the_degrees_warning(
+    sim, ur5, cell
+) -> None:
+    # before: "|q| up to inf: a log in degrees?" from one inf cell
+    t, q, tau = sim.t[1:201].copy(), sim.q_meas[1:201].copy(), sim.tau[1:201]
+    q[50, 2] = float(cell)  # a non-finite or absurd position: a dropped sample
+    q[80, 1], t[80] = 50.0, t[79]  # far outside, on a row skipped for its time
+    run = estimate_log(_kf(ur5), Log(t, q, tau))
+    assert len(run.bad_rows) == 2
+    assert not any("URDF limits" in w for w in run.warnings)
+
+
+def test_a_reversed_log_warns_to_sort_it(sim, ur5) -> None:
+    # before: 1 row of 200 estimated, no word of why but 199 row reports
+    t, q, tau = sim.t[1:201], sim.q_meas[1:201], sim.tau[1:201]
+    run = estimate_log(_kf(ur5), Log(t[::-1], q[::-1], tau[::-1]))
+    assert run.estimated == 1
+    assert any(
+        w.startswith("199 of 200 rows were skipped") and "Sort it" in w for w in run.warnings
+    )
+    assert not any("skipped" in w for w in estimate_log(_kf(ur5), Log(t, q, tau)).warnings)
+
+
+def test_smoothing_a_log_of_no_rows_says_so_not_to_give_noise_std(tmp_path, ur5, capsys) -> None:
+    # before: "the log has too few finite rows to estimate its noise; give noise_std"
+    path = tmp_path / "h.csv"
+    path.write_text("t," + ",".join(f"q{i}" for i in range(6)) + "\n")
+    args = ["estimate", "--robot", "ur5", "--observer", "kf", "--smooth", "--log", str(path)]
+    assert main([*args, "--out", str(tmp_path / "o.csv"), "--no-progress"]) == 1
+    assert "no row of the log could be smoothed" in capsys.readouterr().err
+
+
+def test_two_stray_quotes_cost_their_two_rows_only(tmp_path, sim, ur5) -> None:
+    # quoting now read as standard CSV: the text between two stray quotes is no field
+    path, lines = _lines(tmp_path, sim)
+    _set(lines, 52, 3, '"' + lines[51].split(",")[3])
+    _set(lines, 80, 5, lines[79].split(",")[5] + '"')
+    path.write_text("\n".join(lines) + "\n")
+    log = read_log(path, ur5)
+    assert len(log) == N
+    assert [line for line, _ in log.problems] == [52, 80]
+    assert np.isnan(log.q[[50, 78]]).any(axis=1).all() and np.isfinite(log.q[51:78]).all()

@@ -152,7 +152,10 @@ def _write_bag(
     rng,
     short_at: int = -1,
     unstamped: bool = False,
+    gripper: str = "",
 ) -> None:
+    """``gripper``: a second publisher on the topic, a one-joint JointState ``"before"`` or
+    ``"after"`` each of the robot's."""
     pytest.importorskip("rosbags")
     from rosbags.typesys import Stores, get_typestore
 
@@ -178,7 +181,18 @@ def _write_bag(
                 velocity=np.empty(0),
                 effort=tau[k, order],
             )
+            grip = js(
+                header=header(**extra, stamp=at, frame_id=""),
+                name=["gripper_finger"],
+                position=np.zeros(1),
+                velocity=np.empty(0),
+                effort=np.zeros(1),
+            )
+            if gripper == "before":
+                yield (sec * 10**9 + nsec), grip
             yield (sec * 10**9 + nsec), msg
+            if gripper == "after":
+                yield (sec * 10**9 + nsec), grip
 
     if kind == "ros1":
         from rosbags.rosbag1 import Writer as Writer1
@@ -291,3 +305,171 @@ def test_find_logs_takes_a_file_a_folder_or_a_pattern(tmp_path) -> None:
         find_logs(str(tmp_path / "*.md"))
     with pytest.raises(pinobs.ModelFileError, match="does not exist"):
         find_logs(tmp_path / "missing")
+
+
+@pytest.mark.parametrize("dress", [" {} ", '"{}"'])
+def test_parquet_with_padded_or_quoted_column_names_reads_as_clean(
+    tmp_path, ur5, data, dress
+) -> None:
+    # before: KeyError (renamed from the raw names, looked up by the cleaned ones)
+    pytest.importorskip("pyarrow")
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.arange(6))
+    frame.columns = [dress.format(c) for c in frame.columns]
+    frame.to_parquet(tmp_path / "log.parquet")
+    log = read_log(tmp_path / "log.parquet", ur5)
+    np.testing.assert_array_equal(log.q, q)
+    np.testing.assert_array_equal(log.tau, tau)
+
+
+@pytest.mark.parametrize("name", ["t", "time"])
+def test_parquet_written_with_t_as_the_pandas_index_reads_t(tmp_path, ur5, data, name) -> None:
+    # before: KeyError "['t'] not in index" (pandas' metadata made the column an index)
+    pytest.importorskip("pyarrow")
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.arange(6)).rename(columns={"t": name})
+    frame.set_index(name).to_parquet(tmp_path / "log.parquet")
+    log = read_log(tmp_path / "log.parquet", ur5, columns={"time": "t"} if name == "time" else None)
+    np.testing.assert_array_equal(log.t, t)
+    np.testing.assert_array_equal(log.q, q)
+
+
+@pytest.mark.parametrize("kind", ["datetime", "timedelta"])
+def test_datetime_or_timedelta_t_reads_as_seconds_and_says_so(tmp_path, ur5, data, kind) -> None:
+    # before: every row reported "'t' unreadable", exit 1
+    pytest.importorskip("pyarrow")
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.arange(6))
+    start = pd.Timestamp("2026-12-01 12:00:00") if kind == "datetime" else pd.Timedelta(0)
+    frame["t"] = start + pd.to_timedelta(np.round(t * 1e9).astype("int64"), unit="ns")
+    frame.to_parquet(tmp_path / "log.parquet")
+    for source in (tmp_path / "log.parquet", frame):
+        log = read_log(source, ur5)
+        offset = start.timestamp() if kind == "datetime" else 0.0
+        np.testing.assert_allclose(log.t - offset, t, atol=1e-6)
+        ((row, said),) = log.problems
+        assert row == 0 and "read as seconds" in said
+
+
+@pytest.mark.parametrize("bad", [False, True])
+def test_cr_only_line_ends_read_the_rows_of_the_lf_file(tmp_path, ur5, data, bad) -> None:
+    # before: the header parsed, then "0 rows" (every row lost silently)
+    t, q, tau = data
+    lf = tmp_path / "lf.csv"
+    _named_frame(ur5, t, q, tau, np.arange(6)).to_csv(lf, index=False)
+    lines = lf.read_text().splitlines()
+    if bad:  # a bad cell: the careful reader (pandas) takes over
+        lines[10] = "x" + lines[10][lines[10].index(",") :]
+    lf.write_text("\n".join(lines) + "\n")
+    cr = tmp_path / "cr.csv"
+    cr.write_bytes(lf.read_bytes().replace(b"\n", b"\r"))
+    a, b = read_log(lf, ur5), read_log(cr, ur5)
+    assert len(b) == N
+    np.testing.assert_array_equal(b.q, a.q)
+    np.testing.assert_array_equal(b.lines, a.lines)
+    assert b.problems == a.problems and len(a.problems) == bad
+
+
+def test_an_option_the_format_would_ignore_is_refused(tmp_path, ur5, data) -> None:
+    # before: --map ignored for bags and NPZ, --topic for CSV/Parquet/NPZ, silently
+    t, q, tau = data
+    np.savez(tmp_path / "log.npz", t=t, q=q, tau=tau)
+    _named_frame(ur5, t, q, tau, np.arange(6)).to_csv(tmp_path / "log.csv", index=False)
+    with pytest.raises(pinobs.OptionError, match="--map"):
+        read_log(tmp_path / "log.npz", ur5, columns={"time": "t"})
+    with pytest.raises(pinobs.OptionError, match="not a bag"):
+        read_log(tmp_path / "log.csv", ur5, topic="/joint_states")
+    with pytest.raises(pinobs.OptionError, match="not a bag"):
+        read_log(_named_frame(ur5, t, q, tau, np.arange(6)), ur5, topic="/joint_states")
+    bag = tmp_path / "b"
+    _write_bag(bag, ur5, t[:5], q[:5], tau[:5], kind="mcap", rng=np.random.default_rng(2))
+    with pytest.raises(pinobs.OptionError, match="--map"):
+        read_log(bag, ur5, columns={"time": "t"})
+
+
+@pytest.mark.parametrize("gripper", ["before", "after"])
+def test_messages_of_another_publisher_on_the_topic_are_skipped_and_said_once(
+    tmp_path, ur5, data, gripper
+) -> None:
+    # before: refused when the gripper's came first; otherwise 2N rows, N "dropped samples"
+    t, q, tau = data
+    bag = tmp_path / "b"
+    _write_bag(bag, ur5, t, q, tau, kind="mcap", rng=np.random.default_rng(4), gripper=gripper)
+    log = read_log(bag, ur5)
+    assert len(log) == N and not log.problems
+    np.testing.assert_array_equal(log.q, q)
+    np.testing.assert_array_equal(log.lines, 2 * np.arange(N) + (gripper == "before"))
+    (note,) = log.notes
+    assert f"{N} messages" in note and "gripper_finger" in note and "skipped" in note
+    for chunk_rows in (7, N):
+        run = pinobs.io.process_log(
+            bag, ur5, "kf", rate=1000.0, noise_std=1e-4, chunk_rows=chunk_rows
+        )
+        assert run.rows == run.estimated == N and not run.bad_rows
+        assert run.warnings == [note]
+
+
+def test_a_file_of_another_kind_is_named_with_what_to_do(tmp_path, ur5, data) -> None:
+    # before: a zipped CSV "an .npz must be named .npz", Feather "not UTF-8" alone, an NPZ's
+    # q_meas called q, a bag without JointState "0 topics []"
+    import zipfile
+
+    t, q, tau = data
+    _named_frame(ur5, t, q, tau, np.arange(6)).to_csv(tmp_path / "log.csv", index=False)
+    with zipfile.ZipFile(tmp_path / "log.csv.zip", "w") as z:
+        z.write(tmp_path / "log.csv", "log.csv")
+    with pytest.raises(pinobs.LogFormatError, match=r"zip archive of \['log.csv'\]: unzip it"):
+        read_log(tmp_path / "log.csv.zip", ur5)
+    pytest.importorskip("pyarrow")
+    from pyarrow import feather
+
+    feather.write_feather(pd.DataFrame({"t": t}), str(tmp_path / "log.feather"))
+    with pytest.raises(pinobs.LogFormatError, match=r"Feather / Arrow IPC.*Parquet"):
+        read_log(tmp_path / "log.feather", ur5)
+    np.savez(tmp_path / "res.npz", t=t, q=q, q_meas=q[:, :3])
+    with pytest.raises(pinobs.DimensionError, match=r"q_meas \(120, 3\)"):
+        read_log(tmp_path / "res.npz", ur5)
+
+
+def test_a_bag_without_joint_states_lists_its_topics(tmp_path) -> None:
+    pytest.importorskip("rosbags")
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    text = ts.types["std_msgs/msg/String"]
+    with Writer(tmp_path / "b", version=9) as w:
+        conn = w.add_connection("/chatter", text.__msgtype__, typestore=ts)
+        w.write(conn, 1, ts.serialize_cdr(text(data="hi"), text.__msgtype__))
+    with pytest.raises(pinobs.DimensionError, match=r"its topics: \['/chatter \(std_msgs"):
+        read_log(tmp_path / "b", pinobs.load("ur5"))
+
+
+def test_quoted_fields_read_as_standard_csv_with_their_lines(tmp_path, ur5, data) -> None:
+    # before: a quoted comma failed the whole log; a quoted line break made an extra row
+    # and shifted the cells of the next
+    t, q, tau = data
+    frame = _named_frame(ur5, t, q, tau, np.arange(6))
+    frame["comment"] = ["still"] * N
+    frame.loc[30, "comment"] = "moving, fast"
+    frame.loc[60, "comment"] = 'a "quoted" word'
+    frame.loc[90, "comment"] = "two\nlines"
+    frame.to_csv(tmp_path / "log.csv", index=False)  # pandas quotes the three as needed
+    log = read_log(tmp_path / "log.csv", ur5)
+    assert len(log) == N and not log.problems
+    np.testing.assert_array_equal(log.q, q)
+    np.testing.assert_array_equal(log.t, t)
+    want = np.arange(N) + 2
+    want[91:] += 1  # the row after the two-line field starts a line later
+    np.testing.assert_array_equal(log.lines, want)
+
+
+def test_a_short_row_is_said_as_such(tmp_path, ur5, data) -> None:
+    # before: "non-finite position [..., nan, nan]"
+    t, q, tau = data
+    _named_frame(ur5, t, q, tau, np.arange(6)).to_csv(tmp_path / "log.csv", index=False)
+    lines = (tmp_path / "log.csv").read_text().splitlines()
+    lines[20] = ",".join(lines[20].split(",")[:5])
+    (tmp_path / "log.csv").write_text("\n".join(lines) + "\n")
+    log = read_log(tmp_path / "log.csv", ur5)
+    assert len(log) == N and log.problems == ((21, "row has 5 of 14 cells"),)

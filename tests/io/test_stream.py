@@ -99,3 +99,29 @@ def test_a_failed_run_leaves_no_partial_output(tmp_path, log_path) -> None:
     with pytest.raises(RuntimeError, match="disk full"):
         process_log(log_path, robot, Crashing(), out=out, chunk_rows=50)
     assert list(tmp_path.iterdir()) == []  # neither est.csv nor its temporary file
+
+
+def test_an_output_inside_the_input_bag_folder_is_refused_and_the_bag_kept(tmp_path) -> None:
+    # before: --out bag/bag.db3 overwrote the bag being read
+    from pinobs.errors import OutputExistsError
+    from pinobs.io import EstimateWriter
+
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (bag / "bag.db3").write_bytes(b"SQLite format 3\x00")
+    for out in (bag / "bag.db3", bag / "new.csv"):
+        with pytest.raises(OutputExistsError, match="inside the input bag folder"):
+            EstimateWriter(out, pinobs.load("ur5"), force=True, inputs=[bag])
+    assert sorted(p.name for p in bag.iterdir()) == ["bag.db3", "metadata.yaml"]
+
+
+def test_an_unwritable_or_non_csv_output_is_a_pinobs_error_before_the_work(
+    tmp_path, log_path, capsys
+) -> None:
+    # before: a raw FileExistsError traceback; x.parquet got CSV text silently
+    assert main(_args(log_path, log_path / "x.csv", "--force")) == 2
+    assert "cannot be written (FileExistsError" in capsys.readouterr().err
+    assert main(_args(log_path, tmp_path / "x.parquet")) == 2
+    assert "written as CSV text, not .parquet" in capsys.readouterr().err
+    assert not (tmp_path / "x.parquet").exists()

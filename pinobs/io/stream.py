@@ -161,10 +161,7 @@ def _absurd_bounds(robot: Robot) -> tuple[Vector, Vector, Vector, Vector, Vector
     a_hi = np.where(limited, hi + pad, ABSURD_VALUE)
     w_lo = np.where(limited, lo - LIMIT_WARN_FRACTION * rng, -np.inf)
     w_hi = np.where(limited, hi + LIMIT_WARN_FRACTION * rng, np.inf)
-    eff = np.minimum(np.array(robot.model.effortLimit, dtype=float), 2 * ABSURD_VALUE)
-    ok = np.isfinite(eff) & (eff > 0) & (eff < ABSURD_VALUE)
-    tau_max = np.where(ok, ABSURD_LIMIT_FACTOR * eff, ABSURD_VALUE)
-    return a_lo, a_hi, w_lo, w_hi, tau_max
+    return a_lo, a_hi, w_lo, w_hi, robot.absurd_torque  # the live API's bound too
 
 
 def _coordinate_names(robot: Robot) -> list[str]:

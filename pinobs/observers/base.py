@@ -304,6 +304,18 @@ class Observer(ABC, Generic[State]):
     second's updates once more.  The estimator sees ``h³ x⃛`` too: at low
     rates and fast motions it overestimates σ (noise-free samples of a top
     spinning at 30 rad/s at 100 Hz give 2e-4 rad); pass ``noise_std`` there.
+
+    **Pauses** (MATH §7 holds the torque over a step; a loop that stalls makes one step
+    long).  The sample period ``T`` is ``1/rate``, or without ``rate`` the median of the
+    first :data:`_PERIOD_INTERVALS` intervals after :meth:`reset`.  A step longer than
+    :data:`~pinobs.tolerances.GAP_PERIODS` ``T`` is propagated in sub-steps of at most
+    ``T`` with the held torque (as an update without a sample at every period); a pause
+    longer than :data:`~pinobs.tolerances.PAUSE_RESTART` s and
+    :data:`~pinobs.tolerances.MAX_GAP_PERIODS` ``T`` restarts the state at the next sample
+    (:meth:`_restart_state`: measured position, zero velocity, what the family learned
+    kept), listed in :attr:`pauses`: the log reader's policy (:mod:`pinobs.io.stream`),
+    with a restart threshold in seconds, because restarting from zero velocity costs more
+    than it saves below ~0.1 s (:meth:`_after_pause`).
     """
 
     name: ClassVar[str] = ""
@@ -401,7 +413,7 @@ class Observer(ABC, Generic[State]):
             tau: joint torque [N·m or N] applied from ``t`` on (zero-order
                 hold), shape ``(nv,)``; ``None`` means zero.
 
-        **A pause** (class docstring): a step longer than :data:`GAP_PERIODS` sample
+        **A pause** (class docstring, **Pauses**): a step longer than :data:`GAP_PERIODS` sample
         periods is propagated in sub-steps of at most one period; after one longer than
         :data:`PAUSE_RESTART` s (and :data:`MAX_GAP_PERIODS` periods) the state restarts at
         the sample (:meth:`pauses`).

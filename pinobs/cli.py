@@ -827,13 +827,18 @@ def _parse_seeds(spec: str) -> list[int]:
         if first > last:
             raise OptionError(f"--seeds {spec!r}: the range {part!r} is empty; give LOW-HIGH")
         seeds.extend(range(first, last + 1))
-    repeated = sorted({k for k in seeds if seeds.count(k) > 1})
+    _no_repeats("--seeds", spec, seeds)
+    return seeds
+
+
+def _no_repeats(flag: str, spec: str, items: list[Any]) -> None:
+    """Refuse a list that names an entry twice (a repeated run, skewing the medians)."""
+    repeated = sorted({x for x in items if items.count(x) > 1})
     if repeated:
         raise OptionError(
-            f"--seeds {spec!r} names seed(s) {', '.join(map(str, repeated))} more than once; "
-            "each would run the same simulation again"
+            f"{flag} {spec!r} names {', '.join(map(str, repeated))} more than once; each would "
+            "run the same simulations again"
         )
-    return seeds
 
 
 def _unique_list(flag: str, spec: str) -> list[str]:
@@ -841,12 +846,7 @@ def _unique_list(flag: str, spec: str) -> list[str]:
     items = [x.strip() for x in spec.split(",")]
     if not all(items):
         raise OptionError(f"{flag} {spec!r}: an empty name; give a comma-separated list")
-    repeated = sorted({x for x in items if items.count(x) > 1})
-    if repeated:
-        raise OptionError(
-            f"{flag} {spec!r} names {', '.join(repeated)} more than once; each would run the "
-            "same simulations again"
-        )
+    _no_repeats(flag, spec, items)
     return items
 
 

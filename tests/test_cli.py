@@ -256,7 +256,7 @@ def test_sweep_refuses_bad_observer_specs_before_running(
         ("--seeds", "3-1", "the range '3-1' is empty"),
         ("--seeds", "0--2", "is not a seed or a range"),
         ("--seeds", "5-", "is not a seed or a range"),
-        ("--seeds", "0-2,1", "names seed(s) 1 more than once"),
+        ("--seeds", "0-2,1", "names 1 more than once"),
         ("--robots", "pendulum,pendulum", "names pendulum more than once"),
         ("--robots", "no_such_robot", "no_such_robot"),
         ("--scenarios", "exact,nope", "unknown 'nope'"),

@@ -362,6 +362,10 @@ class Robot:
             DimensionError: wrong shape or not numeric.
             NonFiniteError: NaN or infinite entries.
         """
+        if getattr(getattr(x, "dtype", None), "kind", "f") in ("c", "b", "U", "S"):
+            # complex was cut to its real part with a ComplexWarning, bools read as 0/1,
+            # text parsed (a sweep): a real-valued array is asked for
+            raise DimensionError(f"{what} must be a real array of shape ({n},), got {x!r}")
         try:
             arr = np.array(x, dtype=float)
         except (TypeError, ValueError) as exc:

@@ -78,6 +78,10 @@ State = TypeVar("State")
 NOISE_WINDOW = 1.0
 NOISE_MIN_SAMPLES = 200
 
+#: The sample rates [Hz] and position noise levels [rad or m] an observer accepts.
+RATE_RANGE = (1e-3, 1e7)
+NOISE_STD_RANGE = (1e-12, 1e3)
+
 #: Without ``rate``, the sample period is the median of this many first intervals.
 _PERIOD_INTERVALS = 5
 #: [rad or m] σ̂ at or below this is taken for noise-free data: nothing is retuned.
@@ -339,6 +343,18 @@ class Observer(ABC, Generic[State]):
         self.robot = robot.copy()
         self.rate = positive("rate", rate, allow_none=True)
         self.noise_std = positive("noise_std", noise_std, allow_none=True, allow_zero=True)
+        # beyond these the default gains overflow or divide by zero (raw ZeroDivisionError,
+        # OverflowError or LinAlgError deep in a family's gains, a sweep found)
+        if self.rate is not None and not RATE_RANGE[0] <= self.rate <= RATE_RANGE[1]:
+            raise GainError(
+                f"rate={rate!r} Hz is outside [{RATE_RANGE[0]:g}, {RATE_RANGE[1]:g}]: a sensor "
+                "sample rate in Hz"
+            )
+        if self.noise_std and not NOISE_STD_RANGE[0] <= self.noise_std <= NOISE_STD_RANGE[1]:
+            raise GainError(
+                f"noise_std={noise_std!r} is outside [{NOISE_STD_RANGE[0]:g}, "
+                f"{NOISE_STD_RANGE[1]:g}] (or 0, noise-free): a position noise in rad or m"
+            )
         self._state: State | None = None
         self._t = -math.inf
         self._tau: Vector = np.zeros(self.robot.nv)

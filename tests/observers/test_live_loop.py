@@ -155,3 +155,26 @@ def test_adaptive_without_the_blend_says_it_is_lost_after_a_diverged_update(
     monkeypatch.setattr(ExtendedKalmanFilter, "_step", step)
     ob.update(t[51], q[51], tau[51])
     assert not ob.lost()
+
+
+@pytest.mark.parametrize(
+    "option", [{"noise_std": 1e-300}, {"noise_std": 1e300}, {"rate": 1e300}, {"rate": 1e-300}]
+)
+@pytest.mark.parametrize("name", ["ekf", "kalman", "riemannian", "highgain"])
+def test_sensor_hints_far_outside_any_sensor_are_refused(name: str, option: dict) -> None:
+    """They reached the gains: ZeroDivisionError, OverflowError or a LinAlgError."""
+    with pytest.raises(pinobs.errors.GainError, match="is outside"):
+        make_observer(name, cached_robot("cartpole"), **option)
+
+
+@pytest.mark.parametrize(
+    "bad", [np.array([0.1 + 5j, 0.0]), np.array([True, False]), np.array(["0.1", "0"])]
+)
+def test_complex_bool_and_text_arrays_are_refused(bad) -> None:
+    """A complex q was cut to its real part (numpy's ComplexWarning only), bools read as 0/1."""
+    robot = cached_robot("cartpole")
+    ob = make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
+    ob.reset(0.0, robot.neutral())
+    with pytest.raises(pinobs.errors.DimensionError, match="must be a real array"):
+        ob.update(1e-3, bad)
+    assert ob.estimate.t == 0.0

@@ -182,7 +182,8 @@ class _Learner:
         # the first solve resolve_every after the reset, wherever the clock starts (:meth:`start`;
         # it was at t = resolve_every: a clock 100 s behind never solved, 3 s behind, 3.5 s late)
         self.next_solve = math.nan
-        self._off_run: list[float] = []  # the latest consecutive intervals off h
+        self._off_run: list[float] = []  # the latest consecutive update intervals off h
+        self._t_last: float | None = None  # the latest update's time (committed or not)
         self.theta: Vector | None = None
         self.std: Vector | None = None
         self.excited: NDArray[np.bool_] | None = None
@@ -202,24 +203,26 @@ class _Learner:
         (``q`` None: no sample, nothing added); returns True when a new model was solved for.
         ``explained``: the filter's innovations say the current model explains the data
         (then a solve only validates it)."""
-        if q is None:
-            return False  # a lost sample shows as a gap in the times below
-        if self.buf:
-            dt = t - self.buf[-1][0]
+        if self._t_last is not None:  # the stream's interval, from every update's time
+            dt = t - self._t_last  # (a gated or lost sample is not a slower stream)
             if math.isnan(self.h):
                 self._counts(dt)  # no rate given: the stream's own interval
-            # a gap (a lost sample: 2h) or a doubled sample: windows never straddle one.
-            # Jitter is not a gap: the rows integrate over the samples' own times (MATH §9);
-            # at ±0.1 h this test cleared the windows at every other sample and the learner
-            # never solved, silently (a sweep found it, and a 500 Hz stream without rate)
-            if abs(dt - self.h) > _GAP_FRACTION * self.h:
-                self.buf.clear()
+            elif abs(dt - self.h) > _GAP_FRACTION * self.h:
                 self._off_run.append(dt)
                 if len(self._off_run) == _INTERVAL_CHECK:
                     self._interval(self._off_run)
                     self._off_run = []
             else:
                 self._off_run = []
+        self._t_last = t
+        if q is None:
+            return False  # a lost sample shows as a gap in the times below
+        # a gap (a lost sample: 2h) or a doubled sample: windows never straddle one.  Jitter
+        # is not a gap: the rows integrate over the samples' own times (MATH §9); at ±0.1 h
+        # this test cleared the windows at every other sample and the learner never solved,
+        # silently (a sweep found it, and a 500 Hz stream without rate)
+        if self.buf and abs(t - self.buf[-1][0] - self.h) > _GAP_FRACTION * self.h:
+            self.buf.clear()
         self.buf.append((t, q, tau))
         if math.isnan(self.h):
             return False  # one sample: no interval yet

@@ -295,3 +295,10 @@ def test_timestamp_jitter_and_another_rate_do_not_stop_the_learning(payload_stre
         assert abs(rms / ref500 - 1.0) < (0.05 if rate is None else 0.5), (rate, rms, ref500)
         said = [r for r in c.details["rejected"] if "the samples come every 0.002 s" in r]
         assert len(said) == (rate is not None), c.details["rejected"]
+    # every other sample lost (or gated) is not a slower stream: the interval stays 1/rate
+    ob = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4)
+    ob.reset(t[0], q[0], v[0], tau[0])
+    for k in range(1, 1500):
+        ob.update(t[k], q[k] if k % 2 or k > 1000 else None, tau[k])
+    assert not [r for r in ob.consistency().details["rejected"] if "samples come" in r]
+    assert ob._learner.h == 1e-3

@@ -371,6 +371,8 @@ class Observer(ABC, Generic[State]):
         self._reset_args: tuple[Any, ...] = ()
         self._diverged = False  # the latest update diverged (its state was not kept)
         self._intervals: list[float] = []  # the first intervals after the reset (the period)
+        self._tau_floor = float(np.min(self.robot.absurd_torque)) if self.robot.nv else 0.0
+        self._period_s = None if self.rate is None else 1.0 / self.rate  # (_sample_period)
         self._restart_due = False  # a pause without a sample: restart at the next one
         self._pauses: list[tuple[float, float]] = []
 
@@ -406,6 +408,7 @@ class Observer(ABC, Generic[State]):
         self._gated = 0
         self._diverged = False
         self._intervals, self._restart_due, self._pauses = [], False, []
+        self._period_s = None if self.rate is None else 1.0 / self.rate
         # copies: a loop that reuses its buffers must not change what σ's replay starts from
         # (a sweep found adaptive 0.12 rad/s off after a replay from a reused v0 buffer)
         self._reset_args = (
@@ -505,13 +508,12 @@ class Observer(ABC, Generic[State]):
         :data:`_PERIOD_INTERVALS` intervals after the reset (``None`` until three are in)."""
         if self.rate is None and len(self._intervals) < _PERIOD_INTERVALS:
             self._intervals.append(dt)
-        return self._period()
+            if len(self._intervals) >= 3:  # computed five times at most, not at every update
+                self._period_s = float(np.median(self._intervals))
+        return self._period_s
 
     def _period(self) -> float | None:
-        if self.rate is not None:
-            return 1.0 / self.rate
-        seen = self._intervals
-        return float(np.median(seen)) if len(seen) >= 3 else None
+        return self._period_s
 
     def _stepped(self, state: State, dt: float, q: Vector | None, tau: Vector) -> State:
         """:meth:`_step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
@@ -728,8 +730,10 @@ class Observer(ABC, Generic[State]):
             return np.zeros(self.robot.nv)
         arr = self.robot.check_vector(tau, self.robot.nv, what=what)
         bound = self.robot.absurd_torque
-        if np.any(np.abs(arr) > bound):  # as the log reader's screening (a 1e9 spike sent
-            i = int(np.argmax(np.abs(arr) > bound))  # ekf to 1e23 rad/s, then diverged)
+        # as the log reader's screening (a 1e9 spike sent ekf to 1e23 rad/s, then diverged);
+        # a plain-Python test of the largest |τ| against the smallest bound first (cheap)
+        if max(map(abs, arr.tolist())) > self._tau_floor and np.any(np.abs(arr) > bound):
+            i = int(np.argmax(np.abs(arr) > bound))
             raise NonFiniteError(
                 f"{what}[{i}] = {arr[i]:.6g} is beyond {ABSURD_LIMIT_FACTOR:g}× the effort "
                 f"limit ({bound[i] / ABSURD_LIMIT_FACTOR:.6g}; {ABSURD_VALUE:g} without one): "

@@ -512,16 +512,13 @@ class Observer(ABC, Generic[State]):
                 self._period_s = float(np.median(self._intervals))
         return self._period_s
 
-    def _period(self) -> float | None:
-        return self._period_s
-
     def _stepped(self, state: State, dt: float, q: Vector | None, tau: Vector) -> State:
         """:meth:`_step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
         than :data:`GAP_PERIODS` periods (at most ``PAUSE_RESTART`` worth of them: a longer
         step without a sample is a prediction in the dark, restarted at the next sample).
         One step of 10 s returned 1e74 rad/s from ``ekf`` and every update after it raised;
         one of 1 s left ``riemannian`` 500 rad/s off for seconds (a sweep)."""
-        period = self._period()
+        period = self._period_s
         if period is None or not dt > GAP_PERIODS * period:
             return self._step(state, dt, q, tau)
         n = math.ceil(min(dt, max(PAUSE_RESTART, MAX_GAP_PERIODS * period)) / period - 1e-9)

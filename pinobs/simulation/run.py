@@ -10,7 +10,6 @@ drifts by 9.6e-8 J out of 33.4 J (3e-9 relative) over 2 s.
 
 from __future__ import annotations
 
-import numbers
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -27,7 +26,7 @@ from pinobs.observers import Observer, make_observer
 from pinobs.observers.base import positive
 from pinobs.simulation.inputs import InputProfile, make_input
 from pinobs.simulation.result import ObserverTrace, Result
-from pinobs.simulation.sensors import Sensor
+from pinobs.simulation.sensors import Sensor, _is_int
 
 __all__ = ["default_input", "perturb", "simulate"]
 
@@ -68,10 +67,6 @@ def _portable_source(source: Any) -> Any:
     if isinstance(source, str) and Path(source).is_file():
         return str(Path(source).resolve())
     return source
-
-
-def _is_int(x: Any) -> bool:
-    return isinstance(x, numbers.Integral) and not isinstance(x, bool)
 
 
 def _check_run(

@@ -264,6 +264,7 @@ def _streamed(
         lag=lag,
         filter_options=options,
         band=band,
+        configurations=first.q if np.any(np.isfinite(first.q).all(axis=1)) else None,
     )
     rec = _Streamer(robot, observer, new)
     est = LogEstimator(rec, period=period, check_v=False)

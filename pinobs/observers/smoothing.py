@@ -55,11 +55,15 @@ even in chunks: of the order of the result's own ``nq + 2 nv``).  With
 ``chunk`` the forward pass still runs once, but the backward pass runs on
 windows of ``chunk + overlap`` seconds started from the *filtered* estimate at
 the window's end (the best available without later data) and keeps only the
-first ``chunk`` seconds; the error this makes decays backward at the
-filter's bandwidth, so an overlap of a few time constants reproduces the
-whole-log smoother (:func:`default_overlap`: aimed at 1e-6 of ``v_std``,
-measured 1.7e-6 to 1.8e-6, tested below 1e-5).  The smaller ``accel_psd``,
-the longer the memory: 11 s at ``accel_psd`` = 1e-10 and σ = 1e-4 rad.
+first ``chunk`` seconds; the error this makes decays backward at the rate of
+the filter's slowest pole, so an overlap of a few of its time constants
+reproduces the whole-log smoother (:func:`default_overlap`: aimed at 1e-6 of
+``v_std``, measured 1.7e-6 to 1.8e-6, tested below 1e-5).  The smaller
+``accel_psd``, the longer the memory: 11 s at ``accel_psd`` = 1e-10 and
+σ = 1e-4 rad.  A torque offset (``disturbance_psd``, ``adaptive``) acts
+through ``M(q)⁻¹``, whose coupling leaves it a slow real pole in some
+directions: overlaps of 0.5–10 s where an offset of the same density on
+every joint alone would need 0.4–1.4 s.
 ``lag`` is the near-real-time form: chunks of ``lag`` with an overlap of
 ``lag``, so every estimate uses at least ``lag`` seconds of later samples and
 is available at most ``2 lag`` after its sample; a lag shorter than the
@@ -324,6 +328,10 @@ RHO_WARN = 6.5
 
 #: Relative agreement the default overlap aims at: ``|v_chunked − v_whole| ≤ CHUNK_TOL · v_std``.
 CHUNK_TOL = 1e-6
+
+#: How many of a log's configurations (evenly spaced, the first sample's first) the default
+#: overlap takes the inertia at, with a torque offset (:func:`default_overlap`).
+OVERLAP_CONFIGURATIONS = 32
 
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -1104,32 +1112,91 @@ def default_overlap(
     tol: float = CHUNK_TOL,
     *,
     disturbance_psd: float | None = None,
+    mass_matrices: Sequence[Vector] | None = None,
 ) -> float:
     """The overlap [s] after which a window's start-up error has decayed to ``tol`` of ``v_std``.
 
-    The filter of a double integrator with white acceleration ``q_w``
-    [rad²/s³] measured with noise ``σ`` [rad] every ``h`` [s] (a noise
-    density ``r = σ² h``) has the bandwidth ``ω = (q_w / r)^{1/4}`` [rad/s]
-    and the poles ``ω e^{±3iπ/4}`` (damping 1/√2); the smoother's backward recursion forgets its end condition at the
-    same rate ``ω/√2``, hence ``overlap = √2 ln(1/tol) / ω``.  With the EKF's
-    torque-offset state (``disturbance_psd`` ``q_d`` [rad²/s⁵], a random walk
-    acting as an acceleration) the slowest mode is that of a triple
-    integrator: bandwidth ``ω_d = (q_d / r)^{1/6}``, third-order Butterworth
-    poles, the slowest decaying at ``ω_d/2``, hence ``2 ln(1/tol) / ω_d``; the
-    overlap is the longer of the two.  The model-free ``kf`` (white jerk ``jerk_psd``) is that
-    triple integrator alone: ``accel_psd = 0``, ``disturbance_psd = jerk_psd``.  A robot's dynamics shift the poles
-    little at the gains where this matters (tested against the whole-log
-    smoother: :mod:`tests.observers.test_smoothing`).
+    The backward pass forgets its end condition at the rate of the steady-state
+    filter's slowest pole (the smoother's backward dynamics has the mirror
+    poles), hence ``overlap = ln(1/tol) / min |Re s|``.  The filter of a double
+    integrator with white acceleration ``q_w`` [rad²/s³] measured with noise
+    ``σ`` [rad] every ``h`` [s] (a noise density ``r = σ² h``) has the poles
+    ``ω e^{±3iπ/4}``, ``ω = (q_w / r)^{1/4}``: ``overlap = √2 ln(1/tol) / ω``.
+
+    With the EKF's torque-offset state (``disturbance_psd`` ``j`` [rad²/s⁵], a
+    random walk converted per joint as ``j M̄ᵢᵢ²`` [N²·m²/s] with ``M̄`` the
+    inertia at the filter's first sample, acting through ``M(q)⁻¹``) the
+    offset's acceleration density is ``S = M⁻¹ diag(j M̄ᵢᵢ²) M⁻¹``.  In the
+    eigenbasis of ``S`` (orthogonal, so the measurement and the white
+    acceleration stay isotropic) each direction is a double integrator plus an
+    acceleration bias of density ``λ`` (an eigenvalue of ``S``), the measured
+    position's spectrum ``r + q_w/ω⁴ + λ/ω⁶``; the filter's poles are the
+    left-half-plane roots of ``r s⁶ + q_w s² − λ = 0`` (its spectral factor).
+    With ``u = s²`` the cubic ``r u³ + q_w u − λ`` has one positive root ``u₊``
+    (a real pole, ``√u₊``, the offset's memory) and ``−u₊/2 ± i b`` with
+    ``|u|² = λ / (r u₊)`` (the bandwidth's pair, ``Re s = √((|u| − u₊/2)/2)``).
+    ``λ → 0``: the first case; ``q_w = 0``: third-order Butterworth poles,
+    ``overlap = 2 ln(1/tol) / (λ/r)^{1/6}``.  The coupling of ``M`` matters: on
+    a UR5 or a Panda the smallest ``λ`` is 0.07–0.1 ``j``, on the planar 3R
+    0.02 ``j``, and the real pole ``≈ √(λ/q_w)`` then sets overlaps of 4–10 s
+    where the isotropic ``λ = j`` gives 1.4 s (measured on a planar 3R's
+    adaptive smoothing: 0.41 s of overlap left 3.2e-3 of ``v_std`` between the
+    chunked and whole-log results, 9.45 s 5.5e-9).
+
+    Args:
+        mass_matrices: ``M(q)`` at configurations the log visits, the first at
+            its first sample (``M̄``); ``None``: ``S = j I`` (the model-free
+            ``kf``, white jerk ``jerk_psd``: ``accel_psd = 0``,
+            ``disturbance_psd = jerk_psd``).  The overlap is the longest over
+            them: the poles move with ``q`` and the time-varying filter is not
+            the steady state of any of them (tested against the whole-log
+            smoother, :mod:`tests.observers.test_smoothing`).
     """
     r = meas_std**2 * dt
     if accel_psd <= 0.0 and disturbance_psd is None:
         raise GainError(f"accel_psd={accel_psd!r} and no disturbance_psd: a filter without memory")
-    overlap = 0.0
-    if accel_psd > 0.0:
-        overlap = math.sqrt(2.0) * math.log(1.0 / tol) / (accel_psd / r) ** 0.25
-    if disturbance_psd is not None:
-        overlap = max(overlap, 2.0 * math.log(1.0 / tol) / (disturbance_psd / r) ** (1.0 / 6.0))
-    return overlap
+    if disturbance_psd is None:
+        return math.sqrt(2.0) * math.log(1.0 / tol) / (accel_psd / r) ** 0.25
+    if mass_matrices is None:
+        densities = np.array([disturbance_psd])
+    else:
+        m_bar = np.diag(mass_matrices[0])
+        densities = np.concatenate(
+            [
+                np.linalg.eigvalsh(_offset_density(m, disturbance_psd * m_bar**2))
+                for m in mass_matrices
+            ]
+        )
+    return math.log(1.0 / tol) / min(_slowest_pole(r, accel_psd, lam) for lam in densities)
+
+
+def _offset_density(mass: Vector, torque_psd: Vector) -> Vector:
+    """``M⁻¹ diag(torque_psd) M⁻¹``: a torque random walk's acceleration density."""
+    m_inv = np.linalg.inv(mass)
+    return (m_inv * torque_psd) @ m_inv
+
+
+def _slowest_pole(r: float, q_w: float, lam: float) -> float:
+    """``min |Re s|`` over the left-half-plane roots of ``r s⁶ + q_w s² − λ`` (:func:`default_overlap`)."""
+    if lam <= 0.0:
+        return 0.0  # an offset never driven: never forgotten
+    if q_w <= 0.0:
+        u = (lam / r) ** (1.0 / 3.0)
+    else:  # the real root of u³ + p u − λ/r, p = q_w/r > 0 (trigonometric form: no cancellation)
+        p = q_w / r
+        u = (
+            2.0
+            * math.sqrt(p / 3.0)
+            * math.sinh(math.asinh(1.5 * lam / (r * p) * math.sqrt(3.0 / p)) / 3.0)
+        )
+    pair = math.sqrt(lam / (r * u))  # |u| of the complex pair
+    return min(math.sqrt(u), math.sqrt(max(pair - 0.5 * u, 0.0) / 2.0))
+
+
+def _spread(rows: Vector) -> Vector:
+    """At most :data:`OVERLAP_CONFIGURATIONS` of ``rows``, evenly spaced, the first kept."""
+    pick = np.linspace(0, len(rows) - 1, min(len(rows), OVERLAP_CONFIGURATIONS)).astype(int)
+    return rows[np.unique(pick)]
 
 
 def _samples(seconds: float, dt: float, what: str) -> int:
@@ -1880,10 +1947,15 @@ def _windows(
     lag: float | None,
     dt: float,
     meas_dt: float | None = None,
+    *,
+    robot: Robot,
+    configurations: Vector,
 ) -> tuple[int | None, int]:
     """``(chunk, overlap)`` in samples of ``dt`` [s] (``(None, 0)``: the whole log at once);
     the default overlap from the measurement interval ``meas_dt`` (default ``dt``; a re-timed
-    log has rows between its measurements: :func:`_retimed`)."""
+    log has rows between its measurements: :func:`_retimed`) and, with a torque offset,
+    ``robot``'s inertia at ``configurations`` (rows of ``q``, the first the filter's first:
+    :func:`default_overlap`; ``adaptive``: the nominal model's inertia)."""
     if lag is not None and (chunk is not None or overlap is not None):
         raise OptionError(
             f"lag={lag!r} sets the chunk and the overlap; give lag alone, or chunk and overlap"
@@ -1910,7 +1982,13 @@ def _windows(
             # it replaces each window's, the offset's scaled
             pairs = [(accel_psd, None if d is None else d * accel_psd / a) for a, d in pairs]
         h = dt if meas_dt is None else meas_dt
-        overlap = max(default_overlap(a, gains.meas_std, h, disturbance_psd=d) for a, d in pairs)
+        masses = None
+        if not isinstance(gains, KFGains) and any(d is not None for _, d in pairs):
+            masses = [robot.mass_matrix(q) for q in configurations]
+        overlap = max(
+            default_overlap(a, gains.meas_std, h, disturbance_psd=d, mass_matrices=masses)
+            for a, d in pairs
+        )
     n_chunk, n_over = _samples(chunk, dt, "chunk"), _samples(overlap, dt, "overlap")
     if n_over > COST_WARN * n_chunk:  # every window's backward pass runs over its overlap
         warnings.warn(
@@ -1938,10 +2016,14 @@ def streaming_smoother(
     lag: float | None = None,
     filter_options: Mapping[str, Any] | None = None,
     band: str = "model",
+    configurations: ArrayLike | None = None,
 ) -> tuple[Callable[[], Smoother], dict[str, Any]]:
     """A maker of :class:`Smoother` for a log read as it goes (memory bounded by ``chunk`` or
     ``lag``), and the options to report; the arguments as :func:`smooth`, ``dt`` the
-    nominal sample period [s] (the chunks are counted in samples of it).
+    nominal sample period [s] (the chunks are counted in samples of it), ``configurations``
+    rows of ``q`` the log visits, its first sample first (with a torque offset the default
+    overlap depends on the inertia along them, :func:`default_overlap`; default the robot's
+    neutral configuration and :data:`OVERLAP_CONFIGURATIONS` − 1 random ones, seed 0).
 
     Not for ``accel_psd="auto"`` or ``adaptive``: both pass over the log more than once.
     ``noise_std`` is required: a stream has no log to estimate it from
@@ -1984,7 +2066,20 @@ def streaming_smoother(
         None,
     )
     filt = make(accel_psd)
-    n_chunk, n_over = _windows(filt, extra, accel_psd, chunk, overlap, lag, dt)
+    if configurations is None:
+        rng = np.random.default_rng(0)
+        configs = np.array(
+            [robot.neutral()]
+            + [robot.random_configuration(rng) for _ in range(OVERLAP_CONFIGURATIONS - 1)]
+        )
+    else:
+        configs = np.asarray(configurations, dtype=float).reshape(-1, robot.nq)
+        configs = _spread(configs[np.all(np.isfinite(configs), axis=1)])
+        if not len(configs):
+            raise DimensionError("configurations has no finite row of q")
+    n_chunk, n_over = _windows(
+        filt, extra, accel_psd, chunk, overlap, lag, dt, robot=robot, configurations=configs
+    )
     opts = {
         **cast(Any, filt).options,
         "observer": observer,
@@ -2345,7 +2440,19 @@ def _smooth(
     dt = meas_dt = float(np.median(np.diff(t_all)))
     if "latency" in extra and run_t.size > 1:  # re-timed rows: their mean interval
         dt = float(run_t[-1] - run_t[0]) / (run_t.size - 1)
-    n_chunk, n_over = _windows(filt, extra, accel_psd, chunk, overlap, lag, dt, meas_dt)
+    configs = _spread(arrays[1][arrays[3]])  # the rows measured, from the filter's first
+    n_chunk, n_over = _windows(
+        filt,
+        extra,
+        accel_psd,
+        chunk,
+        overlap,
+        lag,
+        dt,
+        meas_dt,
+        robot=robot,
+        configurations=configs,
+    )
     n_chunk = n_run if n_chunk is None else n_chunk
     out_q = np.full((n_run, model.nq), np.nan)
     out_v = np.full((n_run, nv), np.nan)

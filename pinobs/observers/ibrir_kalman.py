@@ -272,7 +272,11 @@ class IbrirKalman(Observer[_State]):
         q0_std: initial configuration standard deviation [rad] (``P(0)``).
         v0_std: initial velocity standard deviation [rad/s] (``P(0)``).
         diff_order: order of the differentiator giving ``ẏ``.
-        diff_gamma: its bandwidth γ [1/s] (default: ``highgain``'s rule).
+        diff_gamma: its bandwidth γ [1/s] (default: ``highgain``'s rule).  The
+            differentiator enters the estimate only through ``velocity_source=
+            "differentiator"``, ``schedule="filtered"`` or a missing sample's
+            schedule: under the defaults (``"estimate"``, ``"measured"``) these two
+            change nothing on a log without gaps.
         schedule: ``"measured"`` (the paper's y) or ``"filtered"`` (the differentiator's ŷ).
         velocity_source: ``"differentiator"`` (the paper's ẏ) or ``"estimate"`` (v̂);
             default: the former for ``form="paper"``, the latter otherwise.

@@ -17,7 +17,10 @@ not inflate σ, so the robust form is used:
 
 (0.4549 is the median of a χ²₁ variable).  Positions are taken in the tangent
 coordinates ``difference(q_0, q_k)`` so that quaternions and (cos, sin) pairs
-count as angles.
+count as angles.  Only four consecutive rows evenly spaced in time (each interval
+within half an interval of the median) make a ``d_k``: across a dropped sample
+the difference is not the third one, and its motion term is not small (with
+30 % of the samples dropped at random σ̂ was 2.0× σ, with 5 % 1.17×).
 """
 
 from __future__ import annotations
@@ -54,7 +57,7 @@ def estimate_noise_std(
 
     Returns:
         σ̂ per joint velocity coordinate, shape ``(nv,)``, or ``None`` with fewer
-        than 12 usable rows.
+        than 12 usable rows or 9 runs of four consecutive evenly spaced ones.
     """
     q = np.asarray(q, dtype=float)
     idx = _rows(t, q, window, min_rows)
@@ -66,7 +69,13 @@ def estimate_noise_std(
         ref = robot.normalize(q[idx[0]])
         x = np.array([robot.difference(ref, robot.normalize(q[i])) for i in idx])
     d = x[3:] - 3.0 * x[2:-1] + 3.0 * x[1:-2] - x[:-3]  # Gasser et al. (1986), order 3
-    var = np.median(d**2, axis=0) / (_THIRD_DIFF_GAIN * _CHI2_1_MEDIAN)
+    dt = np.diff(np.asarray(t, dtype=float)[idx])
+    h = float(np.median(dt))
+    even = (np.diff(idx) == 1) & (np.abs(dt - h) <= 0.5 * h)  # row j to j+1: the next sample
+    whole = even[:-2] & even[1:-1] & even[2:]  # d_k's four rows: consecutive, evenly spaced
+    if np.count_nonzero(whole) < _MIN_ROWS - 3:
+        return None
+    var = np.median(d[whole] ** 2, axis=0) / (_THIRD_DIFF_GAIN * _CHI2_1_MEDIAN)
     return np.sqrt(var)
 
 

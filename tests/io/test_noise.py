@@ -38,6 +38,25 @@ def test_glitches_do_not_inflate_sigma() -> None:
     assert est is not None and est[2] < 1.3e-3
 
 
+@pytest.mark.parametrize("dropped", [0.05, 0.3])
+@pytest.mark.parametrize("removed", [False, True])
+def test_dropped_samples_do_not_inflate_sigma(dropped: float, removed: bool) -> None:
+    """A dropped sample (a NaN row, or a row absent with its time) broke the third difference:
+    differences across it are not third ones.  UR5, σ = 1e-4, 1 kHz, samples dropped at random
+    (seed 0).  Measured σ̂/σ: 1.12 (5 %) and 1.94 (30 %) before, 1.06 and 1.05 now (1.04 with
+    none dropped)."""
+    robot = pinobs.load("ur5")
+    res = pinobs.simulate(robot, [], duration=1.5, sensor=pinobs.Sensor(1000.0, 1e-4), seed=1)
+    t, q = res.t, res.q_meas.copy()
+    q[np.random.default_rng(0).random(len(q)) < dropped] = np.nan
+    if removed:
+        keep = np.isfinite(q).all(axis=1)
+        t, q = t[keep], q[keep]
+    est = estimate_noise_std(t, q, robot)
+    assert est is not None
+    assert 0.9 < np.median(est) / 1e-4 < 1.1
+
+
 def test_the_report_names_the_rows_it_used_when_the_log_starts_with_nan() -> None:
     """The sentence said "the log's first second" of a log whose first second was NaN; it
     now gives the rows' times."""

@@ -553,7 +553,9 @@ def _print_summary(table: Any, title: str) -> None:
         shown = shown.drop(columns="rho")  # filtered logs: no smoother
     if table["consistency"].isna().all():
         shown = shown.drop(columns="consistency")  # smoothed logs: ρ instead
-    formats = {"sigma": "{:.3g}", "rho": "{:.3g}", "seconds": "{:.1f}"}
+    if (table["latency"].fillna(0.0) == 0.0).all():
+        shown = shown.drop(columns="latency")  # none given or found
+    formats = {"sigma": "{:.3g}", "rho": "{:.3g}", "latency": "{:.6g}", "seconds": "{:.1f}"}
     out = Table(title=title)
     for col in shown.columns:
         out.add_column(col, justify="left" if col in ("log", "consistency", "error") else "right")

@@ -357,7 +357,9 @@ def write_sweep(table: Any, out_dir: str | Path, *, plot: bool = True) -> list[P
 #: what :func:`pinobs.smooth` warns of, :func:`pinobs.observers.smoothing.smoothing_warnings`),
 #: the filter–smoother consistency ``ρ`` of a smoothed log
 #: (:attr:`pinobs.observers.smoothing.Smoother.consistency`, over all its stretches; NaN
-#: when filtered), wall-clock seconds in the worker,
+#: when filtered), the measurement latency [s] the log was estimated under (given, or
+#: found from the log by the smoother: :func:`pinobs.smooth`; its longest stretch's when
+#: stretches differ), wall-clock seconds in the worker,
 #: and the error of a log that failed (empty otherwise).
 SUMMARY_COLUMNS = (
     "log",
@@ -368,6 +370,7 @@ SUMMARY_COLUMNS = (
     "sigma",
     "consistency",
     "rho",
+    "latency",
     "seconds",
     "error",
 )
@@ -506,6 +509,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         "options": dict(task.options) or None,
     }
     verdict, rho = None, math.nan
+    latency = float(dict(task.options).get("latency", 0.0))  # (a number when filtered)
     if task.smooth is None:
         run = process_log(task.log, robot, task.observer, out=task.out, keep=False, **common)
         verdict = None if run.consistency is None else run.consistency.verdict
@@ -516,6 +520,8 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         rho = _pooled_rho(stretches)
         said = any(smoothing_warnings(s["consistency"], s) for s in stretches)
         verdict = "inconsistent" if said else ("consistent" if math.isfinite(rho) else "unknown")
+        if stretches:
+            latency = max(stretches, key=lambda s: s["consistency_terms"]).get("latency", 0.0)
     return {
         "log": task.name,
         "out": task.out,
@@ -525,6 +531,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         "sigma": float("nan") if run.noise_std is None else float(run.noise_std),
         "consistency": verdict,
         "rho": rho,
+        "latency": latency,
         "seconds": time.perf_counter() - start,
         "error": None if run.estimated else "no row of the log could be estimated",
     }
@@ -577,6 +584,7 @@ def estimate_logs(
                 "bad_rows": nan,
                 "sigma": nan,
                 "consistency": None,
+                "latency": nan,
                 "seconds": nan,
                 "error": o.error,
             }

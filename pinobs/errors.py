@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 __all__ = [
+    "ChunkWarning",
     "ConfigurationError",
     "ConsistencyWarning",
     "CostWarning",
@@ -32,6 +33,7 @@ __all__ = [
     "PinobsError",
     "PinobsWarning",
     "TimestampError",
+    "TimestampWarning",
     "UnknownNameError",
     "UnsupportedRobotError",
 ]
@@ -138,6 +140,15 @@ class LatencyWarning(PinobsWarning):
 class CostWarning(PinobsWarning):
     """Options that make a run far costlier than needed for what they ask (a memory bound
     that bounds nothing)."""
+
+
+class ChunkWarning(PinobsWarning):
+    """A chunked smoother whose given overlap is too short for its estimates to equal the
+    whole log's to the stated tolerance."""
+
+
+class TimestampWarning(PinobsWarning):
+    """Timestamps whose sample period says they are in another unit than seconds."""
 
 
 class ModelWarning(PinobsWarning):

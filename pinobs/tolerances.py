@@ -18,6 +18,8 @@ __all__ = [
     "LIMIT_WARN_FRACTION",
     "MASS_MATRIX_SINGULAR_TOL",
     "MAX_GAP_PERIODS",
+    "MAX_PLAUSIBLE_PERIOD",
+    "MIN_PLAUSIBLE_PERIOD",
     "NEGLIGIBLE_MASS_FRACTION",
     "PAUSE_RESTART",
     "QUATERNION_NORM_TOL",
@@ -107,3 +109,8 @@ NEGLIGIBLE_MASS_FRACTION = 1e-6
 #: example-robot-data robot that loads has ``λ_min/λ_max ≥ 5e-8`` at random
 #: configurations; a joint moving only massless links gives ~1e-17.
 MASS_MATRIX_SINGULAR_TOL = 1e-12
+
+#: A median sample period [s] at or beyond these is said to be in another unit
+#: (:func:`pinobs.observers.base.time_unit_warning`): 10 Hz and 1 MHz.
+MAX_PLAUSIBLE_PERIOD = 0.1
+MIN_PLAUSIBLE_PERIOD = 1e-6

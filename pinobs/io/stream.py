@@ -58,6 +58,8 @@ from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers import Estimate, make_observer
+from pinobs.observers.base import median_period as _median_period
+from pinobs.observers.base import time_unit_warning
 from pinobs.observers.noise import noise_from_log
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
@@ -68,11 +70,6 @@ from pinobs.tolerances import (
     TIME_BACK_ROWS,
     TIME_EPS,
 )
-
-#: A median sample period [s] at or beyond these is said to be in another unit
-#: (:func:`time_unit_warning`): 10 Hz and 1 MHz.
-MAX_PLAUSIBLE_PERIOD = 0.1
-MIN_PLAUSIBLE_PERIOD = 1e-6
 
 __all__ = [
     "LogEstimator",
@@ -469,25 +466,6 @@ class LogEstimator:
             self.bad_rows.append((int(line), "; ".join(head + notes)))
 
 
-def time_unit_warning(period: float | None) -> str | None:
-    """What to say of a log whose median sample period [s] is implausible (``None``: nothing).
-
-    A log timed in milliseconds or nanoseconds reads as seconds 1000x or 1e9x too long:
-    its velocities come out that many times too small (a sweep found a kf median |v| of
-    6.7e-4 rad/s for 0.67, and ekf re-initialised at every row of a ns log).
-    """
-    if period is None or MIN_PLAUSIBLE_PERIOD < period < MAX_PLAUSIBLE_PERIOD:
-        return None
-    if period >= MAX_PLAUSIBLE_PERIOD:
-        unit = "milliseconds, microseconds or nanoseconds (t / 1000, t * 1e-6, t * 1e-9)"
-    else:
-        unit = "a unit larger than seconds"
-    return (
-        f"the median sample period is {period:.6g} s ({1 / period:.6g} Hz): is t in {unit}? "
-        "give t in seconds: velocities are per second of t, so they are off by the same factor"
-    )
-
-
 def time_screened(t: Vector) -> NDArray[np.bool_]:
     """Rows whose time is finite and after the previous row's: those the noise estimate
     may use (a sweep found duplicated rows, zero third differences beside jumps, estimate
@@ -496,12 +474,6 @@ def time_screened(t: Vector) -> NDArray[np.bool_]:
     keep = np.isfinite(t)
     keep[1:] &= t[1:] > t[:-1] + TIME_EPS
     return keep
-
-
-def _median_period(t: Vector) -> float | None:
-    d = np.diff(t[np.isfinite(t)])
-    d = d[d > 0]
-    return float(np.median(d)) if d.size else None
 
 
 def _slice(log: Log, a: int, b: int) -> Log:

@@ -50,6 +50,8 @@ from pinobs.tolerances import (
     ABSURD_VALUE,
     GAP_PERIODS,
     MAX_GAP_PERIODS,
+    MAX_PLAUSIBLE_PERIOD,
+    MIN_PLAUSIBLE_PERIOD,
     PAUSE_RESTART,
     TIME_EPS,
 )
@@ -62,12 +64,14 @@ __all__ = [
     "gate_nis",
     "gate_threshold",
     "make_observer",
+    "median_period",
     "observer_class",
     "observer_names",
     "outlier_gate",
     "positive",
     "register",
     "steady_innovation_variance",
+    "time_unit_warning",
 ]
 
 Vector = NDArray[np.floating[Any]]
@@ -815,3 +819,29 @@ def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
     if latency is not None:
         observer.set_latency(latency)
     return observer
+
+
+def time_unit_warning(period: float | None) -> str | None:
+    """What to say of a log whose median sample period [s] is implausible (``None``: nothing).
+
+    A log timed in milliseconds or nanoseconds reads as seconds 1000x or 1e9x too long:
+    its velocities come out that many times too small (a sweep found a kf median |v| of
+    6.7e-4 rad/s for 0.67, and ekf re-initialised at every row of a ns log).
+    """
+    if period is None or MIN_PLAUSIBLE_PERIOD < period < MAX_PLAUSIBLE_PERIOD:
+        return None
+    if period >= MAX_PLAUSIBLE_PERIOD:
+        unit = "milliseconds, microseconds or nanoseconds (t / 1000, t * 1e-6, t * 1e-9)"
+    else:
+        unit = "a unit larger than seconds"
+    return (
+        f"the median sample period is {period:.6g} s ({1 / period:.6g} Hz): is t in {unit}? "
+        "give t in seconds: velocities are per second of t, so they are off by the same factor"
+    )
+
+
+def median_period(t: Vector) -> float | None:
+    """The median of a log's positive sample intervals [s] (finite times), or ``None``."""
+    d = np.diff(t[np.isfinite(t)])
+    d = d[d > 0]
+    return float(np.median(d)) if d.size else None

@@ -237,6 +237,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import (
+    ChunkWarning,
     ConfigurationError,
     ConsistencyWarning,
     CostWarning,
@@ -248,6 +249,7 @@ from pinobs.errors import (
     ObserverDiverged,
     OptionError,
     TimestampError,
+    TimestampWarning,
 )
 from pinobs.model import Robot
 from pinobs.model.robot import read_only
@@ -256,9 +258,11 @@ from pinobs.observers.base import (
     NOISE_FLOOR,
     Vector,
     make_observer,
+    median_period,
     observer_class,
     observer_names,
     positive,
+    time_unit_warning,
 )
 from pinobs.observers.ekf import ExtendedKalmanFilter, _LazyKernel, _posv, cholesky_solve
 from pinobs.observers.kf import ConstantAccelerationKF, KFBank, KFGains, WhiteJerkFilter
@@ -1414,6 +1418,12 @@ def _learn(
     obs = observer(False)
     window = float(obs.options["horizon"] if model_window is None else model_window)
     positive("model_window", window)
+    if window < dt:
+        raise OptionError(
+            f"model_window={window!r} s is shorter than the log's sample interval ({dt:.3g} s): "
+            f"give at least one interval (default the learner's horizon, "
+            f"{obs.options['horizon']:g} s)"
+        )
     # windows (t₀ + jW, t₀ + (j+1)W]: each ends on the sample where the learner's solve
     # falls when W is a multiple of its resolve_every (both count from the reset at t₀), so
     # the window's model includes it.  Half-open the other way, a solve landing on a window's
@@ -1974,12 +1984,14 @@ def _windows(
     *,
     robot: Robot,
     configurations: Vector,
+    rows: int | None = None,
 ) -> tuple[int | None, int]:
     """``(chunk, overlap)`` in samples of ``dt`` [s] (``(None, 0)``: the whole log at once);
     the default overlap from the measurement interval ``meas_dt`` (default ``dt``; a re-timed
     log has rows between its measurements: :func:`_retimed`) and, with a torque offset,
     ``robot``'s inertia at ``configurations`` (rows of ``q``, the first the filter's first:
-    :func:`default_overlap`; ``adaptive``: the nominal model's inertia)."""
+    :func:`default_overlap`; ``adaptive``: the nominal model's inertia); ``rows``: the log's
+    (``None``: streamed, not known), for the cost warning."""
     if lag is not None and (chunk is not None or overlap is not None):
         raise OptionError(
             f"lag={lag!r} sets the chunk and the overlap; give lag alone, or chunk and overlap"
@@ -1994,27 +2006,39 @@ def _windows(
                 "chunk too (or lag)"
             )
         return None, 0
-    if overlap is None:  # the longest memory: the smallest densities (adaptive: any window's)
-        gains = cast(Any, filt).gains
-        if isinstance(gains, KFGains):  # white jerk: the triple integrator alone
-            pairs = [(0.0, gains.jerk_psd)]
-        else:
-            pairs = extra.get("model_densities") or [
-                (gains.accel_psd, cast(Any, filt).disturbance_psd)
-            ]
-        if isinstance(accel_psd, float) and not isinstance(gains, KFGains):
-            # it replaces each window's, the offset's scaled
-            pairs = [(accel_psd, None if d is None else d * accel_psd / a) for a, d in pairs]
-        h = dt if meas_dt is None else meas_dt
-        masses = None
-        if not isinstance(gains, KFGains) and any(d is not None for _, d in pairs):
-            masses = [robot.mass_matrix(q) for q in configurations]
-        overlap = max(
-            default_overlap(a, gains.meas_std, h, disturbance_psd=d, mass_matrices=masses)
-            for a, d in pairs
+    given = overlap
+    # the longest memory: the smallest densities (adaptive: any window's)
+    gains = cast(Any, filt).gains
+    if isinstance(gains, KFGains):  # white jerk: the triple integrator alone
+        pairs = [(0.0, gains.jerk_psd)]
+    else:
+        pairs = extra.get("model_densities") or [(gains.accel_psd, cast(Any, filt).disturbance_psd)]
+    if isinstance(accel_psd, float) and not isinstance(gains, KFGains):
+        # it replaces each window's, the offset's scaled
+        pairs = [(accel_psd, None if d is None else d * accel_psd / a) for a, d in pairs]
+    h = dt if meas_dt is None else meas_dt
+    masses = None
+    if not isinstance(gains, KFGains) and any(d is not None for _, d in pairs):
+        masses = [robot.mass_matrix(q) for q in configurations]
+    needed = max(
+        default_overlap(a, gains.meas_std, h, disturbance_psd=d, mass_matrices=masses)
+        for a, d in pairs
+    )
+    overlap = needed if given is None else given
+    if overlap < needed:  # the backward error decays as exp(−rate·overlap): CHUNK_TOL at needed
+        warnings.warn(
+            ChunkWarning(
+                f"overlap={overlap!r} s is shorter than the {needed:.3g} s over which the "
+                f"filter's slowest mode decays to CHUNK_TOL = {CHUNK_TOL:g} (default_overlap): "
+                f"chunked estimates can differ from the whole log's by the order of "
+                f"{CHUNK_TOL ** (overlap / needed):.2g} of v_std at each chunk's end; give a "
+                "longer overlap, or none (the default)"
+            ),
+            stacklevel=4,
         )
     n_chunk, n_over = _samples(chunk, dt, "chunk"), _samples(overlap, dt, "overlap")
-    if n_over > COST_WARN * n_chunk:  # every window's backward pass runs over its overlap
+    # every window's backward pass runs over its overlap (once over a log within one window)
+    if n_over > COST_WARN * n_chunk and (rows is None or rows > n_chunk + n_over):
         warnings.warn(
             CostWarning(
                 f"chunk={chunk!r} s with an overlap of {n_over * dt:.3g} s: the backward pass runs "
@@ -2312,12 +2336,22 @@ def smooth(
     Warns:
         NoiseWarning: ``noise_std`` not given (σ estimated from the log).
         CostWarning: a ``chunk`` more than :data:`COST_WARN` times shorter than its overlap.
+        ChunkWarning: an ``overlap`` given shorter than :func:`default_overlap`'s.
+        TimestampWarning: a median sample period of 0.1 s or more, or 1 µs or less
+            (``t`` in ms, µs or ns?).
         LatencyWarning: no latency given, and the log explained only with one found in it
             (:func:`latency_note`).
         ConsistencyWarning: ``ρ`` (:attr:`Smoothed.consistency`) above :data:`RHO_WARN`,
             or ``"auto"`` at the grid's largest density: the model does not explain the
             log (:func:`smoothing_warnings`).
     """
+    try:  # a log timed in ms reads as 1000× too slow: the filter is lost, or v 1000× too small
+        times = log[0] if isinstance(log, tuple) else log.t
+        unit = time_unit_warning(median_period(np.asarray(times, dtype=float).ravel()))
+    except (AttributeError, TypeError, ValueError, IndexError):
+        unit = None  # _smooth says what is wrong with the log
+    if unit is not None:
+        warnings.warn(TimestampWarning(unit), stacklevel=2)
     result = _smooth(
         robot,
         log,
@@ -2429,6 +2463,12 @@ def _smooth(
         )[0]
 
     latency_from_log = (filter_options or {}).get("latency") == "auto"
+    if latency_from_log and model_free:
+        raise OptionError(
+            f"latency='auto' with {observer!r}: without a model a late log is as likely as one "
+            "on time, so the log cannot tell its latency; give it in seconds, or smooth with "
+            "ekf or adaptive to find it"
+        )
     if latency_from_log:  # the likeliest latency (select_latency), then smoothed under it
         rest = {k: v for k, v in dict(filter_options or {}).items() if k != "latency"}
         filter_options = {**rest, "latency": find(rest)}
@@ -2483,6 +2523,7 @@ def _smooth(
         meas_dt,
         robot=robot,
         configurations=configs,
+        rows=n_run,
     )
     n_chunk = n_run if n_chunk is None else n_chunk
     out_q = np.full((n_run, model.nq), np.nan)

@@ -313,3 +313,15 @@ def test_a_log_without_torques_is_smoothed_over_kf_without_the_torque_warning(tm
     np.testing.assert_allclose(data[:, 7:13], want.v, rtol=0, atol=1e-12)
     run, _ = smooth_log(log, robot, tmp_path / "ekf.csv", observer="ekf", noise_std=1e-4)
     assert any("no torque columns: 'ekf'" in w for w in run.warnings)
+
+
+def test_kf_refuses_to_find_a_latency() -> None:
+    """Without a model a late log is as likely as one on time: latency='auto' over kf chose
+    3.5 ms on a log on time (0.5 s UR5); refused, a latency in seconds still taken."""
+    robot = cached_robot("ur5")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=0.5, seed=4)
+    log = (res.t, res.q_meas, res.tau)
+    with pytest.raises(OptionError, match="cannot tell its latency"):
+        smooth(robot, log, observer="kf", noise_std=1e-4, filter_options={"latency": "auto"})
+    given = smooth(robot, log, observer="kf", noise_std=1e-4, filter_options={"latency": 1e-3})
+    assert given.options["latency"] == 1e-3

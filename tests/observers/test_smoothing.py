@@ -13,6 +13,7 @@ import pytest
 
 import pinobs
 from pinobs.errors import (
+    ChunkWarning,
     ConfigurationError,
     ConsistencyWarning,
     CostWarning,
@@ -20,8 +21,10 @@ from pinobs.errors import (
     GainError,
     LatencyWarning,
     NoiseWarning,
+    NonFiniteError,
     OptionError,
     TimestampError,
+    TimestampWarning,
 )
 from pinobs.io import Log, estimate_log
 from pinobs.observers import make_observer, smoothing
@@ -598,6 +601,10 @@ def test_bad_inputs_are_rejected_with_what_would_be_valid(ur5_log) -> None:
     t_bad[10] = t_bad[9]
     with pytest.raises(TimestampError, match="strictly increasing"):
         smooth(robot, (t_bad, q, tau))
+    # t in ms: the filter was lost with no word of the unit; now the unit is asked first
+    with pytest.warns(TimestampWarning, match=r"is t in milliseconds"):
+        with pytest.raises(NonFiniteError, match="the filter is lost"):
+            smooth(robot, (1e3 * t, q, tau), noise_std=1e-4)
     with pytest.raises(GainError, match="lag"):
         smooth(robot, (t, q, tau), lag=-1.0)
     with pytest.raises(OptionError, match=r"overlap=0\.5 without chunk"):
@@ -643,13 +650,23 @@ def test_a_log_and_a_density_are_taken_in_any_of_their_natural_forms(ur5_log) ->
 def test_a_chunk_far_shorter_than_its_overlap_is_warned(ur5_log) -> None:
     """A chunk a tenth of the overlap or less makes every window's backward pass mostly
     overlap (at 2 ms against 0.3 s, 150× the whole log's) for no memory saved: warned; a lag
-    (chunk = overlap) is not."""
+    (chunk = overlap) is not, nor a log within one window (it said 151× over a 0.2 s log).
+    An overlap shorter than the default one is warned with the deviation it allows (it was
+    silent), CHUNK_TOL^(overlap/default): measured 0.18 of v_std at 0.05 s (said 0.14), 4.0e-3
+    at 0.15 s (2.5e-3), 1.1e-5 at 0.3 s (6.5e-6)."""
     robot = cached_robot("ur5")
-    opts = {"noise_std": 1e-4, "accel_psd": 1e-4}
-    with pytest.warns(CostWarning, match=r"chunk=0.002 s with an overlap of 0.3 s: .* 151×"):
-        smooth(robot, _log(ur5_log), chunk=0.002, overlap=0.3, **opts)  # type: ignore[arg-type]
-    smooth(robot, _log(ur5_log), lag=0.3, **opts)  # type: ignore[arg-type]
-    smooth(robot, _log(ur5_log), chunk=0.03, overlap=0.3, **opts)  # type: ignore[arg-type]
+    opts = {"noise_std": 1e-4, "accel_psd": 1e-4}  # the default overlap: 0.347 s
+    log = _log(ur5_log)
+    with pytest.warns(CostWarning, match=r"chunk=0.002 s with an overlap of 0.4 s: .* 201×"):
+        smooth(robot, log, chunk=0.002, overlap=0.4, **opts)  # type: ignore[arg-type]
+    smooth(robot, log, lag=0.4, **opts)  # type: ignore[arg-type]
+    smooth(robot, log, chunk=0.04, overlap=0.4, **opts)  # type: ignore[arg-type]
+    short = (log.t[:200], log.q[:200], log.tau[:200])  # 0.2 s: one window, one backward pass
+    smooth(robot, short, chunk=0.002, overlap=0.4, **opts)  # type: ignore[arg-type]
+    whole = smooth(robot, log, **opts)  # type: ignore[arg-type]
+    with pytest.warns(ChunkWarning, match=r"overlap=0.05 s is shorter than the 0.347 s .* 0.14 of"):
+        chunked = smooth(robot, log, chunk=0.1, overlap=0.05, **opts)  # type: ignore[arg-type]
+    assert np.nanmax(np.abs(chunked.v - whole.v) / whole.v_std) > 1e-3
 
 
 @pytest.mark.slow
@@ -1406,6 +1423,8 @@ def test_adaptive_smoothing_options_that_do_not_apply_are_refused(ur5_log) -> No
         smooth(robot, _log(ur5_log), observer="adaptive", noise_std=1e-4, disturbance_psd=1.0)
     with pytest.raises(GainError, match="model_window"):
         smooth(robot, _log(ur5_log), observer="adaptive", noise_std=1e-4, model_window=-1.0)
+    with pytest.raises(OptionError, match=r"model_window=0\.0001 s is shorter than the log's"):
+        smooth(robot, _log(ur5_log), observer="adaptive", noise_std=1e-4, model_window=1e-4)
 
 
 @pytest.mark.slow

@@ -189,8 +189,9 @@ def check_urdf(facts: UrdfFacts, *, mimic: str, inertials: bool = True) -> None:
         raise ModelError(
             f"joint {joint!r} mimics {target!r} (q = {mult:g}·q_{target} + {offset:g}"
             f"{f'; {len(facts.mimics) - 1} more mimic joint(s)' if len(facts.mimics) > 1 else ''}"
-            "): Pinocchio's forward dynamics cannot couple joints. Pass mimic='independent' "
-            "to load every mimic joint as a joint of its own, or remove the <mimic> tags"
+            "): Pinocchio's forward dynamics cannot couple joints. To load every mimic joint "
+            "as a joint of its own pass mimic='independent' (pinobs.load) or --mimic "
+            "independent (the pinobs command), or remove the <mimic> tags"
         )
 
 

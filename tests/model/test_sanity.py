@@ -109,6 +109,19 @@ def test_a_mimic_joint_in_a_file_is_refused_unless_declared_independent(tmp_path
         pinobs.load(f, mimic="couple")
 
 
+def test_the_command_line_loads_a_mimic_file_with_the_option_its_error_names(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from pinobs.cli import main
+
+    f = _arm(tmp_path, mimic='\n    <mimic joint="j1"/>')
+    assert main(["check", "ii", "--robot", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "--mimic independent (the pinobs command)" in err  # was mimic='independent' only
+    assert main(["check", "ii", "--robot", str(f), "--mimic", "independent"]) in (0, 1)
+    assert "Assumption 1" in capsys.readouterr().out
+
+
 def test_registry_robots_with_mimic_grippers_load_them_as_independent_joints() -> None:
     assert pinobs.load("panda").nv == 9
     with pytest.raises(pinobs.ModelError, match="panda_finger_joint2"):

@@ -19,6 +19,7 @@ from functools import cache, partial
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pinocchio as pin
 from pinocchio.robot_wrapper import RobotWrapper
 
@@ -33,7 +34,7 @@ from pinobs.errors import (
 from pinobs.model.mjcf import MujocoMap, build_from_mujoco, cross_check
 from pinobs.model.robot import Robot
 from pinobs.model.sanity import check_model, check_urdf
-from pinobs.model.urdf import UrdfFacts, read_urdf
+from pinobs.model.urdf import read_urdf
 
 __all__ = ["RobotEntry", "load", "robot_entries", "robot_names"]
 
@@ -367,17 +368,46 @@ def _from_pinocchio(
 
 
 def _load_urdf(
-    path: Path, package_dirs: list[str | Path], joint_type: type | None
-) -> tuple[pin.Model, Any, UrdfFacts]:
+    path: Path,
+    package_dirs: list[str | Path],
+    joint_type: type | None,
+    *,
+    mimic: str,
+    check: bool,
+    registered: bool,
+) -> tuple[pin.Model, Any]:
     """Model of a URDF and a loader of its geometry, meshes resolved as :mod:`pinobs.model.urdf` says.
+
+    The file is checked first (:func:`~pinobs.model.sanity.check_urdf`).  Its
+    revolute and prismatic joints with ``<limit lower="0" upper="0">`` (or
+    without both attributes) get no position limits (Pinocchio's ±1.8e308):
+    that is how many exporters write "no limits".  One
+    :class:`~pinobs.errors.ModelWarning` lists them for a file (none for a
+    registered robot: ``double_pendulum`` is written so).
 
     When meshes are missing, the dynamics load alone (no geometry) and one
     :class:`~pinobs.errors.ModelWarning` says which meshes (the playback then
     draws a stick figure).  Otherwise the geometry is built on first use.
     """
     facts = read_urdf(path, package_dirs)
+    check_urdf(facts, mimic=mimic, inertials=check)
     args = (joint_type(),) if joint_type is not None else ()
     model = pin.buildModelFromXML(facts.xml, *args)
+    if facts.zero_limits:
+        lower = np.array(model.lowerPositionLimit, dtype=float)
+        upper = np.array(model.upperPositionLimit, dtype=float)
+        for name in facts.zero_limits:
+            iq = model.joints[model.getJointId(name)].idx_q
+            lower[iq], upper[iq] = -np.finfo(float).max, np.finfo(float).max
+        model.lowerPositionLimit, model.upperPositionLimit = lower, upper
+        if not registered:
+            warnings.warn(
+                f"{path}: joint(s) {', '.join(facts.zero_limits)} have <limit lower=0 upper=0> "
+                "(or no lower/upper), read as no position limits; give their real range, "
+                "or write type continuous, to silence this",
+                ModelWarning,
+                stacklevel=3,
+            )
     if facts.missing_meshes:
         shown = ", ".join(facts.missing_meshes[:3])
         more = len(facts.missing_meshes) - 3
@@ -389,8 +419,8 @@ def _load_urdf(
             ModelWarning,
             stacklevel=3,
         )
-        return model, partial(_given_geometry, None), facts
-    return model, partial(_urdf_geometry, facts.xml), facts
+        return model, partial(_given_geometry, None)
+    return model, partial(_urdf_geometry, facts.xml)
 
 
 def _load_mjcf(
@@ -474,15 +504,22 @@ def load(
             ``"error"`` for files.
         check: refuse models whose dynamics cannot be right
             (:mod:`pinobs.model.sanity`): non-finite, negative or dropped
-            masses, impossible inertias, a mass matrix singular or indefinite
-            at sampled configurations.  ``False`` skips these checks.
+            masses, impossible inertias, negative damping or friction,
+            inverted position limits, a mass matrix singular or indefinite
+            at sampled configurations.  ``False`` skips these checks (a URDF's
+            ``<dynamics>`` and ``<limit>`` values are checked whatever it says).
+            A URDF revolute or prismatic joint with ``<limit lower="0"
+            upper="0">`` (or neither attribute) has no position limits, with
+            one :class:`~pinobs.errors.ModelWarning` naming such joints of a
+            file (a registered robot loads silently).
 
     Raises:
         UnknownNameError: ``source`` is neither a registered name nor a path.
         ModelFileError: the file is missing or cannot be parsed.
         ModelTypeError: ``source`` is of another type.
         ModelError: the model fails a check (``check=True``), has mimic joints
-            (``mimic="error"``), or (MJCF) its mass or ``M(q)`` differs from
+            (``mimic="error"``), a URDF negative ``<dynamics>`` value or an
+            inverted ``<limit>``, or (MJCF) its mass or ``M(q)`` differs from
             MuJoCo's; the message names the body or joint.
         GainError: ``root_joint`` is not one of the accepted values.
     """
@@ -508,11 +545,18 @@ def load(
         )
     joint_type = _ROOT_JOINTS[root]
     dirs: list[str | Path] = [*(package_dirs or ()), *default_dirs]
-    facts: UrdfFacts | None = None
     compiled: tuple[Any, MujocoMap] | None = None
+    registered = str(source) in _all_entries()
     try:
         if _is_urdf(path):
-            model, geometry, facts = _load_urdf(path, dirs, joint_type)
+            model, geometry = _load_urdf(
+                path,
+                dirs,
+                joint_type,
+                mimic=mimic or ("independent" if registered else "error"),
+                check=check,
+                registered=registered,
+            )
         else:
             model, visual, _, compiled = _load_mjcf(path, joint_type, root)
             geometry = partial(_given_geometry, visual)
@@ -530,9 +574,6 @@ def load(
             f"robot {str(source)!r} has no moving joint; a single rigid body needs "
             "root_joint='spherical' or 'freeflyer'"
         )
-    if facts is not None:
-        default = "error" if str(source) not in _all_entries() else "independent"
-        check_urdf(facts, mimic=mimic or default, inertials=check)
     if compiled is not None:
         cross_check(model, *compiled)
     if check:

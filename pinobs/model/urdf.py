@@ -1,4 +1,4 @@
-"""What a URDF file says before Pinocchio reads it: meshes, inertials, mimic joints.
+"""What a URDF file says before Pinocchio reads it: meshes, inertials, mimic joints, joint values.
 
 Pinocchio's URDF parser (urdfdom underneath) fails on a mesh it cannot find,
 drops an ``<inertial>`` whose mass is not a number with only a message on
@@ -48,12 +48,22 @@ class UrdfFacts:
         mimics: ``(joint, mimicked joint, multiplier, offset)`` per ``<mimic>`` tag.
         bad_inertials: ``(link, attribute, text)`` for each ``<inertial>`` value
             that is not a finite number (urdfdom drops such an inertial).
+        bad_dynamics: ``(joint, attribute, text)`` for each ``<dynamics damping friction>``
+            value that is negative or not a finite number.
+        bad_limits: ``(joint, lower, upper)`` for each revolute or prismatic joint whose
+            ``<limit>`` has ``lower > upper``, or ``lower = upper`` other than 0.
+        zero_limits: revolute and prismatic joints whose ``<limit>`` has
+            ``lower = upper = 0`` (an attribute left out reads 0): the "no limits"
+            convention of many exporters.
     """
 
     xml: str
     missing_meshes: tuple[str, ...]
     mimics: tuple[tuple[str, str, float, float], ...]
     bad_inertials: tuple[tuple[str, str, str], ...]
+    bad_dynamics: tuple[tuple[str, str, str], ...]
+    bad_limits: tuple[tuple[str, float, float], ...]
+    zero_limits: tuple[str, ...]
 
 
 def _search_dirs(package_dirs: Sequence[str | Path]) -> list[Path]:
@@ -121,6 +131,26 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
     live = {m.get("filename") for m in root.iter("mesh")}  # not those in comments
     missing = [uri for uri in missing if uri in live]
     mimics = []
+    dynamics: list[tuple[str, str, str]] = []
+    bad_limits: list[tuple[str, float, float]] = []
+    zero_limits: list[str] = []
+    for joint in root.findall("joint"):
+        name = joint.get("name", "?")
+        tag = joint.find("dynamics")
+        for attr in ("damping", "friction"):
+            t = tag.get(attr) if tag is not None else None
+            x = _number(t, 0.0)
+            if x is None or x < 0:
+                dynamics.append((name, attr, str(t)))
+        limit = joint.find("limit")
+        if limit is not None and joint.get("type") in ("revolute", "prismatic"):
+            lower, upper = _number(limit.get("lower"), 0.0), _number(limit.get("upper"), 0.0)
+            if lower is None or upper is None:
+                continue  # urdfdom's own error names it
+            if lower == upper == 0.0:
+                zero_limits.append(name)
+            elif lower >= upper:
+                bad_limits.append((name, lower, upper))
     for joint in root.iter("joint"):
         mimic = joint.find("mimic")
         if mimic is not None:
@@ -152,4 +182,7 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
         missing_meshes=tuple(dict.fromkeys(missing)),
         mimics=tuple(mimics),
         bad_inertials=tuple(bad),
+        bad_dynamics=tuple(dynamics),
+        bad_limits=tuple(bad_limits),
+        zero_limits=tuple(zero_limits),
     )

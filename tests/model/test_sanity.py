@@ -128,6 +128,89 @@ def test_registry_robots_with_mimic_grippers_load_them_as_independent_joints() -
         pinobs.load("panda", mimic="error")
 
 
+@pytest.mark.parametrize(
+    ("dynamics", "message"),
+    [
+        ('damping="-0.1"', r"joint 'j1': <dynamics damping='-0\.1'> is not a finite number ≥ 0"),
+        # Pinocchio's parser said only "min_dry_friction are greater than max_dry_friction"
+        ('friction="-0.2"', r"joint 'j1': <dynamics friction='-0\.2'> is not a finite number"),
+        ('damping="nan"', r"joint 'j1': <dynamics damping='nan'>"),
+    ],
+    ids=["negative-damping", "negative-friction", "nan-damping"],
+)
+def test_a_negative_urdf_damping_or_friction_is_an_error_naming_the_joint_and_value(
+    tmp_path: Path, dynamics: str, message: str
+) -> None:
+    f = _arm(tmp_path)
+    f.write_text(
+        f.read_text().replace(
+            'effort="10" velocity="10"/>', f'effort="10" velocity="10"/><dynamics {dynamics}/>', 1
+        )
+    )
+    with pytest.raises(pinobs.ModelError, match=message):
+        pinobs.load(f)
+    with pytest.raises(pinobs.ModelError, match=message):  # not a dynamics check: always
+        pinobs.load(f, check=False)
+
+
+@pytest.mark.parametrize(
+    ("limit", "message"),
+    [
+        ('lower="3" upper="-3"', r"joint 'j1': <limit lower=3 upper=-3> is inverted"),
+        (
+            'lower="0.5" upper="0.5"',
+            r"joint 'j1': <limit lower=0\.5 upper=0\.5> leaves the joint no motion",
+        ),
+    ],
+    ids=["inverted", "no-motion"],
+)
+def test_inverted_or_degenerate_urdf_limits_are_an_error_naming_the_joint(
+    tmp_path: Path, limit: str, message: str
+) -> None:
+    f = _arm(tmp_path)
+    f.write_text(f.read_text().replace('lower="-3" upper="3"', limit, 1))
+    with pytest.raises(pinobs.ModelError, match=message):
+        pinobs.load(f)
+
+
+@pytest.mark.parametrize("limit", ['lower="0" upper="0"', ""], ids=["zeros", "left-out"])
+def test_zero_urdf_limits_read_as_no_limits_with_one_warning_naming_the_joints(
+    tmp_path: Path, limit: str
+) -> None:
+    f = _arm(tmp_path)
+    f.write_text(f.read_text().replace('lower="-3" upper="3"', limit))  # both joints
+    with pytest.warns(
+        pinobs.ModelWarning, match=r"joint\(s\) j1, j2 have <limit lower=0 upper=0>"
+    ) as rec:
+        robot = pinobs.load(f)
+    assert len(rec) == 1
+    big = np.finfo(float).max  # Pinocchio's "no limit" (they were [0, 0])
+    np.testing.assert_array_equal(robot.model.lowerPositionLimit, [-big, -big])
+    np.testing.assert_array_equal(robot.model.upperPositionLimit, [big, big])
+
+
+def test_a_registered_robot_with_zero_limits_loads_unlimited_and_silently() -> None:
+    robot = pinobs.load("double_pendulum")  # warnings are errors
+    np.testing.assert_array_equal(robot.model.upperPositionLimit, np.full(2, np.finfo(float).max))
+
+
+def test_a_pin_models_joint_values_are_checked_naming_the_joint() -> None:
+    model = pinobs.load("cartpole").model.copy()
+    model.damping[:] = [0.0, -0.5]
+    with pytest.raises(
+        pinobs.ModelError, match=r"joint 'pole_theta' has viscous damping \[-0\.5\]"
+    ):
+        pinobs.load(model)
+    model = pinobs.load("cartpole").model.copy()
+    model.lowerPositionLimit[0], model.upperPositionLimit[0] = 1.0, -1.0
+    with pytest.raises(
+        pinobs.ModelError,
+        match=r"joint 'cart_x' has position limits lower \[1\.0\] > upper",
+    ):
+        pinobs.load(model)
+    assert pinobs.load(model, check=False).nv == 2
+
+
 def test_a_pin_model_is_checked_too() -> None:
     model = pinobs.load("cartpole").model.copy()
     model.armature[:] = [0.0, -1.0]  # negative armature: M indefinite

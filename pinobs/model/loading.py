@@ -9,6 +9,7 @@ prefix's ``share`` folder as package directory.
 
 from __future__ import annotations
 
+import difflib
 import importlib.metadata
 import importlib.resources
 import warnings
@@ -329,15 +330,32 @@ def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
     looks_like_path = path.suffix.lower() in (".urdf", ".xml", ".mjcf") or len(path.parts) > 1
     if not looks_like_path:
         raise UnknownNameError(
-            f"unknown robot {str(source)!r}; give a path to a URDF/MJCF file or one of: "
-            + ", ".join(robot_names())
+            f"unknown robot {str(source)!r}; {_did_you_mean(str(source))}give a path to a "
+            "URDF/MJCF file or a robot name (pinobs list)"
         )
     if not path.is_file():
         raise ModelFileError(
             f"robot file {str(path)!r} does not exist; give an existing URDF/MJCF file "
-            "or one of the robot names: " + ", ".join(robot_names())
+            "or a robot name (pinobs list)"
         )
     return path, [], "fixed", path.stem
+
+
+def _did_you_mean(name: str) -> str:
+    """``"did you mean 'ur5'? "`` for a name close to registered ones (case ignored), else the
+    table's names (the wheel's other URDFs are counted, not listed)."""
+    names = robot_names()
+    lower = {n.lower(): n for n in names}
+    close = difflib.get_close_matches(name.lower(), list(lower), n=3, cutoff=0.6)
+    if name.lower() in lower:  # only the case differs
+        close = [name.lower()]
+    if close:
+        return "did you mean " + " or ".join(repr(lower[c]) for c in close) + "? "
+    table = [e.name for e in _ENTRIES]
+    more = len(names) - len(table)
+    return f"known: {', '.join(sorted(table))}" + (
+        f" and {more} more URDFs of example-robot-data; " if more else "; "
+    )
 
 
 def _from_pinocchio(
@@ -566,8 +584,7 @@ def load(
         raise
     except (RuntimeError, ValueError, OSError, ET.ParseError) as exc:
         raise ModelFileError(
-            f"cannot parse robot file {str(path)!r} (from source {str(source)!r}): {exc}. "
-            "Known robot names: " + ", ".join(robot_names())
+            f"cannot parse robot file {str(path)!r} (from source {str(source)!r}): {exc}"
         ) from exc
     if model.nv == 0:
         raise ModelFileError(

@@ -38,7 +38,7 @@ import warnings
 import numpy as np
 import pinocchio as pin
 
-from pinobs.errors import ModelError, ModelWarning
+from pinobs.errors import ModelError, ModelFileError, ModelWarning
 from pinobs.model.urdf import UrdfFacts
 from pinobs.tolerances import (
     INERTIA_TRIANGLE_TOL,
@@ -178,9 +178,14 @@ def check_mass_matrix(model: pin.Model) -> None:
 def check_urdf(facts: UrdfFacts, *, mimic: str, inertials: bool = True) -> None:
     """Raise :class:`ModelError` for what Pinocchio's URDF parser loses or garbles.
 
+    * :class:`~pinobs.errors.ModelFileError`: a link or joint name given twice
+      (urdfdom says only "not a valid URDF model");
+    * a revolute, continuous or prismatic joint with ``<axis xyz="0 0 0">``;
     * an ``<inertial>`` value that is not a finite number (``mass="nan"``,
-      ``"abc"``): urdfdom prints an error and drops the whole inertial, and
-      the link would silently be massless;
+      ``"abc"``), or left out (no ``<mass>``, ``<inertia>`` or ``iyz``): urdfdom
+      prints an error and drops the inertial or keeps its mass without inertia, so
+      the link would silently be massless or a point mass; a second ``<inertial>``
+      in a link (urdfdom keeps the first);
     * a ``<dynamics damping friction>`` value that is negative or not a finite
       number (a negative damping feeds energy in; Pinocchio's parser refuses a
       negative friction naming no joint);
@@ -192,12 +197,21 @@ def check_urdf(facts: UrdfFacts, *, mimic: str, inertials: bool = True) -> None:
 
     ``inertials=False`` leaves out the inertials.
     """
-    if inertials and facts.bad_inertials:
-        link, attr, text = facts.bad_inertials[0]
+    if facts.duplicates:
+        raise ModelFileError(
+            f"{', '.join(facts.duplicates)} defined more than once; a URDF's link and joint "
+            "names must be unique (a copied block not renamed?)"
+        )
+    if facts.zero_axes:
         raise ModelError(
-            f"link {link!r}: <inertial> {attr}={text!r} is not a finite number; the URDF "
-            "parser drops that inertial and the link would be massless. Write the mass [kg] "
-            "and inertia [kg·m²] as numbers"
+            f"joint(s) {', '.join(map(repr, facts.zero_axes))} have <axis xyz='0 0 0'>, no "
+            "direction to move along; give the axis as a nonzero vector (e.g. '0 0 1')"
+        )
+    if inertials and facts.bad_inertials:
+        link, problem = facts.bad_inertials[0]
+        raise ModelError(
+            f"link {link!r}: {problem}. Write one <inertial> per link with a mass [kg] and all "
+            "six inertia entries [kg·m²] as numbers"
         )
     if facts.bad_dynamics:
         joint, attr, text = facts.bad_dynamics[0]

@@ -64,6 +64,51 @@ def test_an_unreadable_inertia_entry_is_an_error_naming_it(tmp_path: Path) -> No
         pinobs.load(_arm(tmp_path, iyy="1e-2x"))
 
 
+INERTIAL = '<inertial><origin xyz="0 0 -0.25"/><mass value="0.5"/>'
+INERTIA = '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.0005"/>'
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [  # what urdfdom did: kept a point mass, dropped the inertial, kept the first one
+        (INERTIA, "", r"link 'lower': <inertial> has no <inertia>: urdfdom keeps a point mass"),
+        (' iyz="0" izz="0.0005"', ' izz="0.0005"', r"link 'lower': <inertial> iyz=None is not"),
+        ('<mass value="0.5"/>', "", r"link 'lower': <inertial> no mass value: .*massless"),
+        (
+            INERTIA + "</inertial>",
+            INERTIA + "</inertial>" + INERTIAL + INERTIA + "</inertial>",
+            r"link 'lower': 2 <inertial> elements: urdfdom keeps the first",
+        ),
+    ],
+    ids=["no-inertia", "no-iyz", "no-mass", "two-inertials"],
+)
+def test_an_incomplete_or_second_inertial_is_an_error_naming_the_link(
+    tmp_path: Path, old: str, new: str, message: str
+) -> None:
+    f = _arm(tmp_path)
+    text = f.read_text()
+    i = text.index('<link name="lower">')  # the second link's inertial
+    f.write_text(text[:i] + text[i:].replace(old, new, 1))
+    with pytest.raises(pinobs.ModelError, match=message):
+        pinobs.load(f)
+
+
+def test_a_duplicate_link_name_is_a_file_error_naming_it(tmp_path: Path) -> None:
+    f = _arm(tmp_path)
+    f.write_text(
+        f.read_text().replace('<link name="tool"/>', '<link name="tool"/><link name="upper"/>')
+    )
+    with pytest.raises(pinobs.ModelFileError, match=r"link 'upper' defined more than once"):
+        pinobs.load(f)  # was "The XML stream does not contain a valid URDF model."
+
+
+def test_a_zero_joint_axis_is_an_error_naming_the_joint(tmp_path: Path) -> None:
+    f = _arm(tmp_path)
+    f.write_text(f.read_text().replace('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>', 1))
+    with pytest.raises(pinobs.ModelError, match=r"joint\(s\) 'j1' have <axis xyz='0 0 0'>"):
+        pinobs.load(f)  # was "the mass matrix is singular … Give them an <inertial>"
+
+
 def test_a_negative_mass_is_an_error_naming_the_body(tmp_path: Path) -> None:
     with pytest.raises(
         pinobs.ModelError, match=r"body 'lower \(body of joint j2\)' has a negative mass -0\.5 kg"

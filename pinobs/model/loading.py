@@ -442,15 +442,16 @@ def _load_urdf(
 
 
 def _load_mjcf(
-    path: Path, joint_type: type | None, root: str
+    path: Path, joint_type: type | None, root_joint: str | None
 ) -> tuple[
     pin.Model, pin.GeometryModel | None, pin.GeometryModel | None, tuple[Any, MujocoMap] | None
 ]:
     """An MJCF model built from MuJoCo's compiled model, or from Pinocchio's parser without MuJoCo.
 
     Through MuJoCo (:mod:`pinobs.model.mjcf`) the root joint is the file's
-    own (declare a ``<freejoint/>`` in it) and the visual geometry is MuJoCo's
-    primitive geoms (no meshes).  Without MuJoCo one
+    own (declare a ``<freejoint/>`` in it): a ``root_joint`` other than ``None``
+    must name it (:class:`~pinobs.errors.GainError` otherwise), and the visual
+    geometry is MuJoCo's primitive geoms (no meshes).  Without MuJoCo one
     :class:`~pinobs.errors.ModelWarning` says what Pinocchio's parser misses.
     """
     try:
@@ -473,13 +474,31 @@ def _load_mjcf(
         except (RuntimeError, ValueError):
             visual = None
         return model, visual, None, None
-    if root != "fixed":
-        raise GainError(
-            f"root_joint={root!r}: an MJCF file loaded through MuJoCo keeps its own root; "
-            "declare <freejoint/> (or <joint type='ball'/>) in its top body instead"
-        )
     model, mj, mapping, visual = build_from_mujoco(path)
+    if root_joint is not None:
+        own = _mjcf_roots(mj)
+        if own != {root_joint}:
+            how = {
+                "freeflyer": "; to float it, declare <freejoint/> in its top body",
+                "spherical": "; to pivot it, declare <joint type='ball'/> in its top body",
+            }.get(root_joint, "")
+            raise GainError(
+                f"root_joint={root_joint!r}: an MJCF file loaded through MuJoCo keeps its own "
+                f"root, and {path.name}'s is {' and '.join(sorted(own))}: leave out root_joint"
+                + how
+            )
     return model, visual, None, (mj, mapping)
+
+
+def _mjcf_roots(mj: Any) -> set[str]:
+    """How the file's top bodies hang on the world, as ``root_joint`` names: ``"freeflyer"``
+    (a free joint), ``"spherical"`` (a ball joint), ``"fixed"`` (welded or hinged)."""
+    kinds = {0: "freeflyer", 1: "spherical"}  # mjtJoint free, ball
+    return {
+        kinds.get(int(mj.jnt_type[mj.body_jntadr[b]]), "fixed") if mj.body_jntnum[b] else "fixed"
+        for b in range(1, mj.nbody)
+        if mj.body_parentid[b] == 0
+    } or {"fixed"}
 
 
 def load(
@@ -576,7 +595,7 @@ def load(
                 registered=registered,
             )
         else:
-            model, visual, _, compiled = _load_mjcf(path, joint_type, root)
+            model, visual, _, compiled = _load_mjcf(path, joint_type, root_joint)
             geometry = partial(_given_geometry, visual)
             if friction is None and compiled is not None:
                 friction = True  # MJCF authors mean their damping (unlike URDF placeholders)
@@ -600,7 +619,7 @@ def load(
         name=name,
         source=str(source),
         friction=bool(friction),
-        root_joint=root,
+        root_joint=None if compiled is not None else root,  # MuJoCo: the file's own root
         geometry=geometry,  # meshes: on first draw
     )
 

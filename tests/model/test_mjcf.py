@@ -158,6 +158,22 @@ def test_a_root_joint_cannot_be_added_to_an_mjcf_file(tmp_path: Path) -> None:
         pinobs.load(_models_dir() / "mjcf_acrobot.xml", root_joint="freeflyer")
 
 
+def test_a_root_joint_naming_the_files_own_root_is_accepted_and_another_refused(
+    tmp_path: Path,
+) -> None:
+    text = """<mujoco><worldbody><body name="box"><freejoint/>
+      <geom type="box" size="0.1 0.2 0.3" mass="1"/></body></worldbody></mujoco>"""
+    path = _file(tmp_path, text)
+    robot = pinobs.load(path, root_joint="freeflyer")  # was: "declare <freejoint/>", declared
+    assert robot.nv == 6 and robot.root_joint is None  # the file's own: reloads as it is
+    with pytest.raises(
+        pinobs.GainError, match=r"root_joint='fixed': .* model\.xml's is freeflyer: leave out"
+    ):
+        pinobs.load(path, root_joint="fixed")  # was accepted, and the box floated
+    with pytest.raises(pinobs.GainError, match=r"trees\.xml's is fixed and freeflyer"):
+        pinobs.load(_file(tmp_path, TREES, "trees.xml"), root_joint="freeflyer")
+
+
 def test_without_mujoco_pinocchios_parser_loads_with_a_warning_saying_what_it_misses(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:

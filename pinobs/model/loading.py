@@ -457,6 +457,14 @@ def _load_mjcf(
     try:
         import mujoco  # noqa: F401  (optional extra pinobs[mujoco])
     except ImportError:
+        root = ET.parse(path).getroot()
+        included = [e.get("file", "?") for e in root.iter("include")]
+        if included:
+            raise ModelFileError(
+                f"{path} includes {', '.join(included)}, which Pinocchio's MJCF parser drops "
+                "(their bodies would be missing); install MuJoCo (pip install 'pinobs[mujoco]') "
+                "to load it"
+            ) from None
         warnings.warn(
             f"{path}: MuJoCo is not installed (pip install 'pinobs[mujoco]'), so Pinocchio's "
             "MJCF parser reads the file: it ignores geom masses set in <default> classes "
@@ -469,6 +477,7 @@ def _load_mjcf(
             model = pin.buildModelFromMJCF(str(path), joint_type())
         else:
             model = pin.buildModelFromMJCF(str(path))
+        model.gravity = pin.Motion(_mjcf_gravity(root), np.zeros(3))  # the parser ignores it
         try:
             visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
         except (RuntimeError, ValueError):
@@ -488,6 +497,19 @@ def _load_mjcf(
                 + how
             )
     return model, visual, None, (mj, mapping)
+
+
+def _mjcf_gravity(root: ET.Element) -> np.ndarray:
+    """``<option gravity>`` (MuJoCo's default ``0 0 -9.81``), zero under ``<flag gravity="disable">``."""
+    gravity, enabled = np.array([0.0, 0.0, -9.81]), True
+    for option in root.iter("option"):
+        if option.get("gravity") is not None:
+            gravity = np.array([float(x) for x in option.get("gravity", "").split()])
+            if gravity.shape != (3,):
+                raise ValueError(f"<option gravity={option.get('gravity')!r}> is not 3 numbers")
+        for flag in option.iter("flag"):
+            enabled = flag.get("gravity", "enable" if enabled else "disable") == "enable"
+    return gravity if enabled else np.zeros(3)
 
 
 def _mjcf_roots(mj: Any) -> set[str]:

@@ -174,9 +174,7 @@ def test_a_root_joint_naming_the_files_own_root_is_accepted_and_another_refused(
         pinobs.load(_file(tmp_path, TREES, "trees.xml"), root_joint="freeflyer")
 
 
-def test_without_mujoco_pinocchios_parser_loads_with_a_warning_saying_what_it_misses(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
+def _without_mujoco(monkeypatch: pytest.MonkeyPatch) -> None:
     real_import = builtins.__import__
 
     def no_mujoco(name: str, *args: Any, **kwargs: Any) -> Any:
@@ -185,10 +183,34 @@ def test_without_mujoco_pinocchios_parser_loads_with_a_warning_saying_what_it_mi
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_mujoco)
+
+
+def test_without_mujoco_pinocchios_parser_loads_with_a_warning_saying_what_it_misses(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    _without_mujoco(monkeypatch)
     with pytest.warns(pinobs.ModelWarning, match=r"MuJoCo is not installed.*<default> classes"):
         robot = pinobs.load(_models_dir() / "mjcf_acrobot.xml", check=False)
     # what the warning is about: Pinocchio's parser weighs the capsules by density
     assert sum(i.mass for i in robot.model.inertias) > 10.0
+
+
+def test_without_mujoco_an_include_is_refused_and_gravity_options_are_kept(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _without_mujoco(monkeypatch)
+    body = """<body name="l0" pos="0 0 0.1"><joint name="j0" type="hinge" axis="0 1 0"/>
+      <inertial pos="0.2 0 0" mass="1" diaginertia="0.01 0.01 0.001"/></body>"""
+    _file(tmp_path, f"<mujoco>{body.replace('l0', 'l1').replace('j0', 'j1')}</mujoco>", "part.xml")
+    main = f'<mujoco><worldbody><include file="part.xml"/>{body}</worldbody></mujoco>'
+    with pytest.raises(pinobs.ModelFileError, match=r"includes part\.xml, which Pinocchio's"):
+        pinobs.load(_file(tmp_path, main))  # was loaded with nv = 1 of MuJoCo's 2
+    moon = f'<mujoco><option gravity="0 0 -1.62"/><worldbody>{body}</worldbody></mujoco>'
+    off = moon.replace("/>", '><flag gravity="disable"/></option>', 1)
+    for text, gravity in ((moon, [0, 0, -1.62]), (off, [0, 0, 0])):  # both were -9.81
+        with pytest.warns(pinobs.ModelWarning, match="MuJoCo is not installed"):
+            robot = pinobs.load(_file(tmp_path, text))
+        np.testing.assert_array_equal(robot.model.gravity.linear, gravity)
 
 
 DM_CONTROL_SUITE = [

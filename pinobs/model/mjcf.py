@@ -238,9 +238,9 @@ def _effort_limits(mj: Any) -> Vector:
         j = int(mj.actuator_trnid[a, 0])
         if int(mj.jnt_type[j]) not in (_HINGE, _SLIDE):
             continue
-        d = int(mj.jnt_dofadr[j])
+        d, gear = int(mj.jnt_dofadr[j]), abs(float(mj.actuator_gear[a, 0]))
         driven[d] = True
-        effort[d] += abs(float(mj.actuator_gear[a, 0])) * _actuator_force_bound(mj, a)
+        effort[d] += gear * _actuator_force_bound(mj, a) if gear else 0.0
     effort = np.where(driven & ~unbounded, effort, np.inf)
     for j in range(mj.njnt):
         if int(mj.jnt_type[j]) in (_HINGE, _SLIDE) and mj.jnt_actfrclimited[j]:

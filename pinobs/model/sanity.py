@@ -175,6 +175,14 @@ def check_mass_matrix(model: pin.Model) -> None:
         )
 
 
+_UNITS = {"damping": "viscous damping [N·m·s/rad or N·s/m]", "friction": "dry friction [N·m or N]"}
+
+
+def _more(found: tuple[object, ...], what: str) -> str:
+    """`` (2 more such joint(s))`` after the first of ``found``, or nothing."""
+    return f" ({len(found) - 1} more {what})" if len(found) > 1 else ""
+
+
 def check_urdf(facts: UrdfFacts, *, mimic: str, inertials: bool = True) -> None:
     """Raise :class:`ModelError` for what Pinocchio's URDF parser loses or garbles.
 
@@ -217,17 +225,15 @@ def check_urdf(facts: UrdfFacts, *, mimic: str, inertials: bool = True) -> None:
         joint, attr, text = facts.bad_dynamics[0]
         raise ModelError(
             f"joint {joint!r}: <dynamics {attr}={text!r}> is not a finite number ≥ 0"
-            f"{f' ({len(facts.bad_dynamics) - 1} more such value(s))' if len(facts.bad_dynamics) > 1 else ''}; "
-            f"a negative {attr} feeds energy into the motion. Give the "
-            f"{'viscous damping [N·m·s/rad or N·s/m]' if attr == 'damping' else 'dry friction [N·m or N]'}"
-            " as a number ≥ 0 (0: none)"
+            f"{_more(facts.bad_dynamics, 'such value(s)')}; a negative {attr} feeds energy into "
+            f"the motion. Give the {_UNITS[attr]} as a number ≥ 0 (0: none)"
         )
     if facts.bad_limits:
         joint, lower, upper = facts.bad_limits[0]
         what = "is inverted" if lower > upper else "leaves the joint no motion"
         raise ModelError(
             f"joint {joint!r}: <limit lower={lower:g} upper={upper:g}> {what}"
-            f"{f' ({len(facts.bad_limits) - 1} more such joint(s))' if len(facts.bad_limits) > 1 else ''}; "
+            f"{_more(facts.bad_limits, 'such joint(s)')}; "
             "give lower < upper [rad or m] (swapped?), make the joint fixed, or write "
             "lower=upper=0 (or type continuous) for no limits"
         )

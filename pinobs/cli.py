@@ -1023,12 +1023,25 @@ def _add_robot_options(p: argparse.ArgumentParser, files: str = "URDF/MJCF") -> 
         help="the URDF's joint friction (<dynamics damping friction>, as pinobs identify "
         "writes it) in the dynamics (default: off for URDFs)",
     )
+    p.add_argument(
+        "--mimic",
+        default=None,
+        choices=["error", "independent"],
+        help="URDF <mimic> joints: refuse them (default for files) or load each as a joint "
+        "of its own (default for robot names)",
+    )
 
 
 def _load(args: argparse.Namespace) -> Robot:
-    """The robot of ``--robot``, ``--root-joint`` and ``--friction``."""
+    """The robot of ``--robot``, ``--root-joint``, ``--friction`` and ``--mimic``."""
     friction = True if getattr(args, "friction", False) else None
-    return load(args.robot, root_joint=args.root_joint, friction=friction)
+    mimic = getattr(args, "mimic", None)
+    if mimic is not None and getattr(args, "out_dir", None) is not None:
+        raise OptionError(
+            "--mimic is not passed on to the per-log tasks of --out-dir; estimate one log at a "
+            "time (--out), or remove the URDF's <mimic> tags"
+        )
+    return load(args.robot, root_joint=args.root_joint, friction=friction, mimic=mimic)
 
 
 def _add_cluster_options(

@@ -9,6 +9,7 @@ prefix's ``share`` folder as package directory.
 
 from __future__ import annotations
 
+import difflib
 import importlib.metadata
 import importlib.resources
 import warnings
@@ -19,6 +20,7 @@ from functools import cache, partial
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pinocchio as pin
 from pinocchio.robot_wrapper import RobotWrapper
 
@@ -33,7 +35,7 @@ from pinobs.errors import (
 from pinobs.model.mjcf import MujocoMap, build_from_mujoco, cross_check
 from pinobs.model.robot import Robot
 from pinobs.model.sanity import check_model, check_urdf
-from pinobs.model.urdf import UrdfFacts, read_urdf
+from pinobs.model.urdf import read_urdf
 
 __all__ = ["RobotEntry", "load", "robot_entries", "robot_names"]
 
@@ -328,15 +330,32 @@ def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
     looks_like_path = path.suffix.lower() in (".urdf", ".xml", ".mjcf") or len(path.parts) > 1
     if not looks_like_path:
         raise UnknownNameError(
-            f"unknown robot {str(source)!r}; give a path to a URDF/MJCF file or one of: "
-            + ", ".join(robot_names())
+            f"unknown robot {str(source)!r}; {_did_you_mean(str(source))}give a path to a "
+            "URDF/MJCF file or a robot name (pinobs list)"
         )
     if not path.is_file():
         raise ModelFileError(
             f"robot file {str(path)!r} does not exist; give an existing URDF/MJCF file "
-            "or one of the robot names: " + ", ".join(robot_names())
+            "or a robot name (pinobs list)"
         )
     return path, [], "fixed", path.stem
+
+
+def _did_you_mean(name: str) -> str:
+    """``"did you mean 'ur5'? "`` for a name close to registered ones (case ignored), else the
+    table's names (the wheel's other URDFs are counted, not listed)."""
+    names = robot_names()
+    lower = {n.lower(): n for n in names}
+    close = difflib.get_close_matches(name.lower(), list(lower), n=3, cutoff=0.6)
+    if name.lower() in lower:  # only the case differs
+        close = [name.lower()]
+    if close:
+        return "did you mean " + " or ".join(repr(lower[c]) for c in close) + "? "
+    table = [e.name for e in _ENTRIES]
+    more = len(names) - len(table)
+    return f"known: {', '.join(sorted(table))}" + (
+        f" and {more} more URDFs of example-robot-data; " if more else "; "
+    )
 
 
 def _from_pinocchio(
@@ -367,17 +386,46 @@ def _from_pinocchio(
 
 
 def _load_urdf(
-    path: Path, package_dirs: list[str | Path], joint_type: type | None
-) -> tuple[pin.Model, Any, UrdfFacts]:
+    path: Path,
+    package_dirs: list[str | Path],
+    joint_type: type | None,
+    *,
+    mimic: str,
+    check: bool,
+    registered: bool,
+) -> tuple[pin.Model, Any]:
     """Model of a URDF and a loader of its geometry, meshes resolved as :mod:`pinobs.model.urdf` says.
+
+    The file is checked first (:func:`~pinobs.model.sanity.check_urdf`).  Its
+    revolute and prismatic joints with ``<limit lower="0" upper="0">`` (or
+    without both attributes) get no position limits (Pinocchio's ±1.8e308):
+    that is how many exporters write "no limits".  One
+    :class:`~pinobs.errors.ModelWarning` lists them for a file (none for a
+    registered robot: ``double_pendulum`` is written so).
 
     When meshes are missing, the dynamics load alone (no geometry) and one
     :class:`~pinobs.errors.ModelWarning` says which meshes (the playback then
     draws a stick figure).  Otherwise the geometry is built on first use.
     """
     facts = read_urdf(path, package_dirs)
+    check_urdf(facts, mimic=mimic, inertials=check)
     args = (joint_type(),) if joint_type is not None else ()
     model = pin.buildModelFromXML(facts.xml, *args)
+    if facts.zero_limits:
+        lower = np.array(model.lowerPositionLimit, dtype=float)
+        upper = np.array(model.upperPositionLimit, dtype=float)
+        for name in facts.zero_limits:
+            iq = model.joints[model.getJointId(name)].idx_q
+            lower[iq], upper[iq] = -np.finfo(float).max, np.finfo(float).max
+        model.lowerPositionLimit, model.upperPositionLimit = lower, upper
+        if not registered:
+            warnings.warn(
+                f"{path}: joint(s) {', '.join(facts.zero_limits)} have <limit lower=0 upper=0> "
+                "(or no lower/upper), read as no position limits; give their real range, "
+                "or write type continuous, to silence this",
+                ModelWarning,
+                stacklevel=3,
+            )
     if facts.missing_meshes:
         shown = ", ".join(facts.missing_meshes[:3])
         more = len(facts.missing_meshes) - 3
@@ -389,25 +437,34 @@ def _load_urdf(
             ModelWarning,
             stacklevel=3,
         )
-        return model, partial(_given_geometry, None), facts
-    return model, partial(_urdf_geometry, facts.xml), facts
+        return model, partial(_given_geometry, None)
+    return model, partial(_urdf_geometry, facts.xml)
 
 
 def _load_mjcf(
-    path: Path, joint_type: type | None, root: str
+    path: Path, joint_type: type | None, root_joint: str | None
 ) -> tuple[
     pin.Model, pin.GeometryModel | None, pin.GeometryModel | None, tuple[Any, MujocoMap] | None
 ]:
     """An MJCF model built from MuJoCo's compiled model, or from Pinocchio's parser without MuJoCo.
 
     Through MuJoCo (:mod:`pinobs.model.mjcf`) the root joint is the file's
-    own (declare a ``<freejoint/>`` in it) and the visual geometry is MuJoCo's
-    primitive geoms (no meshes).  Without MuJoCo one
+    own (declare a ``<freejoint/>`` in it): a ``root_joint`` other than ``None``
+    must name it (:class:`~pinobs.errors.GainError` otherwise), and the visual
+    geometry is MuJoCo's primitive geoms (no meshes).  Without MuJoCo one
     :class:`~pinobs.errors.ModelWarning` says what Pinocchio's parser misses.
     """
     try:
         import mujoco  # noqa: F401  (optional extra pinobs[mujoco])
     except ImportError:
+        root = ET.parse(path).getroot()
+        included = [e.get("file", "?") for e in root.iter("include")]
+        if included:
+            raise ModelFileError(
+                f"{path} includes {', '.join(included)}, which Pinocchio's MJCF parser drops "
+                "(their bodies would be missing); install MuJoCo (pip install 'pinobs[mujoco]') "
+                "to load it"
+            ) from None
         warnings.warn(
             f"{path}: MuJoCo is not installed (pip install 'pinobs[mujoco]'), so Pinocchio's "
             "MJCF parser reads the file: it ignores geom masses set in <default> classes "
@@ -420,18 +477,50 @@ def _load_mjcf(
             model = pin.buildModelFromMJCF(str(path), joint_type())
         else:
             model = pin.buildModelFromMJCF(str(path))
+        model.gravity = pin.Motion(_mjcf_gravity(root), np.zeros(3))  # the parser ignores it
         try:
             visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
         except (RuntimeError, ValueError):
             visual = None
         return model, visual, None, None
-    if root != "fixed":
-        raise GainError(
-            f"root_joint={root!r}: an MJCF file loaded through MuJoCo keeps its own root; "
-            "declare <freejoint/> (or <joint type='ball'/>) in its top body instead"
-        )
     model, mj, mapping, visual = build_from_mujoco(path)
+    if root_joint is not None:
+        own = _mjcf_roots(mj)
+        if own != {root_joint}:
+            how = {
+                "freeflyer": "; to float it, declare <freejoint/> in its top body",
+                "spherical": "; to pivot it, declare <joint type='ball'/> in its top body",
+            }.get(root_joint, "")
+            raise GainError(
+                f"root_joint={root_joint!r}: an MJCF file loaded through MuJoCo keeps its own "
+                f"root, and {path.name}'s is {' and '.join(sorted(own))}: leave out root_joint"
+                + how
+            )
     return model, visual, None, (mj, mapping)
+
+
+def _mjcf_gravity(root: ET.Element) -> np.ndarray:
+    """``<option gravity>`` (MuJoCo's default ``0 0 -9.81``), zero under ``<flag gravity="disable">``."""
+    gravity, enabled = np.array([0.0, 0.0, -9.81]), True
+    for option in root.iter("option"):
+        if option.get("gravity") is not None:
+            gravity = np.array([float(x) for x in option.get("gravity", "").split()])
+            if gravity.shape != (3,):
+                raise ValueError(f"<option gravity={option.get('gravity')!r}> is not 3 numbers")
+        for flag in option.iter("flag"):
+            enabled = flag.get("gravity", "enable" if enabled else "disable") == "enable"
+    return gravity if enabled else np.zeros(3)
+
+
+def _mjcf_roots(mj: Any) -> set[str]:
+    """How the file's top bodies hang on the world, as ``root_joint`` names: ``"freeflyer"``
+    (a free joint), ``"spherical"`` (a ball joint), ``"fixed"`` (welded or hinged)."""
+    kinds = {0: "freeflyer", 1: "spherical"}  # mjtJoint free, ball
+    return {
+        kinds.get(int(mj.jnt_type[mj.body_jntadr[b]]), "fixed") if mj.body_jntnum[b] else "fixed"
+        for b in range(1, mj.nbody)
+        if mj.body_parentid[b] == 0
+    } or {"fixed"}
 
 
 def load(
@@ -474,15 +563,22 @@ def load(
             ``"error"`` for files.
         check: refuse models whose dynamics cannot be right
             (:mod:`pinobs.model.sanity`): non-finite, negative or dropped
-            masses, impossible inertias, a mass matrix singular or indefinite
-            at sampled configurations.  ``False`` skips these checks.
+            masses, impossible inertias, negative damping or friction,
+            inverted position limits, a mass matrix singular or indefinite
+            at sampled configurations.  ``False`` skips these checks (a URDF's
+            ``<dynamics>`` and ``<limit>`` values are checked whatever it says).
+            A URDF revolute or prismatic joint with ``<limit lower="0"
+            upper="0">`` (or neither attribute) has no position limits, with
+            one :class:`~pinobs.errors.ModelWarning` naming such joints of a
+            file (a registered robot loads silently).
 
     Raises:
         UnknownNameError: ``source`` is neither a registered name nor a path.
         ModelFileError: the file is missing or cannot be parsed.
         ModelTypeError: ``source`` is of another type.
         ModelError: the model fails a check (``check=True``), has mimic joints
-            (``mimic="error"``), or (MJCF) its mass or ``M(q)`` differs from
+            (``mimic="error"``), a URDF negative ``<dynamics>`` value or an
+            inverted ``<limit>``, or (MJCF) its mass or ``M(q)`` differs from
             MuJoCo's; the message names the body or joint.
         GainError: ``root_joint`` is not one of the accepted values.
     """
@@ -508,13 +604,20 @@ def load(
         )
     joint_type = _ROOT_JOINTS[root]
     dirs: list[str | Path] = [*(package_dirs or ()), *default_dirs]
-    facts: UrdfFacts | None = None
     compiled: tuple[Any, MujocoMap] | None = None
+    registered = str(source) in _all_entries()
     try:
         if _is_urdf(path):
-            model, geometry, facts = _load_urdf(path, dirs, joint_type)
+            model, geometry = _load_urdf(
+                path,
+                dirs,
+                joint_type,
+                mimic=mimic or ("independent" if registered else "error"),
+                check=check,
+                registered=registered,
+            )
         else:
-            model, visual, _, compiled = _load_mjcf(path, joint_type, root)
+            model, visual, _, compiled = _load_mjcf(path, joint_type, root_joint)
             geometry = partial(_given_geometry, visual)
             if friction is None and compiled is not None:
                 friction = True  # MJCF authors mean their damping (unlike URDF placeholders)
@@ -522,17 +625,13 @@ def load(
         raise
     except (RuntimeError, ValueError, OSError, ET.ParseError) as exc:
         raise ModelFileError(
-            f"cannot parse robot file {str(path)!r} (from source {str(source)!r}): {exc}. "
-            "Known robot names: " + ", ".join(robot_names())
+            f"cannot parse robot file {str(path)!r} (from source {str(source)!r}): {exc}"
         ) from exc
     if model.nv == 0:
         raise ModelFileError(
             f"robot {str(source)!r} has no moving joint; a single rigid body needs "
             "root_joint='spherical' or 'freeflyer'"
         )
-    if facts is not None:
-        default = "error" if str(source) not in _all_entries() else "independent"
-        check_urdf(facts, mimic=mimic or default, inertials=check)
     if compiled is not None:
         cross_check(model, *compiled)
     if check:
@@ -542,7 +641,7 @@ def load(
         name=name,
         source=str(source),
         friction=bool(friction),
-        root_joint=root,
+        root_joint=None if compiled is not None else root,  # MuJoCo: the file's own root
         geometry=geometry,  # meshes: on first draw
     )
 

@@ -22,7 +22,31 @@ by MuJoCo and the Pinocchio model is built from the compiled ``mjModel``:
   diagonal of ``M`` as ``mj_fullM`` does), ``dof_damping`` → ``model.damping``
   (viscous, used by default), ``dof_frictionloss`` → ``model.friction``
   (Pinocchio's smoothed Coulomb term approximates MuJoCo's dry-friction
-  constraint), ``opt.gravity`` → ``model.gravity``.
+  constraint), ``opt.gravity`` → ``model.gravity``;
+* a limited hinge or slide joint's ``jnt_range`` (compiled, so in radians
+  whatever ``<compiler angle>`` says) → ``lowerPositionLimit`` and
+  ``upperPositionLimit``, shifted by ``qpos0`` as ``q`` is (below); joints
+  without ``limited``/``range``, and ball and free joints (a cone is no box
+  on the quaternion), keep Pinocchio's "no limit" (±1.8e308);
+* the largest ``|τ|`` MuJoCo can apply to a hinge or slide dof →
+  ``effortLimit``: the sum over the actuators driving that joint of
+  ``|gear| ×`` the actuator's force bound (its ``forcerange`` when
+  ``forcelimited``; for a motor-like actuator, fixed gain and no bias,
+  ``|gain| × max |ctrlrange|`` (``max |actrange|`` with activation dynamics)),
+  capped by the joint's ``actuatorfrcrange``.  Pinocchio's effort limit is
+  symmetric, so an asymmetric range gives its larger magnitude.  A dof that
+  no actuator drives, or that an actuator drives without a bound (position
+  servos, tendon or site transmissions), keeps "no limit" unless
+  ``actuatorfrcrange`` bounds it;
+* ``<option><flag …="disable"/>``: ``gravity`` disabled → zero gravity,
+  ``damper`` → no damping, ``frictionloss`` → no friction, ``limit`` → no
+  position limits (``constraint`` disables both), ``clampctrl`` → ``ctrlrange``
+  bounds no effort;
+* ``gravcomp``: when every body with mass has ``gravcomp="1"`` (and no joint
+  routes it through a clamped ``actuatorgravcomp``), the bodies are weightless
+  and the model's gravity is zero; partial compensation cannot be written as a
+  Pinocchio model and is named in a :class:`~pinobs.errors.ModelWarning`
+  (pinobs' dynamics apply full gravity to those bodies).
 
 Coordinates differ in three places, handled by :class:`MujocoMap`:
 
@@ -34,7 +58,12 @@ Coordinates differ in three places, handled by :class:`MujocoMap`:
   body frame in both.  Hence ``M_pin = Jᵀ M_mj J`` with ``qvel = J v``.
 
 Not modelled (a :class:`~pinobs.errors.ModelWarning` names them when
-present): joint stiffness (springs), equality constraints, tendons, contacts.
+present): joint stiffness (springs), equality constraints, tendons, partial
+gravity compensation; contacts.
+
+An unnamed MuJoCo object is named after its type and index (``joint3``,
+``body2``, ``geom0``), with ``_2``, ``_3``, … appended when the file uses that
+name for another object of the type.
 """
 
 from __future__ import annotations
@@ -142,7 +171,108 @@ class MujocoMap:
         return np.linalg.solve(self.velocity_jacobian(q), qvel)
 
 
-def _geometry(mj: Any, where: dict[int, tuple[int, pin.SE3]], name: Any) -> pin.GeometryModel:
+def _unique_names(mj: Any, obj: Any, count: int, prefix: str) -> list[str]:
+    """Names of MuJoCo's objects of one type; an unnamed one is ``prefix<index>``, with
+    ``_2``, ``_3``, … appended while another object of the type has that name."""
+    import mujoco
+
+    given = [mujoco.mj_id2name(mj, obj, i) or "" for i in range(count)]
+    taken = {n for n in given if n}
+    names = []
+    for i, n in enumerate(given):
+        if not n:
+            n = base = f"{prefix}{i}"
+            k = 1
+            while n in taken:
+                k += 1
+                n = f"{base}_{k}"
+            taken.add(n)
+        names.append(n)
+    return names
+
+
+def _disabled(mj: Any, *flags: str) -> bool:
+    """Whether any of MuJoCo's ``<option><flag>`` bits ``flags`` (``"gravity"``, …) is disabled."""
+    import mujoco
+
+    bits = 0
+    for f in flags:
+        bits |= int(getattr(mujoco.mjtDisableBit, f"mjDSBL_{f.upper()}"))
+    return bool(int(mj.opt.disableflags) & bits)
+
+
+def _actuator_force_bound(mj: Any, a: int) -> float:
+    """The largest ``|actuator_force|`` actuator ``a`` can produce [N or N·m], ``inf`` if unbounded."""
+    import mujoco
+
+    bound = np.inf
+    if mj.actuator_forcelimited[a]:
+        bound = float(np.abs(mj.actuator_forcerange[a]).max())
+    motor_like = (
+        int(mj.actuator_gaintype[a]) == mujoco.mjtGain.mjGAIN_FIXED
+        and int(mj.actuator_biastype[a]) == mujoco.mjtBias.mjBIAS_NONE
+    )
+    if motor_like:  # force = gain · input
+        gain = abs(float(mj.actuator_gainprm[a, 0]))
+        if int(mj.actuator_dyntype[a]) == mujoco.mjtDyn.mjDYN_NONE:  # input = ctrl
+            if mj.actuator_ctrllimited[a] and not _disabled(mj, "clampctrl"):
+                bound = min(bound, gain * float(np.abs(mj.actuator_ctrlrange[a]).max()))
+        elif mj.actuator_actlimited[a]:  # input = act, clamped to actrange
+            bound = min(bound, gain * float(np.abs(mj.actuator_actrange[a]).max()))
+    return bound
+
+
+def _effort_limits(mj: Any) -> Vector:
+    """Per MuJoCo dof, the largest ``|τ|`` its actuators can apply (module docstring); ``inf``
+    where nothing bounds it."""
+    import mujoco
+
+    driven = np.zeros(mj.nv, dtype=bool)
+    effort = np.zeros(mj.nv)
+    unbounded = np.zeros(mj.nv, dtype=bool)
+    joint_trn = (mujoco.mjtTrn.mjTRN_JOINT, mujoco.mjtTrn.mjTRN_JOINTINPARENT)
+    for a in range(mj.nu):
+        if int(mj.actuator_trntype[a]) not in joint_trn:  # tendon, site, body: every dof it
+            unbounded[:] = True  # may move is unbounded (moment arms depend on q)
+            continue
+        j = int(mj.actuator_trnid[a, 0])
+        if int(mj.jnt_type[j]) not in (_HINGE, _SLIDE):
+            continue
+        d, gear = int(mj.jnt_dofadr[j]), abs(float(mj.actuator_gear[a, 0]))
+        driven[d] = True
+        effort[d] += gear * _actuator_force_bound(mj, a) if gear else 0.0
+    effort = np.where(driven & ~unbounded, effort, np.inf)
+    for j in range(mj.njnt):
+        if int(mj.jnt_type[j]) in (_HINGE, _SLIDE) and mj.jnt_actfrclimited[j]:
+            d = int(mj.jnt_dofadr[j])
+            effort[d] = min(effort[d], float(np.abs(mj.jnt_actfrcrange[j]).max()))
+    return effort
+
+
+def _gravity(mj: Any, body_names: list[str]) -> tuple[Vector, str | None]:
+    """MuJoCo's gravity as Pinocchio can have it, and what of ``gravcomp`` it cannot (module
+    docstring)."""
+    gravity = np.asarray(mj.opt.gravity, dtype=float).copy()
+    if _disabled(mj, "gravity") or not np.any(gravity):
+        return np.zeros(3), None  # MuJoCo applies no gravity compensation either
+    comp = np.asarray(getattr(mj, "body_gravcomp", np.zeros(mj.nbody)), dtype=float)
+    massive = np.asarray(mj.body_mass, dtype=float) > 0
+    if not np.any(comp[massive]):
+        return gravity, None
+    routed = getattr(mj, "jnt_actgravcomp", np.zeros(mj.njnt, dtype=bool))
+    clamped = np.any(np.asarray(routed, dtype=bool) & np.asarray(mj.jnt_actfrclimited, dtype=bool))
+    if np.all(comp[massive] == 1.0) and not clamped:
+        return np.zeros(3), None  # every weight compensated: the bodies are weightless
+    held = [f"{body_names[b]} ({comp[b]:g})" for b in np.flatnonzero(massive & (comp != 0.0))]
+    return gravity, (
+        f"gravity compensation (gravcomp) of {', '.join(held)}: those bodies get their full "
+        "weight (only gravcomp=1 on every body with mass, zero gravity, can be modelled)"
+    )
+
+
+def _geometry(
+    mj: Any, where: dict[int, tuple[int, pin.SE3]], names: list[str]
+) -> pin.GeometryModel:
     """MuJoCo's primitive geoms (box, sphere, capsule, cylinder, ellipsoid) as visual geometry.
 
     A geom sits at ``geom_pos``/``geom_quat`` in its body, so at
@@ -171,7 +301,7 @@ def _geometry(mj: Any, where: dict[int, tuple[int, pin.SE3]], name: Any) -> pin.
             continue
         joint, body_place = where[int(mj.geom_bodyid[g])]
         place = body_place * pin.SE3(_rotation(mj.geom_quat[g]), mj.geom_pos[g].copy())
-        obj = pin.GeometryObject(name(mujoco.mjtObj.mjOBJ_GEOM, g, "geom"), joint, place, shape)
+        obj = pin.GeometryObject(names[g], joint, place, shape)
         obj.meshColor = np.asarray(mj.geom_rgba[g], dtype=float).copy()
         geom.addGeometryObject(obj)
     return geom
@@ -192,10 +322,10 @@ def build_from_mujoco(path: Path) -> tuple[pin.Model, Any, MujocoMap, pin.Geomet
     mj = mujoco.MjModel.from_xml_path(str(path))
     model = pin.Model()
     model.name = mj.names[: mj.names.index(b"\0")].decode() if mj.names else path.stem
-    model.gravity = pin.Motion(np.asarray(mj.opt.gravity, dtype=float), np.zeros(3))
-
-    def name(obj: Any, i: int, prefix: str) -> str:
-        return mujoco.mj_id2name(mj, obj, i) or f"{prefix}{i}"
+    joint_names = _unique_names(mj, mujoco.mjtObj.mjOBJ_JOINT, mj.njnt, "joint")
+    body_names = _unique_names(mj, mujoco.mjtObj.mjOBJ_BODY, mj.nbody, "body")
+    gravity, gravcomp = _gravity(mj, body_names)
+    model.gravity = pin.Motion(gravity, np.zeros(3))
 
     # per MuJoCo body: (Pinocchio joint, placement of the body frame in that joint's frame)
     where: dict[int, tuple[int, pin.SE3]] = {0: (0, pin.SE3.Identity())}
@@ -220,9 +350,7 @@ def build_from_mujoco(path: Path) -> tuple[pin.Model, Any, MujocoMap, pin.Geomet
                 joint_place = pin.SE3.Identity()
             else:
                 joint_place = place * pin.SE3(np.eye(3), pos - anchor)
-            joint = model.addJoint(
-                joint, jm, joint_place, name(mujoco.mjtObj.mjOBJ_JOINT, j, "joint")
-            )
+            joint = model.addJoint(joint, jm, joint_place, joint_names[j])
             kinds.append(kind)
             qposadr.append(int(mj.jnt_qposadr[j]))
             dofadr.append(int(mj.jnt_dofadr[j]))
@@ -238,26 +366,26 @@ def build_from_mujoco(path: Path) -> tuple[pin.Model, Any, MujocoMap, pin.Geomet
             rot @ np.diag(mj.body_inertia[b]) @ rot.T,
         )
         model.appendBodyToJoint(joint, inertia, place)
-        model.addBodyFrame(
-            name(mujoco.mjtObj.mjOBJ_BODY, b, "body"), joint, place, frame_of_joint[joint]
-        )
+        model.addBodyFrame(body_names[b], joint, place, frame_of_joint[joint])
     if model.nv != mj.nv:  # pragma: no cover - every joint type is mapped above
         raise ModelError(f"built nv = {model.nv} from {path}, MuJoCo has nv = {mj.nv}")
     # MuJoCo's dofs follow its joint order, as Pinocchio's velocity indices do
     model.armature = np.asarray(mj.dof_armature, dtype=float).copy()
-    model.damping = np.asarray(mj.dof_damping, dtype=float).copy()
-    model.friction = np.asarray(mj.dof_frictionloss, dtype=float).copy()
+    model.damping = np.asarray(mj.dof_damping, dtype=float) * (not _disabled(mj, "damper"))
+    model.friction = np.asarray(mj.dof_frictionloss, dtype=float) * (
+        not _disabled(mj, "frictionloss", "constraint")
+    )
+    _set_limits(model, mj, idx_q)
     missing = []
-    if np.any(mj.jnt_stiffness):
-        stiff = [
-            name(mujoco.mjtObj.mjOBJ_JOINT, int(j), "joint")
-            for j in np.flatnonzero(mj.jnt_stiffness)
-        ]
+    if np.any(mj.jnt_stiffness) and not _disabled(mj, "spring"):
+        stiff = [joint_names[int(j)] for j in np.flatnonzero(mj.jnt_stiffness)]
         missing.append(f"joint stiffness (springs) of {', '.join(stiff)}")
-    if mj.neq:
+    if mj.neq and not _disabled(mj, "equality", "constraint"):
         missing.append(f"{mj.neq} equality constraint(s)")
     if mj.ntendon:
         missing.append(f"{mj.ntendon} tendon(s)")
+    if gravcomp is not None:
+        missing.append(gravcomp)
     if missing:
         warnings.warn(
             f"{path}: pinobs' dynamics leave out MuJoCo's " + "; ".join(missing),
@@ -272,7 +400,30 @@ def build_from_mujoco(path: Path) -> tuple[pin.Model, Any, MujocoMap, pin.Geomet
         np.array(mj.qpos0, dtype=float),
         int(mj.nv),
     )
-    return model, mj, mapping, _geometry(mj, where, name)
+    geom_names = _unique_names(mj, mujoco.mjtObj.mjOBJ_GEOM, mj.ngeom, "geom")
+    return model, mj, mapping, _geometry(mj, where, geom_names)
+
+
+def _set_limits(model: pin.Model, mj: Any, idx_q: list[int]) -> None:
+    """Position and effort limits of hinge and slide joints (module docstring), in place."""
+    lower = np.array(model.lowerPositionLimit, dtype=float)
+    upper = np.array(model.upperPositionLimit, dtype=float)
+    effort = np.array(model.effortLimit, dtype=float)
+    limits_on = not _disabled(mj, "limit", "constraint")
+    bound = _effort_limits(mj)
+    for j in range(mj.njnt):
+        if int(mj.jnt_type[j]) not in (_HINGE, _SLIDE):
+            continue
+        iq, d = idx_q[j], int(mj.jnt_dofadr[j])
+        if limits_on and mj.jnt_limited[j]:  # MuJoCo limits qpos; Pinocchio's q = qpos - qpos0
+            qpos0 = float(mj.qpos0[int(mj.jnt_qposadr[j])])
+            lower[iq], upper[iq] = (float(x) - qpos0 for x in mj.jnt_range[j])
+        if np.isfinite(bound[d]):
+            effort[d] = bound[d]
+    model.lowerPositionLimit, model.upperPositionLimit = lower, upper
+    model.effortLimit = effort
+    if hasattr(model, "lowerEffortLimit"):  # Pinocchio ≥ 4: effortLimit is the upper one
+        model.lowerEffortLimit = -effort
 
 
 def _full_mass_matrix(mujoco: Any, mj: Any, data: Any, out: Vector) -> None:

@@ -17,9 +17,17 @@ Checked when :func:`pinobs.load` builds a model (``check=True``):
   that moves no mass (massless links after it) makes ``M`` singular; the error
   names the joint along the eigenvector of ``λ_min``.
 
+* every joint's values (:func:`check_joints`): damping and dry friction
+  finite and ``≥ 0`` (a negative damping feeds energy in), position limits
+  with ``lower ≤ upper``.
+
 Zero-mass links that leave ``M`` regular (fixed-joint frames, sensor links,
 intermediate links of a composite joint) are accepted silently: they are how
 URDFs write frames.
+
+A URDF's own text is checked before Pinocchio reads it (:func:`check_urdf`,
+whatever ``check`` says: Pinocchio's parser fails on a negative friction with a
+message that names no joint).
 """
 
 from __future__ import annotations
@@ -30,7 +38,7 @@ import warnings
 import numpy as np
 import pinocchio as pin
 
-from pinobs.errors import ModelError, ModelWarning
+from pinobs.errors import ModelError, ModelFileError, ModelWarning
 from pinobs.model.urdf import UrdfFacts
 from pinobs.tolerances import (
     INERTIA_TRIANGLE_TOL,
@@ -41,6 +49,7 @@ from pinobs.tolerances import (
 __all__ = [
     "MASS_MATRIX_SAMPLES",
     "check_inertias",
+    "check_joints",
     "check_mass_matrix",
     "check_model",
     "check_urdf",
@@ -166,35 +175,107 @@ def check_mass_matrix(model: pin.Model) -> None:
         )
 
 
-def check_urdf(facts: UrdfFacts, *, mimic: str, inertials: bool = True) -> None:
-    """Raise :class:`ModelError` for what Pinocchio's URDF parser loses without failing.
+_UNITS = {"damping": "viscous damping [N·m·s/rad or N·s/m]", "friction": "dry friction [N·m or N]"}
 
+
+def _more(found: tuple[object, ...], what: str) -> str:
+    """`` (2 more such joint(s))`` after the first of ``found``, or nothing."""
+    return f" ({len(found) - 1} more {what})" if len(found) > 1 else ""
+
+
+def check_urdf(facts: UrdfFacts, *, mimic: str, inertials: bool = True) -> None:
+    """Raise :class:`ModelError` for what Pinocchio's URDF parser loses or garbles.
+
+    * :class:`~pinobs.errors.ModelFileError`: a link or joint name given twice
+      (urdfdom says only "not a valid URDF model");
+    * a revolute, continuous or prismatic joint with ``<axis xyz="0 0 0">``;
     * an ``<inertial>`` value that is not a finite number (``mass="nan"``,
-      ``"abc"``): urdfdom prints an error and drops the whole inertial, and
-      the link would silently be massless;
+      ``"abc"``), or left out (no ``<mass>``, ``<inertia>`` or ``iyz``): urdfdom
+      prints an error and drops the inertial or keeps its mass without inertia, so
+      the link would silently be massless or a point mass; a second ``<inertial>``
+      in a link (urdfdom keeps the first);
+    * a ``<dynamics damping friction>`` value that is negative or not a finite
+      number (a negative damping feeds energy in; Pinocchio's parser refuses a
+      negative friction naming no joint);
+    * a revolute or prismatic ``<limit>`` with ``lower > upper``, or ``lower =
+      upper`` other than 0 (the joint could not move; ``lower = upper = 0`` is
+      the "no limits" convention :func:`pinobs.load` reads as unlimited);
     * ``<mimic>`` joints when ``mimic="error"``: Pinocchio's ABA cannot couple
       joints, so they would move independently (``mimic="independent"`` accepts that).
 
-    ``inertials=False`` checks the mimic joints only.
+    ``inertials=False`` leaves out the inertials.
     """
-    if inertials and facts.bad_inertials:
-        link, attr, text = facts.bad_inertials[0]
+    if facts.duplicates:
+        raise ModelFileError(
+            f"{', '.join(facts.duplicates)} defined more than once; a URDF's link and joint "
+            "names must be unique (a copied block not renamed?)"
+        )
+    if facts.zero_axes:
         raise ModelError(
-            f"link {link!r}: <inertial> {attr}={text!r} is not a finite number; the URDF "
-            "parser drops that inertial and the link would be massless. Write the mass [kg] "
-            "and inertia [kg·m²] as numbers"
+            f"joint(s) {', '.join(map(repr, facts.zero_axes))} have <axis xyz='0 0 0'>, no "
+            "direction to move along; give the axis as a nonzero vector (e.g. '0 0 1')"
+        )
+    if inertials and facts.bad_inertials:
+        link, problem = facts.bad_inertials[0]
+        raise ModelError(
+            f"link {link!r}: {problem}. Write one <inertial> per link with a mass [kg] and all "
+            "six inertia entries [kg·m²] as numbers"
+        )
+    if facts.bad_dynamics:
+        joint, attr, text = facts.bad_dynamics[0]
+        raise ModelError(
+            f"joint {joint!r}: <dynamics {attr}={text!r}> is not a finite number ≥ 0"
+            f"{_more(facts.bad_dynamics, 'such value(s)')}; a negative {attr} feeds energy into "
+            f"the motion. Give the {_UNITS[attr]} as a number ≥ 0 (0: none)"
+        )
+    if facts.bad_limits:
+        joint, lower, upper = facts.bad_limits[0]
+        what = "is inverted" if lower > upper else "leaves the joint no motion"
+        raise ModelError(
+            f"joint {joint!r}: <limit lower={lower:g} upper={upper:g}> {what}"
+            f"{_more(facts.bad_limits, 'such joint(s)')}; "
+            "give lower < upper [rad or m] (swapped?), make the joint fixed, or write "
+            "lower=upper=0 (or type continuous) for no limits"
         )
     if facts.mimics and mimic == "error":
         joint, target, mult, offset = facts.mimics[0]
         raise ModelError(
             f"joint {joint!r} mimics {target!r} (q = {mult:g}·q_{target} + {offset:g}"
             f"{f'; {len(facts.mimics) - 1} more mimic joint(s)' if len(facts.mimics) > 1 else ''}"
-            "): Pinocchio's forward dynamics cannot couple joints. Pass mimic='independent' "
-            "to load every mimic joint as a joint of its own, or remove the <mimic> tags"
+            "): Pinocchio's forward dynamics cannot couple joints. To load every mimic joint "
+            "as a joint of its own pass mimic='independent' (pinobs.load) or --mimic "
+            "independent (the pinobs command), or remove the <mimic> tags"
         )
 
 
+def check_joints(model: pin.Model) -> None:
+    """Raise :class:`ModelError` for a joint whose damping or dry friction is negative or not
+    finite (a negative damping feeds energy in), or whose position limits are inverted
+    (``lower > upper``), naming the joint and the value."""
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        v, q = (
+            slice(joint.idx_v, joint.idx_v + joint.nv),
+            slice(joint.idx_q, joint.idx_q + joint.nq),
+        )
+        for attr, what in (("damping", "viscous damping"), ("friction", "dry friction")):
+            values = np.asarray(getattr(model, attr), dtype=float)[v]
+            if not np.all(np.isfinite(values) & (values >= 0)):
+                raise ModelError(
+                    f"joint {model.names[j]!r} has {what} {values.tolist()}; it must be a finite "
+                    "number ≥ 0 (a negative one feeds energy into the motion)"
+                )
+        lower = np.asarray(model.lowerPositionLimit, dtype=float)[q]
+        upper = np.asarray(model.upperPositionLimit, dtype=float)[q]
+        if np.any(lower > upper):
+            raise ModelError(
+                f"joint {model.names[j]!r} has position limits lower {lower.tolist()} > upper "
+                f"{upper.tolist()}; give lower ≤ upper (swapped?)"
+            )
+
+
 def check_model(model: pin.Model) -> None:
-    """:func:`check_inertias`, then :func:`check_mass_matrix`."""
+    """:func:`check_joints`, :func:`check_inertias`, then :func:`check_mass_matrix`."""
+    check_joints(model)
     check_inertias(model)
     check_mass_matrix(model)

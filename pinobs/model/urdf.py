@@ -1,4 +1,4 @@
-"""What a URDF file says before Pinocchio reads it: meshes, inertials, mimic joints.
+"""What a URDF file says before Pinocchio reads it: meshes, inertials, mimic joints, joint values.
 
 Pinocchio's URDF parser (urdfdom underneath) fails on a mesh it cannot find,
 drops an ``<inertial>`` whose mass is not a number with only a message on
@@ -26,6 +26,7 @@ import math
 import os
 import re
 import xml.etree.ElementTree as ET
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +36,7 @@ __all__ = ["ANCESTOR_LEVELS", "UrdfFacts", "read_urdf", "resolve_mesh"]
 #: How many parent folders of a URDF file are searched for its meshes.
 ANCESTOR_LEVELS = 4
 
+_INERTIA = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 _MESH_ATTR = re.compile(r"(<mesh\b[^>]*?\bfilename\s*=\s*)([\"'])(.*?)\2", re.DOTALL)
 
 
@@ -46,14 +48,29 @@ class UrdfFacts:
         xml: the file's text, every resolvable mesh URI replaced by an absolute path.
         missing_meshes: mesh URIs that resolved to no existing file.
         mimics: ``(joint, mimicked joint, multiplier, offset)`` per ``<mimic>`` tag.
-        bad_inertials: ``(link, attribute, text)`` for each ``<inertial>`` value
-            that is not a finite number (urdfdom drops such an inertial).
+        bad_inertials: ``(link, what is wrong)`` for each ``<inertial>`` urdfdom
+            drops or keeps in part: a value that is not a finite number, a missing
+            ``<mass>``, ``<inertia>`` or attribute, a second ``<inertial>``.
+        duplicates: ``"link 'name'"`` or ``"joint 'name'"`` for each name given twice.
+        zero_axes: revolute, continuous and prismatic joints with ``<axis xyz="0 0 0">``.
+        bad_dynamics: ``(joint, attribute, text)`` for each ``<dynamics damping friction>``
+            value that is negative or not a finite number.
+        bad_limits: ``(joint, lower, upper)`` for each revolute or prismatic joint whose
+            ``<limit>`` has ``lower > upper``, or ``lower = upper`` other than 0.
+        zero_limits: revolute and prismatic joints whose ``<limit>`` has
+            ``lower = upper = 0`` (an attribute left out reads 0): the "no limits"
+            convention of many exporters.
     """
 
     xml: str
     missing_meshes: tuple[str, ...]
     mimics: tuple[tuple[str, str, float, float], ...]
-    bad_inertials: tuple[tuple[str, str, str], ...]
+    bad_inertials: tuple[tuple[str, str], ...]
+    duplicates: tuple[str, ...]
+    zero_axes: tuple[str, ...]
+    bad_dynamics: tuple[tuple[str, str, str], ...]
+    bad_limits: tuple[tuple[str, float, float], ...]
+    zero_limits: tuple[str, ...]
 
 
 def _search_dirs(package_dirs: Sequence[str | Path]) -> list[Path]:
@@ -121,6 +138,26 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
     live = {m.get("filename") for m in root.iter("mesh")}  # not those in comments
     missing = [uri for uri in missing if uri in live]
     mimics = []
+    dynamics: list[tuple[str, str, str]] = []
+    bad_limits: list[tuple[str, float, float]] = []
+    zero_limits: list[str] = []
+    for joint in root.findall("joint"):
+        name = joint.get("name", "?")
+        tag = joint.find("dynamics")
+        for attr in ("damping", "friction"):
+            t = tag.get(attr) if tag is not None else None
+            x = _number(t, 0.0)
+            if x is None or x < 0:
+                dynamics.append((name, attr, str(t)))
+        limit = joint.find("limit")
+        if limit is not None and joint.get("type") in ("revolute", "prismatic"):
+            lower, upper = _number(limit.get("lower"), 0.0), _number(limit.get("upper"), 0.0)
+            if lower is None or upper is None:
+                continue  # urdfdom's own error names it
+            if lower == upper == 0.0:
+                zero_limits.append(name)
+            elif lower >= upper:
+                bad_limits.append((name, lower, upper))
     for joint in root.iter("joint"):
         mimic = joint.find("mimic")
         if mimic is not None:
@@ -132,24 +169,56 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
                     _number(mimic.get("offset"), 0.0) or 0.0,
                 )
             )
-    bad: list[tuple[str, str, str]] = []
+    bad: list[tuple[str, str]] = []
     for link in root.findall("link"):
         name = link.get("name", "?")
-        inertial = link.find("inertial")
-        if inertial is None:
+        inertials = link.findall("inertial")
+        if len(inertials) > 1:
+            bad.append((name, f"{len(inertials)} <inertial> elements: urdfdom keeps the first"))
+        if not inertials:
             continue
-        mass = inertial.find("mass")
-        mass_text = mass.get("value") if mass is not None else None
-        if _number(mass_text, 0.0) is None:
-            bad.append((name, "mass", str(mass_text)))
-        inertia = inertial.find("inertia")
-        for attr in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
-            t = inertia.get(attr) if inertia is not None else None
-            if _number(t, 0.0) is None:
-                bad.append((name, attr, str(t)))
+        mass = inertials[0].find("mass")
+        inertia = inertials[0].find("inertia")
+        massless = "urdfdom drops the inertial (the link would be massless)"
+        value = mass.get("value") if mass is not None else None
+        if value is None or _number(value, 0.0) is None:
+            text = "no mass value" if value is None else f"mass={value!r} is not a finite number"
+            bad.append((name, f"<inertial> {text}: {massless}"))
+            continue
+        if inertia is None:
+            bad.append((name, "<inertial> has no <inertia>: urdfdom keeps a point mass"))
+            continue
+        for attr in _INERTIA:
+            t = inertia.get(attr)
+            if t is None or _number(t, 0.0) is None:
+                bad.append(
+                    (
+                        name,
+                        f"<inertial> {attr}={t!r} is not a finite number: urdfdom drops or "
+                        "garbles the inertial (a massless link or a point mass)",
+                    )
+                )
+    duplicates = [
+        f"{kind} {n!r}"
+        for kind in ("link", "joint")
+        for n, k in Counter(e.get("name", "?") for e in root.findall(kind)).items()
+        if k > 1
+    ]
+    zero_axes = []
+    for joint in root.findall("joint"):
+        axis = joint.find("axis")
+        if axis is not None and joint.get("type") in ("revolute", "continuous", "prismatic"):
+            xyz = [_number(x, 0.0) for x in (axis.get("xyz") or "").split()]
+            if len(xyz) == 3 and all(x == 0.0 for x in xyz):
+                zero_axes.append(joint.get("name", "?"))
     return UrdfFacts(
         xml=xml,
         missing_meshes=tuple(dict.fromkeys(missing)),
         mimics=tuple(mimics),
         bad_inertials=tuple(bad),
+        duplicates=tuple(duplicates),
+        zero_axes=tuple(zero_axes),
+        bad_dynamics=tuple(dynamics),
+        bad_limits=tuple(bad_limits),
+        zero_limits=tuple(zero_limits),
     )

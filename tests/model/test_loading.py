@@ -64,12 +64,18 @@ def test_legged_robots_default_to_a_free_flyer_and_root_joint_overrides() -> Non
     assert pinobs.load("rigid_body", root_joint="spherical").nv == 3
 
 
-def test_unknown_name_raises_a_keyerror_listing_robots() -> None:
+def test_unknown_name_raises_a_keyerror_saying_which_names_are_close() -> None:
     with pytest.raises(
-        pinobs.UnknownNameError, match=r"unknown robot 'ur55'.*cartpole.*ur5"
+        pinobs.UnknownNameError, match=r"unknown robot 'ur55'; did you mean 'ur5'"
     ) as info:
         pinobs.load("ur55")
     assert isinstance(info.value, KeyError)
+    assert "cartpole" not in str(info.value)  # was every one of the ~100 names
+    with pytest.raises(pinobs.UnknownNameError, match=r"unknown robot 'UR5'; did you mean 'ur5'\?"):
+        pinobs.load("UR5")
+    with pytest.raises(pinobs.UnknownNameError, match=r"known: a1, .*ur5, .* more URDFs") as info:
+        pinobs.load("nosuchbot")  # nothing close: the table's names, not the wheel's 35 others
+    assert "alex_nub_hands" not in str(info.value)
 
 
 def test_missing_file_raises_file_not_found(tmp_path: Path) -> None:
@@ -81,8 +87,9 @@ def test_missing_file_raises_file_not_found(tmp_path: Path) -> None:
 def test_malformed_file_raises_model_file_error_naming_it(tmp_path: Path) -> None:
     bad = tmp_path / "bad.urdf"
     bad.write_text("<robot name='x'><link name='a'></robot")
-    with pytest.raises(pinobs.ModelFileError, match=r"cannot parse robot file .*bad\.urdf"):
+    with pytest.raises(pinobs.ModelFileError, match=r"cannot parse robot file .*bad\.urdf") as info:
         pinobs.load(bad)
+    assert "ur5" not in str(info.value)  # the robot names were appended
 
 
 def test_bad_root_joint_is_rejected() -> None:

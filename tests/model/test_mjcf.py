@@ -158,9 +158,23 @@ def test_a_root_joint_cannot_be_added_to_an_mjcf_file(tmp_path: Path) -> None:
         pinobs.load(_models_dir() / "mjcf_acrobot.xml", root_joint="freeflyer")
 
 
-def test_without_mujoco_pinocchios_parser_loads_with_a_warning_saying_what_it_misses(
-    monkeypatch: pytest.MonkeyPatch,
+def test_a_root_joint_naming_the_files_own_root_is_accepted_and_another_refused(
+    tmp_path: Path,
 ) -> None:
+    text = """<mujoco><worldbody><body name="box"><freejoint/>
+      <geom type="box" size="0.1 0.2 0.3" mass="1"/></body></worldbody></mujoco>"""
+    path = _file(tmp_path, text)
+    robot = pinobs.load(path, root_joint="freeflyer")  # was: "declare <freejoint/>", declared
+    assert robot.nv == 6 and robot.root_joint is None  # the file's own: reloads as it is
+    with pytest.raises(
+        pinobs.GainError, match=r"root_joint='fixed': .* model\.xml's is freeflyer: leave out"
+    ):
+        pinobs.load(path, root_joint="fixed")  # was accepted, and the box floated
+    with pytest.raises(pinobs.GainError, match=r"trees\.xml's is fixed and freeflyer"):
+        pinobs.load(_file(tmp_path, TREES, "trees.xml"), root_joint="freeflyer")
+
+
+def _without_mujoco(monkeypatch: pytest.MonkeyPatch) -> None:
     real_import = builtins.__import__
 
     def no_mujoco(name: str, *args: Any, **kwargs: Any) -> Any:
@@ -169,10 +183,34 @@ def test_without_mujoco_pinocchios_parser_loads_with_a_warning_saying_what_it_mi
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_mujoco)
+
+
+def test_without_mujoco_pinocchios_parser_loads_with_a_warning_saying_what_it_misses(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    _without_mujoco(monkeypatch)
     with pytest.warns(pinobs.ModelWarning, match=r"MuJoCo is not installed.*<default> classes"):
         robot = pinobs.load(_models_dir() / "mjcf_acrobot.xml", check=False)
     # what the warning is about: Pinocchio's parser weighs the capsules by density
     assert sum(i.mass for i in robot.model.inertias) > 10.0
+
+
+def test_without_mujoco_an_include_is_refused_and_gravity_options_are_kept(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _without_mujoco(monkeypatch)
+    body = """<body name="l0" pos="0 0 0.1"><joint name="j0" type="hinge" axis="0 1 0"/>
+      <inertial pos="0.2 0 0" mass="1" diaginertia="0.01 0.01 0.001"/></body>"""
+    _file(tmp_path, f"<mujoco>{body.replace('l0', 'l1').replace('j0', 'j1')}</mujoco>", "part.xml")
+    main = f'<mujoco><worldbody><include file="part.xml"/>{body}</worldbody></mujoco>'
+    with pytest.raises(pinobs.ModelFileError, match=r"includes part\.xml, which Pinocchio's"):
+        pinobs.load(_file(tmp_path, main))  # was loaded with nv = 1 of MuJoCo's 2
+    moon = f'<mujoco><option gravity="0 0 -1.62"/><worldbody>{body}</worldbody></mujoco>'
+    off = moon.replace("/>", '><flag gravity="disable"/></option>', 1)
+    for text, gravity in ((moon, [0, 0, -1.62]), (off, [0, 0, 0])):  # both were -9.81
+        with pytest.warns(pinobs.ModelWarning, match="MuJoCo is not installed"):
+            robot = pinobs.load(_file(tmp_path, text))
+        np.testing.assert_array_equal(robot.model.gravity.linear, gravity)
 
 
 DM_CONTROL_SUITE = [
@@ -269,3 +307,194 @@ def test_visual_geoms_sit_where_mujoco_puts_them(tmp_path: Path, rng: np.random.
             np.testing.assert_allclose(
                 gdata.oMg[g].rotation, data.geom_xmat[g].reshape(3, 3), atol=1e-12
             )
+
+
+# a 3-joint arm: MJCF angles in degrees (MuJoCo's default), joint refs, a joint-level
+# actuatorfrcrange, motors with ctrlrange × gear (one range asymmetric) ...
+ARM_MJCF = """<mujoco model="arm">
+  <compiler inertiafromgeom="false" angle="{angle}"/>
+  <worldbody>
+    <body name="l1" pos="0 0 0.1">
+      <joint name="j1" type="hinge" axis="0 1 0" range="{r1}" actuatorfrcrange="-20 20"/>
+      <inertial pos="0 0 0.2" mass="1" diaginertia="0.01 0.01 0.001"/>
+      <body name="l2" pos="0 0 0.4">
+        <joint name="j2" type="hinge" axis="0 1 0" range="{r2}" ref="{ref2}"/>
+        <inertial pos="0 0 0.2" mass="0.5" diaginertia="0.005 0.005 0.0005"/>
+        <body name="l3" pos="0 0 0.4">
+          <joint name="j3" type="slide" axis="0 0 1" range="-0.1 0.2" ref="0.05"/>
+          <inertial pos="0 0 0" mass="0.2" diaginertia="0.001 0.001 0.001"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <motor joint="j2" ctrlrange="-1 1" gear="5"/>
+    <motor joint="j3" ctrlrange="-2 3" gear="10"/>
+  </actuator>
+</mujoco>
+"""
+
+# ... and the same arm as URDF: q = 0 is MuJoCo's qpos0 (the refs), so the limits shift by them
+ARM_URDF = """<robot name="arm">
+  <link name="base"/>
+  <link name="l1"><inertial><origin xyz="0 0 0.2"/><mass value="1"/>
+    <inertia ixx="0.01" iyy="0.01" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="l2"><inertial><origin xyz="0 0 0.2"/><mass value="0.5"/>
+    <inertia ixx="0.005" iyy="0.005" izz="0.0005" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="l3"><inertial><mass value="0.2"/>
+    <inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+    <origin xyz="0 0 0.1"/><axis xyz="0 1 0"/>
+    <limit lower="-1.5707963267948966" upper="0.7853981633974483" effort="20" velocity="10"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0 0 0.4"/><axis xyz="0 1 0"/>
+    <limit lower="-0.6981317007977318" upper="0.8726646259971648" effort="5" velocity="10"/></joint>
+  <joint name="j3" type="prismatic"><parent link="l2"/><child link="l3"/>
+    <origin xyz="0 0 0.4"/><axis xyz="0 0 1"/>
+    <limit lower="-0.15" upper="0.15" effort="30" velocity="10"/></joint>
+</robot>
+"""
+
+ARM_DEGREES = {"angle": "degree", "r1": "-90 45", "r2": "-30 60", "ref2": "10"}
+ARM_RADIANS = {
+    "angle": "radian",
+    "r1": f"{-np.pi / 2!r} {np.pi / 4!r}",
+    "r2": f"{-np.pi / 6!r} {np.pi / 3!r}",
+    "ref2": f"{np.pi / 18!r}",
+}
+
+
+@pytest.mark.parametrize("units", [ARM_DEGREES, ARM_RADIANS], ids=["degree", "radian"])
+def test_mjcf_joint_ranges_and_efforts_equal_the_same_arms_urdf(
+    tmp_path: Path, rng: np.random.Generator, units: dict[str, str]
+) -> None:
+    mjcf = pinobs.load(_file(tmp_path, ARM_MJCF.format(**units)))
+    urdf = pinobs.load(_file(tmp_path, ARM_URDF, "arm.urdf"))
+    for attr in ("lowerPositionLimit", "upperPositionLimit", "effortLimit"):
+        np.testing.assert_allclose(
+            getattr(mjcf.model, attr), getattr(urdf.model, attr), rtol=1e-12, err_msg=attr
+        )
+    for _ in range(3):  # and it is the same arm
+        q = urdf.random_configuration(rng)
+        np.testing.assert_allclose(mjcf.mass_matrix(q), urdf.mass_matrix(q), rtol=1e-12)
+
+
+def test_an_excitation_of_an_mjcf_arm_stays_inside_its_ranges_and_efforts(tmp_path: Path) -> None:
+    from pinobs.model.excitation import excite
+
+    robot = pinobs.load(_file(tmp_path, ARM_MJCF.format(**ARM_DEGREES)), friction=False)
+    ex = excite(robot, duration=2.0, rate=50.0, candidates=4, refine=0)
+    lo, hi = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+    assert np.all(ex.q >= lo) and np.all(ex.q <= hi)  # j3 reached -1.53 m of [-0.15, 0.15]
+    assert np.all(np.abs(ex.tau) <= robot.model.effortLimit)
+
+
+def _one_joint(
+    tmp_path: Path,
+    *,
+    joint: str = 'damping="0.3" frictionloss="0.2"',
+    body: str = "",
+    option: str = "",
+    act: str = "",
+) -> Path:
+    text = f"""<mujoco>
+  <option>{option}</option>
+  <worldbody>
+    <body name="link" pos="0 0 0.1" {body}>
+      <joint name="j" type="hinge" axis="0 1 0" {joint}/>
+      <inertial pos="0.2 0 0" mass="1" diaginertia="0.01 0.01 0.001"/>
+    </body>
+  </worldbody>
+  <actuator>{act}</actuator>
+</mujoco>"""
+    return _file(tmp_path, text)
+
+
+@pytest.mark.parametrize(
+    ("act", "joint", "option", "effort"),
+    [
+        ('<motor joint="j" ctrlrange="-2 1" gear="3"/>', "", "", 6.0),
+        ('<motor joint="j" ctrlrange="-2 1" gear="-3" forcerange="-1 1"/>', "", "", 3.0),
+        (
+            '<motor joint="j" ctrlrange="-1 1" gear="3"/><motor joint="j" ctrlrange="-1 1"/>',
+            "",
+            "",
+            4.0,
+        ),
+        ('<motor joint="j" ctrlrange="-2 1" gear="3"/>', 'actuatorfrcrange="-4 5"', "", 5.0),
+        ('<motor joint="j" ctrlrange="-2 1" gear="3"/>', "", '<flag clampctrl="disable"/>', None),
+        ('<position joint="j" ctrlrange="-1 1" kp="100"/>', "", "", None),
+        ('<position joint="j" kp="100" forcerange="-7 7"/>', "", "", 7.0),
+        ("", "", "", None),  # no actuator
+    ],
+    ids=[
+        "motor",
+        "forcerange",
+        "two-motors",
+        "actuatorfrcrange",
+        "clampctrl-off",
+        "position-servo",
+        "servo-forcerange",
+        "unactuated",
+    ],
+)
+def test_mjcf_effort_limit_is_the_largest_torque_its_actuators_can_apply(
+    tmp_path: Path, act: str, joint: str, option: str, effort: float | None
+) -> None:
+    model = pinobs.load(_one_joint(tmp_path, joint=joint, option=option, act=act)).model
+    expected = np.finfo(float).max if effort is None else effort
+    assert model.effortLimit[0] == expected
+
+
+def test_mjcf_disable_flags_are_honoured(tmp_path: Path) -> None:
+    model = pinobs.load(
+        _one_joint(tmp_path, joint='range="-30 60" damping="0.3" frictionloss="0.2"')
+    ).model
+    assert model.gravity.linear[2] == -9.81 and model.damping[0] == 0.3
+    assert model.friction[0] == 0.2 and model.upperPositionLimit[0] == pytest.approx(np.pi / 3)
+    off = '<flag gravity="disable" damper="disable" frictionloss="disable" limit="disable"/>'
+    j = 'range="-30 60" damping="0.3" frictionloss="0.2"'
+    model = pinobs.load(_one_joint(tmp_path, joint=j, option=off)).model
+    np.testing.assert_array_equal(model.gravity.linear, np.zeros(3))  # was (0, 0, -9.81)
+    assert model.damping[0] == 0.0 and model.friction[0] == 0.0
+    assert model.upperPositionLimit[0] == np.finfo(float).max
+
+
+def test_mjcf_gravity_disabled_or_fully_compensated_gives_mujocos_dynamics(
+    tmp_path: Path, rng: np.random.Generator
+) -> None:
+    for how in ({"option": '<flag gravity="disable"/>'}, {"body": 'gravcomp="1"'}):
+        robot = pinobs.load(_one_joint(tmp_path, joint="", **how))
+        np.testing.assert_array_equal(robot.model.gravity.linear, np.zeros(3))  # was -9.81
+        _, mj, mapping, _ = build_from_mujoco(tmp_path / "model.xml")
+        for _ in range(3):
+            q, v, tau = rng.normal(size=1), rng.normal(size=1), rng.normal(size=1)
+            qacc = _mujoco_qacc(mj, mapping.qpos_from_q(q), v, tau)
+            np.testing.assert_allclose(robot.forward_dynamics(q, v, tau), qacc, rtol=1e-10)
+
+
+def test_partial_gravity_compensation_is_named_in_a_warning(tmp_path: Path) -> None:
+    with pytest.warns(pinobs.ModelWarning, match=r"gravcomp\) of link \(0\.5\): .*full weight"):
+        model = pinobs.load(_one_joint(tmp_path, body='gravcomp="0.5"')).model
+    assert model.gravity.linear[2] == -9.81
+
+
+def test_unnamed_mjcf_joints_bodies_and_geoms_get_names_no_other_has(tmp_path: Path) -> None:
+    text = """<mujoco>
+  <worldbody>
+    <body name="body2" pos="0 0 0.1">
+      <joint type="hinge" axis="0 1 0"/>
+      <geom name="geom1" type="sphere" size="0.1" mass="1"/>
+      <body pos="0.4 0 0">
+        <joint name="joint0" type="hinge" axis="0 1 0"/>
+        <geom type="sphere" size="0.1" mass="1"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>"""
+    robot = pinobs.load(_file(tmp_path, text))
+    assert list(robot.model.names) == ["universe", "joint0_2", "joint0"]  # was joint0 twice
+    bodies = [f.name for f in robot.model.frames if f.type.name == "BODY"]
+    assert bodies == ["body2", "body2_2"]
+    assert robot.visual_model is not None
+    assert [g.name for g in robot.visual_model.geometryObjects] == ["geom1", "geom1_2"]

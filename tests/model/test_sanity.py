@@ -64,6 +64,51 @@ def test_an_unreadable_inertia_entry_is_an_error_naming_it(tmp_path: Path) -> No
         pinobs.load(_arm(tmp_path, iyy="1e-2x"))
 
 
+INERTIAL = '<inertial><origin xyz="0 0 -0.25"/><mass value="0.5"/>'
+INERTIA = '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.0005"/>'
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [  # what urdfdom did: kept a point mass, dropped the inertial, kept the first one
+        (INERTIA, "", r"link 'lower': <inertial> has no <inertia>: urdfdom keeps a point mass"),
+        (' iyz="0" izz="0.0005"', ' izz="0.0005"', r"link 'lower': <inertial> iyz=None is not"),
+        ('<mass value="0.5"/>', "", r"link 'lower': <inertial> no mass value: .*massless"),
+        (
+            INERTIA + "</inertial>",
+            INERTIA + "</inertial>" + INERTIAL + INERTIA + "</inertial>",
+            r"link 'lower': 2 <inertial> elements: urdfdom keeps the first",
+        ),
+    ],
+    ids=["no-inertia", "no-iyz", "no-mass", "two-inertials"],
+)
+def test_an_incomplete_or_second_inertial_is_an_error_naming_the_link(
+    tmp_path: Path, old: str, new: str, message: str
+) -> None:
+    f = _arm(tmp_path)
+    text = f.read_text()
+    i = text.index('<link name="lower">')  # the second link's inertial
+    f.write_text(text[:i] + text[i:].replace(old, new, 1))
+    with pytest.raises(pinobs.ModelError, match=message):
+        pinobs.load(f)
+
+
+def test_a_duplicate_link_name_is_a_file_error_naming_it(tmp_path: Path) -> None:
+    f = _arm(tmp_path)
+    f.write_text(
+        f.read_text().replace('<link name="tool"/>', '<link name="tool"/><link name="upper"/>')
+    )
+    with pytest.raises(pinobs.ModelFileError, match=r"link 'upper' defined more than once"):
+        pinobs.load(f)  # was "The XML stream does not contain a valid URDF model."
+
+
+def test_a_zero_joint_axis_is_an_error_naming_the_joint(tmp_path: Path) -> None:
+    f = _arm(tmp_path)
+    f.write_text(f.read_text().replace('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>', 1))
+    with pytest.raises(pinobs.ModelError, match=r"joint\(s\) 'j1' have <axis xyz='0 0 0'>"):
+        pinobs.load(f)  # was "the mass matrix is singular … Give them an <inertial>"
+
+
 def test_a_negative_mass_is_an_error_naming_the_body(tmp_path: Path) -> None:
     with pytest.raises(
         pinobs.ModelError, match=r"body 'lower \(body of joint j2\)' has a negative mass -0\.5 kg"
@@ -109,10 +154,106 @@ def test_a_mimic_joint_in_a_file_is_refused_unless_declared_independent(tmp_path
         pinobs.load(f, mimic="couple")
 
 
+def test_the_command_line_loads_a_mimic_file_with_the_option_its_error_names(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from pinobs.cli import main
+
+    f = _arm(tmp_path, mimic='\n    <mimic joint="j1"/>')
+    assert main(["check", "ii", "--robot", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "--mimic independent (the pinobs command)" in err  # was mimic='independent' only
+    assert main(["check", "ii", "--robot", str(f), "--mimic", "independent"]) in (0, 1)
+    assert "Assumption 1" in capsys.readouterr().out
+
+
 def test_registry_robots_with_mimic_grippers_load_them_as_independent_joints() -> None:
     assert pinobs.load("panda").nv == 9
     with pytest.raises(pinobs.ModelError, match="panda_finger_joint2"):
         pinobs.load("panda", mimic="error")
+
+
+@pytest.mark.parametrize(
+    ("dynamics", "message"),
+    [
+        ('damping="-0.1"', r"joint 'j1': <dynamics damping='-0\.1'> is not a finite number ≥ 0"),
+        # Pinocchio's parser said only "min_dry_friction are greater than max_dry_friction"
+        ('friction="-0.2"', r"joint 'j1': <dynamics friction='-0\.2'> is not a finite number"),
+        ('damping="nan"', r"joint 'j1': <dynamics damping='nan'>"),
+    ],
+    ids=["negative-damping", "negative-friction", "nan-damping"],
+)
+def test_a_negative_urdf_damping_or_friction_is_an_error_naming_the_joint_and_value(
+    tmp_path: Path, dynamics: str, message: str
+) -> None:
+    f = _arm(tmp_path)
+    f.write_text(
+        f.read_text().replace(
+            'effort="10" velocity="10"/>', f'effort="10" velocity="10"/><dynamics {dynamics}/>', 1
+        )
+    )
+    with pytest.raises(pinobs.ModelError, match=message):
+        pinobs.load(f)
+    with pytest.raises(pinobs.ModelError, match=message):  # not a dynamics check: always
+        pinobs.load(f, check=False)
+
+
+@pytest.mark.parametrize(
+    ("limit", "message"),
+    [
+        ('lower="3" upper="-3"', r"joint 'j1': <limit lower=3 upper=-3> is inverted"),
+        (
+            'lower="0.5" upper="0.5"',
+            r"joint 'j1': <limit lower=0\.5 upper=0\.5> leaves the joint no motion",
+        ),
+    ],
+    ids=["inverted", "no-motion"],
+)
+def test_inverted_or_degenerate_urdf_limits_are_an_error_naming_the_joint(
+    tmp_path: Path, limit: str, message: str
+) -> None:
+    f = _arm(tmp_path)
+    f.write_text(f.read_text().replace('lower="-3" upper="3"', limit, 1))
+    with pytest.raises(pinobs.ModelError, match=message):
+        pinobs.load(f)
+
+
+@pytest.mark.parametrize("limit", ['lower="0" upper="0"', ""], ids=["zeros", "left-out"])
+def test_zero_urdf_limits_read_as_no_limits_with_one_warning_naming_the_joints(
+    tmp_path: Path, limit: str
+) -> None:
+    f = _arm(tmp_path)
+    f.write_text(f.read_text().replace('lower="-3" upper="3"', limit))  # both joints
+    with pytest.warns(
+        pinobs.ModelWarning, match=r"joint\(s\) j1, j2 have <limit lower=0 upper=0>"
+    ) as rec:
+        robot = pinobs.load(f)
+    assert len(rec) == 1
+    big = np.finfo(float).max  # Pinocchio's "no limit" (they were [0, 0])
+    np.testing.assert_array_equal(robot.model.lowerPositionLimit, [-big, -big])
+    np.testing.assert_array_equal(robot.model.upperPositionLimit, [big, big])
+
+
+def test_a_registered_robot_with_zero_limits_loads_unlimited_and_silently() -> None:
+    robot = pinobs.load("double_pendulum")  # warnings are errors
+    np.testing.assert_array_equal(robot.model.upperPositionLimit, np.full(2, np.finfo(float).max))
+
+
+def test_a_pin_models_joint_values_are_checked_naming_the_joint() -> None:
+    model = pinobs.load("cartpole").model.copy()
+    model.damping[:] = [0.0, -0.5]
+    with pytest.raises(
+        pinobs.ModelError, match=r"joint 'pole_theta' has viscous damping \[-0\.5\]"
+    ):
+        pinobs.load(model)
+    model = pinobs.load("cartpole").model.copy()
+    model.lowerPositionLimit[0], model.upperPositionLimit[0] = 1.0, -1.0
+    with pytest.raises(
+        pinobs.ModelError,
+        match=r"joint 'cart_x' has position limits lower \[1\.0\] > upper",
+    ):
+        pinobs.load(model)
+    assert pinobs.load(model, check=False).nv == 2
 
 
 def test_a_pin_model_is_checked_too() -> None:

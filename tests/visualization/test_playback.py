@@ -575,6 +575,28 @@ def test_page_embeds_the_chart_data_in_the_legend_colours(cartpole_run: dict[str
     np.testing.assert_allclose(np.array(data["truth"][1], dtype=float), result.v[k, 1], atol=1e-3)
 
 
+@pytest.mark.parametrize("bad", [np.nan, np.inf, 1e200])
+def test_chart_of_an_estimate_lost_before_the_clip_start_warns_nothing(
+    cartpole_run: dict[str, Any], bad: float
+) -> None:
+    """An estimate NaN (or inf, or overflowing) from early on next to a good one: numpy's "Mean
+    of empty slice" (and overflow) RuntimeWarnings leaked out of chart_data; warnings are errors
+    here.  The joint shown first is the good estimate's worst."""
+    from pinobs.visualization.chart import chart_data
+
+    result, robot = cartpole_run["result"], cartpole_run["robot"]
+    kf = result.trace("kf")
+    v = np.array(kf.v)
+    v[len(v) // 10 :] = bad  # lost from 0.15 s on, before the transient clipped for the range
+    lost = dataclasses.replace(kf, name="lost", v=v, diverged_at=float(result.t[len(v) // 10]))
+    data = chart_data(
+        dataclasses.replace(result, traces=(kf, lost)), robot, ["kf", "lost"], ["#111111"] * 2
+    )
+    alone = chart_data(result, robot, ["kf"], ["#111111"])
+    assert data["joint"] == alone["joint"] and data["range"] == alone["range"]
+    assert all(x is None for x in data["obs"][1]["err"][len(data["t"]) // 5 :])
+
+
 def test_floor_grid_lies_under_the_ur5_and_ends_before_the_camera(tmp_path: Path) -> None:
     robot = pinobs.load("ur5")
     result = pinobs.simulate(robot, ["kf"], duration=0.3, sensor=pinobs.Sensor(rate=100.0), seed=1)

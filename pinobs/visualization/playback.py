@@ -61,6 +61,7 @@ from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.simulation import ObserverTrace, Result
 from pinobs.visualization._deps import require
+from pinobs.visualization.axes import slide_axis
 from pinobs.visualization.chart import chart_data, chart_html
 from pinobs.visualization.palette import hex_colour, observer_colours
 
@@ -385,8 +386,18 @@ def _overlay(
 # ------------------------------------------------------------------ geometry
 
 
-def _stick_figure(model: pin.Model) -> pin.GeometryModel:
-    """Simple shapes for a robot without visual geometry: a sphere per joint, a rod per link."""
+def _stick_figure(
+    model: pin.Model, travel: Mapping[int, tuple[float, float]] | None = None
+) -> pin.GeometryModel:
+    """Simple shapes for a robot without visual geometry: a sphere per joint, a rod per link,
+    and a rail per prismatic joint.
+
+    The rod to a joint is fixed in its parent's frame and ends where the joint is at
+    ``q = 0``; a prismatic joint moves away from there, along a thinner rail that spans
+    ``travel[joint_id]`` (its lowest and highest position [m] in the motion shown), else its
+    finite limits, else one link length either way, and ``0`` in any case: the figure stays
+    connected however far it slides.
+    """
     coal = require("coal", "stick figures of robots without meshes")
     geom = pin.GeometryModel()
     lengths = [
@@ -412,6 +423,16 @@ def _stick_figure(model: pin.Model) -> pin.GeometryModel:
                     f"{name}_rod", parent, placement, coal.Cylinder(0.4 * radius, length)
                 )
             )
+        axis = slide_axis(model, j)
+        if axis is not None:
+            lo, hi = _rail(model, j, scale, (travel or {}).get(j))
+            rot = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), axis).toRotationMatrix()
+            placement = model.jointPlacements[j] * pin.SE3(rot, 0.5 * (lo + hi) * axis)
+            geom.addGeometryObject(
+                pin.GeometryObject(
+                    f"{name}_rail", parent, placement, coal.Cylinder(0.25 * radius, hi - lo)
+                )
+            )
         leaf = j not in model.parents[j + 1 :]
         tip = 2.0 * model.inertias[j].lever
         if leaf and np.linalg.norm(tip) > 1e-6:  # the last link: a rod through its centre of mass
@@ -431,10 +452,49 @@ def _stick_figure(model: pin.Model) -> pin.GeometryModel:
     return geom
 
 
-def _visual_model(robot: Robot) -> pin.GeometryModel:
+def _rail(
+    model: pin.Model, joint_id: int, scale: float, shown: tuple[float, float] | None
+) -> tuple[float, float]:
+    """Ends [m] of a prismatic joint's rail: ``shown`` (the positions played back), else the
+    joint's finite limits, else ``±scale``; always holding 0 and at least ``scale / 10`` long."""
+    k = model.joints[joint_id].idx_q
+    limits = (float(model.lowerPositionLimit[k]), float(model.upperPositionLimit[k]))
+    if shown is not None:
+        lo, hi = shown
+    elif all(math.isfinite(x) and abs(x) < 1e3 for x in limits):
+        lo, hi = limits
+    else:
+        lo, hi = -scale, scale
+    lo, hi = min(lo, 0.0), max(hi, 0.0)
+    if hi - lo < 0.1 * scale:
+        lo, hi = lo - 0.05 * scale, hi + 0.05 * scale
+    return lo, hi
+
+
+def _travel(robot: Robot, configurations: Sequence[Vector]) -> dict[int, tuple[float, float]]:
+    """Lowest and highest finite position [m] of each prismatic joint in ``configurations``
+    (arrays of rows of ``q``)."""
+    out = {}
+    model = robot.model
+    for j in range(1, model.njoints):
+        if slide_axis(model, j) is None:
+            continue
+        k = model.joints[j].idx_q
+        x = np.concatenate([np.asarray(q, dtype=float)[:, k] for q in configurations])
+        x = x[np.isfinite(x)]
+        if x.size:
+            out[j] = (float(x.min()), float(x.max()))
+    return out
+
+
+def _visual_model(robot: Robot, configurations: Sequence[Vector] = ()) -> pin.GeometryModel:
+    """The robot's visual geometry, or a stick figure whose prismatic rails span the
+    ``configurations`` (rows of ``q``) played back."""
     vm = robot.visual_model
     if vm is None or vm.ngeoms == 0:
-        return _stick_figure(robot.model)
+        return _stick_figure(
+            robot.model, _travel(robot, configurations) if configurations else None
+        )
     return vm
 
 
@@ -710,7 +770,7 @@ def _scene(
                 f"no observer {name!r} in this result; have {result.observer_names}"
             )
     model = robot.model
-    geom = _visual_model(robot)
+    geom = _visual_model(robot, [result.q, *(result.trace(name).q for name in labels)])
     finite = np.all(np.isfinite(result.q), axis=1)
     if not finite.any():
         raise NonFiniteError(

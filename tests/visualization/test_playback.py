@@ -368,6 +368,65 @@ def test_robot_without_meshes_gets_a_stick_figure(tmp_path: Path) -> None:
     assert len([p for p in clips(html) if p.startswith("/meshcat/truth/")]) == geom.ngeoms
 
 
+SLIDER_ARM_URDF = """<?xml version="1.0"?>
+<robot name="slider_arm">
+  <link name="base"/>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="10" velocity="5"/></joint>
+  <link name="upper"><inertial><origin xyz="0.25 0 0"/><mass value="1"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="slide" type="prismatic"><parent link="upper"/><child link="carriage"/>
+    <origin xyz="0.5 0 0"/><axis xyz="1 0 0"/>
+    <limit lower="-0.2" upper="0.4" effort="10" velocity="1"/></joint>
+  <link name="carriage"><inertial><origin xyz="0.2 0 0"/><mass value="0.5"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+</robot>
+"""
+
+
+def test_stick_figure_of_a_prismatic_joint_stays_connected_as_it_slides(tmp_path: Path) -> None:
+    """The rod to a slider ended where it is at q = 0: sliding out left a gap of the slide's
+    length (0.3 m at q = 0.3).  Now it slides along a rail spanning its motion (here past its
+    limit, 0.4 m), and its sphere stays on the figure."""
+    urdf = tmp_path / "slider_arm.urdf"
+    urdf.write_text(SLIDER_ARM_URDF)
+    robot = pinobs.load(urdf)
+    assert robot.visual_model is None or robot.visual_model.ngeoms == 0
+    slides = np.array([-0.15, 0.0, 0.3, 0.6])
+    qs = np.column_stack([np.full(slides.size, 0.4), slides])
+    geom = pb._visual_model(robot, [qs])
+    model, data, gdata = robot.model, robot.model.createData(), pin.GeometryData(geom)
+    j = model.getJointId("slide")
+    assert [go.name for go in geom.geometryObjects if go.name.endswith("_rail")] == ["slide_rail"]
+
+    def gap(q: np.ndarray) -> float:
+        """Distance [m] from the slider's sphere to the nearest rod or rail not moving with it."""
+        pin.framesForwardKinematics(model, data, q)
+        pin.updateGeometryPlacements(model, data, geom, gdata)
+        c = data.oMi[j].translation
+        best = np.inf
+        for k, go in enumerate(geom.geometryObjects):
+            if go.name.endswith("_joint") or go.parentJoint == j:
+                continue
+            M, h = gdata.oMg[k], go.geometry.halfLength
+            a, b = M.act(np.array([0.0, 0.0, -h])), M.act(np.array([0.0, 0.0, h]))
+            s = np.clip((c - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
+            best = min(best, float(np.linalg.norm(a + s * (b - a) - c)))
+        return best
+
+    assert max(gap(q) for q in qs) < 1e-12
+    # without the motion, the rail spans the joint's limits
+    bare = pb._stick_figure(robot.model)
+    (rail,) = [go for go in bare.geometryObjects if go.name == "slide_rail"]
+    assert 2 * rail.geometry.halfLength == pytest.approx(0.6)
+    html = write_html(
+        pinobs.simulation.Result(robot.name, np.arange(4) / 30, qs, qs * 0, qs * 0, qs, ()),
+        robot,
+        tmp_path / "slider.html",
+    )
+    assert "/meshcat/truth/visuals/slide_rail" in clips(html)
+
+
 def test_decimation_meets_the_triangle_budget_inside_the_mesh_box(
     rng: np.random.Generator,
 ) -> None:

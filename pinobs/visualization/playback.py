@@ -12,7 +12,10 @@ included, moves so that the true base stays in view.  The motion is
 one meshcat ``Animation`` keyframed at ``fps``
 frames per second of simulated time, so meshcat's own timeline (Open Controls
 → Animations: play, pause, reset, time slider, time scale) plays, pauses and
-scrubs it.
+scrubs it.  The keyframes take at most :data:`MAX_ANIMATION_BYTES` (8 MB) of
+a page: a long run gets fewer keyframes per second, and says so.  Rows
+without a finite configuration are not drawn: the truth holds its last pose,
+a ghost is hidden, and the legend says when.
 
 Two ways to watch:
 

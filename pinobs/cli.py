@@ -24,6 +24,7 @@ import argparse
 import json
 import math
 import os
+import shlex
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -36,6 +37,7 @@ import numpy as np
 from pinobs.errors import (
     DimensionError,
     GainError,
+    ModelFileError,
     OptionError,
     OutputExistsError,
     PinobsError,
@@ -379,6 +381,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
     result = Result.load(args.result)
     source = args.robot or result.meta.get("robot_source") or result.robot
     root = args.root_joint or result.meta.get("root_joint")
+    if args.robot is None:
+        _check_saved_robot_file(args, str(source))
     robot = load(source, root_joint=root)
     if robot.name != result.robot and not args.force:
         raise UnsupportedRobotError(
@@ -394,6 +398,34 @@ def _cmd_play(args: argparse.Namespace) -> int:
         args.html = str(Path(args.result).with_suffix(".html"))
     _watch(result, robot, args)
     return 0
+
+
+def _check_saved_robot_file(args: argparse.Namespace, source: str) -> None:
+    """A run of a robot file that has since moved: the command to play it with the file's new
+    path (one found under the same name next to the result or here, else a placeholder)."""
+    path = Path(source)
+    if path.suffix.lower() not in (".urdf", ".xml", ".mjcf") or path.exists():
+        return
+    near = [Path(args.result).resolve().parent, Path.cwd()]
+    found = sorted(
+        {p.resolve() for d in near for p in [*d.glob(path.name), *d.glob(f"*/{path.name}")]}
+    )
+    new = str(found[0]) if found else f"NEW/PATH/TO/{path.name}"
+    argv = ["pinobs", "play", args.result, "--robot", new]
+    for flag in ("root_joint", "html", "plot", "meshcat", "force", "no_progress"):
+        value = getattr(args, flag)
+        if value:  # the other options as given
+            argv += ["--" + flag.replace("_", "-")] + ([] if value is True else [value])
+    command = " ".join(shlex.quote(a) for a in argv)
+    where = (
+        f"a file of that name is at {new}; if it is the same robot, play it with"
+        if found
+        else "if it moved, give its new path"
+    )
+    raise ModelFileError(
+        f"{args.result!r} is a run of the robot file {source!r}, which no longer exists; "
+        f"{where}:\n  {command}"
+    )
 
 
 def _column_map(items: Sequence[str] | None) -> dict[str, str] | None:

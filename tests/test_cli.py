@@ -409,6 +409,53 @@ def test_play_of_a_file_that_is_not_a_result_is_one_line(tmp_path: Path, capsys)
     assert "is not a result saved by pinobs" in err and "Traceback" not in err
 
 
+def test_play_of_a_run_whose_robot_file_moved_gives_the_command_with_its_new_path(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    """The message was the loader's "does not exist; give an existing URDF/MJCF file or one of
+    the robot names: a1, ..." (78 names); now the command to rerun, with the file's new path
+    when one of that name is next to the result or here, else a placeholder."""
+    import shlex
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "arm").mkdir()
+    urdf = tmp_path / "arm" / "arm.urdf"
+    urdf.write_text(
+        """<?xml version="1.0"?><robot name="arm"><link name="world"/>
+  <joint name="j" type="revolute"><parent link="world"/><child link="rod"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="100" velocity="10"/></joint>
+  <link name="rod"><inertial><origin xyz="0 0 0.5"/><mass value="1"/>
+    <inertia ixx="0.08" ixy="0" ixz="0" iyy="0.08" iyz="0" izz="0.001"/></inertial></link>
+</robot>"""
+    )
+    saved = tmp_path / "runs" / "arm run.npz"
+    run = ["run", "--robot", str(urdf), "--observer", "kf", "--duration", "0.1"]
+    assert main([*run, "--save", str(saved)]) == 0
+    (tmp_path / "models").mkdir()
+    urdf.rename(tmp_path / "models" / "arm.urdf")
+    capsys.readouterr()
+    page = str(tmp_path / "p.html")
+    assert main(["play", str(saved), "--html", page, "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert f"robot file {str(urdf)!r}, which no longer exists" in err and "a1, " not in err
+    command = err.strip().splitlines()[-1]
+    assert shlex.split(command) == [
+        "pinobs",
+        "play",
+        str(saved),
+        "--robot",
+        str(tmp_path / "models" / "arm.urdf"),
+        "--html",
+        page,
+        "--no-progress",
+    ]
+    assert main(shlex.split(command)[1:]) == 0  # the command given works
+    (tmp_path / "models" / "arm.urdf").rename(tmp_path / "elsewhere.urdf")
+    assert main(["play", str(saved), "--meshcat"]) == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert shlex.split(last)[3:] == ["--robot", "NEW/PATH/TO/arm.urdf", "--meshcat"]
+
+
 @pytest.mark.parametrize("spec", ["", ",,", " , "])
 def test_run_refuses_an_observer_list_without_a_name(capsys, monkeypatch, spec: str) -> None:
     import pinobs.cli

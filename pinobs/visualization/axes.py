@@ -11,19 +11,19 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from pinobs.model import Robot
+from pinobs.model.robot import Vector
 
-__all__ = ["clip_start", "velocity_labels", "velocity_range", "velocity_units"]
+__all__ = ["clip_start", "slide_axis", "velocity_labels", "velocity_range", "velocity_units"]
 
 _COMPONENTS = {
     "so3": ("ωx", "ωy", "ωz"),
     "se3": ("vx", "vy", "vz", "ωx", "ωy", "ωz"),
     "se2": ("vx", "vy", "ω"),
 }
-# Pinocchio joint short names whose velocity is a length rate [m/s]
-_PRISMATIC = ("JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned")
 
 
 def velocity_labels(robot: Robot) -> list[str]:
@@ -40,6 +40,25 @@ def velocity_labels(robot: Robot) -> list[str]:
     return labels
 
 
+def slide_axis(model: pin.Model, joint_id: int) -> Vector | None:
+    """Unit axis, in the joint's frame, of a joint that only slides (prismatic: Pinocchio's
+    ``PX``, ``PY``, ``PZ`` and unaligned joints), or ``None`` for any other joint.
+
+    Read from the joint's motion subspace ``S`` (one column, no angular part), so every
+    prismatic joint model counts.
+    """
+    joint = model.joints[joint_id]
+    if joint.nv != 1:
+        return None
+    jdata = joint.createData()
+    joint.calc(jdata, pin.neutral(model))
+    S = np.asarray(jdata.S, dtype=float).reshape(6, -1)[:, 0]  # [linear; angular]
+    linear = float(np.linalg.norm(S[:3]))
+    if linear == 0.0 or np.any(S[3:] != 0.0):
+        return None
+    return S[:3] / linear
+
+
 def velocity_units(robot: Robot) -> list[str]:
     """Unit of each velocity coordinate: ``"m/s"`` (prismatic joints, linear parts of
     free-flyer and planar joints) or ``"rad/s"`` (everything that turns)."""
@@ -48,10 +67,8 @@ def velocity_units(robot: Robot) -> list[str]:
         if j.kind in ("se3", "se2"):
             for k in range(3 if j.kind == "se3" else 2):
                 units[j.idx_v + k] = "m/s"
-        elif j.nv == 1:
-            joint = robot.model.joints[robot.model.getJointId(j.name)]
-            if joint.shortname() in _PRISMATIC:
-                units[j.idx_v] = "m/s"
+        elif slide_axis(robot.model, robot.model.getJointId(j.name)) is not None:
+            units[j.idx_v] = "m/s"
     return units
 
 

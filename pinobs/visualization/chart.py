@@ -64,7 +64,11 @@ def chart_data(
     n = result.t.size
     keep = np.unique(np.round(np.linspace(0, n - 1, min(n, MAX_POINTS))).astype(int))
     t = result.t
-    errors = {name: np.linalg.norm(result.trace(name).v - result.v, axis=1) for name in observers}
+    # a diverged estimate may be inf or overflow (its error is then inf, drawn as no point)
+    with np.errstate(invalid="ignore", over="ignore"):
+        errors = {
+            name: np.linalg.norm(result.trace(name).v - result.v, axis=1) for name in observers
+        }
     start = clip_start(t, [convergence_time(t, errors[name]) for name in observers])
     after = t >= start
     # a diverged estimate does not set the range (it is clipped, and the legend says it diverged)
@@ -74,11 +78,17 @@ def chart_data(
         est = np.column_stack([result.trace(o).v[:, i] for o in observers] or [t * np.nan])
         lo, hi = velocity_range(t, result.v[:, i], [result.trace(o).v[:, i] for o in sane], start)
         ranges.append([lo, hi])
-        with np.errstate(invalid="ignore"):
+        # RMS error of each estimate from ``start`` on, over its finite samples (an estimate
+        # NaN all along, e.g. diverged before ``start``, has none and does not count; it was
+        # numpy's "Mean of empty slice")
+        with np.errstate(invalid="ignore", over="ignore"):
             clipped.append(bool(np.any((est < lo) | (est > hi))))
             e = est[after] - result.v[after, i][:, None]
-            rms = np.sqrt(np.nanmean(e**2, axis=0)) if np.any(np.isfinite(e)) else [0.0]
-        worst.append(float(np.nanmax(rms)) if np.any(np.isfinite(rms)) else 0.0)
+            finite = np.isfinite(e)
+            count = finite.sum(axis=0)
+            square = (np.where(finite, e, 0.0) ** 2).sum(axis=0)
+        has = count > 0
+        worst.append(float(np.sqrt(square[has] / count[has]).max()) if has.any() else 0.0)
     positive = np.concatenate([e[np.isfinite(e) & (e > 0)] for e in errors.values()] or [[]])
     late = np.concatenate(
         [e[after][np.isfinite(e[after]) & (e[after] > 0)] for e in errors.values()] or [[]]

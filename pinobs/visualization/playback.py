@@ -12,7 +12,10 @@ included, moves so that the true base stays in view.  The motion is
 one meshcat ``Animation`` keyframed at ``fps``
 frames per second of simulated time, so meshcat's own timeline (Open Controls
 → Animations: play, pause, reset, time slider, time scale) plays, pauses and
-scrubs it.
+scrubs it.  The keyframes take at most :data:`MAX_ANIMATION_BYTES` (8 MB) of
+a page: a long run gets fewer keyframes per second, and says so.  Rows
+without a finite configuration are not drawn: the truth holds its last pose,
+a ghost is hidden, and the legend says when.
 
 Two ways to watch:
 
@@ -39,6 +42,7 @@ import html
 import json
 import math
 import re
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,16 +52,24 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from pinobs.errors import DimensionError, GainError, UnknownNameError
+from pinobs.errors import (
+    DimensionError,
+    GainError,
+    NonFiniteError,
+    PinobsWarning,
+    UnknownNameError,
+)
 from pinobs.io import Log, LogRun
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.simulation import ObserverTrace, Result
 from pinobs.visualization._deps import require
+from pinobs.visualization.axes import slide_axis
 from pinobs.visualization.chart import chart_data, chart_html
 from pinobs.visualization.palette import hex_colour, observer_colours
 
 __all__ = [
+    "MAX_ANIMATION_BYTES",
     "LegendEntry",
     "LiveViewer",
     "build_scene",
@@ -78,6 +90,14 @@ _REPEAT = 1_000_000  # "loop forever": THREE.LoopRepeat needs a finite count
 #: Mesh files (Collada, STL, OBJ) up to this total size are sent as they are
 #: for the truth; above it the truth gets the same decimated triangles as the ghosts.
 _MAX_MESH_FILE_BYTES = 4_000_000
+#: Bytes of a page the animation's keyframes may take [B]: a longer run gets fewer
+#: keyframes per second (meshcat interpolates between them), and a warning says so.
+MAX_ANIMATION_BYTES = 8_000_000
+#: Page bytes of one node's keyframe at most: position and quaternion, each a msgpack map
+#: ``{time: frame < 2**32, value: [float64, ...]}`` (45 + 54 B), base64-encoded (x 4/3).
+_KEY_BYTES = 132
+#: Page bytes of one node's clip without its keys, at most (path, names, types; base64).
+_CLIP_BYTES = 400
 
 #: ``progress(k, n)`` is called after frame ``k`` of ``n`` (as in :func:`pinobs.simulate`).
 Progress = Callable[[int, int], None]
@@ -101,6 +121,9 @@ class LegendEntry:
         diverged_at: time of divergence [s], or ``None``.
         model_colours: for the truth, the CSS colours its body renders in (the
             visual model's ``meshColor``, most used first); empty for a ghost.
+        gaps: stretches ``(start, end)`` [s] without a finite configuration (NaN
+            rows: dropped samples, a divergence), from the first such row to the
+            next finite one: the truth holds its last pose, a ghost is hidden.
     """
 
     label: str
@@ -109,6 +132,25 @@ class LegendEntry:
     node: str
     diverged_at: float | None = None
     model_colours: tuple[str, ...] = ()
+    gaps: tuple[tuple[float, float], ...] = ()
+
+    @property
+    def gap_note(self) -> str:
+        """The gaps in words (empty without gaps), e.g. ``"no data 0.3–0.5 s: pose held"``."""
+        if not self.gaps:
+            return ""
+        what = "no data" if self.colour is None else "no estimate"
+        shown = "pose held" if self.colour is None else "hidden"
+        a, b = self.gaps[0][0], self.gaps[-1][1]
+        if self.diverged_at is not None and len(self.gaps) == 1 and a >= self.diverged_at:
+            return f"hidden from {a:.3g} s"
+        if len(self.gaps) == 1:
+            return f"{what} {a:.3g}–{b:.3g} s: {shown}"
+        lost = sum(e - s for s, e in self.gaps)
+        return (
+            f"{what} in {len(self.gaps)} stretches between {a:.3g} and {b:.3g} s "
+            f"({lost:.3g} s in all): {shown}"
+        )
 
 
 def _model_colours(
@@ -245,7 +287,7 @@ _OVERLAY = """<div id="pinobs-legend" style="position:absolute;left:10px;top:10p
  border:1px solid #bbb;border-radius:6px;padding:8px 10px;color:#222;pointer-events:none">
 <div style="font-weight:600">{title}</div>
 {rows}
-<div id="pinobs-time" style="margin-top:4px;font-variant-numeric:tabular-nums">t = {t0:.2f} s</div>
+{notes}<div id="pinobs-time" style="margin-top:4px;font-variant-numeric:tabular-nums">t = {t0:.2f} s</div>
 <div style="color:#666;font-size:11px">Open Controls → Animations: play, pause, time;<br>
 drag on the chart below to scrub</div>
 </div>
@@ -254,6 +296,9 @@ drag on the chart below to scrub</div>
   const t0 = {t0!r};
   const anim = viewer.animator;
   const label = document.getElementById("pinobs-time");
+  // stretches without data: the entry's row says so while the time is in one
+  const gaps = {gaps}, tEnd = {t_end!r};
+  const rows = Array.from(document.querySelectorAll("#pinobs-legend .pinobs-entry"));
   function clipTime() {{
     return anim.actions.length ? anim.actions[0].time : 0;
   }}
@@ -277,7 +322,12 @@ drag on the chart below to scrub</div>
   window.addEventListener("hashchange", applyLegend);
   window.addEventListener("hashchange", applyHash);
   function tick() {{
-    label.textContent = "t = " + (t0 + clipTime()).toFixed(2) + " s";
+    const t = t0 + clipTime();
+    label.textContent = "t = " + t.toFixed(2) + " s";
+    gaps.forEach(function (g, i) {{
+      const now = g.some(function (ab) {{ return t >= ab[0] && (t < ab[1] || ab[1] >= tEnd); }});
+      rows[i].querySelector(".pinobs-gap").style.display = now ? "inline" : "none";
+    }});
     requestAnimationFrame(tick);
   }}
   tick();
@@ -286,7 +336,13 @@ drag on the chart below to scrub</div>
 """
 
 
-def _overlay(title: str, entries: Sequence[LegendEntry], t0: float) -> str:
+def _overlay(
+    title: str,
+    entries: Sequence[LegendEntry],
+    t0: float,
+    t_end: float,
+    notes: Sequence[str] = (),
+) -> str:
     rows = []
     for e in entries:
         if e.colour is None:
@@ -304,22 +360,47 @@ def _overlay(title: str, entries: Sequence[LegendEntry], t0: float) -> str:
                 '<span style="display:inline-block;width:12px;height:12px;margin-right:6px;'
                 f'border:1px solid #555;background:{e.colour};opacity:0.8"></span>'
             )
-        note = "" if e.diverged_at is None else f" (diverged at {e.diverged_at:.3g} s)"
+        said = [f"diverged at {e.diverged_at:.3g} s"] if e.diverged_at is not None else []
+        said += [e.gap_note] if e.gaps else []
+        note = f" ({'; '.join(said)})" if said else ""
         what = "estimate"
         if e.colour is None:
             what = "true motion" if e.label == "truth" else "recorded motion"
+        now = "no data now: pose held" if e.colour is None else "no estimate now: hidden"
         rows.append(
             f'<div class="pinobs-entry" data-label="{html.escape(e.label)}">{swatch}'
-            f"<b>{html.escape(e.label)}</b> · {what}{html.escape(note)}</div>"
+            f"<b>{html.escape(e.label)}</b> · {what}{html.escape(note)}"
+            f'<span class="pinobs-gap" style="display:none;color:#b00"> · {now}</span></div>'
         )
-    return _OVERLAY.format(title=html.escape(title), rows="\n".join(rows), t0=float(t0))
+    gaps = json.dumps([[[round(a, 6), round(b, 6)] for a, b in e.gaps] for e in entries])
+    return _OVERLAY.format(
+        title=html.escape(title),
+        rows="\n".join(rows),
+        t0=float(t0),
+        t_end=float(t_end),
+        gaps=gaps,
+        notes="".join(
+            f'<div class="pinobs-note" style="color:#666;font-size:11px">{html.escape(n)}</div>\n'
+            for n in notes
+        ),
+    )
 
 
 # ------------------------------------------------------------------ geometry
 
 
-def _stick_figure(model: pin.Model) -> pin.GeometryModel:
-    """Simple shapes for a robot without visual geometry: a sphere per joint, a rod per link."""
+def _stick_figure(
+    model: pin.Model, travel: Mapping[int, tuple[float, float]] | None = None
+) -> pin.GeometryModel:
+    """Simple shapes for a robot without visual geometry: a sphere per joint, a rod per link,
+    and a rail per prismatic joint.
+
+    The rod to a joint is fixed in its parent's frame and ends where the joint is at
+    ``q = 0``; a prismatic joint moves away from there, along a thinner rail that spans
+    ``travel[joint_id]`` (its lowest and highest position [m] in the motion shown), else its
+    finite limits, else one link length either way, and ``0`` in any case: the figure stays
+    connected however far it slides.
+    """
     coal = require("coal", "stick figures of robots without meshes")
     geom = pin.GeometryModel()
     lengths = [
@@ -345,6 +426,16 @@ def _stick_figure(model: pin.Model) -> pin.GeometryModel:
                     f"{name}_rod", parent, placement, coal.Cylinder(0.4 * radius, length)
                 )
             )
+        axis = slide_axis(model, j)
+        if axis is not None:
+            lo, hi = _rail(model, j, scale, (travel or {}).get(j))
+            rot = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), axis).toRotationMatrix()
+            placement = model.jointPlacements[j] * pin.SE3(rot, 0.5 * (lo + hi) * axis)
+            geom.addGeometryObject(
+                pin.GeometryObject(
+                    f"{name}_rail", parent, placement, coal.Cylinder(0.25 * radius, hi - lo)
+                )
+            )
         leaf = j not in model.parents[j + 1 :]
         tip = 2.0 * model.inertias[j].lever
         if leaf and np.linalg.norm(tip) > 1e-6:  # the last link: a rod through its centre of mass
@@ -364,10 +455,49 @@ def _stick_figure(model: pin.Model) -> pin.GeometryModel:
     return geom
 
 
-def _visual_model(robot: Robot) -> pin.GeometryModel:
+def _rail(
+    model: pin.Model, joint_id: int, scale: float, shown: tuple[float, float] | None
+) -> tuple[float, float]:
+    """Ends [m] of a prismatic joint's rail: ``shown`` (the positions played back), else the
+    joint's finite limits, else ``±scale``; always holding 0 and at least ``scale / 10`` long."""
+    k = model.joints[joint_id].idx_q
+    limits = (float(model.lowerPositionLimit[k]), float(model.upperPositionLimit[k]))
+    if shown is not None:
+        lo, hi = shown
+    elif all(math.isfinite(x) and abs(x) < 1e3 for x in limits):
+        lo, hi = limits
+    else:
+        lo, hi = -scale, scale
+    lo, hi = min(lo, 0.0), max(hi, 0.0)
+    if hi - lo < 0.1 * scale:
+        lo, hi = lo - 0.05 * scale, hi + 0.05 * scale
+    return lo, hi
+
+
+def _travel(robot: Robot, configurations: Sequence[Vector]) -> dict[int, tuple[float, float]]:
+    """Lowest and highest finite position [m] of each prismatic joint in ``configurations``
+    (arrays of rows of ``q``)."""
+    out = {}
+    model = robot.model
+    for j in range(1, model.njoints):
+        if slide_axis(model, j) is None:
+            continue
+        k = model.joints[j].idx_q
+        x = np.concatenate([np.asarray(q, dtype=float)[:, k] for q in configurations])
+        x = x[np.isfinite(x)]
+        if x.size:
+            out[j] = (float(x.min()), float(x.max()))
+    return out
+
+
+def _visual_model(robot: Robot, configurations: Sequence[Vector] = ()) -> pin.GeometryModel:
+    """The robot's visual geometry, or a stick figure whose prismatic rails span the
+    ``configurations`` (rows of ``q``) played back."""
     vm = robot.visual_model
     if vm is None or vm.ngeoms == 0:
-        return _stick_figure(robot.model)
+        return _stick_figure(
+            robot.model, _travel(robot, configurations) if configurations else None
+        )
     return vm
 
 
@@ -476,6 +606,27 @@ def _forward_fill(q: Vector, fallback: Vector) -> Vector:
     return out
 
 
+def _gaps(t: Vector, ok: NDArray[np.bool_]) -> tuple[tuple[float, float], ...]:
+    """Stretches ``(start, end)`` [s] of rows not ``ok``: from the first such row to the next ok
+    row (the last row for a stretch running to the end)."""
+    d = np.diff(np.concatenate([[0], (~ok).astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    last = len(t) - 1
+    return tuple(
+        (float(t[a]), float(t[min(int(b), last)])) for a, b in zip(starts, ends, strict=True)
+    )
+
+
+def _keyframe_rate(t: Vector, fps: float, nodes: int) -> float:
+    """``fps``, or the lower rate at which the keyframes of ``nodes`` animated nodes fit
+    :data:`MAX_ANIMATION_BYTES` [1/s]."""
+    wanted = len(frame_indices(t, fps))  # (checks fps)
+    fit = max(2, (MAX_ANIMATION_BYTES - _CLIP_BYTES * nodes) // (_KEY_BYTES * nodes))
+    if wanted <= fit:
+        return fps
+    return (fit - 1) / float(t[-1] - t[0])
+
+
 def _placements(
     model: pin.Model, data: pin.Data, geom: pin.GeometryModel, gdata: pin.GeometryData, q: Vector
 ) -> list[pin.SE3]:
@@ -520,6 +671,13 @@ def _safe(label: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", label) or "observer"
 
 
+@dataclass(frozen=True)
+class _Scene:
+    legend: list[LegendEntry]
+    fps: float  # keyframes per second used [1/s]
+    notes: list[str]  # what the page says about its fidelity (a lowered keyframe rate)
+
+
 def build_scene(
     vis: Any,
     result: Result,
@@ -535,11 +693,22 @@ def build_scene(
 ) -> list[LegendEntry]:
     """Load the truth and one ghost per observer into ``vis`` and animate them.
 
+    Rows of ``result.q`` or of an estimate with NaN (dropped samples, a
+    divergence) are not drawn: the truth holds its last finite pose, a ghost
+    is hidden until its next finite row, and the legend entry's ``gaps`` (and
+    the page, and a :class:`~pinobs.errors.PinobsWarning`) say when.
+
+    The keyframes take at most :data:`MAX_ANIMATION_BYTES` of a page (8 MB):
+    about 132 B per node per frame, a node being one geometry of the truth or
+    of a ghost, so a long run (a UR5 with two ghosts: past 100 s) gets fewer
+    than ``fps`` keyframes per second, meshcat interpolating between them; a
+    :class:`~pinobs.errors.PinobsWarning` gives the rate used.
+
     Args:
         vis: a ``meshcat.Visualizer`` (live, or recording for :func:`write_html`).
         result: the run to play back.
         robot: the model the run used (``result.robot`` names it).
-        fps: keyframes per second of simulated time [1/s].
+        fps: keyframes per second of simulated time [1/s], at most (see above).
         observers: labels to show (default: every observer of the run).
         opacity: ghost opacity in (0, 1].
         play: start playing when the page loads.
@@ -554,9 +723,38 @@ def build_scene(
 
     Raises:
         DimensionError: the result's arrays do not fit ``robot``.
+        NonFiniteError: no row of ``result.q`` is finite.
         UnknownNameError: an observer label is not in the result.
         GainError: ``fps`` or ``opacity`` out of range.
     """
+    return _scene(
+        vis,
+        result,
+        robot,
+        fps=fps,
+        observers=observers,
+        opacity=opacity,
+        play=play,
+        max_triangles=max_triangles,
+        truth_label=truth_label,
+        progress=progress,
+    ).legend
+
+
+def _scene(
+    vis: Any,
+    result: Result,
+    robot: Robot,
+    *,
+    fps: float,
+    observers: Sequence[str] | None,
+    opacity: float,
+    play: bool = True,
+    max_triangles: int = 60_000,
+    truth_label: str = "truth",
+    progress: Progress | None,
+) -> _Scene:
+    """:func:`build_scene`, also returning the keyframe rate used and the notes on fidelity."""
     viz_mod = require("pinocchio.visualize.meshcat_visualizer", "meshcat playback")
     mg = require("meshcat.geometry", "meshcat playback")
     animation = require("meshcat.animation", "meshcat playback")
@@ -574,9 +772,28 @@ def build_scene(
             raise UnknownNameError(
                 f"no observer {name!r} in this result; have {result.observer_names}"
             )
-    idx = frame_indices(result.t, fps)
     model = robot.model
-    geom = _visual_model(robot)
+    geom = _visual_model(robot, [result.q, *(result.trace(name).q for name in labels)])
+    finite = np.all(np.isfinite(result.q), axis=1)
+    if not finite.any():
+        raise NonFiniteError(
+            f"result of robot {result.robot!r}: none of its {len(finite)} configurations "
+            "(rows of q) is finite; there is no motion to play back"
+        )
+    estimated = {name: np.all(np.isfinite(result.trace(name).q), axis=1) for name in labels}
+    # A floating base (free-flyer, planar root) is followed: the scene moves so
+    # that the true base stays in view; a fixed base is framed once.
+    follow = bool(robot.joints) and robot.joints[0].kind in ("se3", "se2")
+    # animated nodes: each geometry of each copy, a ghost's visibility, the followed scene
+    rate = _keyframe_rate(result.t, fps, geom.ngeoms * (1 + len(labels)) + len(labels) + follow)
+    idx = frame_indices(result.t, rate)
+    notes = []
+    if rate < fps:
+        notes.append(
+            f"keyframes at {rate:.3g} per second instead of {fps:g}: the "
+            f"{result.t[-1] - result.t[0]:.4g} s run fits the page's animation budget "
+            f"({MAX_ANIMATION_BYTES / 1e6:g} MB), motion between keyframes interpolated"
+        )
 
     # Scene dressing: white background, no axes, camera framed on the truth.
     vis["/Background"].set_property("top_color", _BACKGROUND)
@@ -630,7 +847,16 @@ def build_scene(
         )
         nodes["truth"] = [f"truth/{go.name}" for go in geom.geometryObjects]
     truth_swatch = _model_colours(geom, collada_materials=as_is)
-    legend = [LegendEntry(truth_label, None, "model colours", "truth", model_colours=truth_swatch)]
+    legend = [
+        LegendEntry(
+            truth_label,
+            None,
+            "model colours",
+            "truth",
+            model_colours=truth_swatch,
+            gaps=_gaps(result.t, finite),
+        )
+    ]
     colours = observer_colours(len(labels), truth_swatch)
 
     # Ghosts: the same shapes, one flat translucent colour each.
@@ -653,25 +879,38 @@ def build_scene(
         )
         load_copy(node, functools.partial(_same, material))
         nodes[name] = [f"{node}/{go.name}" for go in geom.geometryObjects]
+        tr = result.trace(name)
         legend.append(
-            LegendEntry(name, hex_colour(rgb), colour_name, node, result.trace(name).diverged_at)
+            LegendEntry(
+                name,
+                hex_colour(rgb),
+                colour_name,
+                node,
+                tr.diverged_at,
+                gaps=_gaps(result.t, estimated[name]),
+            )
         )
+    # (a divergence is reported where it happens; the stretch after it needs no warning)
+    told = [e for e in legend if e.gaps and not e.gap_note.startswith("hidden from")]
+    for note in notes + [f"{e.label}: {e.gap_note}" for e in told]:
+        warnings.warn(f"playback of {robot.name}: {note}", PinobsWarning, stacklevel=3)
 
-    # Configurations shown, one row per frame.
-    shown = {"truth": result.q[idx]}
+    # Configurations shown, one row per frame: a NaN row holds the last finite one.
+    first = result.q[np.argmax(finite)]
+    shown = {"truth": _forward_fill(result.q, first)[idx]}
+    present = {"truth": finite[idx]}
     for name in labels:
-        shown[name] = _forward_fill(result.trace(name).q, result.q[0])[idx]
+        shown[name] = _forward_fill(result.trace(name).q, first)[idx]
+        present[name] = estimated[name][idx]
 
     data = model.createData()
     gdata = pin.GeometryData(geom)
-    anim = animation.Animation(default_framerate=fps)
+    anim = animation.Animation(default_framerate=rate)
     points: list[Vector] = []
     radii_one = np.array([_bounding_radius(go) for go in geom.geometryObjects])
     radii: list[Vector] = []
     n_frames = len(idx)
-    # A floating base (free-flyer, planar root) is followed: the scene moves so
-    # that the true base stays in view; a fixed base is framed once.
-    follow = bool(robot.joints) and robot.joints[0].kind in ("se3", "se2")
+    framed = present["truth"] if present["truth"].any() else np.ones(n_frames, dtype=bool)
     shift = np.zeros((n_frames, 3))
     total = n_frames * len(shown)
     done = 0
@@ -684,8 +923,9 @@ def build_scene(
             if who == "truth":
                 if follow:
                     shift[k] = data.oMi[1].translation
-                points.extend(M.translation - shift[k] for M in oMg)
-                radii.append(radii_one)
+                if framed[k]:  # the camera frames finite rows only
+                    points.extend(M.translation - shift[k] for M in oMg)
+                    radii.append(radii_one)
             if k == 0:  # a static pose too (with the mesh scale), for viewers without animation
                 for go, path, M in zip(geom.geometryObjects, nodes[who], oMg, strict=True):
                     T = M.homogeneous
@@ -697,6 +937,17 @@ def build_scene(
                     quat = pin.Quaternion(M.rotation).coeffs()  # x, y, z, w
                     frame[path].set_property("position", "vector3", M.translation.tolist())
                     frame[path].set_property("quaternion", "quaternion", quat.tolist())
+
+    # A ghost without an estimate is hidden: keys where that changes (a boolean track holds
+    # its value), and at the last frame, so that its clip lasts as long as the others.
+    for e in legend[1:]:
+        seen = present[e.label]
+        if seen.all():
+            continue
+        vis[e.node].set_property("visible", bool(seen[0]))
+        for k in sorted({0, n_frames - 1, *(np.flatnonzero(seen[1:] != seen[:-1]) + 1)}):
+            with anim.at_frame(vis[e.node], int(k)) as frame:
+                frame.set_property("visible", "boolean", bool(seen[k]))
 
     pts, rad = np.array(points), np.concatenate(radii)
     centre, offset = _camera(pts, rad)
@@ -718,7 +969,7 @@ def build_scene(
     local = [float(offset[0]), float(offset[2]), float(-offset[1])]
     vis["/Cameras/default/rotated/<object>"].set_property("position", local)
     vis.set_animation(anim, play=play, repetitions=_REPEAT)
-    return legend
+    return _Scene(legend, rate, notes)
 
 
 def _floor(points: Vector, radii: Vector, shift: Vector, centre: Vector, offset: Vector) -> Vector:
@@ -787,11 +1038,19 @@ def write_html(
     norm on a log axis, a cursor at the animation time; dragging on it
     scrubs).  ``page.html#t=1.5`` opens paused at ``t = 1.5 s``.
 
+    The page's size is capped: the keyframes take at most
+    :data:`MAX_ANIMATION_BYTES` (8 MB), so a long run gets fewer than ``fps``
+    keyframes per second, which the legend and a
+    :class:`~pinobs.errors.PinobsWarning` say (:func:`build_scene`).  On top of
+    the keyframes: meshcat's viewer (0.9 MB), the meshes (mesh files up to
+    4 MB, or decimated triangles) and the chart (at most
+    :data:`~pinobs.visualization.chart.MAX_POINTS` samples per curve).
+
     Args:
         result: the run (``pinobs.simulate`` or ``Result.load``).
         robot: the robot it was run on.
         path: output ``.html`` file (parent folders are created).
-        fps: keyframes per second of simulated time [1/s].
+        fps: keyframes per second of simulated time [1/s], at most.
         observers: labels to show (default: all).
         opacity: ghost opacity in (0, 1].
         title: legend title (default: robot name and duration).
@@ -805,7 +1064,7 @@ def write_html(
     path = Path(path)
     window = _RecordingWindow()
     vis = meshcat.Visualizer(window=window)
-    legend = build_scene(
+    scene = _scene(
         vis,
         result,
         robot,
@@ -815,13 +1074,15 @@ def write_html(
         truth_label=truth_label,
         progress=progress,
     )
+    legend = scene.legend
     if title is None:
         title = f"pinobs · {robot.name} · {result.t[-1] - result.t[0]:.3g} s"
     ghosts = legend[1:]
     data = chart_data(
         result, robot, [e.label for e in ghosts], [e.colour or "#000000" for e in ghosts]
     )
-    window.overlay = _overlay(title, legend, float(result.t[0])) + chart_html(data)
+    overlay = _overlay(title, legend, float(result.t[0]), float(result.t[-1]), scene.notes)
+    window.overlay = overlay + chart_html(data)
     page = vis.static_html()
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(page, encoding="utf-8")
@@ -858,8 +1119,8 @@ def log_result(robot: Robot, log: Log, runs: Mapping[str, LogRun]) -> Result:
     The "truth" is the logged configuration (show it with
     ``write_html(..., truth_label="measured")``); its velocity is unknown
     (NaN).  Rows whose time is unreadable or not increasing are left out; an
-    unreadable configuration is replaced by the previous readable one (the
-    first readable one at the start).
+    unreadable configuration (a dropped sample) stays NaN: the playback holds
+    the previous pose there and says so (:func:`build_scene`).
 
     Args:
         robot: the robot of the log.
@@ -876,15 +1137,13 @@ def log_result(robot: Robot, log: Log, runs: Mapping[str, LogRun]) -> Result:
             raise DimensionError(
                 f"estimates {name!r} have shape {run.q.shape}, the log's q has {log.q.shape}"
             )
-    q_log = np.asarray(log.q, dtype=float)[keep]
-    readable = np.flatnonzero(np.all(np.isfinite(q_log), axis=1))
-    q = _forward_fill(q_log, q_log[readable[0]] if readable.size else robot.neutral())
+    q = np.asarray(log.q, dtype=float)[keep]
     n = int(keep.sum())
     tau = np.zeros((n, robot.nv)) if log.tau is None else np.nan_to_num(log.tau[keep])
     traces = tuple(
         ObserverTrace(
             name=name,
-            q=_forward_fill(run.q[keep], q[0]),
+            q=run.q[keep],
             v=run.v[keep],
             update_time=np.full(n, np.nan),
         )
@@ -963,14 +1222,17 @@ def serve(
     meshcat = require("meshcat", "live meshcat playback")
     vis = meshcat.Visualizer(zmq_url=zmq_url)
     vis.delete()
-    legend = build_scene(
+    scene = _scene(
         vis, result, robot, fps=fps, observers=observers, opacity=opacity, progress=progress
     )
+    legend = scene.legend
     url = str(vis.url())
     echo(f"meshcat playback of {robot.name}: {url}")
+    for note in scene.notes:
+        echo(f"  {note}")
     for e in legend:
         what = "model colours" if e.colour is None else f"estimate, {e.colour_name}"
-        echo(f"  {e.label}: {what}")
+        echo(f"  {e.label}: {what}" + (f" ({e.gap_note})" if e.gaps else ""))
     echo("  (Open Controls → Animations: play, pause, time)")
     if open_browser:
         vis.open()

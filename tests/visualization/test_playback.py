@@ -181,6 +181,168 @@ def test_diverged_ghost_freezes_at_its_last_estimate_and_says_so(
     assert np.all(np.isfinite(values))
     assert frozen.sum() > 5
     np.testing.assert_array_equal(values[frozen], np.repeat(values[frozen][:1], frozen.sum(), 0))
+    # and hidden from then on (the legend: "diverged at …; hidden from …")
+    (track,) = clips(html)["/meshcat/ghost_0_kf"]["tracks"]
+    first = int(np.argmax(frozen))
+    assert [(k["time"], k["value"]) for k in track["keys"]] == [
+        (0, True),
+        (first, False),
+        (len(frozen) - 1, False),
+    ]
+
+
+def commands_b64(html: Path) -> list[str]:
+    """The meshcat commands embedded in a page, as the base64 strings the page holds."""
+    text = html.read_text(encoding="utf-8")
+    block = text[
+        text.index("var pinobsCommands = [") : text.index("];", text.index("var pinobsCommands"))
+    ]
+    return re.findall(r'"([A-Za-z0-9+/=]+)"', block)
+
+
+@pytest.mark.parametrize(
+    "budget",
+    [1_000_000, pytest.param(pb.MAX_ANIMATION_BYTES, marks=pytest.mark.slow)],  # 1.5 s, 4 s
+    ids=["1MB", "default"],
+)
+def test_long_run_keyframes_fit_the_page_budget_at_a_lower_rate_that_is_said(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, budget: int
+) -> None:
+    """A 300 s UR5 run with two ghosts: 28.7 MB of page before (30 keyframes per second, no
+    cap); now its keyframes take at most MAX_ANIMATION_BYTES (8 MB: 11.8 MB of page), at a
+    rate the page and a warning give.  (Packing 8 MB of keyframes takes seconds: the default
+    suite checks a 1 MB budget.)"""
+    monkeypatch.setattr(pb, "MAX_ANIMATION_BYTES", budget)
+    robot = pinobs.load("ur5")
+
+    def run(duration: float) -> Any:
+        t = np.arange(0.0, duration + 1e-9, 0.02)
+        q = robot.neutral() + 0.5 * np.sin(0.7 * t[:, None] + np.arange(robot.nq))
+        zeros = np.zeros((t.size, robot.nv))
+        traces = tuple(
+            pinobs.simulation.ObserverTrace(name, q + d, zeros, np.zeros(t.size))
+            for name, d in (("kf", 0.01), ("ekf", -0.02))
+        )
+        return pinobs.simulation.Result(robot.name, t, q, zeros, zeros, q, traces)
+
+    def animation(html: Path) -> str:
+        (anim,) = [b for b in commands_b64(html) if b"set_animation" in base64.b64decode(b)[:40]]
+        return anim
+
+    with pytest.warns(pinobs.errors.PinobsWarning, match=r"keyframes at \d+(\.\d+)? per second"):
+        html = write_html(run(300.0), robot, tmp_path / "long.html")
+    short = write_html(run(1.5), robot, tmp_path / "short.html")
+    anim = animation(html)
+    assert 0.8 * budget < len(anim) <= budget  # 9000 frames of 21 shapes wanted
+    # the rest of the page is the short run's (viewer, meshes), but for the chart's samples
+    # (at most MAX_POINTS a curve; 2 ghosts: 21 curves)
+    rest = html.stat().st_size - len(anim)
+    assert rest < short.stat().st_size - len(animation(short)) + 21 * 800 * 10
+    fps = {clip["fps"] for clip in clips(html).values()}
+    assert len(fps) == 1 and 0.5 < min(fps) < FPS
+    (track, _) = clips(html)["/meshcat/ghost_0_kf/" + robot.visual_model.geometryObjects[1].name][
+        "tracks"
+    ]
+    fps = min(fps)
+    assert track["keys"][-1]["time"] / fps == pytest.approx(300.0, abs=1.0 / fps)  # the whole run
+    assert "keyframes at" in html.read_text(encoding="utf-8").split('id="pinobs-legend"')[1]
+
+
+def test_short_run_keeps_every_frame_and_says_nothing_of_a_budget(
+    cartpole_run: dict[str, Any],
+) -> None:
+    # (warnings are errors in the suite: the fixture's write_html warned of nothing)
+    text = cartpole_run["html"].read_text(encoding="utf-8")
+    assert "keyframes at" not in text and "pinobs-note" not in text.split("</style>")[1]
+    assert all(clip["fps"] == FPS for clip in clips(cartpole_run["html"]).values())
+
+
+def test_nan_rows_of_the_truth_hold_its_last_pose_and_the_page_says_so(
+    cartpole_run: dict[str, Any], tmp_path: Path
+) -> None:
+    """A NaN stretch in ``Result.q`` (it was a numpy LinAlgError in the camera's SVD)."""
+    result = cartpole_run["result"]
+    q = np.array(result.q)
+    q[100:200] = np.nan  # 0.5 s to 1.0 s at 200 Hz
+    with pytest.warns(pinobs.errors.PinobsWarning, match=r"truth: no data 0.5–1 s: pose held"):
+        html = write_html(
+            dataclasses.replace(result, q=q), cartpole_run["robot"], tmp_path / "q.html"
+        )
+    legend = html.read_text(encoding="utf-8").split('id="pinobs-legend"')[1]
+    assert "no data 0.5–1 s: pose held" in legend and "no data now: pose held" in legend
+    name = cartpole_run["robot"].visual_model.geometryObjects[1].name
+    (pos,) = [
+        t
+        for t in clips(html)["/meshcat/truth/visuals/" + name]["tracks"]
+        if t["name"] == ".position"
+    ]
+    values = np.array([k["value"] for k in pos["keys"]])
+    idx = pb.frame_indices(result.t, FPS)
+    held = (idx >= 100) & (idx < 200)
+    assert np.all(np.isfinite(values)) and held.sum() > 10
+    robot = cartpole_run["robot"]
+    geom = robot.visual_model
+    placed = pb._placements(
+        robot.model, robot.model.createData(), geom, pin.GeometryData(geom), q[99]
+    )
+    np.testing.assert_array_equal(values[held], np.tile(placed[1].translation, (held.sum(), 1)))
+    (before,) = [
+        t
+        for t in clips(cartpole_run["html"])["/meshcat/truth/visuals/" + name]["tracks"]
+        if t["name"] == ".position"
+    ]
+    np.testing.assert_array_equal(
+        values[~held], np.array([k["value"] for k in before["keys"]])[~held]
+    )
+
+
+def test_a_result_without_a_finite_configuration_is_refused(
+    cartpole_run: dict[str, Any], tmp_path: Path
+) -> None:
+    result = cartpole_run["result"]
+    empty = dataclasses.replace(result, q=np.full_like(result.q, np.nan))
+    with pytest.raises(pinobs.errors.NonFiniteError, match="no motion to play back"):
+        write_html(empty, cartpole_run["robot"], tmp_path / "x.html")
+
+
+def ghost_with_a_gap(result: Any, lo: int, hi: int, off: float = 0.0) -> Any:
+    """``result`` whose kf estimate is the truth, ``off`` [rad] off in its last coordinate, NaN on
+    rows ``lo:hi`` (no divergence: dropped samples)."""
+    tr = result.trace("kf")
+    q = np.array(result.q)
+    q[:, -1] += off
+    q[lo:hi] = np.nan
+    return dataclasses.replace(result, traces=(dataclasses.replace(tr, q=q),))
+
+
+def test_ghost_is_hidden_while_its_estimate_is_nan_and_the_page_says_so(
+    cartpole_run: dict[str, Any], tmp_path: Path
+) -> None:
+    """A ghost froze silently at its last estimate through NaN rows; now it is hidden there."""
+    result = cartpole_run["result"]
+    with pytest.warns(pinobs.errors.PinobsWarning, match=r"kf: no estimate 0.5–1 s: hidden"):
+        html = write_html(
+            ghost_with_a_gap(result, 100, 200), cartpole_run["robot"], tmp_path / "g.html"
+        )
+    assert "no estimate now: hidden" in html.read_text(encoding="utf-8")
+    (track,) = clips(html)["/meshcat/ghost_0_kf"]["tracks"]
+    assert track["name"] == ".visible" and track["type"] == "boolean"
+    keys = {k["time"]: k["value"] for k in track["keys"]}
+    idx = pb.frame_indices(result.t, FPS)
+    frames = np.arange(len(idx))
+    # a boolean track holds each key's value until the next key
+    shown = np.array([keys[max(k for k in keys if k <= f)] for f in frames])
+    np.testing.assert_array_equal(shown, ~((idx >= 100) & (idx < 200)))
+    assert max(keys) == frames[-1]  # the clip lasts the whole run (clips loop on their own length)
+
+
+def test_legend_names_the_stretches_without_an_estimate() -> None:
+    e = pb.LegendEntry("kf", "#000000", "black", "ghost_0_kf", gaps=((0.5, 1.0), (1.2, 1.5)))
+    assert e.gap_note == "no estimate in 2 stretches between 0.5 and 1.5 s (0.8 s in all): hidden"
+    diverged = dataclasses.replace(e, diverged_at=1.2, gaps=((1.2, 1.5),))
+    assert diverged.gap_note == "hidden from 1.2 s"  # (the divergence is said next to it)
+    truth = pb.LegendEntry("truth", None, "model colours", "truth", gaps=((0.5, 1.0),))
+    assert truth.gap_note == "no data 0.5–1 s: pose held"
 
 
 def test_run_without_observers_shows_the_truth_alone(
@@ -224,6 +386,65 @@ def test_robot_without_meshes_gets_a_stick_figure(tmp_path: Path) -> None:
     assert len([p for p in clips(html) if p.startswith("/meshcat/truth/")]) == geom.ngeoms
 
 
+SLIDER_ARM_URDF = """<?xml version="1.0"?>
+<robot name="slider_arm">
+  <link name="base"/>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="10" velocity="5"/></joint>
+  <link name="upper"><inertial><origin xyz="0.25 0 0"/><mass value="1"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="slide" type="prismatic"><parent link="upper"/><child link="carriage"/>
+    <origin xyz="0.5 0 0"/><axis xyz="1 0 0"/>
+    <limit lower="-0.2" upper="0.4" effort="10" velocity="1"/></joint>
+  <link name="carriage"><inertial><origin xyz="0.2 0 0"/><mass value="0.5"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+</robot>
+"""
+
+
+def test_stick_figure_of_a_prismatic_joint_stays_connected_as_it_slides(tmp_path: Path) -> None:
+    """The rod to a slider ended where it is at q = 0: sliding out left a gap of the slide's
+    length (0.3 m at q = 0.3).  Now it slides along a rail spanning its motion (here past its
+    limit, 0.4 m), and its sphere stays on the figure."""
+    urdf = tmp_path / "slider_arm.urdf"
+    urdf.write_text(SLIDER_ARM_URDF)
+    robot = pinobs.load(urdf)
+    assert robot.visual_model is None or robot.visual_model.ngeoms == 0
+    slides = np.array([-0.15, 0.0, 0.3, 0.6])
+    qs = np.column_stack([np.full(slides.size, 0.4), slides])
+    geom = pb._visual_model(robot, [qs])
+    model, data, gdata = robot.model, robot.model.createData(), pin.GeometryData(geom)
+    j = model.getJointId("slide")
+    assert [go.name for go in geom.geometryObjects if go.name.endswith("_rail")] == ["slide_rail"]
+
+    def gap(q: np.ndarray) -> float:
+        """Distance [m] from the slider's sphere to the nearest rod or rail not moving with it."""
+        pin.framesForwardKinematics(model, data, q)
+        pin.updateGeometryPlacements(model, data, geom, gdata)
+        c = data.oMi[j].translation
+        best = np.inf
+        for k, go in enumerate(geom.geometryObjects):
+            if go.name.endswith("_joint") or go.parentJoint == j:
+                continue
+            M, h = gdata.oMg[k], go.geometry.halfLength
+            a, b = M.act(np.array([0.0, 0.0, -h])), M.act(np.array([0.0, 0.0, h]))
+            s = np.clip((c - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
+            best = min(best, float(np.linalg.norm(a + s * (b - a) - c)))
+        return best
+
+    assert max(gap(q) for q in qs) < 1e-12
+    # without the motion, the rail spans the joint's limits
+    bare = pb._stick_figure(robot.model)
+    (rail,) = [go for go in bare.geometryObjects if go.name == "slide_rail"]
+    assert 2 * rail.geometry.halfLength == pytest.approx(0.6)
+    html = write_html(
+        pinobs.simulation.Result(robot.name, np.arange(4) / 30, qs, qs * 0, qs * 0, qs, ()),
+        robot,
+        tmp_path / "slider.html",
+    )
+    assert "/meshcat/truth/visuals/slide_rail" in clips(html)
+
+
 def test_decimation_meets_the_triangle_budget_inside_the_mesh_box(
     rng: np.random.Generator,
 ) -> None:
@@ -258,13 +479,21 @@ def test_recorded_log_plays_back_measured_motion_and_estimate(
     log = read_log(path, robot)
     observer = pinobs.make_observer("kf", robot, rate=200.0, noise_std=1e-4)
     played = log_result(robot, log, {"kf": estimate_log(observer, log)})
-    html = write_html(played, robot, tmp_path / "log.html", truth_label="measured")
+    # the first row has no reading (the simulated sensor's first sample is dropped), hence no
+    # estimate either: said
+    with pytest.warns(pinobs.errors.PinobsWarning) as said:
+        html = write_html(played, robot, tmp_path / "log.html", truth_label="measured")
+    assert sorted(str(w.message) for w in said) == [
+        "playback of cartpole: kf: no estimate 0–0.005 s: hidden",
+        "playback of cartpole: measured: no data 0–0.005 s: pose held",
+    ]
     text = html.read_text(encoding="utf-8")
     assert 'data-label="measured"' in text and "recorded motion" in text
     by_path = clips(html)
     assert any(p.startswith("/meshcat/ghost_0_kf/") for p in by_path)
     measured = np.all(np.isfinite(result.q_meas), axis=1)
     np.testing.assert_array_equal(played.q[measured], result.q_meas[measured])
+    assert np.all(np.isnan(played.q[~measured]))  # kept as no data, not filled in
 
 
 def test_result_of_another_robot_is_rejected(cartpole_run: dict[str, Any], tmp_path: Path) -> None:
@@ -377,6 +606,23 @@ def test_browser_ghost_moves_onto_the_truth_along_the_timeline(
     assert end["truth"].sum() > 0.8 * start["truth"].sum()
 
 
+@chromium
+def test_browser_hides_the_ghost_while_its_estimate_is_nan(
+    cartpole_run: dict[str, Any], tmp_path: Path
+) -> None:
+    """A ghost 0.6 rad off the truth, its estimate NaN from 0.5 to 1 s: seen before, not within."""
+    played = ghost_with_a_gap(cartpole_run["result"], 100, 200, off=0.6)
+    with pytest.warns(pinobs.errors.PinobsWarning, match="no estimate"):
+        html = write_html(played, cartpole_run["robot"], tmp_path / "gap.html")
+    before, within = (
+        colour_masks(screenshot(html, tmp_path / f"{i}.png", t=t, legend=False))
+        for i, t in enumerate((0.25, 0.75))
+    )
+    assert before["ghost"].sum() > 500
+    assert within["ghost"].sum() < 20
+    assert within["truth"].sum() > 500
+
+
 # ------------------------------------------------------------------ chart and floor
 
 
@@ -404,6 +650,28 @@ def test_page_embeds_the_chart_data_in_the_legend_colours(cartpole_run: dict[str
     err = np.linalg.norm(result.trace("kf").v - result.v, axis=1)[k]
     np.testing.assert_allclose(np.array(kf["err"], dtype=float), err, rtol=1e-3)
     np.testing.assert_allclose(np.array(data["truth"][1], dtype=float), result.v[k, 1], atol=1e-3)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, 1e200])
+def test_chart_of_an_estimate_lost_before_the_clip_start_warns_nothing(
+    cartpole_run: dict[str, Any], bad: float
+) -> None:
+    """An estimate NaN (or inf, or overflowing) from early on next to a good one: numpy's "Mean
+    of empty slice" (and overflow) RuntimeWarnings leaked out of chart_data; warnings are errors
+    here.  The joint shown first is the good estimate's worst."""
+    from pinobs.visualization.chart import chart_data
+
+    result, robot = cartpole_run["result"], cartpole_run["robot"]
+    kf = result.trace("kf")
+    v = np.array(kf.v)
+    v[len(v) // 10 :] = bad  # lost from 0.15 s on, before the transient clipped for the range
+    lost = dataclasses.replace(kf, name="lost", v=v, diverged_at=float(result.t[len(v) // 10]))
+    data = chart_data(
+        dataclasses.replace(result, traces=(kf, lost)), robot, ["kf", "lost"], ["#111111"] * 2
+    )
+    alone = chart_data(result, robot, ["kf"], ["#111111"])
+    assert data["joint"] == alone["joint"] and data["range"] == alone["range"]
+    assert all(x is None for x in data["obs"][1]["err"][len(data["t"]) // 5 :])
 
 
 def test_floor_grid_lies_under_the_ur5_and_ends_before_the_camera(tmp_path: Path) -> None:

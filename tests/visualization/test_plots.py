@@ -189,3 +189,28 @@ def test_plot_of_a_run_where_every_observer_diverged_is_written(run, tmp_path) -
     # was: ValueError: Data cannot be log-scaled (no finite error to draw)
     path = plot(dataclasses.replace(res, traces=nan), run["robot"], tmp_path / "d.png")
     assert path.stat().st_size > 0
+
+
+def test_slide_axis_is_the_axis_of_prismatic_joints_only(tmp_path: Path) -> None:
+    """Read from the motion subspace: aligned and unaligned prismatic joints (their velocity
+    in m/s), not revolute ones."""
+    from pinobs.visualization.axes import slide_axis, velocity_units
+
+    urdf = tmp_path / "two.urdf"
+    urdf.write_text(
+        """<?xml version="1.0"?><robot name="two"><link name="a"/>
+  <joint name="turn" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="b"><inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01"
+    iyz="0" izz="0.01"/></inertial></link>
+  <joint name="slide" type="prismatic"><parent link="b"/><child link="c"/><axis xyz="0.6 0.8 0"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <link name="c"><inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01"
+    iyz="0" izz="0.01"/></inertial></link></robot>"""
+    )
+    robot = pinobs.load(urdf)
+    model = robot.model
+    assert model.joints[2].shortname() == "JointModelPrismaticUnaligned"
+    assert slide_axis(model, 1) is None
+    np.testing.assert_allclose(slide_axis(model, 2), [0.6, 0.8, 0.0], atol=1e-12)
+    assert velocity_units(robot) == ["rad/s", "m/s"]

@@ -513,7 +513,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         )
     if args.html and run.estimated:
         _log_playback(args, robot, run, args.observer)
-    print(f"{args.observer} on {robot.name}: {run.summary()}; wrote {args.out}")
+    nan = " (every row NaN)" if run.estimated == 0 else ""
+    print(f"{args.observer} on {robot.name}: {run.summary()}; wrote {args.out}{nan}")
     if run.estimated == 0:
         print("pinobs: error: no row of the log could be estimated", file=sys.stderr)
         return 1
@@ -564,7 +565,8 @@ def _estimate_many(args: argparse.Namespace) -> int:
     _print_summary(table, f"{what} on {args.robot}")
     path = write_table(table, Path(args.out_dir) / "summary")
     failed = table[table["error"].notna()]
-    print(f"wrote {len(table) - len(failed)} estimates files and {path}")
+    written = int(table["out"].notna().sum())  # a log without an estimated row: all NaN
+    print(f"wrote {written} estimates files and {path}")
     for _, row in failed.iterrows():
         print(f"failed: {row['log']}: {row['error']}", file=sys.stderr)
     if len(failed):
@@ -762,7 +764,12 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             f"(--max-reports N to list more)",
             file=sys.stderr,
         )
-    for opts in stretches:
+    for i, opts in enumerate(stretches):
+        if len(stretches) > 1:  # each stretch between gaps is smoothed on its own
+            a, b = opts["t_span"]
+            print(
+                f"stretch {i + 1} of {len(stretches)}, t = {a:.6g} to {b:.6g} s:", file=sys.stderr
+            )
         print(
             f"filter–smoother consistency ρ = {opts['consistency']:.3g} (about 1: the densities "
             "explain the log; ≫ 1: too small, the band is too narrow; < 1: too large)",
@@ -807,7 +814,10 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
         mode = f"chunks of {args.chunk:g} s"
     if args.html and run.estimated:
         _log_playback(args, robot, run, f"{args.observer} smoothed")
-    print(f"smoothed {args.observer} on {robot.name} ({mode}): {run.summary()}; wrote {args.out}")
+    nan = " (every row NaN)" if run.estimated == 0 else ""
+    print(
+        f"smoothed {args.observer} on {robot.name} ({mode}): {run.summary()}; wrote {args.out}{nan}"
+    )
     if run.estimated == 0:
         print("pinobs: error: no row of the log could be smoothed", file=sys.stderr)
         return 1

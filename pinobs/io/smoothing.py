@@ -379,7 +379,9 @@ def _recorded(
             find_latency=True,  # as pinobs.smooth: a latency found is said (smooth_log)
         )
         samples_q[k], samples_v[k], samples_std[k] = res.q, res.v, res.v_std
-        stretches.append({**res.options, "consistency": res.consistency})
+        stretches.append(
+            {**res.options, "consistency": res.consistency, "t_span": (seg_t[0], seg_t[-1])}
+        )
     ok = np.isfinite(idx)
     rows = idx[ok].astype(int)
     q_s[ok], v_s[ok], std_s[ok] = samples_q[rows], samples_v[rows], samples_std[rows]

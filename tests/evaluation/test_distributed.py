@@ -104,6 +104,7 @@ def test_many_logs_one_estimates_file_each_equal_to_the_single_log_path_and_a_ba
     assert code == 1  # one log failed, and only that one
     assert "failed: " in captured.err and "broken.csv" in captured.err
     assert "1 of 4 logs failed" in captured.err
+    assert "wrote 3 estimates files" in captured.out  # the files there are (not 4 - failed)
     summary = pd.read_parquet(out / "summary.parquet")
     assert list(summary["log"]) == [str(p) for p in sorted(logs)]
     by = summary.set_index(summary["log"].map(lambda s: s.rsplit("/", 1)[-1]))

@@ -254,8 +254,9 @@ def test_every_row_bad_exits_1(tmp_path, sim, capsys) -> None:
     lines = [lines[0]] + [",".join(["x"] * 13) for _ in lines[1:]]
     path.write_text("\n".join(lines) + "\n")
     code = _estimate_kf(path, tmp_path / "o.csv")
-    err = capsys.readouterr().err
-    assert code == 1 and "no row of the log could be estimated" in err
+    said = capsys.readouterr()
+    assert code == 1 and "no row of the log could be estimated" in said.err
+    assert "(every row NaN)" in said.out  # the row-aligned file is written, and said to be empty
 
 
 def test_summary_counts_rows_not_reports(tmp_path, sim, capsys) -> None:

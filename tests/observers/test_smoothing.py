@@ -814,6 +814,23 @@ def test_cli_estimate_smooth_screens_rows_like_estimate_and_reads_every_format(
     np.testing.assert_allclose(np.loadtxt(out2, delimiter=",", skiprows=1), got, rtol=0, atol=1e-12)
 
 
+def test_cli_labels_each_stretch_it_smooths(tmp_path, ur5_log, capsys) -> None:
+    """A gap of 21 periods restarts the smoother: two stretches, each with its own ρ, which
+    were printed as two bare lines; each now says which stretch and times it is."""
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    keep = np.r_[1:250, 270:601]
+    log = write_log(tmp_path / "log.csv", ur5_log.t[keep], ur5_log.q_meas[keep], ur5_log.tau[keep])
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log)]
+    argv += ["--out", str(tmp_path / "e.csv")]
+    assert main([*argv, "--smooth", "--noise", "1e-4", "--accel-psd", "1e-4"]) == 0
+    err = capsys.readouterr().err
+    assert "stretch 1 of 2, t = 0.001 to 0.249 s:" in err
+    assert "stretch 2 of 2, t = 0.27 to 0.6 s:" in err
+    assert err.count("filter–smoother consistency ρ") == 2
+
+
 def test_streamed_smoothing_of_a_log_file_equals_the_recorded_one_through_gaps_and_restarts(
     tmp_path, ur5_log
 ) -> None:

@@ -383,7 +383,9 @@ def _cmd_play(args: argparse.Namespace) -> int:
     root = args.root_joint or result.meta.get("root_joint")
     if args.robot is None:
         _check_saved_robot_file(args, str(source))
-    robot = load(source, root_joint=root)
+    robot = load(
+        source, root_joint=root, mimic=result.meta.get("mimic") if not args.robot else None
+    )
     if robot.name != result.robot and not args.force:
         raise UnsupportedRobotError(
             f"{args.result!r} is a run of {result.robot!r}, not of {robot.name!r}; leave out "
@@ -548,6 +550,7 @@ def _estimate_many(args: argparse.Namespace) -> int:
         observer=args.observer,
         root_joint=args.root_joint,
         friction=True if args.friction else None,
+        mimic=args.mimic,
         force=args.force,
         columns=_column_map(args.map),
         topic=args.topic,
@@ -1078,11 +1081,6 @@ def _load(args: argparse.Namespace) -> Robot:
     """The robot of ``--robot``, ``--root-joint``, ``--friction`` and ``--mimic``."""
     friction = True if getattr(args, "friction", False) else None
     mimic = getattr(args, "mimic", None)
-    if mimic is not None and getattr(args, "out_dir", None) is not None:
-        raise OptionError(
-            "--mimic is not passed on to the per-log tasks of --out-dir; estimate one log at a "
-            "time (--out), or remove the URDF's <mimic> tags"
-        )
     return load(args.robot, root_joint=args.root_joint, friction=friction, mimic=mimic)
 
 

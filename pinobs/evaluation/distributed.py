@@ -389,6 +389,7 @@ class LogTask:
     observer: str
     root_joint: str | None = None
     friction: bool | None = None  # pinobs.load's friction
+    mimic: str | None = None  # pinobs.load's mimic
     force: bool = False
     columns: tuple[tuple[str, str], ...] = ()
     topic: str | None = None
@@ -409,6 +410,7 @@ def log_tasks(
     observer: str,
     root_joint: str | None = None,
     friction: bool | None = None,
+    mimic: str | None = None,
     force: bool = False,
     columns: Mapping[str, str] | None = None,
     topic: str | None = None,
@@ -475,6 +477,7 @@ def log_tasks(
             observer=observer,
             root_joint=root_joint,
             friction=friction,
+            mimic=mimic,
             force=force,
             columns=tuple(sorted((columns or {}).items())),
             topic=topic,
@@ -499,7 +502,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
     from pinobs.observers.smoothing import smoothing_warnings
 
     start = time.perf_counter()
-    robot = load(task.robot, root_joint=task.root_joint, friction=task.friction)
+    robot = load(task.robot, root_joint=task.root_joint, friction=task.friction, mimic=task.mimic)
     common: dict[str, Any] = {
         "force": task.force,
         "columns": dict(task.columns) or None,

@@ -636,7 +636,7 @@ def load(
         cross_check(model, *compiled)
     if check:
         check_model(model)
-    return Robot(
+    robot = Robot(
         model,
         name=name,
         source=str(source),
@@ -644,6 +644,8 @@ def load(
         root_joint=None if compiled is not None else root,  # MuJoCo: the file's own root
         geometry=geometry,  # meshes: on first draw
     )
+    robot.mimic = mimic  # as asked (a saved run reloads its robot so: pinobs play)
+    return robot
 
 
 def _urdf_geometry(xml: str, model: pin.Model) -> tuple[Any, Any]:

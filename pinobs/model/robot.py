@@ -126,6 +126,7 @@ class Robot:
     ) -> None:
         self.model = model
         self.root_joint = root_joint
+        self.mimic: str | None = None  # how pinobs.load took URDF <mimic> joints, if asked
         self.name = name
         self.source = source
         self._geometry_loader = geometry

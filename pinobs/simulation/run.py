@@ -244,6 +244,7 @@ def simulate(
         "robot": robot.name,
         "robot_source": _portable_source(getattr(robot, "source", robot.name)),
         "root_joint": getattr(robot, "root_joint", None),
+        "mimic": getattr(robot, "mimic", None),
         "duration": duration,
         "rate": sensor.rate,
         "noise_std": sensor.noise_std,

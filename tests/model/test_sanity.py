@@ -165,6 +165,20 @@ def test_the_command_line_loads_a_mimic_file_with_the_option_its_error_names(
     assert "--mimic independent (the pinobs command)" in err  # was mimic='independent' only
     assert main(["check", "ii", "--robot", str(f), "--mimic", "independent"]) in (0, 1)
     assert "Assumption 1" in capsys.readouterr().out
+    # a saved run replays with the mimic choice it was run with (play refused the file before)
+    run = tmp_path / "run.npz"
+    common = ["--robot", str(f), "--mimic", "independent", "--duration", "0.2"]
+    assert main(["run", *common, "--observer", "kf", "--save", str(run)]) == 0
+    assert main(["play", str(run), "--html", str(tmp_path / "p.html"), "--no-progress"]) == 0
+    # and estimate --out-dir passes it to each log's task (refused before)
+    from pinobs.io import write_log
+
+    res = pinobs.Result.load(run)
+    (tmp_path / "logs").mkdir()
+    write_log(tmp_path / "logs" / "a.csv", res.t, res.q_meas, res.tau)
+    many = ["--log", str(tmp_path / "logs"), "--out-dir", str(tmp_path / "out"), "--workers", "0"]
+    argv = ["estimate", "--robot", str(f), "--mimic", "independent", "--observer", "kf"]
+    assert main([*argv, *many, "--noise", "1e-3", "--no-progress"]) == 0
 
 
 def test_registry_robots_with_mimic_grippers_load_them_as_independent_joints() -> None:

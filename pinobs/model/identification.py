@@ -69,7 +69,9 @@ was tried first: non-convex, and Levenberg-Marquardt stalled on it.)
 from __future__ import annotations
 
 import functools
+import itertools
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from os import PathLike
@@ -79,9 +81,9 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from pinobs.errors import DimensionError, IdentificationError
+from pinobs.errors import DimensionError, IdentificationError, PinobsWarning, TimestampError
 from pinobs.model.robot import Robot, Vector
-from pinobs.tolerances import COULOMB_SMOOTHING_VELOCITY
+from pinobs.tolerances import ABSURD_LIMIT_FACTOR, ABSURD_VALUE, COULOMB_SMOOTHING_VELOCITY
 
 __all__ = [
     "IDENTIFICATION_FD_STEP",
@@ -763,6 +765,24 @@ def segments(t: Vector, q: Vector, tau: Vector) -> list[slice]:
     return [seg for seg in out if seg.stop - seg.start >= 2]
 
 
+#: A given path's samples closer than this many half windows (of :func:`build_rows`) to
+#: the end of its stretch are not used: a smoother started afresh on each stretch has not
+#: converged there.  Measured (UR5, σ = 1e-4, RTS on the identified model, gaps of 20
+#: rows): its velocity error is 30–130× the interior's at a stretch's first sample, 2–5× at
+#: 20 samples, 1–2× at 50, 1× at 100 (two half windows at 1 kHz).
+SETTLE_WINDOWS = 2
+
+
+def _settled_runs(finite: NDArray[np.bool_], settle: int) -> list[slice]:
+    """The runs of ``finite``, each without its first and last ``settle`` samples."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], finite.astype(np.int8), [0]])))
+    out = []
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if b - a > 2 * settle + 1:
+            out.append(slice(int(a) + settle, int(b) - settle))
+    return out
+
+
 def build_rows(
     reg: MomentumRegressor,
     t: Vector,
@@ -782,7 +802,8 @@ def build_rows(
         quadrature: longest trapezoid step of the regressor integrals [s].
         path: estimated ``(q, v)`` at every sample, ``(N, nq)`` and ``(N, nv)``
             (e.g. a model-based smoother's), used instead of :func:`smooth_path`
-            on every stretch where it is finite.
+            on every stretch where it is finite, except within :data:`SETTLE_WINDOWS`
+            half windows of its runs' ends (those rows are not used).
     """
     As, ys, ends = [], [], []
     for seg in segments(t, q, tau):
@@ -793,21 +814,33 @@ def build_rows(
         hw = max(2, round(half_window / h))
         if ts.shape[0] < max(win + 1, 2 * hw + 1):
             continue
-        if path is not None and np.all(np.isfinite(path[1][seg])):
-            q_s, v = path[0][seg], path[1][seg]
-        else:  # no estimate given, or none for this stretch
+        given = None if path is None else np.all(np.isfinite(path[1][seg]), axis=1)
+        if given is None or not given.any():  # no estimate given, or none for this stretch
             q_s, v = smooth_path(reg.robot, ts, qs, half_window=hw)
-        A, y = reg.system(ts, q_s, v, taus, window=win, stride=stride)
-        As.append(A)
-        ys.append(y)
-        ends += [float(ts[(w + 1) * win]) for w in range(A.shape[0] // reg.robot.nv)]
+            parts = [(slice(0, ts.shape[0]), q_s, v)]
+        else:
+            assert path is not None
+            parts = [
+                (run, path[0][seg][run], path[1][seg][run])
+                for run in _settled_runs(given, SETTLE_WINDOWS * hw)
+            ]
+        for run, q_s, v in parts:
+            A, y = reg.system(ts[run], q_s, v, taus[run], window=win, stride=stride)
+            As.append(A)
+            ys.append(y)
+            t0 = run.start
+            ends += [float(ts[t0 + (w + 1) * win]) for w in range(A.shape[0] // reg.robot.nv)]
     if not As:
         return np.zeros((0, reg.size)), np.zeros(0), []
     return np.vstack(As), np.concatenate(ys), ends
 
 
-def log_arrays(robot: Robot, log: Any) -> tuple[Vector, Vector, Vector]:
-    """``(t, q, tau)`` of a log as :func:`identify` reads it, checked against ``robot``.
+def log_arrays(
+    robot: Robot, log: Any, *, warn_filled: bool = True
+) -> tuple[Vector, Vector, Vector]:
+    """``(t, q, tau)`` of a log as :func:`identify` reads it, checked against ``robot``, short
+    runs of NaN rows filled (:func:`fill_short_gaps`, with a :class:`PinobsWarning`;
+    ``warn_filled=False`` leaves them).
 
     ``log``: a tuple ``(t, q, tau)``, or an object with ``t``, ``q``, ``tau``
     (a ``Log``); a simulation ``Result`` is read through its measured
@@ -816,6 +849,7 @@ def log_arrays(robot: Robot, log: Any) -> tuple[Vector, Vector, Vector]:
     Raises:
         IdentificationError: no torques.
         DimensionError: shapes that do not fit ``robot``.
+        TimestampError: finite times that repeat or step back.
     """
     if isinstance(log, (tuple, list)):
         if len(log) != 3:
@@ -844,33 +878,123 @@ def log_arrays(robot: Robot, log: Any) -> tuple[Vector, Vector, Vector]:
     t = np.asarray(t, dtype=float)
     q = np.asarray(q, dtype=float)
     tau = np.asarray(tau, dtype=float)
-    if q.ndim != 2 or q.shape != (t.shape[0], robot.nq) or tau.shape != (t.shape[0], robot.nv):
+    if (
+        t.ndim != 1
+        or q.ndim != 2
+        or q.shape != (t.shape[0], robot.nq)
+        or tau.shape != (t.shape[0], robot.nv)
+    ):
         raise DimensionError(
             f"log shapes t {t.shape}, q {q.shape}, tau {tau.shape} do not fit robot "
-            f"{robot.name!r} (nq = {robot.nq}, nv = {robot.nv})"
+            f"{robot.name!r} (t (N,), q (N, nq = {robot.nq}), tau (N, nv = {robot.nv}))"
         )
+    with np.errstate(invalid="ignore"):
+        absurd = np.abs(tau) > robot.absurd_torque
+    if absurd.any():
+        k, j = (int(i[0]) for i in np.nonzero(absurd))
+        raise IdentificationError(
+            f"{int(absurd.any(axis=1).sum())} row(s) have absurd torques, the first tau[{k}] "
+            f"(t = {t[k]:.9g} s) = {tau[k, j]:.6g} on coordinate {j}, beyond "
+            f"{robot.absurd_torque[j]:.6g} ({ABSURD_LIMIT_FACTOR:g}× the URDF effort limit, "
+            f"{ABSURD_VALUE:g} without one): check the torques' units, or set those rows to NaN"
+        )
+    tf = t[np.isfinite(t)]
+    back = np.flatnonzero(np.diff(tf) <= 0.0)
+    if back.size:
+        k = int(back[0])
+        raise TimestampError(
+            f"the log's times do not increase: {back.size} finite row(s) repeat or step back, "
+            f"the first at t = {tf[k]:.9g} s followed by t = {tf[k + 1]:.9g} s; give each sample "
+            "its own, increasing time (sort the log and drop duplicated rows)"
+        )
+    if warn_filled:
+        q, tau, filled = fill_short_gaps(robot, t, q, tau)
+        if filled:
+            warnings.warn(
+                f"{filled} row(s) with NaN positions or torques, in runs of at most "
+                f"{MAX_FILL} rows, were filled by interpolating their neighbours (longer runs "
+                "split the log into stretches)",
+                PinobsWarning,
+                stacklevel=3,
+            )
     return t, q, tau
+
+
+#: Runs of at most this many rows with NaN positions or torques between finite rows are
+#: filled by interpolation (:func:`fill_short_gaps`); a longer run splits the log.  At 1 kHz
+#: the linear interpolation errs by ``|q̈|(4h)²/8`` ≈ 2e-5 rad at 10 rad/s², below the noise.
+MAX_FILL = 3
+
+
+def fill_short_gaps(robot: Robot, t: Vector, q: Vector, tau: Vector) -> tuple[Vector, Vector, int]:
+    """``(q, tau, n)``: runs of at most :data:`MAX_FILL` rows whose positions or torques are
+    not finite, between finite rows of uniform time steps, interpolated linearly in time (on
+    the configuration manifold for ``q``); ``n`` the rows filled.
+
+    A missing sample broke the log into stretches that each need their own smoothing
+    start-up and lose their ends: with 2 % of a UR5 log's rows NaN (single rows), the
+    stretches averaged 50 samples, shorter than one window.
+    """
+    good = np.isfinite(t) & np.all(np.isfinite(q), axis=1) & np.all(np.isfinite(tau), axis=1)
+    if good.all() or good.sum() < 2:
+        return q, tau, 0
+    q, tau = q.copy(), tau.copy()
+    h = float(np.median(np.diff(t[good])))
+    idx = np.flatnonzero(good)
+    filled = 0
+    for a, b in itertools.pairwise(idx):
+        gap = b - a - 1
+        if gap == 0 or gap > MAX_FILL or not np.all(np.isfinite(t[a : b + 1])):
+            continue
+        steps = np.diff(t[a : b + 1])
+        if np.any(np.abs(steps - h) > 0.1 * h):
+            continue
+        for k in range(a + 1, b):
+            s = (t[k] - t[a]) / (t[b] - t[a])
+            q[k] = robot.integrate(q[a], s * robot.difference(q[a], q[b]))
+            tau[k] = (1.0 - s) * tau[a] + s * tau[b]
+        filled += gap
+    return q, tau, filled
 
 
 #: A joint whose held-out residual the fit makes more than this many times the nominal
 #: model's is named in the report's ``warnings`` (the fit does not predict unseen data there).
 HOLDOUT_WORSE = 2.0
 
-#: A coordinate where the fit leaves more than this fraction of its torque side unexplained
-#: (``report["unexplained"]``: RMS of ``Aθ − y`` over RMS of ``y``) is named in ``warnings``.
-UNEXPLAINED_WARN = 0.5
+#: A coordinate where the fit leaves more of its torque side unexplained
+#: (``report["unexplained"]``) than this many times what noise alone would leave
+#: (``report["unexplained_floor"]``, :func:`_unexplained`), and more than
+#: :data:`UNEXPLAINED_MIN`, is named in ``warnings``.
+UNEXPLAINED_WARN = 3.0
+
+#: The share left unexplained below which no coordinate is named, whatever the noise floor
+#: (model-form errors the noise model does not cover: Coulomb switching, quadrature).
+UNEXPLAINED_MIN = 0.01
+
+
+#: A window whose residual alone exceeds this share of the coordinate's typical torque
+#: side (and :data:`UNEXPLAINED_WARN` times the noise floor) is named in ``warnings``.
+OUTLIER_SHARE = 0.5
+
+
+def _percent(x: float) -> str:
+    """A share as a percentage; ``"no torque"`` where there is none to share (not "inf %")."""
+    return f"{100 * x:.3g} %" if math.isfinite(x) else "no torque"
 
 
 def _fit_warnings(report: dict[str, Any]) -> list[str]:
     """What the data say against the fit.
 
-    * The coordinates where it leaves more than :data:`UNEXPLAINED_WARN` of the torque
-      side unexplained (no parameters of this robot explain these torques).  Measured on a
-      6 s UR5 log with a payload (``pinobs.identify``; this function on the Savitzky–Golay
-      path in brackets): the fit leaves 0.01–0.03 % (0.07–2.0 %) as logged, 29–137 %
-      (23–120 %) with the torques negated, 98–100 % (95–102 %) at ×100, and all of it with
-      zero torques; ×0.5 and ×3 are absorbed by a common scale (as logged).  A sweep found
-      a log with negated torques written out as a calibrated URDF without a word.
+    * The coordinates where it leaves more of the torque side unexplained than
+      :data:`UNEXPLAINED_WARN` times what noise alone would (:func:`_unexplained`), and
+      more than :data:`UNEXPLAINED_MIN` (no parameters of this robot explain these torques).
+      A fixed 50 % bar let a double pendulum's negated torques (26–32 % unexplained) write
+      link1 at 7.15 kg (truth 0.32).  Measured with ``pinobs.identify`` on 6 s logs
+      (double pendulum, UR5; seeds 1, 2; σ = 1e-4, 1e-3; payload and friction mismatches):
+      clean logs leave 0.01–1.4 %, below 3× their floor; negated torques 10–182 %,
+      reversed joint order 4.8–132 %, friction not identified on a plant with it 8.7–86 %.
+    * Windows whose residual alone is more than :data:`OUTLIER_SHARE` of the torques (a
+      spike, a glitch): named by their end times.
     * Cross-validation on its held-out end, unseen by it: the coordinates whose prediction
       residual it makes more than :data:`HOLDOUT_WORSE` times the nominal model's, or that
       nothing was held out (the fit then goes unchecked).  Found by a sweep: a 0.45 s log
@@ -878,17 +1002,34 @@ def _fit_warnings(report: dict[str, Any]) -> list[str]:
       held-out residual 33× the nominal's, both without a word.
     """
     said = []
+    if report.get("filled_rows"):
+        said.append(
+            f"{report['filled_rows']} row(s) with NaN positions or torques, in runs of at most "
+            f"{MAX_FILL} rows, were filled by interpolating their neighbours"
+        )
     unexplained = [
-        f"{name} ({100 * u:.3g} %)"
-        for name, u in zip(report["coordinates"], report["unexplained"], strict=True)
-        if not u <= UNEXPLAINED_WARN
+        f"{name} ({_percent(u)}; noise alone would leave {_percent(f)})"
+        for name, u, f in zip(
+            report["coordinates"], report["unexplained"], report["unexplained_floor"], strict=True
+        )
+        if not u <= max(UNEXPLAINED_WARN * f, UNEXPLAINED_MIN)
     ]
     if unexplained:
         said.append(
-            "the fit leaves most of the torques unexplained on "
+            "the fit leaves more of the torques unexplained than noise would on "
             + ", ".join(unexplained)
             + ": no parameters of this robot explain them; check the torques' sign and units "
-            "(N·m, N), their joint order, and that they drive this robot"
+            "(N·m, N), their joint order, that they drive this robot, and friction (identify "
+            "it unless the joints have none)"
+        )
+    out = report.get("outlier_windows", [])
+    if out:
+        said.append(
+            f"{len(out)} window(s) of {report['rows'] // len(report['coordinates'])} leave more "
+            f"than {100 * OUTLIER_SHARE:.3g} % of the torques unexplained, ending at t = "
+            + ", ".join(f"{x:.6g}" for x in out[:5])
+            + (", …" if len(out) > 5 else "")
+            + " s: check the log there (a torque spike, a glitch); they were down-weighted"
         )
     if report["holdout_rows"] == 0:
         said.append(
@@ -911,6 +1052,101 @@ def _fit_warnings(report: dict[str, Any]) -> list[str]:
             "right; check before using it"
         )
     return said
+
+
+#: Median of a χ² variable with one degree of freedom: ``median(x²) / _CHI2_1_MEDIAN`` is the
+#: variance of zero-mean Gaussian ``x``, robustly (one outlier row does not move it).
+_CHI2_1_MEDIAN = 0.454936423119572
+
+
+def _robust_rms(x: Vector) -> Vector:
+    """Per column, ``√(median(x²) / median(χ²₁))``: the RMS of zero-mean Gaussian columns,
+    unmoved by a few outlying rows."""
+    return np.sqrt(np.median(x**2, axis=0) / _CHI2_1_MEDIAN)
+
+
+def _difference_noise(x: Vector) -> Vector:
+    """Per column, the white-noise σ of samples of a smooth signal: robust third differences,
+    ``σ̂² = median(d²) / (20 · median(χ²₁))`` (Gasser, Sroka & Jennen-Steinmetz 1986; the
+    estimator of :mod:`pinobs.observers.noise`, which this layer cannot import)."""
+    d = x[3:] - 3.0 * x[2:-1] + 3.0 * x[1:-2] - x[:-3]
+    d = d[np.all(np.isfinite(d), axis=1)]
+    if d.shape[0] == 0:
+        return np.zeros(x.shape[1])
+    return np.sqrt(np.median(d**2, axis=0) / (20.0 * _CHI2_1_MEDIAN))
+
+
+def _unexplained(
+    reg: MomentumRegressor,
+    A: Vector,
+    y: Vector,
+    sol: Solution,
+    t: Vector,
+    q: Vector,
+    tau: Vector,
+    window: float,
+) -> tuple[list[float], list[float]]:
+    """Per coordinate, the share of the torque side the fit leaves unexplained and the share
+    noise alone would leave (:data:`UNEXPLAINED_WARN`).
+
+    ``unexplained_j = S(r_j) / S(y_j)`` with ``r = Aθ − y`` the weighted rows' residual and
+    ``S(x) = √(median(x²) / median(χ²₁))`` (the RMS of Gaussian rows, unmoved by a few
+    outlying windows: a single torque spike is not "100 % unexplained").
+
+    The noise floor: a window's weighted row is ``M₀⁻¹ (ΔM v − ∫Y_G π − ∫τ) / T``.  A
+    velocity error ``δv`` at its two ends (independent: the smoother's span is about a
+    window) adds ``(δv₂ − δv₁)/T``, RMS ``√2 σ_v / T``, with ``σ_v = σ_q ‖c_v‖`` the
+    Savitzky–Golay derivative's noise gain on the position noise ``σ_q`` (an upper bound
+    for the model-based smoother's); white torque noise ``σ_τ`` adds
+    ``M₀⁻¹ σ_τ √(h/T)``.  A least-squares fit of ``p`` combinations to ``n`` rows absorbs
+    ``p/n`` of it, so noise alone leaves ::
+
+        floor_j = √((2 σ_v²/T² + Σ_k (M₀⁻¹)_jk² σ_τk² h/T) · (n − p)/n) / S(y_j)
+
+    ``σ_q`` and ``σ_τ`` are measured on the log (:func:`_difference_noise`).
+    """
+    nv = reg.robot.nv
+    res = (A @ sol.theta - y).reshape(-1, nv)
+    scale = _robust_rms(y.reshape(-1, nv))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(scale > 0, _robust_rms(res) / scale, math.inf)
+    good = np.isfinite(t) & np.all(np.isfinite(q), axis=1) & np.all(np.isfinite(tau), axis=1)
+    rows = np.flatnonzero(good)
+    h = float(np.median(np.diff(t[rows])))
+    robot = reg.robot
+    if robot.is_vector_space:
+        u = q[rows]
+    else:
+        u = np.array([robot.difference(q[rows[0]], q[k]) for k in rows])
+    sigma_q = _difference_noise(u)
+    sigma_tau = _difference_noise(tau[rows])
+    hw = max(2, round(0.05 / h))  # build_rows' default half window
+    c_v, _ = _savgol_coefficients(2 * hw + 1, min(4, 2 * hw), h)
+    sigma_v = sigma_q * float(np.linalg.norm(c_v))
+    m_inv = np.linalg.inv(robot.mass_matrix(q[rows[rows.size // 2]]))
+    var = 2.0 * sigma_v**2 / window**2 + (m_inv**2 @ sigma_tau**2) * h / window
+    n = A.shape[0]
+    dof = max(n - sol.rank, 0) / n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        floor = np.where(scale > 0, np.sqrt(var * dof) / scale, 0.0)
+    return share.tolist(), floor.tolist()
+
+
+def _why_no_window(t: Vector, q: Vector, tau: Vector) -> str:
+    """What broke the log into stretches too short for a window (for the refusal)."""
+    good = np.isfinite(t) & np.all(np.isfinite(q), axis=1) & np.all(np.isfinite(tau), axis=1)
+    if good.sum() < 2:
+        return ": fewer than two finite rows"
+    dt = np.diff(t[good])
+    h = float(np.median(dt))
+    off = float(np.mean(np.abs(dt - h) > 0.1 * h))
+    if off > 0.05:
+        return (
+            f": {100 * off:.3g} % of its sample intervals are more than 10 % off the median "
+            f"{h:.3g} s (timestamp jitter); identification needs uniform sampling: resample "
+            "the log onto a uniform time grid"
+        )
+    return f": {100 * (1 - good.mean()):.3g} % of its rows have NaN (gaps split it)"
 
 
 def _rows_of(
@@ -966,7 +1202,8 @@ def identify(
         IdentificationError: no torques, too short, never moves, or not
             exciting enough (condition number above ``max_condition``).
     """
-    t, q, tau = log_arrays(robot, log)
+    t, q, tau = log_arrays(robot, log, warn_filled=False)
+    q, tau, filled = fill_short_gaps(robot, t, q, tau)
     if not 0.0 <= holdout < 1.0:
         raise DimensionError(f"holdout={holdout!r} must be in [0, 1)")
     est: tuple[Vector, Vector] | None = None
@@ -988,9 +1225,11 @@ def identify(
         )
     split = t_end - holdout * (t_end - t_start)
     fit = t <= split
-    A, y, _ = build_rows(reg, t[fit], q[fit], tau[fit], window=window, path=_rows_of(est, fit))
+    A, y, ends = build_rows(reg, t[fit], q[fit], tau[fit], window=window, path=_rows_of(est, fit))
     if A.shape[0] == 0:
-        raise IdentificationError("no complete window of contiguous finite samples in the log")
+        raise IdentificationError(
+            "no complete window of contiguous finite samples in the log" + _why_no_window(t, q, tau)
+        )
     if float(np.nanmax(np.nanmax(q, axis=0) - np.nanmin(q, axis=0))) < 1e-6:
         raise IdentificationError("the robot never moves in this log: nothing to identify")
     sol = solve(reg, A, y)
@@ -1010,6 +1249,12 @@ def identify(
         return np.sqrt(np.mean(res**2, axis=0)).tolist()
 
     after = per_joint(A, y, sol.theta)
+    unexplained, floor = _unexplained(reg, A, y, sol, t[fit], q[fit], tau[fit], window)
+    res_w = np.abs(A @ sol.theta - y).reshape(-1, nv)
+    bound = np.maximum(OUTLIER_SHARE, UNEXPLAINED_WARN * np.asarray(floor)) * _robust_rms(
+        y.reshape(-1, nv)
+    )
+    outliers = [ends[w] for w in np.flatnonzero(np.any(res_w > bound, axis=1))]
 
     A_h, y_h, _ = (
         build_rows(reg, t[~fit], q[~fit], tau[~fit], window=window, path=_rows_of(est, ~fit))
@@ -1019,11 +1264,11 @@ def identify(
     report = {
         "residual_before": per_joint(A, y, theta0),
         "residual_after": after,
-        # the fraction of the torque side left unexplained: RMS(Aθ − y) / RMS(y), fitted part
-        "unexplained": [
-            a / m if m > 0.0 else math.inf
-            for a, m in zip(after, per_joint(A, y, None), strict=True)
-        ],
+        # the fraction of the torque side left unexplained, robustly, and what noise leaves
+        "unexplained": unexplained,
+        "unexplained_floor": floor,
+        # windows (their end times [s]) whose residual alone is a large share of the torques
+        "outlier_windows": outliers,
         "holdout_before": per_joint(A_h, y_h, theta0),
         "holdout_after": per_joint(A_h, y_h, sol.theta),
         "condition": sol.condition,
@@ -1036,6 +1281,7 @@ def identify(
         "holdout_rows": int(A_h.shape[0]),
         "fit_end": split,
         "sigma": sol.sigma,
+        "filled_rows": filled,
         "joints": list(robot.joint_names),
         # the per-joint lists' entries: one per velocity coordinate (<joint>.<k> for several)
         "coordinates": [

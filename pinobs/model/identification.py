@@ -31,8 +31,14 @@ with ``a = v``; ``Y_G(q, v) π = C(q, v)ᵀ v − g(q) = Ṁ v − (C v + g)`` i
 ``D_v Y_M(q, v) − Y(q, v, 0)`` (the derivative of ``Y_M`` along ``q ⊕ εv``
 with ``v`` held, by a central difference of step
 :data:`IDENTIFICATION_FD_STEP`; ``Y(q, v, 0)`` the regressor of ``C v + g``).
-``∫ τ dt`` is exact for a zero-order-hold torque (MATH §7); the other
-integrals use the trapezoidal rule on every ``stride``-th sample.  ``v`` and a
+``∫ τ dt`` is exact for a zero-order-hold torque (``torque="held"``, MATH §7:
+``pinobs.simulate``'s, a drive's commanded torque) or the trapezoidal rule for a
+torque sampled at the instants (``torque="sampled"``: an excitation's, a torque
+sensor's); the wrong one is off by ``h (τ(t₂) − τ(t₁))/2`` per window, a bias
+∝ 1/rate (a 100 Hz excitation read as held: a spurious damping of 0.16 N·m·s/rad
+on planar_3r, 0.016 at 1 kHz; a UR5 simulation read as sampled: acceleration error
+0.15 against 2.7e-4).  The friction integrals use the trapezoidal rule at the full
+rate, the drift integral every ``stride``-th sample.  ``v`` and a
 smoothed ``q`` come from a zero-phase Savitzky–Golay fit of the measured
 path (:func:`smooth_path`), or are given (``identify(..., path=(q, v))``;
 ``pinobs.identify`` gives a model-based smoother's:
@@ -81,7 +87,13 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from pinobs.errors import DimensionError, IdentificationError, PinobsWarning, TimestampError
+from pinobs.errors import (
+    DimensionError,
+    IdentificationError,
+    OptionError,
+    PinobsWarning,
+    TimestampError,
+)
 from pinobs.model.robot import Robot, Vector
 from pinobs.tolerances import ABSURD_LIMIT_FACTOR, ABSURD_VALUE, COULOMB_SMOOTHING_VELOCITY
 
@@ -326,6 +338,7 @@ class MomentumRegressor:
         window: int,
         stride: int = 1,
         weight_robot: Robot | None = None,
+        torque: str = "held",
     ) -> tuple[Vector, Vector]:
         """The weighted rows ``(A, y)`` of consecutive windows of ``window`` samples.
 
@@ -335,7 +348,12 @@ class MomentumRegressor:
             window: samples per window (a multiple of ``stride``).
             stride: quadrature step of the regressor integrals, in samples.
             weight_robot: the model whose ``M⁻¹`` weights the rows (default: the nominal one).
+            torque: ``"held"`` (``tau[k]`` held from ``t[k]`` to ``t[k+1]``, as
+                ``pinobs.simulate`` and a drive fed commanded torques do) or
+                ``"sampled"`` (the torque at the instants, integrated by trapezoid: an
+                excitation's or a torque sensor's).
         """
+        _check_torque(torque)
         n = t.shape[0]
         n_win = (n - 1) // window
         if n_win < 1:
@@ -343,9 +361,13 @@ class MomentumRegressor:
         wr = weight_robot or self.robot
         nv = self.robot.nv
         rows, rhs = [], []
-        # ∫τ dt, exact under zero-order hold; friction integrals by trapezoid at full rate
-        dt = np.diff(t)
-        tau_int = np.concatenate([np.zeros((1, nv)), np.cumsum(tau[:-1] * dt[:, None], axis=0)])
+        # ∫τ dt as the torque was sampled (module docstring); friction integrals by
+        # trapezoid at full rate
+        if torque == "held":
+            tau_int = np.zeros_like(tau)
+            tau_int[1:] = np.cumsum(tau[:-1] * np.diff(t)[:, None], axis=0)
+        else:
+            tau_int = _cumtrapz(tau, t)
         vf = v[:, list(self.actuated)]
         tanh = np.tanh(vf / COULOMB_SMOOTHING_VELOCITY)
         trap_v = _cumtrapz(vf, t)
@@ -376,6 +398,18 @@ class MomentumRegressor:
             rows.append(weight @ a)
             rhs.append(weight @ b)
         return np.vstack(rows), np.concatenate(rhs)
+
+
+#: How a log's torques were sampled (:meth:`MomentumRegressor.system`).
+TORQUE_SAMPLING = ("held", "sampled")
+
+
+def _check_torque(torque: object) -> None:
+    if torque not in TORQUE_SAMPLING:
+        raise OptionError(
+            f"torque={torque!r}: give 'held' (zero-order hold, pinobs.simulate's) or "
+            "'sampled' (the torque at the sample instants, an excitation's or a sensor's)"
+        )
 
 
 def _cumtrapz(y: Vector, t: Vector) -> Vector:
@@ -793,6 +827,7 @@ def build_rows(
     half_window: float = 0.05,
     quadrature: float = 0.002,
     path: tuple[Vector, Vector] | None = None,
+    torque: str = "held",
 ) -> tuple[Vector, Vector, list[float]]:
     """Weighted rows of every contiguous stretch of a log, and the window end times.
 
@@ -804,6 +839,7 @@ def build_rows(
             (e.g. a model-based smoother's), used instead of :func:`smooth_path`
             on every stretch where it is finite, except within :data:`SETTLE_WINDOWS`
             half windows of its runs' ends (those rows are not used).
+        torque: how the torques were sampled (:meth:`MomentumRegressor.system`).
     """
     As, ys, ends = [], [], []
     for seg in segments(t, q, tau):
@@ -825,7 +861,7 @@ def build_rows(
                 for run in _settled_runs(given, SETTLE_WINDOWS * hw)
             ]
         for run, q_s, v in parts:
-            A, y = reg.system(ts[run], q_s, v, taus[run], window=win, stride=stride)
+            A, y = reg.system(ts[run], q_s, v, taus[run], window=win, stride=stride, torque=torque)
             As.append(A)
             ys.append(y)
             t0 = run.start
@@ -1165,6 +1201,7 @@ def identify(
     window: float = 0.1,
     max_condition: float = MAX_CONDITION,
     path: tuple[ArrayLike, ArrayLike] | None = None,
+    torque: str = "held",
 ) -> Identification:
     """Identify ``robot``'s dynamic parameters from a recorded log (module docstring).
 
@@ -1183,6 +1220,9 @@ def identify(
             and ``(N, nv)`` [rad/s, m/s], used in the regressor instead of the
             Savitzky–Golay fit (:func:`smooth_path`) of the measured positions
             (``pinobs.identify`` passes a model-based smoother's).
+        torque: ``"held"`` (zero-order hold: ``pinobs.simulate``, commanded torques) or
+            ``"sampled"`` (at the sample instants: ``pinobs excite``, a torque sensor);
+            the wrong one biases the fit ∝ 1/rate (module docstring).
 
     The report: ``residual_before`` / ``residual_after`` per joint (RMS of the
     weighted rows, rad/s²-like, on the fitted part) and ``holdout_before`` /
@@ -1202,6 +1242,7 @@ def identify(
         IdentificationError: no torques, too short, never moves, or not
             exciting enough (condition number above ``max_condition``).
     """
+    _check_torque(torque)
     t, q, tau = log_arrays(robot, log, warn_filled=False)
     q, tau, filled = fill_short_gaps(robot, t, q, tau)
     if not 0.0 <= holdout < 1.0:
@@ -1225,7 +1266,9 @@ def identify(
         )
     split = t_end - holdout * (t_end - t_start)
     fit = t <= split
-    A, y, ends = build_rows(reg, t[fit], q[fit], tau[fit], window=window, path=_rows_of(est, fit))
+    A, y, ends = build_rows(
+        reg, t[fit], q[fit], tau[fit], window=window, path=_rows_of(est, fit), torque=torque
+    )
     if A.shape[0] == 0:
         raise IdentificationError(
             "no complete window of contiguous finite samples in the log" + _why_no_window(t, q, tau)
@@ -1257,7 +1300,15 @@ def identify(
     outliers = [ends[w] for w in np.flatnonzero(np.any(res_w > bound, axis=1))]
 
     A_h, y_h, _ = (
-        build_rows(reg, t[~fit], q[~fit], tau[~fit], window=window, path=_rows_of(est, ~fit))
+        build_rows(
+            reg,
+            t[~fit],
+            q[~fit],
+            tau[~fit],
+            window=window,
+            path=_rows_of(est, ~fit),
+            torque=torque,
+        )
         if holdout > 0
         else (np.zeros((0, reg.size)), np.zeros(0), [])
     )

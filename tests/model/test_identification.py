@@ -364,3 +364,17 @@ def test_sampled_torques_give_rate_independent_parameters_on_an_excitation() -> 
         np.testing.assert_allclose(a100, a1k, atol=2e-3 * (1 + np.abs(a1k).max()))
     with pytest.raises(pinobs.OptionError, match="held"):
         identify(robot, (exc.t, exc.q, exc.tau), torque="zoh")
+
+
+def test_too_short_logs_are_refused_or_warned_with_the_length_needed() -> None:
+    """A 0.5 s log had as many rows as identifiable combinations (the fit interpolates):
+    planar_3r came out worse than nominal, without a word."""
+    robot = pinobs.load("planar_3r")
+    truth = planar_3r_truth(robot)
+    t, q, tau = _log(robot, truth, 8.0, 1e-4, 1)
+    with pytest.raises(IdentificationError, match=r"interpolate.*at least [\d.]+ s"):
+        identify(robot, (t[:501], q[:501], tau[:501]), offset=False)
+    short = identify(robot, (t[:2001], q[:2001], tau[:2001]), offset=False).report
+    assert any("loosely determined" in w for w in short["warnings"])
+    full = identify(robot, (t, q, tau), offset=False).report
+    assert not any("loosely determined" in w for w in full["warnings"])

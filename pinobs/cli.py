@@ -45,6 +45,7 @@ from pinobs.errors import (
 from pinobs.evaluation import evaluate, format_table
 from pinobs.io import process_log, read_log
 from pinobs.model import Robot, aba_time, load, robot_entries
+from pinobs.model.identification import MAX_CONDITION
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
 from pinobs.observers.base import positive
 from pinobs.simulation import (
@@ -612,17 +613,21 @@ def _identify_report(ident: Any) -> str:
 def _cmd_identify(args: argparse.Namespace) -> int:
     from pinobs.observers.calibration import identify
 
-    robot = _load(args)
     out = Path(args.out)
-    if out.is_dir():
-        raise OutputExistsError(f"--out {str(out)!r} is a directory; give a file name")
+    _check_output("--out", out)  # before the work, as the other commands
+    robot = _load(args)
     if out.exists() and not args.force:
         raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
     if out.resolve() == Path(args.log).resolve():
         raise OutputExistsError(f"--out {str(out)!r} is the log itself")
     log = read_log(args.log, robot, columns=_column_map(args.map), topic=args.topic)
     ident = identify(
-        robot, log, friction=not args.no_friction, offset=args.offset, holdout=args.holdout
+        robot,
+        log,
+        friction=not args.no_friction,
+        offset=args.offset,
+        holdout=args.holdout,
+        max_condition=args.max_condition,
     )
     print(_identify_report(ident))
     path = ident.save(str(out))
@@ -1211,6 +1216,13 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=0.2,
         help="fraction of the log (its end) kept out of the fit for the report (default %(default)s)",
+    )
+    p.add_argument(
+        "--max-condition",
+        type=float,
+        default=MAX_CONDITION,
+        help="refuse a log whose identifiable combinations are worse conditioned than this "
+        "(default %(default)g)",
     )
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=_cmd_identify)

@@ -287,3 +287,20 @@ def test_identify_warns_when_no_parameters_explain_the_torques(
     out = capsys.readouterr().out
     assert "warning: the fit leaves more of the torques unexplained than noise would on" in out
     assert any(line.startswith("joint") and "unexplained" in line for line in out.splitlines())
+
+
+def test_identify_checks_its_output_before_the_work_and_takes_max_condition(
+    planar_log, tmp_path, capsys
+) -> None:
+    """``--out`` under a file was found only after the fit (no ``_check_output``); the
+    Python API's ``max_condition`` had no option."""
+    path, _ = planar_log
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    bad = ["identify", "--robot", "planar_3r", "--log", str(tmp_path / "missing.csv")]
+    assert main([*bad, "--out", str(blocker / "x.urdf")]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
+    base = ["identify", "--robot", "planar_3r", "--log", str(path)]
+    assert main([*base, "--out", str(tmp_path / "y.urdf"), "--max-condition", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "condition number" in err and "> 2;" in err and not (tmp_path / "y.urdf").exists()

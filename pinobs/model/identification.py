@@ -81,7 +81,7 @@ import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from os import PathLike
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pinocchio as pin
@@ -89,6 +89,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import (
     DimensionError,
+    GainError,
     IdentificationError,
     OptionError,
     PinobsWarning,
@@ -1175,6 +1176,46 @@ def _unexplained(
     return share.tolist(), floor.tolist()
 
 
+#: A coordinate whose motion over the fitted part spans less than this [rad or m] is named
+#: as not moving when the log is refused as not exciting.
+STILL_RANGE = 1e-3
+
+
+def _spans(robot: Robot, t: Vector, q: Vector) -> tuple[Vector, NDArray[np.bool_]]:
+    """Per velocity coordinate, the range of motion over the finite rows [rad or m] and
+    whether it is still: within :data:`STILL_RANGE` or ten times its noise."""
+    rows = np.flatnonzero(np.isfinite(t) & np.all(np.isfinite(q), axis=1))
+    if rows.size == 0:
+        return np.zeros(robot.nv), np.ones(robot.nv, bool)
+    if robot.is_vector_space:
+        u = q[rows] - q[rows[0]]
+    else:
+        u = np.array([robot.difference(q[rows[0]], q[k]) for k in rows])
+    span = u.max(axis=0) - u.min(axis=0)
+    return span, span < np.maximum(STILL_RANGE, 10.0 * _difference_noise(u))
+
+
+def _not_excited(reg: MomentumRegressor, A: Vector, sol: Solution, t: Vector, q: Vector) -> str:
+    """For the refusal of a log that does not excite the dynamics: the coordinates that
+    (nearly) never move, and the parameters of the least excited combination (the smallest
+    singular direction of the prior-scaled base columns)."""
+    robot = reg.robot
+    span, still = _spans(robot, t, q)
+    names = [b.name if b.nv == 1 else f"{b.name}.{k}" for b in robot.joints for k in range(b.nv)]
+    said = ""
+    named = [f"{n} ({x:.2g})" for n, x, s in zip(names, span, still, strict=True) if s]
+    if named:
+        said += f"; never moving (range [rad or m]): {', '.join(named)}"
+    cols = [reg.names.index(n) for n in sol.base]
+    _, _, vt = np.linalg.svd(A[:, cols] * reg.prior_std()[cols], full_matrices=False)
+    weak = vt[-1]
+    top = np.argsort(-np.abs(weak))[:4]
+    said += "; least excited: " + " ".join(
+        f"{'+' if weak[i] >= 0 else '−'}{abs(weak[i]):.2g}·{sol.base[i]}" for i in top
+    )
+    return said
+
+
 def _why_no_window(t: Vector, q: Vector, tau: Vector) -> str:
     """What broke the log into stretches too short for a window (for the refusal)."""
     good = np.isfinite(t) & np.all(np.isfinite(q), axis=1) & np.all(np.isfinite(tau), axis=1)
@@ -1196,6 +1237,25 @@ def _rows_of(
     path: tuple[Vector, Vector] | None, rows: NDArray[np.bool_]
 ) -> tuple[Vector, Vector] | None:
     return None if path is None else (path[0][rows], path[1][rows])
+
+
+def _check_options(
+    friction: object, offset: object, holdout: object, window: object, max_condition: object
+) -> None:
+    """:func:`identify`'s options: booleans, numbers in range (named in the error)."""
+    for name, flag in (("friction", friction), ("offset", offset)):
+        if not isinstance(flag, (bool, np.bool_)):
+            raise OptionError(f"{name}={flag!r}: give True or False")
+    for name, x in (("holdout", holdout), ("window", window), ("max_condition", max_condition)):
+        if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.number)):
+            raise OptionError(f"{name}={x!r}: give a number")
+    h, w, c = (float(cast(float, x)) for x in (holdout, window, max_condition))
+    if not 0.0 <= h < 1.0:
+        raise DimensionError(f"holdout={holdout!r} must be in [0, 1)")
+    if not 0.0 < w < math.inf:
+        raise GainError(f"window={window!r} [s]: give a finite length > 0 (default 0.1)")
+    if not c > 1.0:
+        raise GainError(f"max_condition={max_condition!r}: give a number > 1 (default 1e6)")
 
 
 def identify(
@@ -1249,11 +1309,10 @@ def identify(
         IdentificationError: no torques, too short, never moves, or not
             exciting enough (condition number above ``max_condition``).
     """
+    _check_options(friction, offset, holdout, window, max_condition)
     _check_torque(torque)
     t, q, tau = log_arrays(robot, log, warn_filled=False)
     q, tau, filled = fill_short_gaps(robot, t, q, tau)
-    if not 0.0 <= holdout < 1.0:
-        raise DimensionError(f"holdout={holdout!r} must be in [0, 1)")
     est: tuple[Vector, Vector] | None = None
     if path is not None:
         est = (np.asarray(path[0], dtype=float), np.asarray(path[1], dtype=float))
@@ -1280,8 +1339,12 @@ def identify(
         raise IdentificationError(
             "no complete window of contiguous finite samples in the log" + _why_no_window(t, q, tau)
         )
-    if float(np.nanmax(np.nanmax(q, axis=0) - np.nanmin(q, axis=0))) < 1e-6:
-        raise IdentificationError("the robot never moves in this log: nothing to identify")
+    span, still = _spans(robot, t[fit], q[fit])
+    if still.all():
+        raise IdentificationError(
+            "the robot never moves in this log: nothing to identify (largest range of motion "
+            f"{float(span.max()):.3g} rad or m, within {STILL_RANGE:g} or ten times the noise)"
+        )
     sol = solve(reg, A, y)
     enough = ROWS_PER_COMBINATION * sol.rank
     need = enough / robot.nv * window / (1.0 - holdout)  # log length [s] giving that many rows
@@ -1296,8 +1359,10 @@ def identify(
     if sol.condition > max_condition:
         raise IdentificationError(
             f"the log does not excite the dynamics enough: condition number "
-            f"{sol.condition:.3g} > {max_condition:.3g}; record a richer trajectory "
-            f"(`pinobs excite`)"
+            f"{sol.condition:.3g} > {max_condition:.3g}"
+            + _not_excited(reg, A, sol, t[fit], q[fit])
+            + "; record a richer trajectory (`pinobs excite`), or accept it with a larger "
+            "max_condition (--max-condition)"
         )
     theta0 = reg.nominal()
     nv = robot.nv
@@ -1329,7 +1394,7 @@ def identify(
         if holdout > 0
         else (np.zeros((0, reg.size)), np.zeros(0), [])
     )
-    report = {
+    report: dict[str, Any] = {
         "residual_before": per_joint(A, y, theta0),
         "residual_after": after,
         # the fraction of the torque side left unexplained, robustly, and what noise leaves

@@ -378,3 +378,40 @@ def test_too_short_logs_are_refused_or_warned_with_the_length_needed() -> None:
     assert any("loosely determined" in w for w in short["warnings"])
     full = identify(robot, (t, q, tau), offset=False).report
     assert not any("loosely determined" in w for w in full["warnings"])
+
+
+def test_a_log_that_does_not_excite_names_the_still_joint_and_the_weak_parameters() -> None:
+    """A frozen joint was refused with a condition number alone."""
+    robot = pinobs.load("ur5")
+    t, q, tau = _log(robot, robot, 4.0, 1e-4, 1)
+    q[:, 5] = q[0, 5] + np.random.default_rng(0).normal(0, 1e-4, t.size)
+    with pytest.raises(
+        IdentificationError,
+        match=r"never moving .*wrist_3_joint.*least excited: .*wrist_3_joint.*--max-condition",
+    ):
+        identify(robot, (t, q, tau))
+
+
+def test_a_still_noisy_log_is_refused() -> None:
+    robot = pinobs.load("planar_3r")
+    t = np.arange(4000) * 1e-3
+    q = np.random.default_rng(0).normal(0, 1e-3, (t.size, robot.nq))
+    with pytest.raises(IdentificationError, match="never moves"):
+        identify(robot, (t, q, np.ones((t.size, robot.nv))))
+
+
+def test_identify_options_are_checked_naming_the_value() -> None:
+    robot = pinobs.load("planar_3r")
+    log = (np.arange(10) * 1e-3, np.zeros((10, 3)), np.zeros((10, 3)))
+    for kwargs, error, said in (
+        ({"window": 0.0}, pinobs.GainError, "window=0.0"),
+        ({"window": float("nan")}, pinobs.GainError, "window=nan"),
+        ({"max_condition": float("nan")}, pinobs.GainError, "max_condition=nan"),
+        ({"holdout": "0.2"}, pinobs.OptionError, "holdout='0.2'"),
+        ({"holdout": float("nan")}, pinobs.DimensionError, "holdout=nan"),
+        ({"friction": "no"}, pinobs.OptionError, "friction='no'"),
+    ):
+        with pytest.raises(error, match=said):
+            identify(robot, log, **kwargs)
+    with pytest.raises(pinobs.DimensionError, match=r"t \(N,\)"):
+        identify(robot, (np.zeros((10, 1)), np.zeros((10, 3)), np.zeros((10, 3))))

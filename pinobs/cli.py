@@ -586,8 +586,12 @@ def _identify_report(ident: Any) -> str:
     for j, name in enumerate(rep["coordinates"]):
         lines.append(
             f"{name:24s} {rep['residual_before'][j]:11.4g} {rep['residual_after'][j]:11.4g} "
-            f"{100 * rep['unexplained'][j]:10.3g} % "
-            f"{rep['holdout_before'][j]:16.4g} {rep['holdout_after'][j]:15.4g}"
+            + (
+                f"{100 * rep['unexplained'][j]:10.3g} % "
+                if math.isfinite(rep["unexplained"][j])
+                else f"{'no torque':>12s} "
+            )
+            + f"{rep['holdout_before'][j]:16.4g} {rep['holdout_after'][j]:15.4g}"
         )
     lines += ["", f"{'parameter':32s} {'nominal':>12s} {'identified':>12s} {'std':>10s}"]
     for name, value, std, nominal, excited in ident.parameters.as_rows():
@@ -595,11 +599,22 @@ def _identify_report(ident: Any) -> str:
             lines.append(f"{name:32s} {nominal:12.5g} {value:12.5g} {std:10.2g}")
     n_not = len(rep["not_excited"])
     if n_not:
+        moved = rep.get("moved_by_consistency", [])
+        values = dict(zip(ident.parameters.names, ident.parameters.values, strict=True))
+        nominal = dict(zip(ident.parameters.names, ident.parameters.nominal, strict=True))
         lines.append(
-            f"({n_not} parameters not excited by this log stay near their nominal values: "
+            f"({n_not} parameters not excited by this log: "
             + ", ".join(rep["not_excited"][:6])
             + (", ..." if n_not > 6 else "")
-            + ")"
+            + "; "
+            + (
+                f"physical consistency moved {len(moved)} of them: "
+                + ", ".join(f"{n} {nominal[n]:.4g} → {values[n]:.4g}" for n in moved[:6])
+                + (", ..." if len(moved) > 6 else "")
+                + "; the others stay near their nominal values)"
+                if moved
+                else "they stay near their nominal values)"
+            )
         )
     lines += [f"warning: {w}" for w in rep.get("warnings", [])]
     if np.any(ident.offset):

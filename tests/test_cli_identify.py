@@ -164,7 +164,7 @@ def test_identify_takes_irregular_logs_and_says_what_it_cannot(
     assert "do not increase" in capsys.readouterr().err
     out = ["--log", str(tmp_path / "ms.csv"), "--out", str(tmp_path / "ms.urdf")]
     assert main([*base, *out]) == 2
-    assert "does not excite the dynamics" in capsys.readouterr().err  # ms: a pinobs error
+    assert "if its times are in milliseconds" in capsys.readouterr().err  # was "not excited"
     write_log(tmp_path / "dup.csv", np.repeat(t[:2000:2], 2), q[:2000], tau[:2000])
     assert main([*base, "--log", str(tmp_path / "dup.csv"), "--out", str(tmp_path / "d.urdf")]) == 2
     assert "do not increase" in capsys.readouterr().err
@@ -304,3 +304,27 @@ def test_identify_checks_its_output_before_the_work_and_takes_max_condition(
     assert main([*base, "--out", str(tmp_path / "y.urdf"), "--max-condition", "2"]) == 2
     err = capsys.readouterr().err
     assert "condition number" in err and "> 2;" in err and not (tmp_path / "y.urdf").exists()
+
+
+def test_excite_refuses_a_huge_rate_and_names_continuous_joints(tmp_path, capsys) -> None:
+    """``--rate 1e9`` ran out of memory; a continuous joint was called "not revolute"."""
+    out = ["--out", str(tmp_path / "e.csv")]
+    assert main(["excite", "--robot", "ur5", "--rate", "1e9", *out]) == 2
+    assert "samples" in capsys.readouterr().err and not (tmp_path / "e.csv").exists()
+    assert main(["excite", "--robot", "cartpole_continuous", *out]) == 2
+    assert "pole_theta (continuous" in capsys.readouterr().err
+
+
+def test_identify_report_says_what_consistency_moved_and_never_inf_percent(planar_log) -> None:
+    from pinobs.cli import _identify_report
+
+    path, _ = planar_log
+    robot = pinobs.load("planar_3r")
+    log = pinobs.io.read_log(path, robot)
+    ident = pinobs.identify(robot, log, refine=())
+    ident.report["unexplained"][0] = float("inf")  # a coordinate without torque
+    ident.report["not_excited"] = ["link1.m", "link1.Ixx"]
+    ident.report["moved_by_consistency"] = ["link1.m"]
+    text = _identify_report(ident)
+    assert "inf %" not in text and "no torque" in text
+    assert "physical consistency moved 1 of them: link1.m 2 → 2; the others stay" in text

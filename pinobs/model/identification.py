@@ -1295,8 +1295,10 @@ def identify(
     weighted rows, rad/s²-like, on the fitted part) and ``holdout_before`` /
     ``holdout_after`` (on the held-out end), ``condition``, ``rank``,
     ``base`` (names of the identifiable combinations' pivots),
-    ``not_excited`` (parameters left near nominal), ``projected`` (physical
-    consistency moved the solution), ``rows``, ``fit_end`` (the last time of
+    ``not_excited`` (parameters the data did not fix: near nominal unless physical
+    consistency moved them), ``moved_by_consistency`` (those of them it moved by more
+    than half their prior standard deviation), ``projected`` (physical consistency
+    moved the solution), ``rows``, ``fit_end`` (the last time of
     the fitted part [s]), ``unexplained`` (per coordinate, the fraction of the
     torque side the fit leaves: RMS of ``Aθ − y`` over RMS of ``y``), ``warnings``
     (what the data say against the fit: :func:`_fit_warnings`), and ``observer_options``:
@@ -1329,6 +1331,13 @@ def identify(
         raise IdentificationError(
             f"the log spans {t_end - t_start:.3g} s; identification needs at least "
             f"{4 * window:.3g} s (and a few seconds of rich motion to be useful)"
+        )
+    h = float(np.median(np.diff(t[finite]))) if finite.sum() > 1 else math.nan
+    if h > window / 4:
+        raise IdentificationError(
+            f"the log's median sample interval is {h:.3g} s, too coarse for windows of "
+            f"{window:g} s (four samples at least); if its times are in milliseconds, give "
+            "seconds (t / 1000)"
         )
     split = t_end - holdout * (t_end - t_start)
     fit = t <= split
@@ -1409,6 +1418,14 @@ def identify(
         "n_parameters": reg.size,
         "base": list(sol.base),
         "not_excited": [n for n, e in zip(reg.names, sol.excited, strict=True) if not e],
+        # of those, the ones physical consistency moved by more than half their prior std
+        "moved_by_consistency": [
+            n
+            for n, e, d, sd in zip(
+                reg.names, sol.excited, sol.theta - theta0, reg.prior_std(), strict=True
+            )
+            if not e and sol.projected and abs(d) > 0.5 * sd
+        ],
         "projected": sol.projected,
         "rows": sol.n_rows,
         "holdout_rows": int(A_h.shape[0]),

@@ -1300,7 +1300,10 @@ def identify(
     than half their prior standard deviation), ``projected`` (physical consistency
     moved the solution), ``rows``, ``fit_end`` (the last time of
     the fitted part [s]), ``unexplained`` (per coordinate, the fraction of the
-    torque side the fit leaves: RMS of ``Aθ − y`` over RMS of ``y``), ``warnings``
+    torque side the fit leaves, robust RMS of ``Aθ − y`` over that of ``y``) and
+    ``unexplained_floor`` (what noise alone would leave: :func:`_unexplained`),
+    ``outlier_windows`` (end times [s] of windows the fit leaves mostly unexplained),
+    ``filled_rows`` (NaN rows interpolated: :func:`fill_short_gaps`), ``warnings``
     (what the data say against the fit: :func:`_fit_warnings`), and ``observer_options``:
     what to give ``ekf`` on the calibrated model (``accel_psd=1e-6``,
     ``disturbance_psd=1e-4``: a calibrated model is good, not exact; the
@@ -1337,7 +1340,7 @@ def identify(
         raise IdentificationError(
             f"the log's median sample interval is {h:.3g} s, too coarse for windows of "
             f"{window:g} s (four samples at least); if its times are in milliseconds, give "
-            "seconds (t / 1000)"
+            "seconds (t / 1000), else a longer window"
         )
     split = t_end - holdout * (t_end - t_start)
     fit = t <= split

@@ -1033,10 +1033,14 @@ def _fit_warnings(report: dict[str, Any]) -> list[str]:
       :data:`UNEXPLAINED_WARN` times what noise alone would (:func:`_unexplained`), and
       more than :data:`UNEXPLAINED_MIN` (no parameters of this robot explain these torques).
       A fixed 50 % bar let a double pendulum's negated torques (26–32 % unexplained) write
-      link1 at 7.15 kg (truth 0.32).  Measured with ``pinobs.identify`` on 6 s logs
-      (double pendulum, UR5; seeds 1, 2; σ = 1e-4, 1e-3; payload and friction mismatches):
-      clean logs leave 0.01–1.4 %, below 3× their floor; negated torques 10–182 %,
-      reversed joint order 4.8–132 %, friction not identified on a plant with it 8.7–86 %.
+      link1 at 7.15 kg (truth 0.32).  Measured with ``pinobs.identify`` on 6 s logs at
+      1 kHz (double pendulum, UR5, Panda; seeds 1–3; σ = 1e-4 and 1e-3; payload and
+      friction mismatches): no clean log warned (0 of 37; the largest share left 0.91 %,
+      UR5), every negated (36 of 36), reversed-order (36 of 36) and friction-less fit of
+      a plant with friction (18 of 18) did, leaving 10–187 %, 3.3–148 % and 31–91 % on
+      their worst coordinate (double pendulum and UR5; Panda's defects with
+      ``refine=()``: its refinement smoother takes minutes on them).  With
+      ``refine=()``: 0 of 36 clean logs, 36 of 36 negated.
     * Windows whose residual alone is more than :data:`OUTLIER_SHARE` of the torques (a
       spike, a glitch): named by their end times.
     * Cross-validation on its held-out end, unseen by it: the coordinates whose prediction

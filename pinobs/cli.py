@@ -47,6 +47,7 @@ from pinobs.errors import (
 from pinobs.evaluation import evaluate, format_table
 from pinobs.io import process_log, read_log
 from pinobs.model import Robot, aba_time, load, robot_entries
+from pinobs.model.identification import MAX_CONDITION
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
 from pinobs.observers.base import positive
 from pinobs.simulation import (
@@ -624,8 +625,12 @@ def _identify_report(ident: Any) -> str:
     for j, name in enumerate(rep["coordinates"]):
         lines.append(
             f"{name:24s} {rep['residual_before'][j]:11.4g} {rep['residual_after'][j]:11.4g} "
-            f"{100 * rep['unexplained'][j]:10.3g} % "
-            f"{rep['holdout_before'][j]:16.4g} {rep['holdout_after'][j]:15.4g}"
+            + (
+                f"{100 * rep['unexplained'][j]:10.3g} % "
+                if math.isfinite(rep["unexplained"][j])
+                else f"{'no torque':>12s} "
+            )
+            + f"{rep['holdout_before'][j]:16.4g} {rep['holdout_after'][j]:15.4g}"
         )
     lines += ["", f"{'parameter':32s} {'nominal':>12s} {'identified':>12s} {'std':>10s}"]
     for name, value, std, nominal, excited in ident.parameters.as_rows():
@@ -633,11 +638,22 @@ def _identify_report(ident: Any) -> str:
             lines.append(f"{name:32s} {nominal:12.5g} {value:12.5g} {std:10.2g}")
     n_not = len(rep["not_excited"])
     if n_not:
+        moved = rep.get("moved_by_consistency", [])
+        values = dict(zip(ident.parameters.names, ident.parameters.values, strict=True))
+        nominal = dict(zip(ident.parameters.names, ident.parameters.nominal, strict=True))
         lines.append(
-            f"({n_not} parameters not excited by this log stay near their nominal values: "
+            f"({n_not} parameters not excited by this log: "
             + ", ".join(rep["not_excited"][:6])
             + (", ..." if n_not > 6 else "")
-            + ")"
+            + "; "
+            + (
+                f"physical consistency moved {len(moved)} of them: "
+                + ", ".join(f"{n} {nominal[n]:.4g} → {values[n]:.4g}" for n in moved[:6])
+                + (", ..." if len(moved) > 6 else "")
+                + "; the others stay near their nominal values)"
+                if moved
+                else "they stay near their nominal values)"
+            )
         )
     lines += [f"warning: {w}" for w in rep.get("warnings", [])]
     if np.any(ident.offset):
@@ -651,17 +667,21 @@ def _identify_report(ident: Any) -> str:
 def _cmd_identify(args: argparse.Namespace) -> int:
     from pinobs.observers.calibration import identify
 
-    robot = _load(args)
     out = Path(args.out)
-    if out.is_dir():
-        raise OutputExistsError(f"--out {str(out)!r} is a directory; give a file name")
+    _check_output("--out", out)  # before the work, as the other commands
+    robot = _load(args)
     if out.exists() and not args.force:
         raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
     if out.resolve() == Path(args.log).resolve():
         raise OutputExistsError(f"--out {str(out)!r} is the log itself")
     log = read_log(args.log, robot, columns=_column_map(args.map), topic=args.topic)
     ident = identify(
-        robot, log, friction=not args.no_friction, offset=args.offset, holdout=args.holdout
+        robot,
+        log,
+        friction=not args.no_friction,
+        offset=args.offset,
+        holdout=args.holdout,
+        max_condition=args.max_condition,
     )
     print(_identify_report(ident))
     path = ident.save(str(out))
@@ -1266,6 +1286,13 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=0.2,
         help="fraction of the log (its end) kept out of the fit for the report (default %(default)s)",
+    )
+    p.add_argument(
+        "--max-condition",
+        type=float,
+        default=MAX_CONDITION,
+        help="refuse a log whose identifiable combinations are worse conditioned than this "
+        "(default %(default)g)",
     )
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=_cmd_identify)

@@ -42,6 +42,10 @@ from pinobs.tolerances import COULOMB_SMOOTHING_VELOCITY
 __all__ = ["Excitation", "excite"]
 
 
+#: Most samples :func:`excite` writes (10⁷: 2.6 GB for a 7-joint arm's t, q, v, a, τ).
+MAX_SAMPLES = 10**7
+
+
 @dataclass(frozen=True)
 class Excitation:
     """An excitation trajectory.
@@ -113,8 +117,10 @@ def excite(
 
     Raises:
         GainError: ``duration`` or ``rate`` not a finite number > 0, a rate too low to
-            sample the highest harmonic (at most ``2 · harmonics · f``), a negative seed.
-        UnsupportedRobotError: a joint is not revolute or prismatic (a floating base cannot follow a reference).
+            sample the highest harmonic (at most ``2 · harmonics · f``), more than
+            :data:`MAX_SAMPLES` samples, a negative seed.
+        UnsupportedRobotError: a joint whose position is not one number (continuous
+            joints' ``(cos, sin)``; a floating base cannot follow a reference).
         IdentificationError: no candidate fits the limits.
     """
     for name, value in (("duration", duration), ("rate", rate)):
@@ -137,10 +143,23 @@ def excite(
             f"({f_top:g} Hz = {harmonics} harmonics of {f_top / harmonics:g} Hz); give a rate "
             f"> {2.0 * f_top:g} Hz or a longer duration"
         )
+    samples = math.floor(duration * rate) + 1
+    if samples > MAX_SAMPLES:
+        raise GainError(
+            f"duration={duration:g} s at rate={rate:g} Hz is {samples:.3g} samples, "
+            f"{samples * (4 * robot.nv + 1) * 8 / 1e9:.3g} GB of output; give at most "
+            f"{MAX_SAMPLES:.0e} samples (a lower rate or a shorter duration)"
+        )
     if not robot.is_vector_space:
+        other = [
+            f"{b.name} ({'continuous: q = (cos, sin)' if b.kind == 'circle' else b.kind})"
+            for b in robot.joints
+            if b.kind != "vector"
+        ]
         raise UnsupportedRobotError(
-            f"robot {robot.name!r} has joints that are not revolute or prismatic; "
-            "excitation trajectories are for fixed-base arms"
+            f"robot {robot.name!r} has joints whose position is not one number: "
+            f"{', '.join(other)}; excitation trajectories are for fixed-base arms with "
+            "revolute (bounded) and prismatic joints"
         )
     model = robot.model
     nv = robot.nv

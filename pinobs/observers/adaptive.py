@@ -114,7 +114,13 @@ from numpy.typing import NDArray
 
 from pinobs.errors import GainError, IdentificationError, UnsupportedRobotError
 from pinobs.model import Robot
-from pinobs.model.identification import MomentumRegressor, ParameterSet, smooth_path, solve
+from pinobs.model.identification import (
+    MAX_FILL,
+    MomentumRegressor,
+    ParameterSet,
+    smooth_path,
+    solve,
+)
 from pinobs.observers.base import Consistency, Vector, positive, register
 from pinobs.observers.ekf import ExtendedKalmanFilter, _LazyKernel
 from pinobs.observers.ekf import _State as _EKFState
@@ -197,6 +203,7 @@ class _Learner:
         self.candidate: Vector | None = None  # the latest consistent solve
         self.minv_max: Vector = np.zeros(robot.nv)  # its largest (M⁻¹)ᵢᵢ at the checked q
         self.rejected: list[str] = []
+        self._lost: list[tuple[float, Vector]] = []  # (t, τ) of updates without a sample since
 
     def add(self, t: float, q: Vector | None, tau: Vector, *, explained: bool = False) -> bool:
         """Add the sample ``q`` taken at ``t`` and the torque ``tau`` applied from ``t`` on
@@ -216,18 +223,23 @@ class _Learner:
                 self._off_run = []
         self._t_last = t
         if q is None:
+            if self.buf:
+                self._lost.append((t, tau))
             return False  # a lost sample shows as a gap in the times below
-        # a gap (a lost sample: 2h) or a doubled sample: windows never straddle one.  Jitter
-        # is not a gap: the rows integrate over the samples' own times (MATH §9); at ±0.1 h
-        # this test cleared the windows at every other sample and the learner never solved,
+        # a gap (a lost sample: 2h) or a doubled sample: windows never straddle one, unless
+        # it is at most MAX_FILL lost samples, which are interpolated (_fill).  Jitter is not
+        # a gap: the rows integrate over the samples' own times (MATH §9); at ±0.1 h this
+        # test cleared the windows at every other sample and the learner never solved,
         # silently (a sweep found it, and a 500 Hz stream without rate)
         if self.buf and abs(t - self.buf[-1][0] - self.h) > _GAP_FRACTION * self.h:
-            self.buf.clear()
+            if not self._fill(t, q):
+                self.buf.clear()
+        self._lost = []
         self.buf.append((t, q, tau))
         if math.isnan(self.h):
             return False  # one sample: no interval yet
         need = self.win + 2 * self.hw + 1
-        if len(self.buf) >= need:
+        while len(self.buf) >= need:
             items = list(self.buf)[:need]
             t_arr = np.array([x[0] for x in items])
             q_arr = np.array([x[1] for x in items])
@@ -244,6 +256,30 @@ class _Learner:
             self.next_solve = t + self.resolve_every
             return self._solve(explained)
         return False
+
+    def _fill(self, t: float, q: Vector) -> bool:
+        """Interpolate the ``k − 1`` samples lost between the last buffered one and ``q`` taken
+        at ``t`` (``t − t_last ≈ k h``, ``k − 1 ≤`` :data:`~pinobs.model.identification.MAX_FILL`)
+        linearly on the manifold, each with the torque of its own update (held from the last
+        one given); False (nothing filled) for a longer or uneven gap.  Cleared at every lost
+        sample instead, the windows of ``win + 2 hw + 1`` consecutive samples never filled with
+        2 % of the samples lost at random, and ``adaptive`` never learned (a sweep: UR5 with a
+        payload, 5 % lost, 0 solves in 12 s, 1.19× kf, said "consistent").  The interpolation
+        error, ``(k h)² |q̈| / 8``, is 2e-6 |q̈| rad at 1 kHz over 3 lost samples."""
+        t0, q0, tau0 = self.buf[-1]
+        k = round((t - t0) / self.h)
+        if not 2 <= k <= MAX_FILL + 1 or abs(t - t0 - k * self.h) > _GAP_FRACTION * self.h:
+            return False
+        robot = self.reg.robot
+        step = robot.difference(q0, q)
+        for i in range(1, k):
+            ti = t0 + i * (t - t0) / k
+            held = tau0
+            for t_lost, tau_lost in self._lost:  # the torque applied from the lost update on
+                if t_lost <= ti + _GAP_FRACTION * self.h:
+                    held = tau_lost
+            self.buf.append((ti, robot.integrate(q0, (i / k) * step), held))
+        return True
 
     def _counts(self, h: float) -> None:
         """The windows in samples for the interval ``h`` [s]."""

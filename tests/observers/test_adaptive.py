@@ -302,3 +302,25 @@ def test_timestamp_jitter_and_another_rate_do_not_stop_the_learning(payload_stre
         ob.update(t[k], q[k] if k % 2 or k > 1000 else None, tau[k])
     assert not [r for r in ob.consistency().details["rejected"] if "samples come" in r]
     assert ob._learner.h == 1e-3
+
+
+@pytest.mark.parametrize("lost", [0.05, 0.2])
+def test_lost_samples_do_not_stop_the_learning(payload_stream, lost: float) -> None:
+    """A lost sample cleared the learner's buffer, whose windows need ~200 consecutive
+    samples: with 2 % or more lost at random it never solved, stayed in its warm-up and fell
+    behind kf (UR5 with a payload, 5 % lost: 0 solves in 12 s, 1.19× kf, 'consistent').  Up to
+    three lost in a row are now interpolated.  Measured on that UR5 log: 23 solves, 0.047×
+    kf (5 %), 0.057× (20 %).  Here (planar 3R, 3.5 s), against the log with none lost: 6
+    solves each, RMS 1.55e-3 (none lost), 1.58e-3 (5 %), 1.74e-3 (20 %); 0 solves before."""
+    robot, t, q, tau, v = payload_stream
+    ref, c_ref = _learn_over(robot, t, q, tau, v, 1000.0)
+    drop = np.random.default_rng(0).random(t.size) < lost
+    drop[0] = False
+    ob = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4)
+    ob.reset(t[0], q[0], v[0], tau[0])
+    out = np.array([ob.update(t[k], None if drop[k] else q[k], tau[k]).v for k in range(1, t.size)])
+    late = t[1:] - t[0] > 2.0
+    rms = float(np.sqrt(np.mean((out[late] - v[1:][late]) ** 2)))
+    c = ob.consistency()
+    assert c.details["solves"] >= c_ref.details["solves"] - 1, (c.details, c_ref.details)
+    assert rms < 2.0 * ref, (rms, ref)

@@ -69,7 +69,9 @@ Three parts, each on code shared with the rest of pinobs:
 
 3. **Never behind** (and never lost: should the model-based filter's estimate
    or covariance stop being finite, it restarts on the model-free estimate
-   in the warm-up regime, and :meth:`consistency` counts it; the blend then
+   in the warm-up regime, and :meth:`consistency` counts it; if the restarted
+   filter is lost at once, the learned model itself does not hold and is
+   dropped for the nominal one (said in ``rejected``); the blend then
    starts from ``s = v0_std²`` and blames the model fully until a solve
    replaces it): a bank of per-joint constant-acceleration Kalman filters
    (:class:`~pinobs.observers.kf.ConstantAccelerationKF`, white-jerk
@@ -305,6 +307,7 @@ class _Learner:
                 "identification windows are counted on the samples' interval from here"
             )
             self._counts(h)
+            self.buf.clear()  # spaced (or filled: _fill) at the interval taken before
 
     def _solve(self, explained: bool = False) -> bool:
         A = np.vstack([r[0] for r in self.rows])
@@ -757,7 +760,21 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             restart = super()._initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
             restart = self._set_regime(restart, "warmup")
             state = state._replace(ekf=restart, dt_prev=0.0)
-            ekf = super()._step(restart, dt, q_meas, self._torque(state, dt, tau))
+            with np.errstate(over="ignore", invalid="ignore"):  # lost again: handled below
+                ekf = super()._step(restart, dt, q_meas, self._torque(state, dt, tau))
+            if _lost(ekf) and self._learned is not self._nominal:
+                # lost again at once: the learned model itself does not hold (a mass matrix
+                # not positive definite away from the configurations its solve checked, held
+                # friction stiff there: solo12 with friction, a Panda at hard stops raised
+                # ObserverDiverged); back to the nominal model, which the learner may replace
+                self._replace_robot(self._nominal.copy())
+                self._learned, self._held_friction = self._nominal, None
+                self._offset = np.zeros(self.robot.nv)
+                self._learner.rejected.append(
+                    f"learned model dropped at t = {t:.6g} s (the filter restarted on it was "
+                    "lost at once): back to the nominal model"
+                )
+                ekf = super()._step(restart, dt, q_meas, self._torque(state, dt, tau))
             self._learner.rejected.append(f"model-based filter restarted at t = {t:.6g} s")
             self.restarts += 1
             # the blend's error variance of the lost filter overflowed with it: the restarted

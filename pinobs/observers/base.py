@@ -624,8 +624,9 @@ class Observer(ABC, Generic[State]):
         mean = float(np.mean(self._nis))
         if n < 50:
             verdict = "unknown"
-        else:
-            verdict = "consistent" if mean <= bound else "inconsistent"
+        else:  # a NIS that is not finite or below 0 is a filter being lost, not a small one
+            sane = math.isfinite(mean) and min(self._nis) >= 0.0
+            verdict = "consistent" if sane and mean <= bound else "inconsistent"
         causes = LIKELY_CAUSES if verdict == "inconsistent" else ()
         return Consistency(n, mean, dof, bound, verdict, self._gated, causes)
 

@@ -567,10 +567,12 @@ class ExtendedKalmanFilter(Observer[_State]):
         return _State(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd)
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
-        pred, _ = self._predict(state, dt, tau)
-        if q_meas is None:
-            return pred._replace(P=0.5 * (pred.P + pred.P.T), nis=None, gated=False)
-        return self._correct(pred, q_meas)
+        # a filter being lost overflows: its update says so (ObserverDiverged), numpy does not
+        with np.errstate(over="ignore", invalid="ignore"):
+            pred, _ = self._predict(state, dt, tau)
+            if q_meas is None:
+                return pred._replace(P=0.5 * (pred.P + pred.P.T), nis=None, gated=False)
+            return self._correct(pred, q_meas)
 
     def _predict(self, state: _State, dt: float, tau: Vector) -> tuple[_State, Vector]:
         """Prediction over ``dt`` [s] with ``tau`` held: ``(state⁻, Φ)``.
@@ -644,6 +646,9 @@ class ExtendedKalmanFilter(Observer[_State]):
         e = self.robot.difference(q, q_meas)
         dx, P_new = joseph_update(P, e, R)
         nis = float(e @ (e - dx[:nv])) / R
+        if nis * R < 1e-6 * float(e @ e):  # K_q ≈ I (P_qq ≫ R): e − K_q e lost its digits
+            # and went negative (−9e294 on a filter being lost): eᵀ S⁻¹ e directly
+            nis = float(e @ np.linalg.solve(P[:nv, :nv] + _scaled_eye(nv, R), e))
         reject, level = outlier_gate(nis, state.nis_level, state.gate_run, self._gate, nv)
         if reject:
             return state._replace(

@@ -206,3 +206,19 @@ def test_every_gate_option_is_validated_and_can_be_switched_off(name: str, robot
         **{name: {"outlier_probability": None}},
     )
     assert not any(e.gated for e in out[name][1])
+
+
+def test_a_nis_that_is_negative_or_not_finite_is_never_consistent() -> None:
+    """A filter being lost gave NIS of −9e294 (digits lost in eᵀ(e − K_q e)): the mean came out
+    negative and below the bound, so the verdict said 'consistent'.  Such values now make the
+    verdict 'inconsistent' whatever the mean."""
+    robot = pinobs.load("ur5")
+    ob = make_observer("ekf", robot, noise_std=1e-4)
+    ob.reset(0.0, robot.neutral(), np.zeros(6))
+    for bad in (-1.0, -9e294, float("inf"), float("nan")):
+        ob._nis.clear()
+        ob._nis.extend([3.0] * 99 + [bad])
+        assert ob.consistency().verdict == "inconsistent", bad
+    ob._nis.clear()
+    ob._nis.extend([3.0] * 100)
+    assert ob.consistency().verdict == "consistent"

@@ -137,7 +137,8 @@ def simulate(
     Args:
         robot: the model the observers use (each builds its own copy).
         observers: registry names (built with the sensor's ``rate`` and
-            ``noise_std`` as hints) or a mapping label -> observer instance.
+            :attr:`Sensor.effective_std` as hints: noise and quantization) or a mapping
+            label -> observer instance.
         duration: simulated time [s].
         sensor: sample rate, noise, quantization, delay, dropouts (default: 1 kHz, no noise).
         inputs: ``"zero"``, ``"multisine"``, ``"pd"``, an :class:`InputProfile`,
@@ -179,7 +180,7 @@ def simulate(
         obs = dict(observers)
     else:
         obs = {
-            name: make_observer(name, robot, rate=sensor.rate, noise_std=sensor.noise_std)
+            name: make_observer(name, robot, rate=sensor.rate, noise_std=sensor.effective_std)
             for name in observers
         }
     q_hat0, v_hat0 = perturb(truth, q0, v0, perturb_q, perturb_v, rng)

@@ -6,6 +6,7 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pinobs.cli import DEMO_GHOSTS, main
@@ -179,6 +180,17 @@ def test_excite_writes_a_trajectory_for_a_one_dof_robot(tmp_path: Path, capsys) 
     lines = out.read_text().splitlines()
     assert lines[0] == "t,q.theta,v.theta,a.theta,tau.theta"
     assert len(lines) == 1 + 201
+
+
+def test_excite_of_joints_without_limits_warns_nothing(tmp_path: Path) -> None:
+    """double_pendulum's joints have no position limits (Pinocchio's ±1.8e308 since a URDF's
+    lower = upper = 0 reads as none): hi − lo overflowed, a numpy RuntimeWarning (an error in
+    this suite); each joint now swings about ±π/2 about its neutral position (measured
+    −0.881 to 0.692 and 0 to 1.5712 rad)."""
+    out = tmp_path / "e.csv"
+    assert main(["excite", "--robot", "double_pendulum", "--duration", "2", "--out", str(out)]) == 0
+    q = np.loadtxt(out, delimiter=",", skiprows=1)[:, 1:3]
+    assert np.all(np.abs(q) <= 1.01 * np.pi / 2) and np.ptp(q, axis=0).min() > 0.5
 
 
 @pytest.mark.parametrize(

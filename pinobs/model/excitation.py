@@ -166,7 +166,9 @@ def excite(
     f = base_frequency or 2.0 / duration
     omega = 2 * np.pi * f
     lo, hi = np.array(model.lowerPositionLimit), np.array(model.upperPositionLimit)
-    finite = np.isfinite(lo) & np.isfinite(hi) & (hi - lo < 1e3) & (hi > lo)
+    # Pinocchio's "no limit" is ±1.8e308, whose difference overflows: clip before it
+    lo, hi = np.clip(lo, -1e300, 1e300), np.clip(hi, -1e300, 1e300)
+    finite = (hi - lo < 1e3) & (hi > lo)
     if center is None:
         center = np.where(finite, 0.5 * (lo + hi), robot.neutral())
     half = np.where(finite, (0.5 - position_margin) * (hi - lo), np.pi / 2)

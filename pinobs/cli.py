@@ -682,6 +682,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         offset=args.offset,
         holdout=args.holdout,
         max_condition=args.max_condition,
+        torque=args.torque,
     )
     print(_identify_report(ident))
     path = ident.save(str(out))
@@ -1293,6 +1294,14 @@ def _parser() -> argparse.ArgumentParser:
         default=MAX_CONDITION,
         help="refuse a log whose identifiable combinations are worse conditioned than this "
         "(default %(default)g)",
+    )
+    p.add_argument(
+        "--torque",
+        choices=["held", "sampled"],
+        default="held",
+        help="how the log's torques were taken: held over each sample (zero-order hold: "
+        "pinobs run, most controllers; the default) or sampled at the instants (pinobs "
+        "excite's trajectory)",
     )
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=_cmd_identify)

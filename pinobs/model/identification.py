@@ -1435,6 +1435,7 @@ def identify(
         ],
         "projected": sol.projected,
         "rows": sol.n_rows,
+        "torque": torque,  # how ∫τ dt was taken (held or sampled)
         "holdout_rows": int(A_h.shape[0]),
         "fit_end": split,
         "sigma": sol.sigma,

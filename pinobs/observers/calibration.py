@@ -83,6 +83,7 @@ def identify(
     max_condition: float = MAX_CONDITION,
     refine: Sequence[float] = REFINE_ACCEL_PSD,
     noise_std: float | None = None,
+    torque: str = "held",
 ) -> Identification:
     """Identify ``robot``'s dynamic parameters from a log, with model-based velocities.
 
@@ -108,6 +109,10 @@ def identify(
             (one pass, the cheapest).
         noise_std: the log's position noise [rad or m] (default: estimated,
             :func:`pinobs.observers.noise.estimate_noise_std`).
+        torque: how the log's torques were taken, for ``∫ τ dt``: ``"held"`` over each
+            sample (zero-order hold: ``pinobs.simulate``, most controllers) or
+            ``"sampled"`` at the instants (``pinobs excite``'s trajectory: trapezoid);
+            every pass (the model layer's ``torque``).
 
     ``report["velocities"]`` says which velocities the last pass used
     (``"savgol"`` or ``"rts(accel_psd=…)"``) and ``report["noise_std"]`` the σ
@@ -128,6 +133,7 @@ def identify(
         "holdout": holdout,
         "window": window,
         "max_condition": max_condition,
+        "torque": torque,
     }
     current = ident_model.identify(robot, log, **opts)
     if not refine:

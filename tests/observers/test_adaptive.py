@@ -137,32 +137,16 @@ def test_the_kf_bank_equals_separate_kf_filters(name: str) -> None:
             np.testing.assert_allclose(state.q[i], est.q, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("forced", [False, True])
-def test_a_lost_model_based_filter_restarts_instead_of_failing(forced: bool, monkeypatch) -> None:
+def test_a_lost_model_based_filter_restarts_instead_of_failing() -> None:
     """Learning without friction columns on a truth with strong friction: the learned model
     cannot hold, and its EKF diverged (ObserverDiverged at 4.2 s on the UR5, seed 1) before
-    the restart rule; it then restarted on the kf bank (6 times) and the estimate stayed
-    finite.  After a restart the blend follows the kf until a solve replaces the model: before
-    that rule the estimate reached 1.1 rad/s of error at the restart at 4.19 s, and with the
-    compiled bank's different rounding the blend itself overflowed (5.5 s); then 0.04 rad/s at
-    most after 1 s.  Since the learner interpolates the samples the gate drops (instead of
-    clearing its windows) this log no longer loses the filter (0 restarts, seeds 1-3, RMS
-    6.3e-3 to 6.5e-3 as before): ``forced`` makes the model's torque non-finite for one step
-    at 4.2 s, so that the restart is still exercised on it."""
+    the restart rule; now it restarts on the kf bank and the estimate stays finite.  After a
+    restart the blend follows the kf until a solve replaces the model: before that rule the
+    estimate reached 1.1 rad/s of error at the restart at 4.19 s, and with the compiled bank's
+    different rounding the blend itself overflowed (5.5 s); now 0.04 rad/s at most after 1 s."""
     robot = pinobs.load("ur5")
     plant = mismatched_plant(robot, "friction", seed=0)
     ob = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4, friction=False)
-    if forced:
-        real, calls = type(ob)._torque, []
-
-        def torque(self, state, dt, tau_):  # type: ignore[no-untyped-def]
-            out = real(self, state, dt, tau_)
-            once = state.t >= 4.2 and not calls
-            if once:
-                calls.append(state.t)
-            return np.full_like(out, np.nan) if once else out
-
-        monkeypatch.setattr(type(ob), "_torque", torque)
     res = pinobs.simulate(
         robot,
         {"a": ob},
@@ -173,7 +157,7 @@ def test_a_lost_model_based_filter_restarts_instead_of_failing(forced: bool, mon
     )
     trace = res.trace("a")
     assert trace.diverged_at is None and np.all(np.isfinite(trace.v))
-    assert ob.consistency().details["restarts"] == (1 if forced else 0)
+    assert ob.consistency().details["restarts"] >= 1
     assert _rms_after(res, trace, 1.0) < 0.05
     k = int(np.searchsorted(res.t, 1.0))
     assert np.abs(trace.v[k:] - res.v[k:]).max() < 0.1
@@ -325,9 +309,9 @@ def test_lost_samples_do_not_stop_the_learning(payload_stream, lost: float) -> N
     """A lost sample cleared the learner's buffer, whose windows need ~200 consecutive
     samples: with 2 % or more lost at random it never solved, stayed in its warm-up and fell
     behind kf (UR5 with a payload, 5 % lost: 0 solves in 12 s, 1.19× kf, 'consistent').  Up to
-    three lost in a row are now interpolated.  Measured on that UR5 log: 23 solves, 0.047×
-    kf (5 %), 0.057× (20 %).  Here (planar 3R, 3.5 s), against the log with none lost: 6
-    solves each, RMS 1.55e-3 (none lost), 1.58e-3 (5 %), 1.74e-3 (20 %); 0 solves before."""
+    three lost in a row are now interpolated.  Measured on that UR5 log: 23 solves, 0.049×
+    kf (5 %), 0.053× (20 %).  Here (planar 3R, 3.5 s), against the log with none lost: 6
+    solves each, RMS 1.54e-3 (none lost), 1.61e-3 (5 %), 1.68e-3 (20 %); 0 solves before."""
     robot, t, q, tau, v = payload_stream
     ref, c_ref = _learn_over(robot, t, q, tau, v, 1000.0)
     drop = np.random.default_rng(0).random(t.size) < lost

@@ -48,7 +48,7 @@ is kept as it is (no slope dropped) and both steps are made valid:
 * the mean takes ``n`` RK4 substeps, ``n = ⌈λ h / 2.5⌉`` with ``λ`` the
   largest ``(M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|`` at the velocity nearest zero each joint
   can reach in the step, ``max(|vᵢ| − |aᵢ| h, 0)``
-  (:func:`friction_substeps`; one substep away from zero velocity);
+  (:func:`pinobs.model.integrators.friction_substeps`; one substep away from zero velocity);
 * ``Φ = exp(A h)`` by scaling and squaring (:func:`stiff_transition_matrix`:
   the series on ``A h / 2ˢ``, squared ``s`` times, ``‖A h‖∞ / 2ˢ ≤ 1/4``),
   which contracts the velocity covariance of a sticking joint as the
@@ -126,6 +126,7 @@ import numpy as np
 
 from pinobs.errors import DimensionError
 from pinobs.model import Robot, dynamics_rk4
+from pinobs.model.integrators import friction_substeps
 from pinobs.observers.base import (
     Observer,
     Vector,
@@ -142,7 +143,6 @@ __all__ = [
     "ad_matrix",
     "cholesky_solve",
     "double_integrator_noise",
-    "friction_substeps",
     "joseph_update",
     "stiff_transition_matrix",
     "transition_matrix",
@@ -153,7 +153,6 @@ _NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std (or 0) is given
 
 
 _SERIES_NORM = 0.25  # ‖A h‖∞ up to which the third-order series is used as it is (error < 1e-4)
-_RK4_STIFFNESS = 2.5  # λ h kept below RK4's stability limit on the negative real axis, 2.785
 
 
 def ad_matrix(robot: Robot, v: Vector) -> Vector:
@@ -236,21 +235,6 @@ def stiff_transition_matrix(A: Vector, h: float) -> Vector:
     for _ in range(s):
         Phi = Phi.dot(Phi)
     return Phi
-
-
-def friction_substeps(robot: Robot, v: Vector, acc: Vector, minv_diag: Vector, dt: float) -> int:
-    """RK4 substeps over ``dt`` [s] keeping ``λ h_sub ≤ 2.5`` under joint friction (module docstring).
-
-    ``λ = maxᵢ (M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|`` at the velocity nearest zero that joint
-    ``i`` can reach in the step, ``max(|vᵢ| − |aᵢ| dt, 0)`` (the smoothed
-    Coulomb slope ``F_c / v_s`` peaks at ``v = 0``); ``acc`` [rad/s²] the
-    acceleration at the start, ``minv_diag`` the diagonal of ``M⁻¹``.
-    """
-    v_near = np.maximum(np.abs(v) - np.abs(acc) * dt, 0.0)
-    lam = float(np.max(minv_diag * -robot.friction_derivative(v_near)))
-    if not math.isfinite(lam):  # a lost filter's state: one step, its NaN reported by the caller
-        return 1
-    return max(1, math.ceil(lam * dt / _RK4_STIFFNESS))
 
 
 @functools.lru_cache(maxsize=64)

@@ -100,7 +100,7 @@ import numpy as np
 
 from pinobs.errors import GainError
 from pinobs.model import Robot, lie_rk4
-from pinobs.model.integrators import rk4_stage_matrices
+from pinobs.model.integrators import friction_substeps, rk4_stage_matrices
 from pinobs.observers.base import (
     Observer,
     Vector,
@@ -114,7 +114,6 @@ from pinobs.observers.ekf import (
     ad_matrix,
     cholesky_solve,
     double_integrator_noise,
-    friction_substeps,
     joseph_update,
     stiff_transition_matrix,
     transition_matrix,

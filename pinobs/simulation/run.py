@@ -21,10 +21,10 @@ from threadpoolctl import threadpool_limits
 
 from pinobs.errors import DimensionError, GainError, ObserverDiverged, OptionError, PinobsError
 from pinobs.model import Robot, dynamics_rk4
+from pinobs.model.integrators import friction_substeps
 from pinobs.model.robot import Vector
 from pinobs.observers import Observer, make_observer
 from pinobs.observers.base import positive
-from pinobs.observers.ekf import friction_substeps
 from pinobs.simulation.inputs import InputProfile, make_input
 from pinobs.simulation.result import ObserverTrace, Result
 from pinobs.simulation.sensors import Sensor, _is_int
@@ -58,7 +58,7 @@ def _plant_step(
     plant: Robot, q: Vector, v: Vector, tau: Vector, h: float, n: int
 ) -> tuple[Vector, Vector]:
     """``n`` RK4 steps over ``h``, each split further where joint friction is stiff
-    (:func:`~pinobs.observers.ekf.friction_substeps`, as the EKF's prediction): fixed steps
+    (:func:`~pinobs.model.integrators.friction_substeps`, as the EKF's prediction): fixed steps
     are unstable on the smoothed Coulomb slope, and a double pendulum with 3 N·m of it
     chattered to |v| = 3.57 rad/s where it moves at 0.07 (silently: the observers were then
     scored against a non-physical truth)."""

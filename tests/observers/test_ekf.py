@@ -368,7 +368,8 @@ def test_a_lost_filters_nan_state_gives_nan_steps_not_a_raw_error() -> None:
     ``stiff_transition_matrix`` and ``friction_substeps`` with NaN and raised a raw
     ``ValueError`` (``math.ceil`` of NaN) through ``pinobs identify``'s refinement; they now
     give NaN and one step, which the callers report as a lost filter."""
-    from pinobs.observers.ekf import friction_substeps, stiff_transition_matrix
+    from pinobs.model.integrators import friction_substeps
+    from pinobs.observers.ekf import stiff_transition_matrix
 
     assert np.all(np.isnan(stiff_transition_matrix(np.full((4, 4), np.nan), 1e-3)))
     robot = pinobs.load("ur5", friction=True)

@@ -95,6 +95,7 @@ from pinobs.errors import (
     PinobsWarning,
     TimestampError,
 )
+from pinobs.model.noise import robust_rms, third_difference_std
 from pinobs.model.robot import Robot, Vector
 from pinobs.tolerances import ABSURD_LIMIT_FACTOR, ABSURD_VALUE, COULOMB_SMOOTHING_VELOCITY
 
@@ -988,7 +989,7 @@ def fill_short_gaps(robot: Robot, t: Vector, q: Vector, tau: Vector) -> tuple[Ve
             continue
         for k in range(a + 1, b):
             s = (t[k] - t[a]) / (t[b] - t[a])
-            q[k] = robot.integrate(q[a], s * robot.difference(q[a], q[b]))
+            q[k] = robot.interpolate(q[a], q[b], s)
             tau[k] = (1.0 - s) * tau[a] + s * tau[b]
         filled += gap
     return q, tau, filled
@@ -1102,26 +1103,12 @@ def _fit_warnings(report: dict[str, Any]) -> list[str]:
     return said
 
 
-#: Median of a χ² variable with one degree of freedom: ``median(x²) / _CHI2_1_MEDIAN`` is the
-#: variance of zero-mean Gaussian ``x``, robustly (one outlier row does not move it).
-_CHI2_1_MEDIAN = 0.454936423119572
-
-
-def _robust_rms(x: Vector) -> Vector:
-    """Per column, ``√(median(x²) / median(χ²₁))``: the RMS of zero-mean Gaussian columns,
-    unmoved by a few outlying rows."""
-    return np.sqrt(np.median(x**2, axis=0) / _CHI2_1_MEDIAN)
-
-
-def _difference_noise(x: Vector) -> Vector:
-    """Per column, the white-noise σ of samples of a smooth signal: robust third differences,
-    ``σ̂² = median(d²) / (20 · median(χ²₁))`` (Gasser, Sroka & Jennen-Steinmetz 1986; the
-    estimator of :mod:`pinobs.observers.noise`, which this layer cannot import)."""
-    d = x[3:] - 3.0 * x[2:-1] + 3.0 * x[1:-2] - x[:-3]
-    d = d[np.all(np.isfinite(d), axis=1)]
-    if d.shape[0] == 0:
-        return np.zeros(x.shape[1])
-    return np.sqrt(np.median(d**2, axis=0) / (20.0 * _CHI2_1_MEDIAN))
+def _difference_noise(x: Vector, t: Vector, rows: NDArray[np.intp]) -> Vector:
+    """Per column, the white-noise σ of the samples ``x`` (rows ``rows`` of the log, taken
+    at ``t``) of a smooth signal (:func:`~pinobs.model.noise.third_difference_std`); zero
+    where too few rows are evenly spaced to tell."""
+    sigma = third_difference_std(x, t, rows)
+    return np.zeros(x.shape[1]) if sigma is None else sigma
 
 
 def _unexplained(
@@ -1155,9 +1142,9 @@ def _unexplained(
     """
     nv = reg.robot.nv
     res = (A @ sol.theta - y).reshape(-1, nv)
-    scale = _robust_rms(y.reshape(-1, nv))
+    scale = robust_rms(y.reshape(-1, nv))
     with np.errstate(divide="ignore", invalid="ignore"):
-        share = np.where(scale > 0, _robust_rms(res) / scale, math.inf)
+        share = np.where(scale > 0, robust_rms(res) / scale, math.inf)
     good = np.isfinite(t) & np.all(np.isfinite(q), axis=1) & np.all(np.isfinite(tau), axis=1)
     rows = np.flatnonzero(good)
     h = float(np.median(np.diff(t[rows])))
@@ -1166,8 +1153,8 @@ def _unexplained(
         u = q[rows]
     else:
         u = np.array([robot.difference(q[rows[0]], q[k]) for k in rows])
-    sigma_q = _difference_noise(u)
-    sigma_tau = _difference_noise(tau[rows])
+    sigma_q = _difference_noise(u, t[rows], rows)
+    sigma_tau = _difference_noise(tau[rows], t[rows], rows)
     hw = max(2, round(0.05 / h))  # build_rows' default half window
     c_v, _ = _savgol_coefficients(2 * hw + 1, min(4, 2 * hw), h)
     sigma_v = sigma_q * float(np.linalg.norm(c_v))
@@ -1196,7 +1183,7 @@ def _spans(robot: Robot, t: Vector, q: Vector) -> tuple[Vector, NDArray[np.bool_
     else:
         u = np.array([robot.difference(q[rows[0]], q[k]) for k in rows])
     span = u.max(axis=0) - u.min(axis=0)
-    return span, span < np.maximum(STILL_RANGE, 10.0 * _difference_noise(u))
+    return span, span < np.maximum(STILL_RANGE, 10.0 * _difference_noise(u, t[rows], rows))
 
 
 def _not_excited(reg: MomentumRegressor, A: Vector, sol: Solution, t: Vector, q: Vector) -> str:
@@ -1392,7 +1379,7 @@ def identify(
     after = per_joint(A, y, sol.theta)
     unexplained, floor = _unexplained(reg, A, y, sol, t[fit], q[fit], tau[fit], window)
     res_w = np.abs(A @ sol.theta - y).reshape(-1, nv)
-    bound = np.maximum(OUTLIER_SHARE, UNEXPLAINED_WARN * np.asarray(floor)) * _robust_rms(
+    bound = np.maximum(OUTLIER_SHARE, UNEXPLAINED_WARN * np.asarray(floor)) * robust_rms(
         y.reshape(-1, nv)
     )
     outliers = [ends[w] for w in np.flatnonzero(np.any(res_w > bound, axis=1))]

@@ -401,6 +401,12 @@ class Robot:
         """``log(q0⁻¹ q1) ∈ T_{q0}``: the tangent vector with ``q0 ⊕ difference = q1``."""
         return np.asarray(pin.difference(self.model, q0, q1), dtype=float)
 
+    def interpolate(self, q0: Vector, q1: Vector, s: float) -> Vector:
+        """``q0 ⊕ s · difference(q0, q1)``: the point a share ``s`` along the geodesic of the
+        joints' group from ``q0`` (``s = 0``) to ``q1`` (``s = 1``); ``pin.interpolate`` on a
+        Pinocchio model, written with this class's own operations so subclasses keep it."""
+        return self.integrate(q0, s * self.difference(q0, q1))
+
     def integrate_jacobian(self, q: Vector, xi: Vector) -> Vector:
         """``∂(q ⊕ ξ)/∂ξ``: the right Jacobian of the exponential, in the frame at ``q ⊕ ξ``.
 

@@ -288,14 +288,13 @@ class _Learner:
         if any(g for *_, g in self._lost):  # gated, not lost: the model was not explaining the
             return False  # data there (filled, z1 with a payload went 7.4e-4 -> 1.22e-3 rad/s)
         robot = self.reg.robot
-        step = robot.difference(q0, q)
         for i in range(1, k):
             ti = t0 + i * (t - t0) / k
             held = tau0
             for t_lost, tau_lost, _ in self._lost:  # the torque applied from the lost update on
                 if t_lost <= ti + _GAP_FRACTION * self.h:
                     held = tau_lost
-            self.buf.append((ti, robot.integrate(q0, (i / k) * step), held))
+            self.buf.append((ti, robot.interpolate(q0, q, i / k), held))
         return True
 
     def _counts(self, h: float) -> None:

@@ -1,26 +1,9 @@
 """The position noise level of recorded samples, estimated from the samples themselves.
 
-For samples ``y_k = x(t_k) + e_k`` of a smooth motion ``x`` with white noise
-``e_k ~ N(0, σ²)``, the third difference
-
-    d_k = y_{k+3} - 3 y_{k+2} + 3 y_{k+1} - y_k
-
-is ``h³ x⃛ + O(h⁴)`` plus noise of variance ``(1 + 9 + 9 + 1) σ² = 20 σ²``: it
-is the residual of the exact quadratic fit through four samples, and the
-factor 20 is that fit's degrees-of-freedom correction (the difference-based
-variance estimator of Gasser, Sroka & Jennen-Steinmetz 1986, Biometrika 73(3),
-eq. (2), with the binomial weights of order 3).  At 1 kHz the motion term is
-~1e-9·|x⃛| rad, far below any realistic noise.  A glitch or an outlier must
-not inflate σ, so the robust form is used:
-
-    σ̂² = median(d_k²) / (20 · 0.4549)
-
-(0.4549 is the median of a χ²₁ variable).  Positions are taken in the tangent
-coordinates ``difference(q_0, q_k)`` so that quaternions and (cos, sin) pairs
-count as angles.  Only four consecutive rows evenly spaced in time (each interval
-within half an interval of the median) make a ``d_k``: across a dropped sample
-the difference is not the third one, and its motion term is not small (with
-30 % of the samples dropped at random σ̂ was 2.0× σ, with 5 % 1.17×).
+Third differences of the positions in the tangent coordinates
+``difference(q_0, q_k)`` (so that quaternions and (cos, sin) pairs count as
+angles), robustly (:func:`pinobs.model.noise.third_difference_std`: Gasser,
+Sroka & Jennen-Steinmetz 1986; only runs of four consecutive, evenly spaced rows).
 """
 
 from __future__ import annotations
@@ -31,14 +14,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.model import Robot
+from pinobs.model.noise import third_difference_std
 from pinobs.model.robot import Vector
 
 __all__ = ["estimate_noise_std", "noise_from_log"]
 
-#: Median of a χ² variable with one degree of freedom.
-_CHI2_1_MEDIAN = 0.454936423119572
-#: Σ binomial(3, k)² : the variance gain of the third difference.
-_THIRD_DIFF_GAIN = 20.0
 #: Fewest usable rows for an estimate.
 _MIN_ROWS = 12
 
@@ -68,15 +48,7 @@ def estimate_noise_std(
     else:
         ref = robot.normalize(q[idx[0]])
         x = np.array([robot.difference(ref, robot.normalize(q[i])) for i in idx])
-    d = x[3:] - 3.0 * x[2:-1] + 3.0 * x[1:-2] - x[:-3]  # Gasser et al. (1986), order 3
-    dt = np.diff(np.asarray(t, dtype=float)[idx])
-    h = float(np.median(dt))
-    even = (np.diff(idx) == 1) & (np.abs(dt - h) <= 0.5 * h)  # row j to j+1: the next sample
-    whole = even[:-2] & even[1:-1] & even[2:]  # d_k's four rows: consecutive, evenly spaced
-    if np.count_nonzero(whole) < _MIN_ROWS - 3:
-        return None
-    var = np.median(d[whole] ** 2, axis=0) / (_THIRD_DIFF_GAIN * _CHI2_1_MEDIAN)
-    return np.sqrt(var)
+    return third_difference_std(x, np.asarray(t, dtype=float)[idx], idx, min_runs=_MIN_ROWS - 3)
 
 
 def _rows(t: Vector, q: Vector, window: float, min_rows: int) -> NDArray[np.intp] | None:

@@ -90,3 +90,18 @@ def test_a_robot_on_another_model_shares_the_geometry_without_loading_it() -> No
     other = robot.with_model(robot.model.copy(), name="ur5*")
     assert other.name == "ur5*" and other._geometry is None and robot._geometry is None
     assert robot.perturbed(payload=(1.0, [0, 0, 0.1]))._geometry is None
+
+
+@pytest.mark.parametrize(("name", "root"), [("top", None), ("go1", None), ("planar_3r", "planar")])
+def test_interpolate_is_pinocchios_and_ends_on_its_endpoints(name: str, root: str | None) -> None:
+    import pinocchio as pin
+
+    robot = pinobs.load(name, root_joint=root)
+    rng = np.random.default_rng(4)
+    q0, q1 = robot.random_configuration(rng), robot.random_configuration(rng)
+    np.testing.assert_allclose(robot.interpolate(q0, q1, 0.0), q0, atol=1e-14)
+    np.testing.assert_allclose(robot.difference(robot.interpolate(q0, q1, 1.0), q1), 0, atol=1e-12)
+    for s in (0.25, 0.5, 0.75):
+        np.testing.assert_allclose(
+            robot.interpolate(q0, q1, s), pin.interpolate(robot.model, q0, q1, s), atol=1e-12
+        )

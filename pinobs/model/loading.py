@@ -643,6 +643,7 @@ def load(
         friction=bool(friction),
         root_joint=None if compiled is not None else root,  # MuJoCo: the file's own root
         geometry=geometry,  # meshes: on first draw
+        package_dirs=package_dirs or (),  # the URDF writer resolves the meshes with them
     )
     robot.mimic = mimic  # as asked (a saved run reloads its robot so: pinobs play)
     return robot

@@ -453,7 +453,10 @@ def _load_mjcf(
     own (declare a ``<freejoint/>`` in it): a ``root_joint`` other than ``None``
     must name it (:class:`~pinobs.errors.GainError` otherwise), and the visual
     geometry is MuJoCo's primitive geoms (no meshes).  Without MuJoCo one
-    :class:`~pinobs.errors.ModelWarning` says what Pinocchio's parser misses.
+    :class:`~pinobs.errors.ModelWarning` says what Pinocchio's parser misses;
+    its joint limits are corrected (:func:`_mjcf_limits`), and a ``root_joint``
+    is added above a top body without joints (a :class:`~pinobs.errors.GainError`
+    for one with joints, under which the parser would drop it).
     """
     try:
         import mujoco  # noqa: F401  (optional extra pinobs[mujoco])
@@ -474,8 +477,15 @@ def _load_mjcf(
             ModelWarning,
             stacklevel=3,
         )
-        if joint_type is not None:
-            model = pin.buildModelFromMJCF(str(path), joint_type())
+        if joint_type is not None:  # Pinocchio 4's buildModelFromMJCF(path, joint) is no more
+            build = getattr(pin, "buildModelFromMJCFAndRootJoint", pin.buildModelFromMJCF)
+            model = build(str(path), joint_type())
+            if "root_joint" not in model.names:  # the parser drops it under a jointed top body
+                raise GainError(
+                    f"root_joint={root_joint!r}: Pinocchio's MJCF parser adds a root joint only "
+                    f"under a top body without joints, and {path.name}'s has its own: leave out "
+                    "root_joint, or install MuJoCo (pip install 'pinobs[mujoco]')"
+                ) from None
         else:
             model = pin.buildModelFromMJCF(str(path))
         model.gravity = pin.Motion(_mjcf_gravity(root), np.zeros(3))  # the parser ignores it

@@ -240,6 +240,25 @@ def test_without_mujoco_slide_ranges_and_limited_are_read_as_mujoco_compiles_the
         np.testing.assert_allclose(robot.model.upperPositionLimit, upper, rtol=1e-12)
 
 
+def test_without_mujoco_a_root_joint_is_added_before_the_files_joints(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Pinocchio 4 has no buildModelFromMJCF(path, joint): it was a Boost ArgumentError;
+    under a top body with joints its parser drops the root joint: refused, not ignored."""
+    _without_mujoco(monkeypatch)
+    text, lower, upper = SLIDE_LIMITS["degree"]
+    with pytest.warns(pinobs.ModelWarning, match="MuJoCo is not installed"):
+        with pytest.raises(pinobs.GainError, match=r"model\.xml's has its own: leave out"):
+            pinobs.load(_file(tmp_path, text), root_joint="freeflyer")
+    welded = text.replace('<body name="a">', f'<body name="a">{_INERTIAL}<body name="a2">', 1)
+    welded = welded.replace("</worldbody>", "</body></worldbody>")
+    with pytest.warns(pinobs.ModelWarning, match="MuJoCo is not installed"):
+        robot = pinobs.load(_file(tmp_path, welded), root_joint="freeflyer")
+    assert robot.model.names[1] == "root_joint" and robot.nq == 7 + 3
+    np.testing.assert_allclose(robot.model.lowerPositionLimit[7:], lower, rtol=1e-12)
+    np.testing.assert_allclose(robot.model.upperPositionLimit[7:], upper, rtol=1e-12)
+
+
 @pytest.mark.parametrize("units", ["degree", "radian"])
 def test_without_mujoco_the_arms_limits_are_mujocos(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, units: str

@@ -25,8 +25,9 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -110,6 +111,8 @@ class Robot:
         has_friction: whether that friction is nonzero.
         root_joint: the root joint :func:`pinobs.load` added (``"fixed"``,
             ``"spherical"``, ``"freeflyer"``, ``"planar"``), or ``None`` if unknown.
+        package_dirs: the ``package_dirs`` given to :func:`pinobs.load`, as
+            absolute paths (the URDF writer resolves the source's meshes with them).
     """
 
     def __init__(
@@ -123,9 +126,11 @@ class Robot:
         friction: bool = False,
         root_joint: str | None = None,
         geometry: GeometryLoader | None = None,
+        package_dirs: Sequence[str | Path] = (),
     ) -> None:
         self.model = model
         self.root_joint = root_joint
+        self.package_dirs = tuple(Path(d).resolve() for d in package_dirs)
         self.mimic: str | None = None  # how pinobs.load took URDF <mimic> joints, if asked
         self.name = name
         self.source = source
@@ -264,14 +269,16 @@ class Robot:
         self, model: pin.Model, *, name: str | None = None, friction: bool | None = None
     ) -> Robot:
         """This robot on another ``pin.Model`` of the same tree (perturbed or identified
-        parameters): same source, root joint and geometry (shared, loaded or not: building
-        one never loads meshes); friction as this robot's unless given."""
+        parameters): same source, package directories, root joint and geometry (shared,
+        loaded or not: building one never loads meshes); friction as this robot's unless
+        given."""
         return Robot(
             model,
             name=self.name if name is None else name,
             source=self.source,
             friction=self.friction if friction is None else friction,
             root_joint=self.root_joint,
+            package_dirs=self.package_dirs,
             **self._geometry_kwargs(),
         )
 

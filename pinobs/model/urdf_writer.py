@@ -12,6 +12,14 @@ limits and anything else it says are kept.  What changes:
   the frame origin (Pinocchio's ``Inertia`` holds ``m``, ``c``, ``I_c``).
 * ``<dynamics damping friction>`` of every moving joint: the model's viscous
   and Coulomb coefficients, read back by ``pinobs.load(path, friction=True)``.
+* every ``<mesh filename>`` becomes the absolute path of the file it named,
+  found as :func:`pinobs.load` found it (:func:`~pinobs.model.urdf.resolve_mesh`:
+  ``package://`` URIs through the package directories the robot was loaded
+  with, relative paths from the source URDF's folder), so the written file
+  loads its meshes from any folder of the same machine (copy the meshes and
+  edit the paths to move it to another).  A ``package://`` URI that resolved
+  to nothing is kept as it is; a relative path that did is written absolute
+  from the source's folder all the same.
 
 Numbers are written with ``repr`` (17 significant digits), so a model
 reloaded from the file has the same dynamics to rounding.
@@ -27,6 +35,7 @@ import pinocchio as pin
 
 from pinobs.errors import ModelFileError
 from pinobs.model.robot import Robot
+from pinobs.model.urdf import resolve_mesh
 
 __all__ = ["write_urdf"]
 
@@ -35,11 +44,13 @@ def _fmt(*xs: float) -> str:
     return " ".join(repr(float(x)) for x in xs)
 
 
-def _source_urdf(robot: Robot) -> Path:
+def _source_urdf(robot: Robot) -> tuple[Path, list[Path]]:
+    """The URDF ``robot`` was loaded from, and the package directories its meshes were
+    searched in (those given to :func:`pinobs.load`, then the registry's)."""
     from pinobs.model.loading import _resolve
 
     try:
-        path = _resolve(robot.source)[0]
+        path, dirs = _resolve(robot.source)[:2]
     except Exception as exc:  # unknown name, missing file: say what we need
         raise ModelFileError(
             f"cannot find the URDF robot {robot.name!r} came from ({robot.source!r}): {exc}"
@@ -48,11 +59,28 @@ def _source_urdf(robot: Robot) -> Path:
         raise ModelFileError(
             f"robot {robot.name!r} comes from {str(path)!r}; only URDF sources can be rewritten"
         )
-    return path
+    return path, [*robot.package_dirs, *dirs]
+
+
+def _absolute_meshes(root: ET.Element, source: Path, package_dirs: list[Path]) -> None:
+    """Every ``<mesh filename>`` under ``root`` made an absolute path (module docstring)."""
+    for mesh in root.iter("mesh"):
+        uri = mesh.get("filename")
+        if uri is None:
+            continue
+        found = resolve_mesh(uri, source, package_dirs)
+        if found is None and not uri.startswith("package://"):
+            plain = Path(uri.removeprefix("file://"))
+            found = plain if plain.is_absolute() else source.resolve().parent / plain
+        if found is not None:
+            mesh.set("filename", str(found))
 
 
 def write_urdf(robot: Robot, path: str | Path) -> str:
     """Write ``robot``'s inertials and joint friction into a copy of its source URDF.
+
+    Mesh filenames are written as absolute paths (module docstring), so the copy
+    shows the robot's meshes wherever it is written on this machine.
 
     Args:
         robot: a robot loaded from a URDF (directly or via a calibrated copy of one).
@@ -64,8 +92,10 @@ def write_urdf(robot: Robot, path: str | Path) -> str:
     Raises:
         ModelFileError: the robot's source is not a URDF file that can be found.
     """
-    tree = ET.parse(_source_urdf(robot))
+    source, package_dirs = _source_urdf(robot)
+    tree = ET.parse(source)
     root = tree.getroot()
+    _absolute_meshes(root, source, package_dirs)
     links = {link.get("name"): link for link in root.findall("link")}
     joints = {joint.get("name"): joint for joint in root.findall("joint")}  # not <transmission>s
     model = robot.model

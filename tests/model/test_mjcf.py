@@ -195,6 +195,85 @@ def test_without_mujoco_pinocchios_parser_loads_with_a_warning_saying_what_it_mi
     assert sum(i.mass for i in robot.model.inertias) > 10.0
 
 
+_INERTIAL = '<inertial pos="0 0 0" mass="1" diaginertia="0.1 0.1 0.1"/>'
+_BIG = np.finfo(float).max
+# (file, expected lower, upper): what MuJoCo compiles (q = qpos - ref)
+SLIDE_LIMITS = {
+    "degree": (  # MuJoCo's default angle unit; a slide's range is in metres whatever it says
+        f"""<mujoco><worldbody><body name="a">
+          <joint name="s" type="slide" axis="1 0 0" range="-0.3 0.5" limited="true"/>{_INERTIAL}
+          <body name="b"><joint name="h" axis="0 0 1" range="-90 45" ref="10"/>{_INERTIAL}
+          <body name="c"><joint name="off" type="slide" range="-0.3 0.5" limited="false"/>
+          {_INERTIAL}</body></body></body></worldbody></mujoco>""",
+        [-0.3, -np.pi / 2 - np.pi / 18, -_BIG],
+        [0.5, np.pi / 4 - np.pi / 18, _BIG],
+    ),
+    "classes": (  # range, ref and type from <default> classes, a childclass, autolimits off
+        f"""<mujoco><compiler autolimits="false"/><default>
+          <joint type="slide" range="-0.3 0.5" limited="true"/>
+          <default class="c"><joint range="-0.2 0.4" ref="0.1"/></default></default>
+          <worldbody><body name="a"><joint name="s" axis="1 0 0"/>{_INERTIAL}
+          <body name="b" childclass="c"><joint name="t" axis="1 0 0"/>{_INERTIAL}
+          <joint name="h" type="hinge" axis="0 0 1" range="-90 90"/>
+          <body name="c"><joint name="u" axis="0 1 0" limited="false"/>{_INERTIAL}
+          </body></body></body></worldbody></mujoco>""",
+        [-0.3, -0.3, -np.pi / 2 - np.pi / 1800, -_BIG],
+        [0.5, 0.3, np.pi / 2 - np.pi / 1800, _BIG],
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SLIDE_LIMITS))
+def test_without_mujoco_slide_ranges_and_limited_are_read_as_mujoco_compiles_them(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, case: str
+) -> None:
+    """Pinocchio's parser scaled slide ranges by π/180 under angle="degree" (-0.3..0.5 m read
+    as -0.0052..0.0087 m) and limited joints whose limited="false"."""
+    text, lower, upper = SLIDE_LIMITS[case]
+    path = _file(tmp_path, text)
+    through_mujoco = pinobs.load(path)
+    _without_mujoco(monkeypatch)
+    with pytest.warns(pinobs.ModelWarning, match="MuJoCo is not installed"):
+        fallback = pinobs.load(path)
+    for robot in (through_mujoco, fallback):
+        np.testing.assert_allclose(robot.model.lowerPositionLimit, lower, rtol=1e-12)
+        np.testing.assert_allclose(robot.model.upperPositionLimit, upper, rtol=1e-12)
+
+
+def test_without_mujoco_a_root_joint_is_added_before_the_files_joints(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Pinocchio 4 has no buildModelFromMJCF(path, joint): it was a Boost ArgumentError;
+    under a top body with joints its parser drops the root joint: refused, not ignored."""
+    _without_mujoco(monkeypatch)
+    text, lower, upper = SLIDE_LIMITS["degree"]
+    with pytest.warns(pinobs.ModelWarning, match="MuJoCo is not installed"):
+        with pytest.raises(pinobs.GainError, match=r"model\.xml's has its own: leave out"):
+            pinobs.load(_file(tmp_path, text), root_joint="freeflyer")
+    welded = text.replace('<body name="a">', f'<body name="a">{_INERTIAL}<body name="a2">', 1)
+    welded = welded.replace("</worldbody>", "</body></worldbody>")
+    with pytest.warns(pinobs.ModelWarning, match="MuJoCo is not installed"):
+        robot = pinobs.load(_file(tmp_path, welded), root_joint="freeflyer")
+    assert robot.model.names[1] == "root_joint" and robot.nq == 7 + 3
+    np.testing.assert_allclose(robot.model.lowerPositionLimit[7:], lower, rtol=1e-12)
+    np.testing.assert_allclose(robot.model.upperPositionLimit[7:], upper, rtol=1e-12)
+
+
+@pytest.mark.parametrize("units", ["degree", "radian"])
+def test_without_mujoco_the_arms_limits_are_mujocos(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, units: str
+) -> None:
+    path = _file(tmp_path, ARM_MJCF.format(**(ARM_DEGREES if units == "degree" else ARM_RADIANS)))
+    through_mujoco = pinobs.load(path)
+    _without_mujoco(monkeypatch)
+    with pytest.warns(pinobs.ModelWarning, match="MuJoCo is not installed"):
+        fallback = pinobs.load(path)
+    for attr in ("lowerPositionLimit", "upperPositionLimit"):  # j3 (slide) was -0.052..-0.047
+        np.testing.assert_allclose(
+            getattr(fallback.model, attr), getattr(through_mujoco.model, attr), rtol=1e-12
+        )
+
+
 def test_without_mujoco_an_include_is_refused_and_gravity_options_are_kept(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -269,10 +269,10 @@ class Robot:
         self, model: pin.Model, *, name: str | None = None, friction: bool | None = None
     ) -> Robot:
         """This robot on another ``pin.Model`` of the same tree (perturbed or identified
-        parameters): same source, package directories, root joint and geometry (shared,
-        loaded or not: building one never loads meshes); friction as this robot's unless
-        given."""
-        return Robot(
+        parameters): same source, package directories, root joint, ``mimic`` and geometry
+        (shared, loaded or not: building one never loads meshes); friction as this robot's
+        unless given."""
+        robot = Robot(
             model,
             name=self.name if name is None else name,
             source=self.source,
@@ -281,6 +281,8 @@ class Robot:
             package_dirs=self.package_dirs,
             **self._geometry_kwargs(),
         )
+        robot.mimic = self.mimic  # a run of it is reloaded as this one was (pinobs play)
+        return robot
 
     def perturbed(
         self,

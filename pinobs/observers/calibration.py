@@ -33,12 +33,42 @@ used).  The
 position noise the smoother needs is the log's own (``noise_std``) or, when
 not given, estimated from it (:func:`pinobs.observers.noise.estimate_noise_std`).
 
+**Limitation: noisy torques.** The smoother takes the logged torques as exact
+(only the model's error is white acceleration, ``refine[i]``).  White torque
+noise ``σ_τ`` is an acceleration density ``M⁻¹ diag(σ_τ²) M⁻ᵀ h`` (0.014–0.9
+rad²/s³ at 5 % of each joint's torque RMS, 1 kHz, on a UR5, a Panda and the
+double pendulum: 4–7 decades above ``refine``'s), so the smoothed velocities
+follow the integrated noise: at 5 % the first pass's RMS error was 3.4–12× the
+Savitzky–Golay fit's (σ = 1e-4 rad).  The refined fit is then no better than
+``refine=()``, and can be worse: with 5 % torque noise (per joint, of its RMS;
+the friction truth of :mod:`pinobs.simulation.mismatch`, σ = 1e-4 rad, 6 s of
+``pd`` at 1 kHz, 8 noise draws) its prediction error on a fresh 4 s trajectory
+of the truth was 0.74–1.54× (geometric mean 1.00) that of ``refine=()`` on a
+UR5 and 0.95–1.60× (1.20) on the double pendulum, where a fit on the *true*
+velocities was 0.81–1.25× and 0.45–1.15×: the torque noise in ``∫ τ dt``
+dominates both.  At 1 % (4 draws) the refined fit was 0.47–0.83× (UR5) and 0.81–1.51×
+(double pendulum) of ``refine=()``; on clean torques 0.03–0.51× (UR5, Panda,
+double pendulum; payload and friction truths; σ = 1e-4 and 1e-3), except one
+double-pendulum payload log at σ = 1e-3 (1.38×).  No rule without the truth
+was found to choose: modelling the torque noise in the smoother (that density
+added to ``refine``'s) gave 0.81–1.25× ``refine=()`` on 9 logs (UR5, Panda,
+double pendulum, seeds 1–3, 5 %) where the default gave 0.81–1.39×; the
+held-out residual on the Savitzky–Golay velocities of the held-out end
+(windows of 0.1–1 s) picked ``refine=()`` on a clean double-pendulum log where
+the refined fit was 18× better.  The smoother's own consistency ``ρ`` (last
+pass, pooled over the stretches: ``report["smoother_consistency"]``) says how
+far the model and torques are from explaining the positions: 0.44–14.8 on the
+clean logs (UR5 and double pendulum, seeds 1–3), 20–183 at 1 % torque noise,
+108–4500 at 5 %; in the hundreds, compare with ``refine=()`` on data of your
+own.
+
 The model layer cannot import the smoother (layers run one way), hence this
 thin wrapper one layer up; the machinery is the model layer's, written once.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -115,8 +145,13 @@ def identify(
             every pass (the model layer's ``torque``).
 
     ``report["velocities"]`` says which velocities the last pass used
-    (``"savgol"`` or ``"rts(accel_psd=…)"``) and ``report["noise_std"]`` the σ
-    the smoother was given; ``report["observer_options"]`` is empty (run
+    (``"savgol"`` or ``"rts(accel_psd=…)"``), ``report["noise_std"]`` the σ
+    the smoother was given and ``report["smoother_consistency"]`` the last
+    smoother pass's consistency ``ρ`` (NaN with ``refine=()``): about 1 when
+    the model and the torques explain the positions, in the hundreds under
+    torque noise of a few percent, where the refinement may be worse than
+    ``refine=()`` (module docstring, "Limitation: noisy torques");
+    ``report["observer_options"]`` is empty (run
     ``ekf`` and ``riemannian`` with their defaults on the refined model).
 
     Raises:
@@ -138,6 +173,7 @@ def identify(
     current = ident_model.identify(robot, log, **opts)
     if not refine:
         current.report["velocities"] = "savgol"
+        current.report["smoother_consistency"] = math.nan  # nothing smoothed
         return current
     t, q, tau = log_arrays(robot, log)
     sigma = noise_std if noise_std is not None else _noise_std(robot, t, q)
@@ -145,10 +181,11 @@ def identify(
         # a pass before the last one only feeds the next fit: its held-out end needs no smoothing
         last = i == len(refine) - 1
         rows = np.ones(t.shape, bool) if last else t <= current.report["fit_end"]
-        path = _smoothed_path(current, t, q, tau, rows, accel_psd=psd, noise_std=sigma)
+        path, rho = _smoothed_path(current, t, q, tau, rows, accel_psd=psd, noise_std=sigma)
         current = ident_model.identify(robot, (t, q, tau), path=path, **opts)
         current.report["velocities"] = f"rts(accel_psd={psd:g})"
     current.report["noise_std"] = sigma
+    current.report["smoother_consistency"] = rho
     # measured in benchmarks/learning.py: on a model identified this way the default ekf is
     # 1.1-5x more accurate than with the model-error densities the one-pass fit recommends
     current.report["observer_options"] = {}
@@ -164,14 +201,17 @@ def _smoothed_path(
     *,
     accel_psd: float,
     noise_std: float,
-) -> tuple[Vector, Vector]:
-    """RTS-smoothed ``(q, v)`` of every contiguous stretch of ``rows`` on the identified model.
+) -> tuple[tuple[Vector, Vector], float]:
+    """RTS-smoothed ``(q, v)`` of every contiguous stretch of ``rows`` on the identified model,
+    and the smoother's consistency ``ρ`` pooled over the stretches (each weighted by its number
+    of terms: :attr:`pinobs.observers.smoothing.Smoothed.consistency`; NaN with none smoothed).
 
     NaN elsewhere (where the model layer falls back on Savitzky–Golay).
     """
     robot = ident.robot
     q_out = np.full(q.shape, np.nan)
     v_out = np.full(tau.shape, np.nan)
+    rho_sum, terms = 0.0, 0
     t_rows = np.where(rows, t, np.nan)  # rows left out break the stretches
     for seg in segments(t_rows, q, tau):
         if seg.stop - seg.start < 3:
@@ -187,4 +227,7 @@ def _smoothed_path(
         except (NonFiniteError, ObserverDiverged):
             continue  # this stretch keeps the Savitzky–Golay velocities (build_rows)
         q_out[seg], v_out[seg] = sm.q, sm.v
-    return q_out, v_out
+        n = int(sm.options["consistency_terms"])
+        if n > 0 and np.isfinite(sm.consistency):
+            rho_sum, terms = rho_sum + sm.consistency * n, terms + n
+    return (q_out, v_out), rho_sum / terms if terms else math.nan

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 import pinobs
 from pinobs.observers.calibration import identify
 from pinobs.observers.noise import estimate_noise_std
+from pinobs.observers.smoothing import RHO_WARN
 from pinobs.simulation import Sensor
 from tests.conftest import planar_3r_truth
 
@@ -69,3 +72,26 @@ def test_refine_rejects_a_non_positive_density() -> None:
     t = np.arange(3000) * 1e-3
     with pytest.raises(pinobs.GainError, match="refine"):
         identify(robot, (t, np.zeros((t.size, 3)), np.zeros((t.size, 3))), refine=(0.0,))
+
+
+def test_report_gives_the_smoothers_consistency_about_one_on_exact_torques_large_on_noisy_ones(
+    rng: np.random.Generator,
+) -> None:
+    """``report["smoother_consistency"]``: the last pass's ρ, the sign that the smoother takes
+    noisy torques as exact (module docstring, "Limitation: noisy torques"); NaN unsmoothed."""
+    robot = pinobs.load("planar_3r")
+    res = pinobs.simulate(
+        robot,
+        [],
+        duration=3.0,
+        sensor=Sensor(rate=1000.0, noise_std=1e-4),
+        seed=1,
+        plant=planar_3r_truth(robot),
+    )
+    t, q, tau = res.t, np.array(res.q_meas), np.array(res.tau)
+    noisy = tau + 0.05 * np.sqrt(np.mean(tau**2, axis=0)) * rng.standard_normal(tau.shape)
+    clean_rho = identify(robot, (t, q, tau)).report["smoother_consistency"]
+    noisy_rho = identify(robot, (t, q, noisy)).report["smoother_consistency"]
+    assert clean_rho < RHO_WARN
+    assert noisy_rho > 100.0 * RHO_WARN
+    assert math.isnan(identify(robot, (t, q, tau), refine=()).report["smoother_consistency"])

@@ -609,6 +609,13 @@ def _print_summary(table: Any, title: str) -> None:
     Console(width=console.width if console.is_terminal else 160).print(out)
 
 
+#: ``pinobs identify`` suggests comparing with ``--no-refine`` at or above this smoother
+#: consistency: clean simulated logs gave 0.44–14.8, 1 % torque noise 20–183 (where the
+#: refinement still helped a UR5), 5 % 108–4500 (where it did not, on average:
+#: :mod:`pinobs.observers.calibration`).
+SMOOTHER_RHO_HINT = 100.0
+
+
 def _identify_report(ident: Any) -> str:
     """The identification report as text tables (``pinobs identify``)."""
     rep = ident.report
@@ -655,6 +662,18 @@ def _identify_report(ident: Any) -> str:
                 else "they stay near their nominal values)"
             )
         )
+    rho = rep.get("smoother_consistency", math.nan)
+    if math.isfinite(rho):  # observers.calibration's "Limitation: noisy torques"
+        lines.append(
+            f"velocities: {rep['velocities']}, smoother consistency ρ = {rho:.3g} (about 1 "
+            "when the model and the torques explain the positions"
+            + (
+                "; this high, the torques are likely noisy and the refined fit may be no "
+                "better than --no-refine's: compare the two)"
+                if rho >= SMOOTHER_RHO_HINT
+                else ")"
+            )
+        )
     lines += [f"warning: {w}" for w in rep.get("warnings", [])]
     if np.any(ident.offset):
         lines.append(
@@ -683,6 +702,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         holdout=args.holdout,
         max_condition=args.max_condition,
         torque=args.torque,
+        **({"refine": ()} if args.no_refine else {}),
     )
     print(_identify_report(ident))
     path = ident.save(str(out))
@@ -1302,6 +1322,13 @@ def _parser() -> argparse.ArgumentParser:
         help="how the log's torques were taken: held over each sample (zero-order hold: "
         "pinobs run, most controllers; the default) or sampled at the instants (pinobs "
         "excite's trajectory)",
+    )
+    p.add_argument(
+        "--no-refine",
+        action="store_true",
+        help="fit once, on Savitzky–Golay velocities, without the model-based smoother's "
+        "refinement passes (compare when the report's smoother consistency is in the "
+        "hundreds: noisy torques)",
     )
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=_cmd_identify)

@@ -34,6 +34,7 @@ def test_identify_writes_a_calibrated_urdf_closer_to_the_truth(
     assert main(["identify", "--robot", "planar_3r", "--log", str(log), "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "condition number" in text and "held-out" in text and "joint1.damping" in text
+    assert "smoother consistency ρ" in text and "likely noisy" not in text
     calibrated = pinobs.load(out, friction=True)
     nominal = pinobs.load("planar_3r")
     rng = np.random.default_rng(0)
@@ -352,3 +353,27 @@ def test_identify_of_an_excitation_takes_its_torques_as_sampled(tmp_path, capsys
     argv = ["identify", "--robot", "planar_3r", "--log", str(traj), "--out", str(urdf)]
     assert main([*argv, "--torque", "sampled"]) == 0
     assert urdf.exists()
+
+
+def test_identify_says_when_noisy_torques_defeat_the_refinement_and_runs_without_it(
+    tmp_path, capsys
+) -> None:
+    robot = pinobs.load("planar_3r")
+    truth = planar_3r_truth(robot)
+    res = pinobs.simulate(
+        robot, [], duration=3.0, sensor=Sensor(rate=1000.0, noise_std=1e-4), seed=2, plant=truth
+    )
+    tau = np.array(res.tau)
+    rng = np.random.default_rng(0)
+    tau += 0.05 * np.sqrt(np.mean(tau**2, axis=0)) * rng.standard_normal(tau.shape)  # 5 %
+    q = np.array(res.q_meas)
+    q[0] = res.q[0]
+    log = tmp_path / "noisy_torques.csv"
+    write_log(log, res.t, q, tau)
+    args = ["identify", "--robot", "planar_3r", "--log", str(log), "--force"]
+    assert main([*args, "--out", str(tmp_path / "refined.urdf")]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "smoother consistency" in x)
+    rho = float(line.split("ρ = ")[1].split()[0])
+    assert rho >= 100 and "likely noisy" in line and "--no-refine" in line  # measured ~1.3e3
+    assert main([*args, "--out", str(tmp_path / "plain.urdf"), "--no-refine"]) == 0
+    assert "smoother consistency" not in capsys.readouterr().out  # nothing smoothed

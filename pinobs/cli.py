@@ -684,7 +684,7 @@ def _identify_report(ident: Any) -> str:
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
-    from pinobs.observers.calibration import identify
+    from pinobs.observers.calibration import REFINE_ACCEL_PSD, identify
 
     out = Path(args.out)
     _check_output("--out", out)  # before the work, as the other commands
@@ -702,7 +702,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         holdout=args.holdout,
         max_condition=args.max_condition,
         torque=args.torque,
-        **({"refine": ()} if args.no_refine else {}),
+        refine=() if args.no_refine else REFINE_ACCEL_PSD,
     )
     print(_identify_report(ident))
     path = ident.save(str(out))

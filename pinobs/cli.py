@@ -99,6 +99,21 @@ def _task_progress(label: str, enabled: bool) -> Any:
         yield None if progress is None else (lambda k, n: progress(100 * k, 100 * n))
 
 
+def _check_cluster(args: argparse.Namespace) -> None:
+    """``--workers`` / ``--scheduler`` of sweep, bench and ``estimate --out-dir``: refused,
+    with the flags' names, before any output or work."""
+    if args.workers is not None and args.workers < 0:
+        raise OptionError(
+            f"--workers {args.workers}: give 0 (the tasks one after the other in this process) "
+            "or more local worker processes"
+        )
+    if args.workers is not None and args.scheduler:
+        raise OptionError(
+            f"--workers {args.workers} with --scheduler {args.scheduler}: the scheduler's "
+            "cluster has its own workers; give one or the other"
+        )
+
+
 def _cluster(args: argparse.Namespace) -> str:
     """Where ``--workers`` / ``--scheduler`` run the tasks, in words."""
     if args.scheduler:
@@ -476,6 +491,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             "density is its own (1e3 rad²/s⁵) or, with --accel-psd auto, chosen from the log"
         )
     if args.out_dir is not None:
+        _check_cluster(args)
         return _estimate_many(args)
     if args.smooth:
         return _estimate_smoothed(args)
@@ -880,6 +896,9 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from pinobs.evaluation.bench import BenchConfig, format_bench, run_bench
 
+    _check_cluster(args)
+    if args.workers is None and not args.scheduler:
+        args.workers = 0  # bench's default: its timings not loaded by each other
     cfg = BenchConfig.quick() if args.quick else BenchConfig()
     print(
         f"pinobs bench ({'quick' if args.quick else 'full'}): robots {', '.join(cfg.robots)}; timing also {', '.join(cfg.cost_robots)}"
@@ -889,7 +908,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         cfg,
         log=lambda msg: print(msg, flush=True),
         scheduler=args.scheduler,
-        workers=None if args.scheduler else args.workers,
+        workers=args.workers,
     )
     print(format_bench(report))
     print(
@@ -1000,6 +1019,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     from pinobs.evaluation.distributed import sweep, sweep_tasks, write_sweep
 
     # everything a run would refuse, refused here once rather than in every task
+    _check_cluster(args)
     positive("--duration", args.duration)
     positive("--rate", args.rate)
     positive("--noise", args.noise, allow_zero=True)
@@ -1125,11 +1145,10 @@ def _load(args: argparse.Namespace) -> Robot:
     return load(args.robot, root_joint=args.root_joint, friction=friction, mimic=mimic)
 
 
-def _add_cluster_options(
-    p: argparse.ArgumentParser, workers_help: str, workers: int | None = None
-) -> None:
-    """``--workers`` and ``--scheduler``: where independent tasks run (Dask)."""
-    p.add_argument("--workers", type=int, default=workers, help=workers_help)
+def _add_cluster_options(p: argparse.ArgumentParser, workers_help: str) -> None:
+    """``--workers`` and ``--scheduler``: where independent tasks run (Dask; checked by
+    :func:`_check_cluster`)."""
+    p.add_argument("--workers", type=int, default=None, help=workers_help)
     p.add_argument(
         "--scheduler",
         default=None,
@@ -1350,9 +1369,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--json", default=None, help="write the full report to this JSON file")
     _add_cluster_options(
         p,
-        "its independent runs on a local Dask cluster of N processes (default %(default)s: "
+        "its independent runs on a local Dask cluster of N processes (default 0: "
         "one after the other in this process; workers load each other's timings)",
-        workers=0,
     )
     p.set_defaults(func=_cmd_bench)
 

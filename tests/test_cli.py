@@ -289,6 +289,36 @@ def test_sweep_refuses_bad_options_up_front(
     assert not (tmp_path / "s").exists()
 
 
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["sweep", "--robots", "pendulum"],
+        ["bench", "--quick"],
+        ["estimate", "--robot", "pendulum", "--observer", "kf", "--log", "logs", "--out-dir", "o"],
+    ],
+)
+@pytest.mark.parametrize(
+    ("flags", "match"),
+    [
+        (["--workers", "-1"], "--workers -1: give 0 (the tasks one after the other"),
+        (
+            ["--workers", "2", "--scheduler", "tcp://h:1"],
+            "--workers 2 with --scheduler tcp://h:1: the scheduler's cluster has its own workers",
+        ),
+    ],
+)
+def test_cluster_flags_are_refused_by_name_before_any_output(
+    tmp_path: Path, capsys, monkeypatch, command: list[str], flags: list[str], match: str
+) -> None:
+    """Found by a sweep: refused after "N runs on a local Dask cluster (-1)" was printed, in
+    Python names (workers=2 with scheduler=...); bench ignored --workers with --scheduler."""
+    monkeypatch.chdir(tmp_path)
+    assert main([*command, *flags]) == 2
+    captured = capsys.readouterr()
+    assert f"pinobs: error: {match}" in captured.err and captured.out == ""
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_sweep_where_no_run_succeeds_says_so_and_writes_the_table(tmp_path, capsys) -> None:
     pytest.importorskip("pandas")
     argv = ["sweep", "--robots", "pendulum", "--seeds", "0", "--observers", "liegroup"]

@@ -894,7 +894,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from pinobs.evaluation.bench import BenchConfig, format_bench, run_bench
+    from pinobs.evaluation.bench import BenchConfig, bench_tasks, format_bench, run_bench
 
     _check_cluster(args)
     if args.workers is None and not args.scheduler:
@@ -916,6 +916,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     )
     if args.json:
         print(f"wrote {_write_json(args.json, report)}")
+    if report["failed"]:
+        n = len(bench_tasks(cfg))
+        print(f"pinobs: error: {len(report['failed'])} of {n} bench tasks failed", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -30,6 +30,8 @@ if __name__ == "__main__":
     args = parser.parse_args()
     cfg = BenchConfig.quick() if args.quick else BenchConfig()
     report = run_bench(cfg, log=lambda m: print(m, flush=True))
+    if report["failed"]:  # the README quotes these results: not with rows missing
+        raise SystemExit(f"{len(report['failed'])} bench tasks failed; nothing written")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps(report, indent=1, default=str) + "\n")

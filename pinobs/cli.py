@@ -21,6 +21,7 @@ pinobs sweep --robots R1,R2 --seeds 0-9 ...     robots × scenarios × seeds on 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import os
@@ -99,6 +100,21 @@ def _task_progress(label: str, enabled: bool) -> Any:
         yield None if progress is None else (lambda k, n: progress(100 * k, 100 * n))
 
 
+def _check_cluster(args: argparse.Namespace) -> None:
+    """``--workers`` / ``--scheduler`` of sweep, bench and ``estimate --out-dir``: refused,
+    with the flags' names, before any output or work."""
+    if args.workers is not None and args.workers < 0:
+        raise OptionError(
+            f"--workers {args.workers}: give 0 (the tasks one after the other in this process) "
+            "or more local worker processes"
+        )
+    if args.workers is not None and args.scheduler:
+        raise OptionError(
+            f"--workers {args.workers} with --scheduler {args.scheduler}: the scheduler's "
+            "cluster has its own workers; give one or the other"
+        )
+
+
 def _cluster(args: argparse.Namespace) -> str:
     """Where ``--workers`` / ``--scheduler`` run the tasks, in words."""
     if args.scheduler:
@@ -143,9 +159,14 @@ def _build(
         except UnsupportedRobotError as exc:
             if strict:
                 raise
-            reason = str(exc).split(";")[0]
-            skipped[name] = reason if len(reason) <= 110 else reason[:107] + "..."
+            skipped[name] = _short_reason(exc)
     return built, skipped
+
+
+def _short_reason(exc: UnsupportedRobotError) -> str:
+    """Why an observer refuses a robot, in one short clause (its message up to the first ';')."""
+    reason = str(exc).split(";")[0]
+    return reason if len(reason) <= 110 else reason[:107] + "..."
 
 
 def _consistency_warnings(reports: dict[str, Any]) -> list[str]:
@@ -476,6 +497,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             "density is its own (1e3 rad²/s⁵) or, with --accel-psd auto, chosen from the log"
         )
     if args.out_dir is not None:
+        _check_cluster(args)
         return _estimate_many(args)
     if args.smooth:
         return _estimate_smoothed(args)
@@ -878,8 +900,11 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from pinobs.evaluation.bench import BenchConfig, format_bench, run_bench
+    from pinobs.evaluation.bench import BenchConfig, bench_tasks, format_bench, run_bench
 
+    _check_cluster(args)
+    if args.workers is None and not args.scheduler:
+        args.workers = 0  # bench's default: its timings not loaded by each other
     cfg = BenchConfig.quick() if args.quick else BenchConfig()
     print(
         f"pinobs bench ({'quick' if args.quick else 'full'}): robots {', '.join(cfg.robots)}; timing also {', '.join(cfg.cost_robots)}"
@@ -889,7 +914,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         cfg,
         log=lambda msg: print(msg, flush=True),
         scheduler=args.scheduler,
-        workers=None if args.scheduler else args.workers,
+        workers=args.workers,
     )
     print(format_bench(report))
     print(
@@ -897,6 +922,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     )
     if args.json:
         print(f"wrote {_write_json(args.json, report)}")
+    if report["failed"]:
+        n = len(bench_tasks(cfg))
+        print(f"pinobs: error: {len(report['failed'])} of {n} bench tasks failed", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -997,9 +1026,10 @@ def _parse_sweep_observers(spec: str) -> dict[str, tuple[str, dict[str, Any]]]:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from pinobs.evaluation.distributed import sweep, sweep_tasks, write_sweep
+    from pinobs.evaluation.distributed import check_sweep_out, sweep, sweep_tasks, write_sweep
 
     # everything a run would refuse, refused here once rather than in every task
+    _check_cluster(args)
     positive("--duration", args.duration)
     positive("--rate", args.rate)
     positive("--noise", args.noise, allow_zero=True)
@@ -1008,6 +1038,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             f"--duration {args.duration:g} s is shorter than one sample at {args.rate:g} Hz"
         )
     _check_output("--out", args.out, folder=True)
+    check_sweep_out(args.out, force=args.force)
     robots = _unique_list("--robots", args.robots)
     scenarios = _unique_list("--scenarios", args.scenarios)
     unknown = [s for s in scenarios if s not in MISMATCH_SCENARIOS]
@@ -1018,13 +1049,17 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         )
     seeds = _parse_seeds(args.seeds)
     observers = _parse_sweep_observers(args.observers)
+    refusals = []
     for robot_name in robots:  # a bad robot or observer option fails here, not once per task
         robot = load(robot_name)
-        for name, options in observers.values():
+        for label, (name, options) in observers.items():
             try:
                 make_observer(name, robot, rate=args.rate, noise_std=args.noise, **options)
-            except UnsupportedRobotError:
-                pass  # reported per run, as a failed run
+            except UnsupportedRobotError as exc:  # its rows fail alone, the others run
+                refusals.append(
+                    f"warning: {label} refuses {robot_name}: {_short_reason(exc)}; its "
+                    f"{_plural(len(scenarios) * len(seeds), 'run')} there are reported as failed"
+                )
     tasks = sweep_tasks(
         robots,
         scenarios,
@@ -1034,26 +1069,63 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         rate=args.rate,
         noise_std=args.noise,
     )
-    print(f"pinobs sweep: {len(tasks)} runs on {_cluster(args)}")
+    for line in refusals:
+        print(line, file=sys.stderr)
+    print(f"pinobs sweep: {_plural(len(tasks), 'run')} on {_cluster(args)}")
     with _task_progress("sweep", not args.no_progress) as step:
         table = sweep(tasks, scheduler=args.scheduler, workers=args.workers, progress=step)
     failed = table[table["error"].notna()]
-    for _, row in failed.drop_duplicates(["robot", "scenario", "seed"]).iterrows():
-        print(f"failed: {row['robot']} {row['scenario']} seed {row['seed']}: {row['error']}")
-    ok = table[table["error"].isna()]
-    if ok.empty:
-        print(f"pinobs: error: none of the {len(tasks)} runs succeeded", file=sys.stderr)
+    for line in _failed_runs(failed):
+        print(line, file=sys.stderr)
+    if len(failed) == len(table):  # not one observer ran
+        print(f"pinobs: error: 0 of {_plural(len(tasks), 'run')} succeeded", file=sys.stderr)
     else:
+        # over every run: a robot and scenario where an observer always failed shows NaN
         summary = (
-            ok.groupby(["robot", "scenario", "observer"])["rms_v_error"]
+            table.groupby(["robot", "scenario", "observer"], sort=False)["rms_v_error"]
             .median()
             .unstack("observer")
         )
-        print("median RMS velocity error [rad/s] over seeds:")
+        print("median RMS velocity error [rad/s] over seeds (nan: every run failed):")
         print(summary.to_string(float_format=lambda x: f"{x:.3g}"))
-    for path in write_sweep(table, args.out):
+        if len(failed):
+            print(
+                f"pinobs: error: {len(failed)} of {len(table)} observer runs failed",
+                file=sys.stderr,
+            )
+    for path in write_sweep(table, args.out, force=args.force):
         print(f"wrote {path}")
     return 0 if failed.empty else 1
+
+
+def _failed_runs(failed: Any) -> list[str]:
+    """The failed rows of a sweep, one line per robot, scenario, observers and error,
+    with the seeds where they failed."""
+    runs: dict[tuple[str, str, int, str], list[str]] = {}
+    for r in failed.itertuples(index=False):
+        runs.setdefault((r.robot, r.scenario, r.seed, r.error), []).append(r.observer)
+    lines: dict[tuple[str, str, tuple[str, ...], str], list[int]] = {}
+    for (robot, scenario, seed, error), labels in runs.items():
+        lines.setdefault((robot, scenario, tuple(labels), error), []).append(int(seed))
+    return [
+        f"failed: {', '.join(labels)} on {robot} {scenario}, "
+        f"seed{'s' if len(seeds) > 1 else ''} {_seed_spec(seeds)}: {error}"
+        for (robot, scenario, labels, error), seeds in lines.items()
+    ]
+
+
+def _seed_spec(seeds: Sequence[int]) -> str:
+    """Seeds as :func:`_parse_seeds` reads them: ``[0, 1, 2, 5]`` -> ``"0-2,5"``."""
+    parts: list[str] = []
+    for _, group in itertools.groupby(enumerate(sorted(seeds)), lambda x: x[1] - x[0]):
+        run = [s for _, s in group]
+        parts.append(str(run[0]) if len(run) == 1 else f"{run[0]}-{run[-1]}")
+    return ",".join(parts)
+
+
+def _plural(n: int, word: str) -> str:
+    """``1 run``, ``2 runs``."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
 
 
 # ------------------------------------------------------------------ parser
@@ -1125,11 +1197,10 @@ def _load(args: argparse.Namespace) -> Robot:
     return load(args.robot, root_joint=args.root_joint, friction=friction, mimic=mimic)
 
 
-def _add_cluster_options(
-    p: argparse.ArgumentParser, workers_help: str, workers: int | None = None
-) -> None:
-    """``--workers`` and ``--scheduler``: where independent tasks run (Dask)."""
-    p.add_argument("--workers", type=int, default=workers, help=workers_help)
+def _add_cluster_options(p: argparse.ArgumentParser, workers_help: str) -> None:
+    """``--workers`` and ``--scheduler``: where independent tasks run (Dask; checked by
+    :func:`_check_cluster`)."""
+    p.add_argument("--workers", type=int, default=None, help=workers_help)
     p.add_argument(
         "--scheduler",
         default=None,
@@ -1350,9 +1421,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--json", default=None, help="write the full report to this JSON file")
     _add_cluster_options(
         p,
-        "its independent runs on a local Dask cluster of N processes (default %(default)s: "
+        "its independent runs on a local Dask cluster of N processes (default 0: "
         "one after the other in this process; workers load each other's timings)",
-        workers=0,
     )
     p.set_defaults(func=_cmd_bench)
 
@@ -1373,6 +1443,7 @@ def _parser() -> argparse.ArgumentParser:
         help="names, or label=name:key=value;key=value (e.g. 'ekf+d=ekf:disturbance_psd=1')",
     )
     p.add_argument("--out", default="sweep", help="output folder (default %(default)s)")
+    p.add_argument("--force", action="store_true", help="overwrite a sweep in --out")
     _add_cluster_options(p, "local worker processes (0: this process; default: one per core)")
     p.add_argument("--duration", type=float, default=3.0, help="per run [s] (default %(default)s)")
     p.add_argument(

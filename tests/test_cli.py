@@ -166,10 +166,48 @@ def test_sweep_writes_a_table_and_reports_a_failed_run(tmp_path, capsys) -> None
             str(tmp_path),
         ]
     )
-    out = capsys.readouterr().out
-    assert code == 1  # liegroup refuses both robots: those runs fail alone and are reported
-    assert "failed: pendulum exact seed 0" in out and "ekf+d" not in out
+    captured = capsys.readouterr()
+    assert code == 1  # liegroup refuses both robots: its rows fail alone and are reported
+    # named before the runs, listed once per robot with its seeds, on stderr
+    assert captured.err.index("warning: lg refuses pendulum") < captured.err.index("failed:")
+    assert "failed: lg on pendulum exact, seeds 0-1: " in captured.err
+    assert "failed: lg on cartpole exact, seeds 0-1: " in captured.err
+    assert "ekf+d" not in captured.err and "failed:" not in captured.out
+    assert "pinobs: error: 4 of 12 observer runs failed" in captured.err
     assert any(p.name.startswith("sweep.") for p in tmp_path.iterdir())
+
+
+def test_sweep_an_observer_that_refuses_a_robot_fails_alone(tmp_path, capsys) -> None:
+    """Found by a sweep: liegroup refusing the UR5 made every UR5 row NaN (kf's too),
+    marked them not diverged, and dropped the UR5 from the median table."""
+    pd = pytest.importorskip("pandas")
+    argv = ["sweep", "--robots", "pendulum,rigid_body", "--seeds", "0", "--workers", "0"]
+    code = main(
+        [*argv, "--observers", "kf,lg=liegroup", "--duration", "0.2", "--out", str(tmp_path)]
+    )
+    assert code == 1
+    table = pd.read_parquet(tmp_path / "sweep.parquet").set_index(["robot", "observer"])
+    assert table.loc[("pendulum", "kf"), "rms_v_error"] < 0.1  # was NaN
+    assert pd.isna(table.loc[("pendulum", "kf"), "error"])
+    assert "UnsupportedRobotError" in table.loc[("pendulum", "lg"), "error"]
+    assert pd.isna(table.loc[("pendulum", "lg"), "diverged"])  # was False
+    assert table.loc[("rigid_body", "lg"), "rms_v_error"] < 0.1
+    medians = capsys.readouterr().out.split("over seeds")[1]
+    assert re.search(r"pendulum\s+exact\s+\S+\s+NaN", medians)  # was missing
+
+
+def test_sweep_refuses_an_existing_sweep_without_force_before_running(tmp_path, capsys) -> None:
+    pytest.importorskip("pandas")
+    argv = ["sweep", "--robots", "pendulum", "--seeds", "0", "--observers", "kf", "--workers", "0"]
+    argv += ["--duration", "0.1", "--no-progress", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    before = (tmp_path / "sweep.parquet").read_bytes()
+    capsys.readouterr()
+    assert main(argv) == 2  # was: overwritten
+    captured = capsys.readouterr()
+    assert "sweep.parquet' exists; pass --force" in captured.err and captured.out == ""
+    assert (tmp_path / "sweep.parquet").read_bytes() == before
+    assert main([*argv, "--force"]) == 0
 
 
 # ------------------------------------------------------- excite (sweep findings)
@@ -285,8 +323,38 @@ def test_sweep_refuses_bad_options_up_front(
     code = main(["sweep", "--robots", "pendulum", option, value, "--out", str(tmp_path / "s")])
     assert code == 2
     captured = capsys.readouterr()
-    assert match in captured.err and "runs on" not in captured.out
+    assert match in captured.err and captured.out == ""
     assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["sweep", "--robots", "pendulum"],
+        ["bench", "--quick"],
+        ["estimate", "--robot", "pendulum", "--observer", "kf", "--log", "logs", "--out-dir", "o"],
+    ],
+)
+@pytest.mark.parametrize(
+    ("flags", "match"),
+    [
+        (["--workers", "-1"], "--workers -1: give 0 (the tasks one after the other"),
+        (
+            ["--workers", "2", "--scheduler", "tcp://h:1"],
+            "--workers 2 with --scheduler tcp://h:1: the scheduler's cluster has its own workers",
+        ),
+    ],
+)
+def test_cluster_flags_are_refused_by_name_before_any_output(
+    tmp_path: Path, capsys, monkeypatch, command: list[str], flags: list[str], match: str
+) -> None:
+    """Found by a sweep: refused after "N runs on a local Dask cluster (-1)" was printed, in
+    Python names (workers=2 with scheduler=...); bench ignored --workers with --scheduler."""
+    monkeypatch.chdir(tmp_path)
+    assert main([*command, *flags]) == 2
+    captured = capsys.readouterr()
+    assert f"pinobs: error: {match}" in captured.err and captured.out == ""
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_sweep_where_no_run_succeeds_says_so_and_writes_the_table(tmp_path, capsys) -> None:
@@ -295,7 +363,8 @@ def test_sweep_where_no_run_succeeds_says_so_and_writes_the_table(tmp_path, caps
     code = main([*argv, "--duration", "0.1", "--workers", "0", "--out", str(tmp_path)])
     assert code == 1  # was: ValueError: Data cannot be log-scaled, from the plot
     captured = capsys.readouterr()
-    assert "none of the 1 runs succeeded" in captured.err
+    assert "pinobs: error: 0 of 1 run succeeded" in captured.err
+    assert "pinobs sweep: 1 run on this process" in captured.out
     assert [p.name for p in tmp_path.iterdir() if p.suffix == ".png"] == []
 
 

@@ -57,3 +57,17 @@ def test_readme_learning_section_is_the_committed_results_file() -> None:
     assert m is not None
     results = (README.parent / "benchmarks" / "learning.md").read_text()
     assert m.group(1) == results, "paste benchmarks/learning.md into the README's learning section"
+
+
+def test_readme_python_that_starts_a_local_dask_cluster_guards_main() -> None:
+    """Found by a sweep: the README's many-logs one-liner, pasted into a script, failed
+    (Dask starts its local workers as new processes that import the script)."""
+    blocks = re.findall(r"```python\n(.*?)```", _text(), re.S)
+    local = [
+        b
+        for b in blocks
+        if re.search(r"\b(estimate_logs|sweep)\(", b) and not re.search(r"scheduler=|workers=0", b)
+    ]
+    assert local, "the README shows estimate_logs on a local cluster"
+    for block in local:
+        assert 'if __name__ == "__main__":' in block, block

@@ -243,10 +243,20 @@ def run_bench(
     are ratios to ``pin.aba`` in the same worker, but workers sharing cores
     load each other.
 
-    Raises:
-        PinobsError: a task failed (its error).
+    A task that raises fails alone: the report lists it under ``failed`` (kind,
+    robot, variant, error; logged as it fails) and holds the other tasks' results
+    (its rows, scaling points or geometry costs are missing; a cost it would have
+    timed is NaN).
     """
     from pinobs.evaluation.distributed import run_tasks
+
+    def done(o: Any) -> None:
+        t = o.task
+        log(
+            o.value[1]
+            if o.error is None
+            else f"  failed: {_what(t.kind, t.robot, t.variant)}: {o.error}"
+        )
 
     started = time.perf_counter()
     outcomes = run_tasks(
@@ -255,15 +265,17 @@ def run_bench(
         scheduler=scheduler,
         workers=workers,
         processes=processes,
-        on_result=lambda o: log(o.value[1]) if o.error is None else None,
+        on_result=done,
     )
-    failed = [o for o in outcomes if o.error is not None]
-    if failed:
-        t = failed[0].task
-        raise PinobsError(f"bench: {t.kind} on {t.robot} {t.variant}: {failed[0].error}".strip())
+    failed = [
+        {"kind": o.task.kind, "robot": o.task.robot, "variant": o.task.variant, "error": o.error}
+        for o in outcomes
+        if o.error is not None
+    ]
     parts: dict[str, list[Any]] = {"scaling": [], "accuracy": [], "mismatch": [], "geometry": []}
     for o in outcomes:
-        parts[o.task.kind].append(o.value[0])
+        if o.error is None:
+            parts[o.task.kind].append(o.value[0])
     points: dict[str, list[tuple[str, int, float, float]]] = {}
     for found in parts["scaling"]:
         for name, point in found.items():
@@ -293,6 +305,7 @@ def run_bench(
         "scaling": scaling,
         "geometry": parts["geometry"],
         "mismatch": [r for found in parts["mismatch"] for r in found],
+        "failed": failed,
     }
 
 
@@ -490,7 +503,18 @@ def format_bench(report: dict[str, Any]) -> str:
         lines.append(
             f"| {g['robot']} | {g['nv']} | {g['christoffel']:.1f} | {g['connection']:.1f} | {g['curvature']:.1f} |"
         )
+    if report.get("failed"):
+        lines += ["", "**Failed tasks** (their rows are missing above)", ""]
+        lines += [
+            f"- {_what(f['kind'], f['robot'], f['variant'])}: {f['error']}"
+            for f in report["failed"]
+        ]
     return "\n".join(lines)
+
+
+def _what(kind: str, robot: str, variant: str) -> str:
+    """A bench task in words: ``mismatch on ur5 friction``, ``geometry on ur5``."""
+    return f"{kind} on {robot}" + (f" {variant}" if variant else "")
 
 
 def _format_mismatch(rows: list[dict[str, Any]]) -> list[str]:
@@ -502,9 +526,10 @@ def _format_mismatch(rows: list[dict[str, Any]]) -> list[str]:
     for robot in dict.fromkeys(r["robot"] for r in rows):
         sel = [r for r in rows if r["robot"] == robot]
         cell = {(r["observer"], r["scenario"]): r for r in sel}
+        ran = [s for s in scenarios if any(k[1] == s for k in cell)]  # not a failed task's
         order = sorted(
             dict.fromkeys(r["observer"] for r in sel),
-            key=lambda o: cell[(o, scenarios[0])]["rms_v_error"],
+            key=lambda o: cell.get((o, ran[0]), {"rms_v_error": math.inf})["rms_v_error"],
         )
         lines += [
             "",
@@ -515,7 +540,10 @@ def _format_mismatch(rows: list[dict[str, Any]]) -> list[str]:
         ]
         for o in order:
             cells = [
-                f"{cell[(o, s)]['rms_v_error']:.2g} ({cell[(o, s)]['bias']:.1g})" for s in scenarios
+                f"{cell[(o, s)]['rms_v_error']:.2g} ({cell[(o, s)]['bias']:.1g})"
+                if (o, s) in cell
+                else "-"
+                for s in scenarios
             ]
             lines.append(f"| `{o}` | " + " | ".join(cells) + " |")
     return lines

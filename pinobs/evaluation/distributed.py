@@ -34,15 +34,21 @@ import traceback
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pinobs.errors import OptionError, OutputExistsError
 
+if TYPE_CHECKING:
+    from pinobs.evaluation.metrics import Metrics
+
 __all__ = [
     "SUMMARY_COLUMNS",
+    "SWEEP_COLUMNS",
+    "SWEEP_FILES",
     "LogTask",
     "SweepTask",
     "TaskOutcome",
+    "check_sweep_out",
     "estimate_logs",
     "log_tasks",
     "run_log_task",
@@ -73,12 +79,16 @@ def _dask() -> Any:
     return dd
 
 
+def _reason(exc: BaseException) -> str:
+    """An exception as the last line of its traceback (``module.Type: message``)."""
+    return traceback.format_exception_only(type(exc), exc)[-1].strip()
+
+
 def _guarded(fn: Callable[[Any], Any], task: Any) -> TaskOutcome:
     try:
         return TaskOutcome(task, fn(task))
     except Exception as exc:  # a bad task fails alone, with its reason
-        last = traceback.format_exception_only(type(exc), exc)[-1].strip()
-        return TaskOutcome(task, None, last)
+        return TaskOutcome(task, None, _reason(exc))
 
 
 def run_tasks(
@@ -161,6 +171,25 @@ def run_tasks(
             cluster.close()
 
 
+#: The columns of :func:`sweep`'s table, one row per run and observer label: the run
+#: (robot, mismatch scenario, seed), the observer's label and options, its RMS and max
+#: velocity error [rad/s] after the transient, convergence time [s], whether it diverged
+#: (NA when it did not run), and the error of an observer or run that failed (empty
+#: otherwise; its metrics are then NaN).
+SWEEP_COLUMNS = (
+    "robot",
+    "scenario",
+    "seed",
+    "observer",
+    "options",
+    "rms_v_error",
+    "max_v_error",
+    "convergence_time",
+    "diverged",
+    "error",
+)
+
+
 @dataclass(frozen=True)
 class SweepTask:
     """One simulation of a sweep: a robot, a mismatch scenario, a seed, observers with options."""
@@ -202,7 +231,8 @@ def sweep_tasks(
 
 
 def run_sweep_task(task: SweepTask) -> list[dict[str, Any]]:
-    """One sweep simulation: rows of (robot, scenario, seed, observer, options, metrics)."""
+    """One sweep simulation: rows of (robot, scenario, seed, observer, options, metrics),
+    one per observer label in order; an observer that cannot be built gets its error."""
     from pinobs.evaluation.metrics import evaluate
     from pinobs.model import load
     from pinobs.observers import make_observer
@@ -210,10 +240,17 @@ def run_sweep_task(task: SweepTask) -> list[dict[str, Any]]:
 
     robot = load(task.robot)
     plant = mismatched_plant(robot, task.scenario, seed=task.seed)
-    obs = {
-        label: make_observer(name, robot, rate=task.rate, noise_std=task.noise_std, **dict(opts))
-        for label, name, opts in task.observers
-    }
+    obs: dict[str, Any] = {}
+    refused: dict[str, str] = {}  # an observer that cannot be built fails alone, with its reason
+    for label, name, opts in task.observers:
+        try:
+            obs[label] = make_observer(
+                name, robot, rate=task.rate, noise_std=task.noise_std, **dict(opts)
+            )
+        except Exception as exc:
+            refused[label] = _reason(exc)
+    if not obs:
+        return [_row(task, label, opts, error=refused[label]) for label, _, opts in task.observers]
     res = simulate(
         robot,
         obs,
@@ -223,22 +260,34 @@ def run_sweep_task(task: SweepTask) -> list[dict[str, Any]]:
         seed=task.seed,
         plant=plant,
     )
-    options = {label: dict(opts) for label, _, opts in task.observers}
-    return [
-        {
-            "robot": task.robot,
-            "scenario": task.scenario,
-            "seed": task.seed,
-            "observer": m.observer,
-            "options": repr(options[m.observer]),
-            "rms_v_error": m.rms_v_error,
-            "max_v_error": m.max_v_error,
-            "convergence_time": m.convergence_time,
-            "diverged": m.diverged_at is not None,
-            "error": None,
-        }
-        for m in evaluate(res, robot)
+    metrics = {m.observer: m for m in evaluate(res, robot)}
+    return [  # in the order of task.observers, failed ones included
+        _row(task, label, opts, metrics.get(label), refused.get(label))
+        for label, _, opts in task.observers
     ]
+
+
+def _row(
+    task: SweepTask,
+    label: str,
+    opts: tuple[tuple[str, Any], ...],
+    m: Metrics | None = None,
+    error: str | None = None,
+) -> dict[str, Any]:
+    """A row of :func:`sweep`: an observer's metrics ``m``, or without them (it did not run: ``error``) NaN metrics and ``diverged`` NA."""
+    nan = float("nan")
+    return {
+        "robot": task.robot,
+        "scenario": task.scenario,
+        "seed": task.seed,
+        "observer": label,
+        "options": repr(dict(opts)),
+        "rms_v_error": nan if m is None else m.rms_v_error,
+        "max_v_error": nan if m is None else m.max_v_error,
+        "convergence_time": nan if m is None else m.convergence_time,
+        "diverged": None if m is None else m.diverged_at is not None,
+        "error": error,
+    }
 
 
 def sweep(
@@ -249,10 +298,13 @@ def sweep(
     processes: bool = True,
     progress: Callable[[int, int], None] | None = None,
 ) -> Any:
-    """Run the tasks on Dask; a tidy ``pandas.DataFrame``, one row per run and observer.
+    """Run the tasks on Dask; a tidy ``pandas.DataFrame``, one row per run and observer
+    (:data:`SWEEP_COLUMNS`).
 
-    A run that raised gives one row per observer label with ``error`` set
-    (its message) and NaN metrics.
+    An observer that cannot be built (it refuses the robot, a bad option) fails
+    alone: its row has ``error`` set (the exception's last line), NaN metrics and
+    ``diverged`` NA, and the run's other observers are simulated.  A run that
+    raised gives such a row for every observer label.
     """
     import pandas as pd
 
@@ -268,23 +320,9 @@ def sweep(
         t: SweepTask = o.task
         if o.error is None:
             rows.extend(o.value)
-            continue
-        for label, _, opts in t.observers:
-            rows.append(
-                {
-                    "robot": t.robot,
-                    "scenario": t.scenario,
-                    "seed": t.seed,
-                    "observer": label,
-                    "options": repr(dict(opts)),
-                    "rms_v_error": float("nan"),
-                    "max_v_error": float("nan"),
-                    "convergence_time": float("nan"),
-                    "diverged": False,
-                    "error": o.error,
-                }
-            )
-    return pd.DataFrame(rows)
+        else:
+            rows.extend(_row(t, label, opts, error=o.error) for label, _, opts in t.observers)
+    return pd.DataFrame(rows, columns=list(SWEEP_COLUMNS)).astype({"diverged": "boolean"})
 
 
 def write_table(table: Any, stem: str | Path) -> Path:
@@ -306,46 +344,85 @@ def write_table(table: Any, stem: str | Path) -> Path:
     return path
 
 
-def write_sweep(table: Any, out_dir: str | Path, *, plot: bool = True) -> list[Path]:
+#: The files :func:`write_sweep` writes in its folder: the table (Parquet, or CSV
+#: without pyarrow) and the plot.
+SWEEP_FILES = ("sweep.parquet", "sweep.csv", "sweep.png")
+
+
+def check_sweep_out(out_dir: str | Path, *, force: bool = False) -> None:
+    """Refuse a folder that holds a sweep's outputs (:data:`SWEEP_FILES`) unless ``force``;
+    call it before the runs, as :func:`write_sweep` does before writing.
+
+    Raises:
+        OutputExistsError: one of them exists and not ``force``.
+    """
+    found = [Path(out_dir) / name for name in SWEEP_FILES if (Path(out_dir) / name).exists()]
+    if found and not force:
+        raise OutputExistsError(
+            f"{str(found[0])!r} exists; pass --force (force=True) to overwrite the sweep "
+            "in that folder"
+        )
+
+
+def write_sweep(
+    table: Any, out_dir: str | Path, *, plot: bool = True, force: bool = False
+) -> list[Path]:
     """Save a :func:`sweep` table as ``sweep.parquet`` (``sweep.csv`` without pyarrow) and,
     with matplotlib, ``sweep.png`` (RMS velocity error per observer, one panel per robot
-    and scenario, one dot per seed, log scale; no plot when no run succeeded)."""
+    and scenario, one dot per seed, log scale; no plot when no run succeeded).
+
+    A previous sweep's files in ``out_dir`` are replaced (with ``force``); those this
+    sweep does not write (its plot when there is none) are removed, so the folder
+    holds one sweep.
+
+    Raises:
+        OutputExistsError: a previous sweep's file exists and not ``force``.
+    """
     import numpy as np
 
     out = Path(out_dir)
+    check_sweep_out(out, force=force)
     out.mkdir(parents=True, exist_ok=True)
     written = [write_table(table, out / "sweep")]
     finite = table["rms_v_error"].to_numpy(dtype=float) if len(table) else np.zeros(0)
     if not np.any(np.isfinite(finite) & (finite > 0)):
         plot = False  # no run succeeded: nothing to draw on a log scale
-    if plot:
-        try:
-            import matplotlib
-
-            matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-        except ImportError:
-            return written
-        groups = list(table.groupby(["robot", "scenario"], sort=True))
-        fig, axes = plt.subplots(
-            1, len(groups), figsize=(3.2 * len(groups), 3.2), squeeze=False, sharey=True
-        )
-        for ax, ((robot, scenario), g) in zip(axes[0], groups, strict=True):
-            labels = list(dict.fromkeys(g["observer"]))
-            for i, label in enumerate(labels):
-                y = g.loc[g["observer"] == label, "rms_v_error"].to_numpy(dtype=float)
-                y = y[np.isfinite(y) & (y > 0)]  # failed runs (NaN) are listed, not drawn
-                ax.plot([i] * len(y), y, "o", alpha=0.6)
-            ax.set_xticks(range(len(labels)), labels, rotation=45, ha="right")
-            ax.set_yscale("log")
-            ax.set_title(f"{robot}, {scenario}", fontsize=9)
-        axes[0][0].set_ylabel("RMS velocity error [rad/s]")
-        fig.tight_layout()
-        png = out / "sweep.png"
-        fig.savefig(png, dpi=100)
-        plt.close(fig)
-        written.append(png)
+    if plot and importlib.util.find_spec("matplotlib") is not None:
+        written.append(_plot_sweep(table, out / "sweep.png"))
+    for (
+        name
+    ) in SWEEP_FILES:  # a previous sweep's plot (or table format) would be taken for this one's
+        if out / name not in written:
+            (out / name).unlink(missing_ok=True)
     return written
+
+
+def _plot_sweep(table: Any, png: Path) -> Path:
+    """:func:`write_sweep`'s plot."""
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups = list(table.groupby(["robot", "scenario"], sort=True))
+    fig, axes = plt.subplots(
+        1, len(groups), figsize=(3.2 * len(groups), 3.2), squeeze=False, sharey=True
+    )
+    for ax, ((robot, scenario), g) in zip(axes[0], groups, strict=True):
+        labels = list(dict.fromkeys(g["observer"]))
+        for i, label in enumerate(labels):
+            y = g.loc[g["observer"] == label, "rms_v_error"].to_numpy(dtype=float)
+            y = y[np.isfinite(y) & (y > 0)]  # failed runs (NaN) are listed, not drawn
+            ax.plot([i] * len(y), y, "o", alpha=0.6)
+        ax.set_xticks(range(len(labels)), labels, rotation=45, ha="right")
+        ax.set_yscale("log")
+        ax.set_title(f"{robot}, {scenario}", fontsize=9)
+    axes[0][0].set_ylabel("RMS velocity error [rad/s]")
+    fig.tight_layout()
+    fig.savefig(png, dpi=100)
+    plt.close(fig)
+    return png
 
 
 # ---------------------------------------------------------------- many logs

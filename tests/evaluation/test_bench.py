@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
 from pinobs.cli import main
 from pinobs.evaluation.bench import BenchConfig, format_bench, run_bench, scaling_exponent
+from pinobs.simulation import MISMATCH_SCENARIOS
 
 
 def test_scaling_exponent_recovers_a_power_law() -> None:
@@ -75,3 +77,58 @@ def test_bench_on_a_dask_cluster_gives_the_serial_accuracy_numbers() -> None:
     assert dask["scaling"].keys() == serial["scaling"].keys()
     assert all(r["cost_in_aba"] > 0 for r in dask["rows"])
     assert len(lines) == 1 + 2 + 4 + 1  # timed, two sensors, four scenarios, geometry
+
+
+def test_a_failed_bench_task_fails_alone_and_is_reported(monkeypatch) -> None:
+    """Found by a sweep: the README says a task that raises fails alone, but one failed
+    task made run_bench raise and discard every other result."""
+    import pinobs.evaluation.bench as bench
+
+    real = bench.run_bench_task
+
+    def flaky(task):
+        if (task.kind, task.robot, task.variant) == ("mismatch", "pendulum", "friction"):
+            raise RuntimeError("a worker lost its node")
+        return real(task)
+
+    monkeypatch.setattr(bench, "run_bench_task", flaky)
+    cfg = BenchConfig(
+        robots=("pendulum",),
+        mismatch_robots=("pendulum", "cartpole"),
+        cost_robots=(),
+        duration=0.05,
+        timing_updates=20,
+    )
+    lines: list[str] = []
+    report = run_bench(cfg, log=lines.append)
+    assert report["failed"] == [
+        {
+            "kind": "mismatch",
+            "robot": "pendulum",
+            "variant": "friction",
+            "error": "RuntimeError: a worker lost its node",
+        }
+    ]
+    assert "  failed: mismatch on pendulum friction: RuntimeError: a worker lost its node" in lines
+    assert len(report["rows"]) > 10 and report["geometry"]
+    ran = {(r["robot"], r["scenario"]) for r in report["mismatch"]}
+    assert ran == {(r, s) for r in ("pendulum", "cartpole") for s in MISMATCH_SCENARIOS} - {
+        ("pendulum", "friction")
+    }
+    text = format_bench(report)  # was (had it got here): KeyError on the missing cell
+    assert "**Failed tasks**" in text and "- mismatch on pendulum friction: RuntimeError" in text
+    pendulum = text.split("**Model mismatch, pendulum**")[1].split("**Model mismatch")[0]
+    assert re.search(r"\| `kf\*` \| [^|]+ \| [^|]+ \| [^|]+ \| - \|", pendulum)  # friction: -
+
+
+def test_bench_command_exits_1_when_a_task_failed(tmp_path, capsys, monkeypatch) -> None:
+    import pinobs.evaluation.bench as bench
+
+    failed = [{"kind": "geometry", "robot": "ur5", "variant": "", "error": "RuntimeError: x"}]
+    report = {"rows": [], "mismatch": [], "scaling": {}, "geometry": [], "failed": failed}
+    report |= {"seconds": 1.0, "machine": {"processor": "p", "system": "s"}}
+    monkeypatch.setattr(bench, "run_bench", lambda cfg, **kw: report)
+    assert main(["bench", "--quick", "--json", str(tmp_path / "b.json")]) == 1  # was: raised
+    captured = capsys.readouterr()
+    assert "- geometry on ur5: RuntimeError: x" in captured.out
+    assert "pinobs: error: 1 of " in captured.err and (tmp_path / "b.json").exists()

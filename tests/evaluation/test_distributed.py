@@ -52,12 +52,49 @@ def test_sweep_gives_one_row_per_run_and_observer_and_reports_a_bad_run(tmp_path
     bad = table[table["robot"] == "no_such_robot"]
     assert bad["error"].str.contains("UnknownNameError").all()
     assert bad["rms_v_error"].map(math.isnan).all()
+    assert bad["diverged"].isna().all() and (~good["diverged"]).all()  # was False: not known
     # the same run in this process gives the same numbers (a seeded, deterministic task)
     direct = {r["observer"]: r["rms_v_error"] for r in run_sweep_task(tasks[0])}
     first = good[good["seed"] == 0].set_index("observer")["rms_v_error"].to_dict()
     assert first == direct
     paths = write_sweep(table, tmp_path)
     assert paths[0].exists() and paths[0].stat().st_size > 0
+
+
+def test_sweep_an_observer_that_cannot_be_built_fails_alone_and_the_others_run() -> None:
+    tasks = sweep_tasks(
+        ["pendulum"],
+        ["exact"],
+        [0],
+        {"lg": ("liegroup", {}), "kf": ("kf", {}), "h": ("highgain", {"no_such": 1})},
+        duration=0.2,
+    )
+    table = sweep(tasks, workers=0)
+    assert list(table["observer"]) == ["lg", "kf", "h"]
+    rows = table.set_index("observer")
+    assert rows.loc["kf", "rms_v_error"] < 0.1 and pd.isna(rows.loc["kf", "error"])  # was NaN
+    assert "UnsupportedRobotError" in rows.loc["lg", "error"]
+    assert "no_such" in rows.loc["h", "error"]
+    assert rows.loc[["lg", "h"], "diverged"].isna().all()
+    assert rows.loc[["lg", "h"], "rms_v_error"].map(math.isnan).all()
+
+
+def test_write_sweep_refuses_a_previous_sweep_and_with_force_leaves_no_stale_plot(
+    tmp_path,
+) -> None:
+    from pinobs.errors import OutputExistsError
+
+    pytest.importorskip("matplotlib")
+    ok = sweep(
+        sweep_tasks(["pendulum"], ["exact"], [0], {"kf": ("kf", {})}, duration=0.1), workers=0
+    )
+    failed = ok.assign(rms_v_error=math.nan, error="RuntimeError: x")
+    assert [p.name for p in write_sweep(ok, tmp_path)][1:] == ["sweep.png"]
+    with pytest.raises(OutputExistsError, match=r"sweep\.parquet' exists; pass --force"):
+        write_sweep(failed, tmp_path)
+    assert (tmp_path / "sweep.png").exists()
+    written = write_sweep(failed, tmp_path, force=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [written[0].name]  # was: the old png
 
 
 # ------------------------------------------------------------------ many logs

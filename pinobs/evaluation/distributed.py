@@ -512,7 +512,8 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         "options": dict(task.options) or None,
     }
     verdict, rho = None, math.nan
-    latency = float(dict(task.options).get("latency", 0.0))  # (a number when filtered)
+    given = dict(task.options).get("latency", 0.0)  # smoothed, also "auto": found per stretch
+    latency = math.nan if given == "auto" else float(given)
     if task.smooth is None:
         run = process_log(task.log, robot, task.observer, out=task.out, keep=False, **common)
         verdict = None if run.consistency is None else run.consistency.verdict

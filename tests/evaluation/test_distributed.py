@@ -214,3 +214,31 @@ def test_log_tasks_mirror_subfolders_and_refuse_two_logs_for_one_file(tmp_path) 
         log_tasks([a, a.with_suffix(".npz")], tmp_path / "out", robot="pendulum", observer="kf")
     with pytest.raises(OptionError, match="no logs given"):
         log_tasks([], tmp_path / "out", robot="pendulum", observer="kf")
+
+
+def test_many_logs_smoothed_with_latency_auto_each_equal_to_the_single_log_run(
+    tmp_path,
+) -> None:
+    """``estimate --out-dir --smooth --latency auto``: the latency found per log (as on one
+    log), not an error on every log."""
+    from pinobs.cli import main
+
+    logs = _logs(tmp_path / "logs")[:2]
+    common = ["--robot", "pendulum", "--observer", "ekf", "--noise", "1e-4", "--no-progress"]
+    common += ["--smooth", "--accel-psd", "1e-4", "--lag", "0.05", "--latency", "auto"]
+    out = tmp_path / "out"
+    argv = [
+        "estimate",
+        *common,
+        "--log",
+        str(tmp_path / "logs" / "run[01]*"),
+        "--out-dir",
+        str(out),
+    ]
+    assert main([*argv, "--workers", "0"]) == 0
+    summary = pd.read_parquet(out / "summary.parquet")
+    assert summary["error"].isna().all() and (summary["estimated"] == 200).all()
+    assert summary["latency"].map(math.isfinite).all()
+    single = tmp_path / "single.csv"
+    assert main(["estimate", *common, "--log", str(logs[0]), "--out", str(single)]) == 0
+    assert (out / "run0.csv").read_bytes() == single.read_bytes()

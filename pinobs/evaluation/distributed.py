@@ -81,6 +81,19 @@ def _guarded(fn: Callable[[Any], Any], task: Any) -> TaskOutcome:
         return TaskOutcome(task, None, last)
 
 
+def _lost(dd: Any, exc: Exception) -> str:
+    """Why a task has no outcome: its worker died, the scheduler was lost, or Dask's own error."""
+    last = traceback.format_exception_only(type(exc), exc)[-1].strip()
+    if isinstance(exc, dd.KilledWorker):
+        return (
+            "its worker process died while running it (killed, e.g. out of memory, or "
+            f"crashed): {type(exc).__name__}"
+        )
+    if isinstance(exc, dd.CancelledError):  # the client cancels them all: scheduler lost
+        return "not done: the connection to the Dask scheduler was lost"
+    return f"not done: Dask failed ({last})"
+
+
 def run_tasks(
     fn: Callable[[Any], Any],
     tasks: Sequence[Any],
@@ -107,7 +120,10 @@ def run_tasks(
             (completion order).
 
     Returns:
-        One :class:`TaskOutcome` per task; a task that raised has ``error`` set.
+        One :class:`TaskOutcome` per task; a task that raised has ``error`` set, and so
+        has one whose worker process died running it (killed for lack of memory, a
+        crash: a local cluster does not run it again) or that a lost scheduler left
+        undone; the others are unaffected.
 
     Raises:
         OptionError: ``workers`` is negative, or given with ``scheduler``.
@@ -138,10 +154,19 @@ def run_tasks(
         cluster = None
     else:
         # no statistical profiler in our workers: every 10 ms it takes the GIL from the
-        # task to walk its stack (4 two-minute UR5 logs: 5 % of the wall time)
+        # task to walk its stack (4 two-minute UR5 logs: 5 % of the wall time); a task
+        # whose worker dies (killed for lack of memory, a crash) fails at once instead of
+        # being run 3 more times, and is the only task that worker held (a saturation of
+        # 1: no task queued on it behind the running one, to be charged with its death)
         import dask.config
 
-        with dask.config.set({"distributed.worker.profile.enabled": False}):
+        with dask.config.set(
+            {
+                "distributed.worker.profile.enabled": False,
+                "distributed.scheduler.allowed-failures": 0,
+                "distributed.scheduler.worker-saturation": 1.0,
+            }
+        ):
             cluster = dd.LocalCluster(
                 n_workers=workers, threads_per_worker=1, processes=processes, dashboard_address=None
             )
@@ -151,7 +176,11 @@ def run_tasks(
         index = {f.key: i for i, f in enumerate(futures)}
         out: list[TaskOutcome | None] = [None] * len(tasks)
         for done, fut in enumerate(dd.as_completed(futures), start=1):
-            outcome = fut.result()
+            try:
+                outcome = fut.result()
+            except Exception as exc:  # not the task's own error (_guarded has those)
+                outcome = TaskOutcome(tasks[index[fut.key]], None, _lost(dd, exc))
+            fut.release()  # kept here: not recomputed if its worker dies later
             out[index[fut.key]] = outcome
             report(done, outcome)
         return [o for o in out if o is not None]

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import math
+import os
+import time
+from pathlib import Path
 
 import pytest
 
@@ -10,6 +13,7 @@ pytest.importorskip("dask.distributed")
 pd = pytest.importorskip("pandas")
 
 from pinobs.evaluation.distributed import (  # noqa: E402
+    TaskOutcome,
     run_sweep_task,
     run_tasks,
     sweep,
@@ -242,3 +246,51 @@ def test_many_logs_smoothed_with_latency_auto_each_equal_to_the_single_log_run(
     single = tmp_path / "single.csv"
     assert main(["estimate", *common, "--log", str(logs[0]), "--out", str(single)]) == 0
     assert (out / "run0.csv").read_bytes() == single.read_bytes()
+
+
+def _exit_on_two(task: tuple[Path, int]) -> int:
+    folder, x = task
+    with open(folder / f"ran{x}", "a") as f:
+        f.write("ran\n")
+    if x == 2:
+        os._exit(1)  # the worker process dies, as when killed for lack of memory
+    return x * x
+
+
+def test_a_task_that_kills_its_worker_fails_alone_and_runs_once(tmp_path) -> None:
+    """Its worker dies (KilledWorker): its outcome says so, the others come back, and it
+    is not run again (Dask's default: on 3 more workers)."""
+    seen: list[TaskOutcome] = []
+    tasks = [(tmp_path, k) for k in range(5)]
+    out = run_tasks(_exit_on_two, tasks, workers=1, on_result=seen.append)
+    assert [o.value for o in out] == [0, 1, None, 9, 16]
+    assert "worker process died while running it" in (out[2].error or "")
+    assert "out of memory" in (out[2].error or "")
+    assert len(seen) == 5
+    assert (tmp_path / "ran2").read_text() == "ran\n"
+
+
+def _slow_square(x: int) -> int:
+    time.sleep(0.2)
+    return x * x
+
+
+def test_a_lost_scheduler_leaves_the_tasks_not_done_failed_and_keeps_those_done() -> None:
+    import dask.distributed as dd
+
+    cluster = dd.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+    )
+
+    def lose_it(outcome: TaskOutcome) -> None:
+        if outcome.task == 1:
+            cluster.close()
+
+    out = run_tasks(
+        _slow_square, list(range(5)), scheduler=cluster.scheduler_address, on_result=lose_it
+    )
+    assert [o.value for o in out[:2]] == [0, 1] and out[0].error is out[1].error is None
+    for o in out[2:]:
+        assert (
+            o.value is None and o.error == "not done: the connection to the Dask scheduler was lost"
+        )

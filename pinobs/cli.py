@@ -151,19 +151,7 @@ def _build(
 def _consistency_warnings(reports: dict[str, Any]) -> list[str]:
     """One line per observer whose innovations say the model does not explain the data,
     and per observer that rejected outlier samples (``reports``: name -> Consistency)."""
-    out = []
-    for name, c in reports.items():
-        if c is None:
-            continue
-        if c.verdict == "inconsistent":
-            out.append(
-                f"warning: {name}: the model does not explain the data (mean NIS "
-                f"{c.mean_nis:.3g} over the last {c.samples} samples, expected {c.expected:g}); "
-                "check " + "; ".join(c.causes)
-            )
-        if c.gated:
-            out.append(f"note: {name} rejected {c.gated} outlier sample(s)")
-    return out
+    return [line for name, c in reports.items() if c is not None for line in c.messages(name)]
 
 
 def _run_one(
@@ -571,6 +559,9 @@ def _estimate_many(args: argparse.Namespace) -> int:
     failed = table[table["error"].notna()]
     written = int(table["out"].notna().sum())  # a log without an estimated row: all NaN
     print(f"wrote {written} estimates files and {path}")
+    for _, row in table[table["warnings"].notna()].iterrows():  # as each log alone says them
+        for line in row["warnings"].splitlines():
+            print(f"{row['log']}: {line}", file=sys.stderr)
     for _, row in failed.iterrows():
         print(f"failed: {row['log']}: {row['error']}", file=sys.stderr)
     if len(failed):
@@ -581,12 +572,15 @@ def _estimate_many(args: argparse.Namespace) -> int:
 
 def _print_summary(table: Any, title: str) -> None:
     """The batch summary (without the output paths) as a rich table; errors cut to
-    60 characters (they are printed in full below it)."""
+    60 characters and warnings counted (they are printed in full below it)."""
     import pandas as pd
     from rich.console import Console
     from rich.table import Table
 
     shown = table.drop(columns="out")
+    shown["warnings"] = table["warnings"].map(lambda w: None if pd.isna(w) else w.count("\n") + 1)
+    if shown["warnings"].isna().all():
+        shown = shown.drop(columns="warnings")
     if table["rho"].isna().all():
         shown = shown.drop(columns="rho")  # filtered logs: no smoother
     if table["consistency"].isna().all():

@@ -388,7 +388,9 @@ def write_sweep(table: Any, out_dir: str | Path, *, plot: bool = True) -> list[P
 #: (:attr:`pinobs.observers.smoothing.Smoother.consistency`, over all its stretches; NaN
 #: when filtered), the measurement latency [s] the log was estimated under (given, or
 #: found from the log by the smoother: :func:`pinobs.smooth`; its longest stretch's when
-#: stretches differ), wall-clock seconds in the worker,
+#: stretches differ), wall-clock seconds in the worker, what the run warned of (the
+#: ``warning:`` and ``note:`` lines ``pinobs estimate`` prints for that log alone, one a
+#: line; empty if none: a ``sigma`` of NaN is the observer's default, said there),
 #: and the error of a log that failed (empty otherwise).
 SUMMARY_COLUMNS = (
     "log",
@@ -401,6 +403,7 @@ SUMMARY_COLUMNS = (
     "rho",
     "latency",
     "seconds",
+    "warnings",
     "error",
 )
 SUMMARY_STEM = "summary"
@@ -540,12 +543,14 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         "noise_std": task.noise_std,
         "options": dict(task.options) or None,
     }
-    verdict, rho = None, math.nan
+    verdict, rho, told = None, math.nan, []
     given = dict(task.options).get("latency", 0.0)  # smoothed, also "auto": found per stretch
     latency = math.nan if given == "auto" else float(given)
     if task.smooth is None:
         run = process_log(task.log, robot, task.observer, out=task.out, keep=False, **common)
-        verdict = None if run.consistency is None else run.consistency.verdict
+        if run.consistency is not None:
+            verdict = run.consistency.verdict
+            told = run.consistency.messages(task.observer)
     else:
         run, stretches = smooth_log(
             task.log, robot, task.out, observer=task.observer, **common, **dict(task.smooth)
@@ -566,6 +571,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         "rho": rho,
         "latency": latency,
         "seconds": time.perf_counter() - start,
+        "warnings": "\n".join([f"warning: {w}" for w in run.warnings] + told) or None,
         "error": None if run.estimated else "no row of the log could be estimated",
     }
 
@@ -619,6 +625,7 @@ def estimate_logs(
                 "consistency": None,
                 "latency": nan,
                 "seconds": nan,
+                "warnings": None,
                 "error": o.error,
             }
         )

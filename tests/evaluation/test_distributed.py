@@ -279,7 +279,7 @@ def test_a_lost_scheduler_leaves_the_tasks_not_done_failed_and_keeps_those_done(
     import dask.distributed as dd
 
     cluster = dd.LocalCluster(
-        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
     )
 
     def lose_it(outcome: TaskOutcome) -> None:
@@ -294,3 +294,41 @@ def test_a_lost_scheduler_leaves_the_tasks_not_done_failed_and_keeps_those_done(
         assert (
             o.value is None and o.error == "not done: the connection to the Dask scheduler was lost"
         )
+
+
+def test_many_logs_say_each_logs_warnings_once_naming_it_and_keep_them_in_the_summary(
+    tmp_path, capsys
+) -> None:
+    """The warnings a log alone gives (σ from the log, or too short for it: the observer's
+    default σ; outlier samples rejected) are printed once with the log's name, and are the
+    summary's ``warnings``; a σ of NaN there is not silent."""
+    import numpy as np
+
+    from pinobs.cli import main
+
+    logs = _logs(tmp_path / "logs")
+    t, q, tau = np.loadtxt(logs[0], delimiter=",", skiprows=1).T
+    q[150] += 0.1  # an outlier
+    np.savetxt(logs[0], np.c_[t, q, tau], delimiter=",", header="t,q0,tau0", comments="")
+    short = tmp_path / "logs" / "short.csv"
+    short.write_text("".join(logs[0].read_text().splitlines(keepends=True)[:11]))
+    common = ["--robot", "pendulum", "--observer", "ekf", "--no-progress"]
+    alone = {}
+    for log in (logs[0], short):
+        assert main(["estimate", *common, "--log", str(log), "--out", str(tmp_path / "a.csv"),
+                     "--force"]) == 0  # fmt: skip
+        err = capsys.readouterr().err.splitlines()
+        alone[log.name] = [x for x in err if x.startswith(("warning: ", "note: "))]
+    assert any("too short to estimate it" in x for x in alone["short.csv"])
+    assert any("rejected 1 outlier sample" in x for x in alone["run0.csv"])
+    argv = ["estimate", *common, "--log", str(tmp_path / "logs" / "*.csv")]
+    assert main([*argv, "--out-dir", str(tmp_path / "out"), "--workers", "0"]) == 1  # broken
+    err = capsys.readouterr().err.splitlines()
+    summary = pd.read_parquet(tmp_path / "out" / "summary.parquet")
+    by = summary.set_index(summary["log"].map(lambda s: s.rsplit("/", 1)[-1]))
+    for name, said in alone.items():
+        log = by.loc[name, "log"]
+        assert [x for x in err if x.startswith(f"{log}: ")] == [f"{log}: {x}" for x in said]
+        assert by.loc[name, "warnings"].splitlines() == said
+    assert math.isnan(by.loc["short.csv", "sigma"])
+    assert pd.isna(by.loc["broken.csv", "warnings"])

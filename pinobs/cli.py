@@ -532,8 +532,9 @@ def _estimate_many(args: argparse.Namespace) -> int:
         raise OptionError("--html is for one log (--out FILE), not with --out-dir")
     observer_class(args.observer)  # an unknown name: UnknownNameError listing the registered ones
     _load(args)  # a bad robot fails here, not once per log
+    found = find_logs(args.log)
     tasks = log_tasks(
-        find_logs(args.log),
+        found,
         args.out_dir,
         robot=args.robot,
         observer=args.observer,
@@ -551,6 +552,12 @@ def _estimate_many(args: argparse.Namespace) -> int:
         else {"lag": args.lag, "chunk": args.chunk, "accel_psd": args.accel_psd, "band": args.band},
     )
     what = f"{args.observer}{' smoothed' if args.smooth else ''}"
+    if len(tasks) < len(found):
+        print(
+            f"note: {len(found) - len(tasks)} of the {len(found)} logs found left out: the "
+            f"outputs of an earlier run (in --out-dir {args.out_dir})",
+            file=sys.stderr,
+        )
     print(f"pinobs estimate: {len(tasks)} logs, {what} on {_cluster(args)}")
     with _task_progress("estimate", not args.no_progress) as step:
         table = estimate_logs(tasks, scheduler=args.scheduler, workers=args.workers, progress=step)

@@ -453,7 +453,9 @@ def log_tasks(
 ) -> list[LogTask]:
     """One :class:`LogTask` per log; the estimates of ``logs/a/run.parquet`` go to
     ``out_dir/a/run.csv`` (the log's path below the logs' common folder, suffix
-    ``.csv``).
+    ``.csv``).  The batch's own outputs among ``logs`` (found again by a glob or a
+    folder on a second run) are left out: the summary files, and every file under
+    ``out_dir`` when some logs are outside it; so a run gives fewer tasks than logs.
 
     Args:
         logs: log files or rosbag2 folders (:func:`pinobs.io.find_logs`).
@@ -471,14 +473,31 @@ def log_tasks(
             smoothed, also ``"auto"``: :func:`pinobs.smooth`).
 
     Raises:
-        OptionError: no logs, or two logs whose estimates would share a file.
+        OptionError: no logs (or only outputs), or two logs whose estimates would share a file.
         OutputExistsError: the summary exists and not ``force`` (checked before any work).
     """
     if not logs:
         raise OptionError("no logs given: give at least one log file or rosbag2 folder")
-    paths = [Path(p).resolve() for p in logs]
-    base = Path(os.path.commonpath([str(p.parent) for p in paths]))
     out = Path(out_dir).resolve()
+    # the batch's own outputs, found again by a glob or a folder: the summary, and, when
+    # some logs are outside out_dir, everything in it (with the logs in out_dir, only the
+    # summary: the estimates go next to the logs, and one found again clashes below)
+    found = [(name, Path(name).resolve()) for name in logs]
+    summaries = {out / (SUMMARY_STEM + suffix) for suffix in (".parquet", ".csv")}
+    elsewhere = any(not p.is_relative_to(out) for _, p in found)
+    kept = [
+        (name, p)
+        for name, p in found
+        if p not in summaries and not (elsewhere and p.is_relative_to(out))
+    ]
+    if not kept:
+        raise OptionError(
+            f"the {len(logs)} logs given are the outputs of an earlier run in {str(out)!r} "
+            "(its summary, or estimates under it): give the logs, or another output folder"
+        )
+    logs = [name for name, _ in kept]
+    paths = [p for _, p in kept]
+    base = Path(os.path.commonpath([str(p.parent) for p in paths]))
     targets = [out / p.relative_to(base).with_suffix(".csv") for p in paths]
     seen: dict[Path, str | Path] = {}
     for name, target in zip(logs, targets, strict=True):

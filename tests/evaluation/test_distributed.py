@@ -332,3 +332,41 @@ def test_many_logs_say_each_logs_warnings_once_naming_it_and_keep_them_in_the_su
         assert by.loc[name, "warnings"].splitlines() == said
     assert math.isnan(by.loc["short.csv", "sigma"])
     assert pd.isna(by.loc["broken.csv", "warnings"])
+
+
+def test_a_rerun_does_not_take_the_batchs_own_outputs_for_logs(tmp_path, capsys) -> None:
+    """``--log 'fleet/**/*.csv' --out-dir fleet/est`` twice: the second run estimates the same
+    two logs (not the first run's estimates), saying it left 2 files out; ``--log 'pq/*'
+    --out-dir pq``: the summary found there is not a log."""
+    import shutil
+
+    from pinobs.cli import main
+    from pinobs.errors import OptionError
+    from pinobs.evaluation.distributed import log_tasks
+
+    logs = _logs(tmp_path / "logs")
+    for k in (1, 2):
+        (tmp_path / "fleet" / f"r{k}").mkdir(parents=True)
+        shutil.copy(logs[0], tmp_path / "fleet" / f"r{k}" / "run.csv")
+    argv = ["estimate", "--robot", "pendulum", "--observer", "kf", "--noise", "1e-4"]
+    argv += [
+        "--no-progress",
+        "--workers",
+        "0",
+        "--force",
+        "--log",
+        str(tmp_path / "fleet/**/*.csv"),
+    ]
+    argv += ["--out-dir", str(tmp_path / "fleet" / "est")]
+    for _ in range(2):
+        assert main(argv) == 0
+        summary = pd.read_parquet(tmp_path / "fleet" / "est" / "summary.parquet")
+        assert [s.rsplit("fleet/", 1)[1] for s in summary["log"]] == ["r1/run.csv", "r2/run.csv"]
+    assert "note: 2 of the 4 logs found left out" in capsys.readouterr().err
+    pq = tmp_path / "logs"  # a Parquet log and the summary in the same folder
+    kw = {"robot": "pendulum", "observer": "kf", "force": True}
+    (pq / "summary.parquet").write_bytes(b"")
+    tasks = log_tasks([pq / "run2.parquet", pq / "summary.parquet"], pq, **kw)
+    assert [t.log for t in tasks] == [str(pq / "run2.parquet")]
+    with pytest.raises(OptionError, match="outputs of an earlier run"):
+        log_tasks([pq / "summary.parquet"], pq, **kw)

@@ -530,6 +530,7 @@ def _estimate_many(args: argparse.Namespace) -> int:
 
     if args.html:
         raise OptionError("--html is for one log (--out FILE), not with --out-dir")
+    _check_output("--out-dir", args.out_dir, folder=True)  # a file there: refused before any work
     observer_class(args.observer)  # an unknown name: UnknownNameError listing the registered ones
     _load(args)  # a bad robot fails here, not once per log
     found = find_logs(args.log)

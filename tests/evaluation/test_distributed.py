@@ -370,3 +370,17 @@ def test_a_rerun_does_not_take_the_batchs_own_outputs_for_logs(tmp_path, capsys)
     assert [t.log for t in tasks] == [str(pq / "run2.parquet")]
     with pytest.raises(OptionError, match="outputs of an earlier run"):
         log_tasks([pq / "summary.parquet"], pq, **kw)
+
+
+def test_an_out_dir_that_is_a_file_is_refused_before_any_log(tmp_path, capsys) -> None:
+    from pinobs.cli import main
+
+    _logs(tmp_path / "logs")
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    argv = ["estimate", "--robot", "pendulum", "--observer", "kf", "--no-progress"]
+    argv += ["--log", str(tmp_path / "logs"), "--out-dir", str(afile), "--workers", "0"]
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert f"--out-dir {str(afile)!r} is a file; give a folder" in captured.err
+    assert "pinobs estimate:" not in captured.out  # no log attempted

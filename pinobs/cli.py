@@ -525,7 +525,13 @@ def _log_playback(args: argparse.Namespace, robot: Robot, run: Any, label: str) 
 
 def _estimate_many(args: argparse.Namespace) -> int:
     """``estimate --log GLOB|FOLDER --out-dir OUT``: every log on Dask, a summary table."""
-    from pinobs.evaluation.distributed import estimate_logs, log_tasks, write_table
+    from pinobs.evaluation.distributed import (
+        TaskOutcome,
+        estimate_logs,
+        log_summary,
+        log_tasks,
+        write_table,
+    )
     from pinobs.io import find_logs
 
     if args.html:
@@ -560,8 +566,28 @@ def _estimate_many(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     print(f"pinobs estimate: {len(tasks)} logs, {what} on {_cluster(args)}")
-    with _task_progress("estimate", not args.no_progress) as step:
-        table = estimate_logs(tasks, scheduler=args.scheduler, workers=args.workers, progress=step)
+    done: dict[Any, TaskOutcome] = {}
+
+    def keep(outcome: TaskOutcome) -> None:
+        done[outcome.task] = outcome
+
+    try:
+        with _task_progress("estimate", not args.no_progress) as step:
+            table = estimate_logs(
+                tasks,
+                scheduler=args.scheduler,
+                workers=args.workers,
+                progress=step,
+                on_result=keep,
+            )
+    except KeyboardInterrupt:  # Ctrl-C: the summary of the logs done, the others said
+        table = log_summary(
+            [done.get(t) or TaskOutcome(t, None, "not done: interrupted") for t in tasks]
+        )
+        path = write_table(table, Path(args.out_dir) / "summary")
+        print(f"wrote {path}")
+        print(f"interrupted: {len(done)} of {len(tasks)} logs done", file=sys.stderr)
+        return 130
     _print_summary(table, f"{what} on {args.robot}")
     path = write_table(table, Path(args.out_dir) / "summary")
     failed = table[table["error"].notna()]

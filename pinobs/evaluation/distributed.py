@@ -44,6 +44,7 @@ __all__ = [
     "SweepTask",
     "TaskOutcome",
     "estimate_logs",
+    "log_summary",
     "log_tasks",
     "run_log_task",
     "run_tasks",
@@ -609,25 +610,36 @@ def estimate_logs(
     workers: int | None = None,
     processes: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    on_result: Callable[[TaskOutcome], None] | None = None,
 ) -> Any:
     """Run the logs on Dask (``workers=0``: here, one after the other); the summary as a
     ``pandas.DataFrame``, one row per log in the order of ``tasks`` (:data:`SUMMARY_COLUMNS`).
 
     A log that raised (unreadable, wrong columns, an existing output without
     ``force``) fails alone: its row has ``error`` set (the exception's last
-    line) and NaN counts, and no estimates file.
+    line) and NaN counts, and no estimates file.  ``on_result`` (as :func:`run_tasks`'s)
+    lets a caller interrupted (``KeyboardInterrupt``) still make the summary of the
+    logs done: :func:`log_summary`.
     """
+    return log_summary(
+        run_tasks(
+            run_log_task,
+            tasks,
+            scheduler=scheduler,
+            workers=workers,
+            processes=processes,
+            progress=progress,
+            on_result=on_result,
+        )
+    )
+
+
+def log_summary(outcomes: Sequence[TaskOutcome]) -> Any:
+    """The summary table of :func:`estimate_logs` from the outcomes of :func:`run_log_task`."""
     import pandas as pd
 
     rows: list[dict[str, Any]] = []
-    for o in run_tasks(
-        run_log_task,
-        tasks,
-        scheduler=scheduler,
-        workers=workers,
-        processes=processes,
-        progress=progress,
-    ):
+    for o in outcomes:
         t: LogTask = o.task
         if o.error is None:
             rows.append(o.value)

@@ -14,6 +14,7 @@ pd = pytest.importorskip("pandas")
 
 from pinobs.evaluation.distributed import (  # noqa: E402
     TaskOutcome,
+    run_log_task,
     run_sweep_task,
     run_tasks,
     sweep,
@@ -384,3 +385,29 @@ def test_an_out_dir_that_is_a_file_is_refused_before_any_log(tmp_path, capsys) -
     captured = capsys.readouterr()
     assert f"--out-dir {str(afile)!r} is a file; give a folder" in captured.err
     assert "pinobs estimate:" not in captured.out  # no log attempted
+
+
+def _interrupt_on_run1(task):  # Ctrl-C while the second log runs
+    if "run1" in task.log:
+        raise KeyboardInterrupt
+    return run_log_task(task)
+
+
+def test_an_interrupted_batch_writes_the_summary_of_the_logs_done(
+    tmp_path, capsys, monkeypatch
+) -> None:
+    import pinobs.evaluation.distributed as distributed
+    from pinobs.cli import main
+
+    _logs(tmp_path / "logs")
+    monkeypatch.setattr(distributed, "run_log_task", _interrupt_on_run1)
+    out = tmp_path / "out"
+    argv = ["estimate", "--robot", "pendulum", "--observer", "kf", "--noise", "1e-4"]
+    argv += ["--no-progress", "--log", str(tmp_path / "logs" / "run*"), "--out-dir", str(out)]
+    assert main([*argv, "--workers", "0"]) == 130
+    assert "interrupted: 1 of 3 logs done" in capsys.readouterr().err
+    summary = pd.read_parquet(out / "summary.parquet")
+    assert summary["error"].isna().tolist() == [True, False, False]
+    assert summary["error"][1] == summary["error"][2] == "not done: interrupted"
+    assert summary["estimated"][0] == 200 and (out / "run0.csv").exists()
+    assert not (out / "run1.csv").exists()

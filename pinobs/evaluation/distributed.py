@@ -127,7 +127,8 @@ def run_tasks(
         undone; the others are unaffected.
 
     Raises:
-        OptionError: ``workers`` is negative, or given with ``scheduler``.
+        OptionError: ``workers`` is negative, or given with ``scheduler``; ``scheduler``
+            is not an address.
     """
     if workers is not None and workers < 0:
         raise OptionError(f"workers={workers}: give 0 (this process) or more local workers")
@@ -151,7 +152,13 @@ def run_tasks(
         return serial
     dd = _dask()
     if scheduler is not None:
-        client = dd.Client(scheduler)
+        try:
+            client = dd.Client(scheduler)
+        except ValueError as exc:  # a malformed address (no port, an unknown scheme)
+            raise OptionError(
+                f"--scheduler (scheduler=) {scheduler!r} is not a Dask scheduler's address "
+                f"({exc}); give one as tcp://host:8786"
+            ) from exc
         cluster = None
     else:
         # no statistical profiler in our workers: every 10 ms it takes the GIL from the

@@ -411,3 +411,11 @@ def test_an_interrupted_batch_writes_the_summary_of_the_logs_done(
     assert summary["error"][1] == summary["error"][2] == "not done: interrupted"
     assert summary["estimated"][0] == 200 and (out / "run0.csv").exists()
     assert not (out / "run1.csv").exists()
+
+
+@pytest.mark.parametrize("address", ["garbage", "http://127.0.0.1:9999"])
+def test_a_malformed_scheduler_address_is_an_option_error_naming_the_flag(address) -> None:
+    from pinobs.errors import OptionError
+
+    with pytest.raises(OptionError, match=r"--scheduler \(scheduler=\) .* is not a Dask"):
+        run_tasks(_inverse, [1.0], scheduler=address)

@@ -172,19 +172,7 @@ def _short_reason(exc: UnsupportedRobotError) -> str:
 def _consistency_warnings(reports: dict[str, Any]) -> list[str]:
     """One line per observer whose innovations say the model does not explain the data,
     and per observer that rejected outlier samples (``reports``: name -> Consistency)."""
-    out = []
-    for name, c in reports.items():
-        if c is None:
-            continue
-        if c.verdict == "inconsistent":
-            out.append(
-                f"warning: {name}: the model does not explain the data (mean NIS "
-                f"{c.mean_nis:.3g} over the last {c.samples} samples, expected {c.expected:g}); "
-                "check " + "; ".join(c.causes)
-            )
-        if c.gated:
-            out.append(f"note: {name} rejected {c.gated} outlier sample(s)")
-    return out
+    return [line for name, c in reports.items() if c is not None for line in c.messages(name)]
 
 
 def _run_one(
@@ -559,15 +547,23 @@ def _log_playback(args: argparse.Namespace, robot: Robot, run: Any, label: str) 
 
 def _estimate_many(args: argparse.Namespace) -> int:
     """``estimate --log GLOB|FOLDER --out-dir OUT``: every log on Dask, a summary table."""
-    from pinobs.evaluation.distributed import estimate_logs, log_tasks, write_table
+    from pinobs.evaluation.distributed import (
+        TaskOutcome,
+        estimate_logs,
+        log_summary,
+        log_tasks,
+        write_table,
+    )
     from pinobs.io import find_logs
 
     if args.html:
         raise OptionError("--html is for one log (--out FILE), not with --out-dir")
+    _check_output("--out-dir", args.out_dir, folder=True)  # a file there: refused before any work
     observer_class(args.observer)  # an unknown name: UnknownNameError listing the registered ones
     _load(args)  # a bad robot fails here, not once per log
+    found = find_logs(args.log)
     tasks = log_tasks(
-        find_logs(args.log),
+        found,
         args.out_dir,
         robot=args.robot,
         observer=args.observer,
@@ -585,14 +581,43 @@ def _estimate_many(args: argparse.Namespace) -> int:
         else {"lag": args.lag, "chunk": args.chunk, "accel_psd": args.accel_psd, "band": args.band},
     )
     what = f"{args.observer}{' smoothed' if args.smooth else ''}"
+    if len(tasks) < len(found):
+        print(
+            f"note: {len(found) - len(tasks)} of the {len(found)} logs found left out: the "
+            f"outputs of an earlier run (in --out-dir {args.out_dir})",
+            file=sys.stderr,
+        )
     print(f"pinobs estimate: {len(tasks)} logs, {what} on {_cluster(args)}")
-    with _task_progress("estimate", not args.no_progress) as step:
-        table = estimate_logs(tasks, scheduler=args.scheduler, workers=args.workers, progress=step)
+    done: dict[Any, TaskOutcome] = {}
+
+    def keep(outcome: TaskOutcome) -> None:
+        done[outcome.task] = outcome
+
+    try:
+        with _task_progress("estimate", not args.no_progress) as step:
+            table = estimate_logs(
+                tasks,
+                scheduler=args.scheduler,
+                workers=args.workers,
+                progress=step,
+                on_result=keep,
+            )
+    except KeyboardInterrupt:  # Ctrl-C: the summary of the logs done, the others said
+        table = log_summary(
+            [done.get(t) or TaskOutcome(t, None, "not done: interrupted") for t in tasks]
+        )
+        path = write_table(table, Path(args.out_dir) / "summary")
+        print(f"wrote {path}")
+        print(f"interrupted: {len(done)} of {len(tasks)} logs done", file=sys.stderr)
+        return 130
     _print_summary(table, f"{what} on {args.robot}")
     path = write_table(table, Path(args.out_dir) / "summary")
     failed = table[table["error"].notna()]
     written = int(table["out"].notna().sum())  # a log without an estimated row: all NaN
     print(f"wrote {written} estimates files and {path}")
+    for _, row in table[table["warnings"].notna()].iterrows():  # as each log alone says them
+        for line in row["warnings"].splitlines():
+            print(f"{row['log']}: {line}", file=sys.stderr)
     for _, row in failed.iterrows():
         print(f"failed: {row['log']}: {row['error']}", file=sys.stderr)
     if len(failed):
@@ -603,12 +628,15 @@ def _estimate_many(args: argparse.Namespace) -> int:
 
 def _print_summary(table: Any, title: str) -> None:
     """The batch summary (without the output paths) as a rich table; errors cut to
-    60 characters (they are printed in full below it)."""
+    60 characters and warnings counted (they are printed in full below it)."""
     import pandas as pd
     from rich.console import Console
     from rich.table import Table
 
     shown = table.drop(columns="out")
+    shown["warnings"] = table["warnings"].map(lambda w: None if pd.isna(w) else w.count("\n") + 1)
+    if shown["warnings"].isna().all():
+        shown = shown.drop(columns="warnings")
     if table["rho"].isna().all():
         shown = shown.drop(columns="rho")  # filtered logs: no smoother
     if table["consistency"].isna().all():

@@ -50,6 +50,7 @@ __all__ = [
     "TaskOutcome",
     "check_sweep_out",
     "estimate_logs",
+    "log_summary",
     "log_tasks",
     "run_log_task",
     "run_tasks",
@@ -91,6 +92,19 @@ def _guarded(fn: Callable[[Any], Any], task: Any) -> TaskOutcome:
         return TaskOutcome(task, None, _reason(exc))
 
 
+def _lost(dd: Any, exc: Exception) -> str:
+    """Why a task has no outcome: its worker died, the scheduler was lost, or Dask's own error."""
+    last = traceback.format_exception_only(type(exc), exc)[-1].strip()
+    if isinstance(exc, dd.KilledWorker):
+        return (
+            "its worker process died while running it (killed, e.g. out of memory, or "
+            f"crashed): {type(exc).__name__}"
+        )
+    if isinstance(exc, dd.CancelledError):  # the client cancels them all: scheduler lost
+        return "not done: the connection to the Dask scheduler was lost"
+    return f"not done: Dask failed ({last})"
+
+
 def run_tasks(
     fn: Callable[[Any], Any],
     tasks: Sequence[Any],
@@ -117,10 +131,14 @@ def run_tasks(
             (completion order).
 
     Returns:
-        One :class:`TaskOutcome` per task; a task that raised has ``error`` set.
+        One :class:`TaskOutcome` per task; a task that raised has ``error`` set, and so
+        has one whose worker process died running it (killed for lack of memory, a
+        crash: a local cluster does not run it again) or that a lost scheduler left
+        undone; the others are unaffected.
 
     Raises:
-        OptionError: ``workers`` is negative, or given with ``scheduler``.
+        OptionError: ``workers`` is negative, or given with ``scheduler``; ``scheduler``
+            is not an address.
     """
     if workers is not None and workers < 0:
         raise OptionError(f"workers={workers}: give 0 (this process) or more local workers")
@@ -144,14 +162,29 @@ def run_tasks(
         return serial
     dd = _dask()
     if scheduler is not None:
-        client = dd.Client(scheduler)
+        try:
+            client = dd.Client(scheduler)
+        except ValueError as exc:  # a malformed address (no port, an unknown scheme)
+            raise OptionError(
+                f"--scheduler (scheduler=) {scheduler!r} is not a Dask scheduler's address "
+                f"({exc}); give one as tcp://host:8786"
+            ) from exc
         cluster = None
     else:
         # no statistical profiler in our workers: every 10 ms it takes the GIL from the
-        # task to walk its stack (4 two-minute UR5 logs: 5 % of the wall time)
+        # task to walk its stack (4 two-minute UR5 logs: 5 % of the wall time); a task
+        # whose worker dies (killed for lack of memory, a crash) fails at once instead of
+        # being run 3 more times, and is the only task that worker held (a saturation of
+        # 1: no task queued on it behind the running one, to be charged with its death)
         import dask.config
 
-        with dask.config.set({"distributed.worker.profile.enabled": False}):
+        with dask.config.set(
+            {
+                "distributed.worker.profile.enabled": False,
+                "distributed.scheduler.allowed-failures": 0,
+                "distributed.scheduler.worker-saturation": 1.0,
+            }
+        ):
             cluster = dd.LocalCluster(
                 n_workers=workers, threads_per_worker=1, processes=processes, dashboard_address=None
             )
@@ -161,7 +194,11 @@ def run_tasks(
         index = {f.key: i for i, f in enumerate(futures)}
         out: list[TaskOutcome | None] = [None] * len(tasks)
         for done, fut in enumerate(dd.as_completed(futures), start=1):
-            outcome = fut.result()
+            try:
+                outcome = fut.result()
+            except Exception as exc:  # not the task's own error (_guarded has those)
+                outcome = TaskOutcome(tasks[index[fut.key]], None, _lost(dd, exc))
+            fut.release()  # kept here: not recomputed if its worker dies later
             out[index[fut.key]] = outcome
             report(done, outcome)
         return [o for o in out if o is not None]
@@ -436,7 +473,9 @@ def _plot_sweep(table: Any, png: Path) -> Path:
 #: (:attr:`pinobs.observers.smoothing.Smoother.consistency`, over all its stretches; NaN
 #: when filtered), the measurement latency [s] the log was estimated under (given, or
 #: found from the log by the smoother: :func:`pinobs.smooth`; its longest stretch's when
-#: stretches differ), wall-clock seconds in the worker,
+#: stretches differ), wall-clock seconds in the worker, what the run warned of (the
+#: ``warning:`` and ``note:`` lines ``pinobs estimate`` prints for that log alone, one a
+#: line; empty if none: a ``sigma`` of NaN is the observer's default, said there),
 #: and the error of a log that failed (empty otherwise).
 SUMMARY_COLUMNS = (
     "log",
@@ -449,6 +488,7 @@ SUMMARY_COLUMNS = (
     "rho",
     "latency",
     "seconds",
+    "warnings",
     "error",
 )
 SUMMARY_STEM = "summary"
@@ -498,7 +538,9 @@ def log_tasks(
 ) -> list[LogTask]:
     """One :class:`LogTask` per log; the estimates of ``logs/a/run.parquet`` go to
     ``out_dir/a/run.csv`` (the log's path below the logs' common folder, suffix
-    ``.csv``).
+    ``.csv``).  The batch's own outputs among ``logs`` (found again by a glob or a
+    folder on a second run) are left out: the summary files, and every file under
+    ``out_dir`` when some logs are outside it; so a run gives fewer tasks than logs.
 
     Args:
         logs: log files or rosbag2 folders (:func:`pinobs.io.find_logs`).
@@ -516,14 +558,31 @@ def log_tasks(
             smoothed, also ``"auto"``: :func:`pinobs.smooth`).
 
     Raises:
-        OptionError: no logs, or two logs whose estimates would share a file.
+        OptionError: no logs (or only outputs), or two logs whose estimates would share a file.
         OutputExistsError: the summary exists and not ``force`` (checked before any work).
     """
     if not logs:
         raise OptionError("no logs given: give at least one log file or rosbag2 folder")
-    paths = [Path(p).resolve() for p in logs]
-    base = Path(os.path.commonpath([str(p.parent) for p in paths]))
     out = Path(out_dir).resolve()
+    # the batch's own outputs, found again by a glob or a folder: the summary, and, when
+    # some logs are outside out_dir, everything in it (with the logs in out_dir, only the
+    # summary: the estimates go next to the logs, and one found again clashes below)
+    found = [(name, Path(name).resolve()) for name in logs]
+    summaries = {out / (SUMMARY_STEM + suffix) for suffix in (".parquet", ".csv")}
+    elsewhere = any(not p.is_relative_to(out) for _, p in found)
+    kept = [
+        (name, p)
+        for name, p in found
+        if p not in summaries and not (elsewhere and p.is_relative_to(out))
+    ]
+    if not kept:
+        raise OptionError(
+            f"the {len(logs)} logs given are the outputs of an earlier run in {str(out)!r} "
+            "(its summary, or estimates under it): give the logs, or another output folder"
+        )
+    logs = [name for name, _ in kept]
+    paths = [p for _, p in kept]
+    base = Path(os.path.commonpath([str(p.parent) for p in paths]))
     targets = [out / p.relative_to(base).with_suffix(".csv") for p in paths]
     seen: dict[Path, str | Path] = {}
     for name, target in zip(logs, targets, strict=True):
@@ -588,11 +647,14 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         "noise_std": task.noise_std,
         "options": dict(task.options) or None,
     }
-    verdict, rho = None, math.nan
-    latency = float(dict(task.options).get("latency", 0.0))  # (a number when filtered)
+    verdict, rho, told = None, math.nan, []
+    given = dict(task.options).get("latency", 0.0)  # smoothed, also "auto": found per stretch
+    latency = math.nan if given == "auto" else float(given)
     if task.smooth is None:
         run = process_log(task.log, robot, task.observer, out=task.out, keep=False, **common)
-        verdict = None if run.consistency is None else run.consistency.verdict
+        if run.consistency is not None:
+            verdict = run.consistency.verdict
+            told = run.consistency.messages(task.observer)
     else:
         run, stretches = smooth_log(
             task.log, robot, task.out, observer=task.observer, **common, **dict(task.smooth)
@@ -613,6 +675,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         "rho": rho,
         "latency": latency,
         "seconds": time.perf_counter() - start,
+        "warnings": "\n".join([f"warning: {w}" for w in run.warnings] + told) or None,
         "error": None if run.estimated else "no row of the log could be estimated",
     }
 
@@ -631,25 +694,36 @@ def estimate_logs(
     workers: int | None = None,
     processes: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    on_result: Callable[[TaskOutcome], None] | None = None,
 ) -> Any:
     """Run the logs on Dask (``workers=0``: here, one after the other); the summary as a
     ``pandas.DataFrame``, one row per log in the order of ``tasks`` (:data:`SUMMARY_COLUMNS`).
 
     A log that raised (unreadable, wrong columns, an existing output without
     ``force``) fails alone: its row has ``error`` set (the exception's last
-    line) and NaN counts, and no estimates file.
+    line) and NaN counts, and no estimates file.  ``on_result`` (as :func:`run_tasks`'s)
+    lets a caller interrupted (``KeyboardInterrupt``) still make the summary of the
+    logs done: :func:`log_summary`.
     """
+    return log_summary(
+        run_tasks(
+            run_log_task,
+            tasks,
+            scheduler=scheduler,
+            workers=workers,
+            processes=processes,
+            progress=progress,
+            on_result=on_result,
+        )
+    )
+
+
+def log_summary(outcomes: Sequence[TaskOutcome]) -> Any:
+    """The summary table of :func:`estimate_logs` from the outcomes of :func:`run_log_task`."""
     import pandas as pd
 
     rows: list[dict[str, Any]] = []
-    for o in run_tasks(
-        run_log_task,
-        tasks,
-        scheduler=scheduler,
-        workers=workers,
-        processes=processes,
-        progress=progress,
-    ):
+    for o in outcomes:
         t: LogTask = o.task
         if o.error is None:
             rows.append(o.value)
@@ -666,6 +740,7 @@ def estimate_logs(
                 "consistency": None,
                 "latency": nan,
                 "seconds": nan,
+                "warnings": None,
                 "error": o.error,
             }
         )

@@ -145,6 +145,20 @@ class Consistency:
     causes: tuple[str, ...] = ()
     details: dict[str, Any] = field(default_factory=dict)
 
+    def messages(self, name: str) -> list[str]:
+        """What to tell of observer ``name``: a ``warning:`` line when the model does not
+        explain the data, a ``note:`` line when outlier samples were rejected."""
+        out = []
+        if self.verdict == "inconsistent":
+            out.append(
+                f"warning: {name}: the model does not explain the data (mean NIS "
+                f"{self.mean_nis:.3g} over the last {self.samples} samples, expected "
+                f"{self.expected:g}); check " + "; ".join(self.causes)
+            )
+        if self.gated:
+            out.append(f"note: {name} rejected {self.gated} outlier sample(s)")
+        return out
+
     def as_dict(self) -> dict[str, Any]:
         """Plain values, for JSON."""
         return {

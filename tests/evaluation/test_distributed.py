@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import math
+import os
+import time
+from pathlib import Path
 
 import pytest
 
@@ -10,6 +13,8 @@ pytest.importorskip("dask.distributed")
 pd = pytest.importorskip("pandas")
 
 from pinobs.evaluation.distributed import (  # noqa: E402
+    TaskOutcome,
+    run_log_task,
     run_sweep_task,
     run_tasks,
     sweep,
@@ -251,3 +256,203 @@ def test_log_tasks_mirror_subfolders_and_refuse_two_logs_for_one_file(tmp_path) 
         log_tasks([a, a.with_suffix(".npz")], tmp_path / "out", robot="pendulum", observer="kf")
     with pytest.raises(OptionError, match="no logs given"):
         log_tasks([], tmp_path / "out", robot="pendulum", observer="kf")
+
+
+def test_many_logs_smoothed_with_latency_auto_each_equal_to_the_single_log_run(
+    tmp_path,
+) -> None:
+    """``estimate --out-dir --smooth --latency auto``: the latency found per log (as on one
+    log), not an error on every log."""
+    from pinobs.cli import main
+
+    logs = _logs(tmp_path / "logs")[:2]
+    common = ["--robot", "pendulum", "--observer", "ekf", "--noise", "1e-4", "--no-progress"]
+    common += ["--smooth", "--accel-psd", "1e-4", "--lag", "0.05", "--latency", "auto"]
+    out = tmp_path / "out"
+    argv = [
+        "estimate",
+        *common,
+        "--log",
+        str(tmp_path / "logs" / "run[01]*"),
+        "--out-dir",
+        str(out),
+    ]
+    assert main([*argv, "--workers", "0"]) == 0
+    summary = pd.read_parquet(out / "summary.parquet")
+    assert summary["error"].isna().all() and (summary["estimated"] == 200).all()
+    assert summary["latency"].map(math.isfinite).all()
+    single = tmp_path / "single.csv"
+    assert main(["estimate", *common, "--log", str(logs[0]), "--out", str(single)]) == 0
+    assert (out / "run0.csv").read_bytes() == single.read_bytes()
+
+
+def _exit_on_two(task: tuple[Path, int]) -> int:
+    folder, x = task
+    with open(folder / f"ran{x}", "a") as f:
+        f.write("ran\n")
+    if x == 2:
+        os._exit(1)  # the worker process dies, as when killed for lack of memory
+    return x * x
+
+
+def test_a_task_that_kills_its_worker_fails_alone_and_runs_once(tmp_path) -> None:
+    """Its worker dies (KilledWorker): its outcome says so, the others come back, and it
+    is not run again (Dask's default: on 3 more workers)."""
+    seen: list[TaskOutcome] = []
+    tasks = [(tmp_path, k) for k in range(5)]
+    out = run_tasks(_exit_on_two, tasks, workers=1, on_result=seen.append)
+    assert [o.value for o in out] == [0, 1, None, 9, 16]
+    assert "worker process died while running it" in (out[2].error or "")
+    assert "out of memory" in (out[2].error or "")
+    assert len(seen) == 5
+    assert (tmp_path / "ran2").read_text() == "ran\n"
+
+
+def _slow_square(x: int) -> int:
+    time.sleep(0.2)
+    return x * x
+
+
+def test_a_lost_scheduler_leaves_the_tasks_not_done_failed_and_keeps_those_done() -> None:
+    import dask.distributed as dd
+
+    cluster = dd.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+    )
+
+    def lose_it(outcome: TaskOutcome) -> None:
+        if outcome.task == 1:
+            cluster.close()
+
+    out = run_tasks(
+        _slow_square, list(range(5)), scheduler=cluster.scheduler_address, on_result=lose_it
+    )
+    assert [o.value for o in out[:2]] == [0, 1] and out[0].error is out[1].error is None
+    for o in out[2:]:
+        assert (
+            o.value is None and o.error == "not done: the connection to the Dask scheduler was lost"
+        )
+
+
+def test_many_logs_say_each_logs_warnings_once_naming_it_and_keep_them_in_the_summary(
+    tmp_path, capsys
+) -> None:
+    """The warnings a log alone gives (σ from the log, or too short for it: the observer's
+    default σ; outlier samples rejected) are printed once with the log's name, and are the
+    summary's ``warnings``; a σ of NaN there is not silent."""
+    import numpy as np
+
+    from pinobs.cli import main
+
+    logs = _logs(tmp_path / "logs")
+    t, q, tau = np.loadtxt(logs[0], delimiter=",", skiprows=1).T
+    q[150] += 0.1  # an outlier
+    np.savetxt(logs[0], np.c_[t, q, tau], delimiter=",", header="t,q0,tau0", comments="")
+    short = tmp_path / "logs" / "short.csv"
+    short.write_text("".join(logs[0].read_text().splitlines(keepends=True)[:11]))
+    common = ["--robot", "pendulum", "--observer", "ekf", "--no-progress"]
+    alone = {}
+    for log in (logs[0], short):
+        assert main(["estimate", *common, "--log", str(log), "--out", str(tmp_path / "a.csv"),
+                     "--force"]) == 0  # fmt: skip
+        err = capsys.readouterr().err.splitlines()
+        alone[log.name] = [x for x in err if x.startswith(("warning: ", "note: "))]
+    assert any("too short to estimate it" in x for x in alone["short.csv"])
+    assert any("rejected 1 outlier sample" in x for x in alone["run0.csv"])
+    argv = ["estimate", *common, "--log", str(tmp_path / "logs" / "*.csv")]
+    assert main([*argv, "--out-dir", str(tmp_path / "out"), "--workers", "0"]) == 1  # broken
+    err = capsys.readouterr().err.splitlines()
+    summary = pd.read_parquet(tmp_path / "out" / "summary.parquet")
+    by = summary.set_index(summary["log"].map(lambda s: s.rsplit("/", 1)[-1]))
+    for name, said in alone.items():
+        log = by.loc[name, "log"]
+        assert [x for x in err if x.startswith(f"{log}: ")] == [f"{log}: {x}" for x in said]
+        assert by.loc[name, "warnings"].splitlines() == said
+    assert math.isnan(by.loc["short.csv", "sigma"])
+    assert pd.isna(by.loc["broken.csv", "warnings"])
+
+
+def test_a_rerun_does_not_take_the_batchs_own_outputs_for_logs(tmp_path, capsys) -> None:
+    """``--log 'fleet/**/*.csv' --out-dir fleet/est`` twice: the second run estimates the same
+    two logs (not the first run's estimates), saying it left 2 files out; ``--log 'pq/*'
+    --out-dir pq``: the summary found there is not a log."""
+    import shutil
+
+    from pinobs.cli import main
+    from pinobs.errors import OptionError
+    from pinobs.evaluation.distributed import log_tasks
+
+    logs = _logs(tmp_path / "logs")
+    for k in (1, 2):
+        (tmp_path / "fleet" / f"r{k}").mkdir(parents=True)
+        shutil.copy(logs[0], tmp_path / "fleet" / f"r{k}" / "run.csv")
+    argv = ["estimate", "--robot", "pendulum", "--observer", "kf", "--noise", "1e-4"]
+    argv += [
+        "--no-progress",
+        "--workers",
+        "0",
+        "--force",
+        "--log",
+        str(tmp_path / "fleet/**/*.csv"),
+    ]
+    argv += ["--out-dir", str(tmp_path / "fleet" / "est")]
+    for _ in range(2):
+        assert main(argv) == 0
+        summary = pd.read_parquet(tmp_path / "fleet" / "est" / "summary.parquet")
+        assert [s.rsplit("fleet/", 1)[1] for s in summary["log"]] == ["r1/run.csv", "r2/run.csv"]
+    assert "note: 2 of the 4 logs found left out" in capsys.readouterr().err
+    pq = tmp_path / "logs"  # a Parquet log and the summary in the same folder
+    kw = {"robot": "pendulum", "observer": "kf", "force": True}
+    (pq / "summary.parquet").write_bytes(b"")
+    tasks = log_tasks([pq / "run2.parquet", pq / "summary.parquet"], pq, **kw)
+    assert [t.log for t in tasks] == [str(pq / "run2.parquet")]
+    with pytest.raises(OptionError, match="outputs of an earlier run"):
+        log_tasks([pq / "summary.parquet"], pq, **kw)
+
+
+def test_an_out_dir_that_is_a_file_is_refused_before_any_log(tmp_path, capsys) -> None:
+    from pinobs.cli import main
+
+    _logs(tmp_path / "logs")
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    argv = ["estimate", "--robot", "pendulum", "--observer", "kf", "--no-progress"]
+    argv += ["--log", str(tmp_path / "logs"), "--out-dir", str(afile), "--workers", "0"]
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert f"--out-dir {str(afile)!r} is a file; give a folder" in captured.err
+    assert "pinobs estimate:" not in captured.out  # no log attempted
+
+
+def _interrupt_on_run1(task):  # Ctrl-C while the second log runs
+    if "run1" in task.log:
+        raise KeyboardInterrupt
+    return run_log_task(task)
+
+
+def test_an_interrupted_batch_writes_the_summary_of_the_logs_done(
+    tmp_path, capsys, monkeypatch
+) -> None:
+    import pinobs.evaluation.distributed as distributed
+    from pinobs.cli import main
+
+    _logs(tmp_path / "logs")
+    monkeypatch.setattr(distributed, "run_log_task", _interrupt_on_run1)
+    out = tmp_path / "out"
+    argv = ["estimate", "--robot", "pendulum", "--observer", "kf", "--noise", "1e-4"]
+    argv += ["--no-progress", "--log", str(tmp_path / "logs" / "run*"), "--out-dir", str(out)]
+    assert main([*argv, "--workers", "0"]) == 130
+    assert "interrupted: 1 of 3 logs done" in capsys.readouterr().err
+    summary = pd.read_parquet(out / "summary.parquet")
+    assert summary["error"].isna().tolist() == [True, False, False]
+    assert summary["error"][1] == summary["error"][2] == "not done: interrupted"
+    assert summary["estimated"][0] == 200 and (out / "run0.csv").exists()
+    assert not (out / "run1.csv").exists()
+
+
+@pytest.mark.parametrize("address", ["garbage", "http://127.0.0.1:9999"])
+def test_a_malformed_scheduler_address_is_an_option_error_naming_the_flag(address) -> None:
+    from pinobs.errors import OptionError
+
+    with pytest.raises(OptionError, match=r"--scheduler \(scheduler=\) .* is not a Dask"):
+        run_tasks(_inverse, [1.0], scheduler=address)

@@ -186,7 +186,13 @@ def run_tasks(
             }
         ):
             cluster = dd.LocalCluster(
-                n_workers=workers, threads_per_worker=1, processes=processes, dashboard_address=None
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=processes,
+                dashboard_address=None,  # no dashboard; its HTTP server still starts, so:
+                # on a free port, not 8787 (taken by any other Dask on the machine: a
+                # UserWarning, an error under -W error; the tests failed so beside another)
+                scheduler_kwargs={"dashboard_address": ":0"},
             )
         client = dd.Client(cluster)
     try:

@@ -42,6 +42,24 @@ def test_tasks_come_back_in_order_and_a_bad_one_fails_alone() -> None:
     assert seen[-1] == (3, 3)
 
 
+def test_a_local_cluster_starts_beside_another_dask_on_port_8787() -> None:
+    """Its scheduler's HTTP server took 8787 and, that taken, warned (an error here): the
+    tests failed beside any other Dask on the machine."""
+    import socket
+
+    taken = socket.socket()
+    try:
+        try:
+            taken.bind(("0.0.0.0", 8787))
+            taken.listen()
+        except OSError:
+            pass  # taken already: the same condition
+        out = run_tasks(_inverse, [2.0], workers=1, processes=False)
+        assert out[0].value == 0.5
+    finally:
+        taken.close()
+
+
 def test_sweep_gives_one_row_per_run_and_observer_and_reports_a_bad_run(tmp_path) -> None:
     tasks = sweep_tasks(
         ["pendulum", "no_such_robot"],

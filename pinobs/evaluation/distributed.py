@@ -94,7 +94,6 @@ def _guarded(fn: Callable[[Any], Any], task: Any) -> TaskOutcome:
 
 def _lost(dd: Any, exc: Exception) -> str:
     """Why a task has no outcome: its worker died, the scheduler was lost, or Dask's own error."""
-    last = traceback.format_exception_only(type(exc), exc)[-1].strip()
     if isinstance(exc, dd.KilledWorker):
         return (
             "its worker process died while running it (killed, e.g. out of memory, or "
@@ -102,7 +101,7 @@ def _lost(dd: Any, exc: Exception) -> str:
         )
     if isinstance(exc, dd.CancelledError):  # the client cancels them all: scheduler lost
         return "not done: the connection to the Dask scheduler was lost"
-    return f"not done: Dask failed ({last})"
+    return f"not done: Dask failed ({_reason(exc)})"
 
 
 def run_tasks(
@@ -432,9 +431,8 @@ def write_sweep(
         plot = False  # no run succeeded: nothing to draw on a log scale
     if plot and importlib.util.find_spec("matplotlib") is not None:
         written.append(_plot_sweep(table, out / "sweep.png"))
-    for (
-        name
-    ) in SWEEP_FILES:  # a previous sweep's plot (or table format) would be taken for this one's
+    # a previous sweep's plot (or table format) would be taken for this one's
+    for name in SWEEP_FILES:
         if out / name not in written:
             (out / name).unlink(missing_ok=True)
     return written

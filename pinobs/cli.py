@@ -587,7 +587,7 @@ def _estimate_many(args: argparse.Namespace) -> int:
             f"outputs of an earlier run (in --out-dir {args.out_dir})",
             file=sys.stderr,
         )
-    print(f"pinobs estimate: {len(tasks)} logs, {what} on {_cluster(args)}")
+    print(f"pinobs estimate: {_plural(len(tasks), 'log')}, {what} on {_cluster(args)}")
     done: dict[Any, TaskOutcome] = {}
 
     def keep(outcome: TaskOutcome) -> None:

@@ -487,6 +487,12 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     if args.out_dir is not None:
         _check_cluster(args)
         return _estimate_many(args)
+    if args.workers is not None or args.scheduler:  # one log runs here: they were ignored
+        flag = "--workers" if args.workers is not None else "--scheduler"
+        raise OptionError(
+            f"{flag}: many logs run on Dask (--log GLOB|FOLDER --out-dir OUT); one log "
+            "(--out) runs in this process"
+        )
     if args.smooth:
         return _estimate_smoothed(args)
     robot = _load(args)

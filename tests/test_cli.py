@@ -357,6 +357,19 @@ def test_cluster_flags_are_refused_by_name_before_any_output(
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("flags", [["--workers", "2"], ["--scheduler", "tcp://h:1"]])
+def test_one_log_refuses_the_cluster_flags_it_would_ignore(
+    tmp_path: Path, capsys, flags: list[str]
+) -> None:
+    """Found by a sweep: ``estimate --out`` (one log, run here) ignored them silently."""
+    out = tmp_path / "est.csv"
+    argv = ["estimate", "--robot", "pendulum", "--observer", "kf", "--log", "log.csv"]
+    argv += ["--out", str(out), *flags]
+    assert main(argv) == 2
+    assert f"pinobs: error: {flags[0]}: many logs run on Dask" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_sweep_where_no_run_succeeds_says_so_and_writes_the_table(tmp_path, capsys) -> None:
     pytest.importorskip("pandas")
     argv = ["sweep", "--robots", "pendulum", "--seeds", "0", "--observers", "liegroup"]

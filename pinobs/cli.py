@@ -47,6 +47,7 @@ from pinobs.errors import (
 )
 from pinobs.evaluation import evaluate, format_table
 from pinobs.io import process_log, read_log
+from pinobs.io.clock import CLOCK_MODES
 from pinobs.model import Robot, aba_time, load, robot_entries
 from pinobs.model.identification import MAX_CONDITION
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
@@ -479,6 +480,11 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         if given:
             flags = ", ".join("--" + f.replace("_", "-") for f in given)
             raise OptionError(f"{flags}: options of the smoother; add --smooth")
+    if args.smooth and args.clock is not None:
+        raise OptionError(
+            f"--clock {args.clock}: the smoother reads the log's stamps as they are (the "
+            "clock repair runs with the filter only, for now)"
+        )
     if args.smooth and args.observer == "kf" and args.accel_psd not in (None, "auto"):
         raise OptionError(
             f"--accel-psd {args.accel_psd:g}: kf has no white acceleration; its white-jerk "
@@ -513,6 +519,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
                 noise_std=args.noise,
                 options=_observer_options(args),
                 progress=progress,
+                clock=args.clock or "auto",
             )
         except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
             print(f"pinobs: error: {exc}", file=sys.stderr)
@@ -582,6 +589,7 @@ def _estimate_many(args: argparse.Namespace) -> int:
         rate=args.rate,
         noise_std=args.noise,
         options=_observer_options(args),
+        clock=args.clock or "auto",
         smooth=None
         if not args.smooth
         else {"lag": args.lag, "chunk": args.chunk, "accel_psd": args.accel_psd, "band": args.band},
@@ -1311,6 +1319,14 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
     _add_log_columns(p)
+    p.add_argument(
+        "--clock",
+        choices=CLOCK_MODES,
+        default=None,
+        help="the log's clock: auto (default: repair the stamps of a fixed-rate loop seen "
+        "through a jittery logger clock, skip stale rows, when the motion clearly says so), "
+        "stamps (as stamped), loop (always the loop's clock); the filter only",
+    )
     p.add_argument(
         "--html", default=None, help="also write a 3D playback of the log and the estimate"
     )

@@ -521,6 +521,8 @@ class LogTask:
     smooth: tuple[tuple[str, Any], ...] | None = None
     #: further options of the observer (``latency``), filtered or smoothed
     options: tuple[tuple[str, Any], ...] = ()
+    #: the log's clock (:func:`pinobs.io.process_log`'s ``clock``), filtered only
+    clock: str = "auto"
 
 
 def log_tasks(
@@ -539,6 +541,7 @@ def log_tasks(
     noise_std: float | None = None,
     smooth: Mapping[str, Any] | None = None,
     options: Mapping[str, Any] | None = None,
+    clock: str = "auto",
 ) -> list[LogTask]:
     """One :class:`LogTask` per log; the estimates of ``logs/a/run.parquet`` go to
     ``out_dir/a/run.csv`` (the log's path below the logs' common folder, suffix
@@ -625,6 +628,7 @@ def log_tasks(
             noise_std=noise_std,
             smooth=None if smooth is None else tuple(sorted(smooth.items())),
             options=tuple(sorted((options or {}).items())),
+            clock=clock,
         )
         for name, path, target in zip(logs, paths, targets, strict=True)
     ]
@@ -655,7 +659,9 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
     given = dict(task.options).get("latency", 0.0)  # smoothed, also "auto": found per stretch
     latency = math.nan if given == "auto" else float(given)
     if task.smooth is None:
-        run = process_log(task.log, robot, task.observer, out=task.out, keep=False, **common)
+        run = process_log(
+            task.log, robot, task.observer, out=task.out, keep=False, clock=task.clock, **common
+        )
         if run.consistency is not None:
             verdict = run.consistency.verdict
             told = run.consistency.messages(task.observer)

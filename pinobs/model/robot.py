@@ -303,8 +303,10 @@ class Robot:
             payload: ``(mass [kg], offset [m] in the tool body's frame)``: a
                 point mass added to the last moving body, passing over prismatic
                 joints after it (a Panda's fingers): the end effector of an arm.
-            damping, coulomb: viscous [N·m·s/rad] and Coulomb [N·m] friction per
-                velocity coordinate, replacing the model's (friction switched on).
+            damping: viscous friction [N·m·s/rad] per velocity coordinate,
+                replacing the model's (friction switched on).
+            coulomb: Coulomb friction [N·m] per velocity coordinate, replacing
+                the model's (friction switched on).
         """
         model = self.model.copy()
         if inertia_scale is not None:

@@ -2,7 +2,7 @@
 
 This module is the only code in pinobs that calls Pinocchio's dynamics.
 
-Conventions (Pinocchio's, see ``../shared/MATH.md`` §1-3):
+Conventions (Pinocchio's, see ``docs/theory/math.md`` §1-3):
 
 * ``q`` has ``nq`` entries, ``v`` and every tangent vector ``nv``; quaternions
   are ``x, y, z, w``; a free-flyer's velocity is ``[linear; angular]`` in the

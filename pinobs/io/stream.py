@@ -665,8 +665,9 @@ def estimate(
 ) -> Any:
     """Estimates over a log as a pandas ``DataFrame``: ``t, q0.., v0..``, one row per log row.
 
-    >>> import pinobs
-    >>> df = pinobs.estimate("kf", "examples/ur5_log.csv", robot="ur5")  # doctest: +SKIP
+    Examples:
+        >>> import pinobs
+        >>> df = pinobs.estimate("kf", "examples/ur5_log.csv", robot="ur5")  # doctest: +SKIP
 
     Args:
         observer: a registry name or an observer (then ``robot`` defaults to its robot).

@@ -6,6 +6,7 @@ The site itself is built by CI (``mkdocs build --strict`` in ``.ci/run``), not h
 
 from __future__ import annotations
 
+import importlib.util
 import re
 from pathlib import Path
 
@@ -104,3 +105,29 @@ def test_readme_cites_the_theory_page_in_the_repository() -> None:
 def test_ci_builds_the_site_strictly() -> None:
     ci = (ROOT / ".ci" / "run").read_text()
     assert 'pip install -q -e ".[docs]" && mkdocs build --strict' in ci
+
+
+def test_rst_roles_become_links_where_the_target_resolves_and_code_elsewhere(
+    tmp_path: Path,
+) -> None:
+    griffe = pytest.importorskip("griffe", reason="the docs extra: pip install -e '.[docs]'")
+    spec = importlib.util.spec_from_file_location("rst_roles", DOCS / "rst_roles.py")
+    assert spec is not None and spec.loader is not None
+    rst_roles = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rst_roles)
+    pkg = tmp_path / "pkgx"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text(
+        '"""See :func:`helper`, :class:`~pkgx.Thing`, :meth:`Thing.go` and :func:`nowhere`."""\n'
+        "class Thing:\n    def go(self): ...\n"
+        "def helper(): ...\n"
+    )
+    mod = griffe.load(
+        "pkgx", search_paths=[tmp_path], extensions=griffe.load_extensions(rst_roles.RstRoles())
+    )
+    text = mod.docstring.value
+    assert '<autoref identifier="pkgx.helper" optional><code>helper</code></autoref>' in text
+    assert '<autoref identifier="pkgx.Thing" optional><code>Thing</code></autoref>' in text
+    assert '<autoref identifier="pkgx.Thing.go" optional><code>Thing.go</code></autoref>' in text
+    assert "`nowhere`" in text
+    assert ":func:" not in text and ":class:" not in text

@@ -1,8 +1,9 @@
 """pinobs: velocity observers for any URDF robot, on Pinocchio's dynamics.
 
->>> import pinobs
->>> robot = pinobs.load("cartpole")
->>> obs = pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
+Examples:
+    >>> import pinobs
+    >>> robot = pinobs.load("cartpole")
+    >>> obs = pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
 """
 
 from pinobs.errors import (

@@ -570,7 +570,8 @@ def process_log(
         out: CSV file for the estimates (written through a temporary file).
         force: overwrite an existing ``out``.
         keep: keep the estimates in the returned run (``False``: memory stays flat).
-        columns, topic: as :func:`pinobs.io.iter_log`.
+        columns: as :func:`pinobs.io.iter_log`.
+        topic: as :func:`pinobs.io.iter_log`.
         rate: sample rate [Hz] (default: from the log's median interval).
         noise_std: position noise σ [rad or m]; ``None`` with a name: estimated
             from the log's first second (:func:`pinobs.io.estimate_noise_std`) and reported.
@@ -720,14 +721,20 @@ def estimate(
 ) -> Any:
     """Estimates over a log as a pandas ``DataFrame``: ``t, q0.., v0..``, one row per log row.
 
-    >>> import pinobs
-    >>> df = pinobs.estimate("kf", "examples/ur5_log.csv", robot="ur5")  # doctest: +SKIP
+    Examples:
+        >>> import pinobs
+        >>> df = pinobs.estimate("kf", "examples/ur5_log.csv", robot="ur5")  # doctest: +SKIP
 
     Args:
         observer: a registry name or an observer (then ``robot`` defaults to its robot).
         data: a DataFrame or a log path (any format of :func:`pinobs.io.iter_log`).
         robot: a :class:`~pinobs.Robot` or a registry name; required with a name.
-        columns, topic, rate, noise_std, options, clock: as :func:`process_log`.
+        columns: as :func:`process_log`.
+        topic: as :func:`process_log`.
+        rate: as :func:`process_log`.
+        noise_std: as :func:`process_log`.
+        options: as :func:`process_log`.
+        clock: as :func:`process_log`.
 
     Returns:
         The DataFrame (``t`` the row's time: repaired where the log's clock was,

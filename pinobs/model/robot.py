@@ -2,7 +2,7 @@
 
 This module is the only code in pinobs that calls Pinocchio's dynamics.
 
-Conventions (Pinocchio's, see ``../shared/MATH.md`` §1-3):
+Conventions (Pinocchio's, see ``docs/theory/math.md`` §1-3):
 
 * ``q`` has ``nq`` entries, ``v`` and every tangent vector ``nv``; quaternions
   are ``x, y, z, w``; a free-flyer's velocity is ``[linear; angular]`` in the
@@ -303,8 +303,10 @@ class Robot:
             payload: ``(mass [kg], offset [m] in the tool body's frame)``: a
                 point mass added to the last moving body, passing over prismatic
                 joints after it (a Panda's fingers): the end effector of an arm.
-            damping, coulomb: viscous [N·m·s/rad] and Coulomb [N·m] friction per
-                velocity coordinate, replacing the model's (friction switched on).
+            damping: viscous friction [N·m·s/rad] per velocity coordinate,
+                replacing the model's (friction switched on).
+            coulomb: Coulomb friction [N·m] per velocity coordinate, replacing
+                the model's (friction switched on).
         """
         model = self.model.copy()
         if inertia_scale is not None:

@@ -715,3 +715,34 @@ def test_excite_and_identify_take_lock_and_the_calibrated_urdf_has_the_joint_fix
             np.abs(calibrated.mass_matrix(q) - m).max()
             < 0.2 * np.abs(robot.mass_matrix(q) - m).max()
         )
+
+
+def test_play_of_a_locked_run_whose_robot_file_moved_gives_the_command_with_its_locks(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    import shlex
+
+    from pinobs.model.loading import _models_dir
+
+    monkeypatch.chdir(tmp_path)
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text((_models_dir() / "planar_3r.urdf").read_text())
+    saved = tmp_path / "run.npz"
+    run = ["run", "--robot", str(urdf), "--lock", "joint3=0.25", "--observer", "kf"]
+    assert main([*run, "--duration", "0.05", "--no-progress", "--save", str(saved)]) == 0
+    (tmp_path / "models").mkdir()
+    urdf.rename(tmp_path / "models" / "arm.urdf")
+    capsys.readouterr()
+    png = str(tmp_path / "p.png")
+    assert main(["play", str(saved), "--plot", png]) == 2
+    command = shlex.split(capsys.readouterr().err.strip().splitlines()[-1])
+    assert command[3:] == [
+        "--robot",
+        str(tmp_path / "models" / "arm.urdf"),
+        "--plot",
+        png,
+        "--lock",
+        "joint3=0.25",
+    ]
+    pytest.importorskip("matplotlib")
+    assert main(command[1:]) == 0  # the command given works: the locked two-joint arm

@@ -511,6 +511,8 @@ class LogTask:
     root_joint: str | None = None
     friction: bool | None = None  # pinobs.load's friction
     mimic: str | None = None  # pinobs.load's mimic
+    #: pinobs.load's lock, as (joint, value) pairs (value None: the neutral one)
+    lock: tuple[tuple[str, Any], ...] = ()
     force: bool = False
     columns: tuple[tuple[str, str], ...] = ()
     topic: str | None = None
@@ -534,6 +536,7 @@ def log_tasks(
     root_joint: str | None = None,
     friction: bool | None = None,
     mimic: str | None = None,
+    lock: Sequence[str] | Mapping[str, Any] | None = None,
     force: bool = False,
     columns: Mapping[str, str] | None = None,
     topic: str | None = None,
@@ -557,6 +560,7 @@ def log_tasks(
         root_joint, columns, topic, rate, noise_std: as :func:`pinobs.io.process_log`
             (``noise_std=None``: estimated from each log's first second).
         friction: :func:`pinobs.load`'s (the URDF's joint friction in the dynamics).
+        mimic, lock: :func:`pinobs.load`'s (the joints the logs do not have, locked).
         force: overwrite existing estimates and summary.
         smooth: smooth each log instead of filtering it, with these options of
             :func:`pinobs.io.smoothing.smooth_log` (``{}``: its defaults; ``lag``,
@@ -621,6 +625,7 @@ def log_tasks(
             root_joint=root_joint,
             friction=friction,
             mimic=mimic,
+            lock=_lock_pairs(lock),
             force=force,
             columns=tuple(sorted((columns or {}).items())),
             topic=topic,
@@ -632,6 +637,17 @@ def log_tasks(
         )
         for name, path, target in zip(logs, paths, targets, strict=True)
     ]
+
+
+def _lock_pairs(lock: Sequence[str] | Mapping[str, Any] | None) -> tuple[tuple[str, Any], ...]:
+    """``lock`` as hashable ``(joint, value)`` pairs in its order (sequences as tuples)."""
+    if not lock:
+        return ()
+    items = lock.items() if isinstance(lock, Mapping) else ((n, None) for n in lock)
+    return tuple(
+        (str(n), tuple(v) if isinstance(v, Sequence) and not isinstance(v, str) else v)
+        for n, v in items
+    )
 
 
 def run_log_task(task: LogTask) -> dict[str, Any]:
@@ -646,7 +662,13 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
     from pinobs.observers.smoothing import smoothing_warnings
 
     start = time.perf_counter()
-    robot = load(task.robot, root_joint=task.root_joint, friction=task.friction, mimic=task.mimic)
+    robot = load(
+        task.robot,
+        root_joint=task.root_joint,
+        friction=task.friction,
+        mimic=task.mimic,
+        lock=dict(task.lock) or None,
+    )
     common: dict[str, Any] = {
         "force": task.force,
         "columns": dict(task.columns) or None,

@@ -168,6 +168,7 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
     q_angle: list[bool] = []
     q_slices: list[slice] = []
     missing: list[str] = []
+    absent: list[str] = []  # joints with a q column missing
     for name, kind, iq, nq, _, _ in _blocks(robot):
         q_slices.append(slice(iq, iq + nq))
         cols: list[str] = []
@@ -186,6 +187,7 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
                 for k, c in enumerate(cols)
                 if not c
             ]
+            absent.append(name)
             q_cols.append(tuple(cols))
             q_angle.append(False)
     tau_cols: list[str | None] = []
@@ -206,11 +208,12 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
             "(root_joint=...)? Drop or rename them (columns=...) if they are not its own"
         )
     if t is None or missing:
+        lock = _lock_hint(absent) if absent and len(absent) < len(robot.joints) else ""
         raise DimensionError(
             f"{where}: columns {list(header)} lack {(['t'] if t is None else []) + missing}; "
             f"robot {robot.name!r} needs t, then q0..q{robot.nq - 1} (nq = {robot.nq}) or "
             f"q.<joint> for joints {list(robot.joint_names)}, and optionally "
-            f"tau0..tau{robot.nv - 1} or tau.<joint> (or map other names with columns=...)"
+            f"tau0..tau{robot.nv - 1} or tau.<joint> (or map other names with columns=...)" + lock
         )
     tau: tuple[str, ...] | None = None
     if any(c is not None for c in tau_cols):
@@ -222,6 +225,16 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
         tau = tuple(c for c in tau_cols if c is not None)
     tick = one(["tick"], "the sample counter")
     return _Layout(t, tuple(q_cols), tuple(q_angle), tuple(q_slices), tau, tick)
+
+
+def _lock_hint(absent: Sequence[str]) -> str:
+    """What to do when a log records some of the robot's joints but not ``absent``."""
+    flags = " ".join(f"--lock {n}" for n in absent)
+    return (
+        f". If the log does not record joints {list(absent)} (a gripper's fingers), lock them "
+        f"at a fixed value: pinobs.load(..., lock={list(absent)}) (or lock={{name: value}}), "
+        f"or {flags} (the pinobs command)"
+    )
 
 
 def _clean_header(header: Sequence[Any], columns: Mapping[str, str] | None) -> list[str]:
@@ -751,6 +764,11 @@ def _npz_log(path: Path, robot: Robot) -> Log:
             f"robot {robot.name!r} needs {q_name} of shape (N, {robot.nq}) and tau of shape "
             f"(N, {robot.nv})"
             + (" (q_meas is read as the log's q when present)" if q_name != "q" else "")
+            + (
+                _lock_hint([b.name for b in robot.joints if b.idx_q + b.nq > q.shape[1]])
+                if q.ndim == 2 and 0 < q.shape[1] < robot.nq
+                else ""
+            )
         )
     return Log(t=t, q=q, tau=tau, unit="row")
 

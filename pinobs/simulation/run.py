@@ -261,6 +261,7 @@ def simulate(
         "robot_source": _portable_source(getattr(robot, "source", robot.name)),
         "root_joint": getattr(robot, "root_joint", None),
         "mimic": getattr(robot, "mimic", None),
+        "lock": dict(getattr(robot, "locked", {})) or None,  # pinobs play reloads it so
         "duration": duration,
         "rate": sensor.rate,
         "noise_std": sensor.noise_std,

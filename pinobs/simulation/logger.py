@@ -33,14 +33,18 @@ The model (``P``: the run's sample period [s]; ``t_n = n·P``: the run's times):
    reads the same state again: a duplicate row with that row's ``q`` and ``tau``
    exactly (and its ``tick``) is inserted, stamped uniformly between that row's
    stamp and the next row's (after the last row: within one period ``(1 + drift)·P``
-   after it).  A fraction ``stale / (1 + stale)`` of the rows is then stale.
+   after it).  A fraction ``stale / (1 + stale)`` of the rows is then stale (fewer
+   with a coarse ``resolution``: 5).
 5. **Printing.**  ``q`` and ``tau`` are rounded to ``digits`` significant digits
    (``None``: not rounded); the stamps to the nearest multiple of ``resolution``
-   [s] (``None``: not rounded).  A stamp that rounding makes equal to the
-   previous one (a stale row close to its neighbour, or a jittered one) is moved
-   to the next multiple of ``resolution`` after the previous stamp, so the
-   stamps still strictly increase (each such move adds one ``resolution`` to
-   that stamp's error, and can push the next stamp on in turn).
+   [s] (``None``: not rounded), which must be finer than the row spacing
+   ``(1 + drift)·P``.  The stamps still strictly increase: a kept row's stamp
+   that rounding makes equal to (or puts before) the previous one, which a jitter
+   near half the spacing can do, is moved to the next multiple after the previous
+   stamp (one more ``resolution`` of error for that row, and perhaps the next);
+   a stale row takes the multiple nearest its draw strictly between its
+   neighbours' stamps, and where there is none (neighbours one step apart) it is
+   not written.
 
 With the defaults the log is the run's samples: ``t``, ``q_meas`` and ``tau``,
 every tick, exactly.
@@ -184,29 +188,47 @@ class Logger:
                 "finer resolution"
             )
         ticks = np.flatnonzero(self._kept(n, gen))
+        if ticks.size == 0:  # every tick lost
+            return RecordedLog(
+                t=np.empty(0),
+                q=np.empty((0, result.q_meas.shape[1])),
+                tau=np.empty((0, result.tau.shape[1])),
+                tick=np.empty(0, dtype=np.intp),
+                stale=np.empty(0, dtype=bool),
+                period=period,
+                robot=result.robot,
+            )
         nominal = float(self.offset) + scale * t[ticks]
         stamps = self._jittered(nominal, gen)
-        stale_after = (
-            gen.random(ticks.size) < self.stale if self.stale else np.zeros(ticks.size, bool)
-        )
+        res = None if self.resolution is None else float(self.resolution)
+        grid = None if res is None else _grid_steps(stamps, res)
+        if grid is not None and res is not None:
+            stamps = _from_steps(grid, res)
+        k = np.flatnonzero(gen.random(ticks.size) < self.stale) if self.stale else np.empty(0, int)
+        # a stale read: uniformly between its row's stamp and the next row's
+        lo = stamps[k]
+        hi = np.append(stamps[1:], stamps[-1] + spacing)[k]
+        between = lo + gen.random(k.size) * (hi - lo)
+        if grid is not None and res is not None:  # on a free multiple of res between them
+            g_lo = grid[k]
+            g_hi = np.append(grid[1:], np.rint((stamps[-1] + spacing) / res))[k]
+            room = g_hi - g_lo >= 2
+            k, between = k[room], between[room]
+            steps = np.clip(np.rint(between / res), g_lo[room] + 1, g_hi[room] - 1)
+            between = _from_steps(steps.astype(np.int64), res)
+        else:
+            outside = (between <= lo) | (between >= hi)
+            between[outside] = 0.5 * (lo[outside] + hi[outside])
         # rows: each kept tick, then its stale duplicate if any
-        rows_per_tick = 1 + stale_after.astype(np.intp)
+        rows_per_tick = np.ones(ticks.size, dtype=np.intp)
+        rows_per_tick[k] = 2
         row_tick = np.repeat(ticks, rows_per_tick)
-        is_stale = np.zeros(row_tick.size, dtype=bool)
         first_row = np.cumsum(rows_per_tick) - rows_per_tick  # row of each kept tick
-        is_stale[first_row[stale_after] + 1] = True
+        is_stale = np.zeros(row_tick.size, dtype=bool)
+        is_stale[first_row[k] + 1] = True
         t_rows = np.empty(row_tick.size)
         t_rows[first_row] = stamps
-        if stale_after.any():
-            k = np.flatnonzero(stale_after)
-            nxt = np.append(stamps[1:], stamps[-1] + spacing)
-            lo, hi = stamps[k], nxt[k]
-            mid = lo + gen.random(k.size) * (hi - lo)
-            outside = (mid <= lo) | (mid >= hi)
-            mid[outside] = lo[outside] + 0.5 * (hi[outside] - lo[outside])
-            t_rows[first_row[k] + 1] = mid
-        if self.resolution is not None:
-            t_rows = _on_grid(t_rows, float(self.resolution))
+        t_rows[first_row[k] + 1] = between
         if t_rows.size > 1 and not np.all(np.diff(t_rows) > 0.0):  # pragma: no cover
             bad = int(np.flatnonzero(np.diff(t_rows) <= 0.0)[0]) + 1
             raise TimestampError(
@@ -277,7 +299,7 @@ class Logger:
 def _period(result: Result) -> float:
     """The run's sample period [s]: ``1 / meta["rate"]``, else the step of its times."""
     rate = result.meta.get("rate") if isinstance(result.meta, dict) else None
-    if isinstance(rate, numbers.Real) and not isinstance(rate, bool) and rate > 0:
+    if isinstance(rate, numbers.Real) and not isinstance(rate, bool) and float(rate) > 0:
         return 1.0 / float(rate)
     if result.t.size < 2:
         raise DimensionError(
@@ -286,11 +308,16 @@ def _period(result: Result) -> float:
     return float(result.t[1] - result.t[0])
 
 
-def _on_grid(t: Vector, resolution: float) -> Vector:
-    """``t`` rounded to multiples of ``resolution``, each above the previous (module doc, 5)."""
+def _grid_steps(t: Vector, resolution: float) -> NDArray[np.int64]:
+    """``t`` in whole steps of ``resolution``, rounded, each above the previous (module
+    docstring, 5): ``k[i] = max(round(t[i] / resolution), k[i-1] + 1)``."""
     k = np.rint(t / resolution).astype(np.int64)
     idx = np.arange(k.size, dtype=np.int64)
-    k = np.maximum.accumulate(k - idx) + idx  # k[i] = max(round, k[i-1] + 1)
+    return np.maximum.accumulate(k - idx) + idx
+
+
+def _from_steps(k: NDArray[np.int64], resolution: float) -> Vector:
+    """Stamps [s] of whole steps ``k`` of ``resolution``."""
     per_second = 1.0 / resolution
     if per_second == round(per_second):  # 1e-3 s: k / 1000, which prints as its decimal
         return k / round(per_second)
@@ -320,7 +347,8 @@ def _significant(x: Vector, digits: int) -> Vector:
     fast = (np.abs(shift) <= 22) & (digits <= 15)
     up = fast & (shift >= 0)
     down = fast & (shift < 0)
-    scale = 10.0 ** np.abs(shift).astype(float)
+    scale = np.ones_like(v)
+    scale[fast] = 10.0 ** np.abs(shift[fast]).astype(float)
     res[up] = np.rint(v[up] * scale[up]) / scale[up]
     res[down] = np.rint(v[down] / scale[down]) * scale[down]
     slow = ~fast

@@ -52,9 +52,10 @@ every tick, exactly.
 Two real logs, measured (``benchmarks/real_data.py``): FIGAROH's TIAGo log has
 one row per 10 ms, its stamps on that grid with an error of standard deviation
 0.41 ms (-0.6 to +2.0 ms), no repeated row while the arm moves (3 and 4 above);
-the UR10e logs of Mamedov et al. keep one tick in 5 or 6 of the 500 Hz loop
-(steps of 10 or 12 ms, 1 ms stamps) and print 4 decimals, with repeated rows
-only at rest: a regular decimation, which random drops (2) do not reproduce.
+the UR10e logs of Mamedov et al. step by 10 ms (67 % of rows) or 12 ms (31 %)
+on 1 ms stamps, one tick in 5 or 6 of the robot's 500 Hz loop it seems, and
+print 4 decimals, with repeated rows only at rest: a regular decimation, which
+random drops (2) do not reproduce.
 """
 
 from __future__ import annotations

@@ -110,19 +110,20 @@ from pinobs.observers.base import (
     register,
 )
 from pinobs.observers.differentiators import HighGainDifferentiator
-from pinobs.observers.ekf import (
-    ad_matrix,
+from pinobs.observers.ekf import ad_matrix, double_integrator_noise
+from pinobs.observers.linalg import (
     cholesky_solve,
-    double_integrator_noise,
+    joseph_kernel,
     joseph_update,
     stiff_transition_matrix,
+    transition_kernel,
     transition_matrix,
     warm_linear_algebra,
 )
 
 __all__ = ["IbrirKalman", "IbrirKalmanGains"]
 
-# the compiled kernels of pinobs.observers.ekf, called from _fused_loops (set by _fused_kernel)
+# the compiled kernels of pinobs.observers.linalg, called from _fused_loops (set by _fused_kernel)
 _transition_nb: Any = None
 _joseph_nb: Any = None
 
@@ -204,10 +205,8 @@ def _fused_kernel() -> Any:
     global _transition_nb, _joseph_nb
     import numba  # lazy: start-up time
 
-    from pinobs.observers import ekf
-
-    ekf.warm_linear_algebra(1)  # both ekf kernels loaded
-    _transition_nb, _joseph_nb = ekf._transition_kernel.compiled, ekf._joseph_kernel.compiled
+    warm_linear_algebra(1)  # both linalg kernels loaded
+    _transition_nb, _joseph_nb = transition_kernel.compiled, joseph_kernel.compiled
     kernel = numba.njit(cache=True)(_fused_loops)
     one, eye, zero = np.eye(1), np.eye(2), np.zeros((2, 2))
     kernel(one, one, 1.0, eye, zero, np.zeros(1), 1.0, np.zeros(2), np.zeros((2, 2)))

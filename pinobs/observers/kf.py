@@ -45,7 +45,7 @@ from pinobs.observers.base import (
     positive,
     register,
 )
-from pinobs.observers.ekf import _LazyKernel
+from pinobs.observers.linalg import LazyKernel
 
 __all__ = [
     "KF_CAUSES",
@@ -441,7 +441,7 @@ def _bank_rows_loops(
 _NO_STORE = np.empty((0, 3, 0))
 _NO_PX = np.empty((0, 3, 3))
 _ROW_MEASURED = (np.array([False, False]), np.array([False, True]))  # KFBank.step's rows
-_bank_kernel = _LazyKernel(
+_bank_kernel = LazyKernel(
     _bank_rows_loops,
     np.zeros((1, 1)),
     np.zeros((1, 1)),

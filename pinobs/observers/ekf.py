@@ -127,6 +127,7 @@ from pinobs.errors import DimensionError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.integrators import friction_substeps
 from pinobs.observers.base import (
+    NOISE_FLOOR,
     Observer,
     Vector,
     gate_nis,
@@ -151,8 +152,6 @@ __all__ = [
     "ad_matrix",
     "double_integrator_noise",
 ]
-
-_NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std (or 0) is given
 
 
 def ad_matrix(robot: Robot, v: Vector) -> Vector:
@@ -260,7 +259,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
-        sigma = self.noise_std or _NOISE_FLOOR
+        sigma = self.noise_std or NOISE_FLOOR
         self.gains = EKFGains(accel_psd=accel_psd, meas_std=sigma, q0_std=q0_std, v0_std=v0_std)
         self.disturbance_psd = positive("disturbance_psd", disturbance_psd, allow_none=True)
         self.d0_std = float(positive("d0_std", d0_std) or 0.0)

@@ -102,6 +102,7 @@ from pinobs.errors import GainError
 from pinobs.model import Robot, lie_rk4
 from pinobs.model.integrators import friction_substeps, rk4_stage_matrices
 from pinobs.observers.base import (
+    NOISE_FLOOR,
     Observer,
     Vector,
     gate_threshold,
@@ -213,7 +214,6 @@ def _fused_kernel() -> Any:
     return kernel
 
 
-_NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std (or 0) is given
 _DEFAULT_RATE = 1000.0  # [Hz] assumed for R when no rate is given
 _FUSED_MAX_NV = 12  # as the ekf's kernels: above, NumPy (BLAS products) is faster than loops
 
@@ -308,7 +308,7 @@ class IbrirKalman(Observer[_State]):
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
-        sigma = self.noise_std or _NOISE_FLOOR
+        sigma = self.noise_std or NOISE_FLOOR
         R = output_weight
         if R is None:
             R = (self.rate or _DEFAULT_RATE) / sigma**2

@@ -38,7 +38,7 @@ the row joined; positions are file lines (CSV) or row / message numbers.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -53,7 +53,7 @@ from pinobs.errors import (
     ObserverDiverged,
     PinobsError,
 )
-from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, iter_log
+from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, chain_chunks, iter_log
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
@@ -584,7 +584,7 @@ def process_log(
     parts: list[tuple[Vector, Vector, Vector]] = []
     unit = first.unit
     try:
-        for chunk in _chain(first, chunks):
+        for chunk in chain_chunks(first, chunks):
             part = est.feed(chunk)
             if writer is not None:
                 writer.write(*part)
@@ -623,11 +623,6 @@ def process_log(
 def _consistency(observer: Any) -> Any:
     check = getattr(observer, "consistency", None)
     return check() if callable(check) else None
-
-
-def _chain(first: Log, rest: Iterator[Log]) -> Iterator[Log]:
-    yield first
-    yield from rest
 
 
 def estimate_log(observer: ObserverLike, log: Log, *, period: float | None = None) -> LogRun:

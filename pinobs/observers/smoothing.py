@@ -293,6 +293,7 @@ __all__ = [
     "select_accel_psd",
     "select_latency",
     "smooth",
+    "smooth_quietly",
     "smoothing_warnings",
     "streaming_smoother",
 ]
@@ -1623,7 +1624,7 @@ def _select_latency(
 ) -> tuple[float, list[tuple[float, float]]]:
     """:func:`select_latency` on checked arrays; ``prepared`` (latency → :func:`_prepare`'s
     result) and ``tried`` (latency → ``ℓ``) are read and filled, so that a caller that has
-    run a candidate (:func:`_smooth`: the log as stamped, the latency then smoothed under)
+    run a candidate (:func:`smooth_quietly`: the log as stamped, the latency then smoothed under)
     does not run it twice: ``adaptive``'s learning pass costs about the causal run."""
     t, q, tau = log
     h = float(np.median(np.diff(t)))
@@ -2350,10 +2351,10 @@ def smooth(
         times = log[0] if isinstance(log, tuple) else log.t
         unit = time_unit_warning(median_period(np.asarray(times, dtype=float).ravel()))
     except (AttributeError, TypeError, ValueError, IndexError):
-        unit = None  # _smooth says what is wrong with the log
+        unit = None  # smooth_quietly says what is wrong with the log
     if unit is not None:
         warnings.warn(TimestampWarning(unit), stacklevel=2)
-    result = _smooth(
+    result = smooth_quietly(
         robot,
         log,
         observer=observer,
@@ -2395,7 +2396,7 @@ def _filter_options(options: Any) -> dict[str, Any]:
     return dict(options)
 
 
-def _smooth(
+def smooth_quietly(
     robot: Robot,
     log: LogLike | tuple[ArrayLike, ...],
     *,
@@ -2412,10 +2413,12 @@ def _smooth(
     find_latency: bool = False,
     _prepared: dict[float, Any] | None = None,
 ) -> Smoothed:
-    """:func:`smooth` without its warnings, for callers that report the consistency their
-    own way (a log file's run, the identification's refinement); ``find_latency``: a log the
-    model does not explain, with no latency given, is searched for one (:func:`smooth`).
-    ``_prepared``: :func:`_prepare`'s results by latency, shared with the latency search."""
+    """:func:`smooth` without its warnings (the same arguments and result), for callers that
+    report the consistency their own way (a log file's run, the identification's refinement).
+
+    ``find_latency``: a log the model does not explain, with no latency given, is searched
+    for one (:func:`smooth` sets it).  ``_prepared`` is internal: :func:`_prepare`'s results
+    by latency, shared with the latency search's own calls."""
     if accel_psd is not None and not isinstance(accel_psd, str):  # a float from here on
         accel_psd = positive("accel_psd", accel_psd)
     positive("noise_std", noise_std, allow_none=True)  # (a filter would floor 0 to NOISE_FLOOR)
@@ -2632,7 +2635,7 @@ def _smooth(
     }
 
     def under(d: float, psd: Any) -> Smoothed:
-        return _smooth(
+        return smooth_quietly(
             robot,
             (t_all, q_all, tau_all),
             observer=observer,

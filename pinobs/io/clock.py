@@ -380,7 +380,11 @@ def fit_clock(
         raise OptionError(f"clock={mode!r}: use one of {', '.join(map(repr, CLOCK_MODES))}")
     t = np.asarray(t, dtype=float)
     q = np.asarray(q, dtype=float)
-    q = q.reshape(t.size, q.shape[-1] if q.ndim == 2 else -1) if t.size else q.reshape(0, -1 if q.size else 0)
+    q = (
+        q.reshape(t.size, q.shape[-1] if q.ndim == 2 else -1)
+        if t.size
+        else q.reshape(0, -1 if q.size else 0)
+    )
     n_rows = t.size
     rep = _repeats(q)
     quantum = _quantum(q) if n_rows > 2 else np.zeros(q.shape[1])

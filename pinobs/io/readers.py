@@ -71,7 +71,16 @@ from pinobs.model.robot import Vector
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["CHUNK_ROWS", "Log", "LogSource", "concat_logs", "find_logs", "iter_log", "read_log"]
+__all__ = [
+    "CHUNK_ROWS",
+    "Log",
+    "LogSource",
+    "chain_chunks",
+    "concat_logs",
+    "find_logs",
+    "iter_log",
+    "read_log",
+]
 
 #: Rows per chunk when streaming a log.
 CHUNK_ROWS = 10_000
@@ -925,6 +934,13 @@ def _bag_log(
 
 
 # ------------------------------------------------------------------- public
+def chain_chunks(first: Log, rest: Iterator[Log]) -> Iterator[Log]:
+    """``first``, then the chunks of ``rest``: an :func:`iter_log` whose first chunk was
+    taken to look at (its period, its σ) and must still be run."""
+    yield first
+    yield from rest
+
+
 def iter_log(
     source: LogSource,
     robot: Robot,

@@ -58,7 +58,7 @@ from pinobs.errors import (
     TimestampWarning,
 )
 from pinobs.io.clock import ClockRepair, ClockReport
-from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, concat_logs, iter_log
+from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, chain_chunks, concat_logs, iter_log
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
@@ -621,7 +621,7 @@ def process_log(
     parts: list[tuple[Vector, Vector, Vector]] = []
     unit = first.unit
     try:
-        for chunk in _chain(first, chunks):
+        for chunk in chain_chunks(first, chunks):
             part = est.feed(chunk)
             if writer is not None:
                 writer.write(*part)
@@ -679,11 +679,6 @@ def _repaired(chunks: Iterator[Log], repair: ClockRepair) -> Iterator[Log]:
 def _consistency(observer: Any) -> Any:
     check = getattr(observer, "consistency", None)
     return check() if callable(check) else None
-
-
-def _chain(first: Log, rest: Iterator[Log]) -> Iterator[Log]:
-    yield first
-    yield from rest
 
 
 def estimate_log(observer: ObserverLike, log: Log, *, period: float | None = None) -> LogRun:

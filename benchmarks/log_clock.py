@@ -228,6 +228,7 @@ def main(argv=None):
     a = p.parse_args(argv)
     seeds = (1,) if a.quick else (1, 2, 3)
     sim = simulated(seeds, 1.5 if a.quick else a.duration)
+    Path(a.out).with_suffix(".json").write_text(json.dumps({"simulated": sim}, indent=1))
     rl = [] if a.quick else real()
     Path(a.out).with_suffix(".json").write_text(json.dumps({"simulated": sim, "real": rl}, indent=1))
     Path(a.out).with_suffix(".md").write_text(_markdown(sim, rl))

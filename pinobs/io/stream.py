@@ -593,7 +593,14 @@ def process_log(
         if noise_std is None:
             timed = time_screened(first.t)
             found = noise_from_log(first.t[timed], first.q[timed], robot)
-            if found is not None:
+            if found is not None and found[0] < 1e-12:  # a still robot, positions quantised
+                # (a static UR10e pose printed to 4 decimals gave 3.7e-17, refused by make_observer)
+                warnings.append(
+                    f"the noise level estimated from the log is {found[0]:.3g} (the positions do "
+                    "not move in its first second): the observer's default σ is used; pass "
+                    "noise_std (--noise)"
+                )
+            elif found is not None:
                 noise_std, sigma_joint, said = found
                 warnings.append(said)
             else:

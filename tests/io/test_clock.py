@@ -237,3 +237,15 @@ def test_stamps_going_backwards_keep_every_row(ur5_truth):
     placed = np.isfinite(df["v0"].to_numpy())
     reported = {pos for pos, _ in df.attrs["bad_rows"]}
     assert all(placed[k] or k in reported for k in range(len(frame)))
+
+
+def test_a_log_that_does_not_move_keeps_the_default_noise_with_a_warning(ur5_truth):
+    robot, _ = ur5_truth
+    t = np.arange(1500) * 1e-3
+    q = np.tile(np.round(np.linspace(0.1, 0.6, robot.nq), 4), (t.size, 1))
+    frame = _frame(robot, t, q, np.zeros((t.size, robot.nv)))
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        df = pinobs.estimate("kf", frame, robot=robot)
+    assert np.isfinite(df["v0"].to_numpy()[1:]).all()
+    assert any("do not move in its first second" in str(w.message) for w in seen)

@@ -51,6 +51,7 @@ tracked).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
@@ -68,6 +69,8 @@ __all__ = [
     "ClockRepair",
     "ClockReport",
     "fit_clock",
+    "repaired_chunks",
+    "without_stale",
 ]
 
 #: What ``clock=`` (CLI ``--clock``) accepts.
@@ -688,3 +691,48 @@ class ClockRepair:
             rows=int(self._stats["rows"]),
         )
         return replace(chunk, t=t_out, stale=stale_out, drops=drops)
+
+
+def repaired_chunks(chunks: Iterator[Log], repair: ClockRepair) -> Iterator[Log]:
+    """``chunks`` through ``repair``, in order; the first one yielded even if empty."""
+    any_out = False
+    last: Log | None = None
+    for chunk in chunks:
+        last = chunk
+        for out in repair.feed(chunk):
+            any_out = True
+            yield out
+    for out in repair.finish():
+        any_out = True
+        yield out
+    if not any_out and last is not None:
+        yield last
+
+
+def without_stale(log: Log, *, mode: str = "auto") -> tuple[Log, ClockReport]:
+    """A whole log on its loop's clock with its stale rows left out, for what needs one
+    sample per row (identification); and the report.  The rows left out are counted in
+    the report (``stale``), not lost silently."""
+    fit = fit_clock(log.t, log.q, mode=mode, tick=log.tick)
+    if not fit.report.repaired:
+        return log, fit.report
+    keep = ~fit.stale
+    kept_lines = {int(x) for x in np.asarray(log.lines)[keep]}
+
+    def cut(x: Any) -> Any:
+        return None if x is None else np.asarray(x)[keep]
+
+    return (
+        replace(
+            log,
+            t=fit.t[keep],
+            q=log.q[keep],
+            tau=cut(log.tau),
+            problems=tuple(p for p in log.problems if p[0] in kept_lines),
+            lines=np.asarray(log.lines)[keep],
+            tick=cut(log.tick),
+            stale=None,
+            drops=fit.drops[keep],
+        ),
+        fit.report,
+    )

@@ -32,6 +32,7 @@ from typing import Any, Literal
 import numpy as np
 
 from pinobs.errors import PinobsError
+from pinobs.io.clock import ClockRepair, repaired_chunks
 from pinobs.io.readers import CHUNK_ROWS, LogSource, chain_chunks, iter_log
 from pinobs.io.stream import (
     LogEstimator,
@@ -147,6 +148,7 @@ def smooth_log(
     chunk_rows: int = CHUNK_ROWS,
     stream: bool = True,
     band: str | None = None,
+    clock: str = "auto",
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Smooth a log file into ``out`` (module docstring); returns the row accounting and
     the smoother's options of each stretch (with its ``consistency``,
@@ -174,6 +176,8 @@ def smooth_log(
         chunk_rows: rows read at a time (:func:`pinobs.io.iter_log`).
         stream: stream when possible (module docstring); ``False``: keep the samples and
             smooth at the end (the same numbers, more memory).
+        clock: the log's clock, as :func:`pinobs.io.process_log` (stale rows give the
+            smoothed estimate of the sample they repeat).
 
     Raises:
         OutputExistsError: ``out`` exists (without ``force``) or is the input.
@@ -195,7 +199,10 @@ def smooth_log(
     )
     unit: str | None = None  # t in another unit than seconds: said with any failure
     try:
-        chunks = iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows)
+        repair = ClockRepair(clock)
+        chunks = repaired_chunks(
+            iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows), repair
+        )
         first = next(chunks)
         period = 1.0 / rate if rate else median_period(first.t)
         unit = time_unit_warning(median_period(first.t))
@@ -227,6 +234,9 @@ def smooth_log(
         writer.abort()
         raise
     run.warnings[:0] = said
+    run.clock = repair.report
+    if run.clock is not None and (run.clock.repaired or run.clock.stale):
+        run.warnings.insert(0, run.clock.message())
     for i, opts in enumerate(stretches):  # what pinobs.smooth warns, per stretch
         note = latency_note(opts)
         for told in ([] if note is None else [note]) + smoothing_warnings(

@@ -38,7 +38,7 @@ the row joined; positions are file lines (CSV) or row / message numbers.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -57,7 +57,7 @@ from pinobs.errors import (
     PinobsWarning,
     TimestampWarning,
 )
-from pinobs.io.clock import ClockRepair, ClockReport
+from pinobs.io.clock import ClockRepair, ClockReport, repaired_chunks
 from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, chain_chunks, concat_logs, iter_log
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
@@ -582,7 +582,7 @@ def process_log(
             ``"loop"`` (always the loop's clock).
     """
     repair = ClockRepair(clock)
-    chunks = _repaired(
+    chunks = repaired_chunks(
         iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows), repair
     )
     first = next(chunks)
@@ -665,22 +665,6 @@ def process_log(
     if run.clock is not None and (run.clock.repaired or run.clock.stale):
         run.warnings.insert(0, run.clock.message())
     return run
-
-
-def _repaired(chunks: Iterator[Log], repair: ClockRepair) -> Iterator[Log]:
-    """``chunks`` through the clock repair, in order; the first one yielded even if empty."""
-    any_out = False
-    last: Log | None = None
-    for chunk in chunks:
-        last = chunk
-        for out in repair.feed(chunk):
-            any_out = True
-            yield out
-    for out in repair.finish():
-        any_out = True
-        yield out
-    if not any_out and last is not None:
-        yield last
 
 
 def _consistency(observer: Any) -> Any:

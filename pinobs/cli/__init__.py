@@ -1604,7 +1604,3 @@ def _show_warning(
         print(f"warning: {message}", file=sys.stderr)
     else:
         sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

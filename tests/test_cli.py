@@ -267,7 +267,7 @@ def test_excite_refuses_a_directory_and_creates_missing_parents(tmp_path: Path, 
 
 # ------------------------------------------------------- sweep options (sweep findings)
 def test_sweep_observer_options_are_typed_ints_floats_and_booleans() -> None:
-    from pinobs.cli import _parse_sweep_observers
+    from pinobs.cli.sweep import _parse_sweep_observers
 
     parsed = _parse_sweep_observers(
         "a=adaptive:friction=False,h=highgain:order=3,ekf:disturbance_psd=1e-2,r=riemannian:x=true"
@@ -428,11 +428,11 @@ def test_demo_refuses_a_negative_seed_before_simulating(tmp_path: Path, capsys) 
 def test_run_refuses_unwritable_outputs_before_simulating(
     tmp_path: Path, capsys, monkeypatch, flag: str, target: str, match: str
 ) -> None:
-    import pinobs.cli
+    import pinobs.cli.run
 
     (tmp_path / "adir").mkdir()
     (tmp_path / "afile").write_text("x")
-    monkeypatch.setattr(pinobs.cli, "simulate", None)  # calling it would raise TypeError
+    monkeypatch.setattr(pinobs.cli.run, "simulate", None)  # calling it would raise TypeError
     path = tmp_path / target
     shown = path.parent if target.startswith("afile") else path
     code = main(["run", "--robot", "pendulum", "--observer", "kf", flag, str(path)])
@@ -552,9 +552,9 @@ def test_play_of_a_run_whose_robot_file_moved_gives_the_command_with_its_new_pat
 
 @pytest.mark.parametrize("spec", ["", ",,", " , "])
 def test_run_refuses_an_observer_list_without_a_name(capsys, monkeypatch, spec: str) -> None:
-    import pinobs.cli
+    import pinobs.cli.run
 
-    monkeypatch.setattr(pinobs.cli, "simulate", None)  # was: the whole run, then a TypeError
+    monkeypatch.setattr(pinobs.cli.run, "simulate", None)  # was: the whole run, then a TypeError
     assert main(["run", "--robot", "pendulum", "--observer", spec]) == 2
     assert "names no observer; give names (pinobs list) or 'all'" in capsys.readouterr().err
 
@@ -568,9 +568,9 @@ def test_run_all_in_a_list_skips_observers_that_refuse_the_robot(capsys) -> None
 def test_run_prints_why_an_observer_failed(capsys, monkeypatch) -> None:
     import dataclasses
 
-    import pinobs.cli
+    import pinobs.cli.run
 
-    real = pinobs.cli.simulate
+    real = pinobs.cli.run.simulate
 
     def failing(*args, **kwargs):
         res = real(*args, **kwargs)
@@ -578,7 +578,7 @@ def test_run_prints_why_an_observer_failed(capsys, monkeypatch) -> None:
         meta = {**res.meta, "failures": {"kf": "NonFiniteError at t = 0 s: q is nan"}}
         return dataclasses.replace(res, traces=(tr,), meta=meta)
 
-    monkeypatch.setattr(pinobs.cli, "simulate", failing)
+    monkeypatch.setattr(pinobs.cli.run, "simulate", failing)
     assert main(["run", "--robot", "pendulum", "--observer", "kf", "--duration", "0.1"]) == 0
     assert "failed kf: NonFiniteError at t = 0 s: q is nan" in capsys.readouterr().out
 

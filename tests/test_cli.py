@@ -746,3 +746,55 @@ def test_play_of_a_locked_run_whose_robot_file_moved_gives_the_command_with_its_
     ]
     pytest.importorskip("matplotlib")
     assert main(command[1:]) == 0  # the command given works: the locked two-joint arm
+
+
+# ------------------------------------------------ the package (issue 37, item 3)
+def _subcommands() -> dict[str, object]:
+    import argparse
+
+    from pinobs.cli import _parser
+
+    return next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
+
+
+def test_help_synopsis_lists_every_subcommand_generated_from_its_parser(capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    head, sep, synopsis = text.partition("synopsis (pinobs COMMAND --help")
+    assert sep, text
+    lines = synopsis.splitlines()[1:]
+    assert [line.split()[:2] for line in lines] == [["pinobs", name] for name in _subcommands()]
+    for name in _subcommands():  # and each in the list argparse writes above it
+        assert re.search(rf"^    {name} ", head, re.M), name
+    assert "identify" in synopsis and "excite" in synopsis  # the hand-written one lacked them
+    # the required arguments come from the parsers: a mutually exclusive group, a positional
+    assert (
+        "  pinobs estimate --robot ROBOT --observer OBSERVER --log LOG (--out OUT | --out-dir "
+        "OUT_DIR) [options]"
+    ) in lines
+    assert "  pinobs check {ii} --robot ROBOT [options]" in lines
+    assert "  pinobs list" in lines
+
+
+def test_every_command_module_is_registered_once() -> None:
+    import pinobs.cli
+    from pinobs.cli import COMMANDS
+
+    shared = {"__init__", "__main__", "options", "output"}
+    files = {p.stem for p in Path(pinobs.cli.__file__).parent.glob("*.py")} - shared
+    modules = [getattr(c, "__name__", "").rsplit(".", 1)[-1] for c in COMMANDS]
+    assert sorted(modules) == sorted(files)
+    assert len(_subcommands()) == len(COMMANDS)
+
+
+def test_python_m_pinobs_cli_is_the_pinobs_command() -> None:
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-m", "pinobs.cli", "--help"], capture_output=True, text=True, check=False
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("usage: pinobs ") and "  pinobs demo" in out.stdout

@@ -179,11 +179,6 @@ def _check_options(args: argparse.Namespace) -> None:
         if given:
             flags = ", ".join("--" + f.replace("_", "-") for f in given)
             raise OptionError(f"{flags}: options of the smoother; add --smooth")
-    if args.smooth and args.clock is not None:
-        raise OptionError(
-            f"--clock {args.clock}: the smoother reads the log's stamps as they are (the "
-            "clock repair runs with the filter only, for now)"
-        )
     if args.smooth and args.observer == "kf" and args.accel_psd not in (None, "auto"):
         raise OptionError(
             f"--accel-psd {args.accel_psd:g}: kf has no white acceleration; its white-jerk "
@@ -290,6 +285,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             rate=args.rate,
             band=args.band,
             options=_observer_options(args),
+            clock=args.clock or "auto",
             stream=not args.html,  # the playback needs the estimates kept
         )
     except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)

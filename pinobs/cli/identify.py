@@ -5,15 +5,23 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pinobs.cli.options import add_log_columns, add_robot_options, column_map, load_robot
+from pinobs.cli.options import (
+    add_clock_option,
+    add_log_columns,
+    add_robot_options,
+    column_map,
+    load_robot,
+)
 from pinobs.cli.output import check_output
 from pinobs.errors import OutputExistsError
 from pinobs.io import read_log
+from pinobs.io.clock import without_stale
 from pinobs.model.identification import MAX_CONDITION
 
 if TYPE_CHECKING:
@@ -40,6 +48,7 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="log with t, q and tau columns (CSV, Parquet, NPZ or a ROS bag, as estimate reads)",
     )
     add_log_columns(p)
+    add_clock_option(p)
     p.add_argument("--out", required=True, help="the calibrated URDF to write")
     p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
     p.add_argument(
@@ -91,7 +100,12 @@ def handle(args: argparse.Namespace) -> int:
         raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
     if out.resolve() == Path(args.log).resolve():
         raise OutputExistsError(f"--out {str(out)!r} is the log itself")
-    log = read_log(args.log, robot, columns=column_map(args.map), topic=args.topic)
+    log, clock = without_stale(
+        read_log(args.log, robot, columns=column_map(args.map), topic=args.topic),
+        mode=args.clock or "auto",
+    )
+    if clock.repaired or clock.stale:  # (stale rows left out: one sample per row to fit)
+        print(f"warning: {clock.message()}", file=sys.stderr)
     ident = identify(
         robot,
         log,

@@ -160,7 +160,7 @@ def add_clock_option(p: argparse.ArgumentParser) -> None:
         default=None,
         help="the log's clock: auto (default: repair the stamps of a fixed-rate loop seen "
         "through a jittery logger clock, skip stale rows, when the motion clearly says so), "
-        "stamps (as stamped), loop (always the loop's clock); the filter only",
+        "stamps (as stamped), loop (always the loop's clock)",
     )
 
 

@@ -91,6 +91,9 @@ COHERENCE_ROWS = 512
 #: The stamps are a loop when their phase coherence about it is at least this many
 #: times the ``1/√N`` of stamps without one.
 COHERENT_SIGMAS = 5.0
+#: A loop the stamps were kept against is named in the report only if they are this close
+#: to it (RMS, in periods): a loop found, not the best fit of stamps without one.
+CREDIBLE_JITTER = 0.1
 #: Rows of the first window the clock is chosen on, and the window its fit follows.
 WINDOW_ROWS = 4000
 
@@ -141,7 +144,11 @@ class ClockReport:
             if self.stale and not self.repaired
             else ""
         )
-        if self.period is None:
+        if self.period is None or (
+            not self.repaired and self.jitter > CREDIBLE_JITTER * self.period
+        ):
+            # (the best loop fitted to stamps this far off it is no finding: UR10e logs
+            # stepping 10-12 ms gave "2.46 ms loops" with 0.5 ms RMS off them)
             return f"log clock: stamps kept ({self.reason}){stale}"
         loop = f"a {_ms(self.period)} loop"
         if self.step > 1.5:
@@ -498,6 +505,10 @@ def fit_clock(
             )
         reason = f"the motion is smoother on the loop's clock: interpolation error {ratio:.2g}× the stamps'"
     elif counter:
+        if mode == "auto" and not stale.any() and jitter_max < 0.01 * p:
+            return kept(
+                f"the stamps agree with the sample counter to {_ms(jitter_max)}", p, **stats
+            )
         reason = "from its sample counter"
 
     # every row's tick: usable rows theirs, stale rows the one they repeat

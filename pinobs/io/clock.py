@@ -255,18 +255,27 @@ def _line(n: Floats, t: Floats, period: float) -> tuple[float, float]:
 def _coherent(tu: Floats, guess: float) -> tuple[float, float, float]:
     """The period near ``guess`` whose phase the stamps share most: ``(T0, P, coherence)``.
 
-    ``|Σ exp(2πi t_k / P)| / N`` over a grid of ±``PERIOD_SEARCH`` around ``guess``
-    (the median interval is biased by drops: 2 % on a 1 kHz log with 8 % drops), fine enough that the phase turns by under a quarter of a period over
-    ``tu`` between grid points (the peak found within 3 % of its height).  Uniform jitter of ±0.4 P leaves a coherence of 0.23 at the true period;
-    noise gives about ``1/√N``.
+    ``|Σ exp(2πi f t_k)| / N`` over frequencies ``f`` within ±``PERIOD_SEARCH`` of
+    ``1/guess`` (the median interval is biased by drops: 2 % on a 1 kHz log with 8 %
+    drops), on a grid fine enough that the phase turns by under a quarter of a period
+    over ``tu`` between grid points (the peak found within 3 % of its height); the grid
+    uniform in ``f``, so each point is the previous one's terms times a fixed factor
+    (a product, not an exponential, per term).  Uniform jitter of ±0.4 P leaves a
+    coherence of 0.23 at the true period; stamps without a loop about ``1/√N``.
     """
     span = float(tu[-1] - tu[0]) or guess
-    count = int(min(max(2 * PERIOD_SEARCH * span / (0.25 * guess), 16), 4000))
-    grid = guess * (1.0 + np.linspace(-PERIOD_SEARCH, PERIOD_SEARCH, count))
+    f0 = 1.0 / guess
+    count = int(min(max(2 * PERIOD_SEARCH * span * f0 / 0.25, 16), 4000))
+    df = 2 * PERIOD_SEARCH * f0 / (count - 1)
     x = tu - tu[0]
-    z = np.exp(2j * np.pi * x[None, :] / grid[:, None]).sum(axis=1)
+    w = np.exp(2j * np.pi * (f0 - PERIOD_SEARCH * f0) * x)
+    step = np.exp(2j * np.pi * df * x)
+    z = np.empty(count, dtype=complex)
+    for j in range(count):
+        z[j] = w.sum()
+        w *= step
     i = int(np.argmax(np.abs(z)))
-    p = float(grid[i])
+    p = 1.0 / (f0 - PERIOD_SEARCH * f0 + i * df)
     t0 = float(tu[0] + p * np.angle(z[i]) / (2 * np.pi))
     return t0, p, float(np.abs(z[i]) / tu.size)
 

@@ -27,6 +27,9 @@ of the residual, and so are the first and last half-window of each log.
   added to ``M``'s diagonal (``regressorWithMotorDynamics.m``), ``pi_frcn`` per joint
   as ``Fv·v + Fc·sign(v) + F0`` (``frictionRegressor.m``).  Their ``main.m`` fits
   ``ur-20_02_10-30sec_12harm``: on that log *published* is not held out.
+  *pinobs+rotor*: ``pinobs.identify`` the same way, started from the URDF with the
+  published rotor inertias as ``armature`` (pinobs's parameter set has no armature: it
+  keeps the prior's).
 - TIAGo: the log on the loop's clock (:func:`pinobs.io.fit_clock`, stale rows
   dropped); ``pinobs.identify(holdout=0.2)``: the first 80 % fits, the last 20 % is
   held out.  FIGAROH's numbers are quoted from ``shared/data/README.md``.
@@ -37,12 +40,25 @@ TIAGo ``tiago_velocity.csv``), from 1 s after the start (TIAGo: over the held-ou
 only), over the joints whose torques are measured (TIAGo: torso and arm_1..4):
 ``kf`` (default), ``kf*`` (the best ``jerk_psd`` of :data:`JERK_GRID`, chosen on the
 reference itself: optimistic), ``ekf``, ``riemannian``, ``kalman`` on the nominal
-model and on the identified one (``+id``), and ``adaptive`` (nominal start).  The
-reference's own noise floor: its RMS difference to the non-causal Savitzky–Golay
-velocity above and to the central difference of ``q``.
+model and on the identified one (``+id``), and ``adaptive`` (nominal start); on the
+UR10e also ``ekf`` and ``riemannian`` on the *pinobs+rotor* model (``+rotor``) and on
+the published one (``+pub``: rotor inertias as armature, ``Fv`` as damping, ``Fc`` as
+pinobs's tanh-smoothed Coulomb friction, no offset).  The reference's own noise floor:
+its RMS difference to the non-causal Savitzky–Golay velocity above and to the central
+difference of ``q``.  Re-initialisations after a divergence (``df.attrs["bad_rows"]``)
+are counted.
+
+**TX40** (FIGAROH's ``staubli_TX40`` example): motor encoder positions to joint
+positions through FIGAROH's reduction matrix (ratios 32, 32, 45, −48, 45, 32; wrist
+coupling term ``R[5, 4]``; offsets −π/2, +π/2 on joints 2, 3); ``kf`` and ``kf*`` on
+the log decimated to 1 kHz against the Savitzky–Golay velocity of the full 5 kHz log
+(:data:`TX40_SG_WINDOW` rows, order :data:`SG_ORDER`); its spread, the RMS difference
+to the same fit over twice the window, is given.  The model-based observers are not
+run: ``pinobs.load`` refuses the URDF (singular mass matrix along joint 6).
 
     python benchmarks/real_logs.py            # writes benchmarks/real_logs.{md,json}
     python benchmarks/real_logs.py --quick    # fewer logs and observers, < 2 min, printed
+    python benchmarks/real_logs.py --render   # the .md again from the .json
 """
 
 from __future__ import annotations
@@ -415,7 +431,9 @@ def tx40(quick: bool) -> dict[str, Any]:
     t = np.arange(len(q)) / TX40_RATE
     out: dict[str, Any] = {"rows_full_rate": len(q), "seconds": float(t[-1])}
     try:
-        pinobs.load(str(d / "urdf" / "tx40_mdh_modified.urdf"))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # its meshes are not in the data
+            pinobs.load(str(d / "urdf" / "tx40_mdh_modified.urdf"))
         out["load"] = "loaded"
     except Exception as e:
         out["load"] = f"{type(e).__name__}: {str(e).splitlines()[0][:300]}"
@@ -595,7 +613,7 @@ def markdown(res: dict[str, Any]) -> str:
             f"order {SG_ORDER}, of the full 5 kHz log): kf {_f(v['kf'])}, kf* {_f(v['kf*'])} "
             f"(jerk_psd {_f(v['kf*_jerk_psd'], 2)}) rad/s; the reference against the same fit "
             f"over {2 * TX40_SG_WINDOW + 1} rows: {_f(v['ref_window_spread'])} rad/s. "
-            f"Model-based observers not run: `pinobs.load` says {x['load']}"
+            f"Model-based observers not run: `pinobs.load` says {x['load'].split(' Give them')[0]}"
         )
     L.append("")
     L.append(
@@ -623,7 +641,12 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="fewer logs and observers (< 2 min)")
     p.add_argument("--out", default=str(Path(__file__).with_name("real_logs.md")))
+    p.add_argument("--render", action="store_true", help="rewrite the .md from the .json (no runs)")
     a = p.parse_args(argv)
+    if a.render:
+        res = json.loads(Path(a.out).with_suffix(".json").read_text())
+        Path(a.out).with_suffix(".md").write_text(markdown(res))
+        return 0
     if rd.data_root() is None:
         print(f"no data: set {rd.ENV} or put the shared data at ../shared/data; skipped")
         return 0

@@ -27,7 +27,7 @@ from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass, field
 from statistics import NormalDist
-from typing import Any, ClassVar, Generic, TypeVar, final
+from typing import Any, ClassVar, Generic, NamedTuple, TypeVar, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -60,6 +60,7 @@ __all__ = [
     "NOISE_FLOOR",
     "Consistency",
     "Estimate",
+    "GateState",
     "Observer",
     "chi2_quantile",
     "gate_nis",
@@ -248,6 +249,43 @@ def outlier_gate(
     if run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
         lvl = max(lvl, nis * dof / threshold)
     return False, lvl + NIS_AVERAGING * (min(nis, 100.0 * lvl) - lvl)
+
+
+class GateState(NamedTuple):
+    """The outlier gate's bookkeeping, carried in the state of every family with an innovation.
+
+    One definition for every filter (``ekf``, ``kf``, ``kalman``, ``riemannian``,
+    ``liegroup``, ``ii``; ``adaptive`` through its ``ekf``): a family computes its NIS
+    ``eᵀ S⁻¹ e`` (its own ``e`` and ``S``) and calls :meth:`measured`, or :meth:`predicted`
+    at a step without a sample; the base reads ``nis`` and ``gated`` of the committed
+    state (:meth:`Observer._innovation`: :attr:`Estimate.nis`, :meth:`Observer.consistency`).
+
+    Attributes:
+        nis: normalized innovation squared of the last measurement (``None``: none).
+        gated: that measurement was rejected as an outlier (the state is the prediction).
+        run: measurements rejected in a row.
+        level: running mean of accepted NIS (scales the gate; ``None``: none yet, ``dof``).
+    """
+
+    nis: float | None = None
+    gated: bool = False
+    run: int = 0
+    level: float | None = None
+
+    def measured(self, nis: float, threshold: float, dof: int) -> GateState:
+        """After a measurement of normalized innovation squared ``nis``: the gate's decision
+        (:func:`outlier_gate`, ``threshold`` from :func:`gate_threshold`, ``dof`` degrees of
+        freedom) and its bookkeeping.  ``gated``: the family must not use the measurement."""
+        reject, level = outlier_gate(nis, self.level, self.run, threshold, dof)
+        return GateState(nis, reject, self.run + 1 if reject else 0, level)
+
+    def predicted(self) -> GateState:
+        """After a step without a measurement: no NIS, not gated, the run and level kept."""
+        return GateState(None, False, self.run, self.level)
+
+    def limit(self, threshold: float, dof: int) -> float:
+        """The NIS above which the gate rejects at this level (:func:`gate_nis`)."""
+        return gate_nis(threshold, self.level, dof)
 
 
 @functools.lru_cache(maxsize=64)
@@ -736,8 +774,10 @@ class Observer(ABC, Generic[State]):
         return state
 
     def _innovation(self, state: State) -> tuple[float | None, bool]:
-        """``(NIS, gated)`` of the measurement that made ``state`` (families with a covariance)."""
-        return None, False
+        """``(NIS, gated)`` of the measurement that made ``state``: its :class:`GateState`
+        ``gate`` (families with an innovation), else ``(None, False)``."""
+        gate: GateState | None = getattr(state, "gate", None)
+        return (None, False) if gate is None else (gate.nis, gate.gated)
 
     def _make_estimate(self, t: float, state: State) -> Estimate:
         q, v = self._output(state)

@@ -63,6 +63,7 @@ __all__ = [
     "GateState",
     "Observer",
     "chi2_quantile",
+    "gap_substeps",
     "gate_nis",
     "gate_threshold",
     "make_observer",
@@ -312,6 +313,21 @@ def steady_innovation_variance(k1: float, k2: float, h: float, meas_var: float) 
     vec_p = np.linalg.solve(np.eye(4) - np.kron(A, A), meas_var * (K @ K.T).ravel())
     P = vec_p.reshape(2, 2)
     return float((D @ P @ D.T)[0, 0] + meas_var)
+
+
+def gap_substeps(dt: float, period: float | None, *, span: float = math.inf) -> int:
+    """Steps of at most one sample ``period`` [s] over an interval ``dt`` [s]: the pause rule
+    of the live observer (:meth:`Observer.update`) and of the log reader
+    (:class:`pinobs.io.LogEstimator`).
+
+    ``1`` (one step) unless ``dt`` is longer than :data:`~pinobs.tolerances.GAP_PERIODS`
+    periods; then ``⌈min(dt, span) / period⌉`` (``span`` [s]: the most of a pause
+    propagated in steps of one period; the steps are ``dt / n`` long).  ``period`` ``None``
+    (not known yet): ``1``.
+    """
+    if period is None or not dt > GAP_PERIODS * period:
+        return 1
+    return math.ceil(min(dt, span) / period - 1e-9)
 
 
 def positive(
@@ -574,13 +590,15 @@ class Observer(ABC, Generic[State]):
     def _stepped(self, state: State, dt: float, q: Vector | None, tau: Vector) -> State:
         """:meth:`_step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
         than :data:`GAP_PERIODS` periods (at most ``PAUSE_RESTART`` worth of them: a longer
-        step without a sample is a prediction in the dark, restarted at the next sample).
+        step without a sample is a prediction in the dark, restarted at the next sample;
+        :func:`gap_substeps`, the log reader's count too).
         One step of 10 s returned 1e74 rad/s from ``ekf`` and every update after it raised;
         one of 1 s left ``riemannian`` 500 rad/s off for seconds (a sweep)."""
         period = self._period_s
-        if period is None or not dt > GAP_PERIODS * period:
+        span = math.inf if period is None else max(PAUSE_RESTART, MAX_GAP_PERIODS * period)
+        n = gap_substeps(dt, period, span=span)
+        if n == 1:
             return self._step(state, dt, q, tau)
-        n = math.ceil(min(dt, max(PAUSE_RESTART, MAX_GAP_PERIODS * period)) / period - 1e-9)
         for _ in range(n - 1):
             state = self._step(state, dt / n, None, tau)
         return self._step(state, dt / n, q, tau)

@@ -45,6 +45,7 @@ import re
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -217,7 +218,7 @@ class _RecordingWindow:
     def get_scene(self) -> str:
         viewer_js = _viewer_js()
         cmds = ",\n".join(f'"{base64.b64encode(c).decode("ascii")}"' for c in self.commands)
-        return _PAGE.format(mainminjs=viewer_js, commands=cmds, overlay=self.overlay)
+        return _fill("page.html", mainminjs=viewer_js, commands=cmds, overlay=self.overlay)
 
     def open(self) -> _RecordingWindow:
         return self
@@ -232,108 +233,30 @@ def _viewer_js() -> str:
     return path.read_text(encoding="utf-8")
 
 
-# The page meshcat's server builds for static_html(), with commands replayed
-# synchronously (meshcat's own page fetches data: URLs, in no guaranteed order)
-# and our overlay added.  "</script" cannot occur in base64 or in main.min.js'
-# string literals used here.
-_PAGE = """<!DOCTYPE html>
-<html>
-<head><meta charset="utf-8"><title>pinobs playback</title></head>
-<body>
-<style>
-:root {{ --pinobs-chart-height: clamp(170px, 34vh, 340px); }}
-html, body {{ margin: 0; height: 100%; overflow: hidden; }}
-#meshcat-pane {{ width: 100vw; height: calc(100vh - var(--pinobs-chart-height)); overflow: hidden; }}
-#pinobs-chart {{ height: var(--pinobs-chart-height); display: flex; flex-direction: column;
-  border-top: 1px solid #ccc; background: #fff; color: #222; font: 12px/1.3 system-ui, sans-serif; }}
-.pinobs-chart-bar {{ padding: 3px 8px; white-space: nowrap; overflow: hidden; }}
-.pinobs-chart-bar > * {{ margin-right: 10px; }}
-.pinobs-key i {{ display: inline-block; width: 10px; height: 10px; margin: 0 3px 0 0;
-  vertical-align: -1px; border: 1px solid #555; }}
-.pinobs-hint {{ color: #777; }}
-#pinobs-chart-canvas {{ flex: 1; min-height: 0; width: 100%; display: block; cursor: ew-resize; }}
-</style>
-<div id="meshcat-pane"></div>
-<script>
-{mainminjs}
-</script>
-<script>
-var pinobsPane = document.getElementById("meshcat-pane");
-var viewer = new MeshCat.Viewer(pinobsPane);
-// meshcat sizes its canvas to the window's height; the chart takes the bottom of it
-var pinobsPaneSize = viewer.set_3d_pane_size.bind(viewer);
-viewer.set_3d_pane_size = function (w, h) {{
-  pinobsPaneSize(w === undefined ? pinobsPane.offsetWidth : w,
-                 h === undefined ? pinobsPane.offsetHeight : h);
-}};
-viewer.set_3d_pane_size();
-var pinobsCommands = [
-{commands}
-];
-for (const b64 of pinobsCommands) {{
-  const s = atob(b64);
-  const bytes = new Uint8Array(s.length);
-  for (let i = 0; i < s.length; i++) bytes[i] = s.charCodeAt(i);
-  viewer.handle_command_bytearray(bytes);
-}}
-</script>
-{overlay}
-</body>
-</html>
-"""
+_SLOT = re.compile(r"@([A-Z][A-Z0-9_]*)@")
 
-_OVERLAY = """<div id="pinobs-legend" style="position:absolute;left:10px;top:10px;
- font:13px/1.45 system-ui,sans-serif;background:rgba(255,255,255,0.85);
- border:1px solid #bbb;border-radius:6px;padding:8px 10px;color:#222;pointer-events:none">
-<div style="font-weight:600">{title}</div>
-{rows}
-{notes}<div id="pinobs-time" style="margin-top:4px;font-variant-numeric:tabular-nums">t = {t0:.2f} s</div>
-<div style="color:#666;font-size:11px">Open Controls → Animations: play, pause, time;<br>
-drag on the chart below to scrub</div>
-</div>
-<script>
-(function () {{
-  const t0 = {t0!r};
-  const anim = viewer.animator;
-  const label = document.getElementById("pinobs-time");
-  // stretches without data: the entry's row says so while the time is in one
-  const gaps = {gaps}, tEnd = {t_end!r};
-  const rows = Array.from(document.querySelectorAll("#pinobs-legend .pinobs-entry"));
-  function clipTime() {{
-    return anim.actions.length ? anim.actions[0].time : 0;
-  }}
-  function applyHash() {{
-    const m = /[#&]t=([0-9.eE+-]+)/.exec(window.location.hash);
-    if (m) {{
-      const t = Math.max(0, parseFloat(m[1]) - t0);
-      anim.pause();
-      anim.seek(t);
-      anim.display_progress(t);
-    }} else if (/[#&]paused/.test(window.location.hash)) {{
-      anim.pause();
-    }}
-  }}
-  function applyLegend() {{
-    const hide = /[#&]nolegend/.test(window.location.hash);
-    document.getElementById("pinobs-legend").style.display = hide ? "none" : "block";
-  }}
-  applyHash();
-  applyLegend();
-  window.addEventListener("hashchange", applyLegend);
-  window.addEventListener("hashchange", applyHash);
-  function tick() {{
-    const t = t0 + clipTime();
-    label.textContent = "t = " + t.toFixed(2) + " s";
-    gaps.forEach(function (g, i) {{
-      const now = g.some(function (ab) {{ return t >= ab[0] && (t < ab[1] || ab[1] >= tEnd); }});
-      rows[i].querySelector(".pinobs-gap").style.display = now ? "inline" : "none";
-    }});
-    requestAnimationFrame(tick);
-  }}
-  tick();
-}})();
-</script>
-"""
+
+@functools.cache
+def _template(name: str) -> str:
+    """The text of ``templates/<name>``, shipped as package data."""
+    return (resources.files(__name__) / "templates" / name).read_text(encoding="utf-8")
+
+
+def _fill(name: str, **values: str) -> str:
+    """Template ``name`` with each slot ``@KEY@`` replaced by ``values["key"]``, in one pass
+    (what a value holds is not read for slots).
+
+    The templates: ``page.html``, the page meshcat's server builds for
+    ``static_html()``, with the commands replayed synchronously (meshcat's own
+    page fetches ``data:`` URLs, in no guaranteed order) and our overlay added
+    (``"</script"`` cannot occur in base64 or in ``main.min.js``' string
+    literals used there); ``legend.html`` and ``legend.js``, the legend overlay.
+    """
+    text = _template(name)
+    slots = {m.lower() for m in _SLOT.findall(text)}
+    if slots != set(values):
+        raise KeyError(f"template {name} has slots {sorted(slots)}, given {sorted(values)}")
+    return _SLOT.sub(lambda m: values[m.group(1).lower()], text)
 
 
 def _overlay(
@@ -373,16 +296,17 @@ def _overlay(
             f'<span class="pinobs-gap" style="display:none;color:#b00"> · {now}</span></div>'
         )
     gaps = json.dumps([[[round(a, 6), round(b, 6)] for a, b in e.gaps] for e in entries])
-    return _OVERLAY.format(
+    script = _fill("legend.js", t0=repr(float(t0)), t_end=repr(float(t_end)), gaps=gaps)
+    return _fill(
+        "legend.html",
         title=html.escape(title),
         rows="\n".join(rows),
-        t0=float(t0),
-        t_end=float(t_end),
-        gaps=gaps,
+        time=f"{float(t0):.2f}",
         notes="".join(
             f'<div class="pinobs-note" style="color:#666;font-size:11px">{html.escape(n)}</div>\n'
             for n in notes
         ),
+        script=script,
     )
 
 

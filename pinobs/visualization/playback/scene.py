@@ -8,12 +8,13 @@ import functools
 import math
 import re
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import NDArray
 
 from pinobs.errors import (
     DimensionError,
@@ -56,34 +57,16 @@ GHOST_OPACITY = 0.5
 _BACKGROUND = [1.0, 1.0, 1.0]
 _CAMERA_FOV_DEG = 75.0  # meshcat's default perspective camera (vertical field of view)
 _REPEAT = 1_000_000  # "loop forever": THREE.LoopRepeat needs a finite count
+#: What a playback imports (checked first: a missing one is said before any other error).
+_NEEDED = (
+    "pinocchio.visualize.meshcat_visualizer",
+    "meshcat.geometry",
+    "meshcat.animation",
+    "coal",
+)
 
 #: ``progress(k, n)`` is called after frame ``k`` of ``n`` (as in :func:`pinobs.simulate`).
 Progress = Callable[[int, int], None]
-
-
-def _camera(points: Vector, radii: Vector) -> tuple[Vector, Vector]:
-    """Target and camera offset [m] framing every point (with its radius) of the truth's motion."""
-    lo = np.min(points - radii[:, None], axis=0)
-    hi = np.max(points + radii[:, None], axis=0)
-    centre = 0.5 * (lo + hi)
-    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.2)
-    spread = points - points.mean(axis=0)
-    direction = np.array([1.0, -1.3, 0.8])
-    if len(points) >= 3 and np.any(spread):
-        _, s, vt = np.linalg.svd(spread, full_matrices=False)
-        if s[-1] < 0.15 * s[0]:  # motion in a plane: look at the plane
-            normal = vt[-1]
-            if abs(normal[2]) > 0.9:  # horizontal plane: look from above, slightly tilted
-                normal = np.sign(normal[2]) * normal + np.array([0.0, -0.4, 0.0])
-            else:
-                if normal @ np.array([0.2, -1.0, 0.0]) < 0:
-                    normal = -normal
-                normal = normal + np.array([0.0, 0.0, 0.35])
-            direction = normal
-    direction = direction / np.linalg.norm(direction)
-    # the bounding sphere would just fit at R / sin(fov / 2); it overestimates boxes: go closer
-    distance = 0.8 * radius / math.sin(math.radians(_CAMERA_FOV_DEG) / 2)
-    return centre, distance * direction
 
 
 def _same(value: Any, _go: pin.GeometryObject) -> Any:
@@ -96,9 +79,17 @@ def _safe(label: str) -> str:
 
 @dataclass(frozen=True)
 class Scene:
+    """What :func:`make_scene` loaded.
+
+    Attributes:
+        legend: the truth, then one entry per ghost.
+        fps: keyframes per second used [1/s].
+        notes: what the page says about its fidelity (a lowered keyframe rate).
+    """
+
     legend: list[LegendEntry]
-    fps: float  # keyframes per second used [1/s]
-    notes: list[str]  # what the page says about its fidelity (a lowered keyframe rate)
+    fps: float
+    notes: list[str]
 
 
 def build_scene(
@@ -180,31 +171,11 @@ def make_scene(
     progress: Progress | None,
 ) -> Scene:
     """:func:`build_scene`, also returning the keyframe rate used and the notes on fidelity."""
-    viz_mod = require("pinocchio.visualize.meshcat_visualizer", "meshcat playback")
-    mg = require("meshcat.geometry", "meshcat playback")
-    animation = require("meshcat.animation", "meshcat playback")
-    coal = require("coal", "meshcat playback")
-    if result.q.shape[1:] != (robot.nq,):
-        raise DimensionError(
-            f"result of robot {result.robot!r} has q of shape {result.q.shape}, robot "
-            f"{robot.name!r} has nq = {robot.nq}; play it back with the robot it was run on"
-        )
-    if not (0.0 < opacity <= 1.0):
-        raise GainError(f"opacity={opacity!r} must be in (0, 1]")
-    labels = list(result.observer_names if observers is None else observers)
-    for name in labels:
-        if name not in result.observer_names:
-            raise UnknownNameError(
-                f"no observer {name!r} in this result; have {result.observer_names}"
-            )
-    model = robot.model
+    for module in _NEEDED:
+        require(module, "meshcat playback")
+    labels = _checked_labels(result, robot, observers, opacity)
     geom = visual_model(robot, [result.q, *(result.trace(name).q for name in labels)])
-    finite = np.all(np.isfinite(result.q), axis=1)
-    if not finite.any():
-        raise NonFiniteError(
-            f"result of robot {result.robot!r}: none of its {len(finite)} configurations "
-            "(rows of q) is finite; there is no motion to play back"
-        )
+    finite = _finite_rows(result)
     estimated = {name: np.all(np.isfinite(result.trace(name).q), axis=1) for name in labels}
     # A floating base (free-flyer, planar root) is followed: the scene moves so
     # that the true base stays in view; a fixed base is framed once.
@@ -219,117 +190,241 @@ def make_scene(
     vis["/Background"].set_property("bottom_color", _BACKGROUND)
     vis["/Axes"].set_property("visible", False)
 
-    # Meshes are sent as (decimated) triangle lists, except the truth's mesh
-    # files when they are small: those go through Pinocchio's visualizer as is
-    # (textures and per-part colours of Collada files kept).
-    meshes = {}
-    for go in geom.geometryObjects:
-        tri = triangles(go) if not isinstance(go.geometry, coal.ShapeBase) else None
-        if tri is not None:
-            meshes[go.name] = tri
-    total = sum(len(f) for _, f in meshes.values())
-    for key, (v, f) in meshes.items():
-        budget = max(200, int(max_triangles * len(f) / total)) if total > max_triangles else len(f)
-        v, f = decimate(v, f, budget)
-        meshes[key] = (v, f)
-    truth = viz_mod.MeshcatVisualizer(model, None, geom)
-    truth.initViewer(viewer=vis)
-
-    def load_copy(node: str, material_of: Callable[[pin.GeometryObject], Any]) -> None:
-        for go in geom.geometryObjects:
-            if isinstance(go.geometry, coal.ShapeBase):
-                obj = truth.loadPrimitive(go)
-            elif go.name in meshes:
-                obj = mg.TriangularMeshGeometry(*meshes[go.name])  # meshScale already applied
-            else:
-                obj = None
-            if obj is not None:
-                vis[f"{node}/{go.name}"].set_object(obj, material_of(go))
-
-    nodes: dict[str, list[str]] = {}
-    scaled: dict[str, Vector] = {}
-    as_is = mesh_file_bytes(geom) <= MAX_MESH_FILE_BYTES
-    if as_is:
-        # The truth, as the model describes it, through Pinocchio's visualizer.
-        truth.loadViewerModel(rootNodeName="truth")
-        nodes["truth"] = [f"truth/visuals/{go.name}" for go in geom.geometryObjects]
-        # mesh-file objects drawn by Pinocchio carry meshScale in their node's scale
-        scaled = {
-            go.name: np.asarray(go.meshScale, dtype=float)
-            for go in geom.geometryObjects
-            if viz_mod.hasMeshFileInfo(go) and not isinstance(go.geometry, coal.ShapeBase)
-        }
-    else:
-        load_copy(
-            "truth",
-            lambda go: mg.MeshPhongMaterial(color=int_colour(go.meshColor[:3])),
-        )
-        nodes["truth"] = [f"truth/{go.name}" for go in geom.geometryObjects]
-    truth_swatch = model_colours(geom, collada_materials=as_is)
+    loader = _Loader.start(vis, robot.model, geom, max_triangles)
+    truth_nodes, scaled, swatch = loader.truth_copy()
     legend = [
         LegendEntry(
             truth_label,
             None,
             "model colours",
             "truth",
-            model_colours=truth_swatch,
+            model_colours=swatch,
             gaps=gap_stretches(result.t, finite),
         )
     ]
-    colours = observer_colours(len(labels), truth_swatch)
-
+    copies = {"truth": truth_nodes}
     # Ghosts: the same shapes, one flat translucent colour each.
-    for i, name in enumerate(labels):
-        colour_name, rgb = colours[i]
+    for i, (name, (colour_name, rgb)) in enumerate(
+        zip(labels, observer_colours(len(labels), swatch), strict=True)
+    ):
         node = f"ghost_{i}_{_safe(name)}"
-        # Front faces only, no depth writes, pushed slightly away from the camera:
-        # the truth always shows in full, a ghost shows where it differs from the
-        # truth and vanishes into it when it has converged; ghosts on each other
-        # blend instead of z-fighting (mirrored meshes have their winding restored).
-        material = mg.MeshPhongMaterial(
-            color=int_colour(rgb),
-            transparent=opacity < 1.0,
-            opacity=opacity,
-            side=0,
-            depthWrite=opacity >= 1.0,
-            polygonOffset=True,
-            polygonOffsetFactor=1.0,
-            polygonOffsetUnits=4.0,
-        )
-        load_copy(node, functools.partial(_same, material))
-        nodes[name] = [f"{node}/{go.name}" for go in geom.geometryObjects]
-        tr = result.trace(name)
+        copies[name] = loader.copy(node, functools.partial(_same, _ghost_material(rgb, opacity)))
         legend.append(
             LegendEntry(
                 name,
                 hex_colour(rgb),
                 colour_name,
                 node,
-                tr.diverged_at,
+                result.trace(name).diverged_at,
                 gaps=gap_stretches(result.t, estimated[name]),
             )
         )
-    # (a divergence is reported where it happens; the stretch after it needs no warning)
-    told = [e for e in legend if e.gaps and not e.gap_note.startswith("hidden from")]
-    for note in notes + [f"{e.label}: {e.gap_note}" for e in told]:
-        warnings.warn(f"playback of {robot.name}: {note}", PinobsWarning, stacklevel=3)
+    _warn(robot.name, notes, legend)
 
-    # Configurations shown, one row per frame: a NaN row holds the last finite one.
+    shown, present = _frames(result, idx, finite, estimated)
+    anim = require("meshcat.animation", "meshcat playback").Animation(default_framerate=rate)
+    framed = present["truth"] if present["truth"].any() else np.ones(len(idx), dtype=bool)
+    points, radii, shift = _keyframes(
+        vis, anim, robot.model, geom, shown, copies, scaled, framed, follow, progress
+    )
+    _visibility(vis, anim, legend[1:], present)
+    _view(vis, anim, points, radii, shift, follow)
+    vis.set_animation(anim, play=play, repetitions=_REPEAT)
+    return Scene(legend, rate, notes)
+
+
+def _frames(
+    result: Result,
+    idx: Vector,
+    finite: NDArray[np.bool_],
+    estimated: Mapping[str, NDArray[np.bool_]],
+) -> tuple[dict[str, Vector], dict[str, NDArray[np.bool_]]]:
+    """The configuration of the truth and of each estimate (by label) in each frame, and
+    whether it is drawn there (its finite rows, ``finite`` and ``estimated``).
+
+    Frame ``k`` shows row ``idx[k]``; a NaN row holds the last finite one (the
+    truth's first finite row before any).
+    """
     first = result.q[np.argmax(finite)]
     shown = {"truth": forward_fill(result.q, first)[idx]}
     present = {"truth": finite[idx]}
-    for name in labels:
+    for name, ok in estimated.items():
         shown[name] = forward_fill(result.trace(name).q, first)[idx]
-        present[name] = estimated[name][idx]
+        present[name] = ok[idx]
+    return shown, present
 
+
+def _checked_labels(
+    result: Result, robot: Robot, observers: Sequence[str] | None, opacity: float
+) -> list[str]:
+    """The observer labels to show, once ``result`` fits ``robot`` and ``opacity`` is valid."""
+    if result.q.shape[1:] != (robot.nq,):
+        raise DimensionError(
+            f"result of robot {result.robot!r} has q of shape {result.q.shape}, robot "
+            f"{robot.name!r} has nq = {robot.nq}; play it back with the robot it was run on"
+        )
+    if not (0.0 < opacity <= 1.0):
+        raise GainError(f"opacity={opacity!r} must be in (0, 1]")
+    labels = list(result.observer_names if observers is None else observers)
+    for name in labels:
+        if name not in result.observer_names:
+            raise UnknownNameError(
+                f"no observer {name!r} in this result; have {result.observer_names}"
+            )
+    return labels
+
+
+def _finite_rows(result: Result) -> NDArray[np.bool_]:
+    """Which rows of ``result.q`` are finite; at least one must be."""
+    finite = np.all(np.isfinite(result.q), axis=1)
+    if not finite.any():
+        raise NonFiniteError(
+            f"result of robot {result.robot!r}: none of its {len(finite)} configurations "
+            "(rows of q) is finite; there is no motion to play back"
+        )
+    return finite
+
+
+def _warn(robot_name: str, notes: Sequence[str], legend: Sequence[LegendEntry]) -> None:
+    """A warning per note on fidelity and per copy with gaps, attributed to the caller of
+    :func:`build_scene`, :func:`~pinobs.visualization.write_html` or
+    :func:`~pinobs.visualization.serve`."""
+    # (a divergence is reported where it happens; the stretch after it needs no warning)
+    told = [e for e in legend if e.gaps and not e.gap_note.startswith("hidden from")]
+    for note in [*notes, *(f"{e.label}: {e.gap_note}" for e in told)]:
+        # stacklevel: here, make_scene, build_scene / write_html / serve, their caller
+        warnings.warn(f"playback of {robot_name}: {note}", PinobsWarning, stacklevel=4)
+
+
+def _ghost_material(rgb: Sequence[float], opacity: float) -> Any:
+    """A ghost's material: one flat colour, ``opacity``.
+
+    Front faces only, no depth writes, pushed slightly away from the camera: the
+    truth always shows in full, a ghost shows where it differs from the truth
+    and vanishes into it when it has converged; ghosts on each other blend
+    instead of z-fighting (mirrored meshes have their winding restored).
+    """
+    mg = require("meshcat.geometry", "meshcat playback")
+    return mg.MeshPhongMaterial(
+        color=int_colour(rgb),
+        transparent=opacity < 1.0,
+        opacity=opacity,
+        side=0,
+        depthWrite=opacity >= 1.0,
+        polygonOffset=True,
+        polygonOffsetFactor=1.0,
+        polygonOffsetUnits=4.0,
+    )
+
+
+@dataclass(frozen=True)
+class _Loader:
+    """Loads copies of the robot's shapes into ``vis``.
+
+    Meshes are sent as (decimated) triangle lists, except the truth's mesh
+    files when they are small: those go through Pinocchio's visualizer as is
+    (textures and per-part colours of Collada files kept).  Primitives
+    (boxes, cylinders, ...) are drawn as Pinocchio's visualizer draws them.
+    """
+
+    vis: Any
+    geom: pin.GeometryModel
+    meshes: dict[str, tuple[Vector, NDArray[np.int64]]]  # name -> vertices, triangles
+    truth: Any  # pinocchio.visualize.MeshcatVisualizer on ``vis``
+
+    @classmethod
+    def start(
+        cls, vis: Any, model: pin.Model, geom: pin.GeometryModel, max_triangles: int
+    ) -> _Loader:
+        """The loader of ``geom``, its meshes decimated to ``max_triangles`` in all."""
+        coal = require("coal", "meshcat playback")
+        viz_mod = require("pinocchio.visualize.meshcat_visualizer", "meshcat playback")
+        meshes = {}
+        for go in geom.geometryObjects:
+            tri = triangles(go) if not isinstance(go.geometry, coal.ShapeBase) else None
+            if tri is not None:
+                meshes[go.name] = tri
+        total = sum(len(f) for _, f in meshes.values())
+        for key, (v, f) in meshes.items():
+            share = int(max_triangles * len(f) / total)
+            meshes[key] = decimate(v, f, max(200, share) if total > max_triangles else len(f))
+        truth = viz_mod.MeshcatVisualizer(model, None, geom)
+        truth.initViewer(viewer=vis)
+        return cls(vis, geom, meshes, truth)
+
+    def copy(self, node: str, material_of: Callable[[pin.GeometryObject], Any]) -> list[str]:
+        """Load a copy under ``node``, each shape in ``material_of(shape)``; its nodes' paths."""
+        coal = require("coal", "meshcat playback")
+        mg = require("meshcat.geometry", "meshcat playback")
+        for go in self.geom.geometryObjects:
+            if isinstance(go.geometry, coal.ShapeBase):
+                obj = self.truth.loadPrimitive(go)
+            elif go.name in self.meshes:
+                obj = mg.TriangularMeshGeometry(*self.meshes[go.name])  # meshScale applied
+            else:
+                obj = None
+            if obj is not None:
+                self.vis[f"{node}/{go.name}"].set_object(obj, material_of(go))
+        return [f"{node}/{go.name}" for go in self.geom.geometryObjects]
+
+    def truth_copy(self) -> tuple[list[str], dict[str, Vector], tuple[str, ...]]:
+        """Load the truth: its nodes' paths, the ``meshScale`` its nodes carry (by geometry
+        name), and the colours it renders in (most used first)."""
+        coal = require("coal", "meshcat playback")
+        mg = require("meshcat.geometry", "meshcat playback")
+        viz_mod = require("pinocchio.visualize.meshcat_visualizer", "meshcat playback")
+        geom = self.geom
+        as_is = mesh_file_bytes(geom) <= MAX_MESH_FILE_BYTES
+        scaled: dict[str, Vector] = {}
+        if as_is:
+            # The truth, as the model describes it, through Pinocchio's visualizer.
+            self.truth.loadViewerModel(rootNodeName="truth")
+            nodes = [f"truth/visuals/{go.name}" for go in geom.geometryObjects]
+            # mesh-file objects drawn by Pinocchio carry meshScale in their node's scale
+            scaled = {
+                go.name: np.asarray(go.meshScale, dtype=float)
+                for go in geom.geometryObjects
+                if viz_mod.hasMeshFileInfo(go) and not isinstance(go.geometry, coal.ShapeBase)
+            }
+        else:
+            nodes = self.copy(
+                "truth", lambda go: mg.MeshPhongMaterial(color=int_colour(go.meshColor[:3]))
+            )
+        return nodes, scaled, model_colours(geom, collada_materials=as_is)
+
+
+def _keyframes(
+    vis: Any,
+    anim: Any,
+    model: pin.Model,
+    geom: pin.GeometryModel,
+    shown: Mapping[str, Vector],
+    copies: Mapping[str, Sequence[str]],
+    scaled: Mapping[str, Vector],
+    framed: NDArray[np.bool_],
+    follow: bool,
+    progress: Progress | None,
+) -> tuple[Vector, Vector, Vector]:
+    """Key every copy's placements at each frame (and pose it at the first).
+
+    Args:
+        shown: label -> configuration of each frame (``"truth"`` first).
+        copies: label -> the paths of its nodes.
+        scaled: the truth's ``meshScale`` by geometry name, where its node carries it.
+        framed: the frames the camera frames (the truth's finite rows).
+        follow: whether the scene follows the truth's floating base.
+
+    Returns:
+        The truth's geometry origins in every framed frame, relative to the followed base
+        [m], their bounding radii [m], and the followed base's position in each frame [m]
+        (zeros for a fixed base).
+    """
     data = model.createData()
     gdata = pin.GeometryData(geom)
-    anim = animation.Animation(default_framerate=rate)
     points: list[Vector] = []
     radii_one = np.array([bounding_radius(go) for go in geom.geometryObjects])
     radii: list[Vector] = []
-    n_frames = len(idx)
-    framed = present["truth"] if present["truth"].any() else np.ones(n_frames, dtype=bool)
+    n_frames = len(framed)
     shift = np.zeros((n_frames, 3))
     total = n_frames * len(shown)
     done = 0
@@ -346,49 +441,81 @@ def make_scene(
                     points.extend(M.translation - shift[k] for M in oMg)
                     radii.append(radii_one)
             if k == 0:  # a static pose too (with the mesh scale), for viewers without animation
-                for go, path, M in zip(geom.geometryObjects, nodes[who], oMg, strict=True):
+                for go, path, M in zip(geom.geometryObjects, copies[who], oMg, strict=True):
                     T = M.homogeneous
                     if who == "truth" and go.name in scaled:
                         T = T @ np.diag([*scaled[go.name], 1.0])
                     vis[path].set_transform(T)
             with anim.at_frame(vis, k) as frame:
-                for path, M in zip(nodes[who], oMg, strict=True):
+                for path, M in zip(copies[who], oMg, strict=True):
                     quat = pin.Quaternion(M.rotation).coeffs()  # x, y, z, w
                     frame[path].set_property("position", "vector3", M.translation.tolist())
                     frame[path].set_property("quaternion", "quaternion", quat.tolist())
+    return np.array(points), np.concatenate(radii), shift
 
-    # A ghost without an estimate is hidden: keys where that changes (a boolean track holds
-    # its value), and at the last frame, so that its clip lasts as long as the others.
-    for e in legend[1:]:
+
+def _visibility(
+    vis: Any, anim: Any, ghosts: Sequence[LegendEntry], present: Mapping[str, NDArray[np.bool_]]
+) -> None:
+    """A ghost without an estimate is hidden: keys where that changes (a boolean track holds
+    its value), and at the last frame, so that its clip lasts as long as the others."""
+    for e in ghosts:
         seen = present[e.label]
         if seen.all():
             continue
         vis[e.node].set_property("visible", bool(seen[0]))
-        for k in sorted({0, n_frames - 1, *(np.flatnonzero(seen[1:] != seen[:-1]) + 1)}):
+        for k in sorted({0, len(seen) - 1, *(np.flatnonzero(seen[1:] != seen[:-1]) + 1)}):
             with anim.at_frame(vis[e.node], int(k)) as frame:
                 frame.set_property("visible", "boolean", bool(seen[k]))
 
-    pts, rad = np.array(points), np.concatenate(radii)
-    centre, offset = _camera(pts, rad)
+
+def _view(vis: Any, anim: Any, points: Vector, radii: Vector, shift: Vector, follow: bool) -> None:
+    """Frame the truth's motion (``points``, ``radii`` and ``shift`` as from :func:`_keyframes`):
+    the scene centred, the camera placed, a floor under it."""
+    mg = require("meshcat.geometry", "meshcat playback")
+    centre, offset = _camera(points, radii)
     # meshcat's orbit controls look at the world origin: move the scene (and the
     # floor with it) so that the motion is centred there.
     vis.set_transform(_translation(-centre - shift[0]))
     if follow:
-        for k in range(n_frames):
+        for k in range(len(shift)):
             with anim.at_frame(vis, k) as frame:
                 frame.set_property("position", "vector3", (-centre - shift[k]).tolist())
     # meshcat's 20 m grid reaches behind the camera (and software renderers drop
     # lines that cross the camera plane); our own floor lies under the motion.
     vis["/Grid"].set_property("visible", False)
-    vertices = _floor(pts, rad, shift, centre, offset)
+    vertices = _floor(points, radii, shift, centre, offset)
     vis["floor"].set_object(
         mg.LineSegments(mg.PointsGeometry(vertices.T), mg.LineBasicMaterial(color=0xB4B4B4))
     )
     # meshcat's camera sits in a frame rotated by +90° about x: world (x, y, z) = local (x, -z, y)
     local = [float(offset[0]), float(offset[2]), float(-offset[1])]
     vis["/Cameras/default/rotated/<object>"].set_property("position", local)
-    vis.set_animation(anim, play=play, repetitions=_REPEAT)
-    return Scene(legend, rate, notes)
+
+
+def _camera(points: Vector, radii: Vector) -> tuple[Vector, Vector]:
+    """Target and camera offset [m] framing every point (with its radius) of the truth's motion."""
+    lo = np.min(points - radii[:, None], axis=0)
+    hi = np.max(points + radii[:, None], axis=0)
+    centre = 0.5 * (lo + hi)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.2)
+    spread = points - points.mean(axis=0)
+    direction = np.array([1.0, -1.3, 0.8])
+    if len(points) >= 3 and np.any(spread):
+        _, s, vt = np.linalg.svd(spread, full_matrices=False)
+        if s[-1] < 0.15 * s[0]:  # motion in a plane: look at the plane
+            normal = vt[-1]
+            if abs(normal[2]) > 0.9:  # horizontal plane: look from above, slightly tilted
+                normal = np.sign(normal[2]) * normal + np.array([0.0, -0.4, 0.0])
+            else:
+                if normal @ np.array([0.2, -1.0, 0.0]) < 0:
+                    normal = -normal
+                normal = normal + np.array([0.0, 0.0, 0.35])
+            direction = normal
+    direction = direction / np.linalg.norm(direction)
+    # the bounding sphere would just fit at R / sin(fov / 2); it overestimates boxes: go closer
+    distance = 0.8 * radius / math.sin(math.radians(_CAMERA_FOV_DEG) / 2)
+    return centre, distance * direction
 
 
 def _floor(points: Vector, radii: Vector, shift: Vector, centre: Vector, offset: Vector) -> Vector:

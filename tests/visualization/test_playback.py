@@ -33,7 +33,7 @@ from pinobs.visualization import playback as pb
 from pinobs.visualization.browser import find_chromium
 from pinobs.visualization.palette import PALETTE, hex_colour
 from pinobs.visualization.playback import geometry, timeline
-from pinobs.visualization.playback.page import RecordingWindow
+from pinobs.visualization.playback.page import RecordingWindow, fill_template
 
 DURATION = 1.5  # [s]
 FPS = 30.0
@@ -508,6 +508,23 @@ def test_unknown_observer_label_is_rejected(cartpole_run: dict[str, Any], tmp_pa
         write_html(
             cartpole_run["result"], cartpole_run["robot"], tmp_path / "x.html", observers=["ekf"]
         )
+
+
+def test_every_template_is_package_data_and_fills_its_slots() -> None:
+    """The templates ship in a wheel (pyproject's package-data globs cover each file); a
+    template filled with the wrong slots is refused."""
+    tomllib = pytest.importorskip("tomllib")  # (Python 3.11+)
+    root = Path(pb.__file__).parent
+    pyproject = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text("utf-8"))
+    shipped = pyproject["tool"]["setuptools"]["package-data"]["pinobs.visualization.playback"]
+    files = sorted(p.relative_to(root) for p in (root / "templates").iterdir())
+    assert Path("templates/page.html") in files
+    assert all(any(f.match(glob) for glob in shipped) for f in files)
+    assert "pinobs.visualization.playback" in pyproject["tool"]["setuptools"]["packages"]
+    page = fill_template("page.html", mainminjs="@X@", commands="", overlay="<p>@TITLE@</p>")
+    assert "@X@" in page and "<p>@TITLE@</p>" in page  # (values are not read for slots)
+    with pytest.raises(KeyError, match="has slots"):
+        fill_template("page.html", mainminjs="", commands="")
 
 
 def test_missing_meshcat_names_the_install_command(

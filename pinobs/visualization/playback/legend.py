@@ -63,6 +63,9 @@ def legend_html(
     t_end: float,
     notes: Sequence[str] = (),
 ) -> str:
+    """The legend overlay of a page (top left; needs the page's ``viewer``): ``title``, a
+    row per entry with its swatch and gaps, the ``notes``, and the animation time, from
+    ``t0`` to ``t_end`` [s] (``#t=…``, ``#paused`` and ``&nolegend`` read from the URL)."""
     rows = []
     for e in entries:
         if e.colour is None:

@@ -955,6 +955,10 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from pinobs.evaluation.bench import BenchConfig, bench_tasks, format_bench, run_bench
 
+    if args.live:  # a user's own paced loop (issue 39): pinobs.evaluation.live
+        from pinobs.evaluation.live import print_live
+
+        return print_live(quick=args.quick, json_path=args.json)
     _check_cluster(args)
     if args.workers is None and not args.scheduler:
         args.workers = 0  # bench's default: its timings not loaded by each other
@@ -1528,6 +1532,9 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="accuracy and cost of every observer against the baselines")
     p.add_argument("--quick", action="store_true", help="two robots, short runs: under two minutes")
     p.add_argument("--json", default=None, help="write the full report to this JSON file")
+    p.add_argument(
+        "--live", action="store_true", help="UR5 observers in a paced 1 kHz loop, 10 s each"
+    )
     _add_cluster_options(
         p,
         "its independent runs on a local Dask cluster of N processes (default 0: "

@@ -812,6 +812,7 @@ def observer_class(name: str) -> type[Observer[Any]]:
         ) from None
 
 
+@one_blas_thread  # a family's gains (scipy's DARE...): a woken BLAS thread spins ~50 ms after
 def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
     """Build the observer registered as ``name`` on ``robot``.
 

@@ -7,8 +7,14 @@ covariance on talos is 76²) a multi-threaded BLAS splits the work over its
 threads anyway, and on a busy machine they wait for a core.  :func:`pinobs.simulate` and
 :func:`pinobs.evaluation.measure_cost` run on one thread; a user's own loop
 runs with the process's default (two threads here), so :func:`one_blas_thread`
-puts :meth:`~pinobs.observers.Observer.update` and ``reset`` on one thread for
-the length of the call and restores the count after, whatever the caller set.
+puts :meth:`~pinobs.observers.Observer.update`, ``reset`` and
+:func:`~pinobs.observers.make_observer` on one thread for the length of the
+call and restores the count after, whatever the caller set.  ``make_observer``
+too: a family's gains (``riemannian``'s discrete Riccati equation, by scipy)
+woke scipy's OpenBLAS worker thread, which then spins about 50 ms waiting for
+more work, on the other core, through the first updates (measured: 48–50 ms of
+its run time during 3000 UR5 updates after each build; none with the build on
+one thread).
 
 How, at a cost measured against one ``pin.aba`` call on a UR5 timed in the same
 run (loaded 2-core machine, load average 4–6):

@@ -53,6 +53,15 @@ def test_update_leaves_the_callers_blas_thread_counts_as_they_were(
     assert {n for path, n in before if path in direct} == {threads}  # the caller's, kept
 
 
+def test_make_observer_leaves_the_callers_blas_thread_counts_as_they_were(ur5_run) -> None:
+    robot, _ = ur5_run
+    with threadpool_limits(2, user_api="blas"):
+        before = _blas_threads()
+        for name in ("riemannian", "ekf", "adaptive"):
+            make_observer(name, robot, rate=1000.0, noise_std=1e-4)
+            assert _blas_threads() == before
+
+
 def test_update_leaves_the_counts_as_they_were_when_it_raises(ur5_run) -> None:
     robot, res = ur5_run
     ob = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)

@@ -15,7 +15,7 @@ its one-BLAS-thread limit (as before issue 39) and with it.  The last column is
 benchmark's figure: back to back, one BLAS thread).  Quote the load average next
 to these numbers: on a shared machine they move with it.
 
-    python benchmarks/live_loop.py              # 10 s a run (talos 2 s): about 5 minutes
+    python benchmarks/live_loop.py              # 10 s a run (talos 2 s): about 7 minutes
     python benchmarks/live_loop.py --quick      # 1 s a run, UR5 kf only
 """
 
@@ -45,6 +45,7 @@ RUNS = (
     ("ur5", "ekf", 10.0),
     ("ur5", "riemannian", 10.0),
     ("ur5", "adaptive", 10.0),
+    ("ur5", "highgain", 10.0),  # its updates wake BLAS threads even on a UR5
     ("go1", "riemannian", 10.0),
     ("talos", "ekf", 2.0),
 )
@@ -155,7 +156,7 @@ def main() -> None:
         + " of ticks (the issue asked for 60 s: shortened here). `BLAS`: `default` is the "
         "update without its one-BLAS-thread limit (as before), `1 thread` with it. "
         "Ratios are to the median warm `pin.aba` call (a burst of 10 after every update, in "
-        "the same ticks); in brackets the min–max over 1 s windows. `CPU µs`: the thread's "
+        "the same ticks); in brackets the min–max over 1 s windows, each over its own median `pin.aba`. `CPU µs`: the thread's "
         "CPU time in the update (the rest of the wall time is waiting for a core). "
         "`mean ×`: the mean update (work done every k-th update at its amortised share, as "
         "`measure_cost` counts it). `misses`: updates longer than the period. `first`: the first update. `aba µs`: "

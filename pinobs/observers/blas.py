@@ -34,10 +34,12 @@ run (loaded 2-core machine, load average 4–6):
 
 What it buys: ``ekf`` on talos (76² covariance, past OpenBLAS's threading
 thresholds) took 8.6 ms an update with the default two threads against 0.4 ms
-with the limit (300 updates, load average 4–6), bit-identical estimates.  On a
-UR5 the BLAS worker threads did no work in 5 s of ``kf``, ``ekf``,
-``riemannian``, ``adaptive`` or ``kalman`` updates (their run time from
-``/proc``, limit off): there the limit is only its cost.
+with the limit (300 updates, load average 4–6), bit-identical estimates.  Small
+robots are not safe by size alone: with the limit off, ``highgain``'s updates
+woke the BLAS worker threads on a UR5 and a Panda (24–38 ms of their run time,
+from ``/proc``, in 2 s of updates; its p99.9 update 7–9 ms against 0.5–3.5 ms
+with the limit), while those of every other family on UR5, Panda and go1 did
+not (zero): for those the limit is only its cost.
 
 The libraries are found once (about 3 ms, at the first call: ``reset``), and
 once more after ``scipy.linalg`` is first imported (it loads scipy's own

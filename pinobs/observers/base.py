@@ -44,6 +44,7 @@ from pinobs.errors import (
 )
 from pinobs.model import Robot
 from pinobs.model.robot import read_only
+from pinobs.observers.blas import one_blas_thread
 from pinobs.observers.noise import estimate_noise_std
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
@@ -456,6 +457,7 @@ class Observer(ABC, Generic[State]):
 
     # ----------------------------------------------------------- public API
     @final
+    @one_blas_thread  # small matrices: threads only contend (observers/blas.py)
     def reset(
         self,
         t0: float,
@@ -497,6 +499,7 @@ class Observer(ABC, Generic[State]):
         return estimate
 
     @final
+    @one_blas_thread
     def update(self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None = None) -> Estimate:
         """Advance to time ``t`` [s] and correct with the measured configuration.
 
@@ -867,6 +870,7 @@ def observer_class(name: str) -> type[Observer[Any]]:
         ) from None
 
 
+@one_blas_thread  # a family's gains (scipy's DARE...): a woken BLAS thread spins ~50 ms after
 def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
     """Build the observer registered as ``name`` on ``robot``.
 

@@ -456,3 +456,48 @@ def test_gains_are_validated(name: str) -> None:
         InEKFGains(**{name: -1.0})
     with pytest.raises(GainError, match="both 0"):
         InEKFGains(joint=0.0, kinematics=0.0)
+
+
+# ---------------------------------------------------------------- consistency
+def test_with_noise_matching_its_gains_the_innovations_are_chi2(rng) -> None:
+    """Noisy gyro, accelerometer and encoders at the levels the gains say: the mean NIS of
+    the foot measurements is χ²(9)'s mean, 9, and the error of the observable part
+    (roll, pitch, velocity) is as large as the covariance says."""
+    rate = 200.0
+    samples = synthetic_truth(rate=rate, duration=6.0, swing=False)
+    gains = InEKFGains(
+        gyro=2e-3,
+        accel=2e-2,
+        gyro_bias=1e-6,
+        accel_bias=1e-5,
+        contact=1e-4,
+        joint=2e-3,
+        kinematics=0.0,
+    )
+    ekf = InvariantEKF(SyntheticLegs(3), gains=gains)
+    noisy = [
+        (
+            t,
+            R,
+            v,
+            p,
+            q + rng.normal(0, gains.joint, q.shape),
+            omega + rng.normal(0, gains.gyro * math.sqrt(rate), 3),
+            acc + rng.normal(0, gains.accel * math.sqrt(rate), 3),
+            contacts,
+        )
+        for t, R, v, p, q, omega, acc, contacts in samples
+    ]
+    nis, nees = [], []
+    for est, (R, v, _) in run(ekf, noisy, prior=InEKFPrior(attitude=0.01, velocity=0.01)):
+        nis.append(est.nis)
+        # the observable part of the error: roll, pitch (world x, y of ξ_R) and ξ_v
+        xi_R = Rotation.from_matrix(est.rotation @ R.T).as_rotvec()
+        xi_v = est.velocity_world - est.rotation @ R.T @ v
+        e = np.concatenate([xi_R[:2], xi_v])
+        P = est.covariance[np.ix_([0, 1, 3, 4, 5], [0, 1, 3, 4, 5])]
+        nees.append(e @ np.linalg.solve(P, e))
+    mean_nis = float(np.mean(nis[200:]))  # after the first second; 1000 samples: σ = 0.13
+    assert 9 * 0.9 < mean_nis < 9 * 1.1
+    mean_nees = float(np.mean(nees[200:]))  # 5 dof, correlated in time: a loose band
+    assert 5 * 0.5 < mean_nees < 5 * 1.5

@@ -342,15 +342,21 @@ def test_bias_columns_of_the_transition_match_finite_differences(rng) -> None:
 
 
 # ---------------------------------------------------------------- convergence
-def test_converges_in_roll_pitch_and_velocity_from_30_degrees_and_1_m_per_s() -> None:
+@pytest.mark.parametrize("legs", ["synthetic", "go1"])
+def test_converges_in_roll_pitch_and_velocity_from_30_degrees_and_1_m_per_s(legs: str) -> None:
     """Roll, pitch and the body-frame velocity are observable; yaw is not (its error and
     variance stay), so the world-frame velocity is not compared."""
-    samples = synthetic_truth(rate=200.0, duration=6.0, swing=False)
+    if legs == "go1":
+        kin = Go1Legs()
+        samples = truth(kin, 200.0, 4.0, wobble=0.5, feet_z=None, inverse=kin.inverse)
+        ekf = InvariantEKF(pinobs.load("go1"), GO1_FEET)
+    else:
+        samples = synthetic_truth(rate=200.0, duration=6.0, swing=False)
+        ekf = InvariantEKF(SyntheticLegs(3))
     R0, v0 = samples[0][1], samples[0][2]
     axis = np.array([1.0, 1.0, 0.0]) / math.sqrt(2)  # R0 = I: a pure 30° tilt
     Rw = Rotation.from_rotvec(math.radians(30) * axis).as_matrix() @ R0
     vw = v0 + np.array([0.6, 0.8, 0.0])
-    ekf = InvariantEKF(SyntheticLegs(3))
     prior = InEKFPrior(attitude=0.6, velocity=1.0)
     tilt, speed, yaw_var = [], [], []
     for est, (R, v, _) in run(ekf, samples, R0=Rw, v0=vw, prior=prior):

@@ -114,6 +114,7 @@ kinematics (their covariance grows); roll, pitch, the velocity and the biases
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from collections.abc import Mapping, Sequence
@@ -124,6 +125,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pinobs.errors import (
+    ConfigurationError,
     ContactWarning,
     DimensionError,
     GainError,
@@ -136,7 +138,12 @@ from pinobs.model import FootKinematics, Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.base import Vector
 from pinobs.observers.linalg import cholesky_solve
-from pinobs.tolerances import NO_CONTACT_WARN_TIME, SERIES_ANGLE, TIME_EPS
+from pinobs.tolerances import (
+    NO_CONTACT_WARN_TIME,
+    QUATERNION_NORM_TOL,
+    SERIES_ANGLE,
+    TIME_EPS,
+)
 
 __all__ = [
     "GRAVITY",
@@ -161,6 +168,7 @@ __all__ = [
 GRAVITY = (0.0, 0.0, -9.81)
 
 _I3 = np.eye(3)
+_POWERS = np.arange(5)
 #: ``(−1)^k / (2k + j)!`` for the Taylor branch of :func:`gammas`: row j, column k.
 _SERIES = np.array([[(-1.0) ** k / math.factorial(2 * k + j) for k in range(5)] for j in range(6)])
 
@@ -184,8 +192,7 @@ def gammas(phi: Vector) -> tuple[Vector, Vector, Vector]:
     W2 = W @ W
     t2 = float(phi @ phi)
     if t2 < SERIES_ANGLE**2:
-        powers = t2 ** np.arange(5)
-        c = _SERIES @ powers  # c[j] = Σ_k (−1)^k θ^{2k}/(2k+j)!
+        c = _SERIES @ (t2**_POWERS)  # c[j] = Σ_k (−1)^k θ^{2k}/(2k+j)!
         a0, b0, a1, b1, a2, b2 = c[1], c[2], c[2], c[3], c[3], c[4]
     else:
         t = math.sqrt(t2)
@@ -314,6 +321,21 @@ def _expm_taylor(M: Vector) -> Vector:
     return out
 
 
+@functools.cache
+def _indices(n_contacts: int) -> tuple[Any, Any, Any]:
+    """Index arrays for K feet: the R, v, p and bias entries of the error (the 15 × 15 core of
+    ``Φ_ε``), and ξ_d's and ξ_p's (repeated) rows as ``H`` picks them (read-only)."""
+    n = 15 + 3 * n_contacts
+    out = (
+        np.r_[0:9, n - 6 : n],
+        np.arange(9, 9 + 3 * n_contacts),
+        np.tile(np.arange(6, 9), n_contacts),
+    )
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
 def _body_transition(w: Vector, a: Vector, h: float, n_contacts: int) -> Vector:
     """``Φ_ε``: the transition over ``h`` of the body-frame error ``ε = Ad_X̂⁻¹ ξ`` and ``ζ``
     (module docstring), ``15 + 3K`` square, for bias-corrected readings ``w``, ``a`` held."""
@@ -328,7 +350,7 @@ def _body_transition(w: Vector, a: Vector, h: float, n_contacts: int) -> Vector:
     F[3:6, 12:15] = -_I3
     core = _expm_taylor(F * h)
     n = 15 + 3 * n_contacts
-    idx = np.r_[0:9, n - 6 : n]
+    idx = _indices(n_contacts)[0]
     out = np.zeros((n, n))
     out[np.ix_(idx, idx)] = core
     foot = core[0:3, 0:3]  # ε̇_d = −ω^ ε_d, as ε_R without the bias: exp(−ω^ h)
@@ -605,14 +627,21 @@ class InvariantEKF:
             contacts: feet in contact at ``t`` (added to the state), as in :meth:`update`.
             prior: initial uncertainty (:class:`InEKFPrior`).
             bias: initial ``(b_g, b_a)`` [rad/s, m/s²] (zero if not given).
+
+        Raises:
+            DimensionError: an input of the wrong shape (named).
+            ConfigurationError: ``q[3:7]`` not a unit quaternion.
+            UnknownNameError: contacts naming an unknown foot or missing one.
+            GainError: a ``prior`` that is not an :class:`InEKFPrior`.
         """
         t = self._check_time(t, None)
         nq, nv = 7 + self._nq_j, 6 + self._nv_j
         q = Robot.check_vector(q, nq, what="q")
         quat_norm = float(np.linalg.norm(q[3:7]))
-        if abs(quat_norm - 1.0) > 1e-4:
-            raise DimensionError(
-                f"q[3:7] = {q[3:7].tolist()} is not a unit quaternion (norm {quat_norm:.6g})"
+        if abs(quat_norm - 1.0) > QUATERNION_NORM_TOL:
+            raise ConfigurationError(
+                f"q[3:7] = {q[3:7].tolist()} is not a unit quaternion (x, y, z, w) "
+                f"(norm {quat_norm:.6g}); its norm must be 1 within {QUATERNION_NORM_TOL:g}"
             )
         v = np.zeros(nv) if v is None else Robot.check_vector(v, nv, what="v")
         imu = None
@@ -643,9 +672,7 @@ class InvariantEKF:
         state = InEKFState(t, R, x, (), theta, P, imu, t)
         h, jac = self._kinematics(q[7:])
         state = self._add_feet(state, [j for j, f in enumerate(flags) if f], h, jac)
-        if state.feet:
-            state = _replace(state, last_contact=t)
-        self._commit(state, q[7:], None, None, imu, None)
+        self._commit(state, q[7:], None, None, imu, t if state.feet else None)
         self._warned = False
         return self.estimate
 
@@ -709,9 +736,7 @@ class InvariantEKF:
         new = self._propagate(state, held, t - state.t, t)
         h, jac = self._kinematics(q_joints)
         new, nis = self._correct(new, flags, h, jac)
-        if any(flags):
-            new = _replace(new, last_contact=t)
-        elif not self._warned and t - new.last_contact >= NO_CONTACT_WARN_TIME:
+        if not any(flags) and not self._warned and t - new.last_contact >= NO_CONTACT_WARN_TIME:
             self._warned = True
             warnings.warn(
                 f"InvariantEKF: no foot in contact for {t - new.last_contact:.3g} s "
@@ -721,7 +746,7 @@ class InvariantEKF:
                 ContactWarning,
                 stacklevel=2,
             )
-        self._commit(new, q_joints, dq, nis, reading, t)
+        self._commit(new, q_joints, dq, nis, reading, t if any(flags) else None)
         return self.estimate
 
     # ------------------------------------------------------------- checks
@@ -784,6 +809,7 @@ class InvariantEKF:
         a = imu[3:] - theta[3:]
         K = x.shape[0] - 2
         R1, v1, p1 = propagate_mean(R, x[0], x[1], w, a, dt, self.gravity)
+        R1 = R1 @ (1.5 * _I3 - 0.5 * (R1.T @ R1))  # back onto SO(3) to first order (rounding)
         x1 = x.copy()
         x1[0], x1[1] = v1, p1
         phi_e = _body_transition(w, a, dt, K)
@@ -838,8 +864,7 @@ class InvariantEKF:
         n = P.shape[0]
         k = len(measured)  # the feet in the state, all measured, in state order
         m = 3 * k
-        d_idx = np.arange(9, 9 + m)
-        p_idx = np.tile(np.arange(6, 9), k)
+        _, d_idx, p_idx = _indices(k)
         r = (h[measured] @ R.T - (x[2:] - x[1])).reshape(-1)  # eq. (4)
         blocks = self._foot_noise(R, jac[measured])
         HP = P[p_idx] - P[d_idx]  # H = [0, 0, I, −I_j]
@@ -899,10 +924,15 @@ class InvariantEKF:
         dq: Vector | None,
         nis: float | None,
         reading: Vector | None,
-        t: float | None,
+        contact_time: float | None,
     ) -> None:
-        """Check the new state is finite, store it with the reading to hold, make the estimate."""
-        state = _replace(state, imu=reading if reading is not None else state.imu)
+        """Check the new state is finite, store it with the reading to hold (and the time of
+        a contact, if any), make the estimate."""
+        state = _replace(
+            state,
+            imu=reading if reading is not None else state.imu,
+            last_contact=state.last_contact if contact_time is None else contact_time,
+        )
         finite = (
             np.isfinite(state.R).all()
             and np.isfinite(state.x).all()

@@ -22,6 +22,7 @@ from threadpoolctl import threadpool_limits
 
 import pinobs
 from pinobs.errors import (
+    ConfigurationError,
     ContactWarning,
     DimensionError,
     GainError,
@@ -565,3 +566,10 @@ def test_sampling_a_smooth_motion_errs_in_a_power_of_the_period(hold: str, order
 def test_an_unknown_imu_hold_is_refused() -> None:
     with pytest.raises(GainError, match="imu_hold must be 'previous' or 'average', got 'next'"):
         InvariantEKF(SyntheticLegs(3), imu_hold="next")
+
+
+def test_reset_refuses_a_quaternion_off_unit_norm() -> None:
+    ekf = InvariantEKF(SyntheticLegs(3))
+    q = np.concatenate([np.zeros(3), [0.0, 0.0, 0.0, 2.0], np.zeros(9)])
+    with pytest.raises(ConfigurationError, match=r"q\[3:7\].*not a unit quaternion"):
+        ekf.reset(0.0, q)

@@ -3,8 +3,9 @@
 Hartley, Ghaffari, Eustice, Grizzle, *Contact-aided invariant extended Kalman
 filtering for robot state estimation*, IJRR 39(4), 2020 (arXiv:1904.09251),
 written from the equations (no code taken from the authors' ``invariant-ekf``).
-References below name the paper's sections by their subject: the equation
-numbers of the printed version could not be checked against a copy here.
+References below name the paper's sections by their subject (the equation
+numbers of the printed version could not be checked against a copy here);
+the numbers (1)-(6) are this docstring's, cited as ``eq. (n)`` in the code.
 
 State (the paper's "contact-inertial" state on the matrix Lie group SE_{2+K}(3))::
 

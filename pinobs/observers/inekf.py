@@ -934,13 +934,9 @@ class InvariantEKF:
             imu=reading if reading is not None else state.imu,
             last_contact=state.last_contact if contact_time is None else contact_time,
         )
-        finite = (
-            np.isfinite(state.R).all()
-            and np.isfinite(state.x).all()
-            and np.isfinite(state.P).all()
-            and np.isfinite(state.bias).all()
-        )
-        if not finite:
+        # a sum is finite iff every term is (or it overflowed: diverged as well)
+        total = float(state.R.sum() + state.x.sum() + state.P.sum() + state.bias.sum())
+        if not math.isfinite(total):
             raise ObserverDiverged(
                 f"InvariantEKF: non-finite estimate at t = {state.t!r}",
                 t=state.t,
@@ -965,7 +961,10 @@ class InvariantEKF:
         )
 
 
+_STATE_FIELDS = tuple(f.name for f in fields(InEKFState))
+
+
 def _replace(state: InEKFState, **changes: Any) -> InEKFState:
-    values = {f.name: getattr(state, f.name) for f in fields(state)}
+    values = {name: getattr(state, name) for name in _STATE_FIELDS}
     values.update(changes)
     return InEKFState(**values)

@@ -27,6 +27,7 @@ from pinobs.errors import (
     DimensionError,
     GainError,
     NotResetError,
+    ObserverDiverged,
     TimestampError,
     UnknownNameError,
     UnsupportedRobotError,
@@ -573,3 +574,20 @@ def test_reset_refuses_a_quaternion_off_unit_norm() -> None:
     q = np.concatenate([np.zeros(3), [0.0, 0.0, 0.0, 2.0], np.zeros(9)])
     with pytest.raises(ConfigurationError, match=r"q\[3:7\].*not a unit quaternion"):
         ekf.reset(0.0, q)
+
+
+def test_a_non_finite_estimate_raises_and_keeps_the_last_state() -> None:
+    class Broken(SyntheticLegs):
+        def positions_and_jacobians(self, q):
+            h, jac = super().positions_and_jacobians(q)
+            return h * np.nan if q[0] > 100 else h, jac
+
+    samples = synthetic_truth()
+    ekf = InvariantEKF(Broken(3))
+    for _ in run(ekf, samples[:5]):
+        pass
+    before = ekf.state
+    t, _, _, _, q, omega, acc, contacts = samples[5]
+    with pytest.raises(ObserverDiverged, match="non-finite") as info:
+        ekf.update(t, q + 1000.0, omega, acc, contacts)
+    assert ekf.state is before and info.value.last_estimate is ekf.estimate

@@ -323,15 +323,9 @@ def _expm_taylor(M: Vector) -> Vector:
 
 
 @functools.cache
-def _indices(n_contacts: int) -> tuple[Any, Any, Any]:
-    """Index arrays for K feet: the R, v, p and bias entries of the error (the 15 × 15 core of
-    ``Φ_ε``), and ξ_d's and ξ_p's (repeated) rows as ``H`` picks them (read-only)."""
-    n = 15 + 3 * n_contacts
-    out = (
-        np.r_[0:9, n - 6 : n],
-        np.arange(9, 9 + 3 * n_contacts),
-        np.tile(np.arange(6, 9), n_contacts),
-    )
+def _indices(n_contacts: int) -> tuple[Any, Any]:
+    """Index arrays for K feet: ξ_d's rows and ξ_p's (repeated) as ``H`` picks them (read-only)."""
+    out = (np.arange(9, 9 + 3 * n_contacts), np.tile(np.arange(6, 9), n_contacts))
     for a in out:
         a.setflags(write=False)
     return out
@@ -349,15 +343,33 @@ def _body_transition(w: Vector, a: Vector, h: float, n_contacts: int) -> Vector:
     F[6:9, 6:9] = -W
     F[0:3, 9:12] = -_I3
     F[3:6, 12:15] = -_I3
-    core = _expm_taylor(F * h)
+    core = _expm_taylor(F * h)  # its bias rows are exactly [0, I]
     n = 15 + 3 * n_contacts
-    idx = _indices(n_contacts)[0]
     out = np.zeros((n, n))
-    out[np.ix_(idx, idx)] = core
+    out[:9, :9] = core[:9, :9]
+    out[:9, n - 6 :] = core[:9, 9:]
+    out[n - 6 :, n - 6 :] = np.eye(6)
     foot = core[0:3, 0:3]  # ε̇_d = −ω^ ε_d, as ε_R without the bias: exp(−ω^ h)
     for j in range(n_contacts):
         s = slice(9 + 3 * j, 12 + 3 * j)
         out[s, s] = foot
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _noise_densities(gains: InEKFGains, n_contacts: int) -> Vector:
+    """The diagonal of ``Q_c`` (eq. 3, in the order of the error), read-only."""
+    out = np.concatenate(
+        [
+            np.full(3, gains.gyro**2),
+            np.full(3, gains.accel**2),
+            np.zeros(3),
+            np.full(3 * n_contacts, gains.contact**2),
+            np.full(3, gains.gyro_bias**2),
+            np.full(3, gains.accel_bias**2),
+        ]
+    )
+    out.setflags(write=False)
     return out
 
 
@@ -804,7 +816,6 @@ class InvariantEKF:
     # ------------------------------------------------------------- the steps
     def _propagate(self, state: InEKFState, imu: Vector, dt: float, t: float) -> InEKFState:
         """Eqs. (1)-(3): mean and covariance over ``dt`` with the reading ``imu`` held."""
-        gains = self.gains
         R, x, theta = state.R, state.x, state.bias
         w = imu[:3] - theta[:3]
         a = imu[3:] - theta[3:]
@@ -815,18 +826,9 @@ class InvariantEKF:
         x1[0], x1[1] = v1, p1
         phi_e = _body_transition(w, a, dt, K)
         n = 15 + 3 * K
-        qc = np.concatenate(
-            [
-                np.full(3, gains.gyro**2),
-                np.full(3, gains.accel**2),
-                np.zeros(3),
-                np.full(3 * K, gains.contact**2),
-                np.full(3, gains.gyro_bias**2),
-                np.full(3, gains.accel_bias**2),
-            ]
-        )
+        qc = _noise_densities(self.gains, K)
         Qe = (phi_e * qc) @ phi_e.T
-        Qe[np.diag_indices(n)] += qc
+        Qe.flat[:: n + 1] += qc
         Qe *= 0.5 * dt
         T1 = np.eye(n)
         T1[: n - 6, : n - 6] = adjoint(R1, x1)
@@ -865,7 +867,7 @@ class InvariantEKF:
         n = P.shape[0]
         k = len(measured)  # the feet in the state, all measured, in state order
         m = 3 * k
-        _, d_idx, p_idx = _indices(k)
+        d_idx, p_idx = _indices(k)
         r = (h[measured] @ R.T - (x[2:] - x[1])).reshape(-1)  # eq. (4)
         blocks = self._foot_noise(R, jac[measured])
         HP = P[p_idx] - P[d_idx]  # H = [0, 0, I, −I_j]

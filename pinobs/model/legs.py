@@ -7,7 +7,11 @@ foot in contact through forward kinematics of the measured joint angles::
     J_j(q) = ∂h_j/∂v_joints,  a 3 × (nv − 6) matrix
 
 The base frame is the frame of the free-flyer root joint (Pinocchio's
-``q[0:7]``, the frame whose body velocity is ``v[0:6]``).  Both are computed
+``q[0:7]``, the frame whose body velocity is ``v[0:6]``), or, with
+``imu_frame``, the IMU's frame (a frame fixed to the base: go1's
+``imu_link``, 7 cm from the root): then ``h_j`` and ``J_j`` are expressed in it,
+``R_bi (h_j − r_bi)``-wise, and :attr:`FootKinematics.imu_placement` is
+``(R_bi, r_bi)``, the IMU's rotation and position in the root joint's frame.  Both are computed
 with the base placed at the identity, so the world-aligned frame Jacobian of
 Pinocchio *is* the base-frame one: ``J_j`` is the linear rows, joint columns,
 of ``getFrameJacobian(..., LOCAL_WORLD_ALIGNED)`` at ``q = (0, 0, 0, 0, 0, 0, 1, q_joints)``.
@@ -46,19 +50,24 @@ class FootKinematics:
         robot: a robot whose first joint is a free-flyer (``pinobs.load("go1")``;
             other URDFs: ``pinobs.load(path, root_joint="freeflyer")``).
         feet: names of the foot frames in the model (``"FL_foot"``, ...), at least one.
+        imu_frame: a frame fixed to the root joint (the IMU's) to express the feet in,
+            instead of the root joint's frame.
 
     Attributes:
         feet: the foot frame names, in the given order.
         nq_joints: number of joint coordinates after the free-flyer (``nq − 7``).
         nv_joints: number of joint velocities after the free-flyer (``nv − 6``).
+        imu_placement: ``(R_bi, r_bi)``: rotation and position [m] of the frame the feet are
+            expressed in, in the root joint's frame (identity and zero without ``imu_frame``).
 
     Raises:
-        UnsupportedRobotError: the robot's first joint is not a free-flyer.
+        UnsupportedRobotError: the robot's first joint is not a free-flyer, or the
+            ``imu_frame`` is not fixed to it.
         UnknownNameError: a foot name is not a frame of the model (the message
             lists the closest frame names and the model's frames).
     """
 
-    def __init__(self, robot: Robot, feet: Sequence[str]) -> None:
+    def __init__(self, robot: Robot, feet: Sequence[str], *, imu_frame: str | None = None) -> None:
         model = robot.model
         if not robot.joints or robot.joints[0].kind != "se3" or robot.joints[0].idx_q != 0:
             first = robot.joints[0].name if robot.joints else "none"
@@ -71,16 +80,7 @@ class FootKinematics:
             raise UnknownNameError(
                 f"feet must be a non-empty sequence of frame names, got {feet!r}"
             )
-        names = [str(f.name) for f in model.frames]
-        ids = []
-        for foot in feet:
-            if not model.existFrame(foot):
-                close = difflib.get_close_matches(str(foot), names, n=4, cutoff=0.5)
-                hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
-                raise UnknownNameError(
-                    f"{robot.name} has no frame {foot!r}{hint} Its frames: {', '.join(names)}"
-                )
-            ids.append(model.getFrameId(foot))
+        ids = [_frame_id(robot, foot) for foot in feet]
         if len(set(ids)) != len(ids):
             raise UnknownNameError(f"feet lists a frame twice: {list(feet)}")
         self.feet: tuple[str, ...] = tuple(str(f) for f in feet)
@@ -91,6 +91,24 @@ class FootKinematics:
         self._ids = tuple(ids)
         self._q = np.concatenate([_BASE_AT_IDENTITY, pin.neutral(model)[7:]])
         self.robot_name = robot.name
+        self.imu_frame = imu_frame
+        self.imu_placement: tuple[Vector, Vector] = (np.eye(3), np.zeros(3))
+        if imu_frame is not None:
+            fid = _frame_id(robot, imu_frame)
+            if model.frames[fid].parentJoint != 1:
+                raise UnsupportedRobotError(
+                    f"{robot.name}: imu_frame {imu_frame!r} moves with joint "
+                    f"{model.names[model.frames[fid].parentJoint]!r}, not with the base "
+                    f"({model.names[1]!r}): give a frame fixed to the base"
+                )
+            placement = model.frames[fid].placement  # in the root joint's frame
+            self.imu_placement = (
+                np.array(placement.rotation, dtype=float),
+                np.array(placement.translation, dtype=float),
+            )
+        for a in self.imu_placement:
+            a.setflags(write=False)
+        self._to_imu = None if imu_frame is None else self.imu_placement
 
     def __repr__(self) -> str:
         return f"FootKinematics({self.robot_name!r}, feet={self.feet})"
@@ -99,14 +117,18 @@ class FootKinematics:
         self._q[7:] = q_joints
 
     def positions(self, q_joints: ArrayLike) -> Vector:
-        """``h_j(q)`` for every foot, shape ``(len(feet), 3)`` [m], in the base frame."""
+        """``h_j(q)`` for every foot, shape ``(len(feet), 3)`` [m], in the base (or IMU) frame."""
         self._set(q_joints)
         pin.framesForwardKinematics(self._model, self._data, self._q)
-        return np.array([self._data.oMf[i].translation for i in self._ids])
+        h = np.array([self._data.oMf[i].translation for i in self._ids])
+        if self._to_imu is not None:
+            R_bi, r_bi = self._to_imu
+            h = (h - r_bi) @ R_bi  # rows: R_biᵀ (h − r_bi)
+        return h
 
     def positions_and_jacobians(self, q_joints: ArrayLike) -> tuple[Vector, Vector]:
         """``(h, J)``: foot positions ``(K, 3)`` [m] and their Jacobians ``(K, 3, nv_joints)``
-        [m/rad] with respect to the joint velocities, in the base frame."""
+        [m/rad] with respect to the joint velocities, in the base (or IMU) frame."""
         self._set(q_joints)
         model, data = self._model, self._data
         pin.computeJointJacobians(model, data, self._q)
@@ -117,4 +139,21 @@ class FootKinematics:
             h[k] = data.oMf[fid].translation
             full = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
             jac[k] = full[:3, 6:]
+        if self._to_imu is not None:
+            R_bi, r_bi = self._to_imu
+            h = (h - r_bi) @ R_bi
+            jac = R_bi.T @ jac
         return h, jac
+
+
+def _frame_id(robot: Robot, name: str) -> int:
+    """The frame's index, or an error naming the closest frames and listing them all."""
+    model = robot.model
+    if not model.existFrame(name):
+        names = [str(f.name) for f in model.frames]
+        close = difflib.get_close_matches(str(name), names, n=4, cutoff=0.5)
+        hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+        raise UnknownNameError(
+            f"{robot.name} has no frame {name!r}{hint} Its frames: {', '.join(names)}"
+        )
+    return int(model.getFrameId(name))

@@ -14,7 +14,10 @@ State (the paper's "contact-inertial" state on the matrix Lie group SE_{2+K}(3))
                                           d_j: world position of foot j in contact [m]
     θ = (b_g, b_a)                        gyro [rad/s] and accelerometer [m/s²] biases
 
-The IMU is at the base frame (the free-flyer root joint's frame).  The biases
+"Base" in the filter is the IMU's frame: the free-flyer root joint's frame, or
+with ``imu_frame`` a frame fixed to it (go1's ``imu_link``, 7 cm off the root),
+whose placement ``(R_bi, r_bi)`` in the root frame converts the outputs back
+to the root joint (Pinocchio's ``q[0:7]``, ``v[0:6]``).  The biases
 are a Euclidean augmentation outside the group: the paper's "imperfect IEKF"
 (its section on IMU biases), whose bias columns depend on the estimate.
 
@@ -511,13 +514,14 @@ class InEKFEstimate:
         t: time [s].
         q: free-flyer configuration ``(p, quaternion xyzw, joint positions as measured)``,
             ``nq`` entries (``7 + nq_joints``).
-        v: ``(base linear velocity in the base frame, base angular velocity ω̃ − b̂_g, joint
+        v: ``(base linear velocity in the base frame, base angular velocity R_bi (ω̃ − b̂_g), joint
             velocities)``, ``nv`` entries; the joint velocities are not estimated here: the
             ones passed to ``update`` (``joint_velocities=``), else NaN.
-        rotation: world from base rotation.
-        velocity_world: base velocity in the world [m/s].
+        rotation: world from base (root joint) rotation.
+        velocity_world: velocity of the base's origin in the world [m/s].
         bias: ``(b_g, b_a)`` [rad/s, m/s²].
-        covariance: covariance of ``(ξ_R, ξ_v, ξ_p, ξ_d…, ζ_g, ζ_a)`` (right-invariant error).
+        covariance: covariance of ``(ξ_R, ξ_v, ξ_p, ξ_d…, ζ_g, ζ_a)`` (right-invariant error
+            of the IMU frame's state).
         contacts: names of the feet in the state (in contact), in state order.
         foot_positions: their world positions ``d_j``, shape ``(K, 3)`` [m].
         nis: normalized innovation squared of this update's foot measurements (χ² with
@@ -546,6 +550,8 @@ class InvariantEKF:
         feet: the foot frame names, with a robot.
         gains: noise levels (:class:`InEKFGains`).
         gravity: gravity in the world frame [m/s²].
+        imu_frame: with a robot, the frame of the IMU if it is not the root joint's (a frame
+            fixed to the base, e.g. go1's ``"imu_link"``).
         imu_hold: the reading used over ``[t_k, t_{k+1}]``: ``"previous"`` (the one at
             ``t_k``, held: MATH §7's convention, exact for readings that are held) or
             ``"average"`` (the mean of the readings at ``t_k`` and ``t_{k+1}``: second
@@ -566,6 +572,7 @@ class InvariantEKF:
         gains: InEKFGains | None = None,
         gravity: ArrayLike = GRAVITY,
         imu_hold: str = "previous",
+        imu_frame: str | None = None,
     ) -> None:
         if imu_hold not in ("previous", "average"):
             raise GainError(f"imu_hold must be 'previous' or 'average', got {imu_hold!r}")
@@ -575,8 +582,12 @@ class InvariantEKF:
                 raise UnknownNameError(
                     f"{robot.name}: give the foot frame names (feet=[...]) to measure"
                 )
-            self.kinematics: ContactKinematics = FootKinematics(robot, feet)
+            self.kinematics: ContactKinematics = FootKinematics(robot, feet, imu_frame=imu_frame)
         elif isinstance(robot, ContactKinematics):
+            if imu_frame is not None:
+                raise UnknownNameError(
+                    "imu_frame is for a robot; a ContactKinematics gives imu_placement itself"
+                )
             if feet is not None and tuple(feet) != tuple(robot.feet):
                 raise UnknownNameError(
                     f"feet={list(feet)} differs from the kinematics' feet {list(robot.feet)}"
@@ -593,6 +604,13 @@ class InvariantEKF:
         self.feet: tuple[str, ...] = tuple(self.kinematics.feet)
         self._nq_j = int(self.kinematics.nq_joints)
         self._nv_j = int(self.kinematics.nv_joints)
+        placement = getattr(self.kinematics, "imu_placement", None)
+        #: ``(R_bi, r_bi)``: the IMU's rotation and position in the base (root joint) frame.
+        self.imu_placement: tuple[Vector, Vector] = (
+            (np.eye(3), np.zeros(3))
+            if placement is None
+            else (np.asarray(placement[0], dtype=float), np.asarray(placement[1], dtype=float))
+        )
         self._state: InEKFState | None = None
         self._estimate: InEKFEstimate | None = None
         self._warned = False
@@ -669,8 +687,11 @@ class InvariantEKF:
         if not isinstance(prior, InEKFPrior):
             raise GainError(f"prior must be an InEKFPrior, got {type(prior).__name__}")
         theta = np.zeros(6) if bias is None else Robot.check_vector(bias, 6, what="bias")
-        R = _quaternion_to_rotation(q[3:7])
-        x = np.array([R @ v[:3], q[:3]])
+        R_bi, r_bi = self.imu_placement
+        R_b = _quaternion_to_rotation(q[3:7])
+        R = R_b @ R_bi  # the state is the IMU's frame (the base's without imu_frame)
+        # the IMU's world velocity: the base's plus ω × (IMU − base origin)
+        x = np.array([R_b @ (v[:3] + np.cross(v[3:6], r_bi)), q[:3] + R_b @ r_bi])
         P = np.diag(
             np.concatenate(
                 [
@@ -706,8 +727,8 @@ class InvariantEKF:
             t: time [s], after the previous one.
             q: joint angles (``nq − 7``) or a full free-flyer ``q`` (``nq``; its base part
                is ignored).
-            gyro: angular velocity of the base in the base frame [rad/s], shape ``(3,)``.
-            acc: specific force in the base frame [m/s²] (``Rᵀ(p̈ − g)``: +9.81 up at rest),
+            gyro: angular velocity in the IMU's frame [rad/s], shape ``(3,)``.
+            acc: specific force in the IMU's frame [m/s²] (``Rᵀ(p̈ − g)``: +9.81 up at rest),
                shape ``(3,)``.
             contacts: each foot name → in contact (every foot named), or a sequence of
                bools in the order of ``feet``.
@@ -946,15 +967,20 @@ class InvariantEKF:
             )
         R, x = state.R, state.x
         omega = (state.imu[:3] if state.imu is not None else np.zeros(3)) - state.bias[:3]
-        q = np.concatenate([x[1], rotation_to_quaternion(R), q_joints])
-        v = np.concatenate([R.T @ x[0], omega, np.full(self._nv_j, np.nan) if dq is None else dq])
+        R_bi, r_bi = self.imu_placement
+        R_b = R @ R_bi.T  # the base's rotation, position, angular and linear velocity
+        p_b = x[1] - R_b @ r_bi
+        w_b = R_bi @ omega
+        v_b = R_b.T @ x[0] - np.cross(w_b, r_bi)
+        q = np.concatenate([p_b, rotation_to_quaternion(R_b), q_joints])
+        v = np.concatenate([v_b, w_b, np.full(self._nv_j, np.nan) if dq is None else dq])
         self._state = state
         self._estimate = InEKFEstimate(
             t=state.t,
             q=read_only(q),
             v=read_only(v),
-            rotation=read_only(R),
-            velocity_world=read_only(x[0]),
+            rotation=read_only(R_b),
+            velocity_world=read_only(R_b @ v_b),
             bias=read_only(state.bias),
             covariance=read_only(state.P),
             contacts=tuple(self.feet[j] for j in state.feet),

@@ -52,3 +52,23 @@ def test_an_unknown_frame_is_named_with_the_closest_ones() -> None:
 def test_a_robot_without_a_floating_base_is_refused_with_the_fix() -> None:
     with pytest.raises(UnsupportedRobotError, match="root_joint='freeflyer'"):
         FootKinematics(pinobs.load("ur5"), ["tool0"])
+
+
+def test_with_an_imu_frame_the_feet_are_in_the_imu_frame(rng) -> None:
+    robot = pinobs.load("go1")
+    kin = FootKinematics(robot, FEET, imu_frame="imu_link")
+    model, data = robot.model, robot.model.createData()
+    q = robot.random_configuration(rng)
+    pin.framesForwardKinematics(model, data, q)
+    imu = data.oMf[model.getFrameId("imu_link")]
+    expected = [imu.actInv(data.oMf[model.getFrameId(f)]).translation for f in FEET]
+    h, jac = kin.positions_and_jacobians(q[7:])
+    np.testing.assert_allclose(h, expected, rtol=0, atol=1e-14)
+    R_bi, r_bi = kin.imu_placement
+    np.testing.assert_allclose(r_bi, [-0.01592, -0.06659, -0.00617])
+    _, jac_base = FootKinematics(robot, FEET).positions_and_jacobians(q[7:])
+    np.testing.assert_allclose(jac, R_bi.T @ jac_base, atol=1e-15)
+    with pytest.raises(
+        UnsupportedRobotError, match=r"'FL_calf'.* moves with joint 'FL_calf_joint'"
+    ):
+        FootKinematics(robot, FEET, imu_frame="FL_calf")

@@ -71,7 +71,8 @@ Taylor series for the R, v, p, bias blocks; ``Γ_0(ωh)ᵀ`` for each foot), and
 ``Φ = T(X̂⁺) Φ_ε T(X̂)⁻¹`` with ``T = diag(Ad_X̂, I₆)``.  Its ξ-block is exactly
 ``expm(A h)`` of (2) (a test checks it).  The process noise is
 ``Q = T(X̂⁺) · ½ (Φ_ε Q_c Φ_εᵀ + Q_c) h · T(X̂⁺)ᵀ`` (trapezoid; exact for the
-feet), ``Q_c = diag(σ_g², σ_a², 0, σ_c² …, σ_bg², σ_ba²)`` (densities).
+feet), ``Q_c = diag(σ_g², σ_a², 0, σ_c² …, σ_bg², σ_ba²)`` (densities; the contact
+noise is isotropic, so the foot's orientation ``h_R(q)`` drops out of ``R h_R Σ_c h_Rᵀ Rᵀ``).
 
 Measurement (the paper's forward-kinematics measurement, a right-invariant
 observation ``Y = X⁻¹ b + V``).  For each foot j in contact, with ``h_j(q)``
@@ -112,8 +113,8 @@ motion are not constant between samples: holding them errs by O(period)
 that bound the step, O(period²).
 
 Observability: yaw and the position are not observable from an IMU and leg
-kinematics (their covariance grows); roll, pitch, the velocity and the biases
-(under motion) are.
+kinematics (their covariance grows); roll, pitch and the velocity are, and the
+biases as far as the motion excites them.
 """
 
 from __future__ import annotations

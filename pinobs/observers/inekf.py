@@ -655,7 +655,9 @@ class InvariantEKF:
         joints; zero if not given).
 
         Args:
-            gyro, acc: the IMU reading at ``t``, held until the first update (both or neither).
+            gyro: the gyro reading at ``t`` [rad/s], held until the first update (given
+                with ``acc`` or not at all).
+            acc: the accelerometer reading at ``t`` [m/s²], held likewise.
             contacts: feet in contact at ``t`` (added to the state), as in :meth:`update`.
             prior: initial uncertainty (:class:`InEKFPrior`).
             bias: initial ``(b_g, b_a)`` [rad/s, m/s²] (zero if not given).
@@ -727,12 +729,12 @@ class InvariantEKF:
         Args:
             t: time [s], after the previous one.
             q: joint angles (``nq − 7``) or a full free-flyer ``q`` (``nq``; its base part
-               is ignored).
+                is ignored).
             gyro: angular velocity in the IMU's frame [rad/s], shape ``(3,)``.
             acc: specific force in the IMU's frame [m/s²] (``Rᵀ(p̈ − g)``: +9.81 up at rest),
-               shape ``(3,)``.
+                shape ``(3,)``.
             contacts: each foot name → in contact (every foot named), or a sequence of
-               bools in the order of ``feet``.
+                bools in the order of ``feet``.
             joint_velocities: passed through to ``estimate.v[6:]`` (NaN if not given).
 
         Raises:

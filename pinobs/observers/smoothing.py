@@ -253,6 +253,7 @@ from pinobs.errors import (
 )
 from pinobs.model import Robot
 from pinobs.model.robot import read_only
+from pinobs.model.sampling import on_ticks
 from pinobs.observers.adaptive import AdaptiveEKF, ModelSnapshot
 from pinobs.observers.base import (
     NOISE_FLOOR,
@@ -2442,6 +2443,11 @@ def _smooth(
     if band not in BANDS:
         raise OptionError(f"band={band!r}: give one of {list(BANDS)}")
     t_all, q_all, tau_all = _log_arrays(robot, log)
+    # dropped samples: smoothed on the grid of ticks, each missing one predicted over with
+    # its torque on the line between its neighbours' (pinobs.model.sampling), and the
+    # estimate given at the log's own rows (given_rows; None: nothing was missing)
+    t_given = t_all
+    t_all, q_all, tau_all, given_rows = on_ticks(t_all, q_all, tau_all)
     noise_from_data = noise_std is None
     if noise_std is None:
         noise_std, _, said = log_noise_std(robot, t_all, q_all)
@@ -2583,6 +2589,7 @@ def _smooth(
         "latency": float(extra.get("latency", 0.0)),
         "latency_from_log": latency_from_log,
         "latency_searched": False,
+        "missing_samples": t_all.size - t_given.size,
     }
     result = Smoothed(
         t=t_all,
@@ -2611,7 +2618,7 @@ def _smooth(
         and math.isfinite(rho)
         and (rho > RHO_WARN or hidden)
     ):
-        return result
+        return _at_rows(result, given_rows, t_given)
     # The model does not explain the log: a measurement latency might (module docstring).
     # Adopted only if the log smoothed under it is consistent (ρ ≤ RHO_WARN) and, where
     # "auto" chose the density, likelier by LIKELIHOOD_MARGIN (each at its own chosen density)
@@ -2653,13 +2660,26 @@ def _smooth(
         retry = under(found, asked_psd)
         likelier = retry.log_likelihood > loglik + LIKELIHOOD_MARGIN
         if retry.consistency <= RHO_WARN and (likelier or not hidden):
-            return replace(
-                retry,
-                options={
-                    **retry.options,
-                    **searched,
-                    "latency_from_log": True,
-                    "noise_std_from_log": noise_from_data,
-                },
+            return _at_rows(
+                replace(
+                    retry,
+                    options={
+                        **retry.options,
+                        **searched,
+                        "latency_from_log": True,
+                        "noise_std_from_log": noise_from_data,
+                        "missing_samples": t_all.size - t_given.size,
+                    },
+                ),
+                given_rows,
+                t_given,
             )
-    return replace(result, options={**result.options, **searched})
+    return _at_rows(replace(result, options={**result.options, **searched}), given_rows, t_given)
+
+
+def _at_rows(result: Smoothed, rows: NDArray[np.intp] | None, t: Vector) -> Smoothed:
+    """``result`` (of a log on the grid of its ticks: :func:`~pinobs.model.sampling.on_ticks`)
+    at the given log's rows ``rows``, its times ``t``; as it is with ``rows`` None."""
+    if rows is None:
+        return result
+    return replace(result, t=t, q=result.q[rows], v=result.v[rows], v_std=result.v_std[rows])

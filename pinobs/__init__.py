@@ -1,8 +1,9 @@
 """pinobs: velocity observers for any URDF robot, on Pinocchio's dynamics.
 
->>> import pinobs
->>> robot = pinobs.load("cartpole")
->>> obs = pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
+Examples:
+    >>> import pinobs
+    >>> robot = pinobs.load("cartpole")
+    >>> obs = pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
 """
 
 from pinobs.errors import (
@@ -33,7 +34,7 @@ from pinobs.model.identification import Identification
 from pinobs.observers import Consistency, Estimate, Observer, make_observer, observer_names
 from pinobs.observers.calibration import identify
 from pinobs.observers.smoothing import Smoothed, smooth
-from pinobs.simulation import Result, Sensor, simulate
+from pinobs.simulation import Logger, RecordedLog, Result, Sensor, simulate
 
 __version__ = "0.1.0"
 
@@ -46,6 +47,7 @@ __all__ = [
     "Identification",
     "IdentificationError",
     "LogFormatError",
+    "Logger",
     "Metrics",
     "ModelError",
     "ModelFileError",
@@ -59,6 +61,7 @@ __all__ = [
     "OutputExistsError",
     "PinobsError",
     "PinobsWarning",
+    "RecordedLog",
     "Result",
     "Robot",
     "Sensor",

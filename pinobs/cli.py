@@ -47,6 +47,7 @@ from pinobs.errors import (
 )
 from pinobs.evaluation import evaluate, format_table
 from pinobs.io import process_log, read_log
+from pinobs.io.clock import CLOCK_MODES
 from pinobs.model import Robot, aba_time, load, robot_entries
 from pinobs.model.identification import MAX_CONDITION
 from pinobs.observers import Observer, make_observer, observer_class, observer_names
@@ -392,10 +393,12 @@ def _cmd_play(args: argparse.Namespace) -> int:
     source = args.robot or result.meta.get("robot_source") or result.robot
     root = args.root_joint or result.meta.get("root_joint")
     if args.robot is None:
-        _check_saved_robot_file(args, str(source))
-    robot = load(
-        source, root_joint=root, mimic=result.meta.get("mimic") if not args.robot else None
-    )
+        _check_saved_robot_file(args, str(source), result.meta.get("lock"))
+    lock = _lock_option(args.lock)
+    mimic = None
+    if args.robot is None:  # the run's robot as it was loaded, locked joints and all
+        mimic, lock = result.meta.get("mimic"), lock or result.meta.get("lock")
+    robot = load(source, root_joint=root, mimic=mimic, lock=lock)
     if robot.name != result.robot and not args.force:
         raise UnsupportedRobotError(
             f"{args.result!r} is a run of {result.robot!r}, not of {robot.name!r}; leave out "
@@ -412,7 +415,9 @@ def _cmd_play(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_saved_robot_file(args: argparse.Namespace, source: str) -> None:
+def _check_saved_robot_file(
+    args: argparse.Namespace, source: str, result_lock: dict[str, Any] | None = None
+) -> None:
     """A run of a robot file that has since moved: the command to play it with the file's new
     path (one found under the same name next to the result or here, else a placeholder)."""
     path = Path(source)
@@ -428,6 +433,12 @@ def _check_saved_robot_file(args: argparse.Namespace, source: str) -> None:
         value = getattr(args, flag)
         if value:  # the other options as given
             argv += ["--" + flag.replace("_", "-")] + ([] if value is True else [value])
+    locked = args.lock or [  # the run's locked joints, as it was loaded
+        f"{n}={v}" if not isinstance(v, list) else f"{n}={','.join(map(str, v))}"
+        for n, v in (result_lock or {}).items()
+    ]
+    for item in locked:
+        argv += ["--lock", item]
     command = " ".join(shlex.quote(a) for a in argv)
     where = (
         f"a file of that name is at {new}; if it is the same robot, play it with"
@@ -479,6 +490,11 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         if given:
             flags = ", ".join("--" + f.replace("_", "-") for f in given)
             raise OptionError(f"{flags}: options of the smoother; add --smooth")
+    if args.smooth and args.clock is not None:
+        raise OptionError(
+            f"--clock {args.clock}: the smoother reads the log's stamps as they are (the "
+            "clock repair runs with the filter only, for now)"
+        )
     if args.smooth and args.observer == "kf" and args.accel_psd not in (None, "auto"):
         raise OptionError(
             f"--accel-psd {args.accel_psd:g}: kf has no white acceleration; its white-jerk "
@@ -513,6 +529,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
                 noise_std=args.noise,
                 options=_observer_options(args),
                 progress=progress,
+                clock=args.clock or "auto",
             )
         except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
             print(f"pinobs: error: {exc}", file=sys.stderr)
@@ -576,12 +593,14 @@ def _estimate_many(args: argparse.Namespace) -> int:
         root_joint=args.root_joint,
         friction=True if args.friction else None,
         mimic=args.mimic,
+        lock=_lock_option(args.lock),
         force=args.force,
         columns=_column_map(args.map),
         topic=args.topic,
         rate=args.rate,
         noise_std=args.noise,
         options=_observer_options(args),
+        clock=args.clock or "auto",
         smooth=None
         if not args.smooth
         else {"lag": args.lag, "chunk": args.chunk, "accel_psd": args.accel_psd, "band": args.band},
@@ -1222,13 +1241,59 @@ def _add_robot_options(p: argparse.ArgumentParser, files: str = "URDF/MJCF") -> 
         help="URDF <mimic> joints: refuse them (default for files) or load each as a joint "
         "of its own (default for robot names)",
     )
+    _add_lock_option(p)
+
+
+def _add_lock_option(p: argparse.ArgumentParser) -> None:
+    """``--lock JOINT[=VALUE]`` (repeatable): :func:`pinobs.load`'s ``lock``."""
+    p.add_argument(
+        "--lock",
+        action="append",
+        default=None,
+        metavar="JOINT[=VALUE]",
+        help="lock a joint the log does not have (a gripper's fingers) at VALUE [rad or m; "
+        "a continuous joint's angle; nq comma-separated numbers for other joints], default "
+        "its neutral value (0); the locked bodies move with their parent (repeatable)",
+    )
+
+
+def _lock_option(items: Sequence[str] | None) -> list[str] | dict[str, Any] | None:
+    """``--lock J1 --lock J2=0.02`` -> ``{"J1": None, "J2": 0.02}`` (names alone: a list)."""
+    if not items:
+        return None
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not name:
+            raise OptionError(f"--lock {item!r}: give JOINT or JOINT=VALUE")
+        if name in out:
+            raise OptionError(f"--lock names joint {name!r} twice; give each joint once")
+        if not sep:
+            out[name] = None
+            continue
+        try:
+            values = [float(x) for x in text.split(",")]
+        except ValueError:
+            raise OptionError(
+                f"--lock {item!r}: VALUE {text!r} is not a number; give JOINT=VALUE with VALUE "
+                "in rad (revolute, continuous) or m (prismatic), or the joint's nq numbers "
+                "comma-separated, or JOINT alone for its neutral value"
+            ) from None
+        if not all(np.isfinite(values)):
+            raise OptionError(f"--lock {item!r}: VALUE {text!r} is not finite")
+        out[name] = values[0] if len(values) == 1 else values
+    if all(v is None for v in out.values()):
+        return list(out)
+    return out
 
 
 def _load(args: argparse.Namespace) -> Robot:
-    """The robot of ``--robot``, ``--root-joint``, ``--friction`` and ``--mimic``."""
+    """The robot of ``--robot``, ``--root-joint``, ``--friction``, ``--mimic`` and ``--lock``."""
     friction = True if getattr(args, "friction", False) else None
     mimic = getattr(args, "mimic", None)
-    return load(args.robot, root_joint=args.root_joint, friction=friction, mimic=mimic)
+    lock = _lock_option(getattr(args, "lock", None))
+    return load(args.robot, root_joint=args.root_joint, friction=friction, mimic=mimic, lock=lock)
 
 
 def _add_cluster_options(p: argparse.ArgumentParser, workers_help: str) -> None:
@@ -1287,6 +1352,7 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="play it on a --robot of another name (same nq and nv)",
     )
+    _add_lock_option(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_play)
 
@@ -1311,6 +1377,14 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
     _add_log_columns(p)
+    p.add_argument(
+        "--clock",
+        choices=CLOCK_MODES,
+        default=None,
+        help="the log's clock: auto (default: repair the stamps of a fixed-rate loop seen "
+        "through a jittery logger clock, skip stale rows, when the motion clearly says so), "
+        "stamps (as stamped), loop (always the loop's clock); the filter only",
+    )
     p.add_argument(
         "--html", default=None, help="also write a 3D playback of the log and the estimate"
     )
@@ -1441,6 +1515,7 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("excite", help="write an excitation trajectory for identification")
     p.add_argument("--robot", required=True, help="robot name (pinobs list) or URDF path")
     p.add_argument("--root-joint", default=None, choices=["fixed"])
+    _add_lock_option(p)
     p.add_argument("--duration", type=float, default=20.0, help="length [s] (default %(default)s)")
     p.add_argument(
         "--rate", type=float, default=100.0, help="samples per second (default %(default)s)"

@@ -581,3 +581,168 @@ def test_run_prints_why_an_observer_failed(capsys, monkeypatch) -> None:
     monkeypatch.setattr(pinobs.cli, "simulate", failing)
     assert main(["run", "--robot", "pendulum", "--observer", "kf", "--duration", "0.1"]) == 0
     assert "failed kf: NonFiniteError at t = 0 s: q is nan" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------ --lock
+FINGERS = ["panda_finger_joint1", "panda_finger_joint2"]
+
+
+@pytest.fixture(scope="module")
+def franka_log(tmp_path_factory) -> tuple[Path, np.ndarray]:
+    """A 7-joint Franka log (columns t, q0..q6, tau0..tau6): the panda simulated with its
+    fingers locked, and its true velocities."""
+    import pinobs
+    from pinobs.io import write_log
+
+    arm = pinobs.load("panda", lock=FINGERS)
+    res = pinobs.simulate(arm, [], duration=0.5, sensor=pinobs.Sensor(1000.0, 1e-4), seed=3)
+    path = tmp_path_factory.mktemp("franka") / "franka.csv"
+    write_log(path, res.t[1:], res.q_meas[1:], res.tau[1:], digits=12)
+    return path, np.asarray(res.v[1:])
+
+
+def test_estimate_runs_a_seven_joint_franka_log_on_the_panda_with_its_fingers_locked(
+    franka_log, tmp_path: Path, capsys
+) -> None:
+    log, v_true = franka_log
+    out = tmp_path / "est.csv"
+    base = ["estimate", "--robot", "panda", "--observer", "ekf", "--log", str(log)]
+    base += ["--noise", "1e-4", "--no-progress", "--out", str(out)]
+    assert main(base) == 2  # the nine-joint panda: the log lacks its fingers
+    err = capsys.readouterr().err
+    assert "--lock panda_finger_joint1 --lock panda_finger_joint2" in err and not out.exists()
+    assert main([*base, "--lock", FINGERS[0], "--lock", FINGERS[1]]) == 0
+    header = out.read_text().splitlines()[0].split(",")
+    assert header == ["t", *(f"q{i}" for i in range(7)), *(f"v{i}" for i in range(7))]
+    est = np.loadtxt(out, delimiter=",", skiprows=1)
+    settled = slice(100, None)  # after 0.1 s
+    rms = np.sqrt(np.mean((est[settled, 8:] - v_true[settled]) ** 2))
+    assert rms < 1e-3 * np.sqrt(np.mean(v_true[settled] ** 2))  # (2e-4 of it measured)
+
+
+def test_estimate_of_many_logs_locks_the_joints_in_every_task(franka_log, tmp_path: Path) -> None:
+    import pandas as pd
+
+    log, _ = franka_log
+    argv = ["estimate", "--robot", "panda", "--observer", "kf", "--log", str(log.parent)]
+    argv += ["--lock", FINGERS[0], "--lock", f"{FINGERS[1]}=0.01", "--noise", "1e-4"]
+    assert main([*argv, "--out-dir", str(tmp_path / "out"), "--workers", "0", "--no-progress"]) == 0
+    table = pd.read_parquet(tmp_path / "out" / "summary.parquet")
+    assert len(table) == 1 and table["error"].isna().all()
+
+
+def test_bad_lock_values_are_errors_naming_the_flag(capsys) -> None:
+    base = ["check", "ii", "--robot", "panda"]
+    for lock, said in (
+        (f"{FINGERS[0]}=wide", f"--lock '{FINGERS[0]}=wide': VALUE 'wide' is not a number"),
+        ("=0.01", "--lock '=0.01': give JOINT or JOINT=VALUE"),
+        (f"{FINGERS[0]}=inf", "is not finite"),
+        ("finger", "lock (--lock) names ['finger'], which robot 'panda' does not have"),
+        (f"{FINGERS[0]}=0.5", "outside the position limits [0, 0.04]"),
+    ):
+        assert main([*base, "--lock", lock]) == 2, lock
+        err = capsys.readouterr().err
+        assert said in err and "Traceback" not in err, err
+    assert main([*base, "--lock", FINGERS[0], "--lock", f"{FINGERS[0]}=0.01"]) == 2
+    assert f"--lock names joint '{FINGERS[0]}' twice" in capsys.readouterr().err
+
+
+def test_every_command_that_takes_robot_takes_lock() -> None:
+    import argparse
+
+    from pinobs.cli import _parser
+
+    sub = next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
+    with_robot = {name for name, p in sub.items() if "--robot" in p._option_string_actions}
+    assert with_robot == {"run", "play", "estimate", "check", "identify", "excite"}
+    for name in with_robot:
+        assert "--lock" in sub[name]._option_string_actions, name
+
+
+def test_a_locked_run_is_played_back_on_the_locked_robot(tmp_path: Path, capsys) -> None:
+    pytest.importorskip("matplotlib")
+    saved = tmp_path / "r.npz"
+    run = ["run", "--robot", "panda", "--observer", "kf", "--duration", "0.05", "--no-progress"]
+    assert (
+        main([*run, "--lock", f"{FINGERS[0]}=0.02", "--lock", FINGERS[1], "--save", str(saved)])
+        == 0
+    )
+    from pinobs.simulation import Result
+
+    result = Result.load(saved)
+    assert result.q.shape[1] == 7 and result.meta["lock"] == {FINGERS[0]: 0.02, FINGERS[1]: 0.0}
+    # play reloads the run's robot with its joints locked (nine joints would not fit)
+    assert main(["play", str(saved), "--plot", str(tmp_path / "p.png"), "--no-progress"]) == 0
+    assert (tmp_path / "p.png").stat().st_size > 10_000
+    # the robot given anew: its locks given anew
+    given = ["play", str(saved), "--robot", "panda", "--plot", str(tmp_path / "q.png")]
+    assert main(given) == 2
+    assert "nq = 7, nv = 7; robot 'panda' has nq = 9" in capsys.readouterr().err
+    assert main([*given, "--lock", FINGERS[0], "--lock", FINGERS[1]]) == 0
+
+
+def test_excite_and_identify_take_lock_and_the_calibrated_urdf_has_the_joint_fixed(
+    tmp_path: Path, capsys
+) -> None:
+    import xml.etree.ElementTree as ET
+
+    import pinobs
+
+    out = tmp_path / "exc.csv"
+    argv = ["excite", "--robot", "planar_3r", "--lock", "joint3=0.4", "--duration", "4"]
+    assert main([*argv, "--out", str(out)]) == 0
+    assert out.read_text().splitlines()[0].split(",")[:3] == ["t", "q.joint1", "q.joint2"]
+    robot = pinobs.load("planar_3r", lock={"joint3": 0.4})
+    truth = robot.perturbed(inertia_scale=[1.2, 0.8], damping=[0.2, 0.1])
+    res = pinobs.simulate(
+        robot, [], duration=6.0, sensor=pinobs.Sensor(1000.0, 1e-5), seed=1, plant=truth
+    )
+    from pinobs.io import write_log
+
+    log = write_log(tmp_path / "log.csv", res.t[1:], res.q_meas[1:], res.tau[1:])
+    urdf = tmp_path / "calibrated.urdf"
+    argv = ["identify", "--robot", "planar_3r", "--lock", "joint3=0.4", "--log", str(log)]
+    assert main([*argv, "--out", str(urdf)]) == 0
+    types = {j.get("name"): j.get("type") for j in ET.parse(urdf).getroot().findall("joint")}
+    assert types["joint3"] == "fixed"
+    calibrated = pinobs.load(urdf, friction=True)  # no --lock needed: the file has it fixed
+    assert calibrated.joint_names == ("joint1", "joint2")
+    rng = np.random.default_rng(0)
+    for _ in range(10):  # closer to the truth than the nominal model
+        q = robot.random_configuration(rng)
+        m = truth.mass_matrix(q)
+        assert (
+            np.abs(calibrated.mass_matrix(q) - m).max()
+            < 0.2 * np.abs(robot.mass_matrix(q) - m).max()
+        )
+
+
+def test_play_of_a_locked_run_whose_robot_file_moved_gives_the_command_with_its_locks(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    import shlex
+
+    from pinobs.model.loading import _models_dir
+
+    monkeypatch.chdir(tmp_path)
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text((_models_dir() / "planar_3r.urdf").read_text())
+    saved = tmp_path / "run.npz"
+    run = ["run", "--robot", str(urdf), "--lock", "joint3=0.25", "--observer", "kf"]
+    assert main([*run, "--duration", "0.05", "--no-progress", "--save", str(saved)]) == 0
+    (tmp_path / "models").mkdir()
+    urdf.rename(tmp_path / "models" / "arm.urdf")
+    capsys.readouterr()
+    png = str(tmp_path / "p.png")
+    assert main(["play", str(saved), "--plot", png]) == 2
+    command = shlex.split(capsys.readouterr().err.strip().splitlines()[-1])
+    assert command[3:] == [
+        "--robot",
+        str(tmp_path / "models" / "arm.urdf"),
+        "--plot",
+        png,
+        "--lock",
+        "joint3=0.25",
+    ]
+    pytest.importorskip("matplotlib")
+    assert main(command[1:]) == 0  # the command given works: the locked two-joint arm

@@ -511,6 +511,8 @@ class LogTask:
     root_joint: str | None = None
     friction: bool | None = None  # pinobs.load's friction
     mimic: str | None = None  # pinobs.load's mimic
+    #: pinobs.load's lock, as (joint, value) pairs (value None: the neutral one)
+    lock: tuple[tuple[str, Any], ...] = ()
     force: bool = False
     columns: tuple[tuple[str, str], ...] = ()
     topic: str | None = None
@@ -521,6 +523,8 @@ class LogTask:
     smooth: tuple[tuple[str, Any], ...] | None = None
     #: further options of the observer (``latency``), filtered or smoothed
     options: tuple[tuple[str, Any], ...] = ()
+    #: the log's clock (:func:`pinobs.io.process_log`'s ``clock``), filtered only
+    clock: str = "auto"
 
 
 def log_tasks(
@@ -532,6 +536,7 @@ def log_tasks(
     root_joint: str | None = None,
     friction: bool | None = None,
     mimic: str | None = None,
+    lock: Sequence[str] | Mapping[str, Any] | None = None,
     force: bool = False,
     columns: Mapping[str, str] | None = None,
     topic: str | None = None,
@@ -539,6 +544,7 @@ def log_tasks(
     noise_std: float | None = None,
     smooth: Mapping[str, Any] | None = None,
     options: Mapping[str, Any] | None = None,
+    clock: str = "auto",
 ) -> list[LogTask]:
     """One :class:`LogTask` per log; the estimates of ``logs/a/run.parquet`` go to
     ``out_dir/a/run.csv`` (the log's path below the logs' common folder, suffix
@@ -554,6 +560,7 @@ def log_tasks(
         root_joint, columns, topic, rate, noise_std: as :func:`pinobs.io.process_log`
             (``noise_std=None``: estimated from each log's first second).
         friction: :func:`pinobs.load`'s (the URDF's joint friction in the dynamics).
+        mimic, lock: :func:`pinobs.load`'s (the joints the logs do not have, locked).
         force: overwrite existing estimates and summary.
         smooth: smooth each log instead of filtering it, with these options of
             :func:`pinobs.io.smoothing.smooth_log` (``{}``: its defaults; ``lag``,
@@ -618,6 +625,7 @@ def log_tasks(
             root_joint=root_joint,
             friction=friction,
             mimic=mimic,
+            lock=_lock_pairs(lock),
             force=force,
             columns=tuple(sorted((columns or {}).items())),
             topic=topic,
@@ -625,9 +633,21 @@ def log_tasks(
             noise_std=noise_std,
             smooth=None if smooth is None else tuple(sorted(smooth.items())),
             options=tuple(sorted((options or {}).items())),
+            clock=clock,
         )
         for name, path, target in zip(logs, paths, targets, strict=True)
     ]
+
+
+def _lock_pairs(lock: Sequence[str] | Mapping[str, Any] | None) -> tuple[tuple[str, Any], ...]:
+    """``lock`` as hashable ``(joint, value)`` pairs in its order (sequences as tuples)."""
+    if not lock:
+        return ()
+    items = lock.items() if isinstance(lock, Mapping) else ((n, None) for n in lock)
+    return tuple(
+        (str(n), tuple(v) if isinstance(v, Sequence) and not isinstance(v, str) else v)
+        for n, v in items
+    )
 
 
 def run_log_task(task: LogTask) -> dict[str, Any]:
@@ -642,7 +662,13 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
     from pinobs.observers.smoothing import smoothing_warnings
 
     start = time.perf_counter()
-    robot = load(task.robot, root_joint=task.root_joint, friction=task.friction, mimic=task.mimic)
+    robot = load(
+        task.robot,
+        root_joint=task.root_joint,
+        friction=task.friction,
+        mimic=task.mimic,
+        lock=dict(task.lock) or None,
+    )
     common: dict[str, Any] = {
         "force": task.force,
         "columns": dict(task.columns) or None,
@@ -655,7 +681,9 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
     given = dict(task.options).get("latency", 0.0)  # smoothed, also "auto": found per stretch
     latency = math.nan if given == "auto" else float(given)
     if task.smooth is None:
-        run = process_log(task.log, robot, task.observer, out=task.out, keep=False, **common)
+        run = process_log(
+            task.log, robot, task.observer, out=task.out, keep=False, clock=task.clock, **common
+        )
         if run.consistency is not None:
             verdict = run.consistency.verdict
             told = run.consistency.messages(task.observer)

@@ -12,7 +12,10 @@ Formats (chosen from the source):
     (``q.<joint>.<k>`` / ``tau.<joint>.<k>`` for a joint with several
     coordinates); a continuous joint (``cos, sin`` in Pinocchio) may also be
     given as one angle column ``q.<joint>`` [rad];
-  - ``columns`` maps other column names to these (``{"pos_1": "q.elbow"}``).
+  - ``tick`` (optional): the logger's sample counter (ROS ``header.seq``, a
+    robot's cycle count), used by the clock repair (:mod:`pinobs.io.clock`);
+  - ``columns`` maps other column names to these (``{"pos_1": "q.elbow"}``,
+    ``{"seq": "tick"}``).
 
   The torque columns are optional (every torque then reads as zero, and a
   model-based observer is warned).
@@ -59,6 +62,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pinobs.errors import DimensionError, LogFormatError, ModelFileError, OptionError
 from pinobs.model import Robot
@@ -67,7 +71,7 @@ from pinobs.model.robot import Vector
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["CHUNK_ROWS", "Log", "LogSource", "find_logs", "iter_log", "read_log"]
+__all__ = ["CHUNK_ROWS", "Log", "LogSource", "concat_logs", "find_logs", "iter_log", "read_log"]
 
 #: Rows per chunk when streaming a log.
 CHUNK_ROWS = 10_000
@@ -95,6 +99,10 @@ class Log:
             DataFrame, from 0) or ``"message"`` (a bag, from 0).
         notes: what the reader says of the log as a whole, not of a row (bag messages
             skipped); :class:`~pinobs.io.LogEstimator` adds them to its warnings.
+        tick: the log's own sample counter per row (a ``tick`` column), or ``None``.
+        stale: rows that repeat the previous sample (set by the clock repair,
+            :mod:`pinobs.io.clock`): no measurement, the estimate at that sample's time.
+        drops: per row, the loop samples missing just before it (the clock repair).
     """
 
     t: Vector
@@ -104,6 +112,9 @@ class Log:
     lines: Any = None
     unit: str = "row"
     notes: tuple[str, ...] = ()
+    tick: Vector | None = None
+    stale: NDArray[np.bool_] | None = None
+    drops: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
         if self.lines is None:
@@ -123,11 +134,12 @@ class _Layout:
     q_angle: tuple[bool, ...]  # per q block: given as an angle
     q_slices: tuple[slice, ...]
     tau: tuple[str, ...] | None
+    tick: str | None = None  # the log's own sample counter (pinobs.io.clock)
 
     @property
     def used(self) -> list[str]:
         cols = [self.t, *(c for block in self.q for c in block)]
-        return cols + list(self.tau or ())
+        return cols + list(self.tau or ()) + ([self.tick] if self.tick else [])
 
 
 def _blocks(robot: Robot) -> list[tuple[str, str, int, int, int, int]]:
@@ -156,6 +168,7 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
     q_angle: list[bool] = []
     q_slices: list[slice] = []
     missing: list[str] = []
+    absent: list[str] = []  # joints with a q column missing
     for name, kind, iq, nq, _, _ in _blocks(robot):
         q_slices.append(slice(iq, iq + nq))
         cols: list[str] = []
@@ -174,6 +187,7 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
                 for k, c in enumerate(cols)
                 if not c
             ]
+            absent.append(name)
             q_cols.append(tuple(cols))
             q_angle.append(False)
     tau_cols: list[str | None] = []
@@ -194,11 +208,12 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
             "(root_joint=...)? Drop or rename them (columns=...) if they are not its own"
         )
     if t is None or missing:
+        lock = _lock_hint(absent) if absent and len(absent) < len(robot.joints) else ""
         raise DimensionError(
             f"{where}: columns {list(header)} lack {(['t'] if t is None else []) + missing}; "
             f"robot {robot.name!r} needs t, then q0..q{robot.nq - 1} (nq = {robot.nq}) or "
             f"q.<joint> for joints {list(robot.joint_names)}, and optionally "
-            f"tau0..tau{robot.nv - 1} or tau.<joint> (or map other names with columns=...)"
+            f"tau0..tau{robot.nv - 1} or tau.<joint> (or map other names with columns=...)" + lock
         )
     tau: tuple[str, ...] | None = None
     if any(c is not None for c in tau_cols):
@@ -208,7 +223,18 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
                 f"{where}: has some torque columns but lacks {absent} (nv = {robot.nv})"
             )
         tau = tuple(c for c in tau_cols if c is not None)
-    return _Layout(t, tuple(q_cols), tuple(q_angle), tuple(q_slices), tau)
+    tick = one(["tick"], "the sample counter")
+    return _Layout(t, tuple(q_cols), tuple(q_angle), tuple(q_slices), tau, tick)
+
+
+def _lock_hint(absent: Sequence[str]) -> str:
+    """What to do when a log records some of the robot's joints but not ``absent``."""
+    flags = " ".join(f"--lock {n}" for n in absent)
+    return (
+        f". If the log does not record joints {list(absent)} (a gripper's fingers), lock them "
+        f"at a fixed value: pinobs.load(..., lock={list(absent)}) (or lock={{name: value}}), "
+        f"or {flags} (the pinobs command)"
+    )
 
 
 def _clean_header(header: Sequence[Any], columns: Mapping[str, str] | None) -> list[str]:
@@ -313,6 +339,7 @@ def _from_arrays(
         problems=tuple(problems),
         lines=lines,
         unit=unit,
+        tick=None if layout.tick is None else np.asarray(arrays[layout.tick], dtype=float),
     )
 
 
@@ -737,6 +764,11 @@ def _npz_log(path: Path, robot: Robot) -> Log:
             f"robot {robot.name!r} needs {q_name} of shape (N, {robot.nq}) and tau of shape "
             f"(N, {robot.nv})"
             + (" (q_meas is read as the log's q when present)" if q_name != "q" else "")
+            + (
+                _lock_hint([b.name for b in robot.joints if b.idx_q + b.nq > q.shape[1]])
+                if q.ndim == 2 and 0 < q.shape[1] < robot.nq
+                else ""
+            )
         )
     return Log(t=t, q=q, tau=tau, unit="row")
 
@@ -1005,25 +1037,39 @@ def read_log(
     row, in order, and every cell that could not be read in ``problems``.
     """
     chunks = list(iter_log(source, robot, columns=columns, topic=topic))
+    return chunks[0] if len(chunks) == 1 else concat_logs(chunks, nv=robot.nv)
+
+
+def _joined(parts: Sequence[Any], sizes: Sequence[int], fill: Any, width: int | None) -> Any:
+    """``parts`` concatenated, a ``None`` part as ``fill`` rows; ``None`` if all are."""
+    if all(x is None for x in parts):
+        return None
+    shape: tuple[int, ...]
+    full = []
+    for x, size in zip(parts, sizes, strict=True):
+        shape = (size,) if width is None else (size, width)
+        full.append(x if x is not None else np.full(shape, fill))
+    return np.concatenate(full)
+
+
+def concat_logs(chunks: Sequence[Log], *, nv: int | None = None) -> Log:
+    """Chunks of one log as one :class:`Log`, in order (a missing torque block: NaN rows)."""
     if len(chunks) == 1:
         return chunks[0]
-    taus = [c.tau for c in chunks]
-    tau = None
-    if any(x is not None for x in taus):
-        tau = np.concatenate(
-            [
-                x if x is not None else np.full((len(c), robot.nv), np.nan)
-                for c, x in zip(chunks, taus, strict=True)
-            ]
-        )
+    sizes = [len(c) for c in chunks]
+    if nv is None:
+        nv = next((c.tau.shape[1] for c in chunks if c.tau is not None), 0)
     return Log(
         t=np.concatenate([c.t for c in chunks]),
         q=np.concatenate([c.q for c in chunks]),
-        tau=tau,
+        tau=_joined([c.tau for c in chunks], sizes, np.nan, nv),
         problems=tuple(p for c in chunks for p in c.problems),
         lines=np.concatenate([c.lines for c in chunks]),
-        unit=chunks[0].unit,
+        unit=next((c.unit for c in chunks if len(c)), chunks[0].unit),
         notes=tuple(n for c in chunks for n in c.notes),
+        tick=_joined([c.tick for c in chunks], sizes, np.nan, None),
+        stale=_joined([c.stale for c in chunks], sizes, False, None),
+        drops=_joined([c.drops for c in chunks], sizes, 0, None),
     )
 
 

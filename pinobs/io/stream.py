@@ -42,18 +42,23 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
+from warnings import warn
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.errors import (
     ConfigurationError,
+    ConsistencyWarning,
     DimensionError,
     NonFiniteError,
     ObserverDiverged,
     PinobsError,
+    PinobsWarning,
+    TimestampWarning,
 )
-from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, iter_log
+from pinobs.io.clock import ClockRepair, ClockReport
+from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, concat_logs, iter_log
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
@@ -119,6 +124,8 @@ class LogRun:
         consistency: the observer's innovation test at the end of the run
             (:meth:`pinobs.Observer.consistency`), or ``None`` for an observer-like
             object without one.
+        clock: what the log's clock repair found and did (:mod:`pinobs.io.clock`),
+            or ``None`` when it was not run.
     """
 
     t: Vector
@@ -134,14 +141,24 @@ class LogRun:
     noise_std_per_joint: Vector | None = None
     period: float | None = None
     consistency: Any = None
+    clock: ClockReport | None = None
 
     def summary(self) -> str:
-        """One line: rows in, rows estimated (with / without their measurement), rows reported."""
-        return (
+        """One line: rows in, rows estimated (with / without their measurement), rows reported;
+        and the clock's repair when there was one."""
+        line = (
             f"{self.rows} rows: {self.estimated} estimated ({self.measured} with their "
             f"measurement, {self.estimated - self.measured} propagated only), "
             f"{self.rows - self.estimated} without an estimate; {len(self.bad_rows)} rows reported"
         )
+        if self.clock is not None and self.clock.repaired:
+            c = self.clock
+            line += (
+                f"; clock repaired: {1e3 * (c.period or 0.0):.4g} ms loop, stamp jitter "
+                f"{1e3 * c.jitter:.3g} ms RMS, {c.stale} stale rows, {c.drops} samples dropped, "
+                f"largest correction {1e3 * c.largest_correction:.3g} ms"
+            )
+        return line
 
 
 # ------------------------------------------------------------------ screening
@@ -212,6 +229,8 @@ class LogEstimator:
         self._unit = "line"
         self._time_skipped = 0  # rows skipped for a time not after the previous row's
         self._unit_checked = False
+        self._last: tuple[Vector, Vector] | None = None  # the last estimate output
+        self.stale = 0  # stale rows given the previous sample's estimate (pinobs.io.clock)
 
     # ---------------------------------------------------------------- API
     def feed(self, chunk: Log, *, last: bool = False) -> tuple[Vector, Vector, Vector]:
@@ -298,10 +317,21 @@ class LogEstimator:
         # a bag's messages are named by number and stamp, file rows by their line
         stamps: list[float | None] = t_all.tolist() if unit == "message" else [None] * n
         period = self.period
+        stale = log.stale if log.stale is not None else np.zeros(n, dtype=bool)
+        drops = log.drops if log.drops is not None else np.zeros(n, dtype=np.int64)
         for k in range(n):
             t = float(t_all[k])
             why = problems.get(int(lines[k]), [])
             notes: list[str] = list(why)
+            if stale[k] and self._started and self._last is not None and t == self._t:
+                # a repeat of the previous sample (the clock repair): no measurement, the
+                # estimate at that sample's time (pinobs.io.clock)
+                out_q[k], out_v[k] = self._last
+                self.estimated += 1
+                self.stale += 1
+                if notes:
+                    self._report(lines[k], stamps[k], notes)
+                continue
             # ---- time
             if not math.isfinite(t):
                 self._report(lines[k], stamps[k], [*notes, f"time {t!r} unreadable: row skipped"])
@@ -373,11 +403,12 @@ class LogEstimator:
                 tau = tau_all[k]
                 self._held = tau
             # ---- estimate
-            est = self._estimate(t, q_all[k] if q_ok else None, tau, notes, held)
+            est = self._estimate(t, q_all[k] if q_ok else None, tau, notes, held, int(drops[k]))
             if est is None:
                 self._report(lines[k], stamps[k], notes)
                 continue
             out_q[k], out_v[k] = est[0].q, est[0].v
+            self._last = (out_q[k].copy(), out_v[k].copy())
             self.estimated += 1
             self.measured += int(est[1])
             if notes:
@@ -392,10 +423,13 @@ class LogEstimator:
         tau: Vector | None,
         notes: list[str],
         held: Vector | None = None,
+        dropped: int = 0,
     ) -> tuple[Estimate, bool] | None:
         """The estimate at ``t`` and whether ``q`` corrected it; ``None``: no estimate.
 
-        ``held`` is the torque the observer holds from the previous row (for gap sub-steps).
+        ``held`` is the torque the observer holds from the previous row (for gap sub-steps);
+        ``dropped`` the loop samples the clock repair found missing before the row (the
+        gap they leave is propagated without a note: the clock's report counts them).
         """
         ob = self.observer
         if not self._started:
@@ -419,10 +453,11 @@ class LogEstimator:
                     return self._restart(t, q, tau, notes)
                 for j in range(1, steps):  # sub-steps of gap/steps <= period; not output
                     ob.update(self._t + gap * j / steps, None, held)
-                notes.append(
-                    f"gap of {gap:.6g} s ({gap / period:.1f} periods) before this row: "
-                    f"propagated in {steps} steps of {gap / steps:.3g} s"
-                )
+                if not dropped:
+                    notes.append(
+                        f"gap of {gap:.6g} s ({gap / period:.1f} periods) before this row: "
+                        f"propagated in {steps} steps of {gap / steps:.3g} s"
+                    )
             if q is not None:
                 try:
                     est = ob.update(t, q, tau)
@@ -479,31 +514,25 @@ def time_screened(t: Vector) -> NDArray[np.bool_]:
 def _slice(log: Log, a: int, b: int) -> Log:
     lines = log.lines[a:b]
     keep = set(int(x) for x in lines)
+
+    def cut(x: Any) -> Any:
+        return None if x is None else x[a:b]
+
     return Log(
         t=log.t[a:b],
         q=log.q[a:b],
-        tau=None if log.tau is None else log.tau[a:b],
+        tau=cut(log.tau),
         problems=tuple(p for p in log.problems if p[0] in keep),
         lines=lines,
         unit=log.unit,
+        tick=cut(log.tick),
+        stale=cut(log.stale),
+        drops=cut(log.drops),
     )
 
 
 def _concat(a: Log, b: Log, nv: int) -> Log:
-    if a.tau is None and b.tau is None:
-        tau = None
-    else:
-        tau = np.concatenate(
-            [x.tau if x.tau is not None else np.full((len(x), nv), np.nan) for x in (a, b)]
-        )
-    return Log(
-        t=np.concatenate([a.t, b.t]),
-        q=np.concatenate([a.q, b.q]),
-        tau=tau,
-        problems=a.problems + b.problems,
-        lines=np.concatenate([a.lines, b.lines]),
-        unit=a.unit if len(a) else b.unit,
-    )
+    return concat_logs([x for x in (a, b) if len(x)] or [a], nv=nv)
 
 
 def _empty_like(robot: Robot) -> Log:
@@ -529,6 +558,7 @@ def process_log(
     options: Mapping[str, Any] | None = None,
     chunk_rows: int = CHUNK_ROWS,
     progress: Callable[[int, int], None] | None = None,
+    clock: str = "auto",
 ) -> LogRun:
     """Read, estimate and (optionally) write a log chunk by chunk.
 
@@ -540,14 +570,21 @@ def process_log(
         out: CSV file for the estimates (written through a temporary file).
         force: overwrite an existing ``out``.
         keep: keep the estimates in the returned run (``False``: memory stays flat).
-        columns, topic: as :func:`pinobs.io.iter_log`.
+        columns: as :func:`pinobs.io.iter_log`.
+        topic: as :func:`pinobs.io.iter_log`.
         rate: sample rate [Hz] (default: from the log's median interval).
         noise_std: position noise σ [rad or m]; ``None`` with a name: estimated
             from the log's first second (:func:`pinobs.io.estimate_noise_std`) and reported.
         options: further observer options (with a name).
         progress: called as ``progress(rows_done, 0)`` after each chunk.
+        clock: the log's clock (:mod:`pinobs.io.clock`): ``"auto"`` (repair the stamps of a
+            fixed-rate loop when the motion clearly says so), ``"stamps"`` (as stamped) or
+            ``"loop"`` (always the loop's clock).
     """
-    chunks = iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows)
+    repair = ClockRepair(clock)
+    chunks = _repaired(
+        iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows), repair
+    )
     first = next(chunks)
     period = 1.0 / rate if rate else _median_period(first.t)
     sigma_joint = None
@@ -616,8 +653,27 @@ def process_log(
         noise_std_per_joint=sigma_joint,
         period=period,
         consistency=_consistency(est.observer),
+        clock=repair.report,
     )
+    if run.clock is not None and (run.clock.repaired or run.clock.stale):
+        run.warnings.insert(0, run.clock.message())
     return run
+
+
+def _repaired(chunks: Iterator[Log], repair: ClockRepair) -> Iterator[Log]:
+    """``chunks`` through the clock repair, in order; the first one yielded even if empty."""
+    any_out = False
+    last: Log | None = None
+    for chunk in chunks:
+        last = chunk
+        for out in repair.feed(chunk):
+            any_out = True
+            yield out
+    for out in repair.finish():
+        any_out = True
+        yield out
+    if not any_out and last is not None:
+        yield last
 
 
 def _consistency(observer: Any) -> Any:
@@ -661,21 +717,34 @@ def estimate(
     rate: float | None = None,
     noise_std: float | None = None,
     options: Mapping[str, Any] | None = None,
+    clock: str = "auto",
 ) -> Any:
     """Estimates over a log as a pandas ``DataFrame``: ``t, q0.., v0..``, one row per log row.
 
-    >>> import pinobs
-    >>> df = pinobs.estimate("kf", "examples/ur5_log.csv", robot="ur5")  # doctest: +SKIP
+    Examples:
+        >>> import pinobs
+        >>> df = pinobs.estimate("kf", "examples/ur5_log.csv", robot="ur5")  # doctest: +SKIP
 
     Args:
         observer: a registry name or an observer (then ``robot`` defaults to its robot).
         data: a DataFrame or a log path (any format of :func:`pinobs.io.iter_log`).
         robot: a :class:`~pinobs.Robot` or a registry name; required with a name.
-        columns, topic, rate, noise_std, options: as :func:`process_log`.
+        columns: as :func:`process_log`.
+        topic: as :func:`process_log`.
+        rate: as :func:`process_log`.
+        noise_std: as :func:`process_log`.
+        options: as :func:`process_log`.
+        clock: as :func:`process_log`.
 
     Returns:
-        The DataFrame; ``df.attrs`` holds ``bad_rows``, ``warnings``, ``summary``
-        and ``noise_std``.
+        The DataFrame (``t`` the row's time: repaired where the log's clock was,
+        :mod:`pinobs.io.clock`); ``df.attrs`` holds ``bad_rows``, ``warnings`` (what
+        the CLI prints: the clock's repair, the noise level found, the observer's
+        consistency and rejected outliers), ``summary``, ``noise_std``, ``clock`` (the
+        :class:`~pinobs.io.clock.ClockReport`) and ``consistency``.  Each warning is
+        also issued as a Python warning (:class:`~pinobs.errors.ConsistencyWarning` for
+        the model's consistency, :class:`~pinobs.errors.TimestampWarning` for the clock,
+        :class:`~pinobs.errors.PinobsWarning` otherwise).
     """
     import pandas as pd
 
@@ -698,15 +767,39 @@ def estimate(
         rate=rate,
         noise_std=noise_std,
         options=options,
+        clock=clock,
     )
+    said = _said(run, observer if isinstance(observer, str) else _name_of(observer))
     df = pd.DataFrame(
         np.column_stack([run.t, run.q, run.v]),
         columns=["t", *(f"q{i}" for i in range(robot.nq)), *(f"v{i}" for i in range(robot.nv))],
     )
     df.attrs.update(
         bad_rows=run.bad_rows,
-        warnings=run.warnings,
+        warnings=[text for text, _ in said],
         summary=run.summary(),
         noise_std=run.noise_std,
+        clock=run.clock,
+        consistency=run.consistency,
     )
+    for text, kind in said:
+        warn(text, kind, stacklevel=2)
     return df
+
+
+def _name_of(observer: ObserverLike) -> str:
+    """An observer's name for messages."""
+    return str(getattr(observer, "name", type(observer).__name__))
+
+
+def _said(run: LogRun, name: str) -> list[tuple[str, type[Warning]]]:
+    """The run's warnings as the CLI prints them, each with its warning class."""
+    out: list[tuple[str, type[Warning]]] = []
+    for w in run.warnings:
+        kind = TimestampWarning if w.startswith("log clock") else PinobsWarning
+        out.append((w, kind))
+    if run.consistency is not None and hasattr(run.consistency, "messages"):
+        for line in run.consistency.messages(name):
+            kind = ConsistencyWarning if line.startswith("warning:") else PinobsWarning
+            out.append((line.split(": ", 1)[1] if line.startswith("warning: ") else line, kind))
+    return out

@@ -2,7 +2,7 @@
 
 This module is the only code in pinobs that calls Pinocchio's dynamics.
 
-Conventions (Pinocchio's, see ``../shared/MATH.md`` §1-3):
+Conventions (Pinocchio's, see ``docs/theory/math.md`` §1-3):
 
 * ``q`` has ``nq`` entries, ``v`` and every tangent vector ``nv``; quaternions
   are ``x, y, z, w``; a free-flyer's velocity is ``[linear; angular]`` in the
@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -113,6 +113,11 @@ class Robot:
             ``"spherical"``, ``"freeflyer"``, ``"planar"``), or ``None`` if unknown.
         package_dirs: the ``package_dirs`` given to :func:`pinobs.load`, as
             absolute paths (the URDF writer resolves the source's meshes with them).
+        locked: the joints :func:`pinobs.load` locked (``lock=``), name → value (a float
+            for a one-dof joint, a continuous joint's angle; the joint's ``q`` otherwise),
+            in model order; empty when none.  The URDF writer writes them as fixed joints
+            at these values, and ``pinobs.load(robot.source, lock=robot.locked)`` reloads
+            the same model.
     """
 
     def __init__(
@@ -127,8 +132,10 @@ class Robot:
         root_joint: str | None = None,
         geometry: GeometryLoader | None = None,
         package_dirs: Sequence[str | Path] = (),
+        locked: Mapping[str, float | tuple[float, ...]] | None = None,
     ) -> None:
         self.model = model
+        self.locked: dict[str, float | tuple[float, ...]] = dict(locked or {})
         self.root_joint = root_joint
         self.package_dirs = tuple(Path(d).resolve() for d in package_dirs)
         self.mimic: str | None = None  # how pinobs.load took URDF <mimic> joints, if asked
@@ -228,6 +235,7 @@ class Robot:
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
+        self.__dict__.setdefault("locked", {})  # (pickled before robots kept it)
         self._data = self.model.createData()
         self._free_data = self._free.createData()
         self._zero_nv.setflags(write=False)  # (pickle does not keep the flag)
@@ -269,9 +277,9 @@ class Robot:
         self, model: pin.Model, *, name: str | None = None, friction: bool | None = None
     ) -> Robot:
         """This robot on another ``pin.Model`` of the same tree (perturbed or identified
-        parameters): same source, package directories, root joint, ``mimic`` and geometry
-        (shared, loaded or not: building one never loads meshes); friction as this robot's
-        unless given."""
+        parameters): same source, package directories, root joint, ``mimic``, locked joints
+        and geometry (shared, loaded or not: building one never loads meshes); friction as
+        this robot's unless given."""
         robot = Robot(
             model,
             name=self.name if name is None else name,
@@ -279,6 +287,7 @@ class Robot:
             friction=self.friction if friction is None else friction,
             root_joint=self.root_joint,
             package_dirs=self.package_dirs,
+            locked=self.locked,
             **self._geometry_kwargs(),
         )
         robot.mimic = self.mimic  # a run of it is reloaded as this one was (pinobs play)
@@ -303,8 +312,10 @@ class Robot:
             payload: ``(mass [kg], offset [m] in the tool body's frame)``: a
                 point mass added to the last moving body, passing over prismatic
                 joints after it (a Panda's fingers): the end effector of an arm.
-            damping, coulomb: viscous [N·m·s/rad] and Coulomb [N·m] friction per
-                velocity coordinate, replacing the model's (friction switched on).
+            damping: viscous friction [N·m·s/rad] per velocity coordinate,
+                replacing the model's (friction switched on).
+            coulomb: Coulomb friction [N·m] per velocity coordinate, replacing
+                the model's (friction switched on).
         """
         model = self.model.copy()
         if inertia_scale is not None:

@@ -495,17 +495,21 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         half_window: half-width of the zero-phase smoother of the measured path [s].
         horizon: rows kept for the solve [s] (a sliding window).
         resolve_every: time between solves [s].
-        friction, offset: learn joint friction and a torque offset.
+        friction: learn joint friction.
+        offset: learn a torque offset.
         accel_psd: white-acceleration density once a model is learned [rad²/s³].
         warmup_accel_psd: the same before the first solve.
         disturbance_psd: density of the torque-offset state (as in ``ekf``) before the first solve [rad²/s⁵].
         learned_disturbance_psd: the same once a model is learned.
-        validated_accel_psd, validated_disturbance_psd: the two densities while a solve finds
-            nothing better than the nominal model (the exact-model regime of ``ekf``).
+        validated_accel_psd: ``accel_psd`` while a solve finds nothing better than
+            the nominal model (the exact-model regime of ``ekf``).
+        validated_disturbance_psd: ``disturbance_psd`` in that regime.
         blend: blend with the model-free ``kf`` (never behind it).
         blend_time: averaging time of the disagreement [s].
         jerk_psd: the white-jerk densities of the ``kf`` bank [rad²/s⁵] (module docstring).
-        q0_std, v0_std, d0_std: initial standard deviations (as in ``ekf``).
+        q0_std: initial configuration standard deviation [rad] (as in ``ekf``).
+        v0_std: initial velocity standard deviation [rad/s] (as in ``ekf``).
+        d0_std: initial standard deviation of the torque offset [N·m or N] (as in ``ekf``).
         outlier_probability: the outlier gate (as in ``ekf``; the ``kf`` skips what it rejects).
         rate: sample rate [Hz]: the identification windows are counted in samples of
             ``1/rate``; not given, of the stream's first interval.  Either way, ten

@@ -1,6 +1,6 @@
 """What every observer shares: the sampled-data contract, input checks, the registry.
 
-The contract (``../shared/MATH.md`` §7).  Samples arrive at times ``t_k``.
+The contract (``docs/theory/math.md`` §7).  Samples arrive at times ``t_k``.
 The torque passed with ``update(t_k, q_k, τ_k)`` is the one applied *from*
 ``t_k`` on, held until the next sample (zero-order hold).  So the step to
 ``t_k`` propagates with the torque stored at the previous call, then corrects

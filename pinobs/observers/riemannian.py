@@ -477,15 +477,17 @@ class RiemannianObserver(Observer[_State]):
         curvature_every: recompute the Jacobi operator ``R(v̂, ·)v̂``
             (:func:`jacobi_operator`, 4 ABA-derivatives calls) every this
             many samples and reuse it in between (1 = every sample).
-        gain_a, gain_b, gain_c: Anisi–Hamberg state-dependent gains
-            ``(S, speed) -> A [1/s], B [1/s²], C``; each replaces the
-            constant it stands for.
+        gain_a: Anisi–Hamberg state-dependent gain ``(S, speed) -> A`` [1/s];
+            replaces the constant ``A = 2·alpha``.
+        gain_b: the same for ``B`` [1/s²]; replaces ``beta``.
+        gain_c: the same for ``C``; replaces ``curvature_gain``.
         accel_psd: white-acceleration density [rad²/s³] of the gain rule used
             when ``alpha``/``beta`` are not given and ``rate`` is.
         gain_schedule: ``"riccati"`` (time-varying Kalman gains from the rule's
             double-integrator model) or ``"steady"`` (its steady state); only
             with the rule (module docstring).
-        q0_std, v0_std: initial standard deviations of the schedule [rad], [rad/s].
+        q0_std: initial configuration standard deviation of the schedule [rad].
+        v0_std: initial velocity standard deviation of the schedule [rad/s].
         rate: sample rate [Hz] (gain rule).
         noise_std: position noise standard deviation [rad or m] (gain rule).
 

@@ -709,7 +709,8 @@ class Smoother:
 
     Args:
         filt: the filter (a :class:`SmoothableFilter`).
-        chunk, overlap: in samples (``chunk=None``: everything at :meth:`close`).
+        chunk: samples smoothed per backward pass (``None``: everything at :meth:`close`).
+        overlap: measured samples after a chunk that its backward pass starts from.
     """
 
     def __init__(

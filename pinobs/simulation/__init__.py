@@ -1,4 +1,4 @@
-"""Simulation layer: ground truth on the manifold, inputs, sensors, the result type."""
+"""Simulation layer: ground truth on the manifold, inputs, sensors, the result type, a logger."""
 
 from pinobs.simulation.inputs import (
     INPUT_NAMES,
@@ -8,6 +8,7 @@ from pinobs.simulation.inputs import (
     Zero,
     make_input,
 )
+from pinobs.simulation.logger import Logger, RecordedLog
 from pinobs.simulation.mismatch import MISMATCH_SCENARIOS, mismatched_plant
 from pinobs.simulation.result import ObserverTrace, Result
 from pinobs.simulation.run import default_input, perturb, simulate
@@ -17,9 +18,11 @@ __all__ = [
     "INPUT_NAMES",
     "MISMATCH_SCENARIOS",
     "InputProfile",
+    "Logger",
     "MultiSine",
     "ObserverTrace",
     "PDTracking",
+    "RecordedLog",
     "Result",
     "Sensor",
     "Zero",

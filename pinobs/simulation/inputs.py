@@ -145,7 +145,9 @@ def make_input(
         amplitude: ``multisine``: torque amplitude as a fraction of the static
             gravity torque scale (default 1 N·m per unit of ``M`` diagonal);
             ``pd``: reference amplitude [rad] (default 0.5).
-        n_sines, f_lo, f_hi: number of sines per joint and their frequency band [Hz].
+        n_sines: number of sines per joint.
+        f_lo: lower end of their frequency band [Hz].
+        f_hi: upper end of their frequency band [Hz].
     """
     if name == "zero":
         return Zero(robot.nv)

@@ -155,10 +155,13 @@ def simulate(
         sensor: sample rate, noise, quantization, delay, dropouts (default: 1 kHz, no noise).
         inputs: ``"zero"``, ``"multisine"``, ``"pd"``, an :class:`InputProfile`,
             or ``None`` (:func:`default_input`).
-        q0, v0: true initial state (default: a seeded configuration near the
-            neutral one, zero velocity).
-        perturb_q, perturb_v: norm of the initial estimation error in
-            configuration [rad] and velocity [rad/s] (same draw for every observer).
+        q0: true initial configuration (default: a seeded configuration near
+            the neutral one).
+        v0: true initial velocity (default: zero).
+        perturb_q: norm of the initial estimation error in configuration [rad]
+            (same draw for every observer).
+        perturb_v: norm of the initial estimation error in velocity [rad/s]
+            (same draw for every observer).
         seed: seed of every random draw of the run.
         substeps: plant integration steps per sample.
         plant: the truth's model if it differs from ``robot`` (model mismatch).
@@ -258,6 +261,7 @@ def simulate(
         "robot_source": _portable_source(getattr(robot, "source", robot.name)),
         "root_joint": getattr(robot, "root_joint", None),
         "mimic": getattr(robot, "mimic", None),
+        "lock": dict(getattr(robot, "locked", {})) or None,  # pinobs play reloads it so
         "duration": duration,
         "rate": sensor.rate,
         "noise_std": sensor.noise_std,

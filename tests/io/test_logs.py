@@ -173,3 +173,35 @@ def test_cli_estimate_writes_a_playback_of_the_log(tmp_path: Path, capsys) -> No
     assert main([*args, "--out", str(out), "--html", str(html), "--no-progress"]) == 0
     assert html.stat().st_size > 10_000 and "wrote" in capsys.readouterr().out
     assert len(np.genfromtxt(out, delimiter=",", names=True)) == 60
+
+
+def _seven_joint_panda_log(tmp_path: Path) -> tuple[Path, pinobs.Result]:
+    """A Franka arm log without its fingers: a run of the panda with them locked."""
+    arm = pinobs.load("panda", lock=["panda_finger_joint1", "panda_finger_joint2"])
+    res = pinobs.simulate(arm, [], duration=0.3, sensor=pinobs.Sensor(1000.0, 1e-4), seed=3)
+    path = write_log(tmp_path / "franka.csv", res.t[1:], res.q_meas[1:], res.tau[1:], digits=12)
+    return path, res
+
+
+def test_a_log_lacking_the_fingers_names_lock_as_the_fix_and_reads_with_it(tmp_path: Path) -> None:
+    path, res = _seven_joint_panda_log(tmp_path)
+    fingers = ["panda_finger_joint1", "panda_finger_joint2"]
+    with pytest.raises(pinobs.DimensionError, match=r"lack \['q7 or q.panda_finger_joint1'") as e:
+        read_log(path, pinobs.load("panda"))
+    text = str(e.value)
+    assert (
+        f"lock={fingers}" in text
+        and "--lock panda_finger_joint1 --lock panda_finger_joint2" in text
+    )
+    log = read_log(path, pinobs.load("panda", lock=fingers))  # what it says to do
+    np.testing.assert_allclose(log.q, res.q_meas[1:], atol=1e-11)
+    # a saved run (NPZ: no column names) of the locked arm says the same
+    npz = res.save(tmp_path / "run.npz")
+    with pytest.raises(pinobs.DimensionError, match=r"--lock panda_finger_joint1 --lock panda"):
+        read_log(npz, pinobs.load("panda"))
+    # a log without q columns at all (another robot's) is not told to lock every joint
+    bare = tmp_path / "t_only.csv"
+    bare.write_text("t,x\n0,1\n0.001,2\n")
+    with pytest.raises(pinobs.DimensionError, match="lack") as e:
+        read_log(bare, pinobs.load("panda"))
+    assert "lock" not in str(e.value)

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import pinobs
@@ -177,3 +179,201 @@ def test_a_directory_or_a_non_robot_file_is_refused_saying_what_it_is(tmp_path: 
     notes.write_text("hello\n")
     with pytest.raises(pinobs.errors.ModelFileError, match=r"neither a URDF \(<robot>\) nor"):
         pinobs.load(notes)
+
+
+# ------------------------------------------------------------------ locked joints
+def _full_configuration(full: pinobs.Robot, locked: pinobs.Robot, q: np.ndarray) -> np.ndarray:
+    """The full robot's q: the locked robot's joints from ``q``, the locked ones at their values."""
+    out = np.array(pin.neutral(full.model))
+    blocks = {b.name: b for b in full.joints}
+    for b in locked.joints:
+        f = blocks[b.name]
+        out[f.idx_q : f.idx_q + f.nq] = q[b.idx_q : b.idx_q + b.nq]
+    for name, value in locked.locked.items():
+        f = blocks[name]
+        if isinstance(value, tuple):
+            out[f.idx_q : f.idx_q + f.nq] = value
+        elif f.kind == "circle":
+            out[f.idx_q : f.idx_q + 2] = np.cos(value), np.sin(value)
+        else:
+            out[f.idx_q] = value
+    return out
+
+
+def _free_indices(full: pinobs.Robot, locked: pinobs.Robot) -> np.ndarray:
+    blocks = {b.name: b for b in full.joints}
+    return np.concatenate(
+        [np.arange(blocks[b.name].idx_v, blocks[b.name].idx_v + b.nv) for b in locked.joints]
+    )
+
+
+def _assert_is_the_full_models_free_block(
+    full: pinobs.Robot, locked: pinobs.Robot, rng: np.random.Generator
+) -> None:
+    """M(q) and c(q, v) + g(q) of the locked robot are the full robot's rows and columns of
+    the free joints, at the locked values with zero velocity on the locked joints."""
+    free = _free_indices(full, locked)
+    for _ in range(5):
+        q = locked.random_configuration(rng)
+        v = rng.normal(size=locked.nv)
+        qf = _full_configuration(full, locked, q)
+        vf = np.zeros(full.nv)
+        vf[free] = v
+        np.testing.assert_allclose(
+            locked.mass_matrix(q), full.mass_matrix(qf)[np.ix_(free, free)], rtol=0, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            locked.nonlinear_effects(q, v),
+            full.nonlinear_effects(qf, vf)[free],
+            rtol=0,
+            atol=1e-11,
+        )
+
+
+FINGERS = ["panda_finger_joint1", "panda_finger_joint2"]
+
+
+def test_locking_panda_fingers_leaves_the_arm_with_the_full_models_dynamics(
+    rng: np.random.Generator,
+) -> None:
+    full = pinobs.load("panda")
+    robot = pinobs.load("panda", lock=FINGERS)
+    assert (robot.nq, robot.nv) == (7, 7)
+    assert robot.joint_names == full.joint_names[:7]
+    assert robot.locked == dict.fromkeys(FINGERS, 0.0)  # neutral
+    _assert_is_the_full_models_free_block(full, robot, rng)
+    opened = pinobs.load("panda", lock={FINGERS[0]: 0.03, FINGERS[1]: 0.01})
+    assert opened.locked == {FINGERS[0]: 0.03, FINGERS[1]: 0.01}
+    _assert_is_the_full_models_free_block(full, opened, rng)
+    q = opened.random_configuration(rng)
+    assert not np.allclose(opened.mass_matrix(q), robot.mass_matrix(q), atol=1e-9)  # (it matters)
+
+
+@pytest.mark.parametrize(
+    ("name", "lock"),
+    [
+        ("ur5", {"elbow_joint": 0.7}),  # a middle joint: the bodies after it stay free
+        ("cartpole_continuous", {"pole_theta": 0.4}),  # a continuous joint, by its angle
+        ("cartpole_continuous", {"cart_x": 0.3}),  # prismatic
+        ("go1", ["FL_hip_joint", "FL_thigh_joint", "FL_calf_joint"]),  # under a free-flyer
+    ],
+)
+def test_a_locked_model_is_the_full_models_free_block_at_the_locked_values(
+    name: str, lock: list[str] | dict[str, object], rng: np.random.Generator
+) -> None:
+    full = pinobs.load(name)
+    robot = pinobs.load(name, lock=lock)
+    assert set(robot.locked) == set(lock)
+    assert robot.nv == full.nv - sum(b.nv for b in full.joints if b.name in lock)
+    _assert_is_the_full_models_free_block(full, robot, rng)
+
+
+def test_multi_dof_joints_lock_at_their_nq_coordinates(rng: np.random.Generator) -> None:
+    full = pinobs.load("rigid_body", root_joint="freeflyer")
+    model = full.model.copy()  # a pendulum hung under the body, to keep one joint free
+    jid = model.addJoint(1, pin.JointModelRY(), pin.SE3(np.eye(3), np.array([0, 0, -0.3])), "hinge")
+    model.appendBodyToJoint(jid, pin.Inertia.FromBox(0.7, 0.1, 0.2, 0.3), pin.SE3.Identity())
+    base = pinobs.load(model)
+    pose = (0.1, 0.2, 0.3, 0.0, 0.6, 0.0, 0.8)
+    robot = pinobs.load(model, lock={"root_joint": pose})
+    assert robot.nv == 1 and robot.locked == {"root_joint": pose}
+    _assert_is_the_full_models_free_block(base, robot, rng)
+    with pytest.raises(pinobs.DimensionError, match=r"'root_joint' has nq = 7 coordinates"):
+        pinobs.load(model, lock={"root_joint": 0.5})
+    with pytest.raises(pinobs.GainError, match=r"quaternion .* not of unit norm"):
+        pinobs.load(model, lock={"root_joint": (0, 0, 0, 0, 0, 0, 2.0)})
+
+
+def test_lock_works_for_urdf_files_mjcf_files_and_pin_models(rng: np.random.Generator) -> None:
+    from pinobs.model.loading import _models_dir
+
+    urdf = _models_dir() / "planar_3r.urdf"
+    full = pinobs.load(urdf)
+    joint = full.joint_names[1]
+    for source in (urdf, full.model, pin.RobotWrapper(full.model)):
+        robot = pinobs.load(source, lock={joint: -0.5})
+        assert robot.locked == {joint: -0.5} and robot.nv == 2
+        _assert_is_the_full_models_free_block(full, robot, rng)
+    mjcf = _models_dir() / "mjcf_acrobot.xml"
+    acrobot = pinobs.load(mjcf)
+    robot = pinobs.load(mjcf, lock={"elbow": 0.3})
+    assert robot.joint_names == ("shoulder",) and robot.friction == acrobot.friction
+    _assert_is_the_full_models_free_block(acrobot, robot, rng)
+
+
+def test_locked_geometry_sits_where_the_full_models_does(rng: np.random.Generator) -> None:
+    full = pinobs.load("panda")
+    robot = pinobs.load("panda", lock={FINGERS[0]: 0.03, FINGERS[1]: 0.02})
+    q = robot.random_configuration(rng)
+    qf = _full_configuration(full, robot, q)
+    placements = {}
+    for r, x in ((full, qf), (robot, q)):
+        geom = r.visual_model
+        data = geom.createData()
+        pin.updateGeometryPlacements(r.model, r.model.createData(), geom, data, x)
+        placements[r] = {g.name: data.oMg[k] for k, g in enumerate(geom.geometryObjects)}
+    assert placements[robot].keys() == placements[full].keys()
+    fingers = [n for n in placements[full] if "finger" in n]
+    assert fingers
+    for name, pose in placements[full].items():
+        assert pose.isApprox(placements[robot][name], 1e-12), name
+
+
+def test_copies_of_a_locked_robot_keep_what_was_locked() -> None:
+    import pickle
+
+    robot = pinobs.load("panda", lock={FINGERS[0]: 0.03})
+    assert robot.nv == 8
+    for copy in (
+        robot.copy(),
+        robot.perturbed(inertia_scale=np.ones(8)),
+        robot.with_model(robot.model.copy(), name="other"),
+        pickle.loads(pickle.dumps(robot)),
+    ):
+        assert copy.locked == {FINGERS[0]: 0.03}
+    again = pinobs.load(robot.source, lock=robot.locked)  # what it keeps reloads it
+    q = robot.random_configuration(np.random.default_rng(1))
+    np.testing.assert_array_equal(again.mass_matrix(q), robot.mass_matrix(q))
+
+
+def test_a_mimic_joint_that_is_locked_is_not_refused(tmp_path: Path) -> None:
+    from tests.model.test_sanity import ARM
+
+    arm = tmp_path / "arm.urdf"
+    mimic = '<mimic joint="j1" multiplier="2"/>'
+    arm.write_text(ARM.format(mimic=mimic, mass="1.0", ixx="0.02", iyy="0.02", izz="0.001"))
+    with pytest.raises(pinobs.ModelError, match="mimics"):
+        pinobs.load(arm)
+    assert pinobs.load(arm, lock=["j2"]).joint_names == ("j1",)
+
+
+def test_bad_locks_are_refused_naming_the_joint_and_what_is_valid() -> None:
+    with pytest.raises(
+        pinobs.UnknownNameError,
+        match=r"lock \(--lock\) names \['finger'\].*"
+        r"its joints: \['panda_joint1', .*'panda_finger_joint2'\]",
+    ) as info:
+        pinobs.load("panda", lock=["finger"])
+    assert isinstance(info.value, KeyError)
+    with pytest.raises(pinobs.UnknownNameError, match="did you mean 'panda_finger_joint1'"):
+        pinobs.load("panda", lock=["panda_finger_joint"])
+    with pytest.raises(pinobs.ModelTypeError, match=r"lock=\['panda_joint1'\] locks that joint"):
+        pinobs.load("panda", lock="panda_joint1")
+    with pytest.raises(pinobs.GainError, match=r"outside the position limits \[0, 0\.04\]"):
+        pinobs.load("panda", lock={FINGERS[0]: 0.5})
+    with pytest.raises(pinobs.GainError, match="more than once"):
+        pinobs.load("panda", lock=[FINGERS[0], FINGERS[0]])
+    with pytest.raises(pinobs.GainError, match="locks every moving joint"):
+        pinobs.load("planar_3r", lock=list(pinobs.load("planar_3r").joint_names))
+    with pytest.raises(pinobs.DimensionError, match="has nq = 1 coordinates"):
+        pinobs.load("panda", lock={FINGERS[0]: [0.01, 0.02]})
+    with pytest.raises(pinobs.NonFiniteError, match="not finite"):
+        pinobs.load("panda", lock={FINGERS[0]: float("nan")})
+
+
+def test_a_locked_joints_massless_bodies_are_not_refused() -> None:
+    # full romeo is refused for its massless hands (test_sanity); locking them loads it checked
+    full = pinobs.load("romeo", check=False)
+    hands = [n for n in full.joint_names if re.fullmatch(r"[LR](Hand|Finger\d+|Thumb\d+)", n)]
+    robot = pinobs.load("romeo", lock=hands)
+    assert robot.nv == full.nv - len(hands)

@@ -9,7 +9,7 @@ import pinobs
 from pinobs.cli import main
 from pinobs.io import write_log
 from pinobs.simulation import Sensor
-from tests.conftest import planar_3r_truth
+from tests.conftest import dropped_rows, planar_3r_truth
 
 
 @pytest.fixture(scope="module")
@@ -377,3 +377,34 @@ def test_identify_says_when_noisy_torques_defeat_the_refinement_and_runs_without
     assert rho >= 100 and "likely noisy" in line and "--no-refine" in line  # measured ~1.3e3
     assert main([*args, "--out", str(tmp_path / "plain.urdf"), "--no-refine"]) == 0
     assert "smoother consistency" not in capsys.readouterr().out  # nothing smoothed
+
+
+def _mass_matrix_error(model: pinobs.Robot, truth: pinobs.Robot) -> float:
+    rng = np.random.default_rng(0)
+    errs = []
+    for _ in range(20):
+        q = truth.random_configuration(rng)
+        m = truth.mass_matrix(q)
+        errs.append(np.abs(model.mass_matrix(q) - m).max() / np.abs(m).max())
+    return float(max(errs))
+
+
+def test_identify_runs_on_a_csv_with_dropped_rows_as_well_as_on_the_clean_one(
+    planar_log, tmp_path, capsys
+) -> None:
+    """8 % of the rows deleted (runs of 1 and 3–9): refused before ("resample the log onto a
+    uniform time grid").  Largest relative mass-matrix error against the truth, measured:
+    clean 9.95e-6, dropped 9.32e-6 (the refined fit, σ = 1e-5, seed 1: 0.94×)."""
+    log, truth = planar_log
+    data = np.loadtxt(log, delimiter=",", skiprows=1)
+    keep = dropped_rows(data.shape[0], 0.08, 1)
+    dropped = tmp_path / "dropped.csv"
+    write_log(dropped, data[keep, 0], data[keep, 1:4], data[keep, 4:7])
+    errors = []
+    for path in (log, dropped):
+        out = tmp_path / f"{path.stem}.urdf"
+        assert main(["identify", "--robot", "planar_3r", "--log", str(path), "--out", str(out)]) == 0
+        text = capsys.readouterr().out
+        assert "smoother consistency ρ" in text and "likely noisy" not in text
+        errors.append(_mass_matrix_error(pinobs.load(out, friction=True), truth))
+    assert errors[1] <= 1.2 * errors[0], errors

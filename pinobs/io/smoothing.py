@@ -357,10 +357,18 @@ def _recorded(
     samples_v = np.full((rec._n, nv), np.nan)
     samples_std = np.full((rec._n, nv), np.nan)
     stretches: list[dict[str, Any]] = []
+    # a gap's sub-steps (samples no row asks for) hold the torque before the gap: left out,
+    # the smoother puts the missing samples back on the log's ticks with their torques on
+    # the line across the gap (pinobs.model.sampling.on_ticks)
+    own = np.zeros(rec._n, dtype=bool)
+    own[idx[np.isfinite(idx)].astype(int)] = True
     first_k = 0
     for seg in rec.segments:
-        k = slice(first_k, first_k + len(seg))
+        k = np.arange(first_k, first_k + len(seg))
         first_k += len(seg)
+        kept = own[k]
+        k = k[kept]
+        seg = [s for s, o in zip(seg, kept, strict=True) if o]
         if len(seg) < 2:
             continue  # one sample: no velocity to smooth
         seg_t = np.array([s[0] for s in seg])

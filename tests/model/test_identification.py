@@ -22,7 +22,7 @@ from pinobs.model.identification import (
 )
 from pinobs.model.urdf_writer import write_urdf
 from pinobs.simulation import Sensor
-from tests.conftest import planar_3r_truth
+from tests.conftest import dropped_rows, planar_3r_truth, resampled_log
 
 ROBOTS = ["cartpole", "planar_3r", "ur5"]
 
@@ -484,3 +484,51 @@ def test_identify_options_are_checked_naming_the_value() -> None:
             identify(robot, log, **kwargs)
     with pytest.raises(pinobs.DimensionError, match=r"t \(N,\)"):
         identify(robot, (np.zeros((10, 1)), np.zeros((10, 3)), np.zeros((10, 3))))
+
+
+def _acceleration_error(model: pinobs.Robot, truth: pinobs.Robot) -> float:
+    """RMS of ``model``'s forward dynamics minus the truth's at 100 random states (seed 0)."""
+    rng = np.random.default_rng(0)
+    errs = []
+    for _ in range(100):
+        q, v, tau = truth.random_configuration(rng), rng.normal(size=truth.nv), rng.normal(size=3)
+        errs.append(model.forward_dynamics(q, v, tau) - truth.forward_dynamics(q, v, tau))
+    return float(np.sqrt(np.mean(np.square(errs))))
+
+
+def test_a_log_with_dropped_rows_is_identified_about_as_well_as_the_clean_log() -> None:
+    """8 % of the rows of 8 s planar_3r logs deleted (80 % of the losses single rows, the
+    others runs of 3–9), σ = 1e-4: it was refused ("timestamp jitter").  Acceleration
+    error against the truth, dropped over clean, measured: 0.995, 0.985, 0.963 (seeds 1–3;
+    seeds 4, 5: 1.138, 0.977); with pinobs.identify's refinement 0.518, 0.915, 1.127."""
+    robot = pinobs.load("planar_3r")
+    truth = planar_3r_truth(robot)
+    ratios = []
+    for seed in (1, 2, 3):
+        t, q, tau = _log(robot, truth, 8.0, 1e-4, seed)
+        keep = dropped_rows(t.size, 0.08, seed)
+        clean = identify(robot, (t, q, tau), offset=False)
+        dropped = identify(robot, (t[keep], q[keep], tau[keep]), offset=False)
+        assert dropped.report["rows"] >= 0.95 * clean.report["rows"]  # no window lost
+        ratios.append(_acceleration_error(dropped.robot, truth) / _acceleration_error(clean.robot, truth))
+    assert max(ratios) <= 1.2, ratios
+
+
+def test_an_irregularly_sampled_log_is_identified_about_as_well_as_the_clean_log() -> None:
+    """One 10 kHz run sampled every 1 ms and at intervals uniform in 0.5–1.5 ms (torques as
+    sampled), σ = 1e-4.  Acceleration error, irregular over clean, measured: 1.085, 1.058,
+    1.010 (seeds 1–3); seeds 4, 5 gave 0.574 and 1.764, the noise draw's luck more than
+    the sampling (seed 5's clean 1 kHz held log: 5× the error of this clean log), so the
+    test holds the geometric mean; at σ = 1e-6 (the method's own error) 0.97–1.19 over
+    seeds 1–5.  With pinobs.identify's refinement: 0.972, 0.797, 1.020."""
+    robot = pinobs.load("planar_3r")
+    truth = planar_3r_truth(robot)
+    ratios = []
+    for seed in (1, 2, 3):
+        clean_log, irregular_log = resampled_log(robot, truth, 8.0, 1e-4, seed)
+        clean = identify(robot, clean_log, offset=False, torque="sampled")
+        irregular = identify(robot, irregular_log, offset=False, torque="sampled")
+        ratios.append(
+            _acceleration_error(irregular.robot, truth) / _acceleration_error(clean.robot, truth)
+        )
+    assert float(np.exp(np.mean(np.log(ratios)))) <= 1.2, ratios

@@ -71,7 +71,9 @@ def resampled_log(
     logs = []
     for rows in (np.arange(0, n, 10), irregular[irregular < n]):
         noise_rng = np.random.default_rng(seed + 2)
-        q = np.array([plant.integrate(res.q[k], noise_rng.normal(0, noise, plant.nv)) for k in rows])
+        q = np.array(
+            [plant.integrate(res.q[k], noise_rng.normal(0, noise, plant.nv)) for k in rows]
+        )
         q[0] = res.q[rows[0]]
         logs.append((res.t[rows], q, np.array(res.tau[rows])))
     return logs[0], logs[1]

@@ -403,7 +403,9 @@ def test_identify_runs_on_a_csv_with_dropped_rows_as_well_as_on_the_clean_one(
     errors = []
     for path in (log, dropped):
         out = tmp_path / f"{path.stem}.urdf"
-        assert main(["identify", "--robot", "planar_3r", "--log", str(path), "--out", str(out)]) == 0
+        assert (
+            main(["identify", "--robot", "planar_3r", "--log", str(path), "--out", str(out)]) == 0
+        )
         text = capsys.readouterr().out
         assert "smoother consistency ρ" in text and "likely noisy" not in text
         errors.append(_mass_matrix_error(pinobs.load(out, friction=True), truth))

@@ -38,7 +38,19 @@ sensor's); the wrong one is off by ``h (τ(t₂) − τ(t₁))/2`` per window, a
 ∝ 1/rate (a 100 Hz excitation read as held: a spurious damping of 0.16 N·m·s/rad
 on planar_3r, 0.016 at 1 kHz; a UR5 simulation read as sampled: acceleration error
 0.15 against 2.7e-4).  The friction integrals use the trapezoidal rule at the full
-rate, the drift integral every ``stride``-th sample.  ``v`` and a
+rate, the drift integral every ``stride``-th sample.
+
+**Dropped samples and irregular sampling** (:mod:`pinobs.model.sampling`).  The
+integrals run over the log's true times: windows and quadrature nodes are placed
+in time (a node on the first row at or after each multiple of the stride, a
+dropped sample moving it to the next row, never splitting a window), a held
+torque's missing samples are taken on the line between their neighbours, and the
+Savitzky–Golay fit is made in real time.  Measured on 8 s planar_3r logs
+(σ = 1e-4, seeds 1–3, ``benchmarks/irregular_logs.py``): with 8 % of the rows
+dropped the acceleration error of the fit was 0.96–0.98× that of the clean log
+(``pinobs.identify``'s refined fit 0.51–1.12×); sampled at intervals uniform in
+0.5–1.5 ms, 0.54–0.96× (0.91–1.03×).  On a uniform log every row, window and
+number is what it was.  ``v`` and a
 smoothed ``q`` come from a zero-phase Savitzky–Golay fit of the measured
 path (:func:`smooth_path`), or are given (``identify(..., path=(q, v))``;
 ``pinobs.identify`` gives a model-based smoother's:
@@ -883,8 +895,7 @@ def segments(t: Vector, q: Vector, tau: Vector) -> list[slice]:
     out, start = [], None
     for k in range(t.shape[0]):
         ok = bool(good[k]) and (
-            start is None
-            or (0.0 < t[k] - t[k - 1] <= SPLIT_GAP_PERIODS * h and bool(good[k - 1]))
+            start is None or (0.0 < t[k] - t[k - 1] <= SPLIT_GAP_PERIODS * h and bool(good[k - 1]))
         )
         if ok and start is None:
             start = k
@@ -1061,8 +1072,10 @@ MAX_FILL = 3
 
 def fill_short_gaps(robot: Robot, t: Vector, q: Vector, tau: Vector) -> tuple[Vector, Vector, int]:
     """``(q, tau, n)``: runs of at most :data:`MAX_FILL` rows whose positions or torques are
-    not finite, between finite rows of uniform time steps, interpolated linearly in time (on
-    the configuration manifold for ``q``); ``n`` the rows filled.
+    not finite, between finite rows, interpolated linearly in time (on the configuration
+    manifold for ``q``); ``n`` the rows filled.  Not where the run and its neighbours span
+    more than 1.5 median intervals per step (dropped samples beside it: the interpolation
+    would span too long; the rows then split the log).
 
     A missing sample broke the log into stretches that each need their own smoothing
     start-up and lose their ends: with 2 % of a UR5 log's rows NaN (single rows), the
@@ -1080,7 +1093,7 @@ def fill_short_gaps(robot: Robot, t: Vector, q: Vector, tau: Vector) -> tuple[Ve
         if gap == 0 or gap > MAX_FILL or not np.all(np.isfinite(t[a : b + 1])):
             continue
         steps = np.diff(t[a : b + 1])
-        if np.any(np.abs(steps - h) > 0.1 * h):
+        if np.any(steps <= 0.0) or t[b] - t[a] > 1.5 * (gap + 1) * h:  # a drop beside them
             continue
         for k in range(a + 1, b):
             s = (t[k] - t[a]) / (t[b] - t[a])
@@ -1364,7 +1377,11 @@ def identify(
         log: anything with arrays ``t`` ``(N,)``, ``q`` ``(N, nq)``, ``tau``
             ``(N, nv)`` (a ``Log``), a simulation ``Result`` (its measured
             ``q_meas`` is used, never the truth), or a tuple ``(t, q, tau)``.
-            Rows with NaN are skipped; windows never straddle a gap.
+            Its intervals are used as they are: dropped samples (rows missing from a
+            fixed-rate loop's log) and irregular sampling (:mod:`pinobs.model.sampling`).
+            Short runs of NaN rows are filled (:func:`fill_short_gaps`), longer ones are
+            gaps; windows never straddle a gap, nor an interval longer than
+            :data:`~pinobs.model.sampling.SPLIT_GAP_PERIODS` median intervals.
         friction, offset: identify viscous/Coulomb friction and a torque offset.
         holdout: fraction of the log (its end) kept out of the fit to report
             the prediction error on unseen data.

@@ -103,7 +103,9 @@ def third_difference_std(
                 scale = np.sqrt(_THIRD_DIFF_GAIN / np.sum(w**2, axis=1))
                 rows = np.flatnonzero(uneven)
                 d = d.copy()
-                d[rows] = np.einsum("ki,kij->kj", w * scale[:, None], x[rows[:, None] + np.arange(4)])
+                d[rows] = np.einsum(
+                    "ki,kij->kj", w * scale[:, None], x[rows[:, None] + np.arange(4)]
+                )
     whole: NDArray[np.bool_] = (even[:-2] & even[1:-1] & even[2:]) | uneven  # d_k's four rows
     whole &= np.all(np.isfinite(d), axis=1)
     if np.count_nonzero(whole) < max(min_runs, 1):

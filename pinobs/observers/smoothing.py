@@ -73,6 +73,16 @@ samples out as each window closes; :func:`streaming_smoother` builds one), so
 a log read as it goes (:func:`pinobs.io.smoothing.smooth_log`) never needs
 more than ``chunk + overlap`` samples' states.
 
+A log with dropped samples (rows missing from a fixed-rate loop's log: an interval of
+``m ≥ 2`` median intervals) is smoothed on the grid of its ticks, each missing sample
+predicted over with its torque on the line between its neighbours'
+(:func:`pinobs.model.sampling.on_ticks`), the estimate given at the log's rows.  Fed
+the log as it is, the filter would hold the torque before each gap across it: on a
+4 s UR5 log of the exact model (σ = 1e-4) with 8 % of its rows dropped (runs of 1 and
+3–9) the velocity error was then 33× the clean log's, on the ticks 1.24× (1.04× with
+the missing samples' true torques: the rest is their interpolation).  An irregular
+log (intervals within 1.5 median intervals) is smoothed at its own times.
+
 A known measurement latency (``filter_options={"latency": d}``) re-times the log
 (:func:`_retimed`): each sample at the time it was taken, ``t − d``, each torque
 switching at its stamped time, the estimates read at the stamped times; it is then
@@ -2255,7 +2265,11 @@ def smooth(
         log: ``(t, q)`` or ``(t, q, tau)`` arrays (a tuple or a list, or a mapping with
             those keys), or an object with ``t``, ``q``, ``tau`` attributes
             (:class:`pinobs.io.Log`; a
-            :class:`pinobs.Result` is read through its ``q_meas``): times [s] ``(N,)`` strictly increasing;
+            :class:`pinobs.Result` is read through its ``q_meas``): times [s] ``(N,)`` strictly
+            increasing, at any intervals (an interval of ``m ≥ 2`` median intervals holds
+            ``m − 1`` samples the log lost: they are predicted over at their ticks, each
+            with its torque on the line between its neighbours',
+            :func:`pinobs.model.sampling.on_ticks`; ``options["missing_samples"]``);
             measured configurations ``(N, nq)``, a row with a non-finite entry
             being a dropped sample (predicted over, not corrected with; rows
             before the first good one get NaN); torques applied from each

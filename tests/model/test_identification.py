@@ -499,8 +499,10 @@ def _acceleration_error(model: pinobs.Robot, truth: pinobs.Robot) -> float:
 def test_a_log_with_dropped_rows_is_identified_about_as_well_as_the_clean_log() -> None:
     """8 % of the rows of 8 s planar_3r logs deleted (80 % of the losses single rows, the
     others runs of 3–9), σ = 1e-4: it was refused ("timestamp jitter").  Acceleration
-    error against the truth, dropped over clean, measured: 0.995, 0.985, 0.963 (seeds 1–3;
-    seeds 4, 5: 1.138, 0.977); with pinobs.identify's refinement 0.518, 0.915, 1.127."""
+    error against the truth, dropped over clean, measured: 0.977, 0.978, 0.959 (seeds 1–3;
+    seeds 4, 5: 1.138, 0.974); with pinobs.identify's refinement 0.514, 0.917, 1.122, 0.812,
+    0.995 (benchmarks/irregular_logs.py).  The bound, 1.2: a fit as good as the clean
+    log's, to within the seed-to-seed spread of these ratios."""
     robot = pinobs.load("planar_3r")
     truth = planar_3r_truth(robot)
     ratios = []
@@ -510,17 +512,18 @@ def test_a_log_with_dropped_rows_is_identified_about_as_well_as_the_clean_log() 
         clean = identify(robot, (t, q, tau), offset=False)
         dropped = identify(robot, (t[keep], q[keep], tau[keep]), offset=False)
         assert dropped.report["rows"] >= 0.95 * clean.report["rows"]  # no window lost
-        ratios.append(_acceleration_error(dropped.robot, truth) / _acceleration_error(clean.robot, truth))
+        ratios.append(
+            _acceleration_error(dropped.robot, truth) / _acceleration_error(clean.robot, truth)
+        )
     assert max(ratios) <= 1.2, ratios
 
 
 def test_an_irregularly_sampled_log_is_identified_about_as_well_as_the_clean_log() -> None:
     """One 10 kHz run sampled every 1 ms and at intervals uniform in 0.5–1.5 ms (torques as
-    sampled), σ = 1e-4.  Acceleration error, irregular over clean, measured: 1.085, 1.058,
-    1.010 (seeds 1–3); seeds 4, 5 gave 0.574 and 1.764, the noise draw's luck more than
-    the sampling (seed 5's clean 1 kHz held log: 5× the error of this clean log), so the
-    test holds the geometric mean; at σ = 1e-6 (the method's own error) 0.97–1.19 over
-    seeds 1–5.  With pinobs.identify's refinement: 0.972, 0.797, 1.020."""
+    sampled), σ = 1e-4.  Acceleration error, irregular over clean, measured: 0.541, 0.960,
+    0.768 (seeds 1–3; seeds 4, 5: 1.049, 0.929); with pinobs.identify's refinement 1.030,
+    0.908, 0.861, 1.016 (seeds 1–4; benchmarks/irregular_logs.py).  The two logs' noise
+    draws differ, which is most of the spread."""
     robot = pinobs.load("planar_3r")
     truth = planar_3r_truth(robot)
     ratios = []
@@ -531,4 +534,4 @@ def test_an_irregularly_sampled_log_is_identified_about_as_well_as_the_clean_log
         ratios.append(
             _acceleration_error(irregular.robot, truth) / _acceleration_error(clean.robot, truth)
         )
-    assert float(np.exp(np.mean(np.log(ratios)))) <= 1.2, ratios
+    assert max(ratios) <= 1.2, ratios

@@ -1565,9 +1565,9 @@ def test_a_log_with_dropped_rows_is_smoothed_about_as_well_as_the_clean_log() ->
 
 
 def test_cli_smooths_a_csv_with_dropped_rows_as_smooth_does(tmp_path) -> None:
-    """``estimate --smooth`` on a CSV with dropped rows (refused by identify before, smoothed
-    with the torque held across each gap here): one row per log row, equal to
-    :func:`smooth` on the same rows."""
+    """``estimate --smooth`` on a CSV with dropped rows: one row per log row, equal to
+    :func:`smooth` on the same rows (it held the torque before each gap of more than three
+    periods across it, and fed shorter ones as they were)."""
     from pinobs.cli import main
     from pinobs.io import write_log
 

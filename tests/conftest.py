@@ -77,3 +77,33 @@ def resampled_log(
         q[0] = res.q[rows[0]]
         logs.append((res.t[rows], q, np.array(res.tau[rows])))
     return logs[0], logs[1]
+
+
+def irregular_loop_log(
+    plant: pinobs.Robot, duration: float, noise: float, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A control loop run at intervals uniform in 0.5–1.5 ms, each torque held over its own
+    interval (``pd`` input about the configuration and reference ``pinobs.simulate`` draws
+    with ``seed``): ``(t, q, tau, v)``, ``q`` measured with white noise ``noise`` [rad]
+    (the first row exact), ``v`` the true velocity."""
+    from pinobs.simulation.inputs import make_input
+    from pinobs.simulation.run import _plant_step
+
+    rng = np.random.default_rng(seed)  # as simulate draws them
+    q = plant.random_configuration(rng, scale=0.3)
+    inputs = make_input("pd", plant, rng=rng, center=q)
+    steps = np.random.default_rng(seed + 1).uniform(0.5e-3, 1.5e-3, int(2 * duration / 0.5e-3))
+    t = np.concatenate([[0.0], np.cumsum(steps)])
+    t = t[t <= duration]
+    qs, vs, taus = [], [], []
+    v = np.zeros(plant.nv)
+    for k in range(t.size):
+        if k:
+            q, v = _plant_step(plant, q, v, taus[-1], t[k] - t[k - 1], 1)
+        qs.append(q)
+        vs.append(v)
+        taus.append(inputs.torque(t[k], q, v))
+    noise_rng = np.random.default_rng(seed + 2)
+    q_meas = np.array([plant.integrate(x, noise_rng.normal(0, noise, plant.nv)) for x in qs])
+    q_meas[0] = qs[0]
+    return t, q_meas, np.array(taus), np.array(vs)

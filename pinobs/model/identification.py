@@ -555,27 +555,36 @@ def _local_polynomial(
 ) -> tuple[Vector, Vector]:
     """``(û, u̇)`` at every row: the least-squares polynomial of degree ``order`` in time
     through the rows within ``reach + slack`` [s] of the row (near the ends, of the point
-    ``reach`` from the end), and its derivative: the Savitzky–Golay fit on uneven times."""
+    ``reach`` from the end), and its derivative: the Savitzky–Golay fit on uneven times.
+    The degree is lowered to fit the window with the fewest rows."""
     n = t.shape[0]
     radius = reach + slack
     centre = np.clip(t, t[0] + reach, t[-1] - reach)
     lo = np.searchsorted(t, centre - radius, side="left")
     hi = np.searchsorted(t, centre + radius, side="right")
     span = int(np.max(hi - lo))
+    fewest = int(np.min(hi - lo))
+    if fewest < 2:
+        raise IdentificationError(
+            f"a gap in the log leaves a row alone within ±{radius:.3g} s: no slope to fit there "
+            "(give a longer half window, or split the log at the gap)"
+        )
+    order = min(order, fewest - 1)  # a window the drops left with few rows: a lower degree
     u_s = np.empty_like(u)
     v = np.empty_like(u)
-    powers = np.arange(order + 1)
     for a in range(0, n, 512):  # in blocks: (rows, span, order + 1) per block
         k = np.arange(a, min(a + 512, n))
         idx = lo[k, None] + np.arange(span)[None, :]
         inside = idx < hi[k, None]
         idx = np.minimum(idx, n - 1)
-        x = (t[idx] - t[k, None]) / radius  # scaled: a well-conditioned Vandermonde
-        design = np.where(inside[..., None], x[..., None] ** powers, 0.0)
-        # the fit's first two coefficients: value and slope at the row
-        coef = np.linalg.pinv(design)[:, :2, :]
-        vals = u[idx] * inside[..., None]
-        fit = np.einsum("kcs,ksj->kcj", coef, vals)
+        x = (t[idx] - t[k, None]) / radius  # scaled to [-2, 2]: a well-conditioned Gram matrix
+        design = np.cumprod(np.broadcast_to(x[..., None], (*x.shape, order + 1)), axis=2)
+        design = np.concatenate([np.ones((*x.shape, 1)), design[..., :order]], axis=2)
+        design *= inside[..., None]
+        design_t = design.transpose(0, 2, 1)
+        gram = design_t @ design
+        rhs = design_t @ u[idx]
+        fit = np.linalg.solve(gram, rhs)  # the coefficients; the first two: value and slope
         u_s[k], v[k] = fit[:, 0], fit[:, 1] / radius
     return u_s, v
 

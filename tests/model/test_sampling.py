@@ -24,8 +24,8 @@ def test_missing_samples_count_the_lost_ticks_and_none_on_irregular_sampling(
     lost = missing_samples(t[keep])
     assert lost.sum() == t.size - keep.sum()
     assert set(lost.tolist()) <= {0, 1, *range(3, 10)}
-    irregular = np.cumsum(rng.uniform(0.5e-3, 1.49e-3, 5000))
-    assert not missing_samples(irregular, 1e-3).any()
+    irregular = np.cumsum(rng.uniform(0.5e-3, 1.5e-3, 5000))
+    assert not missing_samples(irregular).any()  # (the median a little under 1 ms)
 
 
 def test_held_integral_with_dropped_ticks_is_exact_for_a_torque_linear_across_each_gap() -> None:

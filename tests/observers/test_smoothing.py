@@ -44,7 +44,7 @@ from pinobs.observers.smoothing import (
     streaming_smoother,
 )
 from pinobs.simulation import Sensor, simulate
-from tests.conftest import cached_robot, dropped_rows
+from tests.conftest import cached_robot, dropped_rows, irregular_loop_log
 
 
 def _log(res: pinobs.Result) -> Log:
@@ -1585,3 +1585,21 @@ def test_cli_smooths_a_csv_with_dropped_rows_as_smooth_does(tmp_path) -> None:
     assert data.shape[0] == keep.sum()
     np.testing.assert_allclose(data[:, 7:13], want.v, rtol=0, atol=1e-9)
     assert np.sqrt(np.mean((want.v - res.v[1:][keep]) ** 2)) < 1e-3
+
+
+def test_an_irregularly_sampled_log_is_smoothed_about_as_well_as_the_clean_log() -> None:
+    """A UR5 control loop run at intervals uniform in 0.5–1.5 ms (torques held over each),
+    exact model, σ = 1e-4, against the 1 kHz run of the same reference: it is smoothed at
+    its own times, no sample taken as lost.  Velocity RMS error, irregular over clean,
+    measured: 0.86 (seed 1); 0.90, 1.04 (seeds 2, 3).  Taking its intervals from 1.5
+    periods on as a lost sample each (78 of them) made it 1.70."""
+    robot = cached_robot("ur5")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), duration=4.0, seed=1)
+    t, q, tau, v = irregular_loop_log(robot, 4.0, 1e-4, 1)
+    errors = []
+    for log, truth in (((res.t[1:], res.q_meas[1:], res.tau[1:]), res.v[1:]), ((t, q, tau), v)):
+        sm = smooth(robot, log, noise_std=1e-4)
+        inner = (log[0] > 0.2) & (log[0] < 3.8)
+        errors.append(float(np.sqrt(np.mean((sm.v - truth)[inner] ** 2))))
+    assert sm.options["missing_samples"] == 0
+    assert errors[1] <= 1.2 * errors[0], errors

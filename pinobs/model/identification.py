@@ -49,7 +49,7 @@ Savitzky–Golay fit is made in real time.  Measured on 8 s planar_3r logs
 (σ = 1e-4, seeds 1–3, ``benchmarks/irregular_logs.py``): with 8 % of the rows
 dropped the acceleration error of the fit was 0.96–0.98× that of the clean log
 (``pinobs.identify``'s refined fit 0.51–1.12×); sampled at intervals uniform in
-0.5–1.5 ms, 0.54–0.96× (0.91–1.03×).  On a uniform log every row, window and
+0.5–1.5 ms, 0.54–0.96× (0.93–1.07×).  On a uniform log every row, window and
 number is what it was.  ``v`` and a
 smoothed ``q`` come from a zero-phase Savitzky–Golay fit of the measured
 path (:func:`smooth_path`), or are given (``identify(..., path=(q, v))``;

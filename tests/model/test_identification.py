@@ -521,8 +521,8 @@ def test_a_log_with_dropped_rows_is_identified_about_as_well_as_the_clean_log() 
 def test_an_irregularly_sampled_log_is_identified_about_as_well_as_the_clean_log() -> None:
     """One 10 kHz run sampled every 1 ms and at intervals uniform in 0.5–1.5 ms (torques as
     sampled), σ = 1e-4.  Acceleration error, irregular over clean, measured: 0.541, 0.960,
-    0.768 (seeds 1–3; seeds 4, 5: 1.049, 0.929); with pinobs.identify's refinement 1.030,
-    0.908, 0.861, 1.016 (seeds 1–4; benchmarks/irregular_logs.py).  The two logs' noise
+    0.768 (seeds 1–3; seeds 4, 5: 1.049, 0.929); with pinobs.identify's refinement 1.071,
+    0.967, 0.931, 1.071, 0.939 (benchmarks/irregular_logs.py).  The two logs' noise
     draws differ, which is most of the spread."""
     robot = pinobs.load("planar_3r")
     truth = planar_3r_truth(robot)

@@ -267,7 +267,7 @@ def test_excite_refuses_a_directory_and_creates_missing_parents(tmp_path: Path, 
 
 # ------------------------------------------------------- sweep options (sweep findings)
 def test_sweep_observer_options_are_typed_ints_floats_and_booleans() -> None:
-    from pinobs.cli import _parse_sweep_observers
+    from pinobs.cli.sweep import _parse_sweep_observers
 
     parsed = _parse_sweep_observers(
         "a=adaptive:friction=False,h=highgain:order=3,ekf:disturbance_psd=1e-2,r=riemannian:x=true"
@@ -428,11 +428,11 @@ def test_demo_refuses_a_negative_seed_before_simulating(tmp_path: Path, capsys) 
 def test_run_refuses_unwritable_outputs_before_simulating(
     tmp_path: Path, capsys, monkeypatch, flag: str, target: str, match: str
 ) -> None:
-    import pinobs.cli
+    import pinobs.cli.run
 
     (tmp_path / "adir").mkdir()
     (tmp_path / "afile").write_text("x")
-    monkeypatch.setattr(pinobs.cli, "simulate", None)  # calling it would raise TypeError
+    monkeypatch.setattr(pinobs.cli.run, "simulate", None)  # calling it would raise TypeError
     path = tmp_path / target
     shown = path.parent if target.startswith("afile") else path
     code = main(["run", "--robot", "pendulum", "--observer", "kf", flag, str(path)])
@@ -552,9 +552,9 @@ def test_play_of_a_run_whose_robot_file_moved_gives_the_command_with_its_new_pat
 
 @pytest.mark.parametrize("spec", ["", ",,", " , "])
 def test_run_refuses_an_observer_list_without_a_name(capsys, monkeypatch, spec: str) -> None:
-    import pinobs.cli
+    import pinobs.cli.run
 
-    monkeypatch.setattr(pinobs.cli, "simulate", None)  # was: the whole run, then a TypeError
+    monkeypatch.setattr(pinobs.cli.run, "simulate", None)  # was: the whole run, then a TypeError
     assert main(["run", "--robot", "pendulum", "--observer", spec]) == 2
     assert "names no observer; give names (pinobs list) or 'all'" in capsys.readouterr().err
 
@@ -568,9 +568,9 @@ def test_run_all_in_a_list_skips_observers_that_refuse_the_robot(capsys) -> None
 def test_run_prints_why_an_observer_failed(capsys, monkeypatch) -> None:
     import dataclasses
 
-    import pinobs.cli
+    import pinobs.cli.run
 
-    real = pinobs.cli.simulate
+    real = pinobs.cli.run.simulate
 
     def failing(*args, **kwargs):
         res = real(*args, **kwargs)
@@ -578,7 +578,7 @@ def test_run_prints_why_an_observer_failed(capsys, monkeypatch) -> None:
         meta = {**res.meta, "failures": {"kf": "NonFiniteError at t = 0 s: q is nan"}}
         return dataclasses.replace(res, traces=(tr,), meta=meta)
 
-    monkeypatch.setattr(pinobs.cli, "simulate", failing)
+    monkeypatch.setattr(pinobs.cli.run, "simulate", failing)
     assert main(["run", "--robot", "pendulum", "--observer", "kf", "--duration", "0.1"]) == 0
     assert "failed kf: NonFiniteError at t = 0 s: q is nan" in capsys.readouterr().out
 
@@ -746,3 +746,55 @@ def test_play_of_a_locked_run_whose_robot_file_moved_gives_the_command_with_its_
     ]
     pytest.importorskip("matplotlib")
     assert main(command[1:]) == 0  # the command given works: the locked two-joint arm
+
+
+# ------------------------------------------------ the package (issue 37, item 3)
+def _subcommands() -> dict[str, object]:
+    import argparse
+
+    from pinobs.cli import _parser
+
+    return next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
+
+
+def test_help_synopsis_lists_every_subcommand_generated_from_its_parser(capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    head, sep, synopsis = text.partition("synopsis (pinobs COMMAND --help")
+    assert sep, text
+    lines = synopsis.splitlines()[1:]
+    assert [line.split()[:2] for line in lines] == [["pinobs", name] for name in _subcommands()]
+    for name in _subcommands():  # and each in the list argparse writes above it
+        assert re.search(rf"^    {name} ", head, re.M), name
+    assert "identify" in synopsis and "excite" in synopsis  # the hand-written one lacked them
+    # the required arguments come from the parsers: a mutually exclusive group, a positional
+    assert (
+        "  pinobs estimate --robot ROBOT --observer OBSERVER --log LOG (--out OUT | --out-dir "
+        "OUT_DIR) [options]"
+    ) in lines
+    assert "  pinobs check {ii} --robot ROBOT [options]" in lines
+    assert "  pinobs list" in lines
+
+
+def test_every_command_module_is_registered_once() -> None:
+    import pinobs.cli
+    from pinobs.cli import COMMANDS
+
+    shared = {"__init__", "__main__", "options", "output"}
+    files = {p.stem for p in Path(pinobs.cli.__file__).parent.glob("*.py")} - shared
+    modules = [getattr(c, "__name__", "").rsplit(".", 1)[-1] for c in COMMANDS]
+    assert sorted(modules) == sorted(files)
+    assert len(_subcommands()) == len(COMMANDS)
+
+
+def test_python_m_pinobs_cli_is_the_pinobs_command() -> None:
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-m", "pinobs.cli", "--help"], capture_output=True, text=True, check=False
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("usage: pinobs ") and "  pinobs demo" in out.stdout

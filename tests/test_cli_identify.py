@@ -318,7 +318,7 @@ def test_excite_refuses_a_huge_rate_and_names_continuous_joints(tmp_path, capsys
 
 
 def test_identify_report_says_what_consistency_moved_and_never_inf_percent(planar_log) -> None:
-    from pinobs.cli import _identify_report
+    from pinobs.cli.identify import _identify_report
 
     path, _ = planar_log
     robot = pinobs.load("planar_3r")

@@ -523,7 +523,7 @@ class LogTask:
     smooth: tuple[tuple[str, Any], ...] | None = None
     #: further options of the observer (``latency``), filtered or smoothed
     options: tuple[tuple[str, Any], ...] = ()
-    #: the log's clock (:func:`pinobs.io.process_log`'s ``clock``), filtered only
+    #: the log's clock (:func:`pinobs.io.process_log`'s ``clock``), filtered or smoothed
     clock: str = "auto"
 
 
@@ -689,7 +689,13 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
             told = run.consistency.messages(task.observer)
     else:
         run, stretches = smooth_log(
-            task.log, robot, task.out, observer=task.observer, **common, **dict(task.smooth)
+            task.log,
+            robot,
+            task.out,
+            observer=task.observer,
+            clock=task.clock,
+            **common,
+            **dict(task.smooth),
         )
         rho = _pooled_rho(stretches)
         said = any(smoothing_warnings(s["consistency"], s) for s in stretches)

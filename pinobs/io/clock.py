@@ -51,6 +51,7 @@ tracked).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
@@ -68,6 +69,8 @@ __all__ = [
     "ClockRepair",
     "ClockReport",
     "fit_clock",
+    "repaired_chunks",
+    "without_stale",
 ]
 
 #: What ``clock=`` (CLI ``--clock``) accepts.
@@ -82,12 +85,15 @@ CLEAR_RATIO = 0.7
 #: Moving interior rows needed for ``auto`` to judge.
 MIN_TRIPLES = 50
 #: The period is searched within ± this fraction of the median interval (divided by m).
-PERIOD_SEARCH = 0.1
+PERIOD_SEARCH = 0.05
 #: Rows the period is first searched on (by phase coherence).
 COHERENCE_ROWS = 512
 #: The stamps are a loop when their phase coherence about it is at least this many
 #: times the ``1/√N`` of stamps without one.
 COHERENT_SIGMAS = 5.0
+#: A loop the stamps were kept against is named in the report only if they are this close
+#: to it (RMS, in periods): a loop found, not the best fit of stamps without one.
+CREDIBLE_JITTER = 0.1
 #: Rows of the first window the clock is chosen on, and the window its fit follows.
 WINDOW_ROWS = 4000
 
@@ -138,7 +144,11 @@ class ClockReport:
             if self.stale and not self.repaired
             else ""
         )
-        if self.period is None:
+        if self.period is None or (
+            not self.repaired and self.jitter > CREDIBLE_JITTER * self.period
+        ):
+            # (the best loop fitted to stamps this far off it is no finding: UR10e logs
+            # stepping 10-12 ms gave "2.46 ms loops" with 0.5 ms RMS off them)
             return f"log clock: stamps kept ({self.reason}){stale}"
         loop = f"a {_ms(self.period)} loop"
         if self.step > 1.5:
@@ -246,13 +256,12 @@ def _coherent(tu: Floats, guess: float) -> tuple[float, float, float]:
     """The period near ``guess`` whose phase the stamps share most: ``(T0, P, coherence)``.
 
     ``|Σ exp(2πi t_k / P)| / N`` over a grid of ±``PERIOD_SEARCH`` around ``guess``
-    (the median interval is biased by drops and stale rows: 2 % on a 1 kHz log with
-    8 % drops), fine enough that the phase turns by under a tenth of a period over
-    ``tu``.  Uniform jitter of ±0.4 P leaves a coherence of 0.23 at the true period;
+    (the median interval is biased by drops: 2 % on a 1 kHz log with 8 % drops), fine enough that the phase turns by under a quarter of a period over
+    ``tu`` between grid points (the peak found within 3 % of its height).  Uniform jitter of ±0.4 P leaves a coherence of 0.23 at the true period;
     noise gives about ``1/√N``.
     """
     span = float(tu[-1] - tu[0]) or guess
-    count = int(min(max(2 * PERIOD_SEARCH * span / (0.1 * guess), 16), 4000))
+    count = int(min(max(2 * PERIOD_SEARCH * span / (0.25 * guess), 16), 4000))
     grid = guess * (1.0 + np.linspace(-PERIOD_SEARCH, PERIOD_SEARCH, count))
     x = tu - tu[0]
     z = np.exp(2j * np.pi * x[None, :] / grid[:, None]).sum(axis=1)
@@ -381,7 +390,11 @@ def fit_clock(
         raise OptionError(f"clock={mode!r}: use one of {', '.join(map(repr, CLOCK_MODES))}")
     t = np.asarray(t, dtype=float)
     q = np.asarray(q, dtype=float)
-    q = q.reshape(t.size, q.shape[-1] if q.ndim == 2 else -1) if t.size else q.reshape(0, -1 if q.size else 0)
+    q = (
+        q.reshape(t.size, q.shape[-1] if q.ndim == 2 else -1)
+        if t.size
+        else q.reshape(0, -1 if q.size else 0)
+    )
     n_rows = t.size
     rep = _repeats(q)
     quantum = _quantum(q) if n_rows > 2 else np.zeros(q.shape[1])
@@ -492,6 +505,10 @@ def fit_clock(
             )
         reason = f"the motion is smoother on the loop's clock: interpolation error {ratio:.2g}× the stamps'"
     elif counter:
+        if mode == "auto" and not stale.any() and jitter_max < 0.01 * p:
+            return kept(
+                f"the stamps agree with the sample counter to {_ms(jitter_max)}", p, **stats
+            )
         reason = "from its sample counter"
 
     # every row's tick: usable rows theirs, stale rows the one they repeat
@@ -685,3 +702,48 @@ class ClockRepair:
             rows=int(self._stats["rows"]),
         )
         return replace(chunk, t=t_out, stale=stale_out, drops=drops)
+
+
+def repaired_chunks(chunks: Iterator[Log], repair: ClockRepair) -> Iterator[Log]:
+    """``chunks`` through ``repair``, in order; the first one yielded even if empty."""
+    any_out = False
+    last: Log | None = None
+    for chunk in chunks:
+        last = chunk
+        for out in repair.feed(chunk):
+            any_out = True
+            yield out
+    for out in repair.finish():
+        any_out = True
+        yield out
+    if not any_out and last is not None:
+        yield last
+
+
+def without_stale(log: Log, *, mode: str = "auto") -> tuple[Log, ClockReport]:
+    """A whole log on its loop's clock with its stale rows left out, for what needs one
+    sample per row (identification); and the report.  The rows left out are counted in
+    the report (``stale``), not lost silently."""
+    fit = fit_clock(log.t, log.q, mode=mode, tick=log.tick)
+    if not fit.report.repaired:
+        return log, fit.report
+    keep = ~fit.stale
+    kept_lines = {int(x) for x in np.asarray(log.lines)[keep]}
+
+    def cut(x: Any) -> Any:
+        return None if x is None else np.asarray(x)[keep]
+
+    return (
+        replace(
+            log,
+            t=fit.t[keep],
+            q=log.q[keep],
+            tau=cut(log.tau),
+            problems=tuple(p for p in log.problems if p[0] in kept_lines),
+            lines=np.asarray(log.lines)[keep],
+            tick=cut(log.tick),
+            stale=None,
+            drops=fit.drops[keep],
+        ),
+        fit.report,
+    )

@@ -30,7 +30,8 @@ Formats (chosen from the source):
   ``sensor_msgs/JointState`` messages on ``topic`` (default: the only
   JointState topic), joints matched by name in any order, ``position`` as q,
   ``effort`` as τ, the header stamp as t (the bag's receive time when the first
-  message's stamp is unset, 0: said in :attr:`Log.problems`).
+  message's stamp is unset, 0: said in :attr:`Log.problems`); a ROS 1 header's ``seq`` as
+  the sample counter (:attr:`Log.tick`, used by the clock repair).
 
 A clean CSV/TSV is read by Arrow's streaming CSV reader straight into NumPy
 (fast, and without importing pandas); from the first row it cannot parse as
@@ -71,7 +72,16 @@ from pinobs.model.robot import Vector
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["CHUNK_ROWS", "Log", "LogSource", "concat_logs", "find_logs", "iter_log", "read_log"]
+__all__ = [
+    "CHUNK_ROWS",
+    "Log",
+    "LogSource",
+    "chain_chunks",
+    "concat_logs",
+    "find_logs",
+    "iter_log",
+    "read_log",
+]
 
 #: Rows per chunk when streaming a log.
 CHUNK_ROWS = 10_000
@@ -823,6 +833,7 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
         buf_q: list[Vector] = []
         buf_tau: list[Vector] = []
         buf_n: list[int] = []  # message numbers (messages of another publisher are skipped)
+        buf_seq: list[float] | None = []  # ROS 1 header.seq: the sample counter (pinobs.io.clock)
         problems: list[tuple[int, str]] = []
         start = 0
         skipped: list[int] = []
@@ -854,6 +865,11 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
                 notes.append("header stamp unset (0)")
             buf_t.append(1e-9 * received if receive_time else stamp)
             buf_n.append(number)
+            seq = getattr(msg.header, "seq", None)  # ROS 2 headers have none
+            if seq is None:
+                buf_seq = None
+            elif buf_seq is not None:
+                buf_seq.append(float(seq))
             eff = np.asarray(msg.effort, dtype=float)
             q = np.full(robot.nq, np.nan)
             tau = np.full(robot.nv, np.nan)
@@ -878,9 +894,12 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
             buf_q.append(q)
             buf_tau.append(tau)
             if len(buf_t) == chunk_rows:
-                yield _bag_log(buf_t, buf_q, buf_tau, buf_n, problems, any_tau, robot.nq, robot.nv)
+                yield _bag_log(
+                    buf_t, buf_q, buf_tau, buf_n, problems, any_tau, robot.nq, robot.nv, (), buf_seq
+                )
                 start += len(buf_t)
                 buf_t, buf_q, buf_tau, buf_n, problems = [], [], [], [], []
+                buf_seq = None if buf_seq is None else []
         if skipped and not start and not buf_t:
             raise DimensionError(
                 f"bag {str(path)!r}, topic {topic!r}: the JointState joints {sorted(others)} "
@@ -895,7 +914,7 @@ def _bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) ->
             )
         if buf_t or start == 0 or said:
             yield _bag_log(
-                buf_t, buf_q, buf_tau, buf_n, problems, any_tau, robot.nq, robot.nv, said
+                buf_t, buf_q, buf_tau, buf_n, problems, any_tau, robot.nq, robot.nv, said, buf_seq
             )
     finally:
         reader.close()
@@ -911,6 +930,7 @@ def _bag_log(
     nq: int,
     nv: int,
     notes: tuple[str, ...] = (),
+    seq: list[float] | None = None,
 ) -> Log:
     n = len(t)
     return Log(
@@ -921,10 +941,18 @@ def _bag_log(
         lines=np.array(numbers, dtype=int),
         unit="message",
         notes=notes,
+        tick=None if seq is None or len(seq) != n else np.array(seq, dtype=float),
     )
 
 
 # ------------------------------------------------------------------- public
+def chain_chunks(first: Log, rest: Iterator[Log]) -> Iterator[Log]:
+    """``first``, then the chunks of ``rest``: an :func:`iter_log` whose first chunk was
+    taken to look at (its period, its σ) and must still be run."""
+    yield first
+    yield from rest
+
+
 def iter_log(
     source: LogSource,
     robot: Robot,

@@ -32,12 +32,11 @@ from typing import Any, Literal
 import numpy as np
 
 from pinobs.errors import PinobsError
-from pinobs.io.readers import CHUNK_ROWS, LogSource, iter_log
+from pinobs.io.clock import ClockRepair, repaired_chunks
+from pinobs.io.readers import CHUNK_ROWS, LogSource, chain_chunks, iter_log
 from pinobs.io.stream import (
     LogEstimator,
     LogRun,
-    _chain,
-    _median_period,
     time_screened,
     time_unit_warning,
 )
@@ -45,12 +44,12 @@ from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.model.sampling import missing_samples
-from pinobs.observers.base import NOISE_FLOOR, Estimate, observer_class, positive
+from pinobs.observers.base import NOISE_FLOOR, Estimate, median_period, observer_class, positive
 from pinobs.observers.smoothing import (
     Smoother,
-    _smooth,
     latency_note,
     log_noise_std,
+    smooth_quietly,
     smoothing_warnings,
     streaming_smoother,
 )
@@ -185,6 +184,7 @@ def smooth_log(
     chunk_rows: int = CHUNK_ROWS,
     stream: bool = True,
     band: str | None = None,
+    clock: str = "auto",
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Smooth a log file into ``out`` (module docstring); returns the row accounting and
     the smoother's options of each stretch (with its ``consistency``,
@@ -212,6 +212,8 @@ def smooth_log(
         chunk_rows: rows read at a time (:func:`pinobs.io.iter_log`).
         stream: stream when possible (module docstring); ``False``: keep the samples and
             smooth at the end (the same numbers, more memory).
+        clock: the log's clock, as :func:`pinobs.io.process_log` (stale rows give the
+            smoothed estimate of the sample they repeat).
 
     Raises:
         OutputExistsError: ``out`` exists (without ``force``) or is the input.
@@ -233,10 +235,13 @@ def smooth_log(
     )
     unit: str | None = None  # t in another unit than seconds: said with any failure
     try:
-        chunks = iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows)
+        repair = ClockRepair(clock)
+        chunks = repaired_chunks(
+            iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows), repair
+        )
         first = next(chunks)
-        period = 1.0 / rate if rate else _median_period(first.t)
-        unit = time_unit_warning(_median_period(first.t))
+        period = 1.0 / rate if rate else median_period(first.t)
+        unit = time_unit_warning(median_period(first.t))
         said, sigma_joint = [], None
         if noise_std is None and not len(first):  # (a sweep found an empty log "give noise_std")
             noise_std = NOISE_FLOOR
@@ -265,6 +270,9 @@ def smooth_log(
         writer.abort()
         raise
     run.warnings[:0] = said
+    run.clock = repair.report
+    if run.clock is not None and (run.clock.repaired or run.clock.stale):
+        run.warnings.insert(0, run.clock.message())
     for i, opts in enumerate(stretches):  # what pinobs.smooth warns, per stretch
         note = latency_note(opts)
         for told in ([] if note is None else [note]) + smoothing_warnings(
@@ -336,7 +344,7 @@ def _streamed(
         if rows:
             writer.write(*(np.array(c) for c in zip(*rows, strict=True)))
 
-    for c in _chain(first, chunks):
+    for c in chain_chunks(first, chunks):
         t, _, idx = est.feed(c)
         pending.extend(zip(t.tolist(), idx[:, 0].tolist(), strict=True))
         drain(False)
@@ -381,7 +389,7 @@ def _recorded(
     """Every screened sample kept, each stretch smoothed at the end."""
     rec = _Recorder(robot, observer)
     est = LogEstimator(rec, period=period, check_v=False)
-    parts = [est.feed(c) for c in _chain(first, chunks)]
+    parts = [est.feed(c) for c in chain_chunks(first, chunks)]
     parts.append(est.finish())
     t = np.concatenate([p[0] for p in parts])
     idx = np.concatenate([p[2][:, 0] for p in parts])  # sample number, NaN: no estimate
@@ -402,7 +410,7 @@ def _recorded(
         seg_t = np.array([s[0] for s in seg])
         seg_q = np.array([np.full(robot.nq, np.nan) if s[1] is None else s[1] for s in seg])
         seg_tau = np.array([s[2] for s in seg])
-        res = _smooth(  # the consistency is reported in the run's warnings (smooth_log)
+        res = smooth_quietly(  # the consistency is reported in the run's warnings (smooth_log)
             robot,
             (seg_t, seg_q, seg_tau),
             observer=observer,

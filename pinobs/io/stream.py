@@ -40,7 +40,7 @@ the row joined; positions are file lines (CSV) or row / message numbers.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -59,8 +59,8 @@ from pinobs.errors import (
     PinobsWarning,
     TimestampWarning,
 )
-from pinobs.io.clock import ClockRepair, ClockReport
-from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, concat_logs, iter_log
+from pinobs.io.clock import ClockRepair, ClockReport, repaired_chunks
+from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, chain_chunks, concat_logs, iter_log
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
@@ -589,7 +589,7 @@ def process_log(
             ``"loop"`` (always the loop's clock).
     """
     repair = ClockRepair(clock)
-    chunks = _repaired(
+    chunks = repaired_chunks(
         iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows), repair
     )
     first = next(chunks)
@@ -600,7 +600,14 @@ def process_log(
         if noise_std is None:
             timed = time_screened(first.t)
             found = noise_from_log(first.t[timed], first.q[timed], robot)
-            if found is not None:
+            if found is not None and found[0] < 1e-12:  # a still robot, positions quantised
+                # (a static UR10e pose printed to 4 decimals gave 3.7e-17, refused by make_observer)
+                warnings.append(
+                    f"the noise level estimated from the log is {found[0]:.3g} (the positions do "
+                    "not move in its first second): the observer's default σ is used; pass "
+                    "noise_std (--noise)"
+                )
+            elif found is not None:
                 noise_std, sigma_joint, said = found
                 warnings.append(said)
             else:
@@ -628,7 +635,7 @@ def process_log(
     parts: list[tuple[Vector, Vector, Vector]] = []
     unit = first.unit
     try:
-        for chunk in _chain(first, chunks):
+        for chunk in chain_chunks(first, chunks):
             part = est.feed(chunk)
             if writer is not None:
                 writer.write(*part)
@@ -667,30 +674,9 @@ def process_log(
     return run
 
 
-def _repaired(chunks: Iterator[Log], repair: ClockRepair) -> Iterator[Log]:
-    """``chunks`` through the clock repair, in order; the first one yielded even if empty."""
-    any_out = False
-    last: Log | None = None
-    for chunk in chunks:
-        last = chunk
-        for out in repair.feed(chunk):
-            any_out = True
-            yield out
-    for out in repair.finish():
-        any_out = True
-        yield out
-    if not any_out and last is not None:
-        yield last
-
-
 def _consistency(observer: Any) -> Any:
     check = getattr(observer, "consistency", None)
     return check() if callable(check) else None
-
-
-def _chain(first: Log, rest: Iterator[Log]) -> Iterator[Log]:
-    yield first
-    yield from rest
 
 
 def estimate_log(observer: ObserverLike, log: Log, *, period: float | None = None) -> LogRun:

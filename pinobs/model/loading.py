@@ -40,7 +40,7 @@ from pinobs.model.robot import Robot
 from pinobs.model.sanity import check_model, check_urdf
 from pinobs.model.urdf import read_urdf
 
-__all__ = ["LockSpec", "RobotEntry", "load", "robot_entries", "robot_names"]
+__all__ = ["LockSpec", "RobotEntry", "load", "resolve_source", "robot_entries", "robot_names"]
 
 #: Joints to lock: names (each at its neutral value, ``pin.neutral``), or name → value: a
 #: float for a one-dof joint (revolute or prismatic [rad or m]; continuous: its angle [rad]),
@@ -313,8 +313,9 @@ def _is_urdf(path: Path) -> bool:
     return _root_tag(path) == "robot"
 
 
-def _resolve(source: str | Path) -> tuple[Path, list[Path], str, str]:
-    """Return (file, package dirs, default root joint, display name) for ``source``."""
+def resolve_source(source: str | Path) -> tuple[Path, list[Path], str, str]:
+    """Return (file, package dirs, default root joint, display name) for ``source``, a
+    registry name or a URDF/MJCF path (as :func:`load` takes it; its errors)."""
     entry = _all_entries().get(str(source))
     if entry is not None:
         if entry.origin == _PINOBS:
@@ -878,7 +879,7 @@ def load(
             "name (pinobs.robot_names()), a path to a URDF/MJCF file, a pinocchio.Model or a "
             "pinocchio.RobotWrapper"
         )
-    path, default_dirs, default_root, name = _resolve(source)
+    path, default_dirs, default_root, name = resolve_source(source)
     root = default_root if root_joint is None else root_joint
     if root not in _ROOT_JOINTS:
         raise GainError(

@@ -105,10 +105,10 @@ def _fix_locked(robot: Robot, joints: dict[str | None, ET.Element], source: Path
 def _source_urdf(robot: Robot) -> tuple[Path, list[Path]]:
     """The URDF ``robot`` was loaded from, and the package directories its meshes were
     searched in (those given to :func:`pinobs.load`, then the registry's)."""
-    from pinobs.model.loading import _resolve
+    from pinobs.model.loading import resolve_source
 
     try:
-        path, dirs = _resolve(robot.source)[:2]
+        path, dirs = resolve_source(robot.source)[:2]
     except Exception as exc:  # unknown name, missing file: say what we need
         raise ModelFileError(
             f"cannot find the URDF robot {robot.name!r} came from ({robot.source!r}): {exc}"

@@ -124,9 +124,9 @@ from pinobs.model.identification import (
     solve,
 )
 from pinobs.observers.base import LIKELY_CAUSES, Consistency, Vector, positive, register
-from pinobs.observers.ekf import ExtendedKalmanFilter, _LazyKernel
-from pinobs.observers.ekf import _State as _EKFState
+from pinobs.observers.ekf import EKFState, ExtendedKalmanFilter
 from pinobs.observers.kf import BankState, KFBank
+from pinobs.observers.linalg import LazyKernel
 from pinobs.tolerances import TIME_EPS
 
 __all__ = ["AdaptiveEKF", "ModelSnapshot"]
@@ -151,7 +151,7 @@ class ModelSnapshot(NamedTuple):
 
 
 class _State(NamedTuple):
-    ekf: _EKFState
+    ekf: EKFState
     kf: BankState  # one filter per white-jerk density of the bank
     score: Vector  # (filters, nv): running mean squared innovation of each kf per coordinate
     t: float
@@ -423,7 +423,7 @@ _NIS_TRUSTED = 2.0
 _NIS_REVOKED = 10.0
 
 
-def _lost(ekf: _EKFState) -> bool:
+def _lost(ekf: EKFState) -> bool:
     """Whether a model-based filter state's estimate or covariance holds NaN or ±inf."""
     return not math.isfinite(ekf.v.sum() + ekf.P.sum())
 
@@ -472,7 +472,7 @@ def _blend_loops(
     return score_out, s_out, q_out, v_out
 
 
-_blend_kernel = _LazyKernel(
+_blend_kernel = LazyKernel(
     _blend_loops,
     np.zeros((1, 1)), np.zeros((1, 1)), True, 0.5, np.zeros((1, 1)), np.zeros((1, 1)),
     np.tile(np.eye(3), (1, 1, 1)), np.zeros(1), np.zeros(1), np.zeros(1), 0.5,
@@ -698,7 +698,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         }
         return replace(base, details=details)
 
-    def _set_regime(self, state: _EKFState, regime: str) -> _EKFState:
+    def _set_regime(self, state: EKFState, regime: str) -> EKFState:
         """Switch the process noise: ``warmup`` (nominal model not trusted yet), ``nominal``
         (a solve found nothing better: the exact-model densities), ``learned`` (a learned model)."""
         self.regime = regime
@@ -708,7 +708,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             return state
         return state._replace(d_psd=dist * self._m_bar2)  # per joint, as ekf: psd · M̄ᵢᵢ²
 
-    def _install(self, state: _EKFState) -> _EKFState:
+    def _install(self, state: EKFState) -> EKFState:
         """Install the learner's model: friction that cannot be stiff (``λᵢ h ≤``
         :data:`_HELD_FRICTION_STIFFNESS`) as a held input, the rest in the filter's model."""
         lr = self._learner

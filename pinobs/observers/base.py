@@ -57,6 +57,7 @@ from pinobs.tolerances import (
 )
 
 __all__ = [
+    "NOISE_FLOOR",
     "Consistency",
     "Estimate",
     "Observer",
@@ -88,7 +89,9 @@ NOISE_STD_RANGE = (1e-12, 1e3)
 
 #: Without ``rate``, the sample period is the median of this many first intervals.
 _PERIOD_INTERVALS = 5
-#: [rad or m] σ̂ at or below this is taken for noise-free data: nothing is retuned.
+#: [rad or m] The σ of noise-free data: the σ a family assumes when built without
+#: ``noise_std`` (or with 0), and a σ̂ at or below it is taken for noise-free data
+#: (nothing is retuned: the family keeps that default).
 NOISE_FLOOR = 1e-6
 
 

@@ -81,7 +81,7 @@ from pinobs.model import identification as ident_model
 from pinobs.model.identification import MAX_CONDITION, Identification, log_arrays, segments
 from pinobs.observers.base import Vector, positive
 from pinobs.observers.noise import noise_from_log
-from pinobs.observers.smoothing import _smooth
+from pinobs.observers.smoothing import smooth_quietly
 
 __all__ = ["REFINE_ACCEL_PSD", "REFINE_DISTURBANCE_PSD", "identify"]
 
@@ -217,7 +217,7 @@ def _smoothed_path(
         if seg.stop - seg.start < 3:
             continue
         try:
-            sm = _smooth(  # its consistency is not the user's concern here
+            sm = smooth_quietly(  # its consistency is not the user's concern here
                 robot,
                 (t[seg], q[seg], tau[seg] + ident.offset),
                 noise_std=noise_std,

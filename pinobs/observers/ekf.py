@@ -33,7 +33,8 @@ constant blocks are written once; ``Q_d`` is cached per sample interval.  For
 imported and loaded by the constructor; compiled once per installation with
 ``cache=True``), where NumPy would spend its time dispatching a dozen
 12 × 12 operations; above, NumPy (BLAS products, a LAPACK Cholesky).  Both
-paths are tested equal to the dense pre-optimisation implementation to 1e-12.
+paths live in :mod:`pinobs.observers.linalg`, shared with the other filters,
+and are tested equal to the dense pre-optimisation implementation to 1e-12.
 
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
 ``τ_f = −D v − F_c tanh(v/v_s)``) makes the error dynamics stiff near ``v = 0``:
@@ -117,8 +118,6 @@ friction, vary as fast as the motion).
 from __future__ import annotations
 
 import functools
-import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -128,6 +127,7 @@ from pinobs.errors import DimensionError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.integrators import friction_substeps
 from pinobs.observers.base import (
+    NOISE_FLOOR,
     Observer,
     Vector,
     gate_nis,
@@ -136,23 +136,22 @@ from pinobs.observers.base import (
     positive,
     register,
 )
+from pinobs.observers.linalg import (
+    identity,
+    joseph_update,
+    scaled_identity,
+    stiff_transition_matrix,
+    transition_matrix,
+    warm_linear_algebra,
+)
 
 __all__ = [
     "EKFGains",
+    "EKFState",
     "ExtendedKalmanFilter",
     "ad_matrix",
-    "cholesky_solve",
     "double_integrator_noise",
-    "joseph_update",
-    "stiff_transition_matrix",
-    "transition_matrix",
-    "warm_linear_algebra",
 ]
-
-_NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std (or 0) is given
-
-
-_SERIES_NORM = 0.25  # ‖A h‖∞ up to which the third-order series is used as it is (error < 1e-4)
 
 
 def ad_matrix(robot: Robot, v: Vector) -> Vector:
@@ -164,77 +163,6 @@ def ad_matrix(robot: Robot, v: Vector) -> Vector:
         return robot.bracket_matrix(v)
     eye = np.eye(nv)
     return np.column_stack([robot.bracket(v, eye[:, j]) for j in range(nv)])
-
-
-@functools.lru_cache(maxsize=8)
-def _eye(n: int) -> Vector:
-    eye = np.eye(n)
-    eye.setflags(write=False)
-    return eye
-
-
-@functools.lru_cache(maxsize=32)
-def _scaled_eye(n: int, scale: float) -> Vector:
-    out = scale * np.eye(n)
-    out.setflags(write=False)
-    return out
-
-
-def _transition_loops(A: Vector, h: float, out: Vector) -> None:
-    """:func:`transition_matrix` in loops (compiled by numba for small matrices)."""
-    n = A.shape[0]
-    inner = np.empty((n, n))  # I + Ah/3
-    for i in range(n):
-        for j in range(n):
-            inner[i, j] = A[i, j] * h / 3.0 + (1.0 if i == j else 0.0)
-    mid = np.empty((n, n))  # I + (Ah/2)(I + Ah/3)
-    for i in range(n):
-        for j in range(n):
-            t = 0.0
-            for k in range(n):
-                t += A[i, k] * inner[k, j]
-            mid[i, j] = 0.5 * h * t + (1.0 if i == j else 0.0)
-    for i in range(n):
-        for j in range(n):
-            t = 0.0
-            for k in range(n):
-                t += A[i, k] * mid[k, j]
-            out[i, j] = h * t + (1.0 if i == j else 0.0)
-
-
-def transition_matrix(A: Vector, h: float) -> Vector:
-    """``exp(A h)`` to third order, ``I + Ah(I + Ah/2 (I + Ah/3))`` (module docstring), a new array."""
-    if A.shape[0] <= 2 * _KERNEL_MAX_NV and _transition_kernel.compiled is not None:
-        out = np.empty_like(A)
-        _transition_kernel.compiled(A, float(h), out)
-        return out
-    Ah = A * h
-    eye = _eye(A.shape[0])
-    inner = Ah / 3.0
-    inner += eye
-    mid = (0.5 * Ah).dot(inner)
-    mid += eye
-    out = Ah.dot(mid)
-    out += eye
-    return out
-
-
-def stiff_transition_matrix(A: Vector, h: float) -> Vector:
-    """``exp(A h)`` for any ``‖A h‖``: the third-order series of :func:`transition_matrix` on
-    ``A h / 2ˢ`` squared ``s`` times, ``s`` the least with ``‖A h‖∞ / 2ˢ ≤ 1/4``
-    (Moler & Van Loan 2003, "Nineteen dubious ways", method 3: scaling and squaring).
-
-    Needed where the smoothed Coulomb friction makes ``A`` stiff (module docstring);
-    equal to :func:`transition_matrix` when ``‖A h‖∞ ≤ 1/4``.
-    """
-    norm = float(np.abs(A).sum(axis=1).max()) * h
-    if not math.isfinite(norm):  # a lost filter's Jacobian: NaN, reported by its caller
-        return np.full_like(A, np.nan)
-    s = 0 if norm <= _SERIES_NORM else math.ceil(math.log2(norm / _SERIES_NORM))
-    Phi = transition_matrix(A, h / 2**s)
-    for _ in range(s):
-        Phi = Phi.dot(Phi)
-    return Phi
 
 
 @functools.lru_cache(maxsize=64)
@@ -252,152 +180,6 @@ def double_integrator_noise(nv: int, h: float, psd: float) -> Vector:
     a handful of values at a fixed rate), so it is built once per value.
     """
     return _double_integrator_noise(nv, float(h), float(psd))
-
-
-@functools.cache
-def _posv() -> Any:
-    """LAPACK ``dposv`` (Cholesky solve), imported on first use: ``scipy.linalg`` costs
-    0.2 s at import, and ``np.linalg.solve`` 5× more per call on these small systems."""
-    from scipy.linalg.lapack import dposv  # lazy: start-up time
-
-    return dposv
-
-
-def cholesky_solve(S: Vector, B: Vector) -> tuple[Vector, bool]:
-    """``(S⁻¹ B, ok)`` for a symmetric positive definite ``S`` (LAPACK ``dposv``, upper triangle).
-
-    ``ok`` is False when ``S`` is not positive definite; the result then comes
-    from the general ``np.linalg.solve``, or is NaN if ``S`` is singular (a
-    diverged filter, which :meth:`Observer.update` reports).
-    """
-    _, x, info = _posv()(S, B)
-    if info == 0:
-        return x, True
-    try:
-        return np.linalg.solve(S, B), False
-    except np.linalg.LinAlgError:  # singular or not finite: NaN, reported by the caller
-        return np.full(B.shape, np.nan), False
-
-
-def _joseph_loops(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bool:
-    """:func:`joseph_update`'s arithmetic in loops (compiled by numba for small ``nv``).
-
-    Cholesky ``S = L Lᵀ`` of ``S = P_qq + r I`` (lower triangle of ``P``),
-    ``Kᵀ = S⁻¹ P_q·`` by two triangular solves, then ``C = P − K P_q·``,
-    ``P⁺ = sym(C − (C_·q − r K) Kᵀ)`` and ``dx = K e`` into ``dx`` and ``out``.
-    Returns False (outputs undefined) when ``S`` is not positive definite.
-    """
-    n, nv = P.shape[0], e.shape[0]
-    L = np.zeros((nv, nv))
-    for j in range(nv):
-        d = P[j, j] + r
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            return False
-        L[j, j] = math.sqrt(d)
-        for i in range(j + 1, nv):
-            t = P[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / L[j, j]
-    Kt = np.empty((nv, n))
-    for c in range(n):  # L y = B[:, c], then Lᵀ x = y
-        for i in range(nv):
-            t = P[i, c]
-            for k in range(i):
-                t -= L[i, k] * Kt[k, c]
-            Kt[i, c] = t / L[i, i]
-        for i in range(nv - 1, -1, -1):
-            t = Kt[i, c]
-            for k in range(i + 1, nv):
-                t -= L[k, i] * Kt[k, c]
-            Kt[i, c] = t / L[i, i]
-    C = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            t = P[i, j]
-            for k in range(nv):
-                t -= Kt[k, i] * P[k, j]
-            C[i, j] = t
-    for i in range(n):
-        for j in range(n):
-            t = C[i, j]
-            for k in range(nv):
-                t -= (C[i, k] - r * Kt[k, i]) * Kt[k, j]
-            out[i, j] = t
-    for i in range(n):
-        for j in range(i):
-            m = 0.5 * (out[i, j] + out[j, i])
-            out[i, j] = m
-            out[j, i] = m
-        t = 0.0
-        for k in range(nv):
-            t += Kt[k, i] * e[k]
-        dx[i] = t
-    return True
-
-
-class _LazyKernel:
-    """A numba-compiled function, built on :meth:`load` (``import pinobs`` does not import
-    numba); ``compiled`` is ``None`` until then.  ``cache=True``: compiled once per
-    installation, then loaded from numba's cache."""
-
-    def __init__(self, fn: Callable[..., Any], *warm_args: Any) -> None:
-        self.fn, self.warm_args = fn, warm_args
-        self.compiled: Callable[..., Any] | None = None
-
-    def load(self) -> None:
-        if self.compiled is None:
-            import numba  # lazy: start-up time
-
-            kernel = numba.njit(cache=True)(self.fn)
-            kernel(*self.warm_args)  # load (or compile) the float64 signature now
-            self.compiled = kernel
-
-
-_KERNEL_MAX_NV = 12  # above, the NumPy path (BLAS products) is faster than the loops
-_joseph_kernel = _LazyKernel(
-    _joseph_loops, np.eye(2), np.zeros(1), 1.0, np.zeros(2), np.zeros((2, 2))
-)
-_transition_kernel = _LazyKernel(_transition_loops, np.eye(2), 1.0, np.zeros((2, 2)))
-
-
-def warm_linear_algebra(nv: int) -> None:
-    """Import LAPACK and load the compiled :func:`joseph_update` for ``nv`` (a filter's
-    constructor calls this, so that its first update does not pay for it)."""
-    _posv()
-    if nv <= _KERNEL_MAX_NV:
-        _joseph_kernel.load()
-        _transition_kernel.load()
-
-
-def joseph_update(P: Vector, e: Vector, meas_var: float) -> tuple[Vector, Vector]:
-    """Kalman update for ``H = [I 0]`` and ``R = meas_var · I``: returns ``(K e, P⁺)``.
-
-    ``S = P_qq + R`` (symmetric positive definite, solved by Cholesky),
-    ``K = P Hᵀ S⁻¹``, and the Joseph form ``P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ``,
-    symmetrised, evaluated as ``C = P − K P_q·``, ``P⁺ = C − (C_·q − R K) Kᵀ``
-    (the same expression: ``(I − KH) P = C``, ``C (I − KH)ᵀ = C − C_·q Kᵀ``),
-    two products of ``(n × nv)(nv × n)`` instead of two of ``n × n``.
-    """
-    nv = e.shape[0]
-    if nv <= _KERNEL_MAX_NV and _joseph_kernel.compiled is not None:
-        dx = np.empty(P.shape[0])
-        P_new = np.empty_like(P)
-        if _joseph_kernel.compiled(P, e, float(meas_var), dx, P_new):
-            return dx, P_new
-    B = P[:nv]  # H P
-    S = B[:, :nv] + _scaled_eye(nv, meas_var)
-    Kt, _ = cholesky_solve(S, B)  # Kᵀ = S⁻¹ H P
-    K = Kt.T
-    C = P - K.dot(B)
-    Y = K * -meas_var
-    Y += C[:, :nv]
-    P_new = C - Y.dot(Kt)
-    P_new += P_new.T
-    P_new *= 0.5
-    return K.dot(e), P_new
 
 
 @dataclass(frozen=True)
@@ -423,7 +205,9 @@ class EKFGains:
         positive("v0_std", self.v0_std)
 
 
-class _State(NamedTuple):
+class EKFState(NamedTuple):
+    """The filter's state (``adaptive`` carries one inside its own)."""
+
     q: Vector
     v: Vector
     P: Vector  # covariance of (δq, δv) or, with the disturbance, of (δq, δv, δd)
@@ -436,7 +220,7 @@ class _State(NamedTuple):
 
 
 @register
-class ExtendedKalmanFilter(Observer[_State]):
+class ExtendedKalmanFilter(Observer[EKFState]):
     """Error-state EKF on the configuration manifold with the exact Pinocchio model.
 
     Args:
@@ -475,7 +259,7 @@ class ExtendedKalmanFilter(Observer[_State]):
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
-        sigma = self.noise_std or _NOISE_FLOOR
+        sigma = self.noise_std or NOISE_FLOOR
         self.gains = EKFGains(accel_psd=accel_psd, meas_std=sigma, q0_std=q0_std, v0_std=v0_std)
         self.disturbance_psd = positive("disturbance_psd", disturbance_psd, allow_none=True)
         self.d0_std = float(positive("d0_std", d0_std) or 0.0)
@@ -515,7 +299,7 @@ class ExtendedKalmanFilter(Observer[_State]):
         if A is None:  # the constant blocks are written once
             n = (2 if self.disturbance_psd is None else 3) * nv
             A = self._scratch_A = np.zeros((n, n))
-            A[:nv, nv : 2 * nv] = _eye(nv)
+            A[:nv, nv : 2 * nv] = identity(nv)
         with_d = self.disturbance_psd is not None
         if isinstance(r, Robot):
             acc, da_dq, da_dv, minv = r.forward_dynamics_with_derivatives(
@@ -540,17 +324,17 @@ class ExtendedKalmanFilter(Observer[_State]):
         return np.array(self._state.d)
 
     # ------------------------------------------------------------- the filter
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State:
+    def _initial_state(self, q0: Vector, v0: Vector) -> EKFState:
         nv = self.robot.nv
         std = np.concatenate([np.full(nv, self.gains.q0_std), np.full(nv, self.gains.v0_std)])
         if self.disturbance_psd is None:
-            return _State(q0.copy(), v0.copy(), np.diag(std**2))
+            return EKFState(q0.copy(), v0.copy(), np.diag(std**2))
         std = np.concatenate([std, np.full(nv, self.d0_std)])
         m_bar = np.diag(self.robot.mass_matrix(q0))
         d_psd = self.disturbance_psd * m_bar**2
-        return _State(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd)
+        return EKFState(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd)
 
-    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+    def _step(self, state: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
         # a filter being lost overflows: its update says so (ObserverDiverged), numpy does not
         with np.errstate(over="ignore", invalid="ignore"):
             pred, _ = self._predict(state, dt, tau)
@@ -558,7 +342,7 @@ class ExtendedKalmanFilter(Observer[_State]):
                 return pred._replace(P=0.5 * (pred.P + pred.P.T), nis=None, gated=False)
             return self._correct(pred, q_meas)
 
-    def _predict(self, state: _State, dt: float, tau: Vector) -> tuple[_State, Vector]:
+    def _predict(self, state: EKFState, dt: float, tau: Vector) -> tuple[EKFState, Vector]:
         """Prediction over ``dt`` [s] with ``tau`` held: ``(state⁻, Φ)``.
 
         Mean by one RKMK4 step of :meth:`vector_field` (with ``τ + d``), covariance
@@ -572,7 +356,9 @@ class ExtendedKalmanFilter(Observer[_State]):
         tau_in = tau if d is None else tau + d  # the offset acts as a torque (module docstring)
         return self._propagate(state, dt, tau_in, *self._jacobian(state.q, state.v, tau_in))
 
-    def _predict_flow(self, state: _State, dt: float, tau: Vector) -> tuple[_State, Vector, Vector]:
+    def _predict_flow(
+        self, state: EKFState, dt: float, tau: Vector
+    ) -> tuple[EKFState, Vector, Vector]:
         """:meth:`_predict` and ``F``, the Jacobian of its mean's step, ``∂x⁻_{k+1}/∂x⁺_k``.
 
         ``Φ`` takes ``A`` at the step's start; along the step ``A`` changes
@@ -596,8 +382,8 @@ class ExtendedKalmanFilter(Observer[_State]):
         return pred, Phi, stiff_transition_matrix(A0, dt) if stiff else transition_matrix(A0, dt)
 
     def _propagate(
-        self, state: _State, dt: float, tau_in: Vector, A: Vector, acc: Any, minv: Vector
-    ) -> tuple[_State, Vector]:
+        self, state: EKFState, dt: float, tau_in: Vector, A: Vector, acc: Any, minv: Vector
+    ) -> tuple[EKFState, Vector]:
         """:meth:`_predict` given the torque (offset included) and the start's Jacobian call."""
         nv, d = self.robot.nv, state.d
         if not self.robot.has_friction:
@@ -616,7 +402,7 @@ class ExtendedKalmanFilter(Observer[_State]):
             P[2 * nv :, 2 * nv :].flat[:: nv + 1] += state.d_psd * dt
         return state._replace(q=q, v=v, P=P), Phi  # the gate's bookkeeping carries over
 
-    def _correct(self, state: _State, q_meas: Vector) -> _State:
+    def _correct(self, state: EKFState, q_meas: Vector) -> EKFState:
         """Correction of a predicted state with the measured ``q_meas`` (Joseph form, module docstring).
 
         The normalized innovation squared ``NIS = eᵀ S⁻¹ e`` comes free:
@@ -632,7 +418,7 @@ class ExtendedKalmanFilter(Observer[_State]):
         nis = float(e @ (e - dx[:nv])) / R
         if nis * R < 1e-6 * float(e @ e):  # K_q ≈ I (P_qq ≫ R): e − K_q e lost its digits
             # and went negative (−9e294 on a filter being lost): eᵀ S⁻¹ e directly
-            nis = float(e @ np.linalg.solve(P[:nv, :nv] + _scaled_eye(nv, R), e))
+            nis = float(e @ np.linalg.solve(P[:nv, :nv] + scaled_identity(nv, R), e))
         reject, level = outlier_gate(nis, state.nis_level, state.gate_run, self._gate, nv)
         if reject:
             return state._replace(
@@ -642,14 +428,14 @@ class ExtendedKalmanFilter(Observer[_State]):
         v = v + dx[nv : 2 * nv]
         if d is not None:
             d = d + dx[2 * nv :]
-        return _State(
+        return EKFState(
             q, v, P_new, d, state.d_psd, nis, False, 0, level
         )  # P symmetric (joseph_update)
 
-    def _innovation(self, state: _State) -> tuple[float | None, bool]:
+    def _innovation(self, state: EKFState) -> tuple[float | None, bool]:
         return state.nis, state.gated
 
-    def _gate_nis(self, state: _State) -> float:
+    def _gate_nis(self, state: EKFState) -> float:
         """The NIS above which :meth:`_correct` rejected ``state``'s measurement: the gate's
         threshold at its level (:func:`pinobs.observers.base.outlier_gate`)."""
         return gate_nis(self._gate, state.nis_level, self.robot.nv)
@@ -668,7 +454,7 @@ class ExtendedKalmanFilter(Observer[_State]):
         self.robot = robot
         self._scratch_A = None  # sized by the robot
 
-    def _output(self, state: _State) -> tuple[Vector, Vector]:
+    def _output(self, state: EKFState) -> tuple[Vector, Vector]:
         return state.q, state.v
 
     def covariance(self) -> Vector:

@@ -102,6 +102,7 @@ from pinobs.errors import GainError
 from pinobs.model import Robot, lie_rk4
 from pinobs.model.integrators import friction_substeps, rk4_stage_matrices
 from pinobs.observers.base import (
+    NOISE_FLOOR,
     Observer,
     Vector,
     gate_threshold,
@@ -110,19 +111,20 @@ from pinobs.observers.base import (
     register,
 )
 from pinobs.observers.differentiators import HighGainDifferentiator
-from pinobs.observers.ekf import (
-    ad_matrix,
+from pinobs.observers.ekf import ad_matrix, double_integrator_noise
+from pinobs.observers.linalg import (
     cholesky_solve,
-    double_integrator_noise,
+    joseph_kernel,
     joseph_update,
     stiff_transition_matrix,
+    transition_kernel,
     transition_matrix,
     warm_linear_algebra,
 )
 
 __all__ = ["IbrirKalman", "IbrirKalmanGains"]
 
-# the compiled kernels of pinobs.observers.ekf, called from _fused_loops (set by _fused_kernel)
+# the compiled kernels of pinobs.observers.linalg, called from _fused_loops (set by _fused_kernel)
 _transition_nb: Any = None
 _joseph_nb: Any = None
 
@@ -204,17 +206,14 @@ def _fused_kernel() -> Any:
     global _transition_nb, _joseph_nb
     import numba  # lazy: start-up time
 
-    from pinobs.observers import ekf
-
-    ekf.warm_linear_algebra(1)  # both ekf kernels loaded
-    _transition_nb, _joseph_nb = ekf._transition_kernel.compiled, ekf._joseph_kernel.compiled
+    warm_linear_algebra(1)  # both linalg kernels loaded
+    _transition_nb, _joseph_nb = transition_kernel.compiled, joseph_kernel.compiled
     kernel = numba.njit(cache=True)(_fused_loops)
     one, eye, zero = np.eye(1), np.eye(2), np.zeros((2, 2))
     kernel(one, one, 1.0, eye, zero, np.zeros(1), 1.0, np.zeros(2), np.zeros((2, 2)))
     return kernel
 
 
-_NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std (or 0) is given
 _DEFAULT_RATE = 1000.0  # [Hz] assumed for R when no rate is given
 _FUSED_MAX_NV = 12  # as the ekf's kernels: above, NumPy (BLAS products) is faster than loops
 
@@ -309,7 +308,7 @@ class IbrirKalman(Observer[_State]):
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
-        sigma = self.noise_std or _NOISE_FLOOR
+        sigma = self.noise_std or NOISE_FLOOR
         R = output_weight
         if R is None:
             R = (self.rate or _DEFAULT_RATE) / sigma**2

@@ -121,6 +121,7 @@ from pinobs.errors import GainError, UnsupportedRobotError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.chart import AngleChart
 from pinobs.observers.base import (
+    NOISE_FLOOR,
     Observer,
     Vector,
     gate_threshold,
@@ -152,7 +153,6 @@ _FULL_SEARCH_MAX_N = 5  # all n! orderings up to n = 5 (120); a heuristic subset
 _GL_SHORT = np.polynomial.legendre.leggauss(3)
 _GL_SEGMENT = np.polynomial.legendre.leggauss(6)
 _SHORT_SEGMENT = 0.02  # [rad or m]: 3-node error ~ (0.02)^7 |∂⁶ T⁻¹| / 2e6, below 1e-17
-_NOISE_FLOOR = 1e-6  # [rad or m] σ assumed when no noise_std (or 0) is given, as the filters'
 _STEP_KH = 0.25  # sub-steps so that k·h_sub <= 0.25 (RK4 factor within (kh)⁵/120 = 8e-6 of e^{−kh})
 
 
@@ -779,7 +779,7 @@ class IIObserver(Observer[_State]):
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
         self.v0_std = float(positive("v0_std", v0_std) or 0.0)
-        self._sigma2 = (self.noise_std or _NOISE_FLOOR) ** 2
+        self._sigma2 = (self.noise_std or NOISE_FLOOR) ** 2
         # continuous joints: the observer runs in the angle chart, unwrapped along the path
         self.chart: AngleChart | None = None
         self.plant = self.robot

@@ -36,6 +36,7 @@ from pinobs.model import Robot
 from pinobs.observers.base import (
     MAX_GATE_RUN,
     NIS_AVERAGING,
+    NOISE_FLOOR,
     Consistency,
     Observer,
     Vector,
@@ -45,7 +46,7 @@ from pinobs.observers.base import (
     positive,
     register,
 )
-from pinobs.observers.ekf import _LazyKernel
+from pinobs.observers.linalg import LazyKernel
 
 __all__ = [
     "KF_CAUSES",
@@ -57,7 +58,6 @@ __all__ = [
     "WhiteJerkFilter",
 ]
 
-_NOISE_FLOOR = 1e-6  # [rad] σ assumed when no noise_std is given
 
 #: What makes ``kf``'s innovations inconsistent (:meth:`ConstantAccelerationKF.consistency`).
 KF_CAUSES = (
@@ -186,7 +186,7 @@ class ConstantAccelerationKF(Observer[_State]):
         super().__init__(robot, rate=rate, noise_std=noise_std)
         positive("v0_std", v0_std)
         self.v0_std = float(v0_std)
-        self.gains = KFGains(jerk_psd, self.noise_std or _NOISE_FLOOR, outlier_probability)
+        self.gains = KFGains(jerk_psd, self.noise_std or NOISE_FLOOR, outlier_probability)
         self._gate = gate_threshold(outlier_probability, robot.nv)[1]
 
     @property
@@ -441,7 +441,7 @@ def _bank_rows_loops(
 _NO_STORE = np.empty((0, 3, 0))
 _NO_PX = np.empty((0, 3, 3))
 _ROW_MEASURED = (np.array([False, False]), np.array([False, True]))  # KFBank.step's rows
-_bank_kernel = _LazyKernel(
+_bank_kernel = LazyKernel(
     _bank_rows_loops,
     np.zeros((1, 1)),
     np.zeros((1, 1)),

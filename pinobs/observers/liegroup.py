@@ -134,6 +134,7 @@ from pinobs.errors import GainError, UnsupportedRobotError
 from pinobs.model import Robot, lie_rk4
 from pinobs.observers.base import (
     MAX_GATE_RUN,
+    NOISE_FLOOR,
     Observer,
     Vector,
     gate_threshold,
@@ -158,7 +159,6 @@ __all__ = [
 
 _DEFAULT_ALPHA = 10.0  # [1/s]   Maithripala et al. §IV-A
 _DEFAULT_BETA = 10.0  # [1/s²]  Maithripala et al. §IV-A
-_NOISE_FLOOR = 1e-6  # [rad or m] σ assumed when no noise_std (or 0) is given, as the filters'
 
 
 # ----------------------------------------------------------------- Lie algebra
@@ -436,7 +436,7 @@ class LieGroupObserver(Observer[_State]):
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.gains = LieGroupGains(alpha=alpha, beta=beta, curvature_gain=curvature_gain)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
-        self._sigma2 = (self.noise_std or _NOISE_FLOOR) ** 2
+        self._sigma2 = (self.noise_std or NOISE_FLOOR) ** 2
         self.geometry = _geometry_of(self.robot)
 
     @property

@@ -131,6 +131,7 @@ import numpy as np
 from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.observers.base import (
+    NOISE_FLOOR,
     Observer,
     Vector,
     gate_threshold,
@@ -158,7 +159,6 @@ GainFunction = Callable[[float, float], float]
 
 _DEFAULT_ALPHA = 60.0  # [1/s]
 _DEFAULT_BETA = 900.0  # [1/s²]
-_NOISE_FLOOR = 1e-6  # [rad] σ assumed for the gain rule when noise_std is not given
 
 
 @dataclass(frozen=True)
@@ -552,7 +552,7 @@ class RiemannianObserver(Observer[_State]):
             )
         if alpha is None or beta is None:
             if self.rate is not None:
-                sigma = self.noise_std or _NOISE_FLOOR
+                sigma = self.noise_std or NOISE_FLOOR
                 alpha, beta = gains_from_noise(self.rate, sigma, self.accel_psd)  # type: ignore[arg-type]
                 self.gain_rule = "kalman"
             else:
@@ -578,7 +578,7 @@ class RiemannianObserver(Observer[_State]):
             if self.gain_rule == "kalman" and not self.gains.state_dependent
             else "steady"
         )
-        self._sigma2 = (self.noise_std or _NOISE_FLOOR) ** 2
+        self._sigma2 = (self.noise_std or NOISE_FLOOR) ** 2
 
     @property
     def options(self) -> dict[str, Any]:

@@ -275,8 +275,9 @@ from pinobs.observers.base import (
     positive,
     time_unit_warning,
 )
-from pinobs.observers.ekf import ExtendedKalmanFilter, _LazyKernel, _posv, cholesky_solve
+from pinobs.observers.ekf import ExtendedKalmanFilter
 from pinobs.observers.kf import ConstantAccelerationKF, KFBank, KFGains, WhiteJerkFilter
+from pinobs.observers.linalg import LazyKernel, cholesky_solve, lapack_posv
 from pinobs.observers.noise import noise_from_log
 from pinobs.tolerances import QUATERNION_NORM_TOL, TIME_EPS
 
@@ -303,6 +304,7 @@ __all__ = [
     "select_accel_psd",
     "select_latency",
     "smooth",
+    "smooth_quietly",
     "smoothing_warnings",
     "streaming_smoother",
 ]
@@ -443,7 +445,7 @@ def _noise_step(
     ``K = None`` at a dropped or gated sample, where ``Pⁿ⁺_k = F Pⁿ⁺_{k−1} Fᵀ``)
     and ``Pⁿ⁺_0 = P⁺_0`` (the start's uncertainty is kept).  Evaluated as
     ``Y = X − K X_q·``, ``Pⁿ⁺ = Y − (Y_·q − σ² K) Kᵀ`` with ``X = F Pⁿ⁺ Fᵀ``
-    (as :func:`pinobs.observers.ekf.joseph_update`).
+    (as :func:`pinobs.observers.linalg.joseph_update`).
     """
     if prev is None:
         return state.P.copy(), None
@@ -488,7 +490,7 @@ def _noise_forward_loops(Pn: Vector, Phi: Vector, K: Vector, r: float, out: Vect
 def _noise_forward(Pn: Vector, Phi: Vector, K: Vector | None, r: float) -> Vector:
     """``(I − K H) Φ Pn Φᵀ (I − K H)ᵀ + r K Kᵀ`` (``K = None``: ``Φ Pn Φᵀ``), evaluated as
     ``X = Φ Pn Φᵀ``, ``Y = X − K X_q·``, ``Y − (Y_·q − r K) Kᵀ`` (as
-    :func:`pinobs.observers.ekf.joseph_update`)."""
+    :func:`pinobs.observers.linalg.joseph_update`)."""
     m = Pn.shape[0]
     if m <= _NOISE_KERNEL_MAX and _noise_forward_kernel.compiled is not None:
         out = np.empty((m, m))
@@ -592,10 +594,10 @@ def _noise_backward(
 
 _NOISE_KERNEL_MAX = 20  # states: above, NumPy's BLAS products win (crossover measured at 21)
 _NO_GAIN = np.empty((0, 0))
-_noise_forward_kernel = _LazyKernel(
+_noise_forward_kernel = LazyKernel(
     _noise_forward_loops, np.eye(2), np.eye(2), np.zeros((2, 1)), 1.0, np.zeros((2, 2))
 )
-_noise_backward_kernel = _LazyKernel(
+_noise_backward_kernel = LazyKernel(
     _noise_backward_loops,
     np.eye(2),
     np.eye(2),
@@ -651,7 +653,7 @@ def _forward(
             q_meas = model.check_configuration(q, what=f"q[{k0 + k}]")
             e = model.difference(pred.q, q_meas)
             # S = U'U (LAPACK dposv: the factor and S⁻¹e at once); log det S = 2 Σ log Uᵢᵢ
-            chol, s_inv_e, info = _posv()(pred.P[:nv, :nv] + meas_var * np.eye(nv), e)
+            chol, s_inv_e, info = lapack_posv()(pred.P[:nv, :nv] + meas_var * np.eye(nv), e)
             if info != 0:
                 raise NonFiniteError(
                     f"sample {k0 + k} (t = {t:.6g} s): the filter is lost (its innovation "
@@ -1084,11 +1086,11 @@ def _jerk_backward_loops(
             rho[1] += nv
 
 
-_jerk_noise_kernel = _LazyKernel(
+_jerk_noise_kernel = LazyKernel(
     _jerk_noise_loops, np.tile(np.eye(3), (2, 1, 1)), np.array([0.0, 1e-3]),
     np.array([False, True]), 1.0, np.zeros((2, 3, 3)),
 )  # fmt: skip
-_jerk_backward_kernel = _LazyKernel(
+_jerk_backward_kernel = LazyKernel(
     _jerk_backward_loops, np.zeros((2, 3, 1)), np.tile(np.eye(3), (2, 1, 1)),
     np.tile(np.eye(3), (2, 1, 1)), np.array([0.0, 1e-3]), np.array([False, True]), 1.0, 1.0,
     0, 2, 2, True, np.zeros((2, 1)), np.zeros((2, 1)), np.zeros(2), np.zeros(2),
@@ -1634,7 +1636,7 @@ def _select_latency(
 ) -> tuple[float, list[tuple[float, float]]]:
     """:func:`select_latency` on checked arrays; ``prepared`` (latency → :func:`_prepare`'s
     result) and ``tried`` (latency → ``ℓ``) are read and filled, so that a caller that has
-    run a candidate (:func:`_smooth`: the log as stamped, the latency then smoothed under)
+    run a candidate (:func:`smooth_quietly`: the log as stamped, the latency then smoothed under)
     does not run it twice: ``adaptive``'s learning pass costs about the causal run."""
     t, q, tau = log
     h = float(np.median(np.diff(t)))
@@ -2365,10 +2367,10 @@ def smooth(
         times = log[0] if isinstance(log, tuple) else log.t
         unit = time_unit_warning(median_period(np.asarray(times, dtype=float).ravel()))
     except (AttributeError, TypeError, ValueError, IndexError):
-        unit = None  # _smooth says what is wrong with the log
+        unit = None  # smooth_quietly says what is wrong with the log
     if unit is not None:
         warnings.warn(TimestampWarning(unit), stacklevel=2)
-    result = _smooth(
+    result = smooth_quietly(
         robot,
         log,
         observer=observer,
@@ -2410,7 +2412,7 @@ def _filter_options(options: Any) -> dict[str, Any]:
     return dict(options)
 
 
-def _smooth(
+def smooth_quietly(
     robot: Robot,
     log: LogLike | tuple[ArrayLike, ...],
     *,
@@ -2427,10 +2429,12 @@ def _smooth(
     find_latency: bool = False,
     _prepared: dict[float, Any] | None = None,
 ) -> Smoothed:
-    """:func:`smooth` without its warnings, for callers that report the consistency their
-    own way (a log file's run, the identification's refinement); ``find_latency``: a log the
-    model does not explain, with no latency given, is searched for one (:func:`smooth`).
-    ``_prepared``: :func:`_prepare`'s results by latency, shared with the latency search."""
+    """:func:`smooth` without its warnings (the same arguments and result), for callers that
+    report the consistency their own way (a log file's run, the identification's refinement).
+
+    ``find_latency``: a log the model does not explain, with no latency given, is searched
+    for one (:func:`smooth` sets it).  ``_prepared`` is internal: :func:`_prepare`'s results
+    by latency, shared with the latency search's own calls."""
     if accel_psd is not None and not isinstance(accel_psd, str):  # a float from here on
         accel_psd = positive("accel_psd", accel_psd)
     positive("noise_std", noise_std, allow_none=True)  # (a filter would floor 0 to NOISE_FLOOR)
@@ -2653,7 +2657,7 @@ def _smooth(
     }
 
     def under(d: float, psd: Any) -> Smoothed:
-        return _smooth(
+        return smooth_quietly(
             robot,
             (t_all, q_all, tau_all),
             observer=observer,

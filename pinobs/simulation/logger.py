@@ -264,6 +264,8 @@ class Logger:
             return np.ones(n, dtype=bool)
         p_end_burst = 1.0 / float(self.burst)  # a lost run ends after each lost tick
         p_start_burst = float(self.drop) / (float(self.burst) * (1.0 - float(self.drop)))
+        if p_start_burst <= 0.0:  # a subnormal drop underflows to no drop (found by hypothesis)
+            return np.ones(n, dtype=bool)
         dropping = bool(gen.random() < self.drop)  # stationary start
         p_first, p_second = (
             (p_end_burst, p_start_burst) if dropping else (p_start_burst, p_end_burst)

@@ -27,7 +27,7 @@ from pinobs.observers import Observer, make_observer
 from pinobs.observers.base import positive
 from pinobs.simulation.inputs import InputProfile, make_input
 from pinobs.simulation.result import ObserverTrace, Result
-from pinobs.simulation.sensors import Sensor, _is_int
+from pinobs.simulation.sensors import Sensor, is_integer
 
 __all__ = ["default_input", "perturb", "simulate"]
 
@@ -101,9 +101,9 @@ def _check_run(
         )
     positive("perturb_q", perturb_q, allow_zero=True)
     positive("perturb_v", perturb_v, allow_zero=True)
-    if not _is_int(seed) or seed < 0:
+    if not is_integer(seed) or seed < 0:
         raise GainError(f"seed={seed!r}: give an integer >= 0")
-    if not _is_int(substeps) or substeps < 1:
+    if not is_integer(substeps) or substeps < 1:
         raise GainError(f"substeps={substeps!r}: give an integer >= 1 (plant steps per sample)")
     if isinstance(observers, str | bytes):
         raise OptionError(

@@ -20,10 +20,11 @@ from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers.base import positive
 
-__all__ = ["Sensor"]
+__all__ = ["Sensor", "is_integer"]
 
 
-def _is_int(x: object) -> bool:
+def is_integer(x: object) -> bool:
+    """Whether ``x`` is an integer (any ``numbers.Integral``, NumPy's included), not a bool."""
     return isinstance(x, numbers.Integral) and not isinstance(x, bool)
 
 
@@ -48,9 +49,9 @@ class Sensor:
     def __post_init__(self) -> None:
         positive("rate", self.rate)
         positive("noise_std", self.noise_std, allow_zero=True)
-        if self.bits is not None and (not _is_int(self.bits) or self.bits < 1):
+        if self.bits is not None and (not is_integer(self.bits) or self.bits < 1):
             raise GainError(f"bits={self.bits!r}: give an integer >= 1 (bits per turn) or None")
-        if not _is_int(self.delay) or self.delay < 0:
+        if not is_integer(self.delay) or self.delay < 0:
             raise GainError(f"delay={self.delay!r}: give a whole number of samples >= 0")
         positive("dropout", self.dropout, allow_zero=True)
         if self.dropout >= 1.0:

@@ -237,3 +237,58 @@ def test_stamps_going_backwards_keep_every_row(ur5_truth):
     placed = np.isfinite(df["v0"].to_numpy())
     reported = {pos for pos, _ in df.attrs["bad_rows"]}
     assert all(placed[k] or k in reported for k in range(len(frame)))
+
+
+def test_a_log_that_does_not_move_keeps_the_default_noise_with_a_warning(ur5_truth):
+    robot, _ = ur5_truth
+    t = np.arange(1500) * 1e-3
+    q = np.tile(np.round(np.linspace(0.1, 0.6, robot.nq), 4), (t.size, 1))
+    frame = _frame(robot, t, q, np.zeros((t.size, robot.nv)))
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        df = pinobs.estimate("kf", frame, robot=robot)
+    assert np.isfinite(df["v0"].to_numpy()[1:]).all()
+    assert any("do not move in its first second" in str(w.message) for w in seen)
+
+
+def test_the_smoother_reads_a_recorded_log_on_its_loop_clock(ur5_truth, tmp_path):
+    from pinobs.io.smoothing import smooth_log
+
+    robot, res = ur5_truth
+    t, q, tau, rows, stale = _recorded(res, 1)
+    cols = [f"v{i}" for i in range(robot.nv)]
+    errors = {}
+    for label, frame, clock in (
+        ("clean", _frame(robot, res.t[rows][~stale], q[~stale], tau[~stale]), "stamps"),
+        ("auto", _frame(robot, t, q, tau), "auto"),
+        ("stamps", _frame(robot, t, q, tau), "stamps"),
+    ):
+        out = tmp_path / f"{label}.csv"
+        with warnings.catch_warnings(record=True):
+            warnings.simplefilter("always")
+            run, _ = smooth_log(frame, robot, out, noise_std=1e-4, clock=clock)
+        df = pd.read_csv(out)
+        assert len(df) == len(frame) == run.rows  # one output row per log row
+        truth = res.v[rows[~stale]] if label == "clean" else res.v[rows]
+        e = df[cols].to_numpy()[200:-200] - truth[200:-200]
+        errors[label] = float(np.sqrt(np.nanmean(e**2)))
+        if label == "auto":
+            assert run.clock is not None and run.clock.repaired
+            assert run.warnings[0].startswith("log clock repaired")
+            k = np.flatnonzero(stale)
+            np.testing.assert_array_equal(df[cols].to_numpy()[k], df[cols].to_numpy()[k - 1])
+    assert errors["auto"] <= 1.2 * errors["clean"], errors
+    assert errors["stamps"] > 2 * errors["auto"], errors
+
+
+def test_without_stale_gives_one_row_per_sample_on_the_loop_clock(ur5_truth):
+    from pinobs.io.clock import without_stale
+
+    robot, res = ur5_truth
+    t, q, tau, _, stale = _recorded(res, 2)
+    log = read_log(_frame(robot, t, q, tau), robot)
+    kept, report = without_stale(log)
+    assert report.repaired and report.stale == int(stale.sum())
+    assert len(kept) == len(log) - int(stale.sum())
+    assert np.all(np.diff(kept.t[np.isfinite(kept.q).all(axis=1)]) > 0)
+    np.testing.assert_array_equal(kept.lines, log.lines[~stale])

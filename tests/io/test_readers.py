@@ -222,6 +222,10 @@ def test_ros_bag_round_trips_through_pinobs_estimate_one_row_per_message(
     _write_bag(bag, ur5, t, q, tau, kind=kind, rng=np.random.default_rng(1))
     log = read_log(bag, ur5)
     assert log.unit == "message" and not log.problems
+    if kind == "ros1":  # header.seq is the sample counter (the clock repair's ticks)
+        np.testing.assert_array_equal(log.tick, np.arange(len(t)))
+    else:
+        assert log.tick is None
     np.testing.assert_array_equal(log.q, q)  # matched by name, whatever the order
     np.testing.assert_array_equal(log.tau, tau)
     np.testing.assert_allclose(log.t - 1_700_000_000, t, atol=1e-6)  # header stamps, ns

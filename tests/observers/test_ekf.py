@@ -10,7 +10,8 @@ from pinobs.errors import GainError
 from pinobs.evaluation import evaluate
 from pinobs.model import lie_rk4
 from pinobs.observers import make_observer
-from pinobs.observers.ekf import ExtendedKalmanFilter, transition_matrix
+from pinobs.observers.ekf import ExtendedKalmanFilter
+from pinobs.observers.linalg import transition_matrix
 from pinobs.simulation import Sensor, make_input, simulate
 
 
@@ -369,7 +370,7 @@ def test_a_lost_filters_nan_state_gives_nan_steps_not_a_raw_error() -> None:
     ``ValueError`` (``math.ceil`` of NaN) through ``pinobs identify``'s refinement; they now
     give NaN and one step, which the callers report as a lost filter."""
     from pinobs.model.integrators import friction_substeps
-    from pinobs.observers.ekf import stiff_transition_matrix
+    from pinobs.observers.linalg import stiff_transition_matrix
 
     assert np.all(np.isnan(stiff_transition_matrix(np.full((4, 4), np.nan), 1e-3)))
     robot = pinobs.load("ur5", friction=True)

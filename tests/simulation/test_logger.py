@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from functools import cache
 from pathlib import Path
 
@@ -11,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import pinobs
-from pinobs.errors import DimensionError, GainError
+from pinobs.errors import ConsistencyWarning, DimensionError, GainError, TimestampWarning
 from pinobs.io import read_log
 from pinobs.simulation import Logger, RecordedLog, Result
 
@@ -395,13 +396,31 @@ def test_a_recorded_log_runs_through_the_estimator_row_for_row() -> None:
     robot, res = ur5_run()
     logger = Logger(drop=0.05, burst=3.0, jitter=5e-5, drift=50e-6, offset=10.0, stale=0.05)
     log = logger.record(res, 2)
-    df = pinobs.estimate("kf", log.to_frame(robot), robot=robot, noise_std=1e-4)
-    assert len(df) == len(log)
-    np.testing.assert_array_equal(df["t"].to_numpy(), log.t)
-    v = df[[f"v{i}" for i in range(robot.nv)]].to_numpy()
+    frame = log.to_frame(robot)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        as_stamped = pinobs.estimate("kf", frame, robot=robot, noise_std=1e-4, clock="stamps")
+    # as stamped, the stale rows are said and kf finds the data inconsistent
+    said = {w.category for w in seen}
+    assert {TimestampWarning, ConsistencyWarning} <= said, said
+    assert len(as_stamped) == len(log)
+    np.testing.assert_array_equal(as_stamped["t"].to_numpy(), log.t)
+    v = as_stamped[[f"v{i}" for i in range(robot.nv)]].to_numpy()
     late = (res.t[log.tick] > 0.5) & ~log.stale
     rms = np.sqrt(np.mean((v[late] - res.v[log.tick[late]]) ** 2))
     assert rms < 0.05, rms  # rad/s
+    # the default repairs the clock: every row at the logger-clock time of its tick
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        df = pinobs.estimate("kf", frame, robot=robot, noise_std=1e-4)
+    told = [str(w.message) for w in seen if w.category is TimestampWarning]
+    assert len(told) == 1 and told[0].startswith("log clock repaired"), told
+    assert not [w for w in seen if w.category is ConsistencyWarning]  # consistent again
+    assert len(df) == len(log)
+    expected = 10.0 + (1 + 50e-6) * res.t[log.tick]
+    placed = np.isfinite(log.q).all(axis=1)  # (a row without a position keeps its stamp)
+    assert np.max(np.abs(df["t"].to_numpy()[placed] - expected[placed])) < 2e-6
+    assert df.attrs["clock"].stale == int(log.stale.sum())
 
 
 def test_a_tiny_drop_rate_keeps_every_tick() -> None:

@@ -1,0 +1,197 @@
+"""``pinobs identify``: inertias and friction (and a torque offset) from a log; a report
+and a calibrated URDF."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pinobs.cli.options import (
+    add_clock_option,
+    add_log_columns,
+    add_robot_options,
+    column_map,
+    load_robot,
+)
+from pinobs.cli.output import check_output
+from pinobs.errors import OutputExistsError
+from pinobs.io import read_log
+from pinobs.io.clock import without_stale
+from pinobs.model.identification import MAX_CONDITION
+
+if TYPE_CHECKING:
+    from pinobs.cli.options import Subparsers
+
+__all__ = ["SMOOTHER_RHO_HINT", "add_parser", "handle"]
+
+#: ``pinobs identify`` suggests comparing with ``--no-refine`` at or above this smoother
+#: consistency: clean simulated logs gave 0.44–14.8, 1 % torque noise 20–183 (where the
+#: refinement still helped a UR5), 5 % 108–4500 (where it did not, on average:
+#: :mod:`pinobs.observers.calibration`).
+SMOOTHER_RHO_HINT = 100.0
+
+
+def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
+    """``pinobs identify``."""
+    p = subparsers.add_parser(
+        "identify", help="identify inertias and friction from a log; write a calibrated URDF"
+    )
+    add_robot_options(p, "URDF")
+    p.add_argument(
+        "--log",
+        required=True,
+        help="log with t, q and tau columns (CSV, Parquet, NPZ or a ROS bag, as estimate reads)",
+    )
+    add_log_columns(p)
+    add_clock_option(p)
+    p.add_argument("--out", required=True, help="the calibrated URDF to write")
+    p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
+    p.add_argument(
+        "--offset",
+        action="store_true",
+        help="also identify a torque offset per joint (a biased torque sensor; not in the URDF)",
+    )
+    p.add_argument(
+        "--holdout",
+        type=float,
+        default=0.2,
+        help="fraction of the log (its end) kept out of the fit for the report (default %(default)s)",
+    )
+    p.add_argument(
+        "--max-condition",
+        type=float,
+        default=MAX_CONDITION,
+        help="refuse a log whose identifiable combinations are worse conditioned than this "
+        "(default %(default)g)",
+    )
+    p.add_argument(
+        "--torque",
+        choices=["held", "sampled"],
+        default="held",
+        help="how the log's torques were taken: held over each sample (zero-order hold: "
+        "pinobs run, most controllers; the default) or sampled at the instants (pinobs "
+        "excite's trajectory)",
+    )
+    p.add_argument(
+        "--no-refine",
+        action="store_true",
+        help="fit once, on Savitzky–Golay velocities, without the model-based smoother's "
+        "refinement passes (compare when the report's smoother consistency is in the "
+        "hundreds: noisy torques)",
+    )
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=handle)
+    return p
+
+
+def handle(args: argparse.Namespace) -> int:
+    """The identification's report printed, its URDF written, how to use it said."""
+    from pinobs.observers.calibration import REFINE_ACCEL_PSD, identify
+
+    out = Path(args.out)
+    check_output("--out", out)  # before the work, as the other commands
+    robot = load_robot(args)
+    if out.exists() and not args.force:
+        raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
+    if out.resolve() == Path(args.log).resolve():
+        raise OutputExistsError(f"--out {str(out)!r} is the log itself")
+    log, clock = without_stale(
+        read_log(args.log, robot, columns=column_map(args.map), topic=args.topic),
+        mode=args.clock or "auto",
+    )
+    if clock.repaired or clock.stale:  # (stale rows left out: one sample per row to fit)
+        print(f"warning: {clock.message()}", file=sys.stderr)
+    ident = identify(
+        robot,
+        log,
+        friction=not args.no_friction,
+        offset=args.offset,
+        holdout=args.holdout,
+        max_condition=args.max_condition,
+        torque=args.torque,
+        refine=() if args.no_refine else REFINE_ACCEL_PSD,
+    )
+    print(_identify_report(ident))
+    path = ident.save(str(out))
+    opts = ", ".join(f"{k}={v:g}" for k, v in ident.report["observer_options"].items())
+    root = robot.root_joint if robot.root_joint not in (None, "fixed") else None
+    how = f"{path!r}, friction=True" + ("" if root is None else f", root_joint={root!r}")
+    cli = f"--robot {path} --friction" + ("" if root is None else f" --root-joint {root}")
+    print(f"wrote {path}: load it with pinobs.load({how}) (pinobs estimate: {cli})")
+    print(
+        f"run ekf or riemannian on it with {opts or 'their default options'}, or adaptive "
+        "starting from it"
+    )
+    return 0
+
+
+def _identify_report(ident: Any) -> str:
+    """The identification report as text tables (``pinobs identify``)."""
+    rep = ident.report
+    lines = [
+        f"rows {rep['rows']} fitted, {rep['holdout_rows']} held out; "
+        f"{rep['rank']} identifiable combinations of {rep['n_parameters']} parameters; "
+        f"condition number {rep['condition']:.3g}"
+        + ("; physical consistency enforced" if rep["projected"] else ""),
+        "",
+        "torque residual RMS per joint (rows weighted by M⁻¹/Δt, rad/s²-like)",
+        f"{'joint':24s} {'fit before':>11s} {'fit after':>11s} {'unexplained':>12s} "
+        f"{'held-out before':>16s} {'held-out after':>15s}",
+    ]
+    for j, name in enumerate(rep["coordinates"]):
+        lines.append(
+            f"{name:24s} {rep['residual_before'][j]:11.4g} {rep['residual_after'][j]:11.4g} "
+            + (
+                f"{100 * rep['unexplained'][j]:10.3g} % "
+                if math.isfinite(rep["unexplained"][j])
+                else f"{'no torque':>12s} "
+            )
+            + f"{rep['holdout_before'][j]:16.4g} {rep['holdout_after'][j]:15.4g}"
+        )
+    lines += ["", f"{'parameter':32s} {'nominal':>12s} {'identified':>12s} {'std':>10s}"]
+    for name, value, std, nominal, excited in ident.parameters.as_rows():
+        if excited:
+            lines.append(f"{name:32s} {nominal:12.5g} {value:12.5g} {std:10.2g}")
+    n_not = len(rep["not_excited"])
+    if n_not:
+        moved = rep.get("moved_by_consistency", [])
+        values = dict(zip(ident.parameters.names, ident.parameters.values, strict=True))
+        nominal = dict(zip(ident.parameters.names, ident.parameters.nominal, strict=True))
+        lines.append(
+            f"({n_not} parameters not excited by this log: "
+            + ", ".join(rep["not_excited"][:6])
+            + (", ..." if n_not > 6 else "")
+            + "; "
+            + (
+                f"physical consistency moved {len(moved)} of them: "
+                + ", ".join(f"{n} {nominal[n]:.4g} → {values[n]:.4g}" for n in moved[:6])
+                + (", ..." if len(moved) > 6 else "")
+                + "; the others stay near their nominal values)"
+                if moved
+                else "they stay near their nominal values)"
+            )
+        )
+    rho = rep.get("smoother_consistency", math.nan)
+    if math.isfinite(rho):  # observers.calibration's "Limitation: noisy torques"
+        lines.append(
+            f"velocities: {rep['velocities']}, smoother consistency ρ = {rho:.3g} (about 1 "
+            "when the model and the torques explain the positions"
+            + (
+                "; this high, the torques are likely noisy and the refined fit may be no "
+                "better than --no-refine's: compare the two)"
+                if rho >= SMOOTHER_RHO_HINT
+                else ")"
+            )
+        )
+    lines += [f"warning: {w}" for w in rep.get("warnings", [])]
+    if np.any(ident.offset):
+        lines.append(
+            "torque offset b per joint [N·m] (not stored in the URDF; the model is driven by tau + b: add it to the torques "
+            "or let the observer estimate it): " + ", ".join(f"{b:.4g}" for b in ident.offset)
+        )
+    return "\n".join(lines)

@@ -355,16 +355,6 @@ def test_friction_derivative_stays_finite_and_silent_at_high_speed() -> None:
     np.testing.assert_array_equal(d, -robot.model.damping)
 
 
-def test_readme_mujoco_benchmark_table_is_the_committed_results() -> None:
-    import re
-
-    root = Path(__file__).resolve().parents[2]
-    readme = (root / "README.md").read_text()
-    m = re.search(r"<!-- mujoco-bench: [^>]*-->\n(.*?)<!-- end mujoco-bench -->", readme, re.S)
-    assert m is not None
-    assert m.group(1) in (root / "benchmarks" / "mujoco_truth.md").read_text()
-
-
 def test_visual_geoms_sit_where_mujoco_puts_them(tmp_path: Path, rng: np.random.Generator) -> None:
     """Every primitive geom's world pose equals MuJoCo's ``geom_xpos``/``geom_xmat``."""
     import pinocchio as pin

@@ -985,24 +985,6 @@ def test_cli_estimate_smooth_over_adaptive_says_how_its_model_was_frozen(
     assert np.all(ratio >= 1.0) and np.ptp(ratio) < 1e-12  # one factor, √max(1, ρ)
 
 
-@pytest.mark.parametrize(
-    ("name", "end"),
-    [
-        ("smoothing", "smoothing bench"),
-        ("smoothing_scenarios", "smoothing scenarios"),
-        ("smoothing_model_free", "smoothing model free"),
-    ],
-)
-def test_readme_smoothing_table_is_the_committed_benchmark_file(name: str, end: str) -> None:
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[2]
-    text = (root / "README.md").read_text()
-    begin = f"<!-- bench: benchmarks/{name}.md -->\n"
-    shown = text[text.index(begin) + len(begin) : text.index(f"<!-- end {end} -->")]
-    assert shown == (root / "benchmarks" / f"{name}.md").read_text()
-
-
 def test_a_log_the_model_does_not_explain_is_said_and_auto_skips_densities_that_lose_the_filter(
     tmp_path, monkeypatch, capsys
 ) -> None:

@@ -20,13 +20,18 @@ ratio to the clean log's.  Then on a 4 s UR5 log of the exact model (σ = 1e-4) 
 
     PYTHONPATH=. python benchmarks/irregular_logs.py                 # seeds 1-5
     PYTHONPATH=. python benchmarks/irregular_logs.py --seeds 1,2 --no-refine
+
+It prints each line as it goes and writes the table to ``benchmarks/irregular_logs.md``
+(``--md``: another path).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -60,7 +65,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="1,2,3,4,5")
     parser.add_argument("--no-refine", action="store_true", help="identify (SG) only")
+    parser.add_argument("--md", default=str(Path(__file__).with_suffix(".md")))
     args = parser.parse_args()
+    start = time.perf_counter()
+    rows: list[str] = []
     seeds = [int(s) for s in args.seeds.split(",")]
     robot = pinobs.load("planar_3r")
     truth = planar_3r_truth(robot)
@@ -83,6 +91,9 @@ def main() -> None:
                     e0 = acceleration_error(fit(clean_log, torque).robot, truth)
                     e1 = acceleration_error(fit(other_log, torque).robot, truth)
                 ratios.setdefault((fit_name, case), []).append(e1 / e0)
+                rows.append(
+                    f"| {fit_name} | {case} | {seed} | {e0:.4g} | {e1:.4g} | {e1 / e0:.3f} |"
+                )
                 print(
                     f"seed {seed} {fit_name:16s} {case:9s} clean {e0:.4g} {case} {e1:.4g} "
                     f"ratio {e1 / e0:.3f}",
@@ -106,6 +117,20 @@ def main() -> None:
             f"ratio {out[1] / out[0]:.3f}",
             flush=True,
         )
+        rows.append(
+            f"| pinobs.smooth (ur5, velocity RMS) | drops | {seed} | {out[0]:.3g} | "
+            f"{out[1]:.3g} | {out[1] / out[0]:.3f} |"
+        )
+    means = [
+        f"| {f} | {c} | geometric mean | | | {math.exp(float(np.mean(np.log(r)))):.3f} |"
+        for (f, c), r in ratios.items()
+    ]
+    made = f"Made by `PYTHONPATH=. python benchmarks/irregular_logs.py --seeds {args.seeds}`"
+    Path(args.md).write_text(
+        f"{made} in {time.perf_counter() - start:.0f} s.\n\n"
+        "| fit | log | seed | clean | dropped or irregular | ratio |\n"
+        "|---|---|---:|---:|---:|---:|\n" + "\n".join(rows + means) + "\n"
+    )
 
 
 if __name__ == "__main__":

@@ -65,8 +65,8 @@ from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers import Estimate, make_observer
+from pinobs.observers.base import gap_substeps, time_unit_warning
 from pinobs.observers.base import median_period as _median_period
-from pinobs.observers.base import time_unit_warning
 from pinobs.observers.noise import noise_from_log
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
@@ -448,8 +448,7 @@ class LogEstimator:
         period = self.period
         gap = t - self._t
         try:
-            if period is not None and gap > GAP_PERIODS * period:
-                steps = math.ceil(gap / period - 1e-9)
+            if period is not None and (steps := gap_substeps(gap, period)) > 1:
                 if gap > MAX_GAP_PERIODS * period:
                     notes.append(f"gap of {gap:.6g} s ({gap / period:.0f} periods) before this row")
                     return self._restart(t, q, tau, notes)

@@ -368,7 +368,9 @@ class SmoothableFilter(Protocol):
     Optionally ``_predict_flow(state, dt, tau) -> (state⁻, Φ, F)`` also returns
     the Jacobian ``F`` of the mean's step, where ``Φ`` is only the filter's
     approximation of it (``band="noise"`` propagates the error with ``F``;
-    without the method, with ``Φ``).
+    without the method, with ``Φ``).  A filter with an outlier gate keeps its bookkeeping
+    in its states' ``gate`` (:class:`~pinobs.observers.base.GateState`), and
+    ``_gate_nis(state)`` is the NIS above which it rejected ``state``'s measurement.
     """
 
     robot: Robot
@@ -420,6 +422,13 @@ class _Step(NamedTuple):
     F: Any = None  # band="noise": F_k, the Jacobian of the mean's step (None likewise)
 
 
+def _gated(state: Any) -> bool:
+    """Whether the filter's outlier gate rejected ``state``'s measurement (its ``gate``,
+    :class:`~pinobs.observers.base.GateState`; a filter without a gate: never)."""
+    gate = getattr(state, "gate", None)
+    return gate is not None and bool(gate.gated)
+
+
 def _noise_step(
     prev: tuple[Vector, Vector | None] | None,
     pred: Any,
@@ -449,7 +458,7 @@ def _noise_step(
     """
     if prev is None:
         return state.P.copy(), None
-    if state is pred or getattr(state, "gated", False):  # predicted over, not corrected
+    if state is pred or _gated(state):  # predicted over, not corrected
         return _noise_forward(prev[0], F, None, meas_var), None
     K = state.P[:, :nv] / meas_var
     return _noise_forward(prev[0], F, K, meas_var), K
@@ -663,7 +672,7 @@ def _forward(
                 )
             nis = float(e @ s_inv_e)
             state = filt._correct(pred, q_meas)
-            if getattr(state, "gated", False):  # rejected by the filter's outlier gate
+            if _gated(state):  # rejected by the filter's outlier gate
                 nis = min(nis, cast(Any, filt)._gate_nis(state))
             ll = -(0.5 * nis + np.log(np.diagonal(chol)).sum() + 0.5 * nv * _LOG_2PI)
         else:

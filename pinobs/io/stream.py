@@ -14,10 +14,12 @@ median interval of the first chunk unless given):
   *next* row comes back before it (``t_k > t_{k+1}``) is a glitch: skipped
   alone, the rows after it are kept.
 - **gap**: a true gap ``GAP_PERIODS·T < Δt ≤ MAX_GAP_PERIODS·T`` is
-  propagated in ``⌈Δt/T⌉`` sub-steps ``update(t_j, None, τ_held)`` of at
+  propagated in ``⌈Δt/T⌉`` sub-steps ``update(t_j, None, τ_j)`` of at
   most ``T`` each (the sub-step estimates are not output), never in one giant
-  step; a longer gap re-initialises the observer at the row (its position,
-  zero velocity), which recovers faster than a long open-loop propagation
+  step, the torques ``τ_j`` the log lost on the line from the held one to the
+  row's (:mod:`pinobs.model.sampling`); a longer gap re-initialises the observer
+  at the row (its position, zero velocity), which recovers faster than a long
+  open-loop propagation
   with a held torque (measured: :data:`pinobs.tolerances.MAX_GAP_PERIODS`).
 - **position** unreadable, non-finite, off its manifold or absurd (further
   outside the URDF range than ``ABSURD_LIMIT_FACTOR`` ranges): the row is a
@@ -451,7 +453,12 @@ class LogEstimator:
                     notes.append(f"gap of {gap:.6g} s ({gap / period:.0f} periods) before this row")
                     return self._restart(t, q, tau, notes)
                 for j in range(1, steps):  # sub-steps of gap/steps <= period; not output
-                    ob.update(self._t + gap * j / steps, None, held)
+                    # the torques the log lost: on the line from the held one to this row's
+                    # (pinobs.model.sampling: holding it across the gap made a smoother's
+                    # velocity error 33x on a UR5 log with 8 % of its rows dropped)
+                    s = j / steps
+                    lost = held if held is None or tau is None else held + s * (tau - held)
+                    ob.update(self._t + s * gap, None, lost)
                 if not dropped:
                     notes.append(
                         f"gap of {gap:.6g} s ({gap / period:.1f} periods) before this row: "

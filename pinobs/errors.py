@@ -14,6 +14,7 @@ __all__ = [
     "ChunkWarning",
     "ConfigurationError",
     "ConsistencyWarning",
+    "ContactWarning",
     "CostWarning",
     "DimensionError",
     "GainError",
@@ -135,6 +136,11 @@ class ConsistencyWarning(PinobsWarning):
 
 class LatencyWarning(PinobsWarning):
     """A measurement latency that was not given was found from the data and used."""
+
+
+class ContactWarning(PinobsWarning):
+    """A contact-aided filter that has had no foot in contact for a while: its velocity is the
+    IMU's integral alone and drifts (contact flags never set, or set to the wrong feet)."""
 
 
 class CostWarning(PinobsWarning):

@@ -21,8 +21,10 @@ __all__ = [
     "MAX_PLAUSIBLE_PERIOD",
     "MIN_PLAUSIBLE_PERIOD",
     "NEGLIGIBLE_MASS_FRACTION",
+    "NO_CONTACT_WARN_TIME",
     "PAUSE_RESTART",
     "QUATERNION_NORM_TOL",
+    "SERIES_ANGLE",
     "TIME_BACK_ROWS",
     "TIME_EPS",
 ]
@@ -114,3 +116,13 @@ MASS_MATRIX_SINGULAR_TOL = 1e-12
 #: (:func:`pinobs.observers.base.time_unit_warning`): 10 Hz and 1 MHz.
 MAX_PLAUSIBLE_PERIOD = 0.1
 MIN_PLAUSIBLE_PERIOD = 1e-6
+
+#: [rad] Below this rotation angle θ the SO(3) series ``Γ_m(φ) = Σ_n (φ^)ⁿ/(n+m)!``
+#: (the exponential, its left Jacobian and the next one) are summed as Taylor series in θ²
+#: to θ⁸ (truncation θ¹⁰/11! < 3e-18 here); above it their closed forms, whose
+#: cancellation error (~1e-16/θ² in Γ_2's last coefficient) is then below 2e-14.
+SERIES_ANGLE = 0.1
+
+#: [s] A contact-aided filter (``pinobs.observers.inekf``) warns once when no foot has been
+#: in contact for this long: its velocity is then the IMU's open-loop integral.
+NO_CONTACT_WARN_TIME = 0.5

@@ -35,3 +35,75 @@ def planar_3r_truth(robot: pinobs.Robot) -> pinobs.Robot:
 @pytest.fixture
 def robot_factory():
     return lambda name: cached_robot(name).copy()
+
+
+def dropped_rows(n: int, fraction: float, seed: int) -> np.ndarray:
+    """Which of ``n`` log rows a lossy logger keeps (booleans): ``fraction`` of them lost,
+    80 % of the losses single rows, the others runs of 3–9 rows; the first two rows and the
+    last ten are kept, and two runs never touch (each is one interval of 2–10 periods)."""
+    rng = np.random.default_rng(seed)
+    keep = np.ones(n, dtype=bool)
+    lost = 0
+    while lost < fraction * n:
+        k = int(rng.integers(2, n - 12))
+        run = 1 if rng.random() < 0.8 else int(rng.integers(3, 10))
+        if keep[k - 1 : k + run + 1].all():
+            keep[k : k + run] = False
+            lost += run
+    return keep
+
+
+def resampled_log(
+    robot: pinobs.Robot, plant: pinobs.Robot, duration: float, noise: float, seed: int
+) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """One 10 kHz run of ``plant`` (``pd`` input, torque held 0.1 ms) sampled twice: every
+    1 ms (the clean log) and at intervals uniform in 0.5–1.5 ms on the 0.1 ms grid (a
+    truly irregular, correctly stamped log); each ``(t, q, tau)``, positions with white
+    noise ``noise`` [rad] (the first row exact), torques as sampled at the rows."""
+    from pinobs.simulation import Sensor
+
+    res = pinobs.simulate(
+        robot, [], duration=duration, sensor=Sensor(rate=10_000.0), seed=seed, plant=plant
+    )
+    n = res.t.size
+    steps = np.random.default_rng(seed + 1).integers(5, 16, size=n)  # 0.5–1.5 ms
+    irregular = np.concatenate([[0], np.cumsum(steps)])
+    logs = []
+    for rows in (np.arange(0, n, 10), irregular[irregular < n]):
+        noise_rng = np.random.default_rng(seed + 2)
+        q = np.array(
+            [plant.integrate(res.q[k], noise_rng.normal(0, noise, plant.nv)) for k in rows]
+        )
+        q[0] = res.q[rows[0]]
+        logs.append((res.t[rows], q, np.array(res.tau[rows])))
+    return logs[0], logs[1]
+
+
+def irregular_loop_log(
+    plant: pinobs.Robot, duration: float, noise: float, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A control loop run at intervals uniform in 0.5–1.5 ms, each torque held over its own
+    interval (``pd`` input about the configuration and reference ``pinobs.simulate`` draws
+    with ``seed``): ``(t, q, tau, v)``, ``q`` measured with white noise ``noise`` [rad]
+    (the first row exact), ``v`` the true velocity."""
+    from pinobs.simulation.inputs import make_input
+    from pinobs.simulation.run import _plant_step
+
+    rng = np.random.default_rng(seed)  # as simulate draws them
+    q = plant.random_configuration(rng, scale=0.3)
+    inputs = make_input("pd", plant, rng=rng, center=q)
+    steps = np.random.default_rng(seed + 1).uniform(0.5e-3, 1.5e-3, int(2 * duration / 0.5e-3))
+    t = np.concatenate([[0.0], np.cumsum(steps)])
+    t = t[t <= duration]
+    qs, vs, taus = [], [], []
+    v = np.zeros(plant.nv)
+    for k in range(t.size):
+        if k:
+            q, v = _plant_step(plant, q, v, taus[-1], t[k] - t[k - 1], 1)
+        qs.append(q)
+        vs.append(v)
+        taus.append(inputs.torque(t[k], q, v))
+    noise_rng = np.random.default_rng(seed + 2)
+    q_meas = np.array([plant.integrate(x, noise_rng.normal(0, noise, plant.nv)) for x in qs])
+    q_meas[0] = qs[0]
+    return t, q_meas, np.array(taus), np.array(vs)

@@ -22,6 +22,9 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
     )
     p.add_argument("--quick", action="store_true", help="two robots, short runs: under two minutes")
     p.add_argument("--json", default=None, help="write the full report to this JSON file")
+    p.add_argument(
+        "--live", action="store_true", help="UR5 observers in a paced 1 kHz loop, 10 s each"
+    )
     add_cluster_options(
         p,
         "its independent runs on a local Dask cluster of N processes (default 0: "
@@ -35,6 +38,10 @@ def handle(args: argparse.Namespace) -> int:
     """The bench's table (and JSON); exit code 1 when a task failed."""
     from pinobs.evaluation.bench import BenchConfig, bench_tasks, format_bench, run_bench
 
+    if args.live:  # a user's own paced loop (issue 39): pinobs.evaluation.live
+        from pinobs.evaluation.live import print_live
+
+        return print_live(quick=args.quick, json_path=args.json)
     check_cluster(args)
     if args.workers is None and not args.scheduler:
         args.workers = 0  # bench's default: its timings not loaded by each other

@@ -373,6 +373,162 @@ def _unwrap_counter(tick: Floats) -> Floats:
 
 
 # ------------------------------------------------------------------ the fit
+@dataclass(frozen=True)
+class _Rows:
+    """A log's rows as the clock sees them (module docstring, step 1)."""
+
+    t: Floats
+    q: Floats
+    repeated: Bool  # equal to the previous row
+    stale: Bool  # repeated while moving (or the counter repeats)
+    usable: Bool  # a new sample with a stamp after the previous usable one's
+    ui: NDArray[np.intp]  # the usable rows
+    scale: Floats  # per coordinate: the typical step between usable rows
+    counter: Floats | None  # the unwrapped sample counter, or None
+
+    @property
+    def size(self) -> int:
+        return int(self.t.size)
+
+
+def _screen(t: Floats, q: Floats, tick: Floats | None) -> _Rows:
+    n_rows = t.size
+    rep = _repeats(q)
+    quantum = _quantum(q) if n_rows > 2 else np.zeros(q.shape[1])
+    stale = _stale(q, rep, quantum)
+    counter = None
+    if tick is not None:
+        counter = _unwrap_counter(np.asarray(tick, dtype=float))
+        stale = stale | (np.r_[1.0, np.diff(counter)] == 0)
+    usable = np.isfinite(t) & ~stale & np.isfinite(q).all(axis=1)
+    # stamps must increase among the usable rows (others: LogEstimator's time rules)
+    ui = np.flatnonzero(usable)
+    if ui.size:
+        keep = np.r_[True, np.diff(np.maximum.accumulate(t[ui])) > 0] & (
+            t[ui] >= np.maximum.accumulate(t[ui])
+        )
+        usable[ui[~keep]] = False
+        ui = ui[keep]
+    scale = np.ones(q.shape[1])
+    if ui.size >= 3:
+        scale = np.maximum(np.median(np.abs(np.diff(q[ui], axis=0)), axis=0), quantum)
+        scale = np.where(scale > 0, scale, 1.0)
+    return _Rows(t, q, rep, stale, usable, ui, scale, counter)
+
+
+def _find_loop(rows: _Rows) -> tuple[Floats, float, float] | None:
+    """The loop's ticks of the usable rows and its line ``T0, P`` (module docstring,
+    steps 2, 3 and 5), or ``None``."""
+    tu, qu = rows.t[rows.ui], rows.q[rows.ui]
+    h = float(np.median(np.diff(tu)))
+    if rows.counter is not None:
+        n = rows.counter[rows.ui] - rows.counter[rows.ui][0]
+        t0, p = _line(n, tu, h)
+        return n, t0, p
+    # the slowest loop whose ticks the stamps keep in phase (a loop of period P is one of
+    # period P/2 too, logged every 2 ticks)
+    floor = COHERENT_SIGMAS / math.sqrt(tu.size)
+    for m in range(1, MAX_SUBDIVISION + 1):
+        n, t0, p, coherence = _fit_ticks(tu, h / m)
+        if 0.5 * h / m < p < 2 * h / m and coherence > floor:
+            n = _resolve_by_motion(n, (tu - t0) / p - n, qu, rows.scale)
+            t0, p = _line(n, tu, p)
+            return n, t0, p
+    return None
+
+
+def _verdict(
+    rows: _Rows, mode: str, n: Floats, t0: float, p: float, jitter_max: float
+) -> tuple[bool, str]:
+    """Whether to use the loop's clock, and why (module docstring, step 4)."""
+    t, q = rows.t, rows.q
+    if rows.counter is not None:
+        if mode == "auto" and not rows.stale.any() and jitter_max < 0.01 * p:
+            return False, f"the stamps agree with the sample counter to {_ms(jitter_max)}"
+        return True, "from its sample counter"
+    if mode != "auto":
+        return True, "clock='loop'"
+    # the stamps as a plain reading would use them: every row with an increasing stamp
+    si = np.flatnonzero(np.isfinite(t) & np.isfinite(q).all(axis=1))
+    if si.size:
+        si = si[np.r_[True, np.diff(t[si]) > 0]]
+    e_stamps, n_s = _interp_error(t[si], q[si], rows.scale)
+    e_loop, n_l = _interp_error(t0 + p * n, q[rows.ui], rows.scale)
+    if min(n_s, n_l) < MIN_TRIPLES:
+        return False, f"too little motion to judge the stamps ({min(n_s, n_l)} moving rows)"
+    ratio = e_loop / e_stamps if e_stamps > 0 else math.inf
+    said = f"interpolation error {ratio:.2g}× the stamps'"
+    if not ratio < CLEAR_RATIO:
+        return False, f"the loop's clock does not explain the motion better: {said}"
+    return True, f"the motion is smoother on the loop's clock: {said}"
+
+
+def _kept(
+    rows: _Rows, mode: str, reason: str, period: float | None = None, **kw: float
+) -> ClockFit:
+    """The stamps as they are, and the report of what was found."""
+    n_rows = rows.size
+    report = ClockReport(
+        mode=mode,
+        repaired=False,
+        period=period,
+        step=float(kw.get("step", 1.0)),
+        jitter=float(kw.get("jitter", 0.0)),
+        jitter_max=float(kw.get("jitter_max", 0.0)),
+        stale=int(rows.stale.sum()),
+        repeated_at_rest=int((rows.repeated & ~rows.stale).sum()),
+        drops=0,
+        largest_correction=0.0,
+        rows=n_rows,
+        counter=rows.counter is not None,
+        reason=reason,
+    )
+    return ClockFit(
+        t=rows.t.copy(),
+        stale=np.zeros(n_rows, dtype=bool),
+        drops=np.zeros(n_rows, dtype=np.int64),
+        tick=np.full(n_rows, -1, dtype=np.int64),
+        report=report,
+    )
+
+
+def _placed(
+    rows: _Rows, mode: str, reason: str, n: Floats, t0: float, p: float, stats: dict[str, float]
+) -> ClockFit:
+    """Every row on the loop's clock: usable rows at their tick, stale rows at the tick of
+    the sample they repeat; a row left out of the usable set for its time keeps its stamp
+    (LogEstimator's time rules handle it)."""
+    t, ui = rows.t, rows.ui
+    tick_u = np.full(rows.size, np.nan)
+    tick_u[ui] = n
+    ticks = _fill_forward(tick_u)
+    stale_out = ~rows.usable & np.isfinite(ticks) & np.isfinite(t) & rows.stale
+    t_out = t.copy()
+    placed = rows.usable | stale_out
+    t_out[placed] = t0 + p * ticks[placed]
+    drops = np.zeros(rows.size, dtype=np.int64)
+    if stats["step"] <= 1.0:
+        drops[ui[1:]] = np.maximum(np.diff(n) - 1, 0).astype(np.int64)
+    corr = np.abs(t_out[placed] - t[placed])
+    report = ClockReport(
+        mode=mode,
+        repaired=True,
+        period=p,
+        step=stats["step"],
+        jitter=stats["jitter"],
+        jitter_max=stats["jitter_max"],
+        stale=int(stale_out.sum()),
+        repeated_at_rest=int((rows.repeated & ~rows.stale).sum()),
+        drops=int(drops.sum()),
+        largest_correction=float(corr.max()) if corr.size else 0.0,
+        rows=rows.size,
+        counter=rows.counter is not None,
+        reason=reason,
+    )
+    tick_int = np.where(np.isfinite(ticks) & placed, ticks, -1).astype(np.int64)
+    return ClockFit(t_out, stale_out, drops, tick_int, report, t0=t0, period=p)
+
+
 def fit_clock(
     t: Floats,
     q: Floats,
@@ -404,153 +560,33 @@ def fit_clock(
         if t.size
         else q.reshape(0, -1 if q.size else 0)
     )
-    n_rows = t.size
-    rep = _repeats(q)
-    quantum = _quantum(q) if n_rows > 2 else np.zeros(q.shape[1])
-    stale = _stale(q, rep, quantum)
-    counter = tick is not None
-    if counter:
-        ticks_all = _unwrap_counter(np.asarray(tick, dtype=float))
-        d = np.r_[1.0, np.diff(ticks_all)]
-        stale = stale | (d == 0)
-    usable = np.isfinite(t) & ~stale & np.isfinite(q).all(axis=1)
-    # stamps must increase among the usable rows (others: LogEstimator's time rules)
-    ui = np.flatnonzero(usable)
-    if ui.size:
-        keep = np.r_[True, np.diff(np.maximum.accumulate(t[ui])) > 0] & (
-            t[ui] >= np.maximum.accumulate(t[ui])
-        )
-        usable[ui[~keep]] = False
-        ui = ui[keep]
-
-    def kept(reason: str, period: float | None = None, **kw: float) -> ClockFit:
-        rep_rest = int((rep & ~stale).sum())
-        report = ClockReport(
-            mode=mode,
-            repaired=False,
-            period=period,
-            step=float(kw.get("step", 1.0)),
-            jitter=float(kw.get("jitter", 0.0)),
-            jitter_max=float(kw.get("jitter_max", 0.0)),
-            stale=int(stale.sum()),
-            repeated_at_rest=rep_rest,
-            drops=0,
-            largest_correction=0.0,
-            rows=n_rows,
-            counter=counter,
-            reason=reason,
-        )
-        return ClockFit(
-            t=t.copy(),
-            stale=np.zeros(n_rows, dtype=bool),
-            drops=np.zeros(n_rows, dtype=np.int64),
-            tick=np.full(n_rows, -1, dtype=np.int64),
-            report=report,
-        )
-
+    rows = _screen(t, q, tick)
     if mode == "stamps":
-        return kept("clock='stamps'")
-    if ui.size < 3:
+        return _kept(rows, mode, "clock='stamps'")
+    if rows.ui.size < 3:
         if mode == "loop":
             raise TimestampError(
-                f"clock='loop': {ui.size} rows with increasing stamps and a new position; "
-                "a loop period cannot be found from fewer than 3"
+                f"clock='loop': {rows.ui.size} rows with increasing stamps and a new "
+                "position; a loop period cannot be found from fewer than 3"
             )
-        return kept("too few rows to find a loop period")
-    tu, qu = t[ui], q[ui]
-    steps = np.diff(tu)
-    h = float(np.median(steps))
-    scale = np.maximum(np.median(np.abs(np.diff(qu, axis=0)), axis=0), quantum)
-    scale = np.where(scale > 0, scale, 1.0)
-
-    best: tuple[Floats, float, float] | None = None  # ticks, t0, P
-    if counter:
-        n = ticks_all[ui] - ticks_all[ui][0]
-        t0, p = _line(n, tu, h)
-        best = (n, t0, p)
-    else:
-        # the slowest loop whose ticks the stamps keep in phase (a loop of period P is
-        # one of period P/2 too, logged every 2 ticks)
-        floor = COHERENT_SIGMAS / math.sqrt(tu.size)
-        for m in range(1, MAX_SUBDIVISION + 1):
-            n, t0, p, coherence = _fit_ticks(tu, h / m)
-            if 0.5 * h / m < p < 2 * h / m and coherence > floor:
-                frac = (tu - t0) / p - n
-                n = _resolve_by_motion(n, frac, qu, scale)
-                t0, p = _line(n, tu, p)
-                best = (n, t0, p)
-                break
-    if best is None:
+        return _kept(rows, mode, "too few rows to find a loop period")
+    found = _find_loop(rows)
+    if found is None:
         if mode == "loop":
             raise TimestampError("clock='loop': no loop period explains the stamps")
-        return kept("no loop period explains the stamps")
-    n, t0, p = best
-    res = tu - (t0 + p * n)
-    jitter = float(np.sqrt(np.mean(res**2)))
-    jitter_max = float(np.max(np.abs(res)))
+        return _kept(rows, mode, "no loop period explains the stamps")
+    n, t0, p = found
+    res = t[rows.ui] - (t0 + p * n)
     dn = np.diff(n)
-    step = float(np.median(dn)) if dn.size else 1.0
-    stats = {"step": step, "jitter": jitter, "jitter_max": jitter_max}
-
-    reason = "clock='loop'"
-    if mode == "auto" and not counter:
-        # the stamps as a plain reading would use them: every row with an increasing stamp
-        si = np.flatnonzero(np.isfinite(t) & np.isfinite(q).all(axis=1))
-        if si.size:
-            si = si[np.r_[True, np.diff(t[si]) > 0]]
-        e_stamps, n_s = _interp_error(t[si], q[si], scale)
-        e_loop, n_l = _interp_error(t0 + p * n, qu, scale)
-        if min(n_s, n_l) < MIN_TRIPLES:
-            return kept(
-                f"too little motion to judge the stamps ({min(n_s, n_l)} moving rows)", p, **stats
-            )
-        ratio = e_loop / e_stamps if e_stamps > 0 else math.inf
-        if not ratio < CLEAR_RATIO:
-            return kept(
-                f"the loop's clock does not explain the motion better: interpolation error "
-                f"{ratio:.2g}× the stamps'",
-                p,
-                **stats,
-            )
-        reason = f"the motion is smoother on the loop's clock: interpolation error {ratio:.2g}× the stamps'"
-    elif counter:
-        if mode == "auto" and not stale.any() and jitter_max < 0.01 * p:
-            return kept(
-                f"the stamps agree with the sample counter to {_ms(jitter_max)}", p, **stats
-            )
-        reason = "from its sample counter"
-
-    # every row's tick: usable rows theirs, stale rows the one they repeat
-    tick_u = np.full(n_rows, np.nan)
-    tick_u[ui] = n
-    ticks = _fill_forward(tick_u)
-    stale_out = ~usable & np.isfinite(ticks) & np.isfinite(t) & stale
-    # a row dropped from the usable set for its time (not after the previous): unplaced,
-    # LogEstimator's rules handle it at its stamp
-    t_out = t.copy()
-    placed = usable | stale_out
-    t_out[placed] = t0 + p * ticks[placed]
-    drops = np.zeros(n_rows, dtype=np.int64)
-    if step <= 1.0:
-        drops[ui[1:]] = np.maximum(dn - 1, 0).astype(np.int64)
-    corr = np.abs(t_out[placed] - t[placed])
-    report = ClockReport(
-        mode=mode,
-        repaired=True,
-        period=p,
-        step=step,
-        jitter=jitter,
-        jitter_max=jitter_max,
-        stale=int(stale_out.sum()),
-        repeated_at_rest=int((rep & ~stale).sum()),
-        drops=int(drops.sum()),
-        largest_correction=float(corr.max()) if corr.size else 0.0,
-        rows=n_rows,
-        counter=counter,
-        reason=reason,
-    )
-    tick_int = np.where(np.isfinite(ticks) & placed, ticks, -1).astype(np.int64)
-    return ClockFit(t_out, stale_out, drops, tick_int, report, t0=t0, period=p)
+    stats = {
+        "step": float(np.median(dn)) if dn.size else 1.0,
+        "jitter": float(np.sqrt(np.mean(res**2))),
+        "jitter_max": float(np.max(np.abs(res))),
+    }
+    repair, reason = _verdict(rows, mode, n, t0, p, stats["jitter_max"])
+    if not repair:
+        return _kept(rows, mode, reason, p, **stats)
+    return _placed(rows, mode, reason, n, t0, p, stats)
 
 
 def _fill_forward(x: Floats) -> Floats:

@@ -43,6 +43,7 @@ from pinobs.io.stream import (
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
+from pinobs.model.sampling import missing_samples
 from pinobs.observers.base import NOISE_FLOOR, Estimate, median_period, observer_class, positive
 from pinobs.observers.smoothing import (
     Smoother,
@@ -94,24 +95,59 @@ class _Recorder:
 
 class _Streamer(_Recorder):
     """The recorder's interface, each sample smoothed as it comes: a stretch (between
-    restarts) is one :class:`Smoother`; finished samples wait in :attr:`finished`."""
+    restarts) is one :class:`Smoother`; finished samples wait in :attr:`finished`.
 
-    def __init__(self, robot: Robot, name: str, new: Callable[[], Smoother]) -> None:
+    A sample after an interval of :data:`~pinobs.model.sampling.MISSING_PERIODS` periods or
+    more is preceded by the samples the log lost there, at their ticks with their torques
+    on the line across the interval, as :func:`pinobs.smooth` puts a log on its ticks
+    (:func:`~pinobs.model.sampling.on_ticks`); they have no row and are not output."""
+
+    def __init__(self, robot: Robot, name: str, new: Callable[[], Smoother], period: float) -> None:
         super().__init__(robot, name)
         self._new = new
+        self._period = period
         self._sm: Smoother | None = None
         self._first = 0  # number of the stretch's first sample
+        # per sample pushed to the stretch's smoother from number `_pushed_from` on: its
+        # sample number, or -1 for a lost one put back on its tick
+        self._numbers: deque[int] = deque()
+        self._pushed_from = 0
+        self._last: tuple[float, Vector] | None = None  # the previous sample's (t, tau)
         self.finished: deque[tuple[int, Vector, Vector, Vector]] = deque()
         self.rho = [0.0, 0]  # the stretches' filter–smoother consistency terms (sum, count)
 
     def _take(self, t: float, q: Vector | None, tau: Vector) -> None:
         assert self._sm is not None  # reset comes first (LogEstimator)
-        done = self._sm.push(t, q, tau)
-        self.finished.extend((self._first + k, *rest) for k, *rest in done)  # type: ignore[misc]
+        if self._last is not None:
+            t0, tau0 = self._last
+            lost = int(missing_samples(np.array([t0, t]), self._period)[0])
+            for i in range(1, lost + 1):
+                s = i / (lost + 1)
+                self._push(t0 + s * (t - t0), None, tau0 + s * (tau - tau0), -1)
+        self._last = (t, tau)
+        self._push(t, q, tau, self._n)
+
+    def _push(self, t: float, q: Vector | None, tau: Vector, number: int) -> None:
+        assert self._sm is not None
+        self._numbers.append(number)
+        self._finish(self._sm.push(t, q, tau))
+
+    def _finish(self, done: list[tuple[int, Vector, Vector, Vector]]) -> None:
+        """``done``'s samples (by their place in the stretch) as sample numbers, in order."""
+        for k, *rest in done:
+            while self._pushed_from < k:
+                self._numbers.popleft()
+                self._pushed_from += 1
+            number = self._numbers.popleft()
+            self._pushed_from += 1
+            if number >= 0:
+                self.finished.append((number, *rest))  # type: ignore[arg-type]
 
     def reset(self, t0: float, q0: Any, v0: Any = None, tau0: Any = None) -> Estimate:
         self.flush()
         self._sm, self._first = self._new(), self._n  # no segment list: nothing is kept
+        self._numbers.clear()
+        self._pushed_from, self._last = 0, None
         try:
             return self._keep(t0, q0, tau0)
         except Exception:
@@ -123,7 +159,7 @@ class _Streamer(_Recorder):
         if self._sm is not None:
             done = self._sm.close()
             if self._n - self._first > 1:  # one sample: no velocity to smooth
-                self.finished.extend((self._first + k, *rest) for k, *rest in done)  # type: ignore[misc]
+                self._finish(done)
             n = self._sm.consistency_terms  # ρ is a mean over n terms: the stretches pool
             self.rho[0] += self._sm.consistency * n if n else 0.0
             self.rho[1] += n
@@ -274,7 +310,7 @@ def _streamed(
         band=band,
         configurations=first.q if np.any(np.isfinite(first.q).all(axis=1)) else None,
     )
-    rec = _Streamer(robot, observer, new)
+    rec = _Streamer(robot, observer, new, period)
     est = LogEstimator(rec, period=period, check_v=False)
     pending: deque[tuple[float, float]] = deque()  # (t, sample number or NaN) of unwritten rows
     estimated = measured = 0

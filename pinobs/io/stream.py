@@ -14,10 +14,12 @@ median interval of the first chunk unless given):
   *next* row comes back before it (``t_k > t_{k+1}``) is a glitch: skipped
   alone, the rows after it are kept.
 - **gap**: a true gap ``GAP_PERIODS·T < Δt ≤ MAX_GAP_PERIODS·T`` is
-  propagated in ``⌈Δt/T⌉`` sub-steps ``update(t_j, None, τ_held)`` of at
+  propagated in ``⌈Δt/T⌉`` sub-steps ``update(t_j, None, τ_j)`` of at
   most ``T`` each (the sub-step estimates are not output), never in one giant
-  step; a longer gap re-initialises the observer at the row (its position,
-  zero velocity), which recovers faster than a long open-loop propagation
+  step, the torques ``τ_j`` the log lost on the line from the held one to the
+  row's (:mod:`pinobs.model.sampling`); a longer gap re-initialises the observer
+  at the row (its position, zero velocity), which recovers faster than a long
+  open-loop propagation
   with a held torque (measured: :data:`pinobs.tolerances.MAX_GAP_PERIODS`).
 - **position** unreadable, non-finite, off its manifold or absurd (further
   outside the URDF range than ``ABSURD_LIMIT_FACTOR`` ranges): the row is a
@@ -63,8 +65,8 @@ from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers import Estimate, make_observer
+from pinobs.observers.base import gap_substeps, time_unit_warning
 from pinobs.observers.base import median_period as _median_period
-from pinobs.observers.base import time_unit_warning
 from pinobs.observers.noise import noise_from_log
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
@@ -446,13 +448,17 @@ class LogEstimator:
         period = self.period
         gap = t - self._t
         try:
-            if period is not None and gap > GAP_PERIODS * period:
-                steps = math.ceil(gap / period - 1e-9)
+            if period is not None and (steps := gap_substeps(gap, period)) > 1:
                 if gap > MAX_GAP_PERIODS * period:
                     notes.append(f"gap of {gap:.6g} s ({gap / period:.0f} periods) before this row")
                     return self._restart(t, q, tau, notes)
                 for j in range(1, steps):  # sub-steps of gap/steps <= period; not output
-                    ob.update(self._t + gap * j / steps, None, held)
+                    # the torques the log lost: on the line from the held one to this row's
+                    # (pinobs.model.sampling: holding it across the gap made a smoother's
+                    # velocity error 33x on a UR5 log with 8 % of its rows dropped)
+                    s = j / steps
+                    lost = held if held is None or tau is None else held + s * (tau - held)
+                    ob.update(self._t + s * gap, None, lost)
                 if not dropped:
                     notes.append(
                         f"gap of {gap:.6g} s ({gap / period:.1f} periods) before this row: "

@@ -15,11 +15,18 @@ not inflate σ, so the robust form is used:
 
     σ̂² = median(d_k²) / (20 · 0.4549)
 
-(0.4549 is the median of a χ²₁ variable).  Only four consecutive rows evenly
-spaced in time (each interval within half an interval of the median) make a
-``d_k``: across a dropped sample the difference is not the third one, and its
-motion term is not small (with 30 % of the samples dropped at random σ̂ was
-2.0× σ, with 5 % 1.17×).
+(0.4549 is the median of a χ²₁ variable).  On four rows evenly spaced in time
+(each interval within :data:`EVEN_TOL` of the median ``h``) that is the
+binomial difference above.  On uneven ones (a dropped sample between them, or
+irregular sampling) the binomial weights do not annihilate a straight line: a
+motion at 1 rad/s sampled at intervals of ``h (1 ± 0.5)`` leaves ~``h·0.5`` rad,
+above the noise (with 30 % of the samples dropped σ̂ was 2.0× σ, with 5 %
+1.17×).  There ``d_k`` is the third divided difference instead, the
+combination ``Σ wᵢ yᵢ``, ``wᵢ = 1 / Πⱼ≠ᵢ (tᵢ − tⱼ)``, that annihilates every
+quadratic whatever the times, scaled to the same noise variance ``20 σ²``
+(``d_k · √(20 / Σ wᵢ²)``; on even times it is the binomial difference).  Its
+motion term grows as ``x⃛ H³`` with the four rows' span ``H``: four rows
+spanning more than :data:`MAX_SPAN` median intervals are not used.
 
 Used on positions by the observers (:mod:`pinobs.observers.noise`) and on
 positions and torques by the identification (:mod:`pinobs.model.identification`).
@@ -40,6 +47,14 @@ CHI2_1_MEDIAN = 0.454936423119572
 #: Σ binomial(3, k)²: the variance gain of the third difference.
 _THIRD_DIFF_GAIN = 20.0
 
+#: Four rows whose intervals are each within this fraction of the median are evenly
+#: spaced (the binomial third difference); others use the divided difference.
+EVEN_TOL = 0.01
+
+#: Four rows spanning more than this many median intervals make no difference (module
+#: docstring: the motion term grows as the span cubed; 5: one dropped sample between them).
+MAX_SPAN = 5.0
+
 
 def robust_rms(x: Vector) -> Vector:
     """Per column, ``√(median(x²) / median(χ²₁))``: the RMS of zero-mean Gaussian columns,
@@ -55,8 +70,9 @@ def third_difference_std(
 
     Args:
         x: samples, shape ``(N, n)``; a difference with a non-finite entry is skipped.
-        t: the rows' times [s], shape ``(N,)``: a difference is used only where its
-            three intervals are each within half the median interval.
+        t: the rows' times [s], shape ``(N,)``: four rows evenly spaced make the
+            binomial difference, unevenly spaced ones (within :data:`MAX_SPAN` median
+            intervals) the scaled divided difference (module docstring).
             ``None``: the rows are taken as evenly spaced.
         idx: the rows' indices in the log they were taken from, shape ``(N,)``: a
             difference is used only over four consecutive indices (none dropped between).
@@ -67,11 +83,30 @@ def third_difference_std(
     even = np.ones(max(x.shape[0] - 1, 0), dtype=bool)  # row j to j+1: the next sample
     if idx is not None:
         even &= np.diff(np.asarray(idx)) == 1
+    uneven = np.zeros(max(x.shape[0] - 3, 0), dtype=bool)
     if t is not None and even.size:
-        dt = np.diff(np.asarray(t, dtype=float))
+        tt = np.asarray(t, dtype=float)
+        dt = np.diff(tt)
         h = float(np.median(dt))
-        even &= np.abs(dt - h) <= 0.5 * h
-    whole: NDArray[np.bool_] = even[:-2] & even[1:-1] & even[2:]  # d_k's four rows
+        close = np.abs(dt - h) <= EVEN_TOL * h
+        linked = even & (dt > 0)
+        even &= close
+        if d.shape[0] and not np.all(close):
+            span = tt[3:] - tt[:-3]
+            uneven = linked[:-2] & linked[1:-1] & linked[2:] & (span <= MAX_SPAN * h)
+            uneven &= ~(even[:-2] & even[1:-1] & even[2:])
+            if uneven.any():
+                four = np.stack([tt[:-3], tt[1:-2], tt[2:-1], tt[3:]], axis=1)[uneven]
+                diff = four[:, :, None] - four[:, None, :]
+                np.einsum("kii->ki", diff)[...] = 1.0
+                w = 1.0 / np.prod(diff, axis=2)  # the third divided difference's weights
+                scale = np.sqrt(_THIRD_DIFF_GAIN / np.sum(w**2, axis=1))
+                rows = np.flatnonzero(uneven)
+                d = d.copy()
+                d[rows] = np.einsum(
+                    "ki,kij->kj", w * scale[:, None], x[rows[:, None] + np.arange(4)]
+                )
+    whole: NDArray[np.bool_] = (even[:-2] & even[1:-1] & even[2:]) | uneven  # d_k's four rows
     whole &= np.all(np.isfinite(d), axis=1)
     if np.count_nonzero(whole) < max(min_runs, 1):
         return None

@@ -830,12 +830,12 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             self._restarted = True  # the next solve must beat the current model to end it
         if not self.blend:
             return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v, v_prev=state.ekf.v, dt_prev=dt)
-        meas = None if ekf.gated else q_meas  # one gate for every filter
+        meas = None if ekf.gate.gated else q_meas  # one gate for every filter
         kf = self._bank.step(state.kf, dt, meas)
         lam = min(1.0, dt / self.blend_time)
         # disagreement is the model's fault only when its innovations say so (NIS̄ > 2 nv)
         nv = self.robot.nv
-        level = float(nv) if ekf.nis_level is None else ekf.nis_level
+        level = float(nv) if ekf.gate.level is None else ekf.gate.level
         blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
         if self._restarted or self._learner.rejected_run >= _REJECTED_RUN:
             blame = 1.0  # the model was lost and not replaced since, or none fits: to blame
@@ -861,7 +861,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         """Teach the learner the committed sample (with the torque held from it on, MATH §7);
         install a new model or leave the warm-up when a solve says so."""
         ekf = state.ekf
-        level = float(self.robot.nv) if ekf.nis_level is None else ekf.nis_level
+        level = float(self.robot.nv) if ekf.gate.level is None else ekf.gate.level
         # the first solve only ends the warm-up: the nominal model gets its chance with the
         # exact-model densities, and its innovations decide at the next solve
         # (a learned model is refined at every solve; only the nominal one is protected)
@@ -871,7 +871,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         lr = self._learner
         if math.isnan(lr.next_solve):
             lr.start(float(self._reset_args[0]))
-        if lr.add(t, q, tau, explained=explained, gated=q is None and bool(state.ekf.gated)):
+        if lr.add(t, q, tau, explained=explained, gated=q is None and bool(state.ekf.gate.gated)):
             ekf = self._install(ekf)
             self._restarted = False
         elif self.regime == "nominal" and level > _NIS_REVOKED * self.robot.nv:
@@ -888,7 +888,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         return state if ekf is state.ekf else state._replace(ekf=ekf)
 
     def _innovation(self, state: _State) -> tuple[float | None, bool]:  # type: ignore[override]
-        return state.ekf.nis, state.ekf.gated
+        return state.ekf.gate.nis, state.ekf.gate.gated
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:  # type: ignore[override]
         return state.q, state.v

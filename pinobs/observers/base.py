@@ -27,7 +27,7 @@ from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass, field
 from statistics import NormalDist
-from typing import Any, ClassVar, Generic, TypeVar, final
+from typing import Any, ClassVar, Generic, NamedTuple, TypeVar, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -44,6 +44,7 @@ from pinobs.errors import (
 )
 from pinobs.model import Robot
 from pinobs.model.robot import read_only
+from pinobs.observers.blas import one_blas_thread
 from pinobs.observers.noise import estimate_noise_std
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
@@ -60,8 +61,10 @@ __all__ = [
     "NOISE_FLOOR",
     "Consistency",
     "Estimate",
+    "GateState",
     "Observer",
     "chi2_quantile",
+    "gap_substeps",
     "gate_nis",
     "gate_threshold",
     "make_observer",
@@ -250,6 +253,43 @@ def outlier_gate(
     return False, lvl + NIS_AVERAGING * (min(nis, 100.0 * lvl) - lvl)
 
 
+class GateState(NamedTuple):
+    """The outlier gate's bookkeeping, carried in the state of every family with an innovation.
+
+    One definition for every filter (``ekf``, ``kf``, ``kalman``, ``riemannian``,
+    ``liegroup``, ``ii``; ``adaptive`` through its ``ekf``): a family computes its NIS
+    ``eᵀ S⁻¹ e`` (its own ``e`` and ``S``) and calls :meth:`measured`, or :meth:`predicted`
+    at a step without a sample; the base reads ``nis`` and ``gated`` of the committed
+    state (:meth:`Observer._innovation`: :attr:`Estimate.nis`, :meth:`Observer.consistency`).
+
+    Attributes:
+        nis: normalized innovation squared of the last measurement (``None``: none).
+        gated: that measurement was rejected as an outlier (the state is the prediction).
+        run: measurements rejected in a row.
+        level: running mean of accepted NIS (scales the gate; ``None``: none yet, ``dof``).
+    """
+
+    nis: float | None = None
+    gated: bool = False
+    run: int = 0
+    level: float | None = None
+
+    def measured(self, nis: float, threshold: float, dof: int) -> GateState:
+        """After a measurement of normalized innovation squared ``nis``: the gate's decision
+        (:func:`outlier_gate`, ``threshold`` from :func:`gate_threshold`, ``dof`` degrees of
+        freedom) and its bookkeeping.  ``gated``: the family must not use the measurement."""
+        reject, level = outlier_gate(nis, self.level, self.run, threshold, dof)
+        return GateState(nis, reject, self.run + 1 if reject else 0, level)
+
+    def predicted(self) -> GateState:
+        """After a step without a measurement: no NIS, not gated, the run and level kept."""
+        return GateState(None, False, self.run, self.level)
+
+    def limit(self, threshold: float, dof: int) -> float:
+        """The NIS above which the gate rejects at this level (:func:`gate_nis`)."""
+        return gate_nis(threshold, self.level, dof)
+
+
 @functools.lru_cache(maxsize=64)
 def steady_innovation_variance(k1: float, k2: float, h: float, meas_var: float) -> float:
     """Innovation variance of a fixed-gain observer of a double integrator, noise-driven, at steady state.
@@ -274,6 +314,21 @@ def steady_innovation_variance(k1: float, k2: float, h: float, meas_var: float) 
     vec_p = np.linalg.solve(np.eye(4) - np.kron(A, A), meas_var * (K @ K.T).ravel())
     P = vec_p.reshape(2, 2)
     return float((D @ P @ D.T)[0, 0] + meas_var)
+
+
+def gap_substeps(dt: float, period: float | None, *, span: float = math.inf) -> int:
+    """Steps of at most one sample ``period`` [s] over an interval ``dt`` [s]: the pause rule
+    of the live observer (:meth:`Observer.update`) and of the log reader
+    (:class:`pinobs.io.LogEstimator`).
+
+    ``1`` (one step) unless ``dt`` is longer than :data:`~pinobs.tolerances.GAP_PERIODS`
+    periods; then ``⌈min(dt, span) / period⌉`` (``span`` [s]: the most of a pause
+    propagated in steps of one period; the steps are ``dt / n`` long).  ``period`` ``None``
+    (not known yet): ``1``.
+    """
+    if period is None or not dt > GAP_PERIODS * period:
+        return 1
+    return math.ceil(min(dt, span) / period - 1e-9)
 
 
 def positive(
@@ -402,6 +457,7 @@ class Observer(ABC, Generic[State]):
 
     # ----------------------------------------------------------- public API
     @final
+    @one_blas_thread  # small matrices: threads only contend (observers/blas.py)
     def reset(
         self,
         t0: float,
@@ -443,6 +499,7 @@ class Observer(ABC, Generic[State]):
         return estimate
 
     @final
+    @one_blas_thread
     def update(self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None = None) -> Estimate:
         """Advance to time ``t`` [s] and correct with the measured configuration.
 
@@ -536,13 +593,15 @@ class Observer(ABC, Generic[State]):
     def _stepped(self, state: State, dt: float, q: Vector | None, tau: Vector) -> State:
         """:meth:`_step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
         than :data:`GAP_PERIODS` periods (at most ``PAUSE_RESTART`` worth of them: a longer
-        step without a sample is a prediction in the dark, restarted at the next sample).
+        step without a sample is a prediction in the dark, restarted at the next sample;
+        :func:`gap_substeps`, the log reader's count too).
         One step of 10 s returned 1e74 rad/s from ``ekf`` and every update after it raised;
         one of 1 s left ``riemannian`` 500 rad/s off for seconds (a sweep)."""
         period = self._period_s
-        if period is None or not dt > GAP_PERIODS * period:
+        span = math.inf if period is None else max(PAUSE_RESTART, MAX_GAP_PERIODS * period)
+        n = gap_substeps(dt, period, span=span)
+        if n == 1:
             return self._step(state, dt, q, tau)
-        n = math.ceil(min(dt, max(PAUSE_RESTART, MAX_GAP_PERIODS * period)) / period - 1e-9)
         for _ in range(n - 1):
             state = self._step(state, dt / n, None, tau)
         return self._step(state, dt / n, q, tau)
@@ -736,8 +795,10 @@ class Observer(ABC, Generic[State]):
         return state
 
     def _innovation(self, state: State) -> tuple[float | None, bool]:
-        """``(NIS, gated)`` of the measurement that made ``state`` (families with a covariance)."""
-        return None, False
+        """``(NIS, gated)`` of the measurement that made ``state``: its :class:`GateState`
+        ``gate`` (families with an innovation), else ``(None, False)``."""
+        gate: GateState | None = getattr(state, "gate", None)
+        return (None, False) if gate is None else (gate.nis, gate.gated)
 
     def _make_estimate(self, t: float, state: State) -> Estimate:
         q, v = self._output(state)
@@ -809,6 +870,7 @@ def observer_class(name: str) -> type[Observer[Any]]:
         ) from None
 
 
+@one_blas_thread  # a family's gains (scipy's DARE...): a woken BLAS thread spins ~50 ms after
 def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
     """Build the observer registered as ``name`` on ``robot``.
 

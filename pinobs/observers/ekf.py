@@ -128,11 +128,10 @@ from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.integrators import friction_substeps
 from pinobs.observers.base import (
     NOISE_FLOOR,
+    GateState,
     Observer,
     Vector,
-    gate_nis,
     gate_threshold,
-    outlier_gate,
     positive,
     register,
 )
@@ -213,10 +212,7 @@ class EKFState(NamedTuple):
     P: Vector  # covariance of (δq, δv) or, with the disturbance, of (δq, δv, δd)
     d: Vector | None = None  # estimated joint-torque offset [N·m or N]
     d_psd: Vector | None = None  # its random-walk density per joint [N²·m²/s]
-    nis: float | None = None  # normalized innovation squared of the last measurement
-    gated: bool = False  # that measurement was rejected as an outlier
-    gate_run: int = 0  # consecutive rejected measurements
-    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
+    gate: GateState = GateState()  # the outlier gate's bookkeeping (NIS of the last measurement)
 
 
 @register
@@ -339,7 +335,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         with np.errstate(over="ignore", invalid="ignore"):
             pred, _ = self._predict(state, dt, tau)
             if q_meas is None:
-                return pred._replace(P=0.5 * (pred.P + pred.P.T), nis=None, gated=False)
+                return pred._replace(P=0.5 * (pred.P + pred.P.T), gate=pred.gate.predicted())
             return self._correct(pred, q_meas)
 
     def _predict(self, state: EKFState, dt: float, tau: Vector) -> tuple[EKFState, Vector]:
@@ -419,26 +415,19 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         if nis * R < 1e-6 * float(e @ e):  # K_q ≈ I (P_qq ≫ R): e − K_q e lost its digits
             # and went negative (−9e294 on a filter being lost): eᵀ S⁻¹ e directly
             nis = float(e @ np.linalg.solve(P[:nv, :nv] + scaled_identity(nv, R), e))
-        reject, level = outlier_gate(nis, state.nis_level, state.gate_run, self._gate, nv)
-        if reject:
-            return state._replace(
-                P=0.5 * (P + P.T), nis=nis, gated=True, gate_run=state.gate_run + 1, nis_level=level
-            )
+        gate = state.gate.measured(nis, self._gate, nv)
+        if gate.gated:
+            return state._replace(P=0.5 * (P + P.T), gate=gate)
         q = self.robot.integrate(q, dx[:nv])
         v = v + dx[nv : 2 * nv]
         if d is not None:
             d = d + dx[2 * nv :]
-        return EKFState(
-            q, v, P_new, d, state.d_psd, nis, False, 0, level
-        )  # P symmetric (joseph_update)
-
-    def _innovation(self, state: EKFState) -> tuple[float | None, bool]:
-        return state.nis, state.gated
+        return EKFState(q, v, P_new, d, state.d_psd, gate)  # P symmetric (joseph_update)
 
     def _gate_nis(self, state: EKFState) -> float:
         """The NIS above which :meth:`_correct` rejected ``state``'s measurement: the gate's
         threshold at its level (:func:`pinobs.observers.base.outlier_gate`)."""
-        return gate_nis(self._gate, state.nis_level, self.robot.nv)
+        return state.gate.limit(self._gate, self.robot.nv)
 
     def _replace_robot(self, robot: Robot) -> None:
         """Swap the filter's model between updates (an adaptive subclass's identified model).

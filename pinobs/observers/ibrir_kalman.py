@@ -103,10 +103,10 @@ from pinobs.model import Robot, lie_rk4
 from pinobs.model.integrators import friction_substeps, rk4_stage_matrices
 from pinobs.observers.base import (
     NOISE_FLOOR,
+    GateState,
     Observer,
     Vector,
     gate_threshold,
-    outlier_gate,
     positive,
     register,
 )
@@ -251,10 +251,7 @@ class _State(NamedTuple):
     P: Vector  # (2nv, 2nv)
     diff: Any  # the differentiator's state (ξ̂ of Theorem 3.1), None when unused
     y_prev: Vector | None  # the sample of the previous call (None: there was none, or gated)
-    nis: float | None = None  # normalized innovation squared of the last measurement
-    gated: bool = False  # that measurement was rejected as an outlier
-    gate_run: int = 0  # consecutive rejected measurements
-    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
+    gate: GateState = GateState()  # the outlier gate's bookkeeping (NIS of the last measurement)
 
 
 @register
@@ -448,7 +445,7 @@ class IbrirKalman(Observer[_State]):
         if q_meas is None:
             P = self._covariance(self._state_matrix(*mid), dt, state.P)
             P = 0.5 * (P + P.T)  # (joseph_update symmetrises)
-            return _State(q, v, P, d1, None, None, False, state.gate_run, state.nis_level)
+            return _State(q, v, P, d1, None, state.gate.predicted())
         r, nv = self.robot, self.robot.nv
         e = q_meas - q if self._vector_space else r.difference(q, q_meas)
         meas_var = 1.0 / (self.gains.output_weight * dt)
@@ -463,16 +460,11 @@ class IbrirKalman(Observer[_State]):
             dx, P = joseph_update(P_pred, e, meas_var)
             nis = float(e.dot(e - dx[:nv])) / meas_var
         dq = dx[:nv]
-        reject, level = outlier_gate(nis, state.nis_level, state.gate_run, self._gate, nv)
-        if reject:
-            return self._step(state, dt, None, tau)._replace(
-                nis=nis, gated=True, gate_run=state.gate_run + 1, nis_level=level
-            )
+        gate = state.gate.measured(nis, self._gate, nv)
+        if gate.gated:
+            return self._step(state, dt, None, tau)._replace(gate=gate)
         q = q + dq if self._vector_space else r.integrate(q, dq)
-        return _State(q, v + dx[nv:], P, d1, q_meas.copy(), nis, False, 0, level)
-
-    def _innovation(self, state: _State) -> tuple[float | None, bool]:
-        return state.nis, state.gated
+        return _State(q, v + dx[nv:], P, d1, q_meas.copy(), gate)
 
     def _noise(self, dt: float) -> Vector:
         """``Q_d`` over ``dt`` [s]: white acceleration (practical form) or none (the paper's)."""

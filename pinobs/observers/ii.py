@@ -122,10 +122,10 @@ from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.chart import AngleChart
 from pinobs.observers.base import (
     NOISE_FLOOR,
+    GateState,
     Observer,
     Vector,
     gate_threshold,
-    outlier_gate,
     positive,
     register,
 )
@@ -709,10 +709,7 @@ class _State(NamedTuple):
     beta: Vector  # β(q)
     q_ref: Vector  # homotopy reference (the configuration at reset)
     age: float = 0.0  # [s] since the reset (the prior's decay in the NIS)
-    nis: float | None = None  # normalized innovation squared of the last sample
-    gated: bool = False  # that sample was rejected as an outlier
-    gate_run: int = 0  # consecutive rejected samples
-    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
+    gate: GateState = GateState()  # the outlier gate's bookkeeping (NIS of the last sample)
 
 
 @register
@@ -1000,7 +997,7 @@ class IIObserver(Observer[_State]):
             qn, vn = dynamics_rk4(robot, nodes_q[-1], nodes_v[-1], tau, h)
             nodes_q.append(qn)
             nodes_v.append(vn)
-        nis, gated, run, level = None, False, state.gate_run, state.nis_level
+        gate = state.gate.predicted()
         if q_meas is None:
             q_end = nodes_q[-1]
         elif self.chart is not None:  # θ unwrapped: the 2π-branch nearest the prediction
@@ -1010,9 +1007,8 @@ class IIObserver(Observer[_State]):
         if q_meas is not None:  # the innovation, its NIS and the filters' outlier gate
             e = q_end - nodes_q[-1]
             nis = float(e.dot(e)) / self.innovation_variance(state.age, dt)
-            gated, level = outlier_gate(nis, level, run, self._gate, e.size)
-            run = run + 1 if gated else 0
-            if gated:  # not used: the path and q̂ are the prediction's
+            gate = state.gate.measured(nis, self._gate, e.size)
+            if gate.gated:  # not used: the path and q̂ are the prediction's
                 q_end = nodes_q[-1]
         shift = q_end - nodes_q[-1]
 
@@ -1040,9 +1036,7 @@ class IIObserver(Observer[_State]):
             eta = eta + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
             cur = _State(qb, eta, sb.beta, state.q_ref)
             sa = sb
-        return _State(
-            q_end.copy(), eta, cur.beta, state.q_ref, state.age + dt, nis, gated, run, level
-        )
+        return _State(q_end.copy(), eta, cur.beta, state.q_ref, state.age + dt, gate)
 
     def innovation_variance(self, age: float, h: float) -> float:
         """``S`` [rad² or m²] per joint of the innovation ``q_meas − q̂⁻`` after ``age`` [s]
@@ -1054,6 +1048,3 @@ class IIObserver(Observer[_State]):
         eps = a2.epsilon if a2 is not None and a2.epsilon > 0.0 else 2.0 * self.gains.gain
         k = self.gains.gain
         return self._sigma2 * (2.0 + 2.0 * k * h) + (h * self.v0_std) ** 2 * math.exp(-eps * age)
-
-    def _innovation(self, state: _State) -> tuple[float | None, bool]:
-        return state.nis, state.gated

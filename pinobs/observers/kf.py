@@ -38,11 +38,10 @@ from pinobs.observers.base import (
     NIS_AVERAGING,
     NOISE_FLOOR,
     Consistency,
+    GateState,
     Observer,
     Vector,
-    gate_nis,
     gate_threshold,
-    outlier_gate,
     positive,
     register,
 )
@@ -94,10 +93,7 @@ class _State(NamedTuple):
     v: Vector
     a: Vector
     P: Vector  # 3×3 covariance shared by every direction
-    nis: float | None = None  # NIS of the last measurement
-    gated: bool = False  # that measurement was rejected as an outlier
-    gate_run: int = 0  # measurements rejected in a row
-    nis_level: float | None = None  # running mean of accepted NIS (the gate's scale)
+    gate: GateState = GateState()  # the outlier gate's bookkeeping (NIS of the last measurement)
 
 
 def transition(h: float, jerk_psd: float) -> tuple[Vector, Vector]:
@@ -126,29 +122,27 @@ def _corrected(
     v: Vector,
     a: Vector,
     P: Vector,
-    run: int,
-    level: float | None,
+    gate: GateState,
     r: float,
-    gate: float,
+    threshold: float,
     q_meas: Vector,
 ) -> _State:
-    """The update of the prediction ``q, v, a, P`` (``P`` its 3×3 covariance; ``run`` and
-    ``level`` the gate's state) with ``q_meas``: the innovation ``e = difference(q, q_meas)``,
+    """The update of the prediction ``q, v, a, P`` (``P`` its 3×3 covariance; ``gate`` the
+    gate's state) with ``q_meas``: the innovation ``e = difference(q, q_meas)``,
     ``S = P₀₀ + r``, the outlier gate on ``NIS = |e|² / S``
-    (:func:`pinobs.observers.base.outlier_gate`, threshold ``gate``: a rejected measurement
+    (:meth:`pinobs.observers.base.GateState.measured`, ``threshold``: a rejected measurement
     leaves the prediction), else per direction the shared gain ``K = P[:, 0] / S`` and ``P`` in
     the Joseph form; ``P`` symmetrised."""
     s = P[0, 0] + r
     e = robot.difference(q, q_meas)
-    nis = float(e.dot(e)) / s
-    reject, level = outlier_gate(nis, level, run, gate, e.size)
-    if reject:
-        return _State(q, v, a, 0.5 * (P + P.T), nis, True, run + 1, level)
+    gate = gate.measured(float(e.dot(e)) / s, threshold, e.size)
+    if gate.gated:
+        return _State(q, v, a, 0.5 * (P + P.T), gate)
     K = P[:, 0] / s
     IKH = np.eye(3) - np.outer(K, [1.0, 0.0, 0.0])
     P = IKH @ P @ IKH.T + r * np.outer(K, K)
     q = robot.integrate(q, K[0] * e)
-    return _State(q, v + K[1] * e, a + K[2] * e, 0.5 * (P + P.T), nis, False, 0, level)
+    return _State(q, v + K[1] * e, a + K[2] * e, 0.5 * (P + P.T), gate)
 
 
 @register
@@ -200,14 +194,10 @@ class ConstantAccelerationKF(Observer[_State]):
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         F, Q = transition(dt, self.gains.jerk_psd)
         q, v, a, P = _predicted(self.robot, state.q, state.v, state.a, state.P, F, Q, dt)
-        run, level = state.gate_run, state.nis_level
         if q_meas is None:
-            return _State(q, v, a, 0.5 * (P + P.T), None, False, run, level)
+            return _State(q, v, a, 0.5 * (P + P.T), state.gate.predicted())
         r = self.gains.meas_std**2
-        return _corrected(self.robot, q, v, a, P, run, level, r, self._gate, q_meas)
-
-    def _innovation(self, state: _State) -> tuple[float | None, bool]:
-        return state.nis, state.gated
+        return _corrected(self.robot, q, v, a, P, state.gate, r, self._gate, q_meas)
 
     def consistency(self) -> Consistency:
         """The NIS test of the base class; its causes are a model-free filter's."""
@@ -245,10 +235,7 @@ class ErrorState(NamedTuple):
     d: Vector  # the acceleration a, named as the smoother's further vector part (the EKF's d)
     P: Vector  # (3nv, 3nv): P₃ ⊗ I, the directions' shared 3×3 covariance
     P3: Vector  # that 3×3 covariance
-    nis: float | None = None  # as ConstantAccelerationKF's state
-    gated: bool = False
-    gate_run: int = 0
-    nis_level: float | None = None
+    gate: GateState = GateState()  # as ConstantAccelerationKF's state
 
 
 class WhiteJerkFilter:
@@ -274,13 +261,13 @@ class WhiteJerkFilter:
     def options(self) -> dict[str, object]:
         return _gain_options(self.gains)
 
-    def _full(self, q: Vector, v: Vector, a: Vector, P3: Vector, *gate: object) -> ErrorState:
-        return ErrorState(q, v, a, _kron_eye(P3, self._eye), P3, *gate)  # type: ignore[arg-type]
+    def _full(self, q: Vector, v: Vector, a: Vector, P3: Vector, gate: GateState) -> ErrorState:
+        return ErrorState(q, v, a, _kron_eye(P3, self._eye), P3, gate)
 
     def _initial_state(self, q0: Vector, v0: Vector) -> ErrorState:
         """As :meth:`ConstantAccelerationKF._initial_state`."""
         P3 = np.diag([self.gains.meas_std**2, self.v0_std**2, (10.0 * self.v0_std) ** 2])
-        return self._full(q0.copy(), v0.copy(), np.zeros_like(v0), P3)
+        return self._full(q0.copy(), v0.copy(), np.zeros_like(v0), P3, GateState())
 
     def _predict(self, state: ErrorState, dt: float, tau: Vector) -> tuple[ErrorState, Vector]:
         """``(state⁻, Φ)`` (``tau`` is not used)."""
@@ -289,22 +276,20 @@ class WhiteJerkFilter:
             self._cache = (dt, F, Q, _kron_eye(F, self._eye))
         _, F, Q, Phi = self._cache
         q, v, a, P3 = _predicted(self.robot, state.q, state.v, state.d, state.P3, F, Q, dt)
-        return self._full(q, v, a, P3, None, False, state.gate_run, state.nis_level), Phi.copy()
+        return self._full(q, v, a, P3, state.gate.predicted()), Phi.copy()
 
     def _correct(self, state: ErrorState, q_meas: Vector) -> ErrorState:
-        q, v, a, P3, run, level = (*state[:3], state.P3, state.gate_run, state.nis_level)
+        q, v, a, P3 = (*state[:3], state.P3)
         new = _corrected(
-            self.robot, q, v, a, P3, run, level, self.gains.meas_std**2, self._gate, q_meas
+            self.robot, q, v, a, P3, state.gate, self.gains.meas_std**2, self._gate, q_meas
         )
-        if new.gated:  # the prediction, as it is
-            return state._replace(
-                nis=new.nis, gated=True, gate_run=new.gate_run, nis_level=new.nis_level
-            )
+        if new.gate.gated:  # the prediction, as it is
+            return state._replace(gate=new.gate)
         return self._full(*new)
 
     def _gate_nis(self, state: ErrorState) -> float:
         """The NIS above which :meth:`_correct` rejected ``state``'s measurement."""
-        return gate_nis(self._gate, state.nis_level, self.robot.nv)
+        return state.gate.limit(self._gate, self.robot.nv)
 
 
 class BankState(NamedTuple):
@@ -399,7 +384,8 @@ def _bank_rows_loops(
                     e[f, i] = ei
                     sq += ei * ei
                 nis = sq / s
-                g = gate * max(1.0, level[f] / nv)  # outlier_gate, in loops
+                # GateState.measured (base.outlier_gate), in loops: tested equal
+                g = gate * max(1.0, level[f] / nv)
                 if nis > g and run[f] < MAX_GATE_RUN:
                     run[f] += 1
                     ll[f] -= 0.5 * (g + nv * math.log(2.0 * math.pi * s))
@@ -544,21 +530,20 @@ class KFBank:
                     h = float(t[k] - t[k - 1])
                     F, Q = transition(h, float(self.jerk[f]))
                     qk, vk, ak, Pk = _predicted(self.robot, one.q, one.v, one.a, one.P, F, Q, h)
-                    one = one._replace(q=qk, v=vk, a=ak, P=Pk, nis=None, gated=False)
+                    one = _State(qk, vk, ak, Pk, one.gate.predicted())
                     if good[k]:
                         s = Pk[0, 0] + self.meas_var
                         one = _corrected(
-                            self.robot, qk, vk, ak, Pk, one.gate_run, one.nis_level,
-                            self.meas_var, self.gate, q[k],
-                        )  # fmt: skip
-                        cap = gate_nis(self.gate, one.nis_level, nv) if one.gated else math.inf
-                        nis = min(cast(float, one.nis), cap)
+                            self.robot, qk, vk, ak, Pk, one.gate, self.meas_var, self.gate, q[k]
+                        )
+                        cap = one.gate.limit(self.gate, nv) if one.gate.gated else math.inf
+                        nis = min(cast(float, one.gate.nis), cap)
                         ll[f] -= 0.5 * (nis + nv * math.log(2.0 * math.pi * s))
                 if store and f == 0:
                     X[k], PX[k], used[k] = (
                         (one.q, one.v, one.a),
                         one.P,
-                        k > 0 and one.nis is not None and not one.gated,
+                        k > 0 and one.gate.nis is not None and not one.gate.gated,
                     )
         return ll, X, PX, used
 

@@ -135,10 +135,10 @@ from pinobs.model import Robot, lie_rk4
 from pinobs.observers.base import (
     MAX_GATE_RUN,
     NOISE_FLOOR,
+    GateState,
     Observer,
     Vector,
     gate_threshold,
-    outlier_gate,
     positive,
     register,
     steady_innovation_variance,
@@ -389,10 +389,7 @@ class _State(NamedTuple):
     q: Vector  # g̃, Pinocchio configuration (unit quaternion inside)
     v: Vector  # ζ̃, body velocity in the Lie-algebra basis
     elapsed: float  # [s] since the last correction (longer than one interval after dropouts)
-    nis: float | None = None  # normalized innovation squared of the last sample
-    gated: bool = False  # that sample was rejected as an outlier
-    gate_run: int = 0  # consecutive rejected samples
-    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
+    gate: GateState = GateState()  # the outlier gate's bookkeeping (NIS of the last sample)
 
 
 @register
@@ -492,7 +489,7 @@ class LieGroupObserver(Observer[_State]):
     # ------------------------------------------------------- sampled data
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:
         # the first sample is accepted whatever its NIS (a start-up transient, not a spike)
-        return _State(q0.copy(), v0.copy(), 0.0, gate_run=MAX_GATE_RUN)
+        return _State(q0.copy(), v0.copy(), 0.0, GateState(run=MAX_GATE_RUN))
 
     def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         q, v = lie_rk4(
@@ -500,17 +497,16 @@ class LieGroupObserver(Observer[_State]):
         )
         h = state.elapsed + dt
         if q_meas is None:
-            return state._replace(q=q, v=v, elapsed=h, nis=None, gated=False)
+            return state._replace(q=q, v=v, elapsed=h, gate=state.gate.predicted())
         geo, g = self.geometry, self.gains
         l1, tau_v = correction_weights(g.alpha, g.beta, h)
         zeta_e = self.error(q_meas, q)
         # NIS of the flat, noise-driven error at steady state (module docstring) and the
-        # filters' outlier gate (base.outlier_gate)
+        # filters' outlier gate (base.GateState)
         s_inn = steady_innovation_variance(l1, g.beta * tau_v, h, self._sigma2)
-        nis = float(zeta_e.dot(zeta_e)) / s_inn
-        reject, level = outlier_gate(nis, state.nis_level, state.gate_run, self._gate, zeta_e.size)
-        if reject:  # the estimate is the prediction; the next correction spans the gap
-            return _State(q, v, h, nis, True, state.gate_run + 1, level)
+        gate = state.gate.measured(float(zeta_e.dot(zeta_e)) / s_inn, self._gate, zeta_e.size)
+        if gate.gated:  # the estimate is the prediction; the next correction spans the gap
+            return _State(q, v, h, gate)
         jump = -l1 * zeta_e  # exact flow of eq. (20)'s −2α ζ_e over h
         v_new = (
             v
@@ -524,10 +520,7 @@ class LieGroupObserver(Observer[_State]):
             )
         )
         q_new = self.robot.normalize(self.robot.integrate(q, jump))
-        return _State(q_new, v_new, 0.0, nis, False, 0, level)
-
-    def _innovation(self, state: _State) -> tuple[float | None, bool]:
-        return state.nis, state.gated
+        return _State(q_new, v_new, 0.0, gate)
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q.copy(), state.v.copy()

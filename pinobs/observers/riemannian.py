@@ -132,10 +132,10 @@ from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.observers.base import (
     NOISE_FLOOR,
+    GateState,
     Observer,
     Vector,
     gate_threshold,
-    outlier_gate,
     positive,
     register,
 )
@@ -458,10 +458,7 @@ class _State(NamedTuple):
     jacobi: Vector | None  # cached R(v̂, ·)v̂ (nv × nv), or None
     age: int  # corrections since the cache was computed
     P: tuple[float, float, float] | None = None  # (P₀₀, P₀₁, P₁₁) of the gain schedule, or None
-    nis: float | None = None  # normalized innovation squared of the last sample (Riccati schedule)
-    gated: bool = False  # that sample was rejected as an outlier
-    gate_run: int = 0  # consecutive rejected samples
-    nis_level: float | None = None  # running mean of accepted NIS (scales the gate)
+    gate: GateState = GateState()  # the outlier gate's bookkeeping (Riccati schedule)
 
 
 @register
@@ -617,9 +614,6 @@ class RiemannianObserver(Observer[_State]):
         return q_dot, v_dot
 
     # ------------------------------------------------------------ sampled
-    def _innovation(self, state: _State) -> tuple[float | None, bool]:
-        return state.nis, state.gated
-
     def _initial_state(self, q0: Vector, v0: Vector) -> _State:
         p0 = (self._p0[0, 0], 0.0, self._p0[1, 1]) if self.gain_schedule == "riccati" else None
         return _State(q0.copy(), v0.copy(), 0.0, None, 0, p0)
@@ -628,22 +622,18 @@ class RiemannianObserver(Observer[_State]):
         q, v = dynamics_rk4(self.robot, state.q, state.v, tau, dt)  # the prediction (MATH §7)
         elapsed = state.elapsed + dt
         if q_meas is None:
-            return state._replace(q=q, v=v, elapsed=elapsed, nis=None, gated=False)
+            return state._replace(q=q, v=v, elapsed=elapsed, gate=state.gate.predicted())
         if state.P is not None:
             # the schedule's innovation variance per joint, S = P⁻₀₀ + σ² (same for every
-            # joint): NIS = |e|² / S and the outlier gate of the filters (base.outlier_gate)
+            # joint): NIS = |e|² / S and the outlier gate of the filters (base.GateState)
             p00, p01, p11 = state.P
             h = elapsed
             s_inn = p00 + h * (2.0 * p01 + h * p11 + self.accel_psd * h * h / 3.0) + self._sigma2
             e = self.robot.difference(q, q_meas)
-            nis = float(e @ e) / s_inn
-            reject, level = outlier_gate(nis, state.nis_level, state.gate_run, self._gate, e.size)
-            if reject:  # the estimate is the prediction; the next correction spans the gap
-                return state._replace(
-                    q=q, v=v, elapsed=elapsed, nis=nis, gated=True,
-                    gate_run=state.gate_run + 1, nis_level=level,
-                )  # fmt: skip
-            state = state._replace(nis=nis, gated=False, gate_run=0, nis_level=level)
+            gate = state.gate.measured(float(e @ e) / s_inn, self._gate, e.size)
+            if gate.gated:  # the estimate is the prediction; the next correction spans the gap
+                return state._replace(q=q, v=v, elapsed=elapsed, gate=gate)
+            state = state._replace(gate=gate)
         if self._lie:
             return self._correct(state, q, v, q_meas, tau, elapsed)
         return self._correct_vector_space(state, q, v, q_meas, tau, elapsed)

@@ -73,6 +73,16 @@ samples out as each window closes; :func:`streaming_smoother` builds one), so
 a log read as it goes (:func:`pinobs.io.smoothing.smooth_log`) never needs
 more than ``chunk + overlap`` samples' states.
 
+A log with dropped samples (rows missing from a fixed-rate loop's log: an interval of
+``m ≥ 2`` median intervals) is smoothed on the grid of its ticks, each missing sample
+predicted over with its torque on the line between its neighbours'
+(:func:`pinobs.model.sampling.on_ticks`), the estimate given at the log's rows.  Fed
+the log as it is, the filter would hold the torque before each gap across it: on a
+4 s UR5 log of the exact model (σ = 1e-4) with 8 % of its rows dropped (runs of 1 and
+3–9) the velocity error was then 33× the clean log's, on the ticks 1.24× (1.04× with
+the missing samples' true torques: the rest is their interpolation).  An irregular
+log (intervals within 1.5 median intervals) is smoothed at its own times.
+
 A known measurement latency (``filter_options={"latency": d}``) re-times the log
 (:func:`_retimed`): each sample at the time it was taken, ``t − d``, each torque
 switching at its stamped time, the estimates read at the stamped times; it is then
@@ -253,6 +263,7 @@ from pinobs.errors import (
 )
 from pinobs.model import Robot
 from pinobs.model.robot import read_only
+from pinobs.model.sampling import on_ticks
 from pinobs.observers.adaptive import AdaptiveEKF, ModelSnapshot
 from pinobs.observers.base import (
     NOISE_FLOOR,
@@ -357,7 +368,9 @@ class SmoothableFilter(Protocol):
     Optionally ``_predict_flow(state, dt, tau) -> (state⁻, Φ, F)`` also returns
     the Jacobian ``F`` of the mean's step, where ``Φ`` is only the filter's
     approximation of it (``band="noise"`` propagates the error with ``F``;
-    without the method, with ``Φ``).
+    without the method, with ``Φ``).  A filter with an outlier gate keeps its bookkeeping
+    in its states' ``gate`` (:class:`~pinobs.observers.base.GateState`), and
+    ``_gate_nis(state)`` is the NIS above which it rejected ``state``'s measurement.
     """
 
     robot: Robot
@@ -409,6 +422,13 @@ class _Step(NamedTuple):
     F: Any = None  # band="noise": F_k, the Jacobian of the mean's step (None likewise)
 
 
+def _gated(state: Any) -> bool:
+    """Whether the filter's outlier gate rejected ``state``'s measurement (its ``gate``,
+    :class:`~pinobs.observers.base.GateState`; a filter without a gate: never)."""
+    gate = getattr(state, "gate", None)
+    return gate is not None and bool(gate.gated)
+
+
 def _noise_step(
     prev: tuple[Vector, Vector | None] | None,
     pred: Any,
@@ -438,7 +458,7 @@ def _noise_step(
     """
     if prev is None:
         return state.P.copy(), None
-    if state is pred or getattr(state, "gated", False):  # predicted over, not corrected
+    if state is pred or _gated(state):  # predicted over, not corrected
         return _noise_forward(prev[0], F, None, meas_var), None
     K = state.P[:, :nv] / meas_var
     return _noise_forward(prev[0], F, K, meas_var), K
@@ -652,7 +672,7 @@ def _forward(
                 )
             nis = float(e @ s_inv_e)
             state = filt._correct(pred, q_meas)
-            if getattr(state, "gated", False):  # rejected by the filter's outlier gate
+            if _gated(state):  # rejected by the filter's outlier gate
                 nis = min(nis, cast(Any, filt)._gate_nis(state))
             ll = -(0.5 * nis + np.log(np.diagonal(chol)).sum() + 0.5 * nv * _LOG_2PI)
         else:
@@ -2256,7 +2276,11 @@ def smooth(
         log: ``(t, q)`` or ``(t, q, tau)`` arrays (a tuple or a list, or a mapping with
             those keys), or an object with ``t``, ``q``, ``tau`` attributes
             (:class:`pinobs.io.Log`; a
-            :class:`pinobs.Result` is read through its ``q_meas``): times [s] ``(N,)`` strictly increasing;
+            :class:`pinobs.Result` is read through its ``q_meas``): times [s] ``(N,)`` strictly
+            increasing, at any intervals (an interval of ``m ≥ 2`` median intervals holds
+            ``m − 1`` samples the log lost: they are predicted over at their ticks, each
+            with its torque on the line between its neighbours',
+            :func:`pinobs.model.sampling.on_ticks`; ``options["missing_samples"]``);
             measured configurations ``(N, nq)``, a row with a non-finite entry
             being a dropped sample (predicted over, not corrected with; rows
             before the first good one get NaN); torques applied from each
@@ -2447,6 +2471,11 @@ def smooth_quietly(
     if band not in BANDS:
         raise OptionError(f"band={band!r}: give one of {list(BANDS)}")
     t_all, q_all, tau_all = _log_arrays(robot, log)
+    # dropped samples: smoothed on the grid of ticks, each missing one predicted over with
+    # its torque on the line between its neighbours' (pinobs.model.sampling), and the
+    # estimate given at the log's own rows (given_rows; None: nothing was missing)
+    t_given = t_all
+    t_all, q_all, tau_all, given_rows = on_ticks(t_all, q_all, tau_all)
     noise_from_data = noise_std is None
     if noise_std is None:
         noise_std, _, said = log_noise_std(robot, t_all, q_all)
@@ -2588,6 +2617,7 @@ def smooth_quietly(
         "latency": float(extra.get("latency", 0.0)),
         "latency_from_log": latency_from_log,
         "latency_searched": False,
+        "missing_samples": t_all.size - t_given.size,
     }
     result = Smoothed(
         t=t_all,
@@ -2616,7 +2646,7 @@ def smooth_quietly(
         and math.isfinite(rho)
         and (rho > RHO_WARN or hidden)
     ):
-        return result
+        return _at_rows(result, given_rows, t_given)
     # The model does not explain the log: a measurement latency might (module docstring).
     # Adopted only if the log smoothed under it is consistent (ρ ≤ RHO_WARN) and, where
     # "auto" chose the density, likelier by LIKELIHOOD_MARGIN (each at its own chosen density)
@@ -2658,13 +2688,26 @@ def smooth_quietly(
         retry = under(found, asked_psd)
         likelier = retry.log_likelihood > loglik + LIKELIHOOD_MARGIN
         if retry.consistency <= RHO_WARN and (likelier or not hidden):
-            return replace(
-                retry,
-                options={
-                    **retry.options,
-                    **searched,
-                    "latency_from_log": True,
-                    "noise_std_from_log": noise_from_data,
-                },
+            return _at_rows(
+                replace(
+                    retry,
+                    options={
+                        **retry.options,
+                        **searched,
+                        "latency_from_log": True,
+                        "noise_std_from_log": noise_from_data,
+                        "missing_samples": t_all.size - t_given.size,
+                    },
+                ),
+                given_rows,
+                t_given,
             )
-    return replace(result, options={**result.options, **searched})
+    return _at_rows(replace(result, options={**result.options, **searched}), given_rows, t_given)
+
+
+def _at_rows(result: Smoothed, rows: NDArray[np.intp] | None, t: Vector) -> Smoothed:
+    """``result`` (of a log on the grid of its ticks: :func:`~pinobs.model.sampling.on_ticks`)
+    at the given log's rows ``rows``, its times ``t``; as it is with ``rows`` None."""
+    if rows is None:
+        return result
+    return replace(result, t=t, q=result.q[rows], v=result.v[rows], v_std=result.v_std[rows])

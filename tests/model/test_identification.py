@@ -22,7 +22,7 @@ from pinobs.model.identification import (
 )
 from pinobs.model.urdf_writer import write_urdf
 from pinobs.simulation import Sensor
-from tests.conftest import planar_3r_truth
+from tests.conftest import dropped_rows, planar_3r_truth, resampled_log
 
 ROBOTS = ["cartpole", "planar_3r", "ur5"]
 
@@ -363,11 +363,12 @@ def test_repeated_or_backward_timestamps_are_refused() -> None:
             identify(robot, (times, qq, tt))
 
 
-def test_jittered_timestamps_are_refused_saying_so() -> None:
+def test_a_log_broken_by_long_gaps_is_refused_saying_so() -> None:
+    """Dropped samples are used as they are; gaps of 40 ms every 100 ms leave no window."""
     robot, (t, q, tau) = _pendulum_log("inertia20_payload", 1e-4)
-    jitter = np.random.default_rng(0).uniform(-0.2e-3, 0.2e-3, t.size)
-    with pytest.raises(IdentificationError, match="timestamp jitter"):
-        identify(robot, (t + jitter, q, tau))
+    keep = np.arange(t.size) % 100 < 60
+    with pytest.raises(IdentificationError, match=r"gaps longer than 16 median intervals"):
+        identify(robot, (t[keep], q[keep], tau[keep]))
 
 
 def test_nan_rows_are_filled_and_give_nearly_the_clean_result() -> None:
@@ -483,3 +484,54 @@ def test_identify_options_are_checked_naming_the_value() -> None:
             identify(robot, log, **kwargs)
     with pytest.raises(pinobs.DimensionError, match=r"t \(N,\)"):
         identify(robot, (np.zeros((10, 1)), np.zeros((10, 3)), np.zeros((10, 3))))
+
+
+def _acceleration_error(model: pinobs.Robot, truth: pinobs.Robot) -> float:
+    """RMS of ``model``'s forward dynamics minus the truth's at 100 random states (seed 0)."""
+    rng = np.random.default_rng(0)
+    errs = []
+    for _ in range(100):
+        q, v, tau = truth.random_configuration(rng), rng.normal(size=truth.nv), rng.normal(size=3)
+        errs.append(model.forward_dynamics(q, v, tau) - truth.forward_dynamics(q, v, tau))
+    return float(np.sqrt(np.mean(np.square(errs))))
+
+
+def test_a_log_with_dropped_rows_is_identified_about_as_well_as_the_clean_log() -> None:
+    """8 % of the rows of 8 s planar_3r logs deleted (80 % of the losses single rows, the
+    others runs of 3–9), σ = 1e-4: it was refused ("timestamp jitter").  Acceleration
+    error against the truth, dropped over clean, measured: 0.977, 0.978, 0.959 (seeds 1–3;
+    seeds 4, 5: 1.138, 0.974); with pinobs.identify's refinement 0.514, 0.917, 1.122, 0.812,
+    0.995 (benchmarks/irregular_logs.py).  The bound, 1.2: a fit as good as the clean
+    log's, to within the seed-to-seed spread of these ratios."""
+    robot = pinobs.load("planar_3r")
+    truth = planar_3r_truth(robot)
+    ratios = []
+    for seed in (1, 2, 3):
+        t, q, tau = _log(robot, truth, 8.0, 1e-4, seed)
+        keep = dropped_rows(t.size, 0.08, seed)
+        clean = identify(robot, (t, q, tau), offset=False)
+        dropped = identify(robot, (t[keep], q[keep], tau[keep]), offset=False)
+        assert dropped.report["rows"] >= 0.95 * clean.report["rows"]  # no window lost
+        ratios.append(
+            _acceleration_error(dropped.robot, truth) / _acceleration_error(clean.robot, truth)
+        )
+    assert max(ratios) <= 1.2, ratios
+
+
+def test_an_irregularly_sampled_log_is_identified_about_as_well_as_the_clean_log() -> None:
+    """One 10 kHz run sampled every 1 ms and at intervals uniform in 0.5–1.5 ms (torques as
+    sampled), σ = 1e-4.  Acceleration error, irregular over clean, measured: 0.541, 0.960,
+    0.768 (seeds 1–3; seeds 4, 5: 1.049, 0.929); with pinobs.identify's refinement 1.071,
+    0.967, 0.931, 1.071, 0.939 (benchmarks/irregular_logs.py).  The two logs' noise
+    draws differ, which is most of the spread."""
+    robot = pinobs.load("planar_3r")
+    truth = planar_3r_truth(robot)
+    ratios = []
+    for seed in (1, 2, 3):
+        clean_log, irregular_log = resampled_log(robot, truth, 8.0, 1e-4, seed)
+        clean = identify(robot, clean_log, offset=False, torque="sampled")
+        irregular = identify(robot, irregular_log, offset=False, torque="sampled")
+        ratios.append(
+            _acceleration_error(irregular.robot, truth) / _acceleration_error(clean.robot, truth)
+        )
+    assert max(ratios) <= 1.2, ratios

@@ -94,14 +94,14 @@ def test_stick_figure_stands_in_for_missing_meshes(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     pytest.importorskip("meshcat")
-    from pinobs.visualization.playback import _visual_model
+    from pinobs.visualization.playback.geometry import visual_model
 
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
     urdf = tmp_path / "ur5.urdf"
     shutil.copy(_erd_share_dir() / UR / "urdf" / "ur5_robot.urdf", urdf)
     with pytest.warns(pinobs.ModelWarning):
         bare = pinobs.load(urdf)
-    assert _visual_model(bare).ngeoms > 0
+    assert visual_model(bare).ngeoms > 0
 
 
 def test_a_pin_model_and_a_robot_wrapper_load_as_copies(rng: np.random.Generator) -> None:

@@ -2,13 +2,23 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 import pinobs
+from pinobs.observers import kf as kf_module
 from pinobs.observers import make_observer
-from pinobs.observers.base import chi2_quantile
-from pinobs.observers.kf import KF_CAUSES
+from pinobs.observers.base import (
+    MAX_GATE_RUN,
+    NIS_AVERAGING,
+    GateState,
+    chi2_quantile,
+    gate_nis,
+    outlier_gate,
+)
+from pinobs.observers.kf import KF_CAUSES, KFBank
 from pinobs.simulation import Sensor
 from pinobs.simulation.mismatch import mismatched_plant
 
@@ -222,3 +232,55 @@ def test_a_nis_that_is_negative_or_not_finite_is_never_consistent() -> None:
     ob._nis.clear()
     ob._nis.extend([3.0] * 100)
     assert ob.consistency().verdict == "consistent"
+
+
+def test_gate_state_keeps_the_outlier_gates_bookkeeping() -> None:
+    """:class:`GateState` is :func:`outlier_gate`'s decision and its bookkeeping: a rejection
+    keeps the level and counts the run, :data:`MAX_GATE_RUN` rejections in a row force the
+    next acceptance (the level raised to it), a step without a sample keeps run and level."""
+    thr, dof = chi2_quantile(6, 1e-6), 6
+    g = GateState()
+    assert g.limit(thr, dof) == gate_nis(thr, None, dof) == thr
+    ok = g.measured(3.0, thr, dof)
+    assert not ok.gated and ok.run == 0 and ok.nis == 3.0
+    assert ok.level == pytest.approx(6.0 + NIS_AVERAGING * (3.0 - 6.0))
+    spike = ok.measured(10 * thr, thr, dof)
+    assert spike.gated and spike.run == 1 and spike.level == ok.level
+    assert spike.predicted() == GateState(None, False, 1, ok.level)
+    assert MAX_GATE_RUN == 1
+    forced = spike.predicted().measured(10 * thr, thr, dof)  # after one rejection: accepted
+    reject, level = outlier_gate(10 * thr, spike.level, spike.run, thr, dof)
+    assert not forced.gated and forced.run == 0 and (forced.gated, forced.level) == (reject, level)
+    assert forced.level > ok.level and forced.limit(thr, dof) > thr
+    assert not GateState().measured(1e300, math.inf, dof).gated  # outlier_probability=None
+
+
+@pytest.mark.parametrize("robot_name", ["ur5", "cartpole"])
+def test_kf_banks_compiled_gate_is_gate_state(
+    robot_name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """:class:`KFBank`'s compiled loops mirror the gate (:meth:`GateState.measured`, which
+    its NumPy path and ``kf`` call): on a log with jumps, single and in pairs (the second
+    forced in), the same samples are gated, the same likelihoods and states."""
+    robot = pinobs.load(robot_name)
+    res = pinobs.simulate(robot, [], duration=1.0, sensor=Sensor(1000.0, 1e-4), seed=0)
+    q = np.array(res.q_meas)
+    q[0] = res.q[0]
+    rng = np.random.default_rng(2)
+    rows = rng.choice(np.arange(10, q.shape[0] - 1), size=20, replace=False)
+    for k in [*rows, rows[0] + 1, rows[1] + 1]:
+        q[k] = robot.integrate(q[k], 0.05 * rng.choice([-1.0, 1.0], size=robot.nv))
+    good = np.ones(q.shape[0], dtype=bool)
+    bank = KFBank(robot, (300.0, 3e3), 1e-4, 1e-6)
+    assert kf_module._bank_kernel.compiled is not None
+    compiled = bank.run(res.t, q, good, 1.0)
+    monkeypatch.setattr(kf_module._bank_kernel, "compiled", None)
+    numpy = bank.run(res.t, q, good, 1.0)
+    ob = make_observer("kf", robot, noise_std=1e-4, jerk_psd=300.0)
+    ob.reset(res.t[0], q[0])
+    gated = [ob.update(res.t[k], q[k]).gated for k in range(1, q.shape[0])]
+    used = compiled[3]
+    assert 15 <= sum(gated) <= 22 and np.array_equal(used[1:], ~np.array(gated))
+    assert np.array_equal(used, numpy[3])
+    for a, b in zip(compiled[:3], numpy[:3], strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-10)  # (q + v h) + a h²/2, or q + (…)

@@ -392,7 +392,7 @@ def test_nis_is_the_innovation_form_whatever_the_covariance(
     P = scale * 1e-8 * (A @ A.T + 12 * np.eye(12))
     state = ekf._initial_state(q0, np.zeros(6))._replace(P=P)
     e = 1e-4 * rng.standard_normal(6) * max(1.0, np.sqrt(scale))
-    nis = ekf._correct(state, ur5.integrate(q0, e)).nis
+    nis = ekf._correct(state, ur5.integrate(q0, e)).gate.nis
     want = e @ np.linalg.solve(P[:6, :6] + 1e-8 * np.eye(6), e)
     assert nis is not None and nis >= 0.0
     assert nis == pytest.approx(want, rel=1e-8)

@@ -8,8 +8,9 @@ import pytest
 import pinobs
 from pinobs.errors import NonFiniteError, ObserverDiverged, OptionError
 from pinobs.observers import make_observer
+from pinobs.observers.base import gap_substeps
 from pinobs.simulation import Sensor
-from pinobs.tolerances import PAUSE_RESTART
+from pinobs.tolerances import GAP_PERIODS, PAUSE_RESTART
 from tests.conftest import cached_robot
 
 
@@ -178,3 +179,15 @@ def test_complex_bool_and_text_arrays_are_refused(bad) -> None:
     with pytest.raises(pinobs.errors.DimensionError, match="must be a real array"):
         ob.update(1e-3, bad)
     assert ob.estimate.t == 0.0
+
+
+def test_gap_substeps_are_steps_of_at_most_one_period_beyond_the_gap_threshold() -> None:
+    """The pause rule the live observer and the log reader share (:func:`gap_substeps`): one
+    step up to ``GAP_PERIODS`` periods (or without a period), then ``⌈min(dt, span) / T⌉``
+    steps of ``dt / n``, each at most one period when ``span`` does not cap them."""
+    T = 1e-3
+    assert gap_substeps(GAP_PERIODS * T, T) == 1 and gap_substeps(1.0, None) == 1
+    for k in (3.5, 6.0, 10.0, 250.0):
+        n = gap_substeps(k * T, T)
+        assert n == int(np.ceil(k)) and k * T / n <= T * (1 + 1e-12)
+    assert gap_substeps(1.0, T, span=PAUSE_RESTART) == round(PAUSE_RESTART / T)

@@ -44,7 +44,7 @@ from pinobs.observers.smoothing import (
     streaming_smoother,
 )
 from pinobs.simulation import Sensor, simulate
-from tests.conftest import cached_robot
+from tests.conftest import cached_robot, dropped_rows, irregular_loop_log
 
 
 def _log(res: pinobs.Result) -> Log:
@@ -1522,3 +1522,66 @@ def test_the_latency_search_runs_no_candidate_twice(monkeypatch) -> None:
         found = smooth(robot, (t, q, tau), noise_std=1e-4, accel_psd=1e-10)
     assert sorted(prepared) == pytest.approx([0.0, 0.5e-3, 1e-3, 2e-3], abs=1e-12)
     assert len(passes) == 3 and found.options["latency_found"] == pytest.approx(0.5e-3)
+
+
+def test_a_log_with_dropped_rows_is_smoothed_about_as_well_as_the_clean_log() -> None:
+    """8 % of a UR5 log's rows deleted (runs of 1 and 3–9), exact model, σ = 1e-4: the
+    smoother runs on the log's ticks, each missing sample predicted over with its torque on
+    the line between its neighbours' (holding the torque before the gap instead made the
+    error 33× the clean log's).  Velocity RMS error, dropped over clean, measured: 1.24
+    (1.71e-5 and 2.11e-5 rad/s, this log); the measurements lost alone cost 1.04× (the
+    missing samples' true torques given), the rest is their torques' interpolation.
+    benchmarks/irregular_logs.py for more seeds."""
+    robot = cached_robot("ur5")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), duration=4.0, seed=1)
+    t, q, tau = res.t[1:], np.array(res.q_meas[1:]), np.array(res.tau[1:])
+    keep = dropped_rows(t.size, 0.08, 0)
+    errors = []
+    for rows in (np.ones(t.size, dtype=bool), keep):
+        sm = smooth(robot, (t[rows], q[rows], tau[rows]), noise_std=1e-4)
+        assert sm.t.shape == (rows.sum(),)
+        inner = (t[rows] > 0.2) & (t[rows] < 3.8)
+        errors.append(float(np.sqrt(np.mean((sm.v - res.v[1:][rows])[inner] ** 2))))
+    assert sm.options["missing_samples"] == t.size - keep.sum()
+    assert errors[1] <= 1.35 * errors[0], errors
+
+
+def test_cli_smooths_a_csv_with_dropped_rows_as_smooth_does(tmp_path) -> None:
+    """``estimate --smooth`` on a CSV with dropped rows: one row per log row, equal to
+    :func:`smooth` on the same rows (it held the torque before each gap of more than three
+    periods across it, and fed shorter ones as they were)."""
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    robot = cached_robot("ur5")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), duration=1.0, seed=2)
+    t, q, tau = res.t[1:], np.array(res.q_meas[1:]), np.array(res.tau[1:])
+    keep = dropped_rows(t.size, 0.08, 2)
+    log = write_log(tmp_path / "dropped.csv", t[keep], q[keep], tau[keep])
+    out = tmp_path / "est.csv"
+    argv = ["estimate", "--robot", "ur5", "--observer", "ekf", "--log", str(log), "--out", str(out)]
+    assert main([*argv, "--smooth", "--noise", "1e-4", "--accel-psd", "1e-8"]) == 0
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    read = np.loadtxt(log, delimiter=",", skiprows=1)
+    want = smooth(robot, (read[:, 0], read[:, 1:7], read[:, 7:]), noise_std=1e-4, accel_psd=1e-8)
+    assert data.shape[0] == keep.sum()
+    np.testing.assert_allclose(data[:, 7:13], want.v, rtol=0, atol=1e-9)
+    assert np.sqrt(np.mean((want.v - res.v[1:][keep]) ** 2)) < 1e-3
+
+
+def test_an_irregularly_sampled_log_is_smoothed_about_as_well_as_the_clean_log() -> None:
+    """A UR5 control loop run at intervals uniform in 0.5–1.5 ms (torques held over each),
+    exact model, σ = 1e-4, against the 1 kHz run of the same reference: it is smoothed at
+    its own times, no sample taken as lost.  Velocity RMS error, irregular over clean,
+    measured: 0.86 (seed 1); 0.90, 1.04 (seeds 2, 3).  Taking its intervals from 1.5
+    periods on as a lost sample each (78 of them) made it 1.70."""
+    robot = cached_robot("ur5")
+    res = simulate(robot, [], sensor=Sensor(1000, 1e-4), duration=4.0, seed=1)
+    t, q, tau, v = irregular_loop_log(robot, 4.0, 1e-4, 1)
+    errors = []
+    for log, truth in (((res.t[1:], res.q_meas[1:], res.tau[1:]), res.v[1:]), ((t, q, tau), v)):
+        sm = smooth(robot, log, noise_std=1e-4)
+        inner = (log[0] > 0.2) & (log[0] < 3.8)
+        errors.append(float(np.sqrt(np.mean((sm.v - truth)[inner] ** 2))))
+    assert sm.options["missing_samples"] == 0
+    assert errors[1] <= 1.2 * errors[0], errors

@@ -32,6 +32,8 @@ from pinobs.visualization import (
 from pinobs.visualization import playback as pb
 from pinobs.visualization.browser import find_chromium
 from pinobs.visualization.palette import PALETTE, hex_colour
+from pinobs.visualization.playback import geometry, timeline
+from pinobs.visualization.playback.page import RecordingWindow, fill_template
 
 DURATION = 1.5  # [s]
 FPS = 30.0
@@ -212,7 +214,7 @@ def test_long_run_keyframes_fit_the_page_budget_at_a_lower_rate_that_is_said(
     cap); now its keyframes take at most MAX_ANIMATION_BYTES (8 MB: 11.8 MB of page), at a
     rate the page and a warning give.  (Packing 8 MB of keyframes takes seconds: the default
     suite checks a 1 MB budget.)"""
-    monkeypatch.setattr(pb, "MAX_ANIMATION_BYTES", budget)
+    monkeypatch.setattr(timeline, "MAX_ANIMATION_BYTES", budget)  # (the rate and the note)
     robot = pinobs.load("ur5")
 
     def run(duration: float) -> Any:
@@ -282,7 +284,7 @@ def test_nan_rows_of_the_truth_hold_its_last_pose_and_the_page_says_so(
     assert np.all(np.isfinite(values)) and held.sum() > 10
     robot = cartpole_run["robot"]
     geom = robot.visual_model
-    placed = pb._placements(
+    placed = geometry.placements(
         robot.model, robot.model.createData(), geom, pin.GeometryData(geom), q[99]
     )
     np.testing.assert_array_equal(values[held], np.tile(placed[1].translation, (held.sum(), 1)))
@@ -376,7 +378,7 @@ def test_every_root_joint_kind_plays_back(name: str, tmp_path: Path) -> None:
 def test_robot_without_meshes_gets_a_stick_figure(tmp_path: Path) -> None:
     bare = pinobs.load("planar_3r")
     robot = pinobs.Robot(bare.model, name="bare_3r", source="test")
-    geom = pb._visual_model(robot)
+    geom = geometry.visual_model(robot)
     spheres = [go for go in geom.geometryObjects if go.name.endswith("_joint")]
     rods = [go for go in geom.geometryObjects if go.name.endswith(("_rod", "_tip"))]
     assert len(spheres) == robot.model.njoints - 1
@@ -412,7 +414,7 @@ def test_stick_figure_of_a_prismatic_joint_stays_connected_as_it_slides(tmp_path
     assert robot.visual_model is None or robot.visual_model.ngeoms == 0
     slides = np.array([-0.15, 0.0, 0.3, 0.6])
     qs = np.column_stack([np.full(slides.size, 0.4), slides])
-    geom = pb._visual_model(robot, [qs])
+    geom = geometry.visual_model(robot, [qs])
     model, data, gdata = robot.model, robot.model.createData(), pin.GeometryData(geom)
     j = model.getJointId("slide")
     assert [go.name for go in geom.geometryObjects if go.name.endswith("_rail")] == ["slide_rail"]
@@ -434,7 +436,7 @@ def test_stick_figure_of_a_prismatic_joint_stays_connected_as_it_slides(tmp_path
 
     assert max(gap(q) for q in qs) < 1e-12
     # without the motion, the rail spans the joint's limits
-    bare = pb._stick_figure(robot.model)
+    bare = geometry.stick_figure(robot.model)
     (rail,) = [go for go in bare.geometryObjects if go.name == "slide_rail"]
     assert 2 * rail.geometry.halfLength == pytest.approx(0.6)
     html = write_html(
@@ -455,7 +457,7 @@ def test_decimation_meets_the_triangle_budget_inside_the_mesh_box(
     faces = np.concatenate(
         [np.stack([i, i + 240, i + 1], -1), np.stack([i + 1, i + 240, i + 241], -1)]
     ).reshape(-1, 3)
-    v2, f2 = pb._decimate(verts, faces, 2000)
+    v2, f2 = geometry.decimate(verts, faces, 2000)
     assert len(faces) > 50_000 and 0 < len(f2) <= 2000
     assert np.all(np.abs(v2) <= 1.0 + 1e-12)
     assert np.max(np.abs(np.linalg.norm(v2, axis=1) - 1.0)) < 0.1  # still a sphere
@@ -508,6 +510,23 @@ def test_unknown_observer_label_is_rejected(cartpole_run: dict[str, Any], tmp_pa
         )
 
 
+def test_every_template_is_package_data_and_fills_its_slots() -> None:
+    """The templates ship in a wheel (pyproject's package-data globs cover each file); a
+    template filled with the wrong slots is refused."""
+    tomllib = pytest.importorskip("tomllib")  # (Python 3.11+)
+    root = Path(pb.__file__).parent
+    pyproject = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text("utf-8"))
+    shipped = pyproject["tool"]["setuptools"]["package-data"]["pinobs.visualization.playback"]
+    files = sorted(p.relative_to(root) for p in (root / "templates").iterdir())
+    assert Path("templates/page.html") in files
+    assert all(any(f.match(glob) for glob in shipped) for f in files)
+    assert "pinobs.visualization.playback" in pyproject["tool"]["setuptools"]["packages"]
+    page = fill_template("page.html", mainminjs="@X@", commands="", overlay="<p>@TITLE@</p>")
+    assert "@X@" in page and "<p>@TITLE@</p>" in page  # (values are not read for slots)
+    with pytest.raises(KeyError, match="has slots"):
+        fill_template("page.html", mainminjs="", commands="")
+
+
 def test_missing_meshcat_names_the_install_command(
     cartpole_run: dict[str, Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -522,7 +541,7 @@ def test_serve_prints_the_url_and_legend(
     """The live path, on a recording window standing in for the server (no port opened)."""
     import meshcat
 
-    window = pb._RecordingWindow()
+    window = RecordingWindow()
     window.web_url = "http://127.0.0.1:7000/static/"
     real = meshcat.Visualizer
     monkeypatch.setattr(meshcat, "Visualizer", lambda zmq_url=None: real(window=window))

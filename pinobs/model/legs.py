@@ -1,0 +1,159 @@
+"""Leg kinematics of a floating-base robot: foot positions in the base frame, and their Jacobians.
+
+The contact-aided invariant EKF (:mod:`pinobs.observers.inekf`) measures each
+foot in contact through forward kinematics of the measured joint angles::
+
+    h_j(q) = position of foot frame j in the base frame   (Hartley et al.'s h_p(α))
+    J_j(q) = ∂h_j/∂v_joints,  a 3 × (nv − 6) matrix
+
+The base frame is the frame of the free-flyer root joint (Pinocchio's
+``q[0:7]``, the frame whose body velocity is ``v[0:6]``), or, with
+``imu_frame``, the IMU's frame (a frame fixed to the base: go1's
+``imu_link``, 7 cm from the root): then ``h_j`` and ``J_j`` are expressed in it,
+``R_bi (h_j − r_bi)``-wise, and :attr:`FootKinematics.imu_placement` is
+``(R_bi, r_bi)``, the IMU's rotation and position in the root joint's frame.  Both are computed
+with the base placed at the identity, so the world-aligned frame Jacobian of
+Pinocchio *is* the base-frame one: ``J_j`` is the linear rows, joint columns,
+of ``getFrameJacobian(..., LOCAL_WORLD_ALIGNED)`` at ``q = (0, 0, 0, 0, 0, 0, 1, q_joints)``.
+For revolute and prismatic joints ``J_j = ∂h_j/∂q_joints``; for continuous
+joints it is with respect to the joint's velocity coordinate (its angle).
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from pinobs.errors import UnknownNameError, UnsupportedRobotError
+from pinobs.model.robot import Robot
+
+__all__ = ["FootKinematics"]
+
+Vector = NDArray[np.floating[Any]]
+
+#: The configuration of a free-flyer at the identity: position 0, quaternion (x, y, z, w) = (0, 0, 0, 1).
+_BASE_AT_IDENTITY = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+
+
+class FootKinematics:
+    """Positions of some frames (the feet) in a free-flyer robot's base frame, from its joint angles.
+
+    Owns its ``pin.Data`` (a copy of ``robot``'s model's data), so it shares
+    nothing with the robot it was built from.
+
+    Args:
+        robot: a robot whose first joint is a free-flyer (``pinobs.load("go1")``;
+            other URDFs: ``pinobs.load(path, root_joint="freeflyer")``).
+        feet: names of the foot frames in the model (``"FL_foot"``, ...), at least one.
+        imu_frame: a frame fixed to the root joint (the IMU's) to express the feet in,
+            instead of the root joint's frame.
+
+    Attributes:
+        feet: the foot frame names, in the given order.
+        nq_joints: number of joint coordinates after the free-flyer (``nq − 7``).
+        nv_joints: number of joint velocities after the free-flyer (``nv − 6``).
+        imu_placement: ``(R_bi, r_bi)``: rotation and position [m] of the frame the feet are
+            expressed in, in the root joint's frame (identity and zero without ``imu_frame``).
+
+    Raises:
+        UnsupportedRobotError: the robot's first joint is not a free-flyer, or the
+            ``imu_frame`` is not fixed to it.
+        UnknownNameError: a foot name is not a frame of the model (the message
+            lists the closest frame names and the model's frames).
+    """
+
+    def __init__(self, robot: Robot, feet: Sequence[str], *, imu_frame: str | None = None) -> None:
+        model = robot.model
+        if not robot.joints or robot.joints[0].kind != "se3" or robot.joints[0].idx_q != 0:
+            first = robot.joints[0].name if robot.joints else "none"
+            raise UnsupportedRobotError(
+                f"{robot.name}: foot kinematics needs a free-flyer root joint (the floating "
+                f"base), but the first joint is {first!r}; load the robot with "
+                f"pinobs.load(..., root_joint='freeflyer')"
+            )
+        if isinstance(feet, str) or len(feet) == 0:
+            raise UnknownNameError(
+                f"feet must be a non-empty sequence of frame names, got {feet!r}"
+            )
+        ids = [_frame_id(robot, foot) for foot in feet]
+        if len(set(ids)) != len(ids):
+            raise UnknownNameError(f"feet lists a frame twice: {list(feet)}")
+        self.feet: tuple[str, ...] = tuple(str(f) for f in feet)
+        self.nq_joints = int(model.nq) - 7
+        self.nv_joints = int(model.nv) - 6
+        self._model = model
+        self._data = model.createData()
+        self._ids = tuple(ids)
+        self._q = np.concatenate([_BASE_AT_IDENTITY, pin.neutral(model)[7:]])
+        self.robot_name = robot.name
+        self.imu_frame = imu_frame
+        self.imu_placement: tuple[Vector, Vector] = (np.eye(3), np.zeros(3))
+        if imu_frame is not None:
+            fid = _frame_id(robot, imu_frame)
+            if model.frames[fid].parentJoint != 1:
+                raise UnsupportedRobotError(
+                    f"{robot.name}: imu_frame {imu_frame!r} moves with joint "
+                    f"{model.names[model.frames[fid].parentJoint]!r}, not with the base "
+                    f"({model.names[1]!r}): give a frame fixed to the base"
+                )
+            placement = model.frames[fid].placement  # in the root joint's frame
+            self.imu_placement = (
+                np.array(placement.rotation, dtype=float),
+                np.array(placement.translation, dtype=float),
+            )
+        for a in self.imu_placement:
+            a.setflags(write=False)
+        self._to_imu = None if imu_frame is None else self.imu_placement
+
+    def __repr__(self) -> str:
+        return f"FootKinematics({self.robot_name!r}, feet={self.feet})"
+
+    def _set(self, q_joints: ArrayLike) -> None:
+        self._q[7:] = q_joints
+
+    def positions(self, q_joints: ArrayLike) -> Vector:
+        """``h_j(q)`` for every foot, shape ``(len(feet), 3)`` [m], in the base (or IMU) frame."""
+        self._set(q_joints)
+        pin.framesForwardKinematics(self._model, self._data, self._q)
+        h = np.array([self._data.oMf[i].translation for i in self._ids])
+        if self._to_imu is not None:
+            R_bi, r_bi = self._to_imu
+            h = (h - r_bi) @ R_bi  # rows: R_biᵀ (h − r_bi)
+        return h
+
+    def positions_and_jacobians(self, q_joints: ArrayLike) -> tuple[Vector, Vector]:
+        """``(h, J)``: foot positions ``(K, 3)`` [m] and their Jacobians ``(K, 3, nv_joints)``
+        [m/rad] with respect to the joint velocities, in the base (or IMU) frame."""
+        self._set(q_joints)
+        model, data = self._model, self._data
+        pin.computeJointJacobians(model, data, self._q)
+        pin.updateFramePlacements(model, data)
+        h = np.empty((len(self._ids), 3))
+        jac = np.empty((len(self._ids), 3, self.nv_joints))
+        for k, fid in enumerate(self._ids):
+            h[k] = data.oMf[fid].translation
+            full = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            jac[k] = full[:3, 6:]
+        if self._to_imu is not None:
+            R_bi, r_bi = self._to_imu
+            h = (h - r_bi) @ R_bi
+            jac = R_bi.T @ jac
+        return h, jac
+
+
+def _frame_id(robot: Robot, name: str) -> int:
+    """The frame's index, or an error naming the closest frames and listing them all."""
+    model = robot.model
+    if not model.existFrame(name):
+        names = [str(f.name) for f in model.frames]
+        close = difflib.get_close_matches(str(name), names, n=4, cutoff=0.5)
+        hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+        raise UnknownNameError(
+            f"{robot.name} has no frame {name!r}{hint} Its frames: {', '.join(names)}"
+        )
+    return int(model.getFrameId(name))

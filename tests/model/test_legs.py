@@ -1,0 +1,74 @@
+"""Foot kinematics (``pinobs.model.legs``): positions in the base frame and their Jacobians."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import pinobs
+from pinobs.errors import UnknownNameError, UnsupportedRobotError
+from pinobs.model import FootKinematics
+
+FEET = ("FL_foot", "FR_foot", "RL_foot", "RR_foot")
+
+
+def test_positions_are_the_feet_in_the_base_frame_whatever_the_base_pose(rng) -> None:
+    robot = pinobs.load("go1")
+    kin = FootKinematics(robot, FEET)
+    model, data = robot.model, robot.model.createData()
+    for _ in range(5):
+        q = robot.random_configuration(rng)  # a random base pose and joint angles
+        pin.framesForwardKinematics(model, data, q)
+        base = data.oMi[1]  # the free-flyer's frame
+        expected = [base.actInv(data.oMf[model.getFrameId(f)]).translation for f in FEET]
+        np.testing.assert_allclose(kin.positions(q[7:]), expected, rtol=0, atol=1e-14)
+
+
+def test_jacobians_match_central_differences(rng) -> None:
+    robot = pinobs.load("go1")
+    kin = FootKinematics(robot, FEET)
+    q = rng.uniform(-1, 1, kin.nq_joints)
+    h, jac = kin.positions_and_jacobians(q)
+    np.testing.assert_array_equal(h, kin.positions(q))
+    eps = 1e-6
+    for i in range(kin.nv_joints):
+        dq = eps * np.eye(kin.nv_joints)[i]
+        fd = (kin.positions(q + dq) - kin.positions(q - dq)) / (2 * eps)
+        np.testing.assert_allclose(jac[:, :, i], fd, rtol=0, atol=1e-9)
+    # a leg moves its own foot only
+    assert not jac[0][:, 3:].any() and jac[0][:, :3].any()
+
+
+def test_an_unknown_frame_is_named_with_the_closest_ones() -> None:
+    with pytest.raises(UnknownNameError, match=r"no frame 'FR_feet'.*did you mean 'FR_foot'"):
+        FootKinematics(pinobs.load("go1"), ["FL_foot", "FR_feet"])
+    with pytest.raises(UnknownNameError, match="twice"):
+        FootKinematics(pinobs.load("go1"), ["FL_foot", "FL_foot"])
+    with pytest.raises(UnknownNameError, match="non-empty"):
+        FootKinematics(pinobs.load("go1"), [])
+
+
+def test_a_robot_without_a_floating_base_is_refused_with_the_fix() -> None:
+    with pytest.raises(UnsupportedRobotError, match="root_joint='freeflyer'"):
+        FootKinematics(pinobs.load("ur5"), ["tool0"])
+
+
+def test_with_an_imu_frame_the_feet_are_in_the_imu_frame(rng) -> None:
+    robot = pinobs.load("go1")
+    kin = FootKinematics(robot, FEET, imu_frame="imu_link")
+    model, data = robot.model, robot.model.createData()
+    q = robot.random_configuration(rng)
+    pin.framesForwardKinematics(model, data, q)
+    imu = data.oMf[model.getFrameId("imu_link")]
+    expected = [imu.actInv(data.oMf[model.getFrameId(f)]).translation for f in FEET]
+    h, jac = kin.positions_and_jacobians(q[7:])
+    np.testing.assert_allclose(h, expected, rtol=0, atol=1e-14)
+    R_bi, r_bi = kin.imu_placement
+    np.testing.assert_allclose(r_bi, [-0.01592, -0.06659, -0.00617])
+    _, jac_base = FootKinematics(robot, FEET).positions_and_jacobians(q[7:])
+    np.testing.assert_allclose(jac, R_bi.T @ jac_base, atol=1e-15)
+    with pytest.raises(
+        UnsupportedRobotError, match=r"'FL_calf'.* moves with joint 'FL_calf_joint'"
+    ):
+        FootKinematics(robot, FEET, imu_frame="FL_calf")

@@ -18,14 +18,15 @@ of the residual, and so are the first and last half-window of each log.
   :data:`UR10E_FIT`, validated on ``validation_data/ptp_10_points`` and on every
   unloaded ``identification_data`` log not used for the fit (the loaded ones carry a
   2.8 kg payload the models lack; the static poses p1..p10 are reported apart).
-  ``pinobs.identify`` refuses the UR10e stamps (steps of 8-16 ms, a third of them
-  more than 10 % off the median): its input is the log resampled onto a uniform
-  10 ms grid (cubic spline of q, linear τ).  *published*: ``UR10E_parameters.txt``
+  ``pinobs.identify`` takes the logs at their own stamps (steps of 8-16 ms; it
+  refused them before main's ``idgrid`` merge), the repeated rows left out, the two
+  logs joined with a NaN row and a 1 s gap between them.  *published*: ``UR10E_parameters.txt``
   (Mamedov et al.): ``pi_rgd`` read per link as ``[Ixx Ixy Ixz Iyy Iyz Izz hx hy hz
   m]`` at the URDF joint frame's origin (their ``parse_urdf.m``,
   ``base_params_qr.m``, ``generate_rb_regressor.m``), ``pi_drvs`` as rotor inertias
   added to ``M``'s diagonal (``regressorWithMotorDynamics.m``), ``pi_frcn`` per joint
-  as ``Fv·v + Fc·sign(v) + F0`` (``frictionRegressor.m``).  Their ``main.m`` fits
+  as ``Fv·v + Fc·sign(v) + F0`` (``frictionRegressor.m``; ``sign`` is 0 below
+  :data:`SIGN_DEADBAND`, as their filtered dq is at rest).  Their ``main.m`` fits
   ``ur-20_02_10-30sec_12harm``: on that log *published* is not held out.
   *pinobs+rotor*: ``pinobs.identify`` the same way, started from the URDF with the
   published rotor inertias as ``armature`` (pinobs's parameter set has no armature: it
@@ -89,8 +90,10 @@ UR10E_FIT = ("ur-20_02_12-40sec_12harm", "ur-20_02_12-50sec_12harm")
 UR10E_PUBLISHED_FIT = "ur-20_02_10-30sec_12harm"
 #: Grid of kf's jerk_psd [rad²/s⁵] for the tuned kf*.
 JERK_GRID = tuple(10.0**k for k in range(-6, 6))
-#: Uniform grid [s] the UR10e logs are resampled onto for pinobs.identify.
-UR10E_GRID = 0.01
+#: |v| [rad/s] below which the published model's sign(v) Coulomb term is 0.
+SIGN_DEADBAND = 1e-6
+#: Gap [s] between two UR10e logs joined for pinobs.identify.
+UR10E_JOIN_GAP = 1.0
 #: Seconds at the start of a log left out of the velocity RMS (the observers' start).
 SETTLE = 1.0
 #: FIGAROH on TIAGo arm_1..4 [N·m], 20 % held out (shared/data/README.md).
@@ -176,7 +179,10 @@ class Published:
         out = np.empty_like(v)
         for k in range(len(q)):
             out[k] = pin.rnea(self.model, self.data, q[k], v[k], a[k])
-        return out + self.rotor * a + self.fv * v + self.fc * np.sign(v) + self.f0
+        # sign(v) with |v| below SIGN_DEADBAND read as 0: the fit's round-off on constant
+        # positions (about 1e-16) would otherwise switch the full Coulomb torque at rest
+        sign = np.where(np.abs(v) > SIGN_DEADBAND, np.sign(v), 0.0)
+        return out + self.rotor * a + self.fv * v + self.fc * sign + self.f0
 
 
 # ------------------------------------------------------------------ observers
@@ -252,23 +258,17 @@ def ur10e_names(folder: str) -> list[str]:
 
 
 def ur10e_identify(names: tuple[str, ...], robot: pinobs.Robot):
-    """pinobs.identify on the named logs, each resampled onto the uniform grid and joined
-    with a NaN row between them (windows never straddle it), nothing held out."""
+    """pinobs.identify on the named logs at their stamps (repeated rows left out), joined
+    with a NaN row and :data:`UR10E_JOIN_GAP` between them, nothing held out."""
     parts_t, parts_q, parts_tau, off = [], [], [], 0.0
-    from scipy.interpolate import CubicSpline
-
     for n in names:
         t, q, tau = arrays(rd.load_log(f"ur10e/identification_data/{n}").frame)
         keep = fresh(q)
-        t, q, tau = t[keep], q[keep], tau[keep]
-        tg = np.arange(t[0], t[-1], UR10E_GRID)
-        qg = CubicSpline(t, q)(tg)
-        taug = np.column_stack([np.interp(tg, t, x) for x in tau.T])
-        tg = tg - tg[0] + off
-        parts_t += [tg, [tg[-1] + UR10E_GRID]]
-        parts_q += [qg, np.full((1, 6), np.nan)]
-        parts_tau += [taug, np.full((1, 6), np.nan)]
-        off = tg[-1] + 2 * UR10E_GRID
+        t, q, tau = t[keep] - t[keep][0] + off, q[keep], tau[keep]
+        parts_t += [t, [t[-1] + UR10E_JOIN_GAP / 2]]
+        parts_q += [q, np.full((1, 6), np.nan)]
+        parts_tau += [tau, np.full((1, 6), np.nan)]
+        off = t[-1] + UR10E_JOIN_GAP
     T, Q, TAU = (np.concatenate(p[:-1]) for p in (parts_t, parts_q, parts_tau))
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -510,7 +510,7 @@ def markdown(res: dict[str, Any]) -> str:
         L.append("")
         L.append(
             f"Identified by `pinobs.identify` on {', '.join(u['fit_logs'])} "
-            f"(resampled to {UR10E_GRID * 1e3:g} ms, {u['identify_seconds']:.0f} s); "
+            f"(at their stamps, {u['identify_seconds']:.0f} s); "
             f"derivatives: Savitzky–Golay {SG_WINDOW} rows, order {SG_ORDER}, on the stamps. "
             f"*published*: UR10E_parameters.txt († its own fitting log, not held out)."
         )

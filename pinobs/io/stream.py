@@ -228,6 +228,8 @@ class LogEstimator:
         # position (a sweep found them "previous torque held" though none was, and for a bag
         # the reports depended on where its chunks began)
         self._untorqued: list[int] = [0, 0, 0]
+        self.failures = 0  # rows where the observer failed or diverged (re-initialised there)
+        self._first_failure = math.nan  # the first one's time [s]
         self._unit = "line"
         self._time_skipped = 0  # rows skipped for a time not after the previous row's
         self._unit_checked = False
@@ -263,6 +265,19 @@ class LogEstimator:
                 f"{self._time_skipped} of {self.rows} rows were skipped because their t is not "
                 "after the previous row's: is the log in reverse order, or is t not its time "
                 "column? Sort it by t"
+            )
+        if self.failures:
+            # (found on real UR10e logs: ekf diverged and was re-initialised 299 times, said
+            # only row by row, its consistency "unknown" over the 1 sample since the last)
+            why = (
+                "its model does not explain this log: use a model-free observer (kf) or a "
+                "calibrated model (pinobs identify), and check the torque columns"
+                if self.observer.uses_torque
+                else "check the log's positions and times (the rows reported)"
+            )
+            self.warnings.append(
+                f"{self.observer.name!r} failed or diverged on {self.failures} rows (the first "
+                f"at t = {self._first_failure:.6g} s) and was re-initialised at each; {why}"
             )
         n, first, last = self._untorqued
         if self.observer.uses_torque and n and not self._any_tau:
@@ -477,6 +492,9 @@ class LogEstimator:
             return self._sane(est, t), False
         except (ObserverDiverged, ArithmeticError, np.linalg.LinAlgError, PinobsError) as exc:
             notes.append(f"observer failed ({type(exc).__name__}: {exc})")
+            self.failures += 1
+            if self.failures == 1:
+                self._first_failure = t
             return self._restart(t, q, tau, notes)
 
     def _sane(self, est: Estimate, t: float) -> Estimate:

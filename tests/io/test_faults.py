@@ -311,6 +311,9 @@ def test_an_observer_failing_on_a_row_is_reinitialised_there_not_aborted(sim, ur
     ((row, reason),) = run.bad_rows
     assert row == 100 and "LinAlgError: Singular matrix" in reason and "re-initialised" in reason
     assert run.estimated == 200 and np.isfinite(run.v).all()
+    # said once for the run too, not only row by row (real UR10e logs: 299 restarts, no word)
+    (said,) = [w for w in run.warnings if "failed or diverged" in w]
+    assert "on 1 rows" in said and f"t = {sim.t[101]:.6g} s" in said
 
 
 def test_a_floating_base_log_with_a_gap_runs_without_overflow_or_abort() -> None:

@@ -17,7 +17,7 @@ from pinobs.model import Robot
 from pinobs.model.noise import third_difference_std
 from pinobs.model.robot import Vector
 
-__all__ = ["estimate_noise_std", "noise_from_log"]
+__all__ = ["estimate_noise_std", "noise_from_log", "quantisation_std"]
 
 #: Fewest usable rows for an estimate.
 _MIN_ROWS = 12
@@ -51,6 +51,27 @@ def estimate_noise_std(
     return third_difference_std(x, np.asarray(t, dtype=float)[idx], idx, min_runs=_MIN_ROWS - 3)
 
 
+def quantisation_std(q: Vector, robot: Robot) -> Vector:
+    """Per velocity coordinate, the noise of rounding the positions to their printed step:
+    ``δ/√12``, ``δ`` the smallest nonzero change between consecutive rows of ``q`` (vector
+    joints; 0 for the others and for a coordinate that never changes).  A floor for σ̂: a
+    still robot's printed positions repeat exactly, so their third differences are 0."""
+    q = np.asarray(q, dtype=float)
+    out = np.zeros(robot.nv)
+    if q.shape[0] < 2:
+        return out
+    d = np.abs(np.diff(q, axis=0))
+    for b in robot.joints:
+        if b.kind != "vector":
+            continue
+        for k in range(b.nv):
+            x = d[:, b.idx_q + k]
+            x = x[np.isfinite(x) & (x > 0)]
+            if x.size:
+                out[b.idx_v + k] = float(x.min()) / np.sqrt(12.0)
+    return out
+
+
 def _rows(t: Vector, q: Vector, window: float, min_rows: int) -> NDArray[np.intp] | None:
     """The rows :func:`estimate_noise_std` uses: the finite ones within ``window`` s of the
     first finite one (at least ``min_rows``), or ``None`` when fewer than 12."""
@@ -70,23 +91,38 @@ def noise_from_log(
     """The one σ [rad or m] an observer takes when none is given: ``(σ̂, σ̂ per joint, a
     sentence reporting them)``, or ``None`` when the log has fewer than 12 usable rows.
 
-    ``σ̂`` is the median over joints of :func:`estimate_noise_std` (the log's first
-    second), at least ``floor`` (a noise-free log: the sentence says so); the sentence
-    also says how to give σ instead.
+    ``σ̂`` is the median over the joints that move of :func:`estimate_noise_std` (the
+    log's first second), each joint's at least the rounding of its printed positions
+    (:func:`quantisation_std`, over all the rows given: a robot still at the start of a
+    real log repeats its printed positions exactly), and at least ``floor`` (a
+    noise-free log: the sentence says so); the sentence also says how to give σ instead.
     """
     sigma_joint = estimate_noise_std(t, q, robot)
     if sigma_joint is None:
         return None
+    quantum = quantisation_std(q, robot)
+    floored = sigma_joint < quantum
+    sigma_joint = np.maximum(sigma_joint, quantum)
+    # a joint whose printed position never changes tells nothing of the noise (σ̂ ~ 1e-17)
+    told = sigma_joint > 1e-12
     used = cast(NDArray[np.intp], _rows(t, np.asarray(q, dtype=float), 1.0, 200))
-    sigma = float(np.median(sigma_joint))
+    sigma = float(np.median(sigma_joint[told] if told.any() else sigma_joint))
     joints = np.array2string(sigma_joint, formatter={"float_kind": "{:.2e}".format})
     # the rows' times: the first second of finite rows need not be the log's (a sweep found
     # the sentence saying "first second" of a log whose first second was NaN)
     said = (
-        f"no noise level given: estimated σ = {sigma:.3g} (median over joints; per joint "
+        f"no noise level given: estimated σ = {sigma:.3g} (median over the joints that move"
+        f"{'' if told.all() else f' ({int(told.sum())} of {told.size})'}; per joint "
         f"{joints}) from the log's first second of finite rows ({used.size} rows, "
         f"t = {t[used[0]]:.6g} to {t[used[-1]]:.6g} s)"
     )
+    if floored.any():
+        # (real logs starting at rest: third differences of repeated printed values are
+        # 0; a UR10e log gave σ = 3.7e-17 on joints 1-3, refused by make_observer)
+        said += (
+            f"; on {int(floored.sum())} joints at least the rounding of their printed "
+            "positions (step/√12)"
+        )
     if sigma < floor:
         said += f" (below {floor:g}: taken as noise-free, σ = {floor:g} used)"
     return max(sigma, floor), sigma_joint, said + "; pass noise_std (--noise) to override"

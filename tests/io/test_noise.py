@@ -94,3 +94,19 @@ def test_without_a_noise_level_estimates_are_within_1_3x_of_those_with_the_true_
     assert rms_est <= 1.3 * rms_true  # measured ratios 0.98 (kf) and 1.00 (ekf) on 4 s
     assert estimated.noise_std == pytest.approx(1e-3, rel=0.15)
     assert any("estimated σ = " in w for w in estimated.warnings)
+
+
+def test_a_log_at_rest_in_its_first_second_takes_the_rounding_of_its_printed_positions() -> None:
+    """Real logs start at rest with positions printed to a few decimals (the UR10e's 4):
+    their third differences are 0 there, and σ̂ was ~1e-17, which make_observer refused."""
+    from pinobs.observers.noise import noise_from_log
+
+    robot = pinobs.load("ur5")
+    t = np.arange(3000) * 1e-3
+    q = np.tile(np.round(np.linspace(0.1, 0.6, robot.nq), 4), (t.size, 1))
+    q[1500:, :2] += np.round(0.2 * np.sin(np.linspace(0, 3, 1500))[:, None], 4)  # then moves
+    sigma, per_joint, said = noise_from_log(t, q, robot)
+    assert sigma == pytest.approx(1e-4 / np.sqrt(12))  # two joints move: their step/√12
+    assert per_joint[0] == per_joint[1] == pytest.approx(1e-4 / np.sqrt(12))
+    assert "the joints that move (2 of 6)" in said and "printed" in said
+    pinobs.make_observer("kf", robot, noise_std=sigma)  # accepted

@@ -385,6 +385,7 @@ def _estimate_many(args: argparse.Namespace) -> int:
         friction=True if args.friction else None,
         mimic=args.mimic,
         lock=lock_option(args.lock),
+        check=not args.no_check,
         force=args.force,
         columns=column_map(args.map),
         topic=args.topic,

@@ -66,6 +66,12 @@ def add_robot_options(p: argparse.ArgumentParser, files: str = "URDF/MJCF") -> N
         help="URDF <mimic> joints: refuse them (default for files) or load each as a joint "
         "of its own (default for robot names)",
     )
+    p.add_argument(
+        "--no-check",
+        action="store_true",
+        help="load a model the sanity check refuses (a singular mass matrix, massless "
+        "links; pinobs.load(check=False)): its estimates may then fail",
+    )
     add_lock_option(p)
 
 
@@ -114,11 +120,20 @@ def lock_option(items: Sequence[str] | None) -> list[str] | dict[str, Any] | Non
 
 
 def load_robot(args: argparse.Namespace) -> Robot:
-    """The robot of ``--robot``, ``--root-joint``, ``--friction``, ``--mimic`` and ``--lock``."""
+    """The robot of ``--robot``, ``--root-joint``, ``--friction``, ``--mimic``, ``--lock`` and
+    ``--no-check``."""
     friction = True if getattr(args, "friction", False) else None
     mimic = getattr(args, "mimic", None)
     lock = lock_option(getattr(args, "lock", None))
-    return load(args.robot, root_joint=args.root_joint, friction=friction, mimic=mimic, lock=lock)
+    check = not getattr(args, "no_check", False)
+    return load(
+        args.robot,
+        root_joint=args.root_joint,
+        friction=friction,
+        mimic=mimic,
+        lock=lock,
+        check=check,
+    )
 
 
 # -------------------------------------------------------------------- log

@@ -513,6 +513,7 @@ class LogTask:
     mimic: str | None = None  # pinobs.load's mimic
     #: pinobs.load's lock, as (joint, value) pairs (value None: the neutral one)
     lock: tuple[tuple[str, Any], ...] = ()
+    check: bool = True  # pinobs.load's check (False: --no-check)
     force: bool = False
     columns: tuple[tuple[str, str], ...] = ()
     topic: str | None = None
@@ -537,6 +538,7 @@ def log_tasks(
     friction: bool | None = None,
     mimic: str | None = None,
     lock: Sequence[str] | Mapping[str, Any] | None = None,
+    check: bool = True,
     force: bool = False,
     columns: Mapping[str, str] | None = None,
     topic: str | None = None,
@@ -560,7 +562,8 @@ def log_tasks(
         root_joint, columns, topic, rate, noise_std: as :func:`pinobs.io.process_log`
             (``noise_std=None``: estimated from each log's first second).
         friction: :func:`pinobs.load`'s (the URDF's joint friction in the dynamics).
-        mimic, lock: :func:`pinobs.load`'s (the joints the logs do not have, locked).
+        mimic, lock, check: :func:`pinobs.load`'s (the joints the logs do not have, locked;
+            ``check=False``: a model the sanity check refuses).
         force: overwrite existing estimates and summary.
         smooth: smooth each log instead of filtering it, with these options of
             :func:`pinobs.io.smoothing.smooth_log` (``{}``: its defaults; ``lag``,
@@ -626,6 +629,7 @@ def log_tasks(
             friction=friction,
             mimic=mimic,
             lock=_lock_pairs(lock),
+            check=check,
             force=force,
             columns=tuple(sorted((columns or {}).items())),
             topic=topic,
@@ -668,6 +672,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         friction=task.friction,
         mimic=task.mimic,
         lock=dict(task.lock) or None,
+        check=task.check,
     )
     common: dict[str, Any] = {
         "force": task.force,

@@ -311,3 +311,23 @@ def test_full_romeo_is_refused_for_its_massless_fingers_and_loads_unchecked() ->
     m = robot.mass_matrix(q)
     iv = robot.model.joints[robot.model.getJointId(joint)].idx_v
     assert m[iv, iv] <= 1e-12 * np.abs(m).max()  # no inertia about its axis: a zero diagonal
+
+
+def test_the_cli_loads_a_model_the_check_refuses_with_no_check(tmp_path: Path, capsys) -> None:
+    """Issue 36: the TX40's URDF (M singular at its last link) was refused by every command
+    with no way to load it unchecked; a model-free observer does not need M."""
+    from pinobs.cli import main
+    from pinobs.io import write_log
+
+    f = _arm(tmp_path, mass="0", ixx="0", iyy="0", izz="0")
+    t = np.arange(300) * 1e-3
+    q = np.column_stack([0.3 * np.sin(3 * t), 0.2 * np.cos(2 * t)])
+    log = tmp_path / "log.csv"
+    write_log(log, t, q, np.zeros_like(q))
+    args = ["estimate", "--robot", str(f), "--observer", "kf", "--log", str(log)]
+    args += ["--noise", "1e-6", "--no-progress", "--out"]
+    assert main([*args, str(tmp_path / "a.csv")]) == 2
+    assert "mass matrix is singular" in capsys.readouterr().err
+    assert main([*args, str(tmp_path / "b.csv"), "--no-check"]) == 0
+    est = np.loadtxt(tmp_path / "b.csv", delimiter=",", skiprows=1)
+    assert est.shape == (300, 5) and np.isfinite(est[1:]).all()

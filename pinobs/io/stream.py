@@ -40,7 +40,7 @@ the row joined; positions are file lines (CSV) or row / message numbers.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -333,7 +333,6 @@ class LogEstimator:
         self._unit = unit
         # a bag's messages are named by number and stamp, file rows by their line
         stamps: list[float | None] = t_all.tolist() if unit == "message" else [None] * n
-        period = self.period
         stale = log.stale if log.stale is not None else np.zeros(n, dtype=bool)
         drops = log.drops if log.drops is not None else np.zeros(n, dtype=np.int64)
         for k in range(n):
@@ -350,49 +349,10 @@ class LogEstimator:
                     self._report(lines[k], stamps[k], notes)
                 continue
             # ---- time
-            if not math.isfinite(t):
-                self._report(lines[k], stamps[k], [*notes, f"time {t!r} unreadable: row skipped"])
-                continue
-            if self._started and not t > self._t + TIME_EPS:
-                # rows that go back in time together (a clock reset, a burst of stamps
-                # ahead) would otherwise all be skipped: after TIME_BACK_ROWS, restart
-                self._back = self._back + 1 if t > self._back_t + TIME_EPS else 1
-                self._back_t = t
-                if self._back <= TIME_BACK_ROWS:
-                    self._time_skipped += 1
-                    self._report(
-                        lines[k],
-                        stamps[k],
-                        [
-                            *notes,
-                            f"t = {t!r} s is not after the previous sample at t = {self._t!r} s: "
-                            "row skipped",
-                        ],
-                    )
-                    continue
-                notes.append(
-                    f"time went back to t = {t!r} s (previous sample at t = {self._t!r} s) and "
-                    f"stayed there for {TIME_BACK_ROWS} rows: observer re-initialised here"
-                )
-                self._started = False
-            self._back = 0
-            if (
-                self._started
-                and period is not None
-                and t - self._t > GAP_PERIODS * period
-                and k + 1 < len(log)
-                and math.isfinite(float(t_all[k + 1]))
-                and self._t < float(t_all[k + 1]) < t
-            ):
-                self._report(
-                    lines[k],
-                    stamps[k],
-                    [
-                        *notes,
-                        f"t = {t!r} s is far ahead of the next {unit} (t = {float(t_all[k + 1])!r} s): "
-                        "timestamp out of order, row skipped",
-                    ],
-                )
+            nxt = float(t_all[k + 1]) if k + 1 < len(log) else None
+            skipped = self._time_verdict(t, nxt, unit, notes)
+            if skipped is not None:
+                self._report(lines[k], stamps[k], [*notes, skipped])
                 continue
             # ---- values
             q_ok = bool(finite_q[k]) and not bool(absurd_q[k])
@@ -403,22 +363,14 @@ class LogEstimator:
                 notes.append(f"position {q_all[k].tolist()} absurd for the joint ranges")
             elif not finite_q[k] and not why:
                 notes.append(f"non-finite position {q_all[k].tolist()}")
-            tau: Vector | None = None
             held = self._held
-            if tau_all is None or (held is None and bad_tau[k] and np.isnan(tau_all[k]).all()):
-                if held is None:  # none yet: zero torque, counted (said once, by finish)
-                    if not self._untorqued[0]:
-                        self._untorqued[1] = int(lines[k])
-                    self._untorqued[0] += 1
-                    self._untorqued[2] = int(lines[k])
-            elif bad_tau[k]:
-                if not why or np.isfinite(tau_all[k]).all():
-                    notes.append(f"torque {tau_all[k].tolist()} non-finite or absurd")
-                notes.append("previous torque held" if held is not None else "zero torque used")
-                tau = self._held
-            else:
-                tau = tau_all[k]
-                self._held = tau
+            tau = self._torque(
+                None if tau_all is None else tau_all[k],
+                tau_all is not None and bool(bad_tau[k]),
+                int(lines[k]),
+                bool(why),
+                notes,
+            )
             # ---- estimate
             est = self._estimate(t, q_all[k] if q_ok else None, tau, notes, held, int(drops[k]))
             if est is None:
@@ -432,6 +384,64 @@ class LogEstimator:
                 self._report(lines[k], stamps[k], notes)
         self.rows += n
         return t_all[:n], out_q, out_v
+
+    def _time_verdict(self, t: float, nxt: float | None, unit: str, notes: list[str]) -> str | None:
+        """Why the row at ``t`` is skipped for its time (module docstring), or ``None``: it
+        is placed (``notes`` then say when time went back and the observer restarts)."""
+        if not math.isfinite(t):
+            return f"time {t!r} unreadable: row skipped"
+        if self._started and not t > self._t + TIME_EPS:
+            # rows that go back in time together (a clock reset, a burst of stamps ahead)
+            # would otherwise all be skipped: after TIME_BACK_ROWS, restart
+            self._back = self._back + 1 if t > self._back_t + TIME_EPS else 1
+            self._back_t = t
+            if self._back <= TIME_BACK_ROWS:
+                self._time_skipped += 1
+                return (
+                    f"t = {t!r} s is not after the previous sample at t = {self._t!r} s: "
+                    "row skipped"
+                )
+            notes.append(
+                f"time went back to t = {t!r} s (previous sample at t = {self._t!r} s) and "
+                f"stayed there for {TIME_BACK_ROWS} rows: observer re-initialised here"
+            )
+            self._started = False
+        self._back = 0
+        period = self.period
+        if (
+            self._started
+            and period is not None
+            and t - self._t > GAP_PERIODS * period
+            and nxt is not None
+            and math.isfinite(nxt)
+            and self._t < nxt < t
+        ):
+            return (
+                f"t = {t!r} s is far ahead of the next {unit} (t = {nxt!r} s): "
+                "timestamp out of order, row skipped"
+            )
+        return None
+
+    def _torque(
+        self, tau: Vector | None, bad: bool, line: int, unreadable: bool, notes: list[str]
+    ) -> Vector | None:
+        """The torque the row feeds the observer (module docstring): its own, the previous
+        one held for a bad one (``notes`` say so), or ``None`` (zero torque, counted)."""
+        held = self._held
+        if tau is None or (held is None and bad and np.isnan(tau).all()):
+            if held is None:  # none yet: zero torque, counted (said once, by finish)
+                if not self._untorqued[0]:
+                    self._untorqued[1] = line
+                self._untorqued[0] += 1
+                self._untorqued[2] = line
+            return None
+        if bad:
+            if not unreadable or np.isfinite(tau).all():
+                notes.append(f"torque {tau.tolist()} non-finite or absurd")
+            notes.append("previous torque held" if held is not None else "zero torque used")
+            return held
+        self._held = tau
+        return tau
 
     def _estimate(
         self,
@@ -615,23 +625,8 @@ def process_log(
     warnings: list[str] = []
     if isinstance(observer, str):
         if noise_std is None:
-            timed = time_screened(first.t)
-            found = noise_from_log(first.t[timed], first.q[timed], robot)
-            if found is not None and found[0] < 1e-12:  # a still robot, positions quantised
-                # (a static UR10e pose printed to 4 decimals gave 3.7e-17, refused by make_observer)
-                warnings.append(
-                    f"the noise level estimated from the log is {found[0]:.3g} (the positions do "
-                    "not move in its first second): the observer's default σ is used; pass "
-                    "noise_std (--noise)"
-                )
-            elif found is not None:
-                noise_std, sigma_joint, said = found
-                warnings.append(said)
-            else:
-                warnings.append(
-                    "no noise level given and the log is too short to estimate it: the "
-                    "observer's default σ is used; pass noise_std (--noise)"
-                )
+            noise_std, sigma_joint, said = _log_noise(first, robot)
+            warnings.append(said)
         ob: ObserverLike = make_observer(
             observer,
             robot,
@@ -649,27 +644,8 @@ def process_log(
             out, robot, force=force, inputs=[] if type(source).__name__ == "DataFrame" else [source]
         )
     )
-    parts: list[tuple[Vector, Vector, Vector]] = []
+    parts = _stream(est, chain_chunks(first, chunks), writer, keep, progress)
     unit = first.unit
-    try:
-        for chunk in chain_chunks(first, chunks):
-            part = est.feed(chunk)
-            if writer is not None:
-                writer.write(*part)
-            if keep:
-                parts.append(part)
-            if progress is not None:
-                progress(est.rows, 0)
-        part = est.finish()
-        if writer is not None:
-            writer.write(*part)
-            writer.close()
-        if keep:
-            parts.append(part)
-    except BaseException:
-        if writer is not None:
-            writer.abort()
-        raise
     run = LogRun(
         t=np.concatenate([p[0] for p in parts]) if parts else np.empty(0),
         q=np.concatenate([p[1] for p in parts]) if parts else np.empty((0, robot.nq)),
@@ -689,6 +665,62 @@ def process_log(
     if run.clock is not None and (run.clock.repaired or run.clock.stale):
         run.warnings.insert(0, run.clock.message())
     return run
+
+
+def _log_noise(first: Log, robot: Robot) -> tuple[float | None, Vector | None, str]:
+    """σ from the log's first chunk (:func:`pinobs.observers.noise.noise_from_log`), per
+    joint, and what to say; ``None``: the observer's default (a log too short, or still)."""
+    timed = time_screened(first.t)
+    found = noise_from_log(first.t[timed], first.q[timed], robot)
+    if found is None:
+        return (
+            None,
+            None,
+            "no noise level given and the log is too short to estimate it: the "
+            "observer's default σ is used; pass noise_std (--noise)",
+        )
+    if found[0] < 1e-12:  # a still robot, positions quantised
+        # (a static UR10e pose printed to 4 decimals gave 3.7e-17, refused by make_observer)
+        return (
+            None,
+            None,
+            f"the noise level estimated from the log is {found[0]:.3g} (the positions do "
+            "not move in its first second): the observer's default σ is used; pass "
+            "noise_std (--noise)",
+        )
+    return found
+
+
+def _stream(
+    est: LogEstimator,
+    chunks: Iterator[Log],
+    writer: EstimateWriter | None,
+    keep: bool,
+    progress: Callable[[int, int], None] | None,
+) -> list[tuple[Vector, Vector, Vector]]:
+    """Every chunk through ``est``, written as it is done (the writer aborted on any
+    failure); the parts kept when ``keep``."""
+    parts: list[tuple[Vector, Vector, Vector]] = []
+    try:
+        for chunk in chunks:
+            part = est.feed(chunk)
+            if writer is not None:
+                writer.write(*part)
+            if keep:
+                parts.append(part)
+            if progress is not None:
+                progress(est.rows, 0)
+        part = est.finish()
+        if writer is not None:
+            writer.write(*part)
+            writer.close()
+        if keep:
+            parts.append(part)
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
+    return parts
 
 
 def _consistency(observer: Any) -> Any:

@@ -1,5 +1,5 @@
-"""``pinobs identify``: inertias and friction (and a torque offset) from a log; a report
-and a calibrated URDF."""
+"""``pinobs identify``: inertias, friction and rotor inertias (and a torque offset) from a
+log; a report and a calibrated URDF (its armature in a ``.pinobs.json`` sidecar)."""
 
 from __future__ import annotations
 
@@ -51,6 +51,11 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
     add_clock_option(p)
     p.add_argument("--out", required=True, help="the calibrated URDF to write")
     p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
+    p.add_argument(
+        "--no-armature",
+        action="store_true",
+        help="do not identify the rotor inertia (armature) per joint; keep the model's",
+    )
     p.add_argument(
         "--offset",
         action="store_true",
@@ -111,6 +116,7 @@ def handle(args: argparse.Namespace) -> int:
         log,
         friction=not args.no_friction,
         offset=args.offset,
+        armature=not args.no_armature,
         holdout=args.holdout,
         max_condition=args.max_condition,
         torque=args.torque,

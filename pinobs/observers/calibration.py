@@ -108,6 +108,7 @@ def identify(
     *,
     friction: bool = True,
     offset: bool = False,
+    armature: bool = True,
     holdout: float = 0.2,
     window: float = 0.1,
     max_condition: float = MAX_CONDITION,
@@ -165,6 +166,7 @@ def identify(
     opts: dict[str, Any] = {
         "friction": friction,
         "offset": offset,
+        "armature": armature,
         "holdout": holdout,
         "window": window,
         "max_condition": max_condition,

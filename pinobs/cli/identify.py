@@ -23,6 +23,7 @@ from pinobs.errors import OutputExistsError
 from pinobs.io import read_log
 from pinobs.io.clock import without_stale
 from pinobs.model.identification import MAX_CONDITION
+from pinobs.model.sidecar import sidecar_path
 
 if TYPE_CHECKING:
     from pinobs.cli.options import Subparsers
@@ -128,7 +129,9 @@ def handle(args: argparse.Namespace) -> int:
     root = robot.root_joint if robot.root_joint not in (None, "fixed") else None
     how = f"{path!r}, friction=True" + ("" if root is None else f", root_joint={root!r}")
     cli = f"--robot {path} --friction" + ("" if root is None else f" --root-joint {root}")
-    print(f"wrote {path}: load it with pinobs.load({how}) (pinobs estimate: {cli})")
+    sidecar = sidecar_path(path)
+    beside = f" and its rotor inertias to {sidecar}" if sidecar.is_file() else ""
+    print(f"wrote {path}{beside}: load it with pinobs.load({how}) (pinobs estimate: {cli})")
     print(
         f"run ekf or riemannian on it with {opts or 'their default options'}, or adaptive "
         "starting from it"

@@ -166,10 +166,6 @@ PRIOR_DAMPING, PRIOR_COULOMB, PRIOR_OFFSET = 10.0, 5.0, 5.0
 #: unexcited one there.
 PRIOR_ARMATURE, PRIOR_ARMATURE_FLOOR = 1.0, 0.1
 
-#: Whether rows are weighted with the armature's prior floor added to ``M₀``
-#: (:attr:`MomentumRegressor.weight_robot`).
-ARMATURE_WEIGHT = True
-
 #: Last barrier weight of :func:`_consistent` (in units of the largest posterior precision).
 MU_END = 1e-16
 
@@ -302,10 +298,11 @@ class MomentumRegressor:
     def weight_robot(self) -> Robot:
         """The model whose ``M(q)⁻¹`` weights the rows: the nominal one, its armature raised
         by :data:`PRIOR_ARMATURE_FLOOR` of its largest ``M̄ⱼⱼ`` on every actuated joint when
-        the armature is identified (:data:`ARMATURE_WEIGHT`)."""
+        the armature is identified (module docstring: a rotor unknown to the nominal model
+        would otherwise be weighed by its link's inertia alone)."""
         if self._weight_robot is None:
             robot = self.robot
-            if self.armature and ARMATURE_WEIGHT and self.n_joint:
+            if self.armature and self.n_joint:
                 model = robot.model.copy()
                 m_bar = np.diag(robot.mass_matrix(robot.neutral()))[list(self.actuated)]
                 armature = np.array(model.armature, dtype=float)

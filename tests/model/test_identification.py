@@ -171,6 +171,21 @@ def test_rows_vanish_on_the_true_parameters_of_a_model_with_armature(identified:
     assert np.abs(A @ reg.nominal() - y).max() / np.abs(y).max() < 1e-4
 
 
+def test_rows_are_weighted_with_the_armature_floor_only_when_it_is_identified() -> None:
+    """A rotor the nominal model lacks would have a wrist's rows weighed by its link alone
+    (UR10e: 2e-4 kg·m² against a 0.44 rotor): the weights' model has the prior's floor."""
+    from pinobs.model.identification import PRIOR_ARMATURE_FLOOR
+
+    robot = pinobs.load("ur5")
+    m_bar = np.diag(robot.mass_matrix(robot.neutral()))
+    floor = PRIOR_ARMATURE_FLOOR * m_bar.max()
+    reg = MomentumRegressor(robot, armature=True)
+    np.testing.assert_allclose(reg.weight_robot.model.armature, np.full(6, floor))
+    np.testing.assert_array_equal(robot.model.armature, np.zeros(6))  # the nominal untouched
+    np.testing.assert_allclose(reg.prior_std()[reg.armature_slice], np.maximum(m_bar, floor))
+    assert MomentumRegressor(robot).weight_robot is robot
+
+
 def test_identify_recovers_the_armature_and_predicts_better_than_without_it(
     rng: np.random.Generator,
 ) -> None:

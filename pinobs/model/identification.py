@@ -68,7 +68,7 @@ rotor 0.44); so weighted, and with the friction priors scaled by that small ``M�
 too, the real UR10e logs (``benchmarks/real_logs.py``) gave wrist 3 a rotor of 0.08
 and a held-out residual no better than without armature (3.27 N·m pooled, 3.34
 without), and the fit depended on the prior's mean (3.27 from 0, 0.73 from the
-published rotors); with the floor, 0.43 kg·m² and 0.72 N·m from either mean.
+published rotors); with the floor, 0.44 kg·m² and 0.73 N·m from either mean.
 The weighted residuals of a fit with and without armature are then in different
 units: compare them in torque (N·m), not in ``report["holdout_after"]``.
 

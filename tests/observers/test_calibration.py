@@ -60,7 +60,7 @@ def test_the_refined_fit_recovers_the_armature_and_without_it_predicts_far_worse
 ) -> None:
     """planar_3r's truth with rotors of 0.05, 0.2, 0.1 kg·m² (6 s, σ = 1e-4).  Measured on 8 s
     logs (seeds 1–3): joints 2 and 3 within 1e-4 kg·m², the torque prediction error on a
-    fresh trajectory (:func:`~tests.conftest.torque_error`) per joint 2000–12000× lower
+    fresh trajectory (:func:`~tests.conftest.torque_error`) per joint 2400–10000× lower
     than ``armature=False``'s; joint 1's rotor is one column with link 1's inertia about
     its axis (only their sum, in M, is identifiable)."""
     robot = pinobs.load("planar_3r")

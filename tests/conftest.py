@@ -32,6 +32,23 @@ def planar_3r_truth(robot: pinobs.Robot) -> pinobs.Robot:
     )
 
 
+def torque_error(model: pinobs.Robot, truth: pinobs.Robot, *, seed: int = 7) -> np.ndarray:
+    """Per joint, the RMS [N·m or N] of ``model``'s inverse dynamics (friction included)
+    against the torques of a fresh 4 s trajectory of ``truth`` (at its own accelerations,
+    every 10th sample of 1 kHz): a prediction error in the torques' own units, whatever
+    weighting a fit used."""
+    from pinobs.simulation import Sensor
+
+    val = pinobs.simulate(
+        model, [], duration=4.0, sensor=Sensor(rate=1000.0), seed=seed, plant=truth
+    )
+    errs = []
+    for q, v, tau in zip(val.q[::10], val.v[::10], val.tau[::10], strict=True):
+        a = truth.forward_dynamics(q, v, tau)
+        errs.append(model.inverse_dynamics(q, v, a) - model.friction_torque(v) - tau)
+    return np.sqrt(np.mean(np.square(errs), axis=0))
+
+
 @pytest.fixture
 def robot_factory():
     return lambda name: cached_robot(name).copy()

@@ -60,6 +60,31 @@ def test_identify_writes_a_calibrated_urdf_closer_to_the_truth(
     assert "exists" in capsys.readouterr().err
 
 
+def test_identify_writes_the_rotor_inertias_beside_the_urdf_unless_told_not_to(
+    tmp_path, capsys
+) -> None:
+    robot = pinobs.load("planar_3r")
+    model = planar_3r_truth(robot).model.copy()
+    model.armature = np.array([0.05, 0.2, 0.1])
+    truth = robot.with_model(model)
+    res = pinobs.simulate(
+        robot, [], duration=8.0, sensor=Sensor(rate=1000.0, noise_std=1e-5), seed=1, plant=truth
+    )
+    log = tmp_path / "geared.csv"
+    write_log(log, res.t, res.q_meas, res.tau)
+    args = ["identify", "--robot", "planar_3r", "--log", str(log), "--no-refine", "--out"]
+    assert main([*args, str(tmp_path / "with.urdf")]) == 0
+    text = capsys.readouterr().out
+    assert "joint2.armature" in text and "with.pinobs.json" in text
+    np.testing.assert_allclose(
+        pinobs.load(tmp_path / "with.urdf").model.armature[1:], [0.2, 0.1], rtol=0.02
+    )
+    assert main([*args, str(tmp_path / "without.urdf"), "--no-armature"]) == 0
+    text = capsys.readouterr().out
+    assert "armature" not in text and "pinobs.json" not in text
+    assert not (tmp_path / "without.pinobs.json").exists()
+
+
 def test_identify_refuses_a_log_without_torques_and_writes_nothing(tmp_path, capsys) -> None:
     robot = pinobs.load("planar_3r")
     res = pinobs.simulate(robot, [], duration=2.0, seed=0)

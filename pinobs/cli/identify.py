@@ -1,5 +1,5 @@
-"""``pinobs identify``: inertias and friction (and a torque offset) from a log; a report
-and a calibrated URDF."""
+"""``pinobs identify``: inertias, friction and rotor inertias (and a torque offset) from a
+log; a report and a calibrated URDF (its armature in a ``.pinobs.json`` sidecar)."""
 
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ from pinobs.errors import OutputExistsError
 from pinobs.io import read_log
 from pinobs.io.clock import without_stale
 from pinobs.model.identification import MAX_CONDITION
+from pinobs.model.sidecar import sidecar_path
 
 if TYPE_CHECKING:
     from pinobs.cli.options import Subparsers
@@ -51,6 +52,11 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
     add_clock_option(p)
     p.add_argument("--out", required=True, help="the calibrated URDF to write")
     p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
+    p.add_argument(
+        "--no-armature",
+        action="store_true",
+        help="do not identify the rotor inertia (armature) per joint; keep the model's",
+    )
     p.add_argument(
         "--offset",
         action="store_true",
@@ -111,6 +117,7 @@ def handle(args: argparse.Namespace) -> int:
         log,
         friction=not args.no_friction,
         offset=args.offset,
+        armature=not args.no_armature,
         holdout=args.holdout,
         max_condition=args.max_condition,
         torque=args.torque,
@@ -122,7 +129,9 @@ def handle(args: argparse.Namespace) -> int:
     root = robot.root_joint if robot.root_joint not in (None, "fixed") else None
     how = f"{path!r}, friction=True" + ("" if root is None else f", root_joint={root!r}")
     cli = f"--robot {path} --friction" + ("" if root is None else f" --root-joint {root}")
-    print(f"wrote {path}: load it with pinobs.load({how}) (pinobs estimate: {cli})")
+    sidecar = sidecar_path(path)
+    beside = f" and its rotor inertias to {sidecar}" if sidecar.is_file() else ""
+    print(f"wrote {path}{beside}: load it with pinobs.load({how}) (pinobs estimate: {cli})")
     print(
         f"run ekf or riemannian on it with {opts or 'their default options'}, or adaptive "
         "starting from it"

@@ -38,6 +38,7 @@ from pinobs.errors import (
 from pinobs.model.mjcf import MujocoMap, build_from_mujoco, cross_check
 from pinobs.model.robot import Robot
 from pinobs.model.sanity import check_model, check_urdf
+from pinobs.model.sidecar import apply_sidecar
 from pinobs.model.urdf import read_urdf
 
 __all__ = ["LockSpec", "RobotEntry", "load", "resolve_source", "robot_entries", "robot_names"]
@@ -810,6 +811,11 @@ def load(
             built from it and ``M(q)`` cross-checked with ``mj_fullM``:
             :mod:`pinobs.model.mjcf`) file, or a Pinocchio ``Model`` or
             ``RobotWrapper`` (copied; its geometry, if any, kept).
+            A URDF's rotor inertias (``model.armature``, which URDF cannot hold) are read
+            from the sidecar ``<name>.pinobs.json`` beside it when there is one
+            (:mod:`pinobs.model.sidecar`: ``pinobs identify`` and
+            :func:`~pinobs.model.urdf_writer.write_urdf` write it); a sidecar naming a joint
+            the robot does not have is refused, naming it.
         root_joint: ``None`` (the registry's default: free-flyer for legged
             robots and the rigid body, spherical for the top, fixed otherwise;
             fixed for files; the model's own for a ``pin.Model``), ``"fixed"``,
@@ -854,7 +860,8 @@ def load(
 
     Raises:
         UnknownNameError: ``source`` is neither a registered name nor a path.
-        ModelFileError: the file is missing or cannot be parsed.
+        ModelFileError: the file is missing or cannot be parsed; its sidecar cannot be
+            parsed or names a joint the robot does not have.
         ModelTypeError: ``source`` is of another type.
         ModelError: the model fails a check (``check=True``), has mimic joints
             (``mimic="error"``), a URDF negative ``<dynamics>`` value or an
@@ -901,6 +908,7 @@ def load(
                 registered=registered,
                 locked=_lock_names(lock),
             )
+            apply_sidecar(model, path)  # the armature a URDF cannot hold (pinobs.model.sidecar)
         else:
             model, visual, _, compiled = _load_mjcf(path, joint_type, root_joint)
             geometry = partial(_given_geometry, visual)

@@ -29,6 +29,11 @@ limits and anything else it says are kept.  What changes:
   ``<safety_controller>`` dropped: Pinocchio then merges their bodies as
   ``pin.buildReducedModel`` did, so the file loads without ``lock=``.
 
+* the rotor inertias (``model.armature``), which URDF cannot hold, go to a sidecar
+  beside the file, ``<name>.pinobs.json`` (:mod:`pinobs.model.sidecar`), which
+  :func:`pinobs.load` reads back; a robot without armature writes none (and removes a
+  stale one of that name).
+
 A robot built from a ``pin.Model`` (or a ``RobotWrapper``) has no URDF behind
 it: one is generated from the model (:func:`_generated_urdf`), with its kinematic
 tree, inertias, limits and joint friction and no geometry.
@@ -47,6 +52,7 @@ import pinocchio as pin
 
 from pinobs.errors import ModelFileError
 from pinobs.model.robot import Robot
+from pinobs.model.sidecar import write_sidecar
 from pinobs.model.urdf import resolve_mesh
 
 __all__ = ["generated_root_joint", "write_urdf"]
@@ -234,15 +240,10 @@ def _generated_urdf(robot: Robot) -> ET.ElementTree[ET.Element]:
     ``root_joint`` (:func:`generated_root_joint`).
 
     Raises:
-        ModelFileError: the model has what a URDF cannot say: another joint type, an
-            armature, a gravity other than the URDF loaders' ``(0, 0, -9.81)``.
+        ModelFileError: the model has what a URDF cannot say: another joint type, a
+            gravity other than the URDF loaders' ``(0, 0, -9.81)``.
     """
     model = robot.model
-    if np.any(np.asarray(model.armature) != 0):
-        raise ModelFileError(
-            f"robot {robot.name!r} has a rotor armature, which a URDF cannot hold; load it "
-            "from its URDF (pinobs.load(path, lock=...)) to write it back"
-        )
     if not np.array_equal(np.asarray(model.gravity.linear), [0.0, 0.0, -9.81]) or np.any(
         model.gravity.angular
     ):
@@ -325,7 +326,9 @@ def _generated_urdf(robot: Robot) -> ET.ElementTree[ET.Element]:
 
 def write_urdf(robot: Robot, path: str | Path) -> str:
     """Write ``robot``'s inertials, joint friction and locked joints into a copy of its source
-    URDF, or, for a robot built from a ``pin.Model``, a URDF generated from its model.
+    URDF, or, for a robot built from a ``pin.Model``, a URDF generated from its model; its
+    armature (rotor inertias) into the sidecar ``<name>.pinobs.json`` beside it
+    (:mod:`pinobs.model.sidecar`), which :func:`pinobs.load` reads.
 
     Mesh filenames are written as absolute paths (module docstring), so the copy
     shows the robot's meshes wherever it is written on this machine.  A generated
@@ -337,7 +340,7 @@ def write_urdf(robot: Robot, path: str | Path) -> str:
         path: the file to write.
 
     Returns:
-        The path written, as a string.
+        The URDF's path, as a string.
 
     Raises:
         ModelFileError: the robot's source is not a URDF file that can be found; a
@@ -352,4 +355,5 @@ def write_urdf(robot: Robot, path: str | Path) -> str:
     tmp = out.with_name(out.name + ".tmp")
     tree.write(tmp, encoding="utf-8", xml_declaration=True)
     tmp.replace(out)
+    write_sidecar(robot.model, out)
     return str(out)

@@ -108,6 +108,7 @@ def identify(
     *,
     friction: bool = True,
     offset: bool = False,
+    armature: bool = True,
     holdout: float = 0.2,
     window: float = 0.1,
     max_condition: float = MAX_CONDITION,
@@ -165,6 +166,7 @@ def identify(
     opts: dict[str, Any] = {
         "friction": friction,
         "offset": offset,
+        "armature": armature,
         "holdout": holdout,
         "window": window,
         "max_condition": max_condition,
@@ -217,13 +219,18 @@ def _smoothed_path(
         if seg.stop - seg.start < 3:
             continue
         try:
-            sm = smooth_quietly(  # its consistency is not the user's concern here
-                robot,
-                (t[seg], q[seg], tau[seg] + ident.offset),
-                noise_std=noise_std,
-                accel_psd=accel_psd,
-                disturbance_psd=REFINE_DISTURBANCE_PSD,
-            )
+            # a fit of torques no parameters explain (negated ones) can leave M(q) singular to
+            # rounding, the rotors' armature at its bound 0 and a body's pseudo-inertia on the
+            # PSD cone's boundary: the EKF's transition then overflows, which the base class
+            # reports as NonFiniteError; numpy's own warnings on the way say nothing more
+            with np.errstate(over="ignore", invalid="ignore"):
+                sm = smooth_quietly(  # its consistency is not the user's concern here
+                    robot,
+                    (t[seg], q[seg], tau[seg] + ident.offset),
+                    noise_std=noise_std,
+                    accel_psd=accel_psd,
+                    disturbance_psd=REFINE_DISTURBANCE_PSD,
+                )
         except (NonFiniteError, ObserverDiverged):
             continue  # this stretch keeps the Savitzky–Golay velocities (build_rows)
         q_out[seg], v_out[seg] = sm.q, sm.v

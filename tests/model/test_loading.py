@@ -106,6 +106,36 @@ def test_a_urdf_path_loads(tmp_path: Path) -> None:
     assert robot.nv == 1 and robot.name == "pendulum"
 
 
+def test_a_urdfs_sidecar_sets_the_armature_and_a_bad_one_is_refused_naming_it(
+    tmp_path: Path,
+) -> None:
+    src = Path(pinobs.model.loading._models_dir()) / "planar_3r.urdf"
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(src.read_text())
+    sidecar = tmp_path / "arm.pinobs.json"
+    head = '{"format": "pinobs-sidecar", "version": 1, "armature": '
+    sidecar.write_text(head + '{"joint2": 0.2, "joint3": 0.1}}')
+    robot = pinobs.load(urdf)
+    np.testing.assert_array_equal(robot.model.armature, [0.0, 0.2, 0.1])
+    plain = pinobs.load("planar_3r")
+    q = plain.neutral()
+    np.testing.assert_allclose(
+        robot.mass_matrix(q) - plain.mass_matrix(q), np.diag([0.0, 0.2, 0.1]), atol=1e-12
+    )
+    for body, match in (
+        ('{"elbow": 0.2}}', r"joint 'elbow', which the robot does not have; .*joint1, joint2"),
+        ('{"joint2": -0.2}}', r"armature -0\.2 of joint 'joint2' must be a finite number ≥ 0"),
+        ('{"joint2": [0.1, 0.2]}}', r"joint 'joint2' has 1 velocity coordinate"),
+        ("{", r"cannot parse the sidecar"),
+    ):
+        sidecar.write_text(head + body if body != "{" else body)
+        with pytest.raises(pinobs.ModelFileError, match=match):
+            pinobs.load(urdf)
+    sidecar.write_text('{"armature": {}}')
+    with pytest.raises(pinobs.ModelFileError, match="not a pinobs sidecar"):
+        pinobs.load(urdf)
+
+
 def test_mjcf_file_loads(tmp_path: Path) -> None:
     f = tmp_path / "arm.xml"
     f.write_text(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -155,10 +156,6 @@ def test_what_a_urdf_cannot_say_is_refused_naming_it(tmp_path: Path) -> None:
     with pytest.raises(pinobs.ModelFileError, match=r"joint 'root_joint' locked, which is not a"):
         write_urdf(go1, tmp_path / "x.urdf")
     model = pinobs.load("planar_3r").model.copy()
-    model.armature = np.full(model.nv, 0.01)
-    with pytest.raises(pinobs.ModelFileError, match=r"armature, .* lock="):
-        write_urdf(pinobs.load(model), tmp_path / "x.urdf")
-    model = pinobs.load("planar_3r").model.copy()
     model.gravity.linear = np.array([0.0, 0.0, -1.62])
     with pytest.raises(pinobs.ModelFileError, match=r"gravity \[0\.0, 0\.0, -1\.62\]"):
         write_urdf(pinobs.load(model), tmp_path / "x.urdf")
@@ -168,3 +165,30 @@ def test_what_a_urdf_cannot_say_is_refused_naming_it(tmp_path: Path) -> None:
     with pytest.raises(pinobs.ModelFileError, match=r"joint 'ball' is a JointModelSpherical"):
         write_urdf(pinobs.load(top), tmp_path / "x.urdf")
     assert not (tmp_path / "x.urdf").exists()
+
+
+@pytest.mark.parametrize("source", ["ur5", "model"])
+def test_the_armature_is_written_beside_the_urdf_and_loaded_back(
+    source: str, tmp_path: Path, rng: np.random.Generator
+) -> None:
+    """A URDF cannot hold a rotor inertia: the sidecar ``<name>.pinobs.json`` does, from a
+    rewritten URDF or one generated from a ``pin.Model``; writing a robot without armature
+    to the same file removes the sidecar, so it is not read back for it."""
+    robot = pinobs.load("ur5")
+    model = robot.model.copy()
+    model.armature = np.array([0.0, 0.5, 0.2, 0.0, 0.1, 0.05])
+    geared = robot.with_model(model) if source == "ur5" else pinobs.load(model)
+    path = tmp_path / "geared.urdf"
+    back = pinobs.load(write_urdf(geared, path))
+    sidecar = json.loads((tmp_path / "geared.pinobs.json").read_text())
+    assert sidecar["armature"] == {
+        "shoulder_lift_joint": 0.5,
+        "elbow_joint": 0.2,
+        "wrist_2_joint": 0.1,
+        "wrist_3_joint": 0.05,
+    }
+    np.testing.assert_array_equal(back.model.armature, model.armature)
+    _assert_same_dynamics(geared, back, rng)
+    write_urdf(robot, path)
+    assert not (tmp_path / "geared.pinobs.json").exists()
+    assert not np.any(pinobs.load(path).model.armature)

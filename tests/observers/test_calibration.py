@@ -12,7 +12,7 @@ from pinobs.observers.calibration import identify
 from pinobs.observers.noise import estimate_noise_std
 from pinobs.observers.smoothing import RHO_WARN
 from pinobs.simulation import Sensor
-from tests.conftest import planar_3r_truth
+from tests.conftest import planar_3r_truth, torque_error
 
 
 def _acc_error(model: pinobs.Robot, truth: pinobs.Robot, rng: np.random.Generator) -> float:
@@ -52,6 +52,31 @@ def test_smoothed_velocities_identify_closer_to_the_truth_than_savitzky_golay(
     assert refined.report["noise_std"] == pytest.approx(1e-4, rel=0.1)
     assert _acc_error(refined.robot, truth, rng) < 0.5 * _acc_error(sg.robot, truth, rng)
     assert max(refined.report["holdout_after"]) < 0.5 * max(sg.report["holdout_after"])
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_the_refined_fit_recovers_the_armature_and_without_it_predicts_far_worse(
+    seed: int,
+) -> None:
+    """planar_3r's truth with rotors of 0.05, 0.2, 0.1 kg·m² (6 s, σ = 1e-4).  Measured on 8 s
+    logs (seeds 1–3): joints 2 and 3 within 1e-4 kg·m², the torque prediction error on a
+    fresh trajectory (:func:`~tests.conftest.torque_error`) per joint 2400–10000× lower
+    than ``armature=False``'s; joint 1's rotor is one column with link 1's inertia about
+    its axis (only their sum, in M, is identifiable)."""
+    robot = pinobs.load("planar_3r")
+    model = planar_3r_truth(robot).model.copy()
+    model.armature = np.array([0.05, 0.2, 0.1])
+    truth = robot.with_model(model)
+    res = pinobs.simulate(
+        robot, [], duration=6.0, sensor=Sensor(rate=1000.0, noise_std=1e-4), seed=seed, plant=truth
+    )
+    ident = identify(robot, res)
+    without = identify(robot, res, armature=False)
+    np.testing.assert_allclose(ident.robot.model.armature[1:], [0.2, 0.1], rtol=0.02)
+    assert not np.any(without.robot.model.armature)
+    np.testing.assert_array_less(
+        torque_error(ident.robot, truth), 0.01 * torque_error(without.robot, truth)
+    )
 
 
 def test_refinement_keeps_the_savitzky_golay_velocities_across_a_gap() -> None:

@@ -234,36 +234,16 @@ def adjoint(R: Vector, x: Vector) -> Vector:
 
 
 def rotation_to_quaternion(R: Vector) -> Vector:
-    """Unit quaternion ``(x, y, z, w)`` of a rotation matrix, ``w ≥ 0`` (Shepperd's method)."""
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    diag = (tr, R[0, 0], R[1, 1], R[2, 2])
-    k = int(np.argmax(diag))
-    if k == 0:
-        s = 2.0 * math.sqrt(1.0 + tr)
-        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, s / 4]
-    elif k == 1:
-        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q = [s / 4, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
-    elif k == 2:
-        s = 2.0 * math.sqrt(1.0 - R[0, 0] + R[1, 1] - R[2, 2])
-        q = [(R[0, 1] + R[1, 0]) / s, s / 4, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
-    else:
-        s = 2.0 * math.sqrt(1.0 - R[0, 0] - R[1, 1] + R[2, 2])
-        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, s / 4, (R[1, 0] - R[0, 1]) / s]
-    out = np.array(q)
-    out /= np.linalg.norm(out)
-    return -out if out[3] < 0 else out
+    """Unit quaternion ``(x, y, z, w)`` of a rotation matrix, ``w ≥ 0`` (SciPy's)."""
+    from scipy.spatial.transform import Rotation  # (not at import: pinobs starts without scipy)
+
+    return np.asarray(Rotation.from_matrix(R).as_quat(canonical=True))
 
 
 def _quaternion_to_rotation(quat: Vector) -> Vector:
-    x, y, z, w = quat / np.linalg.norm(quat)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    from scipy.spatial.transform import Rotation
+
+    return np.asarray(Rotation.from_quat(quat).as_matrix())
 
 
 # -------------------------------------------------------------------- dynamics

@@ -624,7 +624,6 @@ class ClockRepair:
     _tail_n: Floats | None = None
     _last_q: Floats | None = None
     _last_tick: float = math.nan
-    _last_t: float = math.nan
     _scale: Floats | None = None
     _stats: dict[str, float] = field(default_factory=dict)
 
@@ -673,7 +672,6 @@ class ClockRepair:
             self._tail_n = fit.tick[keep].astype(float)
             if idx.size:
                 self._last_tick = float(fit.tick[idx[-1]])
-                self._last_t = float(fit.t[idx[-1]])
                 self._last_q = log.q[idx[-1]].copy()
             q_ok = log.q[idx]
             sc = np.median(np.abs(np.diff(q_ok, axis=0)), axis=0) if idx.size > 1 else None
@@ -729,7 +727,6 @@ class ClockRepair:
             drops[ui] = np.maximum(d - 1, 0).astype(np.int64)
         if ui.size:
             self._last_tick = float(n[ui[-1]])
-            self._last_t = float(t_out[ui[-1]])
             self._last_q = q[ui[-1]].copy()
             self._tail_t = np.r_[self._tail_t, t[ui]][-self.window :]
             self._tail_n = np.r_[self._tail_n, n[ui]][-self.window :]

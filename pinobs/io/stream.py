@@ -40,34 +40,26 @@ the row joined; positions are file lines (CSV) or row / message numbers.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Protocol
-from warnings import warn
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.errors import (
     ConfigurationError,
-    ConsistencyWarning,
     DimensionError,
     NonFiniteError,
     ObserverDiverged,
     PinobsError,
-    PinobsWarning,
-    TimestampWarning,
 )
-from pinobs.io.clock import ClockRepair, ClockReport, repaired_chunks
-from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, chain_chunks, concat_logs, iter_log
-from pinobs.io.writers import EstimateWriter
+from pinobs.io.clock import ClockReport
+from pinobs.io.readers import Log, concat_logs
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
-from pinobs.observers import Estimate, make_observer
+from pinobs.observers import Estimate
 from pinobs.observers.base import gap_substeps, time_unit_warning
 from pinobs.observers.base import median_period as _median_period
-from pinobs.observers.noise import noise_from_log
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
     ABSURD_VALUE,
@@ -78,14 +70,7 @@ from pinobs.tolerances import (
     TIME_EPS,
 )
 
-__all__ = [
-    "LogEstimator",
-    "LogRun",
-    "ObserverLike",
-    "estimate",
-    "estimate_log",
-    "process_log",
-]
+__all__ = ["LogEstimator", "LogRun", "ObserverLike", "time_screened"]
 
 
 class ObserverLike(Protocol):
@@ -571,277 +556,3 @@ def _concat(a: Log, b: Log, nv: int) -> Log:
 
 def _empty_like(robot: Robot) -> Log:
     return Log(np.empty(0), np.empty((0, robot.nq)), None, lines=np.empty(0, dtype=int))
-
-
-# --------------------------------------------------------------- whole runs
-Builder = Callable[[float | None, float | None], ObserverLike]
-
-
-def process_log(
-    source: LogSource,
-    robot: Robot,
-    observer: str | ObserverLike,
-    *,
-    out: str | Path | None = None,
-    force: bool = False,
-    keep: bool = True,
-    columns: Mapping[str, str] | None = None,
-    topic: str | None = None,
-    rate: float | None = None,
-    noise_std: float | None = None,
-    options: Mapping[str, Any] | None = None,
-    chunk_rows: int = CHUNK_ROWS,
-    progress: Callable[[int, int], None] | None = None,
-    clock: str = "auto",
-) -> LogRun:
-    """Read, estimate and (optionally) write a log chunk by chunk.
-
-    Args:
-        source: log path or DataFrame (:func:`pinobs.io.iter_log`).
-        robot: the robot of the log.
-        observer: a registry name (built with ``rate``, ``noise_std`` and
-            ``options``) or a ready observer-like object.
-        out: CSV file for the estimates (written through a temporary file).
-        force: overwrite an existing ``out``.
-        keep: keep the estimates in the returned run (``False``: memory stays flat).
-        columns: as :func:`pinobs.io.iter_log`.
-        topic: as :func:`pinobs.io.iter_log`.
-        rate: sample rate [Hz] (default: from the log's median interval).
-        noise_std: position noise σ [rad or m]; ``None`` with a name: estimated
-            from the log's first second (:func:`pinobs.io.estimate_noise_std`) and reported.
-        options: further observer options (with a name).
-        progress: called as ``progress(rows_done, 0)`` after each chunk.
-        clock: the log's clock (:mod:`pinobs.io.clock`): ``"auto"`` (repair the stamps of a
-            fixed-rate loop when the motion clearly says so), ``"stamps"`` (as stamped) or
-            ``"loop"`` (always the loop's clock).
-    """
-    repair = ClockRepair(clock)
-    chunks = repaired_chunks(
-        iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows), repair
-    )
-    first = next(chunks)
-    period = 1.0 / rate if rate else _median_period(first.t)
-    sigma_joint = None
-    warnings: list[str] = []
-    if isinstance(observer, str):
-        if noise_std is None:
-            noise_std, sigma_joint, said = _log_noise(first, robot)
-            warnings.append(said)
-        ob: ObserverLike = make_observer(
-            observer,
-            robot,
-            rate=(1.0 / period) if period else None,
-            noise_std=noise_std,
-            **dict(options or {}),
-        )
-    else:
-        ob = observer
-    est = LogEstimator(ob, period=period)
-    writer = (
-        None
-        if out is None
-        else EstimateWriter(
-            out, robot, force=force, inputs=[] if type(source).__name__ == "DataFrame" else [source]
-        )
-    )
-    parts = _stream(est, chain_chunks(first, chunks), writer, keep, progress)
-    unit = first.unit
-    run = LogRun(
-        t=np.concatenate([p[0] for p in parts]) if parts else np.empty(0),
-        q=np.concatenate([p[1] for p in parts]) if parts else np.empty((0, robot.nq)),
-        v=np.concatenate([p[2] for p in parts]) if parts else np.empty((0, robot.nv)),
-        bad_rows=est.bad_rows,
-        warnings=warnings + est.warnings,
-        rows=est.rows,
-        estimated=est.estimated,
-        measured=est.measured,
-        unit=unit,
-        noise_std=noise_std if isinstance(observer, str) else getattr(ob, "noise_std", None),
-        noise_std_per_joint=sigma_joint,
-        period=period,
-        consistency=_consistency(est.observer),
-        clock=repair.report,
-    )
-    if run.clock is not None and (run.clock.repaired or run.clock.stale):
-        run.warnings.insert(0, run.clock.message())
-    return run
-
-
-def _log_noise(first: Log, robot: Robot) -> tuple[float | None, Vector | None, str]:
-    """σ from the log's first chunk (:func:`pinobs.observers.noise.noise_from_log`), per
-    joint, and what to say; ``None``: the observer's default (a log too short, or still)."""
-    timed = time_screened(first.t)
-    found = noise_from_log(first.t[timed], first.q[timed], robot)
-    if found is None:
-        return (
-            None,
-            None,
-            "no noise level given and the log is too short to estimate it: the "
-            "observer's default σ is used; pass noise_std (--noise)",
-        )
-    if found[0] < 1e-12:  # a still robot, positions quantised
-        # (a static UR10e pose printed to 4 decimals gave 3.7e-17, refused by make_observer)
-        return (
-            None,
-            None,
-            f"the noise level estimated from the log is {found[0]:.3g} (the positions do "
-            "not move in its first second): the observer's default σ is used; pass "
-            "noise_std (--noise)",
-        )
-    return found
-
-
-def _stream(
-    est: LogEstimator,
-    chunks: Iterator[Log],
-    writer: EstimateWriter | None,
-    keep: bool,
-    progress: Callable[[int, int], None] | None,
-) -> list[tuple[Vector, Vector, Vector]]:
-    """Every chunk through ``est``, written as it is done (the writer aborted on any
-    failure); the parts kept when ``keep``."""
-    parts: list[tuple[Vector, Vector, Vector]] = []
-    try:
-        for chunk in chunks:
-            part = est.feed(chunk)
-            if writer is not None:
-                writer.write(*part)
-            if keep:
-                parts.append(part)
-            if progress is not None:
-                progress(est.rows, 0)
-        part = est.finish()
-        if writer is not None:
-            writer.write(*part)
-            writer.close()
-        if keep:
-            parts.append(part)
-    except BaseException:
-        if writer is not None:
-            writer.abort()
-        raise
-    return parts
-
-
-def _consistency(observer: Any) -> Any:
-    check = getattr(observer, "consistency", None)
-    return check() if callable(check) else None
-
-
-def estimate_log(observer: ObserverLike, log: Log, *, period: float | None = None) -> LogRun:
-    """Run ``observer`` over a log held in memory (rules: module docstring)."""
-    est = LogEstimator(observer, period=period)
-    a = est.feed(log)
-    b = est.finish()
-    return LogRun(
-        t=np.concatenate([a[0], b[0]]),
-        q=np.concatenate([a[1], b[1]]),
-        v=np.concatenate([a[2], b[2]]),
-        bad_rows=est.bad_rows,
-        warnings=est.warnings,
-        rows=est.rows,
-        estimated=est.estimated,
-        measured=est.measured,
-        unit=log.unit,
-        noise_std=getattr(observer, "noise_std", None),
-        period=est.period,
-        consistency=_consistency(observer),
-    )
-
-
-def estimate(
-    observer: str | ObserverLike,
-    data: LogSource,
-    *,
-    robot: Robot | str | None = None,
-    columns: Mapping[str, str] | None = None,
-    topic: str | None = None,
-    rate: float | None = None,
-    noise_std: float | None = None,
-    options: Mapping[str, Any] | None = None,
-    clock: str = "auto",
-) -> Any:
-    """Estimates over a log as a pandas ``DataFrame``: ``t, q0.., v0..``, one row per log row.
-
-    Examples:
-        >>> import pinobs
-        >>> df = pinobs.estimate("kf", "examples/ur5_log.csv", robot="ur5")  # doctest: +SKIP
-
-    Args:
-        observer: a registry name or an observer (then ``robot`` defaults to its robot).
-        data: a DataFrame or a log path (any format of :func:`pinobs.io.iter_log`).
-        robot: a :class:`~pinobs.Robot` or a registry name; required with a name.
-        columns: as :func:`process_log`.
-        topic: as :func:`process_log`.
-        rate: as :func:`process_log`.
-        noise_std: as :func:`process_log`.
-        options: as :func:`process_log`.
-        clock: as :func:`process_log`.
-
-    Returns:
-        The DataFrame (``t`` the row's time: repaired where the log's clock was,
-        :mod:`pinobs.io.clock`); ``df.attrs`` holds ``bad_rows``, ``warnings`` (what
-        the CLI prints: the clock's repair, the noise level found, the observer's
-        consistency and rejected outliers), ``summary``, ``noise_std``, ``clock`` (the
-        :class:`~pinobs.io.clock.ClockReport`) and ``consistency``.  Each warning is
-        also issued as a Python warning (:class:`~pinobs.errors.ConsistencyWarning` for
-        the model's consistency, :class:`~pinobs.errors.TimestampWarning` for the clock,
-        :class:`~pinobs.errors.PinobsWarning` otherwise).
-    """
-    import pandas as pd
-
-    from pinobs.model import load
-
-    if isinstance(robot, str):
-        robot = load(robot)
-    if robot is None:
-        if isinstance(observer, str):
-            raise DimensionError(
-                f"estimate({observer!r}, ...) needs robot=... (a Robot or a registry name)"
-            )
-        robot = observer.robot
-    run = process_log(
-        data,
-        robot,
-        observer,
-        columns=columns,
-        topic=topic,
-        rate=rate,
-        noise_std=noise_std,
-        options=options,
-        clock=clock,
-    )
-    said = _said(run, observer if isinstance(observer, str) else _name_of(observer))
-    df = pd.DataFrame(
-        np.column_stack([run.t, run.q, run.v]),
-        columns=["t", *(f"q{i}" for i in range(robot.nq)), *(f"v{i}" for i in range(robot.nv))],
-    )
-    df.attrs.update(
-        bad_rows=run.bad_rows,
-        warnings=[text for text, _ in said],
-        summary=run.summary(),
-        noise_std=run.noise_std,
-        clock=run.clock,
-        consistency=run.consistency,
-    )
-    for text, kind in said:
-        warn(text, kind, stacklevel=2)
-    return df
-
-
-def _name_of(observer: ObserverLike) -> str:
-    """An observer's name for messages."""
-    return str(getattr(observer, "name", type(observer).__name__))
-
-
-def _said(run: LogRun, name: str) -> list[tuple[str, type[Warning]]]:
-    """The run's warnings as the CLI prints them, each with its warning class."""
-    out: list[tuple[str, type[Warning]]] = []
-    for w in run.warnings:
-        kind = TimestampWarning if w.startswith("log clock") else PinobsWarning
-        out.append((w, kind))
-    if run.consistency is not None and hasattr(run.consistency, "messages"):
-        for line in run.consistency.messages(name):
-            kind = ConsistencyWarning if line.startswith("warning:") else PinobsWarning
-            out.append((line.split(": ", 1)[1] if line.startswith("warning: ") else line, kind))
-    return out

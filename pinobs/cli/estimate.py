@@ -379,11 +379,6 @@ def _estimate_many(args: argparse.Namespace) -> int:
 
     if args.html:
         raise OptionError("--html is for one log (--out FILE), not with --out-dir")
-    if drives_option(args) is not None:
-        raise OptionError(
-            "the drives (--torque-scale, --gear-ratio, --transmission, --motor-constant, "
-            "--position-offset) are read for one log (--out FILE), not yet with --out-dir"
-        )
     check_output("--out-dir", args.out_dir, folder=True)  # a file there: refused before any work
     observer_class(args.observer)  # an unknown name: UnknownNameError listing the registered ones
     load_robot(args)  # a bad robot fails here, not once per log
@@ -405,6 +400,7 @@ def _estimate_many(args: argparse.Namespace) -> int:
         noise_std=args.noise,
         options=_observer_options(args),
         clock=args.clock or "auto",
+        drives=drives_option(args),
         smooth=None
         if not args.smooth
         else {"lag": args.lag, "chunk": args.chunk, "accel_psd": args.accel_psd, "band": args.band},

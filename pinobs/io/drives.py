@@ -56,7 +56,7 @@ def _vector(name: str, value: ArrayLike | None) -> Vector | None:
     return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Drives:
     """A robot's drives: how its log's motor-side columns map to the joints (module docstring).
 
@@ -125,6 +125,16 @@ class Drives:
             sizes["transmission"] = self.transmission.shape[0]
         if len(set(sizes.values())) > 1:
             raise DimensionError(f"drives of different sizes: {sizes}; give one number per joint")
+
+    def _key(self) -> tuple[Any, ...]:
+        fields = (*self._vectors(), self.transmission)
+        return tuple(None if v is None else (v.shape, v.tobytes()) for v in fields)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Drives) and self._key() == other._key()
+
+    def __hash__(self) -> int:  # a LogTask's field (pinobs.evaluation.distributed)
+        return hash(self._key())
 
     @property
     def size(self) -> int:

@@ -43,6 +43,13 @@ def test_the_coupled_wrist_gives_the_known_motor_angles_and_joint_torques() -> N
     np.testing.assert_allclose(d.joint_torques(i), expected, rtol=1e-14)
 
 
+def test_drives_compare_and_hash_by_value() -> None:
+    a = Drives(transmission=tx40_transmission(), motor_constant=np.ones(6))
+    b = Drives(transmission=tx40_transmission(), motor_constant=[1.0] * 6)
+    assert a == b and hash(a) == hash(b)
+    assert a != Drives(transmission=tx40_transmission(), motor_constant=np.full(6, 2.0))
+
+
 def test_joint_torques_balance_the_motors_power(rng) -> None:
     """τ_mᵀ θ̇_m = τᵀ q̇ for any transmission (the motors do the joints' work)."""
     T = rng.normal(size=(4, 4)) + 4 * np.eye(4)
@@ -155,6 +162,14 @@ def test_estimate_reads_a_motor_log_as_the_joint_log_through_the_cli(rng, tmp_pa
     assert "motor_constant" in capsys.readouterr().err
     assert main([*bad, "--transmission", "1,0;0,1"]) == 2
     assert "transmission" in capsys.readouterr().err
+    # many logs (--out-dir) read through the same drives
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    motor.to_csv(logs / "motor.csv", index=False)
+    many = [*est, "--log", str(logs), "--out-dir", str(tmp_path / "many"), "--workers", "0"]
+    assert main([*many, *flags, "--no-progress"]) == 0
+    c = np.loadtxt(tmp_path / "many" / "motor.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(c, a, rtol=0, atol=1e-9)
 
 
 def _real_data():

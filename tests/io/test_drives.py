@@ -162,6 +162,10 @@ def test_estimate_reads_a_motor_log_as_the_joint_log_through_the_cli(rng, tmp_pa
     assert "motor_constant" in capsys.readouterr().err
     assert main([*bad, "--transmission", "1,0;0,1"]) == 2
     assert "transmission" in capsys.readouterr().err
+    ident = ["identify", "--robot", "planar_3r", "--log", str(tmp_path / "joint.csv")]
+    assert main([*ident, "--out", str(tmp_path / "id.urdf"), "--gear-ratio", "1,2,3"]) == 2
+    assert "not used: gear_ratio" in capsys.readouterr().err
+    assert not (tmp_path / "id.urdf").exists()
     # many logs (--out-dir) read through the same drives
     logs = tmp_path / "logs"
     logs.mkdir()

@@ -13,12 +13,14 @@ from typing import TYPE_CHECKING, Any
 from pinobs.cli.options import (
     add_clock_option,
     add_cluster_options,
+    add_drive_options,
     add_log_columns,
     add_progress_option,
     add_robot_options,
     check_cluster,
     cluster_name,
     column_map,
+    drives_option,
     load_robot,
     lock_option,
     progress,
@@ -60,6 +62,7 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
     )
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
     add_log_columns(p)
+    add_drive_options(p)
     add_clock_option(p)
     p.add_argument(
         "--html", default=None, help="also write a 3D playback of the log and the estimate"
@@ -219,6 +222,7 @@ def _estimate_filtered(args: argparse.Namespace) -> int:
                 options=_observer_options(args),
                 progress=step,
                 clock=args.clock or "auto",
+                drives=drives_option(args),
             )
         except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
             print(f"pinobs: error: {exc}", file=sys.stderr)
@@ -255,7 +259,9 @@ def _log_playback(args: argparse.Namespace, robot: Robot, run: Any, label: str) 
     """``estimate --html``: the logged motion, and the estimates (kept in ``run``) as a ghost."""
     from pinobs.visualization import log_result, write_html
 
-    log = read_log(args.log, robot, columns=column_map(args.map), topic=args.topic)
+    log = read_log(
+        args.log, robot, columns=column_map(args.map), topic=args.topic, drives=drives_option(args)
+    )
     page = write_html(
         log_result(robot, log, {label: run}), robot, args.html, truth_label="measured"
     )
@@ -286,6 +292,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
             band=args.band,
             options=_observer_options(args),
             clock=args.clock or "auto",
+            drives=drives_option(args),
             stream=not args.html,  # the playback needs the estimates kept
         )
     except ModuleNotFoundError as exc:  # the io extra (pandas, pyarrow, rosbags)
@@ -393,6 +400,7 @@ def _estimate_many(args: argparse.Namespace) -> int:
         noise_std=args.noise,
         options=_observer_options(args),
         clock=args.clock or "auto",
+        drives=drives_option(args),
         smooth=None
         if not args.smooth
         else {"lag": args.lag, "chunk": args.chunk, "accel_psd": args.accel_psd, "band": args.band},

@@ -13,9 +13,11 @@ import numpy as np
 
 from pinobs.cli.options import (
     add_clock_option,
+    add_drive_options,
     add_log_columns,
     add_robot_options,
     column_map,
+    drives_option,
     load_robot,
 )
 from pinobs.cli.output import check_output
@@ -49,6 +51,7 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="log with t, q and tau columns (CSV, Parquet, NPZ or a ROS bag, as estimate reads)",
     )
     add_log_columns(p)
+    add_drive_options(p)
     add_clock_option(p)
     p.add_argument("--out", required=True, help="the calibrated URDF to write")
     p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
@@ -107,7 +110,13 @@ def handle(args: argparse.Namespace) -> int:
     if out.resolve() == Path(args.log).resolve():
         raise OutputExistsError(f"--out {str(out)!r} is the log itself")
     log, clock = without_stale(
-        read_log(args.log, robot, columns=column_map(args.map), topic=args.topic),
+        read_log(
+            args.log,
+            robot,
+            columns=column_map(args.map),
+            topic=args.topic,
+            drives=drives_option(args),
+        ),
         mode=args.clock or "auto",
     )
     if clock.repaired or clock.stale:  # (stale rows left out: one sample per row to fit)

@@ -19,6 +19,7 @@ import numpy as np
 
 from pinobs.errors import DimensionError, OptionError
 from pinobs.io.clock import CLOCK_MODES
+from pinobs.io.drives import Drives
 from pinobs.model import Robot, load
 from pinobs.simulation import INPUT_NAMES
 
@@ -30,6 +31,7 @@ __all__ = [
     "ROOT_JOINTS",
     "add_clock_option",
     "add_cluster_options",
+    "add_drive_options",
     "add_lock_option",
     "add_log_columns",
     "add_progress_option",
@@ -38,6 +40,7 @@ __all__ = [
     "check_cluster",
     "cluster_name",
     "column_map",
+    "drives_option",
     "load_robot",
     "lock_option",
     "progress",
@@ -165,6 +168,50 @@ def column_map(items: Sequence[str] | None) -> dict[str, str] | None:
                 )
             out[col.strip()] = name.strip()
     return out
+
+
+def add_drive_options(p: argparse.ArgumentParser) -> None:
+    """The drives (:class:`pinobs.io.Drives`): motor positions and currents read as the
+    joints', torque columns scaled."""
+    g = p.add_argument_group(
+        "drives",
+        "a log's motor-side columns: qm.<joint> motor positions [rad] and i.<joint> currents "
+        "[A] read as q = T⁻¹ qm + offset and tau = Tᵀ (k i), T = diag(gear ratio) or the "
+        "transmission matrix of coupled joints; one number per joint, comma-separated",
+    )
+    g.add_argument(
+        "--torque-scale", default=None, metavar="S1,S2,..", help="multiply the tau columns"
+    )
+    g.add_argument(
+        "--gear-ratio", default=None, metavar="N1,N2,..", help="motor turns per joint turn"
+    )
+    g.add_argument(
+        "--transmission",
+        default=None,
+        metavar="ROW;ROW;..",
+        help="T (n × n, motor = T · joint), rows separated by ';' (coupled joints; instead "
+        "of --gear-ratio)",
+    )
+    g.add_argument(
+        "--motor-constant", default=None, metavar="K1,K2,..", help="motor torque per ampere [N·m/A]"
+    )
+    g.add_argument(
+        "--position-offset",
+        default=None,
+        metavar="Q1,Q2,..",
+        help="added to the joint positions from the motors [rad or m]",
+    )
+
+
+def drives_option(args: argparse.Namespace) -> Drives | None:
+    """The :class:`pinobs.io.Drives` of :func:`add_drive_options`' flags, ``None`` without any."""
+    return Drives.from_options(
+        gear_ratio=getattr(args, "gear_ratio", None),
+        transmission=getattr(args, "transmission", None),
+        motor_constant=getattr(args, "motor_constant", None),
+        torque_scale=getattr(args, "torque_scale", None),
+        position_offset=getattr(args, "position_offset", None),
+    )
 
 
 def add_clock_option(p: argparse.ArgumentParser) -> None:

@@ -40,6 +40,7 @@ from pinobs.errors import OptionError, OutputExistsError
 
 if TYPE_CHECKING:
     from pinobs.evaluation.metrics import Metrics
+    from pinobs.io.drives import Drives
 
 __all__ = [
     "SUMMARY_COLUMNS",
@@ -526,6 +527,8 @@ class LogTask:
     options: tuple[tuple[str, Any], ...] = ()
     #: the log's clock (:func:`pinobs.io.process_log`'s ``clock``), filtered or smoothed
     clock: str = "auto"
+    #: the log's drives (:class:`pinobs.io.Drives`), filtered or smoothed
+    drives: Drives | None = None
 
 
 def log_tasks(
@@ -547,6 +550,7 @@ def log_tasks(
     smooth: Mapping[str, Any] | None = None,
     options: Mapping[str, Any] | None = None,
     clock: str = "auto",
+    drives: Drives | None = None,
 ) -> list[LogTask]:
     """One :class:`LogTask` per log; the estimates of ``logs/a/run.parquet`` go to
     ``out_dir/a/run.csv`` (the log's path below the logs' common folder, suffix
@@ -559,7 +563,7 @@ def log_tasks(
         out_dir: folder of the estimates and the summary.
         robot: a registry name or a URDF/MJCF path.
         observer: a registry name.
-        root_joint, columns, topic, rate, noise_std: as :func:`pinobs.io.process_log`
+        root_joint, columns, topic, rate, noise_std, drives: as :func:`pinobs.io.process_log`
             (``noise_std=None``: estimated from each log's first second).
         friction: :func:`pinobs.load`'s (the URDF's joint friction in the dynamics).
         mimic, lock, check: :func:`pinobs.load`'s (the joints the logs do not have, locked;
@@ -638,6 +642,7 @@ def log_tasks(
             smooth=None if smooth is None else tuple(sorted(smooth.items())),
             options=tuple(sorted((options or {}).items())),
             clock=clock,
+            drives=drives,
         )
         for name, path, target in zip(logs, paths, targets, strict=True)
     ]
@@ -681,6 +686,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
         "rate": task.rate,
         "noise_std": task.noise_std,
         "options": dict(task.options) or None,
+        "drives": task.drives,
     }
     verdict, rho, told = None, math.nan, []
     given = dict(task.options).get("latency", 0.0)  # smoothed, also "auto": found per stretch

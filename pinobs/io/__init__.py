@@ -11,6 +11,7 @@ behind a logger's jittery stamps, stale rows and drops.
 """
 
 from pinobs.io.clock import CLOCK_MODES, ClockFit, ClockRepair, ClockReport, fit_clock
+from pinobs.io.drives import Drives
 from pinobs.io.readers import CHUNK_ROWS, Log, concat_logs, find_logs, iter_log, read_log
 from pinobs.io.runs import estimate, estimate_log, process_log
 from pinobs.io.stream import LogEstimator, LogRun, ObserverLike
@@ -23,6 +24,7 @@ __all__ = [
     "ClockFit",
     "ClockRepair",
     "ClockReport",
+    "Drives",
     "EstimateWriter",
     "Log",
     "LogEstimator",

@@ -16,6 +16,10 @@ Formats (chosen from the source):
     robot's cycle count), used by the clock repair (:mod:`pinobs.io.clock`);
   - ``columns`` maps other column names to these (``{"pos_1": "q.elbow"}``,
     ``{"seq": "tick"}``).
+  - with ``drives`` (:class:`~pinobs.io.Drives`): ``qm.<joint>`` motor positions and
+    ``i.<joint>`` motor currents, read through gear ratios, a transmission matrix of
+    coupled joints and motor constants as the joints' ``q`` and ``tau``
+    (:mod:`pinobs.io.drives`); ``tau.<joint>`` scaled by ``torque_scale``.
 
   The torque columns are optional (every torque then reads as zero, and a
   model-based observer is warned).
@@ -58,7 +62,7 @@ import io
 import zipfile
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -66,6 +70,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.errors import DimensionError, LogFormatError, ModelFileError, OptionError
+from pinobs.io.drives import Drives
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 
@@ -145,10 +150,13 @@ class _Layout:
     q_slices: tuple[slice, ...]
     tau: tuple[str, ...] | None
     tick: str | None = None  # the log's own sample counter (pinobs.io.clock)
+    drives: Drives | None = None  # how motor-side columns map to the joints (pinobs.io.drives)
+    motor: tuple[str, ...] = ()  # qm.<joint> per joint: positions from the motors (drives)
+    current: tuple[str, ...] = ()  # i.<joint> per joint: torques from the currents (drives)
 
     @property
     def used(self) -> list[str]:
-        cols = [self.t, *(c for block in self.q for c in block)]
+        cols = [self.t, *(c for block in self.q for c in block), *self.motor, *self.current]
         return cols + list(self.tau or ()) + ([self.tick] if self.tick else [])
 
 
@@ -157,8 +165,63 @@ def _blocks(robot: Robot) -> list[tuple[str, str, int, int, int, int]]:
     return [(b.name, b.kind, b.idx_q, b.nq, b.idx_v, b.nv) for b in robot.joints]
 
 
-def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
+def _motor_layout(
+    header: Sequence[str], robot: Robot, where: str, drives: Drives | None
+) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The ``qm.<joint>`` and ``i.<joint>`` columns (:mod:`pinobs.io.drives`) read through
+    ``drives``: each all or none; a column ``drives`` cannot read, or drives the log does not
+    use, refused naming them."""
+    names = set(header)
+    found = {}
+    for kind, what in (("qm", "motor position"), ("i", "motor current")):
+        want = [f"{kind}.{n}" for n in robot.joint_names]
+        have = [c for c in want if c in names]
+        if have and drives is not None and len(have) < len(want):
+            raise DimensionError(
+                f"{where}: has {what} columns {have} but lacks "
+                f"{[c for c in want if c not in names]}: give one per joint"
+            )
+        found[kind] = tuple(have)
+    if drives is None:
+        return (), ()
+    drives.check(robot)
+    motor, current = found["qm"], found["i"]
+    q_too = [f"q.{n}" for n in robot.joint_names if f"q.{n}" in names] if motor else []
+    tau_too = [f"tau.{n}" for n in robot.joint_names if f"tau.{n}" in names] if current else []
+    if q_too or tau_too:
+        raise DimensionError(
+            f"{where}: has both {list(q_too or tau_too)} and "
+            f"{list(motor if q_too else current)}: the joint's own and the motor's; keep one "
+            "(drop or rename the other)"
+        )
+    unused = []
+    if drives.matrix is not None and not (motor or current):
+        unused.append("gear_ratio or transmission (no qm.<joint> or i.<joint> columns)")
+    if drives.motor_constant is not None and not current:
+        unused.append("motor_constant (no i.<joint> current columns)")
+    if drives.position_offset is not None and not motor:
+        unused.append("position_offset (no qm.<joint> motor position columns)")
+    if drives.torque_scale is not None and (
+        current or not any(c.startswith("tau") for c in header)
+    ):
+        unused.append(
+            "torque_scale (it scales tau.<joint> columns; "
+            + ("currents take motor_constant)" if current else "the log has none)")
+        )
+    if unused:
+        raise OptionError(f"{where}: drives given but not used: {'; '.join(unused)}")
+    if current:
+        drives.joint_torques(np.zeros((0, robot.nv)))  # refuses a missing constant or ratio
+    if motor:
+        drives.joint_positions(np.zeros((0, robot.nv)))
+    return motor, current
+
+
+def _layout(
+    header: Sequence[str], robot: Robot, where: str, drives: Drives | None = None
+) -> _Layout:
     """Match column names to the robot (module docstring); raise naming what is missing."""
+    motor, current = _motor_layout(header, robot, where, drives)
     names = set(header)
     counts = Counter(header)
 
@@ -181,6 +244,10 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
     absent: list[str] = []  # joints with a q column missing
     for name, kind, iq, nq, _, _ in _blocks(robot):
         q_slices.append(slice(iq, iq + nq))
+        if motor:  # every q from the motors (drives)
+            q_cols.append(())
+            q_angle.append(kind == "circle")
+            continue
         cols: list[str] = []
         for k in range(nq):
             named = f"q.{name}" if nq == 1 else f"q.{name}.{k}"
@@ -204,7 +271,7 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
     for name, _, _, _, iv, nv in _blocks(robot):
         for k in range(nv):
             named = f"tau.{name}" if nv == 1 else f"tau.{name}.{k}"
-            tau_cols.append(one([f"tau{iv + k}", named], f"tau{iv + k}"))
+            tau_cols.append(None if current else one([f"tau{iv + k}", named], f"tau{iv + k}"))
     beyond = [
         c
         for c in header
@@ -217,8 +284,14 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
             f"nv = {robot.nv}: the log of another robot, or a floating base loaded fixed "
             "(root_joint=...)? Drop or rename them (columns=...) if they are not its own"
         )
+    motor_only = [c for c in header if c.startswith("qm.")] if missing and not motor else []
     if t is None or missing:
         lock = _lock_hint(absent) if absent and len(absent) < len(robot.joints) else ""
+        if motor_only:
+            lock += (
+                f". Columns {motor_only} are motor positions: read them through the drives "
+                "(drives=pinobs.io.Drives(gear_ratio=...), --gear-ratio or --transmission)"
+            )
         raise DimensionError(
             f"{where}: columns {list(header)} lack {(['t'] if t is None else []) + missing}; "
             f"robot {robot.name!r} needs t, then q0..q{robot.nq - 1} (nq = {robot.nq}) or "
@@ -233,8 +306,26 @@ def _layout(header: Sequence[str], robot: Robot, where: str) -> _Layout:
                 f"{where}: has some torque columns but lacks {absent} (nv = {robot.nv})"
             )
         tau = tuple(c for c in tau_cols if c is not None)
+    currents = [c for c in header if c.startswith("i.")]
+    if tau is None and not current and currents:
+        raise OptionError(
+            f"{where}: columns {currents} are motor currents [A] and the log has no torque "
+            "columns: give their scale, drives=pinobs.io.Drives(motor_constant=..., "
+            "gear_ratio=...) (--motor-constant, --gear-ratio), to read them as torques "
+            "τ = N·k·i, or drop them"
+        )
     tick = one(["tick"], "the sample counter")
-    return _Layout(t, tuple(q_cols), tuple(q_angle), tuple(q_slices), tau, tick)
+    return _Layout(
+        t,
+        tuple(q_cols),
+        tuple(q_angle),
+        tuple(q_slices),
+        tau,
+        tick,
+        drives=drives,
+        motor=motor,
+        current=current,
+    )
 
 
 def _lock_hint(absent: Sequence[str]) -> str:
@@ -335,13 +426,28 @@ def _from_arrays(
 ) -> Log:
     """A :class:`Log` chunk from float columns named as ``layout`` says."""
     q = np.empty((n, robot.nq))
-    for cols, angle, sl in zip(layout.q, layout.q_angle, layout.q_slices, strict=True):
-        if angle:
+    drives = layout.drives
+    from_motor = None
+    if layout.motor and drives is not None:  # (1) of pinobs.io.drives, one angle per joint
+        from_motor = drives.joint_positions(_stack(arrays, layout.motor, n))
+    for k, (cols, angle, sl) in enumerate(
+        zip(layout.q, layout.q_angle, layout.q_slices, strict=True)
+    ):
+        if from_motor is not None:
+            a = from_motor[:, k]
+            q[:, sl] = np.column_stack([np.cos(a), np.sin(a)]) if angle else a[:, None]
+        elif angle:
             a = arrays[cols[0]]
             q[:, sl] = np.column_stack([np.cos(a), np.sin(a)])
         else:
             q[:, sl] = np.column_stack([arrays[c] for c in cols])
-    tau = None if layout.tau is None else np.column_stack([arrays[c] for c in layout.tau])
+    tau = None
+    if layout.current and drives is not None:  # (2), (3) of pinobs.io.drives
+        tau = drives.joint_torques(_stack(arrays, layout.current, n))
+    elif layout.tau is not None:
+        tau = np.column_stack([arrays[c] for c in layout.tau])
+        if drives is not None:  # (4)
+            tau = drives.scaled_torques(tau)
     return Log(
         t=np.asarray(arrays[layout.t], dtype=float),
         q=q,
@@ -351,6 +457,10 @@ def _from_arrays(
         unit=unit,
         tick=None if layout.tick is None else np.asarray(arrays[layout.tick], dtype=float),
     )
+
+
+def _stack(arrays: Mapping[str, Vector], cols: Sequence[str], n: int) -> Vector:
+    return np.column_stack([arrays[c] for c in cols]).reshape(n, len(cols))
 
 
 def _require_pandas() -> Any:
@@ -531,7 +641,11 @@ def _arrow_csv_chunks(
 
 
 def _csv_chunks(
-    path: Path, robot: Robot, columns: Mapping[str, str] | None, chunk_rows: int
+    path: Path,
+    robot: Robot,
+    columns: Mapping[str, str] | None,
+    chunk_rows: int,
+    drives: Drives | None = None,
 ) -> Iterator[Log]:
     line, hint = _undecodable_line(path) if _has_binary_head(path) else (0, "")
     if line:
@@ -552,7 +666,7 @@ def _csv_chunks(
     elif sep == "\t" and "," in first and "\t" not in first:
         sep = ","
     header = _clean_header(next(csv.reader([first], delimiter=sep)), columns)
-    layout = _layout(header, robot, f"log {str(path)!r}")
+    layout = _layout(header, robot, f"log {str(path)!r}", drives)
     if not _has_data_after_header(path):
         return
     start = 0
@@ -696,7 +810,11 @@ def _has_binary_head(path: Path) -> bool:
 
 # ------------------------------------------------------------------ Parquet
 def _parquet_chunks(
-    path: Path, robot: Robot, columns: Mapping[str, str] | None, chunk_rows: int
+    path: Path,
+    robot: Robot,
+    columns: Mapping[str, str] | None,
+    chunk_rows: int,
+    drives: Drives | None = None,
 ) -> Iterator[Log]:
     _require_pandas()
     try:
@@ -710,7 +828,7 @@ def _parquet_chunks(
         raise LogFormatError(f"log {str(path)!r} is not a readable Parquet file: {exc}") from None
     raw = list(pf.schema_arrow.names)
     header = _clean_header(raw, columns)
-    layout = _layout(header, robot, f"log {str(path)!r}")
+    layout = _layout(header, robot, f"log {str(path)!r}", drives)
     back = dict(zip(header, raw, strict=True))
     named = dict(zip(raw, header, strict=True))
     start = 0
@@ -960,6 +1078,7 @@ def iter_log(
     columns: Mapping[str, str] | None = None,
     topic: str | None = None,
     chunk_rows: int = CHUNK_ROWS,
+    drives: Drives | None = None,
 ) -> Iterator[Log]:
     """Read a log chunk by chunk (formats and columns: module docstring).
 
@@ -969,6 +1088,10 @@ def iter_log(
         columns: other column names -> ``t`` / ``q.<joint>`` / ``q3`` / ``tau.<joint>`` ...
         topic: the ``sensor_msgs/JointState`` topic of a bag.
         chunk_rows: rows per chunk (> 0).
+        drives: gear ratios, motor constants, coupled joints (:class:`~pinobs.io.Drives`):
+            ``qm.<joint>`` motor positions and ``i.<joint>`` currents read as joint
+            positions and torques, ``tau.<joint>`` scaled (CSV, TSV, Parquet, DataFrame;
+            NPZ and bags: ``torque_scale`` only).
 
     Yields:
         :class:`Log` chunks, in order; the first one is yielded even when empty.
@@ -977,12 +1100,13 @@ def iter_log(
         ModelFileError: the file is missing (a ``FileNotFoundError``).
         LogFormatError: the file cannot be parsed; the message names the line.
         DimensionError: the columns do not match the robot.
+        OptionError: drives the log does not use, or motor columns without their drives.
     """
     if chunk_rows < 1:
         raise DimensionError(f"chunk_rows={chunk_rows} must be >= 1")
     if type(source).__name__ == "DataFrame":
         _refuse_ignored("DataFrame", columns=None, topic=topic)
-        yield _frame_log(source, robot, columns)
+        yield _frame_log(source, robot, columns, drives)
         return
     path = Path(source)
     if not path.exists():
@@ -994,8 +1118,11 @@ def iter_log(
     else:
         npz = suffix in (".npz", ".npy")
         _refuse_ignored(f"log {str(path)!r}", columns=columns if npz else None, topic=topic)
+    if _is_bag(path) or suffix in (".npz", ".npy"):
+        _check_array_drives(f"log {str(path)!r}", drives, robot)
     if _is_bag(path):
-        yield from _bag_chunks(path, robot, topic, chunk_rows)
+        for chunk in _bag_chunks(path, robot, topic, chunk_rows):
+            yield _scaled(chunk, drives)
     elif path.is_dir():
         raise ModelFileError(f"log {str(path)!r} is a folder but not a rosbag2 (no metadata.yaml)")
     elif suffix in (".npz", ".npy"):
@@ -1003,17 +1130,20 @@ def iter_log(
         for s in range(0, max(len(log), 1), chunk_rows):
             sl = slice(s, s + chunk_rows)
             tau = None if log.tau is None else log.tau[sl]
-            yield Log(log.t[sl], log.q[sl], tau, lines=np.arange(log.t.size)[sl], unit="row")
+            yield _scaled(
+                Log(log.t[sl], log.q[sl], tau, lines=np.arange(log.t.size)[sl], unit="row"),
+                drives,
+            )
     elif suffix in _PARQUET:
         first = True
-        for chunk in _parquet_chunks(path, robot, columns, chunk_rows):
+        for chunk in _parquet_chunks(path, robot, columns, chunk_rows, drives):
             first = False
             yield chunk
         if first:
             yield _empty(robot)
     else:
         first = True
-        for chunk in _csv_chunks(path, robot, columns, chunk_rows):
+        for chunk in _csv_chunks(path, robot, columns, chunk_rows, drives):
             first = False
             yield chunk
         if first:
@@ -1034,17 +1164,48 @@ def _refuse_ignored(what: str, *, columns: Mapping[str, str] | None, topic: str 
         )
 
 
+def _check_array_drives(what: str, drives: Drives | None, robot: Robot) -> None:
+    """NPZ arrays and bag messages have no motor columns: only ``torque_scale`` applies."""
+    if drives is None:
+        return
+    drives.check(robot)
+    other = [
+        name
+        for name in ("gear_ratio", "transmission", "motor_constant", "position_offset")
+        if getattr(drives, name) is not None
+    ]
+    if other:
+        raise OptionError(
+            f"{what}: drives {other} read motor columns (qm.<joint>, i.<joint>) of a CSV, "
+            "Parquet or DataFrame log; an NPZ or a bag has q and tau only (torque_scale "
+            "scales its tau): convert the motor values first (pinobs.io.Drives."
+            "joint_positions / joint_torques)"
+        )
+
+
+def _scaled(log: Log, drives: Drives | None) -> Log:
+    """``log`` with its torques times ``drives.torque_scale`` ((4) of :mod:`pinobs.io.drives`)."""
+    if drives is None or drives.torque_scale is None:
+        return log
+    if log.tau is None and len(log):
+        raise OptionError("drives given but not used: torque_scale (the log has no torques)")
+    tau = None if log.tau is None else drives.scaled_torques(log.tau)
+    return replace(log, tau=tau)
+
+
 def _empty(robot: Robot) -> Log:
     return Log(np.empty(0), np.empty((0, robot.nq)), None, unit="row")
 
 
-def _frame_log(frame: Any, robot: Robot, columns: Mapping[str, str] | None) -> Log:
+def _frame_log(
+    frame: Any, robot: Robot, columns: Mapping[str, str] | None, drives: Drives | None = None
+) -> Log:
     header = _clean_header([str(c) for c in frame.columns], None)
     frame = frame.set_axis(header, axis=1)
     if columns:
         header = _clean_header(header, columns)
         frame = frame.set_axis(header, axis=1)
-    layout = _layout(header, robot, "DataFrame")
+    layout = _layout(header, robot, "DataFrame", drives)
     frame = frame[layout.used].copy()
     problems: list[tuple[int, str]] = []
     if len(frame):
@@ -1058,13 +1219,14 @@ def read_log(
     *,
     columns: Mapping[str, str] | None = None,
     topic: str | None = None,
+    drives: Drives | None = None,
 ) -> Log:
     """Read a whole log into memory (:func:`iter_log` streams it).
 
     Args and raises as :func:`iter_log`.  Returns one :class:`Log` with every
     row, in order, and every cell that could not be read in ``problems``.
     """
-    chunks = list(iter_log(source, robot, columns=columns, topic=topic))
+    chunks = list(iter_log(source, robot, columns=columns, topic=topic, drives=drives))
     return chunks[0] if len(chunks) == 1 else concat_logs(chunks, nv=robot.nv)
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from pinobs.errors import ConsistencyWarning, DimensionError, PinobsWarning, TimestampWarning
 from pinobs.io.clock import ClockRepair, repaired_chunks
+from pinobs.io.drives import Drives
 from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, chain_chunks, iter_log
 from pinobs.io.stream import LogEstimator, LogRun, ObserverLike, time_screened
 from pinobs.io.writers import EstimateWriter
@@ -43,6 +44,7 @@ def process_log(
     chunk_rows: int = CHUNK_ROWS,
     progress: Callable[[int, int], None] | None = None,
     clock: str = "auto",
+    drives: Drives | None = None,
 ) -> LogRun:
     """Read, estimate and (optionally) write a log chunk by chunk.
 
@@ -64,10 +66,13 @@ def process_log(
         clock: the log's clock (:mod:`pinobs.io.clock`): ``"auto"`` (repair the stamps of a
             fixed-rate loop when the motion clearly says so), ``"stamps"`` (as stamped) or
             ``"loop"`` (always the loop's clock).
+        drives: motor positions and currents as joint ones, torque columns scaled
+            (:class:`pinobs.io.Drives`, :func:`pinobs.io.iter_log`).
     """
     repair = ClockRepair(clock)
     chunks = repaired_chunks(
-        iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows), repair
+        iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows, drives=drives),
+        repair,
     )
     first = next(chunks)
     period = 1.0 / rate if rate else _median_period(first.t)
@@ -210,6 +215,7 @@ def estimate(
     noise_std: float | None = None,
     options: Mapping[str, Any] | None = None,
     clock: str = "auto",
+    drives: Drives | None = None,
 ) -> Any:
     """Estimates over a log as a pandas ``DataFrame``: ``t, q0.., v0..``, one row per log row.
 
@@ -227,6 +233,7 @@ def estimate(
         noise_std: as :func:`process_log`.
         options: as :func:`process_log`.
         clock: as :func:`process_log`.
+        drives: as :func:`process_log`.
 
     Returns:
         The DataFrame (``t`` the row's time: repaired where the log's clock was,
@@ -260,6 +267,7 @@ def estimate(
         noise_std=noise_std,
         options=options,
         clock=clock,
+        drives=drives,
     )
     said = _said(run, observer if isinstance(observer, str) else _name_of(observer))
     df = pd.DataFrame(

@@ -33,6 +33,7 @@ import numpy as np
 
 from pinobs.errors import PinobsError
 from pinobs.io.clock import ClockRepair, repaired_chunks
+from pinobs.io.drives import Drives
 from pinobs.io.readers import CHUNK_ROWS, LogSource, chain_chunks, iter_log
 from pinobs.io.stream import (
     LogEstimator,
@@ -185,6 +186,7 @@ def smooth_log(
     stream: bool = True,
     band: str | None = None,
     clock: str = "auto",
+    drives: Drives | None = None,
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Smooth a log file into ``out`` (module docstring); returns the row accounting and
     the smoother's options of each stretch (with its ``consistency``,
@@ -206,7 +208,7 @@ def smooth_log(
         noise_std: position noise σ [rad or m]; ``None``: estimated from the log's first
             second as :func:`pinobs.smooth` does, reported in the run's ``warnings``,
             ``noise_std`` and ``noise_std_per_joint``.
-        columns, topic: as :func:`pinobs.io.iter_log`.
+        columns, topic, drives: as :func:`pinobs.io.iter_log`.
         rate: sample rate [Hz] (default: from the log's median interval).
         options: further options of the filter (``filter_options`` of :func:`pinobs.smooth`).
         chunk_rows: rows read at a time (:func:`pinobs.io.iter_log`).
@@ -237,7 +239,10 @@ def smooth_log(
     try:
         repair = ClockRepair(clock)
         chunks = repaired_chunks(
-            iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows), repair
+            iter_log(
+                source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows, drives=drives
+            ),
+            repair,
         )
         first = next(chunks)
         period = 1.0 / rate if rate else median_period(first.t)

@@ -1383,7 +1383,8 @@ def _unexplained(
     hw = max(2, round(0.05 / h))  # build_rows' default half window
     c_v, _ = _savgol_coefficients(2 * hw + 1, min(4, 2 * hw), h)
     sigma_v = sigma_q * float(np.linalg.norm(c_v))
-    m_inv = np.linalg.inv(robot.mass_matrix(q[rows[rows.size // 2]]))
+    # the rows' own weighting model (a nominal M singular without rotors is regular with them)
+    m_inv = np.linalg.inv(reg.weight_robot.mass_matrix(q[rows[rows.size // 2]]))
     var = 2.0 * sigma_v**2 / window**2 + (m_inv**2 @ sigma_tau**2) * h / window
     n = A.shape[0]
     dof = max(n - sol.rank, 0) / n

@@ -66,11 +66,11 @@ channel counts by how well it can be fitted, in its own units, whatever its link
 inertia.  A channel can be left out (``exclude``: a torque that is not measured), and one
 that is zero on most rows is refused unless it is (:data:`ZERO_TORQUE_SHARE`).  Measured
 (``benchmarks/real_logs.py``'s held-out torque residual per joint, ``pinobs.identify``):
-on TIAGo, arm_5..7 left out, the torso's 0.518 N against 0.589 with ``M⁻¹`` weighting
-(nominal 1.276; on the held-out rows that move, 0.56 against 0.745, nominal 1.80), arm_1..4
-0.813 2.846 1.395 0.847 N·m against 0.817 2.872 1.401 0.840; on the UR10e, pooled over
-the moving held-out logs, 3.41 5.16 1.93 0.561 0.794 0.727 against 3.48 5.27 2.01 0.561
-0.794 0.725; TIAGo with ``weighting="inertia"`` and the same channels left out: torso
+on TIAGo, arm_5..7 left out, the torso's 0.516 N against 0.589 with ``M⁻¹`` weighting
+(nominal 1.276; on the held-out rows that move, 0.564 against 0.745, nominal 1.80),
+arm_1..4 0.813 2.847 1.397 0.844 N·m against 0.817 2.872 1.401 0.840; on the UR10e, pooled
+over the moving held-out logs, 3.41 5.16 1.94 0.562 0.794 0.727 against 3.48 5.27 2.01
+0.561 0.794 0.725; TIAGo with ``weighting="inertia"`` and the same channels left out: torso
 0.723 N (1.11 on the rows where it moves), arm_1..4 0.820 3.077 1.404 0.826.  Hence the
 default: real torques are fitted better in their own units.  On clean simulated logs the
 ``M⁻¹`` weighting is the better one (their residual is mostly the velocity estimate's error

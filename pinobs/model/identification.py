@@ -1664,7 +1664,7 @@ class PayloadRegressor:
     Args:
         robot: the calibrated robot (taken as exact).
         frame: a frame (body, link or tool frame) of the robot, moved by a joint.
-        weighting: as :class:`MomentumRegressor`'s.
+        weighting, exclude: as :class:`MomentumRegressor`'s.
     """
 
     n_joint = 0
@@ -1672,7 +1672,9 @@ class PayloadRegressor:
     offset = False
     armature = False
 
-    def __init__(self, robot: Robot, frame: str, *, weighting: str = "torque") -> None:
+    def __init__(
+        self, robot: Robot, frame: str, *, weighting: str = "torque", exclude: Sequence[str] = ()
+    ) -> None:
         model = robot.model
         if not isinstance(frame, str) or not model.existFrame(frame):
             bodies = [str(f.name) for f in model.frames if f.type == pin.FrameType.BODY]
@@ -1692,7 +1694,12 @@ class PayloadRegressor:
         self.placement = f.placement
         self.weighting = weighting
         self.base = MomentumRegressor(
-            robot, friction=robot.friction, offset=False, armature=False, weighting=weighting
+            robot,
+            friction=robot.friction,
+            offset=False,
+            armature=False,
+            weighting=weighting,
+            exclude=exclude,
         )
         self._theta = self.base.nominal()
         self._cols = slice(10 * (self.joint - 1), 10 * self.joint)
@@ -1774,21 +1781,23 @@ def identify_payload(
     path: tuple[ArrayLike, ArrayLike] | None = None,
     torque: str = "held",
     exclude: Sequence[str] = (),
+    weighting: str = "torque",
 ) -> Identification:
     """The ten inertial parameters of a load attached to ``frame`` of a calibrated ``robot``
     (:class:`PayloadRegressor`), everything else fixed; physically consistent (the load's
     pseudo-inertia ``⪰ 0``, Wensing et al. 2017, by :func:`solve`).
 
-    Rows in N·m, each torque channel weighted by its own residual scale (``weighting=
-    "torque"``).  The result's ``robot`` carries the payload; ``report["payload"]`` gives
+    Rows weighted as :func:`identify`'s (by default in N·m, each torque channel by its own
+    residual scale).  The result's ``robot`` carries the payload; ``report["payload"]`` gives
     its mass [kg], centre of mass [m, in ``frame``] and rotational inertia about it
     [kg·m², in ``frame``'s axes]; ``report["holdout_torque_before"]`` is the robot without
     it.  Other arguments and report keys: :func:`identify`'s.
     """
     _check_options(False, False, False, holdout, window, MAX_CONDITION)
     _check_torque(torque)
+    _check_weighting(weighting)
     excluded = excluded_coordinates(robot, exclude)
-    reg = PayloadRegressor(robot, frame)
+    reg = PayloadRegressor(robot, frame, weighting=weighting, exclude=exclude)
     t, q, tau = log_arrays(robot, log, warn_filled=False)
     check_zero_torques(robot, tau, excluded)
     q, tau, filled = fill_short_gaps(robot, t, q, tau)
@@ -1811,7 +1820,7 @@ def identify_payload(
     nv = robot.nv
     channel = np.tile(np.arange(nv), A.shape[0] // nv)
     used = ~np.isin(channel, excluded)
-    sol = solve(reg, A[used], y[used], channel=channel[used])
+    sol = solve(reg, A[used], y[used], channel=channel[used] if weighting == "torque" else None)
     A_h, y_h, _ = (
         build_rows(
             reg, t[~fit], q[~fit], tau[~fit], window=window, path=_rows_of(est, ~fit), torque=torque
@@ -1828,7 +1837,8 @@ def identify_payload(
     phi = sol.theta
     inertia = pin.Inertia.FromDynamicParameters(phi) if phi[0] > 0 else None
     torque_sigma = np.full(nv, math.nan)
-    torque_sigma[np.unique(channel[used])] = sol.channel_sigma
+    if weighting == "torque":
+        torque_sigma[np.unique(channel[used])] = sol.channel_sigma
     coordinates = _coordinate_names(robot)
     zero = np.zeros(10)
     holdout_before, holdout_after = per_joint(A_h, y_h, zero), per_joint(A_h, y_h, phi)
@@ -1849,9 +1859,9 @@ def identify_payload(
         "outlier_windows": [],
         "holdout_before": holdout_before,
         "holdout_after": holdout_after,
-        "holdout_torque_before": holdout_before,
-        "holdout_torque_after": holdout_after,
-        "weighting": "torque",
+        "holdout_torque_before": holdout_before if weighting == "torque" else [math.nan] * nv,
+        "holdout_torque_after": holdout_after if weighting == "torque" else [math.nan] * nv,
+        "weighting": weighting,
         "excluded": [coordinates[j] for j in excluded],
         "torque_sigma": torque_sigma.tolist(),
         "condition": sol.condition,
@@ -1968,7 +1978,9 @@ def identify(
             the kept joints' block of ``M₀``, inverted (the excluded joints held).
         payload: a body or frame name: identify only the ten inertial parameters of a load
             rigidly attached to it (:func:`identify_payload`), ``robot`` taken as calibrated
-            (its inertials, friction, armature fixed).
+            (its inertials, friction, armature fixed: ``friction``, ``offset``, ``armature``
+            and ``max_condition`` do not apply; a poorly excited load is said in
+            ``warnings``).
 
     The report: ``residual_before`` / ``residual_after`` per joint (RMS of the
     weighted rows, rad/s²-like, on the fitted part) and ``holdout_before`` /
@@ -2011,6 +2023,7 @@ def identify(
             path=path,
             torque=torque,
             exclude=exclude,
+            weighting=weighting,
         )
     excluded = excluded_coordinates(robot, exclude)
     t, q, tau = log_arrays(robot, log, warn_filled=False)

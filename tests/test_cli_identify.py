@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -289,7 +291,7 @@ def test_identify_warns_when_its_held_out_end_says_the_fit_does_not_hold(
 def test_identify_warns_when_no_parameters_explain_the_torques(
     planar_log, tmp_path, capsys
 ) -> None:
-    """A log whose torques are negated or zero is written out with a warning naming
+    """A log whose torques are negated is written out with a warning naming
     the coordinates whose torque side the fit leaves mostly unexplained (it was written
     without a word); ×3 and ×20 (a common scale) are absorbed and not warned, ×1000 is beyond
     100× the effort limits: refused."""
@@ -300,7 +302,9 @@ def test_identify_warns_when_no_parameters_explain_the_torques(
     log = pinobs.io.read_log(path, robot)
     with pytest.raises(pinobs.IdentificationError, match="absurd torques"):
         pinobs.identify(robot, (log.t, log.q, 1000.0 * log.tau))  # beyond 100× effort limits
-    for factor, warned in ((1.0, False), (3.0, False), (-1.0, True), (20.0, False), (0.0, True)):
+    with pytest.raises(pinobs.IdentificationError, match=r"joint1 \(100 % of the rows exactly 0"):
+        pinobs.identify(robot, (log.t, log.q, 0.0 * log.tau))  # no torque measured: refused
+    for factor, warned in ((1.0, False), (3.0, False), (-1.0, True), (20.0, False)):
         ident = pinobs.identify(robot, (log.t, log.q, factor * log.tau))
         unexplained = np.array(ident.report["unexplained"])
         bar = np.maximum(UNEXPLAINED_WARN * np.array(ident.report["unexplained_floor"]), 0.01)
@@ -368,7 +372,8 @@ def test_identify_of_an_excitation_takes_its_torques_as_sampled(tmp_path, capsys
     exc = excite(robot, duration=6.0, rate=100.0, seed=0)
     damping = {}
     for torque in ("held", "sampled"):
-        ident = pinobs.identify(robot, (exc.t, exc.q, exc.tau), torque=torque)
+        # rows weighted by M⁻¹, as measured (weighting="torque": a damping of 0.020 sampled)
+        ident = pinobs.identify(robot, (exc.t, exc.q, exc.tau), torque=torque, weighting="inertia")
         assert ident.report["torque"] == torque
         damping[torque] = max(ident.parameters[f"joint{j}.damping"] for j in (1, 2, 3))
     assert damping["sampled"] < 1e-3 < 1e-2 < damping["held"], damping
@@ -482,8 +487,57 @@ def test_identify_of_a_recorded_log_with_its_clock_repaired_is_as_good_as_the_cl
     write_log(clean, res.t[1:], res.q_meas[1:], res.tau[1:])
     recorded = Logger(drop=0.08, burst=2.0, jitter=0.3e-3, stale=0.05, digits=8).record(res, 3)
     logged = recorded.to_csv(tmp_path / "logged.csv", robot)
-    errors = _identified_errors([clean, logged], tmp_path, ["--clock", "auto"], truth)
+    # rows weighted by M⁻¹, as measured (--weighting torque: clean 2.8e-5 refined, 1.03e-2
+    # with --no-refine; recorded 8.7e-6, 1.03e-2)
+    extra = ["--clock", "auto", "--weighting", "inertia"]
+    errors = _identified_errors([clean, logged], tmp_path, extra, truth)
     assert "log clock repaired" in capsys.readouterr().err
     nominal = _mass_matrix_error(robot, truth)
     assert errors["logged", True] <= 1.2 * errors["clean", True], errors
     assert max(errors.values()) < 0.01 * nominal, errors
+
+
+def test_identify_names_a_mostly_zero_torque_channel_and_takes_it_excluded(
+    tmp_path, capsys
+) -> None:
+    robot = pinobs.load("planar_3r")
+    truth = planar_3r_truth(robot)
+    res = pinobs.simulate(
+        robot, [], duration=6.0, sensor=Sensor(rate=1000.0, noise_std=1e-5), seed=1, plant=truth
+    )
+    tau = np.array(res.tau)
+    tau[: int(0.9 * len(tau)), 2] = 0.0
+    log = tmp_path / "wrist_unmeasured.csv"
+    write_log(log, res.t, res.q_meas, tau)
+    out = tmp_path / "calibrated.urdf"
+    args = ["identify", "--robot", "planar_3r", "--log", str(log), "--out", str(out)]
+    assert main([*args, "--no-refine"]) == 2
+    assert "--exclude-torque joint3" in capsys.readouterr().err and not out.exists()
+    assert main([*args, "--exclude-torque", "joint3", "--noise", "2e-5"]) == 0
+    text = capsys.readouterr().out
+    assert "[N·m; N prismatic]" in text and "excluded" in text and "σ [N·m]" in text
+    assert "position noise σ = 2e-05" in text
+
+
+def test_identify_payload_finds_a_known_load_on_a_calibrated_model(tmp_path, capsys) -> None:
+    import pinocchio as pin
+
+    robot = pinobs.load("planar_3r")
+    model = robot.model.copy()
+    load = pin.Inertia(0.3, np.array([0.04, 0.01, 0.0]), np.diag([1e-4, 2e-4, 2e-4]))
+    model.inertias[3] = model.inertias[3] + load
+    truth = robot.with_model(model)
+    res = pinobs.simulate(robot, [], duration=6.0, sensor=Sensor(rate=1000.0), seed=2, plant=truth)
+    log = tmp_path / "loaded.csv"
+    write_log(log, res.t, res.q_meas, res.tau)
+    out = tmp_path / "with_load.urdf"
+    argv = ["identify", "--robot", "planar_3r", "--log", str(log), "--no-refine"]
+    assert main([*argv, "--payload", "link3", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    found = re.search(r"payload on link3: mass (\S+) ± \S+ kg", text)
+    assert found is not None and float(found.group(1)) == pytest.approx(0.3, rel=2e-3)
+    assert "warning" not in text
+    loaded = pinobs.load(out)
+    assert loaded.model.inertias[3].mass == pytest.approx(model.inertias[3].mass, rel=1e-3)
+    assert main([*argv, "--payload", "nowhere", "--out", str(tmp_path / "x.urdf")]) == 2
+    assert "link3" in capsys.readouterr().err

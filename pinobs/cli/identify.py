@@ -93,6 +93,34 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
         "refinement passes (compare when the report's smoother consistency is in the "
         "hundreds: noisy torques)",
     )
+    p.add_argument(
+        "--weighting",
+        choices=["torque", "inertia"],
+        default="torque",
+        help="how the fit weighs the joints: each torque channel by its own residual scale "
+        "in N·m (the default) or the rows by M⁻¹ (acceleration-like, the earlier default)",
+    )
+    p.add_argument(
+        "--exclude-torque",
+        action="append",
+        default=[],
+        metavar="JOINT",
+        help="leave this joint's torque channel out of the fit (not measured, or mostly "
+        "zero); repeat for several",
+    )
+    p.add_argument(
+        "--noise",
+        type=float,
+        default=None,
+        help="position noise σ [rad or m] of the log (default: estimated from its rows)",
+    )
+    p.add_argument(
+        "--payload",
+        metavar="BODY",
+        default=None,
+        help="identify only a load's ten inertial parameters attached to this body or frame, "
+        "the --robot taken as calibrated (its other parameters fixed)",
+    )
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=handle)
     return p
@@ -131,6 +159,10 @@ def handle(args: argparse.Namespace) -> int:
         max_condition=args.max_condition,
         torque=args.torque,
         refine=() if args.no_refine else REFINE_ACCEL_PSD,
+        noise_std=args.noise,
+        weighting=args.weighting,
+        exclude=args.exclude_torque,
+        payload=args.payload,
     )
     print(_identify_report(ident))
     path = ident.save(str(out))
@@ -157,19 +189,47 @@ def _identify_report(ident: Any) -> str:
         f"condition number {rep['condition']:.3g}"
         + ("; physical consistency enforced" if rep["projected"] else ""),
         "",
-        "torque residual RMS per joint (rows weighted by M⁻¹/Δt, rad/s²-like)",
-        f"{'joint':24s} {'fit before':>11s} {'fit after':>11s} {'unexplained':>12s} "
-        f"{'held-out before':>16s} {'held-out after':>15s}",
     ]
+    by_torque = rep.get("weighting") == "torque"
+    lines.append(
+        "torque residual RMS per joint, windows' mean torque [N·m; N prismatic]"
+        if by_torque
+        else "torque residual RMS per joint (fit: rows weighted by M⁻¹/Δt, rad/s²-like; "
+        "held-out also in N·m [N prismatic])"
+    )
+    lines.append(
+        f"{'joint':24s} {'fit before':>11s} {'fit after':>11s} {'unexplained':>12s} "
+        f"{'held-out before':>16s} {'held-out after':>15s}"
+        + (f" {'σ [N·m]':>10s}" if by_torque else f" {'N·m before':>11s} {'N·m after':>10s}")
+    )
+    excluded = set(rep.get("excluded", []))
     for j, name in enumerate(rep["coordinates"]):
+        unexplained = rep["unexplained"][j]
         lines.append(
             f"{name:24s} {rep['residual_before'][j]:11.4g} {rep['residual_after'][j]:11.4g} "
             + (
-                f"{100 * rep['unexplained'][j]:10.3g} % "
-                if math.isfinite(rep["unexplained"][j])
+                f"{'excluded':>12s} "
+                if name in excluded
+                else f"{100 * unexplained:10.3g} % "
+                if math.isfinite(unexplained)
+                else f"{'—':>12s} "
+                if math.isnan(unexplained)
                 else f"{'no torque':>12s} "
             )
             + f"{rep['holdout_before'][j]:16.4g} {rep['holdout_after'][j]:15.4g}"
+            + (
+                f" {rep['torque_sigma'][j]:10.4g}"
+                if by_torque
+                else f" {rep['holdout_torque_before'][j]:11.4g} "
+                f"{rep['holdout_torque_after'][j]:10.4g}"
+            )
+        )
+    if "payload" in rep:
+        pl = rep["payload"]
+        com = ", ".join(f"{x:.4g}" for x in pl["com"])
+        lines.append(
+            f"payload on {pl['frame']}: mass {pl['mass']:.4g} ± {pl['mass_std']:.2g} kg, centre "
+            f"of mass ({com}) m in {pl['frame']}"
         )
     lines += ["", f"{'parameter':32s} {'nominal':>12s} {'identified':>12s} {'std':>10s}"]
     for name, value, std, nominal, excited in ident.parameters.as_rows():
@@ -206,6 +266,8 @@ def _identify_report(ident: Any) -> str:
                 else ")"
             )
         )
+    if "noise_std" in rep:
+        lines.append(f"position noise σ = {rep['noise_std']:.3g} rad or m (--noise to give it)")
     lines += [f"warning: {w}" for w in rep.get("warnings", [])]
     if np.any(ident.offset):
         lines.append(

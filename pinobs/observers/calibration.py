@@ -80,7 +80,7 @@ from pinobs.model import Robot
 from pinobs.model import identification as ident_model
 from pinobs.model.identification import MAX_CONDITION, Identification, log_arrays, segments
 from pinobs.observers.base import Vector, positive
-from pinobs.observers.noise import noise_from_log
+from pinobs.observers.noise import estimate_noise_std, quantisation_std
 from pinobs.observers.smoothing import smooth_quietly
 
 __all__ = ["REFINE_ACCEL_PSD", "REFINE_DISTURBANCE_PSD", "identify"]
@@ -93,13 +93,34 @@ REFINE_DISTURBANCE_PSD = 1e-4
 
 
 def _noise_std(robot: Robot, t: Vector, q: Vector) -> float:
-    """The log's position noise σ [rad or m]: :func:`pinobs.observers.noise.noise_from_log`
-    (the median over joints of robust third differences over its first second), floored at
-    1e-9 (a noise-free log)."""
-    found = noise_from_log(t, q, robot, floor=1e-9)
-    if found is None:
+    """The log's position noise σ [rad or m]: the median over the joints that move of robust
+    third differences (Gasser et al. 1986) over its first second
+    (:func:`pinobs.observers.noise.estimate_noise_std`), each at least the rounding of its
+    printed positions (:func:`~pinobs.observers.noise.quantisation_std`), floored at 1e-9 (a
+    noise-free log); on a joint at rest in that first second (its third differences there
+    below the rounding of its printed positions), over all the rows instead, moving ones
+    included.
+
+    A first second at rest measured the rounding step, or nothing (then the floor 1e-9): on
+    TIAGo's log (FIGAROH's, on the loop's clock) torso and arm_1..4 gave 1e-18 there, their
+    rounding 4.4e-6, and σ = 5.2e-6; now 1.4e-5 (those joints over all their rows; every
+    joint over all its rows: 2.5e-5, with which the held-out torque residuals of
+    ``pinobs.identify`` were those of 5.2e-6 to 1.2 %: torso 0.518 and 0.517 N).  Over all the rows
+    a slow log's own motion leaks into its third differences (``pinobs excite``'s
+    noise-free 100 Hz trajectory: 1.3e-5 against its first second's 1.15e-5), hence the
+    first second where it moves.  ``noise_std`` (``pinobs identify --noise``) overrides it.
+    """
+    first = estimate_noise_std(t, q, robot)
+    if first is None:
         raise IdentificationError("fewer than 12 finite samples to measure the noise on")
-    return found[0]
+    quantum = quantisation_std(q, robot)
+    rest = first <= quantum  # the first second tells only the rounding: at rest
+    if rest.any():
+        whole = estimate_noise_std(t, q, robot, window=math.inf)
+        first = first if whole is None else np.where(rest, whole, first)
+    sigma = np.maximum(first, quantum)
+    told = sigma > 1e-12  # a joint whose printed position never changes tells nothing
+    return max(float(np.median(sigma[told] if told.any() else sigma)), 1e-9)
 
 
 def identify(
@@ -115,6 +136,9 @@ def identify(
     refine: Sequence[float] = REFINE_ACCEL_PSD,
     noise_std: float | None = None,
     torque: str = "held",
+    weighting: str = "torque",
+    exclude: Sequence[str] = (),
+    payload: str | None = None,
 ) -> Identification:
     """Identify ``robot``'s dynamic parameters from a log, with model-based velocities.
 
@@ -144,6 +168,9 @@ def identify(
             sample (zero-order hold: ``pinobs.simulate``, most controllers) or
             ``"sampled"`` at the instants (``pinobs excite``'s trajectory: trapezoid);
             every pass (the model layer's ``torque``).
+        weighting, exclude, payload: the model layer's (each torque channel weighted by
+            its own residual scale in N·m by default; joints whose torque channel is left
+            out; a load's ten parameters on a calibrated ``robot``), every pass.
 
     ``report["velocities"]`` says which velocities the last pass used
     (``"savgol"`` or ``"rts(accel_psd=…)"``), ``report["noise_std"]`` the σ
@@ -171,6 +198,9 @@ def identify(
         "window": window,
         "max_condition": max_condition,
         "torque": torque,
+        "weighting": weighting,
+        "exclude": tuple(exclude),
+        "payload": payload,
     }
     current = ident_model.identify(robot, log, **opts)
     if not refine:

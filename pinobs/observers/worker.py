@@ -15,6 +15,10 @@ Pinocchio calls; the solve mostly releases it, in LAPACK); through a
 sent.  Here the loop's own thread writes each job to the pipe (one
 ``pickle`` of a few arrays, a ``write``) and reads the results that are
 there (a ``poll``, then a ``read``): nothing else in its process runs Python.
+With the worker in the loop's session: 62–77 (Linux groups a session's
+tasks for the scheduler, autogroup, so the worker spent the loop's share);
+``adaptive``'s worker starts its own session at nice 19: 21–76 (learning
+inside ``update``, in the same sessions: 141–350).
 
 The pipe into the worker is grown to 1 MiB where the OS allows
 (Linux ``F_SETPIPE_SZ``), and a job is written only when it fits in what the

@@ -158,7 +158,7 @@ def live_loop(
     (the loop catches up, as a control loop would).  ``blas_limit=False`` calls the
     update without its one-BLAS-thread limit (:mod:`pinobs.observers.blas`), for comparison.
     ``options``: the observer's options beyond ``rate`` and ``noise_std`` (default
-    :data:`LIVE_OPTIONS` for its family: ``adaptive`` learns on its worker thread).
+    :data:`LIVE_OPTIONS` for its family: ``adaptive`` learns in its worker process).
     """
     robot = load(robot_name)
     sim = simulate(

@@ -643,6 +643,9 @@ _blend_kernel = LazyKernel(
 )  # fmt: skip
 
 
+#: What the worker processes' fork server imports once (:class:`~pinobs.observers.worker.Worker`).
+_PRELOAD = ("pinobs.observers.adaptive", "scipy.signal", "scipy.ndimage", "scipy.linalg")
+
 #: Where the learner's windows and solves run (:class:`AdaptiveEKF`, ``learning``).
 _LEARNING = ("sync", "background")
 
@@ -700,8 +703,9 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         learning: ``"sync"``: the identification runs inside ``update`` (offline replays:
             the results do not depend on the machine's pace); ``"background"``: in a worker
             process, its results taken when they are done (a live loop: no update waits for
-            it; module docstring, 4).  The observer then owns a process, which ends when it
-            is dropped.
+            it; module docstring, 4).  The observer then owns a process (started from
+            multiprocessing's fork server: a script that makes one guards its top-level
+            code with ``if __name__ == "__main__":``), which ends when it is dropped.
     """
 
     name = "adaptive"
@@ -779,7 +783,9 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         # observer is dropped (its jobs hold no observer)
         self._worker: Worker | None = None
         if learning == "background":
-            self._worker = Worker(_worker_start, self._nominal, bool(friction), bool(offset))
+            self._worker = Worker(
+                _worker_start, self._nominal, bool(friction), bool(offset), preload=_PRELOAD
+            )
         self._learner = _Learner(self._nominal, **self._learn_options, worker=self._worker)  # type: ignore[arg-type]
         if self._learner.reg.size == 0:
             raise UnsupportedRobotError(f"robot {robot.name!r} has no dynamic parameter to learn")

@@ -77,10 +77,18 @@ class Worker:
 
     The process starts (and runs ``init``) in the constructor, which waits until it is
     ready; it ends when the worker is closed or dropped (the pipes close: it reads the
-    end), or with the caller's process (a daemon)."""
+    end), or with the caller's process (a daemon).  It is forked from multiprocessing's
+    fork server (spawned where there is none), never from the caller: a fork of a
+    process with threads (OpenBLAS's, the user's) can deadlock in the child, and
+    Python 3.12 warns of it; so, as ``multiprocessing`` asks, a script that makes one
+    guards its top-level code with ``if __name__ == "__main__":``.  ``preload``: modules
+    the fork server imports once (so a worker starts in milliseconds, not the seconds
+    an import of Pinocchio and SciPy takes)."""
 
-    def __init__(self, init: Callable[..., Any], *init_args: Any) -> None:
-        ctx = multiprocessing.get_context()
+    def __init__(
+        self, init: Callable[..., Any], *init_args: Any, preload: tuple[str, ...] = ()
+    ) -> None:
+        ctx = _context(preload)
         jobs_out, jobs_in = ctx.Pipe(duplex=False)  # (reader, writer)
         results_out, results_in = ctx.Pipe(duplex=False)
         self.process = ctx.Process(
@@ -97,7 +105,15 @@ class Worker:
         self.outbox: deque[tuple[bytes, int]] = deque()  # (message, pages) not yet written
         self._untaken: deque[int] = deque()  # pages of each job written and not yet answered
         self._jobs: deque[Job] = deque()  # submitted and not yet answered, in order
-        ok, value = self._recv.recv()  # ready (or init failed)
+        try:
+            ok, value = self._recv.recv()  # ready (or init failed)
+        except EOFError:  # it ended before it was ready
+            self.close()
+            raise RuntimeError(
+                "the worker process ended before it started (exit code "
+                f"{self.process.exitcode}); multiprocessing imports the main script in it: "
+                'guard the script\'s top-level code with if __name__ == "__main__":'
+            ) from None
         if not ok:
             self.close()
             raise value
@@ -136,6 +152,17 @@ class Worker:
             self._send.send_bytes(data)
             self.outbox.popleft()
             self._untaken.append(pages)
+
+
+def _context(preload: tuple[str, ...]) -> Any:
+    """multiprocessing's forkserver context (``preload`` added to what its server imports:
+    ``__main__`` by default), or spawn where there is none (Windows)."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    ctx = multiprocessing.get_context("forkserver")
+    if preload:
+        ctx.set_forkserver_preload(["__main__", *preload])  # (before the server starts)
+    return ctx
 
 
 def _grow_pipe(fd: int) -> int:

@@ -15,10 +15,16 @@ Pinocchio calls; the solve mostly releases it, in LAPACK); through a
 sent.  Here the loop's own thread writes each job to the pipe (one
 ``pickle`` of a few arrays, a ``write``) and reads the results that are
 there (a ``poll``, then a ``read``): nothing else in its process runs Python.
-With the worker in the loop's session: 62–77 (Linux groups a session's
-tasks for the scheduler, autogroup, so the worker spent the loop's share);
-``adaptive``'s worker starts its own session at nice 19: 21–76 (learning
-inside ``update``, in the same sessions: 141–350).
+With the worker (forked from the loop's process then) in the loop's session:
+62–77 (Linux groups a session's tasks for the scheduler, autogroup, so the
+worker spent the loop's share); in its own session at nice 19, as
+``adaptive``'s starts: 21–76; forked from the fork server, as now: 12–128
+at load 7–9 (learning inside ``update``, in the same sessions: 141–350).
+
+Workers are forked from multiprocessing's fork server (:class:`Worker`), not
+from the loop's process: a fork of a process with threads can deadlock in the
+child (Python 3.12 warns of it), and a forked copy shares the loop's pages
+(copy-on-write: the loop's next full garbage collection copied them, 25 ms).
 
 The pipe into the worker is grown to 1 MiB where the OS allows
 (Linux ``F_SETPIPE_SZ``), and a job is written only when it fits in what the

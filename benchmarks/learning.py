@@ -4,6 +4,13 @@ Writes ``benchmarks/learning.md`` and ``benchmarks/learning.json``; the README
 quotes the tables.  Usage::
 
     python benchmarks/learning.py [--robots ur5,panda,z1] [--duration 12] [--quick] [--offline-only]
+    python benchmarks/learning.py --quick --learning background --paced   # the online rows only
+
+``--learning background``: ``adaptive`` learns in its worker process
+(:mod:`pinobs.observers.adaptive`), the online table only, printed (written
+only with ``--out``); ``--paced``: ``adaptive`` is fed in real time, one sample
+every millisecond as in a live loop (the worker's results come when they
+would there; fed as fast as it runs, they come later in sample time).
 
 Every run records one simulated truth (PD tracking of a multi-sine reference,
 1 kHz, σ = 1e-4 rad, seed 1, start error 0.05 rad / 0.5 rad/s), then feeds
@@ -71,13 +78,18 @@ def record(robot, plant, *, duration: float, seed: int, delay: int = 0):
     return pinobs.simulate(robot, [], duration=duration, sensor=sensor, seed=seed, plant=plant)
 
 
-def feed(observer, res, tau, q0, v0) -> np.ndarray:
-    """Run ``observer`` over a recorded run; returns its velocities (NaN after a divergence)."""
+def feed(observer, res, tau, q0, v0, *, paced: bool = False) -> np.ndarray:
+    """Run ``observer`` over a recorded run; returns its velocities (NaN after a divergence).
+    ``paced``: each sample at its own time after the start (a live loop's pace)."""
     n = len(res.t)
     out = np.full((n, res.v.shape[1]), np.nan)
     observer.reset(0.0, q0, v0, tau[0])
     out[0] = observer.estimate.v
+    start = time.perf_counter()
     for k in range(1, n):
+        if paced:
+            while (wait := start + res.t[k] - time.perf_counter()) > 0:
+                time.sleep(wait)
         qm = res.q_meas[k]
         try:
             out[k] = observer.update(res.t[k], None if np.isnan(qm).any() else qm, tau[k]).v
@@ -99,7 +111,9 @@ def start(robot, res, seed: int = 11):
     return q0, res.v[0] + 0.5 * u2 / np.linalg.norm(u2)
 
 
-def scenario_case(name: str, scenario: str, duration: float) -> dict[str, Any]:
+def scenario_case(
+    name: str, scenario: str, duration: float, learning: str = "sync", paced: bool = False
+) -> dict[str, Any]:
     robot = pinobs.load(name)
     model = robot
     delay = 0
@@ -126,11 +140,12 @@ def scenario_case(name: str, scenario: str, duration: float) -> dict[str, Any]:
     for label, obs_name, opts in (
         ("ekf", "ekf", {}),
         ("ekf+d", "ekf", {"disturbance_psd": 1.0}),
-        ("adaptive", "adaptive", {}),
+        ("adaptive", "adaptive", {"learning": learning}),
     ):
         ob = make_observer(obs_name, model, **hints, **opts)
         t0 = time.process_time()
-        rows[label] = rms_after(res, feed(ob, res, tau_fed, q0, v0), 5.0)
+        pace = paced and label == "adaptive"
+        rows[label] = rms_after(res, feed(ob, res, tau_fed, q0, v0, paced=pace), 5.0)
         if label == "adaptive":
             rows["adaptive_cpu_s"] = time.process_time() - t0
             rows["adaptive_installs"] = ob.consistency().details["installs"]
@@ -228,6 +243,25 @@ def fmt(x: float) -> str:
     return "inf" if not np.isfinite(x) else f"{x:.3g}"
 
 
+def online_only(args: argparse.Namespace) -> None:
+    """The online rows with ``adaptive`` learning as ``--learning`` and ``--paced`` say."""
+    robots = ["ur5"] if args.quick else args.robots.split(",")
+    scenarios = ("exact", "inertia20_payload", "torque_scale") if args.quick else SCENARIOS
+    rows = {}
+    for name in robots:
+        for sc in scenarios:
+            r = scenario_case(name, sc, args.duration, args.learning, args.paced)
+            rows[f"{name}/{sc}"] = r
+            print(
+                f"{name} {sc}: adaptive ({args.learning}{', paced' if args.paced else ''}) "
+                f"{fmt(r['adaptive'])}, adaptive / kf* {fmt(r['adaptive/kf*'])}, installs "
+                f"{r['adaptive_installs']}",
+                flush=True,
+            )
+    if args.out:
+        Path(args.out + ".json").write_text(json.dumps(rows, indent=2, default=float) + "\n")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robots", default="ur5,panda,z1")
@@ -236,8 +270,15 @@ def main() -> None:
     ap.add_argument(
         "--offline-only", action="store_true", help="only the offline identification table"
     )
-    ap.add_argument("--out", default=str(HERE / "learning"))
+    ap.add_argument("--learning", choices=("sync", "background"), default="sync")
+    ap.add_argument("--paced", action="store_true", help="adaptive fed at 1 kHz in real time")
+    ap.add_argument("--out", default=None, help="(default: benchmarks/learning, sync only)")
     args = ap.parse_args()
+    if args.learning != "sync" or args.paced:
+        args.offline_only = False
+        online_only(args)
+        return
+    args.out = args.out or str(HERE / "learning")
     robots = ["ur5"] if args.quick else args.robots.split(",")
     scenarios = ("exact", "inertia20_payload", "torque_scale") if args.quick else SCENARIOS
     start_time = time.time()

@@ -23,13 +23,16 @@ import time
 import numpy as np
 
 import pinobs
+from pinobs.evaluation.live import LIVE_OPTIONS
 
 
 def run(robot_name: str, observer: str, seconds: float, rate: float) -> dict[str, float]:
     robot = pinobs.load(robot_name)
     sensor = pinobs.Sensor(rate=rate, noise_std=1e-4)
     sim = pinobs.simulate(robot, [], duration=seconds, sensor=sensor, seed=0)
-    ob = pinobs.make_observer(observer, robot, rate=rate, noise_std=1e-4)
+    # what a live loop should give each family (adaptive: learning="background")
+    options = LIVE_OPTIONS.get(observer, {})
+    ob = pinobs.make_observer(observer, robot, rate=rate, noise_std=1e-4, **options)
     ob.reset(sim.t[0], sim.q[0], None, sim.tau[0])
     period = 1.0 / rate
     n = sim.t.size

@@ -30,6 +30,7 @@ from pinobs.simulation import Sensor, simulate
 
 __all__ = [
     "ABA_BURST",
+    "LIVE_OPTIONS",
     "LIVE_RUNS",
     "LiveTiming",
     "Quantiles",
@@ -47,6 +48,10 @@ WINDOW = 1.0
 SPIN = 2e-4
 #: [rad or m] The simulated sensor's noise, and the observers' ``noise_std``.
 NOISE_STD = 1e-4
+#: A family's options in a live loop (:func:`live_loop`): what a user's real-time loop should
+#: give it.  ``adaptive`` re-identifies its model on a worker thread (its solves took 4–17 ms,
+#: its first window 0.5 s, inside one update when synchronous: ``pinobs.observers.adaptive``).
+LIVE_OPTIONS: dict[str, dict[str, Any]] = {"adaptive": {"learning": "background"}}
 
 
 class Quantiles(NamedTuple):
@@ -71,7 +76,7 @@ class LiveTiming:
     """One observer's per-update times in a paced loop (:func:`live_loop`).
 
     Attributes:
-        robot, observer: what ran.
+        robot, observer: what ran; ``options``: its options beyond ``rate`` and ``noise_std``.
         rate: ticks per second [Hz]; ``duration``: seconds of ticks [s]; ``updates``: their number.
         update_us: wall time of one ``update`` [µs].
         cpu_us: this thread's CPU time in one ``update`` [µs] (without the time it waited
@@ -93,6 +98,7 @@ class LiveTiming:
 
     robot: str
     observer: str
+    options: dict[str, Any]
     rate: float
     duration: float
     updates: int
@@ -140,6 +146,7 @@ def live_loop(
     rate: float = 1000.0,
     seed: int = 0,
     blas_limit: bool = True,
+    options: dict[str, Any] | None = None,
 ) -> LiveTiming:
     """Run ``observer_name`` on ``robot_name`` in a loop paced at ``rate`` [Hz] for
     ``duration`` [s] of ticks (module docstring) and time every update.
@@ -150,12 +157,15 @@ def live_loop(
     sample.  A tick whose update ends after the next one is due starts the next at once
     (the loop catches up, as a control loop would).  ``blas_limit=False`` calls the
     update without its one-BLAS-thread limit (:mod:`pinobs.observers.blas`), for comparison.
+    ``options``: the observer's options beyond ``rate`` and ``noise_std`` (default
+    :data:`LIVE_OPTIONS` for its family: ``adaptive`` learns in its worker process).
     """
     robot = load(robot_name)
     sim = simulate(
         robot, [], duration=duration, sensor=Sensor(rate=rate, noise_std=NOISE_STD), seed=seed
     )
-    observer = make_observer(observer_name, robot, rate=rate, noise_std=NOISE_STD)
+    opts = LIVE_OPTIONS.get(observer_name, {}) if options is None else options
+    observer = make_observer(observer_name, robot, rate=rate, noise_std=NOISE_STD, **opts)
     update = type(observer).update if blas_limit else type(observer).update.__wrapped__  # type: ignore[attr-defined]
     aba = aba_call(robot, seed=seed)
     settings = blas_settings()
@@ -195,6 +205,7 @@ def live_loop(
     return LiveTiming(
         robot=robot_name,
         observer=observer_name,
+        options=dict(opts),
         rate=float(rate),
         duration=float(duration),
         updates=n,

@@ -1,0 +1,231 @@
+"""A worker process fed over two pipes, with no thread in the caller's process.
+
+``adaptive``'s background learning (:mod:`pinobs.observers.adaptive`) runs its
+window rows and solves here.  Not on a thread, and not through
+:class:`concurrent.futures.ProcessPoolExecutor`: both put a second Python
+thread in the loop's process (the worker, or the executor's manager and
+queue feeder), and a loop thread that wakes for its tick while that thread
+holds the GIL waits for it — for the whole time the OS has that thread off a
+core on a loaded machine.  Measured on a 2-core machine at load 9–11 (UR5,
+1 kHz, 10 s ``live_loop``; ``ekf`` alone in the same conditions: 2–5 updates
+over 1 ms): ``adaptive`` learning on a thread, 61–149 updates over 1 ms (the
+window rows hold the GIL: ``smooth_path`` and the regressor are Python and
+Pinocchio calls; the solve mostly releases it, in LAPACK); through a
+``ProcessPoolExecutor``, 128–306, most within 5 samples after a window was
+sent.  Here the loop's own thread writes each job to the pipe (one
+``pickle`` of a few arrays, a ``write``) and reads the results that are
+there (a ``poll``, then a ``read``): nothing else in its process runs Python.
+With the worker (forked from the loop's process then) in the loop's session:
+62–77 (Linux groups a session's tasks for the scheduler, autogroup, so the
+worker spent the loop's share); in its own session at nice 19, as
+``adaptive``'s starts: 21–76; forked from the fork server, as now: 12–128
+at load 7–9 (learning inside ``update``, in the same sessions: 141–350).
+
+Workers are forked from multiprocessing's fork server (:class:`Worker`), not
+from the loop's process: a fork of a process with threads can deadlock in the
+child (Python 3.12 warns of it), and a forked copy shares the loop's pages
+(copy-on-write: the loop's next full garbage collection copied them, 25 ms).
+
+The pipe into the worker is grown to 1 MiB where the OS allows
+(Linux ``F_SETPIPE_SZ``), and a job is written only when it fits in what the
+worker has not yet taken (counted in pages, conservatively); otherwise it
+waits in :attr:`Worker.outbox` and is written at a later :meth:`Worker.poll`.
+So ``submit`` never blocks on a worker that is behind (unless nothing is
+queued and one job is larger than the pipe: then it waits for the worker to
+take it).  Jobs run in the order they were submitted; each one's result (or
+its exception) comes back in that order.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import pickle
+import sys
+import weakref
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["Job", "Worker"]
+
+#: [bytes] The pipe size asked for (Linux's default limit for an unprivileged process).
+PIPE_BYTES = 1 << 20
+_PAGE = 4096
+
+
+class Job:
+    """A job submitted to a :class:`Worker`: its result once the worker sent it."""
+
+    def __init__(self, worker: Worker) -> None:
+        self._worker = worker
+        self._done = False
+        self._ok = True
+        self._value: Any = None
+
+    def done(self) -> bool:
+        """Whether the result is in (reads what the worker has sent, never waits)."""
+        if not self._done:
+            self._worker.poll()
+        return self._done
+
+    def result(self) -> Any:
+        """The job's result, waiting for it if needed; its exception raised here."""
+        while not self._done:
+            self._worker.poll(wait=True)
+        if not self._ok:
+            raise self._value
+        return self._value
+
+
+class Worker:
+    """One worker process: ``state = init(*init_args)`` there once, then each submitted
+    ``fn(state, *args)`` in order (``fn`` a module-level function: it is sent by name).
+
+    The process starts (and runs ``init``) in the constructor, which waits until it is
+    ready; it ends when the worker is closed or dropped (the pipes close: it reads the
+    end), or with the caller's process (a daemon).  It is forked from multiprocessing's
+    fork server (spawned where there is none), never from the caller: a fork of a
+    process with threads (OpenBLAS's, the user's) can deadlock in the child, and
+    Python 3.12 warns of it; so, as ``multiprocessing`` asks, a script that makes one
+    guards its top-level code with ``if __name__ == "__main__":``.  ``preload``: modules
+    the fork server imports once (so a worker starts in milliseconds, not the seconds
+    an import of Pinocchio and SciPy takes)."""
+
+    def __init__(
+        self, init: Callable[..., Any], *init_args: Any, preload: tuple[str, ...] = ()
+    ) -> None:
+        ctx = _context(preload)
+        jobs_out, jobs_in = ctx.Pipe(duplex=False)  # (reader, writer)
+        results_out, results_in = ctx.Pipe(duplex=False)
+        self.process = ctx.Process(
+            target=_main,
+            args=(jobs_out, results_in, init, init_args, (jobs_in, results_out)),
+            name="pinobs-worker",
+            daemon=True,
+        )
+        self.process.start()
+        jobs_out.close()
+        results_in.close()
+        self._send, self._recv = jobs_in, results_out
+        self.capacity = _grow_pipe(jobs_in.fileno()) // _PAGE  # [pages]
+        self.outbox: deque[tuple[bytes, int]] = deque()  # (message, pages) not yet written
+        self._untaken: deque[int] = deque()  # pages of each job written and not yet answered
+        self._jobs: deque[Job] = deque()  # submitted and not yet answered, in order
+        try:
+            ok, value = self._recv.recv()  # ready (or init failed)
+        except EOFError:  # it ended before it was ready
+            self.close()
+            raise RuntimeError(
+                "the worker process ended before it started (exit code "
+                f"{self.process.exitcode}); multiprocessing imports the main script in it: "
+                'guard the script\'s top-level code with if __name__ == "__main__":'
+            ) from None
+        if not ok:
+            self.close()
+            raise value
+        self._finalizer = weakref.finalize(self, _stop, self._send, self._recv, self.process)
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Job:
+        """Queue ``fn(state, *args)``; returns its :class:`Job` at once."""
+        data = pickle.dumps((fn, args), protocol=pickle.HIGHEST_PROTOCOL)
+        self.outbox.append((data, -(-len(data) // _PAGE) + 2))  # + header and a partial page
+        job = Job(self)
+        self._jobs.append(job)
+        self._flush()
+        return job
+
+    def poll(self, *, wait: bool = False) -> None:
+        """Take the results the worker has sent (``wait``: at least one, waiting for it),
+        then write the queued jobs that fit."""
+        while self._jobs and (wait or self._recv.poll()):
+            wait = False
+            self._flush()  # (a job waited for may still be in the outbox)
+            ok, value = self._recv.recv()
+            job = self._jobs.popleft()
+            self._untaken.popleft()
+            job._ok, job._value, job._done = ok, value, True
+        self._flush()
+
+    def close(self) -> None:
+        """End the worker process (its jobs not yet done are dropped)."""
+        _stop(self._send, self._recv, self.process)
+
+    def _flush(self) -> None:
+        while self.outbox:
+            data, pages = self.outbox[0]
+            if self._untaken and sum(self._untaken) + pages > self.capacity:
+                return  # the worker is behind: written at a later poll
+            self._send.send_bytes(data)
+            self.outbox.popleft()
+            self._untaken.append(pages)
+
+
+def _context(preload: tuple[str, ...]) -> Any:
+    """multiprocessing's forkserver context (``preload`` added to what its server imports:
+    ``__main__`` by default), or spawn where there is none (Windows)."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    ctx = multiprocessing.get_context("forkserver")
+    if preload:
+        ctx.set_forkserver_preload(["__main__", *preload])  # (before the server starts)
+    return ctx
+
+
+def _grow_pipe(fd: int) -> int:
+    """Ask for a :data:`PIPE_BYTES` pipe (Linux); returns its size [bytes] (64 KiB assumed
+    where it cannot be read)."""
+    if sys.platform.startswith("linux"):
+        import fcntl
+
+        set_size = getattr(fcntl, "F_SETPIPE_SZ", 1031)
+        get_size = getattr(fcntl, "F_GETPIPE_SZ", 1032)
+        try:
+            fcntl.fcntl(fd, set_size, PIPE_BYTES)
+        except OSError:
+            pass  # above the system's limit: keep what it has
+        try:
+            return int(fcntl.fcntl(fd, get_size))
+        except OSError:
+            pass
+    return 1 << 16
+
+
+def _stop(send: Any, recv: Any, process: Any) -> None:
+    """Close the pipes (the worker reads the end) and end the process now (its work is
+    only ever wanted by this caller; a copy of the pipe forked into another worker would
+    keep it reading)."""
+    send.close()
+    recv.close()
+    if process.is_alive():
+        process.terminate()
+    process.join(timeout=1.0)
+
+
+def _main(
+    jobs: Any, results: Any, init: Callable[..., Any], init_args: tuple[Any, ...], theirs: Any
+) -> None:
+    """The worker process: ``init``, then each job in order until the pipe ends (``theirs``:
+    the caller's ends, closed here: a forked copy of its writer would keep the pipe open)."""
+    for conn in theirs:
+        conn.close()
+    try:
+        state = init(*init_args)
+    except BaseException as exc:  # said to the caller, which raises it
+        results.send((False, exc))
+        return
+    results.send((True, None))
+    while True:
+        try:
+            fn, args = pickle.loads(jobs.recv_bytes())
+        except (EOFError, OSError):
+            return  # the caller closed (or dropped) the worker
+        try:
+            reply = (True, fn(state, *args))
+        except BaseException as exc:
+            reply = (False, exc)
+        try:
+            results.send(reply)
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:  # an unpicklable result
+            results.send((False, RuntimeError(f"{fn.__name__}: {exc!r}")))
+        except (BrokenPipeError, OSError):
+            return

@@ -21,17 +21,46 @@ the estimates by nothing visible (four logs: the same RMS to four digits).
 Defaults: σ = ``noise_std`` (1e-6 if not given, so the filter trusts the
 encoder), ``jerk_psd`` = 1e3 rad²/s⁵ (an arm tracking smooth references;
 tune it with ``pinobs bench``), ``outlier_probability`` = 1e-6.
+
+**``jerk_psd="auto"``: the density of each joint from the data, causally** (a
+multiple-model filter, Magill 1965 / Bar-Shalom, Li & Kirubarajan 2001 §11.6, with
+each model's noise scale profiled out as in Mehra 1970's adaptive filtering).  The
+gain of the filter above depends only on the ratio ``ρ = j / σ²`` and ``h``; so a bank
+of ``n_f`` filters runs on a log-spaced grid ``ρ_f = λ_f / T⁵`` (:data:`AUTO_LAMBDAS`:
+the dimensionless ``λ = ρ T⁵``, ``T`` the sample period, ``1/rate`` or the first
+interval), each with ``R = σ₀²`` (σ₀ the ``noise_std``) and ``Q = ρ_f σ₀² Q₁(h)``: one
+3×3 covariance per filter, shared by the joints.  The filter ``f`` is exact for joint
+``i`` if its noise variance is ``c_fi σ₀²`` and its density ``ρ_f c_fi σ₀²``; its
+innovations ``e_fi`` then have variance ``c_fi S_f``, ``S_f = P⁻_f,00 + σ₀²``.  With
+the exponentially forgotten sums (``γ = exp(−h / auto_window)``, at each measured
+sample)::
+
+    N ← γ N + 1,   A_fi ← γ A_fi + e_fi² / S_f,   B_f ← γ B_f + log S_f,
+
+the scale's maximum-likelihood value is ``ĉ_fi = A_fi / N`` and the concentrated
+(profile) negative log-likelihood, up to a constant,
+``L_fi = N log(A_fi / N) + B_f`` (the prediction-error decomposition, Schweppe 1965,
+with ``c`` maximised out).  Each joint's estimate is the likelihood-weighted mixture
+``w_fi ∝ exp(−(L_fi − min_f L_fi) / 2)`` of the bank's (a posterior over the grid with
+a flat prior: a switch between two filters passes through equal weights, no jump);
+its density and noise are read as ``j_i = exp Σ_f w_fi log(ρ_f ĉ_fi σ₀²)`` and
+``σ_i² = exp Σ_f w_fi log(ĉ_fi σ₀²)`` (:attr:`ConstantAccelerationKF.densities`).
+The outlier gate sees ``NIS = Σ_i Σ_f w_fi e_fi² / (ĉ_fi S_f)`` (the weights and
+scales before the sample), once :data:`AUTO_GATE_SAMPLES` samples are in.  Cost per
+update ``O(n_f · nv)``.  σ₀ changes nothing but the start (``P₀``) and the scale's
+units: the noise level is learnt per joint with the density.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import NamedTuple, cast
+from typing import Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pinobs.errors import NotResetError, OptionError
 from pinobs.model import Robot
 from pinobs.observers.base import (
     MAX_GATE_RUN,
@@ -48,6 +77,7 @@ from pinobs.observers.base import (
 from pinobs.observers.linalg import LazyKernel
 
 __all__ = [
+    "AUTO_LAMBDAS",
     "KF_CAUSES",
     "BankState",
     "ConstantAccelerationKF",
@@ -145,18 +175,63 @@ def _corrected(
     return _State(q, v + K[1] * e, a + K[2] * e, 0.5 * (P + P.T), gate)
 
 
+#: ``jerk_psd="auto"``: the bank's dimensionless densities ``λ = (j / σ²) T⁵`` (module
+#: docstring), every decade from 1e-14 (a bandwidth of about 0.005 / T) to 1e2 (about the
+#: raw difference).
+AUTO_LAMBDAS: tuple[float, ...] = tuple(float(10.0**e) for e in range(-14, 3))
+
+#: ``jerk_psd="auto"``: measured samples (effective count ``N``) before the outlier gate acts.
+AUTO_GATE_SAMPLES = 20.0
+
+#: ``jerk_psd="auto"``: the likelihoods' default forgetting time [s].
+AUTO_WINDOW = 2.0
+
+#: ``jerk_psd="auto"``: the (unused) density its :class:`KFGains` carries [rad²/s⁵].
+AUTO_UNUSED_JERK = 1e3
+
+
+class _AutoState(NamedTuple):
+    """``jerk_psd="auto"``'s state: a bank of ``n_f`` filters (rows) and their likelihoods."""
+
+    q: Vector  # (n_f, nq)
+    v: Vector  # (n_f, nv)
+    a: Vector  # (n_f, nv)
+    P: Vector  # (n_f, 3, 3): each filter's covariance, in units of σ₀² ... shared by joints
+    jerk: Vector  # (n_f,): ρ_f σ₀² [rad²/s⁵] (empty until the period is known)
+    n: float  # N: the forgotten count of measured samples
+    A: Vector  # (n_f, nv): forgotten sums of e² / S
+    B: Vector  # (n_f,): forgotten sums of log S
+    w: Vector  # (n_f, nv): the mixture's weights
+    gate: GateState = GateState()
+
+
+def _auto_weights(n: float, A: Vector, B: Vector) -> Vector:
+    """The mixture's weights ``w_fi ∝ exp(−(L_fi − min_f L_fi) / 2)``, ``L_fi = N log(A_fi /
+    N) + B_f`` (module docstring; uniform before any sample)."""
+    if n <= 0.0:
+        return np.full(A.shape, 1.0 / A.shape[0])
+    L = n * np.log(np.maximum(A, 1e-300) / n) + B[:, None]  # profile likelihood (Mehra 1970)
+    w = np.exp(-0.5 * (L - L.min(axis=0)))
+    return cast(Vector, w / w.sum(axis=0))
+
+
 @register
-class ConstantAccelerationKF(Observer[_State]):
+class ConstantAccelerationKF(Observer["_State | _AutoState"]):
     """Per-joint Kalman filter on a constant-acceleration (white-jerk) model.
 
     Args:
         robot: the robot (only its Lie-group operations are used).
-        jerk_psd: white-jerk spectral density [rad²/s⁵].
+        jerk_psd: white-jerk spectral density [rad²/s⁵], or ``"auto"``: each joint's
+            density (and noise level) from the data as it comes, by a bank of filters and
+            their innovations' likelihoods (module docstring; :attr:`densities`).
         v0_std: initial velocity standard deviation [rad/s] when ``v0`` is not given.
         outlier_probability: false-alarm probability of the outlier gate (as in ``ekf``; a
             rejected measurement leaves the prediction), or ``None``: no gate.
-        rate: sample rate hint [Hz] (not needed: the filter uses the actual intervals).
+        rate: sample rate hint [Hz] (not needed: the filter uses the actual intervals;
+            with ``"auto"`` it sets the grid's period ``T``, else the first interval does).
         noise_std: position noise standard deviation [rad or m], the measurement noise.
+        auto_window: with ``"auto"``, the likelihoods' forgetting time [s] (module
+            docstring: ``γ = exp(−h / auto_window)``).
     """
 
     name = "kf"
@@ -171,27 +246,94 @@ class ConstantAccelerationKF(Observer[_State]):
         self,
         robot: Robot,
         *,
-        jerk_psd: float = 1e3,
+        jerk_psd: float | Literal["auto"] = 1e3,
         v0_std: float = 1.0,
         outlier_probability: float | None = 1e-6,
         rate: float | None = None,
         noise_std: float | None = None,
+        auto_window: float = AUTO_WINDOW,
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         positive("v0_std", v0_std)
+        positive("auto_window", auto_window)
         self.v0_std = float(v0_std)
-        self.gains = KFGains(jerk_psd, self.noise_std or NOISE_FLOOR, outlier_probability)
+        self.auto = isinstance(jerk_psd, str) and jerk_psd == "auto"
+        self.auto_window = float(auto_window)
+        # with "auto" the gains' density is the default's, unused: the bank's are ρ_f σ₀²
+        self.gains = KFGains(
+            AUTO_UNUSED_JERK if self.auto else cast(float, jerk_psd),
+            self.noise_std or NOISE_FLOOR,
+            outlier_probability,
+        )
         self._gate = gate_threshold(outlier_probability, robot.nv)[1]
 
     @property
     def options(self) -> dict[str, object]:
-        return {**super().options, **_gain_options(self.gains)}
+        out = {**super().options, **_gain_options(self.gains)}
+        if self.auto:
+            out.update(jerk_psd="auto", auto_window=self.auto_window)
+        return out
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State:
-        P = np.diag(np.array([self.gains.meas_std**2, self.v0_std**2, (10.0 * self.v0_std) ** 2]))
-        return _State(q0.copy(), v0.copy(), np.zeros_like(v0), P)
+    @property
+    def densities(self) -> Vector:
+        """Each joint's white-jerk density [rad²/s⁵]: ``jerk_psd``, or with ``"auto"`` the
+        bank's current estimate ``exp Σ_f w_fi log(ρ_f ĉ_fi σ₀²)`` (module docstring;
+        ``nan`` before the first measured sample)."""
+        state = self._state
+        if state is None:
+            raise NotResetError(f"{self!r}: call reset(t0, q0) first")
+        if not isinstance(state, _AutoState):
+            return np.full(self.robot.nv, self.gains.jerk_psd)
+        if state.n <= 0.0 or not state.jerk.size:
+            return np.full(self.robot.nv, math.nan)
+        scale = np.maximum(state.A / state.n, 1e-300)
+        return cast(Vector, np.exp(np.sum(state.w * np.log(state.jerk[:, None] * scale), axis=0)))
 
-    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+    @property
+    def noise_stds(self) -> Vector:
+        """Each joint's measurement noise σ [rad or m]: ``noise_std``, or with ``"auto"`` the
+        bank's ``√exp Σ_f w_fi log(ĉ_fi σ₀²)`` (module docstring; ``nan`` before a sample)."""
+        state = self._state
+        if state is None:
+            raise NotResetError(f"{self!r}: call reset(t0, q0) first")
+        if not isinstance(state, _AutoState):
+            return np.full(self.robot.nv, self.gains.meas_std)
+        if state.n <= 0.0:
+            return np.full(self.robot.nv, math.nan)
+        scale = np.maximum(state.A / state.n, 1e-300) * self.gains.meas_std**2
+        return cast(Vector, np.sqrt(np.exp(np.sum(state.w * np.log(scale), axis=0))))
+
+    def _initial_p(self) -> Vector:
+        return np.diag(np.array([self.gains.meas_std**2, self.v0_std**2, (10.0 * self.v0_std) ** 2]))
+
+    def _initial_state(self, q0: Vector, v0: Vector) -> _State | _AutoState:
+        P = self._initial_p()
+        if not self.auto:
+            return _State(q0.copy(), v0.copy(), np.zeros_like(v0), P)
+        n_f, nv = len(AUTO_LAMBDAS), v0.size
+        jerk = np.empty(0) if self.rate is None else self._grid(1.0 / self.rate)
+        return _AutoState(
+            np.tile(q0, (n_f, 1)), np.tile(v0, (n_f, 1)), np.zeros((n_f, nv)),
+            np.tile(P, (n_f, 1, 1)), jerk, 0.0, np.zeros((n_f, nv)), np.zeros(n_f),
+            np.full((n_f, nv), 1.0 / n_f),
+        )  # fmt: skip
+
+    def _restart_state(self, state: _State | _AutoState, q: Vector) -> _State | _AutoState:
+        """After a pause: afresh, but ``"auto"`` keeps its likelihoods (what it learned)."""
+        fresh = self._initial_state(q, np.zeros(self.robot.nv))
+        if isinstance(state, _AutoState) and isinstance(fresh, _AutoState):
+            return fresh._replace(jerk=state.jerk, n=state.n, A=state.A, B=state.B, w=state.w)
+        return fresh
+
+    def _grid(self, period: float) -> Vector:
+        """The bank's densities ``ρ_f σ₀² = λ_f σ₀² / T⁵`` [rad²/s⁵] (module docstring)."""
+        return np.array(AUTO_LAMBDAS) * self.gains.meas_std**2 / period**5
+
+    def _step(
+        self, state: _State | _AutoState, dt: float, q_meas: Vector | None, tau: Vector
+    ) -> _State | _AutoState:
+        if isinstance(state, _AutoState):
+            return self._auto_step(state, dt, q_meas)
         F, Q = transition(dt, self.gains.jerk_psd)
         q, v, a, P = _predicted(self.robot, state.q, state.v, state.a, state.P, F, Q, dt)
         if q_meas is None:
@@ -199,16 +341,82 @@ class ConstantAccelerationKF(Observer[_State]):
         r = self.gains.meas_std**2
         return _corrected(self.robot, q, v, a, P, state.gate, r, self._gate, q_meas)
 
+    def _auto_step(self, state: _AutoState, h: float, q_meas: Vector | None) -> _AutoState:
+        """One step of the bank (module docstring, ``jerk_psd="auto"``): each filter's
+        prediction and correction as :meth:`_step`'s, the forgotten likelihood sums, the
+        mixture's weights."""
+        robot, r = self.robot, self.gains.meas_std**2
+        jerk = state.jerk if state.jerk.size else self._grid(h)
+        F, Q1 = transition(h, 1.0)
+        step = state.v * h + 0.5 * h * h * state.a
+        if robot.is_vector_space:
+            q = state.q + step
+        else:
+            q = np.array([robot.integrate(x, s) for x, s in zip(state.q, step, strict=True)])
+        v, a = state.v + h * state.a, state.a
+        P = F @ state.P @ F.T + jerk[:, None, None] * Q1
+        P = 0.5 * (P + P.transpose(0, 2, 1))
+        forget = math.exp(-h / self.auto_window)  # γ (module docstring)
+        n, A, B = forget * state.n, forget * state.A, forget * state.B
+        kept = _AutoState(q, v, a, P, jerk, n, A, B, state.w, state.gate.predicted())
+        if q_meas is None:
+            return kept
+        S = P[:, 0, 0] + r
+        if robot.is_vector_space:
+            e = q_meas[None, :] - q
+        else:
+            e = np.array([robot.difference(x, q_meas) for x in q])
+        z = e * e / S[:, None]
+        nv = robot.nv
+        if state.n >= AUTO_GATE_SAMPLES:  # the scales ĉ and weights before this sample
+            nis = float(np.sum(state.w * z / np.maximum(state.A / state.n, 1e-300)))
+            gate = state.gate.measured(nis, self._gate, nv)
+        else:  # too few samples for a scale: reported (with σ₀), not gated
+            gate = GateState(float(np.sum(state.w * z)))
+        if gate.gated:
+            return kept._replace(gate=gate)
+        K = P[:, :, 0] / S[:, None]  # (n_f, 3): each filter's gain, shared by the joints
+        if robot.is_vector_space:
+            q = q + K[:, :1] * e
+        else:
+            q = np.array([robot.integrate(x, k * y) for x, k, y in zip(q, K[:, 0], e, strict=True)])
+        v, a = v + K[:, 1:2] * e, a + K[:, 2:3] * e
+        IKH = np.eye(3) - K[:, :, None] * np.array([1.0, 0.0, 0.0])  # Joseph form per filter
+        P = IKH @ P @ IKH.transpose(0, 2, 1) + r * K[:, :, None] * K[:, None, :]
+        n, A, B = n + 1.0, A + z, B + np.log(S)  # forgotten sums (module docstring)
+        w = _auto_weights(n, A, B)
+        return _AutoState(q, v, a, 0.5 * (P + P.transpose(0, 2, 1)), jerk, n, A, B, w, gate)
+
     def consistency(self) -> Consistency:
-        """The NIS test of the base class; its causes are a model-free filter's."""
+        """The NIS test of the base class; its causes are a model-free filter's.  With
+        ``"auto"`` the NIS is scaled by each joint's learnt noise level: about ``nv`` by
+        construction (the test then checks only the shape of the innovations)."""
         base = super().consistency()
         return replace(base, causes=KF_CAUSES) if base.causes else base
 
-    def _output(self, state: _State) -> tuple[Vector, Vector]:
-        return state.q, state.v
+    def _output(self, state: _State | _AutoState) -> tuple[Vector, Vector]:
+        if not isinstance(state, _AutoState):
+            return state.q, state.v
+        w = state.w
+        v = np.sum(w * state.v, axis=0)
+        if self.robot.is_vector_space:
+            return np.sum(w * state.q, axis=0), v
+        ref = int(np.argmax(w.sum(axis=1)))  # the mixture in the tangent space of one filter
+        d = np.array([self.robot.difference(state.q[ref], x) for x in state.q])
+        return self.robot.integrate(state.q[ref], np.sum(w * d, axis=0)), v
 
     def smoothing_filter(self) -> WhiteJerkFilter:
-        """This filter as :func:`pinobs.smooth` runs it (:class:`WhiteJerkFilter`)."""
+        """This filter as :func:`pinobs.smooth` runs it (:class:`WhiteJerkFilter`).
+
+        Raises:
+            OptionError: ``jerk_psd="auto"`` (the smoother's density is one number: smooth
+                with ``accel_psd="auto"``, or give this filter's :attr:`densities`).
+        """
+        if self.auto:
+            raise OptionError(
+                "kf with jerk_psd='auto' has no single density to smooth with: smooth with "
+                "accel_psd='auto' (chosen from the whole log) or give jerk_psd a number"
+            )
         return WhiteJerkFilter(self.robot, self.gains, self.v0_std)
 
 

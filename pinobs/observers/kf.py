@@ -60,7 +60,7 @@ from typing import Literal, NamedTuple, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from pinobs.errors import NotResetError, OptionError
+from pinobs.errors import GainError, NotResetError, OptionError
 from pinobs.model import Robot
 from pinobs.observers.base import (
     MAX_GATE_RUN,
@@ -197,12 +197,9 @@ AUTO_UNUSED_JERK = 1e3
 
 
 class _AutoState(NamedTuple):
-    """``jerk_psd="auto"``'s state: a bank of ``n_f`` filters (rows) and their likelihoods."""
+    """``jerk_psd="auto"``'s state: a bank of ``n_f`` filters and their likelihoods."""
 
-    q: Vector  # (n_f, nq)
-    v: Vector  # (n_f, nv)
-    a: Vector  # (n_f, nv)
-    P: Vector  # (n_f, 3, 3): each filter's covariance, in units of σ₀² ... shared by joints
+    bank: BankState  # the filters' states, rows (KFBank; defined below, a forward reference)
     jerk: Vector  # (n_f,): ρ_f σ₀² [rad²/s⁵] (empty until the period is known)
     n: float  # N: the forgotten count of measured samples
     A: Vector  # (n_f, nv): forgotten sums of e² / S
@@ -263,7 +260,9 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
         positive("v0_std", v0_std)
         positive("auto_memory", auto_memory)
         self.v0_std = float(v0_std)
-        self.auto = isinstance(jerk_psd, str) and jerk_psd == "auto"
+        if isinstance(jerk_psd, str) and jerk_psd != "auto":
+            raise GainError(f"jerk_psd={jerk_psd!r}: give a number > 0 [rad²/s⁵] or 'auto'")
+        self.auto = jerk_psd == "auto"
         self.auto_memory = float(auto_memory)
         # with "auto" the gains' density is the default's, unused: the bank's are ρ_f σ₀²
         self.gains = KFGains(
@@ -272,6 +271,7 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
             outlier_probability,
         )
         self._gate = gate_threshold(outlier_probability, robot.nv)[1]
+        self._bank_cache: KFBank | None = None
 
     @property
     def options(self) -> dict[str, object]:
@@ -318,11 +318,12 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
             return _State(q0.copy(), v0.copy(), np.zeros_like(v0), P)
         n_f, nv = len(AUTO_LAMBDAS), v0.size
         jerk = np.empty(0) if self.rate is None else self._grid(1.0 / self.rate)
-        return _AutoState(
+        bank = BankState(
             np.tile(q0, (n_f, 1)), np.tile(v0, (n_f, 1)), np.zeros((n_f, nv)),
-            np.tile(P, (n_f, 1, 1)), jerk, 0.0, np.zeros((n_f, nv)), np.zeros(n_f),
-            np.full((n_f, nv), 1.0 / n_f),
+            np.tile(P, (n_f, 1, 1)), None,
         )  # fmt: skip
+        w = np.full((n_f, nv), 1.0 / n_f)
+        return _AutoState(bank, jerk, 0.0, np.zeros((n_f, nv)), np.zeros(n_f), w)
 
     def _restart_state(self, state: _State | _AutoState, q: Vector) -> _State | _AutoState:
         """After a pause: afresh, but ``"auto"`` keeps its likelihoods (what it learned)."""
@@ -347,51 +348,38 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
         r = self.gains.meas_std**2
         return _corrected(self.robot, q, v, a, P, state.gate, r, self._gate, q_meas)
 
+    def _bank(self, jerk: Vector) -> KFBank:
+        """The :class:`KFBank` stepping the filters of densities ``jerk`` (built once)."""
+        if self._bank_cache is None or not np.array_equal(self._bank_cache.jerk, jerk):
+            self._bank_cache = KFBank(self.robot, tuple(jerk.tolist()), self.gains.meas_std)
+        return self._bank_cache
+
     def _auto_step(self, state: _AutoState, h: float, q_meas: Vector | None) -> _AutoState:
         """One step of the bank (module docstring, ``jerk_psd="auto"``): each filter's
-        prediction and correction as :meth:`_step`'s, the forgotten likelihood sums, the
-        mixture's weights."""
-        robot, r = self.robot, self.gains.meas_std**2
+        prediction and correction (:meth:`KFBank.step`: the equations of :meth:`_step`),
+        the forgotten likelihood sums, the mixture's weights."""
         jerk = state.jerk if state.jerk.size else self._grid(h)
-        F, Q1 = transition(h, 1.0)
-        step = state.v * h + 0.5 * h * h * state.a
-        if robot.is_vector_space:
-            q = state.q + step
-        else:
-            q = np.array([robot.integrate(x, s) for x, s in zip(state.q, step, strict=True)])
-        v, a = state.v + h * state.a, state.a
-        P = F @ state.P @ F.T + jerk[:, None, None] * Q1
-        P = 0.5 * (P + P.transpose(0, 2, 1))
-        kept = _AutoState(q, v, a, P, jerk, state.n, state.A, state.B, state.w, state.gate.predicted())
+        bank = self._bank(jerk)
         if q_meas is None:
-            return kept
-        S = P[:, 0, 0] + r
-        if robot.is_vector_space:
-            e = q_meas[None, :] - q
-        else:
-            e = np.array([robot.difference(x, q_meas) for x in q])
+            return state._replace(
+                bank=bank.step(state.bank, h, None), jerk=jerk, gate=state.gate.predicted()
+            )
+        new = bank.step(state.bank, h, q_meas)
+        e = cast(Vector, new.innovation)  # (n_f, nv): difference(q⁻_f, q_meas)
+        f0 = np.array([1.0, h, 0.5 * h * h])  # F's first row: S = (F P Fᵀ)₀₀ + j h⁵/20 + σ₀²
+        S = np.einsum("i,fij,j->f", f0, state.bank.P, f0) + jerk * h**5 / 20 + bank.meas_var
         z = e * e / S[:, None]
-        nv = robot.nv
         if state.n >= AUTO_GATE_SAMPLES:  # the scales ĉ and weights before this sample
             nis = float(np.sum(state.w * z / np.maximum(state.A / state.n, 1e-300)))
-            gate = state.gate.measured(nis, self._gate, nv)
+            gate = state.gate.measured(nis, self._gate, self.robot.nv)
         else:  # too few samples for a scale: reported (with σ₀), not gated
             gate = GateState(float(np.sum(state.w * z)))
-        if gate.gated:
-            return kept._replace(gate=gate)
-        K = P[:, :, 0] / S[:, None]  # (n_f, 3): each filter's gain, shared by the joints
-        if robot.is_vector_space:
-            q = q + K[:, :1] * e
-        else:
-            q = np.array([robot.integrate(x, k * y) for x, k, y in zip(q, K[:, 0], e, strict=True)])
-        v, a = v + K[:, 1:2] * e, a + K[:, 2:3] * e
-        IKH = np.eye(3) - K[:, :, None] * np.array([1.0, 0.0, 0.0])  # Joseph form per filter
-        P = IKH @ P @ IKH.transpose(0, 2, 1) + r * K[:, :, None] * K[:, None, :]
+        if gate.gated:  # the prediction (its likelihoods unchanged)
+            return state._replace(bank=bank.step(state.bank, h, None), jerk=jerk, gate=gate)
         forget = math.exp(-1.0 / self.auto_memory)  # γ (module docstring)
         n = forget * state.n + 1.0  # the forgotten sums (module docstring)
         A, B = forget * state.A + z, forget * state.B + np.log(S)
-        w = _auto_weights(n, A, B)
-        return _AutoState(q, v, a, 0.5 * (P + P.transpose(0, 2, 1)), jerk, n, A, B, w, gate)
+        return _AutoState(new, jerk, n, A, B, _auto_weights(n, A, B), gate)
 
     def consistency(self) -> Consistency:
         """The NIS test of the base class; its causes are a model-free filter's.  With
@@ -403,13 +391,13 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
     def _output(self, state: _State | _AutoState) -> tuple[Vector, Vector]:
         if not isinstance(state, _AutoState):
             return state.q, state.v
-        w = state.w
-        v = np.sum(w * state.v, axis=0)
+        w, b = state.w, state.bank
+        v = np.sum(w * b.v, axis=0)
         if self.robot.is_vector_space:
-            return np.sum(w * state.q, axis=0), v
+            return np.sum(w * b.q, axis=0), v
         ref = int(np.argmax(w.sum(axis=1)))  # the mixture in the tangent space of one filter
-        d = np.array([self.robot.difference(state.q[ref], x) for x in state.q])
-        return self.robot.integrate(state.q[ref], np.sum(w * d, axis=0)), v
+        d = np.array([self.robot.difference(b.q[ref], x) for x in b.q])
+        return self.robot.integrate(b.q[ref], np.sum(w * d, axis=0)), v
 
     def smoothing_filter(self) -> WhiteJerkFilter:
         """This filter as :func:`pinobs.smooth` runs it (:class:`WhiteJerkFilter`).

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import pinobs
-from pinobs.observers.kf import AUTO_LAMBDAS, transition
+from pinobs.observers.kf import AUTO_LAMBDAS, SMOOTHING_JERK_PSD, transition
 
 
 def _white_jerk_log(
@@ -108,7 +108,7 @@ def test_fixed_density_reports_itself_and_auto_reports_its_options() -> None:
     auto = pinobs.make_observer("kf", robot, jerk_psd="auto", auto_memory=50)
     assert auto.options["jerk_psd"] == "auto" and auto.options["auto_memory"] == 50
     with pytest.raises(pinobs.NotResetError):
-        auto.densities
+        _ = auto.densities
     auto.reset(0.0, robot.neutral())
     assert np.all(np.isnan(auto.densities))  # nothing measured yet
 
@@ -124,10 +124,9 @@ def test_auto_memory_must_be_positive() -> None:
         pinobs.make_observer("kf", pinobs.load("ur5"), jerk_psd="auto", auto_memory=0.0)
 
 
-def test_auto_has_no_single_density_to_smooth_with() -> None:
-    ob = pinobs.make_observer("kf", pinobs.load("ur5"), jerk_psd="auto")
-    with pytest.raises(pinobs.OptionError, match="accel_psd='auto'"):
-        ob.smoothing_filter()
+def test_the_smoother_over_auto_runs_the_fixed_smoothing_density() -> None:
+    ob = pinobs.make_observer("kf", pinobs.load("ur5"), noise_std=1e-4)
+    assert ob.auto and ob.smoothing_filter().gains.jerk_psd == SMOOTHING_JERK_PSD
 
 
 def test_auto_gates_an_outlier_once_it_has_a_noise_scale(rng: np.random.Generator) -> None:

@@ -22,10 +22,11 @@ Defaults: σ = ``noise_std`` (1e-6 if not given, so the filter trusts the
 encoder), ``jerk_psd`` = ``"auto"`` (below), ``outlier_probability`` = 1e-6.
 The fixed default before it, 1e3 rad²/s⁵ (:data:`SMOOTHING_JERK_PSD`), was about right
 for an arm tracking smooth references at 1 kHz and 1.6–10× over the best fixed density on
-the UR10e and TIAGo logs of ``benchmarks/real_logs.py``; ``"auto"`` is within 0.87–1.21× of
-that best on every one of them, 0.85–0.98× on ``pinobs bench``'s simulations (1 kHz) and
-0.95–1.00× on ``benchmarks/learning.py``'s, at 1.6× the cost of a fixed density on a
-UR5 (27 ``pin.aba`` calls against 17; 5× on go1's free-flyer, NumPy path).
+the UR10e and TIAGo logs of ``benchmarks/real_logs.py``; ``"auto"`` is within 0.89–1.21× of
+that best on every one of them (TX40 at 1 kHz: 0.98×), 0.85–1.03× on ``pinobs bench``'s
+simulations (1 kHz; the fixed 1e3: 1.4–2.3×) and 0.87–1.00× on ``benchmarks/learning.py``'s
+runs, at 1.5× the cost of a fixed density on a UR5 (26 ``pin.aba`` calls against 18; 5×
+on go1's free-flyer, the NumPy path): ``benchmarks/kf_auto.py``.
 
 **``jerk_psd="auto"``: the density of each joint from the data, causally** (a
 multiple-model filter, Magill 1965 / Bar-Shalom, Li & Kirubarajan 2001 §11.6, with

@@ -2298,7 +2298,8 @@ def smooth(
         accel_psd: white-acceleration density of the filter [rad²/s³];
             ``None``: the observer's own (``ekf``: :data:`DEFAULT_ACCEL_PSD`;
             ``adaptive``: each window's regime's; ``kf`` takes no number: its
-            density is ``jerk_psd`` in ``filter_options``, default 1e3 rad²/s⁵);
+            density is ``jerk_psd`` in ``filter_options``, default (and with ``"auto"``,
+            the causal filter's default) 1e3 rad²/s⁵);
             ``"auto"``: chosen from this log, for ``ekf`` by
             :func:`select_accel_psd` (one forward pass per grid value), for
             ``kf`` its ``jerk_psd`` likewise (:data:`JERK_GRID`, then the

@@ -81,9 +81,12 @@ def chart_data(
         # RMS error of each estimate from ``start`` on, over its finite samples (an estimate
         # NaN all along, e.g. diverged before ``start``, has none and does not count; it was
         # numpy's "Mean of empty slice")
+        # the joint shown first is the worst of the estimates that did not diverge (a diverged
+        # one overflowing to 1e200 made every joint's RMS inf: the first joint won)
+        good = np.column_stack([result.trace(o).v[:, i] for o in sane] or [t * np.nan])
         with np.errstate(invalid="ignore", over="ignore"):
             clipped.append(bool(np.any((est < lo) | (est > hi))))
-            e = est[after] - result.v[after, i][:, None]
+            e = good[after] - result.v[after, i][:, None]
             finite = np.isfinite(e)
             count = finite.sum(axis=0)
             square = (np.where(finite, e, 0.0) ** 2).sum(axis=0)

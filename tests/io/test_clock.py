@@ -132,11 +132,16 @@ def test_estimates_on_the_recorded_log_match_the_clean_log_of_the_same_samples(u
     recorded = _frame(robot, t, q, tau)
     truth = res.v[rows]
     for name in ("kf", "ekf"):
+        # kf at a fixed density: its own ("auto") takes part of the jitter as noise, and the
+        # stamps as they are cost it 1.74× (0.0093 against 0.0053 rad/s), not over 2×
+        opts = {"jerk_psd": 1e3} if name == "kf" else {}
         with warnings.catch_warnings(record=True) as seen:
             warnings.simplefilter("always")
-            rec = pinobs.estimate(name, recorded, robot=robot, noise_std=1e-4)
-            raw = pinobs.estimate(name, recorded, robot=robot, noise_std=1e-4, clock="stamps")
-            ref = pinobs.estimate(name, clean, robot=robot, noise_std=1e-4)
+            rec = pinobs.estimate(name, recorded, robot=robot, noise_std=1e-4, options=opts)
+            raw = pinobs.estimate(
+                name, recorded, robot=robot, noise_std=1e-4, clock="stamps", options=opts
+            )
+            ref = pinobs.estimate(name, clean, robot=robot, noise_std=1e-4, options=opts)
         said = [str(w.message) for w in seen if issubclass(w.category, TimestampWarning)]
         assert said[0].startswith("log clock repaired")  # (rec's)
         assert said[1].startswith("log clock: stamps kept (clock='stamps')")  # (raw's)

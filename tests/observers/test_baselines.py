@@ -80,13 +80,15 @@ def test_kf_beats_fd_on_noisy_positions() -> None:
     assert m["kf"].rms_v_error < m["fd"].rms_v_error
 
 
-def test_kf_covariance_stays_symmetric_positive_definite_over_a_long_run() -> None:
+@pytest.mark.parametrize("jerk_psd", [1e3, "auto"])
+def test_kf_covariance_stays_symmetric_positive_definite_over_a_long_run(jerk_psd) -> None:
     robot = pinobs.load("pendulum")
-    ob = pinobs.make_observer("kf", robot, noise_std=1e-4)
+    ob = pinobs.make_observer("kf", robot, noise_std=1e-4, jerk_psd=jerk_psd)
     rng = np.random.default_rng(0)
     ob.reset(0.0, np.zeros(1))
     for k in range(1, 20001):
         ob.update(k * 1e-3, rng.normal(0, 1e-4, 1))
-    P = ob._state.P
-    np.testing.assert_array_equal(P, P.T)
-    assert np.linalg.eigvalsh(P).min() > 0
+    state = ob._state
+    for P in [state.P] if jerk_psd != "auto" else list(state.bank.P):  # "auto": every filter's
+        np.testing.assert_array_equal(P, P.T)
+        assert np.linalg.eigvalsh(P).min() > 0

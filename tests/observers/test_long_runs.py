@@ -25,14 +25,18 @@ def _spin(robot: Robot, n: int, ob, *, h: float = 1e-3) -> None:
 @pytest.mark.parametrize(
     "n", [20_000, pytest.param(1_000_000, marks=pytest.mark.slow, id="a million")]
 )
-def test_kf_keeps_unit_quaternions_and_a_symmetric_covariance_over_many_updates(n: int) -> None:
+@pytest.mark.parametrize("jerk_psd", [1e3, "auto"])
+def test_kf_keeps_unit_quaternions_and_a_symmetric_covariance_over_many_updates(
+    n: int, jerk_psd: float | str
+) -> None:
     robot = pinobs.load("top")
-    ob = pinobs.make_observer("kf", robot, noise_std=1e-4)
+    ob = pinobs.make_observer("kf", robot, noise_std=1e-4, jerk_psd=jerk_psd)
     _spin(robot, n, ob)
     assert abs(np.linalg.norm(ob.estimate.q) - 1.0) < 1e-12
-    P = ob._state.P
-    np.testing.assert_array_equal(P, P.T)
-    assert np.linalg.eigvalsh(P).min() > 0
+    state = ob._state
+    for P in [state.P] if jerk_psd != "auto" else list(state.bank.P):  # "auto": every filter's
+        np.testing.assert_array_equal(P, P.T)
+        assert np.linalg.eigvalsh(P).min() > 0
 
 
 @pytest.mark.parametrize("name", observer_names())

@@ -180,7 +180,8 @@ def test_kf_gates_a_glitch_causal_and_smoothed() -> None:
     """``kf`` has the outlier gate of the EKF family (``outlier_probability``): one sample
     1 rad off is skipped.  Smoothed, the estimate moves by 5e-4 rad/s at most (6.8 rad/s
     without the gate) and ρ, so the inflated band, is the clean log's (4.3e3 without: every
-    ``v_std`` 65× wider); causal, 8e-3 rad/s (75 rad/s without)."""
+    ``v_std`` 65× wider); causal, with ``jerk_psd`` = 1e3, 8e-3 rad/s (75 rad/s without;
+    ``"auto"``'s own gate: ``tests/observers/test_kf_auto.py``)."""
     robot = cached_robot("ur5")
     res = simulate(robot, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=2.0, seed=0)
     q = np.array(res.q_meas)
@@ -196,7 +197,7 @@ def test_kf_gates_a_glitch_causal_and_smoothed() -> None:
     for p, bound in ((1e-6, 1e-2), (None, 10.0)):  # measured 7.9e-3 and 75
         a, b = (
             estimate_log(
-                make_observer("kf", robot, noise_std=1e-4, outlier_probability=p),
+                make_observer("kf", robot, noise_std=1e-4, jerk_psd=1e3, outlier_probability=p),
                 Log(q=x[1:], **log),  # type: ignore[arg-type]
             )
             for x in (q, bad)

@@ -513,7 +513,9 @@ def test_identify_names_a_mostly_zero_torque_channel_and_takes_it_excluded(
     args = ["identify", "--robot", "planar_3r", "--log", str(log), "--out", str(out)]
     assert main([*args, "--no-refine"]) == 2
     assert "--exclude-torque joint3" in capsys.readouterr().err and not out.exists()
-    assert main([*args, "--exclude-torque", "joint3", "--noise", "2e-5"]) == 0
+    assert (
+        main([*args, "--exclude-torque", "joint3", "--noise", "2e-5", "--weighting", "torque"]) == 0
+    )
     text = capsys.readouterr().out
     assert "[N·m; N prismatic]" in text and "excluded" in text and "σ [N·m]" in text
     assert "position noise σ = 2e-05" in text

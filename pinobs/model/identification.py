@@ -58,26 +58,26 @@ path (:func:`smooth_path`), or are given (``identify(..., path=(q, v))``;
 ``pinobs.identify`` gives a model-based smoother's:
 :mod:`pinobs.observers.calibration`).
 
-**Weighting.**  By default (``weighting="torque"``) each window's ``nv`` rows are
+**Weighting.**  With ``weighting="torque"`` each window's ``nv`` rows are
 divided by ``t₂ − t₁`` only: its mean torque [N·m; N for a prismatic joint], and each
 torque channel ``j`` is weighted by its own residual scale ``σ_j`` (``1.4826 · median |r|``
 over its rows, re-estimated at each robust pass: :func:`solve`'s ``channel``), so that a
 channel counts by how well it can be fitted, in its own units, whatever its link's
-inertia.  A channel can be left out (``exclude``: a torque that is not measured), and one
-that is zero on most rows is refused unless it is (:data:`ZERO_TORQUE_SHARE`).  Measured
-(``benchmarks/real_logs.py``'s held-out torque residual per joint, ``pinobs.identify``):
-on TIAGo, arm_5..7 left out, the torso's 0.516 N against 0.589 with ``M⁻¹`` weighting
-(nominal 1.276; on the held-out rows that move, 0.564 against 0.745, nominal 1.80),
-arm_1..4 0.813 2.847 1.397 0.844 N·m against 0.817 2.872 1.401 0.840; on the UR10e, pooled
-over the moving held-out logs, 3.41 5.16 1.94 0.562 0.794 0.727 against 3.48 5.27 2.01
-0.561 0.794 0.725; TIAGo with ``weighting="inertia"`` and the same channels left out: torso
-0.723 N (1.11 on the rows where it moves), arm_1..4 0.820 3.077 1.404 0.826.  Hence the
-default: real torques are fitted better in their own units.  On clean simulated logs the
-``M⁻¹`` weighting is the better one (their residual is mostly the velocity estimate's error
-``M δv / T``, which ``M⁻¹`` whitens): planar_3r, σ = 1e-5, mass-matrix error 1.0e-2 against
-1.1e-3 with ``refine=()`` and 2.8e-5 against 4.1e-6 refined; a rotor test's torque error
-17–24× below ``armature=False``'s against 100×; the tests measuring those pin
-``weighting="inertia"``.  With ``weighting="inertia"`` each window's ``nv`` rows are weighted by
+inertia.  A channel can be left out (``exclude``: a torque that is not measured, under
+either weighting), and one that is zero on most rows is refused unless it is
+(:data:`ZERO_TORQUE_SHARE`).  Measured (``benchmarks/real_logs.py``'s held-out torque
+residual per joint, ``pinobs.identify``): on TIAGo, arm_5..7 left out, the torso's 0.516 N
+against 0.723 with ``M⁻¹`` weighting (nominal 1.276), arm_1..4 0.813 2.847 1.397 0.844 N·m
+against 0.820 3.077 1.404 0.826; on the UR10e, pooled over the moving held-out logs, 3.41
+5.16 1.94 0.562 0.794 0.727 against 3.48 5.27 2.01 0.561 0.794 0.725.  On simulated logs
+the ``M⁻¹`` weighting is the better one (their residual is mostly the velocity estimate's
+error ``M δv / T``, which ``M⁻¹`` whitens): planar_3r, σ = 1e-5, mass-matrix error 1.0e-2
+against 1.1e-3 with ``refine=()`` and 2.8e-5 against 4.1e-6 refined; on
+``benchmarks/learning.py``'s offline table the calibrated ``ekf`` 2.2× (UR5, 20 % inertia
+error and payload) and 1.7× (Panda) less accurate, the one-pass Panda 5×.  Hence the
+default, ``weighting="inertia"``: the real-data gain is 2–30 % on the residual, the
+simulated loss 1.1–5× on the observers; on a real robot whose light joints' torques are
+noisy (TIAGo's torso) try ``weighting="torque"``.  ``weighting="inertia"``.  With ``weighting="inertia"`` each window's ``nv`` rows are weighted by
 ``M₀(q_mid)⁻¹ / (t₂ − t₁)`` (an acceleration-like residual, so every joint
 counts alike; ``M₀`` the nominal mass matrix, and when the armature is identified
 its armature raised by the prior's floor, :data:`PRIOR_ARMATURE_FLOOR` of the largest
@@ -1674,7 +1674,7 @@ class PayloadRegressor:
     armature = False
 
     def __init__(
-        self, robot: Robot, frame: str, *, weighting: str = "torque", exclude: Sequence[str] = ()
+        self, robot: Robot, frame: str, *, weighting: str = "inertia", exclude: Sequence[str] = ()
     ) -> None:
         model = robot.model
         if not isinstance(frame, str) or not model.existFrame(frame):
@@ -1782,7 +1782,7 @@ def identify_payload(
     path: tuple[ArrayLike, ArrayLike] | None = None,
     torque: str = "held",
     exclude: Sequence[str] = (),
-    weighting: str = "torque",
+    weighting: str = "inertia",
 ) -> Identification:
     """The ten inertial parameters of a load attached to ``frame`` of a calibrated ``robot``
     (:class:`PayloadRegressor`), everything else fixed; physically consistent (the load's
@@ -1936,7 +1936,7 @@ def identify(
     max_condition: float = MAX_CONDITION,
     path: tuple[ArrayLike, ArrayLike] | None = None,
     torque: str = "held",
-    weighting: str = "torque",
+    weighting: str = "inertia",
     exclude: Sequence[str] = (),
     payload: str | None = None,
 ) -> Identification:
@@ -1967,11 +1967,11 @@ def identify(
         torque: ``"held"`` (zero-order hold: ``pinobs.simulate``, commanded torques) or
             ``"sampled"`` (at the sample instants: ``pinobs excite``, a torque sensor);
             the wrong one biases the fit ∝ 1/rate (module docstring).
-        weighting: ``"torque"`` (default): each window's rows are its mean torque residual
-            [N·m, N], each torque channel weighted by its own residual scale (re-estimated
-            robustly at each pass, ``report["torque_sigma"]``); ``"inertia"``: the rows
-            weighted by ``M₀⁻¹`` (acceleration-like, the earlier default; module docstring,
-            "Weighting").
+        weighting: ``"inertia"`` (default): the rows weighted by ``M₀⁻¹``
+            (acceleration-like); ``"torque"``: each window's rows are its mean torque
+            residual [N·m, N], each torque channel weighted by its own residual scale
+            (re-estimated robustly at each pass, ``report["torque_sigma"]``) (module
+            docstring, "Weighting": which wins where).
         exclude: names of joints whose torque channel is left out of the fit (a torque
             that is not measured, or mostly zero: refused unless excluded,
             :data:`ZERO_TORQUE_SHARE`); their parameters stay near nominal unless other

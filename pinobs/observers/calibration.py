@@ -136,7 +136,7 @@ def identify(
     refine: Sequence[float] = REFINE_ACCEL_PSD,
     noise_std: float | None = None,
     torque: str = "held",
-    weighting: str = "torque",
+    weighting: str = "inertia",
     exclude: Sequence[str] = (),
     payload: str | None = None,
 ) -> Identification:
@@ -168,8 +168,8 @@ def identify(
             sample (zero-order hold: ``pinobs.simulate``, most controllers) or
             ``"sampled"`` at the instants (``pinobs excite``'s trajectory: trapezoid);
             every pass (the model layer's ``torque``).
-        weighting, exclude, payload: the model layer's (each torque channel weighted by
-            its own residual scale in N·m by default; joints whose torque channel is left
+        weighting, exclude, payload: the model layer's (the rows weighted by ``M⁻¹`` by
+            default, or each torque channel by its own residual scale in N·m; joints whose torque channel is left
             out; a load's ten parameters on a calibrated ``robot``), every pass.
 
     ``report["velocities"]`` says which velocities the last pass used

@@ -743,7 +743,7 @@ def test_a_mostly_zero_torque_channel_is_refused_by_name_unless_excluded() -> No
     tau[: int(0.8 * t.size), 2] = 0.0  # joint3's effort not recorded most of the time
     with pytest.raises(IdentificationError, match=r"joint3 \(80 % .*exclude=\['joint3'\]"):
         identify(robot, (t, q, tau))
-    ident = identify(robot, (t, q, tau), exclude=["joint3"])
+    ident = identify(robot, (t, q, tau), exclude=["joint3"], weighting="torque")
     rep = ident.report
     assert rep["excluded"] == ["joint3"] and np.isnan(rep["torque_sigma"][2])
     assert np.all(np.isfinite(rep["torque_sigma"][:2]))
@@ -780,7 +780,7 @@ def test_torque_weighting_gives_each_channel_its_own_noise_in_newton_metres() ->
     truth = planar_3r_truth(robot)
     t, q, tau = _log(robot, truth, 6.0, 1e-6, 1)
     tau = tau + np.random.default_rng(5).normal(size=tau.shape) * [0.5, 0.005, 0.005]
-    by_torque = identify(robot, (t, q, tau))
+    by_torque = identify(robot, (t, q, tau), weighting="torque")
     sigma = by_torque.report["torque_sigma"]
     assert sigma[0] > 10 * max(sigma[1:])
     np.testing.assert_array_equal(

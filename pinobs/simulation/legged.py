@@ -260,14 +260,22 @@ class _Gait:
         s = min(1.0, t / self.ramp)
         s = s * s * (3.0 - 2.0 * s)  # smooth start
         if self.motion == "sway":
-            p = 0.03 * s * np.array([math.sin(2 * math.pi * 0.5 * t), math.sin(2 * math.pi * 0.7 * t), 0.0])
+            p = (
+                0.03
+                * s
+                * np.array([math.sin(2 * math.pi * 0.5 * t), math.sin(2 * math.pi * 0.7 * t), 0.0])
+            )
             p[2] = 0.03 * s * math.sin(2 * math.pi * 0.9 * t)
-            rpy = 0.1 * s * np.array(
-                [
-                    math.sin(2 * math.pi * 0.6 * t),
-                    math.sin(2 * math.pi * 0.4 * t + 1.0),
-                    math.sin(2 * math.pi * 0.3 * t + 2.0),
-                ]
+            rpy = (
+                0.1
+                * s
+                * np.array(
+                    [
+                        math.sin(2 * math.pi * 0.6 * t),
+                        math.sin(2 * math.pi * 0.4 * t + 1.0),
+                        math.sin(2 * math.pi * 0.3 * t + 2.0),
+                    ]
+                )
             )
             R = _rpy(rpy)
             world = self.nominal  # feet stay; base at (p, R) relative to its stance pose
@@ -293,7 +301,14 @@ class _Gait:
 def _rpy(rpy: Vector) -> Vector:
     """``R = Rz(yaw) Ry(pitch) Rx(roll)``."""
     r, p, y = rpy
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    cr, sr, cp, sp, cy, sy = (
+        math.cos(r),
+        math.sin(r),
+        math.cos(p),
+        math.sin(p),
+        math.cos(y),
+        math.sin(y),
+    )
     return np.array(
         [
             [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
@@ -384,9 +399,7 @@ def simulate_legged(
     n = int(round(duration * rate)) + 1
     settle = int(round(SETTLE * rate))
     rng = np.random.default_rng(seed)
-    bias = np.concatenate(
-        [rng.normal(0.0, noise.gyro_bias, 3), rng.normal(0.0, noise.acc_bias, 3)]
-    )
+    bias = np.concatenate([rng.normal(0.0, noise.gyro_bias, 3), rng.normal(0.0, noise.acc_bias, 3)])
     walk = np.repeat([noise.gyro_walk, noise.acc_walk], 3) * math.sqrt(1.0 / rate)
     white = np.repeat([noise.gyro, noise.acc], 3) * math.sqrt(rate)
 
@@ -407,7 +420,9 @@ def simulate_legged(
         for s in range(substeps):
             q_j = data.qpos[qadr]
             dq_j = data.qvel[vadr]
-            data.ctrl[act] = np.clip(KP * (q_ref + dq_ref * s * h - q_j) + KD * (dq_ref - dq_j), -limit, limit)
+            data.ctrl[act] = np.clip(
+                KP * (q_ref + dq_ref * s * h - q_j) + KD * (dq_ref - dq_j), -limit, limit
+            )
             mujoco.mj_step(mj, data)  # sensors and contacts: of the state before this step
             imu[:3] += data.sensordata[imu_gyro : imu_gyro + 3]
             imu[3:] += data.sensordata[imu_acc : imu_acc + 3]

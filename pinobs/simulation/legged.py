@@ -11,15 +11,17 @@ inertia; it changes no kinematics.
 
 Controller (joint space, at every physics step)::
 
-    τ = clip(K_p (q_ref − q) + K_d (q̇_ref − q̇), ±τ_max)
+    τ = clip(τ_ff + K_p (q_ref − q) + K_d (q̇_ref − q̇), ±τ_max),   τ_ff = −Σ_j J_jᵀ (m g / n) u
 
 where ``q_ref`` is the inverse kinematics (:class:`pinobs.model.FootKinematics`,
-Newton's method) of foot targets in the base frame: ``"stand"`` holds the
+Newton's method) of foot targets in the base frame, and ``τ_ff`` shares the
+robot's weight ``m g`` among the ``n`` feet meant to be down (``u`` the world's
+up in the base frame as the reference has it; a virtual-model feed-forward): ``"stand"`` holds the
 nominal stance; ``"sway"`` keeps the feet where they stand and moves the base
 by sinusoids (position 3 cm, roll/pitch/yaw 0.1 rad, incommensurate
 frequencies 0.3-0.9 Hz); ``"trot"`` moves diagonal pairs of feet in the base
 frame (stance: backwards at the commanded speed; swing: forwards along a
-raised cosine 6 cm high), an open-loop trot at 0.25 m/s, 0.4 s period.
+raised cosine 6 cm high), an open-loop trot commanded at 0.25 m/s, 0.4 s period (it walks about 0.23 m/s).
 
 Sensors, sampled at ``rate`` (``substeps`` physics steps of ``1/(rate·substeps)`` s
 between samples; MuJoCo's semi-implicit Euler)::
@@ -66,7 +68,7 @@ __all__ = [
     "simulate_legged",
 ]
 
-Vector = NDArray[np.float64]
+Vector = NDArray[np.floating[Any]]
 
 #: The motions :func:`simulate_legged` can make.
 LEGGED_MOTIONS = ("stand", "sway", "trot")
@@ -253,10 +255,13 @@ class _Gait:
         self.lift = 0.06  # [m], trot
         self.ramp = 0.5  # [s] to reach full amplitude / speed
 
-    def feet(self, t: float) -> Vector:
-        """Foot targets in the base frame at ``t`` (``t = 0``: the first sample), (4, 3)."""
+    def feet(self, t: float) -> tuple[Vector, Vector, Vector]:
+        """Foot targets in the base frame at ``t`` (``t = 0``: the first sample), (4, 3); which
+        feet are meant to be on the ground, (4,) bools; the world's up in the base frame."""
+        up = np.array([0.0, 0.0, 1.0])
+        all_feet = np.ones(4, dtype=bool)
         if t <= 0.0 or self.motion == "stand":
-            return self.nominal
+            return self.nominal, all_feet, up
         s = min(1.0, t / self.ramp)
         s = s * s * (3.0 - 2.0 * s)  # smooth start
         if self.motion == "sway":
@@ -279,9 +284,10 @@ class _Gait:
             )
             R = _rpy(rpy)
             world = self.nominal  # feet stay; base at (p, R) relative to its stance pose
-            return (world - p) @ R  # rows: Rᵀ (f − p)
+            return (world - p) @ R, all_feet, R.T @ up  # rows: Rᵀ (f − p)
         # trot: phase per diagonal pair; stance half moves back, swing half forwards and up
         out = self.nominal.copy()
+        down = np.ones(4, dtype=bool)
         half = 0.5 * self.period
         stride = self.speed * s * half  # distance the base moves during one stance [m]
         for j, offset in enumerate((0.0, half, half, 0.0)):  # FL, FR, RL, RR
@@ -291,11 +297,12 @@ class _Gait:
                 z = 0.0
             else:
                 u = phase - 1.0
+                down[j] = False
                 x = -0.5 * stride + stride * (0.5 - 0.5 * math.cos(math.pi * u))
                 z = self.lift * 0.5 * (1.0 - math.cos(2 * math.pi * u)) * s
             out[j, 0] += x
             out[j, 2] += z
-        return out
+        return out, down, up
 
 
 def _rpy(rpy: Vector) -> Vector:
@@ -386,6 +393,7 @@ def simulate_legged(
     imu_gyro = mj.sensor("gyro").adr[0]
     imu_acc = mj.sensor("acc").adr[0]
 
+    weight = 9.81 * float(np.sum(mj.body_mass))  # [N]
     stance = np.tile(STANCE, 4)
     nominal = legs.positions(stance)
     height = FOOT_RADIUS - float(nominal[:, 2].mean()) + 1e-3
@@ -396,8 +404,8 @@ def simulate_legged(
     mujoco.mj_forward(mj, data)
 
     h = mj.opt.timestep
-    n = int(round(duration * rate)) + 1
-    settle = int(round(SETTLE * rate))
+    n = round(duration * rate) + 1
+    settle = round(SETTLE * rate)
     rng = np.random.default_rng(seed)
     bias = np.concatenate([rng.normal(0.0, noise.gyro_bias, 3), rng.normal(0.0, noise.acc_bias, 3)])
     walk = np.repeat([noise.gyro_walk, noise.acc_walk], 3) * math.sqrt(1.0 / rate)
@@ -409,19 +417,23 @@ def simulate_legged(
     q_prev = stance.copy()
     for k in range(-settle, n):
         t = k / rate
-        targets = gait.feet(t)
+        targets, down, up = gait.feet(t)
         q_ref = _inverse_kinematics(legs, targets, q_ref)
+        # the weight shared by the feet meant to be down: τ = −Σ J_jᵀ f_j (virtual model)
+        _, jac = legs.positions_and_jacobians(q_ref)
+        share = weight / max(int(down.sum()), 1)
+        tau_ff = -share * np.einsum("jki,k->i", jac[down], up)
         dq_ref = (q_ref - q_prev) * rate if k > -settle else np.zeros(12)
         q_prev = q_ref.copy()
         qpos, qvel = data.qpos.copy(), data.qvel.copy()
         imu = np.zeros(6)
-        forces = np.zeros(4)
+        forces: Vector = np.zeros(4)
         qacc_mean = np.zeros(3)
         for s in range(substeps):
             q_j = data.qpos[qadr]
             dq_j = data.qvel[vadr]
             data.ctrl[act] = np.clip(
-                KP * (q_ref + dq_ref * s * h - q_j) + KD * (dq_ref - dq_j), -limit, limit
+                tau_ff + KP * (q_ref + dq_ref * s * h - q_j) + KD * (dq_ref - dq_j), -limit, limit
             )
             mujoco.mj_step(mj, data)  # sensors and contacts: of the state before this step
             imu[:3] += data.sensordata[imu_gyro : imu_gyro + 3]

@@ -21,9 +21,9 @@ from pinobs.observers.inekf import GRAVITY, InEKFPrior, gammas, propagate_mean
 from pinobs.observers.qekf import QuaternionEKF, error_dynamics
 from tests.observers.test_inekf import (
     GO1_FEET,
-    free_flyer_q,
     Go1Legs,
     SyntheticLegs,
+    free_flyer_q,
     pose_errors,
     run,
     synthetic_truth,
@@ -106,7 +106,7 @@ def test_error_dynamics_match_finite_differences_of_the_flow(rng) -> None:
     """``F`` of eq. (2) against the flow of the true state from ``x̂ ⊕ ε e`` minus that from
     ``x̂``, expressed back in the error (one foot, so ``F`` is 18 square)."""
     R = Rotation.from_rotvec(rng.normal(size=3)).as_matrix()
-    v, p, d = rng.normal(size=3), rng.normal(size=3), rng.normal(size=3)
+    v, p = rng.normal(size=3), rng.normal(size=3)
     b = 0.1 * rng.normal(size=6)
     reading = rng.normal(size=6)
     F = error_dynamics(R, reading[:3] - b[:3], reading[3:] - b[3:], 1)

@@ -24,7 +24,8 @@ Metrics (per run; the tables give the mean over seeds and the worst seed):
 * `yaw drift`: |yaw error| at the end, per metre walked (trot) or per second (stand, sway);
 * `pos drift`: horizontal position error at the end, likewise per metre or per second;
 * `NEES/3`: mean of `eᵀ Σ⁻¹ e / 3` for that error (1 for a consistent filter; below 1:
-  the filter's σ is larger than its errors, conservative);
+  the filter's σ is larger than its errors; the report calls < 0.5 conservative, > 2
+  overconfident);
 * `in 2σ`: fraction of samples × components where the IMU's world velocity error is within
   ±2σ of the filter's own covariance (95.4 % for a consistent Gaussian filter). The
   invariant EKF's velocity error is `v̂ − v ≈ ξ_v − v̂^ ξ_R` (right-invariant), the

@@ -1,8 +1,8 @@
 """Contact-aided quaternion (multiplicative) EKF: the baseline for :mod:`pinobs.observers.inekf`.
 
 The filter most lab code runs (Bloesch et al., *State estimation for legged
-robots: consistent fusion of leg kinematics and IMU*, RSS 2012; the "QEKF" of
-Hartley et al., IJRR 2020, §8), written from the equations as an error-state
+robots: consistent fusion of leg kinematics and IMU*, RSS 2012; the quaternion EKF that
+Hartley et al., IJRR 2020, compare with), written from the equations as an error-state
 EKF in the form of Solà, *Quaternion kinematics for the error-state Kalman
 filter* (arXiv:1711.02508, §5 and §7: the local angular error).  Same state,
 inputs, measurements and noise parameters (:class:`InEKFGains`) as the
@@ -17,16 +17,15 @@ Error (true = estimate ⊕ error, "multiplicative" on the rotation)::
 ``e = (δθ, δv, δp, δd_1 … δd_K, δb_g, δb_a)``, ``9 + 3K + 6`` entries (the
 order of the invariant EKF's error).  The mean propagates by the exact flow
 of the IMU model for held readings (:func:`pinobs.observers.inekf.propagate_mean`,
-shared).  Error dynamics (Solà eq. (237) with the local angular error;
+shared).  Error dynamics (Solà §5.3.3, the error-state kinematics, with the local angular error;
 ``ω = ω̃ − b̂_g``, ``a = ã − b̂_a``)::
 
     δθ̇ = −ω^ δθ − δb_g − w_g,   δv̇ = −R̂ a^ δθ − R̂ δb_a − R̂ w_a,   δṗ = δv,
     δḋ_j = w_c,   δḃ_g = w_bg,   δḃ_a = w_ba                                        (2)
 
 ``F`` depends on the estimate (``R̂``, ``a``): the difference from the invariant
-error, whose ``A`` does not.  ``Φ = I + F h + (F h)²/2 + (F h)³/6`` (the state
-at the start of the step; ``F³`` is the last term that is not zero for
-constant inputs up to the rotation), and
+error, whose ``A`` does not.  ``Φ = I + F h + (F h)²/2 + (F h)³/6`` (``F`` at the
+start of the step; the series' error is O((‖F‖ h)⁴)), and
 ``Q = ½ (Φ Q_c Φᵀ + Q_c) h``, ``Q_c = diag(σ_g², σ_a², 0, σ_c² …, σ_bg², σ_ba²)``
 (``R̂ σ_a² I R̂ᵀ = σ_a² I``).
 
@@ -127,7 +126,7 @@ def error_dynamics(R: Vector, omega: Vector, acc: Vector, n_contacts: int) -> Ve
     with the bias-corrected readings ``ω`` [rad/s] and ``a`` [m/s²]."""
     n = 15 + 3 * n_contacts
     F = np.zeros((n, n))
-    F[0:3, 0:3] = -skew(omega)  # Solà eq. (237): δθ̇ = −[ω]× δθ − δω_b
+    F[0:3, 0:3] = -skew(omega)  # Solà §5.3.3: δθ̇ = −[ω]× δθ − δω_b
     F[0:3, n - 6 : n - 3] = -_I3
     F[3:6, 0:3] = -R @ skew(acc)  # δv̇ = −R [a]× δθ − R δa_b
     F[3:6, n - 3 :] = -R

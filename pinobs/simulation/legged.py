@@ -411,7 +411,7 @@ def simulate_legged(
     walk = np.repeat([noise.gyro_walk, noise.acc_walk], 3) * math.sqrt(1.0 / rate)
     white = np.repeat([noise.gyro, noise.acc], 3) * math.sqrt(rate)
 
-    cols: dict[str, list[float]] = {}
+    cols: dict[str, Vector] = {}
     rows: list[Vector] = []
     q_ref = stance.copy()
     q_prev = stance.copy()
@@ -497,8 +497,8 @@ def simulate_legged(
     for i, name in enumerate(names):
         column = np.ascontiguousarray(table[:, i])
         column.setflags(write=False)
-        cols[name] = column  # type: ignore[assignment]
-    return LeggedRun(motion, seed, float(rate), GO1_FEET, joints, cols, noise)  # type: ignore[arg-type]
+        cols[name] = column
+    return LeggedRun(motion, seed, float(rate), GO1_FEET, joints, cols, noise)
 
 
 def _rotation_wxyz(quat: Vector) -> Vector:

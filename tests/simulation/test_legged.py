@@ -37,6 +37,9 @@ def test_base_velocity_is_the_finite_difference_of_base_position() -> None:
     scale = float(np.abs(v).max())
     assert scale > 0.05  # the base does move
     assert float(np.abs(fd - mid).max()) < 0.01 * scale  # measured 0.33 %
+    # truth.acc_world, the mean over a sample's steps, is the velocity's difference
+    a = run.stack("truth.acc_world.x", "truth.acc_world.y", "truth.acc_world.z")
+    assert float(np.abs((v[1:] - v[:-1]) / dt - a[:-1]).max()) < 1e-2 * float(np.abs(a).max())
     # the base-frame twist is the world one rotated
     R = Rotation.from_quat(run.base_q()[:, 3:]).as_matrix()
     np.testing.assert_allclose(np.einsum("nji,nj->ni", R, v), run.base_v()[:, :3], atol=1e-12)

@@ -33,6 +33,7 @@ __all__ = [
     "OutputExistsError",
     "PinobsError",
     "PinobsWarning",
+    "SimulationFailed",
     "TimestampError",
     "TimestampWarning",
     "UnknownNameError",
@@ -120,6 +121,10 @@ class ObserverDiverged(PinobsError, ArithmeticError):
         super().__init__(message)
         self.t = t
         self.last_estimate = last_estimate
+
+
+class SimulationFailed(PinobsError, RuntimeError):
+    """A simulation left its valid range (a legged robot fell, a non-finite state)."""
 
 
 class PinobsWarning(UserWarning):

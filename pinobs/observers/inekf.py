@@ -159,6 +159,9 @@ __all__ = [
     "InEKFState",
     "InvariantEKF",
     "adjoint",
+    "check_contacts",
+    "check_time",
+    "contact_kinematics",
     "error_transition",
     "gammas",
     "imu_vector_field",
@@ -381,6 +384,55 @@ def error_transition(
     return T1 @ _body_transition(omega, acc, h, K) @ _inverse_frame(R, x)
 
 
+def check_time(t: Any, previous: float | None) -> float:
+    """``t`` as a finite float after ``previous`` (by more than TIME_EPS), or a TimestampError."""
+    try:
+        t = float(t)
+    except (TypeError, ValueError) as exc:
+        raise TimestampError(f"t must be a number, got {t!r}") from exc
+    if not math.isfinite(t):
+        raise TimestampError(f"t must be finite, got {t!r}")
+    if previous is not None and t <= previous + TIME_EPS:
+        raise TimestampError(f"t = {t!r} is not after the previous update's t = {previous!r}")
+    return t
+
+
+def check_contacts(feet: tuple[str, ...], contacts: Any) -> list[bool]:
+    """Contact flags in the order of ``feet`` from a mapping (every foot named) or a sequence
+    of bools; UnknownNameError or DimensionError naming what is wrong."""
+    if isinstance(contacts, Mapping):
+        unknown = [k for k in contacts if k not in feet]
+        if unknown:
+            raise UnknownNameError(f"contacts names {unknown}, not among the feet {list(feet)}")
+        missing = [f for f in feet if f not in contacts]
+        if missing:
+            raise UnknownNameError(
+                f"contacts has no entry for {missing}: give a bool for each of {list(feet)}"
+            )
+        values = [contacts[f] for f in feet]
+    elif isinstance(contacts, (str, bytes)) or not isinstance(contacts, (Sequence, np.ndarray)):
+        raise DimensionError(
+            f"contacts must map each of {list(feet)} to a bool (or be a sequence of "
+            f"{len(feet)} bools), got {contacts!r}"
+        )
+    else:
+        values = list(contacts)
+        if len(values) != len(feet):
+            raise DimensionError(
+                f"contacts has {len(values)} entries, expected {len(feet)} "
+                f"(one bool per foot: {list(feet)})"
+            )
+    out = []
+    for name, value in zip(feet, values, strict=True):
+        if isinstance(value, (bool, np.bool_)):
+            out.append(bool(value))
+        elif isinstance(value, (int, np.integer)) and value in (0, 1):
+            out.append(bool(value))
+        else:
+            raise DimensionError(f"contacts[{name!r}] must be a bool, got {value!r}")
+    return out
+
+
 # ----------------------------------------------------------------- kinematics
 @runtime_checkable
 class ContactKinematics(Protocol):
@@ -397,6 +449,39 @@ class ContactKinematics(Protocol):
     def positions_and_jacobians(self, q_joints: Vector) -> tuple[Vector, Vector]:
         """``(h, J)``: shapes ``(K, 3)`` [m] and ``(K, 3, nv_joints)`` [m/rad]."""
         ...
+
+
+def contact_kinematics(
+    robot: Robot | ContactKinematics, feet: Sequence[str] | None, imu_frame: str | None
+) -> ContactKinematics:
+    """The legs a contact-aided filter measures: :class:`pinobs.model.FootKinematics` of a
+    robot's ``feet`` (in its ``imu_frame``), or a given :class:`ContactKinematics`.
+
+    Raises:
+        UnknownNameError: a robot without ``feet``, ``feet`` that differ from the
+            kinematics' own, or ``imu_frame`` with a :class:`ContactKinematics`.
+        TypeError: neither a robot nor a :class:`ContactKinematics`.
+    """
+    if isinstance(robot, Robot):
+        if feet is None:
+            raise UnknownNameError(
+                f"{robot.name}: give the foot frame names (feet=[...]) to measure"
+            )
+        return FootKinematics(robot, feet, imu_frame=imu_frame)
+    elif isinstance(robot, ContactKinematics):
+        if imu_frame is not None:
+            raise UnknownNameError(
+                "imu_frame is for a robot; a ContactKinematics gives imu_placement itself"
+            )
+        if feet is not None and tuple(feet) != tuple(robot.feet):
+            raise UnknownNameError(
+                f"feet={list(feet)} differs from the kinematics' feet {list(robot.feet)}"
+            )
+        return robot
+    else:
+        raise TypeError(
+            f"robot must be a pinobs.Robot or a ContactKinematics, got {type(robot).__name__}"
+        )
 
 
 # ------------------------------------------------------------------- options
@@ -558,26 +643,7 @@ class InvariantEKF:
         if imu_hold not in ("previous", "average"):
             raise GainError(f"imu_hold must be 'previous' or 'average', got {imu_hold!r}")
         self.imu_hold = imu_hold
-        if isinstance(robot, Robot):
-            if feet is None:
-                raise UnknownNameError(
-                    f"{robot.name}: give the foot frame names (feet=[...]) to measure"
-                )
-            self.kinematics: ContactKinematics = FootKinematics(robot, feet, imu_frame=imu_frame)
-        elif isinstance(robot, ContactKinematics):
-            if imu_frame is not None:
-                raise UnknownNameError(
-                    "imu_frame is for a robot; a ContactKinematics gives imu_placement itself"
-                )
-            if feet is not None and tuple(feet) != tuple(robot.feet):
-                raise UnknownNameError(
-                    f"feet={list(feet)} differs from the kinematics' feet {list(robot.feet)}"
-                )
-            self.kinematics = robot
-        else:
-            raise TypeError(
-                f"robot must be a pinobs.Robot or a ContactKinematics, got {type(robot).__name__}"
-            )
+        self.kinematics = contact_kinematics(robot, feet, imu_frame)
         if gains is not None and not isinstance(gains, InEKFGains):
             raise GainError(f"gains must be an InEKFGains, got {type(gains).__name__}")
         self.gains = gains if gains is not None else InEKFGains()
@@ -769,49 +835,10 @@ class InvariantEKF:
     # ------------------------------------------------------------- checks
     @staticmethod
     def _check_time(t: Any, previous: float | None) -> float:
-        try:
-            t = float(t)
-        except (TypeError, ValueError) as exc:
-            raise TimestampError(f"t must be a number, got {t!r}") from exc
-        if not math.isfinite(t):
-            raise TimestampError(f"t must be finite, got {t!r}")
-        if previous is not None and t <= previous + TIME_EPS:
-            raise TimestampError(f"t = {t!r} is not after the previous update's t = {previous!r}")
-        return t
+        return check_time(t, previous)
 
     def _check_contacts(self, contacts: Any) -> list[bool]:
-        feet = self.feet
-        if isinstance(contacts, Mapping):
-            unknown = [k for k in contacts if k not in feet]
-            if unknown:
-                raise UnknownNameError(f"contacts names {unknown}, not among the feet {list(feet)}")
-            missing = [f for f in feet if f not in contacts]
-            if missing:
-                raise UnknownNameError(
-                    f"contacts has no entry for {missing}: give a bool for each of {list(feet)}"
-                )
-            values = [contacts[f] for f in feet]
-        elif isinstance(contacts, (str, bytes)) or not isinstance(contacts, (Sequence, np.ndarray)):
-            raise DimensionError(
-                f"contacts must map each of {list(feet)} to a bool (or be a sequence of "
-                f"{len(feet)} bools), got {contacts!r}"
-            )
-        else:
-            values = list(contacts)
-            if len(values) != len(feet):
-                raise DimensionError(
-                    f"contacts has {len(values)} entries, expected {len(feet)} "
-                    f"(one bool per foot: {list(feet)})"
-                )
-        out = []
-        for name, value in zip(feet, values, strict=True):
-            if isinstance(value, (bool, np.bool_)):
-                out.append(bool(value))
-            elif isinstance(value, (int, np.integer)) and value in (0, 1):
-                out.append(bool(value))
-            else:
-                raise DimensionError(f"contacts[{name!r}] must be a bool, got {value!r}")
-        return out
+        return check_contacts(self.feet, contacts)
 
     def _kinematics(self, q_joints: Vector) -> tuple[Vector, Vector]:
         h, jac = self.kinematics.positions_and_jacobians(q_joints)

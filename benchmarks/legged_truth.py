@@ -1,0 +1,265 @@
+# /// script
+# requires-python = ">=3.10"
+# dependencies = ["pinobs[mujoco]"]
+# ///
+"""Legged base estimation against MuJoCo's truth: the invariant EKF and the quaternion EKF.
+
+Writes `benchmarks/legged_truth.json` and `benchmarks/legged_truth.md`. go1 simulated by
+`pinobs.simulation.legged.simulate_legged` (MuJoCo, 500 Hz samples, 1 ms physics steps;
+its docstring has the robot, controller, motions and sensor noise), per motion and seed.
+Both filters get the same inputs: the IMU readings (`imu.*`, held between samples), the
+measured joint angles (`q.*`), contacts = measured foot normal force > `CONTACT_FORCE`;
+the same noise parameters (`GAINS`, set from the simulation's noise, not tuned on these
+results; `kinematics` 5 mm for the 2 cm foot sphere that rolls), the IMU frame `imu_link`;
+both start on the true base pose and velocity at the first sample, with zero bias
+estimates and the default prior (`truth` start), or from a roll error and a lateral
+velocity error with a prior of twice those: 10° and 0.3 m/s (`perturbed`), 30° and 1 m/s
+(`large`, the filters' convergence tests' perturbation), where the two errors' dynamics
+differ most. The motion is the same for every seed (the controller reads the true joint
+angles); the seed draws the sensor noise and biases.
+
+Metrics (per run; the tables give the mean over seeds and the worst seed):
+* `v rms`: RMS over the run of the base's linear velocity error in the base frame [m/s]
+  (Pinocchio's `v[0:3]`, all three components pooled);
+* `yaw drift`: |yaw error| at the end, per metre walked (trot) or per second (stand, sway);
+* `pos drift`: horizontal position error at the end, likewise per metre or per second;
+* `NEES/3`: mean of `eᵀ Σ⁻¹ e / 3` for that error (1 for a consistent filter; below 1:
+  the filter's σ is larger than its errors; the report calls < 0.5 conservative, > 2
+  overconfident);
+* `in 2σ`: fraction of samples × components where the IMU's world velocity error is within
+  ±2σ of the filter's own covariance (95.4 % for a consistent Gaussian filter). The
+  invariant EKF's velocity error is `v̂ − v ≈ ξ_v − v̂^ ξ_R` (right-invariant), the
+  quaternion EKF's `δv` directly.
+
+Issue 38 targets: `v rms` ≤ 0.05 m/s and ≤ 0.7 × the quaternion EKF's; `in 2σ` ≥ 95 %.
+
+    python benchmarks/legged_truth.py [--duration 10] [--seeds 0 1 2] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import platform
+import time
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+import pinobs
+from pinobs.observers.inekf import InEKFGains, InEKFPrior, InvariantEKF, skew
+from pinobs.observers.qekf import QuaternionEKF
+from pinobs.simulation.legged import GO1_FEET, LEGGED_MOTIONS, LeggedNoise, simulate_legged
+
+CONTACT_FORCE = 20.0  # [N]
+NOISE = LeggedNoise()
+GAINS = InEKFGains(
+    gyro=NOISE.gyro,
+    accel=NOISE.acc,
+    gyro_bias=NOISE.gyro_walk,
+    accel_bias=NOISE.acc_walk,
+    contact=0.1,
+    joint=NOISE.encoder,
+    kinematics=5e-3,
+)
+#: start → (roll error [deg], lateral velocity error [m/s]); "large" is the perturbation of
+#: the filters' convergence tests (tests/observers/test_inekf.py, test_qekf.py)
+STARTS = {"truth": (0.0, 0.0), "perturbed": (10.0, 0.3), "large": (30.0, 1.0)}
+#: the sensitivity table: the trot with a smaller foot-slip density [m/s/√Hz]
+CONTACT_SENSITIVITY = 0.01
+FILTERS = {"inekf": InvariantEKF, "qekf": QuaternionEKF}
+
+
+def run_filter(
+    name: str, run: Any, robot: pinobs.Robot, start: str, gains: InEKFGains = GAINS
+) -> dict[str, float]:
+    ekf = FILTERS[name](robot, GO1_FEET, gains=gains, imu_frame="imu_link")
+    r_bi = ekf.imu_placement[1]
+    t = run.t
+    q_meas = run.q_joints()
+    gyro, acc = run.gyro(), run.acc()
+    contacts = run.forces() > CONTACT_FORCE
+    base_q, base_v = run.base_q(), run.base_v()
+    # the world's origin moved to the IMU's first position: the invariant EKF's prior is on
+    # the right-invariant error, where a rotation error moves the position by φ × p̂; at the
+    # origin the two errors' priors coincide (the quaternion EKF does not depend on it)
+    origin = base_q[0, :3] + Rotation.from_quat(base_q[0, 3:]).as_matrix() @ r_bi
+    q0 = np.concatenate([base_q[0], q_meas[0]])
+    q0[:3] -= origin
+    v0 = np.concatenate([base_v[0], np.zeros(12)])
+    prior = None
+    roll, speed = STARTS[start]
+    if roll or speed:  # a roll error, a lateral (base y) velocity error, a prior of twice those
+        tilt = Rotation.from_rotvec([math.radians(roll), 0.0, 0.0])
+        q0[3:7] = (Rotation.from_quat(q0[3:7]) * tilt).as_quat()
+        v0[1] += speed
+        prior = InEKFPrior(attitude=math.radians(2 * roll), velocity=2 * speed)
+    ekf.reset(t[0], q0, v0, gyro=gyro[0], acc=acc[0], contacts=contacts[0], prior=prior)
+    err_v, inside, nees, yaw_err, pos_err = [], [], [], 0.0, np.zeros(2)
+    for k in range(1, t.size):
+        est = ekf.update(t[k], q_meas[k], gyro[k], acc[k], contacts[k])
+        err_v.append(est.v[:3] - base_v[k, :3])
+        R_b = Rotation.from_quat(base_q[k, 3:]).as_matrix()
+        # the IMU's world velocity, truth and estimate, and its error covariance
+        v_imu = R_b @ (base_v[k, :3] + np.cross(base_v[k, 3:], r_bi))
+        v_hat = ekf.state.x[0]
+        P = ekf.state.P
+        if name == "inekf":
+            T = np.hstack([-skew(v_hat), np.eye(3)])
+            cov = T @ P[0:6, 0:6] @ T.T
+        else:
+            cov = P[3:6, 3:6]
+        e = v_hat - v_imu
+        inside.append(np.abs(e) <= 2.0 * np.sqrt(np.diag(cov)))
+        nees.append(float(e @ np.linalg.solve(cov, e)) / 3.0)
+        if k == t.size - 1:
+            rel = Rotation.from_matrix(est.rotation @ R_b.T).as_euler("ZYX")
+            yaw_err = abs(float(rel[0]))
+            pos_err = est.q[:2] + origin[:2] - base_q[k, :2]
+    err = np.array(err_v)
+    walked = float(np.sum(np.linalg.norm(np.diff(base_q[:, :2], axis=0), axis=1)))
+    per = walked if run.motion == "trot" else float(t[-1] - t[0])
+    return {
+        "v_rms": float(np.sqrt(np.mean(err**2))),
+        "yaw_drift": yaw_err / per,
+        "pos_drift": float(np.linalg.norm(pos_err)) / per,
+        "in_2sigma": float(np.mean(inside)),
+        "nees": float(np.mean(nees)),
+        "walked_m": walked,
+    }
+
+
+def _verdict(nees: float) -> str:
+    if nees < 0.5:
+        return f"conservative, σ ≈ {nees**-0.5:.2g}× the errors"
+    return "consistent" if nees < 2.0 else "overconfident"
+
+
+def _table(section: dict[str, Any]) -> list[str]:
+    md = [
+        "| motion, start | filter | v rms [m/s] | yaw drift | pos drift | in ±2σ | NEES/3 "
+        "| walked [m] |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for motion, per_filter in section.items():
+        unit = "/m" if motion.startswith("trot") else "/s"
+        for name, runs in per_filter.items():
+            v, yaw, pos, ins, nees, walked = (
+                np.array([r[k] for r in runs])
+                for k in ("v_rms", "yaw_drift", "pos_drift", "in_2sigma", "nees", "walked_m")
+            )
+            md.append(
+                f"| {motion} | `{name}` | {v.mean():.3g} ({v.max():.3g}) | "
+                f"{math.degrees(yaw.mean()):.3g}°{unit} ({math.degrees(yaw.max()):.3g}) | "
+                f"{100 * pos.mean():.3g} cm{unit} ({100 * pos.max():.3g}) | "
+                f"{100 * ins.mean():.1f} % ({100 * ins.min():.1f}) | {nees.mean():.3g} | "
+                f"{walked.mean():.2f} |"
+            )
+    return md
+
+
+def _targets(section: dict[str, Any]) -> list[str]:
+    md = []
+    for motion, per_filter in section.items():
+        inekf = np.mean([r["v_rms"] for r in per_filter["inekf"]])
+        qekf = np.mean([r["v_rms"] for r in per_filter["qekf"]])
+        ins = np.mean([r["in_2sigma"] for r in per_filter["inekf"]])
+        nees = float(np.mean([r["nees"] for r in per_filter["inekf"]]))
+        md.append(
+            f"* {motion}: inekf v rms {inekf:.3g} m/s (≤ 0.05: "
+            f"{'met' if inekf <= 0.05 else 'missed'}); {inekf / qekf:.3g}× qekf's (≤ 0.7: "
+            f"{'met' if inekf <= 0.7 * qekf else 'missed'}); in ±2σ {100 * ins:.1f} % (≥ 95 %: "
+            f"{'met' if ins >= 0.95 else 'missed'}; NEES/3 {nees:.2g}: {_verdict(nees)})"
+        )
+    return md
+
+
+def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
+    m = report["machine"]
+    md = [
+        f"Made by `python benchmarks/legged_truth.py --duration {args.duration:g} --seeds "
+        f"{' '.join(map(str, args.seeds))}` on {m['date']} in {report['seconds']:.0f} s (MuJoCo "
+        f"{m['mujoco']}); conditions in the script's docstring. Mean over the seeds (worst seed "
+        "in brackets). Drift is per metre walked for the trot, per second for stand and sway.",
+        "",
+        *_table(report["motions"]),
+        "",
+        "Targets (issue 38), as measured:",
+        "",
+        *_targets(report["motions"]),
+        "",
+    ]
+    if report["sensitivity"]:
+        md += [
+            f"The trot with a foot-slip density of {CONTACT_SENSITIVITY:g} m/s/√Hz instead of "
+            f"{GAINS.contact:g} (same runs):",
+            "",
+            *_table(report["sensitivity"]),
+            "",
+            *_targets(report["sensitivity"]),
+            "",
+        ]
+    return "\n".join(md)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--motions", nargs="+", default=list(LEGGED_MOTIONS))
+    parser.add_argument("--quick", action="store_true", help="5 s, seed 0, no files written")
+    args = parser.parse_args()
+    if args.quick:
+        args.duration, args.seeds = 5.0, [0]
+    robot = pinobs.load("go1")
+    start = time.time()
+    report: dict[str, Any] = {"motions": {}, "sensitivity": {}}
+    for motion in args.motions:
+        for start_kind in STARTS:
+            report["motions"][f"{motion}, {start_kind} start"] = {name: [] for name in FILTERS}
+        for seed in args.seeds:
+            run = simulate_legged(motion, args.duration, seed=seed, noise=NOISE, robot=robot)
+            for start_kind in STARTS:
+                for name in FILTERS:
+                    out = run_filter(name, run, robot, start_kind)
+                    out["seed"] = seed
+                    report["motions"][f"{motion}, {start_kind} start"][name].append(out)
+                    print(motion, start_kind, seed, name, {k: round(v, 5) for k, v in out.items()})
+                    if motion == "trot":
+                        gains = dataclasses.replace(GAINS, contact=CONTACT_SENSITIVITY)
+                        out = run_filter(name, run, robot, start_kind, gains)
+                        out["seed"] = seed
+                        key = f"trot, {start_kind} start, contact {CONTACT_SENSITIVITY:g}"
+                        report["sensitivity"].setdefault(key, {n: [] for n in FILTERS})
+                        report["sensitivity"][key][name].append(out)
+    report["seconds"] = time.time() - start
+    report["machine"] = {
+        "date": time.strftime("%Y-%m-%d"),
+        "python": platform.python_version(),
+        "mujoco": mujoco.__version__,
+    }
+    report["conditions"] = {
+        "duration_s": args.duration,
+        "seeds": args.seeds,
+        "contact_force_N": CONTACT_FORCE,
+        "starts_roll_deg_lateral_speed_m_s": STARTS,
+        "gains": GAINS.__dict__,
+        "noise": NOISE.__dict__,
+    }
+    md = format_report(report, args)
+    print(md)
+    if not args.quick:
+        here = Path(__file__).parent
+        (here / "legged_truth.json").write_text(json.dumps(report, indent=1) + "\n")
+        (here / "legged_truth.md").write_text(md)
+
+
+if __name__ == "__main__":
+    main()

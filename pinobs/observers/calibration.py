@@ -106,7 +106,7 @@ def identify(
     robot: Robot,
     log: Any,
     *,
-    friction: bool = True,
+    friction: bool | str = True,
     offset: bool = False,
     armature: bool = True,
     holdout: float = 0.2,

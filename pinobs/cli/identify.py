@@ -63,6 +63,14 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
         "not with --offset)",
     )
     p.add_argument(
+        "--smoothing",
+        type=float,
+        default=None,
+        help="the friction law's smoothing velocity v_s [rad/s], every joint, instead of its "
+        "cross-validated search (for --friction-law offset-sigmoid, stribeck, asymmetric; "
+        "viscous-coulomb's is 0.01 unless given)",
+    )
+    p.add_argument(
         "--no-armature",
         action="store_true",
         help="do not identify the rotor inertia (armature) per joint; keep the model's",
@@ -131,6 +139,7 @@ def handle(args: argparse.Namespace) -> int:
         holdout=args.holdout,
         max_condition=args.max_condition,
         torque=args.torque,
+        smoothing=args.smoothing,
         refine=() if args.no_refine else REFINE_ACCEL_PSD,
     )
     print(_identify_report(ident))

@@ -1608,6 +1608,7 @@ def identify(
     max_condition: float = MAX_CONDITION,
     path: tuple[ArrayLike, ArrayLike] | None = None,
     torque: str = "held",
+    smoothing: float | None = None,
 ) -> Identification:
     """Identify ``robot``'s dynamic parameters from a recorded log (module docstring).
 
@@ -1645,6 +1646,9 @@ def identify(
         torque: ``"held"`` (zero-order hold: ``pinobs.simulate``, commanded torques) or
             ``"sampled"`` (at the sample instants: ``pinobs excite``, a torque sensor);
             the wrong one biases the fit ∝ 1/rate (module docstring).
+        smoothing: the friction law's smoothing velocity ``v_s`` [rad/s], the same for every
+            joint, instead of its search (``None``; a Stribeck law's ``v_st`` is still
+            searched); ``friction=True``'s is 0.01 unless given.
 
     The report: ``residual_before`` / ``residual_after`` per joint (RMS of the
     weighted rows, rad/s²-like, on the fitted part) and ``holdout_before`` /
@@ -1681,10 +1685,16 @@ def identify(
                 f"path shapes q {est[0].shape}, v {est[1].shape} do not fit the log: "
                 f"give ({t.shape[0]}, {robot.nq}) and ({t.shape[0]}, {robot.nv})"
             )
-    reg = MomentumRegressor(robot, friction=friction, offset=offset, armature=armature)
+    if smoothing is not None and not (
+        isinstance(smoothing, int | float) and 0.0 < smoothing < math.inf
+    ):
+        raise GainError(f"smoothing={smoothing!r} [rad/s]: give a finite velocity > 0 or None")
+    reg = MomentumRegressor(
+        robot, friction=friction, offset=offset, armature=armature, smoothing=smoothing
+    )
     # a law with its smoothing velocity identified: rows of every candidate's columns
     cands = (
-        _search_candidates(reg.friction_law)
+        _search_candidates(reg.friction_law, smoothing)
         if reg.friction_law not in (None, "viscous-coulomb")
         else []
     )
@@ -1728,7 +1738,7 @@ def identify(
             friction=friction,
             offset=offset,
             armature=armature,
-            smoothing=[cands[c][0] for c in choice],
+            smoothing=[cands[c][0] for c in choice],  # (smoothing, when given, in all)
             stribeck_velocity=[cands[c][1] for c in choice],
         )
     sol = solve(reg, A, y)
@@ -1872,11 +1882,14 @@ def _per_joint(name: str, value: ArrayLike, n: int, *, positive: bool = True) ->
     return x
 
 
-def _search_candidates(law: str) -> list[tuple[float, float]]:
-    """The ``(v_s, v_st)`` pairs tried for ``law`` (``v_st`` 0 but for Stribeck)."""
+def _search_candidates(law: str, smoothing: float | None) -> list[tuple[float, float]]:
+    """The ``(v_s, v_st)`` pairs tried for ``law`` (``v_st`` 0 but for Stribeck); with
+    ``smoothing`` given, only ``v_st`` is searched (none for the other laws: ``[]``)."""
     if law == "stribeck":
+        if smoothing is not None:
+            return [(smoothing, b) for b in sorted({b for _, b in STRIBECK_GRID})]
         return list(STRIBECK_GRID)
-    return [(vs, 0.0) for vs in SMOOTHING_GRID]
+    return [] if smoothing is not None else [(vs, 0.0) for vs in SMOOTHING_GRID]
 
 
 def _widened(reg: MomentumRegressor, cands: list[tuple[float, float]]) -> MomentumRegressor:

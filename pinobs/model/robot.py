@@ -109,6 +109,10 @@ class Robot:
         friction: whether the model's joint friction (URDF ``<dynamics>``) is
             part of the dynamics (:meth:`friction_torque`).
         has_friction: whether that friction is nonzero.
+        friction_law: the friction law :meth:`friction_torque` evaluates
+            (:class:`pinobs.model.friction.FrictionLaw`): the tags' viscous + Coulomb by
+            default, or the ``friction_law`` given (identified, or read from the URDF's
+            sidecar); zero with ``friction`` off.
         root_joint: the root joint :func:`pinobs.load` added (``"fixed"``,
             ``"spherical"``, ``"freeflyer"``, ``"planar"``), or ``None`` if unknown.
         package_dirs: the ``package_dirs`` given to :func:`pinobs.load`, as
@@ -610,6 +614,16 @@ class Robot:
         if self._linear_friction:
             return self._neg_damping.copy()
         return -self.friction_law.force_derivative(v)
+
+    def friction_stiffness(self, v_near: Vector) -> Vector:
+        """The largest ``|∂τ_f/∂v|`` over ``|v| ≥ v_near`` per coordinate (``v_near ≥ 0``)
+        [N·m·s/rad]: :meth:`pinobs.model.friction.FrictionLaw.slope_bound` (the URDF's law:
+        ``−∂τ_f/∂v(v_near)`` exactly)."""
+        if not self.has_friction:
+            return np.zeros(self.nv)
+        if self._linear_friction:
+            return -self._neg_damping
+        return self.friction_law.slope_bound(v_near)
 
     def forward_dynamics(self, q: Vector, v: Vector, tau: Vector) -> Vector:
         """``v̇ = M⁻¹(τ + τ_f(v) − c(q, v) − g(q))`` by the articulated-body algorithm."""

@@ -115,6 +115,7 @@ def identify(
     refine: Sequence[float] = REFINE_ACCEL_PSD,
     noise_std: float | None = None,
     torque: str = "held",
+    smoothing: float | None = None,
 ) -> Identification:
     """Identify ``robot``'s dynamic parameters from a log, with model-based velocities.
 
@@ -144,6 +145,8 @@ def identify(
             sample (zero-order hold: ``pinobs.simulate``, most controllers) or
             ``"sampled"`` at the instants (``pinobs excite``'s trajectory: trapezoid);
             every pass (the model layer's ``torque``).
+        smoothing: the friction law's smoothing velocity [rad/s] instead of its search
+            (the model layer's ``smoothing``), every pass.
 
     ``report["velocities"]`` says which velocities the last pass used
     (``"savgol"`` or ``"rts(accel_psd=…)"``), ``report["noise_std"]`` the σ
@@ -171,6 +174,7 @@ def identify(
         "window": window,
         "max_condition": max_condition,
         "torque": torque,
+        "smoothing": smoothing,
     }
     current = ident_model.identify(robot, log, **opts)
     if not refine:

@@ -245,11 +245,25 @@ def test_identify_recovers_each_law_within_tolerance_from_noisy_positions(law_na
     # σ = 1e-5 rad, Savitzky–Golay velocities: measured on this seed, largest error / largest
     # coefficient 12 % (asymmetric), 47 % (offset-sigmoid: joint 1's offset, 0.24 for 0.1,
     # confounded with gravity), 30 % (stribeck: the static levels); bounds 1.5x those
-    # measurements (set after seeing them), the smoothing velocity within a grid step or two
+    # measurements (set after seeing them); the smoothing velocity of joints 1 and 2 within
+    # two grid steps (joint 3's, F_c 0.05 N·m, is not determined at this noise: 0.001 for
+    # 0.032 measured with offset-sigmoid)
     bound = {"asymmetric": 0.18, "offset-sigmoid": 0.7, "stribeck": 0.45}[law_name]
     np.testing.assert_allclose(fitted, truth, rtol=0.0, atol=bound * np.abs(truth).max())
-    ratio = ident.robot.friction_law.smoothing / law.smoothing
+    ratio = ident.robot.friction_law.smoothing[:2] / law.smoothing[:2]
     assert np.all((ratio > 0.3) & (ratio < 3.2)), ratio
+
+
+def test_a_given_smoothing_velocity_is_used_and_not_searched() -> None:
+    robot, plant, law = _truth("asymmetric")
+    res = pinobs.simulate(robot, [], duration=6.0, sensor=Sensor(rate=1000.0), seed=2, plant=plant)
+    ident = identify(
+        robot, res, friction="asymmetric", offset=False, path=(res.q, res.v), smoothing=0.02
+    )
+    np.testing.assert_array_equal(ident.robot.friction_law.smoothing, [0.02] * 3)
+    assert "cv_sum_of_squares" not in ident.report["friction_law"]
+    with pytest.raises(pinobs.GainError, match="smoothing=0"):
+        identify(robot, res, friction="asymmetric", smoothing=0)
 
 
 def test_identify_friction_options_are_checked_naming_the_laws() -> None:
@@ -260,3 +274,24 @@ def test_identify_friction_options_are_checked_naming_the_laws() -> None:
     with pytest.raises(pinobs.OptionError, match="give offset=False"):
         identify(robot, log, friction="offset-sigmoid", offset=True)
     assert set(FRICTION_LAWS) == {"viscous-coulomb", "offset-sigmoid", "stribeck", "asymmetric"}
+
+
+def test_the_slope_bound_is_above_every_slope_beyond_the_nearest_velocity(rng) -> None:
+    worst = 0.0
+    for _ in range(60):
+        law = FrictionLaw(
+            viscous=rng.uniform(0, 1, 1),
+            coulomb_pos=rng.uniform(0, 1, 1) * rng.integers(0, 2),
+            coulomb_neg=rng.uniform(0, 1, 1),
+            static=rng.uniform(0, 3, 1),
+            offset=[0.0],
+            smoothing=10 ** rng.uniform(-3, -1, 1),
+            stribeck_velocity=10 ** rng.uniform(-2.5, 0, 1),
+        )
+        v_near = np.array([10 ** rng.uniform(-4, 0)])
+        v = v_near + np.linspace(0.0, 3.0, 100001)
+        slopes = np.maximum(np.abs(law.force_derivative(v)), np.abs(law.force_derivative(-v)))
+        worst = max(worst, float(slopes.max() / law.slope_bound(v_near)[0]))
+    assert worst <= 1.0  # measured 0.97 (the grid's maximum within 2 %, times SLOPE_MARGIN)
+    urdf = FrictionLaw.from_urdf([0.5], [2.0])
+    np.testing.assert_array_equal(urdf.slope_bound(np.array([0.1])), urdf.force_derivative([0.1]))

@@ -9,7 +9,8 @@ import pytest
 
 import pinobs
 from pinobs.model.friction import FRICTION_LAWS, FrictionLaw, friction_basis
-from pinobs.model.identification import SMOOTHING_GRID, STRIBECK_GRID, identify
+from pinobs.model.friction_fit import SMOOTHING_GRID, STRIBECK_GRID
+from pinobs.model.identification import identify
 from pinobs.model.sidecar import sidecar_path
 from pinobs.model.urdf_writer import write_urdf
 from pinobs.simulation import Sensor
@@ -255,7 +256,7 @@ def test_identify_recovers_each_law_within_tolerance_from_noisy_positions(law_na
 
 
 def test_a_given_smoothing_velocity_is_used_and_not_searched() -> None:
-    robot, plant, law = _truth("asymmetric")
+    robot, plant, _ = _truth("asymmetric")
     res = pinobs.simulate(robot, [], duration=6.0, sensor=Sensor(rate=1000.0), seed=2, plant=plant)
     ident = identify(
         robot, res, friction="asymmetric", offset=False, path=(res.q, res.v), smoothing=0.02

@@ -543,3 +543,21 @@ def test_identify_payload_finds_a_known_load_on_a_calibrated_model(tmp_path, cap
     assert loaded.model.inertias[3].mass == pytest.approx(model.inertias[3].mass, rel=1e-3)
     assert main([*argv, "--payload", "nowhere", "--out", str(tmp_path / "x.urdf")]) == 2
     assert "link3" in capsys.readouterr().err
+
+
+def test_identify_fits_a_friction_law_and_saves_it_in_the_sidecar(
+    planar_log, tmp_path, capsys
+) -> None:
+    log, _ = planar_log
+    out = tmp_path / "law.urdf"
+    args = ["identify", "--robot", "planar_3r", "--log", str(log), "--no-refine"]
+    assert main([*args, "--friction-law", "asymmetric", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "friction law asymmetric: smoothing velocity v_s joint1" in text
+    assert "joint1.coulomb_pos" in text and "law.pinobs.json" in text
+    law = pinobs.load(out, friction=True).friction_law
+    assert law.law == "asymmetric" and np.all(law.smoothing > 0)
+    assert not np.array_equal(law.coulomb_pos, law.coulomb_neg)
+    bad = ["--friction-law", "offset-sigmoid", "--offset", "--out", str(tmp_path / "b.urdf")]
+    assert main([*args, *bad]) == 2
+    assert "give offset=False" in capsys.readouterr().err

@@ -24,6 +24,7 @@ from pinobs.cli.output import check_output
 from pinobs.errors import OutputExistsError
 from pinobs.io import read_log
 from pinobs.io.clock import without_stale
+from pinobs.model.friction import FRICTION_LAWS
 from pinobs.model.identification import MAX_CONDITION
 from pinobs.model.sidecar import sidecar_path
 
@@ -55,6 +56,23 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
     add_clock_option(p)
     p.add_argument("--out", required=True, help="the calibrated URDF to write")
     p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
+    p.add_argument(
+        "--friction-law",
+        choices=sorted(FRICTION_LAWS),
+        default="viscous-coulomb",
+        help="the joint friction law to fit (default %(default)s: the URDF's viscous + "
+        "Coulomb tanh(v/0.01)); offset-sigmoid, stribeck and asymmetric have their smoothing "
+        "velocity identified and are saved in the sidecar (offset-sigmoid has its own offset: "
+        "not with --offset)",
+    )
+    p.add_argument(
+        "--smoothing",
+        type=float,
+        default=None,
+        help="the friction law's smoothing velocity v_s [rad/s], every joint, instead of its "
+        "cross-validated search (for --friction-law offset-sigmoid, stribeck, asymmetric; "
+        "viscous-coulomb's is 0.01 unless given)",
+    )
     p.add_argument(
         "--no-armature",
         action="store_true",
@@ -153,12 +171,13 @@ def handle(args: argparse.Namespace) -> int:
     ident = identify(
         robot,
         log,
-        friction=not args.no_friction,
+        friction=False if args.no_friction else args.friction_law,
         offset=args.offset,
         armature=not args.no_armature,
         holdout=args.holdout,
         max_condition=args.max_condition,
         torque=args.torque,
+        smoothing=args.smoothing,
         refine=() if args.no_refine else REFINE_ACCEL_PSD,
         noise_std=args.noise,
         weighting=args.weighting,
@@ -172,7 +191,7 @@ def handle(args: argparse.Namespace) -> int:
     how = f"{path!r}, friction=True" + ("" if root is None else f", root_joint={root!r}")
     cli = f"--robot {path} --friction" + ("" if root is None else f" --root-joint {root}")
     sidecar = sidecar_path(path)
-    beside = f" and its rotor inertias to {sidecar}" if sidecar.is_file() else ""
+    beside = f" and its rotor inertias and friction law to {sidecar}" if sidecar.is_file() else ""
     print(f"wrote {path}{beside}: load it with pinobs.load({how}) (pinobs estimate: {cli})")
     print(
         f"run ekf or riemannian on it with {opts or 'their default options'}, or adaptive "
@@ -253,6 +272,20 @@ def _identify_report(ident: Any) -> str:
                 + "; the others stay near their nominal values)"
                 if moved
                 else "they stay near their nominal values)"
+            )
+        )
+    law = rep.get("friction_law")
+    if law and law["law"] != "viscous-coulomb":  # the velocities the search chose [rad/s]
+        lines.append(
+            f"friction law {law['law']}: smoothing velocity v_s "
+            + ", ".join(
+                f"{j} {v:.3g}" for j, v in zip(law["joints"], law["smoothing"], strict=True)
+            )
+            + " rad/s"
+            + (
+                "; Stribeck velocity " + ", ".join(f"{v:.3g}" for v in law["stribeck_velocity"])
+                if law["law"] == "stribeck"
+                else ""
             )
         )
     rho = rep.get("smoother_consistency", math.nan)

@@ -18,7 +18,10 @@ which its CRBA and ABA add to ``M``'s diagonal) and a torque offset ``<joint>.of
 
 (``v_s`` = :data:`pinobs.tolerances.COULOMB_SMOOTHING_VELOCITY`, as in
 :meth:`Robot.friction_torque`).  A torque fed at the wrong scale (motor
-constants) is absorbed by a common scale of ``(π, D, F_c)``.
+constants) is absorbed by a common scale of ``(π, D, F_c)``.  ``identify(...,
+friction=LAW)`` replaces ``D v + F_c tanh(v/v_s)`` by a law of :mod:`pinobs.model.friction`
+(its coefficients' columns ``∫ φ(v) dt``, its ``v_s`` chosen by cross-validation:
+:mod:`pinobs.model.friction_fit`).
 
 **Momentum form** (no acceleration).  With ``p = (M(q) + diag(I_a)) v``,
 ``ṗ = τ + C(q, v)ᵀ v − g(q) − D v − F_c tanh(v/v_s) + b`` (the armature is constant: it
@@ -143,10 +146,17 @@ from pinobs.errors import (
     PinobsWarning,
     TimestampError,
 )
+from pinobs.model.friction import FRICTION_LAWS, FrictionLaw, friction_basis, law_terms
+from pinobs.model.friction_fit import (
+    candidate_columns,
+    search_candidates,
+    search_smoothing,
+    widened,
+)
 from pinobs.model.noise import robust_rms, third_difference_std
 from pinobs.model.robot import Robot, Vector
 from pinobs.model.sampling import SPLIT_GAP_PERIODS, held_torque_integral, is_uniform
-from pinobs.tolerances import ABSURD_LIMIT_FACTOR, ABSURD_VALUE, COULOMB_SMOOTHING_VELOCITY
+from pinobs.tolerances import ABSURD_LIMIT_FACTOR, ABSURD_VALUE
 
 __all__ = [
     "IDENTIFICATION_FD_STEP",
@@ -195,6 +205,9 @@ PRIOR_DAMPING, PRIOR_COULOMB, PRIOR_OFFSET = 10.0, 5.0, 5.0
 #: ``M̄ⱼⱼ`` of any kind, the 19 kg torso's) raised the condition number from 8.4e5
 #: (without armature) to 2.8e6, past :data:`MAX_CONDITION`, 0.01 to 9.5e5.
 PRIOR_ARMATURE, PRIOR_ARMATURE_FLOOR = 1.0, 0.03
+
+#: Default Stribeck velocity ``v_st`` [rad/s] of a Stribeck law's columns before its search.
+STRIBECK_VELOCITY = 0.1
 
 #: Last barrier weight of :func:`_consistent` (in units of the largest posterior precision).
 MU_END = 1e-16
@@ -275,8 +288,16 @@ class MomentumRegressor:
     Args:
         robot: the nominal model (its inertials are the prior mean; its
             friction too when ``robot.friction`` is on).
-        friction: identify viscous and Coulomb friction per actuated joint.
+        friction: identify friction per actuated joint: ``True`` the URDF's viscous +
+            Coulomb law (``"viscous-coulomb"``), or the name of a law of
+            :data:`~pinobs.model.friction.FRICTION_LAWS` (its terms' columns, each
+            ``∫ φ(v) dt``: :func:`~pinobs.model.friction.friction_basis`).
         offset: identify a constant torque offset per actuated joint.
+        smoothing: the smoothing velocity ``v_s`` [rad/s] of the friction columns, one per
+            actuated joint (default: the robot's friction law's, the URDF's 0.01).
+        stribeck_velocity: ``v_st`` [rad/s] of a Stribeck law's columns, one per actuated
+            joint (default: the robot's law's where positive, else
+            :data:`STRIBECK_VELOCITY`).
         armature: identify a rotor inertia per actuated joint (off by default here: the
             online ``adaptive`` learner keeps the model's; :func:`identify` turns it on).
             Off, the model's own armature is taken as known (moved to the torque side).
@@ -292,11 +313,13 @@ class MomentumRegressor:
         self,
         robot: Robot,
         *,
-        friction: bool = True,
+        friction: bool | str = True,
         offset: bool = True,
         armature: bool = False,
         weighting: str = "inertia",
         exclude: Sequence[str] = (),
+        smoothing: ArrayLike | None = None,
+        stribeck_velocity: ArrayLike | None = None,
     ) -> None:
         _check_weighting(weighting)
         self.weighting = weighting
@@ -312,7 +335,10 @@ class MomentumRegressor:
         self._free.gravity.setZero()
         self._free_data = self._free.createData()
         self._zero = np.zeros(model.nv)
-        self.friction = bool(friction)
+        #: the friction law identified (None: no friction columns)
+        self.friction_law: str | None = _law_name(friction)
+        self.friction = self.friction_law is not None
+        self.friction_terms = law_terms(self.friction_law) if self.friction_law else ()
         self.offset = bool(offset)
         self.armature = bool(armature)
         self.bodies = tuple(_body_name(model, i) for i in range(1, model.njoints))
@@ -326,9 +352,25 @@ class MomentumRegressor:
         self.n_inertial = 10 * (model.njoints - 1)
         self.n_joint = len(self.actuated)
         names = [f"{b}.{s}" for b in self.bodies for s in SUFFIXES]
-        if self.friction:
-            names += [f"{j}.damping" for j in self.actuated_names]
-            names += [f"{j}.coulomb" for j in self.actuated_names]
+        law = robot.friction_law
+        idx = list(self.actuated)
+        self.smoothing = _per_joint(
+            "smoothing", law.smoothing[idx] if smoothing is None else smoothing, self.n_joint
+        )
+        default_st = np.where(law.stribeck_velocity[idx] > 0, law.stribeck_velocity[idx], 0.0)
+        if self.friction_law == "stribeck":
+            default_st = np.where(default_st > 0, default_st, STRIBECK_VELOCITY)
+        self.stribeck_velocity = _per_joint(
+            "stribeck_velocity",
+            default_st if stribeck_velocity is None else stribeck_velocity,
+            self.n_joint,
+            positive=self.friction_law == "stribeck",
+        )
+        # the friction columns' groups: (term, v_s, v_st) per actuated joint (the search of
+        # identify() widens them: search_smoothing)
+        self._groups = [(t, self.smoothing, self.stribeck_velocity) for t in self.friction_terms]
+        for term in self.friction_terms:
+            names += [f"{j}.{term}" for j in self.actuated_names]
         if self.armature:
             names += [f"{j}.armature" for j in self.actuated_names]
         if self.offset:
@@ -394,7 +436,7 @@ class MomentumRegressor:
     @property
     def armature_slice(self) -> slice:
         """Where the armature columns are in ``θ`` (empty when not identified)."""
-        start = self.n_inertial + (2 * self.n_joint if self.friction else 0)
+        start = self.n_inertial + len(self.friction_terms) * self.n_joint
         return slice(start, start + (self.n_joint if self.armature else 0))
 
     @property
@@ -407,11 +449,18 @@ class MomentumRegressor:
         """``θ₀``: the robot's inertials, its friction (if on), its armature and a zero offset."""
         model = self.robot.model
         parts = [model.inertias[i].toDynamicParameters() for i in range(1, model.njoints)]
-        if self.friction:
-            on = self.robot.friction
-            idx = list(self.actuated)
-            parts.append(np.asarray(model.damping)[idx] if on else np.zeros(self.n_joint))
-            parts.append(np.asarray(model.friction)[idx] if on else np.zeros(self.n_joint))
+        law, idx = self.robot.friction_law, list(self.actuated)  # (zero when friction is off)
+        mean_c = 0.5 * (law.coulomb_pos + law.coulomb_neg)
+        static = np.where(law.stribeck_velocity > 0, law.static, mean_c)  # F_s = F_c: Coulomb
+        prior_mean = {
+            "damping": law.viscous,
+            "coulomb": mean_c,
+            "coulomb_pos": law.coulomb_pos,
+            "coulomb_neg": law.coulomb_neg,
+            "static": static,
+            "friction_offset": law.offset,
+        }
+        parts += [np.asarray(prior_mean[term])[idx] for term in self.friction_terms]
         if self.armature:
             parts.append(np.asarray(model.armature)[list(self.actuated)])
         if self.offset:
@@ -438,9 +487,9 @@ class MomentumRegressor:
             # link's scale, nor is its friction)
             wr = self.weight_robot
             m_bar = np.maximum(np.diag(wr.mass_matrix(wr.neutral()))[idx], 1e-6)
-            if self.friction:
-                parts.append(PRIOR_DAMPING * m_bar)
-                parts.append(PRIOR_COULOMB * m_bar)
+            prior = {"damping": PRIOR_DAMPING, "friction_offset": PRIOR_OFFSET}
+            for term in self.friction_terms:
+                parts.append(prior.get(term, PRIOR_COULOMB) * m_bar)
             if self.armature:
                 floor = self.armature_floor()
                 parts.append(np.maximum(PRIOR_ARMATURE * np.maximum(m_nom, 1e-6), floor))
@@ -462,21 +511,53 @@ class MomentumRegressor:
         for k, i in enumerate(range(1, model.njoints)):
             pi = theta[10 * k : 10 * k + 10]
             model.inertias[i] = pin.Inertia.FromDynamicParameters(pi)
-        friction = self.robot.friction
+        friction, law = self.robot.friction, None
         if self.friction:
-            n0, n = self.n_inertial, self.n_joint
-            damping = np.array(model.damping if self.robot.friction else np.zeros(model.nv))
-            coulomb = np.array(model.friction if self.robot.friction else np.zeros(model.nv))
-            damping[list(self.actuated)] = theta[n0 : n0 + n]
-            coulomb[list(self.actuated)] = theta[n0 + n : n0 + 2 * n]
-            model.damping, model.friction = damping, coulomb
+            law = self.friction_model(theta)
+            # the tags keep F_v and the mean Coulomb level (a reader of the URDF alone)
+            model.damping = np.array(law.viscous)
+            model.friction = 0.5 * (law.coulomb_pos + law.coulomb_neg)
             friction = True
+            if self.friction_law == "viscous-coulomb" and law.is_urdf:
+                law = None  # the tags say it all (as before friction laws)
         if self.armature:
             armature = np.array(model.armature, dtype=float)
             armature[list(self.actuated)] = theta[self.armature_slice]
             model.armature = armature
         # same geometry, shared and never loaded here (with_model)
-        return self.robot.with_model(model, name=name or f"{self.robot.name}*", friction=friction)
+        return self.robot.with_model(
+            model, name=name or f"{self.robot.name}*", friction=friction, friction_law=law
+        )
+
+    def friction_model(self, theta: Vector) -> FrictionLaw:
+        """The robot's friction law with the actuated joints' replaced by ``θ``'s
+        (:mod:`pinobs.model.friction`; this regressor's ``v_s``, ``v_st``)."""
+        base = self.robot.friction_law  # zero when the robot's friction is off
+        values = {
+            k: np.array(getattr(base, k), dtype=float)
+            for k in ("viscous", "coulomb_pos", "coulomb_neg", "static", "offset")
+        }
+        smoothing = np.array(base.smoothing, dtype=float)
+        stribeck = np.array(base.stribeck_velocity, dtype=float)
+        idx = list(self.actuated)
+        smoothing[idx], stribeck[idx] = self.smoothing, self.stribeck_velocity
+        values["static"][idx] = values["offset"][idx] = 0.0  # (the law's own terms only)
+        if self.friction_law != "stribeck":
+            stribeck[idx] = 0.0
+        n0, n = self.n_inertial, self.n_joint
+        for k, term in enumerate(self.friction_terms):
+            x = theta[n0 + k * n : n0 + (k + 1) * n]
+            if term == "coulomb":
+                values["coulomb_pos"][idx] = values["coulomb_neg"][idx] = x
+            else:
+                key = {"damping": "viscous", "friction_offset": "offset"}.get(term, term)
+                values[key][idx] = x
+        return FrictionLaw(
+            **values,
+            smoothing=smoothing,
+            stribeck_velocity=stribeck,
+            law=self.friction_law or "viscous-coulomb",
+        )
 
     def offsets(self, theta: Vector) -> Vector:
         """The torque offset ``b`` per velocity coordinate (zero where none is identified)."""
@@ -549,9 +630,17 @@ class MomentumRegressor:
         else:
             tau_int = _cumtrapz(tau, t)
         vf = v[:, list(self.actuated)]
-        tanh = np.tanh(vf / COULOMB_SMOOTHING_VELOCITY)
-        trap_v = _cumtrapz(vf, t)
-        trap_tanh = _cumtrapz(tanh, t)
+        # friction columns: ∫ φ(v) dt of each group's term (pinobs.model.friction), the
+        # groups' columns on their joints' rows
+        trap_f = (
+            _cumtrapz(
+                np.hstack([friction_basis(term, vf, vs, vst) for term, vs, vst in self._groups]),
+                t,
+            )
+            if self._groups
+            else np.zeros((t.shape[0], 0))
+        )
+        select_f = np.tile(self._select, len(self._groups))
         ym_prev = self.momentum(q[0], v[0])
         g_prev = self.drift(q[0], v[0])
         for w in range(n_win):
@@ -568,9 +657,8 @@ class MomentumRegressor:
             ym = self.momentum(q[k1], v[k1])
             block = [ym - ym_prev - acc]
             ym_prev = ym
-            if self.friction:
-                block.append(self._select * (trap_v[k1] - trap_v[k0]))
-                block.append(self._select * (trap_tanh[k1] - trap_tanh[k0]))
+            if self._groups:
+                block.append(select_f * (trap_f[k1] - trap_f[k0]))
             if self.armature:  # diag(I_a) (v₂ − v₁): the rotors' momentum
                 block.append(self._select * (vf[k1] - vf[k0]))
             if self.offset:
@@ -958,8 +1046,17 @@ def _is_consistent(reg: MomentumRegressor | PayloadRegressor, theta: Vector) -> 
 
 
 def _nonnegative(reg: MomentumRegressor | PayloadRegressor) -> NDArray[np.intp]:
-    """The indices of ``θ`` that must not be negative: friction and armature."""
-    friction = np.arange(reg.n_inertial, reg.n_inertial + (2 * reg.n_joint if reg.friction else 0))
+    """The indices of ``θ`` that must not be negative: friction (not its offset, which does not
+    dissipate: :mod:`pinobs.model.friction`) and armature."""
+    n0, n = reg.n_inertial, reg.n_joint
+    friction = np.concatenate(
+        [
+            np.arange(n0 + k * n, n0 + (k + 1) * n)
+            for k, term in enumerate(reg.friction_terms)
+            if term != "friction_offset"
+        ]
+        or [np.zeros(0, dtype=np.intp)]
+    )
     arm = reg.armature_slice
     return np.concatenate([friction, np.arange(arm.start, arm.stop)]).astype(np.intp)
 
@@ -1670,6 +1767,7 @@ class PayloadRegressor:
 
     n_joint = 0
     friction = False
+    friction_terms: tuple[str, ...] = ()
     offset = False
     armature = False
 
@@ -1909,9 +2007,14 @@ def _check_options(
     max_condition: object,
 ) -> None:
     """:func:`identify`'s options: booleans, numbers in range (named in the error)."""
-    for name, flag in (("friction", friction), ("offset", offset), ("armature", armature)):
+    for name, flag in (("offset", offset), ("armature", armature)):
         if not isinstance(flag, (bool, np.bool_)):
             raise OptionError(f"{name}={flag!r}: give True or False")
+    if _law_name(friction) == "offset-sigmoid" and offset:
+        raise OptionError(
+            "friction='offset-sigmoid' has its own offset F_0 per joint, which offset=True's "
+            "column would duplicate: give offset=False"
+        )
     for name, x in (("holdout", holdout), ("window", window), ("max_condition", max_condition)):
         if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.number)):
             raise OptionError(f"{name}={x!r}: give a number")
@@ -1928,7 +2031,7 @@ def identify(
     robot: Robot,
     log: Any,
     *,
-    friction: bool = True,
+    friction: bool | str = True,
     offset: bool = True,
     armature: bool = True,
     holdout: float = 0.2,
@@ -1939,6 +2042,7 @@ def identify(
     weighting: str = "inertia",
     exclude: Sequence[str] = (),
     payload: str | None = None,
+    smoothing: float | None = None,
 ) -> Identification:
     """Identify ``robot``'s dynamic parameters from a recorded log (module docstring).
 
@@ -1952,7 +2056,16 @@ def identify(
             Short runs of NaN rows are filled (:func:`fill_short_gaps`), longer ones are
             gaps; windows never straddle a gap, nor an interval longer than
             :data:`~pinobs.model.sampling.SPLIT_GAP_PERIODS` median intervals.
-        friction, offset: identify viscous/Coulomb friction and a torque offset.
+        friction, offset: identify joint friction and a torque offset.  ``friction``:
+            ``True`` the URDF's viscous + Coulomb law (``v_s`` fixed at 0.01 rad/s), or a
+            law of :data:`~pinobs.model.friction.FRICTION_LAWS` (``"offset-sigmoid"``,
+            ``"stribeck"``, ``"asymmetric"``), whose coefficients are fitted linearly and
+            whose smoothing velocity ``v_s`` (and Stribeck ``v_st``) per joint is chosen on
+            a grid by cross-validation over the fitted part
+            (:func:`pinobs.model.friction_fit.search_smoothing`); the law goes with the calibrated
+            robot (and its sidecar when saved).  ``"offset-sigmoid"`` carries its own
+            offset ``F_0`` (part of the robot's friction; not dissipative): give
+            ``offset=False`` with it.
         armature: identify a rotor inertia per actuated joint (``model.armature``, added to
             ``M``'s diagonal; prior mean the model's own, usually 0, width
             :data:`PRIOR_ARMATURE`); ``False`` keeps the model's as known.
@@ -1982,6 +2095,9 @@ def identify(
             (its inertials, friction, armature fixed: ``friction``, ``offset``, ``armature``
             and ``max_condition`` do not apply; a poorly excited load is said in
             ``warnings``).
+        smoothing: the friction law's smoothing velocity ``v_s`` [rad/s], the same for every
+            joint, instead of its search (``None``; a Stribeck law's ``v_st`` is still
+            searched); ``friction=True``'s is 0.01 unless given.
 
     The report: ``residual_before`` / ``residual_after`` per joint (RMS of the
     weighted rows, rad/s²-like, on the fitted part) and ``holdout_before`` /
@@ -2037,6 +2153,10 @@ def identify(
                 f"path shapes q {est[0].shape}, v {est[1].shape} do not fit the log: "
                 f"give ({t.shape[0]}, {robot.nq}) and ({t.shape[0]}, {robot.nv})"
             )
+    if smoothing is not None and not (
+        isinstance(smoothing, int | float) and 0.0 < smoothing < math.inf
+    ):
+        raise GainError(f"smoothing={smoothing!r} [rad/s]: give a finite velocity > 0 or None")
     reg = MomentumRegressor(
         robot,
         friction=friction,
@@ -2044,7 +2164,15 @@ def identify(
         armature=armature,
         weighting=weighting,
         exclude=exclude,
+        smoothing=smoothing,
     )
+    # a law with its smoothing velocity identified: rows of every candidate's columns
+    cands = (
+        search_candidates(reg.friction_law, smoothing)
+        if reg.friction_law not in (None, "viscous-coulomb")
+        else []
+    )
+    rows_reg = widened(reg, cands) if cands else reg
     finite = np.isfinite(t)
     t_end = float(np.max(t[finite])) if finite.any() else 0.0
     t_start = float(np.min(t[finite])) if finite.any() else 0.0
@@ -2063,7 +2191,7 @@ def identify(
     split = t_end - holdout * (t_end - t_start)
     fit = t <= split
     A, y, ends = build_rows(
-        reg, t[fit], q[fit], tau[fit], window=window, path=_rows_of(est, fit), torque=torque
+        rows_reg, t[fit], q[fit], tau[fit], window=window, path=_rows_of(est, fit), torque=torque
     )
     if A.shape[0] == 0:
         raise IdentificationError(
@@ -2079,6 +2207,20 @@ def identify(
     nv = robot.nv
     channel = np.tile(np.arange(nv), A.shape[0] // nv)
     used_rows = ~np.isin(channel, excluded)
+    searched: dict[str, Any] = {}
+    if cands:  # (the search's own least squares, unweighted by channel)
+        choice, searched = search_smoothing(reg, A[used_rows], y[used_rows], cands)
+        A = A[:, candidate_columns(reg, len(cands), choice)]
+        reg = MomentumRegressor(
+            robot,
+            friction=friction,
+            offset=offset,
+            armature=armature,
+            weighting=weighting,
+            exclude=exclude,
+            smoothing=[cands[c][0] for c in choice],  # (smoothing, when given, in all)
+            stribeck_velocity=[cands[c][1] for c in choice],
+        )
     sol = solve(
         reg,
         A[used_rows],
@@ -2207,6 +2349,14 @@ def identify(
         # densities; measured in benchmarks/learning.py, the plain ekf trusts it too much)
         "observer_options": {"accel_psd": 1e-6, "disturbance_psd": 1e-4},
     }
+    if reg.friction:  # the law fitted, its velocities per actuated joint [rad/s]
+        report["friction_law"] = {
+            "law": reg.friction_law,
+            "joints": list(reg.actuated_names),
+            "smoothing": reg.smoothing.tolist(),
+            "stribeck_velocity": reg.stribeck_velocity.tolist(),
+            **searched,
+        }
     report["warnings"] = _fit_warnings(report)
     if sol.n_rows < enough:
         report["warnings"].append(
@@ -2225,3 +2375,28 @@ def identify(
         report=report,
         regressor=reg,
     )
+
+
+# ------------------------------------------------------------ friction laws
+def _law_name(friction: object) -> str | None:
+    """``identify``'s ``friction``: ``True`` → the URDF's law, ``False`` → none, or a law's name.
+
+    Raises:
+        OptionError: anything else (naming the laws).
+    """
+    if isinstance(friction, bool | np.bool_):
+        return "viscous-coulomb" if friction else None
+    if isinstance(friction, str) and friction in FRICTION_LAWS:
+        return friction
+    raise OptionError(
+        f"friction={friction!r}: give True, False or a friction law: "
+        + ", ".join(sorted(FRICTION_LAWS))
+    )
+
+
+def _per_joint(name: str, value: ArrayLike, n: int, *, positive: bool = True) -> Vector:
+    """``value`` as ``n`` finite numbers ``> 0`` (``≥ 0`` unless ``positive``), broadcast."""
+    x = np.array(np.broadcast_to(np.asarray(value, dtype=float), (n,)), dtype=float)
+    if not np.all(np.isfinite(x)) or np.any(x < 0) or (positive and np.any(x == 0)):
+        raise GainError(f"{name}={x.tolist()} [rad/s]: give finite velocities > 0")
+    return x

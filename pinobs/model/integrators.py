@@ -145,12 +145,13 @@ def friction_substeps(robot: Robot, v: Vector, acc: Vector, minv_diag: Vector, d
     on a Panda's wrist at 1 kHz with 2 N·m), and one RK4 step is stable only for
     ``λ h < 2.785`` (on the negative real axis).  ``λ = maxᵢ (M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|`` at the
     velocity nearest zero that joint ``i`` can reach in the step, ``max(|vᵢ| − |aᵢ| dt, 0)``
-    (the slope peaks at ``v = 0``); ``acc`` [rad/s²] the acceleration at the start,
+    (the URDF's slope peaks at ``v = 0``; other laws' largest slope beyond it:
+    :meth:`Robot.friction_stiffness`); ``acc`` [rad/s²] the acceleration at the start,
     ``minv_diag`` the diagonal of ``M⁻¹``.  The step of the simulator's plant and of the
     model-based observers' prediction (:mod:`pinobs.observers.ekf` measures it).
     """
     v_near = np.maximum(np.abs(v) - np.abs(acc) * dt, 0.0)
-    lam = float(np.max(minv_diag * -robot.friction_derivative(v_near)))
+    lam = float(np.max(minv_diag * robot.friction_stiffness(v_near)))
     if not math.isfinite(lam):  # a lost filter's state: one step, its NaN reported by the caller
         return 1
     return max(1, math.ceil(lam * dt / RK4_STIFFNESS))

@@ -38,7 +38,7 @@ from pinobs.errors import (
 from pinobs.model.mjcf import MujocoMap, build_from_mujoco, cross_check
 from pinobs.model.robot import Robot
 from pinobs.model.sanity import check_model, check_urdf
-from pinobs.model.sidecar import apply_sidecar
+from pinobs.model.sidecar import apply_sidecar, read_friction_law
 from pinobs.model.urdf import read_urdf
 
 __all__ = ["LockSpec", "RobotEntry", "load", "resolve_source", "robot_entries", "robot_names"]
@@ -821,7 +821,9 @@ def load(
             fixed for files; the model's own for a ``pin.Model``), ``"fixed"``,
             ``"spherical"``, ``"freeflyer"`` or ``"planar"``.
         friction: include the joint friction of the URDF's ``<dynamics damping
-            friction>`` tags in the dynamics (:meth:`Robot.friction_torque`).
+            friction>`` tags in the dynamics (:meth:`Robot.friction_torque`), or the
+            friction law of its sidecar when it has one (``pinobs identify
+            --friction-law``: :mod:`pinobs.model.friction`).
             ``None`` means off for URDFs (many published ones carry placeholder
             values: pr2's torso has 20000 N·s/m; switch it on when yours are
             identified) and on for MJCF files loaded through MuJoCo (their
@@ -938,6 +940,11 @@ def load(
     )
     robot.mimic = mimic  # as asked (a saved run reloads its robot so: pinobs play)
     robot = _locked(robot, lock)
+    if friction and _is_urdf(path):  # a friction law beyond the tags (pinobs.model.sidecar)
+        law = read_friction_law(robot.model, path, locked=frozenset(robot.locked))
+        if law is not None:
+            robot = robot.with_model(robot.model, friction_law=law)
+            robot.mimic = mimic
     if check:  # (after locking: a locked joint's massless bodies are no longer refused)
         check_model(robot.model)
     return robot

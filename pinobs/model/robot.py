@@ -35,10 +35,10 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import ConfigurationError, DimensionError, NonFiniteError
+from pinobs.model.friction import FrictionLaw
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
     ABSURD_VALUE,
-    COULOMB_SMOOTHING_VELOCITY,
     QUATERNION_NORM_TOL,
 )
 
@@ -109,6 +109,10 @@ class Robot:
         friction: whether the model's joint friction (URDF ``<dynamics>``) is
             part of the dynamics (:meth:`friction_torque`).
         has_friction: whether that friction is nonzero.
+        friction_law: the friction law :meth:`friction_torque` evaluates
+            (:class:`pinobs.model.friction.FrictionLaw`): the tags' viscous + Coulomb by
+            default, or the ``friction_law`` given (identified, or read from the URDF's
+            sidecar); zero with ``friction`` off.
         root_joint: the root joint :func:`pinobs.load` added (``"fixed"``,
             ``"spherical"``, ``"freeflyer"``, ``"planar"``), or ``None`` if unknown.
         package_dirs: the ``package_dirs`` given to :func:`pinobs.load`, as
@@ -133,6 +137,7 @@ class Robot:
         geometry: GeometryLoader | None = None,
         package_dirs: Sequence[str | Path] = (),
         locked: Mapping[str, float | tuple[float, ...]] | None = None,
+        friction_law: FrictionLaw | None = None,
     ) -> None:
         self.model = model
         self.locked: dict[str, float | tuple[float, ...]] = dict(locked or {})
@@ -148,12 +153,26 @@ class Robot:
         self._data = model.createData()
         # Joint friction from the URDF <dynamics damping="…" friction="…"/> tags (Pinocchio
         # loads them into model.damping / model.friction but its ABA ignores them).
+        # A FrictionLaw given (identified, or read from a sidecar: pinobs.model.friction)
+        # replaces the tags' viscous + Coulomb law.
         self.friction = bool(friction)
-        self._damping = np.array(model.damping, dtype=float) if friction else np.zeros(model.nv)
-        self._coulomb = np.array(model.friction, dtype=float) if friction else np.zeros(model.nv)
-        self.has_friction = bool(np.any(self._damping) or np.any(self._coulomb))
-        self._has_coulomb = bool(np.any(self._coulomb))  # else τ_f is linear: no tanh to take
-        self._neg_damping = -self._damping
+        if friction_law is not None and friction_law.nv != model.nv:
+            raise DimensionError(
+                f"friction_law has {friction_law.nv} coordinates; the model has nv={model.nv}"
+            )
+        self._given_law = friction_law
+        if not friction:
+            law = FrictionLaw.zero(model.nv)
+        elif friction_law is None:
+            law = FrictionLaw.from_urdf(model.damping, model.friction)
+        else:
+            law = friction_law
+        #: the friction law in use (zero when ``friction`` is off): :mod:`pinobs.model.friction`
+        self.friction_law = law
+        self.has_friction = bool(np.any(law.viscous) or law.has_coulomb or np.any(law.offset))
+        # a viscous-only law is linear: no tanh to take
+        self._linear_friction = not law.has_coulomb and not np.any(law.offset)
+        self._neg_damping = -law.viscous
         self._neg_damping.setflags(write=False)
         # Zero-gravity copy: aba(q, v, 0) on it is -M⁻¹ c(q, v), the geodesic spray.
         self._free = model.copy()
@@ -274,12 +293,18 @@ class Robot:
         return self.with_model(self.model.copy())
 
     def with_model(
-        self, model: pin.Model, *, name: str | None = None, friction: bool | None = None
+        self,
+        model: pin.Model,
+        *,
+        name: str | None = None,
+        friction: bool | None = None,
+        friction_law: FrictionLaw | None = None,
     ) -> Robot:
         """This robot on another ``pin.Model`` of the same tree (perturbed or identified
         parameters): same source, package directories, root joint, ``mimic``, locked joints
         and geometry (shared, loaded or not: building one never loads meshes); friction as
-        this robot's unless given."""
+        this robot's unless given: its friction law when it was given one
+        (:attr:`friction_law`), else the new model's ``<dynamics>`` tags."""
         robot = Robot(
             model,
             name=self.name if name is None else name,
@@ -288,6 +313,7 @@ class Robot:
             root_joint=self.root_joint,
             package_dirs=self.package_dirs,
             locked=self.locked,
+            friction_law=self._given_law if friction_law is None else friction_law,
             **self._geometry_kwargs(),
         )
         robot.mimic = self.mimic  # a run of it is reloaded as this one was (pinobs play)
@@ -339,7 +365,7 @@ class Robot:
             model.inertias[last] = model.inertias[last] + pin.Inertia(
                 float(mass), np.asarray(offset, dtype=float), np.zeros((3, 3))
             )
-        friction = self.friction
+        friction, law = self.friction, None
         if damping is not None or coulomb is not None:
             model.damping = np.asarray(
                 damping if damping is not None else np.zeros(self.nv), dtype=float
@@ -348,7 +374,10 @@ class Robot:
                 coulomb if coulomb is not None else np.zeros(self.nv), dtype=float
             )
             friction = True
-        return self.with_model(model, name=name or f"{self.name}~", friction=friction)
+            law = FrictionLaw.from_urdf(model.damping, model.friction)  # replaces a given law
+        return self.with_model(
+            model, name=name or f"{self.name}~", friction=friction, friction_law=law
+        )
 
     # ------------------------------------------------------------- validation
     def check_configuration(self, q: ArrayLike, *, what: str = "q") -> Vector:
@@ -561,31 +590,40 @@ class Robot:
         return np.array(pin.nonLinearEffects(self.model, self._data, q, v), dtype=float)
 
     def friction_torque(self, v: Vector) -> Vector:
-        """Joint friction torque ``τ_f(v) = −D v − F_c tanh(v / v_s)`` [N·m or N].
+        """Joint friction torque ``τ_f(v) = −f(v)`` [N·m or N], ``f`` the friction law.
 
-        ``D`` (viscous) and ``F_c`` (Coulomb) from the URDF ``<dynamics damping
-        friction>`` tags; the Coulomb step is smoothed over
-        ``v_s`` = :data:`pinobs.tolerances.COULOMB_SMOOTHING_VELOCITY` so the
-        dynamics stay smooth (integrators and Jacobians need it).  Zero when
+        ``f(v) = F_v v + (1 − e)[F_c⁺ s(1+s)/2 + F_c⁻ s(1−s)/2] + F_s s e + F_0``,
+        ``s = tanh(v/v_s)``, ``e = exp(−(v/v_st)²)`` (:mod:`pinobs.model.friction`).  By
+        default the URDF's ``<dynamics damping friction>`` tags: ``τ_f = −D v − F_c tanh(v /
+        v_s)``, ``v_s`` = :data:`pinobs.tolerances.COULOMB_SMOOTHING_VELOCITY` (the step
+        smoothed so the dynamics stay smooth: integrators and Jacobians need it); a law
+        given to the robot (identified, or read from its sidecar) replaces them.  Zero when
         the robot was built with ``friction=False``.
         """
         if not self.has_friction:
             return np.zeros(self.nv)
-        tau_f = self._neg_damping * v
-        if self._has_coulomb:  # (a viscous-only friction skips the zero Coulomb term's tanh)
-            tau_f -= self._coulomb * np.tanh(v / COULOMB_SMOOTHING_VELOCITY)
-        return tau_f
+        if self._linear_friction:  # (a viscous-only friction skips the zero Coulomb term's tanh)
+            return self._neg_damping * v
+        return -self.friction_law.force(v)
 
     def friction_derivative(self, v: Vector) -> Vector:
-        """``∂τ_f/∂v``, diagonal, returned as its diagonal, shape ``(nv,)``."""
+        """``∂τ_f/∂v``, diagonal, returned as its diagonal, shape ``(nv,)``
+        (:meth:`pinobs.model.friction.FrictionLaw.force_derivative`, negated)."""
         if not self.has_friction:
             return np.zeros(self.nv)
-        if not self._has_coulomb:
+        if self._linear_friction:
             return self._neg_damping.copy()
-        vs = COULOMB_SMOOTHING_VELOCITY
-        return self._neg_damping - self._coulomb / vs * (
-            1.0 - np.tanh(v / vs) ** 2
-        )  # sech², no overflow
+        return -self.friction_law.force_derivative(v)
+
+    def friction_stiffness(self, v_near: Vector) -> Vector:
+        """The largest ``|∂τ_f/∂v|`` over ``|v| ≥ v_near`` per coordinate (``v_near ≥ 0``)
+        [N·m·s/rad]: :meth:`pinobs.model.friction.FrictionLaw.slope_bound` (the URDF's law:
+        ``−∂τ_f/∂v(v_near)`` exactly)."""
+        if not self.has_friction:
+            return np.zeros(self.nv)
+        if self._linear_friction:
+            return -self._neg_damping
+        return self.friction_law.slope_bound(v_near)
 
     def forward_dynamics(self, q: Vector, v: Vector, tau: Vector) -> Vector:
         """``v̇ = M⁻¹(τ + τ_f(v) − c(q, v) − g(q))`` by the articulated-body algorithm."""

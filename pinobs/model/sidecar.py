@@ -11,7 +11,17 @@ to a small JSON file beside the URDF, ``<name>.pinobs.json`` for ``<name>.urdf``
 values in kg·m² (revolute) or kg (prismatic), a list of ``nv`` numbers for a joint of
 several velocity coordinates, joints left out having none; and :func:`pinobs.load`
 reads it when it is there.  Friction stays in the URDF (``<dynamics damping
-friction>``).
+friction>``) unless it is more than those tags say (an identified smoothing velocity, an
+asymmetric Coulomb level, a Stribeck curve, an offset: :mod:`pinobs.model.friction`); then
+the sidecar holds the whole law of each one-coordinate joint as well::
+
+    "friction": {"elbow_joint": {"law": "stribeck", "viscous": 4.1, "coulomb_pos": 9.0,
+                 "coulomb_neg": 9.0, "static": 11.2, "offset": 0.0, "smoothing": 0.02,
+                 "stribeck_velocity": 0.05}, ...}
+
+(:meth:`~pinobs.model.friction.FrictionLaw.as_dict`), which replaces the tags when the
+robot is loaded with ``friction=True`` (the tags still hold ``F_v`` and the mean Coulomb
+level, for other readers of the URDF).
 """
 
 from __future__ import annotations
@@ -24,9 +34,17 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from pinobs.errors import ModelFileError
+from pinobs.errors import GainError, ModelFileError
+from pinobs.model.friction import FrictionLaw
 
-__all__ = ["SIDECAR_FORMAT", "SIDECAR_SUFFIX", "apply_sidecar", "sidecar_path", "write_sidecar"]
+__all__ = [
+    "SIDECAR_FORMAT",
+    "SIDECAR_SUFFIX",
+    "apply_sidecar",
+    "read_friction_law",
+    "sidecar_path",
+    "write_sidecar",
+]
 
 #: What a URDF's sidecar is called: the URDF's name with this suffix instead of ``.urdf``.
 SIDECAR_SUFFIX = ".pinobs.json"
@@ -42,10 +60,20 @@ def sidecar_path(urdf: str | Path) -> Path:
     return path.with_name(stem + SIDECAR_SUFFIX)
 
 
-def write_sidecar(model: pin.Model, urdf: str | Path) -> Path | None:
-    """Write ``model``'s nonzero armature beside ``urdf``; returns the file, or ``None``
-    (and a stale sidecar from an earlier write removed) when the model has none."""
+def write_sidecar(
+    model: pin.Model, urdf: str | Path, friction_law: FrictionLaw | None = None
+) -> Path | None:
+    """Write ``model``'s nonzero armature, and ``friction_law`` when given and more than the
+    URDF's tags say (:attr:`~pinobs.model.friction.FrictionLaw.is_urdf`), beside ``urdf``;
+    returns the file, or ``None`` (and a stale sidecar from an earlier write removed) when
+    there is nothing to write."""
     path = sidecar_path(urdf)
+    laws: dict[str, Any] = {}
+    if friction_law is not None and not friction_law.is_urdf:
+        for i in range(1, model.njoints):
+            joint = model.joints[i]
+            if joint.nv == 1:  # (the law per coordinate; a multi-dof joint keeps the tags')
+                laws[str(model.names[i])] = friction_law.as_dict(joint.idx_v)
     armature = np.asarray(model.armature, dtype=float)
     entries: dict[str, Any] = {}
     for i in range(1, model.njoints):
@@ -57,10 +85,13 @@ def write_sidecar(model: pin.Model, urdf: str | Path) -> Path | None:
             entries[str(model.names[i])] = (
                 float(values[0]) if joint.nv == 1 else [float(x) for x in values]
             )
-    if not entries:
+    if not entries and not laws:
         path.unlink(missing_ok=True)  # an earlier model's armature would be read back
         return None
-    text = json.dumps({"format": SIDECAR_FORMAT, "version": 1, "armature": entries}, indent=2)
+    content: dict[str, Any] = {"format": SIDECAR_FORMAT, "version": 1, "armature": entries}
+    if laws:
+        content["friction"] = laws
+    text = json.dumps(content, indent=2)
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text + "\n", encoding="utf-8")
     tmp.replace(path)
@@ -77,17 +108,9 @@ def apply_sidecar(model: pin.Model, urdf: str | Path) -> Path | None:
             velocity coordinate of its joint.
     """
     path = sidecar_path(urdf)
-    if not path.is_file():
+    data = _read(path)
+    if data is None:
         return None
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ModelFileError(f"cannot parse the sidecar {str(path)!r}: {exc}") from exc
-    if not isinstance(data, dict) or data.get("format") != SIDECAR_FORMAT:
-        raise ModelFileError(
-            f'{str(path)!r} is not a pinobs sidecar (no "format": "{SIDECAR_FORMAT}"); '
-            "move it away or rename it"
-        )
     entries = data.get("armature", {})
     if not isinstance(entries, dict):
         raise ModelFileError(f'sidecar {str(path)!r}: "armature" must map joint names to values')
@@ -116,3 +139,65 @@ def apply_sidecar(model: pin.Model, urdf: str | Path) -> Path | None:
         armature[joint.idx_v : joint.idx_v + joint.nv] = values
     model.armature = armature
     return path
+
+
+def _read(path: Path) -> dict[str, Any] | None:
+    """The parsed sidecar at ``path``, or ``None`` when there is none."""
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelFileError(f"cannot parse the sidecar {str(path)!r}: {exc}") from exc
+    if not isinstance(data, dict) or data.get("format") != SIDECAR_FORMAT:
+        raise ModelFileError(
+            f'{str(path)!r} is not a pinobs sidecar (no "format": "{SIDECAR_FORMAT}"); '
+            "move it away or rename it"
+        )
+    return data
+
+
+def read_friction_law(
+    model: pin.Model, urdf: str | Path, *, locked: frozenset[str] = frozenset()
+) -> FrictionLaw | None:
+    """The friction law of the sidecar beside ``urdf``, on ``model``'s coordinates, or
+    ``None`` when there is no sidecar or it has no ``"friction"``.
+
+    Coordinates it does not name keep the URDF tags' law
+    (:meth:`~pinobs.model.friction.FrictionLaw.from_urdf` of ``model.damping``,
+    ``model.friction``); joints in ``locked`` (fixed by ``pinobs.load(..., lock=...)``)
+    are skipped.
+
+    Raises:
+        ModelFileError: the sidecar cannot be parsed, names a joint the model does not have
+            (listing those it has), or gives an entry that is not a valid law.
+    """
+    path = sidecar_path(urdf)
+    data = _read(path)
+    if data is None or "friction" not in data:
+        return None
+    entries = data["friction"]
+    if not isinstance(entries, dict):
+        raise ModelFileError(f'sidecar {str(path)!r}: "friction" must map joint names to laws')
+    names = [str(model.names[i]) for i in range(1, model.njoints) if model.joints[i].nv == 1]
+    law = FrictionLaw.from_urdf(model.damping, model.friction)
+    labels = set()
+    for name, entry in entries.items():
+        if name in locked:
+            continue
+        if name not in names:
+            raise ModelFileError(
+                f"sidecar {str(path)!r} gives a friction law for joint {name!r}, which the "
+                f"robot does not have; its one-coordinate joints: {', '.join(names)}"
+            )
+        if not isinstance(entry, dict):
+            raise ModelFileError(f"sidecar {str(path)!r}: joint {name!r}'s friction {entry!r}")
+        try:
+            law = law.with_coordinate(model.joints[model.getJointId(name)].idx_v, entry)
+        except GainError as exc:
+            raise ModelFileError(f"sidecar {str(path)!r}, joint {name!r}: {exc}") from exc
+        labels.add(str(entry.get("law", "")))
+    return FrictionLaw(
+        **{k: getattr(law, k) for k in law.__dataclass_fields__ if k != "law"},
+        law=labels.pop() if len(labels) == 1 else "mixed",
+    )

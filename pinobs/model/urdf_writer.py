@@ -161,11 +161,10 @@ def _inertial(link: ET.Element, inertia: pin.Inertia) -> None:
 
 
 def _friction(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    """Viscous and Coulomb coefficients per velocity coordinate (zero with friction off)."""
-    model = robot.model
-    if not robot.friction:
-        return np.zeros(model.nv), np.zeros(model.nv)
-    return np.asarray(model.damping, dtype=float), np.asarray(model.friction, dtype=float)
+    """Viscous and Coulomb coefficients per velocity coordinate (zero with friction off): its
+    friction law's ``F_v`` and mean Coulomb level (the rest of a law goes to the sidecar)."""
+    law = robot.friction_law  # (zero with friction off; the tags' own law by default)
+    return np.array(law.viscous), 0.5 * (law.coulomb_pos + law.coulomb_neg)
 
 
 def _rewritten_urdf(robot: Robot) -> ET.ElementTree[ET.Element]:
@@ -355,5 +354,5 @@ def write_urdf(robot: Robot, path: str | Path) -> str:
     tmp = out.with_name(out.name + ".tmp")
     tree.write(tmp, encoding="utf-8", xml_declaration=True)
     tmp.replace(out)
-    write_sidecar(robot.model, out)
+    write_sidecar(robot.model, out, robot.friction_law if robot.friction else None)
     return str(out)

@@ -127,7 +127,7 @@ def identify(
     robot: Robot,
     log: Any,
     *,
-    friction: bool = True,
+    friction: bool | str = True,
     offset: bool = False,
     armature: bool = True,
     holdout: float = 0.2,
@@ -139,6 +139,7 @@ def identify(
     weighting: str = "inertia",
     exclude: Sequence[str] = (),
     payload: str | None = None,
+    smoothing: float | None = None,
 ) -> Identification:
     """Identify ``robot``'s dynamic parameters from a log, with model-based velocities.
 
@@ -171,6 +172,8 @@ def identify(
         weighting, exclude, payload: the model layer's (the rows weighted by ``M⁻¹`` by
             default, or each torque channel by its own residual scale in N·m; joints whose torque channel is left
             out; a load's ten parameters on a calibrated ``robot``), every pass.
+        smoothing: the friction law's smoothing velocity [rad/s] instead of its search
+            (the model layer's ``smoothing``), every pass.
 
     ``report["velocities"]`` says which velocities the last pass used
     (``"savgol"`` or ``"rts(accel_psd=…)"``), ``report["noise_std"]`` the σ
@@ -201,6 +204,7 @@ def identify(
         "weighting": weighting,
         "exclude": tuple(exclude),
         "payload": payload,
+        "smoothing": smoothing,
     }
     current = ident_model.identify(robot, log, **opts)
     if not refine:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import pinobs
+from pinobs.model.friction import FrictionLaw
 from pinobs.observers import observer_class, observer_names
 
 MODEL_BASED = [n for n in observer_names() if observer_class(n).uses_torque]
@@ -18,7 +19,21 @@ def _robots() -> list[pinobs.Robot]:
     top = pinobs.load("top").perturbed(
         name="top+friction", damping=[0.01, 0.01, 0.005], coulomb=[0.0, 0.0, 0.0]
     )
-    return [cartpole, top]
+    # every term of pinobs.model.friction at once: asymmetric Coulomb, Stribeck, offset
+    law = FrictionLaw(
+        viscous=[0.5, 0.02],
+        coulomb_pos=[0.3, 0.01],
+        coulomb_neg=[0.2, 0.015],
+        static=[0.6, 0.03],
+        offset=[0.05, -0.002],
+        smoothing=[0.02, 0.05],
+        stribeck_velocity=[0.1, 0.2],
+        law="mixed",
+    )
+    laws = cartpole.with_model(
+        cartpole.model, name="cartpole+friction-law", friction=True, friction_law=law
+    )
+    return [cartpole, top, laws]
 
 
 @pytest.mark.parametrize("name", MODEL_BASED)

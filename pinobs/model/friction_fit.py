@@ -1,0 +1,167 @@
+"""The smoothing velocity of a friction law, chosen by cross-validation (identification).
+
+:func:`pinobs.model.identification.identify` with ``friction=LAW``
+(:data:`pinobs.model.friction.FRICTION_LAWS`) fits a law's coefficients linearly; its
+smoothing velocity ``v_s`` (and a Stribeck law's ``v_st``) enters the columns
+nonlinearly.  The rows are built once with every candidate's columns (:func:`widened`:
+the expensive drift regressors are shared), and each joint's candidate is chosen by the
+cross-validated residual of the fitted rows (:func:`search_smoothing`); the chosen
+columns are then the law's (:func:`candidate_columns`).  A grid, not a golden-section
+search: the candidates' columns must exist before the rows are built.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from pinobs.model.identification import MomentumRegressor
+
+Vector = np.ndarray
+
+__all__ = [
+    "SMOOTHING_FOLDS",
+    "SMOOTHING_GRID",
+    "STRIBECK_GRID",
+    "candidate_columns",
+    "search_candidates",
+    "search_smoothing",
+    "widened",
+]
+
+#: The smoothing velocities ``v_s`` [rad/s] :func:`~pinobs.model.identification.identify` tries for a law with an
+#: identified one (:func:`search_smoothing`): 1e-3 to 0.56 rad/s, four per decade.
+SMOOTHING_GRID = tuple(float(10.0 ** (k / 4)) for k in range(-12, -0))
+
+#: A Stribeck law's grid: ``v_s`` two per decade (1e-3 to 0.32), ``v_st`` two per decade
+#: (0.01 to 1), pairs with ``v_st > v_s`` only (a coarser grid: every pair is two columns).
+STRIBECK_GRID = tuple(
+    (float(10.0 ** (a / 2)), float(10.0 ** (b / 2)))
+    for a in range(-6, 0)
+    for b in range(-4, 1)
+    if b > a
+)
+
+#: Contiguous blocks of the fitted rows that choose the smoothing velocity by
+#: cross-validation (:func:`search_smoothing`).
+SMOOTHING_FOLDS = 5
+
+
+def search_candidates(law: str, smoothing: float | None) -> list[tuple[float, float]]:
+    """The ``(v_s, v_st)`` pairs tried for ``law`` (``v_st`` 0 but for Stribeck); with
+    ``smoothing`` given, only ``v_st`` is searched (none for the other laws: ``[]``)."""
+    if law == "stribeck":
+        if smoothing is not None:
+            return [(smoothing, b) for b in sorted({b for _, b in STRIBECK_GRID})]
+        return list(STRIBECK_GRID)
+    return [] if smoothing is not None else [(vs, 0.0) for vs in SMOOTHING_GRID]
+
+
+def widened(reg: MomentumRegressor, cands: list[tuple[float, float]]) -> MomentumRegressor:
+    """A copy of ``reg`` whose friction columns are those of every candidate ``(v_s, v_st)``
+    for the terms that depend on them (``damping`` and ``friction_offset`` do not), laid out
+    term by term, candidate by candidate (:func:`candidate_columns` indexes it)."""
+    wide = copy.copy(reg)
+    n = reg.n_joint
+    groups, names = [], list(reg.names[: reg.n_inertial])
+    for term in reg.friction_terms:
+        fixed = term in ("damping", "friction_offset")
+        for c, (vs, vst) in enumerate(cands[:1] if fixed else cands):
+            groups.append((term, np.full(n, vs), np.full(n, vst)))
+            names += [f"{j}.{term}" + ("" if fixed else f"@{c}") for j in reg.actuated_names]
+    wide._groups = groups
+    wide.names = tuple(names + list(reg.names[reg.n_inertial + len(reg.friction_terms) * n :]))
+    return wide
+
+
+def candidate_columns(reg: MomentumRegressor, n_cands: int, choice: list[int]) -> NDArray[np.intp]:
+    """The columns of :func:`widened`'s rows that make ``reg``'s with joint ``j`` at
+    candidate ``choice[j]``, in ``reg``'s order."""
+    n, n0 = reg.n_joint, reg.n_inertial
+    cols = list(range(n0))
+    start = n0
+    for term in reg.friction_terms:
+        fixed = term in ("damping", "friction_offset")
+        cols += [start + (0 if fixed else choice[j]) * n + j for j in range(n)]
+        start += n * (1 if fixed else n_cands)
+    rest = reg.size - n0 - len(reg.friction_terms) * n
+    cols += list(range(start, start + rest))
+    return np.asarray(cols, dtype=np.intp)
+
+
+def search_smoothing(
+    reg: MomentumRegressor, A: Vector, y: Vector, cands: list[tuple[float, float]]
+) -> tuple[list[int], dict[str, Any]]:
+    """Each joint's ``(v_s, v_st)`` among ``cands``: the one whose columns predict the fitted
+    rows best under cross-validation, and what the search saw.
+
+    The rows (of :func:`widened`) are cut into :data:`SMOOTHING_FOLDS` contiguous blocks;
+    each candidate's prior-regularised linear fit (:func:`~pinobs.model.identification.solve`'s Gaussian prior and residual
+    scale, without its Huber weights and consistency step) on all blocks but one predicts the
+    one left out; the sum of squares over the blocks is the criterion.  The joints' choices
+    interact only through the shared inertial parameters, so they are made one joint at a
+    time (coordinate descent: every joint's grid, with the others held; sweeps until none
+    changes, three at most), from the candidate nearest ``reg``'s own.  The fits are solved on
+    precomputed Gram blocks (``AᵀA`` per block): a candidate costs ``SMOOTHING_FOLDS`` solves
+    of ``reg.size`` unknowns.
+    """
+    theta0, s = reg.nominal(), reg.prior_std()
+    n_c = len(cands)
+    blocks = np.array_split(np.arange(A.shape[0] // reg.robot.nv), SMOOTHING_FOLDS)
+    nv = reg.robot.nv
+    grams, rhs, yy = [], [], []
+    for b in blocks:
+        rows = (b[:, None] * nv + np.arange(nv)).ravel()  # a window's rows stay together
+        grams.append(A[rows].T @ A[rows])
+        rhs.append(A[rows].T @ y[rows])
+        yy.append(float(y[rows] @ y[rows]))
+    g_all, r_all = sum(grams), sum(rhs)
+
+    def start(vs: float, vst: float) -> int:
+        return int(
+            np.argmin(
+                [
+                    abs(math.log(c[0] / vs)) + abs(math.log(max(c[1], 1e-9) / max(vst, 1e-9)))
+                    for c in cands
+                ]
+            )
+        )
+
+    choice = [
+        start(float(a), float(b)) for a, b in zip(reg.smoothing, reg.stribeck_velocity, strict=True)
+    ]
+    # residual scale: of the starting choice's plain fit (as solve's first pass)
+    cols = candidate_columns(reg, n_c, choice)
+    th = np.linalg.lstsq(A[:, cols], y, rcond=None)[0]
+    sigma2 = max(1.4826 * float(np.median(np.abs(A[:, cols] @ th - y))), 1e-300) ** 2
+    prec0 = 1.0 / s**2
+
+    def cv(choice: list[int]) -> float:
+        cols = candidate_columns(reg, n_c, choice)
+        ix = np.ix_(cols, cols)
+        total = 0.0
+        for g, r, e in zip(grams, rhs, yy, strict=True):
+            h = (g_all - g)[ix] / sigma2 + np.diag(prec0)
+            th = np.linalg.solve(h, (r_all - r)[cols] / sigma2 + prec0 * theta0)
+            total += float(th @ g[ix] @ th - 2.0 * th @ r[cols] + e)
+        return total
+
+    best = cv(choice)
+    for _ in range(3):
+        changed = False
+        for j in range(reg.n_joint):
+            for c in range(n_c):
+                if c == choice[j]:
+                    continue
+                trial = [*choice[:j], c, *choice[j + 1 :]]
+                val = cv(trial)
+                if val < best:
+                    best, choice, changed = val, trial, True
+        if not changed:
+            break
+    return choice, {"cv_sum_of_squares": best, "candidates": n_c}

@@ -105,7 +105,7 @@ UR10E_JOIN_GAP = 1.0
 SETTLE = 1.0
 #: FIGAROH on TIAGo arm_1..4 [N·m], 20 % held out (shared/data/README.md).
 FIGAROH_README = {"sign": (1.77, 4.59, 1.96, 1.57), "tanh": (0.87, 2.70, 1.40, 0.86)}
-UR10E_MODELS = ("nominal", "pinobs", "pinobs+rotor", "published")
+UR10E_MODELS = ("nominal", "pinobs", "pinobs N·m", "pinobs+rotor", "published")
 TIAGO_TORQUE_JOINTS = rd.TIAGO_JOINTS[:5]  # torso, arm_1..4 (arm_5..7 efforts mostly 0)
 
 
@@ -264,9 +264,10 @@ def ur10e_names(folder: str) -> list[str]:
     return [n.split("/")[-1] for n in rd.list_logs() if n.startswith(f"ur10e/{folder}/")]
 
 
-def ur10e_identify(names: tuple[str, ...], robot: pinobs.Robot):
+def ur10e_identify(names: tuple[str, ...], robot: pinobs.Robot, **options: Any):
     """pinobs.identify on the named logs at their stamps (repeated rows left out), joined
-    with a NaN row and :data:`UR10E_JOIN_GAP` between them, nothing held out."""
+    with a NaN row and :data:`UR10E_JOIN_GAP` between them, nothing held out; ``options``
+    for :func:`pinobs.identify`."""
     parts_t, parts_q, parts_tau, off = [], [], [], 0.0
     for n in names:
         t, q, tau = arrays(rd.load_log(f"ur10e/identification_data/{n}").frame)
@@ -280,7 +281,7 @@ def ur10e_identify(names: tuple[str, ...], robot: pinobs.Robot):
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        ident = pinobs.identify(robot, (T, Q, TAU), holdout=0.0)
+        ident = pinobs.identify(robot, (T, Q, TAU), holdout=0.0, **options)
     return ident, time.perf_counter() - t0, [str(w.message) for w in caught]
 
 
@@ -293,6 +294,8 @@ def ur10e(quick: bool) -> dict[str, Any]:
     with_rotor = robot.model.copy()
     with_rotor.armature = published.rotor.copy()
     ident_r, secs_r, _ = ur10e_identify(fit, robot.with_model(with_rotor))
+    # each torque channel weighted by its own residual scale in N·m (not the default)
+    ident_t, _, _ = ur10e_identify(fit, robot, weighting="torque")
     unloaded = [
         n
         for n in ur10e_names("identification_data")
@@ -318,6 +321,7 @@ def ur10e(quick: bool) -> dict[str, Any]:
             preds = {
                 "nominal": predict_robot(robot, qk, v, a),
                 "pinobs": predict_robot(ident.robot, qk, v, a),
+                "pinobs N·m": predict_robot(ident_t.robot, qk, v, a),
                 "pinobs+rotor": predict_robot(ident_r.robot, qk, v, a),
                 "published": published.predict(qk, v, a),
             }
@@ -374,16 +378,19 @@ def tiago(quick: bool) -> dict[str, Any]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         # arm_5..7's efforts are zero on most rows: their channels are left out (identify
-        # refuses them), and the wrist bodies, seen only through arm_1..4's torques, make
-        # the first pass's condition 4e7 (hence max_condition)
-        ident = pinobs.identify(
-            robot,
-            (t, q, tau),
-            holdout=0.2,
-            exclude=list(rd.TIAGO_JOINTS[5:]),
-            max_condition=1e8,
-        )
+        # refuses them)
+        ident = pinobs.identify(robot, (t, q, tau), holdout=0.2, exclude=list(rd.TIAGO_JOINTS[5:]))
     secs = time.perf_counter() - t0
+    # each torque channel by its own residual scale in N·m: the wrist bodies, then seen
+    # through arm_1..4's torques alone, make the first pass's condition 4e7
+    ident_t = pinobs.identify(
+        robot,
+        (t, q, tau),
+        holdout=0.2,
+        exclude=list(rd.TIAGO_JOINTS[5:]),
+        weighting="torque",
+        max_condition=1e8,
+    )
     split = ident.report["fit_end"]
     _, v, a = sg_fit(t, q)
     inner = np.zeros(len(t), bool)
@@ -394,6 +401,7 @@ def tiago(quick: bool) -> dict[str, Any]:
     for k, p in (
         ("nominal", predict_robot(robot, q, v, a)),
         ("pinobs", predict_robot(ident.robot, q, v, a)),
+        ("pinobs N·m", predict_robot(ident_t.robot, q, v, a)),
     ):
         torque[k] = {
             "held_out": rms((p - tau)[held]).tolist(),
@@ -672,7 +680,9 @@ def markdown(res: dict[str, Any]) -> str:
             f"Identified by `pinobs.identify` on {', '.join(u['fit_logs'])} "
             f"(at their stamps, {u['identify_seconds']:.0f} s); "
             f"derivatives: Savitzky–Golay {SG_WINDOW} rows, order {SG_ORDER}, on the stamps. "
-            f"*published*: UR10E_parameters.txt († its own fitting log, not held out)."
+            f"*published*: UR10E_parameters.txt († its own fitting log, not held out); "
+            '*pinobs N·m*: `weighting="torque"` (each torque channel by its own residual '
+            "scale; the default weighs the rows by M⁻¹)."
         )
         L.append("")
         j = [x.replace("_joint", "") for x in u["joints"]]
@@ -704,7 +714,8 @@ def markdown(res: dict[str, Any]) -> str:
             f"`pinobs.identify(holdout=0.2)` fits t ≤ {t['fit_end']:.1f} s "
             f"({t['identify_seconds']:.0f} s); {t['held_out_rows']} held-out rows, "
             f"{100 * t['held_out_moving_share']:.0f} % of them moving (|v| > 0.01). "
-            "FIGAROH: quoted from shared/data/README.md, not rerun here."
+            "arm_5..7's torque channels left out (zero on most rows); *pinobs N·m*: "
+            '`weighting="torque"`. FIGAROH: quoted from shared/data/README.md, not rerun here.'
         )
         L.append("")
         j = [x.replace("_joint", "") for x in t["joints"]]

@@ -192,3 +192,48 @@ def test_every_python_block_of_the_docs_parses_and_its_pinobs_names_exist() -> N
             raise AssertionError(f"{page}: a python block does not parse: {exc}") from exc
         missing = [n for n in _pinobs_names(tree) if not _resolves(n)]
         assert not missing, f"{page}: names not in pinobs: {missing}"
+
+
+def _cli_page_options() -> tuple[dict[str, set[str]], set[str]]:
+    """The long options the command-line page's synopsis names: per command (its lines and
+    their continuations), and those it says every robot-loading command takes."""
+    text = (DOCS / "guides" / "cli.md").read_text()
+    block = re.search(r"```text\n(.*?)```", text, re.S)
+    assert block is not None
+    per: dict[str, set[str]] = {}
+    common: set[str] = set()
+    command: str | None = None
+    in_common = False
+    for line in block.group(1).splitlines():
+        started = re.match(r"pinobs (\w+)", line)
+        if started:
+            command = started.group(1)
+        options = set(re.findall(r"--[a-z][a-z0-9-]*", line))
+        if line.startswith("(every command") or in_common:
+            common |= options
+            in_common = not line.rstrip().endswith(")")
+            continue
+        if command is not None:
+            per.setdefault(command, set()).update(options)
+    return per, common
+
+
+def test_command_line_page_names_every_option_of_every_command_and_no_other() -> None:
+    """The page's synopsis is written by hand (it groups and explains): every option a
+    parser takes is on it, under its command or in the common note, and it names none a
+    parser does not take."""
+    import argparse
+
+    from pinobs.cli import _parser
+
+    sub = next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction))
+    parsers = {
+        name: {o for a in p._actions for o in a.option_strings if o.startswith("--")} - {"--help"}
+        for name, p in sub.choices.items()
+    }
+    documented, common = _cli_page_options()
+    assert set(documented) == set(parsers), "a command missing from docs/guides/cli.md"
+    assert common <= set().union(*parsers.values()), common
+    for name, options in parsers.items():
+        assert options <= documented[name] | common, (name, sorted(options - documented[name]))
+        assert documented[name] <= options, (name, sorted(documented[name] - options))

@@ -119,11 +119,14 @@ One number cannot fit an exact model (where any density costs accuracy: 3.5e-3
 against 4.0e-5 above) and a wrong one.  With ``"auto"`` each joint's density ``ψᵢ``
 [N²·m²/s] is matched to the filter's own innovations by covariance matching
 (:func:`pinobs.observers.neverbehind.match_density`; Mehra 1972 §IV, Myers & Tapley
-1976): ``rᵢ``, the windowed mean of ``eᵢ² / Sᵢᵢ`` (``S = P⁻_qq + σ² I``, the predicted
-innovation covariance; window ``AUTO_WINDOW``), multiplies ``ψᵢ`` by ``rᵢ^{h/T}`` at
-every sample, between ``AUTO_PSD_BOUNDS · M̄ᵢᵢ²``, from ``AUTO_PSD_START · M̄ᵢᵢ²``: the
-density grows while the model under-predicts the innovations and shrinks while the
-filter over-predicts them.  A gated sample does not count.  The offset starts with
+1976) at every sample ``h``, in the log domain (``S = P⁻_qq + σ² I``, the predicted
+innovation covariance; ``T`` = ``AUTO_WINDOW``)::
+
+    log ψᵢ ← log ψᵢ + (h/T) (clip(log(eᵢ² / Sᵢᵢ), −8, 5) − m),   m = E[clip(log χ²₁)],
+
+between ``AUTO_PSD_BOUNDS · M̄ᵢᵢ²``, from ``AUTO_PSD_START · M̄ᵢᵢ²``: the density grows
+while the model under-predicts the innovations and shrinks while the filter
+over-predicts them.  A gated sample does not count.  The offset starts with
 ``d0_std`` = ``AUTO_D0_ACCEL · M̄ᵢᵢ`` (a grossly wrong model's torque error, absorbed in
 the first samples) unless ``d0_std`` is given.
 """
@@ -173,8 +176,8 @@ __all__ = [
 
 #: ``disturbance_psd="auto"`` (module docstring): the starting acceleration density
 #: [rad²/s⁵], its bounds, the matching window [s], the initial offset std [rad/s²].
-AUTO_PSD_START = 1e-6
-AUTO_PSD_BOUNDS = (1e-10, 1e8)
+AUTO_PSD_START = 1e-9
+AUTO_PSD_BOUNDS = (1e-12, 1e8)
 AUTO_WINDOW = 0.1
 AUTO_D0_ACCEL = 10.0
 
@@ -239,7 +242,7 @@ class EKFState(NamedTuple):
     d: Vector | None = None  # estimated joint-torque offset [N·m or N]
     d_psd: Vector | None = None  # its random-walk density per joint [N²·m²/s]
     gate: GateState = GateState()  # the outlier gate's bookkeeping (NIS of the last measurement)
-    ratio: Vector | None = None  # disturbance_psd="auto": the windowed e²/S per joint
+    auto: bool = False  # disturbance_psd="auto": d_psd learned from the innovations
 
 
 @register
@@ -372,8 +375,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         if not self.auto:
             return EKFState(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd)
         self._psd_bounds = np.outer(AUTO_PSD_BOUNDS, m_bar**2)
-        ratio = np.ones(nv)
-        return EKFState(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd, ratio=ratio)
+        return EKFState(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd, auto=True)
 
     def _step(self, state: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
         # a filter being lost overflows: its update says so (ObserverDiverged), numpy does not
@@ -382,16 +384,14 @@ class ExtendedKalmanFilter(Observer[EKFState]):
             if q_meas is None:
                 return pred._replace(P=0.5 * (pred.P + pred.P.T), gate=pred.gate.predicted())
             new = self._correct(pred, q_meas)
-            if new.ratio is None or new.d_psd is None or new.gate.gated:
+            if not new.auto or new.d_psd is None or new.gate.gated:
                 return new
             # disturbance_psd="auto": ψ matched to the innovations (module docstring)
             nv = self.robot.nv
             e = self.robot.difference(pred.q, q_meas)
             s = pred.P.diagonal()[:nv] + self.gains.meas_std**2  # Sᵢᵢ = P⁻_qq,ii + σ²
-            psd, ratio = match_density(
-                new.d_psd, new.ratio, e, s, dt, window=AUTO_WINDOW, bounds=self._psd_bounds
-            )
-            return new._replace(d_psd=psd, ratio=ratio)
+            psd = match_density(new.d_psd, e, s, dt, window=AUTO_WINDOW, bounds=self._psd_bounds)
+            return new._replace(d_psd=psd)
 
     def _predict(self, state: EKFState, dt: float, tau: Vector) -> tuple[EKFState, Vector]:
         """Prediction over ``dt`` [s] with ``tau`` held: ``(state⁻, Φ)``.
@@ -477,7 +477,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         v = v + dx[nv : 2 * nv]
         if d is not None:
             d = d + dx[2 * nv :]
-        return EKFState(q, v, P_new, d, state.d_psd, gate, state.ratio)  # P symmetric (joseph)
+        return EKFState(q, v, P_new, d, state.d_psd, gate, state.auto)  # P symmetric (joseph)
 
     def _gate_nis(self, state: EKFState) -> float:
         """The NIS above which :meth:`_correct` rejected ``state``'s measurement: the gate's

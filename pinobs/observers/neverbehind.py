@@ -37,9 +37,12 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    accuracy is kept); with a useless one the ``kf`` wins (``w → 0``: the tuned
    model-free accuracy).  **Lost**: when the model-based estimate stops being finite, its
    step raises, or its score exceeds ``lost_ratio²`` times the ``kf``'s on some joint, it
-   is re-seeded from the blend (its family's initial state at ``(q̂, v̂)``, its score set
-   to ``lost_ratio`` times the ``kf``'s, so its weight stays near zero until its
-   predictions have beaten the ``kf``'s over a window) and :attr:`NeverBehind.reseeds` counts it.
+   is re-seeded from the blend (its family's initial state at the ``kf``'s ``(q̂, v̂)`` of
+   that sample, the blend's with ``w = 0``; its score set to ``lost_ratio`` times the
+   ``kf``'s, so its weight stays near zero until its predictions have beaten the
+   ``kf``'s over a window) and :attr:`NeverBehind.reseeds` counts it.  Where ``ℓ``
+   reaches its bound ``−50``, ``w = 0`` exactly: a model 1e20 rad/s off cannot leak
+   through ``w = 2e-22``.
 
 2. **The disturbance density learned from the innovations** (:func:`match_density`,
    ``ekf``'s ``disturbance_psd="auto"``): a per-joint random-walk density ``ψᵢ``
@@ -256,10 +259,9 @@ class NeverBehind(Observer[_State]):
             s_k = s_k + lam * (e_k * e_k - s_k)
             c = c + lam * (1.0 - c)
             lost = c > 0.5 and bool(np.any(s_m > self.lost_ratio**2 * s_k))
-        if lost:  # re-seeded from the blend (module docstring): the last finite output
+        if lost:  # re-seeded (module docstring) at the kf's estimate, the blend's when w = 0
             self.reseeds += 1
-            m = self.model._initial_state(state.q, state.v)
-            m = self.model._step(m, dt, q_meas, tau)
+            m = self.model._initial_state(q_kf, v_kf)
             q_m, v_m = self.model._output(m)
             s_m = self.lost_ratio * s_k  # to prove itself: w ≈ 0 until it has
         if c > 0.0:
@@ -269,6 +271,7 @@ class NeverBehind(Observer[_State]):
             ell = (self.sharpness * 0.5 * n) * (s_k - s_m) / np.maximum(np.minimum(s_m, s_k), floor)
             ell = np.clip(ell + (1.0 - c) * _LOG_ODDS, -_LOG_ODDS, _LOG_ODDS)  # the prior fading
             w = 1.0 / (1.0 + np.exp(-ell))  # Bar-Shalom, Li & Kirubarajan 2001 §11.6.2
+            w[ell <= -_LOG_ODDS] = 0.0  # a far-off model (1e20 rad/s) must not leak through
         else:
             w = np.ones(r.nv)  # nothing scored yet: the model trusted (the prior)
         v = v_kf + w * (v_m - v_kf)

@@ -248,6 +248,8 @@ class NeverBehind(Observer[_State]):
             step_a = ahead * (state.v - state.v_prev)  # ½ h² â, â = Δv̂ / h₋ (the blend's)
             qm0, vm0 = self.model._output(state.model)
             qk0, vk0 = self.reference._output(state.kf)
+            e_m: Vector
+            e_k: Vector
             if flat:
                 e_m = q_meas - (qm0 + dt * vm0 + step_a)
                 e_k = q_meas - (qk0 + dt * vk0 + step_a)

@@ -9,6 +9,7 @@ import pinobs
 from pinobs.errors import OptionError
 from pinobs.evaluation import evaluate
 from pinobs.observers import make_observer
+from pinobs.observers.ekf import ExtendedKalmanFilter
 from pinobs.observers.neverbehind import NeverBehind, match_density
 from pinobs.simulation import Sensor, simulate
 
@@ -34,6 +35,7 @@ def test_blend_started_on_the_truth_stays_on_it(family: str) -> None:
         duration=0.5,
         seed=1,
     )
+    assert isinstance(ob, NeverBehind)
     assert np.abs(res.trace("nb").v - res.trace("alone").v).max() < 1e-10
     assert np.abs(res.trace("nb").v - res.v).max() < 1e-5  # measured 3e-14, 3e-14, 2.2e-6
     assert ob.reseeds == 0
@@ -110,7 +112,7 @@ def test_match_density_moves_toward_consistent_innovations(rng: np.random.Genera
     bounds = np.array([1e-6, 1e6])
     s = np.ones(3)
     scale = np.array([10.0, 0.1, 1.0])  # the innovations' std over √S
-    psd = np.ones(3)
+    psd: np.ndarray = np.ones(3)
     logs = []
     for _ in range(20000):
         e = scale * rng.standard_normal(3)
@@ -125,8 +127,11 @@ def test_learned_disturbance_ekf_started_on_the_truth_stays_on_it() -> None:
     robot = pinobs.load("ur5")
     ob = make_observer("ekf", robot, noise_std=0.0, disturbance_psd="auto")
     res = simulate(robot, {"auto": ob}, sensor=Sensor(1000, 0.0), inputs="pd", duration=0.5, seed=1)
+    assert isinstance(ob, ExtendedKalmanFilter)
     assert np.abs(res.trace("auto").v - res.v).max() < 1e-8
-    np.testing.assert_allclose(ob.disturbance, 0.0, atol=1e-6)
+    d = ob.disturbance
+    assert d is not None
+    np.testing.assert_allclose(d, 0.0, atol=1e-6)
 
 
 @pytest.mark.slow

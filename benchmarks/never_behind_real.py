@@ -110,7 +110,7 @@ else:
     frame["t"] = t
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ident = pinobs.identify(robot, (t, q, tau), holdout=0.2)
+        ident = pinobs.identify(robot, (t, q, tau), holdout=0.2, exclude=list(rd.TIAGO_JOINTS[5:]))
     split = ident.report["fit_end"]
     joints = [rd.TIAGO_JOINTS.index(j) for j in R.TIAGO_TORQUE_JOINTS]
     do("tiago", frame, robot, ident.robot, ref, t > split, joints)

@@ -296,7 +296,11 @@ class NeverBehind(Observer[_State]):
         return state._replace(model=m, kf=k)
 
     def _innovation(self, state: _State) -> tuple[float | None, bool]:
-        return self.model._innovation(state.model)
+        """The model-based observer's NIS (the consistency test is of the model), and the
+        ``kf``'s outlier decision (the one the scores use): a lost model gates every
+        sample, and a sample reported gated is withheld from both observers' learning
+        (:meth:`_after_commit`)."""
+        return self.model._innovation(state.model)[0], self.reference._innovation(state.kf)[1]
 
     def _output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v

@@ -876,7 +876,10 @@ def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
 
     Options are the keyword arguments of the family's constructor (every
     family accepts ``rate`` [Hz] and ``noise_std`` [rad or m]), and
-    ``latency`` [s] for every family (:meth:`Observer.set_latency`).
+    ``latency`` [s] for every family (:meth:`Observer.set_latency`), and
+    ``never_behind=True`` for a model-based family: the family blended per joint with
+    the model-free ``kf`` (:class:`pinobs.observers.neverbehind.NeverBehind`; its
+    ``window``, ``sharpness``, ``lost_ratio``, ``reference_options`` then accepted too).
 
     Raises:
         UnknownNameError: unknown ``name``.
@@ -884,21 +887,37 @@ def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
         GainError: an option out of range.
     """
     cls = observer_class(name)
+    latency = options.pop("latency", None)
+    never_behind = bool(options.pop("never_behind", False))
+    blend = {k: options.pop(k) for k in _BLEND_OPTIONS if never_behind and k in options}
     accepted = [
         p.name
         for p in inspect.signature(cls.__init__).parameters.values()
         if p.kind is inspect.Parameter.KEYWORD_ONLY
     ]
-    latency = options.pop("latency", None)
     unknown = sorted(set(options) - set(accepted))
     if unknown:
         raise OptionError(
             f"observer {name!r} does not accept option(s) {unknown}; accepted: {accepted}"
+            + ("" if never_behind else ", and never_behind (model-based families)")
         )
-    observer = cls(robot, **options)
+    if never_behind:  # the family blended with kf (pinobs.observers.neverbehind)
+        from pinobs.observers.neverbehind import NeverBehind
+
+        given = {k: options.pop(k) for k in ("rate", "noise_std") if k in options}
+        observer: Observer[Any] = NeverBehind(
+            robot, observer=name, options=options, **blend, **given
+        )
+    else:
+        observer = cls(robot, **options)
     if latency is not None:
         observer.set_latency(latency)
     return observer
+
+
+#: Options of :class:`pinobs.observers.neverbehind.NeverBehind` that ``make_observer`` passes
+#: to it with ``never_behind=True``.
+_BLEND_OPTIONS = ("window", "sharpness", "lost_ratio", "reference_options")
 
 
 def time_unit_warning(period: float | None) -> str | None:

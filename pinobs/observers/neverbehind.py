@@ -1,0 +1,306 @@
+"""Never behind a model-free filter: a model-based observer blended per joint with ``kf``.
+
+Two shared pieces (issue 36, item 2), used by every model-based family:
+
+1. **The blend** (:class:`NeverBehind`, ``make_observer(name, robot, never_behind=True)``):
+   the family's observer and a model-free :class:`~pinobs.observers.kf.ConstantAccelerationKF`
+   run side by side on the same samples (composition: the wrapper holds both observers
+   and their states, and steps each through its own family interface).  Each is scored
+   per coordinate by its one-step prediction of the next sample: with ``(q̂ᵢ, v̂ᵢ)`` its
+   estimate at ``t_k`` and ``â`` the blend's acceleration (finite difference of its last
+   two velocities, common to both),
+
+       eᵢ = difference(q̂ᵢ ⊕ (h v̂ᵢ + ½ h² â), q_{k+1}),    sᵢ ← sᵢ + (h/T)(eᵢ² − sᵢ),
+
+   (``T`` = ``window``; a sample the ``kf``'s outlier gate rejects is not scored; one the
+   model-based observer's gate rejects is: a lost model rejects the samples).
+   The measurement noise ``n_{k+1}`` enters both ``eᵢ`` alike and is independent of both
+   predictions (made before it), so the difference of the scores measures the difference
+   of the predictors' errors, not the noise.  The weights are the posterior probabilities
+   of the two predictors given the window's innovations, Gaussian with a common variance
+   ``S = max(min(s_m, s_kf), σ²)`` (the multiple-model weights of Magill 1965; Bar-Shalom,
+   Li & Kirubarajan 2001, §11.6.2, with a forgetting window instead of a growing one):
+
+       ℓ = κ (N/2) (s_kf − s_m) / S,    N = T/h,    w = 1 / (1 + e^{−ℓ}),
+
+   (the scores are exponential means started at zero: until the window has filled,
+   ``sᵢ`` is divided by the weight gathered so far, ``c = 1 − (1 − h/T)^k``, and ``N`` is
+   ``c T/h``; the log-odds start from a prior ``ℓ₀ = 50`` for the model that fades as the
+   window fills, ``ℓ += (1 − c) ℓ₀``: the model is trusted until the data disagree)
+
+   ``κ`` (``sharpness``) scales the count ``N`` of innovations in the window (before any
+   sample is scored the model is trusted, ``w = 1``); and the output
+
+       v̂ = w v̂_m + (1 − w) v̂_kf,    q̂ = q̂_kf ⊕ w · difference(q̂_kf, q̂_m).
+
+   With an exact model the model-based predictor wins every window (``w → 1``: its
+   accuracy is kept); with a useless one the ``kf`` wins (``w → 0``: the tuned
+   model-free accuracy).  **Lost**: when the model-based estimate stops being finite, its
+   step raises, or its score exceeds ``lost_ratio²`` times the ``kf``'s on some joint, it
+   is re-seeded from the blend (its family's initial state at the ``kf``'s ``(q̂, v̂)`` of
+   that sample, the blend's with ``w = 0``; its score set to ``lost_ratio`` times the
+   ``kf``'s, so its weight stays near zero until its predictions have beaten the
+   ``kf``'s over a window) and :attr:`NeverBehind.reseeds` counts it.  It is lost too when
+   its velocity jumps away from the ``kf``'s by more than ``FAR_GATE`` = 10 times the
+   ``kf``'s own RMS one-step error as a velocity, ``h |v̂_m − v̂_kf| > 10 √s_kf``: the
+   windowed scores lag such a jump (on a UR10e log an ``ekf+auto`` 1.7 rad/s RMS off in
+   bursts kept a mean weight 0.1–0.27 and made the blend 1.2× the ``kf``).  Where ``ℓ``
+   reaches its bound ``−50``, ``w = 0`` exactly: a model 1e20 rad/s off cannot leak
+   through ``w = 2e-22``.
+
+2. **The disturbance density learned from the innovations** (:func:`match_density`,
+   ``ekf``'s ``disturbance_psd="auto"``): a per-joint random-walk density ``ψᵢ``
+   matched to the innovations, covariance matching (Mehra 1972 §IV; Myers & Tapley
+   1976: the innovations of a filter whose noise densities are right have the
+   covariance it predicts, ``E[e eᵀ] = S``) done joint by joint, in the log domain and
+   at every sample:
+
+       log ψᵢ ← log ψᵢ + (h/T) (clip(log(eᵢ² / Sᵢᵢ), −8, 5) − m),
+
+   a stochastic approximation (Robbins & Monro 1951) whose fixed point is
+   ``E[clip(log(eᵢ²/Sᵢᵢ))] = m``, ``m`` the mean of the clipped ``log χ²₁``
+   (−1.24; −(γ + log 2) = −1.27 unclipped): ``eᵢ ~ N(0, Sᵢᵢ)``.
+   ψ grows while the model under-predicts the innovations (model error it does not
+   carry) and shrinks while the filter over-predicts them.  Per sample rather than
+   from a windowed ratio: a windowed ratio lags the density it steers, and on a UR5
+   with a payload it wound up to the density's bound (velocity RMS 0.12 rad/s against
+   0.0093 per sample).  Tried and dropped: the innovations' lag-one correlation
+   (Mehra 1970), whose target, white innovations, a motion-dependent model error never
+   gives (it drove the density up to 7e5 rad²/s⁵, 0.17 rad/s).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from pinobs.errors import GainError, ObserverDiverged, OptionError
+from pinobs.model import Robot
+from pinobs.observers.base import Observer, Vector, observer_class, positive
+
+__all__ = ["NeverBehind", "match_density"]
+
+#: The bounds of one sample's ``log(e²/S)`` in :func:`match_density` (an outlier moves ψ by at
+#: most ``e^{5h/T}``; an innovation of zero by ``e^{−8h/T}``).
+LOG_BOUNDS = (-8.0, 5.0)
+
+
+def _clipped_log_chi2_mean(lo: float, hi: float) -> float:
+    """``E[clip(log u, lo, hi)]`` for ``u ~ χ²₁`` (``−(γ + log 2) = −1.2704`` unclipped): the
+    density of ``y = log u`` is ``exp(y/2 − eʸ/2)/√(2π)``, integrated by the trapezoid rule."""
+    y = np.linspace(-60.0, 8.0, 200001)
+    f = np.exp(0.5 * y - 0.5 * np.exp(y)) / np.sqrt(2.0 * np.pi)
+    return float(np.trapezoid(np.clip(y, lo, hi) * f, y) / np.trapezoid(f, y))
+
+
+#: The mean the clipped ``log(e²/S)`` has when ``e ~ N(0, S)``: the fixed point.
+LOG_CHI2_MEAN = _clipped_log_chi2_mean(*LOG_BOUNDS)
+
+
+def match_density(
+    psd: Vector, e: Vector, s: Vector, dt: float, *, window: float, bounds: Vector
+) -> Vector:
+    """One step of module docstring item 2: the densities ``ψ`` updated.
+
+    Args:
+        psd: the densities ``ψ`` per coordinate (any unit; returned in it).
+        e: this sample's innovation per coordinate.
+        s: its predicted variance per coordinate (``Sᵢᵢ``), > 0.
+        dt: the step [s].
+        window: ``T`` [s], the time constant of ``log ψ``.
+        bounds: ``(2, n)`` or ``(2,)``: ``ψ_min``, ``ψ_max``.
+    """
+    lam = min(1.0, dt / window)
+    with np.errstate(divide="ignore"):  # e = 0: log 0 = −∞, clipped
+        step = np.clip(np.log(e * e / s), *LOG_BOUNDS) - LOG_CHI2_MEAN
+    return np.clip(psd * np.exp(lam * step), bounds[0], bounds[1])  # type: ignore[no-any-return]
+
+
+#: Bound of the blend's log-odds ``ℓ`` (``1 − w`` or ``w`` ≥ 2e-22) and its prior (docstring).
+_LOG_ODDS = 50.0
+_TINY = 1e-300  # the smallest score the log-odds divide by
+#: A model-based velocity this many kf one-step errors (as velocities) from the kf's is lost.
+FAR_GATE = 10.0
+
+
+class _State(NamedTuple):
+    model: Any  # the model-based observer's state
+    kf: Any  # the kf's state
+    s: Vector  # (2, nv): windowed mean squared one-step prediction error, model then kf
+    c: float  # the weight the window has gathered so far, 1 − (1 − h/T)^k (s / c: the mean)
+    w: Vector  # the model-based weight per coordinate
+    q: Vector  # the blend
+    v: Vector
+    v_prev: Vector  # the blend's v̂ one step before (â)
+    dt_prev: float  # that step [s] (0: none yet)
+
+
+class NeverBehind(Observer[_State]):
+    """A model-based observer blended per joint with ``kf`` (module docstring, item 1).
+
+    Built by ``make_observer(name, robot, never_behind=True, ...)`` (or directly).
+
+    Args:
+        robot: the model.
+        observer: the registered name of the model-based observer.
+        options: its options (``rate`` and ``noise_std`` are passed to both observers).
+        reference_options: options of the model-free ``kf``.
+        window: ``T`` [s], the scores' averaging window.
+        sharpness: ``κ``, the weight of the window's innovation count in the log-odds.
+        lost_ratio: RMS prediction error ratio (model over kf) beyond which the
+            model-based observer is re-seeded from the blend.
+        rate: sample rate hint [Hz].
+        noise_std: position noise standard deviation [rad or m].
+    """
+
+    name = "never_behind"  # not registered: the option never_behind=True of every family
+    summary = "a model-based observer blended per joint with kf by their one-step predictions"
+    uses_noise_std = True
+
+    def __init__(
+        self,
+        robot: Robot,
+        *,
+        observer: str = "ekf",
+        options: dict[str, Any] | None = None,
+        reference_options: dict[str, Any] | None = None,
+        window: float = 0.2,
+        sharpness: float = 1.0,
+        lost_ratio: float = 100.0,
+        rate: float | None = None,
+        noise_std: float | None = None,
+    ) -> None:
+        super().__init__(robot, rate=rate, noise_std=noise_std)
+        self.window = float(positive("window", window) or 0.0)
+        self.sharpness = float(positive("sharpness", sharpness) or 0.0)
+        self.lost_ratio = float(positive("lost_ratio", lost_ratio) or 0.0)
+        if self.lost_ratio <= 1.0:
+            raise GainError(f"lost_ratio={lost_ratio!r}: give a ratio above 1")
+        cls = observer_class(observer)
+        if not cls.uses_torque:
+            raise OptionError(
+                f"never_behind blends a model-based observer with kf; {observer!r} is model-free"
+            )
+        if cls is NeverBehind:
+            raise OptionError("never_behind cannot wrap itself")
+        opts = dict(options or {})
+        for k in ("rate", "noise_std"):
+            if k in opts:
+                raise OptionError(f"give {k} to never_behind, not in options (it passes it on)")
+        given = {"rate": rate, "noise_std": noise_std}
+        self.model = cls(robot, **opts, **given)
+        self.reference = observer_class("kf")(robot, **dict(reference_options or {}), **given)
+        self.reseeds = 0
+
+    @property
+    def options(self) -> dict[str, Any]:
+        return {
+            **super().options,
+            "observer": self.model.name,
+            "model_options": self.model.options,
+            "reference_options": self.reference.options,
+            "window": self.window,
+            "sharpness": self.sharpness,
+            "lost_ratio": self.lost_ratio,
+        }
+
+    def set_latency(self, latency: float) -> None:
+        """Refused (but for 0): the blend steps both observers forward and cannot predict
+        without committing (give the latency to a family observer instead)."""
+        if latency:
+            raise OptionError("never_behind takes no latency; give it to the observer alone")
+        super().set_latency(latency)
+
+    @property
+    def weights(self) -> Vector:
+        """The current model-based weight ``w`` per coordinate (module docstring)."""
+        if self._state is None:
+            return np.full(self.robot.nv, np.nan)
+        return np.array(self._state.w)
+
+    # ---------------------------------------------------------------- states
+    def _initial_state(self, q0: Vector, v0: Vector) -> _State:
+        self.reseeds = 0
+        nv = self.robot.nv
+        m = self.model._initial_state(q0, v0)
+        k = self.reference._initial_state(q0, v0)
+        return _State(m, k, np.zeros((2, nv)), 0.0, np.ones(nv), q0.copy(), v0.copy(), v0, 0.0)
+
+    def _restart_state(self, state: _State, q: Vector) -> _State:
+        nv = self.robot.nv
+        zero = np.zeros(nv)
+        m = self.model._restart_state(state.model, q)
+        k = self.reference._restart_state(state.kf, q)
+        return _State(m, k, np.zeros((2, nv)), 0.0, np.ones(nv), q.copy(), zero, zero, 0.0)
+
+    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+        r = self.robot
+        flat = r.is_vector_space  # q ⊕ x = q + x, difference(a, b) = b − a: plain arithmetic
+        kf = self.reference._step(state.kf, dt, q_meas, tau)
+        q_kf, v_kf = self.reference._output(kf)
+        try:
+            m = self.model._step(state.model, dt, q_meas, tau)
+            q_m, v_m = self.model._output(m)
+            # (a sum overflowing to inf says lost too: a filter that far off is)
+            lost = not math.isfinite(sum(q_m.tolist()) + sum(v_m.tolist()))
+        except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
+            lost = True
+        s_m, s_k, c = state.s[0], state.s[1], state.c
+        if not lost and q_meas is not None and not self.reference._innovation(kf)[1]:
+            # scored (module docstring), unless the kf's gate took the sample for an outlier
+            ahead = 0.0 if state.dt_prev <= 0 else 0.5 * dt * dt / state.dt_prev
+            step_a = ahead * (state.v - state.v_prev)  # ½ h² â, â = Δv̂ / h₋ (the blend's)
+            qm0, vm0 = self.model._output(state.model)
+            qk0, vk0 = self.reference._output(state.kf)
+            e_m: Vector
+            e_k: Vector
+            if flat:
+                e_m = q_meas - (qm0 + dt * vm0 + step_a)
+                e_k = q_meas - (qk0 + dt * vk0 + step_a)
+            else:
+                e_m = r.difference(r.integrate(qm0, dt * vm0 + step_a), q_meas)
+                e_k = r.difference(r.integrate(qk0, dt * vk0 + step_a), q_meas)
+            lam = min(1.0, dt / self.window)
+            s_m = s_m + lam * (e_m * e_m - s_m)
+            s_k = s_k + lam * (e_k * e_k - s_k)
+            c = c + lam * (1.0 - c)
+            lost = c > 0.5 and bool(np.any(s_m > self.lost_ratio**2 * s_k))
+            # far: the model's velocity off the kf's by more than FAR_GATE times the kf's own
+            # one-step prediction error as a velocity, sqrt(s_k / c) / h (the scores lag a
+            # model that jumps away in one step)
+            lost = lost or bool(np.any(dt * np.abs(v_m - v_kf) > FAR_GATE * np.sqrt(s_k / c)))
+        if lost:  # re-seeded (module docstring) at the kf's estimate, the blend's when w = 0
+            self.reseeds += 1
+            m = self.model._initial_state(q_kf, v_kf)
+            q_m, v_m = self.model._output(m)
+            s_m = self.lost_ratio * s_k  # to prove itself: w ≈ 0 until it has
+        if c > 0.0:
+            # the window's means so far (exponential means started at zero): s / c
+            floor = max(c * (self.noise_std or 0.0) ** 2, _TINY)
+            n = c * self.window / dt  # the innovations in the window so far
+            ell = (self.sharpness * 0.5 * n) * (s_k - s_m) / np.maximum(np.minimum(s_m, s_k), floor)
+            ell = np.clip(ell + (1.0 - c) * _LOG_ODDS, -_LOG_ODDS, _LOG_ODDS)  # the prior fading
+            w = 1.0 / (1.0 + np.exp(-ell))  # Bar-Shalom, Li & Kirubarajan 2001 §11.6.2
+            w[ell <= -_LOG_ODDS] = 0.0  # a far-off model (1e20 rad/s) must not leak through
+        else:
+            w = np.ones(r.nv)  # nothing scored yet: the model trusted (the prior)
+        v = v_kf + w * (v_m - v_kf)
+        q = q_kf + w * (q_m - q_kf) if flat else r.integrate(q_kf, w * r.difference(q_kf, q_m))
+        return _State(m, kf, np.array([s_m, s_k]), c, w, q, v, state.v, dt)
+
+    def _after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
+        m = self.model._after_commit(state.model, t, q, tau)
+        k = self.reference._after_commit(state.kf, t, q, tau)
+        return state._replace(model=m, kf=k)
+
+    def _innovation(self, state: _State) -> tuple[float | None, bool]:
+        """The model-based observer's NIS (the consistency test is of the model), and the
+        ``kf``'s outlier decision (the one the scores use): a lost model gates every
+        sample, and a sample reported gated is withheld from both observers' learning
+        (:meth:`_after_commit`)."""
+        return self.model._innovation(state.model)[0], self.reference._innovation(state.kf)[1]
+
+    def _output(self, state: _State) -> tuple[Vector, Vector]:
+        return state.q, state.v

@@ -29,11 +29,13 @@ of the residual, and so are the first and last half-window of each log.
   :data:`SIGN_DEADBAND`, as their filtered dq is at rest).  Their ``main.m`` fits
   ``ur-20_02_10-30sec_12harm``: on that log *published* is not held out.
   *pinobs+rotor*: ``pinobs.identify`` the same way, started from the URDF with the
-  published rotor inertias as ``armature`` (pinobs's parameter set has no armature: it
-  keeps the prior's).
+  published rotor inertias as ``armature`` (the prior of pinobs's own rotor-inertia
+  fit); *pinobs N·m*: ``weighting="torque"`` (each torque channel by its own residual
+  scale; the default weighs the rows by ``M⁻¹``).
 - TIAGo: the log on the loop's clock (:func:`pinobs.io.fit_clock`, stale rows
-  dropped); ``pinobs.identify(holdout=0.2)``: the first 80 % fits, the last 20 % is
-  held out.  FIGAROH's numbers are quoted from ``shared/data/README.md``.
+  dropped); ``pinobs.identify(holdout=0.2)`` with arm_5..7's torque channels left out
+  (zero on most rows), and with ``weighting="torque"`` (*pinobs N·m*): the first 80 %
+  fits, the last 20 % is held out.  FIGAROH's numbers are quoted from ``shared/data/README.md``.
 
 **Velocity RMS** [rad/s, m/s for the torso] of ``pinobs.estimate`` (default
 ``clock="auto"``, σ from the log) against the robot's own velocity (UR10e ``dq``,
@@ -41,7 +43,10 @@ TIAGo ``tiago_velocity.csv``), from 1 s after the start (TIAGo: over the held-ou
 only), over the joints whose torques are measured (TIAGo: torso and arm_1..4):
 ``kf`` (default), ``kf*`` (the best ``jerk_psd`` of :data:`JERK_GRID`, chosen on the
 reference itself: optimistic), ``ekf``, ``riemannian``, ``kalman`` on the nominal
-model and on the identified one (``+id``), and ``adaptive`` (nominal start); on the
+model and on the identified one (``+id``), each also blended per joint with ``kf``
+(``+nb``: ``never_behind=True``, :mod:`pinobs.observers.neverbehind`), ``ekf`` on the
+identified model with its learned torque offset and the blend (``ekf+auto+nb+id``:
+``disturbance_psd="auto"``), and ``adaptive`` (nominal start); on the
 UR10e also ``ekf`` and ``riemannian`` on the *pinobs+rotor* model (``+rotor``) and on
 the published one (``+pub``: rotor inertias as armature, ``Fv`` as damping, ``Fc`` as
 pinobs's tanh-smoothed Coulomb friction, no offset).  The reference's own noise floor:
@@ -231,10 +236,15 @@ def velocity_runs(
         best = min(best, (out.pop(f"kf(jerk_psd={j:g})"), j))
     out["kf*"], out["kf*_jerk_psd"] = best
     names = ("ekf", "riemannian") if quick else ("ekf", "riemannian", "kalman")
+    nb = {"never_behind": True}
     for name in names:
         run(name, name, robot)
+        run(f"{name}+nb", name, robot, nb)
         if identified is not None:
             run(f"{name}+id", name, identified)
+            run(f"{name}+nb+id", name, identified, nb)
+    if identified is not None and not quick:
+        run("ekf+auto+nb+id", "ekf", identified, {**nb, "disturbance_psd": "auto"})
     for suffix, rob in extra:
         for name in ("ekf", "riemannian"):
             run(f"{name}+{suffix}", name, rob)
@@ -378,11 +388,13 @@ def tiago(quick: bool) -> dict[str, Any]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         # arm_5..7's efforts are zero on most rows: their channels are left out (identify
-        # refuses them)
-        ident = pinobs.identify(robot, (t, q, tau), holdout=0.2, exclude=list(rd.TIAGO_JOINTS[5:]))
+        # refuses them); the wrist bodies, then seen through arm_1..4's torques alone, make
+        # the condition 2e6 (M⁻¹ weighting) to 4e7 (torque weighting): hence max_condition
+        ident = pinobs.identify(
+            robot, (t, q, tau), holdout=0.2, exclude=list(rd.TIAGO_JOINTS[5:]), max_condition=1e8
+        )
     secs = time.perf_counter() - t0
-    # each torque channel by its own residual scale in N·m: the wrist bodies, then seen
-    # through arm_1..4's torques alone, make the first pass's condition 4e7
+    # each torque channel by its own residual scale in N·m
     ident_t = pinobs.identify(
         robot,
         (t, q, tau),
@@ -580,6 +592,13 @@ OBS_COLS = (
     "riemannian+id",
     "kalman",
     "kalman+id",
+    "ekf+nb",
+    "riemannian+nb",
+    "kalman+nb",
+    "ekf+nb+id",
+    "riemannian+nb+id",
+    "kalman+nb+id",
+    "ekf+auto+nb+id",
     "adaptive",
     "ekf+rotor",
     "riemannian+rotor",
@@ -754,22 +773,30 @@ def markdown(res: dict[str, Any]) -> str:
     L.append(
         "Against issue 36's targets (ratios of the RMS above): default `kf` over `kf*` "
         "(target ≤ 1.3); the worst of `ekf`, `riemannian`, `kalman` on the nominal model over "
-        "`kf` (≤ 1.2); `ekf+id` and `riemannian+id` over `kf` (≤ 0.7); `adaptive` over `kf*` "
-        "(≤ 0.5); with the `+rotor` model, `ekf+rotor` over `kf`."
+        "`kf` (≤ 1.2), alone and blended with `kf` (`+nb`: `never_behind=True`); `ekf+id` and "
+        "`riemannian+id` over `kf` (≤ 0.7), alone, blended, and `ekf` with the learned "
+        'disturbance (`+auto`: `disturbance_psd="auto"`); `adaptive` over `kf*` (≤ 0.5); '
+        "with the `+rotor` model, `ekf+rotor` over `kf`."
     )
     L.append("")
     L.append(
-        "| log | kf / kf* | nominal model-based / kf | ekf+id / kf | riemannian+id / kf "
+        "| log | kf / kf* | nominal model-based / kf | nominal +nb / kf | ekf+id / kf "
+        "| riemannian+id / kf | ekf+nb+id / kf | riemannian+nb+id / kf | ekf+auto+nb+id / kf "
         "| adaptive / kf* | ekf+rotor / kf |"
     )
-    L.append("|---|---|---|---|---|---|---|")
+    L.append("|---|" + "---|" * 10)
     for n, v in logs:
         worst = max(v.get(c, math.nan) for c in ("ekf", "riemannian", "kalman"))
+        worst_nb = max(v.get(c, math.nan) for c in ("ekf+nb", "riemannian+nb", "kalman+nb"))
         cells = (
             v["kf"] / v["kf*"],
             worst / v["kf"],
+            worst_nb / v["kf"],
             v.get("ekf+id", math.nan) / v["kf"],
             v.get("riemannian+id", math.nan) / v["kf"],
+            v.get("ekf+nb+id", math.nan) / v["kf"],
+            v.get("riemannian+nb+id", math.nan) / v["kf"],
+            v.get("ekf+auto+nb+id", math.nan) / v["kf"],
             v.get("adaptive", math.nan) / v["kf*"],
             v.get("ekf+rotor", math.nan) / v["kf"],
         )

@@ -169,9 +169,10 @@ def identify(
             sample (zero-order hold: ``pinobs.simulate``, most controllers) or
             ``"sampled"`` at the instants (``pinobs excite``'s trajectory: trapezoid);
             every pass (the model layer's ``torque``).
-        weighting, exclude, payload: the model layer's (the rows weighted by ``M⁻¹`` by
-            default, or each torque channel by its own residual scale in N·m; joints whose torque channel is left
-            out; a load's ten parameters on a calibrated ``robot``), every pass.
+        weighting: the model layer's (the rows weighted by ``M⁻¹`` by default, or each
+            torque channel by its own residual scale in N·m), every pass.
+        exclude: the model layer's (joints whose torque channel is left out), every pass.
+        payload: the model layer's (a load's ten parameters on a calibrated ``robot``).
         smoothing: the friction law's smoothing velocity [rad/s] instead of its search
             (the model layer's ``smoothing``), every pass.
 

@@ -117,9 +117,9 @@ friction, vary as fast as the motion).
 The density learned from the innovations (``disturbance_psd="auto"``, issue 36).
 One number cannot fit an exact model (where any density costs accuracy: 3.5e-3
 against 4.0e-5 above) and a wrong one.  With ``"auto"`` each joint's density ``ψᵢ``
-[N²·m²/s] is matched to the filter's own innovations by covariance matching
-(:func:`pinobs.observers.neverbehind.match_density`; Mehra 1972 §IV, Myers & Tapley
-1976) at every sample ``h``, in the log domain (``S = P⁻_qq + σ² I``, the predicted
+(in N²·m²/s) is matched to the filter's own innovations by covariance matching,
+:func:`pinobs.observers.neverbehind.match_density` (Mehra 1972 §IV, Myers & Tapley
+1976), at every sample ``h``, in the log domain (``S = P⁻_qq + σ² I``, the predicted
 innovation covariance; ``T`` = ``AUTO_WINDOW``)::
 
     log ψᵢ ← log ψᵢ + (h/T) (clip(log(eᵢ² / Sᵢᵢ), −8, 5) − m),   m = E[clip(log χ²₁)],

@@ -129,7 +129,7 @@ import functools
 import itertools
 import math
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from typing import Any, cast
@@ -1677,6 +1677,22 @@ def _rows_of(
     return None if path is None else (path[0][rows], path[1][rows])
 
 
+def _holdout_in_newton_metres(
+    reg: MomentumRegressor | PayloadRegressor,
+    unweighted: Callable[[], MomentumRegressor | PayloadRegressor],
+    rows: tuple[Vector, Vector],
+    log: tuple[Vector, Vector, Vector],
+    **options: Any,
+) -> tuple[Vector, Vector]:
+    """The held-out rows in N·m: ``rows`` themselves when ``reg`` already weights by torque,
+    else the same windows built again through ``unweighted()`` (their mean torques)."""
+    A_h, _ = rows
+    if reg.weighting == "torque" or A_h.shape[0] == 0:
+        return rows
+    A_nm, y_nm, _ = build_rows(unweighted(), *log, **options)
+    return A_nm, y_nm
+
+
 #: A torque channel with more than this share of its finite rows exactly zero is refused
 #: (named) unless excluded: a joint whose effort is not measured most of the time (TIAGo's
 #: wrist, arm_5..7: 88–90 % zeros) would otherwise be fitted to "no torque".
@@ -1886,8 +1902,9 @@ def identify_payload(
     (:class:`PayloadRegressor`), everything else fixed; physically consistent (the load's
     pseudo-inertia ``⪰ 0``, Wensing et al. 2017, by :func:`solve`).
 
-    Rows weighted as :func:`identify`'s (by default in N·m, each torque channel by its own
-    residual scale).  The result's ``robot`` carries the payload; ``report["payload"]`` gives
+    Rows weighted as :func:`identify`'s (by default through ``M⁻¹``; ``weighting="torque"``:
+    each torque channel in N·m by its own residual scale); the held-out report is in N·m
+    either way.  The result's ``robot`` carries the payload; ``report["payload"]`` gives
     its mass [kg], centre of mass [m, in ``frame``] and rotational inertia about it
     [kg·m², in ``frame``'s axes]; ``report["holdout_torque_before"]`` is the robot without
     it.  Other arguments and report keys: :func:`identify`'s.
@@ -1941,6 +1958,15 @@ def identify_payload(
     coordinates = _coordinate_names(robot)
     zero = np.zeros(10)
     holdout_before, holdout_after = per_joint(A_h, y_h, zero), per_joint(A_h, y_h, phi)
+    A_nm, y_nm = _holdout_in_newton_metres(
+        reg,
+        lambda: PayloadRegressor(robot, frame, weighting="torque", exclude=exclude),
+        (A_h, y_h),
+        (t[~fit], q[~fit], tau[~fit]),
+        window=window,
+        path=_rows_of(est, ~fit),
+        torque=torque,
+    )
     report: dict[str, Any] = {
         "payload": {
             "frame": frame,
@@ -1958,8 +1984,8 @@ def identify_payload(
         "outlier_windows": [],
         "holdout_before": holdout_before,
         "holdout_after": holdout_after,
-        "holdout_torque_before": holdout_before if weighting == "torque" else [math.nan] * nv,
-        "holdout_torque_after": holdout_after if weighting == "torque" else [math.nan] * nv,
+        "holdout_torque_before": per_joint(A_nm, y_nm, zero),
+        "holdout_torque_after": per_joint(A_nm, y_nm, phi),
         "weighting": weighting,
         "excluded": [coordinates[j] for j in excluded],
         "torque_sigma": torque_sigma.tolist(),
@@ -2284,25 +2310,17 @@ def identify(
         if holdout > 0
         else (np.zeros((0, reg.size)), np.zeros(0), [])
     )
-    if weighting == "torque":
-        A_nm, y_nm = A_h, y_h
-    else:  # the held-out windows again, unweighted: their mean torques [N·m]
-        reg_nm = MomentumRegressor(
+    A_nm, y_nm = _holdout_in_newton_metres(
+        reg,
+        lambda: MomentumRegressor(
             robot, friction=friction, offset=offset, armature=armature, weighting="torque"
-        )
-        A_nm, y_nm, _ = (
-            build_rows(
-                reg_nm,
-                t[~fit],
-                q[~fit],
-                tau[~fit],
-                window=window,
-                path=_rows_of(est, ~fit),
-                torque=torque,
-            )
-            if A_h.shape[0]
-            else (np.zeros((0, reg.size)), np.zeros(0), [])
-        )
+        ),
+        (A_h, y_h),
+        (t[~fit], q[~fit], tau[~fit]),
+        window=window,
+        path=_rows_of(est, ~fit),
+        torque=torque,
+    )
     torque_sigma = np.full(nv, math.nan)
     if weighting == "torque":
         torque_sigma[np.unique(channel[used_rows])] = sol.channel_sigma

@@ -713,6 +713,11 @@ def test_identify_payload_recovers_a_known_load_on_a_noise_free_log(weighting: s
     )
     rep = ident.report
     assert max(rep["holdout_after"]) < 1e-2 * max(rep["holdout_before"])
+    # the held-out torques in N·m whatever the weighting: the load's weight on the shoulder
+    # lift (2.8 kg · 9.81 at up to ~1 m) before, nothing after
+    before, after = np.array(rep["holdout_torque_before"]), np.array(rep["holdout_torque_after"])
+    assert np.isfinite(before).all() and 1.0 < before[1] < 2.8 * 9.81 * 1.2
+    assert max(after) < 1e-2 * max(before)
 
 
 def test_identify_payload_of_a_point_mass_stays_physically_consistent() -> None:

@@ -39,7 +39,6 @@ from pinobs.model.friction import FrictionLaw
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
     ABSURD_VALUE,
-    COULOMB_SMOOTHING_VELOCITY,
     QUATERNION_NORM_TOL,
 )
 
@@ -175,12 +174,6 @@ class Robot:
         self._linear_friction = not law.has_coulomb and not np.any(law.offset)
         self._neg_damping = -law.viscous
         self._neg_damping.setflags(write=False)
-        # The URDF's law (every robot without an identified one) by its two terms: the
-        # general law's formula costs 7x per call (12 against 1.8 µs on a double pendulum,
-        # 218 s against a few for a friction test's plant, which calls it at every RK4 stage)
-        self._urdf_coulomb: Vector | None = (
-            law.coulomb_pos.copy() if law.has_coulomb and law.is_urdf else None
-        )
         # Zero-gravity copy: aba(q, v, 0) on it is -M⁻¹ c(q, v), the geodesic spray.
         self._free = model.copy()
         self._free.gravity.setZero()
@@ -611,10 +604,6 @@ class Robot:
             return np.zeros(self.nv)
         if self._linear_friction:  # (a viscous-only friction skips the zero Coulomb term's tanh)
             return self._neg_damping * v
-        if self._urdf_coulomb is not None:  # −D v − F_c tanh(v / v_s), the URDF's law
-            tau_f = self._neg_damping * v
-            tau_f -= self._urdf_coulomb * np.tanh(v / COULOMB_SMOOTHING_VELOCITY)
-            return tau_f
         return -self.friction_law.force(v)
 
     def friction_derivative(self, v: Vector) -> Vector:
@@ -624,9 +613,6 @@ class Robot:
             return np.zeros(self.nv)
         if self._linear_friction:
             return self._neg_damping.copy()
-        if self._urdf_coulomb is not None:  # the URDF's law: −D − F_c sech²(v / v_s) / v_s
-            vs = COULOMB_SMOOTHING_VELOCITY
-            return self._neg_damping - self._urdf_coulomb / vs * (1.0 - np.tanh(v / vs) ** 2)
         return -self.friction_law.force_derivative(v)
 
     def friction_stiffness(self, v_near: Vector) -> Vector:
@@ -637,8 +623,6 @@ class Robot:
             return np.zeros(self.nv)
         if self._linear_friction:
             return -self._neg_damping
-        if self._urdf_coulomb is not None:  # steepest at the nearest velocity (sech² falls)
-            return -self.friction_derivative(np.abs(np.asarray(v_near, dtype=float)))
         return self.friction_law.slope_bound(v_near)
 
     def forward_dynamics(self, q: Vector, v: Vector, tau: Vector) -> Vector:

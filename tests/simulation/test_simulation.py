@@ -271,6 +271,7 @@ def test_the_observers_noise_hint_includes_the_quantization() -> None:
     assert rms["kf"] < 0.05 and rms["ekf"] < 5e-4, rms
 
 
+@pytest.mark.slow  # 800k RK4 steps at 200 substeps: 69-106 s
 def test_the_plant_splits_its_steps_where_coulomb_friction_is_stiff() -> None:
     """Fixed RK4 steps are unstable on the smoothed Coulomb slope: a double pendulum with
     3 N·m of it chattered to |v| = 3.57 rad/s at one step per sample (0.071 at 50), silently.

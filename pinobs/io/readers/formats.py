@@ -13,6 +13,7 @@ from pinobs.errors import DimensionError, ModelFileError, OptionError
 from pinobs.io.drives import Drives
 from pinobs.io.readers.bags import BAG_FILES, bag_chunks, is_bag
 from pinobs.io.readers.csv_log import csv_chunks
+from pinobs.io.readers.legged import legged_notes
 from pinobs.io.readers.log import CHUNK_ROWS, Log, LogSource, concat_logs
 from pinobs.io.readers.npz import npz_log
 from pinobs.io.readers.parquet import parquet_chunks
@@ -141,7 +142,7 @@ def iter_log(
         raise DimensionError(f"chunk_rows={chunk_rows} must be >= 1")
     if type(source).__name__ == "DataFrame":
         _refuse_ignored("DataFrame", columns=None, topic=topic)
-        yield frame_log(source, robot, columns, drives)
+        yield from _said(iter([frame_log(source, robot, columns, drives)]), robot)
         return
     path = Path(source)
     if not path.exists():
@@ -158,7 +159,19 @@ def iter_log(
         _check_array_drives(f"log {str(path)!r}", drives, robot)
     if path.is_dir() and not reader.folder:
         raise ModelFileError(f"log {str(path)!r} is a folder but not a rosbag2 (no metadata.yaml)")
-    yield from reader.chunks(path, robot, _Options(columns, topic, chunk_rows, drives))
+    yield from _said(
+        reader.chunks(path, robot, _Options(columns, topic, chunk_rows, drives)), robot
+    )
+
+
+def _said(chunks: Iterator[Log], robot: Robot) -> Iterator[Log]:
+    """``chunks``, the first with what its legged columns say of the log (units, no base)."""
+    first = next(chunks, None)
+    if first is None:
+        return
+    notes = legged_notes(robot, first.q, first.imu_gyro, first.imu_acc)
+    yield replace(first, notes=first.notes + notes) if notes else first
+    yield from chunks
 
 
 def _refuse_ignored(what: str, *, columns: Mapping[str, str] | None, topic: str | None) -> None:

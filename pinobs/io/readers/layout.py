@@ -12,6 +12,7 @@ import numpy as np
 
 from pinobs.errors import DimensionError, OptionError
 from pinobs.io.drives import Drives
+from pinobs.io.readers.legged import LeggedColumns, free_flyer_root, legged_columns
 from pinobs.model import Robot
 
 
@@ -28,11 +29,13 @@ class Layout:
     drives: Drives | None = None  # how motor-side columns map to the joints (pinobs.io.drives)
     motor: tuple[str, ...] = ()  # qm.<joint> per joint: positions from the motors (drives)
     current: tuple[str, ...] = ()  # i.<joint> per joint: torques from the currents (drives)
+    legged: LeggedColumns | None = None  # IMU, foot forces or contacts (readers.legged)
 
     @property
     def used(self) -> list[str]:
         cols = [self.t, *(c for block in self.q for c in block), *self.motor, *self.current]
-        return cols + list(self.tau or ()) + ([self.tick] if self.tick else [])
+        legged = self.legged.used if self.legged is not None else []
+        return cols + list(self.tau or ()) + ([self.tick] if self.tick else []) + legged
 
 
 def joint_blocks(robot: Robot) -> list[tuple[str, str, int, int, int, int]]:
@@ -123,8 +126,11 @@ class _QColumns:
     absent: list[str] = field(default_factory=list)  # joints with a q column missing
 
 
-def _q_columns(pick: _Picker, robot: Robot, motor: tuple[str, ...]) -> _QColumns:
-    """Each joint's ``q<k>`` or ``q.<joint>[.<k>]`` columns (or one angle of a circle)."""
+def _q_columns(
+    pick: _Picker, robot: Robot, motor: tuple[str, ...], unmeasured: str | None = None
+) -> _QColumns:
+    """Each joint's ``q<k>`` or ``q.<joint>[.<k>]`` columns (or one angle of a circle); the
+    joint ``unmeasured`` (a legged robot's free-flyer root) may have none: read as NaN."""
     out = _QColumns()
     for name, kind, iq, nq, _, _ in joint_blocks(robot):
         out.slices.append(slice(iq, iq + nq))
@@ -138,6 +144,9 @@ def _q_columns(pick: _Picker, robot: Robot, motor: tuple[str, ...]) -> _QColumns
             cols.append(pick.one([f"q{iq + k}", named], f"q{iq + k}") or "")
         if all(cols):
             out.cols.append(tuple(cols))
+            out.angle.append(False)
+        elif name == unmeasured and not any(cols):
+            out.cols.append(())  # NaN (from_arrays)
             out.angle.append(False)
         elif kind == "circle" and not any(cols) and f"q.{name}" in pick.names:
             out.cols.append((f"q.{name}",))
@@ -236,7 +245,9 @@ def table_layout(
     motor, current = motor_layout(header, robot, where, drives)
     pick = _Picker(header, where)
     t = pick.one(["t"], "t")
-    q = _q_columns(pick, robot, motor)
+    legged = legged_columns(header, robot, where)
+    unmeasured = free_flyer_root(robot) if legged.imu and not motor else None
+    q = _q_columns(pick, robot, motor, unmeasured)
     tau_cols = _tau_candidates(pick, robot, current)
     _refuse_beyond(header, robot, where)
     t = _refuse_missing(header, robot, where, t, q, bool(motor))
@@ -252,6 +263,7 @@ def table_layout(
         drives=drives,
         motor=motor,
         current=current,
+        legged=legged if legged.used else None,
     )
 
 

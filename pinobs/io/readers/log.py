@@ -35,6 +35,12 @@ class Log:
         stale: rows that repeat the previous sample (set by the clock repair,
             :mod:`pinobs.io.clock`): no measurement, the estimate at that sample's time.
         drops: per row, the loop samples missing just before it (the clock repair).
+        imu_gyro: trunk IMU angular velocity [rad/s], shape ``(N, 3)``, or ``None``
+            (``imu.gyro.x|y|z`` columns, :mod:`pinobs.io.readers.legged`).
+        imu_acc: trunk IMU specific force [m/s²], shape ``(N, 3)``, or ``None``.
+        foot_force: normal force per foot [N], shape ``(N, len(feet))``, or ``None``.
+        contact: contact flag per foot (0, 1), shape ``(N, len(feet))``, or ``None``.
+        feet: the foot frames of ``foot_force`` and ``contact`` columns, in order.
     """
 
     t: Vector
@@ -47,6 +53,11 @@ class Log:
     tick: Vector | None = None
     stale: NDArray[np.bool_] | None = None
     drops: NDArray[np.int64] | None = None
+    imu_gyro: Vector | None = None
+    imu_acc: Vector | None = None
+    foot_force: Vector | None = None
+    contact: Vector | None = None
+    feet: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.lines is None:
@@ -93,4 +104,9 @@ def concat_logs(chunks: Sequence[Log], *, nv: int | None = None) -> Log:
         tick=_joined([c.tick for c in chunks], sizes, np.nan, None),
         stale=_joined([c.stale for c in chunks], sizes, False, None),
         drops=_joined([c.drops for c in chunks], sizes, 0, None),
+        imu_gyro=_joined([c.imu_gyro for c in chunks], sizes, np.nan, 3),
+        imu_acc=_joined([c.imu_acc for c in chunks], sizes, np.nan, 3),
+        foot_force=_joined([c.foot_force for c in chunks], sizes, np.nan, len(chunks[0].feet)),
+        contact=_joined([c.contact for c in chunks], sizes, np.nan, len(chunks[0].feet)),
+        feet=chunks[0].feet,
     )

@@ -9,6 +9,7 @@ import numpy as np
 
 from pinobs.io.drives import Drives
 from pinobs.io.readers.layout import Layout, clean_header, table_layout
+from pinobs.io.readers.legged import legged_arrays
 from pinobs.io.readers.log import Log
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
@@ -103,6 +104,8 @@ def from_arrays(
         if from_motor is not None:
             a = from_motor[:, k]
             q[:, sl] = np.column_stack([np.cos(a), np.sin(a)]) if angle else a[:, None]
+        elif not cols:  # a legged robot's base pose, not in the log (readers.legged)
+            q[:, sl] = np.nan
         elif angle:
             a = arrays[cols[0]]
             q[:, sl] = np.column_stack([np.cos(a), np.sin(a)])
@@ -123,6 +126,7 @@ def from_arrays(
         lines=lines,
         unit=unit,
         tick=None if layout.tick is None else np.asarray(arrays[layout.tick], dtype=float),
+        **vars(legged_arrays(arrays, n, layout.legged, lines, unit)),
     )
 
 

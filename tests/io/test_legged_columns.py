@@ -182,3 +182,122 @@ def test_real_go1_log_reads_every_row(go1) -> None:
     assert log.feet == ("FR_foot", "FL_foot", "RR_foot", "RL_foot")
     assert (log.foot_force >= 0).all() and (log.foot_force <= SEROW_MG).all()
     assert any("base pose" in n for n in log.notes)
+
+
+# ------------------------------------------------------------------ ROS bags
+def _write_legged_bag(path: Path, robot: pinobs.Robot, *, imu_gap: bool = False) -> None:
+    """JointState at 100 Hz (t = 0.001 + k/100), Imu at 250 Hz, a WrenchStamped per foot at
+    200 Hz, every sensor value linear in time (interpolation is then exact)."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    js, imu, wr = (
+        T["sensor_msgs/msg/JointState"],
+        T["sensor_msgs/msg/Imu"],
+        T["geometry_msgs/msg/WrenchStamped"],
+    )
+    Header, Time, V3, Q = (
+        T["std_msgs/msg/Header"],
+        T["builtin_interfaces/msg/Time"],
+        T["geometry_msgs/msg/Vector3"],
+        T["geometry_msgs/msg/Quaternion"],
+    )
+    Wrench = T["geometry_msgs/msg/Wrench"]
+
+    def header(t: float, frame: str = "") -> object:
+        return Header(stamp=Time(sec=int(t), nanosec=round((t % 1) * 1e9)), frame_id=frame)
+
+    names = list(robot.joint_names[1:])
+    with Writer(path, version=9) as w:
+        cj = w.add_connection("/joint_states", js.__msgtype__, typestore=ts)
+        ci = w.add_connection("/imu", imu.__msgtype__, typestore=ts)
+        cf = {
+            f: w.add_connection(f"/force/{f}", wr.__msgtype__, typestore=ts)
+            for f in ("FL_foot", "RR_foot")
+        }
+        for k in range(250):
+            t = k / 250
+            if imu_gap and 0.5 < t < 0.6:
+                continue
+            m = imu(
+                header=header(t, "imu_link"),
+                orientation=Q(x=0, y=0, z=0, w=1),
+                orientation_covariance=np.zeros(9),
+                angular_velocity=V3(x=t, y=2 * t, z=-t),
+                angular_velocity_covariance=np.zeros(9),
+                linear_acceleration=V3(x=0.1 * t, y=0.0, z=9.81 + t),
+                linear_acceleration_covariance=np.zeros(9),
+            )
+            w.write(ci, int(t * 1e9), ts.serialize_cdr(m, imu.__msgtype__))
+        for k in range(200):
+            t = k / 200
+            for i, (foot, conn) in enumerate(cf.items()):
+                m = wr(
+                    header=header(t, foot),
+                    wrench=Wrench(
+                        force=V3(x=1.0, y=0.0, z=50 + 10 * t + i), torque=V3(x=0, y=0, z=0)
+                    ),
+                )
+                w.write(conn, int(t * 1e9), ts.serialize_cdr(m, wr.__msgtype__))
+        for k in range(100):
+            t = 0.001 + k / 100
+            m = js(
+                header=header(t),
+                name=names,
+                position=np.full(len(names), t),
+                velocity=np.empty(0),
+                effort=np.empty(0),
+            )
+            w.write(cj, int(t * 1e9), ts.serialize_cdr(m, js.__msgtype__))
+
+
+def test_bag_imu_and_wrenches_are_interpolated_at_the_joint_stamps(tmp_path, go1) -> None:
+    pytest.importorskip("rosbags")
+    _write_legged_bag(tmp_path / "bag", go1)
+    log = read_log(tmp_path / "bag", go1)
+    t = 0.001 + np.arange(100) / 100
+    assert len(log) == 100  # one row per JointState message
+    np.testing.assert_allclose(log.t, t, atol=1e-9)
+    last = 249 / 250  # the IMU's last stamp: the rows after it have no IMU value
+    inside = t <= last
+    np.testing.assert_allclose(
+        log.imu_gyro[inside], np.column_stack([t, 2 * t, -t])[inside], atol=1e-9
+    )
+    np.testing.assert_allclose(log.imu_acc[inside, 2], 9.81 + t[inside], atol=1e-9)
+    assert np.isnan(log.imu_gyro[~inside]).all()
+    assert log.feet == ("FL_foot", "RR_foot")
+    ok = t <= 199 / 200
+    np.testing.assert_allclose(
+        log.foot_force[ok], np.column_stack([50 + 10 * t, 51 + 10 * t])[ok], atol=1e-9
+    )
+    lost = {k for k, text in log.problems if "/imu" in text}
+    assert lost == set(np.flatnonzero(~inside))  # every NaN row said, by message number
+    assert np.isnan(log.q[:, :7]).all() and np.isfinite(log.q[:, 7:]).all()
+    chunks = list(iter_log(tmp_path / "bag", go1, chunk_rows=30))
+    np.testing.assert_array_equal(np.concatenate([c.imu_acc for c in chunks]), log.imu_acc)
+
+
+def test_a_bag_imu_dropout_is_nan_and_said_not_bridged(tmp_path, go1) -> None:
+    pytest.importorskip("rosbags")
+    _write_legged_bag(tmp_path / "bag", go1, imu_gap=True)
+    log = read_log(tmp_path / "bag", go1)
+    t = log.t
+    gap = (t > 0.5) & (t < 0.6)
+    assert gap.sum() == 10 and np.isnan(log.imu_gyro[gap]).all()
+    assert np.isfinite(log.imu_gyro[(t < 0.49) | ((t > 0.61) & (t < 0.99))]).all()
+    assert {k for k, text in log.problems if "a gap" in text} >= set(np.flatnonzero(gap))
+
+
+def test_a_free_flyer_bag_without_imu_is_still_refused(tmp_path, go1) -> None:
+    pytest.importorskip("rosbags")
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    js = ts.types["sensor_msgs/msg/JointState"]
+    with Writer(tmp_path / "bag", version=9) as w:
+        w.add_connection("/joint_states", js.__msgtype__, typestore=ts)
+    with pytest.raises(DimensionError, match=r"root_joint.*se3.*sensor_msgs/Imu"):
+        read_log(tmp_path / "bag", go1)

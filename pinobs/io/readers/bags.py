@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pinobs.errors import DimensionError, LogFormatError
+from pinobs.io.readers.bag_sensors import BagSensors, bag_sensors
 from pinobs.io.readers.layout import joint_blocks
+from pinobs.io.readers.legged import free_flyer_root
 from pinobs.io.readers.log import Log
 from pinobs.io.readers.table import INSTALL_IO
 from pinobs.model import Robot
@@ -32,18 +35,26 @@ def _open_bag(path: Path, robot: Robot) -> Any:
         from rosbags.typesys import Stores, get_typestore
     except ImportError as exc:
         raise ModuleNotFoundError(f"reading ROS bags needs rosbags: {INSTALL_IO}") from exc
-    for name, kind, *_ in joint_blocks(robot):
-        if kind not in ("vector", "circle"):
-            raise DimensionError(
-                f"joint {name!r} of {robot.name!r} is a {kind} joint, which "
-                "sensor_msgs/JointState cannot carry; load the robot with a fixed root"
-            )
     try:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         reader.open()
     except (AnyReaderError, OSError) as exc:
         raise LogFormatError(f"bag {str(path)!r} cannot be opened: {exc}") from None
     return reader
+
+
+def _measured_joints(robot: Robot, sensors: BagSensors | None) -> list[Any]:
+    """The joints a JointState carries: all, but a legged robot's free-flyer root when the
+    bag has its IMU (its pose then NaN, :mod:`pinobs.io.readers.legged`)."""
+    unmeasured = free_flyer_root(robot) if sensors is not None and sensors.imu else None
+    for name, kind, *_ in joint_blocks(robot):
+        if kind not in ("vector", "circle") and name != unmeasured:
+            raise DimensionError(
+                f"joint {name!r} of {robot.name!r} is a {kind} joint, which "
+                "sensor_msgs/JointState cannot carry; load the robot with a fixed root"
+                + (", or record the trunk's sensor_msgs/Imu in the bag" if kind == "se3" else "")
+            )
+    return [b for b in robot.joints if b.name != unmeasured]
 
 
 def _joint_state_topic(reader: Any, path: Path, topic: str | None) -> tuple[str, list[Any]]:
@@ -71,7 +82,12 @@ def _joint_state_topic(reader: Any, path: Path, topic: str | None) -> tuple[str,
 
 
 def _joint_row(
-    msg: Any, names: list[str], robot: Robot, lacking: list[str], notes: list[str]
+    msg: Any,
+    names: list[str],
+    robot: Robot,
+    joints: list[Any],
+    lacking: list[str],
+    notes: list[str],
 ) -> tuple[Vector, Vector, int]:
     """``q``, ``tau`` of one JointState message (NaN where a joint lacks), the effort's size;
     what is wrong with it added to ``notes``."""
@@ -82,7 +98,7 @@ def _joint_row(
     tau = np.full(robot.nv, np.nan)
     if lacking:
         notes.append(f"no position for joints {lacking}")
-    for b in robot.joints:
+    for b in joints:
         i = where.get(b.name)
         if i is None:
             continue
@@ -93,7 +109,7 @@ def _joint_row(
                 q[b.idx_q] = pos[i]
         if i < eff.size:
             tau[b.idx_v] = eff[i]
-    if eff.size and np.isnan(tau).any():
+    if eff.size and any(np.isnan(tau[b.idx_v : b.idx_v + b.nv]).any() for b in joints):
         notes.append("effort lacks some joints")
     return q, tau, int(eff.size)
 
@@ -101,8 +117,10 @@ def _joint_row(
 class _Rows:
     """The rows of the chunk being read, and what is said of the log as a whole."""
 
-    def __init__(self, robot: Robot, topic: str) -> None:
-        self.robot, self.topic = robot, topic
+    def __init__(
+        self, robot: Robot, topic: str, joints: list[Any], sensors: BagSensors | None
+    ) -> None:
+        self.robot, self.topic, self.joints, self.sensors = robot, topic, joints, sensors
         self.start = 0  # rows already yielded
         self.skipped: list[int] = []  # messages of another publisher
         self.others: set[str] = set()  # the joints they name
@@ -143,7 +161,7 @@ class _Rows:
             self.seq = None
         elif self.seq is not None:
             self.seq.append(float(seq))
-        q, tau, n_eff = _joint_row(msg, names, self.robot, lacking, notes)
+        q, tau, n_eff = _joint_row(msg, names, self.robot, self.joints, lacking, notes)
         self.any_tau = self.any_tau or n_eff > 0
         if notes:
             self.problems.append((number, "; ".join(notes)))
@@ -158,7 +176,14 @@ class _Rows:
         )  # fmt: skip
         self.start += len(self.t)
         self.clear()
-        return log
+        if self.sensors is None:
+            return log
+        legged, said = self.sensors.at(log.t, log.lines)
+        merged: dict[int, list[str]] = {}
+        for k, text in (*log.problems, *said):
+            merged.setdefault(k, []).append(text)
+        problems = tuple((k, "; ".join(v)) for k, v in sorted(merged.items()))
+        return replace(log, problems=problems, **vars(legged))
 
     def said(self) -> tuple[str, ...]:
         """Messages skipped, said once; none of them the robot's: refused."""
@@ -166,7 +191,7 @@ class _Rows:
             raise DimensionError(
                 f"topic {self.topic!r}: the JointState joints {sorted(self.others)} "
                 f"include none of the joints of robot {self.robot.name!r}, "
-                f"{list(self.robot.joint_names)}"
+                f"{[b.name for b in self.joints]}"
             )
         if not self.skipped:
             return ()
@@ -180,10 +205,12 @@ class _Rows:
 def bag_chunks(path: Path, robot: Robot, topic: str | None, chunk_rows: int) -> Iterator[Log]:
     """The ``sensor_msgs/JointState`` messages on ``topic`` as rows, chunk by chunk."""
     reader = _open_bag(path, robot)
-    index = list(robot.joint_names)
     try:
+        sensors = bag_sensors(reader, str(path), robot)
+        joints = _measured_joints(robot, sensors)
+        index = [b.name for b in joints]
         topic, conns = _joint_state_topic(reader, path, topic)
-        rows = _Rows(robot, topic)
+        rows = _Rows(robot, topic, joints, sensors)
         for number, (conn, received, raw) in enumerate(reader.messages(connections=conns)):
             msg: Any = reader.deserialize(raw, conn.msgtype)
             names = list(msg.name)

@@ -23,6 +23,11 @@ Formats (chosen from the source):
 
   The torque columns are optional (every torque then reads as zero, and a
   model-based observer is warned).
+  - a legged robot's ``imu.gyro.x|y|z`` [rad/s], ``imu.acc.x|y|z`` [m/s²],
+    ``force.<foot frame>`` [N] or ``contact.<foot frame>`` (0/1) as
+    :attr:`Log.imu_gyro`, :attr:`Log.imu_acc`, :attr:`Log.foot_force`,
+    :attr:`Log.contact` (:mod:`pinobs.io.readers.legged`; a free-flyer base the
+    log does not have read as NaN).
 - Parquet (``.parquet``, ``.pq``): the same columns.
 - NPZ (``.npz``): arrays ``t`` (N,), ``q`` (N, nq), optionally ``tau`` (N, nv).
   A result saved by ``pinobs run --save`` (:meth:`pinobs.Result.save`) is read
@@ -35,7 +40,13 @@ Formats (chosen from the source):
   JointState topic), joints matched by name in any order, ``position`` as q,
   ``effort`` as τ, the header stamp as t (the bag's receive time when the first
   message's stamp is unset, 0: said in :attr:`Log.problems`); a ROS 1 header's ``seq`` as
-  the sample counter (:attr:`Log.tick`, used by the clock repair).
+  the sample counter (:attr:`Log.tick`, used by the clock repair).  ``sensor_msgs/Imu`` and
+  ``geometry_msgs/WrenchStamped`` topics interpolated at the JointState stamps
+  (:mod:`pinobs.io.readers.bag_sensors`).
+
+Each format has its reader (:data:`pinobs.io.readers.formats.READERS`, by suffix,
+after :data:`~pinobs.io.readers.formats.DETECTORS`: a rosbag2 folder); any other
+suffix is read as CSV.
 
 A clean CSV/TSV is read by Arrow's streaming CSV reader straight into NumPy
 (fast, and without importing pandas); from the first row it cannot parse as

@@ -66,6 +66,13 @@ def test_simulated_go1_log_reads_imu_forces_and_joints_as_written(tmp_path, go1,
         assert any("base pose" in n for n in log.notes)
 
 
+def test_with_the_root_fixed_the_legs_read_without_nan(run) -> None:
+    legs = pinobs.load("go1", root_joint="fixed")
+    log = read_log(_frame(run), legs)
+    assert log.q.shape == (len(run.columns["t"]), 12) and np.isfinite(log.q).all()
+    assert log.imu_acc is not None and not log.notes
+
+
 def test_chunks_join_to_the_whole_log(tmp_path, go1, run) -> None:
     _frame(run).to_csv(tmp_path / "go1.csv", index=False)
     whole = read_log(tmp_path / "go1.csv", go1)

@@ -199,6 +199,8 @@ def legged_notes(
     if root is not None and q.shape[0] and np.isnan(q[:, :7]).all():
         notes.append(
             f"the base pose ({root}, q0..q6) is not in the log: read as NaN; an observer "
-            "that estimates the base from the IMU and the legs fills it"
+            "that estimates the base from the IMU and the legs fills it, a joint observer "
+            "sees every row as a dropped sample: run it on the legs alone, "
+            f"pinobs.load({robot.name!r}, root_joint='fixed') (--root-joint fixed)"
         )
     return tuple(notes)

@@ -82,6 +82,17 @@ def test_chunks_join_to_the_whole_log(tmp_path, go1, run) -> None:
     np.testing.assert_array_equal(np.concatenate([c.foot_force for c in chunks]), whole.foot_force)
 
 
+def test_concat_logs_keeps_the_feet_of_any_chunk(go1, run) -> None:
+    from pinobs.io import concat_logs
+
+    log = read_log(_frame(run), go1)
+    empty = pinobs.io.Log(np.empty(0), np.empty((0, go1.nq)), None)
+    joined = concat_logs([empty, log])
+    assert joined.feet == log.feet
+    np.testing.assert_array_equal(joined.foot_force, log.foot_force)
+    np.testing.assert_array_equal(joined.imu_gyro, log.imu_gyro)
+
+
 def test_contact_flags_read_and_a_force_in_a_contact_column_is_refused(go1) -> None:
     frame = pd.DataFrame({"t": [0.0, 0.01], **{f"q.{n}": [0.1, 0.1] for n in go1.joint_names[1:]}})
     frame["contact.FL_foot"] = [1, 0]

@@ -93,6 +93,7 @@ def concat_logs(chunks: Sequence[Log], *, nv: int | None = None) -> Log:
     sizes = [len(c) for c in chunks]
     if nv is None:
         nv = next((c.tau.shape[1] for c in chunks if c.tau is not None), 0)
+    feet = next((c.feet for c in chunks if c.feet), ())
     return Log(
         t=np.concatenate([c.t for c in chunks]),
         q=np.concatenate([c.q for c in chunks]),
@@ -106,7 +107,7 @@ def concat_logs(chunks: Sequence[Log], *, nv: int | None = None) -> Log:
         drops=_joined([c.drops for c in chunks], sizes, 0, None),
         imu_gyro=_joined([c.imu_gyro for c in chunks], sizes, np.nan, 3),
         imu_acc=_joined([c.imu_acc for c in chunks], sizes, np.nan, 3),
-        foot_force=_joined([c.foot_force for c in chunks], sizes, np.nan, len(chunks[0].feet)),
-        contact=_joined([c.contact for c in chunks], sizes, np.nan, len(chunks[0].feet)),
-        feet=chunks[0].feet,
+        foot_force=_joined([c.foot_force for c in chunks], sizes, np.nan, len(feet)),
+        contact=_joined([c.contact for c in chunks], sizes, np.nan, len(feet)),
+        feet=feet,
     )

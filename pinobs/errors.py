@@ -33,6 +33,7 @@ __all__ = [
     "OutputExistsError",
     "PinobsError",
     "PinobsWarning",
+    "SensorWarning",
     "SimulationFailed",
     "TimestampError",
     "TimestampWarning",
@@ -160,6 +161,11 @@ class ChunkWarning(PinobsWarning):
 
 class TimestampWarning(PinobsWarning):
     """Timestamps whose sample period says they are in another unit than seconds."""
+
+
+class SensorWarning(PinobsWarning):
+    """Sensor columns whose values say they are in another unit than the one read (an
+    accelerometer in g, a gyro in deg/s)."""
 
 
 class ModelWarning(PinobsWarning):

@@ -547,6 +547,11 @@ def _slice(log: Log, a: int, b: int) -> Log:
         tick=cut(log.tick),
         stale=cut(log.stale),
         drops=cut(log.drops),
+        imu_gyro=cut(log.imu_gyro),
+        imu_acc=cut(log.imu_acc),
+        foot_force=cut(log.foot_force),
+        contact=cut(log.contact),
+        feet=log.feet,
     )
 
 

@@ -7,8 +7,11 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from pinobs.cli.options import (
     add_clock_option,
@@ -27,7 +30,7 @@ from pinobs.cli.options import (
     task_progress,
 )
 from pinobs.cli.output import check_output, consistency_warnings, plural
-from pinobs.errors import OptionError
+from pinobs.errors import OptionError, OutputExistsError
 from pinobs.io import process_log, read_log
 from pinobs.model import Robot
 from pinobs.observers import observer_class
@@ -87,11 +90,32 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
     )
     add_progress_option(p)
     _add_smoother_options(p)
+    _add_legged_options(p)
     add_cluster_options(
         p, "with --out-dir: local worker processes (0: this process; default: one per core)"
     )
     p.set_defaults(func=handle)
     return p
+
+
+def _add_legged_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group(
+        "legged robots (--observer inekf: imu.* and force.*/contact.* columns)"
+    )
+    g.add_argument(
+        "--imu-frame",
+        default=None,
+        help="the IMU's frame in the model (default: imu_link if the model has one, else the base)",
+    )
+    g.add_argument(
+        "--contact-force",
+        type=float,
+        nargs="+",
+        metavar=("ON", "OFF"),
+        default=None,
+        help="a foot touches from ON [N] until its force falls to OFF (default OFF = ON/2; "
+        "default ON = 0.15 of the robot's weight, OFF = 0.075)",
+    )
 
 
 def _add_smoother_options(p: argparse.ArgumentParser) -> None:
@@ -167,6 +191,8 @@ def handle(args: argparse.Namespace) -> int:
             f"{flag}: many logs run on Dask (--log GLOB|FOLDER --out-dir OUT); one log "
             "(--out) runs in this process"
         )
+    if args.observer == INEKF:
+        return _estimate_legged(args)
     if args.smooth:
         return _estimate_smoothed(args)
     return _estimate_filtered(args)
@@ -174,6 +200,7 @@ def handle(args: argparse.Namespace) -> int:
 
 def _check_options(args: argparse.Namespace) -> None:
     """Options refused before any work: out of range, or given where they would be ignored."""
+    _check_legged_options(args)
     positive("rate", args.rate, allow_none=True)  # (inf divided by zero, 0 meant "from the log")
     if args.max_reports < 0:
         raise OptionError(f"--max-reports {args.max_reports}: give a count >= 0")
@@ -266,6 +293,68 @@ def _log_playback(args: argparse.Namespace, robot: Robot, run: Any, label: str) 
         log_result(robot, log, {label: run}), robot, args.html, truth_label="measured"
     )
     print(f"wrote {page} (the logged motion, and the estimate as a ghost)")
+
+
+# ------------------------------------------------- estimate --observer inekf (issue 38)
+#: The legged robots' observer: not a registry family (IMU, legs and contacts, not q and τ).
+INEKF = "inekf"
+
+
+def _check_legged_options(args: argparse.Namespace) -> None:
+    legged = [f for f in ("imu_frame", "contact_force") if getattr(args, f) is not None]
+    if args.observer != INEKF:
+        if legged:
+            flags = ", ".join("--" + f.replace("_", "-") for f in legged)
+            raise OptionError(f"{flags}: options of --observer {INEKF} (legged robots)")
+        return
+    given = [
+        flag
+        for flag, on in (
+            ("--out-dir", args.out_dir is not None),
+            ("--smooth", args.smooth),
+            ("--latency", args.latency is not None),
+            ("--noise", args.noise is not None),
+            ("--rate", args.rate is not None),
+        )
+        if on
+    ]
+    if given:
+        raise OptionError(f"{', '.join(given)}: not available with --observer {INEKF}")
+    if args.contact_force is not None and len(args.contact_force) > 2:
+        raise OptionError("--contact-force takes ON [N] and optionally OFF [N]")
+
+
+def _estimate_legged(args: argparse.Namespace) -> int:
+    """``estimate --observer inekf``: the base from the IMU, the legs and the contacts."""
+    from pinobs.io.legged_run import estimate_legged
+    from pinobs.io.writers import write_estimates
+
+    robot = load_robot(args)
+    check_output("--out", args.out)
+    if Path(args.out).exists() and not args.force:  # (before the work, not after it)
+        raise OutputExistsError(f"--out {args.out!r} exists; pass --force to overwrite it")
+    log = read_log(
+        args.log, robot, columns=column_map(args.map), topic=args.topic, drives=drives_option(args)
+    )
+    on, off = [*(args.contact_force or []), None, None][:2]
+    run = estimate_legged(robot, log, imu_frame=args.imu_frame, contact_on=on, contact_off=off)
+    write_estimates(args.out, run, force=args.force)
+    # (the note that the base pose is not in the log: this observer fills it)
+    notes = [n for n in log.notes if not n.startswith("the base pose")]
+    for w in (*notes, *run.warnings):
+        print(f"warning: {w}", file=sys.stderr)
+    _print_bad_rows(args, run)
+    if args.html and run.estimated:
+        from pinobs.visualization import log_result, write_html
+
+        # the legs as measured on the estimated base (a legged log has no base pose to show)
+        shown = replace(log, q=np.where(np.isnan(log.q), run.q, log.q))
+        page = write_html(
+            log_result(robot, shown, {INEKF: run}), robot, args.html, truth_label="measured"
+        )
+        print(f"wrote {page} (the measured legs on the estimated base, and the estimate)")
+    print(f"{INEKF} on {robot.name}: {run.summary()}; wrote {args.out}")
+    return 0 if run.estimated else 1
 
 
 # ------------------------------------------------- estimate --smooth (issue 19)

@@ -243,9 +243,8 @@ class FrictionLaw:
         ``C = F_c⁺ s(1 + s)/2 + F_c⁻ s(1 − s)/2``, ``C' = s' (F_c⁺ (1 + 2s) + F_c⁻ (1 − 2s))/2``.
         """
         if self._urdf_terms is not None:  # the URDF's law: F_v + F_c sech²(v / v_s) / v_s
-            vs = COULOMB_SMOOTHING_VELOCITY
-            s = np.tanh(np.asarray(v, dtype=float) / vs)
-            return self.viscous + self._urdf_terms / vs * (1.0 - s**2)
+            t = np.tanh(np.asarray(v, dtype=float) / COULOMB_SMOOTHING_VELOCITY)
+            return self.viscous + self._urdf_terms / COULOMB_SMOOTHING_VELOCITY * (1.0 - t**2)
         out = np.array(np.broadcast_to(self.viscous, np.shape(v)), dtype=float)
         if not self.has_coulomb:
             return out

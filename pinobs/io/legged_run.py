@@ -1,0 +1,208 @@
+"""A legged robot's log through the contact-aided invariant EKF (issue 38, item 4).
+
+:func:`estimate_legged` runs :class:`~pinobs.observers.inekf.InvariantEKF` over a log
+read with the legged columns (:mod:`pinobs.io.readers.legged`: ``imu.gyro.*``,
+``imu.acc.*``, ``force.<foot>`` or ``contact.<foot>``, the joints' ``q.<joint>``) and
+returns the full free-flyer estimate, a :class:`~pinobs.io.LogRun` like every other
+observer's (``q`` of size ``nq``: base position, quaternion ``xyzw``, joints; ``v`` of
+size ``nv``: the base's linear velocity in the base frame (Pinocchio's convention), its
+angular velocity, the joints').  So the writers, the playback and the CLI
+(``pinobs estimate --observer inekf``) take it unchanged.
+
+* **Joint velocities**: the model-free ``kf`` over the joint columns (the robot with its
+  root locked), run through :func:`~pinobs.io.estimate_log` with the usual row rules.
+* **Contacts**: the log's ``contact.<foot>`` flags, else the ``force.<foot>`` columns
+  through :func:`~pinobs.observers.contacts.contacts_from_forces` (threshold and
+  hysteresis; defaults from the robot's weight).
+* **Start**: the first row with a finite IMU reading and finite joint angles.  The base
+  pose is the log's where it has one; else the base at the origin, its roll and pitch
+  from the accelerometer (at rest it reads ``Rᵀ(0, 0, g)``) and yaw zero: the filter's
+  position and yaw are then relative to the start (they are unobservable from an IMU and
+  legs alone; Hartley et al. 2020).
+* **Rows**: every log row gets a row of the output; a row with a NaN IMU reading or NaN
+  joint angles, or that does not advance the time, is not fed to the filter, holds NaN
+  and is reported in ``bad_rows`` (nothing is bridged silently).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from pinobs.errors import DimensionError, LogFormatError, ObserverDiverged
+from pinobs.io.readers import Log
+from pinobs.io.runs import estimate_log
+from pinobs.io.stream import LogRun
+from pinobs.model import Robot, load
+from pinobs.model.robot import Vector
+from pinobs.observers import make_observer
+from pinobs.observers.contacts import contacts_from_forces, default_thresholds
+from pinobs.observers.inekf import InEKFGains, InvariantEKF, rotation_to_quaternion
+
+#: The IMU frame used when the model has one of this name and none is given.
+IMU_FRAME = "imu_link"
+
+
+def _contacts(robot: Robot, log: Log, on: float | None, off: float | None) -> np.ndarray:
+    """Contact flags ``(N, feet)``: the log's, else from its foot forces."""
+    if log.contact is not None:
+        return contacts_from_forces(log.contact, 0.5, 0.25)  # 0/1 flags; NaN keeps
+    if log.foot_force is None:
+        raise LogFormatError(
+            "inekf needs the feet's contacts: give force.<foot frame> [N] or "
+            "contact.<foot frame> (0/1) columns (pinobs.io.readers.legged)"
+        )
+    d_on, d_off = default_thresholds(robot)
+    on = d_on if on is None else on
+    off = (d_off if on == d_on else 0.5 * on) if off is None else off
+    return contacts_from_forces(log.foot_force, on, off)
+
+
+def _start_pose(q0: Vector, acc: Vector, placement: tuple[Vector, Vector]) -> Vector:
+    """The first row's free-flyer ``q``: the log's base pose if finite, else gravity-aligned."""
+    q = q0.copy()
+    if np.all(np.isfinite(q[:7])):
+        return q
+    up = acc / np.linalg.norm(acc)  # the world's z in the IMU frame (at rest)
+    # R_imu: world from IMU with yaw 0; its last row is up (R_imu^T e_z = up)
+    x = np.cross([0.0, 1.0, 0.0], up)
+    if np.linalg.norm(x) < 1e-9:
+        x = np.array([1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(up, x)
+    R_imu = np.vstack([x, y, up])
+    R_bi, _ = placement
+    q[:3] = 0.0
+    q[3:7] = rotation_to_quaternion(R_imu @ R_bi.T)  # the root's from the IMU's
+    return q
+
+
+def estimate_legged(
+    robot: Robot,
+    log: Log,
+    *,
+    imu_frame: str | None = None,
+    contact_on: float | None = None,
+    contact_off: float | None = None,
+    gains: InEKFGains | None = None,
+) -> LogRun:
+    """The free-flyer estimate over a legged log (module docstring).
+
+    Args:
+        robot: a robot with a free-flyer root (``pinobs.load("go1")``).
+        log: read with its legged columns (:func:`pinobs.io.read_log`).
+        imu_frame: the IMU's frame; default ``imu_link`` if the model has it, else the root.
+        contact_on, contact_off: force thresholds [N] (:mod:`pinobs.observers.contacts`).
+        gains: the filter's noise levels (:class:`~pinobs.observers.inekf.InEKFGains`).
+
+    Raises:
+        LogFormatError: no IMU columns, no contact or force columns.
+        UnsupportedRobotError: a robot without a free-flyer root (the filter's).
+        UnknownNameError: a foot or IMU frame not in the model.
+    """
+    if log.imu_gyro is None or log.imu_acc is None:
+        raise LogFormatError(
+            "inekf needs the trunk IMU: imu.gyro.x|y|z [rad/s] and imu.acc.x|y|z [m/s²] columns"
+        )
+    if imu_frame is None and robot.model.existFrame(IMU_FRAME):
+        imu_frame = IMU_FRAME
+    contacts = _contacts(robot, log, contact_on, contact_off)
+    filt = InvariantEKF(robot, log.feet, gains=gains, imu_frame=imu_frame)
+    joints = _joint_velocities(robot, log)
+    n = len(log)
+    q_out, v_out = np.full((n, robot.nq), np.nan), np.full((n, robot.nv), np.nan)
+    bad: list[tuple[int, str]] = list(joints.bad_rows)
+    usable = (
+        np.isfinite(log.t)
+        & np.all(np.isfinite(log.imu_gyro), axis=1)
+        & np.all(np.isfinite(log.imu_acc), axis=1)
+        & np.all(np.isfinite(log.q[:, 7:]), axis=1)
+    )
+    previous: float | None = None
+    said: list[str] = list(joints.warnings)
+    for k in range(n):
+        if not usable[k] or (previous is not None and log.t[k] <= previous):
+            bad.append((int(log.lines[k]), _why(log, k, usable[k])))
+            continue
+        est = _step(filt, robot, log, k, contacts[k], joints.v[k], previous is None)
+        if est is None:
+            said.append(f"inekf diverged at t = {log.t[k]:.6g} s: the rows after it are NaN")
+            bad.extend((int(log.lines[j]), "after the filter diverged") for j in range(k, n))
+            break
+        previous = float(log.t[k])
+        q_out[k], v_out[k] = est.q, est.v
+        v_out[k, 6:] = joints.v[k]  # (what update passes through; reset shows none)
+    done = int(np.all(np.isfinite(q_out), axis=1).sum())
+    return LogRun(
+        t=log.t.copy(),
+        q=q_out,
+        v=v_out,
+        bad_rows=sorted(set(bad)),
+        warnings=said,
+        rows=n,
+        estimated=done,
+        measured=done,
+        unit=log.unit,
+        period=joints.period,
+    )
+
+
+def _why(log: Log, k: int, usable: bool) -> str:
+    if not usable:
+        return "no IMU reading or joint angle: not fed to inekf"
+    return f"time {log.t[k]!r} does not advance: not fed to inekf"
+
+
+def _step(
+    filt: InvariantEKF,
+    robot: Robot,
+    log: Log,
+    k: int,
+    contacts: np.ndarray,
+    dq_row: Vector,
+    first: bool,
+) -> Any:
+    """The filter reset (first row) or updated with row ``k``; ``None`` if it diverged."""
+    assert log.imu_gyro is not None and log.imu_acc is not None
+    gyro, acc = log.imu_gyro[k], log.imu_acc[k]
+    flags = [bool(c) for c in contacts]
+    dq = dq_row if np.all(np.isfinite(dq_row)) else None
+    if first:
+        q0 = _start_pose(log.q[k], acc, filt.imu_placement)
+        v0 = np.zeros(robot.nv)
+        if dq is not None:
+            v0[6:] = dq
+        return filt.reset(log.t[k], q0, v0, gyro=gyro, acc=acc, contacts=flags)
+    try:
+        return filt.update(log.t[k], log.q[k, 7:], gyro, acc, flags, joint_velocities=dq)
+    except ObserverDiverged:
+        return None
+
+
+def _joint_velocities(robot: Robot, log: Log) -> LogRun:
+    """``kf`` over the joint columns: the robot with its free-flyer root locked."""
+    names = list(robot.model.names)
+    if robot.nq < 7 or len(names) < 2:
+        raise DimensionError(f"{robot.name}: inekf needs a free-flyer root joint")
+    fixed = load(robot.model, lock=[names[1]])
+    joint_log = replace(
+        log,
+        q=log.q[:, 7:],
+        tau=None,
+        imu_gyro=None,
+        imu_acc=None,
+        foot_force=None,
+        contact=None,
+        feet=(),
+        notes=(),
+    )
+    with warnings.catch_warnings(record=True) as caught:  # (kf's σ from the log: said in
+        warnings.simplefilter("always")  # the run's warnings, as the rest of the run's are)
+        run = estimate_log(make_observer("kf", fixed), joint_log)
+    return replace(run, warnings=[*run.warnings, *(str(w.message) for w in caught)])
+
+
+__all__ = ["IMU_FRAME", "estimate_legged"]

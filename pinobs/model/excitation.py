@@ -123,6 +123,28 @@ def excite(
             joints' ``(cos, sin)``; a floating base cannot follow a reference).
         IdentificationError: no candidate fits the limits.
     """
+    _check_arguments(robot, duration, rate, base_frequency, harmonics, seed)
+    f = base_frequency or 2.0 / duration
+    problem = _Problem.of(robot, f, center, position_margin, velocity_fraction, effort_fraction)
+    rng = np.random.default_rng(seed)
+    best, best_c = _search(problem, rng, candidates, harmonics)
+    best, best_c = _refine(problem, best, best_c, refine)
+    t = np.arange(round(duration * rate) + 1) / rate
+    q, v, acc = _series(best, t, problem.omega, problem.center)
+    model, data = problem.model, problem.data
+    tau = np.array([pin.rnea(model, data, q[k], v[k], acc[k]) for k in range(len(t))])
+    return Excitation(t, q, v, acc, tau, best_c, robot.joint_names)
+
+
+def _check_arguments(
+    robot: Robot,
+    duration: float,
+    rate: float,
+    base_frequency: float | None,
+    harmonics: int,
+    seed: int,
+) -> None:
+    """:func:`excite`'s arguments, refused before any work (its ``Raises``)."""
     for name, value in (("duration", duration), ("rate", rate)):
         if (
             isinstance(value, bool)
@@ -161,45 +183,83 @@ def excite(
             f"{', '.join(other)}; excitation trajectories are for fixed-base arms with "
             "revolute (bounded) and prismatic joints"
         )
-    model = robot.model
-    nv = robot.nv
-    f = base_frequency or 2.0 / duration
-    omega = 2 * np.pi * f
-    lo, hi = np.array(model.lowerPositionLimit), np.array(model.upperPositionLimit)
-    # Pinocchio's "no limit" is ±1.8e308, whose difference overflows: clip before it
-    lo, hi = np.clip(lo, -1e300, 1e300), np.clip(hi, -1e300, 1e300)
-    finite = (hi - lo < 1e3) & (hi > lo)
-    if center is None:
-        center = np.where(finite, 0.5 * (lo + hi), robot.neutral())
-    half = np.where(finite, (0.5 - position_margin) * (hi - lo), np.pi / 2)
-    half = np.minimum(half, np.pi)  # continuous-looking ±2π limits: ±π is motion enough
-    vmax = np.array(model.velocityLimit) * velocity_fraction
-    vmax = np.where((vmax > 0) & np.isfinite(vmax), vmax, np.inf)
-    emax = np.array(model.effortLimit) * effort_fraction
-    emax = np.where((emax > 0) & np.isfinite(emax), emax, np.inf)
-    reg = MomentumRegressor(robot)
-    data = model.createData()
-    s = reg.prior_std()
-    t_eval = np.linspace(0.0, 1.0 / f, 60, endpoint=False)
-    rng = np.random.default_rng(seed)
 
-    def fit_limits(coef: Vector) -> Vector | None:
-        q, v, _ = _series(coef, t_eval, omega, center)
+
+@dataclass(frozen=True)
+class _Problem:
+    """The design problem of :func:`excite`: the series' ``omega`` [rad/s] and ``center``,
+    the bounds it must meet (``half``: the position half-range about ``center``, ``vmax``
+    [rad/s], ``emax`` [N·m]: ``inf`` where unlimited), the regressor and its prior scale
+    ``s``, and the times ``t_eval`` [s] over one period where both are evaluated."""
+
+    robot: Robot
+    model: pin.Model
+    data: pin.Data
+    omega: float
+    center: Vector
+    half: Vector
+    vmax: Vector
+    emax: Vector
+    reg: MomentumRegressor
+    s: Vector
+    t_eval: Vector
+
+    @staticmethod
+    def of(
+        robot: Robot,
+        f: float,
+        center: Vector | None,
+        position_margin: float,
+        velocity_fraction: float,
+        effort_fraction: float,
+    ) -> _Problem:
+        """The problem of a series of base frequency ``f`` [Hz], its limits read from
+        ``robot``'s model (:func:`excite`'s arguments)."""
+        model = robot.model
+        lo, hi = np.array(model.lowerPositionLimit), np.array(model.upperPositionLimit)
+        # Pinocchio's "no limit" is ±1.8e308, whose difference overflows: clip before it
+        lo, hi = np.clip(lo, -1e300, 1e300), np.clip(hi, -1e300, 1e300)
+        finite = (hi - lo < 1e3) & (hi > lo)
+        if center is None:
+            center = np.where(finite, 0.5 * (lo + hi), robot.neutral())
+        half = np.where(finite, (0.5 - position_margin) * (hi - lo), np.pi / 2)
+        half = np.minimum(half, np.pi)  # continuous-looking ±2π limits: ±π is motion enough
+        vmax = np.array(model.velocityLimit) * velocity_fraction
+        vmax = np.where((vmax > 0) & np.isfinite(vmax), vmax, np.inf)
+        emax = np.array(model.effortLimit) * effort_fraction
+        emax = np.where((emax > 0) & np.isfinite(emax), emax, np.inf)
+        reg = MomentumRegressor(robot)
+        data = model.createData()
+        s = reg.prior_std()
+        omega = 2 * np.pi * f
+        t_eval = np.linspace(0.0, 1.0 / f, 60, endpoint=False)
+        return _Problem(robot, model, data, omega, center, half, vmax, emax, reg, s, t_eval)
+
+    def fit_limits(self, coef: Vector) -> Vector | None:
+        """``coef`` scaled down to meet the position, velocity and effort limits, or
+        ``None`` when 20 shrinkings do not meet the effort limits."""
+        model, data, center = self.model, self.data, self.center
+        q, v, _ = _series(coef, self.t_eval, self.omega, center)
         ratio = max(
-            float(np.max(np.abs(q - center) / half)), float(np.max(np.abs(v) / vmax)), 1e-12
+            float(np.max(np.abs(q - center) / self.half)),
+            float(np.max(np.abs(v) / self.vmax)),
+            1e-12,
         )
         coef = coef / ratio
         for _ in range(20):  # effort: not linear in the coefficients (gravity): shrink until met
-            q, v, acc = _series(coef, t_eval, omega, center)
+            q, v, acc = _series(coef, self.t_eval, self.omega, center)
             tau = np.array([pin.rnea(model, data, q[k], v[k], acc[k]) for k in range(len(q))])
-            over = float(np.max(np.abs(tau) / emax))
+            over = float(np.max(np.abs(tau) / self.emax))
             if over <= 1.0:
                 return coef
             coef = coef * 0.8
         return None
 
-    def criterion(coef: Vector) -> float:
-        q, v, acc = _series(coef, t_eval, omega, center)
+    def criterion(self, coef: Vector) -> float:
+        """Swevers' criterion: the condition number of the scaled regressor along the
+        series (module docstring)."""
+        model, data, reg, nv = self.model, self.data, self.reg, self.robot.nv
+        q, v, acc = _series(coef, self.t_eval, self.omega, self.center)
         rows = []
         for k in range(len(q)):
             # (nv, n) always: Pinocchio returns a 1-D row when nv = 1
@@ -211,41 +271,48 @@ def excite(
                 block.append(np.diag(np.tanh(v[k] / COULOMB_SMOOTHING_VELOCITY)))
             if reg.offset:
                 block.append(-np.eye(nv))
-            minv = np.linalg.inv(robot.mass_matrix(q[k]))
+            minv = np.linalg.inv(self.robot.mass_matrix(q[k]))
             rows.append(minv @ np.hstack(block))
-        A = np.vstack(rows) * s
+        A = np.vstack(rows) * self.s
         sv = np.linalg.svd(A, compute_uv=False)
         keep = sv > 1e-8 * sv[0]
         return float(sv[0] / sv[keep][-1])
 
+
+def _search(
+    problem: _Problem, rng: np.random.Generator, candidates: int, harmonics: int
+) -> tuple[Vector, float]:
+    """The best of ``candidates`` random coefficients fitted to the limits, and its criterion."""
     best, best_c = None, np.inf
     for _ in range(candidates):
-        coef = fit_limits(rng.normal(size=(2, nv, harmonics)))
+        coef = problem.fit_limits(rng.normal(size=(2, problem.robot.nv, harmonics)))
         if coef is None:
             continue
-        c = criterion(coef)
+        c = problem.criterion(coef)
         if c < best_c:
             best, best_c = coef, c
     if best is None:
         raise IdentificationError(
-            f"no excitation of {robot.name!r} fits its effort limits; lower effort_fraction's "
-            "demand (more margin) or check the URDF's <limit effort>"
+            f"no excitation of {problem.robot.name!r} fits its effort limits; lower "
+            "effort_fraction's demand (more margin) or check the URDF's <limit effort>"
         )
+    return best, best_c
+
+
+def _refine(problem: _Problem, best: Vector, best_c: float, refine: int) -> tuple[Vector, float]:
+    """``refine`` passes of coordinate-wise refinement of ``best`` (step halved each pass)."""
     step = 0.3
     for _ in range(refine):  # coordinate-wise refinement
         for idx in np.ndindex(best.shape):
             for sign in (1.0, -1.0):
                 trial = best.copy()
                 trial[idx] += sign * step * (np.abs(best).mean() + 1e-9)
-                trial = fit_limits(trial)
+                trial = problem.fit_limits(trial)
                 if trial is None:
                     continue
-                c = criterion(trial)
+                c = problem.criterion(trial)
                 if c < best_c:
                     best, best_c = trial, c
                     break
         step *= 0.5
-    t = np.arange(round(duration * rate) + 1) / rate
-    q, v, acc = _series(best, t, omega, center)
-    tau = np.array([pin.rnea(model, data, q[k], v[k], acc[k]) for k in range(len(t))])
-    return Excitation(t, q, v, acc, tau, best_c, robot.joint_names)
+    return best, best_c

@@ -5,6 +5,33 @@ The example-robot-data wheel installs URDFs and meshes under its cmeel prefix
 Python loader, so the table below maps its robot names to files.  Meshes are
 resolved through the ``package://example-robot-data/...`` URIs with the
 prefix's ``share`` folder as package directory.
+
+**Files.**  An MJCF file (``.xml``/``.mjcf``) is compiled by MuJoCo when it is
+installed, the model built from it and ``M(q)`` cross-checked with ``mj_fullM``
+(:mod:`pinobs.model.mjcf`; without MuJoCo: :mod:`pinobs.model.mjcf_loading`).
+A URDF's rotor inertias (``model.armature``, which URDF cannot hold) are read
+from the sidecar ``<name>.pinobs.json`` beside it when there is one
+(:mod:`pinobs.model.sidecar`: ``pinobs identify`` and
+:func:`~pinobs.model.urdf_writer.write_urdf` write it); a sidecar naming a joint
+the robot does not have is refused, naming it.
+
+**Friction** (:func:`load`'s ``friction``): the joint friction of the URDF's
+``<dynamics damping friction>`` tags, or the friction law of its sidecar when it
+has one (``pinobs identify --friction-law``: :mod:`pinobs.model.friction`).
+``friction=None`` means off for URDFs (many published ones carry placeholder
+values: pr2's torso has 20000 N·s/m; switch it on when yours are identified) and
+on for MJCF files loaded through MuJoCo (their ``damping`` and ``frictionloss``,
+which MJCF authors mean).
+
+**Checks** (:func:`load`'s ``check``): models whose dynamics cannot be right are
+refused (:mod:`pinobs.model.sanity`): non-finite, negative or dropped masses,
+impossible inertias, negative damping or friction, inverted position limits, a
+mass matrix singular or indefinite at sampled configurations.  ``check=False``
+skips these checks (a URDF's ``<dynamics>`` and ``<limit>`` values are checked
+whatever it says).  A URDF revolute or prismatic joint with ``<limit lower="0"
+upper="0">`` (or neither attribute) has no position limits, with one
+:class:`~pinobs.errors.ModelWarning` naming such joints of a file (a registered
+robot loads silently).
 """
 
 from __future__ import annotations
@@ -14,10 +41,9 @@ import importlib.metadata
 import importlib.resources
 import warnings
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import cache, partial
-from itertools import accumulate
 from pathlib import Path
 from typing import Any
 
@@ -26,16 +52,16 @@ import pinocchio as pin
 from pinocchio.robot_wrapper import RobotWrapper
 
 from pinobs.errors import (
-    DimensionError,
     GainError,
     ModelFileError,
     ModelTypeError,
     ModelWarning,
-    NonFiniteError,
     PinobsError,
     UnknownNameError,
 )
-from pinobs.model.mjcf import MujocoMap, build_from_mujoco, cross_check
+from pinobs.model.locking import LockSpec, lock_joints, lock_names
+from pinobs.model.mjcf import MujocoMap, cross_check
+from pinobs.model.mjcf_loading import load_mjcf
 from pinobs.model.robot import Robot
 from pinobs.model.sanity import check_model, check_urdf
 from pinobs.model.sidecar import apply_sidecar, read_friction_law
@@ -43,10 +69,6 @@ from pinobs.model.urdf import read_urdf
 
 __all__ = ["LockSpec", "RobotEntry", "load", "resolve_source", "robot_entries", "robot_names"]
 
-#: Joints to lock: names (each at its neutral value, ``pin.neutral``), or name → value: a
-#: float for a one-dof joint (revolute or prismatic [rad or m]; continuous: its angle [rad]),
-#: ``nq`` numbers (Pinocchio's ``q`` of the joint) for any joint, ``None`` for the neutral.
-LockSpec = Sequence[str] | Mapping[str, "float | Sequence[float] | None"]
 
 _ROOT_JOINTS: dict[str, type | None] = {
     "fixed": None,
@@ -395,157 +417,6 @@ def _from_pinocchio(
     )
 
 
-def _lock_values(
-    model: pin.Model, lock: LockSpec, robot: str
-) -> tuple[list[int], np.ndarray, dict[str, float | tuple[float, ...]]]:
-    """The joint ids to lock, the configuration they are locked at (the others neutral) and
-    what was locked, name → value as :attr:`Robot.locked` keeps it (a float for one-dof
-    joints, a continuous joint's angle included; Pinocchio's ``q`` of the joint otherwise)."""
-    if isinstance(lock, str | bytes) or not isinstance(lock, Sequence | Mapping):
-        raise ModelTypeError(
-            f"lock={lock!r}: give a list of joint names, or a mapping joint name → value "
-            f"(lock=[{lock!r}] locks that joint at its neutral value)"
-            if isinstance(lock, str)
-            else f"lock={lock!r}: give a list of joint names, or a mapping joint name → value"
-        )
-    values: Mapping[str, float | Sequence[float] | None] = (
-        lock if isinstance(lock, Mapping) else dict.fromkeys(lock)
-    )
-    if not isinstance(lock, Mapping) and len(values) < len(lock):
-        twice = sorted({n for n in lock if list(lock).count(n) > 1})
-        raise GainError(f"lock names {twice} more than once; name each joint once")
-    moving = [model.names[i] for i in range(1, model.njoints) if model.joints[i].nv > 0]
-    unknown = [n for n in values if not isinstance(n, str) or n not in moving]
-    if unknown:
-        close = sorted({c for n in unknown for c in difflib.get_close_matches(str(n), moving, n=2)})
-        hint = f"did you mean {' or '.join(map(repr, close))}? " if close else ""
-        raise UnknownNameError(
-            f"lock (--lock) names {unknown}, which robot {robot!r} does not have among its "
-            f"moving joints; {hint}its joints: {moving}"
-        )
-    q_ref = pin.neutral(model)
-    ids: list[int] = []
-    locked: dict[str, float | tuple[float, ...]] = {}
-    for name, value in values.items():
-        jid = model.getJointId(name)
-        joint = model.joints[jid]
-        iq, nq = joint.idx_q, joint.nq
-        short = joint.shortname()
-        circle = short.startswith("JointModelRUB")  # continuous: q = (cos, sin)
-        ids.append(jid)
-        if value is not None:
-            q_ref[iq : iq + nq] = _lock_q(model, name, value, iq, nq, circle)
-        if nq == 1:
-            locked[name] = float(q_ref[iq])
-        elif circle:
-            locked[name] = float(np.arctan2(q_ref[iq + 1], q_ref[iq]))
-        else:
-            locked[name] = tuple(float(x) for x in q_ref[iq : iq + nq])
-    if sum(model.joints[i].nv for i in ids) == model.nv:
-        raise GainError(
-            f"lock={list(values)} locks every moving joint of robot {robot!r}: nothing "
-            "would move; leave at least one joint free"
-        )
-    return sorted(ids), q_ref, locked
-
-
-def _lock_q(
-    model: pin.Model, name: str, value: float | Sequence[float], iq: int, nq: int, circle: bool
-) -> np.ndarray:
-    """The ``q`` of joint ``name`` locked at ``value`` (a float for one-dof joints, else ``nq``
-    numbers), checked against its position limits and, on a Lie group, its unit norms."""
-    if isinstance(value, int | float | np.floating | np.integer) and not isinstance(value, bool):
-        if nq == 1:
-            q = np.array([float(value)])
-        elif circle:
-            q = np.array([np.cos(float(value)), np.sin(float(value))])
-        else:
-            raise DimensionError(
-                f"lock={{{name!r}: {value!r}}}: joint {name!r} has nq = {nq} coordinates; give "
-                f"its {nq} values (Pinocchio's q of the joint), or lock it at its neutral value "
-                f"(lock=[{name!r}])"
-            )
-    else:
-        try:
-            q = np.array(value, dtype=float).reshape(-1)
-        except (TypeError, ValueError) as exc:
-            raise GainError(
-                f"lock={{{name!r}: {value!r}}}: give a number, or the joint's {nq} values"
-            ) from exc
-        if q.size != nq:
-            raise DimensionError(
-                f"lock={{{name!r}: {value!r}}}: joint {name!r} has nq = {nq} coordinates"
-                + ("" if nq == 1 and not circle else "; give that many values")
-                + ("; or its angle as one number" if circle else "")
-            )
-    if not np.all(np.isfinite(q)):
-        raise NonFiniteError(f"lock={{{name!r}: {value!r}}}: the value is not finite")
-    lo = np.array(model.lowerPositionLimit[iq : iq + nq], dtype=float)
-    hi = np.array(model.upperPositionLimit[iq : iq + nq], dtype=float)
-    if nq == 1 and np.isfinite(lo[0]) and np.isfinite(hi[0]) and lo[0] < hi[0] < 1e300:
-        if not lo[0] <= q[0] <= hi[0]:
-            raise GainError(
-                f"lock={{{name!r}: {value!r}}} is outside the position limits "
-                f"[{lo[0]:g}, {hi[0]:g}] of joint {name!r}"
-            )
-    full = pin.neutral(model)
-    full[iq : iq + nq] = q
-    if not pin.isNormalized(model, full, 1e-6):
-        raise GainError(
-            f"lock={{{name!r}: {value!r}}}: joint {name!r}'s quaternion or (cos, sin) pair "
-            "is not of unit norm"
-        )
-    return pin.normalize(model, full)[iq : iq + nq]
-
-
-def _locked_geometry(
-    loader: Any, full: pin.Model, ids: list[int], q_ref: np.ndarray, model: pin.Model
-) -> tuple[Any, Any]:
-    """The geometry of a locked robot: its full model's (from ``loader``), reduced as the
-    model was (``pin.buildReducedModel``), so playback draws the locked bodies where they are."""
-    visual, collision = loader(full) if loader is not None else (None, None)
-    given = [g for g in (visual, collision) if g is not None]
-    if not given:
-        return visual, collision
-    _, reduced = pin.buildReducedModel(full, given, ids, q_ref)
-    out = iter(reduced)
-    return (
-        next(out) if visual is not None else None,
-        next(out) if collision is not None else None,
-    )
-
-
-def _locked(robot: Robot, lock: LockSpec | None) -> Robot:
-    """``robot`` with the joints of ``lock`` locked (:func:`load`); itself when none."""
-    if lock is None or (isinstance(lock, Sequence | Mapping) and len(lock) == 0):
-        return robot
-    full = robot.model
-    ids, q_ref, locked = _lock_values(full, lock, robot.name)
-    model = pin.buildReducedModel(full, ids, q_ref)
-    if robot._geometry is not None:  # given (pin.Model, RobotWrapper): reduced now
-        geometry: dict[str, Any] = dict(
-            zip(
-                ("visual_model", "collision_model"),
-                _locked_geometry(lambda _: robot._geometry, full, ids, q_ref, model),
-                strict=True,
-            )
-        )
-    else:  # a loader: reduced when first drawn
-        geometry = {"geometry": partial(_locked_geometry, robot._geometry_loader, full, ids, q_ref)}
-    out = Robot(
-        model,
-        name=robot.name,
-        source=robot.source,
-        friction=robot.friction,
-        root_joint=robot.root_joint,
-        package_dirs=robot.package_dirs,
-        locked=locked,
-        **geometry,
-    )
-    out.mimic = robot.mimic
-    return out
-
-
 def _load_urdf(
     path: Path,
     package_dirs: list[str | Path],
@@ -587,7 +458,7 @@ def _load_urdf(
                 "(or no lower/upper), read as no position limits; give their real range, "
                 "or write type continuous, to silence this",
                 ModelWarning,
-                stacklevel=3,
+                stacklevel=4,
             )
     if facts.missing_meshes:
         shown = ", ".join(facts.missing_meshes[:3])
@@ -598,198 +469,10 @@ def _load_urdf(
             "(the playback draws a stick figure). Pass package_dirs=[folder that contains the "
             "package folder], or set ROS_PACKAGE_PATH / AMENT_PREFIX_PATH, to find package:// meshes",
             ModelWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
         return model, partial(_given_geometry, None)
     return model, partial(_urdf_geometry, facts.xml)
-
-
-def _load_mjcf(
-    path: Path, joint_type: type | None, root_joint: str | None
-) -> tuple[
-    pin.Model, pin.GeometryModel | None, pin.GeometryModel | None, tuple[Any, MujocoMap] | None
-]:
-    """An MJCF model built from MuJoCo's compiled model, or from Pinocchio's parser without MuJoCo.
-
-    Through MuJoCo (:mod:`pinobs.model.mjcf`) the root joint is the file's
-    own (declare a ``<freejoint/>`` in it): a ``root_joint`` other than ``None``
-    must name it (:class:`~pinobs.errors.GainError` otherwise), and the visual
-    geometry is MuJoCo's primitive geoms (no meshes).  Without MuJoCo one
-    :class:`~pinobs.errors.ModelWarning` says what Pinocchio's parser misses;
-    its joint limits are corrected (:func:`_mjcf_limits`), and a ``root_joint``
-    is added above a top body without joints (a :class:`~pinobs.errors.GainError`
-    for one with joints, under which the parser would drop it).
-    """
-    try:
-        import mujoco  # noqa: F401  (optional extra pinobs[mujoco])
-    except ImportError:
-        root = ET.parse(path).getroot()
-        included = [e.get("file", "?") for e in root.iter("include")]
-        if included:
-            raise ModelFileError(
-                f"{path} includes {', '.join(included)}, which Pinocchio's MJCF parser drops "
-                "(their bodies would be missing); install MuJoCo (pip install 'pinobs[mujoco]') "
-                "to load it"
-            ) from None
-        warnings.warn(
-            f"{path}: MuJoCo is not installed (pip install 'pinobs[mujoco]'), so Pinocchio's "
-            "MJCF parser reads the file: it ignores geom masses set in <default> classes "
-            "(density is used instead), settotalmass and joint stiffness, keeps only the first "
-            "body tree, and MuJoCo's M(q) cannot be cross-checked",
-            ModelWarning,
-            stacklevel=3,
-        )
-        if joint_type is not None:  # Pinocchio 4's buildModelFromMJCF(path, joint) is no more
-            build = getattr(pin, "buildModelFromMJCFAndRootJoint", pin.buildModelFromMJCF)
-            model = build(str(path), joint_type())
-            if "root_joint" not in model.names:  # the parser drops it under a jointed top body
-                raise GainError(
-                    f"root_joint={root_joint!r}: Pinocchio's MJCF parser adds a root joint only "
-                    f"under a top body without joints, and {path.name}'s has its own: leave out "
-                    "root_joint, or install MuJoCo (pip install 'pinobs[mujoco]')"
-                ) from None
-        else:
-            model = pin.buildModelFromMJCF(str(path))
-        model.gravity = pin.Motion(_mjcf_gravity(root), np.zeros(3))  # the parser ignores it
-        _mjcf_limits(root, model, path)  # the parser scales slide ranges, ignores limited
-        try:
-            visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
-        except (RuntimeError, ValueError):
-            visual = None
-        return model, visual, None, None
-    model, mj, mapping, visual = build_from_mujoco(path)
-    if root_joint is not None:
-        own = _mjcf_roots(mj)
-        if own != {root_joint}:
-            how = {
-                "freeflyer": "; to float it, declare <freejoint/> in its top body",
-                "spherical": "; to pivot it, declare <joint type='ball'/> in its top body",
-            }.get(root_joint, "")
-            raise GainError(
-                f"root_joint={root_joint!r}: an MJCF file loaded through MuJoCo keeps its own "
-                f"root, and {path.name}'s is {' and '.join(sorted(own))}: leave out root_joint"
-                + how
-            )
-    return model, visual, None, (mj, mapping)
-
-
-def _mjcf_gravity(root: ET.Element) -> np.ndarray:
-    """``<option gravity>`` (MuJoCo's default ``0 0 -9.81``), zero under ``<flag gravity="disable">``."""
-    gravity, enabled = np.array([0.0, 0.0, -9.81]), True
-    for option in root.iter("option"):
-        if option.get("gravity") is not None:
-            gravity = np.array([float(x) for x in option.get("gravity", "").split()])
-            if gravity.shape != (3,):
-                raise ValueError(f"<option gravity={option.get('gravity')!r}> is not 3 numbers")
-        for flag in option.iter("flag"):
-            enabled = flag.get("gravity", "enable" if enabled else "disable") == "enable"
-    return gravity if enabled else np.zeros(3)
-
-
-def _mjcf_joint_classes(root: ET.Element) -> dict[str, dict[str, str]]:
-    """Joint attributes of each ``<default>`` class, inherited from the enclosing classes
-    as MuJoCo does (``"main"``: the top-level default)."""
-    classes: dict[str, dict[str, str]] = {"main": {}}
-
-    def walk(default: ET.Element, inherited: dict[str, str]) -> None:
-        attrs = dict(inherited)
-        for joint in default.findall("joint"):
-            attrs.update(joint.attrib)
-        classes[default.get("class", "main")] = attrs
-        for child in default.findall("default"):
-            walk(child, attrs)
-
-    for top in root.findall("default"):
-        walk(top, {})
-    return classes
-
-
-def _mjcf_limits(root: ET.Element, model: pin.Model, path: Path) -> None:
-    """Hinge and slide position limits of a model from Pinocchio's MJCF parser, set in place
-    to MuJoCo's (those the MuJoCo path gives: :mod:`pinobs.model.mjcf`).
-
-    Pinocchio's parser (4.1) multiplies every joint ``range`` by π/180 under
-    ``<compiler angle="degree">`` (MuJoCo's default), slide joints' too, whose
-    range MuJoCo reads in metres (a slide ``range="-0.3 0.5"`` became ±0.005–0.009 m),
-    and it limits a joint with a ``range`` whatever its ``limited`` says.  So the
-    limits are read here from the file as MuJoCo compiles them: a joint's
-    attributes are its ``class``'s (else the nearest ``childclass`` of its
-    bodies', else the top-level ``<default>``'s) overridden by its own; it is
-    limited when ``limited="true"``, or ``"auto"`` (the default) with a ``range``
-    under ``autolimits`` (the default); a hinge's ``range`` and ``ref`` are in
-    degrees unless ``angle="radian"``; ``q = qpos − ref`` (as the MuJoCo path),
-    so the limits are ``range − ref``; an unlimited joint gets Pinocchio's "no
-    limit" (±1.8e308).  Only the first body tree is read, as the parser does;
-    if its joints do not line up with the model's ``q``, the parser's limits are
-    kept and a :class:`~pinobs.errors.ModelWarning` says so.
-    """
-    compiler: dict[str, str] = {}
-    for el in root.iter("compiler"):
-        compiler.update(el.attrib)
-    degree = compiler.get("angle", "degree") != "radian"
-    autolimits = compiler.get("autolimits", "true") == "true"
-    classes = _mjcf_joint_classes(root)
-    joints: list[tuple[str | None, int, tuple[float, float] | None]] = []  # name, nq, limits
-
-    def walk(body: ET.Element, childclass: str) -> None:
-        childclass = body.get("childclass", childclass)
-        for el in body:
-            if el.tag == "freejoint":
-                joints.append((el.get("name"), 7, None))
-            elif el.tag == "joint":
-                attrs = {**classes.get(el.get("class", childclass), {}), **el.attrib}
-                kind = attrs.get("type", "hinge")
-                if kind not in ("hinge", "slide"):
-                    joints.append((attrs.get("name"), 7 if kind == "free" else 4, None))
-                    continue
-                scale = np.pi / 180.0 if kind == "hinge" and degree else 1.0
-                ref = scale * float(attrs.get("ref", "0"))
-                lo, hi = (scale * float(x) for x in attrs.get("range", "0 0").split())
-                limited = attrs.get("limited", "auto")
-                on = limited == "true" or (limited == "auto" and autolimits and "range" in attrs)
-                big = np.finfo(float).max
-                joints.append((attrs.get("name"), 1, (lo - ref, hi - ref) if on else (-big, big)))
-        for child in body.findall("body"):
-            walk(child, childclass)
-
-    worldbody = root.find("worldbody")
-    first = worldbody.find("body") if worldbody is not None else None
-    if first is not None:
-        walk(first, "main")
-    offset = model.nq - sum(nq for _, nq, _ in joints)  # a root joint pinobs added comes first
-    idx_q = list(accumulate((nq for _, nq, _ in joints), initial=offset))[:-1]
-    lined_up = offset >= 0 and all(
-        model.joints[model.getJointId(name)].idx_q == i
-        for (name, _, _), i in zip(joints, idx_q, strict=True)
-        if name is not None and model.existJointName(name)
-    )
-    if not lined_up:
-        warnings.warn(
-            f"{path}: the joints of its first body tree do not line up with the model Pinocchio's "
-            "MJCF parser built, so its joint limits are the parser's (which scales slide ranges "
-            "by π/180 under angle='degree' and ignores limited='false'); install MuJoCo "
-            "(pip install 'pinobs[mujoco]') to load it",
-            ModelWarning,
-            stacklevel=4,
-        )
-        return
-    lower = np.array(model.lowerPositionLimit, dtype=float)
-    upper = np.array(model.upperPositionLimit, dtype=float)
-    for (_, _, limits), i in zip(joints, idx_q, strict=True):
-        if limits is not None:
-            lower[i], upper[i] = limits
-    model.lowerPositionLimit, model.upperPositionLimit = lower, upper
-
-
-def _mjcf_roots(mj: Any) -> set[str]:
-    """How the file's top bodies hang on the world, as ``root_joint`` names: ``"freeflyer"``
-    (a free joint), ``"spherical"`` (a ball joint), ``"fixed"`` (welded or hinged)."""
-    kinds = {0: "freeflyer", 1: "spherical"}  # mjtJoint free, ball
-    return {
-        kinds.get(int(mj.jnt_type[mj.body_jntadr[b]]), "fixed") if mj.body_jntnum[b] else "fixed"
-        for b in range(1, mj.nbody)
-        if mj.body_parentid[b] == 0
-    } or {"fixed"}
 
 
 def load(
@@ -807,27 +490,16 @@ def load(
     Args:
         source: a name from :func:`robot_names` (the project's ``models/`` or
             example-robot-data), a path to a URDF (``.urdf``) or MJCF
-            (``.xml``/``.mjcf``; compiled by MuJoCo when installed, the model
-            built from it and ``M(q)`` cross-checked with ``mj_fullM``:
-            :mod:`pinobs.model.mjcf`) file, or a Pinocchio ``Model`` or
-            ``RobotWrapper`` (copied; its geometry, if any, kept).
-            A URDF's rotor inertias (``model.armature``, which URDF cannot hold) are read
-            from the sidecar ``<name>.pinobs.json`` beside it when there is one
-            (:mod:`pinobs.model.sidecar`: ``pinobs identify`` and
-            :func:`~pinobs.model.urdf_writer.write_urdf` write it); a sidecar naming a joint
-            the robot does not have is refused, naming it.
+            (``.xml``/``.mjcf``) file (module docstring: files, sidecars), or a Pinocchio
+            ``Model`` or ``RobotWrapper`` (copied; its geometry, if any, kept).
         root_joint: ``None`` (the registry's default: free-flyer for legged
             robots and the rigid body, spherical for the top, fixed otherwise;
             fixed for files; the model's own for a ``pin.Model``), ``"fixed"``,
             ``"spherical"``, ``"freeflyer"`` or ``"planar"``.
         friction: include the joint friction of the URDF's ``<dynamics damping
             friction>`` tags in the dynamics (:meth:`Robot.friction_torque`), or the
-            friction law of its sidecar when it has one (``pinobs identify
-            --friction-law``: :mod:`pinobs.model.friction`).
-            ``None`` means off for URDFs (many published ones carry placeholder
-            values: pr2's torso has 20000 N·s/m; switch it on when yours are
-            identified) and on for MJCF files loaded through MuJoCo (their
-            ``damping`` and ``frictionloss``, which MJCF authors mean).
+            friction law of its sidecar when it has one; ``None``: off for URDFs, on for
+            MJCF files loaded through MuJoCo (module docstring: friction).
         package_dirs: folders searched for ``package://pkg/…`` mesh URIs (each
             holding the folder ``pkg``, or being it), before ``ROS_PACKAGE_PATH``,
             ``AMENT_PREFIX_PATH`` and the file's parent folders
@@ -838,27 +510,11 @@ def load(
             joint) or ``"independent"`` (each a joint of its own).  ``None``:
             ``"independent"`` for registry names (panda's and talos' grippers),
             ``"error"`` for files.  A mimic joint that is locked is fixed: no longer refused.
-        lock: joints to lock (those a log does not record: a Panda's fingers), the model
-            reduced by ``pin.buildReducedModel`` so each locked joint's child bodies are
-            merged into its parent's, the geometry with it.  A list of joint names locks each
-            at its neutral value (``pin.neutral``: 0 for revolute and prismatic joints); a
-            mapping name → value at that value: a float for a revolute [rad], prismatic [m]
-            or continuous (its angle [rad]) joint, within its position limits; for any joint
-            also a sequence of its ``nq`` coordinates (Pinocchio's ``q`` of the joint, unit
-            quaternions and ``(cos, sin)`` pairs), ``None`` for its neutral value.  The robot
-            keeps what was locked (:attr:`Robot.locked`, name → value, a float for one-dof
-            joints) and :func:`~pinobs.model.urdf_writer.write_urdf` writes those joints back
-            as fixed ones at their values.
-        check: refuse models whose dynamics cannot be right
-            (:mod:`pinobs.model.sanity`): non-finite, negative or dropped
-            masses, impossible inertias, negative damping or friction,
-            inverted position limits, a mass matrix singular or indefinite
-            at sampled configurations.  ``False`` skips these checks (a URDF's
-            ``<dynamics>`` and ``<limit>`` values are checked whatever it says).
-            A URDF revolute or prismatic joint with ``<limit lower="0"
-            upper="0">`` (or neither attribute) has no position limits, with
-            one :class:`~pinobs.errors.ModelWarning` naming such joints of a
-            file (a registered robot loads silently).
+        lock: joints to lock (those a log does not record: a Panda's fingers): a list of
+            joint names (each at its neutral value) or a mapping name → value (module
+            docstring of :mod:`pinobs.model.locking`).
+        check: refuse models whose dynamics cannot be right (module docstring: checks);
+            ``False`` skips these checks.
 
     Raises:
         UnknownNameError: ``source`` is neither a registered name nor a path.
@@ -878,16 +534,30 @@ def load(
     if mimic not in (None, "error", "independent"):
         raise GainError(f"mimic={mimic!r} is not accepted; use None, 'error' or 'independent'")
     if isinstance(source, pin.Model | RobotWrapper):
-        robot = _locked(_from_pinocchio(source, root_joint, friction), lock)
-        if check:
-            check_model(robot.model)
-        return robot
-    if not isinstance(source, str | Path):
+        robot = lock_joints(_from_pinocchio(source, root_joint, friction), lock)
+    elif isinstance(source, str | Path):
+        robot = _load_file(source, root_joint, friction, package_dirs, mimic, lock, check)
+    else:
         raise ModelTypeError(
             f"cannot load a robot from a {type(source).__name__} ({source!r}); give a registry "
             "name (pinobs.robot_names()), a path to a URDF/MJCF file, a pinocchio.Model or a "
             "pinocchio.RobotWrapper"
         )
+    if check:  # (after locking: a locked joint's massless bodies are no longer refused)
+        check_model(robot.model)
+    return robot
+
+
+def _load_file(
+    source: str | Path,
+    root_joint: str | None,
+    friction: bool | None,
+    package_dirs: Sequence[str | Path] | None,
+    mimic: str | None,
+    lock: LockSpec | None,
+    check: bool,
+) -> Robot:
+    """:func:`load` of a registry name or a file (its arguments), before the model checks."""
     path, default_dirs, default_root, name = resolve_source(source)
     root = default_root if root_joint is None else root_joint
     if root not in _ROOT_JOINTS:
@@ -908,11 +578,11 @@ def load(
                 mimic=mimic or ("independent" if registered else "error"),
                 check=check,
                 registered=registered,
-                locked=_lock_names(lock),
+                locked=lock_names(lock),
             )
             apply_sidecar(model, path)  # the armature a URDF cannot hold (pinobs.model.sidecar)
         else:
-            model, visual, _, compiled = _load_mjcf(path, joint_type, root_joint)
+            model, visual, _, compiled = load_mjcf(path, joint_type, root_joint)
             geometry = partial(_given_geometry, visual)
             if friction is None and compiled is not None:
                 friction = True  # MJCF authors mean their damping (unlike URDF placeholders)
@@ -939,22 +609,13 @@ def load(
         package_dirs=package_dirs or (),  # the URDF writer resolves the meshes with them
     )
     robot.mimic = mimic  # as asked (a saved run reloads its robot so: pinobs play)
-    robot = _locked(robot, lock)
+    robot = lock_joints(robot, lock)
     if friction and _is_urdf(path):  # a friction law beyond the tags (pinobs.model.sidecar)
         law = read_friction_law(robot.model, path, locked=frozenset(robot.locked))
         if law is not None:
             robot = robot.with_model(robot.model, friction_law=law)
             robot.mimic = mimic
-    if check:  # (after locking: a locked joint's massless bodies are no longer refused)
-        check_model(robot.model)
     return robot
-
-
-def _lock_names(lock: LockSpec | None) -> frozenset[str]:
-    """The joint names of ``lock`` (checked against the model later, :func:`_lock_values`)."""
-    if lock is None or isinstance(lock, str | bytes):
-        return frozenset()
-    return frozenset(str(n) for n in lock)
 
 
 def _urdf_geometry(xml: str, model: pin.Model) -> tuple[Any, Any]:

@@ -327,7 +327,30 @@ def build_from_mujoco(path: Path) -> tuple[pin.Model, Any, MujocoMap, pin.Geomet
     gravity, gravcomp = _gravity(mj, body_names)
     model.gravity = pin.Motion(gravity, np.zeros(3))
 
-    # per MuJoCo body: (Pinocchio joint, placement of the body frame in that joint's frame)
+    where, mapping = _add_bodies(model, mj, joint_names, body_names)
+    if model.nv != mj.nv:  # pragma: no cover - every joint type is mapped above
+        raise ModelError(f"built nv = {model.nv} from {path}, MuJoCo has nv = {mj.nv}")
+    # MuJoCo's dofs follow its joint order, as Pinocchio's velocity indices do
+    model.armature = np.asarray(mj.dof_armature, dtype=float).copy()
+    model.damping = np.asarray(mj.dof_damping, dtype=float) * (not _disabled(mj, "damper"))
+    model.friction = np.asarray(mj.dof_frictionloss, dtype=float) * (
+        not _disabled(mj, "frictionloss", "constraint")
+    )
+    _set_limits(model, mj, list(mapping.idx_q))
+    _warn_left_out(path, mj, joint_names, gravcomp)
+    geom_names = _unique_names(mj, mujoco.mjtObj.mjOBJ_GEOM, mj.ngeom, "geom")
+    return model, mj, mapping, _geometry(mj, where, geom_names)
+
+
+def _add_bodies(
+    model: pin.Model, mj: Any, joint_names: list[str], body_names: list[str]
+) -> tuple[dict[int, tuple[int, pin.SE3]], MujocoMap]:
+    """Add MuJoCo's bodies and joints to ``model`` (module docstring), in place.
+
+    Returns:
+        per MuJoCo body its Pinocchio joint and the placement of the body frame in that
+        joint's frame, and the map of MuJoCo's ``qpos``/``qvel`` to Pinocchio's.
+    """
     where: dict[int, tuple[int, pin.SE3]] = {0: (0, pin.SE3.Identity())}
     kinds, qposadr, dofadr, idx_q = [], [], [], []
     frame_of_joint: dict[int, int] = {0: 0}
@@ -367,15 +390,20 @@ def build_from_mujoco(path: Path) -> tuple[pin.Model, Any, MujocoMap, pin.Geomet
         )
         model.appendBodyToJoint(joint, inertia, place)
         model.addBodyFrame(body_names[b], joint, place, frame_of_joint[joint])
-    if model.nv != mj.nv:  # pragma: no cover - every joint type is mapped above
-        raise ModelError(f"built nv = {model.nv} from {path}, MuJoCo has nv = {mj.nv}")
-    # MuJoCo's dofs follow its joint order, as Pinocchio's velocity indices do
-    model.armature = np.asarray(mj.dof_armature, dtype=float).copy()
-    model.damping = np.asarray(mj.dof_damping, dtype=float) * (not _disabled(mj, "damper"))
-    model.friction = np.asarray(mj.dof_frictionloss, dtype=float) * (
-        not _disabled(mj, "frictionloss", "constraint")
+    mapping = MujocoMap(
+        tuple(kinds),
+        tuple(qposadr),
+        tuple(dofadr),
+        tuple(idx_q),
+        np.array(mj.qpos0, dtype=float),
+        int(mj.nv),
     )
-    _set_limits(model, mj, idx_q)
+    return where, mapping
+
+
+def _warn_left_out(path: Path, mj: Any, joint_names: list[str], gravcomp: str | None) -> None:
+    """One :class:`~pinobs.errors.ModelWarning` naming what of MuJoCo's model pinobs'
+    dynamics leave out (springs, equality constraints, tendons, gravity compensation)."""
     missing = []
     if np.any(mj.jnt_stiffness) and not _disabled(mj, "spring"):
         stiff = [joint_names[int(j)] for j in np.flatnonzero(mj.jnt_stiffness)]
@@ -390,18 +418,8 @@ def build_from_mujoco(path: Path) -> tuple[pin.Model, Any, MujocoMap, pin.Geomet
         warnings.warn(
             f"{path}: pinobs' dynamics leave out MuJoCo's " + "; ".join(missing),
             ModelWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
-    mapping = MujocoMap(
-        tuple(kinds),
-        tuple(qposadr),
-        tuple(dofadr),
-        tuple(idx_q),
-        np.array(mj.qpos0, dtype=float),
-        int(mj.nv),
-    )
-    geom_names = _unique_names(mj, mujoco.mjtObj.mjOBJ_GEOM, mj.ngeom, "geom")
-    return model, mj, mapping, _geometry(mj, where, geom_names)
 
 
 def _set_limits(model: pin.Model, mj: Any, idx_q: list[int]) -> None:

@@ -151,6 +151,19 @@ class Robot:
         if visual_model is not None or collision_model is not None or geometry is None:
             self._geometry = (visual_model, collision_model)
         self._data = model.createData()
+        self._set_friction(model, friction, friction_law)
+        # Zero-gravity copy: aba(q, v, 0) on it is -M⁻¹ c(q, v), the geodesic spray.
+        self._free = model.copy()
+        self._free.gravity.setZero()
+        self._free_data = self._free.createData()
+        self._zero_nv = np.zeros(model.nv)
+        self._zero_nv.setflags(write=False)
+        self._set_joint_blocks(model)
+
+    def _set_friction(
+        self, model: pin.Model, friction: bool, friction_law: FrictionLaw | None
+    ) -> None:
+        """The friction attributes (:meth:`__init__`'s ``friction`` and ``friction_law``)."""
         # Joint friction from the URDF <dynamics damping="…" friction="…"/> tags (Pinocchio
         # loads them into model.damping / model.friction but its ABA ignores them).
         # A FrictionLaw given (identified, or read from a sidecar: pinobs.model.friction)
@@ -174,12 +187,9 @@ class Robot:
         self._linear_friction = not law.has_coulomb and not np.any(law.offset)
         self._neg_damping = -law.viscous
         self._neg_damping.setflags(write=False)
-        # Zero-gravity copy: aba(q, v, 0) on it is -M⁻¹ c(q, v), the geodesic spray.
-        self._free = model.copy()
-        self._free.gravity.setZero()
-        self._free_data = self._free.createData()
-        self._zero_nv = np.zeros(model.nv)
-        self._zero_nv.setflags(write=False)
+
+    def _set_joint_blocks(self, model: pin.Model) -> None:
+        """The joint blocks and the slices of ``q`` and ``v`` built from them."""
         self.joints: tuple[JointBlock, ...] = tuple(
             JointBlock(
                 name=model.names[i],

@@ -124,6 +124,34 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
         OSError: the file cannot be read.
     """
     text = path.read_text()
+    xml, missing = _resolved_meshes(text, path, package_dirs)
+    root = ET.fromstring(text)
+    live = {m.get("filename") for m in root.iter("mesh")}  # not those in comments
+    missing = [uri for uri in missing if uri in live]
+    dynamics, bad_limits, zero_limits = _joint_values(root)
+    return UrdfFacts(
+        xml=xml,
+        missing_meshes=tuple(dict.fromkeys(missing)),
+        mimics=tuple(_mimics(root)),
+        bad_inertials=tuple(_bad_inertials(root)),
+        duplicates=tuple(
+            f"{kind} {n!r}"
+            for kind in ("link", "joint")
+            for n, k in Counter(e.get("name", "?") for e in root.findall(kind)).items()
+            if k > 1
+        ),
+        zero_axes=tuple(_zero_axes(root)),
+        bad_dynamics=tuple(dynamics),
+        bad_limits=tuple(bad_limits),
+        zero_limits=tuple(zero_limits),
+    )
+
+
+def _resolved_meshes(
+    text: str, path: Path, package_dirs: Sequence[str | Path]
+) -> tuple[str, list[str]]:
+    """``text`` with its mesh filenames resolved (:func:`resolve_mesh`), and the URIs not
+    found (those in comments included)."""
     missing: list[str] = []
 
     def _sub(m: re.Match[str]) -> str:
@@ -133,11 +161,14 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
             return m.group(0)
         return f"{m.group(1)}{m.group(2)}{found}{m.group(2)}"
 
-    xml = _MESH_ATTR.sub(_sub, text)
-    root = ET.fromstring(text)
-    live = {m.get("filename") for m in root.iter("mesh")}  # not those in comments
-    missing = [uri for uri in missing if uri in live]
-    mimics = []
+    return _MESH_ATTR.sub(_sub, text), missing
+
+
+def _joint_values(
+    root: ET.Element,
+) -> tuple[list[tuple[str, str, str]], list[tuple[str, float, float]], list[str]]:
+    """The top-level joints' ``<dynamics>`` values that are not numbers >= 0, their inverted
+    ``<limit>`` ranges, and the revolute and prismatic joints whose limits are both 0."""
     dynamics: list[tuple[str, str, str]] = []
     bad_limits: list[tuple[str, float, float]] = []
     zero_limits: list[str] = []
@@ -158,6 +189,12 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
                 zero_limits.append(name)
             elif lower >= upper:
                 bad_limits.append((name, lower, upper))
+    return dynamics, bad_limits, zero_limits
+
+
+def _mimics(root: ET.Element) -> list[tuple[str, str, float, float]]:
+    """``(joint, mimicked joint, multiplier, offset)`` of every ``<mimic>`` joint."""
+    mimics = []
     for joint in root.iter("joint"):
         mimic = joint.find("mimic")
         if mimic is not None:
@@ -169,6 +206,12 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
                     _number(mimic.get("offset"), 0.0) or 0.0,
                 )
             )
+    return mimics
+
+
+def _bad_inertials(root: ET.Element) -> list[tuple[str, str]]:
+    """``(link, what is wrong)`` of each ``<inertial>`` urdfdom would drop, garble or
+    reduce to a point mass, and of each link with more than one."""
     bad: list[tuple[str, str]] = []
     for link in root.findall("link"):
         name = link.get("name", "?")
@@ -198,12 +241,11 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
                         "garbles the inertial (a massless link or a point mass)",
                     )
                 )
-    duplicates = [
-        f"{kind} {n!r}"
-        for kind in ("link", "joint")
-        for n, k in Counter(e.get("name", "?") for e in root.findall(kind)).items()
-        if k > 1
-    ]
+    return bad
+
+
+def _zero_axes(root: ET.Element) -> list[str]:
+    """The top-level revolute, continuous and prismatic joints whose ``<axis>`` is zero."""
     zero_axes = []
     for joint in root.findall("joint"):
         axis = joint.find("axis")
@@ -211,14 +253,4 @@ def read_urdf(path: Path, package_dirs: Sequence[str | Path]) -> UrdfFacts:
             xyz = [_number(x, 0.0) for x in (axis.get("xyz") or "").split()]
             if len(xyz) == 3 and all(x == 0.0 for x in xyz):
                 zero_axes.append(joint.get("name", "?"))
-    return UrdfFacts(
-        xml=xml,
-        missing_meshes=tuple(dict.fromkeys(missing)),
-        mimics=tuple(mimics),
-        bad_inertials=tuple(bad),
-        duplicates=tuple(duplicates),
-        zero_axes=tuple(zero_axes),
-        bad_dynamics=tuple(dynamics),
-        bad_limits=tuple(bad_limits),
-        zero_limits=tuple(zero_limits),
-    )
+    return zero_axes

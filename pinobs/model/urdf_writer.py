@@ -45,6 +45,7 @@ reloaded from the file has the same dynamics to rounding.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -243,6 +244,26 @@ def _generated_urdf(robot: Robot) -> ET.ElementTree[ET.Element]:
             gravity other than the URDF loaders' ``(0, 0, -9.81)``.
     """
     model = robot.model
+    floating = _check_generable(robot)
+    names: dict[int, str] = {}  # joint id -> its link's name
+    link_name = _link_namer(model, floating)
+    root = ET.Element("robot", name=model.name or robot.name)
+    first = 1 if floating else 0
+    damping, coulomb = _friction(robot)
+    for i in range(first, model.njoints):
+        names[i] = link_name(i)
+        link = ET.SubElement(root, "link", name=names[i])
+        if i > 0:
+            _inertial(link, model.inertias[i])
+    for i in range(first + 1, model.njoints):
+        _joint_element(root, robot, i, names, damping, coulomb)
+    return ET.ElementTree(root)
+
+
+def _check_generable(robot: Robot) -> bool:
+    """Whether ``robot``'s model has a floating root (left out of the URDF), after checking
+    that a URDF can say its gravity and its root (:func:`_generated_urdf`'s errors)."""
+    model = robot.model
     if not np.array_equal(np.asarray(model.gravity.linear), [0.0, 0.0, -9.81]) or np.any(
         model.gravity.angular
     ):
@@ -261,7 +282,12 @@ def _generated_urdf(robot: Robot) -> ET.ElementTree[ET.Element]:
                 f"robot {robot.name!r}: its {root_kind} root joint is not the only joint on the "
                 "world at the identity, which a URDF loaded with root_joint cannot say"
             )
-    names: dict[int, str] = {}  # joint id -> its link's name
+    return floating
+
+
+def _link_namer(model: pin.Model, floating: bool) -> Callable[[int], str]:
+    """A function naming joint ``i``'s link: its body frame's name at the joint's frame,
+    else ``<joint>_link``; unique among the links' and joints' names."""
     taken = {model.names[i] for i in range(model.njoints)}  # link names must differ from joints'
 
     def link_name(i: int) -> str:
@@ -280,47 +306,51 @@ def _generated_urdf(robot: Robot) -> ET.ElementTree[ET.Element]:
         taken.add(name)
         return name
 
-    root = ET.Element("robot", name=model.name or robot.name)
-    first = 1 if floating else 0
-    damping, coulomb = _friction(robot)
-    for i in range(first, model.njoints):
-        names[i] = link_name(i)
-        link = ET.SubElement(root, "link", name=names[i])
-        if i > 0:
-            _inertial(link, model.inertias[i])
-    for i in range(first + 1, model.njoints):
-        joint = model.joints[i]
-        short = joint.shortname()
-        if short not in _URDF_JOINTS:
-            raise ModelFileError(
-                f"robot {robot.name!r}: joint {model.names[i]!r} is a {short}, which a URDF "
-                "cannot say (revolute, continuous and prismatic joints can, and a free-flyer, "
-                "spherical or planar root); load the robot from its URDF with "
-                "pinobs.load(path, lock=...) to write it back"
-            )
-        kind, axis = _URDF_JOINTS[short]
-        el = ET.SubElement(root, "joint", name=model.names[i], type=kind)
-        placement = model.jointPlacements[i]
-        ET.SubElement(
-            el,
-            "origin",
-            xyz=_fmt(*placement.translation),
-            rpy=_fmt(*pin.rpy.matrixToRpy(placement.rotation)),
+    return link_name
+
+
+def _joint_element(
+    root: ET.Element,
+    robot: Robot,
+    i: int,
+    names: dict[int, str],
+    damping: np.ndarray,
+    coulomb: np.ndarray,
+) -> None:
+    """Joint ``i`` of ``robot``'s model written into ``root``: placement, axis, limits,
+    friction (``damping``, ``coulomb`` by velocity index)."""
+    model = robot.model
+    joint = model.joints[i]
+    short = joint.shortname()
+    if short not in _URDF_JOINTS:
+        raise ModelFileError(
+            f"robot {robot.name!r}: joint {model.names[i]!r} is a {short}, which a URDF "
+            "cannot say (revolute, continuous and prismatic joints can, and a free-flyer, "
+            "spherical or planar root); load the robot from its URDF with "
+            "pinobs.load(path, lock=...) to write it back"
         )
-        ET.SubElement(el, "parent", link=names[model.parents[i]])
-        ET.SubElement(el, "child", link=names[i])
-        ET.SubElement(el, "axis", xyz=_fmt(*(axis if axis is not None else joint.extract().axis)))
-        iq, iv = joint.idx_q, joint.idx_v
-        limit = {
-            "effort": _fmt(min(float(model.effortLimit[iv]), _NO_LIMIT)),
-            "velocity": _fmt(min(float(model.velocityLimit[iv]), _NO_LIMIT)),
-        }
-        if kind != "continuous":
-            limit["lower"] = _fmt(max(float(model.lowerPositionLimit[iq]), -_NO_LIMIT))
-            limit["upper"] = _fmt(min(float(model.upperPositionLimit[iq]), _NO_LIMIT))
-        ET.SubElement(el, "limit", limit)
-        ET.SubElement(el, "dynamics", damping=_fmt(damping[iv]), friction=_fmt(coulomb[iv]))
-    return ET.ElementTree(root)
+    kind, axis = _URDF_JOINTS[short]
+    el = ET.SubElement(root, "joint", name=model.names[i], type=kind)
+    placement = model.jointPlacements[i]
+    ET.SubElement(
+        el,
+        "origin",
+        xyz=_fmt(*placement.translation),
+        rpy=_fmt(*pin.rpy.matrixToRpy(placement.rotation)),
+    )
+    ET.SubElement(el, "parent", link=names[model.parents[i]])
+    ET.SubElement(el, "child", link=names[i])
+    ET.SubElement(el, "axis", xyz=_fmt(*(axis if axis is not None else joint.extract().axis)))
+    iq, iv = joint.idx_q, joint.idx_v
+    limit = {
+        "effort": _fmt(min(float(model.effortLimit[iv]), _NO_LIMIT)),
+        "velocity": _fmt(min(float(model.velocityLimit[iv]), _NO_LIMIT)),
+    }
+    if kind != "continuous":
+        limit["lower"] = _fmt(max(float(model.lowerPositionLimit[iq]), -_NO_LIMIT))
+        limit["upper"] = _fmt(min(float(model.upperPositionLimit[iq]), _NO_LIMIT))
+    ET.SubElement(el, "limit", limit)
+    ET.SubElement(el, "dynamics", damping=_fmt(damping[iv]), friction=_fmt(coulomb[iv]))
 
 
 def write_urdf(robot: Robot, path: str | Path) -> str:

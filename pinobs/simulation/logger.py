@@ -213,36 +213,8 @@ class Logger:
         if grid is not None and res is not None:
             stamps = _from_steps(grid, res)
         k = np.flatnonzero(gen.random(ticks.size) < self.stale) if self.stale else np.empty(0, int)
-        # a stale read: uniformly between its row's stamp and the next row's
-        lo = stamps[k]
-        hi = np.append(stamps[1:], stamps[-1] + spacing)[k]
-        between = lo + gen.random(k.size) * (hi - lo)
-        if grid is not None and res is not None:  # on a free multiple of res between them
-            g_lo = grid[k]
-            g_hi = np.append(grid[1:], np.rint((stamps[-1] + spacing) / res))[k]
-            room = g_hi - g_lo >= 2
-            k, between = k[room], between[room]
-            steps = np.clip(np.rint(between / res), g_lo[room] + 1, g_hi[room] - 1)
-            between = _from_steps(steps.astype(np.int64), res)
-        else:
-            outside = (between <= lo) | (between >= hi)
-            between[outside] = 0.5 * (lo[outside] + hi[outside])
-        # rows: each kept tick, then its stale duplicate if any
-        rows_per_tick = np.ones(ticks.size, dtype=np.intp)
-        rows_per_tick[k] = 2
-        row_tick = np.repeat(ticks, rows_per_tick)
-        first_row = np.cumsum(rows_per_tick) - rows_per_tick  # row of each kept tick
-        is_stale = np.zeros(row_tick.size, dtype=bool)
-        is_stale[first_row[k] + 1] = True
-        t_rows = np.empty(row_tick.size)
-        t_rows[first_row] = stamps
-        t_rows[first_row[k] + 1] = between
-        if t_rows.size > 1 and not np.all(np.diff(t_rows) > 0.0):  # pragma: no cover
-            bad = int(np.flatnonzero(np.diff(t_rows) <= 0.0)[0]) + 1
-            raise TimestampError(
-                f"row {bad}: stamp {t_rows[bad]!r} s does not follow {t_rows[bad - 1]!r} s "
-                "(the rows are too close for float stamps)"
-            )
+        k, between = _stale_stamps(stamps, k, spacing, grid, res, gen)
+        row_tick, is_stale, t_rows = _rows(ticks, stamps, k, between)
         q = np.asarray(result.q_meas, dtype=float)[row_tick]
         tau = np.asarray(result.tau, dtype=float)[row_tick]
         if self.digits is not None:
@@ -455,3 +427,58 @@ class RecordedLog:
         frame: Any = self.to_frame(robot)
         frame.to_csv(path, index=False, lineterminator="\n")
         return path
+
+
+def _stale_stamps(
+    stamps: Vector,
+    k: NDArray[np.intp],
+    spacing: float,
+    grid: NDArray[np.int64] | None,
+    res: float | None,
+    gen: np.random.Generator,
+) -> tuple[NDArray[np.intp], Vector]:
+    """The stale rows that are written (of those after kept rows ``k``) and their stamps
+    (module docstring, 4 and 5): uniformly between their row's stamp and the next row's
+    (one row spacing after the last), on a free multiple of ``res`` between them when
+    the stamps are rounded (a row without one is not written)."""
+    lo = stamps[k]
+    hi = np.append(stamps[1:], stamps[-1] + spacing)[k]
+    between: Vector = lo + gen.random(k.size) * (hi - lo)
+    if grid is not None and res is not None:  # on a free multiple of res between them
+        g_lo = grid[k]
+        g_hi = np.append(grid[1:], np.rint((stamps[-1] + spacing) / res))[k]
+        room = g_hi - g_lo >= 2
+        k, between = k[room], between[room]
+        steps = np.clip(np.rint(between / res), g_lo[room] + 1, g_hi[room] - 1)
+        between = _from_steps(steps.astype(np.int64), res)
+    else:
+        outside = (between <= lo) | (between >= hi)
+        between[outside] = 0.5 * (lo[outside] + hi[outside])
+    return k, between
+
+
+def _rows(
+    ticks: NDArray[np.intp],
+    stamps: Vector,
+    k: NDArray[np.intp],
+    between: Vector,
+) -> tuple[NDArray[np.intp], NDArray[np.bool_], Vector]:
+    """The log's rows, each kept tick then its stale duplicate if any: each row's tick,
+    whether it is stale, and its stamp [s] (``stamps`` of the kept rows, ``between`` of
+    the stale rows after kept rows ``k``)."""
+    rows_per_tick = np.ones(ticks.size, dtype=np.intp)
+    rows_per_tick[k] = 2
+    row_tick = np.repeat(ticks, rows_per_tick)
+    first_row = np.cumsum(rows_per_tick) - rows_per_tick  # row of each kept tick
+    is_stale = np.zeros(row_tick.size, dtype=bool)
+    is_stale[first_row[k] + 1] = True
+    t_rows = np.empty(row_tick.size)
+    t_rows[first_row] = stamps
+    t_rows[first_row[k] + 1] = between
+    if t_rows.size > 1 and not np.all(np.diff(t_rows) > 0.0):  # pragma: no cover
+        bad = int(np.flatnonzero(np.diff(t_rows) <= 0.0)[0]) + 1
+        raise TimestampError(
+            f"row {bad}: stamp {t_rows[bad]!r} s does not follow {t_rows[bad - 1]!r} s "
+            "(the rows are too close for float stamps)"
+        )
+    return row_tick, is_stale, t_rows

@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -183,97 +184,180 @@ def simulate(
     _check_run(robot, observers, duration, sensor, perturb_q, perturb_v, seed, substeps, plant)
     rng = np.random.default_rng(seed)
     truth = (plant or robot).copy()
-    n = round(duration * sensor.rate) + 1
-    h = sensor.period
     if q0 is None:
         q0 = truth.random_configuration(rng, scale=0.3)
     q0 = truth.check_configuration(q0, what="q0")
     v0 = np.zeros(truth.nv) if v0 is None else truth.check_vector(v0, truth.nv, what="v0")
     if not isinstance(inputs, InputProfile):
         inputs = make_input(inputs or default_input(truth), truth, rng=rng, center=q0)
-    if isinstance(observers, Mapping):
-        obs = dict(observers)
-    else:
-        obs = {
-            name: make_observer(name, robot, rate=sensor.rate, noise_std=sensor.effective_std)
-            for name in observers
-        }
-    q_hat0, v_hat0 = perturb(truth, q0, v0, perturb_q, perturb_v, rng)
-
-    t = np.arange(n) * h
-    Q = np.empty((n, truth.nq))
-    V = np.empty((n, truth.nv))
-    TAU = np.empty((n, truth.nv))
-    QM = np.full((n, truth.nq), np.nan)
-    est_q = {k: np.full((n, truth.nq), np.nan) for k in obs}
-    est_v = {k: np.full((n, truth.nv), np.nan) for k in obs}
-    wall = {k: np.full(n, np.nan) for k in obs}
-    diverged: dict[str, float | None] = dict.fromkeys(obs)
-    failures: dict[str, str] = {}
-    history: deque[Vector] = deque(maxlen=sensor.delay + 1)
-
-    q, v = q0, v0
-    for k in range(n):
-        if k > 0:
-            q, v = _plant_step(truth, q, v, TAU[k - 1], h, substeps)
-        tau = inputs.torque(t[k], q, v)
-        Q[k], V[k], TAU[k] = q, v, tau
-        history.append(q)
-        meas = sensor.measure(truth, history[0], rng) if k > 0 else None
-        if meas is not None:
-            QM[k] = meas
-        for name, ob in obs.items():
-            if diverged[name] is not None:
-                continue
-            start = time.perf_counter()
-            try:
-                if k == 0:
-                    est = ob.reset(t[0], q_hat0, v_hat0, tau)
-                else:
-                    est = ob.update(t[k], meas, tau)
-            except ObserverDiverged as exc:
-                diverged[name] = exc.t
-                failures[name] = str(exc)
-                continue
-            except (ArithmeticError, np.linalg.LinAlgError, PinobsError) as exc:
-                # one failing observer must not take the others' results with it
-                diverged[name] = float(t[k])
-                failures[name] = f"{type(exc).__name__} at t = {t[k]:.6g} s: {exc}"
-                continue
-            wall[name][k] = time.perf_counter() - start
-            est_q[name][k], est_v[name][k] = est.q, est.v
-        if progress is not None:
-            progress(k + 1, n)
-
-    traces = tuple(
-        ObserverTrace(
-            name=name,
-            q=est_q[name],
-            v=est_v[name],
-            update_time=wall[name],
-            options=ob.options,
-            diverged_at=diverged[name],
-        )
-        for name, ob in obs.items()
-    )
+    obs = _observers(robot, observers, sensor)
+    start = perturb(truth, q0, v0, perturb_q, perturb_v, rng)
+    rec = _Recording.empty(round(duration * sensor.rate) + 1, sensor.period, truth, obs)
+    _run(rec, truth, obs, sensor, inputs, (q0, v0), start, substeps, rng, progress)
     meta = {
-        "robot": robot.name,
-        "robot_source": _portable_source(getattr(robot, "source", robot.name)),
-        "root_joint": getattr(robot, "root_joint", None),
-        "mimic": getattr(robot, "mimic", None),
-        "lock": dict(getattr(robot, "locked", {})) or None,  # pinobs play reloads it so
+        **_robot_meta(robot),
         "duration": duration,
-        "rate": sensor.rate,
-        "noise_std": sensor.noise_std,
-        "bits": sensor.bits,
-        "delay": sensor.delay,
-        "dropout": sensor.dropout,
+        **_sensor_meta(sensor),
         "input": inputs.name,
         "seed": seed,
         "perturb_q": perturb_q,
         "perturb_v": perturb_v,
         "substeps": substeps,
         "plant": truth.name if plant is not None else None,
-        "failures": failures,
+        "failures": rec.failures,
     }
-    return Result(robot=robot.name, t=t, q=Q, v=V, tau=TAU, q_meas=QM, traces=traces, meta=meta)
+    return rec.result(robot.name, obs, meta)
+
+
+def _observers(
+    robot: Robot, observers: Sequence[str] | Mapping[str, Observer[Any]], sensor: Sensor
+) -> dict[str, Observer[Any]]:
+    """:func:`simulate`'s observers by label: those given, or built by name for the sensor."""
+    if isinstance(observers, Mapping):
+        return dict(observers)
+    return {
+        name: make_observer(name, robot, rate=sensor.rate, noise_std=sensor.effective_std)
+        for name in observers
+    }
+
+
+def _robot_meta(robot: Robot) -> dict[str, Any]:
+    """What a saved run needs to reload its robot (``pinobs play``)."""
+    return {
+        "robot": robot.name,
+        "robot_source": _portable_source(getattr(robot, "source", robot.name)),
+        "root_joint": getattr(robot, "root_joint", None),
+        "mimic": getattr(robot, "mimic", None),
+        "lock": dict(getattr(robot, "locked", {})) or None,  # pinobs play reloads it so
+    }
+
+
+def _sensor_meta(sensor: Sensor) -> dict[str, Any]:
+    """The sensor's settings, as a run's ``meta`` keeps them."""
+    return {
+        "rate": sensor.rate,
+        "noise_std": sensor.noise_std,
+        "bits": sensor.bits,
+        "delay": sensor.delay,
+        "dropout": sensor.dropout,
+    }
+
+
+def _run(
+    rec: _Recording,
+    truth: Robot,
+    obs: Mapping[str, Observer[Any]],
+    sensor: Sensor,
+    inputs: InputProfile,
+    state: tuple[Vector, Vector],
+    start: tuple[Vector, Vector],
+    substeps: int,
+    rng: np.random.Generator,
+    progress: Progress | None,
+) -> None:
+    """The sample loop of :func:`simulate`, from the true ``state`` ``(q0, v0)``, the
+    observers started at ``start`` ``(q̂0, v̂0)``: recorded into ``rec``."""
+    history: deque[Vector] = deque(maxlen=sensor.delay + 1)
+    q, v = state
+    for k in range(rec.t.size):
+        if k > 0:
+            q, v = _plant_step(truth, q, v, rec.tau[k - 1], sensor.period, substeps)
+        tau = inputs.torque(rec.t[k], q, v)
+        rec.q[k], rec.v[k], rec.tau[k] = q, v, tau
+        history.append(q)
+        meas = sensor.measure(truth, history[0], rng) if k > 0 else None
+        if meas is not None:
+            rec.q_meas[k] = meas
+        for name, ob in obs.items():
+            if rec.diverged[name] is None:
+                rec.update(name, ob, k, meas, tau, start)
+        if progress is not None:
+            progress(k + 1, rec.t.size)
+
+
+@dataclass
+class _Recording:
+    """What :func:`simulate` records, filled sample by sample: the truth (``q``, ``v``,
+    ``tau`` at times ``t`` [s]), the measurements (NaN where none) and each observer's
+    estimates, update times [s] (NaN from a failure on), failure time [s] and reason."""
+
+    t: Vector
+    q: Vector
+    v: Vector
+    tau: Vector
+    q_meas: Vector
+    est_q: dict[str, Vector]
+    est_v: dict[str, Vector]
+    wall: dict[str, Vector]
+    diverged: dict[str, float | None]
+    failures: dict[str, str]
+
+    @staticmethod
+    def empty(n: int, h: float, truth: Robot, obs: Mapping[str, Observer[Any]]) -> _Recording:
+        """A recording of ``n`` samples ``h`` [s] apart, nothing recorded yet."""
+        return _Recording(
+            t=np.arange(n) * h,
+            q=np.empty((n, truth.nq)),
+            v=np.empty((n, truth.nv)),
+            tau=np.empty((n, truth.nv)),
+            q_meas=np.full((n, truth.nq), np.nan),
+            est_q={k: np.full((n, truth.nq), np.nan) for k in obs},
+            est_v={k: np.full((n, truth.nv), np.nan) for k in obs},
+            wall={k: np.full(n, np.nan) for k in obs},
+            diverged=dict.fromkeys(obs),
+            failures={},
+        )
+
+    def update(
+        self,
+        name: str,
+        ob: Observer[Any],
+        k: int,
+        meas: Vector | None,
+        tau: Vector,
+        start: tuple[Vector, Vector],
+    ) -> None:
+        """Observer ``name`` at sample ``k`` (reset at ``start``, ``(q̂0, v̂0)``, at
+        ``k = 0``), timed; a failure recorded, not raised."""
+        t = self.t
+        began = time.perf_counter()
+        try:
+            if k == 0:
+                est = ob.reset(t[0], *start, tau)
+            else:
+                est = ob.update(t[k], meas, tau)
+        except ObserverDiverged as exc:
+            self.diverged[name] = exc.t
+            self.failures[name] = str(exc)
+            return
+        except (ArithmeticError, np.linalg.LinAlgError, PinobsError) as exc:
+            # one failing observer must not take the others' results with it
+            self.diverged[name] = float(t[k])
+            self.failures[name] = f"{type(exc).__name__} at t = {t[k]:.6g} s: {exc}"
+            return
+        self.wall[name][k] = time.perf_counter() - began
+        self.est_q[name][k], self.est_v[name][k] = est.q, est.v
+
+    def result(self, robot: str, obs: Mapping[str, Observer[Any]], meta: dict[str, Any]) -> Result:
+        """The :class:`Result` of the run."""
+        traces = tuple(
+            ObserverTrace(
+                name=name,
+                q=self.est_q[name],
+                v=self.est_v[name],
+                update_time=self.wall[name],
+                options=ob.options,
+                diverged_at=self.diverged[name],
+            )
+            for name, ob in obs.items()
+        )
+        return Result(
+            robot=robot,
+            t=self.t,
+            q=self.q,
+            v=self.v,
+            tau=self.tau,
+            q_meas=self.q_meas,
+            traces=traces,
+            meta=meta,
+        )

@@ -283,7 +283,8 @@ def _smoothed(
     unit = time_unit_warning(median_period(first.t))
     try:
         said, sigma_joint = [], None
-        if how.noise_std is None and not len(first):  # (a sweep: an empty log "give noise_std")
+        # (a sweep found an empty log "give noise_std")
+        if how.noise_std is None and not len(first):
             how = replace(how, noise_std=NOISE_FLOOR)
         elif how.noise_std is None:  # as pinobs.smooth, from the first chunk
             timed = time_screened(first.t)
@@ -306,8 +307,8 @@ def _smoothed(
 
 
 def _tell(run: LogRun, stretches: list[dict[str, Any]], repair: ClockRepair) -> None:
-    """The clock's repair first in the run's warnings, then what :func:`pinobs.smooth`
-    warns, per stretch."""
+    """The run's clock report, its repair said first in the run's warnings, then what
+    :func:`pinobs.smooth` warns, per stretch."""
     run.clock = repair.report
     if run.clock is not None and (run.clock.repaired or run.clock.stale):
         run.warnings.insert(0, run.clock.message())

@@ -55,6 +55,15 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
     add_drive_options(p)
     add_clock_option(p)
     p.add_argument("--out", required=True, help="the calibrated URDF to write")
+    _add_model_options(p)
+    _add_fit_options(p)
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=handle)
+    return p
+
+
+def _add_model_options(p: argparse.ArgumentParser) -> None:
+    """``pinobs identify``'s options of what is identified (friction, armature, offset)."""
     p.add_argument("--no-friction", action="store_true", help="do not identify joint friction")
     p.add_argument(
         "--friction-law",
@@ -83,6 +92,11 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
         action="store_true",
         help="also identify a torque offset per joint (a biased torque sensor; not in the URDF)",
     )
+
+
+def _add_fit_options(p: argparse.ArgumentParser) -> None:
+    """``pinobs identify``'s options of the fit (hold-out, conditioning, torques, noise,
+    payload)."""
     p.add_argument(
         "--holdout",
         type=float,
@@ -140,9 +154,6 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="identify only a load's ten inertial parameters attached to this body or frame, "
         "the --robot taken as calibrated (its other parameters fixed)",
     )
-    p.add_argument("--force", action="store_true", help="overwrite an existing output")
-    p.set_defaults(func=handle)
-    return p
 
 
 def handle(args: argparse.Namespace) -> int:
@@ -210,6 +221,22 @@ def _identify_report(ident: Any) -> str:
         + ("; physical consistency enforced" if rep["projected"] else ""),
         "",
     ]
+    lines += _residual_lines(rep)
+    if "payload" in rep:
+        pl = rep["payload"]
+        com = ", ".join(f"{x:.4g}" for x in pl["com"])
+        lines.append(
+            f"payload on {pl['frame']}: mass {pl['mass']:.4g} ± {pl['mass_std']:.2g} kg, centre "
+            f"of mass ({com}) m in {pl['frame']}"
+        )
+    lines += _parameter_lines(ident, rep)
+    lines += _notes(ident, rep)
+    return "\n".join(lines)
+
+
+def _residual_lines(rep: dict[str, Any]) -> list[str]:
+    """The report's table of torque residuals per joint, with its title."""
+    lines: list[str] = []
     by_torque = rep.get("weighting") == "torque"
     lines.append(
         "torque residual RMS per joint, windows' mean torque [N·m; N prismatic]"
@@ -244,14 +271,12 @@ def _identify_report(ident: Any) -> str:
                 f"{rep['holdout_torque_after'][j]:10.4g}"
             )
         )
-    if "payload" in rep:
-        pl = rep["payload"]
-        com = ", ".join(f"{x:.4g}" for x in pl["com"])
-        lines.append(
-            f"payload on {pl['frame']}: mass {pl['mass']:.4g} ± {pl['mass_std']:.2g} kg, centre "
-            f"of mass ({com}) m in {pl['frame']}"
-        )
-    lines += ["", f"{'parameter':32s} {'nominal':>12s} {'identified':>12s} {'std':>10s}"]
+    return lines
+
+
+def _parameter_lines(ident: Any, rep: dict[str, Any]) -> list[str]:
+    """The report's table of the parameters identified, and those not excited."""
+    lines = ["", f"{'parameter':32s} {'nominal':>12s} {'identified':>12s} {'std':>10s}"]
     for name, value, std, nominal, excited in ident.parameters.as_rows():
         if excited:
             lines.append(f"{name:32s} {nominal:12.5g} {value:12.5g} {std:10.2g}")
@@ -274,6 +299,13 @@ def _identify_report(ident: Any) -> str:
                 else "they stay near their nominal values)"
             )
         )
+    return lines
+
+
+def _notes(ident: Any, rep: dict[str, Any]) -> list[str]:
+    """The report's closing lines: the friction law's velocities, the smoother's
+    consistency, the noise level, the warnings and the torque offset."""
+    lines: list[str] = []
     law = rep.get("friction_law")
     if law and law["law"] != "viscous-coulomb":  # the velocities the search chose [rad/s]
         lines.append(
@@ -308,4 +340,4 @@ def _identify_report(ident: Any) -> str:
             "torque offset b per joint [N·m] (not stored in the URDF; the model is driven by tau + b: add it to the torques "
             "or let the observer estimate it): " + ", ".join(f"{b:.4g}" for b in ident.offset)
         )
-    return "\n".join(lines)
+    return lines

@@ -276,26 +276,8 @@ def run_bench(
     for o in outcomes:
         if o.error is None:
             parts[o.task.kind].append(o.value[0])
-    points: dict[str, list[tuple[str, int, float, float]]] = {}
-    for found in parts["scaling"]:
-        for name, point in found.items():
-            points.setdefault(name, []).append(point)
-    scaling = {
-        name: {
-            "points": [{"robot": b, "nv": n, "seconds": t, "cost_in_aba": r} for b, n, t, r in pts],
-            "exponent": scaling_exponent([p[1] for p in pts], [p[2] for p in pts]),
-        }
-        for name, pts in points.items()
-    }
-    cost = {(name, p[0]): (p[2], p[3]) for name, pts in points.items() for p in pts}
-    rows: list[BenchRow] = []
-    skipped_all: dict[str, dict[str, str]] = {}
-    for found, skipped in parts["accuracy"]:
-        for row in found:
-            timed = {"fd*": "fd", "kf*": "kf", "diff": "fd"}.get(row.observer, row.observer)
-            seconds, ratio = cost.get((timed, row.robot), (math.nan, math.nan))
-            rows.append(replace(row, time_per_update=seconds, cost_in_aba=ratio))
-            skipped_all[row.robot] = skipped
+    scaling, cost = _scaling(parts["scaling"])
+    rows, skipped_all = _costed_rows(parts["accuracy"], cost)
     return {
         "config": asdict(cfg),
         "machine": _machine(),
@@ -307,6 +289,44 @@ def run_bench(
         "mismatch": [r for found in parts["mismatch"] for r in found],
         "failed": failed,
     }
+
+
+def _scaling(
+    found_points: list[Any],
+) -> tuple[dict[str, Any], dict[tuple[str, str], tuple[float, float]]]:
+    """The scaling tasks' points gathered per observer (the report's ``scaling``, with each
+    observer's exponent) and each ``(observer, robot)``'s cost: seconds per update and
+    ratio to ``pin.aba``."""
+    points: dict[str, list[tuple[str, int, float, float]]] = {}
+    for found in found_points:
+        for name, point in found.items():
+            points.setdefault(name, []).append(point)
+    scaling = {
+        name: {
+            "points": [{"robot": b, "nv": n, "seconds": t, "cost_in_aba": r} for b, n, t, r in pts],
+            "exponent": scaling_exponent([p[1] for p in pts], [p[2] for p in pts]),
+        }
+        for name, pts in points.items()
+    }
+    cost = {(name, p[0]): (p[2], p[3]) for name, pts in points.items() for p in pts}
+    return scaling, cost
+
+
+def _costed_rows(
+    accuracy: list[Any], cost: dict[tuple[str, str], tuple[float, float]]
+) -> tuple[list[BenchRow], dict[str, dict[str, str]]]:
+    """The accuracy tasks' rows, each with the cost of the observer it is timed as (``fd*``
+    and ``diff`` as ``fd``, ``kf*`` as ``kf``; NaN when not timed), and the observers each
+    robot skipped."""
+    rows: list[BenchRow] = []
+    skipped_all: dict[str, dict[str, str]] = {}
+    for found, skipped in accuracy:
+        for row in found:
+            timed = {"fd*": "fd", "kf*": "kf", "diff": "fd"}.get(row.observer, row.observer)
+            seconds, ratio = cost.get((timed, row.robot), (math.nan, math.nan))
+            rows.append(replace(row, time_per_update=seconds, cost_in_aba=ratio))
+            skipped_all[row.robot] = skipped
+    return rows, skipped_all
 
 
 def _accuracy(

@@ -161,40 +161,7 @@ def run_tasks(
             report(done, serial[-1])
         return serial
     dd = _dask()
-    if scheduler is not None:
-        try:
-            client = dd.Client(scheduler)
-        except ValueError as exc:  # a malformed address (no port, an unknown scheme)
-            raise OptionError(
-                f"--scheduler (scheduler=) {scheduler!r} is not a Dask scheduler's address "
-                f"({exc}); give one as tcp://host:8786"
-            ) from exc
-        cluster = None
-    else:
-        # no statistical profiler in our workers: every 10 ms it takes the GIL from the
-        # task to walk its stack (4 two-minute UR5 logs: 5 % of the wall time); a task
-        # whose worker dies (killed for lack of memory, a crash) fails at once instead of
-        # being run 3 more times, and is the only task that worker held (a saturation of
-        # 1: no task queued on it behind the running one, to be charged with its death)
-        import dask.config
-
-        with dask.config.set(
-            {
-                "distributed.worker.profile.enabled": False,
-                "distributed.scheduler.allowed-failures": 0,
-                "distributed.scheduler.worker-saturation": 1.0,
-            }
-        ):
-            cluster = dd.LocalCluster(
-                n_workers=workers,
-                threads_per_worker=1,
-                processes=processes,
-                dashboard_address=None,  # no dashboard; its HTTP server still starts, so:
-                # on a free port, not 8787 (taken by any other Dask on the machine: a
-                # UserWarning, an error under -W error; the tests failed so beside another)
-                scheduler_kwargs={"dashboard_address": ":0"},
-            )
-        client = dd.Client(cluster)
+    client, cluster = _client(dd, scheduler, workers, processes)
     try:
         futures = client.map(_guarded, [fn] * len(tasks), list(tasks), pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
@@ -212,6 +179,43 @@ def run_tasks(
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _client(dd: Any, scheduler: str | None, workers: int | None, processes: bool) -> Any:
+    """The client of the cluster at ``scheduler`` and ``None``, or of a new local cluster of
+    ``workers`` and that cluster (to close after the client)."""
+    if scheduler is not None:
+        try:
+            return dd.Client(scheduler), None
+        except ValueError as exc:  # a malformed address (no port, an unknown scheme)
+            raise OptionError(
+                f"--scheduler (scheduler=) {scheduler!r} is not a Dask scheduler's address "
+                f"({exc}); give one as tcp://host:8786"
+            ) from exc
+    # no statistical profiler in our workers: every 10 ms it takes the GIL from the
+    # task to walk its stack (4 two-minute UR5 logs: 5 % of the wall time); a task
+    # whose worker dies (killed for lack of memory, a crash) fails at once instead of
+    # being run 3 more times, and is the only task that worker held (a saturation of
+    # 1: no task queued on it behind the running one, to be charged with its death)
+    import dask.config
+
+    with dask.config.set(
+        {
+            "distributed.worker.profile.enabled": False,
+            "distributed.scheduler.allowed-failures": 0,
+            "distributed.scheduler.worker-saturation": 1.0,
+        }
+    ):
+        cluster = dd.LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=processes,
+            dashboard_address=None,  # no dashboard; its HTTP server still starts, so:
+            # on a free port, not 8787 (taken by any other Dask on the machine: a
+            # UserWarning, an error under -W error; the tests failed so beside another)
+            scheduler_kwargs={"dashboard_address": ":0"},
+        )
+    return dd.Client(cluster), cluster
 
 
 #: The columns of :func:`sweep`'s table, one row per run and observer label: the run
@@ -579,48 +583,7 @@ def log_tasks(
         OptionError: no logs (or only outputs), or two logs whose estimates would share a file.
         OutputExistsError: the summary exists and not ``force`` (checked before any work).
     """
-    if not logs:
-        raise OptionError("no logs given: give at least one log file or rosbag2 folder")
-    out = Path(out_dir).resolve()
-    # the batch's own outputs, found again by a glob or a folder: the summary, and, when
-    # some logs are outside out_dir, everything in it (with the logs in out_dir, only the
-    # summary: the estimates go next to the logs, and one found again clashes below)
-    found = [(name, Path(name).resolve()) for name in logs]
-    summaries = {out / (SUMMARY_STEM + suffix) for suffix in (".parquet", ".csv")}
-    elsewhere = any(not p.is_relative_to(out) for _, p in found)
-    kept = [
-        (name, p)
-        for name, p in found
-        if p not in summaries and not (elsewhere and p.is_relative_to(out))
-    ]
-    if not kept:
-        raise OptionError(
-            f"the {len(logs)} logs given are the outputs of an earlier run in {str(out)!r} "
-            "(its summary, or estimates under it): give the logs, or another output folder"
-        )
-    logs = [name for name, _ in kept]
-    paths = [p for _, p in kept]
-    base = Path(os.path.commonpath([str(p.parent) for p in paths]))
-    targets = [out / p.relative_to(base).with_suffix(".csv") for p in paths]
-    seen: dict[Path, str | Path] = {}
-    for name, target in zip(logs, targets, strict=True):
-        if target in seen:
-            raise OptionError(
-                f"logs {str(seen[target])!r} and {str(name)!r} would both write {str(target)!r}: "
-                "rename one, or run them separately"
-            )
-        if target.parent == out and target.stem == SUMMARY_STEM:
-            raise OptionError(
-                f"log {str(name)!r} would write {str(target)!r}, the summary's name: rename it"
-            )
-        seen[target] = name
-    for suffix in (".parquet", ".csv"):
-        summary = out / (SUMMARY_STEM + suffix)
-        if summary.exists() and not force:
-            raise OutputExistsError(
-                f"summary {str(summary)!r} exists; pass --force (force=True) to overwrite "
-                "it and the estimates"
-            )
+    planned = _planned(logs, Path(out_dir).resolve(), force)
     robot_source = str(Path(robot).resolve()) if Path(robot).is_file() else robot
     return [
         LogTask(
@@ -644,8 +607,54 @@ def log_tasks(
             clock=clock,
             drives=drives,
         )
-        for name, path, target in zip(logs, paths, targets, strict=True)
+        for name, path, target in planned
     ]
+
+
+def _planned(
+    logs: Sequence[str | Path], out: Path, force: bool
+) -> list[tuple[str | Path, Path, Path]]:
+    """The logs :func:`log_tasks` keeps (the batch's own outputs left out), each as given,
+    resolved, and with its estimates file in ``out``; refused as :func:`log_tasks` says."""
+    if not logs:
+        raise OptionError("no logs given: give at least one log file or rosbag2 folder")
+    # the batch's own outputs, found again by a glob or a folder: the summary, and, when
+    # some logs are outside out_dir, everything in it (with the logs in out_dir, only the
+    # summary: the estimates go next to the logs, and one found again clashes below)
+    found = [(name, Path(name).resolve()) for name in logs]
+    summaries = tuple(out / (SUMMARY_STEM + suffix) for suffix in (".parquet", ".csv"))
+    elsewhere = any(not p.is_relative_to(out) for _, p in found)
+    kept = [
+        (name, p)
+        for name, p in found
+        if p not in summaries and not (elsewhere and p.is_relative_to(out))
+    ]
+    if not kept:
+        raise OptionError(
+            f"the {len(logs)} logs given are the outputs of an earlier run in {str(out)!r} "
+            "(its summary, or estimates under it): give the logs, or another output folder"
+        )
+    base = Path(os.path.commonpath([str(p.parent) for _, p in kept]))
+    planned = [(name, p, out / p.relative_to(base).with_suffix(".csv")) for name, p in kept]
+    seen: dict[Path, str | Path] = {}
+    for name, _, target in planned:
+        if target in seen:
+            raise OptionError(
+                f"logs {str(seen[target])!r} and {str(name)!r} would both write {str(target)!r}: "
+                "rename one, or run them separately"
+            )
+        if target.parent == out and target.stem == SUMMARY_STEM:
+            raise OptionError(
+                f"log {str(name)!r} would write {str(target)!r}, the summary's name: rename it"
+            )
+        seen[target] = name
+    for summary in summaries:
+        if summary.exists() and not force:
+            raise OutputExistsError(
+                f"summary {str(summary)!r} exists; pass --force (force=True) to overwrite "
+                "it and the estimates"
+            )
+    return planned
 
 
 def _lock_pairs(lock: Sequence[str] | Mapping[str, Any] | None) -> tuple[tuple[str, Any], ...]:

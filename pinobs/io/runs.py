@@ -76,29 +76,12 @@ def process_log(
     )
     first = next(chunks)
     period = 1.0 / rate if rate else _median_period(first.t)
-    sigma_joint = None
-    warnings: list[str] = []
-    if isinstance(observer, str):
-        if noise_std is None:
-            noise_std, sigma_joint, said = _log_noise(first, robot)
-            warnings.append(said)
-        ob: ObserverLike = make_observer(
-            observer,
-            robot,
-            rate=(1.0 / period) if period else None,
-            noise_std=noise_std,
-            **dict(options or {}),
-        )
-    else:
-        ob = observer
-    est = LogEstimator(ob, period=period)
-    writer = (
-        None
-        if out is None
-        else EstimateWriter(
-            out, robot, force=force, inputs=[] if type(source).__name__ == "DataFrame" else [source]
-        )
+    ob, noise_std, sigma_joint, warnings = _observer(
+        observer, robot, first, period, noise_std, options
     )
+    est = LogEstimator(ob, period=period)
+    inputs = [] if type(source).__name__ == "DataFrame" else [source]
+    writer = None if out is None else EstimateWriter(out, robot, force=force, inputs=inputs)
     parts = _stream(est, chain_chunks(first, chunks), writer, keep, progress)
     unit = first.unit
     run = LogRun(
@@ -120,6 +103,35 @@ def process_log(
     if run.clock is not None and (run.clock.repaired or run.clock.stale):
         run.warnings.insert(0, run.clock.message())
     return run
+
+
+def _observer(
+    observer: str | ObserverLike,
+    robot: Robot,
+    first: Log,
+    period: float | None,
+    noise_std: float | None,
+    options: Mapping[str, Any] | None,
+) -> tuple[ObserverLike, float | None, Vector | None, list[str]]:
+    """:func:`process_log`'s observer: a name built (with σ from the log's first chunk
+    when ``noise_std`` is ``None``), or ``observer`` itself; with the σ used, the σ per
+    joint found and what to say."""
+    sigma_joint = None
+    warnings: list[str] = []
+    if isinstance(observer, str):
+        if noise_std is None:
+            noise_std, sigma_joint, said = _log_noise(first, robot)
+            warnings.append(said)
+        ob: ObserverLike = make_observer(
+            observer,
+            robot,
+            rate=(1.0 / period) if period else None,
+            noise_std=noise_std,
+            **dict(options or {}),
+        )
+    else:
+        ob = observer
+    return ob, noise_std, sigma_joint, warnings
 
 
 def _log_noise(first: Log, robot: Robot) -> tuple[float | None, Vector | None, str]:
@@ -245,8 +257,6 @@ def estimate(
         the model's consistency, :class:`~pinobs.errors.TimestampWarning` for the clock,
         :class:`~pinobs.errors.PinobsWarning` otherwise).
     """
-    import pandas as pd
-
     from pinobs.model import load
 
     if isinstance(robot, str):
@@ -270,20 +280,28 @@ def estimate(
         drives=drives,
     )
     said = _said(run, observer if isinstance(observer, str) else _name_of(observer))
+    df = _frame(run, robot, [text for text, _ in said])
+    for text, kind in said:
+        warn(text, kind, stacklevel=2)
+    return df
+
+
+def _frame(run: LogRun, robot: Robot, warnings: list[str]) -> Any:
+    """:func:`estimate`'s DataFrame of ``run`` (its ``attrs`` with ``warnings``)."""
+    import pandas as pd
+
     df = pd.DataFrame(
         np.column_stack([run.t, run.q, run.v]),
         columns=["t", *(f"q{i}" for i in range(robot.nq)), *(f"v{i}" for i in range(robot.nv))],
     )
     df.attrs.update(
         bad_rows=run.bad_rows,
-        warnings=[text for text, _ in said],
+        warnings=warnings,
         summary=run.summary(),
         noise_std=run.noise_std,
         clock=run.clock,
         consistency=run.consistency,
     )
-    for text, kind in said:
-        warn(text, kind, stacklevel=2)
     return df
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -227,15 +228,7 @@ def smooth_log(
     writer = EstimateWriter(
         out, robot, force=force, inputs=inputs, extra_columns=[f"v_std{i}" for i in range(robot.nv)]
     )
-    stream = (
-        stream
-        and (chunk is not None or lag is not None)
-        and accel_psd != "auto"
-        and observer == "ekf"
-        and band != "inflated"  # scaled by the whole log's ρ
-        and not (options or {}).get("latency")  # re-timed as a whole (pinobs.smooth)
-    )
-    unit: str | None = None  # t in another unit than seconds: said with any failure
+    how = _Smoothing(observer, noise_std, accel_psd, lag, chunk, options, band)
     try:
         repair = ClockRepair(clock)
         chunks = repaired_chunks(
@@ -244,37 +237,78 @@ def smooth_log(
             ),
             repair,
         )
-        first = next(chunks)
-        period = 1.0 / rate if rate else median_period(first.t)
-        unit = time_unit_warning(median_period(first.t))
+        run, stretches = _smoothed(chunks, robot, writer, how, rate, stream and how.streams())
+    except BaseException:
+        writer.abort()
+        raise
+    _tell(run, stretches, repair)
+    return run, stretches
+
+
+@dataclass(frozen=True)
+class _Smoothing:
+    """How :func:`smooth_log` smooths: its arguments of the same names."""
+
+    observer: str
+    noise_std: float | None
+    accel_psd: float | Literal["auto"] | None
+    lag: float | None
+    chunk: float | None
+    options: Mapping[str, Any] | None
+    band: str | None
+
+    def streams(self) -> bool:
+        """Whether the log can stream (module docstring), when asked to."""
+        return (
+            (self.chunk is not None or self.lag is not None)
+            and self.accel_psd != "auto"
+            and self.observer == "ekf"
+            and self.band != "inflated"  # scaled by the whole log's ρ
+            and not (self.options or {}).get("latency")  # re-timed as a whole (pinobs.smooth)
+        )
+
+
+def _smoothed(
+    chunks: Any,
+    robot: Robot,
+    writer: EstimateWriter,
+    how: _Smoothing,
+    rate: float | None,
+    stream: bool,
+) -> tuple[LogRun, list[dict[str, Any]]]:
+    """The log's chunks smoothed into ``writer`` (closed); a failure of the smoothing says
+    the log's time unit when it is not seconds."""
+    first = next(chunks)
+    period = 1.0 / rate if rate else median_period(first.t)
+    unit = time_unit_warning(median_period(first.t))
+    try:
         said, sigma_joint = [], None
-        if noise_std is None and not len(first):  # (a sweep found an empty log "give noise_std")
-            noise_std = NOISE_FLOOR
-        elif noise_std is None:  # as pinobs.smooth, from the first chunk
+        # (a sweep found an empty log "give noise_std")
+        if how.noise_std is None and not len(first):
+            how = replace(how, noise_std=NOISE_FLOOR)
+        elif how.noise_std is None:  # as pinobs.smooth, from the first chunk
             timed = time_screened(first.t)
             noise_std, sigma_joint, message = log_noise_std(robot, first.t[timed], first.q[timed])
+            how = replace(how, noise_std=noise_std)
             said.append(message)
         if stream and period is not None:
-            run, stretches = _streamed(
-                first, chunks, robot, writer, period, observer, noise_std,
-                accel_psd if accel_psd != "auto" else None, lag, chunk, options, band or "model",
-            )  # fmt: skip
+            run, stretches = _streamed(first, chunks, robot, writer, period, how)
         else:
-            run, stretches = _recorded(
-                first, chunks, robot, writer, period, observer, noise_std, accel_psd, lag, chunk,
-                options, band,
-            )  # fmt: skip
+            run, stretches = _recorded(first, chunks, robot, writer, period, how)
         writer.close()
     except PinobsError as exc:
-        writer.abort()
         if unit is not None and exc.args and isinstance(exc.args[0], str):
             # (a sweep found a log in ms fail here saying only "the filter is lost")
             exc.args = (f"{exc.args[0]} (and {unit})", *exc.args[1:])
         raise
-    except BaseException:
-        writer.abort()
-        raise
     run.warnings[:0] = said
+    run.noise_std_per_joint = sigma_joint
+    return run, stretches
+
+
+def _tell(run: LogRun, stretches: list[dict[str, Any]], repair: ClockRepair) -> None:
+    """The run's clock report, its repair said first in the run's warnings, then what
+    :func:`pinobs.smooth` warns, per stretch."""
     run.clock = repair.report
     if run.clock is not None and (run.clock.repaired or run.clock.stale):
         run.warnings.insert(0, run.clock.message())
@@ -284,47 +318,28 @@ def smooth_log(
             opts["consistency"], opts
         ):
             run.warnings.append(told if len(stretches) == 1 else f"stretch {i + 1}: {told}")
-    run.noise_std_per_joint = sigma_joint
-    return run, stretches
 
 
-def _streamed(
-    first: Any,
-    chunks: Any,
-    robot: Robot,
-    writer: EstimateWriter,
-    period: float,
-    observer: str,
-    noise_std: float,
-    accel_psd: float | None,
-    lag: float | None,
-    chunk: float | None,
-    options: Mapping[str, Any] | None,
-    band: str,
-) -> tuple[LogRun, list[dict[str, Any]]]:
-    """Rows in, smoothed rows out as soon as they and every row before them are done."""
-    new, opts = streaming_smoother(
-        robot,
-        dt=period,
-        observer=observer,
-        noise_std=noise_std,
-        accel_psd=accel_psd,
-        chunk=chunk,
-        lag=lag,
-        filter_options=options,
-        band=band,
-        configurations=first.q if np.any(np.isfinite(first.q).all(axis=1)) else None,
-    )
-    rec = _Streamer(robot, observer, new, period)
-    est = LogEstimator(rec, period=period, check_v=False)
-    pending: deque[tuple[float, float]] = deque()  # (t, sample number or NaN) of unwritten rows
-    estimated = measured = 0
-    nan_q, nan_v = np.full(robot.nq, np.nan), np.full(robot.nv, np.nan)
+class _Rows:
+    """The rows a stream has read and not yet written: each written, in order, once its
+    sample is smoothed (its ``t`` and estimate, NaN without one), counted as
+    :class:`LogRun`'s ``estimated`` and ``measured``."""
 
-    def drain(final: bool) -> None:
-        nonlocal estimated, measured
+    def __init__(self, rec: _Streamer, writer: EstimateWriter) -> None:
+        self.rec, self.writer = rec, writer
+        self.pending: deque[tuple[float, float]] = deque()  # (t, sample number or NaN)
+        self.estimated = self.measured = 0
+        self.nan_q, self.nan_v = np.full(rec.robot.nq, np.nan), np.full(rec.robot.nv, np.nan)
+
+    def add(self, t: Vector, idx: Any) -> None:
+        """Rows read (their times and :class:`LogEstimator`'s estimates: sample numbers)."""
+        self.pending.extend(zip(t.tolist(), idx[:, 0].tolist(), strict=True))
+
+    def drain(self, final: bool) -> None:
+        """Write the rows whose samples are done (``final``: every row)."""
         rows: list[tuple[float, Vector, Vector, Vector]] = []
-        done = rec.finished
+        pending, rec, done = self.pending, self.rec, self.rec.finished
+        nan_q, nan_v = self.nan_q, self.nan_v
         while pending:
             t, idx = pending[0]
             if math.isnan(idx):
@@ -336,27 +351,47 @@ def _streamed(
                     _, qs, vs, var = done[0]
                     rows.append((t, qs, vs, np.sqrt(np.maximum(var, 0.0))))
                     if np.all(np.isfinite(vs)):
-                        estimated += 1
+                        self.estimated += 1
                         while rec.had_q_from < idx:  # samples no row will ask for again
                             rec.had_q.popleft()
                             rec.had_q_from += 1
-                        measured += rec.had_q[0]
+                        self.measured += rec.had_q[0]
                 elif final:
                     rows.append((t, nan_q, nan_v, nan_v))  # a one-sample stretch
                 else:
                     break
             pending.popleft()
         if rows:
-            writer.write(*(np.array(c) for c in zip(*rows, strict=True)))
+            self.writer.write(*(np.array(c) for c in zip(*rows, strict=True)))
 
+
+def _streamed(
+    first: Any, chunks: Any, robot: Robot, writer: EstimateWriter, period: float, how: _Smoothing
+) -> tuple[LogRun, list[dict[str, Any]]]:
+    """Rows in, smoothed rows out as soon as they and every row before them are done."""
+    new, opts = streaming_smoother(
+        robot,
+        dt=period,
+        observer=how.observer,
+        noise_std=how.noise_std,
+        accel_psd=how.accel_psd if how.accel_psd != "auto" else None,
+        chunk=how.chunk,
+        lag=how.lag,
+        filter_options=how.options,
+        band=how.band or "model",
+        configurations=first.q if np.any(np.isfinite(first.q).all(axis=1)) else None,
+    )
+    rec = _Streamer(robot, how.observer, new, period)
+    est = LogEstimator(rec, period=period, check_v=False)
+    rows = _Rows(rec, writer)
     for c in chain_chunks(first, chunks):
         t, _, idx = est.feed(c)
-        pending.extend(zip(t.tolist(), idx[:, 0].tolist(), strict=True))
-        drain(False)
+        rows.add(t, idx)
+        rows.drain(False)
     t, _, idx = est.finish()
-    pending.extend(zip(t.tolist(), idx[:, 0].tolist(), strict=True))
+    rows.add(t, idx)
     rec.flush()
-    drain(True)
+    rows.drain(True)
     empty = np.empty(0)
     run = LogRun(
         t=empty,
@@ -365,10 +400,10 @@ def _streamed(
         bad_rows=est.bad_rows,
         warnings=est.warnings,
         rows=est.rows,
-        estimated=estimated,
-        measured=measured,  # rows estimated with their measurement (not est's: rows fed)
+        estimated=rows.estimated,
+        measured=rows.measured,  # rows estimated with their measurement (not est's: rows fed)
         unit=first.unit,
-        noise_std=noise_std,
+        noise_std=how.noise_std,
         period=period,
     )
     rho_sum, rho_n = rec.rho
@@ -383,16 +418,10 @@ def _recorded(
     robot: Robot,
     writer: EstimateWriter,
     period: float | None,
-    observer: str,
-    noise_std: float,
-    accel_psd: float | Literal["auto"] | None,
-    lag: float | None,
-    chunk: float | None,
-    options: Mapping[str, Any] | None,
-    band: str | None,
+    how: _Smoothing,
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Every screened sample kept, each stretch smoothed at the end."""
-    rec = _Recorder(robot, observer)
+    rec = _Recorder(robot, how.observer)
     est = LogEstimator(rec, period=period, check_v=False)
     parts = [est.feed(c) for c in chain_chunks(first, chunks)]
     parts.append(est.finish())
@@ -418,13 +447,13 @@ def _recorded(
         res = smooth_quietly(  # the consistency is reported in the run's warnings (smooth_log)
             robot,
             (seg_t, seg_q, seg_tau),
-            observer=observer,
-            noise_std=noise_std,
-            accel_psd=accel_psd,
-            lag=lag,
-            chunk=chunk,
-            filter_options=options,
-            band=band,
+            observer=how.observer,
+            noise_std=how.noise_std,
+            accel_psd=how.accel_psd,
+            lag=how.lag,
+            chunk=how.chunk,
+            filter_options=how.options,
+            band=how.band,
             find_latency=True,  # as pinobs.smooth: a latency found is said (smooth_log)
         )
         samples_q[k], samples_v[k], samples_std[k] = res.q, res.v, res.v_std
@@ -446,7 +475,7 @@ def _recorded(
         estimated=int(np.all(np.isfinite(v_s), axis=1).sum()),
         measured=int(np.sum(np.array(rec.had_q, dtype=bool)[rows][done])),
         unit=first.unit,
-        noise_std=noise_std,
+        noise_std=how.noise_std,
         period=period,
     )
     return run, stretches

@@ -73,35 +73,8 @@ def chart_data(
     after = t >= start
     # a diverged estimate does not set the range (it is clipped, and the legend says it diverged)
     sane = [o for o in observers if result.trace(o).diverged_at is None]
-    ranges, clipped, worst = [], [], []
-    for i in range(robot.nv):
-        est = np.column_stack([result.trace(o).v[:, i] for o in observers] or [t * np.nan])
-        lo, hi = velocity_range(t, result.v[:, i], [result.trace(o).v[:, i] for o in sane], start)
-        ranges.append([lo, hi])
-        # RMS error of each estimate from ``start`` on, over its finite samples (an estimate
-        # NaN all along, e.g. diverged before ``start``, has none and does not count; it was
-        # numpy's "Mean of empty slice")
-        # the joint shown first is the worst of the estimates that did not diverge (a diverged
-        # one overflowing to 1e200 made every joint's RMS inf: the first joint won)
-        good = np.column_stack([result.trace(o).v[:, i] for o in sane] or [t * np.nan])
-        with np.errstate(invalid="ignore", over="ignore"):
-            clipped.append(bool(np.any((est < lo) | (est > hi))))
-            e = good[after] - result.v[after, i][:, None]
-            finite = np.isfinite(e)
-            count = finite.sum(axis=0)
-            square = (np.where(finite, e, 0.0) ** 2).sum(axis=0)
-        has = count > 0
-        worst.append(float(np.sqrt(square[has] / count[has]).max()) if has.any() else 0.0)
-    positive = np.concatenate([e[np.isfinite(e) & (e > 0)] for e in errors.values()] or [[]])
-    late = np.concatenate(
-        [e[after][np.isfinite(e[after]) & (e[after] > 0)] for e in errors.values()] or [[]]
-    )
-    if positive.size:
-        hi = float(positive.max()) * 2.0
-        lo = float(late.min() if late.size else positive.min()) / 2.0
-        err_range = [max(lo, hi * 1e-9), hi]
-    else:
-        err_range = [1e-3, 1.0]
+    ranges, clipped, worst = _joint_ranges(result, robot, observers, sane, start)
+    err_range = _error_range(errors, after)
     units = velocity_units(robot)
     return {
         "t": _numbers(t[keep]),
@@ -125,6 +98,50 @@ def chart_data(
         ],
         "err_range": err_range,
     }
+
+
+def _joint_ranges(
+    result: Result, robot: Robot, observers: Sequence[str], sane: list[str], start: float
+) -> tuple[list[list[float]], list[bool], list[float]]:
+    """Per velocity coordinate: its y-range (set by the truth and the ``sane`` estimates
+    after ``start``), whether an estimate is clipped, and the worst ``sane`` estimate's
+    RMS error after ``start``."""
+    t = result.t
+    after = t >= start
+    ranges, clipped, worst = [], [], []
+    for i in range(robot.nv):
+        est = np.column_stack([result.trace(o).v[:, i] for o in observers] or [t * np.nan])
+        lo, hi = velocity_range(t, result.v[:, i], [result.trace(o).v[:, i] for o in sane], start)
+        ranges.append([lo, hi])
+        # RMS error of each estimate from ``start`` on, over its finite samples (an estimate
+        # NaN all along, e.g. diverged before ``start``, has none and does not count; it was
+        # numpy's "Mean of empty slice")
+        # the joint shown first is the worst of the estimates that did not diverge (a diverged
+        # one overflowing to 1e200 made every joint's RMS inf: the first joint won)
+        good = np.column_stack([result.trace(o).v[:, i] for o in sane] or [t * np.nan])
+        with np.errstate(invalid="ignore", over="ignore"):
+            clipped.append(bool(np.any((est < lo) | (est > hi))))
+            e = good[after] - result.v[after, i][:, None]
+            finite = np.isfinite(e)
+            count = finite.sum(axis=0)
+            square = (np.where(finite, e, 0.0) ** 2).sum(axis=0)
+        has = count > 0
+        worst.append(float(np.sqrt(square[has] / count[has]).max()) if has.any() else 0.0)
+    return ranges, clipped, worst
+
+
+def _error_range(errors: dict[str, Any], after: Any) -> list[float]:
+    """The error panel's log axis: from half the smallest positive error after the start
+    (or at all) to twice the largest, at most nine decades."""
+    positive = np.concatenate([e[np.isfinite(e) & (e > 0)] for e in errors.values()] or [[]])
+    late = np.concatenate(
+        [e[after][np.isfinite(e[after]) & (e[after] > 0)] for e in errors.values()] or [[]]
+    )
+    if positive.size:
+        hi = float(positive.max()) * 2.0
+        lo = float(late.min() if late.size else positive.min()) / 2.0
+        return [max(lo, hi * 1e-9), hi]
+    return [1e-3, 1.0]
 
 
 def chart_html(data: dict[str, Any]) -> str:

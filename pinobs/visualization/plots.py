@@ -30,7 +30,10 @@ from pinobs.visualization.palette import TRUTH_LINE, hex_colour, observer_colour
 from pinobs.visualization.playback import truth_colours
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
+
+    from pinobs.evaluation.metrics import Metrics
 
 __all__ = ["figure", "plot", "plot_path"]
 
@@ -122,29 +125,14 @@ def figure(
     nrows = math.ceil(shown / ncols)
     fig = Figure(figsize=(4.6 * ncols, 2.0 * nrows + 3.0), dpi=dpi, layout="constrained")
     grid = fig.add_gridspec(nrows + 1, ncols, height_ratios=[1.0] * nrows + [1.6])
-    t = result.t
-    start = clip_start(t, [metrics[n].convergence_time for n in names])
+    start = clip_start(result.t, [metrics[n].convergence_time for n in names])
     clipped = False
     # a diverged estimate does not set the range (it is clipped, and the legend says it diverged)
     sane = [n for n in names if metrics[n].diverged_at is None]
     for i in range(shown):
         ax = fig.add_subplot(grid[i // ncols, i % ncols])
-        # the truth thin and on top: a converged estimate shows as its coloured rim
-        ax.plot(t, result.v[:, i], color=TRUTH_LINE, lw=0.9, label="truth", zorder=3)
-        estimates = np.column_stack([result.trace(n).v[:, i] for n in names] or [t * np.nan])
-        for k, name in enumerate(names):
-            ax.plot(t, estimates[:, k], color=colours[name], lw=1.6, label=name)
-        lo, hi = velocity_range(t, result.v[:, i], [result.trace(n).v[:, i] for n in sane], start)
-        with np.errstate(invalid="ignore"):
-            outside = bool(np.any((estimates < lo) | (estimates > hi)))
-        ax.set_ylim(lo, hi)
-        if outside:
-            clipped = True
-            ax.axvspan(t[0], start, color="0.88", lw=0, zorder=0)
-        ax.set_ylabel(f"{labels[i]} [{units[i]}]", fontsize=8)
-        ax.set_xlabel("t [s]", fontsize=7, labelpad=1)
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
+        label = f"{labels[i]} [{units[i]}]"
+        clipped |= _velocity_panel(ax, result, i, label, names, sane, colours, start)
     title = f"{robot.name}: true (black) and estimated velocity"
     if shown < robot.nv:
         title += f" (first {shown} of {robot.nv} coordinates)"
@@ -153,6 +141,61 @@ def figure(
     fig.suptitle(title, fontsize=10)
 
     ax = fig.add_subplot(grid[nrows, :])
+    unit = units[0] if len(set(units)) == 1 else "rad/s and m/s mixed"
+    _error_panel(ax, result, names, colours, metrics, unit)
+    # one legend for every panel, under them, where it hides no curve
+    handles = [
+        fig.axes[0].get_lines()[0],
+        *(line for line in ax.get_lines() if not str(line.get_label()).startswith("_")),
+    ]
+    fig.legend(
+        handles=handles, loc="outside lower center", ncols=min(ncols, len(handles)), fontsize=7
+    )
+    return fig
+
+
+def _velocity_panel(
+    ax: Axes,
+    result: Result,
+    i: int,
+    label: str,
+    names: list[str],
+    sane: list[str],
+    colours: dict[str, str],
+    start: float,
+) -> bool:
+    """Coordinate ``i``'s panel: the truth and each estimate, the y-range from the truth and
+    the ``sane`` estimates after ``start``; whether an estimate is clipped (then shaded)."""
+    t = result.t
+    # the truth thin and on top: a converged estimate shows as its coloured rim
+    ax.plot(t, result.v[:, i], color=TRUTH_LINE, lw=0.9, label="truth", zorder=3)
+    estimates = np.column_stack([result.trace(n).v[:, i] for n in names] or [t * np.nan])
+    for k, name in enumerate(names):
+        ax.plot(t, estimates[:, k], color=colours[name], lw=1.6, label=name)
+    lo, hi = velocity_range(t, result.v[:, i], [result.trace(n).v[:, i] for n in sane], start)
+    with np.errstate(invalid="ignore"):
+        outside = bool(np.any((estimates < lo) | (estimates > hi)))
+    ax.set_ylim(lo, hi)
+    if outside:
+        ax.axvspan(t[0], start, color="0.88", lw=0, zorder=0)
+    ax.set_ylabel(label, fontsize=8)
+    ax.set_xlabel("t [s]", fontsize=7, labelpad=1)
+    ax.tick_params(labelsize=7)
+    ax.grid(alpha=0.3)
+    return outside
+
+
+def _error_panel(
+    ax: Axes,
+    result: Result,
+    names: list[str],
+    colours: dict[str, str],
+    metrics: dict[str, Metrics],
+    unit: str,
+) -> None:
+    """The error-norm panel: ``|v̂ − v|₂`` of each estimate on a log scale, its convergence
+    (dashed) and divergence (dotted) times marked and quoted in its label."""
+    t = result.t
     for name in names:
         err = np.linalg.norm(result.trace(name).v - result.v, axis=1)
         err = np.where(err > 0, err, np.nan)  # log scale: an exact zero is not drawn
@@ -173,16 +216,6 @@ def figure(
     else:  # every estimate diverged at once (or is exact): nothing to draw on a log scale
         ax.text(0.5, 0.5, "no finite velocity error to plot", ha="center", transform=ax.transAxes)
     ax.set_xlabel("t [s]")
-    unit = units[0] if len(set(units)) == 1 else "rad/s and m/s mixed"
     ax.set_ylabel(f"|v̂ − v|₂ [{unit}]")
     ax.grid(alpha=0.3, which="both")
     ax.set_title("velocity error, log scale (dashed: convergence time)", fontsize=9)
-    # one legend for every panel, under them, where it hides no curve
-    handles = [
-        fig.axes[0].get_lines()[0],
-        *(line for line in ax.get_lines() if not str(line.get_label()).startswith("_")),
-    ]
-    fig.legend(
-        handles=handles, loc="outside lower center", ncols=min(ncols, len(handles)), fontsize=7
-    )
-    return fig

@@ -457,13 +457,8 @@ def _print_stretch(args: argparse.Namespace, opts: dict[str, Any]) -> None:
 # ------------------------------------------------------ estimate --out-dir
 def _estimate_many(args: argparse.Namespace) -> int:
     """``estimate --log GLOB|FOLDER --out-dir OUT``: every log on Dask, a summary table."""
-    from pinobs.evaluation.distributed import (
-        TaskOutcome,
-        estimate_logs,
-        log_summary,
-        log_tasks,
-        write_table,
-    )
+    from pinobs.evaluation.distributed import TaskOutcome, write_table
+    from pinobs.evaluation.many_logs import estimate_logs, log_summary, log_tasks
     from pinobs.io import find_logs
 
     if args.html:

@@ -133,7 +133,7 @@ class Drives:
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Drives) and self._key() == other._key()
 
-    def __hash__(self) -> int:  # a LogTask's field (pinobs.evaluation.distributed)
+    def __hash__(self) -> int:  # a LogTask's field (pinobs.evaluation.many_logs)
         return hash(self._key())
 
     @property

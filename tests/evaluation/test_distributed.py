@@ -14,13 +14,13 @@ pd = pytest.importorskip("pandas")
 
 from pinobs.evaluation.distributed import (  # noqa: E402
     TaskOutcome,
-    run_log_task,
     run_sweep_task,
     run_tasks,
     sweep,
     sweep_tasks,
     write_sweep,
 )
+from pinobs.evaluation.many_logs import run_log_task  # noqa: E402
 
 
 def _inverse(x: float) -> float:
@@ -189,7 +189,7 @@ def test_many_logs_one_estimates_file_each_equal_to_the_single_log_path_and_a_ba
 
 @pytest.mark.parametrize("smooth", [None, {"accel_psd": 1e-4}], ids=["filtered", "smoothed"])
 def test_many_logs_on_a_dask_cluster_give_the_serial_results(tmp_path, smooth) -> None:
-    from pinobs.evaluation.distributed import estimate_logs, log_tasks
+    from pinobs.evaluation.many_logs import estimate_logs, log_tasks
 
     logs = _logs(tmp_path / "logs", n=100)
     kw = {"robot": "pendulum", "observer": "ekf", "noise_std": 1e-4, "smooth": smooth}
@@ -211,7 +211,7 @@ def test_many_logs_smoothed_each_equal_to_the_single_log_smoother_with_its_rho(
     import numpy as np
 
     from pinobs.cli import main
-    from pinobs.evaluation.distributed import estimate_logs, log_tasks
+    from pinobs.evaluation.many_logs import estimate_logs, log_tasks
     from pinobs.io import write_log
     from pinobs.io.smoothing import smooth_log
     from pinobs.model import load
@@ -262,7 +262,7 @@ def test_smoother_options_without_smooth_are_refused(tmp_path, capsys) -> None:
 
 def test_log_tasks_mirror_subfolders_and_refuse_two_logs_for_one_file(tmp_path) -> None:
     from pinobs.errors import OptionError
-    from pinobs.evaluation.distributed import log_tasks
+    from pinobs.evaluation.many_logs import log_tasks
 
     a, b = tmp_path / "r1" / "run.csv", tmp_path / "r2" / "run.csv"
     tasks = log_tasks([a, b], tmp_path / "out", robot="pendulum", observer="kf")
@@ -398,7 +398,7 @@ def test_a_rerun_does_not_take_the_batchs_own_outputs_for_logs(tmp_path, capsys)
 
     from pinobs.cli import main
     from pinobs.errors import OptionError
-    from pinobs.evaluation.distributed import log_tasks
+    from pinobs.evaluation.many_logs import log_tasks
 
     logs = _logs(tmp_path / "logs")
     for k in (1, 2):
@@ -451,11 +451,11 @@ def _interrupt_on_run1(task):  # Ctrl-C while the second log runs
 def test_an_interrupted_batch_writes_the_summary_of_the_logs_done(
     tmp_path, capsys, monkeypatch
 ) -> None:
-    import pinobs.evaluation.distributed as distributed
+    import pinobs.evaluation.many_logs as many_logs
     from pinobs.cli import main
 
     _logs(tmp_path / "logs")
-    monkeypatch.setattr(distributed, "run_log_task", _interrupt_on_run1)
+    monkeypatch.setattr(many_logs, "run_log_task", _interrupt_on_run1)
     out = tmp_path / "out"
     argv = ["estimate", "--robot", "pendulum", "--observer", "kf", "--noise", "1e-4"]
     argv += ["--no-progress", "--log", str(tmp_path / "logs" / "run*"), "--out-dir", str(out)]

@@ -209,7 +209,7 @@ from pinobs.model.identification.regressor import (
 from pinobs.model.identification.regressor import (
     WEIGHTINGS as WEIGHTINGS,
 )
-from pinobs.model.identification.result import Identification, ParameterSet
+from pinobs.model.identification.result import Identification, ParameterSet, Report
 from pinobs.model.identification.rows import (
     MAX_FILL as MAX_FILL,
 )
@@ -234,6 +234,7 @@ __all__ = [
     "MomentumRegressor",
     "ParameterSet",
     "PayloadRegressor",
+    "Report",
     "Solution",
     "check_zero_torques",
     "excluded_coordinates",

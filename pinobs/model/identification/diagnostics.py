@@ -6,6 +6,7 @@ or a refusal's message."""
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -68,7 +69,7 @@ def _percent(x: float) -> str:
     return f"{100 * x:.3g} %" if math.isfinite(x) else "no torque"
 
 
-def fit_warnings(report: dict[str, Any]) -> list[str]:
+def fit_warnings(report: Mapping[str, Any]) -> list[str]:
     """What the data say against the fit.
 
     * The coordinates where it leaves more of the torque side unexplained than

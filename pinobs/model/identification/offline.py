@@ -41,7 +41,7 @@ from pinobs.model.identification.regressor import (
     coordinate_names,
     excluded_coordinates,
 )
-from pinobs.model.identification.result import Identification, ParameterSet
+from pinobs.model.identification.result import Identification, ParameterSet, Report
 from pinobs.model.identification.rows import (
     fill_short_gaps,
     fit_rows,
@@ -127,29 +127,12 @@ def identify(
             joint, instead of its search (``None``; a Stribeck law's ``v_st`` is still
             searched); ``friction=True``'s is 0.01 unless given.
 
-    The report: ``residual_before`` / ``residual_after`` per joint (RMS of the
-    weighted rows, rad/s²-like, on the fitted part) and ``holdout_before`` /
-    ``holdout_after`` (on the held-out end), ``condition``, ``rank``,
-    ``base`` (names of the identifiable combinations' pivots),
-    ``not_excited`` (parameters the data did not fix: near nominal unless physical
-    consistency moved them), ``moved_by_consistency`` (those of them it moved by more
-    than half their prior standard deviation), ``projected`` (physical consistency
-    moved the solution), ``rows``, ``fit_end`` (the last time of
-    the fitted part [s]), ``unexplained`` (per coordinate, the fraction of the
-    torque side the fit leaves, robust RMS of ``Aθ − y`` over that of ``y``) and
-    ``unexplained_floor`` (what noise alone would leave: :func:`unexplained_shares`),
-    ``holdout_torque_before`` / ``holdout_torque_after`` (the held-out windows' mean
-    torque residual RMS per coordinate [N·m; N for a prismatic joint], whatever the
-    weighting), ``weighting``, ``excluded`` (coordinates left out), ``torque_sigma`` (per
-    coordinate, its channel's residual scale [N·m, N]; NaN when excluded or with
-    ``weighting="inertia"``),
-    ``outlier_windows`` (end times [s] of windows the fit leaves mostly unexplained),
-    ``filled_rows`` (NaN rows interpolated: :func:`fill_short_gaps`), ``warnings``
-    (what the data say against the fit: :func:`fit_warnings`), and ``observer_options``:
-    what to give ``ekf`` on the calibrated model (``accel_psd=1e-6``,
-    ``disturbance_psd=1e-4``: a calibrated model is good, not exact; the
-    default ``ekf`` trusts it as if it were exact, and was 1.3–30× less
-    accurate for it in ``benchmarks/learning.py``).
+    The report (:class:`~pinobs.model.identification.result.Report`, read as a mapping
+    too): per coordinate the weighted rows' residual before and after, on the fitted part
+    and the held-out end, the held-out torques' in N·m, the share of the torques left
+    unexplained against what noise alone would leave, the condition number, rank and
+    unexcited parameters, the ``warnings`` (:func:`fit_warnings`) and the
+    ``observer_options`` to run ``ekf`` with on the calibrated model.
 
     Raises:
         IdentificationError: no torques, too short, never moves, or not
@@ -227,7 +210,7 @@ def _regressors(
     return reg, cands, (widened(reg, cands) if cands else reg)
 
 
-def _result(reg: MomentumRegressor, sol: Solution, report: dict[str, Any]) -> Identification:
+def _result(reg: MomentumRegressor, sol: Solution, report: Report) -> Identification:
     """The :class:`Identification` of ``sol``: the calibrated robot, the parameters, the
     offset and ``report``."""
     params = ParameterSet(
@@ -388,7 +371,7 @@ def _assess(
     rows: dict[str, Any],
     info: dict[str, Any],
     searched: dict[str, Any],
-) -> dict[str, Any]:
+) -> Report:
     """:func:`identify`'s report but its ``warnings``: the fitted rows diagnosed
     (:func:`_diagnose`), the held-out end's rows built (weighted and in N·m), and the friction
     law fitted.  ``fitted``: the fitted rows ``A``, ``y``, their windows' ``ends``, the used
@@ -471,7 +454,7 @@ def _report(
     excluded: NDArray[np.intp],
     channel: NDArray[np.intp],
     log: dict[str, Any],
-) -> dict[str, Any]:
+) -> Report:
     """:func:`identify`'s report (its ``friction_law`` and ``warnings`` apart): ``rows`` the
     fitted (``"fit"``), held-out (``"held"``) and held-out N·m (``"held_nm"``) rows,
     ``diagnosed`` :func:`_diagnose`'s, ``channel`` the fitted rows' channels, ``log`` its
@@ -482,45 +465,45 @@ def _report(
     if reg.weighting == "torque":
         torque_sigma[np.unique(channel)] = sol.channel_sigma
     coordinates = coordinate_names(robot)
-    return {
-        "residual_before": rms_per_coordinate(A, y, theta0, nv),
-        "residual_after": rms_per_coordinate(A, y, sol.theta, nv),
+    return Report(
+        residual_before=rms_per_coordinate(A, y, theta0, nv),
+        residual_after=rms_per_coordinate(A, y, sol.theta, nv),
         # the fraction of the torque side left unexplained, robustly, and what noise leaves
-        "unexplained": diagnosed["unexplained"],
-        "unexplained_floor": diagnosed["unexplained_floor"],
+        unexplained=diagnosed["unexplained"],
+        unexplained_floor=diagnosed["unexplained_floor"],
         # windows (their end times [s]) whose residual alone is a large share of the torques
-        "outlier_windows": diagnosed["outlier_windows"],
-        "holdout_before": rms_per_coordinate(A_h, y_h, theta0, nv),
-        "holdout_after": rms_per_coordinate(A_h, y_h, sol.theta, nv),
-        "holdout_torque_before": rms_per_coordinate(A_nm, y_nm, theta0, nv),
-        "holdout_torque_after": rms_per_coordinate(A_nm, y_nm, sol.theta, nv),
-        "weighting": reg.weighting,
-        "excluded": [coordinates[j] for j in excluded],
-        "torque_sigma": torque_sigma.tolist(),
-        "condition": sol.condition,
-        "rank": sol.rank,
-        "n_parameters": reg.size,
-        "base": list(sol.base),
-        "not_excited": [n for n, e in zip(reg.names, sol.excited, strict=True) if not e],
+        outlier_windows=diagnosed["outlier_windows"],
+        holdout_before=rms_per_coordinate(A_h, y_h, theta0, nv),
+        holdout_after=rms_per_coordinate(A_h, y_h, sol.theta, nv),
+        holdout_torque_before=rms_per_coordinate(A_nm, y_nm, theta0, nv),
+        holdout_torque_after=rms_per_coordinate(A_nm, y_nm, sol.theta, nv),
+        weighting=reg.weighting,
+        excluded=[coordinates[j] for j in excluded],
+        torque_sigma=torque_sigma.tolist(),
+        condition=sol.condition,
+        rank=sol.rank,
+        n_parameters=reg.size,
+        base=list(sol.base),
+        not_excited=[n for n, e in zip(reg.names, sol.excited, strict=True) if not e],
         # of those, the ones physical consistency moved by more than half their prior std
-        "moved_by_consistency": [
+        moved_by_consistency=[
             n
             for n, e, d, sd in zip(
                 reg.names, sol.excited, sol.theta - theta0, reg.prior_std(), strict=True
             )
             if not e and sol.projected and abs(d) > 0.5 * sd
         ],
-        "projected": sol.projected,
-        "rows": sol.n_rows,
-        "torque": log["torque"],  # how ∫τ dt was taken (held or sampled)
-        "holdout_rows": int(A_h.shape[0]),
-        "fit_end": log["fit_end"],
-        "sigma": sol.sigma,
-        "filled_rows": log["filled_rows"],
-        "joints": list(robot.joint_names),
+        projected=sol.projected,
+        rows=sol.n_rows,
+        torque=log["torque"],  # how ∫τ dt was taken (held or sampled)
+        holdout_rows=int(A_h.shape[0]),
+        fit_end=log["fit_end"],
+        sigma=sol.sigma,
+        filled_rows=log["filled_rows"],
+        joints=list(robot.joint_names),
         # the per-joint lists' entries: one per velocity coordinate (<joint>.<k> for several)
-        "coordinates": coordinates,
+        coordinates=coordinates,
         # a calibrated model is good, not exact: run ekf with these (adaptive's learned-model
         # densities; measured in benchmarks/learning.py, the plain ekf trusts it too much)
-        "observer_options": {"accel_psd": 1e-6, "disturbance_psd": 1e-4},
-    }
+        observer_options={"accel_psd": 1e-6, "disturbance_psd": 1e-4},
+    )

@@ -27,7 +27,7 @@ from pinobs.model.identification.regressor import (
     coordinate_names,
     excluded_coordinates,
 )
-from pinobs.model.identification.result import Identification, ParameterSet
+from pinobs.model.identification.result import Identification, ParameterSet, Report
 from pinobs.model.identification.rows import (
     fill_short_gaps,
     fit_rows,
@@ -262,7 +262,7 @@ def _payload_report(
     excluded: NDArray[np.intp],
     channel: NDArray[np.intp],
     log: dict[str, Any],
-) -> dict[str, Any]:
+) -> Report:
     """:func:`identify_payload`'s report (its ``warnings`` apart): ``rows`` the fitted
     (``"fit"``), held-out (``"held"``) and held-out N·m (``"held_nm"``) rows, ``channel``
     the fitted rows' channels, ``log`` its ``torque``, ``fit_end`` and ``filled_rows``."""
@@ -276,42 +276,42 @@ def _payload_report(
     (A, y), (A_h, y_h), (A_nm, y_nm) = rows["fit"], rows["held"], rows["held_nm"]
     holdout_before = rms_per_coordinate(A_h, y_h, zero, nv)
     holdout_after = rms_per_coordinate(A_h, y_h, phi, nv)
-    return {
-        "payload": {
+    return Report(
+        payload={
             "frame": reg.frame,
             "mass": float(phi[0]),
             "com": [math.nan] * 3 if inertia is None else inertia.lever.tolist(),
             "inertia": [[math.nan] * 3] * 3 if inertia is None else inertia.inertia.tolist(),
             "mass_std": float(sol.std[0]),
         },
-        "residual_before": rms_per_coordinate(A, y, zero, nv),
-        "residual_after": rms_per_coordinate(A, y, phi, nv),
+        residual_before=rms_per_coordinate(A, y, zero, nv),
+        residual_after=rms_per_coordinate(A, y, phi, nv),
         # (not told here: the rows' torque side is what the calibrated robot leaves, whose
         # share the payload explains says nothing of the model's)
-        "unexplained": [math.nan] * nv,
-        "unexplained_floor": [math.nan] * nv,
-        "outlier_windows": [],
-        "holdout_before": holdout_before,
-        "holdout_after": holdout_after,
-        "holdout_torque_before": rms_per_coordinate(A_nm, y_nm, zero, nv),
-        "holdout_torque_after": rms_per_coordinate(A_nm, y_nm, phi, nv),
-        "weighting": reg.weighting,
-        "excluded": [coordinates[j] for j in excluded],
-        "torque_sigma": torque_sigma.tolist(),
-        "condition": sol.condition,
-        "rank": sol.rank,
-        "n_parameters": 10,
-        "base": list(sol.base),
-        "not_excited": [n for n, e in zip(reg.names, sol.excited, strict=True) if not e],
-        "moved_by_consistency": [],
-        "projected": sol.projected,
-        "rows": sol.n_rows,
-        "torque": log["torque"],
-        "holdout_rows": int(A_h.shape[0]),
-        "fit_end": log["fit_end"],
-        "sigma": sol.sigma,
-        "filled_rows": log["filled_rows"],
-        "joints": list(robot.joint_names),
-        "coordinates": coordinates,
-        "observer_options": {"accel_psd": 1e-6, "disturbance_psd": 1e-4},
-    }
+        unexplained=[math.nan] * nv,
+        unexplained_floor=[math.nan] * nv,
+        outlier_windows=[],
+        holdout_before=holdout_before,
+        holdout_after=holdout_after,
+        holdout_torque_before=rms_per_coordinate(A_nm, y_nm, zero, nv),
+        holdout_torque_after=rms_per_coordinate(A_nm, y_nm, phi, nv),
+        weighting=reg.weighting,
+        excluded=[coordinates[j] for j in excluded],
+        torque_sigma=torque_sigma.tolist(),
+        condition=sol.condition,
+        rank=sol.rank,
+        n_parameters=10,
+        base=list(sol.base),
+        not_excited=[n for n, e in zip(reg.names, sol.excited, strict=True) if not e],
+        moved_by_consistency=[],
+        projected=sol.projected,
+        rows=sol.n_rows,
+        torque=log["torque"],
+        holdout_rows=int(A_h.shape[0]),
+        fit_end=log["fit_end"],
+        sigma=sol.sigma,
+        filled_rows=log["filled_rows"],
+        joints=list(robot.joint_names),
+        coordinates=coordinates,
+        observer_options={"accel_psd": 1e-6, "disturbance_psd": 1e-4},
+    )

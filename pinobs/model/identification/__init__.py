@@ -1,7 +1,12 @@
 """Identification of a robot's dynamic parameters in momentum form (MATH §9).
 
 One machinery for the offline :func:`identify` (``pinobs identify``) and the
-online ``adaptive`` observer.
+online ``adaptive`` observer, in modules along its seams: ``regressor`` (the rows'
+regressor, its parameters and priors), ``savgol`` (velocities of the measured path),
+``leastsquares`` (the solve and physical consistency), ``rows`` (a log read, split and
+made into rows), ``diagnostics`` (what the data say against a fit), ``payload`` (a load on a
+calibrated robot), ``offline`` (:func:`identify`) and ``result`` (what it returns).  Every
+public name is importable from here.
 
 **Parameters.**  ``θ = (π, D, F_c, b)``: ``π`` stacks ten numbers per body in
 Pinocchio's ``Inertia.toDynamicParameters()`` order (``m, m·c_x, m·c_y,

@@ -259,7 +259,7 @@ def test_identify_warns_when_its_held_out_end_says_the_fit_does_not_hold(
     the fit makes more than twice the nominal model's, is warned; the 8 s calibration log is
     not.  A 0.45 s log (a 2 kg link fitted to 38 kg unchecked) is refused: it has as many
     rows as identifiable combinations."""
-    from pinobs.model.identification import _fit_warnings
+    from pinobs.model.identification.diagnostics import fit_warnings
 
     path, _ = planar_log
     assert main(["identify", "--robot", "planar_3r", "--log", str(path),
@@ -283,8 +283,8 @@ def test_identify_warns_when_its_held_out_end_says_the_fit_does_not_hold(
         "unexplained": [0.01, 0.005],
         "unexplained_floor": [0.001, 0.001],
     }
-    assert _fit_warnings({**report, "holdout_after": [1.9, 0.5]}) == []
-    (said,) = _fit_warnings({**report, "holdout_after": [2.1, 0.5]})
+    assert fit_warnings({**report, "holdout_after": [1.9, 0.5]}) == []
+    (said,) = fit_warnings({**report, "holdout_after": [2.1, 0.5]})
     assert "worse than the nominal one on a (1 → 2.1)" in said
 
 

@@ -14,13 +14,12 @@ import pinobs
 from pinobs.errors import IdentificationError
 from pinobs.model.identification import (
     MomentumRegressor,
-    _consistent,
-    _is_consistent,
     identify,
     pseudo_inertia,
     smooth_path,
     solve,
 )
+from pinobs.model.identification.leastsquares import _consistent, _is_consistent
 from pinobs.model.urdf_writer import write_urdf
 from pinobs.simulation import Sensor
 from tests.conftest import dropped_rows, planar_3r_truth, resampled_log, torque_error

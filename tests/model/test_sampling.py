@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pinobs.model.identification import _local_polynomial, _window_nodes
+from pinobs.model.identification.regressor import _window_nodes
+from pinobs.model.identification.savgol import _local_polynomial
 from pinobs.model.noise import third_difference_std
 from pinobs.model.sampling import held_torque_integral, missing_samples, on_ticks
 from tests.conftest import dropped_rows

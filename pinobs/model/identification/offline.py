@@ -1,0 +1,509 @@
+"""The offline identification of a robot from a log (:func:`identify`), step by step: the
+log read and checked, the rows of its fitted part, the friction law's smoothing searched,
+the solve checked, and the report (MATH §9; the package docstring of
+:mod:`pinobs.model.identification`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pinobs.errors import DimensionError, GainError, IdentificationError
+from pinobs.model.friction_fit import (
+    candidate_columns,
+    search_candidates,
+    search_smoothing,
+    widened,
+)
+from pinobs.model.identification.diagnostics import (
+    OUTLIER_SHARE,
+    ROWS_PER_COMBINATION,
+    STILL_RANGE,
+    UNEXPLAINED_WARN,
+    check_zero_torques,
+    fit_warnings,
+    motion_spans,
+    not_excited_message,
+    rms_per_coordinate,
+    unexplained_shares,
+)
+from pinobs.model.identification.leastsquares import MAX_CONDITION, Solution, solve
+from pinobs.model.identification.payload import identify_payload
+from pinobs.model.identification.regressor import (
+    MomentumRegressor,
+    check_options,
+    check_torque,
+    check_weighting,
+    coordinate_names,
+    excluded_coordinates,
+)
+from pinobs.model.identification.result import Identification, ParameterSet, Report
+from pinobs.model.identification.rows import (
+    fill_short_gaps,
+    fit_rows,
+    holdout_in_newton_metres,
+    holdout_rows,
+    log_arrays,
+)
+from pinobs.model.noise import robust_rms
+from pinobs.model.robot import Robot, Vector
+
+__all__ = ["identify"]
+
+
+def identify(
+    robot: Robot,
+    log: Any,
+    *,
+    friction: bool | str = True,
+    offset: bool = True,
+    armature: bool = True,
+    holdout: float = 0.2,
+    window: float = 0.1,
+    max_condition: float = MAX_CONDITION,
+    path: tuple[ArrayLike, ArrayLike] | None = None,
+    torque: str = "held",
+    weighting: str = "inertia",
+    exclude: Sequence[str] = (),
+    payload: str | None = None,
+    smoothing: float | None = None,
+) -> Identification:
+    """Identify ``robot``'s dynamic parameters from a recorded log (module docstring).
+
+    Args:
+        robot: the nominal model (the prior).
+        log: anything with arrays ``t`` ``(N,)``, ``q`` ``(N, nq)``, ``tau``
+            ``(N, nv)`` (a ``Log``), a simulation ``Result`` (its measured
+            ``q_meas`` is used, never the truth), or a tuple ``(t, q, tau)``.
+            Its intervals are used as they are: dropped samples (rows missing from a
+            fixed-rate loop's log) and irregular sampling (:mod:`pinobs.model.sampling`).
+            Short runs of NaN rows are filled (:func:`fill_short_gaps`), longer ones are
+            gaps; windows never straddle a gap, nor an interval longer than
+            :data:`~pinobs.model.sampling.SPLIT_GAP_PERIODS` median intervals.
+        friction, offset: identify joint friction and a torque offset.  ``friction``:
+            ``True`` the URDF's viscous + Coulomb law (``v_s`` fixed at 0.01 rad/s), or a
+            law of :data:`~pinobs.model.friction.FRICTION_LAWS` (``"offset-sigmoid"``,
+            ``"stribeck"``, ``"asymmetric"``), whose coefficients are fitted linearly and
+            whose smoothing velocity ``v_s`` (and Stribeck ``v_st``) per joint is chosen on
+            a grid by cross-validation over the fitted part
+            (:func:`pinobs.model.friction_fit.search_smoothing`); the law goes with the calibrated
+            robot (and its sidecar when saved).  ``"offset-sigmoid"`` carries its own
+            offset ``F_0`` (part of the robot's friction; not dissipative): give
+            ``offset=False`` with it.
+        armature: identify a rotor inertia per actuated joint (``model.armature``, added to
+            ``M``'s diagonal; prior mean the model's own, usually 0, width
+            :data:`PRIOR_ARMATURE`); ``False`` keeps the model's as known.
+        holdout: fraction of the log (its end) kept out of the fit to report
+            the prediction error on unseen data.
+        window: integration window [s].
+        max_condition: refuse when the base regressor is worse conditioned.
+        path: estimated ``(q, v)`` at every sample of the log, ``(N, nq)`` [rad, m]
+            and ``(N, nv)`` [rad/s, m/s], used in the regressor instead of the
+            Savitzky–Golay fit (:func:`smooth_path`) of the measured positions
+            (``pinobs.identify`` passes a model-based smoother's).
+        torque: ``"held"`` (zero-order hold: ``pinobs.simulate``, commanded torques) or
+            ``"sampled"`` (at the sample instants: ``pinobs excite``, a torque sensor);
+            the wrong one biases the fit ∝ 1/rate (module docstring).
+        weighting: ``"inertia"`` (default): the rows weighted by ``M₀⁻¹``
+            (acceleration-like); ``"torque"``: each window's rows are its mean torque
+            residual [N·m, N], each torque channel weighted by its own residual scale
+            (re-estimated robustly at each pass, ``report["torque_sigma"]``) (module
+            docstring, "Weighting": which wins where).
+        exclude: names of joints whose torque channel is left out of the fit (a torque
+            that is not measured, or mostly zero: refused unless excluded,
+            :data:`ZERO_TORQUE_SHARE`); their parameters stay near nominal unless other
+            channels see them.  With ``weighting="inertia"`` the kept rows are weighted by
+            the kept joints' block of ``M₀``, inverted (the excluded joints held).
+        payload: a body or frame name: identify only the ten inertial parameters of a load
+            rigidly attached to it (:func:`identify_payload`), ``robot`` taken as calibrated
+            (its inertials, friction, armature fixed: ``friction``, ``offset``, ``armature``
+            and ``max_condition`` do not apply; a poorly excited load is said in
+            ``warnings``).
+        smoothing: the friction law's smoothing velocity ``v_s`` [rad/s], the same for every
+            joint, instead of its search (``None``; a Stribeck law's ``v_st`` is still
+            searched); ``friction=True``'s is 0.01 unless given.
+
+    The report (:class:`~pinobs.model.identification.result.Report`, read as a mapping
+    too): per coordinate the weighted rows' residual before and after, on the fitted part
+    and the held-out end, the held-out torques' in N·m, the share of the torques left
+    unexplained against what noise alone would leave, the condition number, rank and
+    unexcited parameters, the ``warnings`` (:func:`fit_warnings`) and the
+    ``observer_options`` to run ``ekf`` with on the calibrated model.
+
+    Raises:
+        IdentificationError: no torques, too short, never moves, or not
+            exciting enough (condition number above ``max_condition``).
+    """
+    check_options(friction, offset, armature, holdout, window, max_condition)
+    check_torque(torque)
+    check_weighting(weighting)
+    if payload is not None:
+        return identify_payload(
+            robot,
+            log,
+            payload,
+            holdout=holdout,
+            window=window,
+            path=path,
+            torque=torque,
+            exclude=exclude,
+            weighting=weighting,
+        )
+    excluded = excluded_coordinates(robot, exclude)
+    t, q, tau, filled, est = _read_log(robot, log, path)
+    _check_smoothing(smoothing)
+    laws: dict[str, Any] = {
+        "friction": friction,
+        "offset": offset,
+        "armature": armature,
+        "weighting": weighting,
+        "exclude": exclude,
+    }
+    reg, cands, rows_reg = _regressors(robot, laws, smoothing)
+    split = _fit_end(t, window, holdout)
+    fit = t <= split
+    rows: dict[str, Any] = {"window": window, "path": est, "torque": torque}
+    A, y, ends = fit_rows(rows_reg, (t, q, tau), fit, **rows)
+    _check_moves(robot, t[fit], q[fit])
+    check_zero_torques(robot, tau, excluded)
+    channel = np.tile(np.arange(robot.nv), A.shape[0] // robot.nv)
+    used_rows = ~np.isin(channel, excluded)
+    searched: dict[str, Any] = {}
+    if cands:  # (the search's own least squares, unweighted by channel)
+        reg, A, searched = _search_smoothing(reg, A, y, used_rows, cands, laws)
+    sol = solve(
+        reg,
+        A[used_rows],
+        y[used_rows],
+        channel=channel[used_rows] if weighting == "torque" else None,
+    )
+    too_few = _check_solution(
+        reg, sol, (A, used_rows), (t[fit], q[fit]), excluded, window, holdout, max_condition
+    )
+    fitted = {"A": A, "y": y, "ends": ends, "channel": channel[used_rows], "fit": fit}
+    info = {"torque": torque, "fit_end": split, "filled_rows": filled, "holdout": holdout}
+    report = _assess(reg, sol, (t, q, tau), fitted, excluded, laws, rows, info, searched)
+    report["warnings"] = fit_warnings(report)
+    if too_few is not None:
+        report["warnings"].append(too_few)
+    return _result(reg, sol, report)
+
+
+def _regressors(
+    robot: Robot, laws: dict[str, Any], smoothing: float | None
+) -> tuple[MomentumRegressor, list[tuple[float, float]], MomentumRegressor]:
+    """The regressor of ``laws`` (:class:`MomentumRegressor`'s options), the friction law's
+    smoothing candidates (none unless its smoothing velocity is searched) and the regressor
+    whose rows carry every candidate's columns
+    (:func:`~pinobs.model.friction_fit.widened`)."""
+    reg = MomentumRegressor(robot, **laws, smoothing=smoothing)
+    # a law with its smoothing velocity identified: rows of every candidate's columns
+    cands = (
+        search_candidates(reg.friction_law, smoothing)
+        if reg.friction_law not in (None, "viscous-coulomb")
+        else []
+    )
+    return reg, cands, (widened(reg, cands) if cands else reg)
+
+
+def _result(reg: MomentumRegressor, sol: Solution, report: Report) -> Identification:
+    """The :class:`Identification` of ``sol``: the calibrated robot, the parameters, the
+    offset and ``report``."""
+    params = ParameterSet(
+        names=reg.names, values=sol.theta, std=sol.std, nominal=reg.nominal(), excited=sol.excited
+    )
+    calibrated = reg.with_parameters(sol.theta, name=f"{reg.robot.name}+id")
+    return Identification(
+        robot=calibrated,
+        parameters=params,
+        offset=reg.offsets(sol.theta),
+        report=report,
+        regressor=reg,
+    )
+
+
+def _read_log(
+    robot: Robot, log: Any, path: tuple[ArrayLike, ArrayLike] | None
+) -> tuple[Vector, Vector, Vector, int, tuple[Vector, Vector] | None]:
+    """``(t, q, tau, filled, path)``: the log read (:func:`log_arrays`), its short NaN runs
+    filled (:func:`fill_short_gaps`, ``filled`` rows), and the given path as arrays.
+
+    Raises:
+        DimensionError: a path whose shapes do not fit the log.
+    """
+    t, q, tau = log_arrays(robot, log, warn_filled=False)
+    q, tau, filled = fill_short_gaps(robot, t, q, tau)
+    est: tuple[Vector, Vector] | None = None
+    if path is not None:
+        est = (np.asarray(path[0], dtype=float), np.asarray(path[1], dtype=float))
+        if est[0].shape != q.shape or est[1].shape != tau.shape:
+            raise DimensionError(
+                f"path shapes q {est[0].shape}, v {est[1].shape} do not fit the log: "
+                f"give ({t.shape[0]}, {robot.nq}) and ({t.shape[0]}, {robot.nv})"
+            )
+    return t, q, tau, filled, est
+
+
+def _check_smoothing(smoothing: object) -> None:
+    if smoothing is not None and not (
+        isinstance(smoothing, int | float) and 0.0 < smoothing < math.inf
+    ):
+        raise GainError(f"smoothing={smoothing!r} [rad/s]: give a finite velocity > 0 or None")
+
+
+def _fit_end(t: Vector, window: float, holdout: float) -> float:
+    """The last time [s] of the fitted part (the rest, ``holdout`` of the span, held out).
+
+    Raises:
+        IdentificationError: a log shorter than four windows, or sampled too coarsely for
+            them (times in milliseconds).
+    """
+    finite = np.isfinite(t)
+    t_end = float(np.max(t[finite])) if finite.any() else 0.0
+    t_start = float(np.min(t[finite])) if finite.any() else 0.0
+    if t_end - t_start < 4 * window:
+        raise IdentificationError(
+            f"the log spans {t_end - t_start:.3g} s; identification needs at least "
+            f"{4 * window:.3g} s (and a few seconds of rich motion to be useful)"
+        )
+    h = float(np.median(np.diff(t[finite]))) if finite.sum() > 1 else math.nan
+    if h > window / 4:
+        raise IdentificationError(
+            f"the log's median sample interval is {h:.3g} s, too coarse for windows of "
+            f"{window:g} s (four samples at least); if its times are in milliseconds, give "
+            "seconds (t / 1000), else a longer window"
+        )
+    return t_end - holdout * (t_end - t_start)
+
+
+def _check_moves(robot: Robot, t: Vector, q: Vector) -> None:
+    """Refuse a fitted part where no coordinate moves (:func:`motion_spans`)."""
+    span, still = motion_spans(robot, t, q)
+    if still.all():
+        raise IdentificationError(
+            "the robot never moves in this log: nothing to identify (largest range of motion "
+            f"{float(span.max()):.3g} rad or m, within {STILL_RANGE:g} or ten times the noise)"
+        )
+
+
+def _search_smoothing(
+    reg: MomentumRegressor,
+    A: Vector,
+    y: Vector,
+    used_rows: NDArray[np.bool_],
+    cands: list[tuple[float, float]],
+    laws: dict[str, Any],
+) -> tuple[MomentumRegressor, Vector, dict[str, Any]]:
+    """The friction law's smoothing velocities chosen among ``cands`` by cross-validation
+    (:func:`~pinobs.model.friction_fit.search_smoothing`): the regressor with them, the rows'
+    chosen columns, and what the search reports."""
+    choice, searched = search_smoothing(reg, A[used_rows], y[used_rows], cands)
+    A = A[:, candidate_columns(reg, len(cands), choice)]
+    reg = MomentumRegressor(
+        reg.robot,
+        **laws,
+        smoothing=[cands[c][0] for c in choice],  # (smoothing, when given, in all)
+        stribeck_velocity=[cands[c][1] for c in choice],
+    )
+    return reg, A, searched
+
+
+def _check_solution(
+    reg: MomentumRegressor,
+    sol: Solution,
+    rows: tuple[Vector, NDArray[np.bool_]],
+    fitted: tuple[Vector, Vector],
+    excluded: NDArray[np.intp],
+    window: float,
+    holdout: float,
+    max_condition: float,
+) -> str | None:
+    """Refuse a fit with no more rows than combinations, or too ill-conditioned (``rows``:
+    the fitted rows and which of them were used, ``fitted``: the fitted part's ``(t, q)``);
+    the warning of a loosely determined one (fewer than :data:`ROWS_PER_COMBINATION` rows
+    each), else ``None``."""
+    robot, (A, used_rows) = reg.robot, rows
+    enough = ROWS_PER_COMBINATION * sol.rank
+    need = enough / robot.nv * window / (1.0 - holdout)  # log length [s] giving that many rows
+    used = f"{A.shape[0] // robot.nv} windows of {window:g} s ({sol.n_rows} rows)"
+    if sol.n_rows <= sol.rank:
+        raise IdentificationError(
+            f"{used} for {sol.rank} identifiable combinations: the fit would interpolate the "
+            f"data with nothing left to check it; give at least {need:.3g} s of contiguous, "
+            f"exciting motion ({ROWS_PER_COMBINATION} rows per combination, holdout "
+            f"{holdout:g} kept out)"
+        )
+    if sol.condition > max_condition:
+        raise IdentificationError(
+            f"the log does not excite the dynamics enough: condition number "
+            f"{sol.condition:.3g} > {max_condition:.3g}"
+            + not_excited_message(reg, A[used_rows], sol, *fitted)
+            + (
+                " (with the torques of "
+                + ", ".join(coordinate_names(robot)[j] for j in excluded)
+                + " left out, what only they see is seen through the others' alone)"
+                if excluded.size
+                else ""
+            )
+            + "; record a richer trajectory (`pinobs excite`), or accept it with a larger "
+            "max_condition (--max-condition)"
+        )
+    if sol.n_rows < enough:
+        return (
+            f"only {used} for {sol.rank} identifiable combinations (fewer than "
+            f"{ROWS_PER_COMBINATION} rows each): the fit is loosely determined; give at least "
+            f"{need:.3g} s of contiguous, exciting motion"
+        )
+    return None
+
+
+def _assess(
+    reg: MomentumRegressor,
+    sol: Solution,
+    log: tuple[Vector, Vector, Vector],
+    fitted: dict[str, Any],
+    excluded: NDArray[np.intp],
+    laws: dict[str, Any],
+    rows: dict[str, Any],
+    info: dict[str, Any],
+    searched: dict[str, Any],
+) -> Report:
+    """:func:`identify`'s report but its ``warnings``: the fitted rows diagnosed
+    (:func:`_diagnose`), the held-out end's rows built (weighted and in N·m), and the friction
+    law fitted.  ``fitted``: the fitted rows ``A``, ``y``, their windows' ``ends``, the used
+    rows' ``channel`` and the fitted rows of the log ``fit``; ``laws``: the regressor's
+    options; ``rows``: :func:`~pinobs.model.identification.rows.build_rows`' options;
+    ``info``: ``torque``, ``fit_end``, ``filled_rows``, ``holdout``; ``searched``: the
+    smoothing search's report."""
+    t, q, tau = log
+    A, y, fit = fitted["A"], fitted["y"], fitted["fit"]
+    window = rows["window"]
+    diagnosed = _diagnose(
+        reg, A, y, sol, (t[fit], q[fit], tau[fit]), window, fitted["ends"], excluded
+    )
+    held = holdout_rows(reg, log, ~fit, holdout=info["holdout"], **rows)
+    held_nm = holdout_in_newton_metres(
+        reg,
+        lambda: MomentumRegressor(
+            reg.robot,
+            friction=laws["friction"],
+            offset=laws["offset"],
+            armature=laws["armature"],
+            weighting="torque",
+        ),
+        held,
+        log,
+        ~fit,
+        **rows,
+    )
+    report = _report(
+        reg,
+        sol,
+        {"fit": (A, y), "held": held, "held_nm": held_nm},
+        diagnosed,
+        excluded,
+        fitted["channel"],
+        info,
+    )
+    if reg.friction:  # the law fitted, its velocities per actuated joint [rad/s]
+        report["friction_law"] = {
+            "law": reg.friction_law,
+            "joints": list(reg.actuated_names),
+            "smoothing": reg.smoothing.tolist(),
+            "stribeck_velocity": reg.stribeck_velocity.tolist(),
+            **searched,
+        }
+    return report
+
+
+def _diagnose(
+    reg: MomentumRegressor,
+    A: Vector,
+    y: Vector,
+    sol: Solution,
+    fitted: tuple[Vector, Vector, Vector],
+    window: float,
+    ends: list[float],
+    excluded: NDArray[np.intp],
+) -> dict[str, Any]:
+    """The report's ``unexplained``, ``unexplained_floor`` (:func:`unexplained_shares`) and
+    ``outlier_windows`` (end times [s] of the windows left mostly unexplained) of the fitted
+    rows; NaN shares on the excluded coordinates."""
+    nv = reg.robot.nv
+    unexplained, floor = unexplained_shares(reg, A, y, sol, *fitted, window)
+    res_w = np.abs(A @ sol.theta - y).reshape(-1, nv)
+    bound = np.maximum(OUTLIER_SHARE, UNEXPLAINED_WARN * np.asarray(floor)) * robust_rms(
+        y.reshape(-1, nv)
+    )
+    kept = ~np.isin(np.arange(nv), excluded)
+    outliers = [ends[w] for w in np.flatnonzero(np.any((res_w > bound)[:, kept], axis=1))]
+    for j in excluded:  # left out of the fit: nothing to say of how well it explains them
+        unexplained[j] = floor[j] = math.nan
+    return {"unexplained": unexplained, "unexplained_floor": floor, "outlier_windows": outliers}
+
+
+def _report(
+    reg: MomentumRegressor,
+    sol: Solution,
+    rows: dict[str, tuple[Vector, Vector]],
+    diagnosed: dict[str, Any],
+    excluded: NDArray[np.intp],
+    channel: NDArray[np.intp],
+    log: dict[str, Any],
+) -> Report:
+    """:func:`identify`'s report (its ``friction_law`` and ``warnings`` apart): ``rows`` the
+    fitted (``"fit"``), held-out (``"held"``) and held-out N·m (``"held_nm"``) rows,
+    ``diagnosed`` :func:`_diagnose`'s, ``channel`` the fitted rows' channels, ``log`` its
+    ``torque``, ``fit_end`` and ``filled_rows``."""
+    robot, nv, theta0 = reg.robot, reg.robot.nv, reg.nominal()
+    (A, y), (A_h, y_h), (A_nm, y_nm) = rows["fit"], rows["held"], rows["held_nm"]
+    torque_sigma = np.full(nv, math.nan)
+    if reg.weighting == "torque":
+        torque_sigma[np.unique(channel)] = sol.channel_sigma
+    coordinates = coordinate_names(robot)
+    return Report(
+        residual_before=rms_per_coordinate(A, y, theta0, nv),
+        residual_after=rms_per_coordinate(A, y, sol.theta, nv),
+        # the fraction of the torque side left unexplained, robustly, and what noise leaves
+        unexplained=diagnosed["unexplained"],
+        unexplained_floor=diagnosed["unexplained_floor"],
+        # windows (their end times [s]) whose residual alone is a large share of the torques
+        outlier_windows=diagnosed["outlier_windows"],
+        holdout_before=rms_per_coordinate(A_h, y_h, theta0, nv),
+        holdout_after=rms_per_coordinate(A_h, y_h, sol.theta, nv),
+        holdout_torque_before=rms_per_coordinate(A_nm, y_nm, theta0, nv),
+        holdout_torque_after=rms_per_coordinate(A_nm, y_nm, sol.theta, nv),
+        weighting=reg.weighting,
+        excluded=[coordinates[j] for j in excluded],
+        torque_sigma=torque_sigma.tolist(),
+        condition=sol.condition,
+        rank=sol.rank,
+        n_parameters=reg.size,
+        base=list(sol.base),
+        not_excited=[n for n, e in zip(reg.names, sol.excited, strict=True) if not e],
+        # of those, the ones physical consistency moved by more than half their prior std
+        moved_by_consistency=[
+            n
+            for n, e, d, sd in zip(
+                reg.names, sol.excited, sol.theta - theta0, reg.prior_std(), strict=True
+            )
+            if not e and sol.projected and abs(d) > 0.5 * sd
+        ],
+        projected=sol.projected,
+        rows=sol.n_rows,
+        torque=log["torque"],  # how ∫τ dt was taken (held or sampled)
+        holdout_rows=int(A_h.shape[0]),
+        fit_end=log["fit_end"],
+        sigma=sol.sigma,
+        filled_rows=log["filled_rows"],
+        joints=list(robot.joint_names),
+        # the per-joint lists' entries: one per velocity coordinate (<joint>.<k> for several)
+        coordinates=coordinates,
+        # a calibrated model is good, not exact: run ekf with these (adaptive's learned-model
+        # densities; measured in benchmarks/learning.py, the plain ekf trusts it too much)
+        observer_options={"accel_psd": 1e-6, "disturbance_psd": 1e-4},
+    )

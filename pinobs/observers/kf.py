@@ -25,8 +25,9 @@ for an arm tracking smooth references at 1 kHz and 1.6–10× over the best fixe
 the UR10e and TIAGo logs of ``benchmarks/real_logs.py``; ``"auto"`` is within 0.89–1.21× of
 that best on every one of them (TX40 at 1 kHz: 0.98×), 0.85–1.03× on ``pinobs bench``'s
 simulations (1 kHz; the fixed 1e3: 1.4–2.3×) and 0.87–1.00× on ``benchmarks/learning.py``'s
-runs, at 1.5× the cost of a fixed density on a UR5 (26 ``pin.aba`` calls against 18; 5×
-on go1's free-flyer, the NumPy path): ``benchmarks/kf_auto.py``.
+runs, at half the cost of a fixed density on a UR5 (8.5 ``pin.aba`` calls against 18: the bank
+is one compiled step on vector joints; 4.9× the fixed one on go1's free-flyer, the NumPy
+path): ``benchmarks/kf_auto.py``.
 
 **``jerk_psd="auto"``: the density of each joint from the data, causally** (a
 multiple-model filter, Magill 1965 / Bar-Shalom, Li & Kirubarajan 2001 §11.6, with

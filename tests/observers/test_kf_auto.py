@@ -201,8 +201,8 @@ def test_auto_compiled_step_equals_the_numpy_step(
         est = np.array([np.concatenate([e.q, e.v]) for e in out])
         return est, nis, gated, ob.densities, ob.noise_stds
 
-    assert kf_module._auto_kernel.compiled is not None
     compiled = run()
+    assert kf_module._auto_kernel.compiled is not None  # loaded by make_observer
     monkeypatch.setattr(kf_module._auto_kernel, "compiled", None)
     numpy = run()
     assert np.array_equal(compiled[2], numpy[2]) and 3 <= int(np.sum(numpy[2])) <= 5
@@ -213,3 +213,23 @@ def test_auto_compiled_step_equals_the_numpy_step(
     assert np.all(np.abs(nis[ok] - numpy[1][ok]) <= 1e-12 * np.max(numpy[1][ok]))
     for a, b in zip(compiled[3:], numpy[3:], strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-12)
+
+
+def test_auto_kernel_is_loaded_when_made_and_never_compiled_in_the_loop() -> None:
+    """Issue 39: the compiled step is there once ``make_observer`` returns, and the updates
+    (missing samples, a read-only sample) run its one signature, the one loaded at
+    construction: nothing is compiled inside an update."""
+    from pinobs.observers import kf as kf_module
+
+    robot = pinobs.load("ur5")
+    ob = pinobs.make_observer("kf", robot, noise_std=1e-4, rate=1000.0)
+    kernel = kf_module._auto_kernel.compiled
+    assert kernel is not None
+    signatures = list(kernel.signatures)
+    q = robot.neutral()
+    ob.reset(0.0, q)
+    frozen = q.copy()
+    frozen.setflags(write=False)
+    for k in range(1, 50):
+        ob.update(k * 1e-3, None if k % 7 == 0 else (frozen if k % 5 == 0 else q))
+    assert list(kernel.signatures) == signatures and len(signatures) == 1

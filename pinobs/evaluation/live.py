@@ -13,10 +13,21 @@ call just before the update (after the same wait: *cold*) and, after the
 update, a burst of :data:`ABA_BURST` calls (*warm*, the reference of
 :func:`~pinobs.evaluation.measure_cost`), so every ratio compares times taken
 under the same machine load, in the same tick.
+
+**The garbage collector.**  A full (generation-2) collection walks every object the process
+tracks: after ``import pinobs`` and one observer about 125 000, 120 ms on the 2-core machine
+of ``benchmarks/live_loop.md`` (a UR5 ``ekf`` built, load average 12).  CPython runs one
+when enough long-lived objects have accumulated (a loop that keeps its estimates in a list
+gets there), inside whichever update allocates at that moment: a stall of a hundred
+periods.  ``gc.freeze()`` after the set-up (the observer made and reset) moves what exists
+to a permanent generation that no collection walks (the same collection then takes
+microseconds); :func:`live_loop` does it (``freeze_gc``, undone after the loop), as
+``examples/realtime_loop.py`` does and a user's real-time loop should.
 """
 
 from __future__ import annotations
 
+import gc
 import os
 import time
 from dataclasses import asdict, dataclass
@@ -94,6 +105,7 @@ class LiveTiming:
         blas_after: the same after the loop (an observer must leave them as they were).
         blas_limit: whether ``update`` ran with its one-BLAS-thread limit.
         load: the machine's load averages (1, 5, 15 min) at the end; ``cpus``: its cores.
+        freeze_gc: whether the loop ran with the set-up's objects frozen (``gc.freeze``).
     """
 
     robot: str
@@ -116,6 +128,7 @@ class LiveTiming:
     blas_limit: bool
     load: tuple[float, float, float]
     cpus: int
+    freeze_gc: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values, for JSON."""
@@ -147,6 +160,7 @@ def live_loop(
     seed: int = 0,
     blas_limit: bool = True,
     options: dict[str, Any] | None = None,
+    freeze_gc: bool = True,
 ) -> LiveTiming:
     """Run ``observer_name`` on ``robot_name`` in a loop paced at ``rate`` [Hz] for
     ``duration`` [s] of ticks (module docstring) and time every update.
@@ -159,6 +173,9 @@ def live_loop(
     update without its one-BLAS-thread limit (:mod:`pinobs.observers.blas`), for comparison.
     ``options``: the observer's options beyond ``rate`` and ``noise_std`` (default
     :data:`LIVE_OPTIONS` for its family: ``adaptive`` learns in its worker process).
+    ``freeze_gc``: ``gc.collect()`` then ``gc.freeze()`` once the observer is reset, so that
+    no collection walks the set-up's objects during the loop (module docstring); unfrozen
+    after it.
     """
     robot = load(robot_name)
     sim = simulate(
@@ -173,24 +190,14 @@ def live_loop(
     n = sim.t.size - 1
     wall, cpu, cold, warm = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     period = 1.0 / rate
-    clock, cpu_clock = time.perf_counter, time.thread_time
-    start = clock()
-    for k in range(n):
-        due = start + (k + 1) * period
-        while (now := clock()) < due:  # sleep, then spin the last SPIN seconds
-            if due - now > SPIN:
-                time.sleep(due - now - SPIN)
-        t0 = clock()
-        aba()
-        t1 = clock()
-        c1 = cpu_clock()
-        update(observer, sim.t[k + 1], sim.q_meas[k + 1], sim.tau[k + 1])
-        c2 = cpu_clock()
-        t2 = clock()
-        for _ in range(ABA_BURST):
-            aba()
-        t3 = clock()
-        cold[k], wall[k], cpu[k], warm[k] = t1 - t0, t2 - t1, c2 - c1, (t3 - t2) / ABA_BURST
+    if freeze_gc:
+        gc.collect()
+        gc.freeze()
+    try:
+        _paced(observer, update, aba, sim, rate, wall, cpu, cold, warm)
+    finally:
+        if freeze_gc:
+            gc.unfreeze()
     aba_s = float(np.median(warm))
     per_window = max(1, round(WINDOW * rate))
     med, p99 = [], []
@@ -223,7 +230,41 @@ def live_loop(
         blas_limit=blas_limit,
         load=(load1, load5, load15),
         cpus=os.cpu_count() or 1,
+        freeze_gc=freeze_gc,
     )
+
+
+def _paced(
+    observer: Any,
+    update: Any,
+    aba: Any,
+    sim: Any,
+    rate: float,
+    wall: np.ndarray,
+    cpu: np.ndarray,
+    cold: np.ndarray,
+    warm: np.ndarray,
+) -> None:
+    """:func:`live_loop`'s ticks: the times written into ``wall``, ``cpu``, ``cold``, ``warm``."""
+    period = 1.0 / rate
+    clock, cpu_clock = time.perf_counter, time.thread_time
+    start = clock()
+    for k in range(wall.size):
+        due = start + (k + 1) * period
+        while (now := clock()) < due:  # sleep, then spin the last SPIN seconds
+            if due - now > SPIN:
+                time.sleep(due - now - SPIN)
+        t0 = clock()
+        aba()
+        t1 = clock()
+        c1 = cpu_clock()
+        update(observer, sim.t[k + 1], sim.q_meas[k + 1], sim.tau[k + 1])
+        c2 = cpu_clock()
+        t2 = clock()
+        for _ in range(ABA_BURST):
+            aba()
+        t3 = clock()
+        cold[k], wall[k], cpu[k], warm[k] = t1 - t0, t2 - t1, c2 - c1, (t3 - t2) / ABA_BURST
 
 
 def live_table(rows: list[LiveTiming]) -> Any:

@@ -25,8 +25,9 @@ for an arm tracking smooth references at 1 kHz and 1.6–10× over the best fixe
 the UR10e and TIAGo logs of ``benchmarks/real_logs.py``; ``"auto"`` is within 0.89–1.21× of
 that best on every one of them (TX40 at 1 kHz: 0.98×), 0.85–1.03× on ``pinobs bench``'s
 simulations (1 kHz; the fixed 1e3: 1.4–2.3×) and 0.87–1.00× on ``benchmarks/learning.py``'s
-runs, at 1.5× the cost of a fixed density on a UR5 (26 ``pin.aba`` calls against 18; 5×
-on go1's free-flyer, the NumPy path): ``benchmarks/kf_auto.py``.
+runs, at half the cost of a fixed density on a UR5 (8.5 ``pin.aba`` calls against 18: the bank
+is one compiled step on vector joints; 4.9× the fixed one on go1's free-flyer, the NumPy
+path): ``benchmarks/kf_auto.py``.
 
 **``jerk_psd="auto"``: the density of each joint from the data, causally** (a
 multiple-model filter, Magill 1965 / Bar-Shalom, Li & Kirubarajan 2001 §11.6, with
@@ -75,6 +76,7 @@ that lags scores better against it; the likelihood sees only the positions.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Literal, NamedTuple, cast
 
@@ -230,6 +232,7 @@ class _AutoState(NamedTuple):
     B: Vector  # (n_f,): forgotten sums of log S
     w: Vector  # (n_f, nv): the mixture's weights
     gate: GateState = GateState()
+    mix: Vector | None = None  # (2, nv): the estimate (Σ_f w q_f, Σ_f w v_f), if computed
 
 
 def _auto_weights(n: float, A: Vector, B: Vector) -> Vector:
@@ -296,6 +299,13 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
         )
         self._gate = gate_threshold(outlier_probability, robot.nv)[1]
         self._bank_cache: KFBank | None = None
+        # "auto" on vector joints: its compiled step loaded now, not at the first update
+        self._forget = math.exp(-1.0 / self.auto_memory)  # γ (module docstring)
+        self._bank_var = float(self.gains.meas_std) ** 2  # as KFBank's meas_var
+        self._no_sample = np.zeros(robot.nv)
+        self._dof = float(robot.nv)  # the gate's level before any (outlier_gate)
+        if self.auto and robot.is_vector_space:
+            _auto_kernel.load()
 
     @property
     def options(self) -> dict[str, object]:
@@ -383,8 +393,13 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
     def _auto_step(self, state: _AutoState, h: float, q_meas: Vector | None) -> _AutoState:
         """One step of the bank (module docstring, ``jerk_psd="auto"``): each filter's
         prediction and correction (:meth:`KFBank.step`: the equations of :meth:`_step`),
-        the forgotten likelihood sums, the mixture's weights."""
+        the forgotten likelihood sums, the mixture's weights.  On vector joints one compiled
+        call (:func:`_auto_step_loops`) into arrays allocated here (the state before is kept
+        as it was); otherwise NumPy, the configurations filter by filter."""
         jerk = state.jerk if state.jerk.size else self._grid(h)
+        kernel = _auto_kernel.compiled
+        if kernel is not None and self.robot.is_vector_space:
+            return self._auto_step_compiled(kernel, state, jerk, h, q_meas)
         bank = self._bank(jerk)
         if q_meas is None:
             return state._replace(
@@ -407,6 +422,43 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
         A, B = forget * state.A + z, forget * state.B + np.log(S)
         return _AutoState(new, jerk, n, A, B, _auto_weights(n, A, B), gate)
 
+    def _auto_step_compiled(
+        self,
+        kernel: Callable[..., tuple[float, bool, float]],
+        state: _AutoState,
+        jerk: Vector,
+        h: float,
+        q_meas: Vector | None,
+    ) -> _AutoState:
+        """:meth:`_auto_step` on vector joints: :func:`_auto_step_loops` (the same equations,
+        tested equal to the NumPy ones to 1e-12)."""
+        b, gate = state.bank, state.gate
+        gate_on = state.n >= AUTO_GATE_SAMPLES  # the scales ĉ and weights before this sample
+        n_new = self._forget * state.n + 1.0  # the forgotten count (module docstring)
+        new = (
+            np.empty_like(b.v), np.empty_like(b.v), np.empty_like(b.v), np.empty_like(b.P),
+            np.empty_like(b.v), np.empty_like(state.A), np.empty_like(state.B),
+            np.empty_like(state.w), np.empty((2, b.v.shape[1])),
+        )  # fmt: skip
+        nis, rejected, level = kernel(
+            b.q, b.v, b.a, b.P, state.A, state.B, state.w, jerk, h, self._bank_var,
+            self._no_sample if q_meas is None else q_meas, q_meas is not None, gate_on,
+            state.n, n_new, self._forget, self._gate,
+            self._dof if gate.level is None else gate.level, gate.run, *new,
+        )  # fmt: skip
+        q, v, a, P, e, A, B, w, mix = new
+        if q_meas is None:  # the prediction (its likelihoods unchanged)
+            return _AutoState(
+                BankState(q, v, a, P, None), jerk, state.n, A, B, w, gate.predicted(), mix
+            )
+        if not gate_on:  # too few samples for a scale: reported (with σ₀), not gated
+            after = GateState(nis)
+        else:  # GateState.measured, decided in the kernel
+            after = GateState(nis, rejected, gate.run + 1 if rejected else 0, level)
+        if rejected:  # the prediction (its likelihoods unchanged)
+            return _AutoState(BankState(q, v, a, P, None), jerk, state.n, A, B, w, after, mix)
+        return _AutoState(BankState(q, v, a, P, e), jerk, n_new, A, B, w, after, mix)
+
     def consistency(self) -> Consistency:
         """The NIS test of the base class; its causes are a model-free filter's.  With
         ``"auto"`` the NIS is scaled by each joint's learnt noise level: about ``nv`` by
@@ -417,6 +469,8 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
     def _output(self, state: _State | _AutoState) -> tuple[Vector, Vector]:
         if not isinstance(state, _AutoState):
             return state.q, state.v
+        if state.mix is not None:  # computed by the compiled step
+            return state.mix[0], state.mix[1]
         w, b = state.w, state.bank
         v = np.sum(w * b.v, axis=0)
         if self.robot.is_vector_space:
@@ -669,6 +723,176 @@ _bank_kernel = LazyKernel(
     np.zeros(2, dtype=bool),
 )
 _NO_USED = np.zeros(0, dtype=bool)
+
+
+def _auto_step_loops(
+    q: Vector,
+    v: Vector,
+    a: Vector,
+    P: Vector,
+    A: Vector,
+    B: Vector,
+    w: Vector,
+    jerk: Vector,
+    h: float,
+    meas_var: float,
+    q_meas: Vector,
+    measured: bool,
+    gate_on: bool,
+    n: float,
+    n_new: float,
+    forget: float,
+    threshold: float,
+    level: float,
+    run: int,
+    q1: Vector,
+    v1: Vector,
+    a1: Vector,
+    P1: Vector,
+    e1: Vector,
+    A1: Vector,
+    B1: Vector,
+    w1: Vector,
+    mix: Vector,
+) -> tuple[float, bool, float]:
+    """One step of ``jerk_psd="auto"`` on vector joints (module docstring), in loops compiled
+    by numba: the bank's prediction and correction (:func:`_bank_rows_loops`'s arithmetic, one
+    row), the outlier gate, the forgotten likelihood sums, the weights and the mixture.
+
+    Reads the state ``(q, v, a, P, A, B, w)`` (``n`` its count, ``n_new = γ n + 1``), writes
+    the next one into ``(q1, v1, a1, P1, A1, B1, w1)`` (all preallocated by the caller: the
+    state before is left as it was), the innovations ``e_fi = q_meas_i − q⁻_fi`` into ``e1``
+    and the mixture ``(Σ_f w_fi q_fi, Σ_f w_fi v_fi)`` into ``mix`` (2, nv).  With
+    ``measured``: ``S_f = P⁻_f,00 + σ₀²``, ``z_fi = e_fi² / S_f``, the gate's NIS
+    ``Σ w_fi z_fi / max(A_fi / N, 1e-300)`` (``gate_on``) or ``Σ w_fi z_fi`` (too few
+    samples: not gated), :func:`pinobs.observers.base.outlier_gate` on it (``threshold``,
+    ``level`` the gate's, ``nv`` its degrees of freedom, ``run`` its rejections in a row: in
+    loops, tested equal to :meth:`GateState.measured`); a rejected measurement leaves the
+    prediction and the sums; else the Kalman correction (Joseph form, symmetrised),
+    ``A ← γ A + z``, ``B ← γ B + log S`` and ``w_fi ∝ exp(−(L_fi − min_f L_fi) / 2)``,
+    ``L_fi = N log(max(A_fi, 1e-300) / N) + B_f`` (Mehra 1970's profile likelihood).
+    Returns ``(nis, rejected, level after)`` (``nis`` NaN without a measurement).
+    """
+    nf, nv = v.shape
+    F = np.eye(3)
+    F[0, 1], F[0, 2], F[1, 2] = h, 0.5 * h * h, h
+    Q1 = np.zeros((3, 3))
+    Q1[0, 0], Q1[0, 1], Q1[0, 2] = h**5 / 20, h**4 / 8, h**3 / 6
+    Q1[1, 1], Q1[1, 2], Q1[2, 2] = h**3 / 3, h**2 / 2, h
+    Q1[1, 0], Q1[2, 0], Q1[2, 1] = Q1[0, 1], Q1[0, 2], Q1[1, 2]
+    FP = np.empty((3, 3))
+    S = np.empty(nf)
+    for f in range(nf):  # predict: x ← F x, P⁻ = F P Fᵀ + j_f Q₁(h)
+        for i in range(3):
+            for j in range(3):
+                s = 0.0
+                for m in range(3):
+                    s += F[i, m] * P[f, m, j]
+                FP[i, j] = s
+        for i in range(3):
+            for j in range(3):
+                s = 0.0
+                for m in range(3):
+                    s += FP[i, m] * F[j, m]
+                P1[f, i, j] = s + jerk[f] * Q1[i, j]
+        for i in range(nv):
+            q1[f, i] = q[f, i] + v[f, i] * h + 0.5 * h * h * a[f, i]
+            v1[f, i] = v[f, i] + h * a[f, i]
+            a1[f, i] = a[f, i]
+        S[f] = P1[f, 0, 0] + meas_var
+    nis = math.nan
+    reject = False
+    accept = measured
+    if measured:
+        nis = 0.0
+        for f in range(nf):
+            for i in range(nv):
+                ei = q_meas[i] - q1[f, i]
+                e1[f, i] = ei
+                z = ei * ei / S[f]
+                A1[f, i] = z  # z for now: the sums below
+                if gate_on:
+                    nis += w[f, i] * z / max(A[f, i] / n, 1e-300)
+                else:
+                    nis += w[f, i] * z
+        if gate_on:  # base.outlier_gate, in loops
+            if nis > threshold * max(1.0, level / nv) and run < MAX_GATE_RUN:
+                reject = True
+            else:
+                if run >= MAX_GATE_RUN:
+                    level = max(level, nis * nv / threshold)
+                level = level + NIS_AVERAGING * (min(nis, 100.0 * level) - level)
+        accept = not reject
+    if accept:
+        K = np.empty(3)
+        C = np.empty((3, 3))
+        Pn = np.empty((3, 3))
+        for f in range(nf):  # correct: K = P⁻[:, 0] / S, the Joseph form
+            s = S[f]
+            for i in range(3):
+                K[i] = P1[f, i, 0] / s
+            for i in range(nv):
+                ei = e1[f, i]
+                q1[f, i] += K[0] * ei
+                v1[f, i] += K[1] * ei
+                a1[f, i] += K[2] * ei
+            for i in range(3):  # C = (I − K e₀ᵀ) P⁻
+                for j in range(3):
+                    C[i, j] = P1[f, i, j] - K[i] * P1[f, 0, j]
+            for i in range(3):  # C (I − K e₀ᵀ)ᵀ + σ² K Kᵀ
+                for j in range(3):
+                    Pn[i, j] = C[i, j] - C[i, 0] * K[j] + meas_var * K[i] * K[j]
+            for i in range(3):
+                for j in range(3):
+                    P1[f, i, j] = 0.5 * (Pn[i, j] + Pn[j, i])
+            B1[f] = forget * B[f] + math.log(s)  # the forgotten sums (module docstring)
+            for i in range(nv):
+                A1[f, i] = forget * A[f, i] + A1[f, i]
+        for f in range(nf):  # L_fi (into w1), the profile likelihood (Mehra 1970)
+            for i in range(nv):
+                w1[f, i] = n_new * math.log(max(A1[f, i], 1e-300) / n_new) + B1[f]
+        for i in range(nv):  # w_fi ∝ exp(−(L_fi − min_f L_fi) / 2), summed over f in order
+            low = w1[0, i]
+            for f in range(1, nf):
+                low = min(low, w1[f, i])
+            for f in range(nf):  # exp(x) = 0 exactly below −745.2: not called there
+                x = -0.5 * (w1[f, i] - low)
+                w1[f, i] = math.exp(x) if x > -746.0 else 0.0
+            total = w1[0, i]
+            for f in range(1, nf):
+                total += w1[f, i]
+            for f in range(nf):
+                w1[f, i] = w1[f, i] / total
+    else:  # no measurement, or rejected: the sums and weights as they were
+        for f in range(nf):
+            B1[f] = B[f]
+            for i in range(nv):
+                A1[f, i] = A[f, i]
+                w1[f, i] = w[f, i]
+    for i in range(nv):  # the mixture, summed over f in order
+        mq = w1[0, i] * q1[0, i]
+        mv = w1[0, i] * v1[0, i]
+        for f in range(1, nf):
+            mq += w1[f, i] * q1[f, i]
+            mv += w1[f, i] * v1[f, i]
+        mix[0, i], mix[1, i] = mq, mv
+    return nis, reject, level
+
+
+def _auto_warm_args() -> tuple[object, ...]:
+    """Arguments of :data:`_auto_kernel`'s one signature (float64 C arrays, as the step gives)."""
+    nf, nv = 2, 1
+    z2, P = np.zeros((nf, nv)), np.tile(np.eye(3), (nf, 1, 1))
+    return (
+        z2, z2.copy(), z2.copy(), P, np.ones((nf, nv)), np.zeros(nf), np.full((nf, nv), 0.5),
+        np.ones(nf), 1e-3, 1.0, np.zeros(nv), True, True, 30.0, 30.0, 0.99, math.inf, 1.0, 0,
+        *(np.empty((nf, nv)) for _ in range(3)), np.empty((nf, 3, 3)), np.empty((nf, nv)),
+        np.empty((nf, nv)), np.empty(nf), np.empty((nf, nv)), np.empty((2, nv)),
+    )  # fmt: skip
+
+
+#: :func:`_auto_step_loops` compiled (loaded when a vector-joint ``kf`` with ``"auto"`` is made).
+_auto_kernel = LazyKernel(_auto_step_loops, *_auto_warm_args())
 
 
 class KFBank:

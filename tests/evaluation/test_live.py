@@ -70,3 +70,13 @@ def test_adaptive_learns_off_the_loop_in_a_live_loop() -> None:
     assert r.cpu_us.max < 3000.0
     sync = live_loop("ur5", "adaptive", duration=0.2, options={"learning": "sync"})
     assert sync.options == {"learning": "sync"}
+
+
+def test_the_loop_freezes_the_set_up_for_the_collector_and_unfreezes_after(
+    kf_run: LiveTiming,
+) -> None:
+    import gc
+
+    assert kf_run.freeze_gc and gc.get_freeze_count() == 0
+    r = live_loop("ur5", "kf", duration=0.05, freeze_gc=False)
+    assert not r.freeze_gc and gc.get_freeze_count() == 0

@@ -179,3 +179,47 @@ def test_relative_imports_of_a_package_resolve_from_the_package_itself() -> None
     assert private_imports("pinobs.observers", source, _MODULES, is_package=True) == [
         (1, "imports _posv from pinobs.observers.ekf")
     ]
+
+
+# ------------------------------------------------------------ size (issue 37)
+#: A function's length (``def`` to its last line, docstring included) and a module's.
+MAX_FUNCTION_LINES, MAX_MODULE_LINES = 80, 800
+#: Functions over the limit today, each with its length: they may shrink (lower the entry,
+#: remove it once under the limit), never grow, and no other may join them.
+LONG_FUNCTIONS: dict[tuple[str, str], int] = {}
+#: Modules over the limit today, likewise.
+LARGE_MODULES: dict[str, int] = {}
+
+
+def _sizes() -> tuple[dict[tuple[str, str], int], dict[str, int]]:
+    functions: dict[tuple[str, str], int] = {}
+    modules: dict[str, int] = {}
+    for path in sorted(PACKAGE_DIR.rglob("*.py")):
+        rel = path.relative_to(PACKAGE_DIR.parent).as_posix()
+        source = path.read_text(encoding="utf-8")
+        modules[rel] = len(source.splitlines())
+        for node in ast.walk(ast.parse(source)):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                length = (node.end_lineno or node.lineno) - node.lineno + 1
+                key = (rel, node.name)
+                functions[key] = max(functions.get(key, 0), length)
+    return functions, modules
+
+
+def test_no_function_or_module_grows_past_the_limits() -> None:
+    functions, modules = _sizes()
+    long = {k: n for k, n in functions.items() if n > MAX_FUNCTION_LINES}
+    large = {k: n for k, n in modules.items() if n > MAX_MODULE_LINES}
+    grown = [
+        f"{f}:{name} {n} lines (allowed {LONG_FUNCTIONS.get((f, name), MAX_FUNCTION_LINES)})"
+        for (f, name), n in long.items()
+        if n > LONG_FUNCTIONS.get((f, name), MAX_FUNCTION_LINES)
+    ] + [
+        f"{f} {n} lines (allowed {LARGE_MODULES.get(f, MAX_MODULE_LINES)})"
+        for f, n in large.items()
+        if n > LARGE_MODULES.get(f, MAX_MODULE_LINES)
+    ]
+    assert not grown, "split these along their seams:\n" + "\n".join(grown)
+    stale = [f"{f}:{n}" for (f, n) in LONG_FUNCTIONS if functions.get((f, n), 0) <= MAX_FUNCTION_LINES]
+    stale += [f for f in LARGE_MODULES if modules.get(f, 0) <= MAX_MODULE_LINES]
+    assert not stale, "under the limit now: remove from the allow-lists:\n" + "\n".join(stale)

@@ -101,6 +101,19 @@ is ``ξ_dj = ξ_p + R̂ J_j w_q``::
 
     P ← F P Fᵀ + G N_j Gᵀ,   F: the new rows copy ξ_p's,   G: the new block.    (6)
 
+Prior (at ``reset``, before any foot is added).  :class:`InEKFPrior` gives independent
+errors of the attitude ``ξ_R``, of the velocity in the base frame ``v_b`` (as ``reset``
+takes it), and of the world position: ``ξ_v = R̂ (v̂_b − v_b)`` exactly, and to first
+order ``ξ_p = δp + p̂^ ξ_R`` (``δp = p̂ − p``, the p column of ``X̂ X⁻¹``), so::
+
+    P₀ = T diag(σ_θ², σ_v², σ_p², σ_bg², σ_ba²) Tᵀ,   T = [[I, 0, 0], [0, I, 0], [p̂^, 0, I]] ⊕ I₆   (7)
+
+A translation of the world by ``c`` maps ξ by ``Ad`` (``ξ_p, ξ_d += c^ ξ_R``), under
+which (2)-(6) are equivariant; (7) is too, so the whole filter is the same wherever
+the world's origin is (a diagonal ``P₀`` on ξ would give the base a position error
+``p̂ × ξ_R`` growing with the distance from the origin).  Feet added by (6) then start
+from the base's position, as in Hartley et al.
+
 Sampled data (``docs/theory/math.md`` §7, as for torques): the IMU reading
 passed with ``update(t_k, …)`` is held from ``t_k`` to ``t_{k+1}``, so the step
 to ``t_k`` propagates with the reading stored at the previous call, then
@@ -164,6 +177,7 @@ __all__ = [
     "gammas",
     "imu_step",
     "imu_vector_field",
+    "prior_covariance",
     "propagate_mean",
     "right_invariant_error_matrix",
     "rotation_to_quaternion",
@@ -369,6 +383,16 @@ def error_transition(
     return T1 @ _body_transition(omega, acc, h, K) @ _inverse_frame(R, x)
 
 
+def prior_covariance(prior: InEKFPrior, x: Vector) -> Vector:
+    """Eq. (7): the prior of the right-invariant error ``(ξ, ζ)`` (no feet) from the
+    :class:`InEKFPrior` of ``(ξ_R, R̂ δv_b, δp, ζ)`` (independent) at the estimate's
+    position ``x[1] = p̂`` (module docstring): ``T diag(σ²) Tᵀ``, ``T``'s ``(ξ_p, ξ_R)``
+    block ``p̂^``, so that the prior is the same wherever the world's origin is."""
+    T = np.eye(15)
+    T[6:9, 0:3] = skew(x[1])
+    return T @ prior.covariance() @ T.T
+
+
 # ---------------------------------------------------------------------- filter
 class InvariantEKF:
     """Contact-aided invariant EKF (right-invariant error, bias-augmented; module docstring).
@@ -478,8 +502,7 @@ class InvariantEKF:
             GainError: a ``prior`` that is not an :class:`InEKFPrior`.
         """
         a = self.setup.reset_inputs(t, q, v, gyro, acc, contacts, prior, bias)
-        P = a.prior.covariance()
-        state = InEKFState(a.t, a.R, a.x, (), a.bias, P, a.imu, a.t)
+        state = InEKFState(a.t, a.R, a.x, (), a.bias, prior_covariance(a.prior, a.x), a.imu, a.t)
         h, jac = self.setup.legs(a.q_joints)
         state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
         self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None)

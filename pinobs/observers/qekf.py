@@ -174,7 +174,12 @@ class QuaternionEKF:
         """Start at ``t`` [s] from the free-flyer ``q`` and ``v`` (as
         :meth:`pinobs.observers.inekf.InvariantEKF.reset`; same arguments and errors)."""
         a = self.setup.reset_inputs(t, q, v, gyro, acc, contacts, prior, bias)
-        state = QEKFState(a.t, a.R, a.x, (), a.bias, a.prior.covariance(), a.imu, a.t)
+        # the prior's velocity is the IMU frame's (as the invariant EKF's, its eq. 7):
+        # v = R v_b, so δv = R̂ δv_b + v̂^ R̂ δθ to first order
+        T = np.eye(15)
+        T[3:6, 0:3] = skew(a.x[0]) @ a.R
+        P = T @ a.prior.covariance() @ T.T
+        state = QEKFState(a.t, a.R, a.x, (), a.bias, P, a.imu, a.t)
         h, jac = self.setup.legs(a.q_joints)
         state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
         self._commit(state, a.q_joints, None, None, a.t if state.feet else None)

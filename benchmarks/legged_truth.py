@@ -56,7 +56,14 @@ import pinobs
 from pinobs.model import aba_call
 from pinobs.observers.inekf import InEKFGains, InEKFPrior, InvariantEKF, skew
 from pinobs.observers.qekf import QuaternionEKF
-from pinobs.simulation.legged import GO1_FEET, LEGGED_MOTIONS, LeggedNoise, simulate_legged
+from pinobs.simulation.legged import (
+    GO1_FEET,
+    HUMANOID_MOTIONS,
+    LEGGED_MOTIONS,
+    LeggedNoise,
+    simulate_humanoid,
+    simulate_legged,
+)
 
 CONTACT_FORCE = 20.0  # [N]
 NOISE = LeggedNoise()
@@ -86,7 +93,8 @@ FILTERS = {"inekf": InvariantEKF, "qekf": QuaternionEKF}
 def run_filter(
     name: str, run: Any, robot: pinobs.Robot, start: str, gains: InEKFGains = GAINS
 ) -> dict[str, float]:
-    ekf = FILTERS[name](robot, GO1_FEET, gains=gains, imu_frame="imu_link")
+    imu_frame = "imu_link" if run.feet == GO1_FEET else None  # TALOS: the IMU at the base
+    ekf = FILTERS[name](robot, run.feet, gains=gains, imu_frame=imu_frame)
     r_bi = ekf.imu_placement[1]
     t = run.t
     q_meas = run.q_joints()
@@ -94,7 +102,7 @@ def run_filter(
     contacts = run.forces() > CONTACT_FORCE
     base_q, base_v = run.base_q(), run.base_v()
     q0 = np.concatenate([base_q[0], q_meas[0]])
-    v0 = np.concatenate([base_v[0], np.zeros(12)])
+    v0 = np.concatenate([base_v[0], np.zeros(len(run.joints))])
     # the bias prior is the simulation's (σ of the initial biases); the rest InEKFPrior's
     prior = InEKFPrior(gyro_bias=NOISE.gyro_bias, accel_bias=NOISE.acc_bias)
     roll, speed = STARTS[start]
@@ -226,7 +234,8 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
     md = [
         f"Made by `python benchmarks/legged_truth.py --duration {args.duration:g} --seeds "
         f"{' '.join(map(str, args.seeds))} --long {args.long:g} --long-seeds "
-        f"{' '.join(map(str, args.long_seeds))}` on {m['date']} in {report['seconds']:.0f} s "
+        f"{' '.join(map(str, args.long_seeds))}` on {m['date']} in "
+        f"{' + '.join(f'{v:.0f} s ({k})' for k, v in report['seconds'].items())} "
         f"(MuJoCo {m['mujoco']}); conditions in the script's docstring. Mean over the seeds "
         "(worst seed in brackets). Drift is per metre walked for the trot, per second for "
         "stand and sway. The gains were chosen on the trot, seed 0 (`GAINS`' comment): the "
@@ -240,6 +249,16 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
         *_targets(report["motions"]),
         "",
     ]
+    if report["humanoid"]:
+        md += [
+            "TALOS (`simulate_humanoid`: 32 joints, flat soles, IMU at the base), same gains "
+            "(held out: chosen on go1's trot), drift per second:",
+            "",
+            *_table(report["humanoid"]),
+            "",
+            *_targets(report["humanoid"]),
+            "",
+        ]
     if report["long"]:
         md += [
             f"Long trot, {args.long:g} s:",
@@ -297,25 +316,43 @@ def main() -> None:
     parser.add_argument("--motions", nargs="+", default=list(LEGGED_MOTIONS))
     parser.add_argument("--long", type=float, default=60.0, help="long trot [s] (0: none)")
     parser.add_argument("--long-seeds", type=int, nargs="+", default=[0, 1])
+    parser.add_argument(
+        "--sections",
+        nargs="+",
+        choices=["go1", "humanoid"],
+        default=["go1", "humanoid"],
+        help="what to run; with --merge, the others are kept from legged_truth.json",
+    )
+    parser.add_argument("--merge", action="store_true", help="keep the sections not run")
     parser.add_argument("--quick", action="store_true", help="5 s, seed 0, no files written")
     args = parser.parse_args()
     if args.quick:
         args.duration, args.seeds, args.long = 5.0, [0], 0.0
-    robot = pinobs.load("go1")
+    here = Path(__file__).parent
     start = time.time()
-    report: dict[str, Any] = {"motions": {}, "long": {}, "old_gains": {}, "cost": {}}
-    for motion in args.motions:
-        for seed in args.seeds:
-            run = simulate_legged(motion, args.duration, seed=seed, noise=NOISE, robot=robot)
-            _runs(report, "motions", motion, run, robot, GAINS)
-            if motion == "trot":
-                _runs(report, "old_gains", "trot, old gains", run, robot, OLD_GAINS)
-                if seed == args.seeds[0]:
-                    report["cost"] = measure_cost(run, robot)
-    for seed in args.long_seeds if args.long > 0 else []:
-        run = simulate_legged("trot", args.long, seed=seed, noise=NOISE, robot=robot)
-        _runs(report, "long", f"trot {args.long:g} s", run, robot, GAINS)
-    report["seconds"] = time.time() - start
+    report: dict[str, Any] = {
+        "motions": {},
+        "long": {},
+        "old_gains": {},
+        "cost": {},
+        "humanoid": {},
+    }
+    if args.merge:
+        report.update(json.loads((here / "legged_truth.json").read_text()))
+    if "go1" in args.sections:
+        report.update(motions={}, long={}, old_gains={}, cost={})
+        _go1_sections(report, args)
+    if "humanoid" in args.sections:
+        report["humanoid"] = {}
+        talos = pinobs.load("talos")
+        for motion in HUMANOID_MOTIONS:
+            for seed in args.seeds:
+                run = simulate_humanoid(motion, args.duration, seed=seed, noise=NOISE, robot=talos)
+                _runs(report, "humanoid", f"TALOS {motion}", run, talos, GAINS)
+    report.setdefault("seconds", {})
+    if not isinstance(report["seconds"], dict):
+        report["seconds"] = {"go1": report["seconds"]}
+    report["seconds"][" + ".join(args.sections)] = time.time() - start
     report["machine"] = {
         "date": time.strftime("%Y-%m-%d"),
         "python": platform.python_version(),
@@ -335,9 +372,23 @@ def main() -> None:
     md = format_report(report, args)
     print(md)
     if not args.quick:
-        here = Path(__file__).parent
         (here / "legged_truth.json").write_text(json.dumps(report, indent=1) + "\n")
         (here / "legged_truth.md").write_text(md)
+
+
+def _go1_sections(report: dict[str, Any], args: argparse.Namespace) -> None:
+    robot = pinobs.load("go1")
+    for motion in args.motions:
+        for seed in args.seeds:
+            run = simulate_legged(motion, args.duration, seed=seed, noise=NOISE, robot=robot)
+            _runs(report, "motions", motion, run, robot, GAINS)
+            if motion == "trot":
+                _runs(report, "old_gains", "trot, old gains", run, robot, OLD_GAINS)
+                if seed == args.seeds[0]:
+                    report["cost"] = measure_cost(run, robot)
+    for seed in args.long_seeds if args.long > 0 else []:
+        run = simulate_legged("trot", args.long, seed=seed, noise=NOISE, robot=robot)
+        _runs(report, "long", f"trot {args.long:g} s", run, robot, GAINS)
 
 
 if __name__ == "__main__":

@@ -225,3 +225,32 @@ def test_talos_stands_on_both_soles_and_the_invariant_ekf_tracks_its_sway() -> N
     ]
     assert float(np.sqrt(np.mean(np.square(err)))) < 0.03
     assert float(np.abs(base_v[:, :3]).max()) > 0.1  # it does move
+
+
+@pytest.mark.slow
+def test_on_a_60_second_trot_the_velocity_error_stays_bounded() -> None:
+    """Yaw and position drift (unobservable), the velocity does not: its RMS over the last
+    10 s of a 60 s trot is as small as over the first 10 s (within 1.5×) and < 0.05 m/s."""
+    run = simulate_legged("trot", 60.0, seed=3, noise=NOISE)
+    robot = pinobs.load("go1")
+    ekf = InvariantEKF(robot, GO1_FEET, gains=GAINS, imu_frame="imu_link")
+    q, gyro, acc = run.q_joints(), run.gyro(), run.acc()
+    contacts = run.forces() > 20.0
+    base_q, base_v = run.base_q(), run.base_v()
+    ekf.reset(
+        run.t[0],
+        np.concatenate([base_q[0], q[0]]),
+        np.concatenate([base_v[0], np.zeros(12)]),
+        gyro=gyro[0],
+        acc=acc[0],
+        contacts=contacts[0],
+    )
+    err = np.array(
+        [
+            ekf.update(run.t[k], q[k], gyro[k], acc[k], contacts[k]).v[:3] - base_v[k, :3]
+            for k in range(1, run.t.size)
+        ]
+    )
+    ten = round(10.0 * run.rate)
+    first, last = (float(np.sqrt(np.mean(e**2))) for e in (err[:ten], err[-ten:]))
+    assert last < 0.05 and last < 1.5 * first, (first, last)

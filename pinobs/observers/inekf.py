@@ -101,6 +101,19 @@ is ``ξ_dj = ξ_p + R̂ J_j w_q``::
 
     P ← F P Fᵀ + G N_j Gᵀ,   F: the new rows copy ξ_p's,   G: the new block.    (6)
 
+Prior (at ``reset``, before any foot is added).  :class:`InEKFPrior` gives independent
+errors of the attitude ``ξ_R``, of the velocity in the base frame ``v_b`` (as ``reset``
+takes it), and of the world position: ``ξ_v = R̂ (v̂_b − v_b)`` exactly, and to first
+order ``ξ_p = δp + p̂^ ξ_R`` (``δp = p̂ − p``, the p column of ``X̂ X⁻¹``), so::
+
+    P₀ = T diag(σ_θ², σ_v², σ_p², σ_bg², σ_ba²) Tᵀ,   T = [[I, 0, 0], [0, I, 0], [p̂^, 0, I]] ⊕ I₆   (7)
+
+A translation of the world by ``c`` maps ξ by ``Ad`` (``ξ_p, ξ_d += c^ ξ_R``), under
+which (2)-(6) are equivariant; (7) is too, so the whole filter is the same wherever
+the world's origin is (a diagonal ``P₀`` on ξ would give the base a position error
+``p̂ × ξ_R`` growing with the distance from the origin).  Feet added by (6) then start
+from the base's position, as in Hartley et al.
+
 Sampled data (``docs/theory/math.md`` §7, as for torques): the IMU reading
 passed with ``update(t_k, …)`` is held from ``t_k`` to ``t_{k+1}``, so the step
 to ``t_k`` propagates with the reading stored at the previous call, then
@@ -121,34 +134,32 @@ from __future__ import annotations
 
 import functools
 import math
-import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pinobs.errors import (
-    ConfigurationError,
-    ContactWarning,
-    DimensionError,
-    GainError,
-    NotResetError,
-    ObserverDiverged,
-    TimestampError,
-    UnknownNameError,
-)
-from pinobs.model import FootKinematics, Robot
-from pinobs.model.robot import read_only
+from pinobs.model import Robot
 from pinobs.observers.base import Vector
-from pinobs.observers.linalg import cholesky_solve
-from pinobs.tolerances import (
-    NO_CONTACT_WARN_TIME,
-    QUATERNION_NORM_TOL,
-    SERIES_ANGLE,
-    TIME_EPS,
+from pinobs.observers.legs import (
+    ContactKinematics,
+    InEKFEstimate,
+    InEKFGains,
+    InEKFPrior,
+    LeggedSetup,
+    LegState,
+    check_contacts,
+    check_time,
+    contact_kinematics,
+    foot_noise,
+    noise_densities,
+    remove_feet,
+    replace_state,
+    rotation_to_quaternion,
 )
+from pinobs.observers.linalg import cholesky_solve
+from pinobs.tolerances import SERIES_ANGLE
 
 __all__ = [
     "GRAVITY",
@@ -164,7 +175,9 @@ __all__ = [
     "contact_kinematics",
     "error_transition",
     "gammas",
+    "imu_step",
     "imu_vector_field",
+    "prior_covariance",
     "propagate_mean",
     "right_invariant_error_matrix",
     "rotation_to_quaternion",
@@ -174,6 +187,10 @@ __all__ = [
 
 #: Gravity in the world frame [m/s²] (z up).
 GRAVITY = (0.0, 0.0, -9.81)
+#: The invariant EKF's state (:class:`pinobs.observers.legs.LegState`; ``P`` is the
+#: covariance of ``(ξ_R, ξ_v, ξ_p, ξ_d1 … ξ_dK, ζ_g, ζ_a)``).
+InEKFState = LegState
+
 
 _I3 = np.eye(3)
 _POWERS = np.arange(5)
@@ -236,19 +253,6 @@ def adjoint(R: Vector, x: Vector) -> Vector:
     return out
 
 
-def rotation_to_quaternion(R: Vector) -> Vector:
-    """Unit quaternion ``(x, y, z, w)`` of a rotation matrix, ``w ≥ 0`` (SciPy's)."""
-    from scipy.spatial.transform import Rotation  # (not at import: pinobs starts without scipy)
-
-    return np.asarray(Rotation.from_matrix(R).as_quat(canonical=True))
-
-
-def _quaternion_to_rotation(quat: Vector) -> Vector:
-    from scipy.spatial.transform import Rotation
-
-    return np.asarray(Rotation.from_quat(quat).as_matrix())
-
-
 # -------------------------------------------------------------------- dynamics
 def imu_vector_field(
     R: Vector, v: Vector, omega: Vector, acc: Vector, gravity: ArrayLike = GRAVITY
@@ -275,6 +279,18 @@ def propagate_mean(
         v + (R @ (G1 @ acc)) * h + g * h,
         p + v * h + (R @ (G2 @ acc)) * (h * h) + 0.5 * g * (h * h),
     )
+
+
+def imu_step(
+    R: Vector, x: Vector, omega: Vector, acc: Vector, h: float, gravity: ArrayLike = GRAVITY
+) -> tuple[Vector, Vector]:
+    """Eq. (1) on a state ``(R, x)`` (rows ``v, p, d_j``): ``(R⁺, x⁺)``, ``R⁺`` brought back
+    onto SO(3) to first order (``R (3I − RᵀR)/2``: rounding only), the feet unchanged."""
+    R1, v1, p1 = propagate_mean(R, x[0], x[1], omega, acc, h, gravity)
+    R1 = R1 @ (1.5 * _I3 - 0.5 * (R1.T @ R1))
+    x1 = x.copy()
+    x1[0], x1[1] = v1, p1
+    return R1, x1
 
 
 def right_invariant_error_matrix(n_contacts: int, gravity: ArrayLike = GRAVITY) -> Vector:
@@ -343,23 +359,6 @@ def _body_transition(w: Vector, a: Vector, h: float, n_contacts: int) -> Vector:
     return out
 
 
-@functools.lru_cache(maxsize=64)
-def _noise_densities(gains: InEKFGains, n_contacts: int) -> Vector:
-    """The diagonal of ``Q_c`` (eq. 3, in the order of the error), read-only."""
-    out = np.concatenate(
-        [
-            np.full(3, gains.gyro**2),
-            np.full(3, gains.accel**2),
-            np.zeros(3),
-            np.full(3 * n_contacts, gains.contact**2),
-            np.full(3, gains.gyro_bias**2),
-            np.full(3, gains.accel_bias**2),
-        ]
-    )
-    out.setflags(write=False)
-    return out
-
-
 def _inverse_frame(R: Vector, x: Vector) -> Vector:
     """``diag(Ad_X⁻¹, I₆)``: ``Ad_{X⁻¹}`` with ``X⁻¹ = (Rᵀ, −Rᵀ x_i)``."""
     n = 3 + 3 * x.shape[0] + 6
@@ -384,226 +383,14 @@ def error_transition(
     return T1 @ _body_transition(omega, acc, h, K) @ _inverse_frame(R, x)
 
 
-def check_time(t: Any, previous: float | None) -> float:
-    """``t`` as a finite float after ``previous`` (by more than TIME_EPS), or a TimestampError."""
-    try:
-        t = float(t)
-    except (TypeError, ValueError) as exc:
-        raise TimestampError(f"t must be a number, got {t!r}") from exc
-    if not math.isfinite(t):
-        raise TimestampError(f"t must be finite, got {t!r}")
-    if previous is not None and t <= previous + TIME_EPS:
-        raise TimestampError(f"t = {t!r} is not after the previous update's t = {previous!r}")
-    return t
-
-
-def check_contacts(feet: tuple[str, ...], contacts: Any) -> list[bool]:
-    """Contact flags in the order of ``feet`` from a mapping (every foot named) or a sequence
-    of bools; UnknownNameError or DimensionError naming what is wrong."""
-    if isinstance(contacts, Mapping):
-        unknown = [k for k in contacts if k not in feet]
-        if unknown:
-            raise UnknownNameError(f"contacts names {unknown}, not among the feet {list(feet)}")
-        missing = [f for f in feet if f not in contacts]
-        if missing:
-            raise UnknownNameError(
-                f"contacts has no entry for {missing}: give a bool for each of {list(feet)}"
-            )
-        values = [contacts[f] for f in feet]
-    elif isinstance(contacts, (str, bytes)) or not isinstance(contacts, (Sequence, np.ndarray)):
-        raise DimensionError(
-            f"contacts must map each of {list(feet)} to a bool (or be a sequence of "
-            f"{len(feet)} bools), got {contacts!r}"
-        )
-    else:
-        values = list(contacts)
-        if len(values) != len(feet):
-            raise DimensionError(
-                f"contacts has {len(values)} entries, expected {len(feet)} "
-                f"(one bool per foot: {list(feet)})"
-            )
-    out = []
-    for name, value in zip(feet, values, strict=True):
-        if isinstance(value, (bool, np.bool_)):
-            out.append(bool(value))
-        elif isinstance(value, (int, np.integer)) and value in (0, 1):
-            out.append(bool(value))
-        else:
-            raise DimensionError(f"contacts[{name!r}] must be a bool, got {value!r}")
-    return out
-
-
-# ----------------------------------------------------------------- kinematics
-@runtime_checkable
-class ContactKinematics(Protocol):
-    """What the filter needs of the legs: foot positions in the base frame and their Jacobians.
-
-    :class:`pinobs.model.FootKinematics` is one (from a Pinocchio model); tests
-    use synthetic ones.
-    """
-
-    feet: tuple[str, ...]
-    nq_joints: int
-    nv_joints: int
-
-    def positions_and_jacobians(self, q_joints: Vector) -> tuple[Vector, Vector]:
-        """``(h, J)``: shapes ``(K, 3)`` [m] and ``(K, 3, nv_joints)`` [m/rad]."""
-        ...
-
-
-def contact_kinematics(
-    robot: Robot | ContactKinematics, feet: Sequence[str] | None, imu_frame: str | None
-) -> ContactKinematics:
-    """The legs a contact-aided filter measures: :class:`pinobs.model.FootKinematics` of a
-    robot's ``feet`` (in its ``imu_frame``), or a given :class:`ContactKinematics`.
-
-    Raises:
-        UnknownNameError: a robot without ``feet``, ``feet`` that differ from the
-            kinematics' own, or ``imu_frame`` with a :class:`ContactKinematics`.
-        TypeError: neither a robot nor a :class:`ContactKinematics`.
-    """
-    if isinstance(robot, Robot):
-        if feet is None:
-            raise UnknownNameError(
-                f"{robot.name}: give the foot frame names (feet=[...]) to measure"
-            )
-        return FootKinematics(robot, feet, imu_frame=imu_frame)
-    elif isinstance(robot, ContactKinematics):
-        if imu_frame is not None:
-            raise UnknownNameError(
-                "imu_frame is for a robot; a ContactKinematics gives imu_placement itself"
-            )
-        if feet is not None and tuple(feet) != tuple(robot.feet):
-            raise UnknownNameError(
-                f"feet={list(feet)} differs from the kinematics' feet {list(robot.feet)}"
-            )
-        return robot
-    else:
-        raise TypeError(
-            f"robot must be a pinobs.Robot or a ContactKinematics, got {type(robot).__name__}"
-        )
-
-
-# ------------------------------------------------------------------- options
-@dataclass(frozen=True)
-class InEKFGains:
-    """Noise levels of the contact-aided invariant EKF (``Q_c`` of eq. 3, ``N`` of eq. 4).
-
-    Densities are of continuous white noise (σ of a sample at rate f is density·√f).
-
-    Attributes:
-        gyro: gyro noise density [rad/s/√Hz].
-        accel: accelerometer noise density [m/s²/√Hz].
-        gyro_bias: gyro bias random walk [rad/s²/√Hz].
-        accel_bias: accelerometer bias random walk [m/s³/√Hz].
-        contact: foot velocity while in contact (slip) [m/s/√Hz].
-        joint: joint encoder noise, σ per sample [rad].
-        kinematics: foot position model error (foot radius, link lengths), σ per sample [m].
-    """
-
-    gyro: float = 1e-2
-    accel: float = 1e-1
-    gyro_bias: float = 1e-5
-    accel_bias: float = 1e-4
-    contact: float = 1e-1
-    joint: float = 1e-3
-    kinematics: float = 1e-3
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-                raise GainError(f"InEKFGains.{f.name} must be a finite number ≥ 0, got {value!r}")
-        if self.joint == 0 and self.kinematics == 0:
-            raise GainError(
-                "InEKFGains.joint and InEKFGains.kinematics are both 0: the foot measurement "
-                "would be exact and its innovation covariance singular; make one > 0"
-            )
-
-
-@dataclass(frozen=True)
-class InEKFPrior:
-    """Initial uncertainty (standard deviations of the right-invariant error at ``reset``).
-
-    Attributes:
-        attitude: orientation [rad] (per axis).
-        velocity: velocity [m/s].
-        position: position [m].
-        gyro_bias: gyro bias [rad/s].
-        accel_bias: accelerometer bias [m/s²].
-    """
-
-    attitude: float = 0.1
-    velocity: float = 0.5
-    position: float = 0.1
-    gyro_bias: float = 1e-2
-    accel_bias: float = 1e-1
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-                raise GainError(f"InEKFPrior.{f.name} must be a finite number > 0, got {value!r}")
-
-
-# ---------------------------------------------------------------- state, output
-@dataclass(frozen=True)
-class InEKFState:
-    """The filter's state (immutable).
-
-    Attributes:
-        t: time [s].
-        R: world from base rotation.
-        x: rows ``v, p, d_1 … d_K`` (world frame) [m/s, m], shape ``(2 + K, 3)``.
-        feet: index (into the kinematics' feet) of each ``d_j``, in state order.
-        bias: ``(b_g, b_a)`` [rad/s, m/s²].
-        P: covariance of ``(ξ_R, ξ_v, ξ_p, ξ_d1 … ξ_dK, ζ_g, ζ_a)``, ``9 + 3K + 6`` square.
-        imu: the held reading ``(ω̃, ã)``, or ``None`` before the first one.
-        last_contact: time a foot was last in contact (the reset time if none yet) [s].
-    """
-
-    t: float
-    R: Vector
-    x: Vector
-    feet: tuple[int, ...]
-    bias: Vector
-    P: Vector
-    imu: Vector | None
-    last_contact: float
-
-
-@dataclass(frozen=True)
-class InEKFEstimate:
-    """The filter's estimate at one time (read-only arrays).
-
-    Attributes:
-        t: time [s].
-        q: free-flyer configuration ``(p, quaternion xyzw, joint positions as measured)``,
-            ``nq`` entries (``7 + nq_joints``).
-        v: ``(base linear velocity in the base frame, base angular velocity R_bi (ω̃ − b̂_g), joint
-            velocities)``, ``nv`` entries; the joint velocities are not estimated here: the
-            ones passed to ``update`` (``joint_velocities=``), else NaN.
-        rotation: world from base (root joint) rotation.
-        velocity_world: velocity of the base's origin in the world [m/s].
-        bias: ``(b_g, b_a)`` [rad/s, m/s²].
-        covariance: covariance of ``(ξ_R, ξ_v, ξ_p, ξ_d…, ζ_g, ζ_a)`` (right-invariant error
-            of the IMU frame's state).
-        contacts: names of the feet in the state (in contact), in state order.
-        foot_positions: their world positions ``d_j``, shape ``(K, 3)`` [m].
-        nis: normalized innovation squared of this update's foot measurements (χ² with
-            3 × (feet measured) degrees of freedom for a consistent filter), or ``None``.
-    """
-
-    t: float
-    q: Vector
-    v: Vector
-    rotation: Vector
-    velocity_world: Vector
-    bias: Vector
-    covariance: Vector
-    contacts: tuple[str, ...]
-    foot_positions: Vector
-    nis: float | None = None
+def prior_covariance(prior: InEKFPrior, x: Vector) -> Vector:
+    """Eq. (7): the prior of the right-invariant error ``(ξ, ζ)`` (no feet) from the
+    :class:`InEKFPrior` of ``(ξ_R, R̂ δv_b, δp, ζ)`` (independent) at the estimate's
+    position ``x[1] = p̂`` (module docstring): ``T diag(σ²) Tᵀ``, ``T``'s ``(ξ_p, ξ_R)``
+    block ``p̂^``, so that the prior is the same wherever the world's origin is."""
+    T = np.eye(15)
+    T[6:9, 0:3] = skew(x[1])
+    return T @ prior.covariance() @ T.T
 
 
 # ---------------------------------------------------------------------- filter
@@ -640,24 +427,24 @@ class InvariantEKF:
         imu_hold: str = "previous",
         imu_frame: str | None = None,
     ) -> None:
-        if imu_hold not in ("previous", "average"):
-            raise GainError(f"imu_hold must be 'previous' or 'average', got {imu_hold!r}")
-        self.imu_hold = imu_hold
-        self.kinematics = contact_kinematics(robot, feet, imu_frame)
-        if gains is not None and not isinstance(gains, InEKFGains):
-            raise GainError(f"gains must be an InEKFGains, got {type(gains).__name__}")
-        self.gains = gains if gains is not None else InEKFGains()
-        self.gravity = Robot.check_vector(gravity, 3, what="gravity")
-        self.feet: tuple[str, ...] = tuple(self.kinematics.feet)
-        self._nq_j = int(self.kinematics.nq_joints)
-        self._nv_j = int(self.kinematics.nv_joints)
-        placement = getattr(self.kinematics, "imu_placement", None)
-        #: ``(R_bi, r_bi)``: the IMU's rotation and position in the base (root joint) frame.
-        self.imu_placement: tuple[Vector, Vector] = (
-            (np.eye(3), np.zeros(3))
-            if placement is None
-            else (np.asarray(placement[0], dtype=float), np.asarray(placement[1], dtype=float))
+        #: the legs, options and conversions shared with the quaternion EKF
+        self.setup = LeggedSetup(
+            "InvariantEKF",
+            robot,
+            feet,
+            gains=gains,
+            gravity=gravity,
+            imu_hold=imu_hold,
+            imu_frame=imu_frame,
         )
+        s = self.setup
+        self.imu_hold, self.kinematics, self.gains, self.gravity = (
+            s.imu_hold,
+            s.kinematics,
+            s.gains,
+            s.gravity,
+        )
+        self.feet, self.imu_placement = s.feet, s.imu_placement
         self._state: InEKFState | None = None
         self._estimate: InEKFEstimate | None = None
         self._warned = False
@@ -670,14 +457,14 @@ class InvariantEKF:
     def state(self) -> InEKFState:
         """The current state (raises before ``reset``)."""
         if self._state is None:
-            raise NotResetError("InvariantEKF: call reset(t, q, ...) before update")
+            raise self.setup.not_reset()
         return self._state
 
     @property
     def estimate(self) -> InEKFEstimate:
         """The last estimate (raises before ``reset``)."""
         if self._estimate is None:
-            raise NotResetError("InvariantEKF: call reset(t, q, ...) before update")
+            raise self.setup.not_reset()
         return self._estimate
 
     def error_matrix(self) -> Vector:
@@ -714,48 +501,11 @@ class InvariantEKF:
             UnknownNameError: contacts naming an unknown foot or missing one.
             GainError: a ``prior`` that is not an :class:`InEKFPrior`.
         """
-        t = self._check_time(t, None)
-        nq, nv = 7 + self._nq_j, 6 + self._nv_j
-        q = Robot.check_vector(q, nq, what="q")
-        quat_norm = float(np.linalg.norm(q[3:7]))
-        if abs(quat_norm - 1.0) > QUATERNION_NORM_TOL:
-            raise ConfigurationError(
-                f"q[3:7] = {q[3:7].tolist()} is not a unit quaternion (x, y, z, w) "
-                f"(norm {quat_norm:.6g}); its norm must be 1 within {QUATERNION_NORM_TOL:g}"
-            )
-        v = np.zeros(nv) if v is None else Robot.check_vector(v, nv, what="v")
-        imu = None
-        if (gyro is None) != (acc is None):
-            raise DimensionError("give both gyro and acc to reset, or neither")
-        if gyro is not None and acc is not None:
-            imu = np.concatenate(
-                [Robot.check_vector(gyro, 3, what="gyro"), Robot.check_vector(acc, 3, what="acc")]
-            )
-        flags = self._check_contacts(contacts) if contacts is not None else [False] * len(self.feet)
-        prior = prior if prior is not None else InEKFPrior()
-        if not isinstance(prior, InEKFPrior):
-            raise GainError(f"prior must be an InEKFPrior, got {type(prior).__name__}")
-        theta = np.zeros(6) if bias is None else Robot.check_vector(bias, 6, what="bias")
-        R_bi, r_bi = self.imu_placement
-        R_b = _quaternion_to_rotation(q[3:7])
-        R = R_b @ R_bi  # the state is the IMU's frame (the base's without imu_frame)
-        # the IMU's world velocity: the base's plus ω × (IMU − base origin)
-        x = np.array([R_b @ (v[:3] + np.cross(v[3:6], r_bi)), q[:3] + R_b @ r_bi])
-        P = np.diag(
-            np.concatenate(
-                [
-                    np.full(3, prior.attitude**2),
-                    np.full(3, prior.velocity**2),
-                    np.full(3, prior.position**2),
-                    np.full(3, prior.gyro_bias**2),
-                    np.full(3, prior.accel_bias**2),
-                ]
-            )
-        )
-        state = InEKFState(t, R, x, (), theta, P, imu, t)
-        h, jac = self._kinematics(q[7:])
-        state = self._add_feet(state, [j for j, f in enumerate(flags) if f], h, jac)
-        self._commit(state, q[7:], None, None, imu, t if state.feet else None)
+        a = self.setup.reset_inputs(t, q, v, gyro, acc, contacts, prior, bias)
+        state = InEKFState(a.t, a.R, a.x, (), a.bias, prior_covariance(a.prior, a.x), a.imu, a.t)
+        h, jac = self.setup.legs(a.q_joints)
+        state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
+        self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None)
         self._warned = False
         return self.estimate
 
@@ -793,56 +543,15 @@ class InvariantEKF:
             ObserverDiverged: a non-finite estimate (the state is left as it was).
         """
         state = self.state
-        t = self._check_time(t, state.t)
-        q = np.asarray(q, dtype=float) if not isinstance(q, np.ndarray) else q
-        if q.shape == (7 + self._nq_j,):
-            q_joints = Robot.check_vector(q, 7 + self._nq_j, what="q")[7:]
-        else:
-            if q.shape != (self._nq_j,):
-                raise DimensionError(
-                    f"q must have shape ({self._nq_j},) (joint angles) or "
-                    f"({7 + self._nq_j},) (a free-flyer q), got shape {q.shape}"
-                )
-            q_joints = Robot.check_vector(q, self._nq_j, what="q")
-        reading = np.concatenate(
-            [Robot.check_vector(gyro, 3, what="gyro"), Robot.check_vector(acc, 3, what="acc")]
+        u = self.setup.update_inputs(state.t, t, q, gyro, acc, contacts, joint_velocities)
+        new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
+        h, jac = self.setup.legs(u.q_joints)
+        new, nis = self._correct(new, u.flags, h, jac)
+        self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
+        self._commit(
+            new, u.q_joints, u.joint_velocities, nis, u.reading, u.t if any(u.flags) else None
         )
-        flags = self._check_contacts(contacts)
-        dq = (
-            None
-            if joint_velocities is None
-            else Robot.check_vector(joint_velocities, self._nv_j, what="joint_velocities")
-        )
-        held = state.imu if state.imu is not None else reading
-        if self.imu_hold == "average":
-            held = 0.5 * (held + reading)
-        new = self._propagate(state, held, t - state.t, t)
-        h, jac = self._kinematics(q_joints)
-        new, nis = self._correct(new, flags, h, jac)
-        if not any(flags) and not self._warned and t - new.last_contact >= NO_CONTACT_WARN_TIME:
-            self._warned = True
-            warnings.warn(
-                f"InvariantEKF: no foot in contact for {t - new.last_contact:.3g} s "
-                f"(since t = {new.last_contact:.6g} s): the velocity is the IMU's open-loop "
-                f"integral and drifts; contacts must set each of {', '.join(self.feet)} "
-                "to True while it is on the ground",
-                ContactWarning,
-                stacklevel=2,
-            )
-        self._commit(new, q_joints, dq, nis, reading, t if any(flags) else None)
         return self.estimate
-
-    # ------------------------------------------------------------- checks
-    @staticmethod
-    def _check_time(t: Any, previous: float | None) -> float:
-        return check_time(t, previous)
-
-    def _check_contacts(self, contacts: Any) -> list[bool]:
-        return check_contacts(self.feet, contacts)
-
-    def _kinematics(self, q_joints: Vector) -> tuple[Vector, Vector]:
-        h, jac = self.kinematics.positions_and_jacobians(q_joints)
-        return np.asarray(h, dtype=float), np.asarray(jac, dtype=float)
 
     # ------------------------------------------------------------- the steps
     def _propagate(self, state: InEKFState, imu: Vector, dt: float, t: float) -> InEKFState:
@@ -851,13 +560,10 @@ class InvariantEKF:
         w = imu[:3] - theta[:3]
         a = imu[3:] - theta[3:]
         K = x.shape[0] - 2
-        R1, v1, p1 = propagate_mean(R, x[0], x[1], w, a, dt, self.gravity)
-        R1 = R1 @ (1.5 * _I3 - 0.5 * (R1.T @ R1))  # back onto SO(3) to first order (rounding)
-        x1 = x.copy()
-        x1[0], x1[1] = v1, p1
+        R1, x1 = imu_step(R, x, w, a, dt, self.gravity)
         phi_e = _body_transition(w, a, dt, K)
         n = 15 + 3 * K
-        qc = _noise_densities(self.gains, K)
+        qc = noise_densities(self.gains, K)
         Qe = (phi_e * qc) @ phi_e.T
         Qe.flat[:: n + 1] += qc
         Qe *= 0.5 * dt
@@ -866,7 +572,7 @@ class InvariantEKF:
         Phi = T1 @ phi_e @ _inverse_frame(R, x)
         P = Phi @ state.P @ Phi.T + T1 @ Qe @ T1.T
         P = 0.5 * (P + P.T)
-        return _replace(state, t=t, R=R1, x=x1, P=P)
+        return replace_state(state, t=t, R=R1, x=x1, P=P)
 
     def _correct(
         self, state: InEKFState, flags: list[bool], h: Vector, jac: Vector
@@ -874,7 +580,7 @@ class InvariantEKF:
         """Contacts ended are removed, eqs. (4)-(5) for those that continue, eq. (6) for new ones."""
         ended = [s for s, j in enumerate(state.feet) if not flags[j]]
         if ended:
-            state = self._remove_feet(state, ended)
+            state = remove_feet(state, ended)
         measured = list(state.feet)
         nis = None
         if measured:
@@ -886,9 +592,7 @@ class InvariantEKF:
 
     def _foot_noise(self, R: Vector, jac: Vector) -> Vector:
         """``N_j = R (J_j Σ_q J_jᵀ + σ_k² I) Rᵀ`` (eq. 4), for one ``J`` (3, n) or a stack (m, 3, n)."""
-        g = self.gains
-        cov = (g.joint**2) * (jac @ np.swapaxes(jac, -1, -2)) + (g.kinematics**2) * _I3
-        return R @ cov @ R.T
+        return R @ foot_noise(self.gains, jac) @ R.T
 
     def _update(
         self, state: InEKFState, measured: list[int], h: Vector, jac: Vector
@@ -924,7 +628,7 @@ class InvariantEKF:
             Y[:, 3 * i : 3 * i + 3] -= K[:, 3 * i : 3 * i + 3] @ blocks[i]
         P1 = C - Y @ Kt
         P1 = 0.5 * (P1 + P1.T)
-        return _replace(state, R=R1, x=x1, bias=theta, P=P1), nis
+        return replace_state(state, R=R1, x=x1, bias=theta, P=P1), nis
 
     def _add_feet(self, state: InEKFState, new: list[int], h: Vector, jac: Vector) -> InEKFState:
         """Eq. (6): each new foot at ``p̂ + R̂ h_j``, its error rows copying ξ_p's."""
@@ -939,17 +643,7 @@ class InvariantEKF:
             P = F @ P @ F.T
             P[at : at + 3, at : at + 3] += self._foot_noise(R, jac[j])
             x = np.vstack([x, x[1] + R @ h[j]])
-        return _replace(state, x=x, P=P, feet=state.feet + tuple(new))
-
-    @staticmethod
-    def _remove_feet(state: InEKFState, slots: list[int]) -> InEKFState:
-        """Marginalise the feet at state positions ``slots``: delete their rows and columns."""
-        n = state.P.shape[0]
-        drop = np.concatenate([np.arange(9 + 3 * s, 12 + 3 * s) for s in slots])
-        keep = np.setdiff1d(np.arange(n), drop)
-        rows = np.setdiff1d(np.arange(state.x.shape[0]), [2 + s for s in slots])
-        feet = tuple(f for s, f in enumerate(state.feet) if s not in slots)
-        return _replace(state, x=state.x[rows], P=state.P[np.ix_(keep, keep)], feet=feet)
+        return replace_state(state, x=x, P=P, feet=state.feet + tuple(new))
 
     def _commit(
         self,
@@ -960,49 +654,12 @@ class InvariantEKF:
         reading: Vector | None,
         contact_time: float | None,
     ) -> None:
-        """Check the new state is finite, store it with the reading to hold (and the time of
-        a contact, if any), make the estimate."""
-        state = _replace(
+        """Store the new state with the reading to hold (and the time of a contact, if any)
+        and its estimate (ObserverDiverged, the state left as it was, if not finite)."""
+        state = replace_state(
             state,
             imu=reading if reading is not None else state.imu,
             last_contact=state.last_contact if contact_time is None else contact_time,
         )
-        # a sum is finite iff every term is (or it overflowed: diverged as well)
-        total = float(state.R.sum() + state.x.sum() + state.P.sum() + state.bias.sum())
-        if not math.isfinite(total):
-            raise ObserverDiverged(
-                f"InvariantEKF: non-finite estimate at t = {state.t!r}",
-                t=state.t,
-                last_estimate=self._estimate,
-            )
-        R, x = state.R, state.x
-        omega = (state.imu[:3] if state.imu is not None else np.zeros(3)) - state.bias[:3]
-        R_bi, r_bi = self.imu_placement
-        R_b = R @ R_bi.T  # the base's rotation, position, angular and linear velocity
-        p_b = x[1] - R_b @ r_bi
-        w_b = R_bi @ omega
-        v_b = R_b.T @ x[0] - np.cross(w_b, r_bi)
-        q = np.concatenate([p_b, rotation_to_quaternion(R_b), q_joints])
-        v = np.concatenate([v_b, w_b, np.full(self._nv_j, np.nan) if dq is None else dq])
-        self._state = state
-        self._estimate = InEKFEstimate(
-            t=state.t,
-            q=read_only(q),
-            v=read_only(v),
-            rotation=read_only(R_b),
-            velocity_world=read_only(R_b @ v_b),
-            bias=read_only(state.bias),
-            covariance=read_only(state.P),
-            contacts=tuple(self.feet[j] for j in state.feet),
-            foot_positions=read_only(x[2:]),
-            nis=nis,
-        )
-
-
-_STATE_FIELDS = tuple(f.name for f in fields(InEKFState))
-
-
-def _replace(state: InEKFState, **changes: Any) -> InEKFState:
-    values = {name: getattr(state, name) for name in _STATE_FIELDS}
-    values.update(changes)
-    return InEKFState(**values)
+        estimate = self.setup.estimate(state, self._estimate, q_joints, dq, nis)
+        self._state, self._estimate = state, estimate

@@ -1,4 +1,5 @@
-"""A quadruped in MuJoCo as the truth for legged base estimation: go1 standing, swaying, trotting.
+"""Legged robots in MuJoCo as the truth for base estimation: go1 standing, swaying, trotting;
+TALOS standing and swaying (:func:`simulate_humanoid`).
 
 The robot is example-robot-data's go1 URDF compiled by MuJoCo (its ``<visual>``
 meshes, ``.dae`` that MuJoCo cannot read, and ``<transmission>`` tags removed;
@@ -61,11 +62,15 @@ from pinobs.model.loading import resolve_source
 __all__ = [
     "ARMATURE",
     "GO1_FEET",
+    "HUMANOID_MOTIONS",
     "LEGGED_MOTIONS",
+    "TALOS_FEET",
     "LeggedNoise",
     "LeggedRun",
     "go1_mujoco_spec",
+    "simulate_humanoid",
     "simulate_legged",
+    "talos_mujoco_spec",
 ]
 
 Vector = NDArray[np.floating[Any]]
@@ -80,6 +85,23 @@ FOOT_RADIUS = 0.02  # [m], go1.urdf's foot collision sphere
 STANCE = (0.0, 0.8, -1.6)  # hip, thigh, calf [rad]
 KP, KD = 80.0, 2.0  # [N·m/rad], [N·m·s/rad]
 SETTLE = 1.0  # [s] simulated before the first sample (unrecorded)
+#: The motions :func:`simulate_humanoid` can make.
+HUMANOID_MOTIONS = ("stand", "sway")
+#: TALOS's sole frames (left, right), in Pinocchio's joint order.
+TALOS_FEET = ("left_sole_link", "right_sole_link")
+_TALOS_LEG = (0.0, 0.0, -0.411354, 0.859395, -0.448041, -0.001708)  # half-sitting [rad]
+_TALOS_ARM = (0.25847, 0.173046, -0.0002, -0.525366, 0.0, 0.0, 0.1, -0.005)
+#: TALOS's half-sitting configuration (its SRDF's), joints in Pinocchio's order [rad].
+TALOS_STANCE = (
+    _TALOS_LEG
+    + _TALOS_LEG
+    + (0.0, 0.006761)
+    + _TALOS_ARM
+    + tuple(-a if i < 3 else a for i, a in enumerate(_TALOS_ARM))
+    + (0.0, 0.0)
+)
+TALOS_KP, TALOS_KD = 2000.0, 20.0  # [N·m/rad], [N·m·s/rad]
+SOLE = (0.1, 0.065, 0.01)  # half-sizes of TALOS's sole box [m]
 
 
 @dataclass(frozen=True)
@@ -242,6 +264,63 @@ def go1_mujoco_spec() -> Any:
     return spec
 
 
+def _add_imu_and_floor(spec: Any, imu_body: str) -> None:
+    import mujoco
+
+    spec.worldbody.add_geom(
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0.0, 0.0, 0.05],
+        contype=0,
+        conaffinity=1,
+        friction=[1.0, 0.005, 0.0001],
+    )
+    spec.body(imu_body).add_site(name="imu")
+    for name, kind in (
+        ("gyro", mujoco.mjtSensor.mjSENS_GYRO),
+        ("acc", mujoco.mjtSensor.mjSENS_ACCELEROMETER),
+    ):
+        spec.add_sensor(name=name, type=kind, objtype=mujoco.mjtObj.mjOBJ_SITE, objname="imu")
+
+
+def talos_mujoco_spec() -> Any:
+    """TALOS (example-robot-data's ``talos_reduced.urdf``, 32 joints) compiled by MuJoCo:
+    every ``<visual>``/``<collision>`` removed (meshes), a box sole (half-sizes ``SOLE``,
+    friction 1) under each of :data:`TALOS_FEET`, the only geoms that touch the floor; a
+    free joint on ``base_link``, an unlimited torque motor and armature 0.05 kg·m² per
+    joint, an IMU site at ``base_link``'s origin (TALOS's ``imu_link`` moves with the torso).
+    Returns the ``mujoco.MjSpec``."""
+    import mujoco
+
+    root = ET.parse(resolve_source("talos")[0]).getroot()
+    for link in root.iter("link"):
+        for tag in ("visual", "collision"):
+            for element in link.findall(tag):
+                link.remove(element)
+    for unused in root.findall("transmission") + root.findall("gazebo"):
+        root.remove(unused)
+    extra = ET.SubElement(root, "mujoco")
+    ET.SubElement(extra, "compiler", discardvisual="true", fusestatic="false", angle="radian")
+    spec = mujoco.MjSpec.from_string(ET.tostring(root, encoding="unicode"))
+    spec.option.timestep = 1e-3
+    spec.body("base_link").add_freejoint(name="root")
+    for foot in TALOS_FEET:  # the sole frame is the sole's centre, on the floor
+        spec.body(foot).add_geom(
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=list(SOLE),
+            pos=[0.0, 0.0, SOLE[2]],
+            contype=1,
+            conaffinity=0,
+            condim=3,
+        )
+    _add_imu_and_floor(spec, "base_link")
+    for joint in spec.joints:
+        if joint.type == mujoco.mjtJoint.mjJNT_HINGE:
+            joint.armature = 0.05
+            spec.add_actuator(name=joint.name, target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+    return spec
+
+
 # --------------------------------------------------------------- references
 class _Gait:
     """Foot targets in the base frame and base targets for a motion (module docstring)."""
@@ -340,6 +419,18 @@ def _inverse_kinematics(legs: FootKinematics, targets: Vector, q0: Vector) -> Ve
 
 
 # --------------------------------------------------------------- simulation
+def _check_arguments(
+    motion: str, motions: tuple[str, ...], duration: float, rate: float, substeps: int
+) -> None:
+    if motion not in motions:
+        raise UnknownNameError(f"unknown motion {motion!r}; one of {', '.join(motions)}")
+    if not (duration > 0 and rate > 0 and isinstance(substeps, int) and substeps >= 1):
+        raise ConfigurationError(
+            f"duration ({duration!r} s) and rate ({rate!r} Hz) must be > 0 and substeps "
+            f"({substeps!r}) an integer ≥ 1"
+        )
+
+
 def simulate_legged(
     motion: str,
     duration: float,
@@ -367,40 +458,139 @@ def simulate_legged(
         SimulationFailed: the robot fell (base below 12 cm) or MuJoCo's state became
             non-finite.
     """
-    import mujoco
-
-    if motion not in LEGGED_MOTIONS:
-        raise UnknownNameError(f"unknown motion {motion!r}; one of {', '.join(LEGGED_MOTIONS)}")
-    if not (duration > 0 and rate > 0 and isinstance(substeps, int) and substeps >= 1):
-        raise ConfigurationError(
-            f"duration ({duration!r} s) and rate ({rate!r} Hz) must be > 0 and substeps "
-            f"({substeps!r}) an integer ≥ 1"
-        )
-    noise = noise if noise is not None else LeggedNoise()
+    _check_arguments(motion, LEGGED_MOTIONS, duration, rate, substeps)
     robot = robot if robot is not None else load("go1")
     legs = FootKinematics(robot, GO1_FEET)
-    joints = tuple(j.name for j in robot.joints[1:])
     spec = go1_mujoco_spec()
     spec.option.timestep = 1.0 / (rate * substeps)
     mj = spec.compile()
-    data = mujoco.MjData(mj)
-    qadr = np.array([mj.joint(j).qposadr[0] for j in joints])
-    vadr = np.array([mj.joint(j).dofadr[0] for j in joints])
-    act = np.array([mj.actuator(j).id for j in joints])
-    limit = mj.actuator_ctrlrange[act, 1]
-    foot_bodies = [mj.body(f).id for f in GO1_FEET]
-    floor = mj.geom("floor").id
-    imu_gyro = mj.sensor("gyro").adr[0]
-    imu_acc = mj.sensor("acc").adr[0]
-
     weight = 9.81 * float(np.sum(mj.body_mass))  # [N]
     stance = np.tile(STANCE, 4)
     nominal = legs.positions(stance)
     height = FOOT_RADIUS - float(nominal[:, 2].mean()) + 1e-3
     gait = _Gait(motion, nominal, height)
-    data.qpos[:3] = (0.0, 0.0, height)
+    first = round(-SETTLE * rate)
+    memory = {"q_ref": stance.copy(), "q_prev": stance.copy()}
+
+    def reference(k: int, t: float) -> tuple[Vector, Vector, Vector]:
+        targets, down, up = gait.feet(t)
+        q_ref = _inverse_kinematics(legs, targets, memory["q_ref"])
+        # the weight shared by the feet meant to be down: τ = −Σ J_jᵀ f_j (virtual model)
+        _, jac = legs.positions_and_jacobians(q_ref)
+        share = weight / max(int(down.sum()), 1)
+        tau_ff = -share * np.einsum("jki,k->i", jac[down], up)
+        dq_ref = (q_ref - memory["q_prev"]) * rate if k > first else np.zeros(12)
+        memory["q_ref"], memory["q_prev"] = q_ref, q_ref.copy()
+        return q_ref, dq_ref, tau_ff
+
+    machine = _Machine("go1", mj, robot, GO1_FEET, stance, height, KP, KD, 0.12)
+    return _record(machine, motion, reference, duration, seed, rate, substeps, noise)
+
+
+def simulate_humanoid(
+    motion: str,
+    duration: float,
+    *,
+    seed: int = 0,
+    rate: float = 500.0,
+    substeps: int = 2,
+    noise: LeggedNoise | None = None,
+    robot: Robot | None = None,
+) -> LeggedRun:
+    """Simulate TALOS (:func:`talos_mujoco_spec`) standing on both feet in MuJoCo, sampled as
+    :func:`simulate_legged` samples go1 (same columns, sensors and noise).
+
+    Controller: the joint PD law of the module docstring (``TALOS_KP``, ``TALOS_KD``, no
+    torque limit) around the half-sitting :data:`TALOS_STANCE`, with the feed-forward
+    ``τ_ff`` = the arms', torso's and head's gravity torques at the reference
+    (``pin.computeGeneralizedGravity``) and, for the legs, half the weight on each sole
+    (``−Σ_j J_jᵀ (m g / 2) e_z``).  ``"stand"`` holds the stance; ``"sway"`` moves both
+    legs alike, the feet staying flat: a squat (hip pitch −a, knee +2a, ankle pitch −a,
+    a = 0.08 sin(2π 0.5 t) rad: the base ±2.5 cm up and down) and a side sway (hip roll +b,
+    ankle roll −b, b = 0.05 sin(2π 0.3 t) rad: ±5 cm sideways), ramped in over 0.5 s.
+
+    Raises:
+        UnknownNameError: an unknown motion (one of :data:`HUMANOID_MOTIONS`).
+        ConfigurationError: a non-positive duration, rate or substeps.
+        SimulationFailed: it fell (base below 0.6 m) or MuJoCo's state became non-finite.
+    """
+    _check_arguments(motion, HUMANOID_MOTIONS, duration, rate, substeps)
+    robot = robot if robot is not None else load("talos")
+    legs = FootKinematics(robot, TALOS_FEET)
+    spec = talos_mujoco_spec()
+    spec.option.timestep = 1.0 / (rate * substeps)
+    mj = spec.compile()
+    stance = np.array(TALOS_STANCE)
+    weight = 9.81 * float(np.sum(mj.body_mass))  # [N]
+    gravity = robot.gravity(np.concatenate([[0, 0, 0, 0, 0, 0, 1.0], stance]))[6:]
+    height = -float(legs.positions(stance)[:, 2].mean()) + 1e-3
+    first = round(-SETTLE * rate)
+    memory = {"q_prev": stance.copy()}
+
+    def reference(k: int, t: float) -> tuple[Vector, Vector, Vector]:
+        q_ref = stance.copy()
+        if motion == "sway" and t > 0:
+            s = min(1.0, t / 0.5)
+            a = 0.08 * s * math.sin(2 * math.pi * 0.5 * t)  # squat
+            b = 0.05 * s * math.sin(2 * math.pi * 0.3 * t)  # side sway
+            for o in (0, 6):  # left leg, right leg: hip yaw, roll, pitch, knee, ankle pitch, roll
+                q_ref[o + 1 : o + 6] += (b, -a, 2 * a, -a, -b)
+        _, jac = legs.positions_and_jacobians(q_ref)
+        tau_ff = gravity.copy()
+        tau_ff[:12] = -0.5 * weight * np.einsum("jki,k->i", jac, (0.0, 0.0, 1.0))[:12]
+        dq_ref = (q_ref - memory["q_prev"]) * rate if k > first else np.zeros(stance.size)
+        memory["q_prev"] = q_ref
+        return q_ref, dq_ref, tau_ff
+
+    machine = _Machine("talos", mj, robot, TALOS_FEET, stance, height, TALOS_KP, TALOS_KD, 0.6)
+    return _record(machine, motion, reference, duration, seed, rate, substeps, noise)
+
+
+@dataclass(frozen=True)
+class _Machine:
+    """A compiled MuJoCo model and what :func:`_record` needs of it."""
+
+    name: str
+    mj: Any
+    robot: Robot
+    feet: tuple[str, ...]
+    stance: Vector  # joint angles at the start [rad]
+    height: float  # base height at the start [m]
+    kp: float  # [N·m/rad]
+    kd: float  # [N·m·s/rad]
+    fallen: float  # base height below which it fell [m]
+
+
+def _record(
+    machine: _Machine,
+    motion: str,
+    reference: Any,
+    duration: float,
+    seed: int,
+    rate: float,
+    substeps: int,
+    noise: LeggedNoise | None,
+) -> LeggedRun:
+    """Run ``reference(k, t) -> (q_ref, q̇_ref, τ_ff)`` through the joint PD law on ``machine``
+    and sample the sensors and the truth (module docstring)."""
+    import mujoco
+
+    noise = noise if noise is not None else LeggedNoise()
+    mj, robot, feet = machine.mj, machine.robot, machine.feet
+    name = machine.name
+    data = mujoco.MjData(mj)
+    joints = tuple(j.name for j in robot.joints[1:])
+    qadr = np.array([mj.joint(j).qposadr[0] for j in joints])
+    vadr = np.array([mj.joint(j).dofadr[0] for j in joints])
+    act = np.array([mj.actuator(j).id for j in joints])
+    limit = np.where(mj.actuator_ctrllimited[act] > 0, mj.actuator_ctrlrange[act, 1], np.inf)
+    foot_bodies = [mj.body(f).id for f in feet]
+    floor = mj.geom("floor").id
+    imu_gyro = mj.sensor("gyro").adr[0]
+    imu_acc = mj.sensor("acc").adr[0]
+    data.qpos[:3] = (0.0, 0.0, machine.height)
     data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
-    data.qpos[qadr] = stance
+    data.qpos[qadr] = machine.stance
     mujoco.mj_forward(mj, data)
 
     h = mj.opt.timestep
@@ -410,30 +600,24 @@ def simulate_legged(
     bias = np.concatenate([rng.normal(0.0, noise.gyro_bias, 3), rng.normal(0.0, noise.acc_bias, 3)])
     walk = np.repeat([noise.gyro_walk, noise.acc_walk], 3) * math.sqrt(1.0 / rate)
     white = np.repeat([noise.gyro, noise.acc], 3) * math.sqrt(rate)
+    nj, nf = len(joints), len(feet)
 
     cols: dict[str, Vector] = {}
     rows: list[Vector] = []
-    q_ref = stance.copy()
-    q_prev = stance.copy()
     for k in range(-settle, n):
         t = k / rate
-        targets, down, up = gait.feet(t)
-        q_ref = _inverse_kinematics(legs, targets, q_ref)
-        # the weight shared by the feet meant to be down: τ = −Σ J_jᵀ f_j (virtual model)
-        _, jac = legs.positions_and_jacobians(q_ref)
-        share = weight / max(int(down.sum()), 1)
-        tau_ff = -share * np.einsum("jki,k->i", jac[down], up)
-        dq_ref = (q_ref - q_prev) * rate if k > -settle else np.zeros(12)
-        q_prev = q_ref.copy()
+        q_ref, dq_ref, tau_ff = reference(k, t)
         qpos, qvel = data.qpos.copy(), data.qvel.copy()
         imu = np.zeros(6)
-        forces: Vector = np.zeros(4)
+        forces: Vector = np.zeros(nf)
         qacc_mean = np.zeros(3)
         for s in range(substeps):
             q_j = data.qpos[qadr]
             dq_j = data.qvel[vadr]
             data.ctrl[act] = np.clip(
-                tau_ff + KP * (q_ref + dq_ref * s * h - q_j) + KD * (dq_ref - dq_j), -limit, limit
+                tau_ff + machine.kp * (q_ref + dq_ref * s * h - q_j) + machine.kd * (dq_ref - dq_j),
+                -limit,
+                limit,
             )
             mujoco.mj_step(mj, data)  # sensors and contacts: of the state before this step
             imu[:3] += data.sensordata[imu_gyro : imu_gyro + 3]
@@ -442,10 +626,12 @@ def simulate_legged(
             if s == 0:
                 forces = _foot_forces(mujoco, mj, data, foot_bodies, floor)
         if not np.all(np.isfinite(data.qpos)):
-            raise SimulationFailed(f"go1 {motion}: MuJoCo's state is not finite at t = {t:.3f} s")
-        if qpos[2] < 0.12:
             raise SimulationFailed(
-                f"go1 {motion}: fell (base at {qpos[2]:.3f} m) at t = {t:.3f} s; seed {seed}"
+                f"{name} {motion}: MuJoCo's state is not finite at t = {t:.3f} s"
+            )
+        if qpos[2] < machine.fallen:
+            raise SimulationFailed(
+                f"{name} {motion}: fell (base at {qpos[2]:.3f} m) at t = {t:.3f} s; seed {seed}"
             )
         imu /= substeps
         qacc_mean /= substeps
@@ -460,8 +646,8 @@ def simulate_legged(
             [
                 [t],
                 reading,
-                forces + noise.force * rng.normal(size=4),
-                qpos[qadr] + noise.encoder * rng.normal(size=12),
+                forces + noise.force * rng.normal(size=nf),
+                qpos[qadr] + noise.encoder * rng.normal(size=nj),
                 qpos[:3],
                 quat_wxyz[[1, 2, 3, 0]],
                 R.T @ v_world,
@@ -475,11 +661,22 @@ def simulate_legged(
             ]
         )
         rows.append(row)
-    names = (
+    names = _column_names(feet, joints)
+    table = np.array(rows)
+    for i, column_name in enumerate(names):
+        column = np.ascontiguousarray(table[:, i])
+        column.setflags(write=False)
+        cols[column_name] = column
+    return LeggedRun(motion, seed, float(rate), feet, joints, cols, noise)
+
+
+def _column_names(feet: tuple[str, ...], joints: tuple[str, ...]) -> list[str]:
+    """The columns of a :class:`LeggedRun`, in order (module docstring)."""
+    return (
         ["t"]
         + [f"imu.gyro.{a}" for a in "xyz"]
         + [f"imu.acc.{a}" for a in "xyz"]
-        + [f"force.{f}" for f in GO1_FEET]
+        + [f"force.{f}" for f in feet]
         + [f"q.{j}" for j in joints]
         + [f"truth.p.{a}" for a in "xyz"]
         + [f"truth.quat.{a}" for a in "xyzw"]
@@ -491,14 +688,8 @@ def simulate_legged(
         + [f"truth.dq.{j}" for j in joints]
         + [f"truth.bias.gyro.{a}" for a in "xyz"]
         + [f"truth.bias.acc.{a}" for a in "xyz"]
-        + [f"contact.{f}" for f in GO1_FEET]
+        + [f"contact.{f}" for f in feet]
     )
-    table = np.array(rows)
-    for i, name in enumerate(names):
-        column = np.ascontiguousarray(table[:, i])
-        column.setflags(write=False)
-        cols[name] = column
-    return LeggedRun(motion, seed, float(rate), GO1_FEET, joints, cols, noise)
 
 
 def _rotation_wxyz(quat: Vector) -> Vector:

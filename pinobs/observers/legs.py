@@ -1,0 +1,618 @@
+"""What the contact-aided filters share: legs, contacts, options, state, inputs and outputs.
+
+:class:`pinobs.observers.inekf.InvariantEKF` and
+:class:`pinobs.observers.qekf.QuaternionEKF` estimate the same state from the
+same inputs and differ only in their error (right-invariant or additive with a
+local attitude error).  Everything else lives here, once:
+
+* the legs (:class:`ContactKinematics`, :func:`contact_kinematics`) and the IMU's
+  placement ``(R_bi, r_bi)`` in the base (root joint) frame;
+* the options (:class:`InEKFGains`, :class:`InEKFPrior`) and the noise they give:
+  the process densities ``Q_c = diag(σ_g², σ_a², 0, σ_c² …, σ_bg², σ_ba²)``
+  (:func:`noise_densities`) and a foot measurement's covariance in the IMU frame
+  ``J Σ_q Jᵀ + σ_k² I`` (:func:`foot_noise`, Hartley et al. IJRR 2020, the
+  forward-kinematics measurement; Bloesch et al. RSS 2012 likewise);
+* the state (:class:`LegState`), the input checks of ``reset``/``update``
+  (:class:`LeggedSetup`), a foot's marginalisation at lift-off
+  (:func:`remove_feet`), and the output (:class:`InEKFEstimate`), converted from
+  the IMU frame to the root joint (Pinocchio's ``q[0:7]``, ``v[0:6]``)::
+
+      R_b = R R_biᵀ,  p_b = p − R_b r_bi,  ω_b = R_bi (ω̃ − b̂_g),  v_b = R_bᵀ v − ω_b × r_bi
+
+Each filter holds a :class:`LeggedSetup` (composition) and keeps its mathematics.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from typing import Any, NamedTuple, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from pinobs.errors import (
+    ConfigurationError,
+    ContactWarning,
+    DimensionError,
+    GainError,
+    NotResetError,
+    ObserverDiverged,
+    TimestampError,
+    UnknownNameError,
+)
+from pinobs.model import FootKinematics, Robot
+from pinobs.model.robot import read_only
+from pinobs.observers.base import Vector
+from pinobs.tolerances import NO_CONTACT_WARN_TIME, QUATERNION_NORM_TOL, TIME_EPS
+
+__all__ = [
+    "ContactKinematics",
+    "InEKFEstimate",
+    "InEKFGains",
+    "InEKFPrior",
+    "LegState",
+    "LeggedSetup",
+    "ResetInputs",
+    "UpdateInputs",
+    "check_contacts",
+    "check_time",
+    "contact_kinematics",
+    "foot_noise",
+    "noise_densities",
+    "quaternion_to_rotation",
+    "remove_feet",
+    "replace_state",
+    "rotation_to_quaternion",
+]
+
+_I3 = np.eye(3)
+
+
+def rotation_to_quaternion(R: Vector) -> Vector:
+    """Unit quaternion ``(x, y, z, w)`` of a rotation matrix, ``w ≥ 0`` (SciPy's convention).
+
+    Shepperd's method (J. Guidance Control 1978): from the largest of ``4w² = 1 + tr R``
+    and ``4x² = 1 + 2R₀₀ − tr R`` (…), so no division by a small number; 20× cheaper
+    than SciPy's ``Rotation.from_matrix`` per call (which cost 40 % of an update)."""
+    r = R.tolist()
+    (a, b, c), (d, e, f), (g, h, i) = r
+    tr = a + e + i
+    if tr >= a and tr >= e and tr >= i:
+        w = 0.5 * math.sqrt(max(1.0 + tr, 0.0))
+        k = 0.25 / w
+        q = [(h - f) * k, (c - g) * k, (d - b) * k, w]
+    elif a >= e and a >= i:
+        x = 0.5 * math.sqrt(max(1.0 + a - e - i, 0.0))
+        k = 0.25 / x
+        q = [x, (b + d) * k, (c + g) * k, (h - f) * k]
+    elif e >= i:
+        y = 0.5 * math.sqrt(max(1.0 - a + e - i, 0.0))
+        k = 0.25 / y
+        q = [(b + d) * k, y, (f + h) * k, (c - g) * k]
+    else:
+        z = 0.5 * math.sqrt(max(1.0 - a - e + i, 0.0))
+        k = 0.25 / z
+        q = [(c + g) * k, (f + h) * k, z, (d - b) * k]
+    out = np.array(q)
+    out /= math.sqrt(float(out @ out))
+    return -out if out[3] < 0 else out
+
+
+def quaternion_to_rotation(quat: Vector) -> Vector:
+    """Rotation matrix of a unit quaternion ``(x, y, z, w)`` (SciPy's)."""
+    from scipy.spatial.transform import Rotation
+
+    return np.asarray(Rotation.from_quat(quat).as_matrix())
+
+
+def _cross(a: Vector, b: Vector) -> Vector:
+    """``a × b`` of two 3-vectors (``np.cross`` costs 10× more on 3-vectors)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
+
+
+# ------------------------------------------------------------------- checks
+def check_time(t: Any, previous: float | None) -> float:
+    """``t`` as a finite float after ``previous`` (by more than TIME_EPS), or a TimestampError."""
+    try:
+        t = float(t)
+    except (TypeError, ValueError) as exc:
+        raise TimestampError(f"t must be a number, got {t!r}") from exc
+    if not math.isfinite(t):
+        raise TimestampError(f"t must be finite, got {t!r}")
+    if previous is not None and t <= previous + TIME_EPS:
+        raise TimestampError(f"t = {t!r} is not after the previous update's t = {previous!r}")
+    return t
+
+
+def check_contacts(feet: tuple[str, ...], contacts: Any) -> list[bool]:
+    """Contact flags in the order of ``feet`` from a mapping (every foot named) or a sequence
+    of bools; UnknownNameError or DimensionError naming what is wrong."""
+    if isinstance(contacts, Mapping):
+        unknown = [k for k in contacts if k not in feet]
+        if unknown:
+            raise UnknownNameError(f"contacts names {unknown}, not among the feet {list(feet)}")
+        missing = [f for f in feet if f not in contacts]
+        if missing:
+            raise UnknownNameError(
+                f"contacts has no entry for {missing}: give a bool for each of {list(feet)}"
+            )
+        values = [contacts[f] for f in feet]
+    elif isinstance(contacts, (str, bytes)) or not isinstance(contacts, (Sequence, np.ndarray)):
+        raise DimensionError(
+            f"contacts must map each of {list(feet)} to a bool (or be a sequence of "
+            f"{len(feet)} bools), got {contacts!r}"
+        )
+    else:
+        values = list(contacts)
+        if len(values) != len(feet):
+            raise DimensionError(
+                f"contacts has {len(values)} entries, expected {len(feet)} "
+                f"(one bool per foot: {list(feet)})"
+            )
+    out = []
+    for name, value in zip(feet, values, strict=True):
+        if isinstance(value, (bool, np.bool_)):
+            out.append(bool(value))
+        elif isinstance(value, (int, np.integer)) and value in (0, 1):
+            out.append(bool(value))
+        else:
+            raise DimensionError(f"contacts[{name!r}] must be a bool, got {value!r}")
+    return out
+
+
+# ----------------------------------------------------------------- kinematics
+@runtime_checkable
+class ContactKinematics(Protocol):
+    """What the filter needs of the legs: foot positions in the base frame and their Jacobians.
+
+    :class:`pinobs.model.FootKinematics` is one (from a Pinocchio model); tests
+    use synthetic ones.
+    """
+
+    feet: tuple[str, ...]
+    nq_joints: int
+    nv_joints: int
+
+    def positions_and_jacobians(self, q_joints: Vector) -> tuple[Vector, Vector]:
+        """``(h, J)``: shapes ``(K, 3)`` [m] and ``(K, 3, nv_joints)`` [m/rad]."""
+        ...
+
+
+def contact_kinematics(
+    robot: Robot | ContactKinematics, feet: Sequence[str] | None, imu_frame: str | None
+) -> ContactKinematics:
+    """The legs a contact-aided filter measures: :class:`pinobs.model.FootKinematics` of a
+    robot's ``feet`` (in its ``imu_frame``), or a given :class:`ContactKinematics`.
+
+    Raises:
+        UnknownNameError: a robot without ``feet``, ``feet`` that differ from the
+            kinematics' own, or ``imu_frame`` with a :class:`ContactKinematics`.
+        TypeError: neither a robot nor a :class:`ContactKinematics`.
+    """
+    if isinstance(robot, Robot):
+        if feet is None:
+            raise UnknownNameError(
+                f"{robot.name}: give the foot frame names (feet=[...]) to measure"
+            )
+        return FootKinematics(robot, feet, imu_frame=imu_frame)
+    elif isinstance(robot, ContactKinematics):
+        if imu_frame is not None:
+            raise UnknownNameError(
+                "imu_frame is for a robot; a ContactKinematics gives imu_placement itself"
+            )
+        if feet is not None and tuple(feet) != tuple(robot.feet):
+            raise UnknownNameError(
+                f"feet={list(feet)} differs from the kinematics' feet {list(robot.feet)}"
+            )
+        return robot
+    else:
+        raise TypeError(
+            f"robot must be a pinobs.Robot or a ContactKinematics, got {type(robot).__name__}"
+        )
+
+
+# ------------------------------------------------------------------- options
+@dataclass(frozen=True)
+class InEKFGains:
+    """Noise levels of the contact-aided filters (``Q_c`` of the process, ``N`` of a foot).
+
+    Densities are of continuous white noise (σ of a sample at rate f is density·√f).
+
+    Attributes:
+        gyro: gyro noise density [rad/s/√Hz].
+        accel: accelerometer noise density [m/s²/√Hz].
+        gyro_bias: gyro bias random walk [rad/s²/√Hz].
+        accel_bias: accelerometer bias random walk [m/s³/√Hz].
+        contact: foot velocity while in contact (slip) [m/s/√Hz].
+        joint: joint encoder noise, σ per sample [rad].
+        kinematics: foot position model error (foot radius, link lengths), σ per sample [m].
+    """
+
+    gyro: float = 1e-2
+    accel: float = 1e-1
+    gyro_bias: float = 1e-5
+    accel_bias: float = 1e-4
+    contact: float = 1e-1
+    joint: float = 1e-3
+    kinematics: float = 1e-3
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise GainError(f"InEKFGains.{f.name} must be a finite number ≥ 0, got {value!r}")
+        if self.joint == 0 and self.kinematics == 0:
+            raise GainError(
+                "InEKFGains.joint and InEKFGains.kinematics are both 0: the foot measurement "
+                "would be exact and its innovation covariance singular; make one > 0"
+            )
+
+
+@dataclass(frozen=True)
+class InEKFPrior:
+    """Initial uncertainty (standard deviations at ``reset``) of the IMU frame's attitude,
+    velocity (in its own frame, as ``reset`` takes it) and world position and of the
+    biases, independent of each other.
+
+    Attributes:
+        attitude: orientation [rad] (per axis).
+        velocity: velocity [m/s].
+        position: position in the world [m] (the same wherever the world's origin is).
+        gyro_bias: gyro bias [rad/s].
+        accel_bias: accelerometer bias [m/s²].
+    """
+
+    attitude: float = 0.1
+    velocity: float = 0.5
+    position: float = 0.1
+    gyro_bias: float = 1e-2
+    accel_bias: float = 1e-1
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise GainError(f"InEKFPrior.{f.name} must be a finite number > 0, got {value!r}")
+
+    def covariance(self) -> Vector:
+        """``diag(σ_θ², σ_v², σ_p², σ_bg², σ_ba²)`` (each thrice), 15 square."""
+        return np.diag(
+            np.concatenate(
+                [
+                    np.full(3, self.attitude**2),
+                    np.full(3, self.velocity**2),
+                    np.full(3, self.position**2),
+                    np.full(3, self.gyro_bias**2),
+                    np.full(3, self.accel_bias**2),
+                ]
+            )
+        )
+
+
+@functools.lru_cache(maxsize=64)
+def noise_densities(gains: InEKFGains, n_contacts: int) -> Vector:
+    """The diagonal of ``Q_c`` in the order of the filters' error
+    ``(R, v, p, d_1 … d_K, b_g, b_a)``, read-only."""
+    out = np.concatenate(
+        [
+            np.full(3, gains.gyro**2),
+            np.full(3, gains.accel**2),
+            np.zeros(3),
+            np.full(3 * n_contacts, gains.contact**2),
+            np.full(3, gains.gyro_bias**2),
+            np.full(3, gains.accel_bias**2),
+        ]
+    )
+    out.setflags(write=False)
+    return out
+
+
+def foot_noise(gains: InEKFGains, jac: Vector) -> Vector:
+    """``J Σ_q Jᵀ + σ_k² I`` in the IMU frame, for one ``J`` (3, n) or a stack (m, 3, n)."""
+    return (gains.joint**2) * (jac @ np.swapaxes(jac, -1, -2)) + (gains.kinematics**2) * _I3
+
+
+# ---------------------------------------------------------------- state, output
+@dataclass(frozen=True)
+class LegState:
+    """A contact-aided filter's state (immutable).
+
+    Attributes:
+        t: time [s].
+        R: world from IMU rotation.
+        x: rows ``v, p, d_1 … d_K`` (world frame) [m/s, m], shape ``(2 + K, 3)``.
+        feet: index (into the kinematics' feet) of each ``d_j``, in state order.
+        bias: ``(b_g, b_a)`` [rad/s, m/s²].
+        P: covariance of the filter's error ``(R, v, p, d_1 … d_K, b_g, b_a)``,
+            ``9 + 3K + 6`` square (right-invariant for the invariant EKF, additive with a
+            local attitude error for the quaternion EKF).
+        imu: the held reading ``(ω̃, ã)``, or ``None`` before the first one.
+        last_contact: time a foot was last in contact (the reset time if none yet) [s].
+    """
+
+    t: float
+    R: Vector
+    x: Vector
+    feet: tuple[int, ...]
+    bias: Vector
+    P: Vector
+    imu: Vector | None
+    last_contact: float
+
+
+_STATE_FIELDS = tuple(f.name for f in fields(LegState))
+
+
+def replace_state(state: LegState, **changes: Any) -> LegState:
+    """``state`` with ``changes`` (``dataclasses.replace`` without its checks)."""
+    values = {name: getattr(state, name) for name in _STATE_FIELDS}
+    values.update(changes)
+    return LegState(**values)
+
+
+def remove_feet(state: LegState, slots: list[int]) -> LegState:
+    """Marginalise the feet at state positions ``slots``: delete their rows and columns."""
+    n = state.P.shape[0]
+    drop = np.concatenate([np.arange(9 + 3 * s, 12 + 3 * s) for s in slots])
+    keep = np.setdiff1d(np.arange(n), drop)
+    rows = np.setdiff1d(np.arange(state.x.shape[0]), [2 + s for s in slots])
+    feet = tuple(f for s, f in enumerate(state.feet) if s not in slots)
+    return replace_state(state, x=state.x[rows], P=state.P[np.ix_(keep, keep)], feet=feet)
+
+
+@dataclass(frozen=True)
+class InEKFEstimate:
+    """A contact-aided filter's estimate at one time (read-only arrays).
+
+    Attributes:
+        t: time [s].
+        q: free-flyer configuration ``(p, quaternion xyzw, joint positions as measured)``,
+            ``nq`` entries (``7 + nq_joints``).
+        v: ``(base linear velocity in the base frame, base angular velocity R_bi (ω̃ − b̂_g), joint
+            velocities)``, ``nv`` entries; the joint velocities are not estimated here: the
+            ones passed to ``update`` (``joint_velocities=``), else NaN.
+        rotation: world from base (root joint) rotation.
+        velocity_world: velocity of the base's origin in the world [m/s].
+        bias: ``(b_g, b_a)`` [rad/s, m/s²].
+        covariance: covariance of the filter's error (:attr:`LegState.P`) of the IMU
+            frame's state.
+        contacts: names of the feet in the state (in contact), in state order.
+        foot_positions: their world positions ``d_j``, shape ``(K, 3)`` [m].
+        nis: normalized innovation squared of this update's foot measurements (χ² with
+            3 × (feet measured) degrees of freedom for a consistent filter), or ``None``.
+    """
+
+    t: float
+    q: Vector
+    v: Vector
+    rotation: Vector
+    velocity_world: Vector
+    bias: Vector
+    covariance: Vector
+    contacts: tuple[str, ...]
+    foot_positions: Vector
+    nis: float | None = None
+
+
+# ------------------------------------------------------------------ the setup
+class ResetInputs(NamedTuple):
+    """``reset``'s arguments, checked: the IMU frame's ``R``, rows ``x = (v, p)`` in the world."""
+
+    t: float
+    q_joints: Vector
+    R: Vector
+    x: Vector
+    imu: Vector | None
+    flags: list[bool]
+    prior: InEKFPrior
+    bias: Vector
+
+
+class UpdateInputs(NamedTuple):
+    """``update``'s arguments, checked."""
+
+    t: float
+    q_joints: Vector
+    reading: Vector
+    flags: list[bool]
+    joint_velocities: Vector | None
+
+
+class LeggedSetup:
+    """The legs, options and input/output conversions of a contact-aided filter.
+
+    Args:
+        name: the filter's class name (in messages).
+        robot, feet, gains, gravity, imu_hold, imu_frame: as
+            :class:`pinobs.observers.inekf.InvariantEKF` takes them.
+
+    Raises:
+        GainError: an ``imu_hold`` that is neither ``"previous"`` nor ``"average"``, or
+            ``gains`` that are not an :class:`InEKFGains`.
+        UnknownNameError: a foot frame that is not in the model (names the frames).
+        UnsupportedRobotError: a robot without a free-flyer root joint.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        robot: Robot | ContactKinematics,
+        feet: Sequence[str] | None,
+        *,
+        gains: InEKFGains | None,
+        gravity: ArrayLike,
+        imu_hold: str,
+        imu_frame: str | None,
+    ) -> None:
+        if imu_hold not in ("previous", "average"):
+            raise GainError(f"imu_hold must be 'previous' or 'average', got {imu_hold!r}")
+        self.name = name
+        self.imu_hold = imu_hold
+        self.kinematics = contact_kinematics(robot, feet, imu_frame)
+        if gains is not None and not isinstance(gains, InEKFGains):
+            raise GainError(f"gains must be an InEKFGains, got {type(gains).__name__}")
+        self.gains = gains if gains is not None else InEKFGains()
+        self.gravity = Robot.check_vector(gravity, 3, what="gravity")
+        self.feet: tuple[str, ...] = tuple(self.kinematics.feet)
+        self.nq_joints = int(self.kinematics.nq_joints)
+        self.nv_joints = int(self.kinematics.nv_joints)
+        placement = getattr(self.kinematics, "imu_placement", None)
+        #: ``(R_bi, r_bi)``: the IMU's rotation and position in the base (root joint) frame.
+        self.imu_placement: tuple[Vector, Vector] = (
+            (np.eye(3), np.zeros(3))
+            if placement is None
+            else (np.asarray(placement[0], dtype=float), np.asarray(placement[1], dtype=float))
+        )
+
+    def not_reset(self) -> NotResetError:
+        """The error for a call before ``reset``."""
+        return NotResetError(f"{self.name}: call reset(t, q, ...) before update")
+
+    def reset_inputs(
+        self,
+        t: float,
+        q: ArrayLike,
+        v: ArrayLike | None,
+        gyro: ArrayLike | None,
+        acc: ArrayLike | None,
+        contacts: Mapping[str, bool] | Sequence[bool] | None,
+        prior: InEKFPrior | None,
+        bias: ArrayLike | None,
+    ) -> ResetInputs:
+        """Check ``reset``'s arguments (its docstring names the errors); the IMU's world
+        velocity is the base's plus ``ω × (IMU − base origin)``."""
+        t = check_time(t, None)
+        nq, nv = 7 + self.nq_joints, 6 + self.nv_joints
+        q = Robot.check_vector(q, nq, what="q")
+        quat_norm = float(np.linalg.norm(q[3:7]))
+        if abs(quat_norm - 1.0) > QUATERNION_NORM_TOL:
+            raise ConfigurationError(
+                f"q[3:7] = {q[3:7].tolist()} is not a unit quaternion (x, y, z, w) "
+                f"(norm {quat_norm:.6g}); its norm must be 1 within {QUATERNION_NORM_TOL:g}"
+            )
+        v = np.zeros(nv) if v is None else Robot.check_vector(v, nv, what="v")
+        imu = None
+        if (gyro is None) != (acc is None):
+            raise DimensionError("give both gyro and acc to reset, or neither")
+        if gyro is not None and acc is not None:
+            imu = np.concatenate(
+                [Robot.check_vector(gyro, 3, what="gyro"), Robot.check_vector(acc, 3, what="acc")]
+            )
+        flags = (
+            check_contacts(self.feet, contacts)
+            if contacts is not None
+            else [False] * len(self.feet)
+        )
+        prior = prior if prior is not None else InEKFPrior()
+        if not isinstance(prior, InEKFPrior):
+            raise GainError(f"prior must be an InEKFPrior, got {type(prior).__name__}")
+        theta = np.zeros(6) if bias is None else Robot.check_vector(bias, 6, what="bias")
+        R_bi, r_bi = self.imu_placement
+        R_b = quaternion_to_rotation(q[3:7])
+        x = np.array([R_b @ (v[:3] + np.cross(v[3:6], r_bi)), q[:3] + R_b @ r_bi])
+        return ResetInputs(t, q[7:], R_b @ R_bi, x, imu, flags, prior, theta)
+
+    def update_inputs(
+        self,
+        previous: float,
+        t: float,
+        q: ArrayLike,
+        gyro: ArrayLike,
+        acc: ArrayLike,
+        contacts: Mapping[str, bool] | Sequence[bool],
+        joint_velocities: ArrayLike | None,
+    ) -> UpdateInputs:
+        """Check ``update``'s arguments (its docstring names the errors)."""
+        t = check_time(t, previous)
+        q = np.asarray(q, dtype=float) if not isinstance(q, np.ndarray) else q
+        if q.shape == (7 + self.nq_joints,):
+            q_joints = Robot.check_vector(q, 7 + self.nq_joints, what="q")[7:]
+        else:
+            if q.shape != (self.nq_joints,):
+                raise DimensionError(
+                    f"q must have shape ({self.nq_joints},) (joint angles) or "
+                    f"({7 + self.nq_joints},) (a free-flyer q), got shape {q.shape}"
+                )
+            q_joints = Robot.check_vector(q, self.nq_joints, what="q")
+        reading = np.concatenate(
+            [Robot.check_vector(gyro, 3, what="gyro"), Robot.check_vector(acc, 3, what="acc")]
+        )
+        flags = check_contacts(self.feet, contacts)
+        dq = (
+            None
+            if joint_velocities is None
+            else Robot.check_vector(joint_velocities, self.nv_joints, what="joint_velocities")
+        )
+        return UpdateInputs(t, q_joints, reading, flags, dq)
+
+    def held(self, state: LegState, reading: Vector) -> Vector:
+        """The reading to propagate with over ``[state.t, t]`` (``imu_hold``)."""
+        held = state.imu if state.imu is not None else reading
+        if self.imu_hold == "average":
+            held = 0.5 * (held + reading)
+        return held
+
+    def legs(self, q_joints: Vector) -> tuple[Vector, Vector]:
+        """Foot positions in the IMU frame ``(K, 3)`` and their Jacobians ``(K, 3, nv_j)``."""
+        h, jac = self.kinematics.positions_and_jacobians(q_joints)
+        return np.asarray(h, dtype=float), np.asarray(jac, dtype=float)
+
+    def warn_without_contact(self, warned: bool, t: float, flags: list[bool], last: float) -> bool:
+        """Warn once when no foot has been in contact for NO_CONTACT_WARN_TIME; whether warned."""
+        if any(flags) or warned or t - last < NO_CONTACT_WARN_TIME:
+            return warned
+        warnings.warn(
+            f"{self.name}: no foot in contact for {t - last:.3g} s "
+            f"(since t = {last:.6g} s): the velocity is the IMU's open-loop "
+            f"integral and drifts; contacts must set each of {', '.join(self.feet)} "
+            "to True while it is on the ground",
+            ContactWarning,
+            stacklevel=3,
+        )
+        return True
+
+    def estimate(
+        self,
+        state: LegState,
+        last: InEKFEstimate | None,
+        q_joints: Vector,
+        dq: Vector | None,
+        nis: float | None,
+    ) -> InEKFEstimate:
+        """Check ``state`` is finite (else ObserverDiverged with ``last``), convert it to the
+        root joint (module docstring)."""
+        # a sum is finite iff every term is (or it overflowed: diverged as well)
+        total = float(state.R.sum() + state.x.sum() + state.P.sum() + state.bias.sum())
+        if not math.isfinite(total):
+            raise ObserverDiverged(
+                f"{self.name}: non-finite estimate at t = {state.t!r}",
+                t=state.t,
+                last_estimate=last,
+            )
+        R, x = state.R, state.x
+        omega = (state.imu[:3] if state.imu is not None else np.zeros(3)) - state.bias[:3]
+        R_bi, r_bi = self.imu_placement
+        R_b = R @ R_bi.T  # the base's rotation, position, angular and linear velocity
+        p_b = x[1] - R_b @ r_bi
+        w_b = R_bi @ omega
+        v_b = R_b.T @ x[0] - _cross(w_b, r_bi)
+        q = np.concatenate([p_b, rotation_to_quaternion(R_b), q_joints])
+        v = np.concatenate([v_b, w_b, np.full(self.nv_joints, np.nan) if dq is None else dq])
+        return InEKFEstimate(
+            t=state.t,
+            q=read_only(q),
+            v=read_only(v),
+            rotation=read_only(R_b),
+            velocity_world=read_only(R_b @ v_b),
+            bias=read_only(state.bias),
+            covariance=read_only(state.P),
+            contacts=tuple(self.feet[j] for j in state.feet),
+            foot_positions=read_only(x[2:]),
+            nis=nis,
+        )

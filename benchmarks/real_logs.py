@@ -47,7 +47,8 @@ model and on the identified one (``+id``), each also blended per joint with ``kf
 (``+nb``: ``never_behind=True``, :mod:`pinobs.observers.neverbehind`), ``ekf`` on the
 identified model with its learned torque offset and the blend (``ekf+auto+nb+id``:
 ``disturbance_psd="auto"``), and ``adaptive`` (nominal start), alone and blended with
-``kf`` (``adaptive+nb``); on the
+``kf`` (``adaptive+nb``), and started from the identified model (``adaptive+id``, not in
+``--quick``); on the
 UR10e also ``ekf`` and ``riemannian`` on the *pinobs+rotor* model (``+rotor``) and on
 the published one (``+pub``: rotor inertias as armature, ``Fv`` as damping, ``Fc`` as
 pinobs's tanh-smoothed Coulomb friction, no offset).  The reference's own noise floor:
@@ -253,6 +254,8 @@ def velocity_runs(
             run(f"{name}+{suffix}", name, rob)
     run("adaptive", "adaptive", robot)
     run("adaptive+nb", "adaptive", robot, nb)
+    if identified is not None and not quick:
+        run("adaptive+id", "adaptive", identified)  # learning on from the identified model
     out["seconds"] = float(sum(seconds.values()))
     out["seconds_by_run"] = seconds
     out["warnings"] = said
@@ -604,6 +607,7 @@ OBS_COLS = (
     "ekf+auto+nb+id",
     "adaptive",
     "adaptive+nb",
+    "adaptive+id",
     "ekf+rotor",
     "riemannian+rotor",
     "ekf+pub",

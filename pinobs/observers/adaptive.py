@@ -100,7 +100,7 @@ Three parts, each on code shared with the rest of pinobs:
    tested equal to the NumPy path that Lie-group robots take.
 
 Learning happens only from samples the base class has committed
-(:meth:`Observer._after_commit`), so a rejected update, a gated outlier or
+(:meth:`Observer.after_commit`), so a rejected update, a gated outlier or
 a prediction that is not kept (under a known latency) teaches nothing.
 
 4. **Off the loop** (``learning="background"``; issue 39).  Synchronous (the
@@ -605,7 +605,7 @@ def _blend_loops(
     s: Vector,
     blame: float,
 ) -> tuple[Vector, Vector, Vector, Vector]:
-    """The blend of :meth:`AdaptiveEKF._step` on vector joints, in loops (compiled by numba).
+    """The blend of :meth:`AdaptiveEKF.step` on vector joints, in loops (compiled by numba).
 
     Per coordinate ``i``: the scores ``score ← score + λ(e² − score)`` (if ``measured``),
     the filter ``b`` of the least score, ``v_kf = v_b``, ``P_kf = P_b,11``,
@@ -930,7 +930,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
                 theta[n : n + nj][cols] = 0.0
                 theta[n + nj : n + 2 * nj][cols] = 0.0
                 self._held_friction = held.astype(float)
-        self._replace_robot(lr.reg.with_parameters(theta, name=name))
+        self.replace_robot(lr.reg.with_parameters(theta, name=name))
         self._offset = lr.reg.offsets(lr.theta)
         state = self._set_regime(state, "learned")
         if state.d is None:
@@ -938,9 +938,9 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         return state._replace(d=np.zeros_like(state.d))  # the new model explains what d absorbed
 
     # ------------------------------------------------------------------ filter
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State:  # type: ignore[override]
+    def initial_state(self, q0: Vector, v0: Vector) -> _State:  # type: ignore[override]
         # a reset starts learning afresh from the nominal model
-        self._replace_robot(self._nominal.copy())
+        self.replace_robot(self._nominal.copy())
         self._learned = self._nominal
         self._held_friction = None
         self._learner = _Learner(self._nominal, **self._learn_options, worker=self._worker)  # type: ignore[arg-type]
@@ -949,7 +949,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         self.regime = "warmup"
         self.restarts, self._restarted = 0, False
         self._m_bar2 = np.diag(self._nominal.mass_matrix(q0)) ** 2
-        ekf = super()._initial_state(q0, v0)
+        ekf = super().initial_state(q0, v0)
         kf = self._bank.initial(q0, v0, self.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
@@ -962,22 +962,22 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         on paths already taken (NumPy's and the filters' first calls, their caches: the
         kernels are compiled or loaded when the observer is made, SciPy imported then too).
         UR5 in a loop paced at 1 kHz, first update 820–1065 µs without it, 295–406 µs with it
-        (median update 200 µs).  ``_step`` leaves ``state`` as it is; what a lost filter's
+        (median update 200 µs).  ``step`` leaves ``state`` as it is; what a lost filter's
         restart would change here is put back."""
         kept = (self.restarts, self._restarted, list(self._learner.rejected), self.regime)
         h = 1.0 / self.rate if self.rate else 1e-3
         with np.errstate(all="ignore"):
-            self._step(state, h, q0, np.zeros(self.robot.nv))
+            self.step(state, h, q0, np.zeros(self.robot.nv))
         self.restarts, self._restarted, rejected, regime = kept
         self._learner.rejected = deque(rejected, maxlen=_REJECTED_KEPT)
         if regime != self.regime:
             self._set_regime(state.ekf, regime)
 
-    def _restart_state(self, state: _State, q: Vector) -> _State:  # type: ignore[override]
+    def restart_state(self, state: _State, q: Vector) -> _State:  # type: ignore[override]
         """After a pause: the filter and the bank afresh at ``q`` (zero velocity), in the
         current regime; the learned model, offset and learner kept (a reset would relearn)."""
         zero = np.zeros(self.robot.nv)
-        ekf = self._set_regime(super()._initial_state(q, zero), self.regime)
+        ekf = self._set_regime(super().initial_state(q, zero), self.regime)
         kf = self._bank.initial(q, zero, self.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         return _State(ekf, kf, score, state.t, zero.copy(), q.copy(), zero.copy(), ekf.v, 0.0)
@@ -1016,32 +1016,32 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         v_mid = v + (0.5 * dt / state.dt_prev) * (v - state.v_prev) if state.dt_prev > 0 else v
         return tau + self._offset + self._held_friction * self._learned.friction_torque(v_mid)
 
-    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
+    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
         with np.errstate(over="ignore", invalid="ignore"):  # a lost filter is handled below
-            ekf = super()._step(state.ekf, dt, q_meas, self._torque(state, dt, tau))
+            ekf = super().step(state.ekf, dt, q_meas, self._torque(state, dt, tau))
         t = state.t + dt
         if self.blend and _lost(ekf):
             # the model-based filter is lost (a learned model that does not hold): restart it
             # on the model-free estimate, in the warm-up regime, rather than fail
             v_kf, _, dq_kf = self._model_free(state)
-            restart = super()._initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
+            restart = super().initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
             restart = self._set_regime(restart, "warmup")
             state = state._replace(ekf=restart, dt_prev=0.0)
             with np.errstate(over="ignore", invalid="ignore"):  # lost again: handled below
-                ekf = super()._step(restart, dt, q_meas, self._torque(state, dt, tau))
+                ekf = super().step(restart, dt, q_meas, self._torque(state, dt, tau))
             if _lost(ekf) and self._learned is not self._nominal:
                 # lost again at once: the learned model itself does not hold (a mass matrix
                 # not positive definite away from the configurations its solve checked, held
                 # friction stiff there: solo12 with friction, a Panda at hard stops raised
                 # ObserverDiverged); back to the nominal model, which the learner may replace
-                self._replace_robot(self._nominal.copy())
+                self.replace_robot(self._nominal.copy())
                 self._learned, self._held_friction = self._nominal, None
                 self._offset = np.zeros(self.robot.nv)
                 self._learner.rejected.append(
                     f"learned model dropped at t = {t:.6g} s (the filter restarted on it was "
                     "lost at once): back to the nominal model"
                 )
-                ekf = super()._step(restart, dt, q_meas, self._torque(state, dt, tau))
+                ekf = super().step(restart, dt, q_meas, self._torque(state, dt, tau))
             self._learner.rejected.append(f"model-based filter restarted at t = {t:.6g} s")
             self.restarts += 1
             # the blend's error variance of the lost filter overflowed with it: the restarted
@@ -1077,7 +1077,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         q = self.robot.integrate(ekf.q, (1.0 - w) * dq_kf)
         return new._replace(s=s, q=q, v=v)
 
-    def _after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
+    def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
         """Teach the learner the committed sample (with the torque held from it on, MATH §7);
         install a new model or leave the warm-up when a solve says so."""
         ekf = state.ekf
@@ -1107,10 +1107,10 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             ekf = self._set_regime(ekf, "learned" if lr.installs else "nominal")
         return state if ekf is state.ekf else state._replace(ekf=ekf)
 
-    def _innovation(self, state: _State) -> tuple[float | None, bool]:  # type: ignore[override]
+    def innovation(self, state: _State) -> tuple[float | None, bool]:  # type: ignore[override]
         return state.ekf.gate.nis, state.ekf.gate.gated
 
-    def _output(self, state: _State) -> tuple[Vector, Vector]:  # type: ignore[override]
+    def output(self, state: _State) -> tuple[Vector, Vector]:  # type: ignore[override]
         return state.q, state.v
 
     @property

@@ -8,8 +8,8 @@ with ``q_k``, then stores ``τ_k``.  ``reset(t0, q0, v0=None, tau0=None)``
 stores the first torque (zero if not given).
 
 A family implements only its mathematics, as pure functions of an immutable
-state: :meth:`Observer._initial_state`, :meth:`Observer._step` and
-:meth:`Observer._output`.  The base validates every input before anything
+state: :meth:`Observer.initial_state`, :meth:`Observer.step` and
+:meth:`Observer.output`.  The base validates every input before anything
 changes, checks the new estimate is finite, and commits the new state only
 then, so a rejected call leaves the observer exactly as it was.
 """
@@ -260,7 +260,7 @@ class GateState(NamedTuple):
     ``liegroup``, ``ii``; ``adaptive`` through its ``ekf``): a family computes its NIS
     ``eᵀ S⁻¹ e`` (its own ``e`` and ``S``) and calls :meth:`measured`, or :meth:`predicted`
     at a step without a sample; the base reads ``nis`` and ``gated`` of the committed
-    state (:meth:`Observer._innovation`: :attr:`Estimate.nis`, :meth:`Observer.consistency`).
+    state (:meth:`Observer.innovation`: :attr:`Estimate.nis`, :meth:`Observer.consistency`).
 
     Attributes:
         nis: normalized innovation squared of the last measurement (``None``: none).
@@ -392,7 +392,7 @@ class Observer(ABC, Generic[State]):
     ``T`` with the held torque (as an update without a sample at every period); a pause
     longer than :data:`~pinobs.tolerances.PAUSE_RESTART` s and
     :data:`~pinobs.tolerances.MAX_GAP_PERIODS` ``T`` restarts the state at the next sample
-    (:meth:`_restart_state`: measured position, zero velocity, what the family learned
+    (:meth:`restart_state`: measured position, zero velocity, what the family learned
     kept), listed in :attr:`pauses`: the log reader's policy (:mod:`pinobs.io.stream`),
     with a restart threshold in seconds, because restarting from zero velocity costs more
     than it saves below ~0.1 s (:meth:`_after_pause`).
@@ -477,7 +477,7 @@ class Observer(ABC, Generic[State]):
             else self.robot.check_vector(v0, self.robot.nv, what="v0")
         )
         tau = self._check_tau(tau0, what="tau0")
-        state = self._initial_state(q, v)
+        state = self.initial_state(q, v)
         estimate = self._make_estimate(t, state)
         self._state, self._t, self._tau, self._last = state, t, tau, estimate
         self._ts, self._torques = t, [(t, tau)]
@@ -573,7 +573,7 @@ class Observer(ABC, Generic[State]):
         else:  # the state is at t_new: only the torque applied from t_new on matters
             self._torques, held = [(t_new, tau_new)], tau_new
         used = q if t_state > ts_before + TIME_EPS and not estimate.gated else None
-        self._state = self._after_commit(state, t_state, used, held)
+        self._state = self.after_commit(state, t_state, used, held)
         if estimate.nis is not None:
             self._nis.append(estimate.nis)
             self._gated += estimate.gated
@@ -591,7 +591,7 @@ class Observer(ABC, Generic[State]):
         return self._period_s
 
     def _stepped(self, state: State, dt: float, q: Vector | None, tau: Vector) -> State:
-        """:meth:`_step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
+        """:meth:`step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
         than :data:`GAP_PERIODS` periods (at most ``PAUSE_RESTART`` worth of them: a longer
         step without a sample is a prediction in the dark, restarted at the next sample;
         :func:`gap_substeps`, the log reader's count too).
@@ -601,14 +601,14 @@ class Observer(ABC, Generic[State]):
         span = math.inf if period is None else max(PAUSE_RESTART, MAX_GAP_PERIODS * period)
         n = gap_substeps(dt, period, span=span)
         if n == 1:
-            return self._step(state, dt, q, tau)
+            return self.step(state, dt, q, tau)
         for _ in range(n - 1):
-            state = self._step(state, dt / n, None, tau)
-        return self._step(state, dt / n, q, tau)
+            state = self.step(state, dt / n, None, tau)
+        return self.step(state, dt / n, q, tau)
 
     def _after_pause(self, t_new: float, q: Vector, dt: float) -> tuple[State, float, Estimate]:
         """After a pause: the state afresh at the sample (its position, zero velocity; what the
-        family learned is kept: :meth:`_restart_state`), ``(state, its time, estimate at
+        family learned is kept: :meth:`restart_state`), ``(state, its time, estimate at
         t_new)``.  Measured on a UR5 log (1 kHz, σ = 1e-4 rad, PD input), ``ekf``'s error at
         the first sample / 50 ms / RMS over 1 s after a pause: 0.2 s: 0.54 / 0.44 / 0.2
         rad/s propagated, 0.88 / 1.3e-3 / 0.04 restarted; 1 s: 16 / 12 / 5.5 against 1.2 /
@@ -616,7 +616,7 @@ class Observer(ABC, Generic[State]):
         first sample against 1.2–1.3), hence the restart only beyond ``PAUSE_RESTART``."""
         assert self._state is not None
         t_state = t_new - self.latency
-        state = self._restart_state(self._state, q)
+        state = self.restart_state(self._state, q)
         self._restart_due = False
         self._pauses.append((t_new, dt))
         if t_state < t_new - TIME_EPS:  # a latency: the estimate at t_new, predicted ahead
@@ -624,7 +624,7 @@ class Observer(ABC, Generic[State]):
             ahead = self._advance(state, t_state, t_new, None)
         else:
             t_state, ahead = t_new, state
-        q_hat, v_hat = self._output(ahead)
+        q_hat, v_hat = self.output(ahead)
         return state, t_state, Estimate(t=t_new, q=read_only(q_hat), v=read_only(v_hat))
 
     @property
@@ -683,9 +683,9 @@ class Observer(ABC, Generic[State]):
         else:  # the sample predates the state: keep the state
             state, t_state = self._state, self._ts
         ahead = self._advance(state, t_state, t_new, None) if t_new > t_state + TIME_EPS else state
-        q_hat, v_hat = self._output(ahead)
+        q_hat, v_hat = self.output(ahead)
         nis, gated = (
-            self._innovation(state) if s > self._ts + TIME_EPS and q is not None else (None, False)
+            self.innovation(state) if s > self._ts + TIME_EPS and q is not None else (None, False)
         )
         estimate = Estimate(t=t_new, q=read_only(q_hat), v=read_only(v_hat), nis=nis, gated=gated)
         return state, t_state, estimate
@@ -767,42 +767,42 @@ class Observer(ABC, Generic[State]):
 
     # ------------------------------------------------------ family interface
     @abstractmethod
-    def _initial_state(self, q0: Vector, v0: Vector) -> State:
+    def initial_state(self, q0: Vector, v0: Vector) -> State:
         """The state at reset.  Must not keep references to mutable inputs."""
 
-    def _restart_state(self, state: State, q: Vector) -> State:
+    def restart_state(self, state: State, q: Vector) -> State:
         """The state restarted at ``q`` with zero velocity after a pause (:meth:`update`);
         a family that learns (``adaptive``) keeps what it learned."""
-        return self._initial_state(q, np.zeros(self.robot.nv))
+        return self.initial_state(q, np.zeros(self.robot.nv))
 
     @abstractmethod
-    def _step(self, state: State, dt: float, q_meas: Vector | None, tau: Vector) -> State:
+    def step(self, state: State, dt: float, q_meas: Vector | None, tau: Vector) -> State:
         """Propagate ``state`` over ``dt`` [s] with torque ``tau`` held, then correct with ``q_meas``.
 
         Must return a new state and leave ``state`` untouched.
         """
 
     @abstractmethod
-    def _output(self, state: State) -> tuple[Vector, Vector]:
+    def output(self, state: State) -> tuple[Vector, Vector]:
         """``(q̂, v̂)`` of a state."""
 
     # -------------------------------------------------------------- helpers
-    def _after_commit(self, state: State, t: float, q: Vector | None, tau: Vector) -> State:
+    def after_commit(self, state: State, t: float, q: Vector | None, tau: Vector) -> State:
         """Called once a state is committed: ``t`` its time, ``q`` the sample it used (``None``
         if none or gated), ``tau`` the torque applied from ``t`` on.  Families that learn from
-        the data do it here (never in :meth:`_step`, which also runs for predictions that are
+        the data do it here (never in :meth:`step`, which also runs for predictions that are
         not kept); may return a replacement state.  Default: the state unchanged."""
         return state
 
-    def _innovation(self, state: State) -> tuple[float | None, bool]:
+    def innovation(self, state: State) -> tuple[float | None, bool]:
         """``(NIS, gated)`` of the measurement that made ``state``: its :class:`GateState`
         ``gate`` (families with an innovation), else ``(None, False)``."""
         gate: GateState | None = getattr(state, "gate", None)
         return (None, False) if gate is None else (gate.nis, gate.gated)
 
     def _make_estimate(self, t: float, state: State) -> Estimate:
-        q, v = self._output(state)
-        nis, gated = self._innovation(state)
+        q, v = self.output(state)
+        nis, gated = self.innovation(state)
         return Estimate(t=t, q=read_only(q), v=read_only(v), nis=nis, gated=gated)
 
     def _check_tau(self, tau: ArrayLike | None, *, what: str) -> Vector:

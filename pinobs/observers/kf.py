@@ -348,7 +348,7 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
             np.array([self.gains.meas_std**2, self.v0_std**2, (10.0 * self.v0_std) ** 2])
         )
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State | _AutoState:
+    def initial_state(self, q0: Vector, v0: Vector) -> _State | _AutoState:
         P = self._initial_p()
         if not self.auto:
             return _State(q0.copy(), v0.copy(), np.zeros_like(v0), P)
@@ -361,9 +361,9 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
         w = np.full((n_f, nv), 1.0 / n_f)
         return _AutoState(bank, jerk, 0.0, np.zeros((n_f, nv)), np.zeros(n_f), w)
 
-    def _restart_state(self, state: _State | _AutoState, q: Vector) -> _State | _AutoState:
+    def restart_state(self, state: _State | _AutoState, q: Vector) -> _State | _AutoState:
         """After a pause: afresh, but ``"auto"`` keeps its likelihoods (what it learned)."""
-        fresh = self._initial_state(q, np.zeros(self.robot.nv))
+        fresh = self.initial_state(q, np.zeros(self.robot.nv))
         if isinstance(state, _AutoState) and isinstance(fresh, _AutoState):
             return fresh._replace(jerk=state.jerk, n=state.n, A=state.A, B=state.B, w=state.w)
         return fresh
@@ -372,7 +372,7 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
         """The bank's densities ``ρ_f σ₀² = λ_f σ₀² / T⁵`` [rad²/s⁵] (module docstring)."""
         return np.array(AUTO_LAMBDAS) * self.gains.meas_std**2 / period**5
 
-    def _step(
+    def step(
         self, state: _State | _AutoState, dt: float, q_meas: Vector | None, tau: Vector
     ) -> _State | _AutoState:
         if isinstance(state, _AutoState):
@@ -392,7 +392,7 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
 
     def _auto_step(self, state: _AutoState, h: float, q_meas: Vector | None) -> _AutoState:
         """One step of the bank (module docstring, ``jerk_psd="auto"``): each filter's
-        prediction and correction (:meth:`KFBank.step`: the equations of :meth:`_step`),
+        prediction and correction (:meth:`KFBank.step`: the equations of :meth:`step`),
         the forgotten likelihood sums, the mixture's weights.  On vector joints one compiled
         call (:func:`_auto_step_loops`) into arrays allocated here (the state before is kept
         as it was); otherwise NumPy, the configurations filter by filter."""
@@ -466,7 +466,7 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
         base = super().consistency()
         return replace(base, causes=KF_CAUSES) if base.causes else base
 
-    def _output(self, state: _State | _AutoState) -> tuple[Vector, Vector]:
+    def output(self, state: _State | _AutoState) -> tuple[Vector, Vector]:
         if not isinstance(state, _AutoState):
             return state.q, state.v
         if state.mix is not None:  # computed by the compiled step
@@ -539,12 +539,12 @@ class WhiteJerkFilter:
     def _full(self, q: Vector, v: Vector, a: Vector, P3: Vector, gate: GateState) -> ErrorState:
         return ErrorState(q, v, a, _kron_eye(P3, self._eye), P3, gate)
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> ErrorState:
-        """As :meth:`ConstantAccelerationKF._initial_state`."""
+    def initial_state(self, q0: Vector, v0: Vector) -> ErrorState:
+        """As :meth:`ConstantAccelerationKF.initial_state`."""
         P3 = np.diag([self.gains.meas_std**2, self.v0_std**2, (10.0 * self.v0_std) ** 2])
         return self._full(q0.copy(), v0.copy(), np.zeros_like(v0), P3, GateState())
 
-    def _predict(self, state: ErrorState, dt: float, tau: Vector) -> tuple[ErrorState, Vector]:
+    def predict(self, state: ErrorState, dt: float, tau: Vector) -> tuple[ErrorState, Vector]:
         """``(state⁻, Φ)`` (``tau`` is not used)."""
         if self._cache is None or self._cache[0] != dt:
             F, Q = transition(dt, self.gains.jerk_psd)
@@ -553,7 +553,7 @@ class WhiteJerkFilter:
         q, v, a, P3 = _predicted(self.robot, state.q, state.v, state.d, state.P3, F, Q, dt)
         return self._full(q, v, a, P3, state.gate.predicted()), Phi.copy()
 
-    def _correct(self, state: ErrorState, q_meas: Vector) -> ErrorState:
+    def correct(self, state: ErrorState, q_meas: Vector) -> ErrorState:
         q, v, a, P3 = (*state[:3], state.P3)
         new = _corrected(
             self.robot, q, v, a, P3, state.gate, self.gains.meas_std**2, self._gate, q_meas
@@ -562,8 +562,8 @@ class WhiteJerkFilter:
             return state._replace(gate=new.gate)
         return self._full(*new)
 
-    def _gate_nis(self, state: ErrorState) -> float:
-        """The NIS above which :meth:`_correct` rejected ``state``'s measurement."""
+    def gate_limit(self, state: ErrorState) -> float:
+        """The NIS above which :meth:`correct` rejected ``state``'s measurement."""
         return state.gate.limit(self._gate, self.robot.nv)
 
 

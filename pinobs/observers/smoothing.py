@@ -2,8 +2,8 @@
 
 A causal filter estimates ``x_k`` from the samples up to ``t_k``; a log has the
 later samples too.  The fixed-interval smoother runs the filter forward
-(:class:`pinobs.observers.ekf.ExtendedKalmanFilter`, whose ``_predict`` and
-``_correct`` it calls), stores at every sample the filtered mean and
+(:class:`pinobs.observers.ekf.ExtendedKalmanFilter`, whose ``predict`` and
+``correct`` it calls), stores at every sample the filtered mean and
 covariance ``(x⁺_k, P⁺_k)``, the predicted ones ``(x⁻_{k+1}, P⁻_{k+1})`` and
 the transition Jacobian ``Φ_k`` of the error state, then runs backward
 (Rauch, Tung, Striebel 1965; Särkkä, *Bayesian Filtering and Smoothing*, 2013,
@@ -107,8 +107,8 @@ Gaussian: ``ekf``, ``adaptive`` through its model-based filter, and the
 model-free ``kf`` (:class:`pinobs.observers.kf.WhiteJerkFilter`: its per-joint
 white-jerk filter as one error state ``(δq, δv, δa)`` with ``P = P₃ ⊗ I``, the
 acceleration smoothed as the EKF's ``d``).  Another family qualifies by offering
-the same methods (:class:`SmoothableFilter`: ``_initial_state``, ``_predict``
-returning ``Φ``, ``_correct``), or a ``smoothing_filter()`` that gives them, and
+the same methods (:class:`SmoothableFilter`: ``initial_state``, ``predict``
+returning ``Φ``, ``correct``), or a ``smoothing_filter()`` that gives them, and
 a state with ``q``, ``v``, ``P`` (and optionally ``d``).
 
 The model-free smoother is the floor where the model is wrong.  Over ``ekf``
@@ -201,7 +201,7 @@ velocity lags a slowly varying acceleration error ``w`` by about
 ``ω``).  The error moves by the Jacobian ``F`` of the filter's mean step,
 which the filter's ``Φ`` (``A`` at the step's start) only approximates:
 ``F = exp(h Ā)``, ``Ā`` the mean of ``A`` at the step's two ends
-(:meth:`~pinobs.observers.ekf.ExtendedKalmanFilter._predict_flow`, one
+(:meth:`~pinobs.observers.ekf.ExtendedKalmanFilter.predict_flow`, one
 derivatives call more per sample; ``O(h³)``, 670× closer than ``Φ`` on a Panda
 at 1 kHz).  With ``Φ`` in its place the band was too narrow on the Panda's
 exact-model logs: over 20 noise draws on one 10 s log (seed 3, density
@@ -362,22 +362,22 @@ _LOG_2PI = math.log(2.0 * math.pi)
 class SmoothableFilter(Protocol):
     """What the smoother needs from a filter: an error-state Gaussian, predicted and corrected apart.
 
-    ``_predict(state, dt, tau) -> (state⁻, Φ)`` propagates over ``dt`` [s]
+    ``predict(state, dt, tau) -> (state⁻, Φ)`` propagates over ``dt`` [s]
     with ``tau`` held and returns the transition Jacobian of the error state;
-    ``_correct(state⁻, q_meas) -> state⁺`` fuses one measured configuration.
-    Optionally ``_predict_flow(state, dt, tau) -> (state⁻, Φ, F)`` also returns
+    ``correct(state⁻, q_meas) -> state⁺`` fuses one measured configuration.
+    Optionally ``predict_flow(state, dt, tau) -> (state⁻, Φ, F)`` also returns
     the Jacobian ``F`` of the mean's step, where ``Φ`` is only the filter's
     approximation of it (``band="noise"`` propagates the error with ``F``;
     without the method, with ``Φ``).  A filter with an outlier gate keeps its bookkeeping
     in its states' ``gate`` (:class:`~pinobs.observers.base.GateState`), and
-    ``_gate_nis(state)`` is the NIS above which it rejected ``state``'s measurement.
+    ``gate_limit(state)`` is the NIS above which it rejected ``state``'s measurement.
     """
 
     robot: Robot
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> Any: ...
-    def _predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]: ...
-    def _correct(self, state: Any, q_meas: Vector) -> Any: ...
+    def initial_state(self, q0: Vector, v0: Vector) -> Any: ...
+    def predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]: ...
+    def correct(self, state: Any, q_meas: Vector) -> Any: ...
 
 
 @dataclass(frozen=True)
@@ -448,7 +448,7 @@ def _noise_step(
 
     with ``F_{k−1}`` the Jacobian of the mean's step, by which the error
     propagates (the filter's ``Φ`` only approximates it; ``F = Φ`` for a
-    filter without ``_predict_flow``), ``K_k = P⁻_k Hᵀ (H P⁻_k Hᵀ + σ² I)⁻¹ =
+    filter without ``predict_flow``), ``K_k = P⁻_k Hᵀ (H P⁻_k Hᵀ + σ² I)⁻¹ =
     P⁺_k Hᵀ / σ²`` the filter's own gain (``H = [I 0]``; the second form, free,
     holds for the Kalman gain: ``P⁺Hᵀ = P⁻Hᵀ − K (S − σ² I) = σ² K``;
     ``K = None`` at a dropped or gated sample, where ``Pⁿ⁺_k = F Pⁿ⁺_{k−1} Fᵀ``)
@@ -648,14 +648,14 @@ def _forward(
     t_prev, q0, tau_prev = next(rows)
     if q0 is None:
         raise NonFiniteError(f"sample {k0} has no configuration; the smoother starts on one")
-    state = filt._initial_state(model.check_configuration(q0, what=f"q[{k0}]"), np.zeros(nv))
+    state = filt.initial_state(model.check_configuration(q0, what=f"q[{k0}]"), np.zeros(nv))
     yield 0, None, None, state, 0.0, None
-    predict_flow = getattr(filt, "_predict_flow", None) if flow else None
+    predict_flow = getattr(filt, "predict_flow", None) if flow else None
     for k, (t, q, tau) in enumerate(rows, start=1):
         if predict_flow is not None:
             pred, Phi, F = predict_flow(state, float(t - t_prev), tau_prev)
         else:
-            pred, Phi = filt._predict(state, float(t - t_prev), tau_prev)
+            pred, Phi = filt.predict(state, float(t - t_prev), tau_prev)
             F = Phi if flow else None
         ll = 0.0
         if q is not None:
@@ -671,9 +671,9 @@ def _forward(
                     "accel_psd='auto' or observer='adaptive'"
                 )
             nis = float(e @ s_inv_e)
-            state = filt._correct(pred, q_meas)
+            state = filt.correct(pred, q_meas)
             if _gated(state):  # rejected by the filter's outlier gate
-                nis = min(nis, cast(Any, filt)._gate_nis(state))
+                nis = min(nis, cast(Any, filt).gate_limit(state))
             ll = -(0.5 * nis + np.log(np.diagonal(chol)).sum() + 0.5 * nv * _LOG_2PI)
         else:
             state = pred
@@ -1334,7 +1334,7 @@ def _smoothable(cls: type) -> bool:
     """A family that says so (``smoothable = True``) and has the filter's two halves, or a
     ``smoothing_filter()`` that gives a filter that has them (``kf``)."""
     return bool(getattr(cls, "smoothable", False)) and (
-        all(callable(getattr(cls, m, None)) for m in ("_predict", "_correct"))
+        all(callable(getattr(cls, m, None)) for m in ("predict", "correct"))
         or callable(getattr(cls, "smoothing_filter", None))
     )
 
@@ -1376,7 +1376,7 @@ class _FrozenModels:
 
     def _use(self, state: Any, j: int) -> Any:
         snap = self._snaps[j]
-        self._ekf._replace_robot(snap.robot)
+        self._ekf.replace_robot(snap.robot)
         scale = 1.0 if self._accel is None else self._accel / snap.accel_psd
         d_scale = scale
         if self._offset_scale is not None:
@@ -1385,24 +1385,24 @@ class _FrozenModels:
         self._j, self.robot = j, snap.robot
         return state._replace(d_psd=d_scale * snap.disturbance_psd)
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> Any:
+    def initial_state(self, q0: Vector, v0: Vector) -> Any:
         self._k, self._j = 0, -1
-        state = self._ekf._initial_state(q0, v0)
+        state = self._ekf.initial_state(q0, v0)
         return self._use(state, int(self._which[0]))
 
-    # No _predict_flow: the noise band propagates the error with Φ (module docstring, "Two bands")
-    def _predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]:
+    # No predict_flow: the noise band propagates the error with Φ (module docstring, "Two bands")
+    def predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]:
         j = int(self._which[self._k])
         if j != self._j:
             state = self._use(state, j)
         self._k += 1
-        return self._ekf._predict(state, dt, tau + self._snaps[j].offset)
+        return self._ekf.predict(state, dt, tau + self._snaps[j].offset)
 
-    def _correct(self, state: Any, q_meas: Vector) -> Any:
-        return self._ekf._correct(state, q_meas)
+    def correct(self, state: Any, q_meas: Vector) -> Any:
+        return self._ekf.correct(state, q_meas)
 
-    def _gate_nis(self, state: Any) -> float:
-        return self._ekf._gate_nis(state)
+    def gate_limit(self, state: Any) -> float:
+        return self._ekf.gate_limit(state)
 
 
 def _learn(

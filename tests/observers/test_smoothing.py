@@ -163,7 +163,7 @@ def test_backward_pass_equals_batch_conditioning_on_a_linear_gaussian_model(
 
 def test_noise_band_propagates_the_error_by_the_mean_steps_jacobian(rng, noise_path: str) -> None:
     """The EKF's ``Φ`` only approximates the Jacobian ``F`` of its mean's step
-    (:meth:`ExtendedKalmanFilter._predict_flow`); the truth's error moves by ``F``.  On a
+    (:meth:`ExtendedKalmanFilter.predict_flow`); the truth's error moves by ``F``.  On a
     linear model whose mean moves by ``F`` and covariance by ``Φ ≠ F``, the noise band is
     the covariance of the smoothed velocity's error computed directly: the estimate is
     linear in the prior mean and the measurements (its matrices by superposition), the
@@ -208,17 +208,17 @@ class _DoubleIntegratorKF:
     def __init__(self, robot: pinobs.Robot, a: float, sigma: float) -> None:
         self.robot, self.gains, self.a = robot, _Gains(sigma), a
 
-    def _initial_state(self, q0: np.ndarray, v0: np.ndarray) -> _LinState:
+    def initial_state(self, q0: np.ndarray, v0: np.ndarray) -> _LinState:
         nv = self.robot.nv
         return _LinState(q0, v0, np.diag(np.r_[np.full(nv, 1e-2), np.full(nv, 1e2)]))
 
-    def _predict(self, s: _LinState, dt: float, tau: np.ndarray) -> tuple[_LinState, np.ndarray]:
+    def predict(self, s: _LinState, dt: float, tau: np.ndarray) -> tuple[_LinState, np.ndarray]:
         nv = self.robot.nv
         Phi = np.block([[np.eye(nv), dt * np.eye(nv)], [np.zeros((nv, nv)), np.eye(nv)]])
         Q = np.kron(self.a * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]]), np.eye(nv))
         return _LinState(s.q + dt * s.v, s.v, Phi @ s.P @ Phi.T + Q), Phi
 
-    def _correct(self, s: _LinState, q_meas: np.ndarray) -> _LinState:
+    def correct(self, s: _LinState, q_meas: np.ndarray) -> _LinState:
         nv = self.robot.nv
         H = np.hstack([np.eye(nv), np.zeros((nv, nv))])
         K = s.P @ H.T @ np.linalg.inv(s.P[:nv, :nv] + self.gains.meas_std**2 * np.eye(nv))

@@ -141,7 +141,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from pinobs.errors import GainError, IdentificationError, UnsupportedRobotError
+from pinobs.errors import GainError, IdentificationError, OptionError, UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.model.identification import (
     MAX_FILL,
@@ -711,6 +711,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     name = "adaptive"
     #: :func:`pinobs.smooth` smooths its model-based filter, the learned model frozen per window
     smoothable = True
+    learns_model = True
     summary = "EKF that identifies its model online, blended with kf: never behind it (model-based)"
 
     def __init__(
@@ -1112,6 +1113,18 @@ class AdaptiveEKF(ExtendedKalmanFilter):
 
     def output(self, state: _State) -> tuple[Vector, Vector]:  # type: ignore[override]
         return state.q, state.v
+
+    def smoothing_filter(self) -> ExtendedKalmanFilter:
+        """None: a smoother runs it causally and replays its learned models frozen
+        (:attr:`learns_model`; :func:`pinobs.smooth`).
+
+        Raises:
+            OptionError: always.
+        """
+        raise OptionError(
+            "adaptive learns its model: pinobs.smooth runs it causally, then replays its "
+            "learned models frozen per window (model_window)"
+        )
 
     @property
     def disturbance(self) -> Vector | None:

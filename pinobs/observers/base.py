@@ -9,9 +9,17 @@ stores the first torque (zero if not given).
 
 A family implements only its mathematics, as pure functions of an immutable
 state: :meth:`Observer.initial_state`, :meth:`Observer.step` and
-:meth:`Observer.output`.  The base validates every input before anything
-changes, checks the new estimate is finite, and commits the new state only
-then, so a rejected call leaves the observer exactly as it was.
+:meth:`Observer.output` (optionally :meth:`Observer.restart_state`,
+:meth:`Observer.after_commit`, :meth:`Observer.innovation`).  The base validates
+every input before anything changes, checks the new estimate is finite, and
+commits the new state only then, so a rejected call leaves the observer exactly
+as it was.  Those methods are public: a family is driven through them by the
+base, by another family (the never-behind blend) and by the smoother, which also
+reads what a family declares of itself (:attr:`Observer.smoothable`,
+:attr:`Observer.model_free`, :attr:`Observer.learns_model`,
+:attr:`Observer.process_density`) and runs the Gaussian filter a smoothable
+family gives (:meth:`Observer.smoothing_filter`, a :class:`GaussianFilter`: its
+``predict`` and ``correct`` apart, as filterpy's ``KalmanFilter``).
 """
 
 from __future__ import annotations
@@ -27,7 +35,7 @@ from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass, field
 from statistics import NormalDist
-from typing import Any, ClassVar, Generic, NamedTuple, TypeVar, final
+from typing import Any, ClassVar, Generic, NamedTuple, Protocol, TypeVar, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -62,6 +70,7 @@ __all__ = [
     "Consistency",
     "Estimate",
     "GateState",
+    "GaussianFilter",
     "Observer",
     "chi2_quantile",
     "gap_substeps",
@@ -354,6 +363,47 @@ def positive(
     return x
 
 
+class GaussianFilter(Protocol):
+    """An error-state Gaussian filter, predicted and corrected apart (what a smoother runs).
+
+    The filter's step is ``correct ∘ predict`` (filterpy's ``KalmanFilter.predict`` /
+    ``update``), both pure functions of an immutable state carrying the mean ``q, v``
+    (and more: a torque offset ``d``, …) and the error covariance ``P``:
+
+    * ``predict(state, dt, tau) -> (state⁻, Φ)`` propagates over ``dt`` [s] with ``tau``
+      [N·m or N] held and returns the transition Jacobian ``Φ`` of the error state
+      (Rauch-Tung-Striebel needs it);
+    * ``predict_flow(state, dt, tau) -> (state⁻, Φ, F)`` also returns ``F``, the Jacobian
+      of the mean's step, of which ``Φ`` is only the filter's approximation (a filter
+      without a better one returns ``Φ`` as ``F``);
+    * ``correct(state⁻, q_meas) -> state⁺`` fuses one measured configuration; a filter with
+      an outlier gate keeps its bookkeeping in the state's ``gate`` (:class:`GateState`),
+      and ``gate_limit(state⁺)`` is the NIS above which it rejected that measurement.
+
+    Attributes:
+        robot: the process model (its configuration space is the filter's).
+        gains: the family's frozen gains; ``gains.meas_std`` is the position noise σ
+            [rad or m], and the process density is ``gains.accel_psd`` [rad²/s³] (a
+            model-based filter) or ``gains.jerk_psd`` [rad²/s⁵] (white jerk).
+        disturbance_psd: the density of a random-walk torque offset, or ``None``.
+        options: the filter's resolved options (reported with a smoothed result).
+    """
+
+    robot: Robot
+
+    @property
+    def gains(self) -> Any: ...
+    @property
+    def disturbance_psd(self) -> float | None: ...
+    @property
+    def options(self) -> dict[str, Any]: ...
+    def initial_state(self, q0: Vector, v0: Vector) -> Any: ...
+    def predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]: ...
+    def predict_flow(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector, Vector]: ...
+    def correct(self, state: Any, q_meas: Vector) -> Any: ...
+    def gate_limit(self, state: Any) -> float: ...
+
+
 class Observer(ABC, Generic[State]):
     """Base class of every observer.
 
@@ -369,6 +419,8 @@ class Observer(ABC, Generic[State]):
         uses_torque: whether the observer uses the torque (model-based) or not.
         uses_noise_std: whether it uses ``noise_std`` (gains or NIS).
         noise_in_gains: whether its gains depend on it (else only its NIS).
+        smoothable, model_free, learns_model, process_density: what a smoother needs
+            to know of the family (each documented below; :meth:`smoothing_filter`).
 
     **σ from the data, live.**  Built without ``noise_std`` (``None``; ``0``
     means noise-free and is kept), an observer whose gains depend on it starts
@@ -406,6 +458,17 @@ class Observer(ABC, Generic[State]):
     uses_noise_std: ClassVar[bool] = False
     #: ... and whether in its gains (else only in ``_sigma2``, its NIS's measurement variance).
     noise_in_gains: ClassVar[bool] = True
+    #: Whether a smoother can run it: it keeps an error-state covariance and gives a
+    #: :class:`GaussianFilter` (:meth:`smoothing_filter`), or it ``learns_model``.
+    smoothable: ClassVar[bool] = False
+    #: Whether its process model is kinematic (white jerk: no torque, no robot dynamics).
+    model_free: ClassVar[bool] = False
+    #: Whether it learns its dynamic model from the data (``adaptive``): a smoother first
+    #: runs it causally and then replays its learned models frozen.
+    learns_model: ClassVar[bool] = False
+    #: The option naming the process-noise density a smoother tunes (``accel_psd="auto"``):
+    #: ``"accel_psd"`` [rad²/s³] (white acceleration) or ``"jerk_psd"`` [rad²/s⁵] (white jerk).
+    process_density: ClassVar[str] = "accel_psd"
     _init_args: tuple[tuple[Any, ...], dict[str, Any]]  # set by __new__
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Observer[Any]:
@@ -766,9 +829,13 @@ class Observer(ABC, Generic[State]):
         )
 
     # ------------------------------------------------------ family interface
+    # The protocol every family implements (module docstring): pure functions of an
+    # immutable state, called by :meth:`update`, by another family (the never-behind blend)
+    # and by the smoother.
     @abstractmethod
     def initial_state(self, q0: Vector, v0: Vector) -> State:
-        """The state at reset.  Must not keep references to mutable inputs."""
+        """The state at reset, ``q0`` [nq] and ``v0`` [nv].  Must not keep references to
+        mutable inputs."""
 
     def restart_state(self, state: State, q: Vector) -> State:
         """The state restarted at ``q`` with zero velocity after a pause (:meth:`update`);
@@ -786,7 +853,6 @@ class Observer(ABC, Generic[State]):
     def output(self, state: State) -> tuple[Vector, Vector]:
         """``(q̂, v̂)`` of a state."""
 
-    # -------------------------------------------------------------- helpers
     def after_commit(self, state: State, t: float, q: Vector | None, tau: Vector) -> State:
         """Called once a state is committed: ``t`` its time, ``q`` the sample it used (``None``
         if none or gated), ``tau`` the torque applied from ``t`` on.  Families that learn from
@@ -800,6 +866,19 @@ class Observer(ABC, Generic[State]):
         gate: GateState | None = getattr(state, "gate", None)
         return (None, False) if gate is None else (gate.nis, gate.gated)
 
+    def smoothing_filter(self) -> GaussianFilter:
+        """The Gaussian filter a smoother runs for this family (:class:`GaussianFilter`),
+        for a :attr:`smoothable` family that does not :attr:`learns_model`.
+
+        Raises:
+            OptionError: the family keeps no error-state covariance to smooth.
+        """
+        raise OptionError(
+            f"observer {self.name!r} keeps no error-state covariance to smooth; smoothable: "
+            f"{[n for n in observer_names() if observer_class(n).smoothable]}"
+        )
+
+    # -------------------------------------------------------------- helpers
     def _make_estimate(self, t: float, state: State) -> Estimate:
         q, v = self.output(state)
         nis, gated = self.innovation(state)

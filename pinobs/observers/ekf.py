@@ -484,6 +484,11 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         threshold at its level (:func:`pinobs.observers.base.outlier_gate`)."""
         return state.gate.limit(self._gate, self.robot.nv)
 
+    def smoothing_filter(self) -> ExtendedKalmanFilter:
+        """The filter itself: its :meth:`predict` and :meth:`correct` are a
+        :class:`~pinobs.observers.base.GaussianFilter`'s."""
+        return self
+
     def replace_robot(self, robot: Robot) -> None:
         """Swap the filter's model between updates (an adaptive subclass's identified model).
 

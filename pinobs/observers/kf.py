@@ -271,6 +271,8 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
     #: :func:`pinobs.smooth` can run its backward pass over this filter (through
     #: :meth:`smoothing_filter`: the model-free smoother).
     smoothable = True
+    model_free = True
+    process_density = "jerk_psd"
 
     def __init__(
         self,
@@ -515,7 +517,7 @@ class ErrorState(NamedTuple):
 
 class WhiteJerkFilter:
     """:class:`ConstantAccelerationKF` with its predict and correct apart, for the RTS
-    smoother (:class:`pinobs.observers.smoothing.SmoothableFilter`): the model-free smoother.
+    smoother (a :class:`pinobs.observers.base.GaussianFilter`): the model-free smoother.
 
     The same equations (module docstring), stated for the whole error state
     ``x = (δq, δv, δa)`` of ``3 nv`` coordinates: every direction has the same
@@ -531,6 +533,9 @@ class WhiteJerkFilter:
         self._gate = gate_threshold(gains.outlier_probability, robot.nv)[1]
         self._cache: tuple[float, Vector, Vector, Vector] | None = None
         self._eye = np.eye(robot.nv)
+
+    #: No torque offset: white jerk takes no torque.
+    disturbance_psd: float | None = None
 
     @property
     def options(self) -> dict[str, object]:
@@ -552,6 +557,14 @@ class WhiteJerkFilter:
         _, F, Q, Phi = self._cache
         q, v, a, P3 = _predicted(self.robot, state.q, state.v, state.d, state.P3, F, Q, dt)
         return self._full(q, v, a, P3, state.gate.predicted()), Phi.copy()
+
+    def predict_flow(
+        self, state: ErrorState, dt: float, tau: Vector
+    ) -> tuple[ErrorState, Vector, Vector]:
+        """:meth:`predict` and the Jacobian of its mean's step: ``Φ`` itself (the step is
+        linear in the error state)."""
+        pred, Phi = self.predict(state, dt, tau)
+        return pred, Phi, Phi
 
     def correct(self, state: ErrorState, q_meas: Vector) -> ErrorState:
         q, v, a, P3 = (*state[:3], state.P3)

@@ -150,7 +150,14 @@ from pinobs.model.identification import (
     smooth_path,
     solve,
 )
-from pinobs.observers.base import LIKELY_CAUSES, Consistency, Vector, positive, register
+from pinobs.observers.base import (
+    LIKELY_CAUSES,
+    Consistency,
+    Observer,
+    Vector,
+    positive,
+    register,
+)
 from pinobs.observers.blas import blas_libraries, one_blas_thread
 from pinobs.observers.ekf import EKFState, ExtendedKalmanFilter
 from pinobs.observers.kf import BankState, KFBank
@@ -669,8 +676,14 @@ def _huber_loss(r: Vector, sigma: float, c: float = 1.345) -> float:
 
 
 @register
-class AdaptiveEKF(ExtendedKalmanFilter):
+class AdaptiveEKF(Observer["_State"]):
     """EKF that identifies its model online and blends with a model-free filter (module docstring).
+
+    A composition: :attr:`core`, an :class:`~pinobs.observers.ekf.ExtendedKalmanFilter`
+    whose model and densities the learner sets (:meth:`~pinobs.observers.ekf.
+    ExtendedKalmanFilter.replace_robot`, its ``gains``), driven through its public
+    ``initial_state``/``step``; the learner (:class:`_Learner`); the blend with a bank of
+    model-free ``kf`` (:class:`~pinobs.observers.kf.KFBank`).
 
     Args:
         robot: the nominal model (the identification's prior).
@@ -709,6 +722,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     """
 
     name = "adaptive"
+    uses_noise_std = True
     #: :func:`pinobs.smooth` smooths its model-based filter, the learned model frozen per window
     smoothable = True
     learns_model = True
@@ -743,7 +757,9 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     ) -> None:
         if learning not in _LEARNING:
             raise GainError(f"learning={learning!r} must be one of {', '.join(_LEARNING)}")
-        super().__init__(
+        super().__init__(robot, rate=rate, noise_std=noise_std)
+        #: The model-based filter (class docstring).
+        self.core = ExtendedKalmanFilter(
             robot,
             accel_psd=warmup_accel_psd,
             q0_std=q0_std,
@@ -768,7 +784,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             positive(key, val)
         if horizon < 2 * window:
             positive("horizon - 2 window", horizon - 2 * window)
-        self._nominal = self.robot
+        self._nominal = self.core.robot
         self._learn_options = dict(
             window=float(window),
             half_window=float(half_window),
@@ -798,7 +814,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             raise GainError(f"jerk_psd={jerk_psd!r} must be a sequence of numbers > 0") from None
         if not jerks:
             raise GainError("jerk_psd needs at least one density")
-        self._bank = KFBank(self.robot, jerks, self.gains.meas_std)
+        self._bank = KFBank(self.robot, jerks, self.core.gains.meas_std)
         if self.blend and self.robot.is_vector_space:
             _blend_kernel.load()
         self._offset: Vector = np.zeros(self.robot.nv)
@@ -817,7 +833,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     @property
     def options(self) -> dict[str, Any]:
         return {
-            **super().options,
+            **self.core.options,
             **self._learn_options,
             "accel_psd": self._regimes["learned"][0],
             "warmup_accel_psd": self._regimes["warmup"][0],
@@ -841,7 +857,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         The model is the filter's, with the learned friction it takes as a held input
         (:meth:`_install`) put back: the learned model whole."""
         accel, dist = self._regimes[self.regime]
-        robot = self.robot if self._held_friction is None else self._learned
+        robot = self.core.robot if self._held_friction is None else self._learned
         return ModelSnapshot(
             robot.copy(), self._offset.copy(), self.regime, accel, dist * self._m_bar2
         )
@@ -853,7 +869,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         diverged update keeps the last finite state, so this said ``False`` then (a sweep)."""
         if self._state is None:
             return False
-        return self._diverged or _lost(self._state.ekf)  # type: ignore[attr-defined]
+        return self._diverged or _lost(self._state.ekf)
 
     def parameters(self) -> ParameterSet:
         """The learned parameters with names and standard deviations (nominal before the first solve)."""
@@ -897,7 +913,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             "warming_up": lr.theta is None,
             "regime": self.regime,
             "restarts": self.restarts,
-            "blend_weight": None if self._state is None else self._weights(self._state).tolist(),  # type: ignore[arg-type]
+            "blend_weight": None if self._state is None else self._weights(self._state).tolist(),
         }
         return replace(base, details=details)
 
@@ -906,7 +922,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         (a solve found nothing better: the exact-model densities), ``learned`` (a learned model)."""
         self.regime = regime
         accel, dist = self._regimes[regime]
-        self.gains = replace(self.gains, accel_psd=accel)
+        self.core.gains = replace(self.core.gains, accel_psd=accel)
         if state.d_psd is None:
             return state
         return state._replace(d_psd=dist * self._m_bar2)  # per joint, as ekf: psd · M̄ᵢᵢ²
@@ -931,7 +947,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
                 theta[n : n + nj][cols] = 0.0
                 theta[n + nj : n + 2 * nj][cols] = 0.0
                 self._held_friction = held.astype(float)
-        self.replace_robot(lr.reg.with_parameters(theta, name=name))
+        self.core.replace_robot(lr.reg.with_parameters(theta, name=name))
         self._offset = lr.reg.offsets(lr.theta)
         state = self._set_regime(state, "learned")
         if state.d is None:
@@ -939,19 +955,19 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         return state._replace(d=np.zeros_like(state.d))  # the new model explains what d absorbed
 
     # ------------------------------------------------------------------ filter
-    def initial_state(self, q0: Vector, v0: Vector) -> _State:  # type: ignore[override]
+    def initial_state(self, q0: Vector, v0: Vector) -> _State:
         # a reset starts learning afresh from the nominal model
-        self.replace_robot(self._nominal.copy())
+        self.core.replace_robot(self._nominal.copy())
         self._learned = self._nominal
         self._held_friction = None
         self._learner = _Learner(self._nominal, **self._learn_options, worker=self._worker)  # type: ignore[arg-type]
         self._offset = np.zeros(self.robot.nv)
-        self.gains = replace(self.gains, accel_psd=self._regimes["warmup"][0])
+        self.core.gains = replace(self.core.gains, accel_psd=self._regimes["warmup"][0])
         self.regime = "warmup"
         self.restarts, self._restarted = 0, False
         self._m_bar2 = np.diag(self._nominal.mass_matrix(q0)) ** 2
-        ekf = super().initial_state(q0, v0)
-        kf = self._bank.initial(q0, v0, self.gains.v0_std)
+        ekf = self.core.initial_state(q0, v0)
+        kf = self._bank.initial(q0, v0, self.core.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
         state = _State(ekf, kf, score, 0.0, s, q0.copy(), v0.copy(), ekf.v, 0.0)
@@ -974,12 +990,12 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         if regime != self.regime:
             self._set_regime(state.ekf, regime)
 
-    def restart_state(self, state: _State, q: Vector) -> _State:  # type: ignore[override]
+    def restart_state(self, state: _State, q: Vector) -> _State:
         """After a pause: the filter and the bank afresh at ``q`` (zero velocity), in the
         current regime; the learned model, offset and learner kept (a reset would relearn)."""
         zero = np.zeros(self.robot.nv)
-        ekf = self._set_regime(super().initial_state(q, zero), self.regime)
-        kf = self._bank.initial(q, zero, self.gains.v0_std)
+        ekf = self._set_regime(self.core.initial_state(q, zero), self.regime)
+        kf = self._bank.initial(q, zero, self.core.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         return _State(ekf, kf, score, state.t, zero.copy(), q.copy(), zero.copy(), ekf.v, 0.0)
 
@@ -1017,37 +1033,37 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         v_mid = v + (0.5 * dt / state.dt_prev) * (v - state.v_prev) if state.dt_prev > 0 else v
         return tau + self._offset + self._held_friction * self._learned.friction_torque(v_mid)
 
-    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
+    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         with np.errstate(over="ignore", invalid="ignore"):  # a lost filter is handled below
-            ekf = super().step(state.ekf, dt, q_meas, self._torque(state, dt, tau))
+            ekf = self.core.step(state.ekf, dt, q_meas, self._torque(state, dt, tau))
         t = state.t + dt
         if self.blend and _lost(ekf):
             # the model-based filter is lost (a learned model that does not hold): restart it
             # on the model-free estimate, in the warm-up regime, rather than fail
             v_kf, _, dq_kf = self._model_free(state)
-            restart = super().initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
+            restart = self.core.initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
             restart = self._set_regime(restart, "warmup")
             state = state._replace(ekf=restart, dt_prev=0.0)
             with np.errstate(over="ignore", invalid="ignore"):  # lost again: handled below
-                ekf = super().step(restart, dt, q_meas, self._torque(state, dt, tau))
+                ekf = self.core.step(restart, dt, q_meas, self._torque(state, dt, tau))
             if _lost(ekf) and self._learned is not self._nominal:
                 # lost again at once: the learned model itself does not hold (a mass matrix
                 # not positive definite away from the configurations its solve checked, held
                 # friction stiff there: solo12 with friction, a Panda at hard stops raised
                 # ObserverDiverged); back to the nominal model, which the learner may replace
-                self.replace_robot(self._nominal.copy())
+                self.core.replace_robot(self._nominal.copy())
                 self._learned, self._held_friction = self._nominal, None
                 self._offset = np.zeros(self.robot.nv)
                 self._learner.rejected.append(
                     f"learned model dropped at t = {t:.6g} s (the filter restarted on it was "
                     "lost at once): back to the nominal model"
                 )
-                ekf = super().step(restart, dt, q_meas, self._torque(state, dt, tau))
+                ekf = self.core.step(restart, dt, q_meas, self._torque(state, dt, tau))
             self._learner.rejected.append(f"model-based filter restarted at t = {t:.6g} s")
             self.restarts += 1
             # the blend's error variance of the lost filter overflowed with it: the restarted
             # one starts with its initial velocity variance (the blend follows the kf first)
-            state = state._replace(s=np.full(self.robot.nv, self.gains.v0_std**2))
+            state = state._replace(s=np.full(self.robot.nv, self.core.gains.v0_std**2))
             self._restarted = True  # the next solve must beat the current model to end it
         if not self.blend:
             return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v, v_prev=state.ekf.v, dt_prev=dt)
@@ -1078,7 +1094,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         q = self.robot.integrate(ekf.q, (1.0 - w) * dq_kf)
         return new._replace(s=s, q=q, v=v)
 
-    def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
+    def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
         """Teach the learner the committed sample (with the torque held from it on, MATH §7);
         install a new model or leave the warm-up when a solve says so."""
         ekf = state.ekf
@@ -1108,10 +1124,10 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             ekf = self._set_regime(ekf, "learned" if lr.installs else "nominal")
         return state if ekf is state.ekf else state._replace(ekf=ekf)
 
-    def innovation(self, state: _State) -> tuple[float | None, bool]:  # type: ignore[override]
+    def innovation(self, state: _State) -> tuple[float | None, bool]:
         return state.ekf.gate.nis, state.ekf.gate.gated
 
-    def output(self, state: _State) -> tuple[Vector, Vector]:  # type: ignore[override]
+    def output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v
 
     def smoothing_filter(self) -> ExtendedKalmanFilter:
@@ -1129,12 +1145,12 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     @property
     def disturbance(self) -> Vector | None:
         """The EKF's estimated joint-torque offset ``d`` beyond the learned offset [N·m or N]."""
-        if self._state is None or self._state.ekf.d is None:  # type: ignore[attr-defined]
+        if self._state is None or self._state.ekf.d is None:
             return None
-        return np.array(self._state.ekf.d)  # type: ignore[attr-defined]
+        return np.array(self._state.ekf.d)
 
     def covariance(self) -> Vector:
         """The EKF's covariance of ``(δq, δv, δd)`` (before the blend), a copy."""
         if self._state is None:
-            return super().covariance()
-        return np.array(self._state.ekf.P)  # type: ignore[attr-defined]
+            return self.core.covariance()  # NaN: not reset
+        return np.array(self._state.ekf.P)

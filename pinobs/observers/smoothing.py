@@ -1472,7 +1472,7 @@ def _learn(
         q0_std=opts["q0_std"],
         v0_std=opts["v0_std"],
         disturbance_psd=1.0,  # the state gets each window's own density (_FrozenModels._use)
-        d0_std=obs.d0_std,
+        d0_std=obs.core.d0_std,
         outlier_probability=opts["outlier_probability"],
         noise_std=noise_std,
     )

@@ -231,7 +231,7 @@ def test_friction_too_weak_to_be_stiff_is_a_held_input_and_started_on_the_truth_
     lr.minv_max = np.diag(np.linalg.inv(truth.mass_matrix(res.q[0])))
     ob._state = ob._state._replace(ekf=ob._install(ob._state.ekf))
     assert ob._held_friction is not None and np.all(ob._held_friction == 1.0)
-    assert not ob.robot.has_friction and ob.learned_robot().has_friction
+    assert not ob.core.robot.has_friction and ob.learned_robot().has_friction
     v = np.array([1.0, -0.5, 0.003, 0.0, -0.01, 2.0])
     np.testing.assert_allclose(
         ob.learned_robot().friction_torque(v), truth.friction_torque(v), rtol=0, atol=1e-15

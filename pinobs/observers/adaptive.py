@@ -2,7 +2,9 @@
 
 Three parts, each on code shared with the rest of pinobs:
 
-1. **The filter** is :class:`~pinobs.observers.ekf.ExtendedKalmanFilter` with
+1. **The filter** is an :class:`~pinobs.observers.ekf.ExtendedKalmanFilter`
+   (:attr:`AdaptiveEKF.core`, held, not inherited: driven through its public
+   ``initial_state``, ``step`` and ``replace_robot``) with
    its joint-torque offset state ``d`` (``disturbance_psd``), run on the
    current learned model ``θ̂`` and the learned torque offset ``b̂``::
 

@@ -3,7 +3,7 @@
 Three parts, each on code shared with the rest of pinobs:
 
 1. **The filter** is an :class:`~pinobs.observers.ekf.ExtendedKalmanFilter`
-   (:attr:`AdaptiveEKF.core`, held, not inherited: driven through its public
+   (``AdaptiveEKF.core``, held, not inherited: driven through its public
    ``initial_state``, ``step`` and ``replace_robot``) with
    its joint-torque offset state ``d`` (``disturbance_psd``), run on the
    current learned model ``θ̂`` and the learned torque offset ``b̂``::
@@ -681,11 +681,10 @@ def _huber_loss(r: Vector, sigma: float, c: float = 1.345) -> float:
 class AdaptiveEKF(Observer["_State"]):
     """EKF that identifies its model online and blends with a model-free filter (module docstring).
 
-    A composition: :attr:`core`, an :class:`~pinobs.observers.ekf.ExtendedKalmanFilter`
-    whose model and densities the learner sets (:meth:`~pinobs.observers.ekf.
-    ExtendedKalmanFilter.replace_robot`, its ``gains``), driven through its public
-    ``initial_state``/``step``; the learner (:class:`_Learner`); the blend with a bank of
-    model-free ``kf`` (:class:`~pinobs.observers.kf.KFBank`).
+    A composition: ``core``, an :class:`~pinobs.observers.ekf.ExtendedKalmanFilter` whose
+    model and densities the learner sets (its ``replace_robot`` and ``gains``), driven
+    through its public ``initial_state`` and ``step``; the learner; the blend with a bank
+    of model-free ``kf`` (:class:`~pinobs.observers.kf.KFBank`).
 
     Args:
         robot: the nominal model (the identification's prior).

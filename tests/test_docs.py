@@ -12,7 +12,9 @@ import importlib.util
 import re
 import textwrap
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 
 from pinobs.cli import observer_table
@@ -237,3 +239,25 @@ def test_command_line_page_names_every_option_of_every_command_and_no_other() ->
     for name, options in parsers.items():
         assert options <= documented[name] | common, (name, sorted(options - documented[name]))
         assert documented[name] <= options, (name, sorted(documented[name] - options))
+
+
+def test_the_worked_observer_of_the_usage_guide_converges_and_stays_on_the_truth() -> None:
+    """The guide's minimal family (section **Writing an observer**) runs as printed: from
+    zero velocity it converges to the constant true velocity, and started on the truth it
+    stays there (noise-free samples)."""
+    text = (DOCS / "guides" / "usage.md").read_text()
+    section = text[text.index("### Writing an observer") :]
+    block = re.search(r"^```python\n(.*?)^```", section, re.S | re.M)
+    assert block is not None
+    ns: dict[str, Any] = {}
+    exec(compile(block.group(1), "usage.md", "exec"), ns)
+    est, v_true, q0 = ns["est"], ns["v_true"], ns["q0"]
+    assert np.max(np.abs(est.v - v_true)) < 1e-9
+    obs = ns["AlphaBeta"](ns["robot"])
+    obs.reset(0.0, q0, v_true)
+    robot = ns["robot"]
+    worst = 0.0
+    for k in range(1, 101):
+        e = obs.update(k * 1e-3, robot.integrate(q0, v_true * k * 1e-3))
+        worst = max(worst, float(np.max(np.abs(e.v - v_true))))
+    assert worst < 1e-10

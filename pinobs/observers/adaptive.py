@@ -2,7 +2,9 @@
 
 Three parts, each on code shared with the rest of pinobs:
 
-1. **The filter** is :class:`~pinobs.observers.ekf.ExtendedKalmanFilter` with
+1. **The filter** is an :class:`~pinobs.observers.ekf.ExtendedKalmanFilter`
+   (``AdaptiveEKF.core``, held, not inherited: driven through its public
+   ``initial_state``, ``step`` and ``replace_robot``) with
    its joint-torque offset state ``d`` (``disturbance_psd``), run on the
    current learned model ``θ̂`` and the learned torque offset ``b̂``::
 
@@ -101,7 +103,7 @@ Three parts, each on code shared with the rest of pinobs:
    tested equal to the NumPy path that Lie-group robots take.
 
 Learning happens only from samples the base class has committed
-(:meth:`Observer._after_commit`), so a rejected update, a gated outlier or
+(:meth:`Observer.after_commit`), so a rejected update, a gated outlier or
 a prediction that is not kept (under a known latency) teaches nothing.
 
 4. **Off the loop** (``learning="background"``; issue 39).  Synchronous (the
@@ -146,6 +148,7 @@ from pinobs.errors import (
     GainError,
     IdentificationError,
     ObserverDiverged,
+    OptionError,
     UnsupportedRobotError,
 )
 from pinobs.model import Robot
@@ -156,7 +159,14 @@ from pinobs.model.identification import (
     smooth_path,
     solve,
 )
-from pinobs.observers.base import LIKELY_CAUSES, Consistency, Vector, positive, register
+from pinobs.observers.base import (
+    LIKELY_CAUSES,
+    Consistency,
+    Observer,
+    Vector,
+    positive,
+    register,
+)
 from pinobs.observers.blas import blas_libraries, one_blas_thread
 from pinobs.observers.ekf import EKFState, ExtendedKalmanFilter
 from pinobs.observers.kf import BankState, KFBank
@@ -620,7 +630,7 @@ def _blend_loops(
     s: Vector,
     blame: float,
 ) -> tuple[Vector, Vector, Vector, Vector]:
-    """The blend of :meth:`AdaptiveEKF._step` on vector joints, in loops (compiled by numba).
+    """The blend of :meth:`AdaptiveEKF.step` on vector joints, in loops (compiled by numba).
 
     Per coordinate ``i``: the scores ``score ← score + λ(e² − score)`` (if ``measured``),
     the filter ``b`` of the least score, ``v_kf = v_b``, ``P_kf = P_b,11``,
@@ -684,8 +694,13 @@ def _huber_loss(r: Vector, sigma: float, c: float = 1.345) -> float:
 
 
 @register
-class AdaptiveEKF(ExtendedKalmanFilter):
+class AdaptiveEKF(Observer["_State"]):
     """EKF that identifies its model online and blends with a model-free filter (module docstring).
+
+    A composition: ``core``, an :class:`~pinobs.observers.ekf.ExtendedKalmanFilter` whose
+    model and densities the learner sets (its ``replace_robot`` and ``gains``), driven
+    through its public ``initial_state`` and ``step``; the learner; the blend with a bank
+    of model-free ``kf`` (:class:`~pinobs.observers.kf.KFBank`).
 
     Args:
         robot: the nominal model (the identification's prior).
@@ -724,8 +739,10 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     """
 
     name = "adaptive"
+    uses_noise_std = True
     #: :func:`pinobs.smooth` smooths its model-based filter, the learned model frozen per window
     smoothable = True
+    learns_model = True
     summary = "EKF that identifies its model online, blended with kf: never behind it (model-based)"
 
     def __init__(
@@ -757,7 +774,9 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     ) -> None:
         if learning not in _LEARNING:
             raise GainError(f"learning={learning!r} must be one of {', '.join(_LEARNING)}")
-        super().__init__(
+        super().__init__(robot, rate=rate, noise_std=noise_std)
+        #: The model-based filter (class docstring).
+        self.core = ExtendedKalmanFilter(
             robot,
             accel_psd=warmup_accel_psd,
             q0_std=q0_std,
@@ -782,7 +801,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             positive(key, val)
         if horizon < 2 * window:
             positive("horizon - 2 window", horizon - 2 * window)
-        self._nominal = self.robot
+        self._nominal = self.core.robot
         self._learn_options = dict(
             window=float(window),
             half_window=float(half_window),
@@ -812,7 +831,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             raise GainError(f"jerk_psd={jerk_psd!r} must be a sequence of numbers > 0") from None
         if not jerks:
             raise GainError("jerk_psd needs at least one density")
-        self._bank = KFBank(self.robot, jerks, self.gains.meas_std)
+        self._bank = KFBank(self.robot, jerks, self.core.gains.meas_std)
         if self.blend and self.robot.is_vector_space:
             _blend_kernel.load()
         self._offset: Vector = np.zeros(self.robot.nv)
@@ -831,7 +850,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
     @property
     def options(self) -> dict[str, Any]:
         return {
-            **super().options,
+            **self.core.options,
             **self._learn_options,
             "accel_psd": self._regimes["learned"][0],
             "warmup_accel_psd": self._regimes["warmup"][0],
@@ -855,7 +874,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         The model is the filter's, with the learned friction it takes as a held input
         (:meth:`_install`) put back: the learned model whole."""
         accel, dist = self._regimes[self.regime]
-        robot = self.robot if self._held_friction is None else self._learned
+        robot = self.core.robot if self._held_friction is None else self._learned
         return ModelSnapshot(
             robot.copy(), self._offset.copy(), self.regime, accel, dist * self._m_bar2
         )
@@ -867,7 +886,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         diverged update keeps the last finite state, so this said ``False`` then (a sweep)."""
         if self._state is None:
             return False
-        return self._diverged or _lost(self._state.ekf)  # type: ignore[attr-defined]
+        return self._diverged or _lost(self._state.ekf)
 
     def parameters(self) -> ParameterSet:
         """The learned parameters with names and standard deviations (nominal before the first solve)."""
@@ -911,7 +930,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             "warming_up": lr.theta is None,
             "regime": self.regime,
             "restarts": self.restarts,
-            "blend_weight": None if self._state is None else self._weights(self._state).tolist(),  # type: ignore[arg-type]
+            "blend_weight": None if self._state is None else self._weights(self._state).tolist(),
         }
         return replace(base, details=details)
 
@@ -920,7 +939,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         (a solve found nothing better: the exact-model densities), ``learned`` (a learned model)."""
         self.regime = regime
         accel, dist = self._regimes[regime]
-        self.gains = replace(self.gains, accel_psd=accel)
+        self.core.gains = replace(self.core.gains, accel_psd=accel)
         if state.d_psd is None:
             return state
         return state._replace(d_psd=dist * self._m_bar2)  # per joint, as ekf: psd · M̄ᵢᵢ²
@@ -945,7 +964,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
                 theta[n : n + nj][cols] = 0.0
                 theta[n + nj : n + 2 * nj][cols] = 0.0
                 self._held_friction = held.astype(float)
-        self._replace_robot(lr.reg.with_parameters(theta, name=name))
+        self.core.replace_robot(lr.reg.with_parameters(theta, name=name))
         self._offset = lr.reg.offsets(lr.theta)
         state = self._set_regime(state, "learned")
         if state.d is None:
@@ -953,19 +972,19 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         return state._replace(d=np.zeros_like(state.d))  # the new model explains what d absorbed
 
     # ------------------------------------------------------------------ filter
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State:  # type: ignore[override]
+    def initial_state(self, q0: Vector, v0: Vector) -> _State:
         # a reset starts learning afresh from the nominal model
-        self._replace_robot(self._nominal.copy())
+        self.core.replace_robot(self._nominal.copy())
         self._learned = self._nominal
         self._held_friction = None
         self._learner = _Learner(self._nominal, **self._learn_options, worker=self._worker)  # type: ignore[arg-type]
         self._offset = np.zeros(self.robot.nv)
-        self.gains = replace(self.gains, accel_psd=self._regimes["warmup"][0])
+        self.core.gains = replace(self.core.gains, accel_psd=self._regimes["warmup"][0])
         self.regime = "warmup"
         self.restarts, self._restarted = 0, False
         self._m_bar2 = np.diag(self._nominal.mass_matrix(q0)) ** 2
-        ekf = super()._initial_state(q0, v0)
-        kf = self._bank.initial(q0, v0, self.gains.v0_std)
+        ekf = self.core.initial_state(q0, v0)
+        kf = self._bank.initial(q0, v0, self.core.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
         state = _State(ekf, kf, score, 0.0, s, q0.copy(), v0.copy(), ekf.v, 0.0)
@@ -977,23 +996,23 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         on paths already taken (NumPy's and the filters' first calls, their caches: the
         kernels are compiled or loaded when the observer is made, SciPy imported then too).
         UR5 in a loop paced at 1 kHz, first update 820–1065 µs without it, 295–406 µs with it
-        (median update 200 µs).  ``_step`` leaves ``state`` as it is; what a lost filter's
+        (median update 200 µs).  ``step`` leaves ``state`` as it is; what a lost filter's
         restart would change here is put back."""
         kept = (self.restarts, self._restarted, list(self._learner.rejected), self.regime)
         h = 1.0 / self.rate if self.rate else 1e-3
         with np.errstate(all="ignore"):
-            self._step(state, h, q0, np.zeros(self.robot.nv))
+            self.step(state, h, q0, np.zeros(self.robot.nv))
         self.restarts, self._restarted, rejected, regime = kept
         self._learner.rejected = deque(rejected, maxlen=_REJECTED_KEPT)
         if regime != self.regime:
             self._set_regime(state.ekf, regime)
 
-    def _restart_state(self, state: _State, q: Vector) -> _State:  # type: ignore[override]
+    def restart_state(self, state: _State, q: Vector) -> _State:
         """After a pause: the filter and the bank afresh at ``q`` (zero velocity), in the
         current regime; the learned model, offset and learner kept (a reset would relearn)."""
         zero = np.zeros(self.robot.nv)
-        ekf = self._set_regime(super()._initial_state(q, zero), self.regime)
-        kf = self._bank.initial(q, zero, self.gains.v0_std)
+        ekf = self._set_regime(self.core.initial_state(q, zero), self.regime)
+        kf = self._bank.initial(q, zero, self.core.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         return _State(ekf, kf, score, state.t, zero.copy(), q.copy(), zero.copy(), ekf.v, 0.0)
 
@@ -1031,47 +1050,47 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         v_mid = v + (0.5 * dt / state.dt_prev) * (v - state.v_prev) if state.dt_prev > 0 else v
         return tau + self._offset + self._held_friction * self._learned.friction_torque(v_mid)
 
-    def _ekf_step(self, ekf: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
+    def _core_step(self, ekf: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
         """The model-based filter's step; a filter whose covariance overflowed to a singular
         innovation covariance, or that its family says diverged, comes back with a NaN
-        velocity (lost: restarted by :meth:`_step`).  On UR10e logs at ~95 Hz the warm-up
+        velocity (lost: restarted by :meth:`step`).  On UR10e logs at ~95 Hz the warm-up
         filter's velocity variance reached 6e10 before ``solve`` raised ``LinAlgError``, which
         escaped the restart and left the re-initialisation to :func:`pinobs.estimate`."""
         try:
-            with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: handled by _step
-                return super()._step(ekf, dt, q_meas, tau)
+            with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: handled by step
+                return self.core.step(ekf, dt, q_meas, tau)
         except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
             return ekf._replace(v=np.full_like(ekf.v, np.nan))
 
-    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
-        ekf = self._ekf_step(state.ekf, dt, q_meas, self._torque(state, dt, tau))
+    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+        ekf = self._core_step(state.ekf, dt, q_meas, self._torque(state, dt, tau))
         t = state.t + dt
         if self.blend and _lost(ekf):
             # the model-based filter is lost (a learned model that does not hold): restart it
             # on the model-free estimate, in the warm-up regime, rather than fail
             v_kf, _, dq_kf = self._model_free(state)
-            restart = super()._initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
+            restart = self.core.initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
             restart = self._set_regime(restart, "warmup")
             state = state._replace(ekf=restart, dt_prev=0.0)
-            ekf = self._ekf_step(restart, dt, q_meas, self._torque(state, dt, tau))
+            ekf = self._core_step(restart, dt, q_meas, self._torque(state, dt, tau))
             if _lost(ekf) and self._learned is not self._nominal:
                 # lost again at once: the learned model itself does not hold (a mass matrix
                 # not positive definite away from the configurations its solve checked, held
                 # friction stiff there: solo12 with friction, a Panda at hard stops raised
                 # ObserverDiverged); back to the nominal model, which the learner may replace
-                self._replace_robot(self._nominal.copy())
+                self.core.replace_robot(self._nominal.copy())
                 self._learned, self._held_friction = self._nominal, None
                 self._offset = np.zeros(self.robot.nv)
                 self._learner.rejected.append(
                     f"learned model dropped at t = {t:.6g} s (the filter restarted on it was "
                     "lost at once): back to the nominal model"
                 )
-                ekf = super()._step(restart, dt, q_meas, self._torque(state, dt, tau))
+                ekf = self.core.step(restart, dt, q_meas, self._torque(state, dt, tau))
             self._learner.rejected.append(f"model-based filter restarted at t = {t:.6g} s")
             self.restarts += 1
             # the blend's error variance of the lost filter overflowed with it: the restarted
             # one starts with its initial velocity variance (the blend follows the kf first)
-            state = state._replace(s=np.full(self.robot.nv, self.gains.v0_std**2))
+            state = state._replace(s=np.full(self.robot.nv, self.core.gains.v0_std**2))
             self._restarted = True  # the next solve must beat the current model to end it
         if not self.blend:
             return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v, v_prev=state.ekf.v, dt_prev=dt)
@@ -1102,7 +1121,7 @@ class AdaptiveEKF(ExtendedKalmanFilter):
         q = self.robot.integrate(ekf.q, (1.0 - w) * dq_kf)
         return new._replace(s=s, q=q, v=v)
 
-    def _after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:  # type: ignore[override]
+    def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
         """Teach the learner the committed sample (with the torque held from it on, MATH §7);
         install a new model or leave the warm-up when a solve says so."""
         ekf = state.ekf
@@ -1133,21 +1152,33 @@ class AdaptiveEKF(ExtendedKalmanFilter):
             ekf = self._set_regime(ekf, "learned" if lr.installs else "nominal")
         return state if ekf is state.ekf else state._replace(ekf=ekf)
 
-    def _innovation(self, state: _State) -> tuple[float | None, bool]:  # type: ignore[override]
+    def innovation(self, state: _State) -> tuple[float | None, bool]:
         return state.ekf.gate.nis, state.ekf.gate.gated
 
-    def _output(self, state: _State) -> tuple[Vector, Vector]:  # type: ignore[override]
+    def output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v
+
+    def smoothing_filter(self) -> ExtendedKalmanFilter:
+        """None: a smoother runs it causally and replays its learned models frozen
+        (:attr:`learns_model`; :func:`pinobs.smooth`).
+
+        Raises:
+            OptionError: always.
+        """
+        raise OptionError(
+            "adaptive learns its model: pinobs.smooth runs it causally, then replays its "
+            "learned models frozen per window (model_window)"
+        )
 
     @property
     def disturbance(self) -> Vector | None:
         """The EKF's estimated joint-torque offset ``d`` beyond the learned offset [N·m or N]."""
-        if self._state is None or self._state.ekf.d is None:  # type: ignore[attr-defined]
+        if self._state is None or self._state.ekf.d is None:
             return None
-        return np.array(self._state.ekf.d)  # type: ignore[attr-defined]
+        return np.array(self._state.ekf.d)
 
     def covariance(self) -> Vector:
         """The EKF's covariance of ``(δq, δv, δd)`` (before the blend), a copy."""
         if self._state is None:
-            return super().covariance()
-        return np.array(self._state.ekf.P)  # type: ignore[attr-defined]
+            return self.core.covariance()  # NaN: not reset
+        return np.array(self._state.ekf.P)

@@ -8,10 +8,18 @@ with ``q_k``, then stores ``τ_k``.  ``reset(t0, q0, v0=None, tau0=None)``
 stores the first torque (zero if not given).
 
 A family implements only its mathematics, as pure functions of an immutable
-state: :meth:`Observer._initial_state`, :meth:`Observer._step` and
-:meth:`Observer._output`.  The base validates every input before anything
-changes, checks the new estimate is finite, and commits the new state only
-then, so a rejected call leaves the observer exactly as it was.
+state: :meth:`Observer.initial_state`, :meth:`Observer.step` and
+:meth:`Observer.output` (optionally :meth:`Observer.restart_state`,
+:meth:`Observer.after_commit`, :meth:`Observer.innovation`).  The base validates
+every input before anything changes, checks the new estimate is finite, and
+commits the new state only then, so a rejected call leaves the observer exactly
+as it was.  Those methods are public: a family is driven through them by the
+base, by another family (the never-behind blend) and by the smoother, which also
+reads what a family declares of itself (:attr:`Observer.smoothable`,
+:attr:`Observer.model_free`, :attr:`Observer.learns_model`,
+:attr:`Observer.process_density`) and runs the Gaussian filter a smoothable
+family gives (:meth:`Observer.smoothing_filter`, a :class:`GaussianFilter`: its
+``predict`` and ``correct`` apart, as filterpy's ``KalmanFilter``).
 """
 
 from __future__ import annotations
@@ -27,7 +35,7 @@ from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass, field
 from statistics import NormalDist
-from typing import Any, ClassVar, Generic, NamedTuple, TypeVar, final
+from typing import Any, ClassVar, Generic, NamedTuple, Protocol, TypeVar, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -62,6 +70,7 @@ __all__ = [
     "Consistency",
     "Estimate",
     "GateState",
+    "GaussianFilter",
     "Observer",
     "chi2_quantile",
     "gap_substeps",
@@ -260,7 +269,7 @@ class GateState(NamedTuple):
     ``liegroup``, ``ii``; ``adaptive`` through its ``ekf``): a family computes its NIS
     ``eᵀ S⁻¹ e`` (its own ``e`` and ``S``) and calls :meth:`measured`, or :meth:`predicted`
     at a step without a sample; the base reads ``nis`` and ``gated`` of the committed
-    state (:meth:`Observer._innovation`: :attr:`Estimate.nis`, :meth:`Observer.consistency`).
+    state (:meth:`Observer.innovation`: :attr:`Estimate.nis`, :meth:`Observer.consistency`).
 
     Attributes:
         nis: normalized innovation squared of the last measurement (``None``: none).
@@ -354,6 +363,47 @@ def positive(
     return x
 
 
+class GaussianFilter(Protocol):
+    """An error-state Gaussian filter, predicted and corrected apart (what a smoother runs).
+
+    The filter's step is ``correct ∘ predict`` (filterpy's ``KalmanFilter.predict`` /
+    ``update``), both pure functions of an immutable state carrying the mean ``q, v``
+    (and more: a torque offset ``d``, …) and the error covariance ``P``:
+
+    * ``predict(state, dt, tau) -> (state⁻, Φ)`` propagates over ``dt`` [s] with ``tau``
+      [N·m or N] held and returns the transition Jacobian ``Φ`` of the error state
+      (Rauch-Tung-Striebel needs it);
+    * ``predict_flow(state, dt, tau) -> (state⁻, Φ, F)`` also returns ``F``, the Jacobian
+      of the mean's step, of which ``Φ`` is only the filter's approximation (a filter
+      without a better one returns ``Φ`` as ``F``);
+    * ``correct(state⁻, q_meas) -> state⁺`` fuses one measured configuration; a filter with
+      an outlier gate keeps its bookkeeping in the state's ``gate`` (:class:`GateState`),
+      and ``gate_limit(state⁺)`` is the NIS above which it rejected that measurement.
+
+    Attributes:
+        robot: the process model (its configuration space is the filter's).
+        gains: the family's frozen gains; ``gains.meas_std`` is the position noise σ
+            [rad or m], and the process density is ``gains.accel_psd`` [rad²/s³] (a
+            model-based filter) or ``gains.jerk_psd`` [rad²/s⁵] (white jerk).
+        disturbance_psd: the density of a random-walk torque offset, or ``None``.
+        options: the filter's resolved options (reported with a smoothed result).
+    """
+
+    robot: Robot
+
+    @property
+    def gains(self) -> Any: ...
+    @property
+    def disturbance_psd(self) -> float | None: ...
+    @property
+    def options(self) -> dict[str, Any]: ...
+    def initial_state(self, q0: Vector, v0: Vector) -> Any: ...
+    def predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]: ...
+    def predict_flow(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector, Vector]: ...
+    def correct(self, state: Any, q_meas: Vector) -> Any: ...
+    def gate_limit(self, state: Any) -> float: ...
+
+
 class Observer(ABC, Generic[State]):
     """Base class of every observer.
 
@@ -369,6 +419,8 @@ class Observer(ABC, Generic[State]):
         uses_torque: whether the observer uses the torque (model-based) or not.
         uses_noise_std: whether it uses ``noise_std`` (gains or NIS).
         noise_in_gains: whether its gains depend on it (else only its NIS).
+        smoothable, model_free, learns_model, process_density: what a smoother needs
+            to know of the family (each documented below; :meth:`smoothing_filter`).
 
     **σ from the data, live.**  Built without ``noise_std`` (``None``; ``0``
     means noise-free and is kept), an observer whose gains depend on it starts
@@ -392,7 +444,7 @@ class Observer(ABC, Generic[State]):
     ``T`` with the held torque (as an update without a sample at every period); a pause
     longer than :data:`~pinobs.tolerances.PAUSE_RESTART` s and
     :data:`~pinobs.tolerances.MAX_GAP_PERIODS` ``T`` restarts the state at the next sample
-    (:meth:`_restart_state`: measured position, zero velocity, what the family learned
+    (:meth:`restart_state`: measured position, zero velocity, what the family learned
     kept), listed in :attr:`pauses`: the log reader's policy (:mod:`pinobs.io.stream`),
     with a restart threshold in seconds, because restarting from zero velocity costs more
     than it saves below ~0.1 s (:meth:`_after_pause`).
@@ -406,6 +458,17 @@ class Observer(ABC, Generic[State]):
     uses_noise_std: ClassVar[bool] = False
     #: ... and whether in its gains (else only in ``_sigma2``, its NIS's measurement variance).
     noise_in_gains: ClassVar[bool] = True
+    #: Whether a smoother can run it: it keeps an error-state covariance and gives a
+    #: :class:`GaussianFilter` (:meth:`smoothing_filter`), or it ``learns_model``.
+    smoothable: ClassVar[bool] = False
+    #: Whether its process model is kinematic (white jerk: no torque, no robot dynamics).
+    model_free: ClassVar[bool] = False
+    #: Whether it learns its dynamic model from the data (``adaptive``): a smoother first
+    #: runs it causally and then replays its learned models frozen.
+    learns_model: ClassVar[bool] = False
+    #: The option naming the process-noise density a smoother tunes (``accel_psd="auto"``):
+    #: ``"accel_psd"`` [rad²/s³] (white acceleration) or ``"jerk_psd"`` [rad²/s⁵] (white jerk).
+    process_density: ClassVar[str] = "accel_psd"
     _init_args: tuple[tuple[Any, ...], dict[str, Any]]  # set by __new__
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Observer[Any]:
@@ -477,7 +540,7 @@ class Observer(ABC, Generic[State]):
             else self.robot.check_vector(v0, self.robot.nv, what="v0")
         )
         tau = self._check_tau(tau0, what="tau0")
-        state = self._initial_state(q, v)
+        state = self.initial_state(q, v)
         estimate = self._make_estimate(t, state)
         self._state, self._t, self._tau, self._last = state, t, tau, estimate
         self._ts, self._torques = t, [(t, tau)]
@@ -573,7 +636,7 @@ class Observer(ABC, Generic[State]):
         else:  # the state is at t_new: only the torque applied from t_new on matters
             self._torques, held = [(t_new, tau_new)], tau_new
         used = q if t_state > ts_before + TIME_EPS and not estimate.gated else None
-        self._state = self._after_commit(state, t_state, used, held)
+        self._state = self.after_commit(state, t_state, used, held)
         if estimate.nis is not None:
             self._nis.append(estimate.nis)
             self._gated += estimate.gated
@@ -591,7 +654,7 @@ class Observer(ABC, Generic[State]):
         return self._period_s
 
     def _stepped(self, state: State, dt: float, q: Vector | None, tau: Vector) -> State:
-        """:meth:`_step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
+        """:meth:`step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
         than :data:`GAP_PERIODS` periods (at most ``PAUSE_RESTART`` worth of them: a longer
         step without a sample is a prediction in the dark, restarted at the next sample;
         :func:`gap_substeps`, the log reader's count too).
@@ -601,14 +664,14 @@ class Observer(ABC, Generic[State]):
         span = math.inf if period is None else max(PAUSE_RESTART, MAX_GAP_PERIODS * period)
         n = gap_substeps(dt, period, span=span)
         if n == 1:
-            return self._step(state, dt, q, tau)
+            return self.step(state, dt, q, tau)
         for _ in range(n - 1):
-            state = self._step(state, dt / n, None, tau)
-        return self._step(state, dt / n, q, tau)
+            state = self.step(state, dt / n, None, tau)
+        return self.step(state, dt / n, q, tau)
 
     def _after_pause(self, t_new: float, q: Vector, dt: float) -> tuple[State, float, Estimate]:
         """After a pause: the state afresh at the sample (its position, zero velocity; what the
-        family learned is kept: :meth:`_restart_state`), ``(state, its time, estimate at
+        family learned is kept: :meth:`restart_state`), ``(state, its time, estimate at
         t_new)``.  Measured on a UR5 log (1 kHz, σ = 1e-4 rad, PD input), ``ekf``'s error at
         the first sample / 50 ms / RMS over 1 s after a pause: 0.2 s: 0.54 / 0.44 / 0.2
         rad/s propagated, 0.88 / 1.3e-3 / 0.04 restarted; 1 s: 16 / 12 / 5.5 against 1.2 /
@@ -616,7 +679,7 @@ class Observer(ABC, Generic[State]):
         first sample against 1.2–1.3), hence the restart only beyond ``PAUSE_RESTART``."""
         assert self._state is not None
         t_state = t_new - self.latency
-        state = self._restart_state(self._state, q)
+        state = self.restart_state(self._state, q)
         self._restart_due = False
         self._pauses.append((t_new, dt))
         if t_state < t_new - TIME_EPS:  # a latency: the estimate at t_new, predicted ahead
@@ -624,7 +687,7 @@ class Observer(ABC, Generic[State]):
             ahead = self._advance(state, t_state, t_new, None)
         else:
             t_state, ahead = t_new, state
-        q_hat, v_hat = self._output(ahead)
+        q_hat, v_hat = self.output(ahead)
         return state, t_state, Estimate(t=t_new, q=read_only(q_hat), v=read_only(v_hat))
 
     @property
@@ -683,9 +746,9 @@ class Observer(ABC, Generic[State]):
         else:  # the sample predates the state: keep the state
             state, t_state = self._state, self._ts
         ahead = self._advance(state, t_state, t_new, None) if t_new > t_state + TIME_EPS else state
-        q_hat, v_hat = self._output(ahead)
+        q_hat, v_hat = self.output(ahead)
         nis, gated = (
-            self._innovation(state) if s > self._ts + TIME_EPS and q is not None else (None, False)
+            self.innovation(state) if s > self._ts + TIME_EPS and q is not None else (None, False)
         )
         estimate = Estimate(t=t_new, q=read_only(q_hat), v=read_only(v_hat), nis=nis, gated=gated)
         return state, t_state, estimate
@@ -766,43 +829,59 @@ class Observer(ABC, Generic[State]):
         )
 
     # ------------------------------------------------------ family interface
+    # The protocol every family implements (module docstring): pure functions of an
+    # immutable state, called by :meth:`update`, by another family (the never-behind blend)
+    # and by the smoother.
     @abstractmethod
-    def _initial_state(self, q0: Vector, v0: Vector) -> State:
-        """The state at reset.  Must not keep references to mutable inputs."""
+    def initial_state(self, q0: Vector, v0: Vector) -> State:
+        """The state at reset, ``q0`` [nq] and ``v0`` [nv].  Must not keep references to
+        mutable inputs."""
 
-    def _restart_state(self, state: State, q: Vector) -> State:
+    def restart_state(self, state: State, q: Vector) -> State:
         """The state restarted at ``q`` with zero velocity after a pause (:meth:`update`);
         a family that learns (``adaptive``) keeps what it learned."""
-        return self._initial_state(q, np.zeros(self.robot.nv))
+        return self.initial_state(q, np.zeros(self.robot.nv))
 
     @abstractmethod
-    def _step(self, state: State, dt: float, q_meas: Vector | None, tau: Vector) -> State:
+    def step(self, state: State, dt: float, q_meas: Vector | None, tau: Vector) -> State:
         """Propagate ``state`` over ``dt`` [s] with torque ``tau`` held, then correct with ``q_meas``.
 
         Must return a new state and leave ``state`` untouched.
         """
 
     @abstractmethod
-    def _output(self, state: State) -> tuple[Vector, Vector]:
+    def output(self, state: State) -> tuple[Vector, Vector]:
         """``(q̂, v̂)`` of a state."""
 
-    # -------------------------------------------------------------- helpers
-    def _after_commit(self, state: State, t: float, q: Vector | None, tau: Vector) -> State:
+    def after_commit(self, state: State, t: float, q: Vector | None, tau: Vector) -> State:
         """Called once a state is committed: ``t`` its time, ``q`` the sample it used (``None``
         if none or gated), ``tau`` the torque applied from ``t`` on.  Families that learn from
-        the data do it here (never in :meth:`_step`, which also runs for predictions that are
+        the data do it here (never in :meth:`step`, which also runs for predictions that are
         not kept); may return a replacement state.  Default: the state unchanged."""
         return state
 
-    def _innovation(self, state: State) -> tuple[float | None, bool]:
+    def innovation(self, state: State) -> tuple[float | None, bool]:
         """``(NIS, gated)`` of the measurement that made ``state``: its :class:`GateState`
         ``gate`` (families with an innovation), else ``(None, False)``."""
         gate: GateState | None = getattr(state, "gate", None)
         return (None, False) if gate is None else (gate.nis, gate.gated)
 
+    def smoothing_filter(self) -> GaussianFilter:
+        """The Gaussian filter a smoother runs for this family (:class:`GaussianFilter`),
+        for a :attr:`smoothable` family that does not :attr:`learns_model`.
+
+        Raises:
+            OptionError: the family keeps no error-state covariance to smooth.
+        """
+        raise OptionError(
+            f"observer {self.name!r} keeps no error-state covariance to smooth; smoothable: "
+            f"{[n for n in observer_names() if observer_class(n).smoothable]}"
+        )
+
+    # -------------------------------------------------------------- helpers
     def _make_estimate(self, t: float, state: State) -> Estimate:
-        q, v = self._output(state)
-        nis, gated = self._innovation(state)
+        q, v = self.output(state)
+        nis, gated = self.innovation(state)
         return Estimate(t=t, q=read_only(q), v=read_only(v), nis=nis, gated=gated)
 
     def _check_tau(self, tau: ArrayLike | None, *, what: str) -> Vector:

@@ -357,14 +357,14 @@ class HighGainDifferentiator(Observer[_HGState]):
         e = self.robot.difference(q_hat, y)  # the group error, y − x₁
         return X[0] + k[0] * e, X_dot + np.outer(k[1:], e)
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> _HGState:
+    def initial_state(self, q0: Vector, v0: Vector) -> _HGState:
         n, g = self.gains.order, self.gains
         X = np.zeros((n - 1, self.robot.nv))
         X[0] = v0
         L0 = steady_gain_matrix(n, g.gamma / g.aux)
         return _HGState(q0.copy(), X, L0, None, 0.0)
 
-    def _step(self, state: _HGState, dt: float, q_meas: Vector | None, tau: Vector) -> _HGState:
+    def step(self, state: _HGState, dt: float, q_meas: Vector | None, tau: Vector) -> _HGState:
         n, nv = self.gains.order, self.robot.nv
         since = state.since + dt
         y0: Vector | None = None  # no sample: no injection
@@ -430,7 +430,7 @@ class HighGainDifferentiator(Observer[_HGState]):
             self._foh_cache[dt] = cached
         return cached
 
-    def _output(self, state: _HGState) -> tuple[Vector, Vector]:
+    def output(self, state: _HGState) -> tuple[Vector, Vector]:
         return state.q, state.X[0]
 
 
@@ -507,12 +507,12 @@ class SlidingDifferentiator(Observer[_SMState]):
         X_dot = X_ext[1:] - np.outer(self.beta[1:], sigma) - np.outer(self.k[1:], s)
         return u, X_dot
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> _SMState:
+    def initial_state(self, q0: Vector, v0: Vector) -> _SMState:
         X = np.zeros((self.gains.order - 1, self.robot.nv))
         X[0] = v0
         return _SMState(q0.copy(), X)
 
-    def _step(self, state: _SMState, dt: float, q_meas: Vector | None, tau: Vector) -> _SMState:
+    def step(self, state: _SMState, dt: float, q_meas: Vector | None, tau: Vector) -> _SMState:
         q, X = _taylor_transport(self.robot, state.q, state.X, dt)  # drift, exact
         if q_meas is None:
             return _SMState(q, X)
@@ -530,5 +530,5 @@ class SlidingDifferentiator(Observer[_SMState]):
         X = X - dt * (np.outer(self.beta[1:], sigma) + np.outer(self.k[1:], s))
         return _SMState(q, X)
 
-    def _output(self, state: _SMState) -> tuple[Vector, Vector]:
+    def output(self, state: _SMState) -> tuple[Vector, Vector]:
         return state.q, state.X[0]

@@ -261,7 +261,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         d0_std: initial standard deviation of that offset [N·m or N]; ``None``: 1, or
             with ``"auto"`` ``AUTO_D0_ACCEL · M̄ᵢᵢ``.
         outlier_probability: false-alarm probability ``p`` of the outlier gate
-            (:meth:`_correct`); ``None`` switches the gate off.
+            (:meth:`correct`); ``None`` switches the gate off.
         rate: sample rate hint [Hz] (not needed: the filter uses the actual intervals).
         noise_std: position noise standard deviation [rad or m], the measurement noise.
     """
@@ -359,7 +359,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         return np.array(self._state.d)
 
     # ------------------------------------------------------------- the filter
-    def _initial_state(self, q0: Vector, v0: Vector) -> EKFState:
+    def initial_state(self, q0: Vector, v0: Vector) -> EKFState:
         nv = self.robot.nv
         std = np.concatenate([np.full(nv, self.gains.q0_std), np.full(nv, self.gains.v0_std)])
         if self.disturbance_psd is None:
@@ -377,13 +377,13 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self._psd_bounds = np.outer(AUTO_PSD_BOUNDS, m_bar**2)
         return EKFState(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd, auto=True)
 
-    def _step(self, state: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
+    def step(self, state: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
         # a filter being lost overflows: its update says so (ObserverDiverged), numpy does not
         with np.errstate(over="ignore", invalid="ignore"):
-            pred, _ = self._predict(state, dt, tau)
+            pred, _ = self.predict(state, dt, tau)
             if q_meas is None:
                 return pred._replace(P=0.5 * (pred.P + pred.P.T), gate=pred.gate.predicted())
-            new = self._correct(pred, q_meas)
+            new = self.correct(pred, q_meas)
             if not new.auto or new.d_psd is None or new.gate.gated:
                 return new
             # disturbance_psd="auto": ψ matched to the innovations (module docstring)
@@ -393,12 +393,12 @@ class ExtendedKalmanFilter(Observer[EKFState]):
             psd = match_density(new.d_psd, e, s, dt, window=AUTO_WINDOW, bounds=self._psd_bounds)
             return new._replace(d_psd=psd)
 
-    def _predict(self, state: EKFState, dt: float, tau: Vector) -> tuple[EKFState, Vector]:
+    def predict(self, state: EKFState, dt: float, tau: Vector) -> tuple[EKFState, Vector]:
         """Prediction over ``dt`` [s] with ``tau`` held: ``(state⁻, Φ)``.
 
         Mean by one RKMK4 step of :meth:`vector_field` (with ``τ + d``), covariance
         ``P⁻ = Φ P Φᵀ + Q_d`` (module docstring; symmetric to rounding, not
-        symmetrised: :meth:`_correct` and :meth:`_step` do that).  ``Φ`` (a new
+        symmetrised: :meth:`correct` and :meth:`step` do that).  ``Φ`` (a new
         array) is returned for smoothers (Rauch-Tung-Striebel needs it).  One
         ``computeABADerivatives`` gives ``A`` and the first RK stage, three ABA
         calls the others.
@@ -407,10 +407,10 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         tau_in = tau if d is None else tau + d  # the offset acts as a torque (module docstring)
         return self._propagate(state, dt, tau_in, *self._jacobian(state.q, state.v, tau_in))
 
-    def _predict_flow(
+    def predict_flow(
         self, state: EKFState, dt: float, tau: Vector
     ) -> tuple[EKFState, Vector, Vector]:
-        """:meth:`_predict` and ``F``, the Jacobian of its mean's step, ``∂x⁻_{k+1}/∂x⁺_k``.
+        """:meth:`predict` and ``F``, the Jacobian of its mean's step, ``∂x⁻_{k+1}/∂x⁺_k``.
 
         ``Φ`` takes ``A`` at the step's start; along the step ``A`` changes
         (with ``q``, ``v``: ``h ΔA`` is 2e-3 of ``Φ − I`` on a Panda at 1 kHz), so
@@ -435,7 +435,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
     def _propagate(
         self, state: EKFState, dt: float, tau_in: Vector, A: Vector, acc: Any, minv: Vector
     ) -> tuple[EKFState, Vector]:
-        """:meth:`_predict` given the torque (offset included) and the start's Jacobian call."""
+        """:meth:`predict` given the torque (offset included) and the start's Jacobian call."""
         nv, d = self.robot.nv, state.d
         if not self.robot.has_friction:
             Phi = transition_matrix(A, dt)
@@ -453,7 +453,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
             P[2 * nv :, 2 * nv :].flat[:: nv + 1] += state.d_psd * dt
         return state._replace(q=q, v=v, P=P), Phi  # the gate's bookkeeping carries over
 
-    def _correct(self, state: EKFState, q_meas: Vector) -> EKFState:
+    def correct(self, state: EKFState, q_meas: Vector) -> EKFState:
         """Correction of a predicted state with the measured ``q_meas`` (Joseph form, module docstring).
 
         The normalized innovation squared ``NIS = eᵀ S⁻¹ e`` comes free:
@@ -479,12 +479,17 @@ class ExtendedKalmanFilter(Observer[EKFState]):
             d = d + dx[2 * nv :]
         return EKFState(q, v, P_new, d, state.d_psd, gate, state.auto)  # P symmetric (joseph)
 
-    def _gate_nis(self, state: EKFState) -> float:
-        """The NIS above which :meth:`_correct` rejected ``state``'s measurement: the gate's
+    def gate_limit(self, state: EKFState) -> float:
+        """The NIS above which :meth:`correct` rejected ``state``'s measurement: the gate's
         threshold at its level (:func:`pinobs.observers.base.outlier_gate`)."""
         return state.gate.limit(self._gate, self.robot.nv)
 
-    def _replace_robot(self, robot: Robot) -> None:
+    def smoothing_filter(self) -> ExtendedKalmanFilter:
+        """The filter itself: its :meth:`predict` and :meth:`correct` are a
+        :class:`~pinobs.observers.base.GaussianFilter`'s."""
+        return self
+
+    def replace_robot(self, robot: Robot) -> None:
         """Swap the filter's model between updates (an adaptive subclass's identified model).
 
         The state is kept; the next prediction uses ``robot``'s dynamics.  ``robot``
@@ -498,7 +503,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self.robot = robot
         self._scratch_A = None  # sized by the robot
 
-    def _output(self, state: EKFState) -> tuple[Vector, Vector]:
+    def output(self, state: EKFState) -> tuple[Vector, Vector]:
         return state.q, state.v
 
     def covariance(self) -> Vector:

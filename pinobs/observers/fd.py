@@ -98,10 +98,10 @@ class FiniteDifference(Observer[_State]):
     def options(self) -> dict[str, object]:
         return {**super().options, "cutoff": self.gains.cutoff}
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State:
+    def initial_state(self, q0: Vector, v0: Vector) -> _State:
         return _State(q_last=q0.copy(), since=0.0, q=q0.copy(), v=v0.copy())
 
-    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         since = state.since + dt
         if q_meas is None:
             return _State(state.q_last, since, self.robot.integrate(state.q, state.v * dt), state.v)
@@ -110,5 +110,5 @@ class FiniteDifference(Observer[_State]):
         v = state.v + a * (v_raw - state.v)
         return _State(q_last=q_meas.copy(), since=0.0, q=q_meas.copy(), v=v)
 
-    def _output(self, state: _State) -> tuple[Vector, Vector]:
+    def output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v

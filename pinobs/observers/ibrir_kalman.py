@@ -194,7 +194,7 @@ def _fused_loops(
             Pm[i, j] = t + Q[i, j]
     if not _joseph_nb(Pm, e, r, dx, out):
         return np.nan
-    nis = 0.0  # S⁻¹ e = (e − K_q e) / r (ExtendedKalmanFilter._correct)
+    nis = 0.0  # S⁻¹ e = (e − K_q e) / r (ExtendedKalmanFilter.correct)
     for i in range(nv):
         nis += e[i] * (e[i] - dx[i])
     return nis / r
@@ -425,18 +425,18 @@ class IbrirKalman(Observer[_State]):
         return v_hat + corr[:nv], F[nv:, nv:] @ v_hat + G[nv:] + corr[nv:]
 
     # ------------------------------------------------------------- the filter
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State:
+    def initial_state(self, q0: Vector, v0: Vector) -> _State:
         nv = self.robot.nv
         std = np.concatenate([np.full(nv, self.gains.q0_std), np.full(nv, self.gains.v0_std)])
         uses_diff = self.velocity_source == "differentiator" or self.schedule == "filtered"
-        diff = self.differentiator._initial_state(q0, v0) if uses_diff else None
+        diff = self.differentiator.initial_state(q0, v0) if uses_diff else None
         return _State(q0.copy(), v0.copy(), np.diag(std**2), diff, None)
 
-    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         """Prediction over ``dt`` [s] (scheduled on ``q_meas``), then the gated Kalman correction.
 
         ``NIS = eᵀ S⁻¹ e`` with ``S = P⁻_qq + 1/(R h)`` comes free from the update
-        (``S⁻¹ e = (e − K_q e) R h``, as in :meth:`ExtendedKalmanFilter._correct`).  A
+        (``S⁻¹ e = (e − K_q e) R h``, as in :meth:`ExtendedKalmanFilter.correct`).  A
         measurement the gate rejects (:func:`pinobs.observers.base.outlier_gate`) is used
         nowhere: the step is redone as if there were no sample (the schedule ``y(t)`` and
         the differentiator had read it too), and the estimate is that prediction.
@@ -462,7 +462,7 @@ class IbrirKalman(Observer[_State]):
         dq = dx[:nv]
         gate = state.gate.measured(nis, self._gate, nv)
         if gate.gated:
-            return self._step(state, dt, None, tau)._replace(gate=gate)
+            return self.step(state, dt, None, tau)._replace(gate=gate)
         q = q + dq if self._vector_space else r.integrate(q, dq)
         return _State(q, v + dx[nv:], P, d1, q_meas.copy(), gate)
 
@@ -491,7 +491,7 @@ class IbrirKalman(Observer[_State]):
         covariance takes ``F``."""
         r, nv = self.robot, self.robot.nv
         d0 = state.diff
-        d1 = None if d0 is None else self.differentiator._step(d0, dt, q_meas, tau)  # ξ̂
+        d1 = None if d0 is None else self.differentiator.step(d0, dt, q_meas, tau)  # ξ̂
         # scheduling output y(s) on the interval, s ∈ [0, dt]: y0 ⊕ (s/dt) dy
         vector_space = self._vector_space  # ⊕ is +, ⊖ is −: NumPy, not a Pinocchio call
         if self.schedule == "filtered" and d0 is not None and d1 is not None:
@@ -557,7 +557,7 @@ class IbrirKalman(Observer[_State]):
         y_dot_mid = 0.5 * (state.v + v) if use_estimate else 0.5 * (yd0 + yd1)
         return q, v, (y_at[0.5], y_dot_mid), d1
 
-    def _output(self, state: _State) -> tuple[Vector, Vector]:
+    def output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v
 
     def covariance(self) -> Vector:

@@ -455,7 +455,7 @@ class IIObserver(Observer[_State]):
 
     # ------------------------------------------------------ family interface
     # The state lives in the chart (θ unwrapped for continuous joints); q in and out is the robot's.
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State:
+    def initial_state(self, q0: Vector, v0: Vector) -> _State:
         if self.chart is not None:
             q0 = self.chart.to_chart(q0)
         q_ref = q0.copy()
@@ -474,13 +474,13 @@ class IIObserver(Observer[_State]):
         eta = beta - self._momentum(q0, v0)  # P̂(0) = β − η = T⁻¹ v0
         return _State(q0.copy(), eta, beta, q_ref)
 
-    def _output(self, state: _State) -> tuple[Vector, Vector]:
+    def output(self, state: _State) -> tuple[Vector, Vector]:
         v_hat = self.factor.frame(state.q) @ (state.beta - state.eta)
         if self.chart is not None:
             return self.chart.from_chart(state.q), v_hat
         return state.q, v_hat
 
-    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         robot = self.plant
         n_sub = self.substeps or max(1, math.ceil(self.gains.gain * dt / _STEP_KH))
         h = dt / n_sub

@@ -271,6 +271,8 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
     #: :func:`pinobs.smooth` can run its backward pass over this filter (through
     #: :meth:`smoothing_filter`: the model-free smoother).
     smoothable = True
+    model_free = True
+    process_density = "jerk_psd"
 
     def __init__(
         self,
@@ -348,7 +350,7 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
             np.array([self.gains.meas_std**2, self.v0_std**2, (10.0 * self.v0_std) ** 2])
         )
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State | _AutoState:
+    def initial_state(self, q0: Vector, v0: Vector) -> _State | _AutoState:
         P = self._initial_p()
         if not self.auto:
             return _State(q0.copy(), v0.copy(), np.zeros_like(v0), P)
@@ -361,9 +363,9 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
         w = np.full((n_f, nv), 1.0 / n_f)
         return _AutoState(bank, jerk, 0.0, np.zeros((n_f, nv)), np.zeros(n_f), w)
 
-    def _restart_state(self, state: _State | _AutoState, q: Vector) -> _State | _AutoState:
+    def restart_state(self, state: _State | _AutoState, q: Vector) -> _State | _AutoState:
         """After a pause: afresh, but ``"auto"`` keeps its likelihoods (what it learned)."""
-        fresh = self._initial_state(q, np.zeros(self.robot.nv))
+        fresh = self.initial_state(q, np.zeros(self.robot.nv))
         if isinstance(state, _AutoState) and isinstance(fresh, _AutoState):
             return fresh._replace(jerk=state.jerk, n=state.n, A=state.A, B=state.B, w=state.w)
         return fresh
@@ -372,7 +374,7 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
         """The bank's densities ``ρ_f σ₀² = λ_f σ₀² / T⁵`` [rad²/s⁵] (module docstring)."""
         return np.array(AUTO_LAMBDAS) * self.gains.meas_std**2 / period**5
 
-    def _step(
+    def step(
         self, state: _State | _AutoState, dt: float, q_meas: Vector | None, tau: Vector
     ) -> _State | _AutoState:
         if isinstance(state, _AutoState):
@@ -392,7 +394,7 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
 
     def _auto_step(self, state: _AutoState, h: float, q_meas: Vector | None) -> _AutoState:
         """One step of the bank (module docstring, ``jerk_psd="auto"``): each filter's
-        prediction and correction (:meth:`KFBank.step`: the equations of :meth:`_step`),
+        prediction and correction (:meth:`KFBank.step`: the equations of :meth:`step`),
         the forgotten likelihood sums, the mixture's weights.  On vector joints one compiled
         call (:func:`_auto_step_loops`) into arrays allocated here (the state before is kept
         as it was); otherwise NumPy, the configurations filter by filter."""
@@ -466,7 +468,7 @@ class ConstantAccelerationKF(Observer["_State | _AutoState"]):
         base = super().consistency()
         return replace(base, causes=KF_CAUSES) if base.causes else base
 
-    def _output(self, state: _State | _AutoState) -> tuple[Vector, Vector]:
+    def output(self, state: _State | _AutoState) -> tuple[Vector, Vector]:
         if not isinstance(state, _AutoState):
             return state.q, state.v
         if state.mix is not None:  # computed by the compiled step
@@ -515,7 +517,7 @@ class ErrorState(NamedTuple):
 
 class WhiteJerkFilter:
     """:class:`ConstantAccelerationKF` with its predict and correct apart, for the RTS
-    smoother (:class:`pinobs.observers.smoothing.SmoothableFilter`): the model-free smoother.
+    smoother (a :class:`pinobs.observers.base.GaussianFilter`): the model-free smoother.
 
     The same equations (module docstring), stated for the whole error state
     ``x = (δq, δv, δa)`` of ``3 nv`` coordinates: every direction has the same
@@ -532,6 +534,9 @@ class WhiteJerkFilter:
         self._cache: tuple[float, Vector, Vector, Vector] | None = None
         self._eye = np.eye(robot.nv)
 
+    #: No torque offset: white jerk takes no torque.
+    disturbance_psd: float | None = None
+
     @property
     def options(self) -> dict[str, object]:
         return _gain_options(self.gains)
@@ -539,12 +544,12 @@ class WhiteJerkFilter:
     def _full(self, q: Vector, v: Vector, a: Vector, P3: Vector, gate: GateState) -> ErrorState:
         return ErrorState(q, v, a, _kron_eye(P3, self._eye), P3, gate)
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> ErrorState:
-        """As :meth:`ConstantAccelerationKF._initial_state`."""
+    def initial_state(self, q0: Vector, v0: Vector) -> ErrorState:
+        """As :meth:`ConstantAccelerationKF.initial_state`."""
         P3 = np.diag([self.gains.meas_std**2, self.v0_std**2, (10.0 * self.v0_std) ** 2])
         return self._full(q0.copy(), v0.copy(), np.zeros_like(v0), P3, GateState())
 
-    def _predict(self, state: ErrorState, dt: float, tau: Vector) -> tuple[ErrorState, Vector]:
+    def predict(self, state: ErrorState, dt: float, tau: Vector) -> tuple[ErrorState, Vector]:
         """``(state⁻, Φ)`` (``tau`` is not used)."""
         if self._cache is None or self._cache[0] != dt:
             F, Q = transition(dt, self.gains.jerk_psd)
@@ -553,7 +558,15 @@ class WhiteJerkFilter:
         q, v, a, P3 = _predicted(self.robot, state.q, state.v, state.d, state.P3, F, Q, dt)
         return self._full(q, v, a, P3, state.gate.predicted()), Phi.copy()
 
-    def _correct(self, state: ErrorState, q_meas: Vector) -> ErrorState:
+    def predict_flow(
+        self, state: ErrorState, dt: float, tau: Vector
+    ) -> tuple[ErrorState, Vector, Vector]:
+        """:meth:`predict` and the Jacobian of its mean's step: ``Φ`` itself (the step is
+        linear in the error state)."""
+        pred, Phi = self.predict(state, dt, tau)
+        return pred, Phi, Phi
+
+    def correct(self, state: ErrorState, q_meas: Vector) -> ErrorState:
         q, v, a, P3 = (*state[:3], state.P3)
         new = _corrected(
             self.robot, q, v, a, P3, state.gate, self.gains.meas_std**2, self._gate, q_meas
@@ -562,8 +575,8 @@ class WhiteJerkFilter:
             return state._replace(gate=new.gate)
         return self._full(*new)
 
-    def _gate_nis(self, state: ErrorState) -> float:
-        """The NIS above which :meth:`_correct` rejected ``state``'s measurement."""
+    def gate_limit(self, state: ErrorState) -> float:
+        """The NIS above which :meth:`correct` rejected ``state``'s measurement."""
         return state.gate.limit(self._gate, self.robot.nv)
 
 

@@ -404,7 +404,7 @@ class LieGroupObserver(Observer[_State]):
         curvature_gain: ``c`` in ``c·R(ζ̃, ζ_e)ζ̃`` (default −1; +1 as printed,
             module docstring).
         outlier_probability: false-alarm probability ``p`` of the outlier gate
-            (:meth:`_step`); ``None`` switches the gate off.
+            (:meth:`step`); ``None`` switches the gate off.
         rate: sample rate hint [Hz] (unused: the gains are the paper's unless given).
         noise_std: position noise standard deviation [rad or m]: the gains ignore it,
             the NIS divides by it (1e-6 if not given, as the filters').
@@ -487,11 +487,11 @@ class LieGroupObserver(Observer[_State]):
         return v, self.geometry.euler(v) + self.force(q, tau + self.robot.friction_torque(v))
 
     # ------------------------------------------------------- sampled data
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State:
+    def initial_state(self, q0: Vector, v0: Vector) -> _State:
         # the first sample is accepted whatever its NIS (a start-up transient, not a spike)
         return _State(q0.copy(), v0.copy(), 0.0, GateState(run=MAX_GATE_RUN))
 
-    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         q, v = lie_rk4(
             self.robot, state.q, state.v, dt, lambda qq, vv: self.model_vector_field(qq, vv, tau)
         )
@@ -522,5 +522,5 @@ class LieGroupObserver(Observer[_State]):
         q_new = self.robot.normalize(self.robot.integrate(q, jump))
         return _State(q_new, v_new, 0.0, gate)
 
-    def _output(self, state: _State) -> tuple[Vector, Vector]:
+    def output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q.copy(), state.v.copy()

@@ -221,39 +221,39 @@ class NeverBehind(Observer[_State]):
         return np.array(self._state.w)
 
     # ---------------------------------------------------------------- states
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State:
+    def initial_state(self, q0: Vector, v0: Vector) -> _State:
         self.reseeds = 0
         nv = self.robot.nv
-        m = self.model._initial_state(q0, v0)
-        k = self.reference._initial_state(q0, v0)
+        m = self.model.initial_state(q0, v0)
+        k = self.reference.initial_state(q0, v0)
         return _State(m, k, np.zeros((2, nv)), 0.0, np.ones(nv), q0.copy(), v0.copy(), v0, 0.0)
 
-    def _restart_state(self, state: _State, q: Vector) -> _State:
+    def restart_state(self, state: _State, q: Vector) -> _State:
         nv = self.robot.nv
         zero = np.zeros(nv)
-        m = self.model._restart_state(state.model, q)
-        k = self.reference._restart_state(state.kf, q)
+        m = self.model.restart_state(state.model, q)
+        k = self.reference.restart_state(state.kf, q)
         return _State(m, k, np.zeros((2, nv)), 0.0, np.ones(nv), q.copy(), zero, zero, 0.0)
 
-    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         r = self.robot
         flat = r.is_vector_space  # q ⊕ x = q + x, difference(a, b) = b − a: plain arithmetic
-        kf = self.reference._step(state.kf, dt, q_meas, tau)
-        q_kf, v_kf = self.reference._output(kf)
+        kf = self.reference.step(state.kf, dt, q_meas, tau)
+        q_kf, v_kf = self.reference.output(kf)
         try:
-            m = self.model._step(state.model, dt, q_meas, tau)
-            q_m, v_m = self.model._output(m)
+            m = self.model.step(state.model, dt, q_meas, tau)
+            q_m, v_m = self.model.output(m)
             # (a sum overflowing to inf says lost too: a filter that far off is)
             lost = not math.isfinite(sum(q_m.tolist()) + sum(v_m.tolist()))
         except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
             lost = True
         s_m, s_k, c = state.s[0], state.s[1], state.c
-        if not lost and q_meas is not None and not self.reference._innovation(kf)[1]:
+        if not lost and q_meas is not None and not self.reference.innovation(kf)[1]:
             # scored (module docstring), unless the kf's gate took the sample for an outlier
             ahead = 0.0 if state.dt_prev <= 0 else 0.5 * dt * dt / state.dt_prev
             step_a = ahead * (state.v - state.v_prev)  # ½ h² â, â = Δv̂ / h₋ (the blend's)
-            qm0, vm0 = self.model._output(state.model)
-            qk0, vk0 = self.reference._output(state.kf)
+            qm0, vm0 = self.model.output(state.model)
+            qk0, vk0 = self.reference.output(state.kf)
             e_m: Vector
             e_k: Vector
             if flat:
@@ -275,8 +275,8 @@ class NeverBehind(Observer[_State]):
             lost = bool(np.any(dt * np.abs(v_m - v_kf) > FAR_GATE * np.sqrt(s_k / c)))
         if lost:  # re-seeded (module docstring) at the kf's estimate, the blend's when w = 0
             self.reseeds += 1
-            m = self.model._initial_state(q_kf, v_kf)
-            q_m, v_m = self.model._output(m)
+            m = self.model.initial_state(q_kf, v_kf)
+            q_m, v_m = self.model.output(m)
             s_m = self.lost_ratio * s_k  # to prove itself: w ≈ 0 until it has
         if c > 0.0:
             # the window's means so far (exponential means started at zero): s / c
@@ -292,17 +292,17 @@ class NeverBehind(Observer[_State]):
         q = q_kf + w * (q_m - q_kf) if flat else r.integrate(q_kf, w * r.difference(q_kf, q_m))
         return _State(m, kf, np.array([s_m, s_k]), c, w, q, v, state.v, dt)
 
-    def _after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
-        m = self.model._after_commit(state.model, t, q, tau)
-        k = self.reference._after_commit(state.kf, t, q, tau)
+    def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
+        m = self.model.after_commit(state.model, t, q, tau)
+        k = self.reference.after_commit(state.kf, t, q, tau)
         return state._replace(model=m, kf=k)
 
-    def _innovation(self, state: _State) -> tuple[float | None, bool]:
+    def innovation(self, state: _State) -> tuple[float | None, bool]:
         """The model-based observer's NIS (the consistency test is of the model), and the
         ``kf``'s outlier decision (the one the scores use): a lost model gates every
         sample, and a sample reported gated is withheld from both observers' learning
-        (:meth:`_after_commit`)."""
-        return self.model._innovation(state.model)[0], self.reference._innovation(state.kf)[1]
+        (:meth:`after_commit`)."""
+        return self.model.innovation(state.model)[0], self.reference.innovation(state.kf)[1]
 
-    def _output(self, state: _State) -> tuple[Vector, Vector]:
+    def output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v

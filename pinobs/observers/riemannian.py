@@ -614,11 +614,11 @@ class RiemannianObserver(Observer[_State]):
         return q_dot, v_dot
 
     # ------------------------------------------------------------ sampled
-    def _initial_state(self, q0: Vector, v0: Vector) -> _State:
+    def initial_state(self, q0: Vector, v0: Vector) -> _State:
         p0 = (self._p0[0, 0], 0.0, self._p0[1, 1]) if self.gain_schedule == "riccati" else None
         return _State(q0.copy(), v0.copy(), 0.0, None, 0, p0)
 
-    def _step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         q, v = dynamics_rk4(self.robot, state.q, state.v, tau, dt)  # the prediction (MATH §7)
         elapsed = state.elapsed + dt
         if q_meas is None:
@@ -732,5 +732,5 @@ class RiemannianObserver(Observer[_State]):
         speed = math.sqrt(max(float(v @ m @ v), 0.0))
         return g.at(s, speed)
 
-    def _output(self, state: _State) -> tuple[Vector, Vector]:
+    def output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v

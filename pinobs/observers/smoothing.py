@@ -2,8 +2,8 @@
 
 A causal filter estimates ``x_k`` from the samples up to ``t_k``; a log has the
 later samples too.  The fixed-interval smoother runs the filter forward
-(:class:`pinobs.observers.ekf.ExtendedKalmanFilter`, whose ``_predict`` and
-``_correct`` it calls), stores at every sample the filtered mean and
+(:class:`pinobs.observers.ekf.ExtendedKalmanFilter`, whose ``predict`` and
+``correct`` it calls), stores at every sample the filtered mean and
 covariance ``(x⁺_k, P⁺_k)``, the predicted ones ``(x⁻_{k+1}, P⁻_{k+1})`` and
 the transition Jacobian ``Φ_k`` of the error state, then runs backward
 (Rauch, Tung, Striebel 1965; Särkkä, *Bayesian Filtering and Smoothing*, 2013,
@@ -106,10 +106,12 @@ The observers that can be smoothed are those that keep an error-state
 Gaussian: ``ekf``, ``adaptive`` through its model-based filter, and the
 model-free ``kf`` (:class:`pinobs.observers.kf.WhiteJerkFilter`: its per-joint
 white-jerk filter as one error state ``(δq, δv, δa)`` with ``P = P₃ ⊗ I``, the
-acceleration smoothed as the EKF's ``d``).  Another family qualifies by offering
-the same methods (:class:`SmoothableFilter`: ``_initial_state``, ``_predict``
-returning ``Φ``, ``_correct``), or a ``smoothing_filter()`` that gives them, and
-a state with ``q``, ``v``, ``P`` (and optionally ``d``).
+acceleration smoothed as the EKF's ``d``).  Another family qualifies by declaring
+itself :attr:`~pinobs.observers.base.Observer.smoothable` and giving, from its
+:meth:`~pinobs.observers.base.Observer.smoothing_filter`, a
+:class:`~pinobs.observers.base.GaussianFilter` (``initial_state``, ``predict``
+returning ``Φ``, ``correct``) whose states carry ``q``, ``v``, ``P`` (and
+optionally ``d``).
 
 The model-free smoother is the floor where the model is wrong.  Over ``ekf``
 with a wrong model, ``accel_psd="auto"`` ends at white acceleration
@@ -201,7 +203,7 @@ velocity lags a slowly varying acceleration error ``w`` by about
 ``ω``).  The error moves by the Jacobian ``F`` of the filter's mean step,
 which the filter's ``Φ`` (``A`` at the step's start) only approximates:
 ``F = exp(h Ā)``, ``Ā`` the mean of ``A`` at the step's two ends
-(:meth:`~pinobs.observers.ekf.ExtendedKalmanFilter._predict_flow`, one
+(:meth:`~pinobs.observers.ekf.ExtendedKalmanFilter.predict_flow`, one
 derivatives call more per sample; ``O(h³)``, 670× closer than ``Φ`` on a Panda
 at 1 kHz).  With ``Φ`` in its place the band was too narrow on the Panda's
 exact-model logs: over 20 noise draws on one 10 s log (seed 3, density
@@ -267,6 +269,8 @@ from pinobs.model.sampling import on_ticks
 from pinobs.observers.adaptive import AdaptiveEKF, ModelSnapshot
 from pinobs.observers.base import (
     NOISE_FLOOR,
+    GaussianFilter,
+    Observer,
     Vector,
     make_observer,
     median_period,
@@ -276,7 +280,7 @@ from pinobs.observers.base import (
     time_unit_warning,
 )
 from pinobs.observers.ekf import ExtendedKalmanFilter
-from pinobs.observers.kf import ConstantAccelerationKF, KFBank, KFGains, WhiteJerkFilter
+from pinobs.observers.kf import KFBank, KFGains, WhiteJerkFilter
 from pinobs.observers.linalg import LazyKernel, cholesky_solve, lapack_posv
 from pinobs.observers.noise import noise_from_log
 from pinobs.tolerances import QUATERNION_NORM_TOL, TIME_EPS
@@ -294,7 +298,6 @@ __all__ = [
     "OFFSET_SCALE_RANGE",
     "RHO_WARN",
     "LogLike",
-    "SmoothableFilter",
     "Smoothed",
     "Smoother",
     "consistent_offset_scale",
@@ -357,27 +360,6 @@ OVERLAP_CONFIGURATIONS = 32
 
 
 _LOG_2PI = math.log(2.0 * math.pi)
-
-
-class SmoothableFilter(Protocol):
-    """What the smoother needs from a filter: an error-state Gaussian, predicted and corrected apart.
-
-    ``_predict(state, dt, tau) -> (state⁻, Φ)`` propagates over ``dt`` [s]
-    with ``tau`` held and returns the transition Jacobian of the error state;
-    ``_correct(state⁻, q_meas) -> state⁺`` fuses one measured configuration.
-    Optionally ``_predict_flow(state, dt, tau) -> (state⁻, Φ, F)`` also returns
-    the Jacobian ``F`` of the mean's step, where ``Φ`` is only the filter's
-    approximation of it (``band="noise"`` propagates the error with ``F``;
-    without the method, with ``Φ``).  A filter with an outlier gate keeps its bookkeeping
-    in its states' ``gate`` (:class:`~pinobs.observers.base.GateState`), and
-    ``_gate_nis(state)`` is the NIS above which it rejected ``state``'s measurement.
-    """
-
-    robot: Robot
-
-    def _initial_state(self, q0: Vector, v0: Vector) -> Any: ...
-    def _predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]: ...
-    def _correct(self, state: Any, q_meas: Vector) -> Any: ...
 
 
 @dataclass(frozen=True)
@@ -448,7 +430,7 @@ def _noise_step(
 
     with ``F_{k−1}`` the Jacobian of the mean's step, by which the error
     propagates (the filter's ``Φ`` only approximates it; ``F = Φ`` for a
-    filter without ``_predict_flow``), ``K_k = P⁻_k Hᵀ (H P⁻_k Hᵀ + σ² I)⁻¹ =
+    filter without ``predict_flow``), ``K_k = P⁻_k Hᵀ (H P⁻_k Hᵀ + σ² I)⁻¹ =
     P⁺_k Hᵀ / σ²`` the filter's own gain (``H = [I 0]``; the second form, free,
     holds for the Kalman gain: ``P⁺Hᵀ = P⁻Hᵀ − K (S − σ² I) = σ² K``;
     ``K = None`` at a dropped or gated sample, where ``Pⁿ⁺_k = F Pⁿ⁺_{k−1} Fᵀ``)
@@ -620,7 +602,7 @@ _noise_backward_kernel = LazyKernel(
 
 
 def _forward(
-    filt: SmoothableFilter,
+    filt: GaussianFilter,
     rows: Iterator[tuple[float, Vector | None, Vector]],
     k0: int,
     flow: bool = False,
@@ -630,7 +612,7 @@ def _forward(
 
     Yields ``(k, x⁻_k, Φ_{k−1}, x⁺_k, log N(e_k; 0, S_k), F_{k−1})`` (``None, None,
     ·, 0, None`` at ``k = 0``; ``x⁺_k = x⁻_k`` and 0 at a dropped sample; ``F`` the
-    Jacobian of the mean's step with ``flow`` (:class:`SmoothableFilter`), else
+    Jacobian of the mean's step with ``flow`` (:class:`GaussianFilter`), else
     ``None``), where
     ``e_k = q_k ⊖ q⁻_k`` and ``S_k = P⁻_qq + σ² I`` are the innovation and its
     covariance (the prediction-error decomposition of the likelihood,
@@ -644,19 +626,18 @@ def _forward(
     """
     model = filt.robot
     nv = model.nv
-    meas_var = cast(Any, filt).gains.meas_std ** 2
+    meas_var = filt.gains.meas_std**2
     t_prev, q0, tau_prev = next(rows)
     if q0 is None:
         raise NonFiniteError(f"sample {k0} has no configuration; the smoother starts on one")
-    state = filt._initial_state(model.check_configuration(q0, what=f"q[{k0}]"), np.zeros(nv))
+    state = filt.initial_state(model.check_configuration(q0, what=f"q[{k0}]"), np.zeros(nv))
     yield 0, None, None, state, 0.0, None
-    predict_flow = getattr(filt, "_predict_flow", None) if flow else None
     for k, (t, q, tau) in enumerate(rows, start=1):
-        if predict_flow is not None:
-            pred, Phi, F = predict_flow(state, float(t - t_prev), tau_prev)
+        F: Vector | None = None
+        if flow:
+            pred, Phi, F = filt.predict_flow(state, float(t - t_prev), tau_prev)
         else:
-            pred, Phi = filt._predict(state, float(t - t_prev), tau_prev)
-            F = Phi if flow else None
+            pred, Phi = filt.predict(state, float(t - t_prev), tau_prev)
         ll = 0.0
         if q is not None:
             q_meas = model.check_configuration(q, what=f"q[{k0 + k}]")
@@ -671,9 +652,9 @@ def _forward(
                     "accel_psd='auto' or observer='adaptive'"
                 )
             nis = float(e @ s_inv_e)
-            state = filt._correct(pred, q_meas)
+            state = filt.correct(pred, q_meas)
             if _gated(state):  # rejected by the filter's outlier gate
-                nis = min(nis, cast(Any, filt)._gate_nis(state))
+                nis = min(nis, filt.gate_limit(state))
             ll = -(0.5 * nis + np.log(np.diagonal(chol)).sum() + 0.5 * nv * _LOG_2PI)
         else:
             state = pred
@@ -729,13 +710,13 @@ class Smoother:
             (module docstring) the smoother's band is wider than ``ρ`` says.
 
     Args:
-        filt: the filter (a :class:`SmoothableFilter`).
+        filt: the filter (a :class:`GaussianFilter`).
         chunk: samples smoothed per backward pass (``None``: everything at :meth:`close`).
         overlap: measured samples after a chunk that its backward pass starts from.
     """
 
     def __init__(
-        self, filt: SmoothableFilter, chunk: int | None, overlap: int, band: str = "model"
+        self, filt: GaussianFilter, chunk: int | None, overlap: int, band: str = "model"
     ) -> None:
         if band not in BANDS[:2]:  # "inflated" needs the whole log's ρ: smooth() scales at the end
             raise OptionError(f"band={band!r}: a Smoother gives one of {list(BANDS[:2])}")
@@ -743,7 +724,7 @@ class Smoother:
         self._gen = _forward(filt, self._fed, 0, flow=band == "noise")
         self._model = filt.robot
         self._chunk, self._over = chunk, overlap
-        self._meas_var = float(cast(Any, filt).gains.meas_std ** 2)
+        self._meas_var = float(filt.gains.meas_std**2)
         self._noise: tuple[Vector, Vector | None] | None = None  # band="noise": (Pⁿ⁺, K) last
         if band == "noise" and 2 * self._model.nv <= _NOISE_KERNEL_MAX:
             _noise_forward_kernel.load()
@@ -1330,15 +1311,6 @@ def _log_arrays(
     return t_arr, q_arr, tau_arr
 
 
-def _smoothable(cls: type) -> bool:
-    """A family that says so (``smoothable = True``) and has the filter's two halves, or a
-    ``smoothing_filter()`` that gives a filter that has them (``kf``)."""
-    return bool(getattr(cls, "smoothable", False)) and (
-        all(callable(getattr(cls, m, None)) for m in ("_predict", "_correct"))
-        or callable(getattr(cls, "smoothing_filter", None))
-    )
-
-
 class _FrozenModels:
     """``adaptive``'s model-based filter replayed with its learned model frozen per window.
 
@@ -1374,9 +1346,14 @@ class _FrozenModels:
     def options(self) -> dict[str, Any]:
         return self._ekf.options
 
+    @property
+    def disturbance_psd(self) -> float | None:
+        """The offset density given at construction (each window's regime sets its own)."""
+        return self._ekf.disturbance_psd
+
     def _use(self, state: Any, j: int) -> Any:
         snap = self._snaps[j]
-        self._ekf._replace_robot(snap.robot)
+        self._ekf.replace_robot(snap.robot)
         scale = 1.0 if self._accel is None else self._accel / snap.accel_psd
         d_scale = scale
         if self._offset_scale is not None:
@@ -1385,24 +1362,29 @@ class _FrozenModels:
         self._j, self.robot = j, snap.robot
         return state._replace(d_psd=d_scale * snap.disturbance_psd)
 
-    def _initial_state(self, q0: Vector, v0: Vector) -> Any:
+    def initial_state(self, q0: Vector, v0: Vector) -> Any:
         self._k, self._j = 0, -1
-        state = self._ekf._initial_state(q0, v0)
+        state = self._ekf.initial_state(q0, v0)
         return self._use(state, int(self._which[0]))
 
-    # No _predict_flow: the noise band propagates the error with Φ (module docstring, "Two bands")
-    def _predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]:
+    def predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]:
         j = int(self._which[self._k])
         if j != self._j:
             state = self._use(state, j)
         self._k += 1
-        return self._ekf._predict(state, dt, tau + self._snaps[j].offset)
+        return self._ekf.predict(state, dt, tau + self._snaps[j].offset)
 
-    def _correct(self, state: Any, q_meas: Vector) -> Any:
-        return self._ekf._correct(state, q_meas)
+    def predict_flow(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector, Vector]:
+        """:meth:`predict` with ``Φ`` as the mean's Jacobian: the noise band propagates the
+        error with ``Φ`` here (module docstring, "Two bands")."""
+        pred, Phi = self.predict(state, dt, tau)
+        return pred, Phi, Phi
 
-    def _gate_nis(self, state: Any) -> float:
-        return self._ekf._gate_nis(state)
+    def correct(self, state: Any, q_meas: Vector) -> Any:
+        return self._ekf.correct(state, q_meas)
+
+    def gate_limit(self, state: Any) -> float:
+        return self._ekf.gate_limit(state)
 
 
 def _learn(
@@ -1490,7 +1472,7 @@ def _learn(
         q0_std=opts["q0_std"],
         v0_std=opts["v0_std"],
         disturbance_psd=1.0,  # the state gets each window's own density (_FrozenModels._use)
-        d0_std=obs.d0_std,
+        d0_std=obs.core.d0_std,
         outlier_probability=opts["outlier_probability"],
         noise_std=noise_std,
     )
@@ -1786,7 +1768,7 @@ def select_accel_psd(
         filter_options,
         model_window,
     )
-    model_free = issubclass(observer_class(observer), ConstantAccelerationKF)
+    model_free = observer_class(observer).model_free
     if grid is None:
         grid = JERK_GRID if model_free else DEFAULT_GRID
     return _select(make, arrays, k0, grid, threshold, model_free)
@@ -1840,7 +1822,7 @@ def consistent_offset_scale(
 
 
 def _consistent(
-    make: Callable[..., SmoothableFilter],
+    make: Callable[..., GaussianFilter],
     arrays: tuple[Vector, Vector, Vector, Vector],
     tol: float = 0.02,
     max_passes: int = 8,
@@ -1878,7 +1860,7 @@ def _consistent(
 
 
 def _select(
-    make: Callable[[float | None], SmoothableFilter],
+    make: Callable[[float | None], GaussianFilter],
     arrays: tuple[Vector, Vector, Vector, Vector],
     k0: int,
     grid: Sequence[float],
@@ -1925,7 +1907,7 @@ def _select(
 
 
 def _log_likelihood(
-    filt: SmoothableFilter, arrays: tuple[Vector, Vector, Vector, Vector], k0: int
+    filt: GaussianFilter, arrays: tuple[Vector, Vector, Vector, Vector], k0: int
 ) -> float:
     """``ℓ`` of :func:`select_accel_psd` for one filter; ``−∞`` if the filter is lost on the log
     (its covariance or estimate stops being finite: under a model error a small density
@@ -1938,11 +1920,12 @@ def _log_likelihood(
     return ll if math.isfinite(ll) else -math.inf
 
 
-def _smoothable_class(observer: str) -> type:
-    """The class of ``observer``, if a smoother can run it (else :class:`OptionError`)."""
+def _smoothable_class(observer: str) -> type[Observer[Any]]:
+    """The class of ``observer``, if a smoother can run it (its
+    :attr:`~pinobs.observers.base.Observer.smoothable`; else :class:`OptionError`)."""
     cls = observer_class(observer)
-    if not _smoothable(cls):
-        smoothable = [n for n in observer_names() if _smoothable(observer_class(n))]
+    if not cls.smoothable:
+        smoothable = [n for n in observer_names() if observer_class(n).smoothable]
         raise OptionError(
             f"observer {observer!r} keeps no error-state covariance to smooth; "
             f"smoothable: {smoothable}"
@@ -1959,13 +1942,13 @@ def _filter_maker(
     filter_options: Mapping[str, Any] | None,
     model_window: float | None,
     learn: tuple[tuple[Vector, Vector, Vector, Vector], Mapping[str, Any]] | None = None,
-) -> tuple[Callable[[float | None], SmoothableFilter], dict[str, Any]]:
+) -> tuple[Callable[..., GaussianFilter], dict[str, Any]]:
     """``make(accel_psd)`` -> the filter the smoother runs over ``arrays`` (``None``: the
     observer's own density), and the options to report beyond the filter's (``adaptive``:
     after its learning pass, over ``learn``'s arrays with its options when given: a known
     latency, :func:`_prepare`)."""
     cls = _smoothable_class(observer)
-    if issubclass(cls, AdaptiveEKF):
+    if cls.learns_model:
         if disturbance_psd is not None:
             raise OptionError(
                 f"disturbance_psd={disturbance_psd!r}: adaptive's densities are its regimes' "
@@ -1980,23 +1963,21 @@ def _filter_maker(
             f"not {observer!r}"
         )
 
-    model_free = issubclass(cls, ConstantAccelerationKF)
-    density = "jerk_psd" if model_free else "accel_psd"  # the process density make() sets
+    density = cls.process_density  # the process density make() sets
     options = dict(filter_options or {})
     if disturbance_psd is not None:
         options["disturbance_psd"] = disturbance_psd
 
-    def make(psd: float | None) -> SmoothableFilter:
+    def make(psd: float | None) -> GaussianFilter:
         extra = {} if psd is None else {density: psd}
-        filt: Any = make_observer(observer, robot, noise_std=noise_std, **{**options, **extra})
-        # kf: its predict and correct apart (WhiteJerkFilter)
-        return cast(SmoothableFilter, filt.smoothing_filter() if model_free else filt)
+        filt = make_observer(observer, robot, noise_std=noise_std, **{**options, **extra})
+        return filt.smoothing_filter()  # kf: its predict and correct apart (WhiteJerkFilter)
 
     return make, {}
 
 
 def _windows(
-    filt: SmoothableFilter,
+    filt: GaussianFilter,
     extra: Mapping[str, Any],
     accel_psd: float | str | None,
     chunk: float | None,
@@ -2031,11 +2012,11 @@ def _windows(
         return None, 0
     given = overlap
     # the longest memory: the smallest densities (adaptive: any window's)
-    gains = cast(Any, filt).gains
+    gains = filt.gains
     if isinstance(gains, KFGains):  # white jerk: the triple integrator alone
         pairs = [(0.0, gains.jerk_psd)]
     else:
-        pairs = extra.get("model_densities") or [(gains.accel_psd, cast(Any, filt).disturbance_psd)]
+        pairs = extra.get("model_densities") or [(gains.accel_psd, filt.disturbance_psd)]
     if isinstance(accel_psd, float) and not isinstance(gains, KFGains):
         # it replaces each window's, the offset's scaled
         pairs = [(accel_psd, None if d is None else d * accel_psd / a) for a, d in pairs]
@@ -2105,7 +2086,7 @@ def streaming_smoother(
         GainError: no ``noise_std``.
     """
     cls = observer_class(observer)
-    if accel_psd == "auto" or issubclass(cls, AdaptiveEKF) or (chunk is None and lag is None):
+    if accel_psd == "auto" or cls.learns_model or (chunk is None and lag is None):
         raise OptionError(
             f"a streamed smoother needs chunk or lag, a given accel_psd and a filter with one "
             f"model (got observer={observer!r}, accel_psd={accel_psd!r}, chunk={chunk!r}, "
@@ -2152,7 +2133,7 @@ def streaming_smoother(
         filt, extra, accel_psd, chunk, overlap, lag, dt, robot=robot, configurations=configs
     )
     opts = {
-        **cast(Any, filt).options,
+        **filt.options,
         "observer": observer,
         "chunk": None if n_chunk is None else n_chunk * dt,
         "overlap": n_over * dt if n_over else None,
@@ -2460,7 +2441,7 @@ def smooth_quietly(
     for name, seconds in (("chunk", chunk), ("overlap", overlap), ("lag", lag)):
         positive(name, seconds, allow_none=True)  # before any pass over the log
     cls = _smoothable_class(observer)
-    adaptive, model_free = issubclass(cls, AdaptiveEKF), issubclass(cls, ConstantAccelerationKF)
+    adaptive, model_free = cls.learns_model, cls.model_free
     if model_free and accel_psd is not None and accel_psd != "auto":
         raise OptionError(
             f"accel_psd={accel_psd!r}: {observer!r} has no white acceleration; its process "
@@ -2533,7 +2514,7 @@ def smooth_quietly(
                 (AUTO_WHITE_SCALE * a, offset_scale * d) for a, d in extra["model_densities"]
             ],
         }
-        filt = cast(Any, make)(None, offset_scale)
+        filt = make(None, offset_scale)
     else:
         if accel_psd == "auto":
             grid = JERK_GRID if model_free else DEFAULT_GRID  # kf: its jerk_psd
@@ -2602,7 +2583,7 @@ def smooth_quietly(
     if not model_free and (isinstance(accel_psd, float) or not adaptive):
         reported_psd = accel_psd if isinstance(accel_psd, float) else filt.gains.accel_psd
     opts = {
-        **cast(Any, filt).options,
+        **filt.options,
         **extra,
         "accel_psd": reported_psd,
         "observer": observer,

@@ -177,7 +177,7 @@ def test_a_filter_step_that_raises_is_a_lost_filter_restarted(monkeypatch) -> No
     tau = robot.gravity(q0)
     for k in range(1, 5):
         ob.update(k * 1e-3, q0, tau)
-    step = ExtendedKalmanFilter._step
+    step = ExtendedKalmanFilter.step
     calls = {"n": 0}
 
     def raising_once(self, *args):
@@ -186,7 +186,7 @@ def test_a_filter_step_that_raises_is_a_lost_filter_restarted(monkeypatch) -> No
             raise np.linalg.LinAlgError("Singular matrix")
         return step(self, *args)
 
-    monkeypatch.setattr(ExtendedKalmanFilter, "_step", raising_once)
+    monkeypatch.setattr(ExtendedKalmanFilter, "step", raising_once)
     est = ob.update(5e-3, q0, tau)
     assert calls["n"] == 2  # the raising step, then the restarted filter's
     assert ob.restarts == 1 and np.all(np.isfinite(est.v))
@@ -281,7 +281,7 @@ def test_friction_too_weak_to_be_stiff_is_a_held_input_and_started_on_the_truth_
     lr.minv_max = np.diag(np.linalg.inv(truth.mass_matrix(res.q[0])))
     ob._state = ob._state._replace(ekf=ob._install(ob._state.ekf))
     assert ob._held_friction is not None and np.all(ob._held_friction == 1.0)
-    assert not ob.robot.has_friction and ob.learned_robot().has_friction
+    assert not ob.core.robot.has_friction and ob.learned_robot().has_friction
     v = np.array([1.0, -0.5, 0.003, 0.0, -0.01, 2.0])
     np.testing.assert_allclose(
         ob.learned_robot().friction_torque(v), truth.friction_torque(v), rtol=0, atol=1e-15

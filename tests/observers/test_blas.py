@@ -77,13 +77,13 @@ def test_blas_runs_on_one_thread_inside_update(ur5_run, monkeypatch) -> None:
     robot, res = ur5_run
     ob = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
     seen: list[set[int]] = []
-    step = type(ob)._step
+    step = type(ob).step
 
     def spy(self, *args, **kwargs):
         seen.append({d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"})
         return step(self, *args, **kwargs)
 
-    monkeypatch.setattr(type(ob), "_step", spy)
+    monkeypatch.setattr(type(ob), "step", spy)
     with threadpool_limits(2, user_api="blas"):
         ob.reset(res.t[0], res.q[0], None, res.tau[0])
         for k in range(1, 4):

@@ -86,17 +86,17 @@ def test_error_jacobian_with_ad_term_is_the_derivative_of_the_flow_on_so3() -> N
 
 
 def _predict_jacobian_errors(name: str, h: float, offset: bool) -> tuple[float, float]:
-    """Max error of ``Φ`` and of ``F`` (:meth:`ExtendedKalmanFilter._predict_flow`) against
+    """Max error of ``Φ`` and of ``F`` (:meth:`ExtendedKalmanFilter.predict_flow`) against
     finite differences of the prediction's mean over the error state (``δq, δv[, δd]``)."""
     robot = pinobs.load(name)
     ekf = ExtendedKalmanFilter(robot, disturbance_psd=1.0 if offset else None)
     rng = np.random.default_rng(3)
     q, v = robot.random_configuration(rng), rng.normal(0.0, 2.0, robot.nv)
     tau = rng.normal(0.0, 0.1, robot.nv)
-    state = ekf._initial_state(q, v)
+    state = ekf.initial_state(q, v)
     if offset:
         state = state._replace(d=rng.normal(0.0, 0.1, robot.nv))
-    pred, Phi, F = ekf._predict_flow(state, h, tau)
+    pred, Phi, F = ekf.predict_flow(state, h, tau)
     nv, m, eps = robot.nv, Phi.shape[0], 1e-6
     fd = np.empty((m, m))
     for j in range(m):
@@ -105,7 +105,7 @@ def _predict_jacobian_errors(name: str, h: float, offset: bool) -> tuple[float, 
         moved = state._replace(q=robot.integrate(q, dx[:nv]), v=v + dx[nv : 2 * nv])
         if offset:
             moved = moved._replace(d=state.d + dx[2 * nv :])
-        p = ekf._predict(moved, h, tau)[0]
+        p = ekf.predict(moved, h, tau)[0]
         cols = [robot.difference(pred.q, p.q), p.v - pred.v] + ([p.d - pred.d] if offset else [])
         fd[:, j] = np.concatenate(cols) / eps
     return float(np.abs(Phi - fd).max()), float(np.abs(F - fd).max())
@@ -196,7 +196,7 @@ def test_disturbance_augmented_ekf_learns_a_constant_unmodelled_torque() -> None
 def test_step_is_the_correction_of_the_prediction(
     ur5: pinobs.Robot, disturbance_psd: float | None
 ) -> None:
-    """``_step = _correct ∘ _predict``; the prediction's Φ is the transition of the error Jacobian."""
+    """``step = correct ∘ predict``; the prediction's Φ is the transition of the error Jacobian."""
     ekf = ExtendedKalmanFilter(ur5, noise_std=1e-4, disturbance_psd=disturbance_psd)
     rng = np.random.default_rng(5)
     q = ur5.random_configuration(rng)
@@ -206,15 +206,15 @@ def test_step_is_the_correction_of_the_prediction(
     state = ekf._state
     assert state is not None
     q_meas = ur5.integrate(q, 1e-3 * v + rng.normal(0.0, 1e-4, ur5.nv))
-    pred, Phi = ekf._predict(state, 1e-3, tau)
-    stepped = ekf._step(state, 1e-3, q_meas, tau)
-    corrected = ekf._correct(pred, q_meas)
+    pred, Phi = ekf.predict(state, 1e-3, tau)
+    stepped = ekf.step(state, 1e-3, q_meas, tau)
+    corrected = ekf.correct(pred, q_meas)
     for a, b in zip(stepped, corrected, strict=True):
         np.testing.assert_array_equal(a, b)
     A = ekf.error_jacobian(q, v, tau)
     np.testing.assert_allclose(Phi, transition_matrix(A, 1e-3), rtol=0, atol=1e-12)
     # without a sample the step is the prediction (P symmetrised)
-    only = ekf._step(state, 1e-3, None, tau)
+    only = ekf.step(state, 1e-3, None, tau)
     np.testing.assert_array_equal(only.v, pred.v)
     np.testing.assert_array_equal(only.P, only.P.T)
 
@@ -229,11 +229,11 @@ def test_replacing_the_robot_by_a_copy_changes_nothing_and_a_wrong_size_is_refus
         ob.reset(res.t[0], res.q[0], res.v[0], res.tau[0])
     for k in range(1, len(res.t)):
         if k == 20:
-            ekf._replace_robot(ur5.copy())  # type: ignore[attr-defined]
+            ekf.replace_robot(ur5.copy())  # type: ignore[attr-defined]
         est = ekf.update(res.t[k], res.q_meas[k], res.tau[k])
         np.testing.assert_array_equal(est.v, plain.update(res.t[k], res.q_meas[k], res.tau[k]).v)
     with pytest.raises(pinobs.DimensionError, match="nv"):
-        ekf._replace_robot(pinobs.load("cartpole"))  # type: ignore[attr-defined]
+        ekf.replace_robot(pinobs.load("cartpole"))  # type: ignore[attr-defined]
 
 
 # ---------------------------------------------------------------- the speed work
@@ -264,7 +264,7 @@ def _reference_ad(robot: pinobs.Robot, v: np.ndarray) -> np.ndarray:
 
 
 class _ReferenceEKF(ExtendedKalmanFilter):
-    def _step(self, state, dt, q_meas, tau):  # type: ignore[no-untyped-def]
+    def step(self, state, dt, q_meas, tau):  # type: ignore[no-untyped-def]
         r, nv, d = self.robot, self.robot.nv, state.d
         tau_in = tau if d is None else tau + d
         da_dq, da_dv, minv = r.forward_dynamics_derivatives(state.q, state.v, tau_in)
@@ -390,9 +390,9 @@ def test_nis_is_the_innovation_form_whatever_the_covariance(
     q0 = ur5.neutral()
     A = rng.standard_normal((12, 12))
     P = scale * 1e-8 * (A @ A.T + 12 * np.eye(12))
-    state = ekf._initial_state(q0, np.zeros(6))._replace(P=P)
+    state = ekf.initial_state(q0, np.zeros(6))._replace(P=P)
     e = 1e-4 * rng.standard_normal(6) * max(1.0, np.sqrt(scale))
-    nis = ekf._correct(state, ur5.integrate(q0, e)).gate.nis
+    nis = ekf.correct(state, ur5.integrate(q0, e)).gate.nis
     want = e @ np.linalg.solve(P[:6, :6] + 1e-8 * np.eye(6), e)
     assert nis is not None and nis >= 0.0
     assert nis == pytest.approx(want, rel=1e-8)

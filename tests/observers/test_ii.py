@@ -236,7 +236,7 @@ def test_vector_field_leaves_the_manifold_invariant_and_contracts_off_it(
     robot = _load("cartpole").copy()
     ob = IIObserver(robot, gain=GAIN)
     q, v, tau = rng.standard_normal((3, 2))
-    state = ob._initial_state(q, v)
+    state = ob.initial_state(q, v)
     beta, pt = ob.beta_and_jacobian(q, state)
     a = robot.forward_dynamics(q, v, tau)
     e = 1e-6

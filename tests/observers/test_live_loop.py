@@ -143,17 +143,17 @@ def test_adaptive_without_the_blend_says_it_is_lost_after_a_diverged_update(
     ob.reset(t[0], q[0], v[0], tau[0])
     for k in range(1, 50):
         ob.update(t[k], q[k], tau[k])
-    step = ExtendedKalmanFilter._step
+    step = ExtendedKalmanFilter.step
 
     def nan_step(self, state, dt, q_meas, tau_):
         out = step(self, state, dt, q_meas, tau_)
         return out._replace(v=np.full_like(out.v, np.nan))
 
-    monkeypatch.setattr(ExtendedKalmanFilter, "_step", nan_step)
+    monkeypatch.setattr(ExtendedKalmanFilter, "step", nan_step)
     with pytest.raises(ObserverDiverged):
         ob.update(t[50], q[50], tau[50])
     assert ob.lost()
-    monkeypatch.setattr(ExtendedKalmanFilter, "_step", step)
+    monkeypatch.setattr(ExtendedKalmanFilter, "step", step)
     ob.update(t[51], q[51], tau[51])
     assert not ob.lost()
 

@@ -88,14 +88,14 @@ def test_divergence_raises_with_the_time_and_the_last_finite_estimate() -> None:
     class Unstable(Observer[tuple]):
         name = "unstable_toy"
 
-        def _initial_state(self, q0, v0):
+        def initial_state(self, q0, v0):
             return (q0, v0)
 
-        def _step(self, state, dt, q_meas, tau):
+        def step(self, state, dt, q_meas, tau):
             q, v = state
             return (q, np.full_like(v, np.inf))
 
-        def _output(self, state):
+        def output(self, state):
             return state
 
     robot = pinobs.load("pendulum")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import warnings
 from pathlib import Path
 from typing import NamedTuple
@@ -29,6 +30,7 @@ from pinobs.errors import (
 from pinobs.io import Log, estimate_log
 from pinobs.observers import make_observer, smoothing
 from pinobs.observers.base import NOISE_FLOOR
+from pinobs.observers.kf import WhiteJerkFilter
 from pinobs.observers.smoothing import (
     AUTO_WHITE_SCALE,
     OFFSET_SCALE_RANGE,
@@ -163,7 +165,7 @@ def test_backward_pass_equals_batch_conditioning_on_a_linear_gaussian_model(
 
 def test_noise_band_propagates_the_error_by_the_mean_steps_jacobian(rng, noise_path: str) -> None:
     """The EKF's ``Φ`` only approximates the Jacobian ``F`` of its mean's step
-    (:meth:`ExtendedKalmanFilter._predict_flow`); the truth's error moves by ``F``.  On a
+    (:meth:`ExtendedKalmanFilter.predict_flow`); the truth's error moves by ``F``.  On a
     linear model whose mean moves by ``F`` and covariance by ``Φ ≠ F``, the noise band is
     the covariance of the smoothed velocity's error computed directly: the estimate is
     linear in the prior mean and the measurements (its matrices by superposition), the
@@ -203,22 +205,35 @@ class _Gains(NamedTuple):
 
 class _DoubleIntegratorKF:
     """A linear Kalman filter of ``nv`` independent double integrators (white acceleration
-    of density ``a``, positions measured with ``σ``): the smoother's filter interface."""
+    of density ``a``, positions measured with ``σ``): a
+    :class:`~pinobs.observers.base.GaussianFilter`, the smoother's filter interface."""
+
+    disturbance_psd = None
 
     def __init__(self, robot: pinobs.Robot, a: float, sigma: float) -> None:
         self.robot, self.gains, self.a = robot, _Gains(sigma), a
+        self.options: dict[str, object] = {}
 
-    def _initial_state(self, q0: np.ndarray, v0: np.ndarray) -> _LinState:
+    def initial_state(self, q0: np.ndarray, v0: np.ndarray) -> _LinState:
         nv = self.robot.nv
         return _LinState(q0, v0, np.diag(np.r_[np.full(nv, 1e-2), np.full(nv, 1e2)]))
 
-    def _predict(self, s: _LinState, dt: float, tau: np.ndarray) -> tuple[_LinState, np.ndarray]:
+    def predict(self, s: _LinState, dt: float, tau: np.ndarray) -> tuple[_LinState, np.ndarray]:
         nv = self.robot.nv
         Phi = np.block([[np.eye(nv), dt * np.eye(nv)], [np.zeros((nv, nv)), np.eye(nv)]])
         Q = np.kron(self.a * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]]), np.eye(nv))
         return _LinState(s.q + dt * s.v, s.v, Phi @ s.P @ Phi.T + Q), Phi
 
-    def _correct(self, s: _LinState, q_meas: np.ndarray) -> _LinState:
+    def predict_flow(
+        self, s: _LinState, dt: float, tau: np.ndarray
+    ) -> tuple[_LinState, np.ndarray, np.ndarray]:
+        pred, Phi = self.predict(s, dt, tau)
+        return pred, Phi, Phi  # linear: Φ is the mean's Jacobian
+
+    def gate_limit(self, s: _LinState) -> float:
+        return math.inf  # no outlier gate
+
+    def correct(self, s: _LinState, q_meas: np.ndarray) -> _LinState:
         nv = self.robot.nv
         H = np.hstack([np.eye(nv), np.zeros((nv, nv))])
         K = s.P @ H.T @ np.linalg.inv(s.P[:nv, :nv] + self.gains.meas_std**2 * np.eye(nv))
@@ -586,6 +601,27 @@ def test_a_sample_the_gate_rejects_decides_neither_the_density_nor_the_latency()
             assert abs(got.log_likelihood - want.log_likelihood) < 25.0
             rms = [np.sqrt(np.nanmean((x.v - res.v) ** 2)) for x in (got, want)]
             assert rms[0] < 1.05 * rms[1]  # measured 1.4e-5 and 2.1e-5 rad/s, both logs
+
+
+def test_families_declare_what_the_smoother_needs_on_the_public_protocol() -> None:
+    """Smoothable families are found from the registry by their class attributes; each
+    gives its Gaussian filter (or, learning its model, says how it is smoothed); the
+    others refuse, naming the smoothable ones."""
+    robot = cached_robot("ur5")
+    names = pinobs.observer_names()
+    cls = pinobs.observers.observer_class
+    assert [n for n in names if cls(n).smoothable] == ["adaptive", "ekf", "kf"]
+    assert [n for n in names if cls(n).model_free and cls(n).smoothable] == ["kf"]
+    assert [n for n in names if cls(n).learns_model] == ["adaptive"]
+    assert {cls(n).process_density for n in ("ekf", "kf")} == {"accel_psd", "jerk_psd"}
+    ekf = make_observer("ekf", robot, noise_std=1e-4)
+    assert ekf.smoothing_filter() is ekf
+    jerk = make_observer("kf", robot, noise_std=1e-4).smoothing_filter()
+    assert isinstance(jerk, WhiteJerkFilter) and jerk.disturbance_psd is None
+    with pytest.raises(OptionError, match="smoothable: \\['adaptive', 'ekf', 'kf'\\]"):
+        make_observer("fd", robot).smoothing_filter()
+    with pytest.raises(OptionError, match="learns its model"):
+        make_observer("adaptive", robot, noise_std=1e-4).smoothing_filter()
 
 
 def test_bad_inputs_are_rejected_with_what_would_be_valid(ur5_log) -> None:

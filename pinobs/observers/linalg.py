@@ -200,7 +200,10 @@ def _joseph_loops(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bo
 class LazyKernel:
     """A numba-compiled function, built on :meth:`load` (``import pinobs`` does not import
     numba); ``compiled`` is ``None`` until then.  ``cache=True``: compiled once per
-    installation, then loaded from numba's cache."""
+    installation, then loaded from numba's cache.  ``error_model="numpy"``: a division by
+    zero gives ``inf``/``nan`` as in the NumPy path the kernel replaces (numba's default
+    raises ``ZeroDivisionError``: a ``kf`` fed a huge sample raised it from its compiled
+    bank instead of reporting a diverged estimate)."""
 
     def __init__(self, fn: Callable[..., Any], *warm_args: Any) -> None:
         self.fn, self.warm_args = fn, warm_args
@@ -211,7 +214,7 @@ class LazyKernel:
         if self.compiled is None:
             import numba  # lazy: start-up time
 
-            kernel = numba.njit(cache=True)(self.fn)
+            kernel = numba.njit(cache=True, error_model="numpy")(self.fn)
             kernel(*self.warm_args)  # load (or compile) the float64 signature now
             self.compiled = kernel
 

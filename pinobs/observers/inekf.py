@@ -584,8 +584,21 @@ class InvariantEKF:
         R1, x1, theta, P1 = np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P)
         kernel = correct_kernel.compiled
         assert kernel is not None  # loaded by the constructor
-        noise = foot_noise(self.gains, jac[measured])
-        nis = kernel(R, x, state.bias, P, h[measured], noise, R1, x1, theta, P1)
+        g = self.gains
+        nis = kernel(
+            R,
+            x,
+            state.bias,
+            P,
+            h[measured],
+            jac[measured],
+            g.joint**2,
+            g.kinematics**2,
+            R1,
+            x1,
+            theta,
+            P1,
+        )
         if nis < 0.0:
             return self._update_solve(state, measured, h, jac)
         return replace_state(state, R=R1, x=x1, bias=theta, P=P1), float(nis)

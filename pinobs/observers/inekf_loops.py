@@ -253,21 +253,30 @@ def _correct_loops(
     theta: Vector,
     P: Vector,
     h: Vector,
-    noise: Vector,
+    jac: Vector,
+    joint_var: float,
+    kin_var: float,
     R1: Vector,
     x1: Vector,
     theta1: Vector,
     P1: Vector,
 ) -> float:
-    """Eqs. (4)-(5) for every foot in the state (rows ``h`` of its measured position, ``noise``
-    its ``J Σ_q Jᵀ + σ_k² I`` in the IMU frame): ``R1``, ``x1``, ``theta1``, ``P1``; returns
-    the NIS, or −1 (outputs undefined) when ``S`` is not positive definite."""
+    """Eqs. (4)-(5) for every foot in the state (rows ``h`` of its measured position, ``jac``
+    its Jacobian, ``σ_q²``, ``σ_k²``): ``R1``, ``x1``, ``theta1``, ``P1``; returns the NIS,
+    or −1 (outputs undefined) when ``S`` is not positive definite."""
     n, k = P.shape[0], x.shape[0] - 2
     m = 3 * k
     N = np.empty((k, 3, 3))
     HP = np.empty((m, n + 1))  # [H P, r]
+    M = np.empty((3, 3))
     for f in range(k):
-        N[f] = R @ noise[f] @ R.T  # eq. (4): N_j = R̂ (J Σ_q Jᵀ + σ_k² I) R̂ᵀ
+        for c in range(3):
+            for d in range(3):
+                t = 0.0
+                for q in range(jac.shape[2]):
+                    t += jac[f, c, q] * jac[f, d, q]
+                M[c, d] = joint_var * t + (kin_var if c == d else 0.0)
+        N[f] = R @ M @ R.T  # eq. (4): N_j = R̂ (J Σ_q Jᵀ + σ_k² I) R̂ᵀ
         Rh = R @ h[f]
         for c in range(3):
             a = 3 * f + c
@@ -377,7 +386,7 @@ def _warm_propagate() -> tuple[object, ...]:
 
 #: :func:`_propagate_loops` compiled: ``(R, x, θ, imu, h, g, Q_c, P, R1, x1, P1)``.
 propagate_kernel = LazyKernel(_propagate_loops, *_warm_propagate())
-#: :func:`_correct_loops` compiled: ``(R, x, θ, P, h, noise, R1, x1, θ1, P1) -> nis``.
+#: :func:`_correct_loops` compiled: ``(R, x, θ, P, h, J, σ_q², σ_k², R1, x1, θ1, P1) -> nis``.
 correct_kernel = LazyKernel(
     _correct_loops,
     np.eye(3),
@@ -385,7 +394,9 @@ correct_kernel = LazyKernel(
     np.zeros(6),
     np.eye(18),
     np.zeros((1, 3)),
-    np.tile(np.eye(3), (1, 1, 1)),
+    np.zeros((1, 3, 2)),
+    1.0,
+    1.0,
     np.empty((3, 3)),
     np.empty((3, 3)),
     np.empty(6),

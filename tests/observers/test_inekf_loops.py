@@ -80,7 +80,9 @@ def test_compiled_correction_is_the_kalman_update_with_h_written_out(n_feet: int
     noise = foot_noise(gains, jac)
     R1, x1, th1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P)
     assert correct_kernel.compiled is not None
-    nis = correct_kernel.compiled(R, x, theta, P, hm, noise, R1, x1, th1, P1)
+    nis = correct_kernel.compiled(
+        R, x, theta, P, hm, jac, gains.joint**2, gains.kinematics**2, R1, x1, th1, P1
+    )
     n, m = P.shape[0], 3 * n_feet
     H = np.zeros((m, n))
     N = np.zeros((m, m))
@@ -106,10 +108,10 @@ def test_compiled_correction_is_the_kalman_update_with_h_written_out(n_feet: int
 
 def test_the_correction_reports_an_innovation_covariance_that_is_not_positive_definite() -> None:
     R, x, theta, P = _state(np.random.default_rng(3), 1)
-    noise = -np.ones((1, 3, 3)) * 1e3 * np.eye(3)  # S = H P Hᵀ − 1000 I
+    jac = np.zeros((1, 3, 12))
     out = (np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P))
-    assert correct_kernel.compiled is not None
-    assert correct_kernel.compiled(R, x, theta, P, np.zeros((1, 3)), noise, *out) == -1.0
+    assert correct_kernel.compiled is not None  # S = H P Hᵀ − 1000 I
+    assert correct_kernel.compiled(R, x, theta, P, np.zeros((1, 3)), jac, 1.0, -1e3, *out) == -1.0
 
 
 @pytest.mark.parametrize("angle", [0.0, 1e-9, 1e-4, 0.3, 3.0])

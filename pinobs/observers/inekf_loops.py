@@ -317,17 +317,18 @@ def _solve_innovation(HP: Vector, N: Vector, sol: Vector) -> bool:
             else:
                 L[i, j] = s / L[j, j]
     sol[:] = HP
-    for c in range(n + 1):
-        for i in range(m):
-            s = sol[i, c]
-            for q in range(i):
-                s -= L[i, q] * sol[q, c]
-            sol[i, c] = s / L[i, i]
-        for i in range(m - 1, -1, -1):
-            s = sol[i, c]
-            for q in range(i + 1, m):
-                s -= L[q, i] * sol[q, c]
-            sol[i, c] = s / L[i, i]
+    for i in range(m):  # L y = b, then Lᵀ x = y, on every column at once
+        for q in range(i):
+            for c in range(n + 1):
+                sol[i, c] -= L[i, q] * sol[q, c]
+        for c in range(n + 1):
+            sol[i, c] /= L[i, i]
+    for i in range(m - 1, -1, -1):
+        for q in range(i + 1, m):
+            for c in range(n + 1):
+                sol[i, c] -= L[q, i] * sol[q, c]
+        for c in range(n + 1):
+            sol[i, c] /= L[i, i]
     return True
 
 
@@ -336,12 +337,11 @@ def _joseph(P: Vector, HP: Vector, sol: Vector, N: Vector, P1: Vector) -> None:
     ``C = P − K H P``, ``Kᵀ = sol[:, :n]``, symmetrised, into ``P1``."""
     n, m = P.shape[0], HP.shape[0]
     C = P.copy()
-    for i in range(n):
-        for j in range(n):
-            s = C[i, j]
-            for a in range(m):
-                s -= sol[a, i] * HP[a, j]
-            C[i, j] = s
+    for i in range(n):  # C[i, :] −= Σ_a K[i, a] (H P)[a, :], the inner loop contiguous
+        for a in range(m):
+            k = sol[a, i]
+            for j in range(n):
+                C[i, j] -= k * HP[a, j]
     Y = np.empty((n, m))
     for i in range(n):
         for a in range(m):
@@ -350,15 +350,16 @@ def _joseph(P: Vector, HP: Vector, sol: Vector, N: Vector, P1: Vector) -> None:
             for e in range(3):
                 s -= sol[3 * f + e, i] * N[f, e, c]
             Y[i, a] = s
+    D = C.copy()  # C − Y Kᵀ, then symmetrised
+    for i in range(n):
+        for a in range(m):
+            y = Y[i, a]
+            for j in range(n):
+                D[i, j] -= y * sol[a, j]
     for i in range(n):
         for j in range(i + 1):
-            s1, s2 = C[i, j], C[j, i]
-            for a in range(m):
-                s1 -= Y[i, a] * sol[a, j]
-                s2 -= Y[j, a] * sol[a, i]
-            P1[i, j] = 0.5 * (s1 + s2)
+            P1[i, j] = 0.5 * (D[i, j] + D[j, i])
             P1[j, i] = P1[i, j]
-
 
 def _update_mean(
     R: Vector, x: Vector, theta: Vector, e: Vector, R1: Vector, x1: Vector, theta1: Vector

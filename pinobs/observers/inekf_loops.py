@@ -361,6 +361,7 @@ def _joseph(P: Vector, HP: Vector, sol: Vector, N: Vector, P1: Vector) -> None:
             P1[i, j] = 0.5 * (D[i, j] + D[j, i])
             P1[j, i] = P1[i, j]
 
+
 def _update_mean(
     R: Vector, x: Vector, theta: Vector, e: Vector, R1: Vector, x1: Vector, theta1: Vector
 ) -> None:

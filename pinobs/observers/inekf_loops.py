@@ -139,62 +139,56 @@ def _body_core(w: Vector, a: Vector, h: float, core: Vector) -> None:
 
 def _left_adjoint(R: Vector, x: Vector, M: Vector, out: Vector, inverse: bool) -> None:
     """``out = diag(Ad_X, I₆) M`` (or ``Ad_X⁻¹``) by blocks, ``X = (R, x_1 … x_n)``:
-    rows ``R M_0``, ``x_i^ R M_0 + R M_i`` (``Rᵀ M_0``, ``Rᵀ (M_i − x_i^ M_0)``)."""
-    n_blk = x.shape[0]
-    n = M.shape[1]
-    top = np.empty(3)
-    c = np.empty(3)  # x_i × (R M_0), or x_i × M_0 for the inverse
-    for j in range(n):
-        m0, m1, m2 = M[0, j], M[1, j], M[2, j]
-        for r in range(3):
-            top[r] = (
-                (R[0, r] * m0 + R[1, r] * m1 + R[2, r] * m2)
-                if inverse
-                else (R[r, 0] * m0 + R[r, 1] * m1 + R[r, 2] * m2)
-            )
-            out[r, j] = top[r]
-        for r in range(3):
-            c[r] = M[r, j] if inverse else top[r]
-        for i in range(n_blk):
-            o = 3 + 3 * i
-            xi = x[i]
-            cr0 = xi[1] * c[2] - xi[2] * c[1]
-            cr1 = xi[2] * c[0] - xi[0] * c[2]
-            cr2 = xi[0] * c[1] - xi[1] * c[0]
-            u0, u1, u2 = M[o, j], M[o + 1, j], M[o + 2, j]
+    rows ``R M_0``, ``x_i^ R M_0 + R M_i`` (``Rᵀ M_0``, ``Rᵀ (M_i − x_i^ M_0)``); ``M``
+    C-contiguous, the inner loops along its rows."""
+    n_blk, n = x.shape[0], M.shape[1]
+    Rm = R.T.copy() if inverse else R.copy()
+    for r in range(3):
+        for j in range(n):
+            out[r, j] = Rm[r, 0] * M[0, j] + Rm[r, 1] * M[1, j] + Rm[r, 2] * M[2, j]
+    c = M[0:3] if inverse else out[0:3]  # x_i × M_0, or x_i × (R M_0)
+    for i in range(n_blk):
+        o = 3 + 3 * i
+        x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
+        for j in range(n):
+            cr0 = x1 * c[2, j] - x2 * c[1, j]
+            cr1 = x2 * c[0, j] - x0 * c[2, j]
+            cr2 = x0 * c[1, j] - x1 * c[0, j]
             if inverse:
-                u0, u1, u2 = u0 - cr0, u1 - cr1, u2 - cr2
+                u0, u1, u2 = M[o, j] - cr0, M[o + 1, j] - cr1, M[o + 2, j] - cr2
                 for r in range(3):
-                    out[o + r, j] = R[0, r] * u0 + R[1, r] * u1 + R[2, r] * u2
+                    out[o + r, j] = Rm[r, 0] * u0 + Rm[r, 1] * u1 + Rm[r, 2] * u2
             else:
-                for r in range(3):
-                    out[o + r, j] = (R[r, 0] * u0 + R[r, 1] * u1 + R[r, 2] * u2) + (
-                        cr0 if r == 0 else (cr1 if r == 1 else cr2)
-                    )
-        for r in range(3 + 3 * n_blk, M.shape[0]):
+                u0, u1, u2 = M[o, j], M[o + 1, j], M[o + 2, j]
+                out[o, j] = (Rm[0, 0] * u0 + Rm[0, 1] * u1 + Rm[0, 2] * u2) + cr0
+                out[o + 1, j] = (Rm[1, 0] * u0 + Rm[1, 1] * u1 + Rm[1, 2] * u2) + cr1
+                out[o + 2, j] = (Rm[2, 0] * u0 + Rm[2, 1] * u1 + Rm[2, 2] * u2) + cr2
+    for r in range(3 + 3 * n_blk, M.shape[0]):
+        for j in range(n):
             out[r, j] = M[r, j]
 
 
 def _left_body(core: Vector, n_feet: int, M: Vector, out: Vector) -> None:
     """``out = Φ_ε M``: the core's 9 × 15 on rows ε_R, ε_v, ε_p (columns ε and ζ), its
-    ``exp(−ω^ h)`` block on each foot, the bias rows copied."""
-    n = M.shape[0]
+    ``exp(−ω^ h)`` block on each foot, the bias rows copied (``M`` C-contiguous)."""
+    n, n_col = M.shape[0], M.shape[1]
     b = n - 6
-    for j in range(M.shape[1]):
-        for i in range(9):
-            t = 0.0
-            for k in range(9):
-                t += core[i, k] * M[k, j]
-            for k in range(6):
-                t += core[i, 9 + k] * M[b + k, j]
-            out[i, j] = t
-        for f in range(n_feet):
-            o = 9 + 3 * f
-            for i in range(3):
-                out[o + i, j] = (
-                    core[i, 0] * M[o, j] + core[i, 1] * M[o + 1, j] + core[i, 2] * M[o + 2, j]
-                )
-        for i in range(b, n):
+    for i in range(9):
+        for j in range(n_col):
+            out[i, j] = 0.0
+        for k in range(15):
+            coef = core[i, k]
+            row = k if k < 9 else b + k - 9
+            for j in range(n_col):
+                out[i, j] += coef * M[row, j]
+    for f in range(n_feet):
+        o = 9 + 3 * f
+        for i in range(3):
+            c0, c1, c2 = core[i, 0], core[i, 1], core[i, 2]
+            for j in range(n_col):
+                out[o + i, j] = c0 * M[o, j] + c1 * M[o + 1, j] + c2 * M[o + 2, j]
+    for i in range(b, n):
+        for j in range(n_col):
             out[i, j] = M[i, j]
 
 
@@ -231,15 +225,15 @@ def _propagate_loops(
     A = np.empty((n, n))
     B = np.empty((n, n))
     _left_adjoint(R, x, P, A, True)  # T(X̂)⁻¹ P
-    _left_adjoint(R, x, A.T, B, True)  # P_ε = T(X̂)⁻¹ P T(X̂)⁻ᵀ
+    _left_adjoint(R, x, np.ascontiguousarray(A.T), B, True)  # P_ε = T(X̂)⁻¹ P T(X̂)⁻ᵀ
     for i in range(n):
         B[i, i] += 0.5 * h * qc[i]
     _left_body(core, x.shape[0] - 2, B, A)
-    _left_body(core, x.shape[0] - 2, A.T, B)  # Φ_ε (P_ε + ½ h Q_c) Φ_εᵀ
+    _left_body(core, x.shape[0] - 2, np.ascontiguousarray(A.T), B)  # Φ_ε (P_ε + ½ h Q_c) Φ_εᵀ
     for i in range(n):
         B[i, i] += 0.5 * h * qc[i]
     _left_adjoint(R1, x1, B, A, False)
-    _left_adjoint(R1, x1, A.T, B, False)  # T(X̂⁺) … T(X̂⁺)ᵀ
+    _left_adjoint(R1, x1, np.ascontiguousarray(A.T), B, False)  # T(X̂⁺) … T(X̂⁺)ᵀ
     for i in range(n):
         for j in range(i + 1):
             m = 0.5 * (B[i, j] + B[j, i])

@@ -43,7 +43,9 @@ Issue 38 targets: `v rms` ≤ 0.05 m/s and ≤ 0.7 × the quaternion EKF's; ≥ 
 every axis and consistent (NEES/3 0.5-2); an update ≤ 30 `pin.aba` on go1.
 
     python benchmarks/legged_truth.py [--duration 10] [--seeds 0 1 2] [--long 60]
-        [--sections go1 humanoid] [--merge] [--quick]
+        [--sections go1 humanoid cost] [--merge] [--quick]
+
+    python benchmarks/legged_truth.py --sections cost --merge    # the cost table alone
 """
 
 from __future__ import annotations
@@ -329,9 +331,10 @@ def main() -> None:
     parser.add_argument(
         "--sections",
         nargs="+",
-        choices=["go1", "humanoid"],
+        choices=["go1", "humanoid", "cost"],
         default=["go1", "humanoid"],
-        help="what to run; with --merge, the others are kept from legged_truth.json",
+        help="what to run (go1 includes cost; cost alone: its trot only); with --merge, "
+        "the others are kept from legged_truth.json",
     )
     parser.add_argument("--merge", action="store_true", help="keep the sections not run")
     parser.add_argument("--quick", action="store_true", help="5 s, seed 0, no files written")
@@ -352,6 +355,10 @@ def main() -> None:
     if "go1" in args.sections:
         report.update(motions={}, long={}, old_gains={}, cost={})
         _go1_sections(report, args)
+    elif "cost" in args.sections:
+        robot = pinobs.load("go1")
+        run = simulate_legged("trot", args.duration, seed=args.seeds[0], noise=NOISE, robot=robot)
+        report["cost"] = measure_cost(run, robot)
     if "humanoid" in args.sections:
         report["humanoid"] = {}
         talos = pinobs.load("talos")

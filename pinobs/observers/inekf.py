@@ -133,7 +133,6 @@ biases as far as the motion excites them.
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -142,6 +141,13 @@ from numpy.typing import ArrayLike
 
 from pinobs.model import Robot
 from pinobs.observers.base import Vector
+from pinobs.observers.inekf_loops import (
+    correct_kernel,
+    expm_degree,
+    gamma_coefficients,
+    load_kernels,
+    propagate_kernel,
+)
 from pinobs.observers.legs import (
     ContactKinematics,
     InEKFEstimate,
@@ -159,7 +165,6 @@ from pinobs.observers.legs import (
     rotation_to_quaternion,
 )
 from pinobs.observers.linalg import cholesky_solve
-from pinobs.tolerances import SERIES_ANGLE
 
 __all__ = [
     "GRAVITY",
@@ -193,9 +198,6 @@ InEKFState = LegState
 
 
 _I3 = np.eye(3)
-_POWERS = np.arange(5)
-#: ``(−1)^k / (2k + j)!`` for the Taylor branch of :func:`gammas`: row j, column k.
-_SERIES = np.array([[(-1.0) ** k / math.factorial(2 * k + j) for k in range(5)] for j in range(6)])
 
 
 # ------------------------------------------------------------------- SO(3), SE_K(3)
@@ -215,16 +217,7 @@ def gammas(phi: Vector) -> tuple[Vector, Vector, Vector]:
     """
     W = skew(phi)
     W2 = W @ W
-    t2 = float(phi @ phi)
-    if t2 < SERIES_ANGLE**2:
-        c = _SERIES @ (t2**_POWERS)  # c[j] = Σ_k (−1)^k θ^{2k}/(2k+j)!
-        a0, b0, a1, b1, a2, b2 = c[1], c[2], c[2], c[3], c[3], c[4]
-    else:
-        t = math.sqrt(t2)
-        s, co = math.sin(t), math.cos(t)
-        a0, b0 = s / t, (1.0 - co) / t2
-        a1, b1 = b0, (t - s) / (t2 * t)
-        a2, b2 = b1, (t2 + 2.0 * co - 2.0) / (2.0 * t2 * t2)
+    a0, b0, a1, b1, a2, b2 = gamma_coefficients(float(phi @ phi))
     return (
         _I3 + a0 * W + b0 * W2,
         _I3 + a1 * W + b1 * W2,
@@ -305,14 +298,8 @@ def right_invariant_error_matrix(n_contacts: int, gravity: ArrayLike = GRAVITY) 
 def _expm_taylor(M: Vector) -> Vector:
     """``exp(M)`` by scaling (to ``‖M‖∞ ≤ 1/8``), a Taylor series and squaring; the degree d
     is the least with ``‖M‖^{d+1}/(d+1)! < 1e-17`` (6 at ‖M‖ = 0.01, 10 at 1/8)."""
-    norm = float(np.abs(M).sum(axis=1).max())
-    s = max(0, math.ceil(math.log2(norm * 8.0))) if norm > 0.125 else 0
+    s, degree = expm_degree(float(np.abs(M).sum(axis=1).max()))
     A = M / (2.0**s)
-    norm /= 2.0**s
-    degree, term = 1, norm
-    while degree < 12 and term * norm / (degree + 1) >= 1e-17:
-        degree += 1
-        term *= norm / degree
     n = M.shape[0]
     eye = np.eye(n)
     out = eye + A / degree
@@ -445,6 +432,8 @@ class InvariantEKF:
             s.gravity,
         )
         self.feet, self.imu_placement = s.feet, s.imu_placement
+        self._gravity = np.array(self.gravity, dtype=float)  # writable: the kernel's signature
+        load_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
         self._state: InEKFState | None = None
         self._estimate: InEKFEstimate | None = None
         self._warned = False
@@ -555,24 +544,16 @@ class InvariantEKF:
 
     # ------------------------------------------------------------- the steps
     def _propagate(self, state: InEKFState, imu: Vector, dt: float, t: float) -> InEKFState:
-        """Eqs. (1)-(3): mean and covariance over ``dt`` with the reading ``imu`` held."""
-        R, x, theta = state.R, state.x, state.bias
-        w = imu[:3] - theta[:3]
-        a = imu[3:] - theta[3:]
-        K = x.shape[0] - 2
-        R1, x1 = imu_step(R, x, w, a, dt, self.gravity)
-        phi_e = _body_transition(w, a, dt, K)
-        n = 15 + 3 * K
-        qc = noise_densities(self.gains, K)
-        Qe = (phi_e * qc) @ phi_e.T
-        Qe.flat[:: n + 1] += qc
-        Qe *= 0.5 * dt
-        T1 = np.eye(n)
-        T1[: n - 6, : n - 6] = adjoint(R1, x1)
-        Phi = T1 @ phi_e @ _inverse_frame(R, x)
-        P = Phi @ state.P @ Phi.T + T1 @ Qe @ T1.T
-        P = 0.5 * (P + P.T)
-        return replace_state(state, t=t, R=R1, x=x1, P=P)
+        """Eqs. (1)-(3): mean and covariance over ``dt`` with the reading ``imu`` held, as
+        ``P⁺ = T(X̂⁺) (Φ_ε (T(X̂)⁻¹ P T(X̂)⁻ᵀ + ½ h Q_c) Φ_εᵀ + ½ h Q_c) T(X̂⁺)ᵀ`` (the module
+        docstring's ``Φ P Φᵀ + Q``) in compiled loops (:mod:`pinobs.observers.inekf_loops`)."""
+        x, P = state.x, state.P
+        R1, x1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty_like(P)
+        qc = noise_densities(self.gains, x.shape[0] - 2)
+        kernel = propagate_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        kernel(state.R, x, state.bias, imu, dt, self._gravity, qc, P, R1, x1, P1)
+        return replace_state(state, t=t, R=R1, x=x1, P=P1)
 
     def _correct(
         self, state: InEKFState, flags: list[bool], h: Vector, jac: Vector
@@ -595,6 +576,34 @@ class InvariantEKF:
         return R @ foot_noise(self.gains, jac) @ R.T
 
     def _update(
+        self, state: InEKFState, measured: list[int], h: Vector, jac: Vector
+    ) -> tuple[InEKFState, float]:
+        """Eqs. (4)-(5) in compiled loops (:mod:`pinobs.observers.inekf_loops`); with NumPy
+        (:meth:`_update_solve`) if ``S`` is not positive definite."""
+        R, x, P = state.R, state.x, state.P
+        R1, x1, theta, P1 = np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P)
+        kernel = correct_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        g = self.gains
+        nis = kernel(
+            R,
+            x,
+            state.bias,
+            P,
+            h[measured],
+            jac[measured],
+            g.joint**2,
+            g.kinematics**2,
+            R1,
+            x1,
+            theta,
+            P1,
+        )
+        if nis < 0.0:
+            return self._update_solve(state, measured, h, jac)
+        return replace_state(state, R=R1, x=x1, bias=theta, P=P1), float(nis)
+
+    def _update_solve(
         self, state: InEKFState, measured: list[int], h: Vector, jac: Vector
     ) -> tuple[InEKFState, float]:
         """Eqs. (4)-(5) with ``H``'s structure: ``H P`` is rows of P subtracted (ξ_p's minus ξ_dj's)."""

@@ -1,0 +1,129 @@
+"""The invariant EKF's compiled steps (``pinobs.observers.inekf_loops``) against the module
+docstring's equations written with dense matrices: ``P⁺ = Φ P Φᵀ + Q`` with ``Φ`` from
+:func:`error_transition` (the propagation), and eq. (5) with ``H`` built explicitly and
+``S`` inverted (the correction)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from pinobs.observers.inekf import GRAVITY, InEKFGains, adjoint, error_transition, sek3_exp
+from pinobs.observers.inekf_loops import (
+    correct_kernel,
+    gamma_coefficients,
+    load_kernels,
+    propagate_kernel,
+)
+from pinobs.observers.legs import foot_noise, noise_densities
+
+G = np.array(GRAVITY)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _compiled() -> None:
+    load_kernels()
+
+
+def _state(rng: np.random.Generator, n_feet: int) -> tuple[np.ndarray, ...]:
+    """A random rotation, rows ``v, p, d_j`` a metre or two away, biases, an SPD ``P``."""
+    R = expm(np.cross(np.eye(3), rng.normal(size=3)))
+    x = rng.normal(size=(2 + n_feet, 3))
+    x[1:] += 2.0
+    theta = 0.05 * rng.normal(size=6)
+    n = 15 + 3 * n_feet
+    A = rng.normal(size=(n, n))
+    P = 1e-3 * (A @ A.T + n * np.eye(n))
+    return R, x, theta, P
+
+
+def _frame(R: np.ndarray, x: np.ndarray) -> np.ndarray:
+    n = 9 + 3 * (x.shape[0] - 2)
+    T = np.eye(n + 6)
+    T[:n, :n] = adjoint(R, x)
+    return T
+
+
+@pytest.mark.parametrize("n_feet", [0, 1, 4])
+@pytest.mark.parametrize("rate", [2.0, 500.0])
+def test_compiled_propagation_is_phi_p_phi_t_plus_q(n_feet: int, rate: float) -> None:
+    """``Q = T⁺ ½ (Φ_ε Q_c Φ_εᵀ + Q_c) h T⁺ᵀ``, ``Φ_ε = T⁺⁻¹ Φ T``; a 0.5 s step scales the
+    series (its ‖F h‖ > 1/8)."""
+    rng = np.random.default_rng(n_feet)
+    R, x, theta, P = _state(rng, n_feet)
+    imu = np.concatenate([rng.normal(size=3), rng.normal(size=3) + np.array([0.0, 0.0, 9.81])])
+    h = 1.0 / rate
+    gains = InEKFGains()
+    qc = noise_densities(gains, n_feet)
+    R1, x1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty_like(P)
+    assert propagate_kernel.compiled is not None
+    propagate_kernel.compiled(R, x, theta, imu, h, G.copy(), qc, P, R1, x1, P1)
+    w, a = imu[:3] - theta[:3], imu[3:] - theta[3:]
+    Phi = error_transition(R, x, w, a, h)
+    T0, T1 = _frame(R, x), _frame(R1, x1)
+    Phi_e = np.linalg.solve(T1, Phi @ T0)
+    Q = T1 @ (0.5 * h * (Phi_e @ np.diag(qc) @ Phi_e.T + np.diag(qc))) @ T1.T
+    np.testing.assert_allclose(P1, Phi @ P @ Phi.T + Q, rtol=0, atol=1e-12 * np.abs(P1).max())
+    np.testing.assert_array_equal(P1, P1.T)
+    np.testing.assert_allclose(R1.T @ R1, np.eye(3), atol=1e-14)
+
+
+@pytest.mark.parametrize("n_feet", [1, 4])
+def test_compiled_correction_is_the_kalman_update_with_h_written_out(n_feet: int) -> None:
+    rng = np.random.default_rng(10 + n_feet)
+    R, x, theta, P = _state(rng, n_feet)
+    gains = InEKFGains()
+    hm = x[2:] @ R + 0.01 * rng.normal(size=(n_feet, 3))  # ≈ Rᵀ (d_j − p) per row
+    hm -= x[1] @ R
+    jac = 0.3 * rng.normal(size=(n_feet, 3, 12))
+    noise = foot_noise(gains, jac)
+    R1, x1, th1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P)
+    assert correct_kernel.compiled is not None
+    nis = correct_kernel.compiled(
+        R, x, theta, P, hm, jac, gains.joint**2, gains.kinematics**2, R1, x1, th1, P1
+    )
+    n, m = P.shape[0], 3 * n_feet
+    H = np.zeros((m, n))
+    N = np.zeros((m, m))
+    r = np.empty(m)
+    for j in range(n_feet):
+        H[3 * j : 3 * j + 3, 6:9] = np.eye(3)
+        H[3 * j : 3 * j + 3, 9 + 3 * j : 12 + 3 * j] = -np.eye(3)
+        N[3 * j : 3 * j + 3, 3 * j : 3 * j + 3] = R @ noise[j] @ R.T
+        r[3 * j : 3 * j + 3] = R @ hm[j] - (x[2 + j] - x[1])  # eq. (4)
+    S = H @ P @ H.T + N
+    K = P @ H.T @ np.linalg.inv(S)
+    IKH = np.eye(n) - K @ H
+    delta = K @ r
+    dR, dx = sek3_exp(-delta[: n - 6])
+    np.testing.assert_allclose(nis, r @ np.linalg.solve(S, r), rtol=1e-10)
+    np.testing.assert_allclose(
+        P1, IKH @ P @ IKH.T + K @ N @ K.T, rtol=0, atol=1e-12 * np.abs(P).max()
+    )
+    np.testing.assert_allclose(R1, dR @ R, atol=1e-14)
+    np.testing.assert_allclose(x1, x @ dR.T + dx, atol=1e-13)
+    np.testing.assert_allclose(th1, theta - delta[n - 6 :], atol=1e-15)
+
+
+def test_the_correction_reports_an_innovation_covariance_that_is_not_positive_definite() -> None:
+    R, x, theta, P = _state(np.random.default_rng(3), 1)
+    jac = np.zeros((1, 3, 12))
+    out = (np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P))
+    assert correct_kernel.compiled is not None  # S = H P Hᵀ − 1000 I
+    assert correct_kernel.compiled(R, x, theta, P, np.zeros((1, 3)), jac, 1.0, -1e3, *out) == -1.0
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-9, 1e-4, 0.3, 3.0])
+def test_gamma_coefficients_are_the_series_of_the_closed_forms(angle: float) -> None:
+    """``a_m, b_m`` against the series ``Σ_k (−θ²)^k/(2k+1+m)!``, ``Σ_k (−θ²)^k/(2k+2+m)!``
+    summed to 30 terms."""
+    from math import factorial
+
+    t2 = angle**2
+
+    def series(j: int) -> float:
+        return sum((-t2) ** k / factorial(2 * k + j) for k in range(30))
+
+    want = [series(1), series(2), series(2), series(3), series(3), series(4)]
+    np.testing.assert_allclose(gamma_coefficients(t2), want, rtol=1e-12, atol=1e-15)

@@ -183,7 +183,7 @@ def live_loop(
     )
     opts = LIVE_OPTIONS.get(observer_name, {}) if options is None else options
     observer = make_observer(observer_name, robot, rate=rate, noise_std=NOISE_STD, **opts)
-    update = type(observer).update if blas_limit else type(observer).update.__wrapped__  # type: ignore[attr-defined]
+    observer.uses_blas = observer.uses_blas and blas_limit  # False: the caller's BLAS threads
     aba = aba_call(robot, seed=seed)
     settings = blas_settings()
     observer.reset(sim.t[0], sim.q[0], None, sim.tau[0])
@@ -194,7 +194,7 @@ def live_loop(
         gc.collect()
         gc.freeze()
     try:
-        _paced(observer, update, aba, sim, rate, wall, cpu, cold, warm)
+        _paced(observer, type(observer).update, aba, sim, rate, wall, cpu, cold, warm)
     finally:
         if freeze_gc:
             gc.unfreeze()
@@ -227,7 +227,7 @@ def live_loop(
         first_us=float(wall[0]) * 1e6,
         blas=settings,
         blas_after=blas_settings(),
-        blas_limit=blas_limit,
+        blas_limit=observer.uses_blas,
         load=(load1, load5, load15),
         cpus=os.cpu_count() or 1,
         freeze_gc=freeze_gc,

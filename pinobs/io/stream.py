@@ -58,8 +58,8 @@ from pinobs.io.readers import Log, concat_logs
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers import Estimate
-from pinobs.observers.base import gap_substeps, time_unit_warning
 from pinobs.observers.base import median_period as _median_period
+from pinobs.observers.checks import propagate_gap, time_unit_warning
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
     ABSURD_VALUE,
@@ -458,22 +458,25 @@ class LogEstimator:
         period = self.period
         gap = t - self._t
         try:
-            if period is not None and (steps := gap_substeps(gap, period)) > 1:
-                if gap > MAX_GAP_PERIODS * period:
-                    notes.append(f"gap of {gap:.6g} s ({gap / period:.0f} periods) before this row")
-                    return self._restart(t, q, tau, notes)
-                for j in range(1, steps):  # sub-steps of gap/steps <= period; not output
-                    # the torques the log lost: on the line from the held one to this row's
-                    # (pinobs.model.sampling: holding it across the gap made a smoother's
-                    # velocity error 33x on a UR5 log with 8 % of its rows dropped)
-                    s = j / steps
-                    lost = held if held is None or tau is None else held + s * (tau - held)
-                    ob.update(self._t + s * gap, None, lost)
-                if not dropped:
-                    notes.append(
-                        f"gap of {gap:.6g} s ({gap / period:.1f} periods) before this row: "
-                        f"propagated in {steps} steps of {gap / steps:.3g} s"
-                    )
+            if period is not None and gap > MAX_GAP_PERIODS * period:
+                notes.append(f"gap of {gap:.6g} s ({gap / period:.0f} periods) before this row")
+                return self._restart(t, q, tau, notes)
+            t0 = self._t
+
+            def substep(_: None, j: int, steps: int) -> None:  # gap/steps <= period; not output
+                # the torques the log lost: on the line from the held one to this row's
+                # (pinobs.model.sampling: holding it across the gap made a smoother's
+                # velocity error 33x on a UR5 log with 8 % of its rows dropped)
+                s = j / steps
+                lost = held if held is None or tau is None else held + s * (tau - held)
+                ob.update(t0 + s * gap, None, lost)
+
+            _, steps = propagate_gap(substep, None, gap, period)  # the observers' pause rule
+            if steps > 1 and not dropped and period is not None:
+                notes.append(
+                    f"gap of {gap:.6g} s ({gap / period:.1f} periods) before this row: "
+                    f"propagated in {steps} steps of {gap / steps:.3g} s"
+                )
             if q is not None:
                 try:
                     est = ob.update(t, q, tau)

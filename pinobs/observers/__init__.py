@@ -1,7 +1,9 @@
 """Observer layer: the protocol, the registry and one module per family.
 
-Every module in this package other than ``base`` is a family; importing the
-package imports them all, and each registers itself with ``@register``.
+The protocol is ``base`` (with its helpers ``checks``, ``gating``, ``registry`` and
+``results``, re-exported by ``base``); the other modules are the families and their
+algebra.  Importing the package imports them all, and each family registers itself
+with ``@register``.
 """
 
 import importlib

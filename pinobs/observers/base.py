@@ -1,4 +1,9 @@
-"""What every observer shares: the sampled-data contract, input checks, the registry.
+"""What every observer shares: the sampled-data contract and the :class:`Observer` base.
+
+The helpers of the protocol live in modules of their own and are re-exported here:
+:mod:`pinobs.observers.checks` (option checks, the pause rule), :mod:`pinobs.observers.gating`
+(the outlier gate and NIS), :mod:`pinobs.observers.registry` (families by name) and
+:mod:`pinobs.observers.results` (:class:`Estimate`, :class:`Consistency`).
 
 The contract (``docs/theory/math.md`` §7).  Samples arrive at times ``t_k``.
 The torque passed with ``update(t_k, q_k, τ_k)`` is the one applied *from*
@@ -25,17 +30,12 @@ family gives (:meth:`Observer.smoothing_filter`, a :class:`GaussianFilter`: its
 from __future__ import annotations
 
 import copy
-import functools
-import inspect
 import itertools
 import math
-import numbers
 import warnings
 from abc import ABC, abstractmethod
 from collections import deque
-from dataclasses import dataclass, field
-from statistics import NormalDist
-from typing import Any, ClassVar, Generic, NamedTuple, Protocol, TypeVar, final
+from typing import Any, ClassVar, Generic, Protocol, TypeVar, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -48,24 +48,45 @@ from pinobs.errors import (
     ObserverDiverged,
     OptionError,
     TimestampError,
-    UnknownNameError,
 )
 from pinobs.model import Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.blas import one_blas_thread
+from pinobs.observers.checks import (
+    gap_substeps,
+    median_period,
+    positive,
+    propagate_gap,
+    time_unit_warning,
+)
+from pinobs.observers.gating import (
+    MAX_GATE_RUN,
+    NIS_AVERAGING,
+    GateState,
+    chi2_quantile,
+    gate_nis,
+    gate_threshold,
+    outlier_gate,
+    steady_innovation_variance,
+)
 from pinobs.observers.noise import estimate_noise_std
+from pinobs.observers.registry import make_observer, observer_class, observer_names, register
+from pinobs.observers.results import CONSISTENCY_WINDOW, LIKELY_CAUSES, Consistency, Estimate
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
     ABSURD_VALUE,
-    GAP_PERIODS,
     MAX_GAP_PERIODS,
-    MAX_PLAUSIBLE_PERIOD,
-    MIN_PLAUSIBLE_PERIOD,
     PAUSE_RESTART,
     TIME_EPS,
 )
 
+# (the protocol's helpers live in their own modules and are re-exported here, where they
+# were first defined: pinobs.observers.checks, .gating, .registry, .results)
 __all__ = [
+    "CONSISTENCY_WINDOW",
+    "LIKELY_CAUSES",
+    "MAX_GATE_RUN",
+    "NIS_AVERAGING",
     "NOISE_FLOOR",
     "Consistency",
     "Estimate",
@@ -82,6 +103,7 @@ __all__ = [
     "observer_names",
     "outlier_gate",
     "positive",
+    "propagate_gap",
     "register",
     "steady_innovation_variance",
     "time_unit_warning",
@@ -105,262 +127,6 @@ _PERIOD_INTERVALS = 5
 #: ``noise_std`` (or with 0), and a σ̂ at or below it is taken for noise-free data
 #: (nothing is retuned: the family keeps that default).
 NOISE_FLOOR = 1e-6
-
-
-@dataclass(frozen=True)
-class Estimate:
-    """An observer's estimate at one time.
-
-    Attributes:
-        t: time [s].
-        q: estimated configuration, shape ``(nq,)`` (read-only).
-        v: estimated velocity, shape ``(nv,)`` (read-only), Pinocchio's tangent frame.
-        nis: normalized innovation squared ``eᵀ S⁻¹ e`` of this sample's
-            measurement (``S`` the predicted innovation covariance; χ² with
-            ``nv`` degrees of freedom when the model and noise level are
-            right), or ``None`` (no covariance, or no measurement).
-        gated: the measurement was rejected as an outlier (the estimate is the prediction).
-    """
-
-    t: float
-    q: Vector
-    v: Vector
-    nis: float | None = None
-    gated: bool = False
-
-
-@dataclass(frozen=True)
-class Consistency:
-    """Does the model explain the data?  A windowed test of the normalized innovation squared.
-
-    Over the last ``samples`` measurements the mean NIS of a consistent filter
-    is χ²(n·nv)/n: expectation ``expected`` (= nv), standard deviation
-    ``√(2 nv / n)``.  ``verdict`` is ``"consistent"`` below ``bound`` (the
-    expectation plus five standard deviations, plus 50 %: filters are tuned,
-    not exact), ``"inconsistent"`` above it, ``"unknown"`` without a covariance
-    or with fewer than 50 samples.
-
-    Attributes:
-        samples: measurements in the window.
-        mean_nis: their mean NIS (NaN if none).
-        expected: its expectation for a consistent filter (``nv``).
-        bound: the threshold of the verdict.
-        verdict: ``"consistent"``, ``"inconsistent"`` or ``"unknown"``.
-        gated: measurements rejected as outliers since the reset.
-        causes: what usually makes a model-based filter inconsistent (when it is).
-        details: family-specific diagnostics (an adaptive observer's learning).
-    """
-
-    samples: int
-    mean_nis: float
-    expected: float
-    bound: float
-    verdict: str
-    gated: int = 0
-    causes: tuple[str, ...] = ()
-    details: dict[str, Any] = field(default_factory=dict)
-
-    def messages(self, name: str) -> list[str]:
-        """What to tell of observer ``name``: a ``warning:`` line when the model does not
-        explain the data, a ``note:`` line when outlier samples were rejected."""
-        out = []
-        if self.verdict == "inconsistent":
-            out.append(
-                f"warning: {name}: the model does not explain the data (mean NIS "
-                f"{self.mean_nis:.3g} over the last {self.samples} samples, expected "
-                f"{self.expected:g}); check " + "; ".join(self.causes)
-            )
-        if self.gated:
-            out.append(f"note: {name} rejected {self.gated} outlier sample(s)")
-        return out
-
-    def as_dict(self) -> dict[str, Any]:
-        """Plain values, for JSON."""
-        return {
-            "samples": self.samples,
-            "mean_nis": self.mean_nis,
-            "expected": self.expected,
-            "bound": self.bound,
-            "verdict": self.verdict,
-            "gated": self.gated,
-            "causes": list(self.causes),
-            **self.details,
-        }
-
-
-#: What to check when a model-based filter's innovations are too large (Consistency.causes).
-LIKELY_CAUSES = (
-    "link masses or inertias (a payload, CAD values): try `pinobs identify` or the adaptive observer",
-    "joint friction not in the model (URDF <dynamics>, load(..., friction=True))",
-    "torque units or scale (gear ratios, motor constants, N·m vs mN·m), or a torque offset",
-    "a measurement latency (give latency= if it is known)",
-    "the noise level (noise_std smaller than the sensor's)",
-)
-
-#: Measurements in the consistency window.
-CONSISTENCY_WINDOW = 1000
-
-#: Consecutive measurements the outlier gate may reject before it accepts one whatever its NIS.
-MAX_GATE_RUN = 1
-
-#: Weight of each accepted NIS in the running mean that scales the gate.
-NIS_AVERAGING = 0.01
-
-
-def chi2_quantile(dof: int, p: float) -> float:
-    """The χ² quantile with upper tail ``p`` by Wilson-Hilferty (above the exact one: +4 % at dof 6, +15 % at dof 1, p = 1e-6).
-
-    ``χ²_k(1 − p) ≈ k (1 − 2/(9k) + z √(2/(9k)))³``, ``z`` the normal quantile
-    (Wilson & Hilferty 1931); the standard library's ``NormalDist`` keeps
-    ``scipy.stats`` out of the import.
-    """
-    z = NormalDist().inv_cdf(1.0 - p)
-    c = 2.0 / (9.0 * dof)
-    return float(dof * (1.0 - c + z * math.sqrt(c)) ** 3)
-
-
-def gate_threshold(outlier_probability: float | None, dof: int) -> tuple[float | None, float]:
-    """Validate the ``outlier_probability`` option: ``(p, χ²_dof(1 − p))``; ``(None, inf)`` switches
-    the gate off.
-
-    Raises:
-        GainError: ``p`` not a number in (0, 0.5).
-    """
-    p = positive("outlier_probability", outlier_probability, allow_none=True)
-    if p is None:
-        return None, math.inf
-    if p >= 0.5:
-        raise GainError(f"outlier_probability={p!r} must be in (0, 0.5) (or None: no gate)")
-    return p, chi2_quantile(dof, p)
-
-
-def gate_nis(threshold: float, level: float | None, dof: int) -> float:
-    """The NIS above which :func:`outlier_gate` rejects a measurement at ``level``
-    (``threshold · max(1, NIS̄ / dof)``; ``level`` ``None``: ``dof``)."""
-    return threshold * max(1.0, (float(dof) if level is None else level) / dof)
-
-
-def outlier_gate(
-    nis: float, level: float | None, run: int, threshold: float, dof: int
-) -> tuple[bool, float]:
-    """The outlier gate of the filters with an innovation covariance: ``(reject, new level)``.
-
-    A measurement whose NIS exceeds ``threshold · max(1, NIS̄ / dof)`` is
-    rejected (``NIS̄`` = ``level``, a running mean of accepted NIS, so a filter
-    whose model is off does not reject everything), unless :data:`MAX_GATE_RUN`
-    were rejected in a row (``run``): then it is accepted whatever its NIS (a
-    real jump, or a prediction gone wrong, not a spike) and the level raised
-    to it.  Measured: with ten allowed rejections, a Panda whose model has
-    stiff Coulomb friction lost track (prediction errors near v = 0 were
-    gated while the prediction drifted); with one it does not.
-    """
-    lvl = float(dof) if level is None else level
-    if nis > gate_nis(threshold, lvl, dof) and run < MAX_GATE_RUN:
-        return True, lvl
-    if run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
-        lvl = max(lvl, nis * dof / threshold)
-    return False, lvl + NIS_AVERAGING * (min(nis, 100.0 * lvl) - lvl)
-
-
-class GateState(NamedTuple):
-    """The outlier gate's bookkeeping, carried in the state of every family with an innovation.
-
-    One definition for every filter (``ekf``, ``kf``, ``kalman``, ``riemannian``,
-    ``liegroup``, ``ii``; ``adaptive`` through its ``ekf``): a family computes its NIS
-    ``eᵀ S⁻¹ e`` (its own ``e`` and ``S``) and calls :meth:`measured`, or :meth:`predicted`
-    at a step without a sample; the base reads ``nis`` and ``gated`` of the committed
-    state (:meth:`Observer.innovation`: :attr:`Estimate.nis`, :meth:`Observer.consistency`).
-
-    Attributes:
-        nis: normalized innovation squared of the last measurement (``None``: none).
-        gated: that measurement was rejected as an outlier (the state is the prediction).
-        run: measurements rejected in a row.
-        level: running mean of accepted NIS (scales the gate; ``None``: none yet, ``dof``).
-    """
-
-    nis: float | None = None
-    gated: bool = False
-    run: int = 0
-    level: float | None = None
-
-    def measured(self, nis: float, threshold: float, dof: int) -> GateState:
-        """After a measurement of normalized innovation squared ``nis``: the gate's decision
-        (:func:`outlier_gate`, ``threshold`` from :func:`gate_threshold`, ``dof`` degrees of
-        freedom) and its bookkeeping.  ``gated``: the family must not use the measurement."""
-        reject, level = outlier_gate(nis, self.level, self.run, threshold, dof)
-        return GateState(nis, reject, self.run + 1 if reject else 0, level)
-
-    def predicted(self) -> GateState:
-        """After a step without a measurement: no NIS, not gated, the run and level kept."""
-        return GateState(None, False, self.run, self.level)
-
-    def limit(self, threshold: float, dof: int) -> float:
-        """The NIS above which the gate rejects at this level (:func:`gate_nis`)."""
-        return gate_nis(threshold, self.level, dof)
-
-
-@functools.lru_cache(maxsize=64)
-def steady_innovation_variance(k1: float, k2: float, h: float, meas_var: float) -> float:
-    """Innovation variance of a fixed-gain observer of a double integrator, noise-driven, at steady state.
-
-    One tangent direction, error ``e = (δq, δv)``, a sample every ``h`` [s] with
-    noise of variance ``meas_var`` [rad²], the correction ``e⁺ = e⁻ − K (δq⁻ − n)``
-    with the observer's own gains ``K = (k1, k2)`` [1, 1/s], the prediction
-    ``e⁻ = D e``, ``D = [[1, h], [0, 1]]`` (no process noise: an exact model)::
-
-        P = A P Aᵀ + meas_var K Kᵀ,   A = (I − K H) D,   H = [1 0]      (discrete Lyapunov)
-        S = (D P Dᵀ)₀₀ + meas_var
-
-    (solved as ``(I − A ⊗ A) vec P = meas_var vec(K Kᵀ)``).  The innovation
-    ``δq⁻ − n`` is then Gaussian with variance ``S``, so ``|e|²/S`` over ``nv``
-    such directions is χ²(nv).  ``inf`` if ``A`` is not stable (no steady state).
-    """
-    D = np.array([[1.0, h], [0.0, 1.0]])
-    K = np.array([[k1], [k2]])
-    A = (np.eye(2) - K @ np.array([[1.0, 0.0]])) @ D
-    if not float(np.max(np.abs(np.linalg.eigvals(A)))) < 1.0:
-        return math.inf
-    vec_p = np.linalg.solve(np.eye(4) - np.kron(A, A), meas_var * (K @ K.T).ravel())
-    P = vec_p.reshape(2, 2)
-    return float((D @ P @ D.T)[0, 0] + meas_var)
-
-
-def gap_substeps(dt: float, period: float | None, *, span: float = math.inf) -> int:
-    """Steps of at most one sample ``period`` [s] over an interval ``dt`` [s]: the pause rule
-    of the live observer (:meth:`Observer.update`) and of the log reader
-    (:class:`pinobs.io.LogEstimator`).
-
-    ``1`` (one step) unless ``dt`` is longer than :data:`~pinobs.tolerances.GAP_PERIODS`
-    periods; then ``⌈min(dt, span) / period⌉`` (``span`` [s]: the most of a pause
-    propagated in steps of one period; the steps are ``dt / n`` long).  ``period`` ``None``
-    (not known yet): ``1``.
-    """
-    if period is None or not dt > GAP_PERIODS * period:
-        return 1
-    return math.ceil(min(dt, span) / period - 1e-9)
-
-
-def positive(
-    name: str, value: float | None, *, allow_none: bool = False, allow_zero: bool = False
-) -> float | None:
-    """Validate a gain or option: a finite real number > 0 (or >= 0), or ``None`` if allowed.
-
-    Raises:
-        GainError: naming the option, the value and the accepted range.
-    """
-    if value is None:
-        if allow_none:
-            return None
-        raise GainError(f"{name} is required: give a finite number > 0")
-    if isinstance(value, (str, bytes, bool)) or not isinstance(value, numbers.Real):
-        # a string would pass float() here and crash the first update (issue 17)
-        raise GainError(f"{name}={value!r} is not a number; give a finite number > 0")
-    x = float(value)
-    ok = math.isfinite(x) and (x >= 0 if allow_zero else x > 0)
-    if not ok:
-        bound = ">= 0" if allow_zero else "> 0"
-        raise GainError(f"{name}={value!r} is out of range; give a finite number {bound}")
-    return x
 
 
 class GaussianFilter(Protocol):
@@ -469,6 +235,14 @@ class Observer(ABC, Generic[State]):
     #: The option naming the process-noise density a smoother tunes (``accel_psd="auto"``):
     #: ``"accel_psd"`` [rad²/s³] (white acceleration) or ``"jerk_psd"`` [rad²/s⁵] (white jerk).
     process_density: ClassVar[str] = "accel_psd"
+    #: Whether its :meth:`step`, :meth:`output` and :meth:`after_commit` may call a BLAS
+    #: (NumPy's or SciPy's matrix algebra): :meth:`update` then runs on one BLAS thread
+    #: (:func:`~pinobs.observers.blas.one_blas_thread`, 11–12 µs a call in a paced loop).
+    #: A family whose step makes no BLAS call (elementwise NumPy, Pinocchio, a compiled
+    #: kernel) sets it ``False`` (a class default; an instance may set its own, as a family
+    #: whose step is compiled only on some robots): the limit is not entered and costs
+    #: nothing per update.
+    uses_blas: bool = True
     _init_args: tuple[tuple[Any, ...], dict[str, Any]]  # set by __new__
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Observer[Any]:
@@ -511,7 +285,8 @@ class Observer(ABC, Generic[State]):
         self._diverged = False  # the latest update diverged (its state was not kept)
         self._intervals: list[float] = []  # the first intervals after the reset (the period)
         self._tau_floor = float(np.min(self.robot.absurd_torque)) if self.robot.nv else 0.0
-        self._period_s = None if self.rate is None else 1.0 / self.rate  # (_sample_period)
+        self._set_period(None if self.rate is None else 1.0 / self.rate)  # (_sample_period)
+        self._intervals_due = self.rate is None
         self._restart_due = False  # a pause without a sample: restart at the next one
         self._pauses: list[tuple[float, float]] = []
 
@@ -548,7 +323,8 @@ class Observer(ABC, Generic[State]):
         self._gated = 0
         self._diverged = False
         self._intervals, self._restart_due, self._pauses = [], False, []
-        self._period_s = None if self.rate is None else 1.0 / self.rate
+        self._set_period(None if self.rate is None else 1.0 / self.rate)
+        self._intervals_due = self.rate is None
         # copies: a loop that reuses its buffers must not change what σ's replay starts from
         # (a sweep found adaptive 0.12 rad/s off after a replay from a reused v0 buffer)
         self._reset_args = (
@@ -562,7 +338,6 @@ class Observer(ABC, Generic[State]):
         return estimate
 
     @final
-    @one_blas_thread
     def update(self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None = None) -> Estimate:
         """Advance to time ``t`` [s] and correct with the measured configuration.
 
@@ -584,7 +359,16 @@ class Observer(ABC, Generic[State]):
             DimensionError, NonFiniteError, ConfigurationError: bad ``q_meas`` or ``tau``
                 (a torque beyond :data:`ABSURD_LIMIT_FACTOR` times the effort limit included).
             ObserverDiverged: the estimate became non-finite (state kept as it was).
+
+        On one BLAS thread for the call if the family :attr:`uses_blas` (the caller's
+        thread counts restored after), else straight.
         """
+        if self.uses_blas:
+            return self._update_on_one_thread(t, q_meas, tau)
+        return self._update(t, q_meas, tau)
+
+    def _update(self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None) -> Estimate:
+        """:meth:`update` (its docstring), on the caller's BLAS threads."""
         if self._state is None:
             raise NotResetError(f"{self!r}: call reset(t0, q0) before update()")
         t_new = self._check_time(t, previous=self._t)
@@ -592,8 +376,9 @@ class Observer(ABC, Generic[State]):
         tau_new = self._check_tau(tau, what="tau")
         ts_before = self._ts
         dt = t_new - self._t
-        period = self._sample_period(dt)
-        if period is not None and dt > max(PAUSE_RESTART, MAX_GAP_PERIODS * period):
+        if self._intervals_due:
+            self._sample_period(dt)
+        if dt > self._span:  # a pause (class docstring): restart at the next sample
             self._restart_due = True
         if self._restart_due and q is not None:
             state, t_state, estimate = self._after_pause(t_new, q, dt)
@@ -644,30 +429,39 @@ class Observer(ABC, Generic[State]):
             return self.estimate  # rebuilt with σ from the data, replayed up to t_new
         return estimate
 
+    _update_on_one_thread = one_blas_thread(_update)  # small matrices: threads only contend
+
     def _sample_period(self, dt: float) -> float | None:
         """The sample period [s]: ``1/rate``, or (none given) the median of the first
         :data:`_PERIOD_INTERVALS` intervals after the reset (``None`` until three are in)."""
         if self.rate is None and len(self._intervals) < _PERIOD_INTERVALS:
             self._intervals.append(dt)
             if len(self._intervals) >= 3:  # computed five times at most, not at every update
-                self._period_s = float(np.median(self._intervals))
+                self._set_period(float(np.median(self._intervals)))
+        self._intervals_due = self.rate is None and len(self._intervals) < _PERIOD_INTERVALS
         return self._period_s
+
+    def _set_period(self, period: float | None) -> None:
+        """The sample period [s] (``None``: not known yet) and what follows from it, computed
+        once: the longest step propagated in sub-steps before a restart (:meth:`_stepped`)."""
+        self._period_s = period
+        self._span = math.inf if period is None else max(PAUSE_RESTART, MAX_GAP_PERIODS * period)
 
     def _stepped(self, state: State, dt: float, q: Vector | None, tau: Vector) -> State:
         """:meth:`step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
         than :data:`GAP_PERIODS` periods (at most ``PAUSE_RESTART`` worth of them: a longer
         step without a sample is a prediction in the dark, restarted at the next sample;
-        :func:`gap_substeps`, the log reader's count too).
+        :func:`~pinobs.observers.checks.propagate_gap`, the log reader's too).
         One step of 10 s returned 1e74 rad/s from ``ekf`` and every update after it raised;
         one of 1 s left ``riemannian`` 500 rad/s off for seconds (a sweep)."""
-        period = self._period_s
-        span = math.inf if period is None else max(PAUSE_RESTART, MAX_GAP_PERIODS * period)
-        n = gap_substeps(dt, period, span=span)
-        if n == 1:
-            return self.step(state, dt, q, tau)
-        for _ in range(n - 1):
-            state = self.step(state, dt / n, None, tau)
-        return self.step(state, dt / n, q, tau)
+        state, n = propagate_gap(
+            lambda s, _, n: self.step(s, dt / n, None, tau),
+            state,
+            dt,
+            self._period_s,
+            span=self._span,
+        )
+        return self.step(state, dt if n == 1 else dt / n, q, tau)
 
     def _after_pause(self, t_new: float, q: Vector, dt: float) -> tuple[State, float, Estimate]:
         """After a pause: the state afresh at the sample (its position, zero velocity; what the
@@ -914,112 +708,3 @@ class Observer(ABC, Generic[State]):
                 "timestamps must be strictly increasing"
             )
         return x
-
-
-# ------------------------------------------------------------------ registry
-_REGISTRY: dict[str, type[Observer[Any]]] = {}
-
-ObserverType = TypeVar("ObserverType", bound=type[Observer[Any]])
-
-
-def register(cls: ObserverType) -> ObserverType:
-    """Class decorator: add an observer family to the registry under ``cls.name``."""
-    if not cls.name or cls.name in _REGISTRY:
-        raise ValueError(f"observer name {cls.name!r} is empty or already registered")
-    _REGISTRY[cls.name] = cls
-    return cls
-
-
-def observer_names() -> list[str]:
-    """Registered observer names, sorted."""
-    return sorted(_REGISTRY)
-
-
-def observer_class(name: str) -> type[Observer[Any]]:
-    """The class registered under ``name``.
-
-    Raises:
-        UnknownNameError: listing the registered names.
-    """
-    try:
-        return _REGISTRY[name]
-    except KeyError:
-        raise UnknownNameError(
-            f"unknown observer {name!r}; available: {', '.join(observer_names())}"
-        ) from None
-
-
-@one_blas_thread  # a family's gains (scipy's DARE...): a woken BLAS thread spins ~50 ms after
-def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
-    """Build the observer registered as ``name`` on ``robot``.
-
-    Options are the keyword arguments of the family's constructor (every
-    family accepts ``rate`` [Hz] and ``noise_std`` [rad or m]), and
-    ``latency`` [s] for every family (:meth:`Observer.set_latency`), and
-    ``never_behind=True`` for a model-based family: the family blended per joint with
-    the model-free ``kf`` (:class:`pinobs.observers.neverbehind.NeverBehind`; its
-    ``window``, ``sharpness``, ``lost_ratio``, ``reference_options`` then accepted too).
-
-    Raises:
-        UnknownNameError: unknown ``name``.
-        OptionError: an option the family does not accept (the message lists them).
-        GainError: an option out of range.
-    """
-    cls = observer_class(name)
-    latency = options.pop("latency", None)
-    never_behind = bool(options.pop("never_behind", False))
-    blend = {k: options.pop(k) for k in _BLEND_OPTIONS if never_behind and k in options}
-    accepted = [
-        p.name
-        for p in inspect.signature(cls.__init__).parameters.values()
-        if p.kind is inspect.Parameter.KEYWORD_ONLY
-    ]
-    unknown = sorted(set(options) - set(accepted))
-    if unknown:
-        raise OptionError(
-            f"observer {name!r} does not accept option(s) {unknown}; accepted: {accepted}"
-            + ("" if never_behind else ", and never_behind (model-based families)")
-        )
-    if never_behind:  # the family blended with kf (pinobs.observers.neverbehind)
-        from pinobs.observers.neverbehind import NeverBehind
-
-        given = {k: options.pop(k) for k in ("rate", "noise_std") if k in options}
-        observer: Observer[Any] = NeverBehind(
-            robot, observer=name, options=options, **blend, **given
-        )
-    else:
-        observer = cls(robot, **options)
-    if latency is not None:
-        observer.set_latency(latency)
-    return observer
-
-
-#: Options of :class:`pinobs.observers.neverbehind.NeverBehind` that ``make_observer`` passes
-#: to it with ``never_behind=True``.
-_BLEND_OPTIONS = ("window", "sharpness", "lost_ratio", "reference_options")
-
-
-def time_unit_warning(period: float | None) -> str | None:
-    """What to say of a log whose median sample period [s] is implausible (``None``: nothing).
-
-    A log timed in milliseconds or nanoseconds reads as seconds 1000x or 1e9x too long:
-    its velocities come out that many times too small (a sweep found a kf median |v| of
-    6.7e-4 rad/s for 0.67, and ekf re-initialised at every row of a ns log).
-    """
-    if period is None or MIN_PLAUSIBLE_PERIOD < period < MAX_PLAUSIBLE_PERIOD:
-        return None
-    if period >= MAX_PLAUSIBLE_PERIOD:
-        unit = "milliseconds, microseconds or nanoseconds (t / 1000, t * 1e-6, t * 1e-9)"
-    else:
-        unit = "a unit larger than seconds"
-    return (
-        f"the median sample period is {period:.6g} s ({1 / period:.6g} Hz): is t in {unit}? "
-        "give t in seconds: velocities are per second of t, so they are off by the same factor"
-    )
-
-
-def median_period(t: Vector) -> float | None:
-    """The median of a log's positive sample intervals [s] (finite times), or ``None``."""
-    d = np.diff(t[np.isfinite(t)])
-    d = d[d > 0]
-    return float(np.median(d)) if d.size else None

@@ -78,6 +78,7 @@ class FiniteDifference(Observer[_State]):
     summary = "backward difference + first-order low-pass (model-free baseline)"
     uses_torque = False
     uses_noise_std = True
+    uses_blas = False  # differences, Pinocchio's integrate and elementwise NumPy only
 
     def __init__(
         self,

@@ -26,11 +26,11 @@ def ur5_run():
 
 
 def _feed(ob: Observer, res, limited: bool = True) -> np.ndarray:
-    update = Observer.update if limited else Observer.update.__wrapped__  # type: ignore[attr-defined]
+    ob.uses_blas = limited  # (on the instance: the limit on or off)
     ob.reset(res.t[0], res.q[0], None, res.tau[0])
     rows = []
     for k in range(1, res.t.size):
-        e = update(ob, res.t[k], res.q_meas[k], res.tau[k])
+        e = ob.update(res.t[k], res.q_meas[k], res.tau[k])
         rows.append(np.concatenate([e.q, e.v]))
     return np.array(rows)
 
@@ -90,6 +90,28 @@ def test_blas_runs_on_one_thread_inside_update(ur5_run, monkeypatch) -> None:
             ob.update(res.t[k], res.q_meas[k], res.tau[k])
         assert {d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"} == {2}
     assert seen == [{1}] * 3
+
+
+def test_a_family_without_blas_calls_updates_on_the_callers_threads(ur5_run, monkeypatch) -> None:
+    """``uses_blas = False`` (``fd``): the limit is not entered, so it costs nothing per update;
+    a family that may call a BLAS (``ekf``, the default) runs its step on one thread."""
+    robot, res = ur5_run
+    for name, inside in (("fd", {2}), ("ekf", {1})):
+        ob = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
+        assert ob.uses_blas is (name == "ekf")
+        seen: list[set[int]] = []
+        step = type(ob).step
+
+        def spy(self, *args, step=step, seen=seen, **kwargs):
+            seen.append({d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"})
+            return step(self, *args, **kwargs)
+
+        monkeypatch.setattr(type(ob), "step", spy)
+        with threadpool_limits(2, user_api="blas"):
+            ob.reset(res.t[0], res.q[0], None, res.tau[0])
+            for k in range(1, 4):
+                ob.update(res.t[k], res.q_meas[k], res.tau[k])
+        assert seen == [inside] * 3, name
 
 
 @pytest.mark.parametrize("name", observer_names())

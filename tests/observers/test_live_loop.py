@@ -8,7 +8,7 @@ import pytest
 import pinobs
 from pinobs.errors import NonFiniteError, ObserverDiverged, OptionError
 from pinobs.observers import make_observer
-from pinobs.observers.base import gap_substeps
+from pinobs.observers.checks import gap_substeps, propagate_gap
 from pinobs.simulation import Sensor
 from pinobs.tolerances import GAP_PERIODS, PAUSE_RESTART
 from tests.conftest import cached_robot
@@ -191,3 +191,22 @@ def test_gap_substeps_are_steps_of_at_most_one_period_beyond_the_gap_threshold()
         n = gap_substeps(k * T, T)
         assert n == int(np.ceil(k)) and k * T / n <= T * (1 + 1e-12)
     assert gap_substeps(1.0, T, span=PAUSE_RESTART) == round(PAUSE_RESTART / T)
+
+
+def test_propagate_gap_predicts_the_first_n_minus_one_substeps_and_leaves_the_last() -> None:
+    """:func:`propagate_gap`, the sub-stepping of the live observer and of the log reader:
+    ``advance(state, j, n)`` for ``j = 1 … n − 1`` in order, the state threaded through,
+    ``n`` from :func:`gap_substeps`; one step (nothing predicted) below the gap threshold."""
+    T = 1e-3
+    calls: list[tuple[int, int]] = []
+
+    def advance(state: list[float], j: int, n: int) -> list[float]:
+        calls.append((j, n))
+        return [*state, j / n]
+
+    state, n = propagate_gap(advance, [], 7.5 * T, T)
+    assert n == gap_substeps(7.5 * T, T) == 8
+    assert calls == [(j, 8) for j in range(1, 8)] and state == [j / 8 for j in range(1, 8)]
+    calls.clear()
+    assert propagate_gap(advance, [], 2.0 * T, T) == ([], 1) and calls == []
+    assert propagate_gap(advance, [], 1.0, T, span=PAUSE_RESTART)[1] == round(PAUSE_RESTART / T)

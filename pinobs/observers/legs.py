@@ -429,8 +429,12 @@ class LeggedSetup:
 
     Args:
         name: the filter's class name (in messages).
-        robot, feet, gains, gravity, imu_hold, imu_frame: as
-            :class:`pinobs.observers.inekf.InvariantEKF` takes them.
+        robot: as :class:`pinobs.observers.inekf.InvariantEKF` takes it.
+        feet: likewise.
+        gains: likewise.
+        gravity: likewise.
+        imu_hold: likewise.
+        imu_frame: likewise.
 
     Raises:
         GainError: an ``imu_hold`` that is neither ``"previous"`` nor ``"average"``, or

@@ -23,6 +23,7 @@ from pinobs.errors import (
 )
 from pinobs.model import Robot
 from pinobs.observers.base import (
+    Vector,
     median_period,
     observer_class,
     positive,
@@ -72,6 +73,44 @@ def streaming_smoother(
         OptionError: those two, or neither ``chunk`` nor ``lag`` (the whole log is not a stream).
         GainError: no ``noise_std``.
     """
+    _check_streamable(observer, accel_psd, chunk, lag, band, filter_options, dt, noise_std)
+    empty = np.empty(0)
+    make, extra = filter_maker(
+        robot,
+        observer,
+        (empty, empty, empty, empty),
+        noise_std,
+        disturbance_psd,
+        filter_options,
+        None,
+    )
+    filt = make(accel_psd)
+    configs = _overlap_configurations(robot, configurations)
+    n_chunk, n_over = window_samples(
+        filt, extra, accel_psd, chunk, overlap, lag, dt, robot=robot, configurations=configs
+    )
+    opts = {
+        **filt.options,
+        "observer": observer,
+        "chunk": None if n_chunk is None else n_chunk * dt,
+        "overlap": n_over * dt if n_over else None,
+        "lag": lag,
+        "band": band,
+    }
+    return (lambda: Smoother(make(accel_psd), n_chunk, n_over, band)), opts
+
+
+def _check_streamable(
+    observer: str,
+    accel_psd: float | None,
+    chunk: float | None,
+    lag: float | None,
+    band: str,
+    filter_options: Mapping[str, Any] | None,
+    dt: float,
+    noise_std: float | None,
+) -> None:
+    """:func:`streaming_smoother`'s refusals (its docstring), before any filter is made."""
     cls = observer_class(observer)
     if accel_psd == "auto" or cls.learns_model or (chunk is None and lag is None):
         raise OptionError(
@@ -94,17 +133,11 @@ def streaming_smoother(
         raise GainError(
             "a streamed smoother needs noise_std [rad or m]: it has no log to estimate it from"
         )
-    empty = np.empty(0)
-    make, extra = filter_maker(
-        robot,
-        observer,
-        (empty, empty, empty, empty),
-        noise_std,
-        disturbance_psd,
-        filter_options,
-        None,
-    )
-    filt = make(accel_psd)
+
+
+def _overlap_configurations(robot: Robot, configurations: ArrayLike | None) -> Vector:
+    """The configurations the default overlap takes the inertia at: the finite rows of
+    ``configurations`` spread out, or the neutral one and random ones (seed 0)."""
     if configurations is None:
         rng = np.random.default_rng(0)
         configs = np.array(
@@ -116,18 +149,7 @@ def streaming_smoother(
         configs = spread_configurations(configs[np.all(np.isfinite(configs), axis=1)])
         if not len(configs):
             raise DimensionError("configurations has no finite row of q")
-    n_chunk, n_over = window_samples(
-        filt, extra, accel_psd, chunk, overlap, lag, dt, robot=robot, configurations=configs
-    )
-    opts = {
-        **filt.options,
-        "observer": observer,
-        "chunk": None if n_chunk is None else n_chunk * dt,
-        "overlap": n_over * dt if n_over else None,
-        "lag": lag,
-        "band": band,
-    }
-    return (lambda: Smoother(make(accel_psd), n_chunk, n_over, band)), opts
+    return configs
 
 
 def smoothing_warnings(consistency: float, options: Mapping[str, Any]) -> list[str]:
@@ -183,6 +205,19 @@ def smoothing_warnings(consistency: float, options: Mapping[str, Any]) -> list[s
             f"a model error); {widened}; {check}"
         )
     return said
+
+
+def _warn_time_unit(log: LogLike | tuple[ArrayLike, ...]) -> None:
+    """:class:`~pinobs.errors.TimestampWarning` for a median sample period of 0.1 s or more, or
+    1 µs or less: a log timed in ms reads as 1000× too slow (the filter is lost, or ``v``
+    1000× too small)."""
+    try:
+        times = log[0] if isinstance(log, tuple) else log.t
+        unit = time_unit_warning(median_period(np.asarray(times, dtype=float).ravel()))
+    except (AttributeError, TypeError, ValueError, IndexError):
+        unit = None  # smooth_quietly says what is wrong with the log
+    if unit is not None:
+        warnings.warn(TimestampWarning(unit), stacklevel=3)  # the caller of smooth()
 
 
 def smooth(
@@ -304,13 +339,7 @@ def smooth(
             or ``"auto"`` at the grid's largest density: the model does not explain the
             log (:func:`smoothing_warnings`).
     """
-    try:  # a log timed in ms reads as 1000× too slow: the filter is lost, or v 1000× too small
-        times = log[0] if isinstance(log, tuple) else log.t
-        unit = time_unit_warning(median_period(np.asarray(times, dtype=float).ravel()))
-    except (AttributeError, TypeError, ValueError, IndexError):
-        unit = None  # smooth_quietly says what is wrong with the log
-    if unit is not None:
-        warnings.warn(TimestampWarning(unit), stacklevel=2)
+    _warn_time_unit(log)
     result = smooth_quietly(
         robot,
         log,

@@ -141,7 +141,8 @@ def smooth_quietly(
         and (rho > RHO_WARN or hidden)
     ):
         return at_rows(result, ticks.rows, ticks.t_given)
-    return _latency_retried(req, result, options, accel_psd if hidden else None)
+    hidden_psd = accel_psd if hidden and isinstance(accel_psd, float) else None
+    return _latency_retried(req, result, options, hidden_psd)
 
 
 class _Ticks(NamedTuple):

@@ -8,6 +8,7 @@ from dataclasses import replace
 from typing import Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pinobs.errors import (
     ObserverDiverged,
@@ -148,6 +149,29 @@ def learned_models(
     # the window's model includes it.  Half-open the other way, a solve landing on a window's
     # first sample was left out of the window before it: a payload log smoothed with its
     # first window frozen in the nominal regime, ρ = 72.
+    which, frozen = _window_numbers(t, window, frozen_t)
+    snapshots = _snapshots(obs, t, q, tau, good, which, options)
+    if snapshots is None:  # lost: the pass with the bank, which restarts the filter
+        obs = observer(True)
+        snapshots = cast(list[ModelSnapshot], _snapshots(obs, t, q, tau, good, which, options))
+    ekf, report = _frozen_filter(obs, snapshots, options, noise_std, window)
+
+    def make(accel_psd: float | None, offset_scale: float | None = None) -> _FrozenModels:
+        return _FrozenModels(ekf, snapshots, frozen, accel_psd, offset_scale)
+
+    return make, report
+
+
+def _window_numbers(
+    t: Vector, window: float, frozen_t: Vector | None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Each sample's window (numbered from 0, empty ones dropped), and each frozen-model row's
+    (:func:`learned_models`' ``frozen_t``; the samples' own when ``None``)."""
+    # windows (t₀ + jW, t₀ + (j+1)W]: each ends on the sample where the learner's solve
+    # falls when W is a multiple of its resolve_every (both count from the reset at t₀), so
+    # the window's model includes it.  Half-open the other way, a solve landing on a window's
+    # first sample was left out of the window before it: a payload log smoothed with its
+    # first window frozen in the nominal regime, ρ = 72.
     which = np.maximum(np.ceil((t - t[0]) / window - 1e-6).astype(int) - 1, 0)
     which[0] = which[1]  # sample 0 is never a window of its own (nothing learned before it)
     which = np.unique(which, return_inverse=True)[1].astype(float)  # empty windows (gaps) dropped
@@ -155,30 +179,47 @@ def learned_models(
     if frozen_t is not None:
         latest = np.searchsorted(t, frozen_t + TIME_EPS, side="right") - 1
         frozen = which[np.maximum(latest, 0)]
+    return which, frozen
 
-    def learn(obs: AdaptiveEKF) -> list[ModelSnapshot] | None:
-        """The snapshots at the windows' ends; ``None`` if a filter run without the bank the
-        user asked for is lost."""
-        give_up = not obs.blend and bool(options.get("blend", True))
-        snapshots: list[ModelSnapshot] = []
-        obs.reset(float(t[0]), q[0], None, tau[0])
-        for k in range(1, t.size):
-            try:
-                obs.update(float(t[k]), q[k] if good[k] else None, tau[k])
-            except ObserverDiverged:
-                if give_up:
-                    return None
-                raise
-            if give_up and obs.lost():
+
+def _snapshots(
+    obs: AdaptiveEKF,
+    t: Vector,
+    q: Vector,
+    tau: Vector,
+    good: Vector,
+    which: NDArray[np.float64],
+    options: Mapping[str, Any],
+) -> list[ModelSnapshot] | None:
+    """The learning pass: the snapshots at the windows' ends (``which``: each sample's
+    window); ``None`` if a filter run without the bank the user asked for is lost."""
+    give_up = not obs.blend and bool(options.get("blend", True))
+    snapshots: list[ModelSnapshot] = []
+    obs.reset(float(t[0]), q[0], None, tau[0])
+    for k in range(1, t.size):
+        try:
+            obs.update(float(t[k]), q[k] if good[k] else None, tau[k])
+        except ObserverDiverged:
+            if give_up:
                 return None
-            if k == t.size - 1 or which[k + 1] != which[k]:
-                snapshots.append(obs.snapshot())  # the model held at the window's last sample
-        return snapshots
+            raise
+        if give_up and obs.lost():
+            return None
+        if k == t.size - 1 or which[k + 1] != which[k]:
+            snapshots.append(obs.snapshot())  # the model held at the window's last sample
+    return snapshots
 
-    snapshots = learn(obs)
-    if snapshots is None:  # lost: the pass with the bank, which restarts the filter
-        obs = observer(True)
-        snapshots = cast(list[ModelSnapshot], learn(obs))
+
+def _frozen_filter(
+    obs: AdaptiveEKF,
+    snapshots: list[ModelSnapshot],
+    options: Mapping[str, Any],
+    noise_std: float | None,
+    window: float,
+) -> tuple[ExtendedKalmanFilter, dict[str, Any]]:
+    """The EKF the frozen models run in (each window's model and densities set on it by
+    :class:`_FrozenModels`), and the options to report: ``obs``'s, the window, and each
+    window's regime and densities."""
     opts = {**obs.options, "blend": options.get("blend", True)}
     ekf = ExtendedKalmanFilter(
         snapshots[0].robot,
@@ -203,8 +244,4 @@ def learned_models(
         # (accel_psd [rad²/s³], offset density [rad²/s⁵]) of each window's regime
         "model_densities": [(s.accel_psd, densities[s.regime]) for s in snapshots],
     }
-
-    def make(accel_psd: float | None, offset_scale: float | None = None) -> _FrozenModels:
-        return _FrozenModels(ekf, snapshots, frozen, accel_psd, offset_scale)
-
-    return make, report
+    return ekf, report

@@ -4,6 +4,7 @@ kernels (:func:`white_jerk_smooth`)."""
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, cast
 
@@ -55,6 +56,148 @@ def _jerk_noise_loops(PX: Vector, t: Vector, measured: Vector, r: float, Pn: Vec
                 Pn[k, i, j] = T[i, j] - (T[i, 0] - r * K[i]) * K[j]
 
 
+def _jerk_gain_loops(
+    PX: Vector,
+    k: int,
+    h: float,
+    jerk: float,
+    F: Vector,
+    Q: Vector,
+    W: Vector,
+    Pp: Vector,
+    L: Vector,
+    G: Vector,
+) -> None:
+    """The step ``k → k+1`` of :func:`_jerk_backward_loops`: ``F(h)``, ``Q(h)``
+    (:func:`pinobs.observers.kf.transition`), ``W = F P⁺_k``, ``P⁻_{k+1} = W Fᵀ + Q = L Lᵀ``
+    and the smoother gain ``Gᵀ = (P⁻_{k+1})⁻¹ W`` (3×3 factors), into the arrays given."""
+    F[0, 1], F[0, 2], F[1, 2] = h, 0.5 * h * h, h
+    Q[0, 0], Q[0, 1], Q[0, 2] = jerk * h**5 / 20, jerk * h**4 / 8, jerk * h**3 / 6
+    Q[1, 1], Q[1, 2], Q[2, 2] = jerk * h**3 / 3, jerk * h**2 / 2, jerk * h
+    Q[1, 0], Q[2, 0], Q[2, 1] = Q[0, 1], Q[0, 2], Q[1, 2]
+    for i in range(3):  # W = F P⁺_k, P⁻_{k+1} = W Fᵀ + Q
+        for j in range(3):
+            s = 0.0
+            for m in range(3):
+                s += F[i, m] * PX[k, m, j]
+            W[i, j] = s
+    for i in range(3):
+        for j in range(3):
+            s = 0.0
+            for m in range(3):
+                s += W[i, m] * F[j, m]
+            Pp[i, j] = s + Q[i, j]
+    for j in range(3):  # P⁻ = L Lᵀ
+        s = Pp[j, j]
+        for m in range(j):
+            s -= L[j, m] * L[j, m]
+        L[j, j] = math.sqrt(s) if s > 0.0 else math.nan  # lost: NaN, reported by smooth()
+        for i in range(j + 1, 3):
+            s = Pp[i, j]
+            for m in range(j):
+                s -= L[i, m] * L[j, m]
+            L[i, j] = s / L[j, j]
+    for c in range(3):  # Gᵀ = (P⁻)⁻¹ W, column by column  [Särkkä 2013, Thm 8.2]
+        for i in range(3):
+            s = W[i, c]
+            for m in range(i):
+                s -= L[i, m] * G[c, m]
+            G[c, i] = s / L[i, i]
+        for i in range(2, -1, -1):
+            s = G[c, i]
+            for m in range(i + 1, 3):
+                s -= L[m, i] * G[c, m]
+            G[c, i] = s / L[i, i]
+
+
+def _jerk_covariance_loops(
+    PX: Vector, k: int, G: Vector, Pp: Vector, Ps: Vector, T: Vector, W: Vector
+) -> None:
+    """``P^s_k = P⁺_k + G (P^s_{k+1} − P⁻_{k+1}) Gᵀ`` (symmetrised) into ``Ps``, which holds
+    ``P^s_{k+1}`` on entry [Särkkä 2013, Thm 8.2]; ``T`` and ``W`` are scratch."""
+    for i in range(3):
+        for j in range(3):
+            s = 0.0
+            for m in range(3):
+                s += G[i, m] * (Ps[m, j] - Pp[m, j])
+            T[i, j] = s
+    for i in range(3):
+        for j in range(3):
+            s = 0.0
+            for m in range(3):
+                s += T[i, m] * G[j, m]
+            W[i, j] = PX[k, i, j] + s
+    for i in range(3):
+        for j in range(3):
+            Ps[i, j] = 0.5 * (W[i, j] + W[j, i])
+
+
+def _jerk_band_loops(
+    PX: Vector,
+    k: int,
+    measured: Vector,
+    r: float,
+    F: Vector,
+    G: Vector,
+    B: Vector,
+    U: Vector,
+    D: Vector,
+    T: Vector,
+    W: Vector,
+    BK: Vector,
+) -> None:
+    """:func:`noise_backward`'s ``B, U`` recursion from ``k+1`` to ``k`` on the 3×3 factors
+    (``K = K_{k+1} = P⁺_{k+1}[:, 0] / σ²`` where row ``k+1`` was corrected):
+    ``D = B F − F − (B K) Hᵢ F``, ``U ← G (U + σ² (B K)(B K)ᵀ) Gᵀ``, ``B ← G D + I``;
+    ``D``, ``T``, ``W``, ``BK`` are scratch."""
+    for i in range(3):
+        for j in range(3):
+            s = 0.0
+            for m in range(3):
+                s += B[i, m] * F[m, j]
+            D[i, j] = s - F[i, j]
+    if measured[k + 1]:
+        for i in range(3):
+            s = 0.0
+            for m in range(3):
+                s += B[i, m] * PX[k + 1, m, 0]
+            BK[i] = s / r
+        for i in range(3):
+            for j in range(3):
+                D[i, j] -= BK[i] * F[0, j]
+                U[i, j] += r * BK[i] * BK[j]
+    for i in range(3):  # U ← G U Gᵀ
+        for j in range(3):
+            s = 0.0
+            for m in range(3):
+                s += G[i, m] * U[m, j]
+            T[i, j] = s
+    for i in range(3):
+        for j in range(3):
+            s = 0.0
+            for m in range(3):
+                s += T[i, m] * G[j, m]
+            W[i, j] = s
+    for i in range(3):  # B ← G D + I
+        for j in range(3):
+            U[i, j] = W[i, j]
+            s = 1.0 if i == j else 0.0
+            for m in range(3):
+                s += G[i, m] * D[m, j]
+            T[i, j] = s
+    for i in range(3):
+        for j in range(3):
+            B[i, j] = T[i, j]
+
+
+#: The steps :func:`_jerk_backward_loops` calls: these Python functions, replaced by their
+#: compiled forms (:func:`_backward_kernel`) before it is compiled (numba calls only compiled
+#: functions from compiled code).
+_gain_step: Any = _jerk_gain_loops
+_covariance_step: Any = _jerk_covariance_loops
+_band_step: Any = _jerk_band_loops
+
+
 def _jerk_backward_loops(
     X: Vector,
     PX: Vector,
@@ -75,30 +218,18 @@ def _jerk_backward_loops(
     """:func:`_backward` (and :class:`Smoother`'s ``ρ`` terms) for the white-jerk filter on the
     rows ``start..stop−1``, from the filtered state at ``stop − 1``, in loops (compiled by
     numba).  Every direction shares ``F``, ``Q`` and ``H``, so the gain is ``G₃ ⊗ I`` with
-    ``G₃ = P⁺₃ Fᵀ (P⁻₃)⁻¹`` (3×3) and the means move joint by joint; the covariances
-    (``P^s``, the noise band's ``B, U``) are their 3×3 factors.  Writes the rows
-    ``start..start+keep−1``: ``qs``, ``vs`` and ``var`` (the velocity variance of the model band,
-    or of the noise band with ``noise``; one per row, every direction's), and adds ``ρ``'s sum
-    and count to ``rho``.  ``X[k] = (q, v, a)`` and ``PX[k]`` the filter's (from
+    ``G₃ = P⁺₃ Fᵀ (P⁻₃)⁻¹`` (3×3: :func:`_jerk_gain_loops`) and the means move joint by joint;
+    the covariances (``P^s``, the noise band's ``B, U``) are their 3×3 factors.  Writes the
+    rows ``start..start+keep−1``: ``qs``, ``vs`` and ``var`` (the velocity variance of the
+    model band, or of the noise band with ``noise``; one per row, every direction's), and adds
+    ``ρ``'s sum and count to ``rho``.  ``X[k] = (q, v, a)`` and ``PX[k]`` the filter's (from
     :meth:`pinobs.observers.kf.KFBank.run`, ``measured`` its rows corrected), ``Pn``
     :func:`_jerk_noise_loops`'."""
     nv = X.shape[2]
-    F, Q, W, Pp, L = (
-        np.eye(3),
-        np.empty((3, 3)),
-        np.empty((3, 3)),
-        np.empty((3, 3)),
-        np.zeros((3, 3)),
-    )
-    G, T, D, B, U = (
-        np.empty((3, 3)),
-        np.empty((3, 3)),
-        np.empty((3, 3)),
-        np.eye(3),
-        np.zeros((3, 3)),
-    )
-    xs, xp, BK = np.empty((3, nv)), np.empty(3), np.empty(3)
-    Ps = np.empty((3, 3))
+    F, B, L, U = np.eye(3), np.eye(3), np.zeros((3, 3)), np.zeros((3, 3))
+    Q, W, Pp = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))  # scratch, set before use
+    G, T, D = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    xs, xp, BK, Ps = np.empty((3, nv)), np.empty(3), np.empty(3), np.empty((3, 3))
     last = stop - 1
     for i in range(3):
         for j in range(nv):
@@ -110,104 +241,17 @@ def _jerk_backward_loops(
             qs[last, j], vs[last, j] = xs[0, j], xs[1, j]
         var[last] = Pn[last, 1, 1] if noise else Ps[1, 1]
     for k in range(last - 1, start - 1, -1):
-        h = t[k + 1] - t[k]  # F(h), Q(h) (pinobs.observers.kf.transition)
-        F[0, 1], F[0, 2], F[1, 2] = h, 0.5 * h * h, h
-        Q[0, 0], Q[0, 1], Q[0, 2] = jerk * h**5 / 20, jerk * h**4 / 8, jerk * h**3 / 6
-        Q[1, 1], Q[1, 2], Q[2, 2] = jerk * h**3 / 3, jerk * h**2 / 2, jerk * h
-        Q[1, 0], Q[2, 0], Q[2, 1] = Q[0, 1], Q[0, 2], Q[1, 2]
-        for i in range(3):  # W = F P⁺_k, P⁻_{k+1} = W Fᵀ + Q
-            for j in range(3):
-                s = 0.0
-                for m in range(3):
-                    s += F[i, m] * PX[k, m, j]
-                W[i, j] = s
-        for i in range(3):
-            for j in range(3):
-                s = 0.0
-                for m in range(3):
-                    s += W[i, m] * F[j, m]
-                Pp[i, j] = s + Q[i, j]
-        for j in range(3):  # P⁻ = L Lᵀ
-            s = Pp[j, j]
-            for m in range(j):
-                s -= L[j, m] * L[j, m]
-            L[j, j] = math.sqrt(s) if s > 0.0 else math.nan  # lost: NaN, reported by smooth()
-            for i in range(j + 1, 3):
-                s = Pp[i, j]
-                for m in range(j):
-                    s -= L[i, m] * L[j, m]
-                L[i, j] = s / L[j, j]
-        for c in range(3):  # Gᵀ = (P⁻)⁻¹ W, column by column  [Särkkä 2013, Thm 8.2]
-            for i in range(3):
-                s = W[i, c]
-                for m in range(i):
-                    s -= L[i, m] * G[c, m]
-                G[c, i] = s / L[i, i]
-            for i in range(2, -1, -1):
-                s = G[c, i]
-                for m in range(i + 1, 3):
-                    s -= L[m, i] * G[c, m]
-                G[c, i] = s / L[i, i]
+        h = t[k + 1] - t[k]
+        _gain_step(PX, k, h, jerk, F, Q, W, Pp, L, G)
         for j in range(nv):  # x^s_k = x⁺_k + G (x^s_{k+1} − x⁻_{k+1}), joint by joint
             q, v, a = X[k, 0, j], X[k, 1, j], X[k, 2, j]
             xp[0], xp[1], xp[2] = q + v * h + 0.5 * h * h * a, v + h * a, a
             d0, d1, d2 = xs[0, j] - xp[0], xs[1, j] - xp[1], xs[2, j] - xp[2]
             for i in range(3):
                 xs[i, j] = X[k, i, j] + G[i, 0] * d0 + G[i, 1] * d1 + G[i, 2] * d2
-        for i in range(3):  # P^s_k = P⁺_k + G (P^s_{k+1} − P⁻_{k+1}) Gᵀ
-            for j in range(3):
-                s = 0.0
-                for m in range(3):
-                    s += G[i, m] * (Ps[m, j] - Pp[m, j])
-                T[i, j] = s
-        for i in range(3):
-            for j in range(3):
-                s = 0.0
-                for m in range(3):
-                    s += T[i, m] * G[j, m]
-                W[i, j] = PX[k, i, j] + s
-        for i in range(3):
-            for j in range(3):
-                Ps[i, j] = 0.5 * (W[i, j] + W[j, i])
+        _covariance_step(PX, k, G, Pp, Ps, T, W)
         if noise:  # noise_backward's B, U recursion, K = K_{k+1}
-            for i in range(3):
-                for j in range(3):
-                    s = 0.0
-                    for m in range(3):
-                        s += B[i, m] * F[m, j]
-                    D[i, j] = s - F[i, j]
-            if measured[k + 1]:
-                for i in range(3):
-                    s = 0.0
-                    for m in range(3):
-                        s += B[i, m] * PX[k + 1, m, 0]
-                    BK[i] = s / r
-                for i in range(3):
-                    for j in range(3):
-                        D[i, j] -= BK[i] * F[0, j]
-                        U[i, j] += r * BK[i] * BK[j]
-            for i in range(3):  # U ← G U Gᵀ
-                for j in range(3):
-                    s = 0.0
-                    for m in range(3):
-                        s += G[i, m] * U[m, j]
-                    T[i, j] = s
-            for i in range(3):
-                for j in range(3):
-                    s = 0.0
-                    for m in range(3):
-                        s += T[i, m] * G[j, m]
-                    W[i, j] = s
-            for i in range(3):  # B ← G D + I
-                for j in range(3):
-                    U[i, j] = W[i, j]
-                    s = 1.0 if i == j else 0.0
-                    for m in range(3):
-                        s += G[i, m] * D[m, j]
-                    T[i, j] = s
-            for i in range(3):
-                for j in range(3):
-                    B[i, j] = T[i, j]
+            _band_step(PX, k, measured, r, F, G, B, U, D, T, W, BK)
         if k - start >= keep:
             continue
         for j in range(nv):
@@ -233,11 +277,23 @@ _jerk_noise_kernel = LazyKernel(
 )  # fmt: skip
 
 
-_jerk_backward_kernel = LazyKernel(
-    _jerk_backward_loops, np.zeros((2, 3, 1)), np.tile(np.eye(3), (2, 1, 1)),
-    np.tile(np.eye(3), (2, 1, 1)), np.array([0.0, 1e-3]), np.array([False, True]), 1.0, 1.0,
-    0, 2, 2, True, np.zeros((2, 1)), np.zeros((2, 1)), np.zeros(2), np.zeros(2),
-)  # fmt: skip
+@functools.cache
+def _backward_kernel() -> Any:
+    """:func:`_jerk_backward_loops` compiled (numba, ``cache=True``), its steps compiled
+    first (as :mod:`pinobs.observers.ibrir_kalman`'s fused kernel)."""
+    global _gain_step, _covariance_step, _band_step
+    import numba  # lazy: start-up time
+
+    _gain_step = numba.njit(cache=True)(_jerk_gain_loops)
+    _covariance_step = numba.njit(cache=True)(_jerk_covariance_loops)
+    _band_step = numba.njit(cache=True)(_jerk_band_loops)
+    kernel = numba.njit(cache=True)(_jerk_backward_loops)
+    kernel(
+        np.zeros((2, 3, 1)), np.tile(np.eye(3), (2, 1, 1)), np.tile(np.eye(3), (2, 1, 1)),
+        np.array([0.0, 1e-3]), np.array([False, True]), 1.0, 1.0, 0, 2, 2, True,
+        np.zeros((2, 1)), np.zeros((2, 1)), np.zeros(2), np.zeros(2),
+    )  # fmt: skip
+    return kernel
 
 
 def white_jerk_smooth(
@@ -261,7 +317,7 @@ def white_jerk_smooth(
     t = np.ascontiguousarray(t, dtype=float)
     r, n, nv = gains.meas_std**2, t.size, filt.robot.nv
     noise = band == "noise"
-    _jerk_backward_kernel.load()
+    backward = _backward_kernel()
     Pn = PX
     if noise:
         _jerk_noise_kernel.load()
@@ -283,7 +339,5 @@ def white_jerk_smooth(
     if start < n:
         windows.append((start, n, n - start))
     for start, stop, keep in windows:
-        cast(Any, _jerk_backward_kernel.compiled)(
-            X, PX, Pn, t, used, gains.jerk_psd, r, start, stop, keep, noise, qs, vs, var, rho
-        )
+        backward(X, PX, Pn, t, used, gains.jerk_psd, r, start, stop, keep, noise, qs, vs, var, rho)
     return qs, vs, np.repeat(var[:, None], nv, axis=1), float(ll[0]), float(rho[0]), int(rho[1])

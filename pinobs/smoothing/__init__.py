@@ -265,6 +265,7 @@ from pinobs.smoothing.constants import (
     JERK_GRID,
     LIKELIHOOD_MARGIN,
     OFFSET_SCALE_RANGE,
+    OVERLAP_CONFIGURATIONS,
     RHO_WARN,
 )
 from pinobs.smoothing.densities import consistent_offset_scale, select_accel_psd
@@ -285,6 +286,7 @@ __all__ = [
     "LATENCY_INTERVALS",
     "LIKELIHOOD_MARGIN",
     "OFFSET_SCALE_RANGE",
+    "OVERLAP_CONFIGURATIONS",
     "RHO_WARN",
     "LogLike",
     "Smoothed",

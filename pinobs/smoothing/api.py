@@ -42,6 +42,8 @@ from pinobs.smoothing.pipeline import smooth_quietly
 from pinobs.smoothing.rts import Smoothed, Smoother
 from pinobs.smoothing.windows import spread_configurations, window_samples
 
+__all__ = ["smooth", "smoothing_warnings", "streaming_smoother"]
+
 
 def streaming_smoother(
     robot: Robot,
@@ -235,7 +237,7 @@ def smooth(
     filter_options: Mapping[str, Any] | None = None,
     band: str | None = None,
 ) -> Smoothed:
-    """Fixed-interval RTS smoothing of a log on the manifold (module docstring for the equations).
+    """Fixed-interval RTS smoothing of a log on the manifold (equations: :mod:`pinobs.smoothing`).
 
     Args:
         robot: the model (the filter's process model; ``adaptive``'s nominal model).
@@ -253,7 +255,7 @@ def smooth(
             sample on [N·m or N] ``(N, nv)`` (zero-order hold, MATH §7;
             ``None``: zero).
         observer: the filter smoothed: ``"ekf"``, ``"adaptive"`` (its learned
-            model frozen per ``model_window``: module docstring), or the model-free
+            model frozen per ``model_window``: :mod:`pinobs.smoothing`), or the model-free
             ``"kf"`` (white jerk, no torque: the floor where the model is wrong).
         noise_std: position noise standard deviation [rad or m]; ``None``: the
             median over joints of its estimate from the log's first second
@@ -271,7 +273,7 @@ def smooth(
             ``kf`` its ``jerk_psd`` likewise (:data:`JERK_GRID`, then the
             half-decades either side), for ``adaptive`` by
             :func:`consistent_offset_scale` (``ρ = 1``; 3–7 smoother
-            passes); module docstring.  Reported in ``options`` (``accel_psd``,
+            passes); :mod:`pinobs.smoothing`.  Reported in ``options`` (``accel_psd``,
             ``accel_psd_from_log``).
         disturbance_psd: the EKF's joint-torque offset density [rad²/s⁵], or ``None``
             (not for ``adaptive``: its regimes set it).
@@ -283,7 +285,7 @@ def smooth(
         lag: fixed-lag mode [s]: chunks of ``lag`` with ``lag`` of overlap
             (exclusive with ``chunk`` and ``overlap``).
         model_window: ``adaptive`` only: the window [s] over which its learned model
-            is frozen (default: its ``horizon``, 10 s: module docstring).
+            is frozen (default: its ``horizon``, 10 s: :mod:`pinobs.smoothing`).
         filter_options: further options of the filter (``q0_std``, ``v0_std``, ...;
             for ``adaptive``, those of its causal learning pass).  ``latency`` [s], a
             known measurement latency (the sample stamped ``t`` was taken at
@@ -297,7 +299,7 @@ def smooth(
             explain the log as stamped (``ρ`` > :data:`RHO_WARN`), which is then searched
             as with ``"auto"`` and smoothed under the latency found if that explains it
             (``ρ`` ≤ :data:`RHO_WARN`; ``options["latency_searched"]``,
-            ``"consistency_without_latency"``; module docstring), or ``accel_psd="auto"``
+            ``"consistency_without_latency"``; :mod:`pinobs.smoothing`), or ``accel_psd="auto"``
             chose a density above ``ekf``'s own (``"accel_psd_without_latency"``); ``0``:
             as stamped.
         band: what ``v_std`` states (:data:`BANDS`): ``"model"``, the smoother's
@@ -306,13 +308,13 @@ def smooth(
             estimate's error driven by the measurement noise alone
             (:func:`_backward`), for a model error that is smooth in time, which
             the forward and backward passes lag in opposite directions and the
-            smoother cancels (module docstring); ``"inflated"``, the noise band
+            smoother cancels (:mod:`pinobs.smoothing`); ``"inflated"``, the noise band
             scaled by ``√max(1, ρ)`` (``ρ`` = :attr:`Smoothed.consistency` of this
-            log; module docstring: a model error the densities do not explain
+            log; :mod:`pinobs.smoothing`: a model error the densities do not explain
             widens it, never below the noise's own); ``None``: ``"inflated"`` over
             ``adaptive`` with its regimes' densities (tuned for the causal
             filter's tracking, not fitted to the log) and over ``kf`` (a robot's
-            motion is not white jerk: module docstring), ``"model"`` otherwise
+            motion is not white jerk: :mod:`pinobs.smoothing`), ``"model"`` otherwise
             (``ekf``; densities given or chosen from the log).
 
     Raises:

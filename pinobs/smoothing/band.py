@@ -13,6 +13,16 @@ from pinobs.observers.base import (
 )
 from pinobs.observers.linalg import LazyKernel
 
+__all__ = [
+    "NOISE_KERNEL_MAX",
+    "noise_backward",
+    "noise_backward_kernel",
+    "noise_forward",
+    "noise_forward_kernel",
+    "noise_step",
+    "was_gated",
+]
+
 
 def was_gated(state: Any) -> bool:
     """Whether the filter's outlier gate rejected ``state``'s measurement (its ``gate``,

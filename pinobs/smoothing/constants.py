@@ -2,7 +2,21 @@
 
 from __future__ import annotations
 
-#: Default white-acceleration density of the smoothed filter [rad²/s³] (module docstring).
+__all__ = [
+    "AUTO_WHITE_SCALE",
+    "BANDS",
+    "CHUNK_TOL",
+    "COST_WARN",
+    "DEFAULT_ACCEL_PSD",
+    "DEFAULT_GRID",
+    "JERK_GRID",
+    "LIKELIHOOD_MARGIN",
+    "OFFSET_SCALE_RANGE",
+    "OVERLAP_CONFIGURATIONS",
+    "RHO_WARN",
+]
+
+#: Default white-acceleration density of the smoothed filter [rad²/s³] (:mod:`pinobs.smoothing`).
 DEFAULT_ACCEL_PSD = 1e-8
 
 

@@ -34,6 +34,14 @@ from pinobs.smoothing.filters import prepare_log
 from pinobs.smoothing.logs import LogLike, smoothing_arrays
 from pinobs.smoothing.rts import Smoother, forward_pass, log_rows
 
+__all__ = [
+    "consistent_offset_scale",
+    "consistent_scale",
+    "forward_log_likelihood",
+    "select_accel_psd",
+    "select_density",
+]
+
 
 def select_accel_psd(
     robot: Robot,
@@ -64,7 +72,7 @@ def select_accel_psd(
     filter (:func:`smooth`; the learning pass runs once).  For ``kf`` every
     candidate's ``ℓ`` comes from one pass of a bank of filters
     (:meth:`~pinobs.observers.kf.KFBank.log_likelihoods`), and the rule is applied
-    once more with the half-decades either side of its choice added (module docstring).
+    once more with the half-decades either side of its choice added (:mod:`pinobs.smoothing`).
 
     Raises:
         GainError: an empty grid, a non-positive candidate or threshold.
@@ -109,7 +117,7 @@ def consistent_offset_scale(
     regimes' density, when the log is too short to give a ``ρ``).
     A method of moments, not the likelihood: the learned model's residual
     error lies outside the filter's noise family, where the likelihood keeps a
-    white acceleration that widens the smoother's band (module docstring).
+    white acceleration that widens the smoother's band (:mod:`pinobs.smoothing`).
     Uses no ground truth; costs one learning pass and 3–7 smoother passes
     (measured on the README's twelve model-error logs of seeds 1 and 2).
 

@@ -26,6 +26,8 @@ from pinobs.observers.base import (
 from pinobs.smoothing.logs import first_good, latency_option, retimed
 from pinobs.smoothing.replay import learned_models
 
+__all__ = ["filter_maker", "prepare_log", "smoothable_class"]
+
 
 def prepare_log(
     robot: Robot,

@@ -16,6 +16,8 @@ from pinobs.observers.base import (
 from pinobs.observers.kf import KFBank, WhiteJerkFilter
 from pinobs.observers.linalg import LazyKernel
 
+__all__ = ["white_jerk_smooth"]
+
 
 def _jerk_noise_loops(PX: Vector, t: Vector, measured: Vector, r: float, Pn: Vector) -> None:
     """:func:`noise_step` for the white-jerk filter on its 3×3 factor (``P = P₃ ⊗ I``, so

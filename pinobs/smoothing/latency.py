@@ -23,6 +23,8 @@ from pinobs.smoothing.densities import forward_log_likelihood
 from pinobs.smoothing.filters import prepare_log
 from pinobs.smoothing.logs import LogLike, smoothing_arrays
 
+__all__ = ["LATENCY_INTERVALS", "latency_note", "likeliest_latency", "select_latency"]
+
 #: :func:`select_latency`'s range: latencies up to this many sample intervals.
 LATENCY_INTERVALS = 3
 

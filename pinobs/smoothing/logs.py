@@ -25,6 +25,16 @@ from pinobs.observers.noise import noise_from_log
 from pinobs.smoothing.rts import Smoothed
 from pinobs.tolerances import QUATERNION_NORM_TOL
 
+__all__ = [
+    "LogLike",
+    "at_rows",
+    "first_good",
+    "latency_option",
+    "log_noise_std",
+    "retimed",
+    "smoothing_arrays",
+]
+
 
 class LogLike(Protocol):
     """Anything with a log's arrays ``t``, ``q`` (measured), ``tau``: :class:`pinobs.io.Log`.

@@ -44,6 +44,8 @@ from pinobs.smoothing.logs import LogLike, at_rows, latency_option, log_noise_st
 from pinobs.smoothing.rts import Smoothed, Smoother, log_rows
 from pinobs.smoothing.windows import spread_configurations, window_samples
 
+__all__ = ["smooth_quietly"]
+
 
 def _filter_options(options: Any) -> dict[str, Any]:
     """``filter_options`` as a dict, or :class:`OptionError` (not a mapping, or an option
@@ -190,7 +192,7 @@ def _checked(
 ) -> tuple[Any, dict[str, Any], str, Any]:
     """:func:`smooth_quietly`'s arguments checked before any pass over the log: ``accel_psd``
     (a float, ``"auto"`` or ``None``), the filter options as a dict, the band (its default
-    resolved: module docstring) and the observer's class."""
+    resolved: :mod:`pinobs.smoothing`) and the observer's class."""
     if accel_psd is not None and not isinstance(accel_psd, str):  # a float from here on
         accel_psd = positive("accel_psd", accel_psd)
     positive("noise_std", noise_std, allow_none=True)  # (a filter would floor 0 to NOISE_FLOOR)

@@ -25,6 +25,8 @@ from pinobs.observers.ekf import ExtendedKalmanFilter
 from pinobs.smoothing.constants import AUTO_WHITE_SCALE
 from pinobs.tolerances import TIME_EPS
 
+__all__ = ["learned_models"]
+
 
 class _FrozenModels:
     """``adaptive``'s model-based filter replayed with its learned model frozen per window.
@@ -91,7 +93,7 @@ class _FrozenModels:
 
     def predict_flow(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector, Vector]:
         """:meth:`predict` with ``Φ`` as the mean's Jacobian: the noise band propagates the
-        error with ``Φ`` here (module docstring, "Two bands")."""
+        error with ``Φ`` here (:mod:`pinobs.smoothing`, "Two bands")."""
         pred, Phi = self.predict(state, dt, tau)
         return pred, Phi, Phi
 

@@ -33,6 +33,8 @@ from pinobs.smoothing.band import (
 )
 from pinobs.smoothing.constants import BANDS
 
+__all__ = ["Smoothed", "Smoother", "forward_pass", "log_rows"]
+
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -184,7 +186,7 @@ class Smoother:
             error is larger than the densities say (bands too narrow); ``ρ < 1``:
             smaller.  It tests the filter's covariance, which the smoother's
             inherits; measured under a learned model's smooth residual error
-            (module docstring) the smoother's band is wider than ``ρ`` says.
+            (:mod:`pinobs.smoothing`) the smoother's band is wider than ``ρ`` says.
 
     Args:
         filt: the filter (a :class:`GaussianFilter`).
@@ -291,7 +293,7 @@ def _backward(
     emit: Callable[[int, Vector, Vector, Vector, Vector | None], None],
     meas_var: float = 0.0,
 ) -> None:
-    """RTS backward pass over ``steps`` (module docstring), from the last one's filtered state.
+    """RTS backward pass over ``steps`` (:mod:`pinobs.smoothing`), from the last one's filtered state.
 
     Calls ``emit(i, q^s_i, v^s_i, diag P^s_i, diag Pⁿˢ_i)`` for every index, last
     first; ``Pⁿˢ`` (``None`` unless the steps carry :func:`noise_step`'s

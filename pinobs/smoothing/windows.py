@@ -26,6 +26,8 @@ from pinobs.observers.base import (
 from pinobs.observers.kf import KFGains
 from pinobs.smoothing.constants import CHUNK_TOL, COST_WARN, OVERLAP_CONFIGURATIONS
 
+__all__ = ["default_overlap", "spread_configurations", "window_samples"]
+
 
 def default_overlap(
     accel_psd: float,

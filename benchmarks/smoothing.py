@@ -10,7 +10,7 @@ UR5 and Panda, σ = 1e-4 and 1e-3 rad.  Velocity RMS error over t > 0.5 s of
 - ``ekf``: the causal filter with its default options (``accel_psd`` 1e-8);
 - ``rts (1e-8)``: the smoother over that same filter;
 - ``rts (auto)``: the smoother with ``accel_psd`` chosen from the log by
-  likelihood (:func:`pinobs.observers.smoothing.select_accel_psd`, no truth);
+  likelihood (:func:`pinobs.smoothing.select_accel_psd`, no truth);
 - ``savgol``: ``scipy.signal.savgol_filter`` (``deriv=1``, all joints at once),
   its window (odd, 5–801 samples) and order (2–4) tuned *on the truth*.
 
@@ -18,7 +18,7 @@ UR5 and Panda, σ = 1e-4 and 1e-3 rad.  Velocity RMS error over t > 0.5 s of
 ``rts (auto)`` ±2σ band (``band="model"``, the default over ``ekf``; ``noise
 band``: ``band="noise"``, the same estimate's error driven by the measurement
 noise alone); ``ρ`` the filter–smoother consistency
-(:attr:`pinobs.observers.smoothing.Smoother.consistency`, no truth; 1 when the
+(:attr:`pinobs.smoothing.Smoother.consistency`, no truth; 1 when the
 densities explain the log).  On an exact-model log the smoothed error is a
 slowly varying curve (few independent values per log), so one log's coverage
 is a coarse draw: the seeds table (seeds 0–3, 3 s and 10 s logs) shows the
@@ -33,7 +33,7 @@ found on seeds 1 and 2 and checked on seeds 3 and 4; the ``noise`` band it
 scales; and the ``model`` band of the same estimate) and once with
 ``accel_psd="auto"`` (white acceleration at 1e-2 of
 the regimes', the offset density set so that ρ = 1:
-:func:`pinobs.observers.smoothing.consistent_offset_scale`; model band); RMS after 5 s; the
+:func:`pinobs.smoothing.consistent_offset_scale`; model band); RMS after 5 s; the
 CPU times of the smoother (its learning pass and, for ``auto``, its search
 passes included) over the causal run's, one run each.  ``lag`` rows give the fixed-lag smoother against the
 whole-log one.  ``cost`` is the smoother's wall time over the causal filter's
@@ -57,8 +57,8 @@ import pinobs
 from pinobs.io import Log, estimate_log
 from pinobs.model import aba_time
 from pinobs.observers import make_observer
-from pinobs.observers.smoothing import select_accel_psd, smooth
 from pinobs.simulation import Sensor, simulate
+from pinobs.smoothing import select_accel_psd, smooth
 
 CASES = (("ur5", 1e-4), ("ur5", 1e-3), ("panda", 1e-4), ("panda", 1e-3))
 GRID = tuple(10.0 ** np.arange(-14, -3))

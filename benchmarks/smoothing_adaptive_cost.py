@@ -26,8 +26,8 @@ import numpy as np
 import pinobs
 from pinobs.io import Log
 from pinobs.observers import make_observer
-from pinobs.observers.smoothing import smooth
 from pinobs.simulation.mismatch import mismatched_plant
+from pinobs.smoothing import smooth
 
 LOGS = (
     ("panda", "inertia20_payload", 1),

@@ -32,8 +32,8 @@ import numpy as np
 
 import pinobs
 from pinobs.io import Log
-from pinobs.observers.smoothing import smooth
 from pinobs.simulation import Sensor, simulate
+from pinobs.smoothing import smooth
 
 VANISHING_PSD = 1e-14
 

@@ -14,7 +14,7 @@ learning benchmark's model-error logs (``benchmarks/learning.py``: 12 s,
 - ``ll − max``: the innovation log-likelihood [nats] against the sweep's best
   (the rule ``accel_psd="auto"`` uses, there along the diagonal only);
 - ``ρ``: the filter–smoother consistency (no truth; 1 when the densities
-  explain the log: :attr:`pinobs.observers.smoothing.Smoother.consistency`);
+  explain the log: :attr:`pinobs.smoothing.Smoother.consistency`);
 - ``z² filter``, ``z² smoother``: the mean squared velocity error over the
   claimed variance after 5 s, against the truth (1: calibrated);
 - ``cover``: the smoother's ±2σ coverage after 5 s (target 90–98 %), and its RMS.
@@ -35,8 +35,8 @@ import numpy as np
 
 import pinobs
 from pinobs.io import Log
-from pinobs.observers import smoothing as S
 from pinobs.simulation.mismatch import mismatched_plant
+from pinobs.smoothing import filters, logs, rts
 
 CASES = (("ur5", "inertia20_payload", 1), ("panda", "friction", 1), ("ur5", "torque_scale", 2))
 A_SCALES = (1e-3, 1e-2, 1e-1, 1.0, 1e1)
@@ -51,10 +51,10 @@ def sweep(name: str, scenario: str, seed: int) -> list[str]:
     truth = "exact" if scenario == "torque_scale" else scenario
     res = record(robot, mismatched_plant(robot, truth, seed=0), duration=12.0, seed=seed)
     tau = 0.9 * res.tau + 0.3 if scenario == "torque_scale" else np.array(res.tau)
-    t, q, ta = S._log_arrays(robot, Log(t=res.t, q=res.q_meas, tau=tau))
-    k0, good = S._first_good(q)
+    t, q, ta = logs.smoothing_arrays(robot, Log(t=res.t, q=res.q_meas, tau=tau))
+    k0, good = logs.first_good(q)
     arrays = (t[k0:], q[k0:], ta[k0:], good)
-    make, _ = S._filter_maker(robot, "adaptive", arrays, NOISE, None, None, None)
+    make, _ = filters.filter_maker(robot, "adaptive", arrays, NOISE, None, None, None)
     snaps = make(None)._snaps  # the learning pass ran once, in _filter_maker
     v_true, late = res.v[k0:], t[k0:] > 5.0
     rows: list[tuple[float, ...]] = []
@@ -65,13 +65,13 @@ def sweep(name: str, scenario: str, seed: int) -> list[str]:
                 s._replace(accel_psd=a * s.accel_psd, disturbance_psd=d * s.disturbance_psd)
                 for s in snaps
             ]
-            steps: list[S._Step] = []
+            steps: list[rts._Step] = []
             ll = 0.0
-            for _, pred, Phi, state, lk, _ in S._forward(filt, S._rows(*arrays), k0):
+            for _, pred, Phi, state, lk, _ in rts.forward_pass(filt, rts.log_rows(*arrays), k0):
                 ll += lk
                 if pred is not None:
                     steps[-1] = steps[-1]._replace(pred=pred, Phi=Phi)
-                steps.append(S._Step(state, None, None))
+                steps.append(rts._Step(state, None, None))
             n = len(steps)
             v_s, var_s = np.empty((n, nv)), np.empty((n, nv))
 
@@ -80,7 +80,7 @@ def sweep(name: str, scenario: str, seed: int) -> list[str]:
             ) -> None:
                 v_s[i], var_s[i] = vs, var[nv : 2 * nv]
 
-            S._backward(robot, steps, emit)
+            rts._backward(robot, steps, emit)
             v_f = np.array([s.filt.v for s in steps])
             var_f = np.array([np.diag(s.filt.P)[nv : 2 * nv] for s in steps])
             dvar = var_f - var_s

@@ -34,8 +34,8 @@ import pinobs
 from pinobs.errors import ConsistencyWarning
 from pinobs.io import Log
 from pinobs.observers import make_observer
-from pinobs.observers.smoothing import smooth
 from pinobs.simulation.mismatch import mismatched_plant
+from pinobs.smoothing import smooth
 
 SCENARIOS = ("inertia20_payload", "torque_scale", "friction", "latency")
 

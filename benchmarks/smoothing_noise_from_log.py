@@ -7,7 +7,7 @@
 The sixteen 3 s logs of ``benchmarks/smoothing.py``'s seeds table (UR5 and Panda,
 ``pd`` tracking, 1 kHz, σ = 1e-4 and 1e-3 rad, seeds 0–3), each smoothed with
 ``accel_psd="auto"`` twice: ``noise_std=σ`` and ``noise_std=None`` (σ̂ from the log's
-first second, :func:`pinobs.observers.smoothing.log_noise_std`).  Velocity RMS error
+first second, :func:`pinobs.smoothing.log_noise_std`).  Velocity RMS error
 and ±2σ coverage over t > 0.5 s.
 
     python benchmarks/smoothing_noise_from_log.py --out benchmarks
@@ -24,8 +24,8 @@ import numpy as np
 import pinobs
 from pinobs.errors import NoiseWarning
 from pinobs.io import Log
-from pinobs.observers.smoothing import smooth
 from pinobs.simulation import Sensor, simulate
+from pinobs.smoothing import smooth
 
 
 def main(out: Path) -> str:

@@ -6,6 +6,7 @@ Examples:
     >>> obs = pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
 """
 
+from pinobs.calibration import identify
 from pinobs.errors import (
     ConfigurationError,
     DimensionError,
@@ -32,9 +33,8 @@ from pinobs.io import estimate
 from pinobs.model import Robot, load, robot_names
 from pinobs.model.identification import Identification
 from pinobs.observers import Consistency, Estimate, Observer, make_observer, observer_names
-from pinobs.observers.calibration import identify
-from pinobs.observers.smoothing import Smoothed, smooth
 from pinobs.simulation import Logger, RecordedLog, Result, Sensor, simulate
+from pinobs.smoothing import Smoothed, smooth
 
 __version__ = "0.1.0"
 

@@ -415,7 +415,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
 def _print_stretch(args: argparse.Namespace, opts: dict[str, Any]) -> None:
     """What the smoother says of one stretch of the log (its consistency, the band, what it
     chose from the log), on stderr."""
-    from pinobs.observers.smoothing import AUTO_WHITE_SCALE
+    from pinobs.smoothing import AUTO_WHITE_SCALE
 
     print(
         f"filter–smoother consistency ρ = {opts['consistency']:.3g} (about 1: the densities "

@@ -36,7 +36,7 @@ __all__ = ["SMOOTHER_RHO_HINT", "add_parser", "handle"]
 #: ``pinobs identify`` suggests comparing with ``--no-refine`` at or above this smoother
 #: consistency: clean simulated logs gave 0.44–14.8, 1 % torque noise 20–183 (where the
 #: refinement still helped a UR5), 5 % 108–4500 (where it did not, on average:
-#: :mod:`pinobs.observers.calibration`).
+#: :mod:`pinobs.calibration`).
 SMOOTHER_RHO_HINT = 100.0
 
 
@@ -158,7 +158,7 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     """The identification's report printed, its URDF written, how to use it said."""
-    from pinobs.observers.calibration import REFINE_ACCEL_PSD, identify
+    from pinobs.calibration import REFINE_ACCEL_PSD, identify
 
     out = Path(args.out)
     check_output("--out", out)  # before the work, as the other commands

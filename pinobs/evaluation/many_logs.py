@@ -40,9 +40,9 @@ __all__ = [
 #: repaired), the noise σ used [rad or m], the innovation test's verdict
 #: (``consistent`` / ``inconsistent`` / ``unknown``: too few samples or an
 #: observer without the test; for a smoothed log, ``inconsistent`` when a stretch is
-#: what :func:`pinobs.smooth` warns of, :func:`pinobs.observers.smoothing.smoothing_warnings`),
+#: what :func:`pinobs.smooth` warns of, :func:`pinobs.smoothing.smoothing_warnings`),
 #: the filter–smoother consistency ``ρ`` of a smoothed log
-#: (:attr:`pinobs.observers.smoothing.Smoother.consistency`, over all its stretches; NaN
+#: (:attr:`pinobs.smoothing.Smoother.consistency`, over all its stretches; NaN
 #: when filtered), the measurement latency [s] the log was estimated under (given, or
 #: found from the log by the smoother: :func:`pinobs.smooth`; its longest stretch's when
 #: stretches differ), wall-clock seconds in the worker, what the run warned of (the
@@ -240,7 +240,7 @@ def run_log_task(task: LogTask) -> dict[str, Any]:
     from pinobs.io import process_log
     from pinobs.io.smoothing import smooth_log
     from pinobs.model import load
-    from pinobs.observers.smoothing import smoothing_warnings
+    from pinobs.smoothing import smoothing_warnings
 
     start = time.perf_counter()
     robot = load(

@@ -11,7 +11,7 @@ restarts is smoothed and written with :class:`~pinobs.io.EstimateWriter`
 log row, ``t, q0.., v0.., v_std0..``.
 
 Memory: with ``chunk`` or ``lag`` and a given ``accel_psd`` over ``ekf``, the
-log streams: each sample goes to a :class:`~pinobs.observers.smoothing.Smoother`
+log streams: each sample goes to a :class:`~pinobs.smoothing.Smoother`
 as the estimator screens it, finished samples are written as soon as every
 row before them is, and only ``chunk + overlap`` samples' states (and the rows
 waiting for them) are held.  Otherwise (the whole log at once,
@@ -47,7 +47,7 @@ from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.model.sampling import missing_samples
 from pinobs.observers.base import NOISE_FLOOR, Estimate, median_period, observer_class, positive
-from pinobs.observers.smoothing import (
+from pinobs.smoothing import (
     Smoother,
     latency_note,
     log_noise_std,
@@ -191,13 +191,13 @@ def smooth_log(
 ) -> tuple[LogRun, list[dict[str, Any]]]:
     """Smooth a log file into ``out`` (module docstring); returns the row accounting and
     the smoother's options of each stretch (with its ``consistency``,
-    :attr:`pinobs.observers.smoothing.Smoother.consistency`, and ``consistency_terms``, how
+    :attr:`pinobs.smoothing.Smoother.consistency`, and ``consistency_terms``, how
     many terms it averages; streamed: one, over every stretch).  A stretch whose ``ρ``
-    exceeds :data:`~pinobs.observers.smoothing.RHO_WARN` (or whose ``"auto"`` density is the
+    exceeds :data:`~pinobs.smoothing.RHO_WARN` (or whose ``"auto"`` density is the
     grid's largest) adds what :func:`pinobs.smooth` would warn
-    (:func:`~pinobs.observers.smoothing.smoothing_warnings`) to the run's ``warnings``, and
+    (:func:`~pinobs.smoothing.smoothing_warnings`) to the run's ``warnings``, and
     so does a latency found for a stretch the model did not explain as stamped
-    (:func:`~pinobs.observers.smoothing.latency_note`; not when streamed: the search passes
+    (:func:`~pinobs.smoothing.latency_note`; not when streamed: the search passes
     over the whole log).
 
     Args:

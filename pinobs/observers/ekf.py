@@ -419,7 +419,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         trapezoid, ``F = exp(h (A(x⁺_k, τ) + A(x⁻_{k+1}, τ)) / 2)`` (Magnus 1954;
         error ``O(h³)``; 7.7e-6 of ``F − I`` against the RK4 step's finite-difference
         Jacobian on a Panda, against 2.3e-3 for ``Φ``), at one derivatives call
-        more.  :mod:`pinobs.observers.smoothing`'s noise band propagates the error
+        more.  :mod:`pinobs.smoothing`'s noise band propagates the error
         with it.
         """
         d = state.d

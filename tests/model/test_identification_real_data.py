@@ -72,7 +72,7 @@ def test_ur10e_payload_mass_is_within_five_percent(payload) -> None:
 def test_tiago_noise_is_measured_where_its_joints_move_not_at_rest() -> None:
     """TIAGo's torso and arm_1..4 are still in the log's first second (third differences
     1e-18 there): σ was their rounding step; their moving rows say more."""
-    from pinobs.observers.calibration import _noise_std
+    from pinobs.calibration import _noise_std
     from pinobs.observers.noise import noise_from_log, quantisation_std
 
     log = real_data.tiago_log()

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import pinobs
-from pinobs.observers.calibration import identify
+from pinobs.calibration import identify
 from pinobs.observers.noise import estimate_noise_std
-from pinobs.observers.smoothing import RHO_WARN
 from pinobs.simulation import Sensor
+from pinobs.smoothing import RHO_WARN
 from tests.conftest import planar_3r_truth, torque_error
 
 

@@ -10,27 +10,26 @@ from pinobs.io import Log, estimate_log
 from pinobs.observers import kf as kf_module
 from pinobs.observers import make_observer
 from pinobs.observers.kf import KFBank, transition
-from pinobs.observers.smoothing import (
+from pinobs.simulation import Sensor, simulate
+from pinobs.simulation.mismatch import mismatched_plant
+from pinobs.smoothing import (
     JERK_GRID,
     Smoother,
-    _first_good,
-    _log_arrays,
-    _log_likelihood,
-    _prepare,
-    _rows,
-    _white_jerk_smooth,
     default_overlap,
     select_accel_psd,
     smooth,
     streaming_smoother,
 )
-from pinobs.simulation import Sensor, simulate
-from pinobs.simulation.mismatch import mismatched_plant
+from pinobs.smoothing.densities import forward_log_likelihood
+from pinobs.smoothing.filters import prepare_log
+from pinobs.smoothing.jerk import white_jerk_smooth
+from pinobs.smoothing.logs import first_good, smoothing_arrays
+from pinobs.smoothing.rts import log_rows
 from tests.conftest import cached_robot
 
 
 def _half_decade(x: float) -> bool:
-    """``x`` is on the jerk grid or halfway between two of its decades (``_select``'s refine)."""
+    """``x`` is on the jerk grid or halfway between two of its decades (``select_density``'s refine)."""
     e = 2 * np.log10(x)
     return bool(abs(e - round(e)) < 1e-9)
 
@@ -141,7 +140,7 @@ def test_model_free_smoother_chunks_and_streams_like_the_whole_log() -> None:
 @pytest.mark.parametrize("band", ["model", "noise"])
 def test_compiled_model_free_smoother_is_the_smoother(chunk, overlap, band, monkeypatch) -> None:
     """On vector joints :func:`smooth` runs ``kf``'s smoother in compiled passes
-    (:func:`_white_jerk_smooth`: 3×3 factors of ``P₃ ⊗ I``); it gives what :class:`Smoother`
+    (:func:`white_jerk_smooth`: 3×3 factors of ``P₃ ⊗ I``); it gives what :class:`Smoother`
     gives over the same filter: estimates, band, likelihood and ``ρ``, whole or in windows (a
     short overlap, so that the windows show), with uneven intervals and dropped samples (three
     in a row).  The bank's NumPy pass stores the same states as its compiled one."""
@@ -151,17 +150,17 @@ def test_compiled_model_free_smoother_is_the_smoother(chunk, overlap, band, monk
     t = res.t + np.r_[0.0, rng.uniform(-2e-4, 2e-4, res.t.size - 1)]
     q = np.array(res.q_meas)
     q[[5, 300, 301, 302, 900]] = np.nan
-    k0, good = _first_good(q)
+    k0, good = first_good(q)
     arrays = (t[k0:], q[k0:], np.zeros((t.size - k0, robot.nv)), good)
     filt = make_observer("kf", robot, noise_std=1e-4, jerk_psd=300.0).smoothing_filter()
     smoother, n = Smoother(filt, chunk, overlap, band), t.size - k0
     want = np.full((3, n, robot.nv), np.nan)
-    for row in _rows(*arrays):
+    for row in log_rows(*arrays):
         for k, qs, vs, var in smoother.push(*row):
             want[:, k] = qs, vs, var
     for k, qs, vs, var in smoother.close():
         want[:, k] = qs, vs, var
-    q_s, v_s, var_s, ll, rho_sum, terms = _white_jerk_smooth(filt, arrays, chunk, overlap, band)
+    q_s, v_s, var_s, ll, rho_sum, terms = white_jerk_smooth(filt, arrays, chunk, overlap, band)
     np.testing.assert_allclose(q_s, want[0], rtol=0, atol=1e-12)
     np.testing.assert_allclose(v_s, want[1], rtol=0, atol=1e-11 * np.abs(want[1]).max())
     np.testing.assert_allclose(var_s, want[2], rtol=1e-10)
@@ -247,11 +246,17 @@ def test_one_bank_pass_gives_each_jerk_densitys_likelihood(name: str) -> None:
     res = simulate(robot, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=0.5, seed=1)
     q = np.array(res.q_meas)
     q[50] = np.nan
-    arrays, k0, _, make, _ = _prepare(
-        robot, *_log_arrays(robot, Log(t=res.t, q=q, tau=res.tau)), "kf", 1e-4, None, None, None
+    arrays, k0, _, make, _ = prepare_log(
+        robot,
+        *smoothing_arrays(robot, Log(t=res.t, q=q, tau=res.tau)),
+        "kf",
+        1e-4,
+        None,
+        None,
+        None,
     )
     jerks = (1.0, 1e2, 1e4)
-    each = [_log_likelihood(make(j), arrays, k0) for j in jerks]
+    each = [forward_log_likelihood(make(j), arrays, k0) for j in jerks]
     bank = KFBank(robot, jerks, 1e-4, 1e-6).log_likelihoods(arrays[0], arrays[1], arrays[3], 1.0)
     np.testing.assert_allclose(bank, each, rtol=1e-12)
 

@@ -28,24 +28,29 @@ from pinobs.errors import (
     TimestampWarning,
 )
 from pinobs.io import Log, estimate_log
-from pinobs.observers import make_observer, smoothing
+from pinobs.observers import make_observer
 from pinobs.observers.base import NOISE_FLOOR
 from pinobs.observers.kf import WhiteJerkFilter
-from pinobs.observers.smoothing import (
+from pinobs.simulation import Sensor, simulate
+from pinobs.smoothing import (
     AUTO_WHITE_SCALE,
     OFFSET_SCALE_RANGE,
     Smoother,
-    _backward,
-    _noise_step,
-    _Step,
+    api,
     consistent_offset_scale,
     default_overlap,
+    latency,
+    logs,
+    pipeline,
+    replay,
     select_accel_psd,
     select_latency,
     smooth,
     streaming_smoother,
 )
-from pinobs.simulation import Sensor, simulate
+from pinobs.smoothing import band as band_module
+from pinobs.smoothing.band import noise_step
+from pinobs.smoothing.rts import _backward, _Step
 from tests.conftest import cached_robot, dropped_rows, irregular_loop_log
 
 
@@ -63,7 +68,7 @@ class _LinState(NamedTuple):
 @pytest.fixture(params=["compiled", "numpy"])
 def noise_path(request, monkeypatch) -> str:  # type: ignore[no-untyped-def]
     """The noise recursion's path: the compiled loops (small state) or NumPy's products."""
-    for kernel in (smoothing._noise_forward_kernel, smoothing._noise_backward_kernel):
+    for kernel in (band_module.noise_forward_kernel, band_module.noise_backward_kernel):
         if request.param == "compiled":
             kernel.load()
         else:
@@ -103,7 +108,7 @@ def _linear_rts(robot, Phis, Fs, Qs, P0, m0, ys, r) -> tuple[np.ndarray, ...]:  
                 K = Pp @ H.T @ np.linalg.inv(S)
                 x, P = xp + K @ (ys[k] - H @ xp), (np.eye(m) - K @ H) @ Pp
         state = _LinState(x[:nv], x[nv:], P) if ys[k] is not None or k == 0 else pred
-        noise = _noise_step(noise, pred, F, state, nv, r)
+        noise = noise_step(noise, pred, F, state, nv, r)
         steps.append(_Step(state, None, None, noise))
     got_v, got_var, got_noise = np.empty((n, nv)), np.empty((n, m)), np.empty((n, m))
 
@@ -582,7 +587,7 @@ def test_likelihood_choice_of_accel_psd_is_the_largest_the_data_do_not_reject(ur
 
 def test_a_sample_the_gate_rejects_decides_neither_the_density_nor_the_latency() -> None:
     """One glitch (a joint 1 rad off, or 1e6) is rejected by the EKF's outlier gate, and the
-    likelihood counts it at the gate (:func:`smoothing._forward`): ``"auto"`` and the latency
+    likelihood counts it at the gate (:func:`pinobs.smoothing.rts.forward_pass`): ``"auto"`` and the latency
     search choose on the glitched log what they choose on the clean one (before: 1 instead of
     1e-9 rad²/s³, an RMS 900× larger; 1 ms found on a log without latency), and the
     likelihood moves by less than the gate's half (χ²₆(1 − 1e-6)/2 ≈ 20 nats)."""
@@ -680,7 +685,7 @@ def test_a_log_and_a_density_are_taken_in_any_of_their_natural_forms(ur5_log) ->
     unix = smooth(robot, (stamps, late, tau), **opts)  # type: ignore[arg-type]
     assert np.array_equal(np.isnan(unix.v), np.isnan(rel.v))
     for times in (t, stamps):  # each measurement on the stamp before it: no row of its own
-        assert smoothing._retimed(times, late, tau, 1e-3)[0].size == t.size + 1
+        assert logs.retimed(times, late, tau, 1e-3)[0].size == t.size + 1
 
 
 def test_a_chunk_far_shorter_than_its_overlap_is_warned(ur5_log) -> None:
@@ -1049,7 +1054,9 @@ def test_a_log_the_model_does_not_explain_is_said_and_auto_skips_densities_that_
     late = res.t > 1.0
     cover = np.mean(np.abs(default.v - res.v)[late] <= 2 * default.v_std[late])
     assert cover < 0.1  # why it is said
-    monkeypatch.setattr(smoothing, "DEFAULT_GRID", (1e-13, 1e-2, 1.0))
+    grid = (1e-13, 1e-2, 1.0)
+    monkeypatch.setattr(pipeline, "DEFAULT_GRID", grid)  # the density chosen
+    monkeypatch.setattr(api, "DEFAULT_GRID", grid)  # its warning
     with pytest.warns(ConsistencyWarning, match="chose 1 rad²/s³, the largest it tries"):
         auto = smooth(robot, _log(res), noise_std=1e-4, accel_psd="auto")
     assert auto.options["accel_psd"] == 1.0
@@ -1064,13 +1071,13 @@ def test_retimed_log_puts_each_sample_at_the_time_it_was_taken_and_torques_at_th
     """A latency d: the sample stamped t_k was taken at t_k − d; the torque switches at t_k."""
     t = np.array([0.0, 1.0, 2.0, 3.0]) * 1e-3
     q, tau = np.arange(4.0)[:, None], 10 * np.arange(4.0)[:, None]
-    times, q_r, tau_r, rows = smoothing._retimed(t, q, tau, 0.4e-3)
+    times, q_r, tau_r, rows = logs.retimed(t, q, tau, 0.4e-3)
     np.testing.assert_allclose(times, [-0.4, 0, 0.6, 1, 1.6, 2, 2.6, 3] * np.array(1e-3))
     np.testing.assert_array_equal(q_r[::2, 0], [0, 1, 2, 3])
     assert np.all(np.isnan(q_r[1::2]))  # the stamped times: predicted over
     np.testing.assert_array_equal(tau_r[:, 0], [0, 0, 0, 10, 10, 20, 20, 30])
     np.testing.assert_array_equal(times[rows], t)  # the estimates come out at the stamped times
-    times, q_r, tau_r, rows = smoothing._retimed(t, q, tau, 1e-3)  # a whole interval: merged
+    times, q_r, tau_r, rows = logs.retimed(t, q, tau, 1e-3)  # a whole interval: merged
     np.testing.assert_allclose(times, [-1e-3, 0, 1e-3, 2e-3, 3e-3])
     np.testing.assert_array_equal(q_r[:4, 0], [0, 1, 2, 3])
     assert np.all(np.isnan(q_r[4]))
@@ -1378,7 +1385,7 @@ def test_adaptive_is_smoothed_with_its_model_frozen_per_window_and_chunks_change
 
 def _snapshots(monkeypatch, robot, res, bank: bool | None, **options) -> tuple[list, list[bool]]:
     """The learning pass's snapshots, and the ``blend`` of each observer it made (``bank``:
-    forced on or off; ``None``: as :func:`smoothing._learn` chooses)."""
+    forced on or off; ``None``: as :func:`pinobs.smoothing.replay.learned_models` chooses)."""
     made: list[bool] = []
 
     def make(name, robot, **kw):  # type: ignore[no-untyped-def]
@@ -1387,9 +1394,9 @@ def _snapshots(monkeypatch, robot, res, bank: bool | None, **options) -> tuple[l
         made.append(kw["blend"])
         return make_observer(name, robot, **kw)
 
-    monkeypatch.setattr(smoothing, "make_observer", make)
+    monkeypatch.setattr(replay, "make_observer", make)
     t, q, tau = res.t[1:], res.q_meas[1:], res.tau[1:]  # sample 0 is not measured
-    maker, _ = smoothing._learn(robot, t, q, tau, np.ones(t.size, bool), 1e-4, options, 0.5)
+    maker, _ = replay.learned_models(robot, t, q, tau, np.ones(t.size, bool), 1e-4, options, 0.5)
     monkeypatch.undo()
     return list(maker(None)._snaps), made
 
@@ -1517,7 +1524,7 @@ def test_latency_search_finds_a_quadratic_peak_in_few_passes(
 ) -> None:
     """:func:`select_latency`'s search on a synthetic ``ℓ(d) = −(d − peak)²`` (in intervals
     of h = 1 ms; ``−∞`` where the filter is lost)."""
-    from pinobs.observers.smoothing import _latency_search
+    from pinobs.smoothing.latency import _latency_search
 
     h, tried = 1e-3, {}
 
@@ -1542,18 +1549,19 @@ def test_the_latency_search_runs_no_candidate_twice(monkeypatch) -> None:
     t, q, tau, _ = _late_log(1, 2000.0, 1.0)
     prepared: list[float] = []
     passes: list[int] = []
-    real_prepare, real_ll = smoothing._prepare, smoothing._log_likelihood
+    real_prepare, real_ll = latency.prepare_log, latency.forward_log_likelihood
 
     def prepare(*args, **kwargs):  # type: ignore[no-untyped-def]
-        prepared.append(smoothing._latency(args[7])[0])
+        prepared.append(logs.latency_option(args[7])[0])
         return real_prepare(*args, **kwargs)
 
     def ll(*args, **kwargs):  # type: ignore[no-untyped-def]
         passes.append(1)
         return real_ll(*args, **kwargs)
 
-    monkeypatch.setattr(smoothing, "_prepare", prepare)
-    monkeypatch.setattr(smoothing, "_log_likelihood", ll)
+    monkeypatch.setattr(pipeline, "prepare_log", prepare)  # the first pass
+    monkeypatch.setattr(latency, "prepare_log", prepare)  # the search's candidates
+    monkeypatch.setattr(latency, "forward_log_likelihood", ll)
     with pytest.warns(LatencyWarning, match="0.5 ms late"):
         found = smooth(robot, (t, q, tau), noise_std=1e-4, accel_psd=1e-10)
     assert sorted(prepared) == pytest.approx([0.0, 0.5e-3, 1e-3, 2e-3], abs=1e-12)

@@ -64,7 +64,7 @@ number is what it was.  ``v`` and a
 smoothed ``q`` come from a zero-phase Savitzky–Golay fit of the measured
 path (:func:`smooth_path`), or are given (``identify(..., path=(q, v))``;
 ``pinobs.identify`` gives a model-based smoother's:
-:mod:`pinobs.observers.calibration`).
+:mod:`pinobs.calibration`).
 
 **Weighting.**  With ``weighting="torque"`` each window's ``nv`` rows are
 divided by ``t₂ − t₁`` only: its mean torque [N·m; N for a prismatic joint], and each

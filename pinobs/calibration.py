@@ -19,7 +19,7 @@ So the velocities are re-estimated with the model just identified, and the
 identification repeated (a fixed-point iteration)::
 
     θ⁰ = identify(q_meas, v_SG)                                  first pass
-    (q̂, v̂)ⁱ = RTS smoother of ekf on robot(θⁱ⁻¹) over the log      (pinobs.observers.smoothing)
+    (q̂, v̂)ⁱ = RTS smoother of ekf on robot(θⁱ⁻¹) over the log      (pinobs.smoothing)
     θⁱ = identify(q̂ⁱ, v̂ⁱ)                                        i = 1 … len(refine)
 
 The smoother runs the EKF with a white-acceleration density ``refine[i−1]``
@@ -81,7 +81,7 @@ from pinobs.model import identification as ident_model
 from pinobs.model.identification import MAX_CONDITION, Identification, log_arrays, segments
 from pinobs.observers.base import Vector, positive
 from pinobs.observers.noise import estimate_noise_std, quantisation_std
-from pinobs.observers.smoothing import smooth_quietly
+from pinobs.smoothing import smooth_quietly
 
 __all__ = ["REFINE_ACCEL_PSD", "REFINE_DISTURBANCE_PSD", "identify"]
 
@@ -241,7 +241,7 @@ def _smoothed_path(
 ) -> tuple[tuple[Vector, Vector], float]:
     """RTS-smoothed ``(q, v)`` of every contiguous stretch of ``rows`` on the identified model,
     and the smoother's consistency ``ρ`` pooled over the stretches (each weighted by its number
-    of terms: :attr:`pinobs.observers.smoothing.Smoothed.consistency`; NaN with none smoothed).
+    of terms: :attr:`pinobs.smoothing.Smoothed.consistency`; NaN with none smoothed).
 
     NaN elsewhere (where the model layer falls back on Savitzky–Golay).
     """

@@ -190,8 +190,6 @@ LONG_FUNCTIONS: dict[tuple[str, str], int] = {
     ("pinobs/evaluation/live.py", "live_loop"): 81,
     ("pinobs/model/identification/offline.py", "identify"): 136,
     ("pinobs/observers/calibration.py", "identify"): 104,
-    ("pinobs/observers/kf_kernels.py", "auto_step_loops"): 152,
-    ("pinobs/observers/kf_kernels.py", "bank_rows_loops"): 120,
     ("pinobs/observers/smoothing.py", "_jerk_backward_loops"): 170,
     ("pinobs/observers/smoothing.py", "_learn"): 107,
     ("pinobs/observers/smoothing.py", "smooth"): 147,

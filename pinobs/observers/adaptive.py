@@ -376,9 +376,9 @@ class AdaptiveEKF(Observer["_State"]):
         self._m_bar2: Vector = np.zeros(self.robot.nv)
 
     def _start_learning(self, learning: str) -> None:
-        """The learner (its SciPy modules imported now, :func:`~pinobs.observers.adaptive_learner.
-        load_learning`) and, with ``learning="background"``, its worker process, started now (not
-        in the loop; it ends when the observer is dropped: its jobs hold no observer)."""
+        """The learner (its SciPy modules imported now, :func:`load_learning`) and, with
+        ``learning="background"``, its worker process (:func:`learning_worker`), started now,
+        not in the loop (it ends when the observer is dropped: its jobs hold no observer)."""
         load_learning()
         self._worker: Worker | None = None
         if learning == "background":

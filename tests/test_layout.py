@@ -187,20 +187,14 @@ MAX_FUNCTION_LINES, MAX_MODULE_LINES = 80, 800
 #: Functions over the limit today, each with its length: they may shrink (lower the entry,
 #: remove it once under the limit), never grow, and no other may join them.
 LONG_FUNCTIONS: dict[tuple[str, str], int] = {
+    ("pinobs/calibration.py", "identify"): 104,
     ("pinobs/evaluation/live.py", "live_loop"): 81,
     ("pinobs/model/identification/offline.py", "identify"): 136,
-    ("pinobs/observers/adaptive.py", "__init__"): 101,
-    ("pinobs/calibration.py", "identify"): 104,
-    ("pinobs/observers/kf.py", "_auto_step_loops"): 152,
-    ("pinobs/observers/kf.py", "_bank_rows_loops"): 120,
-    ("pinobs/smoothing/api.py", "smooth"): 141,
     ("pinobs/simulation/legged.py", "_record"): 107,
+    ("pinobs/smoothing/api.py", "smooth"): 141,
 }
 #: Modules over the limit today, likewise.
-LARGE_MODULES: dict[str, int] = {
-    "pinobs/observers/adaptive.py": 1184,
-    "pinobs/observers/kf.py": 1041,
-}
+LARGE_MODULES: dict[str, int] = {}
 
 
 def _sizes() -> tuple[dict[tuple[str, str], int], dict[str, int]]:

@@ -123,7 +123,7 @@ a prediction that is not kept (under a known latency) teaches nothing.
    late solve is used late: installed then, compared with the model that
    was current when it was asked for).  One solve at a time: while one is
    out, the next is asked for when it is back.  Given the time to finish
-   before each result is taken (the test hook ``_Learner.join``), the
+   before each result is taken (the test hook ``Learner.join``), the
    output equals the synchronous one (tested to 1e-12: it is bit-identical);
    fed as fast as it runs, a UR5 with a payload made the same number of
    solves or one fewer, its velocity RMS within ±10 % of the synchronous
@@ -133,31 +133,29 @@ a prediction that is not kept (under a known latency) teaches nothing.
 
 from __future__ import annotations
 
-import contextlib
-import itertools
 import math
-import os
 from collections import deque
 from dataclasses import replace
 from typing import Any, NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
 
 from pinobs.errors import (
     GainError,
-    IdentificationError,
     ObserverDiverged,
     OptionError,
     UnsupportedRobotError,
 )
 from pinobs.model import Robot
 from pinobs.model.identification import (
-    MAX_FILL,
-    MomentumRegressor,
     ParameterSet,
-    smooth_path,
-    solve,
+)
+from pinobs.observers.adaptive_blend import blend_kernel
+from pinobs.observers.adaptive_learner import (
+    REJECTED_KEPT,
+    Learner,
+    learning_worker,
+    load_learning,
 )
 from pinobs.observers.base import (
     LIKELY_CAUSES,
@@ -167,12 +165,9 @@ from pinobs.observers.base import (
     positive,
     register,
 )
-from pinobs.observers.blas import blas_libraries, one_blas_thread
 from pinobs.observers.ekf import EKFState, ExtendedKalmanFilter
-from pinobs.observers.kf import BankState, KFBank
-from pinobs.observers.linalg import LazyKernel
+from pinobs.observers.kf_bank import BankState, KFBank
 from pinobs.observers.worker import Worker
-from pinobs.tolerances import TIME_EPS
 
 __all__ = ["AdaptiveEKF", "ModelSnapshot"]
 
@@ -207,365 +202,6 @@ class _State(NamedTuple):
     dt_prev: float  # that step [s] (0: none yet)
 
 
-class _Learner:
-    """Sliding-window momentum-form identification fed one committed sample at a time.
-
-    The bookkeeping (the buffer, the interval, when to solve, what a solve changes) runs on
-    the loop; the rows of each window and the solves (:class:`_Identifier`) run on the loop
-    too, or, given a ``worker``, in its process (``learning="background"``), their results
-    taken at the first update after they are done (:meth:`collect`)."""
-
-    #: Test hook: :meth:`collect` waits for every job asked for (background learning then
-    #: gives what synchronous learning gives).
-    join = False
-
-    def __init__(
-        self,
-        robot: Robot,
-        *,
-        window: float,
-        half_window: float,
-        horizon: float,
-        resolve_every: float,
-        friction: bool,
-        offset: bool,
-        rate: float | None,
-        worker: Worker | None = None,
-    ) -> None:
-        self.reg = MomentumRegressor(robot, friction=friction, offset=offset)
-        self.nominal = self.reg.nominal()
-        # the costly part: here (synchronous) or in the worker process (background)
-        self.identifier = _Identifier(self.reg, max(1, round(horizon / window)))
-        self.worker = worker  # None: synchronous (every job run in add)
-        self.key = next(_KEYS)  # this learner's identifier in the worker process
-        self.row_count = 0  # rows kept, as of the last window taken
-        # the jobs asked for and not yet taken, in order: (job, (explained, current) of a solve)
-        self.pending: deque[tuple[Any, tuple[bool, Vector] | None]] = deque()
-        self.windows = 0  # windows of rows asked for (at most the rows kept)
-        self.solving = False  # a solve is pending
-        self.window, self.half_window = window, half_window
-        self.rate_given = rate
-        self.h = math.nan  # the sample interval: 1/rate, or the first one seen (_interval)
-        if rate is not None:
-            self._counts(1.0 / rate)
-        self.buf: deque[tuple[float, Vector, Vector]] = deque()
-        self.resolve_every = resolve_every
-        # the first solve resolve_every after the reset, wherever the clock starts (:meth:`start`;
-        # it was at t = resolve_every: a clock 100 s behind never solved, 3 s behind, 3.5 s late)
-        self.next_solve = math.nan
-        self._off_run: list[float] = []  # the latest consecutive update intervals off h
-        self._t_last: float | None = None  # the latest update's time (committed or not)
-        self.theta: Vector | None = None
-        self.std: Vector | None = None
-        self.excited: NDArray[np.bool_] | None = None
-        self.condition = np.nan
-        self.rank = 0
-        self.solves = 0
-        self.installs = 0
-        self.validated = False  # a solve has checked the current model against the data
-        self.last_drop = np.nan
-        self.history: list[tuple[float, float]] = []
-        self.candidate: Vector | None = None  # the latest consistent solve
-        self.minv_max: Vector = np.zeros(robot.nv)  # its largest (M⁻¹)ᵢᵢ at the checked q
-        self.rejected: deque[str] = deque(maxlen=_REJECTED_KEPT)  # the latest, said in details
-        self.rejected_run = 0  # consecutive solves rejected (not physical, or failed)
-        # (t, τ, gated) of the updates without a sample since the last one
-        self._lost: list[tuple[float, Vector, bool]] = []
-
-    def add(
-        self,
-        t: float,
-        q: Vector | None,
-        tau: Vector,
-        *,
-        explained: bool = False,
-        gated: bool = False,
-    ) -> bool:
-        """Add the sample ``q`` taken at ``t`` and the torque ``tau`` applied from ``t`` on
-        (``q`` None: no sample, nothing added); returns True when a new model was solved for.
-        ``explained``: the filter's innovations say the current model explains the data
-        (then a solve only validates it); ``gated``: ``q`` None because the filter's gate
-        rejected the sample (not filled: :meth:`_fill`)."""
-        if self._t_last is not None:  # the stream's interval, from every update's time
-            dt = t - self._t_last  # (a gated or lost sample is not a slower stream)
-            if math.isnan(self.h):
-                self._counts(dt)  # no rate given: the stream's own interval
-            elif abs(dt - self.h) > _GAP_FRACTION * self.h:
-                self._off_run.append(dt)
-                if len(self._off_run) == _INTERVAL_CHECK:
-                    self._interval(self._off_run)
-                    self._off_run = []
-            else:
-                self._off_run = []
-        self._t_last = t
-        if q is None:
-            if self.buf:
-                self._lost.append((t, tau, gated))
-            return self.collect()  # a lost sample shows as a gap in the times below
-        # a gap (a lost sample: 2h) or a doubled sample: windows never straddle one, unless
-        # it is at most MAX_FILL lost samples, which are interpolated (_fill).  Jitter is not
-        # a gap: the rows integrate over the samples' own times (MATH §9); at ±0.1 h this
-        # test cleared the windows at every other sample and the learner never solved,
-        # silently (a sweep found it, and a 500 Hz stream without rate)
-        if self.buf and abs(t - self.buf[-1][0] - self.h) > _GAP_FRACTION * self.h:
-            if not self._fill(t, q):
-                self.buf.clear()
-        self._lost = []
-        self.buf.append((t, q, tau))
-        if math.isnan(self.h):
-            return self.collect()  # one sample: no interval yet
-        need = self.win + 2 * self.hw + 1
-        while len(self.buf) >= need:
-            # (concatenated, not np.stack: 3× faster; still 0.2 ms a window on a UR5 in a
-            # paced loop, its caches cold, and 0.12 ms to send it: the window's update cost)
-            t_s, q_s, tau_s = zip(*list(self.buf)[:need], strict=True)
-            t_arr = np.array(t_s)
-            q_arr = np.concatenate(q_s).reshape(need, -1)
-            tau_arr = np.concatenate(tau_s).reshape(need, -1)
-            self._run(None, "add_window", t_arr, q_arr, tau_arr, self.hw, self.win, self.stride)
-            self.windows = min(self.windows + 1, self.identifier.rows.maxlen or 0)
-            for _ in range(self.win):
-                self.buf.popleft()
-        if (
-            t >= self.next_solve - TIME_EPS  # (t₀ + kT: rounding)
-            and self.windows >= 2
-            and not self.solving  # one solve at a time: a late one is used late, not queued
-        ):
-            self.next_solve = t + self.resolve_every
-            current = self.nominal if self.theta is None else self.theta
-            qs = [x[1] for x in list(self.buf)[:: max(1, len(self.buf) // 4)]]
-            self.solving = True
-            self._run((explained, current), "solve", current, qs)
-        return self.collect()
-
-    def _run(self, solve: tuple[bool, Vector] | None, job: str, *args: Any) -> None:
-        """Run the identifier's ``job(*args)`` now (synchronous) or queue it on the worker
-        process (background); ``solve``: ``(explained, current model)`` of a solve, ``None``
-        for a window."""
-        if self.worker is None:
-            self.pending.append((_Done(getattr(self.identifier, job)(*args)), solve))
-        else:
-            windows = self.identifier.rows.maxlen or 1
-            self.pending.append((self.worker.submit(_remote, self.key, windows, job, *args), solve))
-
-    def collect(self) -> bool:
-        """Take the jobs that are done, in order (all of them, synchronous or with :attr:`join`),
-        and apply a solve's result (:meth:`_apply`); True when it installs a new model.
-        A job's exception is raised here, as the synchronous learner raises it in ``add``."""
-        installed = False
-        while self.pending and (self.join or self.pending[0][0].done()):
-            job, solve = self.pending.popleft()
-            result = job.result()
-            if solve is None:
-                self.row_count = result
-            else:
-                self.solving = False
-                installed = self._apply(result, *solve) or installed
-        return installed
-
-    def _fill(self, t: float, q: Vector) -> bool:
-        """Interpolate the ``k − 1`` samples lost between the last buffered one and ``q`` taken
-        at ``t`` (``t − t_last ≈ k h``, ``k − 1 ≤`` :data:`~pinobs.model.identification.MAX_FILL`)
-        linearly on the manifold, each with the torque of its own update (held from the last
-        one given); False (nothing filled) for a longer or uneven gap, or one where the filter's
-        gate rejected a sample (the model did not explain the data there: filled too, z1 with a
-        payload went from 7.4e-4 to 1.22e-3 rad/s in ``benchmarks/learning.py``).  Cleared at every lost
-        sample instead, the windows of ``win + 2 hw + 1`` consecutive samples never filled with
-        2 % of the samples lost at random, and ``adaptive`` never learned (a sweep: UR5 with a
-        payload, 5 % lost, 0 solves in 12 s, 1.19× kf, said "consistent").  The interpolation
-        error, ``(k h)² |q̈| / 8``, is 2e-6 |q̈| rad at 1 kHz over 3 lost samples."""
-        t0, q0, tau0 = self.buf[-1]
-        k = round((t - t0) / self.h)
-        if not 2 <= k <= MAX_FILL + 1 or abs(t - t0 - k * self.h) > _GAP_FRACTION * self.h:
-            return False
-        if any(g for *_, g in self._lost):  # gated, not lost: the model was not explaining the
-            return False  # data there (filled, z1 with a payload went 7.4e-4 -> 1.22e-3 rad/s)
-        robot = self.reg.robot
-        for i in range(1, k):
-            ti = t0 + i * (t - t0) / k
-            held = tau0
-            for t_lost, tau_lost, _ in self._lost:  # the torque applied from the lost update on
-                if t_lost <= ti + _GAP_FRACTION * self.h:
-                    held = tau_lost
-            self.buf.append((ti, robot.interpolate(q0, q, i / k), held))
-        return True
-
-    def _counts(self, h: float) -> None:
-        """The windows in samples for the interval ``h`` [s]."""
-        self.h = h
-        self.stride = max(1, round(0.004 / h))
-        self.win = max(self.stride, round(self.window / h / self.stride) * self.stride)
-        self.hw = max(2, round(self.half_window / h))
-
-    def start(self, t0: float) -> None:
-        """Begin at the reset time ``t0`` [s]: the first solve comes ``resolve_every`` after it."""
-        self.next_solve = t0 + self.resolve_every
-
-    def _interval(self, run: list[float]) -> None:
-        """:data:`_INTERVAL_CHECK` consecutive intervals off ``h`` that agree among themselves:
-        the stream is not at ``rate`` (or its first interval was not its own); their median
-        becomes ``h``, said in ``rejected``.  A 500 Hz stream taken for 1 kHz (the default
-        without ``rate``) never solved, silently."""
-        h = float(np.median(run))
-        if all(abs(d - h) <= _GAP_FRACTION * h for d in run):
-            given = f"rate = {self.rate_given:g} Hz" if self.rate_given else "its first interval"
-            self.rejected.append(
-                f"the samples come every {h:.6g} s, not {self.h:.6g} s ({given}): the "
-                "identification windows are counted on the samples' interval from here"
-            )
-            self._counts(h)
-            self.buf.clear()  # spaced (or filled: _fill) at the interval taken before
-
-    def _apply(self, sol: _Solution, explained: bool, current: Vector) -> bool:
-        """Take the solve ``sol`` (:meth:`_Identifier.solve`, against ``current``, the model
-        when it was asked for); True when it installs a new model.  Model selection: keep the
-        current model unless the new one explains the rows better than fitting noise would
-        (robust loss drop above rank + 3√rank, in units of ½χ²)."""
-        if sol.failure is not None:
-            self.rejected.append(f"solve failed: {sol.failure}")
-            self.rejected_run += 1
-            return False
-        self.condition, self.rank = sol.condition, sol.rank
-        if sol.unphysical is not None:
-            self.rejected.append(f"{sol.unphysical} in solve {self.solves + 1}")
-            self.rejected_run += 1
-            return False
-        assert sol.minv_max is not None and sol.theta is not None  # (a consistent solve)
-        self.minv_max = sol.minv_max  # of the latest consistent solve (the candidate)
-        self.candidate = sol.theta  # the latest consistent solve, installed or not
-        drop = sol.loss_current - sol.loss_new
-        self.history.append((sol.loss_current, sol.loss_new))
-        self.solves += 1
-        self.rejected_run = 0
-        self.validated = True
-        self.std, self.excited = sol.std, sol.excited
-        self.last_drop = float(drop)
-        if explained or drop <= sol.rank + 3.0 * np.sqrt(sol.rank):
-            if self.theta is None:
-                self.theta = current
-            return False
-        self.theta = sol.theta
-        self.installs += 1
-        return True
-
-
-class _Solution(NamedTuple):
-    """One solve of :class:`_Identifier` (``failure`` or ``unphysical`` said why it is not one)."""
-
-    failure: str | None = None  # the solve raised
-    unphysical: str | None = None  # a non-positive mass, or M(q) not positive definite
-    condition: float = math.nan
-    rank: int = 0
-    theta: Vector | None = None  # friction clipped and kept nominal where the data do not show it
-    std: Vector | None = None
-    excited: NDArray[np.bool_] | None = None
-    minv_max: Vector | None = None  # the largest (M⁻¹)ᵢᵢ at the checked configurations
-    loss_current: float = math.nan  # the robust loss of the current model on the rows
-    loss_new: float = math.nan  # the same of the solve
-
-
-class _Identifier:
-    """The learner's costly part: the rows of each window and the solves, run in order on the
-    loop (synchronous) or in the worker process (background), on its own regressor."""
-
-    def __init__(self, reg: MomentumRegressor, windows: int) -> None:
-        self.reg = reg
-        self.nominal = reg.nominal()
-        self.rows: deque[tuple[Vector, Vector]] = deque(maxlen=windows)
-
-    def add_window(self, t: Vector, q: Vector, tau: Vector, hw: int, win: int, stride: int) -> int:
-        """The ``nv`` rows of one window (module docstring, MATH §9) from the samples ``q``
-        [rad] taken at ``t`` [s] with the torques ``tau`` (``win + 2 hw + 1`` of them: the
-        smoother's half-width ``hw`` on both sides); returns the rows kept."""
-        q_s, v = smooth_path(self.reg.robot, t, q, half_window=hw, edges=False)
-        k = slice(hw, hw + win + 1)
-        A, y = self.reg.system(t[k], q_s[k], v[k], tau[k], window=win, stride=stride)
-        self.rows.append((A, y))
-        return sum(r[0].shape[0] for r in self.rows)
-
-    def solve(self, current: Vector, qs: list[Vector]) -> _Solution:
-        """Solve the rows; check the masses and ``M(q) ≻ 0`` at the configurations ``qs``;
-        the robust losses of ``current`` and of the solve (for :meth:`_Learner._apply`)."""
-        A = np.vstack([r[0] for r in self.rows])
-        y = np.concatenate([r[1] for r in self.rows])
-        try:
-            sol = solve(self.reg, A, y, consistent=False)
-        except (IdentificationError, np.linalg.LinAlgError) as exc:
-            return _Solution(failure=str(exc))
-        theta = sol.theta
-        n = self.reg.n_inertial
-        masses = theta[0:n:10]
-        if np.any(masses <= 0):
-            return _Solution(None, "non-positive mass", sol.condition, sol.rank)
-        if self.reg.friction:
-            theta = theta.copy()
-            f = slice(n, n + 2 * self.reg.n_joint)
-            theta[f] = np.maximum(theta[f], 0.0)  # friction never feeds energy in
-            # friction the data do not show (within _FRICTION_SIGMAS σ of nominal) stays nominal:
-            # a learned friction makes every prediction pay for it (ekf's stiff path)
-            nominal = self.nominal[f]
-            weak = np.abs(theta[f] - nominal) <= _FRICTION_SIGMAS * sol.std[f]
-            theta[f] = np.where(weak, nominal, theta[f])
-        robot = self.reg.with_parameters(theta)
-        minv_max = np.zeros(robot.nv)
-        for q in qs:
-            m = robot.mass_matrix(q)
-            if np.linalg.eigvalsh(m)[0] <= 0:
-                return _Solution(None, "M(q) not positive definite", sol.condition, sol.rank)
-            minv_max = np.maximum(minv_max, np.diag(np.linalg.inv(m)))
-        loss_cur = _huber_loss(A @ current - y, sol.sigma)
-        loss_new = _huber_loss(A @ theta - y, sol.sigma)
-        return _Solution(
-            None, None, sol.condition, sol.rank, theta, sol.std, sol.excited, minv_max,
-            loss_cur, loss_new,
-        )  # fmt: skip
-
-
-class _Done:
-    """A job run on the loop (synchronous learning): its result, as a done future."""
-
-    def __init__(self, result: Any) -> None:
-        self._result = result
-
-    def done(self) -> bool:
-        return True
-
-    def result(self) -> Any:
-        return self._result
-
-
-#: Learner keys (:attr:`_Learner.key`): which learner a job in the worker process is for.
-_KEYS = itertools.count()
-
-
-def _worker_start(robot: Robot, friction: bool, offset: bool) -> dict[str, Any]:
-    """The worker process's state (:class:`~pinobs.observers.worker.Worker`): its regressor
-    (its own ``pin.Data``) and the identifier of the latest learner that sent a job."""
-    _load_learning()
-    # off the loop's scheduling: its own session (so its own group where Linux groups tasks
-    # by session, autogroup: the loop's share is not spent on it) at the lowest priority.
-    # UR5 live_loop at load 9-11, updates over 1 ms in 10 s: 62-77 in the loop's session,
-    # 21-41 in its own (synchronous learning: 141-168)
-    with contextlib.suppress(AttributeError, OSError):
-        os.setsid()
-    with contextlib.suppress(AttributeError, OSError):
-        os.nice(19)
-    return {"reg": MomentumRegressor(robot, friction=friction, offset=offset), "key": None}
-
-
-@one_blas_thread  # small matrices (and the loop is on the other core)
-def _remote(state: dict[str, Any], key: int, windows: int, job: str, *args: Any) -> Any:
-    """In the worker process: the job ``job(*args)`` of the identifier of learner ``key``
-    (made afresh, keeping ``windows`` windows of rows, at that learner's first job: a reset)."""
-    if state["key"] != key:
-        state["key"], state["identifier"] = key, _Identifier(state["reg"], windows)
-    return getattr(state["identifier"], job)(*args)
-
-
-#: A sample interval further than this fraction of ``h`` from it is a gap for the learner
-#: (a lost sample is ``2h``): its windows restart after it.
-_GAP_FRACTION = 0.5
-
 #: Consecutive rejected solves (no physical model fits the rows) after which :meth:`AdaptiveEKF.
 #: consistency` says ``"inconsistent"`` whatever the NIS: measured, exact-model and the
 #: README's model-error logs (UR5, Panda, double pendulum, 12 s, seeds 0-1) reject at most one
@@ -573,16 +209,6 @@ _GAP_FRACTION = 0.5
 #: one for 30 s, stayed in its warm-up (1.18× kf) and read "consistent" (the offset state
 #: absorbs the wrong torque below the NIS bound).
 _REJECTED_RUN = 4
-
-#: The latest rejections kept in ``details["rejected"]`` (it grew without bound, two a second).
-_REJECTED_KEPT = 100
-
-#: Consecutive off-interval samples after which the learner takes their median as ``h``.
-_INTERVAL_CHECK = 10
-
-#: Friction parameters within this many standard deviations of their nominal values are kept
-#: nominal (the significance of a learned viscous or Coulomb coefficient).
-_FRICTION_SIGMAS = 3.0
 
 
 #: ``λ h`` up to which a learned joint friction is a held input of the filter rather than part
@@ -617,80 +243,17 @@ def _lost(ekf: EKFState) -> bool:
     return not math.isfinite(ekf.v.sum() + ekf.P.sum())
 
 
-def _blend_loops(
-    score: Vector,
-    innovation: Vector,
-    measured: bool,
-    lam: float,
-    bank_q: Vector,
-    bank_v: Vector,
-    bank_P: Vector,
-    q: Vector,
-    v: Vector,
-    s: Vector,
-    blame: float,
-) -> tuple[Vector, Vector, Vector, Vector]:
-    """The blend of :meth:`AdaptiveEKF.step` on vector joints, in loops (compiled by numba).
-
-    Per coordinate ``i``: the scores ``score ← score + λ(e² − score)`` (if ``measured``),
-    the filter ``b`` of the least score, ``v_kf = v_b``, ``P_kf = P_b,11``,
-    ``s ← s + λ(blame · max((v − v_kf)² − P_kf, 0) − s)``, ``w = P_kf / (P_kf + s)``,
-    ``v̂ = w v + (1 − w) v_kf``, ``q̂ = q + (1 − w)(q_b − q)`` (module docstring).
-    Returns new arrays ``(score, s, q̂, v̂)``.
-    """
-    nf, nv = score.shape
-    score_out = score.copy()
-    if measured:
-        for f in range(nf):
-            for i in range(nv):
-                score_out[f, i] = score[f, i] + lam * (innovation[f, i] ** 2 - score[f, i])
-    s_out = np.empty(nv)
-    q_out = np.empty(nv)
-    v_out = np.empty(nv)
-    for i in range(nv):
-        b = 0
-        for f in range(1, nf):
-            if score_out[f, i] < score_out[b, i]:
-                b = f
-        p_kf = bank_P[b, 1, 1]
-        d = v[i] - bank_v[b, i]
-        s_out[i] = s[i] + lam * (blame * max(d * d - p_kf, 0.0) - s[i])
-        w = p_kf / (p_kf + s_out[i] + 1e-300)
-        v_out[i] = w * v[i] + (1.0 - w) * bank_v[b, i]
-        q_out[i] = q[i] + (1.0 - w) * (bank_q[b, i] - q[i])
-    return score_out, s_out, q_out, v_out
-
-
-_blend_kernel = LazyKernel(
-    _blend_loops,
-    np.zeros((1, 1)), np.zeros((1, 1)), True, 0.5, np.zeros((1, 1)), np.zeros((1, 1)),
-    np.tile(np.eye(3), (1, 1, 1)), np.zeros(1), np.zeros(1), np.zeros(1), 0.5,
-)  # fmt: skip
-
-
-#: What the worker processes' fork server imports once (:class:`~pinobs.observers.worker.Worker`).
-_PRELOAD = ("pinobs.observers.adaptive", "scipy.signal", "scipy.ndimage", "scipy.linalg")
-
 #: Where the learner's windows and solves run (:class:`AdaptiveEKF`, ``learning``).
 _LEARNING = ("sync", "background")
 
 
-def _load_learning() -> None:
-    """Import what the learner imports when it first runs (SciPy's smoothing and QR: about
-    0.5 s, the first window's update took 494 ms on a UR5) and scan the BLAS libraries
-    with ``scipy.linalg`` loaded (:func:`~pinobs.observers.blas.blas_libraries`): now, at
-    construction, not in the loop."""
-    import scipy.linalg
-    import scipy.ndimage
-    import scipy.signal  # noqa: F401
-
-    blas_libraries()
-
-
-def _huber_loss(r: Vector, sigma: float, c: float = 1.345) -> float:
-    """``Σ ρ(rᵢ/σ)`` with Huber's ρ (½z² inside ``c``, ``c|z| − ½c²`` outside)."""
-    z = np.abs(r) / sigma
-    return float(np.sum(np.where(z <= c, 0.5 * z * z, c * z - 0.5 * c * c)))
+def _check_options(**options: float) -> None:
+    """Each of :class:`AdaptiveEKF`'s ``options`` (named) > 0, and ``horizon ≥ 2 window``
+    (two identification windows at least)."""
+    for key, val in options.items():
+        positive(key, val)
+    if options["horizon"] < 2 * options["window"]:
+        positive("horizon - 2 window", options["horizon"] - 2 * options["window"])
 
 
 @register
@@ -777,63 +340,28 @@ class AdaptiveEKF(Observer["_State"]):
         super().__init__(robot, rate=rate, noise_std=noise_std)
         #: The model-based filter (class docstring).
         self.core = ExtendedKalmanFilter(
-            robot,
-            accel_psd=warmup_accel_psd,
-            q0_std=q0_std,
-            v0_std=v0_std,
-            disturbance_psd=disturbance_psd,
-            d0_std=d0_std,
-            outlier_probability=outlier_probability,
-            rate=rate,
-            noise_std=noise_std,
-        )
-        for key, val in (
-            ("window", window),
-            ("half_window", half_window),
-            ("horizon", horizon),
-            ("resolve_every", resolve_every),
-            ("accel_psd", accel_psd),
-            ("blend_time", blend_time),
-            ("learned_disturbance_psd", learned_disturbance_psd),
-            ("validated_accel_psd", validated_accel_psd),
-            ("validated_disturbance_psd", validated_disturbance_psd),
-        ):
-            positive(key, val)
-        if horizon < 2 * window:
-            positive("horizon - 2 window", horizon - 2 * window)
+            robot, accel_psd=warmup_accel_psd, q0_std=q0_std, v0_std=v0_std,
+            disturbance_psd=disturbance_psd, d0_std=d0_std,
+            outlier_probability=outlier_probability, rate=rate, noise_std=noise_std,
+        )  # fmt: skip
+        _check_options(
+            window=window, half_window=half_window, horizon=horizon, resolve_every=resolve_every,
+            accel_psd=accel_psd, blend_time=blend_time,
+            learned_disturbance_psd=learned_disturbance_psd,
+            validated_accel_psd=validated_accel_psd,
+            validated_disturbance_psd=validated_disturbance_psd,
+        )  # fmt: skip
         self._nominal = self.core.robot
         self._learn_options = dict(
-            window=float(window),
-            half_window=float(half_window),
-            horizon=float(horizon),
-            resolve_every=float(resolve_every),
-            friction=bool(friction),
-            offset=bool(offset),
+            window=float(window), half_window=float(half_window), horizon=float(horizon),
+            resolve_every=float(resolve_every), friction=bool(friction), offset=bool(offset),
             rate=None if self.rate is None else float(self.rate),
-        )
+        )  # fmt: skip
         self.learning = learning
-        _load_learning()
-        # background: one worker process, started now (not in the loop); it ends when the
-        # observer is dropped (its jobs hold no observer)
-        self._worker: Worker | None = None
-        if learning == "background":
-            self._worker = Worker(
-                _worker_start, self._nominal, bool(friction), bool(offset), preload=_PRELOAD
-            )
-        self._learner = _Learner(self._nominal, **self._learn_options, worker=self._worker)  # type: ignore[arg-type]
-        if self._learner.reg.size == 0:
-            raise UnsupportedRobotError(f"robot {robot.name!r} has no dynamic parameter to learn")
+        self._start_learning(learning)
         self.blend = bool(blend)
         self.blend_time = float(blend_time)
-        try:
-            jerks = tuple(float(positive("jerk_psd", j) or 0.0) for j in jerk_psd)
-        except TypeError:
-            raise GainError(f"jerk_psd={jerk_psd!r} must be a sequence of numbers > 0") from None
-        if not jerks:
-            raise GainError("jerk_psd needs at least one density")
-        self._bank = KFBank(self.robot, jerks, self.core.gains.meas_std)
-        if self.blend and self.robot.is_vector_space:
-            _blend_kernel.load()
+        self._bank = self._make_bank(jerk_psd)
         self._offset: Vector = np.zeros(self.robot.nv)
         self._learned = self._nominal  # the learned model, all its friction included
         self._held_friction: Vector | None = None  # 1 where it is a held input (_install)
@@ -846,6 +374,41 @@ class AdaptiveEKF(Observer["_State"]):
         self.restarts = 0  # times the model-based filter was lost and restarted
         self._restarted = False
         self._m_bar2: Vector = np.zeros(self.robot.nv)
+
+    def _start_learning(self, learning: str) -> None:
+        """The learner (its SciPy modules imported now, :func:`load_learning`) and, with
+        ``learning="background"``, its worker process (:func:`learning_worker`), started now,
+        not in the loop (it ends when the observer is dropped: its jobs hold no observer)."""
+        load_learning()
+        self._worker: Worker | None = None
+        if learning == "background":
+            opts = self._learn_options
+            self._worker = learning_worker(
+                self._nominal, bool(opts["friction"]), bool(opts["offset"])
+            )
+        self._learner = self._new_learner()
+        if self._learner.reg.size == 0:
+            name = self.robot.name
+            raise UnsupportedRobotError(f"robot {name!r} has no dynamic parameter to learn")
+
+    def _new_learner(self) -> Learner:
+        """A :class:`~pinobs.observers.adaptive_learner.Learner` afresh from the nominal model."""
+        options: dict[str, Any] = self._learn_options
+        return Learner(self._nominal, **options, worker=self._worker)
+
+    def _make_bank(self, jerk_psd: tuple[float, ...]) -> KFBank:
+        """The blend's bank of ``kf`` filters of densities ``jerk_psd`` (checked: a non-empty
+        sequence of numbers > 0); the compiled blend loaded now on vector joints."""
+        try:
+            jerks = tuple(float(positive("jerk_psd", j) or 0.0) for j in jerk_psd)
+        except TypeError:
+            raise GainError(f"jerk_psd={jerk_psd!r} must be a sequence of numbers > 0") from None
+        if not jerks:
+            raise GainError("jerk_psd needs at least one density")
+        bank = KFBank(self.robot, jerks, self.core.gains.meas_std)
+        if self.blend and self.robot.is_vector_space:
+            blend_kernel.load()
+        return bank
 
     @property
     def options(self) -> dict[str, Any]:
@@ -902,7 +465,8 @@ class AdaptiveEKF(Observer["_State"]):
         """The NIS test of the base class, with what the learner did in ``details``:
         solves, the regressor's condition number and rank, rejected solves (a
         failed re-solve keeps the last model and is listed here: the latest
-        :data:`_REJECTED_KEPT`), the blend weights.  ``"inconsistent"`` whatever the
+        :data:`~pinobs.observers.adaptive_learner.REJECTED_KEPT`), the blend
+        weights.  ``"inconsistent"`` whatever the
         NIS after :data:`_REJECTED_RUN` rejected solves in a row (no physical model
         fits the data)."""
         lr = self._learner
@@ -977,7 +541,7 @@ class AdaptiveEKF(Observer["_State"]):
         self.core.replace_robot(self._nominal.copy())
         self._learned = self._nominal
         self._held_friction = None
-        self._learner = _Learner(self._nominal, **self._learn_options, worker=self._worker)  # type: ignore[arg-type]
+        self._learner = self._new_learner()
         self._offset = np.zeros(self.robot.nv)
         self.core.gains = replace(self.core.gains, accel_psd=self._regimes["warmup"][0])
         self.regime = "warmup"
@@ -1003,7 +567,7 @@ class AdaptiveEKF(Observer["_State"]):
         with np.errstate(all="ignore"):
             self.step(state, h, q0, np.zeros(self.robot.nv))
         self.restarts, self._restarted, rejected, regime = kept
-        self._learner.rejected = deque(rejected, maxlen=_REJECTED_KEPT)
+        self._learner.rejected = deque(rejected, maxlen=REJECTED_KEPT)
         if regime != self.regime:
             self._set_regime(state.ekf, regime)
 
@@ -1103,8 +667,8 @@ class AdaptiveEKF(Observer["_State"]):
         blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
         if self._restarted or self._learner.rejected_run >= _REJECTED_RUN:
             blame = 1.0  # the model was lost and not replaced since, or none fits: to blame
-        if self.robot.is_vector_space and _blend_kernel.compiled is not None:
-            score, s, q, v = _blend_kernel.compiled(
+        if self.robot.is_vector_space and blend_kernel.compiled is not None:
+            score, s, q, v = blend_kernel.compiled(
                 state.score, kf.v if kf.innovation is None else kf.innovation,
                 kf.innovation is not None, lam, kf.q, kf.v, kf.P, ekf.q, ekf.v, state.s, blame,
             )  # fmt: skip

@@ -203,10 +203,15 @@ class LazyKernel:
     installation, then loaded from numba's cache.  ``error_model="numpy"``: a division by
     zero gives ``inf``/``nan`` as in the NumPy path the kernel replaces (numba's default
     raises ``ZeroDivisionError``: a ``kf`` fed a huge sample raised it from its compiled
-    bank instead of reporting a diverged estimate)."""
+    bank instead of reporting a diverged estimate).  ``helpers``: functions of ``fn``'s
+    module that it calls, compiled first (the same error model; ``inline="always"``: numba
+    inlines them into ``fn``) and put in their place there (numba resolves a call by name in
+    ``fn``'s module when it compiles ``fn``)."""
 
-    def __init__(self, fn: Callable[..., Any], *warm_args: Any) -> None:
-        self.fn, self.warm_args = fn, warm_args
+    def __init__(
+        self, fn: Callable[..., Any], *warm_args: Any, helpers: tuple[Callable[..., Any], ...] = ()
+    ) -> None:
+        self.fn, self.warm_args, self.helpers = fn, warm_args, helpers
         self.compiled: Callable[..., Any] | None = None
 
     def load(self) -> None:
@@ -214,6 +219,11 @@ class LazyKernel:
         if self.compiled is None:
             import numba  # lazy: start-up time
 
+            scope = self.fn.__globals__
+            for helper in self.helpers:  # (shared helpers: compiled by the first kernel)
+                if not hasattr(scope[helper.__name__], "py_func"):
+                    compiled = numba.njit(cache=True, error_model="numpy", inline="always")
+                    scope[helper.__name__] = compiled(helper)
             kernel = numba.njit(cache=True, error_model="numpy")(self.fn)
             kernel(*self.warm_args)  # load (or compile) the float64 signature now
             self.compiled = kernel

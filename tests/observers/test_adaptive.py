@@ -77,12 +77,12 @@ def test_learns_a_payload_and_beats_the_best_model_free_filter(name: str) -> Non
 
 
 def test_a_failed_solve_keeps_the_last_model_and_says_so(monkeypatch) -> None:
-    import pinobs.observers.adaptive as adaptive
+    import pinobs.observers.adaptive_learner as adaptive_learner
 
     def fail(*args, **kwargs):
         raise IdentificationError("simulated failure")
 
-    monkeypatch.setattr(adaptive, "solve", fail)
+    monkeypatch.setattr(adaptive_learner, "solve", fail)
     robot = pinobs.load("cartpole")
     ob = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4)
     res = pinobs.simulate(
@@ -216,8 +216,8 @@ def test_adaptive_runs_inside_never_behind() -> None:
 def test_the_compiled_bank_and_blend_equal_the_numpy_ones(monkeypatch) -> None:
     """On vector joints the bank and the blend are compiled loops; the NumPy path (Lie-group
     robots) gives the same estimates on the same run, a payload error and sample dropouts."""
-    import pinobs.observers.adaptive as adaptive
-    import pinobs.observers.kf as kf
+    import pinobs.observers.adaptive_blend as adaptive_blend
+    import pinobs.observers.kf_kernels as kf_kernels
 
     robot = pinobs.load("planar_3r")
     plant = mismatched_plant(robot, "inertia20_payload", seed=0)
@@ -234,9 +234,10 @@ def test_the_compiled_bank_and_blend_equal_the_numpy_ones(monkeypatch) -> None:
         return np.array(out)
 
     compiled = run()
-    assert adaptive._blend_kernel.compiled is not None and kf._bank_kernel.compiled is not None
-    monkeypatch.setattr(adaptive._blend_kernel, "compiled", None)
-    monkeypatch.setattr(kf._bank_kernel, "compiled", None)
+    assert adaptive_blend.blend_kernel.compiled is not None
+    assert kf_kernels.bank_kernel.compiled is not None
+    monkeypatch.setattr(adaptive_blend.blend_kernel, "compiled", None)
+    monkeypatch.setattr(kf_kernels.bank_kernel, "compiled", None)
     np.testing.assert_allclose(compiled, run(), rtol=0, atol=1e-12)
 
 

@@ -2,7 +2,7 @@
 
 The window rows and solves run in a worker process; their results are taken at
 the first update after they are done.  Given the time to finish before each
-is taken (the test hook ``_Learner.join``), the output is the synchronous one;
+is taken (the test hook ``Learner.join``), the output is the synchronous one;
 without it, a late solve is used late (the difference is measured below).
 """
 
@@ -13,7 +13,7 @@ import pytest
 
 import pinobs
 from pinobs.errors import GainError
-from pinobs.observers import adaptive, make_observer
+from pinobs.observers import adaptive_learner, make_observer
 from pinobs.simulation import Sensor
 from pinobs.simulation.mismatch import mismatched_plant
 from tests.conftest import cached_robot
@@ -51,7 +51,7 @@ def test_background_learning_given_the_time_to_finish_equals_the_synchronous_one
     robot, res = mismatch_run
     sync = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4)
     expected = _feed(sync, res, reset_at=1200)
-    monkeypatch.setattr(adaptive._Learner, "join", True)
+    monkeypatch.setattr(adaptive_learner.Learner, "join", True)
     bg = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4, learning="background")
     got = _feed(bg, res, reset_at=1200)
     assert sync.consistency().details["installs"] >= 1  # learned models were installed

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 import pinobs
-from pinobs.observers import kf as kf_module
-from pinobs.observers import make_observer
+from pinobs.observers import kf_kernels, make_observer
 from pinobs.observers.base import (
     MAX_GATE_RUN,
     NIS_AVERAGING,
@@ -272,9 +271,9 @@ def test_kf_banks_compiled_gate_is_gate_state(
         q[k] = robot.integrate(q[k], 0.05 * rng.choice([-1.0, 1.0], size=robot.nv))
     good = np.ones(q.shape[0], dtype=bool)
     bank = KFBank(robot, (300.0, 3e3), 1e-4, 1e-6)
-    assert kf_module._bank_kernel.compiled is not None
+    assert kf_kernels.bank_kernel.compiled is not None
     compiled = bank.run(res.t, q, good, 1.0)
-    monkeypatch.setattr(kf_module._bank_kernel, "compiled", None)
+    monkeypatch.setattr(kf_kernels.bank_kernel, "compiled", None)
     numpy = bank.run(res.t, q, good, 1.0)
     ob = make_observer("kf", robot, noise_std=1e-4, jerk_psd=300.0)
     ob.reset(res.t[0], q[0])

@@ -174,12 +174,12 @@ def test_the_grid_spans_from_heavy_smoothing_to_the_raw_difference() -> None:
 def test_auto_compiled_step_equals_the_numpy_step(
     rate: float | None, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The compiled ``"auto"`` step (``_auto_step_loops``, vector joints) against the NumPy
+    """The compiled ``"auto"`` step (``kf_kernels.auto_step_loops``, vector joints) against the NumPy
     one: a UR5 log with missing samples, single and paired jumps (the second forced in by
     the gate's run) and a pause; the same samples gated, the estimates, NIS and learnt
     densities equal to 1e-12 relative (measured: 2e-15 of each signal's largest value; the
     kernel sums in another order, and its ``S = P⁻₀₀ + σ²`` is the correction's)."""
-    from pinobs.observers import kf as kf_module
+    from pinobs.observers import kf_kernels
 
     robot = pinobs.load("ur5")
     res = pinobs.simulate(robot, [], duration=1.0, sensor=pinobs.Sensor(1000.0, 1e-4), seed=3)
@@ -202,8 +202,8 @@ def test_auto_compiled_step_equals_the_numpy_step(
         return est, nis, gated, ob.densities, ob.noise_stds
 
     compiled = run()
-    assert kf_module._auto_kernel.compiled is not None  # loaded by make_observer
-    monkeypatch.setattr(kf_module._auto_kernel, "compiled", None)
+    assert kf_kernels.auto_kernel.compiled is not None  # loaded by make_observer
+    monkeypatch.setattr(kf_kernels.auto_kernel, "compiled", None)
     numpy = run()
     assert np.array_equal(compiled[2], numpy[2]) and 3 <= int(np.sum(numpy[2])) <= 5
     np.testing.assert_array_equal(np.isnan(compiled[1]), np.isnan(numpy[1]))
@@ -219,11 +219,11 @@ def test_auto_kernel_is_loaded_when_made_and_never_compiled_in_the_loop() -> Non
     """Issue 39: the compiled step is there once ``make_observer`` returns, and the updates
     (missing samples, a read-only sample) run its one signature, the one loaded at
     construction: nothing is compiled inside an update."""
-    from pinobs.observers import kf as kf_module
+    from pinobs.observers import kf_kernels
 
     robot = pinobs.load("ur5")
     ob = pinobs.make_observer("kf", robot, noise_std=1e-4, rate=1000.0)
-    kernel = kf_module._auto_kernel.compiled
+    kernel = kf_kernels.auto_kernel.compiled
     assert kernel is not None
     signatures = list(kernel.signatures)
     q = robot.neutral()

@@ -8,12 +8,12 @@ import time
 import numpy as np
 import pytest
 
-from pinobs.observers.adaptive import _PRELOAD
+from pinobs.observers.adaptive_learner import PRELOAD
 from pinobs.observers.worker import Worker as _Worker
 
 
 def Worker(*args):  # the fork server started as adaptive starts it (whichever test is first)
-    return _Worker(*args, preload=_PRELOAD)
+    return _Worker(*args, preload=PRELOAD)
 
 
 def _start(offset: float) -> dict:

@@ -1,0 +1,66 @@
+"""``adaptive``'s blend with its bank of ``kf`` filters on vector joints, compiled
+(:mod:`pinobs.observers.adaptive` module docstring, 3).
+:meth:`~pinobs.observers.adaptive.AdaptiveEKF.step` runs it, or the same equations in NumPy
+on Lie-group joints (tested equal).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pinobs.observers.base import Vector
+from pinobs.observers.linalg import LazyKernel
+
+__all__ = ["blend_kernel", "blend_loops"]
+
+
+def blend_loops(
+    score: Vector,
+    innovation: Vector,
+    measured: bool,
+    lam: float,
+    bank_q: Vector,
+    bank_v: Vector,
+    bank_P: Vector,
+    q: Vector,
+    v: Vector,
+    s: Vector,
+    blame: float,
+) -> tuple[Vector, Vector, Vector, Vector]:
+    """The blend of :meth:`AdaptiveEKF.step` on vector joints, in loops (compiled by numba).
+
+    Per coordinate ``i``: the scores ``score ← score + λ(e² − score)`` (if ``measured``),
+    the filter ``b`` of the least score, ``v_kf = v_b``, ``P_kf = P_b,11``,
+    ``s ← s + λ(blame · max((v − v_kf)² − P_kf, 0) − s)``, ``w = P_kf / (P_kf + s)``,
+    ``v̂ = w v + (1 − w) v_kf``, ``q̂ = q + (1 − w)(q_b − q)`` (module docstring).
+    Returns new arrays ``(score, s, q̂, v̂)``.
+    """
+    nf, nv = score.shape
+    score_out = score.copy()
+    if measured:
+        for f in range(nf):
+            for i in range(nv):
+                score_out[f, i] = score[f, i] + lam * (innovation[f, i] ** 2 - score[f, i])
+    s_out = np.empty(nv)
+    q_out = np.empty(nv)
+    v_out = np.empty(nv)
+    for i in range(nv):
+        b = 0
+        for f in range(1, nf):
+            if score_out[f, i] < score_out[b, i]:
+                b = f
+        p_kf = bank_P[b, 1, 1]
+        d = v[i] - bank_v[b, i]
+        s_out[i] = s[i] + lam * (blame * max(d * d - p_kf, 0.0) - s[i])
+        w = p_kf / (p_kf + s_out[i] + 1e-300)
+        v_out[i] = w * v[i] + (1.0 - w) * bank_v[b, i]
+        q_out[i] = q[i] + (1.0 - w) * (bank_q[b, i] - q[i])
+    return score_out, s_out, q_out, v_out
+
+
+#: :func:`blend_loops` compiled (loaded when a blending ``adaptive`` on vector joints is made).
+blend_kernel = LazyKernel(
+    blend_loops,
+    np.zeros((1, 1)), np.zeros((1, 1)), True, 0.5, np.zeros((1, 1)), np.zeros((1, 1)),
+    np.tile(np.eye(3), (1, 1, 1)), np.zeros(1), np.zeros(1), np.zeros(1), 0.5,
+)  # fmt: skip

@@ -1,0 +1,426 @@
+"""``adaptive``'s learner: sliding-window momentum-form identification fed one committed sample
+at a time (:mod:`pinobs.observers.adaptive` module docstring, 2 and 4).
+
+:class:`Learner` keeps the bookkeeping (the buffer, the interval, when to solve, what a solve
+changes) on the loop; its costly part, the rows of each window and the solves
+(``_Identifier``), runs on the loop too (``learning="sync"``) or in a worker process
+(``learning="background"``, :func:`learning_worker`, :class:`~pinobs.observers.worker.Worker`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import math
+import os
+from collections import deque
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pinobs.errors import IdentificationError
+from pinobs.model import Robot
+from pinobs.model.identification import MAX_FILL, MomentumRegressor, smooth_path, solve
+from pinobs.observers.base import Vector
+from pinobs.observers.blas import blas_libraries, one_blas_thread
+from pinobs.observers.worker import Worker
+from pinobs.tolerances import TIME_EPS
+
+__all__ = ["PRELOAD", "REJECTED_KEPT", "Learner", "learning_worker", "load_learning"]
+
+#: What the worker processes' fork server imports once (:class:`~pinobs.observers.worker.Worker`).
+PRELOAD = ("pinobs.observers.adaptive_learner", "scipy.signal", "scipy.ndimage", "scipy.linalg")
+
+#: A sample interval further than this fraction of ``h`` from it is a gap for the learner
+#: (a lost sample is ``2h``): its windows restart after it.
+_GAP_FRACTION = 0.5
+
+#: The latest rejections kept in ``details["rejected"]`` (it grew without bound, two a second).
+REJECTED_KEPT = 100
+
+#: Consecutive off-interval samples after which the learner takes their median as ``h``.
+_INTERVAL_CHECK = 10
+
+#: Friction parameters within this many standard deviations of their nominal values are kept
+#: nominal (the significance of a learned viscous or Coulomb coefficient).
+_FRICTION_SIGMAS = 3.0
+
+
+class Learner:
+    """Sliding-window momentum-form identification fed one committed sample at a time.
+
+    The bookkeeping (the buffer, the interval, when to solve, what a solve changes) runs on
+    the loop; the rows of each window and the solves (:class:`_Identifier`) run on the loop
+    too, or, given a ``worker``, in its process (``learning="background"``), their results
+    taken at the first update after they are done (:meth:`collect`)."""
+
+    #: Test hook: :meth:`collect` waits for every job asked for (background learning then
+    #: gives what synchronous learning gives).
+    join = False
+
+    def __init__(
+        self,
+        robot: Robot,
+        *,
+        window: float,
+        half_window: float,
+        horizon: float,
+        resolve_every: float,
+        friction: bool,
+        offset: bool,
+        rate: float | None,
+        worker: Worker | None = None,
+    ) -> None:
+        self.reg = MomentumRegressor(robot, friction=friction, offset=offset)
+        self.nominal = self.reg.nominal()
+        # the costly part: here (synchronous) or in the worker process (background)
+        self.identifier = _Identifier(self.reg, max(1, round(horizon / window)))
+        self.worker = worker  # None: synchronous (every job run in add)
+        self.key = next(_KEYS)  # this learner's identifier in the worker process
+        self.row_count = 0  # rows kept, as of the last window taken
+        # the jobs asked for and not yet taken, in order: (job, (explained, current) of a solve)
+        self.pending: deque[tuple[Any, tuple[bool, Vector] | None]] = deque()
+        self.windows = 0  # windows of rows asked for (at most the rows kept)
+        self.solving = False  # a solve is pending
+        self.window, self.half_window = window, half_window
+        self.rate_given = rate
+        self.h = math.nan  # the sample interval: 1/rate, or the first one seen (_interval)
+        if rate is not None:
+            self._counts(1.0 / rate)
+        self.buf: deque[tuple[float, Vector, Vector]] = deque()
+        self.resolve_every = resolve_every
+        # the first solve resolve_every after the reset, wherever the clock starts (:meth:`start`;
+        # it was at t = resolve_every: a clock 100 s behind never solved, 3 s behind, 3.5 s late)
+        self.next_solve = math.nan
+        self._off_run: list[float] = []  # the latest consecutive update intervals off h
+        self._t_last: float | None = None  # the latest update's time (committed or not)
+        self.theta: Vector | None = None
+        self.std: Vector | None = None
+        self.excited: NDArray[np.bool_] | None = None
+        self.condition = np.nan
+        self.rank = 0
+        self.solves = 0
+        self.installs = 0
+        self.validated = False  # a solve has checked the current model against the data
+        self.last_drop = np.nan
+        self.history: list[tuple[float, float]] = []
+        self.candidate: Vector | None = None  # the latest consistent solve
+        self.minv_max: Vector = np.zeros(robot.nv)  # its largest (M⁻¹)ᵢᵢ at the checked q
+        self.rejected: deque[str] = deque(maxlen=REJECTED_KEPT)  # the latest, said in details
+        self.rejected_run = 0  # consecutive solves rejected (not physical, or failed)
+        # (t, τ, gated) of the updates without a sample since the last one
+        self._lost: list[tuple[float, Vector, bool]] = []
+
+    def add(
+        self,
+        t: float,
+        q: Vector | None,
+        tau: Vector,
+        *,
+        explained: bool = False,
+        gated: bool = False,
+    ) -> bool:
+        """Add the sample ``q`` taken at ``t`` and the torque ``tau`` applied from ``t`` on
+        (``q`` None: no sample, nothing added); returns True when a new model was solved for.
+        ``explained``: the filter's innovations say the current model explains the data
+        (then a solve only validates it); ``gated``: ``q`` None because the filter's gate
+        rejected the sample (not filled: :meth:`_fill`)."""
+        if self._t_last is not None:  # the stream's interval, from every update's time
+            dt = t - self._t_last  # (a gated or lost sample is not a slower stream)
+            if math.isnan(self.h):
+                self._counts(dt)  # no rate given: the stream's own interval
+            elif abs(dt - self.h) > _GAP_FRACTION * self.h:
+                self._off_run.append(dt)
+                if len(self._off_run) == _INTERVAL_CHECK:
+                    self._interval(self._off_run)
+                    self._off_run = []
+            else:
+                self._off_run = []
+        self._t_last = t
+        if q is None:
+            if self.buf:
+                self._lost.append((t, tau, gated))
+            return self.collect()  # a lost sample shows as a gap in the times below
+        # a gap (a lost sample: 2h) or a doubled sample: windows never straddle one, unless
+        # it is at most MAX_FILL lost samples, which are interpolated (_fill).  Jitter is not
+        # a gap: the rows integrate over the samples' own times (MATH §9); at ±0.1 h this
+        # test cleared the windows at every other sample and the learner never solved,
+        # silently (a sweep found it, and a 500 Hz stream without rate)
+        if self.buf and abs(t - self.buf[-1][0] - self.h) > _GAP_FRACTION * self.h:
+            if not self._fill(t, q):
+                self.buf.clear()
+        self._lost = []
+        self.buf.append((t, q, tau))
+        if math.isnan(self.h):
+            return self.collect()  # one sample: no interval yet
+        need = self.win + 2 * self.hw + 1
+        while len(self.buf) >= need:
+            # (concatenated, not np.stack: 3× faster; still 0.2 ms a window on a UR5 in a
+            # paced loop, its caches cold, and 0.12 ms to send it: the window's update cost)
+            t_s, q_s, tau_s = zip(*list(self.buf)[:need], strict=True)
+            t_arr = np.array(t_s)
+            q_arr = np.concatenate(q_s).reshape(need, -1)
+            tau_arr = np.concatenate(tau_s).reshape(need, -1)
+            self._run(None, "add_window", t_arr, q_arr, tau_arr, self.hw, self.win, self.stride)
+            self.windows = min(self.windows + 1, self.identifier.rows.maxlen or 0)
+            for _ in range(self.win):
+                self.buf.popleft()
+        if (
+            t >= self.next_solve - TIME_EPS  # (t₀ + kT: rounding)
+            and self.windows >= 2
+            and not self.solving  # one solve at a time: a late one is used late, not queued
+        ):
+            self.next_solve = t + self.resolve_every
+            current = self.nominal if self.theta is None else self.theta
+            qs = [x[1] for x in list(self.buf)[:: max(1, len(self.buf) // 4)]]
+            self.solving = True
+            self._run((explained, current), "solve", current, qs)
+        return self.collect()
+
+    def _run(self, solve: tuple[bool, Vector] | None, job: str, *args: Any) -> None:
+        """Run the identifier's ``job(*args)`` now (synchronous) or queue it on the worker
+        process (background); ``solve``: ``(explained, current model)`` of a solve, ``None``
+        for a window."""
+        if self.worker is None:
+            self.pending.append((_Done(getattr(self.identifier, job)(*args)), solve))
+        else:
+            windows = self.identifier.rows.maxlen or 1
+            self.pending.append((self.worker.submit(_remote, self.key, windows, job, *args), solve))
+
+    def collect(self) -> bool:
+        """Take the jobs that are done, in order (all of them, synchronous or with :attr:`join`),
+        and apply a solve's result (:meth:`_apply`); True when it installs a new model.
+        A job's exception is raised here, as the synchronous learner raises it in ``add``."""
+        installed = False
+        while self.pending and (self.join or self.pending[0][0].done()):
+            job, solve = self.pending.popleft()
+            result = job.result()
+            if solve is None:
+                self.row_count = result
+            else:
+                self.solving = False
+                installed = self._apply(result, *solve) or installed
+        return installed
+
+    def _fill(self, t: float, q: Vector) -> bool:
+        """Interpolate the ``k − 1`` samples lost between the last buffered one and ``q`` taken
+        at ``t`` (``t − t_last ≈ k h``, ``k − 1 ≤`` :data:`~pinobs.model.identification.MAX_FILL`)
+        linearly on the manifold, each with the torque of its own update (held from the last
+        one given); False (nothing filled) for a longer or uneven gap, or one where the filter's
+        gate rejected a sample (the model did not explain the data there: filled too, z1 with a
+        payload went from 7.4e-4 to 1.22e-3 rad/s in ``benchmarks/learning.py``).  Cleared at every lost
+        sample instead, the windows of ``win + 2 hw + 1`` consecutive samples never filled with
+        2 % of the samples lost at random, and ``adaptive`` never learned (a sweep: UR5 with a
+        payload, 5 % lost, 0 solves in 12 s, 1.19× kf, said "consistent").  The interpolation
+        error, ``(k h)² |q̈| / 8``, is 2e-6 |q̈| rad at 1 kHz over 3 lost samples."""
+        t0, q0, tau0 = self.buf[-1]
+        k = round((t - t0) / self.h)
+        if not 2 <= k <= MAX_FILL + 1 or abs(t - t0 - k * self.h) > _GAP_FRACTION * self.h:
+            return False
+        if any(g for *_, g in self._lost):  # gated, not lost: the model was not explaining the
+            return False  # data there (filled, z1 with a payload went 7.4e-4 -> 1.22e-3 rad/s)
+        robot = self.reg.robot
+        for i in range(1, k):
+            ti = t0 + i * (t - t0) / k
+            held = tau0
+            for t_lost, tau_lost, _ in self._lost:  # the torque applied from the lost update on
+                if t_lost <= ti + _GAP_FRACTION * self.h:
+                    held = tau_lost
+            self.buf.append((ti, robot.interpolate(q0, q, i / k), held))
+        return True
+
+    def _counts(self, h: float) -> None:
+        """The windows in samples for the interval ``h`` [s]."""
+        self.h = h
+        self.stride = max(1, round(0.004 / h))
+        self.win = max(self.stride, round(self.window / h / self.stride) * self.stride)
+        self.hw = max(2, round(self.half_window / h))
+
+    def start(self, t0: float) -> None:
+        """Begin at the reset time ``t0`` [s]: the first solve comes ``resolve_every`` after it."""
+        self.next_solve = t0 + self.resolve_every
+
+    def _interval(self, run: list[float]) -> None:
+        """:data:`_INTERVAL_CHECK` consecutive intervals off ``h`` that agree among themselves:
+        the stream is not at ``rate`` (or its first interval was not its own); their median
+        becomes ``h``, said in ``rejected``.  A 500 Hz stream taken for 1 kHz (the default
+        without ``rate``) never solved, silently."""
+        h = float(np.median(run))
+        if all(abs(d - h) <= _GAP_FRACTION * h for d in run):
+            given = f"rate = {self.rate_given:g} Hz" if self.rate_given else "its first interval"
+            self.rejected.append(
+                f"the samples come every {h:.6g} s, not {self.h:.6g} s ({given}): the "
+                "identification windows are counted on the samples' interval from here"
+            )
+            self._counts(h)
+            self.buf.clear()  # spaced (or filled: _fill) at the interval taken before
+
+    def _apply(self, sol: _Solution, explained: bool, current: Vector) -> bool:
+        """Take the solve ``sol`` (:meth:`_Identifier.solve`, against ``current``, the model
+        when it was asked for); True when it installs a new model.  Model selection: keep the
+        current model unless the new one explains the rows better than fitting noise would
+        (robust loss drop above rank + 3√rank, in units of ½χ²)."""
+        if sol.failure is not None:
+            self.rejected.append(f"solve failed: {sol.failure}")
+            self.rejected_run += 1
+            return False
+        self.condition, self.rank = sol.condition, sol.rank
+        if sol.unphysical is not None:
+            self.rejected.append(f"{sol.unphysical} in solve {self.solves + 1}")
+            self.rejected_run += 1
+            return False
+        assert sol.minv_max is not None and sol.theta is not None  # (a consistent solve)
+        self.minv_max = sol.minv_max  # of the latest consistent solve (the candidate)
+        self.candidate = sol.theta  # the latest consistent solve, installed or not
+        drop = sol.loss_current - sol.loss_new
+        self.history.append((sol.loss_current, sol.loss_new))
+        self.solves += 1
+        self.rejected_run = 0
+        self.validated = True
+        self.std, self.excited = sol.std, sol.excited
+        self.last_drop = float(drop)
+        if explained or drop <= sol.rank + 3.0 * np.sqrt(sol.rank):
+            if self.theta is None:
+                self.theta = current
+            return False
+        self.theta = sol.theta
+        self.installs += 1
+        return True
+
+
+class _Solution(NamedTuple):
+    """One solve of :class:`_Identifier` (``failure`` or ``unphysical`` said why it is not one)."""
+
+    failure: str | None = None  # the solve raised
+    unphysical: str | None = None  # a non-positive mass, or M(q) not positive definite
+    condition: float = math.nan
+    rank: int = 0
+    theta: Vector | None = None  # friction clipped and kept nominal where the data do not show it
+    std: Vector | None = None
+    excited: NDArray[np.bool_] | None = None
+    minv_max: Vector | None = None  # the largest (M⁻¹)ᵢᵢ at the checked configurations
+    loss_current: float = math.nan  # the robust loss of the current model on the rows
+    loss_new: float = math.nan  # the same of the solve
+
+
+class _Identifier:
+    """The learner's costly part: the rows of each window and the solves, run in order on the
+    loop (synchronous) or in the worker process (background), on its own regressor."""
+
+    def __init__(self, reg: MomentumRegressor, windows: int) -> None:
+        self.reg = reg
+        self.nominal = reg.nominal()
+        self.rows: deque[tuple[Vector, Vector]] = deque(maxlen=windows)
+
+    def add_window(self, t: Vector, q: Vector, tau: Vector, hw: int, win: int, stride: int) -> int:
+        """The ``nv`` rows of one window (module docstring, MATH §9) from the samples ``q``
+        [rad] taken at ``t`` [s] with the torques ``tau`` (``win + 2 hw + 1`` of them: the
+        smoother's half-width ``hw`` on both sides); returns the rows kept."""
+        q_s, v = smooth_path(self.reg.robot, t, q, half_window=hw, edges=False)
+        k = slice(hw, hw + win + 1)
+        A, y = self.reg.system(t[k], q_s[k], v[k], tau[k], window=win, stride=stride)
+        self.rows.append((A, y))
+        return sum(r[0].shape[0] for r in self.rows)
+
+    def solve(self, current: Vector, qs: list[Vector]) -> _Solution:
+        """Solve the rows; check the masses and ``M(q) ≻ 0`` at the configurations ``qs``;
+        the robust losses of ``current`` and of the solve (for :meth:`Learner._apply`)."""
+        A = np.vstack([r[0] for r in self.rows])
+        y = np.concatenate([r[1] for r in self.rows])
+        try:
+            sol = solve(self.reg, A, y, consistent=False)
+        except (IdentificationError, np.linalg.LinAlgError) as exc:
+            return _Solution(failure=str(exc))
+        theta = sol.theta
+        n = self.reg.n_inertial
+        masses = theta[0:n:10]
+        if np.any(masses <= 0):
+            return _Solution(None, "non-positive mass", sol.condition, sol.rank)
+        if self.reg.friction:
+            theta = theta.copy()
+            f = slice(n, n + 2 * self.reg.n_joint)
+            theta[f] = np.maximum(theta[f], 0.0)  # friction never feeds energy in
+            # friction the data do not show (within _FRICTION_SIGMAS σ of nominal) stays nominal:
+            # a learned friction makes every prediction pay for it (ekf's stiff path)
+            nominal = self.nominal[f]
+            weak = np.abs(theta[f] - nominal) <= _FRICTION_SIGMAS * sol.std[f]
+            theta[f] = np.where(weak, nominal, theta[f])
+        robot = self.reg.with_parameters(theta)
+        minv_max = np.zeros(robot.nv)
+        for q in qs:
+            m = robot.mass_matrix(q)
+            if np.linalg.eigvalsh(m)[0] <= 0:
+                return _Solution(None, "M(q) not positive definite", sol.condition, sol.rank)
+            minv_max = np.maximum(minv_max, np.diag(np.linalg.inv(m)))
+        loss_cur = _huber_loss(A @ current - y, sol.sigma)
+        loss_new = _huber_loss(A @ theta - y, sol.sigma)
+        return _Solution(
+            None, None, sol.condition, sol.rank, theta, sol.std, sol.excited, minv_max,
+            loss_cur, loss_new,
+        )  # fmt: skip
+
+
+class _Done:
+    """A job run on the loop (synchronous learning): its result, as a done future."""
+
+    def __init__(self, result: Any) -> None:
+        self._result = result
+
+    def done(self) -> bool:
+        return True
+
+    def result(self) -> Any:
+        return self._result
+
+
+#: Learner keys (:attr:`Learner.key`): which learner a job in the worker process is for.
+_KEYS = itertools.count()
+
+
+def _worker_start(robot: Robot, friction: bool, offset: bool) -> dict[str, Any]:
+    """The worker process's state (:class:`~pinobs.observers.worker.Worker`): its regressor
+    (its own ``pin.Data``) and the identifier of the latest learner that sent a job."""
+    load_learning()
+    # off the loop's scheduling: its own session (so its own group where Linux groups tasks
+    # by session, autogroup: the loop's share is not spent on it) at the lowest priority.
+    # UR5 live_loop at load 9-11, updates over 1 ms in 10 s: 62-77 in the loop's session,
+    # 21-41 in its own (synchronous learning: 141-168)
+    with contextlib.suppress(AttributeError, OSError):
+        os.setsid()
+    with contextlib.suppress(AttributeError, OSError):
+        os.nice(19)
+    return {"reg": MomentumRegressor(robot, friction=friction, offset=offset), "key": None}
+
+
+@one_blas_thread  # small matrices (and the loop is on the other core)
+def _remote(state: dict[str, Any], key: int, windows: int, job: str, *args: Any) -> Any:
+    """In the worker process: the job ``job(*args)`` of the identifier of learner ``key``
+    (made afresh, keeping ``windows`` windows of rows, at that learner's first job: a reset)."""
+    if state["key"] != key:
+        state["key"], state["identifier"] = key, _Identifier(state["reg"], windows)
+    return getattr(state["identifier"], job)(*args)
+
+
+def load_learning() -> None:
+    """Import what the learner imports when it first runs (SciPy's smoothing and QR: about
+    0.5 s, the first window's update took 494 ms on a UR5) and scan the BLAS libraries
+    with ``scipy.linalg`` loaded (:func:`~pinobs.observers.blas.blas_libraries`): now, at
+    construction, not in the loop."""
+    import scipy.linalg
+    import scipy.ndimage
+    import scipy.signal  # noqa: F401
+
+    blas_libraries()
+
+
+def _huber_loss(r: Vector, sigma: float, c: float = 1.345) -> float:
+    """``Σ ρ(rᵢ/σ)`` with Huber's ρ (½z² inside ``c``, ``c|z| − ½c²`` outside)."""
+    z = np.abs(r) / sigma
+    return float(np.sum(np.where(z <= c, 0.5 * z * z, c * z - 0.5 * c * c)))
+
+
+def learning_worker(robot: Robot, friction: bool, offset: bool) -> Worker:
+    """The worker process of ``learning="background"`` (started now, not in the loop; it ends
+    when dropped: its jobs hold no observer), its regressor made for ``robot``."""
+    return Worker(_worker_start, robot, friction, offset, preload=PRELOAD)

@@ -1,0 +1,432 @@
+"""The banks of ``kf`` filters: the white-jerk filter's equations, :class:`KFBank` (several
+densities stepped together) and :class:`AutoBank` (``jerk_psd="auto"``: the bank, its profile
+likelihood and mixture).
+
+The equations, the auto bank's likelihood and why it is built so are in the
+:mod:`pinobs.observers.kf` module docstring; on vector joints the banks run as compiled loops
+(:mod:`pinobs.observers.kf_kernels`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple, cast
+
+import numpy as np
+
+from pinobs.model import Robot
+from pinobs.observers.base import GateState, Vector, gate_threshold, positive
+from pinobs.observers.kf_kernels import auto_kernel, bank_kernel
+
+__all__ = [
+    "AUTO_GATE_SAMPLES",
+    "AUTO_LAMBDAS",
+    "AUTO_MEMORY",
+    "AutoBank",
+    "AutoState",
+    "BankState",
+    "KFBank",
+    "KFState",
+    "corrected",
+    "predicted",
+    "transition",
+]
+
+
+class KFState(NamedTuple):
+    """A ``kf`` filter's state (one density): the mean and the directions' shared covariance."""
+
+    q: Vector
+    v: Vector
+    a: Vector
+    P: Vector  # 3×3 covariance shared by every direction
+    gate: GateState = GateState()  # the outlier gate's bookkeeping (NIS of the last measurement)
+
+
+def transition(h: float, jerk_psd: float) -> tuple[Vector, Vector]:
+    """``(F(h), Q(h))`` of the white-jerk model (:mod:`pinobs.observers.kf`)."""
+    F = np.array([[1.0, h, 0.5 * h * h], [0.0, 1.0, h], [0.0, 0.0, 1.0]])
+    Q = jerk_psd * np.array(
+        [
+            [h**5 / 20, h**4 / 8, h**3 / 6],
+            [h**4 / 8, h**3 / 3, h**2 / 2],
+            [h**3 / 6, h**2 / 2, h],
+        ]
+    )
+    return F, Q
+
+
+def predicted(
+    robot: Robot, q: Vector, v: Vector, a: Vector, P: Vector, F: Vector, Q: Vector, h: float
+) -> tuple[Vector, Vector, Vector, Vector]:
+    """The prediction over ``h``: ``q ⊕ (v h + a h²/2)``, ``v + a h``, ``a``, ``F P Fᵀ + Q``."""
+    return robot.integrate(q, v * h + 0.5 * h * h * a), v + h * a, a, F @ P @ F.T + Q
+
+
+def corrected(
+    robot: Robot,
+    q: Vector,
+    v: Vector,
+    a: Vector,
+    P: Vector,
+    gate: GateState,
+    r: float,
+    threshold: float,
+    q_meas: Vector,
+) -> KFState:
+    """The update of the prediction ``q, v, a, P`` (``P`` its 3×3 covariance; ``gate`` the
+    gate's state) with ``q_meas``: the innovation ``e = difference(q, q_meas)``,
+    ``S = P₀₀ + r``, the outlier gate on ``NIS = |e|² / S``
+    (:meth:`pinobs.observers.base.GateState.measured`, ``threshold``: a rejected measurement
+    leaves the prediction), else per direction the shared gain ``K = P[:, 0] / S`` and ``P`` in
+    the Joseph form; ``P`` symmetrised."""
+    s = P[0, 0] + r
+    e = robot.difference(q, q_meas)
+    gate = gate.measured(float(e.dot(e)) / s, threshold, e.size)
+    if gate.gated:
+        return KFState(q, v, a, 0.5 * (P + P.T), gate)
+    K = P[:, 0] / s
+    IKH = np.eye(3) - np.outer(K, [1.0, 0.0, 0.0])
+    P = IKH @ P @ IKH.T + r * np.outer(K, K)
+    q = robot.integrate(q, K[0] * e)
+    return KFState(q, v + K[1] * e, a + K[2] * e, 0.5 * (P + P.T), gate)
+
+
+#: ``jerk_psd="auto"``: the bank's dimensionless densities ``λ = (j / σ²) T⁵``
+#: (:mod:`pinobs.observers.kf`), every decade from 1e-14 (a bandwidth of about 0.005 / T)
+#: to 1e2 (about the raw difference).
+AUTO_LAMBDAS: tuple[float, ...] = tuple(float(10.0**e) for e in range(-14, 3))
+
+#: ``jerk_psd="auto"``: measured samples (effective count ``N``) before the outlier gate acts.
+AUTO_GATE_SAMPLES = 20.0
+
+#: ``jerk_psd="auto"``: the likelihoods' default memory [measured samples].  In samples, not
+#: seconds: the grid's filters remember from about 1 (λ = 1e2) to 200 samples (λ = 1e-14,
+#: ``λ^(−1/6)`` periods), and the likelihood needs many such spans.  Measured (velocity RMS
+#: over the best fixed density on the run): 1 kHz simulations (ur5, start error 0.05 rad,
+#: 0.5 rad/s) 0.97–0.98× at 100 samples, 1.14–1.15× at 300, 1.3–1.7× at 500 to 2000 (the
+#: start's transient, remembered, holds the density up); UR10e and TIAGo logs (~100 Hz)
+#: within 5 % of each other from 50 to 1000 samples.
+AUTO_MEMORY = 100.0
+
+
+class BankState(NamedTuple):
+    """States of a bank of ``F`` per-joint filters (:class:`KFBank`): rows are filters."""
+
+    q: Vector  # (F, nq)
+    v: Vector  # (F, nv)
+    a: Vector  # (F, nv)
+    P: Vector  # (F, 3, 3)
+    innovation: Vector | None  # (F, nv): each filter's innovation at the last sample
+
+
+class AutoState(NamedTuple):
+    """``jerk_psd="auto"``'s state: a bank of ``n_f`` filters and their likelihoods."""
+
+    bank: BankState  # the filters' states, rows (KFBank)
+    jerk: Vector  # (n_f,): ρ_f σ₀² [rad²/s⁵] (empty until the period is known)
+    n: float  # N: the forgotten count of measured samples
+    A: Vector  # (n_f, nv): forgotten sums of e² / S
+    B: Vector  # (n_f,): forgotten sums of log S
+    w: Vector  # (n_f, nv): the mixture's weights
+    gate: GateState = GateState()
+    mix: Vector | None = None  # (2, nv): the estimate (Σ_f w q_f, Σ_f w v_f), if computed
+
+
+def _auto_weights(n: float, A: Vector, B: Vector) -> Vector:
+    """The mixture's weights ``w_fi ∝ exp(−(L_fi − min_f L_fi) / 2)``, ``L_fi = N log(A_fi /
+    N) + B_f`` (:mod:`pinobs.observers.kf`; uniform before any sample)."""
+    if n <= 0.0:
+        return np.full(A.shape, 1.0 / A.shape[0])
+    L = n * np.log(np.maximum(A, 1e-300) / n) + B[:, None]  # profile likelihood (Mehra 1970)
+    w = np.exp(-0.5 * (L - L.min(axis=0)))
+    return cast(Vector, w / w.sum(axis=0))
+
+
+_NO_STORE = np.empty((0, 3, 0))
+_NO_PX = np.empty((0, 3, 3))
+_ROW_MEASURED = (np.array([False, False]), np.array([False, True]))  # KFBank.step's rows
+_NO_USED = np.zeros(0, dtype=bool)
+
+
+class KFBank:
+    """Several :class:`~pinobs.observers.kf.ConstantAccelerationKF` filters with different
+    ``jerk_psd``, stepped together.
+
+    The same equations as the family (:mod:`pinobs.observers.kf`), one filter per row
+    of the arrays.  On robots whose joints are all vector joints a step is one
+    compiled loop (:func:`~pinobs.observers.kf_kernels.bank_rows_loops`, numba; a NumPy
+    step cost about 15 ``pin.aba``
+    calls on a UR5, mostly in dispatching small-array operations); otherwise NumPy
+    arrays, the configuration part filter by filter through ``integrate``/``difference``.
+    Both paths are tested equal to separate
+    :class:`~pinobs.observers.kf.ConstantAccelerationKF` filters.
+    Each step also returns every filter's innovation ``e = difference(q̂⁻, q_meas)``,
+    which the adaptive observer uses to pick the best filter per joint; :meth:`step` has no
+    outlier gate (the adaptive observer gives it only the samples its own gate keeps),
+    :meth:`run` over a log has the filters' (``outlier_probability``).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        jerk_psd: tuple[float, ...],
+        meas_std: float,
+        outlier_probability: float | None = None,
+    ) -> None:
+        self.robot = robot
+        self.jerk = np.array([float(positive("jerk_psd", j) or 0.0) for j in jerk_psd])
+        self.meas_var = float(positive("meas_std", meas_std) or 0.0) ** 2
+        self.gate = gate_threshold(outlier_probability, robot.nv)[1]
+        self._cache: tuple[float, Vector, Vector] | None = None
+        n = self.jerk.size  # step's scratch (its likelihood and gate are not kept)
+        self._ll, self._level, self._run = np.zeros(n), np.ones(n), np.zeros(n, dtype=np.int64)
+        if robot.is_vector_space:
+            bank_kernel.load()
+
+    def initial(self, q0: Vector, v0: Vector, v0_std: float) -> BankState:
+        n = self.jerk.size
+        P = np.diag([self.meas_var, v0_std**2, (10.0 * v0_std) ** 2])
+        return BankState(
+            np.tile(q0, (n, 1)), np.tile(v0, (n, 1)), np.zeros((n, v0.size)),
+            np.tile(P, (n, 1, 1)), None,
+        )  # fmt: skip
+
+    def log_likelihoods(self, t: Vector, q: Vector, good: Vector, v0_std: float) -> Vector:
+        """Each filter's innovation log-likelihood over a log, in one pass: ``Σ_k log N(e_k;
+        0, S_k I)`` over the measured samples ``k ≥ 1`` (``good[k]``), ``S_k = P⁻₀₀ + σ²``
+        (the prediction-error decomposition, Schweppe 1965; a sample the gate rejects counted
+        at the gate), started at ``q[0]`` with ``v = 0`` (:meth:`initial`); what
+        :func:`pinobs.observers.smoothing.select_accel_psd` computes for ``kf`` filter by
+        filter (tested equal)."""
+        return self.run(t, q, good, v0_std, store=False)[0]
+
+    def run(
+        self, t: Vector, q: Vector, good: Vector, v0_std: float, *, store: bool = True
+    ) -> tuple[Vector, Vector, Vector, Vector]:
+        """The bank over a log from :meth:`initial` at ``q[0]`` with ``v = 0``, with the outlier
+        gate: each filter's innovation log-likelihood (:meth:`log_likelihoods`) and, with
+        ``store``, the first filter's state at every row, ``X[k] = (q, v, a)`` of shape
+        ``(3, nv)``, its 3×3 covariance ``PX[k]`` and whether it was corrected with the row's
+        measurement, ``used[k]`` (all three empty without; ``store`` needs ``nq = nv``).  On
+        vector joints one compiled pass (:func:`~pinobs.observers.kf_kernels.bank_rows_loops`),
+        otherwise each filter in
+        turn as :class:`~pinobs.observers.kf.ConstantAccelerationKF` steps."""
+        nv, n_f = self.robot.nv, self.jerk.size
+        n = t.size if store else 0
+        X, PX, used = np.empty((n, 3, nv)), np.empty((n, 3, 3)), np.zeros(n, dtype=bool)
+        ll = np.zeros(n_f)
+        state = self.initial(q[0], np.zeros(nv), v0_std)
+        if self.robot.is_vector_space and bank_kernel.compiled is not None:
+            q_meas = np.ascontiguousarray(np.where(good[:, None], q, 0.0), dtype=float)
+            bank_kernel.compiled(
+                *(np.array(x) for x in state[:4]), np.ascontiguousarray(t, dtype=float), q_meas,
+                np.ascontiguousarray(good, dtype=bool), self.jerk, self.meas_var, self.gate,
+                np.full(n_f, float(nv)), np.zeros(n_f, dtype=np.int64), ll,
+                np.empty((n_f, nv)), X if store else _NO_STORE, PX, used if store else _NO_USED,
+            )  # fmt: skip
+            return ll, X, PX, used
+        for f in range(n_f):  # the causal filter's own steps, the likelihood as _forward's
+            one = KFState(state.q[f], state.v[f], state.a[f], state.P[f])
+            for k in range(t.size):
+                if k > 0:
+                    h = float(t[k] - t[k - 1])
+                    F, Q = transition(h, float(self.jerk[f]))
+                    qk, vk, ak, Pk = predicted(self.robot, one.q, one.v, one.a, one.P, F, Q, h)
+                    one = KFState(qk, vk, ak, Pk, one.gate.predicted())
+                    if good[k]:
+                        s = Pk[0, 0] + self.meas_var
+                        one = corrected(
+                            self.robot, qk, vk, ak, Pk, one.gate, self.meas_var, self.gate, q[k]
+                        )
+                        cap = one.gate.limit(self.gate, nv) if one.gate.gated else math.inf
+                        nis = min(cast(float, one.gate.nis), cap)
+                        ll[f] -= 0.5 * (nis + nv * math.log(2.0 * math.pi * s))
+                if store and f == 0:
+                    X[k], PX[k], used[k] = (
+                        (one.q, one.v, one.a),
+                        one.P,
+                        k > 0 and one.gate.nis is not None and not one.gate.gated,
+                    )
+        return ll, X, PX, used
+
+    def step(self, state: BankState, dt: float, q_meas: Vector | None) -> BankState:
+        r = self.robot
+        if r.is_vector_space and bank_kernel.compiled is not None:
+            measured = q_meas is not None
+            q, v, a, P = state.q.copy(), state.v.copy(), state.a.copy(), state.P.copy()
+            e = np.empty_like(v)
+            rows = np.empty((2, v.shape[1]))
+            if measured:
+                rows[1] = q_meas
+            bank_kernel.compiled(
+                q, v, a, P, np.array([0.0, dt]), rows, _ROW_MEASURED[measured], self.jerk,
+                self.meas_var, math.inf, self._level, self._run, self._ll, e, _NO_STORE, _NO_PX,
+                _NO_USED,
+            )  # fmt: skip
+            return BankState(q, v, a, P, e if measured else None)
+        if self._cache is None or self._cache[0] != dt:
+            F, Q = transition(dt, 1.0)
+            self._cache = (dt, F, self.jerk[:, None, None] * Q)
+        _, F, Q = self._cache
+        step = state.v * dt + 0.5 * dt * dt * state.a
+        q = np.array([r.integrate(x, s) for x, s in zip(state.q, step, strict=True)])
+        v = state.v + dt * state.a
+        a = state.a
+        P = F @ state.P @ F.T + Q
+        if q_meas is None:
+            return BankState(q, v, a, P, None)
+        e = np.array([r.difference(x, q_meas) for x in q])
+        K = P[:, :, 0] / (P[:, 0, 0] + self.meas_var)[:, None]  # (F, 3)
+        q = np.array([r.integrate(x, k * y) for x, k, y in zip(q, K[:, 0], e, strict=True)])
+        v = v + K[:, 1:2] * e
+        a = a + K[:, 2:3] * e
+        IKH = np.eye(3) - K[:, :, None] * np.array([1.0, 0.0, 0.0])  # Joseph form, per filter
+        P = IKH @ P @ IKH.transpose(0, 2, 1) + self.meas_var * K[:, :, None] * K[:, None, :]
+        return BankState(q, v, a, 0.5 * (P + P.transpose(0, 2, 1)), e)
+
+
+class AutoBank:
+    """``jerk_psd="auto"`` of :class:`~pinobs.observers.kf.ConstantAccelerationKF`: a bank of
+    ``n_f`` filters on the grid :data:`AUTO_LAMBDAS`, their forgotten profile likelihoods and
+    the mixture (the :mod:`pinobs.observers.kf` module docstring), on :class:`AutoState`.
+
+    Args:
+        robot: the robot (only its Lie-group operations are used).
+        meas_std: σ₀ [rad or m]: every filter's measurement noise (the scales' unit).
+        memory: the likelihoods' memory [measured samples]: ``γ = exp(−1 / memory)``.
+        gate: the outlier gate's NIS threshold (``inf``: no gate).
+    """
+
+    def __init__(self, robot: Robot, meas_std: float, memory: float, gate: float) -> None:
+        self.robot, self.meas_std, self.memory, self.gate = robot, meas_std, memory, gate
+        self._cache: KFBank | None = None
+        self._forget = math.exp(-1.0 / memory)  # γ
+        self._var = float(meas_std) ** 2  # as KFBank's meas_var
+        self._no_sample = np.zeros(robot.nv)
+        self._dof = float(robot.nv)  # the gate's level before any (outlier_gate)
+        if robot.is_vector_space:  # its compiled step loaded now, not at the first update
+            auto_kernel.load()
+
+    def initial(self, q0: Vector, v0: Vector, P: Vector, rate: float | None) -> AutoState:
+        """Every filter at ``(q0, v0, a = 0)`` with the 3×3 covariance ``P``, uniform weights;
+        ``rate`` [Hz] sets the grid's period ``T = 1/rate`` (``None``: the first interval)."""
+        n_f, nv = len(AUTO_LAMBDAS), v0.size
+        jerk = np.empty(0) if rate is None else self.grid(1.0 / rate)
+        bank = BankState(
+            np.tile(q0, (n_f, 1)), np.tile(v0, (n_f, 1)), np.zeros((n_f, nv)),
+            np.tile(P, (n_f, 1, 1)), None,
+        )  # fmt: skip
+        w = np.full((n_f, nv), 1.0 / n_f)
+        return AutoState(bank, jerk, 0.0, np.zeros((n_f, nv)), np.zeros(n_f), w)
+
+    def grid(self, period: float) -> Vector:
+        """The bank's densities ``ρ_f σ₀² = λ_f σ₀² / T⁵`` [rad²/s⁵] (``T`` the period [s];
+        :mod:`pinobs.observers.kf`)."""
+        return np.array(AUTO_LAMBDAS) * self.meas_std**2 / period**5
+
+    def densities(self, state: AutoState) -> Vector:
+        """Each joint's density ``exp Σ_f w_fi log(ρ_f ĉ_fi σ₀²)`` [rad²/s⁵] (``nan`` before
+        the first measured sample)."""
+        if state.n <= 0.0 or not state.jerk.size:
+            return np.full(self.robot.nv, math.nan)
+        scale = np.maximum(state.A / state.n, 1e-300)
+        return cast(Vector, np.exp(np.sum(state.w * np.log(state.jerk[:, None] * scale), axis=0)))
+
+    def noise_stds(self, state: AutoState) -> Vector:
+        """Each joint's noise ``√exp Σ_f w_fi log(ĉ_fi σ₀²)`` [rad or m] (``nan`` before a
+        measured sample)."""
+        if state.n <= 0.0:
+            return np.full(self.robot.nv, math.nan)
+        scale = np.maximum(state.A / state.n, 1e-300) * self.meas_std**2
+        return cast(Vector, np.sqrt(np.exp(np.sum(state.w * np.log(scale), axis=0))))
+
+    def output(self, state: AutoState) -> tuple[Vector, Vector]:
+        """The mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)``; on Lie groups the configurations mixed
+        in the tangent space of the filter of largest total weight."""
+        if state.mix is not None:  # computed by the compiled step
+            return state.mix[0], state.mix[1]
+        w, b = state.w, state.bank
+        v = np.sum(w * b.v, axis=0)
+        if self.robot.is_vector_space:
+            return np.sum(w * b.q, axis=0), v
+        ref = int(np.argmax(w.sum(axis=1)))  # the mixture in the tangent space of one filter
+        d = np.array([self.robot.difference(b.q[ref], x) for x in b.q])
+        return self.robot.integrate(b.q[ref], np.sum(w * d, axis=0)), v
+
+    def _bank(self, jerk: Vector) -> KFBank:
+        """The :class:`KFBank` stepping the filters of densities ``jerk`` (built once)."""
+        if self._cache is None or not np.array_equal(self._cache.jerk, jerk):
+            self._cache = KFBank(self.robot, tuple(jerk.tolist()), self.meas_std)
+        return self._cache
+
+    def step(self, state: AutoState, h: float, q_meas: Vector | None) -> AutoState:
+        """One step of the bank (:mod:`pinobs.observers.kf`): each filter's
+        prediction and correction (:meth:`KFBank.step`: the equations of :meth:`step`),
+        the forgotten likelihood sums, the mixture's weights.  On vector joints one compiled
+        call (:func:`~pinobs.observers.kf_kernels.auto_step_loops`) into arrays allocated here
+        (the state before is kept
+        as it was); otherwise NumPy, the configurations filter by filter."""
+        jerk = state.jerk if state.jerk.size else self.grid(h)
+        kernel = auto_kernel.compiled
+        if kernel is not None and self.robot.is_vector_space:
+            return self._step_compiled(kernel, state, jerk, h, q_meas)
+        bank = self._bank(jerk)
+        if q_meas is None:
+            return state._replace(
+                bank=bank.step(state.bank, h, None), jerk=jerk, gate=state.gate.predicted()
+            )
+        new = bank.step(state.bank, h, q_meas)
+        e = cast(Vector, new.innovation)  # (n_f, nv): difference(q⁻_f, q_meas)
+        f0 = np.array([1.0, h, 0.5 * h * h])  # F's first row: S = (F P Fᵀ)₀₀ + j h⁵/20 + σ₀²
+        S = np.einsum("i,fij,j->f", f0, state.bank.P, f0) + jerk * h**5 / 20 + bank.meas_var
+        z = e * e / S[:, None]
+        if state.n >= AUTO_GATE_SAMPLES:  # the scales ĉ and weights before this sample
+            nis = float(np.sum(state.w * z / np.maximum(state.A / state.n, 1e-300)))
+            gate = state.gate.measured(nis, self.gate, self.robot.nv)
+        else:  # too few samples for a scale: reported (with σ₀), not gated
+            gate = GateState(float(np.sum(state.w * z)))
+        if gate.gated:  # the prediction (its likelihoods unchanged)
+            return state._replace(bank=bank.step(state.bank, h, None), jerk=jerk, gate=gate)
+        forget = self._forget  # γ (:mod:`pinobs.observers.kf`)
+        n = forget * state.n + 1.0  # the forgotten sums (:mod:`pinobs.observers.kf`)
+        A, B = forget * state.A + z, forget * state.B + np.log(S)
+        return AutoState(new, jerk, n, A, B, _auto_weights(n, A, B), gate)
+
+    def _step_compiled(
+        self,
+        kernel: Callable[..., tuple[float, bool, float]],
+        state: AutoState,
+        jerk: Vector,
+        h: float,
+        q_meas: Vector | None,
+    ) -> AutoState:
+        """:meth:`step` on vector joints: :func:`~pinobs.observers.kf_kernels.auto_step_loops`
+        (the same equations, tested equal to the NumPy ones to 1e-12)."""
+        b, gate = state.bank, state.gate
+        gate_on = state.n >= AUTO_GATE_SAMPLES  # the scales ĉ and weights before this sample
+        n_new = self._forget * state.n + 1.0  # the forgotten count (:mod:`pinobs.observers.kf`)
+        new = (
+            np.empty_like(b.v), np.empty_like(b.v), np.empty_like(b.v), np.empty_like(b.P),
+            np.empty_like(b.v), np.empty_like(state.A), np.empty_like(state.B),
+            np.empty_like(state.w), np.empty((2, b.v.shape[1])),
+        )  # fmt: skip
+        nis, rejected, level = kernel(
+            b.q, b.v, b.a, b.P, state.A, state.B, state.w, jerk, h, self._var,
+            self._no_sample if q_meas is None else q_meas, q_meas is not None, gate_on,
+            state.n, n_new, self._forget, self.gate,
+            self._dof if gate.level is None else gate.level, gate.run, *new,
+        )  # fmt: skip
+        q, v, a, P, e, A, B, w, mix = new
+        if q_meas is None:  # the prediction (its likelihoods unchanged)
+            return AutoState(
+                BankState(q, v, a, P, None), jerk, state.n, A, B, w, gate.predicted(), mix
+            )
+        if not gate_on:  # too few samples for a scale: reported (with σ₀), not gated
+            after = GateState(nis)
+        else:  # GateState.measured, decided in the kernel
+            after = GateState(nis, rejected, gate.run + 1 if rejected else 0, level)
+        if rejected:  # the prediction (its likelihoods unchanged)
+            return AutoState(BankState(q, v, a, P, None), jerk, state.n, A, B, w, after, mix)
+        return AutoState(BankState(q, v, a, P, e), jerk, n_new, A, B, w, after, mix)

@@ -321,7 +321,7 @@ def _notes(ident: Any, rep: dict[str, Any]) -> list[str]:
             )
         )
     rho = rep.get("smoother_consistency", math.nan)
-    if math.isfinite(rho):  # observers.calibration's "Limitation: noisy torques"
+    if math.isfinite(rho):  # pinobs.calibration's "Limitation: noisy torques"
         lines.append(
             f"velocities: {rep['velocities']}, smoother consistency ρ = {rho:.3g} (about 1 "
             "when the model and the torques explain the positions"

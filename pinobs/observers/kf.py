@@ -214,6 +214,9 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
             if self.auto
             else None
         )
+        # the compiled bank's step (vector joints) makes no BLAS call: no thread limit to
+        # enter per update (Observer.uses_blas); the fixed density's NumPy step does
+        self.uses_blas = not (self.auto_bank is not None and self.auto_bank.compiled)
 
     @property
     def options(self) -> dict[str, object]:

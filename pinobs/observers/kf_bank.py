@@ -198,7 +198,7 @@ class KFBank:
         0, S_k I)`` over the measured samples ``k ≥ 1`` (``good[k]``), ``S_k = P⁻₀₀ + σ²``
         (the prediction-error decomposition, Schweppe 1965; a sample the gate rejects counted
         at the gate), started at ``q[0]`` with ``v = 0`` (:meth:`initial`); what
-        :func:`pinobs.observers.smoothing.select_accel_psd` computes for ``kf`` filter by
+        :func:`pinobs.smoothing.select_accel_psd` computes for ``kf`` filter by
         filter (tested equal)."""
         return self.run(t, q, good, v0_std, store=False)[0]
 
@@ -308,6 +308,11 @@ class AutoBank:
         self._dof = float(robot.nv)  # the gate's level before any (outlier_gate)
         if robot.is_vector_space:  # its compiled step loaded now, not at the first update
             auto_kernel.load()
+
+    @property
+    def compiled(self) -> bool:
+        """Whether :meth:`step` is the compiled kernel (vector joints, numba present)."""
+        return self.robot.is_vector_space and auto_kernel.compiled is not None
 
     def initial(self, q0: Vector, v0: Vector, P: Vector, rate: float | None) -> AutoState:
         """Every filter at ``(q0, v0, a = 0)`` with the 3×3 covariance ``P``, uniform weights;

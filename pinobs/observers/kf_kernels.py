@@ -198,7 +198,7 @@ def bank_rows_loops(
     outlier gate first (:func:`pinobs.observers.base.outlier_gate`: ``gate`` its threshold,
     ``inf`` for none; ``level`` and ``run`` each filter's, updated): a rejected measurement
     leaves the prediction and counts in ``ll`` at the gate (as
-    :func:`pinobs.observers.smoothing._forward`).  ``e`` receives the innovations of the last
+    :func:`pinobs.smoothing.rts.forward_pass`).  ``e`` receives the innovations of the last
     row, when it is measured.  When ``X`` has rows, ``X[k] = (q, v, a)``, ``PX[k] = P`` and
     ``used[k]`` (corrected with its measurement) of filter 0 at every row ``k`` (row 0
     included: not corrected).

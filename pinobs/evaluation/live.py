@@ -36,6 +36,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from pinobs.model import aba_call, load
+from pinobs.model.robot import Vector
 from pinobs.observers import make_observer
 from pinobs.simulation import Sensor, simulate
 
@@ -151,6 +152,22 @@ def blas_settings() -> str:
     return "; ".join(parts)
 
 
+def _window_ratios(
+    wall: Vector, warm: Vector, per_window: int, aba_s: float
+) -> tuple[list[float], list[float]]:
+    """The median and p99 update time over each window of ``per_window`` ticks, each as a
+    ratio to the window's own ``pin.aba`` median (the whole run if shorter than a window)."""
+    med, p99 = [], []
+    for i in range(0, wall.size - per_window + 1, per_window):
+        w = slice(i, i + per_window)
+        ref = float(np.median(warm[w]))
+        med.append(float(np.median(wall[w])) / ref)
+        p99.append(float(np.percentile(wall[w], 99.0)) / ref)
+    if not med:  # shorter than one window: the whole run
+        med, p99 = [float(np.median(wall)) / aba_s], [float(np.percentile(wall, 99.0)) / aba_s]
+    return med, p99
+
+
 def live_loop(
     robot_name: str,
     observer_name: str,
@@ -199,15 +216,7 @@ def live_loop(
         if freeze_gc:
             gc.unfreeze()
     aba_s = float(np.median(warm))
-    per_window = max(1, round(WINDOW * rate))
-    med, p99 = [], []
-    for i in range(0, n - per_window + 1, per_window):
-        w = slice(i, i + per_window)
-        ref = float(np.median(warm[w]))
-        med.append(float(np.median(wall[w])) / ref)
-        p99.append(float(np.percentile(wall[w], 99.0)) / ref)
-    if not med:  # shorter than one window: the whole run
-        med, p99 = [float(np.median(wall)) / aba_s], [float(np.percentile(wall, 99.0)) / aba_s]
+    med, p99 = _window_ratios(wall, warm, max(1, round(WINDOW * rate)), aba_s)
     load1, load5, load15 = os.getloadavg()
     return LiveTiming(
         robot=robot_name,

@@ -568,6 +568,10 @@ class Robot:
         return out
 
     # --------------------------------------------------------------- dynamics
+    def total_mass(self) -> float:
+        """The sum of the bodies' masses [kg] (``pin.computeTotalMass``)."""
+        return float(pin.computeTotalMass(self.model))
+
     def mass_matrix(self, q: Vector) -> Vector:
         """``M(q)``, symmetric positive definite, shape ``(nv, nv)`` [kg, kg·m, kg·m²]."""
         m = np.array(pin.crba(self.model, self._data, q))

@@ -33,7 +33,7 @@ G = 9.80665
 
 def default_thresholds(robot: Robot) -> tuple[float, float]:
     """``(on, off)`` [N]: :data:`ON_FRACTION` and :data:`OFF_FRACTION` of the robot's weight."""
-    weight = G * sum(float(inertia.mass) for inertia in robot.model.inertias)
+    weight = G * robot.total_mass()
     return ON_FRACTION * weight, OFF_FRACTION * weight
 
 

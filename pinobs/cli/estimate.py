@@ -282,17 +282,30 @@ def _print_bad_rows(args: argparse.Namespace, run: Any) -> None:
         )
 
 
-def _log_playback(args: argparse.Namespace, robot: Robot, run: Any, label: str) -> None:
-    """``estimate --html``: the logged motion, and the estimates (kept in ``run``) as a ghost."""
+def _log_playback(
+    args: argparse.Namespace,
+    robot: Robot,
+    run: Any,
+    label: str,
+    log: Any = None,
+    what: str = "the logged motion",
+) -> None:
+    """``estimate --html``: the logged motion (``log``, read again if not given), and the
+    estimates (kept in ``run``) as a ghost."""
     from pinobs.visualization import log_result, write_html
 
-    log = read_log(
-        args.log, robot, columns=column_map(args.map), topic=args.topic, drives=drives_option(args)
-    )
+    if log is None:
+        log = read_log(
+            args.log,
+            robot,
+            columns=column_map(args.map),
+            topic=args.topic,
+            drives=drives_option(args),
+        )
     page = write_html(
         log_result(robot, log, {label: run}), robot, args.html, truth_label="measured"
     )
-    print(f"wrote {page} (the logged motion, and the estimate as a ghost)")
+    print(f"wrote {page} ({what}, and the estimate as a ghost)")
 
 
 # ------------------------------------------------- estimate --observer inekf (issue 38)
@@ -345,14 +358,9 @@ def _estimate_legged(args: argparse.Namespace) -> int:
         print(f"warning: {w}", file=sys.stderr)
     _print_bad_rows(args, run)
     if args.html and run.estimated:
-        from pinobs.visualization import log_result, write_html
-
         # the legs as measured on the estimated base (a legged log has no base pose to show)
         shown = replace(log, q=np.where(np.isnan(log.q), run.q, log.q))
-        page = write_html(
-            log_result(robot, shown, {INEKF: run}), robot, args.html, truth_label="measured"
-        )
-        print(f"wrote {page} (the measured legs on the estimated base, and the estimate)")
+        _log_playback(args, robot, run, INEKF, shown, "the measured legs on the estimated base")
     print(f"{INEKF} on {robot.name}: {run.summary()}; wrote {args.out}")
     return 0 if run.estimated else 1
 

@@ -164,22 +164,19 @@ class Robot:
         self, model: pin.Model, friction: bool, friction_law: FrictionLaw | None
     ) -> None:
         """The friction attributes (:meth:`__init__`'s ``friction`` and ``friction_law``)."""
-        # Joint friction from the URDF <dynamics damping="…" friction="…"/> tags (Pinocchio
-        # loads them into model.damping / model.friction but its ABA ignores them).
-        # A FrictionLaw given (identified, or read from a sidecar: pinobs.model.friction)
-        # replaces the tags' viscous + Coulomb law.
+        # The URDF's <dynamics damping friction> tags (model.damping, .friction: ABA ignores
+        # them), or a FrictionLaw given (identified, or a sidecar's) in their place.
         self.friction = bool(friction)
         if friction_law is not None and friction_law.nv != model.nv:
             raise DimensionError(
                 f"friction_law has {friction_law.nv} coordinates; the model has nv={model.nv}"
             )
         self._given_law = friction_law
+        law = friction_law
         if not friction:
             law = FrictionLaw.zero(model.nv)
-        elif friction_law is None:
+        elif law is None:
             law = FrictionLaw.from_urdf(model.damping, model.friction)
-        else:
-            law = friction_law
         #: the friction law in use (zero when ``friction`` is off): :mod:`pinobs.model.friction`
         self.friction_law = law
         self.has_friction = bool(np.any(law.viscous) or law.has_coulomb or np.any(law.offset))

@@ -90,7 +90,7 @@ MAX_GAP_PERIODS = 10.0
 #: restart starts from zero velocity, which after 12–50 ms on a UR5 (1 kHz, PD input)
 #: costs more at the first sample (1.2–1.3 rad/s) than propagating (0.002–0.033), and
 #: after 0.2 s less (0.88 against 0.54 at the first sample, but 1.3e-3 against 0.44 rad/s
-#: 50 ms later; :meth:`pinobs.observers.base.Observer._after_pause`).
+#: 50 ms later; :func:`pinobs.observers.checks.propagate_gap`).
 PAUSE_RESTART = 0.1
 
 #: Log rows whose time is not after the previous accepted row are skipped one

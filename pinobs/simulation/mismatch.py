@@ -37,8 +37,7 @@ def mismatched_plant(robot: Robot, scenario: str, *, seed: int = 0) -> Robot:
         scale = 1.0 + error * rng.choice([-1.0, 1.0], n_bodies)
         payload = None
         if scenario == "inertia20_payload":
-            mass = sum(float(robot.model.inertias[i].mass) for i in range(1, robot.model.njoints))
-            payload = (0.1 * mass, [0.0, 0.0, 0.05])
+            payload = (0.1 * robot.total_mass(), [0.0, 0.0, 0.05])
         return robot.perturbed(
             name=f"{robot.name}[{scenario}]", inertia_scale=scale, payload=payload
         )

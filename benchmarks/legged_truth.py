@@ -43,15 +43,24 @@ Issue 38 targets: `v rms` ≤ 0.05 m/s and ≤ 0.7 × the quaternion EKF's; ≥ 
 every axis and consistent (NEES/3 0.5-2); an update ≤ 30 `pin.aba` on go1.
 
     python benchmarks/legged_truth.py [--duration 10] [--seeds 0 1 2] [--long 60]
-        [--sections go1 humanoid cost] [--merge] [--quick]
+        [--sections go1 humanoid cost real] [--merge] [--quick]
 
     python benchmarks/legged_truth.py --sections cost --merge    # the cost table alone
+    python benchmarks/legged_truth.py --sections real --merge    # the real Go1 log alone
+
+`real`: SEROW's Go1 log (no truth; `benchmarks/real_data.py`) through
+`pinobs.io.legged_run.legged_run` with `GAINS`, contacts from the force threshold or
+SEROW's probability, with and without the foot gate: the feet's NIS over the stance rows
+(`pinobs.observers.legs.stance_consistency`: NIS per degree of freedom, expected 1, and the
+share of stance rows inside their own 95 % χ² interval, expected 95 %), and the base speed
+where every joint moves slower than 0.05 rad/s (the stands).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import math
 import platform
@@ -100,6 +109,9 @@ OLD_GAINS = dataclasses.replace(GAINS, contact=0.1, kinematics=5e-3)
 #: the filters' convergence tests (tests/observers/test_inekf.py, test_qekf.py)
 STARTS = {"truth": (0.0, 0.0), "perturbed": (10.0, 0.3), "large": (30.0, 1.0)}
 FILTERS = {"inekf": InvariantEKF, "qekf": QuaternionEKF}
+#: The foot gate's outlier probability in the cost table's ``inekf+gate`` row and the real
+#: log's rows (``InvariantEKF(foot_gate=)``).
+FOOT_GATE = 1e-3
 
 
 def run_filter(
@@ -216,8 +228,9 @@ def measure_cost(run: Any, robot: pinobs.Robot, chunk: int = 20, chunks: int = 1
     q, gyro, acc = run.q_joints(), run.gyro(), run.acc()
     aba = aba_call(robot)
     out: dict[str, Any] = {}
+    gated = functools.partial(InvariantEKF, foot_gate=FOOT_GATE)
     with threadpool_limits(limits=1, user_api="blas"):
-        for name, cls in FILTERS.items():
+        for name, cls in {**FILTERS, "inekf+gate": gated}.items():
             for clock_name, clock in (("cpu", time.thread_time), ("wall", time.perf_counter)):
                 ekf = cls(robot, GO1_FEET, gains=GAINS, imu_frame="imu_link")
                 q0 = np.concatenate([run.base_q()[0], q[0]])
@@ -303,7 +316,81 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
                 f"{c['ratio']:.0f}× ({'met' if c['ratio'] <= 30 else 'missed'}) |"
             )
         md.append("")
+    md += _real_table(report.get("real") or {})
     return "\n".join(md)
+
+
+def real_log_nis() -> dict[str, Any]:
+    """The real Go1 log's feet NIS over stance rows and standing speed, per contact mode and
+    gate (module docstring, ``real``); empty without the shared data."""
+    import importlib.util
+    import warnings
+
+    from pinobs.io import read_log
+    from pinobs.io.legged_run import legged_run
+
+    spec = importlib.util.spec_from_file_location(
+        "real_data", Path(__file__).parent / "real_data.py"
+    )
+    assert spec is not None and spec.loader is not None
+    real = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(real)
+    root = real.data_root()
+    if root is None or not (root / real.SEROW_GO1).is_file():
+        return {}
+    go1 = pinobs.load("go1")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the note that the log has no base pose
+        log = read_log(real.serow_go1_frame(root / real.SEROW_GO1), go1)
+    out: dict[str, Any] = {}
+    for contacts in ("force", "probability"):
+        for gate in (None, FOOT_GATE):
+            run, flags, nis, dof = legged_run(
+                go1, log, gains=GAINS, contacts=contacts, foot_gate=gate
+            )
+            c = run.consistency
+            still = np.abs(run.v[:, 6:]).max(axis=1) < 0.05
+            speed = np.linalg.norm(run.v[still, :3], axis=1)
+            per_dof = nis / np.maximum(dof, 1)
+            stance = dof > 0
+            out[f"{contacts}, gate {gate}"] = {
+                "stance_rows": c.samples,
+                "rows": run.rows,
+                "nis_per_dof": c.mean_nis,
+                **{k: c.details[k] for k in ("median_per_dof", "inside", "below", "above")},
+                "gated": c.gated,
+                "in_contact": float(flags.mean()),
+                "still_rows": int(still.sum()),
+                "still_speed_max": float(speed.max()),
+                "still_speed_median": float(np.median(speed)),
+                "median_per_dof_standing": float(np.median(per_dof[stance & still])),
+                "median_per_dof_walking": float(np.median(per_dof[stance & ~still])),
+            }
+    return out
+
+
+def _real_table(real: dict[str, Any]) -> list[str]:
+    if not real:
+        return []
+    md = [
+        "SEROW's Go1 log (real, 25 s at 400 Hz, no truth; `GAINS`): the feet's NIS over the "
+        "stance rows (each row against its own 95 % χ² interval, dof = 3 × feet measured; a "
+        "consistent filter: NIS/dof 1, 95 % inside) and the base speed on the stands:",
+        "",
+        "| contacts, gate | stance rows | NIS/dof mean (median) | inside | below | above "
+        "| gated | in contact | NIS/dof median standing / walking "
+        "| stand speed max (median) [m/s] |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for name, r in real.items():
+        md.append(
+            f"| {name} | {r['stance_rows']} / {r['rows']} | {r['nis_per_dof']:.3g} "
+            f"({r['median_per_dof']:.3g}) | {100 * r['inside']:.1f} % | {100 * r['below']:.1f} % "
+            f"| {100 * r['above']:.1f} % | {r['gated']} | {100 * r['in_contact']:.1f} % "
+            f"| {r['median_per_dof_standing']:.3g} / {r['median_per_dof_walking']:.3g} "
+            f"| {r['still_speed_max']:.3f} ({r['still_speed_median']:.3f}) |"
+        )
+    return [*md, ""]
 
 
 def _runs(
@@ -331,7 +418,7 @@ def main() -> None:
     parser.add_argument(
         "--sections",
         nargs="+",
-        choices=["go1", "humanoid", "cost"],
+        choices=["go1", "humanoid", "cost", "real"],
         default=["go1", "humanoid"],
         help="what to run (go1 includes cost; cost alone: its trot only); with --merge, "
         "the others are kept from legged_truth.json",
@@ -349,6 +436,7 @@ def main() -> None:
         "old_gains": {},
         "cost": {},
         "humanoid": {},
+        "real": {},
     }
     if args.merge:
         report.update(json.loads((here / "legged_truth.json").read_text()))
@@ -366,6 +454,8 @@ def main() -> None:
             for seed in args.seeds:
                 run = simulate_humanoid(motion, args.duration, seed=seed, noise=NOISE, robot=talos)
                 _runs(report, "humanoid", f"TALOS {motion}", run, talos, GAINS)
+    if "real" in args.sections:
+        report["real"] = real_log_nis()
     report.setdefault("seconds", {})
     if not isinstance(report["seconds"], dict):
         report["seconds"] = {"go1": report["seconds"]}

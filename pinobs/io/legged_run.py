@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -138,7 +138,23 @@ def estimate_legged(
         contacts=contacts,
         probability=probability,
         foot_gate=foot_gate,
-    )[0]
+    ).run
+
+
+class LeggedDetail(NamedTuple):
+    """:func:`legged_run`'s result: the run and, per log row, what the filter was given and said.
+
+    Attributes:
+        run: the :class:`~pinobs.io.LogRun` (:func:`estimate_legged`'s).
+        contacts: the contact flags used ``(N, feet)`` (in the order of ``log.feet``).
+        nis: the feet's NIS per row (NaN where no foot was measured).
+        nis_dof: its degrees of freedom per row (3 × feet measured; 0: none).
+    """
+
+    run: LogRun
+    contacts: np.ndarray
+    nis: np.ndarray
+    nis_dof: np.ndarray
 
 
 def legged_run(
@@ -152,8 +168,8 @@ def legged_run(
     contacts: str = "force",
     probability: ContactProbability | None = None,
     foot_gate: float | None = None,
-) -> tuple[LogRun, np.ndarray]:
-    """:func:`estimate_legged` (same arguments), and the contact flags it used ``(N, feet)``."""
+) -> LeggedDetail:
+    """:func:`estimate_legged` (same arguments), with the contacts and the NIS per row."""
     if log.imu_gyro is None or log.imu_acc is None:
         raise LogFormatError(
             "inekf needs the trunk IMU: imu.gyro.x|y|z [rad/s] and imu.acc.x|y|z [m/s²] columns"
@@ -215,7 +231,7 @@ def legged_run(
         period=joints.period,
         consistency=stance_consistency(nis, dof, gated),
     )
-    return run, flags
+    return LeggedDetail(run, flags, nis, dof)
 
 
 def _probable(
@@ -292,4 +308,4 @@ def _joint_velocities(robot: Robot, log: Log) -> LogRun:
     return replace(run, warnings=[*run.warnings, *(str(w.message) for w in caught)])
 
 
-__all__ = ["CONTACT_MODES", "IMU_FRAME", "estimate_legged", "legged_run"]
+__all__ = ["CONTACT_MODES", "IMU_FRAME", "LeggedDetail", "estimate_legged", "legged_run"]

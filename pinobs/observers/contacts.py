@@ -78,7 +78,7 @@ def contacts_from_forces(
 #: the weight (between :data:`OFF_FRACTION` and :data:`ON_FRACTION`), the foot speed below
 #: which a foot is still [m/s] and its spread [m/s] (SEROW's ``VelocityThres: 0.2`` and
 #: ``lvnorm_sigma: 0.05``, config/estimation_params.yaml at mrsp/serow d968c5b).
-FORCE_MID, FORCE_SPREAD, SPEED_MAX, SPEED_SIGMA = 0.1125, 0.0375, 0.2, 0.05
+FORCE_MID, FORCE_SPREAD, SPEED_MAX, SPEED_SIGMA = 0.1125, 0.0375, 0.5, 0.1
 
 
 @dataclass(frozen=True)

@@ -150,6 +150,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pinobs.errors import GainError
 from pinobs.model import Robot
 from pinobs.observers.base import Vector
 from pinobs.observers.gating import GateState, gate_threshold
@@ -450,7 +451,10 @@ class InvariantEKF:
         self.feet, self.imu_placement = s.feet, s.imu_placement
         self._gravity = np.array(self.gravity, dtype=float)  # writable: the kernel's signature
         #: the foot gate's outlier probability (``None``: off) and its χ²₃ threshold
-        self.foot_gate, self._gate_nis = gate_threshold(foot_gate, 3)
+        try:
+            self.foot_gate, self._gate_nis = gate_threshold(foot_gate, 3)
+        except GainError as exc:
+            raise GainError(f"foot_gate: {exc}") from exc
         load_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
         self._state: InEKFState | None = None
         self._estimate: InEKFEstimate | None = None

@@ -323,18 +323,13 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
 def real_log_nis() -> dict[str, Any]:
     """The real Go1 log's feet NIS over stance rows and standing speed, per contact mode and
     gate (module docstring, ``real``); empty without the shared data."""
-    import importlib.util
     import warnings
+
+    import real_data as real  # beside this script
 
     from pinobs.io import read_log
     from pinobs.io.legged_run import legged_run
 
-    spec = importlib.util.spec_from_file_location(
-        "real_data", Path(__file__).parent / "real_data.py"
-    )
-    assert spec is not None and spec.loader is not None
-    real = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(real)
     root = real.data_root()
     if root is None or not (root / real.SEROW_GO1).is_file():
         return {}

@@ -157,6 +157,7 @@ from pinobs.observers.gating import GateState, gate_threshold
 from pinobs.observers.inekf_loops import (
     correct_kernel,
     expm_degree,
+    foot_nis_kernel,
     gamma_coefficients,
     load_kernels,
     propagate_kernel,
@@ -621,15 +622,15 @@ class InvariantEKF:
 
     def foot_nis(self, state: InEKFState, h: Vector, jac: Vector) -> Vector:
         """Eq. (8): each foot's own ``NIS_j = r_jᵀ S_jj⁻¹ r_j`` (3 dof) in the state's order,
-        with ``h``, ``jac`` the feet's positions and Jacobians (:meth:`LeggedSetup.legs`)."""
-        R, x, P = state.R, state.x, state.P
+        with ``h``, ``jac`` the feet's positions and Jacobians (:meth:`LeggedSetup.legs`), in
+        a compiled loop (:data:`pinobs.observers.inekf_loops.foot_nis_kernel`)."""
         feet = list(state.feet)
-        r = h[feet] @ R.T - (x[2:] - x[1])  # eq. (4), one row per foot
-        at = [9 + 3 * s for s in range(len(feet))]
-        P_dd = np.stack([P[a : a + 3, a : a + 3] for a in at])
-        P_pd = np.stack([P[6:9, a : a + 3] for a in at])
-        S = P[6:9, 6:9] + P_dd - P_pd - np.swapaxes(P_pd, 1, 2) + self._foot_noise(R, jac[feet])
-        return np.einsum("ki,ki->k", r, np.linalg.solve(S, r[..., None])[..., 0])
+        out = np.empty(len(feet))
+        kernel = foot_nis_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        g = self.gains
+        kernel(state.R, state.x, state.P, h[feet], jac[feet], g.joint**2, g.kinematics**2, out)
+        return out
 
     def _foot_noise(self, R: Vector, jac: Vector) -> Vector:
         """``N_j = R (J_j Σ_q J_jᵀ + σ_k² I) Rᵀ`` (eq. 4), for one ``J`` (3, n) or a stack (m, 3, n)."""

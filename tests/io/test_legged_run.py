@@ -185,7 +185,8 @@ def test_the_real_go1_logs_stance_nis_says_what_is_wrong_with_the_feet() -> None
     assert 0.3 < f.details["inside"] < 0.5 and f.details["above"] > 0.2  # measured 0.41, 0.26
     assert p.details["above"] < 0.01 and p.details["below"] > 0.5  # measured 0.001, 0.66
     still = np.abs(force.v[:, 6:]).max(axis=1) < 0.05
-    assert np.linalg.norm(force.v[still, :3], axis=1).max() < 0.05  # the stands
+    for run in (force, prob):  # the stands: measured 0.035 and 0.010 m/s at most
+        assert np.linalg.norm(run.v[still, :3], axis=1).max() < 0.05
 
 
 def test_cli_inekf_takes_the_contact_probability_and_the_foot_gate(tmp_path, trot, capsys) -> None:

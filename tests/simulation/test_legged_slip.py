@@ -3,16 +3,17 @@ without the invariant EKF's foot gate (each foot's own NIS through the shared ou
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 from functools import cache
+from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 pytest.importorskip("mujoco")
 
 import pinobs
-from pinobs.model import FootKinematics
 from pinobs.observers.inekf import InvariantEKF
 from pinobs.simulation.legged import GO1_FEET, LeggedNoise, simulate_legged
 from tests.simulation.test_legged import GAINS
@@ -20,19 +21,18 @@ from tests.simulation.test_legged import GAINS
 QUIET = LeggedNoise(0, 0, 0, 0, 0, 0, 0, 0)
 
 
-class SlidingLegs:
-    """go1's legs, one foot's measured position moved by ``offset`` (IMU frame): the foot
-    slid by ``R_imuᵀ Δd`` in the world while the legs still say "in contact"."""
-
-    def __init__(self, legs: FootKinematics) -> None:
-        self.legs, self.feet = legs, legs.feet
-        self.nq_joints, self.nv_joints = legs.nq_joints, legs.nv_joints
-        self.imu_placement = legs.imu_placement
-        self.offset = np.zeros((len(legs.feet), 3))
-
-    def positions_and_jacobians(self, q_joints):
-        h, jac = self.legs.positions_and_jacobians(q_joints)
-        return h + self.offset, jac
+@cache
+def bench():
+    """benchmarks/legged_truth.py (its ``SlidingLegs`` and ``slip_track``, the ``slip`` table's)."""
+    name = "pinobs_bench_legged_truth"
+    if name not in sys.modules:
+        path = Path(__file__).resolve().parents[2] / "benchmarks" / "legged_truth.py"
+        spec = importlib.util.spec_from_file_location(name, path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
 
 
 @cache
@@ -40,33 +40,9 @@ def stand(noise: LeggedNoise | None = None):
     return simulate_legged("stand", 3.0, seed=0, noise=noise)
 
 
-def track(run, *, gate: float | None, speed: float, duration: float, t0: float = 1.0):
-    """Base velocity error ``(samples, 3)`` and the feet gated, FL sliding at ``speed`` [m/s]
-    (direction (2, 1, 0)/√5) from ``t0`` for ``duration`` [s] while in contact."""
-    robot = pinobs.load("go1")
-    legs = SlidingLegs(FootKinematics(robot, GO1_FEET, imu_frame="imu_link"))
-    ekf = InvariantEKF(legs, gains=GAINS, foot_gate=gate)
-    q, gyro, acc = run.q_joints(), run.gyro(), run.acc()
-    contacts = run.forces() > 20.0
-    base_q, base_v = run.base_q(), run.base_v()
-    R_imu = Rotation.from_quat(base_q[:, 3:]).as_matrix() @ legs.imu_placement[0]
-    u = speed * np.array([2.0, 1.0, 0.0]) / np.sqrt(5.0)
-    ekf.reset(
-        run.t[0],
-        np.concatenate([base_q[0], q[0]]),
-        np.concatenate([base_v[0], np.zeros(12)]),
-        gyro=gyro[0],
-        acc=acc[0],
-        contacts=contacts[0],
-    )
-    err, gated = [np.zeros(3)], 0
-    for k in range(1, run.t.size):
-        slid = min(max(run.t[k] - t0, 0.0), duration)
-        legs.offset[0] = R_imu[k].T @ (u * slid)
-        est = ekf.update(run.t[k], q[k], gyro[k], acc[k], contacts[k])
-        err.append(est.v[:3] - base_v[k, :3])
-        gated += len(est.gated)
-    return np.array(err), gated
+def track(run, *, gate: float | None, speed: float, duration: float):
+    """Base velocity error and foot measurements gated, FL sliding (``slip_track``)."""
+    return bench().slip_track(run, gate=gate, speed=speed, duration=duration)
 
 
 def test_noise_free_on_the_truth_the_gate_rejects_nothing_and_changes_nothing() -> None:

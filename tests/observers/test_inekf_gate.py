@@ -82,3 +82,20 @@ def test_a_foot_that_jumps_is_gated_and_re_anchored_others_measured(go1) -> None
 def test_the_foot_gate_is_checked(go1) -> None:
     with pytest.raises(GainError, match=r"foot_gate: .*\(0, 0.5\)"):
         InvariantEKF(go1, FEET, foot_gate=0.6)
+
+
+@pytest.mark.parametrize("family", ["inekf", "qekf"])
+def test_nis_dof_counts_the_feet_measured(go1, family) -> None:
+    from pinobs.observers.qekf import QuaternionEKF
+
+    cls = InvariantEKF if family == "inekf" else QuaternionEKF
+    ekf = cls(go1, FEET, imu_frame="imu_link")
+    q = np.concatenate([[0, 0, 0.3, 0, 0, 0, 1], np.tile([0.0, 0.8, -1.6], 4)])
+    g = np.array([0.0, 0.0, 9.81])
+    assert (
+        ekf.reset(0.0, q, gyro=np.zeros(3), acc=g, contacts=[True, True, False, False]).nis_dof == 0
+    )
+    est = ekf.update(0.0025, q[7:], np.zeros(3), g, [True, True, True, False])  # RL lands
+    assert est.nis_dof == 6 and est.nis is not None
+    est = ekf.update(0.005, q[7:], np.zeros(3), g, [False] * 4)
+    assert est.nis_dof == 0 and est.nis is None

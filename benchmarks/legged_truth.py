@@ -43,15 +43,28 @@ Issue 38 targets: `v rms` ≤ 0.05 m/s and ≤ 0.7 × the quaternion EKF's; ≥ 
 every axis and consistent (NEES/3 0.5-2); an update ≤ 30 `pin.aba` on go1.
 
     python benchmarks/legged_truth.py [--duration 10] [--seeds 0 1 2] [--long 60]
-        [--sections go1 humanoid cost] [--merge] [--quick]
+        [--sections go1 humanoid cost real slip] [--merge] [--quick]
 
     python benchmarks/legged_truth.py --sections cost --merge    # the cost table alone
+    python benchmarks/legged_truth.py --sections real --merge    # the real Go1 log alone
+
+`real`: SEROW's Go1 log (no truth; `benchmarks/real_data.py`) through
+`pinobs.io.legged_run.legged_run` with `GAINS`, contacts from the force threshold or
+SEROW's probability, with and without the foot gate: the feet's NIS over the stance rows
+(`pinobs.observers.legs.stance_consistency`: NIS per degree of freedom, expected 1, and the
+share of stance rows inside their own 95 % χ² interval, expected 95 %), and the base speed
+where every joint moves slower than 0.05 rad/s (the stands); and, with `LOG_GAINS` (the IMU
+and encoder noise measured on the log's stands), the kinematics term varied.
+
+`slip`: go1 standing in MuJoCo, one foot made to slide while its force keeps it in contact
+(`SlidingLegs`), with and without the foot gate: the base velocity error (`slip_table`).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import math
 import platform
@@ -65,7 +78,7 @@ from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
 import pinobs
-from pinobs.model import aba_call
+from pinobs.model import FootKinematics, aba_call
 from pinobs.observers.inekf import InEKFGains, InEKFPrior, InvariantEKF, skew
 from pinobs.observers.qekf import QuaternionEKF
 from pinobs.simulation.legged import (
@@ -100,6 +113,13 @@ OLD_GAINS = dataclasses.replace(GAINS, contact=0.1, kinematics=5e-3)
 #: the filters' convergence tests (tests/observers/test_inekf.py, test_qekf.py)
 STARTS = {"truth": (0.0, 0.0), "perturbed": (10.0, 0.3), "large": (30.0, 1.0)}
 FILTERS = {"inekf": InvariantEKF, "qekf": QuaternionEKF}
+#: The real log's IMU densities measured on its stands (per-sample σ / √400 Hz, mean of the
+#: axes: gyro 0.014, 0.015, 0.063 rad/s; accelerometer 0.13, 0.09, 0.16 m/s²) and kf's
+#: encoder σ on the log (1e-4 rad); the kinematics term is the one varied in the table.
+LOG_GAINS = dataclasses.replace(GAINS, gyro=1.5e-3, accel=6.4e-3, joint=1e-4)
+#: The foot gate's outlier probability in the cost table's ``inekf+gate`` row and the real
+#: log's rows (``InvariantEKF(foot_gate=)``).
+FOOT_GATE = 1e-3
 
 
 def run_filter(
@@ -216,8 +236,9 @@ def measure_cost(run: Any, robot: pinobs.Robot, chunk: int = 20, chunks: int = 1
     q, gyro, acc = run.q_joints(), run.gyro(), run.acc()
     aba = aba_call(robot)
     out: dict[str, Any] = {}
+    gated = functools.partial(InvariantEKF, foot_gate=FOOT_GATE)
     with threadpool_limits(limits=1, user_api="blas"):
-        for name, cls in FILTERS.items():
+        for name, cls in {**FILTERS, "inekf+gate": gated}.items():
             for clock_name, clock in (("cpu", time.thread_time), ("wall", time.perf_counter)):
                 ekf = cls(robot, GO1_FEET, gains=GAINS, imu_frame="imu_link")
                 q0 = np.concatenate([run.base_q()[0], q[0]])
@@ -303,7 +324,170 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
                 f"{c['ratio']:.0f}× ({'met' if c['ratio'] <= 30 else 'missed'}) |"
             )
         md.append("")
+    md += _slip_lines(report.get("slip") or {})
+    md += _real_table(report.get("real") or {})
     return "\n".join(md)
+
+
+def real_log_nis() -> dict[str, Any]:
+    """The real Go1 log's feet NIS over stance rows and standing speed, per contact mode and
+    gate (module docstring, ``real``); empty without the shared data."""
+    import warnings
+
+    import real_data as real  # beside this script
+
+    from pinobs.io import read_log
+    from pinobs.io.legged_run import legged_run
+
+    root = real.data_root()
+    if root is None or not (root / real.SEROW_GO1).is_file():
+        return {}
+    go1 = pinobs.load("go1")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the note that the log has no base pose
+        log = read_log(real.serow_go1_frame(root / real.SEROW_GO1), go1)
+    out: dict[str, Any] = {}
+    rows = [
+        (f"{c}, gate {g}", GAINS, c, g) for c in ("force", "probability") for g in (None, FOOT_GATE)
+    ]
+    rows += [
+        (
+            f"probability, log's noise, kinematics {1e3 * k:g} mm",
+            dataclasses.replace(LOG_GAINS, kinematics=k),
+            "probability",
+            None,
+        )
+        for k in (1e-3, 3e-4, 1e-4)
+    ]
+    for name, gains, contacts, gate in rows:
+        run, flags, nis, dof = legged_run(go1, log, gains=gains, contacts=contacts, foot_gate=gate)
+        c = run.consistency
+        still = np.abs(run.v[:, 6:]).max(axis=1) < 0.05
+        speed = np.linalg.norm(run.v[still, :3], axis=1)
+        per_dof = nis / np.maximum(dof, 1)
+        stance = dof > 0
+        out[name] = {
+            "stance_rows": c.samples,
+            "rows": run.rows,
+            "nis_per_dof": c.mean_nis,
+            **{k: c.details[k] for k in ("median_per_dof", "inside", "below", "above")},
+            "gated": c.gated,
+            "in_contact": float(flags.mean()),
+            "still_rows": int(still.sum()),
+            "still_speed_max": float(speed.max()),
+            "still_speed_median": float(np.median(speed)),
+            "median_per_dof_standing": float(np.median(per_dof[stance & still])),
+            "median_per_dof_walking": float(np.median(per_dof[stance & ~still])),
+        }
+    return out
+
+
+class SlidingLegs:
+    """go1's legs with one foot's measured position moved by ``offset`` (IMU frame): the foot
+    slid by ``R_imuᵀ Δd`` in the world while its force keeps it in contact (a
+    :class:`~pinobs.observers.legs.ContactKinematics`)."""
+
+    def __init__(self, legs: Any) -> None:
+        self.legs, self.feet = legs, legs.feet
+        self.nq_joints, self.nv_joints = legs.nq_joints, legs.nv_joints
+        self.imu_placement = legs.imu_placement
+        self.offset = np.zeros((len(legs.feet), 3))
+
+    def positions_and_jacobians(self, q_joints: Any) -> tuple[Any, Any]:
+        h, jac = self.legs.positions_and_jacobians(q_joints)
+        return h + self.offset, jac
+
+
+def slip_track(
+    run: Any, *, gate: float | None, speed: float, duration: float, t0: float = 1.0
+) -> tuple[np.ndarray, int]:
+    """The invariant EKF (``GAINS``, started on the truth) with FL sliding at ``speed`` [m/s]
+    (direction (2, 1, 0)/√5) from ``t0`` for ``duration`` [s]: the base velocity error
+    ``(samples, 3)`` and the foot measurements gated."""
+    robot = pinobs.load("go1")
+    legs = SlidingLegs(FootKinematics(robot, GO1_FEET, imu_frame="imu_link"))
+    ekf = InvariantEKF(legs, gains=GAINS, foot_gate=gate)
+    q, gyro, acc = run.q_joints(), run.gyro(), run.acc()
+    contacts = run.forces() > CONTACT_FORCE
+    base_q, base_v = run.base_q(), run.base_v()
+    R_imu = Rotation.from_quat(base_q[:, 3:]).as_matrix() @ legs.imu_placement[0]
+    u = speed * np.array([2.0, 1.0, 0.0]) / np.sqrt(5.0)
+    q0, v0 = np.concatenate([base_q[0], q[0]]), np.concatenate([base_v[0], np.zeros(12)])
+    ekf.reset(run.t[0], q0, v0, gyro=gyro[0], acc=acc[0], contacts=contacts[0])
+    err, gated = [np.zeros(3)], 0
+    for k in range(1, run.t.size):
+        legs.offset[0] = R_imu[k].T @ (u * min(max(run.t[k] - t0, 0.0), duration))
+        est = ekf.update(run.t[k], q[k], gyro[k], acc[k], contacts[k])
+        err.append(est.v[:3] - base_v[k, :3])
+        gated += len(est.gated)
+    return np.array(err), gated
+
+
+#: (speed [m/s], duration [s]) of the slides of the ``slip`` section.
+SLIDES = ((1.0, 0.03), (0.5, 0.1), (0.2, 1.0))
+
+
+def slip_table() -> dict[str, Any]:
+    """The ``slip`` section: go1 standing 3 s (seed 0), FL sliding at t = 1 s, base velocity
+    error RMS (and max) over the slide and 0.5 s after, without and with the foot gate."""
+    run = simulate_legged("stand", 3.0, seed=0, noise=NOISE)
+    out: dict[str, Any] = {}
+    for speed, duration in SLIDES:
+        window = (run.t >= 1.0) & (run.t <= 1.5 + duration)
+        row: dict[str, Any] = {}
+        for gate in (None, FOOT_GATE, 1e-2):
+            err, gated = slip_track(run, gate=gate, speed=speed, duration=duration)
+            row[str(gate)] = {
+                "rms": float(np.sqrt(np.mean(err[window] ** 2))),
+                "max": float(np.abs(err[window]).max()),
+                "gated": gated,
+                "before": float(np.sqrt(np.mean(err[(run.t > 0.2) & (run.t < 1.0)] ** 2))),
+            }
+        out[f"{100 * speed * duration:g} cm in {duration:g} s ({speed:g} m/s)"] = row
+    return out
+
+
+def _slip_lines(slip: dict[str, Any]) -> list[str]:
+    if not slip:
+        return []
+    gates = list(next(iter(slip.values())))
+    md = [
+        "A foot that slides while its force keeps it in contact (`SlidingLegs`: go1 standing, "
+        "seed 0, FL moved in the world from t = 1 s; the invariant EKF from the truth): base "
+        "velocity error RMS [m/s] over the slide and 0.5 s after (max; foot measurements gated):",
+        "",
+        "| slide | " + " | ".join(f"foot_gate {g}" for g in gates) + " |",
+        "|---|" + "---:|" * len(gates),
+    ]
+    for name, row in slip.items():
+        cells = [f"{r['rms']:.4f} ({r['max']:.3f}; {r['gated']})" for r in row.values()]
+        md.append(f"| {name} | " + " | ".join(cells) + " |")
+    before = next(iter(next(iter(slip.values())).values()))["before"]
+    return [*md, "", f"Before the slide: {before:.4f} m/s RMS.", ""]
+
+
+def _real_table(real: dict[str, Any]) -> list[str]:
+    if not real:
+        return []
+    md = [
+        "SEROW's Go1 log (real, 25 s at 400 Hz, no truth; `GAINS`): the feet's NIS over the "
+        "stance rows (each row against its own 95 % χ² interval, dof = 3 × feet measured; a "
+        "consistent filter: NIS/dof 1, 95 % inside) and the base speed on the stands:",
+        "",
+        "| contacts, gate | stance rows | NIS/dof mean (median) | inside | below | above "
+        "| gated | in contact | NIS/dof median standing / walking "
+        "| stand speed max (median) [m/s] |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for name, r in real.items():
+        md.append(
+            f"| {name} | {r['stance_rows']} / {r['rows']} | {r['nis_per_dof']:.3g} "
+            f"({r['median_per_dof']:.3g}) | {100 * r['inside']:.1f} % | {100 * r['below']:.1f} % "
+            f"| {100 * r['above']:.1f} % | {r['gated']} | {100 * r['in_contact']:.1f} % "
+            f"| {r['median_per_dof_standing']:.3g} / {r['median_per_dof_walking']:.3g} "
+            f"| {r['still_speed_max']:.3f} ({r['still_speed_median']:.3f}) |"
+        )
+    return [*md, ""]
 
 
 def _runs(
@@ -331,7 +515,7 @@ def main() -> None:
     parser.add_argument(
         "--sections",
         nargs="+",
-        choices=["go1", "humanoid", "cost"],
+        choices=["go1", "humanoid", "cost", "real", "slip"],
         default=["go1", "humanoid"],
         help="what to run (go1 includes cost; cost alone: its trot only); with --merge, "
         "the others are kept from legged_truth.json",
@@ -349,6 +533,8 @@ def main() -> None:
         "old_gains": {},
         "cost": {},
         "humanoid": {},
+        "real": {},
+        "slip": {},
     }
     if args.merge:
         report.update(json.loads((here / "legged_truth.json").read_text()))
@@ -366,6 +552,10 @@ def main() -> None:
             for seed in args.seeds:
                 run = simulate_humanoid(motion, args.duration, seed=seed, noise=NOISE, robot=talos)
                 _runs(report, "humanoid", f"TALOS {motion}", run, talos, GAINS)
+    if "real" in args.sections:
+        report["real"] = real_log_nis()
+    if "slip" in args.sections:
+        report["slip"] = slip_table()
     report.setdefault("seconds", {})
     if not isinstance(report["seconds"], dict):
         report["seconds"] = {"go1": report["seconds"]}

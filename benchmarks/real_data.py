@@ -378,3 +378,33 @@ if __name__ == "__main__":
             f"{'—' if moving is None else f'{moving:.3f}'} | "
             f"{'—' if rms is None else f'{rms:.4f}'} |"
         )
+
+
+# ------------------------------------------------------------------ SEROW's Go1
+#: SEROW's Go1 unit-test log under the shared data folder (legged robots, issue 38).
+SEROW_GO1 = "serow_go1/evaluation/unit_tests/data/go1.csv"
+SEROW_MG = 12 * 9.81  # go1_test.cpp: mass 12 kg, g 9.81 m/s²
+SEROW_BIAS = -6.0  # go1_test.cpp: the raw reading of an unloaded foot
+
+
+def serow_go1_frame(path: Path) -> pd.DataFrame:
+    """SEROW's Go1 unit-test CSV in pinobs' table columns.
+
+    ``Time(s)`` -> ``t`` (as recorded); ``BaseWx..z`` -> ``imu.gyro.*`` [rad/s];
+    ``BaseAx..z`` -> ``imu.acc.*`` [m/s²]; ``JointPos<LEG>_<part>`` ->
+    ``q.<LEG>_<part>_joint``; the raw foot readings ``<LEG>_Force`` (integers, not N)
+    -> ``force.<LEG>_foot`` [N] scaled as SEROW's ``go1_test.cpp`` does::
+
+        f = clip((raw − b) · m g / (m g − 4 b), 0, m g),   m = 12 kg, g = 9.81, b = −6
+    """
+    raw = pd.read_csv(path)
+    out = {"t": raw["Time(s)"]}
+    for a in "xyz":
+        out[f"imu.gyro.{a}"] = raw[f"BaseW{a}"]
+        out[f"imu.acc.{a}"] = raw[f"BaseA{a}"]
+    for leg in ("FR", "FL", "RR", "RL"):
+        force = (raw[f"{leg}_Force"] - SEROW_BIAS) * SEROW_MG / (SEROW_MG - 4 * SEROW_BIAS)
+        out[f"force.{leg}_foot"] = force.clip(0.0, SEROW_MG)  # go1_test.cpp, line 72
+        for part in ("hip", "thigh", "calf"):
+            out[f"q.{leg}_{part}_joint"] = raw[f"JointPos{leg}_{part}"]
+    return pd.DataFrame(out)

@@ -116,6 +116,21 @@ def _add_legged_options(p: argparse.ArgumentParser) -> None:
         help="a foot touches from ON [N] until its force falls to OFF (default OFF = ON/2; "
         "default ON = 0.15 of the robot's weight, OFF = 0.075)",
     )
+    g.add_argument(
+        "--contacts",
+        choices=("force", "probability"),
+        default=None,
+        help="force: the log's contact.* flags or the force threshold (default); probability: "
+        "SEROW's force x foot-speed probability (the speed from the filter)",
+    )
+    g.add_argument(
+        "--foot-gate",
+        type=float,
+        default=None,
+        metavar="P",
+        help="gate each foot by its own innovation (outlier probability P, e.g. 1e-3): a foot "
+        "that slips is re-anchored instead of dragging the base",
+    )
 
 
 def _add_smoother_options(p: argparse.ArgumentParser) -> None:
@@ -314,7 +329,11 @@ INEKF = "inekf"
 
 
 def _check_legged_options(args: argparse.Namespace) -> None:
-    legged = [f for f in ("imu_frame", "contact_force") if getattr(args, f) is not None]
+    legged = [
+        f
+        for f in ("imu_frame", "contact_force", "contacts", "foot_gate")
+        if getattr(args, f) is not None
+    ]
     if args.observer != INEKF:
         if legged:
             flags = ", ".join("--" + f.replace("_", "-") for f in legged)
@@ -350,13 +369,31 @@ def _estimate_legged(args: argparse.Namespace) -> int:
         args.log, robot, columns=column_map(args.map), topic=args.topic, drives=drives_option(args)
     )
     on, off = [*(args.contact_force or []), None, None][:2]
-    run = estimate_legged(robot, log, imu_frame=args.imu_frame, contact_on=on, contact_off=off)
+    run = estimate_legged(
+        robot,
+        log,
+        imu_frame=args.imu_frame,
+        contact_on=on,
+        contact_off=off,
+        contacts=args.contacts or "force",
+        foot_gate=args.foot_gate,
+    )
     write_estimates(args.out, run, force=args.force)
     # (the note that the base pose is not in the log: this observer fills it)
     notes = [n for n in log.notes if not n.startswith("the base pose")]
     for w in (*notes, *run.warnings):
         print(f"warning: {w}", file=sys.stderr)
     _print_bad_rows(args, run)
+    c = run.consistency
+    if c is not None and c.samples:
+        print(
+            f"{INEKF}: feet's NIS over {c.samples} stance rows: {c.mean_nis:.3g} per degree of "
+            f"freedom (expected 1), {100 * c.details['inside']:.0f} % inside their 95 % χ² "
+            f"interval ({100 * c.details['below']:.0f} % below, {100 * c.details['above']:.0f} "
+            f"% above){f'; {c.gated} foot measurements gated' if c.gated else ''}"
+        )
+        for w in consistency_warnings({INEKF: replace(c, gated=0)}):
+            print(w, file=sys.stderr)
     if args.html and run.estimated:
         # the legs as measured on the estimated base (a legged log has no base pose to show)
         shown = replace(log, q=np.where(np.isnan(log.q), run.q, log.q))

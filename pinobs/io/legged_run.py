@@ -11,9 +11,17 @@ angular velocity, the joints').  So the writers, the playback and the CLI
 
 * **Joint velocities**: the model-free ``kf`` over the joint columns (the robot with its
   root locked), run through :func:`~pinobs.io.estimate_log` with the usual row rules.
-* **Contacts**: the log's ``contact.<foot>`` flags, else the ``force.<foot>`` columns
-  through :func:`~pinobs.observers.contacts.contacts_from_forces` (threshold and
-  hysteresis; defaults from the robot's weight).
+* **Contacts** (``contacts=``): ``"force"`` (default): the log's ``contact.<foot>``
+  flags, else the ``force.<foot>`` columns through
+  :func:`~pinobs.observers.contacts.contacts_from_forces` (threshold and hysteresis;
+  defaults from the robot's weight); ``"probability"``: the force and the foot's speed
+  as the filter predicts it from the previous row (SEROW's,
+  :class:`~pinobs.observers.contacts.ContactProbability`), row by row.
+* **Slip**: ``foot_gate=p`` gates each foot by its own innovation (the filter's
+  ``foot_gate``): a foot that slides while flagged in contact is re-anchored, not measured.
+* **Consistency**: ``run.consistency`` is the feet's NIS over the stance rows
+  (:func:`~pinobs.observers.legs.stance_consistency`: mean NIS per degree of freedom and
+  the fraction of rows inside their 95 % χ² interval).
 * **Start**: the first row with a finite IMU reading and finite joint angles.  The base
   pose is the log's where it has one; else the base at the origin, its roll and pitch
   from the accelerometer (at rest it reads ``Rᵀ(0, 0, g)``) and yaw zero: the filter's
@@ -28,19 +36,28 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from pinobs.errors import DimensionError, LogFormatError, ObserverDiverged
+from pinobs.errors import DimensionError, LogFormatError, ObserverDiverged, OptionError
 from pinobs.io.readers import Log
 from pinobs.io.runs import estimate_log
 from pinobs.io.stream import LogRun
 from pinobs.model import Robot, load
 from pinobs.model.robot import Vector
 from pinobs.observers import make_observer
-from pinobs.observers.contacts import contacts_from_forces, default_thresholds
+from pinobs.observers.contacts import (
+    ContactProbability,
+    contacts_from_forces,
+    contacts_from_probability,
+    default_thresholds,
+)
 from pinobs.observers.inekf import InEKFGains, InvariantEKF, rotation_to_quaternion
+from pinobs.observers.legs import stance_consistency
+
+#: ``contacts=`` of :func:`estimate_legged`.
+CONTACT_MODES = ("force", "probability")
 
 #: The IMU frame used when the model has one of this name and none is given.
 IMU_FRAME = "imu_link"
@@ -88,6 +105,9 @@ def estimate_legged(
     contact_on: float | None = None,
     contact_off: float | None = None,
     gains: InEKFGains | None = None,
+    contacts: str = "force",
+    probability: ContactProbability | None = None,
+    foot_gate: float | None = None,
 ) -> LogRun:
     """The free-flyer estimate over a legged log (module docstring).
 
@@ -97,23 +117,79 @@ def estimate_legged(
         imu_frame: the IMU's frame; default ``imu_link`` if the model has it, else the root.
         contact_on, contact_off: force thresholds [N] (:mod:`pinobs.observers.contacts`).
         gains: the filter's noise levels (:class:`~pinobs.observers.inekf.InEKFGains`).
+        contacts: ``"force"`` or ``"probability"`` (module docstring).
+        probability: its parameters (default :meth:`ContactProbability.for_robot`).
+        foot_gate: the filter's foot gate (outlier probability; ``None``: off).
 
     Raises:
-        LogFormatError: no IMU columns, no contact or force columns.
+        LogFormatError: no IMU columns, no contact or force columns (no force columns
+            with ``contacts="probability"``).
+        OptionError: ``contacts`` not one of :data:`CONTACT_MODES`.
         UnsupportedRobotError: a robot without a free-flyer root (the filter's).
         UnknownNameError: a foot or IMU frame not in the model.
     """
+    return legged_run(
+        robot,
+        log,
+        imu_frame=imu_frame,
+        contact_on=contact_on,
+        contact_off=contact_off,
+        gains=gains,
+        contacts=contacts,
+        probability=probability,
+        foot_gate=foot_gate,
+    ).run
+
+
+class LeggedDetail(NamedTuple):
+    """:func:`legged_run`'s result: the run and, per log row, what the filter was given and said.
+
+    Attributes:
+        run: the :class:`~pinobs.io.LogRun` (:func:`estimate_legged`'s).
+        contacts: the contact flags used ``(N, feet)`` (in the order of ``log.feet``).
+        nis: the feet's NIS per row (NaN where no foot was measured).
+        nis_dof: its degrees of freedom per row (3 × feet measured; 0: none).
+    """
+
+    run: LogRun
+    contacts: np.ndarray
+    nis: np.ndarray
+    nis_dof: np.ndarray
+
+
+def legged_run(
+    robot: Robot,
+    log: Log,
+    *,
+    imu_frame: str | None = None,
+    contact_on: float | None = None,
+    contact_off: float | None = None,
+    gains: InEKFGains | None = None,
+    contacts: str = "force",
+    probability: ContactProbability | None = None,
+    foot_gate: float | None = None,
+) -> LeggedDetail:
+    """:func:`estimate_legged` (same arguments), with the contacts and the NIS per row."""
     if log.imu_gyro is None or log.imu_acc is None:
         raise LogFormatError(
             "inekf needs the trunk IMU: imu.gyro.x|y|z [rad/s] and imu.acc.x|y|z [m/s²] columns"
         )
+    if contacts not in CONTACT_MODES:
+        raise OptionError(f"contacts={contacts!r}: choose one of {', '.join(CONTACT_MODES)}")
     if imu_frame is None and robot.model.existFrame(IMU_FRAME):
         imu_frame = IMU_FRAME
-    contacts = _contacts(robot, log, contact_on, contact_off)
-    filt = InvariantEKF(robot, log.feet, gains=gains, imu_frame=imu_frame)
+    if contacts == "probability":
+        if log.foot_force is None:
+            raise LogFormatError("contacts='probability' needs force.<foot frame> [N] columns")
+        prob = ContactProbability.for_robot(robot) if probability is None else probability
+        flags = np.zeros((len(log), len(log.feet)), dtype=bool)
+    else:
+        prob, flags = None, _contacts(robot, log, contact_on, contact_off)
+    filt = InvariantEKF(robot, log.feet, gains=gains, imu_frame=imu_frame, foot_gate=foot_gate)
     joints = _joint_velocities(robot, log)
     n = len(log)
     q_out, v_out = np.full((n, robot.nq), np.nan), np.full((n, robot.nv), np.nan)
+    nis, dof, gated = np.full(n, np.nan), np.zeros(n, dtype=int), 0
     bad: list[tuple[int, str]] = list(joints.bad_rows)
     usable = (
         np.isfinite(log.t)
@@ -126,8 +202,12 @@ def estimate_legged(
     for k in range(n):
         if not usable[k] or (previous is not None and log.t[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
+            if prob is not None and k:
+                flags[k] = flags[k - 1]
             continue
-        est = _step(filt, robot, log, k, contacts[k], joints.v[k], previous is None)
+        if prob is not None:
+            flags[k] = _probable(filt, prob, log, k, joints.v[k], flags[k - 1] if k else None)
+        est = _step(filt, robot, log, k, flags[k], joints.v[k], previous is None)
         if est is None:
             said.append(f"inekf diverged at t = {log.t[k]:.6g} s: the rows after it are NaN")
             bad.extend((int(log.lines[j]), "after the filter diverged") for j in range(k, n))
@@ -135,8 +215,10 @@ def estimate_legged(
         previous = float(log.t[k])
         q_out[k], v_out[k] = est.q, est.v
         v_out[k, 6:] = joints.v[k]  # (what update passes through; reset shows none)
+        nis[k] = np.nan if est.nis is None else est.nis
+        dof[k], gated = est.nis_dof, gated + len(est.gated)
     done = int(np.all(np.isfinite(q_out), axis=1).sum())
-    return LogRun(
+    run = LogRun(
         t=log.t.copy(),
         q=q_out,
         v=v_out,
@@ -147,7 +229,28 @@ def estimate_legged(
         measured=done,
         unit=log.unit,
         period=joints.period,
+        consistency=stance_consistency(nis, dof, gated),
     )
+    return LeggedDetail(run, flags, nis, dof)
+
+
+def _probable(
+    filt: InvariantEKF,
+    prob: ContactProbability,
+    log: Log,
+    k: int,
+    dq_row: Vector,
+    previous: np.ndarray | None,
+) -> np.ndarray:
+    """Row ``k``'s flags from its forces and the feet's speeds the filter predicts (the
+    first row, or without joint velocities: the force alone, speed 0)."""
+    assert log.foot_force is not None and log.imu_gyro is not None
+    speed = np.zeros(len(log.feet))
+    if previous is not None and np.all(np.isfinite(dq_row)):
+        vel = filt.foot_velocities(log.q[k, 7:], dq_row, log.imu_gyro[k])
+        speed = np.linalg.norm(vel, axis=1)
+    before = np.zeros(len(log.feet), dtype=bool) if previous is None else previous
+    return contacts_from_probability(prob(log.foot_force[k], speed), before)
 
 
 def _why(log: Log, k: int, usable: bool) -> str:
@@ -205,4 +308,4 @@ def _joint_velocities(robot: Robot, log: Log) -> LogRun:
     return replace(run, warnings=[*run.warnings, *(str(w.message) for w in caught)])
 
 
-__all__ = ["IMU_FRAME", "estimate_legged"]
+__all__ = ["CONTACT_MODES", "IMU_FRAME", "LeggedDetail", "estimate_legged", "legged_run"]

@@ -1,4 +1,5 @@
-"""Foot contacts from measured normal forces: a threshold with hysteresis (issue 38, item 2).
+"""Foot contacts from measured normal forces: a threshold with hysteresis, or a probability
+from the force and the foot's speed (:class:`ContactProbability`, as SEROW) (issue 38, item 2).
 
 A foot is in contact from the first sample whose normal force reaches ``on`` until the
 first one that falls to ``off`` (``off < on``): a Schmitt trigger per foot,
@@ -18,6 +19,7 @@ Go1, whose ``0.15 W`` is 18.7 N; a foot of a trotting quadruped carries about ``
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -69,3 +71,81 @@ def contacts_from_forces(
     index = np.where(np.isnan(rows), 0, np.arange(rows.shape[0])[:, None])
     last = np.maximum.accumulate(index, axis=0)
     return np.take_along_axis(rows, last, axis=0)[1:] > 0.5
+
+
+# ------------------------------------------------------------- contact probability
+#: :class:`ContactProbability`'s defaults: its force's mid-point and spread as fractions of
+#: the weight (between :data:`OFF_FRACTION` and :data:`ON_FRACTION`), the foot speed below
+#: which a foot is still [m/s] and its spread [m/s] (SEROW's ``VelocityThres: 0.2`` and
+#: ``lvnorm_sigma: 0.05``, config/estimation_params.yaml at mrsp/serow d968c5b).
+FORCE_MID, FORCE_SPREAD, SPEED_MAX, SPEED_SIGMA = 0.1125, 0.0375, 0.5, 0.1
+
+
+@dataclass(frozen=True)
+class ContactProbability:
+    """A foot's contact probability from its normal force and its speed (issue 38, item 2).
+
+        SEROW's probabilistic contact detection (Piperakis et al., mrsp/serow,
+        ``include/serow/ContactDetectionQuad.h`` at commit d968c5b, ``computeForceContactProb``
+        and ``computeKinContactProb``): the force and the foot's speed, each with a Gaussian
+        uncertainty, must both say "in contact"::
+
+            p = Φ((f − f_min) / σ_f) · Φ((v_max − |v_foot|) / σ_v),     in contact ⇔ p > ½
+
+    (``Φ`` the standard normal CDF; SEROW's current ``Serow::runContactEstimator``,
+        core/src/Serow.cpp at b2e0d0b, also sets the status at ``p > 0.5``).  ``v_foot`` is the
+        foot's velocity in the world as the filter predicts it (:meth:`InvariantEKF.foot_velocities
+        <pinobs.observers.inekf.InvariantEKF.foot_velocities>`): a foot still pushing down but
+        already moving (lift-off) or sliding is out of contact, where a force threshold keeps it.
+        SEROW normalises its four probabilities by their sum (so that they share one); that
+        would put four feet in stance at ¼ each, so each foot is kept on its own here.
+
+        Attributes:
+            force_min: ``f_min`` [N].
+            force_sigma: ``σ_f`` [N].
+            speed_max: ``v_max`` [m/s].
+            speed_sigma: ``σ_v`` [m/s].
+    """
+
+    force_min: float
+    force_sigma: float
+    speed_max: float = SPEED_MAX
+    speed_sigma: float = SPEED_SIGMA
+
+    def __post_init__(self) -> None:
+        for name in ("force_min", "force_sigma", "speed_max", "speed_sigma"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise GainError(
+                    f"ContactProbability.{name} must be a finite number ≥ 0, got {value!r}"
+                )
+        if self.force_sigma == 0 or self.speed_sigma == 0:
+            raise GainError("ContactProbability: force_sigma and speed_sigma must be > 0")
+
+    @classmethod
+    def for_robot(cls, robot: Robot) -> ContactProbability:
+        """Defaults from the robot's weight ``W``: ``f_min = 0.1125 W``, ``σ_f = 0.0375 W``
+        (the Schmitt trigger's ``on`` and ``off`` are ``f_min ± σ_f``)."""
+        weight = G * robot.total_mass()
+        return cls(FORCE_MID * weight, FORCE_SPREAD * weight)
+
+    def __call__(self, force: ArrayLike, foot_speed: ArrayLike) -> NDArray[np.float64]:
+        """``p`` per foot (same shape as ``force``) from forces [N] and speeds [m/s]; a NaN
+        force gives NaN (:func:`contacts_from_probability` keeps the previous state)."""
+        f, v = np.asarray(force, dtype=float), np.asarray(foot_speed, dtype=float)
+        z_f = (f - self.force_min) / self.force_sigma
+        z_v = (self.speed_max - v) / self.speed_sigma
+        # Φ(z) = ½ erfc(−z/√2); SEROW d968c5b ContactDetectionQuad.h: p_f · p_v
+        return 0.25 * _erfc(-z_f / math.sqrt(2.0)) * _erfc(-z_v / math.sqrt(2.0))
+
+
+def _erfc(z: NDArray[np.float64]) -> NDArray[np.float64]:
+    from scipy.special import erfc
+
+    return np.asarray(erfc(z), dtype=float)
+
+
+def contacts_from_probability(p: ArrayLike, previous: ArrayLike) -> NDArray[np.bool_]:
+    """Flags ``p > ½`` per foot; a NaN probability keeps the foot's ``previous`` flag."""
+    prob, prev = np.asarray(p, dtype=float), np.asarray(previous, dtype=bool)
+    return np.where(np.isnan(prob), prev, prob > 0.5)

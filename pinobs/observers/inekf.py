@@ -101,6 +101,17 @@ is ``ξ_dj = ξ_p + R̂ J_j w_q``::
 
     P ← F P Fᵀ + G N_j Gᵀ,   F: the new rows copy ξ_p's,   G: the new block.    (6)
 
+A slipping foot (the paper's contact model assumes none beyond the white ``w_c``) is caught
+with ``foot_gate=p``: before (5) each foot in the state is tested alone, its marginal
+innovation ``r_j`` (eq. 4) against its own block of ``S``::
+
+    NIS_j = r_jᵀ S_jj⁻¹ r_j,   S_jj = P_pp − P_pdj − P_djp + P_djdj + N_j   (χ² with 3 dof)
+
+by the shared outlier gate (:mod:`pinobs.observers.gating`, threshold ``χ²₃(1 − p)``).  A
+rejected foot does not correct the base: it is removed (its marginal) and re-anchored
+where the legs now put it, by (6), as a foot that lands (its next innovation starts from
+zero, so a run of rejections cannot leave the filter without feet).                    (8)
+
 Prior (at ``reset``, before any foot is added).  :class:`InEKFPrior` gives independent
 errors of the attitude ``ξ_R``, of the velocity in the base frame ``v_b`` (as ``reset``
 takes it), and of the world position: ``ξ_v = R̂ (v̂_b − v_b)`` exactly, and to first
@@ -139,11 +150,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pinobs.errors import GainError
 from pinobs.model import Robot
 from pinobs.observers.base import Vector
+from pinobs.observers.gating import GateState, gate_threshold
 from pinobs.observers.inekf_loops import (
     correct_kernel,
     expm_degree,
+    foot_nis_kernel,
     gamma_coefficients,
     load_kernels,
     propagate_kernel,
@@ -397,9 +411,12 @@ class InvariantEKF:
             ``"average"`` (the mean of the readings at ``t_k`` and ``t_{k+1}``: second
             order in the period for readings sampled from a smooth motion, where
             ``"previous"`` is first order).
+        foot_gate: the outlier probability ``p`` of the foot gate (module docstring, eq. 8):
+            a foot whose own NIS exceeds ``χ²₃(1 − p)`` is re-anchored instead of measured;
+            ``None`` (default): every foot in contact is measured.
 
     Raises:
-        GainError: an ``imu_hold`` that is neither.
+        GainError: an ``imu_hold`` that is neither; a ``foot_gate`` not in (0, 0.5).
         UnknownNameError: a foot frame that is not in the model (names the frames).
         UnsupportedRobotError: a robot without a free-flyer root joint.
     """
@@ -413,6 +430,7 @@ class InvariantEKF:
         gravity: ArrayLike = GRAVITY,
         imu_hold: str = "previous",
         imu_frame: str | None = None,
+        foot_gate: float | None = None,
     ) -> None:
         #: the legs, options and conversions shared with the quaternion EKF
         self.setup = LeggedSetup(
@@ -433,6 +451,11 @@ class InvariantEKF:
         )
         self.feet, self.imu_placement = s.feet, s.imu_placement
         self._gravity = np.array(self.gravity, dtype=float)  # writable: the kernel's signature
+        #: the foot gate's outlier probability (``None``: off) and its χ²₃ threshold
+        try:
+            self.foot_gate, self._gate_nis = gate_threshold(foot_gate, 3)
+        except GainError as exc:
+            raise GainError(f"foot_gate: {exc}") from exc
         load_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
         self._state: InEKFState | None = None
         self._estimate: InEKFEstimate | None = None
@@ -535,12 +558,27 @@ class InvariantEKF:
         u = self.setup.update_inputs(state.t, t, q, gyro, acc, contacts, joint_velocities)
         new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
         h, jac = self.setup.legs(u.q_joints)
-        new, nis = self._correct(new, u.flags, h, jac)
+        new, nis, used, gated = self._correct(new, u.flags, h, jac)
         self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
-        self._commit(
-            new, u.q_joints, u.joint_velocities, nis, u.reading, u.t if any(u.flags) else None
-        )
+        contact_time = u.t if any(u.flags) else None
+        self._commit(new, u.q_joints, u.joint_velocities, nis, u.reading, contact_time, used, gated)
         return self.estimate
+
+    def foot_velocities(self, q: ArrayLike, joint_velocities: ArrayLike, gyro: ArrayLike) -> Vector:
+        """Each foot's velocity in the world [m/s], ``(K, 3)`` in the order of ``feet``, from
+        the current state and the joint angles ``q`` (``nq − 7``), their velocities and the gyro
+        reading (IMU frame, [rad/s])::
+
+            ṗ_j = v̂ + R̂ ((ω̃ − b̂_g) × h_j(q) + J_j(q) q̇)      (zero for a foot that stands)
+
+        (what :class:`pinobs.observers.contacts.ContactProbability` takes as the foot's speed).
+        """
+        state = self.state
+        h, jac = self.setup.legs(Robot.check_vector(q, self.setup.nq_joints, what="q"))
+        dq = Robot.check_vector(joint_velocities, self.setup.nv_joints, what="joint_velocities")
+        w = Robot.check_vector(gyro, 3, what="gyro") - state.bias[:3]
+        local = np.cross(w, h) + jac @ dq  # in the IMU frame
+        return np.asarray(state.x[0] + local @ state.R.T)
 
     # ------------------------------------------------------------- the steps
     def _propagate(self, state: InEKFState, imu: Vector, dt: float, t: float) -> InEKFState:
@@ -557,11 +595,22 @@ class InvariantEKF:
 
     def _correct(
         self, state: InEKFState, flags: list[bool], h: Vector, jac: Vector
-    ) -> tuple[InEKFState, float | None]:
-        """Contacts ended are removed, eqs. (4)-(5) for those that continue, eq. (6) for new ones."""
+    ) -> tuple[InEKFState, float | None, int, tuple[int, ...]]:
+        """Contacts ended are removed, eqs. (4)-(5) for those that continue, eq. (6) for new
+        ones and, with the foot gate, for those it rejects (eq. 8).  Returns the state, the NIS,
+        the number of feet measured and those gated (indices into ``feet``)."""
         ended = [s for s, j in enumerate(state.feet) if not flags[j]]
         if ended:
             state = remove_feet(state, ended)
+        gated: list[int] = []
+        if state.feet and self.foot_gate is not None:
+            nis_j = self.foot_nis(state, h, jac)
+            gated = [
+                s for s, z in enumerate(nis_j) if GateState().measured(z, self._gate_nis, 3).gated
+            ]  # the shared gate, fresh for each foot: a rejected one is re-anchored (eq. 8)
+            dropped = tuple(state.feet[s] for s in gated)
+            if gated:
+                state = remove_feet(state, gated)
         measured = list(state.feet)
         nis = None
         if measured:
@@ -569,7 +618,19 @@ class InvariantEKF:
         new = [j for j, f in enumerate(flags) if f and j not in measured]
         if new:
             state = self._add_feet(state, new, h, jac)
-        return state, nis
+        return state, nis, len(measured), dropped if gated else ()
+
+    def foot_nis(self, state: InEKFState, h: Vector, jac: Vector) -> Vector:
+        """Eq. (8): each foot's own ``NIS_j = r_jᵀ S_jj⁻¹ r_j`` (3 dof) in the state's order,
+        with ``h``, ``jac`` the feet's positions and Jacobians (:meth:`LeggedSetup.legs`), in
+        a compiled loop (:data:`pinobs.observers.inekf_loops.foot_nis_kernel`)."""
+        feet = list(state.feet)
+        out = np.empty(len(feet))
+        kernel = foot_nis_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        g = self.gains
+        kernel(state.R, state.x, state.P, h[feet], jac[feet], g.joint**2, g.kinematics**2, out)
+        return out
 
     def _foot_noise(self, R: Vector, jac: Vector) -> Vector:
         """``N_j = R (J_j Σ_q J_jᵀ + σ_k² I) Rᵀ`` (eq. 4), for one ``J`` (3, n) or a stack (m, 3, n)."""
@@ -662,6 +723,8 @@ class InvariantEKF:
         nis: float | None,
         reading: Vector | None,
         contact_time: float | None,
+        measured: int = 0,
+        gated: tuple[int, ...] = (),
     ) -> None:
         """Store the new state with the reading to hold (and the time of a contact, if any)
         and its estimate (ObserverDiverged, the state left as it was, if not finite)."""
@@ -670,5 +733,7 @@ class InvariantEKF:
             imu=reading if reading is not None else state.imu,
             last_contact=state.last_contact if contact_time is None else contact_time,
         )
-        estimate = self.setup.estimate(state, self._estimate, q_joints, dq, nis)
+        estimate = self.setup.estimate(
+            state, self._estimate, q_joints, dq, nis, 3 * measured, gated
+        )
         self._state, self._estimate = state, estimate

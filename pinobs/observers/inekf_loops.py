@@ -18,7 +18,8 @@ operations:
   ``(Rᵀ M_0, Rᵀ (M_i − x_i^ M_0))``, ``Φ_ε`` its 9 × 15 core and a 3 × 3 block
   per foot;
 * correction, eqs. (4)-(5): ``r``, ``H P`` (rows of ``P``), ``S``, its Cholesky
-  factor and ``S⁻¹ [H P, r]``, ``exp(−δ_ξ)`` and the Joseph form, in one call.
+  factor and ``S⁻¹ [H P, r]``, ``exp(−δ_ξ)`` and the Joseph form, in one call;
+* the foot gate's NIS of each foot alone, eq. (8), by the 3 × 3 adjugate.
 
 The results equal NumPy's to rounding (the products are summed in another
 order).  :func:`load_kernels` compiles them (``cache=True``: once per
@@ -38,6 +39,7 @@ from pinobs.tolerances import SERIES_ANGLE
 __all__ = [
     "correct_kernel",
     "expm_degree",
+    "foot_nis_kernel",
     "gamma_coefficients",
     "load_kernels",
     "propagate_kernel",
@@ -292,6 +294,58 @@ def _correct_loops(
     return nis
 
 
+def _foot_nis_loops(
+    R: Vector,
+    x: Vector,
+    P: Vector,
+    h: Vector,
+    jac: Vector,
+    joint_var: float,
+    kin_var: float,
+    out: Vector,
+) -> None:
+    """Eq. (8): ``out[j] = r_jᵀ S_jj⁻¹ r_j`` for every foot in the state (``S_jj`` its own
+    block of ``S``, inverted by its adjugate; ``inf`` if it is singular)."""
+    S = np.empty((3, 3))
+    M = np.empty((3, 3))
+    r = np.empty(3)
+    for f in range(x.shape[0] - 2):
+        for c in range(3):
+            for d in range(3):
+                t = 0.0
+                for q in range(jac.shape[2]):
+                    t += jac[f, c, q] * jac[f, d, q]
+                M[c, d] = joint_var * t + (kin_var if c == d else 0.0)
+        N = R @ M @ R.T  # eq. (4): N_j
+        Rh = R @ h[f]
+        a = 9 + 3 * f
+        for c in range(3):
+            r[c] = Rh[c] - (x[2 + f, c] - x[1, c])  # eq. (4): r_j
+            for d in range(3):  # S_jj = P_pp − P_pd − P_dp + P_dd + N_j
+                S[c, d] = P[6 + c, 6 + d] - P[6 + c, a + d] - P[a + c, 6 + d] + P[a + c, a + d]
+                S[c, d] += N[c, d]
+        c00 = S[1, 1] * S[2, 2] - S[1, 2] * S[2, 1]  # the adjugate's first column
+        c10 = S[1, 2] * S[2, 0] - S[1, 0] * S[2, 2]
+        c20 = S[1, 0] * S[2, 1] - S[1, 1] * S[2, 0]
+        det = S[0, 0] * c00 + S[0, 1] * c10 + S[0, 2] * c20
+        if not det > 0.0:
+            out[f] = np.inf
+            continue
+        adj = np.empty((3, 3))
+        adj[0, 0], adj[1, 0], adj[2, 0] = c00, c10, c20
+        adj[0, 1] = S[0, 2] * S[2, 1] - S[0, 1] * S[2, 2]
+        adj[1, 1] = S[0, 0] * S[2, 2] - S[0, 2] * S[2, 0]
+        adj[2, 1] = S[0, 1] * S[2, 0] - S[0, 0] * S[2, 1]
+        adj[0, 2] = S[0, 1] * S[1, 2] - S[0, 2] * S[1, 1]
+        adj[1, 2] = S[0, 2] * S[1, 0] - S[0, 0] * S[1, 2]
+        adj[2, 2] = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+        t = 0.0
+        for c in range(3):
+            for d in range(3):
+                t += r[c] * adj[c, d] * r[d]
+        out[f] = t / det
+
+
 def _solve_innovation(HP: Vector, N: Vector, sol: Vector) -> bool:
     """``sol = S⁻¹ [H P, r]`` with ``S = H P Hᵀ + N`` (eq. 5; ``HP = [H P, r]``, ``N`` the
     feet's 3 × 3 blocks) by Cholesky ``S = L Lᵀ``; False if ``S`` is not positive definite."""
@@ -400,9 +454,27 @@ correct_kernel = LazyKernel(
 )
 
 
+#: :func:`_foot_nis_loops` compiled: ``(R, x, P, h, J, σ_q², σ_k², out)`` (the foot gate's).
+foot_nis_kernel = LazyKernel(
+    _foot_nis_loops,
+    np.eye(3),
+    np.zeros((3, 3)),
+    np.eye(18),
+    np.zeros((1, 3)),
+    np.zeros((1, 3, 2)),
+    1.0,
+    1.0,
+    np.empty(1),
+)
+
+
 def load_kernels() -> None:
-    """Compile (or load from numba's cache) both kernels; once."""
-    if propagate_kernel.compiled is None or correct_kernel.compiled is None:
+    """Compile (or load from numba's cache) the kernels; once."""
+    if (
+        propagate_kernel.compiled is None
+        or correct_kernel.compiled is None
+        or foot_nis_kernel.compiled is None
+    ):
         from numba.extending import register_jitable  # lazy: start-up time
 
         for helper in (
@@ -419,3 +491,4 @@ def load_kernels() -> None:
             register_jitable(helper)
         propagate_kernel.load()
         correct_kernel.load()
+        foot_nis_kernel.load()

@@ -47,6 +47,7 @@ from pinobs.errors import (
 from pinobs.model import FootKinematics, Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.base import Vector
+from pinobs.observers.results import Consistency
 from pinobs.tolerances import NO_CONTACT_WARN_TIME, QUATERNION_NORM_TOL, TIME_EPS
 
 __all__ = [
@@ -67,6 +68,7 @@ __all__ = [
     "remove_feet",
     "replace_state",
     "rotation_to_quaternion",
+    "stance_consistency",
 ]
 
 _I3 = np.eye(3)
@@ -385,7 +387,10 @@ class InEKFEstimate:
         contacts: names of the feet in the state (in contact), in state order.
         foot_positions: their world positions ``d_j``, shape ``(K, 3)`` [m].
         nis: normalized innovation squared of this update's foot measurements (χ² with
-            3 × (feet measured) degrees of freedom for a consistent filter), or ``None``.
+            ``nis_dof`` degrees of freedom for a consistent filter), or ``None``.
+        nis_dof: its degrees of freedom, 3 × (feet measured); 0 with no measurement.
+        gated: the feet whose measurement the foot gate rejected at this update (re-anchored
+            instead: :class:`pinobs.observers.inekf.InvariantEKF`'s ``foot_gate``).
     """
 
     t: float
@@ -398,6 +403,8 @@ class InEKFEstimate:
     contacts: tuple[str, ...]
     foot_positions: Vector
     nis: float | None = None
+    nis_dof: int = 0
+    gated: tuple[str, ...] = ()
 
 
 # ------------------------------------------------------------------ the setup
@@ -588,6 +595,8 @@ class LeggedSetup:
         q_joints: Vector,
         dq: Vector | None,
         nis: float | None,
+        nis_dof: int = 0,
+        gated: tuple[int, ...] = (),
     ) -> InEKFEstimate:
         """Check ``state`` is finite (else ObserverDiverged with ``last``), convert it to the
         root joint (module docstring)."""
@@ -619,4 +628,65 @@ class LeggedSetup:
             contacts=tuple(self.feet[j] for j in state.feet),
             foot_positions=read_only(x[2:]),
             nis=nis,
+            nis_dof=nis_dof,
+            gated=tuple(self.feet[j] for j in gated),
         )
+
+
+#: What to check when the feet's innovations are not χ² (:func:`stance_consistency`).
+LEG_CAUSES = (
+    "the foot noise levels (InEKFGains.contact, kinematics, joint): NIS/dof far below 1 "
+    "while standing says they are too large",
+    "contact detection: a foot flagged in contact while it lands or lifts (or slips) gives "
+    "large NIS near the contact changes (contacts='probability', foot_gate=)",
+    "the IMU's frame or units (--imu-frame; m/s² and rad/s)",
+)
+#: The two-sided probability of the per-row interval :func:`stance_consistency` counts.
+NIS_INTERVAL = 0.95
+
+
+def stance_consistency(nis: ArrayLike, dof: ArrayLike, gated: int = 0) -> Consistency:
+    """The feet's NIS over the stance rows of a run: a :class:`Consistency` per degree of freedom.
+
+    A row with feet measured (``dof = 3 × feet > 0``, the estimates' ``nis_dof``) has, for a
+    consistent filter, ``NIS ~ χ²(dof)`` (Bar-Shalom, Li, Kirubarajan, *Estimation with
+    Applications to Tracking and Navigation*, 2001, §5.4): so ``NIS/dof`` has mean 1, and
+    each row falls inside ``[χ²_dof(2.5 %), χ²_dof(97.5 %)]`` with probability
+    :data:`NIS_INTERVAL`.  Reported: ``mean_nis`` the mean of ``NIS/dof`` (``expected`` 1,
+    ``bound`` as :class:`Consistency` puts it for ``Σ dof`` degrees of freedom, and a
+    ``lower_bound`` likewise below 1: a mean far below 1 is a filter whose noise is too
+    large, "inconsistent" too), ``gated`` the feet rejected by the foot gate, and in
+    ``details`` the fractions of stance rows inside, below and above their interval, the
+    median ``NIS/dof`` and the interval's probability.
+
+    Raises:
+        DimensionError: ``nis`` and ``dof`` of different shapes.
+    """
+    from scipy.stats import chi2
+
+    z, k = np.asarray(nis, dtype=float), np.asarray(dof, dtype=float)
+    if z.shape != k.shape or z.ndim != 1:
+        raise DimensionError(f"nis {z.shape} and dof {k.shape} must be one row each")
+    stance = (k > 0) & np.isfinite(z)
+    n = int(stance.sum())
+    if n == 0:
+        return Consistency(0, math.nan, 1.0, math.nan, "unknown")
+    z, k = z[stance], k[stance]
+    r = z / k
+    tail = 0.5 * (1.0 - NIS_INTERVAL)
+    lo, hi = chi2.ppf(tail, k), chi2.ppf(1.0 - tail, k)
+    mean = float(r.mean())
+    spread = 5.0 * math.sqrt(2.0 / float(k.sum()))  # five σ of the mean of NIS/dof
+    bound, lower = 1.5 * (1.0 + spread), (1.0 - spread) / 1.5
+    verdict = "unknown" if n < 50 else ("consistent" if lower <= mean <= bound else "inconsistent")
+    details = {
+        "per_dof": True,
+        "lower_bound": lower,
+        "interval": NIS_INTERVAL,
+        "inside": float(np.mean((z >= lo) & (z <= hi))),
+        "below": float(np.mean(z < lo)),
+        "above": float(np.mean(z > hi)),
+        "median_per_dof": float(np.median(r)),
+    }
+    causes = LEG_CAUSES if verdict == "inconsistent" else ()
+    return Consistency(n, mean, 1.0, bound, verdict, gated, causes, details)

@@ -205,7 +205,7 @@ class QuaternionEKF:
         ended = [s for s, j in enumerate(new.feet) if not u.flags[j]]
         if ended:
             new = remove_feet(new, ended)
-        nis = None
+        nis, dof = None, 3 * len(new.feet)
         if new.feet:
             new, nis = self._update(new, h, jac)
         landed = [j for j, f in enumerate(u.flags) if f and j not in new.feet]
@@ -213,7 +213,8 @@ class QuaternionEKF:
             new = self._add_feet(new, landed, h, jac)
         new = replace_state(new, imu=u.reading)
         self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
-        self._commit(new, u.q_joints, u.joint_velocities, nis, u.t if any(u.flags) else None)
+        contact_time = u.t if any(u.flags) else None
+        self._commit(new, u.q_joints, u.joint_velocities, nis, contact_time, dof)
         return self.estimate
 
     # ------------------------------------------------------------- the steps
@@ -290,8 +291,9 @@ class QuaternionEKF:
         dq: Vector | None,
         nis: float | None,
         contact_time: float | None,
+        nis_dof: int = 0,
     ) -> None:
         if contact_time is not None:
             state = replace_state(state, last_contact=contact_time)
-        estimate = self.setup.estimate(state, self._estimate, q_joints, dq, nis)
+        estimate = self.setup.estimate(state, self._estimate, q_joints, dq, nis, nis_dof)
         self._state, self._estimate = state, estimate

@@ -156,31 +156,12 @@ def _real_data():
     return sys.modules[name]
 
 
-SEROW_MG = 12 * 9.81  # go1_test.cpp: mass 12 kg, g 9.81 m/s²
-SEROW_BIAS = -6.0  # go1_test.cpp: the raw reading of an unloaded foot
+SEROW_MG = _real_data().SEROW_MG
 
 
 def serow_go1_frame(path: Path) -> pd.DataFrame:
-    """SEROW's Go1 unit-test CSV in pinobs' table columns.
-
-    ``Time(s)`` -> ``t`` (as recorded); ``BaseWx..z`` -> ``imu.gyro.*`` [rad/s];
-    ``BaseAx..z`` -> ``imu.acc.*`` [m/s²]; ``JointPos<LEG>_<part>`` ->
-    ``q.<LEG>_<part>_joint``; the raw foot readings ``<LEG>_Force`` (integers, not N)
-    -> ``force.<LEG>_foot`` [N] scaled as SEROW's ``go1_test.cpp`` does::
-
-        f = clip((raw − b) · m g / (m g − 4 b), 0, m g),   m = 12 kg, g = 9.81, b = −6
-    """
-    raw = pd.read_csv(path)
-    out = {"t": raw["Time(s)"]}
-    for a in "xyz":
-        out[f"imu.gyro.{a}"] = raw[f"BaseW{a}"]
-        out[f"imu.acc.{a}"] = raw[f"BaseA{a}"]
-    for leg in ("FR", "FL", "RR", "RL"):
-        force = (raw[f"{leg}_Force"] - SEROW_BIAS) * SEROW_MG / (SEROW_MG - 4 * SEROW_BIAS)
-        out[f"force.{leg}_foot"] = force.clip(0.0, SEROW_MG)  # go1_test.cpp, line 72
-        for part in ("hip", "thigh", "calf"):
-            out[f"q.{leg}_{part}_joint"] = raw[f"JointPos{leg}_{part}"]
-    return pd.DataFrame(out)
+    """SEROW's Go1 unit-test CSV in pinobs' table columns (benchmarks/real_data.py)."""
+    return _real_data().serow_go1_frame(path)
 
 
 def test_real_go1_log_reads_every_row(go1) -> None:

@@ -3,9 +3,9 @@
 Three parts, each on code shared with the rest of pinobs:
 
 1. **The filter** is an :class:`~pinobs.observers.ekf.ExtendedKalmanFilter`
-   (``AdaptiveEKF.core``, held, not inherited: driven through its public
-   ``initial_state``, ``step`` and ``replace_robot``) with
-   its joint-torque offset state ``d`` (``disturbance_psd``), run on the
+   (``AdaptiveEKF.core``, held, not inherited: copied per model and regime into the
+   state, 5, and driven through its public ``initial_state``, ``step``, ``replace_robot``)
+   with its joint-torque offset state ``d`` (``disturbance_psd``), run on the
    current learned model ``θ̂`` and the learned torque offset ``b̂``::
 
        v̇ = M_θ̂⁻¹(q)(τ + b̂ + d + τ_f,θ̂(v) − c_θ̂(q, v) − g_θ̂(q)),   ḋ = w_d.
@@ -129,12 +129,22 @@ a prediction that is not kept (under a known latency) teaches nothing.
    solves or one fewer, its velocity RMS within ±10 % of the synchronous
    one.  The SciPy modules the learner uses are imported when the observer
    is made (the first window's update took 0.5 s importing them).
+
+5. **A pure step** (issue 37).  What it learned lives in its state (``_State.model``: the
+   learned model and the filter run on it, the offset, the regime, the restarts; the
+   learner), never on the observer: ``step`` reads it and returns it changed (a restart) in
+   a new state, so a step that is not kept (a latency's prediction, the warm-up step)
+   changes nothing.  The learner is the one part changed in place, and only by
+   :meth:`~AdaptiveEKF.after_commit`, on the state the base has just committed: there it
+   takes the sample, and a background job's result done by then (the sample boundary), and
+   a new model or regime goes into the committed state.  Read from the latest state:
+   :attr:`~AdaptiveEKF.regime`, :attr:`~AdaptiveEKF.restarts`, :meth:`~AdaptiveEKF.snapshot`.
 """
 
 from __future__ import annotations
 
+import copy
 import math
-from collections import deque
 from dataclasses import replace
 from typing import Any, NamedTuple
 
@@ -150,9 +160,8 @@ from pinobs.model import Robot
 from pinobs.model.identification import (
     ParameterSet,
 )
-from pinobs.observers.adaptive_blend import blend_kernel
+from pinobs.observers.adaptive_blend import JERK_PSD, blend_kernel
 from pinobs.observers.adaptive_learner import (
-    REJECTED_KEPT,
     Learner,
     learning_worker,
     load_learning,
@@ -190,6 +199,22 @@ class ModelSnapshot(NamedTuple):
     disturbance_psd: Vector
 
 
+class _Model(NamedTuple):
+    """What ``adaptive`` has learned and how its filter runs on it (module docstring, 5): part
+    of its state, made anew when it changes (an install, a regime, a restart), never changed."""
+
+    core: ExtendedKalmanFilter  # the filter on this model at this regime's accel_psd
+    learned: Robot  # the learned model whole (friction included); the nominal one before
+    held: Vector | None  # 1 where the learned friction is a held input (AdaptiveEKF._install)
+    offset: Vector  # the learned torque offset b̂ [N·m or N]
+    regime: str  # "warmup", "nominal" or "learned"
+    m_bar2: Vector  # M̄ᵢᵢ² at the reset: the offset densities' per-joint scale
+    restarts: int  # times the model-based filter was lost and restarted
+    restarted: bool  # and not replaced by a solve since: the model is to blame
+    rejected_run: int  # the learner's solves rejected in a row, as of the last commit
+    said: tuple[str, ...] = ()  # what the steps since the last commit said (restarts)
+
+
 class _State(NamedTuple):
     ekf: EKFState
     kf: BankState  # one filter per white-jerk density of the bank
@@ -200,6 +225,8 @@ class _State(NamedTuple):
     v: Vector
     v_prev: Vector  # the EKF's v̂ at the start of the last step (held friction, _torque)
     dt_prev: float  # that step [s] (0: none yet)
+    model: _Model  # what was learned, the regime, the restarts (read only by step)
+    learner: Learner  # fed by after_commit only, at the commit boundary (module docstring, 5)
 
 
 #: Consecutive rejected solves (no physical model fits the rows) after which :meth:`AdaptiveEKF.
@@ -210,7 +237,6 @@ class _State(NamedTuple):
 #: absorbs the wrong torque below the NIS bound).
 _REJECTED_RUN = 4
 
-
 #: ``λ h`` up to which a learned joint friction is a held input of the filter rather than part
 #: of its model (``λ = (M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|``, largest over the configurations the learner
 #: checked): the friction held at the extrapolated mid-step velocity (:meth:`AdaptiveEKF._torque`)
@@ -219,23 +245,12 @@ _REJECTED_RUN = 4
 #: model (``ekf``'s stiff-friction path, which costs its substeps and ``exp(Ah)`` by squaring).
 _HELD_FRICTION_STIFFNESS = 0.1
 
-
 #: Mean NIS per degree of freedom up to which the model-based filter is trusted outright by the
 #: blend (twice the consistent value); the blame on the model ramps up to full at twice this.
 _NIS_TRUSTED = 2.0
 
-
 #: Mean NIS per degree of freedom above which the nominal model's trust is revoked at once.
 _NIS_REVOKED = 10.0
-
-
-#: The bank's white-jerk densities [rad²/s⁵] (module docstring, 3).  1e1 … 1e5 until the
-#: UR10e logs (~95 Hz, positions printed to 1e-4 rad, ``benchmarks/real_logs.py``), where
-#: the best fixed ``kf`` density is 1e-2 … 1: with the bank's floor at 1e1 the blend's
-#: model-free side alone was 3.0× the ``kf``'s RMS (0.027 against 0.0092 rad/s on
-#: ur-19_09_27-11_32_02, its model-based filter lost and restarted all along, weight 0),
-#: with 1e-2 … 1e5 1.13× (0.0104); the simulated learning table is unchanged.
-JERK_PSD: tuple[float, ...] = tuple(float(10.0**k) for k in range(-2, 6))
 
 
 def _lost(ekf: EKFState) -> bool:
@@ -260,9 +275,9 @@ def _check_options(**options: float) -> None:
 class AdaptiveEKF(Observer["_State"]):
     """EKF that identifies its model online and blends with a model-free filter (module docstring).
 
-    A composition: ``core``, an :class:`~pinobs.observers.ekf.ExtendedKalmanFilter` whose
-    model and densities the learner sets (its ``replace_robot`` and ``gains``), driven
-    through its public ``initial_state`` and ``step``; the learner; the blend with a bank
+    A composition: ``core``, an :class:`~pinobs.observers.ekf.ExtendedKalmanFilter` copied
+    with the model and densities the learner sets (its ``replace_robot`` and ``gains``) into
+    the state, driven through its public ``initial_state`` and ``step``; the learner; a bank
     of model-free ``kf`` (:class:`~pinobs.observers.kf.KFBank`).
 
     Args:
@@ -362,18 +377,14 @@ class AdaptiveEKF(Observer["_State"]):
         self.blend = bool(blend)
         self.blend_time = float(blend_time)
         self._bank = self._make_bank(jerk_psd)
-        self._offset: Vector = np.zeros(self.robot.nv)
-        self._learned = self._nominal  # the learned model, all its friction included
-        self._held_friction: Vector | None = None  # 1 where it is a held input (_install)
         self._regimes = {  # (accel_psd, disturbance density) per regime
             "warmup": (float(warmup_accel_psd), float(disturbance_psd)),
             "nominal": (float(validated_accel_psd), float(validated_disturbance_psd)),
             "learned": (float(accel_psd), float(learned_disturbance_psd)),
         }
-        self.regime = "warmup"
-        self.restarts = 0  # times the model-based filter was lost and restarted
-        self._restarted = False
-        self._m_bar2: Vector = np.zeros(self.robot.nv)
+        zero = np.zeros(self.robot.nv)
+        # what is read of it before a reset (afterwards, of its latest state: _model)
+        self._idle = _Model(self.core, self._nominal, None, zero, "warmup", zero, 0, False, 0)
 
     def _start_learning(self, learning: str) -> None:
         """The learner (its SciPy modules imported now, :func:`load_learning`) and, with
@@ -386,7 +397,7 @@ class AdaptiveEKF(Observer["_State"]):
             self._worker = learning_worker(
                 self._nominal, bool(opts["friction"]), bool(opts["offset"])
             )
-        self._learner = self._new_learner()
+        self._learner = self._new_learner()  # read before a reset (each reset makes its own)
         if self._learner.reg.size == 0:
             name = self.robot.name
             raise UnsupportedRobotError(f"robot {name!r} has no dynamic parameter to learn")
@@ -427,20 +438,36 @@ class AdaptiveEKF(Observer["_State"]):
         }
 
     # ---------------------------------------------------------------- learning
+    # What it learned is read from its latest committed state (module docstring, 5).
+    def _model(self) -> _Model:
+        return self._idle if self._state is None else self._state.model
+
+    def _learning(self) -> Learner:
+        return self._learner if self._state is None else self._state.learner
+
+    @property
+    def regime(self) -> str:
+        """``"warmup"``, ``"nominal"`` or ``"learned"`` (module docstring, 1)."""
+        return self._model().regime
+
+    @property
+    def restarts(self) -> int:
+        """Times the model-based filter was lost and restarted since the reset."""
+        return self._model().restarts
+
     def learned_robot(self) -> Robot:
         """A :class:`Robot` carrying the current estimate (friction included; the nominal one before the first solve)."""
-        return self._learned.copy()
+        return self._model().learned.copy()
 
     def snapshot(self) -> ModelSnapshot:
         """The learned model, offset and regime densities now (read only: the filter is unchanged).
 
         The model is the filter's, with the learned friction it takes as a held input
         (:meth:`_install`) put back: the learned model whole."""
-        accel, dist = self._regimes[self.regime]
-        robot = self.core.robot if self._held_friction is None else self._learned
-        return ModelSnapshot(
-            robot.copy(), self._offset.copy(), self.regime, accel, dist * self._m_bar2
-        )
+        m = self._model()
+        accel, dist = self._regimes[m.regime]
+        robot = m.core.robot if m.held is None else m.learned
+        return ModelSnapshot(robot.copy(), m.offset.copy(), m.regime, accel, dist * m.m_bar2)
 
     def lost(self) -> bool:
         """Whether the model-based filter's estimate or covariance is not finite, or its
@@ -453,7 +480,7 @@ class AdaptiveEKF(Observer["_State"]):
 
     def parameters(self) -> ParameterSet:
         """The learned parameters with names and standard deviations (nominal before the first solve)."""
-        lr = self._learner
+        lr = self._learning()
         reg = lr.reg
         nominal = reg.nominal()
         if lr.theta is None or lr.std is None or lr.excited is None:
@@ -469,7 +496,7 @@ class AdaptiveEKF(Observer["_State"]):
         weights.  ``"inconsistent"`` whatever the
         NIS after :data:`_REJECTED_RUN` rejected solves in a row (no physical model
         fits the data)."""
-        lr = self._learner
+        lr = self._learning()
         base = super().consistency()
         if lr.rejected_run >= _REJECTED_RUN:  # no physical model fits: the NIS cannot see it
             last = lr.rejected[-1] if lr.rejected else ""
@@ -498,28 +525,34 @@ class AdaptiveEKF(Observer["_State"]):
         }
         return replace(base, details=details)
 
-    def _set_regime(self, state: EKFState, regime: str) -> EKFState:
+    def _set_regime(
+        self, model: _Model, ekf: EKFState, regime: str, robot: Robot | None = None
+    ) -> tuple[_Model, EKFState]:
         """Switch the process noise: ``warmup`` (nominal model not trusted yet), ``nominal``
-        (a solve found nothing better: the exact-model densities), ``learned`` (a learned model)."""
-        self.regime = regime
+        (a solve found nothing better: the exact-model densities), ``learned`` (a learned
+        model); on a new filter (``model.core``'s copy, on ``robot`` if given) when it changes."""
         accel, dist = self._regimes[regime]
-        self.core.gains = replace(self.core.gains, accel_psd=accel)
-        if state.d_psd is None:
-            return state
-        return state._replace(d_psd=dist * self._m_bar2)  # per joint, as ekf: psd · M̄ᵢᵢ²
+        if robot is not None or regime != model.regime:
+            core = copy.copy(model.core)  # (shares its scratch buffer: one step at a time)
+            if robot is not None:
+                core.replace_robot(robot)
+            core.gains = replace(core.gains, accel_psd=accel)
+            model = model._replace(core=core, regime=regime)
+        if ekf.d_psd is None:
+            return model, ekf
+        return model, ekf._replace(d_psd=dist * model.m_bar2)  # per joint, as ekf: psd · M̄ᵢᵢ²
 
-    def _install(self, state: EKFState) -> EKFState:
+    def _install(self, model: _Model, lr: Learner, ekf: EKFState) -> tuple[_Model, EKFState]:
         """Install the learner's model: friction that cannot be stiff (``λᵢ h ≤``
         :data:`_HELD_FRICTION_STIFFNESS`) as a held input, the rest in the filter's model."""
-        lr = self._learner
         assert lr.theta is not None
         name = f"{self._nominal.name}~learned"
-        self._learned = lr.reg.with_parameters(lr.theta, name=name)
+        learned = lr.reg.with_parameters(lr.theta, name=name)
         theta = lr.theta
-        self._held_friction = None
-        if lr.reg.friction and self._learned.has_friction:
+        held_friction = None
+        if lr.reg.friction and learned.has_friction:
             # λᵢ = max (M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v| (its largest slope is at v = 0)
-            lam = lr.minv_max * np.abs(self._learned.friction_derivative(np.zeros(self.robot.nv)))
+            lam = lr.minv_max * np.abs(learned.friction_derivative(np.zeros(self.robot.nv)))
             held = lam * lr.h <= _HELD_FRICTION_STIFFNESS
             if np.any(held & (lam > 0)):
                 n, nj = lr.reg.n_inertial, lr.reg.n_joint
@@ -527,31 +560,28 @@ class AdaptiveEKF(Observer["_State"]):
                 theta = theta.copy()
                 theta[n : n + nj][cols] = 0.0
                 theta[n + nj : n + 2 * nj][cols] = 0.0
-                self._held_friction = held.astype(float)
-        self.core.replace_robot(lr.reg.with_parameters(theta, name=name))
-        self._offset = lr.reg.offsets(lr.theta)
-        state = self._set_regime(state, "learned")
-        if state.d is None:
-            return state
-        return state._replace(d=np.zeros_like(state.d))  # the new model explains what d absorbed
+                held_friction = held.astype(float)
+        model = model._replace(learned=learned, held=held_friction, offset=lr.reg.offsets(lr.theta))
+        robot = lr.reg.with_parameters(theta, name=name)
+        model, ekf = self._set_regime(model, ekf, "learned", robot)
+        if ekf.d is None:
+            return model, ekf
+        return model, ekf._replace(d=np.zeros_like(ekf.d))  # the new model explains what d absorbed
 
     # ------------------------------------------------------------------ filter
     def initial_state(self, q0: Vector, v0: Vector) -> _State:
-        # a reset starts learning afresh from the nominal model
-        self.core.replace_robot(self._nominal.copy())
-        self._learned = self._nominal
-        self._held_friction = None
-        self._learner = self._new_learner()
-        self._offset = np.zeros(self.robot.nv)
-        self.core.gains = replace(self.core.gains, accel_psd=self._regimes["warmup"][0])
-        self.regime = "warmup"
-        self.restarts, self._restarted = 0, False
-        self._m_bar2 = np.diag(self._nominal.mass_matrix(q0)) ** 2
-        ekf = self.core.initial_state(q0, v0)
-        kf = self._bank.initial(q0, v0, self.core.gains.v0_std)
+        # a reset starts learning afresh from the nominal model, on a filter of its own
+        core = copy.copy(self.core)
+        core.replace_robot(self._nominal.copy())
+        m_bar2 = np.diag(self._nominal.mass_matrix(q0)) ** 2
+        offset = np.zeros(self.robot.nv)
+        model = _Model(core, self._nominal, None, offset, "warmup", m_bar2, 0, False, 0)
+        ekf = core.initial_state(q0, v0)
+        kf = self._bank.initial(q0, v0, core.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
-        state = _State(ekf, kf, score, 0.0, s, q0.copy(), v0.copy(), ekf.v, 0.0)
+        learner = self._new_learner()
+        state = _State(ekf, kf, score, 0.0, s, q0.copy(), v0.copy(), ekf.v, 0.0, model, learner)
         self._warm(state, q0)
         return state
 
@@ -560,25 +590,23 @@ class AdaptiveEKF(Observer["_State"]):
         on paths already taken (NumPy's and the filters' first calls, their caches: the
         kernels are compiled or loaded when the observer is made, SciPy imported then too).
         UR5 in a loop paced at 1 kHz, first update 820–1065 µs without it, 295–406 µs with it
-        (median update 200 µs).  ``step`` leaves ``state`` as it is; what a lost filter's
-        restart would change here is put back."""
-        kept = (self.restarts, self._restarted, list(self._learner.rejected), self.regime)
+        (median update 200 µs).  ``step`` is pure: nothing to put back."""
         h = 1.0 / self.rate if self.rate else 1e-3
         with np.errstate(all="ignore"):
             self.step(state, h, q0, np.zeros(self.robot.nv))
-        self.restarts, self._restarted, rejected, regime = kept
-        self._learner.rejected = deque(rejected, maxlen=REJECTED_KEPT)
-        if regime != self.regime:
-            self._set_regime(state.ekf, regime)
 
     def restart_state(self, state: _State, q: Vector) -> _State:
         """After a pause: the filter and the bank afresh at ``q`` (zero velocity), in the
         current regime; the learned model, offset and learner kept (a reset would relearn)."""
         zero = np.zeros(self.robot.nv)
-        ekf = self._set_regime(self.core.initial_state(q, zero), self.regime)
-        kf = self._bank.initial(q, zero, self.core.gains.v0_std)
+        model = state.model
+        model, ekf = self._set_regime(model, model.core.initial_state(q, zero), model.regime)
+        kf = self._bank.initial(q, zero, model.core.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
-        return _State(ekf, kf, score, state.t, zero.copy(), q.copy(), zero.copy(), ekf.v, 0.0)
+        return _State(
+            ekf, kf, score, state.t, zero.copy(), q.copy(), zero.copy(), ekf.v, 0.0, model,
+            state.learner,
+        )  # fmt: skip
 
     def _model_free(self, state: _State) -> tuple[Vector, Vector, Vector]:
         """Per coordinate, the bank's ``kf`` with the smallest running innovation:
@@ -608,13 +636,16 @@ class AdaptiveEKF(Observer["_State"]):
         a first step).  Held at ``v̂`` alone, its error would be first order,
         ``h |∂τ_f/∂v| |a| h/2`` per step (7e-4 rad/s on a UR5 started on a noise-free truth);
         extrapolated, second order (tested)."""
-        if self._held_friction is None:
-            return tau + self._offset
+        m = state.model
+        if m.held is None:
+            return tau + m.offset
         v = state.ekf.v
         v_mid = v + (0.5 * dt / state.dt_prev) * (v - state.v_prev) if state.dt_prev > 0 else v
-        return tau + self._offset + self._held_friction * self._learned.friction_torque(v_mid)
+        return tau + m.offset + m.held * m.learned.friction_torque(v_mid)
 
-    def _core_step(self, ekf: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
+    def _core_step(
+        self, core: ExtendedKalmanFilter, ekf: EKFState, dt: float, q: Vector | None, tau: Vector
+    ) -> EKFState:
         """The model-based filter's step; a filter whose covariance overflowed to a singular
         innovation covariance, or that its family says diverged, comes back with a NaN
         velocity (lost: restarted by :meth:`step`).  On UR10e logs at ~95 Hz the warm-up
@@ -622,61 +653,75 @@ class AdaptiveEKF(Observer["_State"]):
         escaped the restart and left the re-initialisation to :func:`pinobs.estimate`."""
         try:
             with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: handled by step
-                return self.core.step(ekf, dt, q_meas, tau)
+                return core.step(ekf, dt, q, tau)
         except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
             return ekf._replace(v=np.full_like(ekf.v, np.nan))
 
+    def _restart(
+        self, state: _State, dt: float, q_meas: Vector | None, tau: Vector
+    ) -> tuple[_State, EKFState]:
+        """The model-based filter is lost (a learned model that does not hold): restarted on
+        the model-free estimate, in the warm-up regime, rather than fail; ``(state with the
+        restart, its step)``.  Said and counted in the state's model (committed with it)."""
+        t = state.t + dt
+        v_kf, _, dq_kf = self._model_free(state)
+        model = state.model
+        restart = model.core.initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
+        model, restart = self._set_regime(model, restart, "warmup")
+        state = state._replace(ekf=restart, dt_prev=0.0, model=model)
+        ekf = self._core_step(model.core, restart, dt, q_meas, self._torque(state, dt, tau))
+        said: tuple[str, ...] = ()
+        if _lost(ekf) and model.learned is not self._nominal:
+            # lost again at once: the learned model itself does not hold (a mass matrix
+            # not positive definite away from the configurations its solve checked, held
+            # friction stiff there: solo12 with friction, a Panda at hard stops raised
+            # ObserverDiverged); back to the nominal model, which the learner may replace
+            core = copy.copy(model.core)
+            core.replace_robot(self._nominal.copy())
+            zero = np.zeros(self.robot.nv)
+            model = model._replace(core=core, learned=self._nominal, held=None, offset=zero)
+            state = state._replace(model=model)
+            said = (
+                f"learned model dropped at t = {t:.6g} s (the filter restarted on it was "
+                "lost at once): back to the nominal model",
+            )
+            ekf = core.step(restart, dt, q_meas, self._torque(state, dt, tau))
+        said += (f"model-based filter restarted at t = {t:.6g} s",)
+        # the next solve must beat the current model to end it (restarted)
+        model = model._replace(restarts=model.restarts + 1, restarted=True, said=model.said + said)
+        # the blend's error variance of the lost filter overflowed with it: the restarted
+        # one starts with its initial velocity variance (the blend follows the kf first)
+        s = np.full(self.robot.nv, model.core.gains.v0_std**2)
+        return state._replace(model=model, s=s), ekf
+
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
-        ekf = self._core_step(state.ekf, dt, q_meas, self._torque(state, dt, tau))
+        ekf = self._core_step(state.model.core, state.ekf, dt, q_meas, self._torque(state, dt, tau))
         t = state.t + dt
         if self.blend and _lost(ekf):
-            # the model-based filter is lost (a learned model that does not hold): restart it
-            # on the model-free estimate, in the warm-up regime, rather than fail
-            v_kf, _, dq_kf = self._model_free(state)
-            restart = self.core.initial_state(self.robot.integrate(state.ekf.q, dq_kf), v_kf)
-            restart = self._set_regime(restart, "warmup")
-            state = state._replace(ekf=restart, dt_prev=0.0)
-            ekf = self._core_step(restart, dt, q_meas, self._torque(state, dt, tau))
-            if _lost(ekf) and self._learned is not self._nominal:
-                # lost again at once: the learned model itself does not hold (a mass matrix
-                # not positive definite away from the configurations its solve checked, held
-                # friction stiff there: solo12 with friction, a Panda at hard stops raised
-                # ObserverDiverged); back to the nominal model, which the learner may replace
-                self.core.replace_robot(self._nominal.copy())
-                self._learned, self._held_friction = self._nominal, None
-                self._offset = np.zeros(self.robot.nv)
-                self._learner.rejected.append(
-                    f"learned model dropped at t = {t:.6g} s (the filter restarted on it was "
-                    "lost at once): back to the nominal model"
-                )
-                ekf = self.core.step(restart, dt, q_meas, self._torque(state, dt, tau))
-            self._learner.rejected.append(f"model-based filter restarted at t = {t:.6g} s")
-            self.restarts += 1
-            # the blend's error variance of the lost filter overflowed with it: the restarted
-            # one starts with its initial velocity variance (the blend follows the kf first)
-            state = state._replace(s=np.full(self.robot.nv, self.core.gains.v0_std**2))
-            self._restarted = True  # the next solve must beat the current model to end it
+            state, ekf = self._restart(state, dt, q_meas, tau)
         if not self.blend:
             return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v, v_prev=state.ekf.v, dt_prev=dt)
         meas = None if ekf.gate.gated else q_meas  # one gate for every filter
         kf = self._bank.step(state.kf, dt, meas)
         lam = min(1.0, dt / self.blend_time)
         # disagreement is the model's fault only when its innovations say so (NIS̄ > 2 nv)
-        nv = self.robot.nv
+        nv, model = self.robot.nv, state.model
         level = float(nv) if ekf.gate.level is None else ekf.gate.level
         blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
-        if self._restarted or self._learner.rejected_run >= _REJECTED_RUN:
+        if model.restarted or model.rejected_run >= _REJECTED_RUN:
             blame = 1.0  # the model was lost and not replaced since, or none fits: to blame
         if self.robot.is_vector_space and blend_kernel.compiled is not None:
             score, s, q, v = blend_kernel.compiled(
                 state.score, kf.v if kf.innovation is None else kf.innovation,
                 kf.innovation is not None, lam, kf.q, kf.v, kf.P, ekf.q, ekf.v, state.s, blame,
             )  # fmt: skip
-            return _State(ekf, kf, score, t, s, q, v, state.ekf.v, dt)
+            return _State(ekf, kf, score, t, s, q, v, state.ekf.v, dt, model, state.learner)
         score = state.score
         if kf.innovation is not None:
             score = score + lam * (kf.innovation**2 - score)
-        new = _State(ekf, kf, score, t, state.s, ekf.q, ekf.v, state.ekf.v, dt)
+        new = _State(
+            ekf, kf, score, t, state.s, ekf.q, ekf.v, state.ekf.v, dt, model, state.learner
+        )
         v_kf, p_kf, dq_kf = self._model_free(new)
         d = ekf.v - v_kf
         s = state.s + lam * (blame * np.maximum(d * d - p_kf, 0.0) - state.s)
@@ -687,34 +732,41 @@ class AdaptiveEKF(Observer["_State"]):
 
     def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
         """Teach the learner the committed sample (with the torque held from it on, MATH §7);
-        install a new model or leave the warm-up when a solve says so."""
-        ekf = state.ekf
+        install a new model or leave the warm-up when a solve says so.  The one place the
+        learner changes (module docstring, 5): what the steps since the last commit said
+        (restarts) joins its ``rejected`` first, as when they said it."""
+        model, ekf, lr = state.model, state.ekf, state.learner
+        if model.said:
+            lr.rejected.extend(model.said)
         level = float(self.robot.nv) if ekf.gate.level is None else ekf.gate.level
         # the first solve only ends the warm-up: the nominal model gets its chance with the
         # exact-model densities, and its innovations decide at the next solve
         # (a learned model is refined at every solve; only the nominal one is protected)
-        explained = (self.regime == "warmup" and not self._restarted) or (
-            self.regime == "nominal" and level <= _NIS_TRUSTED * self.robot.nv
+        explained = (model.regime == "warmup" and not model.restarted) or (
+            model.regime == "nominal" and level <= _NIS_TRUSTED * self.robot.nv
         )
-        lr = self._learner
         if math.isnan(lr.next_solve):
             # the reset time; inside never_behind (which is the one reset) the first sample's
             lr.start(float(self._reset_args[0]) if self._reset_args else t)
-        if lr.add(t, q, tau, explained=explained, gated=q is None and bool(state.ekf.gate.gated)):
-            ekf = self._install(ekf)
-            self._restarted = False
-        elif self.regime == "nominal" and level > _NIS_REVOKED * self.robot.nv:
+        restarted = model.restarted
+        if lr.add(t, q, tau, explained=explained, gated=q is None and bool(ekf.gate.gated)):
+            model, ekf = self._install(model, lr, ekf)
+            restarted = False
+        elif model.regime == "nominal" and level > _NIS_REVOKED * self.robot.nv:
             # the nominal model stopped explaining the data between solves: do not wait
             if lr.candidate is not None:
                 lr.theta = lr.candidate
                 lr.installs += 1
-                ekf = self._install(ekf)
+                model, ekf = self._install(model, lr, ekf)
             else:
-                ekf = self._set_regime(ekf, "warmup")
-        elif self._learner.validated and self.regime == "warmup" and not self._restarted:
+                model, ekf = self._set_regime(model, ekf, "warmup")
+        elif lr.validated and model.regime == "warmup" and not model.restarted:
             # the nominal model explains the data (a learned one, after a restart)
-            ekf = self._set_regime(ekf, "learned" if lr.installs else "nominal")
-        return state if ekf is state.ekf else state._replace(ekf=ekf)
+            model, ekf = self._set_regime(model, ekf, "learned" if lr.installs else "nominal")
+        if model is state.model and lr.rejected_run == model.rejected_run and not model.said:
+            return state if ekf is state.ekf else state._replace(ekf=ekf)
+        model = model._replace(restarted=restarted, rejected_run=lr.rejected_run, said=())
+        return state._replace(ekf=ekf, model=model)
 
     def innovation(self, state: _State) -> tuple[float | None, bool]:
         return state.ekf.gate.nis, state.ekf.gate.gated

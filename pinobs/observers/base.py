@@ -640,7 +640,10 @@ class Observer(ABC, Generic[State]):
     def step(self, state: State, dt: float, q_meas: Vector | None, tau: Vector) -> State:
         """Propagate ``state`` over ``dt`` [s] with torque ``tau`` held, then correct with ``q_meas``.
 
-        Must return a new state and leave ``state`` untouched.
+        Must return a new state and leave ``state`` and the observer untouched: what it
+        learns or counts (a restart) goes into the new state, read from :attr:`_state`, the
+        latest committed one; only working memory (``pin.Data``, ``_scratch*`` buffers, memo
+        caches) may change (``tests/observers/test_purity.py``).
         """
 
     @abstractmethod

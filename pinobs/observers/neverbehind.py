@@ -135,6 +135,7 @@ class _State(NamedTuple):
     v: Vector
     v_prev: Vector  # the blend's v̂ one step before (â)
     dt_prev: float  # that step [s] (0: none yet)
+    reseeds: int  # times the model-based observer was re-seeded since the reset
 
 
 class NeverBehind(Observer[_State]):
@@ -192,7 +193,6 @@ class NeverBehind(Observer[_State]):
         given = {"rate": rate, "noise_std": noise_std}
         self.model = cls(robot, **opts, **given)
         self.reference = observer_class("kf")(robot, **dict(reference_options or {}), **given)
-        self.reseeds = 0
 
     @property
     def options(self) -> dict[str, Any]:
@@ -214,6 +214,12 @@ class NeverBehind(Observer[_State]):
         super().set_latency(latency)
 
     @property
+    def reseeds(self) -> int:
+        """Times the model-based observer was re-seeded since the reset (module docstring),
+        read from the latest state (``step`` is pure: it counts them in the state)."""
+        return 0 if self._state is None else self._state.reseeds
+
+    @property
     def weights(self) -> Vector:
         """The current model-based weight ``w`` per coordinate (module docstring)."""
         if self._state is None:
@@ -222,18 +228,18 @@ class NeverBehind(Observer[_State]):
 
     # ---------------------------------------------------------------- states
     def initial_state(self, q0: Vector, v0: Vector) -> _State:
-        self.reseeds = 0
         nv = self.robot.nv
         m = self.model.initial_state(q0, v0)
         k = self.reference.initial_state(q0, v0)
-        return _State(m, k, np.zeros((2, nv)), 0.0, np.ones(nv), q0.copy(), v0.copy(), v0, 0.0)
+        return _State(m, k, np.zeros((2, nv)), 0.0, np.ones(nv), q0.copy(), v0.copy(), v0, 0.0, 0)
 
     def restart_state(self, state: _State, q: Vector) -> _State:
         nv = self.robot.nv
         zero = np.zeros(nv)
         m = self.model.restart_state(state.model, q)
         k = self.reference.restart_state(state.kf, q)
-        return _State(m, k, np.zeros((2, nv)), 0.0, np.ones(nv), q.copy(), zero, zero, 0.0)
+        w = np.ones(nv)
+        return _State(m, k, np.zeros((2, nv)), 0.0, w, q.copy(), zero, zero, 0.0, state.reseeds)
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         r = self.robot
@@ -273,8 +279,9 @@ class NeverBehind(Observer[_State]):
             # model that jumps away in one step), on every measured sample, scored or not (one
             # the kf's gate rejects too: a UR10e log's wrist was 0.73 rad/s off on such rows)
             lost = bool(np.any(dt * np.abs(v_m - v_kf) > FAR_GATE * np.sqrt(s_k / c)))
+        reseeds = state.reseeds
         if lost:  # re-seeded (module docstring) at the kf's estimate, the blend's when w = 0
-            self.reseeds += 1
+            reseeds += 1
             m = self.model.initial_state(q_kf, v_kf)
             q_m, v_m = self.model.output(m)
             s_m = self.lost_ratio * s_k  # to prove itself: w ≈ 0 until it has
@@ -290,11 +297,15 @@ class NeverBehind(Observer[_State]):
             w = np.ones(r.nv)  # nothing scored yet: the model trusted (the prior)
         v = v_kf + w * (v_m - v_kf)
         q = q_kf + w * (q_m - q_kf) if flat else r.integrate(q_kf, w * r.difference(q_kf, q_m))
-        return _State(m, kf, np.array([s_m, s_k]), c, w, q, v, state.v, dt)
+        return _State(m, kf, np.array([s_m, s_k]), c, w, q, v, state.v, dt, reseeds)
 
     def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
+        """Each observer's own, on its part of the state; the model-based observer's committed
+        part is then its latest state, for what is read of it (``adaptive``'s learned model,
+        regime, restarts: :meth:`~pinobs.observers.adaptive.AdaptiveEKF.snapshot`)."""
         m = self.model.after_commit(state.model, t, q, tau)
         k = self.reference.after_commit(state.kf, t, q, tau)
+        self.model._state = m  # (the blend is the one reset: the wrapped observer never is)
         return state._replace(model=m, kf=k)
 
     def innovation(self, state: _State) -> tuple[float | None, bool]:

@@ -277,12 +277,13 @@ def test_friction_too_weak_to_be_stiff_is_a_held_input_and_started_on_the_truth_
     truth = lr.reg.with_parameters(theta)
     res = pinobs.simulate(truth, [], duration=0.45, sensor=Sensor(rate=1000.0), seed=4)
     ob.reset(0.0, res.q[0], res.v[0], res.tau[0])
-    lr = ob._learner  # a reset starts a new learner
+    lr = ob._state.learner  # a reset starts a new learner
     lr.theta = theta
     lr.minv_max = np.diag(np.linalg.inv(truth.mass_matrix(res.q[0])))
-    ob._state = ob._state._replace(ekf=ob._install(ob._state.ekf))
-    assert ob._held_friction is not None and np.all(ob._held_friction == 1.0)
-    assert not ob.core.robot.has_friction and ob.learned_robot().has_friction
+    model, ekf = ob._install(ob._state.model, lr, ob._state.ekf)
+    ob._state = ob._state._replace(model=model, ekf=ekf)
+    assert model.held is not None and np.all(model.held == 1.0)
+    assert not model.core.robot.has_friction and ob.learned_robot().has_friction
     v = np.array([1.0, -0.5, 0.003, 0.0, -0.01, 2.0])
     np.testing.assert_allclose(
         ob.learned_robot().friction_torque(v), truth.friction_torque(v), rtol=0, atol=1e-15
@@ -352,7 +353,7 @@ def test_timestamp_jitter_and_another_rate_do_not_stop_the_learning(payload_stre
     for k in range(1, 1500):
         ob.update(t[k], q[k] if k % 2 or k > 1000 else None, tau[k])
     assert not [r for r in ob.consistency().details["rejected"] if "samples come" in r]
-    assert ob._learner.h == 1e-3
+    assert ob._state.learner.h == 1e-3
 
 
 @pytest.mark.parametrize("lost", [0.05, 0.2])
@@ -392,7 +393,7 @@ def test_a_learned_model_lost_again_at_its_restart_falls_back_to_the_nominal_one
 
     def torque(self, state, dt, tau_):  # type: ignore[no-untyped-def]
         out = real(self, state, dt, tau_)
-        broken = self._learned is not self._nominal and state.t >= 2.0
+        broken = state.model.learned is not self._nominal and state.t >= 2.0
         return np.full_like(out, np.nan) if broken else out
 
     monkeypatch.setattr(type(ob), "_torque", torque)

@@ -99,7 +99,7 @@ def test_the_update_never_waits_for_the_worker_and_asks_one_solve_at_a_time(mism
     ob = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4, learning="background")
     ob.reset(res.t[0], res.q[0], None, res.tau[0])
     stuck = _StuckWorker()
-    ob._learner.worker = stuck
+    ob._state.learner.worker = stuck
     for k in range(1, 2001):
         e = ob.update(res.t[k], res.q_meas[k], res.tau[k])
         assert np.all(np.isfinite(e.v))

@@ -54,13 +54,22 @@ def _outside_package(target: str, importer: str) -> bool:
     return False
 
 
-def private_imports(
-    module: str, source: str, modules: set[str], *, is_package: bool = False
-) -> list[tuple[int, str]]:
-    """``(line, what)`` for each private name of another pinobs module that ``module`` uses."""
-    tree = ast.parse(source)
+def _import_from_target(node: ast.ImportFrom, module: str, is_package: bool) -> str:
+    """The module a ``from ... import`` in ``module`` reads from, relative levels resolved."""
+    if not node.level:
+        return node.module or ""
+    here = module.split(".") if is_package else module.split(".")[:-1]
+    base = here[: len(here) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _imports(
+    tree: ast.AST, module: str, modules: set[str], is_package: bool
+) -> tuple[list[tuple[int, str]], dict[str, str]]:
+    """The private modules and names ``module`` imports from other pinobs modules, and the
+    local names bound to pinobs modules (local name -> the module it stands for)."""
     found: list[tuple[int, str]] = []
-    bound: dict[str, str] = {}  # local name -> the pinobs module it stands for
+    bound: dict[str, str] = {}
 
     def check_module(target: str, line: int) -> None:
         if _outside_package(target, module):
@@ -72,17 +81,9 @@ def private_imports(
                 if alias.name.split(".")[0] != "pinobs":
                     continue
                 check_module(alias.name, node.lineno)
-                if alias.asname:
-                    bound[alias.asname] = alias.name
-                else:
-                    bound["pinobs"] = "pinobs"
+                bound[alias.asname or "pinobs"] = alias.name if alias.asname else "pinobs"
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                here = module.split(".") if is_package else module.split(".")[:-1]
-                base = here[: len(here) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
+            target = _import_from_target(node, module, is_package)
             if target.split(".")[0] != "pinobs":
                 continue
             check_module(target, node.lineno)
@@ -93,6 +94,15 @@ def private_imports(
                     bound[alias.asname or alias.name] = full
                 elif _private(alias.name) and target != module:
                     found.append((node.lineno, f"imports {alias.name} from {target}"))
+    return found, bound
+
+
+def _private_attributes(
+    tree: ast.AST, module: str, modules: set[str], bound: dict[str, str]
+) -> list[tuple[int, str]]:
+    """``(line, what)`` for each private attribute of another pinobs module reached through
+    a name in ``bound`` (``pinobs.x._y``, ``alias._y``)."""
+    found: list[tuple[int, str]] = []
     for node in ast.walk(tree):
         if not (isinstance(node, ast.Attribute) and _private(node.attr)):
             continue
@@ -105,7 +115,16 @@ def private_imports(
         owner = ".".join([bound[value.id], *reversed(chain)])
         if owner in modules and owner != module:
             found.append((node.lineno, f"uses {owner}.{node.attr}"))
-    return sorted(set(found))
+    return found
+
+
+def private_imports(
+    module: str, source: str, modules: set[str], *, is_package: bool = False
+) -> list[tuple[int, str]]:
+    """``(line, what)`` for each private name of another pinobs module that ``module`` uses."""
+    tree = ast.parse(source)
+    found, bound = _imports(tree, module, modules, is_package)
+    return sorted(set(found + _private_attributes(tree, module, modules, bound)))
 
 
 def test_no_module_imports_a_private_name_of_another() -> None:

@@ -94,7 +94,7 @@ def expm_degree(norm: float) -> tuple[int, int]:
     return s, degree
 
 
-def _body_core(w: Vector, a: Vector, h: float, core: Vector) -> None:
+def _body_core(w: Vector, a: Vector, h: float, core: Vector) -> None:  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     """``core = expm(F_ε h)`` (15 × 15: ε_R, ε_v, ε_p, ζ_g, ζ_a), the Horner form of the series
     on the 9 rows that move (the bias rows of ``F_ε`` are zero, of ``core`` ``[0, I]``)."""
     F = np.zeros((15, 15))
@@ -292,7 +292,7 @@ def _correct_loops(
     return nis
 
 
-def _solve_innovation(HP: Vector, N: Vector, sol: Vector) -> bool:
+def _solve_innovation(HP: Vector, N: Vector, sol: Vector) -> bool:  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     """``sol = S⁻¹ [H P, r]`` with ``S = H P Hᵀ + N`` (eq. 5; ``HP = [H P, r]``, ``N`` the
     feet's 3 × 3 blocks) by Cholesky ``S = L Lᵀ``; False if ``S`` is not positive definite."""
     m, n = HP.shape[0], HP.shape[1] - 1

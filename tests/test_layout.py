@@ -63,6 +63,45 @@ def _import_from_target(node: ast.ImportFrom, module: str, is_package: bool) -> 
     return ".".join(base + ([node.module] if node.module else []))
 
 
+def _check_module(target: str, importer: str, line: int, found: list[tuple[int, str]]) -> None:
+    if _outside_package(target, importer):
+        found.append((line, f"imports private module {target}"))
+
+
+def _plain_import(
+    node: ast.Import, module: str, found: list[tuple[int, str]], bound: dict[str, str]
+) -> None:
+    """``import pinobs.x [as y]``: a private module said in ``found``, the name bound."""
+    for alias in node.names:
+        if alias.name.split(".")[0] != "pinobs":
+            continue
+        _check_module(alias.name, module, node.lineno, found)
+        bound[alias.asname or "pinobs"] = alias.name if alias.asname else "pinobs"
+
+
+def _from_import(
+    node: ast.ImportFrom,
+    module: str,
+    modules: set[str],
+    is_package: bool,
+    found: list[tuple[int, str]],
+    bound: dict[str, str],
+) -> None:
+    """``from pinobs.x import y``: a private module or name said in ``found``, a submodule's
+    name bound."""
+    target = _import_from_target(node, module, is_package)
+    if target.split(".")[0] != "pinobs":
+        return
+    _check_module(target, module, node.lineno, found)
+    for alias in node.names:
+        full = f"{target}.{alias.name}"
+        if full in modules:  # a submodule: private only as a module is
+            _check_module(full, module, node.lineno, found)
+            bound[alias.asname or alias.name] = full
+        elif _private(alias.name) and target != module:
+            found.append((node.lineno, f"imports {alias.name} from {target}"))
+
+
 def _imports(
     tree: ast.AST, module: str, modules: set[str], is_package: bool
 ) -> tuple[list[tuple[int, str]], dict[str, str]]:
@@ -70,30 +109,11 @@ def _imports(
     local names bound to pinobs modules (local name -> the module it stands for)."""
     found: list[tuple[int, str]] = []
     bound: dict[str, str] = {}
-
-    def check_module(target: str, line: int) -> None:
-        if _outside_package(target, module):
-            found.append((line, f"imports private module {target}"))
-
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            for alias in node.names:
-                if alias.name.split(".")[0] != "pinobs":
-                    continue
-                check_module(alias.name, node.lineno)
-                bound[alias.asname or "pinobs"] = alias.name if alias.asname else "pinobs"
+            _plain_import(node, module, found, bound)
         elif isinstance(node, ast.ImportFrom):
-            target = _import_from_target(node, module, is_package)
-            if target.split(".")[0] != "pinobs":
-                continue
-            check_module(target, node.lineno)
-            for alias in node.names:
-                full = f"{target}.{alias.name}"
-                if full in modules:  # a submodule: private only as a module is
-                    check_module(full, node.lineno)
-                    bound[alias.asname or alias.name] = full
-                elif _private(alias.name) and target != module:
-                    found.append((node.lineno, f"imports {alias.name} from {target}"))
+            _from_import(node, module, modules, is_package, found, bound)
     return found, bound
 
 

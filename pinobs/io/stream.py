@@ -473,16 +473,7 @@ class LogEstimator:
         """
         ob = self.observer
         if not self._started:
-            if q is None:
-                notes.append("no usable position yet: no estimate")
-                return None
-            try:
-                est = ob.reset(t, q, None, tau)
-            except (ConfigurationError, NonFiniteError, DimensionError) as exc:
-                notes.append(f"{exc}: no estimate")
-                return None
-            self._started, self._t = True, t
-            return est, True
+            return self._start(t, q, tau, notes)
         period = self.period
         gap = t - self._t
         try:
@@ -522,6 +513,22 @@ class LogEstimator:
             if self.failures == 1:
                 self._first_failure = t
             return self._restart(t, q, tau, notes)
+
+    def _start(
+        self, t: float, q: Vector | None, tau: Vector | None, notes: list[str]
+    ) -> tuple[Estimate, bool] | None:
+        """The observer started on the row at ``t`` (its estimate, corrected by ``q``), or
+        ``None`` (``notes`` say why): no usable position, or one it refuses."""
+        if q is None:
+            notes.append("no usable position yet: no estimate")
+            return None
+        try:
+            est = self.observer.reset(t, q, None, tau)
+        except (ConfigurationError, NonFiniteError, DimensionError) as exc:
+            notes.append(f"{exc}: no estimate")
+            return None
+        self._started, self._t = True, t
+        return est, True
 
     def _sane(self, est: Estimate, t: float) -> Estimate:
         """``est``, or :class:`ObserverDiverged` if a velocity is absurd (module docstring)."""

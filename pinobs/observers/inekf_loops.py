@@ -241,7 +241,7 @@ def _propagate_loops(
             P1[j, i] = m
 
 
-def _correct_loops(
+def _correct_loops(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
     R: Vector,
     x: Vector,
     theta: Vector,
@@ -326,7 +326,7 @@ def _solve_innovation(HP: Vector, N: Vector, sol: Vector) -> bool:  # noqa: C901
     return True
 
 
-def _joseph(P: Vector, HP: Vector, sol: Vector, N: Vector, P1: Vector) -> None:
+def _joseph(P: Vector, HP: Vector, sol: Vector, N: Vector, P1: Vector) -> None:  # noqa: C901 -- numba kernel: its branches are loops over small matrices
     """Eq. (5)'s Joseph form ``(I − KH) P (I − KH)ᵀ + K N Kᵀ = C − (C Hᵀ − K N) Kᵀ`` with
     ``C = P − K H P``, ``Kᵀ = sol[:, :n]``, symmetrised, into ``P1``."""
     n, m = P.shape[0], HP.shape[0]

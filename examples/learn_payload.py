@@ -50,6 +50,59 @@ def run(observer, res) -> np.ndarray:
     return np.array(out)
 
 
+def model_errors(model: pinobs.Robot, truth: pinobs.Robot, q: np.ndarray) -> tuple[float, float]:
+    """Relative errors of M(q) and g(q) at a configuration of the run (single parameters
+    such as one link's mass are often not identifiable; these combinations are)."""
+    m_t, g_t = truth.mass_matrix(q), truth.gravity(q)
+    m_err = np.linalg.norm(model.mass_matrix(q) - m_t) / np.linalg.norm(m_t)
+    g_err = np.linalg.norm(model.gravity(q) - g_t) / np.linalg.norm(g_t)
+    return float(m_err), float(g_err)
+
+
+def run_adaptive(adaptive, val, truth: pinobs.Robot, q_ref: np.ndarray, masses: list) -> np.ndarray:
+    """``adaptive``'s velocities over ``val``; every 100 samples, the errors of the model it
+    has learned appended to ``masses`` as ``(t, M error, g error)``."""
+    adaptive.reset(0.0, val.q[0], val.v[0], val.tau[0])
+    v = [val.v[0]]
+    for k in range(1, len(val.t)):
+        v.append(adaptive.update(val.t[k], val.q_meas[k], val.tau[k]).v)
+        if k % 100 == 0:  # what the learned model predicts, against the truth
+            learned = adaptive.learned_robot()
+            masses.append((val.t[k], *model_errors(learned, truth, q_ref)))
+    return np.array(v)
+
+
+def plot(png: Path, estimates: dict, val, masses: list, levels: dict) -> None:
+    """The estimates' errors over time, and the adaptive observer's model errors against the
+    URDF's and the identified model's (``levels``: name -> (M error, g error))."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    for name, v in estimates.items():
+        err = np.linalg.norm(v - val.v, axis=1)
+        ax1.semilogy(val.t[1:], np.maximum(err[1:], 1e-7), lw=0.8, label=name)
+    ax1.set_ylabel("|v̂ − v| [rad/s]")
+    ax1.legend(fontsize=7, ncol=2)
+    ax1.set_title("UR5 with ±20 % link inertias and an unknown payload")
+    t_m, m_err, g_err = np.array(masses).T
+    ax2.semilogy(t_m, m_err, color="C0", label="adaptive's model: M(q) error")
+    ax2.semilogy(t_m, g_err, color="C1", label="adaptive's model: g(q) error")
+    for (name, (m, g)), ls in zip(levels.items(), (":", "--"), strict=True):
+        ax2.axhline(m, color="C0", ls=ls, label=f"{name}: M {m:.2g}")
+        ax2.axhline(g, color="C1", ls=ls, label=f"{name}: g {g:.2g}")
+    ax2.set_xlabel("t [s]")
+    ax2.set_ylabel("relative error at a configuration of the run")
+    ax2.set_title(
+        "The learned dynamics converge (one link's mass alone is not identifiable)", fontsize=9
+    )
+    ax2.legend(fontsize=7, ncol=3)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=".", help="folder for learn_payload.png and calibrated.urdf")
@@ -76,33 +129,13 @@ def main() -> None:
     hints = {"rate": 1000.0, "noise_std": 1e-4}
     adaptive = make_observer("adaptive", robot, **hints)
     q_ref = val.q[len(val.t) // 2]
-
-    def model_errors(model: pinobs.Robot) -> tuple[float, float]:
-        """Relative errors of M(q) and g(q) at a configuration of the run (single parameters
-        such as one link's mass are often not identifiable; these combinations are)."""
-        m_t, g_t = truth.mass_matrix(q_ref), truth.gravity(q_ref)
-        m_err = np.linalg.norm(model.mass_matrix(q_ref) - m_t) / np.linalg.norm(m_t)
-        g_err = np.linalg.norm(model.gravity(q_ref) - g_t) / np.linalg.norm(g_t)
-        return float(m_err), float(g_err)
-
-    masses = []
-
-    def run_adaptive() -> np.ndarray:
-        adaptive.reset(0.0, val.q[0], val.v[0], val.tau[0])
-        v = [val.v[0]]
-        for k in range(1, len(val.t)):
-            v.append(adaptive.update(val.t[k], val.q_meas[k], val.tau[k]).v)
-            if k % 100 == 0:  # what the learned model predicts, against the truth
-                learned = adaptive.learned_robot()
-                masses.append((val.t[k], *model_errors(learned)))
-        return np.array(v)
-
+    masses: list = []
     estimates = {
         "ekf (URDF)": run(make_observer("ekf", robot, **hints), val),
         "riemannian (URDF)": run(make_observer("riemannian", robot, **hints), val),
         "ekf (identified)": run(make_observer("ekf", calibrated, **hints), val),
         "riemannian (identified)": run(make_observer("riemannian", calibrated, **hints), val),
-        "adaptive (learns online)": run_adaptive(),
+        "adaptive (learns online)": run_adaptive(adaptive, val, truth, q_ref, masses),
     }
     kfs = {
         j: run(make_observer("kf", robot, jerk_psd=j, **hints), val) for j in (1e1, 1e2, 1e3, 1e4)
@@ -118,36 +151,12 @@ def main() -> None:
         e = float(np.sqrt(np.mean((v[k0:] - val.v[k0:]) ** 2)))
         print(f"  {name:32s} {e:10.3g}   {e / ref:8.3g} x kf*")
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
-    for name, v in estimates.items():
-        err = np.linalg.norm(v - val.v, axis=1)
-        ax1.semilogy(val.t[1:], np.maximum(err[1:], 1e-7), lw=0.8, label=name)
-    ax1.set_ylabel("|v̂ − v| [rad/s]")
-    ax1.legend(fontsize=7, ncol=2)
-    ax1.set_title("UR5 with ±20 % link inertias and an unknown payload")
-    t_m, m_err, g_err = np.array(masses).T
-    m_urdf, g_urdf = model_errors(robot)
-    m_id, g_id = model_errors(calibrated)
-    ax2.semilogy(t_m, m_err, color="C0", label="adaptive's model: M(q) error")
-    ax2.semilogy(t_m, g_err, color="C1", label="adaptive's model: g(q) error")
-    ax2.axhline(m_urdf, color="C0", ls=":", label=f"URDF: M {m_urdf:.2g}")
-    ax2.axhline(g_urdf, color="C1", ls=":", label=f"URDF: g {g_urdf:.2g}")
-    ax2.axhline(m_id, color="C0", ls="--", label=f"identified offline: M {m_id:.2g}")
-    ax2.axhline(g_id, color="C1", ls="--", label=f"identified offline: g {g_id:.2g}")
-    ax2.set_xlabel("t [s]")
-    ax2.set_ylabel("relative error at a configuration of the run")
-    ax2.set_title(
-        "The learned dynamics converge (one link's mass alone is not identifiable)", fontsize=9
-    )
-    ax2.legend(fontsize=7, ncol=3)
-    fig.tight_layout()
+    levels = {
+        "URDF": model_errors(robot, truth, q_ref),
+        "identified offline": model_errors(calibrated, truth, q_ref),
+    }
     png = out / "learn_payload.png"
-    fig.savefig(png, dpi=110)
+    plot(png, estimates, val, masses, levels)
     print(f"wrote {png}")
 
 

@@ -62,6 +62,20 @@ clean logs (UR5 and double pendulum, seeds 1–3), 20–183 at 1 % torque noise,
 108–4500 at 5 %; in the hundreds, compare with ``refine=()`` on data of your
 own.
 
+**The torque offset** is not identified by default (``offset=False``): a
+:class:`Robot` cannot carry a torque offset, so the observers run on
+``.robot`` without it, and an offset the log does not have is confounded
+with gravity (the shoulder's ``m·c``, on a trajectory about one mean
+posture): identified anyway, it made the default ``ekf`` 1.6–3.4× less
+accurate in ``benchmarks/learning.py`` (z1: 0.06 → 0.19× kf*; the
+truths there have no offset).  Give ``offset=True`` for a torque sensor
+known to be biased, and add ``.offset`` to the torques fed to the
+observers (the model is driven by ``τ + b``: module docstring of
+:mod:`pinobs.model.identification`; subtracting it doubles the bias: on
+a 4 s UR5 log read as ``τ + [0.5, −2, 1, 0.3, 0, −0.1]`` N·m, seed 0, the
+``ekf`` on the calibrated model errs by 2.6 rad/s RMS, by 6.2e-3 adding
+it, 8.0e-3 on the true torques).
+
 The model layer cannot import the smoother (layers run one way), hence this
 thin wrapper one layer up; the machinery is the model layer's, written once.
 """
@@ -145,19 +159,8 @@ def identify(
 
     The arguments up to ``max_condition`` and the result are those of
     :func:`pinobs.model.identification.identify` (the log, the report, the
-    errors it raises), except that ``offset`` is off by default: a
-    :class:`Robot` cannot carry a torque offset, so the observers run on
-    ``.robot`` without it, and an offset the log does not have is confounded
-    with gravity (the shoulder's ``m·c``, on a trajectory about one mean
-    posture): identified anyway, it made the default ``ekf`` 1.6–3.4× less
-    accurate in ``benchmarks/learning.py`` (z1: 0.06 → 0.19× kf*; the
-    truths there have no offset).  Give ``offset=True`` for a torque sensor
-    known to be biased, and add ``.offset`` to the torques fed to the
-    observers (the model is driven by ``τ + b``: module docstring of
-    :mod:`pinobs.model.identification`; subtracting it doubles the bias: on
-    a 4 s UR5 log read as ``τ + [0.5, −2, 1, 0.3, 0, −0.1]`` N·m, seed 0, the
-    ``ekf`` on the calibrated model errs by 2.6 rad/s RMS, by 6.2e-3 adding
-    it, 8.0e-3 on the true torques).  This adds:
+    errors it raises), except that ``offset`` is off by default (module docstring,
+    "The torque offset").  This adds:
 
     Args:
         refine: white-acceleration densities [rad²/s³] of the smoother passes
@@ -212,7 +215,21 @@ def identify(
         current.report["velocities"] = "savgol"
         current.report["smoother_consistency"] = math.nan  # nothing smoothed
         return current
-    t, q, tau = log_arrays(robot, log)
+    return _refined(robot, log_arrays(robot, log), current, opts, refine, noise_std)
+
+
+def _refined(
+    robot: Robot,
+    log: tuple[Vector, Vector, Vector],
+    current: Identification,
+    opts: dict[str, Any],
+    refine: Sequence[float],
+    noise_std: float | None,
+) -> Identification:
+    """The passes of :func:`identify` after the first (``current``): each smooths the log
+    ``(t, q, tau)`` on the model identified so far, at the next density of ``refine``, and
+    identifies again from the smoothed path (module docstring)."""
+    t, q, tau = log
     sigma = noise_std if noise_std is not None else _noise_std(robot, t, q)
     for i, psd in enumerate(refine):
         # a pass before the last one only feeds the next fit: its held-out end needs no smoothing

@@ -54,45 +54,75 @@ def _outside_package(target: str, importer: str) -> bool:
     return False
 
 
-def private_imports(
-    module: str, source: str, modules: set[str], *, is_package: bool = False
-) -> list[tuple[int, str]]:
-    """``(line, what)`` for each private name of another pinobs module that ``module`` uses."""
-    tree = ast.parse(source)
+def _import_from_target(node: ast.ImportFrom, module: str, is_package: bool) -> str:
+    """The module a ``from ... import`` in ``module`` reads from, relative levels resolved."""
+    if not node.level:
+        return node.module or ""
+    here = module.split(".") if is_package else module.split(".")[:-1]
+    base = here[: len(here) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _check_module(target: str, importer: str, line: int, found: list[tuple[int, str]]) -> None:
+    if _outside_package(target, importer):
+        found.append((line, f"imports private module {target}"))
+
+
+def _plain_import(
+    node: ast.Import, module: str, found: list[tuple[int, str]], bound: dict[str, str]
+) -> None:
+    """``import pinobs.x [as y]``: a private module said in ``found``, the name bound."""
+    for alias in node.names:
+        if alias.name.split(".")[0] != "pinobs":
+            continue
+        _check_module(alias.name, module, node.lineno, found)
+        bound[alias.asname or "pinobs"] = alias.name if alias.asname else "pinobs"
+
+
+def _from_import(
+    node: ast.ImportFrom,
+    module: str,
+    modules: set[str],
+    is_package: bool,
+    found: list[tuple[int, str]],
+    bound: dict[str, str],
+) -> None:
+    """``from pinobs.x import y``: a private module or name said in ``found``, a submodule's
+    name bound."""
+    target = _import_from_target(node, module, is_package)
+    if target.split(".")[0] != "pinobs":
+        return
+    _check_module(target, module, node.lineno, found)
+    for alias in node.names:
+        full = f"{target}.{alias.name}"
+        if full in modules:  # a submodule: private only as a module is
+            _check_module(full, module, node.lineno, found)
+            bound[alias.asname or alias.name] = full
+        elif _private(alias.name) and target != module:
+            found.append((node.lineno, f"imports {alias.name} from {target}"))
+
+
+def _imports(
+    tree: ast.AST, module: str, modules: set[str], is_package: bool
+) -> tuple[list[tuple[int, str]], dict[str, str]]:
+    """The private modules and names ``module`` imports from other pinobs modules, and the
+    local names bound to pinobs modules (local name -> the module it stands for)."""
     found: list[tuple[int, str]] = []
-    bound: dict[str, str] = {}  # local name -> the pinobs module it stands for
-
-    def check_module(target: str, line: int) -> None:
-        if _outside_package(target, module):
-            found.append((line, f"imports private module {target}"))
-
+    bound: dict[str, str] = {}
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            for alias in node.names:
-                if alias.name.split(".")[0] != "pinobs":
-                    continue
-                check_module(alias.name, node.lineno)
-                if alias.asname:
-                    bound[alias.asname] = alias.name
-                else:
-                    bound["pinobs"] = "pinobs"
+            _plain_import(node, module, found, bound)
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                here = module.split(".") if is_package else module.split(".")[:-1]
-                base = here[: len(here) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
-            if target.split(".")[0] != "pinobs":
-                continue
-            check_module(target, node.lineno)
-            for alias in node.names:
-                full = f"{target}.{alias.name}"
-                if full in modules:  # a submodule: private only as a module is
-                    check_module(full, node.lineno)
-                    bound[alias.asname or alias.name] = full
-                elif _private(alias.name) and target != module:
-                    found.append((node.lineno, f"imports {alias.name} from {target}"))
+            _from_import(node, module, modules, is_package, found, bound)
+    return found, bound
+
+
+def _private_attributes(
+    tree: ast.AST, module: str, modules: set[str], bound: dict[str, str]
+) -> list[tuple[int, str]]:
+    """``(line, what)`` for each private attribute of another pinobs module reached through
+    a name in ``bound`` (``pinobs.x._y``, ``alias._y``)."""
+    found: list[tuple[int, str]] = []
     for node in ast.walk(tree):
         if not (isinstance(node, ast.Attribute) and _private(node.attr)):
             continue
@@ -105,7 +135,16 @@ def private_imports(
         owner = ".".join([bound[value.id], *reversed(chain)])
         if owner in modules and owner != module:
             found.append((node.lineno, f"uses {owner}.{node.attr}"))
-    return sorted(set(found))
+    return found
+
+
+def private_imports(
+    module: str, source: str, modules: set[str], *, is_package: bool = False
+) -> list[tuple[int, str]]:
+    """``(line, what)`` for each private name of another pinobs module that ``module`` uses."""
+    tree = ast.parse(source)
+    found, bound = _imports(tree, module, modules, is_package)
+    return sorted(set(found + _private_attributes(tree, module, modules, bound)))
 
 
 def test_no_module_imports_a_private_name_of_another() -> None:
@@ -186,12 +225,7 @@ def test_relative_imports_of_a_package_resolve_from_the_package_itself() -> None
 MAX_FUNCTION_LINES, MAX_MODULE_LINES = 80, 800
 #: Functions over the limit today, each with its length: they may shrink (lower the entry,
 #: remove it once under the limit), never grow, and no other may join them.
-LONG_FUNCTIONS: dict[tuple[str, str], int] = {
-    ("pinobs/calibration.py", "identify"): 104,
-    ("pinobs/model/identification/offline.py", "identify"): 136,
-    ("pinobs/simulation/legged.py", "_record"): 107,
-    ("pinobs/smoothing/api.py", "smooth"): 141,
-}
+LONG_FUNCTIONS: dict[tuple[str, str], int] = {}
 #: Modules over the limit today, likewise.
 LARGE_MODULES: dict[str, int] = {}
 

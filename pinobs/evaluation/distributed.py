@@ -127,13 +127,7 @@ def run_tasks(
         OptionError: ``workers`` is negative, or given with ``scheduler``; ``scheduler``
             is not an address.
     """
-    if workers is not None and workers < 0:
-        raise OptionError(f"workers={workers}: give 0 (this process) or more local workers")
-    if scheduler is not None and workers is not None:
-        raise OptionError(
-            f"workers={workers} with scheduler={scheduler!r}: the scheduler's cluster "
-            "has its own workers; give one or the other"
-        )
+    _check_cluster(scheduler, workers)
 
     def report(done: int, outcome: TaskOutcome) -> None:
         if on_result is not None:
@@ -166,6 +160,17 @@ def run_tasks(
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _check_cluster(scheduler: str | None, workers: int | None) -> None:
+    """:func:`run_tasks`' refusals of ``workers`` negative, or given with ``scheduler``."""
+    if workers is not None and workers < 0:
+        raise OptionError(f"workers={workers}: give 0 (this process) or more local workers")
+    if scheduler is not None and workers is not None:
+        raise OptionError(
+            f"workers={workers} with scheduler={scheduler!r}: the scheduler's cluster "
+            "has its own workers; give one or the other"
+        )
 
 
 def _client(dd: Any, scheduler: str | None, workers: int | None, processes: bool) -> Any:

@@ -721,8 +721,7 @@ class ClockRepair:
         t_out[placed] = t0 + p * ticks[placed]
         drops = np.zeros(n_rows, dtype=np.int64)
         if ui.size and rep.step <= 1.0:
-            seq = np.r_[prev_tick, n[ui]]
-            d = np.diff(seq)
+            d = np.diff(np.r_[prev_tick, n[ui]])
             d = np.where(np.isfinite(d), d, 1.0)
             drops[ui] = np.maximum(d - 1, 0).astype(np.int64)
         if ui.size:

@@ -45,6 +45,30 @@ __all__ = ["MAX_TRANSMISSION_CONDITION", "Drives"]
 MAX_TRANSMISSION_CONDITION = 1e12
 
 
+def _transmission(transmission: ArrayLike) -> Vector:
+    """``transmission`` as a read-only square matrix, checked: finite, invertible.
+
+    Raises:
+        DimensionError: not square, not finite, or singular.
+    """
+    T = np.asarray(transmission, dtype=float)
+    if T.ndim != 2 or T.shape[0] != T.shape[1]:
+        raise DimensionError(
+            f"transmission must be a square matrix (n × n, θ_m = T q), got shape {T.shape}"
+        )
+    if not np.all(np.isfinite(T)):
+        raise DimensionError("transmission is not finite")
+    cond = np.linalg.cond(T)
+    if not cond < MAX_TRANSMISSION_CONDITION:
+        raise DimensionError(
+            f"transmission is singular (condition number {cond:.3g}): no joint "
+            f"positions follow from the motors'; T = {T.tolist()}"
+        )
+    T = T.copy()
+    T.flags.writeable = False
+    return T
+
+
 def _vector(name: str, value: ArrayLike | None) -> Vector | None:
     if value is None:
         return None
@@ -104,22 +128,7 @@ class Drives:
                     f"{name} = {v.tolist()} has a zero: every joint needs a non-zero one"
                 )
         if self.transmission is not None:
-            T = np.asarray(self.transmission, dtype=float)
-            if T.ndim != 2 or T.shape[0] != T.shape[1]:
-                raise DimensionError(
-                    f"transmission must be a square matrix (n × n, θ_m = T q), got shape {T.shape}"
-                )
-            if not np.all(np.isfinite(T)):
-                raise DimensionError("transmission is not finite")
-            cond = np.linalg.cond(T)
-            if not cond < MAX_TRANSMISSION_CONDITION:
-                raise DimensionError(
-                    f"transmission is singular (condition number {cond:.3g}): no joint "
-                    f"positions follow from the motors'; T = {T.tolist()}"
-                )
-            T = T.copy()
-            T.flags.writeable = False
-            object.__setattr__(self, "transmission", T)
+            object.__setattr__(self, "transmission", _transmission(self.transmission))
         sizes = {n: v.size for n, v in vectors.items() if v is not None}
         if self.transmission is not None:
             sizes["transmission"] = self.transmission.shape[0]

@@ -174,17 +174,9 @@ def legged_run(
         raise LogFormatError(
             "inekf needs the trunk IMU: imu.gyro.x|y|z [rad/s] and imu.acc.x|y|z [m/s²] columns"
         )
-    if contacts not in CONTACT_MODES:
-        raise OptionError(f"contacts={contacts!r}: choose one of {', '.join(CONTACT_MODES)}")
     if imu_frame is None and robot.model.existFrame(IMU_FRAME):
         imu_frame = IMU_FRAME
-    if contacts == "probability":
-        if log.foot_force is None:
-            raise LogFormatError("contacts='probability' needs force.<foot frame> [N] columns")
-        prob = ContactProbability.for_robot(robot) if probability is None else probability
-        flags = np.zeros((len(log), len(log.feet)), dtype=bool)
-    else:
-        prob, flags = None, _contacts(robot, log, contact_on, contact_off)
+    prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
     filt = InvariantEKF(robot, log.feet, gains=gains, imu_frame=imu_frame, foot_gate=foot_gate)
     joints = _joint_velocities(robot, log)
     n = len(log)
@@ -232,6 +224,26 @@ def legged_run(
         consistency=stance_consistency(nis, dof, gated),
     )
     return LeggedDetail(run, flags, nis, dof)
+
+
+def _contact_setup(
+    robot: Robot,
+    log: Log,
+    contacts: str,
+    probability: ContactProbability | None,
+    contact_on: float | None,
+    contact_off: float | None,
+) -> tuple[ContactProbability | None, np.ndarray]:
+    """The contact model and the flags per row: from the forces' thresholds now, or (mode
+    ``"probability"``) all clear, to be set row by row as the filter runs."""
+    if contacts not in CONTACT_MODES:
+        raise OptionError(f"contacts={contacts!r}: choose one of {', '.join(CONTACT_MODES)}")
+    if contacts != "probability":
+        return None, _contacts(robot, log, contact_on, contact_off)
+    if log.foot_force is None:
+        raise LogFormatError("contacts='probability' needs force.<foot frame> [N] columns")
+    prob = ContactProbability.for_robot(robot) if probability is None else probability
+    return prob, np.zeros((len(log), len(log.feet)), dtype=bool)
 
 
 def _probable(

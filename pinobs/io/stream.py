@@ -165,6 +165,38 @@ def _absurd_bounds(robot: Robot) -> tuple[Vector, Vector, Vector, Vector, Vector
     return a_lo, a_hi, w_lo, w_hi, robot.absurd_torque  # the live API's bound too
 
 
+@dataclass(frozen=True)
+class _RowMasks:
+    """Per row of a log: its position finite, absurd (beyond the joint ranges' absurd
+    bounds), which joints are far outside the limits (``outside``, ``outside_rows``: only
+    usable positions), and its torque non-finite or absurd (``None`` without torques)."""
+
+    finite_q: NDArray[np.bool_]
+    absurd_q: NDArray[np.bool_]
+    outside: NDArray[np.bool_]
+    outside_rows: list[bool]
+    bad_tau: NDArray[np.bool_] | None
+
+    @classmethod
+    def of(cls, log: Log, bounds: tuple[Vector, Vector, Vector, Vector, Vector]) -> _RowMasks:
+        a_lo, a_hi, w_lo, w_hi, tau_max = bounds
+        q_all, tau_all = log.q, log.tau
+        finite_q: NDArray[np.bool_] = np.asarray(np.isfinite(q_all).all(axis=1))
+        absurd_q: NDArray[np.bool_] = np.asarray(
+            finite_q & ((q_all < a_lo) | (q_all > a_hi)).any(axis=1)
+        )
+        # rows far outside the limits (the degrees warning of finish): only usable positions
+        # of rows placed in time (a sweep found an inf cell said as "|q| up to inf")
+        outside = (q_all < w_lo) | (q_all > w_hi)
+        outside_rows = (outside.any(axis=1) & finite_q & ~absurd_q).tolist()
+        bad_tau: NDArray[np.bool_] | None = None
+        if tau_all is not None:
+            bad_tau = np.asarray(
+                ~np.isfinite(tau_all).all(axis=1) | (np.abs(tau_all) > tau_max).any(axis=1)
+            )
+        return cls(finite_q, absurd_q, outside, outside_rows, bad_tau)
+
+
 def _coordinate_names(robot: Robot) -> list[str]:
     names = [""] * robot.nq
     for b in robot.joints:
@@ -295,21 +327,8 @@ class LogEstimator:
         out_v = np.full((n, robot.nv), np.nan)
         if n == 0:
             return log.t[:0], out_q, out_v
-        a_lo, a_hi, w_lo, w_hi, tau_max = self._bounds
-        q_all, t_all = log.q, log.t
-        finite_q: NDArray[np.bool_] = np.asarray(np.isfinite(q_all).all(axis=1))
-        absurd_q: NDArray[np.bool_] = np.asarray(
-            finite_q & ((q_all < a_lo) | (q_all > a_hi)).any(axis=1)
-        )
-        # rows far outside the limits (the degrees warning of finish): only usable positions
-        # of rows placed in time (a sweep found an inf cell said as "|q| up to inf")
-        outside = (q_all < w_lo) | (q_all > w_hi)
-        outside_rows = (outside.any(axis=1) & finite_q & ~absurd_q).tolist()
-        tau_all = log.tau
-        if tau_all is not None:
-            bad_tau: NDArray[np.bool_] = np.asarray(
-                ~np.isfinite(tau_all).all(axis=1) | (np.abs(tau_all) > tau_max).any(axis=1)
-            )
+        masks = _RowMasks.of(log, self._bounds)
+        q_all, t_all, tau_all = log.q, log.t, log.tau
         problems: dict[int, list[str]] = {}
         for pos, reason in log.problems:
             problems.setdefault(pos, []).append(reason)
@@ -340,18 +359,11 @@ class LogEstimator:
                 self._report(lines[k], stamps[k], [*notes, skipped])
                 continue
             # ---- values
-            q_ok = bool(finite_q[k]) and not bool(absurd_q[k])
-            if outside_rows[k]:
-                for i in np.flatnonzero(outside[k]).tolist():
-                    self._outside[i] = max(self._outside.get(i, 0.0), abs(float(q_all[k, i])))
-            if finite_q[k] and absurd_q[k]:
-                notes.append(f"position {q_all[k].tolist()} absurd for the joint ranges")
-            elif not finite_q[k] and not why:
-                notes.append(f"non-finite position {q_all[k].tolist()}")
+            q_ok = self._position_verdict(q_all[k], masks, k, bool(why), notes)
             held = self._held
             tau = self._torque(
                 None if tau_all is None else tau_all[k],
-                tau_all is not None and bool(bad_tau[k]),
+                masks.bad_tau is not None and bool(masks.bad_tau[k]),
                 int(lines[k]),
                 bool(why),
                 notes,
@@ -369,6 +381,22 @@ class LogEstimator:
                 self._report(lines[k], stamps[k], notes)
         self.rows += n
         return t_all[:n], out_q, out_v
+
+    def _position_verdict(
+        self, q: Vector, masks: _RowMasks, k: int, unreadable: bool, notes: list[str]
+    ) -> bool:
+        """Whether row ``k``'s position ``q`` is usable; its joints far outside the limits
+        recorded (the degrees warning of :meth:`finish`), an absurd or non-finite one said in
+        ``notes`` (unless the row was ``unreadable``: its problem says why)."""
+        if masks.outside_rows[k]:
+            for i in np.flatnonzero(masks.outside[k]).tolist():
+                self._outside[i] = max(self._outside.get(i, 0.0), abs(float(q[i])))
+        finite, absurd = bool(masks.finite_q[k]), bool(masks.absurd_q[k])
+        if finite and absurd:
+            notes.append(f"position {q.tolist()} absurd for the joint ranges")
+        elif not finite and not unreadable:
+            notes.append(f"non-finite position {q.tolist()}")
+        return finite and not absurd
 
     def _time_verdict(self, t: float, nxt: float | None, unit: str, notes: list[str]) -> str | None:
         """Why the row at ``t`` is skipped for its time (module docstring), or ``None``: it
@@ -445,16 +473,7 @@ class LogEstimator:
         """
         ob = self.observer
         if not self._started:
-            if q is None:
-                notes.append("no usable position yet: no estimate")
-                return None
-            try:
-                est = ob.reset(t, q, None, tau)
-            except (ConfigurationError, NonFiniteError, DimensionError) as exc:
-                notes.append(f"{exc}: no estimate")
-                return None
-            self._started, self._t = True, t
-            return est, True
+            return self._start(t, q, tau, notes)
         period = self.period
         gap = t - self._t
         try:
@@ -494,6 +513,22 @@ class LogEstimator:
             if self.failures == 1:
                 self._first_failure = t
             return self._restart(t, q, tau, notes)
+
+    def _start(
+        self, t: float, q: Vector | None, tau: Vector | None, notes: list[str]
+    ) -> tuple[Estimate, bool] | None:
+        """The observer started on the row at ``t`` (its estimate, corrected by ``q``), or
+        ``None`` (``notes`` say why): no usable position, or one it refuses."""
+        if q is None:
+            notes.append("no usable position yet: no estimate")
+            return None
+        try:
+            est = self.observer.reset(t, q, None, tau)
+        except (ConfigurationError, NonFiniteError, DimensionError) as exc:
+            notes.append(f"{exc}: no estimate")
+            return None
+        self._started, self._t = True, t
+        return est, True
 
     def _sane(self, est: Estimate, t: float) -> Estimate:
         """``est``, or :class:`ObserverDiverged` if a velocity is absurd (module docstring)."""

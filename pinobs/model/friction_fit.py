@@ -94,6 +94,31 @@ def candidate_columns(reg: MomentumRegressor, n_cands: int, choice: list[int]) -
     return np.asarray(cols, dtype=np.intp)
 
 
+def _fold_grams(A: Vector, y: Vector, nv: int) -> tuple[list[Vector], list[Vector], list[float]]:
+    """``(AᵀA, Aᵀy, yᵀy)`` of each of the :data:`SMOOTHING_FOLDS` contiguous blocks of the
+    rows (a window's ``nv`` rows stay together)."""
+    blocks = np.array_split(np.arange(A.shape[0] // nv), SMOOTHING_FOLDS)
+    grams, rhs, yy = [], [], []
+    for b in blocks:
+        rows = (b[:, None] * nv + np.arange(nv)).ravel()  # a window's rows stay together
+        grams.append(A[rows].T @ A[rows])
+        rhs.append(A[rows].T @ y[rows])
+        yy.append(float(y[rows] @ y[rows]))
+    return grams, rhs, yy
+
+
+def _nearest(cands: list[tuple[float, float]], vs: float, vst: float) -> int:
+    """The index of the candidate ``(v_s, v_st)`` nearest ``(vs, vst)`` in log scale."""
+    return int(
+        np.argmin(
+            [
+                abs(math.log(c[0] / vs)) + abs(math.log(max(c[1], 1e-9) / max(vst, 1e-9)))
+                for c in cands
+            ]
+        )
+    )
+
+
 def search_smoothing(
     reg: MomentumRegressor, A: Vector, y: Vector, cands: list[tuple[float, float]]
 ) -> tuple[list[int], dict[str, Any]]:
@@ -112,28 +137,11 @@ def search_smoothing(
     """
     theta0, s = reg.nominal(), reg.prior_std()
     n_c = len(cands)
-    blocks = np.array_split(np.arange(A.shape[0] // reg.robot.nv), SMOOTHING_FOLDS)
-    nv = reg.robot.nv
-    grams, rhs, yy = [], [], []
-    for b in blocks:
-        rows = (b[:, None] * nv + np.arange(nv)).ravel()  # a window's rows stay together
-        grams.append(A[rows].T @ A[rows])
-        rhs.append(A[rows].T @ y[rows])
-        yy.append(float(y[rows] @ y[rows]))
+    grams, rhs, yy = _fold_grams(A, y, reg.robot.nv)
     g_all, r_all = sum(grams), sum(rhs)
-
-    def start(vs: float, vst: float) -> int:
-        return int(
-            np.argmin(
-                [
-                    abs(math.log(c[0] / vs)) + abs(math.log(max(c[1], 1e-9) / max(vst, 1e-9)))
-                    for c in cands
-                ]
-            )
-        )
-
     choice = [
-        start(float(a), float(b)) for a, b in zip(reg.smoothing, reg.stribeck_velocity, strict=True)
+        _nearest(cands, float(a), float(b))
+        for a, b in zip(reg.smoothing, reg.stribeck_velocity, strict=True)
     ]
     # residual scale: of the starting choice's plain fit (as solve's first pass)
     cols = candidate_columns(reg, n_c, choice)

@@ -129,6 +129,53 @@ def _mjcf_joint_classes(root: ET.Element) -> dict[str, dict[str, str]]:
     return classes
 
 
+def _mjcf_joint(
+    attrs: dict[str, str], degree: bool, autolimits: bool
+) -> tuple[str | None, int, tuple[float, float] | None]:
+    """``(name, nq, limits)`` of a ``<joint>`` with these attributes (its class's and its own),
+    as MuJoCo compiles it (:func:`_mjcf_limits`); ``limits`` ``None`` but for a hinge or a
+    slide."""
+    kind = attrs.get("type", "hinge")
+    if kind not in ("hinge", "slide"):
+        return attrs.get("name"), 7 if kind == "free" else 4, None
+    scale = np.pi / 180.0 if kind == "hinge" and degree else 1.0
+    ref = scale * float(attrs.get("ref", "0"))
+    lo, hi = (scale * float(x) for x in attrs.get("range", "0 0").split())
+    limited = attrs.get("limited", "auto")
+    on = limited == "true" or (limited == "auto" and autolimits and "range" in attrs)
+    big = np.finfo(float).max
+    return attrs.get("name"), 1, (lo - ref, hi - ref) if on else (-big, big)
+
+
+def _mjcf_joints(root: ET.Element) -> list[tuple[str | None, int, tuple[float, float] | None]]:
+    """``(name, nq, limits)`` of every joint of the file's first body tree, in order, as
+    MuJoCo compiles them (:func:`_mjcf_joint`; :func:`_mjcf_limits`)."""
+    compiler: dict[str, str] = {}
+    for el in root.iter("compiler"):
+        compiler.update(el.attrib)
+    degree = compiler.get("angle", "degree") != "radian"
+    autolimits = compiler.get("autolimits", "true") == "true"
+    classes = _mjcf_joint_classes(root)
+    joints: list[tuple[str | None, int, tuple[float, float] | None]] = []
+
+    def walk(body: ET.Element, childclass: str) -> None:
+        childclass = body.get("childclass", childclass)
+        for el in body:
+            if el.tag == "freejoint":
+                joints.append((el.get("name"), 7, None))
+            elif el.tag == "joint":
+                attrs = {**classes.get(el.get("class", childclass), {}), **el.attrib}
+                joints.append(_mjcf_joint(attrs, degree, autolimits))
+        for child in body.findall("body"):
+            walk(child, childclass)
+
+    worldbody = root.find("worldbody")
+    first = worldbody.find("body") if worldbody is not None else None
+    if first is not None:
+        walk(first, "main")
+    return joints
+
+
 def _mjcf_limits(root: ET.Element, model: pin.Model, path: Path) -> None:
     """Hinge and slide position limits of a model from Pinocchio's MJCF parser, set in place
     to MuJoCo's (those the MuJoCo path gives: :mod:`pinobs.model.mjcf`).
@@ -148,39 +195,7 @@ def _mjcf_limits(root: ET.Element, model: pin.Model, path: Path) -> None:
     if its joints do not line up with the model's ``q``, the parser's limits are
     kept and a :class:`~pinobs.errors.ModelWarning` says so.
     """
-    compiler: dict[str, str] = {}
-    for el in root.iter("compiler"):
-        compiler.update(el.attrib)
-    degree = compiler.get("angle", "degree") != "radian"
-    autolimits = compiler.get("autolimits", "true") == "true"
-    classes = _mjcf_joint_classes(root)
-    joints: list[tuple[str | None, int, tuple[float, float] | None]] = []  # name, nq, limits
-
-    def walk(body: ET.Element, childclass: str) -> None:
-        childclass = body.get("childclass", childclass)
-        for el in body:
-            if el.tag == "freejoint":
-                joints.append((el.get("name"), 7, None))
-            elif el.tag == "joint":
-                attrs = {**classes.get(el.get("class", childclass), {}), **el.attrib}
-                kind = attrs.get("type", "hinge")
-                if kind not in ("hinge", "slide"):
-                    joints.append((attrs.get("name"), 7 if kind == "free" else 4, None))
-                    continue
-                scale = np.pi / 180.0 if kind == "hinge" and degree else 1.0
-                ref = scale * float(attrs.get("ref", "0"))
-                lo, hi = (scale * float(x) for x in attrs.get("range", "0 0").split())
-                limited = attrs.get("limited", "auto")
-                on = limited == "true" or (limited == "auto" and autolimits and "range" in attrs)
-                big = np.finfo(float).max
-                joints.append((attrs.get("name"), 1, (lo - ref, hi - ref) if on else (-big, big)))
-        for child in body.findall("body"):
-            walk(child, childclass)
-
-    worldbody = root.find("worldbody")
-    first = worldbody.find("body") if worldbody is not None else None
-    if first is not None:
-        walk(first, "main")
+    joints = _mjcf_joints(root)
     offset = model.nq - sum(nq for _, nq, _ in joints)  # a root joint pinobs added comes first
     idx_q = list(accumulate((nq for _, nq, _ in joints), initial=offset))[:-1]
     lined_up = offset >= 0 and all(

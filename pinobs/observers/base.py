@@ -392,22 +392,7 @@ class Observer(ABC, Generic[State]):
         if not (
             math.isfinite(sum(estimate.q.tolist())) and math.isfinite(sum(estimate.v.tolist()))
         ):
-            # (a sum overflowing to inf also lands here: then check entry by entry)
-            if not (np.all(np.isfinite(estimate.q)) and np.all(np.isfinite(estimate.v))):
-                self._diverged = True
-                why = (
-                    f"predicted through a pause of {dt:.6g} s without a sample (the next sample "
-                    "restarts it)"
-                    if self._restart_due
-                    else "check the model and the torques (or the gains); reset(t, q) starts "
-                    "it afresh"
-                )
-                raise ObserverDiverged(
-                    f"{self!r} diverged at t = {t_new:.6g} s (non-finite estimate); "
-                    f"the last finite estimate is at t = {self._t:.6g} s, kept: {why}.",
-                    t=t_new,
-                    last_estimate=self._last,
-                )
+            self._check_finite(estimate, t_new, dt)  # entry by entry: a sum can overflow to inf
         self._diverged = False
         self._state, self._t, self._tau, self._last = state, t_new, tau_new, estimate
         self._ts = t_state
@@ -428,6 +413,25 @@ class Observer(ABC, Generic[State]):
         if self._noise_samples is not None and self._learn_noise(t_new, q, tau_new):
             return self.estimate  # rebuilt with σ from the data, replayed up to t_new
         return estimate
+
+    def _check_finite(self, estimate: Estimate, t_new: float, dt: float) -> None:
+        """:class:`ObserverDiverged` if ``estimate`` (at ``t_new``, ``dt`` after the previous
+        one) has a non-finite entry, checked entry by entry (the sums :meth:`_update` checks
+        first can overflow to inf on a finite estimate)."""
+        if not (np.all(np.isfinite(estimate.q)) and np.all(np.isfinite(estimate.v))):
+            self._diverged = True
+            why = (
+                f"predicted through a pause of {dt:.6g} s without a sample (the next sample "
+                "restarts it)"
+                if self._restart_due
+                else "check the model and the torques (or the gains); reset(t, q) starts it afresh"
+            )
+            raise ObserverDiverged(
+                f"{self!r} diverged at t = {t_new:.6g} s (non-finite estimate); "
+                f"the last finite estimate is at t = {self._t:.6g} s, kept: {why}.",
+                t=t_new,
+                last_estimate=self._last,
+            )
 
     _update_on_one_thread = one_blas_thread(_update)  # small matrices: threads only contend
 

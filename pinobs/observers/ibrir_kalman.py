@@ -129,7 +129,7 @@ _transition_nb: Any = None
 _joseph_nb: Any = None
 
 
-def _fused_loops(
+def _fused_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     M: Vector,
     CD: Vector,
     h: float,
@@ -492,15 +492,8 @@ class IbrirKalman(Observer[_State]):
         r, nv = self.robot, self.robot.nv
         d0 = state.diff
         d1 = None if d0 is None else self.differentiator.step(d0, dt, q_meas, tau)  # ξ̂
-        # scheduling output y(s) on the interval, s ∈ [0, dt]: y0 ⊕ (s/dt) dy
         vector_space = self._vector_space  # ⊕ is +, ⊖ is −: NumPy, not a Pinocchio call
-        if self.schedule == "filtered" and d0 is not None and d1 is not None:
-            y0, dy = d0.q, r.difference(d0.q, d1.q)
-        elif q_meas is not None:  # the paper's y; from q̂ when no sample opened the interval
-            y0 = state.q if state.y_prev is None else state.y_prev
-            dy = q_meas - y0 if vector_space else r.difference(y0, q_meas)
-        else:  # no sample at either end: the prediction's own path
-            y0, dy = state.q, dt * state.v
+        y0, dy = self._schedule(state, d0, d1, q_meas, dt)
         yd0 = yd1 = state.v
         if d0 is not None and d1 is not None:
             yd0, yd1 = d0.X[0], d1.X[0]
@@ -531,24 +524,7 @@ class IbrirKalman(Observer[_State]):
             minv_diag = np.diag(np.linalg.inv(r.mass_matrix(y0)))
             n = friction_substeps(r, state.v, a0, minv_diag, dt)
         if n == 1 and use_estimate and vector_space:  # RK4 without lie_rk4's bookkeeping
-            # classical RK4 stacked as in dynamics_rk4: rows (q, v, a₁, a₂, a₃, a₄)
-            c2, c3, c4, c_out = rk4_stage_matrices(float(dt))
-            fd, b = r.forward_dynamics, np.empty((6, nv))
-            b[0], b[1] = state.q, state.v
-            y_half = y_at[0.5]
-            if not self._viscous:  # C_f v = 0: τ as it is (the same numbers)
-                b[2] = fd(y0, b[1], tau)
-                b[3] = fd(y_half, c2[1].dot(b[:3]), tau)
-                b[4] = fd(y_half, c3[1].dot(b[:4]), tau)
-                b[5] = fd(y_at[1.0], c4[1].dot(b[:5]), tau)
-            else:
-                visc = self.viscous
-                for i, (y, c) in enumerate(
-                    ((y0, None), (y_half, c2), (y_half, c3), (y_at[1.0], c4))
-                ):
-                    v_i = b[1] if c is None else c[1].dot(b[: i + 2])
-                    b[i + 2] = fd(y, v_i, tau - visc * v_i)
-            q, v = c_out.dot(b)
+            q, v = self._rk4(state, y_at, tau, dt)
         else:
             q, x = state.q, np.concatenate([state.v, [0.0]])
             for _ in range(n):  # x[nv] carries the time since the interval's start
@@ -556,6 +532,44 @@ class IbrirKalman(Observer[_State]):
             v = x[:nv]
         y_dot_mid = 0.5 * (state.v + v) if use_estimate else 0.5 * (yd0 + yd1)
         return q, v, (y_at[0.5], y_dot_mid), d1
+
+    def _schedule(
+        self, state: _State, d0: Any, d1: Any, q_meas: Vector | None, dt: float
+    ) -> tuple[Vector, Vector]:
+        """``(y0, dy)`` of the scheduling output on the interval, ``y(s) = y0 ⊕ (s/dt) dy``
+        for ``s ∈ [0, dt]`` (module docstring; ``d0``, ``d1`` the differentiator's states at
+        its ends, ``None`` without one)."""
+        r = self.robot
+        if self.schedule == "filtered" and d0 is not None and d1 is not None:
+            return d0.q, r.difference(d0.q, d1.q)
+        if q_meas is not None:  # the paper's y; from q̂ when no sample opened the interval
+            y0 = state.q if state.y_prev is None else state.y_prev
+            return y0, q_meas - y0 if self._vector_space else r.difference(y0, q_meas)
+        return state.q, dt * state.v  # no sample at either end: the prediction's own path
+
+    def _rk4(
+        self, state: _State, y_at: dict[float, Vector], tau: Vector, dt: float
+    ) -> tuple[Vector, Vector]:
+        """One classical RK4 step of ``(q, v)`` on a vector space with ``ẏ = v̂`` (``y_at``:
+        ``y`` at the stages' ``s = 0, ½, 1``), stacked as in ``dynamics_rk4``: rows ``(q, v,
+        a₁, a₂, a₃, a₄)``, without :func:`lie_rk4`'s bookkeeping."""
+        r, nv = self.robot, self.robot.nv
+        c2, c3, c4, c_out = rk4_stage_matrices(float(dt))
+        fd, b = r.forward_dynamics, np.empty((6, nv))
+        b[0], b[1] = state.q, state.v
+        y0, y_half = y_at[0.0], y_at[0.5]
+        if not self._viscous:  # C_f v = 0: τ as it is (the same numbers)
+            b[2] = fd(y0, b[1], tau)
+            b[3] = fd(y_half, c2[1].dot(b[:3]), tau)
+            b[4] = fd(y_half, c3[1].dot(b[:4]), tau)
+            b[5] = fd(y_at[1.0], c4[1].dot(b[:5]), tau)
+        else:
+            visc = self.viscous
+            for i, (y, c) in enumerate(((y0, None), (y_half, c2), (y_half, c3), (y_at[1.0], c4))):
+                v_i = b[1] if c is None else c[1].dot(b[: i + 2])
+                b[i + 2] = fd(y, v_i, tau - visc * v_i)
+        q, v = c_out.dot(b)
+        return q, v
 
     def output(self, state: _State) -> tuple[Vector, Vector]:
         return state.q, state.v

@@ -96,7 +96,7 @@ def expm_degree(norm: float) -> tuple[int, int]:
     return s, degree
 
 
-def _body_core(w: Vector, a: Vector, h: float, core: Vector) -> None:
+def _body_core(w: Vector, a: Vector, h: float, core: Vector) -> None:  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     """``core = expm(F_ε h)`` (15 × 15: ε_R, ε_v, ε_p, ζ_g, ζ_a), the Horner form of the series
     on the 9 rows that move (the bias rows of ``F_ε`` are zero, of ``core`` ``[0, I]``)."""
     F = np.zeros((15, 15))
@@ -243,7 +243,7 @@ def _propagate_loops(
             P1[j, i] = m
 
 
-def _correct_loops(
+def _correct_loops(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
     R: Vector,
     x: Vector,
     theta: Vector,
@@ -346,7 +346,7 @@ def _foot_nis_loops(
         out[f] = t / det
 
 
-def _solve_innovation(HP: Vector, N: Vector, sol: Vector) -> bool:
+def _solve_innovation(HP: Vector, N: Vector, sol: Vector) -> bool:  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     """``sol = S⁻¹ [H P, r]`` with ``S = H P Hᵀ + N`` (eq. 5; ``HP = [H P, r]``, ``N`` the
     feet's 3 × 3 blocks) by Cholesky ``S = L Lᵀ``; False if ``S`` is not positive definite."""
     m, n = HP.shape[0], HP.shape[1] - 1
@@ -380,7 +380,7 @@ def _solve_innovation(HP: Vector, N: Vector, sol: Vector) -> bool:
     return True
 
 
-def _joseph(P: Vector, HP: Vector, sol: Vector, N: Vector, P1: Vector) -> None:
+def _joseph(P: Vector, HP: Vector, sol: Vector, N: Vector, P1: Vector) -> None:  # noqa: C901 -- numba kernel: its branches are loops over small matrices
     """Eq. (5)'s Joseph form ``(I − KH) P (I − KH)ᵀ + K N Kᵀ = C − (C Hᵀ − K N) Kᵀ`` with
     ``C = P − K H P``, ``Kᵀ = sol[:, :n]``, symmetrised, into ``P1``."""
     n, m = P.shape[0], HP.shape[0]

@@ -167,7 +167,7 @@ def _mixture_into(w1: Vector, q1: Vector, v1: Vector, mix: Vector) -> None:
         mix[0, i], mix[1, i] = mq, mv
 
 
-def bank_rows_loops(
+def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
     q: Vector,
     v: Vector,
     a: Vector,

@@ -138,7 +138,7 @@ def cholesky_solve(S: Vector, B: Vector) -> tuple[Vector, bool]:
         return np.full(B.shape, np.nan), False
 
 
-def _joseph_loops(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bool:
+def _joseph_loops(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bool:  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     """:func:`joseph_update`'s arithmetic in loops (compiled by numba for small ``nv``).
 
     Cholesky ``S = L Lᵀ`` of ``S = P_qq + r I`` (lower triangle of ``P``),

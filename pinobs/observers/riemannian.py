@@ -216,6 +216,20 @@ class RiemannianGains:
         return alpha, beta, c
 
 
+def _check_schedule(curvature_every: int, *gains: GainFunction | None) -> None:
+    """Refuse a ``curvature_every`` that is not an integer ≥ 1, or a gain function
+    (``gain_a``, ``gain_b``, ``gain_c``) that is not callable."""
+    if (
+        isinstance(curvature_every, bool)
+        or not isinstance(curvature_every, int)
+        or curvature_every < 1
+    ):
+        raise GainError(f"curvature_every={curvature_every!r}; give an integer >= 1")
+    for label, fn in zip(("gain_a", "gain_b", "gain_c"), gains, strict=True):
+        if fn is not None and not callable(fn):
+            raise GainError(f"{label}={fn!r} is not callable; give a function (S, speed) -> gain")
+
+
 def _checked(label: str, value: float, s: float, speed: float, *, positive_only: bool) -> float:
     x = float(value)
     if not math.isfinite(x) or (positive_only and x <= 0.0):
@@ -524,18 +538,8 @@ class RiemannianObserver(Observer[_State]):
         positive("q0_std", q0_std)
         positive("v0_std", v0_std)
         self._p0 = np.diag([float(q0_std) ** 2, float(v0_std) ** 2])
-        if (
-            isinstance(curvature_every, bool)
-            or not isinstance(curvature_every, int)
-            or curvature_every < 1
-        ):
-            raise GainError(f"curvature_every={curvature_every!r}; give an integer >= 1")
+        _check_schedule(curvature_every, gain_a, gain_b, gain_c)
         self.curvature_every = curvature_every
-        for label, fn in (("gain_a", gain_a), ("gain_b", gain_b), ("gain_c", gain_c)):
-            if fn is not None and not callable(fn):
-                raise GainError(
-                    f"{label}={fn!r} is not callable; give a function (S, speed) -> gain"
-                )
         # An Anisi–Hamberg gain function stands in for the constant it replaces;
         # the constant is then its value at zero error and speed (for reports).
         if alpha is None and gain_a is not None:

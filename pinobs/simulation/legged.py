@@ -561,6 +561,38 @@ class _Machine:
     fallen: float  # base height below which it fell [m]
 
 
+@dataclass(frozen=True)
+class _Wiring:
+    """Where :func:`_record` reads and drives a compiled MuJoCo model (indices into its
+    arrays); the joints in Pinocchio's order."""
+
+    joints: tuple[str, ...]
+    qadr: NDArray[np.intp]  # each joint's qpos address
+    vadr: NDArray[np.intp]  # each joint's qvel address
+    act: NDArray[np.intp]  # each joint's motor
+    limit: Vector  # each motor's torque limit [N·m] (inf: unlimited)
+    foot_bodies: list[int]
+    floor: int
+    imu_gyro: int  # sensordata address of the gyro
+    imu_acc: int  # sensordata address of the accelerometer
+
+    @classmethod
+    def of(cls, mj: Any, robot: Robot, feet: tuple[str, ...]) -> _Wiring:
+        joints = tuple(j.name for j in robot.joints[1:])
+        act = np.array([mj.actuator(j).id for j in joints])
+        return cls(
+            joints=joints,
+            qadr=np.array([mj.joint(j).qposadr[0] for j in joints]),
+            vadr=np.array([mj.joint(j).dofadr[0] for j in joints]),
+            act=act,
+            limit=np.where(mj.actuator_ctrllimited[act] > 0, mj.actuator_ctrlrange[act, 1], np.inf),
+            foot_bodies=[mj.body(f).id for f in feet],
+            floor=mj.geom("floor").id,
+            imu_gyro=mj.sensor("gyro").adr[0],
+            imu_acc=mj.sensor("acc").adr[0],
+        )
+
+
 def _record(
     machine: _Machine,
     motion: str,
@@ -576,55 +608,27 @@ def _record(
     import mujoco
 
     noise = noise if noise is not None else LeggedNoise()
-    mj, robot, feet = machine.mj, machine.robot, machine.feet
-    name = machine.name
+    mj, feet, name = machine.mj, machine.feet, machine.name
     data = mujoco.MjData(mj)
-    joints = tuple(j.name for j in robot.joints[1:])
-    qadr = np.array([mj.joint(j).qposadr[0] for j in joints])
-    vadr = np.array([mj.joint(j).dofadr[0] for j in joints])
-    act = np.array([mj.actuator(j).id for j in joints])
-    limit = np.where(mj.actuator_ctrllimited[act] > 0, mj.actuator_ctrlrange[act, 1], np.inf)
-    foot_bodies = [mj.body(f).id for f in feet]
-    floor = mj.geom("floor").id
-    imu_gyro = mj.sensor("gyro").adr[0]
-    imu_acc = mj.sensor("acc").adr[0]
+    wiring = _Wiring.of(mj, machine.robot, feet)
     data.qpos[:3] = (0.0, 0.0, machine.height)
     data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
-    data.qpos[qadr] = machine.stance
+    data.qpos[wiring.qadr] = machine.stance
     mujoco.mj_forward(mj, data)
 
-    h = mj.opt.timestep
     n = round(duration * rate) + 1
     settle = round(SETTLE * rate)
     rng = np.random.default_rng(seed)
     bias = np.concatenate([rng.normal(0.0, noise.gyro_bias, 3), rng.normal(0.0, noise.acc_bias, 3)])
     walk = np.repeat([noise.gyro_walk, noise.acc_walk], 3) * math.sqrt(1.0 / rate)
     white = np.repeat([noise.gyro, noise.acc], 3) * math.sqrt(rate)
-    nj, nf = len(joints), len(feet)
 
-    cols: dict[str, Vector] = {}
     rows: list[Vector] = []
     for k in range(-settle, n):
         t = k / rate
-        q_ref, dq_ref, tau_ff = reference(k, t)
+        ref = reference(k, t)
         qpos, qvel = data.qpos.copy(), data.qvel.copy()
-        imu = np.zeros(6)
-        forces: Vector = np.zeros(nf)
-        qacc_mean = np.zeros(3)
-        for s in range(substeps):
-            q_j = data.qpos[qadr]
-            dq_j = data.qvel[vadr]
-            data.ctrl[act] = np.clip(
-                tau_ff + machine.kp * (q_ref + dq_ref * s * h - q_j) + machine.kd * (dq_ref - dq_j),
-                -limit,
-                limit,
-            )
-            mujoco.mj_step(mj, data)  # sensors and contacts: of the state before this step
-            imu[:3] += data.sensordata[imu_gyro : imu_gyro + 3]
-            imu[3:] += data.sensordata[imu_acc : imu_acc + 3]
-            qacc_mean += data.qacc[:3]
-            if s == 0:
-                forces = _foot_forces(mujoco, mj, data, foot_bodies, floor)
+        imu, forces, qacc_mean = _advance(mujoco, machine, data, wiring, ref, substeps)
         if not np.all(np.isfinite(data.qpos)):
             raise SimulationFailed(
                 f"{name} {motion}: MuJoCo's state is not finite at t = {t:.3f} s"
@@ -639,35 +643,87 @@ def _record(
             continue
         bias = bias + walk * rng.normal(size=6) if k > 0 else bias
         reading = imu + bias + white * rng.normal(size=6)
-        quat_wxyz = qpos[3:7]
-        R = _rotation_wxyz(quat_wxyz)
-        v_world = qvel[:3]
-        row = np.concatenate(
-            [
-                [t],
-                reading,
-                forces + noise.force * rng.normal(size=nf),
-                qpos[qadr] + noise.encoder * rng.normal(size=nj),
-                qpos[:3],
-                quat_wxyz[[1, 2, 3, 0]],
-                R.T @ v_world,
-                qvel[3:6],
-                v_world,
-                qacc_mean,
-                qpos[qadr],
-                qvel[vadr],
-                bias,
-                (forces > 0).astype(float),
-            ]
-        )
-        rows.append(row)
-    names = _column_names(feet, joints)
+        truth = (qpos, qvel, qacc_mean, bias)
+        rows.append(_row(t, reading, forces, truth, wiring, noise, rng))
+    cols: dict[str, Vector] = {}
     table = np.array(rows)
-    for i, column_name in enumerate(names):
+    for i, column_name in enumerate(_column_names(feet, wiring.joints)):
         column = np.ascontiguousarray(table[:, i])
         column.setflags(write=False)
         cols[column_name] = column
-    return LeggedRun(motion, seed, float(rate), feet, joints, cols, noise)
+    return LeggedRun(motion, seed, float(rate), feet, wiring.joints, cols, noise)
+
+
+def _advance(
+    mujoco: Any,
+    machine: _Machine,
+    data: Any,
+    wiring: _Wiring,
+    ref: tuple[Vector, Vector, Vector],
+    substeps: int,
+) -> tuple[Vector, Vector, Vector]:
+    """The ``substeps`` physics steps of one sample under the joint PD law towards ``ref`` =
+    ``(q_ref, q̇_ref, τ_ff)`` (module docstring): the sums over them of the IMU's readings
+    (gyro, accelerometer) and of the base's acceleration, and the feet's normal forces
+    before the first step."""
+    q_ref, dq_ref, tau_ff = ref
+    h = machine.mj.opt.timestep
+    imu = np.zeros(6)
+    forces: Vector = np.zeros(len(wiring.foot_bodies))
+    qacc_sum = np.zeros(3)
+    g, a = wiring.imu_gyro, wiring.imu_acc
+    for s in range(substeps):
+        q_j = data.qpos[wiring.qadr]
+        dq_j = data.qvel[wiring.vadr]
+        data.ctrl[wiring.act] = np.clip(
+            tau_ff + machine.kp * (q_ref + dq_ref * s * h - q_j) + machine.kd * (dq_ref - dq_j),
+            -wiring.limit,
+            wiring.limit,
+        )
+        mujoco.mj_step(machine.mj, data)  # sensors and contacts: of the state before this step
+        imu[:3] += data.sensordata[g : g + 3]
+        imu[3:] += data.sensordata[a : a + 3]
+        qacc_sum += data.qacc[:3]
+        if s == 0:
+            forces = _foot_forces(mujoco, machine.mj, data, wiring.foot_bodies, wiring.floor)
+    return imu, forces, qacc_sum
+
+
+def _row(
+    t: float,
+    reading: Vector,
+    forces: Vector,
+    truth: tuple[Vector, Vector, Vector, Vector],
+    wiring: _Wiring,
+    noise: LeggedNoise,
+    rng: np.random.Generator,
+) -> Vector:
+    """One sample's row of a :class:`LeggedRun` (:func:`_column_names`' order): the IMU
+    ``reading``, the feet's ``forces`` and the joints' angles with their noises drawn from
+    ``rng`` (in that order), then the truth (``qpos``, ``qvel``, the base's mean
+    acceleration, the IMU's biases) and the contacts."""
+    qpos, qvel, qacc_mean, bias = truth
+    quat_wxyz = qpos[3:7]
+    R = _rotation_wxyz(quat_wxyz)
+    v_world = qvel[:3]
+    return np.concatenate(
+        [
+            [t],
+            reading,
+            forces + noise.force * rng.normal(size=forces.size),
+            qpos[wiring.qadr] + noise.encoder * rng.normal(size=wiring.qadr.size),
+            qpos[:3],
+            quat_wxyz[[1, 2, 3, 0]],
+            R.T @ v_world,
+            qvel[3:6],
+            v_world,
+            qacc_mean,
+            qpos[wiring.qadr],
+            qvel[wiring.vadr],
+            bias,
+            (forces > 0).astype(float),
+        ]
+    )
 
 
 def _column_names(feet: tuple[str, ...], joints: tuple[str, ...]) -> list[str]:

@@ -1,7 +1,62 @@
 """What a user calls: :func:`smooth` (with its warnings; :func:`~pinobs.smoothing.pipeline.smooth_quietly`
 without), and
 :func:`streaming_smoother` (a :class:`~pinobs.smoothing.rts.Smoother` for a log read as it
-goes)."""
+goes).
+
+**The options of** :func:`smooth` **in full** (its docstring lists them in short):
+
+- ``log``: ``(t, q)`` or ``(t, q, tau)`` arrays (a tuple or a list, or a mapping with those
+  keys), or an object with ``t``, ``q``, ``tau`` attributes (:class:`pinobs.io.Log`; a
+  :class:`pinobs.Result` is read through its ``q_meas``): times [s] ``(N,)`` strictly
+  increasing, at any intervals (an interval of ``m ≥ 2`` median intervals holds ``m − 1``
+  samples the log lost: they are predicted over at their ticks, each with its torque on the
+  line between its neighbours', :func:`pinobs.model.sampling.on_ticks`;
+  ``options["missing_samples"]``); measured configurations ``(N, nq)``, a row with a
+  non-finite entry being a dropped sample (predicted over, not corrected with; rows before
+  the first good one get NaN); torques applied from each sample on [N·m or N] ``(N, nv)``
+  (zero-order hold, MATH §7; ``None``: zero).
+- ``observer``: ``"adaptive"`` has its learned model frozen per ``model_window``
+  (:mod:`pinobs.smoothing`); the model-free ``"kf"`` (white jerk, no torque) is the floor
+  where the model is wrong.
+- ``noise_std``: ``None`` is the median over joints of its estimate from the log's first
+  second (:func:`pinobs.observers.noise.noise_from_log`; at least
+  :data:`~pinobs.observers.base.NOISE_FLOOR`), warned (:class:`~pinobs.errors.NoiseWarning`)
+  and reported in ``options`` (``noise_std``, ``noise_std_from_log``).
+- ``accel_psd``: ``None`` is the observer's own (``ekf``: :data:`DEFAULT_ACCEL_PSD`;
+  ``adaptive``: each window's regime's; ``kf`` takes no number: its density is ``jerk_psd``
+  in ``filter_options``, default (and with ``"auto"``, the causal filter's default) 1e3
+  rad²/s⁵); ``"auto"`` is chosen from this log, for ``ekf`` by :func:`select_accel_psd` (one
+  forward pass per grid value), for ``kf`` its ``jerk_psd`` likewise (:data:`JERK_GRID`,
+  then the half-decades either side), for ``adaptive`` by :func:`consistent_offset_scale`
+  (``ρ = 1``; 3–7 smoother passes); :mod:`pinobs.smoothing`.  Reported in ``options``
+  (``accel_psd``, ``accel_psd_from_log``).
+- ``overlap``: default :func:`default_overlap`: agreement with the whole-log smoother to
+  :data:`CHUNK_TOL` of ``v_std``.
+- ``model_window``: default ``adaptive``'s ``horizon``, 10 s (:mod:`pinobs.smoothing`).
+- ``filter_options``: for ``adaptive``, those of its causal learning pass.  ``latency`` [s],
+  a known measurement latency (the sample stamped ``t`` was taken at ``t − latency``, as
+  :meth:`pinobs.observers.base.Observer.set_latency`): the log is smoothed on the times its
+  samples were taken, the torque switching at the stamped times, and the estimate given at
+  the stamped times (:func:`retimed`; reported in ``options["latency"]``); ``"auto"``: the
+  likeliest latency from the log (:func:`select_latency`, at ``accel_psd`` if a number is
+  given, else the observer's own density; ``options["latency_from_log"]``).  Not given: 0,
+  unless the model does not explain the log as stamped (``ρ`` > :data:`RHO_WARN`), which is
+  then searched as with ``"auto"`` and smoothed under the latency found if that explains it
+  (``ρ`` ≤ :data:`RHO_WARN`; ``options["latency_searched"]``,
+  ``"consistency_without_latency"``; :mod:`pinobs.smoothing`), or ``accel_psd="auto"`` chose
+  a density above ``ekf``'s own (``"accel_psd_without_latency"``); ``0``: as stamped.
+- ``band`` (:data:`BANDS`): ``"model"``, the smoother's covariance ``P^s`` under the filter's
+  noise model (white acceleration and offset as modelled); ``"noise"``, the covariance of
+  the same estimate's error driven by the measurement noise alone (:func:`_backward`), for a
+  model error that is smooth in time, which the forward and backward passes lag in opposite
+  directions and the smoother cancels (:mod:`pinobs.smoothing`); ``"inflated"``, the noise
+  band scaled by ``√max(1, ρ)`` (``ρ`` = :attr:`Smoothed.consistency` of this log;
+  :mod:`pinobs.smoothing`: a model error the densities do not explain widens it, never below
+  the noise's own); ``None``: ``"inflated"`` over ``adaptive`` with its regimes' densities
+  (tuned for the causal filter's tracking, not fitted to the log) and over ``kf`` (a
+  robot's motion is not white jerk: :mod:`pinobs.smoothing`), ``"model"`` otherwise
+  (``ekf``; densities given or chosen from the log).
+"""
 
 from __future__ import annotations
 
@@ -237,91 +292,33 @@ def smooth(
     filter_options: Mapping[str, Any] | None = None,
     band: str | None = None,
 ) -> Smoothed:
-    """Fixed-interval RTS smoothing of a log on the manifold (equations: :mod:`pinobs.smoothing`).
+    """Fixed-interval RTS smoothing of a log on the manifold (equations: :mod:`pinobs.smoothing`;
+    each option in full, and what it reports in ``options``: this module's docstring).
 
     Args:
         robot: the model (the filter's process model; ``adaptive``'s nominal model).
-        log: ``(t, q)`` or ``(t, q, tau)`` arrays (a tuple or a list, or a mapping with
-            those keys), or an object with ``t``, ``q``, ``tau`` attributes
-            (:class:`pinobs.io.Log`; a
-            :class:`pinobs.Result` is read through its ``q_meas``): times [s] ``(N,)`` strictly
-            increasing, at any intervals (an interval of ``m ≥ 2`` median intervals holds
-            ``m − 1`` samples the log lost: they are predicted over at their ticks, each
-            with its torque on the line between its neighbours',
-            :func:`pinobs.model.sampling.on_ticks`; ``options["missing_samples"]``);
-            measured configurations ``(N, nq)``, a row with a non-finite entry
-            being a dropped sample (predicted over, not corrected with; rows
-            before the first good one get NaN); torques applied from each
-            sample on [N·m or N] ``(N, nv)`` (zero-order hold, MATH §7;
-            ``None``: zero).
-        observer: the filter smoothed: ``"ekf"``, ``"adaptive"`` (its learned
-            model frozen per ``model_window``: :mod:`pinobs.smoothing`), or the model-free
-            ``"kf"`` (white jerk, no torque: the floor where the model is wrong).
-        noise_std: position noise standard deviation [rad or m]; ``None``: the
-            median over joints of its estimate from the log's first second
-            (:func:`pinobs.observers.noise.noise_from_log`; at least
-            :data:`~pinobs.observers.base.NOISE_FLOOR`), warned
-            (:class:`~pinobs.errors.NoiseWarning`) and reported in ``options``
-            (``noise_std``, ``noise_std_from_log``).
-        accel_psd: white-acceleration density of the filter [rad²/s³];
-            ``None``: the observer's own (``ekf``: :data:`DEFAULT_ACCEL_PSD`;
-            ``adaptive``: each window's regime's; ``kf`` takes no number: its
-            density is ``jerk_psd`` in ``filter_options``, default (and with ``"auto"``,
-            the causal filter's default) 1e3 rad²/s⁵);
-            ``"auto"``: chosen from this log, for ``ekf`` by
-            :func:`select_accel_psd` (one forward pass per grid value), for
-            ``kf`` its ``jerk_psd`` likewise (:data:`JERK_GRID`, then the
-            half-decades either side), for ``adaptive`` by
-            :func:`consistent_offset_scale` (``ρ = 1``; 3–7 smoother
-            passes); :mod:`pinobs.smoothing`.  Reported in ``options`` (``accel_psd``,
-            ``accel_psd_from_log``).
-        disturbance_psd: the EKF's joint-torque offset density [rad²/s⁵], or ``None``
-            (not for ``adaptive``: its regimes set it).
+        log: ``(t, q)`` or ``(t, q, tau)``: times [s] ``(N,)``, configurations ``(N, nq)`` (a
+            non-finite row is a dropped sample), torques held from each sample [N·m or N]
+            ``(N, nv)``; arrays, a mapping, a :class:`pinobs.io.Log` or a :class:`pinobs.Result`.
+        observer: the filter smoothed: ``"ekf"``, ``"adaptive"`` or the model-free ``"kf"``.
+        noise_std: position noise standard deviation [rad or m]; ``None``: from the log, warned.
+        accel_psd: white-acceleration density of the filter [rad²/s³]; ``None``: the
+            observer's own; ``"auto"``: chosen from this log.
+        disturbance_psd: the EKF's torque offset density [rad²/s⁵] (``adaptive``: its regimes').
         chunk: memory bound: the backward pass runs on windows of ``chunk``
             seconds (``None``: the whole log at once).
-        overlap: seconds of later samples each window's backward pass starts
-            from (default :func:`default_overlap`: agreement with the whole-log
-            smoother to :data:`CHUNK_TOL` of ``v_std``).
-        lag: fixed-lag mode [s]: chunks of ``lag`` with ``lag`` of overlap
-            (exclusive with ``chunk`` and ``overlap``).
-        model_window: ``adaptive`` only: the window [s] over which its learned model
-            is frozen (default: its ``horizon``, 10 s: :mod:`pinobs.smoothing`).
-        filter_options: further options of the filter (``q0_std``, ``v0_std``, ...;
-            for ``adaptive``, those of its causal learning pass).  ``latency`` [s], a
-            known measurement latency (the sample stamped ``t`` was taken at
-            ``t − latency``, as :meth:`pinobs.observers.base.Observer.set_latency`):
-            the log is smoothed on the times its samples were taken, the torque
-            switching at the stamped times, and the estimate given at the stamped
-            times (:func:`retimed`; reported in ``options["latency"]``);
-            ``"auto"``: the likeliest latency from the log (:func:`select_latency`,
-            at ``accel_psd`` if a number is given, else the observer's own density;
-            ``options["latency_from_log"]``).  Not given: 0, unless the model does not
-            explain the log as stamped (``ρ`` > :data:`RHO_WARN`), which is then searched
-            as with ``"auto"`` and smoothed under the latency found if that explains it
-            (``ρ`` ≤ :data:`RHO_WARN`; ``options["latency_searched"]``,
-            ``"consistency_without_latency"``; :mod:`pinobs.smoothing`), or ``accel_psd="auto"``
-            chose a density above ``ekf``'s own (``"accel_psd_without_latency"``); ``0``:
-            as stamped.
-        band: what ``v_std`` states (:data:`BANDS`): ``"model"``, the smoother's
-            covariance ``P^s`` under the filter's noise model (white acceleration
-            and offset as modelled); ``"noise"``, the covariance of the same
-            estimate's error driven by the measurement noise alone
-            (:func:`_backward`), for a model error that is smooth in time, which
-            the forward and backward passes lag in opposite directions and the
-            smoother cancels (:mod:`pinobs.smoothing`); ``"inflated"``, the noise band
-            scaled by ``√max(1, ρ)`` (``ρ`` = :attr:`Smoothed.consistency` of this
-            log; :mod:`pinobs.smoothing`: a model error the densities do not explain
-            widens it, never below the noise's own); ``None``: ``"inflated"`` over
-            ``adaptive`` with its regimes' densities (tuned for the causal
-            filter's tracking, not fitted to the log) and over ``kf`` (a robot's
-            motion is not white jerk: :mod:`pinobs.smoothing`), ``"model"`` otherwise
-            (``ekf``; densities given or chosen from the log).
+        overlap: seconds of later samples each window's backward pass starts from.
+        lag: fixed-lag mode [s]: chunks of ``lag``, ``lag`` of overlap (no ``chunk``, ``overlap``).
+        model_window: ``adaptive`` only: the window [s] over which its learned model is frozen.
+        filter_options: further options of the filter (``q0_std``, ``v0_std``, ...);
+            ``latency``: a measurement latency [s], or ``"auto"`` (found in the log).
+        band: what ``v_std`` states: ``"model"``, ``"noise"`` or ``"inflated"``; ``None``:
+            ``"inflated"`` over ``adaptive`` and ``kf``, ``"model"`` over ``ekf``.
 
     Raises:
-        UnknownNameError, OptionError: ``observer`` is unknown or cannot be smoothed,
-            or an option it does not take; ``overlap`` without ``chunk``; ``filter_options``
-            not a mapping, or with ``noise_std`` or ``rate`` (given to :func:`smooth` or set
-            by the log).
+        UnknownNameError, OptionError: ``observer`` is unknown or cannot be smoothed, or an
+            option it does not take; ``overlap`` without ``chunk``; ``filter_options`` not a
+            mapping, or with ``noise_std`` or ``rate`` (given to :func:`smooth`, or the log's).
         GainError: a non-positive ``noise_std``, ``chunk``, ``overlap``, ``lag`` or
             ``model_window``, a latency not shorter than the log, a bad filter option, or no
             ``noise_std`` and too few finite rows to estimate it.
@@ -333,13 +330,10 @@ def smooth(
         NoiseWarning: ``noise_std`` not given (σ estimated from the log).
         CostWarning: a ``chunk`` more than :data:`COST_WARN` times shorter than its overlap.
         ChunkWarning: an ``overlap`` given shorter than :func:`default_overlap`'s.
-        TimestampWarning: a median sample period of 0.1 s or more, or 1 µs or less
-            (``t`` in ms, µs or ns?).
-        LatencyWarning: no latency given, and the log explained only with one found in it
-            (:func:`latency_note`).
+        TimestampWarning: a median sample period ≥ 0.1 s or ≤ 1 µs (``t`` in ms, µs or ns?).
+        LatencyWarning: the log explained only with a latency found in it (:func:`latency_note`).
         ConsistencyWarning: ``ρ`` (:attr:`Smoothed.consistency`) above :data:`RHO_WARN`,
-            or ``"auto"`` at the grid's largest density: the model does not explain the
-            log (:func:`smoothing_warnings`).
+            or ``"auto"`` at the grid's largest density (:func:`smoothing_warnings`).
     """
     _warn_time_unit(log)
     result = smooth_quietly(

@@ -66,7 +66,7 @@ def noise_step(
     return noise_forward(prev[0], F, K, meas_var), K
 
 
-def _noise_forward_loops(Pn: Vector, Phi: Vector, K: Vector, r: float, out: Vector) -> None:
+def _noise_forward_loops(Pn: Vector, Phi: Vector, K: Vector, r: float, out: Vector) -> None:  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     """:func:`noise_forward` in loops (compiled by numba for small matrices); ``K`` with no
     columns: no correction."""
     m, nv = Pn.shape[0], K.shape[1]
@@ -116,7 +116,7 @@ def noise_forward(Pn: Vector, Phi: Vector, K: Vector | None, r: float) -> Vector
     return Y - (Y[:, :nv] - r * K) @ K.T
 
 
-def _noise_backward_loops(
+def _noise_backward_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     B: Vector, U: Vector, G: Vector, Phi: Vector, K: Vector, Pn: Vector, r: float, var: Vector
 ) -> None:
     """:func:`noise_backward` in loops, ``B`` and ``U`` updated in place (compiled by numba

@@ -19,7 +19,7 @@ from pinobs.observers.linalg import LazyKernel
 __all__ = ["white_jerk_smooth"]
 
 
-def _jerk_noise_loops(PX: Vector, t: Vector, measured: Vector, r: float, Pn: Vector) -> None:
+def _jerk_noise_loops(PX: Vector, t: Vector, measured: Vector, r: float, Pn: Vector) -> None:  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     """:func:`noise_step` for the white-jerk filter on its 3×3 factor (``P = P₃ ⊗ I``, so
     ``Pⁿ = Pⁿ₃ ⊗ I``), every row: ``Pⁿ₀ = P⁺₀``, then ``X = F Pⁿ_{k−1} Fᵀ`` and, at a row
     corrected with its measurement (``measured``: neither dropped nor gated), ``K = P⁺_k[:, 0] /
@@ -58,7 +58,7 @@ def _jerk_noise_loops(PX: Vector, t: Vector, measured: Vector, r: float, Pn: Vec
                 Pn[k, i, j] = T[i, j] - (T[i, 0] - r * K[i]) * K[j]
 
 
-def _jerk_gain_loops(
+def _jerk_gain_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     PX: Vector,
     k: int,
     h: float,
@@ -134,7 +134,7 @@ def _jerk_covariance_loops(
             Ps[i, j] = 0.5 * (W[i, j] + W[j, i])
 
 
-def _jerk_band_loops(
+def _jerk_band_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     PX: Vector,
     k: int,
     measured: Vector,
@@ -200,7 +200,7 @@ _covariance_step: Any = _jerk_covariance_loops
 _band_step: Any = _jerk_band_loops
 
 
-def _jerk_backward_loops(
+def _jerk_backward_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     X: Vector,
     PX: Vector,
     Pn: Vector,

@@ -55,22 +55,7 @@ def smoothing_arrays(
     robot: Robot, log: LogLike | Sequence[ArrayLike] | Mapping[str, ArrayLike]
 ) -> tuple[Vector, Vector, Vector]:
     """``(t, q, tau)`` of a log, checked (``tau`` zero when the log has none)."""
-    if isinstance(log, (tuple, list)):
-        if len(log) not in (2, 3):
-            raise DimensionError(f"log is a tuple of {len(log)} arrays; give (t, q) or (t, q, tau)")
-        t, q, tau = (*log, None)[:3]
-    elif isinstance(log, Mapping):
-        if not {"t", "q"} <= set(log):
-            raise DimensionError(f"log has the keys {sorted(log)}; give 't', 'q' (and 'tau')")
-        t, q, tau = log["t"], log["q"], log.get("tau")
-    elif hasattr(log, "t") and hasattr(log, "q"):
-        # a Result's q is the truth: its measurements are q_meas
-        t, q, tau = log.t, getattr(log, "q_meas", log.q), getattr(log, "tau", None)
-    else:
-        raise DimensionError(
-            f"log is a {type(log).__name__}; give a pinobs.io.Log, a pinobs.Result, (t, q) or "
-            "(t, q, tau) arrays, or a mapping with 't', 'q' (and 'tau')"
-        )
+    t, q, tau = _log_fields(log)
     t_arr = np.asarray(t, dtype=float)
     q_arr = np.asarray(q, dtype=float)
     if t_arr.ndim != 1 or t_arr.size < 2:
@@ -80,16 +65,7 @@ def smoothing_arrays(
         raise DimensionError(
             f"q has shape {q_arr.shape}; robot {robot.name!r} with {n} times needs ({n}, {robot.nq})"
         )
-    if not np.all(np.isfinite(t_arr)):
-        bad = int(np.flatnonzero(~np.isfinite(t_arr))[0])
-        raise TimestampError(f"t[{bad}] = {t_arr[bad]!r} is not finite; every time must be")
-    steps = np.diff(t_arr)
-    if np.any(steps <= 0):
-        bad = int(np.flatnonzero(steps <= 0)[0]) + 1
-        raise TimestampError(
-            f"t[{bad}] = {t_arr[bad]!r} s is not after t[{bad - 1}] = {t_arr[bad - 1]!r} s; "
-            "timestamps must be strictly increasing"
-        )
+    _check_times(t_arr)
     off = np.flatnonzero(robot.off_unit_rows(q_arr))
     if off.size:  # refused before the passes, not at the row, after minutes (a sweep found it)
         rows = ", ".join(map(str, off[:5])) + (", …" if off.size > 5 else "")
@@ -98,18 +74,56 @@ def smoothing_arrays(
             f"than {QUATERNION_NORM_TOL:g} (rows {rows}; row {off[0]}: {q_arr[off[0]].tolist()}); "
             "set such rows to NaN to smooth over them as dropped samples"
         )
+    return t_arr, q_arr, _torques(robot, tau, n)
+
+
+def _log_fields(log: Any) -> tuple[Any, Any, Any]:
+    """The log's ``t``, measured ``q`` and ``tau`` (``None`` without), as given."""
+    if isinstance(log, (tuple, list)):
+        if len(log) not in (2, 3):
+            raise DimensionError(f"log is a tuple of {len(log)} arrays; give (t, q) or (t, q, tau)")
+        t, q, tau = (*log, None)[:3]
+        return t, q, tau
+    if isinstance(log, Mapping):
+        if not {"t", "q"} <= set(log):
+            raise DimensionError(f"log has the keys {sorted(log)}; give 't', 'q' (and 'tau')")
+        return log["t"], log["q"], log.get("tau")
+    if hasattr(log, "t") and hasattr(log, "q"):
+        # a Result's q is the truth: its measurements are q_meas
+        return log.t, getattr(log, "q_meas", log.q), getattr(log, "tau", None)
+    raise DimensionError(
+        f"log is a {type(log).__name__}; give a pinobs.io.Log, a pinobs.Result, (t, q) or "
+        "(t, q, tau) arrays, or a mapping with 't', 'q' (and 'tau')"
+    )
+
+
+def _check_times(t: Vector) -> None:
+    """Refuse times that are not finite or not strictly increasing, naming the first."""
+    if not np.all(np.isfinite(t)):
+        bad = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise TimestampError(f"t[{bad}] = {t[bad]!r} is not finite; every time must be")
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        bad = int(np.flatnonzero(steps <= 0)[0]) + 1
+        raise TimestampError(
+            f"t[{bad}] = {t[bad]!r} s is not after t[{bad - 1}] = {t[bad - 1]!r} s; "
+            "timestamps must be strictly increasing"
+        )
+
+
+def _torques(robot: Robot, tau: ArrayLike | None, n: int) -> Vector:
+    """The log's torques ``(n, nv)``, checked; zero when it has none."""
     if tau is None:
-        tau_arr = np.zeros((n, robot.nv))
-    else:
-        tau_arr = np.asarray(tau, dtype=float)
-        if tau_arr.shape != (n, robot.nv):
-            raise DimensionError(
-                f"tau has shape {tau_arr.shape}; robot {robot.name!r} with {n} times needs ({n}, {robot.nv})"
-            )
-        if not np.all(np.isfinite(tau_arr)):
-            bad = int(np.flatnonzero(~np.all(np.isfinite(tau_arr), axis=1))[0])
-            raise NonFiniteError(f"tau[{bad}] = {tau_arr[bad].tolist()} is not finite")
-    return t_arr, q_arr, tau_arr
+        return np.zeros((n, robot.nv))
+    tau_arr = np.asarray(tau, dtype=float)
+    if tau_arr.shape != (n, robot.nv):
+        raise DimensionError(
+            f"tau has shape {tau_arr.shape}; robot {robot.name!r} with {n} times needs ({n}, {robot.nv})"
+        )
+    if not np.all(np.isfinite(tau_arr)):
+        bad = int(np.flatnonzero(~np.all(np.isfinite(tau_arr), axis=1))[0])
+        raise NonFiniteError(f"tau[{bad}] = {tau_arr[bad].tolist()} is not finite")
+    return tau_arr
 
 
 def first_good(q: Vector) -> tuple[int, Vector]:

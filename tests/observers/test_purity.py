@@ -41,10 +41,9 @@ def _working_memory(owner: str, name: str) -> bool:
     return name.startswith("_scratch") or "cache" in name or name in SCRATCH.get(owner, ())
 
 
-def _fingerprint(x: Any, seen: set[int]) -> Any:
-    """A comparable image of ``x``: arrays by their bytes, pinobs objects by their attributes
-    (working memory left out), containers item by item, anything else by identity."""
-    if x is None or isinstance(x, (bool, int, str, bytes)):
+def _leaf(x: Any) -> Any:
+    """The image of a value with no parts (``None`` for anything else)."""
+    if isinstance(x, (bool, int, str, bytes)):
         return x
     if isinstance(x, (float, np.generic)):
         return repr(x)
@@ -52,6 +51,15 @@ def _fingerprint(x: Any, seen: set[int]) -> Any:
         return ("array", x.shape, x.dtype.str, x.tobytes())
     if isinstance(x, pin.Data):
         return "pin.Data"
+    return None
+
+
+def _fingerprint(x: Any, seen: set[int]) -> Any:
+    """A comparable image of ``x``: arrays by their bytes, pinobs objects by their attributes
+    (working memory left out), containers item by item, anything else by identity."""
+    leaf = _leaf(x)
+    if leaf is not None or x is None:
+        return leaf
     if id(x) in seen:
         return ("seen", type(x).__name__, id(x))
     seen.add(id(x))

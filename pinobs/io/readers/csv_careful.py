@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -48,24 +49,8 @@ def _careful_records(
             if '"' not in line:
                 cells = line.rstrip("\n").split(sep)
             else:
-                text, extra = line, 0
-                while text.count('"') % 2 and extra < _MAX_FIELD_LINES:
-                    more = pending[extra] if extra < len(pending) else fh.readline()
-                    if not more:
-                        break
-                    if extra >= len(pending):
-                        pending.append(more)
-                    text, extra = text + more, extra + 1
-                try:
-                    parsed = next(csv.reader([text], delimiter=sep, skipinitialspace=True), [])
-                except csv.Error:  # (a line break outside quotes: lines joined past a stray one)
-                    parsed = []
-                if text.count('"') % 2 == 0 and len(parsed) == ncols:
-                    cells = parsed
-                    del pending[:extra]
-                    number += extra
-                else:  # a stray quote: a character of its cell, this line alone
-                    cells = line.rstrip("\n").split(sep)
+                cells, extra = _quoted_record(line, fh, pending, sep, ncols)
+                number += extra
             if len(cells) > ncols:
                 raise LogFormatError(
                     f"log {str(path)!r}: line {at} has {len(cells)} cells, the header {ncols}"
@@ -75,6 +60,30 @@ def _careful_records(
                 said = f"row has {len(cells)} of {ncols} cells"
                 cells = cells + [""] * (ncols - len(cells))
             yield at, cells, said
+
+
+def _quoted_record(
+    line: str, fh: TextIO, pending: list[str], sep: str, ncols: int
+) -> tuple[list[str], int]:
+    """The cells of the record that starts with ``line`` (which has a quote) and how many
+    further lines it spans (taken from ``pending``, the lines read ahead from ``fh``, which
+    keeps the rest); a stray quote: ``line``'s own cells, and 0."""
+    text, extra = line, 0
+    while text.count('"') % 2 and extra < _MAX_FIELD_LINES:
+        more = pending[extra] if extra < len(pending) else fh.readline()
+        if not more:
+            break
+        if extra >= len(pending):
+            pending.append(more)
+        text, extra = text + more, extra + 1
+    try:
+        parsed = next(csv.reader([text], delimiter=sep, skipinitialspace=True), [])
+    except csv.Error:  # (a line break outside quotes: lines joined past a stray one)
+        parsed = []
+    if text.count('"') % 2 == 0 and len(parsed) == ncols:
+        del pending[:extra]
+        return parsed, extra
+    return line.rstrip("\n").split(sep), 0  # a stray quote: a character of its cell, this line
 
 
 def careful_chunks(

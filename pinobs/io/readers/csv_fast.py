@@ -68,6 +68,16 @@ def _open_arrow_csv(
     )
 
 
+def _pyarrow() -> tuple[Any, Any]:
+    """``pyarrow`` and ``pyarrow.csv``; without them, :class:`Fallback` from the first row."""
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pa_csv
+    except ImportError:  # pragma: no cover - pyarrow is in the io and test extras
+        raise Fallback(0) from None
+    return pa, pa_csv
+
+
 def arrow_csv_chunks(
     path: Path, header: list[str], layout: Layout, robot: Robot, sep: str, chunk_rows: int
 ) -> Iterator[Log]:
@@ -80,11 +90,7 @@ def arrow_csv_chunks(
     separator or a line break makes a wrong cell count, so the careful reader, which
     reads quoting and counts lines, takes over.)
     """
-    try:
-        import pyarrow as pa
-        import pyarrow.csv as pa_csv
-    except ImportError:  # pragma: no cover - pyarrow is in the io and test extras
-        raise Fallback(0) from None
+    pa, pa_csv = _pyarrow()
     used = list(dict.fromkeys(layout.used))
     names = [f"{c}\x00{i}" if c not in used else c for i, c in enumerate(header)]
     try:

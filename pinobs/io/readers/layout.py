@@ -72,6 +72,21 @@ def motor_layout(
             f"{list(motor if q_too else current)}: the joint's own and the motor's; keep one "
             "(drop or rename the other)"
         )
+    unused = _unused_drives(drives, header, motor, current)
+    if unused:
+        raise OptionError(f"{where}: drives given but not used: {'; '.join(unused)}")
+    if current:
+        drives.joint_torques(np.zeros((0, robot.nv)))  # refuses a missing constant or ratio
+    if motor:
+        drives.joint_positions(np.zeros((0, robot.nv)))
+    return motor, current
+
+
+def _unused_drives(
+    drives: Drives, header: Sequence[str], motor: tuple[str, ...], current: tuple[str, ...]
+) -> list[str]:
+    """The parts of ``drives`` a log with these ``motor`` position and ``current`` columns
+    does not use, each with why."""
     unused = []
     if drives.matrix is not None and not (motor or current):
         unused.append("gear_ratio or transmission (no qm.<joint> or i.<joint> columns)")
@@ -86,13 +101,7 @@ def motor_layout(
             "torque_scale (it scales tau.<joint> columns; "
             + ("currents take motor_constant)" if current else "the log has none)")
         )
-    if unused:
-        raise OptionError(f"{where}: drives given but not used: {'; '.join(unused)}")
-    if current:
-        drives.joint_torques(np.zeros((0, robot.nv)))  # refuses a missing constant or ratio
-    if motor:
-        drives.joint_positions(np.zeros((0, robot.nv)))
-    return motor, current
+    return unused
 
 
 class _Picker:

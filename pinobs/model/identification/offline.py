@@ -1,7 +1,55 @@
 """The offline identification of a robot from a log (:func:`identify`), step by step: the
 log read and checked, the rows of its fitted part, the friction law's smoothing searched,
 the solve checked, and the report (MATH §9; the package docstring of
-:mod:`pinobs.model.identification`)."""
+:mod:`pinobs.model.identification`).
+
+**The options of** :func:`identify` **in full** (its docstring lists them in short):
+
+- ``log``: anything with arrays ``t`` ``(N,)``, ``q`` ``(N, nq)``, ``tau`` ``(N, nv)`` (a
+  ``Log``), a simulation ``Result`` (its measured ``q_meas`` is used, never the truth), or a
+  tuple ``(t, q, tau)``.  Its intervals are used as they are: dropped samples (rows missing
+  from a fixed-rate loop's log) and irregular sampling (:mod:`pinobs.model.sampling`).
+  Short runs of NaN rows are filled (:func:`fill_short_gaps`), longer ones are gaps;
+  windows never straddle a gap, nor an interval longer than
+  :data:`~pinobs.model.sampling.SPLIT_GAP_PERIODS` median intervals.
+- ``friction``: ``True`` the URDF's viscous + Coulomb law (``v_s`` fixed at 0.01 rad/s), or a
+  law of :data:`~pinobs.model.friction.FRICTION_LAWS` (``"offset-sigmoid"``,
+  ``"stribeck"``, ``"asymmetric"``), whose coefficients are fitted linearly and whose
+  smoothing velocity ``v_s`` (and Stribeck ``v_st``) per joint is chosen on a grid by
+  cross-validation over the fitted part (:func:`pinobs.model.friction_fit.search_smoothing`);
+  the law goes with the calibrated robot (and its sidecar when saved).  ``"offset-sigmoid"``
+  carries its own offset ``F_0`` (part of the robot's friction; not dissipative): give
+  ``offset=False`` with it.
+- ``armature``: a rotor inertia per actuated joint (``model.armature``, added to ``M``'s
+  diagonal; prior mean the model's own, usually 0, width :data:`PRIOR_ARMATURE`).
+- ``path``: ``(N, nq)`` [rad, m] and ``(N, nv)`` [rad/s, m/s], used in the regressor instead
+  of the Savitzky–Golay fit (:func:`smooth_path`) of the measured positions
+  (``pinobs.identify`` passes a model-based smoother's).
+- ``torque``: ``"held"`` (zero-order hold: ``pinobs.simulate``, commanded torques) or
+  ``"sampled"`` (at the sample instants: ``pinobs excite``, a torque sensor); the wrong one
+  biases the fit ∝ 1/rate (package docstring).
+- ``weighting``: ``"inertia"`` (default): the rows weighted by ``M₀⁻¹``
+  (acceleration-like); ``"torque"``: each window's rows are its mean torque residual [N·m,
+  N], each torque channel weighted by its own residual scale (re-estimated robustly at each
+  pass, ``report["torque_sigma"]``) (package docstring, "Weighting": which wins where).
+- ``exclude``: a torque that is not measured, or mostly zero, is refused unless excluded
+  (:data:`ZERO_TORQUE_SHARE`); the excluded joints' parameters stay near nominal unless
+  other channels see them.  With ``weighting="inertia"`` the kept rows are weighted by the
+  kept joints' block of ``M₀``, inverted (the excluded joints held).
+- ``payload``: only the ten inertial parameters of a load rigidly attached to the body or
+  frame named are identified (:func:`identify_payload`), ``robot`` taken as calibrated (its
+  inertials, friction, armature fixed: ``friction``, ``offset``, ``armature`` and
+  ``max_condition`` do not apply; a poorly excited load is said in ``warnings``).
+- ``smoothing``: the same ``v_s`` for every joint, instead of its search (a Stribeck law's
+  ``v_st`` is still searched); ``friction=True``'s is 0.01 unless given.
+
+The report (:class:`~pinobs.model.identification.result.Report`, read as a mapping too):
+per coordinate the weighted rows' residual before and after, on the fitted part and the
+held-out end, the held-out torques' in N·m, the share of the torques left unexplained
+against what noise alone would leave, the condition number, rank and unexcited parameters,
+the ``warnings`` (:func:`fit_warnings`) and the ``observer_options`` to run ``ekf`` with on
+the calibrated model.
+"""
 
 from __future__ import annotations
 
@@ -72,71 +120,26 @@ def identify(
     payload: str | None = None,
     smoothing: float | None = None,
 ) -> Identification:
-    """Identify ``robot``'s dynamic parameters from a recorded log (module docstring).
+    """Identify ``robot``'s dynamic parameters from a log (options, report: module docstring).
 
     Args:
         robot: the nominal model (the prior).
-        log: anything with arrays ``t`` ``(N,)``, ``q`` ``(N, nq)``, ``tau``
-            ``(N, nv)`` (a ``Log``), a simulation ``Result`` (its measured
-            ``q_meas`` is used, never the truth), or a tuple ``(t, q, tau)``.
-            Its intervals are used as they are: dropped samples (rows missing from a
-            fixed-rate loop's log) and irregular sampling (:mod:`pinobs.model.sampling`).
-            Short runs of NaN rows are filled (:func:`fill_short_gaps`), longer ones are
-            gaps; windows never straddle a gap, nor an interval longer than
-            :data:`~pinobs.model.sampling.SPLIT_GAP_PERIODS` median intervals.
-        friction, offset: identify joint friction and a torque offset.  ``friction``:
-            ``True`` the URDF's viscous + Coulomb law (``v_s`` fixed at 0.01 rad/s), or a
-            law of :data:`~pinobs.model.friction.FRICTION_LAWS` (``"offset-sigmoid"``,
-            ``"stribeck"``, ``"asymmetric"``), whose coefficients are fitted linearly and
-            whose smoothing velocity ``v_s`` (and Stribeck ``v_st``) per joint is chosen on
-            a grid by cross-validation over the fitted part
-            (:func:`pinobs.model.friction_fit.search_smoothing`); the law goes with the calibrated
-            robot (and its sidecar when saved).  ``"offset-sigmoid"`` carries its own
-            offset ``F_0`` (part of the robot's friction; not dissipative): give
-            ``offset=False`` with it.
-        armature: identify a rotor inertia per actuated joint (``model.armature``, added to
-            ``M``'s diagonal; prior mean the model's own, usually 0, width
-            :data:`PRIOR_ARMATURE`); ``False`` keeps the model's as known.
-        holdout: fraction of the log (its end) kept out of the fit to report
-            the prediction error on unseen data.
+        log: ``(t, q, tau)``: a tuple, a ``Log`` or a simulation ``Result`` (its ``q_meas``).
+        friction, offset: identify joint friction (``True``: viscous + Coulomb, or a law of
+            :data:`~pinobs.model.friction.FRICTION_LAWS`) and a torque offset.
+        armature: identify a rotor inertia per actuated joint; ``False`` keeps the model's.
+        holdout: fraction of the log (its end) kept out of the fit, to report the error on.
         window: integration window [s].
         max_condition: refuse when the base regressor is worse conditioned.
-        path: estimated ``(q, v)`` at every sample of the log, ``(N, nq)`` [rad, m]
-            and ``(N, nv)`` [rad/s, m/s], used in the regressor instead of the
-            Savitzky–Golay fit (:func:`smooth_path`) of the measured positions
-            (``pinobs.identify`` passes a model-based smoother's).
-        torque: ``"held"`` (zero-order hold: ``pinobs.simulate``, commanded torques) or
-            ``"sampled"`` (at the sample instants: ``pinobs excite``, a torque sensor);
-            the wrong one biases the fit ∝ 1/rate (module docstring).
-        weighting: ``"inertia"`` (default): the rows weighted by ``M₀⁻¹``
-            (acceleration-like); ``"torque"``: each window's rows are its mean torque
-            residual [N·m, N], each torque channel weighted by its own residual scale
-            (re-estimated robustly at each pass, ``report["torque_sigma"]``) (module
-            docstring, "Weighting": which wins where).
-        exclude: names of joints whose torque channel is left out of the fit (a torque
-            that is not measured, or mostly zero: refused unless excluded,
-            :data:`ZERO_TORQUE_SHARE`); their parameters stay near nominal unless other
-            channels see them.  With ``weighting="inertia"`` the kept rows are weighted by
-            the kept joints' block of ``M₀``, inverted (the excluded joints held).
-        payload: a body or frame name: identify only the ten inertial parameters of a load
-            rigidly attached to it (:func:`identify_payload`), ``robot`` taken as calibrated
-            (its inertials, friction, armature fixed: ``friction``, ``offset``, ``armature``
-            and ``max_condition`` do not apply; a poorly excited load is said in
-            ``warnings``).
-        smoothing: the friction law's smoothing velocity ``v_s`` [rad/s], the same for every
-            joint, instead of its search (``None``; a Stribeck law's ``v_st`` is still
-            searched); ``friction=True``'s is 0.01 unless given.
-
-    The report (:class:`~pinobs.model.identification.result.Report`, read as a mapping
-    too): per coordinate the weighted rows' residual before and after, on the fitted part
-    and the held-out end, the held-out torques' in N·m, the share of the torques left
-    unexplained against what noise alone would leave, the condition number, rank and
-    unexcited parameters, the ``warnings`` (:func:`fit_warnings`) and the
-    ``observer_options`` to run ``ekf`` with on the calibrated model.
+        path: estimated ``(q, v)`` at every sample, instead of a Savitzky–Golay fit of ``q``.
+        torque: ``"held"`` (zero-order hold) or ``"sampled"`` (at the sample instants).
+        weighting: ``"inertia"`` (rows weighted by ``M₀⁻¹``) or ``"torque"`` (by channel).
+        exclude: names of joints whose torque channel is left out of the fit.
+        payload: a body or frame name: identify only a load rigidly attached to it.
+        smoothing: the friction law's smoothing velocity [rad/s] instead of its search.
 
     Raises:
-        IdentificationError: no torques, too short, never moves, or not
-            exciting enough (condition number above ``max_condition``).
+        IdentificationError: no torques, too short, never moves, or above ``max_condition``.
     """
     check_options(friction, offset, armature, holdout, window, max_condition)
     check_torque(torque)
@@ -155,7 +158,6 @@ def identify(
         )
     excluded = excluded_coordinates(robot, exclude)
     t, q, tau, filled, est = _read_log(robot, log, path)
-    _check_smoothing(smoothing)
     laws: dict[str, Any] = {
         "friction": friction,
         "offset": offset,
@@ -172,24 +174,14 @@ def identify(
     check_zero_torques(robot, tau, excluded)
     channel = np.tile(np.arange(robot.nv), A.shape[0] // robot.nv)
     used_rows = ~np.isin(channel, excluded)
-    searched: dict[str, Any] = {}
-    if cands:  # (the search's own least squares, unweighted by channel)
-        reg, A, searched = _search_smoothing(reg, A, y, used_rows, cands, laws)
-    sol = solve(
-        reg,
-        A[used_rows],
-        y[used_rows],
-        channel=channel[used_rows] if weighting == "torque" else None,
-    )
+    reg, A, sol, searched = _solve_rows(reg, A, y, (channel, used_rows), cands, laws)
     too_few = _check_solution(
         reg, sol, (A, used_rows), (t[fit], q[fit]), excluded, window, holdout, max_condition
     )
     fitted = {"A": A, "y": y, "ends": ends, "channel": channel[used_rows], "fit": fit}
     info = {"torque": torque, "fit_end": split, "filled_rows": filled, "holdout": holdout}
     report = _assess(reg, sol, (t, q, tau), fitted, excluded, laws, rows, info, searched)
-    report["warnings"] = fit_warnings(report)
-    if too_few is not None:
-        report["warnings"].append(too_few)
+    report["warnings"] = fit_warnings(report) + ([] if too_few is None else [too_few])
     return _result(reg, sol, report)
 
 
@@ -199,7 +191,12 @@ def _regressors(
     """The regressor of ``laws`` (:class:`MomentumRegressor`'s options), the friction law's
     smoothing candidates (none unless its smoothing velocity is searched) and the regressor
     whose rows carry every candidate's columns
-    (:func:`~pinobs.model.friction_fit.widened`)."""
+    (:func:`~pinobs.model.friction_fit.widened`).
+
+    Raises:
+        GainError: a ``smoothing`` that is not a finite velocity > 0 (nor ``None``).
+    """
+    _check_smoothing(smoothing)
     reg = MomentumRegressor(robot, **laws, smoothing=smoothing)
     # a law with its smoothing velocity identified: rows of every candidate's columns
     cands = (
@@ -310,6 +307,32 @@ def _search_smoothing(
         stribeck_velocity=[cands[c][1] for c in choice],
     )
     return reg, A, searched
+
+
+def _solve_rows(
+    reg: MomentumRegressor,
+    A: Vector,
+    y: Vector,
+    rows: tuple[NDArray[np.intp], NDArray[np.bool_]],
+    cands: list[tuple[float, float]],
+    laws: dict[str, Any],
+) -> tuple[MomentumRegressor, Vector, Solution, dict[str, Any]]:
+    """The least squares on the rows used (``rows``: each row's torque channel, and which rows
+    are used), each channel weighted by its own scale with ``weighting="torque"``, after the
+    friction law's smoothing search when there are candidates (:func:`_search_smoothing`):
+    the regressor and rows (with the chosen smoothing), the solution, what the search
+    reports."""
+    channel, used_rows = rows
+    searched: dict[str, Any] = {}
+    if cands:  # (the search's own least squares, unweighted by channel)
+        reg, A, searched = _search_smoothing(reg, A, y, used_rows, cands, laws)
+    sol = solve(
+        reg,
+        A[used_rows],
+        y[used_rows],
+        channel=channel[used_rows] if laws["weighting"] == "torque" else None,
+    )
+    return reg, A, sol, searched
 
 
 def _check_solution(

@@ -441,17 +441,29 @@ def _keyframes(
                     points.extend(M.translation - shift[k] for M in oMg)
                     radii.append(radii_one)
             if k == 0:  # a static pose too (with the mesh scale), for viewers without animation
-                for go, path, M in zip(geom.geometryObjects, copies[who], oMg, strict=True):
-                    T = M.homogeneous
-                    if who == "truth" and go.name in scaled:
-                        T = T @ np.diag([*scaled[go.name], 1.0])
-                    vis[path].set_transform(T)
+                _static_pose(vis, geom, copies[who], oMg, scaled if who == "truth" else {})
             with anim.at_frame(vis, k) as frame:
                 for path, M in zip(copies[who], oMg, strict=True):
                     quat = pin.Quaternion(M.rotation).coeffs()  # x, y, z, w
                     frame[path].set_property("position", "vector3", M.translation.tolist())
                     frame[path].set_property("quaternion", "quaternion", quat.tolist())
     return np.array(points), np.concatenate(radii), shift
+
+
+def _static_pose(
+    vis: Any,
+    geom: pin.GeometryModel,
+    paths: Sequence[str],
+    oMg: Sequence[pin.SE3],
+    scaled: Mapping[str, Vector],
+) -> None:
+    """Pose the nodes ``paths`` of one copy at the placements ``oMg``, a geometry named in
+    ``scaled`` with its mesh scale."""
+    for go, path, M in zip(geom.geometryObjects, paths, oMg, strict=True):
+        T = M.homogeneous
+        if go.name in scaled:
+            T = T @ np.diag([*scaled[go.name], 1.0])
+        vis[path].set_transform(T)
 
 
 def _visibility(

@@ -88,16 +88,18 @@ def _correct(
     ``out = (Pn + Pnᵀ) / 2`` (``Pn`` and ``out`` may be ``Pp``: it is read before)."""
     for i in range(3):
         K[i] = Pp[i, 0] / s
-    lie = table.shape[0] > 0
-    for i in range(e.size):
-        ei = e[i]
-        if lie:
-            d[i] = K[0] * ei
-        else:
+    if table.shape[0] == 0:
+        for i in range(e.size):
+            ei = e[i]
             q[i] += K[0] * ei
-        v[i] += K[1] * ei
-        a[i] += K[2] * ei
-    if lie:
+            v[i] += K[1] * ei
+            a[i] += K[2] * ei
+    else:
+        for i in range(e.size):
+            ei = e[i]
+            d[i] = K[0] * ei
+            v[i] += K[1] * ei
+            a[i] += K[2] * ei
         integrate_joints(q, d, table, q)
     for i in range(3):  # C = (I − K e₀ᵀ) P⁻
         for j in range(3):
@@ -130,15 +132,15 @@ def _predict_mean(
     """``q1 = q ⊕ (v h + a h²/2)``, ``v1 = v + a h`` (the module docstring; ``q1`` may be ``q``,
     ``v1`` ``v``): on a vector space ``q + v h + a h²/2``, else :func:`integrate_joints`
     (``d`` its scratch)."""
-    lie = table.shape[0] > 0
-    for i in range(v.size):
-        if lie:
-            d[i] = v[i] * h + 0.5 * h * h * a[i]
-        else:
+    if table.shape[0] == 0:
+        for i in range(v.size):
             q1[i] = q[i] + v[i] * h + 0.5 * h * h * a[i]
+            v1[i] = v[i] + h * a[i]
+        return
+    for i in range(v.size):
+        d[i] = v[i] * h + 0.5 * h * h * a[i]
         v1[i] = v[i] + h * a[i]
-    if lie:
-        integrate_joints(q, d, table, q1)
+    integrate_joints(q, d, table, q1)
 
 
 def _outlier_gate(
@@ -435,6 +437,7 @@ LIE_HELPERS = (
     _difference_se3, integrate_joints, difference_joints,
 )  # fmt: skip
 
+
 def bank_rows_loops(
     q: Vector,
     v: Vector,
@@ -588,7 +591,9 @@ def auto_step_loops(
     if accept:
         K, C, Pn = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
         for f in range(nf):  # correct: K = P⁻[:, 0] / S, the Joseph form
-            _correct(P1[f], S[f], meas_var, e1[f], q1[f], v1[f], a1[f], K, C, Pn, P1[f], table, d[0])
+            _correct(
+                P1[f], S[f], meas_var, e1[f], q1[f], v1[f], a1[f], K, C, Pn, P1[f], table, d[0]
+            )
             B1[f] = forget * B[f] + math.log(S[f])  # the forgotten sums (module docstring)
             for i in range(nv):
                 A1[f, i] = forget * A[f, i] + A1[f, i]

@@ -42,7 +42,9 @@ def test_compiled_integrate_and_difference_equal_pinocchios(name: str) -> None:
             assert np.all(np.abs(e - ref) <= 1e-11 * np.maximum(1.0, np.abs(ref)))
 
 
-def _noisy_log(robot: Robot, rng: np.random.Generator, n: int) -> tuple[np.ndarray, list, np.ndarray]:
+def _noisy_log(
+    robot: Robot, rng: np.random.Generator, n: int
+) -> tuple[np.ndarray, list, np.ndarray]:
     """``(t, q_meas, missing)``: a smooth motion measured with 1e-4 noise, four jumps (two
     paired), 5 % of the samples missing and a 1 s pause."""
     h, v, q = 1e-3, rng.uniform(-1.0, 1.0, robot.nv), robot.neutral()
@@ -96,7 +98,8 @@ def test_compiled_banks_equal_the_numpy_ones_on_lie_groups(
     numpy = _run(robot, t, qs, missing)
     assert compiled[6][0] and not numpy[6][0]
     assert np.array_equal(compiled[2], numpy[2]) and 2 <= int(np.sum(numpy[2])) <= 5
-    for (a, b), tol in zip(((compiled[0], numpy[0]), (compiled[4], numpy[4])), (1e-12, 1e-11)):
+    pairs = ((compiled[0], numpy[0], 1e-12), (compiled[4], numpy[4], 1e-11))
+    for a, b, tol in pairs:
         assert np.all(np.abs(a - b) <= tol * np.max(np.abs(b), axis=0))
     ok = np.isfinite(numpy[1])
     np.testing.assert_array_equal(np.isfinite(compiled[1]), ok)

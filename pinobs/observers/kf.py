@@ -26,8 +26,8 @@ the UR10e and TIAGo logs of ``benchmarks/real_logs.py``; ``"auto"`` is within 0.
 that best on every one of them (TX40 at 1 kHz: 0.98×), 0.85–1.03× on ``pinobs bench``'s
 simulations (1 kHz; the fixed 1e3: 1.4–2.3×) and 0.87–1.00× on ``benchmarks/learning.py``'s
 runs, at half the cost of a fixed density on a UR5 (8.5 ``pin.aba`` calls against 18: the bank
-is one compiled step on vector joints; 4.9× the fixed one on go1's free-flyer, the NumPy
-path): ``benchmarks/kf_auto.py``.
+is one compiled step, on Lie-group joints too; go1's free-flyer 7.2 against 10.5, where the
+NumPy path of the bank cost 52): ``benchmarks/kf_auto.py``.
 
 **``jerk_psd="auto"``: the density of each joint from the data, causally** (a
 multiple-model filter, Magill 1965 / Bar-Shalom, Li & Kirubarajan 2001 §11.6, with
@@ -214,7 +214,7 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
             if self.auto
             else None
         )
-        # the compiled bank's step (vector joints) makes no BLAS call: no thread limit to
+        # the compiled bank's step (its joints compiled) makes no BLAS call: no thread limit to
         # enter per update (Observer.uses_blas); the fixed density's NumPy step does
         self.uses_blas = not (self.auto_bank is not None and self.auto_bank.compiled)
 

@@ -3,8 +3,9 @@ densities stepped together) and :class:`AutoBank` (``jerk_psd="auto"``: the bank
 likelihood and mixture).
 
 The equations, the auto bank's likelihood and why it is built so are in the
-:mod:`pinobs.observers.kf` module docstring; on vector joints the banks run as compiled loops
-(:mod:`pinobs.observers.kf_kernels`).
+:mod:`pinobs.observers.kf` module docstring; the banks run as compiled loops
+(:mod:`pinobs.observers.kf_kernels`) on vector, continuous, spherical and free-flyer joints,
+as NumPy arrays otherwise (planar joints, or numba absent).
 """
 
 from __future__ import annotations
@@ -15,9 +16,10 @@ from typing import NamedTuple, cast
 
 import numpy as np
 
+from pinobs.errors import UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.observers.base import GateState, Vector, gate_threshold, positive
-from pinobs.observers.kf_kernels import auto_kernel, bank_kernel
+from pinobs.observers.kf_kernels import auto_kernel, bank_kernel, joint_table
 
 __all__ = [
     "AUTO_GATE_SAMPLES",
@@ -131,7 +133,7 @@ class AutoState(NamedTuple):
     B: Vector  # (n_f,): forgotten sums of log S
     w: Vector  # (n_f, nv): the mixture's weights
     gate: GateState = GateState()
-    mix: Vector | None = None  # (2, nv): the estimate (Σ_f w q_f, Σ_f w v_f), if computed
+    mix: Vector | None = None  # (nq + nv,): the estimate (q then v), if computed
 
 
 def _auto_weights(n: float, A: Vector, B: Vector) -> Vector:
@@ -155,9 +157,9 @@ class KFBank:
     ``jerk_psd``, stepped together.
 
     The same equations as the family (:mod:`pinobs.observers.kf`), one filter per row
-    of the arrays.  On robots whose joints are all vector joints a step is one
-    compiled loop (:func:`~pinobs.observers.kf_kernels.bank_rows_loops`, numba; a NumPy
-    step cost about 15 ``pin.aba``
+    of the arrays.  On vector, continuous, spherical and free-flyer joints a step is one
+    compiled loop (:func:`~pinobs.observers.kf_kernels.bank_rows_loops`, numba, the group's
+    ``integrate``/``difference`` in it; a NumPy step cost about 15 ``pin.aba``
     calls on a UR5, mostly in dispatching small-array operations); otherwise NumPy
     arrays, the configuration part filter by filter through ``integrate``/``difference``.
     Both paths are tested equal to separate
@@ -182,7 +184,9 @@ class KFBank:
         self._cache: tuple[float, Vector, Vector] | None = None
         n = self.jerk.size  # step's scratch (its likelihood and gate are not kept)
         self._ll, self._level, self._run = np.zeros(n), np.ones(n), np.zeros(n, dtype=np.int64)
-        if robot.is_vector_space:
+        #: the joints as the compiled loops take them (``None``: the NumPy path)
+        self.table = joint_table(robot.joints, robot.nq, robot.nv)
+        if self.table is not None:
             bank_kernel.load()
 
     def initial(self, q0: Vector, v0: Vector, v0_std: float) -> BankState:
@@ -209,22 +213,28 @@ class KFBank:
         gate: each filter's innovation log-likelihood (:meth:`log_likelihoods`) and, with
         ``store``, the first filter's state at every row, ``X[k] = (q, v, a)`` of shape
         ``(3, nv)``, its 3×3 covariance ``PX[k]`` and whether it was corrected with the row's
-        measurement, ``used[k]`` (all three empty without; ``store`` needs ``nq = nv``).  On
-        vector joints one compiled pass (:func:`~pinobs.observers.kf_kernels.bank_rows_loops`),
-        otherwise each filter in
+        measurement, ``used[k]`` (all three empty without; ``store`` needs ``nq = nv``).  One
+        compiled pass (:func:`~pinobs.observers.kf_kernels.bank_rows_loops`) where the joints
+        allow (:attr:`table`), otherwise each filter in
         turn as :class:`~pinobs.observers.kf.ConstantAccelerationKF` steps."""
         nv, n_f = self.robot.nv, self.jerk.size
+        if store and self.robot.nq != nv:
+            raise UnsupportedRobotError(
+                f"{self.robot.name}: KFBank.run(store=True) stores q in the rows of v: it needs "
+                f"vector joints (nq = nv), not nq={self.robot.nq}, nv={nv}"
+            )
         n = t.size if store else 0
         X, PX, used = np.empty((n, 3, nv)), np.empty((n, 3, 3)), np.zeros(n, dtype=bool)
         ll = np.zeros(n_f)
         state = self.initial(q[0], np.zeros(nv), v0_std)
-        if self.robot.is_vector_space and bank_kernel.compiled is not None:
+        if self.table is not None and bank_kernel.compiled is not None:
             q_meas = np.ascontiguousarray(np.where(good[:, None], q, 0.0), dtype=float)
             bank_kernel.compiled(
                 *(np.array(x) for x in state[:4]), np.ascontiguousarray(t, dtype=float), q_meas,
                 np.ascontiguousarray(good, dtype=bool), self.jerk, self.meas_var, self.gate,
                 np.full(n_f, float(nv)), np.zeros(n_f, dtype=np.int64), ll,
                 np.empty((n_f, nv)), X if store else _NO_STORE, PX, used if store else _NO_USED,
+                self.table,
             )  # fmt: skip
             return ll, X, PX, used
         for f in range(n_f):  # the causal filter's own steps, the likelihood as _forward's
@@ -253,17 +263,17 @@ class KFBank:
 
     def step(self, state: BankState, dt: float, q_meas: Vector | None) -> BankState:
         r = self.robot
-        if r.is_vector_space and bank_kernel.compiled is not None:
+        if self.table is not None and bank_kernel.compiled is not None:
             measured = q_meas is not None
             q, v, a, P = state.q.copy(), state.v.copy(), state.a.copy(), state.P.copy()
             e = np.empty_like(v)
-            rows = np.empty((2, v.shape[1]))
+            rows = np.empty((2, q.shape[1]))
             if measured:
                 rows[1] = q_meas
             bank_kernel.compiled(
                 q, v, a, P, np.array([0.0, dt]), rows, _ROW_MEASURED[measured], self.jerk,
                 self.meas_var, math.inf, self._level, self._run, self._ll, e, _NO_STORE, _NO_PX,
-                _NO_USED,
+                _NO_USED, self.table,
             )  # fmt: skip
             return BankState(q, v, a, P, e if measured else None)
         if self._cache is None or self._cache[0] != dt:
@@ -306,13 +316,15 @@ class AutoBank:
         self._var = float(meas_std) ** 2  # as KFBank's meas_var
         self._no_sample = np.zeros(robot.nv)
         self._dof = float(robot.nv)  # the gate's level before any (outlier_gate)
-        if robot.is_vector_space:  # its compiled step loaded now, not at the first update
+        self._table = joint_table(robot.joints, robot.nq, robot.nv)  # None: the NumPy step
+        if self._table is not None:  # its compiled step loaded now, not at the first update
             auto_kernel.load()
 
     @property
     def compiled(self) -> bool:
-        """Whether :meth:`step` is the compiled kernel (vector joints, numba present)."""
-        return self.robot.is_vector_space and auto_kernel.compiled is not None
+        """Whether :meth:`step` is the compiled kernel (vector, continuous, spherical and
+        free-flyer joints; numba present)."""
+        return self._table is not None and auto_kernel.compiled is not None
 
     def initial(self, q0: Vector, v0: Vector, P: Vector, rate: float | None) -> AutoState:
         """Every filter at ``(q0, v0, a = 0)`` with the 3×3 covariance ``P``, uniform weights;
@@ -351,7 +363,8 @@ class AutoBank:
         """The mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)``; on Lie groups the configurations mixed
         in the tangent space of the filter of largest total weight."""
         if state.mix is not None:  # computed by the compiled step
-            return state.mix[0], state.mix[1]
+            nq = state.mix.size - state.w.shape[1]
+            return state.mix[:nq], state.mix[nq:]
         w, b = state.w, state.bank
         v = np.sum(w * b.v, axis=0)
         if self.robot.is_vector_space:
@@ -369,13 +382,13 @@ class AutoBank:
     def step(self, state: AutoState, h: float, q_meas: Vector | None) -> AutoState:
         """One step of the bank (:mod:`pinobs.observers.kf`): each filter's
         prediction and correction (:meth:`KFBank.step`: the equations of :meth:`step`),
-        the forgotten likelihood sums, the mixture's weights.  On vector joints one compiled
+        the forgotten likelihood sums, the mixture's weights.  Where :attr:`compiled`, one
         call (:func:`~pinobs.observers.kf_kernels.auto_step_loops`) into arrays allocated here
-        (the state before is kept
-        as it was); otherwise NumPy, the configurations filter by filter."""
+        (the state before is kept as it was); otherwise NumPy, the configurations filter by
+        filter."""
         jerk = state.jerk if state.jerk.size else self.grid(h)
         kernel = auto_kernel.compiled
-        if kernel is not None and self.robot.is_vector_space:
+        if kernel is not None and self._table is not None:
             return self._step_compiled(kernel, state, jerk, h, q_meas)
         bank = self._bank(jerk)
         if q_meas is None:
@@ -407,21 +420,21 @@ class AutoBank:
         h: float,
         q_meas: Vector | None,
     ) -> AutoState:
-        """:meth:`step` on vector joints: :func:`~pinobs.observers.kf_kernels.auto_step_loops`
+        """:meth:`step` compiled: :func:`~pinobs.observers.kf_kernels.auto_step_loops`
         (the same equations, tested equal to the NumPy ones to 1e-12)."""
         b, gate = state.bank, state.gate
         gate_on = state.n >= AUTO_GATE_SAMPLES  # the scales ĉ and weights before this sample
         n_new = self._forget * state.n + 1.0  # the forgotten count (:mod:`pinobs.observers.kf`)
         new = (
-            np.empty_like(b.v), np.empty_like(b.v), np.empty_like(b.v), np.empty_like(b.P),
+            np.empty_like(b.q), np.empty_like(b.v), np.empty_like(b.v), np.empty_like(b.P),
             np.empty_like(b.v), np.empty_like(state.A), np.empty_like(state.B),
-            np.empty_like(state.w), np.empty((2, b.v.shape[1])),
+            np.empty_like(state.w), np.empty(b.q.shape[1] + b.v.shape[1]),
         )  # fmt: skip
         nis, rejected, level = kernel(
             b.q, b.v, b.a, b.P, state.A, state.B, state.w, jerk, h, self._var,
             self._no_sample if q_meas is None else q_meas, q_meas is not None, gate_on,
             state.n, n_new, self._forget, self.gate,
-            self._dof if gate.level is None else gate.level, gate.run, *new,
+            self._dof if gate.level is None else gate.level, gate.run, self._table, *new,
         )  # fmt: skip
         q, v, a, P, e, A, B, w, mix = new
         if q_meas is None:  # the prediction (its likelihoods unchanged)

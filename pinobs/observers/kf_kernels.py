@@ -1,13 +1,16 @@
 """The compiled loops of ``kf``'s filter banks (:mod:`pinobs.observers.kf_bank`).
 
-Two numba kernels on vector joints, each loaded on first use
+Two numba kernels, each loaded on first use
 (:class:`~pinobs.observers.linalg.LazyKernel`: ``import pinobs`` does not import numba):
 :func:`bank_rows_loops`, a bank of white-jerk filters over the rows of a log
 (:meth:`~pinobs.observers.kf_bank.KFBank.run` and ``KFBank.step``), and
 :func:`auto_step_loops`, one step of ``jerk_psd="auto"``
 (:class:`~pinobs.observers.kf_bank.AutoBank`).  Their equations are those of the
 :mod:`pinobs.observers.kf` module docstring ("module docstring" below); both are tested
-equal to the NumPy paths.
+equal to the NumPy paths.  On vector joints ``q ⊕ δ = q + δ``; on Lie-group joints
+(continuous, spherical, free-flyer: :func:`joint_table`) Pinocchio's ``integrate`` and
+``difference`` per joint, in loops (:func:`integrate_joints`, :func:`difference_joints`),
+so that the filters' tangent-space algebra and the group's steps run in one compiled call.
 """
 
 from __future__ import annotations
@@ -17,10 +20,21 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from pinobs.model import JointBlock
 from pinobs.observers.base import MAX_GATE_RUN, NIS_AVERAGING, Vector
 from pinobs.observers.linalg import LazyKernel
 
-__all__ = ["auto_kernel", "auto_step_loops", "bank_kernel", "bank_rows_loops"]
+__all__ = [
+    "JOINT_KINDS",
+    "LIE_HELPERS",
+    "auto_kernel",
+    "auto_step_loops",
+    "bank_kernel",
+    "bank_rows_loops",
+    "difference_joints",
+    "integrate_joints",
+    "joint_table",
+]
 
 
 # The kernels' steps: small functions compiled with them and inlined into them by numba
@@ -63,21 +77,30 @@ def _predict_covariance(
             out[i, j] = s + jerk * Q1[i, j]
 
 
-def _correct(
+def _correct(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
     Pp: Vector, s: float, meas_var: float, e: Vector, q: Vector, v: Vector, a: Vector,
-    K: Vector, C: Vector, Pn: Vector, out: Vector,
+    K: Vector, C: Vector, Pn: Vector, out: Vector, table: NDArray[np.int64], d: Vector,
 ) -> None:  # fmt: skip
     """One filter's Kalman correction by its innovations ``e`` (per joint): the gain
-    ``K = P⁻[:, 0] / s`` (``s = P⁻₀₀ + σ²``), ``q, v, a`` += ``K₀ e, K₁ e, K₂ e`` in place, and
+    ``K = P⁻[:, 0] / s`` (``s = P⁻₀₀ + σ²``), ``q ← q ⊕ K₀ e`` (:func:`integrate_joints` on
+    Lie-group joints, ``d`` its scratch), ``v, a`` += ``K₁ e, K₂ e`` in place, and
     the Joseph form ``C = (I − K e₀ᵀ) P⁻``, ``Pn = C (I − K e₀ᵀ)ᵀ + σ² K Kᵀ``,
     ``out = (Pn + Pnᵀ) / 2`` (``Pn`` and ``out`` may be ``Pp``: it is read before)."""
     for i in range(3):
         K[i] = Pp[i, 0] / s
-    for i in range(e.size):
-        ei = e[i]
-        q[i] += K[0] * ei
-        v[i] += K[1] * ei
-        a[i] += K[2] * ei
+    if table.shape[0] == 0:
+        for i in range(e.size):
+            ei = e[i]
+            q[i] += K[0] * ei
+            v[i] += K[1] * ei
+            a[i] += K[2] * ei
+    else:
+        for i in range(e.size):
+            ei = e[i]
+            d[i] = K[0] * ei
+            v[i] += K[1] * ei
+            a[i] += K[2] * ei
+        integrate_joints(q, d, table, q)
     for i in range(3):  # C = (I − K e₀ᵀ) P⁻
         for j in range(3):
             C[i, j] = Pp[i, j] - K[i] * Pp[0, j]
@@ -89,14 +112,35 @@ def _correct(
             out[i, j] = 0.5 * (Pn[i, j] + Pn[j, i])
 
 
-def _innovations_into(q_meas: Vector, q: Vector, e: Vector) -> float:
-    """One filter's innovations ``e_i = q_meas_i − q⁻_i`` into ``e``; returns ``Σ e_i²``."""
+def _innovations_into(q_meas: Vector, q: Vector, table: NDArray[np.int64], e: Vector) -> float:
+    """One filter's innovations ``e = difference(q⁻, q_meas)`` (``q_meas − q⁻`` on a vector
+    space) into ``e``; returns ``Σ e_i²``."""
+    if table.shape[0] > 0:
+        difference_joints(q, q_meas, table, e)
     sq = 0.0
     for i in range(e.size):
-        ei = q_meas[i] - q[i]
+        ei = e[i] if table.shape[0] > 0 else q_meas[i] - q[i]
         e[i] = ei
         sq += ei * ei
     return sq
+
+
+def _predict_mean(
+    q: Vector, v: Vector, a: Vector, h: float, table: NDArray[np.int64], d: Vector,
+    q1: Vector, v1: Vector,
+) -> None:  # fmt: skip
+    """``q1 = q ⊕ (v h + a h²/2)``, ``v1 = v + a h`` (the module docstring; ``q1`` may be ``q``,
+    ``v1`` ``v``): on a vector space ``q + v h + a h²/2``, else :func:`integrate_joints`
+    (``d`` its scratch)."""
+    if table.shape[0] == 0:
+        for i in range(v.size):
+            q1[i] = q[i] + v[i] * h + 0.5 * h * h * a[i]
+            v1[i] = v[i] + h * a[i]
+        return
+    for i in range(v.size):
+        d[i] = v[i] * h + 0.5 * h * h * a[i]
+        v1[i] = v[i] + h * a[i]
+    integrate_joints(q, d, table, q1)
 
 
 def _outlier_gate(
@@ -113,16 +157,19 @@ def _outlier_gate(
 
 def _innovations(
     q_meas: Vector, q1: Vector, S: Vector, w: Vector, A: Vector, n: float, gate_on: bool,
-    e1: Vector, A1: Vector,
+    table: NDArray[np.int64], e1: Vector, A1: Vector,
 ) -> float:  # fmt: skip
-    """:func:`auto_step_loops`'s innovations ``e_fi = q_meas_i − q⁻_fi`` (into ``e1``),
-    ``z_fi = e_fi² / S_f`` (into ``A1``) and the gate's NIS, ``Σ w_fi z_fi / max(A_fi / N,
-    1e-300)`` (``gate_on``) or ``Σ w_fi z_fi``, summed in order."""
+    """:func:`auto_step_loops`'s innovations ``e_f = difference(q⁻_f, q_meas)`` (``q_meas −
+    q⁻_f`` on a vector space; into ``e1``), ``z_fi = e_fi² / S_f`` (into ``A1``) and the gate's
+    NIS, ``Σ w_fi z_fi / max(A_fi / N, 1e-300)`` (``gate_on``) or ``Σ w_fi z_fi``, in order."""
     nf, nv = e1.shape
+    lie = table.shape[0] > 0
     nis = 0.0
     for f in range(nf):
+        if lie:
+            difference_joints(q1[f], q_meas, table, e1[f])
         for i in range(nv):
-            ei = q_meas[i] - q1[f, i]
+            ei = e1[f, i] if lie else q_meas[i] - q1[f, i]
             e1[f, i] = ei
             z = ei * ei / S[f]
             A1[f, i] = z  # z for now: the sums below
@@ -154,17 +201,241 @@ def _weights_into(n_new: float, A1: Vector, B1: Vector, w1: Vector) -> None:
             w1[f, i] = w1[f, i] / total
 
 
-def _mixture_into(w1: Vector, q1: Vector, v1: Vector, mix: Vector) -> None:
-    """The mixture ``(Σ_f w_fi q_fi, Σ_f w_fi v_fi)`` into ``mix`` (2, nv), summed over ``f``
-    in order."""
+def _mixture_into(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
+    w1: Vector, q1: Vector, v1: Vector, table: NDArray[np.int64], d: Vector, mix: Vector
+) -> None:
+    """The mixture ``(Σ_f w_fi q_fi, Σ_f w_fi v_fi)`` into ``mix`` (``nq + nv``: ``q`` then
+    ``v``), summed over ``f`` in order; on Lie-group joints the configurations mixed in the
+    tangent space of the filter ``r`` of largest total weight, ``q_r ⊕ Σ_f w_f
+    difference(q_r, q_f)`` (as :meth:`~pinobs.observers.kf_bank.AutoBank.output`; ``d``: two
+    rows of ``nv`` scratch)."""
     nf, nv = w1.shape
+    nq = mix.size - nv
     for i in range(nv):
-        mq = w1[0, i] * q1[0, i]
         mv = w1[0, i] * v1[0, i]
         for f in range(1, nf):
-            mq += w1[f, i] * q1[f, i]
             mv += w1[f, i] * v1[f, i]
-        mix[0, i], mix[1, i] = mq, mv
+        mix[nq + i] = mv
+    if table.shape[0] == 0:
+        for i in range(nv):
+            mq = w1[0, i] * q1[0, i]
+            for f in range(1, nf):
+                mq += w1[f, i] * q1[f, i]
+            mix[i] = mq
+        return
+    ref, best = 0, -math.inf
+    for f in range(nf):  # the first of the largest (np.argmax)
+        total = 0.0
+        for i in range(nv):
+            total += w1[f, i]
+        if total > best:
+            ref, best = f, total
+    for f in range(nf):
+        difference_joints(q1[ref], q1[f], table, d[0])
+        for i in range(nv):
+            d[1, i] = w1[f, i] * d[0, i] if f == 0 else d[1, i] + w1[f, i] * d[0, i]
+    integrate_joints(q1[ref], d[1], table, mix[:nq])
+
+
+# Lie-group joints (:func:`joint_table`): Pinocchio 3/4's ``integrate`` and ``difference``
+# per joint, the same formulas and branches in loops (``pinocchio/src/spatial/
+# explog-quaternion.hxx``, ``log.hxx``, ``multibody/liegroup/special-orthogonal.hxx`` and
+# ``special-euclidean.hxx``; the maps are those of Sola, Deray & Atchuthan 2018, "A micro Lie
+# theory", App. B (SO(3) as unit quaternions) and D (SE(3), its ``V(θ)``)); tested equal to
+# ``pin.integrate``/``difference``.
+_EPS = 2.220446049250313e-16  # the float64 machine epsilon (Pinocchio's eps)
+_TAYLOR2 = _EPS ** (1.0 / 3.0)  # TaylorSeriesExpansion<double>::precision<2>()
+_TAYLOR3 = _EPS ** (1.0 / 4.0)  # TaylorSeriesExpansion<double>::precision<3>()
+#: :func:`joint_table`'s kinds: ``pinobs.model.JointBlock.kind`` → code.
+JOINT_KINDS = {"vector": 0, "circle": 1, "so3": 2, "se3": 3}
+
+
+def joint_table(joints: tuple[JointBlock, ...], nq: int, nv: int) -> NDArray[np.int64] | None:
+    """The kernels' description of a robot's joints: rows ``(kind, idx_q, idx_v, nv)``
+    (:data:`JOINT_KINDS`), empty on a vector space (every joint a vector joint, ``nq = nv``:
+    the kernels' plain ``q + δ``), ``None`` if a joint's group is not compiled (planar) or the
+    joints do not cover ``q`` and ``v``."""
+    if all(b.kind == "vector" for b in joints) and nq == nv:
+        return np.zeros((0, 4), dtype=np.int64)
+    if any(b.kind not in JOINT_KINDS for b in joints):
+        return None
+    if sum(b.nq for b in joints) != nq or sum(b.nv for b in joints) != nv:
+        return None
+    rows = [(JOINT_KINDS[b.kind], b.idx_q, b.idx_v, b.nv) for b in joints]
+    return np.array(rows, dtype=np.int64).reshape(-1, 4)
+
+
+def _quat_mul(
+    ax: float, ay: float, az: float, aw: float, bx: float, by: float, bz: float, bw: float
+) -> tuple[float, float, float, float]:
+    """The Hamilton product ``a b`` of ``(x, y, z, w)`` quaternions (Eigen's order of terms)."""
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by + ay * bw + az * bx - ax * bz,
+        aw * bz + az * bw + ax * by - ay * bx,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
+
+
+def _quat_rotate(
+    x: float, y: float, z: float, w: float, p0: float, p1: float, p2: float
+) -> tuple[float, float, float]:
+    """``q p q*`` as Eigen's ``_transformVector``: ``u = 2 (q⃗ × p)``, ``p + w u + q⃗ × u``."""
+    u0, u1, u2 = y * p2 - z * p1, z * p0 - x * p2, x * p1 - y * p0
+    u0, u1, u2 = u0 + u0, u1 + u1, u2 + u2
+    return (
+        p0 + w * u0 + (y * u2 - z * u1),
+        p1 + w * u1 + (z * u0 - x * u2),
+        p2 + w * u2 + (x * u1 - y * u0),
+    )
+
+
+def _exp3(w0: float, w1: float, w2: float) -> tuple[float, float, float, float]:
+    """``Exp(ω)`` as a unit quaternion ``(sin(θ/2) ω/θ, cos(θ/2))``, ``θ = |ω|`` (Sola et al.
+    App. B); below ``θ² = ε^¼`` their Taylor series to ``θ⁴`` (``quaternion::exp3``)."""
+    t2 = w0 * w0 + w1 * w1 + w2 * w2
+    if t2 > _TAYLOR3:
+        t = math.sqrt(t2 + _EPS * _EPS)
+        s, c = math.sin(0.5 * t), math.cos(0.5 * t)
+        return s * (w0 / t), s * (w1 / t), s * (w2 / t), c
+    h2 = t2 / 4.0  # (θ/2)²
+    k = 0.5 * (1.0 - h2 / 6.0 + h2 * h2 / 120.0)
+    return k * w0, k * w1, k * w2, 1.0 - h2 / 2.0 + h2 * h2 / 24.0
+
+
+def _log3(x: float, y: float, z: float, w: float) -> tuple[float, float, float, float]:
+    """``(θ, Log(q))``: ``Log(q) = θ u`` with ``θ = 2 atan2(|q⃗|, |w|)`` on the quaternion of
+    ``w ≥ 0`` (Sola et al. App. B); below ``|q⃗|² = ε^⅓`` the Taylor series
+    (``quaternion::log3``)."""
+    n2 = x * x + y * y + z * z
+    norm = math.sqrt(n2 + _EPS * _EPS)
+    sign = 1.0 if w >= 0.0 else -1.0
+    wp = sign * w
+    if n2 < _TAYLOR2:
+        theta = 2.0 * (1.0 - n2 / (wp * wp) / 3.0) * (norm / wp)
+        h2 = theta * theta / 4.0
+        k = 2.0 * (1.0 + h2 / 6.0 + 7.0 / 360.0 * h2 * h2)
+    else:
+        half = math.atan2(norm, wp)
+        theta = 2.0 * half
+        k = theta / math.sin(half)
+    return theta, k * (sign * x), k * (sign * y), k * (sign * z)
+
+
+def _normalize_first_order(x: float, y: float, z: float, w: float, out: Vector, i: int) -> None:
+    """``q (3 − |q|²) / 2`` into ``out[i:i + 4]`` (Pinocchio's ``firstOrderNormalize``)."""
+    k = (3.0 - (x * x + y * y + z * z + w * w)) / 2.0
+    out[i], out[i + 1], out[i + 2], out[i + 3] = x * k, y * k, z * k, w * k
+
+
+def _integrate_se3(q: Vector, d: Vector, iq: int, iv: int, out: Vector) -> None:
+    """A free-flyer's ``q ⊕ δ``: ``(p + R V(ω) ν, q Exp(ω))`` with ``V(ω) = I + (1 − cos θ)/θ²
+    ω^ + (θ − sin θ)/θ³ ω^²`` (Sola et al. App. D), the quaternion's sign kept near
+    ``q``'s, normalised to first order (``SpecialEuclideanOperationTpl<3>::integrate``)."""
+    n0, n1, n2 = d[iv], d[iv + 1], d[iv + 2]
+    w0, w1, w2 = d[iv + 3], d[iv + 4], d[iv + 5]
+    x, y, z, w = q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6]
+    t2 = w0 * w0 + w1 * w1 + w2 * w2 + _EPS * _EPS
+    t = math.sqrt(t2)
+    if t < _TAYLOR3:
+        a, b = 0.5 - t2 / 24.0, 1.0 / 6.0 - t2 / 120.0
+    else:
+        a, b = (1.0 - math.cos(t)) * (1.0 / t2), (t - math.sin(t)) * (1.0 / t2) / t
+    c0, c1, c2 = w1 * n2 - w2 * n1, w2 * n0 - w0 * n2, w0 * n1 - w1 * n0  # ω × ν
+    cc0, cc1, cc2 = w1 * c2 - w2 * c1, w2 * c0 - w0 * c2, w0 * c1 - w1 * c0  # ω × (ω × ν)
+    r0, r1, r2 = _quat_rotate(
+        x, y, z, w, n0 + a * c0 + b * cc0, n1 + a * c1 + b * cc1, n2 + a * c2 + b * cc2
+    )
+    out[iq], out[iq + 1], out[iq + 2] = r0 + q[iq], r1 + q[iq + 1], r2 + q[iq + 2]
+    ex, ey, ez, ew = _exp3(w0, w1, w2)
+    rx, ry, rz, rw = _quat_mul(x, y, z, w, ex, ey, ez, ew)
+    if rx * x + ry * y + rz * z + rw * w < 0.0:
+        rx, ry, rz, rw = -rx, -ry, -rz, -rw
+    _normalize_first_order(rx, ry, rz, rw, out, iq + 3)
+
+
+def _difference_se3(q0: Vector, q1: Vector, iq: int, iv: int, out: Vector) -> None:
+    """A free-flyer's ``Log(q0⁻¹ q1)``: ``ω = Log(q0* q1)`` (:func:`_log3`) and ``ν = V(ω)⁻¹
+    R0ᵀ (p1 − p0)``, ``V⁻¹ = I − ω^/2 + β ω^²`` (Sola et al. App. D, inverted; ``β`` of
+    J. L. Blanco's eq. (9.26), Pinocchio's ``log6`` of a quaternion)."""
+    x, y, z, w = q0[iq + 3], q0[iq + 4], q0[iq + 5], q0[iq + 6]
+    p0, p1, p2 = _quat_rotate(
+        -x, -y, -z, w, q1[iq] - q0[iq], q1[iq + 1] - q0[iq + 1], q1[iq + 2] - q0[iq + 2]
+    )
+    rx, ry, rz, rw = _quat_mul(-x, -y, -z, w, q1[iq + 3], q1[iq + 4], q1[iq + 5], q1[iq + 6])
+    theta, w0, w1, w2 = _log3(rx, ry, rz, rw)
+    t2 = w0 * w0 + w1 * w1 + w2 * w2
+    ct = (1.0 if rw >= 0.0 else -1.0) * rw
+    cot = ct / math.sqrt(rx * rx + ry * ry + rz * rz + _EPS * _EPS)  # cot(θ/2)
+    if theta <= _TAYLOR3:
+        beta = (1.0 / 3.0 - t2 / 4.0 / 45.0) / 4.0
+    else:
+        beta = 1.0 / t2 - cot * 0.5 / theta
+    c0, c1, c2 = w1 * p2 - w2 * p1, w2 * p0 - w0 * p2, w0 * p1 - w1 * p0  # ω × p
+    cc0, cc1, cc2 = w1 * c2 - w2 * c1, w2 * c0 - w0 * c2, w0 * c1 - w1 * c0
+    out[iv], out[iv + 1], out[iv + 2] = (
+        p0 - 0.5 * c0 + beta * cc0, p1 - 0.5 * c1 + beta * cc1, p2 - 0.5 * c2 + beta * cc2
+    )  # fmt: skip
+    out[iv + 3], out[iv + 4], out[iv + 5] = w0, w1, w2
+
+
+def integrate_joints(q: Vector, d: Vector, table: NDArray[np.int64], out: Vector) -> None:
+    """``out = q ⊕ d`` joint by joint (``table``: :func:`joint_table`; ``out`` may be ``q``):
+    vector ``q + d``; continuous ``(cos, sin)`` turned by ``d`` and normalised to first order;
+    spherical ``q Exp(d)`` normalised to first order; free-flyer :func:`_integrate_se3`."""
+    for j in range(table.shape[0]):
+        kind, iq, iv, n = table[j, 0], table[j, 1], table[j, 2], table[j, 3]
+        if kind == 0:
+            for i in range(n):
+                out[iq + i] = q[iq + i] + d[iv + i]
+        elif kind == 1:
+            ca, sa = q[iq], q[iq + 1]
+            s, c = math.sin(d[iv]), math.cos(d[iv])
+            o0, o1 = c * ca - s * sa, s * ca + c * sa
+            k = (3.0 - (o0 * o0 + o1 * o1)) / 2.0
+            out[iq], out[iq + 1] = o0 * k, o1 * k
+        elif kind == 2:
+            ex, ey, ez, ew = _exp3(d[iv], d[iv + 1], d[iv + 2])
+            rx, ry, rz, rw = _quat_mul(q[iq], q[iq + 1], q[iq + 2], q[iq + 3], ex, ey, ez, ew)
+            _normalize_first_order(rx, ry, rz, rw, out, iq)
+        else:
+            _integrate_se3(q, d, iq, iv, out)
+
+
+def difference_joints(q0: Vector, q1: Vector, table: NDArray[np.int64], out: Vector) -> None:
+    """``out = difference(q0, q1)`` joint by joint (``table``: :func:`joint_table`): vector
+    ``q1 − q0``; continuous the angle of ``R0ᵀ R1`` (Pinocchio's SO(2) ``log``: ``asin`` near
+    0, ``acos`` elsewhere); spherical ``Log(q0* q1)``; free-flyer :func:`_difference_se3`."""
+    for j in range(table.shape[0]):
+        kind, iq, iv, n = table[j, 0], table[j, 1], table[j, 2], table[j, 3]
+        if kind == 0:
+            for i in range(n):
+                out[iv + i] = q1[iq + i] - q0[iq + i]
+        elif kind == 1:
+            c = q0[iq] * q1[iq] + q0[iq + 1] * q1[iq + 1]
+            s = q0[iq] * q1[iq + 1] - q0[iq + 1] * q1[iq]
+            tr = c + c
+            if tr > 2.0:
+                out[iv] = 0.0
+            elif tr < -2.0:
+                out[iv] = math.pi if s >= 0.0 else -math.pi
+            elif tr > 2.0 - 1e-2:
+                out[iv] = math.asin((s - -s) / 2.0)
+            else:
+                out[iv] = math.acos(tr / 2.0) if s >= 0.0 else -math.acos(tr / 2.0)
+        elif kind == 2:
+            x, y, z, w = q0[iq], q0[iq + 1], q0[iq + 2], q0[iq + 3]
+            r = _quat_mul(-x, -y, -z, w, q1[iq], q1[iq + 1], q1[iq + 2], q1[iq + 3])
+            _, out[iv], out[iv + 1], out[iv + 2] = _log3(r[0], r[1], r[2], r[3])
+        else:
+            _difference_se3(q0, q1, iq, iv, out)
+
+
+# The Lie-group helpers, in the order they are compiled (each before its callers).
+LIE_HELPERS = (
+    _quat_mul, _quat_rotate, _exp3, _log3, _normalize_first_order, _integrate_se3,
+    _difference_se3, integrate_joints, difference_joints,
+)  # fmt: skip
 
 
 def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
@@ -185,14 +456,15 @@ def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over 
     X: Vector,
     PX: Vector,
     used: NDArray[np.bool_],
+    table: NDArray[np.int64],
 ) -> None:
-    """A bank of filters on vector joints over rows ``1..`` of ``(t, q_meas, measured)``, from
+    """A bank of filters over rows ``1..`` of ``(t, q_meas, measured)``, from
     its state at ``t[0]``, in loops (compiled by numba); the state arrays updated in place.
 
     The equations of the module docstring per filter ``f`` (row) and row ``k``, with
     ``h = t[k] − t[k−1]``: predict with ``F(h)`` and ``Q(h) = jerk[f] · Q₁(h)``, then, if
     ``measured[k]``, the gain ``K = P⁻[:, 0] / S`` with ``S = P⁻₀₀ + σ²``, the innovation
-    ``e = q_meas[k] − q⁻`` per joint, the Joseph form
+    ``e = difference(q⁻, q_meas[k])``, the Joseph form
     ``P = (I − K e₀ᵀ) P⁻ (I − K e₀ᵀ)ᵀ + σ² K Kᵀ`` (symmetrised), and
     ``ll[f] += log N(e; 0, S I)`` (the prediction-error decomposition, Schweppe 1965); the
     outlier gate first (:func:`pinobs.observers.base.outlier_gate`: ``gate`` its threshold,
@@ -201,13 +473,14 @@ def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over 
     :func:`pinobs.smoothing.rts.forward_pass`).  ``e`` receives the innovations of the last
     row, when it is measured.  When ``X`` has rows, ``X[k] = (q, v, a)``, ``PX[k] = P`` and
     ``used[k]`` (corrected with its measurement) of filter 0 at every row ``k`` (row 0
-    included: not corrected).
+    included: not corrected; needs ``nq = nv``).  ``table``: the joints (:func:`joint_table`;
+    empty on a vector space).
     """
     nf, nv = v.shape
     store = X.shape[0] > 0
     F, Q1 = np.eye(3), np.zeros((3, 3))
     FP, Pp, C = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
-    K = np.empty(3)
+    K, d = np.empty(3), np.empty(nv)
     h_prev = math.nan
     for k in range(t.size):
         if k > 0:
@@ -217,14 +490,12 @@ def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over 
                 h_prev = h
             for f in range(nf):
                 _predict_covariance(F, Q1, jerk[f], P[f], FP, Pp)  # P⁻ = F P Fᵀ + Q
-                for i in range(nv):
-                    q[f, i] = q[f, i] + v[f, i] * h + 0.5 * h * h * a[f, i]
-                    v[f, i] = v[f, i] + h * a[f, i]
+                _predict_mean(q[f], v[f], a[f], h, table, d, q[f], v[f])
                 if not measured[k]:
                     _copy_into(Pp, P[f])
                     continue
                 s = Pp[0, 0] + meas_var
-                nis = _innovations_into(q_meas[k], q[f], e[f]) / s
+                nis = _innovations_into(q_meas[k], q[f], table, e[f]) / s
                 # GateState.measured (base.outlier_gate), in loops: tested equal
                 g = gate * max(1.0, level[f] / nv)
                 if nis > g and run[f] < MAX_GATE_RUN:
@@ -239,15 +510,15 @@ def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over 
                 if f == 0 and store:
                     used[k] = True
                 ll[f] -= 0.5 * (nis + nv * math.log(2.0 * math.pi * s))
-                _correct(Pp, s, meas_var, e[f], q[f], v[f], a[f], K, C, Pp, P[f])
+                _correct(Pp, s, meas_var, e[f], q[f], v[f], a[f], K, C, Pp, P[f], table, d)
         if store:  # filter 0's state
             for i in range(nv):
                 X[k, 0, i], X[k, 1, i], X[k, 2, i] = q[0, i], v[0, i], a[0, i]
             _copy_into(P[0], PX[k])
 
 
-#: :func:`bank_rows_loops` compiled (loaded when a vector-joint
-#: :class:`~pinobs.observers.kf_bank.KFBank` is made).
+#: :func:`bank_rows_loops` compiled (loaded when a
+#: :class:`~pinobs.observers.kf_bank.KFBank` whose joints it runs is made).
 bank_kernel = LazyKernel(
     bank_rows_loops,
     np.zeros((1, 1)),
@@ -267,48 +538,29 @@ bank_kernel = LazyKernel(
     np.zeros((2, 3, 1)),
     np.zeros((2, 3, 3)),
     np.zeros(2, dtype=bool),
-    helpers=(_transition_into, _copy_into, _predict_covariance, _innovations_into, _correct),
-)
+    np.zeros((0, 4), dtype=np.int64),
+    helpers=(
+        *LIE_HELPERS, _transition_into, _copy_into, _predict_covariance, _innovations_into,
+        _predict_mean, _correct,
+    ),
+)  # fmt: skip
 
 
 def auto_step_loops(
-    q: Vector,
-    v: Vector,
-    a: Vector,
-    P: Vector,
-    A: Vector,
-    B: Vector,
-    w: Vector,
-    jerk: Vector,
-    h: float,
-    meas_var: float,
-    q_meas: Vector,
-    measured: bool,
-    gate_on: bool,
-    n: float,
-    n_new: float,
-    forget: float,
-    threshold: float,
-    level: float,
-    run: int,
-    q1: Vector,
-    v1: Vector,
-    a1: Vector,
-    P1: Vector,
-    e1: Vector,
-    A1: Vector,
-    B1: Vector,
-    w1: Vector,
-    mix: Vector,
-) -> tuple[float, bool, float]:
-    """One step of ``jerk_psd="auto"`` on vector joints (module docstring), in loops compiled
-    by numba: the bank's prediction and correction (:func:`bank_rows_loops`'s arithmetic, one
+    q: Vector, v: Vector, a: Vector, P: Vector, A: Vector, B: Vector, w: Vector, jerk: Vector,
+    h: float, meas_var: float, q_meas: Vector, measured: bool, gate_on: bool, n: float,
+    n_new: float, forget: float, threshold: float, level: float, run: int,
+    table: NDArray[np.int64], q1: Vector, v1: Vector, a1: Vector, P1: Vector, e1: Vector,
+    A1: Vector, B1: Vector, w1: Vector, mix: Vector,
+) -> tuple[float, bool, float]:  # fmt: skip
+    """One step of ``jerk_psd="auto"`` (module docstring), in loops compiled by numba: the bank's prediction and correction (:func:`bank_rows_loops`'s arithmetic, one
     row), the outlier gate, the forgotten likelihood sums, the weights and the mixture.
 
     Reads the state ``(q, v, a, P, A, B, w)`` (``n`` its count, ``n_new = γ n + 1``), writes
     the next one into ``(q1, v1, a1, P1, A1, B1, w1)`` (all preallocated by the caller: the
-    state before is left as it was), the innovations ``e_fi = q_meas_i − q⁻_fi`` into ``e1``
-    and the mixture ``(Σ_f w_fi q_fi, Σ_f w_fi v_fi)`` into ``mix`` (2, nv).  With
+    state before is left as it was), the innovations ``e_f = difference(q⁻_f, q_meas)`` into
+    ``e1`` and the mixture (:func:`_mixture_into`) into ``mix`` (``nq + nv``; ``table``: the
+    joints, :func:`joint_table`).  With
     ``measured``: ``S_f = P⁻_f,00 + σ₀²``, ``z_fi = e_fi² / S_f``, the gate's NIS
     ``Σ w_fi z_fi / max(A_fi / N, 1e-300)`` (``gate_on``) or ``Σ w_fi z_fi`` (too few
     samples: not gated), :func:`pinobs.observers.base.outlier_gate` on it (``threshold``,
@@ -322,25 +574,26 @@ def auto_step_loops(
     nf, nv = v.shape
     F, Q1 = np.eye(3), np.zeros((3, 3))
     _transition_into(h, F, Q1)
-    FP = np.empty((3, 3))
+    FP, d = np.empty((3, 3)), np.empty((2, nv))
     S = np.empty(nf)
     for f in range(nf):  # predict: x ← F x, P⁻ = F P Fᵀ + j_f Q₁(h)
         _predict_covariance(F, Q1, jerk[f], P[f], FP, P1[f])
+        _predict_mean(q[f], v[f], a[f], h, table, d[0], q1[f], v1[f])
         for i in range(nv):
-            q1[f, i] = q[f, i] + v[f, i] * h + 0.5 * h * h * a[f, i]
-            v1[f, i] = v[f, i] + h * a[f, i]
             a1[f, i] = a[f, i]
         S[f] = P1[f, 0, 0] + meas_var
     nis, reject, accept = math.nan, False, measured
     if measured:
-        nis = _innovations(q_meas, q1, S, w, A, n, gate_on, e1, A1)
+        nis = _innovations(q_meas, q1, S, w, A, n, gate_on, table, e1, A1)
         if gate_on:  # base.outlier_gate, in loops
             reject, level = _outlier_gate(nis, threshold, level, nv, run)
         accept = not reject
     if accept:
         K, C, Pn = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
         for f in range(nf):  # correct: K = P⁻[:, 0] / S, the Joseph form
-            _correct(P1[f], S[f], meas_var, e1[f], q1[f], v1[f], a1[f], K, C, Pn, P1[f])
+            _correct(
+                P1[f], S[f], meas_var, e1[f], q1[f], v1[f], a1[f], K, C, Pn, P1[f], table, d[0]
+            )
             B1[f] = forget * B[f] + math.log(S[f])  # the forgotten sums (module docstring)
             for i in range(nv):
                 A1[f, i] = forget * A[f, i] + A1[f, i]
@@ -349,7 +602,7 @@ def auto_step_loops(
         B1[:] = B
         _copy_into(A, A1)
         _copy_into(w, w1)
-    _mixture_into(w1, q1, v1, mix)
+    _mixture_into(w1, q1, v1, table, d, mix)
     return nis, reject, level
 
 
@@ -360,17 +613,20 @@ def _auto_warm_args() -> tuple[object, ...]:
     return (
         z2, z2.copy(), z2.copy(), P, np.ones((nf, nv)), np.zeros(nf), np.full((nf, nv), 0.5),
         np.ones(nf), 1e-3, 1.0, np.zeros(nv), True, True, 30.0, 30.0, 0.99, math.inf, 1.0, 0,
-        *(np.empty((nf, nv)) for _ in range(3)), np.empty((nf, 3, 3)), np.empty((nf, nv)),
-        np.empty((nf, nv)), np.empty(nf), np.empty((nf, nv)), np.empty((2, nv)),
+        np.zeros((0, 4), dtype=np.int64), *(np.empty((nf, nv)) for _ in range(3)),
+        np.empty((nf, 3, 3)), np.empty((nf, nv)), np.empty((nf, nv)), np.empty(nf),
+        np.empty((nf, nv)), np.empty(2 * nv),
     )  # fmt: skip
 
 
-#: :func:`auto_step_loops` compiled (loaded when a vector-joint ``kf`` with ``"auto"`` is made).
+#: :func:`auto_step_loops` compiled (loaded when a ``kf`` with ``"auto"`` whose joints it runs
+#: is made).
 auto_kernel = LazyKernel(
     auto_step_loops,
     *_auto_warm_args(),
     helpers=(
-        _transition_into, _copy_into, _predict_covariance, _correct, _innovations,
+        *LIE_HELPERS, _transition_into, _copy_into, _predict_covariance, _predict_mean, _correct,
+        _innovations,
         _outlier_gate, _weights_into, _mixture_into,
     ),
 )  # fmt: skip

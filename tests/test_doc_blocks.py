@@ -309,11 +309,19 @@ def _run_python(block: Block, folder: Path, monkeypatch: pytest.MonkeyPatch) -> 
 
 
 def _params(lang: str, slow: bool) -> list[Any]:
+    """The blocks of ``lang`` run in the default run (``slow`` False) or with ``-m slow``:
+    every python block; a shell block when it has a ``pinobs`` command to run (one of
+    :data:`RUN`, or any when the block is slow)."""
+
+    def runs(b: Block) -> bool:
+        if lang == "python":
+            return True
+        return any(slow or a[1] in RUN for a in commands(b.code) if a[0] == "pinobs")
+
     return [
         pytest.param(b, id=b.id)
         for b in _of(lang)
-        if (_match(SLOW, b) is not None) == slow
-        and (lang == "python" or re.search(r"^pinobs ", b.code, re.M))
+        if (_match(SLOW, b) is not None) == slow and runs(b)
     ]
 
 
@@ -460,18 +468,13 @@ def _run_pinobs(block: Block, folder: Path, monkeypatch: pytest.MonkeyPatch) -> 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # printed to the user as notes
             assert main(argv[1:]) == 0, shlex.join(argv)
+        if "--out" in argv:
+            assert (folder / argv[argv.index("--out") + 1]).exists(), shlex.join(argv)
         ran += 1
     assert ran, f"{block.id}: no pinobs command run"
 
 
-@pytest.mark.parametrize(
-    "block",
-    [
-        p
-        for p in _params("bash", slow=False)
-        if any(a[1] in RUN for a in commands(p.values[0].code) if a[0] == "pinobs")
-    ],
-)
+@pytest.mark.parametrize("block", _params("bash", slow=False))
 def test_shell_block_runs(block: Block, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     _run_pinobs(block, tmp_path, monkeypatch)
 

@@ -21,6 +21,7 @@ need something this machine may lack skip, saying what (:data:`NEEDS`).
 
 from __future__ import annotations
 
+import argparse
 import ast
 import contextlib
 import importlib
@@ -431,10 +432,17 @@ def _check_script(argv: list[str]) -> None:
 
 
 def _check_pinobs(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    """Parsed by ``pinobs``'s own parser, every ``--option`` spelled in full (argparse
+    would take an abbreviation that a new option can make ambiguous)."""
+    parser = _parser()
     try:
-        _parser().parse_args(argv[1:])
+        parser.parse_args(argv[1:])
     except SystemExit as exc:
         raise AssertionError(f"{shlex.join(argv)}: {capsys.readouterr().err}") from exc
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    options = {o for a in sub.choices[argv[1]]._actions for o in a.option_strings}
+    abbreviated = [w for w in argv[2:] if w.startswith("--") and w.split("=")[0] not in options]
+    assert not abbreviated, f"{shlex.join(argv)}: spell out {abbreviated}"
 
 
 @pytest.mark.parametrize("block", [pytest.param(b, id=b.id) for b in _of("bash")])

@@ -11,7 +11,8 @@ Each fenced block of ``README.md`` and ``docs/**/*.md`` is one test, its id
   checked: ``pinobs ...`` is parsed by the command's own parser (a wrong flag fails),
   then run in process when cheap (:data:`RUN`); ``pip install`` names only extras of
   ``pyproject.toml``; ``python SCRIPT`` names a script that exists and takes every
-  ``--flag`` given; ``python -m pytest`` is this suite (not run).
+  ``--flag`` given, and is run with ``-m slow`` when it writes nothing (:data:`SCRIPT_RUNS`)
+  or says in :data:`NOT_RUN` why not; ``python -m pytest`` is this suite (not run).
 - ``text``: not code; each is the output of the block before it (compared) or listed in
   :data:`TEXT` with the test that checks it.
 
@@ -25,10 +26,14 @@ import argparse
 import ast
 import contextlib
 import importlib
+import importlib.util
 import io
+import os
 import re
 import shlex
 import shutil
+import subprocess
+import sys
 import textwrap
 import warnings
 from collections.abc import Callable
@@ -111,13 +116,14 @@ def _output_of(block: Block) -> Block | None:
     return None
 
 
-#: Blocks (by page and a line of their code) slower than about 5 s: run with ``-m slow``.
+#: Blocks (by page and a line of their code) slower than about 5 s: run with ``-m slow``
+#: (times measured on a shared 2-core machine, load average 8-11).
 SLOW: dict[tuple[str, str], str] = {
-    ("docs/guides/learning.md", "ident = pinobs.identify(robot, log)"): "identification: ~10 s",
-    ("docs/guides/recorded-logs.md", "table = estimate_logs("): "a local Dask cluster: ~10 s",
-    ("README.md", "pinobs demo"): "every observer on two robots: ~25 s of CPU",
-    ("docs/index.md", "pinobs demo"): "every observer on two robots: ~25 s of CPU",
-    ("docs/benchmarks/index.md", "pinobs bench --quick"): "the quick benchmark: ~2 min",
+    ("docs/guides/learning.md", "ident = pinobs.identify(robot, log)"): "identification: 20 s",
+    ("docs/guides/recorded-logs.md", "table = estimate_logs("): "a local Dask cluster: 28 s",
+    ("README.md", "pinobs demo"): "every observer on two robots: 33-48 s",
+    ("docs/index.md", "pinobs demo"): "every observer on two robots: 33-48 s",
+    ("docs/benchmarks/index.md", "pinobs bench --quick"): "the quick benchmark: 171 s",
 }
 
 #: Blocks that need what this machine may not have: the block's line, and a check giving
@@ -142,10 +148,31 @@ TEXT: dict[tuple[str, str], str] = {
 NOT_RUN: dict[str, str] = {
     "benchmarks/run_bench.py": "writes the committed benchmarks/results.{md,json} (~2 min)",
     "benchmarks/learning.py": "writes the committed benchmarks/learning.{md,json}",
-    "benchmarks/real_logs.py": "needs the shared real logs and minutes",
+    "benchmarks/real_logs.py": "writes the committed benchmarks/real_logs.{md,json} (~12 min);"
+    " its --quick run: SCRIPT_RUNS",
     "benchmarks/never_behind_real.py": "needs the shared real logs and minutes",
     "benchmarks/never_behind_sim.py": "minutes of simulations",
     "benchmarks/never_behind_cost.py": "a timing benchmark",
+}
+
+
+def _no_shared_data() -> str | None:
+    """Why not to run a script on the shared real logs: ``benchmarks/real_data.py``'s
+    ``data_root`` (loaded as ``tests/io/test_real_data.py`` loads it)."""
+    name = "pinobs_bench_real_data"
+    if name not in sys.modules:
+        path = ROOT / "benchmarks" / "real_data.py"
+        spec = importlib.util.spec_from_file_location(name, path)
+        assert spec is not None and spec.loader is not None
+        sys.modules[name] = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(sys.modules[name])
+    missing = sys.modules[name].data_root() is None
+    return "no shared data folder (../shared/data)" if missing else None
+
+
+#: Script commands of the docs that write nothing, run with ``-m slow``; what they need.
+SCRIPT_RUNS: dict[str, Callable[[], str | None]] = {
+    "python benchmarks/real_logs.py --quick": _no_shared_data,  # under 2 minutes, printed
 }
 
 #: ``pinobs`` commands run for real in the default run (cheap on the fixtures); the
@@ -493,3 +520,33 @@ def test_slow_shell_block_runs(
     block: Block, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     _run_pinobs(block, tmp_path, monkeypatch)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("block", "command"),
+    [
+        pytest.param(b, shlex.join(a), id=b.id)
+        for b in _of("bash")
+        for a in commands(b.code)
+        if shlex.join(a) in SCRIPT_RUNS
+    ],
+)
+def test_slow_script_command_runs(block: Block, command: str) -> None:
+    """Run as printed, from the repository (the scripts find their files there), this
+    tree first on the path."""
+    reason = SCRIPT_RUNS[command]()
+    if reason:
+        pytest.skip(reason)
+    env = os.environ | {
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
+    }
+    argv = [sys.executable, *shlex.split(command)[1:]]
+    done = subprocess.run(argv, cwd=ROOT, env=env, capture_output=True, text=True, timeout=1200)
+    assert done.returncode == 0, f"{block.id}: {command}\n{done.stderr[-3000:]}"
+
+
+def test_every_script_entry_is_a_command_of_the_docs() -> None:
+    argvs = [a for b in _of("bash") for a in commands(b.code)]
+    assert set(SCRIPT_RUNS) <= {shlex.join(a) for a in argvs}
+    assert set(NOT_RUN) == {a[1] for a in argvs if a[0] == "python" and a[1] != "-m"}

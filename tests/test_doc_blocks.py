@@ -172,7 +172,7 @@ def _no_shared_data() -> str | None:
 
 #: Script commands of the docs that write nothing, run with ``-m slow``; what they need.
 SCRIPT_RUNS: dict[str, Callable[[], str | None]] = {
-    "python benchmarks/real_logs.py --quick": _no_shared_data,  # under 2 minutes, printed
+    "python benchmarks/real_logs.py --quick": _no_shared_data,  # 337 s of CPU, printed
 }
 
 #: ``pinobs`` commands run for real in the default run (cheap on the fixtures); the

@@ -6,11 +6,9 @@ The site itself is built by CI (``mkdocs build --strict`` in ``.ci/run``), not h
 
 from __future__ import annotations
 
-import ast
 import importlib
 import importlib.util
 import re
-import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -136,64 +134,6 @@ def test_rst_roles_become_links_where_the_target_resolves_and_code_elsewhere(
     assert '<autoref identifier="pkgx.Thing.go" optional><code>Thing.go</code></autoref>' in text
     assert "`nowhere`" in text
     assert ":func:" not in text and ":class:" not in text
-
-
-def _python_blocks() -> list[tuple[str, str]]:
-    """Every ```python block of the README and the docs, dedented (a block inside a list is
-    indented), with the page it is on."""
-    pages = [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]
-    return [
-        (str(p.relative_to(ROOT)), textwrap.dedent(b))
-        for p in pages
-        for b in re.findall(r"^[ \t]*```python\n(.*?)^[ \t]*```", p.read_text(), re.S | re.M)
-    ]
-
-
-def _pinobs_names(tree: ast.AST) -> list[str]:
-    """Dotted names the block takes from pinobs: ``from pinobs.x import y`` gives
-    ``pinobs.x.y``; ``pinobs.a.b(...)`` gives ``pinobs.a.b``."""
-    names: list[str] = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "pinobs":
-            names += [f"{node.module}.{a.name}" for a in node.names]
-        elif isinstance(node, ast.Attribute):
-            parts: list[str] = []
-            cur: ast.expr = node
-            while isinstance(cur, ast.Attribute):
-                parts.append(cur.attr)
-                cur = cur.value
-            if isinstance(cur, ast.Name) and cur.id == "pinobs":
-                names.append(".".join(["pinobs", *reversed(parts)]))
-    return names
-
-
-def _resolves(dotted: str) -> bool:
-    parts = dotted.split(".")
-    obj: object = importlib.import_module(parts[0])
-    for i, part in enumerate(parts[1:], start=1):
-        if hasattr(obj, part):
-            obj = getattr(obj, part)
-            continue
-        try:  # a submodule not imported by its package
-            obj = importlib.import_module(".".join(parts[: i + 1]))
-        except ImportError:
-            return False
-    return True
-
-
-def test_every_python_block_of_the_docs_parses_and_its_pinobs_names_exist() -> None:
-    """The README's usage block is run (tests/test_readme.py); the docs' blocks are
-    fragments (they read the user's files), so they are parsed and every name they take
-    from pinobs is looked up: a renamed function breaks this test, not a user's paste."""
-    blocks = _python_blocks()
-    assert len(blocks) >= 6, blocks
-    for page, block in blocks:
-        try:
-            tree = ast.parse(block)
-        except SyntaxError as exc:
-            raise AssertionError(f"{page}: a python block does not parse: {exc}") from exc
-        missing = [n for n in _pinobs_names(tree) if not _resolves(n)]
-        assert not missing, f"{page}: names not in pinobs: {missing}"
 
 
 def _cli_page_options() -> tuple[dict[str, set[str]], set[str]]:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 import re
 from pathlib import Path
 
@@ -20,18 +18,6 @@ def test_observer_table_is_generated_from_the_registry() -> None:
     m = re.search(r"<!-- observer-table.*?-->\n(.*?)\n<!-- end observer-table -->", _text(), re.S)
     assert m is not None
     assert m.group(1) == observer_table(), "regenerate with pinobs.cli.observer_table()"
-
-
-def test_usage_example_runs_and_prints_what_the_readme_shows() -> None:
-    m = re.search(
-        r"## Usage\n\n```python\n(.*?)```\n\nprints[^\n]*\n\n```text\n(.*?)```", _text(), re.S
-    )
-    assert m is not None
-    code, shown = m.groups()
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        exec(compile(code, "README-usage", "exec"), {})
-    assert out.getvalue() == shown
 
 
 def test_readme_states_the_two_commands_and_ci_runs_the_test_command() -> None:

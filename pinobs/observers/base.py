@@ -661,6 +661,12 @@ class Observer(ABC, Generic[State]):
         not kept); may return a replacement state.  Default: the state unchanged."""
         return state
 
+    def adopt(self, state: State) -> None:
+        """Hold ``state`` as this observer's committed state, when a wrapper steps it (as
+        :class:`~pinobs.observers.neverbehind.NeverBehind` does): what is read of the
+        observer (its covariance, what it learned) then comes from that state."""
+        self._state = state
+
     def innovation(self, state: State) -> tuple[float | None, bool]:
         """``(NIS, gated)`` of the measurement that made ``state``: its :class:`GateState`
         ``gate`` (families with an innovation), else ``(None, False)``."""

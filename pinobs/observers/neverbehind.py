@@ -305,7 +305,7 @@ class NeverBehind(Observer[_State]):
         regime, restarts: :meth:`~pinobs.observers.adaptive.AdaptiveEKF.snapshot`)."""
         m = self.model.after_commit(state.model, t, q, tau)
         k = self.reference.after_commit(state.kf, t, q, tau)
-        self.model._state = m  # (the blend is the one reset: the wrapped observer never is)
+        self.model.adopt(m)  # (the blend is the one reset: the wrapped observer never is)
         return state._replace(model=m, kf=k)
 
     def innovation(self, state: _State) -> tuple[float | None, bool]:

@@ -183,7 +183,8 @@ class KFBank:
         self.gate = gate_threshold(outlier_probability, robot.nv)[1]
         self._cache: tuple[float, Vector, Vector] | None = None
         n = self.jerk.size  # step's scratch (its likelihood and gate are not kept)
-        self._ll, self._level, self._run = np.zeros(n), np.ones(n), np.zeros(n, dtype=np.int64)
+        self._scratch_ll, self._scratch_level = np.zeros(n), np.ones(n)
+        self._scratch_run = np.zeros(n, dtype=np.int64)
         #: the joints as the compiled loops take them (``None``: the NumPy path)
         self.table = joint_table(robot.joints, robot.nq, robot.nv)
         if self.table is not None:
@@ -272,8 +273,8 @@ class KFBank:
                 rows[1] = q_meas
             bank_kernel.compiled(
                 q, v, a, P, np.array([0.0, dt]), rows, _ROW_MEASURED[measured], self.jerk,
-                self.meas_var, math.inf, self._level, self._run, self._ll, e, _NO_STORE, _NO_PX,
-                _NO_USED, self.table,
+                self.meas_var, math.inf, self._scratch_level, self._scratch_run, self._scratch_ll,
+                e, _NO_STORE, _NO_PX, _NO_USED, self.table,
             )  # fmt: skip
             return BankState(q, v, a, P, e if measured else None)
         if self._cache is None or self._cache[0] != dt:
@@ -423,6 +424,8 @@ class AutoBank:
         """:meth:`step` compiled: :func:`~pinobs.observers.kf_kernels.auto_step_loops`
         (the same equations, tested equal to the NumPy ones to 1e-12)."""
         b, gate = state.bank, state.gate
+        if q_meas is not None and not q_meas.flags.writeable:  # (one kernel signature)
+            q_meas = q_meas.copy()
         gate_on = state.n >= AUTO_GATE_SAMPLES  # the scales ĉ and weights before this sample
         n_new = self._forget * state.n + 1.0  # the forgotten count (:mod:`pinobs.observers.kf`)
         new = (

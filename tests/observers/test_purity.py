@@ -34,11 +34,8 @@ DURATION = 0.6  # [s]: adaptive's first solve is at 0.5 s
 #: Working memory named otherwise: ``KFBank``'s compiled step writes its likelihood and gate
 #: level into these and never reads them back (its gate is off, ``inf``: kf_bank.py, "step's
 #: scratch (its likelihood and gate are not kept)").
-SCRATCH = {"KFBank": ("_ll", "_level", "_run")}
-
-
-def _working_memory(owner: str, name: str) -> bool:
-    return name.startswith("_scratch") or "cache" in name or name in SCRATCH.get(owner, ())
+def _working_memory(name: str) -> bool:
+    return name.startswith("_scratch") or "cache" in name
 
 
 def _leaf(x: Any) -> Any:
@@ -66,14 +63,14 @@ def _fingerprint(x: Any, seen: set[int]) -> Any:
     if isinstance(x, (tuple, list, deque)):
         return (type(x).__name__, [_fingerprint(y, seen) for y in x])
     if isinstance(x, dict):  # (vars(observer): its attributes)
-        items = [(k, v) for k, v in x.items() if not _working_memory("", str(k))]
+        items = [(k, v) for k, v in x.items() if not _working_memory(str(k))]
         return ("dict", [(repr(k), _fingerprint(v, seen)) for k, v in items])
     if type(x).__module__.startswith("pinobs"):
         attrs = dict(getattr(x, "__dict__", {}))
         for slot in getattr(type(x), "__slots__", ()):
             if hasattr(x, slot):
                 attrs[slot] = getattr(x, slot)
-        kept = {k: v for k, v in attrs.items() if not _working_memory(type(x).__name__, k)}
+        kept = {k: v for k, v in attrs.items() if not _working_memory(k)}
         return (type(x).__name__, [(k, _fingerprint(v, seen)) for k, v in sorted(kept.items())])
     return ("object", type(x).__name__, id(x))
 

@@ -187,8 +187,8 @@ MAX_FUNCTION_LINES, MAX_MODULE_LINES = 80, 800
 #: Functions over the limit today, each with its length: they may shrink (lower the entry,
 #: remove it once under the limit), never grow, and no other may join them.
 LONG_FUNCTIONS: dict[tuple[str, str], int] = {
-    ("pinobs/calibration.py", "identify"): 104,
-    ("pinobs/model/identification/offline.py", "identify"): 136,
+    ("pinobs/calibration.py", "identify"): 102,
+    ("pinobs/model/identification/offline.py", "identify"): 134,
     ("pinobs/simulation/legged.py", "_record"): 107,
     ("pinobs/smoothing/api.py", "smooth"): 141,
 }

@@ -99,7 +99,17 @@ and a held-out residual no better than without armature (3.27 N·m pooled, 3.34
 without), and the fit depended on the prior's mean (3.27 from 0, 0.73 from the
 published rotors); with the floor, 0.44 kg·m² and 0.73 N·m from either mean.
 The weighted residuals of a fit with and without armature are then in different
-units: compare them in torque (N·m), not in ``report["holdout_after"]``.
+units: compare them in torque (N·m), not in ``report["holdout_after"]``.  The floor is a
+guess at rotors the data have not yet shown; kept as the weights, it cost a truth without
+rotors dearly (UR5, links ±20 % and a payload: the wrists' rows ~8× under-weighted, the
+one-pass ``ekf`` of ``benchmarks/learning.py`` 3.3× less accurate).  Hence two stages
+(feasible generalised least squares): the fit weighted with the floor, then the fit
+weighted by ``M(q)⁻¹`` of that first fit's model (``identify(weight_model=...)``;
+``pinobs.identify``'s refined passes take the previous pass's model, one stage each).
+The priors keep the floor's inertia (they do not depend on the data).  Measured: that
+one-pass row 1.95e-3 → 5.9e-4 rad/s (12-03, before the floor: 6.7e-4); the UR10e's
+pooled held-out torques 3.48 5.27 2.01 0.561 0.794 0.725 → 3.45 5.14 1.95 0.561 0.794
+0.725 N·m, wrist 3's rotor 0.436 → 0.439 kg·m².
 
 **Solve** (:func:`solve`).  A Gaussian prior ``θ ~ N(θ₀, diag(s²))`` pulls
 toward the nominal model (``θ₀``: the URDF's inertials, friction and armature, zero

@@ -71,6 +71,7 @@ def identify(
     exclude: Sequence[str] = (),
     payload: str | None = None,
     smoothing: float | None = None,
+    weight_model: Robot | None = None,
 ) -> Identification:
     """Identify ``robot``'s dynamic parameters from a recorded log (module docstring).
 
@@ -126,6 +127,8 @@ def identify(
         smoothing: the friction law's smoothing velocity ``v_s`` [rad/s], the same for every
             joint, instead of its search (``None``; a Stribeck law's ``v_st`` is still
             searched); ``friction=True``'s is 0.01 unless given.
+        weight_model: the robot whose ``M⁻¹`` weights the rows; ``None``: a first stage's
+            fit when the armature is identified (package docstring, "Weighting").
 
     The report (:class:`~pinobs.model.identification.result.Report`, read as a mapping
     too): per coordinate the weighted rows' residual before and after, on the fitted part
@@ -162,25 +165,20 @@ def identify(
         "armature": armature,
         "weighting": weighting,
         "exclude": exclude,
+        "weight_model": weight_model,
     }
-    reg, cands, rows_reg = _regressors(robot, laws, smoothing)
-    split = _fit_end(t, window, holdout)
-    fit = t <= split
-    rows: dict[str, Any] = {"window": window, "path": est, "torque": torque}
-    A, y, ends = fit_rows(rows_reg, (t, q, tau), fit, **rows)
-    _check_moves(robot, t[fit], q[fit])
-    check_zero_torques(robot, tau, excluded)
-    channel = np.tile(np.arange(robot.nv), A.shape[0] // robot.nv)
-    used_rows = ~np.isin(channel, excluded)
-    searched: dict[str, Any] = {}
-    if cands:  # (the search's own least squares, unweighted by channel)
-        reg, A, searched = _search_smoothing(reg, A, y, used_rows, cands, laws)
-    sol = solve(
-        reg,
-        A[used_rows],
-        y[used_rows],
-        channel=channel[used_rows] if weighting == "torque" else None,
-    )
+    while True:  # inertia weighting: again on the inertia the first stage fitted (FGLS)
+        reg, cands, rows_reg = _regressors(robot, laws, smoothing)
+        split = _fit_end(t, window, holdout)
+        fit = t <= split
+        rows: dict[str, Any] = {"window": window, "path": est, "torque": torque}
+        A, y, ends = fit_rows(rows_reg, (t, q, tau), fit, **rows)
+        _check_moves(robot, t[fit], q[fit])
+        check_zero_torques(robot, tau, excluded)
+        reg, A, channel, used_rows, searched, sol = _search_and_solve(reg, cands, A, y, laws)
+        if laws["weight_model"] is not None or not reg.armature_weighted:
+            break
+        laws["weight_model"] = reg.with_parameters(sol.theta)
     too_few = _check_solution(
         reg, sol, (A, used_rows), (t[fit], q[fit]), excluded, window, holdout, max_condition
     )
@@ -288,6 +286,27 @@ def _check_moves(robot: Robot, t: Vector, q: Vector) -> None:
             "the robot never moves in this log: nothing to identify (largest range of motion "
             f"{float(span.max()):.3g} rad or m, within {STILL_RANGE:g} or ten times the noise)"
         )
+
+
+def _search_and_solve(
+    reg: MomentumRegressor, cands: list[tuple[float, float]], A: Vector, y: Vector, laws: dict
+) -> tuple[
+    MomentumRegressor, Vector, NDArray[np.intp], NDArray[np.bool_], dict[str, Any], Solution
+]:
+    """The fit of the rows ``(A, y)``: the friction law's smoothing searched among ``cands``
+    (none: not searched), then :func:`solve` on the rows of the channels not excluded, each
+    channel by its own scale with ``weighting="torque"``.  Returns the regressor, its
+    columns of ``A``, every row's channel, the rows used, the search's report, the
+    solution."""
+    nv = reg.robot.nv
+    channel = np.tile(np.arange(nv), A.shape[0] // nv)
+    used_rows = ~np.isin(channel, reg.excluded)
+    searched: dict[str, Any] = {}
+    if cands:  # (the search's own least squares, unweighted by channel)
+        reg, A, searched = _search_smoothing(reg, A, y, used_rows, cands, laws)
+    by_channel = channel[used_rows] if reg.weighting == "torque" else None
+    sol = solve(reg, A[used_rows], y[used_rows], channel=by_channel)
+    return reg, A, channel, used_rows, searched, sol
 
 
 def _search_smoothing(

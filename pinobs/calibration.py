@@ -237,13 +237,14 @@ def _refined(
     opts: dict[str, Any],
 ) -> tuple[Identification, float]:
     """One refinement pass of :func:`identify`: the model layer's fit (options ``opts``) on
-    the path :func:`_smoothed_path` gives on ``ident``'s model, its rows weighted by that
-    model's ``M⁻¹`` when the default weights would carry the armature's floor (the model
+    the path :func:`_smoothed_path` gives on ``ident``'s model, its rows weighted by the
+    armature ``ident`` identified when the default weights would carry the floor's (the model
     layer's ``weight_model``: its second stage, without the first); and the smoother's ``ρ``."""
     t, q, tau = log
     path, rho = _smoothed_path(ident, t, q, tau, rows, accel_psd=accel_psd, noise_std=noise_std)
-    if opts["payload"] is None and ident.regressor.armature_weighted:
-        opts = {**opts, "weight_model": ident.robot}
+    reg = ident.regressor
+    if opts["payload"] is None and reg.armature_weighted:
+        opts = {**opts, "weight_model": reg.armature_weights(ident.parameters.values)}
     out = ident_model.identify(robot, log, path=path, **opts)
     out.report["velocities"] = f"rts(accel_psd={accel_psd:g})"
     return out, rho

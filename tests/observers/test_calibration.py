@@ -37,12 +37,6 @@ def test_estimated_noise_std_matches_the_simulated_sensor(sigma: float) -> None:
     assert float(np.median(sigma_joint)) == pytest.approx(sigma, rel=0.1)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="since identify's second stage (weights by the first stage's model) the one-pass "
-    "fit improved 3.7x (acceleration error 0.0866 -> 0.0236) and the refined one 4 % (0.0192 "
-    "-> 0.0184): refined / one-pass 0.78, no longer under 0.5",
-)
 def test_smoothed_velocities_identify_closer_to_the_truth_than_savitzky_golay(
     rng: np.random.Generator,
 ) -> None:

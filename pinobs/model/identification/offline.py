@@ -167,7 +167,7 @@ def identify(
         "exclude": exclude,
         "weight_model": weight_model,
     }
-    while True:  # inertia weighting: again on the inertia the first stage fitted (FGLS)
+    while True:  # inertia weighting: again on the armature the first stage fitted (FGLS)
         reg, cands, rows_reg = _regressors(robot, laws, smoothing)
         split = _fit_end(t, window, holdout)
         fit = t <= split
@@ -178,7 +178,7 @@ def identify(
         reg, A, channel, used_rows, searched, sol = _search_and_solve(reg, cands, A, y, laws)
         if laws["weight_model"] is not None or not reg.armature_weighted:
             break
-        laws["weight_model"] = reg.with_parameters(sol.theta)
+        laws["weight_model"] = reg.armature_weights(sol.theta)
     too_few = _check_solution(
         reg, sol, (A, used_rows), (t[fit], q[fit]), excluded, window, holdout, max_condition
     )

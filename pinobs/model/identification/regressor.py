@@ -229,6 +229,17 @@ class MomentumRegressor:
             self._prior_robot = robot
         return self._prior_robot
 
+    def armature_weights(self, theta: ArrayLike) -> Robot:
+        """The nominal robot carrying ``θ``'s armature on its actuated joints: the weights'
+        model of :func:`identify`'s second stage (the nominal inertials: a fit's, which
+        compensate what the model cannot express, weighed the real TX40's joint 2 to a
+        held-out residual of 16.8 N·m, against 6.6 with these and 8.7 nominal)."""
+        model = self.robot.model.copy()
+        armature = np.array(model.armature, dtype=float)
+        armature[list(self.actuated)] = np.asarray(theta, dtype=float)[self.armature_slice]
+        model.armature = armature
+        return self.robot.with_model(model)
+
     @property
     def weight_robot(self) -> Robot:
         """The model whose ``M(q)⁻¹`` weights the rows: :attr:`weight_model` when given

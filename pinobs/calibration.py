@@ -235,15 +235,36 @@ def _refined(
         # a pass before the last one only feeds the next fit: its held-out end needs no smoothing
         last = i == len(refine) - 1
         rows = np.ones(t.shape, bool) if last else t <= current.report["fit_end"]
-        path, rho = _smoothed_path(current, t, q, tau, rows, accel_psd=psd, noise_std=sigma)
-        current = ident_model.identify(robot, (t, q, tau), path=path, **opts)
-        current.report["velocities"] = f"rts(accel_psd={psd:g})"
+        current, rho = _refine_pass(robot, current, (t, q, tau), rows, psd, sigma, opts)
     current.report["noise_std"] = sigma
     current.report["smoother_consistency"] = rho
     # measured in benchmarks/learning.py: on a model identified this way the default ekf is
     # 1.1-5x more accurate than with the model-error densities the one-pass fit recommends
     current.report["observer_options"] = {}
     return current
+
+
+def _refine_pass(
+    robot: Robot,
+    ident: Identification,
+    log: tuple[Vector, Vector, Vector],
+    rows: NDArray[np.bool_],
+    accel_psd: float,
+    noise_std: float,
+    opts: dict[str, Any],
+) -> tuple[Identification, float]:
+    """One refinement pass of :func:`identify`: the model layer's fit (options ``opts``) on
+    the path :func:`_smoothed_path` gives on ``ident``'s model, its rows weighted by the
+    armature ``ident`` identified when the default weights would carry the floor's (the model
+    layer's ``weight_model``: its second stage, without the first); and the smoother's ``ρ``."""
+    t, q, tau = log
+    path, rho = _smoothed_path(ident, t, q, tau, rows, accel_psd=accel_psd, noise_std=noise_std)
+    reg = ident.regressor
+    if opts["payload"] is None and reg.armature_weighted:
+        opts = {**opts, "weight_model": reg.armature_weights(ident.parameters.values)}
+    out = ident_model.identify(robot, log, path=path, **opts)
+    out.report["velocities"] = f"rts(accel_psd={accel_psd:g})"
+    return out, rho
 
 
 def _smoothed_path(

@@ -99,7 +99,22 @@ and a held-out residual no better than without armature (3.27 N·m pooled, 3.34
 without), and the fit depended on the prior's mean (3.27 from 0, 0.73 from the
 published rotors); with the floor, 0.44 kg·m² and 0.73 N·m from either mean.
 The weighted residuals of a fit with and without armature are then in different
-units: compare them in torque (N·m), not in ``report["holdout_after"]``.
+units: compare them in torque (N·m), not in ``report["holdout_after"]``.  The floor is a
+guess at rotors the data have not yet shown; kept as the weights, it cost a truth without
+rotors dearly (UR5, links ±20 % and a payload: the wrists' rows ~8× under-weighted, the
+one-pass ``ekf`` of ``benchmarks/learning.py`` 2.9× less accurate).  Hence two stages
+(feasible generalised least squares): the fit weighted with the floor, then the fit
+weighted by ``M₀(q)⁻¹`` carrying the armature that first fit identified
+(:meth:`MomentumRegressor.armature_weights`, ``identify(weight_model=...)``;
+``pinobs.identify``'s refined passes take the previous pass's, one stage each).  The
+priors keep the floor's inertia (they do not depend on the data).  Measured: that
+one-pass row 1.95e-3 → 6.6e-4 rad/s (before the floor: 6.7e-4); the UR10e's pooled
+held-out torques 3.48 5.27 2.01 0.561 0.794 0.725 → 3.44 5.14 1.95 0.561 0.794 0.725 N·m
+(wrist 3's rotor 0.436 → 0.439 kg·m²); TIAGo's held-out torso 0.648 → 0.611 N, arm_1..4
+0.821 3.037 1.381 0.823 → 0.967 3.204 1.356 0.828 N·m.  Weighting by the whole first fit's
+``M`` instead was better still on the simulated truths (one-pass UR5 5.9e-4, z1 2.7e-3 →
+8.5e-4) but weighed the real TX40's joint 2 to a held-out residual of 16.8 N·m (6.6 so,
+8.7 nominal): a fit's inertials compensate what the model cannot express.
 
 **Solve** (:func:`solve`).  A Gaussian prior ``θ ~ N(θ₀, diag(s²))`` pulls
 toward the nominal model (``θ₀``: the URDF's inertials, friction and armature, zero

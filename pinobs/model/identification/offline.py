@@ -119,6 +119,7 @@ def identify(
     exclude: Sequence[str] = (),
     payload: str | None = None,
     smoothing: float | None = None,
+    weight_model: Robot | None = None,
 ) -> Identification:
     """Identify ``robot``'s dynamic parameters from a log (options, report: module docstring).
 
@@ -137,6 +138,7 @@ def identify(
         exclude: names of joints whose torque channel is left out of the fit.
         payload: a body or frame name: identify only a load rigidly attached to it.
         smoothing: the friction law's smoothing velocity [rad/s] instead of its search.
+        weight_model: the robot whose ``M⁻¹`` weights the rows (``None``: package docstring).
 
     Raises:
         IdentificationError: no torques, too short, never moves, or above ``max_condition``.
@@ -145,36 +147,29 @@ def identify(
     check_torque(torque)
     check_weighting(weighting)
     if payload is not None:
-        return identify_payload(
-            robot,
-            log,
-            payload,
-            holdout=holdout,
-            window=window,
-            path=path,
-            torque=torque,
-            exclude=exclude,
-            weighting=weighting,
-        )
+        opts: dict[str, Any] = {
+            "holdout": holdout,
+            "window": window,
+            "path": path,
+            "torque": torque,
+        }
+        return identify_payload(robot, log, payload, exclude=exclude, weighting=weighting, **opts)
     excluded = excluded_coordinates(robot, exclude)
     t, q, tau, filled, est = _read_log(robot, log, path)
-    laws: dict[str, Any] = {
-        "friction": friction,
-        "offset": offset,
-        "armature": armature,
-        "weighting": weighting,
-        "exclude": exclude,
-    }
-    reg, cands, rows_reg = _regressors(robot, laws, smoothing)
-    split = _fit_end(t, window, holdout)
-    fit = t <= split
-    rows: dict[str, Any] = {"window": window, "path": est, "torque": torque}
-    A, y, ends = fit_rows(rows_reg, (t, q, tau), fit, **rows)
-    _check_moves(robot, t[fit], q[fit])
-    check_zero_torques(robot, tau, excluded)
-    channel = np.tile(np.arange(robot.nv), A.shape[0] // robot.nv)
-    used_rows = ~np.isin(channel, excluded)
-    reg, A, sol, searched = _solve_rows(reg, A, y, (channel, used_rows), cands, laws)
+    laws: dict[str, Any] = {"friction": friction, "offset": offset, "armature": armature}
+    laws |= {"weighting": weighting, "exclude": exclude, "weight_model": weight_model}
+    while True:  # inertia weighting: again on the armature the first stage fitted (FGLS)
+        reg, cands, rows_reg = _regressors(robot, laws, smoothing)
+        split = _fit_end(t, window, holdout)
+        fit = t <= split
+        rows: dict[str, Any] = {"window": window, "path": est, "torque": torque}
+        A, y, ends = fit_rows(rows_reg, (t, q, tau), fit, **rows)
+        _check_moves(robot, t[fit], q[fit])
+        check_zero_torques(robot, tau, excluded)
+        reg, A, channel, used_rows, searched, sol = _search_and_solve(reg, cands, A, y, laws)
+        if laws["weight_model"] is not None or not reg.armature_weighted:
+            break
+        laws["weight_model"] = reg.armature_weights(sol.theta)
     too_few = _check_solution(
         reg, sol, (A, used_rows), (t[fit], q[fit]), excluded, window, holdout, max_condition
     )
@@ -287,6 +282,27 @@ def _check_moves(robot: Robot, t: Vector, q: Vector) -> None:
         )
 
 
+def _search_and_solve(
+    reg: MomentumRegressor, cands: list[tuple[float, float]], A: Vector, y: Vector, laws: dict
+) -> tuple[
+    MomentumRegressor, Vector, NDArray[np.intp], NDArray[np.bool_], dict[str, Any], Solution
+]:
+    """The fit of the rows ``(A, y)``: the friction law's smoothing searched among ``cands``
+    (none: not searched), then :func:`solve` on the rows of the channels not excluded, each
+    channel by its own scale with ``weighting="torque"``.  Returns the regressor, its
+    columns of ``A``, every row's channel, the rows used, the search's report, the
+    solution."""
+    nv = reg.robot.nv
+    channel = np.tile(np.arange(nv), A.shape[0] // nv)
+    used_rows = ~np.isin(channel, reg.excluded)
+    searched: dict[str, Any] = {}
+    if cands:  # (the search's own least squares, unweighted by channel)
+        reg, A, searched = _search_smoothing(reg, A, y, used_rows, cands, laws)
+    by_channel = channel[used_rows] if reg.weighting == "torque" else None
+    sol = solve(reg, A[used_rows], y[used_rows], channel=by_channel)
+    return reg, A, channel, used_rows, searched, sol
+
+
 def _search_smoothing(
     reg: MomentumRegressor,
     A: Vector,
@@ -307,32 +323,6 @@ def _search_smoothing(
         stribeck_velocity=[cands[c][1] for c in choice],
     )
     return reg, A, searched
-
-
-def _solve_rows(
-    reg: MomentumRegressor,
-    A: Vector,
-    y: Vector,
-    rows: tuple[NDArray[np.intp], NDArray[np.bool_]],
-    cands: list[tuple[float, float]],
-    laws: dict[str, Any],
-) -> tuple[MomentumRegressor, Vector, Solution, dict[str, Any]]:
-    """The least squares on the rows used (``rows``: each row's torque channel, and which rows
-    are used), each channel weighted by its own scale with ``weighting="torque"``, after the
-    friction law's smoothing search when there are candidates (:func:`_search_smoothing`):
-    the regressor and rows (with the chosen smoothing), the solution, what the search
-    reports."""
-    channel, used_rows = rows
-    searched: dict[str, Any] = {}
-    if cands:  # (the search's own least squares, unweighted by channel)
-        reg, A, searched = _search_smoothing(reg, A, y, used_rows, cands, laws)
-    sol = solve(
-        reg,
-        A[used_rows],
-        y[used_rows],
-        channel=channel[used_rows] if laws["weighting"] == "torque" else None,
-    )
-    return reg, A, sol, searched
 
 
 def _check_solution(

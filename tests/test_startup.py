@@ -1,9 +1,11 @@
-"""Start-up: ``import pinobs`` stays light (issue 18)."""
+"""Start-up: ``import pinobs`` stays light (issues 18 and 39)."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
+
+import pytest
 
 
 def test_import_pinobs_imports_no_numba_scipy_linalg_or_meshcat() -> None:
@@ -23,3 +25,38 @@ def test_import_pinobs_cli_imports_no_plotting_playback_dataframes_or_dask() -> 
     code = f"import sys, pinobs.cli; print(sorted(m for m in {heavy!r} if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_import_pinobs_imports_no_layer_and_make_observer_only_its_family() -> None:
+    """Issue 39: ``import pinobs`` imports neither pinocchio nor any layer (its public names
+    are imported on first use); ``make_observer("fd")`` imports that family only, and no
+    numba."""
+    code = (
+        "import sys, pinobs\n"
+        "print(sorted(m for m in ('numba', 'pinocchio', 'scipy', 'pinobs.model') if m in sys.modules))\n"
+        "pinobs.make_observer('fd', pinobs.load('cartpole'))\n"
+        "print(sorted(m for m in sys.modules if m.startswith('pinobs.observers.')"
+        " and m.rsplit('.', 1)[1] in {'kf', 'ekf', 'adaptive', 'riemannian', 'fd'}), "
+        "'numba' in sys.modules)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], check=True, capture_output=True, text=True
+    ).stdout.splitlines()
+    assert out == ["[]", "['pinobs.observers.fd'] False"]
+
+
+def test_every_public_name_resolves_to_its_module_s_object() -> None:
+    """The lazy ``pinobs.<name>`` (PEP 562) is the defining module's object, listed by
+    ``dir``; an unknown name raises ``AttributeError`` naming it."""
+    import importlib
+
+    import pinobs
+
+    for name in pinobs.__all__:
+        value = getattr(pinobs, name)
+        module = value.__module__ if hasattr(value, "__module__") else None
+        assert module is not None and module.startswith("pinobs")
+        assert getattr(importlib.import_module(module), name) is value
+        assert name in dir(pinobs)
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        pinobs.nope  # noqa: B018

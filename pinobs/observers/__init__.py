@@ -2,12 +2,12 @@
 
 The protocol is ``base`` (with its helpers ``checks``, ``gating``, ``registry`` and
 ``results``, re-exported by ``base``); the other modules are the families and their
-algebra.  Importing the package imports them all, and each family registers itself
-with ``@register``.
+algebra.  Each family registers itself with ``@register`` when its module is imported;
+importing the package imports none of them: :func:`make_observer` (and
+:func:`observer_class`) import a family's module when it is first asked for
+(:data:`~pinobs.observers.registry.FAMILY_MODULES`), so a program pays the start-up of the
+families it uses only (issue 39).
 """
-
-import importlib
-import pkgutil
 
 from pinobs.observers.base import (
     Consistency,
@@ -19,10 +19,6 @@ from pinobs.observers.base import (
     positive,
     register,
 )
-
-for _info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
-    if _info.name != "base" and not _info.name.startswith("_"):
-        importlib.import_module(f"{__name__}.{_info.name}")
 
 __all__ = [
     "Consistency",

@@ -390,7 +390,7 @@ class AdaptiveEKF(Observer["_State"]):
         """The learner (its SciPy modules imported now, :func:`load_learning`) and, with
         ``learning="background"``, its worker process (:func:`learning_worker`), started now,
         not in the loop (it ends when the observer is dropped: its jobs hold no observer)."""
-        load_learning()
+        load_learning(smoothing=learning != "background")  # background: in the worker
         self._worker: Worker | None = None
         if learning == "background":
             opts = self._learn_options

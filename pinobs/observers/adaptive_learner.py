@@ -413,14 +413,18 @@ def _remote(state: dict[str, Any], key: int, windows: int, job: str, *args: Any)
     return getattr(state["identifier"], job)(*args)
 
 
-def load_learning() -> None:
+def load_learning(*, smoothing: bool = True) -> None:
     """Import what the learner imports when it first runs (SciPy's smoothing and QR: about
     0.5 s, the first window's update took 494 ms on a UR5) and scan the BLAS libraries
     with ``scipy.linalg`` loaded (:func:`~pinobs.observers.blas.blas_libraries`): now, at
-    construction, not in the loop."""
+    construction, not in the loop.  ``smoothing=False`` (``learning="background"``: the
+    windows are smoothed in the worker process, which imports them, :data:`PRELOAD`):
+    ``scipy.linalg`` only (``scipy.signal`` and ``scipy.ndimage`` cost 0.3–0.6 s CPU)."""
     import scipy.linalg
-    import scipy.ndimage
-    import scipy.signal  # noqa: F401
+
+    if smoothing:
+        import scipy.ndimage
+        import scipy.signal  # noqa: F401
 
     blas_libraries()
 

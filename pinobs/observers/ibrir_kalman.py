@@ -210,7 +210,9 @@ def _fused_kernel() -> Any:
     _transition_nb, _joseph_nb = transition_kernel.compiled, joseph_kernel.compiled
     kernel = numba.njit(cache=True)(_fused_loops)
     one, eye, zero = np.eye(1), np.eye(2), np.zeros((2, 2))
-    kernel(one, one, 1.0, eye, zero, np.zeros(1), 1.0, np.zeros(2), np.zeros((2, 2)))
+    noise = np.zeros((2, 2))
+    noise.flags.writeable = False  # as IbrirKalman._noise's (cached) matrices: one signature
+    kernel(one, one, 1.0, eye, noise, np.zeros(1), 1.0, np.zeros(2), zero)
     return kernel
 
 

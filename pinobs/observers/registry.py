@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import inspect
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -12,9 +13,26 @@ from pinobs.observers.blas import one_blas_thread
 if TYPE_CHECKING:
     from pinobs.observers.base import Observer
 
-__all__ = ["make_observer", "observer_class", "observer_names", "register"]
+__all__ = ["FAMILY_MODULES", "make_observer", "observer_class", "observer_names", "register"]
 
 _REGISTRY: dict[str, type[Observer[Any]]] = {}
+
+#: pinobs's observer families by name -> the module that defines (and registers) each,
+#: imported when the family is first asked for: a program imports only the families it uses
+#: (issue 39, start-up time).  ``tests/observers/test_registry.py`` checks it against what
+#: the modules register.
+FAMILY_MODULES = {
+    "adaptive": "pinobs.observers.adaptive",
+    "ekf": "pinobs.observers.ekf",
+    "fd": "pinobs.observers.fd",
+    "highgain": "pinobs.observers.differentiators",
+    "ii": "pinobs.observers.ii",
+    "kalman": "pinobs.observers.ibrir_kalman",
+    "kf": "pinobs.observers.kf",
+    "liegroup": "pinobs.observers.liegroup",
+    "riemannian": "pinobs.observers.riemannian",
+    "sliding": "pinobs.observers.differentiators",
+}
 
 ObserverType = TypeVar("ObserverType", bound="type[Observer[Any]]")
 
@@ -28,8 +46,8 @@ def register(cls: ObserverType) -> ObserverType:
 
 
 def observer_names() -> list[str]:
-    """Registered observer names, sorted."""
-    return sorted(_REGISTRY)
+    """Observer names (pinobs's families and any registered since), sorted."""
+    return sorted(set(FAMILY_MODULES) | set(_REGISTRY))
 
 
 def observer_class(name: str) -> type[Observer[Any]]:
@@ -38,6 +56,8 @@ def observer_class(name: str) -> type[Observer[Any]]:
     Raises:
         UnknownNameError: listing the registered names.
     """
+    if name not in _REGISTRY and name in FAMILY_MODULES:
+        importlib.import_module(FAMILY_MODULES[name])  # registers it
     try:
         return _REGISTRY[name]
     except KeyError:

@@ -12,6 +12,7 @@ import pytest
 
 import pinobs
 from pinobs.observers import observer_names
+from pinobs.observers.registry import FAMILY_MODULES
 
 # Each observer on the first of these robots it accepts.
 CANDIDATE_ROBOTS = ("cartpole", "top", "rigid_body")
@@ -154,3 +155,17 @@ def test_registry_is_sorted_and_every_observer_has_a_summary() -> None:
     assert names == sorted(names) and {"fd", "kf"} <= set(names)
     for n in names:
         assert pinobs.observers.observer_class(n).summary
+
+
+def test_family_modules_lists_exactly_what_the_modules_register() -> None:
+    """``make_observer`` imports a family's module on first use (``FAMILY_MODULES``): every
+    module of the layer imported, the registry holds those names and no others, each
+    registered by the module the table names."""
+    import importlib
+    import pkgutil
+
+    for info in pkgutil.iter_modules(pinobs.observers.__path__):
+        importlib.import_module(f"pinobs.observers.{info.name}")
+    assert observer_names() == sorted(FAMILY_MODULES)
+    for name, module in FAMILY_MODULES.items():
+        assert pinobs.observers.observer_class(name).__module__ == module

@@ -108,9 +108,9 @@ def main() -> None:
         res, (t, q, tau) = held_log(ur5, ur5, 4.0, seed)
         keep = dropped_rows(t.size, 0.08, seed)
         out = []
-        for rows in (np.ones(t.size, dtype=bool), keep):
-            sm = pinobs.smooth(ur5, (t[rows], q[rows], tau[rows]), noise_std=1e-4)
-            err = (sm.v - res.v[rows])[(t[rows] > 0.2) & (t[rows] < t[-1] - 0.2)]
+        for sel in (np.ones(t.size, dtype=bool), keep):
+            sm = pinobs.smooth(ur5, (t[sel], q[sel], tau[sel]), noise_std=1e-4)
+            err = (sm.v - res.v[sel])[(t[sel] > 0.2) & (t[sel] < t[-1] - 0.2)]
             out.append(float(np.sqrt(np.mean(err**2))))
         print(
             f"seed {seed} pinobs.smooth ur5 velocity RMS clean {out[0]:.3g} drops {out[1]:.3g} "

@@ -94,7 +94,7 @@ from pinobs.model import Robot
 from pinobs.model import identification as ident_model
 from pinobs.model.identification import MAX_CONDITION, Identification, log_arrays, segments
 from pinobs.observers.base import Vector, positive
-from pinobs.observers.noise import estimate_noise_std, quantisation_std
+from pinobs.observers.noise import joint_noise_std, moving_median
 from pinobs.smoothing import smooth_quietly
 
 __all__ = ["REFINE_ACCEL_PSD", "REFINE_DISTURBANCE_PSD", "identify"]
@@ -108,9 +108,9 @@ REFINE_DISTURBANCE_PSD = 1e-4
 
 def _noise_std(robot: Robot, t: Vector, q: Vector) -> float:
     """The log's position noise σ [rad or m]: the median over the joints that move of robust
-    third differences (Gasser et al. 1986) over its first second
-    (:func:`pinobs.observers.noise.estimate_noise_std`), each at least the rounding of its
-    printed positions (:func:`~pinobs.observers.noise.quantisation_std`), floored at 1e-9 (a
+    third differences (Gasser et al. 1986) over its first second, each at least the rounding
+    of its printed positions (:func:`pinobs.observers.noise.joint_noise_std`,
+    :func:`~pinobs.observers.noise.moving_median`), floored at 1e-9 (a
     noise-free log); on a joint at rest in that first second (its third differences there
     below the rounding of its printed positions), over all the rows instead, moving ones
     included.
@@ -124,17 +124,10 @@ def _noise_std(robot: Robot, t: Vector, q: Vector) -> float:
     noise-free 100 Hz trajectory: 1.3e-5 against its first second's 1.15e-5), hence the
     first second where it moves.  ``noise_std`` (``pinobs identify --noise``) overrides it.
     """
-    first = estimate_noise_std(t, q, robot)
-    if first is None:
+    found = joint_noise_std(t, q, robot, rest_over_all_rows=True)
+    if found is None:
         raise IdentificationError("fewer than 12 finite samples to measure the noise on")
-    quantum = quantisation_std(q, robot)
-    rest = first <= quantum  # the first second tells only the rounding: at rest
-    if rest.any():
-        whole = estimate_noise_std(t, q, robot, window=math.inf)
-        first = first if whole is None else np.where(rest, whole, first)
-    sigma = np.maximum(first, quantum)
-    told = sigma > 1e-12  # a joint whose printed position never changes tells nothing
-    return max(float(np.median(sigma[told] if told.any() else sigma)), 1e-9)
+    return max(moving_median(found[0])[0], 1e-9)
 
 
 def identify(

@@ -17,11 +17,12 @@ from pinobs.errors import ConsistencyWarning, DimensionError, PinobsWarning, Tim
 from pinobs.io.clock import ClockRepair, repaired_chunks
 from pinobs.io.drives import Drives
 from pinobs.io.readers import CHUNK_ROWS, Log, LogSource, chain_chunks, iter_log
-from pinobs.io.stream import LogEstimator, LogRun, ObserverLike, time_screened
+from pinobs.io.stream import LogEstimator, LogRun, ObserverLike, noise_rows
 from pinobs.io.writers import EstimateWriter
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers import make_observer
+from pinobs.observers.base import NOISE_STD_RANGE
 from pinobs.observers.base import median_period as _median_period
 from pinobs.observers.noise import noise_from_log
 
@@ -137,8 +138,7 @@ def _observer(
 def _log_noise(first: Log, robot: Robot) -> tuple[float | None, Vector | None, str]:
     """σ from the log's first chunk (:func:`pinobs.observers.noise.noise_from_log`), per
     joint, and what to say; ``None``: the observer's default (a log too short, or still)."""
-    timed = time_screened(first.t)
-    found = noise_from_log(first.t[timed], first.q[timed], robot)
+    found = noise_from_log(*noise_rows(first), robot)
     if found is None:
         return (
             None,
@@ -146,7 +146,7 @@ def _log_noise(first: Log, robot: Robot) -> tuple[float | None, Vector | None, s
             "no noise level given and the log is too short to estimate it: the "
             "observer's default σ is used; pass noise_std (--noise)",
         )
-    if found[0] < 1e-12:  # a still robot, positions quantised
+    if found[0] < NOISE_STD_RANGE[0]:  # a still robot, positions quantised
         # (a static UR10e pose printed to 4 decimals gave 3.7e-17, refused by make_observer)
         return (
             None,

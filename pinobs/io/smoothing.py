@@ -39,7 +39,7 @@ from pinobs.io.readers import CHUNK_ROWS, LogSource, chain_chunks, iter_log
 from pinobs.io.stream import (
     LogEstimator,
     LogRun,
-    time_screened,
+    noise_rows,
     time_unit_warning,
 )
 from pinobs.io.writers import EstimateWriter
@@ -287,8 +287,7 @@ def _smoothed(
         if how.noise_std is None and not len(first):
             how = replace(how, noise_std=NOISE_FLOOR)
         elif how.noise_std is None:  # as pinobs.smooth, from the first chunk
-            timed = time_screened(first.t)
-            noise_std, sigma_joint, message = log_noise_std(robot, first.t[timed], first.q[timed])
+            noise_std, sigma_joint, message = log_noise_std(robot, *noise_rows(first))
             how = replace(how, noise_std=noise_std)
             said.append(message)
         if stream and period is not None:

@@ -70,7 +70,7 @@ from pinobs.tolerances import (
     TIME_EPS,
 )
 
-__all__ = ["LogEstimator", "LogRun", "ObserverLike", "time_screened"]
+__all__ = ["LogEstimator", "LogRun", "ObserverLike", "noise_rows", "time_screened"]
 
 
 class ObserverLike(Protocol):
@@ -556,6 +556,13 @@ class LogEstimator:
         if notes:
             head = [] if stamp is None else [f"stamp {stamp:.9f} s"]
             self.bad_rows.append((int(line), "; ".join(head + notes)))
+
+
+def noise_rows(log: Log) -> tuple[Vector, Vector]:
+    """The times and positions of ``log`` that its noise estimate uses (:func:`time_screened`):
+    the first chunk's, for the σ an observer or a smoother takes when none is given."""
+    timed = time_screened(log.t)
+    return log.t[timed], log.q[timed]
 
 
 def time_screened(t: Vector) -> NDArray[np.bool_]:

@@ -69,7 +69,7 @@ from pinobs.observers.gating import (
     outlier_gate,
     steady_innovation_variance,
 )
-from pinobs.observers.noise import estimate_noise_std
+from pinobs.observers.noise import NOISE_MIN_SAMPLES, NOISE_WINDOW, estimate_noise_std
 from pinobs.observers.registry import make_observer, observer_class, observer_names, register
 from pinobs.observers.results import CONSISTENCY_WINDOW, LIKELY_CAUSES, Consistency, Estimate
 from pinobs.tolerances import (
@@ -81,13 +81,15 @@ from pinobs.tolerances import (
 )
 
 # (the protocol's helpers live in their own modules and are re-exported here, where they
-# were first defined: pinobs.observers.checks, .gating, .registry, .results)
+# were first defined: pinobs.observers.checks, .gating, .noise, .registry, .results)
 __all__ = [
     "CONSISTENCY_WINDOW",
     "LIKELY_CAUSES",
     "MAX_GATE_RUN",
     "NIS_AVERAGING",
     "NOISE_FLOOR",
+    "NOISE_MIN_SAMPLES",
+    "NOISE_WINDOW",
     "Consistency",
     "Estimate",
     "GateState",
@@ -111,11 +113,6 @@ __all__ = [
 
 Vector = NDArray[np.floating[Any]]
 State = TypeVar("State")
-
-#: Seconds of samples (and at least :data:`NOISE_MIN_SAMPLES`) from which an
-#: observer built without ``noise_std`` estimates σ (:class:`Observer`).
-NOISE_WINDOW = 1.0
-NOISE_MIN_SAMPLES = 200
 
 #: The sample rates [Hz] and position noise levels [rad or m] an observer accepts.
 RATE_RANGE = (1e-3, 1e7)
@@ -281,6 +278,8 @@ class Observer(ABC, Generic[State]):
         self._noise_samples: list[tuple[float, Vector | None, Vector]] | None = (
             [] if noise_std is None and self.uses_noise_std else None
         )
+        #: the measurement variance σ² [rad² or m²] of a family's NIS (:attr:`noise_std_used`)
+        self._sigma2 = self.noise_std_used**2
         self._reset_args: tuple[Any, ...] = ()
         self._diverged = False  # the latest update diverged (its state was not kept)
         self._intervals: list[float] = []  # the first intervals after the reset (the period)
@@ -292,6 +291,12 @@ class Observer(ABC, Generic[State]):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.robot.name!r})"
+
+    @property
+    def noise_std_used(self) -> float:
+        """The position noise σ [rad or m] a family's gains and NIS take: ``noise_std``, or
+        :data:`NOISE_FLOOR` when it was not given or is 0 (noise-free)."""
+        return self.noise_std or NOISE_FLOOR
 
     # ----------------------------------------------------------- public API
     @final
@@ -615,7 +620,7 @@ class Observer(ABC, Generic[State]):
         if not self.noise_in_gains:
             twin = copy.copy(self)
             twin.noise_std = sigma
-            twin.__dict__["_sigma2"] = sigma**2  # the family's NIS measurement variance
+            twin._sigma2 = twin.noise_std_used**2  # the family's NIS measurement variance
             return twin
         args, kwargs = self._init_args
         fresh = type(self)(*args, **{**kwargs, "noise_std": sigma})

@@ -143,7 +143,6 @@ from pinobs.errors import DimensionError, GainError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.integrators import friction_substeps
 from pinobs.observers.base import (
-    NOISE_FLOOR,
     GateState,
     Observer,
     Vector,
@@ -287,7 +286,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
-        sigma = self.noise_std or NOISE_FLOOR
+        sigma = self.noise_std_used
         self.gains = EKFGains(accel_psd=accel_psd, meas_std=sigma, q0_std=q0_std, v0_std=v0_std)
         self.auto = disturbance_psd == "auto"
         if isinstance(disturbance_psd, str) and not self.auto:

@@ -102,7 +102,6 @@ from pinobs.errors import GainError
 from pinobs.model import Robot, lie_rk4
 from pinobs.model.integrators import friction_substeps, rk4_stage_matrices
 from pinobs.observers.base import (
-    NOISE_FLOOR,
     GateState,
     Observer,
     Vector,
@@ -307,7 +306,7 @@ class IbrirKalman(Observer[_State]):
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
-        sigma = self.noise_std or NOISE_FLOOR
+        sigma = self.noise_std_used
         R = output_weight
         if R is None:
             R = (self.rate or _DEFAULT_RATE) / sigma**2

@@ -118,7 +118,6 @@ from pinobs.errors import GainError, UnsupportedRobotError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.chart import AngleChart
 from pinobs.observers.base import (
-    NOISE_FLOOR,
     GateState,
     Observer,
     Vector,
@@ -272,7 +271,6 @@ class IIObserver(Observer[_State]):
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
         self.v0_std = float(positive("v0_std", v0_std) or 0.0)
-        self._sigma2 = (self.noise_std or NOISE_FLOOR) ** 2
         # continuous joints: the observer runs in the angle chart, unwrapped along the path
         self.chart: AngleChart | None = None
         self.plant = self.robot

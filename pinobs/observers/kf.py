@@ -83,7 +83,6 @@ import numpy as np
 from pinobs.errors import GainError, NotResetError
 from pinobs.model import Robot
 from pinobs.observers.base import (
-    NOISE_FLOOR,
     Consistency,
     GateState,
     Observer,
@@ -203,7 +202,7 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         # with "auto" the gains' density is only the smoother's: the bank's are ρ_f σ₀²
         self.gains = KFGains(
             SMOOTHING_JERK_PSD if self.auto else cast(float, jerk_psd),
-            self.noise_std or NOISE_FLOOR,
+            self.noise_std_used,
             outlier_probability,
         )
         self._gate = gate_threshold(outlier_probability, robot.nv)[1]

@@ -134,7 +134,6 @@ from pinobs.errors import GainError, UnsupportedRobotError
 from pinobs.model import Robot, lie_rk4
 from pinobs.observers.base import (
     MAX_GATE_RUN,
-    NOISE_FLOOR,
     GateState,
     Observer,
     Vector,
@@ -433,7 +432,6 @@ class LieGroupObserver(Observer[_State]):
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.gains = LieGroupGains(alpha=alpha, beta=beta, curvature_gain=curvature_gain)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
-        self._sigma2 = (self.noise_std or NOISE_FLOOR) ** 2
         self.geometry = _geometry_of(self.robot)
 
     @property

@@ -8,6 +8,7 @@ Sroka & Jennen-Steinmetz 1986; only runs of four consecutive, evenly spaced rows
 
 from __future__ import annotations
 
+import math
 from typing import cast
 
 import numpy as np
@@ -17,14 +18,38 @@ from pinobs.model import Robot
 from pinobs.model.noise import third_difference_std
 from pinobs.model.robot import Vector
 
-__all__ = ["estimate_noise_std", "noise_from_log", "quantisation_std"]
+__all__ = [
+    "NOISE_MIN_SAMPLES",
+    "NOISE_WINDOW",
+    "STILL_STD",
+    "estimate_noise_std",
+    "joint_noise_std",
+    "moving_median",
+    "noise_from_log",
+    "quantisation_std",
+]
 
 #: Fewest usable rows for an estimate.
 _MIN_ROWS = 12
 
+#: Seconds of samples (and at least :data:`NOISE_MIN_SAMPLES` rows) σ is estimated from: a
+#: log's first second (:func:`estimate_noise_std`), an observer's first second after its
+#: reset (:class:`pinobs.observers.base.Observer`).
+NOISE_WINDOW = 1.0
+NOISE_MIN_SAMPLES = 200
+
+#: [rad or m] A joint whose σ̂ is at most this tells nothing of the noise: its printed
+#: position never changes (its third differences are rounding, σ̂ ~ 1e-17).
+STILL_STD = 1e-12
+
 
 def estimate_noise_std(
-    t: Vector, q: Vector, robot: Robot, *, window: float = 1.0, min_rows: int = 200
+    t: Vector,
+    q: Vector,
+    robot: Robot,
+    *,
+    window: float = NOISE_WINDOW,
+    min_rows: int = NOISE_MIN_SAMPLES,
 ) -> Vector | None:
     """σ per velocity coordinate [rad or m] from the first ``window`` seconds of a log.
 
@@ -97,16 +122,14 @@ def noise_from_log(
     real log repeats its printed positions exactly), and at least ``floor`` (a
     noise-free log: the sentence says so); the sentence also says how to give σ instead.
     """
-    sigma_joint = estimate_noise_std(t, q, robot)
-    if sigma_joint is None:
+    found = joint_noise_std(t, q, robot)
+    if found is None:
         return None
-    quantum = quantisation_std(q, robot)
-    floored = sigma_joint < quantum
-    sigma_joint = np.maximum(sigma_joint, quantum)
-    # a joint whose printed position never changes tells nothing of the noise (σ̂ ~ 1e-17)
-    told = sigma_joint > 1e-12
-    used = cast(NDArray[np.intp], _rows(t, np.asarray(q, dtype=float), 1.0, 200))
-    sigma = float(np.median(sigma_joint[told] if told.any() else sigma_joint))
+    sigma_joint, floored = found
+    sigma, told = moving_median(sigma_joint)
+    used = cast(
+        NDArray[np.intp], _rows(t, np.asarray(q, dtype=float), NOISE_WINDOW, NOISE_MIN_SAMPLES)
+    )
     joints = np.array2string(sigma_joint, formatter={"float_kind": "{:.2e}".format})
     # the rows' times: the first second of finite rows need not be the log's (a sweep found
     # the sentence saying "first second" of a log whose first second was NaN)
@@ -126,3 +149,34 @@ def noise_from_log(
     if sigma < floor:
         said += f" (below {floor:g}: taken as noise-free, σ = {floor:g} used)"
     return max(sigma, floor), sigma_joint, said + "; pass noise_std (--noise) to override"
+
+
+def joint_noise_std(
+    t: Vector, q: Vector, robot: Robot, *, rest_over_all_rows: bool = False
+) -> tuple[Vector, NDArray[np.bool_]] | None:
+    """σ̂ per velocity coordinate [rad or m], each at least the rounding of its printed
+    positions, and where that rounding floored it: ``(max(σ̂_j, δ_j/√12), σ̂_j < δ_j/√12)``
+    (:func:`estimate_noise_std` over the log's first second, :func:`quantisation_std` over
+    all the rows given), or ``None`` with too few usable rows.
+
+    ``rest_over_all_rows``: a joint at rest in the first second (``σ̂_j ≤ δ_j/√12``: its
+    third differences there are only the rounding) is measured over all the rows instead
+    (``pinobs.identify``'s σ: :mod:`pinobs.calibration`)."""
+    first = estimate_noise_std(t, q, robot)
+    if first is None:
+        return None
+    quantum = quantisation_std(q, robot)
+    floored = first < quantum
+    if rest_over_all_rows:
+        rest = first <= quantum
+        if rest.any():
+            whole = estimate_noise_std(t, q, robot, window=math.inf)
+            first = first if whole is None else np.where(rest, whole, first)
+    return np.maximum(first, quantum), floored
+
+
+def moving_median(sigma_joint: Vector) -> tuple[float, NDArray[np.bool_]]:
+    """The one σ of a log: the median of ``sigma_joint`` over the joints that move (σ̂ above
+    :data:`STILL_STD`; over all of them when none does), and which moved."""
+    told = sigma_joint > STILL_STD
+    return float(np.median(sigma_joint[told] if told.any() else sigma_joint)), told

@@ -131,7 +131,6 @@ import numpy as np
 from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.observers.base import (
-    NOISE_FLOOR,
     GateState,
     Observer,
     Vector,
@@ -553,7 +552,7 @@ class RiemannianObserver(Observer[_State]):
             )
         if alpha is None or beta is None:
             if self.rate is not None:
-                sigma = self.noise_std or NOISE_FLOOR
+                sigma = self.noise_std_used
                 alpha, beta = gains_from_noise(self.rate, sigma, self.accel_psd)  # type: ignore[arg-type]
                 self.gain_rule = "kalman"
             else:
@@ -579,7 +578,6 @@ class RiemannianObserver(Observer[_State]):
             if self.gain_rule == "kalman" and not self.gains.state_dependent
             else "steady"
         )
-        self._sigma2 = (self.noise_std or NOISE_FLOOR) ** 2
 
     @property
     def options(self) -> dict[str, Any]:

@@ -110,3 +110,34 @@ def test_a_log_at_rest_in_its_first_second_takes_the_rounding_of_its_printed_pos
     assert per_joint[0] == per_joint[1] == pytest.approx(1e-4 / np.sqrt(12))
     assert "the joints that move (2 of 6)" in said and "printed" in said
     pinobs.make_observer("kf", robot, noise_std=sigma)  # accepted
+
+
+def test_the_log_sigma_is_the_median_over_the_joints_that_move() -> None:
+    from pinobs.observers.noise import STILL_STD, moving_median
+
+    sigma, told = moving_median(np.array([1e-17, 3e-4, 1e-4, 2e-4, 0.0]))
+    assert sigma == 2e-4  # the median of the three that move
+    assert told.tolist() == [False, True, True, True, False]
+    still = np.array([1e-17, 0.5 * STILL_STD, 0.0])
+    assert moving_median(still)[0] == np.median(still)  # none moves: over all of them
+
+
+def test_a_joint_at_rest_in_the_first_second_is_measured_over_all_rows_when_asked() -> None:
+    """pinobs.identify's σ (rest_over_all_rows): a joint still in the first second (its
+    printed positions repeat: only the rounding there) is measured over the whole log."""
+    from pinobs.observers.noise import joint_noise_std, quantisation_std
+
+    robot = pinobs.load("ur5")
+    rng = np.random.default_rng(7)
+    t = np.arange(4000) * 1e-3
+    q = np.tile(np.linspace(0.1, 0.6, robot.nq), (t.size, 1))
+    q += 0.2 * np.sin(t)[:, None] + 1e-3 * rng.standard_normal(q.shape)
+    q[:1200, 0] = 0.1  # joint 0 still for its first 1.2 s
+    q = np.round(q, 6)
+    quantum = quantisation_std(q, robot)
+    first = joint_noise_std(t, q, robot)
+    whole = joint_noise_std(t, q, robot, rest_over_all_rows=True)
+    assert first is not None and whole is not None
+    assert first[0][0] == quantum[0] and first[1][0]  # floored to the rounding, and said so
+    assert 0.5e-3 < whole[0][0] < 1.5e-3  # over all rows: the noise (70 % of them move)
+    np.testing.assert_array_equal(whole[0][1:], first[0][1:])  # the moving joints unchanged

@@ -118,3 +118,22 @@ def test_pickled_mid_window_resumes_identically(robot: pinobs.Robot, run: pinobs
     with pytest.warns(NoiseWarning):
         b = np.array([clone.update(*x).v for x in rest])
     np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize(
+    ("name", "robot_name"),
+    [("ii", "cartpole"), ("liegroup", "top"), ("riemannian", "top")]
+    + [(name, "cartpole") for name in ("ekf", "kf", "kalman")],
+)
+def test_the_sigma_a_family_uses_is_the_base_one(name: str, robot_name: str) -> None:
+    """σ (``noise_std``, or the floor when none or 0 is given) and the NIS variance σ² are
+    defined once, in the base, for every family."""
+    from pinobs.observers.base import NOISE_FLOOR
+
+    robot = pinobs.load(robot_name)  # one the family accepts
+    for given, used in ((None, NOISE_FLOOR), (0.0, NOISE_FLOOR), (2e-4, 2e-4)):
+        ob = pinobs.make_observer(name, robot, rate=1000.0, noise_std=given)
+        assert ob.noise_std_used == used
+        assert ob._sigma2 == used**2
+        meas_std = getattr(getattr(ob, "gains", None), "meas_std", None)  # ekf, kf
+        assert meas_std is None or meas_std == used

@@ -130,6 +130,7 @@ import numpy as np
 
 from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
+from pinobs.model.integrators import DynamicsCalls, dynamics_calls
 from pinobs.observers.base import (
     NOISE_FLOOR,
     GateState,
@@ -139,6 +140,7 @@ from pinobs.observers.base import (
     positive,
     register,
 )
+from pinobs.observers.fused import load_fused_kernels, rk4_stage_kernel, rk4_start_kernel
 from pinobs.tolerances import JACOBI_FD_STEP
 
 __all__ = [
@@ -464,6 +466,16 @@ def _vector_space_correction(
     return q_new, v_new
 
 
+def _fast_calls(robot: Robot) -> tuple[DynamicsCalls, Vector] | None:
+    """Pinocchio's calls on the observer's own ``pin.Data`` and the work rows of the compiled
+    RK4 step (:mod:`pinobs.observers.fused`, issue 39): for a :class:`Robot` on a vector
+    space without joint friction; ``None`` elsewhere (:func:`dynamics_rk4`)."""
+    if not (isinstance(robot, Robot) and robot.is_vector_space and not robot.has_friction):
+        return None
+    load_fused_kernels(ekf=False)
+    return dynamics_calls(robot), np.zeros((8, robot.nv))
+
+
 # ---------------------------------------------------------------- observer
 class _State(NamedTuple):
     q: Vector
@@ -573,6 +585,7 @@ class RiemannianObserver(Observer[_State]):
         self._lie = not self.robot.is_vector_space  # brackets or unit-norm blocks to keep
         if not self._lie:
             _compiled_correction()  # numba imported and the kernel loaded now, not in an update
+        self._scratch_rk4 = _fast_calls(self.robot)
         # the Riccati schedule replaces (α, β) only when they came from the Kalman rule
         self.gain_schedule = (
             gain_schedule
@@ -623,7 +636,15 @@ class RiemannianObserver(Observer[_State]):
         return _State(q0.copy(), v0.copy(), 0.0, None, 0, p0)
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
-        q, v = dynamics_rk4(self.robot, state.q, state.v, tau, dt)  # the prediction (MATH §7)
+        if self._scratch_rk4 is None:
+            q, v = dynamics_rk4(self.robot, state.q, state.v, tau, dt)  # the prediction (MATH §7)
+        else:  # the same RK4 step, compiled around the four ABA calls
+            (aba, _, _), w = self._scratch_rk4
+            rk4_start_kernel.compiled(w, state.q, state.v, aba(state.q, state.v, tau), dt)
+            qs, vs = w[6], w[7]
+            for stage in (2, 3, 4):
+                rk4_stage_kernel.compiled(w, aba(qs, vs, tau), stage, dt)
+            q, v = qs.copy(), vs.copy()
         elapsed = state.elapsed + dt
         if q_meas is None:
             return state._replace(q=q, v=v, elapsed=elapsed, gate=state.gate.predicted())
@@ -714,7 +735,12 @@ class RiemannianObserver(Observer[_State]):
         arithmetic is one call of :func:`_vector_space_correction`.
         """
         delta = q_meas - q
-        acc, a_q, a_v = self.robot.forward_dynamics_jacobians(q, delta, tau)
+        if self._scratch_rk4 is None:
+            acc, a_q, a_v = self.robot.forward_dynamics_jacobians(q, delta, tau)
+        else:  # the same call on the observer's own data, read in place by the kernel
+            calls = self._scratch_rk4[0]
+            calls.derivatives(q, delta, tau)
+            acc, a_q, a_v = calls.data.ddq, calls.data.ddq_dq, calls.data.ddq_dv
         # ζ is needed before the kernel only by state-dependent gains
         zeta = 0.25 * a_v.dot(delta) - delta if self.gains.state_dependent else None
         k1, k2, c, P = self._correction_gains(state, q, zeta, v, h)

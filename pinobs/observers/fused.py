@@ -24,6 +24,8 @@ the compiled steps equal the NumPy ones to rounding (the tests compare them).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -33,7 +35,7 @@ from pinobs.observers.linalg import LazyKernel, joseph_kernel
 __all__ = [
     "ekf_correct_kernel",
     "ekf_predict_kernel",
-    "load_fused_kernels",
+    "loaded",
     "rk4_stage_kernel",
     "rk4_start_kernel",
 ]
@@ -184,13 +186,15 @@ def _warm_predict() -> tuple[object, ...]:
 
 #: :func:`rk4_start_loops` compiled: ``(w, q, v, a₁, h)``.
 rk4_start_kernel = LazyKernel(
-    rk4_start_loops, np.zeros((8, 1)), np.zeros(1), np.zeros(1), np.zeros(1), 1e-3
+    rk4_start_loops, np.zeros((8, 1)), np.zeros(1), np.zeros(1), np.zeros(1), 1e-3, contract=True
 )
 #: :func:`rk4_stage_loops` compiled: ``(w, a, stage, h)``.
-rk4_stage_kernel = LazyKernel(rk4_stage_loops, np.zeros((8, 1)), np.zeros(1), 2, 1e-3)
+rk4_stage_kernel = LazyKernel(
+    rk4_stage_loops, np.zeros((8, 1)), np.zeros(1), 2, 1e-3, contract=True
+)
 #: :func:`ekf_predict_loops` compiled.
 ekf_predict_kernel = LazyKernel(
-    ekf_predict_loops, *_warm_predict(), helpers=(rk4_start_loops, _times_a)
+    ekf_predict_loops, *_warm_predict(), helpers=(rk4_start_loops, _times_a), contract=True
 )
 #: :func:`ekf_correct_loops` compiled: returns the NIS (NaN: take the NumPy way).
 ekf_correct_kernel = LazyKernel(
@@ -201,11 +205,8 @@ ekf_correct_kernel = LazyKernel(
 )  # fmt: skip
 
 
-def load_fused_kernels(*, ekf: bool) -> None:
-    """Load (or compile once) the RK4 kernels and, with ``ekf``, the EKF's (a constructor
-    calls this, so that no update compiles)."""
-    rk4_start_kernel.load()
-    rk4_stage_kernel.load()
-    if ekf:
-        ekf_predict_kernel.load()
-        ekf_correct_kernel.load()
+def loaded(kernel: LazyKernel) -> Callable[..., Any]:
+    """``kernel``'s compiled function, loaded (or compiled once) now if it is not yet."""
+    kernel.load()
+    assert kernel.compiled is not None  # (load sets it)
+    return kernel.compiled

@@ -84,7 +84,9 @@ through the Jacobi operator ``R(v̂, ·)v̂`` (:func:`jacobi_operator`, four
 ABA-derivatives calls), recomputed every ``curvature_every`` samples (default
 10: it moves with ``q̂, v̂``, not with the noise in ζ) and applied as a matrix
 in between.  Around those calls, the Python work is kept small: the
-prediction is :func:`pinobs.model.dynamics_rk4` (stacked stages) and, where
+prediction is :func:`pinobs.model.dynamics_rk4` (stacked stages; on a vector
+space without friction its stages compiled, :mod:`pinobs.observers.fused`, on
+the observer's own ``pin.Data``) and, where
 ``q ∈ Rⁿ``, the correction's arithmetic is one compiled call
 (:func:`_vector_space_correction`, numba; equal to the general
 :meth:`RiemannianObserver._correct` to rounding, tested).
@@ -140,7 +142,7 @@ from pinobs.observers.base import (
     positive,
     register,
 )
-from pinobs.observers.fused import load_fused_kernels, rk4_stage_kernel, rk4_start_kernel
+from pinobs.observers.fused import loaded, rk4_stage_kernel, rk4_start_kernel
 from pinobs.tolerances import JACOBI_FD_STEP
 
 __all__ = [
@@ -466,14 +468,17 @@ def _vector_space_correction(
     return q_new, v_new
 
 
-def _fast_calls(robot: Robot) -> tuple[DynamicsCalls, Vector] | None:
-    """Pinocchio's calls on the observer's own ``pin.Data`` and the work rows of the compiled
-    RK4 step (:mod:`pinobs.observers.fused`, issue 39): for a :class:`Robot` on a vector
-    space without joint friction; ``None`` elsewhere (:func:`dynamics_rk4`)."""
+def _fast_calls(
+    robot: Robot,
+) -> tuple[DynamicsCalls, Vector, Callable[..., Any], Callable[..., Any]] | None:
+    """Pinocchio's calls on the observer's own ``pin.Data``, the work rows of the compiled
+    RK4 step and its two kernels (:mod:`pinobs.observers.fused`, issue 39): for a
+    :class:`Robot` on a vector space without joint friction; ``None`` elsewhere
+    (:func:`dynamics_rk4`)."""
     if not (isinstance(robot, Robot) and robot.is_vector_space and not robot.has_friction):
         return None
-    load_fused_kernels(ekf=False)
-    return dynamics_calls(robot), np.zeros((8, robot.nv))
+    w = np.zeros((8, robot.nv))
+    return dynamics_calls(robot), w, loaded(rk4_start_kernel), loaded(rk4_stage_kernel)
 
 
 # ---------------------------------------------------------------- observer
@@ -583,9 +588,9 @@ class RiemannianObserver(Observer[_State]):
         )
         self._zero_nn = np.zeros((self.robot.nv, self.robot.nv))  # J when C = 0
         self._lie = not self.robot.is_vector_space  # brackets or unit-norm blocks to keep
-        if not self._lie:
-            _compiled_correction()  # numba imported and the kernel loaded now, not in an update
-        self._scratch_rk4 = _fast_calls(self.robot)
+        # numba imported and the kernel loaded now, not in an update
+        self._correction = None if self._lie else _compiled_correction()
+        self._scratch_calls = _fast_calls(self.robot)
         # the Riccati schedule replaces (α, β) only when they came from the Kalman rule
         self.gain_schedule = (
             gain_schedule
@@ -636,14 +641,14 @@ class RiemannianObserver(Observer[_State]):
         return _State(q0.copy(), v0.copy(), 0.0, None, 0, p0)
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
-        if self._scratch_rk4 is None:
+        if self._scratch_calls is None:
             q, v = dynamics_rk4(self.robot, state.q, state.v, tau, dt)  # the prediction (MATH §7)
-        else:  # the same RK4 step, compiled around the four ABA calls
-            (aba, _, _), w = self._scratch_rk4
-            rk4_start_kernel.compiled(w, state.q, state.v, aba(state.q, state.v, tau), dt)
+        else:  # the same RK4 step (the same bits), compiled around the four ABA calls
+            (aba, _, _), w, start, stage = self._scratch_calls
+            start(w, state.q, state.v, aba(state.q, state.v, tau), dt)
             qs, vs = w[6], w[7]
-            for stage in (2, 3, 4):
-                rk4_stage_kernel.compiled(w, aba(qs, vs, tau), stage, dt)
+            for k in (2, 3, 4):
+                stage(w, aba(qs, vs, tau), k, dt)
             q, v = qs.copy(), vs.copy()
         elapsed = state.elapsed + dt
         if q_meas is None:
@@ -654,7 +659,7 @@ class RiemannianObserver(Observer[_State]):
             p00, p01, p11 = state.P
             h = elapsed
             s_inn = p00 + h * (2.0 * p01 + h * p11 + self.accel_psd * h * h / 3.0) + self._sigma2
-            e = self.robot.difference(q, q_meas)
+            e = self.robot.difference(q, q_meas) if self._lie else q_meas - q  # (the same)
             gate = state.gate.measured(float(e @ e) / s_inn, self._gate, e.size)
             if gate.gated:  # the estimate is the prediction; the next correction spans the gap
                 return state._replace(q=q, v=v, elapsed=elapsed, gate=gate)
@@ -735,10 +740,10 @@ class RiemannianObserver(Observer[_State]):
         arithmetic is one call of :func:`_vector_space_correction`.
         """
         delta = q_meas - q
-        if self._scratch_rk4 is None:
+        if self._scratch_calls is None:
             acc, a_q, a_v = self.robot.forward_dynamics_jacobians(q, delta, tau)
         else:  # the same call on the observer's own data, read in place by the kernel
-            calls = self._scratch_rk4[0]
+            calls = self._scratch_calls[0]
             calls.derivatives(q, delta, tau)
             acc, a_q, a_v = calls.data.ddq, calls.data.ddq_dq, calls.data.ddq_dv
         # ζ is needed before the kernel only by state-dependent gains
@@ -747,10 +752,10 @@ class RiemannianObserver(Observer[_State]):
         jac, age = state.jacobi, state.age + 1
         if c != 0.0:
             jac, age = self._jacobi(state, q, v)
-        q_new, v_new = _compiled_correction()(
+        q_new, v_new = self._correction(  # type: ignore[misc]
             q, v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, k1, k2, h, c * h
         )
-        return state._replace(q=q_new, v=v_new, elapsed=0.0, jacobi=jac, age=age, P=P)
+        return _State(q_new, v_new, 0.0, jac, age, P, state.gate)
 
     def _gains_at(self, q: Vector, zeta: Vector | None, v: Vector) -> tuple[float, float, float]:
         g = self.gains

@@ -561,7 +561,6 @@ class _FastPath:
         self._scratch_A[:nv, nv : 2 * nv] = identity(nv)
         self._scratch_Phi = np.empty((n, n))
         self.no_psd = np.zeros(nv)
-        self.psd, self.r = ekf.gains.accel_psd, ekf.gains.meas_std**2
         self.predict = loaded(ekf_predict_kernel)
         self.stage = loaded(rk4_stage_kernel)
         self.correct = loaded(ekf_correct_kernel)
@@ -595,8 +594,9 @@ class _FastPath:
         data = calls.data
         psd = self.no_psd if state.d_psd is None else state.d_psd
         P = np.empty_like(state.P)
+        accel_psd = ekf.gains.accel_psd  # (read at every step: a smoother's replay sets it)
         self.predict(w, state.q, state.v, data.ddq, data.ddq_dq, data.ddq_dv, data.Minv,
-                     state.P, dt, self.psd, psd, self._scratch_A, self._scratch_Phi, P)  # fmt: skip
+                     state.P, dt, accel_psd, psd, self._scratch_A, self._scratch_Phi, P)  # fmt: skip
         aba, stage = calls.aba, self.stage
         stage(w, aba(qs, vs, tau_in), 2, dt)  # RKMK4 (dynamics_rk4), its first stage the
         stage(w, aba(qs, vs, tau_in), 3, dt)  # derivatives call's v̇
@@ -617,7 +617,8 @@ class _FastPath:
         nv = qs.shape[0]
         e, dx, P_new = np.empty(nv), np.empty(P.shape[0]), np.empty_like(P)
         q, v = np.empty(nv), np.empty(nv)
-        nis = self.correct(self._scratch_work, q_meas, P, self.r, e, dx, P_new, q, v)
+        r = ekf.gains.meas_std**2
+        nis = self.correct(self._scratch_work, q_meas, P, r, e, dx, P_new, q, v)
         if nis != nis:  # NaN: ekf.correct's other ways
             pred = state._replace(q=qs.copy(), v=vs.copy(), P=P)
             with np.errstate(over="ignore", invalid="ignore"):
@@ -631,7 +632,7 @@ class _FastPath:
             with np.errstate(over="ignore", invalid="ignore"):
                 d = d + dx[2 * nv :]
                 if state.auto and d_psd is not None:  # as ekf.corrected
-                    s = P.diagonal()[:nv] + self.r  # Sᵢᵢ = P⁻_qq,ii + σ²
+                    s = P.diagonal()[:nv] + r  # Sᵢᵢ = P⁻_qq,ii + σ²
                     d_psd = match_density(
                         d_psd, e, s, dt, window=AUTO_WINDOW, bounds=ekf._psd_bounds
                     )

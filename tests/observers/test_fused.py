@@ -3,6 +3,7 @@ equal the NumPy steps they replace, to rounding, and are taken where they apply.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -97,3 +98,21 @@ def test_the_compiled_step_is_taken_where_it_applies_and_only_there() -> None:
     lie = ExtendedKalmanFilter(go1, rate=1000.0, noise_std=1e-4)
     assert lie._fast is None and lie.uses_blas
     assert RiemannianObserver(go1, rate=1000.0)._scratch_calls is None
+
+
+def test_the_compiled_ekf_step_reads_the_gains_a_caller_sets_after_construction() -> None:
+    """``adaptive`` and the smoother's replay set ``ekf.gains`` between steps: the compiled
+    step uses them as the NumPy step does."""
+    robot = cached_robot("ur5")
+    res = pinobs.simulate(robot, [], duration=0.2, sensor=Sensor(1000.0, 1e-4), seed=6)
+    fast = ExtendedKalmanFilter(robot, rate=1000.0, noise_std=1e-4)
+    slow = ExtendedKalmanFilter(robot, rate=1000.0, noise_std=1e-4)
+    slow._fast = None
+    out = []
+    for ob in (fast, slow):
+        ob.gains = replace(ob.gains, accel_psd=1e-2, meas_std=3e-4)
+        out.append(_run(ob, res))
+    default = _run(ExtendedKalmanFilter(robot, rate=1000.0, noise_std=1e-4), res)
+    for a, b in zip(out[0], out[1], strict=True):
+        _assert_close_per_signal(a, b, 1e-12)
+    assert np.abs(out[0][1] - default[1]).max() > 1e-6  # the new gains made a difference

@@ -218,6 +218,8 @@ def _dynamics_rkmk4(
     its per-stage zero tests.
     """
     fd, solve, integrate = robot.forward_dynamics, robot.integrate_jacobian_solve, robot.integrate
+    if not robot.has_friction:  # the call, without the method (its result is the same)
+        fd = partial(pin.aba, robot.model, robot._data)
     hh = 0.5 * h
     a1 = fd(q, v, tau) if acc0 is None else np.array(acc0)  # a copy: acc0 may be a view
     xi2 = hh * v

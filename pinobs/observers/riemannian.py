@@ -591,6 +591,10 @@ class RiemannianObserver(Observer[_State]):
         # numba imported and the kernel loaded now, not in an update
         self._correction = None if self._lie else _compiled_correction()
         self._scratch_calls = _fast_calls(self.robot)
+        # the correction's derivatives call on the observer's own data (any Robot)
+        self._scratch_derivatives = (
+            dynamics_calls(self.robot) if isinstance(self.robot, Robot) else None
+        )
         # the Riccati schedule replaces (α, β) only when they came from the Kalman rule
         self.gain_schedule = (
             gain_schedule
@@ -704,6 +708,17 @@ class RiemannianObserver(Observer[_State]):
             jac, age = jacobi_operator(self.robot, q, v), 0
         return jac, age
 
+    def _jacobians(self, q: Vector, x: Vector, tau: Vector) -> tuple[Vector, Vector, Vector]:
+        """:meth:`Robot.forward_dynamics_jacobians`; on a :class:`Robot`, the same call on the
+        observer's own ``pin.Data``, its arrays read in place (views, valid until the next
+        call: the Jacobi operator uses the robot's data)."""
+        calls = self._scratch_derivatives
+        if calls is None:
+            return self.robot.forward_dynamics_jacobians(q, x, tau)
+        calls.derivatives(q, x, tau)
+        data = calls.data
+        return data.ddq, data.ddq_dq, data.ddq_dv
+
     def _correct(
         self, state: _State, q: Vector, v: Vector, q_meas: Vector, tau: Vector, h: float
     ) -> _State:
@@ -714,7 +729,7 @@ class RiemannianObserver(Observer[_State]):
         r = self.robot
         delta = r.difference(q, q_meas)
         # One analytic call at (q̂⁻, δ, τ): a = S(q̂) − Γs(δ,δ), ∂a/∂q, ∂a/∂v = −2Γs(δ, ·).
-        acc, a_q, a_v = r.forward_dynamics_jacobians(q, delta, tau)
+        acc, a_q, a_v = self._jacobians(q, delta, tau)
         g_dd = -0.5 * (a_v @ delta)  # Γs(δ, δ)
         zeta = -(delta + 0.5 * g_dd)  # second-order −log_q̂(q) (MATH §4)
         k1, k2, c, P = self._correction_gains(state, q, zeta, v, h)
@@ -740,12 +755,7 @@ class RiemannianObserver(Observer[_State]):
         arithmetic is one call of :func:`_vector_space_correction`.
         """
         delta = q_meas - q
-        if self._scratch_calls is None:
-            acc, a_q, a_v = self.robot.forward_dynamics_jacobians(q, delta, tau)
-        else:  # the same call on the observer's own data, read in place by the kernel
-            calls = self._scratch_calls[0]
-            calls.derivatives(q, delta, tau)
-            acc, a_q, a_v = calls.data.ddq, calls.data.ddq_dq, calls.data.ddq_dv
+        acc, a_q, a_v = self._jacobians(q, delta, tau)
         # ζ is needed before the kernel only by state-dependent gains
         zeta = 0.25 * a_v.dot(delta) - delta if self.gains.state_dependent else None
         k1, k2, c, P = self._correction_gains(state, q, zeta, v, h)

@@ -28,19 +28,54 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from functools import lru_cache, partial
+from typing import Any, NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
 from pinobs.model.robot import Robot, Vector
 
-__all__ = ["RK4_STIFFNESS", "dynamics_rk4", "friction_substeps", "lie_rk4", "rk4_stage_matrices"]
+__all__ = [
+    "RK4_STIFFNESS",
+    "DynamicsCalls",
+    "dynamics_calls",
+    "dynamics_rk4",
+    "friction_substeps",
+    "lie_rk4",
+    "rk4_stage_matrices",
+]
 
 #: ``λ h`` kept below classical RK4's stability limit on the negative real axis, 2.785
 #: (:func:`friction_substeps`).
 RK4_STIFFNESS = 2.5
 
 Rhs = Callable[[Vector, Vector], tuple[Vector, Vector]]
+
+
+class DynamicsCalls(NamedTuple):
+    """Pinocchio's two dynamics calls bound to a model and a ``pin.Data`` of the caller's own.
+
+    ``aba(q, v, τ)`` returns ``v̇`` (a view into ``data``: copy it or use it before the next
+    call); ``derivatives(q, v, τ)`` runs ``pin.computeABADerivatives`` and leaves ``v̇``,
+    ``∂v̇/∂q``, ``∂v̇/∂v`` and ``M⁻¹`` (upper triangle) in ``data.ddq``, ``data.ddq_dq``,
+    ``data.ddq_dv`` and ``data.Minv``.  No checks and no friction: for the compiled
+    steps of the observers (:mod:`pinobs.observers.fused`), which read ``data``'s arrays in place.
+    """
+
+    aba: Callable[[Vector, Vector, Vector], Vector]
+    derivatives: Callable[[Vector, Vector, Vector], object]
+    data: Any
+
+
+def dynamics_calls(robot: Robot) -> DynamicsCalls:
+    """:class:`DynamicsCalls` of ``robot``'s model on a new ``pin.Data`` (every consumer owns
+    its data: the filter's calls do not overwrite the robot's)."""
+    data = robot.model.createData()
+    return DynamicsCalls(
+        partial(pin.aba, robot.model, data),
+        partial(pin.computeABADerivatives, robot.model, data),
+        data,
+    )
 
 
 def lie_rk4(robot: Robot, q: Vector, x: Vector, h: float, rhs: Rhs) -> tuple[Vector, Vector]:
@@ -183,6 +218,8 @@ def _dynamics_rkmk4(
     its per-stage zero tests.
     """
     fd, solve, integrate = robot.forward_dynamics, robot.integrate_jacobian_solve, robot.integrate
+    if not robot.has_friction:  # the call, without the method (its result is the same)
+        fd = partial(pin.aba, robot.model, robot._data)
     hh = 0.5 * h
     a1 = fd(q, v, tau) if acc0 is None else np.array(acc0)  # a copy: acc0 may be a view
     xi2 = hh * v

@@ -75,6 +75,7 @@ from pinobs.observers.results import CONSISTENCY_WINDOW, LIKELY_CAUSES, Consiste
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
     ABSURD_VALUE,
+    GAP_PERIODS,
     MAX_GAP_PERIODS,
     PAUSE_RESTART,
     TIME_EPS,
@@ -463,6 +464,9 @@ class Observer(ABC, Generic[State]):
         :func:`~pinobs.observers.checks.propagate_gap`, the log reader's too).
         One step of 10 s returned 1e74 rad/s from ``ekf`` and every update after it raised;
         one of 1 s left ``riemannian`` 500 rad/s off for seconds (a sweep)."""
+        period = self._period_s
+        if period is None or not dt > GAP_PERIODS * period:  # gap_substeps' one step, directly
+            return self.step(state, dt, q, tau)
         state, n = propagate_gap(
             lambda s, _, n: self.step(s, dt / n, None, tau),
             state,

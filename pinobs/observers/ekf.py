@@ -35,6 +35,11 @@ imported and loaded by the constructor; compiled once per installation with
 12 × 12 operations; above, NumPy (BLAS products, a LAPACK Cholesky).  Both
 paths live in :mod:`pinobs.observers.linalg`, shared with the other filters,
 and are tested equal to the dense pre-optimisation implementation to 1e-12.
+On a vector-space robot without friction (``nv ≤ 12``) the whole step is five
+compiled calls around Pinocchio's four (issue 39, :mod:`pinobs.observers.fused`:
+RK4 stages, ``Φ P Φᵀ + Q_d``, the Joseph correction; on the filter's own
+``pin.Data``): on a UR5, 23 → 14 ``pin.aba`` per update (``measure_cost``, CPU
+time), equal to the NumPy step to rounding (tested).
 
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
 ``τ_f = −D v − F_c tanh(v/v_s)``) makes the error dynamics stiff near ``v = 0``:
@@ -141,7 +146,7 @@ import numpy as np
 
 from pinobs.errors import DimensionError, GainError
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.model.integrators import friction_substeps
+from pinobs.model.integrators import dynamics_calls, friction_substeps
 from pinobs.observers.base import (
     GateState,
     Observer,
@@ -150,7 +155,14 @@ from pinobs.observers.base import (
     positive,
     register,
 )
+from pinobs.observers.fused import (
+    ekf_correct_kernel,
+    ekf_predict_kernel,
+    loaded,
+    rk4_stage_kernel,
+)
 from pinobs.observers.linalg import (
+    KERNEL_MAX_NV,
     identity,
     joseph_update,
     scaled_identity,
@@ -299,6 +311,10 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self.d0_std = positive("d0_std", d0_std, allow_none=True)
         self._scratch_A: Vector | None = None  # A's buffer (_jacobian)
         warm_linear_algebra(self.robot.nv)  # LAPACK and the compiled update, now
+        self._fast: _FastPath | None = _FastPath.build(self)
+        # the compiled step makes no BLAS call (Observer.uses_blas; its rare ways back to
+        # NumPy, ≤ 36 × 36 with nv ≤ 12, are below OpenBLAS's threading sizes)
+        self.uses_blas = self._fast is None
 
     @property
     def options(self) -> dict[str, object]:
@@ -377,20 +393,27 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         return EKFState(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd, auto=True)
 
     def step(self, state: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
+        if self._fast is not None:
+            return self._fast.step(self, state, dt, q_meas, tau)
         # a filter being lost overflows: its update says so (ObserverDiverged), numpy does not
         with np.errstate(over="ignore", invalid="ignore"):
             pred, _ = self.predict(state, dt, tau)
             if q_meas is None:
                 return pred._replace(P=0.5 * (pred.P + pred.P.T), gate=pred.gate.predicted())
-            new = self.correct(pred, q_meas)
-            if not new.auto or new.d_psd is None or new.gate.gated:
-                return new
-            # disturbance_psd="auto": ψ matched to the innovations (module docstring)
-            nv = self.robot.nv
-            e = self.robot.difference(pred.q, q_meas)
-            s = pred.P.diagonal()[:nv] + self.gains.meas_std**2  # Sᵢᵢ = P⁻_qq,ii + σ²
-            psd = match_density(new.d_psd, e, s, dt, window=AUTO_WINDOW, bounds=self._psd_bounds)
-            return new._replace(d_psd=psd)
+            return self.corrected(pred, q_meas, dt)
+
+    def corrected(self, pred: EKFState, q_meas: Vector, dt: float) -> EKFState:
+        """:meth:`correct`, then (``disturbance_psd="auto"``) the density matched to the
+        innovation of a measurement the gate let through (module docstring); ``dt`` [s] the
+        prediction's interval."""
+        new = self.correct(pred, q_meas)
+        if not new.auto or new.d_psd is None or new.gate.gated:
+            return new
+        nv = self.robot.nv
+        e = self.robot.difference(pred.q, q_meas)
+        s = pred.P.diagonal()[:nv] + self.gains.meas_std**2  # Sᵢᵢ = P⁻_qq,ii + σ²
+        psd = match_density(new.d_psd, e, s, dt, window=AUTO_WINDOW, bounds=self._psd_bounds)
+        return new._replace(d_psd=psd)
 
     def predict(self, state: EKFState, dt: float, tau: Vector) -> tuple[EKFState, Vector]:
         """Prediction over ``dt`` [s] with ``tau`` held: ``(state⁻, Φ)``.
@@ -501,6 +524,8 @@ class ExtendedKalmanFilter(Observer[EKFState]):
             )
         self.robot = robot
         self._scratch_A = None  # sized by the robot
+        self._fast = _FastPath.build(self)
+        self.uses_blas = self._fast is None
 
     def output(self, state: EKFState) -> tuple[Vector, Vector]:
         return state.q, state.v
@@ -511,3 +536,103 @@ class ExtendedKalmanFilter(Observer[EKFState]):
             n = (2 if self.disturbance_psd is None else 3) * self.robot.nv
             return np.full((n, n), np.nan)
         return np.array(self._state.P)
+
+
+class _FastPath:
+    """:meth:`ExtendedKalmanFilter.step` in five compiled calls around Pinocchio's four
+    (issue 39; :mod:`pinobs.observers.fused`).  For a :class:`Robot` whose configuration
+    space is a vector space, without joint friction, ``nv ≤ KERNEL_MAX_NV``; the same
+    equations as :meth:`~ExtendedKalmanFilter.predict` then
+    :meth:`~ExtendedKalmanFilter.corrected`, to rounding (tested), which it falls back on
+    where :meth:`~ExtendedKalmanFilter.correct` takes another way (a NaN NIS, see
+    :func:`~pinobs.observers.fused.ekf_correct_loops`).  It owns its ``pin.Data``; its
+    buffers are working memory (``_scratch``: overwritten by every step, never read across
+    steps)."""
+
+    def __init__(self, ekf: ExtendedKalmanFilter) -> None:
+        robot, nv = ekf.robot, ekf.robot.nv
+        n = (2 if ekf.disturbance_psd is None else 3) * nv
+        self.calls = dynamics_calls(robot)
+        self._scratch_work = np.zeros((8, nv))  # the RK4's rows (pinobs.observers.fused)
+        # the next stage's (q, v)
+        self._scratch_point = (self._scratch_work[6], self._scratch_work[7])
+        self._scratch_A = np.zeros((n, n))
+        self._scratch_A[:nv, nv : 2 * nv] = identity(nv)
+        self._scratch_Phi = np.empty((n, n))
+        self.no_psd = np.zeros(nv)
+        self.predict = loaded(ekf_predict_kernel)
+        self.stage = loaded(rk4_stage_kernel)
+        self.correct = loaded(ekf_correct_kernel)
+
+    @classmethod
+    def build(cls, ekf: ExtendedKalmanFilter) -> _FastPath | None:
+        """The fast path of ``ekf``, or ``None`` where its robot does not qualify."""
+        r = ekf.robot
+        if not (
+            isinstance(r, Robot)
+            and r.is_vector_space
+            and not r.has_friction
+            and r.nv <= KERNEL_MAX_NV
+        ):
+            return None
+        return cls(ekf)
+
+    def step(
+        self, ekf: ExtendedKalmanFilter, state: EKFState, dt: float, q_meas: Vector | None,
+        tau: Vector,
+    ) -> EKFState:  # fmt: skip
+        """:meth:`ExtendedKalmanFilter.step` (class docstring)."""
+        d = state.d
+        if d is None:
+            tau_in = tau
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):  # a lost filter's offset
+                tau_in = tau + d
+        calls, w, (qs, vs) = self.calls, self._scratch_work, self._scratch_point
+        calls.derivatives(state.q, state.v, tau_in)
+        data = calls.data
+        psd = self.no_psd if state.d_psd is None else state.d_psd
+        P = np.empty_like(state.P)
+        accel_psd = ekf.gains.accel_psd  # (read at every step: a smoother's replay sets it)
+        self.predict(w, state.q, state.v, data.ddq, data.ddq_dq, data.ddq_dv, data.Minv,
+                     state.P, dt, accel_psd, psd, self._scratch_A, self._scratch_Phi, P)  # fmt: skip
+        aba, stage = calls.aba, self.stage
+        stage(w, aba(qs, vs, tau_in), 2, dt)  # RKMK4 (dynamics_rk4), its first stage the
+        stage(w, aba(qs, vs, tau_in), 3, dt)  # derivatives call's v̇
+        stage(w, aba(qs, vs, tau_in), 4, dt)
+        if q_meas is None:
+            with np.errstate(over="ignore", invalid="ignore"):
+                P = 0.5 * (P + P.T)
+            return state._replace(q=qs.copy(), v=vs.copy(), P=P, gate=state.gate.predicted())
+        return self.corrected(ekf, state, P, dt, q_meas)
+
+    def corrected(
+        self, ekf: ExtendedKalmanFilter, state: EKFState, P: Vector, dt: float, q_meas: Vector
+    ) -> EKFState:
+        """:meth:`ExtendedKalmanFilter.corrected` of the prediction (``P`` and the work's
+        ``(q_s, v_s)``) made by :meth:`step` from ``state``."""
+        qs, vs = self._scratch_point
+        d = state.d
+        nv = qs.shape[0]
+        e, dx, P_new = np.empty(nv), np.empty(P.shape[0]), np.empty_like(P)
+        q, v = np.empty(nv), np.empty(nv)
+        r = ekf.gains.meas_std**2
+        nis = self.correct(self._scratch_work, q_meas, P, r, e, dx, P_new, q, v)
+        if nis != nis:  # NaN: ekf.correct's other ways
+            pred = state._replace(q=qs.copy(), v=vs.copy(), P=P)
+            with np.errstate(over="ignore", invalid="ignore"):
+                return ekf.corrected(pred, q_meas, dt)
+        gate = state.gate.measured(nis, ekf._gate, nv)
+        if gate.gated:
+            with np.errstate(over="ignore", invalid="ignore"):
+                return state._replace(q=qs.copy(), v=vs.copy(), P=0.5 * (P + P.T), gate=gate)
+        d_psd = state.d_psd
+        if d is not None:
+            with np.errstate(over="ignore", invalid="ignore"):
+                d = d + dx[2 * nv :]
+                if state.auto and d_psd is not None:  # as ekf.corrected
+                    s = P.diagonal()[:nv] + r  # Sᵢᵢ = P⁻_qq,ii + σ²
+                    d_psd = match_density(
+                        d_psd, e, s, dt, window=AUTO_WINDOW, bounds=ekf._psd_bounds
+                    )
+        return EKFState(q, v, P_new, d, d_psd, gate, state.auto)

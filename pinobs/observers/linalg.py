@@ -206,12 +206,20 @@ class LazyKernel:
     bank instead of reporting a diverged estimate).  ``helpers``: functions of ``fn``'s
     module that it calls, compiled first (the same error model; ``inline="always"``: numba
     inlines them into ``fn``) and put in their place there (numba resolves a call by name in
-    ``fn``'s module when it compiles ``fn``)."""
+    ``fn``'s module when it compiles ``fn``).  ``contract``: ``a·b + c`` may be fused into one
+    FMA instruction (numba's ``fastmath={"contract"}``, nothing else of fast-math), as
+    OpenBLAS's products do: the RK4 stages of :mod:`pinobs.observers.fused` then give the
+    same bits as the stacked ``c.dot(b)`` of :func:`pinobs.model.dynamics_rk4` (tested)."""
 
     def __init__(
-        self, fn: Callable[..., Any], *warm_args: Any, helpers: tuple[Callable[..., Any], ...] = ()
+        self,
+        fn: Callable[..., Any],
+        *warm_args: Any,
+        helpers: tuple[Callable[..., Any], ...] = (),
+        contract: bool = False,
     ) -> None:
         self.fn, self.warm_args, self.helpers = fn, warm_args, helpers
+        self.fastmath: set[str] | bool = {"contract"} if contract else False
         self.compiled: Callable[..., Any] | None = None
 
     def load(self) -> None:
@@ -224,7 +232,7 @@ class LazyKernel:
                 if not hasattr(scope[helper.__name__], "py_func"):
                     compiled = numba.njit(cache=True, error_model="numpy", inline="always")
                     scope[helper.__name__] = compiled(helper)
-            kernel = numba.njit(cache=True, error_model="numpy")(self.fn)
+            kernel = numba.njit(cache=True, error_model="numpy", fastmath=self.fastmath)(self.fn)
             kernel(*self.warm_args)  # load (or compile) the float64 signature now
             self.compiled = kernel
 

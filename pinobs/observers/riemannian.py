@@ -84,7 +84,9 @@ through the Jacobi operator ``R(v̂, ·)v̂`` (:func:`jacobi_operator`, four
 ABA-derivatives calls), recomputed every ``curvature_every`` samples (default
 10: it moves with ``q̂, v̂``, not with the noise in ζ) and applied as a matrix
 in between.  Around those calls, the Python work is kept small: the
-prediction is :func:`pinobs.model.dynamics_rk4` (stacked stages) and, where
+prediction is :func:`pinobs.model.dynamics_rk4` (stacked stages; on a vector
+space without friction its stages compiled, :mod:`pinobs.observers.fused`, on
+the observer's own ``pin.Data``) and, where
 ``q ∈ Rⁿ``, the correction's arithmetic is one compiled call
 (:func:`_vector_space_correction`, numba; equal to the general
 :meth:`RiemannianObserver._correct` to rounding, tested).
@@ -130,6 +132,7 @@ import numpy as np
 
 from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
+from pinobs.model.integrators import DynamicsCalls, dynamics_calls
 from pinobs.observers.base import (
     GateState,
     Observer,
@@ -138,6 +141,7 @@ from pinobs.observers.base import (
     positive,
     register,
 )
+from pinobs.observers.fused import loaded, rk4_stage_kernel, rk4_start_kernel
 from pinobs.tolerances import JACOBI_FD_STEP
 
 __all__ = [
@@ -463,6 +467,19 @@ def _vector_space_correction(
     return q_new, v_new
 
 
+def _fast_calls(
+    robot: Robot,
+) -> tuple[DynamicsCalls, Vector, Callable[..., Any], Callable[..., Any]] | None:
+    """Pinocchio's calls on the observer's own ``pin.Data``, the work rows of the compiled
+    RK4 step and its two kernels (:mod:`pinobs.observers.fused`, issue 39): for a
+    :class:`Robot` on a vector space without joint friction; ``None`` elsewhere
+    (:func:`dynamics_rk4`)."""
+    if not (isinstance(robot, Robot) and robot.is_vector_space and not robot.has_friction):
+        return None
+    w = np.zeros((8, robot.nv))
+    return dynamics_calls(robot), w, loaded(rk4_start_kernel), loaded(rk4_stage_kernel)
+
+
 # ---------------------------------------------------------------- observer
 class _State(NamedTuple):
     q: Vector
@@ -570,8 +587,13 @@ class RiemannianObserver(Observer[_State]):
         )
         self._zero_nn = np.zeros((self.robot.nv, self.robot.nv))  # J when C = 0
         self._lie = not self.robot.is_vector_space  # brackets or unit-norm blocks to keep
-        if not self._lie:
-            _compiled_correction()  # numba imported and the kernel loaded now, not in an update
+        # numba imported and the kernel loaded now, not in an update
+        self._correction = None if self._lie else _compiled_correction()
+        self._scratch_calls = _fast_calls(self.robot)
+        # the correction's derivatives call on the observer's own data (any Robot)
+        self._scratch_derivatives = (
+            dynamics_calls(self.robot) if isinstance(self.robot, Robot) else None
+        )
         # the Riccati schedule replaces (α, β) only when they came from the Kalman rule
         self.gain_schedule = (
             gain_schedule
@@ -621,7 +643,15 @@ class RiemannianObserver(Observer[_State]):
         return _State(q0.copy(), v0.copy(), 0.0, None, 0, p0)
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
-        q, v = dynamics_rk4(self.robot, state.q, state.v, tau, dt)  # the prediction (MATH §7)
+        if self._scratch_calls is None:
+            q, v = dynamics_rk4(self.robot, state.q, state.v, tau, dt)  # the prediction (MATH §7)
+        else:  # the same RK4 step (the same bits), compiled around the four ABA calls
+            (aba, _, _), w, start, stage = self._scratch_calls
+            start(w, state.q, state.v, aba(state.q, state.v, tau), dt)
+            qs, vs = w[6], w[7]
+            for k in (2, 3, 4):
+                stage(w, aba(qs, vs, tau), k, dt)
+            q, v = qs.copy(), vs.copy()
         elapsed = state.elapsed + dt
         if q_meas is None:
             return state._replace(q=q, v=v, elapsed=elapsed, gate=state.gate.predicted())
@@ -631,7 +661,7 @@ class RiemannianObserver(Observer[_State]):
             p00, p01, p11 = state.P
             h = elapsed
             s_inn = p00 + h * (2.0 * p01 + h * p11 + self.accel_psd * h * h / 3.0) + self._sigma2
-            e = self.robot.difference(q, q_meas)
+            e = self.robot.difference(q, q_meas) if self._lie else q_meas - q  # (the same)
             gate = state.gate.measured(float(e @ e) / s_inn, self._gate, e.size)
             if gate.gated:  # the estimate is the prediction; the next correction spans the gap
                 return state._replace(q=q, v=v, elapsed=elapsed, gate=gate)
@@ -676,6 +706,17 @@ class RiemannianObserver(Observer[_State]):
             jac, age = jacobi_operator(self.robot, q, v), 0
         return jac, age
 
+    def _jacobians(self, q: Vector, x: Vector, tau: Vector) -> tuple[Vector, Vector, Vector]:
+        """:meth:`Robot.forward_dynamics_jacobians`; on a :class:`Robot`, the same call on the
+        observer's own ``pin.Data``, its arrays read in place (views, valid until the next
+        call: the Jacobi operator uses the robot's data)."""
+        calls = self._scratch_derivatives
+        if calls is None:
+            return self.robot.forward_dynamics_jacobians(q, x, tau)
+        calls.derivatives(q, x, tau)
+        data = calls.data
+        return data.ddq, data.ddq_dq, data.ddq_dv
+
     def _correct(
         self, state: _State, q: Vector, v: Vector, q_meas: Vector, tau: Vector, h: float
     ) -> _State:
@@ -686,7 +727,7 @@ class RiemannianObserver(Observer[_State]):
         r = self.robot
         delta = r.difference(q, q_meas)
         # One analytic call at (q̂⁻, δ, τ): a = S(q̂) − Γs(δ,δ), ∂a/∂q, ∂a/∂v = −2Γs(δ, ·).
-        acc, a_q, a_v = r.forward_dynamics_jacobians(q, delta, tau)
+        acc, a_q, a_v = self._jacobians(q, delta, tau)
         g_dd = -0.5 * (a_v @ delta)  # Γs(δ, δ)
         zeta = -(delta + 0.5 * g_dd)  # second-order −log_q̂(q) (MATH §4)
         k1, k2, c, P = self._correction_gains(state, q, zeta, v, h)
@@ -712,17 +753,17 @@ class RiemannianObserver(Observer[_State]):
         arithmetic is one call of :func:`_vector_space_correction`.
         """
         delta = q_meas - q
-        acc, a_q, a_v = self.robot.forward_dynamics_jacobians(q, delta, tau)
+        acc, a_q, a_v = self._jacobians(q, delta, tau)
         # ζ is needed before the kernel only by state-dependent gains
         zeta = 0.25 * a_v.dot(delta) - delta if self.gains.state_dependent else None
         k1, k2, c, P = self._correction_gains(state, q, zeta, v, h)
         jac, age = state.jacobi, state.age + 1
         if c != 0.0:
             jac, age = self._jacobi(state, q, v)
-        q_new, v_new = _compiled_correction()(
+        q_new, v_new = self._correction(  # type: ignore[misc]
             q, v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, k1, k2, h, c * h
         )
-        return state._replace(q=q_new, v=v_new, elapsed=0.0, jacobi=jac, age=age, P=P)
+        return _State(q_new, v_new, 0.0, jac, age, P, state.gate)
 
     def _gains_at(self, q: Vector, zeta: Vector | None, v: Vector) -> tuple[float, float, float]:
         g = self.gains

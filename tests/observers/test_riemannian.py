@@ -215,7 +215,6 @@ def test_update_costs_the_counted_dynamics_calls(monkeypatch) -> None:
     import pinocchio
 
     robot = pinobs.load("ur5")
-    ob = RiemannianObserver(robot, alpha=20.0, beta=400.0)
     counts = {"aba": 0, "computeABADerivatives": 0}
     for method in counts:
         original = getattr(pinocchio, method)
@@ -225,6 +224,8 @@ def test_update_costs_the_counted_dynamics_calls(monkeypatch) -> None:
             return _original(*args)
 
         monkeypatch.setattr(pinocchio, method, counted)
+    # built after the patch: the observer binds Pinocchio's calls when it is made
+    ob = RiemannianObserver(robot, alpha=20.0, beta=400.0)
     q0 = robot.neutral()
     ob.reset(0.0, q0, np.ones(robot.nv))
     for k in range(1, 21):

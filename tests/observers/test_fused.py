@@ -1,0 +1,118 @@
+"""The compiled steps of ``ekf`` and ``riemannian`` (:mod:`pinobs.observers.fused`, issue 39)
+equal the NumPy steps they replace, to rounding, and are taken where they apply."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.model import dynamics_rk4
+from pinobs.observers import make_observer
+from pinobs.observers.ekf import ExtendedKalmanFilter
+from pinobs.observers.fused import loaded, rk4_stage_kernel, rk4_start_kernel
+from pinobs.observers.riemannian import RiemannianObserver
+from pinobs.simulation import Sensor
+from tests.conftest import cached_robot
+
+
+def _run(ob: Any, res: pinobs.Result) -> tuple[np.ndarray, np.ndarray]:
+    """``ob`` over ``res`` from a start off the truth, every 7th sample missing; its
+    estimates ``(q, v)``."""
+    robot = ob.robot
+    ob.reset(res.t[0], robot.integrate(res.q[0], np.full(robot.nv, 1e-3)), None, res.tau[0])
+    qs, vs = [], []
+    for k in range(1, res.t.size):
+        missing = k % 7 == 0 or not np.all(np.isfinite(res.q_meas[k]))
+        est = ob.update(res.t[k], None if missing else res.q_meas[k], res.tau[k])
+        qs.append(est.q)
+        vs.append(est.v)
+    return np.array(qs), np.array(vs)
+
+
+def _assert_close_per_signal(a: np.ndarray, b: np.ndarray, rel: float) -> None:
+    """Each column of ``a`` within ``rel`` of the largest |value| of that column of ``b``."""
+    scale = np.abs(b).max(axis=0)
+    assert np.all(np.abs(a - b).max(axis=0) <= rel * scale), np.abs(a - b).max(axis=0) / scale
+
+
+@pytest.mark.parametrize(
+    ("robot_name", "name", "options"),
+    [
+        ("ur5", "ekf", {}),
+        ("ur5", "ekf", {"disturbance_psd": 1.0}),
+        ("ur5", "ekf", {"disturbance_psd": "auto"}),
+        ("panda", "ekf", {}),
+        ("ur5", "riemannian", {}),
+        ("panda", "riemannian", {"alpha": 20.0, "beta": 400.0}),
+    ],
+)
+def test_the_compiled_step_equals_the_numpy_step_to_1e_12(
+    robot_name: str, name: str, options: dict[str, Any]
+) -> None:
+    """A run with missing samples (and the gate on): estimates equal per signal to 1e-12 of
+    its largest value, the compiled step against the NumPy one (the same observer with its
+    compiled step switched off)."""
+    robot = cached_robot(robot_name)
+    res = pinobs.simulate(robot, [], duration=0.4, sensor=Sensor(1000.0, 1e-4), seed=4)
+    fast = make_observer(name, robot, rate=1000.0, noise_std=1e-4, **options)
+    slow = make_observer(name, robot, rate=1000.0, noise_std=1e-4, **options)
+    attr = "_fast" if name == "ekf" else "_scratch_calls"
+    assert getattr(fast, attr) is not None  # the compiled step is the one compared
+    setattr(slow, attr, None)
+    q_fast, v_fast = _run(fast, res)
+    q_slow, v_slow = _run(slow, res)
+    _assert_close_per_signal(q_fast, q_slow, 1e-12)
+    _assert_close_per_signal(v_fast, v_slow, 1e-12)
+
+
+def test_the_compiled_rk4_step_equals_dynamics_rk4() -> None:
+    """The stages of :func:`~pinobs.observers.fused.rk4_stage_loops` are those of
+    :func:`pinobs.model.dynamics_rk4` (its stacked form), to rounding (to the bit where the
+    BLAS fuses its products' multiply-adds as the kernel does: here)."""
+    robot = cached_robot("ur5")
+    start, stage = loaded(rk4_start_kernel), loaded(rk4_stage_kernel)
+    rng = np.random.default_rng(1)
+    q, v = robot.random_configuration(rng), rng.standard_normal(robot.nv)
+    tau = rng.standard_normal(robot.nv)
+    h = 1e-3
+    w = np.zeros((8, robot.nv))
+    start(w, q, v, robot.forward_dynamics(q, v, tau), h)
+    for k in (2, 3, 4):
+        stage(w, robot.forward_dynamics(w[6], w[7], tau), k, h)
+    q_ref, v_ref = dynamics_rk4(robot, q, v, tau, h)
+    np.testing.assert_allclose(w[6], q_ref, rtol=0, atol=1e-14 * np.abs(q_ref).max())
+    np.testing.assert_allclose(w[7], v_ref, rtol=0, atol=1e-14 * np.abs(v_ref).max())
+
+
+def test_the_compiled_step_is_taken_where_it_applies_and_only_there() -> None:
+    """Vector-space robots without friction (``ekf``: ``nv ≤ 12`` as well); not on Lie
+    groups; ``ekf``'s compiled step makes no BLAS call, so its update enters no thread limit."""
+    ur5, go1 = cached_robot("ur5"), cached_robot("go1")
+    ekf = ExtendedKalmanFilter(ur5, rate=1000.0, noise_std=1e-4)
+    assert ekf._fast is not None and not ekf.uses_blas
+    assert RiemannianObserver(ur5, rate=1000.0)._scratch_calls is not None
+    lie = ExtendedKalmanFilter(go1, rate=1000.0, noise_std=1e-4)
+    assert lie._fast is None and lie.uses_blas
+    assert RiemannianObserver(go1, rate=1000.0)._scratch_calls is None
+
+
+def test_the_compiled_ekf_step_reads_the_gains_a_caller_sets_after_construction() -> None:
+    """``adaptive`` and the smoother's replay set ``ekf.gains`` between steps: the compiled
+    step uses them as the NumPy step does."""
+    robot = cached_robot("ur5")
+    res = pinobs.simulate(robot, [], duration=0.2, sensor=Sensor(1000.0, 1e-4), seed=6)
+    fast = ExtendedKalmanFilter(robot, rate=1000.0, noise_std=1e-4)
+    slow = ExtendedKalmanFilter(robot, rate=1000.0, noise_std=1e-4)
+    slow._fast = None
+    out = []
+    for ob in (fast, slow):
+        ob.gains = replace(ob.gains, accel_psd=1e-2, meas_std=3e-4)
+        out.append(_run(ob, res))
+    default = _run(ExtendedKalmanFilter(robot, rate=1000.0, noise_std=1e-4), res)
+    for a, b in zip(out[0], out[1], strict=True):
+        _assert_close_per_signal(a, b, 1e-12)
+    assert np.abs(out[0][1] - default[1]).max() > 1e-6  # the new gains made a difference

@@ -96,8 +96,12 @@ def real(quick: bool) -> dict[str, dict[str, Any]]:
     frame["t"] = t[keep]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ident = pinobs.identify(  # (for its fit_end; the wrist's efforts are mostly 0)
-            tlog.robot, (t[keep], q[keep], tau[keep]), holdout=0.2, exclude=rd.TIAGO_JOINTS[5:]
+        ident = pinobs.identify(  # (for its fit_end; as real_logs.py fits TIAGo)
+            tlog.robot,
+            (t[keep], q[keep], tau[keep]),
+            holdout=0.2,
+            exclude=rd.TIAGO_JOINTS[5:],
+            max_condition=1e8,
         )
     joints = [rd.TIAGO_JOINTS.index(j) for j in rl.TIAGO_TORQUE_JOINTS]
     rows = t[keep] > ident.report["fit_end"]

@@ -60,8 +60,8 @@ def test_ur10e_payload_is_consistent_and_explains_the_loaded_torques(payload) ->
 @pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
-    reason="measured 2.59 kg (−7.8 %; 2.52 before the two-stage weighting): the torques are drvGains × current with the published "
-    "gains, and the model-free difference of the loaded and unloaded runs' torques along the "
+    reason="measured 2.59 kg (−7.8 %; 2.52 before the two-stage weighting): the torques are "
+    "drvGains × current with the published gains, and the model-free difference of the loaded and unloaded runs' torques along the "
     "same trajectory gives 2.47 kg: the torque scale, not the fit (issue 36, drives)",
 )
 def test_ur10e_payload_mass_is_within_five_percent(payload) -> None:

@@ -185,11 +185,17 @@ def test_every_text_block_is_output_checked_or_listed() -> None:
         )
 
 
+def _parses(code: str) -> bool:
+    try:
+        ast.parse(code)
+    except SyntaxError:
+        return False
+    return True
+
+
 def test_no_text_block_is_python() -> None:
-    for b in _of("text"):
-        with contextlib.suppress(SyntaxError):
-            ast.parse(b.code)
-            raise AssertionError(f"{b.id} parses as Python: fence it as python")
+    python = [b.id for b in _of("text") if _parses(b.code)]
+    assert not python, f"{python} parse as Python: fence them as python"
 
 
 # ----------------------------------------------------------------- the files blocks read
@@ -296,7 +302,9 @@ def _exec_prefix(page: str, line: str, stop: str) -> dict[str, Any]:
 # ----------------------------------------------------------------------- python blocks
 
 
-def _run_python(block: Block, folder: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def _run_python(block: Block, folder: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[str, str]:
+    """Run ``block`` as a script: ``(what it printed, what the docs show it prints)`` (the
+    printed output itself when the docs show none)."""
     reason = (_match(NEEDS, block) or (lambda: None))()
     if reason:
         pytest.skip(reason)
@@ -309,8 +317,7 @@ def _run_python(block: Block, folder: Path, monkeypatch: pytest.MonkeyPatch) -> 
         warnings.simplefilter("error", FutureWarning)
         exec(compile(block.code, block.id, "exec"), {"__name__": "__main__"})
     shown = _output_of(block)
-    if shown is not None:
-        assert out.getvalue() == shown.code, f"{block.id} prints other than {shown.id} shows"
+    return out.getvalue(), out.getvalue() if shown is None else shown.code
 
 
 def _params(lang: str, slow: bool) -> list[Any]:
@@ -332,7 +339,8 @@ def _params(lang: str, slow: bool) -> list[Any]:
 
 @pytest.mark.parametrize("block", _params("python", slow=False))
 def test_python_block_runs(block: Block, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    _run_python(block, tmp_path, monkeypatch)
+    printed, shown = _run_python(block, tmp_path, monkeypatch)
+    assert printed == shown, f"{block.id} prints other than the docs show"
 
 
 @pytest.mark.slow
@@ -340,7 +348,8 @@ def test_python_block_runs(block: Block, tmp_path: Path, monkeypatch: pytest.Mon
 def test_slow_python_block_runs(
     block: Block, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    _run_python(block, tmp_path, monkeypatch)
+    printed, shown = _run_python(block, tmp_path, monkeypatch)
+    assert printed == shown, f"{block.id} prints other than the docs show"
 
 
 def _pinobs_names(tree: ast.AST) -> list[str]:
@@ -469,7 +478,9 @@ def test_shell_block_commands_exist_and_parse(
             raise AssertionError(f"{block.id}: a command this test does not know: {argv}")
 
 
-def _run_pinobs(block: Block, folder: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def _run_pinobs(block: Block, folder: Path, monkeypatch: pytest.MonkeyPatch) -> int:
+    """Run the block's ``pinobs`` commands (each must succeed and write its ``--out``): how
+    many ran."""
     monkeypatch.chdir(folder)
     _make_fixtures(block.code, folder)
     slow = _match(SLOW, block) is not None
@@ -483,12 +494,12 @@ def _run_pinobs(block: Block, folder: Path, monkeypatch: pytest.MonkeyPatch) -> 
         if "--out" in argv:
             assert (folder / argv[argv.index("--out") + 1]).exists(), shlex.join(argv)
         ran += 1
-    assert ran, f"{block.id}: no pinobs command run"
+    return ran
 
 
 @pytest.mark.parametrize("block", _params("bash", slow=False))
 def test_shell_block_runs(block: Block, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    _run_pinobs(block, tmp_path, monkeypatch)
+    assert _run_pinobs(block, tmp_path, monkeypatch) > 0, f"{block.id}: no pinobs command run"
 
 
 @pytest.mark.slow
@@ -496,7 +507,7 @@ def test_shell_block_runs(block: Block, tmp_path: Path, monkeypatch: pytest.Monk
 def test_slow_shell_block_runs(
     block: Block, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    _run_pinobs(block, tmp_path, monkeypatch)
+    assert _run_pinobs(block, tmp_path, monkeypatch) > 0, f"{block.id}: no pinobs command run"
 
 
 def test_every_script_entry_is_a_command_of_the_docs() -> None:

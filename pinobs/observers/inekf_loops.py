@@ -243,7 +243,21 @@ def _propagate_loops(
             P1[j, i] = m
 
 
-def _correct_loops(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
+def _foot_noise(
+    R: Vector, jac: Vector, f: int, joint_var: float, kin_var: float, M: Vector
+) -> Vector:
+    """Eq. (4): foot ``f``'s measurement noise ``N_j = R̂ (J Σ_q Jᵀ + σ_k² I) R̂ᵀ`` (``M`` is
+    scratch, ``3 × 3``)."""
+    for c in range(3):
+        for d in range(3):
+            t = 0.0
+            for q in range(jac.shape[2]):
+                t += jac[f, c, q] * jac[f, d, q]
+            M[c, d] = joint_var * t + (kin_var if c == d else 0.0)
+    return R @ M @ R.T
+
+
+def _correct_loops(
     R: Vector,
     x: Vector,
     theta: Vector,
@@ -266,13 +280,7 @@ def _correct_loops(  # noqa: C901 -- numba kernel: its branches are loops over s
     HP = np.empty((m, n + 1))  # [H P, r]
     M = np.empty((3, 3))
     for f in range(k):
-        for c in range(3):
-            for d in range(3):
-                t = 0.0
-                for q in range(jac.shape[2]):
-                    t += jac[f, c, q] * jac[f, d, q]
-                M[c, d] = joint_var * t + (kin_var if c == d else 0.0)
-        N[f] = R @ M @ R.T  # eq. (4): N_j = R̂ (J Σ_q Jᵀ + σ_k² I) R̂ᵀ
+        N[f] = _foot_noise(R, jac, f, joint_var, kin_var, M)  # eq. (4): N_j
         Rh = R @ h[f]
         for c in range(3):
             a = 3 * f + c
@@ -310,13 +318,7 @@ def _foot_nis_loops(
     M = np.empty((3, 3))
     r = np.empty(3)
     for f in range(x.shape[0] - 2):
-        for c in range(3):
-            for d in range(3):
-                t = 0.0
-                for q in range(jac.shape[2]):
-                    t += jac[f, c, q] * jac[f, d, q]
-                M[c, d] = joint_var * t + (kin_var if c == d else 0.0)
-        N = R @ M @ R.T  # eq. (4): N_j
+        N = _foot_noise(R, jac, f, joint_var, kin_var, M)  # eq. (4): N_j
         Rh = R @ h[f]
         a = 9 + 3 * f
         for c in range(3):
@@ -487,6 +489,7 @@ def load_kernels() -> None:
             _update_mean,
             _solve_innovation,
             _joseph,
+            _foot_noise,
         ):
             register_jitable(helper)
         propagate_kernel.load()

@@ -124,12 +124,12 @@ class _Steps:
         feet = self.soles.copy()  # world: before step i, stance at i L, swing at (i − 1) L
         feet[stance, 0] += i * STEP_LENGTH
         feet[swing, 0] += max(i - 1, 0) * STEP_LENGTH
-        start = self._over(i - 1) if i > 0 else np.zeros(2)
+        start: Vector = self._over(i - 1) if i > 0 else np.zeros(2)
         if tau < STEP_SHIFT:
-            base = start + (self._over(i) - start) * _smooth(tau / STEP_SHIFT)
+            base: Vector = start + (self._over(i) - start) * _smooth(tau / STEP_SHIFT)
             y_left, y_right = feet[0, 1], feet[1, 1]
             left = min(max((base[1] + self.com[1] - y_right) / (y_left - y_right), 0.0), 1.0)
-            shares = np.array([left, 1.0 - left])
+            shares: Vector = np.array([left, 1.0 - left])
         else:
             base = self._over(i)
             u = (tau - STEP_SHIFT) / STEP_SWING

@@ -120,7 +120,7 @@ class LeggedRun:
     """A simulated run: one row per sample, named columns (read-only arrays).
 
     Attributes:
-        motion: ``"stand"``, ``"sway"`` or ``"trot"``.
+        motion: ``"stand"``, ``"sway"``, ``"trot"`` (go1) or ``"step"`` (TALOS).
         seed: the noise generator's seed.
         rate: sample rate [Hz].
         feet: foot frame names (``force.<foot>``, ``contact.<foot>``).

@@ -7,7 +7,8 @@ The robot (:func:`talos_mujoco_spec`), its sensors, noise and columns are those 
 
 around a reference ``q_ref`` (motions below) with a gravity feed-forward ``τ_ff``.
 
-``"step"``: quasi-static walking, a step every ``STEP_SHIFT + STEP_SWING`` s (:class:`_Steps`).
+``"step"``: quasi-static walking (a scheme chosen for being simple and stable, not a
+humanoid walking controller from the literature), a step every ``STEP_SHIFT + STEP_SWING`` s (:class:`_Steps`).
 Each step first moves the base (minimum-jerk, ``STEP_SHIFT`` s) until the robot's centre of
 mass is over the centre of the sole that will carry it (the CoM's horizontal offset from the
 base taken at the half-sitting stance), then swings the other foot (``STEP_SWING`` s) to
@@ -84,7 +85,9 @@ SOLE = (0.1, 0.065, 0.01)  # half-sizes of TALOS's sole box [m]
 STEP_LENGTH = 0.06  # [m], the swing foot lands this far ahead of the stance foot
 STEP_SHIFT, STEP_SWING = 1.5, 1.0  # [s], moving the CoM over the stance sole; the swing
 STEP_LIFT = 0.04  # [m], the swing foot's highest point
-LEVEL_GAIN = 1.0  # [rad/rad], the standing ankles' turn per radian of the base's tilt
+#: [rad/rad], the standing ankles' turn per radian of the base's tilt (0.5: TALOS falls at
+#: 4.8 s; a rate term, 0.1 s × the base's angular velocity, made the soles chatter)
+LEVEL_GAIN = 1.0
 #: d q_leg / d (hip roll, hip pitch, knee): the sole stays parallel to the base (hip yaw 0).
 _FLAT = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, -1, -1], [-1, 0, 0]], dtype=float)
 

@@ -7,7 +7,8 @@
 Writes `benchmarks/legged_truth.json` and `benchmarks/legged_truth.md`. go1 simulated by
 `pinobs.simulation.legged.simulate_legged` (MuJoCo, 500 Hz samples, 1 ms physics steps;
 its docstring has the robot, controller, motions and sensor noise), per motion and seed,
-and TALOS by `simulate_humanoid` (stand, sway; the IMU at the base), and a 60 s go1 trot.
+and TALOS by `pinobs.simulation.humanoid.simulate_humanoid` (stand, sway; and stepping
+forward, 60 s like the long trot, `--long`; the IMU at the base), and a 60 s go1 trot.
 Both filters get the same inputs: the IMU readings (`imu.*`, held between samples), the
 measured joint angles (`q.*`), contacts = measured foot normal force > `CONTACT_FORCE`;
 the same noise parameters (`GAINS`: the simulation's IMU and encoder noise; the foot slip
@@ -24,7 +25,8 @@ where the simulation puts it (the invariant EKF's prior no longer depends on it)
 Metrics (per run; the tables give the mean over seeds and the worst seed):
 * `v rms`: RMS over the run of the base's linear velocity error in the base frame [m/s]
   (Pinocchio's `v[0:3]`, all three components pooled);
-* `yaw drift`: |yaw error| at the end, per metre walked (trot) or per second (stand, sway);
+* `yaw drift`: |yaw error| at the end, per metre walked (trot, step: the base's horizontal
+  path, for the stepping mostly its side-to-side shifts) or per second (stand, sway);
 * `pos drift`: horizontal position error at the end, likewise per metre or per second;
 * `NEES/3`: mean of `eᵀ Σ⁻¹ e / 3` for that error (1 for a consistent filter; below 1:
   the filter's σ is larger than its errors; the report calls < 0.5 conservative, > 2
@@ -81,14 +83,8 @@ import pinobs
 from pinobs.model import FootKinematics, aba_call
 from pinobs.observers.inekf import InEKFGains, InEKFPrior, InvariantEKF, skew
 from pinobs.observers.qekf import QuaternionEKF
-from pinobs.simulation.legged import (
-    GO1_FEET,
-    HUMANOID_MOTIONS,
-    LEGGED_MOTIONS,
-    LeggedNoise,
-    simulate_humanoid,
-    simulate_legged,
-)
+from pinobs.simulation.humanoid import HUMANOID_MOTIONS, simulate_humanoid
+from pinobs.simulation.legged import GO1_FEET, LEGGED_MOTIONS, LeggedNoise, simulate_legged
 
 CONTACT_FORCE = 20.0  # [N]
 NOISE = LeggedNoise()
@@ -113,6 +109,8 @@ OLD_GAINS = dataclasses.replace(GAINS, contact=0.1, kinematics=5e-3)
 #: the filters' convergence tests (tests/observers/test_inekf.py, test_qekf.py)
 STARTS = {"truth": (0.0, 0.0), "perturbed": (10.0, 0.3), "large": (30.0, 1.0)}
 FILTERS = {"inekf": InvariantEKF, "qekf": QuaternionEKF}
+#: The motions whose drift is per metre walked (the others': per second).
+WALKS = ("trot", "step")
 #: The real log's IMU densities measured on its stands (per-sample σ / √400 Hz, mean of the
 #: axes: gyro 0.014, 0.015, 0.063 rad/s; accelerometer 0.13, 0.09, 0.16 m/s²) and kf's
 #: encoder σ on the log (1e-4 rad); the kinematics term is the one varied in the table.
@@ -167,7 +165,7 @@ def run_filter(
             pos_err = est.q[:2] - base_q[k, :2]
     err = np.array(err_v)
     walked = float(np.sum(np.linalg.norm(np.diff(base_q[:, :2], axis=0), axis=1)))
-    per = walked if run.motion == "trot" else float(t[-1] - t[0])
+    per = walked if run.motion in WALKS else float(t[-1] - t[0])
     return {
         "v_rms": float(np.sqrt(np.mean(err**2))),
         "yaw_drift": yaw_err / per,
@@ -192,7 +190,7 @@ def _table(section: dict[str, Any]) -> list[str]:
         "|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for motion, per_filter in section.items():
-        unit = "/m" if motion.startswith("trot") else "/s"
+        unit = "/m" if any(w in motion for w in WALKS) else "/s"
         for name, runs in per_filter.items():
             v, yaw, pos, ins, nees, walked = (
                 np.array([r[k] for r in runs])
@@ -270,8 +268,8 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
         f"{' '.join(map(str, args.long_seeds))}` on {m['date']} in "
         f"{' + '.join(f'{v:.0f} s ({k})' for k, v in report['seconds'].items())} "
         f"(MuJoCo {m['mujoco']}); conditions in the script's docstring. Mean over the seeds "
-        "(worst seed in brackets). Drift is per metre walked for the trot, per second for "
-        "stand and sway. The gains were chosen on the trot, seed 0 (`GAINS`' comment): the "
+        "(worst seed in brackets). Drift is per metre walked for the trot and TALOS's "
+        "stepping, per second for stand and sway. The gains were chosen on the trot, seed 0 (`GAINS`' comment): the "
         "stand and sway rows are held out (seeds change only the sensor noise; the motion is "
         "the same).",
         "",
@@ -285,7 +283,8 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
     if report["humanoid"]:
         md += [
             "TALOS (`simulate_humanoid`: 32 joints, flat soles, IMU at the base), same gains "
-            "(held out: chosen on go1's trot), drift per second:",
+            "(held out: chosen on go1's trot), drift per second (stand, sway) or per metre "
+            "walked (step: the base's horizontal path, side-to-side shifts included):",
             "",
             *_table(report["humanoid"]),
             "",
@@ -521,6 +520,13 @@ def main() -> None:
         "the others are kept from legged_truth.json",
     )
     parser.add_argument("--merge", action="store_true", help="keep the sections not run")
+    parser.add_argument(
+        "--humanoid-motions",
+        nargs="+",
+        choices=HUMANOID_MOTIONS,
+        default=list(HUMANOID_MOTIONS),
+        help="TALOS's motions to run (the humanoid section; the others' rows are kept)",
+    )
     parser.add_argument("--quick", action="store_true", help="5 s, seed 0, no files written")
     args = parser.parse_args()
     if args.quick:
@@ -546,12 +552,7 @@ def main() -> None:
         run = simulate_legged("trot", args.duration, seed=args.seeds[0], noise=NOISE, robot=robot)
         report["cost"] = measure_cost(run, robot)
     if "humanoid" in args.sections:
-        report["humanoid"] = {}
-        talos = pinobs.load("talos")
-        for motion in HUMANOID_MOTIONS:
-            for seed in args.seeds:
-                run = simulate_humanoid(motion, args.duration, seed=seed, noise=NOISE, robot=talos)
-                _runs(report, "humanoid", f"TALOS {motion}", run, talos, GAINS)
+        _humanoid_section(report, args)
     if "real" in args.sections:
         report["real"] = real_log_nis()
     if "slip" in args.sections:
@@ -559,7 +560,7 @@ def main() -> None:
     report.setdefault("seconds", {})
     if not isinstance(report["seconds"], dict):
         report["seconds"] = {"go1": report["seconds"]}
-    report["seconds"][" + ".join(args.sections)] = time.time() - start
+    report["seconds"][_ran(args)] = time.time() - start
     report["machine"] = {
         "date": time.strftime("%Y-%m-%d"),
         "python": platform.python_version(),
@@ -581,6 +582,37 @@ def main() -> None:
     if not args.quick:
         (here / "legged_truth.json").write_text(json.dumps(report, indent=1) + "\n")
         (here / "legged_truth.md").write_text(md)
+
+
+def _ran(args: argparse.Namespace) -> str:
+    """The sections run, for ``report["seconds"]`` (with TALOS's motions when not all)."""
+    ran = " + ".join(args.sections)
+    if "humanoid" in args.sections and args.humanoid_motions != list(HUMANOID_MOTIONS):
+        ran = ran.replace("humanoid", "humanoid " + " ".join(args.humanoid_motions))
+    return ran
+
+
+def _humanoid_section(report: dict[str, Any], args: argparse.Namespace) -> None:
+    """TALOS's rows: stand and sway for ``--duration`` over ``--seeds``; the stepping for
+    ``--long`` s over ``--long-seeds`` (``--duration`` and ``--seeds`` without ``--long``);
+    ``--humanoid-motions`` keeps the other motions' rows (from the JSON with ``--merge``)."""
+    section = report.setdefault("humanoid", {})
+    for key in [k for k in section if k.split(",")[0].split()[1] in args.humanoid_motions]:
+        del section[key]
+    talos = pinobs.load("talos")
+    for motion in args.humanoid_motions:
+        long = motion == "step" and args.long > 0
+        duration, label = (
+            (args.long, f"TALOS step {args.long:g} s")
+            if long
+            else (
+                args.duration,
+                f"TALOS {motion}",
+            )
+        )
+        for seed in args.long_seeds if long else args.seeds:
+            run = simulate_humanoid(motion, duration, seed=seed, noise=NOISE, robot=talos)
+            _runs(report, "humanoid", label, run, talos, GAINS)
 
 
 def _go1_sections(report: dict[str, Any], args: argparse.Namespace) -> None:

@@ -1,5 +1,6 @@
-"""Legged robots in MuJoCo as the truth for base estimation: go1 standing, swaying, trotting;
-TALOS standing and swaying (:func:`simulate_humanoid`).
+"""Legged robots in MuJoCo as the truth for base estimation: go1 standing, swaying, trotting
+(TALOS standing, swaying and stepping: :mod:`pinobs.simulation.humanoid`, whose names are
+also importable from here).
 
 The robot is example-robot-data's go1 URDF compiled by MuJoCo (its ``<visual>``
 meshes, ``.dae`` that MuJoCo cannot read, and ``<transmission>`` tags removed;
@@ -62,15 +63,11 @@ from pinobs.model.loading import resolve_source
 __all__ = [
     "ARMATURE",
     "GO1_FEET",
-    "HUMANOID_MOTIONS",
     "LEGGED_MOTIONS",
-    "TALOS_FEET",
     "LeggedNoise",
     "LeggedRun",
     "go1_mujoco_spec",
-    "simulate_humanoid",
     "simulate_legged",
-    "talos_mujoco_spec",
 ]
 
 Vector = NDArray[np.floating[Any]]
@@ -85,23 +82,6 @@ FOOT_RADIUS = 0.02  # [m], go1.urdf's foot collision sphere
 STANCE = (0.0, 0.8, -1.6)  # hip, thigh, calf [rad]
 KP, KD = 80.0, 2.0  # [N·m/rad], [N·m·s/rad]
 SETTLE = 1.0  # [s] simulated before the first sample (unrecorded)
-#: The motions :func:`simulate_humanoid` can make.
-HUMANOID_MOTIONS = ("stand", "sway")
-#: TALOS's sole frames (left, right), in Pinocchio's joint order.
-TALOS_FEET = ("left_sole_link", "right_sole_link")
-_TALOS_LEG = (0.0, 0.0, -0.411354, 0.859395, -0.448041, -0.001708)  # half-sitting [rad]
-_TALOS_ARM = (0.25847, 0.173046, -0.0002, -0.525366, 0.0, 0.0, 0.1, -0.005)
-#: TALOS's half-sitting configuration (its SRDF's), joints in Pinocchio's order [rad].
-TALOS_STANCE = (
-    _TALOS_LEG
-    + _TALOS_LEG
-    + (0.0, 0.006761)
-    + _TALOS_ARM
-    + tuple(-a if i < 3 else a for i, a in enumerate(_TALOS_ARM))
-    + (0.0, 0.0)
-)
-TALOS_KP, TALOS_KD = 2000.0, 20.0  # [N·m/rad], [N·m·s/rad]
-SOLE = (0.1, 0.065, 0.01)  # half-sizes of TALOS's sole box [m]
 
 
 @dataclass(frozen=True)
@@ -140,7 +120,7 @@ class LeggedRun:
     """A simulated run: one row per sample, named columns (read-only arrays).
 
     Attributes:
-        motion: ``"stand"``, ``"sway"`` or ``"trot"``.
+        motion: ``"stand"``, ``"sway"``, ``"trot"`` (go1) or ``"step"`` (TALOS).
         seed: the noise generator's seed.
         rate: sample rate [Hz].
         feet: foot frame names (``force.<foot>``, ``contact.<foot>``).
@@ -264,7 +244,7 @@ def go1_mujoco_spec() -> Any:
     return spec
 
 
-def _add_imu_and_floor(spec: Any, imu_body: str) -> None:
+def add_imu_and_floor(spec: Any, imu_body: str) -> None:
     import mujoco
 
     spec.worldbody.add_geom(
@@ -281,44 +261,6 @@ def _add_imu_and_floor(spec: Any, imu_body: str) -> None:
         ("acc", mujoco.mjtSensor.mjSENS_ACCELEROMETER),
     ):
         spec.add_sensor(name=name, type=kind, objtype=mujoco.mjtObj.mjOBJ_SITE, objname="imu")
-
-
-def talos_mujoco_spec() -> Any:
-    """TALOS (example-robot-data's ``talos_reduced.urdf``, 32 joints) compiled by MuJoCo:
-    every ``<visual>``/``<collision>`` removed (meshes), a box sole (half-sizes ``SOLE``,
-    friction 1) under each of :data:`TALOS_FEET`, the only geoms that touch the floor; a
-    free joint on ``base_link``, an unlimited torque motor and armature 0.05 kg·m² per
-    joint, an IMU site at ``base_link``'s origin (TALOS's ``imu_link`` moves with the torso).
-    Returns the ``mujoco.MjSpec``."""
-    import mujoco
-
-    root = ET.parse(resolve_source("talos")[0]).getroot()
-    for link in root.iter("link"):
-        for tag in ("visual", "collision"):
-            for element in link.findall(tag):
-                link.remove(element)
-    for unused in root.findall("transmission") + root.findall("gazebo"):
-        root.remove(unused)
-    extra = ET.SubElement(root, "mujoco")
-    ET.SubElement(extra, "compiler", discardvisual="true", fusestatic="false", angle="radian")
-    spec = mujoco.MjSpec.from_string(ET.tostring(root, encoding="unicode"))
-    spec.option.timestep = 1e-3
-    spec.body("base_link").add_freejoint(name="root")
-    for foot in TALOS_FEET:  # the sole frame is the sole's centre, on the floor
-        spec.body(foot).add_geom(
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=list(SOLE),
-            pos=[0.0, 0.0, SOLE[2]],
-            contype=1,
-            conaffinity=0,
-            condim=3,
-        )
-    _add_imu_and_floor(spec, "base_link")
-    for joint in spec.joints:
-        if joint.type == mujoco.mjtJoint.mjJNT_HINGE:
-            joint.armature = 0.05
-            spec.add_actuator(name=joint.name, target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-    return spec
 
 
 # --------------------------------------------------------------- references
@@ -419,7 +361,7 @@ def _inverse_kinematics(legs: FootKinematics, targets: Vector, q0: Vector) -> Ve
 
 
 # --------------------------------------------------------------- simulation
-def _check_arguments(
+def check_arguments(
     motion: str, motions: tuple[str, ...], duration: float, rate: float, substeps: int
 ) -> None:
     if motion not in motions:
@@ -458,7 +400,7 @@ def simulate_legged(
         SimulationFailed: the robot fell (base below 12 cm) or MuJoCo's state became
             non-finite.
     """
-    _check_arguments(motion, LEGGED_MOTIONS, duration, rate, substeps)
+    check_arguments(motion, LEGGED_MOTIONS, duration, rate, substeps)
     robot = robot if robot is not None else load("go1")
     legs = FootKinematics(robot, GO1_FEET)
     spec = go1_mujoco_spec()
@@ -472,7 +414,7 @@ def simulate_legged(
     first = round(-SETTLE * rate)
     memory = {"q_ref": stance.copy(), "q_prev": stance.copy()}
 
-    def reference(k: int, t: float) -> tuple[Vector, Vector, Vector]:
+    def reference(k: int, t: float, _: Any) -> tuple[Vector, Vector, Vector]:
         targets, down, up = gait.feet(t)
         q_ref = _inverse_kinematics(legs, targets, memory["q_ref"])
         # the weight shared by the feet meant to be down: τ = −Σ J_jᵀ f_j (virtual model)
@@ -483,72 +425,13 @@ def simulate_legged(
         memory["q_ref"], memory["q_prev"] = q_ref, q_ref.copy()
         return q_ref, dq_ref, tau_ff
 
-    machine = _Machine("go1", mj, robot, GO1_FEET, stance, height, KP, KD, 0.12)
-    return _record(machine, motion, reference, duration, seed, rate, substeps, noise)
-
-
-def simulate_humanoid(
-    motion: str,
-    duration: float,
-    *,
-    seed: int = 0,
-    rate: float = 500.0,
-    substeps: int = 2,
-    noise: LeggedNoise | None = None,
-    robot: Robot | None = None,
-) -> LeggedRun:
-    """Simulate TALOS (:func:`talos_mujoco_spec`) standing on both feet in MuJoCo, sampled as
-    :func:`simulate_legged` samples go1 (same columns, sensors and noise).
-
-    Controller: the joint PD law of the module docstring (``TALOS_KP``, ``TALOS_KD``, no
-    torque limit) around the half-sitting :data:`TALOS_STANCE`, with the feed-forward
-    ``τ_ff`` = the arms', torso's and head's gravity torques at the reference
-    (``pin.computeGeneralizedGravity``) and, for the legs, half the weight on each sole
-    (``−Σ_j J_jᵀ (m g / 2) e_z``).  ``"stand"`` holds the stance; ``"sway"`` moves both
-    legs alike, the feet staying flat: a squat (hip pitch −a, knee +2a, ankle pitch −a,
-    a = 0.08 sin(2π 0.5 t) rad: the base ±2.5 cm up and down) and a side sway (hip roll +b,
-    ankle roll −b, b = 0.05 sin(2π 0.3 t) rad: ±5 cm sideways), ramped in over 0.5 s.
-
-    Raises:
-        UnknownNameError: an unknown motion (one of :data:`HUMANOID_MOTIONS`).
-        ConfigurationError: a non-positive duration, rate or substeps.
-        SimulationFailed: it fell (base below 0.6 m) or MuJoCo's state became non-finite.
-    """
-    _check_arguments(motion, HUMANOID_MOTIONS, duration, rate, substeps)
-    robot = robot if robot is not None else load("talos")
-    legs = FootKinematics(robot, TALOS_FEET)
-    spec = talos_mujoco_spec()
-    spec.option.timestep = 1.0 / (rate * substeps)
-    mj = spec.compile()
-    stance = np.array(TALOS_STANCE)
-    weight = 9.81 * float(np.sum(mj.body_mass))  # [N]
-    gravity = robot.gravity(np.concatenate([[0, 0, 0, 0, 0, 0, 1.0], stance]))[6:]
-    height = -float(legs.positions(stance)[:, 2].mean()) + 1e-3
-    first = round(-SETTLE * rate)
-    memory = {"q_prev": stance.copy()}
-
-    def reference(k: int, t: float) -> tuple[Vector, Vector, Vector]:
-        q_ref = stance.copy()
-        if motion == "sway" and t > 0:
-            s = min(1.0, t / 0.5)
-            a = 0.08 * s * math.sin(2 * math.pi * 0.5 * t)  # squat
-            b = 0.05 * s * math.sin(2 * math.pi * 0.3 * t)  # side sway
-            for o in (0, 6):  # left leg, right leg: hip yaw, roll, pitch, knee, ankle pitch, roll
-                q_ref[o + 1 : o + 6] += (b, -a, 2 * a, -a, -b)
-        _, jac = legs.positions_and_jacobians(q_ref)
-        tau_ff = gravity.copy()
-        tau_ff[:12] = -0.5 * weight * np.einsum("jki,k->i", jac, (0.0, 0.0, 1.0))[:12]
-        dq_ref = (q_ref - memory["q_prev"]) * rate if k > first else np.zeros(stance.size)
-        memory["q_prev"] = q_ref
-        return q_ref, dq_ref, tau_ff
-
-    machine = _Machine("talos", mj, robot, TALOS_FEET, stance, height, TALOS_KP, TALOS_KD, 0.6)
-    return _record(machine, motion, reference, duration, seed, rate, substeps, noise)
+    machine = Machine("go1", mj, robot, GO1_FEET, stance, height, KP, KD, 0.12)
+    return record_run(machine, motion, reference, duration, seed, rate, substeps, noise)
 
 
 @dataclass(frozen=True)
-class _Machine:
-    """A compiled MuJoCo model and what :func:`_record` needs of it."""
+class Machine:
+    """A compiled MuJoCo model and what :func:`record_run` needs of it."""
 
     name: str
     mj: Any
@@ -563,7 +446,7 @@ class _Machine:
 
 @dataclass(frozen=True)
 class _Wiring:
-    """Where :func:`_record` reads and drives a compiled MuJoCo model (indices into its
+    """Where :func:`record_run` reads and drives a compiled MuJoCo model (indices into its
     arrays); the joints in Pinocchio's order."""
 
     joints: tuple[str, ...]
@@ -593,8 +476,8 @@ class _Wiring:
         )
 
 
-def _record(
-    machine: _Machine,
+def record_run(
+    machine: Machine,
     motion: str,
     reference: Any,
     duration: float,
@@ -603,7 +486,8 @@ def _record(
     substeps: int,
     noise: LeggedNoise | None,
 ) -> LeggedRun:
-    """Run ``reference(k, t) -> (q_ref, q̇_ref, τ_ff)`` through the joint PD law on ``machine``
+    """Run ``reference(k, t, data) -> (q_ref, q̇_ref, τ_ff)`` (``data``: MuJoCo's state at
+    ``t``, to read, not to change) through the joint PD law on ``machine``
     and sample the sensors and the truth (module docstring)."""
     import mujoco
 
@@ -626,7 +510,7 @@ def _record(
     rows: list[Vector] = []
     for k in range(-settle, n):
         t = k / rate
-        ref = reference(k, t)
+        ref = reference(k, t, data)
         qpos, qvel = data.qpos.copy(), data.qvel.copy()
         imu, forces, qacc_mean = _advance(mujoco, machine, data, wiring, ref, substeps)
         if not np.all(np.isfinite(data.qpos)):
@@ -656,7 +540,7 @@ def _record(
 
 def _advance(
     mujoco: Any,
-    machine: _Machine,
+    machine: Machine,
     data: Any,
     wiring: _Wiring,
     ref: tuple[Vector, Vector, Vector],
@@ -773,3 +657,19 @@ def _foot_forces(mujoco: Any, mj: Any, data: Any, feet: list[int], floor: int) -
             mujoco.mj_contactForce(mj, data, i, wrench)
             out[feet.index(body)] += wrench[0]
     return out
+
+
+#: The humanoid's names, moved to :mod:`pinobs.simulation.humanoid`, still importable from here.
+_HUMANOID_NAMES = frozenset(
+    ("HUMANOID_MOTIONS", "TALOS_FEET", "TALOS_STANCE", "simulate_humanoid", "talos_mujoco_spec")
+)
+
+
+def __getattr__(name: str) -> Any:
+    """``from pinobs.simulation.legged import simulate_humanoid`` (PEP 562): the humanoid's
+    names, from :mod:`pinobs.simulation.humanoid` (imported on first use: it imports this)."""
+    if name in _HUMANOID_NAMES:
+        from pinobs.simulation import humanoid
+
+        return getattr(humanoid, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -112,6 +112,19 @@ rejected foot does not correct the base: it is removed (its marginal) and re-anc
 where the legs now put it, by (6), as a foot that lands (its next innovation starts from
 zero, so a run of rejections cannot leave the filter without feet).                    (8)
 
+The foot's noise.  ``Σ_q`` in (4) is ``σ_q² I`` (``gains.joint``) or, with ``joint_std``,
+``diag(σ_q,i²)`` per joint: the form of Hartley et al.'s forward-kinematics noise (SEROW's
+contact position noise is likewise ``J`` of ``joint_position_variance``); ``σ_k`` is then a
+floor for model error.  With ``slip_speed`` the contact density covers the foot's predicted
+motion: the model says ``ḋ_j = 0``, the foot's velocity ``ṗ̂_j`` (:meth:`foot_velocities`,
+at the previous update) says by how much that fails, and its displacement over the step,
+``|ṗ̂_j| h``, is taken as the σ of that step of the foot's random walk::
+
+    Q_c,dj = (σ_c² + |ṗ̂_j|² h) I                                                        (9)
+
+(standing, ``ṗ̂_j`` is the joint velocities' noise; at lift-off and touch-down it is large:
+one white ``σ_c`` cannot fit both).
+
 Prior (at ``reset``, before any foot is added).  :class:`InEKFPrior` gives independent
 errors of the attitude ``ξ_R``, of the velocity in the base frame ``v_b`` (as ``reset``
 takes it), and of the world position: ``ξ_v = R̂ (v̂_b − v_b)`` exactly, and to first
@@ -416,9 +429,15 @@ class InvariantEKF:
         foot_gate: the outlier probability ``p`` of the foot gate (module docstring, eq. 8):
             a foot whose own NIS exceeds ``χ²₃(1 − p)`` is re-anchored instead of measured;
             ``None`` (default): every foot in contact is measured.
+        joint_std: the encoders' σ per joint [rad] (``nv − 6`` entries): eq. (4)'s ``Σ_q``,
+            instead of ``gains.joint`` for every joint.
+        slip_speed: eq. (9), each foot's contact noise from its speed predicted at the
+            previous update (updates without ``joint_velocities``: ``gains.contact`` alone).
 
     Raises:
-        GainError: an ``imu_hold`` that is neither; a ``foot_gate`` not in (0, 0.5).
+        GainError: an ``imu_hold`` that is neither; a ``foot_gate`` not in (0, 0.5); a
+            negative ``joint_std`` (non-finite: NonFiniteError), or one all 0 with
+            ``gains.kinematics`` 0.
         UnknownNameError: a foot frame that is not in the model (names the frames).
         UnsupportedRobotError: a robot without a free-flyer root joint.
     """

@@ -346,7 +346,7 @@ def check_joint_std(joint_std: ArrayLike, n: int) -> Vector:
     bad = ~np.isfinite(out) | (out < 0)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise GainError(f"joint_std[{k}] = {out[k]!r}: each joint's encoder σ must be a finite number ≥ 0 [rad]")
+        raise GainError(f"joint_std[{k}] = {float(out[k])!r}: each joint's encoder σ must be a finite number ≥ 0 [rad]")
     out.setflags(write=False)
     return out
 

@@ -204,13 +204,14 @@ def legged_run(
     if imu_frame is None and robot.model.existFrame(IMU_FRAME):
         imu_frame = IMU_FRAME
     prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
+    sigma_q = _joint_std(robot, log, joint_std)
     filt = InvariantEKF(
         robot,
         log.feet,
         gains=LEGGED_GAINS if gains is None else gains,
         imu_frame=imu_frame,
         foot_gate=foot_gate,
-        joint_std=_joint_std(robot, log, joint_std),
+        joint_std=sigma_q,
         slip_speed=slip_speed,
     )
     joints = _joint_velocities(robot, log)
@@ -226,6 +227,12 @@ def legged_run(
     )
     previous: float | None = None
     said: list[str] = list(joints.warnings)
+    if isinstance(joint_std, str):  # (measured: said, as kf's σ is)
+        sigma_q = np.asarray(sigma_q, dtype=float)
+        said.append(
+            f"inekf: the encoders' σ per joint measured on the log (first second): "
+            f"{np.min(sigma_q):.2g}-{np.max(sigma_q):.2g} rad; pass joint_std to override"
+        )
     for k in range(n):
         if not usable[k] or (previous is not None and log.t[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
@@ -377,4 +384,11 @@ def _joint_velocities(robot: Robot, log: Log) -> LogRun:
     return replace(run, warnings=[*run.warnings, *(str(w.message) for w in caught)])
 
 
-__all__ = ["CONTACT_MODES", "IMU_FRAME", "LEGGED_GAINS", "LeggedDetail", "estimate_legged", "legged_run"]
+__all__ = [
+    "CONTACT_MODES",
+    "IMU_FRAME",
+    "LEGGED_GAINS",
+    "LeggedDetail",
+    "estimate_legged",
+    "legged_run",
+]

@@ -51,8 +51,6 @@ from pinobs.observers.results import Consistency
 from pinobs.tolerances import NO_CONTACT_WARN_TIME, QUATERNION_NORM_TOL, TIME_EPS
 
 __all__ = [
-    "check_joint_std",
-    "slip_densities",
     "ContactKinematics",
     "InEKFEstimate",
     "InEKFGains",
@@ -62,6 +60,7 @@ __all__ = [
     "ResetInputs",
     "UpdateInputs",
     "check_contacts",
+    "check_joint_std",
     "check_time",
     "contact_kinematics",
     "foot_noise",
@@ -70,6 +69,7 @@ __all__ = [
     "remove_feet",
     "replace_state",
     "rotation_to_quaternion",
+    "slip_densities",
     "stance_consistency",
 ]
 
@@ -346,7 +346,9 @@ def check_joint_std(joint_std: ArrayLike, n: int) -> Vector:
     bad = ~np.isfinite(out) | (out < 0)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise GainError(f"joint_std[{k}] = {float(out[k])!r}: each joint's encoder σ must be a finite number ≥ 0 [rad]")
+        raise GainError(
+            f"joint_std[{k}] = {float(out[k])!r}: each joint's encoder σ must be a finite number ≥ 0 [rad]"
+        )
     out.setflags(write=False)
     return out
 

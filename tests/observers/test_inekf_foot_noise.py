@@ -22,7 +22,7 @@ def test_foot_noise_is_the_encoders_covariance_through_finite_difference_jacobia
     and a Monte Carlo covariance of the positions at encoder noise σ (linear at this σ)."""
     legs = Go1Legs("imu_link")
     q = legs.stance + 0.1 * np.sin(np.arange(12))
-    h, jac = legs.positions_and_jacobians(q)
+    _, jac = legs.positions_and_jacobians(q)
     gains = InEKFGains(kinematics=2e-5)
     eps = 1e-6
     fd = np.zeros((4, 3, 12))
@@ -134,7 +134,7 @@ def test_a_foot_that_moves_raises_its_contact_noise() -> None:
         out.append((speed, ekf.state.P))
     (s0, P0), (s1, P1) = out
     assert s0.max() < 1e-12 and s1[0] > 0.3 and np.all(s1[1:] < 1e-12)
-    grow = [np.trace(P1[b:b + 3, b:b + 3] - P0[b:b + 3, b:b + 3]) for b in (9, 12, 15, 18)]
+    grow = [np.trace(P1[b : b + 3, b : b + 3] - P0[b : b + 3, b : b + 3]) for b in (9, 12, 15, 18)]
     assert grow[0] > 1e-8  # measured 8.0e-8 (the update takes most of the 6.6e-6 added)
     assert max(abs(g) for g in grow[1:]) < 0.5 * grow[0]  # measured 3.4e-8
 

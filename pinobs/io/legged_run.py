@@ -204,7 +204,7 @@ def legged_run(
     if imu_frame is None and robot.model.existFrame(IMU_FRAME):
         imu_frame = IMU_FRAME
     prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
-    sigma_q = _joint_std(robot, log, joint_std)
+    sigma_q, said_q = _joint_std(robot, log, joint_std)
     filt = InvariantEKF(
         robot,
         log.feet,
@@ -226,13 +226,7 @@ def legged_run(
         & np.all(np.isfinite(log.q[:, 7:]), axis=1)
     )
     previous: float | None = None
-    said: list[str] = list(joints.warnings)
-    if isinstance(joint_std, str):  # (measured: said, as kf's σ is)
-        sigma_q = np.asarray(sigma_q, dtype=float)
-        said.append(
-            f"inekf: the encoders' σ per joint measured on the log (first second): "
-            f"{np.min(sigma_q):.2g}-{np.max(sigma_q):.2g} rad; pass joint_std to override"
-        )
+    said: list[str] = [*joints.warnings, *said_q]
     for k in range(n):
         if not usable[k] or (previous is not None and log.t[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
@@ -347,12 +341,14 @@ def _joints_robot(robot: Robot) -> Robot:
     return load(robot.model, lock=[names[1]])
 
 
-def _joint_std(robot: Robot, log: Log, joint_std: ArrayLike | str | None) -> ArrayLike | None:
-    """``joint_std`` for the filter: ``"log"`` → σ̂ per joint of the log's joint columns
-    (:func:`~pinobs.observers.noise.joint_noise_std`: third differences over the first
-    second, at least the printed positions' rounding)."""
+def _joint_std(
+    robot: Robot, log: Log, joint_std: ArrayLike | str | None
+) -> tuple[ArrayLike | None, list[str]]:
+    """``joint_std`` for the filter and what to say of it: ``"log"`` → σ̂ per joint of the
+    log's joint columns (:func:`~pinobs.observers.noise.joint_noise_std`: third differences
+    over the first second, at least the printed positions' rounding), said as kf's σ is."""
     if not isinstance(joint_std, str):
-        return joint_std
+        return joint_std, []
     if joint_std != "log":
         raise OptionError(f"joint_std={joint_std!r}: give 'log', σ per joint [rad] or None")
     found = joint_noise_std(log.t, log.q[:, 7:], _joints_robot(robot))
@@ -361,7 +357,11 @@ def _joint_std(robot: Robot, log: Log, joint_std: ArrayLike | str | None) -> Arr
             "joint_std='log': the log has too few finite, evenly spaced rows to measure the "
             "encoders' σ from; give joint_std (σ per joint [rad]) or None (gains.joint)"
         )
-    return found[0]
+    sigma = found[0]
+    return sigma, [
+        f"inekf: the encoders' σ per joint measured on the log (first second): "
+        f"{np.min(sigma):.2g}-{np.max(sigma):.2g} rad; pass joint_std to override"
+    ]
 
 
 def _joint_velocities(robot: Robot, log: Log) -> LogRun:

@@ -19,6 +19,10 @@ angular velocity, the joints').  So the writers, the playback and the CLI
   :class:`~pinobs.observers.contacts.ContactProbability`), row by row.
 * **Slip**: ``foot_gate=p`` gates each foot by its own innovation (the filter's
   ``foot_gate``): a foot that slides while flagged in contact is re-anchored, not measured.
+* **Foot noise** (defaults): the filter's ``joint_std`` measured on the log's joint columns
+  (:func:`~pinobs.observers.noise.joint_noise_std`) and its ``slip_speed`` (the contact
+  noise from each foot's predicted speed), with :data:`LEGGED_GAINS`; ``joint_std=None,
+  slip_speed=False`` is the white foot noise of ``gains`` alone.
 * **Consistency**: ``run.consistency`` is the feet's NIS over the stance rows
   (:func:`~pinobs.observers.legs.stance_consistency`: mean NIS per degree of freedom and
   the fraction of rows inside their 95 % χ² interval).

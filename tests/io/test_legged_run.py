@@ -156,7 +156,7 @@ def test_contacts_from_the_probability_agree_with_mujocos_and_track_the_trot(tro
         legged_run(go1, log, contacts="switches")
 
 
-@pytest.mark.slow  # two runs of the 25 s log: ~50 s
+@pytest.mark.slow  # four runs of the 25 s log: ~40 s
 def test_the_real_go1_logs_stance_nis_says_what_is_wrong_with_the_feet() -> None:
     """Issue 38's "NIS in its expected range during stance" on SEROW's Go1 log, as measured
     (each stance row's NIS against its own 95 % χ² interval, dof = 3 × feet measured).

@@ -51,12 +51,15 @@ every axis and consistent (NEES/3 0.5-2); an update ≤ 30 `pin.aba` on go1.
     python benchmarks/legged_truth.py --sections real --merge    # the real Go1 log alone
 
 `real`: SEROW's Go1 log (no truth; `benchmarks/real_data.py`) through
-`pinobs.io.legged_run.legged_run` with `GAINS`, contacts from the force threshold or
-SEROW's probability, with and without the foot gate: the feet's NIS over the stance rows
+`pinobs.io.legged_run.legged_run` with its defaults (`LEGGED_GAINS`, the encoders' σ from the
+log, `slip_speed`: chosen on MuJoCo, the log held out) and with the white foot noise of
+before (`GAINS`), contacts from the force threshold or SEROW's probability, with and
+without the foot gate: the feet's NIS over the stance rows
 (`pinobs.observers.legs.stance_consistency`: NIS per degree of freedom, expected 1, and the
 share of stance rows inside their own 95 % χ² interval, expected 95 %), and the base speed
 where every joint moves slower than 0.05 rad/s (the stands); and, with `LOG_GAINS` (the IMU
-and encoder noise measured on the log's stands), the kinematics term varied.
+and encoder noise measured on the log's stands), the kinematics term varied; then the same
+NIS on the MuJoCo go1 (`simulated_nis`), where the defaults were chosen.
 
 `slip`: go1 standing in MuJoCo, one foot made to slide while its force keeps it in contact
 (`SlidingLegs`), with and without the foot gate: the base velocity error (`slip_table`).
@@ -325,6 +328,7 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
         md.append("")
     md += _slip_lines(report.get("slip") or {})
     md += _real_table(report.get("real") or {})
+    md += _sim_nis_lines(report.get("real_sim") or {})
     return "\n".join(md)
 
 
@@ -346,20 +350,24 @@ def real_log_nis() -> dict[str, Any]:
         warnings.simplefilter("ignore")  # the note that the log has no base pose
         log = read_log(real.serow_go1_frame(root / real.SEROW_GO1), go1)
     out: dict[str, Any] = {}
-    rows = [
-        (f"{c}, gate {g}", GAINS, c, g) for c in ("force", "probability") for g in (None, FOOT_GATE)
-    ]
+    modes = [(c, g) for c in ("force", "probability") for g in (None, FOOT_GATE)]
+    white = {"joint_std": None, "slip_speed": False}  # the foot noise before (white)
+    rows = [(f"defaults, {c}, gate {g}", None, c, g, {}) for c, g in modes]
+    rows += [(f"white, {c}, gate {g}", GAINS, c, g, white) for c, g in modes]
     rows += [
         (
-            f"probability, log's noise, kinematics {1e3 * k:g} mm",
+            f"white, probability, log's noise, kinematics {1e3 * k:g} mm",
             dataclasses.replace(LOG_GAINS, kinematics=k),
             "probability",
             None,
+            white,
         )
         for k in (1e-3, 3e-4, 1e-4)
     ]
-    for name, gains, contacts, gate in rows:
-        run, flags, nis, dof = legged_run(go1, log, gains=gains, contacts=contacts, foot_gate=gate)
+    for name, gains, contacts, gate, foot in rows:
+        run, flags, nis, dof = legged_run(
+            go1, log, gains=gains, contacts=contacts, foot_gate=gate, **foot
+        )
         c = run.consistency
         still = np.abs(run.v[:, 6:]).max(axis=1) < 0.05
         speed = np.linalg.norm(run.v[still, :3], axis=1)
@@ -377,8 +385,69 @@ def real_log_nis() -> dict[str, Any]:
             "still_speed_median": float(np.median(speed)),
             "median_per_dof_standing": float(np.median(per_dof[stance & still])),
             "median_per_dof_walking": float(np.median(per_dof[stance & ~still])),
+            "first_second_speed_max": float(
+                np.linalg.norm(run.v[run.t < run.t[0] + 1, :3], axis=1).max()
+            ),
+            "diverged": int(np.isnan(run.q).any(axis=1).sum()),
         }
     return out
+
+
+def simulated_nis(duration: float = 10.0, seed: int = 0) -> dict[str, Any]:
+    """The ``real`` table's settings on the MuJoCo go1 (stand, sway, trot; where
+    ``LEGGED_GAINS`` were chosen), through ``legged_run`` from the simulated log (contacts
+    from the forces): the stance rows' NIS and the base velocity error after 0.5 s."""
+    import warnings
+
+    import pandas as pd
+
+    from pinobs.io import read_log
+    from pinobs.io.legged_run import legged_run
+
+    go1 = pinobs.load("go1")
+    white = {"joint_std": None, "slip_speed": False}
+    settings = {"defaults": (None, {}), "white, GAINS": (GAINS, white),
+                "white, InEKFGains()": (InEKFGains(), white)}  # fmt: skip
+    out: dict[str, Any] = {}
+    for motion in LEGGED_MOTIONS:
+        run = simulate_legged(motion, duration, seed=seed, noise=NOISE, robot=go1)
+        frame = pd.DataFrame(
+            {k: v for k, v in run.columns.items() if not k.startswith(("truth.", "contact."))}
+        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the note that the log has no base pose
+            log = read_log(frame, go1)
+        late = run.t > run.t[0] + 0.5
+        for name, (gains, foot) in settings.items():
+            est = legged_run(go1, log, gains=gains, **foot).run
+            c = est.consistency
+            err = est.v[late, :3] - run.base_v()[late, :3]
+            out[f"{motion}, {name}"] = {
+                "nis_per_dof": c.mean_nis,
+                **{k: c.details[k] for k in ("median_per_dof", "inside", "below", "above")},
+                "v_rms": float(np.sqrt(np.mean(err**2))),
+            }
+    return out
+
+
+def _sim_nis_lines(sim: dict[str, Any]) -> list[str]:
+    if not sim:
+        return []
+    md = [
+        "Where `legged_run`'s defaults were chosen: the MuJoCo go1 (10 s, seed 0) through "
+        "`legged_run` (contacts from the forces), the stance rows' NIS and the base velocity "
+        "error after 0.5 s:",
+        "",
+        "| motion, foot noise | NIS/dof mean (median) | inside | below | above | v rms [m/s] |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    for name, r in sim.items():
+        md.append(
+            f"| {name} | {r['nis_per_dof']:.3g} ({r['median_per_dof']:.3g}) "
+            f"| {100 * r['inside']:.1f} % | {100 * r['below']:.1f} % "
+            f"| {100 * r['above']:.1f} % | {r['v_rms']:.4f} |"
+        )
+    return [*md, ""]
 
 
 class SlidingLegs:
@@ -469,14 +538,18 @@ def _real_table(real: dict[str, Any]) -> list[str]:
     if not real:
         return []
     md = [
-        "SEROW's Go1 log (real, 25 s at 400 Hz, no truth; `GAINS`): the feet's NIS over the "
-        "stance rows (each row against its own 95 % χ² interval, dof = 3 × feet measured; a "
-        "consistent filter: NIS/dof 1, 95 % inside) and the base speed on the stands:",
+        "SEROW's Go1 log (real, 25 s at 400 Hz, no truth): the feet's NIS over the stance rows "
+        "(each row against its own 95 % χ² interval, dof = 3 × feet measured; a consistent "
+        "filter: NIS/dof 1, 95 % inside) and the base speed on the stands (every joint slower "
+        "than 0.05 rad/s) and over the first second. `defaults`: `legged_run`'s (the CLI's: "
+        "`LEGGED_GAINS`, σ_q per joint from the log, `slip_speed`; chosen on MuJoCo, this log "
+        "held out); `white`: the foot noise before (`joint_std=None, slip_speed=False`) with "
+        "`GAINS` or `LOG_GAINS`:",
         "",
         "| contacts, gate | stance rows | NIS/dof mean (median) | inside | below | above "
         "| gated | in contact | NIS/dof median standing / walking "
-        "| stand speed max (median) [m/s] |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| stand speed max (median) [m/s] | first 1 s speed max | rows lost |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for name, r in real.items():
         md.append(
@@ -484,7 +557,8 @@ def _real_table(real: dict[str, Any]) -> list[str]:
             f"({r['median_per_dof']:.3g}) | {100 * r['inside']:.1f} % | {100 * r['below']:.1f} % "
             f"| {100 * r['above']:.1f} % | {r['gated']} | {100 * r['in_contact']:.1f} % "
             f"| {r['median_per_dof_standing']:.3g} / {r['median_per_dof_walking']:.3g} "
-            f"| {r['still_speed_max']:.3f} ({r['still_speed_median']:.3f}) |"
+            f"| {r['still_speed_max']:.3f} ({r['still_speed_median']:.3f}) "
+            f"| {r.get('first_second_speed_max', math.nan):.3f} | {r.get('diverged', 0)} |"
         )
     return [*md, ""]
 
@@ -541,6 +615,7 @@ def main() -> None:
         "humanoid": {},
         "real": {},
         "slip": {},
+        "real_sim": {},
     }
     if args.merge:
         report.update(json.loads((here / "legged_truth.json").read_text()))
@@ -555,6 +630,7 @@ def main() -> None:
         _humanoid_section(report, args)
     if "real" in args.sections:
         report["real"] = real_log_nis()
+        report["real_sim"] = simulated_nis()
     if "slip" in args.sections:
         report["slip"] = slip_table()
     report.setdefault("seconds", {})

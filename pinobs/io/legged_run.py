@@ -19,6 +19,10 @@ angular velocity, the joints').  So the writers, the playback and the CLI
   :class:`~pinobs.observers.contacts.ContactProbability`), row by row.
 * **Slip**: ``foot_gate=p`` gates each foot by its own innovation (the filter's
   ``foot_gate``): a foot that slides while flagged in contact is re-anchored, not measured.
+* **Foot noise** (defaults): the filter's ``joint_std`` measured on the log's joint columns
+  (:func:`~pinobs.observers.noise.joint_noise_std`) and its ``slip_speed`` (the contact
+  noise from each foot's predicted speed), with :data:`LEGGED_GAINS`; ``joint_std=None,
+  slip_speed=False`` is the white foot noise of ``gains`` alone.
 * **Consistency**: ``run.consistency`` is the feet's NIS over the stance rows
   (:func:`~pinobs.observers.legs.stance_consistency`: mean NIS per degree of freedom and
   the fraction of rows inside their 95 % χ² interval).
@@ -39,6 +43,7 @@ from dataclasses import replace
 from typing import Any, NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pinobs.errors import DimensionError, LogFormatError, ObserverDiverged, OptionError
 from pinobs.io.readers import Log
@@ -55,12 +60,23 @@ from pinobs.observers.contacts import (
 )
 from pinobs.observers.inekf import InEKFGains, InvariantEKF, rotation_to_quaternion
 from pinobs.observers.legs import stance_consistency
+from pinobs.observers.noise import joint_noise_std
 
 #: ``contacts=`` of :func:`estimate_legged`.
 CONTACT_MODES = ("force", "probability")
 
 #: The IMU frame used when the model has one of this name and none is given.
 IMU_FRAME = "imu_link"
+
+#: The gains when none are given: :class:`~pinobs.observers.inekf.InEKFGains`' IMU densities,
+#: with the foot's noise split as the filter's eqs. (4) and (9) put it.  The encoders' σ_q is
+#: measured on the log (``joint_std="log"``); ``kinematics`` is only a floor R_0 under
+#: ``J Σ_q Jᵀ`` (10 µm) and ``contact`` one under the slip term ``|ṗ_j|² h`` (1e-4 m/s/√Hz:
+#: 5 µm per sample at 400 Hz).  Chosen on the MuJoCo go1 (stand, sway, trot, 10 s, seed 0;
+#: docs/benchmarks/legged.md): stance rows inside their 95 % χ² interval 86 / 87 / 83 %
+#: (the white 0.1 m/s/√Hz and 1 mm before: 0 %); R_0 of 0, 10 or 30 µm changed that by ≤ 1 %.
+#: The real Go1 log was not used to choose them.
+LEGGED_GAINS = InEKFGains(contact=1e-4, kinematics=1e-5)
 
 
 def _contacts(robot: Robot, log: Log, on: float | None, off: float | None) -> np.ndarray:
@@ -108,6 +124,8 @@ def estimate_legged(
     contacts: str = "force",
     probability: ContactProbability | None = None,
     foot_gate: float | None = None,
+    joint_std: ArrayLike | str | None = "log",
+    slip_speed: bool = True,
 ) -> LogRun:
     """The free-flyer estimate over a legged log (module docstring).
 
@@ -116,15 +134,24 @@ def estimate_legged(
         log: read with its legged columns (:func:`pinobs.io.read_log`).
         imu_frame: the IMU's frame; default ``imu_link`` if the model has it, else the root.
         contact_on, contact_off: force thresholds [N] (:mod:`pinobs.observers.contacts`).
-        gains: the filter's noise levels (:class:`~pinobs.observers.inekf.InEKFGains`).
+        gains: the filter's noise levels (:class:`~pinobs.observers.inekf.InEKFGains`;
+            default :data:`LEGGED_GAINS`).
         contacts: ``"force"`` or ``"probability"`` (module docstring).
         probability: its parameters (default :meth:`ContactProbability.for_robot`).
         foot_gate: the filter's foot gate (outlier probability; ``None``: off).
+        joint_std: the encoders' σ per joint [rad] in the filter's foot noise
+            ``J Σ_q Jᵀ``: ``"log"`` (default) measured on the log's joint columns
+            (:func:`~pinobs.observers.noise.joint_noise_std`, the σ rule of every observer),
+            an array (one per joint), or ``None``: ``gains.joint`` for every joint.
+        slip_speed: the filter's ``slip_speed`` (each foot's contact noise grows with its
+            predicted speed; ``False``: the white ``gains.contact`` alone, as before).
 
     Raises:
         LogFormatError: no IMU columns, no contact or force columns (no force columns
             with ``contacts="probability"``).
-        OptionError: ``contacts`` not one of :data:`CONTACT_MODES`.
+        OptionError: ``contacts`` not one of :data:`CONTACT_MODES`, a ``joint_std`` string
+            other than ``"log"``, or ``"log"`` on a log too short to measure σ_q from.
+        GainError: a negative ``joint_std``.
         UnsupportedRobotError: a robot without a free-flyer root (the filter's).
         UnknownNameError: a foot or IMU frame not in the model.
     """
@@ -138,6 +165,8 @@ def estimate_legged(
         contacts=contacts,
         probability=probability,
         foot_gate=foot_gate,
+        joint_std=joint_std,
+        slip_speed=slip_speed,
     ).run
 
 
@@ -168,6 +197,8 @@ def legged_run(
     contacts: str = "force",
     probability: ContactProbability | None = None,
     foot_gate: float | None = None,
+    joint_std: ArrayLike | str | None = "log",
+    slip_speed: bool = True,
 ) -> LeggedDetail:
     """:func:`estimate_legged` (same arguments), with the contacts and the NIS per row."""
     if log.imu_gyro is None or log.imu_acc is None:
@@ -177,7 +208,16 @@ def legged_run(
     if imu_frame is None and robot.model.existFrame(IMU_FRAME):
         imu_frame = IMU_FRAME
     prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
-    filt = InvariantEKF(robot, log.feet, gains=gains, imu_frame=imu_frame, foot_gate=foot_gate)
+    sigma_q, said_q = _joint_std(robot, log, joint_std)
+    filt = InvariantEKF(
+        robot,
+        log.feet,
+        gains=LEGGED_GAINS if gains is None else gains,
+        imu_frame=imu_frame,
+        foot_gate=foot_gate,
+        joint_std=sigma_q,
+        slip_speed=slip_speed,
+    )
     joints = _joint_velocities(robot, log)
     n = len(log)
     q_out, v_out = np.full((n, robot.nq), np.nan), np.full((n, robot.nv), np.nan)
@@ -190,7 +230,7 @@ def legged_run(
         & np.all(np.isfinite(log.q[:, 7:]), axis=1)
     )
     previous: float | None = None
-    said: list[str] = list(joints.warnings)
+    said: list[str] = [*joints.warnings, *said_q]
     for k in range(n):
         if not usable[k] or (previous is not None and log.t[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
@@ -297,12 +337,40 @@ def _step(
         return None
 
 
-def _joint_velocities(robot: Robot, log: Log) -> LogRun:
-    """``kf`` over the joint columns: the robot with its free-flyer root locked."""
+def _joints_robot(robot: Robot) -> Robot:
+    """The robot with its free-flyer root locked (its joints alone)."""
     names = list(robot.model.names)
     if robot.nq < 7 or len(names) < 2:
         raise DimensionError(f"{robot.name}: inekf needs a free-flyer root joint")
-    fixed = load(robot.model, lock=[names[1]])
+    return load(robot.model, lock=[names[1]])
+
+
+def _joint_std(
+    robot: Robot, log: Log, joint_std: ArrayLike | str | None
+) -> tuple[ArrayLike | None, list[str]]:
+    """``joint_std`` for the filter and what to say of it: ``"log"`` → σ̂ per joint of the
+    log's joint columns (:func:`~pinobs.observers.noise.joint_noise_std`: third differences
+    over the first second, at least the printed positions' rounding), said as kf's σ is."""
+    if not isinstance(joint_std, str):
+        return joint_std, []
+    if joint_std != "log":
+        raise OptionError(f"joint_std={joint_std!r}: give 'log', σ per joint [rad] or None")
+    found = joint_noise_std(log.t, log.q[:, 7:], _joints_robot(robot))
+    if found is None:
+        raise OptionError(
+            "joint_std='log': the log has too few finite, evenly spaced rows to measure the "
+            "encoders' σ from; give joint_std (σ per joint [rad]) or None (gains.joint)"
+        )
+    sigma = found[0]
+    return sigma, [
+        f"inekf: the encoders' σ per joint measured on the log (first second): "
+        f"{np.min(sigma):.2g}-{np.max(sigma):.2g} rad; pass joint_std to override"
+    ]
+
+
+def _joint_velocities(robot: Robot, log: Log) -> LogRun:
+    """``kf`` over the joint columns: the robot with its free-flyer root locked."""
+    fixed = _joints_robot(robot)
     joint_log = replace(
         log,
         q=log.q[:, 7:],
@@ -320,4 +388,11 @@ def _joint_velocities(robot: Robot, log: Log) -> LogRun:
     return replace(run, warnings=[*run.warnings, *(str(w.message) for w in caught)])
 
 
-__all__ = ["CONTACT_MODES", "IMU_FRAME", "LeggedDetail", "estimate_legged", "legged_run"]
+__all__ = [
+    "CONTACT_MODES",
+    "IMU_FRAME",
+    "LEGGED_GAINS",
+    "LeggedDetail",
+    "estimate_legged",
+    "legged_run",
+]

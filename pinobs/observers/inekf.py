@@ -112,6 +112,19 @@ rejected foot does not correct the base: it is removed (its marginal) and re-anc
 where the legs now put it, by (6), as a foot that lands (its next innovation starts from
 zero, so a run of rejections cannot leave the filter without feet).                    (8)
 
+The foot's noise.  ``Σ_q`` in (4) is ``σ_q² I`` (``gains.joint``) or, with ``joint_std``,
+``diag(σ_q,i²)`` per joint: the form of Hartley et al.'s forward-kinematics noise (SEROW's
+contact position noise is likewise ``J`` of ``joint_position_variance``); ``σ_k`` is then a
+floor for model error.  With ``slip_speed`` the contact density covers the foot's predicted
+motion: the model says ``ḋ_j = 0``, the foot's velocity ``ṗ̂_j`` (:meth:`foot_velocities`,
+at the previous update) says by how much that fails, and its displacement over the step,
+``|ṗ̂_j| h``, is taken as the σ of that step of the foot's random walk::
+
+    Q_c,dj = (σ_c² + |ṗ̂_j|² h) I                                                        (9)
+
+(standing, ``ṗ̂_j`` is the joint velocities' noise; at lift-off and touch-down it is large:
+one white ``σ_c`` cannot fit both).
+
 Prior (at ``reset``, before any foot is added).  :class:`InEKFPrior` gives independent
 errors of the attitude ``ξ_R``, of the velocity in the base frame ``v_b`` (as ``reset``
 takes it), and of the world position: ``ξ_v = R̂ (v̂_b − v_b)`` exactly, and to first
@@ -170,6 +183,7 @@ from pinobs.observers.legs import (
     LeggedSetup,
     LegState,
     check_contacts,
+    check_joint_std,
     check_time,
     contact_kinematics,
     foot_noise,
@@ -177,6 +191,7 @@ from pinobs.observers.legs import (
     remove_feet,
     replace_state,
     rotation_to_quaternion,
+    slip_densities,
 )
 from pinobs.observers.linalg import cholesky_solve
 
@@ -414,9 +429,15 @@ class InvariantEKF:
         foot_gate: the outlier probability ``p`` of the foot gate (module docstring, eq. 8):
             a foot whose own NIS exceeds ``χ²₃(1 − p)`` is re-anchored instead of measured;
             ``None`` (default): every foot in contact is measured.
+        joint_std: the encoders' σ per joint [rad] (``nv − 6`` entries): eq. (4)'s ``Σ_q``,
+            instead of ``gains.joint`` for every joint.
+        slip_speed: eq. (9), each foot's contact noise from its speed predicted at the
+            previous update (updates without ``joint_velocities``: ``gains.contact`` alone).
 
     Raises:
-        GainError: an ``imu_hold`` that is neither; a ``foot_gate`` not in (0, 0.5).
+        GainError: an ``imu_hold`` that is neither; a ``foot_gate`` not in (0, 0.5); a
+            negative ``joint_std`` (non-finite: NonFiniteError), or one all 0 with
+            ``gains.kinematics`` 0.
         UnknownNameError: a foot frame that is not in the model (names the frames).
         UnsupportedRobotError: a robot without a free-flyer root joint.
     """
@@ -431,6 +452,8 @@ class InvariantEKF:
         imu_hold: str = "previous",
         imu_frame: str | None = None,
         foot_gate: float | None = None,
+        joint_std: ArrayLike | None = None,
+        slip_speed: bool = False,
     ) -> None:
         #: the legs, options and conversions shared with the quaternion EKF
         self.setup = LeggedSetup(
@@ -456,6 +479,17 @@ class InvariantEKF:
             self.foot_gate, self._gate_nis = gate_threshold(foot_gate, 3)
         except GainError as exc:
             raise GainError(f"foot_gate: {exc}") from exc
+        #: σ_q per joint [rad] (``None``: ``gains.joint`` for every joint), eq. (4)'s ``Σ_q``
+        self.joint_std = None if joint_std is None else check_joint_std(joint_std, s.nv_joints)
+        self._joint_var = 1.0 if self.joint_std is not None else self.gains.joint**2
+        if self.joint_std is not None and not self.joint_std.any() and not self.gains.kinematics:
+            raise GainError(
+                "joint_std is all 0 and InEKFGains.kinematics is 0: the foot measurement would "
+                "be exact and its innovation covariance singular; make one > 0"
+            )
+        #: eq. (9): each foot's contact density grows with its predicted speed
+        self.slip_speed = bool(slip_speed)
+        self._speed: Vector | None = None  # |ṗ_j| of every foot at the last sample [m/s]
         load_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
         self._state: InEKFState | None = None
         self._estimate: InEKFEstimate | None = None
@@ -515,7 +549,8 @@ class InvariantEKF:
         """
         a = self.setup.reset_inputs(t, q, v, gyro, acc, contacts, prior, bias)
         state = InEKFState(a.t, a.R, a.x, (), a.bias, prior_covariance(a.prior, a.x), a.imu, a.t)
-        h, jac = self.setup.legs(a.q_joints)
+        h, jac = self._legs(a.q_joints)
+        self._speed = None
         state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
         self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None)
         self._warned = False
@@ -557,11 +592,18 @@ class InvariantEKF:
         state = self.state
         u = self.setup.update_inputs(state.t, t, q, gyro, acc, contacts, joint_velocities)
         new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
-        h, jac = self.setup.legs(u.q_joints)
+        h, jac = self._legs(u.q_joints)
         new, nis, used, gated = self._correct(new, u.flags, h, jac)
         self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
         contact_time = u.t if any(u.flags) else None
         self._commit(new, u.q_joints, u.joint_velocities, nis, u.reading, contact_time, used, gated)
+        if self.slip_speed:  # eq. (9): the feet's speeds for the next step's contact noise
+            dq = u.joint_velocities
+            self._speed = (
+                None
+                if dq is None
+                else np.linalg.norm(self.foot_velocities(u.q_joints, dq, u.reading[:3]), axis=1)
+            )
         return self.estimate
 
     def foot_velocities(self, q: ArrayLike, joint_velocities: ArrayLike, gyro: ArrayLike) -> Vector:
@@ -588,6 +630,8 @@ class InvariantEKF:
         x, P = state.x, state.P
         R1, x1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty_like(P)
         qc = noise_densities(self.gains, x.shape[0] - 2)
+        if self._speed is not None and state.feet:
+            qc = slip_densities(qc, self._speed[list(state.feet)], dt)  # eq. (9)
         kernel = propagate_kernel.compiled
         assert kernel is not None  # loaded by the constructor
         kernel(state.R, x, state.bias, imu, dt, self._gravity, qc, P, R1, x1, P1)
@@ -629,12 +673,18 @@ class InvariantEKF:
         kernel = foot_nis_kernel.compiled
         assert kernel is not None  # loaded by the constructor
         g = self.gains
-        kernel(state.R, state.x, state.P, h[feet], jac[feet], g.joint**2, g.kinematics**2, out)
+        kernel(state.R, state.x, state.P, h[feet], jac[feet], self._joint_var, g.kinematics**2, out)
         return out
+
+    def _legs(self, q_joints: Vector) -> tuple[Vector, Vector]:
+        """The feet's positions and Jacobians, the columns scaled by ``joint_std`` if given
+        (``J diag(σ_q)``: eq. (4)'s ``J Σ_q Jᵀ`` with unit variance)."""
+        h, jac = self.setup.legs(q_joints)
+        return (h, jac) if self.joint_std is None else (h, jac * self.joint_std)
 
     def _foot_noise(self, R: Vector, jac: Vector) -> Vector:
         """``N_j = R (J_j Σ_q J_jᵀ + σ_k² I) Rᵀ`` (eq. 4), for one ``J`` (3, n) or a stack (m, 3, n)."""
-        return R @ foot_noise(self.gains, jac) @ R.T
+        return R @ foot_noise(self.gains, jac, self._joint_var) @ R.T
 
     def _update(
         self, state: InEKFState, measured: list[int], h: Vector, jac: Vector
@@ -653,7 +703,7 @@ class InvariantEKF:
             P,
             h[measured],
             jac[measured],
-            g.joint**2,
+            self._joint_var,
             g.kinematics**2,
             R1,
             x1,

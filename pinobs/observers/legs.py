@@ -60,6 +60,7 @@ __all__ = [
     "ResetInputs",
     "UpdateInputs",
     "check_contacts",
+    "check_joint_std",
     "check_time",
     "contact_kinematics",
     "foot_noise",
@@ -68,6 +69,7 @@ __all__ = [
     "remove_feet",
     "replace_state",
     "rotation_to_quaternion",
+    "slip_densities",
     "stance_consistency",
 ]
 
@@ -315,9 +317,40 @@ def noise_densities(gains: InEKFGains, n_contacts: int) -> Vector:
     return out
 
 
-def foot_noise(gains: InEKFGains, jac: Vector) -> Vector:
-    """``J Σ_q Jᵀ + σ_k² I`` in the IMU frame, for one ``J`` (3, n) or a stack (m, 3, n)."""
-    return (gains.joint**2) * (jac @ np.swapaxes(jac, -1, -2)) + (gains.kinematics**2) * _I3
+def foot_noise(gains: InEKFGains, jac: Vector, joint_var: float | None = None) -> Vector:
+    """``J Σ_q Jᵀ + σ_k² I`` in the IMU frame, for one ``J`` (3, n) or a stack (m, 3, n),
+    ``Σ_q = σ_q² I`` with ``σ_q² = joint_var`` (default ``gains.joint²``; 1 for a ``J``
+    whose columns are already scaled by each joint's σ)."""
+    var = gains.joint**2 if joint_var is None else joint_var
+    return var * (jac @ np.swapaxes(jac, -1, -2)) + (gains.kinematics**2) * _I3
+
+
+def slip_densities(qc: Vector, speed: Vector, h: float) -> Vector:
+    """Eq. (9) of :mod:`pinobs.observers.inekf`: ``Q_c`` (:func:`noise_densities`, feet in
+    state order) with each foot's density raised by ``|ṗ_j|² h`` (``speed`` [m/s], one per
+    foot in the state; ``h`` the step [s]), read-only."""
+    out = np.array(qc, dtype=float)
+    out[9 : 9 + 3 * speed.size] += np.repeat(np.asarray(speed, dtype=float) ** 2 * h, 3)
+    out.setflags(write=False)
+    return out
+
+
+def check_joint_std(joint_std: ArrayLike, n: int) -> Vector:
+    """``joint_std`` as a read-only ``(n,)`` array of finite numbers ≥ 0 [rad].
+
+    Raises:
+        DimensionError: not ``n`` entries.
+        GainError: a negative or non-finite entry (named).
+    """
+    out = np.array(Robot.check_vector(joint_std, n, what="joint_std"), dtype=float)
+    bad = ~np.isfinite(out) | (out < 0)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise GainError(
+            f"joint_std[{k}] = {float(out[k])!r}: each joint's encoder σ must be a finite number ≥ 0 [rad]"
+        )
+    out.setflags(write=False)
+    return out
 
 
 # ---------------------------------------------------------------- state, output

@@ -156,17 +156,18 @@ def test_contacts_from_the_probability_agree_with_mujocos_and_track_the_trot(tro
         legged_run(go1, log, contacts="switches")
 
 
-@pytest.mark.slow  # two runs of the 25 s log: ~50 s
+@pytest.mark.slow  # four runs of the 25 s log: ~40 s
 def test_the_real_go1_logs_stance_nis_says_what_is_wrong_with_the_feet() -> None:
     """Issue 38's "NIS in its expected range during stance" on SEROW's Go1 log, as measured
-    (gains of benchmarks/legged_truth.py; each stance row's NIS against its own 95 % χ²
-    interval, dof = 3 × feet measured): it is not in range.  With the force threshold
-    (Schmitt trigger) 41 % of stance rows are inside, 26 % above (at lift-off and landing:
-    a foot flagged in contact while it moves) and 33 % below (NIS/dof 0.02 while the robot
-    stands: the foot noise, 1 mm kinematics and 0.007 m/s/√Hz slip, is too large for the
-    Go1's legs at rest).  With SEROW's contact probability the rows above fall to 0.1 %
-    (the moving feet are out), the rows below stay (66 %): the noise levels, not the IMU
-    frame, are what is left."""
+    (each stance row's NIS against its own 95 % χ² interval, dof = 3 × feet measured).
+
+    Before (white foot noise: ``joint_std=None, slip_speed=False``, gains of
+    benchmarks/legged_truth.py): with the force threshold 41 % of stance rows inside, 26 %
+    above (lift-off and landing) and 33 % below; with SEROW's contact probability 0.1 %
+    above, 66 % below.  With the runner's defaults (σ_q per joint from the log through the
+    legs' Jacobian, the contact noise from each foot's speed; chosen on MuJoCo, this log held
+    out): 53 % inside, 4 % above, 43 % below (force), 59 / 4 / 37 % (probability): better,
+    still not in range (NIS/dof 0.69; 95 % would be)."""
     from pinobs.io.legged_run import legged_run
     from tests.io.test_legged_columns import _real_data, serow_go1_frame
     from tests.simulation.test_legged import GAINS
@@ -177,16 +178,55 @@ def test_the_real_go1_logs_stance_nis_says_what_is_wrong_with_the_feet() -> None
         pytest.skip("no shared data folder with serow_go1")
     go1 = pinobs.load("go1")
     log = _read(serow_go1_frame(path), go1)
-    force = legged_run(go1, log, gains=GAINS).run
-    prob = legged_run(go1, log, gains=GAINS, contacts="probability").run
+    white = {"gains": GAINS, "joint_std": None, "slip_speed": False}
+    force = legged_run(go1, log, **white).run
+    prob = legged_run(go1, log, contacts="probability", **white).run
     f, p = force.consistency, prob.consistency
     assert f.samples > 0.9 * len(log) and p.samples > 0.8 * len(log)
     assert f.verdict == p.verdict == "inconsistent"
     assert 0.3 < f.details["inside"] < 0.5 and f.details["above"] > 0.2  # measured 0.41, 0.26
     assert p.details["above"] < 0.01 and p.details["below"] > 0.5  # measured 0.001, 0.66
+    new_f = legged_run(go1, log).run
+    new_p = legged_run(go1, log, contacts="probability").run
+    nf, np_ = new_f.consistency, new_p.consistency
+    assert 0.5 < nf.details["inside"] < 0.6 and nf.details["above"] < 0.06  # 0.533, 0.041
+    assert 0.55 < np_.details["inside"] < 0.65 and np_.details["above"] < 0.06  # 0.594, 0.036
+    assert 0.5 < nf.mean_nis < 0.9  # measured 0.69
     still = np.abs(force.v[:, 6:]).max(axis=1) < 0.05
-    for run in (force, prob):  # the stands: measured 0.035 and 0.010 m/s at most
+    for run in (force, prob, new_f, new_p):  # the stands: measured 0.035, 0.010, 0.018, 0.018
         assert np.linalg.norm(run.v[still, :3], axis=1).max() < 0.05
+        assert np.isfinite(run.q).all()  # no divergence: every row estimated
+
+
+def test_the_runners_defaults_put_the_simulated_trots_nis_near_its_interval(trot) -> None:
+    """The runner's defaults on the MuJoCo trot (2 s, seed 3; the defaults were chosen on
+    seed 0, 10 s): most stance rows inside their 95 % χ² interval, where the white contact
+    noise of InEKFGains (0.1 m/s/√Hz, 1 mm) put none."""
+    from pinobs.io.legged_run import legged_run
+    from pinobs.observers.inekf import InEKFGains
+
+    go1 = pinobs.load("go1")
+    log = _read(_frame(trot), go1)
+    new = legged_run(go1, log).run
+    old = legged_run(go1, log, gains=InEKFGains(), joint_std=None, slip_speed=False).run
+    assert new.consistency.details["inside"] > 0.7, new.consistency.details  # measured 0.82
+    assert old.consistency.details["inside"] < 0.05  # measured 0.0 (NIS/dof 0.0025)
+    late = new.t > 0.5
+    truth = trot.base_v()
+    rms = [np.sqrt(np.mean((r.v[late, :3] - truth[late, :3]) ** 2)) for r in (new, old)]
+    assert rms[0] < rms[1], rms  # measured 0.0126 and 0.0508 m/s
+
+
+def test_runner_joint_std_option_is_checked(trot) -> None:
+    from pinobs.errors import OptionError
+    from pinobs.io.legged_run import legged_run
+
+    go1 = pinobs.load("go1")
+    log = _read(_frame(trot), go1)
+    with pytest.raises(OptionError, match="joint_std='median'"):
+        legged_run(go1, log, joint_std="median")
+    with pytest.raises(GainError, match=r"joint_std\[0\] = -0.001"):
+        legged_run(go1, log, joint_std=np.r_[-1e-3, np.full(11, 1e-4)])
 
 
 def test_cli_inekf_takes_the_contact_probability_and_the_foot_gate(tmp_path, trot, capsys) -> None:

@@ -42,7 +42,10 @@ published models, imported from it; RMS over the six joints from 1 s after the s
 4. **The observers** by ``pinobs.estimate`` as ``real_logs.py`` runs them: ``kf``,
    ``kf*`` (best ``jerk_psd`` of its grid on the reference), ``ekf+id``, ``ekf+auto+id``
    (``disturbance_psd="auto"`` alone: the row ``real_logs.md`` lacks),
-   ``ekf+auto+nb+id``, ``adaptive``, ``adaptive+nb``.
+   ``ekf+auto+nb+id``, ``adaptive``, ``adaptive+nb``, ``adaptive+id`` (learning on,
+   started from the identified model); and ``ekf``, ``riemannian`` on the identified
+   model at the fixed densities of :data:`FIXED`, the one reported per log
+   (``+loo``) chosen on the *other* logs (:func:`leave_one_out`).
 5. **True error** of each: ``√(RMS² − σ_ref²)`` (errors uncorrelated with the
    reference's), σ_ref from the ``(dq, SG, kf)`` hat.
 
@@ -100,6 +103,17 @@ OBSERVERS = (
     ("ekf+auto+nb+id", "ekf", True, {"disturbance_psd": "auto", "never_behind": True}),
     ("adaptive", "adaptive", False, {}),
     ("adaptive+nb", "adaptive", False, {"never_behind": True}),
+    ("adaptive+id", "adaptive", True, {}),  # learning on, started from the identified model
+)
+#: Fixed densities of ekf / riemannian on the identified model; per log, the one with the
+#: lowest mean log-ratio to kf on the *other* logs is reported (``+loo``).
+FIXED = (
+    *(
+        (f"ekf(a={a:g},d={d:g})", "ekf", {"accel_psd": a, **({"disturbance_psd": d} if d else {})})
+        for a in (1e-4, 1e-2, 1.0)
+        for d in (0.0, 1e2, 1e4)
+    ),
+    *((f"riemannian(a={a:g})", "riemannian", {"accel_psd": a}) for a in (1e-4, 1e-2, 1.0)),
 )
 HERE = Path(__file__).resolve().parent
 
@@ -217,6 +231,33 @@ def reference_noise(out, t, q, ref, tk, v_k, v_sg, fresh_rows, ev):
     return cd, ev_cd
 
 
+def observer_runs(frame, robot, ident, ref, rows, out) -> dict[str, np.ndarray]:
+    """``kf``, ``kf*``, :data:`OBSERVERS` (velocities returned) and :data:`FIXED` (RMS
+    into ``out["fixed"]``) by ``pinobs.estimate``; refusals into ``out["errors"]``."""
+    vel: dict[str, np.ndarray] = {"kf": estimate_v(frame, robot, "kf", {})}
+    best = (math.inf, math.nan)
+    for j in R.JERK_GRID:
+        v = estimate_v(frame, robot, "kf", {"jerk_psd": j})
+        e = float(R.rms((v - ref)[rows].ravel()))
+        if e < best[0]:
+            best, vel["kf*"] = (e, j), v
+    out["kf*_jerk_psd"] = best[1]
+    for label, fam, use_id, opts in OBSERVERS:
+        try:
+            vel[label] = estimate_v(frame, ident if use_id else robot, fam, opts)
+        except Exception as e:  # a refusal is a result here
+            out.setdefault("errors", {})[label] = f"{type(e).__name__}: {str(e)[:200]}"
+    out["fixed"] = {}
+    for label, fam, opts in FIXED:
+        try:
+            v = estimate_v(frame, ident, fam, opts)
+            out["fixed"][label] = float(R.rms((v - ref)[rows].ravel()))
+        except Exception as e:  # a refusal is a result here
+            out["fixed"][label] = math.nan
+            out.setdefault("errors", {})[label] = f"{type(e).__name__}: {str(e)[:200]}"
+    return vel
+
+
 def one_log(name: str, robot, ident, pub) -> dict[str, Any]:
     folder = "validation_data" if name.startswith("ur-20_01_17") else "identification_data"
     log = rd.load_log(f"ur10e/{folder}/{name}")
@@ -232,20 +273,7 @@ def one_log(name: str, robot, ident, pub) -> dict[str, Any]:
     ev = rows & (t >= tk[R.SG_WINDOW // 2]) & (t <= tk[-R.SG_WINDOW // 2])
     out: dict[str, Any] = {"rows": int(rows.sum()), "seconds": float(t[-1] - t[0])}
     cd, ev_cd = reference_noise(out, t, q, ref, tk, v_k, v_sg, rows & keep, ev)
-    # observers
-    vel: dict[str, np.ndarray] = {"kf": estimate_v(log.frame, robot, "kf", {})}
-    best = (math.inf, math.nan)
-    for j in R.JERK_GRID:
-        v = estimate_v(log.frame, robot, "kf", {"jerk_psd": j})
-        e = float(R.rms((v - ref)[rows].ravel()))
-        if e < best[0]:
-            best, vel["kf*"] = (e, j), v
-    out["kf*_jerk_psd"] = best[1]
-    for label, fam, use_id, opts in OBSERVERS:
-        try:
-            vel[label] = estimate_v(log.frame, ident if use_id else robot, fam, opts)
-        except Exception as e:  # a refusal is a result here
-            out.setdefault("errors", {})[label] = f"{type(e).__name__}: {str(e)[:200]}"
+    vel = observer_runs(log.frame, robot, ident, ref, rows, out)
     # oracles and model-predicted filters
     dens: dict[str, Any] = {}
     a_id, a_pub = model_acceleration(ident, q, v_sg, tau), published_acceleration(pub, q, v_sg, tau)
@@ -284,6 +312,26 @@ def one_log(name: str, robot, ident, pub) -> dict[str, Any]:
     return out
 
 
+def leave_one_out(logs: dict[str, Any]) -> None:
+    """``ekf+loo+id`` / ``riemannian+loo+id``: per log, the fixed densities of :data:`FIXED`
+    with the lowest mean ``log(RMS / kf)`` over the other logs (the log's own reference
+    unused); nothing when there is one log."""
+    for fam in ("ekf", "riemannian"):
+        labels = [lab for lab, f, _ in FIXED if f == fam]
+        for n, x in logs.items():
+            others = [y for m, y in logs.items() if m != n]
+            if not others:
+                continue
+            score = {
+                lab: float(np.mean([math.log(y["fixed"][lab] / y["rms"]["kf"]) for y in others]))
+                for lab in labels
+            }
+            score = {k: v for k, v in score.items() if not math.isnan(v)}
+            best = min(score, key=score.__getitem__)
+            x["rms"][f"{fam}+loo+id"] = x["fixed"][best]
+            x.setdefault("loo_choice", {})[fam] = best
+
+
 def run(quick: bool) -> dict[str, Any]:
     robot = rd.ur10e_robot()
     fit = R.UR10E_FIT
@@ -297,6 +345,7 @@ def run(quick: bool) -> dict[str, Any]:
         t1 = time.perf_counter()
         res["logs"][n] = one_log(n, robot, ident.robot, pub)
         print(f"  {n}: {time.perf_counter() - t1:.0f} s", flush=True)
+    leave_one_out(res["logs"])
     res["seconds"] = time.perf_counter() - t0
     res["date"] = time.strftime("%Y-%m-%d")
     return res
@@ -318,10 +367,13 @@ COLS = (
     "fusion+id [ref]",
     "fusion+id [nll]",
     "ekf+id",
+    "ekf+loo+id",
+    "riemannian+loo+id",
     "ekf+auto+id",
     "ekf+auto+nb+id",
     "adaptive",
     "adaptive+nb",
+    "adaptive+id",
 )
 
 
@@ -347,9 +399,10 @@ def verdicts(logs: dict[str, Any]) -> list[str]:
         "error a model may keep). Targets: `ekf`+id ≤ 0.7 × kf, `adaptive` ≤ 0.5 × kf*.",
         "",
         "| log | floor SG | σ_ref | kf | kf*/kf | oracle/kf | oracle/kf* | id bound/kf "
-        "| pub bound/kf | λ ≤ 0.7 | ekf+auto+id/kf | ekf+auto+nb+id/kf | fusion+id [nll]/kf "
-        "| adaptive/kf* | adaptive+nb/kf* | 0.7 kf reachable: oracle / id |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| pub bound/kf | λ ≤ 0.7 | ekf+loo+id/kf | riemannian+loo+id/kf | ekf+auto+id/kf "
+        "| ekf+auto+nb+id/kf | fusion+id [nll]/kf | adaptive/kf* | adaptive+nb/kf* "
+        "| adaptive+id/kf* | 0.7 kf reachable: oracle / id |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for n, x in logs.items():
         r, kf = x["rms"], x["rms"]["kf"]
@@ -372,11 +425,14 @@ def verdicts(logs: dict[str, Any]) -> list[str]:
             *(
                 _f(r.get(c, math.nan) / d)
                 for c, d in (
+                    ("ekf+loo+id", kf),
+                    ("riemannian+loo+id", kf),
                     ("ekf+auto+id", kf),
                     ("ekf+auto+nb+id", kf),
                     ("fusion+id [nll]", kf),
                     ("adaptive", r["kf*"]),
                     ("adaptive+nb", r["kf*"]),
+                    ("adaptive+id", r["kf*"]),
                 )
             ),
             ("yes" if r["oracle q̈ [ref]"] <= 0.7 * kf else "**no**")
@@ -394,6 +450,20 @@ def verdicts(logs: dict[str, Any]) -> list[str]:
     for c in ("oracle q̈ [ref]", "model+id [ref]", "model+pub [ref]", "fusion+id [ref]"):
         per = np.array([np.divide(x["rms_joint"][c], x["rms_joint"]["kf"]) for x in logs.values()])
         L.append(f"| {c} | " + " | ".join(_range(list(col)) for col in per.T) + " |")
+    labels = [lab for lab, _, _ in FIXED]
+    L += [
+        "",
+        "Fixed densities on the identified model (`a`: `accel_psd`, `d`: "
+        "`disturbance_psd`, 0: none), RMS / kf; `+loo` takes, per log, the column with "
+        "the lowest mean log-ratio on the other logs (its choice in the last column).",
+        "",
+        "| log | " + " | ".join(labels) + " | +loo choice |",
+        "|---|" + "---|" * (len(labels) + 1),
+    ]
+    for n, x in logs.items():
+        ratios = [_f(x["fixed"].get(lab, math.nan) / x["rms"]["kf"]) for lab in labels]
+        choice = ", ".join(x.get("loo_choice", {}).values())
+        L.append(f"| {n} | " + " | ".join(ratios) + f" | {choice} |")
     return L
 
 

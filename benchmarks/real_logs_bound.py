@@ -228,6 +228,8 @@ def reference_noise(out, t, q, ref, tk, v_k, v_sg, fresh_rows, ev):
     out["ref_lag"], out["floor_sg_at_lag"] = min(shifted.items(), key=lambda x: x[1])
     m = fresh_rows
     out["sigma_ref_white"] = second_difference_noise_std(ref[m], t[m]).tolist()
+    # the same statistic of the smooth SG velocity: the signal's own curvature in it
+    out["sigma_sg_white"] = second_difference_noise_std(v_sg[m], t[m]).tolist()
     return cd, ev_cd
 
 
@@ -391,29 +393,41 @@ def verdicts(logs: dict[str, Any]) -> list[str]:
     L = [
         "### Summary: issue 36's velocity targets against these bounds",
         "",
-        "Ratios of RMS against `dq`. *oracle*: `oracle q̈ [ref]` (the acceleration known, "
+        "Ratios of RMS against `dq`. σ_w: the white part of `dq`'s own error, less (in "
+        "quadrature) the same statistic of the smooth SG velocity (the signal's own "
+        "curvature): an estimator with no error at all scores at least that; *oracle*: `oracle q̈ [ref]` (the acceleration known, "
         "tuned on `dq`); *id bound*, *pub bound*: `model+id [ref]`, `model+pub [ref]`; "
         "*λ ≤ 0.7*: the largest λ of "
         + ", ".join(f"{lam:g}" for lam in LAMBDAS)
         + " whose `λ [ref]` ≤ 0.7 × kf (the share of the identified model's acceleration "
         "error a model may keep). Targets: `ekf`+id ≤ 0.7 × kf, `adaptive` ≤ 0.5 × kf*.",
         "",
-        "| log | floor SG | σ_ref | kf | kf*/kf | oracle/kf | oracle/kf* | id bound/kf "
+        "| log | floor SG | σ_ref | σ_w | kf | σ_w/kf | σ_w/kf* | kf*/kf | oracle/kf "
+        "| oracle/kf* | id bound/kf "
         "| pub bound/kf | λ ≤ 0.7 | ekf+loo+id/kf | riemannian+loo+id/kf | ekf+auto+id/kf "
         "| ekf+auto+nb+id/kf | fusion+id [nll]/kf | adaptive/kf* | adaptive+nb/kf* "
         "| adaptive+id/kf* | 0.7 kf reachable: oracle / id |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for n, x in logs.items():
         r, kf = x["rms"], x["rms"]["kf"]
         lam_ok = [lam for lam in LAMBDAS if r[f"λ={lam:g} [ref]"] <= 0.7 * kf]
+        # σ_w less the signal's own curvature (the SG velocity's statistic), in quadrature
+        w = math.sqrt(
+            float(
+                np.mean(np.square(x["sigma_ref_white"])) - np.mean(np.square(x["sigma_sg_white"]))
+            )
+        )
         cells = [
             _f(x["floor_sg"]),
             _f(math.sqrt(max(x["hat_kf"][0], 0.0))),
+            _f(w),
             _f(kf),
             *(
                 f"{v:.2f}"
                 for v in (
+                    w / kf,
+                    w / r["kf*"],
                     r["kf*"] / kf,
                     r["oracle q̈ [ref]"] / kf,
                     r["oracle q̈ [ref]"] / r["kf*"],
@@ -485,22 +499,24 @@ def markdown(res: dict[str, Any]) -> str:
         "floor SG / CD: RMS of `dq` − the SG velocity / central difference of `q` "
         "(`real_logs.md`'s floor); lag: the shift of the SG velocity that fits `dq` best "
         "(+: `dq` late) and the floor there; σ_w: the white part of `dq`'s error from its "
-        "own second differences (`second_difference_noise_std`, a lower bound); σ_ref, "
+        "own second differences (`second_difference_noise_std`, a lower bound once the "
+        "signal's own curvature, σ_w of the SG velocity, is taken out); σ_ref, "
         "σ_SG, σ_kf: the three-cornered hat over (`dq`, SG, `kf`); σ_ref″: over (`dq`, SG, "
         "CD) (√ of the mean square over joints; negative: the triple's errors are "
         "correlated). σ_ref is what an estimator with **zero** true error would score.",
         "",
-        "| log | floor SG | floor CD | lag [ms] | floor at lag | σ_w | σ_ref | σ_SG | σ_kf "
-        "| σ_ref″ | kf | σ_ref / kf |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| log | floor SG | floor CD | lag [ms] | floor at lag | σ_w | σ_w of SG | σ_ref "
+        "| σ_SG | σ_kf | σ_ref″ | kf | σ_ref / kf |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     sq = lambda s: math.copysign(math.sqrt(abs(s)), s)  # noqa: E731
     for n, x in logs.items():
         h, h2 = x["hat_kf"], x["hat_cd"]
         w = math.sqrt(float(np.mean(np.square(x["sigma_ref_white"]))))
+        w_sg = math.sqrt(float(np.mean(np.square(x["sigma_sg_white"]))))
         L.append(
             f"| {n} | {_f(x['floor_sg'])} | {_f(x['floor_cd'])} | {x['ref_lag'] * 1e3:+.0f} "
-            f"| {_f(x['floor_sg_at_lag'])} | {_f(w)} | {_f(sq(h[0]))} | {_f(sq(h[1]))} "
+            f"| {_f(x['floor_sg_at_lag'])} | {_f(w)} | {_f(w_sg)} | {_f(sq(h[0]))} | {_f(sq(h[1]))} "
             f"| {_f(sq(h[2]))} | {_f(sq(h2[0]))} | {_f(x['rms']['kf'])} "
             f"| {sq(h[0]) / x['rms']['kf']:.2f} |"
         )

@@ -599,6 +599,19 @@ def markdown(res: dict[str, Any]) -> str:
     return "\n".join(L) + "\n"
 
 
+def _json_safe(x: object, back: bool = False) -> object:
+    """Strict JSON: ``inf`` (σ of a model ignored) and ``nan`` written as strings, read back."""
+    if isinstance(x, dict):
+        return {k: _json_safe(v, back) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_json_safe(v, back) for v in x]
+    if back and x in ("inf", "-inf", "nan"):
+        return float(str(x))
+    if not back and isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    return x
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help=f"{QUICK} logs, printed only")
@@ -606,7 +619,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     js, md = HERE / "real_logs_bound.json", HERE / "real_logs_bound.md"
     if args.render:
-        md.write_text(markdown(json.loads(js.read_text(encoding="utf-8"))), encoding="utf-8")
+        md.write_text(
+            markdown(_json_safe(json.loads(js.read_text(encoding="utf-8")), back=True)),
+            encoding="utf-8",
+        )
         return 0
     if not rd.list_logs():
         print("no real data (see benchmarks/real_data.py): nothing to do")
@@ -615,7 +631,7 @@ def main(argv: list[str] | None = None) -> int:
     text = markdown(res)
     print(text)
     if not args.quick:
-        js.write_text(json.dumps(res, indent=1), encoding="utf-8")
+        js.write_text(json.dumps(_json_safe(res), indent=1, allow_nan=False), encoding="utf-8")
         md.write_text(text, encoding="utf-8")
     return 0
 

@@ -288,10 +288,18 @@ def gains_from_noise(rate: float, noise_std: float, accel_psd: float) -> tuple[f
     converted with ``e^{−2αh} = 1 − k₁`` and the closed-loop poles
     ``λ = e^{s h}``: ``β = s₁ s₂``.
 
+    A second-order error dynamics ``ζ̈ = −2α ζ̇ − β ζ`` has poles ``e^{s h}`` that
+    are positive reals or a complex-conjugate pair: a DARE gain whose closed-loop
+    poles lie on the negative real axis (a density far above the noise, ``q h³ ≫ σ²``)
+    has no ``(α, β)`` and is refused, not mapped to a wrong gain.
+
     Args:
         rate: sample rate [Hz].
         noise_std: position noise standard deviation [rad or m], > 0.
         accel_psd: white-acceleration density [rad²/s³], > 0.
+
+    Raises:
+        GainError: the Kalman gain's closed-loop poles lie on the negative real axis.
     """
     h = 1.0 / rate
     F = np.array([[1.0, h], [0.0, 1.0]])
@@ -303,6 +311,13 @@ def gains_from_noise(rate: float, noise_std: float, accel_psd: float) -> tuple[f
     K = P[:, 0] / (P[0, 0] + noise_std**2)  # gain on the predicted error
     closed = (np.eye(2) - np.outer(K, [1.0, 0.0])) @ F
     lam = np.linalg.eigvals(closed).astype(complex)
+    if np.any((np.abs(lam.imag) <= 1e-12 * np.abs(lam)) & (lam.real <= 0.0)):
+        raise GainError(
+            f"accel_psd={accel_psd:.3g} with noise_std={noise_std:.3g} at {rate:.4g} Hz asks for a "
+            f"Kalman gain whose error poles {np.round(lam.real, 6).tolist()} lie on the negative "
+            "real axis, which no (alpha, beta) reproduces: give the log's noise_std (the default "
+            "1e-6 assumes noise-free positions), lower accel_psd, or give alpha and beta"
+        )
     s = np.log(lam) / h
     alpha = -0.5 * float(np.real(s[0] + s[1]))
     beta = float(np.real(s[0] * s[1]))

@@ -142,6 +142,30 @@ def test_gain_rule_reproduces_the_steady_state_kalman_gain() -> None:
     assert ob.options["gain_rule"] == "kalman" and ob.gains.alpha == pytest.approx(alpha)
 
 
+@pytest.mark.parametrize("sigma", [1e-4, 1e-5])
+def test_gain_rule_reproduces_fast_kalman_gains(sigma: float) -> None:
+    # 500 Hz, accel_psd 1: at σ 1e-5 the error poles are a complex pair of negative real part
+    rate, psd = 500.0, 1.0
+    h = 1.0 / rate
+    F = np.array([[1.0, h], [0.0, 1.0]])
+    Q = psd * np.array([[h**3 / 3, h**2 / 2], [h**2 / 2, h]])
+    P = scipy.linalg.solve_discrete_are(F.T, np.array([[1.0], [0.0]]), Q, np.array([[sigma**2]]))
+    kalman = P[:, 0] / (P[0, 0] + sigma**2)
+    np.testing.assert_allclose(
+        discrete_gains(*gains_from_noise(rate, sigma, psd), h), kalman, rtol=1e-8
+    )
+
+
+@pytest.mark.parametrize("sigma", [1e-6, 1e-7, 1e-9])
+def test_gain_rule_refuses_kalman_gains_with_negative_real_poles(sigma: float) -> None:
+    # There the DARE's error poles are two negative reals: no (α, β) gives them (it used
+    # to return β = -8.6e4 at 1e-6 and a positive β of the wrong gain k₂ at 1e-7 and 1e-9).
+    with pytest.raises(pinobs.GainError, match="negative real axis"):
+        gains_from_noise(500.0, sigma, 1.0)
+    with pytest.raises(pinobs.GainError, match="give the log's noise_std"):
+        RiemannianObserver(pinobs.load("cartpole"), rate=500.0, noise_std=sigma, accel_psd=1.0)
+
+
 @pytest.mark.parametrize(
     ("options", "match"),
     [

@@ -765,6 +765,21 @@ def tx40_markdown(x: dict[str, Any]) -> list[str]:
         "both joints (`Tᵀ I_m T`, `Tᵀ f_m(T v)`, off the diagonal), which pinobs's per-joint "
         "armature and friction cannot express."
     )
+    lsq = next(iter(TX40_LSQ))
+    above = [
+        name
+        for i, name in enumerate(j)
+        if all(lsq in r and r[lsq][i] > TX40_FIGAROH_TANH[i] for r in x["torque"].values())
+    ]
+    if above:
+        L.append("")
+        L.append(
+            "FIGAROH-tanh's numbers were measured with a protocol the README does not state "
+            "in full (its derivatives' window, its rows): on these rows and derivatives, with "
+            f"either window, the least squares with FIGAROH's own columns (*{lsq}*) is above "
+            f"them on {', '.join(above)}, so the last column compares unlike protocols there; "
+            "the *lsq* rows are the like-for-like reference."
+        )
     L += tx40_rest_split(x["torque"].get(str(TX40_SG_WINDOW), {}), j)
     if "velocity" not in x:  # (a --torque-only run not merged into a stored one)
         return L

@@ -126,6 +126,10 @@ def test_bad_drives_are_refused_naming_what_is_wrong(rng) -> None:
         Drives(transmission=[[1.0, 2.0, 0.0], [2.0, 4.0, 0.0], [0.0, 0.0, 1.0]])
     with pytest.raises(DimensionError, match=r"describe 2 joints.*has 3"):
         read_log(motor, robot, drives=Drives(gear_ratio=[1.0, 2.0], motor_constant=[1.0, 1.0]))
+    # a square transmission of another robot's size: named, with the size wanted
+    four = Drives(transmission=np.eye(4), motor_constant=np.ones(4))
+    with pytest.raises(DimensionError, match=r"describe 4 joints.*has 3.*3 × 3 transmission"):
+        read_log(motor, robot, drives=four)
     with pytest.raises(DimensionError, match="different sizes"):
         Drives(gear_ratio=[1.0, 2.0, 3.0], motor_constant=[1.0, 1.0])
     with pytest.raises(DimensionError, match="zero"):

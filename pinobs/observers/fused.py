@@ -17,6 +17,16 @@ vector space (``⊕`` is ``+``) with ``nv ≤`` :data:`~pinobs.observers.linalg.
 * the EKF's correction: the innovation, the Joseph update
   (:func:`~pinobs.observers.linalg.joseph_update`'s loops) and the NIS.
 
+With Lie-group or continuous joints (no friction, any ``nv``; issue 39):
+
+* the RKMK4 step (:class:`LieRK4`: :func:`rkmk4_stage_loops` between the ``aba`` calls and
+  the model's ``integrate``, ``integrate_jacobian_solve`` and ``normalize``, which stay
+  Pinocchio's);
+* ``riemannian``'s correction but its bracket (:func:`lie_correction_loops`), its
+  vector-space correction with the Riccati schedule's gains (:func:`riccati_correction_loops`)
+  and its Jacobi operator's products (:func:`jacobi_loops`), so that its update makes no
+  BLAS call.
+
 The equations are those of :mod:`pinobs.observers.ekf` and :mod:`pinobs.model.integrators`;
 the compiled steps equal the NumPy ones to rounding (the tests compare them).
 """
@@ -42,6 +52,7 @@ __all__ = [
     "lie_correction_kernel",
     "loaded",
     "riccati_correction_kernel",
+    "rk4_calls",
     "rk4_stage_kernel",
     "rk4_start_kernel",
     "rkmk4_stage_kernel",
@@ -452,6 +463,18 @@ riccati_correction_kernel = LazyKernel(
 )  # fmt: skip
 #: :func:`jacobi_loops` compiled.
 jacobi_kernel = LazyKernel(jacobi_loops, *(np.zeros((1, 1)),) * 2, 1.0, *(np.zeros((1, 1)),) * 6)
+
+
+def rk4_calls(
+    robot: Robot,
+) -> tuple[DynamicsCalls, Vector, Callable[..., Any], Callable[..., Any]] | None:
+    """Pinocchio's calls on a new ``pin.Data`` (the observer's own), the work rows of the
+    compiled RK4 step and its two kernels: for a :class:`Robot` on a vector space without
+    joint friction; ``None`` elsewhere (:func:`pinobs.model.dynamics_rk4`)."""
+    if not (isinstance(robot, Robot) and robot.is_vector_space and not robot.has_friction):
+        return None
+    w = np.zeros((8, robot.nv))
+    return dynamics_calls(robot), w, loaded(rk4_start_kernel), loaded(rk4_stage_kernel)
 
 
 def loaded(kernel: LazyKernel) -> Callable[..., Any]:

@@ -84,12 +84,16 @@ through the Jacobi operator ``R(v̂, ·)v̂`` (:func:`jacobi_operator`, four
 ABA-derivatives calls), recomputed every ``curvature_every`` samples (default
 10: it moves with ``q̂, v̂``, not with the noise in ζ) and applied as a matrix
 in between.  Around those calls, the Python work is kept small: the
-prediction is :func:`pinobs.model.dynamics_rk4` (stacked stages; on a vector
-space without friction its stages compiled, :mod:`pinobs.observers.fused`, on
-the observer's own ``pin.Data``) and, where
-``q ∈ Rⁿ``, the correction's arithmetic is one compiled call
-(:func:`~pinobs.observers.fused.vector_correction_loops`, numba; equal to the general
-:meth:`RiemannianObserver._correct` to rounding, tested).
+prediction is :func:`pinobs.model.dynamics_rk4` (without friction its stages
+compiled, :mod:`pinobs.observers.fused`, on the observer's own ``pin.Data``: the
+stacked RK4 on a vector space, :class:`~pinobs.observers.fused.LieRK4` with
+Lie-group or continuous joints) and, where ``q ∈ Rⁿ``, the correction's arithmetic
+is one compiled call, the Riccati schedule's gains included
+(:func:`~pinobs.observers.fused.riccati_correction_loops`), elsewhere one compiled
+call and the bracket (:func:`~pinobs.observers.fused.lie_correction_loops`; both equal
+to the general :meth:`RiemannianObserver._correct` to rounding, tested); the Jacobi
+operator's products are compiled too, so with constant gains the update makes no BLAS
+call.
 :func:`pinobs.evaluation.measure_cost` reports ``time(update) / time(pin.aba)``
 (chunks of updates, each followed by as many ``pin.aba`` calls; the Jacobi
 operator counted at its amortised share).  Measured on a UR5 at 1 kHz:
@@ -131,7 +135,7 @@ import numpy as np
 
 from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.model.integrators import DynamicsCalls, dynamics_calls
+from pinobs.model.integrators import dynamics_calls
 from pinobs.observers.base import (
     GateState,
     Observer,
@@ -146,8 +150,7 @@ from pinobs.observers.fused import (
     lie_correction_kernel,
     loaded,
     riccati_correction_kernel,
-    rk4_stage_kernel,
-    rk4_start_kernel,
+    rk4_calls,
     vector_correction_kernel,
 )
 from pinobs.tolerances import JACOBI_FD_STEP
@@ -418,19 +421,6 @@ def transport_first_order(robot: Robot, q_hat: Vector, zeta: Vector, s: Vector) 
     return s - robot.connection(q_hat, zeta, s)
 
 
-def _fast_calls(
-    robot: Robot,
-) -> tuple[DynamicsCalls, Vector, Callable[..., Any], Callable[..., Any]] | None:
-    """Pinocchio's calls on the observer's own ``pin.Data``, the work rows of the compiled
-    RK4 step and its two kernels (:mod:`pinobs.observers.fused`, issue 39): for a
-    :class:`Robot` on a vector space without joint friction; ``None`` elsewhere
-    (:func:`dynamics_rk4`)."""
-    if not (isinstance(robot, Robot) and robot.is_vector_space and not robot.has_friction):
-        return None
-    w = np.zeros((8, robot.nv))
-    return dynamics_calls(robot), w, loaded(rk4_start_kernel), loaded(rk4_stage_kernel)
-
-
 # ---------------------------------------------------------------- observer
 class _State(NamedTuple):
     q: Vector
@@ -568,7 +558,7 @@ class RiemannianObserver(Observer[_State]):
         :class:`Robot` with constant gains the step makes no BLAS call, the Jacobi operator
         included (:attr:`Observer.uses_blas`)."""
         robot = self.robot
-        self._scratch_calls = _fast_calls(robot)  # vector space: the RK4's stages
+        self._scratch_calls = rk4_calls(robot)  # vector space: the RK4's stages
         self._scratch_lie = LieRK4.build(robot)  # Lie-group joints: the RKMK4's
         # the correction's derivatives call (any Robot)
         self._scratch_derivatives = dynamics_calls(robot) if isinstance(robot, Robot) else None

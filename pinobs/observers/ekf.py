@@ -41,10 +41,11 @@ RK4 stages, ``Φ P Φᵀ + Q_d``, the Joseph correction; on the filter's own
 ``pin.Data``): on a UR5, 23 → 14 ``pin.aba`` per update (``measure_cost``, CPU
 time), equal to the NumPy step to rounding (tested).  With Lie-group or continuous
 joints (no friction), :class:`_LieFast`: the RKMK4 step compiled between Pinocchio's
-calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`), above it ``Φ`` and the
-Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`: the identity rows copied,
-``−ad_v̂`` on its joints' rows only, a Cholesky factor and two triangular solves): a talos
-(nv = 38) 36 → 33 ``pin.aba`` per update (``measure_cost``, CPU time, same run).
+calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`); from ``nv = 28``,
+``Φ`` on ``A``'s blocks (:mod:`pinobs.observers.blocks`: the identity rows copied,
+``−ad_v̂`` on its joints' rows only) and the Joseph update by a Cholesky factor and two
+triangular solves: a talos (nv = 38) 36.3 → 34.7 ``pin.aba`` per update
+(``measure_cost``, CPU time, the two paths alternating in one process).
 
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
 ``τ_f = −D v − F_c tanh(v/v_s)``) makes the error dynamics stiff near ``v = 0``:
@@ -501,7 +502,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         q, v, d, P = state.q, state.v, state.d, state.P
         R = self.gains.meas_std**2
         e = self.robot.difference(q, q_meas)
-        large = self._lie_fast is not None and nv > KERNEL_MAX_NV
+        large = self._lie_fast is not None and nv >= blocks.MIN_NV
         dx, P_new = blocks.joseph_update(P, e, R) if large else joseph_update(P, e, R)
         nis = float(e @ (e - dx[:nv])) / R
         if nis * R < 1e-6 * float(e @ e):  # K_q ≈ I (P_qq ≫ R): e − K_q e lost its digits
@@ -659,10 +660,12 @@ class _LieFast:
     :class:`Robot` with Lie-group or continuous joints, without joint friction (issue 39).
     Up to ``KERNEL_MAX_NV``: the RKMK4 step compiled between Pinocchio's calls
     (:class:`~pinobs.observers.fused.LieRK4`, on its own ``pin.Data``; the filter loads
-    numba there anyway).  Above (a talos): ``Φ`` and the Joseph update on ``A``'s blocks
-    (:mod:`pinobs.observers.blocks`: NumPy and LAPACK, no numba, so no start-up cost; the
-    compiled RKMK4 would save 1.5 % of the update there).  The same equations, equal to the
-    general path to rounding (tested)."""
+    numba there anyway).  From ``blocks.MIN_NV`` (a talos): ``Φ`` and the Joseph update on
+    ``A``'s blocks (:mod:`pinobs.observers.blocks`: NumPy and LAPACK, no numba, so no
+    start-up cost; the compiled RKMK4 would save 1.5 % of the update there).  In between
+    (a go1), the general path: measured in the filter's loop, the blocks were not faster
+    there (go1: 34.1 against 33.0 ``pin.aba``; talos: 34.7 against 36.3).  The same
+    equations, equal to the general path to rounding (tested)."""
 
     def __init__(self, robot: Robot) -> None:
         self.nv = robot.nv
@@ -675,7 +678,7 @@ class _LieFast:
         r = ekf.robot
         if not isinstance(r, Robot) or r.is_vector_space or r.has_friction:
             return None
-        return cls(r)
+        return cls(r) if r.nv <= KERNEL_MAX_NV or r.nv >= blocks.MIN_NV else None
 
     def transition(self, A: Vector, h: float) -> Vector:
         """``Φ`` (:func:`~pinobs.observers.linalg.transition_matrix`), a new array."""

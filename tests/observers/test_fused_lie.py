@@ -35,7 +35,8 @@ _COMPILED = (
     [
         ("ur5", "riemannian", 3.0),
         ("go1", "riemannian", 3.0),
-        ("go1", "ekf", 3.0),
+        ("top", "ekf", 3.0),
+        ("rigid_body", "ekf", 3.0),
         ("talos", "ekf", 2.0),
         ("talos", "riemannian", 2.0),
         ("cartpole_continuous", "riemannian", 3.0),
@@ -137,13 +138,17 @@ def test_the_block_products_equal_the_dense_ones(with_offset: bool) -> None:
 
 
 def test_the_lie_group_paths_are_taken_where_they_apply() -> None:
-    """``ekf`` and ``riemannian`` take the compiled Lie-group paths on go1 and talos;
-    ``riemannian`` with constant gains makes no BLAS call there (its update enters no thread
-    limit), ``ekf`` on a talos (76 × 76 covariance products) does."""
-    go1, talos = cached_robot("go1"), cached_robot("talos")
+    """``riemannian`` takes the compiled Lie-group paths on go1 and talos and with constant
+    gains makes no BLAS call there (its update enters no thread limit); ``ekf`` takes its
+    compiled RKMK4 up to nv = 12 (top), the block products from ``blocks.MIN_NV`` (talos,
+    76 × 76 covariance products on one BLAS thread), and neither in between (go1)."""
+    go1, talos, top = cached_robot("go1"), cached_robot("talos"), cached_robot("top")
+    small = make_observer("ekf", top, rate=1000.0, noise_std=1e-4)
+    assert small._lie_fast is not None and small._lie_fast.rk4 is not None
+    large = make_observer("ekf", talos, rate=1000.0, noise_std=1e-4)
+    assert large._lie_fast is not None and large._lie_fast.rk4 is None and large.uses_blas
+    assert make_observer("ekf", go1, rate=1000.0, noise_std=1e-4)._lie_fast is None
     for robot in (go1, talos):
-        ekf = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
-        assert ekf._lie_fast is not None and ekf.uses_blas
         rie = make_observer("riemannian", robot, rate=1000.0, noise_std=1e-4)
         assert rie._scratch_lie is not None and rie._lie_correction is not None
         assert not rie.uses_blas

@@ -15,12 +15,13 @@ multiply-adds on ``A``'s constant rows.  Here:
   on a talos); the offset's rows are zero.  :func:`transition` builds ``Φ`` with two of
   them instead of two ``n × n × n`` products;
 * the Joseph update's ``S⁻¹ (H P)`` (:func:`joseph_update`) by a Cholesky factor (LAPACK
-  ``dpotrf``) and two triangular solves (BLAS ``dtrsm``) on ``P``'s column block, which is
-  Fortran-ordered as it lies in memory (LAPACK's ``dposv`` copies it first; 34 → 25 µs
-  for a talos), then the same products as :func:`pinobs.observers.linalg.joseph_update`.
+  ``dpotrf``) and two triangular solves (BLAS ``dtrsm``) on ``P``'s column block, which lies
+  in memory as the solves want it (``dposv`` on the same system: 34 against 25 µs for a
+  talos, one thread), then the same products as
+  :func:`pinobs.observers.linalg.joseph_update`.
 
-The same equations as the dense products, equal to them to rounding (tested in
-``tests/observers/test_fused.py``).
+:mod:`pinobs.observers.ekf` takes them from :data:`MIN_NV` on.  The same equations as the
+dense products, equal to them to rounding (tested in ``tests/observers/test_fused_lie.py``).
 """
 
 from __future__ import annotations

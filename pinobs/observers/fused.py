@@ -230,11 +230,11 @@ class LieRK4:
     arithmetic between the calls compiled (:func:`rkmk4_stage_loops`): four ``aba`` on
     ``calls``' own data, and the model's ``integrate`` (four), ``integrate_jacobian_solve``
     (three) and ``normalize``, as :func:`pinobs.model.dynamics_rk4` calls them.  Equal to it
-    to the bit (tested).  ``work`` is overwritten by every step."""
+    to the bit (tested).  ``_scratch_work`` is overwritten by every step."""
 
     def __init__(self, robot: Robot, calls: DynamicsCalls) -> None:
         self.robot, self.calls = robot, calls
-        self.work = np.zeros((10, robot.nv))
+        self._scratch_work = np.zeros((10, robot.nv))
         self.stage = loaded(rkmk4_stage_kernel)
 
     @classmethod
@@ -250,7 +250,7 @@ class LieRK4:
     ) -> tuple[Vector, Vector]:
         """``(q⁺, v⁺)`` after ``h`` [s] with ``tau`` held from ``(q, v)``; ``acc0``: the first
         stage's ``v̇`` if the caller has it (read before any call)."""
-        r, aba, stage, w = self.robot, self.calls.aba, self.stage, self.work
+        r, aba, stage, w = self.robot, self.calls.aba, self.stage, self._scratch_work
         integrate, solve = r.integrate, r.integrate_jacobian_solve
         xi, vs = w[8], w[9]
         w[0] = v

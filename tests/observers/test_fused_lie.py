@@ -19,6 +19,7 @@ from pinobs.observers.riemannian import jacobi_operator
 from pinobs.simulation import Sensor
 from tests.conftest import cached_robot
 from tests.observers.test_fused import _assert_close_per_signal, _run
+from tests.observers.test_purity import fingerprint
 
 # the attributes that switch the compiled paths on (None: the NumPy step)
 _COMPILED = (
@@ -155,3 +156,26 @@ def test_the_lie_group_paths_are_taken_where_they_apply() -> None:
     # state-dependent gains: the general correction, on one BLAS thread
     rie = make_observer("riemannian", go1, beta=100.0, gain_a=lambda s, speed: 8.0 + s)
     assert rie._lie_correction is None and rie.uses_blas
+
+
+@pytest.mark.parametrize(
+    ("robot_name", "name"), [("top", "ekf"), ("talos", "ekf"), ("go1", "riemannian")]
+)
+def test_the_lie_group_paths_keep_step_pure(robot_name: str, name: str) -> None:
+    """``step`` on the Lie-group paths changes only working memory (``_scratch*``,
+    ``pin.Data``: tests/observers/test_purity.py, whose robots take the vector-space paths
+    for these families) and gives the same state twice from the same inputs."""
+    robot = cached_robot(robot_name)
+    res = pinobs.simulate(robot, [], duration=0.2, sensor=Sensor(1000.0, 1e-4), seed=3)
+    ob = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
+    ob.reset(res.t[0], res.q[0], None, res.tau[0])
+    for k in range(1, res.t.size - 1):
+        ob.update(res.t[k], res.q_meas[k], res.tau[k])
+    state, before = ob._state, fingerprint(ob)
+    first = ob.step(state, 1e-3, res.q_meas[-1], res.tau[-1])
+    assert fingerprint(ob) == before
+    second = ob.step(state, 1e-3, res.q_meas[-1], res.tau[-1])
+    assert fingerprint(ob) == before
+    for a, b in zip(first, second, strict=True):
+        if isinstance(a, np.ndarray):
+            np.testing.assert_array_equal(a, b)

@@ -39,7 +39,13 @@ On a vector-space robot without friction (``nv ≤ 12``) the whole step is five
 compiled calls around Pinocchio's four (issue 39, :mod:`pinobs.observers.fused`:
 RK4 stages, ``Φ P Φᵀ + Q_d``, the Joseph correction; on the filter's own
 ``pin.Data``): on a UR5, 23 → 14 ``pin.aba`` per update (``measure_cost``, CPU
-time), equal to the NumPy step to rounding (tested).
+time), equal to the NumPy step to rounding (tested).  With Lie-group or continuous
+joints (no friction), :class:`_LieFast`: the RKMK4 step compiled between Pinocchio's
+calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`); from ``nv = 28``,
+``Φ`` on ``A``'s blocks (:mod:`pinobs.observers.blocks`: the identity rows copied,
+``−ad_v̂`` on its joints' rows only) and the Joseph update by a Cholesky factor and two
+triangular solves: a talos (nv = 38) 36.3 → 34.7 ``pin.aba`` per update
+(``measure_cost``, CPU time, the two paths alternating in one process).
 
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
 ``τ_f = −D v − F_c tanh(v/v_s)``) makes the error dynamics stiff near ``v = 0``:
@@ -147,6 +153,7 @@ import numpy as np
 from pinobs.errors import DimensionError, GainError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.integrators import dynamics_calls, friction_substeps
+from pinobs.observers import blocks
 from pinobs.observers.base import (
     GateState,
     Observer,
@@ -156,6 +163,7 @@ from pinobs.observers.base import (
     register,
 )
 from pinobs.observers.fused import (
+    LieRK4,
     ekf_correct_kernel,
     ekf_predict_kernel,
     loaded,
@@ -312,6 +320,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self._scratch_A: Vector | None = None  # A's buffer (_jacobian)
         warm_linear_algebra(self.robot.nv)  # LAPACK and the compiled update, now
         self._fast: _FastPath | None = _FastPath.build(self)
+        self._lie_fast = _LieFast.build(self)  # Lie-group joints (module docstring)
         # the compiled step makes no BLAS call (Observer.uses_blas; its rare ways back to
         # NumPy, ≤ 36 × 36 with nv ≤ 12, are below OpenBLAS's threading sizes)
         self.uses_blas = self._fast is None
@@ -458,8 +467,14 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self, state: EKFState, dt: float, tau_in: Vector, A: Vector, acc: Any, minv: Vector
     ) -> tuple[EKFState, Vector]:
         """:meth:`predict` given the torque (offset included) and the start's Jacobian call."""
-        nv, d = self.robot.nv, state.d
-        if not self.robot.has_friction:
+        nv, d, lie = self.robot.nv, state.d, self._lie_fast
+        if lie is not None:  # the same step, on A's blocks or compiled between the calls
+            Phi = lie.transition(A, dt)
+            if lie.rk4 is not None:
+                q, v = lie.rk4.step(state.q, state.v, tau_in, dt, acc0=acc)
+            else:
+                q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt, acc0=acc)
+        elif not self.robot.has_friction:
             Phi = transition_matrix(A, dt)
             # RKMK4 of vector_field; its first stage is the derivatives call's v̇
             q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt, acc0=acc)
@@ -487,7 +502,8 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         q, v, d, P = state.q, state.v, state.d, state.P
         R = self.gains.meas_std**2
         e = self.robot.difference(q, q_meas)
-        dx, P_new = joseph_update(P, e, R)
+        large = self._lie_fast is not None and nv >= blocks.MIN_NV
+        dx, P_new = blocks.joseph_update(P, e, R) if large else joseph_update(P, e, R)
         nis = float(e @ (e - dx[:nv])) / R
         if nis * R < 1e-6 * float(e @ e):  # K_q ≈ I (P_qq ≫ R): e − K_q e lost its digits
             # and went negative (−9e294 on a filter being lost): eᵀ S⁻¹ e directly
@@ -525,6 +541,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self.robot = robot
         self._scratch_A = None  # sized by the robot
         self._fast = _FastPath.build(self)
+        self._lie_fast = _LieFast.build(self)
         self.uses_blas = self._fast is None
 
     def output(self, state: EKFState) -> tuple[Vector, Vector]:
@@ -636,3 +653,35 @@ class _FastPath:
                         d_psd, e, s, dt, window=AUTO_WINDOW, bounds=ekf._psd_bounds
                     )
         return EKFState(q, v, P_new, d, d_psd, gate, state.auto)
+
+
+class _LieFast:
+    """:meth:`ExtendedKalmanFilter.predict` and :meth:`~ExtendedKalmanFilter.correct` on a
+    :class:`Robot` with Lie-group or continuous joints, without joint friction (issue 39).
+    Up to ``KERNEL_MAX_NV``: the RKMK4 step compiled between Pinocchio's calls
+    (:class:`~pinobs.observers.fused.LieRK4`, on its own ``pin.Data``; the filter loads
+    numba there anyway).  From ``blocks.MIN_NV`` (a talos): ``Φ`` and the Joseph update on
+    ``A``'s blocks (:mod:`pinobs.observers.blocks`: NumPy and LAPACK, no numba, so no
+    start-up cost; the compiled RKMK4 would save 1.5 % of the update there).  In between
+    (a go1), the general path: measured in the filter's loop, the blocks were not faster
+    there (go1: 34.1 against 33.0 ``pin.aba``; talos: 34.7 against 36.3).  The same
+    equations, equal to the general path to rounding (tested)."""
+
+    def __init__(self, robot: Robot) -> None:
+        self.nv = robot.nv
+        self.rk4 = LieRK4.build(robot) if self.nv <= KERNEL_MAX_NV else None
+        self.rows = blocks.bracket_rows(robot)  # where −ad_v̂ can be nonzero
+
+    @classmethod
+    def build(cls, ekf: ExtendedKalmanFilter) -> _LieFast | None:
+        """The Lie-group path of ``ekf``, or ``None`` where its robot does not qualify."""
+        r = ekf.robot
+        if not isinstance(r, Robot) or r.is_vector_space or r.has_friction:
+            return None
+        return cls(r) if r.nv <= KERNEL_MAX_NV or r.nv >= blocks.MIN_NV else None
+
+    def transition(self, A: Vector, h: float) -> Vector:
+        """``Φ`` (:func:`~pinobs.observers.linalg.transition_matrix`), a new array."""
+        if self.nv <= KERNEL_MAX_NV:
+            return transition_matrix(A, h)
+        return blocks.transition(A, h, self.nv, self.rows)

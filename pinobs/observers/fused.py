@@ -17,6 +17,16 @@ vector space (``⊕`` is ``+``) with ``nv ≤`` :data:`~pinobs.observers.linalg.
 * the EKF's correction: the innovation, the Joseph update
   (:func:`~pinobs.observers.linalg.joseph_update`'s loops) and the NIS.
 
+With Lie-group or continuous joints (no friction, any ``nv``; issue 39):
+
+* the RKMK4 step (:class:`LieRK4`: :func:`rkmk4_stage_loops` between the ``aba`` calls and
+  the model's ``integrate``, ``integrate_jacobian_solve`` and ``normalize``, which stay
+  Pinocchio's);
+* ``riemannian``'s correction but its bracket (:func:`lie_correction_loops`), its
+  vector-space correction with the Riccati schedule's gains (:func:`riccati_correction_loops`)
+  and its Jacobi operator's products (:func:`jacobi_loops`), so that its update makes no
+  BLAS call.
+
 The equations are those of :mod:`pinobs.observers.ekf` and :mod:`pinobs.model.integrators`;
 the compiled steps equal the NumPy ones to rounding (the tests compare them).
 """
@@ -29,15 +39,24 @@ from typing import Any
 
 import numpy as np
 
+from pinobs.model import Robot
+from pinobs.model.integrators import DynamicsCalls, dynamics_calls
 from pinobs.observers.base import Vector
 from pinobs.observers.linalg import LazyKernel, joseph_kernel
 
 __all__ = [
+    "LieRK4",
     "ekf_correct_kernel",
     "ekf_predict_kernel",
+    "jacobi_kernel",
+    "lie_correction_kernel",
     "loaded",
+    "riccati_correction_kernel",
+    "rk4_calls",
     "rk4_stage_kernel",
     "rk4_start_kernel",
+    "rkmk4_stage_kernel",
+    "vector_correction_kernel",
 ]
 
 # the linalg loop, under its own name (LazyKernel's helpers are found by name here)
@@ -178,6 +197,216 @@ def ekf_correct_loops(
     return nis / r
 
 
+def rkmk4_stage_loops(w: Vector, acc: Vector, k: Vector, stage: int, h: float) -> None:
+    """Stage ``stage`` (1 to 4) of the RKMK4 step on a Lie group, work rows ``w`` =
+    ``(v, a₁, a₂, a₃, a₄, k₂, k₃, k₄, ξ, v_s)``: stores ``a_stage = acc`` and
+    ``k_stage = k`` (``J_r(ξ)⁻¹ v_s``, the caller's solve; unused at stage 1, where it is
+    ``v``), then the next stage's ``(ξ, v_s)`` (``ξ₂ = ½h v``, ``ξ₃ = ½h k₂``, ``ξ₄ = h k₃``;
+    ``v_{i+1} = v + c h a_i``), after the fourth ``ξ = ⅙h (v + 2k₂ + 2k₃ + k₄)`` and ``v⁺``
+    (:func:`pinobs.model.dynamics_rk4` on Lie-group joints: the same operations in the
+    same order, without fused multiply-adds, so the same bits)."""
+    hh, h6 = 0.5 * h, h / 6.0
+    for i in range(w.shape[1]):
+        v = w[0, i]
+        w[stage, i] = acc[i]
+        if stage > 1:
+            w[3 + stage, i] = k[i]
+        if stage == 1:
+            w[8, i] = hh * v
+            w[9, i] = v + hh * acc[i]
+        elif stage == 2:
+            w[8, i] = hh * k[i]
+            w[9, i] = v + hh * acc[i]
+        elif stage == 3:
+            w[8, i] = h * k[i]
+            w[9, i] = v + h * acc[i]
+        else:
+            w[8, i] = h6 * (v + 2.0 * w[5, i] + 2.0 * w[6, i] + k[i])
+            w[9, i] = v + h6 * (w[1, i] + 2.0 * w[2, i] + 2.0 * w[3, i] + acc[i])
+
+
+class LieRK4:
+    """:func:`pinobs.model.dynamics_rk4` on Lie-group joints (RKMK4, without friction), its
+    arithmetic between the calls compiled (:func:`rkmk4_stage_loops`): four ``aba`` on
+    ``calls``' own data, and the model's ``integrate`` (four), ``integrate_jacobian_solve``
+    (three) and ``normalize``, as :func:`pinobs.model.dynamics_rk4` calls them.  Equal to it
+    to the bit (tested).  ``_scratch_work`` is overwritten by every step."""
+
+    def __init__(self, robot: Robot, calls: DynamicsCalls) -> None:
+        self.robot, self.calls = robot, calls
+        self._scratch_work = np.zeros((10, robot.nv))
+        self.stage = loaded(rkmk4_stage_kernel)
+
+    @classmethod
+    def build(cls, robot: Robot) -> LieRK4 | None:
+        """The step on a new ``pin.Data`` of ``robot``'s, for a :class:`Robot` with
+        Lie-group or continuous joints and no joint friction; ``None`` elsewhere."""
+        if not isinstance(robot, Robot) or robot.is_vector_space or robot.has_friction:
+            return None
+        return cls(robot, dynamics_calls(robot))
+
+    def step(
+        self, q: Vector, v: Vector, tau: Vector, h: float, acc0: Vector | None = None
+    ) -> tuple[Vector, Vector]:
+        """``(q⁺, v⁺)`` after ``h`` [s] with ``tau`` held from ``(q, v)``; ``acc0``: the first
+        stage's ``v̇`` if the caller has it (read before any call)."""
+        r, aba, stage, w = self.robot, self.calls.aba, self.stage, self._scratch_work
+        integrate, solve = r.integrate, r.integrate_jacobian_solve
+        xi, vs = w[8], w[9]
+        w[0] = v
+        stage(w, aba(q, v, tau) if acc0 is None else acc0, v, 1, h)
+        for k in (2, 3, 4):
+            acc = aba(integrate(q, xi), vs, tau)
+            stage(w, acc, solve(q, xi, vs), k, h)
+        return r.normalize(integrate(q, xi)), vs.copy()
+
+
+def lie_correction_loops(
+    v: Vector, acc: Vector, a_q: Vector, a_v: Vector, delta: Vector, jac: Vector, k1: float,
+    k2: float, h: float, ch: float, zeta: Vector, w: Vector, dv: Vector, step: Vector,
+) -> None:  # fmt: skip
+    """The riemannian correction's arithmetic on any robot but its bracket (module
+    docstring of :mod:`pinobs.observers.riemannian`), with ``a, ∂a/∂q, ∂a/∂v`` the ABA
+    derivatives at ``(q̂⁻, δ, τ)`` and ``Γs(δ,δ) = −½(∂a/∂v)δ``::
+
+        ζ = −(δ + ½Γs(δ,δ))                          (second-order −log_q̂(q), MATH §4)
+        w = k₁ v̂ − h (a + Γs(δ,δ) + (∂a/∂q)δ)
+        dv = ½(∂a/∂v) w − k₂ ζ + h (∂a/∂q)δ + C h J ζ,     step = −k₁ ζ
+
+    (``½(∂a/∂v)w = Γs(ζ, w)`` to first order, Maithripala et al. eq. (19); ``J ζ =
+    R(v̂, ζ)v̂``, Anisi–Hamberg eq. (6)); the caller adds ``½[ζ, w]`` to ``dv``."""
+    n = v.shape[0]
+    ds = np.empty(n)
+    for i in range(n):
+        u = 0.0
+        d = 0.0
+        for j in range(n):
+            u += a_v[i, j] * delta[j]
+            d += a_q[i, j] * delta[j]
+        ds[i] = d
+        g = -0.5 * u
+        zeta[i] = -(delta[i] + 0.5 * g)
+        w[i] = k1 * v[i] - h * (acc[i] + g + d)
+    for i in range(n):
+        t = 0.0
+        c = 0.0
+        for j in range(n):
+            t += a_v[i, j] * w[j]
+            c += jac[i, j] * zeta[j]
+        dv[i] = 0.5 * t - k2 * zeta[i] + h * ds[i] + ch * c
+        step[i] = -k1 * zeta[i]
+
+
+def jacobi_loops(
+    b_plus: Vector, b_minus: Vector, eps: float, p_v: Vector, b_v: Vector, b_g: Vector,
+    ad_v: Vector, ad_g: Vector, out: Vector,
+) -> None:  # fmt: skip
+    """The Jacobi operator from its four calls' matrices, without BLAS
+    (:func:`pinobs.observers.riemannian.jacobi_operator`)::
+
+        J = ½ D_v B_v − P_v + (½B_v + ½ad_v)(½B_v − ½ad_v) − ½(B_g − ad_g) − (½B_v − ½ad_v) ad_v
+
+    with ``D_v B_v = (B₊ − B₋)/(2ε)``; ``ad ≡ 0`` on robots without Lie-group joints."""
+    n = b_v.shape[0]
+    left = np.empty((n, n))
+    right = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            left[i, j] = 0.5 * (b_v[i, j] - ad_v[i, j])
+            right[i, j] = 0.5 * (b_v[i, j] + ad_v[i, j])
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = (
+                0.5 * ((b_plus[i, j] - b_minus[i, j]) / (2.0 * eps))
+                - p_v[i, j]
+                - 0.5 * (b_g[i, j] - ad_g[i, j])
+            )
+    for i in range(n):
+        for k in range(n):
+            c = right[i, k]
+            e = left[i, k]
+            for j in range(n):
+                out[i, j] += c * left[k, j] - e * ad_v[k, j]
+
+
+def vector_correction_loops(
+    q: Vector,
+    v: Vector,
+    acc: Vector,
+    a_q: Vector,
+    a_v: Vector,
+    delta: Vector,
+    jac: Vector,
+    k1: float,
+    k2: float,
+    h: float,
+    ch: float,
+) -> tuple[Vector, Vector]:
+    """The correction's arithmetic on a vector space: ``(q̂⁺, v̂⁺)``, compiled (one call).
+
+    With ``a, ∂a/∂q, ∂a/∂v`` the ABA derivatives at ``(q̂⁻, δ, τ)``,
+    ``u = (∂a/∂v)δ = −2Γs(δ, δ)``, ``d = (∂a/∂q)δ``::
+
+        ζ = −δ + ¼u                              (second-order log, MATH §4)
+        w = k₁ v̂ − h (a − ½u + d)                (S at q = a + Γs(δ,δ) + d)
+        q̂⁺ = q̂ − k₁ ζ
+        v̂⁺ = v̂ + ½(∂a/∂v) w − k₂ ζ + h d + C h J ζ
+
+    (``½(∂a/∂v)w = ω(ζ, w)`` to first order: Maithripala et al. eq. (19);
+    ``J ζ = R(v̂, ζ)v̂``: Anisi–Hamberg eq. (6)).  For six joints NumPy would
+    spend more time dispatching a dozen tiny operations than computing them.
+    """
+    n = q.shape[0]
+    zeta = np.empty(n)
+    d = np.empty(n)
+    half_w = np.empty(n)
+    for i in range(n):
+        u_i = 0.0
+        d_i = 0.0
+        for j in range(n):
+            u_i += a_v[i, j] * delta[j]
+            d_i += a_q[i, j] * delta[j]
+        d[i] = d_i
+        zeta[i] = 0.25 * u_i - delta[i]
+        half_w[i] = 0.5 * (k1 * v[i] - h * (acc[i] - 0.5 * u_i + d_i))
+    q_new = np.empty(n)
+    v_new = np.empty(n)
+    for i in range(n):
+        transport = 0.0
+        curvature = 0.0
+        for j in range(n):
+            transport += a_v[i, j] * half_w[j]
+            curvature += jac[i, j] * zeta[j]
+        v_new[i] = v[i] + transport - k2 * zeta[i] + h * d[i] + ch * curvature
+        q_new[i] = q[i] - k1 * zeta[i]
+    return q_new, v_new
+
+
+def riccati_correction_loops(
+    q: Vector, v: Vector, acc: Vector, a_q: Vector, a_v: Vector, delta: Vector, jac: Vector,
+    p00: float, p01: float, p11: float, qa: float, r2: float, h: float, c: float,
+) -> tuple[Vector, Vector, float, float, float]:  # fmt: skip
+    """:func:`vector_correction_loops` with the gains of the Riccati schedule
+    (:meth:`pinobs.observers.riemannian.RiemannianObserver._correction_gains`, the same
+    operations in the same order): ``P⁻ = F P Fᵀ + Q``, ``K = P⁻Hᵀ/(P⁻₀₀ + σ²)``,
+    ``(k₁, k₂) = K``, the Joseph update; returns ``(q̂⁺, v̂⁺, P⁺₀₀, P⁺₀₁, P⁺₁₁)``
+    (``qa`` the acceleration density [rad²/s³], ``r2 = σ²``, ``c`` the curvature gain)."""
+    p00 += h * (2.0 * p01 + h * p11 + qa * h * h / 3.0)  # P⁻ = F P Fᵀ + Q
+    p01 += h * (p11 + 0.5 * qa * h)
+    p11 += qa * h
+    s = 1.0 / (p00 + r2)
+    k1, k2 = p00 * s, p01 * s  # K = P⁻Hᵀ (H P⁻Hᵀ + σ²)⁻¹
+    m = 1.0 - k1
+    q_new, v_new = vector_correction_loops(q, v, acc, a_q, a_v, delta, jac, k1, k2, h, c * h)
+    return (  # Joseph form (I − KH) P⁻ (I − KH)ᵀ + K σ² Kᵀ
+        q_new,
+        v_new,
+        m * m * p00 + r2 * k1 * k1,
+        m * (p01 - k2 * p00) + r2 * k1 * k2,
+        k2 * k2 * (p00 + r2) - 2.0 * k2 * p01 + p11,
+    )
+
+
 def _warm_predict() -> tuple[object, ...]:
     one, two = np.zeros((1, 1)), np.zeros((2, 2))
     return (np.zeros((8, 1)), np.zeros(1), np.zeros(1), np.zeros(1), one, one, one, np.eye(2),
@@ -203,6 +432,49 @@ ekf_correct_kernel = LazyKernel(
     np.zeros(1), np.zeros(1),
     helpers=(_joseph_loops,),
 )  # fmt: skip
+
+
+#: :func:`rkmk4_stage_loops` compiled: ``(w, a, k, stage, h)`` (no contraction: the bits of
+#: NumPy's separate products and sums).
+rkmk4_stage_kernel = LazyKernel(
+    rkmk4_stage_loops, np.zeros((10, 1)), np.zeros(1), np.zeros(1), 1, 1e-3
+)
+#: :func:`lie_correction_loops` compiled.
+lie_correction_kernel = LazyKernel(
+    lie_correction_loops,
+    *(np.zeros(1), np.zeros(1), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros(1)),
+    np.zeros((1, 1)),
+    0.5,
+    0.5,
+    1e-3,
+    0.0,
+    *(np.zeros(1),) * 4,
+)
+#: :func:`vector_correction_loops` compiled.
+vector_correction_kernel = LazyKernel(
+    vector_correction_loops, *(np.zeros(1),) * 3, np.zeros((1, 1)), np.zeros((1, 1)),
+    np.zeros(1), np.zeros((1, 1)), 0.0, 0.0, 0.0, 0.0,
+)  # fmt: skip
+#: :func:`riccati_correction_loops` compiled.
+riccati_correction_kernel = LazyKernel(
+    riccati_correction_loops, *(np.zeros(1),) * 3, np.zeros((1, 1)), np.zeros((1, 1)),
+    np.zeros(1), np.zeros((1, 1)), *(1.0,) * 7,
+    helpers=(vector_correction_loops,),
+)  # fmt: skip
+#: :func:`jacobi_loops` compiled.
+jacobi_kernel = LazyKernel(jacobi_loops, *(np.zeros((1, 1)),) * 2, 1.0, *(np.zeros((1, 1)),) * 6)
+
+
+def rk4_calls(
+    robot: Robot,
+) -> tuple[DynamicsCalls, Vector, Callable[..., Any], Callable[..., Any]] | None:
+    """Pinocchio's calls on a new ``pin.Data`` (the observer's own), the work rows of the
+    compiled RK4 step and its two kernels: for a :class:`Robot` on a vector space without
+    joint friction; ``None`` elsewhere (:func:`pinobs.model.dynamics_rk4`)."""
+    if not (isinstance(robot, Robot) and robot.is_vector_space and not robot.has_friction):
+        return None
+    w = np.zeros((8, robot.nv))
+    return dynamics_calls(robot), w, loaded(rk4_start_kernel), loaded(rk4_stage_kernel)
 
 
 def loaded(kernel: LazyKernel) -> Callable[..., Any]:

@@ -84,12 +84,16 @@ through the Jacobi operator ``R(v̂, ·)v̂`` (:func:`jacobi_operator`, four
 ABA-derivatives calls), recomputed every ``curvature_every`` samples (default
 10: it moves with ``q̂, v̂``, not with the noise in ζ) and applied as a matrix
 in between.  Around those calls, the Python work is kept small: the
-prediction is :func:`pinobs.model.dynamics_rk4` (stacked stages; on a vector
-space without friction its stages compiled, :mod:`pinobs.observers.fused`, on
-the observer's own ``pin.Data``) and, where
-``q ∈ Rⁿ``, the correction's arithmetic is one compiled call
-(:func:`_vector_space_correction`, numba; equal to the general
-:meth:`RiemannianObserver._correct` to rounding, tested).
+prediction is :func:`pinobs.model.dynamics_rk4` (without friction its stages
+compiled, :mod:`pinobs.observers.fused`, on the observer's own ``pin.Data``: the
+stacked RK4 on a vector space, :class:`~pinobs.observers.fused.LieRK4` with
+Lie-group or continuous joints) and, where ``q ∈ Rⁿ``, the correction's arithmetic
+is one compiled call, the Riccati schedule's gains included
+(:func:`~pinobs.observers.fused.riccati_correction_loops`), elsewhere one compiled
+call and the bracket (:func:`~pinobs.observers.fused.lie_correction_loops`; both equal
+to the general :meth:`RiemannianObserver._correct` to rounding, tested); the Jacobi
+operator's products are compiled too, so with constant gains the update makes no BLAS
+call.
 :func:`pinobs.evaluation.measure_cost` reports ``time(update) / time(pin.aba)``
 (chunks of updates, each followed by as many ``pin.aba`` calls; the Jacobi
 operator counted at its amortised share).  Measured on a UR5 at 1 kHz:
@@ -122,7 +126,6 @@ matter.  ``"steady"``: the constant steady-state gains.
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -132,7 +135,7 @@ import numpy as np
 
 from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.model.integrators import DynamicsCalls, dynamics_calls
+from pinobs.model.integrators import dynamics_calls
 from pinobs.observers.base import (
     GateState,
     Observer,
@@ -141,7 +144,15 @@ from pinobs.observers.base import (
     positive,
     register,
 )
-from pinobs.observers.fused import loaded, rk4_stage_kernel, rk4_start_kernel
+from pinobs.observers.fused import (
+    LieRK4,
+    jacobi_kernel,
+    lie_correction_kernel,
+    loaded,
+    riccati_correction_kernel,
+    rk4_calls,
+    vector_correction_kernel,
+)
 from pinobs.tolerances import JACOBI_FD_STEP
 
 __all__ = [
@@ -378,7 +389,9 @@ def jacobi_operator(robot: Robot, q: Vector, v: Vector) -> Vector:
     with ``g = Γs(v, v)``.  Four ABA-derivatives calls: at ``(q, v)``,
     ``(q, g)`` and at ``q ⊕ ±εv`` for the central difference ``D_v B_v``
     (step ``ε|v| =`` :data:`pinobs.tolerances.JACOBI_FD_STEP`; error ~1e-9
-    relative).  The observer caches it for ``curvature_every`` samples.
+    relative).  The observer caches it for ``curvature_every`` samples.  Once the observer
+    has loaded :data:`~pinobs.observers.fused.jacobi_kernel`, the sums run compiled
+    (no BLAS; equal to the NumPy products to rounding, tested).
     """
     n = robot.nv
     speed = float(np.linalg.norm(v))
@@ -389,11 +402,20 @@ def jacobi_operator(robot: Robot, q: Vector, v: Vector) -> Vector:
     eps = JACOBI_FD_STEP / speed
     _, _, b_plus = robot.spray_jacobians(robot.integrate(q, eps * v), v)
     _, _, b_minus = robot.spray_jacobians(robot.integrate(q, -eps * v), v)
+    lie = robot.has_lie_group_joints
+    ad_v = _ad_matrix(robot, v) if lie else None
+    ad_g = _ad_matrix(robot, g_vv) if lie else None
+    if jacobi_kernel.compiled is not None:  # the same sums in loops, no BLAS (fused.jacobi_loops)
+        out = np.empty((n, n))
+        zero = np.zeros((n, n))
+        jacobi_kernel.compiled(
+            b_plus, b_minus, eps, p_v, b_v, b_g,
+            zero if ad_v is None else ad_v, zero if ad_g is None else ad_g, out,
+        )  # fmt: skip
+        return out
     dv_bv = (b_plus - b_minus) / (2.0 * eps)
-    if not robot.has_lie_group_joints:  # ad ≡ 0: the same formula without the brackets
+    if ad_v is None or ad_g is None:  # ad ≡ 0: the same formula without the brackets
         return 0.5 * dv_bv - p_v + 0.25 * b_v.dot(b_v) - 0.5 * b_g  # type: ignore[no-any-return]
-    ad_v = _ad_matrix(robot, v)
-    ad_g = _ad_matrix(robot, g_vv)
     left = 0.5 * (b_v - ad_v)  # z -> ω(z, v)
     right = 0.5 * (b_v + ad_v)  # a -> ω(v, a)
     return 0.5 * dv_bv - p_v + right @ left - 0.5 * (b_g - ad_g) - left @ ad_v  # type: ignore[no-any-return]
@@ -412,87 +434,6 @@ def transport_first_order(robot: Robot, q_hat: Vector, zeta: Vector, s: Vector) 
     order of their eq. (1) (module docstring).
     """
     return s - robot.connection(q_hat, zeta, s)
-
-
-@functools.cache
-def _compiled_correction() -> Callable[..., tuple[Vector, Vector]]:
-    """:func:`_vector_space_correction` compiled by numba, on first use (``import pinobs``
-    does not import numba, 0.2 s).  ``cache=True``: compiled once per installation (about
-    2 s), then loaded from numba's cache (``__pycache__`` next to this file, or
-    ``NUMBA_CACHE_DIR``).  :class:`RiemannianObserver` calls this when it is built, so
-    its first update does not pay for it."""
-    import numba  # lazy: start-up time
-
-    kernel = numba.njit(cache=True)(_vector_space_correction)
-    one, eye = np.zeros(1), np.zeros((1, 1))  # load (or compile) the float64 signature now
-    kernel(one, one, one, eye, eye, one, eye, 0.0, 0.0, 0.0, 0.0)
-    return kernel  # type: ignore[no-any-return]
-
-
-def _vector_space_correction(
-    q: Vector,
-    v: Vector,
-    acc: Vector,
-    a_q: Vector,
-    a_v: Vector,
-    delta: Vector,
-    jac: Vector,
-    k1: float,
-    k2: float,
-    h: float,
-    ch: float,
-) -> tuple[Vector, Vector]:
-    """The correction's arithmetic on a vector space: ``(q̂⁺, v̂⁺)``, compiled (one call).
-
-    With ``a, ∂a/∂q, ∂a/∂v`` the ABA derivatives at ``(q̂⁻, δ, τ)``,
-    ``u = (∂a/∂v)δ = −2Γs(δ, δ)``, ``d = (∂a/∂q)δ``::
-
-        ζ = −δ + ¼u                              (second-order log, MATH §4)
-        w = k₁ v̂ − h (a − ½u + d)                (S at q = a + Γs(δ,δ) + d)
-        q̂⁺ = q̂ − k₁ ζ
-        v̂⁺ = v̂ + ½(∂a/∂v) w − k₂ ζ + h d + C h J ζ
-
-    (``½(∂a/∂v)w = ω(ζ, w)`` to first order: Maithripala et al. eq. (19);
-    ``J ζ = R(v̂, ζ)v̂``: Anisi–Hamberg eq. (6)).  For six joints NumPy would
-    spend more time dispatching a dozen tiny operations than computing them.
-    """
-    n = q.shape[0]
-    zeta = np.empty(n)
-    d = np.empty(n)
-    half_w = np.empty(n)
-    for i in range(n):
-        u_i = 0.0
-        d_i = 0.0
-        for j in range(n):
-            u_i += a_v[i, j] * delta[j]
-            d_i += a_q[i, j] * delta[j]
-        d[i] = d_i
-        zeta[i] = 0.25 * u_i - delta[i]
-        half_w[i] = 0.5 * (k1 * v[i] - h * (acc[i] - 0.5 * u_i + d_i))
-    q_new = np.empty(n)
-    v_new = np.empty(n)
-    for i in range(n):
-        transport = 0.0
-        curvature = 0.0
-        for j in range(n):
-            transport += a_v[i, j] * half_w[j]
-            curvature += jac[i, j] * zeta[j]
-        v_new[i] = v[i] + transport - k2 * zeta[i] + h * d[i] + ch * curvature
-        q_new[i] = q[i] - k1 * zeta[i]
-    return q_new, v_new
-
-
-def _fast_calls(
-    robot: Robot,
-) -> tuple[DynamicsCalls, Vector, Callable[..., Any], Callable[..., Any]] | None:
-    """Pinocchio's calls on the observer's own ``pin.Data``, the work rows of the compiled
-    RK4 step and its two kernels (:mod:`pinobs.observers.fused`, issue 39): for a
-    :class:`Robot` on a vector space without joint friction; ``None`` elsewhere
-    (:func:`dynamics_rk4`)."""
-    if not (isinstance(robot, Robot) and robot.is_vector_space and not robot.has_friction):
-        return None
-    w = np.zeros((8, robot.nv))
-    return dynamics_calls(robot), w, loaded(rk4_start_kernel), loaded(rk4_stage_kernel)
 
 
 # ---------------------------------------------------------------- observer
@@ -602,19 +543,13 @@ class RiemannianObserver(Observer[_State]):
         )
         self._zero_nn = np.zeros((self.robot.nv, self.robot.nv))  # J when C = 0
         self._lie = not self.robot.is_vector_space  # brackets or unit-norm blocks to keep
-        # numba imported and the kernel loaded now, not in an update
-        self._correction = None if self._lie else _compiled_correction()
-        self._scratch_calls = _fast_calls(self.robot)
-        # the correction's derivatives call on the observer's own data (any Robot)
-        self._scratch_derivatives = (
-            dynamics_calls(self.robot) if isinstance(self.robot, Robot) else None
-        )
         # the Riccati schedule replaces (α, β) only when they came from the Kalman rule
         self.gain_schedule = (
             gain_schedule
             if self.gain_rule == "kalman" and not self.gains.state_dependent
             else "steady"
         )
+        self._set_compiled_steps()
 
     @property
     def options(self) -> dict[str, Any]:
@@ -631,6 +566,26 @@ class RiemannianObserver(Observer[_State]):
             "gain_schedule": self.gain_schedule,
             "outlier_probability": self.outlier_probability,
         }
+
+    def _set_compiled_steps(self) -> None:
+        """The compiled steps (issue 39, :mod:`pinobs.observers.fused`; numba loaded now, not
+        in an update) and their Pinocchio calls on the observer's own ``pin.Data``.  On a
+        :class:`Robot` with constant gains the step makes no BLAS call, the Jacobi operator
+        included (:attr:`Observer.uses_blas`)."""
+        robot = self.robot
+        self._scratch_calls = rk4_calls(robot)  # vector space: the RK4's stages
+        self._scratch_lie = LieRK4.build(robot)  # Lie-group joints: the RKMK4's
+        # the correction's derivatives call (any Robot)
+        self._scratch_derivatives = dynamics_calls(robot) if isinstance(robot, Robot) else None
+        self._correction = None if self._lie else loaded(vector_correction_kernel)
+        compiled = isinstance(robot, Robot) and not self.gains.state_dependent
+        # the vector-space correction with the schedule's gains: one compiled call
+        riccati = not self._lie and self.gain_schedule == "riccati"
+        self._riccati_correction = loaded(riccati_correction_kernel) if riccati else None
+        self._lie_correction = loaded(lie_correction_kernel) if compiled and self._lie else None
+        if compiled:
+            jacobi_kernel.load()
+        self.uses_blas = not compiled
 
     # ------------------------------------------------------ continuous time
     def vector_field(
@@ -657,33 +612,48 @@ class RiemannianObserver(Observer[_State]):
         p0 = (self._p0[0, 0], 0.0, self._p0[1, 1]) if self.gain_schedule == "riccati" else None
         return _State(q0.copy(), v0.copy(), 0.0, None, 0, p0)
 
-    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+    def _predicted(self, state: _State, dt: float, tau: Vector) -> tuple[Vector, Vector, bool]:
+        """The prediction (MATH §7), one RKMK4 step of the model over ``dt`` [s]: ``(q, v,
+        work)``, ``work`` True where ``(q, v)`` are rows of the compiled step's work array
+        (read them before the next step; copy what a state keeps)."""
+        if self._scratch_lie is not None:  # Lie-group joints: compiled between the calls
+            return (*self._scratch_lie.step(state.q, state.v, tau, dt), False)
         if self._scratch_calls is None:
-            q, v = dynamics_rk4(self.robot, state.q, state.v, tau, dt)  # the prediction (MATH §7)
-        else:  # the same RK4 step (the same bits), compiled around the four ABA calls
-            (aba, _, _), w, start, stage = self._scratch_calls
-            start(w, state.q, state.v, aba(state.q, state.v, tau), dt)
-            qs, vs = w[6], w[7]
-            for k in (2, 3, 4):
-                stage(w, aba(qs, vs, tau), k, dt)
-            q, v = qs.copy(), vs.copy()
+            return (*dynamics_rk4(self.robot, state.q, state.v, tau, dt), False)
+        # the same RK4 step (the same bits), compiled around the four ABA calls
+        (aba, _, _), w, start, stage = self._scratch_calls
+        start(w, state.q, state.v, aba(state.q, state.v, tau), dt)
+        q, v = w[6], w[7]
+        for k in (2, 3, 4):
+            stage(w, aba(q, v, tau), k, dt)
+        return q, v, True
+
+    def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+        q, v, work = self._predicted(state, dt, tau)
         elapsed = state.elapsed + dt
         if q_meas is None:
+            if work:
+                q, v = q.copy(), v.copy()
             return state._replace(q=q, v=v, elapsed=elapsed, gate=state.gate.predicted())
+        gate, delta = state.gate, None
         if state.P is not None:
             # the schedule's innovation variance per joint, S = P⁻₀₀ + σ² (same for every
             # joint): NIS = |e|² / S and the outlier gate of the filters (base.GateState)
             p00, p01, p11 = state.P
             h = elapsed
             s_inn = p00 + h * (2.0 * p01 + h * p11 + self.accel_psd * h * h / 3.0) + self._sigma2
-            e = self.robot.difference(q, q_meas) if self._lie else q_meas - q  # (the same)
-            gate = state.gate.measured(float(e @ e) / s_inn, self._gate, e.size)
+            # e = δ, the correction's (difference is − on a vector space)
+            delta = self.robot.difference(q, q_meas) if self._lie else q_meas - q
+            gate = gate.measured(float(delta.dot(delta)) / s_inn, self._gate, delta.size)
             if gate.gated:  # the estimate is the prediction; the next correction spans the gap
+                if work:
+                    q, v = q.copy(), v.copy()
                 return state._replace(q=q, v=v, elapsed=elapsed, gate=gate)
-            state = state._replace(gate=gate)
-        if self._lie:
-            return self._correct(state, q, v, q_meas, tau, elapsed)
-        return self._correct_vector_space(state, q, v, q_meas, tau, elapsed)
+        if not self._lie:
+            return self._correct_vector_space(state, q, v, q_meas, tau, elapsed, delta, gate)
+        if self._lie_correction is not None:
+            return self._correct_compiled(state, q, v, q_meas, tau, elapsed, delta, gate)
+        return self._correct(state._replace(gate=gate), q, v, q_meas, tau, elapsed)
 
     def _correction_gains(
         self, state: _State, q: Vector, zeta: Vector | None, v: Vector, h: float
@@ -759,16 +729,54 @@ class RiemannianObserver(Observer[_State]):
         q_new = r.normalize(r.integrate(q, -k1 * zeta))
         return state._replace(q=q_new, v=v + dv, elapsed=0.0, jacobi=jac, age=age, P=P)
 
+    def _correct_compiled(
+        self, state: _State, q: Vector, v: Vector, q_meas: Vector, tau: Vector, h: float,
+        delta: Vector | None, gate: GateState,
+    ) -> _State:  # fmt: skip
+        """:meth:`_correct` with constant gains, its arithmetic but the bracket in one
+        compiled call (:func:`~pinobs.observers.fused.lie_correction_loops`); the same
+        formulas, equal to it to rounding (tested).  ``delta``: ``difference(q, q_meas)``
+        if the caller has it; ``gate``: the new state's."""
+        r = self.robot
+        if delta is None:
+            delta = r.difference(q, q_meas)
+        acc, a_q, a_v = self._jacobians(q, delta, tau)
+        k1, k2, c, P = self._correction_gains(state, q, None, v, h)  # (constant gains)
+        jac, age = state.jacobi, state.age + 1
+        if c != 0.0:
+            jac, age = self._jacobi(state, q, v)
+        n = r.nv
+        zeta, w, dv, jump = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        self._lie_correction(  # type: ignore[misc]
+            v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, k1, k2, h, c * h,
+            zeta, w, dv, jump,
+        )  # fmt: skip
+        dv += 0.5 * r.bracket(zeta, w)  # ω(ζ, w)'s bracket (Maithripala et al. eq. (19))
+        q_new = r.normalize(r.integrate(q, jump))
+        return _State(q_new, v + dv, 0.0, jac, age, P, gate)
+
     def _correct_vector_space(
-        self, state: _State, q: Vector, v: Vector, q_meas: Vector, tau: Vector, h: float
-    ) -> _State:
+        self, state: _State, q: Vector, v: Vector, q_meas: Vector, tau: Vector, h: float,
+        delta: Vector | None, gate: GateState,
+    ) -> _State:  # fmt: skip
         """:meth:`_correct` where ``q ∈ Rⁿ`` (``⊕`` is ``+``, no bracket), compiled.
 
         The same formulas (the tests check it equals :meth:`_correct`); the
-        arithmetic is one call of :func:`_vector_space_correction`.
+        arithmetic is one call of :func:`~pinobs.observers.fused.vector_correction_loops`
+        (with the Riccati schedule's gains: :func:`~pinobs.observers.fused.riccati_correction_loops`).  ``delta``:
+        ``q_meas − q`` if the caller has it; ``gate``: the new state's.
         """
-        delta = q_meas - q
+        if delta is None:
+            delta = q_meas - q
         acc, a_q, a_v = self._jacobians(q, delta, tau)
+        if state.P is not None and self._riccati_correction is not None:
+            c = self.gains.curvature_gain  # (constant with the schedule)
+            jac, age = self._jacobi(state, q, v) if c != 0.0 else (state.jacobi, state.age + 1)
+            q_new, v_new, *P = self._riccati_correction(
+                q, v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, *state.P,
+                self.accel_psd, self._sigma2, h, c,
+            )  # fmt: skip
+            return _State(q_new, v_new, 0.0, jac, age, tuple(P), gate)  # type: ignore[arg-type]
         # ζ is needed before the kernel only by state-dependent gains
         zeta = 0.25 * a_v.dot(delta) - delta if self.gains.state_dependent else None
         k1, k2, c, P = self._correction_gains(state, q, zeta, v, h)
@@ -778,7 +786,7 @@ class RiemannianObserver(Observer[_State]):
         q_new, v_new = self._correction(  # type: ignore[misc]
             q, v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, k1, k2, h, c * h
         )
-        return _State(q_new, v_new, 0.0, jac, age, P, state.gate)
+        return _State(q_new, v_new, 0.0, jac, age, P, gate)
 
     def _gains_at(self, q: Vector, zeta: Vector | None, v: Vector) -> tuple[float, float, float]:
         g = self.gains

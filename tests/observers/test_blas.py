@@ -75,8 +75,8 @@ def test_update_leaves_the_counts_as_they_were_when_it_raises(ur5_run) -> None:
 
 def test_blas_runs_on_one_thread_inside_update(ur5_run, monkeypatch) -> None:
     robot, res = ur5_run
-    # riemannian may call a BLAS (its Jacobi operator); ekf's compiled step on a UR5 does not
-    ob = make_observer("riemannian", robot, rate=1000.0, noise_std=1e-4)
+    # kalman may call a BLAS; ekf's and riemannian's compiled steps on a UR5 do not
+    ob = make_observer("kalman", robot, rate=1000.0, noise_std=1e-4)
     seen: list[set[int]] = []
     step = type(ob).step
 
@@ -95,12 +95,12 @@ def test_blas_runs_on_one_thread_inside_update(ur5_run, monkeypatch) -> None:
 
 def test_a_family_without_blas_calls_updates_on_the_callers_threads(ur5_run, monkeypatch) -> None:
     """``uses_blas = False`` (``fd``): the limit is not entered, so it costs nothing per update;
-    ``ekf``'s compiled step on a UR5 neither; a family that may call a BLAS
-    (``riemannian``, the default) runs its step on one thread."""
+    ``ekf``'s and ``riemannian``'s compiled steps on a UR5 neither; a family that may call a
+    BLAS (``kalman``, the default) runs its step on one thread."""
     robot, res = ur5_run
-    for name, inside in (("fd", {2}), ("ekf", {2}), ("riemannian", {1})):
+    for name, inside in (("fd", {2}), ("ekf", {2}), ("riemannian", {2}), ("kalman", {1})):
         ob = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
-        assert ob.uses_blas is (name == "riemannian")
+        assert ob.uses_blas is (name == "kalman")
         seen: list[set[int]] = []
         step = type(ob).step
 

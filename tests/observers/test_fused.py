@@ -90,13 +90,14 @@ def test_the_compiled_rk4_step_equals_dynamics_rk4() -> None:
 
 def test_the_compiled_step_is_taken_where_it_applies_and_only_there() -> None:
     """Vector-space robots without friction (``ekf``: ``nv ≤ 12`` as well); not on Lie
-    groups; ``ekf``'s compiled step makes no BLAS call, so its update enters no thread limit."""
+    groups (their own compiled paths); ``ekf``'s compiled step makes no BLAS call, so its
+    update enters no thread limit."""
     ur5, go1 = cached_robot("ur5"), cached_robot("go1")
     ekf = ExtendedKalmanFilter(ur5, rate=1000.0, noise_std=1e-4)
     assert ekf._fast is not None and not ekf.uses_blas
     assert RiemannianObserver(ur5, rate=1000.0)._scratch_calls is not None
     lie = ExtendedKalmanFilter(go1, rate=1000.0, noise_std=1e-4)
-    assert lie._fast is None and lie.uses_blas
+    assert lie._fast is None and lie.uses_blas  # (Lie groups: tests/observers/test_fused_lie.py)
     assert RiemannianObserver(go1, rate=1000.0)._scratch_calls is None
 
 

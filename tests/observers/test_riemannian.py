@@ -224,7 +224,7 @@ def test_compiled_vector_space_correction_equals_the_general_one(name: str, opti
     v = rng.standard_normal(robot.nv)
     q_meas = robot.integrate(q, 1e-2 * rng.standard_normal(robot.nv))
     general = ob._correct(state, q, v, q_meas, tau, 1e-3)
-    compiled = ob._correct_vector_space(state, q, v, q_meas, tau, 1e-3)
+    compiled = ob._correct_vector_space(state, q, v, q_meas, tau, 1e-3, None, state.gate)
     assert np.abs(general.v - v).max() > 1e-4  # the correction did something
     assert np.abs(compiled.q - general.q).max() <= 1e-14
     assert np.abs(compiled.v - general.v).max() <= 1e-13 * np.abs(general.v).max()

@@ -1,0 +1,181 @@
+"""The compiled steps of ``ekf`` and ``riemannian`` on robots with Lie-group or continuous
+joints (:class:`~pinobs.observers.fused.LieRK4`, the Lie correction and Jacobi kernels,
+:mod:`pinobs.observers.blocks`; issue 39) equal the NumPy steps they replace, to rounding,
+over a few thousand updates."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.model import dynamics_rk4
+from pinobs.observers import blocks, make_observer
+from pinobs.observers.fused import LieRK4, jacobi_kernel
+from pinobs.observers.linalg import joseph_update, transition_matrix
+from pinobs.observers.riemannian import jacobi_operator
+from pinobs.simulation import Sensor
+from tests.conftest import cached_robot
+from tests.observers.test_fused import _assert_close_per_signal, _run
+from tests.observers.test_purity import fingerprint
+
+# the attributes that switch the compiled paths on (None: the NumPy step)
+_COMPILED = (
+    "_scratch_lie",
+    "_lie_correction",
+    "_riccati_correction",
+    "_scratch_calls",
+    "_lie_fast",
+)
+
+
+@pytest.mark.parametrize(
+    ("robot_name", "name", "duration"),
+    [
+        ("ur5", "riemannian", 3.0),
+        ("go1", "riemannian", 3.0),
+        ("top", "ekf", 3.0),
+        ("rigid_body", "ekf", 3.0),
+        ("talos", "ekf", 2.0),
+        ("talos", "riemannian", 2.0),
+        ("cartpole_continuous", "riemannian", 3.0),
+        ("cartpole_continuous", "ekf", 3.0),
+    ],
+)
+def test_the_compiled_step_equals_the_numpy_step_over_thousands_of_updates(
+    robot_name: str, name: str, duration: float
+) -> None:
+    """A run with missing samples (and the gate on), 2000–3000 updates from a start off the
+    truth: the estimates equal per signal to 1e-12 of its largest value, the compiled step
+    against the NumPy one (the same observer with its compiled paths switched off)."""
+    robot = cached_robot(robot_name)
+    res = pinobs.simulate(robot, [], duration=duration, sensor=Sensor(1000.0, 1e-4), seed=4)
+    fast = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
+    slow = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
+    taken = [a for a in _COMPILED if getattr(fast, a, None) is not None]
+    assert taken  # a compiled path is the one compared
+    for attr in taken:
+        setattr(slow, attr, None)
+    q_fast, v_fast = _run(fast, res)
+    q_slow, v_slow = _run(slow, res)
+    assert np.isfinite(v_slow).all()
+    _assert_close_per_signal(q_fast, q_slow, 1e-12)
+    _assert_close_per_signal(v_fast, v_slow, 1e-12)
+
+
+@pytest.mark.parametrize("robot_name", ["go1", "talos", "cartpole_continuous"])
+def test_the_compiled_rkmk4_step_is_dynamics_rk4_to_the_bit(robot_name: str) -> None:
+    """:class:`LieRK4` runs :func:`pinobs.model.dynamics_rk4`'s operations in its order
+    (no fused multiply-adds): the same bits, with and without the first stage given."""
+    robot = cached_robot(robot_name)
+    rk4 = LieRK4.build(robot)
+    assert rk4 is not None
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q, v = robot.random_configuration(rng), rng.standard_normal(robot.nv)
+        tau = rng.standard_normal(robot.nv)
+        q_ref, v_ref = dynamics_rk4(robot, q, v, tau, 1e-3)
+        for acc0 in (None, robot.forward_dynamics(q, v, tau)):
+            q_new, v_new = rk4.step(q, v, tau, 1e-3, acc0=acc0)
+            np.testing.assert_array_equal(q_new, q_ref)
+            np.testing.assert_array_equal(v_new, v_ref)
+
+
+@pytest.mark.parametrize("robot_name", ["ur5", "go1", "talos", "cartpole_continuous"])
+def test_the_compiled_jacobi_operator_equals_the_numpy_products(
+    robot_name: str, monkeypatch: Any
+) -> None:
+    """:func:`jacobi_operator` by :func:`~pinobs.observers.fused.jacobi_loops` (no BLAS)
+    equals its NumPy products to 1e-13 of its largest term (``∂_q Γs(v, v)``,
+    ``(∂_v Γs(v, v))²``; the operator itself: on a cartpole, flat, the terms cancel to
+    1e-12 of them)."""
+    robot = cached_robot(robot_name)
+    jacobi_kernel.load()
+    rng = np.random.default_rng(5)
+    for _ in range(4):
+        q, v = robot.random_configuration(rng), rng.standard_normal(robot.nv)
+        compiled = jacobi_operator(robot, q, v)
+        with monkeypatch.context() as m:
+            m.setattr(jacobi_kernel, "compiled", None)
+            reference = jacobi_operator(robot, q, v)
+        _, p_v, b_v = robot.spray_jacobians(q, v)
+        scale = max(np.abs(reference).max(), np.abs(p_v).max(), np.abs(b_v).max() ** 2)
+        assert np.abs(compiled - reference).max() <= 1e-13 * scale
+
+
+@pytest.mark.parametrize("with_offset", [False, True])
+def test_the_block_products_equal_the_dense_ones(with_offset: bool) -> None:
+    """On a talos's ``A`` (free-flyer: ``−ad_v̂`` on six rows), :func:`blocks.transition`
+    equals :func:`transition_matrix` and :func:`blocks.joseph_update` the dense
+    :func:`joseph_update`, to 1e-13 of their largest entries."""
+    robot = cached_robot("talos")
+    nv = robot.nv
+    n = (3 if with_offset else 2) * nv
+    rng = np.random.default_rng(2)
+    q, v = robot.random_configuration(rng), rng.standard_normal(nv)
+    _, da_dq, da_dv, minv = robot.forward_dynamics_with_derivatives(q, v, robot.gravity(q))
+    A = np.zeros((n, n))
+    A[:nv, :nv] = -robot.bracket_matrix(v)
+    A[:nv, nv : 2 * nv] = np.eye(nv)
+    A[nv : 2 * nv, :nv], A[nv : 2 * nv, nv : 2 * nv] = da_dq, da_dv
+    if with_offset:
+        A[nv : 2 * nv, 2 * nv :] = np.triu(minv) + np.triu(minv, 1).T
+    rows = blocks.bracket_rows(robot)
+    assert rows == (slice(0, 6),)
+    Phi = blocks.transition(A, 1e-3, nv, rows)
+    ref = transition_matrix(A, 1e-3)
+    assert np.abs(Phi - ref).max() <= 1e-13 * np.abs(ref).max()
+    X = rng.standard_normal((n, n))
+    P = 1e-4 * (X @ X.T) / n + 1e-6 * np.eye(n)
+    e = 1e-3 * rng.standard_normal(nv)
+    for r in (1e-8, 1e-2):
+        dx, P_new = blocks.joseph_update(P, e, r)
+        dx_ref, P_ref = joseph_update(P, e, r)
+        assert np.abs(dx - dx_ref).max() <= 1e-13 * np.abs(dx_ref).max()
+        assert np.abs(P_new - P_ref).max() <= 1e-13 * np.abs(P_ref).max()
+        np.testing.assert_array_equal(P_new, P_new.T)
+
+
+def test_the_lie_group_paths_are_taken_where_they_apply() -> None:
+    """``riemannian`` takes the compiled Lie-group paths on go1 and talos and with constant
+    gains makes no BLAS call there (its update enters no thread limit); ``ekf`` takes its
+    compiled RKMK4 up to nv = 12 (top), the block products from ``blocks.MIN_NV`` (talos,
+    76 × 76 covariance products on one BLAS thread), and neither in between (go1)."""
+    go1, talos, top = cached_robot("go1"), cached_robot("talos"), cached_robot("top")
+    small = make_observer("ekf", top, rate=1000.0, noise_std=1e-4)
+    assert small._lie_fast is not None and small._lie_fast.rk4 is not None
+    large = make_observer("ekf", talos, rate=1000.0, noise_std=1e-4)
+    assert large._lie_fast is not None and large._lie_fast.rk4 is None and large.uses_blas
+    assert make_observer("ekf", go1, rate=1000.0, noise_std=1e-4)._lie_fast is None
+    for robot in (go1, talos):
+        rie = make_observer("riemannian", robot, rate=1000.0, noise_std=1e-4)
+        assert rie._scratch_lie is not None and rie._lie_correction is not None
+        assert not rie.uses_blas
+    # state-dependent gains: the general correction, on one BLAS thread
+    rie = make_observer("riemannian", go1, beta=100.0, gain_a=lambda s, speed: 8.0 + s)
+    assert rie._lie_correction is None and rie.uses_blas
+
+
+@pytest.mark.parametrize(
+    ("robot_name", "name"), [("top", "ekf"), ("talos", "ekf"), ("go1", "riemannian")]
+)
+def test_the_lie_group_paths_keep_step_pure(robot_name: str, name: str) -> None:
+    """``step`` on the Lie-group paths changes only working memory (``_scratch*``,
+    ``pin.Data``: tests/observers/test_purity.py, whose robots take the vector-space paths
+    for these families) and gives the same state twice from the same inputs."""
+    robot = cached_robot(robot_name)
+    res = pinobs.simulate(robot, [], duration=0.2, sensor=Sensor(1000.0, 1e-4), seed=3)
+    ob = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
+    ob.reset(res.t[0], res.q[0], None, res.tau[0])
+    for k in range(1, res.t.size - 1):
+        ob.update(res.t[k], res.q_meas[k], res.tau[k])
+    state, before = ob._state, fingerprint(ob)
+    first = ob.step(state, 1e-3, res.q_meas[-1], res.tau[-1])
+    assert fingerprint(ob) == before
+    second = ob.step(state, 1e-3, res.q_meas[-1], res.tau[-1])
+    assert fingerprint(ob) == before
+    for a, b in zip(first, second, strict=True):
+        if isinstance(a, np.ndarray):
+            np.testing.assert_array_equal(a, b)

@@ -299,10 +299,8 @@ def gains_from_noise(rate: float, noise_std: float, accel_psd: float) -> tuple[f
     converted with ``e^{−2αh} = 1 − k₁`` and the closed-loop poles
     ``λ = e^{s h}``: ``β = s₁ s₂``.
 
-    A second-order error dynamics ``ζ̈ = −2α ζ̇ − β ζ`` has poles ``e^{s h}`` that
-    are positive reals or a complex-conjugate pair: a DARE gain whose closed-loop
-    poles lie on the negative real axis (a density far above the noise, ``q h³ ≫ σ²``)
-    has no ``(α, β)`` and is refused, not mapped to a wrong gain.
+    Poles ``e^{s h}`` of ``ζ̈ = −2α ζ̇ − β ζ`` are positive or a conjugate pair: DARE
+    poles on the negative real axis (``q h³ ≫ σ²``) have no ``(α, β)`` and are refused.
 
     Args:
         rate: sample rate [Hz].
@@ -310,7 +308,7 @@ def gains_from_noise(rate: float, noise_std: float, accel_psd: float) -> tuple[f
         accel_psd: white-acceleration density [rad²/s³], > 0.
 
     Raises:
-        GainError: the Kalman gain's closed-loop poles lie on the negative real axis.
+        GainError: the Kalman gain's error poles lie on the negative real axis.
     """
     h = 1.0 / rate
     F = np.array([[1.0, h], [0.0, 1.0]])

@@ -30,7 +30,7 @@ from pinobs.tolerances import TIME_EPS
 __all__ = ["PRELOAD", "REJECTED_KEPT", "Learner", "learning_worker", "load_learning"]
 
 #: What the worker processes' fork server imports once (:class:`~pinobs.observers.worker.Worker`).
-PRELOAD = ("pinobs.observers.adaptive_learner", "scipy.signal", "scipy.ndimage", "scipy.linalg")
+PRELOAD = ("pinobs.observers.adaptive_learner", "scipy.linalg")
 
 #: A sample interval further than this fraction of ``h`` from it is a gap for the learner
 #: (a lost sample is ``2h``): its windows restart after it.
@@ -413,18 +413,16 @@ def _remote(state: dict[str, Any], key: int, windows: int, job: str, *args: Any)
     return getattr(state["identifier"], job)(*args)
 
 
-def load_learning(*, smoothing: bool = True) -> None:
-    """Import what the learner imports when it first runs (SciPy's smoothing and QR: about
-    0.5 s, the first window's update took 494 ms on a UR5) and scan the BLAS libraries
-    with ``scipy.linalg`` loaded (:func:`~pinobs.observers.blas.blas_libraries`): now, at
-    construction, not in the loop.  ``smoothing=False`` (``learning="background"``: the
-    windows are smoothed in the worker process, which imports them, :data:`PRELOAD`):
-    ``scipy.linalg`` only (``scipy.signal`` and ``scipy.ndimage`` cost 0.3–0.6 s CPU)."""
-    import scipy.linalg
-
-    if smoothing:
-        import scipy.ndimage
-        import scipy.signal  # noqa: F401
+def load_learning() -> None:
+    """Import what the learner imports when it first runs (SciPy's QR and least squares:
+    ``scipy.linalg``, 0.15 s CPU, loaded already by the compiled kernels of numba, which
+    imports it with its first kernel) and scan the BLAS libraries with ``scipy.linalg``
+    loaded (:func:`~pinobs.observers.blas.blas_libraries`): now, at construction, not in
+    the loop.  The smoothing no longer imports ``scipy.signal`` and ``scipy.ndimage`` (0.5 s
+    CPU; the first window's update took 494 ms on a UR5 importing them, then the observer's
+    construction did): :func:`~pinobs.model.identification.convolve_nearest` does the same
+    arithmetic in NumPy."""
+    import scipy.linalg  # noqa: F401
 
     blas_libraries()
 

@@ -19,8 +19,8 @@ from pinobs.model.identification import (
     smooth_path,
     solve,
 )
-from pinobs.model.identification.savgol import convolve_nearest, savgol_coefficients
 from pinobs.model.identification.leastsquares import _consistent, _is_consistent
+from pinobs.model.identification.savgol import convolve_nearest, savgol_coefficients
 from pinobs.model.urdf_writer import write_urdf
 from pinobs.simulation import Sensor
 from tests.conftest import dropped_rows, planar_3r_truth, resampled_log, torque_error
@@ -87,7 +87,9 @@ def test_smooth_path_recovers_the_velocity_of_a_noisy_sine() -> None:
     assert np.sqrt(np.mean((v_hat[100:-100] - v[100:-100]) ** 2)) < 2e-3
 
 
-@pytest.mark.parametrize(("length", "order", "h"), [(101, 4, 1e-3), (11, 4, 1e-2), (7, 2, 1.0), (9, 8, 4e-3)])
+@pytest.mark.parametrize(
+    ("length", "order", "h"), [(101, 4, 1e-3), (11, 4, 1e-2), (7, 2, 1.0), (9, 8, 4e-3)]
+)
 def test_savgol_coefficients_and_their_convolution_are_scipy_s_to_the_bit(
     length: int, order: int, h: float
 ) -> None:

@@ -84,4 +84,3 @@ def test_quaternion_to_rotation_is_scipy_s_to_the_bit_and_a_rotation(rng) -> Non
         unit = quat / np.linalg.norm(quat)
         expected = pin.Quaternion(unit[3], *unit[:3]).toRotationMatrix()
         np.testing.assert_allclose(R, expected, rtol=0, atol=1e-14)
-

@@ -127,9 +127,8 @@ a prediction that is not kept (under a known latency) teaches nothing.
    output equals the synchronous one (tested to 1e-12: it is bit-identical);
    fed as fast as it runs, a UR5 with a payload made the same number of
    solves or one fewer, its velocity RMS within ±10 % of the synchronous
-   one.  The learner's SciPy module (``scipy.linalg``) is imported when the
-   observer is made (the first window's update took 0.5 s importing
-   ``scipy.signal`` for the smoothing, which is now NumPy's: the same bits).
+   one.  ``scipy.linalg`` is imported when the observer is made (the smoothing is NumPy's:
+   the first window's update took 0.5 s importing ``scipy.signal`` for it).
 
 5. **A pure step** (issue 37).  What it learned lives in its state (``_State.model``: the
    learned model and the filter run on it, the offset, the regime, the restarts; the

@@ -91,13 +91,18 @@ def test_smooth_path_recovers_the_velocity_of_a_noisy_sine() -> None:
     ("length", "order", "h"), [(101, 4, 1e-3), (11, 4, 1e-2), (7, 2, 1.0), (9, 8, 4e-3)]
 )
 def test_savgol_coefficients_and_their_convolution_are_scipy_s_to_the_bit(
-    length: int, order: int, h: float
+    length: int, order: int, h: float, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Issue 39: the learner's smoothing no longer imports ``scipy.signal`` nor
-    ``scipy.ndimage`` (0.5 s CPU); its coefficients and convolutions, and hence every
-    learned model, are the same bits as theirs, on (anti)symmetric and general weights."""
+    ``scipy.ndimage`` (0.5 s CPU); its coefficients and convolutions (NumPy's, without
+    ``scipy.ndimage`` imported), and hence every learned model, are the same bits as
+    theirs, on (anti)symmetric and general weights."""
+    import sys
+
     from scipy.ndimage import convolve1d
     from scipy.signal import savgol_coeffs
+
+    monkeypatch.delitem(sys.modules, "scipy.ndimage")  # convolve_nearest's NumPy path
 
     c_v, c_u = savgol_coefficients(length, order, h)
     assert np.array_equal(c_v, savgol_coeffs(length, order, deriv=1, delta=h))

@@ -17,6 +17,8 @@ to these numbers: on a shared machine they move with it.
 
     python benchmarks/live_loop.py              # 10 s a run (talos 2 s): about 7 minutes
     python benchmarks/live_loop.py --quick      # 1 s a run, UR5 kf only
+    python benchmarks/live_loop.py --only ur5:kf,ur5:adaptive --seconds 30 --limited
+        # those rows, 30 s each, only with the limit (what update does by default)
 """
 
 from __future__ import annotations
@@ -85,7 +87,8 @@ def row(r: LiveTiming, bench: float) -> str:
         f"{r.ratio.median:.1f} ({m_lo:.1f}–{m_hi:.1f}) | {r.mean_ratio:.1f} | "
         f"{r.ratio.p99:.0f} ({p_lo:.0f}–{p_hi:.0f}) | "
         f"{r.ratio.p999:.0f} | {r.ratio.max:.0f} | {r.update_us.median:.0f} | "
-        f"{r.cpu_us.median:.0f} | {r.update_us.max / 1e3:.2f} | {r.cpu_us.max / 1e3:.2f} | "
+        f"{r.cpu_us.median:.0f} | {r.cpu_us.p999 / r.cpu_us.median:.1f} | "
+        f"{r.update_us.max / 1e3:.2f} | {r.cpu_us.max / 1e3:.2f} | "
         f"{r.misses} / {r.updates} | "
         f"{r.first_us / 1e3:.2f} | {r.aba_us:.2f} ({r.aba_cold_us:.1f}) | {bench:.1f} |"
     )
@@ -134,14 +137,22 @@ def limit_cost(seconds: float) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="1 s, UR5 kf only")
+    parser.add_argument("--only", default=None, help="comma-separated robot:observer rows")
+    parser.add_argument("--seconds", type=float, default=None, help="seconds of ticks a run")
+    parser.add_argument("--limited", action="store_true", help="only with the BLAS limit")
     parser.add_argument("--out", default=str(Path(__file__).with_suffix(".md")))
     args = parser.parse_args()
-    runs = QUICK_RUNS if args.quick else RUNS
+    runs: tuple[tuple[str, str, float], ...] = QUICK_RUNS if args.quick else RUNS
+    if args.only:
+        pairs = [x.split(":", 1) for x in args.only.split(",")]
+        runs = tuple((robot, observer, 10.0) for robot, observer in pairs)
+    if args.seconds:
+        runs = tuple((r, o, args.seconds) for r, o, _ in runs)
     load0 = os.getloadavg()
     lines = [
         "# What a user's own 1 kHz loop sees (issue 39)",
         "",
-        f"`python benchmarks/live_loop.py{' --quick' if args.quick else ''}`, "
+        f"`python benchmarks/live_loop.py{''.join(' ' + a for a in sys.argv[1:])}`, "
         f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, "
         f"{os.cpu_count()} cores, load average {load0[0]:.1f} / {load0[1]:.1f} / {load0[2]:.1f} "
         "at the start (a shared, loaded machine: the numbers move with the load).",
@@ -161,25 +172,27 @@ def main() -> None:
         "the same ticks); in brackets the min–max over 1 s windows, each over its own median `pin.aba`. `CPU µs`: the thread's "
         "CPU time in the update (the rest of the wall time is waiting for a core; `CPU max`: "
         "the largest, to tell the observer's own worst work from the machine's preemption). "
+        "`CPU p99.9/med`: the CPU time's p99.9 over its median (the worst case without the "
+        "machine's pre-emption, as far as the thread's CPU clock can tell it). "
         "`mean ×`: the mean update (work done every k-th update at its amortised share, as "
         "`measure_cost` counts it). `misses`: updates longer than the period. `first`: the first update. `aba µs`: "
         "warm (cold: one call just before each update, after the same wait). `bench ×`: "
         "`measure_cost` on the same observer (back to back, one BLAS thread), same session.",
         "",
         "| robot | observer | BLAS | median × | mean × | p99 × | p99.9 × | max × | median µs "
-        "| CPU µs | max ms | CPU max ms | misses | first ms | aba µs | bench × |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| CPU µs | CPU p99.9/med | max ms | CPU max ms | misses | first ms | aba µs | bench × |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for robot, observer, seconds in runs:
         ob = pinobs.make_observer(observer, pinobs.load(robot), rate=1000.0, noise_std=1e-4)
         bench = measure_cost(ob)["ratio"]
-        for limit in (False, True):
+        for limit in (True,) if args.limited else (False, True):
             r = fresh_run(robot, observer, seconds, limit)
             if r.blas_after != r.blas:
                 raise SystemExit(f"{robot} {observer}: BLAS settings changed: {r.blas_after}")
             lines.append(row(r, bench))
             print(lines[-1], flush=True)
-    lines += ["", limit_cost(2.0 if args.quick else 10.0)]
+    lines += ["", limit_cost(2.0 if args.quick or args.only else 10.0)]
     print(lines[-1], flush=True)
     load1 = os.getloadavg()
     lines += [

@@ -20,11 +20,14 @@ processes (as a user's program starts), each timing its steps one by one:
 
 Compiled kernels are cached on disk (numba ``cache=True``): two warm-up processes per
 observer run first, so every timed process loads them from the cache as a user's second run
-would.  The floor row is ``import numpy, pinocchio`` (and with numba) alone, in the same way.
+would; so is Python's bytecode (``__pycache__``): the processes run without
+``PYTHONDONTWRITEBYTECODE`` (a machine that sets it compiles every pinobs module from source
+in every process: ``adaptive``'s ``make`` 20–80 ms more; ``--no-bytecode-cache`` keeps it).  The floor row is ``import numpy, pinocchio`` (and with numba) alone, in the same way.
 Quote the load average next to the numbers: on a shared 2-core machine they move with it.
 
     python benchmarks/startup.py            # ur5 every observer, go1 inekf; 5 runs each
     python benchmarks/startup.py --quick    # ur5 kf and riemannian, 3 runs
+    python benchmarks/startup.py --only adaptive,inekf --runs 3   # those rows only
 """
 
 from __future__ import annotations
@@ -109,7 +112,10 @@ RUNS: tuple[tuple[str, str, dict[str, object]], ...] = (
     ("ur5", "sliding", {}),
     ("go1", "inekf", {}),
 )
-QUICK_RUNS = (("ur5", "kf", {}), ("ur5", "riemannian", {}))
+QUICK_RUNS: tuple[tuple[str, str, dict[str, object]], ...] = (
+    ("ur5", "kf", {}),
+    ("ur5", "riemannian", {}),
+)
 #: The floor: what every process pays before pinobs's own work (the last one is what any
 #: numba kernel costs the first time one is loaded from the cache: numba imports its whole
 #: implementation registry then, ``scipy.linalg`` included, whatever the kernel).
@@ -123,10 +129,15 @@ FLOORS = (
 )
 
 
+#: The processes' environment (:func:`fresh`): Python's bytecode cache on unless
+#: ``--no-bytecode-cache``.
+ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+
+
 def fresh(code: str, *args: str) -> dict[str, float]:
     """``code`` in a new Python process; its last printed line, parsed as JSON."""
     out = subprocess.run(
-        [sys.executable, "-c", code, *args], check=True, capture_output=True, text=True
+        [sys.executable, "-c", code, *args], check=True, capture_output=True, text=True, env=ENV
     ).stdout
     return json.loads(out.strip().splitlines()[-1])
 
@@ -158,19 +169,28 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="ur5 kf and riemannian, 3 runs")
     parser.add_argument("--runs", type=int, default=None, help="fresh processes per row")
+    parser.add_argument("--only", default=None, help="comma-separated observers (rows) to run")
+    parser.add_argument(
+        "--no-bytecode-cache", action="store_true", help="keep PYTHONDONTWRITEBYTECODE if set"
+    )
     parser.add_argument("--out", default=str(Path(__file__).with_suffix(".md")))
     args = parser.parse_args()
     runs = QUICK_RUNS if args.quick else RUNS
+    if args.only:
+        runs = tuple(r for r in RUNS if r[1] in args.only.split(","))
+    if args.no_bytecode_cache:
+        ENV.update(os.environ)
     n = args.runs or (3 if args.quick else 5)
     load0 = os.getloadavg()
     lines = [
         "# Start-up: `import pinobs`, `make_observer` and the first update (issue 39)",
         "",
-        f"`python benchmarks/startup.py{' --quick' if args.quick else ''}`, "
+        f"`python benchmarks/startup.py{''.join(' ' + a for a in sys.argv[1:])}`, "
         f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, "
         f"{os.cpu_count()} cores, load average {load0[0]:.1f} / {load0[1]:.1f} / {load0[2]:.1f} "
         f"at the start. Median of {n} fresh processes per row, numba's cache warm (two "
-        "untimed processes first). Times in the module docstring; targets: `make + first` "
+        "untimed processes first), Python's bytecode cache "
+        f"{'as the environment has it' if args.no_bytecode_cache else 'on'}. Times in the module docstring; targets: `make + first` "
         "(make_observer + reset + first update) ≤ 500 ms, `import` ≤ 0.3 s CPU. Steps "
         "as wall ms (CPU ms: `time.process_time`, every thread of the process); on a loaded "
         "machine the wall time waits for a core, so the target is judged on the CPU time "

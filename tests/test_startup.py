@@ -60,3 +60,30 @@ def test_every_public_name_resolves_to_its_module_s_object() -> None:
         assert name in dir(pinobs)
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
         pinobs.nope  # noqa: B018
+
+
+def test_adaptive_learning_and_inekf_reset_import_no_scipy_signal_ndimage_or_spatial() -> None:
+    """Issue 39: ``adaptive``'s learner (made, then its first windows and first solve, on a
+    UR5 at 1 kHz) and ``inekf``'s reset no longer import ``scipy.signal`` (0.45 s CPU),
+    ``scipy.ndimage`` or ``scipy.spatial``: NumPy does their arithmetic, to the bit (tested
+    in tests/model/test_identification.py and tests/observers/test_leg_contacts.py)."""
+    code = (
+        "import sys, numpy as np, pinobs\n"
+        "robot = pinobs.load('ur5')\n"
+        "obs = pinobs.make_observer('adaptive', robot, rate=1000.0, noise_std=1e-4)\n"
+        "q0 = robot.neutral(); obs.reset(0.0, q0)\n"
+        "for k in range(1, 700):\n"
+        "    obs.update(k * 1e-3, q0 + 0.1 * np.sin(k * 1e-2 + np.arange(robot.nv)))\n"
+        "assert obs.consistency().details['solves'] >= 1\n"
+        "from pinobs.observers.inekf import InvariantEKF\n"
+        "go1 = pinobs.load('go1')\n"
+        "ekf = InvariantEKF(go1, ('FL_foot', 'FR_foot', 'RL_foot', 'RR_foot'))\n"
+        "q = np.zeros(go1.nq); q[2] = 0.3; q[6] = 1.0\n"
+        "gyro, acc = np.array([0.01, -0.02, 0.03]), np.array([0.1, 0.0, 9.81])\n"
+        "ekf.reset(0.0, q, gyro=gyro, acc=acc, contacts=[True] * 4)\n"
+        "ekf.update(1e-3, q, gyro, acc, [True] * 4)\n"
+        "heavy = ('scipy.signal', 'scipy.ndimage', 'scipy.spatial', 'scipy.stats')\n"
+        "print(sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]"

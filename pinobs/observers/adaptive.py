@@ -127,8 +127,8 @@ a prediction that is not kept (under a known latency) teaches nothing.
    output equals the synchronous one (tested to 1e-12: it is bit-identical);
    fed as fast as it runs, a UR5 with a payload made the same number of
    solves or one fewer, its velocity RMS within ±10 % of the synchronous
-   one.  The SciPy modules the learner uses are imported when the observer
-   is made (the first window's update took 0.5 s importing them).
+   one.  ``scipy.linalg`` is imported when the observer is made (the smoothing is NumPy's:
+   the first window's update took 0.5 s importing ``scipy.signal`` for it).
 
 5. **A pure step** (issue 37).  What it learned lives in its state (``_State.model``: the
    learned model and the filter run on it, the offset, the regime, the restarts; the
@@ -390,7 +390,7 @@ class AdaptiveEKF(Observer["_State"]):
         """The learner (its SciPy modules imported now, :func:`load_learning`) and, with
         ``learning="background"``, its worker process (:func:`learning_worker`), started now,
         not in the loop (it ends when the observer is dropped: its jobs hold no observer)."""
-        load_learning(smoothing=learning != "background")  # background: in the worker
+        load_learning()
         self._worker: Worker | None = None
         if learning == "background":
             opts = self._learn_options

@@ -30,7 +30,7 @@ from pinobs.tolerances import TIME_EPS
 __all__ = ["PRELOAD", "REJECTED_KEPT", "Learner", "learning_worker", "load_learning"]
 
 #: What the worker processes' fork server imports once (:class:`~pinobs.observers.worker.Worker`).
-PRELOAD = ("pinobs.observers.adaptive_learner", "scipy.signal", "scipy.ndimage", "scipy.linalg")
+PRELOAD = ("pinobs.observers.adaptive_learner", "scipy.linalg", "scipy.ndimage")
 
 #: A sample interval further than this fraction of ``h`` from it is a gap for the learner
 #: (a lost sample is ``2h``): its windows restart after it.
@@ -83,12 +83,13 @@ class Learner:
         self.pending: deque[tuple[Any, tuple[bool, Vector] | None]] = deque()
         self.windows = 0  # windows of rows asked for (at most the rows kept)
         self.solving = False  # a solve is pending
+        self._ripe = False  # a background solve's result was read in an earlier update
         self.window, self.half_window = window, half_window
         self.rate_given = rate
         self.h = math.nan  # the sample interval: 1/rate, or the first one seen (_interval)
         if rate is not None:
             self._counts(1.0 / rate)
-        self.buf: deque[tuple[float, Vector, Vector]] = deque()
+        self.buf = _Samples(robot.nq, robot.nv)
         self.resolve_every = resolve_every
         # the first solve resolve_every after the reset, wherever the clock starts (:meth:`start`;
         # it was at t = resolve_every: a clock 100 s behind never solved, 3 s behind, 3.5 s late)
@@ -136,7 +137,7 @@ class Learner:
         # a gap: the rows integrate over the samples' own times (MATH §9); at ±0.1 h this
         # test cleared the windows at every other sample and the learner never solved,
         # silently (a sweep found it, and a 500 Hz stream without rate)
-        if self.buf and abs(t - self.buf[-1][0] - self.h) > _GAP_FRACTION * self.h:
+        if self.buf and abs(t - self.buf.latest_time() - self.h) > _GAP_FRACTION * self.h:
             if not self._fill(t, q):
                 self.buf.clear()
         self._lost = []
@@ -151,7 +152,7 @@ class Learner:
         ):
             self.next_solve = t + self.resolve_every
             current = self.nominal if self.theta is None else self.theta
-            qs = [x[1] for x in list(self.buf)[:: max(1, len(self.buf) // 4)]]
+            qs = self.buf.configurations(max(1, len(self.buf) // 4))
             self.solving = True
             self._run((explained, current), "solve", current, qs)
         return self.collect()
@@ -178,16 +179,12 @@ class Learner:
         by a window each."""
         need = self.win + 2 * self.hw + 1
         while len(self.buf) >= need:
-            # (concatenated, not np.stack: 3× faster; still 0.2 ms a window on a UR5 in a
-            # paced loop, its caches cold, and 0.12 ms to send it: the window's update cost)
-            t_s, q_s, tau_s = zip(*list(self.buf)[:need], strict=True)
-            t_arr = np.array(t_s)
-            q_arr = np.concatenate(q_s).reshape(need, -1)
-            tau_arr = np.concatenate(tau_s).reshape(need, -1)
+            # (the samples' rows written as they came, _Samples: built from a deque of
+            # tuples here, 0.2–0.6 ms a window on a UR5 in a paced loop, caches cold)
+            t_arr, q_arr, tau_arr = self.buf.first(need)
             self._run(None, "add_window", t_arr, q_arr, tau_arr, self.hw, self.win, self.stride)
             self.windows = min(self.windows + 1, self.identifier.rows.maxlen or 0)
-            for _ in range(self.win):
-                self.buf.popleft()
+            self.buf.popleft(self.win)
 
     def _run(self, solve: tuple[bool, Vector] | None, job: str, *args: Any) -> None:
         """Run the identifier's ``job(*args)`` now (synchronous) or queue it on the worker
@@ -202,9 +199,17 @@ class Learner:
     def collect(self) -> bool:
         """Take the jobs that are done, in order (all of them, synchronous or with :attr:`join`),
         and apply a solve's result (:meth:`_apply`); True when it installs a new model.
-        A job's exception is raised here, as the synchronous learner raises it in ``add``."""
+        A job's exception is raised here, as the synchronous learner raises it in ``add``.
+        In the background (not :attr:`join`), a solve's result read from the worker in this
+        update is applied at the next one: reading it (0.05–0.25 ms on a UR5 in a paced loop)
+        and installing the model it brings (0.2–0.4 ms) fall in two updates, not one."""
         installed = False
         while self.pending and (self.join or self.pending[0][0].done()):
+            if self.pending[0][1] is not None and self.worker is not None and not self.join:
+                if not self._ripe:  # read in this update: applied at the next one
+                    self._ripe = True
+                    break
+                self._ripe = False
             job, solve = self.pending.popleft()
             result = job.result()
             if solve is None:
@@ -300,6 +305,70 @@ class Learner:
         return True
 
 
+class _Samples:
+    """The learner's buffer of samples ``(t, q, τ)``, oldest first, as rows of preallocated
+    arrays (each sample's row written when it comes, in ``O(nq + nv)``): a window's arrays
+    are then three slices copied (:meth:`first`), not ``need`` tuples gathered at once in the
+    update that completes it (issue 39: the worst updates of a live loop).  The rows live in
+    ``[start, end)``; moved to the front (or the arrays doubled) when ``end`` reaches the
+    capacity, which happens once every capacity − length samples."""
+
+    def __init__(self, nq: int, nv: int, capacity: int = 256) -> None:
+        self.t = np.empty(capacity)
+        self.q = np.empty((capacity, nq))
+        self.tau = np.empty((capacity, nv))
+        self.start = self.end = 0
+
+    def __len__(self) -> int:
+        return self.end - self.start
+
+    def __bool__(self) -> bool:
+        return self.end > self.start
+
+    def __getitem__(self, i: int) -> tuple[float, Vector, Vector]:
+        """The sample ``i`` (``-1``: the latest), its arrays copies."""
+        k = (self.end if i < 0 else self.start) + i
+        if not self.start <= k < self.end:
+            raise IndexError(f"sample {i} of {len(self)}")
+        return float(self.t[k]), self.q[k].copy(), self.tau[k].copy()
+
+    def latest_time(self) -> float:
+        return float(self.t[self.end - 1])
+
+    def append(self, sample: tuple[float, Vector, Vector]) -> None:
+        if self.end == self.t.shape[0]:
+            self._make_room()
+        k = self.end
+        self.t[k], self.q[k], self.tau[k] = sample
+        self.end = k + 1
+
+    def _make_room(self) -> None:
+        n, cap = len(self), self.t.shape[0]
+        grow = 2 * cap if 2 * n > cap else cap  # at most half full: moved to the front
+        for name in ("t", "q", "tau"):
+            old = getattr(self, name)
+            new = old if grow == cap else np.empty((grow, *old.shape[1:]))
+            new[:n] = old[self.start : self.end]
+            setattr(self, name, new)
+        self.start, self.end = 0, n
+
+    def clear(self) -> None:
+        self.start = self.end = 0
+
+    def popleft(self, n: int) -> None:
+        """Drop the ``n`` oldest samples."""
+        self.start = min(self.start + n, self.end)
+
+    def first(self, n: int) -> tuple[Vector, Vector, Vector]:
+        """Copies of the ``n`` oldest samples' ``(t, q, τ)`` as arrays of ``n`` rows."""
+        k = slice(self.start, self.start + n)
+        return self.t[k].copy(), self.q[k].copy(), self.tau[k].copy()
+
+    def configurations(self, step: int) -> list[Vector]:
+        """Every ``step``-th sample's ``q``, oldest first (copies)."""
+        return [self.q[k].copy() for k in range(self.start, self.end, step)]
+
+
 class _Solution(NamedTuple):
     """One solve of :class:`_Identifier` (``failure`` or ``unphysical`` said why it is not one)."""
 
@@ -393,6 +462,8 @@ def _worker_start(robot: Robot, friction: bool, offset: bool) -> dict[str, Any]:
     """The worker process's state (:class:`~pinobs.observers.worker.Worker`): its regressor
     (its own ``pin.Data``) and the identifier of the latest learner that sent a job."""
     load_learning()
+    import scipy.ndimage  # noqa: F401  (the smoothing's convolution in C: convolve_nearest)
+
     # off the loop's scheduling: its own session (so its own group where Linux groups tasks
     # by session, autogroup: the loop's share is not spent on it) at the lowest priority.
     # UR5 live_loop at load 9-11, updates over 1 ms in 10 s: 62-77 in the loop's session,
@@ -413,18 +484,16 @@ def _remote(state: dict[str, Any], key: int, windows: int, job: str, *args: Any)
     return getattr(state["identifier"], job)(*args)
 
 
-def load_learning(*, smoothing: bool = True) -> None:
-    """Import what the learner imports when it first runs (SciPy's smoothing and QR: about
-    0.5 s, the first window's update took 494 ms on a UR5) and scan the BLAS libraries
-    with ``scipy.linalg`` loaded (:func:`~pinobs.observers.blas.blas_libraries`): now, at
-    construction, not in the loop.  ``smoothing=False`` (``learning="background"``: the
-    windows are smoothed in the worker process, which imports them, :data:`PRELOAD`):
-    ``scipy.linalg`` only (``scipy.signal`` and ``scipy.ndimage`` cost 0.3–0.6 s CPU)."""
-    import scipy.linalg
-
-    if smoothing:
-        import scipy.ndimage
-        import scipy.signal  # noqa: F401
+def load_learning() -> None:
+    """Import what the learner imports when it first runs (SciPy's QR and least squares:
+    ``scipy.linalg``, 0.15 s CPU, loaded already by the compiled kernels of numba, which
+    imports it with its first kernel) and scan the BLAS libraries with ``scipy.linalg``
+    loaded (:func:`~pinobs.observers.blas.blas_libraries`): now, at construction, not in
+    the loop.  The smoothing no longer imports ``scipy.signal`` and ``scipy.ndimage`` (0.5 s
+    CPU; the first window's update took 494 ms on a UR5 importing them, then the observer's
+    construction did): :func:`~pinobs.model.identification.convolve_nearest` does the same
+    arithmetic in NumPy."""
+    import scipy.linalg  # noqa: F401
 
     blas_libraries()
 

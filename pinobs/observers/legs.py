@@ -107,10 +107,29 @@ def rotation_to_quaternion(R: Vector) -> Vector:
 
 
 def quaternion_to_rotation(quat: Vector) -> Vector:
-    """Rotation matrix of a unit quaternion ``(x, y, z, w)`` (SciPy's)."""
-    from scipy.spatial.transform import Rotation
+    """Rotation matrix of a quaternion ``(x, y, z, w)``, normalised first: with
+    ``x² + y² + z² + w² = 1``,
 
-    return np.asarray(Rotation.from_quat(quat).as_matrix())
+        R = [[x²−y²−z²+w², 2(xy−zw), 2(xz+yw)],
+             [2(xy+zw), −x²+y²−z²+w², 2(yz−xw)],
+             [2(xz−yw), 2(yz+xw), −x²−y²+z²+w²]]
+
+    (the Hamilton convention, Pinocchio's: Solà, *Quaternion kinematics for the error-state
+    Kalman filter*, the rotation matrix of a quaternion), in the order of SciPy's
+    ``Rotation.from_quat(quat).as_matrix()``: the same bits (tested), without importing
+    ``scipy.spatial`` (0.1–0.4 s CPU: ``inekf``'s reset, issue 39)."""
+    x, y, z, w = (float(c) for c in quat)
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
+    xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
+    return np.array(
+        [
+            [x2 - y2 - z2 + w2, 2 * (xy - zw), 2 * (xz + yw)],
+            [2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw)],
+            [2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2],
+        ]
+    )
 
 
 def _cross(a: Vector, b: Vector) -> Vector:

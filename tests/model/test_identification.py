@@ -20,6 +20,7 @@ from pinobs.model.identification import (
     solve,
 )
 from pinobs.model.identification.leastsquares import _consistent, _is_consistent
+from pinobs.model.identification.savgol import convolve_nearest, savgol_coefficients
 from pinobs.model.urdf_writer import write_urdf
 from pinobs.simulation import Sensor
 from tests.conftest import dropped_rows, planar_3r_truth, resampled_log, torque_error
@@ -84,6 +85,36 @@ def test_smooth_path_recovers_the_velocity_of_a_noisy_sine() -> None:
     noisy = q + np.random.default_rng(0).normal(0, 1e-4, q.shape)
     _, v_hat = smooth_path(robot, t, noisy, half_window=50)
     assert np.sqrt(np.mean((v_hat[100:-100] - v[100:-100]) ** 2)) < 2e-3
+
+
+@pytest.mark.parametrize(
+    ("length", "order", "h"), [(101, 4, 1e-3), (11, 4, 1e-2), (7, 2, 1.0), (9, 8, 4e-3)]
+)
+def test_savgol_coefficients_and_their_convolution_are_scipy_s_to_the_bit(
+    length: int, order: int, h: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 39: the learner's smoothing no longer imports ``scipy.signal`` nor
+    ``scipy.ndimage`` (0.5 s CPU); its coefficients and convolutions (NumPy's, without
+    ``scipy.ndimage`` imported), and hence every learned model, are the same bits as
+    theirs, on (anti)symmetric and general weights."""
+    import sys
+
+    from scipy.ndimage import convolve1d
+    from scipy.signal import savgol_coeffs
+
+    monkeypatch.delitem(sys.modules, "scipy.ndimage")  # convolve_nearest's NumPy path
+
+    c_v, c_u = savgol_coefficients(length, order, h)
+    assert np.array_equal(c_v, savgol_coeffs(length, order, deriv=1, delta=h))
+    assert np.array_equal(c_u, savgol_coeffs(length, order))
+    rng = np.random.default_rng(length)
+    general = rng.normal(size=length)
+    for rows in (length // 2 + 1, length, 3 * length):
+        u = rng.normal(size=(rows, 6)).cumsum(axis=0)
+        for c in (c_v, c_u, general):
+            assert np.array_equal(convolve_nearest(u, c), convolve1d(u, c, axis=0, mode="nearest"))
+    with pytest.raises(ValueError, match="odd number of weights, not 4"):
+        convolve_nearest(u, np.ones(4))
 
 
 def test_consistency_step_returns_positive_semidefinite_pseudo_inertias() -> None:

@@ -108,6 +108,41 @@ def test_the_update_never_waits_for_the_worker_and_asks_one_solve_at_a_time(mism
     assert ob.regime == "warmup" and ob.consistency().details["solves"] == 0
 
 
+class _DoneJob:
+    def __init__(self, result) -> None:
+        self._result = result
+
+    def done(self) -> bool:
+        return True
+
+    def result(self):
+        return self._result
+
+
+def test_a_solve_read_from_the_worker_is_applied_at_the_next_update_not_the_same() -> None:
+    """Issue 39: reading a solve's result and applying it (installing its model) fall in two
+    updates in the background; a window's row count is taken at once; with ``join`` (the
+    synchronous equivalence) nothing waits."""
+    from types import SimpleNamespace
+
+    robot = cached_robot("ur5")
+    opts = dict(window=0.1, half_window=0.05, horizon=10.0, resolve_every=0.5)
+    lr = adaptive_learner.Learner(robot, **opts, friction=True, offset=True, rate=1000.0)
+    lr.worker = _StuckWorker()  # type: ignore[assignment]  (background; jobs queued by hand)
+    failed = SimpleNamespace(failure="boom")  # a failed solve: said in `rejected` when applied
+    lr.pending.append((_DoneJob(7), None))
+    lr.pending.append((_DoneJob(failed), (False, lr.nominal)))
+    lr.solving = True
+    assert not lr.collect()
+    assert lr.row_count == 7 and len(lr.pending) == 1 and not lr.rejected  # read, not applied
+    assert not lr.collect()
+    assert not lr.pending and list(lr.rejected) == ["solve failed: boom"] and not lr.solving
+    lr.join = True  # (the test hook: as synchronously, in the same call)
+    lr.pending.append((_DoneJob(failed), (False, lr.nominal)))
+    lr.collect()
+    assert not lr.pending and len(lr.rejected) == 2
+
+
 def test_an_unknown_learning_mode_is_refused() -> None:
     with pytest.raises(GainError, match="learning='threads' must be one of sync, background"):
         make_observer("adaptive", cached_robot("ur5"), learning="threads")

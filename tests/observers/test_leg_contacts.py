@@ -12,7 +12,7 @@ from scipy.stats import chi2, norm
 import pinobs
 from pinobs.errors import DimensionError, GainError
 from pinobs.observers.contacts import ContactProbability, contacts_from_probability
-from pinobs.observers.legs import stance_consistency
+from pinobs.observers.legs import quaternion_to_rotation, stance_consistency
 
 
 def test_chi2_innovations_are_consistent_and_fall_in_their_interval_95_percent(rng) -> None:
@@ -64,3 +64,23 @@ def test_contact_probability_defaults_scale_with_weight_and_bad_values_are_named
         ContactProbability(10.0, 2.0, speed_max=-1.0)
     with pytest.raises(GainError, match="force_sigma and speed_sigma"):
         ContactProbability(10.0, 0.0)
+
+
+def test_quaternion_to_rotation_is_scipy_s_to_the_bit_and_a_rotation(rng) -> None:
+    """Issue 39: ``inekf``'s reset no longer imports ``scipy.spatial`` (0.1–0.4 s CPU); its
+    rotation is the same bits as SciPy's (unit and non-unit quaternions, near identity),
+    orthonormal with determinant 1, and Pinocchio's for the same quaternion."""
+    import pinocchio as pin
+    from scipy.spatial.transform import Rotation
+
+    for k in range(3000):
+        quat = rng.normal(size=4) * 10.0 ** rng.uniform(-3, 3)
+        if k % 5 == 0:
+            quat = np.array([0.0, 0.0, 0.0, 1.0]) + 1e-9 * rng.normal(size=4)
+        R = quaternion_to_rotation(quat)
+        assert np.array_equal(R, Rotation.from_quat(quat).as_matrix())
+        np.testing.assert_allclose(R @ R.T, np.eye(3), rtol=0, atol=1e-14)
+        assert abs(np.linalg.det(R) - 1.0) < 1e-14
+        unit = quat / np.linalg.norm(quat)
+        expected = pin.Quaternion(unit[3], *unit[:3]).toRotationMatrix()
+        np.testing.assert_allclose(R, expected, rtol=0, atol=1e-14)

@@ -147,6 +147,7 @@ NOT_RUN: dict[str, str] = {
     "benchmarks/real_logs.py": "writes the committed benchmarks/real_logs.{md,json} (~12 min);"
     " its --quick run takes 337 s of CPU, over what CI's budget leaves",
     "benchmarks/never_behind_real.py": "needs the shared real logs and minutes",
+    "benchmarks/real_logs_bound.py": "needs the shared real logs and minutes",
     "benchmarks/never_behind_sim.py": "minutes of simulations",
     "benchmarks/never_behind_cost.py": "a timing benchmark",
 }

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import pinobs
 from pinobs.errors import OptionError
 from pinobs.model.identification import (
+    ARMATURE_SHARE,
     ARMATURE_SIGMAS,
     MomentumRegressor,
     Solution,
@@ -39,18 +41,36 @@ def _solution(theta: np.ndarray, std: np.ndarray) -> Solution:
     )
 
 
-def test_a_rotor_is_kept_only_beyond_armature_sigmas_of_the_models_own() -> None:
-    """The z-test ``|θ̂ − θ₀| > 3 σ`` (closed form), either side of a model's own rotor."""
+def test_a_rotor_is_kept_only_beyond_two_sigmas_and_one_percent_of_its_joints_inertia() -> None:
+    """``|θ̂ − θ₀| > max(2 σ, 0.01 M̄ⱼⱼ)`` (closed form), either side of a model's own rotor."""
     robot = _with_armature(pinobs.load("planar_3r"), [0.0, 0.1, 0.1])
+    m_bar = np.diag(robot.mass_matrix(robot.neutral()))
     reg = MomentumRegressor(robot, friction=False, offset=False, armature=True)
-    assert ARMATURE_SIGMAS == 3.0
+    assert (ARMATURE_SIGMAS, ARMATURE_SHARE) == (2.0, 0.01)
     theta, std = reg.nominal(), np.full(reg.size, 1.0)
     arm = reg.armature_slice
-    std[arm] = 0.01
-    theta[arm] = [0.029, 0.1 + 0.031, 0.1 - 0.031]  # z = 2.9, 3.1, −3.1
-    assert determined_armature(reg, _solution(theta, std)) == ("joint2", "joint3")
-    theta[arm] = [0.031, 0.1 + 0.029, 0.1 - 0.029]
-    assert determined_armature(reg, _solution(theta, std)) == ("joint1",)
+    nominal = theta[arm].copy()
+
+    def kept(step: list[float], sigma: list[float]) -> tuple[str, ...]:
+        theta[arm] = nominal + np.array(step) * m_bar
+        std[arm] = np.array(sigma) * m_bar
+        return determined_armature(reg, _solution(theta, std))
+
+    # the standard deviation binding (1 % of M̄): z = 2.1 kept, 1.9 not, on either side
+    assert kept([0.021, 0.019, -0.021], [0.01, 0.01, 0.01]) == ("joint1", "joint3")
+    # the share binding (σ = 0.1 % of M̄): 1.1 % kept, 0.9 % not (z = 9)
+    assert kept([0.011, 0.009, -0.009], [0.001, 0.001, 0.001]) == ("joint1",)
+
+
+def test_a_joint_without_inertia_of_its_own_keeps_its_rotor() -> None:
+    """A massless last link (M singular without a rotor, as FIGAROH's TX40 link 6)."""
+    robot = pinobs.load("planar_3r")
+    model = robot.model.copy()
+    model.inertias[3] = pin.Inertia.Zero()
+    massless = robot.with_model(model)
+    assert np.diag(massless.mass_matrix(massless.neutral()))[2] == 0.0
+    reg = MomentumRegressor(massless, friction=False, offset=False, armature=True)
+    assert determined_armature(reg, _solution(reg.nominal(), np.ones(reg.size))) == ("joint3",)
 
 
 @pytest.mark.parametrize("joints", [("joint2",), ("joint1", "joint3")])

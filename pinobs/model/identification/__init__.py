@@ -117,20 +117,25 @@ held-out torques 3.48 5.27 2.01 0.561 0.794 0.725 → 3.44 5.14 1.95 0.561 0.794
 8.7 nominal): a fit's inertials compensate what the model cannot express.
 
 **Armature: only where the data determine it** (:mod:`~pinobs.model.identification.armature`).
-After each fit, a rotor inertia whose estimate is within :data:`ARMATURE_SIGMAS` (3)
-posterior standard deviations of the model's own is dropped (the model's taken as known)
-and the fit is made again without its column, the rows weighted by the nominal model
-carrying the rotors kept (none kept: the fit without armature, its weights and priors).
-The kept set only shrinks, so this ends.  A column the data do not determine adds
-variance: on ``benchmarks/learning.py``'s simulated truths (no rotors) the armature columns
-cost the one-pass ``ekf`` up to 1.16× (z1, links ±20 % and a payload) against the fit
-without them; with the test every spurious rotor (z ≤ 3.65 at the first stage, ≤ 2.84 when
-tested again) is dropped and those rows are the fit without armature's again.  On the real
-UR10e logs (``benchmarks/real_logs.py``'s fit) every rotor is kept (shoulder pan z 2.8 at
-the first stage and 3.9 at the last refined pass; the wrists 19–43), the pooled held-out
-torques unchanged (3.44 5.14 1.95 0.561 0.794 0.725 N·m), wrist 3's rotor 0.438 kg·m²
-(published 0.44).  At 5σ the UR10e's shoulder rotors were dropped and joint 2's held-out
-residual rose 4 % (5.35 N·m).
+The fit with every rotor is tested once (at each of its stages until one is dropped): a
+rotor inertia whose step from the model's own is within :data:`ARMATURE_SIGMAS` (2)
+posterior standard deviations, or within :data:`ARMATURE_SHARE` (1 %) of its joint's
+nominal inertia ``M̄ⱼⱼ``, is dropped (the model's own taken as known, no column) and the
+fit is made again, its rows weighted by the nominal model carrying the rotors kept (none
+kept: the fit without armature, weights and priors included).  A column the data do not
+determine adds variance: on ``benchmarks/learning.py``'s simulated truths (no rotors) the
+armature columns cost the one-pass ``ekf`` up to 1.16× (z1, links ±20 % and a payload)
+against the fit without them; their spurious rotors had z up to 3.65 but were 0.06–0.8 %
+of their joints' inertia (the 0.8 %, z1's joint 6, at z = 1.4), and with the test every
+one is dropped and those rows are the fit without armature's, to the digit.  On real
+arms every rotor is kept: the UR10e's (``benchmarks/real_logs.py``'s fit; smallest z 2.8,
+the shoulder pan's, whose column is nearly link 1's inertia about the same axis), the
+pooled held-out torques and wrist 3's 0.4385 kg·m² (published 0.44) unchanged; FIGAROH's
+TX40 (joint 5's rotor 10× its link's inertia at z = 2.6), its held-out torques unchanged.
+A z-test alone (3σ, the rotors tested again after each refit) dropped the TX40's rotors
+one by one (joint 2's held-out residual 6.6 → 11 N·m); tested once, it kept a spurious z1
+rotor (one-pass ``ekf`` 1.11×).  The thresholds are round values chosen with these
+cases in view.
 
 **Solve** (:func:`solve`).  A Gaussian prior ``θ ~ N(θ₀, diag(s²))`` pulls
 toward the nominal model (``θ₀``: the URDF's inertials, friction and armature, zero
@@ -161,6 +166,9 @@ was tried first: non-convex, and Levenberg-Marquardt stalled on it.)
 
 from __future__ import annotations
 
+from pinobs.model.identification.armature import (
+    ARMATURE_SHARE as ARMATURE_SHARE,
+)
 from pinobs.model.identification.armature import (
     ARMATURE_SIGMAS as ARMATURE_SIGMAS,
 )
@@ -271,6 +279,7 @@ from pinobs.model.identification.rows import (
 from pinobs.model.identification.savgol import smooth_path
 
 __all__ = [
+    "ARMATURE_SHARE",
     "ARMATURE_SIGMAS",
     "IDENTIFICATION_FD_STEP",
     "Identification",

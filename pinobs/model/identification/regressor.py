@@ -150,9 +150,7 @@ class MomentumRegressor:
         #: the actuated joints whose armature is identified (in the order of the joints)
         self.armature_joints = _armature_joints(robot, armature, self.actuated_names)
         self.armature = bool(self.armature_joints)
-        # their positions among the actuated joints, and their velocity coordinates
         self._arm_pos = [self.actuated_names.index(j) for j in self.armature_joints]
-        self._arm_coords = [self.actuated[k] for k in self._arm_pos]
         names = [f"{b}.{s}" for b in self.bodies for s in SUFFIXES]
         law = robot.friction_law
         idx = list(self.actuated)
@@ -184,9 +182,14 @@ class MomentumRegressor:
         # identified, that of the coordinates without a column (a free-flyer's)
         self._known_armature = np.array(model.armature, dtype=float)
         if self.armature:
-            self._known_armature[self._arm_coords] = 0.0
+            self._known_armature[self.armature_coordinates] = 0.0
         self.weight_model = _weight_model(weight_model, robot)
         self._prior_robot: Robot | None = None
+
+    @property
+    def armature_coordinates(self) -> list[int]:
+        """The velocity coordinates of :attr:`armature_joints`."""
+        return [self.actuated[k] for k in self._arm_pos]
 
     def _inertia_weight(self, mass: Vector) -> Vector:
         """``M⁻¹``, or with channels :attr:`excluded`, ``(M_KK)⁻¹`` on the kept coordinates
@@ -231,7 +234,7 @@ class MomentumRegressor:
             if self.armature and self.n_joint:
                 model = robot.model.copy()
                 armature = np.array(model.armature, dtype=float)
-                armature[self._arm_coords] += self.armature_floor()[self._arm_pos]
+                armature[self.armature_coordinates] += self.armature_floor()[self._arm_pos]
                 model.armature = armature
                 robot = robot.with_model(model)
             self._prior_robot = robot
@@ -244,7 +247,7 @@ class MomentumRegressor:
         held-out residual of 16.8 N·m, against 6.6 with these and 8.7 nominal)."""
         model = self.robot.model.copy()
         armature = np.array(model.armature, dtype=float)
-        armature[self._arm_coords] = np.asarray(theta, dtype=float)[self.armature_slice]
+        armature[self.armature_coordinates] = np.asarray(theta, dtype=float)[self.armature_slice]
         model.armature = armature
         return self.robot.with_model(model)
 
@@ -290,7 +293,7 @@ class MomentumRegressor:
         }
         parts += [np.asarray(prior_mean[term])[idx] for term in self.friction_terms]
         if self.armature:
-            parts.append(np.asarray(model.armature)[self._arm_coords])
+            parts.append(np.asarray(model.armature)[self.armature_coordinates])
         if self.offset:
             parts.append(np.zeros(self.n_joint))
         return np.concatenate(parts)
@@ -351,7 +354,7 @@ class MomentumRegressor:
                 law = None  # the tags say it all (as before friction laws)
         if self.armature:
             armature = np.array(model.armature, dtype=float)
-            armature[self._arm_coords] = theta[self.armature_slice]
+            armature[self.armature_coordinates] = theta[self.armature_slice]
             model.armature = armature
         # same geometry, shared and never loaded here (with_model)
         return self.robot.with_model(

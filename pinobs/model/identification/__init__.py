@@ -57,9 +57,9 @@ dropped sample moving it to the next row, never splitting a window), a held
 torque's missing samples are taken on the line between their neighbours, and the
 Savitzky–Golay fit is made in real time.  Measured on 8 s planar_3r logs
 (σ = 1e-4, seeds 1–5, ``benchmarks/irregular_logs.py``): with 8 % of the rows
-dropped the acceleration error of the fit was 0.95–1.27× that of the clean log, geometric
-mean 1.06 (``pinobs.identify``'s refined fit 0.47–1.40×, 0.87); sampled at intervals
-uniform in 0.5–1.5 ms, 0.70–1.05×, 0.87 (0.86–1.09×, 0.98).  On a uniform log every row, window and
+dropped the acceleration error of the fit was 0.96–1.14× that of the clean log, geometric
+mean 1.00 (``pinobs.identify``'s refined fit 0.51–1.12×, 0.84); sampled at intervals
+uniform in 0.5–1.5 ms, 0.54–1.05×, 0.82 (0.93–1.07×, 0.99).  On a uniform log every row, window and
 number is what it was.  ``v`` and a
 smoothed ``q`` come from a zero-phase Savitzky–Golay fit of the measured
 path (:func:`smooth_path`), or are given (``identify(..., path=(q, v))``;

@@ -240,7 +240,9 @@ def test_the_second_stage_weights_by_the_armature_the_first_fitted() -> None:
         ratios.append(
             error(ident.robot) / error(identify(robot, log, weight_model=reg.prior_robot).robot)
         )
-    assert max(ratios) < 1.0 and np.mean(ratios) < 0.8  # measured 0.53, 0.92, 0.63
+    # measured 0.63, 0.55, 0.69 (no rotor kept: the default fit is armature=False's, 0.0030,
+    # 0.0079, 0.0059; with every rotor kept it was 0.53, 0.92, 0.63)
+    assert max(ratios) < 1.0 and np.mean(ratios) < 0.8
 
 
 def test_identify_recovers_the_armature_and_predicts_better_than_without_it(

@@ -86,7 +86,8 @@ def _add_model_options(p: argparse.ArgumentParser) -> None:
         "--no-armature",
         action="store_true",
         help="do not identify the rotor inertia (armature) per joint (identified by default "
-        "where the data determine it: 3 standard deviations from the model's); keep the model's",
+        "where the data determine it: beyond 2 standard deviations and 1 %% of the joint's "
+        "inertia from the model's); keep the model's",
     )
     p.add_argument(
         "--offset",

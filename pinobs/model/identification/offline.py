@@ -23,8 +23,8 @@ the solve checked, and the report (MATH §9; the package docstring of
 - ``armature``: a rotor inertia per actuated joint (``model.armature``, added to ``M``'s
   diagonal; prior mean the model's own, usually 0, width :data:`PRIOR_ARMATURE`), kept only
   where the data determine it (:func:`~pinobs.model.identification.armature.determined_armature`:
-  more than :data:`ARMATURE_SIGMAS` standard deviations from the model's own), the model's
-  own elsewhere.
+  a step from the model's own beyond :data:`ARMATURE_SIGMAS` standard deviations and
+  :data:`ARMATURE_SHARE` of the joint's inertia), the model's own elsewhere.
 - ``path``: ``(N, nq)`` [rad, m] and ``(N, nv)`` [rad/s, m/s], used in the regressor instead
   of the Savitzky–Golay fit (:func:`smooth_path`) of the measured positions
   (``pinobs.identify`` passes a model-based smoother's).

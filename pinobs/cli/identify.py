@@ -85,7 +85,9 @@ def _add_model_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-armature",
         action="store_true",
-        help="do not identify the rotor inertia (armature) per joint; keep the model's",
+        help="do not identify the rotor inertia (armature) per joint (identified by default "
+        "where the data determine it: beyond 2 standard deviations and 1 %% of the joint's "
+        "inertia from the model's); keep the model's",
     )
     p.add_argument(
         "--offset",

@@ -89,8 +89,11 @@ class MomentumRegressor:
             joint (default: the robot's law's where positive, else
             :data:`STRIBECK_VELOCITY`).
         armature: identify a rotor inertia per actuated joint (off by default here: the
-            online ``adaptive`` learner keeps the model's; :func:`identify` turns it on).
-            Off, the model's own armature is taken as known (moved to the torque side).
+            online ``adaptive`` learner keeps the model's; :func:`identify` turns it on), or
+            on the actuated joints named only (:func:`identify`'s choice of the rotors the
+            data determine: :mod:`pinobs.model.identification.armature`).  Where it is not
+            identified, the model's own armature is taken as known (moved to the torque
+            side).
         weighting: how :meth:`system` weighs a window's ``nv`` rows: ``"inertia"`` by
             ``M₀(q_mid)⁻¹ / (t₂ − t₁)`` (acceleration-like, rad/s²; the online learner's)
             or ``"torque"`` by ``1 / (t₂ − t₁)``: the window's mean torque residual in N·m
@@ -108,7 +111,7 @@ class MomentumRegressor:
         *,
         friction: bool | str = True,
         offset: bool = True,
-        armature: bool = False,
+        armature: bool | Sequence[str] = False,
         weighting: str = "inertia",
         exclude: Sequence[str] = (),
         smoothing: ArrayLike | None = None,
@@ -134,7 +137,6 @@ class MomentumRegressor:
         self.friction = self.friction_law is not None
         self.friction_terms = law_terms(self.friction_law) if self.friction_law else ()
         self.offset = bool(offset)
-        self.armature = bool(armature)
         self.bodies = tuple(_body_name(model, i) for i in range(1, model.njoints))
         #: velocity coordinates with friction and offset columns (actuated 1-dof joints)
         self.actuated = tuple(
@@ -145,6 +147,10 @@ class MomentumRegressor:
         )
         self.n_inertial = 10 * (model.njoints - 1)
         self.n_joint = len(self.actuated)
+        #: the actuated joints whose armature is identified (in the order of the joints)
+        self.armature_joints = _armature_joints(robot, armature, self.actuated_names)
+        self.armature = bool(self.armature_joints)
+        self._arm_pos = [self.actuated_names.index(j) for j in self.armature_joints]
         names = [f"{b}.{s}" for b in self.bodies for s in SUFFIXES]
         law = robot.friction_law
         idx = list(self.actuated)
@@ -166,7 +172,7 @@ class MomentumRegressor:
         for term in self.friction_terms:
             names += [f"{j}.{term}" for j in self.actuated_names]
         if self.armature:
-            names += [f"{j}.armature" for j in self.actuated_names]
+            names += [f"{j}.armature" for j in self.armature_joints]
         if self.offset:
             names += [f"{j}.offset" for j in self.actuated_names]
         self.names: tuple[str, ...] = tuple(names)
@@ -176,9 +182,14 @@ class MomentumRegressor:
         # identified, that of the coordinates without a column (a free-flyer's)
         self._known_armature = np.array(model.armature, dtype=float)
         if self.armature:
-            self._known_armature[list(self.actuated)] = 0.0
+            self._known_armature[self.armature_coordinates] = 0.0
         self.weight_model = _weight_model(weight_model, robot)
         self._prior_robot: Robot | None = None
+
+    @property
+    def armature_coordinates(self) -> list[int]:
+        """The velocity coordinates of :attr:`armature_joints`."""
+        return [self.actuated[k] for k in self._arm_pos]
 
     def _inertia_weight(self, mass: Vector) -> Vector:
         """``M⁻¹``, or with channels :attr:`excluded`, ``(M_KK)⁻¹`` on the kept coordinates
@@ -215,28 +226,28 @@ class MomentumRegressor:
     @property
     def prior_robot(self) -> Robot:
         """The inertia the friction and offset priors are accelerations of: the nominal
-        model, its armature raised by :meth:`armature_floor` on every actuated joint when
-        the armature is identified (module docstring: a rotor unknown to the nominal model
+        model, its armature raised by :meth:`armature_floor` on every joint whose armature
+        is identified (module docstring: a rotor unknown to the nominal model
         would otherwise be weighed by its link's inertia alone).  Data-independent."""
         if self._prior_robot is None:
             robot = self.robot
             if self.armature and self.n_joint:
                 model = robot.model.copy()
                 armature = np.array(model.armature, dtype=float)
-                armature[list(self.actuated)] += self.armature_floor()
+                armature[self.armature_coordinates] += self.armature_floor()[self._arm_pos]
                 model.armature = armature
                 robot = robot.with_model(model)
             self._prior_robot = robot
         return self._prior_robot
 
     def armature_weights(self, theta: ArrayLike) -> Robot:
-        """The nominal robot carrying ``θ``'s armature on its actuated joints: the weights'
+        """The nominal robot carrying ``θ``'s armature on its joints with one: the weights'
         model of :func:`identify`'s second stage (the nominal inertials: a fit's, which
         compensate what the model cannot express, weighed the real TX40's joint 2 to a
         held-out residual of 16.8 N·m, against 6.6 with these and 8.7 nominal)."""
         model = self.robot.model.copy()
         armature = np.array(model.armature, dtype=float)
-        armature[list(self.actuated)] = np.asarray(theta, dtype=float)[self.armature_slice]
+        armature[self.armature_coordinates] = np.asarray(theta, dtype=float)[self.armature_slice]
         model.armature = armature
         return self.robot.with_model(model)
 
@@ -257,7 +268,7 @@ class MomentumRegressor:
     def armature_slice(self) -> slice:
         """Where the armature columns are in ``θ`` (empty when not identified)."""
         start = self.n_inertial + len(self.friction_terms) * self.n_joint
-        return slice(start, start + (self.n_joint if self.armature else 0))
+        return slice(start, start + len(self._arm_pos))
 
     @property
     def size(self) -> int:
@@ -282,7 +293,7 @@ class MomentumRegressor:
         }
         parts += [np.asarray(prior_mean[term])[idx] for term in self.friction_terms]
         if self.armature:
-            parts.append(np.asarray(model.armature)[list(self.actuated)])
+            parts.append(np.asarray(model.armature)[self.armature_coordinates])
         if self.offset:
             parts.append(np.zeros(self.n_joint))
         return np.concatenate(parts)
@@ -312,7 +323,8 @@ class MomentumRegressor:
                 parts.append(prior.get(term, PRIOR_COULOMB) * m_bar)
             if self.armature:
                 floor = self.armature_floor()
-                parts.append(np.maximum(PRIOR_ARMATURE * np.maximum(m_nom, 1e-6), floor))
+                arm_std = np.maximum(PRIOR_ARMATURE * np.maximum(m_nom, 1e-6), floor)
+                parts.append(arm_std[self._arm_pos])
             if self.offset:
                 parts.append(PRIOR_OFFSET * m_bar)
         return np.concatenate(parts)
@@ -342,7 +354,7 @@ class MomentumRegressor:
                 law = None  # the tags say it all (as before friction laws)
         if self.armature:
             armature = np.array(model.armature, dtype=float)
-            armature[list(self.actuated)] = theta[self.armature_slice]
+            armature[self.armature_coordinates] = theta[self.armature_slice]
             model.armature = armature
         # same geometry, shared and never loaded here (with_model)
         return self.robot.with_model(
@@ -456,7 +468,7 @@ class MomentumRegressor:
             if self._groups:
                 block.append(select_f * (trap_f[k1] - trap_f[k0]))
             if self.armature:  # diag(I_a) (v₂ − v₁): the rotors' momentum
-                block.append(self._select * (vf[k1] - vf[k0]))
+                block.append(self._select[:, self._arm_pos] * (vf[k1] - vf[k0])[self._arm_pos])
             if self.offset:
                 block.append(-self._select * (t[k1] - t[k0]))
             a = np.hstack(block)
@@ -624,6 +636,25 @@ def excluded_coordinates(robot: Robot, exclude: Sequence[str]) -> NDArray[np.int
             )
         out += range(found[0].idx_v, found[0].idx_v + found[0].nv)
     return np.array(sorted(set(out)), dtype=np.intp)
+
+
+def _armature_joints(robot: Robot, armature: object, actuated: tuple[str, ...]) -> tuple[str, ...]:
+    """:class:`MomentumRegressor`'s ``armature``: every actuated joint (``True``), none
+    (``False``) or those named, in the order of the joints.
+
+    Raises:
+        OptionError: a name that is not an actuated joint of ``robot`` (the valid ones named).
+    """
+    if isinstance(armature, (bool, np.bool_)):
+        return actuated if armature else ()
+    names = [armature] if isinstance(armature, str) else list(cast(Sequence[str], armature))
+    unknown = [n for n in names if n not in actuated]
+    if unknown:
+        raise OptionError(
+            f"armature names {unknown!r}, not actuated joints of {robot.name!r}; its actuated "
+            "joints: " + ", ".join(actuated)
+        )
+    return tuple(j for j in actuated if j in names)
 
 
 def check_options(

@@ -283,7 +283,8 @@ class EKFState(NamedTuple):
     d_psd: Vector | None = None  # its random-walk density per joint [N²·m²/s]
     gate: GateState = GateState()  # the outlier gate's bookkeeping (NIS of the last measurement)
     auto: bool = False  # disturbance_psd="auto": d_psd learned from the innovations
-    psd_scale: Vector | None = None  # "auto": M̄ᵢᵢ² at the reset [kg²·m⁴], rad²/s⁵ → N²·m²/s
+    # "auto": M̄ᵢᵢ² at the reset configuration, the density's scale from rad²/s⁵ to N²·m²/s
+    psd_scale: Vector | None = None
 
 
 @register
@@ -452,7 +453,10 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         of predicted variance ``s`` [rad²] over ``dt`` [s] (module docstring)."""
         scale = pred.psd_scale
         if pred.d_psd is None or scale is None:
-            raise ValueError("matched_density needs a state with disturbance_psd='auto'")
+            raise GainError(
+                "matched_density needs the state of an ekf with disturbance_psd='auto' "
+                f"(this one has d_psd={'None' if pred.d_psd is None else 'fixed'})"
+            )
         lo, hi = AUTO_PSD_BOUNDS
         hi = max(min(hi, AUTO_CEILING * self.gains.meas_std**2 / dt**5), lo)  # the ceiling
         bounds = np.array([lo * scale, hi * scale])  # (2, nv), per joint: ψ_τ = ψ M̄ᵢᵢ²

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import pinobs
+from pinobs.errors import GainError
 from pinobs.evaluation import evaluate
 from pinobs.observers import make_observer
 from pinobs.observers.ekf import (
@@ -137,3 +138,13 @@ def test_a_grossly_wrong_model_degrades_to_about_the_kf(rate: float) -> None:
     rms = _rms(res, robot)
     assert np.isfinite(rms["auto"])
     assert rms["auto"] <= (1.5 if rate == 100.0 else 3.5) * rms["kf"]
+
+
+def test_matched_density_refuses_a_state_without_the_learned_density() -> None:
+    robot = pinobs.load("ur5")
+    ob = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4, disturbance_psd=1.0)
+    assert isinstance(ob, ExtendedKalmanFilter)
+    state = ob.initial_state(robot.neutral(), np.zeros(robot.nv))
+    e = np.zeros(robot.nv)
+    with pytest.raises(GainError, match="disturbance_psd='auto'"):
+        ob.matched_density(state, e, np.ones(robot.nv), 1e-3)

@@ -150,14 +150,16 @@ with ``d`` through the velocity terms).  Without it, at 100 Hz the density ran a
 (UR5, masses ×3 in the truth, pd tracking, σ = 1e-4: to 2e7 rad²/s⁵ on a joint, NaN; the
 plain ``ekf`` NaN too; with it 1.34× the ``kf``, 1.8e-2 against 1.3e-2 rad/s; ``AUTO_CEILING``
 chosen there: 0.01 → 2.4×, 0.1 → 1.26×, 1 → 1.34×, 20 → 2.9×).  At 1 kHz with σ = 1e-4 the
-ceiling (1e7 rad²/s⁵) is not reached on those runs (exact model 5.1e-5, ×3 1.6e-2: unchanged);
-its bound ``AUTO_PSD_BOUNDS``' top is 1e8.  On the UR10e logs of
+ceiling (1e7 rad²/s⁵, below ``AUTO_PSD_BOUNDS``' top, 1e8) is not reached on those runs
+(exact model 5.1e-5, ×3 1.6e-2: unchanged).  On the UR10e logs of
 ``benchmarks/real_logs_bound.py`` (100 Hz, the model ``identify`` fits on
-``real_logs.UR10E_FIT``, σ 2.9e-5 to 4.1e-5) ``ekf`` with ``"auto"`` alone diverged (rad/s errors:
-338× and 1380× the default ``kf`` on the two logs traced); it is 1.5–2.9× on seven logs; what remains is the
-model-plus-random-walk structure's: the best fixed ``(accel_psd, disturbance_psd)`` of that
-benchmark's grid is 1.27–2.3× the ``kf`` on the same model.  ``never_behind=True`` blends it
-with the ``kf`` (:mod:`pinobs.observers.neverbehind`).
+``real_logs.UR10E_FIT``, σ 2.9e-5 to 4.1e-5), ``ekf`` with ``"auto"`` alone diverged
+(rad/s errors: 338× and 1380× the default ``kf`` on the two logs traced); with the ceiling
+it is 1.5–2.9× on seven logs (the benchmark's six: 1.4–2.7×).  What remains is the
+structure's, model plus random-walk offset: the same model's acceleration with an offset
+tuned on the reference (the benchmark's *id bound*) is 1.5–5.4× the ``kf``, the best fixed
+``(accel_psd, disturbance_psd)`` of its grid 1.27–2.3×.  ``never_behind=True`` blends the
+filter with the ``kf`` (:mod:`pinobs.observers.neverbehind`).
 """
 
 from __future__ import annotations

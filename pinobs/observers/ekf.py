@@ -140,6 +140,26 @@ while the model under-predicts the innovations and shrinks while the filter
 over-predicts them.  A gated sample does not count.  The offset starts with
 ``d0_std`` = ``AUTO_D0_ACCEL · M̄ᵢᵢ`` (a grossly wrong model's torque error, absorbed in
 the first samples) unless ``d0_std`` is given.
+
+The density's ceiling.  ``ψᵢ`` is also kept at or below ``AUTO_CEILING · σ² / h⁵ · M̄ᵢᵢ²``
+(``AUTO_CEILING`` = 1): at ``ψ h⁵ / σ² = 1`` the offset's random walk alone adds ``σ²/20``
+of position variance per sample (``Q₀₀ = ψ h⁵/20``, the constant-acceleration filter's), so
+the filter already follows every sample and a denser offset only feeds the measurement noise
+into ``d``, whose torque then swings the linearisation out of its validity (``‖A h‖`` grows
+with ``d`` through the velocity terms).  Without it, at 100 Hz the density ran away
+(UR5, masses ×3 in the truth, pd tracking, σ = 1e-4: to 2e7 rad²/s⁵ on a joint, NaN; the
+plain ``ekf`` NaN too; with it 1.34× the ``kf``, 1.8e-2 against 1.3e-2 rad/s; ``AUTO_CEILING``
+chosen there: 0.01 → 2.4×, 0.1 → 1.26×, 1 → 1.34×, 20 → 2.9×).  At 1 kHz with σ = 1e-4 the
+ceiling (1e7 rad²/s⁵, below ``AUTO_PSD_BOUNDS``' top, 1e8) is not reached on those runs
+(exact model 5.1e-5, ×3 1.6e-2: unchanged).  On the UR10e logs of
+``benchmarks/real_logs_bound.py`` (100 Hz, the model ``identify`` fits on
+``real_logs.UR10E_FIT``, σ 2.9e-5 to 4.1e-5), ``ekf`` with ``"auto"`` alone diverged
+(rad/s errors: 338× and 1380× the default ``kf`` on the two logs traced); with the ceiling
+it is 1.5–2.9× on seven logs (the benchmark's six: 1.4–2.7×).  What remains is the
+structure's, model plus random-walk offset: the same model's acceleration with an offset
+tuned on the reference (the benchmark's *id bound*) is 1.5–5.4× the ``kf``, the best fixed
+``(accel_psd, disturbance_psd)`` of its grid 1.27–2.3×.  ``never_behind=True`` blends the
+filter with the ``kf`` (:mod:`pinobs.observers.neverbehind`).
 """
 
 from __future__ import annotations
@@ -181,6 +201,7 @@ from pinobs.observers.linalg import (
 from pinobs.observers.neverbehind import match_density
 
 __all__ = [
+    "AUTO_CEILING",
     "AUTO_D0_ACCEL",
     "AUTO_PSD_BOUNDS",
     "AUTO_PSD_START",
@@ -199,6 +220,8 @@ AUTO_PSD_START = 1e-9
 AUTO_PSD_BOUNDS = (1e-12, 1e8)
 AUTO_WINDOW = 0.1
 AUTO_D0_ACCEL = 10.0
+#: ``"auto"``: the ceiling of the density, ``ψ ≤ AUTO_CEILING · σ² / h⁵`` [rad²/s⁵] (module docstring).
+AUTO_CEILING = 1.0
 
 
 def ad_matrix(robot: Robot, v: Vector) -> Vector:
@@ -262,6 +285,8 @@ class EKFState(NamedTuple):
     d_psd: Vector | None = None  # its random-walk density per joint [N²·m²/s]
     gate: GateState = GateState()  # the outlier gate's bookkeeping (NIS of the last measurement)
     auto: bool = False  # disturbance_psd="auto": d_psd learned from the innovations
+    # "auto": M̄ᵢᵢ² at the reset configuration, the density's scale from rad²/s⁵ to N²·m²/s
+    psd_scale: Vector | None = None
 
 
 @register
@@ -398,8 +423,10 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         d_psd = self.disturbance_psd * m_bar**2
         if not self.auto:
             return EKFState(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd)
-        self._psd_bounds = np.outer(AUTO_PSD_BOUNDS, m_bar**2)
-        return EKFState(q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd, auto=True)
+        return EKFState(
+            q0.copy(), v0.copy(), np.diag(std**2), np.zeros(nv), d_psd, auto=True,
+            psd_scale=m_bar**2,
+        )  # fmt: skip
 
     def step(self, state: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
         if self._fast is not None:
@@ -421,8 +448,21 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         nv = self.robot.nv
         e = self.robot.difference(pred.q, q_meas)
         s = pred.P.diagonal()[:nv] + self.gains.meas_std**2  # Sᵢᵢ = P⁻_qq,ii + σ²
-        psd = match_density(new.d_psd, e, s, dt, window=AUTO_WINDOW, bounds=self._psd_bounds)
-        return new._replace(d_psd=psd)
+        return new._replace(d_psd=self.matched_density(pred, e, s, dt))
+
+    def matched_density(self, pred: EKFState, e: Vector, s: Vector, dt: float) -> Vector:
+        """``disturbance_psd="auto"``: the offset's density after the innovation ``e`` [rad]
+        of predicted variance ``s`` [rad²] over ``dt`` [s] (module docstring)."""
+        scale = pred.psd_scale
+        if pred.d_psd is None or scale is None:
+            raise GainError(
+                "matched_density needs the state of an ekf with disturbance_psd='auto' "
+                f"(this one has d_psd={'None' if pred.d_psd is None else 'fixed'})"
+            )
+        lo, hi = AUTO_PSD_BOUNDS
+        hi = max(min(hi, AUTO_CEILING * self.gains.meas_std**2 / dt**5), lo)  # the ceiling
+        bounds = np.array([lo * scale, hi * scale])  # (2, nv), per joint: ψ_τ = ψ M̄ᵢᵢ²
+        return match_density(pred.d_psd, e, s, dt, window=AUTO_WINDOW, bounds=bounds)
 
     def predict(self, state: EKFState, dt: float, tau: Vector) -> tuple[EKFState, Vector]:
         """Prediction over ``dt`` [s] with ``tau`` held: ``(state⁻, Φ)``.
@@ -515,7 +555,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         v = v + dx[nv : 2 * nv]
         if d is not None:
             d = d + dx[2 * nv :]
-        return EKFState(q, v, P_new, d, state.d_psd, gate, state.auto)  # P symmetric (joseph)
+        return state._replace(q=q, v=v, P=P_new, d=d, gate=gate)  # P symmetric (joseph)
 
     def gate_limit(self, state: EKFState) -> float:
         """The NIS above which :meth:`correct` rejected ``state``'s measurement: the gate's
@@ -649,10 +689,8 @@ class _FastPath:
                 d = d + dx[2 * nv :]
                 if state.auto and d_psd is not None:  # as ekf.corrected
                     s = P.diagonal()[:nv] + r  # Sᵢᵢ = P⁻_qq,ii + σ²
-                    d_psd = match_density(
-                        d_psd, e, s, dt, window=AUTO_WINDOW, bounds=ekf._psd_bounds
-                    )
-        return EKFState(q, v, P_new, d, d_psd, gate, state.auto)
+                    d_psd = ekf.matched_density(state, e, s, dt)
+        return state._replace(q=q, v=v, P=P_new, d=d, d_psd=d_psd, gate=gate)
 
 
 class _LieFast:

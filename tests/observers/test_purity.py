@@ -87,6 +87,7 @@ def _cases() -> list[tuple[str, dict[str, Any]]]:
             cases.append((name, {"never_behind": True}))
     cases.append(("adaptive", {"learning": "background"}))
     cases.append(("adaptive", {"blend": False}))
+    cases.append(("ekf", {"disturbance_psd": "auto"}))
     return cases
 
 

@@ -35,7 +35,7 @@ import math
 import warnings
 from abc import ABC, abstractmethod
 from collections import deque
-from typing import Any, ClassVar, Generic, Protocol, TypeGuard, TypeVar, final
+from typing import Any, ClassVar, Generic, Protocol, TypeVar, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -129,11 +129,6 @@ NOISE_FLOOR = 1e-6
 #: The time types :meth:`Observer.update`'s fast path takes as they are (else ``float(t)``).
 _FLOATS = (float, np.float64)
 _F64 = np.dtype(np.float64)
-
-
-def _f64_vector(x: object, shape: tuple[int]) -> TypeGuard[NDArray[np.float64]]:
-    """Whether ``x`` is a plain float64 ndarray of ``shape`` (the fast paths' input)."""
-    return type(x) is np.ndarray and x.dtype is _F64 and x.shape == shape
 
 
 class GaussianFilter(Protocol):
@@ -294,9 +289,10 @@ class Observer(ABC, Generic[State]):
         self._diverged = False  # the latest update diverged (its state was not kept)
         self._intervals: list[float] = []  # the first intervals after the reset (the period)
         self._tau_floor = float(np.min(self.robot.absurd_torque)) if self.robot.nv else 0.0
-        # update's fast path: no unit-norm block in q, the shapes (Robot.nq/nv ask Pinocchio)
-        self._plain_q = self.robot.is_vector_space
-        self._shapes = ((self.robot.nq,), (self.robot.nv,))
+        # the shapes update's fast path takes (Robot.nq/nv ask Pinocchio): q's only without a
+        # unit-norm block, neither when empty (no min or max)
+        nq, nv = self.robot.nq, self.robot.nv
+        self._shapes = ((nq if self.robot.is_vector_space and nq else -1,), (nv if nv else -1,))
         self._set_period(None if self.rate is None else 1.0 / self.rate)  # (_sample_period)
         self._intervals_due = self.rate is None
         self._restart_due = False  # a pause without a sample: restart at the next one
@@ -451,14 +447,24 @@ class Observer(ABC, Generic[State]):
         t_new = float(t) if type(t) in _FLOATS and self._t + TIME_EPS < t < math.inf else None
         if t_new is None:
             t_new = self._check_time(t, previous=self._t)
-        q = q_meas.copy() if self._plain_q and _f64_vector(q_meas, self._shapes[0]) else None
+        q = (
+            q_meas.copy()
+            if type(q_meas) is np.ndarray
+            and q_meas.dtype is _F64
+            and q_meas.shape == self._shapes[0]
+            else None
+        )
         if q is None or not math.isfinite(sum(q.tolist())):
             q = None if q_meas is None else self.robot.check_configuration(q_meas, what="q_meas")
-        tau_new = tau.copy() if _f64_vector(tau, self._shapes[1]) else None
+        tau_new = (
+            tau.copy()
+            if type(tau) is np.ndarray and tau.dtype is _F64 and tau.shape == self._shapes[1]
+            else None
+        )
         if tau_new is None or not (
             math.isfinite(sum(lst := tau_new.tolist()))
-            and -self._tau_floor <= min(lst, default=0.0)
-            and max(lst, default=0.0) <= self._tau_floor
+            and -self._tau_floor <= min(lst)
+            and max(lst) <= self._tau_floor
         ):
             tau_new = self._check_tau(tau, what="tau")
         return t_new, q, tau_new

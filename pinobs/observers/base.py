@@ -410,9 +410,8 @@ class Observer(ABC, Generic[State]):
         self._diverged = False
         self._state, self._t, self._tau, self._last = state, t_new, tau_new, estimate
         self._ts = t_state
-        # without a latency the state is at t_new: only the torque applied from t_new on
-        # matters (_torques is read only under a latency, which is set before the first update
-        # after a reset, which writes it, as _after_pause does: not kept here)
+        # without a latency the state is at t_new and only tau_new matters from there on
+        # (_delayed rebuilds _torques from _t and _tau when the state is at _t)
         held = self._keep_torques(t_state, t_new, tau_new) if self.latency > 0.0 else tau_new
         used = q if t_state > ts_before + TIME_EPS and not estimate.gated else None
         self._state = self.after_commit(state, t_state, used, held)
@@ -596,6 +595,8 @@ class Observer(ABC, Generic[State]):
     def _delayed(self, t_new: float, q: Vector | None) -> tuple[State, float, Estimate]:
         """One update under a known latency (:meth:`set_latency`): ``(state, its time, estimate at t_new)``."""
         assert self._state is not None
+        if self._ts >= self._t - TIME_EPS:  # the state at the last sample (after a reset, or
+            self._torques = [(self._t, self._tau)]  # updates without a latency): its torque
         s = t_new - self.latency
         if s > self._ts + TIME_EPS:
             state, t_state = self._advance(self._state, self._ts, s, q), s

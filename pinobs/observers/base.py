@@ -126,6 +126,10 @@ _PERIOD_INTERVALS = 5
 #: (nothing is retuned: the family keeps that default).
 NOISE_FLOOR = 1e-6
 
+#: The time types :meth:`Observer.update`'s fast path takes as they are (else ``float(t)``).
+_FLOATS = (float, np.float64)
+_F64 = np.dtype(np.float64)
+
 
 class GaussianFilter(Protocol):
     """An error-state Gaussian filter, predicted and corrected apart (what a smoother runs).
@@ -285,6 +289,10 @@ class Observer(ABC, Generic[State]):
         self._diverged = False  # the latest update diverged (its state was not kept)
         self._intervals: list[float] = []  # the first intervals after the reset (the period)
         self._tau_floor = float(np.min(self.robot.absurd_torque)) if self.robot.nv else 0.0
+        # the shapes update's fast path takes (Robot.nq/nv ask Pinocchio): q's only without a
+        # unit-norm block, neither when empty (no min or max)
+        nq, nv = self.robot.nq, self.robot.nv
+        self._shapes = ((nq if self.robot.is_vector_space and nq else -1,), (nv if nv else -1,))
         self._set_period(None if self.rate is None else 1.0 / self.rate)  # (_sample_period)
         self._intervals_due = self.rate is None
         self._restart_due = False  # a pause without a sample: restart at the next one
@@ -377,9 +385,7 @@ class Observer(ABC, Generic[State]):
         """:meth:`update` (its docstring), on the caller's BLAS threads."""
         if self._state is None:
             raise NotResetError(f"{self!r}: call reset(t0, q0) before update()")
-        t_new = self._check_time(t, previous=self._t)
-        q = None if q_meas is None else self.robot.check_configuration(q_meas, what="q_meas")
-        tau_new = self._check_tau(tau, what="tau")
+        t_new, q, tau_new = self._inputs(t, q_meas, tau)
         ts_before = self._ts
         dt = t_new - self._t
         if self._intervals_due:
@@ -391,26 +397,22 @@ class Observer(ABC, Generic[State]):
         elif self.latency > 0.0:
             state, t_state, estimate = self._delayed(t_new, q)
         else:
-            # MATH §7: propagate with the torque held since the previous call, then correct.
-            state = self._stepped(self._state, dt, q, self._tau)
+            # MATH §7: propagate with the torque held since the previous call, then correct
+            # (in sub-steps past GAP_PERIODS periods: _stepped)
+            if dt > self._gap:
+                state = self._stepped(self._state, dt, q, self._tau)
+            else:
+                state = self.step(self._state, dt, q, self._tau)
             t_state = t_new
             estimate = self._make_estimate(t_new, state)
-        if not (
-            math.isfinite(sum(estimate.q.tolist())) and math.isfinite(sum(estimate.v.tolist()))
-        ):
+        if not math.isfinite(sum(estimate.q.tolist()) + sum(estimate.v.tolist())):
             self._check_finite(estimate, t_new, dt)  # entry by entry: a sum can overflow to inf
         self._diverged = False
         self._state, self._t, self._tau, self._last = state, t_new, tau_new, estimate
         self._ts = t_state
-        if self.latency > 0.0:  # the torques applied since the state's time, for the next steps
-            self._torques = [
-                x
-                for i, x in enumerate(self._torques)
-                if i + 1 == len(self._torques) or self._torques[i + 1][0] > t_state
-            ] + [(t_new, tau_new)]
-            held = next(x for tk, x in reversed(self._torques) if tk <= t_state + TIME_EPS)
-        else:  # the state is at t_new: only the torque applied from t_new on matters
-            self._torques, held = [(t_new, tau_new)], tau_new
+        # without a latency the state is at t_new and only tau_new matters from there on
+        # (_delayed rebuilds _torques from _t and _tau when the state is at _t)
+        held = self._keep_torques(t_state, t_new, tau_new) if self.latency > 0.0 else tau_new
         used = q if t_state > ts_before + TIME_EPS and not estimate.gated else None
         self._state = self.after_commit(state, t_state, used, held)
         if estimate.nis is not None:
@@ -419,6 +421,52 @@ class Observer(ABC, Generic[State]):
         if self._noise_samples is not None and self._learn_noise(t_new, q, tau_new):
             return self.estimate  # rebuilt with σ from the data, replayed up to t_new
         return estimate
+
+    def _keep_torques(self, t_state: float, t_new: float, tau_new: Vector) -> Vector:
+        """Under a latency: keep the torques applied since the state's time ``t_state`` (for
+        the next steps) with ``tau_new`` applied from ``t_new``; the torque held at ``t_state``."""
+        self._torques = [
+            x
+            for i, x in enumerate(self._torques)
+            if i + 1 == len(self._torques) or self._torques[i + 1][0] > t_state
+        ] + [(t_new, tau_new)]
+        return next(x for tk, x in reversed(self._torques) if tk <= t_state + TIME_EPS)
+
+    def _inputs(
+        self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None
+    ) -> tuple[float, Vector | None, Vector]:
+        """:meth:`update`'s inputs checked: ``(t, q or None, τ)``, fresh arrays.
+
+        Fast paths for the usual call (issue 39: the checks cost 3× one ``pin.aba`` an update
+        on a UR5): a ``float`` time after the previous one, float64 arrays of the right shape
+        copied whose Python sum is finite (then every entry is), a τ within ``±`` the smallest
+        joint's bound, on a robot without unit-norm blocks; anything else goes through the
+        full checks (:meth:`_check_time`, ``Robot.check_configuration``, :meth:`_check_tau`),
+        which raise their errors or accept it as before."""
+        t_new = float(t) if type(t) in _FLOATS and self._t + TIME_EPS < t < math.inf else None
+        if t_new is None:
+            t_new = self._check_time(t, previous=self._t)
+        q = (
+            q_meas.copy()
+            if type(q_meas) is np.ndarray
+            and q_meas.dtype is _F64
+            and q_meas.shape == self._shapes[0]
+            else None
+        )
+        if q is None or not math.isfinite(sum(q.tolist())):
+            q = None if q_meas is None else self.robot.check_configuration(q_meas, what="q_meas")
+        tau_new = (
+            tau.copy()
+            if type(tau) is np.ndarray and tau.dtype is _F64 and tau.shape == self._shapes[1]
+            else None
+        )
+        if tau_new is None or not (
+            math.isfinite(sum(lst := tau_new.tolist()))
+            and -self._tau_floor <= min(lst)
+            and max(lst) <= self._tau_floor
+        ):
+            tau_new = self._check_tau(tau, what="tau")
+        return t_new, q, tau_new
 
     def _check_finite(self, estimate: Estimate, t_new: float, dt: float) -> None:
         """:class:`ObserverDiverged` if ``estimate`` (at ``t_new``, ``dt`` after the previous
@@ -456,6 +504,7 @@ class Observer(ABC, Generic[State]):
         once: the longest step propagated in sub-steps before a restart (:meth:`_stepped`)."""
         self._period_s = period
         self._span = math.inf if period is None else max(PAUSE_RESTART, MAX_GAP_PERIODS * period)
+        self._gap = math.inf if period is None else GAP_PERIODS * period  # sub-steps beyond
 
     def _stepped(self, state: State, dt: float, q: Vector | None, tau: Vector) -> State:
         """:meth:`step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
@@ -464,8 +513,7 @@ class Observer(ABC, Generic[State]):
         :func:`~pinobs.observers.checks.propagate_gap`, the log reader's too).
         One step of 10 s returned 1e74 rad/s from ``ekf`` and every update after it raised;
         one of 1 s left ``riemannian`` 500 rad/s off for seconds (a sweep)."""
-        period = self._period_s
-        if period is None or not dt > GAP_PERIODS * period:  # gap_substeps' one step, directly
+        if not dt > self._gap:  # gap_substeps' one step, directly
             return self.step(state, dt, q, tau)
         state, n = propagate_gap(
             lambda s, _, n: self.step(s, dt / n, None, tau),
@@ -547,6 +595,8 @@ class Observer(ABC, Generic[State]):
     def _delayed(self, t_new: float, q: Vector | None) -> tuple[State, float, Estimate]:
         """One update under a known latency (:meth:`set_latency`): ``(state, its time, estimate at t_new)``."""
         assert self._state is not None
+        if self._ts >= self._t - TIME_EPS:  # the state at the last sample (after a reset, or
+            self._torques = [(self._t, self._tau)]  # updates without a latency): its torque
         s = t_new - self.latency
         if s > self._ts + TIME_EPS:
             state, t_state = self._advance(self._state, self._ts, s, q), s
@@ -696,9 +746,15 @@ class Observer(ABC, Generic[State]):
 
     # -------------------------------------------------------------- helpers
     def _make_estimate(self, t: float, state: State) -> Estimate:
+        """The estimate of ``state`` at ``t``: :meth:`output` copied read-only (as
+        ``read_only``; a float64 array by its own ``copy``, cheaper) and :meth:`innovation`."""
         q, v = self.output(state)
         nis, gated = self.innovation(state)
-        return Estimate(t=t, q=read_only(q), v=read_only(v), nis=nis, gated=gated)
+        q = q.copy() if type(q) is np.ndarray and q.dtype is _F64 else np.array(q, dtype=float)
+        v = v.copy() if type(v) is np.ndarray and v.dtype is _F64 else np.array(v, dtype=float)
+        q.setflags(write=False)
+        v.setflags(write=False)
+        return Estimate(t, q, v, nis, gated)
 
     def _check_tau(self, tau: ArrayLike | None, *, what: str) -> Vector:
         if tau is None:

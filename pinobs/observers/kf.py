@@ -290,8 +290,8 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         return replace(base, causes=KF_CAUSES) if base.causes else base
 
     def output(self, state: KFState | AutoState) -> tuple[Vector, Vector]:
-        if isinstance(state, AutoState):
-            return self._auto().output(state)
+        if isinstance(state, AutoState):  # (not through _auto: a call less an update)
+            return cast(AutoBank, self.auto_bank).output(state)
         return state.q, state.v
 
     def smoothing_filter(self) -> WhiteJerkFilter:

@@ -33,7 +33,7 @@ import numpy as np
 
 from pinobs.model import Robot
 from pinobs.observers.base import Vector
-from pinobs.observers.linalg import cholesky_solve, identity, scaled_identity
+from pinobs.observers.linalg import cholesky_solve, identity, joseph_from_gain, scaled_identity
 
 __all__ = ["MIN_NV", "bracket_rows", "joseph_update", "times_a", "transition"]
 
@@ -112,10 +112,4 @@ def joseph_update(P: Vector, e: Vector, meas_var: float) -> tuple[Vector, Vector
     else:
         Kt, _ = cholesky_solve(S, B)
         K = Kt.T
-    C = P - K.dot(B)
-    Y = K * -meas_var
-    Y += C[:, :nv]
-    P_new = C - Y.dot(Kt)
-    P_new += P_new.T
-    P_new *= 0.5
-    return K.dot(e), P_new
+    return joseph_from_gain(P, B, K, Kt, e, meas_var)

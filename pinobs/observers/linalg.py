@@ -276,7 +276,15 @@ def joseph_update(P: Vector, e: Vector, meas_var: float) -> tuple[Vector, Vector
     B = P[:nv]  # H P
     S = B[:, :nv] + scaled_identity(nv, meas_var)
     Kt, _ = cholesky_solve(S, B)  # Kᵀ = S⁻¹ H P
-    K = Kt.T
+    return joseph_from_gain(P, B, Kt.T, Kt, e, meas_var)
+
+
+def joseph_from_gain(
+    P: Vector, B: Vector, K: Vector, Kt: Vector, e: Vector, meas_var: float
+) -> tuple[Vector, Vector]:
+    """:func:`joseph_update` once its gain ``K`` (and ``Kt = Kᵀ``, ``B = H P``) is known:
+    ``C = P − K B``, ``P⁺ = C − (C_·q − R K) Kᵀ``, symmetrised; returns ``(K e, P⁺)``."""
+    nv = e.shape[0]
     C = P - K.dot(B)
     Y = K * -meas_var
     Y += C[:, :nv]

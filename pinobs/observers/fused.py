@@ -382,29 +382,38 @@ def vector_correction_loops(
     return q_new, v_new
 
 
-def riccati_correction_loops(
-    q: Vector, v: Vector, acc: Vector, a_q: Vector, a_v: Vector, delta: Vector, jac: Vector,
-    p00: float, p01: float, p11: float, qa: float, r2: float, h: float, c: float,
-) -> tuple[Vector, Vector, float, float, float]:  # fmt: skip
-    """:func:`vector_correction_loops` with the gains of the Riccati schedule
-    (:meth:`pinobs.observers.riemannian.RiemannianObserver._correction_gains`, the same
-    operations in the same order): ``P⁻ = F P Fᵀ + Q``, ``K = P⁻Hᵀ/(P⁻₀₀ + σ²)``,
-    ``(k₁, k₂) = K``, the Joseph update; returns ``(q̂⁺, v̂⁺, P⁺₀₀, P⁺₀₁, P⁺₁₁)``
-    (``qa`` the acceleration density [rad²/s³], ``r2 = σ²``, ``c`` the curvature gain)."""
+def riccati_gains(
+    p00: float, p01: float, p11: float, qa: float, r2: float, h: float
+) -> tuple[float, float, float, float, float]:
+    """The Riccati schedule's step (:mod:`pinobs.observers.riemannian`'s module docstring):
+    ``P⁻ = F P Fᵀ + Q``, ``(k₁, k₂) = K = P⁻Hᵀ/(P⁻₀₀ + σ²)``, and the Joseph update;
+    returns ``(k₁, k₂, P⁺₀₀, P⁺₀₁, P⁺₁₁)`` (``qa`` the acceleration density [rad²/s³],
+    ``r2 = σ²``, ``h`` [s]).  Plain Python for the NumPy path, inlined in the kernel."""
     p00 += h * (2.0 * p01 + h * p11 + qa * h * h / 3.0)  # P⁻ = F P Fᵀ + Q
     p01 += h * (p11 + 0.5 * qa * h)
     p11 += qa * h
     s = 1.0 / (p00 + r2)
     k1, k2 = p00 * s, p01 * s  # K = P⁻Hᵀ (H P⁻Hᵀ + σ²)⁻¹
     m = 1.0 - k1
-    q_new, v_new = vector_correction_loops(q, v, acc, a_q, a_v, delta, jac, k1, k2, h, c * h)
     return (  # Joseph form (I − KH) P⁻ (I − KH)ᵀ + K σ² Kᵀ
-        q_new,
-        v_new,
+        k1,
+        k2,
         m * m * p00 + r2 * k1 * k1,
         m * (p01 - k2 * p00) + r2 * k1 * k2,
         k2 * k2 * (p00 + r2) - 2.0 * k2 * p01 + p11,
     )
+
+
+def riccati_correction_loops(
+    q: Vector, v: Vector, acc: Vector, a_q: Vector, a_v: Vector, delta: Vector, jac: Vector,
+    p00: float, p01: float, p11: float, qa: float, r2: float, h: float, c: float,
+) -> tuple[Vector, Vector, float, float, float]:  # fmt: skip
+    """:func:`vector_correction_loops` with the gains of :func:`riccati_gains` (the Riccati
+    schedule of :meth:`pinobs.observers.riemannian.RiemannianObserver._correction_gains`);
+    returns ``(q̂⁺, v̂⁺, P⁺₀₀, P⁺₀₁, P⁺₁₁)`` (``c`` the curvature gain)."""
+    k1, k2, p00, p01, p11 = riccati_gains(p00, p01, p11, qa, r2, h)
+    q_new, v_new = vector_correction_loops(q, v, acc, a_q, a_v, delta, jac, k1, k2, h, c * h)
+    return q_new, v_new, p00, p01, p11
 
 
 def _warm_predict() -> tuple[object, ...]:
@@ -459,7 +468,7 @@ vector_correction_kernel = LazyKernel(
 riccati_correction_kernel = LazyKernel(
     riccati_correction_loops, *(np.zeros(1),) * 3, np.zeros((1, 1)), np.zeros((1, 1)),
     np.zeros(1), np.zeros((1, 1)), *(1.0,) * 7,
-    helpers=(vector_correction_loops,),
+    helpers=(vector_correction_loops, riccati_gains),
 )  # fmt: skip
 #: :func:`jacobi_loops` compiled.
 jacobi_kernel = LazyKernel(jacobi_loops, *(np.zeros((1, 1)),) * 2, 1.0, *(np.zeros((1, 1)),) * 6)

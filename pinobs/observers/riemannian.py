@@ -150,6 +150,7 @@ from pinobs.observers.fused import (
     lie_correction_kernel,
     loaded,
     riccati_correction_kernel,
+    riccati_gains,
     rk4_calls,
     vector_correction_kernel,
 )
@@ -668,19 +669,8 @@ class RiemannianObserver(Observer[_State]):
         # Riccati schedule of the double-integrator error model (module docstring);
         # constant gains here, so C is the constant one
         p00, p01, p11 = P  # 2×2 symmetric, in scalars: this runs every sample
-        qa, r2 = self.accel_psd, self._sigma2
-        p00 += h * (2.0 * p01 + h * p11 + qa * h * h / 3.0)  # P⁻ = F P Fᵀ + Q
-        p01 += h * (p11 + 0.5 * qa * h)
-        p11 += qa * h
-        s = 1.0 / (p00 + r2)
-        k1, k2 = p00 * s, p01 * s  # K = P⁻Hᵀ (H P⁻Hᵀ + σ²)⁻¹
-        m = 1.0 - k1
-        P = (  # Joseph form (I − KH) P⁻ (I − KH)ᵀ + K σ² Kᵀ
-            m * m * p00 + r2 * k1 * k1,
-            m * (p01 - k2 * p00) + r2 * k1 * k2,
-            k2 * k2 * (p00 + r2) - 2.0 * k2 * p01 + p11,
-        )
-        return k1, k2, self.gains.curvature_gain, P
+        k1, k2, p00, p01, p11 = riccati_gains(p00, p01, p11, self.accel_psd, self._sigma2, h)
+        return k1, k2, self.gains.curvature_gain, (p00, p01, p11)
 
     def _jacobi(self, state: _State, q: Vector, v: Vector) -> tuple[Vector, int]:
         """The cached ``R(v̂, ·)v̂``, recomputed every ``curvature_every`` corrections."""

@@ -69,8 +69,8 @@ with gravity (the shoulder's ``m·c``, on a trajectory about one mean
 posture): identified anyway, it made the default ``ekf`` 1.6–3.4× less
 accurate in ``benchmarks/learning.py`` (z1: 0.06 → 0.19× kf*; the
 truths there have no offset).  On real logs (``benchmarks/real_logs.py``, held-out
-20 %, N·m) it helped TIAGo's (``weighting="torque"``: torso, arm_1..4 0.516 0.813 2.85
-1.40 0.844 → 0.506 0.742 2.73 1.35 0.853) and not the TX40's (j1..j4 1.96 5.34 1.03
+20 %, N·m) it helped TIAGo's (``weighting="torque"``: torso, arm_1..4 0.519 0.816 2.89
+1.38 0.844 → 0.503 0.744 2.58 1.33 0.850) and not the TX40's (j1..j4 1.96 5.34 1.03
 0.642 → 2.21 5.58 1.00 0.550), whose held-out end is 79 % at rest and its fitted part
 never; a choice inside the fitted part (its last 20 % held out, ``refine=()``) would have
 taken it for j1..j3 and not j4: on j1, j2 and j4 the held-out end's opposite.  Give ``offset=True`` for a

@@ -74,18 +74,20 @@ channel counts by how well it can be fitted, in its own units, whatever its link
 inertia.  A channel can be left out (``exclude``: a torque that is not measured, under
 either weighting), and one that is zero on most rows is refused unless it is
 (:data:`ZERO_TORQUE_SHARE`).  Measured (``benchmarks/real_logs.py``'s held-out torque
-residual per joint, ``pinobs.identify``): on TIAGo, arm_5..7 left out, the torso's 0.516 N
-against 0.723 with ``M⁻¹`` weighting (nominal 1.276), arm_1..4 0.813 2.847 1.397 0.844 N·m
-against 0.820 3.077 1.404 0.826; on the UR10e, pooled over the moving held-out logs, 3.41
-5.16 1.94 0.562 0.794 0.727 against 3.48 5.27 2.01 0.561 0.794 0.725.  On simulated logs
+residual per joint, ``pinobs.identify``; the run of ``real_logs.json`` dated 2026-12-05): on
+TIAGo, arm_5..7 left out, the torso's 0.519 N against 1.08 with ``M⁻¹`` weighting (nominal
+1.28), arm_1..4 0.816 2.89 1.38 0.844 N·m against 0.841 3.08 1.40 0.839; on the UR10e,
+pooled over the moving held-out logs, 3.41 5.16 1.93 0.562 0.794 0.727 against 3.44 5.14
+1.95 0.561 0.794 0.725.  On simulated logs
 the ``M⁻¹`` weighting is the better one (their residual is mostly the velocity estimate's
 error ``M δv / T``, which ``M⁻¹`` whitens): planar_3r, σ = 1e-5, mass-matrix error 1.0e-2
 against 1.1e-3 with ``refine=()`` and 2.8e-5 against 4.1e-6 refined; on
 ``benchmarks/learning.py``'s offline table the calibrated ``ekf`` 2.2× (UR5, 20 % inertia
 error and payload) and 1.7× (Panda) less accurate, the one-pass Panda 5×.  Hence the
-default, ``weighting="inertia"``: the real-data gain is 2–30 % on the residual, the
-simulated loss 1.1–5× on the observers; on a real robot whose light joints' torques are
-noisy (TIAGo's torso) try ``weighting="torque"``.  ``weighting="inertia"``.  With ``weighting="inertia"`` each window's ``nv`` rows are weighted by
+default, ``weighting="inertia"``: the real-data gain of the other is within 6 % on the
+arms' joints (52 % on TIAGo's torso), the simulated loss 1.1–5× on the observers; on a
+real robot whose light joints' torques are noisy (TIAGo's torso) try
+``weighting="torque"``.  With ``weighting="inertia"`` each window's ``nv`` rows are weighted by
 ``M₀(q_mid)⁻¹ / (t₂ − t₁)`` (an acceleration-like residual, so every joint
 counts alike; ``M₀`` the nominal mass matrix, and when the armature is identified
 its armature raised by the prior's floor, :data:`PRIOR_ARMATURE_FLOOR` of the largest

@@ -405,16 +405,39 @@ def ur10e(quick: bool) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------ TIAGo
-def tiago(quick: bool, velocity: bool = True) -> dict[str, Any]:
-    """TIAGo: held-out torque residuals of the identified models; the observers' velocity
-    RMS unless ``velocity`` is False (``--torque-only``)."""
+def held_out_split(t: np.ndarray, holdout: float = 0.2) -> float:
+    """``pinobs.identify``'s split [s]: ``fit_end = t_end − holdout·(t_end − t_start)``, the
+    rows at or before it fitted, the last ``holdout`` of the span held out (its report's
+    ``fit_end``; :func:`tiago` and :func:`tx40` check that the two agree)."""
+    return float(t.max() - holdout * (t.max() - t.min()))
+
+
+def checked_split(ident, t: np.ndarray) -> float:
+    """``ident``'s ``fit_end``, refused unless it is :func:`held_out_split` of ``t``."""
+    split = float(ident.report["fit_end"])
+    if not math.isclose(split, held_out_split(t), rel_tol=0.0, abs_tol=1e-9):
+        raise RuntimeError(f"identify's fit_end {split} is not held_out_split {held_out_split(t)}")
+    return split
+
+
+def tiago_rows():
+    """The TIAGo log as :func:`tiago` uses it: ``(log, clock, keep, t, q, tau)``, ``keep``
+    the log's rows that are not stale (:func:`pinobs.io.fit_clock`), ``t`` the loop's clock
+    on them, ``q`` and ``tau`` those rows."""
     log = rd.tiago_log()
-    robot = log.robot
     t_raw, q, tau = arrays(log.frame)
     clock = pinobs.io.fit_clock(t_raw, q)
     t = np.asarray(clock.t, float)
     keep = ~np.asarray(clock.stale) & np.isfinite(t)
-    t, q, tau, ref = t[keep], q[keep], tau[keep], log.velocity[keep]
+    return log, clock, keep, t[keep], q[keep], tau[keep]
+
+
+def tiago(quick: bool, velocity: bool = True) -> dict[str, Any]:
+    """TIAGo: held-out torque residuals of the identified models; the observers' velocity
+    RMS unless ``velocity`` is False (``--torque-only``)."""
+    log, clock, keep, t, q, tau = tiago_rows()
+    robot = log.robot
+    ref = log.velocity[keep]
     frame = log.frame[keep].copy()
     frame["t"] = t
     # arm_5..7's efforts are zero on most rows: their channels are left out (identify
@@ -431,7 +454,7 @@ def tiago(quick: bool, velocity: bool = True) -> dict[str, Any]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             idents[label] = pinobs.identify(robot, (t, q, tau), **common, **opts)
-    split = ident.report["fit_end"]
+    split = checked_split(ident, t)
     _, v, a = sg_fit(t, q)
     inner = np.zeros(len(t), bool)
     inner[SG_WINDOW // 2 : len(t) - SG_WINDOW // 2] = True
@@ -521,6 +544,23 @@ def tx40_log(robot: pinobs.Robot):
     return pinobs.io.read_log(frame, robot, drives=tx40_drives())
 
 
+def tx40_urdf() -> Path:
+    """FIGAROH's TX40 URDF in the shared data."""
+    return (
+        rd.data_root() / "figaroh" / "examples" / "staubli_TX40" / "urdf" / "tx40_mdh_modified.urdf"
+    )
+
+
+def tx40_rows():
+    """``(robot, log)``: the TX40 URDF loaded with ``check=False`` (its ``M`` is singular as
+    shipped) and its full-rate log through :func:`tx40_drives`; :func:`tx40` splits it at
+    :func:`held_out_split` of the 1 kHz rows ``pinobs.identify`` fits."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # its meshes are not in the data
+        robot = pinobs.load(str(tx40_urdf()), check=False)
+    return robot, tx40_log(robot)
+
+
 def tx40_identify(robot: pinobs.Robot, t, q, tau) -> tuple[dict[str, Any], dict[str, Any]]:
     """``pinobs.identify(holdout=0.2)`` of each of :data:`TX40_IDENTIFY` on the log decimated
     to 1 kHz: the identifications and what each reported."""
@@ -592,9 +632,7 @@ def tx40(quick: bool, velocity: bool = True) -> dict[str, Any]:
     out), held-out torque residuals (all held-out rows, moving ones, at-rest ones); the
     observers on the log decimated to 1 kHz against the full-rate non-causal
     Savitzky–Golay velocity unless ``velocity`` is False (module docstring)."""
-    urdf = (
-        rd.data_root() / "figaroh" / "examples" / "staubli_TX40" / "urdf" / "tx40_mdh_modified.urdf"
-    )
+    urdf = tx40_urdf()
     out: dict[str, Any] = {}
     try:
         with warnings.catch_warnings():
@@ -603,15 +641,12 @@ def tx40(quick: bool, velocity: bool = True) -> dict[str, Any]:
         out["load"] = "loaded"
     except Exception as e:
         out["load"] = f"{type(e).__name__}: {str(e).splitlines()[0][:300]}"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        robot = pinobs.load(str(urdf), check=False)
-    log = tx40_log(robot)
+    robot, log = tx40_rows()
     t, q, tau = log.t, log.q, log.tau
     out.update(rows_full_rate=len(q), seconds=float(t[-1]), joints=list(robot.joint_names))
     idents, said = tx40_identify(robot, t, q, tau)
     out.update(said)
-    split = idents["pinobs"].report["fit_end"]
+    split = checked_split(idents["pinobs"], t[::TX40_DECIMATE])
     out["fit_end"] = split
     torque: dict[str, Any] = {}
     for window in (TX40_SG_WINDOW, SG_WINDOW):

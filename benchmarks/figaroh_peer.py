@@ -1,5 +1,5 @@
 # /// script
-# requires-python = ">=3.11"
+# requires-python = ">=3.10"
 # dependencies = ["pinobs[io,peers]", "scipy"]
 # ///
 """FIGAROH run side by side (issue 36): its identification on the TIAGo and Stäubli TX40
@@ -15,7 +15,11 @@ their legacy configs turned into FIGAROH 1.0's format by FIGAROH's own
 ``figaroh.utils.config_migration.convert_legacy_to_unified`` (its ``extends:`` template
 and the calibration section dropped: the wheel ships no templates, the examples'
 calibration sections are empty).  Robots: ``pinocchio.RobotWrapper`` on the URDF's
-model (``figaroh.tools.load_robot`` needs the meshes, which the data lack).
+model (``figaroh.tools.load_robot`` needs the meshes, which the data lack).  TIAGo's
+``identification.py`` names ``config/tiago_unified_config.yaml`` and
+``urdf/tiago_48_schunk.urdf``, which the data do not hold: ``config/tiago_config.yaml``
+and ``urdf/tiago.urdf`` are used (the script sets the drive constants, active joints and
+data files itself, as ``identification.py`` does; the filter is the class's default).
 
 **(a) Same rows** (``fed``): the rows, split and Savitzky–Golay derivatives of
 :mod:`real_logs` (:func:`real_logs.tiago_rows`, :func:`real_logs.tx40_rows`,
@@ -57,6 +61,7 @@ import io
 import json
 import logging
 import math
+import os
 import sys
 import tempfile
 import time
@@ -88,7 +93,15 @@ PROTOCOL_MATCH = 0.10
 
 
 def examples() -> Path:
-    return rd.data_root() / "figaroh" / "examples"
+    """FIGAROH's examples in the shared data.
+
+    Raises:
+        FileNotFoundError: no shared data folder.
+    """
+    root = rd.data_root()
+    if root is None:
+        raise FileNotFoundError(f"no shared data folder: set {rd.ENV} or use ../shared/data")
+    return root / "figaroh" / "examples"
 
 
 def figaroh_version() -> str:
@@ -153,6 +166,17 @@ def coulomb_model(kind: str) -> Iterator[None]:
         yield
     finally:
         bi.build_regressor_basic = shipped
+
+
+@contextlib.contextmanager
+def working_directory(folder: Path) -> Iterator[None]:
+    """Run in ``folder`` (the TX40 example reads ``data/*.csv`` relative to it)."""
+    before = Path.cwd()
+    os.chdir(folder)
+    try:
+        yield
+    finally:
+        os.chdir(before)
 
 
 def set_active(iden, joints: list[str]) -> None:
@@ -268,7 +292,7 @@ def tiago_own(config: str, same: dict[str, Any], kind: str) -> dict[str, Any]:
     window ``TIAGO_TRUNCATE`` cut at the split; validated on the whole log."""
     tools = example_module("tiago", "tiago_tools.py")
 
-    class Own(tools.TiagoIdentification):
+    class Own(tools.TiagoIdentification):  # type: ignore[name-defined]
         def load_trajectory_data(self, data_source=None):  # validation: the whole log again
             return super().load_trajectory_data()
 
@@ -335,13 +359,13 @@ def tx40_own(config: str, same: dict[str, Any], kind: str) -> dict[str, Any]:
     scored against the log's torque at ``k`` (and, as FIGAROH pairs them, at ``k + 20``)."""
     tools = example_module("staubli_TX40", "staubli_tx40_tools.py")
 
-    class Own(tools.TX40Identification):
+    class Own(tools.TX40Identification):  # type: ignore[name-defined]
         def load_trajectory_data(self, data_source=None):  # validation: the whole log again
             return super().load_trajectory_data()
 
     model = pin.buildModelFromUrdf(str(rl.tx40_urdf()))
     t0 = time.perf_counter()
-    with coulomb_model(kind), contextlib.chdir(examples() / "staubli_TX40"):
+    with coulomb_model(kind), working_directory(examples() / "staubli_TX40"):
         iden = Own(pin.RobotWrapper(model), config)  # reads data/*.csv from its folder
         iden.identif_config["validation_data_file"] = "the whole log"
         report = quiet_solve(iden, decimate=True, truncate=(0, same["fit_end_row"]))
@@ -413,7 +437,8 @@ def markdown(res: dict[str, Any]) -> str:
         "example as shipped (its filtering, derivatives, window and decimation), fitted before "
         "the split, scored on the same held-out rows. *sign*: FIGAROH's Coulomb column as "
         f"shipped; *tanh*: that column replaced by tanh(v / {res['tanh_velocity']:g}), the "
-        "only change.",
+        "only change. pinobs against these: `benchmarks/real_logs.md` (its TIAGo and TX40 "
+        "tables, issue 36's targets).",
         "",
         "### TIAGo: held-out torque residual RMS [N·m; torso N]",
         "",
@@ -421,7 +446,9 @@ def markdown(res: dict[str, Any]) -> str:
         f"{t['held_rows']} held out. *fed*: pinobs's 8-joint model, torso and arm_1..4's "
         "torques fitted; *own*: FIGAROH's full URDF, all 8 torques fitted as its example "
         f"does, rows {t['own sign']['truncate'][0]}..{t['own sign']['truncate'][1]} "
-        f"(its window {TIAGO_TRUNCATE[0]}..{TIAGO_TRUNCATE[1]} cut at the split).",
+        f"(its window {TIAGO_TRUNCATE[0]}..{TIAGO_TRUNCATE[1]} cut at the split); "
+        "its identification.py's config and URDF are not in the data: tiago_config.yaml and "
+        "tiago.urdf are used.",
         "",
         "| FIGAROH | " + " | ".join(j.replace("_joint", "") for j in t["joints"]) + " |",
         "|---|" + "---|" * len(t["joints"]),

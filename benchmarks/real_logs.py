@@ -37,8 +37,10 @@ of the residual, and so are the first and last half-window of each log.
   (zero on most rows), and with ``weighting="torque"`` (*pinobs N·m*), also with
   ``offset=True`` (*pinobs N·m offset*: a constant torque per joint, FIGAROH's joint
   offset; every identified model's prediction is less its offset,
-  :func:`predict_identified`): the first 80 % fits, the last 20 % is held out.  FIGAROH's
-  numbers are quoted from ``shared/data/README.md``.
+  :func:`predict_identified`): the first 80 % fits, the last 20 % is held out.  FIGAROH:
+  measured by ``figaroh_peer.py`` (FIGAROH 1.0.2 on these rows and derivatives, and by its
+  own protocol; read from ``figaroh_peer.json`` when it is there,
+  :func:`figaroh_measured`), the numbers quoted in ``shared/data/README.md`` beside them.
 
 **Velocity RMS** [rad/s, m/s for the torso] of ``pinobs.estimate`` (default
 ``clock="auto"``, σ from the log) against the robot's own velocity (UR10e ``dq``,
@@ -67,8 +69,8 @@ the coupled wrist's ``T[5, 4]``, ``q = T⁻¹ θ_m`` with offsets −π/2, +π/2
 6); loaded with ``check=False``, ``pinobs.identify(holdout=0.2)`` (armature on: the
 rotors make ``M`` regular) on the log decimated to 1 kHz, by default and with
 ``refine=()``; held-out torque residuals on the full-rate log with Savitzky–Golay
-derivatives over :data:`TX40_SG_WINDOW` and :data:`SG_WINDOW` rows (FIGAROH-tanh
-quoted from the data's README, whose window is not stated), over all the held-out rows
+derivatives over :data:`TX40_SG_WINDOW` and :data:`SG_WINDOW` rows (FIGAROH measured
+by ``figaroh_peer.py`` as for TIAGo, the README's quote beside it), over all the held-out rows
 and apart over its moving ones and those at rest (:data:`TX40_REST_SPEED`), with
 ``offset=True`` too, and for reference a weighted least-squares fit with FIGAROH's
 model's columns, coupled wrist included (:func:`lsq_figaroh_columns`).  Observers (``kf``,
@@ -122,6 +124,18 @@ UR10E_JOIN_GAP = 1.0
 SETTLE = 1.0
 #: FIGAROH on TIAGo arm_1..4 [N·m], 20 % held out (shared/data/README.md).
 FIGAROH_README = {"sign": (1.77, 4.59, 1.96, 1.57), "tanh": (0.87, 2.70, 1.40, 0.86)}
+#: FIGAROH run side by side by ``figaroh_peer.py``: its results, beside this script.
+FIGAROH_PEER = Path(__file__).with_name("figaroh_peer.json")
+#: figaroh_peer.py's runs: label here → its key (*fed*: these rows and derivatives; *own*:
+#: FIGAROH's example's own filtering and derivatives, scored on the same held-out rows).
+FIGAROH_RUNS = {
+    "same rows, sign": "fed sign",
+    "same rows, tanh": "fed tanh",
+    "own protocol, sign": "own sign",
+    "own protocol, tanh": "own tanh",
+}
+#: The measured FIGAROH runs the issue's targets are computed against (tanh Coulomb).
+FIGAROH_TARGET_RUNS = ("same rows, tanh", "own protocol, tanh")
 #: ``--quick``: the moving UR10e logs run (ptp_10_points and the first two unloaded ones).
 QUICK_UR10E_LOGS = 3
 UR10E_MODELS = ("nominal", "pinobs", "pinobs N·m", "pinobs+rotor", "published")
@@ -135,6 +149,35 @@ TIAGO_VARIANTS: dict[str, dict[str, Any]] = {
 
 
 # ------------------------------------------------------------------ helpers
+def figaroh_measured(path: Path = FIGAROH_PEER) -> dict[str, Any] | None:
+    """FIGAROH's held-out RMS per joint measured by ``figaroh_peer.py``, or None when its
+    ``.json`` is not there: ``{"label": "FIGAROH <version> (measured)", "tiago": {run:
+    [torso, arm_1..4]}, "tx40": {window: {run: [j1..j6]}}}``, ``run`` a key of
+    :data:`FIGAROH_RUNS`; the *own protocol* runs have their own derivatives, the same for
+    every window."""
+    if not path.exists():
+        return None
+    r = json.loads(path.read_text())
+    x = r["tx40"]
+    windows = [w for w in x if w.isdigit()]
+    return {
+        "label": f"FIGAROH {r['figaroh']} (measured)",
+        "tiago": {k: r["tiago"][v]["held_out"] for k, v in FIGAROH_RUNS.items()},
+        "tx40": {
+            w: {
+                k: (x[w] if v.startswith("fed") else x)[v]["held_out"]
+                for k, v in FIGAROH_RUNS.items()
+            }
+            for w in windows
+        },
+    }
+
+
+def worst_ratio(values, reference) -> float:
+    """The largest ``values[i] / reference[i]`` over the joints both give."""
+    return max(a / b for a, b in zip(values, reference, strict=False))
+
+
 def sg_fit(t: np.ndarray, q: np.ndarray, window: int = SG_WINDOW, order: int = SG_ORDER):
     """Zero-phase Savitzky–Golay ``(q, v, a)`` on the rows' own times (window shifted inward at
     the ends)."""
@@ -405,16 +448,39 @@ def ur10e(quick: bool) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------ TIAGo
-def tiago(quick: bool, velocity: bool = True) -> dict[str, Any]:
-    """TIAGo: held-out torque residuals of the identified models; the observers' velocity
-    RMS unless ``velocity`` is False (``--torque-only``)."""
+def held_out_split(t: np.ndarray, holdout: float = 0.2) -> float:
+    """``pinobs.identify``'s split [s]: ``fit_end = t_end − holdout·(t_end − t_start)``, the
+    rows at or before it fitted, the last ``holdout`` of the span held out (its report's
+    ``fit_end``; :func:`tiago` and :func:`tx40` check that the two agree)."""
+    return float(t.max() - holdout * (t.max() - t.min()))
+
+
+def checked_split(ident, t: np.ndarray) -> float:
+    """``ident``'s ``fit_end``, refused unless it is :func:`held_out_split` of ``t``."""
+    split = float(ident.report["fit_end"])
+    if not math.isclose(split, held_out_split(t), rel_tol=0.0, abs_tol=1e-9):
+        raise RuntimeError(f"identify's fit_end {split} is not held_out_split {held_out_split(t)}")
+    return split
+
+
+def tiago_rows():
+    """The TIAGo log as :func:`tiago` uses it: ``(log, clock, keep, t, q, tau)``, ``keep``
+    the log's rows that are not stale (:func:`pinobs.io.fit_clock`), ``t`` the loop's clock
+    on them, ``q`` and ``tau`` those rows."""
     log = rd.tiago_log()
-    robot = log.robot
     t_raw, q, tau = arrays(log.frame)
     clock = pinobs.io.fit_clock(t_raw, q)
     t = np.asarray(clock.t, float)
     keep = ~np.asarray(clock.stale) & np.isfinite(t)
-    t, q, tau, ref = t[keep], q[keep], tau[keep], log.velocity[keep]
+    return log, clock, keep, t[keep], q[keep], tau[keep]
+
+
+def tiago(quick: bool, velocity: bool = True) -> dict[str, Any]:
+    """TIAGo: held-out torque residuals of the identified models; the observers' velocity
+    RMS unless ``velocity`` is False (``--torque-only``)."""
+    log, clock, keep, t, q, tau = tiago_rows()
+    robot = log.robot
+    ref = log.velocity[keep]
     frame = log.frame[keep].copy()
     frame["t"] = t
     # arm_5..7's efforts are zero on most rows: their channels are left out (identify
@@ -431,7 +497,7 @@ def tiago(quick: bool, velocity: bool = True) -> dict[str, Any]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             idents[label] = pinobs.identify(robot, (t, q, tau), **common, **opts)
-    split = ident.report["fit_end"]
+    split = checked_split(ident, t)
     _, v, a = sg_fit(t, q)
     inner = np.zeros(len(t), bool)
     inner[SG_WINDOW // 2 : len(t) - SG_WINDOW // 2] = True
@@ -521,6 +587,23 @@ def tx40_log(robot: pinobs.Robot):
     return pinobs.io.read_log(frame, robot, drives=tx40_drives())
 
 
+def tx40_urdf() -> Path:
+    """FIGAROH's TX40 URDF in the shared data."""
+    return (
+        rd.data_root() / "figaroh" / "examples" / "staubli_TX40" / "urdf" / "tx40_mdh_modified.urdf"
+    )
+
+
+def tx40_rows():
+    """``(robot, log)``: the TX40 URDF loaded with ``check=False`` (its ``M`` is singular as
+    shipped) and its full-rate log through :func:`tx40_drives`; :func:`tx40` splits it at
+    :func:`held_out_split` of the 1 kHz rows ``pinobs.identify`` fits."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # its meshes are not in the data
+        robot = pinobs.load(str(tx40_urdf()), check=False)
+    return robot, tx40_log(robot)
+
+
 def tx40_identify(robot: pinobs.Robot, t, q, tau) -> tuple[dict[str, Any], dict[str, Any]]:
     """``pinobs.identify(holdout=0.2)`` of each of :data:`TX40_IDENTIFY` on the log decimated
     to 1 kHz: the identifications and what each reported."""
@@ -592,9 +675,7 @@ def tx40(quick: bool, velocity: bool = True) -> dict[str, Any]:
     out), held-out torque residuals (all held-out rows, moving ones, at-rest ones); the
     observers on the log decimated to 1 kHz against the full-rate non-causal
     Savitzky–Golay velocity unless ``velocity`` is False (module docstring)."""
-    urdf = (
-        rd.data_root() / "figaroh" / "examples" / "staubli_TX40" / "urdf" / "tx40_mdh_modified.urdf"
-    )
+    urdf = tx40_urdf()
     out: dict[str, Any] = {}
     try:
         with warnings.catch_warnings():
@@ -603,15 +684,12 @@ def tx40(quick: bool, velocity: bool = True) -> dict[str, Any]:
         out["load"] = "loaded"
     except Exception as e:
         out["load"] = f"{type(e).__name__}: {str(e).splitlines()[0][:300]}"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        robot = pinobs.load(str(urdf), check=False)
-    log = tx40_log(robot)
+    robot, log = tx40_rows()
     t, q, tau = log.t, log.q, log.tau
     out.update(rows_full_rate=len(q), seconds=float(t[-1]), joints=list(robot.joint_names))
     idents, said = tx40_identify(robot, t, q, tau)
     out.update(said)
-    split = idents["pinobs"].report["fit_end"]
+    split = checked_split(idents["pinobs"], t[::TX40_DECIMATE])
     out["fit_end"] = split
     torque: dict[str, Any] = {}
     for window in (TX40_SG_WINDOW, SG_WINDOW):
@@ -721,8 +799,104 @@ def tx40_rest_split(rows: dict[str, Any], j: list[str]) -> list[str]:
     return L
 
 
+def quote_gap(measured: dict[str, Any], run: str) -> float:
+    """The largest relative difference over j1..j6 between the README's TX40 FIGAROH-tanh
+    quote and the measured ``run`` at :data:`TX40_SG_WINDOW`."""
+    got = np.asarray(measured["tx40"][str(TX40_SG_WINDOW)][run])
+    quote = np.asarray(TX40_FIGAROH_TANH)
+    return float(np.max(np.abs(got - quote) / quote))
+
+
+def tx40_references(measured: dict[str, Any] | None, window: str) -> dict[str, list[float]]:
+    """FIGAROH-tanh per joint for issue 36's TX40 target: the measured tanh runs at
+    ``window`` (when figaroh_peer.json is there), and the README's quote."""
+    refs = {} if measured is None else {k: measured["tx40"][window][k] for k in FIGAROH_TARGET_RUNS}
+    return refs | {"README tanh": list(TX40_FIGAROH_TANH)}
+
+
+def tx40_torque_table(
+    x: dict[str, Any], measured: dict[str, Any] | None, j: list[str]
+) -> list[str]:
+    """The TX40's held-out residuals per window and model, FIGAROH's measured and quoted
+    rows, and issue 36's target (j1–j4 ≤ 0.8 × FIGAROH-tanh) against each FIGAROH-tanh."""
+    window0 = next(iter(x["torque"]))
+    names = list(tx40_references(measured, window0))
+    L = [
+        "| SG window [rows] | model | "
+        + " | ".join(j)
+        + " | "
+        + " | ".join(f"worst j1–j4 / FIGAROH {k}" for k in names)
+        + " |",
+        "|---|---|" + "---|" * (len(j) + len(names)),
+    ]
+    for window, rows in x["torque"].items():
+        refs = tx40_references(measured, window)
+        models = [(k, rows[k]) for k in TX40_MODELS if k in rows]
+        models += [
+            (f"{measured['label']}, {k}", v)
+            for k, v in (measured or {}).get("tx40", {}).get(window, {}).items()
+        ]
+        for k, vals in models:
+            ratios = [worst_ratio(vals[:4], r[:4]) for r in refs.values()]
+            L.append(
+                f"| {window} | {k} | "
+                + " | ".join(_f(v) for v in vals)
+                + " | "
+                + " | ".join(_f(r) for r in ratios)
+                + " |"
+            )
+    L.append(
+        "| — | FIGAROH-tanh (README quote) | "
+        + " | ".join(_f(v) for v in TX40_FIGAROH_TANH)
+        + " | "
+        + " | ".join("—" for _ in names)
+        + " |"
+    )
+    L.append("")
+    L.append(
+        "The last columns: the largest over j1–j4 of the row's held-out residual over "
+        "FIGAROH-tanh's, each FIGAROH-tanh at the row's window (issue 36's target: ≤ 0.8). "
+        "*own protocol* rows: the same FIGAROH run in both windows (its own derivatives). "
+        "*pinobs offset*: "
+        "`offset=True` (a constant torque per joint, FIGAROH's joint offset; the prediction "
+        "is the model's less it). *lsq FIGAROH columns*: not FIGAROH but its TX40 model's "
+        "columns (rigid body, viscous, tanh Coulomb, rotor inertia, offset per joint, and the "
+        "coupled wrist's motor 6: its inertia, viscous and Coulomb friction on j5 and j6), "
+        "fitted by per-channel weighted least squares on the same derivatives and rows, no "
+        "prior, no physical consistency (`lsq_figaroh_columns`); *uncoupled*: without "
+        "motor 6's columns. j5 and j6 share motor 6: its rotor inertia and friction act on "
+        "both joints (`Tᵀ I_m T`, `Tᵀ f_m(T v)`, off the diagonal), which pinobs's per-joint "
+        "armature and friction cannot express. FIGAROH 1.0.2's `initialize` never calls its "
+        "example's coupled-wrist columns (`add_additional_parameters`): its measured runs "
+        "have none."
+    )
+    lsq = next(iter(TX40_LSQ))
+    above = [
+        name
+        for i, name in enumerate(j)
+        if all(lsq in r and r[lsq][i] > TX40_FIGAROH_TANH[i] for r in x["torque"].values())
+    ]
+    if above:
+        L.append("")
+        L.append(
+            "The README's FIGAROH-tanh quote does not state its derivatives' window or rows: "
+            f"on these rows and derivatives, with either window, the least squares with "
+            f"FIGAROH's own columns (*{lsq}*) is above it on {', '.join(above)}"
+            + (
+                f"; the quote differs by up to {quote_gap(measured, 'own protocol, tanh'):.0%} "
+                "per joint from FIGAROH's own protocol measured (its filtering and derivatives), "
+                f"by up to {quote_gap(measured, 'same rows, tanh'):.0%} from FIGAROH on "
+                f"these rows and derivatives ({TX40_SG_WINDOW} rows; figaroh_peer.md)."
+                if measured is not None
+                else ", so its column compares unlike protocols there."
+            )
+        )
+    return L
+
+
 def tx40_markdown(x: dict[str, Any]) -> list[str]:
     """The TX40's block: held-out torque residuals and velocity RMS."""
+    measured = figaroh_measured()
     L = ["", "### TX40: torque residual RMS, last 20 % held out [N·m]", ""]
     ident = x["identify[pinobs]"]
     L.append(
@@ -735,51 +909,20 @@ def tx40_markdown(x: dict[str, Any]) -> list[str]:
         f"{ident['rank']}, condition {ident['condition']:.3g}); identified armature "
         + ", ".join(f"{a:.3g}" for a in ident["armature"])
         + " kg·m². Residuals on the full 5 kHz log, derivatives: Savitzky–Golay order "
-        f"{SG_ORDER} over the window given. FIGAROH-tanh: quoted from shared/data/README.md "
-        "(its window is not stated there), not rerun here."
+        f"{SG_ORDER} over the window given. "
+        + (
+            "FIGAROH-tanh: quoted from shared/data/README.md (figaroh_peer.py has not been "
+            "run: no figaroh_peer.json)."
+            if measured is None
+            else f"{measured['label']}: run by `benchmarks/figaroh_peer.py` on these rows, "
+            "split and derivatives (*same rows*, each window) and by its example's own "
+            "protocol (*own protocol*: its filtering and derivatives, whatever the window), "
+            "Coulomb as shipped (*sign*) and as tanh (*tanh*); the README's quote below them."
+        )
     )
     L.append("")
     j = [n.replace("joint_", "j") for n in x["joints"]]
-    L.append("| SG window [rows] | model | " + " | ".join(j) + " | worst j1–j4 / FIGAROH-tanh |")
-    L.append("|---|---|" + "---|" * (len(j) + 1))
-    for window, rows in x["torque"].items():
-        for k in (k for k in TX40_MODELS if k in rows):
-            ratio = max(a / b for a, b in zip(rows[k][:4], TX40_FIGAROH_TANH[:4], strict=False))
-            L.append(
-                f"| {window} | {k} | " + " | ".join(_f(v) for v in rows[k]) + f" | {_f(ratio, 2)} |"
-            )
-    L.append(
-        "| — | FIGAROH-tanh (README) | " + " | ".join(_f(v) for v in TX40_FIGAROH_TANH) + " | 1 |"
-    )
-    L.append("")
-    L.append(
-        "The last column: the largest over j1–j4 of the model's held-out residual over "
-        "FIGAROH-tanh's (issue 36's target: ≤ 0.8 on each). *pinobs offset*: "
-        "`offset=True` (a constant torque per joint, FIGAROH's joint offset; the prediction "
-        "is the model's less it). *lsq FIGAROH columns*: not FIGAROH but its TX40 model's "
-        "columns (rigid body, viscous, tanh Coulomb, rotor inertia, offset per joint, and the "
-        "coupled wrist's motor 6: its inertia, viscous and Coulomb friction on j5 and j6), "
-        "fitted by per-channel weighted least squares on the same derivatives and rows, no "
-        "prior, no physical consistency (`lsq_figaroh_columns`); *uncoupled*: without "
-        "motor 6's columns. j5 and j6 share motor 6: its rotor inertia and friction act on "
-        "both joints (`Tᵀ I_m T`, `Tᵀ f_m(T v)`, off the diagonal), which pinobs's per-joint "
-        "armature and friction cannot express."
-    )
-    lsq = next(iter(TX40_LSQ))
-    above = [
-        name
-        for i, name in enumerate(j)
-        if all(lsq in r and r[lsq][i] > TX40_FIGAROH_TANH[i] for r in x["torque"].values())
-    ]
-    if above:
-        L.append("")
-        L.append(
-            "FIGAROH-tanh's numbers were measured with a protocol the README does not state "
-            "in full (its derivatives' window, its rows): on these rows and derivatives, with "
-            f"either window, the least squares with FIGAROH's own columns (*{lsq}*) is above "
-            f"them on {', '.join(above)}, so the last column compares unlike protocols there; "
-            "the *lsq* rows are the like-for-like reference."
-        )
+    L += tx40_torque_table(x, measured, j)
     L += tx40_rest_split(x["torque"].get(str(TX40_SG_WINDOW), {}), j)
     if "velocity" not in x:  # (a --torque-only run not merged into a stored one)
         return L
@@ -818,6 +961,53 @@ def tx40_markdown(x: dict[str, Any]) -> list[str]:
         L.append("")
         for k, msg in errs.items():
             L.append(f"- {k} refused: {msg.splitlines()[0][:300]}")
+    return L
+
+
+def tiago_figaroh_said(measured: dict[str, Any] | None) -> str:
+    """The TIAGo block's sentence on where its FIGAROH rows come from."""
+    if measured is None:
+        return (
+            "FIGAROH: quoted from shared/data/README.md (figaroh_peer.py has not been run: "
+            "no figaroh_peer.json)."
+        )
+    return (
+        f"{measured['label']}: run by `benchmarks/figaroh_peer.py` (figaroh_peer.md), on "
+        "these rows, split and derivatives (*same rows*: torso and arm_1..4's torques fitted) "
+        "and by its example's own protocol (*own protocol*: its filtering and derivatives, "
+        "fitted before the split, scored on these held-out rows), with its Coulomb column as "
+        "shipped (*sign*) and as tanh (*tanh*); the README's quote below them."
+    )
+
+
+def tiago_torque_table(t: dict[str, Any], measured: dict[str, Any] | None) -> list[str]:
+    """TIAGo's held-out and fitted residuals per model, FIGAROH's measured and quoted rows,
+    and issue 36's target (arm_1..4 ≤ FIGAROH-tanh) against each measured tanh run."""
+    j = [x.replace("_joint", "") for x in t["joints"]]
+    L = ["| model | part | " + " | ".join(j) + " |", "|---|---|" + "---|" * len(j)]
+    for k, d in t["torque"].items():
+        for part in ("held_out", "fitted"):
+            L.append(f"| {k} | {part} | " + " | ".join(_f(x) for x in d[part]) + " |")
+    for k, vals in (measured or {}).get("tiago", {}).items():
+        cells = [_f(x) for x in vals] + ["—"] * (len(j) - len(vals))
+        L.append(f"| {measured['label']}, {k} | held_out | " + " | ".join(cells) + " |")
+    for k, vals in FIGAROH_README.items():
+        cells = ["—"] + [_f(x) for x in vals] + ["—"] * (len(j) - 5)
+        L.append(f"| FIGAROH ({k} Coulomb, README quote) | held_out | " + " | ".join(cells) + " |")
+    refs = {f"README {k}": list(v) for k, v in FIGAROH_README.items() if k == "tanh"}
+    if measured is not None:
+        refs = {k: measured["tiago"][k][1:5] for k in FIGAROH_TARGET_RUNS} | refs
+    L += [
+        "",
+        "Issue 36's target, arm_1..4 ≤ FIGAROH-tanh: the worst over arm_1..4 of the model's "
+        "held-out residual over FIGAROH-tanh's (met when ≤ 1).",
+        "",
+        "| model | " + " | ".join(f"/ FIGAROH {k}" for k in refs) + " |",
+        "|---|" + "---|" * len(refs),
+    ]
+    for k, d in t["torque"].items():
+        ratios = [worst_ratio(d["held_out"][1:5], r) for r in refs.values()]
+        L.append(f"| {k} | " + " | ".join(_f(x) for x in ratios) + " |")
     return L
 
 
@@ -886,19 +1076,11 @@ def markdown(res: dict[str, Any]) -> str:
             f"{100 * t['held_out_moving_share']:.0f} % of them moving (|v| > 0.01). "
             "arm_5..7's torque channels left out (zero on most rows); *pinobs N·m*: "
             '`weighting="torque"`; *pinobs N·m offset*: also `offset=True` (a constant torque '
-            "per joint; the prediction is the model's less it). FIGAROH: quoted from "
-            "shared/data/README.md, not rerun here."
+            "per joint; the prediction is the model's less it). "
+            + tiago_figaroh_said(figaroh_measured())
         )
         L.append("")
-        j = [x.replace("_joint", "") for x in t["joints"]]
-        L.append("| model | part | " + " | ".join(j) + " |")
-        L.append("|---|---|" + "---|" * len(j))
-        for k, d in t["torque"].items():
-            for part in ("held_out", "fitted"):
-                L.append(f"| {k} | {part} | " + " | ".join(_f(x) for x in d[part]) + " |")
-        for k, vals in FIGAROH_README.items():
-            cells = ["—"] + [_f(x) for x in vals] + ["—"] * (len(j) - 5)
-            L.append(f"| FIGAROH ({k} Coulomb, README) | held_out | " + " | ".join(cells) + " |")
+        L += tiago_torque_table(t, figaroh_measured())
         L.append("")
     L.append("### Velocity RMS against the robot's own velocity [rad/s]")
     L.append("")

@@ -273,6 +273,24 @@ def _go1(path: Path) -> None:
     pd.DataFrame(cols).to_csv(path, index=False)
 
 
+def _serow_go1(path: Path) -> None:
+    """:func:`_go1`'s log under the names of SEROW's Go1 CSV (``Time(s)``, ``BaseWx``,
+    ``JointPosFR_hip``, raw ``FR_Force`` counts: SEROW's scaling inverted)."""
+    pd = pytest.importorskip("pandas")
+    _go1(path)
+    log = pd.read_csv(path)
+    mg = 12 * 9.81  # go1_test.cpp: f = (raw + 6) m g / (m g + 24)
+    names = {"t": "Time(s)"}
+    names |= {f"imu.gyro.{a}": f"BaseW{a}" for a in "xyz"}
+    names |= {f"imu.acc.{a}": f"BaseA{a}" for a in "xyz"}
+    for leg in ("FR", "FL", "RR", "RL"):
+        log[f"force.{leg}_foot"] = log[f"force.{leg}_foot"] * (mg + 24) / mg - 6
+        names[f"force.{leg}_foot"] = f"{leg}_Force"
+        names |= {f"q.{leg}_{p}_joint": f"JointPos{leg}_{p}" for p in ("hip", "thigh", "calf")}
+    assert set(names) == set(log.columns), set(log.columns) ^ set(names)
+    log.rename(columns=names).to_csv(path, index=False)
+
+
 #: Files the blocks read, made in the block's folder when its code names them: the user's
 #: logs, simulated (UR5, 1 kHz, σ = 1e-4 rad, seed 0, 1 s, unless said).
 FIXTURES: dict[str, Callable[[Path], None]] = {
@@ -284,6 +302,7 @@ FIXTURES: dict[str, Callable[[Path], None]] = {
     "motors.csv": _motors,  # the drives' motor positions and currents
     "arm.csv": _arm,  # a Panda with its fingers locked, 0.5 s
     "go1.csv": _go1,
+    "serow_go1.csv": _serow_go1,  # the same, under SEROW's column names
 }
 
 

@@ -19,8 +19,9 @@ angular velocity, the joints').  So the writers, the playback and the CLI
   :class:`~pinobs.observers.contacts.ContactProbability`), row by row.
 * **Slip**: ``foot_gate=p`` gates each foot by its own innovation (the filter's
   ``foot_gate``): a foot that slides while flagged in contact is re-anchored, not measured.
-* **Foot noise** (defaults): the filter's ``joint_std`` measured on the log's joint columns
-  (:func:`~pinobs.observers.noise.joint_noise_std`) and its ``slip_speed`` (the contact
+* **Noise** (defaults): the filter's ``joint_std`` measured on the log's joint columns
+  where they move least (:func:`~pinobs.observers.noise.still_noise_std`), the IMU's white
+  densities measured in that same stillest second (with ``gains=None``), and its ``slip_speed`` (the contact
   noise from each foot's predicted speed), with :data:`LEGGED_GAINS`; ``joint_std=None,
   slip_speed=False`` is the white foot noise of ``gains`` alone.
 * **Consistency**: ``run.consistency`` is the feet's NIS over the stance rows
@@ -38,6 +39,7 @@ angular velocity, the joints').  So the writers, the playback and the CLI
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import replace
 from typing import Any, NamedTuple
@@ -50,6 +52,7 @@ from pinobs.io.readers import Log
 from pinobs.io.runs import estimate_log
 from pinobs.io.stream import LogRun
 from pinobs.model import Robot, load
+from pinobs.model.noise import third_difference_std
 from pinobs.model.robot import Vector
 from pinobs.observers import make_observer
 from pinobs.observers.contacts import (
@@ -60,10 +63,16 @@ from pinobs.observers.contacts import (
 )
 from pinobs.observers.inekf import InEKFGains, InvariantEKF, rotation_to_quaternion
 from pinobs.observers.legs import stance_consistency
-from pinobs.observers.noise import joint_noise_std
+from pinobs.observers.noise import STILL_STD, joint_noise_std, still_noise_std, stillest_rows
 
 #: ``contacts=`` of :func:`estimate_legged`.
 CONTACT_MODES = ("force", "probability")
+
+#: ``joint_std=`` rules of :func:`estimate_legged`: ``"log"`` (default), σ_q from the log's
+#: stillest second (:func:`~pinobs.observers.noise.still_noise_std`); ``"first-second"``,
+#: from its first second (kf's rule; the default before: on the real Go1 log, which settles
+#: in its first second, 0.4-1.9e-4 rad, 2-5× what its still stretches show).
+JOINT_STD_RULES = ("log", "first-second")
 
 #: The IMU frame used when the model has one of this name and none is given.
 IMU_FRAME = "imu_link"
@@ -75,7 +84,10 @@ IMU_FRAME = "imu_link"
 #: 5 µm per sample at 400 Hz).  Chosen on the MuJoCo go1 (stand, sway, trot, 10 s, seed 0;
 #: docs/benchmarks/legged.md): stance rows inside their 95 % χ² interval 86 / 87 / 83 %
 #: (the white 0.1 m/s/√Hz and 1 mm before: 0 %); R_0 of 0, 10 or 30 µm changed that by ≤ 1 %.
-#: The real Go1 log was not used to choose them.
+#: The real Go1 log was not used to choose them.  With ``gains=None`` the runner replaces the
+#: gyro's and accelerometer's densities by those measured on the log's stillest second
+#: (``_imu_gains``): eq. (10) of the filter takes the gyro's noise out of the feet's speeds,
+#: and with these defaults' 1e-2 rad/s/√Hz (5× the MuJoCo go1's) it took out 25× too much.
 LEGGED_GAINS = InEKFGains(contact=1e-4, kinematics=1e-5)
 
 
@@ -135,14 +147,17 @@ def estimate_legged(
         imu_frame: the IMU's frame; default ``imu_link`` if the model has it, else the root.
         contact_on, contact_off: force thresholds [N] (:mod:`pinobs.observers.contacts`).
         gains: the filter's noise levels (:class:`~pinobs.observers.inekf.InEKFGains`;
-            default :data:`LEGGED_GAINS`).
+            default :data:`LEGGED_GAINS` with the gyro's and accelerometer's densities
+            measured on the log's stillest second, where it has one).
         contacts: ``"force"`` or ``"probability"`` (module docstring).
         probability: its parameters (default :meth:`ContactProbability.for_robot`).
         foot_gate: the filter's foot gate (outlier probability; ``None``: off).
         joint_std: the encoders' σ per joint [rad] in the filter's foot noise
-            ``J Σ_q Jᵀ``: ``"log"`` (default) measured on the log's joint columns
-            (:func:`~pinobs.observers.noise.joint_noise_std`, the σ rule of every observer),
-            an array (one per joint), or ``None``: ``gains.joint`` for every joint.
+            ``J Σ_q Jᵀ``: ``"log"`` (default) measured on the log's joint columns where
+            they move least (:func:`~pinobs.observers.noise.still_noise_std`),
+            ``"first-second"`` over its first second
+            (:func:`~pinobs.observers.noise.joint_noise_std`, kf's σ rule), an array (one
+            per joint), or ``None``: ``gains.joint`` for every joint.
         slip_speed: the filter's ``slip_speed`` (each foot's contact noise grows with its
             predicted speed; ``False``: the white ``gains.contact`` alone, as before).
 
@@ -150,7 +165,7 @@ def estimate_legged(
         LogFormatError: no IMU columns, no contact or force columns (no force columns
             with ``contacts="probability"``).
         OptionError: ``contacts`` not one of :data:`CONTACT_MODES`, a ``joint_std`` string
-            other than ``"log"``, or ``"log"`` on a log too short to measure σ_q from.
+            not in :data:`JOINT_STD_RULES`, or one on a log too short to measure σ_q from.
         GainError: a negative ``joint_std``.
         UnsupportedRobotError: a robot without a free-flyer root (the filter's).
         UnknownNameError: a foot or IMU frame not in the model.
@@ -209,10 +224,11 @@ def legged_run(
         imu_frame = IMU_FRAME
     prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
     sigma_q, said_q = _joint_std(robot, log, joint_std)
+    gains, said_g = (gains, []) if gains is not None else _imu_gains(robot, log)
     filt = InvariantEKF(
         robot,
         log.feet,
-        gains=LEGGED_GAINS if gains is None else gains,
+        gains=gains,
         imu_frame=imu_frame,
         foot_gate=foot_gate,
         joint_std=sigma_q,
@@ -230,7 +246,7 @@ def legged_run(
         & np.all(np.isfinite(log.q[:, 7:]), axis=1)
     )
     previous: float | None = None
-    said: list[str] = [*joints.warnings, *said_q]
+    said: list[str] = [*joints.warnings, *said_q, *said_g]
     for k in range(n):
         if not usable[k] or (previous is not None and log.t[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
@@ -348,23 +364,60 @@ def _joints_robot(robot: Robot) -> Robot:
 def _joint_std(
     robot: Robot, log: Log, joint_std: ArrayLike | str | None
 ) -> tuple[ArrayLike | None, list[str]]:
-    """``joint_std`` for the filter and what to say of it: ``"log"`` → σ̂ per joint of the
-    log's joint columns (:func:`~pinobs.observers.noise.joint_noise_std`: third differences
-    over the first second, at least the printed positions' rounding), said as kf's σ is."""
+    """``joint_std`` for the filter and what to say of it: ``"log"`` → σ̂ per joint from the
+    log's stillest second (:func:`~pinobs.observers.noise.still_noise_std`: third
+    differences where the joints move least, at least the readings' rounding δ/√12);
+    ``"first-second"`` → over the first second (:func:`~pinobs.observers.noise.joint_noise_std`,
+    kf's σ rule)."""
     if not isinstance(joint_std, str):
         return joint_std, []
-    if joint_std != "log":
-        raise OptionError(f"joint_std={joint_std!r}: give 'log', σ per joint [rad] or None")
-    found = joint_noise_std(log.t, log.q[:, 7:], _joints_robot(robot))
-    if found is None:
+    if joint_std not in JOINT_STD_RULES:
         raise OptionError(
-            "joint_std='log': the log has too few finite, evenly spaced rows to measure the "
-            "encoders' σ from; give joint_std (σ per joint [rad]) or None (gains.joint)"
+            f"joint_std={joint_std!r}: give {' or '.join(map(repr, JOINT_STD_RULES))}, "
+            "σ per joint [rad] or None"
         )
-    sigma = found[0]
+    fixed = _joints_robot(robot)
+    if joint_std == "log":
+        sigma = still_noise_std(log.t, log.q[:, 7:], fixed)
+        where = "its stillest second"
+    else:
+        found = joint_noise_std(log.t, log.q[:, 7:], fixed)
+        sigma, where = (None if found is None else found[0]), "its first second"
+    if sigma is None:
+        raise OptionError(
+            f"joint_std={joint_std!r}: the log has too few finite, evenly spaced rows to "
+            "measure the encoders' σ from; give joint_std (σ per joint [rad]) or None "
+            "(gains.joint)"
+        )
     return sigma, [
-        f"inekf: the encoders' σ per joint measured on the log (first second): "
+        f"inekf: the encoders' σ per joint measured on the log ({where}): "
         f"{np.min(sigma):.2g}-{np.max(sigma):.2g} rad; pass joint_std to override"
+    ]
+
+
+def _imu_gains(robot: Robot, log: Log) -> tuple[InEKFGains, list[str]]:
+    """:data:`LEGGED_GAINS` with the gyro's and accelerometer's white densities measured on
+    the log's stillest second (:func:`~pinobs.observers.noise.stillest_rows`, the joints'):
+    ``σ_a = √(mean over the axes of σ̂²) · √T``, ``σ̂`` each axis' per-sample σ (robust third
+    differences, :func:`pinobs.model.noise.third_difference_std`), ``T`` the sample period
+    (a reading held over ``T`` has variance ``σ_a²/T``); kept where the log does not tell."""
+    assert log.imu_gyro is not None and log.imu_acc is not None
+    rows = stillest_rows(log.t, log.q[:, 7:], _joints_robot(robot))
+    if rows is None:
+        return LEGGED_GAINS, []
+    t = log.t[rows]
+    period = float(np.median(np.diff(t))) if rows.size > 1 else math.nan
+    found = {}
+    for name, x in (("gyro", log.imu_gyro), ("accel", log.imu_acc)):
+        sigma = third_difference_std(x[rows], t, rows, min_runs=9)
+        if sigma is not None and np.isfinite(period) and np.all(sigma > STILL_STD):
+            found[name] = float(np.sqrt(np.mean(sigma**2) * period))
+    if not found:
+        return LEGGED_GAINS, []
+    return replace(LEGGED_GAINS, **found), [
+        "inekf: the IMU's white noise densities measured on the log (its stillest second): "
+        + ", ".join(f"{k} {v:.2g}" for k, v in found.items())
+        + " (per √Hz); pass gains to override"
     ]
 
 
@@ -391,6 +444,7 @@ def _joint_velocities(robot: Robot, log: Log) -> LogRun:
 __all__ = [
     "CONTACT_MODES",
     "IMU_FRAME",
+    "JOINT_STD_RULES",
     "LEGGED_GAINS",
     "LeggedDetail",
     "estimate_legged",

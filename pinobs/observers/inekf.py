@@ -123,19 +123,12 @@ at the previous update) says by how much that fails, and its displacement over t
     Q_c,dj = (σ_c² + |ṗ̂_j|² h) I                                                        (9)
 
 (at lift-off and touch-down it is large: one white ``σ_c`` cannot fit both).  Standing,
-``ṗ̂_j = v̂ + R̂((ω̃ − b̂_g) × h_j + J_j q̇)`` is mostly the readings' noise, which (9) would
-take for slip: the held gyro reading's white noise (variance ``σ_g²/T`` per axis over a
-sample period ``T``) adds ``2 |h_j|² σ_g²/T`` to ``E|ṗ̂_j|²`` (``tr([h]×[h]×ᵀ) = 2|h|²``;
-go1 at 400 Hz with the MuJoCo gyro: 0.02 m/s, 4× the velocity's error), so (9) takes the speed
-with that taken out (the joint velocities' own noise, not known to the filter, and the
-velocity's error, shared by every foot and large after a reset, are left in)::
+``ṗ̂_j`` is mostly the readings' noise: the held gyro reading's (variance ``σ_g²/T`` per
+axis, period ``T``) adds ``2 |h_j|² σ_g²/T`` to ``E|ṗ̂_j|²`` (go1, 400 Hz, MuJoCo's gyro:
+0.02 m/s, 4× the velocity's error), so (9) takes, leaving in the joint velocities' noise
+(unknown here) and the velocity's error (:func:`~pinobs.observers.legs.slip_speeds`)::
 
     |ṗ_j|² ≈ max(|ṗ̂_j|² − 2 |h_j|² σ_g²/T, 0)                                            (10)
-
-(MuJoCo go1 standing 10 s, seed 0, encoders quantised as the real Go1's, through
-:func:`pinobs.io.legged_run.legged_run`: stance rows inside their 95 % χ² interval 0.5 %
-without (10), 18 % with it, 47 % with it and the IMU densities measured on the log; the
-encoders white 5e-4 rad: 86 % before, 95 % with both; ``benchmarks/legged_truth.md``).
 
 Prior (at ``reset``, before any foot is added).  :class:`InEKFPrior` gives independent
 errors of the attitude ``ξ_R``, of the velocity in the base frame ``v_b`` (as ``reset``
@@ -204,6 +197,7 @@ from pinobs.observers.legs import (
     replace_state,
     rotation_to_quaternion,
     slip_densities,
+    slip_speeds,
 )
 from pinobs.observers.linalg import cholesky_solve
 
@@ -614,17 +608,14 @@ class InvariantEKF:
             self._speed = (
                 None
                 if dq is None
-                else self._slip_speeds(
-                    self.foot_velocities(u.q_joints, dq, u.reading[:3]), h, u.t - state.t
+                else slip_speeds(  # eq. (10)
+                    self.foot_velocities(u.q_joints, dq, u.reading[:3]),
+                    h,
+                    self.gains.gyro,
+                    u.t - state.t,
                 )
             )
         return self.estimate
-
-    def _slip_speeds(self, vel: Vector, h: Vector, period: float) -> Vector:
-        """Eq. (10): each foot's speed for eq. (9) with the gyro's white noise taken out,
-        ``√max(|ṗ̂_j|² − 2 |h_j|² σ_g²/T, 0)`` (module docstring)."""
-        var_w = 2.0 * np.sum(h * h, axis=1) * self.gains.gyro**2 / period  # ω̃'s white noise
-        return np.sqrt(np.maximum(np.sum(vel * vel, axis=1) - var_w, 0.0))
 
     def foot_velocities(self, q: ArrayLike, joint_velocities: ArrayLike, gyro: ArrayLike) -> Vector:
         """Each foot's velocity in the world [m/s], ``(K, 3)`` in the order of ``feet``, from

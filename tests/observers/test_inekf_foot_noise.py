@@ -10,7 +10,7 @@ import pytest
 import pinobs
 from pinobs.errors import DimensionError, GainError, NonFiniteError
 from pinobs.observers.inekf import InEKFGains, InvariantEKF
-from pinobs.observers.legs import foot_noise, noise_densities, slip_densities
+from pinobs.observers.legs import foot_noise, noise_densities, slip_densities, slip_speeds
 from tests.observers.test_inekf import GO1_FEET, Go1Legs, free_flyer_q, pose_errors, truth
 
 #: σ per joint [rad], different on every joint (go1: 12)
@@ -186,3 +186,12 @@ def test_the_gyros_noise_is_not_taken_for_slip(rng) -> None:
             )
         )
     assert relative[1] < 1.6 * relative[0], relative
+
+
+def test_slip_speeds_take_the_held_gyros_noise_out_of_the_squared_speed() -> None:
+    """Eq. (10) in closed form: ``|ṗ|² − 2|h|² σ_g²/T`` (here 0.25 − 2·0.1·1e-4·400 = 0.242),
+    and 0 where the noise exceeds the speed."""
+    h = np.array([[0.3, 0.0, -0.1], [0.2, 0.1, -0.3]])  # |h|² = 0.1, 0.14
+    vel = np.array([[0.3, 0.4, 0.0], [0.01, 0.0, 0.0]])  # |ṗ|² = 0.25, 1e-4
+    got = slip_speeds(vel, h, 1e-2, 1 / 400)
+    np.testing.assert_allclose(got, [np.sqrt(0.25 - 2 * 0.1 * 1e-4 * 400), 0.0], rtol=1e-12)

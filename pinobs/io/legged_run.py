@@ -20,8 +20,7 @@ angular velocity, the joints').  So the writers, the playback and the CLI
 * **Slip**: ``foot_gate=p`` gates each foot by its own innovation (the filter's
   ``foot_gate``): a foot that slides while flagged in contact is re-anchored, not measured.
 * **Noise** (defaults): the filter's ``joint_std`` measured on the log's joint columns
-  where they move least (:func:`~pinobs.observers.noise.still_noise_std`), the IMU's white
-  densities measured in that same stillest second (with ``gains=None``), and its ``slip_speed`` (the contact
+  where they move least (:func:`~pinobs.observers.noise.still_noise_std`) and its ``slip_speed`` (the contact
   noise from each foot's predicted speed), with :data:`LEGGED_GAINS`; ``joint_std=None,
   slip_speed=False`` is the white foot noise of ``gains`` alone.
 * **Consistency**: ``run.consistency`` is the feet's NIS over the stance rows
@@ -84,10 +83,8 @@ IMU_FRAME = "imu_link"
 #: 5 µm per sample at 400 Hz).  Chosen on the MuJoCo go1 (stand, sway, trot, 10 s, seed 0;
 #: docs/benchmarks/legged.md): stance rows inside their 95 % χ² interval 86 / 87 / 83 %
 #: (the white 0.1 m/s/√Hz and 1 mm before: 0 %); R_0 of 0, 10 or 30 µm changed that by ≤ 1 %.
-#: The real Go1 log was not used to choose them.  With ``gains=None`` the runner replaces the
-#: gyro's and accelerometer's densities by those measured on the log's stillest second
-#: (``_imu_gains``): eq. (10) of the filter takes the gyro's noise out of the feet's speeds,
-#: and with these defaults' 1e-2 rad/s/√Hz (5× the MuJoCo go1's) it took out 25× too much.
+#: The real Go1 log was not used to choose them.  ``imu_noise="log"`` replaces the IMU's
+#: densities by those measured on the log (with the filter's eq. 10; off by default).
 LEGGED_GAINS = InEKFGains(contact=1e-4, kinematics=1e-5)
 
 
@@ -138,6 +135,7 @@ def estimate_legged(
     foot_gate: float | None = None,
     joint_std: ArrayLike | str | None = "log",
     slip_speed: bool = True,
+    imu_noise: str | None = None,
 ) -> LogRun:
     """The free-flyer estimate over a legged log (module docstring).
 
@@ -160,6 +158,13 @@ def estimate_legged(
             per joint), or ``None``: ``gains.joint`` for every joint.
         slip_speed: the filter's ``slip_speed`` (each foot's contact noise grows with its
             predicted speed; ``False``: the white ``gains.contact`` alone, as before).
+        imu_noise: ``"log"``: the gyro's and accelerometer's densities measured on the log's
+            stillest second (replacing those of ``gains``), and the gyro's taken out of the
+            feet's speeds (the filter's ``slip_gyro``, eq. 10); ``None`` (default): ``gains``'.
+            Off by default: the real Go1 log's stillest second gives densities (gyro 3.6e-4,
+            accelerometer 1.1e-3 per √Hz) far below what its walking shows, and the filter
+            then trusts its IMU so that SEROW's contact probability loses the feet and the
+            velocity runs away (``benchmarks/legged_truth.md``).
 
     Raises:
         LogFormatError: no IMU columns, no contact or force columns (no force columns
@@ -182,6 +187,7 @@ def estimate_legged(
         foot_gate=foot_gate,
         joint_std=joint_std,
         slip_speed=slip_speed,
+        imu_noise=imu_noise,
     ).run
 
 
@@ -214,21 +220,22 @@ def legged_run(
     foot_gate: float | None = None,
     joint_std: ArrayLike | str | None = "log",
     slip_speed: bool = True,
+    imu_noise: str | None = None,
 ) -> LeggedDetail:
     """:func:`estimate_legged` (same arguments), with the contacts and the NIS per row."""
     if log.imu_gyro is None or log.imu_acc is None:
         raise LogFormatError(
             "inekf needs the trunk IMU: imu.gyro.x|y|z [rad/s] and imu.acc.x|y|z [m/s²] columns"
         )
-    if imu_frame is None and robot.model.existFrame(IMU_FRAME):
-        imu_frame = IMU_FRAME
+    imu_frame = IMU_FRAME if imu_frame is None and robot.model.existFrame(IMU_FRAME) else imu_frame
     prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
     sigma_q, said_q = _joint_std(robot, log, joint_std)
-    gains, said_g = (gains, []) if gains is not None else _imu_gains(robot, log)
+    gains, said_g = _imu_gains(robot, log, gains, imu_noise)
     filt = InvariantEKF(
         robot,
         log.feet,
         gains=gains,
+        slip_gyro=gains.gyro if imu_noise == "log" else 0.0,
         imu_frame=imu_frame,
         foot_gate=foot_gate,
         joint_std=sigma_q,
@@ -395,16 +402,24 @@ def _joint_std(
     ]
 
 
-def _imu_gains(robot: Robot, log: Log) -> tuple[InEKFGains, list[str]]:
-    """:data:`LEGGED_GAINS` with the gyro's and accelerometer's white densities measured on
-    the log's stillest second (:func:`~pinobs.observers.noise.stillest_rows`, the joints'):
+def _imu_gains(
+    robot: Robot, log: Log, gains: InEKFGains | None, imu_noise: str | None
+) -> tuple[InEKFGains, list[str]]:
+    """``gains`` (default :data:`LEGGED_GAINS`), with ``imu_noise="log"`` the gyro's and
+    accelerometer's white densities measured on the log's stillest second
+    (:func:`~pinobs.observers.noise.stillest_rows`, the joints'):
     ``σ_a = √(mean over the axes of σ̂²) · √T``, ``σ̂`` each axis' per-sample σ (robust third
     differences, :func:`pinobs.model.noise.third_difference_std`), ``T`` the sample period
     (a reading held over ``T`` has variance ``σ_a²/T``); kept where the log does not tell."""
     assert log.imu_gyro is not None and log.imu_acc is not None
+    base = LEGGED_GAINS if gains is None else gains
+    if imu_noise is None:
+        return base, []
+    if imu_noise != "log":
+        raise OptionError(f"imu_noise={imu_noise!r}: give 'log' or None")
     rows = stillest_rows(log.t, log.q[:, 7:], _joints_robot(robot))
     if rows is None:
-        return LEGGED_GAINS, []
+        return base, []
     t = log.t[rows]
     period = float(np.median(np.diff(t))) if rows.size > 1 else math.nan
     found = {}
@@ -413,8 +428,8 @@ def _imu_gains(robot: Robot, log: Log) -> tuple[InEKFGains, list[str]]:
         if sigma is not None and np.isfinite(period) and np.all(sigma > STILL_STD):
             found[name] = float(np.sqrt(np.mean(sigma**2) * period))
     if not found:
-        return LEGGED_GAINS, []
-    return replace(LEGGED_GAINS, **found), [
+        return base, []
+    return replace(base, **found), [
         "inekf: the IMU's white noise densities measured on the log (its stillest second): "
         + ", ".join(f"{k} {v:.2g}" for k, v in found.items())
         + " (per √Hz); pass gains to override"

@@ -231,10 +231,10 @@ def test_runner_joint_std_option_is_checked(trot) -> None:
 
 
 def test_the_runner_measures_the_imu_and_encoder_noise_on_the_logs_stillest_second(trot) -> None:
-    """The defaults' noise from the log (the MuJoCo trot, 2 s, seed 3; never still: its
-    stillest second is a trot's): the gyro's and accelerometer's densities, said in the
-    warnings, within 15 % of the simulation's (2e-3 rad/s/√Hz, 2e-2 m/s²/√Hz); given gains
-    are kept; ``"first-second"`` is kf's σ rule."""
+    """``imu_noise="log"`` on the MuJoCo trot (2 s, seed 3; never still: its stillest second
+    is a trot's): the gyro's and accelerometer's densities, said in the warnings, within 15 %
+    of the simulation's (2e-3 rad/s/√Hz, 2e-2 m/s²/√Hz); by default the gains are kept;
+    ``"first-second"`` is kf's σ rule; an unknown ``imu_noise`` is refused."""
     import re
 
     from pinobs.io.legged_run import legged_run
@@ -242,7 +242,7 @@ def test_the_runner_measures_the_imu_and_encoder_noise_on_the_logs_stillest_seco
 
     go1 = pinobs.load("go1")
     log = _read(_frame(trot), go1)
-    said = " ".join(legged_run(go1, log).run.warnings)
+    said = " ".join(legged_run(go1, log, imu_noise="log").run.warnings)
     found = re.search(r"gyro ([0-9.e-]+), accel ([0-9.e-]+) \(per √Hz\)", said)
     assert found is not None, said
     truth = LeggedNoise()
@@ -251,6 +251,8 @@ def test_the_runner_measures_the_imu_and_encoder_noise_on_the_logs_stillest_seco
     kept = legged_run(go1, log, gains=InEKFGains(), joint_std="first-second").run.warnings
     assert not [w for w in kept if "IMU" in w]
     assert [w for w in kept if "first second" in w]
+    with pytest.raises(pinobs.errors.OptionError, match="imu_noise='still'"):
+        legged_run(go1, log, imu_noise="still")
 
 
 def test_cli_inekf_takes_the_contact_probability_and_the_foot_gate(tmp_path, trot, capsys) -> None:

@@ -160,11 +160,12 @@ def test_encoder_sigma_zero_with_no_kinematic_floor_is_refused() -> None:
 
 
 def test_the_gyros_noise_is_not_taken_for_slip(rng) -> None:
-    """Eq. (10): go1 standing still 1 s at 400 Hz, the gyro reading white at the filter's own
-    density (σ_g √400 = 0.2 rad/s per sample: |ω̃ × h_j| ≈ 0.08 m/s at the feet), joint
+    """Eq. (10) (``slip_gyro``): go1 standing still 1 s at 400 Hz, the gyro reading white at
+    the filter's own density (σ_g √400 = 0.2 rad/s per sample: |ω̃ × h_j| ≈ 0.08 m/s at the feet), joint
     velocities 0.  The feet's covariance relative to the base (``P_dd − P_dp − P_pd + P_pp``,
     what the next innovation sees) with ``slip_speed`` over the one without: measured 1.34
-    with (10); 1.87 with eq. (9) on the raw speed (the noise taken for slip)."""
+    with (10); 1.87 with eq. (9) on the raw speed (the noise taken for slip, ``slip_gyro=0``).
+    A negative ``slip_gyro`` is refused."""
     go1 = pinobs.load("go1")
     legs = Go1Legs("imu_link")
     q = legs.stance.copy()
@@ -173,7 +174,8 @@ def test_the_gyros_noise_is_not_taken_for_slip(rng) -> None:
     noise = gains.gyro * np.sqrt(400.0) * rng.standard_normal((401, 3))
     relative = []
     for slip in (False, True):
-        ekf = InvariantEKF(go1, GO1_FEET, imu_frame="imu_link", gains=gains, slip_speed=slip)
+        ekf = InvariantEKF(go1, GO1_FEET, imu_frame="imu_link", gains=gains, slip_speed=slip,
+                           slip_gyro=gains.gyro)  # fmt: skip
         q0 = np.r_[0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0, q]
         ekf.reset(0.0, q0, gyro=noise[0], acc=acc, contacts=[True] * 4)
         for k in range(1, 401):
@@ -186,6 +188,8 @@ def test_the_gyros_noise_is_not_taken_for_slip(rng) -> None:
             )
         )
     assert relative[1] < 1.6 * relative[0], relative
+    with pytest.raises(GainError, match="slip_gyro=-0.001"):
+        InvariantEKF(go1, GO1_FEET, imu_frame="imu_link", slip_speed=True, slip_gyro=-1e-3)
 
 
 def test_slip_speeds_take_the_held_gyros_noise_out_of_the_squared_speed() -> None:

@@ -364,8 +364,8 @@ def slip_speeds(velocities: Vector, h: Vector, gyro: float, period: float) -> Ve
 
     MuJoCo go1 standing 10 s, seed 0, encoders quantised as the real Go1's, through
     :func:`pinobs.io.legged_run.legged_run`: stance rows inside their 95 % χ² interval
-    0.5 % without (10), 18 % with it, 46 % with it and the IMU densities measured on the
-    log; the encoders white 5e-4 rad: 86 % before, 95 % with both
+    0.5 % with the raw speed, 46 % with ``imu_noise="log"`` (the IMU's densities measured
+    on the log and (10)); the encoders white 5e-4 rad: 87 % and 95 %
     (``benchmarks/legged_truth.md``)."""
     noise = 2.0 * np.sum(h * h, axis=1) * gyro**2 / period
     return np.sqrt(np.maximum(np.sum(velocities * velocities, axis=1) - noise, 0.0))

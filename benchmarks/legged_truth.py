@@ -13,7 +13,8 @@ Both filters get the same inputs: the IMU readings (`imu.*`, held between sample
 measured joint angles (`q.*`), contacts = measured foot normal force > `CONTACT_FORCE`;
 the same noise parameters (`GAINS`: the simulation's IMU and encoder noise; the foot slip
 measured on the truth of the trot, seed 0, and the kinematics term chosen on that run, see
-`GAINS`' comment: the stand, sway and TALOS rows are held out), go1's IMU frame `imu_link`;
+`GAINS`' comment: the stand and sway rows are held out; TALOS: `TALOS_GAINS`, its contact
+density measured on its stepping's truth), go1's IMU frame `imu_link`;
 both start on the true base pose and velocity at the first sample, with zero bias
 estimates and a prior of the simulation's bias σ (`truth` start), or from a roll error
 and a lateral velocity error with a prior of twice those: 10° and 0.3 m/s (`perturbed`),
@@ -52,14 +53,16 @@ every axis and consistent (NEES/3 0.5-2); an update ≤ 30 `pin.aba` on go1.
 
 `real`: SEROW's Go1 log (no truth; `benchmarks/real_data.py`) through
 `pinobs.io.legged_run.legged_run` with its defaults (`LEGGED_GAINS`, the encoders' σ from the
-log, `slip_speed`: chosen on MuJoCo, the log held out) and with the white foot noise of
+log's stillest second, `slip_speed`: chosen on MuJoCo, the log held out), with σ_q from the
+first second (the default before), with `imu_noise="log"`, and with the white foot noise of
 before (`GAINS`), contacts from the force threshold or SEROW's probability, with and
 without the foot gate: the feet's NIS over the stance rows
 (`pinobs.observers.legs.stance_consistency`: NIS per degree of freedom, expected 1, and the
 share of stance rows inside their own 95 % χ² interval, expected 95 %), and the base speed
 where every joint moves slower than 0.05 rad/s (the stands); and, with `LOG_GAINS` (the IMU
 and encoder noise measured on the log's stands), the kinematics term varied; then the same
-NIS on the MuJoCo go1 (`simulated_nis`), where the defaults were chosen.
+NIS on the MuJoCo go1 (`simulated_nis`), where the defaults were chosen, its encoders white
+(`NOISE`) or quantised as the real log's (`QUANTISED`).
 
 `slip`: go1 standing in MuJoCo, one foot made to slide while its force keeps it in contact
 (`SlidingLegs`), with and without the foot gate: the base velocity error (`slip_table`).
@@ -108,6 +111,17 @@ GAINS = InEKFGains(
     kinematics=1e-3,
 )
 OLD_GAINS = dataclasses.replace(GAINS, contact=0.1, kinematics=5e-3)
+#: TALOS's: ``GAINS`` with the contact density measured the same way on TALOS's truth (the
+#: stepping, 20 s, seed 0: sqrt(Σ|Δd|² / (3 Σ τ)) = 8.8e-4 m/s/√Hz; standing 1.5e-4, swaying
+#: 2.5e-4): its flat soles do not roll, go1's 2 cm spheres do (0.0069).  With go1's 0.007 the
+#: TALOS rows were conservative (NEES/3 0.31-0.44, σ 1.5-1.8× the errors); on TALOS stand
+#: (10 s, seed 0) the contact term alone made it: contact 1e-6 → NEES/3 0.85 (0.42 with
+#: 0.007), the kinematics term 0 instead → 0.42 (unchanged), the encoders' J Σ_q Jᵀ 0 → 0.42.
+TALOS_GAINS = dataclasses.replace(GAINS, contact=8.8e-4)
+#: go1's encoders quantised as the real Go1 log's are (steps 6e-5 rad hip and thigh, 4e-5 rad
+#: calf; white 3e-5 rad under the rounding, so 44 % of a still joint's readings repeat the
+#: previous one, the log's 35-57 %): the ``real_sim`` rows' second noise.
+QUANTISED = dataclasses.replace(NOISE, encoder=3e-5, encoder_step=(6e-5, 6e-5, 4e-5) * 4)
 #: start → (roll error [deg], lateral velocity error [m/s]); "large" is the perturbation of
 #: the filters' convergence tests (tests/observers/test_inekf.py, test_qekf.py)
 STARTS = {"truth": (0.0, 0.0), "perturbed": (10.0, 0.3), "large": (30.0, 1.0)}
@@ -285,8 +299,9 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
     ]
     if report["humanoid"]:
         md += [
-            "TALOS (`simulate_humanoid`: 32 joints, flat soles, IMU at the base), same gains "
-            "(held out: chosen on go1's trot), drift per second (stand, sway) or per metre "
+            "TALOS (`simulate_humanoid`: 32 joints, flat soles, IMU at the base), `TALOS_GAINS` "
+            "(`GAINS` with the contact density measured on TALOS's stepping truth, 20 s, seed 0: "
+            "stand and sway held out), drift per second (stand, sway) or per metre "
             "walked (step: the base's horizontal path, side-to-side shifts included):",
             "",
             *_table(report["humanoid"]),
@@ -353,6 +368,20 @@ def real_log_nis() -> dict[str, Any]:
     modes = [(c, g) for c in ("force", "probability") for g in (None, FOOT_GATE)]
     white = {"joint_std": None, "slip_speed": False}  # the foot noise before (white)
     rows = [(f"defaults, {c}, gate {g}", None, c, g, {}) for c, g in modes]
+    rows += [  # the default σ_q rule before: the log's first second (it settles then)
+        (
+            f"defaults but σ_q from the first second, {c}",
+            None,
+            c,
+            None,
+            {"joint_std": "first-second"},
+        )
+        for c in ("force", "probability")
+    ]
+    rows += [  # the IMU's densities from the log's stillest second, and eq. (10)
+        (f"defaults + imu_noise='log', {c}", None, c, None, {"imu_noise": "log"})
+        for c in ("force", "probability")
+    ]
     rows += [(f"white, {c}, gate {g}", GAINS, c, g, white) for c, g in modes]
     rows += [
         (
@@ -406,11 +435,15 @@ def simulated_nis(duration: float = 10.0, seed: int = 0) -> dict[str, Any]:
 
     go1 = pinobs.load("go1")
     white = {"joint_std": None, "slip_speed": False}
-    settings = {"defaults": (None, {}), "white, GAINS": (GAINS, white),
+    settings = {"defaults": (None, {}), "defaults + imu_noise='log'": (None, {"imu_noise": "log"}),
+                "white, GAINS": (GAINS, white),
                 "white, InEKFGains()": (InEKFGains(), white)}  # fmt: skip
     out: dict[str, Any] = {}
-    for motion in LEGGED_MOTIONS:
-        run = simulate_legged(motion, duration, seed=seed, noise=NOISE, robot=go1)
+    for motion, noise in [(m, n) for n in ("white", "quantised") for m in LEGGED_MOTIONS]:
+        run = simulate_legged(
+            motion, duration, seed=seed, noise=NOISE if noise == "white" else QUANTISED, robot=go1
+        )
+        label = motion if noise == "white" else f"{motion} (quantised encoders)"
         frame = pd.DataFrame(
             {k: v for k, v in run.columns.items() if not k.startswith(("truth.", "contact."))}
         )
@@ -418,16 +451,31 @@ def simulated_nis(duration: float = 10.0, seed: int = 0) -> dict[str, Any]:
             warnings.simplefilter("ignore")  # the note that the log has no base pose
             log = read_log(frame, go1)
         late = run.t > run.t[0] + 0.5
+        true_std = np.std(run.q_joints() - run.q_joints(truth=True), axis=0)
         for name, (gains, foot) in settings.items():
+            if noise != "white" and name == "white, InEKFGains()":
+                continue
             est = legged_run(go1, log, gains=gains, **foot).run
             c = est.consistency
             err = est.v[late, :3] - run.base_v()[late, :3]
-            out[f"{motion}, {name}"] = {
+            out[f"{label}, {name}"] = {
+                "sigma_q_over_true": _sigma_ratio(go1, log, true_std)
+                if name == "defaults"
+                else None,
                 "nis_per_dof": c.mean_nis,
                 **{k: c.details[k] for k in ("median_per_dof", "inside", "below", "above")},
                 "v_rms": float(np.sqrt(np.mean(err**2))),
             }
     return out
+
+
+def _sigma_ratio(go1: pinobs.Robot, log: Any, true_std: np.ndarray) -> list[float]:
+    """``joint_std="log"``'s σ_q per joint over the readings' true error σ: (min, max)."""
+    from pinobs.observers.noise import still_noise_std
+
+    fixed = pinobs.load(go1.model, lock=[list(go1.model.names)[1]])
+    ratio = still_noise_std(log.t, log.q[:, 7:], fixed) / true_std
+    return [float(ratio.min()), float(ratio.max())]
 
 
 def _sim_nis_lines(sim: dict[str, Any]) -> list[str]:
@@ -436,16 +484,21 @@ def _sim_nis_lines(sim: dict[str, Any]) -> list[str]:
     md = [
         "Where `legged_run`'s defaults were chosen: the MuJoCo go1 (10 s, seed 0) through "
         "`legged_run` (contacts from the forces), the stance rows' NIS and the base velocity "
-        "error after 0.5 s:",
+        "error after 0.5 s; the encoders white (`NOISE`, 5e-4 rad) or quantised as the real "
+        "log's (`QUANTISED`); the last column: the defaults' σ_q per joint over the readings' "
+        "true error σ:",
         "",
-        "| motion, foot noise | NIS/dof mean (median) | inside | below | above | v rms [m/s] |",
-        "|---|---:|---:|---:|---:|---:|",
+        "| motion, foot noise | NIS/dof mean (median) | inside | below | above | v rms [m/s] "
+        "| σ_q / true σ (min-max) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for name, r in sim.items():
+        ratio = r.get("sigma_q_over_true")
         md.append(
             f"| {name} | {r['nis_per_dof']:.3g} ({r['median_per_dof']:.3g}) "
             f"| {100 * r['inside']:.1f} % | {100 * r['below']:.1f} % "
-            f"| {100 * r['above']:.1f} % | {r['v_rms']:.4f} |"
+            f"| {100 * r['above']:.1f} % | {r['v_rms']:.4f} "
+            f"| {'' if ratio is None else f'{ratio[0]:.2f}-{ratio[1]:.2f}'} |"
         )
     return [*md, ""]
 
@@ -542,9 +595,11 @@ def _real_table(real: dict[str, Any]) -> list[str]:
         "(each row against its own 95 % χ² interval, dof = 3 × feet measured; a consistent "
         "filter: NIS/dof 1, 95 % inside) and the base speed on the stands (every joint slower "
         "than 0.05 rad/s) and over the first second. `defaults`: `legged_run`'s (the CLI's: "
-        "`LEGGED_GAINS`, σ_q per joint from the log, `slip_speed`; chosen on MuJoCo, this log "
-        "held out); `white`: the foot noise before (`joint_std=None, slip_speed=False`) with "
-        "`GAINS` or `LOG_GAINS`:",
+        "`LEGGED_GAINS`, σ_q per joint from the log's stillest second, `slip_speed`; chosen on "
+        "MuJoCo, this log held out); `σ_q from the first second`: the default before; "
+        "`imu_noise='log'`: the IMU's densities from the log's stillest second and eq. (10) "
+        "(off by default since this table); `white`: the foot noise before (`joint_std=None, "
+        "slip_speed=False`) with `GAINS` or `LOG_GAINS`:",
         "",
         "| contacts, gate | stance rows | NIS/dof mean (median) | inside | below | above "
         "| gated | in contact | NIS/dof median standing / walking "
@@ -688,7 +743,7 @@ def _humanoid_section(report: dict[str, Any], args: argparse.Namespace) -> None:
         )
         for seed in args.long_seeds if long else args.seeds:
             run = simulate_humanoid(motion, duration, seed=seed, noise=NOISE, robot=talos)
-            _runs(report, "humanoid", label, run, talos, GAINS)
+            _runs(report, "humanoid", label, run, talos, TALOS_GAINS)
 
 
 def _go1_sections(report: dict[str, Any], args: argparse.Namespace) -> None:

@@ -19,8 +19,8 @@ angular velocity, the joints').  So the writers, the playback and the CLI
   :class:`~pinobs.observers.contacts.ContactProbability`), row by row.
 * **Slip**: ``foot_gate=p`` gates each foot by its own innovation (the filter's
   ``foot_gate``): a foot that slides while flagged in contact is re-anchored, not measured.
-* **Foot noise** (defaults): the filter's ``joint_std`` measured on the log's joint columns
-  (:func:`~pinobs.observers.noise.joint_noise_std`) and its ``slip_speed`` (the contact
+* **Noise** (defaults): the filter's ``joint_std`` measured on the log's joint columns
+  where they move least (:func:`~pinobs.observers.noise.still_noise_std`) and its ``slip_speed`` (the contact
   noise from each foot's predicted speed), with :data:`LEGGED_GAINS`; ``joint_std=None,
   slip_speed=False`` is the white foot noise of ``gains`` alone.
 * **Consistency**: ``run.consistency`` is the feet's NIS over the stance rows
@@ -38,6 +38,7 @@ angular velocity, the joints').  So the writers, the playback and the CLI
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import replace
 from typing import Any, NamedTuple
@@ -50,6 +51,7 @@ from pinobs.io.readers import Log
 from pinobs.io.runs import estimate_log
 from pinobs.io.stream import LogRun
 from pinobs.model import Robot, load
+from pinobs.model.noise import third_difference_std
 from pinobs.model.robot import Vector
 from pinobs.observers import make_observer
 from pinobs.observers.contacts import (
@@ -60,10 +62,16 @@ from pinobs.observers.contacts import (
 )
 from pinobs.observers.inekf import InEKFGains, InvariantEKF, rotation_to_quaternion
 from pinobs.observers.legs import stance_consistency
-from pinobs.observers.noise import joint_noise_std
+from pinobs.observers.noise import STILL_STD, joint_noise_std, still_noise_std, stillest_rows
 
 #: ``contacts=`` of :func:`estimate_legged`.
 CONTACT_MODES = ("force", "probability")
+
+#: ``joint_std=`` rules of :func:`estimate_legged`: ``"log"`` (default), σ_q from the log's
+#: stillest second (:func:`~pinobs.observers.noise.still_noise_std`); ``"first-second"``,
+#: from its first second (kf's rule; the default before: on the real Go1 log, which settles
+#: in its first second, 0.4-1.9e-4 rad, 2-5× what its still stretches show).
+JOINT_STD_RULES = ("log", "first-second")
 
 #: The IMU frame used when the model has one of this name and none is given.
 IMU_FRAME = "imu_link"
@@ -75,7 +83,8 @@ IMU_FRAME = "imu_link"
 #: 5 µm per sample at 400 Hz).  Chosen on the MuJoCo go1 (stand, sway, trot, 10 s, seed 0;
 #: docs/benchmarks/legged.md): stance rows inside their 95 % χ² interval 86 / 87 / 83 %
 #: (the white 0.1 m/s/√Hz and 1 mm before: 0 %); R_0 of 0, 10 or 30 µm changed that by ≤ 1 %.
-#: The real Go1 log was not used to choose them.
+#: The real Go1 log was not used to choose them.  ``imu_noise="log"`` replaces the IMU's
+#: densities by those measured on the log (with the filter's eq. 10; off by default).
 LEGGED_GAINS = InEKFGains(contact=1e-4, kinematics=1e-5)
 
 
@@ -126,6 +135,7 @@ def estimate_legged(
     foot_gate: float | None = None,
     joint_std: ArrayLike | str | None = "log",
     slip_speed: bool = True,
+    imu_noise: str | None = None,
 ) -> LogRun:
     """The free-flyer estimate over a legged log (module docstring).
 
@@ -135,22 +145,32 @@ def estimate_legged(
         imu_frame: the IMU's frame; default ``imu_link`` if the model has it, else the root.
         contact_on, contact_off: force thresholds [N] (:mod:`pinobs.observers.contacts`).
         gains: the filter's noise levels (:class:`~pinobs.observers.inekf.InEKFGains`;
-            default :data:`LEGGED_GAINS`).
+            default :data:`LEGGED_GAINS` with the gyro's and accelerometer's densities
+            measured on the log's stillest second, where it has one).
         contacts: ``"force"`` or ``"probability"`` (module docstring).
         probability: its parameters (default :meth:`ContactProbability.for_robot`).
         foot_gate: the filter's foot gate (outlier probability; ``None``: off).
         joint_std: the encoders' σ per joint [rad] in the filter's foot noise
-            ``J Σ_q Jᵀ``: ``"log"`` (default) measured on the log's joint columns
-            (:func:`~pinobs.observers.noise.joint_noise_std`, the σ rule of every observer),
-            an array (one per joint), or ``None``: ``gains.joint`` for every joint.
+            ``J Σ_q Jᵀ``: ``"log"`` (default) measured on the log's joint columns where
+            they move least (:func:`~pinobs.observers.noise.still_noise_std`),
+            ``"first-second"`` over its first second
+            (:func:`~pinobs.observers.noise.joint_noise_std`, kf's σ rule), an array (one
+            per joint), or ``None``: ``gains.joint`` for every joint.
         slip_speed: the filter's ``slip_speed`` (each foot's contact noise grows with its
             predicted speed; ``False``: the white ``gains.contact`` alone, as before).
+        imu_noise: ``"log"``: the gyro's and accelerometer's densities measured on the log's
+            stillest second (replacing those of ``gains``), and the gyro's taken out of the
+            feet's speeds (the filter's ``slip_gyro``, eq. 10); ``None`` (default): ``gains``'.
+            Off by default: the real Go1 log's stillest second gives densities (gyro 3.6e-4,
+            accelerometer 1.1e-3 per √Hz) far below what its walking shows, and the filter
+            then trusts its IMU so that SEROW's contact probability loses the feet and the
+            velocity runs away (``benchmarks/legged_truth.md``).
 
     Raises:
         LogFormatError: no IMU columns, no contact or force columns (no force columns
             with ``contacts="probability"``).
         OptionError: ``contacts`` not one of :data:`CONTACT_MODES`, a ``joint_std`` string
-            other than ``"log"``, or ``"log"`` on a log too short to measure σ_q from.
+            not in :data:`JOINT_STD_RULES`, or one on a log too short to measure σ_q from.
         GainError: a negative ``joint_std``.
         UnsupportedRobotError: a robot without a free-flyer root (the filter's).
         UnknownNameError: a foot or IMU frame not in the model.
@@ -167,6 +187,7 @@ def estimate_legged(
         foot_gate=foot_gate,
         joint_std=joint_std,
         slip_speed=slip_speed,
+        imu_noise=imu_noise,
     ).run
 
 
@@ -199,20 +220,22 @@ def legged_run(
     foot_gate: float | None = None,
     joint_std: ArrayLike | str | None = "log",
     slip_speed: bool = True,
+    imu_noise: str | None = None,
 ) -> LeggedDetail:
     """:func:`estimate_legged` (same arguments), with the contacts and the NIS per row."""
     if log.imu_gyro is None or log.imu_acc is None:
         raise LogFormatError(
             "inekf needs the trunk IMU: imu.gyro.x|y|z [rad/s] and imu.acc.x|y|z [m/s²] columns"
         )
-    if imu_frame is None and robot.model.existFrame(IMU_FRAME):
-        imu_frame = IMU_FRAME
+    imu_frame = IMU_FRAME if imu_frame is None and robot.model.existFrame(IMU_FRAME) else imu_frame
     prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
     sigma_q, said_q = _joint_std(robot, log, joint_std)
+    gains, said_g = _imu_gains(robot, log, gains, imu_noise)
     filt = InvariantEKF(
         robot,
         log.feet,
-        gains=LEGGED_GAINS if gains is None else gains,
+        gains=gains,
+        slip_gyro=gains.gyro if imu_noise == "log" else 0.0,
         imu_frame=imu_frame,
         foot_gate=foot_gate,
         joint_std=sigma_q,
@@ -230,7 +253,7 @@ def legged_run(
         & np.all(np.isfinite(log.q[:, 7:]), axis=1)
     )
     previous: float | None = None
-    said: list[str] = [*joints.warnings, *said_q]
+    said: list[str] = [*joints.warnings, *said_q, *said_g]
     for k in range(n):
         if not usable[k] or (previous is not None and log.t[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
@@ -348,23 +371,68 @@ def _joints_robot(robot: Robot) -> Robot:
 def _joint_std(
     robot: Robot, log: Log, joint_std: ArrayLike | str | None
 ) -> tuple[ArrayLike | None, list[str]]:
-    """``joint_std`` for the filter and what to say of it: ``"log"`` → σ̂ per joint of the
-    log's joint columns (:func:`~pinobs.observers.noise.joint_noise_std`: third differences
-    over the first second, at least the printed positions' rounding), said as kf's σ is."""
+    """``joint_std`` for the filter and what to say of it: ``"log"`` → σ̂ per joint from the
+    log's stillest second (:func:`~pinobs.observers.noise.still_noise_std`: third
+    differences where the joints move least, at least the readings' rounding δ/√12);
+    ``"first-second"`` → over the first second (:func:`~pinobs.observers.noise.joint_noise_std`,
+    kf's σ rule)."""
     if not isinstance(joint_std, str):
         return joint_std, []
-    if joint_std != "log":
-        raise OptionError(f"joint_std={joint_std!r}: give 'log', σ per joint [rad] or None")
-    found = joint_noise_std(log.t, log.q[:, 7:], _joints_robot(robot))
-    if found is None:
+    if joint_std not in JOINT_STD_RULES:
         raise OptionError(
-            "joint_std='log': the log has too few finite, evenly spaced rows to measure the "
-            "encoders' σ from; give joint_std (σ per joint [rad]) or None (gains.joint)"
+            f"joint_std={joint_std!r}: give {' or '.join(map(repr, JOINT_STD_RULES))}, "
+            "σ per joint [rad] or None"
         )
-    sigma = found[0]
+    fixed = _joints_robot(robot)
+    if joint_std == "log":
+        sigma = still_noise_std(log.t, log.q[:, 7:], fixed)
+        where = "its stillest second"
+    else:
+        found = joint_noise_std(log.t, log.q[:, 7:], fixed)
+        sigma, where = (None if found is None else found[0]), "its first second"
+    if sigma is None:
+        raise OptionError(
+            f"joint_std={joint_std!r}: the log has too few finite, evenly spaced rows to "
+            "measure the encoders' σ from; give joint_std (σ per joint [rad]) or None "
+            "(gains.joint)"
+        )
     return sigma, [
-        f"inekf: the encoders' σ per joint measured on the log (first second): "
+        f"inekf: the encoders' σ per joint measured on the log ({where}): "
         f"{np.min(sigma):.2g}-{np.max(sigma):.2g} rad; pass joint_std to override"
+    ]
+
+
+def _imu_gains(
+    robot: Robot, log: Log, gains: InEKFGains | None, imu_noise: str | None
+) -> tuple[InEKFGains, list[str]]:
+    """``gains`` (default :data:`LEGGED_GAINS`), with ``imu_noise="log"`` the gyro's and
+    accelerometer's white densities measured on the log's stillest second
+    (:func:`~pinobs.observers.noise.stillest_rows`, the joints'):
+    ``σ_a = √(mean over the axes of σ̂²) · √T``, ``σ̂`` each axis' per-sample σ (robust third
+    differences, :func:`pinobs.model.noise.third_difference_std`), ``T`` the sample period
+    (a reading held over ``T`` has variance ``σ_a²/T``); kept where the log does not tell."""
+    assert log.imu_gyro is not None and log.imu_acc is not None
+    base = LEGGED_GAINS if gains is None else gains
+    if imu_noise is None:
+        return base, []
+    if imu_noise != "log":
+        raise OptionError(f"imu_noise={imu_noise!r}: give 'log' or None")
+    rows = stillest_rows(log.t, log.q[:, 7:], _joints_robot(robot))
+    if rows is None:
+        return base, []
+    t = log.t[rows]
+    period = float(np.median(np.diff(t))) if rows.size > 1 else math.nan
+    found = {}
+    for name, x in (("gyro", log.imu_gyro), ("accel", log.imu_acc)):
+        sigma = third_difference_std(x[rows], t, rows, min_runs=9)
+        if sigma is not None and np.isfinite(period) and np.all(sigma > STILL_STD):
+            found[name] = float(np.sqrt(np.mean(sigma**2) * period))
+    if not found:
+        return base, []
+    return replace(base, **found), [
+        "inekf: the IMU's white noise densities measured on the log (its stillest second): "
+        + ", ".join(f"{k} {v:.2g}" for k, v in found.items())
+        + " (per √Hz); pass gains to override"
     ]
 
 
@@ -391,6 +459,7 @@ def _joint_velocities(robot: Robot, log: Log) -> LogRun:
 __all__ = [
     "CONTACT_MODES",
     "IMU_FRAME",
+    "JOINT_STD_RULES",
     "LEGGED_GAINS",
     "LeggedDetail",
     "estimate_legged",

@@ -122,8 +122,12 @@ at the previous update) says by how much that fails, and its displacement over t
 
     Q_c,dj = (σ_c² + |ṗ̂_j|² h) I                                                        (9)
 
-(standing, ``ṗ̂_j`` is the joint velocities' noise; at lift-off and touch-down it is large:
-one white ``σ_c`` cannot fit both).
+(at lift-off and touch-down it is large: one white ``σ_c`` cannot fit both).  Standing,
+``ṗ̂_j`` is mostly the readings' noise: the held gyro reading's (variance ``σ_g²/T`` per
+axis, period ``T``) adds ``2 |h_j|² σ_g²/T`` to ``E|ṗ̂_j|²`` (go1, 400 Hz: 0.02 m/s), so with
+``slip_gyro = σ_g`` (9) takes (:func:`~pinobs.observers.legs.slip_speeds`)::
+
+    |ṗ_j|² ≈ max(|ṗ̂_j|² − 2 |h_j|² σ_g²/T, 0)                                            (10)
 
 Prior (at ``reset``, before any foot is added).  :class:`InEKFPrior` gives independent
 errors of the attitude ``ξ_R``, of the velocity in the base frame ``v_b`` (as ``reset``
@@ -166,6 +170,7 @@ from numpy.typing import ArrayLike
 from pinobs.errors import GainError
 from pinobs.model import Robot
 from pinobs.observers.base import Vector
+from pinobs.observers.checks import positive
 from pinobs.observers.gating import GateState, gate_threshold
 from pinobs.observers.inekf_loops import (
     correct_kernel,
@@ -192,6 +197,7 @@ from pinobs.observers.legs import (
     replace_state,
     rotation_to_quaternion,
     slip_densities,
+    slip_speeds,
 )
 from pinobs.observers.linalg import cholesky_solve
 
@@ -433,6 +439,8 @@ class InvariantEKF:
             instead of ``gains.joint`` for every joint.
         slip_speed: eq. (9), each foot's contact noise from its speed predicted at the
             previous update (updates without ``joint_velocities``: ``gains.contact`` alone).
+        slip_gyro: eq. (10), the gyro's white noise density [rad/s/√Hz] taken out of those
+            speeds (the gyro's own, measured; 0, default: none taken out).
 
     Raises:
         GainError: an ``imu_hold`` that is neither; a ``foot_gate`` not in (0, 0.5); a
@@ -454,6 +462,7 @@ class InvariantEKF:
         foot_gate: float | None = None,
         joint_std: ArrayLike | None = None,
         slip_speed: bool = False,
+        slip_gyro: float = 0.0,
     ) -> None:
         #: the legs, options and conversions shared with the quaternion EKF
         self.setup = LeggedSetup(
@@ -466,12 +475,8 @@ class InvariantEKF:
             imu_frame=imu_frame,
         )
         s = self.setup
-        self.imu_hold, self.kinematics, self.gains, self.gravity = (
-            s.imu_hold,
-            s.kinematics,
-            s.gains,
-            s.gravity,
-        )
+        self.imu_hold, self.kinematics = s.imu_hold, s.kinematics
+        self.gains, self.gravity = s.gains, s.gravity
         self.feet, self.imu_placement = s.feet, s.imu_placement
         self._gravity = np.array(self.gravity, dtype=float)  # writable: the kernel's signature
         #: the foot gate's outlier probability (``None``: off) and its χ²₃ threshold
@@ -489,6 +494,7 @@ class InvariantEKF:
             )
         #: eq. (9): each foot's contact density grows with its predicted speed
         self.slip_speed = bool(slip_speed)
+        self.slip_gyro = positive("slip_gyro", slip_gyro, allow_zero=True) or 0.0
         self._speed: Vector | None = None  # |ṗ_j| of every foot at the last sample [m/s]
         load_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
         self._state: InEKFState | None = None
@@ -602,7 +608,12 @@ class InvariantEKF:
             self._speed = (
                 None
                 if dq is None
-                else np.linalg.norm(self.foot_velocities(u.q_joints, dq, u.reading[:3]), axis=1)
+                else slip_speeds(  # eq. (10)
+                    self.foot_velocities(u.q_joints, dq, u.reading[:3]),
+                    h,
+                    self.slip_gyro,
+                    u.t - state.t,
+                )
             )
         return self.estimate
 

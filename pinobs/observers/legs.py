@@ -70,6 +70,7 @@ __all__ = [
     "replace_state",
     "rotation_to_quaternion",
     "slip_densities",
+    "slip_speeds",
     "stance_consistency",
 ]
 
@@ -352,6 +353,22 @@ def slip_densities(qc: Vector, speed: Vector, h: float) -> Vector:
     out[9 : 9 + 3 * speed.size] += np.repeat(np.asarray(speed, dtype=float) ** 2 * h, 3)
     out.setflags(write=False)
     return out
+
+
+def slip_speeds(velocities: Vector, h: Vector, gyro: float, period: float) -> Vector:
+    """Eq. (10) of :mod:`pinobs.observers.inekf`: each foot's speed [m/s] for eq. (9) with the
+    gyro's white noise taken out, ``√max(|ṗ̂_j|² − 2 |h_j|² σ_g²/T, 0)``: ``velocities``
+    ``ṗ̂_j`` (K, 3) [m/s], ``h`` the feet's positions from the IMU (K, 3) [m], ``gyro``
+    ``σ_g`` [rad/s/√Hz], ``period`` ``T`` the reading's sample period [s] (the held
+    reading's noise variance per axis: ``σ_g²/T``; ``tr([h]×[h]×ᵀ) = 2|h|²``).
+
+    MuJoCo go1 standing 10 s, seed 0, encoders quantised as the real Go1's, through
+    :func:`pinobs.io.legged_run.legged_run`: stance rows inside their 95 % χ² interval
+    0.5 % with the raw speed, 46 % with ``imu_noise="log"`` (the IMU's densities measured
+    on the log and (10)); the encoders white 5e-4 rad: 87 % and 95 %
+    (``benchmarks/legged_truth.md``)."""
+    noise = 2.0 * np.sum(h * h, axis=1) * gyro**2 / period
+    return np.sqrt(np.maximum(np.sum(velocities * velocities, axis=1) - noise, 0.0))
 
 
 def check_joint_std(joint_std: ArrayLike, n: int) -> Vector:

@@ -27,6 +27,8 @@ __all__ = [
     "moving_median",
     "noise_from_log",
     "quantisation_std",
+    "still_noise_std",
+    "stillest_rows",
 ]
 
 #: Fewest usable rows for an estimate.
@@ -74,6 +76,74 @@ def estimate_noise_std(
         ref = robot.normalize(q[idx[0]])
         x = np.array([robot.difference(ref, robot.normalize(q[i])) for i in idx])
     return third_difference_std(x, np.asarray(t, dtype=float)[idx], idx, min_runs=_MIN_ROWS - 3)
+
+
+def still_noise_std(
+    t: Vector, q: Vector, robot: Robot, *, window: float = NOISE_WINDOW
+) -> Vector | None:
+    """σ per velocity coordinate [rad or m] from the log's stillest ``window`` seconds, each at
+    least the rounding of its printed positions::
+
+        w* = argmin_w max_j (max_{k∈w} x_kj − min_{k∈w} x_kj)        (the stillest window)
+        σ_j = max(√(mean_{k∈w*} d_kj² / 20),  δ_j/√12)
+
+    ``x`` the positions in tangent coordinates, ``w`` the windows of ``window`` s of finite
+    rows (starting every ``window/2`` s; the whole log when shorter), ``d`` the third
+    differences over four consecutive, evenly spaced rows (Gasser, Sroka & Jennen-Steinmetz
+    1986: variance ``20 σ²`` for white noise; the mean form,
+    :func:`pinobs.model.noise.third_difference_std` with ``robust=False``, since a quantised
+    reading's ``d`` take a few multiples of its step) and ``δ_j/√12``
+    :func:`quantisation_std` (Widrow & Kollár 2008, §4.1; a joint whose reading repeats
+    while still shows no third differences there).
+
+    Why the stillest window and not the first second (:func:`estimate_noise_std`): a robot
+    moving at the start (the real Go1 log settles on its legs in its first second) adds its
+    motion's third differences ``h³ x⃛`` to the noise's; a window is chosen by how far its
+    joints move, which the noise hardly changes, so σ is not measured where it happened to
+    be low.  On a robot that never stands still the stillest window still holds motion, and
+    σ comes out high (the first second's rule has the same bias).
+
+    Returns ``None`` with fewer than 12 finite rows or 9 usable third differences in the
+    window.
+    """
+    rows = stillest_rows(t, q, robot, window=window)
+    if rows is None:
+        return None
+    x = _tangent(np.asarray(q, dtype=float), rows, robot)
+    tt = np.asarray(t, dtype=float)[rows]
+    sigma = third_difference_std(x, tt, rows, min_runs=_MIN_ROWS - 3, robust=False)
+    return None if sigma is None else np.maximum(sigma, quantisation_std(q, robot))
+
+
+def stillest_rows(
+    t: Vector, q: Vector, robot: Robot, *, window: float = NOISE_WINDOW
+) -> NDArray[np.intp] | None:
+    """The finite rows of the log's stillest ``window`` seconds (:func:`still_noise_std`:
+    the window whose joints' largest range is smallest), or ``None`` with fewer than 12."""
+    q = np.asarray(q, dtype=float)
+    t = np.asarray(t, dtype=float)
+    idx = np.flatnonzero(np.isfinite(t) & np.isfinite(q).all(axis=1))
+    if idx.size < _MIN_ROWS:
+        return None
+    x, tt = _tangent(q, idx, robot), t[idx]
+    starts = np.arange(tt[0], max(tt[-1] - window, tt[0]) + 0.5 * window, 0.5 * window)
+    best, motion = None, np.inf
+    for s in starts:
+        inside = (tt >= s) & (tt < s + window)
+        if np.count_nonzero(inside) < _MIN_ROWS:
+            continue
+        moved = float(np.max(np.ptp(x[inside], axis=0)))
+        if moved < motion:
+            best, motion = idx[inside], moved
+    return best
+
+
+def _tangent(q: np.ndarray, rows: NDArray[np.intp], robot: Robot) -> np.ndarray:
+    """The rows' positions in tangent coordinates (``difference`` from the first)."""
+    if robot.is_vector_space:
+        return q[rows]
+    ref = robot.normalize(q[rows[0]])
+    return np.array([robot.difference(ref, robot.normalize(q[i])) for i in rows])
 
 
 def quantisation_std(q: Vector, robot: Robot) -> Vector:

@@ -30,7 +30,7 @@ between samples; MuJoCo's semi-implicit Euler)::
 
     imu.gyro  = mean over the sample's steps of MuJoCo's gyro  + b_g + n_g     [rad/s]
     imu.acc   = mean over the sample's steps of MuJoCo's accelerometer + b_a + n_a   [m/s²]
-    q.<joint> = q + n_q                                                        [rad]
+    q.<joint> = Δ_j round((q + n_q) / Δ_j)   (Δ_j = 0: q + n_q)                 [rad]
     force.<foot> = Σ normal contact forces on that foot's sphere + n_f         [N]
 
 MuJoCo's accelerometer reads the specific force ``Rᵀ(p̈ − g)`` of the site
@@ -97,6 +97,14 @@ class LeggedNoise:
         acc_walk: accelerometer bias random walk [m/s³/√Hz].
         encoder: joint encoder noise per sample [rad].
         force: foot force noise per sample [N].
+        encoder_step: the encoders' resolution Δ [rad]: one for every joint, or one per
+            joint (in the model's order); 0: not quantised.  The noisy angle is rounded to
+            it (``Δ round((q + n_q)/Δ)``), so a still joint repeats its reading when
+            ``encoder ≲ Δ/2`` and dithers between neighbouring steps above that, as the
+            real Go1 log's do (steps of 6e-5 rad, hip and thigh, and 4e-5 rad, calf;
+            35-57 % of the still rows repeat the previous reading).  The reading's error
+            has variance ``≈ encoder² + Δ²/12`` (Widrow & Kollár 2008, *Quantization
+            Noise*, §4.1; exact for ``encoder ≳ Δ``).
     """
 
     gyro: float = 2e-3
@@ -107,9 +115,16 @@ class LeggedNoise:
     acc_walk: float = 1e-3
     encoder: float = 5e-4
     force: float = 2.0
+    encoder_step: float | tuple[float, ...] = 0.0
 
     def __post_init__(self) -> None:
+        steps = self.encoder_step
+        for value in steps if isinstance(steps, tuple) else (steps,):
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise GainError(f"LeggedNoise.encoder_step: finite numbers ≥ 0, got {steps!r}")
         for f in fields(self):
+            if f.name == "encoder_step":
+                continue
             value = getattr(self, f.name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise GainError(f"LeggedNoise.{f.name} must be a finite number ≥ 0, got {value!r}")
@@ -495,6 +510,12 @@ def record_run(
     mj, feet, name = machine.mj, machine.feet, machine.name
     data = mujoco.MjData(mj)
     wiring = _Wiring.of(mj, machine.robot, feet)
+    steps = noise.encoder_step
+    if isinstance(steps, tuple) and len(steps) != wiring.qadr.size:
+        raise ConfigurationError(
+            f"LeggedNoise.encoder_step has {len(steps)} entries; {name} has "
+            f"{wiring.qadr.size} joints (give one step, or one per joint)"
+        )
     data.qpos[:3] = (0.0, 0.0, machine.height)
     data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
     data.qpos[wiring.qadr] = machine.stance
@@ -573,6 +594,15 @@ def _advance(
     return imu, forces, qacc_sum
 
 
+def _encoders(q: Vector, noise: LeggedNoise, rng: np.random.Generator) -> Vector:
+    """The joints' readings: ``Δ round((q + n_q)/Δ)`` per joint (``Δ = 0``: ``q + n_q``)."""
+    x = q + noise.encoder * rng.normal(size=q.size)
+    step = np.broadcast_to(np.asarray(noise.encoder_step, dtype=float), q.shape)
+    if not step.any():
+        return x
+    return np.where(step > 0, np.round(x / np.where(step > 0, step, 1.0)) * step, x)
+
+
 def _row(
     t: float,
     reading: Vector,
@@ -595,7 +625,7 @@ def _row(
             [t],
             reading,
             forces + noise.force * rng.normal(size=forces.size),
-            qpos[wiring.qadr] + noise.encoder * rng.normal(size=wiring.qadr.size),
+            _encoders(qpos[wiring.qadr], noise, rng),
             qpos[:3],
             quat_wxyz[[1, 2, 3, 0]],
             R.T @ v_world,

@@ -10,7 +10,7 @@ import pytest
 import pinobs
 from pinobs.errors import DimensionError, GainError, NonFiniteError
 from pinobs.observers.inekf import InEKFGains, InvariantEKF
-from pinobs.observers.legs import foot_noise, noise_densities, slip_densities
+from pinobs.observers.legs import foot_noise, noise_densities, slip_densities, slip_speeds
 from tests.observers.test_inekf import GO1_FEET, Go1Legs, free_flyer_q, pose_errors, truth
 
 #: σ per joint [rad], different on every joint (go1: 12)
@@ -71,10 +71,11 @@ def go1_truth():
 
 
 def test_started_on_the_truth_it_stays_there_with_joint_std_and_slip_speed(go1_truth) -> None:
-    ekf = InvariantEKF(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", joint_std=SIGMA,
-                       slip_speed=True)  # fmt: skip
-    _, worst = _run(ekf, go1_truth)
-    assert worst < 1e-9
+    for slip_gyro in (0.0, 1e-2):  # eq. (10) changes Q, not the mean
+        ekf = InvariantEKF(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", joint_std=SIGMA,
+                           slip_speed=True, slip_gyro=slip_gyro)  # fmt: skip
+        _, worst = _run(ekf, go1_truth)
+        assert worst < 1e-9
 
 
 def test_joint_std_equal_to_gains_joint_gives_the_same_filter(go1_truth) -> None:
@@ -157,3 +158,45 @@ def test_encoder_sigma_zero_with_no_kinematic_floor_is_refused() -> None:
     with pytest.raises(GainError, match="joint_std is all 0"):
         InvariantEKF(pinobs.load("go1"), GO1_FEET, joint_std=np.zeros(12),
                      gains=InEKFGains(kinematics=0.0))  # fmt: skip
+
+
+def test_the_gyros_noise_is_not_taken_for_slip(rng) -> None:
+    """Eq. (10) (``slip_gyro``): go1 standing still 1 s at 400 Hz, the gyro reading white at
+    the filter's own density (σ_g √400 = 0.2 rad/s per sample: |ω̃ × h_j| ≈ 0.08 m/s at the feet), joint
+    velocities 0.  The feet's covariance relative to the base (``P_dd − P_dp − P_pd + P_pp``,
+    what the next innovation sees) with ``slip_speed`` over the one without: measured 1.34
+    with (10); 1.87 with eq. (9) on the raw speed (the noise taken for slip, ``slip_gyro=0``).
+    A negative ``slip_gyro`` is refused."""
+    go1 = pinobs.load("go1")
+    legs = Go1Legs("imu_link")
+    q = legs.stance.copy()
+    gains = InEKFGains(contact=1e-3)
+    acc = np.array([0.0, 0.0, 9.81])
+    noise = gains.gyro * np.sqrt(400.0) * rng.standard_normal((401, 3))
+    relative = []
+    for slip in (False, True):
+        ekf = InvariantEKF(go1, GO1_FEET, imu_frame="imu_link", gains=gains, slip_speed=slip,
+                           slip_gyro=gains.gyro)  # fmt: skip
+        q0 = np.r_[0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0, q]
+        ekf.reset(0.0, q0, gyro=noise[0], acc=acc, contacts=[True] * 4)
+        for k in range(1, 401):
+            ekf.update(k / 400.0, q, noise[k], acc, [True] * 4, joint_velocities=np.zeros(12))
+        P = ekf.state.P
+        relative.append(
+            sum(
+                np.trace(P[b : b + 3, b : b + 3] - 2 * P[b : b + 3, 6:9] + P[6:9, 6:9])
+                for b in (9, 12, 15, 18)
+            )
+        )
+    assert relative[1] < 1.6 * relative[0], relative
+    with pytest.raises(GainError, match=r"slip_gyro=-0\.001"):
+        InvariantEKF(go1, GO1_FEET, imu_frame="imu_link", slip_speed=True, slip_gyro=-1e-3)
+
+
+def test_slip_speeds_take_the_held_gyros_noise_out_of_the_squared_speed() -> None:
+    """Eq. (10) in closed form: ``|ṗ|² − 2|h|² σ_g²/T`` (here 0.25 − 2·0.1·1e-4·400 = 0.242),
+    and 0 where the noise exceeds the speed."""
+    h = np.array([[0.3, 0.0, -0.1], [0.2, 0.1, -0.3]])  # |h|² = 0.1, 0.14
+    vel = np.array([[0.3, 0.4, 0.0], [0.01, 0.0, 0.0]])  # |ṗ|² = 0.25, 1e-4
+    got = slip_speeds(vel, h, 1e-2, 1 / 400)
+    np.testing.assert_allclose(got, [np.sqrt(0.25 - 2 * 0.1 * 1e-4 * 400), 0.0], rtol=1e-12)

@@ -254,3 +254,30 @@ def test_on_a_60_second_trot_the_velocity_error_stays_bounded() -> None:
     ten = round(10.0 * run.rate)
     first, last = (float(np.sqrt(np.mean(e**2))) for e in (err[:ten], err[-ten:]))
     assert last < 0.05 and last < 1.5 * first, (first, last)
+
+
+def test_quantised_encoders_read_whole_steps_and_repeat_when_still() -> None:
+    """``encoder_step``: every reading a whole number of its joint's step; standing with white
+    3e-5 rad under steps of 6e-5 / 4e-5 rad, about half the readings repeat the previous one
+    (measured 0.44; the real Go1 log's still rows: 0.35-0.57) and the error's σ, pooled over
+    the joints of one step (a still joint's depends on where it stands between two steps), is
+    ``√(σ² + Δ²/12)`` (3.5e-5, 3.2e-5) to 10 %."""
+    steps = np.array((6e-5, 6e-5, 4e-5) * 4)
+    noise = dataclasses.replace(QUIET, encoder=3e-5, encoder_step=tuple(steps))
+    run = simulate_legged("stand", 0.5, seed=2, noise=noise)
+    q = run.q_joints()
+    np.testing.assert_allclose(q / steps, np.round(q / steps), atol=1e-6)
+    assert 0.3 < float(np.mean(np.diff(q, axis=0) == 0)) < 0.6
+    err = q - run.q_joints(truth=True)
+    for step in (6e-5, 4e-5):
+        pooled = float(np.sqrt(np.mean(err[:, steps == step] ** 2)))
+        assert pooled == pytest.approx(math.sqrt(3e-5**2 + step**2 / 12), rel=0.1)
+
+
+def test_encoder_steps_are_checked() -> None:
+    with pytest.raises(pinobs.errors.GainError, match="encoder_step"):
+        LeggedNoise(encoder_step=-1e-5)
+    with pytest.raises(pinobs.errors.GainError, match="encoder_step"):
+        LeggedNoise(encoder_step=(1e-5, math.nan))
+    with pytest.raises(ConfigurationError, match="12 joints"):
+        simulate_legged("stand", 0.01, noise=LeggedNoise(encoder_step=(6e-5, 4e-5)))

@@ -121,3 +121,19 @@ def test_bad_input_is_refused_by_name(runs) -> None:
         identify_drive_gains(robot, logs[0], loaded, body="tool0", load_mass=2.8)
     with pytest.raises(OptionError, match="method='tls'"):
         identify_drive_gains(robot, *logs, body="tool0", load_mass=2.8, method="tls")
+
+
+def test_gains_a_load_does_not_show_are_refused_by_name() -> None:
+    """The unloaded run given again as the loaded one (a load that changed no torque), and a
+    second run "loaded" with a point mass at the first joint's origin, on its axis (which
+    moves nothing): the scale is free."""
+    robot = pinobs.load("planar_3r")
+    logs = []
+    for seed in (1, 2):
+        res = pinobs.simulate(robot, [], duration=3.0, sensor=Sensor(rate=1000.0), seed=seed)
+        logs.append((res.t, res.q_meas, res.tau / 2.0))
+    match = r"do not determine the drive gains of \['joint1', 'joint2', 'joint3'\]"
+    with pytest.raises(IdentificationError, match=match):
+        identify_drive_gains(robot, logs[0], logs[0], body="link3", load_mass=1.0)
+    with pytest.raises(IdentificationError, match=match):
+        identify_drive_gains(robot, logs[0], logs[1], body="link1", load_mass=1.0)

@@ -203,15 +203,10 @@ def identify_drive_gains(
     G = np.zeros((Z.shape[0], nv))
     G[np.arange(Z.shape[0]), channel] = current
     w, gains, std, fit = _solve(np.hstack([Z, -G]), -c, channel, irls, huber)
+    _check_determined(robot, fit["null_share"][Z.shape[1] :], body, m)
     if method == "current":
         w, gains, std, fit = _output_error(Z, c, current, channel, gains, irls, huber)
-    loose = [robot.joint_names[j] for j in range(nv) if fit["null_share"][Z.shape[1] + j] > 0]
-    if loose:
-        raise IdentificationError(
-            f"the logs do not determine the drive gains of {loose}: the loaded run must move "
-            f"those joints and the load must change their torques (a load on {body!r} of "
-            f"{m:g} kg; excite them, or put it farther from their axes)"
-        )
+        _check_determined(robot, fit["null_share"][Z.shape[1] :], body, m)
     res = Z @ w + c - gains[channel] * current  # [N·m]
     report = _report(res, w[reg.size :], fit, (body, m, method, torque), A_u.shape[0], nv)
     return DriveGains(gains=gains, std=std, joints=tuple(robot.joint_names), report=report)
@@ -244,6 +239,21 @@ def _report(
         "warnings": fit.get("warnings", []),
         "torque": torque,
     }
+
+
+def _check_determined(robot: Robot, null_share: Vector, body: str, m: float) -> None:
+    """Refuse gains with a share in the combinations the logs do not determine.
+
+    Raises:
+        IdentificationError: naming those joints.
+    """
+    loose = [robot.joint_names[j] for j in np.flatnonzero(null_share > 0)]
+    if loose:
+        raise IdentificationError(
+            f"the logs do not determine the drive gains of {loose}: the loaded run must move "
+            f"those joints and the load must change their torques (a load on {body!r} of "
+            f"{m:g} kg; excite them, or put it farther from their axes)"
+        )
 
 
 def _check(
@@ -318,11 +328,13 @@ def _rows(
 
 def _weights(res: Vector, channel: NDArray[np.intp], huber: float | None) -> tuple[Vector, Vector]:
     """``(σ per channel, row weights)``: ``σ_j = 1.4826 · median |r|`` over channel ``j``'s
-    rows (at least :data:`CHANNEL_SIGMA_FLOOR` of the largest), each row ``1/σ²`` times its
-    Huber weight (none when ``huber`` is ``None``)."""
+    rows (at least :data:`CHANNEL_SIGMA_FLOOR` of the largest; all 1 when every residual is
+    0), each row ``1/σ²`` times its Huber weight (none when ``huber`` is ``None``)."""
     labels = np.unique(channel)
     sigma = np.array([1.4826 * np.median(np.abs(res[channel == k])) for k in labels])
-    sigma = np.maximum(sigma, max(CHANNEL_SIGMA_FLOOR * float(sigma.max()), 1e-300))
+    if not sigma.max() > 0.0:  # every row fitted exactly: nothing to weigh them by
+        sigma = np.ones_like(sigma)
+    sigma = np.maximum(sigma, CHANNEL_SIGMA_FLOOR * float(sigma.max()))
     s_row = sigma[np.searchsorted(labels, channel)]
     if huber is None:
         return sigma, 1.0 / s_row**2

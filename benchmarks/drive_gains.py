@@ -18,7 +18,7 @@ pair, rows 195..4966 (unloaded) and 308..5071 (loaded).  Here:
    identified on its loaded run (``pinobs.identify(..., payload="tool0")``, its last 20 %
    held out): the load's mass against 2.805 kg, and the held-out torque residual per joint
    [N·m] with the load (after) and without (before); the same with the published gains
-   beside it.
+   beside it, and (not ``--quick``) with the gains of ``method="ols"`` (their ``'OLS'``).
 
 Rows that repeat the previous position exactly (the logger's stale reads, ~5 %) are left
 out, as in ``tests/model/test_identification_real_data.py``.  Writes
@@ -89,10 +89,11 @@ def run(name: str) -> dict[str, np.ndarray]:
     return {"t": t[keep] - t[keep][0], "q": q[keep], "current": current, "rows": [first, last]}
 
 
-def gains_on(robot: pinobs.Robot, pair: str) -> dict:
+def gains_on(robot: pinobs.Robot, pair: str, method: str = "current") -> dict:
+    """The gains ``identify_drive_gains`` finds on ``pair`` by ``method``, and its report."""
     unloaded, loaded = (run(n) for n in PAIRS[pair])
     start = time.perf_counter()
-    out = identify_drive_gains(robot, unloaded, loaded, body=BODY, load_mass=LOAD_KG)
+    out = identify_drive_gains(robot, unloaded, loaded, body=BODY, load_mass=LOAD_KG, method=method)
     rep = out.report
     return {
         "pair": pair,
@@ -152,9 +153,14 @@ def main(argv: list[str] | None = None) -> int:
             f"  held out on {held}: mass {ours['mass']:.3f} kg ({100 * ours['mass_error']:+.1f} %)"
             f", published gains {theirs['mass']:.3f} kg ({100 * theirs['mass_error']:+.1f} %)"
         )
-        results["directions"].append(
-            {"fit": fit, "held_out": held, "gains": g, "payload": ours, "payload_published": theirs}
-        )
+        entry = {"fit": fit, "held_out": held, "gains": g, "payload": ours}
+        entry["payload_published"] = theirs
+        if not args.quick:  # Mamedov et al.'s 'OLS' (method="ols") beside it
+            g_ols = gains_on(robot, fit, "ols")
+            entry["gains_ols"] = g_ols
+            entry["payload_ols"] = payload_on(robot, held, np.array(g_ols["gains"]))
+            print(f"  ols: {np.round(g_ols['gains'], 3)}: {entry['payload_ols']['mass']:.3f} kg")
+        results["directions"].append(entry)
     (HERE / "drive_gains.json").write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
     (HERE / "drive_gains.md").write_text(markdown(results), encoding="utf-8")
     return 0
@@ -195,9 +201,10 @@ def markdown(results: dict) -> str:
             + " |",
             "",
             f"Rank {g['rank']} of {g['n_parameters']} columns, condition {g['condition']:.3g}, "
-            f"{g['seconds']:.1f} s; the load's centre of mass "
+            f"{g['seconds']:.1f} s (wall, a shared 2-core machine); the load's centre of mass "
             f"{np.round(g['load_com'], 4).tolist()} m (tool0).",
             "",
+            *_ols_lines(d),
             f"Held out on {d['held_out']}: load mass **{p['mass']:.3f} kg "
             f"({100 * p['mass_error']:+.1f} %)** with these gains, {pp['mass']:.3f} kg "
             f"({100 * pp['mass_error']:+.1f} %) with the published ones (target: within 5 %).",
@@ -232,6 +239,20 @@ def markdown(results: dict) -> str:
             "",
         ]
     return "\n".join(lines)
+
+
+def _ols_lines(d: dict) -> list[str]:
+    """The ``method="ols"`` gains and the load they give, when run (not ``--quick``)."""
+    if "gains_ols" not in d:
+        return []
+    g, p = d["gains_ols"], d["payload_ols"]
+    return [
+        "By `method=\"ols\"` (their 'OLS', least squares in torque): gains "
+        + ", ".join(f"{x:.3f}" for x in g["gains"])
+        + f"; the load held out on {d['held_out']} with them: {p['mass']:.3f} kg "
+        f"({100 * p['mass_error']:+.1f} %).",
+        "",
+    ]
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ out, as in ``tests/model/test_identification_real_data.py``.  Writes
 ``benchmarks/drive_gains.json`` and ``benchmarks/drive_gains.md``.
 
     python benchmarks/drive_gains.py            # both directions (about 10 min on 2 cores)
-    python benchmarks/drive_gains.py --quick    # gains on 14harm, held out on 15harm only
+    python benchmarks/drive_gains.py --quick    # 14harm → 15harm only, printed (no files)
 """
 
 from __future__ import annotations
@@ -161,6 +161,8 @@ def main(argv: list[str] | None = None) -> int:
             entry["payload_ols"] = payload_on(robot, held, np.array(g_ols["gains"]))
             print(f"  ols: {np.round(g_ols['gains'], 3)}: {entry['payload_ols']['mass']:.3f} kg")
         results["directions"].append(entry)
+    if args.quick:  # one direction: printed, the full run's files kept
+        return 0
     (HERE / "drive_gains.json").write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
     (HERE / "drive_gains.md").write_text(markdown(results), encoding="utf-8")
     return 0

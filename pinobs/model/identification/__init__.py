@@ -201,6 +201,13 @@ from pinobs.model.identification.diagnostics import (
 from pinobs.model.identification.diagnostics import (
     check_zero_torques,
 )
+from pinobs.model.identification.drive_gains import (
+    GAIN_NULL_TOL as GAIN_NULL_TOL,
+)
+from pinobs.model.identification.drive_gains import (
+    GAIN_RANK_TOL as GAIN_RANK_TOL,
+)
+from pinobs.model.identification.drive_gains import DriveGains, identify_drive_gains
 from pinobs.model.identification.leastsquares import (
     CHANNEL_SIGMA_FLOOR as CHANNEL_SIGMA_FLOOR,
 )
@@ -284,6 +291,7 @@ __all__ = [
     "ARMATURE_SHARE",
     "ARMATURE_SIGMAS",
     "IDENTIFICATION_FD_STEP",
+    "DriveGains",
     "Identification",
     "MomentumRegressor",
     "ParameterSet",
@@ -294,6 +302,7 @@ __all__ = [
     "determined_armature",
     "excluded_coordinates",
     "identify",
+    "identify_drive_gains",
     "identify_payload",
     "log_arrays",
     "pseudo_inertia",

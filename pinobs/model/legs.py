@@ -145,6 +145,27 @@ class FootKinematics:
             jac = R_bi.T @ jac
         return h, jac
 
+    def placements_and_jacobians(self, q_joints: ArrayLike) -> tuple[Vector, ...]:
+        """``(h, R, J, J_ω)``: the feet's positions ``(K, 3)`` [m] and orientations ``(K, 3, 3)``,
+        their linear ``(K, 3, nv_joints)`` [m/rad] and angular ``(K, 3, nv_joints)`` [rad/rad]
+        Jacobians with respect to the joint velocities, all in the base (or IMU) frame."""
+        self._set(q_joints)
+        model, data = self._model, self._data
+        pin.computeJointJacobians(model, data, self._q)
+        pin.updateFramePlacements(model, data)
+        K = len(self._ids)
+        h, rot, jac = np.empty((K, 3)), np.empty((K, 3, 3)), np.empty((K, 6, self.nv_joints))
+        for k, fid in enumerate(self._ids):
+            h[k], rot[k] = data.oMf[fid].translation, data.oMf[fid].rotation
+            full = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            jac[k] = full[:, 6:]
+        lin, ang = jac[:, :3], jac[:, 3:]
+        if self._to_imu is not None:
+            R_bi, r_bi = self._to_imu
+            h, rot = (h - r_bi) @ R_bi, R_bi.T @ rot
+            lin, ang = R_bi.T @ lin, R_bi.T @ ang
+        return h, rot, lin, ang
+
 
 def _frame_id(robot: Robot, name: str) -> int:
     """The frame's index, or an error naming the closest frames and listing them all."""

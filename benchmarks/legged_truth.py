@@ -64,6 +64,10 @@ and encoder noise measured on the log's stands), the kinematics term varied; the
 NIS on the MuJoCo go1 (`simulated_nis`), where the defaults were chosen, its encoders white
 (`NOISE`) or quantised as the real log's (`QUANTISED`).
 
+`rolling`: go1's `--motions` and the `--long` trot with both filters given `foot_radius`
+(the URDF's foot spheres, 2 cm: each foot measured at its point that touched the ground,
+`pinobs.observers.rolling`), `GAINS` unchanged; the section's other rows kept.
+
 `slip`: go1 standing in MuJoCo, one foot made to slide while its force keeps it in contact
 (`SlidingLegs`), with and without the foot gate: the base velocity error (`slip_table`).
 """
@@ -86,7 +90,7 @@ from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
 import pinobs
-from pinobs.model import FootKinematics, aba_call
+from pinobs.model import FootKinematics, aba_call, foot_sphere_radius
 from pinobs.observers.inekf import InEKFGains, InEKFPrior, InvariantEKF, skew
 from pinobs.observers.qekf import QuaternionEKF
 from pinobs.simulation.humanoid import HUMANOID_MOTIONS, simulate_humanoid
@@ -803,6 +807,9 @@ def _rolling_section(report: dict[str, Any], args: argparse.Namespace) -> None:
     for key in [k for k in section if k.split(",")[0] in labels]:
         del section[key]
     robot = pinobs.load("go1")
+    radius = {foot_sphere_radius(robot, foot) for foot in GO1_FEET}  # the URDF's spheres
+    if radius != {FOOT_RADIUS}:  # the simulation's feet
+        raise RuntimeError(f"go1.urdf's foot spheres {radius} are not the simulation's")
     for motion in args.motions:
         for seed in args.seeds:
             run = simulate_legged(motion, args.duration, seed=seed, noise=NOISE, robot=robot)

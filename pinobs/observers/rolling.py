@@ -31,7 +31,8 @@ angular Jacobians (:meth:`pinobs.model.FootKinematics.placements_and_jacobians`)
 
 ``s_j`` fixed when the foot lands (its flag rises), from the estimated orientation ``R̂₀``
 (an error ``δθ`` there moves the anchored point by ``r δθ`` on the sphere, whose drift is then
-``r φ δθ``: second order); feet not in contact are measured at their centre (``s_j = 0``).
+``r φ δθ``: second order); feet not in contact are measured at their centre (``s_j = 0``),
+and a foot the foot gate re-anchors (``foot_gate``, still in contact) keeps its ``s_j``.
 ``r = 0`` leaves the filters as they were.
 """
 

@@ -64,6 +64,10 @@ and encoder noise measured on the log's stands), the kinematics term varied; the
 NIS on the MuJoCo go1 (`simulated_nis`), where the defaults were chosen, its encoders white
 (`NOISE`) or quantised as the real log's (`QUANTISED`).
 
+`rolling`: go1's `--motions` and the `--long` trot with both filters given `foot_radius`
+(the URDF's foot spheres, 2 cm: each foot measured at its point that touched the ground,
+`pinobs.observers.rolling`), `GAINS` unchanged; the section's other rows kept.
+
 `slip`: go1 standing in MuJoCo, one foot made to slide while its force keeps it in contact
 (`SlidingLegs`), with and without the foot gate: the base velocity error (`slip_table`).
 """
@@ -86,11 +90,17 @@ from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
 import pinobs
-from pinobs.model import FootKinematics, aba_call
+from pinobs.model import FootKinematics, aba_call, foot_sphere_radius
 from pinobs.observers.inekf import InEKFGains, InEKFPrior, InvariantEKF, skew
 from pinobs.observers.qekf import QuaternionEKF
 from pinobs.simulation.humanoid import HUMANOID_MOTIONS, simulate_humanoid
-from pinobs.simulation.legged import GO1_FEET, LEGGED_MOTIONS, LeggedNoise, simulate_legged
+from pinobs.simulation.legged import (
+    FOOT_RADIUS,
+    GO1_FEET,
+    LEGGED_MOTIONS,
+    LeggedNoise,
+    simulate_legged,
+)
 
 CONTACT_FORCE = 20.0  # [N]
 NOISE = LeggedNoise()
@@ -138,10 +148,15 @@ FOOT_GATE = 1e-3
 
 
 def run_filter(
-    name: str, run: Any, robot: pinobs.Robot, start: str, gains: InEKFGains = GAINS
+    name: str,
+    run: Any,
+    robot: pinobs.Robot,
+    start: str,
+    gains: InEKFGains = GAINS,
+    foot_radius: float = 0.0,
 ) -> dict[str, float]:
     imu_frame = "imu_link" if run.feet == GO1_FEET else None  # TALOS: the IMU at the base
-    ekf = FILTERS[name](robot, run.feet, gains=gains, imu_frame=imu_frame)
+    ekf = FILTERS[name](robot, run.feet, gains=gains, imu_frame=imu_frame, foot_radius=foot_radius)
     r_bi = ekf.imu_placement[1]
     t = run.t
     q_meas = run.q_joints()
@@ -341,6 +356,18 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
                 f"{c['ratio']:.0f}× ({'met' if c['ratio'] <= 30 else 'missed'}) |"
             )
         md.append("")
+    if report.get("rolling"):
+        md += [
+            f"Rolling feet: both filters with `foot_radius={FOOT_RADIUS:g}` (go1's foot spheres; "
+            "`pinobs.observers.rolling`: each foot measured at its point that touched the "
+            "ground; a change of the measurement model the two filters share), `GAINS` "
+            "unchanged; the rows run with `--sections rolling` (the others above: radius 0):",
+            "",
+            *_table(report["rolling"]),
+            "",
+            *_targets(report["rolling"]),
+            "",
+        ]
     md += _slip_lines(report.get("slip") or {})
     md += _real_table(report.get("real") or {})
     md += _sim_nis_lines(report.get("real_sim") or {})
@@ -619,13 +646,19 @@ def _real_table(real: dict[str, Any]) -> list[str]:
 
 
 def _runs(
-    report: dict[str, Any], section: str, label: str, run: Any, robot: Any, gains: InEKFGains
+    report: dict[str, Any],
+    section: str,
+    label: str,
+    run: Any,
+    robot: Any,
+    gains: InEKFGains,
+    foot_radius: float = 0.0,
 ) -> None:
     for start_kind in STARTS if section != "old_gains" else ("truth", "large"):
         key = f"{label}, {start_kind} start"
         report[section].setdefault(key, {name: [] for name in FILTERS})
         for name in FILTERS:
-            out: dict[str, Any] = run_filter(name, run, robot, start_kind, gains)
+            out: dict[str, Any] = run_filter(name, run, robot, start_kind, gains, foot_radius)
             out["seed"] = run.seed
             report[section][key][name].append(out)
             print(section, key, run.seed, name, out, flush=True)
@@ -643,7 +676,7 @@ def main() -> None:
     parser.add_argument(
         "--sections",
         nargs="+",
-        choices=["go1", "humanoid", "cost", "real", "slip"],
+        choices=["go1", "humanoid", "cost", "real", "slip", "rolling"],
         default=["go1", "humanoid"],
         help="what to run (go1 includes cost; cost alone: its trot only); with --merge, "
         "the others are kept from legged_truth.json",
@@ -671,6 +704,7 @@ def main() -> None:
         "real": {},
         "slip": {},
         "real_sim": {},
+        "rolling": {},
     }
     if args.merge:
         report.update(json.loads((here / "legged_truth.json").read_text()))
@@ -688,6 +722,7 @@ def main() -> None:
         report["real_sim"] = simulated_nis()
     if "slip" in args.sections:
         report["slip"] = slip_table()
+    _rolling_section(report, args)  # if asked for
     report.setdefault("seconds", {})
     if not isinstance(report["seconds"], dict):
         report["seconds"] = {"go1": report["seconds"]}
@@ -759,6 +794,29 @@ def _go1_sections(report: dict[str, Any], args: argparse.Namespace) -> None:
     for seed in args.long_seeds if args.long > 0 else []:
         run = simulate_legged("trot", args.long, seed=seed, noise=NOISE, robot=robot)
         _runs(report, "long", f"trot {args.long:g} s", run, robot, GAINS)
+
+
+def _rolling_section(report: dict[str, Any], args: argparse.Namespace) -> None:
+    """go1's ``--motions`` over ``--seeds`` and the ``--long`` trot over ``--long-seeds`` with
+    ``foot_radius=FOOT_RADIUS``; the section's other rows are kept (from the JSON with
+    ``--merge``), those of the motions run replaced.  Nothing without ``--sections rolling``."""
+    if "rolling" not in args.sections:
+        return
+    section = report.setdefault("rolling", {})
+    labels = [*args.motions, *([f"trot {args.long:g} s"] if args.long > 0 else [])]
+    for key in [k for k in section if k.split(",")[0] in labels]:
+        del section[key]
+    robot = pinobs.load("go1")
+    radius = {foot_sphere_radius(robot, foot) for foot in GO1_FEET}  # the URDF's spheres
+    if radius != {FOOT_RADIUS}:  # the simulation's feet
+        raise RuntimeError(f"go1.urdf's foot spheres {radius} are not the simulation's")
+    for motion in args.motions:
+        for seed in args.seeds:
+            run = simulate_legged(motion, args.duration, seed=seed, noise=NOISE, robot=robot)
+            _runs(report, "rolling", motion, run, robot, GAINS, FOOT_RADIUS)
+    for seed in args.long_seeds if args.long > 0 else []:
+        run = simulate_legged("trot", args.long, seed=seed, noise=NOISE, robot=robot)
+        _runs(report, "rolling", f"trot {args.long:g} s", run, robot, GAINS, FOOT_RADIUS)
 
 
 if __name__ == "__main__":

@@ -17,11 +17,15 @@ Pinocchio *is* the base-frame one: ``J_j`` is the linear rows, joint columns,
 of ``getFrameJacobian(..., LOCAL_WORLD_ALIGNED)`` at ``q = (0, 0, 0, 0, 0, 0, 1, q_joints)``.
 For revolute and prismatic joints ``J_j = ∂h_j/∂q_joints``; for continuous
 joints it is with respect to the joint's velocity coordinate (its angle).
+
+:func:`foot_sphere_radius` reads a foot's collision sphere from the robot's URDF (go1's
+2 cm feet), the radius the filters' ``foot_radius`` takes (:mod:`pinobs.observers.rolling`).
 """
 
 from __future__ import annotations
 
 import difflib
+import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from typing import Any
 
@@ -29,10 +33,11 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from pinobs.errors import UnknownNameError, UnsupportedRobotError
+from pinobs.errors import ConfigurationError, UnknownNameError, UnsupportedRobotError
+from pinobs.model.loading import resolve_source
 from pinobs.model.robot import Robot
 
-__all__ = ["FootKinematics"]
+__all__ = ["FootKinematics", "foot_sphere_radius"]
 
 Vector = NDArray[np.floating[Any]]
 
@@ -145,6 +150,27 @@ class FootKinematics:
             jac = R_bi.T @ jac
         return h, jac
 
+    def placements_and_jacobians(self, q_joints: ArrayLike) -> tuple[Vector, ...]:
+        """``(h, R, J, J_ω)``: the feet's positions ``(K, 3)`` [m] and orientations ``(K, 3, 3)``,
+        their linear ``(K, 3, nv_joints)`` [m/rad] and angular ``(K, 3, nv_joints)`` [rad/rad]
+        Jacobians with respect to the joint velocities, all in the base (or IMU) frame."""
+        self._set(q_joints)
+        model, data = self._model, self._data
+        pin.computeJointJacobians(model, data, self._q)
+        pin.updateFramePlacements(model, data)
+        K = len(self._ids)
+        h, rot, jac = np.empty((K, 3)), np.empty((K, 3, 3)), np.empty((K, 6, self.nv_joints))
+        for k, fid in enumerate(self._ids):
+            h[k], rot[k] = data.oMf[fid].translation, data.oMf[fid].rotation
+            full = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            jac[k] = full[:, 6:]
+        lin, ang = jac[:, :3], jac[:, 3:]
+        if self._to_imu is not None:
+            R_bi, r_bi = self._to_imu
+            h, rot = (h - r_bi) @ R_bi, R_bi.T @ rot
+            lin, ang = R_bi.T @ lin, R_bi.T @ ang
+        return h, rot, lin, ang
+
 
 def _frame_id(robot: Robot, name: str) -> int:
     """The frame's index, or an error naming the closest frames and listing them all."""
@@ -157,3 +183,38 @@ def _frame_id(robot: Robot, name: str) -> int:
             f"{robot.name} has no frame {name!r}{hint} Its frames: {', '.join(names)}"
         )
     return int(model.getFrameId(name))
+
+
+def foot_sphere_radius(robot: Robot, foot: str) -> float:
+    """The radius [m] of the collision sphere of the URDF link named ``foot`` (a foot frame of
+    a URDF robot is its link's), centred on the link's frame; 0 if its collision geometry is
+    not a sphere (a flat sole: the frame is the contact point).
+
+    Raises:
+        UnknownNameError: ``foot`` is not a frame of the model, or not a link of the URDF.
+        ConfigurationError: the robot was not loaded from a URDF, or the sphere is off the
+            link's origin (the frame would not be its centre).
+    """
+    _frame_id(robot, foot)
+    path = resolve_source(robot.source)[0]
+    if path.suffix.lower() != ".urdf":
+        raise ConfigurationError(f"{robot.name}: foot_sphere_radius reads a URDF, got {path.name}")
+    links = {link.get("name"): link for link in ET.parse(path).getroot().iter("link")}
+    if foot not in links:
+        raise UnknownNameError(f"{robot.name}: {foot!r} is a frame but not a link of {path.name}")
+    for collision in links[foot].findall("collision"):
+        sphere = collision.find("geometry/sphere")
+        if sphere is None:
+            continue
+        origin = collision.find("origin")
+        xyz = [
+            float(a)
+            for a in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()
+        ]
+        if any(xyz):
+            raise ConfigurationError(
+                f"{robot.name}: {foot}'s collision sphere is centred at {xyz}, not at the "
+                "link's origin: the foot frame is not its centre"
+            )
+        return float(sphere.get("radius", "nan"))
+    return 0.0

@@ -77,7 +77,7 @@ noise is isotropic, so the foot's orientation ``h_R(q)`` drops out of ``R h_R Σ
 Measurement (the paper's forward-kinematics measurement, a right-invariant
 observation ``Y = X⁻¹ b + V``).  For each foot j in contact, with ``h_j(q)``
 its position in the base frame from the measured joint angles q
-(:class:`pinobs.model.FootKinematics`)::
+(:class:`pinobs.model.FootKinematics`; rolling spheres, ``foot_radius``: :mod:`~.rolling`)::
 
     Y = (h_j(q̃), 0, 1, −1_j)ᵀ = X⁻¹ (0, 0, 1, −1_j)ᵀ + noise,    h_j(q) = Rᵀ (d_j − p)
     r_j = Π (X̂ Y − b) = R̂ h_j(q̃) − (d̂_j − p̂)  ≈  ξ_p − ξ_dj + R̂ J_j w_q            (4)
@@ -441,6 +441,9 @@ class InvariantEKF:
             previous update (updates without ``joint_velocities``: ``gains.contact`` alone).
         slip_gyro: eq. (10), the gyro's white noise density [rad/s/√Hz] taken out of those
             speeds (the gyro's own, measured; 0, default: none taken out).
+        foot_radius: the feet's sphere radius [m] (go1: 0.02): each foot measured at its point
+            that touched the ground, which rolling leaves still (:mod:`pinobs.observers.rolling`,
+            eq. R4); 0 (default): at its frame.
 
     Raises:
         GainError: an ``imu_hold`` that is neither; a ``foot_gate`` not in (0, 0.5); a
@@ -463,6 +466,7 @@ class InvariantEKF:
         joint_std: ArrayLike | None = None,
         slip_speed: bool = False,
         slip_gyro: float = 0.0,
+        foot_radius: float = 0.0,
     ) -> None:
         #: the legs, options and conversions shared with the quaternion EKF
         self.setup = LeggedSetup(
@@ -473,6 +477,7 @@ class InvariantEKF:
             gravity=gravity,
             imu_hold=imu_hold,
             imu_frame=imu_frame,
+            foot_radius=foot_radius,
         )
         s = self.setup
         self.imu_hold, self.kinematics = s.imu_hold, s.kinematics
@@ -555,7 +560,7 @@ class InvariantEKF:
         """
         a = self.setup.reset_inputs(t, q, v, gyro, acc, contacts, prior, bias)
         state = InEKFState(a.t, a.R, a.x, (), a.bias, prior_covariance(a.prior, a.x), a.imu, a.t)
-        h, jac = self._legs(a.q_joints)
+        h, jac = self._legs(a.q_joints, a.R, a.flags)
         self._speed = None
         state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
         self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None)
@@ -598,7 +603,7 @@ class InvariantEKF:
         state = self.state
         u = self.setup.update_inputs(state.t, t, q, gyro, acc, contacts, joint_velocities)
         new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
-        h, jac = self._legs(u.q_joints)
+        h, jac = self._legs(u.q_joints, new.R, u.flags)
         new, nis, used, gated = self._correct(new, u.flags, h, jac)
         self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
         contact_time = u.t if any(u.flags) else None
@@ -687,10 +692,10 @@ class InvariantEKF:
         kernel(state.R, state.x, state.P, h[feet], jac[feet], self._joint_var, g.kinematics**2, out)
         return out
 
-    def _legs(self, q_joints: Vector) -> tuple[Vector, Vector]:
-        """The feet's positions and Jacobians, the columns scaled by ``joint_std`` if given
-        (``J diag(σ_q)``: eq. (4)'s ``J Σ_q Jᵀ`` with unit variance)."""
-        h, jac = self.setup.legs(q_joints)
+    def _legs(self, q_joints: Vector, R: Any = None, flags: Any = None) -> tuple[Vector, Vector]:
+        """The feet's positions and Jacobians (:meth:`LeggedSetup.legs`), the columns scaled by
+        ``joint_std`` if given (``J diag(σ_q)``: eq. (4)'s ``J Σ_q Jᵀ`` with unit variance)."""
+        h, jac = self.setup.legs(q_joints, R, flags)
         return (h, jac) if self.joint_std is None else (h, jac * self.joint_std)
 
     def _foot_noise(self, R: Vector, jac: Vector) -> Vector:
@@ -706,21 +711,8 @@ class InvariantEKF:
         R1, x1, theta, P1 = np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P)
         kernel = correct_kernel.compiled
         assert kernel is not None  # loaded by the constructor
-        g = self.gains
-        nis = kernel(
-            R,
-            x,
-            state.bias,
-            P,
-            h[measured],
-            jac[measured],
-            self._joint_var,
-            g.kinematics**2,
-            R1,
-            x1,
-            theta,
-            P1,
-        )
+        feet = (h[measured], jac[measured], self._joint_var, self.gains.kinematics**2)
+        nis = kernel(R, x, state.bias, P, *feet, R1, x1, theta, P1)
         if nis < 0.0:
             return self._update_solve(state, measured, h, jac)
         return replace_state(state, R=R1, x=x1, bias=theta, P=P1), float(nis)

@@ -48,6 +48,7 @@ from pinobs.model import FootKinematics, Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.base import Vector
 from pinobs.observers.results import Consistency
+from pinobs.observers.rolling import RollingFeet
 from pinobs.tolerances import NO_CONTACT_WARN_TIME, QUATERNION_NORM_TOL, TIME_EPS
 
 __all__ = [
@@ -511,6 +512,7 @@ class LeggedSetup:
         gravity: likewise.
         imu_hold: likewise.
         imu_frame: likewise.
+        foot_radius: likewise (:class:`pinobs.observers.rolling.RollingFeet`).
 
     Raises:
         GainError: an ``imu_hold`` that is neither ``"previous"`` nor ``"average"``, or
@@ -529,6 +531,7 @@ class LeggedSetup:
         gravity: ArrayLike,
         imu_hold: str,
         imu_frame: str | None,
+        foot_radius: float = 0.0,
     ) -> None:
         if imu_hold not in ("previous", "average"):
             raise GainError(f"imu_hold must be 'previous' or 'average', got {imu_hold!r}")
@@ -549,6 +552,8 @@ class LeggedSetup:
             if placement is None
             else (np.asarray(placement[0], dtype=float), np.asarray(placement[1], dtype=float))
         )
+        #: the rolling feet's model (``None``: ``foot_radius`` 0, the foot frames measured)
+        self.rolling = RollingFeet(self.kinematics, foot_radius) if foot_radius != 0 else None
 
     def not_reset(self) -> NotResetError:
         """The error for a call before ``reset``."""
@@ -596,6 +601,8 @@ class LeggedSetup:
         R_bi, r_bi = self.imu_placement
         R_b = quaternion_to_rotation(q[3:7])
         x = np.array([R_b @ (v[:3] + np.cross(v[3:6], r_bi)), q[:3] + R_b @ r_bi])
+        if self.rolling is not None:
+            self.rolling.restart()  # the feet down at reset land now
         return ResetInputs(t, q[7:], R_b @ R_bi, x, imu, flags, prior, theta)
 
     def update_inputs(
@@ -638,8 +645,12 @@ class LeggedSetup:
             held = 0.5 * (held + reading)
         return held
 
-    def legs(self, q_joints: Vector) -> tuple[Vector, Vector]:
-        """Foot positions in the IMU frame ``(K, 3)`` and their Jacobians ``(K, 3, nv_j)``."""
+    def legs(self, q_joints: Vector, R: Any = None, flags: Any = None) -> tuple[Vector, Vector]:
+        """Foot positions in the IMU frame ``(K, 3)`` and their Jacobians ``(K, 3, nv_j)``; with
+        ``foot_radius``, of the points :class:`~pinobs.observers.rolling.RollingFeet` measures
+        (feet that land anchored from the estimated orientation ``R`` and the contact ``flags``)."""
+        if self.rolling is not None:
+            return self.rolling.legs(q_joints, R, flags)
         h, jac = self.kinematics.positions_and_jacobians(q_joints)
         return np.asarray(h, dtype=float), np.asarray(jac, dtype=float)
 

@@ -119,6 +119,7 @@ class QuaternionEKF:
         gravity: ArrayLike = GRAVITY,
         imu_hold: str = "previous",
         imu_frame: str | None = None,
+        foot_radius: float = 0.0,
     ) -> None:
         #: the legs, options and conversions shared with the invariant EKF
         self.setup = LeggedSetup(
@@ -129,6 +130,7 @@ class QuaternionEKF:
             gravity=gravity,
             imu_hold=imu_hold,
             imu_frame=imu_frame,
+            foot_radius=foot_radius,
         )
         s = self.setup
         self.imu_hold, self.kinematics, self.gains, self.gravity = (
@@ -180,7 +182,7 @@ class QuaternionEKF:
         T[3:6, 0:3] = skew(a.x[0]) @ a.R
         P = T @ a.prior.covariance() @ T.T
         state = QEKFState(a.t, a.R, a.x, (), a.bias, P, a.imu, a.t)
-        h, jac = self.setup.legs(a.q_joints)
+        h, jac = self.setup.legs(a.q_joints, a.R, a.flags)
         state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
         self._commit(state, a.q_joints, None, None, a.t if state.feet else None)
         self._warned = False
@@ -201,7 +203,7 @@ class QuaternionEKF:
         state = self.state
         u = self.setup.update_inputs(state.t, t, q, gyro, acc, contacts, joint_velocities)
         new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
-        h, jac = self.setup.legs(u.q_joints)
+        h, jac = self.setup.legs(u.q_joints, new.R, u.flags)
         ended = [s for s, j in enumerate(new.feet) if not u.flags[j]]
         if ended:
             new = remove_feet(new, ended)

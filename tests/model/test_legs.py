@@ -8,7 +8,7 @@ import pytest
 
 import pinobs
 from pinobs.errors import UnknownNameError, UnsupportedRobotError
-from pinobs.model import FootKinematics
+from pinobs.model import FootKinematics, foot_sphere_radius
 
 FEET = ("FL_foot", "FR_foot", "RL_foot", "RR_foot")
 
@@ -72,3 +72,15 @@ def test_with_an_imu_frame_the_feet_are_in_the_imu_frame(rng) -> None:
         UnsupportedRobotError, match=r"'FL_calf'.* moves with joint 'FL_calf_joint'"
     ):
         FootKinematics(robot, FEET, imu_frame="FL_calf")
+
+
+def test_foot_sphere_radius_reads_the_urdf_collision_spheres() -> None:
+    go1 = pinobs.load("go1")
+    assert [foot_sphere_radius(go1, f) for f in GO1_FEET_NAMES] == [0.02] * 4
+    talos = pinobs.load("talos")  # flat soles: boxes, not spheres
+    assert foot_sphere_radius(talos, "left_sole_link") == 0.0
+    with pytest.raises(UnknownNameError, match="FL_fot"):
+        foot_sphere_radius(go1, "FL_fot")
+
+
+GO1_FEET_NAMES = ("FL_foot", "FR_foot", "RL_foot", "RR_foot")

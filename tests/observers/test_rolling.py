@@ -1,0 +1,191 @@
+"""Rolling spherical feet (:mod:`pinobs.observers.rolling`): closed forms, Jacobians, invariance."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import pinobs
+from pinobs.errors import ConfigurationError, GainError
+from pinobs.model import FootKinematics
+from pinobs.observers.inekf import InvariantEKF
+from pinobs.observers.qekf import QuaternionEKF
+from pinobs.observers.rolling import RollingFeet
+from tests.observers.test_inekf import GO1_FEET, Go1Legs, free_flyer_q, pose_errors, truth
+
+RADIUS = 0.02  # go1's foot spheres [m]
+
+
+class RollingSphere:
+    """One foot: a sphere of radius ``r`` rolling along +x on the plane z = −0.3 − r, its joint
+    the rolling angle φ: centre ``(r φ, 0, −0.3)``, orientation ``Rot_y(φ)`` (rolling without
+    slipping, eq. R1: ``ċ = φ̇ ŷ × r ẑ``)."""
+
+    feet = ("foot",)
+    nq_joints = nv_joints = 1
+
+    def __init__(self, r: float) -> None:
+        self.r = r
+
+    def placements_and_jacobians(self, q):
+        phi = float(q[0])
+        h = np.array([[self.r * phi, 0.0, -0.3]])
+        rot = Rotation.from_rotvec([0.0, phi, 0.0]).as_matrix()[None]
+        lin = np.array([[[self.r], [0.0], [0.0]]])
+        ang = np.array([[[0.0], [1.0], [0.0]]])
+        return h, rot, lin, ang
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.05, 0.1, 0.5, -0.3])
+def test_the_touchdown_point_of_a_rolling_sphere_moves_along_a_cycloid(phi: float) -> None:
+    """(R3): ``a(φ) − a(0) = r (φ − sin φ) x̂ + r (1 − cos φ) ẑ`` and its Jacobian the
+    derivative of that, while the centre moves ``r φ``."""
+    r = RADIUS
+    feet = RollingFeet(RollingSphere(r), r)
+    a0, _ = feet.legs(np.zeros(1), np.eye(3), [True])  # lands at φ = 0
+    np.testing.assert_allclose(a0[0], [0.0, 0.0, -0.3 - r], atol=1e-15)  # the lowest point
+    a, jac = feet.legs(np.array([phi]))
+    expected = [r * (phi - math.sin(phi)), 0.0, r * (1.0 - math.cos(phi))]
+    np.testing.assert_allclose(a[0] - a0[0], expected, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        jac[0][:, 0], [r * (1 - math.cos(phi)), 0.0, r * math.sin(phi)], rtol=0, atol=1e-15
+    )
+    if phi:  # third order along the walking axis, where the centre moved r φ
+        assert abs(a[0, 0] - a0[0, 0]) < 0.2 * phi**2 * r * abs(phi)
+
+
+def test_feet_that_lift_off_are_measured_at_their_centre_and_reanchored_when_they_land() -> None:
+    r = RADIUS
+    feet = RollingFeet(RollingSphere(r), r)
+    feet.legs(np.zeros(1), np.eye(3), [True])
+    h_up, _ = feet.legs(np.array([0.2]), np.eye(3), [False])
+    np.testing.assert_allclose(h_up[0], [r * 0.2, 0.0, -0.3], atol=1e-15)
+    tilted = Rotation.from_rotvec([0.3, 0.0, 0.0]).as_matrix()  # the base rolled by 0.3 rad
+    h_down, _ = feet.legs(np.array([0.2]), tilted, [True])
+    # the point −r n of the world, expressed in the base frame: r (0, −sin 0.3, −cos 0.3)
+    np.testing.assert_allclose(
+        h_down[0] - h_up[0], r * np.array([0.0, -math.sin(0.3), -math.cos(0.3)]), atol=1e-15
+    )
+    feet.restart()
+    h, _ = feet.legs(np.array([0.2]))
+    np.testing.assert_allclose(h, h_up, atol=0)
+
+
+def test_the_measured_points_jacobian_matches_finite_differences_on_go1(rng) -> None:
+    legs = FootKinematics(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link")
+    feet = RollingFeet(legs, RADIUS)
+    q0 = np.tile([0.0, 0.8, -1.6], 4)
+    feet.legs(q0, Rotation.from_rotvec(rng.normal(size=3) * 0.3).as_matrix(), [True] * 4)
+    q = q0 + 0.2 * rng.normal(size=12)
+    h, jac = feet.legs(q)
+    eps = 1e-6
+    for i in range(12):
+        dq = np.zeros(12)
+        dq[i] = eps
+        fd = (feet.legs(q + dq)[0] - feet.legs(q - dq)[0]) / (2 * eps)
+        np.testing.assert_allclose(jac[:, :, i], fd, rtol=0, atol=1e-8)
+    centre, centre_jac = legs.positions_and_jacobians(q)
+    assert np.allclose(np.linalg.norm(h - centre, axis=1), RADIUS)
+    assert not np.allclose(jac, centre_jac)
+
+
+def test_placements_and_jacobians_agree_with_positions_and_jacobians(rng) -> None:
+    for imu_frame in (None, "imu_link"):
+        legs = FootKinematics(pinobs.load("go1"), GO1_FEET, imu_frame=imu_frame)
+        q = np.tile([0.0, 0.8, -1.6], 4) + 0.3 * rng.normal(size=12)
+        h, rot, lin, ang = legs.placements_and_jacobians(q)
+        h_ref, lin_ref = legs.positions_and_jacobians(q)
+        np.testing.assert_allclose(h, h_ref, atol=1e-15)
+        np.testing.assert_allclose(lin, lin_ref, atol=1e-15)
+        # the angular Jacobian by finite differences of the orientation: (R⁺ Rᵀ)^∨ / ε
+        eps = 1e-7
+        for i in range(12):
+            dq = np.zeros(12)
+            dq[i] = eps
+            rot_plus = legs.placements_and_jacobians(q + dq)[1]
+            w = np.array(
+                [
+                    Rotation.from_matrix(a @ b.T).as_rotvec()
+                    for a, b in zip(rot_plus, rot, strict=True)
+                ]
+            )
+            np.testing.assert_allclose(ang[:, :, i], w / eps, rtol=0, atol=1e-6)
+
+
+class RollingGo1Legs(Go1Legs):
+    """go1 whose feet are measured at their touch-down points (R2), anchored at the stance
+    with the base level: the truth helper's inverse kinematics keeps those points still."""
+
+    def __init__(self) -> None:
+        super().__init__("imu_link")
+        self.rolling = RollingFeet(
+            FootKinematics(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link"), RADIUS
+        )
+        self.rolling.legs(self.stance, np.eye(3), [True] * 4)
+
+    def positions_and_jacobians(self, q):
+        return self.rolling.legs(q)
+
+
+@pytest.mark.parametrize("cls", [InvariantEKF, QuaternionEKF])
+def test_started_on_the_truth_with_rolling_feet_it_stays_there(cls) -> None:
+    """Noise-free go1 whose feet rotate about their still touch-down points (the centres move
+    by up to millimetres): with ``foot_radius`` the filter stays on the truth; without, not."""
+    legs = RollingGo1Legs()
+    R_bi, r_bi = legs.imu_placement
+    samples = truth(legs, 200.0, 2.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
+    centres = np.array([legs.rolling.kinematics.positions(s[4]) for s in samples])
+    worst = {}
+    for radius in (RADIUS, 0.0):
+        ekf = cls(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", foot_radius=radius)
+        R_i, v_i, p_i = samples[0][1:4]
+        R_b = R_i @ R_bi.T
+        omega_b = R_bi @ samples[0][5]
+        v0 = np.concatenate([R_b.T @ v_i - np.cross(omega_b, r_bi), omega_b, np.zeros(12)])
+        q0 = free_flyer_q(R_b, p_i - R_b @ r_bi, samples[0][4])
+        ekf.reset(0.0, q0, v0, gyro=samples[0][5], acc=samples[0][6], contacts=samples[0][7])
+        worst[radius] = 0.0
+        for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
+            est = ekf.update(t, q, omega, acc, contacts)
+            R_b = R_i @ R_bi.T
+            v_b = v_i - np.cross(R_i @ omega, R_b @ r_bi)
+            worst[radius] = max(worst[radius], *pose_errors(est, R_b, v_b, p_i - R_b @ r_bi))
+    world = np.array(
+        [s[3] + c @ s[1].T for s, c in zip(samples, centres, strict=True)]
+    )  # centres' world
+    assert np.ptp(world, axis=0).max() > 1e-3  # the centres moved: the feet rolled
+    assert worst[RADIUS] < 1e-9
+    assert worst[0.0] > 1e-4
+
+
+def test_bad_foot_radius_is_refused() -> None:
+    go1 = pinobs.load("go1")
+    with pytest.raises(GainError, match="foot_radius"):
+        InvariantEKF(go1, GO1_FEET, foot_radius=-0.02)
+    with pytest.raises(GainError, match="foot_radius"):
+        QuaternionEKF(go1, GO1_FEET, foot_radius=math.nan)
+
+    class NoOrientations:
+        feet = ("foot",)
+        nq_joints = nv_joints = 1
+
+        def positions_and_jacobians(self, q):
+            return np.zeros((1, 3)), np.zeros((1, 3, 1))
+
+    with pytest.raises(ConfigurationError, match="placements_and_jacobians"):
+        InvariantEKF(NoOrientations(), foot_radius=0.02)
+
+
+def test_foot_radius_zero_is_bit_for_bit_the_filter_without_it() -> None:
+    legs = Go1Legs("imu_link")
+    samples = truth(legs, 200.0, 0.5, wobble=0.5, feet_z=None, inverse=legs.inverse)
+    outs = []
+    for kwargs in ({}, {"foot_radius": 0.0}):
+        ekf = InvariantEKF(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", **kwargs)
+        t, R, _, p, q, omega, acc, contacts = samples[0]
+        ekf.reset(t, free_flyer_q(R, p, q), gyro=omega, acc=acc, contacts=contacts)
+        outs.append([ekf.update(t, q, w, a, c).v.copy() for t, _, _, _, q, w, a, c in samples[1:]])
+    np.testing.assert_array_equal(outs[0], outs[1])

@@ -182,6 +182,7 @@ from pinobs.observers.base import (
     positive,
     register,
 )
+from pinobs.observers.blockstep import BlockStep
 from pinobs.observers.fused import (
     LieRK4,
     ekf_correct_kernel,
@@ -431,6 +432,9 @@ class ExtendedKalmanFilter(Observer[EKFState]):
     def step(self, state: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
         if self._fast is not None:
             return self._fast.step(self, state, dt, q_meas, tau)
+        lie = self._lie_fast
+        if lie is not None and lie.blocks is not None and state.d is None:
+            return lie.step(self, state, dt, q_meas, tau)
         # a filter being lost overflows: its update says so (ObserverDiverged), numpy does not
         with np.errstate(over="ignore", invalid="ignore"):
             pred, _ = self.predict(state, dt, tau)
@@ -705,10 +709,12 @@ class _LieFast:
     there (go1: 34.1 against 33.0 ``pin.aba``; talos: 34.7 against 36.3).  The same
     equations, equal to the general path to rounding (tested)."""
 
-    def __init__(self, robot: Robot) -> None:
+    def __init__(self, robot: Robot, offset: bool) -> None:
         self.nv = robot.nv
         self.rk4 = LieRK4.build(robot) if self.nv <= KERNEL_MAX_NV else None
         self.rows = blocks.bracket_rows(robot)  # where −ad_v̂ can be nonzero
+        # the whole step by blocks (pinobs.observers.blockstep), without the offset state
+        self.blocks = BlockStep(robot) if self.nv >= blocks.MIN_NV and not offset else None
 
     @classmethod
     def build(cls, ekf: ExtendedKalmanFilter) -> _LieFast | None:
@@ -716,10 +722,34 @@ class _LieFast:
         r = ekf.robot
         if not isinstance(r, Robot) or r.is_vector_space or r.has_friction:
             return None
-        return cls(r) if r.nv <= KERNEL_MAX_NV or r.nv >= blocks.MIN_NV else None
+        offset = ekf.disturbance_psd is not None
+        return cls(r, offset) if r.nv <= KERNEL_MAX_NV or r.nv >= blocks.MIN_NV else None
 
     def transition(self, A: Vector, h: float) -> Vector:
         """``Φ`` (:func:`~pinobs.observers.linalg.transition_matrix`), a new array."""
         if self.nv <= KERNEL_MAX_NV:
             return transition_matrix(A, h)
         return blocks.transition(A, h, self.nv, self.rows)
+
+    def step(
+        self, ekf: ExtendedKalmanFilter, state: EKFState, dt: float, q_meas: Vector | None,
+        tau: Vector,
+    ) -> EKFState:  # fmt: skip
+        """:meth:`ExtendedKalmanFilter.step` by :class:`~pinobs.observers.blockstep.BlockStep`
+        (no offset state), falling back on :meth:`~ExtendedKalmanFilter.correct` where it
+        takes another way (``S`` not positive definite, ``K_q ≈ I``)."""
+        b, r, robot = self.blocks, ekf.gains.meas_std**2, ekf.robot
+        assert b is not None  # (the caller checked)
+        with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: update says so
+            q, v, P = b.predict(state.q, state.v, tau, dt, state.P, ekf.gains.accel_psd, r)
+            if q_meas is None:
+                return state._replace(q=q, v=v, P=0.5 * (P + P.T), gate=state.gate.predicted())
+            e = robot.difference(q, q_meas)
+            dx, P_new, nis = b.correct(P, e, r)
+            if not nis * r >= 1e-6 * float(e @ e):  # NaN or K_q ≈ I: correct's other ways
+                return ekf.corrected(state._replace(q=q, v=v, P=P.copy()), q_meas, dt)
+            gate = state.gate.measured(nis, ekf._gate, self.nv)
+            if gate.gated:
+                return state._replace(q=q, v=v, P=0.5 * (P + P.T), gate=gate)
+            q = robot.integrate(q, dx[: self.nv])
+            return state._replace(q=q, v=v + dx[self.nv :], P=P_new, gate=gate)

@@ -42,7 +42,47 @@ from pinobs.observers.blocks import bracket_rows
 from pinobs.observers.fused import LieRK4, loaded
 from pinobs.observers.linalg import LazyKernel
 
-__all__ = ["BlockStep", "joseph_kernels", "transition_kernels"]
+__all__ = ["BlockStep", "bracket_table", "joseph_kernels", "transition_kernels"]
+
+
+#: The bracket blocks' kinds in :func:`_start_loops`' table (:attr:`pinobs.model.JointBlock.kind`).
+_KINDS = {"so3": 0, "se3": 1, "se2": 2}
+
+
+def _start_loops(a_q: Vector, a_v: Vector, v: Vector, table: Any, G: Vector, D: Vector) -> None:  # noqa: C901 -- numba kernel: one branch per joint kind
+    """``G = [A_q A_v]`` and ``D = −ad_v`` on the bracket blocks (``table`` rows: kind, first
+    row; :meth:`pinobs.model.Robot.bracket_matrix`: ``skew(ω)`` in a spherical joint, se(3)'s
+    ``[[skew(ω), skew(v)], [0, skew(ω)]]`` in a free-flyer (``x = (v, ω)``), the se(2)
+    bracket in a planar joint); ``D`` elsewhere is not read."""
+    nv = a_q.shape[0]
+    for i in range(nv):
+        for j in range(nv):
+            G[i, j] = a_q[i, j]
+            G[i, nv + j] = a_v[i, j]
+    for r in range(table.shape[0]):
+        kind, i = table[r, 0], table[r, 1]
+        if kind == 2:  # se2, x = (vx, vy, w)
+            for a in range(3):
+                for b in range(3):
+                    D[i + a, i + b] = 0.0
+            D[i, i + 1], D[i, i + 2] = v[i + 2], -v[i + 1]
+            D[i + 1, i], D[i + 1, i + 2] = -v[i + 2], v[i]
+            continue
+        w = i + 3 if kind == 1 else i  # ω's first index
+        for o in range(0, 6 if kind == 1 else 3, 3):  # the diagonal blocks: −skew(ω)
+            D[i + o, i + o], D[i + o, i + o + 1], D[i + o, i + o + 2] = 0.0, v[w + 2], -v[w + 1]
+            D[i + o + 1, i + o], D[i + o + 1, i + o + 1] = -v[w + 2], 0.0
+            D[i + o + 1, i + o + 2] = v[w]
+            D[i + o + 2, i + o], D[i + o + 2, i + o + 1], D[i + o + 2, i + o + 2] = (
+                v[w + 1], -v[w], 0.0,
+            )  # fmt: skip
+        if kind == 1:  # −skew(v) above, zero below
+            D[i, i + 3], D[i, i + 4], D[i, i + 5] = 0.0, v[i + 2], -v[i + 1]
+            D[i + 1, i + 3], D[i + 1, i + 4], D[i + 1, i + 5] = -v[i + 2], 0.0, v[i]
+            D[i + 2, i + 3], D[i + 2, i + 4], D[i + 2, i + 5] = v[i + 1], -v[i], 0.0
+            for a in range(3):
+                for b in range(3):
+                    D[i + 3 + a, i + b] = 0.0
 
 
 def _mid_loops(G: Vector, W: Vector, D: Vector, runs: Any, h: float, mid: Vector) -> None:  # noqa: C901 -- numba kernel: loops over blocks
@@ -207,8 +247,9 @@ def _warm(nv: int) -> tuple[Any, ...]:
 
 
 _m, _s, _g, _runs = _warm(1)
-#: :func:`_mid_loops` and :func:`_phi_loops` compiled.
+#: :func:`_start_loops`, :func:`_mid_loops` and :func:`_phi_loops` compiled.
 transition_kernels = (
+    LazyKernel(_start_loops, _s, _s, np.zeros(1), np.zeros((0, 2), dtype=np.int64), _g, _s),
     LazyKernel(_mid_loops, _g, _g, _s, _runs, 1e-3, _m),
     LazyKernel(_phi_loops, _m, _s, _runs, 1e-3, _m, _m),
 )
@@ -225,6 +266,13 @@ joseph_kernels = (
 )  # fmt: skip
 
 
+def bracket_table(robot: Robot) -> Vector:
+    """The table of :func:`_start_loops`: one row ``(kind, first velocity index)`` per
+    spherical (0), free-flyer (1) and planar (2) joint of ``robot``."""
+    kinds = [(_KINDS[b.kind], b.idx_v) for b in robot.joints if b.kind in _KINDS]
+    return np.array(kinds, dtype=np.int64).reshape(-1, 2)
+
+
 class BlockStep:
     """``ekf``'s step by blocks (module docstring) for a :class:`Robot` with Lie-group joints,
     without friction, ``nv ≥ blocks.MIN_NV``; its own ``pin.Data`` (:class:`LieRK4`'s).
@@ -237,12 +285,13 @@ class BlockStep:
         assert rk4 is not None  # (the caller checked the robot)
         self.robot, self.rk4, self.nv = robot, rk4, nv
         self.runs = np.array([[s.start, s.stop] for s in bracket_rows(robot)], dtype=np.int64)
+        self.table = bracket_table(robot)
+        self._scratch_D = np.zeros((nv, nv))
         self._scratch_G = np.empty((nv, n))
         self._scratch_W = np.empty((nv, n))
         self._scratch_mid = np.empty((n, n))
         self._scratch_Phi = np.empty((n, n))
         self._scratch_PhiT = np.empty((n, n))
-        self._scratch_T = np.empty((n, n))
         self._scratch_P = np.empty((n, n))  # P⁻
         self._scratch_S = np.empty((nv, nv))
         self._scratch_KP = np.empty((n, nv))
@@ -250,7 +299,7 @@ class BlockStep:
         self._scratch_YK = np.empty((n, nv))
         self._scratch_KPv = np.empty((nv, nv))
         self._scratch_YKv = np.empty((nv, nv))
-        self.mid, self.phi = (loaded(k) for k in transition_kernels)
+        self.start, self.mid, self.phi = (loaded(k) for k in transition_kernels)
         self.noise, self.gain, self.carry, self.joseph = (loaded(k) for k in joseph_kernels)
         self._scratch_Kt = np.empty((nv, n))
 
@@ -264,16 +313,13 @@ class BlockStep:
         calls.derivatives(q, v, tau)
         data = calls.data
         G, W, mid, Phi = self._scratch_G, self._scratch_W, self._scratch_mid, self._scratch_Phi
-        a_v = data.ddq_dv
-        G[:, :nv] = data.ddq_dq
-        G[:, nv:] = a_v
-        D = self.robot.bracket_matrix(v)
-        np.negative(D, out=D)
+        a_v, D = data.ddq_dv, self._scratch_D
+        self.start(data.ddq_dq, a_v, v, self.table, G, D)
         np.dot(a_v, G, out=W)  # A_v G
         self.mid(G, W, D, runs, h, mid)
         np.dot(G, mid, out=Phi[nv:])  # G M
         self.phi(mid, D, runs, h, Phi, self._scratch_PhiT)
-        T, P_new = self._scratch_T, self._scratch_P
+        T, P_new = mid, self._scratch_P  # (M is not needed any more)
         np.dot(Phi, P, out=T)
         np.dot(T, self._scratch_PhiT, out=P_new)
         self.noise(P_new, psd * h**3 / 3.0, psd * h**2 / 2.0, psd * h, r, self._scratch_S)

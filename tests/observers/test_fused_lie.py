@@ -8,12 +8,14 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import pinobs
 from pinobs.model import dynamics_rk4
 from pinobs.observers import blocks, make_observer
-from pinobs.observers.fused import LieRK4, jacobi_kernel
+from pinobs.observers.blockstep import bracket_table, transition_kernels
+from pinobs.observers.fused import LieRK4, jacobi_kernel, loaded
 from pinobs.observers.linalg import joseph_update, transition_matrix
 from pinobs.observers.riemannian import jacobi_operator
 from pinobs.simulation import Sensor
@@ -257,3 +259,41 @@ def test_talos_ekf_started_on_the_truth_stays_on_it_and_converges_from_off_it() 
     err = np.abs(res.trace("ekf").v - res.v)
     assert err[0].max() > 0.01
     assert err[res.t > 0.2].max() < 1e-8  # measured 4.1e-2 at the start, 5.3e-11 after 0.2 s
+
+
+def _floating_planar_spherical() -> pinobs.Robot:
+    """A free-flyer carrying a spherical joint and a planar one (every bracket kind)."""
+    model = pin.Model()
+    inertia = pin.Inertia.FromBox(1.0, 0.2, 0.1, 0.1)
+    base = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "base")
+    model.appendBodyToJoint(base, inertia, pin.SE3.Identity())
+    ball = model.addJoint(base, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
+    model.appendBodyToJoint(ball, inertia, pin.SE3.Identity())
+    plane = model.addJoint(ball, pin.JointModelPlanar(), pin.SE3.Identity(), "plane")
+    model.appendBodyToJoint(plane, inertia, pin.SE3.Identity())
+    return pinobs.Robot(model, name="brackets", source="test")
+
+
+@pytest.mark.parametrize("robot_name", ["talos", "top", "brackets"])
+def test_the_compiled_bracket_blocks_are_the_robots(robot_name: str) -> None:
+    """The block step's ``D = −ad_v`` (:func:`~pinobs.observers.blockstep.bracket_table`'s
+    kernel) equals ``−robot.bracket_matrix(v)`` on the runs of bracket rows (adjacent joints'
+    blocks merged), to the bit, for the free-flyer, spherical and planar joints;
+    ``G = [∂a/∂q ∂a/∂v]`` copied."""
+    robot = _floating_planar_spherical() if robot_name == "brackets" else cached_robot(robot_name)
+    nv = robot.nv
+    start = loaded(transition_kernels[0])
+    table = bracket_table(robot)
+    rng = np.random.default_rng(9)
+    for _ in range(3):
+        v, a_q, a_v = (
+            rng.standard_normal(nv),
+            rng.standard_normal((nv, nv)),
+            rng.standard_normal((nv, nv)),
+        )
+        G, D = np.empty((nv, 2 * nv)), np.zeros((nv, nv))  # (zero off the blocks, as BlockStep's)
+        start(a_q, a_v, v, table, G, D)
+        np.testing.assert_array_equal(G, np.hstack([a_q, a_v]))
+        ref = -robot.bracket_matrix(v)
+        for s in blocks.bracket_rows(robot):
+            np.testing.assert_array_equal(D[s, s], ref[s, s])

@@ -254,13 +254,13 @@ transition_kernels = (
     LazyKernel(_phi_loops, _m, _s, _runs, 1e-3, _m, _m),
 )
 #: :func:`_noise_loops`, :func:`_gain_loops`, :func:`_carry_loops` and :func:`_joseph_loops`
-#: compiled (``K`` as ``Kᵀ``'s transpose).
+#: compiled (``K`` as ``Kᵀ``'s transpose: Fortran order, warmed so).
 joseph_kernels = (
     LazyKernel(_noise_loops, _m, 0.0, 0.0, 0.0, 1.0, _s),
     LazyKernel(_gain_loops, _m, _s, np.zeros((1, 2)), contract=True),
-    LazyKernel(_carry_loops, _m, np.zeros((2, 1)), np.zeros((1, 2)).T, 1.0, np.zeros((2, 1))),
+    LazyKernel(_carry_loops, _m, np.zeros((2, 1)), np.zeros((2, 2)).T, 1.0, np.zeros((2, 1))),
     LazyKernel(
-        _joseph_loops, _m, np.zeros((2, 1)), np.zeros((2, 1)), _s, _s, np.zeros((1, 2)).T,
+        _joseph_loops, _m, np.zeros((2, 1)), np.zeros((2, 1)), _s, _s, np.zeros((2, 2)).T,
         np.zeros(1), 1.0, _m, np.zeros(2),
     ),
 )  # fmt: skip

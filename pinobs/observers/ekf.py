@@ -41,11 +41,15 @@ RK4 stages, ``Φ P Φᵀ + Q_d``, the Joseph correction; on the filter's own
 ``pin.Data``): on a UR5, 23 → 14 ``pin.aba`` per update (``measure_cost``, CPU
 time), equal to the NumPy step to rounding (tested).  With Lie-group or continuous
 joints (no friction), :class:`_LieFast`: the RKMK4 step compiled between Pinocchio's
-calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`); from ``nv = 28``,
-``Φ`` on ``A``'s blocks (:mod:`pinobs.observers.blocks`: the identity rows copied,
-``−ad_v̂`` on its joints' rows only) and the Joseph update by a Cholesky factor and two
-triangular solves: a talos (nv = 38) 36.3 → 34.7 ``pin.aba`` per update
-(``measure_cost``, CPU time, the two paths alternating in one process).
+calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`); from ``nv = 28``
+without the offset state, the whole step by blocks (:mod:`pinobs.observers.blockstep`:
+``Φ`` from ``A``'s blocks in two BLAS products, ``Φ P Φᵀ`` in two more, a compiled
+Cholesky gain, the Joseph update's lower block triangle, the compiled RKMK4, the
+arithmetic between them compiled): a talos (nv = 38) 31.8 → 23.7 ``pin.aba`` per update
+(``measure_cost``, CPU time, median of six processes each, the trees alternating, load
+3.7–3.9), of which Pinocchio's four calls are 7.3, the eight BLAS products 6.7 and the
+gain 1.7; predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset
+state) take ``Φ`` and the Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`).
 
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
 ``τ_f = −D v − F_c tanh(v/v_s)``) makes the error dynamics stiff near ``v = 0``:
@@ -701,12 +705,12 @@ class _LieFast:
     """:meth:`ExtendedKalmanFilter.predict` and :meth:`~ExtendedKalmanFilter.correct` on a
     :class:`Robot` with Lie-group or continuous joints, without joint friction (issue 39).
     Up to ``KERNEL_MAX_NV``: the RKMK4 step compiled between Pinocchio's calls
-    (:class:`~pinobs.observers.fused.LieRK4`, on its own ``pin.Data``; the filter loads
-    numba there anyway).  From ``blocks.MIN_NV`` (a talos): ``Φ`` and the Joseph update on
-    ``A``'s blocks (:mod:`pinobs.observers.blocks`: NumPy and LAPACK, no numba, so no
-    start-up cost; the compiled RKMK4 would save 1.5 % of the update there).  In between
-    (a go1), the general path: measured in the filter's loop, the blocks were not faster
-    there (go1: 34.1 against 33.0 ``pin.aba``; talos: 34.7 against 36.3).  The same
+    (:class:`~pinobs.observers.fused.LieRK4`, on its own ``pin.Data``).  From
+    ``blocks.MIN_NV`` (a talos): ``Φ`` and the Joseph update on ``A``'s blocks
+    (:mod:`pinobs.observers.blocks`), and :meth:`step` by
+    :class:`~pinobs.observers.blockstep.BlockStep` without the offset state (numba loaded
+    by the constructor).  In between (a go1), the general path: measured in the filter's
+    loop, the blocks were not faster there (go1: 34.1 against 33.0 ``pin.aba``).  The same
     equations, equal to the general path to rounding (tested)."""
 
     def __init__(self, robot: Robot, offset: bool) -> None:

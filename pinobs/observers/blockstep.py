@@ -35,6 +35,7 @@ import math
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pinobs.model import Robot
 from pinobs.observers.base import Vector
@@ -266,7 +267,7 @@ joseph_kernels = (
 )  # fmt: skip
 
 
-def bracket_table(robot: Robot) -> Vector:
+def bracket_table(robot: Robot) -> NDArray[np.int64]:
     """The table of :func:`_start_loops`: one row ``(kind, first velocity index)`` per
     spherical (0), free-flyer (1) and planar (2) joint of ``robot``."""
     kinds = [(_KINDS[b.kind], b.idx_v) for b in robot.joints if b.kind in _KINDS]

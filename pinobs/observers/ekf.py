@@ -702,23 +702,24 @@ class _FastPath:
 
 
 class _LieFast:
-    """:meth:`ExtendedKalmanFilter.predict` and :meth:`~ExtendedKalmanFilter.correct` on a
-    :class:`Robot` with Lie-group or continuous joints, without joint friction (issue 39).
-    Up to ``KERNEL_MAX_NV``: the RKMK4 step compiled between Pinocchio's calls
-    (:class:`~pinobs.observers.fused.LieRK4`, on its own ``pin.Data``).  From
-    ``blocks.MIN_NV`` (a talos): ``Φ`` and the Joseph update on ``A``'s blocks
-    (:mod:`pinobs.observers.blocks`), and :meth:`step` by
-    :class:`~pinobs.observers.blockstep.BlockStep` without the offset state (numba loaded
-    by the constructor).  In between (a go1), the general path: measured in the filter's
-    loop, the blocks were not faster there (go1: 34.1 against 33.0 ``pin.aba``).  The same
-    equations, equal to the general path to rounding (tested)."""
+    """:meth:`ExtendedKalmanFilter.predict`, :meth:`~ExtendedKalmanFilter.correct` and
+    :meth:`~ExtendedKalmanFilter.step` on a :class:`Robot` with Lie-group or continuous joints,
+    without joint friction (issue 39).  Up to ``KERNEL_MAX_NV``: the RKMK4 step compiled
+    between Pinocchio's calls (:class:`~pinobs.observers.fused.LieRK4`, on its own
+    ``pin.Data``).  Above, without the offset state: :meth:`step` by
+    :class:`~pinobs.observers.blockstep.BlockStep` (numba loaded by the constructor; go1,
+    nv = 18: 31.4–37.4 → 15.6–25.4 ``pin.aba`` per update in two alternating pairs, load 5).
+    From ``blocks.MIN_NV`` (a talos): :meth:`predict` and :meth:`correct` take ``Φ`` and the
+    Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`; below, not faster: go1
+    34.1 against 33.0 ``pin.aba``, the general products).  The same equations, equal to the
+    general path to rounding (tested)."""
 
     def __init__(self, robot: Robot, offset: bool) -> None:
         self.nv = robot.nv
         self.rk4 = LieRK4.build(robot) if self.nv <= KERNEL_MAX_NV else None
         self.rows = blocks.bracket_rows(robot)  # where −ad_v̂ can be nonzero
         # the whole step by blocks (pinobs.observers.blockstep), without the offset state
-        self.blocks = BlockStep(robot) if self.nv >= blocks.MIN_NV and not offset else None
+        self.blocks = BlockStep(robot) if self.nv > KERNEL_MAX_NV and not offset else None
 
     @classmethod
     def build(cls, ekf: ExtendedKalmanFilter) -> _LieFast | None:
@@ -727,11 +728,12 @@ class _LieFast:
         if not isinstance(r, Robot) or r.is_vector_space or r.has_friction:
             return None
         offset = ekf.disturbance_psd is not None
-        return cls(r, offset) if r.nv <= KERNEL_MAX_NV or r.nv >= blocks.MIN_NV else None
+        small, large = r.nv <= KERNEL_MAX_NV, r.nv >= blocks.MIN_NV
+        return cls(r, offset) if small or large or not offset else None
 
     def transition(self, A: Vector, h: float) -> Vector:
         """``Φ`` (:func:`~pinobs.observers.linalg.transition_matrix`), a new array."""
-        if self.nv <= KERNEL_MAX_NV:
+        if self.nv < blocks.MIN_NV:
             return transition_matrix(A, h)
         return blocks.transition(A, h, self.nv, self.rows)
 

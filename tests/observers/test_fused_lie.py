@@ -40,6 +40,7 @@ _COMPILED = (
         ("go1", "riemannian", 3.0),
         ("top", "ekf", 3.0),
         ("rigid_body", "ekf", 3.0),
+        ("go1", "ekf", 3.0),
         ("talos", "ekf", 2.0),
         ("talos", "riemannian", 2.0),
         ("cartpole_continuous", "riemannian", 3.0),
@@ -143,14 +144,17 @@ def test_the_block_products_equal_the_dense_ones(with_offset: bool) -> None:
 def test_the_lie_group_paths_are_taken_where_they_apply() -> None:
     """``riemannian`` takes the compiled Lie-group paths on go1 and talos and with constant
     gains makes no BLAS call there (its update enters no thread limit); ``ekf`` takes its
-    compiled RKMK4 up to nv = 12 (top), the block products from ``blocks.MIN_NV`` (talos,
-    76 × 76 covariance products on one BLAS thread), and neither in between (go1)."""
+    compiled RKMK4 up to nv = 12 (top), the block step above (go1, talos: covariance
+    products on one BLAS thread), and with the offset state the general path on a go1."""
     go1, talos, top = cached_robot("go1"), cached_robot("talos"), cached_robot("top")
     small = make_observer("ekf", top, rate=1000.0, noise_std=1e-4)
     assert small._lie_fast is not None and small._lie_fast.rk4 is not None
-    large = make_observer("ekf", talos, rate=1000.0, noise_std=1e-4)
-    assert large._lie_fast is not None and large._lie_fast.rk4 is None and large.uses_blas
-    assert make_observer("ekf", go1, rate=1000.0, noise_std=1e-4)._lie_fast is None
+    for robot in (go1, talos):  # the block step, on one BLAS thread (its products)
+        large = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
+        assert large._lie_fast is not None and large._lie_fast.rk4 is None and large.uses_blas
+        assert large._lie_fast.blocks is not None
+    offset = make_observer("ekf", go1, rate=1000.0, noise_std=1e-4, disturbance_psd=1.0)
+    assert offset._lie_fast is None  # between the two, with the offset: the general path
     for robot in (go1, talos):
         rie = make_observer("riemannian", robot, rate=1000.0, noise_std=1e-4)
         assert rie._scratch_lie is not None and rie._lie_correction is not None
@@ -245,20 +249,27 @@ def test_the_block_step_takes_the_general_correction_where_s_is_not_positive_def
         assert np.abs(x - y).max() <= 1e-12 * np.abs(y).max()
 
 
-def test_talos_ekf_started_on_the_truth_stays_on_it_and_converges_from_off_it() -> None:
-    """The block step (talos, nv = 38), noise-free: started on the truth it stays on it;
-    started off it, it converges."""
-    robot = cached_robot("talos")
+@pytest.mark.parametrize("robot_name", ["go1", "talos"])
+def test_the_block_step_started_on_the_truth_stays_on_it_and_converges_from_off_it(
+    robot_name: str,
+) -> None:
+    """The block step (go1, nv = 18; talos, nv = 38), noise-free: started on the truth it
+    stays on it; started off it, it converges."""
+    robot = cached_robot(robot_name)
     assert make_observer("ekf", robot)._lie_fast.blocks is not None  # the path tested
     res = pinobs.simulate(robot, ["ekf"], sensor=Sensor(1000, 0.0), duration=0.3, seed=1)
-    assert np.abs(res.trace("ekf").v - res.v).max() < 1e-10  # measured 3.0e-14 (|v| ≤ 11)
+    assert (
+        np.abs(res.trace("ekf").v - res.v).max() < 1e-10
+    )  # measured 3.0e-14 (talos, |v| ≤ 11), 4.1e-14 (go1)
     res = pinobs.simulate(
         robot, ["ekf"], sensor=Sensor(1000, 0.0), duration=0.3, seed=1, perturb_q=0.01,
         perturb_v=0.1,
     )  # fmt: skip
     err = np.abs(res.trace("ekf").v - res.v)
     assert err[0].max() > 0.01
-    assert err[res.t > 0.2].max() < 1e-8  # measured 4.1e-2 at the start, 5.3e-11 after 0.2 s
+    assert (
+        err[res.t > 0.2].max() < 1e-8
+    )  # 4.1e-2, 4.4e-2 at the start; 5.3e-11, 4.9e-11 after 0.2 s
 
 
 def _floating_planar_spherical() -> pinobs.Robot:

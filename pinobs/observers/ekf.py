@@ -47,8 +47,8 @@ without the offset state, the whole step by blocks (:mod:`pinobs.observers.block
 Cholesky gain, the Joseph update's lower block triangle, the compiled RKMK4, the
 arithmetic between them compiled): a talos (nv = 38) 31.8 → 23.7 ``pin.aba`` per update
 (``measure_cost``, CPU time, median of six processes each, the trees alternating, load
-3.7–3.9), of which Pinocchio's four calls are 7.3, the eight BLAS products 6.7 and the
-gain 1.7; predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset
+3.7–3.9; 36.1 → 25.9 at load 4.6–4.9), of which Pinocchio's four calls are 7.2, the eight
+BLAS products 6.5 and the gain 1.7; a go1 (nv = 18) 34.5 → 23.6 (load 4.1–4.6); predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset
 state) take ``Φ`` and the Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`).
 
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
@@ -708,7 +708,7 @@ class _LieFast:
     between Pinocchio's calls (:class:`~pinobs.observers.fused.LieRK4`, on its own
     ``pin.Data``).  Above, without the offset state: :meth:`step` by
     :class:`~pinobs.observers.blockstep.BlockStep` (numba loaded by the constructor; go1,
-    nv = 18: 31.4–37.4 → 15.6–25.4 ``pin.aba`` per update in two alternating pairs, load 5).
+    nv = 18: 34.5 → 23.6 ``pin.aba`` per update, module docstring).
     From ``blocks.MIN_NV`` (a talos): :meth:`predict` and :meth:`correct` take ``Φ`` and the
     Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`; below, not faster: go1
     34.1 against 33.0 ``pin.aba``, the general products).  The same equations, equal to the

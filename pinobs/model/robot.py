@@ -399,17 +399,28 @@ class Robot:
             NonFiniteError: ``q`` has NaN or infinite entries.
             ConfigurationError: a quaternion is not of unit norm.
         """
-        arr = self.check_vector(q, self.nq, what=what)
+        return self.normalized_units(self.check_vector(q, self.nq, what=what), what=what)
+
+    def normalized_units(self, q: Vector, *, what: str = "q") -> Vector:
+        """``q`` (a finite float array of shape ``(nq,)``, changed in place and returned) with
+        its quaternions and ``(cos, sin)`` pairs divided by their norms, each checked to be 1
+        within :data:`pinobs.tolerances.QUATERNION_NORM_TOL` (:meth:`check_configuration`'s
+        last step, for callers that checked the rest).
+
+        Raises:
+            ConfigurationError: a quaternion is not of unit norm.
+        """
         for s in self._unit_slices:
-            norm = float(np.linalg.norm(arr[s]))
+            block = q[s]
+            norm = math.sqrt(float(block.dot(block)))  # np.linalg.norm's arithmetic
             if abs(norm - 1.0) > QUATERNION_NORM_TOL:
                 raise ConfigurationError(
-                    f"{what}[{s.start}:{s.stop}] = {arr[s].tolist()} has norm {norm:.6g}; "
+                    f"{what}[{s.start}:{s.stop}] = {block.tolist()} has norm {norm:.6g}; "
                     f"unit quaternions and (cos, sin) pairs must have norm 1 "
                     f"within {QUATERNION_NORM_TOL:g}"
                 )
-            arr[s] /= norm
-        return arr
+            block /= norm
+        return q
 
     @staticmethod
     def check_vector(x: ArrayLike, n: int, *, what: str) -> Vector:

@@ -45,10 +45,10 @@ calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`); from ``nv = 2
 without the offset state, the whole step by blocks (:mod:`pinobs.observers.blockstep`:
 ``Φ`` from ``A``'s blocks in two BLAS products, ``Φ P Φᵀ`` in two more, a compiled
 Cholesky gain, the Joseph update's lower block triangle, the compiled RKMK4, the
-arithmetic between them compiled): a talos (nv = 38) 31.8 → 23.7 ``pin.aba`` per update
-(``measure_cost``, CPU time, median of six processes each, the trees alternating, load
-3.7–3.9; 36.1 → 25.9 at load 4.6–4.9), of which Pinocchio's four calls are 7.2, the eight
-BLAS products 6.5 and the gain 1.7; a go1 (nv = 18) 34.5 → 23.6 (load 4.1–4.6); predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset
+arithmetic between them compiled; with the update's input checks of issue 39): a talos
+(nv = 38) 31.4 → 22.7 ``pin.aba`` per update (``measure_cost``, CPU time, median of six
+processes each, the trees alternating, load 3.0–3.4), of which Pinocchio's four calls are
+7.2, the eight BLAS products 6.5 and the gain 1.7; a go1 (nv = 18) 32.9 → 22.1; predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset
 state) take ``Φ`` and the Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`).
 
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
@@ -708,7 +708,7 @@ class _LieFast:
     between Pinocchio's calls (:class:`~pinobs.observers.fused.LieRK4`, on its own
     ``pin.Data``).  Above, without the offset state: :meth:`step` by
     :class:`~pinobs.observers.blockstep.BlockStep` (numba loaded by the constructor; go1,
-    nv = 18: 34.5 → 23.6 ``pin.aba`` per update, module docstring).
+    nv = 18: 32.9 → 22.1 ``pin.aba`` per update, module docstring).
     From ``blocks.MIN_NV`` (a talos): :meth:`predict` and :meth:`correct` take ``Φ`` and the
     Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`; below, not faster: go1
     34.1 against 33.0 ``pin.aba``, the general products).  The same equations, equal to the

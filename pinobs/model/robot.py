@@ -388,28 +388,16 @@ class Robot:
 
     # ------------------------------------------------------------- validation
     def check_configuration(self, q: ArrayLike, *, what: str = "q") -> Vector:
-        """Return ``q`` as a float array after checking shape, finiteness and unit quaternions.
-
-        Quaternions (and continuous-joint ``(cos, sin)`` pairs) must have unit
-        norm within :data:`pinobs.tolerances.QUATERNION_NORM_TOL`; they are
-        then renormalised exactly.
-
-        Raises:
-            DimensionError: ``q`` does not have shape ``(nq,)``.
-            NonFiniteError: ``q`` has NaN or infinite entries.
-            ConfigurationError: a quaternion is not of unit norm.
-        """
+        """``q`` as a float array, checked: shape ``(nq,)`` (or ``DimensionError``), finite (or
+        ``NonFiniteError``), unit quaternions and continuous joints' ``(cos, sin)`` pairs (norm 1
+        within :data:`pinobs.tolerances.QUATERNION_NORM_TOL`, or ``ConfigurationError``; then
+        renormalised exactly)."""
         return self.normalized_units(self.check_vector(q, self.nq, what=what), what=what)
 
     def normalized_units(self, q: Vector, *, what: str = "q") -> Vector:
-        """``q`` (a finite float array of shape ``(nq,)``, changed in place and returned) with
-        its quaternions and ``(cos, sin)`` pairs divided by their norms, each checked to be 1
-        within :data:`pinobs.tolerances.QUATERNION_NORM_TOL` (:meth:`check_configuration`'s
-        last step, for callers that checked the rest).
-
-        Raises:
-            ConfigurationError: a quaternion is not of unit norm.
-        """
+        """:meth:`check_configuration`'s last step on ``q``, a finite float array of shape
+        ``(nq,)``, changed in place and returned: its unit-norm blocks checked (or
+        ``ConfigurationError``) and divided by their norms."""
         for s in self._unit_slices:
             block = q[s]
             norm = math.sqrt(float(block.dot(block)))  # np.linalg.norm's arithmetic

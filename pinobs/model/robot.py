@@ -388,28 +388,27 @@ class Robot:
 
     # ------------------------------------------------------------- validation
     def check_configuration(self, q: ArrayLike, *, what: str = "q") -> Vector:
-        """Return ``q`` as a float array after checking shape, finiteness and unit quaternions.
+        """``q`` as a float array, checked: shape ``(nq,)`` (or ``DimensionError``), finite (or
+        ``NonFiniteError``), unit quaternions and continuous joints' ``(cos, sin)`` pairs (norm 1
+        within :data:`pinobs.tolerances.QUATERNION_NORM_TOL`, or ``ConfigurationError``; then
+        renormalised exactly)."""
+        return self.normalized_units(self.check_vector(q, self.nq, what=what), what=what)
 
-        Quaternions (and continuous-joint ``(cos, sin)`` pairs) must have unit
-        norm within :data:`pinobs.tolerances.QUATERNION_NORM_TOL`; they are
-        then renormalised exactly.
-
-        Raises:
-            DimensionError: ``q`` does not have shape ``(nq,)``.
-            NonFiniteError: ``q`` has NaN or infinite entries.
-            ConfigurationError: a quaternion is not of unit norm.
-        """
-        arr = self.check_vector(q, self.nq, what=what)
+    def normalized_units(self, q: Vector, *, what: str = "q") -> Vector:
+        """:meth:`check_configuration`'s last step on ``q``, a finite float array of shape
+        ``(nq,)``, changed in place and returned: its unit-norm blocks checked (or
+        ``ConfigurationError``) and divided by their norms."""
         for s in self._unit_slices:
-            norm = float(np.linalg.norm(arr[s]))
+            block = q[s]
+            norm = math.sqrt(float(block.dot(block)))  # np.linalg.norm's arithmetic
             if abs(norm - 1.0) > QUATERNION_NORM_TOL:
                 raise ConfigurationError(
-                    f"{what}[{s.start}:{s.stop}] = {arr[s].tolist()} has norm {norm:.6g}; "
+                    f"{what}[{s.start}:{s.stop}] = {block.tolist()} has norm {norm:.6g}; "
                     f"unit quaternions and (cos, sin) pairs must have norm 1 "
                     f"within {QUATERNION_NORM_TOL:g}"
                 )
-            arr[s] /= norm
-        return arr
+            block /= norm
+        return q
 
     @staticmethod
     def check_vector(x: ArrayLike, n: int, *, what: str) -> Vector:

@@ -20,7 +20,8 @@ multiply-adds on ``A``'s constant rows.  Here:
   talos, one thread), then the same products as
   :func:`pinobs.observers.linalg.joseph_update`.
 
-:mod:`pinobs.observers.ekf` takes them from :data:`MIN_NV` on.  The same equations as the
+:mod:`pinobs.observers.ekf`'s ``predict`` and ``correct`` take them from :data:`MIN_NV` on
+(its ``step`` without the offset state takes :mod:`pinobs.observers.blockstep`'s).  The same equations as the
 dense products, equal to them to rounding (tested in ``tests/observers/test_fused_lie.py``).
 """
 

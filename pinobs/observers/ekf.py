@@ -41,11 +41,15 @@ RK4 stages, ``Φ P Φᵀ + Q_d``, the Joseph correction; on the filter's own
 ``pin.Data``): on a UR5, 23 → 14 ``pin.aba`` per update (``measure_cost``, CPU
 time), equal to the NumPy step to rounding (tested).  With Lie-group or continuous
 joints (no friction), :class:`_LieFast`: the RKMK4 step compiled between Pinocchio's
-calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`); from ``nv = 28``,
-``Φ`` on ``A``'s blocks (:mod:`pinobs.observers.blocks`: the identity rows copied,
-``−ad_v̂`` on its joints' rows only) and the Joseph update by a Cholesky factor and two
-triangular solves: a talos (nv = 38) 36.3 → 34.7 ``pin.aba`` per update
-(``measure_cost``, CPU time, the two paths alternating in one process).
+calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`); from ``nv = 28``
+without the offset state, the whole step by blocks (:mod:`pinobs.observers.blockstep`:
+``Φ`` from ``A``'s blocks in two BLAS products, ``Φ P Φᵀ`` in two more, a compiled
+Cholesky gain, the Joseph update's lower block triangle, the compiled RKMK4, the
+arithmetic between them compiled; with the update's input checks of issue 39): a talos
+(nv = 38) 31.4 → 22.7 ``pin.aba`` per update (``measure_cost``, CPU time, median of six
+processes each, the trees alternating, load 3.0–3.4), of which Pinocchio's four calls are
+7.2, the eight BLAS products 6.5 and the gain 1.7; a go1 (nv = 18) 32.9 → 22.1; predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset
+state) take ``Φ`` and the Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`).
 
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
 ``τ_f = −D v − F_c tanh(v/v_s)``) makes the error dynamics stiff near ``v = 0``:
@@ -182,6 +186,7 @@ from pinobs.observers.base import (
     positive,
     register,
 )
+from pinobs.observers.blockstep import BlockStep
 from pinobs.observers.fused import (
     LieRK4,
     ekf_correct_kernel,
@@ -431,6 +436,9 @@ class ExtendedKalmanFilter(Observer[EKFState]):
     def step(self, state: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
         if self._fast is not None:
             return self._fast.step(self, state, dt, q_meas, tau)
+        lie = self._lie_fast
+        if lie is not None and lie.blocks is not None and state.d is None:
+            return lie.step(self, state, dt, q_meas, tau)
         # a filter being lost overflows: its update says so (ObserverDiverged), numpy does not
         with np.errstate(over="ignore", invalid="ignore"):
             pred, _ = self.predict(state, dt, tau)
@@ -694,21 +702,24 @@ class _FastPath:
 
 
 class _LieFast:
-    """:meth:`ExtendedKalmanFilter.predict` and :meth:`~ExtendedKalmanFilter.correct` on a
-    :class:`Robot` with Lie-group or continuous joints, without joint friction (issue 39).
-    Up to ``KERNEL_MAX_NV``: the RKMK4 step compiled between Pinocchio's calls
-    (:class:`~pinobs.observers.fused.LieRK4`, on its own ``pin.Data``; the filter loads
-    numba there anyway).  From ``blocks.MIN_NV`` (a talos): ``Φ`` and the Joseph update on
-    ``A``'s blocks (:mod:`pinobs.observers.blocks`: NumPy and LAPACK, no numba, so no
-    start-up cost; the compiled RKMK4 would save 1.5 % of the update there).  In between
-    (a go1), the general path: measured in the filter's loop, the blocks were not faster
-    there (go1: 34.1 against 33.0 ``pin.aba``; talos: 34.7 against 36.3).  The same
-    equations, equal to the general path to rounding (tested)."""
+    """:meth:`ExtendedKalmanFilter.predict`, :meth:`~ExtendedKalmanFilter.correct` and
+    :meth:`~ExtendedKalmanFilter.step` on a :class:`Robot` with Lie-group or continuous joints,
+    without joint friction (issue 39).  Up to ``KERNEL_MAX_NV``: the RKMK4 step compiled
+    between Pinocchio's calls (:class:`~pinobs.observers.fused.LieRK4`, on its own
+    ``pin.Data``).  Above, without the offset state: :meth:`step` by
+    :class:`~pinobs.observers.blockstep.BlockStep` (numba loaded by the constructor; go1,
+    nv = 18: 32.9 → 22.1 ``pin.aba`` per update, module docstring).
+    From ``blocks.MIN_NV`` (a talos): :meth:`predict` and :meth:`correct` take ``Φ`` and the
+    Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`; below, not faster: go1
+    34.1 against 33.0 ``pin.aba``, the general products).  The same equations, equal to the
+    general path to rounding (tested)."""
 
-    def __init__(self, robot: Robot) -> None:
+    def __init__(self, robot: Robot, offset: bool) -> None:
         self.nv = robot.nv
         self.rk4 = LieRK4.build(robot) if self.nv <= KERNEL_MAX_NV else None
         self.rows = blocks.bracket_rows(robot)  # where −ad_v̂ can be nonzero
+        # the whole step by blocks (pinobs.observers.blockstep), without the offset state
+        self.blocks = BlockStep(robot) if self.nv > KERNEL_MAX_NV and not offset else None
 
     @classmethod
     def build(cls, ekf: ExtendedKalmanFilter) -> _LieFast | None:
@@ -716,10 +727,35 @@ class _LieFast:
         r = ekf.robot
         if not isinstance(r, Robot) or r.is_vector_space or r.has_friction:
             return None
-        return cls(r) if r.nv <= KERNEL_MAX_NV or r.nv >= blocks.MIN_NV else None
+        offset = ekf.disturbance_psd is not None
+        small, large = r.nv <= KERNEL_MAX_NV, r.nv >= blocks.MIN_NV
+        return cls(r, offset) if small or large or not offset else None
 
     def transition(self, A: Vector, h: float) -> Vector:
         """``Φ`` (:func:`~pinobs.observers.linalg.transition_matrix`), a new array."""
-        if self.nv <= KERNEL_MAX_NV:
+        if self.nv < blocks.MIN_NV:
             return transition_matrix(A, h)
         return blocks.transition(A, h, self.nv, self.rows)
+
+    def step(
+        self, ekf: ExtendedKalmanFilter, state: EKFState, dt: float, q_meas: Vector | None,
+        tau: Vector,
+    ) -> EKFState:  # fmt: skip
+        """:meth:`ExtendedKalmanFilter.step` by :class:`~pinobs.observers.blockstep.BlockStep`
+        (no offset state), falling back on :meth:`~ExtendedKalmanFilter.correct` where it
+        takes another way (``S`` not positive definite, ``K_q ≈ I``)."""
+        b, r, robot = self.blocks, ekf.gains.meas_std**2, ekf.robot
+        assert b is not None  # (the caller checked)
+        with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: update says so
+            q, v, P = b.predict(state.q, state.v, tau, dt, state.P, ekf.gains.accel_psd, r)
+            if q_meas is None:
+                return state._replace(q=q, v=v, P=0.5 * (P + P.T), gate=state.gate.predicted())
+            e = robot.difference(q, q_meas)
+            dx, P_new, nis = b.correct(P, e, r)
+            if not nis * r >= 1e-6 * float(e @ e):  # NaN or K_q ≈ I: correct's other ways
+                return ekf.corrected(state._replace(q=q, v=v, P=P.copy()), q_meas, dt)
+            gate = state.gate.measured(nis, ekf._gate, self.nv)
+            if gate.gated:
+                return state._replace(q=q, v=v, P=0.5 * (P + P.T), gate=gate)
+            q = robot.integrate(q, dx[: self.nv])
+            return state._replace(q=q, v=v + dx[self.nv :], P=P_new, gate=gate)

@@ -8,12 +8,14 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import pinobs
 from pinobs.model import dynamics_rk4
 from pinobs.observers import blocks, make_observer
-from pinobs.observers.fused import LieRK4, jacobi_kernel
+from pinobs.observers.blockstep import bracket_table, transition_kernels
+from pinobs.observers.fused import LieRK4, jacobi_kernel, loaded
 from pinobs.observers.linalg import joseph_update, transition_matrix
 from pinobs.observers.riemannian import jacobi_operator
 from pinobs.simulation import Sensor
@@ -38,6 +40,7 @@ _COMPILED = (
         ("go1", "riemannian", 3.0),
         ("top", "ekf", 3.0),
         ("rigid_body", "ekf", 3.0),
+        ("go1", "ekf", 3.0),
         ("talos", "ekf", 2.0),
         ("talos", "riemannian", 2.0),
         ("cartpole_continuous", "riemannian", 3.0),
@@ -141,14 +144,17 @@ def test_the_block_products_equal_the_dense_ones(with_offset: bool) -> None:
 def test_the_lie_group_paths_are_taken_where_they_apply() -> None:
     """``riemannian`` takes the compiled Lie-group paths on go1 and talos and with constant
     gains makes no BLAS call there (its update enters no thread limit); ``ekf`` takes its
-    compiled RKMK4 up to nv = 12 (top), the block products from ``blocks.MIN_NV`` (talos,
-    76 × 76 covariance products on one BLAS thread), and neither in between (go1)."""
+    compiled RKMK4 up to nv = 12 (top), the block step above (go1, talos: covariance
+    products on one BLAS thread), and with the offset state the general path on a go1."""
     go1, talos, top = cached_robot("go1"), cached_robot("talos"), cached_robot("top")
     small = make_observer("ekf", top, rate=1000.0, noise_std=1e-4)
     assert small._lie_fast is not None and small._lie_fast.rk4 is not None
-    large = make_observer("ekf", talos, rate=1000.0, noise_std=1e-4)
-    assert large._lie_fast is not None and large._lie_fast.rk4 is None and large.uses_blas
-    assert make_observer("ekf", go1, rate=1000.0, noise_std=1e-4)._lie_fast is None
+    for robot in (go1, talos):  # the block step, on one BLAS thread (its products)
+        large = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
+        assert large._lie_fast is not None and large._lie_fast.rk4 is None and large.uses_blas
+        assert large._lie_fast.blocks is not None
+    offset = make_observer("ekf", go1, rate=1000.0, noise_std=1e-4, disturbance_psd=1.0)
+    assert offset._lie_fast is None  # between the two, with the offset: the general path
     for robot in (go1, talos):
         rie = make_observer("riemannian", robot, rate=1000.0, noise_std=1e-4)
         assert rie._scratch_lie is not None and rie._lie_correction is not None
@@ -179,3 +185,126 @@ def test_the_lie_group_paths_keep_step_pure(robot_name: str, name: str) -> None:
     for a, b in zip(first, second, strict=True):
         if isinstance(a, np.ndarray):
             np.testing.assert_array_equal(a, b)
+
+
+def _talos_state(rng: np.random.Generator, robot: pinobs.Robot) -> tuple[Any, ...]:
+    nv = robot.nv
+    q, v = robot.random_configuration(rng, scale=0.5), rng.standard_normal(nv)
+    X = rng.standard_normal((2 * nv, 4 * nv))
+    P = 1e-4 * (X @ X.T) / (4 * nv) + 1e-8 * np.eye(2 * nv)  # SPD, spread as a filter's
+    return q, v, P, robot.gravity(q)
+
+
+def test_the_block_step_equals_predict_then_correct_on_talos() -> None:
+    """:class:`~pinobs.observers.blockstep.BlockStep` (``Φ`` from ``A``'s blocks, the Cholesky
+    gain by rows, the Joseph update's lower block triangle) against the filter's
+    :meth:`predict` and :meth:`correct` on ``A`` (:func:`blocks.transition`,
+    :func:`blocks.joseph_update`): ``(q⁻, v⁻)`` to the bit (both RKMK4 steps are
+    :func:`dynamics_rk4`'s), ``P⁻``, ``dx``, ``P⁺`` to 1e-13 of their largest entries,
+    ``P⁺`` exactly symmetric."""
+    robot = cached_robot("talos")
+    nv = robot.nv
+    ekf = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
+    step = ekf._lie_fast.blocks
+    assert step is not None
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        q, v, P, tau = _talos_state(rng, robot)
+        state = ekf.initial_state(q, v)._replace(P=P)
+        pred, _ = ekf.predict(state, 1e-3, tau)
+        r, psd = ekf.gains.meas_std**2, ekf.gains.accel_psd
+        q_b, v_b, P_b = step.predict(q, v, tau, 1e-3, P, psd, r)
+        np.testing.assert_array_equal(q_b, pred.q)
+        np.testing.assert_array_equal(v_b, pred.v)
+        assert np.abs(P_b - pred.P).max() <= 1e-13 * np.abs(pred.P).max()
+        e = 1e-3 * rng.standard_normal(nv)
+        dx, P_new, nis = step.correct(P_b, e, r)
+        dx_ref, P_ref = blocks.joseph_update(pred.P, e, r)
+        assert np.abs(dx - dx_ref).max() <= 1e-13 * np.abs(dx_ref).max()
+        assert np.abs(P_new - P_ref).max() <= 1e-13 * np.abs(P_ref).max()
+        np.testing.assert_array_equal(P_new, P_new.T)
+        S = pred.P[:nv, :nv] + r * np.eye(nv)
+        assert nis == pytest.approx(float(e @ np.linalg.solve(S, e)), rel=1e-9)
+
+
+def test_the_block_step_takes_the_general_correction_where_s_is_not_positive_definite() -> None:
+    """A covariance whose ``S = P_qq + R`` is indefinite (a filter being lost): the block step
+    reports it (NaN NIS) and the filter's step equals the general path's."""
+    robot = cached_robot("talos")
+    nv = robot.nv
+    fast = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
+    slow = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
+    slow._lie_fast = None
+    rng = np.random.default_rng(8)
+    q, v, P, tau = _talos_state(rng, robot)
+    P[:nv, :nv] -= 2.0 * np.abs(P).max() * np.eye(nv)  # S negative definite
+    state = fast.initial_state(q, v)._replace(P=P)
+    step = fast._lie_fast.blocks
+    _, _, P_b = step.predict(q, v, tau, 1e-3, P, fast.gains.accel_psd, 1e-8)
+    assert np.isnan(step.correct(P_b, np.zeros(nv), 1e-8)[2])
+    q_meas = robot.integrate(q, 1e-4 * rng.standard_normal(nv))
+    a = fast.step(state, 1e-3, q_meas, tau)
+    b = slow.step(state, 1e-3, q_meas, tau)
+    for x, y in ((a.q, b.q), (a.v, b.v), (a.P, b.P)):
+        assert np.abs(x - y).max() <= 1e-12 * np.abs(y).max()
+
+
+@pytest.mark.parametrize("robot_name", ["go1", "talos"])
+def test_the_block_step_started_on_the_truth_stays_on_it_and_converges_from_off_it(
+    robot_name: str,
+) -> None:
+    """The block step (go1, nv = 18; talos, nv = 38), noise-free: started on the truth it
+    stays on it; started off it, it converges."""
+    robot = cached_robot(robot_name)
+    assert make_observer("ekf", robot)._lie_fast.blocks is not None  # the path tested
+    res = pinobs.simulate(robot, ["ekf"], sensor=Sensor(1000, 0.0), duration=0.3, seed=1)
+    assert (
+        np.abs(res.trace("ekf").v - res.v).max() < 1e-10
+    )  # measured 3.0e-14 (talos, |v| ≤ 11), 4.1e-14 (go1)
+    res = pinobs.simulate(
+        robot, ["ekf"], sensor=Sensor(1000, 0.0), duration=0.3, seed=1, perturb_q=0.01,
+        perturb_v=0.1,
+    )  # fmt: skip
+    err = np.abs(res.trace("ekf").v - res.v)
+    assert err[0].max() > 0.01
+    assert (
+        err[res.t > 0.2].max() < 1e-8
+    )  # 4.1e-2, 4.4e-2 at the start; 5.3e-11, 4.9e-11 after 0.2 s
+
+
+def _floating_planar_spherical() -> pinobs.Robot:
+    """A free-flyer carrying a spherical joint and a planar one (every bracket kind)."""
+    model = pin.Model()
+    inertia = pin.Inertia.FromBox(1.0, 0.2, 0.1, 0.1)
+    base = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "base")
+    model.appendBodyToJoint(base, inertia, pin.SE3.Identity())
+    ball = model.addJoint(base, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
+    model.appendBodyToJoint(ball, inertia, pin.SE3.Identity())
+    plane = model.addJoint(ball, pin.JointModelPlanar(), pin.SE3.Identity(), "plane")
+    model.appendBodyToJoint(plane, inertia, pin.SE3.Identity())
+    return pinobs.Robot(model, name="brackets", source="test")
+
+
+@pytest.mark.parametrize("robot_name", ["talos", "top", "brackets"])
+def test_the_compiled_bracket_blocks_are_the_robots(robot_name: str) -> None:
+    """The block step's ``D = −ad_v`` (:func:`~pinobs.observers.blockstep.bracket_table`'s
+    kernel) equals ``−robot.bracket_matrix(v)`` on the runs of bracket rows (adjacent joints'
+    blocks merged), to the bit, for the free-flyer, spherical and planar joints;
+    ``G = [∂a/∂q ∂a/∂v]`` copied."""
+    robot = _floating_planar_spherical() if robot_name == "brackets" else cached_robot(robot_name)
+    nv = robot.nv
+    start = loaded(transition_kernels[0])
+    table = bracket_table(robot)
+    rng = np.random.default_rng(9)
+    for _ in range(3):
+        v, a_q, a_v = (
+            rng.standard_normal(nv),
+            rng.standard_normal((nv, nv)),
+            rng.standard_normal((nv, nv)),
+        )
+        G, D = np.empty((nv, 2 * nv)), np.zeros((nv, nv))  # (zero off the blocks, as BlockStep's)
+        start(a_q, a_v, v, table, G, D)
+        np.testing.assert_array_equal(G, np.hstack([a_q, a_v]))
+        ref = -robot.bracket_matrix(v)
+        for s in blocks.bracket_rows(robot):
+            np.testing.assert_array_equal(D[s, s], ref[s, s])

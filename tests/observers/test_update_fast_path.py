@@ -1,8 +1,8 @@
 """``Observer.update``'s fast input path (issue 39) against its full checks.
 
 A float time and float64 arrays of the right shape are checked by a cheaper path
-(a Python sum for finiteness, ``±`` the smallest joint's torque bound); anything
-else goes through the full checks.  Both must give the same estimates bit for
+(a Python sum for finiteness, ``±`` the smallest joint's torque bound or each joint's
+own, unit-norm blocks of ``q`` normalised); anything else goes through the full checks.  Both must give the same estimates bit for
 bit, the same errors, and no aliasing of the caller's buffers or of an estimate
 the caller kept.
 """
@@ -39,7 +39,7 @@ def _pair(name: str, *robot_names: str):
 @pytest.mark.parametrize("name", observer_names())
 def test_fast_and_full_checks_give_the_same_bits(name: str) -> None:
     """Arrays and floats (fast path) against lists, ints-as-float64 scalars (full checks)."""
-    robot, (fast, full), ts, qs = _pair(name, "cartpole", "top")  # top: q's full checks
+    robot, (fast, full), ts, qs = _pair(name, "cartpole", "top")  # top: a quaternion
     tau = robot.gravity(robot.neutral()) + 0.5
     for k, (t, q) in enumerate(zip(ts, qs, strict=True)):
         q_in = None if k % 7 == 3 else q
@@ -107,3 +107,26 @@ def test_reused_input_buffers_and_kept_estimates_are_not_aliased(name: str) -> N
     for e, (q, v) in zip(kept, copies, strict=True):
         assert e.q.tobytes() == q.tobytes() and e.v.tobytes() == v.tobytes()
         assert not e.q.flags.writeable and not e.v.flags.writeable
+
+
+@pytest.mark.parametrize("name", ["ekf", "riemannian"])
+def test_a_quaternion_off_unit_norm_is_normalised_or_refused_as_by_the_full_check(
+    name: str,
+) -> None:
+    """go1 (free-flyer): a quaternion 1e-9 off unit norm is normalised by the fast path to the
+    bits of ``check_configuration`` (the same estimates as from a list); one 1e-2 off is
+    refused with its message, and leaves the observer as it was."""
+    robot, (fast, full), ts, qs = _pair(name, "go1")
+    for k, (t, q) in enumerate(zip(ts[:10], qs[:10], strict=True)):
+        q = q.copy()
+        q[3:7] *= 1.0 + 1e-9 * (k % 3)
+        a = fast.update(t, q, np.zeros(robot.nv))
+        b = full.update(t, q.tolist(), np.zeros(robot.nv).tolist())
+        assert a.q.tobytes() == b.q.tobytes() and a.v.tobytes() == b.v.tobytes()
+    bad = qs[10].copy()
+    bad[3:7] *= 1.01
+    with pytest.raises(pinobs.ConfigurationError, match=r"q_meas\[3:7\] = .* has norm 1\.01"):
+        fast.update(ts[10], bad, np.zeros(robot.nv))
+    a = fast.update(ts[10], qs[10], np.zeros(robot.nv))
+    b = full.update(ts[10], qs[10], np.zeros(robot.nv))
+    assert a.q.tobytes() == b.q.tobytes() and a.v.tobytes() == b.v.tobytes()

@@ -14,6 +14,9 @@ processes (as a user's program starts), each timing its steps one by one:
   importing :mod:`pinobs.observers.inekf` and building ``InvariantEKF(robot, feet)``);
 * ``reset``, ``first`` (the first ``update``) and ``later`` (the median of the next 20);
 * ``make + first`` — ``make + reset + first``: issue 39's target ≤ 0.5 s;
+* ``main thread`` — its CPU time on the main thread alone (``time.thread_time``): the rest
+  of the process's CPU time is OpenBLAS's worker thread spinning (about 2²⁸ cycles, before
+  it sleeps) after SciPy's OpenBLAS is loaded, which numba does when its first kernel loads;
 * ``numba`` — whether the process imported numba, and how many compiled kernels it loaded;
 * ``to first CPU`` — the process's CPU time from its start to the first estimate (the
   interpreter's own start-up, ``import``, ``load``, ``make``, ``reset``, ``first``).
@@ -51,9 +54,10 @@ robot_name, name, opts = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
 out = {"import_cpu": c1 - c0, "import_wall": w1 - w0, "start_cpu": c0}
 
 def step(key, f):
-    c, t = time.process_time(), time.perf_counter()
+    c, t, m = time.process_time(), time.perf_counter(), time.thread_time()
     r = f()
     out[key], out[key + "_cpu"] = time.perf_counter() - t, time.process_time() - c
+    out[key + "_main"] = time.thread_time() - m
     return r
 
 robot = step("load", lambda: pinobs.load(robot_name))
@@ -92,9 +96,10 @@ print(json.dumps(out))
 
 _FLOOR = r"""
 import json, sys, time
-c0, w0 = time.process_time(), time.perf_counter()
+c0, w0, m0 = time.process_time(), time.perf_counter(), time.thread_time()
 exec(sys.argv[1])
-print(json.dumps({"import_cpu": time.process_time() - c0, "import_wall": time.perf_counter() - w0}))
+print(json.dumps({"import_cpu": time.process_time() - c0, "import_wall": time.perf_counter() - w0,
+                  "import_main": time.thread_time() - m0}))
 """
 
 #: (robot, observer, options)
@@ -124,6 +129,7 @@ FLOORS = (
     "import numpy, pinocchio",
     "import numpy, pinocchio, scipy.linalg",
     "import numpy, pinocchio, numba",
+    "import numpy, pinocchio, numba, scipy.linalg.cython_blas",
     "import numpy, pinocchio, numba; from pinobs.observers.linalg import transition_kernel; "
     "transition_kernel.load()",
 )
@@ -151,6 +157,7 @@ def row(robot: str, name: str, options: dict[str, object], m: dict[str, float]) 
     """One table row: every step as wall ms (CPU ms)."""
     keys = ("make", "reset", "first")
     first, first_cpu = sum(m[k] for k in keys), sum(m[k + "_cpu"] for k in keys)
+    first_main = sum(m[k + "_main"] for k in keys)
     label = name + "".join(f" {k}={v}" for k, v in options.items())
     met = "yes" if first_cpu <= 0.5 else "**no**"
 
@@ -161,6 +168,7 @@ def row(robot: str, name: str, options: dict[str, object], m: dict[str, float]) 
         f"| {robot} | {label} | {m['import_cpu']:.3f} | {m['import_wall']:.3f} | "
         f"{ms('load')} | {ms('make')} | {ms('reset')} | {ms('first')} | "
         f"{m['later'] * 1e3:.2f} | {first * 1e3:.0f} ({first_cpu * 1e3:.0f}) {met} | "
+        f"{first_main * 1e3:.0f} | "
         f"{'yes' if m['numba'] else 'no'} ({m['kernels']:.0f}) | {m['to_first_cpu']:.2f} |"
     )
 
@@ -197,8 +205,9 @@ def main() -> None:
         "(`yes`/`no`).",
         "",
         "| robot | observer | import CPU s | import wall s | load ms | make ms | reset ms "
-        "| first ms | later ms | make + first ms | numba (kernels) | to first CPU s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| first ms | later ms | make + first ms | main thread CPU ms | numba (kernels) "
+        "| to first CPU s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     print("\n".join(lines), flush=True)
     for robot, name, options in runs:
@@ -210,7 +219,10 @@ def main() -> None:
     lines += ["", "The floor (the same fresh processes, importing only):", ""]
     for code in FLOORS:
         m = median_of([fresh(_FLOOR, code) for _ in range(n)])
-        lines.append(f"* `{code}`: {m['import_cpu']:.3f} s CPU, {m['import_wall']:.3f} s wall")
+        lines.append(
+            f"* `{code}`: {m['import_cpu']:.3f} s CPU ({m['import_main']:.3f} on the main "
+            f"thread), {m['import_wall']:.3f} s wall"
+        )
         print(lines[-1], flush=True)
     load1 = os.getloadavg()
     lines += ["", f"Load average at the end {load1[0]:.1f} / {load1[1]:.1f} / {load1[2]:.1f}."]

@@ -87,7 +87,7 @@ __all__ = ["NeverBehind", "match_density"]
 LOG_BOUNDS = (-8.0, 5.0)
 
 
-def _clipped_log_chi2_mean(lo: float, hi: float) -> float:
+def clipped_log_chi2_mean(lo: float, hi: float) -> float:
     """``E[clip(log u, lo, hi)]`` for ``u ~ χ²₁`` (``−(γ + log 2) = −1.2704`` unclipped): the
     density of ``y = log u`` is ``exp(y/2 − eʸ/2)/√(2π)``, integrated by the trapezoid rule."""
     y = np.linspace(-60.0, 8.0, 200001)
@@ -95,8 +95,10 @@ def _clipped_log_chi2_mean(lo: float, hi: float) -> float:
     return float(np.trapezoid(np.clip(y, lo, hi) * f, y) / np.trapezoid(f, y))
 
 
-#: The mean the clipped ``log(e²/S)`` has when ``e ~ N(0, S)``: the fixed point.
-LOG_CHI2_MEAN = _clipped_log_chi2_mean(*LOG_BOUNDS)
+#: The mean the clipped ``log(e²/S)`` has when ``e ~ N(0, S)``: the fixed point,
+#: ``clipped_log_chi2_mean(*LOG_BOUNDS)`` written out (its 200 001-point integral cost 5–9 ms
+#: of every ``make_observer`` at import: issue 39; the test recomputes it).
+LOG_CHI2_MEAN = -1.241135859180433
 
 
 def match_density(

@@ -10,7 +10,13 @@ from pinobs.errors import OptionError
 from pinobs.evaluation import evaluate
 from pinobs.observers import make_observer
 from pinobs.observers.ekf import ExtendedKalmanFilter
-from pinobs.observers.neverbehind import NeverBehind, match_density
+from pinobs.observers.neverbehind import (
+    LOG_BOUNDS,
+    LOG_CHI2_MEAN,
+    NeverBehind,
+    clipped_log_chi2_mean,
+    match_density,
+)
 from pinobs.simulation import Sensor, simulate
 
 FAMILIES = ["ekf", "riemannian", "kalman"]
@@ -162,3 +168,24 @@ def test_learned_disturbance_ekf_absorbs_a_grossly_wrong_model() -> None:
     assert rms["x3"]["auto+nb"] <= 1.1 * rms["x3"]["kf"]
     assert rms["exact"]["auto"] <= 1.5 * rms["exact"]["ekf"]  # measured 1.28× (5.1e-5)
     assert rms["exact"]["auto+nb"] <= 1.5 * rms["exact"]["ekf"]
+
+
+def test_log_chi2_mean_constant_is_the_clipped_integral() -> None:
+    """The written-out fixed point is the integral it stands for (recomputed here), and that
+    integral is right: unclipped, ``E[log u] = −(γ + log 2)`` for ``u ~ χ²₁``; clipped, the
+    same expectation by adaptive quadrature (scipy) of the density of ``y = log u``."""
+    from scipy.integrate import quad
+
+    assert LOG_CHI2_MEAN == pytest.approx(clipped_log_chi2_mean(*LOG_BOUNDS), rel=0, abs=1e-14)
+    assert clipped_log_chi2_mean(-np.inf, np.inf) == pytest.approx(
+        -(np.euler_gamma + np.log(2.0)), abs=1e-9
+    )
+    lo, hi = LOG_BOUNDS
+
+    def density(y: float) -> float:
+        return float(np.exp(0.5 * y - 0.5 * np.exp(y)) / np.sqrt(2.0 * np.pi))
+
+    below = quad(density, -np.inf, lo)[0]
+    inside = quad(lambda y: y * density(y), lo, hi)[0]
+    above = quad(density, hi, np.inf)[0]
+    assert lo * below + inside + hi * above == pytest.approx(LOG_CHI2_MEAN, abs=1e-9)

@@ -57,7 +57,8 @@ is appended to it; without it, the header is generated from the arguments.
 
 `real`: SEROW's Go1 log (no truth; `benchmarks/real_data.py`) through
 `pinobs.io.legged_run.legged_run` with its defaults (`LEGGED_GAINS`, the encoders' σ from the
-log's stillest second, `slip_speed`: chosen on MuJoCo, the log held out), with σ_q from the
+log's stillest second, `slip_speed`, `foot_radius="urdf"`: chosen on MuJoCo, the log held
+out), with `foot_radius=0` (the foot frames, the default before), with σ_q from the
 first second (the default before), with `imu_noise="log"`, and with the white foot noise of
 before (`GAINS`), contacts from the force threshold or SEROW's probability, with and
 without the foot gate: the feet's NIS over the stance rows

@@ -446,7 +446,9 @@ def _foot_radius(
             radii = {foot: foot_sphere_radius(robot, foot) for foot in feet}
         except PinobsError as exc:  # not a URDF robot, a foot frame not a link: no sphere known
             return 0.0, [
-                f"inekf: foot_radius='urdf' but {exc}: the foot frames measured (radius 0)"
+                f"inekf: foot_radius='urdf' but {robot.name}'s foot spheres are not known "
+                f"({str(exc).split(';')[0]}): the foot frames measured (radius 0); pass "
+                "foot_radius [m]"
             ]
         if len(set(radii.values())) > 1:
             raise OptionError(

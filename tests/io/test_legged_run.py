@@ -276,7 +276,8 @@ def test_cli_inekf_takes_the_contact_probability_and_the_foot_gate(tmp_path, tro
 
 def test_the_foot_radius_reaches_the_filter(trot, monkeypatch) -> None:
     """``foot_radius`` (default ``"urdf"``: go1's foot spheres, 0.02 m, said in the warnings)
-    is the filter's; 0 builds the filter without rolling feet (its own default, as before)."""
+    is the filter's; 0 builds the filter without rolling feet (its own default, as before);
+    a model not loaded from a URDF gets 0, said."""
     import pinobs.io.legged_run as runner
 
     made = []
@@ -294,7 +295,10 @@ def test_the_foot_radius_reaches_the_filter(trot, monkeypatch) -> None:
     runner.legged_run(go1, log, foot_radius=0.01)
     frames = runner.legged_run(go1, log, foot_radius=0).run.warnings
     assert not [w for w in frames if "rolling" in w]
-    (r_urdf, roll_urdf), (r_given, roll_given), (r_zero, roll_zero) = made
+    unknown = runner.legged_run(pinobs.load(go1.model), log).run.warnings  # not from a URDF
+    assert [w for w in unknown if "foot spheres are not known" in w and "(radius 0)" in w]
+    (r_urdf, roll_urdf), (r_given, roll_given), (r_zero, roll_zero), (r_none, _) = made
+    assert r_none == 0.0
     assert r_urdf == 0.02 and roll_urdf.radius == 0.02
     assert r_given == 0.01 and roll_given.radius == 0.01
     assert r_zero == 0.0 and roll_zero is None

@@ -51,9 +51,14 @@ every axis and consistent (NEES/3 0.5-2); an update ≤ 30 `pin.aba` on go1.
     python benchmarks/legged_truth.py --sections cost --merge    # the cost table alone
     python benchmarks/legged_truth.py --sections real --merge    # the real Go1 log alone
 
+With `--merge` the report's first paragraph (its header, hand-written prose about earlier
+runs) is kept from `legged_truth.md` and a sentence naming this run (command, date, time)
+is appended to it; without it, the header is generated from the arguments.
+
 `real`: SEROW's Go1 log (no truth; `benchmarks/real_data.py`) through
 `pinobs.io.legged_run.legged_run` with its defaults (`LEGGED_GAINS`, the encoders' σ from the
-log's stillest second, `slip_speed`: chosen on MuJoCo, the log held out), with σ_q from the
+log's stillest second, `slip_speed`, `foot_radius="urdf"`: chosen on MuJoCo, the log held
+out), with `foot_radius=0` (the foot frames, the default before), with σ_q from the
 first second (the default before), with `imu_noise="log"`, and with the white foot noise of
 before (`GAINS`), contacts from the force threshold or SEROW's probability, with and
 without the foot gate: the feet's NIS over the stance rows
@@ -292,10 +297,17 @@ def measure_cost(run: Any, robot: pinobs.Robot, chunk: int = 20, chunks: int = 1
     return out
 
 
-def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
+def format_report(
+    report: dict[str, Any], args: argparse.Namespace, header: str | None = None
+) -> str:
+    """The markdown report; its first paragraph ``header`` (the one of the report being
+    merged into, hand-written prose kept) followed by a sentence naming this run, or
+    (``None``) generated from ``args``."""
     m = report["machine"]
     md = [
-        f"Made by `python benchmarks/legged_truth.py --duration {args.duration:g} --seeds "
+        header + " " + _rerun_sentence(report, args)
+        if header
+        else f"Made by `python benchmarks/legged_truth.py --duration {args.duration:g} --seeds "
         f"{' '.join(map(str, args.seeds))} --long {args.long:g} --long-seeds "
         f"{' '.join(map(str, args.long_seeds))}` on {m['date']} in "
         f"{' + '.join(f'{v:.0f} s ({k})' for k, v in report['seconds'].items())} "
@@ -374,6 +386,26 @@ def format_report(report: dict[str, Any], args: argparse.Namespace) -> str:
     return "\n".join(md)
 
 
+def _rerun_sentence(report: dict[str, Any], args: argparse.Namespace) -> str:
+    """This run, said after a kept header: its command, date and time, the rows kept."""
+    import sys
+
+    command = " ".join(["python", "benchmarks/legged_truth.py", *sys.argv[1:]])
+    seconds = report["seconds"][_ran(args)]
+    return (
+        f"On {report['machine']['date']} `{command}` reran the {_ran(args)} rows "
+        f"({seconds:.0f} s); every other row is kept from the JSON."
+    )
+
+
+def kept_header(path: Path) -> str | None:
+    """The first paragraph of the report at ``path`` (its hand-written header), if any."""
+    if not path.is_file():
+        return None
+    first = path.read_text().split("\n\n", 1)[0].strip()
+    return first if first.startswith("Made by") else None
+
+
 def real_log_nis() -> dict[str, Any]:
     """The real Go1 log's feet NIS over stance rows and standing speed, per contact mode and
     gate (module docstring, ``real``); empty without the shared data."""
@@ -403,6 +435,10 @@ def real_log_nis() -> dict[str, Any]:
             None,
             {"joint_std": "first-second"},
         )
+        for c in ("force", "probability")
+    ]
+    rows += [  # the foot frames measured (the runner's default before its foot_radius="urdf")
+        (f"defaults but foot_radius 0, {c}", None, c, None, {"foot_radius": 0.0})
         for c in ("force", "probability")
     ]
     rows += [  # the IMU's densities from the log's stillest second, and eq. (10)
@@ -462,7 +498,8 @@ def simulated_nis(duration: float = 10.0, seed: int = 0) -> dict[str, Any]:
 
     go1 = pinobs.load("go1")
     white = {"joint_std": None, "slip_speed": False}
-    settings = {"defaults": (None, {}), "defaults + imu_noise='log'": (None, {"imu_noise": "log"}),
+    settings = {"defaults": (None, {}), "defaults but foot_radius 0": (None, {"foot_radius": 0.0}),
+                "defaults + imu_noise='log'": (None, {"imu_noise": "log"}),
                 "white, GAINS": (GAINS, white),
                 "white, InEKFGains()": (InEKFGains(), white)}  # fmt: skip
     out: dict[str, Any] = {}
@@ -512,8 +549,9 @@ def _sim_nis_lines(sim: dict[str, Any]) -> list[str]:
         "Where `legged_run`'s defaults were chosen: the MuJoCo go1 (10 s, seed 0) through "
         "`legged_run` (contacts from the forces), the stance rows' NIS and the base velocity "
         "error after 0.5 s; the encoders white (`NOISE`, 5e-4 rad) or quantised as the real "
-        "log's (`QUANTISED`); the last column: the defaults' σ_q per joint over the readings' "
-        "true error σ:",
+        'log\'s (`QUANTISED`); `defaults` with `foot_radius="urdf"` (2 cm), `defaults but '
+        "foot_radius 0` the foot frames; the last column: the defaults' σ_q per joint over the "
+        "readings' true error σ:",
         "",
         "| motion, foot noise | NIS/dof mean (median) | inside | below | above | v rms [m/s] "
         "| σ_q / true σ (min-max) |",
@@ -626,7 +664,9 @@ def _real_table(real: dict[str, Any]) -> list[str]:
         "MuJoCo, this log held out); `σ_q from the first second`: the default before; "
         "`imu_noise='log'`: the IMU's densities from the log's stillest second and eq. (10) "
         "(off by default since this table); `white`: the foot noise before (`joint_std=None, "
-        "slip_speed=False`) with `GAINS` or `LOG_GAINS`:",
+        "slip_speed=False`) with `GAINS` or `LOG_GAINS`; every row with `legged_run`'s "
+        'default `foot_radius="urdf"` (go1\'s 2 cm foot spheres: the rolling feet) but '
+        "`foot_radius 0` (the foot frames, the default before):",
         "",
         "| contacts, gate | stance rows | NIS/dof mean (median) | inside | below | above "
         "| gated | in contact | NIS/dof median standing / walking "
@@ -743,7 +783,7 @@ def main() -> None:
         "old_gains": OLD_GAINS.__dict__,
         "noise": NOISE.__dict__,
     }
-    md = format_report(report, args)
+    md = format_report(report, args, kept_header(here / "legged_truth.md") if args.merge else None)
     print(md)
     if not args.quick:
         (here / "legged_truth.json").write_text(json.dumps(report, indent=1) + "\n")

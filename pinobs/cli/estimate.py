@@ -131,6 +131,17 @@ def _add_legged_options(p: argparse.ArgumentParser) -> None:
         help="gate each foot by its own innovation (outlier probability P, e.g. 1e-3): a foot "
         "that slips is re-anchored instead of dragging the base",
     )
+    g.add_argument(
+        "--foot-radius",
+        type=_number_or_urdf,
+        default=None,
+        metavar="R|urdf",
+        help="the feet's sphere radius R [m]: each foot measured at its point that touched "
+        "the ground (rolling feet); default 'urdf', the URDF's foot collision spheres (go1 "
+        "0.02 m; 0 where a foot has none): on the MuJoCo go1 benchmark it lowers the trot's "
+        "base velocity error 0.0123 -> 0.0084 m/s and the sway's 0.0112 -> 0.0090, the "
+        "stand's unchanged; 0: the foot frames, as before",
+    )
 
 
 def _add_smoother_options(p: argparse.ArgumentParser) -> None:
@@ -192,6 +203,16 @@ def _number_or_auto(what: str) -> Callable[[str], float | str]:
             raise argparse.ArgumentTypeError(f"{text!r} is not {what} or 'auto'") from None
 
     return parse
+
+
+def _number_or_urdf(text: str) -> float | str:
+    """``--foot-radius``: a radius [m] (its sign checked by the runner) or ``"urdf"``."""
+    if text == "urdf":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a foot radius [m] or 'urdf'") from None
 
 
 def handle(args: argparse.Namespace) -> int:
@@ -331,7 +352,7 @@ INEKF = "inekf"
 def _check_legged_options(args: argparse.Namespace) -> None:
     legged = [
         f
-        for f in ("imu_frame", "contact_force", "contacts", "foot_gate")
+        for f in ("imu_frame", "contact_force", "contacts", "foot_gate", "foot_radius")
         if getattr(args, f) is not None
     ]
     if args.observer != INEKF:
@@ -377,6 +398,7 @@ def _estimate_legged(args: argparse.Namespace) -> int:
         contact_off=off,
         contacts=args.contacts or "force",
         foot_gate=args.foot_gate,
+        foot_radius="urdf" if args.foot_radius is None else args.foot_radius,
     )
     write_estimates(args.out, run, force=args.force)
     # (the note that the base pose is not in the log: this observer fills it)

@@ -239,6 +239,36 @@ class LeggedDetail(NamedTuple):
     nis_dof: np.ndarray
 
 
+def _make_filter(
+    robot: Robot,
+    log: Log,
+    imu_frame: str | None,
+    gains: InEKFGains | None,
+    foot_gate: float | None,
+    joint_std: ArrayLike | str | None,
+    slip_speed: bool,
+    imu_noise: str | None,
+    foot_radius: float | str,
+) -> tuple[InvariantEKF, list[str]]:
+    """:func:`legged_run`'s filter, and what its set-up measured on the log (said once)."""
+    radius, said_r = _foot_radius(robot, log.feet, foot_radius)
+    sigma_q, said_q = _joint_std(robot, log, joint_std)
+    gains, said_g = _imu_gains(robot, log, gains, imu_noise)
+    imu_frame = IMU_FRAME if imu_frame is None and robot.model.existFrame(IMU_FRAME) else imu_frame
+    filt = InvariantEKF(
+        robot,
+        log.feet,
+        gains=gains,
+        imu_frame=imu_frame,
+        foot_gate=foot_gate,
+        joint_std=sigma_q,
+        slip_speed=slip_speed,
+        foot_radius=radius,
+        slip_gyro=gains.gyro if imu_noise == "log" else 0.0,
+    )
+    return filt, [*said_q, *said_g, *said_r]
+
+
 def legged_run(
     robot: Robot,
     log: Log,
@@ -261,13 +291,9 @@ def legged_run(
             "inekf needs the trunk IMU: imu.gyro.x|y|z [rad/s] and imu.acc.x|y|z [m/s²] columns"
         )
     prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
-    radius, said_r = _foot_radius(robot, log.feet, foot_radius)
-    sigma_q, said_q = _joint_std(robot, log, joint_std)
-    gains, said_g = _imu_gains(robot, log, gains, imu_noise)
-    imu_frame = IMU_FRAME if imu_frame is None and robot.model.existFrame(IMU_FRAME) else imu_frame
-    filt = InvariantEKF(robot, log.feet, gains=gains, imu_frame=imu_frame, foot_gate=foot_gate,
-                        joint_std=sigma_q, slip_speed=slip_speed, foot_radius=radius,
-                        slip_gyro=gains.gyro if imu_noise == "log" else 0.0)  # fmt: skip
+    filt, said_setup = _make_filter(
+        robot, log, imu_frame, gains, foot_gate, joint_std, slip_speed, imu_noise, foot_radius
+    )
     joints = _joint_velocities(robot, log)
     n = len(log)
     q_out, v_out = np.full((n, robot.nq), np.nan), np.full((n, robot.nv), np.nan)
@@ -280,7 +306,7 @@ def legged_run(
         & np.all(np.isfinite(log.q[:, 7:]), axis=1)
     )
     previous: float | None = None
-    said: list[str] = [*joints.warnings, *said_q, *said_g, *said_r]
+    said: list[str] = [*joints.warnings, *said_setup]
     for k in range(n):
         if not usable[k] or (previous is not None and log.t[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))

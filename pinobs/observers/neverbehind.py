@@ -46,7 +46,10 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    windowed scores lag such a jump (on a UR10e log an ``ekf+auto`` 1.7 rad/s RMS off in
    bursts kept a mean weight 0.1–0.27 and made the blend 1.2× the ``kf``).  Where ``ℓ``
    reaches its bound ``−50``, ``w = 0`` exactly: a model 1e20 rad/s off cannot leak
-   through ``w = 2e-22``.
+   through ``w = 2e-22``.  The arithmetic between the two observers' steps is compiled
+   (numba: :func:`score_loops`, :func:`log_odds_loops`, :func:`weigh_loops`; Pinocchio's
+   ``integrate``/``difference`` on Lie-group joints, NumPy's ``exp``, whose last bit
+   numba's ``exp`` does not always give) and equals the NumPy form bit for bit.
 
 2. **The disturbance density learned from the innovations** (:func:`match_density`,
    ``ekf``'s ``disturbance_psd="auto"``): a per-joint random-walk density ``ψᵢ``
@@ -71,14 +74,15 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
 
 from __future__ import annotations
 
-import math
-from typing import Any, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 
 from pinobs.errors import GainError, ObserverDiverged, OptionError
 from pinobs.model import Robot
 from pinobs.observers.base import Observer, Vector, observer_class, positive
+from pinobs.observers.linalg import LazyKernel
 
 __all__ = ["NeverBehind", "match_density"]
 
@@ -125,6 +129,129 @@ _LOG_ODDS = 50.0
 _TINY = 1e-300  # the smallest score the log-odds divide by
 #: A model-based velocity this many kf one-step errors (as velocities) from the kf's is lost.
 FAR_GATE = 10.0
+
+
+def log_odds_loops(
+    c: float, dt: float, window: float, sharpness: float, nvar: float, out: Vector
+) -> None:
+    """``out[2] = −ℓ`` per coordinate from the scores ``out[0:2]`` (model, kf) and the weight
+    ``c`` the window has gathered (module docstring, item 1; compiled by numba):
+
+        ℓ = clip(κ (N/2)(s_kf − s_m) / max(min(s_m, s_kf), max(c σ², 10⁻³⁰⁰)) + (1 − c) ℓ₀, ±ℓ₀),
+
+    ``N = c T/h`` (the scores are sums ``c`` times their means), NaN kept as NumPy keeps it."""
+    floor = c * nvar
+    if _TINY > floor:
+        floor = _TINY
+    k = sharpness * 0.5 * (c * window / dt)
+    prior = (1.0 - c) * _LOG_ODDS
+    for i in range(out.shape[1]):
+        s_m, s_k = out[0, i], out[1, i]
+        low = s_m if s_m <= s_k else (s_k if s_k < s_m else s_m + s_k)  # np.minimum (NaN: NaN)
+        den = low if low >= floor else (floor if floor > low else low + floor)  # np.maximum
+        ell = k * (s_k - s_m) / den + prior  # Bar-Shalom, Li & Kirubarajan 2001 §11.6.2
+        if ell < -_LOG_ODDS:
+            ell = -_LOG_ODDS
+        elif ell > _LOG_ODDS:
+            ell = _LOG_ODDS
+        out[2, i] = -ell
+
+
+def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over small vectors
+    flat: bool,
+    scored: bool,
+    measured: bool,
+    raised: bool,
+    q_meas: Vector,
+    qm0: Vector,
+    vm0: Vector,
+    qk0: Vector,
+    vk0: Vector,
+    v: Vector,
+    v_prev: Vector,
+    dt: float,
+    dt_prev: float,
+    q_m: Vector,
+    v_m: Vector,
+    v_kf: Vector,
+    s: Vector,
+    c: float,
+    window: float,
+    lost_ratio2: float,
+    sharpness: float,
+    nvar: float,
+    out: Vector,
+) -> tuple[float, bool]:
+    """:meth:`NeverBehind.step`'s arithmetic up to the weights (module docstring, item 1;
+    compiled by numba): lost if ``raised`` or ``(q_m, v_m)`` sums to a non-finite value;
+    if ``scored`` (and not lost) the one-step errors (``flat``: here,
+    ``eᵢ = q_{k+1} − (q̂ᵢ + h v̂ᵢ + ½ h² â)``, else given in ``out[5:7]``), the scores
+    ``sᵢ ← sᵢ + λ(eᵢ² − sᵢ)`` into ``out[0:2]``, ``c ← c + λ(1 − c)``, ``λ = min(1, h/T)``,
+    lost if ``s_m > lost_ratio² s_kf`` somewhere once ``c > ½``; if ``measured``, lost if
+    ``h |v̂_m − v̂_kf| > FAR_GATE √(s_kf / c)`` somewhere; if not lost and ``c > 0``,
+    :func:`log_odds_loops`.  Returns ``(c, lost)``."""
+    nv = out.shape[1]
+    total_q = 0.0
+    for i in range(q_m.shape[0]):  # (a sum overflowing to inf says lost too: that far off)
+        total_q += q_m[i]
+    total_v = 0.0
+    for i in range(nv):
+        total_v += v_m[i]
+    lost = raised or not np.isfinite(total_q + total_v)
+    for i in range(nv):
+        out[0, i] = s[0, i]
+        out[1, i] = s[1, i]
+    if not lost and scored:
+        lam = min(1.0, dt / window)
+        ahead = 0.0 if dt_prev <= 0 else 0.5 * dt * dt / dt_prev
+        for i in range(nv):
+            if flat:
+                step_a = ahead * (v[i] - v_prev[i])  # ½ h² â, â = Δv̂ / h₋ (the blend's)
+                out[5, i] = q_meas[i] - (qm0[i] + dt * vm0[i] + step_a)
+                out[6, i] = q_meas[i] - (qk0[i] + dt * vk0[i] + step_a)
+            e_m, e_k = out[5, i], out[6, i]
+            out[0, i] = s[0, i] + lam * (e_m * e_m - s[0, i])
+            out[1, i] = s[1, i] + lam * (e_k * e_k - s[1, i])
+        c = c + lam * (1.0 - c)
+        if c > 0.5:
+            for i in range(nv):
+                lost = lost or out[0, i] > lost_ratio2 * out[1, i]
+    if not lost and c > 0.0 and measured:
+        for i in range(nv):  # far (step's comment)
+            lost = lost or dt * abs(v_m[i] - v_kf[i]) > FAR_GATE * np.sqrt(out[1, i] / c)
+    if not lost and c > 0.0:
+        log_odds_loops(c, dt, window, sharpness, nvar, out)
+    return c, lost
+
+
+def weigh_loops(
+    weigh: bool, flat: bool, q_kf: Vector, v_kf: Vector, q_m: Vector, v_m: Vector, out: Vector
+) -> None:
+    """The blend (module docstring, item 1; compiled by numba): ``w = 1/(1 + e^{−ℓ})``
+    (``out[2] = −ℓ``, ``out[5] = e^{−ℓ}``), ``0`` where ``ℓ = −ℓ₀`` (a far-off model must
+    not leak through), ``1`` unless ``weigh``, into ``out[2]``; ``v̂ = v̂_kf + w (v̂_m − v̂_kf)``
+    into ``out[3]``; if ``flat`` ``q̂ = q̂_kf + w (q̂_m − q̂_kf)`` into ``out[4]``."""
+    for i in range(out.shape[1]):
+        w = 1.0
+        if weigh:
+            w = 0.0 if out[2, i] >= _LOG_ODDS else 1.0 / (1.0 + out[5, i])
+        out[2, i] = w
+        out[3, i] = v_kf[i] + w * (v_m[i] - v_kf[i])
+        if flat:
+            out[4, i] = q_kf[i] + w * (q_m[i] - q_kf[i])
+
+
+_Kernel = Callable[..., Any]
+_ONE = np.ones(1)
+_ROWS = np.zeros((7, 1))
+#: :func:`score_loops`, :func:`log_odds_loops` and :func:`weigh_loops` compiled (loaded when
+#: a blend is made).
+score_kernel = LazyKernel(
+    score_loops, True, True, True, False, *(_ONE,) * 7, 1e-3, 1e-3, *(_ONE,) * 3,
+    np.zeros((2, 1)), 0.5, 0.2, 1e4, 1.0, 1e-8, _ROWS.copy(), helpers=(log_odds_loops,),
+)  # fmt: skip
+log_odds_kernel = LazyKernel(log_odds_loops, 0.5, 1e-3, 0.2, 1.0, 1e-8, _ROWS.copy())
+weigh_kernel = LazyKernel(weigh_loops, True, True, *(_ONE,) * 4, _ROWS.copy())
 
 
 class _State(NamedTuple):
@@ -195,6 +322,15 @@ class NeverBehind(Observer[_State]):
         given = {"rate": rate, "noise_std": noise_std}
         self.model = cls(robot, **opts, **given)
         self.reference = observer_class("kf")(robot, **dict(reference_options or {}), **given)
+        #: the kernels' gains: T, lost_ratio², κ, σ² (a σ learnt from the data rebuilds the blend)
+        self._gains = (
+            self.window,
+            self.lost_ratio**2,
+            self.sharpness,
+            (self.noise_std or 0.0) ** 2,
+        )
+        for kernel in (score_kernel, log_odds_kernel, weigh_kernel):
+            kernel.load()  # (numba's cache: compiled once per installation)
 
     @property
     def options(self) -> dict[str, Any]:
@@ -244,6 +380,10 @@ class NeverBehind(Observer[_State]):
         return _State(m, k, np.zeros((2, nv)), 0.0, w, q.copy(), zero, zero, 0.0, state.reseeds)
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+        """Module docstring, item 1: both observers stepped, then :func:`score_loops`,
+        NumPy's ``exp`` and :func:`weigh_loops` (issue 39: the blend's own arithmetic cost
+        ~14 ``pin.aba`` per UR5 update in NumPy, ~3 compiled; the same bits, tested), into
+        one new array whose rows the new state holds."""
         r = self.robot
         flat = r.is_vector_space  # q ⊕ x = q + x, difference(a, b) = b − a: plain arithmetic
         kf = self.reference.step(state.kf, dt, q_meas, tau)
@@ -251,55 +391,40 @@ class NeverBehind(Observer[_State]):
         try:
             m = self.model.step(state.model, dt, q_meas, tau)
             q_m, v_m = self.model.output(m)
-            # (a sum overflowing to inf says lost too: a filter that far off is)
-            lost = not math.isfinite(sum(q_m.tolist()) + sum(v_m.tolist()))
+            raised = False
         except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
-            lost = True
-        s_m, s_k, c = state.s[0], state.s[1], state.c
-        if not lost and q_meas is not None and not self.reference.innovation(kf)[1]:
-            # scored (module docstring), unless the kf's gate took the sample for an outlier
+            q_m, v_m, raised = q_kf, v_kf, True
+        measured = q_meas is not None
+        # scored (module docstring), unless the kf's gate took the sample for an outlier
+        scored = measured and not self.reference.innovation(kf)[1]
+        qm0, vm0 = self.model.output(state.model)
+        qk0, vk0 = self.reference.output(state.kf)
+        # the new state's rows: s (model, kf), w, v, q (flat), the one-step errors (model, kf)
+        out = np.empty((7, r.nv))
+        if q_meas is not None and scored and not flat and not raised:  # on Lie groups: Pinocchio
             ahead = 0.0 if state.dt_prev <= 0 else 0.5 * dt * dt / state.dt_prev
             step_a = ahead * (state.v - state.v_prev)  # ½ h² â, â = Δv̂ / h₋ (the blend's)
-            qm0, vm0 = self.model.output(state.model)
-            qk0, vk0 = self.reference.output(state.kf)
-            e_m: Vector
-            e_k: Vector
-            if flat:
-                e_m = q_meas - (qm0 + dt * vm0 + step_a)
-                e_k = q_meas - (qk0 + dt * vk0 + step_a)
-            else:
-                e_m = r.difference(r.integrate(qm0, dt * vm0 + step_a), q_meas)
-                e_k = r.difference(r.integrate(qk0, dt * vk0 + step_a), q_meas)
-            lam = min(1.0, dt / self.window)
-            s_m = s_m + lam * (e_m * e_m - s_m)
-            s_k = s_k + lam * (e_k * e_k - s_k)
-            c = c + lam * (1.0 - c)
-            lost = c > 0.5 and bool(np.any(s_m > self.lost_ratio**2 * s_k))
-        if not lost and c > 0.0 and q_meas is not None:
-            # far: the model's velocity off the kf's by more than FAR_GATE times the kf's own
-            # one-step prediction error as a velocity, sqrt(s_k / c) / h (the scores lag a
-            # model that jumps away in one step), on every measured sample, scored or not (one
-            # the kf's gate rejects too: a UR10e log's wrist was 0.73 rad/s off on such rows)
-            lost = bool(np.any(dt * np.abs(v_m - v_kf) > FAR_GATE * np.sqrt(s_k / c)))
+            out[5] = r.difference(r.integrate(qm0, dt * vm0 + step_a), q_meas)
+            out[6] = r.difference(r.integrate(qk0, dt * vk0 + step_a), q_meas)
+        gains = self._gains
+        c, lost = cast(_Kernel, score_kernel.compiled)(  # scores, lost tests, log-odds
+            flat, scored and not raised, measured, raised, q_meas if measured else q_kf,
+            qm0, vm0, qk0, vk0, state.v, state.v_prev, dt, state.dt_prev, q_m, v_m, v_kf,
+            state.s, state.c, *gains, out,
+        )  # fmt: skip
         reseeds = state.reseeds
         if lost:  # re-seeded (module docstring) at the kf's estimate, the blend's when w = 0
             reseeds += 1
             m = self.model.initial_state(q_kf, v_kf)
             q_m, v_m = self.model.output(m)
-            s_m = self.lost_ratio * s_k  # to prove itself: w ≈ 0 until it has
+            np.multiply(self.lost_ratio, out[1], out=out[0])  # to prove itself: w ≈ 0 until it has
+            if c > 0.0:
+                cast(_Kernel, log_odds_kernel.compiled)(c, dt, gains[0], gains[2], gains[3], out)
         if c > 0.0:
-            # the window's means so far (exponential means started at zero): s / c
-            floor = max(c * (self.noise_std or 0.0) ** 2, _TINY)
-            n = c * self.window / dt  # the innovations in the window so far
-            ell = (self.sharpness * 0.5 * n) * (s_k - s_m) / np.maximum(np.minimum(s_m, s_k), floor)
-            ell = np.clip(ell + (1.0 - c) * _LOG_ODDS, -_LOG_ODDS, _LOG_ODDS)  # the prior fading
-            w = 1.0 / (1.0 + np.exp(-ell))  # Bar-Shalom, Li & Kirubarajan 2001 §11.6.2
-            w[ell <= -_LOG_ODDS] = 0.0  # a far-off model (1e20 rad/s) must not leak through
-        else:
-            w = np.ones(r.nv)  # nothing scored yet: the model trusted (the prior)
-        v = v_kf + w * (v_m - v_kf)
-        q = q_kf + w * (q_m - q_kf) if flat else r.integrate(q_kf, w * r.difference(q_kf, q_m))
-        return _State(m, kf, np.array([s_m, s_k]), c, w, q, v, state.v, dt, reseeds)
+            np.exp(out[2], out=out[5])  # NumPy's exp (out[2] = −ℓ): the NumPy form's bits
+        cast(_Kernel, weigh_kernel.compiled)(c > 0.0, flat, q_kf, v_kf, q_m, v_m, out)
+        q = out[4] if flat else r.integrate(q_kf, out[2] * r.difference(q_kf, q_m))
+        return _State(m, kf, out[:2], c, out[2], q, out[3], state.v, dt, reseeds)
 
     def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
         """Each observer's own, on its part of the state; the model-based observer's committed

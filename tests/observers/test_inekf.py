@@ -160,6 +160,18 @@ def free_flyer_q(R, p, q_joints):
     return np.concatenate([p, Rotation.from_matrix(R).as_quat(), q_joints])
 
 
+def reset_through_imu(ekf, sample, R_bi, r_bi):
+    """Reset ``ekf`` on the truth's first ``sample`` (its IMU's pose and twist) for a base
+    whose IMU sits at ``(R_bi, r_bi)``: the base's pose and twist from the IMU's."""
+    _, R_i, v_i, p_i, q, omega, acc, contacts = sample
+    R_b = R_i @ R_bi.T
+    omega_b = R_bi @ omega
+    v0 = np.concatenate([R_b.T @ v_i - np.cross(omega_b, r_bi), omega_b, np.zeros(len(q))])
+    ekf.reset(
+        0.0, free_flyer_q(R_b, p_i - R_b @ r_bi, q), v0, gyro=omega, acc=acc, contacts=contacts
+    )
+
+
 def run(ekf, samples, *, R0=None, v0=None, prior=None):
     t, R, v, p, q, omega, acc, contacts = samples[0]
     R0 = R if R0 is None else R0
@@ -262,12 +274,7 @@ def test_started_on_the_truth_it_stays_there_on_go1(imu_frame: str | None) -> No
     assert (np.linalg.norm(r_bi) > 0.05) == (imu_frame is not None)
     samples = truth(legs, 200.0, 2.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
     ekf = InvariantEKF(pinobs.load("go1"), GO1_FEET, imu_frame=imu_frame)
-    R_i, v_i, p_i = samples[0][1:4]
-    R_b = R_i @ R_bi.T
-    omega_b = R_bi @ samples[0][5]
-    v0 = np.concatenate([R_b.T @ v_i - np.cross(omega_b, r_bi), omega_b, np.zeros(12)])
-    q0 = free_flyer_q(R_b, p_i - R_b @ r_bi, samples[0][4])
-    ekf.reset(0.0, q0, v0, gyro=samples[0][5], acc=samples[0][6], contacts=samples[0][7])
+    reset_through_imu(ekf, samples[0], R_bi, r_bi)
     worst = 0.0
     for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
         est = ekf.update(t, q, omega, acc, contacts)

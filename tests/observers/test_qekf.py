@@ -23,8 +23,8 @@ from tests.observers.test_inekf import (
     GO1_FEET,
     Go1Legs,
     SyntheticLegs,
-    free_flyer_q,
     pose_errors,
+    reset_through_imu,
     run,
     synthetic_truth,
     truth,
@@ -58,12 +58,7 @@ def test_started_on_the_truth_it_stays_there_on_go1(imu_frame: str | None) -> No
     R_bi, r_bi = legs.imu_placement
     samples = truth(legs, 200.0, 1.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
     ekf = QuaternionEKF(pinobs.load("go1"), GO1_FEET, imu_frame=imu_frame)
-    R_i, v_i, p_i = samples[0][1:4]
-    R_b = R_i @ R_bi.T
-    omega_b = R_bi @ samples[0][5]
-    v0 = np.concatenate([R_b.T @ v_i - np.cross(omega_b, r_bi), omega_b, np.zeros(12)])
-    q0 = free_flyer_q(R_b, p_i - R_b @ r_bi, samples[0][4])
-    ekf.reset(0.0, q0, v0, gyro=samples[0][5], acc=samples[0][6], contacts=samples[0][7])
+    reset_through_imu(ekf, samples[0], R_bi, r_bi)
     worst = 0.0
     for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
         est = ekf.update(t, q, omega, acc, contacts)

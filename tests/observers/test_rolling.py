@@ -14,7 +14,14 @@ from pinobs.model import FootKinematics
 from pinobs.observers.inekf import InvariantEKF
 from pinobs.observers.qekf import QuaternionEKF
 from pinobs.observers.rolling import RollingFeet
-from tests.observers.test_inekf import GO1_FEET, Go1Legs, free_flyer_q, pose_errors, truth
+from tests.observers.test_inekf import (
+    GO1_FEET,
+    Go1Legs,
+    free_flyer_q,
+    pose_errors,
+    reset_through_imu,
+    truth,
+)
 
 RADIUS = 0.02  # go1's foot spheres [m]
 
@@ -141,12 +148,7 @@ def test_started_on_the_truth_with_rolling_feet_it_stays_there(cls) -> None:
     worst = {}
     for radius in (RADIUS, 0.0):
         ekf = cls(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", foot_radius=radius)
-        R_i, v_i, p_i = samples[0][1:4]
-        R_b = R_i @ R_bi.T
-        omega_b = R_bi @ samples[0][5]
-        v0 = np.concatenate([R_b.T @ v_i - np.cross(omega_b, r_bi), omega_b, np.zeros(12)])
-        q0 = free_flyer_q(R_b, p_i - R_b @ r_bi, samples[0][4])
-        ekf.reset(0.0, q0, v0, gyro=samples[0][5], acc=samples[0][6], contacts=samples[0][7])
+        reset_through_imu(ekf, samples[0], R_bi, r_bi)
         worst[radius] = 0.0
         for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
             est = ekf.update(t, q, omega, acc, contacts)

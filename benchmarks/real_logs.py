@@ -37,7 +37,7 @@ of the residual, and so are the first and last half-window of each log.
   (zero on most rows), and with ``weighting="torque"`` (*pinobs N·m*), also with
   ``offset=True`` (*pinobs N·m offset*: a constant torque per joint, FIGAROH's joint
   offset; every identified model's prediction is less its offset,
-  :func:`predict_identified`): the first 80 % fits, the last 20 % is held out.  FIGAROH:
+  :func:`predict_identified`), and that without the smoother's passes (``refine=()``): the first 80 % fits, the last 20 % is held out.  FIGAROH:
   measured by ``figaroh_peer.py`` (FIGAROH 1.0.2 on these rows and derivatives, and by its
   own protocol; read from ``figaroh_peer.json`` when it is there,
   :func:`figaroh_measured`), the numbers quoted in ``shared/data/README.md`` beside them.
@@ -153,6 +153,7 @@ TIAGO_TORQUE_JOINTS = rd.TIAGO_JOINTS[:5]  # torso, arm_1..4 (arm_5..7 efforts m
 TIAGO_VARIANTS: dict[str, dict[str, Any]] = {
     "pinobs N·m": {"weighting": "torque"},
     "pinobs N·m offset": {"weighting": "torque", "offset": True},
+    "pinobs N·m offset refine=()": {"weighting": "torque", "offset": True, "refine": ()},
 }
 #: TIAGo's reference fits of pinobs's own columns at each sample (:func:`lsq_pinobs_columns`,
 #: not ``pinobs.identify``): label → ``(prior, physically consistent)``; ``prior``: ``None``
@@ -1156,6 +1157,15 @@ def tiago_lsq_said(t: dict[str, Any]) -> list[str]:
             "wrist's parameters that arm_1..4's torques do not see, and the consistent fit's "
             "prediction of those three channels is meaningless (their columns above).",
         ]
+    refined, plain = (t["torque"].get(k, {}).get("held_out") for k in list(TIAGO_VARIANTS)[1:3])
+    if refined and plain:
+        L += [
+            "",
+            "The smoother's passes' price on the held-out arm_1..4 (*pinobs N·m offset* over "
+            "*pinobs N·m offset refine=()*): "
+            + ", ".join(f"×{r / p:.3f}" for r, p in zip(refined[1:5], plain[1:5], strict=True))
+            + ".",
+        ]
     return L
 
 
@@ -1224,7 +1234,11 @@ def markdown(res: dict[str, Any]) -> str:
             f"{100 * t['held_out_moving_share']:.0f} % of them moving (|v| > 0.01). "
             "arm_5..7's torque channels left out (zero on most rows); *pinobs N·m*: "
             '`weighting="torque"`; *pinobs N·m offset*: also `offset=True` (a constant torque '
-            "per joint; the prediction is the model's less it). "
+            "per joint; the prediction is the model's less it); *refine=()*: the "
+            "Savitzky–Golay velocities only, without the model-based smoother's passes "
+            f"(their consistency ρ = {t['identify_report']['smoother_consistency']:.3g} on "
+            "this log for the default run, against about 1 when model and torques explain "
+            "the positions: `pinobs.identify`'s docstring). "
             + tiago_figaroh_said(figaroh_measured())
         )
         L.append("")

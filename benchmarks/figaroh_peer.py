@@ -49,6 +49,10 @@ option for another; *tanh*: the one change made, that column replaced by
 ``build_regressor_basic`` (wrapped where ``base_identification`` calls it, so fit and
 validation both use it; the column is checked to hold ``sign(v)`` before).
 
+**Physical consistency.** FIGAROH's least squares has no constraint; its base parameters
+that stand for one mass, rotor inertia or friction coefficient alone are checked for sign
+(:func:`negative_alone`; a pseudo-inertia is not readable from its base combinations).
+
     python benchmarks/figaroh_peer.py   # writes benchmarks/figaroh_peer.{md,json}
 """
 
@@ -239,6 +243,23 @@ def fed_identification(robot, config: str, sets: dict[Any, tuple], joints, fit_j
     return iden
 
 
+#: FIGAROH's names of the standard parameters that physics wants ≥ 0: mass, rotor inertia,
+#: viscous and Coulomb friction (its ``m_``, ``Ia_``, ``fv_``, ``fs_`` prefixes).
+NONNEGATIVE = ("m_", "Ia_", "fv_", "fs_")
+
+
+def negative_alone(iden) -> dict[str, float]:
+    """FIGAROH's base parameters that are one standard parameter alone (no combination: a
+    name without spaces) of :data:`NONNEGATIVE` and negative: a physical inconsistency its
+    base parameters show without mapping back (a pseudo-inertia's is not readable from
+    the combinations)."""
+    return {
+        n: float(p)
+        for n, p in zip(iden.params_base, iden.phi_base, strict=True)
+        if " " not in n and n.startswith(NONNEGATIVE) and p < 0
+    }
+
+
 def run_fed(robot, config, sets, joints, fit_joints, kind: str) -> dict[str, Any]:
     """(a): FIGAROH fitted on ``sets[None]``, its held-out RMS per fitted joint."""
     t0 = time.perf_counter()
@@ -253,6 +274,7 @@ def run_fed(robot, config, sets, joints, fit_joints, kind: str) -> dict[str, Any
         "held_out": rl.rms(pred - held_tau).tolist(),
         "figaroh_rmse_identified": figaroh_rms,
         "base_parameters": len(iden.phi_base),
+        "negative_alone": negative_alone(iden),
         "fit_rmse_stacked": float(iden.rms_error),
         "seconds": time.perf_counter() - t0,
         "report_tail": report.strip().splitlines()[-12:],
@@ -457,6 +479,7 @@ def markdown(res: dict[str, Any]) -> str:
         L.append(_row(f"{k} ({t[k]['base_parameters']} base parameters)", t[k]["held_out"]))
     for k, vals in rl.FIGAROH_README.items():
         L.append(_row(f"README quote, {k}", [math.nan, *vals]))
+    L += ["", negative_note(t, ("fed sign", "fed tanh"))]
     j = [n.replace("joint_", "j") for n in x["joints"]]
     L += [
         "",
@@ -486,6 +509,29 @@ def markdown(res: dict[str, Any]) -> str:
     L.append(_row("README quote, tanh | —", list(rl.TX40_FIGAROH_TANH)))
     L += ["", *protocol_note(res)]
     return "\n".join(L) + "\n"
+
+
+def negative_note(t: dict[str, Any], runs: tuple[str, ...]) -> str:
+    """The base parameters each of ``runs`` identified negative that physics wants ≥ 0
+    (:func:`negative_alone`)."""
+    said = [
+        f"*{k}*: "
+        + (
+            ", ".join(f"`{n}` {v:.3g}" for n, v in t[k]["negative_alone"].items())
+            if t[k]["negative_alone"]
+            else "none"
+        )
+        for k in runs
+        if "negative_alone" in t[k]
+    ]
+    if not said:
+        return ""
+    return (
+        "Physical consistency: FIGAROH's least squares has no constraint. Base parameters "
+        "that stand for one mass, rotor inertia or friction coefficient alone and came out "
+        "negative: " + "; ".join(said) + " (the pseudo-inertias are not readable from its "
+        "base combinations)."
+    )
 
 
 def protocol_note(res: dict[str, Any]) -> list[str]:

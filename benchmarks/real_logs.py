@@ -37,10 +37,15 @@ of the residual, and so are the first and last half-window of each log.
   (zero on most rows), and with ``weighting="torque"`` (*pinobs N·m*), also with
   ``offset=True`` (*pinobs N·m offset*: a constant torque per joint, FIGAROH's joint
   offset; every identified model's prediction is less its offset,
-  :func:`predict_identified`): the first 80 % fits, the last 20 % is held out.  FIGAROH:
+  :func:`predict_identified`), and that without the smoother's passes (``refine=()``): the first 80 % fits, the last 20 % is held out.  FIGAROH:
   measured by ``figaroh_peer.py`` (FIGAROH 1.0.2 on these rows and derivatives, and by its
   own protocol; read from ``figaroh_peer.json`` when it is there,
   :func:`figaroh_measured`), the numbers quoted in ``shared/data/README.md`` beside them.
+  For reference (not ``pinobs.identify``), pinobs's own columns fitted at each sample on
+  FIGAROH's *same rows* (:func:`pinobs_columns`, :func:`lsq_pinobs_columns`,
+  :data:`TIAGO_LSQ`): plain weighted least squares (no prior, no physical consistency),
+  and pinobs's ``solve`` with a wide prior without and with physical consistency, and with
+  its own prior: what consistency, the prior and the momentum form each cost there.
 
 **Velocity RMS** [rad/s, m/s for the torso] of ``pinobs.estimate`` (default
 ``clock="auto"``, σ from the log) against the robot's own velocity (UR10e ``dq``,
@@ -106,6 +111,9 @@ import real_data as rd
 
 import pinobs
 import pinobs.io
+from pinobs.model.friction import friction_basis
+from pinobs.model.identification.leastsquares import pseudo_inertia, solve
+from pinobs.model.identification.regressor import MomentumRegressor
 from pinobs.tolerances import COULOMB_SMOOTHING_VELOCITY
 
 #: Savitzky–Golay window [rows] and polynomial order of the derivatives of q.
@@ -145,7 +153,21 @@ TIAGO_TORQUE_JOINTS = rd.TIAGO_JOINTS[:5]  # torso, arm_1..4 (arm_5..7 efforts m
 TIAGO_VARIANTS: dict[str, dict[str, Any]] = {
     "pinobs N·m": {"weighting": "torque"},
     "pinobs N·m offset": {"weighting": "torque", "offset": True},
+    "pinobs N·m offset refine=()": {"weighting": "torque", "offset": True, "refine": ()},
 }
+#: TIAGo's reference fits of pinobs's own columns at each sample (:func:`lsq_pinobs_columns`,
+#: not ``pinobs.identify``): label → ``(prior, physically consistent)``; ``prior``: ``None``
+#: plain least squares, or the factor on pinobs's prior widths with ``solve`` (no Huber),
+#: :data:`TIAGO_WIDE_PRIOR` (*wide prior*) or 1 (pinobs's own prior, with its Huber loss).
+TIAGO_LSQ: dict[str, tuple[float | None, bool]] = {
+    "lsq pinobs columns": (None, False),
+    "lsq pinobs columns, wide prior": (1e3, False),
+    "lsq pinobs columns, wide prior, consistent": (1e3, True),
+    "pinobs solve, per-sample rows": (1.0, True),
+}
+#: Factor on pinobs's prior widths that leaves TIAGo's fit to the data; at 1e6 ``solve``
+#: loses precision (its fitted residual 60-160 N·m on arm_1..4 against 2).
+TIAGO_WIDE_PRIOR = 1e3
 
 
 # ------------------------------------------------------------------ helpers
@@ -505,6 +527,8 @@ def tiago(quick: bool, velocity: bool = True) -> dict[str, Any]:
     fitted = inner & (t <= split)
     preds = {"nominal": predict_robot(robot, q, v, a)}
     preds.update({k: predict_identified(i, q, v, a) for k, i in idents.items()})
+    lsq, lsq_said = tiago_lsq(robot, common["exclude"], q, v, a, tau, fitted)
+    preds.update(lsq)
     torque = {
         k: {"held_out": rms((p - tau)[held]).tolist(), "fitted": rms((p - tau)[fitted]).tolist()}
         for k, p in preds.items()
@@ -527,6 +551,7 @@ def tiago(quick: bool, velocity: bool = True) -> dict[str, Any]:
             for k in ("rank", "condition", "rows", "noise_std", "smoother_consistency", "warnings")
         },
         "torque": torque,
+        "lsq_inconsistent": lsq_said,
     }
     if velocity:
         rows = t > split
@@ -534,6 +559,92 @@ def tiago(quick: bool, velocity: bool = True) -> dict[str, Any]:
         vel.update(reference_floor(t, q, ref, rows, joints))
         out["velocity"] = vel
     return out
+
+
+def pinobs_columns(robot: pinobs.Robot, exclude, q, v, a) -> tuple[Any, np.ndarray, np.ndarray]:
+    """pinobs's own columns at each sample (acceleration form, not the momentum windows of
+    ``pinobs.identify``): ``τ − I_known a = Y(q, v, a) π + Σ_f diag(φ_f(v)) F_f + diag(a) I_a
+    − b``, the columns of :class:`MomentumRegressor` (rigid body, its friction law's terms
+    ``φ_f``: viscous ``v`` and Coulomb ``tanh(v/v_s)``, rotor inertia on every actuated joint,
+    offset ``b``; the signs of its ``system``).  Returns ``(regressor, C, I_known a)``: ``C``
+    ``(N, nv, p)`` and the torque of the armature not identified (``(N, nv)``; zero when
+    every rotor is), the fit being ``τ − I_known a ≈ C θ``."""
+    reg = MomentumRegressor(robot, armature=True, weighting="torque", exclude=exclude)
+    model = robot.model
+    data = model.createData()
+    act = list(reg.actuated)
+    sel = np.zeros((model.nv, reg.n_joint))
+    sel[act, range(reg.n_joint)] = 1.0
+    arm = [reg.actuated_names.index(j) for j in reg.armature_joints]
+    known = np.array(model.armature, dtype=float)
+    known[reg.armature_coordinates] = 0.0
+
+    def columns(k: int) -> np.ndarray:
+        va = v[k, act]
+        phi = [
+            sel * friction_basis(f, va, reg.smoothing, reg.stribeck_velocity)
+            for f in reg.friction_terms
+        ]
+        rigid = pin.computeJointTorqueRegressor(model, data, q[k], v[k], a[k])
+        return np.hstack([rigid, *phi, sel[:, arm] * a[k, act][arm], -sel])
+
+    return reg, np.array([columns(k) for k in range(len(q))]), known * a
+
+
+def lsq_pinobs_columns(
+    reg, C, known, tau, fit, channels, *, prior, consistent
+) -> tuple[np.ndarray, np.ndarray]:
+    """A reference fit of :func:`pinobs_columns` (not ``pinobs.identify``) on ``fit``'s rows
+    of the torque ``channels``, each channel weighted by its residual's spread; returns the
+    prediction ``C θ + I_known a`` on every row and ``θ``.  ``prior`` ``None``: ordinary
+    least squares, then again weighted (:func:`lsq_figaroh_columns`'s recipe; no prior, no consistency);
+    else ``pinobs``'s ``solve`` with its prior widths times ``prior`` (its channel weights:
+    ``1.4826 · median |r|`` per channel, re-estimated at each pass), Huber's loss only at
+    ``prior == 1`` (as ``identify``), and physical consistency when ``consistent``
+    (every body's pseudo-inertia ⪰ 0, friction and armature ≥ 0: Wensing et al. 2017)."""
+    rows = np.flatnonzero(fit)
+    A = C[rows][:, channels].reshape(-1, C.shape[2])
+    y = (tau - known)[rows][:, channels].ravel()
+    if prior is None:
+        theta = np.linalg.lstsq(A, y, rcond=None)[0]
+        w = np.tile(1.0 / (A @ theta - y).reshape(-1, len(channels)).std(axis=0), len(rows))
+        theta = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)[0]
+    else:
+        channel = np.tile(np.arange(len(channels)), len(rows))
+        loss = {} if prior == 1.0 else {"huber": np.inf}
+        s = prior * reg.prior_std()
+        theta = solve(reg, A, y, prior_std=s, consistent=consistent, channel=channel, **loss).theta
+    return C @ theta + known, theta
+
+
+def inconsistent(reg, theta) -> list[str]:
+    """What in ``θ`` (:func:`pinobs_columns`'s order) is not physically consistent: the
+    bodies whose pseudo-inertia is not ⪰ 0 (or mass ≤ 0), and the friction or armature
+    below 0 by more than 1e-9 of the largest (the solver's barrier stops that close)."""
+    out = []
+    for k, body in enumerate(reg.bodies):
+        J = pseudo_inertia(theta[10 * k : 10 * k + 10])
+        if np.linalg.eigvalsh(J)[0] < -1e-12 * np.abs(J).max() or J[3, 3] <= 0:
+            out.append(f"{body} (mass {J[3, 3]:.3g} kg)")
+    n0, n = reg.n_inertial, reg.n_joint
+    lo = slice(n0, n0 + len(reg.friction_terms) * n + len(reg.armature_joints))
+    scale = 1e-9 * np.abs(theta[lo]).max()
+    out += [f"{reg.names[i]} {theta[i]:.3g}" for i in range(lo.start, lo.stop) if theta[i] < -scale]
+    return out
+
+
+def tiago_lsq(robot, exclude, q, v, a, tau, fitted) -> tuple[dict[str, Any], dict[str, Any]]:
+    """TIAGo's :data:`TIAGO_LSQ` reference fits: their predictions on every row and, per fit,
+    what in it is not physically consistent (:func:`inconsistent`)."""
+    reg, C, known = pinobs_columns(robot, exclude, q, v, a)
+    channels = [robot.model.joints[robot.model.getJointId(j)].idx_v for j in TIAGO_TORQUE_JOINTS]
+    preds, said = {}, {}
+    for label, (prior, consistent) in TIAGO_LSQ.items():
+        preds[label], theta = lsq_pinobs_columns(
+            reg, C, known, tau, fitted, channels, prior=prior, consistent=consistent
+        )
+        said[label] = inconsistent(reg, theta)
+    return preds, said
 
 
 # ------------------------------------------------------------------ TX40
@@ -1011,6 +1122,53 @@ def tiago_torque_table(t: dict[str, Any], measured: dict[str, Any] | None) -> li
     return L
 
 
+def tiago_lsq_said(t: dict[str, Any]) -> list[str]:
+    """What TIAGo's reference rows (:data:`TIAGO_LSQ`) are, and what in each is not
+    physically consistent."""
+    said = t.get("lsq_inconsistent")
+    if not said:
+        return []
+    L = [
+        "",
+        "Reference rows, not `pinobs.identify` (`lsq_pinobs_columns`): pinobs's own columns "
+        "(rigid body, viscous, Coulomb `tanh(v/0.01)`, rotor inertia and offset on every "
+        "joint: `MomentumRegressor`'s) at each sample, on the same Savitzky–Golay "
+        "derivatives and fitted rows as FIGAROH's *same rows* runs, torso and arm_1..4's "
+        "torques, each channel weighted by its residual's spread; FIGAROH's acceleration "
+        "form, not identify's momentum windows. *lsq pinobs columns*: ordinary then weighted "
+        "least squares, no prior, no physical consistency (as the TX40's "
+        "`lsq_figaroh_columns`); *wide prior*: pinobs's `solve` with its prior widths × "
+        f"{TIAGO_WIDE_PRIOR:g} and no Huber loss, without and with physical consistency "
+        "(*consistent*: pseudo-inertias ⪰ 0, friction and armature ≥ 0); *pinobs solve, "
+        "per-sample rows*: its prior and Huber loss as `identify` has them, consistent. "
+        "Not physically consistent in each fit:",
+        "",
+    ]
+    for k, bad in said.items():
+        L.append(f"- {k}: " + ("; ".join(bad) if bad else "nothing (consistent)"))
+    free, cons = (t["torque"].get(k, {}).get("held_out") for k in list(TIAGO_LSQ)[1:3])
+    if free and cons:
+        L += [
+            "",
+            "Physical consistency's price on the held-out arm_1..4 (*wide prior, consistent* "
+            "over *wide prior*): "
+            + ", ".join(f"×{c / f:.3f}" for f, c in zip(free[1:5], cons[1:5], strict=True))
+            + ". arm_5..7's torques are not fitted: with the wide prior nothing holds the "
+            "wrist's parameters that arm_1..4's torques do not see, and the consistent fit's "
+            "prediction of those three channels is meaningless (their columns above).",
+        ]
+    refined, plain = (t["torque"].get(k, {}).get("held_out") for k in list(TIAGO_VARIANTS)[1:3])
+    if refined and plain:
+        L += [
+            "",
+            "The smoother's passes' price on the held-out arm_1..4 (*pinobs N·m offset* over "
+            "*pinobs N·m offset refine=()*): "
+            + ", ".join(f"×{r / p:.3f}" for r, p in zip(refined[1:5], plain[1:5], strict=True))
+            + ".",
+        ]
+    return L
+
+
 def header(res: dict[str, Any]) -> list[str]:
     """The table's first lines: how, when and on what it was made, and any rerun since."""
     L: list[str] = [
@@ -1076,11 +1234,16 @@ def markdown(res: dict[str, Any]) -> str:
             f"{100 * t['held_out_moving_share']:.0f} % of them moving (|v| > 0.01). "
             "arm_5..7's torque channels left out (zero on most rows); *pinobs N·m*: "
             '`weighting="torque"`; *pinobs N·m offset*: also `offset=True` (a constant torque '
-            "per joint; the prediction is the model's less it). "
+            "per joint; the prediction is the model's less it); *refine=()*: the "
+            "Savitzky–Golay velocities only, without the model-based smoother's passes "
+            f"(their consistency ρ = {t['identify_report']['smoother_consistency']:.3g} on "
+            "this log for the default run, against about 1 when model and torques explain "
+            "the positions: `pinobs.identify`'s docstring). "
             + tiago_figaroh_said(figaroh_measured())
         )
         L.append("")
         L += tiago_torque_table(t, figaroh_measured())
+        L += tiago_lsq_said(t)
         L.append("")
     L.append("### Velocity RMS against the robot's own velocity [rad/s]")
     L.append("")

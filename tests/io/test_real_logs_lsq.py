@@ -1,0 +1,88 @@
+"""``benchmarks/real_logs.py``'s reference fits of pinobs's own columns at each sample
+(``pinobs_columns``, ``lsq_pinobs_columns``) on torques made by RNEA from a known,
+physically consistent model, plus noise: the columns are checked against the closed-form dynamics, not
+against themselves."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import pinobs
+
+ROOT = Path(__file__).resolve().parents[2]
+VS = 0.01  # [rad/s] the URDF friction law's smoothing velocity (pinobs's default)
+NOISE = 0.01  # [N·m] the torques' measurement noise (standard deviation)
+
+
+def _real_logs() -> ModuleType:
+    name = "pinobs_bench_real_logs"
+    if name in sys.modules:
+        return sys.modules[name]
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / "real_logs.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _known(robot: pinobs.Robot):
+    """A smooth trajectory and ``τ = RNEA(q, v, a) + I_a a + F_v v + F_c tanh(v/VS) − b``
+    with fixed positive ``I_a``, ``F_v``, ``F_c`` and any-sign ``b``."""
+    model = robot.model
+    n = model.nv
+    t = np.arange(0.0, 8.0, 0.01)
+    w = 2 * np.pi * np.array([0.3, 0.5, 0.7])[:n]
+    q = 0.8 * np.sin(np.outer(t, w) + 0.3)
+    v = 0.8 * w * np.cos(np.outer(t, w) + 0.3)
+    a = -0.8 * w**2 * np.sin(np.outer(t, w) + 0.3)
+    arm, fv, fc, b = (
+        0.05 * np.ones(n),
+        0.3 * np.ones(n),
+        0.2 * np.ones(n),
+        np.array([0.1, -0.2, 0.05])[:n],
+    )
+    data = model.createData()
+    tau = np.array([pin.rnea(model, data, q[k], v[k], a[k]) for k in range(len(t))])
+    tau += arm * a + fv * v + fc * np.tanh(v / VS) - b
+    return t, q, v, a, tau
+
+
+@pytest.mark.parametrize(("prior", "consistent"), [(None, False), (1e3, False), (1e3, True)])
+def test_lsq_pinobs_columns_recover_the_torques_of_a_known_consistent_model(prior, consistent):
+    rl = _real_logs()
+    robot = pinobs.load("planar_3r")
+    t, q, v, a, tau = _known(robot)
+    reg, C, known = rl.pinobs_columns(robot, (), q, v, a)
+    fit = t <= 6.0
+    # noise: pinobs's solve weighs each channel by its residual's median, which a noise-free
+    # fit drives to rounding
+    noisy = tau + NOISE * np.random.default_rng(0).standard_normal(tau.shape)
+    pred, theta = rl.lsq_pinobs_columns(
+        reg, C, known, noisy, fit, list(range(robot.nv)), prior=prior, consistent=consistent
+    )
+    # the held-out end against the noise-free torques: the fit averages the noise down to
+    # about NOISE·√(parameters/rows) ≈ 0.15 NOISE here (42 parameters, 3 × 601 rows)
+    assert np.sqrt(np.mean((pred - tau)[~fit] ** 2)) < 0.5 * NOISE
+    if consistent:
+        assert rl.inconsistent(reg, theta) == []
+
+
+def test_inconsistent_names_a_negative_rotor_inertia_and_a_negative_mass():
+    rl = _real_logs()
+    robot = pinobs.load("planar_3r")
+    reg, _, _ = rl.pinobs_columns(robot, (), *np.zeros((3, 2, robot.nv)))
+    theta = reg.nominal().copy()
+    assert rl.inconsistent(reg, theta) == []
+    theta[0] = -1.0  # the first body's mass
+    theta[reg.armature_slice.start] = -0.1
+    said = rl.inconsistent(reg, theta)
+    assert len(said) == 2 and "mass -1" in said[0] and "armature" in said[1]

@@ -272,8 +272,10 @@ def measure_cost(run: Any, robot: pinobs.Robot, chunk: int = 20, chunks: int = 1
     aba = aba_call(robot)
     out: dict[str, Any] = {}
     gated = functools.partial(InvariantEKF, foot_gate=FOOT_GATE)
+    radius = foot_sphere_radius(robot, GO1_FEET[0])  # the CLI's default, "urdf"
+    rolling = functools.partial(InvariantEKF, foot_radius=radius)
     with threadpool_limits(limits=1, user_api="blas"):
-        for name, cls in {**FILTERS, "inekf+gate": gated}.items():
+        for name, cls in {**FILTERS, "inekf+gate": gated, "inekf+rolling": rolling}.items():
             for clock_name, clock in (("cpu", time.thread_time), ("wall", time.perf_counter)):
                 ekf = cls(robot, GO1_FEET, gains=GAINS, imu_frame="imu_link")
                 q0 = np.concatenate([run.base_q()[0], q[0]])

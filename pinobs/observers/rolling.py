@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike
 from pinobs.errors import ConfigurationError
 from pinobs.observers.base import Vector
 from pinobs.observers.checks import positive
+from pinobs.observers.linalg import LazyKernel
 
 __all__ = ["RollingFeet"]
 
@@ -80,6 +81,7 @@ class RollingFeet:
             raise ConfigurationError(f"the ground normal must be non-zero, got {normal!r}")
         self.normal = n / np.linalg.norm(n)
         self.offsets = np.zeros((len(kinematics.feet), 3))  # type: ignore[attr-defined]
+        rolling_kernel.load()
         self.down = np.zeros(len(self.offsets), dtype=bool)
 
     def restart(self) -> None:
@@ -100,14 +102,43 @@ class RollingFeet:
         h, rot, jac, jac_w = self.kinematics.placements_and_jacobians(q_joints)  # type: ignore[attr-defined]
         if R is not None and flags is not None:
             now = np.asarray(flags, dtype=bool)
-            landed = now & ~self.down
-            down_local = -self.radius * (np.asarray(R).T @ self.normal)  # −r n, IMU frame
-            for j in np.flatnonzero(landed):
-                self.offsets[j] = rot[j].T @ down_local  # (R4): s_j = R_j(q₀)ᵀ R̂₀ᵀ (−r n)
+            landed = np.flatnonzero(now & ~self.down)
+            if landed.size:
+                down_local = -self.radius * (np.asarray(R).T @ self.normal)  # −r n, IMU frame
+                for j in landed:
+                    self.offsets[j] = rot[j].T @ down_local  # (R4): s_j = R_j(q₀)ᵀ R̂₀ᵀ (−r n)
             self.offsets[~now] = 0.0
             self.down = now
-        o = np.einsum("kab,kb->ka", rot, self.offsets)  # R_j(q) s_j
-        cross = np.zeros((len(o), 3, 3))  # (R_j s_j)^
-        cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = -o[:, 2], o[:, 1], -o[:, 0]
-        cross -= cross.transpose(0, 2, 1)
-        return h + o, jac - cross @ jac_w  # (R4)
+        h_out, jac_out = np.empty_like(h), np.empty_like(jac)
+        kernel = rolling_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        kernel(h, rot, jac, jac_w, self.offsets, h_out, jac_out)  # (R4)
+        return h_out, jac_out
+
+
+def _rolling_loops(h, rot, jac, jac_w, s, h_out, jac_out):  # type: ignore[no-untyped-def]
+    """(R4) in loops (compiled: :data:`rolling_kernel`): ``h_out = h + R s`` and
+    ``jac_out = J − (R s)^ J_ω`` per foot, the cross product written out column by column."""
+    for k in range(h.shape[0]):
+        o0 = rot[k, 0, 0] * s[k, 0] + rot[k, 0, 1] * s[k, 1] + rot[k, 0, 2] * s[k, 2]
+        o1 = rot[k, 1, 0] * s[k, 0] + rot[k, 1, 1] * s[k, 1] + rot[k, 1, 2] * s[k, 2]
+        o2 = rot[k, 2, 0] * s[k, 0] + rot[k, 2, 1] * s[k, 1] + rot[k, 2, 2] * s[k, 2]
+        h_out[k, 0], h_out[k, 1], h_out[k, 2] = h[k, 0] + o0, h[k, 1] + o1, h[k, 2] + o2
+        for c in range(jac.shape[2]):
+            wx, wy, wz = jac_w[k, 0, c], jac_w[k, 1, c], jac_w[k, 2, c]
+            jac_out[k, 0, c] = jac[k, 0, c] - (o1 * wz - o2 * wy)
+            jac_out[k, 1, c] = jac[k, 1, c] - (o2 * wx - o0 * wz)
+            jac_out[k, 2, c] = jac[k, 2, c] - (o0 * wy - o1 * wx)
+
+
+#: :func:`_rolling_loops` compiled: ``(h, R, J, J_ω, s, h_out, J_out)``.
+rolling_kernel = LazyKernel(
+    _rolling_loops,
+    np.zeros((1, 3)),
+    np.zeros((1, 3, 3)),
+    np.zeros((1, 3, 2)),
+    np.zeros((1, 3, 2)),
+    np.zeros((1, 3)),
+    np.empty((1, 3)),
+    np.empty((1, 3, 2)),
+)

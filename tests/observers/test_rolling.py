@@ -191,3 +191,22 @@ def test_foot_radius_zero_is_bit_for_bit_the_filter_without_it() -> None:
         ekf.reset(t, free_flyer_q(R, p, q), gyro=omega, acc=acc, contacts=contacts)
         outs.append([ekf.update(t, q, w, a, c).v.copy() for t, _, _, _, q, w, a, c in samples[1:]])
     np.testing.assert_array_equal(outs[0], outs[1])
+
+
+def test_the_compiled_points_are_r4_in_numpy() -> None:
+    """The compiled (R4) equals its NumPy form: ``h + R s`` and ``J − (R s)^ J_ω``."""
+    from pinobs.observers.rolling import rolling_kernel
+
+    rng = np.random.default_rng(0)
+    h, s = rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
+    rot = Rotation.random(4, random_state=1).as_matrix()
+    jac, jac_w = rng.normal(size=(4, 3, 12)), rng.normal(size=(4, 3, 12))
+    rolling_kernel.load()
+    h_out, jac_out = np.empty_like(h), np.empty_like(jac)
+    rolling_kernel.compiled(h, rot, jac, jac_w, s, h_out, jac_out)
+    o = np.einsum("kab,kb->ka", rot, s)
+    hat = np.zeros((4, 3, 3))
+    hat[:, 0, 1], hat[:, 0, 2], hat[:, 1, 2] = -o[:, 2], o[:, 1], -o[:, 0]
+    hat -= hat.transpose(0, 2, 1)
+    np.testing.assert_allclose(h_out, h + o, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(jac_out, jac - hat @ jac_w, rtol=0, atol=1e-14)

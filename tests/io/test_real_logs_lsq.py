@@ -86,3 +86,21 @@ def test_inconsistent_names_a_negative_rotor_inertia_and_a_negative_mass():
     theta[reg.armature_slice.start] = -0.1
     said = rl.inconsistent(reg, theta)
     assert len(said) == 2 and "mass -1" in said[0] and "armature" in said[1]
+
+
+@pytest.mark.parametrize("prior", [1.0, 1e3, 1e6])
+def test_lsq_pinobs_columns_fit_noise_free_torques_to_rounding_with_wide_priors(prior):
+    """Noise-free: each channel's σ is at rounding level; the wide-prior fits returned fitted
+    residuals of 5.5e-11 (×1), 6.4e4 (×1e3) and 1.1e10 N·m (×1e6) before ``solve`` took its
+    weighted step by a truncated SVD there; now 6.5e-15 to 8.9e-15 N·m (measured)."""
+    rl = _real_logs()
+    robot = pinobs.load("planar_3r")
+    t, q, v, a, tau = _known(robot)
+    reg, C, known = rl.pinobs_columns(robot, (), q, v, a)
+    fit = t <= 6.0
+    pred, _ = rl.lsq_pinobs_columns(
+        reg, C, known, tau, fit, list(range(robot.nv)), prior=prior, consistent=False
+    )
+    scale = np.sqrt(np.mean(tau**2))
+    assert np.sqrt(np.mean((pred - tau)[fit] ** 2)) < 1e-10 * scale
+    assert np.sqrt(np.mean((pred - tau)[~fit] ** 2)) < 1e-10 * scale

@@ -73,3 +73,19 @@ def test_rows_fitted_exactly_by_the_prior_mean_keep_it_with_finite_widths(channe
     np.testing.assert_array_equal(sol.theta, reg.nominal())
     np.testing.assert_array_equal(sol.channel_sigma, np.ones(3 if channels else 1))
     assert np.all(np.isfinite(sol.std)) and np.all(sol.std <= reg.prior_std())
+
+
+def test_fewer_noise_free_rows_than_parameters_are_fitted_and_the_rest_keeps_the_prior() -> None:
+    """Four samples (12 rows, 42 parameters), noise-free: the truncated-SVD step's V is
+    completed to every parameter, the unseen directions keep the prior's width."""
+    robot = pinobs.load("planar_3r")
+    reg = MomentumRegressor(robot, armature=True, weighting="torque")
+    A, channel = _rigid_rows(robot, np.arange(0.0, 0.04, 0.01))
+    truth = reg.nominal().copy()
+    truth[: reg.n_inertial] *= 1.2
+    y = A @ truth
+    sol = solve(reg, A, y, prior_std=1e3 * reg.prior_std(), channel=channel)
+    assert np.sqrt(np.mean((A @ sol.theta - y) ** 2)) < 1e-10 * np.sqrt(np.mean(y**2))
+    assert sol.std.shape == (reg.size,) and np.all(np.isfinite(sol.std))
+    assert int(np.sum(sol.excited)) <= A.shape[0]
+    np.testing.assert_allclose(sol.std[reg.n_inertial :], 1e3 * reg.prior_std()[reg.n_inertial :])

@@ -328,8 +328,9 @@ def _rows(
 
 def _weights(res: Vector, channel: NDArray[np.intp], huber: float | None) -> tuple[Vector, Vector]:
     """``(σ per channel, row weights)``: ``σ_j = 1.4826 · median |r|`` over channel ``j``'s
-    rows (at least :data:`CHANNEL_SIGMA_FLOOR` of the largest; all 1 when every residual is
-    0), each row ``1/σ²`` times its Huber weight (none when ``huber`` is ``None``)."""
+    rows (:func:`~pinobs.model.identification.leastsquares.channel_sigma`: at least
+    ``CHANNEL_SIGMA_FLOOR`` of the largest; all 1 when every residual is 0), each row
+    ``1/σ²`` times its Huber weight (none when ``huber`` is ``None``)."""
     labels = np.unique(channel)
     sigma = channel_sigma(res, channel)
     s_row = sigma[np.searchsorted(labels, channel)]

@@ -250,10 +250,12 @@ def _weighted_step(
         lam = np.maximum(lam, 1.0)
         return prec_u, lam, vec, vec @ ((vec.T @ (Aw.T @ r0)) / lam), False
     sw = np.sqrt(row_w)
-    U, S, Vt = np.linalg.svd(As * sw[:, None], full_matrices=False)
+    # the whole V (p × p) also when there are fewer rows than parameters
+    U, S, Vt = np.linalg.svd(As * sw[:, None], full_matrices=As.shape[0] < As.shape[1])
+    k = S.size
     S = np.where(S > np.finfo(float).eps * max(As.shape) * S[0], S, 0.0)
-    lam, vec = 1.0 + S**2, Vt.T
-    step = vec @ (S / lam * (U.T @ (r0 * sw)))
+    lam, vec = 1.0 + np.concatenate([S, np.zeros(As.shape[1] - k)]) ** 2, Vt.T
+    step = vec[:, :k] @ (S / lam[:k] * (U[:, :k].T @ (r0 * sw)))
     return (vec * lam) @ vec.T, lam, vec, step, True
 
 

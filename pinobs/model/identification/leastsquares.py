@@ -126,7 +126,11 @@ def solve(
     channel then has its own σ (``σ_c = 1.4826 · median |r_i|`` over its rows, at least
     :data:`CHANNEL_SIGMA_FLOOR` of the largest), re-estimated at each pass: rows of
     torques in N·m weighted by their own noise (module docstring, "Weighting").  ``None``:
-    one σ for all rows (rows made commensurable by their weights beforehand).
+    one σ for all rows (rows made commensurable by their weights beforehand).  Rows weighted
+    beyond what the normal equations resolve against the prior (a noise-free log, σ at
+    rounding; prior widths many orders wide: :data:`NORMAL_EQUATIONS_LIMIT`) are solved by a
+    truncated SVD instead (``_weighted_step``); ``precision`` is then only as good as a dense
+    matrix holds it (``ε·λ_max`` on every eigenvalue).
 
     Raises:
         IdentificationError: no rows, or nothing identifiable.
@@ -349,7 +353,8 @@ def _consistent(
     (``T = V diag(1/√λ)``, ``u = T x``): a dense ``Λ`` scaled to a unit largest eigenvalue
     held the weakly seen directions at rounding level, which the barrier (μ down to
     :data:`MU_END`) pushed anywhere (noise-free planar_3r, prior ×1e3: fitted residual 2e4
-    N·m; TIAGo, prior ×1e6: up to 36 N·m against 0.7–2.4 unconstrained).
+    N·m), and with its eigenvalues capped where a dense matrix still holds them the fit was
+    still off (TIAGo, prior ×1e6: torso 36.5 N·m fitted against 0.71 so).
     """
     if _is_consistent(reg, theta):
         return theta

@@ -4,7 +4,6 @@ skipped without FIGAROH (``pip install 'pinobs[peers]'``)."""
 from __future__ import annotations
 
 import importlib.util
-import sys
 import warnings
 from pathlib import Path
 from types import ModuleType
@@ -14,8 +13,8 @@ import pinocchio as pin
 import pytest
 
 import pinobs
+from tests.io.test_real_data import bench_module
 
-ROOT = Path(__file__).resolve().parents[2]
 VS = 0.01  # [rad/s] the benchmark's tanh velocity (pinobs's COULOMB_SMOOTHING_VELOCITY)
 LEGACY_CONFIG = """\
 identification:
@@ -40,16 +39,7 @@ def _peer() -> ModuleType:
         if importlib.util.find_spec("figaroh") is None:
             pytest.skip("FIGAROH is not installed (pip install 'pinobs[peers]')")
         import figaroh.identification.base_identification  # noqa: F401
-    name = "pinobs_bench_figaroh_peer"
-    if name in sys.modules:
-        return sys.modules[name]
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / "figaroh_peer.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return bench_module("figaroh_peer")
 
 
 def _known_torques(model: pin.Model, t: np.ndarray):

@@ -15,11 +15,15 @@ from pinobs.io import read_log
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _module() -> ModuleType:
-    name = "pinobs_bench_real_data"
+def bench_module(stem: str) -> ModuleType:
+    """``benchmarks/<stem>.py`` imported as a module (once; the benchmarks folder on the path,
+    for the scripts that import their siblings)."""
+    name = f"pinobs_bench_{stem}"
     if name in sys.modules:
         return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / "real_data.py")
+    if str(ROOT / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{stem}.py")
     assert spec is not None and spec.loader is not None
     mod = importlib.util.module_from_spec(spec)
     sys.modules[name] = mod
@@ -27,7 +31,7 @@ def _module() -> ModuleType:
     return mod
 
 
-real_data = _module()
+real_data = bench_module("real_data")
 needs_data = pytest.mark.skipif(
     real_data.data_root() is None, reason="no shared data folder (../shared/data)"
 )

@@ -5,9 +5,6 @@ against themselves."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 from types import ModuleType
 
 import numpy as np
@@ -15,23 +12,14 @@ import pinocchio as pin
 import pytest
 
 import pinobs
+from tests.io.test_real_data import bench_module
 
-ROOT = Path(__file__).resolve().parents[2]
 VS = 0.01  # [rad/s] the URDF friction law's smoothing velocity (pinobs's default)
 NOISE = 0.01  # [N·m] the torques' measurement noise (standard deviation)
 
 
 def _real_logs() -> ModuleType:
-    name = "pinobs_bench_real_logs"
-    if name in sys.modules:
-        return sys.modules[name]
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / "real_logs.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return bench_module("real_logs")
 
 
 def _known(robot: pinobs.Robot):

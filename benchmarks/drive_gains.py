@@ -168,6 +168,11 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def _row(label: str, values, fmt: str = ".3f") -> str:  # type: ignore[no-untyped-def]
+    """One markdown table row: ``| label | v₁ | v₂ | … |``."""
+    return f"| {label} | " + " | ".join(format(float(x), fmt) for x in values) + " |"
+
+
 def markdown(results: dict) -> str:
     joints = ("pan", "lift", "elbow", "wrist 1", "wrist 2", "wrist 3")
     pub = results["published_gains"]
@@ -189,18 +194,12 @@ def markdown(results: dict) -> str:
             "",
             "| joint | " + " | ".join(joints) + " |",
             "|---|" + "---|" * 6,
-            "| gain | " + " | ".join(f"{x:.3f}" for x in g["gains"]) + " |",
-            "| ± (1σ) | " + " | ".join(f"{x:.3f}" for x in g["std"]) + " |",
-            "| published | " + " | ".join(f"{x:.4f}" for x in pub) + " |",
-            "| ratio | "
-            + " | ".join(f"{a / b:.3f}" for a, b in zip(g["gains"], pub, strict=True))
-            + " |",
-            "| fit residual unloaded [N·m] | "
-            + " | ".join(f"{x:.3f}" for x in g["residual_unloaded"])
-            + " |",
-            "| fit residual loaded [N·m] | "
-            + " | ".join(f"{x:.3f}" for x in g["residual_loaded"])
-            + " |",
+            _row("gain", g["gains"]),
+            _row("± (1σ)", g["std"]),
+            _row("published", pub, ".4f"),
+            _row("ratio", (a / b for a, b in zip(g["gains"], pub, strict=True))),
+            _row("fit residual unloaded [N·m]", g["residual_unloaded"]),
+            _row("fit residual loaded [N·m]", g["residual_loaded"]),
             "",
             f"Rank {g['rank']} of {g['n_parameters']} columns, condition {g['condition']:.3g}, "
             f"{g['seconds']:.1f} s (wall, a shared 2-core machine); the load's centre of mass "
@@ -213,28 +212,20 @@ def markdown(results: dict) -> str:
             "",
             "| held-out torque RMS [N·m] | " + " | ".join(joints) + " |",
             "|---|" + "---|" * 6,
-            "| without the load, these gains | "
-            + " | ".join(f"{x:.3f}" for x in p["holdout_torque_before"])
-            + " |",
-            "| with it, these gains | "
-            + " | ".join(f"{x:.3f}" for x in p["holdout_torque_after"])
-            + " |",
-            "| without the load, published | "
-            + " | ".join(f"{x:.3f}" for x in pp["holdout_torque_before"])
-            + " |",
-            "| with it, published | "
-            + " | ".join(f"{x:.3f}" for x in pp["holdout_torque_after"])
-            + " |",
-            "| with it, these gains, in A (÷ gain) | "
-            + " | ".join(
-                f"{x / k:.4f}" for x, k in zip(p["holdout_torque_after"], g["gains"], strict=True)
-            )
-            + " |",
-            "| with it, published, in A (÷ gain) | "
-            + " | ".join(
-                f"{x / k:.4f}" for x, k in zip(pp["holdout_torque_after"], pub, strict=True)
-            )
-            + " |",
+            _row("without the load, these gains", p["holdout_torque_before"]),
+            _row("with it, these gains", p["holdout_torque_after"]),
+            _row("without the load, published", pp["holdout_torque_before"]),
+            _row("with it, published", pp["holdout_torque_after"]),
+            _row(
+                "with it, these gains, in A (÷ gain)",
+                (x / k for x, k in zip(p["holdout_torque_after"], g["gains"], strict=True)),
+                ".4f",
+            ),
+            _row(
+                "with it, published, in A (÷ gain)",
+                (x / k for x, k in zip(pp["holdout_torque_after"], pub, strict=True)),
+                ".4f",
+            ),
             "",
             "Each row is in its own gains' torque (gain × current): the rows in A compare the "
             "two fits on the measured currents.",

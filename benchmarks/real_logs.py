@@ -1122,6 +1122,12 @@ def tiago_torque_table(t: dict[str, Any], measured: dict[str, Any] | None) -> li
     return L
 
 
+def _price(what: str, over: str, num: list[float], den: list[float]) -> str:
+    """``num`` over ``den`` on the held-out arm_1..4 (channels 1..4), as a sentence."""
+    ratios = (f"×{a / b:.3f}" for a, b in zip(num[1:5], den[1:5], strict=True))
+    return f"{what} price on the held-out arm_1..4 ({over}): " + ", ".join(ratios)
+
+
 def tiago_lsq_said(t: dict[str, Any]) -> list[str]:
     """What TIAGo's reference rows (:data:`TIAGO_LSQ`) are, and what in each is not
     physically consistent."""
@@ -1150,22 +1156,17 @@ def tiago_lsq_said(t: dict[str, Any]) -> list[str]:
     if free and cons:
         L += [
             "",
-            "Physical consistency's price on the held-out arm_1..4 (*wide prior, consistent* "
-            "over *wide prior*): "
-            + ", ".join(f"×{c / f:.3f}" for f, c in zip(free[1:5], cons[1:5], strict=True))
+            _price(
+                "Physical consistency's", "*wide prior, consistent* over *wide prior*", cons, free
+            )
             + ". arm_5..7's torques are not fitted: with the wide prior nothing holds the "
             "wrist's parameters that arm_1..4's torques do not see, and the consistent fit's "
             "prediction of those three channels is meaningless (their columns above).",
         ]
     refined, plain = (t["torque"].get(k, {}).get("held_out") for k in list(TIAGO_VARIANTS)[1:3])
     if refined and plain:
-        L += [
-            "",
-            "The smoother's passes' price on the held-out arm_1..4 (*pinobs N·m offset* over "
-            "*pinobs N·m offset refine=()*): "
-            + ", ".join(f"×{r / p:.3f}" for r, p in zip(refined[1:5], plain[1:5], strict=True))
-            + ".",
-        ]
+        over = "*pinobs N·m offset* over *pinobs N·m offset refine=()*"
+        L += ["", _price("The smoother's passes'", over, refined, plain) + "."]
     return L
 
 

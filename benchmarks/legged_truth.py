@@ -349,7 +349,7 @@ def _density_lines(density: dict[str, Any]) -> list[str]:
     if not density:
         return []
     md = [
-        "Contact densities measured on the truth (`contact_density`, seed 0; each stance, "
+        "`density`: contact densities measured on the truth (`contact_density`, seed 0; each stance, "
         "measured force > 20 N, moves the foot's point by Δa: σ_c = sqrt(Σ|Δa|² / (3 Σ τ)), "
         "the point's velocity spectrum at 0 Hz; the bands: the same spectrum there, flat for "
         "the filters' random walk): the first row is `GO1_GAINS`' (the rolling rows), the "
@@ -500,11 +500,15 @@ def format_report(report: dict[str, Any]) -> str:
     )
     md += _section_lines(
         report.get("rolling") or {},
-        rolling + f"`GO1_GAINS` (contact {GO1_GAINS.contact:g} m/s/√Hz, measured: `density`):",
+        "`rolling`: "
+        + rolling
+        + f"`GO1_GAINS` (contact {GO1_GAINS.contact:g} m/s/√Hz, measured: `density`):",
     )
     md += _section_lines(
         report.get("rolling_gains") or {},
-        rolling + f"`GAINS` (contact {GAINS.contact:g} m/s/√Hz; the rows before `GO1_GAINS`):",
+        "`rolling_gains`: "
+        + rolling
+        + f"`GAINS` (contact {GAINS.contact:g} m/s/√Hz; the rows before `GO1_GAINS`):",
     )
     md += _density_lines(report.get("density") or {})
     md += _slip_lines(report.get("slip") or {})

@@ -46,14 +46,15 @@ Issue 38 targets: `v rms` ≤ 0.05 m/s and ≤ 0.7 × the quaternion EKF's; ≥ 
 every axis and consistent (NEES/3 0.5-2); an update ≤ 30 `pin.aba` on go1.
 
     python benchmarks/legged_truth.py [--duration 10] [--seeds 0 1 2] [--long 60]
-        [--sections go1 humanoid cost real slip] [--merge] [--quick]
+        [--sections go1 humanoid cost real slip rolling density] [--merge] [--quick]
 
     python benchmarks/legged_truth.py --sections cost --merge    # the cost table alone
     python benchmarks/legged_truth.py --sections real --merge    # the real Go1 log alone
 
-With `--merge` the report's first paragraph (its header, hand-written prose about earlier
-runs) is kept from `legged_truth.md` and a sentence naming this run (command, date, time)
-is appended to it; without it, the header is generated from the arguments.
+With `--merge` the sections not run are kept from `legged_truth.json`.  The report's header
+lists, per section, the run that made its rows (`runs` in the JSON: date, command, seconds,
+load average; a rerun replaces its section's entry) with the section's note (`NOTES`); the
+JSON's `gains` holds the gains each section ran with.
 
 `real`: SEROW's Go1 log (no truth; `benchmarks/real_data.py`) through
 `pinobs.io.legged_run.legged_run` with its defaults (`LEGGED_GAINS`, the encoders' σ from the
@@ -71,7 +72,14 @@ NIS on the MuJoCo go1 (`simulated_nis`), where the defaults were chosen, its enc
 
 `rolling`: go1's `--motions` and the `--long` trot with both filters given `foot_radius`
 (the URDF's foot spheres, 2 cm: each foot measured at its point that touched the ground,
-`pinobs.observers.rolling`), `GAINS` unchanged; the section's other rows kept.
+`pinobs.observers.rolling`), with `GO1_GAINS` (the contact density measured at that point,
+`density`); the section's other rows kept (`rolling_gains`: the rows with `GAINS`, before).
+
+`density`: the contact density of the feet's true motion over their stances
+(`contact_density`, no filter): go1's trot at the touch point, which gives `GO1_GAINS`, and
+the runs that check the method against `GAINS`' and `TALOS_GAINS`' numbers; and
+(`density_diagnosis`) the invariant EKF on the measuring motion with one term of
+`GO1_GAINS` changed at a time: what keeps go1 conservative (a diagnosis, not a choice).
 
 `slip`: go1 standing in MuJoCo, one foot made to slide while its force keeps it in contact
 (`SlidingLegs`), with and without the foot gate: the base velocity error (`slip_table`).
@@ -84,6 +92,7 @@ import dataclasses
 import functools
 import json
 import math
+import os
 import platform
 import time
 from pathlib import Path
@@ -133,6 +142,16 @@ OLD_GAINS = dataclasses.replace(GAINS, contact=0.1, kinematics=5e-3)
 #: (10 s, seed 0) the contact term alone made it: contact 1e-6 → NEES/3 0.85 (0.42 with
 #: 0.007), the kinematics term 0 instead → 0.42 (unchanged), the encoders' J Σ_q Jᵀ 0 → 0.42.
 TALOS_GAINS = dataclasses.replace(GAINS, contact=8.8e-4)
+#: go1 with rolling feet (``foot_radius=FOOT_RADIUS``, the ``rolling`` rows; ``legged_run``'s
+#: default radius): ``GAINS`` with the contact density measured the same way on go1's truth
+#: at the point each foot touched the ground (rolling.py's (R2)), not its centre
+#: (``contact_density``; the trot, 20 s, seed 0: sqrt(Σ|Δa|² / (3 Σ τ)) = 0.0053 m/s/√Hz,
+#: per axis x / y / z 0.0050 / 0.0024 / 0.0073, 390 stances; the centre's 0.0065 on the same
+#: run, 0.0069 on its first 5 s: ``GAINS``' number).  What is left is MuJoCo's soft contact:
+#: the loaded sphere sinks ~1 mm and creeps ~2 mm sideways over a stance.  Measured on the
+#: trot's truth (the motion is the same for every seed), so the trot rows are not held out;
+#: stand and sway are.  ``kinematics`` stays 1 mm, as in ``TALOS_GAINS``.
+GO1_GAINS = dataclasses.replace(GAINS, contact=5.3e-3)
 #: go1's encoders quantised as the real Go1 log's are (steps 6e-5 rad hip and thigh, 4e-5 rad
 #: calf; white 3e-5 rad under the rounding, so 44 % of a still joint's readings repeat the
 #: previous one, the log's 35-57 %): the ``real_sim`` rows' second noise.
@@ -147,6 +166,27 @@ WALKS = ("trot", "step")
 #: axes: gyro 0.014, 0.015, 0.063 rad/s; accelerometer 0.13, 0.09, 0.16 m/s²) and kf's
 #: encoder σ on the log (1e-4 rad); the kinematics term is the one varied in the table.
 LOG_GAINS = dataclasses.replace(GAINS, gyro=1.5e-3, accel=6.4e-3, joint=1e-4)
+#: A short note per section (the report's list of runs): what its gains were measured on,
+#: what is held out, how to read its numbers.
+NOTES = {
+    "go1": "`GAINS`: contact density measured on the trot's truth (seed 0, 5 s; the foot centre) "
+    "and kinematics chosen on that run: stand and sway held out. Accuracy rows from the NumPy "
+    "steps (the compiled ones equal them to 5e-11 relative); includes the cost table",
+    "cost": "By this thread's CPU time and by wall time: on a loaded machine the wall time "
+    "counts the other processes (read the CPU rows)",
+    "humanoid": "`TALOS_GAINS`: contact density measured on TALOS's stepping truth (20 s, "
+    "seed 0): the step rows are not held out, stand and sway are. The stepping walks 1.30 m "
+    "forward; the base's path, the drifts' denominator, is 5.87 m (side-to-side shifts)",
+    "rolling": "`GO1_GAINS`: contact density measured on the trot's truth at the touch point "
+    "(20 s, seed 0; section `density`): the trot rows are not held out (the motion is the same "
+    "for every seed), stand and sway are",
+    "rolling_gains": "`GAINS` with rolling feet, the rows before `GO1_GAINS` (not rerun)",
+    "density": "Measured on the truth alone (no filter): seed 0, the motions of `DENSITY_RUNS`; "
+    "`density_diagnosis`: filters on the measuring motion, not used to choose",
+    "real": "The real log held out: run once with the settings MuJoCo gave, nothing tuned on "
+    "it (`GO1_GAINS` rows: run once, after the rolling rows)",
+    "slip": "`GAINS`, go1 standing (seed 0), one foot made to slide",
+}
 #: The foot gate's outlier probability in the cost table's ``inekf+gate`` row and the real
 #: log's rows (``InvariantEKF(foot_gate=)``).
 FOOT_GATE = 1e-3
@@ -212,6 +252,161 @@ def run_filter(
         "nees": float(np.mean(nees)),
         "walked_m": walked,
     }
+
+
+#: Frequency bands [Hz] of :func:`stance_density`'s velocity spectrum.
+PSD_BANDS = ((5.0, 20.0), (20.0, 60.0), (60.0, 250.0))
+
+
+def stance_density(
+    t: np.ndarray,
+    centres: np.ndarray,
+    rotations: np.ndarray,
+    flags: np.ndarray,
+    radius: float,
+    normal: Any = (0.0, 0.0, 1.0),
+) -> dict[str, Any]:
+    """The contact density a foot's true motion over its stances amounts to: each stance
+    (a run of ``flags``, samples ``k₀..k₁``) moves the foot's measured point by ``Δa``, and a
+    random walk of density ``σ_c`` (the filters' ``ḋ_j = R h_R w_c``) has ``E|Δa|² = 3 σ_c² τ``
+    over a stance of ``τ = t[k₁] − t[k₀]``, so::
+
+        σ_c = sqrt(Σ |Δa|² / (3 Σ τ)),   per axis  sqrt(Σ Δa_i² / Σ τ)
+
+    with ``a = c + R_f s``, ``s = R_f(t₀)ᵀ (−r n)`` (:mod:`pinobs.observers.rolling`'s (R2): the
+    point that touched the ground; ``radius`` 0: the foot frame).  That is the point's velocity
+    spectrum at zero frequency over the stances: with ``V(f) = Σ ȧ e^{−2πi f t} Δt`` over a
+    stance (``ȧ`` by differences, ``f = k/τ``), ``V(0) = Δa`` and a white velocity of density
+    ``σ`` gives ``E|V(f)|² = 3 σ² τ`` at every ``f``; ``psd`` is ``sqrt(Σ|V|² / (3 Σ τ))`` over
+    the bins in each of :data:`PSD_BANDS` (the spectrum's shape: a white walk is flat).
+    ``t`` (N,) [s], evenly sampled, ``centres`` (N, K, 3) the foot frames' world positions [m],
+    ``rotations`` (N, K, 3, 3) their world orientations, ``flags`` (N, K) contact; stances of
+    one sample are skipped (τ = 0)."""
+    n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    dt = float(t[1] - t[0])
+    sq, tau, stances = np.zeros(3), 0.0, 0
+    band = np.zeros((len(PSD_BANDS), 2))  # Σ|V|², Σ τ
+    for j in range(flags.shape[1]):
+        edges = np.diff(np.concatenate([[0], flags[:, j].astype(int), [0]]))
+        for k0, k1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True):
+            if k1 > k0:
+                s = rotations[k0, j].T @ (-radius * n)  # (R2)
+                a = centres[k0 : k1 + 1, j] + rotations[k0 : k1 + 1, j] @ s
+                d = a[-1] - a[0]
+                sq, tau, stances = sq + d * d, tau + float(t[k1] - t[k0]), stances + 1
+                power = np.sum(np.abs(np.fft.rfft(np.diff(a, axis=0), axis=0)) ** 2, axis=1)
+                f = np.fft.rfftfreq(k1 - k0, dt)
+                for i, (lo, hi) in enumerate(PSD_BANDS):
+                    inside = (f >= lo) & (f < hi)
+                    band[i] += power[inside].sum(), inside.sum() * (k1 - k0) * dt
+    if tau <= 0:
+        raise ValueError("no stance of two samples or more: no contact density to measure")
+    return {
+        "density": float(np.sqrt(sq.sum() / (3.0 * tau))),
+        "per_axis": np.sqrt(sq / tau).tolist(),
+        "psd": [float(np.sqrt(p / (3.0 * w))) if w > 0 else math.nan for p, w in band],
+        "stances": stances,
+        "stance_s": tau,
+    }
+
+
+def contact_density(run: Any, robot: pinobs.Robot, radius: float) -> dict[str, Any]:
+    """:func:`stance_density` of a simulated run's truth: the feet from the true base pose and
+    joint angles, the stances from the measured forces (> ``CONTACT_FORCE``, the filters')."""
+    legs = FootKinematics(robot, run.feet)
+    q, base = run.q_joints(truth=True), run.base_q()
+    R_b = Rotation.from_quat(base[:, 3:]).as_matrix()
+    centres = np.empty((run.t.size, len(run.feet), 3))
+    rotations = np.empty((run.t.size, len(run.feet), 3, 3))
+    for k in range(run.t.size):
+        h, rot, _, _ = legs.placements_and_jacobians(q[k])
+        centres[k] = base[k, :3] + h @ R_b[k].T
+        rotations[k] = R_b[k] @ rot
+    return stance_density(run.t, centres, rotations, run.forces() > CONTACT_FORCE, radius)
+
+
+#: The ``density`` section's runs: label → (robot, motion, duration [s], foot radius [m]);
+#: seed 0.  The first gives ``GO1_GAINS``; the others check the method against the numbers of
+#: ``GAINS`` (go1's foot centre, the trot's first 5 s) and ``TALOS_GAINS`` (TALOS's soles).
+DENSITY_RUNS = {
+    "go1 trot 20 s, touch point (GO1_GAINS)": ("go1", "trot", 20.0, FOOT_RADIUS),
+    "go1 trot 20 s, foot centre": ("go1", "trot", 20.0, 0.0),
+    "go1 trot 5 s, foot centre (GAINS)": ("go1", "trot", 5.0, 0.0),
+    "TALOS step 20 s, sole (TALOS_GAINS)": ("talos", "step", 20.0, 0.0),
+}
+
+
+def density_section() -> dict[str, Any]:
+    """The ``density`` section: :func:`contact_density` of :data:`DENSITY_RUNS`."""
+    out: dict[str, Any] = {}
+    for label, (name, motion, duration, radius) in DENSITY_RUNS.items():
+        robot = pinobs.load(name)
+        simulate = simulate_legged if name == "go1" else simulate_humanoid
+        run = simulate(motion, duration, seed=0, noise=NOISE, robot=robot)
+        out[label] = contact_density(run, robot, radius)
+        print("density", label, out[label], flush=True)
+    return out
+
+
+#: The ``density_diagnosis`` rows: ``GO1_GAINS`` and one term changed at a time.
+DIAGNOSIS_GAINS = {
+    "GO1_GAINS (contact 0.0053, kinematics 1 mm)": GO1_GAINS,
+    "contact 1e-6": dataclasses.replace(GO1_GAINS, contact=1e-6),
+    "kinematics 0.1 mm": dataclasses.replace(GO1_GAINS, kinematics=1e-4),
+    "kinematics 0": dataclasses.replace(GO1_GAINS, kinematics=0.0),
+}
+
+
+def density_diagnosis() -> dict[str, Any]:
+    """The invariant EKF with rolling feet on the motion ``GO1_GAINS`` was measured on (trot,
+    10 s, seed 0, truth start) with :data:`DIAGNOSIS_GAINS`: a diagnosis of what keeps go1
+    conservative, not a choice (the ``rolling`` rows keep ``GO1_GAINS``)."""
+    robot = pinobs.load("go1")
+    run = simulate_legged("trot", 10.0, seed=0, noise=NOISE, robot=robot)
+    return {
+        label: run_filter("inekf", run, robot, "truth", gains, FOOT_RADIUS)
+        for label, gains in DIAGNOSIS_GAINS.items()
+    }
+
+
+def _diagnosis_lines(rows: dict[str, Any]) -> list[str]:
+    if not rows:
+        return []
+    md = [
+        "`density_diagnosis`: the invariant EKF with rolling feet on the measuring motion (trot, "
+        "10 s, seed 0, truth start) with `GO1_GAINS` and one term changed (a diagnosis, not "
+        "used to choose):",
+        "",
+        "| gains | v rms [m/s] | in ±2σ x / y / z | NEES/3 |",
+        "|---|---:|---:|---:|",
+    ]
+    for label, r in rows.items():
+        xyz = " / ".join(f"{100 * a:.1f}" for a in r["in_2sigma_xyz"])
+        md.append(f"| {label} | {r['v_rms']:.4f} | {xyz} | {r['nees']:.3g} |")
+    return [*md, ""]
+
+
+def _density_lines(density: dict[str, Any]) -> list[str]:
+    if not density:
+        return []
+    md = [
+        "`density`: contact densities measured on the truth (`contact_density`, seed 0; each stance, "
+        "measured force > 20 N, moves the foot's point by Δa: σ_c = sqrt(Σ|Δa|² / (3 Σ τ)), "
+        "the point's velocity spectrum at 0 Hz; the bands: the same spectrum there, flat for "
+        "the filters' random walk): the first row is `GO1_GAINS`' (the rolling rows), the "
+        "others check the method against `GAINS`' and `TALOS_GAINS`' numbers:",
+        "",
+        "| run | σ_c [m/s/√Hz] | x / y / z | "
+        + " | ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in PSD_BANDS)
+        + " | stances | stance time [s] |",
+        "|---|---:|---:|" + "---:|" * len(PSD_BANDS) + "---:|---:|",
+    ]
+    for label, r in density.items():
+        md.append(
+            f"| {label} | {r['density']:.2g} | {' / '.join(f'{a:.2g}' for a in r['per_axis'])} "
+            f"| {' | '.join(f'{p:.2g}' for p in r['psd'])} | {r['stances']} | {r['stance_s']:.1f} |"
+        )
+    return [*md, ""]
 
 
 def _verdict(nees: float) -> str:
@@ -299,113 +494,130 @@ def measure_cost(run: Any, robot: pinobs.Robot, chunk: int = 20, chunks: int = 1
     return out
 
 
-def format_report(
-    report: dict[str, Any], args: argparse.Namespace, header: str | None = None
-) -> str:
-    """The markdown report; its first paragraph ``header`` (the one of the report being
-    merged into, hand-written prose kept) followed by a sentence naming this run, or
-    (``None``) generated from ``args``."""
+def format_report(report: dict[str, Any]) -> str:
+    """The markdown report: a short header, the runs that made each section's rows (their
+    command, date, seconds and load, with the section's note: ``NOTES``), then the tables."""
     m = report["machine"]
     md = [
-        header + " " + _rerun_sentence(report, args)
-        if header
-        else f"Made by `python benchmarks/legged_truth.py --duration {args.duration:g} --seeds "
-        f"{' '.join(map(str, args.seeds))} --long {args.long:g} --long-seeds "
-        f"{' '.join(map(str, args.long_seeds))}` on {m['date']} in "
-        f"{' + '.join(f'{v:.0f} s ({k})' for k, v in report['seconds'].items())} "
-        f"(MuJoCo {m['mujoco']}); conditions in the script's docstring. Mean over the seeds "
-        "(worst seed in brackets). Drift is per metre walked for the trot and TALOS's "
-        "stepping, per second for stand and sway. The gains were chosen on the trot, seed 0 (`GAINS`' comment): the "
-        "stand and sway rows are held out (seeds change only the sensor noise; the motion is "
-        "the same).",
+        "Made by `python benchmarks/legged_truth.py`, section by section: `--sections NAME "
+        "--merge` reruns one and keeps every other row from `legged_truth.json` (conditions: "
+        "the script's docstring; the JSON's `conditions`, and `gains`: each section's). Mean "
+        "over the seeds (worst seed in brackets); drift per metre walked (trot, TALOS's step) "
+        f"or per second (stand, sway). MuJoCo {m['mujoco']}, Python {m['python']}.",
         "",
-        *_table(report["motions"]),
+        "Runs, the last of each section (a rerun replaces its line; load: the 1-min load "
+        "average at the start and the end, on 2 cores shared with other work):",
         "",
-        "Targets (issue 38), as measured:",
+        *_run_lines(report.get("runs") or {}),
         "",
-        *_targets(report["motions"]),
+        "go1, the foot frames measured (`foot_radius=0`, the filters' default), `GAINS`:",
         "",
     ]
-    if report["humanoid"]:
-        md += [
-            "TALOS (`simulate_humanoid`: 32 joints, flat soles, IMU at the base), `TALOS_GAINS` "
-            "(`GAINS` with the contact density measured on TALOS's stepping truth, 20 s, seed 0: "
-            "stand and sway held out), drift per second (stand, sway) or per metre "
-            "walked (step: the base's horizontal path, side-to-side shifts included):",
-            "",
-            *_table(report["humanoid"]),
-            "",
-            *_targets(report["humanoid"]),
-            "",
-        ]
-    if report["long"]:
-        md += [
-            f"Long trot, {args.long:g} s:",
-            "",
-            *_table(report["long"]),
-            "",
-            *_targets(report["long"]),
-            "",
-        ]
-    if report["old_gains"]:
-        md += [
+    tables = [
+        ("motions", "", True),
+        (
+            "humanoid",
+            "TALOS (`simulate_humanoid`: 32 joints, flat soles, IMU at the base), `TALOS_GAINS`, "
+            "drift per second (stand, sway) or per metre walked (step: the base's horizontal "
+            "path, side-to-side shifts included):",
+            True,
+        ),
+        ("long", "go1, long trot, `GAINS`:", True),
+        (
+            "old_gains",
             f"The trot with the first benchmark's gains (contact {OLD_GAINS.contact:g} m/s/√Hz, "
             f"kinematics {1e3 * OLD_GAINS.kinematics:g} mm; same runs):",
-            "",
-            *_table(report["old_gains"]),
-            "",
-        ]
-    if report["cost"]:
-        md += [
-            "Cost per update on go1 (trot, 4 feet, measured in the same run as `pin.aba`, "
-            "interleaved in chunks of 20; medians; target ≤ 30× aba):",
-            "",
-            "| filter | clock | update [µs] | aba [µs] | ratio |",
-            "|---|---|---:|---:|---:|",
-        ]
-        for key, c in report["cost"].items():
-            name, clock = key.rsplit("_", 1)
-            md.append(
-                f"| `{name}` | {clock} | {1e6 * c['update_s']:.0f} | {1e6 * c['aba_s']:.2f} | "
-                f"{c['ratio']:.0f}× ({'met' if c['ratio'] <= 30 else 'missed'}) |"
-            )
-        md.append("")
-    if report.get("rolling"):
-        md += [
-            f"Rolling feet: both filters with `foot_radius={FOOT_RADIUS:g}` (go1's foot spheres; "
-            "`pinobs.observers.rolling`: each foot measured at its point that touched the "
-            "ground; a change of the measurement model the two filters share), `GAINS` "
-            "unchanged; the rows run with `--sections rolling` (the others above: radius 0):",
-            "",
-            *_table(report["rolling"]),
-            "",
-            *_targets(report["rolling"]),
-            "",
-        ]
+            False,
+        ),
+    ]
+    for key, title, targets in tables:
+        md += _section_lines(report.get(key) or {}, title, targets)
+    md += _cost_lines(report.get("cost") or {})
+    rolling = (
+        f"go1 with rolling feet: both filters with `foot_radius={FOOT_RADIUS:g}` (go1's foot "
+        "spheres; `pinobs.observers.rolling`: each foot measured at its point that touched the "
+        "ground; a change of the measurement model the two filters share; `legged_run`'s "
+        "default), "
+    )
+    md += _section_lines(
+        report.get("rolling") or {},
+        "`rolling`: "
+        + rolling
+        + f"`GO1_GAINS` (contact {GO1_GAINS.contact:g} m/s/√Hz, measured: `density`):",
+    )
+    md += _section_lines(
+        report.get("rolling_gains") or {},
+        "`rolling_gains`: "
+        + rolling
+        + f"`GAINS` (contact {GAINS.contact:g} m/s/√Hz; the rows before `GO1_GAINS`):",
+    )
+    md += _density_lines(report.get("density") or {})
+    md += _diagnosis_lines(report.get("density_diagnosis") or {})
     md += _slip_lines(report.get("slip") or {})
     md += _real_table(report.get("real") or {})
     md += _sim_nis_lines(report.get("real_sim") or {})
     return "\n".join(md)
 
 
-def _rerun_sentence(report: dict[str, Any], args: argparse.Namespace) -> str:
-    """This run, said after a kept header: its command, date and time, the rows kept."""
+def _section_lines(section: dict[str, Any], title: str, targets: bool = True) -> list[str]:
+    """A section's table under ``title``, with issue 38's targets if ``targets``."""
+    if not section:
+        return []
+    md = [*([title, ""] if title else []), *_table(section), ""]
+    if targets:
+        md += ["Targets (issue 38), as measured:", "", *_targets(section), ""]
+    return md
+
+
+def _cost_lines(cost: dict[str, Any]) -> list[str]:
+    if not cost:
+        return []
+    md = [
+        "Cost per update on go1 (trot, 4 feet, measured in the same run as `pin.aba`, "
+        "interleaved in chunks of 20; medians; target ≤ 30× aba):",
+        "",
+        "| filter | clock | update [µs] | aba [µs] | ratio |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for key, c in cost.items():
+        name, clock = key.rsplit("_", 1)
+        md.append(
+            f"| `{name}` | {clock} | {1e6 * c['update_s']:.0f} | {1e6 * c['aba_s']:.2f} | "
+            f"{c['ratio']:.0f}× ({'met' if c['ratio'] <= 30 else 'missed'}) |"
+        )
+    return [*md, ""]
+
+
+def _run_lines(runs: dict[str, Any]) -> list[str]:
+    """One line per entry of ``report["runs"]``, with its section's note."""
+    md = []
+    for label, r in runs.items():
+        note = NOTES.get(label.split()[0], "")
+        md.append(
+            f"* `{label}`: {r['date']}, `{r['command']}`, {r['seconds']:.0f} s, load "
+            f"{r['load']}{'. ' + note if note else ''}."
+        )
+    return md
+
+
+def record_run(report: dict[str, Any], args: argparse.Namespace, seconds: float, load: str) -> None:
+    """``report["runs"]``: this run's entry for each section it ran, replacing that section's
+    entries (all of them when the section was run whole, else the one of the same rows)."""
     import sys
 
-    command = " ".join(["python", "benchmarks/legged_truth.py", *sys.argv[1:]])
-    seconds = report["seconds"][_ran(args)]
-    return (
-        f"On {report['machine']['date']} `{command}` reran the {_ran(args)} rows "
-        f"({seconds:.0f} s); every other row is kept from the JSON."
-    )
-
-
-def kept_header(path: Path) -> str | None:
-    """The first paragraph of the report at ``path`` (its hand-written header), if any."""
-    if not path.is_file():
-        return None
-    first = path.read_text().split("\n\n", 1)[0].strip()
-    return first if first.startswith("Made by") else None
+    runs = report.setdefault("runs", {})
+    entry = {
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "command": " ".join(["python", "benchmarks/legged_truth.py", *sys.argv[1:]]),
+        "seconds": seconds,
+        "load": load,
+    }
+    for label in _ran(args):
+        section = label.split()[0]
+        whole = label == section
+        for old in [k for k in runs if k.split()[0] == section and (whole or k == label)]:
+            del runs[old]
+        runs[label] = entry
 
 
 def real_log_nis() -> dict[str, Any]:
@@ -428,6 +640,7 @@ def real_log_nis() -> dict[str, Any]:
     out: dict[str, Any] = {}
     modes = [(c, g) for c in ("force", "probability") for g in (None, FOOT_GATE)]
     white = {"joint_std": None, "slip_speed": False}  # the foot noise before (white)
+    rows: list[tuple[str, InEKFGains | None, str, float | None, dict[str, Any]]]
     rows = [(f"defaults, {c}, gate {g}", None, c, g, {}) for c, g in modes]
     rows += [  # the default σ_q rule before: the log's first second (it settles then)
         (
@@ -448,6 +661,9 @@ def real_log_nis() -> dict[str, Any]:
         for c in ("force", "probability")
     ]
     rows += [(f"white, {c}, gate {g}", GAINS, c, g, white) for c, g in modes]
+    rows += [  # the contact density measured at go1's touch point (the rolling rows' gains)
+        (f"white, GO1_GAINS, {c}", GO1_GAINS, c, None, white) for c in ("force", "probability")
+    ]
     rows += [
         (
             f"white, probability, log's noise, kinematics {1e3 * k:g} mm",
@@ -503,6 +719,7 @@ def simulated_nis(duration: float = 10.0, seed: int = 0) -> dict[str, Any]:
     settings = {"defaults": (None, {}), "defaults but foot_radius 0": (None, {"foot_radius": 0.0}),
                 "defaults + imu_noise='log'": (None, {"imu_noise": "log"}),
                 "white, GAINS": (GAINS, white),
+                "white, GO1_GAINS": (GO1_GAINS, white),
                 "white, InEKFGains()": (InEKFGains(), white)}  # fmt: skip
     out: dict[str, Any] = {}
     for motion, noise in [(m, n) for n in ("white", "quantised") for m in LEGGED_MOTIONS]:
@@ -519,7 +736,7 @@ def simulated_nis(duration: float = 10.0, seed: int = 0) -> dict[str, Any]:
         late = run.t > run.t[0] + 0.5
         true_std = np.std(run.q_joints() - run.q_joints(truth=True), axis=0)
         for name, (gains, foot) in settings.items():
-            if noise != "white" and name == "white, InEKFGains()":
+            if noise != "white" and name in ("white, InEKFGains()", "white, GO1_GAINS"):
                 continue
             est = legged_run(go1, log, gains=gains, **foot).run
             c = est.consistency
@@ -666,7 +883,7 @@ def _real_table(real: dict[str, Any]) -> list[str]:
         "MuJoCo, this log held out); `σ_q from the first second`: the default before; "
         "`imu_noise='log'`: the IMU's densities from the log's stillest second and eq. (10) "
         "(off by default since this table); `white`: the foot noise before (`joint_std=None, "
-        "slip_speed=False`) with `GAINS` or `LOG_GAINS`; every row with `legged_run`'s "
+        "slip_speed=False`) with `GAINS`, `GO1_GAINS` or `LOG_GAINS`; every row with `legged_run`'s "
         'default `foot_radius="urdf"` (go1\'s 2 cm foot spheres: the rolling feet) but '
         "`foot_radius 0` (the foot frames, the default before):",
         "",
@@ -718,7 +935,7 @@ def main() -> None:
     parser.add_argument(
         "--sections",
         nargs="+",
-        choices=["go1", "humanoid", "cost", "real", "slip", "rolling"],
+        choices=["go1", "humanoid", "cost", "real", "slip", "rolling", "density"],
         default=["go1", "humanoid"],
         help="what to run (go1 includes cost; cost alone: its trot only); with --merge, "
         "the others are kept from legged_truth.json",
@@ -736,68 +953,86 @@ def main() -> None:
     if args.quick:
         args.duration, args.seeds, args.long = 5.0, [0], 0.0
     here = Path(__file__).parent
-    start = time.time()
-    report: dict[str, Any] = {
-        "motions": {},
-        "long": {},
-        "old_gains": {},
-        "cost": {},
-        "humanoid": {},
-        "real": {},
-        "slip": {},
-        "real_sim": {},
-        "rolling": {},
-    }
+    start, load = time.time(), os.getloadavg()[0]
+    report: dict[str, Any] = {section: {} for section in SECTIONS}
     if args.merge:
         report.update(json.loads((here / "legged_truth.json").read_text()))
-    if "go1" in args.sections:
-        report.update(motions={}, long={}, old_gains={}, cost={})
-        _go1_sections(report, args)
-    elif "cost" in args.sections:
-        robot = pinobs.load("go1")
-        run = simulate_legged("trot", args.duration, seed=args.seeds[0], noise=NOISE, robot=robot)
-        report["cost"] = measure_cost(run, robot)
-    if "humanoid" in args.sections:
-        _humanoid_section(report, args)
-    if "real" in args.sections:
-        report["real"] = real_log_nis()
-        report["real_sim"] = simulated_nis()
-    if "slip" in args.sections:
-        report["slip"] = slip_table()
-    _rolling_section(report, args)  # if asked for
-    report.setdefault("seconds", {})
-    if not isinstance(report["seconds"], dict):
-        report["seconds"] = {"go1": report["seconds"]}
-    report["seconds"][_ran(args)] = time.time() - start
-    report["machine"] = {
-        "date": time.strftime("%Y-%m-%d"),
-        "python": platform.python_version(),
-        "mujoco": mujoco.__version__,
-    }
+    _run_sections(report, args)
+    record_run(report, args, time.time() - start, f"{load:.1f} → {os.getloadavg()[0]:.1f}")
+    report["machine"] = {"python": platform.python_version(), "mujoco": mujoco.__version__}
     report["conditions"] = {
-        "duration_s": args.duration,
-        "seeds": args.seeds,
-        "long_s": args.long,
-        "long_seeds": args.long_seeds,
         "contact_force_N": CONTACT_FORCE,
         "starts_roll_deg_lateral_speed_m_s": STARTS,
-        "gains": GAINS.__dict__,
-        "old_gains": OLD_GAINS.__dict__,
         "noise": NOISE.__dict__,
+        "quantised_noise": QUANTISED.__dict__,
     }
-    md = format_report(report, args, kept_header(here / "legged_truth.md") if args.merge else None)
+    md = format_report(report)
     print(md)
     if not args.quick:
         (here / "legged_truth.json").write_text(json.dumps(report, indent=1) + "\n")
         (here / "legged_truth.md").write_text(md)
 
 
-def _ran(args: argparse.Namespace) -> str:
-    """The sections run, for ``report["seconds"]`` (with TALOS's motions when not all)."""
-    ran = " + ".join(args.sections)
-    if "humanoid" in args.sections and args.humanoid_motions != list(HUMANOID_MOTIONS):
-        ran = ran.replace("humanoid", "humanoid " + " ".join(args.humanoid_motions))
-    return ran
+#: The report's sections (``legged_truth.json``'s keys besides ``runs``, ``gains``,
+#: ``machine`` and ``conditions``); ``rolling_gains``: the rolling rows with ``GAINS`` (kept).
+SECTIONS = ("motions", "long", "old_gains", "cost", "humanoid", "real", "slip", "real_sim",
+            "rolling", "rolling_gains", "density", "density_diagnosis", "gains")  # fmt: skip
+
+
+def _gains(**named: InEKFGains) -> dict[str, Any]:
+    return {name: dataclasses.asdict(g) for name, g in named.items()}
+
+
+def _run_sections(report: dict[str, Any], args: argparse.Namespace) -> None:
+    """The sections of ``args.sections`` into ``report``, each with its gains (``gains``)."""
+    gains = report["gains"]
+    if "go1" in args.sections:
+        report.update(motions={}, long={}, old_gains={}, cost={})
+        _go1_sections(report, args)
+        gains["go1"] = _gains(GAINS=GAINS, OLD_GAINS=OLD_GAINS)
+    elif "cost" in args.sections:
+        robot = pinobs.load("go1")
+        run = simulate_legged("trot", args.duration, seed=args.seeds[0], noise=NOISE, robot=robot)
+        report["cost"] = measure_cost(run, robot)
+    if {"go1", "cost"} & set(args.sections):
+        gains["cost"] = _gains(GAINS=GAINS)
+    if "humanoid" in args.sections:
+        _humanoid_section(report, args)
+        gains["humanoid"] = _gains(TALOS_GAINS=TALOS_GAINS)
+    if "real" in args.sections:
+        report["real"] = real_log_nis()
+        report["real_sim"] = simulated_nis()
+        gains["real"] = {
+            "defaults": "legged_run's LEGGED_GAINS, σ_q from the log, slip_speed",
+            **_gains(GAINS=GAINS, GO1_GAINS=GO1_GAINS, LOG_GAINS=LOG_GAINS),
+        }
+    if "slip" in args.sections:
+        report["slip"] = slip_table()
+        gains["slip"] = _gains(GAINS=GAINS)
+    if "density" in args.sections:
+        report["density"] = density_section()
+        report["density_diagnosis"] = density_diagnosis()
+        gains["density"] = _gains(**DIAGNOSIS_GAINS)
+    if "rolling" in args.sections:
+        _rolling_section(report, args)
+        gains["rolling"] = _gains(GO1_GAINS=GO1_GAINS)
+
+
+def _ran(args: argparse.Namespace) -> list[str]:
+    """A label per section run, for ``report["runs"]``: its name, and the motions run when
+    not all (go1, rolling: ``--motions`` and the long trot; humanoid: TALOS's)."""
+    out = []
+    for section in args.sections:
+        if section == "humanoid" and args.humanoid_motions != list(HUMANOID_MOTIONS):
+            section += " " + " ".join(args.humanoid_motions)
+        elif section in ("go1", "rolling") and (
+            set(args.motions) != set(LEGGED_MOTIONS) or args.long <= 0
+        ):
+            section += " " + " ".join(
+                [*args.motions, *([f"+ trot {args.long:g} s"] if args.long > 0 else [])]
+            )
+        out.append(section)
+    return out
 
 
 def _humanoid_section(report: dict[str, Any], args: argparse.Namespace) -> None:
@@ -841,9 +1076,7 @@ def _go1_sections(report: dict[str, Any], args: argparse.Namespace) -> None:
 def _rolling_section(report: dict[str, Any], args: argparse.Namespace) -> None:
     """go1's ``--motions`` over ``--seeds`` and the ``--long`` trot over ``--long-seeds`` with
     ``foot_radius=FOOT_RADIUS``; the section's other rows are kept (from the JSON with
-    ``--merge``), those of the motions run replaced.  Nothing without ``--sections rolling``."""
-    if "rolling" not in args.sections:
-        return
+    ``--merge``), those of the motions run replaced; gains ``GO1_GAINS``."""
     section = report.setdefault("rolling", {})
     labels = [*args.motions, *([f"trot {args.long:g} s"] if args.long > 0 else [])]
     for key in [k for k in section if k.split(",")[0] in labels]:
@@ -855,10 +1088,10 @@ def _rolling_section(report: dict[str, Any], args: argparse.Namespace) -> None:
     for motion in args.motions:
         for seed in args.seeds:
             run = simulate_legged(motion, args.duration, seed=seed, noise=NOISE, robot=robot)
-            _runs(report, "rolling", motion, run, robot, GAINS, FOOT_RADIUS)
+            _runs(report, "rolling", motion, run, robot, GO1_GAINS, FOOT_RADIUS)
     for seed in args.long_seeds if args.long > 0 else []:
         run = simulate_legged("trot", args.long, seed=seed, noise=NOISE, robot=robot)
-        _runs(report, "rolling", f"trot {args.long:g} s", run, robot, GAINS, FOOT_RADIUS)
+        _runs(report, "rolling", f"trot {args.long:g} s", run, robot, GO1_GAINS, FOOT_RADIUS)
 
 
 if __name__ == "__main__":

@@ -29,8 +29,8 @@ angular velocity, the joints').  So the writers, the playback and the CLI
   robot's URDF (:func:`pinobs.model.foot_sphere_radius`: go1 0.02 m; 0 where a foot has no
   sphere, e.g. TALOS's flat soles, and for a robot not loaded from a URDF, said in the
   warnings).  The filters' own default stays 0; this runner's is the URDF's because the
-  MuJoCo go1 benchmark (``benchmarks/legged_truth.md``, section ``rolling``: 10 s seeds 0-2,
-  60 s seeds 0-1, truth start, gains unchanged) gains with it: trot base velocity RMS
+  MuJoCo go1 benchmark (``benchmarks/legged_truth.md``, table ``rolling_gains``: 10 s seeds
+  0-2, 60 s seeds 0-1, truth start, gains unchanged) gains with it: trot base velocity RMS
   0.0123 → 0.0084 m/s, the walking axis inside ±2σ 86.4 → 99.6 %; sway 0.0112 → 0.0090;
   stand unchanged (0.00675 → 0.00677).  The real Go1 log was not used to choose it.
   ``foot_radius=0`` is the runner as it was (the foot frames measured).

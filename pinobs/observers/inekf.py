@@ -161,7 +161,7 @@ biases as far as the motion excites them.
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -180,13 +180,16 @@ from pinobs.observers.inekf_loops import (
     load_kernels,
     propagate_kernel,
 )
+from pinobs.observers.legged_filter import LeggedFilter
 from pinobs.observers.legs import (
+    GRAVITY,
     ContactKinematics,
     InEKFEstimate,
     InEKFGains,
     InEKFPrior,
-    LeggedSetup,
     LegState,
+    ResetInputs,
+    UpdateInputs,
     check_contacts,
     check_joint_std,
     check_time,
@@ -225,8 +228,6 @@ __all__ = [
     "skew",
 ]
 
-#: Gravity in the world frame [m/s²] (z up).
-GRAVITY = (0.0, 0.0, -9.81)
 #: The invariant EKF's state (:class:`pinobs.observers.legs.LegState`; ``P`` is the
 #: covariance of ``(ξ_R, ξ_v, ξ_p, ξ_d1 … ξ_dK, ζ_g, ζ_a)``).
 InEKFState = LegState
@@ -416,7 +417,7 @@ def prior_covariance(prior: InEKFPrior, x: Vector) -> Vector:
 
 
 # ---------------------------------------------------------------------- filter
-class InvariantEKF:
+class InvariantEKF(LeggedFilter):
     """Contact-aided invariant EKF (right-invariant error, bias-augmented; module docstring).
 
     Args:
@@ -468,9 +469,7 @@ class InvariantEKF:
         slip_gyro: float = 0.0,
         foot_radius: float = 0.0,
     ) -> None:
-        #: the legs, options and conversions shared with the quaternion EKF
-        self.setup = LeggedSetup(
-            "InvariantEKF",
+        super().__init__(
             robot,
             feet,
             gains=gains,
@@ -480,9 +479,6 @@ class InvariantEKF:
             foot_radius=foot_radius,
         )
         s = self.setup
-        self.imu_hold, self.kinematics = s.imu_hold, s.kinematics
-        self.gains, self.gravity = s.gains, s.gravity
-        self.feet, self.imu_placement = s.feet, s.imu_placement
         self._gravity = np.array(self.gravity, dtype=float)  # writable: the kernel's signature
         #: the foot gate's outlier probability (``None``: off) and its χ²₃ threshold
         try:
@@ -502,125 +498,10 @@ class InvariantEKF:
         self.slip_gyro = positive("slip_gyro", slip_gyro, allow_zero=True) or 0.0
         self._speed: Vector | None = None  # |ṗ_j| of every foot at the last sample [m/s]
         load_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
-        self._state: InEKFState | None = None
-        self._estimate: InEKFEstimate | None = None
-        self._warned = False
-
-    def __repr__(self) -> str:
-        return f"InvariantEKF(feet={self.feet})"
-
-    # ------------------------------------------------------------ public API
-    @property
-    def state(self) -> InEKFState:
-        """The current state (raises before ``reset``)."""
-        if self._state is None:
-            raise self.setup.not_reset()
-        return self._state
-
-    @property
-    def estimate(self) -> InEKFEstimate:
-        """The last estimate (raises before ``reset``)."""
-        if self._estimate is None:
-            raise self.setup.not_reset()
-        return self._estimate
 
     def error_matrix(self) -> Vector:
         """Eq. (2) for the current contacts: ``A`` of the right-invariant error, without biases."""
         return right_invariant_error_matrix(len(self.state.feet), self.gravity)
-
-    def reset(
-        self,
-        t: float,
-        q: ArrayLike,
-        v: ArrayLike | None = None,
-        *,
-        gyro: ArrayLike | None = None,
-        acc: ArrayLike | None = None,
-        contacts: Mapping[str, bool] | Sequence[bool] | None = None,
-        prior: InEKFPrior | None = None,
-        bias: ArrayLike | None = None,
-    ) -> InEKFEstimate:
-        """Start at time ``t`` [s] from the free-flyer configuration ``q`` (``nq`` entries:
-        base pose, joint angles) and velocity ``v`` (``nv``: base-frame linear and angular,
-        joints; zero if not given).
-
-        Args:
-            gyro: the gyro reading at ``t`` [rad/s], held until the first update (given
-                with ``acc`` or not at all).
-            acc: the accelerometer reading at ``t`` [m/s²], held likewise.
-            contacts: feet in contact at ``t`` (added to the state), as in :meth:`update`.
-            prior: initial uncertainty (:class:`InEKFPrior`).
-            bias: initial ``(b_g, b_a)`` [rad/s, m/s²] (zero if not given).
-
-        Raises:
-            DimensionError: an input of the wrong shape (named).
-            ConfigurationError: ``q[3:7]`` not a unit quaternion.
-            UnknownNameError: contacts naming an unknown foot or missing one.
-            GainError: a ``prior`` that is not an :class:`InEKFPrior`.
-        """
-        a = self.setup.reset_inputs(t, q, v, gyro, acc, contacts, prior, bias)
-        state = InEKFState(a.t, a.R, a.x, (), a.bias, prior_covariance(a.prior, a.x), a.imu, a.t)
-        h, jac = self._legs(a.q_joints, a.R, a.flags)
-        self._speed = None
-        state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
-        self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None)
-        self._warned = False
-        return self.estimate
-
-    def update(
-        self,
-        t: float,
-        q: ArrayLike,
-        gyro: ArrayLike,
-        acc: ArrayLike,
-        contacts: Mapping[str, bool] | Sequence[bool],
-        *,
-        joint_velocities: ArrayLike | None = None,
-    ) -> InEKFEstimate:
-        """One sample: propagate to ``t`` [s] with the held IMU reading, correct with the feet
-        in contact, store this reading.
-
-        Args:
-            t: time [s], after the previous one.
-            q: joint angles (``nq − 7``) or a full free-flyer ``q`` (``nq``; its base part
-                is ignored).
-            gyro: angular velocity in the IMU's frame [rad/s], shape ``(3,)``.
-            acc: specific force in the IMU's frame [m/s²] (``Rᵀ(p̈ − g)``: +9.81 up at rest),
-                shape ``(3,)``.
-            contacts: each foot name → in contact (every foot named), or a sequence of
-                bools in the order of ``feet``.
-            joint_velocities: passed through to ``estimate.v[6:]`` (NaN if not given).
-
-        Raises:
-            NotResetError: before ``reset``.
-            DimensionError: an input of the wrong shape (named), a contacts sequence of the
-                wrong length or a non-bool flag.
-            UnknownNameError: contacts naming a foot that is not one of ``feet``, or
-                missing one.
-            TimestampError: ``t`` not after the previous update.
-            ObserverDiverged: a non-finite estimate (the state is left as it was).
-        """
-        state = self.state
-        u = self.setup.update_inputs(state.t, t, q, gyro, acc, contacts, joint_velocities)
-        new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
-        h, jac = self._legs(u.q_joints, new.R, u.flags)
-        new, nis, used, gated = self._correct(new, u.flags, h, jac)
-        self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
-        contact_time = u.t if any(u.flags) else None
-        self._commit(new, u.q_joints, u.joint_velocities, nis, u.reading, contact_time, used, gated)
-        if self.slip_speed:  # eq. (9): the feet's speeds for the next step's contact noise
-            dq = u.joint_velocities
-            self._speed = (
-                None
-                if dq is None
-                else slip_speeds(  # eq. (10)
-                    self.foot_velocities(u.q_joints, dq, u.reading[:3]),
-                    h,
-                    self.slip_gyro,
-                    u.t - state.t,
-                )
-            )
-        return self.estimate
 
     def foot_velocities(self, q: ArrayLike, joint_velocities: ArrayLike, gyro: ArrayLike) -> Vector:
         """Each foot's velocity in the world [m/s], ``(K, 3)`` in the order of ``feet``, from
@@ -639,6 +520,10 @@ class InvariantEKF:
         return np.asarray(state.x[0] + local @ state.R.T)
 
     # ------------------------------------------------------------- the steps
+    def _initial_covariance(self, a: ResetInputs) -> Vector:
+        """Eq. (7) (:func:`prior_covariance`)."""
+        return prior_covariance(a.prior, a.x)
+
     def _propagate(self, state: InEKFState, imu: Vector, dt: float, t: float) -> InEKFState:
         """Eqs. (1)-(3): mean and covariance over ``dt`` with the reading ``imu`` held, as
         ``P⁺ = T(X̂⁺) (Φ_ε (T(X̂)⁻¹ P T(X̂)⁻ᵀ + ½ h Q_c) Φ_εᵀ + ½ h Q_c) T(X̂⁺)ᵀ`` (the module
@@ -653,32 +538,29 @@ class InvariantEKF:
         kernel(state.R, x, state.bias, imu, dt, self._gravity, qc, P, R1, x1, P1)
         return replace_state(state, t=t, R=R1, x=x1, P=P1)
 
-    def _correct(
-        self, state: InEKFState, flags: list[bool], h: Vector, jac: Vector
-    ) -> tuple[InEKFState, float | None, int, tuple[int, ...]]:
-        """Contacts ended are removed, eqs. (4)-(5) for those that continue, eq. (6) for new
-        ones and, with the foot gate, for those it rejects (eq. 8).  Returns the state, the NIS,
-        the number of feet measured and those gated (indices into ``feet``)."""
-        ended = [s for s, j in enumerate(state.feet) if not flags[j]]
-        if ended:
-            state = remove_feet(state, ended)
-        gated: list[int] = []
-        if state.feet and self.foot_gate is not None:
-            nis_j = self.foot_nis(state, h, jac)
-            gated = [
-                s for s, z in enumerate(nis_j) if GateState().measured(z, self._gate_nis, 3).gated
-            ]  # the shared gate, fresh for each foot: a rejected one is re-anchored (eq. 8)
-            dropped = tuple(state.feet[s] for s in gated)
-            if gated:
-                state = remove_feet(state, gated)
-        measured = list(state.feet)
-        nis = None
-        if measured:
-            state, nis = self._update(state, measured, h, jac)
-        new = [j for j, f in enumerate(flags) if f and j not in measured]
-        if new:
-            state = self._add_feet(state, new, h, jac)
-        return state, nis, len(measured), dropped if gated else ()
+    def _gate(
+        self, state: InEKFState, h: Vector, jac: Vector
+    ) -> tuple[InEKFState, tuple[int, ...]]:
+        """Eq. (8), with the foot gate: the feet whose own NIS exceeds its threshold removed
+        (re-anchored by :meth:`_correct`, eq. 6), and their indices into ``feet``."""
+        if not state.feet or self.foot_gate is None:
+            return state, ()
+        nis_j = self.foot_nis(state, h, jac)
+        gated = [
+            s for s, z in enumerate(nis_j) if GateState().measured(z, self._gate_nis, 3).gated
+        ]  # the shared gate, fresh for each foot: a rejected one is re-anchored (eq. 8)
+        if not gated:
+            return state, ()
+        return remove_feet(state, gated), tuple(state.feet[s] for s in gated)
+
+    def _remember(self, u: UpdateInputs | None, h: Vector, dt: float = 0.0) -> None:
+        """Eq. (9): with ``slip_speed``, the feet's speeds for the next step's contact noise
+        (none after ``reset`` or an update without ``joint_velocities``)."""
+        if u is None or u.joint_velocities is None or not self.slip_speed:
+            self._speed = None
+        else:
+            velocities = self.foot_velocities(u.q_joints, u.joint_velocities, u.reading[:3])
+            self._speed = slip_speeds(velocities, h, self.slip_gyro, dt)  # eq. (10)
 
     def foot_nis(self, state: InEKFState, h: Vector, jac: Vector) -> Vector:
         """Eq. (8): each foot's own ``NIS_j = r_jᵀ S_jj⁻¹ r_j`` (3 dof) in the state's order,
@@ -767,26 +649,3 @@ class InvariantEKF:
             P[at : at + 3, at : at + 3] += self._foot_noise(R, jac[j])
             x = np.vstack([x, x[1] + R @ h[j]])
         return replace_state(state, x=x, P=P, feet=state.feet + tuple(new))
-
-    def _commit(
-        self,
-        state: InEKFState,
-        q_joints: Vector,
-        dq: Vector | None,
-        nis: float | None,
-        reading: Vector | None,
-        contact_time: float | None,
-        measured: int = 0,
-        gated: tuple[int, ...] = (),
-    ) -> None:
-        """Store the new state with the reading to hold (and the time of a contact, if any)
-        and its estimate (ObserverDiverged, the state left as it was, if not finite)."""
-        state = replace_state(
-            state,
-            imu=reading if reading is not None else state.imu,
-            last_contact=state.last_contact if contact_time is None else contact_time,
-        )
-        estimate = self.setup.estimate(
-            state, self._estimate, q_joints, dq, nis, 3 * measured, gated
-        )
-        self._state, self._estimate = state, estimate

@@ -52,6 +52,7 @@ from pinobs.observers.rolling import RollingFeet
 from pinobs.tolerances import NO_CONTACT_WARN_TIME, QUATERNION_NORM_TOL, TIME_EPS
 
 __all__ = [
+    "GRAVITY",
     "ContactKinematics",
     "InEKFEstimate",
     "InEKFGains",
@@ -75,6 +76,8 @@ __all__ = [
     "stance_consistency",
 ]
 
+#: Gravity in the world frame [m/s²] (z up).
+GRAVITY = (0.0, 0.0, -9.81)
 _I3 = np.eye(3)
 
 

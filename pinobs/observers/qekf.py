@@ -55,24 +55,16 @@ frame to the root joint) are the invariant EKF's; ``covariance`` is that of
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-
 import numpy as np
-from numpy.typing import ArrayLike
 
-from pinobs.model import Robot
 from pinobs.observers.base import Vector
-from pinobs.observers.inekf import GRAVITY, gammas, imu_step, skew
+from pinobs.observers.inekf import gammas, imu_step, skew
+from pinobs.observers.legged_filter import LeggedFilter
 from pinobs.observers.legs import (
-    ContactKinematics,
-    InEKFEstimate,
-    InEKFGains,
-    InEKFPrior,
-    LeggedSetup,
     LegState,
+    ResetInputs,
     foot_noise,
     noise_densities,
-    remove_feet,
     replace_state,
 )
 from pinobs.observers.linalg import cholesky_solve
@@ -98,11 +90,13 @@ def error_dynamics(R: Vector, omega: Vector, acc: Vector, n_contacts: int) -> Ve
     return F
 
 
-class QuaternionEKF:
+class QuaternionEKF(LeggedFilter):
     """Contact-aided quaternion EKF (multiplicative attitude error; module docstring).
 
-    Takes the arguments of :class:`pinobs.observers.inekf.InvariantEKF` and has its
-    ``reset``/``update`` interface and :class:`InEKFEstimate` output.
+    Takes the arguments of :class:`pinobs.observers.inekf.InvariantEKF` that both take
+    (:class:`~pinobs.observers.legged_filter.LeggedFilter`: not ``foot_gate``, ``joint_std``,
+    ``slip_speed``, ``slip_gyro``) and has its ``reset``/``update`` interface and
+    :class:`InEKFEstimate` output.
 
     Raises:
         GainError: an ``imu_hold`` that is neither ``"previous"`` nor ``"average"``.
@@ -110,116 +104,14 @@ class QuaternionEKF:
         UnsupportedRobotError: a robot without a free-flyer root joint.
     """
 
-    def __init__(
-        self,
-        robot: Robot | ContactKinematics,
-        feet: Sequence[str] | None = None,
-        *,
-        gains: InEKFGains | None = None,
-        gravity: ArrayLike = GRAVITY,
-        imu_hold: str = "previous",
-        imu_frame: str | None = None,
-        foot_radius: float = 0.0,
-    ) -> None:
-        #: the legs, options and conversions shared with the invariant EKF
-        self.setup = LeggedSetup(
-            "QuaternionEKF",
-            robot,
-            feet,
-            gains=gains,
-            gravity=gravity,
-            imu_hold=imu_hold,
-            imu_frame=imu_frame,
-            foot_radius=foot_radius,
-        )
-        s = self.setup
-        self.imu_hold, self.kinematics, self.gains, self.gravity = (
-            s.imu_hold,
-            s.kinematics,
-            s.gains,
-            s.gravity,
-        )
-        self.feet, self.imu_placement = s.feet, s.imu_placement
-        self._state: QEKFState | None = None
-        self._estimate: InEKFEstimate | None = None
-        self._warned = False
-
-    def __repr__(self) -> str:
-        return f"QuaternionEKF(feet={self.feet})"
-
-    @property
-    def state(self) -> QEKFState:
-        """The current state (raises before ``reset``)."""
-        if self._state is None:
-            raise self.setup.not_reset()
-        return self._state
-
-    @property
-    def estimate(self) -> InEKFEstimate:
-        """The last estimate (raises before ``reset``)."""
-        if self._estimate is None:
-            raise self.setup.not_reset()
-        return self._estimate
-
-    def reset(
-        self,
-        t: float,
-        q: ArrayLike,
-        v: ArrayLike | None = None,
-        *,
-        gyro: ArrayLike | None = None,
-        acc: ArrayLike | None = None,
-        contacts: Mapping[str, bool] | Sequence[bool] | None = None,
-        prior: InEKFPrior | None = None,
-        bias: ArrayLike | None = None,
-    ) -> InEKFEstimate:
-        """Start at ``t`` [s] from the free-flyer ``q`` and ``v`` (as
-        :meth:`pinobs.observers.inekf.InvariantEKF.reset`; same arguments and errors)."""
-        a = self.setup.reset_inputs(t, q, v, gyro, acc, contacts, prior, bias)
-        # the prior's velocity is the IMU frame's (as the invariant EKF's, its eq. 7):
-        # v = R v_b, so δv = R̂ δv_b + v̂^ R̂ δθ to first order
+    # ------------------------------------------------------------- the steps
+    def _initial_covariance(self, a: ResetInputs) -> Vector:
+        """The prior's velocity is the IMU frame's (as the invariant EKF's, its eq. 7):
+        ``v = R v_b``, so ``δv = R̂ δv_b + v̂^ R̂ δθ`` to first order."""
         T = np.eye(15)
         T[3:6, 0:3] = skew(a.x[0]) @ a.R
-        P = T @ a.prior.covariance() @ T.T
-        state = QEKFState(a.t, a.R, a.x, (), a.bias, P, a.imu, a.t)
-        h, jac = self.setup.legs(a.q_joints, a.R, a.flags)
-        state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
-        self._commit(state, a.q_joints, None, None, a.t if state.feet else None)
-        self._warned = False
-        return self.estimate
+        return T @ a.prior.covariance() @ T.T
 
-    def update(
-        self,
-        t: float,
-        q: ArrayLike,
-        gyro: ArrayLike,
-        acc: ArrayLike,
-        contacts: Mapping[str, bool] | Sequence[bool],
-        *,
-        joint_velocities: ArrayLike | None = None,
-    ) -> InEKFEstimate:
-        """One sample (as :meth:`pinobs.observers.inekf.InvariantEKF.update`: same arguments,
-        conventions and errors): propagate with the held reading, correct, store the reading."""
-        state = self.state
-        u = self.setup.update_inputs(state.t, t, q, gyro, acc, contacts, joint_velocities)
-        new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
-        h, jac = self.setup.legs(u.q_joints, new.R, u.flags)
-        ended = [s for s, j in enumerate(new.feet) if not u.flags[j]]
-        if ended:
-            new = remove_feet(new, ended)
-        nis, dof = None, 3 * len(new.feet)
-        if new.feet:
-            new, nis = self._update(new, h, jac)
-        landed = [j for j, f in enumerate(u.flags) if f and j not in new.feet]
-        if landed:
-            new = self._add_feet(new, landed, h, jac)
-        new = replace_state(new, imu=u.reading)
-        self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
-        contact_time = u.t if any(u.flags) else None
-        self._commit(new, u.q_joints, u.joint_velocities, nis, contact_time, dof)
-        return self.estimate
-
-    # ------------------------------------------------------------- the steps
     def _propagate(self, state: QEKFState, imu: Vector, dt: float, t: float) -> QEKFState:
         """Mean by the exact flow, covariance by eq. (2) discretised (module docstring)."""
         w = imu[:3] - state.bias[:3]
@@ -239,8 +131,10 @@ class QuaternionEKF:
         """``N_j = J_j Σ_q J_jᵀ + σ_k² I`` (eq. 3), for a stack of ``J`` (m, 3, n)."""
         return foot_noise(self.gains, jac)
 
-    def _update(self, state: QEKFState, h: Vector, jac: Vector) -> tuple[QEKFState, float]:
-        """Eqs. (3)-(4) for every foot in the state."""
+    def _update(
+        self, state: QEKFState, measured: list[int], h: Vector, jac: Vector
+    ) -> tuple[QEKFState, float]:
+        """Eqs. (3)-(4) for every foot in the state (``measured``, in state order)."""
         R, x, P = state.R, state.x, state.P
         n = P.shape[0]
         k = len(state.feet)
@@ -285,17 +179,3 @@ class QuaternionEKF:
             P[at : at + 3, at : at + 3] += R @ self._noise(jac[j][None])[0] @ R.T
             x = np.vstack([x, x[1] + R @ h[j]])
         return replace_state(state, x=x, P=P, feet=state.feet + tuple(new))
-
-    def _commit(
-        self,
-        state: QEKFState,
-        q_joints: Vector,
-        dq: Vector | None,
-        nis: float | None,
-        contact_time: float | None,
-        nis_dof: int = 0,
-    ) -> None:
-        if contact_time is not None:
-            state = replace_state(state, last_contact=contact_time)
-        estimate = self.setup.estimate(state, self._estimate, q_joints, dq, nis, nis_dof)
-        self._state, self._estimate = state, estimate

@@ -1,0 +1,254 @@
+""":class:`LeggedFilter`, the thin base of the two contact-aided filters
+(:class:`pinobs.observers.inekf.InvariantEKF`, :class:`pinobs.observers.qekf.QuaternionEKF`).
+
+It runs their common sample (:meth:`LeggedFilter.update`: propagate with the held reading,
+marginalise the feet that lifted off, remove the gated ones, update with those that stay,
+add the new and the gated ones, store the reading, check and convert the estimate); a family
+gives only its mathematics (``_initial_covariance``, ``_propagate``, ``_update``,
+``_add_feet``; optionally ``_legs``, ``_gate``, ``_remember``).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from numpy.typing import ArrayLike
+
+from pinobs.model import Robot
+from pinobs.observers.base import Vector
+from pinobs.observers.legs import (
+    GRAVITY,
+    ContactKinematics,
+    InEKFEstimate,
+    InEKFGains,
+    InEKFPrior,
+    LeggedSetup,
+    LegState,
+    ResetInputs,
+    UpdateInputs,
+    remove_feet,
+    replace_state,
+)
+
+__all__ = ["LeggedFilter"]
+
+
+class LeggedFilter(ABC):
+    """A contact-aided filter's ``reset``/``update`` around its family's mathematics (module
+    docstring).  Takes the arguments of :class:`pinobs.observers.inekf.InvariantEKF` that both
+    families take (there in full).
+
+    Raises:
+        GainError: an ``imu_hold`` that is neither ``"previous"`` nor ``"average"``.
+        UnknownNameError: a foot frame that is not in the model (names the frames).
+        UnsupportedRobotError: a robot without a free-flyer root joint.
+    """
+
+    def __init__(
+        self,
+        robot: Robot | ContactKinematics,
+        feet: Sequence[str] | None = None,
+        *,
+        gains: InEKFGains | None = None,
+        gravity: ArrayLike = GRAVITY,
+        imu_hold: str = "previous",
+        imu_frame: str | None = None,
+        foot_radius: float = 0.0,
+    ) -> None:
+        #: the legs, options and conversions (:class:`pinobs.observers.legs.LeggedSetup`)
+        self.setup = LeggedSetup(
+            type(self).__name__,
+            robot,
+            feet,
+            gains=gains,
+            gravity=gravity,
+            imu_hold=imu_hold,
+            imu_frame=imu_frame,
+            foot_radius=foot_radius,
+        )
+        s = self.setup
+        self.imu_hold, self.kinematics = s.imu_hold, s.kinematics
+        self.gains, self.gravity = s.gains, s.gravity
+        self.feet, self.imu_placement = s.feet, s.imu_placement
+        self._state: LegState | None = None
+        self._estimate: InEKFEstimate | None = None
+        self._warned = False
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(feet={self.feet})"
+
+    @property
+    def state(self) -> LegState:
+        """The current state (raises before ``reset``)."""
+        if self._state is None:
+            raise self.setup.not_reset()
+        return self._state
+
+    @property
+    def estimate(self) -> InEKFEstimate:
+        """The last estimate (raises before ``reset``)."""
+        if self._estimate is None:
+            raise self.setup.not_reset()
+        return self._estimate
+
+    def reset(
+        self,
+        t: float,
+        q: ArrayLike,
+        v: ArrayLike | None = None,
+        *,
+        gyro: ArrayLike | None = None,
+        acc: ArrayLike | None = None,
+        contacts: Mapping[str, bool] | Sequence[bool] | None = None,
+        prior: InEKFPrior | None = None,
+        bias: ArrayLike | None = None,
+    ) -> InEKFEstimate:
+        """Start at time ``t`` [s] from the free-flyer configuration ``q`` (``nq`` entries:
+        base pose, joint angles) and velocity ``v`` (``nv``: base-frame linear and angular,
+        joints; zero if not given).
+
+        Args:
+            gyro: the gyro reading at ``t`` [rad/s], held until the first update (given
+                with ``acc`` or not at all).
+            acc: the accelerometer reading at ``t`` [m/s²], held likewise.
+            contacts: feet in contact at ``t`` (added to the state), as in :meth:`update`.
+            prior: initial uncertainty (:class:`InEKFPrior`).
+            bias: initial ``(b_g, b_a)`` [rad/s, m/s²] (zero if not given).
+
+        Raises:
+            DimensionError: an input of the wrong shape (named).
+            ConfigurationError: ``q[3:7]`` not a unit quaternion.
+            UnknownNameError: contacts naming an unknown foot or missing one.
+            GainError: a ``prior`` that is not an :class:`InEKFPrior`.
+        """
+        a = self.setup.reset_inputs(t, q, v, gyro, acc, contacts, prior, bias)
+        P = self._initial_covariance(a)
+        state = LegState(a.t, a.R, a.x, (), a.bias, P, a.imu, a.t)
+        h, jac = self._legs(a.q_joints, a.R, a.flags)
+        self._remember(None, h)
+        state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
+        self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None)
+        self._warned = False
+        return self.estimate
+
+    def update(
+        self,
+        t: float,
+        q: ArrayLike,
+        gyro: ArrayLike,
+        acc: ArrayLike,
+        contacts: Mapping[str, bool] | Sequence[bool],
+        *,
+        joint_velocities: ArrayLike | None = None,
+    ) -> InEKFEstimate:
+        """One sample: propagate to ``t`` [s] with the held IMU reading, correct with the feet
+        in contact, store this reading.
+
+        Args:
+            t: time [s], after the previous one.
+            q: joint angles (``nq − 7``) or a full free-flyer ``q`` (``nq``; its base part
+                is ignored).
+            gyro: angular velocity in the IMU's frame [rad/s], shape ``(3,)``.
+            acc: specific force in the IMU's frame [m/s²] (``Rᵀ(p̈ − g)``: +9.81 up at rest),
+                shape ``(3,)``.
+            contacts: each foot name → in contact (every foot named), or a sequence of
+                bools in the order of ``feet``.
+            joint_velocities: passed through to ``estimate.v[6:]`` (NaN if not given).
+
+        Raises:
+            NotResetError: before ``reset``.
+            DimensionError: an input of the wrong shape (named), a contacts sequence of the
+                wrong length or a non-bool flag.
+            UnknownNameError: contacts naming a foot that is not one of ``feet``, or
+                missing one.
+            TimestampError: ``t`` not after the previous update.
+            ObserverDiverged: a non-finite estimate (the state is left as it was).
+        """
+        state = self.state
+        u = self.setup.update_inputs(state.t, t, q, gyro, acc, contacts, joint_velocities)
+        new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
+        h, jac = self._legs(u.q_joints, new.R, u.flags)
+        new, nis, used, gated = self._correct(new, u.flags, h, jac)
+        self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
+        contact_time = u.t if any(u.flags) else None
+        self._commit(new, u.q_joints, u.joint_velocities, nis, u.reading, contact_time, used, gated)
+        self._remember(u, h, u.t - state.t)
+        return self.estimate
+
+    # ------------------------------------------------------ the family's part
+    @abstractmethod
+    def _initial_covariance(self, a: ResetInputs) -> Vector:
+        """The covariance of the error (no feet) at ``reset`` from ``a.prior``."""
+
+    @abstractmethod
+    def _propagate(self, state: LegState, imu: Vector, dt: float, t: float) -> LegState:
+        """Mean and covariance over ``dt`` [s] with the reading ``imu`` held, to time ``t``."""
+
+    @abstractmethod
+    def _update(
+        self, state: LegState, measured: list[int], h: Vector, jac: Vector
+    ) -> tuple[LegState, float]:
+        """One update with every foot in the state (``measured``, in state order), and its NIS."""
+
+    @abstractmethod
+    def _add_feet(self, state: LegState, new: list[int], h: Vector, jac: Vector) -> LegState:
+        """The feet ``new`` (indices into ``feet``) added at ``p̂ + R̂ h_j``."""
+
+    def _legs(self, q_joints: Vector, R: Any = None, flags: Any = None) -> tuple[Vector, Vector]:
+        """The feet's positions and Jacobians (:meth:`LeggedSetup.legs`)."""
+        return self.setup.legs(q_joints, R, flags)
+
+    def _gate(self, state: LegState, h: Vector, jac: Vector) -> tuple[LegState, tuple[int, ...]]:
+        """The feet a gate rejects, removed (to be re-anchored), and their indices into
+        ``feet``; here none."""
+        return state, ()
+
+    def _remember(self, u: UpdateInputs | None, h: Vector, dt: float = 0.0) -> None:
+        """What the next step needs of this one (after the commit; ``u`` ``None`` at
+        ``reset``, before the feet are added); here nothing."""
+        return
+
+    # ----------------------------------------------------------- the shared part
+    def _correct(
+        self, state: LegState, flags: list[bool], h: Vector, jac: Vector
+    ) -> tuple[LegState, float | None, int, tuple[int, ...]]:
+        """Contacts ended are removed, those gated removed too (:meth:`_gate`), one update
+        with those that continue, and new ones and the gated added.  Returns the state, the
+        NIS, the number of feet measured and those gated (indices into ``feet``)."""
+        ended = [s for s, j in enumerate(state.feet) if not flags[j]]
+        if ended:
+            state = remove_feet(state, ended)
+        state, gated = self._gate(state, h, jac)
+        measured = list(state.feet)
+        nis = None
+        if measured:
+            state, nis = self._update(state, measured, h, jac)
+        new = [j for j, f in enumerate(flags) if f and j not in measured]
+        if new:
+            state = self._add_feet(state, new, h, jac)
+        return state, nis, len(measured), gated
+
+    def _commit(
+        self,
+        state: LegState,
+        q_joints: Vector,
+        dq: Vector | None,
+        nis: float | None,
+        reading: Vector | None,
+        contact_time: float | None,
+        measured: int = 0,
+        gated: tuple[int, ...] = (),
+    ) -> None:
+        """Store the new state with the reading to hold (and the time of a contact, if any)
+        and its estimate (ObserverDiverged, the state left as it was, if not finite)."""
+        state = replace_state(
+            state,
+            imu=reading if reading is not None else state.imu,
+            last_contact=state.last_contact if contact_time is None else contact_time,
+        )
+        estimate = self.setup.estimate(
+            state, self._estimate, q_joints, dq, nis, 3 * measured, gated
+        )
+        self._state, self._estimate = state, estimate

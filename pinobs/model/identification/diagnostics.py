@@ -14,7 +14,8 @@ from numpy.typing import NDArray
 
 from pinobs.errors import IdentificationError
 from pinobs.model.identification.leastsquares import Solution
-from pinobs.model.identification.regressor import MomentumRegressor
+from pinobs.model.identification.regressor import MomentumRegressor, coordinate_names
+from pinobs.model.identification.result import Report
 from pinobs.model.identification.rows import MAX_FILL
 from pinobs.model.identification.savgol import savgol_coefficients
 from pinobs.model.noise import robust_rms, third_difference_std
@@ -29,6 +30,7 @@ __all__ = [
     "UNEXPLAINED_WARN",
     "ZERO_TORQUE_SHARE",
     "check_zero_torques",
+    "fit_report",
     "fit_warnings",
     "motion_spans",
     "not_excited_message",
@@ -302,3 +304,68 @@ def rms_per_coordinate(A: Vector, y: Vector, theta: Vector, nv: int) -> list[flo
         return [math.nan] * nv
     res = (A @ theta - y).reshape(-1, nv)
     return np.sqrt(np.mean(res**2, axis=0)).tolist()
+
+
+def fit_report(
+    reg: Any,
+    sol: Solution,
+    rows: Mapping[str, tuple[Vector, Vector]],
+    theta0: Vector,
+    excluded: NDArray[np.intp],
+    channel: NDArray[np.intp],
+    log: Mapping[str, Any],
+    diagnosed: Mapping[str, Any],
+    *,
+    moved: list[str],
+    payload: dict[str, Any] | None = None,
+) -> Report:
+    """The :class:`Report` of a fit (its ``friction_law`` and ``warnings`` apart), a whole
+    model's (:func:`~pinobs.model.identification.identify`) or a payload's: ``reg`` its
+    regressor (``robot``, ``weighting``, ``names``), ``rows`` the fitted (``"fit"``),
+    held-out (``"held"``) and held-out N·m (``"held_nm"``) rows, ``theta0`` the parameters
+    before (the nominal ones; a payload's zero), ``channel`` the fitted rows' channels,
+    ``log`` its ``torque``, ``fit_end`` and ``filled_rows``, ``diagnosed`` the
+    ``unexplained``, ``unexplained_floor`` and ``outlier_windows``, ``moved`` the
+    ``moved_by_consistency``."""
+    robot, nv = reg.robot, reg.robot.nv
+    (A, y), (A_h, y_h), (A_nm, y_nm) = rows["fit"], rows["held"], rows["held_nm"]
+    torque_sigma = np.full(nv, math.nan)
+    if reg.weighting == "torque":
+        torque_sigma[np.unique(channel)] = sol.channel_sigma
+    coordinates = coordinate_names(robot)
+    return Report(
+        payload=payload,
+        residual_before=rms_per_coordinate(A, y, theta0, nv),
+        residual_after=rms_per_coordinate(A, y, sol.theta, nv),
+        # the fraction of the torque side left unexplained, robustly, and what noise leaves
+        unexplained=diagnosed["unexplained"],
+        unexplained_floor=diagnosed["unexplained_floor"],
+        # windows (their end times [s]) whose residual alone is a large share of the torques
+        outlier_windows=diagnosed["outlier_windows"],
+        holdout_before=rms_per_coordinate(A_h, y_h, theta0, nv),
+        holdout_after=rms_per_coordinate(A_h, y_h, sol.theta, nv),
+        holdout_torque_before=rms_per_coordinate(A_nm, y_nm, theta0, nv),
+        holdout_torque_after=rms_per_coordinate(A_nm, y_nm, sol.theta, nv),
+        weighting=reg.weighting,
+        excluded=[coordinates[j] for j in excluded],
+        torque_sigma=torque_sigma.tolist(),
+        condition=sol.condition,
+        rank=sol.rank,
+        n_parameters=len(theta0),
+        base=list(sol.base),
+        not_excited=[n for n, e in zip(reg.names, sol.excited, strict=True) if not e],
+        moved_by_consistency=moved,
+        projected=sol.projected,
+        rows=sol.n_rows,
+        torque=log["torque"],  # how ∫τ dt was taken (held or sampled)
+        holdout_rows=int(A_h.shape[0]),
+        fit_end=log["fit_end"],
+        sigma=sol.sigma,
+        filled_rows=log["filled_rows"],
+        joints=list(robot.joint_names),
+        # the per-joint lists' entries: one per velocity coordinate (<joint>.<k> for several)
+        coordinates=coordinates,
+        # a calibrated model is good, not exact: run ekf with these (adaptive's learned-model
+        # densities; measured in benchmarks/learning.py, the plain ekf trusts it too much)
+        observer_options={"accel_psd": 1e-6, "disturbance_psd": 1e-4},
+    )

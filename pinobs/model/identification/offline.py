@@ -77,10 +77,10 @@ from pinobs.model.identification.diagnostics import (
     STILL_RANGE,
     UNEXPLAINED_WARN,
     check_zero_torques,
+    fit_report,
     fit_warnings,
     motion_spans,
     not_excited_message,
-    rms_per_coordinate,
     unexplained_shares,
 )
 from pinobs.model.identification.leastsquares import MAX_CONDITION, Solution, solve
@@ -442,14 +442,19 @@ def _assess(
         ~fit,
         **rows,
     )
-    report = _report(
-        reg,
-        sol,
-        {"fit": (A, y), "held": held, "held_nm": held_nm},
-        diagnosed,
-        excluded,
-        fitted["channel"],
-        info,
+    theta0 = reg.nominal()
+    # of those not excited, the ones physical consistency moved by more than half their
+    # prior std
+    moved = [
+        n
+        for n, e, d, sd in zip(
+            reg.names, sol.excited, sol.theta - theta0, reg.prior_std(), strict=True
+        )
+        if not e and sol.projected and abs(d) > 0.5 * sd
+    ]
+    rows_used = {"fit": (A, y), "held": held, "held_nm": held_nm}
+    report = fit_report(
+        reg, sol, rows_used, theta0, excluded, fitted["channel"], info, diagnosed, moved=moved
     )
     if reg.friction:  # the law fitted, its velocities per actuated joint [rad/s]
         report["friction_law"] = {
@@ -486,66 +491,3 @@ def _diagnose(
     for j in excluded:  # left out of the fit: nothing to say of how well it explains them
         unexplained[j] = floor[j] = math.nan
     return {"unexplained": unexplained, "unexplained_floor": floor, "outlier_windows": outliers}
-
-
-def _report(
-    reg: MomentumRegressor,
-    sol: Solution,
-    rows: dict[str, tuple[Vector, Vector]],
-    diagnosed: dict[str, Any],
-    excluded: NDArray[np.intp],
-    channel: NDArray[np.intp],
-    log: dict[str, Any],
-) -> Report:
-    """:func:`identify`'s report (its ``friction_law`` and ``warnings`` apart): ``rows`` the
-    fitted (``"fit"``), held-out (``"held"``) and held-out N·m (``"held_nm"``) rows,
-    ``diagnosed`` :func:`_diagnose`'s, ``channel`` the fitted rows' channels, ``log`` its
-    ``torque``, ``fit_end`` and ``filled_rows``."""
-    robot, nv, theta0 = reg.robot, reg.robot.nv, reg.nominal()
-    (A, y), (A_h, y_h), (A_nm, y_nm) = rows["fit"], rows["held"], rows["held_nm"]
-    torque_sigma = np.full(nv, math.nan)
-    if reg.weighting == "torque":
-        torque_sigma[np.unique(channel)] = sol.channel_sigma
-    coordinates = coordinate_names(robot)
-    return Report(
-        residual_before=rms_per_coordinate(A, y, theta0, nv),
-        residual_after=rms_per_coordinate(A, y, sol.theta, nv),
-        # the fraction of the torque side left unexplained, robustly, and what noise leaves
-        unexplained=diagnosed["unexplained"],
-        unexplained_floor=diagnosed["unexplained_floor"],
-        # windows (their end times [s]) whose residual alone is a large share of the torques
-        outlier_windows=diagnosed["outlier_windows"],
-        holdout_before=rms_per_coordinate(A_h, y_h, theta0, nv),
-        holdout_after=rms_per_coordinate(A_h, y_h, sol.theta, nv),
-        holdout_torque_before=rms_per_coordinate(A_nm, y_nm, theta0, nv),
-        holdout_torque_after=rms_per_coordinate(A_nm, y_nm, sol.theta, nv),
-        weighting=reg.weighting,
-        excluded=[coordinates[j] for j in excluded],
-        torque_sigma=torque_sigma.tolist(),
-        condition=sol.condition,
-        rank=sol.rank,
-        n_parameters=reg.size,
-        base=list(sol.base),
-        not_excited=[n for n, e in zip(reg.names, sol.excited, strict=True) if not e],
-        # of those, the ones physical consistency moved by more than half their prior std
-        moved_by_consistency=[
-            n
-            for n, e, d, sd in zip(
-                reg.names, sol.excited, sol.theta - theta0, reg.prior_std(), strict=True
-            )
-            if not e and sol.projected and abs(d) > 0.5 * sd
-        ],
-        projected=sol.projected,
-        rows=sol.n_rows,
-        torque=log["torque"],  # how ∫τ dt was taken (held or sampled)
-        holdout_rows=int(A_h.shape[0]),
-        fit_end=log["fit_end"],
-        sigma=sol.sigma,
-        filled_rows=log["filled_rows"],
-        joints=list(robot.joint_names),
-        # the per-joint lists' entries: one per velocity coordinate (<joint>.<k> for several)
-        coordinates=coordinates,
-        # a calibrated model is good, not exact: run ekf with these (adaptive's learned-model
-        # densities; measured in benchmarks/learning.py, the plain ekf trusts it too much)
-        observer_options={"accel_psd": 1e-6, "disturbance_psd": 1e-4},
-    )

@@ -14,8 +14,8 @@ from numpy.typing import ArrayLike, NDArray
 from pinobs.errors import IdentificationError, OptionError
 from pinobs.model.identification.diagnostics import (
     check_zero_torques,
+    fit_report,
     fit_warnings,
-    rms_per_coordinate,
 )
 from pinobs.model.identification.leastsquares import MAX_CONDITION, Solution, solve
 from pinobs.model.identification.regressor import (
@@ -24,7 +24,6 @@ from pinobs.model.identification.regressor import (
     check_options,
     check_torque,
     check_weighting,
-    coordinate_names,
     excluded_coordinates,
 )
 from pinobs.model.identification.result import Identification, ParameterSet, Report
@@ -263,55 +262,27 @@ def _payload_report(
     channel: NDArray[np.intp],
     log: dict[str, Any],
 ) -> Report:
-    """:func:`identify_payload`'s report (its ``warnings`` apart): ``rows`` the fitted
-    (``"fit"``), held-out (``"held"``) and held-out N·m (``"held_nm"``) rows, ``channel``
-    the fitted rows' channels, ``log`` its ``torque``, ``fit_end`` and ``filled_rows``."""
-    robot, nv, phi = reg.robot, reg.robot.nv, sol.theta
+    """:func:`identify_payload`'s report (its ``warnings`` apart; :func:`fit_report`):
+    ``rows`` the fitted (``"fit"``), held-out (``"held"``) and held-out N·m (``"held_nm"``)
+    rows, ``channel`` the fitted rows' channels, ``log`` its ``torque``, ``fit_end`` and
+    ``filled_rows``."""
+    nv, phi = reg.robot.nv, sol.theta
     inertia = pin.Inertia.FromDynamicParameters(phi) if phi[0] > 0 else None
-    torque_sigma = np.full(nv, math.nan)
-    if reg.weighting == "torque":
-        torque_sigma[np.unique(channel)] = sol.channel_sigma
-    coordinates = coordinate_names(robot)
+    payload = {
+        "frame": reg.frame,
+        "mass": float(phi[0]),
+        "com": [math.nan] * 3 if inertia is None else inertia.lever.tolist(),
+        "inertia": [[math.nan] * 3] * 3 if inertia is None else inertia.inertia.tolist(),
+        "mass_std": float(sol.std[0]),
+    }
+    # (no unexplained shares here: the rows' torque side is what the calibrated robot leaves,
+    # whose share the payload explains says nothing of the model's)
+    diagnosed = {
+        "unexplained": [math.nan] * nv,
+        "unexplained_floor": [math.nan] * nv,
+        "outlier_windows": [],
+    }
     zero = np.zeros(10)
-    (A, y), (A_h, y_h), (A_nm, y_nm) = rows["fit"], rows["held"], rows["held_nm"]
-    holdout_before = rms_per_coordinate(A_h, y_h, zero, nv)
-    holdout_after = rms_per_coordinate(A_h, y_h, phi, nv)
-    return Report(
-        payload={
-            "frame": reg.frame,
-            "mass": float(phi[0]),
-            "com": [math.nan] * 3 if inertia is None else inertia.lever.tolist(),
-            "inertia": [[math.nan] * 3] * 3 if inertia is None else inertia.inertia.tolist(),
-            "mass_std": float(sol.std[0]),
-        },
-        residual_before=rms_per_coordinate(A, y, zero, nv),
-        residual_after=rms_per_coordinate(A, y, phi, nv),
-        # (not told here: the rows' torque side is what the calibrated robot leaves, whose
-        # share the payload explains says nothing of the model's)
-        unexplained=[math.nan] * nv,
-        unexplained_floor=[math.nan] * nv,
-        outlier_windows=[],
-        holdout_before=holdout_before,
-        holdout_after=holdout_after,
-        holdout_torque_before=rms_per_coordinate(A_nm, y_nm, zero, nv),
-        holdout_torque_after=rms_per_coordinate(A_nm, y_nm, phi, nv),
-        weighting=reg.weighting,
-        excluded=[coordinates[j] for j in excluded],
-        torque_sigma=torque_sigma.tolist(),
-        condition=sol.condition,
-        rank=sol.rank,
-        n_parameters=10,
-        base=list(sol.base),
-        not_excited=[n for n, e in zip(reg.names, sol.excited, strict=True) if not e],
-        moved_by_consistency=[],
-        projected=sol.projected,
-        rows=sol.n_rows,
-        torque=log["torque"],
-        holdout_rows=int(A_h.shape[0]),
-        fit_end=log["fit_end"],
-        sigma=sol.sigma,
-        filled_rows=log["filled_rows"],
-        joints=list(robot.joint_names),
-        coordinates=coordinates,
-        observer_options={"accel_psd": 1e-6, "disturbance_psd": 1e-4},
+    return fit_report(
+        reg, sol, rows, zero, excluded, channel, log, diagnosed, moved=[], payload=payload
     )

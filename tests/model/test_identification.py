@@ -834,6 +834,8 @@ def test_identify_payload_refuses_an_unknown_or_fixed_frame() -> None:
         identify(robot, log, payload="gripper")
     with pytest.raises(pinobs.OptionError, match="fixed to the world"):
         identify(robot, log, payload="world")
+    with pytest.raises(pinobs.DimensionError, match="path shapes"):  # as identify's own
+        identify(robot, log, payload="link3", path=(log[1][:10], log[1][:10]))
 
 
 def test_a_mostly_zero_torque_channel_is_refused_by_name_unless_excluded() -> None:

@@ -63,7 +63,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pinobs.errors import DimensionError, GainError, IdentificationError
+from pinobs.errors import GainError, IdentificationError
 from pinobs.model.friction_fit import (
     candidate_columns,
     search_candidates,
@@ -95,11 +95,10 @@ from pinobs.model.identification.regressor import (
 )
 from pinobs.model.identification.result import Identification, ParameterSet, Report
 from pinobs.model.identification.rows import (
-    fill_short_gaps,
     fit_rows,
     holdout_in_newton_metres,
     holdout_rows,
-    log_arrays,
+    read_fit_log,
 )
 from pinobs.model.noise import robust_rms
 from pinobs.model.robot import Robot, Vector
@@ -160,7 +159,7 @@ def identify(
         }
         return identify_payload(robot, log, payload, exclude=exclude, weighting=weighting, **opts)
     excluded = excluded_coordinates(robot, exclude)
-    t, q, tau, filled, est = _read_log(robot, log, path)
+    t, q, tau, filled, est = read_fit_log(robot, log, path)
     laws: dict[str, Any] = {"friction": friction, "offset": offset, "armature": armature}
     laws |= {"weighting": weighting, "exclude": exclude, "weight_model": weight_model}
     while True:  # inertia weighting: again on the armature the first stage fitted (FGLS)
@@ -243,28 +242,6 @@ def _result(reg: MomentumRegressor, sol: Solution, report: Report) -> Identifica
         report=report,
         regressor=reg,
     )
-
-
-def _read_log(
-    robot: Robot, log: Any, path: tuple[ArrayLike, ArrayLike] | None
-) -> tuple[Vector, Vector, Vector, int, tuple[Vector, Vector] | None]:
-    """``(t, q, tau, filled, path)``: the log read (:func:`log_arrays`), its short NaN runs
-    filled (:func:`fill_short_gaps`, ``filled`` rows), and the given path as arrays.
-
-    Raises:
-        DimensionError: a path whose shapes do not fit the log.
-    """
-    t, q, tau = log_arrays(robot, log, warn_filled=False)
-    q, tau, filled = fill_short_gaps(robot, t, q, tau)
-    est: tuple[Vector, Vector] | None = None
-    if path is not None:
-        est = (np.asarray(path[0], dtype=float), np.asarray(path[1], dtype=float))
-        if est[0].shape != q.shape or est[1].shape != tau.shape:
-            raise DimensionError(
-                f"path shapes q {est[0].shape}, v {est[1].shape} do not fit the log: "
-                f"give ({t.shape[0]}, {robot.nq}) and ({t.shape[0]}, {robot.nv})"
-            )
-    return t, q, tau, filled, est
 
 
 def _check_smoothing(smoothing: object) -> None:

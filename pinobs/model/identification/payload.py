@@ -28,11 +28,10 @@ from pinobs.model.identification.regressor import (
 )
 from pinobs.model.identification.result import Identification, ParameterSet, Report
 from pinobs.model.identification.rows import (
-    fill_short_gaps,
     fit_rows,
     holdout_in_newton_metres,
     holdout_rows,
-    log_arrays,
+    read_fit_log,
 )
 from pinobs.model.robot import Robot, Vector
 
@@ -200,12 +199,8 @@ def identify_payload(
     check_weighting(weighting)
     excluded = excluded_coordinates(robot, exclude)
     reg = PayloadRegressor(robot, frame, weighting=weighting, exclude=exclude)
-    t, q, tau = log_arrays(robot, log, warn_filled=False)
+    t, q, tau, filled, est = read_fit_log(robot, log, path)
     check_zero_torques(robot, tau, excluded)
-    q, tau, filled = fill_short_gaps(robot, t, q, tau)
-    est: tuple[Vector, Vector] | None = None
-    if path is not None:
-        est = (np.asarray(path[0], dtype=float), np.asarray(path[1], dtype=float))
     finite = np.isfinite(t)
     if finite.sum() < 2:
         raise IdentificationError("the log has fewer than two finite times")

@@ -11,7 +11,7 @@ from os import PathLike
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import DimensionError, IdentificationError, PinobsWarning, TimestampError
 from pinobs.model.identification.savgol import smooth_path
@@ -32,6 +32,7 @@ __all__ = [
     "holdout_in_newton_metres",
     "holdout_rows",
     "log_arrays",
+    "read_fit_log",
     "segments",
 ]
 
@@ -178,6 +179,28 @@ def log_arrays(
                 stacklevel=3,
             )
     return t, q, tau
+
+
+def read_fit_log(
+    robot: Robot, log: Any, path: tuple[ArrayLike, ArrayLike] | None
+) -> tuple[Vector, Vector, Vector, int, tuple[Vector, Vector] | None]:
+    """``(t, q, tau, filled, path)``: the log read (:func:`log_arrays`), its short NaN runs
+    filled (:func:`fill_short_gaps`, ``filled`` rows), and the given path as arrays.
+
+    Raises:
+        DimensionError: a path whose shapes do not fit the log.
+    """
+    t, q, tau = log_arrays(robot, log, warn_filled=False)
+    q, tau, filled = fill_short_gaps(robot, t, q, tau)
+    est: tuple[Vector, Vector] | None = None
+    if path is not None:
+        est = (np.asarray(path[0], dtype=float), np.asarray(path[1], dtype=float))
+        if est[0].shape != q.shape or est[1].shape != tau.shape:
+            raise DimensionError(
+                f"path shapes q {est[0].shape}, v {est[1].shape} do not fit the log: "
+                f"give ({t.shape[0]}, {robot.nq}) and ({t.shape[0]}, {robot.nv})"
+            )
+    return t, q, tau, filled, est
 
 
 def _unpack_log(log: Any) -> tuple[Any, Any, Any]:

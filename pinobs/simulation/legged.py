@@ -223,27 +223,7 @@ def go1_mujoco_spec() -> Any:
         geom.contype, geom.conaffinity = (1 if touches else 0), 0
         if touches:
             geom.condim = 3
-    spec.worldbody.add_geom(
-        name="floor",
-        type=mujoco.mjtGeom.mjGEOM_PLANE,
-        size=[0.0, 0.0, 0.05],
-        contype=0,
-        conaffinity=1,
-        friction=[1.0, 0.005, 0.0001],
-    )
-    spec.body("imu_link").add_site(name="imu")
-    spec.add_sensor(
-        name="gyro",
-        type=mujoco.mjtSensor.mjSENS_GYRO,
-        objtype=mujoco.mjtObj.mjOBJ_SITE,
-        objname="imu",
-    )
-    spec.add_sensor(
-        name="acc",
-        type=mujoco.mjtSensor.mjSENS_ACCELEROMETER,
-        objtype=mujoco.mjtObj.mjOBJ_SITE,
-        objname="imu",
-    )
+    add_imu_and_floor(spec, "imu_link")
     for joint in spec.joints:
         if joint.type != mujoco.mjtJoint.mjJNT_HINGE:
             continue
@@ -260,6 +240,8 @@ def go1_mujoco_spec() -> Any:
 
 
 def add_imu_and_floor(spec: Any, imu_body: str) -> None:
+    """Add the floor (the only geom the feet touch) and an IMU site on ``imu_body`` with its
+    gyro and accelerometer (sensors ``gyro``, ``acc``) to the MuJoCo ``spec``."""
     import mujoco
 
     spec.worldbody.add_geom(

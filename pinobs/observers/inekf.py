@@ -634,18 +634,3 @@ class InvariantEKF(LeggedFilter):
         P1 = C - Y @ Kt
         P1 = 0.5 * (P1 + P1.T)
         return replace_state(state, R=R1, x=x1, bias=theta, P=P1), nis
-
-    def _add_feet(self, state: InEKFState, new: list[int], h: Vector, jac: Vector) -> InEKFState:
-        """Eq. (6): each new foot at ``p̂ + R̂ h_j``, its error rows copying ξ_p's."""
-        R, x, P = state.R, state.x, state.P
-        for j in new:
-            n = P.shape[0]
-            at = n - 6  # the new block goes before the biases
-            F = np.zeros((n + 3, n))
-            F[:at, :at] = np.eye(at)
-            F[at : at + 3, 6:9] = _I3
-            F[at + 3 :, at:] = np.eye(6)
-            P = F @ P @ F.T
-            P[at : at + 3, at : at + 3] += self._foot_noise(R, jac[j])
-            x = np.vstack([x, x[1] + R @ h[j]])
-        return replace_state(state, x=x, P=P, feet=state.feet + tuple(new))

@@ -5,7 +5,7 @@ It runs their common sample (:meth:`LeggedFilter.update`: propagate with the hel
 marginalise the feet that lifted off, remove the gated ones, update with those that stay,
 add the new and the gated ones, store the reading, check and convert the estimate); a family
 gives only its mathematics (``_initial_covariance``, ``_propagate``, ``_update``,
-``_add_feet``; optionally ``_legs``, ``_gate``, ``_remember``).
+``_foot_noise``; optionally ``_landing_attitude``, ``_legs``, ``_gate``, ``_remember``).
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
 from numpy.typing import ArrayLike
 
 from pinobs.model import Robot
@@ -33,6 +34,8 @@ from pinobs.observers.legs import (
 )
 
 __all__ = ["LeggedFilter"]
+
+_I3 = np.eye(3)
 
 
 class LeggedFilter(ABC):
@@ -193,8 +196,14 @@ class LeggedFilter(ABC):
         """One update with every foot in the state (``measured``, in state order), and its NIS."""
 
     @abstractmethod
-    def _add_feet(self, state: LegState, new: list[int], h: Vector, jac: Vector) -> LegState:
-        """The feet ``new`` (indices into ``feet``) added at ``p̂ + R̂ h_j``."""
+    def _foot_noise(self, R: Vector, jac: Vector) -> Vector:
+        """A foot's measurement noise in the world frame, ``R N_j Rᵀ``, from its Jacobian
+        ``J_j`` (3, n)."""
+
+    def _landing_attitude(self, R: Vector, h: Vector) -> Vector | None:
+        """The block of a landing foot's error on the attitude error (``None``: none, as the
+        invariant error's)."""
+        return None
 
     def _legs(self, q_joints: Vector, R: Any = None, flags: Any = None) -> tuple[Vector, Vector]:
         """The feet's positions and Jacobians (:meth:`LeggedSetup.legs`)."""
@@ -229,6 +238,27 @@ class LeggedFilter(ABC):
         if new:
             state = self._add_feet(state, new, h, jac)
         return state, nis, len(measured), gated
+
+    def _add_feet(self, state: LegState, new: list[int], h: Vector, jac: Vector) -> LegState:
+        """The feet ``new`` (indices into ``feet``) added before the biases at
+        ``d̂_j = p̂ + R̂ h_j``, their error ``δp``'s plus the family's attitude block
+        (:meth:`_landing_attitude`) plus their noise: ``P ← F P Fᵀ + R N_j Rᵀ`` (the invariant
+        EKF's eq. 6, the quaternion EKF's eq. 5)."""
+        R, x, P = state.R, state.x, state.P
+        for j in new:
+            n = P.shape[0]
+            at = n - 6  # the new block goes before the biases
+            F = np.zeros((n + 3, n))
+            F[:at, :at] = np.eye(at)
+            attitude = self._landing_attitude(R, h[j])
+            if attitude is not None:
+                F[at : at + 3, 0:3] = attitude
+            F[at : at + 3, 6:9] = _I3
+            F[at + 3 :, at:] = np.eye(6)
+            P = F @ P @ F.T
+            P[at : at + 3, at : at + 3] += self._foot_noise(R, jac[j])
+            x = np.vstack([x, x[1] + R @ h[j]])
+        return replace_state(state, x=x, P=P, feet=state.feet + tuple(new))
 
     def _commit(
         self,

@@ -127,9 +127,13 @@ class QuaternionEKF(LeggedFilter):
         P = Phi @ state.P @ Phi.T + 0.5 * dt * Q
         return replace_state(state, t=t, R=R1, x=x1, P=0.5 * (P + P.T))
 
-    def _noise(self, jac: Vector) -> Vector:
-        """``N_j = J_j Σ_q J_jᵀ + σ_k² I`` (eq. 3), for a stack of ``J`` (m, 3, n)."""
-        return foot_noise(self.gains, jac)
+    def _foot_noise(self, R: Vector, jac: Vector) -> Vector:
+        """``R N_j Rᵀ``, ``N_j = J_j Σ_q J_jᵀ + σ_k² I`` (eq. 3), for one ``J`` (3, n)."""
+        return R @ foot_noise(self.gains, jac[None])[0] @ R.T
+
+    def _landing_attitude(self, R: Vector, h: Vector) -> Vector:
+        """Eq. (5): ``δd_j = δp − R̂ h_j^ δθ + …``."""
+        return -R @ skew(h)
 
     def _update(
         self, state: QEKFState, measured: list[int], h: Vector, jac: Vector
@@ -141,7 +145,7 @@ class QuaternionEKF(LeggedFilter):
         H = np.zeros((3 * k, n))
         N = np.zeros((3 * k, 3 * k))
         r = np.empty(3 * k)
-        blocks = self._noise(jac[list(state.feet)])
+        blocks = foot_noise(self.gains, jac[list(state.feet)])  # eq. (3)'s N_j
         for s, j in enumerate(state.feet):
             rows = slice(3 * s, 3 * s + 3)
             y_hat = R.T @ (x[2 + s] - x[1])  # Bloesch et al.: s_i = Cᵀ (p_i − r)
@@ -163,19 +167,3 @@ class QuaternionEKF(LeggedFilter):
         IKH = np.eye(n) - Kt.T @ H
         P1 = IKH @ P @ IKH.T + Kt.T @ N @ Kt
         return replace_state(state, R=R1, x=x1, bias=bias, P=0.5 * (P1 + P1.T)), nis
-
-    def _add_feet(self, state: QEKFState, new: list[int], h: Vector, jac: Vector) -> QEKFState:
-        """Eq. (5): each new foot at ``p̂ + R̂ h_j``."""
-        R, x, P = state.R, state.x, state.P
-        for j in new:
-            n = P.shape[0]
-            at = n - 6
-            F = np.zeros((n + 3, n))
-            F[:at, :at] = np.eye(at)
-            F[at : at + 3, 0:3] = -R @ skew(h[j])
-            F[at : at + 3, 6:9] = _I3
-            F[at + 3 :, at:] = np.eye(6)
-            P = F @ P @ F.T
-            P[at : at + 3, at : at + 3] += R @ self._noise(jac[j][None])[0] @ R.T
-            x = np.vstack([x, x[1] + R @ h[j]])
-        return replace_state(state, x=x, P=P, feet=state.feet + tuple(new))

@@ -4,12 +4,15 @@ orders wide; and rows fitted exactly."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
 import pinobs
-from pinobs.model.identification import MomentumRegressor, solve
+from pinobs.model.identification import MomentumRegressor, leastsquares, solve
+from pinobs.model.identification.leastsquares import NORMAL_EQUATIONS_LIMIT
 
 
 def _rigid_rows(robot: pinobs.Robot, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -89,3 +92,33 @@ def test_fewer_noise_free_rows_than_parameters_are_fitted_and_the_rest_keeps_the
     assert sol.std.shape == (reg.size,) and np.all(np.isfinite(sol.std))
     assert int(np.sum(sol.excited)) <= A.shape[0]
     np.testing.assert_allclose(sol.std[reg.n_inertial :], 1e3 * reg.prior_std()[reg.n_inertial :])
+
+
+def test_rows_that_do_not_over_determine_the_fit_keep_the_normal_equations(monkeypatch) -> None:
+    """As many rows as their rank are fitted exactly by the first pass, whose residual scale
+    (rounding) then puts the weighted step past :data:`NORMAL_EQUATIONS_LIMIT` although it
+    says nothing about the noise.  The truncated-SVD step fitted such rows exactly, which
+    overfitted: ``adaptive``'s first solve on a UR5 (18 rows, 78 parameters) had masses of
+    −0.34 kg and was rejected (0 solves where there had been 1), planar 3R with a payload
+    (18 rows, 39 parameters) 64 prior widths from the truth.  They keep the normal
+    equations: the solve is the one without the SVD step, to the bit."""
+    robot = pinobs.load("planar_3r")
+    reg = MomentumRegressor(robot, armature=True, weighting="torque")
+    A, channel = _rigid_rows(robot, np.arange(0.0, 0.02, 0.01))  # 2 samples: 6 rows
+    assert np.linalg.matrix_rank(A) == A.shape[0] < reg.size
+    truth = reg.nominal().copy()
+    truth[: reg.n_inertial] *= 1.2
+    y = A @ truth + 0.01 * np.random.default_rng(0).standard_normal(A.shape[0])
+    # the first pass fits them to rounding: past the limit
+    As = A * reg.prior_std()
+    u0 = np.linalg.lstsq(As, y - A @ reg.nominal(), rcond=None)[0]
+    sigma0 = 1.4826 * np.median(np.abs(As @ u0 - (y - A @ reg.nominal())))
+    lam_max = np.linalg.eigvalsh(As.T @ As)[-1] / sigma0**2
+    assert np.finfo(float).eps * lam_max > NORMAL_EQUATIONS_LIMIT
+    for consistent, chan in ((False, None), (True, channel)):
+        sol = solve(reg, A, y, consistent=consistent, channel=chan)
+        with monkeypatch.context() as m:
+            m.setattr(leastsquares, "NORMAL_EQUATIONS_LIMIT", math.inf)
+            ref = solve(reg, A, y, consistent=consistent, channel=chan)
+        np.testing.assert_array_equal(sol.theta, ref.theta)
+        np.testing.assert_array_equal(sol.std, ref.std)

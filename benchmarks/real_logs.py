@@ -165,8 +165,9 @@ TIAGO_LSQ: dict[str, tuple[float | None, bool]] = {
     "lsq pinobs columns, wide prior, consistent": (1e3, True),
     "pinobs solve, per-sample rows": (1.0, True),
 }
-#: Factor on pinobs's prior widths that leaves TIAGo's fit to the data; at 1e6 ``solve``
-#: loses precision (its fitted residual 60-160 N·m on arm_1..4 against 2).
+#: Factor on pinobs's prior widths that leaves TIAGo's fit to the data (at 1e6 ``solve``
+#: lost precision, fitted residual 60-160 N·m on arm_1..4 against 2, until its steps took a
+#: truncated SVD there: now within 0.3 % of 1e3, ``tests/io/test_real_logs_lsq.py``).
 TIAGO_WIDE_PRIOR = 1e3
 
 

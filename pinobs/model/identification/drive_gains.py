@@ -79,7 +79,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.errors import DimensionError, GainError, IdentificationError, OptionError
-from pinobs.model.identification.leastsquares import CHANNEL_SIGMA_FLOOR
+from pinobs.model.identification.leastsquares import channel_sigma
 from pinobs.model.identification.payload import PayloadRegressor
 from pinobs.model.identification.regressor import (
     SUFFIXES,
@@ -328,13 +328,11 @@ def _rows(
 
 def _weights(res: Vector, channel: NDArray[np.intp], huber: float | None) -> tuple[Vector, Vector]:
     """``(σ per channel, row weights)``: ``σ_j = 1.4826 · median |r|`` over channel ``j``'s
-    rows (at least :data:`CHANNEL_SIGMA_FLOOR` of the largest; all 1 when every residual is
-    0), each row ``1/σ²`` times its Huber weight (none when ``huber`` is ``None``)."""
+    rows (:func:`~pinobs.model.identification.leastsquares.channel_sigma`: at least
+    ``CHANNEL_SIGMA_FLOOR`` of the largest; all 1 when every residual is 0), each row
+    ``1/σ²`` times its Huber weight (none when ``huber`` is ``None``)."""
     labels = np.unique(channel)
-    sigma = np.array([1.4826 * np.median(np.abs(res[channel == k])) for k in labels])
-    if not sigma.max() > 0.0:  # every row fitted exactly: nothing to weigh them by
-        sigma = np.ones_like(sigma)
-    sigma = np.maximum(sigma, CHANNEL_SIGMA_FLOOR * float(sigma.max()))
+    sigma = channel_sigma(res, channel)
     s_row = sigma[np.searchsorted(labels, channel)]
     if huber is None:
         return sigma, 1.0 / s_row**2

@@ -21,7 +21,16 @@ if TYPE_CHECKING:
     from pinobs.model.identification.payload import PayloadRegressor
     from pinobs.model.identification.regressor import MomentumRegressor
 
-__all__ = ["CHANNEL_SIGMA_FLOOR", "MAX_CONDITION", "MU_END", "Solution", "pseudo_inertia", "solve"]
+__all__ = [
+    "CHANNEL_SIGMA_FLOOR",
+    "MAX_CONDITION",
+    "MU_END",
+    "NORMAL_EQUATIONS_LIMIT",
+    "Solution",
+    "channel_sigma",
+    "pseudo_inertia",
+    "solve",
+]
 
 
 #: Last barrier weight of :func:`_consistent` (in units of the largest posterior precision).
@@ -117,7 +126,11 @@ def solve(
     channel then has its own σ (``σ_c = 1.4826 · median |r_i|`` over its rows, at least
     :data:`CHANNEL_SIGMA_FLOOR` of the largest), re-estimated at each pass: rows of
     torques in N·m weighted by their own noise (module docstring, "Weighting").  ``None``:
-    one σ for all rows (rows made commensurable by their weights beforehand).
+    one σ for all rows (rows made commensurable by their weights beforehand).  Rows weighted
+    beyond what the normal equations resolve against the prior (a noise-free log, σ at
+    rounding; prior widths many orders wide: :data:`NORMAL_EQUATIONS_LIMIT`) are solved by a
+    truncated SVD instead when they over-determine the fit (``_weighted_step``); ``precision``
+    is then only as good as a dense matrix holds it (``ε·λ_max`` on every eigenvalue).
 
     Raises:
         IdentificationError: no rows, or nothing identifiable.
@@ -159,7 +172,8 @@ def _solve(
     if not np.any(As):
         raise IdentificationError("the regressor is zero: the log never moves the robot")
     # first pass: σ from an almost unregularised fit
-    u = np.linalg.lstsq(As, r0, rcond=None)[0]
+    u, _, rank0, _ = np.linalg.lstsq(As, r0, rcond=None)
+    over = rank0 < A.shape[0]  # the rows over-determine the fit (_weighted_step)
     sig = _row_sigma(As @ u - r0, channel)
     # identifiable combinations: pivoted QR of the prior-scaled rows, each over its σ (one
     # scalar without channels: the rank and condition number are those of As)
@@ -173,24 +187,21 @@ def _solve(
     condition = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
     w = np.ones(A.shape[0])
     eye = np.eye(reg.size)
-    prec_u = eye
+    prec_u: Vector = eye
     for it in range(irls + 1):
         res = As @ u - r0
         sig = _row_sigma(res, channel)
         sigma = float(np.median(sig))
         z = np.abs(res) / sig
         w = np.where(z <= huber, 1.0, huber / np.maximum(z, 1e-300))
-        Aw = As * (w / sig**2)[:, None]
-        prec_u = Aw.T @ As + eye  # posterior precision in u-units (≥ I)
-        prec_u = 0.5 * (prec_u + prec_u.T)
-        lam, vec = np.linalg.eigh(prec_u)  # by eigenvalues: huge row weights make it stiff
-        lam = np.maximum(lam, 1.0)
+        prec_u, lam, vec, step, wide = _weighted_step(As, w / sig**2, r0, eye, over)
         if it < irls:
-            u = vec @ ((vec.T @ (Aw.T @ r0)) / lam)
+            u = step
     cov_u = (vec / lam) @ vec.T
     std = s * np.sqrt(np.diag(cov_u))
     theta = theta0 + s * u
-    theta_c = _consistent(reg, theta, prec_u, s) if consistent else theta
+    whiten = (lam, vec) if wide else None  # Λ too wide to hold densely (_weighted_step)
+    theta_c = _consistent(reg, theta, prec_u, s, whiten) if consistent else theta
     projected = not np.array_equal(theta_c, theta)
     return Solution(
         theta=theta_c,
@@ -203,8 +214,68 @@ def _solve(
         projected=projected,
         n_rows=int(A.shape[0]),
         precision=prec_u / np.outer(s, s),
-        channel_sigma=_channel_sigma(res, channel),
+        channel_sigma=channel_sigma(res, channel),
     )
+
+
+#: The normal equations of :func:`solve`'s weighted step are used while their largest
+#: eigenvalue times the machine epsilon stays below this share of the prior's unit
+#: eigenvalue; above it, the step is taken by a truncated SVD of the weighted rows instead.
+NORMAL_EQUATIONS_LIMIT = 1.0
+
+
+def _weighted_step(
+    As: Vector, row_w: Vector, r0: Vector, eye: Vector, over: bool = True
+) -> tuple[Vector, Vector, Vector, Vector, bool]:
+    """``(Λ, λ, V, u, wide)``: the posterior precision ``Λ = Asᵀ W As + I = V diag(λ) Vᵀ`` (u-units)
+    and the step ``u = Λ⁻¹ Asᵀ W r₀`` of rows weighted by ``W = diag(row_w)``; ``wide``:
+    beyond the normal equations' limit.
+
+    By the normal equations while ``ε·λ_max ≤`` :data:`NORMAL_EQUATIONS_LIMIT`; beyond it
+    (rows weighted by a residual scale at rounding level, a noise-free log, or prior widths
+    many orders wide) their rounding, about ``ε·λ_max`` on every eigenvalue (Golub & Van Loan,
+    *Matrix Computations*, 4th ed., 2013, §8.1.2, Weyl), swamps the prior's unit eigenvalue:
+    the directions the data do not fix then got steps of order rounding/1, which made fitted
+    residuals of 60–160 N·m (TIAGo, prior ×1e6) and 8.9 N·m (planar_3r's rigid-body rows,
+    noise-free, prior ×1e3) where the truth fits to 1e-14.  Then ``B = W^½ As = U diag(S) Vᵀ``
+    (``Λ = V diag(S² + 1) Vᵀ``, with no squaring of ``B``'s condition number), its singular
+    values below ``ε·max(B.shape)·S₀`` taken as zero (``numpy.linalg.lstsq``'s default cut-off;
+    Golub & Van Loan §5.5.8, the numerical rank): those directions keep the prior's mean
+    (``u = 0``) and its width (``λ = 1``), as in :mod:`.drive_gains`'s truncated-SVD step.
+    A dense ``Λ`` then no longer holds the prior's unit eigenvalue either, and
+    :func:`_consistent` works in ``Λ``'s whitened coordinates instead.  Fitted residuals,
+    noise-free planar_3r rows, priors ×1, ×1e3, ×1e6: 9e-15 to 1.1e-14 N·m, against 8.8e-7,
+    8.9 and 1.5e19 N·m by the normal equations.
+
+    Only for rows that over-determine the fit (``over``: more rows than the rank of ``As``).
+    Fewer (the online learner's first solves: 9–42 rows of rank as many, 39–78 parameters)
+    are fitted exactly by :func:`solve`'s first pass, so that their residual scale at
+    rounding says nothing about the noise, and the exact fit it asks for overfits: planar 3R
+    with a payload, 18 rows, 39 parameters, 64 prior widths from the truth (held-out rows'
+    RMS 16.0, the nominal model's 15.9); UR5, 18 rows, 78 parameters: masses of −0.34 kg.
+    Those keep the normal equations, as before this step (bit-identical).  Their first pass
+    is past the limit all the same (residual RMS 2.9e7 on that planar 3R, rounding), and
+    the re-weighted passes shrink σ back from it to a fit that depends on their count
+    (second link 1.57 kg at the default 4, 1.61 at 8, −56 at 12, the truth 1.8; with 9 rows,
+    5.4e8 kg at 8): left as it was.  The evidence's σ (MacKay, "Bayesian interpolation",
+    1992; held over the passes) was measured in its place and left out: the learner's
+    velocity RMS after 2 s, 2.8e-3 against 1.6e-3 rad/s.
+    """
+    Aw = As * row_w[:, None]
+    prec_u = Aw.T @ As + eye  # posterior precision in u-units (≥ I)
+    prec_u = 0.5 * (prec_u + prec_u.T)
+    lam, vec = np.linalg.eigh(prec_u)  # by eigenvalues: huge row weights make it stiff
+    if not over or np.finfo(float).eps * float(lam[-1]) <= NORMAL_EQUATIONS_LIMIT:
+        lam = np.maximum(lam, 1.0)
+        return prec_u, lam, vec, vec @ ((vec.T @ (Aw.T @ r0)) / lam), False
+    sw = np.sqrt(row_w)
+    # the whole V (p × p) also when there are fewer rows than parameters
+    U, S, Vt = np.linalg.svd(As * sw[:, None], full_matrices=As.shape[0] < As.shape[1])
+    k = S.size
+    S = np.where(S > np.finfo(float).eps * max(As.shape) * S[0], S, 0.0)
+    lam, vec = 1.0 + np.concatenate([S, np.zeros(As.shape[1] - k)]) ** 2, Vt.T
+    step = vec[:, :k] @ (S / lam[:k] * (U[:, :k].T @ (r0 * sw)))
+    return (vec * lam) @ vec.T, lam, vec, step, True
 
 
 #: A channel's residual scale is taken as at least this share of the largest channel's
@@ -213,19 +284,22 @@ def _solve(
 CHANNEL_SIGMA_FLOOR = 1e-6
 
 
-def _channel_sigma(res: Vector, channel: NDArray[np.intp] | None) -> Vector:
+def channel_sigma(res: Vector, channel: NDArray[np.intp] | None) -> Vector:
     """Per channel (in the order of ``np.unique(channel)``), ``1.4826 · median |r|`` over its
-    rows, at least :data:`CHANNEL_SIGMA_FLOOR` of the largest; one value without channels."""
-    if channel is None:
-        return np.array([max(1.4826 * float(np.median(np.abs(res))), 1e-300)])
-    labels = np.unique(channel)
-    out = np.array([1.4826 * float(np.median(np.abs(res[channel == c]))) for c in labels])
-    return np.maximum(out, max(CHANNEL_SIGMA_FLOOR * float(out.max()), 1e-300))
+    rows, at least :data:`CHANNEL_SIGMA_FLOOR` of the largest; one value without channels.
+    All ones when every residual is exactly 0 (nothing to weigh the rows by: weighting them
+    by ``1/0`` made weights of 1e600 and a NaN fit), so the rows are weighted alike."""
+    labels = np.unique(channel) if channel is not None else np.zeros(1, dtype=np.intp)
+    lab = channel if channel is not None else np.zeros(res.shape, dtype=np.intp)
+    out = np.array([1.4826 * float(np.median(np.abs(res[lab == c]))) for c in labels])
+    if not out.max() > 0.0:  # every row fitted exactly
+        return np.ones_like(out)
+    return np.maximum(out, CHANNEL_SIGMA_FLOOR * float(out.max()))
 
 
 def _row_sigma(res: Vector, channel: NDArray[np.intp] | None) -> Vector:
-    """Per row, the σ of its channel (:func:`_channel_sigma`)."""
-    per = _channel_sigma(res, channel)
+    """Per row, the σ of its channel (:func:`channel_sigma`)."""
+    per = channel_sigma(res, channel)
     if channel is None:
         return np.full(res.shape, per[0])
     return per[np.searchsorted(np.unique(channel), channel)]
@@ -266,7 +340,11 @@ _E = _pseudo_inertia_basis()
 
 
 def _consistent(
-    reg: MomentumRegressor | PayloadRegressor, theta: Vector, prec_u: Vector, s: Vector
+    reg: MomentumRegressor | PayloadRegressor,
+    theta: Vector,
+    prec_u: Vector,
+    s: Vector,
+    whiten: tuple[Vector, Vector] | None = None,
 ) -> Vector:
     """The closest physically consistent ``θ`` in the posterior metric (module docstring).
 
@@ -283,6 +361,15 @@ def _consistent(
     directions, which are the ones consistency moves, and left the solution
     100–10⁴× off the optimum on a noise-free log (UR5, residual 1.7 against
     4.4e-5).
+
+    ``whiten = (λ, V)`` (``Λ = V diag(λ) Vᵀ``, given when ``ε·λ_max`` passes
+    :data:`NORMAL_EQUATIONS_LIMIT`): the same steps in ``x = diag(√λ) Vᵀ u``, where the metric
+    is the identity and the barrier's derivatives are ``Tᵀ∇`` and ``Tᵀ∇²T``
+    (``T = V diag(1/√λ)``, ``u = T x``): a dense ``Λ`` scaled to a unit largest eigenvalue
+    held the weakly seen directions at rounding level, which the barrier (μ down to
+    :data:`MU_END`) pushed anywhere (noise-free planar_3r, prior ×1e3: fitted residual 2e4
+    N·m), and with its eigenvalues capped where a dense matrix still holds them the fit was
+    still off (TIAGo, prior ×1e6: torso 36.5 N·m fitted against 0.71 so).
     """
     if _is_consistent(reg, theta):
         return theta
@@ -291,16 +378,33 @@ def _consistent(
     fr = _nonnegative(reg)
     u_hat = (theta - theta0) / s
     u: Vector = (_feasible_start(theta0, s, nb, fr) - theta0) / s
-    # the metric scaled to a unit largest eigenvalue, so that μ and the stopping rule are
-    # relative: the precision of a nearly noise-free log reaches 1e15 (measured, UR5)
-    prec_u = prec_u / float(np.linalg.eigvalsh(prec_u)[-1])
     E = [_E * s[10 * k : 10 * k + 10, None, None] for k in range(nb)]  # ∂J_k/∂u
     barrier = functools.partial(_log_barrier, theta0=theta0, s=s, E=E, fr=fr)
+    T = np.eye(u.size)
+    if whiten is None:
+        # the metric scaled to a unit largest eigenvalue, so that μ and the stopping rule are
+        # relative: the precision of a nearly noise-free log reaches 1e15 (measured, UR5)
+        prec_u = prec_u / float(np.linalg.eigvalsh(prec_u)[-1])
+    else:  # x = diag(√λ) Vᵀ u, u = T x: the metric is the identity
+        root, vec = np.sqrt(whiten[0]), whiten[1]
+        T = vec / root
+        barrier = functools.partial(_whitened, barrier=barrier, T=T)
+        u_hat, u, prec_u = (vec.T @ u_hat) * root, (vec.T @ u) * root, np.eye(u.size)
     mu = 1.0
     while mu >= MU_END:
         u = _centre(barrier, prec_u, u_hat, u, mu)
         mu *= 0.1
-    return theta0 + s * u
+    return theta0 + s * (u if whiten is None else T @ u)
+
+
+def _whitened(
+    x: Vector, *, barrier: Callable[[Vector], tuple[float, Vector, Vector] | None], T: Vector
+) -> tuple[float, Vector, Vector] | None:
+    """``barrier(T x)`` and its gradient and Hessian in ``x``: ``Tᵀ∇``, ``Tᵀ∇²T``."""
+    b = barrier(T @ x)
+    if b is None:
+        return None
+    return b[0], T.T @ b[1], T.T @ b[2] @ T
 
 
 def _feasible_start(theta0: Vector, s: Vector, nb: int, fr: NDArray[np.intp]) -> Vector:

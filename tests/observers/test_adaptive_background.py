@@ -8,6 +8,8 @@ without it, a late solve is used late (the difference is measured below).
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -153,3 +155,17 @@ def test_the_options_say_where_it_learns() -> None:
     assert make_observer("adaptive", robot).options["learning"] == "sync"
     ob = make_observer("adaptive", robot, learning="background")
     assert ob.options["learning"] == "background"
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="Linux scheduling policies")
+def test_the_learning_worker_never_preempts_the_loop_on_its_core() -> None:
+    """Issue 39: a job written to the pipe wakes the worker onto the loop's core; at the
+    normal policy it preempted the update for the whole job (1.5-7 ms).  SCHED_IDLE, in its
+    own session at nice 19 (:func:`~pinobs.observers.adaptive_learner.learning_worker`)."""
+    worker = adaptive_learner.learning_worker(cached_robot("ur5"), True, True)
+    pid = worker.process.pid
+    assert pid is not None and pid != os.getpid()
+    assert os.sched_getscheduler(pid) == os.SCHED_IDLE
+    assert os.getsid(pid) == pid and os.getpriority(os.PRIO_PROCESS, pid) == 19
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER  # the loop's process as it was
+    worker.close()

@@ -301,9 +301,10 @@ class EKFState(NamedTuple):
         after a step (issue 39).  CPython 3.11's ``_replace`` fills a temporary tuple from a
         ``map``, which has no length: allocated for 10 items (counted by the garbage
         collector) and freed resized to these 8 into the free list (not counted), each call
-        left the collector's generation-0 count one higher; at one call an update, a UR5
-        ``ekf`` or ``adaptive`` in a live loop ran a collection (25–90 µs) every ~600 updates,
-        for nothing to collect."""
+        left the collector's generation-0 count one higher until that free list was full
+        (2000 tuples); a live loop, whose set-up's full collection empties the free lists,
+        ran 2–3 generation-0 collections (~20 µs each, nothing to collect) inside its first
+        ~2000 updates (UR5 ``ekf`` and ``adaptive``, 20 s)."""
         return EKFState(q, v, P, d, d_psd, gate, self.auto, self.psd_scale)
 
 

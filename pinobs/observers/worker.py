@@ -26,8 +26,8 @@ preempted the loop there, which waited, inside ``submit``, for the whole job (1.
 for 40–80 µs of the loop's CPU, one involuntary context switch each, at every window and
 solve).  ``adaptive``'s worker runs at Linux's ``SCHED_IDLE`` policy, whose tasks never
 preempt a running one at their wake-up (``learning_worker`` in
-:mod:`pinobs.observers.adaptive_learner`): UR5, 20 s at load 2, updates over 1 ms 58 → 14,
-none of them in a ``submit``.
+:mod:`pinobs.observers.adaptive_learner`): UR5, ``benchmarks/live_loop.py`` 20 s at load
+2, updates over 1 ms 35–38 → 1–7, none of them in a ``submit``.
 
 Workers are forked from multiprocessing's fork server (:class:`Worker`), not
 from the loop's process: a fork of a process with threads can deadlock in the

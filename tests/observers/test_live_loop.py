@@ -217,9 +217,10 @@ def test_propagate_gap_predicts_the_first_n_minus_one_substeps_and_leaves_the_la
 @pytest.mark.parametrize("name", ["kf", "ekf", "riemannian", "adaptive"])
 def test_updates_leave_the_collectors_count_where_it_was(ur5_run, name: str) -> None:
     """Issue 39: an update that leaves the garbage collector's generation-0 count one higher
-    (``ekf``'s ``EKFState._replace``, in ``adaptive`` too: CPython's tuple free list) runs a
-    collection every ~700 updates of a live loop, 25–90 µs inside one of them.  Counted after
-    a full collection (which empties the free lists, as ``live_loop``'s before its loop)."""
+    (``ekf``'s ``EKFState._replace``, in ``adaptive`` too: CPython's tuple free list, until it
+    is full) runs collections inside updates for nothing (2–3 of ~20 µs in a live loop's
+    first 2000 updates).  Counted after a full collection (which empties the free lists, as
+    ``live_loop``'s before its loop)."""
     robot, t, q, tau, v = ur5_run
     opts = {"learning": "background"} if name == "adaptive" else {}
     ob = make_observer(name, robot, rate=1000.0, noise_std=1e-4, **opts)

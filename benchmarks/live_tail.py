@@ -14,7 +14,7 @@ process), what its learner did in it, read from its state around the update: a w
 a solve sent to the worker, a result taken, a model installed.  Each update after the
 first above the p99.9, and each over 1 ms, gets the causes it shows: ``preempted`` (an
 involuntary switch, or wall over twice the CPU time), ``gc<generation>``, the learner's
-events, else ``cpu`` (the thread ran, nothing of the above: the work itself, or the
+events (``worker busy``: a job was out, not yet taken, when the update began), else ``cpu`` (the thread ran, nothing of the above: the work itself, or the
 machine slowing it: caches, interrupts, which the CPU clock counts).
 
 ``--replay``: the same update at every tick (the observer's state and its inputs at sample
@@ -57,7 +57,7 @@ def _learner_events(before: tuple[int, ...] | None, after: tuple[int, ...] | Non
         before,
         after,
     )
-    events = []
+    events = ["worker busy"] if pending0 else []  # a job out at the update's start
     if windows1 > windows0:
         events.append("window sent")
     if solving1 and not solving0:

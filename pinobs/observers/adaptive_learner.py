@@ -161,7 +161,7 @@ class Learner:
             current = self.nominal if self.theta is None else self.theta
             qs = self.buf.configurations(max(1, len(self.buf) // 4))
             self.solving = True
-            self._run((explained, current), "solve", current, qs)
+            self._run((explained, current), "solve", current.tobytes(), qs.tobytes())
         return self.collect()
 
     def _track_interval(self, t: float) -> None:
@@ -188,7 +188,8 @@ class Learner:
         while len(self.buf) >= need:
             # (the samples' rows written as they came, _Samples: built from a deque of
             # tuples here, 0.2–0.6 ms a window on a UR5 in a paced loop, caches cold)
-            self._run(None, "add_window", self.buf.first(need), self.hw, self.win, self.stride)
+            rows = self.buf.first(need).tobytes()  # (raw bytes: _Identifier)
+            self._run(None, "add_window", rows, self.hw, self.win, self.stride)
             self.windows = min(self.windows + 1, self.identifier.rows.maxlen or 0)
             self.buf.popleft(self.win)
 
@@ -315,10 +316,11 @@ class _Samples:
     """The learner's buffer of samples ``(t, q, τ)``, oldest first, as the rows ``[t, q, τ]``
     of one preallocated array (each sample's row written when it comes, in ``O(nq + nv)``): a
     window is then one slice copied (:meth:`first`), not ``need`` tuples gathered at once in
-    the update that completes it (issue 39: the worst updates of a live loop), and one array
-    to send to the worker process, not three (its pickle is most of what a window costs the
-    loop: 75 µs of the 130 µs ``submit`` took in a paced loop with three arrays; 48 against
-    30 µs for one, caches cold).  The rows live in ``[start, end)``; moved to the front (or
+    the update that completes it (issue 39: the worst updates of a live loop), and one block
+    of float64 bytes to send to the worker process (:class:`_Identifier` takes its jobs'
+    arrays as bytes: pickled as bytes, not through numpy's reduce of three arrays, which was
+    most of what a window cost the loop; UR5 in a paced loop at load 0.3, the pickle 80 → 26
+    µs, ``submit`` 137 → 79 µs).  The rows live in ``[start, end)``; moved to the front (or
     the array doubled) when ``end`` reaches the capacity, which happens once every
     capacity − length samples."""
 
@@ -397,28 +399,34 @@ class _Solution(NamedTuple):
 
 class _Identifier:
     """The learner's costly part: the rows of each window and the solves, run in order on the
-    loop (synchronous) or in the worker process (background), on its own regressor."""
+    loop (synchronous) or in the worker process (background), on its own regressor.  Its
+    jobs take their arrays as float64 bytes (``ndarray.tobytes``; :class:`_Samples`)."""
 
     def __init__(self, reg: MomentumRegressor, windows: int) -> None:
         self.reg = reg
         self.nominal = reg.nominal()
         self.rows: deque[tuple[Vector, Vector]] = deque(maxlen=windows)
 
-    def add_window(self, samples: Vector, hw: int, win: int, stride: int) -> int:
+    def add_window(self, samples: bytes, hw: int, win: int, stride: int) -> int:
         """The ``nv`` rows of one window (module docstring, MATH §9) from the samples, rows
         ``[t, q, τ]`` (:func:`split_samples`: ``q`` [rad] taken at ``t`` [s] with the torques
-        ``τ``; ``win + 2 hw + 1`` of them: the smoother's half-width ``hw`` on both sides);
-        returns the rows kept."""
-        t, q, tau = split_samples(samples, self.reg.robot.nq)
+        ``τ``; ``win + 2 hw + 1`` of them: the smoother's half-width ``hw`` on both sides) as
+        their float64 bytes; returns the rows kept."""
+        robot = self.reg.robot
+        rows = np.frombuffer(samples).reshape(-1, 1 + robot.nq + robot.nv)
+        t, q, tau = split_samples(rows, robot.nq)
         q_s, v = smooth_path(self.reg.robot, t, q, half_window=hw, edges=False)
         k = slice(hw, hw + win + 1)
         A, y = self.reg.system(t[k], q_s[k], v[k], tau[k], window=win, stride=stride)
         self.rows.append((A, y))
         return sum(r[0].shape[0] for r in self.rows)
 
-    def solve(self, current: Vector, qs: Vector) -> _Solution:
-        """Solve the rows; check the masses and ``M(q) ≻ 0`` at the configurations ``qs`` (rows);
-        the robust losses of ``current`` and of the solve (for :meth:`Learner._apply`)."""
+    def solve(self, current_bytes: bytes, qs_bytes: bytes) -> _Solution:
+        """Solve the rows; check the masses and ``M(q) ≻ 0`` at the configurations ``qs``
+        (rows); the robust losses of ``current`` and of the solve (for :meth:`Learner._apply`).
+        Both given as their float64 bytes."""
+        current = np.frombuffer(current_bytes).copy()  # (writable, as the arrays sent before)
+        qs = np.frombuffer(qs_bytes).reshape(-1, self.reg.robot.nq).copy()
         A = np.vstack([r[0] for r in self.rows])
         y = np.concatenate([r[1] for r in self.rows])
         try:

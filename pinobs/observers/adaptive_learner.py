@@ -27,7 +27,14 @@ from pinobs.observers.blas import blas_libraries, one_blas_thread
 from pinobs.observers.worker import Worker
 from pinobs.tolerances import TIME_EPS
 
-__all__ = ["PRELOAD", "REJECTED_KEPT", "Learner", "learning_worker", "load_learning"]
+__all__ = [
+    "PRELOAD",
+    "REJECTED_KEPT",
+    "Learner",
+    "learning_worker",
+    "load_learning",
+    "split_samples",
+]
 
 #: What the worker processes' fork server imports once (:class:`~pinobs.observers.worker.Worker`).
 PRELOAD = ("pinobs.observers.adaptive_learner", "scipy.linalg", "scipy.ndimage")
@@ -154,7 +161,7 @@ class Learner:
             current = self.nominal if self.theta is None else self.theta
             qs = self.buf.configurations(max(1, len(self.buf) // 4))
             self.solving = True
-            self._run((explained, current), "solve", current, qs)
+            self._run((explained, current), "solve", current.tobytes(), qs.tobytes())
         return self.collect()
 
     def _track_interval(self, t: float) -> None:
@@ -181,8 +188,8 @@ class Learner:
         while len(self.buf) >= need:
             # (the samples' rows written as they came, _Samples: built from a deque of
             # tuples here, 0.2–0.6 ms a window on a UR5 in a paced loop, caches cold)
-            t_arr, q_arr, tau_arr = self.buf.first(need)
-            self._run(None, "add_window", t_arr, q_arr, tau_arr, self.hw, self.win, self.stride)
+            rows = self.buf.first(need).tobytes()  # (raw bytes: _Identifier)
+            self._run(None, "add_window", rows, self.hw, self.win, self.stride)
             self.windows = min(self.windows + 1, self.identifier.rows.maxlen or 0)
             self.buf.popleft(self.win)
 
@@ -306,17 +313,20 @@ class Learner:
 
 
 class _Samples:
-    """The learner's buffer of samples ``(t, q, τ)``, oldest first, as rows of preallocated
-    arrays (each sample's row written when it comes, in ``O(nq + nv)``): a window's arrays
-    are then three slices copied (:meth:`first`), not ``need`` tuples gathered at once in the
-    update that completes it (issue 39: the worst updates of a live loop).  The rows live in
-    ``[start, end)``; moved to the front (or the arrays doubled) when ``end`` reaches the
-    capacity, which happens once every capacity − length samples."""
+    """The learner's buffer of samples ``(t, q, τ)``, oldest first, as the rows ``[t, q, τ]``
+    of one preallocated array (each sample's row written when it comes, in ``O(nq + nv)``): a
+    window is then one slice copied (:meth:`first`), not ``need`` tuples gathered at once in
+    the update that completes it (issue 39: the worst updates of a live loop), and one block
+    of float64 bytes to send to the worker process (:class:`_Identifier` takes its jobs'
+    arrays as bytes: pickled as bytes, not through numpy's reduce of three arrays, which was
+    most of what a window cost the loop; UR5 in a paced loop at load 0.3, the pickle 80 → 26
+    µs, ``submit`` 137 → 79 µs).  The rows live in ``[start, end)``; moved to the front (or
+    the array doubled) when ``end`` reaches the capacity, which happens once every
+    capacity − length samples."""
 
     def __init__(self, nq: int, nv: int, capacity: int = 256) -> None:
-        self.t = np.empty(capacity)
-        self.q = np.empty((capacity, nq))
-        self.tau = np.empty((capacity, nv))
+        self.rows = np.empty((capacity, 1 + nq + nv))
+        self.nq = nq
         self.start = self.end = 0
 
     def __len__(self) -> int:
@@ -330,27 +340,25 @@ class _Samples:
         k = (self.end if i < 0 else self.start) + i
         if not self.start <= k < self.end:
             raise IndexError(f"sample {i} of {len(self)}")
-        return float(self.t[k]), self.q[k].copy(), self.tau[k].copy()
+        row, nq = self.rows[k], self.nq
+        return float(row[0]), row[1 : 1 + nq].copy(), row[1 + nq :].copy()
 
     def latest_time(self) -> float:
-        return float(self.t[self.end - 1])
+        return float(self.rows[self.end - 1, 0])
 
     def append(self, sample: tuple[float, Vector, Vector]) -> None:
-        if self.end == self.t.shape[0]:
+        if self.end == self.rows.shape[0]:
             self._make_room()
-        k = self.end
-        self.t[k], self.q[k], self.tau[k] = sample
-        self.end = k + 1
+        row, nq = self.rows[self.end], self.nq
+        row[0], row[1 : 1 + nq], row[1 + nq :] = sample
+        self.end += 1
 
     def _make_room(self) -> None:
-        n, cap = len(self), self.t.shape[0]
+        n, cap = len(self), self.rows.shape[0]
         grow = 2 * cap if 2 * n > cap else cap  # at most half full: moved to the front
-        for name in ("t", "q", "tau"):
-            old = getattr(self, name)
-            new = old if grow == cap else np.empty((grow, *old.shape[1:]))
-            new[:n] = old[self.start : self.end]
-            setattr(self, name, new)
-        self.start, self.end = 0, n
+        new = self.rows if grow == cap else np.empty((grow, self.rows.shape[1]))
+        new[:n] = self.rows[self.start : self.end]
+        self.rows, self.start, self.end = new, 0, n
 
     def clear(self) -> None:
         self.start = self.end = 0
@@ -359,14 +367,19 @@ class _Samples:
         """Drop the ``n`` oldest samples."""
         self.start = min(self.start + n, self.end)
 
-    def first(self, n: int) -> tuple[Vector, Vector, Vector]:
-        """Copies of the ``n`` oldest samples' ``(t, q, τ)`` as arrays of ``n`` rows."""
-        k = slice(self.start, self.start + n)
-        return self.t[k].copy(), self.q[k].copy(), self.tau[k].copy()
+    def first(self, n: int) -> Vector:
+        """A copy of the ``n`` oldest samples' rows ``[t, q, τ]`` (:func:`split_samples`)."""
+        return self.rows[self.start : self.start + n].copy()
 
-    def configurations(self, step: int) -> list[Vector]:
-        """Every ``step``-th sample's ``q``, oldest first (copies)."""
-        return [self.q[k].copy() for k in range(self.start, self.end, step)]
+    def configurations(self, step: int) -> Vector:
+        """Every ``step``-th sample's ``q``, oldest first, as the rows of one array (a copy)."""
+        return self.rows[self.start : self.end : step, 1 : 1 + self.nq].copy()
+
+
+def split_samples(rows: Vector, nq: int) -> tuple[Vector, Vector, Vector]:
+    """``(t, q, τ)`` of the rows ``[t, q, τ]`` of :meth:`_Samples.first`, each contiguous
+    (copies: the arithmetic then runs on the arrays it ran on before)."""
+    return rows[:, 0].copy(), rows[:, 1 : 1 + nq].copy(), rows[:, 1 + nq :].copy()
 
 
 class _Solution(NamedTuple):
@@ -386,26 +399,34 @@ class _Solution(NamedTuple):
 
 class _Identifier:
     """The learner's costly part: the rows of each window and the solves, run in order on the
-    loop (synchronous) or in the worker process (background), on its own regressor."""
+    loop (synchronous) or in the worker process (background), on its own regressor.  Its
+    jobs take their arrays as float64 bytes (``ndarray.tobytes``; :class:`_Samples`)."""
 
     def __init__(self, reg: MomentumRegressor, windows: int) -> None:
         self.reg = reg
         self.nominal = reg.nominal()
         self.rows: deque[tuple[Vector, Vector]] = deque(maxlen=windows)
 
-    def add_window(self, t: Vector, q: Vector, tau: Vector, hw: int, win: int, stride: int) -> int:
-        """The ``nv`` rows of one window (module docstring, MATH §9) from the samples ``q``
-        [rad] taken at ``t`` [s] with the torques ``tau`` (``win + 2 hw + 1`` of them: the
-        smoother's half-width ``hw`` on both sides); returns the rows kept."""
+    def add_window(self, samples: bytes, hw: int, win: int, stride: int) -> int:
+        """The ``nv`` rows of one window (module docstring, MATH §9) from the samples, rows
+        ``[t, q, τ]`` (:func:`split_samples`: ``q`` [rad] taken at ``t`` [s] with the torques
+        ``τ``; ``win + 2 hw + 1`` of them: the smoother's half-width ``hw`` on both sides) as
+        their float64 bytes; returns the rows kept."""
+        robot = self.reg.robot
+        rows = np.frombuffer(samples).reshape(-1, 1 + robot.nq + robot.nv)
+        t, q, tau = split_samples(rows, robot.nq)
         q_s, v = smooth_path(self.reg.robot, t, q, half_window=hw, edges=False)
         k = slice(hw, hw + win + 1)
         A, y = self.reg.system(t[k], q_s[k], v[k], tau[k], window=win, stride=stride)
         self.rows.append((A, y))
         return sum(r[0].shape[0] for r in self.rows)
 
-    def solve(self, current: Vector, qs: list[Vector]) -> _Solution:
-        """Solve the rows; check the masses and ``M(q) ≻ 0`` at the configurations ``qs``;
-        the robust losses of ``current`` and of the solve (for :meth:`Learner._apply`)."""
+    def solve(self, current_bytes: bytes, qs_bytes: bytes) -> _Solution:
+        """Solve the rows; check the masses and ``M(q) ≻ 0`` at the configurations ``qs``
+        (rows); the robust losses of ``current`` and of the solve (for :meth:`Learner._apply`).
+        Both given as their float64 bytes."""
+        current = np.frombuffer(current_bytes).copy()  # (writable, as the arrays sent before)
+        qs = np.frombuffer(qs_bytes).reshape(-1, self.reg.robot.nq).copy()
         A = np.vstack([r[0] for r in self.rows])
         y = np.concatenate([r[1] for r in self.rows])
         try:
@@ -472,6 +493,19 @@ def _worker_start(robot: Robot, friction: bool, offset: bool) -> dict[str, Any]:
         os.setsid()
     with contextlib.suppress(AttributeError, OSError):
         os.nice(19)
+    # and never woken onto the loop's core ahead of it (Linux SCHED_IDLE: a task of that
+    # policy does not preempt a running one at its wake-up).  A job written to the pipe wakes
+    # this process with a synchronous wake-up (the kernel's hint that the writer is about to
+    # sleep), so it was queued on the loop's core and preempted the loop in the middle of its
+    # update, which then waited for the whole job: UR5 live_loop, 20 s at load 2 on 2 cores,
+    # the write inside update took 1.5-7 ms wall for 40-80 µs of the loop's CPU (one
+    # involuntary context switch each), every window and every solve.  With SCHED_IDLE
+    # (benchmarks/live_loop.py, 20 s, load 1.8-2.4, two runs each): updates over 1 ms
+    # 35, 38 -> 7, 1; p99.9 / median 13.1, 13.9 -> 3.2, 3.5 (what is left over 1 ms: the
+    # machine's other processes, in updates without a job as often as with one).  Its own session's group keeps it its
+    # share of the machine: the policy only orders it behind the loop on their core.
+    with contextlib.suppress(AttributeError, OSError):
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     return {"reg": MomentumRegressor(robot, friction=friction, offset=offset), "key": None}
 
 

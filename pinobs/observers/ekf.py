@@ -293,6 +293,20 @@ class EKFState(NamedTuple):
     # "auto": M̄ᵢᵢ² at the reset configuration, the density's scale from rad²/s⁵ to N²·m²/s
     psd_scale: Vector | None = None
 
+    def moved(
+        self, q: Vector, v: Vector, P: Vector, gate: GateState, d: Vector | None,
+        d_psd: Vector | None,
+    ) -> EKFState:  # fmt: skip
+        """``_replace(q=q, v=v, P=P, gate=gate, d=d, d_psd=d_psd)``, built directly: the state
+        after a step (issue 39).  CPython 3.11's ``_replace`` fills a temporary tuple from a
+        ``map``, which has no length: allocated for 10 items (counted by the garbage
+        collector) and freed resized to these 8 into the free list (not counted), each call
+        left the collector's generation-0 count one higher until that free list was full
+        (2000 tuples); a live loop, whose set-up's full collection empties the free lists,
+        ran 2–3 generation-0 collections (~20 µs each, nothing to collect) inside its first
+        ~2000 updates (UR5 ``ekf`` and ``adaptive``, 20 s)."""
+        return EKFState(q, v, P, d, d_psd, gate, self.auto, self.psd_scale)
+
 
 @register
 class ExtendedKalmanFilter(Observer[EKFState]):
@@ -443,7 +457,8 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         with np.errstate(over="ignore", invalid="ignore"):
             pred, _ = self.predict(state, dt, tau)
             if q_meas is None:
-                return pred._replace(P=0.5 * (pred.P + pred.P.T), gate=pred.gate.predicted())
+                P = 0.5 * (pred.P + pred.P.T)
+                return pred.moved(pred.q, pred.v, P, pred.gate.predicted(), pred.d, pred.d_psd)
             return self.corrected(pred, q_meas, dt)
 
     def corrected(self, pred: EKFState, q_meas: Vector, dt: float) -> EKFState:
@@ -456,7 +471,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         nv = self.robot.nv
         e = self.robot.difference(pred.q, q_meas)
         s = pred.P.diagonal()[:nv] + self.gains.meas_std**2  # Sᵢᵢ = P⁻_qq,ii + σ²
-        return new._replace(d_psd=self.matched_density(pred, e, s, dt))
+        return new.moved(new.q, new.v, new.P, new.gate, new.d, self.matched_density(pred, e, s, dt))
 
     def matched_density(self, pred: EKFState, e: Vector, s: Vector, dt: float) -> Vector:
         """``disturbance_psd="auto"``: the offset's density after the innovation ``e`` [rad]
@@ -536,7 +551,8 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         P[: 2 * nv, : 2 * nv] += double_integrator_noise(nv, dt, self.gains.accel_psd)
         if d is not None and state.d_psd is not None:  # Q_d's offset block, diag(psd_τ h)
             P[2 * nv :, 2 * nv :].flat[:: nv + 1] += state.d_psd * dt
-        return state._replace(q=q, v=v, P=P), Phi  # the gate's bookkeeping carries over
+        # the gate's bookkeeping carries over
+        return state.moved(q, v, P, state.gate, state.d, state.d_psd), Phi
 
     def correct(self, state: EKFState, q_meas: Vector) -> EKFState:
         """Correction of a predicted state with the measured ``q_meas`` (Joseph form, module docstring).
@@ -563,7 +579,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         v = v + dx[nv : 2 * nv]
         if d is not None:
             d = d + dx[2 * nv :]
-        return state._replace(q=q, v=v, P=P_new, d=d, gate=gate)  # P symmetric (joseph)
+        return state.moved(q, v, P_new, gate, d, state.d_psd)  # P symmetric (joseph)
 
     def gate_limit(self, state: EKFState) -> float:
         """The NIS above which :meth:`correct` rejected ``state``'s measurement: the gate's
@@ -668,7 +684,8 @@ class _FastPath:
         if q_meas is None:
             with np.errstate(over="ignore", invalid="ignore"):
                 P = 0.5 * (P + P.T)
-            return state._replace(q=qs.copy(), v=vs.copy(), P=P, gate=state.gate.predicted())
+            gate = state.gate.predicted()
+            return state.moved(qs.copy(), vs.copy(), P, gate, state.d, state.d_psd)
         return self.corrected(ekf, state, P, dt, q_meas)
 
     def corrected(
@@ -698,7 +715,7 @@ class _FastPath:
                 if state.auto and d_psd is not None:  # as ekf.corrected
                     s = P.diagonal()[:nv] + r  # Sᵢᵢ = P⁻_qq,ii + σ²
                     d_psd = ekf.matched_density(state, e, s, dt)
-        return state._replace(q=q, v=v, P=P_new, d=d, d_psd=d_psd, gate=gate)
+        return state.moved(q, v, P_new, gate, d, d_psd)
 
 
 class _LieFast:
@@ -749,7 +766,8 @@ class _LieFast:
         with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: update says so
             q, v, P = b.predict(state.q, state.v, tau, dt, state.P, ekf.gains.accel_psd, r)
             if q_meas is None:
-                return state._replace(q=q, v=v, P=0.5 * (P + P.T), gate=state.gate.predicted())
+                gate = state.gate.predicted()
+                return state.moved(q, v, 0.5 * (P + P.T), gate, state.d, state.d_psd)
             e = robot.difference(q, q_meas)
             dx, P_new, nis = b.correct(P, e, r)
             if not nis * r >= 1e-6 * float(e @ e):  # NaN or K_q ≈ I: correct's other ways
@@ -758,4 +776,4 @@ class _LieFast:
             if gate.gated:
                 return state._replace(q=q, v=v, P=0.5 * (P + P.T), gate=gate)
             q = robot.integrate(q, dx[: self.nv])
-            return state._replace(q=q, v=v + dx[self.nv :], P=P_new, gate=gate)
+            return state.moved(q, v + dx[self.nv :], P_new, gate, state.d, state.d_psd)

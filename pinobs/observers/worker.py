@@ -20,6 +20,14 @@ With the worker (forked from the loop's process then) in the loop's session:
 worker spent the loop's share); in its own session at nice 19, as
 ``adaptive``'s starts: 21–76; forked from the fork server, as now: 12–128
 at load 7–9 (learning inside ``update``, in the same sessions: 141–350).
+What remained was the write itself: a pipe write wakes its reader synchronously (the
+kernel's hint that the writer will sleep), so the worker was queued on the loop's core and
+preempted the loop there, which waited, inside ``submit``, for the whole job (1.5–7 ms wall
+for 40–80 µs of the loop's CPU, one involuntary context switch each, at every window and
+solve).  ``adaptive``'s worker runs at Linux's ``SCHED_IDLE`` policy, whose tasks never
+preempt a running one at their wake-up (``learning_worker`` in
+:mod:`pinobs.observers.adaptive_learner`): UR5, ``benchmarks/live_loop.py`` 20 s at load
+2, updates over 1 ms 35–38 → 1–7, none of them in a ``submit``.
 
 Workers are forked from multiprocessing's fork server (:class:`Worker`), not
 from the loop's process: a fork of a process with threads can deadlock in the

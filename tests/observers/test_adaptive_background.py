@@ -8,6 +8,8 @@ without it, a late solve is used late (the difference is measured below).
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -153,3 +155,45 @@ def test_the_options_say_where_it_learns() -> None:
     assert make_observer("adaptive", robot).options["learning"] == "sync"
     ob = make_observer("adaptive", robot, learning="background")
     assert ob.options["learning"] == "background"
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="Linux scheduling policies")
+def test_the_learning_worker_never_preempts_the_loop_on_its_core() -> None:
+    """Issue 39: a job written to the pipe wakes the worker onto the loop's core; at the
+    normal policy it preempted the update for the whole job (1.5-7 ms).  SCHED_IDLE, in its
+    own session at nice 19 (:func:`~pinobs.observers.adaptive_learner.learning_worker`)."""
+    worker = adaptive_learner.learning_worker(cached_robot("ur5"), True, True)
+    pid = worker.process.pid
+    assert pid is not None and pid != os.getpid()
+    assert os.sched_getscheduler(pid) == os.SCHED_IDLE
+    assert os.getsid(pid) == pid and os.getpriority(os.PRIO_PROCESS, pid) == 19
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER  # the loop's process as it was
+    worker.close()
+
+
+def test_the_learners_buffer_gives_back_the_samples_as_they_came() -> None:
+    """The buffer keeps each sample as one row ``[t, q, τ]`` (issue 39: a window is one array
+    to send); a window split back is the samples given, bit for bit, across its moves and
+    growths (capacity 256)."""
+    robot = cached_robot("ur5")
+    lr = adaptive_learner.Learner(
+        robot, window=0.1, half_window=0.05, horizon=10.0, resolve_every=0.5,
+        friction=True, offset=True, rate=1000.0,
+    )  # fmt: skip
+    rng = np.random.default_rng(0)
+    t = np.cumsum(rng.uniform(0.9e-3, 1.1e-3, 700))
+    q, tau = rng.standard_normal((700, robot.nq)), rng.standard_normal((700, robot.nv))
+    buf, kept = lr.buf, 0
+    for k in range(700):
+        buf.append((t[k], q[k], tau[k]))
+        if k % 150 == 149:  # a window taken: the buffer moves on
+            buf.popleft(100)
+            kept += 100
+    assert len(buf) == 700 - kept
+    t_w, q_w, tau_w = adaptive_learner.split_samples(buf.first(151), robot.nq)
+    w = slice(kept, kept + 151)
+    assert np.array_equal(t_w, t[w]) and np.array_equal(q_w, q[w]) and np.array_equal(tau_w, tau[w])
+    assert all(x.flags.c_contiguous for x in (t_w, q_w, tau_w))
+    last = buf[-1]
+    assert last[0] == t[-1] and np.array_equal(last[1], q[-1]) and np.array_equal(last[2], tau[-1])
+    assert np.array_equal(buf.configurations(7), q[kept::7])

@@ -10,7 +10,8 @@ from pinobs.errors import GainError
 from pinobs.evaluation import evaluate
 from pinobs.model import lie_rk4
 from pinobs.observers import make_observer
-from pinobs.observers.ekf import ExtendedKalmanFilter
+from pinobs.observers.ekf import EKFState, ExtendedKalmanFilter
+from pinobs.observers.gating import GateState
 from pinobs.observers.linalg import transition_matrix
 from pinobs.simulation import Sensor, make_input, simulate
 
@@ -422,3 +423,16 @@ def test_a_filter_being_lost_says_so_without_numpys_warnings(ur5: pinobs.Robot) 
     with pytest.raises(ObserverDiverged, match="non-finite"):
         for k in range(1, 5):
             ekf.update(1e-3 * k, q0 + 1e-3, np.zeros(6))
+
+
+def test_a_moved_state_is_its_replace_with_every_other_field_kept() -> None:
+    """``EKFState.moved`` (built directly, issue 39) against ``_replace``: every field that
+    is not moved is kept, so a field added to the state cannot be dropped by it."""
+    rng = np.random.default_rng(0)
+    base = EKFState(*(rng.standard_normal(3) for _ in range(5)), GateState(), True, np.ones(3))
+    args = [rng.standard_normal(3) for _ in range(3)]
+    gate, d, d_psd = GateState().predicted(), rng.standard_normal(3), rng.standard_normal(3)
+    moved = base.moved(*args, gate, d, d_psd)
+    want = base._replace(q=args[0], v=args[1], P=args[2], gate=gate, d=d, d_psd=d_psd)
+    assert type(moved) is EKFState and len(moved) == len(EKFState._fields)
+    assert all(a is b for a, b in zip(moved, want, strict=True))

@@ -61,7 +61,7 @@ SPIN = 2e-4
 #: [rad or m] The simulated sensor's noise, and the observers' ``noise_std``.
 NOISE_STD = 1e-4
 #: A family's options in a live loop (:func:`live_loop`): what a user's real-time loop should
-#: give it.  ``adaptive`` re-identifies its model on a worker thread (its solves took 4–17 ms,
+#: give it.  ``adaptive`` re-identifies its model on a worker process (its solves took 4–17 ms,
 #: its first window 0.5 s, inside one update when synchronous: ``pinobs.observers.adaptive``).
 LIVE_OPTIONS: dict[str, dict[str, Any]] = {"adaptive": {"learning": "background"}}
 

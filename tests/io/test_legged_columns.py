@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 import warnings
 from pathlib import Path
 
@@ -14,6 +12,7 @@ import pytest
 import pinobs
 from pinobs.errors import DimensionError, LogFormatError, SensorWarning
 from pinobs.io import iter_log, read_log
+from tests.io.test_real_data import bench_module
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -145,27 +144,16 @@ def test_logs_without_legged_columns_have_none_of_them(tmp_path) -> None:
 
 
 # --------------------------------------------------------------- the real Go1 log
-def _real_data():
-    name = "pinobs_bench_real_data"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / "real_data.py")
-        assert spec is not None and spec.loader is not None
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[name] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules[name]
-
-
-SEROW_MG = _real_data().SEROW_MG
+SEROW_MG = bench_module("real_data").SEROW_MG
 
 
 def serow_go1_frame(path: Path) -> pd.DataFrame:
     """SEROW's Go1 unit-test CSV in pinobs' table columns (benchmarks/real_data.py)."""
-    return _real_data().serow_go1_frame(path)
+    return bench_module("real_data").serow_go1_frame(path)
 
 
 def test_real_go1_log_reads_every_row(go1) -> None:
-    root = _real_data().data_root()
+    root = bench_module("real_data").data_root()
     path = None if root is None else root / "serow_go1/evaluation/unit_tests/data/go1.csv"
     if path is None or not path.is_file():
         pytest.skip("no shared data folder with serow_go1")

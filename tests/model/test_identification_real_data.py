@@ -3,10 +3,7 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 import warnings
-from types import ModuleType
 
 import numpy as np
 import pandas as pd
@@ -14,7 +11,7 @@ import pytest
 
 import pinobs
 from pinobs.model.identification import pseudo_inertia
-from tests.io.test_real_data import ROOT, needs_data, real_data
+from tests.io.test_real_data import bench_module, needs_data, real_data
 
 #: The load of their ``estimate_drive_gains.m`` [kg], and the rows (1-based, inclusive, of the
 #: raw CSV) it keeps of the unloaded and loaded runs of the same trajectory.
@@ -71,17 +68,6 @@ def test_ur10e_payload_mass_is_within_five_percent(payload) -> None:
     assert payload.report["payload"]["mass"] == pytest.approx(LOAD_KG, rel=0.05)
 
 
-def _drive_gains_benchmark() -> ModuleType:
-    """``benchmarks/drive_gains.py`` (its runs' rows, gains and held-out payload)."""
-    name = "pinobs_bench_drive_gains"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / "drive_gains.py")
-        assert spec is not None and spec.loader is not None
-        sys.modules[name] = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(sys.modules[name])
-    return sys.modules[name]
-
-
 @needs_data
 @pytest.mark.slow
 @pytest.mark.parametrize(("fit", "held"), [("14harm", "15harm"), ("15harm", "14harm")])
@@ -92,7 +78,7 @@ def test_ur10e_payload_is_within_five_percent_with_gains_identified_on_the_other
     identified on the other pair with them (``benchmarks/drive_gains.py``): measured 2.688 kg
     (−4.2 %) on 15harm and 2.867 kg (+2.2 %) on 14harm, against 2.155 and 2.585 kg with the
     published gains."""
-    bench = _drive_gains_benchmark()
+    bench = bench_module("drive_gains")
     robot = real_data.ur10e_robot()
     gains = np.array(bench.gains_on(robot, fit)["gains"])
     assert bench.payload_on(robot, held, gains)["mass"] == pytest.approx(LOAD_KG, rel=0.05)

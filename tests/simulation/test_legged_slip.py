@@ -3,10 +3,7 @@ without the invariant EKF's foot gate (each foot's own NIS through the shared ou
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from functools import cache
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,23 +13,10 @@ pytest.importorskip("mujoco")
 import pinobs
 from pinobs.observers.inekf import InvariantEKF
 from pinobs.simulation.legged import GO1_FEET, LeggedNoise, simulate_legged
+from tests.io.test_real_data import bench_module
 from tests.simulation.test_legged import GAINS
 
 QUIET = LeggedNoise(0, 0, 0, 0, 0, 0, 0, 0)
-
-
-@cache
-def bench():
-    """benchmarks/legged_truth.py (its ``SlidingLegs`` and ``slip_track``, the ``slip`` table's)."""
-    name = "pinobs_bench_legged_truth"
-    if name not in sys.modules:
-        path = Path(__file__).resolve().parents[2] / "benchmarks" / "legged_truth.py"
-        spec = importlib.util.spec_from_file_location(name, path)
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
 
 
 @cache
@@ -42,7 +26,7 @@ def stand(noise: LeggedNoise | None = None):
 
 def track(run, *, gate: float | None, speed: float, duration: float):
     """Base velocity error and foot measurements gated, FL sliding (``slip_track``)."""
-    return bench().slip_track(run, gate=gate, speed=speed, duration=duration)
+    return bench_module("legged_truth").slip_track(run, gate=gate, speed=speed, duration=duration)
 
 
 def test_noise_free_on_the_truth_the_gate_rejects_nothing_and_changes_nothing() -> None:

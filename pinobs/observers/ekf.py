@@ -574,7 +574,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
             nis = float(e @ np.linalg.solve(P[:nv, :nv] + scaled_identity(nv, R), e))
         gate = state.gate.measured(nis, self._gate, nv)
         if gate.gated:
-            return state._replace(P=0.5 * (P + P.T), gate=gate)
+            return state.moved(state.q, state.v, 0.5 * (P + P.T), gate, state.d, state.d_psd)
         q = self.robot.integrate(q, dx[:nv])
         v = v + dx[nv : 2 * nv]
         if d is not None:
@@ -701,13 +701,14 @@ class _FastPath:
         r = ekf.gains.meas_std**2
         nis = self.correct(self._scratch_work, q_meas, P, r, e, dx, P_new, q, v)
         if nis != nis:  # NaN: ekf.correct's other ways
-            pred = state._replace(q=qs.copy(), v=vs.copy(), P=P)
+            pred = state.moved(qs.copy(), vs.copy(), P, state.gate, state.d, state.d_psd)
             with np.errstate(over="ignore", invalid="ignore"):
                 return ekf.corrected(pred, q_meas, dt)
         gate = state.gate.measured(nis, ekf._gate, nv)
         if gate.gated:
             with np.errstate(over="ignore", invalid="ignore"):
-                return state._replace(q=qs.copy(), v=vs.copy(), P=0.5 * (P + P.T), gate=gate)
+                P = 0.5 * (P + P.T)
+                return state.moved(qs.copy(), vs.copy(), P, gate, state.d, state.d_psd)
         d_psd = state.d_psd
         if d is not None:
             with np.errstate(over="ignore", invalid="ignore"):
@@ -771,9 +772,10 @@ class _LieFast:
             e = robot.difference(q, q_meas)
             dx, P_new, nis = b.correct(P, e, r)
             if not nis * r >= 1e-6 * float(e @ e):  # NaN or K_q ≈ I: correct's other ways
-                return ekf.corrected(state._replace(q=q, v=v, P=P.copy()), q_meas, dt)
+                pred = state.moved(q, v, P.copy(), state.gate, state.d, state.d_psd)
+                return ekf.corrected(pred, q_meas, dt)
             gate = state.gate.measured(nis, ekf._gate, self.nv)
             if gate.gated:
-                return state._replace(q=q, v=v, P=0.5 * (P + P.T), gate=gate)
+                return state.moved(q, v, 0.5 * (P + P.T), gate, state.d, state.d_psd)
             q = robot.integrate(q, dx[: self.nv])
             return state.moved(q, v + dx[self.nv :], P_new, gate, state.d, state.d_psd)

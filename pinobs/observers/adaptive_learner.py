@@ -493,17 +493,10 @@ def _worker_start(robot: Robot, friction: bool, offset: bool) -> dict[str, Any]:
         os.setsid()
     with contextlib.suppress(AttributeError, OSError):
         os.nice(19)
-    # and never woken onto the loop's core ahead of it (Linux SCHED_IDLE: a task of that
-    # policy does not preempt a running one at its wake-up).  A job written to the pipe wakes
-    # this process with a synchronous wake-up (the kernel's hint that the writer is about to
-    # sleep), so it was queued on the loop's core and preempted the loop in the middle of its
-    # update, which then waited for the whole job: UR5 live_loop, 20 s at load 2 on 2 cores,
-    # the write inside update took 1.5-7 ms wall for 40-80 µs of the loop's CPU (one
-    # involuntary context switch each), every window and every solve.  With SCHED_IDLE
-    # (benchmarks/live_loop.py, 20 s, load 1.8-2.4, two runs each): updates over 1 ms
-    # 35, 38 -> 7, 1; p99.9 / median 13.1, 13.9 -> 3.2, 3.5 (what is left over 1 ms: the
-    # machine's other processes, in updates without a job as often as with one).  Its own session's group keeps it its
-    # share of the machine: the policy only orders it behind the loop on their core.
+    # and never woken onto the loop's core ahead of it: Linux's SCHED_IDLE, whose tasks do not
+    # preempt a running one at their wake-up (why, with the numbers: pinobs.observers.worker's
+    # docstring).  Its own session's group keeps it its share of the machine: the policy only
+    # orders it behind the loop on their core.
     with contextlib.suppress(AttributeError, OSError):
         os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     return {"reg": MomentumRegressor(robot, friction=friction, offset=offset), "key": None}

@@ -152,11 +152,17 @@ def serow_go1_frame(path: Path) -> pd.DataFrame:
     return bench_module("real_data").serow_go1_frame(path)
 
 
-def test_real_go1_log_reads_every_row(go1) -> None:
+def serow_go1_csv() -> Path:
+    """SEROW's Go1 log in the shared data folder; the test skips where it is absent."""
     root = bench_module("real_data").data_root()
     path = None if root is None else root / "serow_go1/evaluation/unit_tests/data/go1.csv"
     if path is None or not path.is_file():
         pytest.skip("no shared data folder with serow_go1")
+    return path
+
+
+def test_real_go1_log_reads_every_row(go1) -> None:
+    path = serow_go1_csv()
     log = read_log(serow_go1_frame(path), go1)
     with path.open() as fh:
         n = sum(1 for _ in fh) - 1

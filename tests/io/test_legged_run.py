@@ -122,12 +122,9 @@ def test_the_real_go1_log_runs_as_recorded_and_stands_still_when_the_legs_do() -
     divergence; where every joint moves slower than 0.05 rad/s (the stands, ~3 s of it)
     the base speed stays below 0.05 m/s (measured with the default foot radius, go1's 2 cm
     spheres: at most 0.022, median 0.003; with foot_radius=0: 0.021, 0.003)."""
-    from tests.io.test_legged_columns import _real_data, serow_go1_frame
+    from tests.io.test_legged_columns import serow_go1_csv, serow_go1_frame
 
-    root = _real_data().data_root()
-    path = None if root is None else root / "serow_go1/evaluation/unit_tests/data/go1.csv"
-    if path is None or not path.is_file():
-        pytest.skip("no shared data folder with serow_go1")
+    path = serow_go1_csv()
     go1 = pinobs.load("go1")
     run = estimate_legged(go1, _read(serow_go1_frame(path), go1))
     assert run.estimated == run.rows and not run.bad_rows
@@ -174,13 +171,10 @@ def test_the_real_go1_logs_stance_nis_says_what_is_wrong_with_the_feet() -> None
     before: 54 / 6 / 40 % and 60 / 6 / 34 %; σ_q from the first second: 53 / 4 / 43 % and
     59 / 4 / 37 %.)  Measured by ``benchmarks/legged_truth.py --sections real``."""
     from pinobs.io.legged_run import legged_run
-    from tests.io.test_legged_columns import _real_data, serow_go1_frame
+    from tests.io.test_legged_columns import serow_go1_csv, serow_go1_frame
     from tests.simulation.test_legged import GAINS
 
-    root = _real_data().data_root()
-    path = None if root is None else root / "serow_go1/evaluation/unit_tests/data/go1.csv"
-    if path is None or not path.is_file():
-        pytest.skip("no shared data folder with serow_go1")
+    path = serow_go1_csv()
     go1 = pinobs.load("go1")
     log = _read(serow_go1_frame(path), go1)
     white = {"gains": GAINS, "joint_std": None, "slip_speed": False}

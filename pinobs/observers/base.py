@@ -51,9 +51,12 @@ from pinobs.errors import (
 )
 from pinobs.model import Robot
 from pinobs.model.robot import read_only
+from pinobs.model.sampling import MISSING_PERIODS
 from pinobs.observers.blas import one_blas_thread
 from pinobs.observers.checks import (
     gap_substeps,
+    interval_substeps,
+    lost_torque,
     median_period,
     positive,
     propagate_gap,
@@ -400,9 +403,9 @@ class Observer(ABC, Generic[State]):
             state, t_state, estimate = self._delayed(t_new, q)
         else:
             # MATH §7: propagate with the torque held since the previous call, then correct
-            # (in sub-steps past GAP_PERIODS periods: _stepped)
-            if dt > self._gap:
-                state = self._stepped(self._state, dt, q, self._tau)
+            # (in sub-steps over dropped samples or past GAP_PERIODS periods: _stepped)
+            if dt >= self._split:
+                state = self._stepped(self._state, dt, q, self._tau, tau_new)
             else:
                 state = self.step(self._state, dt, q, self._tau)
             t_state = t_new
@@ -513,24 +516,25 @@ class Observer(ABC, Generic[State]):
         self._period_s = period
         self._span = math.inf if period is None else max(PAUSE_RESTART, MAX_GAP_PERIODS * period)
         self._gap = math.inf if period is None else GAP_PERIODS * period  # sub-steps beyond
+        missing = MISSING_PERIODS * (period or math.inf) if self.uses_torque else math.inf
+        self._split = min(self._gap, missing)  # sub-steps from (and over dropped samples)
 
-    def _stepped(self, state: State, dt: float, q: Vector | None, tau: Vector) -> State:
-        """:meth:`step` over ``dt``, in sub-steps of at most one period when ``dt`` is longer
-        than :data:`GAP_PERIODS` periods (at most ``PAUSE_RESTART`` worth of them: a longer
-        step without a sample is a prediction in the dark, restarted at the next sample;
-        :func:`~pinobs.observers.checks.propagate_gap`, the log reader's too).
-        One step of 10 s returned 1e74 rad/s from ``ekf`` and every update after it raised;
-        one of 1 s left ``riemannian`` 500 rad/s off for seconds (a sweep)."""
-        if not dt > self._gap:  # gap_substeps' one step, directly
+    def _stepped(
+        self, state: State, dt: float, q: Vector | None, tau: Vector, tau_b: Vector | None = None
+    ) -> State:
+        """:meth:`step` over ``dt`` in sub-steps: of at most one period past :data:`GAP_PERIODS`
+        periods (a step of 10 s gave 1e74 rad/s from ``ekf``; past ``PAUSE_RESTART``: restarted)
+        and, for a model-based family given ``tau_b`` (the torque ending the interval), one per
+        dropped sample (MATH §7, **Dropped samples**: :func:`interval_substeps`), with the lost
+        torques on the line from ``tau`` to ``tau_b`` (:func:`lost_torque`), else ``tau`` held."""
+        sub = interval_substeps if tau_b is not None and self.uses_torque else gap_substeps
+        n = sub(dt, self._period_s, span=self._span)
+        if n == 1:
             return self.step(state, dt, q, tau)
-        state, n = propagate_gap(
-            lambda s, _, n: self.step(s, dt / n, None, tau),
-            state,
-            dt,
-            self._period_s,
-            span=self._span,
-        )
-        return self.step(state, dt if n == 1 else dt / n, q, tau)
+        b = tau if tau_b is None else tau_b
+        for j in range(n - 1):
+            state = self.step(state, dt / n, None, lost_torque(tau, b, j, n))
+        return self.step(state, dt / n, q, lost_torque(tau, b, n - 1, n))
 
     def _after_pause(self, t_new: float, q: Vector, dt: float) -> tuple[State, float, Estimate]:
         """After a pause: the state afresh at the sample (its position, zero velocity; what the

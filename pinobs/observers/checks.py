@@ -4,7 +4,8 @@
 :func:`time_unit_warning` read a log's sample period; :func:`gap_substeps` and
 :func:`propagate_gap` are the pause rule of the live observer
 (:meth:`pinobs.observers.base.Observer.update`) and of the log reader
-(:class:`pinobs.io.LogEstimator`), defined once here.
+(:class:`pinobs.io.LogEstimator`), defined once here; :func:`interval_substeps` adds the
+samples a loop dropped (MATH §7, **Dropped samples**) and :func:`lost_torque` their torques.
 """
 
 from __future__ import annotations
@@ -18,9 +19,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.errors import GainError
+from pinobs.model.sampling import MISSING_PERIODS
 from pinobs.tolerances import GAP_PERIODS, MAX_PLAUSIBLE_PERIOD, MIN_PLAUSIBLE_PERIOD
 
-__all__ = ["gap_substeps", "median_period", "positive", "propagate_gap", "time_unit_warning"]
+__all__ = [
+    "gap_substeps",
+    "interval_substeps",
+    "lost_torque",
+    "median_period",
+    "positive",
+    "propagate_gap",
+    "time_unit_warning",
+]
 
 Vector = NDArray[np.floating[Any]]
 S = TypeVar("S")
@@ -62,6 +72,24 @@ def gap_substeps(dt: float, period: float | None, *, span: float = math.inf) -> 
     if period is None or not dt > GAP_PERIODS * period:
         return 1
     return math.ceil(min(dt, span) / period - 1e-9)
+
+
+def interval_substeps(dt: float, period: float | None, *, span: float = math.inf) -> int:
+    """The sub-steps of a model-based observer's step of ``dt`` [s] (MATH §7, **Dropped
+    samples**): :func:`gap_substeps`, and below :data:`~pinobs.tolerances.GAP_PERIODS`
+    periods ``m = round(dt / period)`` from :data:`~pinobs.model.sampling.MISSING_PERIODS`
+    periods on (the ``m − 1`` samples the loop dropped: ``pinobs.model.sampling``'s rule)."""
+    n = gap_substeps(dt, period, span=span)
+    if n == 1 and period is not None and dt >= MISSING_PERIODS * period:
+        return round(dt / period)
+    return n
+
+
+def lost_torque(tau_a: Vector, tau_b: Vector, j: int, n: int) -> Vector:
+    """The torque held over sub-step ``j`` (``0 … n − 1``) of ``n`` between samples holding
+    ``tau_a`` and ``tau_b`` [N·m or N], on the line between them (MATH §7, **Dropped
+    samples**): ``τ_a + (j/n)(τ_b − τ_a)``, ``τ_a`` itself for ``j = 0``."""
+    return tau_a if j == 0 else tau_a + (j / n) * (tau_b - tau_a)  # type: ignore[no-any-return]
 
 
 def propagate_gap(

@@ -10,7 +10,7 @@ import pytest
 import pinobs
 from pinobs.errors import NonFiniteError, ObserverDiverged, OptionError
 from pinobs.observers import make_observer
-from pinobs.observers.checks import gap_substeps, propagate_gap
+from pinobs.observers.checks import gap_substeps, lost_torque, propagate_gap
 from pinobs.simulation import Sensor
 from pinobs.tolerances import GAP_PERIODS, PAUSE_RESTART
 from tests.conftest import cached_robot
@@ -54,8 +54,9 @@ def test_after_a_pause_the_state_restarts_at_the_sample(ur5_run, name: str, paus
 
 @pytest.mark.parametrize("name", ["ekf", "kf", "riemannian"])
 def test_a_short_pause_is_the_same_as_its_periods_without_samples(ur5_run, name: str) -> None:
-    """Up to PAUSE_RESTART, a pause is propagated in sub-steps of one period with the torque
-    held: the same as an update without a sample at every period of it."""
+    """Up to PAUSE_RESTART, a pause is propagated in sub-steps of one period, the torques
+    the caller did not give on the line to the next one (MATH §7, **Dropped samples**; ``kf``
+    ignores them): the same as an update without a sample at every period of it."""
     robot, t, q, tau, v = ur5_run
     a = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
     b = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
@@ -65,7 +66,7 @@ def test_a_short_pause_is_the_same_as_its_periods_without_samples(ur5_run, name:
     assert n * 1e-3 < PAUSE_RESTART
     for k in range(1, 700):
         if k0 <= k < k0 + n:
-            b.update(t[k], None, tau[k0 - 1])  # the held torque, each period
+            b.update(t[k], None, lost_torque(tau[k0 - 1], tau[k0 + n], k - k0 + 1, n + 1))
             continue
         ea, eb = a.update(t[k], q[k], tau[k]), b.update(t[k], q[k], tau[k])
         np.testing.assert_allclose(ea.v, eb.v, rtol=0, atol=1e-9)

@@ -208,11 +208,11 @@ class Observer(ABC, Generic[State]):
     rates and fast motions it overestimates σ (noise-free samples of a top
     spinning at 30 rad/s at 100 Hz give 2e-4 rad); pass ``noise_std`` there.
 
-    **Pauses** (MATH §7 holds the torque over a step; a loop that stalls makes one step
-    long).  The sample period ``T`` is ``1/rate``, or without ``rate`` the median of the
-    first :data:`_PERIOD_INTERVALS` intervals after :meth:`reset`.  A step longer than
-    :data:`~pinobs.tolerances.GAP_PERIODS` ``T`` is propagated in sub-steps of at most
-    ``T`` with the held torque (as an update without a sample at every period); a pause
+    **Pauses** (MATH §7 holds the torque over a step; a loop that stalls or a dropped row
+    makes one step long).  The sample period ``T`` is ``1/rate``, or without ``rate`` the
+    median of the first :data:`_PERIOD_INTERVALS` intervals after :meth:`reset`.  A step
+    longer than :data:`~pinobs.tolerances.GAP_PERIODS` ``T`` (a model-based one: 1.75 ``T``)
+    is propagated in sub-steps of about ``T``, lost torques on the line (:meth:`_stepped`); a pause
     longer than :data:`~pinobs.tolerances.PAUSE_RESTART` s and
     :data:`~pinobs.tolerances.MAX_GAP_PERIODS` ``T`` restarts the state at the next sample
     (:meth:`restart_state`: measured position, zero velocity, what the family learned

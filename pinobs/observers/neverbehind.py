@@ -26,7 +26,19 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    (the scores are exponential means started at zero: until the window has filled,
    ``sᵢ`` is divided by the weight gathered so far, ``c = 1 − (1 − h/T)^k``, and ``N`` is
    ``c T/h``; the log-odds start from a prior ``ℓ₀ = 50`` for the model that fades as the
-   window fills, ``ℓ += (1 − c) ℓ₀``: the model is trusted until the data disagree)
+   window fills, ``ℓ += (1 − c) ℓ₀``: the model is trusted until the data disagree).
+   **Irregular steps.**  The log-likelihood ratio counts each innovation once, decayed by
+   its age: ``ℓ = κ Σⱼ Dⱼ (e²_kf,j − e²_m,j) / (2S)``, ``Dⱼ = Π_{i>j} (1 − hᵢ/T)``.  On a
+   regular grid that is the form above (``sᵢ = Σⱼ (h/T) Dⱼ e²ᵢ,ⱼ``, so the sum is
+   ``(T/h)(s_kf − s_m)``); on an irregular one ``(N/2)(s_kf − s_m)`` weighs sample ``j`` by
+   ``hⱼ/h_k`` and rescales the whole window by the current step (a step of ``h/2`` doubles
+   ``ℓ``, one of ``2h`` halves it).  So the count-decayed sum is kept,
+   ``d ← (1 − h/T) d + (e²_kf − e²_m)``, and a step more than ``UNIFORM_TOL`` (10 %) off the
+   sample period takes ``ℓ = κ c d / (2 max(min(s_m, s_kf), c σ²))`` instead (a step on the
+   grid keeps the form above, to the bit).  Measured on an exact-model UR5 log stamped at
+   intervals uniform in 0.5–1.5 ms (PD input, σ = 1e-4 rad, seed 2): the blend 3.5× ``ekf``
+   alone (9.9e-5 against 2.8e-5 rad/s, weights down to 0.22), with ``d`` 1.43× (4.0e-5; the
+   same log on a regular 1 ms grid: 1.27×, 3.6e-5: what the one-step scores can tell).
 
    ``κ`` (``sharpness``) scales the count ``N`` of innovations in the window (before any
    sample is scored the model is trusted, ``w = 1``); and the output
@@ -81,6 +93,7 @@ import numpy as np
 
 from pinobs.errors import GainError, ObserverDiverged, OptionError
 from pinobs.model import Robot
+from pinobs.model.sampling import UNIFORM_TOL
 from pinobs.observers.base import Observer, Vector, observer_class, positive
 from pinobs.observers.linalg import LazyKernel
 
@@ -132,14 +145,16 @@ FAR_GATE = 10.0
 
 
 def log_odds_loops(
-    c: float, dt: float, window: float, sharpness: float, nvar: float, out: Vector
+    c: float, dt: float, window: float, sharpness: float, nvar: float, out: Vector, fair: bool
 ) -> None:
     """``out[2] = −ℓ`` per coordinate from the scores ``out[0:2]`` (model, kf) and the weight
     ``c`` the window has gathered (module docstring, item 1; compiled by numba):
 
         ℓ = clip(κ (N/2)(s_kf − s_m) / max(min(s_m, s_kf), max(c σ², 10⁻³⁰⁰)) + (1 − c) ℓ₀, ±ℓ₀),
 
-    ``N = c T/h`` (the scores are sums ``c`` times their means), NaN kept as NumPy keeps it."""
+    ``N = c T/h`` (the scores are sums ``c`` times their means); ``fair`` (a step off the
+    grid: **Irregular steps**) ``c d`` for ``N (s_kf − s_m)``, ``d = out[7]``; NaN kept as
+    NumPy keeps it."""
     floor = c * nvar
     if _TINY > floor:
         floor = _TINY
@@ -149,7 +164,8 @@ def log_odds_loops(
         s_m, s_k = out[0, i], out[1, i]
         low = s_m if s_m <= s_k else (s_k if s_k < s_m else s_m + s_k)  # np.minimum (NaN: NaN)
         den = low if low >= floor else (floor if floor > low else low + floor)  # np.maximum
-        ell = k * (s_k - s_m) / den + prior  # Bar-Shalom, Li & Kirubarajan 2001 §11.6.2
+        # Bar-Shalom, Li & Kirubarajan 2001 §11.6.2 (each innovation counted once if fair)
+        ell = (sharpness * 0.5 * c * out[7, i] if fair else k * (s_k - s_m)) / den + prior
         if ell < -_LOG_ODDS:
             ell = -_LOG_ODDS
         elif ell > _LOG_ODDS:
@@ -175,6 +191,8 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
     v_m: Vector,
     v_kf: Vector,
     s: Vector,
+    d: Vector,
+    fair: bool,
     c: float,
     window: float,
     lost_ratio2: float,
@@ -186,7 +204,8 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
     compiled by numba): lost if ``raised`` or ``(q_m, v_m)`` sums to a non-finite value;
     if ``scored`` (and not lost) the one-step errors (``flat``: here,
     ``eᵢ = q_{k+1} − (q̂ᵢ + h v̂ᵢ + ½ h² â)``, else given in ``out[5:7]``), the scores
-    ``sᵢ ← sᵢ + λ(eᵢ² − sᵢ)`` into ``out[0:2]``, ``c ← c + λ(1 − c)``, ``λ = min(1, h/T)``,
+    ``sᵢ ← sᵢ + λ(eᵢ² − sᵢ)`` into ``out[0:2]``, ``d ← (1 − λ) d + e²_kf − e²_m`` into
+    ``out[7]`` (``d`` itself if not scored), ``c ← c + λ(1 − c)``, ``λ = min(1, h/T)``,
     lost if ``s_m > lost_ratio² s_kf`` somewhere once ``c > ½``; if ``measured``, lost if
     ``h |v̂_m − v̂_kf| > FAR_GATE √(s_kf / c)`` somewhere; if not lost and ``c > 0``,
     :func:`log_odds_loops`.  Returns ``(c, lost)``."""
@@ -201,6 +220,7 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
     for i in range(nv):
         out[0, i] = s[0, i]
         out[1, i] = s[1, i]
+        out[7, i] = d[i]
     if not lost and scored:
         lam = min(1.0, dt / window)
         ahead = 0.0 if dt_prev <= 0 else 0.5 * dt * dt / dt_prev
@@ -212,6 +232,7 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
             e_m, e_k = out[5, i], out[6, i]
             out[0, i] = s[0, i] + lam * (e_m * e_m - s[0, i])
             out[1, i] = s[1, i] + lam * (e_k * e_k - s[1, i])
+            out[7, i] = (1.0 - lam) * d[i] + (e_k * e_k - e_m * e_m)  # (**Irregular steps**)
         c = c + lam * (1.0 - c)
         if c > 0.5:
             for i in range(nv):
@@ -220,7 +241,7 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
         for i in range(nv):  # far (step's comment)
             lost = lost or dt * abs(v_m[i] - v_kf[i]) > FAR_GATE * np.sqrt(out[1, i] / c)
     if not lost and c > 0.0:
-        log_odds_loops(c, dt, window, sharpness, nvar, out)
+        log_odds_loops(c, dt, window, sharpness, nvar, out, fair)
     return c, lost
 
 
@@ -243,14 +264,15 @@ def weigh_loops(
 
 _Kernel = Callable[..., Any]
 _ONE = np.ones(1)
-_ROWS = np.zeros((7, 1))
+_ROWS = np.zeros((8, 1))
 #: :func:`score_loops`, :func:`log_odds_loops` and :func:`weigh_loops` compiled (loaded when
 #: a blend is made).
 score_kernel = LazyKernel(
     score_loops, True, True, True, False, *(_ONE,) * 7, 1e-3, 1e-3, *(_ONE,) * 3,
-    np.zeros((2, 1)), 0.5, 0.2, 1e4, 1.0, 1e-8, _ROWS.copy(), helpers=(log_odds_loops,),
+    np.zeros((2, 1)), _ONE, False, 0.5, 0.2, 1e4, 1.0, 1e-8, _ROWS.copy(),
+    helpers=(log_odds_loops,),
 )  # fmt: skip
-log_odds_kernel = LazyKernel(log_odds_loops, 0.5, 1e-3, 0.2, 1.0, 1e-8, _ROWS.copy())
+log_odds_kernel = LazyKernel(log_odds_loops, 0.5, 1e-3, 0.2, 1.0, 1e-8, _ROWS.copy(), False)
 weigh_kernel = LazyKernel(weigh_loops, True, True, *(_ONE,) * 4, _ROWS.copy())
 
 
@@ -265,6 +287,7 @@ class _State(NamedTuple):
     v_prev: Vector  # the blend's v̂ one step before (â)
     dt_prev: float  # that step [s] (0: none yet)
     reseeds: int  # times the model-based observer was re-seeded since the reset
+    d: Vector  # (nv,): Σⱼ Dⱼ (e²_kf − e²_m), each innovation once (**Irregular steps**)
 
 
 class NeverBehind(Observer[_State]):
@@ -369,7 +392,8 @@ class NeverBehind(Observer[_State]):
         nv = self.robot.nv
         m = self.model.initial_state(q0, v0)
         k = self.reference.initial_state(q0, v0)
-        return _State(m, k, np.zeros((2, nv)), 0.0, np.ones(nv), q0.copy(), v0.copy(), v0, 0.0, 0)
+        z = np.zeros((3, nv))  # (the scores, d)
+        return _State(m, k, z[:2], 0.0, np.ones(nv), q0.copy(), v0.copy(), v0, 0.0, 0, z[2])
 
     def restart_state(self, state: _State, q: Vector) -> _State:
         nv = self.robot.nv
@@ -377,7 +401,8 @@ class NeverBehind(Observer[_State]):
         m = self.model.restart_state(state.model, q)
         k = self.reference.restart_state(state.kf, q)
         w = np.ones(nv)
-        return _State(m, k, np.zeros((2, nv)), 0.0, w, q.copy(), zero, zero, 0.0, state.reseeds)
+        z = np.zeros((3, nv))  # (the scores, d)
+        return _State(m, k, z[:2], 0.0, w, q.copy(), zero, zero, 0.0, state.reseeds, z[2])
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         """Module docstring, item 1: both observers stepped, then :func:`score_loops`,
@@ -399,18 +424,19 @@ class NeverBehind(Observer[_State]):
         scored = measured and not self.reference.innovation(kf)[1]
         qm0, vm0 = self.model.output(state.model)
         qk0, vk0 = self.reference.output(state.kf)
-        # the new state's rows: s (model, kf), w, v, q (flat), the one-step errors (model, kf)
-        out = np.empty((7, r.nv))
+        # the new state's rows: s (model, kf), w, v, q (flat), the one-step errors (model, kf), d
+        out = np.empty((8, r.nv))
         if q_meas is not None and scored and not flat and not raised:  # on Lie groups: Pinocchio
             ahead = 0.0 if state.dt_prev <= 0 else 0.5 * dt * dt / state.dt_prev
             step_a = ahead * (state.v - state.v_prev)  # ½ h² â, â = Δv̂ / h₋ (the blend's)
             out[5] = r.difference(r.integrate(qm0, dt * vm0 + step_a), q_meas)
             out[6] = r.difference(r.integrate(qk0, dt * vk0 + step_a), q_meas)
-        gains = self._gains
+        gains, period = self._gains, self._period_s  # a step off the grid: fair (docstring)
+        fair = period is not None and abs(dt - period) > UNIFORM_TOL * period
         c, lost = cast(_Kernel, score_kernel.compiled)(  # scores, lost tests, log-odds
             flat, scored and not raised, measured, raised, q_meas if measured else q_kf,
             qm0, vm0, qk0, vk0, state.v, state.v_prev, dt, state.dt_prev, q_m, v_m, v_kf,
-            state.s, state.c, *gains, out,
+            state.s, state.d, fair, state.c, *gains, out,
         )  # fmt: skip
         reseeds = state.reseeds
         if lost:  # re-seeded (module docstring) at the kf's estimate, the blend's when w = 0
@@ -418,13 +444,15 @@ class NeverBehind(Observer[_State]):
             m = self.model.initial_state(q_kf, v_kf)
             q_m, v_m = self.model.output(m)
             np.multiply(self.lost_ratio, out[1], out=out[0])  # to prove itself: w ≈ 0 until it has
+            out[7] = (out[1] - out[0]) / min(1.0, dt / gains[0])  # (d as on the grid)
             if c > 0.0:
-                cast(_Kernel, log_odds_kernel.compiled)(c, dt, gains[0], gains[2], gains[3], out)
+                g = (gains[0], gains[2], gains[3])
+                cast(_Kernel, log_odds_kernel.compiled)(c, dt, *g, out, fair)
         if c > 0.0:
             np.exp(out[2], out=out[5])  # NumPy's exp (out[2] = −ℓ): the NumPy form's bits
         cast(_Kernel, weigh_kernel.compiled)(c > 0.0, flat, q_kf, v_kf, q_m, v_m, out)
         q = out[4] if flat else r.integrate(q_kf, out[2] * r.difference(q_kf, q_m))
-        return _State(m, kf, out[:2], c, out[2], q, out[3], state.v, dt, reseeds)
+        return _State(m, kf, out[:2], c, out[2], q, out[3], state.v, dt, reseeds, out[7])
 
     def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
         """Each observer's own, on its part of the state; the model-based observer's committed

@@ -132,3 +132,19 @@ def test_dropped_rows_keep_the_ekf_and_its_never_behind_blend_accurate(ur5_log) 
     assert ekf < 1.1 * ekf_full, (ekf, ekf_full)
     assert nb < 1.001 * ekf, (nb, ekf)
     assert blend.weights.min() > 0.99 and blend.reseeds == 0
+
+
+def test_the_blends_innovation_count_is_its_scores_on_a_regular_grid(ur5_log) -> None:
+    """The blend's count-decayed sum ``d`` (``neverbehind``'s **Irregular steps**) is
+    ``(T/h)(s_kf − s_m)`` on a regular grid (the same recursion, started at zero), so the
+    log-odds it gives off the grid are those of the scores on it."""
+    robot, res = ur5_log
+    blend = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4, never_behind=True)
+    blend.reset(res.t[1], res.q_meas[1])
+    for k in range(2, 1500):
+        blend.update(res.t[k], res.q_meas[k], res.tau[k])
+    state = blend._state
+    assert state is not None and blend.reseeds == 0
+    lam = 1e-3 / blend.window
+    np.testing.assert_allclose(state.d, (state.s[1] - state.s[0]) / lam, rtol=1e-6)
+    assert np.all(state.d > 0)  # the exact model predicts better on every joint

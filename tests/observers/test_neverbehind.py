@@ -12,6 +12,7 @@ import pytest
 import pinobs
 from pinobs.errors import ObserverDiverged, OptionError
 from pinobs.evaluation import evaluate
+from pinobs.model.sampling import UNIFORM_TOL
 from pinobs.observers import make_observer
 from pinobs.observers.ekf import ExtendedKalmanFilter
 from pinobs.observers.neverbehind import (
@@ -211,7 +212,7 @@ class NumpyBlend(NeverBehind):
             lost = not math.isfinite(sum(q_m.tolist()) + sum(v_m.tolist()))
         except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
             lost = True
-        s_m, s_k, c = state.s[0], state.s[1], state.c
+        s_m, s_k, c, d = state.s[0], state.s[1], state.c, state.d
         if not lost and q_meas is not None and not self.reference.innovation(kf)[1]:
             ahead = 0.0 if state.dt_prev <= 0 else 0.5 * dt * dt / state.dt_prev
             step_a = ahead * (state.v - state.v_prev)
@@ -226,6 +227,7 @@ class NumpyBlend(NeverBehind):
             lam = min(1.0, dt / self.window)
             s_m = s_m + lam * (e_m * e_m - s_m)
             s_k = s_k + lam * (e_k * e_k - s_k)
+            d = (1.0 - lam) * d + (e_k * e_k - e_m * e_m)
             c = c + lam * (1.0 - c)
             lost = c > 0.5 and bool(np.any(s_m > self.lost_ratio**2 * s_k))
         if not lost and c > 0.0 and q_meas is not None:
@@ -236,28 +238,38 @@ class NumpyBlend(NeverBehind):
             m = self.model.initial_state(q_kf, v_kf)
             q_m, v_m = self.model.output(m)
             s_m = self.lost_ratio * s_k
-        bound = 50.0  # the log-odds' bound and prior (module docstring)
-        if c > 0.0:
-            floor = max(c * (self.noise_std or 0.0) ** 2, 1e-300)
-            n = c * self.window / dt
-            ell = (self.sharpness * 0.5 * n) * (s_k - s_m) / np.maximum(np.minimum(s_m, s_k), floor)
-            ell = np.clip(ell + (1.0 - c) * bound, -bound, bound)
-            w = 1.0 / (1.0 + np.exp(-ell))
-            w[ell <= -bound] = 0.0
-        else:
-            w = np.ones(r.nv)
+            d = (s_k - s_m) / min(1.0, dt / self.window)
+        w = self.weights_of(c, dt, s_m, s_k, d) if c > 0.0 else np.ones(r.nv)
         v = v_kf + w * (v_m - v_kf)
         q = q_kf + w * (q_m - q_kf) if flat else r.integrate(q_kf, w * r.difference(q_kf, q_m))
         return state._replace(
             model=m, kf=kf, s=np.array([s_m, s_k]), c=c, w=w, q=q, v=v, v_prev=state.v,
-            dt_prev=dt, reseeds=reseeds,
+            dt_prev=dt, reseeds=reseeds, d=d,
         )  # fmt: skip
+
+    def weights_of(self, c: float, dt: float, s_m: Any, s_k: Any, d: Any) -> Any:
+        """The weights from the scores (module docstring, with **Irregular steps**)."""
+        bound = 50.0  # the log-odds' bound and prior (module docstring)
+        floor = max(c * (self.noise_std or 0.0) ** 2, 1e-300)
+        n = c * self.window / dt
+        den = np.maximum(np.minimum(s_m, s_k), floor)
+        ell = (self.sharpness * 0.5 * n) * (s_k - s_m) / den
+        period = self._period_s  # a step off the grid: each innovation counted once
+        if period is not None and abs(dt - period) > UNIFORM_TOL * period:
+            ell = self.sharpness * 0.5 * c * d / den
+        ell = np.clip(ell + (1.0 - c) * bound, -bound, bound)
+        w = 1.0 / (1.0 + np.exp(-ell))
+        w[ell <= -bound] = 0.0
+        return w
 
 
 def _run_blend(ob: NeverBehind, res: pinobs.simulation.Result) -> dict[str, np.ndarray]:
-    """``ob`` fed ``res``'s samples (a dropped one as ``None``) with a pause sub-stepped (30 ms
-    at 500 Hz) and one it restarts after (2 s, :meth:`~pinobs.observers.base.Observer.update`)."""
+    """``ob`` fed ``res``'s samples (a dropped one as ``None``) with a stretch stamped off the
+    grid (steps of 0.4 and 1.6 periods: the blend's **Irregular steps**), a pause sub-stepped
+    (30 ms at 500 Hz) and one it restarts after (2 s, :meth:`~pinobs.observers.base.Observer.update`)."""
     t = np.array(res.t)
+    off = np.arange(len(t) // 8, len(t) // 4)
+    t[off] += 0.3 * (t[1] - t[0]) * (-1.0) ** off
     t[len(t) // 2 :] += 0.03
     t[3 * len(t) // 4 :] += 2.0
     ob.reset(t[0], res.q[0], res.v[0], res.tau[0])

@@ -1274,7 +1274,8 @@ def markdown(res: dict[str, Any]) -> str:
     L.append(
         "Against issue 36's targets (ratios of the RMS above): default `kf` over `kf*` "
         "(target ≤ 1.3); the worst of `ekf`, `riemannian`, `kalman` on the nominal model over "
-        "`kf` (≤ 1.2), alone and blended with `kf` (`+nb`: `never_behind=True`); `ekf+id` and "
+        "`kf` (≤ 1.2), alone (`never_behind=False`) and blended with `kf` (`+nb`: "
+        "`never_behind=True`, what `pinobs.estimate` runs on a log by default); `ekf+id` and "
         "`riemannian+id` over `kf` (≤ 0.7), alone, blended, and `ekf` with the learned "
         'disturbance (`+auto`: `disturbance_psd="auto"`); `adaptive` over `kf*` (≤ 0.5), '
         "alone and blended with `kf` (`adaptive+nb`); "

@@ -36,9 +36,7 @@ out = {}
 
 def run(frame, rob, ref, rows, joints, label):
     base, *suf = label.split("+")
-    opts = {}
-    if "nb" in suf:
-        opts["never_behind"] = True
+    opts = {"never_behind": "nb" in suf}  # (explicit: pinobs.estimate's default is the blend)
     if "auto" in suf:
         opts["disturbance_psd"] = "auto"
     for x in suf:

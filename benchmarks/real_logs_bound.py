@@ -131,7 +131,7 @@ def moving_logs() -> list[str]:
 def estimate_v(frame, robot, name: str, options: dict) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        df = pinobs.estimate(name, frame, robot=robot, options=options)
+        df = pinobs.estimate(name, frame, robot=robot, options={"never_behind": False, **options})
     return df[[f"v{i}" for i in range(robot.nv)]].to_numpy()
 
 

@@ -798,3 +798,39 @@ def test_python_m_pinobs_cli_is_the_pinobs_command() -> None:
     )
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith("usage: pinobs ") and "  pinobs demo" in out.stdout
+
+
+def test_estimate_blends_a_model_based_observer_unless_alone(franka_log, tmp_path: Path) -> None:
+    """``pinobs estimate`` runs ``ekf`` never behind kf (``pinobs.estimate``'s default);
+    ``--alone`` runs the family alone; both equal the Python API's."""
+    import pinobs
+
+    log, _ = franka_log
+    arm = pinobs.load("panda", lock=FINGERS)
+    base = ["estimate", "--robot", "panda", "--observer", "ekf", "--log", str(log)]
+    base += ["--lock", FINGERS[0], "--lock", FINGERS[1], "--noise", "1e-4", "--no-progress"]
+    for alone in (False, True):
+        out = tmp_path / f"est{alone}.csv"
+        assert main([*base, "--out", str(out), *(["--alone"] if alone else [])]) == 0
+        est = np.loadtxt(out, delimiter=",", skiprows=1)[:, 8:]
+        df = pinobs.estimate(
+            "ekf", log, robot=arm, noise_std=1e-4, options={"never_behind": not alone}
+        )
+        np.testing.assert_allclose(est, df[[f"v{i}" for i in range(7)]].to_numpy(), atol=1e-9)
+    blended = np.loadtxt(tmp_path / "estFalse.csv", delimiter=",", skiprows=1)
+    assert not np.array_equal(
+        blended, np.loadtxt(tmp_path / "estTrue.csv", delimiter=",", skiprows=1)
+    )
+
+
+@pytest.mark.parametrize(
+    ("flags", "said"),
+    [
+        (["--observer", "ekf", "--smooth"], "--alone: the smoother runs its observer alone"),
+        (["--observer", "inekf"], "--alone: inekf runs its observer alone"),
+    ],
+)
+def test_alone_is_refused_where_nothing_is_blended(tmp_path: Path, capsys, flags, said) -> None:
+    argv = ["estimate", "--robot", "pendulum", "--log", "log.csv", "--alone"]
+    assert main([*argv, *flags, "--out", str(tmp_path / "o.csv")]) == 2
+    assert f"pinobs: error: {said}" in capsys.readouterr().err

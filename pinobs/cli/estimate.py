@@ -83,6 +83,13 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
         help="position noise std [rad or m] (default: estimated from the log's first second)",
     )
     p.add_argument(
+        "--alone",
+        action="store_true",
+        help="a model-based observer alone; by default a log runs it never behind kf, "
+        "blended per joint (pinobs.observers.neverbehind: a model that does not explain the "
+        "log on a joint gives way to kf there)",
+    )
+    p.add_argument(
         "--max-reports",
         type=int,
         default=20,
@@ -245,6 +252,9 @@ def _check_options(args: argparse.Namespace) -> None:
         if given:
             flags = ", ".join("--" + f.replace("_", "-") for f in given)
             raise OptionError(f"{flags}: options of the smoother; add --smooth")
+    if args.alone and (args.smooth or args.observer == INEKF):
+        what = "the smoother" if args.smooth else INEKF
+        raise OptionError(f"--alone: {what} runs its observer alone (no never-behind blend)")
     if args.smooth and args.observer == "kf" and args.accel_psd not in (None, "auto"):
         raise OptionError(
             f"--accel-psd {args.accel_psd:g}: kf has no white acceleration; its white-jerk "
@@ -253,15 +263,16 @@ def _check_options(args: argparse.Namespace) -> None:
 
 
 def _observer_options(args: argparse.Namespace) -> dict[str, Any] | None:
-    """The observer's options ``estimate`` gives (``--latency``), or ``None``."""
+    """The observer's options ``estimate`` gives (``--latency``, ``--alone``), or ``None``."""
+    options: dict[str, Any] = {"never_behind": False} if args.alone else {}
     if args.latency is None:
-        return None
+        return options or None
     if args.latency == "auto" and not args.smooth:
         raise OptionError(
             "--latency auto is chosen from the whole log by the smoother: add --smooth, or "
             "give the latency in seconds"
         )
-    return {"latency": args.latency}
+    return {**options, "latency": args.latency}
 
 
 def _estimate_filtered(args: argparse.Namespace) -> int:

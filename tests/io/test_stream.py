@@ -8,6 +8,7 @@ import pytest
 import pinobs
 from pinobs.cli import main
 from pinobs.io import estimate_log, process_log, read_log, write_log
+from pinobs.io.runs import log_options
 
 pd = pytest.importorskip("pandas")
 
@@ -31,9 +32,8 @@ def log_path(tmp_path_factory):
 @pytest.mark.parametrize("chunk_rows", [7, 49, 50, 1000])
 def test_chunk_boundaries_change_nothing(log_path, chunk_rows) -> None:
     robot = pinobs.load("ur5")
-    whole = estimate_log(
-        pinobs.make_observer("ekf", robot, rate=1000.0, noise_std=1e-4), read_log(log_path, robot)
-    )
+    ekf = pinobs.make_observer("ekf", robot, rate=1000.0, noise_std=1e-4, **log_options("ekf", {}))
+    whole = estimate_log(ekf, read_log(log_path, robot))
     streamed = process_log(
         log_path, robot, "ekf", rate=1000.0, noise_std=1e-4, chunk_rows=chunk_rows
     )

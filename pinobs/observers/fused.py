@@ -24,8 +24,8 @@ With Lie-group or continuous joints (no friction, any ``nv``; issue 39):
   Pinocchio's);
 * ``riemannian``'s correction but its bracket (:func:`lie_correction_loops`), its
   vector-space correction with the Riccati schedule's gains (:func:`riccati_correction_loops`)
-  and its Jacobi operator's products (:func:`jacobi_loops`), so that its update makes no
-  BLAS call.
+  and its Jacobi operator's products (:func:`jacobi_loops`; its calls: :class:`JacobiCalls`),
+  so that its update makes no BLAS call.
 
 The equations are those of :mod:`pinobs.observers.ekf` and :mod:`pinobs.model.integrators`;
 the compiled steps equal the NumPy ones to rounding (the tests compare them).
@@ -43,8 +43,10 @@ from pinobs.model import Robot
 from pinobs.model.integrators import DynamicsCalls, dynamics_calls
 from pinobs.observers.base import Vector
 from pinobs.observers.linalg import LazyKernel, joseph_kernel
+from pinobs.tolerances import JACOBI_FD_STEP
 
 __all__ = [
+    "JacobiCalls",
     "LieRK4",
     "ekf_correct_kernel",
     "ekf_predict_kernel",
@@ -299,27 +301,31 @@ def lie_correction_loops(
 
 def jacobi_loops(
     b_plus: Vector, b_minus: Vector, eps: float, p_v: Vector, b_v: Vector, b_g: Vector,
-    ad_v: Vector, ad_g: Vector, out: Vector,
+    ad_v: Vector, ad_g: Vector, sign: float, out: Vector,
 ) -> None:  # fmt: skip
     """The Jacobi operator from its four calls' matrices, without BLAS
     (:func:`pinobs.observers.riemannian.jacobi_operator`)::
 
         J = ½ D_v B_v − P_v + (½B_v + ½ad_v)(½B_v − ½ad_v) − ½(B_g − ad_g) − (½B_v − ½ad_v) ad_v
 
-    with ``D_v B_v = (B₊ − B₋)/(2ε)``; ``ad ≡ 0`` on robots without Lie-group joints."""
+    with ``D_v B_v = (B₊ − B₋)/(2ε)``; ``ad ≡ 0`` on robots without Lie-group joints.  The
+    matrices ``B₊, B₋, P_v, B_v, B_g`` are ``sign`` times the arguments: ``sign = −1`` reads
+    the ABA derivatives of the model without gravity as they are (:class:`JacobiCalls`);
+    ``±1 · x`` is exact, so the bits are those of the negated arrays."""
     n = b_v.shape[0]
     left = np.empty((n, n))
     right = np.empty((n, n))
     for i in range(n):
         for j in range(n):
-            left[i, j] = 0.5 * (b_v[i, j] - ad_v[i, j])
-            right[i, j] = 0.5 * (b_v[i, j] + ad_v[i, j])
+            b = sign * b_v[i, j]
+            left[i, j] = 0.5 * (b - ad_v[i, j])
+            right[i, j] = 0.5 * (b + ad_v[i, j])
     for i in range(n):
         for j in range(n):
             out[i, j] = (
-                0.5 * ((b_plus[i, j] - b_minus[i, j]) / (2.0 * eps))
-                - p_v[i, j]
-                - 0.5 * (b_g[i, j] - ad_g[i, j])
+                0.5 * ((sign * b_plus[i, j] - sign * b_minus[i, j]) / (2.0 * eps))
+                - sign * p_v[i, j]
+                - 0.5 * (sign * b_g[i, j] - ad_g[i, j])
             )
     for i in range(n):
         for k in range(n):
@@ -327,6 +333,61 @@ def jacobi_loops(
             e = left[i, k]
             for j in range(n):
                 out[i, j] += c * left[k, j] - e * ad_v[k, j]
+
+
+class JacobiCalls:
+    """:func:`pinobs.observers.riemannian.jacobi_operator` on a :class:`Robot`, its
+    overhead cut (issue 39: it was 185 of the 200 slowest updates of ``riemannian``'s 1 kHz
+    loop on a UR5).  The same four ABA-derivatives calls of the model without gravity, at
+    ``(q, v)``, ``(q, Γs(v, v))`` and ``(q ⊕ ±εv, v)``, each on its own ``pin.Data``
+    (:func:`~pinobs.model.integrators.dynamics_calls`), read in place (no copies, no
+    negations: ``sign = −1`` in :func:`jacobi_loops`); ``q ⊕ ±εv`` as ``q ± εv`` on a
+    vector space (Pinocchio's ``integrate`` of a revolute or prismatic joint is ``q + v``);
+    ``|v|`` as ``np.linalg.norm`` computes it, ``√(v·v)``.  The same operations on the same
+    numbers: equal to :func:`~pinobs.observers.riemannian.jacobi_operator` with its
+    compiled products to the bit (tested)."""
+
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+        self.calls = tuple(dynamics_calls(robot, gravity=False) for _ in range(4))
+        n = robot.nv
+        self._vector_space, self._lie = robot.is_vector_space, robot.has_lie_group_joints
+        self._zero_tau, self._zero_nn = np.zeros(n), np.zeros((n, n))
+        self._scratch_g = np.empty(n)  # Γs(v, v)
+        self.kernel = loaded(jacobi_kernel)
+
+    @classmethod
+    def build(cls, robot: Robot) -> JacobiCalls | None:
+        """The calls for a :class:`Robot`; ``None`` for another model."""
+        return cls(robot) if isinstance(robot, Robot) else None
+
+    def __call__(self, q: Vector, v: Vector) -> Vector:
+        """The matrix ``J`` with ``J z = R(v, z) v`` at ``q``, shape ``(nv, nv)`` (fresh)."""
+        n = v.shape[0]
+        speed = math.sqrt(v.dot(v))  # np.linalg.norm(v), its operations
+        if speed == 0.0:
+            return np.zeros((n, n))
+        (_, at_v, d_v), (_, at_g, d_g), (_, at_p, d_p), (_, at_m, d_m) = self.calls
+        zero = self._zero_tau
+        at_v(q, v, zero)  # −Γs(v, v), −P_v, −B_v
+        g = np.negative(d_v.ddq, out=self._scratch_g)
+        at_g(q, g, zero)  # −B_g
+        eps = JACOBI_FD_STEP / speed
+        if self._vector_space:
+            at_p(q + eps * v, v, zero)  # −B₊
+            at_m(q + -eps * v, v, zero)  # −B₋
+        else:
+            at_p(self.robot.integrate(q, eps * v), v, zero)
+            at_m(self.robot.integrate(q, -eps * v), v, zero)
+        ad_v: Vector = self._zero_nn
+        ad_g: Vector = self._zero_nn
+        if self._lie:
+            ad_v, ad_g = self.robot.bracket_matrix(v), self.robot.bracket_matrix(g)
+        out = np.empty((n, n))
+        self.kernel(
+            d_p.ddq_dv, d_m.ddq_dv, eps, d_v.ddq_dq, d_v.ddq_dv, d_g.ddq_dv, ad_v, ad_g, -1.0, out
+        )
+        return out
 
 
 def vector_correction_loops(
@@ -471,7 +532,9 @@ riccati_correction_kernel = LazyKernel(
     helpers=(vector_correction_loops, riccati_gains),
 )  # fmt: skip
 #: :func:`jacobi_loops` compiled.
-jacobi_kernel = LazyKernel(jacobi_loops, *(np.zeros((1, 1)),) * 2, 1.0, *(np.zeros((1, 1)),) * 6)
+jacobi_kernel = LazyKernel(
+    jacobi_loops, *(np.zeros((1, 1)),) * 2, 1.0, *(np.zeros((1, 1)),) * 5, 1.0, np.zeros((1, 1))
+)
 
 
 def rk4_calls(

@@ -92,8 +92,9 @@ is one compiled call, the Riccati schedule's gains included
 (:func:`~pinobs.observers.fused.riccati_correction_loops`), elsewhere one compiled
 call and the bracket (:func:`~pinobs.observers.fused.lie_correction_loops`; both equal
 to the general :meth:`RiemannianObserver._correct` to rounding, tested); the Jacobi
-operator's products are compiled too, so with constant gains the update makes no BLAS
-call.
+operator's products are compiled too, its four calls on the observer's own ``pin.Data``
+(:class:`~pinobs.observers.fused.JacobiCalls`, the same bits), so with constant gains the
+update makes no BLAS call.
 :func:`pinobs.evaluation.measure_cost` reports ``time(update) / time(pin.aba)``
 (chunks of updates, each followed by as many ``pin.aba`` calls; the Jacobi
 operator counted at its amortised share).  Measured on a UR5 at 1 kHz:
@@ -145,6 +146,7 @@ from pinobs.observers.base import (
     register,
 )
 from pinobs.observers.fused import (
+    JacobiCalls,
     LieRK4,
     jacobi_kernel,
     lie_correction_kernel,
@@ -409,7 +411,7 @@ def jacobi_operator(robot: Robot, q: Vector, v: Vector) -> Vector:
         zero = np.zeros((n, n))
         jacobi_kernel.compiled(
             b_plus, b_minus, eps, p_v, b_v, b_g,
-            zero if ad_v is None else ad_v, zero if ad_g is None else ad_g, out,
+            zero if ad_v is None else ad_v, zero if ad_g is None else ad_g, 1.0, out,
         )  # fmt: skip
         return out
     dv_bv = (b_plus - b_minus) / (2.0 * eps)
@@ -582,8 +584,8 @@ class RiemannianObserver(Observer[_State]):
         riccati = not self._lie and self.gain_schedule == "riccati"
         self._riccati_correction = loaded(riccati_correction_kernel) if riccati else None
         self._lie_correction = loaded(lie_correction_kernel) if compiled and self._lie else None
-        if compiled:
-            jacobi_kernel.load()
+        # the Jacobi operator: the same calls and bits, on its own pin.Data, less overhead
+        self._scratch_jacobi = JacobiCalls.build(robot) if compiled else None
         self.uses_blas = not compiled
 
     # ------------------------------------------------------ continuous time
@@ -676,7 +678,8 @@ class RiemannianObserver(Observer[_State]):
         """The cached ``R(v̂, ·)v̂``, recomputed every ``curvature_every`` corrections."""
         jac, age = state.jacobi, state.age + 1
         if jac is None or age >= self.curvature_every:
-            jac, age = jacobi_operator(self.robot, q, v), 0
+            fast = self._scratch_jacobi
+            jac, age = (jacobi_operator(self.robot, q, v) if fast is None else fast(q, v)), 0
         return jac, age
 
     def _jacobians(self, q: Vector, x: Vector, tau: Vector) -> tuple[Vector, Vector, Vector]:

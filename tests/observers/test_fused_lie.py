@@ -131,6 +131,31 @@ def test_the_jacobi_calls_are_jacobi_operator_to_the_bit(robot_name: str) -> Non
     assert JacobiCalls.build(AnalyticMetric(lambda q: np.eye(2), n=2)) is None  # not a Robot
 
 
+@pytest.mark.parametrize(
+    ("robot_name", "options"),
+    [("ur5", {}), ("ur5", {"gain_schedule": "steady"}), ("go1", {"curvature_every": 3})],
+)
+def test_the_observer_with_jacobi_calls_is_the_observer_with_jacobi_operator_to_the_bit(
+    robot_name: str, options: dict[str, Any]
+) -> None:
+    """``riemannian`` with :class:`JacobiCalls` on its correction's ``pin.Data`` (the
+    operator first, then the correction's call) against the same observer calling
+    :func:`jacobi_operator` on the robot's data: over 1500 updates from a start off the
+    truth, with missing samples, the same bits (and the operator was recomputed)."""
+    robot = cached_robot(robot_name)
+    res = pinobs.simulate(robot, [], duration=1.5, sensor=Sensor(1000.0, 1e-4), seed=6)
+    fast = make_observer("riemannian", robot, rate=1000.0, noise_std=1e-4, **options)
+    slow = make_observer("riemannian", robot, rate=1000.0, noise_std=1e-4, **options)
+    assert isinstance(fast._scratch_jacobi, JacobiCalls)
+    assert fast._scratch_jacobi.calls.data is fast._scratch_derivatives.data
+    slow._scratch_jacobi = None
+    q_fast, v_fast = _run(fast, res)
+    q_slow, v_slow = _run(slow, res)
+    assert fast._state.jacobi is not None and np.abs(fast._state.jacobi).max() > 0.0
+    np.testing.assert_array_equal(q_fast, q_slow)
+    np.testing.assert_array_equal(v_fast, v_slow)
+
+
 @pytest.mark.parametrize("with_offset", [False, True])
 def test_the_block_products_equal_the_dense_ones(with_offset: bool) -> None:
     """On a talos's ``A`` (free-flyer: ``−ad_v̂`` on six rows), :func:`blocks.transition`

@@ -335,33 +335,66 @@ def jacobi_loops(
                 out[i, j] += c * left[k, j] - e * ad_v[k, j]
 
 
+def jacobi_first_loops(
+    ddq: Vector, ddq_dq: Vector, ddq_dv: Vector, g: Vector, p_v: Vector, b_v: Vector
+) -> None:
+    """After :class:`JacobiCalls`' first call: ``g = −ddq`` (``Γs(v, v)``, the next call's
+    velocity) and the call's ``∂/∂q``, ``∂/∂v`` copied (``−P_v``, ``−B_v``)."""
+    n = ddq.shape[0]
+    for i in range(n):
+        g[i] = -ddq[i]
+        for j in range(n):
+            p_v[i, j] = ddq_dq[i, j]
+            b_v[i, j] = ddq_dv[i, j]
+
+
+def jacobi_points_loops(
+    ddq_dv: Vector, b_g: Vector, q: Vector, v: Vector, eps: float, q_p: Vector, q_m: Vector
+) -> None:
+    """After :class:`JacobiCalls`' second call, on a vector space: its ``∂/∂v`` copied
+    (``−B_g``) and ``q ⊕ ±εv = q ± εv``, the product and the sum of NumPy's ``q + eps * v``
+    (no fused multiply-add: the same bits; ``q + (−εv) = q − εv`` exactly)."""
+    n = q.shape[0]
+    for i in range(n):
+        s = eps * v[i]
+        q_p[i] = q[i] + s
+        q_m[i] = q[i] - s
+        for j in range(n):
+            b_g[i, j] = ddq_dv[i, j]
+
+
 class JacobiCalls:
-    """:func:`pinobs.observers.riemannian.jacobi_operator` on a :class:`Robot`, its
-    overhead cut (issue 39: it was 185 of the 200 slowest updates of ``riemannian``'s 1 kHz
-    loop on a UR5).  The same four ABA-derivatives calls of the model without gravity, at
-    ``(q, v)``, ``(q, Γs(v, v))`` and ``(q ⊕ ±εv, v)``, on ``data``, the ``pin.Data`` of the
-    observer's correction call (:func:`~pinobs.model.integrators.dynamics_calls`), which
-    every update runs: in a paced loop the operator runs every tenth update, and a
-    ``pin.Data`` of its own has left the cache by then (UR5 at 1 kHz, load 3.6–4.2, the
-    variants interleaved in one loop: 108 / 156 µs CPU for the operator on the robot's
-    data, 96 / 150 on four of its own, 76 / 117 on the correction's; 25 µs in a tight
-    loop); the caller reads that call's results first.  The matrices
-    are copied into working buffers between the calls, not negated (``sign = −1`` in
-    :func:`jacobi_loops`); ``q ⊕ ±εv`` is ``q ± εv`` on a vector space (Pinocchio's
-    ``integrate`` of a revolute or prismatic joint is ``q + v``); ``|v|`` as
-    ``np.linalg.norm`` computes it, ``√(v·v)``.  The same operations on the same numbers:
-    equal to :func:`~pinobs.observers.riemannian.jacobi_operator` with its compiled
-    products to the bit (tested)."""
+    """:func:`pinobs.observers.riemannian.jacobi_operator` on a :class:`Robot`, cheaper
+    (issue 39: it was 185 of the 200 slowest updates of ``riemannian``'s 1 kHz loop on a
+    UR5).  The same four ABA-derivatives calls of the model without gravity, at ``(q, v)``,
+    ``(q, Γs(v, v))`` and ``(q ⊕ ±εv, v)``, on ``data``, the ``pin.Data`` of the observer's
+    correction call (:func:`~pinobs.model.integrators.dynamics_calls`), which every update
+    runs: the operator runs every tenth update, and a ``pin.Data`` of its own has left the
+    cache by then; the caller reads that call's results first.  Between the calls, the
+    copies, ``Γs(v, v) = −ddq`` and ``q ± εv`` (``q ⊕ ±εv`` on a vector space: Pinocchio's
+    ``integrate`` of a revolute or prismatic joint is ``q + v``) are two compiled calls
+    (:func:`jacobi_first_loops`, :func:`jacobi_points_loops`) on views of ``data``'s
+    arrays, not a dozen NumPy ones; the signs are folded into :func:`jacobi_loops`
+    (``sign = −1``); ``|v|`` as ``np.linalg.norm`` computes it, ``√(v·v)``.  The same
+    operations on the same numbers: equal to
+    :func:`~pinobs.observers.riemannian.jacobi_operator` with its compiled products to the
+    bit (tested).  UR5 at 1 kHz, paced, load 2.8–3.3, the variants interleaved in one loop:
+    100 / 101 µs CPU for ``jacobi_operator`` (on the robot's data), 72 / 70 with these calls
+    and NumPy between them, 64 / 59 as here (25 µs in a tight loop)."""
 
     def __init__(self, robot: Robot, data: Any = None) -> None:
         self.robot = robot
         self.calls = dynamics_calls(robot, gravity=False, data=data)
-        self._call, self._data = self.calls.derivatives, self.calls.data
+        self._call = self.calls.derivatives
+        d = self.calls.data  # its arrays, as views (Pinocchio writes them in place)
+        self._ddq, self._ddq_dq, self._ddq_dv = d.ddq, d.ddq_dq, d.ddq_dv
         n = robot.nv
         self._vector_space, self._lie = robot.is_vector_space, robot.has_lie_group_joints
         self._zero_tau, self._zero_nn = np.zeros(n), np.zeros((n, n))
         self._scratch = tuple(np.empty((n, n)) for _ in range(4))  # −P_v, −B_v, −B_g, −B₊
         self._scratch_g = np.empty(n)  # Γs(v, v)
+        self._scratch_points: tuple[Vector, Vector] = (np.empty(robot.nq), np.empty(robot.nq))
+        self.first, self.points = loaded(jacobi_first_kernel), loaded(jacobi_points_kernel)
         self.kernel = loaded(jacobi_kernel)
 
     @classmethod
@@ -377,30 +410,27 @@ class JacobiCalls:
         speed = math.sqrt(v.dot(v))  # np.linalg.norm(v), its operations
         if speed == 0.0:
             return np.zeros((n, n))
-        call, d, zero = self._call, self._data, self._zero_tau
+        call, zero, ddq_dv, g = self._call, self._zero_tau, self._ddq_dv, self._scratch_g
         p_v, b_v, b_g, b_p = self._scratch
         call(q, v, zero)  # −Γs(v, v), −P_v, −B_v
-        np.copyto(p_v, d.ddq_dq)
-        np.copyto(b_v, d.ddq_dv)
-        g = np.negative(d.ddq, out=self._scratch_g)
-        call(q, g, zero)
-        np.copyto(b_g, d.ddq_dv)
+        self.first(self._ddq, self._ddq_dq, ddq_dv, g, p_v, b_v)
+        call(q, g, zero)  # −B_g
         eps = JACOBI_FD_STEP / speed
-        if self._vector_space:  # q ⊕ ±εv = q ± εv (and q + (−εv) = q − εv exactly)
-            step = eps * v
-            call(q + step, v, zero)
-            np.copyto(b_p, d.ddq_dv)
-            call(q - step, v, zero)  # −B₋, read in place
+        if self._vector_space:
+            q_p, q_m = self._scratch_points
+            self.points(ddq_dv, b_g, q, v, eps, q_p, q_m)
         else:
-            call(self.robot.integrate(q, eps * v), v, zero)
-            np.copyto(b_p, d.ddq_dv)
-            call(self.robot.integrate(q, -eps * v), v, zero)
+            np.copyto(b_g, ddq_dv)
+            q_p, q_m = self.robot.integrate(q, eps * v), self.robot.integrate(q, -eps * v)
+        call(q_p, v, zero)  # −B₊
+        np.copyto(b_p, ddq_dv)
+        call(q_m, v, zero)  # −B₋, read in place
         ad_v: Vector = self._zero_nn
         ad_g: Vector = self._zero_nn
         if self._lie:
             ad_v, ad_g = self.robot.bracket_matrix(v), self.robot.bracket_matrix(g)
         out = np.empty((n, n))
-        self.kernel(b_p, d.ddq_dv, eps, p_v, b_v, b_g, ad_v, ad_g, -1.0, out)
+        self.kernel(b_p, ddq_dv, eps, p_v, b_v, b_g, ad_v, ad_g, -1.0, out)
         return out
 
 
@@ -545,6 +575,14 @@ riccati_correction_kernel = LazyKernel(
     np.zeros(1), np.zeros((1, 1)), *(1.0,) * 7,
     helpers=(vector_correction_loops, riccati_gains),
 )  # fmt: skip
+#: :func:`jacobi_first_loops` compiled.
+jacobi_first_kernel = LazyKernel(
+    jacobi_first_loops, np.zeros(1), *(np.zeros((1, 1)),) * 2, np.zeros(1), *(np.zeros((1, 1)),) * 2
+)
+#: :func:`jacobi_points_loops` compiled.
+jacobi_points_kernel = LazyKernel(
+    jacobi_points_loops, *(np.zeros((1, 1)),) * 2, *(np.zeros(1),) * 2, 1.0, *(np.zeros(1),) * 2
+)
 #: :func:`jacobi_loops` compiled.
 jacobi_kernel = LazyKernel(
     jacobi_loops, *(np.zeros((1, 1)),) * 2, 1.0, *(np.zeros((1, 1)),) * 5, 1.0, np.zeros((1, 1))

@@ -67,14 +67,22 @@ class DynamicsCalls(NamedTuple):
     data: Any
 
 
-def dynamics_calls(robot: Robot) -> DynamicsCalls:
+def dynamics_calls(robot: Robot, *, gravity: bool = True, data: Any = None) -> DynamicsCalls:
     """:class:`DynamicsCalls` of ``robot``'s model on a new ``pin.Data`` (every consumer owns
-    its data: the filter's calls do not overwrite the robot's)."""
-    data = robot.model.createData()
+    its data: the filter's calls do not overwrite the robot's), or on ``data``, a
+    ``pin.Data`` of ``robot``'s model that the caller's other calls use too (so that they
+    find it in the cache).  ``gravity=False``: on a copy of the model without gravity, whose
+    ``derivatives(q, x, 0)`` leaves ``−Γs(x, x)``, ``−∂_q Γs(x, x)`` and ``−∂_x Γs(x, x)``,
+    the negated :meth:`Robot.spray_jacobians`, to the bit (the same model parameters; a
+    ``pin.Data`` depends only on the model's structure)."""
+    model = robot.model
+    if not gravity:
+        model = model.copy()
+        model.gravity.setZero()
+    if data is None:
+        data = model.createData()
     return DynamicsCalls(
-        partial(pin.aba, robot.model, data),
-        partial(pin.computeABADerivatives, robot.model, data),
-        data,
+        partial(pin.aba, model, data), partial(pin.computeABADerivatives, model, data), data
     )
 
 

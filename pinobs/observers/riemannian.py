@@ -92,8 +92,9 @@ is one compiled call, the Riccati schedule's gains included
 (:func:`~pinobs.observers.fused.riccati_correction_loops`), elsewhere one compiled
 call and the bracket (:func:`~pinobs.observers.fused.lie_correction_loops`; both equal
 to the general :meth:`RiemannianObserver._correct` to rounding, tested); the Jacobi
-operator's products are compiled too, so with constant gains the update makes no BLAS
-call.
+operator's products are compiled too, its four calls on the correction call's ``pin.Data``
+(:class:`~pinobs.observers.fused.JacobiCalls`, the same bits), so with constant gains the
+update makes no BLAS call.
 :func:`pinobs.evaluation.measure_cost` reports ``time(update) / time(pin.aba)``
 (chunks of updates, each followed by as many ``pin.aba`` calls; the Jacobi
 operator counted at its amortised share).  Measured on a UR5 at 1 kHz:
@@ -145,6 +146,7 @@ from pinobs.observers.base import (
     register,
 )
 from pinobs.observers.fused import (
+    JacobiCalls,
     LieRK4,
     jacobi_kernel,
     lie_correction_kernel,
@@ -409,7 +411,7 @@ def jacobi_operator(robot: Robot, q: Vector, v: Vector) -> Vector:
         zero = np.zeros((n, n))
         jacobi_kernel.compiled(
             b_plus, b_minus, eps, p_v, b_v, b_g,
-            zero if ad_v is None else ad_v, zero if ad_g is None else ad_g, out,
+            zero if ad_v is None else ad_v, zero if ad_g is None else ad_g, 1.0, out,
         )  # fmt: skip
         return out
     dv_bv = (b_plus - b_minus) / (2.0 * eps)
@@ -575,15 +577,16 @@ class RiemannianObserver(Observer[_State]):
         self._scratch_calls = rk4_calls(robot)  # vector space: the RK4's stages
         self._scratch_lie = LieRK4.build(robot)  # Lie-group joints: the RKMK4's
         # the correction's derivatives call (any Robot)
-        self._scratch_derivatives = dynamics_calls(robot) if isinstance(robot, Robot) else None
+        calls = dynamics_calls(robot) if isinstance(robot, Robot) else None
+        self._scratch_derivatives = calls
         self._correction = None if self._lie else loaded(vector_correction_kernel)
         compiled = isinstance(robot, Robot) and not self.gains.state_dependent
         # the vector-space correction with the schedule's gains: one compiled call
         riccati = not self._lie and self.gain_schedule == "riccati"
         self._riccati_correction = loaded(riccati_correction_kernel) if riccati else None
         self._lie_correction = loaded(lie_correction_kernel) if compiled and self._lie else None
-        if compiled:
-            jacobi_kernel.load()
+        # the Jacobi operator (the same bits), its calls on the correction's pin.Data
+        self._scratch_jacobi = JacobiCalls(robot, calls.data) if compiled and calls else None
         self.uses_blas = not compiled
 
     # ------------------------------------------------------ continuous time
@@ -672,17 +675,19 @@ class RiemannianObserver(Observer[_State]):
         k1, k2, p00, p01, p11 = riccati_gains(p00, p01, p11, self.accel_psd, self._sigma2, h)
         return k1, k2, self.gains.curvature_gain, (p00, p01, p11)
 
-    def _jacobi(self, state: _State, q: Vector, v: Vector) -> tuple[Vector, int]:
-        """The cached ``R(v̂, ·)v̂``, recomputed every ``curvature_every`` corrections."""
+    def _jacobi(self, state: _State, q: Vector, v: Vector, c: float) -> tuple[Vector | None, int]:
+        """The cached ``R(v̂, ·)v̂``, recomputed every ``curvature_every`` corrections (with
+        ``C ≠ 0``).  Before :meth:`_jacobians`: they share a ``pin.Data`` (JacobiCalls)."""
         jac, age = state.jacobi, state.age + 1
-        if jac is None or age >= self.curvature_every:
-            jac, age = jacobi_operator(self.robot, q, v), 0
+        if c != 0.0 and (jac is None or age >= self.curvature_every):
+            fast = self._scratch_jacobi
+            jac, age = (jacobi_operator(self.robot, q, v) if fast is None else fast(q, v)), 0
         return jac, age
 
     def _jacobians(self, q: Vector, x: Vector, tau: Vector) -> tuple[Vector, Vector, Vector]:
         """:meth:`Robot.forward_dynamics_jacobians`; on a :class:`Robot`, the same call on the
         observer's own ``pin.Data``, its arrays read in place (views, valid until the next
-        call: the Jacobi operator uses the robot's data)."""
+        call, the Jacobi operator's included)."""
         calls = self._scratch_derivatives
         if calls is None:
             return self.robot.forward_dynamics_jacobians(q, x, tau)
@@ -710,9 +715,8 @@ class RiemannianObserver(Observer[_State]):
         # ω(ζ, w) with Γs(ζ, ·) = −Γs(δ, ·) + O(δ²) = ½ ∂a/∂v: transports v̂ along the
         # jump −k₁ζ and S to q̂ (Maithripala et al. eq. (19)).
         dv = 0.5 * (a_v @ w) - k2 * zeta + h * ds + 0.5 * r.bracket(zeta, w)
-        jac, age = state.jacobi, state.age + 1
-        if c != 0.0:
-            jac, age = self._jacobi(state, q, v)
+        jac, age = self._jacobi(state, q, v, c)  # (after the last read of a_q, a_v)
+        if jac is not None and c != 0.0:
             dv = dv + (c * h) * (jac @ zeta)  # Anisi–Hamberg eq. (6): C·R(v̂, ζ)v̂
         q_new = r.normalize(r.integrate(q, -k1 * zeta))
         return state._replace(q=q_new, v=v + dv, elapsed=0.0, jacobi=jac, age=age, P=P)
@@ -728,11 +732,9 @@ class RiemannianObserver(Observer[_State]):
         r = self.robot
         if delta is None:
             delta = r.difference(q, q_meas)
+        jac, age = self._jacobi(state, q, v, self.gains.curvature_gain)  # (constant gains)
         acc, a_q, a_v = self._jacobians(q, delta, tau)
-        k1, k2, c, P = self._correction_gains(state, q, None, v, h)  # (constant gains)
-        jac, age = state.jacobi, state.age + 1
-        if c != 0.0:
-            jac, age = self._jacobi(state, q, v)
+        k1, k2, c, P = self._correction_gains(state, q, None, v, h)
         n = r.nv
         zeta, w, dv, jump = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         self._lie_correction(  # type: ignore[misc]
@@ -756,10 +758,12 @@ class RiemannianObserver(Observer[_State]):
         """
         if delta is None:
             delta = q_meas - q
+        constant = not self.gains.state_dependent  # (the schedule's gains are)
+        if constant:
+            jac, age = self._jacobi(state, q, v, self.gains.curvature_gain)
         acc, a_q, a_v = self._jacobians(q, delta, tau)
         if state.P is not None and self._riccati_correction is not None:
-            c = self.gains.curvature_gain  # (constant with the schedule)
-            jac, age = self._jacobi(state, q, v) if c != 0.0 else (state.jacobi, state.age + 1)
+            c = self.gains.curvature_gain
             q_new, v_new, *P = self._riccati_correction(
                 q, v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, *state.P,
                 self.accel_psd, self._sigma2, h, c,
@@ -768,9 +772,8 @@ class RiemannianObserver(Observer[_State]):
         # ζ is needed before the kernel only by state-dependent gains
         zeta = 0.25 * a_v.dot(delta) - delta if self.gains.state_dependent else None
         k1, k2, c, P = self._correction_gains(state, q, zeta, v, h)
-        jac, age = state.jacobi, state.age + 1
-        if c != 0.0:
-            jac, age = self._jacobi(state, q, v)
+        if not constant:
+            jac, age = self._jacobi(state, q, v, c)
         q_new, v_new = self._correction(  # type: ignore[misc]
             q, v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, k1, k2, h, c * h
         )

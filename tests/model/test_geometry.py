@@ -16,6 +16,7 @@ import pytest
 
 import pinobs
 from pinobs.model import Robot
+from pinobs.model.integrators import dynamics_calls
 from pinobs.model.reference import fd_curvature, koszul_connection, mass_matrix_derivative_fd
 
 ROBOTS = [
@@ -194,3 +195,27 @@ def test_dynamics_pieces_add_up(rng) -> None:
     _, _, minv = robot.forward_dynamics_derivatives(q, v, tau)
     np.testing.assert_allclose(minv, np.linalg.inv(m), rtol=1e-8, atol=1e-10)
     assert robot.kinetic_energy(q, v) == pytest.approx(0.5 * v @ m @ v, rel=1e-12)
+
+
+@pytest.mark.parametrize("name", ["ur5", "go1"])
+def test_gravity_free_dynamics_calls_are_the_negated_spray_jacobians(name: str, rng) -> None:
+    """``dynamics_calls(robot, gravity=False)``'s derivatives at ``(q, x, 0)`` leave
+    ``−Γs(x, x)``, ``−∂_q Γs(x, x)``, ``−∂_x Γs(x, x)`` to the bit, on a new ``pin.Data``
+    or on one shared with the model's own calls (whose results it leaves as they were)."""
+    robot = _robot(name)
+    own = dynamics_calls(robot)
+    free = dynamics_calls(robot, gravity=False)
+    shared = dynamics_calls(robot, gravity=False, data=own.data)
+    assert shared.data is own.data and free.data is not own.data
+    assert np.any(robot.model.gravity.linear != 0.0)  # (the model's own calls have gravity)
+    zero = np.zeros(robot.nv)
+    for _ in range(3):
+        q, (x, tau) = robot.random_configuration(rng), rng.standard_normal((2, robot.nv))
+        spray, s_q, s_x = robot.spray_jacobians(q, x)
+        for calls in (free, shared):
+            calls.derivatives(q, x, zero)
+            d = calls.data
+            for got, want in ((d.ddq, spray), (d.ddq_dq, s_q), (d.ddq_dv, s_x)):
+                np.testing.assert_array_equal(-got, want)
+        own.derivatives(q, x, tau)  # gravity back: the model's own dynamics
+        np.testing.assert_array_equal(own.data.ddq, robot.forward_dynamics_jacobians(q, x, tau)[0])

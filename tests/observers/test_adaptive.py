@@ -271,6 +271,32 @@ def test_a_filter_whose_velocity_squared_overflows_is_lost(monkeypatch) -> None:
     assert np.abs(est.v).max() < 1e-2  # at rest: the restart is on the bank's estimate
 
 
+def test_a_filter_lost_at_once_on_the_nominal_model_leaves_the_estimate_on_the_bank(
+    monkeypatch,
+) -> None:
+    """A model-based filter lost at every step, also when restarted on the nominal model:
+    it stays at its restart (the bank's estimate, finite) and the update's estimate is the
+    bank's; before, its NaN reached the blend and the update raised ``ObserverDiverged``."""
+    from pinobs.observers.ekf import ExtendedKalmanFilter
+
+    robot = pinobs.load("ur5")
+    ob = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4)
+    q0 = robot.neutral()
+    ob.reset(0.0, q0, np.zeros(robot.nv))
+    tau = robot.gravity(q0)
+    step = ExtendedKalmanFilter.step
+
+    def lost(self, *args):
+        new = step(self, *args)
+        return new._replace(v=np.full_like(new.v, np.nan))
+
+    monkeypatch.setattr(ExtendedKalmanFilter, "step", lost)
+    for k in range(1, 20):
+        est = ob.update(k * 1e-3, q0, tau)
+        assert np.all(np.isfinite(est.v)) and np.abs(est.v).max() < 1e-2  # at rest
+    assert ob.restarts == 19
+
+
 def test_adaptive_runs_inside_never_behind() -> None:
     """``make_observer("adaptive", never_behind=True)``: the wrapped observer is never reset
     itself (the blend is), so its learner starts at the first committed sample (it raised

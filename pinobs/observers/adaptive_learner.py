@@ -225,7 +225,9 @@ class Learner:
             job, solve = self.pending.popleft()
             result = job.result()
             if solve is None:
-                self.row_count = result
+                self.row_count, said = result
+                if said is not None:
+                    self.rejected.append(said)
             else:
                 self.solving = False
                 installed = self._apply(result, *solve) or installed
@@ -412,19 +414,26 @@ class _Identifier:
         self.nominal = reg.nominal()
         self.rows: deque[tuple[Vector, Vector]] = deque(maxlen=windows)
 
-    def add_window(self, samples: bytes, hw: int, win: int, stride: int) -> int:
+    def add_window(self, samples: bytes, hw: int, win: int, stride: int) -> tuple[int, str | None]:
         """The ``nv`` rows of one window (module docstring, MATH §9) from the samples, rows
         ``[t, q, τ]`` (:func:`split_samples`: ``q`` [rad] taken at ``t`` [s] with the torques
         ``τ``; ``win + 2 hw + 1`` of them: the smoother's half-width ``hw`` on both sides) as
-        their float64 bytes; returns the rows kept."""
+        their float64 bytes; returns the rows kept and why the window was left out (or None).
+        A nominal ``M(q)`` singular in the window (a model loaded with ``check=False``: the
+        TX40's, ``benchmarks/real_logs.py``) leaves it out: its rows are weighted by
+        ``M(q)⁻¹``; the error escaped ``update`` and ``pinobs.estimate`` re-initialised the
+        observer at every window."""
         robot = self.reg.robot
         rows = np.frombuffer(samples).reshape(-1, 1 + robot.nq + robot.nv)
         t, q, tau = split_samples(rows, robot.nq)
         q_s, v = smooth_path(self.reg.robot, t, q, half_window=hw, edges=False)
         k = slice(hw, hw + win + 1)
-        A, y = self.reg.system(t[k], q_s[k], v[k], tau[k], window=win, stride=stride)
-        self.rows.append((A, y))
-        return sum(r[0].shape[0] for r in self.rows)
+        said = None
+        try:
+            self.rows.append(self.reg.system(t[k], q_s[k], v[k], tau[k], window=win, stride=stride))
+        except np.linalg.LinAlgError as exc:
+            said = f"window at t = {t[hw]:.6g} s left out: {exc} (the rows' M(q)⁻¹ weighting)"
+        return sum(r[0].shape[0] for r in self.rows), said
 
     def solve(self, current_bytes: bytes, qs_bytes: bytes) -> _Solution:
         """Solve the rows; check the masses and ``M(q) ≻ 0`` at the configurations ``qs``
@@ -432,6 +441,8 @@ class _Identifier:
         Both given as their float64 bytes."""
         current = np.frombuffer(current_bytes).copy()  # (writable, as the arrays sent before)
         qs = np.frombuffer(qs_bytes).reshape(-1, self.reg.robot.nq).copy()
+        if not self.rows:
+            return _Solution(failure="no rows: every window was left out")
         A = np.vstack([r[0] for r in self.rows])
         y = np.concatenate([r[1] for r in self.rows])
         try:

@@ -1,17 +1,21 @@
 """``adaptive``'s blend with its bank of ``kf`` filters on vector joints, compiled
 (:mod:`pinobs.observers.adaptive` module docstring, 3).
 :meth:`~pinobs.observers.adaptive.AdaptiveEKF.step` runs it, or the same equations in NumPy
-on Lie-group joints (tested equal).
+on Lie-group joints (tested equal); :func:`lost_filter`: when the model-based filter is lost
+for the blend.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from pinobs.observers.base import Vector
+from pinobs.observers.ekf import EKFState
 from pinobs.observers.linalg import LazyKernel
 
-__all__ = ["JERK_PSD", "blend_kernel", "blend_loops"]
+__all__ = ["JERK_PSD", "blend_kernel", "blend_loops", "lost_filter"]
 
 #: The bank's white-jerk densities [rad²/s⁵] (:mod:`pinobs.observers.adaptive` module
 #: docstring, 3).  1e1 … 1e5 until the UR10e logs (~95 Hz, positions printed to 1e-4 rad, ``benchmarks/real_logs.py``), where
@@ -20,6 +24,15 @@ __all__ = ["JERK_PSD", "blend_kernel", "blend_loops"]
 #: ur-19_09_27-11_32_02, its model-based filter lost and restarted all along, weight 0),
 #: with 1e-2 … 1e5 1.13× (0.0104); the simulated learning table is unchanged.
 JERK_PSD: tuple[float, ...] = tuple(float(10.0**k) for k in range(-2, 6))
+
+
+def lost_filter(ekf: EKFState) -> bool:
+    """Whether a model-based filter state's estimate or covariance holds NaN or ±inf, or its
+    velocity's square overflows: the blend squares it (a UR10e log, a filter at 1e207 rad/s:
+    the blend's ``s`` became ``inf − inf``, the estimate NaN, and :func:`pinobs.estimate`
+    re-initialised the whole observer mid-log)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return not math.isfinite(float(ekf.v @ ekf.v) + ekf.P.sum())
 
 
 def blend_loops(

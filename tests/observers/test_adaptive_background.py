@@ -132,7 +132,7 @@ def test_a_solve_read_from_the_worker_is_applied_at_the_next_update_not_the_same
     lr = adaptive_learner.Learner(robot, **opts, friction=True, offset=True, rate=1000.0)
     lr.worker = _StuckWorker()  # type: ignore[assignment]  (background; jobs queued by hand)
     failed = SimpleNamespace(failure="boom")  # a failed solve: said in `rejected` when applied
-    lr.pending.append((_DoneJob(7), None))
+    lr.pending.append((_DoneJob((7, None)), None))  # a window: (rows kept, left out because)
     lr.pending.append((_DoneJob(failed), (False, lr.nominal)))
     lr.solving = True
     assert not lr.collect()

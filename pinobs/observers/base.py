@@ -692,7 +692,8 @@ class Observer(ABC, Generic[State]):
         """Called once a state is committed: ``t`` its time, ``q`` the sample it used (``None``
         if none or gated), ``tau`` the torque applied from ``t`` on.  Families that learn from
         the data do it here (never in :meth:`step`, which also runs for predictions that are
-        not kept); may return a replacement state.  Default: the state unchanged."""
+        not kept); may return a replacement state.  Default: the state unchanged (and
+        :meth:`update` then skips the call: override it in the class)."""
         return state
 
     def adopt(self, state: State) -> None:

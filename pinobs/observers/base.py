@@ -2,7 +2,8 @@
 
 The helpers of the protocol live in modules of their own and are re-exported here:
 :mod:`pinobs.observers.checks` (option checks, the pause rule), :mod:`pinobs.observers.gating`
-(the outlier gate and NIS), :mod:`pinobs.observers.registry` (families by name) and
+(the outlier gate and NIS), :mod:`pinobs.observers.gaussian` (:class:`GaussianFilter`, what a
+smoother runs), :mod:`pinobs.observers.registry` (families by name) and
 :mod:`pinobs.observers.results` (:class:`Estimate`, :class:`Consistency`).
 
 The contract (``docs/theory/math.md`` §7).  Samples arrive at times ``t_k``.
@@ -35,7 +36,7 @@ import math
 import warnings
 from abc import ABC, abstractmethod
 from collections import deque
-from typing import Any, ClassVar, Generic, Protocol, TypeVar, final
+from typing import Any, ClassVar, Generic, TypeVar, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -72,6 +73,7 @@ from pinobs.observers.gating import (
     outlier_gate,
     steady_innovation_variance,
 )
+from pinobs.observers.gaussian import GaussianFilter
 from pinobs.observers.noise import NOISE_MIN_SAMPLES, NOISE_WINDOW, estimate_noise_std
 from pinobs.observers.registry import make_observer, observer_class, observer_names, register
 from pinobs.observers.results import CONSISTENCY_WINDOW, LIKELY_CAUSES, Consistency, Estimate
@@ -85,7 +87,7 @@ from pinobs.tolerances import (
 )
 
 # (the protocol's helpers live in their own modules and are re-exported here, where they
-# were first defined: pinobs.observers.checks, .gating, .noise, .registry, .results)
+# were first defined: pinobs.observers.checks, .gating, .gaussian, .noise, .registry, .results)
 __all__ = [
     "CONSISTENCY_WINDOW",
     "LIKELY_CAUSES",
@@ -132,47 +134,7 @@ NOISE_FLOOR = 1e-6
 #: The time types :meth:`Observer.update`'s fast path takes as they are (else ``float(t)``).
 _FLOATS = (float, np.float64)
 _F64 = np.dtype(np.float64)
-
-
-class GaussianFilter(Protocol):
-    """An error-state Gaussian filter, predicted and corrected apart (what a smoother runs).
-
-    The filter's step is ``correct ∘ predict`` (filterpy's ``KalmanFilter.predict`` /
-    ``update``), both pure functions of an immutable state carrying the mean ``q, v``
-    (and more: a torque offset ``d``, …) and the error covariance ``P``:
-
-    * ``predict(state, dt, tau) -> (state⁻, Φ)`` propagates over ``dt`` [s] with ``tau``
-      [N·m or N] held and returns the transition Jacobian ``Φ`` of the error state
-      (Rauch-Tung-Striebel needs it);
-    * ``predict_flow(state, dt, tau) -> (state⁻, Φ, F)`` also returns ``F``, the Jacobian
-      of the mean's step, of which ``Φ`` is only the filter's approximation (a filter
-      without a better one returns ``Φ`` as ``F``);
-    * ``correct(state⁻, q_meas) -> state⁺`` fuses one measured configuration; a filter with
-      an outlier gate keeps its bookkeeping in the state's ``gate`` (:class:`GateState`),
-      and ``gate_limit(state⁺)`` is the NIS above which it rejected that measurement.
-
-    Attributes:
-        robot: the process model (its configuration space is the filter's).
-        gains: the family's frozen gains; ``gains.meas_std`` is the position noise σ
-            [rad or m], and the process density is ``gains.accel_psd`` [rad²/s³] (a
-            model-based filter) or ``gains.jerk_psd`` [rad²/s⁵] (white jerk).
-        disturbance_psd: the density of a random-walk torque offset, or ``None``.
-        options: the filter's resolved options (reported with a smoothed result).
-    """
-
-    robot: Robot
-
-    @property
-    def gains(self) -> Any: ...
-    @property
-    def disturbance_psd(self) -> float | None: ...
-    @property
-    def options(self) -> dict[str, Any]: ...
-    def initial_state(self, q0: Vector, v0: Vector) -> Any: ...
-    def predict(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector]: ...
-    def predict_flow(self, state: Any, dt: float, tau: Vector) -> tuple[Any, Vector, Vector]: ...
-    def correct(self, state: Any, q_meas: Vector) -> Any: ...
-    def gate_limit(self, state: Any) -> float: ...
+_new_object = object.__new__  # an instance without its __init__ (_make_estimate)
 
 
 class Observer(ABC, Generic[State]):
@@ -302,6 +264,11 @@ class Observer(ABC, Generic[State]):
         self._intervals_due = self.rate is None
         self._restart_due = False  # a pause without a sample: restart at the next one
         self._pauses: list[tuple[float, float]] = []
+        # whether the family overrides after_commit / innovation: else update skips the
+        # call (the default returns the state) / reads the state's gate inline (issue 39)
+        family = type(self)
+        self._commits = family.after_commit is not Observer.after_commit
+        self._own_innovation = family.innovation is not Observer.innovation
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.robot.name!r})"
@@ -419,7 +386,7 @@ class Observer(ABC, Generic[State]):
         # (_delayed rebuilds _torques from _t and _tau when the state is at _t)
         held = self._keep_torques(t_state, t_new, tau_new) if self.latency > 0.0 else tau_new
         used = q if t_state > ts_before + TIME_EPS and not estimate.gated else None
-        self._state = self.after_commit(state, t_state, used, held)
+        self._state = self.after_commit(state, t_state, used, held) if self._commits else state
         if estimate.nis is not None:
             self._nis.append(estimate.nis)
             self._gated += estimate.gated
@@ -729,7 +696,8 @@ class Observer(ABC, Generic[State]):
         """Called once a state is committed: ``t`` its time, ``q`` the sample it used (``None``
         if none or gated), ``tau`` the torque applied from ``t`` on.  Families that learn from
         the data do it here (never in :meth:`step`, which also runs for predictions that are
-        not kept); may return a replacement state.  Default: the state unchanged."""
+        not kept); may return a replacement state.  Default: the state unchanged (and
+        :meth:`update` then skips the call: override it in the class)."""
         return state
 
     def adopt(self, state: State) -> None:
@@ -761,12 +729,21 @@ class Observer(ABC, Generic[State]):
         """The estimate of ``state`` at ``t``: :meth:`output` copied read-only (as
         ``read_only``; a float64 array by its own ``copy``, cheaper) and :meth:`innovation`."""
         q, v = self.output(state)
-        nis, gated = self.innovation(state)
+        if self._own_innovation:
+            nis, gated = self.innovation(state)
+        else:  # Observer.innovation, inline (issue 39: a call less at every update)
+            gate: GateState | None = getattr(state, "gate", None)
+            nis, gated = (None, False) if gate is None else (gate.nis, gate.gated)
         q = q.copy() if type(q) is np.ndarray and q.dtype is _F64 else np.array(q, dtype=float)
         v = v.copy() if type(v) is np.ndarray and v.dtype is _F64 else np.array(v, dtype=float)
         q.setflags(write=False)
         v.setflags(write=False)
-        return Estimate(t, q, v, nis, gated)
+        # Estimate(t, q, v, nis, gated) without its __init__'s call: the fields written into
+        # the instance's dict, as that __init__ does (tests/observers/test_update_path.py)
+        estimate = _new_object(Estimate)
+        d = estimate.__dict__
+        d["t"], d["q"], d["v"], d["nis"], d["gated"] = t, q, v, nis, gated
+        return estimate
 
     def _check_tau(self, tau: ArrayLike | None, *, what: str) -> Vector:
         if tau is None:

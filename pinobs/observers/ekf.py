@@ -280,6 +280,9 @@ class EKFGains:
         positive("v0_std", self.v0_std)
 
 
+_new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (EKFState.moved)
+
+
 class EKFState(NamedTuple):
     """The filter's state (``adaptive`` carries one inside its own)."""
 
@@ -304,8 +307,9 @@ class EKFState(NamedTuple):
         left the collector's generation-0 count one higher until that free list was full
         (2000 tuples); a live loop, whose set-up's full collection empties the free lists,
         ran 2–3 generation-0 collections (~20 µs each, nothing to collect) inside its first
-        ~2000 updates (UR5 ``ekf`` and ``adaptive``, 20 s)."""
-        return EKFState(q, v, P, d, d_psd, gate, self.auto, self.psd_scale)
+        ~2000 updates (UR5 ``ekf`` and ``adaptive``, 20 s).  By ``tuple.__new__``: the
+        NamedTuple's own ``__new__`` is a Python call more (every step)."""
+        return _new_tuple(EKFState, (q, v, P, d, d_psd, gate, self.auto, self.psd_scale))
 
 
 @register

@@ -10,7 +10,7 @@ from __future__ import annotations
 import functools
 import math
 from statistics import NormalDist
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -84,13 +84,8 @@ def outlier_gate(
     stiff Coulomb friction lost track (prediction errors near v = 0 were
     gated while the prediction drifted); with one it does not.
     """
-    lvl = float(dof) if level is None else level
-    scale = lvl / dof  # gate_nis's max(1, NIS̄ / dof), inline (every update of every filter)
-    if nis > threshold * (scale if scale > 1.0 else 1.0) and run < MAX_GATE_RUN:
-        return True, lvl
-    if run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
-        lvl = max(lvl, nis * dof / threshold)
-    return False, lvl + NIS_AVERAGING * (min(nis, 100.0 * lvl) - lvl)
+    gate = _new_tuple(GateState, (None, False, run, level)).measured(nis, threshold, dof)
+    return gate.gated, cast(float, gate.level)
 
 
 class GateState(NamedTuple):
@@ -117,14 +112,24 @@ class GateState(NamedTuple):
     def measured(self, nis: float, threshold: float, dof: int) -> GateState:
         """After a measurement of normalized innovation squared ``nis``: the gate's decision
         (:func:`outlier_gate`, ``threshold`` from :func:`gate_threshold`, ``dof`` degrees of
-        freedom) and its bookkeeping.  ``gated``: the family must not use the measurement."""
-        reject, level = outlier_gate(nis, self.level, self.run, threshold, dof)
-        # tuple.__new__ directly: the NamedTuple's own __new__ is a Python call more
-        return _new_tuple(GateState, (nis, reject, self.run + 1 if reject else 0, level))
+        freedom) and its bookkeeping.  ``gated``: the family must not use the measurement.
+
+        :func:`outlier_gate`'s rule is written here, where every filter calls it at every
+        sample (issue 39: a call less), and that function calls this; the new state by
+        ``tuple.__new__`` directly (the NamedTuple's own ``__new__`` is a Python call more)."""
+        run = self.run
+        lvl = float(dof) if self.level is None else self.level
+        scale = lvl / dof  # gate_nis's max(1, NIS̄ / dof), inline
+        if nis > threshold * (scale if scale > 1.0 else 1.0) and run < MAX_GATE_RUN:
+            return _new_tuple(GateState, (nis, True, run + 1, lvl))
+        if run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
+            lvl = max(lvl, nis * dof / threshold)
+        lvl += NIS_AVERAGING * (min(nis, 100.0 * lvl) - lvl)
+        return _new_tuple(GateState, (nis, False, 0, lvl))
 
     def predicted(self) -> GateState:
         """After a step without a measurement: no NIS, not gated, the run and level kept."""
-        return GateState(None, False, self.run, self.level)
+        return _new_tuple(GateState, (None, False, self.run, self.level))
 
     def limit(self, threshold: float, dof: int) -> float:
         """The NIS above which the gate rejects at this level (:func:`gate_nis`)."""

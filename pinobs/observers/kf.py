@@ -273,8 +273,9 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
     def step(
         self, state: KFState | AutoState, dt: float, q_meas: Vector | None, tau: Vector
     ) -> KFState | AutoState:
-        if isinstance(state, AutoState):
-            return self._auto().step(state, dt, q_meas)
+        if isinstance(state, AutoState):  # (an AutoState comes only from the auto bank; not
+            # through _auto: its call and cast's, every update)
+            return self.auto_bank.step(state, dt, q_meas)  # type: ignore[union-attr]
         F, Q = transition(dt, self.gains.jerk_psd)
         q, v, a, P = predicted(self.robot, state.q, state.v, state.a, state.P, F, Q, dt)
         if q_meas is None:
@@ -290,8 +291,8 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         return replace(base, causes=KF_CAUSES) if base.causes else base
 
     def output(self, state: KFState | AutoState) -> tuple[Vector, Vector]:
-        if isinstance(state, AutoState):  # (not through _auto: a call less an update)
-            return cast(AutoBank, self.auto_bank).output(state)
+        if isinstance(state, AutoState):  # (not through _auto, nor cast: two calls less)
+            return self.auto_bank.output(state)  # type: ignore[union-attr]
         return state.q, state.v
 
     def smoothing_filter(self) -> WhiteJerkFilter:

@@ -11,7 +11,6 @@ as NumPy arrays otherwise (planar joints, or numba absent).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import NamedTuple, cast
 
 import numpy as np
@@ -20,6 +19,8 @@ from pinobs.errors import UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.observers.base import GateState, Vector, gate_threshold, positive
 from pinobs.observers.kf_kernels import auto_kernel, bank_kernel, joint_table
+
+_new_tuple = tuple.__new__  # a NamedTuple made without its __new__, a Python call (step)
 
 __all__ = [
     "AUTO_GATE_SAMPLES",
@@ -318,6 +319,9 @@ class AutoBank:
         self._no_sample = np.zeros(robot.nv)
         self._dof = float(robot.nv)  # the gate's level before any (outlier_gate)
         self._table = joint_table(robot.joints, robot.nq, robot.nv)  # None: the NumPy step
+        n_f, nq, nv = len(AUTO_LAMBDAS), robot.nq, robot.nv
+        #: the compiled step's new arrays: q (n_f, nq); v, a, e, A, w (n_f, nv); P; B; the mixture
+        self._out_shapes = ((n_f, nq), (n_f, nv), (n_f, 3, 3), (n_f,), (nq + nv,))
         if self._table is not None:  # its compiled step loaded now, not at the first update
             auto_kernel.load()
 
@@ -384,13 +388,50 @@ class AutoBank:
         """One step of the bank (:mod:`pinobs.observers.kf`): each filter's
         prediction and correction (:meth:`KFBank.step`: the equations of :meth:`step`),
         the forgotten likelihood sums, the mixture's weights.  Where :attr:`compiled`, one
-        call (:func:`~pinobs.observers.kf_kernels.auto_step_loops`) into arrays allocated here
-        (the state before is kept as it was); otherwise NumPy, the configurations filter by
-        filter."""
+        call (:func:`~pinobs.observers.kf_kernels.auto_step_loops`, the same equations, tested
+        equal to the NumPy ones to 1e-12) into arrays allocated here (the state before is kept
+        as it was); otherwise NumPy (:meth:`_step_numpy`).
+
+        The compiled path is written for its cost (issue 39: every ``kf`` update): its new
+        arrays by ``np.empty`` of shapes computed once (``np.empty_like`` is a Python call
+        more each), its named tuples by ``tuple.__new__`` (their own ``__new__`` is one)."""
+        kernel, table = auto_kernel.compiled, self._table
+        if kernel is None or table is None:
+            return self._step_numpy(state, h, q_meas)
         jerk = state.jerk if state.jerk.size else self.grid(h)
-        kernel = auto_kernel.compiled
-        if kernel is not None and self._table is not None:
-            return self._step_compiled(kernel, state, jerk, h, q_meas)
+        b, gate, n = state.bank, state.gate, state.n
+        if q_meas is not None and not q_meas.flags.writeable:  # (one kernel signature)
+            q_meas = q_meas.copy()
+        gate_on = n >= AUTO_GATE_SAMPLES  # the scales ĉ and weights before this sample
+        n_new = self._forget * n + 1.0  # the forgotten count (:mod:`pinobs.observers.kf`)
+        fq, fv, fP, fB, mix = self._out_shapes
+        q, v, a, P = np.empty(fq), np.empty(fv), np.empty(fv), np.empty(fP)
+        e, A, B, w = np.empty(fv), np.empty(fv), np.empty(fB), np.empty(fv)
+        mix_ = np.empty(mix)
+        nis, rejected, level = kernel(
+            b.q, b.v, b.a, b.P, state.A, state.B, state.w, jerk, h, self._var,
+            self._no_sample if q_meas is None else q_meas, q_meas is not None, gate_on,
+            n, n_new, self._forget, self.gate,
+            self._dof if gate.level is None else gate.level, gate.run, table,
+            q, v, a, P, e, A, B, w, mix_,
+        )  # fmt: skip
+        if q_meas is None:  # the prediction (its likelihoods unchanged): GateState.predicted
+            after, n_new, e_ = _new_tuple(GateState, (None, False, gate.run, gate.level)), n, None
+        elif not gate_on:  # too few samples for a scale: reported (with σ₀), not gated
+            after, e_ = _new_tuple(GateState, (nis, False, 0, None)), e
+        else:  # GateState.measured, decided in the kernel
+            after = _new_tuple(GateState, (nis, rejected, gate.run + 1 if rejected else 0, level))
+            if rejected:  # the prediction (its likelihoods unchanged)
+                n_new, e_ = n, None
+            else:
+                e_ = e
+        bank = _new_tuple(BankState, (q, v, a, P, e_))
+        return _new_tuple(AutoState, (bank, jerk, n_new, A, B, w, after, mix_))
+
+    def _step_numpy(self, state: AutoState, h: float, q_meas: Vector | None) -> AutoState:
+        """:meth:`step` in NumPy, the configurations filter by filter (planar joints, or
+        numba absent)."""
+        jerk = state.jerk if state.jerk.size else self.grid(h)
         bank = self._bank(jerk)
         if q_meas is None:
             return state._replace(
@@ -412,42 +453,3 @@ class AutoBank:
         n = forget * state.n + 1.0  # the forgotten sums (:mod:`pinobs.observers.kf`)
         A, B = forget * state.A + z, forget * state.B + np.log(S)
         return AutoState(new, jerk, n, A, B, _auto_weights(n, A, B), gate)
-
-    def _step_compiled(
-        self,
-        kernel: Callable[..., tuple[float, bool, float]],
-        state: AutoState,
-        jerk: Vector,
-        h: float,
-        q_meas: Vector | None,
-    ) -> AutoState:
-        """:meth:`step` compiled: :func:`~pinobs.observers.kf_kernels.auto_step_loops`
-        (the same equations, tested equal to the NumPy ones to 1e-12)."""
-        b, gate = state.bank, state.gate
-        if q_meas is not None and not q_meas.flags.writeable:  # (one kernel signature)
-            q_meas = q_meas.copy()
-        gate_on = state.n >= AUTO_GATE_SAMPLES  # the scales ĉ and weights before this sample
-        n_new = self._forget * state.n + 1.0  # the forgotten count (:mod:`pinobs.observers.kf`)
-        new = (
-            np.empty_like(b.q), np.empty_like(b.v), np.empty_like(b.v), np.empty_like(b.P),
-            np.empty_like(b.v), np.empty_like(state.A), np.empty_like(state.B),
-            np.empty_like(state.w), np.empty(b.q.shape[1] + b.v.shape[1]),
-        )  # fmt: skip
-        nis, rejected, level = kernel(
-            b.q, b.v, b.a, b.P, state.A, state.B, state.w, jerk, h, self._var,
-            self._no_sample if q_meas is None else q_meas, q_meas is not None, gate_on,
-            state.n, n_new, self._forget, self.gate,
-            self._dof if gate.level is None else gate.level, gate.run, self._table, *new,
-        )  # fmt: skip
-        q, v, a, P, e, A, B, w, mix = new
-        if q_meas is None:  # the prediction (its likelihoods unchanged)
-            return AutoState(
-                BankState(q, v, a, P, None), jerk, state.n, A, B, w, gate.predicted(), mix
-            )
-        if not gate_on:  # too few samples for a scale: reported (with σ₀), not gated
-            after = GateState(nis)
-        else:  # GateState.measured, decided in the kernel
-            after = GateState(nis, rejected, gate.run + 1 if rejected else 0, level)
-        if rejected:  # the prediction (its likelihoods unchanged)
-            return AutoState(BankState(q, v, a, P, None), jerk, state.n, A, B, w, after, mix)
-        return AutoState(BankState(q, v, a, P, e), jerk, n_new, A, B, w, after, mix)

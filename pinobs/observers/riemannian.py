@@ -438,6 +438,9 @@ def transport_first_order(robot: Robot, q_hat: Vector, zeta: Vector, s: Vector) 
 
 
 # ---------------------------------------------------------------- observer
+_new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (_correct_vector_space)
+
+
 class _State(NamedTuple):
     q: Vector
     v: Vector
@@ -768,7 +771,8 @@ class RiemannianObserver(Observer[_State]):
                 q, v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, *state.P,
                 self.accel_psd, self._sigma2, h, c,
             )  # fmt: skip
-            return _State(q_new, v_new, 0.0, jac, age, tuple(P), gate)  # type: ignore[arg-type]
+            # by tuple.__new__: the NamedTuple's own __new__ is a Python call more (issue 39)
+            return _new_tuple(_State, (q_new, v_new, 0.0, jac, age, tuple(P), gate))
         # ζ is needed before the kernel only by state-dependent gains
         zeta = 0.25 * a_v.dot(delta) - delta if self.gains.state_dependent else None
         k1, k2, c, P = self._correction_gains(state, q, zeta, v, h)

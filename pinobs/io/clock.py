@@ -18,8 +18,9 @@ worse estimates).  :func:`fit_clock` reconstructs the loop's clock:
 
 1. **Stale rows**: a row equal to the previous one while the robot moves
    (its neighbours differ by more than two quantisation steps on some
-   joint).  A repeated row at rest is a genuine sample of a still robot,
-   placed by its stamp.
+   joint; for repeats that end the log, the sample they repeat and the row
+   before it: the robot moved into the repeat).  A repeated row at rest is a
+   genuine sample of a still robot, placed by its stamp.
 2. **Period and ticks**: ``P`` and ``T0`` by least squares of the stamps on
    integer ticks, grown from the first rows (ticks by rounding the intervals)
    to the whole window (ticks by rounding ``(t − T0)/P``, then made strictly
@@ -45,7 +46,9 @@ the sample it repeats (its estimate is the one at that time, and it corrects
 nothing).  :class:`ClockRepair` applies it chunk by chunk with bounded memory:
 the clock is fitted and chosen on the first window, then followed (the fit
 refreshed over the last window of rows, so a slowly drifting logger clock is
-tracked).
+tracked); a chunk's trailing repeats wait for the next chunk's fresh row, so the
+stale rows are those of the whole log (but for a run of ``WINDOW_ROWS`` repeats or
+more, judged as the log's last run to bound the memory).
 """
 
 from __future__ import annotations
@@ -59,6 +62,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.errors import OptionError, TimestampError
+from pinobs.io.clock_report import ClockFit, ClockReport, in_ms
 
 if TYPE_CHECKING:
     from pinobs.io.readers import Log
@@ -91,108 +95,12 @@ COHERENCE_ROWS = 512
 #: The stamps are a loop when their phase coherence about it is at least this many
 #: times the ``1/√N`` of stamps without one.
 COHERENT_SIGMAS = 5.0
-#: A loop the stamps were kept against is named in the report only if they are this close
-#: to it (RMS, in periods): a loop found, not the best fit of stamps without one.
-CREDIBLE_JITTER = 0.1
 #: Rows of the first window the clock is chosen on, and the window its fit follows.
 WINDOW_ROWS = 4000
 
 Bool = NDArray[np.bool_]
 Floats = NDArray[np.floating[Any]]
 Ints = NDArray[np.int64]
-
-
-@dataclass(frozen=True)
-class ClockReport:
-    """What :func:`fit_clock` found and did (module docstring).
-
-    Attributes:
-        mode: the mode asked (``"auto"``, ``"stamps"``, ``"loop"``).
-        repaired: the loop's clock replaced the stamps.
-        period: the loop's period [s] (``None``: no loop found).
-        step: the median row step in loop periods (1: every sample logged).
-        jitter: RMS of the stamps about the loop's clock [s].
-        jitter_max: largest ``|stamp − loop time|`` of a non-stale row [s].
-        stale: rows that repeat the previous sample while the robot moves.
-        repeated_at_rest: rows equal to the previous one at rest (kept as samples).
-        drops: loop samples missing between rows (when every sample is logged, ``step`` 1).
-        largest_correction: largest ``|repaired time − stamp|`` [s] (0 when not repaired).
-        rows: rows seen.
-        counter: ticks came from a sample counter column.
-        reason: why this clock (for ``auto``).
-    """
-
-    mode: str
-    repaired: bool
-    period: float | None
-    step: float
-    jitter: float
-    jitter_max: float
-    stale: int
-    repeated_at_rest: int
-    drops: int
-    largest_correction: float
-    rows: int
-    counter: bool = False
-    reason: str = ""
-
-    def message(self) -> str:
-        """One line for the run's warnings and the summary."""
-        stale = (
-            f"; {self.stale} rows repeat the previous sample while the robot moves (stale "
-            "reads of the logger), measured as they are: clock='auto' or 'loop' skips them"
-            if self.stale and not self.repaired
-            else ""
-        )
-        if self.period is None or (
-            not self.repaired and self.jitter > CREDIBLE_JITTER * self.period
-        ):
-            # (the best loop fitted to stamps this far off it is no finding: UR10e logs
-            # stepping 10-12 ms gave "2.46 ms loops" with 0.5 ms RMS off them)
-            return f"log clock: stamps kept ({self.reason}){stale}"
-        loop = f"a {_ms(self.period)} loop"
-        if self.step > 1.5:
-            loop += f" logged every {self.step:.3g} periods"
-        found = f"{loop}; stamps off it by {_ms(self.jitter)} RMS (at most {_ms(self.jitter_max)})"
-        if not self.repaired:
-            return f"log clock: stamps kept ({self.reason}): {found}{stale}"
-        parts = [
-            f"{self.stale} stale rows (a repeat of the previous sample: skipped, "
-            "output at that sample's time)",
-            f"{self.drops} loop samples missing (propagated across)",
-        ]
-        if self.repeated_at_rest:
-            parts.append(f"{self.repeated_at_rest} repeated rows at rest kept as samples")
-        how = "from its sample counter" if self.counter else self.reason
-        return (
-            f"log clock repaired ({how}): {found}; {'; '.join(parts)}; "
-            f"largest correction {_ms(self.largest_correction)} (clock='stamps' keeps the stamps)"
-        )
-
-
-def _ms(x: float) -> str:
-    return f"{1e3 * x:.3g} ms"
-
-
-@dataclass(frozen=True)
-class ClockFit:
-    """A log's rows on the loop's clock.
-
-    Attributes:
-        t: the time of every row [s] (the stamps when not repaired; NaN where the stamp is).
-        stale: rows that repeat the previous sample (no measurement).
-        drops: per row, loop samples missing just before it (0 when not repaired).
-        tick: per row, the loop's tick (``−1`` where unplaced; all ``−1`` when not repaired).
-        report: what was found and done.
-    """
-
-    t: Floats
-    stale: Bool
-    drops: Ints
-    tick: Ints
-    report: ClockReport
-    t0: float = 0.0
-    period: float = 0.0
 
 
 # ------------------------------------------------------------------ pieces
@@ -217,7 +125,12 @@ def _quantum(q: Floats) -> Floats:
 
 
 def _stale(q: Floats, rep: Bool, quantum: Floats) -> Bool:
-    """Repeated rows while the robot moves (module docstring, step 1)."""
+    """Repeated rows while the robot moves (module docstring, step 1).
+
+    A run of repeats of the fresh row ``a`` is stale when the robot moves across it:
+    ``|q_b − q_a| > 2·quantum`` on some coordinate, ``b`` the next fresh row; for the
+    run that ends the rows (no ``b``), ``b = a − 1``: the robot moved into the repeat.
+    """
     n = len(q)
     if not rep.any():
         return np.zeros(n, dtype=bool)
@@ -227,12 +140,21 @@ def _stale(q: Floats, rep: Bool, quantum: Floats) -> Bool:
     k = np.flatnonzero(rep)
     after = np.searchsorted(fresh, k, side="right")
     has_next = after < fresh.size
-    b = fresh[np.minimum(after, fresh.size - 1)]
     a = prev[k]
-    moved = (np.abs(q[b] - q[a]) > 2 * quantum).any(axis=1)
+    b = np.where(has_next, fresh[np.minimum(after, fresh.size - 1)], np.maximum(a - 1, 0))
+    moved = (np.abs(q[b] - q[a]) > 2 * quantum).any(axis=1)  # (a NaN row: not moved)
     out = np.zeros(n, dtype=bool)
-    out[k] = moved & has_next
+    out[k] = moved
     return out
+
+
+def _decided(repeated: Bool, window: int) -> int:
+    """How many leading rows of a chunk can be judged now: all but its trailing run of
+    repeats (their next fresh row, in a later chunk, decides them), unless that run is
+    ``window`` rows or longer (then judged as the log's last run, to bound memory)."""
+    fresh = np.flatnonzero(~repeated)
+    start = int(fresh[-1]) + 1 if fresh.size else 0
+    return start if repeated.size - start < window else int(repeated.size)
 
 
 def _monotone(n: Floats) -> Floats:
@@ -444,7 +366,7 @@ def _verdict(
     t, q = rows.t, rows.q
     if rows.counter is not None:
         if mode == "auto" and not rows.stale.any() and jitter_max < 0.01 * p:
-            return False, f"the stamps agree with the sample counter to {_ms(jitter_max)}"
+            return False, f"the stamps agree with the sample counter to {in_ms(jitter_max)}"
         return True, "from its sample counter"
     if mode != "auto":
         return True, "clock='loop'"
@@ -622,10 +544,13 @@ class ClockRepair:
     _fit: ClockFit | None = None
     _tail_t: Floats | None = None
     _tail_n: Floats | None = None
-    _last_q: Floats | None = None
     _last_tick: float = math.nan
     _scale: Floats | None = None
     _stats: dict[str, float] = field(default_factory=dict)
+    # the rows before the next chunk: the last fresh row and the row before it (for the
+    # stale rule), and a trailing run of repeats not judged yet (its next fresh row decides)
+    _ctx: Floats | None = None
+    _carry: Log | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in CLOCK_MODES:
@@ -634,21 +559,29 @@ class ClockRepair:
             )
 
     def feed(self, chunk: Log) -> list[Log]:
-        """The chunks ready (none while the first window fills)."""
+        """The chunks ready (none while the first window fills; a chunk's trailing
+        repeats of one sample are held until the next fresh row tells whether they are
+        stale)."""
         if self._fit is None:
             self._held.append(chunk)
             if sum(len(c) for c in self._held) < self.window:
                 return []
-            return self._decide()
-        return [self._follow(chunk)]
+            return self._decide(final=False)
+        return self._follow(chunk, final=False)
 
     def finish(self) -> list[Log]:
-        """Chunks still held (a log shorter than the first window)."""
-        return self._decide() if self._fit is None else []
+        """Rows still held (a log shorter than the first window; a trailing run)."""
+        if self._fit is None:
+            return self._decide(final=True)
+        if self._carry is None:
+            return []
+        from pinobs.io.readers import slice_log
+
+        return self._follow(slice_log(self._carry, 0, 0), final=True)
 
     # ------------------------------------------------------------ internals
-    def _decide(self) -> list[Log]:
-        from pinobs.io.readers import concat_logs
+    def _decide(self, *, final: bool) -> list[Log]:
+        from pinobs.io.readers import concat_logs, slice_log
 
         held, self._held = self._held, []
         if not held:
@@ -664,40 +597,96 @@ class ClockRepair:
             "corr": fit.report.largest_correction,
             "rows": fit.report.rows,
         }
-        if fit.report.repaired:
-            placed = fit.tick >= 0
-            idx = np.flatnonzero(placed & ~fit.stale)
-            keep = idx[-self.window :]
-            self._tail_t = log.t[keep]
-            self._tail_n = fit.tick[keep].astype(float)
-            if idx.size:
-                self._last_tick = float(fit.tick[idx[-1]])
-                self._last_q = log.q[idx[-1]].copy()
-            q_ok = log.q[idx]
-            sc = np.median(np.abs(np.diff(q_ok, axis=0)), axis=0) if idx.size > 1 else None
-            self._scale = None if sc is None else np.where(sc > 0, sc, 1.0)
-            self._quantum = _quantum(log.q) if len(log) > 2 else np.zeros(log.q.shape[1])
-            out = replace(log, t=fit.t, stale=fit.stale, drops=fit.drops)
-        else:
-            out = log
-        return [out]
+        if not fit.report.repaired:
+            return [log]
+        repeated = _repeats(log.q)
+        k = len(log) if final else _decided(repeated, self.window)
+        if k < len(log):  # the trailing run waits for its next fresh row
+            self._carry = slice_log(log, k, len(log))
+            self._carry_out(log, fit, repeated, k)
+        placed = fit.tick[:k] >= 0
+        idx = np.flatnonzero(placed & ~fit.stale[:k])
+        keep = idx[-self.window :]
+        self._tail_t = log.t[keep]
+        self._tail_n = fit.tick[keep].astype(float)
+        if idx.size:
+            self._last_tick = float(fit.tick[idx[-1]])
+        q_ok = log.q[idx]
+        sc = np.median(np.abs(np.diff(q_ok, axis=0)), axis=0) if idx.size > 1 else None
+        self._scale = None if sc is None else np.where(sc > 0, sc, 1.0)
+        self._quantum = _quantum(log.q) if len(log) > 2 else np.zeros(log.q.shape[1])
+        self._ctx = _context(np.vstack([np.full((2, log.q.shape[1]), np.nan), log.q[:k]]))
+        if k == 0:
+            return []
+        head = log if k == len(log) else replace(slice_log(log, 0, k), notes=log.notes)
+        return [replace(head, t=fit.t[:k], stale=fit.stale[:k], drops=fit.drops[:k])]
 
-    def _follow(self, chunk: Log) -> Log:
+    def _carry_out(self, log: Log, fit: ClockFit, repeated: Bool, k: int) -> None:
+        """The report of the first window without its rows ``k:`` (carried to the next
+        chunk, where they are judged and counted)."""
+        rows = _screen(np.asarray(log.t, dtype=float), log.q, log.tick)
+        placed = fit.tick[:k] >= 0
+        corr = np.abs(fit.t[:k][placed] - log.t[:k][placed])
+        self._stats = {
+            "stale": int(fit.stale[:k].sum()),
+            "drops": int(fit.drops[:k].sum()),
+            "rest": int((repeated & ~rows.stale)[:k].sum()),
+            "corr": float(corr.max()) if corr.size else 0.0,
+            "rows": k,
+        }
+        self.report = self._reported(self._stats)
+
+    def _reported(self, stats: dict[str, float]) -> ClockReport:
+        assert self._fit is not None  # (internal: _decide ran)
+        return replace(
+            self._fit.report,
+            stale=int(stats["stale"]),
+            drops=int(stats["drops"]),
+            repeated_at_rest=int(stats["rest"]),
+            largest_correction=float(stats["corr"]),
+            rows=int(stats["rows"]),
+        )
+
+    def _follow(self, chunk: Log, *, final: bool) -> list[Log]:
+        fit = self._fit
+        assert fit is not None  # (internal: _decide ran)
+        rep = fit.report
+        if not rep.repaired:
+            self._stats["rows"] += len(chunk)
+            self.report = replace(rep, rows=int(self._stats["rows"]))
+            return [chunk]
+        assert self._ctx is not None  # (internal: _decide ran)
+        if self._carry is not None:
+            from pinobs.io.readers import concat_logs
+
+            chunk, self._carry = concat_logs([self._carry, chunk]), None
+        # stale rows: repeats of the previous row (the first compared with the last row
+        # out, a fresh one), judged with the two rows before the chunk
+        qq = np.vstack([self._ctx, chunk.q])
+        rep_all = _repeats(qq)
+        rep_all[:2] = False
+        k = len(chunk) if final else _decided(rep_all[2:], self.window)
+        if k < len(chunk):
+            from pinobs.io.readers import slice_log
+
+            self._carry = slice_log(chunk, k, len(chunk))
+            chunk = replace(slice_log(chunk, 0, k), notes=chunk.notes)
+            qq, rep_all = qq[: 2 + k], rep_all[: 2 + k]
+        if k == 0:
+            return []
+        self._ctx = _context(qq)
+        return [self._placed_chunk(chunk, qq, rep_all)]
+
+    def _placed_chunk(self, chunk: Log, qq: Floats, rep_all: Bool) -> Log:
         fit = self._fit
         assert fit is not None  # (internal: _decide ran)
         rep = fit.report
         n_rows = len(chunk)
         self._stats["rows"] += n_rows
-        if not rep.repaired or n_rows == 0:
-            self.report = replace(rep, rows=int(self._stats["rows"]))
-            return chunk
         p = fit.period
         t, q = chunk.t, chunk.q
-        # stale rows: repeats of the previous row (the first compared with the last row seen)
-        prev_q = self._last_q if self._last_q is not None else np.full(q.shape[1], np.nan)
-        qq = np.vstack([prev_q[None, :], q])
-        repq = _repeats(qq)[1:]
-        stale = _stale(qq, np.r_[False, repq], self._quantum)[1:]
+        repq = rep_all[2:]
+        stale = _stale(qq, rep_all, self._quantum)[2:]
         if chunk.tick is not None:
             stale |= np.r_[False, np.diff(chunk.tick) == 0]
         usable = np.isfinite(t) & ~stale & np.isfinite(q).all(axis=1)
@@ -726,7 +715,6 @@ class ClockRepair:
             drops[ui] = np.maximum(d - 1, 0).astype(np.int64)
         if ui.size:
             self._last_tick = float(n[ui[-1]])
-            self._last_q = q[ui[-1]].copy()
             self._tail_t = np.r_[self._tail_t, t[ui]][-self.window :]
             self._tail_n = np.r_[self._tail_n, n[ui]][-self.window :]
         corr = np.abs(t_out[placed] - t[placed])
@@ -734,15 +722,17 @@ class ClockRepair:
         self._stats["drops"] += int(drops.sum())
         self._stats["rest"] += int((repq & ~stale).sum())
         self._stats["corr"] = max(self._stats["corr"], float(corr.max()) if corr.size else 0.0)
-        self.report = replace(
-            rep,
-            stale=int(self._stats["stale"]),
-            drops=int(self._stats["drops"]),
-            repeated_at_rest=int(self._stats["rest"]),
-            largest_correction=float(self._stats["corr"]),
-            rows=int(self._stats["rows"]),
-        )
+        self.report = self._reported(self._stats)
         return replace(chunk, t=t_out, stale=stale_out, drops=drops)
+
+
+def _context(qq: Floats) -> Floats:
+    """The last fresh row of ``qq`` (not a repeat of the row before it) and the row
+    before it: what the stale rule of the next rows needs (:func:`_stale`)."""
+    rep = _repeats(qq)
+    rep[:2] = False
+    a = int(np.flatnonzero(~rep)[-1])
+    return np.asarray(qq[a - 1 : a + 1]).copy()
 
 
 def repaired_chunks(chunks: Iterator[Log], repair: ClockRepair) -> Iterator[Log]:

@@ -54,7 +54,7 @@ from pinobs.errors import (
     PinobsError,
 )
 from pinobs.io.clock import ClockReport
-from pinobs.io.readers import Log, concat_logs
+from pinobs.io.readers import Log, concat_logs, slice_log
 from pinobs.model import Robot
 from pinobs.model.robot import Vector
 from pinobs.observers import Estimate
@@ -270,7 +270,7 @@ class LogEstimator:
             if said is not None:
                 self.warnings.append(said)
         n = len(log) if last else max(len(log) - 1, 0)
-        self._pending = None if n == len(log) else _slice(log, n, len(log))
+        self._pending = None if n == len(log) else slice_log(log, n, len(log))
         return self._run(log, n)
 
     def finish(self) -> tuple[Vector, Vector, Vector]:
@@ -573,31 +573,6 @@ def time_screened(t: Vector) -> NDArray[np.bool_]:
     keep = np.isfinite(t)
     keep[1:] &= t[1:] > t[:-1] + TIME_EPS
     return keep
-
-
-def _slice(log: Log, a: int, b: int) -> Log:
-    lines = log.lines[a:b]
-    keep = set(int(x) for x in lines)
-
-    def cut(x: Any) -> Any:
-        return None if x is None else x[a:b]
-
-    return Log(
-        t=log.t[a:b],
-        q=log.q[a:b],
-        tau=cut(log.tau),
-        problems=tuple(p for p in log.problems if p[0] in keep),
-        lines=lines,
-        unit=log.unit,
-        tick=cut(log.tick),
-        stale=cut(log.stale),
-        drops=cut(log.drops),
-        imu_gyro=cut(log.imu_gyro),
-        imu_acc=cut(log.imu_acc),
-        foot_force=cut(log.foot_force),
-        contact=cut(log.contact),
-        feet=log.feet,
-    )
 
 
 def _concat(a: Log, b: Log, nv: int) -> Log:

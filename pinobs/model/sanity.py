@@ -37,6 +37,7 @@ import warnings
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import NDArray
 
 from pinobs.errors import ModelError, ModelFileError, ModelWarning
 from pinobs.model.urdf import UrdfFacts
@@ -53,6 +54,7 @@ __all__ = [
     "check_mass_matrix",
     "check_model",
     "check_urdf",
+    "mass_matrix_defect",
 ]
 
 #: Configurations at which :func:`check_mass_matrix` samples ``M(q)``.
@@ -140,8 +142,37 @@ def _joint_of_velocity(model: pin.Model, k: int) -> int:
     )
 
 
+def mass_matrix_defect(model: pin.Model, data: pin.Data, q: NDArray[np.float64]) -> str | None:
+    """What is wrong with ``M(q)`` (Pinocchio's CRBA, symmetrised), or ``None``: singular or
+    indefinite when ``λ_min(M) ≤`` :data:`~pinobs.tolerances.MASS_MATRIX_SINGULAR_TOL`
+    ``· λ_max(M)``, said along the joint of the largest entry of ``λ_min``'s eigenvector, with
+    the bodies it moves (they carry no mass or inertia about its axis)."""
+    m = np.array(pin.crba(model, data, q))
+    m = np.triu(m) + np.triu(m, 1).T
+    eig, vec = np.linalg.eigh(m)
+    if eig[0] > MASS_MATRIX_SINGULAR_TOL * eig[-1]:
+        return None
+    k = int(np.argmax(np.abs(vec[:, 0])))
+    joint = _joint_of_velocity(model, k)
+    bodies = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
+    after = [
+        f.name
+        for f in model.frames
+        if f.type == pin.FrameType.BODY
+        and (f.parentJoint == joint or joint in model.supports[f.parentJoint])
+    ] or bodies[:1]
+    kind = "indefinite" if eig[0] < -MASS_MATRIX_SINGULAR_TOL * eig[-1] else "singular"
+    return (
+        f"the mass matrix is {kind} (smallest eigenvalue {eig[0]:.3g} against largest "
+        f"{eig[-1]:.3g}) at q = {np.round(q, 4).tolist()}, along joint "
+        f"{model.names[joint]!r}: the bodies it moves ({', '.join(after[:6])}"
+        f"{', …' if len(after) > 6 else ''}) carry no mass or inertia about its axis"
+    )
+
+
 def check_mass_matrix(model: pin.Model) -> None:
-    """Raise :class:`ModelError` if ``M(q)`` is singular or indefinite at a sampled ``q``.
+    """Raise :class:`ModelError` if ``M(q)`` is singular or indefinite at a sampled ``q``
+    (:func:`mass_matrix_defect`).
 
     ``M`` is Pinocchio's CRBA (``model.armature`` on its diagonal), symmetrised; configurations are ``neutral ⊕ ξ``, ξ uniform
     in ``[-π, π]^nv`` with a fixed seed.
@@ -151,28 +182,12 @@ def check_mass_matrix(model: pin.Model) -> None:
     q0 = pin.neutral(model)
     for _ in range(MASS_MATRIX_SAMPLES):
         q = pin.integrate(model, q0, rng.uniform(-np.pi, np.pi, model.nv))
-        m = np.array(pin.crba(model, data, q))
-        m = np.triu(m) + np.triu(m, 1).T
-        eig, vec = np.linalg.eigh(m)
-        if eig[0] > MASS_MATRIX_SINGULAR_TOL * eig[-1]:
-            continue
-        k = int(np.argmax(np.abs(vec[:, 0])))
-        joint = _joint_of_velocity(model, k)
-        bodies = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
-        after = [
-            f.name
-            for f in model.frames
-            if f.type == pin.FrameType.BODY
-            and (f.parentJoint == joint or joint in model.supports[f.parentJoint])
-        ] or bodies[:1]
-        kind = "indefinite" if eig[0] < -MASS_MATRIX_SINGULAR_TOL * eig[-1] else "singular"
-        raise ModelError(
-            f"the mass matrix is {kind} (smallest eigenvalue {eig[0]:.3g} against largest "
-            f"{eig[-1]:.3g}) at q = {np.round(q, 4).tolist()}, along joint "
-            f"{model.names[joint]!r}: the bodies it moves ({', '.join(after[:6])}"
-            f"{', …' if len(after) > 6 else ''}) carry no mass or inertia about its axis. "
-            "Give them an <inertial>, or make the joint fixed; check=False loads it anyway"
-        )
+        said = mass_matrix_defect(model, data, q)
+        if said is not None:
+            raise ModelError(
+                f"{said}. Give them an <inertial>, or make the joint fixed; check=False loads "
+                "it anyway"
+            )
 
 
 _UNITS = {"damping": "viscous damping [N·m·s/rad or N·s/m]", "friction": "dry friction [N·m or N]"}

@@ -496,17 +496,11 @@ class AdaptiveEKF(Observer["_State"]):
         fits the data)."""
         lr = self._learning()
         base = super().consistency()
-        if lr.rejected_run >= _REJECTED_RUN:  # no physical model fits: the NIS cannot see it
-            last = lr.rejected[-1] if lr.rejected else ""
-            base = replace(
-                base,
-                verdict="inconsistent",
-                causes=(
-                    f"no physical model fits the data: the last {lr.rejected_run} solves were "
-                    f"rejected ({last}); check the torques' signs, scales and column order",
-                    *LIKELY_CAUSES,
-                ),
-            )
+        if lr.rejected_run >= _REJECTED_RUN:  # no model from the data: the NIS cannot see it
+            cause = lr.rejection_cause()
+            singular = cause.startswith("no rows")  # (then the usual suspects are not)
+            causes = (cause,) if singular else (cause, *LIKELY_CAUSES)
+            base = replace(base, verdict="inconsistent", causes=causes)
         details = {
             "solves": lr.solves,
             "installs": lr.installs,

@@ -22,12 +22,14 @@ from numpy.typing import NDArray
 from pinobs.errors import IdentificationError
 from pinobs.model import Robot
 from pinobs.model.identification import MAX_FILL, MomentumRegressor, smooth_path, solve
+from pinobs.model.sanity import mass_matrix_defect
 from pinobs.observers.base import Vector
 from pinobs.observers.blas import blas_libraries, one_blas_thread
 from pinobs.observers.worker import Worker
 from pinobs.tolerances import TIME_EPS
 
 __all__ = [
+    "NO_ROWS",
     "PRELOAD",
     "REJECTED_KEPT",
     "Learner",
@@ -42,6 +44,9 @@ PRELOAD = ("pinobs.observers.adaptive_learner", "scipy.linalg", "scipy.ndimage")
 #: A sample interval further than this fraction of ``h`` from it is a gap for the learner
 #: (a lost sample is ``2h``): its windows restart after it.
 _GAP_FRACTION = 0.5
+
+#: A solve's failure when every window was left out (:meth:`Learner.rejection_cause`).
+NO_ROWS = "no rows: every window was left out"
 
 #: The latest rejections kept in ``details["rejected"]`` (it grew without bound, two a second).
 REJECTED_KEPT = 100
@@ -117,6 +122,9 @@ class Learner:
         self.minv_max: Vector = np.zeros(robot.nv)  # its largest (M⁻¹)ᵢᵢ at the checked q
         self.rejected: deque[str] = deque(maxlen=REJECTED_KEPT)  # the latest, said in details
         self.rejected_run = 0  # consecutive solves rejected (not physical, or failed)
+        self.last_rejection = ""  # why the latest rejected solve was
+        self.left_out = 0  # windows left out (a singular nominal M(q): _Identifier.add_window)
+        self.left_out_said = ""  # the latest one's reason
         # (t, τ, gated) of the updates without a sample since the last one
         self._lost: list[tuple[float, Vector, bool]] = []
 
@@ -228,6 +236,8 @@ class Learner:
                 self.row_count, said = result
                 if said is not None:
                     self.rejected.append(said)
+                    self.left_out += 1
+                    self.left_out_said = said
             else:
                 self.solving = False
                 installed = self._apply(result, *solve) or installed
@@ -286,19 +296,40 @@ class Learner:
             self._counts(h)
             self.buf.clear()  # spaced (or filled: _fill) at the interval taken before
 
+    def _reject(self, why: str) -> None:
+        self.rejected.append(why)
+        self.last_rejection = why
+        self.rejected_run += 1
+
+    def rejection_cause(self) -> str:
+        """Why the latest :attr:`rejected_run` solves were rejected, and what to check: when
+        they had no rows because every window was left out for a singular nominal ``M(q)``
+        (a URDF with a link that moves no mass, loaded with ``check=False``: the TX40's), that
+        model; else no physical model fits the rows (the torques' signs, scales, columns)."""
+        n = self.rejected_run
+        if self.last_rejection == f"solve failed: {NO_ROWS}" and self.left_out:
+            return (
+                f"no rows to learn from: the last {n} solves had none, every window left out "
+                f"({self.left_out} so far) because the nominal M(q) is singular at its "
+                f"configurations ({self.left_out_said}); check the URDF's inertias, or lock or "
+                "fix that link (not the torques: the model cannot weigh them)"
+            )
+        return (
+            f"no physical model fits the data: the last {n} solves were rejected "
+            f"({self.last_rejection}); check the torques' signs, scales and column order"
+        )
+
     def _apply(self, sol: _Solution, explained: bool, current: Vector) -> bool:
         """Take the solve ``sol`` (:meth:`_Identifier.solve`, against ``current``, the model
         when it was asked for); True when it installs a new model.  Model selection: keep the
         current model unless the new one explains the rows better than fitting noise would
         (robust loss drop above rank + 3√rank, in units of ½χ²)."""
         if sol.failure is not None:
-            self.rejected.append(f"solve failed: {sol.failure}")
-            self.rejected_run += 1
+            self._reject(f"solve failed: {sol.failure}")
             return False
         self.condition, self.rank = sol.condition, sol.rank
         if sol.unphysical is not None:
-            self.rejected.append(f"{sol.unphysical} in solve {self.solves + 1}")
-            self.rejected_run += 1
+            self._reject(f"{sol.unphysical} in solve {self.solves + 1}")
             return False
         assert sol.minv_max is not None and sol.theta is not None  # (a consistent solve)
         self.minv_max = sol.minv_max  # of the latest consistent solve (the candidate)
@@ -413,6 +444,7 @@ class _Identifier:
         self.reg = reg
         self.nominal = reg.nominal()
         self.rows: deque[tuple[Vector, Vector]] = deque(maxlen=windows)
+        self._data = reg.robot.model.createData()  # (its own: what a left-out window is told)
 
     def add_window(self, samples: bytes, hw: int, win: int, stride: int) -> tuple[int, str | None]:
         """The ``nv`` rows of one window (module docstring, MATH §9) from the samples, rows
@@ -432,7 +464,11 @@ class _Identifier:
         try:
             self.rows.append(self.reg.system(t[k], q_s[k], v[k], tau[k], window=win, stride=stride))
         except np.linalg.LinAlgError as exc:
-            said = f"window at t = {t[hw]:.6g} s left out: {exc} (the rows' M(q)⁻¹ weighting)"
+            model = self.reg.robot.model
+            why = mass_matrix_defect(model, self._data, q_s[hw]) or "M(q) not invertible"
+            said = (
+                f"window at t = {t[hw]:.6g} s left out: {exc} (the rows' M(q)⁻¹ weighting: {why})"
+            )
         return sum(r[0].shape[0] for r in self.rows), said
 
     def solve(self, current_bytes: bytes, qs_bytes: bytes) -> _Solution:
@@ -442,7 +478,7 @@ class _Identifier:
         current = np.frombuffer(current_bytes).copy()  # (writable, as the arrays sent before)
         qs = np.frombuffer(qs_bytes).reshape(-1, self.reg.robot.nq).copy()
         if not self.rows:
-            return _Solution(failure="no rows: every window was left out")
+            return _Solution(failure=NO_ROWS)
         A = np.vstack([r[0] for r in self.rows])
         y = np.concatenate([r[1] for r in self.rows])
         try:

@@ -367,7 +367,7 @@ class Observer(ABC, Generic[State]):
         if self._restart_due and q is not None:
             state, t_state, estimate = self._after_pause(t_new, q, dt)
         elif self.latency > 0.0:
-            state, t_state, estimate = self._delayed(t_new, q)
+            state, t_state, estimate = self._delayed(t_new, q, tau_new)
         else:
             # MATH §7: propagate with the torque held since the previous call, then correct
             # (in sub-steps over dropped samples or past GAP_PERIODS periods: _stepped)
@@ -494,14 +494,20 @@ class Observer(ABC, Generic[State]):
         and, for a model-based family given ``tau_b`` (the torque ending the interval), one per
         dropped sample (MATH §7, **Dropped samples**: :func:`interval_substeps`), with the lost
         torques on the line from ``tau`` to ``tau_b`` (:func:`lost_torque`), else ``tau`` held."""
-        sub = interval_substeps if tau_b is not None and self.uses_torque else gap_substeps
-        n = sub(dt, self._period_s, span=self._span)
+        n = self._substeps(dt, tau_b)
         if n == 1:
             return self.step(state, dt, q, tau)
         b = tau if tau_b is None else tau_b
         for j in range(n - 1):
             state = self.step(state, dt / n, None, lost_torque(tau, b, j, n))
         return self.step(state, dt / n, q, lost_torque(tau, b, n - 1, n))
+
+    def _substeps(self, dt: float, tau_b: Vector | None) -> int:
+        """The sub-steps of a step of ``dt`` [s]: one per sample the loop dropped for a
+        model-based family given the torque ``tau_b`` ending it (:func:`interval_substeps`),
+        else the pause rule (:func:`gap_substeps`)."""
+        sub = interval_substeps if tau_b is not None and self.uses_torque else gap_substeps
+        return sub(dt, self._period_s, span=self._span)
 
     def _after_pause(self, t_new: float, q: Vector, dt: float) -> tuple[State, float, Estimate]:
         """After a pause: the state afresh at the sample (its position, zero velocity; what the
@@ -571,16 +577,28 @@ class Observer(ABC, Generic[State]):
             state = self._stepped(state, b - a, q if last else None, tau)
         return state
 
-    def _delayed(self, t_new: float, q: Vector | None) -> tuple[State, float, Estimate]:
-        """One update under a known latency (:meth:`set_latency`): ``(state, its time, estimate at t_new)``."""
+    def _delayed(
+        self, t_new: float, q: Vector | None, tau_new: Vector
+    ) -> tuple[State, float, Estimate]:
+        """One update under a known latency (:meth:`set_latency`): ``(state, its time, estimate
+        at t_new)``.  Over dropped samples (MATH §7, **Dropped samples**; :meth:`_substeps`) a
+        model-based family predicts through each lost tick ``t_j`` as an update without a
+        sample would: to ``t_j − latency``, then its torque (:func:`lost_torque`) from ``t_j``."""
         assert self._state is not None
         if self._ts >= self._t - TIME_EPS:  # the state at the last sample (after a reset, or
             self._torques = [(self._t, self._tau)]  # updates without a latency): its torque
         s = t_new - self.latency
-        if s > self._ts + TIME_EPS:
-            state, t_state = self._advance(self._state, self._ts, s, q), s
-        else:  # the sample predates the state: keep the state
-            state, t_state = self._state, self._ts
+        state, t_state, dt = self._state, self._ts, t_new - self._t
+        n = self._substeps(dt, tau_new) if self.uses_torque and dt >= self._split else 1
+        for j in range(1, n):  # the lost ticks, as updates without a sample
+            t_j = self._t + (j / n) * dt
+            if t_j - self.latency > t_state + TIME_EPS:
+                state = self._advance(state, t_state, t_j - self.latency, None)
+                t_state = t_j - self.latency
+            self._torques.append((t_j, lost_torque(self._tau, tau_new, j, n)))
+        if s > t_state + TIME_EPS:
+            state, t_state = self._advance(state, t_state, s, q), s
+        # (else the sample predates the state: the state kept)
         ahead = self._advance(state, t_state, t_new, None) if t_new > t_state + TIME_EPS else state
         q_hat, v_hat = self.output(ahead)
         nis, gated = (

@@ -320,3 +320,62 @@ def test_the_never_behind_blend_keeps_the_ekf_on_a_recorded_log(ur5_truth):
     assert errs[0] < 3e-5, errs
     assert errs[1] < 1.01 * errs[0], errs
     assert ob.weights.min() > 0.99
+
+
+def _ends_stale(res, seed):
+    """A simulated logger's log (pinobs.Logger: stale rows, drops, jitter, 6 digits) cut
+    just after its last stale row: a log whose last row repeats the previous sample while
+    the robot moves; its ``stale`` column is the truth."""
+    rec = pinobs.Logger(drop=0.08, jitter=4e-4, stale=0.06, digits=6).record(res, seed)
+    end = int(np.flatnonzero(rec.stale)[-1]) + 1
+    return rec.t[:end], rec.q[:end], rec.tau[:end], rec.stale[:end]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_stale_last_row_is_found_as_any_other(ur5_truth, seed):
+    _, res = ur5_truth
+    t, q, _, stale = _ends_stale(res, seed)
+    assert stale[-1]
+    for mode in ("auto", "stamps"):
+        fit = fit_clock(t, q, mode=mode)
+        assert fit.report.stale == int(stale.sum())  # (reported, repaired or not)
+    fit = fit_clock(t, q)
+    assert fit.report.repaired
+    np.testing.assert_array_equal(fit.stale, stale)
+    assert fit.t[-1] == fit.t[-2]  # at the time of the sample it repeats
+
+
+def test_a_repeated_last_row_at_rest_is_a_sample():
+    # the robot slows to rest: steps of one quantisation step, then the same value
+    t = np.arange(3000) * 1e-3
+    q = np.round(np.sin(np.minimum(t, 2.0) * np.pi / 4.0)[:, None] * [1.0, 0.5] * 1e3) / 1e3
+    assert (q[-1] == q[-2]).all() and np.abs(np.diff(q[-100:], axis=0)).max() == 0
+    fit = fit_clock(t, q)
+    assert not fit.stale.any()
+    assert fit.report.stale == 0 and fit.report.repeated_at_rest > 0
+
+
+def test_chunked_repair_finds_stale_rows_at_chunk_ends_as_the_whole_log_does(ur5_truth):
+    _, res = ur5_truth
+    t, q, tau, stale = _ends_stale(res, 0)
+    whole = fit_clock(t, q)
+    np.testing.assert_array_equal(whole.stale, stale)
+    # chunks cut just after stale rows (their next fresh row in the next chunk), one of
+    # them inside the first window, and one just before a stale row
+    k = np.flatnonzero(stale)
+    cuts = sorted({int(k[2]) + 1, *(int(x) + 1 for x in k[k > 1600][::3]), int(k[-5])})
+    log = pinobs.io.Log(t, q, tau)
+    repair = ClockRepair("auto", window=1500)  # (the loop is not found on 900 of these rows)
+    out = []
+    for a, b in zip([0, *cuts], [*cuts, len(log)], strict=True):
+        out += repair.feed(pinobs.io.Log(log.t[a:b], log.q[a:b], log.tau[a:b]))
+    out += repair.finish()
+    joined = concat_logs(out)
+    assert len(joined) == len(log)
+    np.testing.assert_array_equal(joined.q, q)
+    np.testing.assert_array_equal(joined.stale, stale)
+    assert np.max(np.abs(joined.t - whole.t)) < 0.1e-3
+    assert repair.report is not None
+    assert repair.report.stale == whole.report.stale == int(stale.sum())
+    assert repair.report.rows == len(log)
+    assert repair.report.repeated_at_rest == whole.report.repeated_at_rest

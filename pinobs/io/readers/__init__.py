@@ -68,7 +68,7 @@ log; NPZ files are loaded whole.
 from __future__ import annotations
 
 from pinobs.io.readers.formats import find_logs, iter_log, read_log
-from pinobs.io.readers.log import CHUNK_ROWS, Log, LogSource, chain_chunks, concat_logs
+from pinobs.io.readers.log import CHUNK_ROWS, Log, LogSource, chain_chunks, concat_logs, slice_log
 
 __all__ = [
     "CHUNK_ROWS",
@@ -79,4 +79,5 @@ __all__ = [
     "find_logs",
     "iter_log",
     "read_log",
+    "slice_log",
 ]

@@ -111,3 +111,30 @@ def concat_logs(chunks: Sequence[Log], *, nv: int | None = None) -> Log:
         contact=_joined([c.contact for c in chunks], sizes, np.nan, len(feet)),
         feet=feet,
     )
+
+
+def slice_log(log: Log, a: int, b: int) -> Log:
+    """Rows ``a:b`` of ``log`` (its problems on those rows; its notes not: they are of the
+    log as a whole, said once)."""
+    lines = log.lines[a:b]
+    keep = set(int(x) for x in lines)
+
+    def cut(x: Any) -> Any:
+        return None if x is None else x[a:b]
+
+    return Log(
+        t=log.t[a:b],
+        q=log.q[a:b],
+        tau=cut(log.tau),
+        problems=tuple(p for p in log.problems if p[0] in keep),
+        lines=lines,
+        unit=log.unit,
+        tick=cut(log.tick),
+        stale=cut(log.stale),
+        drops=cut(log.drops),
+        imu_gyro=cut(log.imu_gyro),
+        imu_acc=cut(log.imu_acc),
+        foot_force=cut(log.foot_force),
+        contact=cut(log.contact),
+        feet=log.feet,
+    )

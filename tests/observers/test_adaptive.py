@@ -163,13 +163,8 @@ def test_a_lost_model_based_filter_restarts_instead_of_failing() -> None:
     assert np.abs(trace.v[k:] - res.v[k:]).max() < 0.1
 
 
-def test_a_filter_step_that_raises_is_a_lost_filter_restarted(monkeypatch) -> None:
-    """A model-based step that raises (``LinAlgError`` from a singular innovation covariance:
-    on a UR10e log at 95 Hz the warm-up filter's velocity variance reached 6e10 first) is a
-    lost filter: restarted on the kf bank, the update returns a finite estimate, as for a
-    step that returns NaN.  Before, the error escaped ``update``."""
-    from pinobs.observers.ekf import ExtendedKalmanFilter
-
+def _ur5_at_rest_for_4_ms():
+    """``adaptive`` on a UR5 held at its neutral pose against gravity, 4 updates in."""
     robot = pinobs.load("ur5")
     ob = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4)
     q0 = robot.neutral()
@@ -177,6 +172,17 @@ def test_a_filter_step_that_raises_is_a_lost_filter_restarted(monkeypatch) -> No
     tau = robot.gravity(q0)
     for k in range(1, 5):
         ob.update(k * 1e-3, q0, tau)
+    return ob, q0, tau
+
+
+def test_a_filter_step_that_raises_is_a_lost_filter_restarted(monkeypatch) -> None:
+    """A model-based step that raises (``LinAlgError`` from a singular innovation covariance:
+    on a UR10e log at 95 Hz the warm-up filter's velocity variance reached 6e10 first) is a
+    lost filter: restarted on the kf bank, the update returns a finite estimate, as for a
+    step that returns NaN.  Before, the error escaped ``update``."""
+    from pinobs.observers.ekf import ExtendedKalmanFilter
+
+    ob, q0, tau = _ur5_at_rest_for_4_ms()
     step = ExtendedKalmanFilter.step
     calls = {"n": 0}
 
@@ -250,13 +256,7 @@ def test_a_filter_whose_velocity_squared_overflows_is_lost(monkeypatch) -> None:
     lost filter: restarted, the estimate stays finite and on the bank's."""
     from pinobs.observers.ekf import ExtendedKalmanFilter
 
-    robot = pinobs.load("ur5")
-    ob = make_observer("adaptive", robot, rate=1000.0, noise_std=1e-4)
-    q0 = robot.neutral()
-    ob.reset(0.0, q0, np.zeros(robot.nv))
-    tau = robot.gravity(q0)
-    for k in range(1, 5):
-        ob.update(k * 1e-3, q0, tau)
+    ob, q0, tau = _ur5_at_rest_for_4_ms()
     step = ExtendedKalmanFilter.step
     calls = {"n": 0}
 

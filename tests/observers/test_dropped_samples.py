@@ -65,17 +65,13 @@ def test_lost_torques_lie_on_the_line_and_integrate_as_the_smoother_takes_them()
         np.testing.assert_allclose(ours, whole, rtol=1e-12)
 
 
-@pytest.mark.parametrize("name", ["ekf", "riemannian", "kalman", "adaptive"])
-def test_a_dropped_row_is_predicted_as_updates_without_a_sample_at_its_ticks(
-    ur5_log, name: str
-) -> None:
-    """The step over a lost row equals explicit predictions (``update(t_j, None, τ_j)``)
-    at its ticks with the interpolated torques, to rounding: every model-based family
-    gets the same sub-steps from the base."""
+def _lost_rows_as_updates(ur5_log, name: str, keep: list[int], **latency: float) -> None:
+    """A step over lost rows equals explicit ``update(t_j, None, τ_j)`` at their ticks with
+    the interpolated torques, to rounding, for every model-based family (the base gives
+    them the same sub-steps) and on the latency path too."""
     robot, res = ur5_log
-    keep = [1, 2, 3, 5, 6, 9, 10, 11, 15]
-    a = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
-    b = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
+    a = make_observer(name, robot, rate=1000.0, noise_std=1e-4, **latency)
+    b = make_observer(name, robot, rate=1000.0, noise_std=1e-4, **latency)
     for ob in (a, b):
         ob.reset(res.t[1], res.q_meas[1], None, res.tau[1])
     prev = 1
@@ -83,13 +79,29 @@ def test_a_dropped_row_is_predicted_as_updates_without_a_sample_at_its_ticks(
         ea = a.update(res.t[k], res.q_meas[k], res.tau[k])
         m = k - prev
         for j in range(1, m):
-            s = j / m
             lost = lost_torque(res.tau[prev], res.tau[k], j, m)
-            b.update(res.t[prev] + s * (res.t[k] - res.t[prev]), None, lost)
+            b.update(res.t[prev] + j / m * (res.t[k] - res.t[prev]), None, lost)
         eb = b.update(res.t[k], res.q_meas[k], res.tau[k])
         prev = k
         np.testing.assert_allclose(ea.v, eb.v, rtol=0, atol=1e-12)
         np.testing.assert_allclose(ea.q, eb.q, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["ekf", "riemannian", "kalman", "adaptive"])
+def test_a_dropped_row_is_predicted_as_updates_without_a_sample_at_its_ticks(
+    ur5_log, name: str
+) -> None:
+    _lost_rows_as_updates(ur5_log, name, [1, 2, 3, 5, 6, 9, 10, 11, 15])
+
+
+@pytest.mark.parametrize("latency", [4e-4, 2.5e-3])
+@pytest.mark.parametrize("name", ["ekf", "riemannian", "kalman", "adaptive"])
+def test_under_a_latency_a_dropped_row_is_predicted_as_updates_without_a_sample(
+    ur5_log, name: str, latency: float
+) -> None:
+    """A latency shorter and one longer than the period (a lost tick's torque then applies
+    before the state reaches the previous sample's time)."""
+    _lost_rows_as_updates(ur5_log, name, [1, 2, 3, 5, 6, 9, 10, 11, 15, 16, 20], latency=latency)
 
 
 def test_a_regular_log_takes_one_step_per_sample(ur5_log) -> None:
@@ -148,31 +160,3 @@ def test_the_blends_innovation_count_is_its_scores_on_a_regular_grid(ur5_log) ->
     lam = 1e-3 / blend.window
     np.testing.assert_allclose(state.d, (state.s[1] - state.s[0]) / lam, rtol=1e-6)
     assert np.all(state.d > 0)  # the exact model predicts better on every joint
-
-
-@pytest.mark.parametrize("latency", [4e-4, 2.5e-3])
-@pytest.mark.parametrize("name", ["ekf", "riemannian", "kalman", "adaptive"])
-def test_under_a_latency_a_dropped_row_is_predicted_as_updates_without_a_sample(
-    ur5_log, name: str, latency: float
-) -> None:
-    """The same rule on the latency path (``set_latency``): the step over a lost row equals
-    explicit ``update(t_j, None, τ_j)`` at its ticks with the interpolated torques, a
-    latency shorter and one longer than the period (a lost tick's torque then applies
-    before the state reaches the previous sample's time)."""
-    robot, res = ur5_log
-    keep = [1, 2, 3, 5, 6, 9, 10, 11, 15, 16, 20]
-    a = make_observer(name, robot, rate=1000.0, noise_std=1e-4, latency=latency)
-    b = make_observer(name, robot, rate=1000.0, noise_std=1e-4, latency=latency)
-    for ob in (a, b):
-        ob.reset(res.t[1], res.q_meas[1], None, res.tau[1])
-    prev = 1
-    for k in keep[1:]:
-        ea = a.update(res.t[k], res.q_meas[k], res.tau[k])
-        m = k - prev
-        for j in range(1, m):
-            lost = lost_torque(res.tau[prev], res.tau[k], j, m)
-            b.update(res.t[prev] + j / m * (res.t[k] - res.t[prev]), None, lost)
-        eb = b.update(res.t[k], res.q_meas[k], res.tau[k])
-        prev = k
-        np.testing.assert_allclose(ea.v, eb.v, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(ea.q, eb.q, rtol=0, atol=1e-12)

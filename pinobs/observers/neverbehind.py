@@ -15,65 +15,33 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    (``T`` = ``window``; a sample the ``kf``'s outlier gate rejects is not scored; one the
    model-based observer's gate rejects is: a lost model rejects the samples).
    The measurement noise ``n_{k+1}`` enters both ``eᵢ`` alike and is independent of both
-   predictions (made before it).  These one-step scores decide when the model is **lost**
-   (below); the weights come from the velocity scores (**Velocity score**).
+   predictions (made before it), so the difference of the scores measures the difference
+   of the predictors' errors, not the noise.  The weights are the posterior probabilities
+   of the two predictors given the window's innovations, Gaussian with a common variance
+   ``S = max(min(s_m, s_kf), σ²)`` (the multiple-model weights of Magill 1965; Bar-Shalom,
+   Li & Kirubarajan 2001, §11.6.2, with a forgetting window instead of a growing one):
 
-   **Velocity score.**  A one-step error barely sees a velocity error: the ``kf``'s
-   ``δv ≈ 5e-3`` rad/s at 1 kHz moves its prediction by ``h δv = 5e-6`` rad,
-   ``(h δv)² = 2.5e-11`` against ``σ² = 1e-8``, while the position estimates' own errors (a
-   fraction of σ) enter in full: the one-step scores rank the position estimates.  Weighted
-   by them (a window log-likelihood ratio, below, from the one-step scores) an exact
-   ``riemannian`` on a Panda, whose positions follow the noise more than the ``kf``'s but
-   whose velocities are ~10× better, had that ratio down to −1000 against it (σ = 1e-3 rad,
-   1 kHz) and the blend was 7.8× the family alone (mean of 10 seeds; 3.7× for an exact
-   ``riemannian`` and 1.5× for an exact ``ekf`` on a UR5: ``benchmarks/never_behind_exact.md``).
-   So each predictor is judged by its velocity over a span ``H`` (:data:`VELOCITY_HORIZON`,
-   10 ms): its estimate at ``t_{a−1}`` predicts the displacement from the next sample
-   ``q_a`` to a later one ``q_k`` (the oldest waiting prediction with
-   ``Δ = t_k − t_a ≥ 0.9 H``, or the oldest of :data:`RING_SIZE`),
+       ℓ = κ (N/2) (s_kf − s_m) / S,    N = T/h,    w = 1 / (1 + e^{−ℓ}),
 
-       εᵢ = (q_k ⊖ q_a) − (Δ v̂ᵢ + ½ ((Δ + h₀)² − h₀²) â),    h₀ = t_a − t_{a−1},
+   (the scores are exponential means started at zero: until the window has filled,
+   ``sᵢ`` is divided by the weight gathered so far, ``c = 1 − (1 − h/T)^k``, and ``N`` is
+   ``c T/h``; the log-odds start from a prior ``ℓ₀ = 50`` for the model that fades as the
+   window fills, ``ℓ += (1 − c) ℓ₀``: the model is trusted until the data disagree).
+   **Irregular steps.**  The log-likelihood ratio counts each innovation once, decayed by
+   its age: ``ℓ = κ Σⱼ Dⱼ (e²_kf,j − e²_m,j) / (2S)``, ``Dⱼ = Π_{i>j} (1 − hᵢ/T)``.  On a
+   regular grid that is the form above (``sᵢ = Σⱼ (h/T) Dⱼ e²ᵢ,ⱼ``, so the sum is
+   ``(T/h)(s_kf − s_m)``); on an irregular one ``(N/2)(s_kf − s_m)`` weighs sample ``j`` by
+   ``hⱼ/h_k`` and rescales the whole window by the current step (a step of ``h/2`` doubles
+   ``ℓ``, one of ``2h`` halves it).  So the count-decayed sum is kept,
+   ``d ← (1 − h/T) d + (e²_kf − e²_m)``, and a step more than ``UNIFORM_TOL`` (10 %) off the
+   sample period takes ``ℓ = κ c d / (2 max(min(s_m, s_kf), c σ²))`` instead (a step on the
+   grid keeps the form above, to the bit).  Measured on an exact-model UR5 log stamped at
+   intervals uniform in 0.5–1.5 ms (PD input, σ = 1e-4 rad, seed 2): the blend 3.5× ``ekf``
+   alone (9.9e-5 against 2.8e-5 rad/s, weights down to 0.22), with ``d`` 1.43× (4.0e-5; the
+   same log on a regular 1 ms grid: 1.27×, 3.6e-5: what the one-step scores can tell).
 
-   ``â`` the blend's acceleration at ``t_{a−1}`` (common to both).  Both samples come after
-   the estimate, so their noise ``n_k − n_a`` (variance ``2σ²``) is independent of both
-   predictions and the same in both; the position estimates do not enter; a velocity error
-   enters as ``Δ δv``, growing with the span while the noise stays: ``(Δ δv)² = 2.5e-9``
-   against ``2σ² = 2e-8`` for the ``kf`` above (``Δ = 10`` ms), 100× the one-step ratio
-   (the k-step-ahead prediction errors of multiple-model testing, Bar-Shalom, Li &
-   Kirubarajan 2001 §11.6, on a span rather than one step).  Scored like the one-step
-   errors, ``uᵢ ← uᵢ + λ(εᵢ² − uᵢ)``, ``c_v ← c_v + λ(1 − c_v)``, ``λ = min(1, h/T)``.  The
-   weights are the posterior probabilities of the two predictors given the window's
-   velocity innovations, Gaussian with a common variance ``S = max(min(u_m, u_kf)/c_v, 2σ²)``
-   (the multiple-model weights of Magill 1965; Bar-Shalom, Li & Kirubarajan 2001, §11.6.2,
-   with a forgetting window), each innovation's log-likelihood ratio censored at ``±C``
-   (:data:`EVIDENCE_CLIP` = 5; Huber 1965's censored probability-ratio test: a start
-   transient, where a ``kf`` 1 rad/s off is 2500 S off, must not outweigh a window of later
-   evidence), counted once and decayed by its age (on an irregular grid too):
-
-       d ← (1 − λ) d + clip((ε²_kf − ε²_m) / (2S), ±C),    ℓ = clip(κ d + ℓ_p, ±ℓ₀),
-       w = 1 / (1 + e^{−ℓ}).
-
-   **Persistent prior** ``ℓ_p`` (:data:`MODEL_PRIOR` = 10).  An exact model's weight must
-   stay close to 1: the ``kf``'s velocity is up to ~200× worse (σ = 1e-4 rad, 1 kHz, UR5:
-   5e-3 against 2.6e-5 rad/s), so ``1 − w`` of 1e-3 already costs ``(1 − w) δv_kf = 5e-6``
-   rad/s, a fifth of the model's own error.  The window's log-likelihood ratio between two
-   good predictors wanders around zero (consecutive velocity errors are correlated, so its
-   ~200 terms are fewer independent ones); the prior keeps ``1 − w ≤ e^{−10} = 4.5e-5``
-   while it does.  The evidence needed to drop the model: ``d < −ℓ_p``, i.e. (uncensored)
-   ``N Δ² (δv_m² − δv_kf²) / (4σ²) > ℓ_p`` (``N = T/h``): at 1 kHz, σ = 1e-4 rad,
-   ``Δ = 9`` ms, ``δv_m² > δv_kf² + 2.5e-5``, a model worse than 7.1e-3 rad/s against the
-   ``kf``'s 5e-3 (a model between the two may be kept, partly).  A lost model (below)
-   starts at the most evidence a window holds against it, ``d = −C/λ``, ``c_v = 1``; a
-   restart after a pause keeps ``d``, ``u``, ``c_v`` and the weights (a model the data
-   rejected stays rejected, as ``kf``'s bank keeps its likelihoods).  Measured
-   (``benchmarks/never_behind_exact.md``): on exact models at most 1.004× the family alone
-   (240 runs; the one-step weights: up to 10×); the mismatch rows of
-   ``never_behind_sim.py`` 1.00× ``kf``; but on the real UR10e logs with the identified
-   model 1.01–1.56× ``kf`` (the one-step weights: 1.00×), and +1.3–1.6 ``pin.aba`` per
-   update: not adopted.
-
-   ``κ`` (``sharpness``) scales the evidence (before any velocity is scored the model is
-   trusted, ``w = 1``); and the output
+   ``κ`` (``sharpness``) scales the count ``N`` of innovations in the window (before any
+   sample is scored the model is trusted, ``w = 1``); and the output
 
        v̂ = w v̂_m + (1 − w) v̂_kf,    q̂ = q̂_kf ⊕ w · difference(q̂_kf, q̂_m).
 
@@ -83,16 +51,15 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    step raises, or its score exceeds ``lost_ratio²`` times the ``kf``'s on some joint, it
    is re-seeded from the blend (its family's initial state at the ``kf``'s ``(q̂, v̂)`` of
    that sample, the blend's with ``w = 0``; its score set to ``lost_ratio`` times the
-   ``kf``'s, its velocity scores alike, its evidence as above and its waiting predictions
-   dropped) and :attr:`NeverBehind.reseeds` counts it.  It is lost too when
+   ``kf``'s, so its weight stays near zero until its predictions have beaten the
+   ``kf``'s over a window) and :attr:`NeverBehind.reseeds` counts it.  It is lost too when
    its velocity jumps away from the ``kf``'s by more than ``FAR_GATE`` = 10 times the
    ``kf``'s own RMS one-step error as a velocity, ``h |v̂_m − v̂_kf| > 10 √s_kf``: the
    windowed scores lag such a jump (on a UR10e log an ``ekf+auto`` 1.7 rad/s RMS off in
    bursts kept a mean weight 0.1–0.27 and made the blend 1.2× the ``kf``).  Where ``ℓ``
    reaches its bound ``−50``, ``w = 0`` exactly: a model 1e20 rad/s off cannot leak
    through ``w = 2e-22``.  The arithmetic between the two observers' steps is compiled
-   (numba: :func:`score_loops`, :func:`velocity_loops` with :func:`log_odds_loops`,
-   :func:`weigh_loops`; Pinocchio's
+   (numba: :func:`score_loops`, :func:`log_odds_loops`, :func:`weigh_loops`; Pinocchio's
    ``integrate``/``difference`` on Lie-group joints, NumPy's ``exp``, whose last bit
    numba's ``exp`` does not always give) and equals the NumPy form bit for bit.
 
@@ -175,22 +142,30 @@ _LOG_ODDS = 50.0
 _TINY = 1e-300  # the smallest score the log-odds divide by
 #: A model-based velocity this many kf one-step errors (as velocities) from the kf's is lost.
 FAR_GATE = 10.0
-#: ``H`` [s]: the span of the velocity score's predictions (module docstring, **Velocity score**).
-VELOCITY_HORIZON = 0.01
-#: ``ℓ_p``: the persistent prior log-odds of the model (module docstring, **Velocity score**).
-MODEL_PRIOR = 10.0
-#: The most predictions waiting for their span (above: the oldest is scored early).
-RING_SIZE = 32
-#: ``C``: the bound of one velocity innovation's log-likelihood ratio (module docstring).
-EVIDENCE_CLIP = 5.0
 
 
-def log_odds_loops(cv: float, sharpness: float, prior: float, out: Vector) -> None:
-    """``out[2] = −ℓ`` per coordinate from the velocity evidence ``d = out[7]`` and the weight
-    ``c_v`` its window has gathered (module docstring, item 1, **Velocity score**; compiled
-    by numba): ``ℓ = clip(κ d + ℓ_p, ±ℓ₀)``, ``ℓ_p = prior``; NaN kept as NumPy keeps it."""
+def log_odds_loops(
+    c: float, dt: float, window: float, sharpness: float, nvar: float, out: Vector, fair: bool
+) -> None:
+    """``out[2] = −ℓ`` per coordinate from the scores ``out[0:2]`` (model, kf) and the weight
+    ``c`` the window has gathered (module docstring, item 1; compiled by numba):
+
+        ℓ = clip(κ (N/2)(s_kf − s_m) / max(min(s_m, s_kf), max(c σ², 10⁻³⁰⁰)) + (1 − c) ℓ₀, ±ℓ₀),
+
+    ``N = c T/h`` (the scores are sums ``c`` times their means); ``fair`` (a step off the
+    grid: **Irregular steps**) ``c d`` for ``N (s_kf − s_m)``, ``d = out[7]``; NaN kept as
+    NumPy keeps it."""
+    floor = c * nvar
+    if _TINY > floor:
+        floor = _TINY
+    k = sharpness * 0.5 * (c * window / dt)
+    prior = (1.0 - c) * _LOG_ODDS
     for i in range(out.shape[1]):
-        ell = sharpness * out[7, i] + prior
+        s_m, s_k = out[0, i], out[1, i]
+        low = s_m if s_m <= s_k else (s_k if s_k < s_m else s_m + s_k)  # np.minimum (NaN: NaN)
+        den = low if low >= floor else (floor if floor > low else low + floor)  # np.maximum
+        # Bar-Shalom, Li & Kirubarajan 2001 §11.6.2 (each innovation counted once if fair)
+        ell = (sharpness * 0.5 * c * out[7, i] if fair else k * (s_k - s_m)) / den + prior
         if ell < -_LOG_ODDS:
             ell = -_LOG_ODDS
         elif ell > _LOG_ODDS:
@@ -216,18 +191,24 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
     v_m: Vector,
     v_kf: Vector,
     s: Vector,
+    d: Vector,
+    fair: bool,
     c: float,
     window: float,
     lost_ratio2: float,
+    sharpness: float,
+    nvar: float,
     out: Vector,
 ) -> tuple[float, bool]:
-    """:meth:`NeverBehind.step`'s one-step scores and lost tests (module docstring, item 1;
+    """:meth:`NeverBehind.step`'s arithmetic up to the weights (module docstring, item 1;
     compiled by numba): lost if ``raised`` or ``(q_m, v_m)`` sums to a non-finite value;
     if ``scored`` (and not lost) the one-step errors (``flat``: here,
     ``eᵢ = q_{k+1} − (q̂ᵢ + h v̂ᵢ + ½ h² â)``, else given in ``out[5:7]``), the scores
-    ``sᵢ ← sᵢ + λ(eᵢ² − sᵢ)`` into ``out[0:2]``, ``c ← c + λ(1 − c)``, ``λ = min(1, h/T)``,
+    ``sᵢ ← sᵢ + λ(eᵢ² − sᵢ)`` into ``out[0:2]``, ``d ← (1 − λ) d + e²_kf − e²_m`` into
+    ``out[7]`` (``d`` itself if not scored), ``c ← c + λ(1 − c)``, ``λ = min(1, h/T)``,
     lost if ``s_m > lost_ratio² s_kf`` somewhere once ``c > ½``; if ``measured``, lost if
-    ``h |v̂_m − v̂_kf| > FAR_GATE √(s_kf / c)`` somewhere.  Returns ``(c, lost)``."""
+    ``h |v̂_m − v̂_kf| > FAR_GATE √(s_kf / c)`` somewhere; if not lost and ``c > 0``,
+    :func:`log_odds_loops`.  Returns ``(c, lost)``."""
     nv = out.shape[1]
     total_q = 0.0
     for i in range(q_m.shape[0]):  # (a sum overflowing to inf says lost too: that far off)
@@ -239,6 +220,7 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
     for i in range(nv):
         out[0, i] = s[0, i]
         out[1, i] = s[1, i]
+        out[7, i] = d[i]
     if not lost and scored:
         lam = min(1.0, dt / window)
         ahead = 0.0 if dt_prev <= 0 else 0.5 * dt * dt / dt_prev
@@ -250,6 +232,7 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
             e_m, e_k = out[5, i], out[6, i]
             out[0, i] = s[0, i] + lam * (e_m * e_m - s[0, i])
             out[1, i] = s[1, i] + lam * (e_k * e_k - s[1, i])
+            out[7, i] = (1.0 - lam) * d[i] + (e_k * e_k - e_m * e_m)  # (**Irregular steps**)
         c = c + lam * (1.0 - c)
         if c > 0.5:
             for i in range(nv):
@@ -257,74 +240,9 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
     if not lost and c > 0.0 and measured:
         for i in range(nv):  # far (step's comment)
             lost = lost or dt * abs(v_m[i] - v_kf[i]) > FAR_GATE * np.sqrt(out[1, i] / c)
+    if not lost and c > 0.0:
+        log_odds_loops(c, dt, window, sharpness, nvar, out, fair)
     return c, lost
-
-
-def velocity_loops(
-    flat: bool,
-    scored: bool,
-    age: float,
-    h0: float,
-    dt_prev: float,
-    vm0: Vector,
-    vk0: Vector,
-    v: Vector,
-    v_prev: Vector,
-    q_anchor: Vector,
-    q_meas: Vector,
-    lam: float,
-    u: Vector,
-    d: Vector,
-    cv: float,
-    sharpness: float,
-    nvar: float,
-    prior: float,
-    out: Vector,
-) -> float:
-    """The velocity scores (module docstring, item 1, **Velocity score**; compiled by numba):
-    if ``scored``, one prediction's errors over the span ``age = t_k − t_a`` (``flat``: the
-    displacement ``q_k − q_a`` here, else given in ``q_meas``),
-
-        εᵢ = (q_k ⊖ q_a) − (age v̂ᵢ + ½ ((age + h₀)² − h₀²) â),    â = (v − v₋)/h₋,
-
-    into ``out[10:12]``; the evidence ``d ← (1 − λ) d + clip((ε²_kf − ε²_m) / (2S), ±C)``,
-    ``S = max(min(u_m, u_kf)/c_v, 2σ², 10⁻³⁰⁰)`` (``0`` for the mean while ``c_v = 0``), into
-    ``out[7]``; ``uᵢ ← uᵢ + λ(εᵢ² − uᵢ)`` into ``out[8:10]``; ``c_v ← c_v + λ(1 − c_v)``
-    (returned); else ``u``, ``d`` copied; then, if ``c_v > 0``, :func:`log_odds_loops`."""
-    nv = out.shape[1]
-    for i in range(nv):
-        out[8, i] = u[0, i]
-        out[9, i] = u[1, i]
-        out[7, i] = d[i]
-    floor = 2.0 * nvar
-    if _TINY > floor:
-        floor = _TINY
-    ahead = 0.0 if dt_prev <= 0 else 0.5 * ((age + h0) * (age + h0) - h0 * h0) / dt_prev
-    for i in range(nv if scored else 0):
-        disp = q_meas[i] - q_anchor[i] if flat else q_meas[i]
-        step_a = ahead * (v[i] - v_prev[i])
-        e_m = disp - (age * vm0[i] + step_a)
-        e_k = disp - (age * vk0[i] + step_a)
-        out[10, i] = e_m
-        out[11, i] = e_k
-        u_m, u_k = u[0, i], u[1, i]
-        low = u_m if u_m <= u_k else (u_k if u_k < u_m else u_m + u_k)  # np.minimum (NaN: NaN)
-        mean = low / cv if cv > 0.0 else 0.0
-        big = mean if mean >= floor else (floor if floor > mean else mean + floor)  # np.maximum
-        # Huber 1965: each innovation's log-likelihood ratio, censored at ±C
-        term = (e_k * e_k - e_m * e_m) / (2.0 * big)
-        if term < -EVIDENCE_CLIP:
-            term = -EVIDENCE_CLIP
-        elif term > EVIDENCE_CLIP:
-            term = EVIDENCE_CLIP
-        out[7, i] = (1.0 - lam) * d[i] + term
-        out[8, i] = u_m + lam * (e_m * e_m - u_m)
-        out[9, i] = u_k + lam * (e_k * e_k - u_k)
-    if scored:
-        cv = cv + lam * (1.0 - cv)
-    if cv > 0.0:
-        log_odds_loops(cv, sharpness, prior, out)
-    return cv
 
 
 def weigh_loops(
@@ -346,17 +264,15 @@ def weigh_loops(
 
 _Kernel = Callable[..., Any]
 _ONE = np.ones(1)
-_ROWS = np.zeros((12, 1))
-#: :func:`score_loops`, :func:`velocity_loops`, :func:`log_odds_loops` and :func:`weigh_loops`
-#: compiled (loaded when a blend is made).
+_ROWS = np.zeros((8, 1))
+#: :func:`score_loops`, :func:`log_odds_loops` and :func:`weigh_loops` compiled (loaded when
+#: a blend is made).
 score_kernel = LazyKernel(
     score_loops, True, True, True, False, *(_ONE,) * 7, 1e-3, 1e-3, *(_ONE,) * 3,
-    np.zeros((2, 1)), 0.5, 0.2, 1e4, _ROWS.copy(),
+    np.zeros((2, 1)), _ONE, False, 0.5, 0.2, 1e4, 1.0, 1e-8, _ROWS.copy(),
+    helpers=(log_odds_loops,),
 )  # fmt: skip
-velocity_kernel = LazyKernel(
-    velocity_loops, True, True, 1e-2, 1e-3, 1e-3, *(_ONE,) * 6, 5e-3, np.zeros((2, 1)), _ONE,
-    0.5, 1.0, 1e-8, 10.0, _ROWS.copy(), helpers=(log_odds_loops,),
-)  # fmt: skip
+log_odds_kernel = LazyKernel(log_odds_loops, 0.5, 1e-3, 0.2, 1.0, 1e-8, _ROWS.copy(), False)
 weigh_kernel = LazyKernel(weigh_loops, True, True, *(_ONE,) * 4, _ROWS.copy())
 
 
@@ -371,29 +287,7 @@ class _State(NamedTuple):
     v_prev: Vector  # the blend's v̂ one step before (â)
     dt_prev: float  # that step [s] (0: none yet)
     reseeds: int  # times the model-based observer was re-seeded since the reset
-    d: Vector  # (nv,): Σⱼ Dⱼ (ε²_kf − ε²_m), each velocity innovation once
-    u: Vector  # (2, nv): windowed mean squared velocity-score error, model then kf
-    cv: float  # the weight the velocity window has gathered
-    ring: tuple[Any, ...]  # predictions waiting for their span (t_a, h₀, h₋, v̂_m, v̂_kf, v, v₋, q_a)
-    clock: float  # time since the reset [s]
-
-
-def _queued(
-    ring: tuple[Any, ...],
-    clock: float,
-    dt: float,
-    state: _State,
-    vm0: Vector,
-    vk0: Vector,
-    q_meas: Vector,
-) -> tuple[tuple[Any, ...], tuple[Any, ...], bool]:
-    """This sample's prediction queued (module docstring, **Velocity score**: made at the
-    previous one, anchored here) and the oldest taken out if its span is due."""
-    a = (state.dt_prev, vm0, vk0, state.v, state.v_prev, q_meas.copy())
-    ring = (*ring, (clock, dt, *a))
-    old = ring[0]
-    due = len(ring) > RING_SIZE or clock - old[0] >= (1 - UNIFORM_TOL) * VELOCITY_HORIZON
-    return (ring[1:] if due else ring), old, due
+    d: Vector  # (nv,): Σⱼ Dⱼ (e²_kf − e²_m), each innovation once (**Irregular steps**)
 
 
 class NeverBehind(Observer[_State]):
@@ -458,7 +352,7 @@ class NeverBehind(Observer[_State]):
             self.sharpness,
             (self.noise_std or 0.0) ** 2,
         )
-        for kernel in (score_kernel, velocity_kernel, weigh_kernel):
+        for kernel in (score_kernel, log_odds_kernel, weigh_kernel):
             kernel.load()  # (numba's cache: compiled once per installation)
 
     @property
@@ -498,25 +392,17 @@ class NeverBehind(Observer[_State]):
         nv = self.robot.nv
         m = self.model.initial_state(q0, v0)
         k = self.reference.initial_state(q0, v0)
-        z = np.zeros((5, nv))  # (the scores, d, the velocity scores)
-        w = np.ones(nv)
-        return _State(
-            m, k, z[:2], 0.0, w, q0.copy(), v0.copy(), v0, 0.0, 0, z[2], z[3:], 0.0, (), 0.0
-        )
+        z = np.zeros((3, nv))  # (the scores, d)
+        return _State(m, k, z[:2], 0.0, np.ones(nv), q0.copy(), v0.copy(), v0, 0.0, 0, z[2])
 
     def restart_state(self, state: _State, q: Vector) -> _State:
-        """After a pause: both observers restarted, the one-step scores afresh; the velocity
-        evidence (``d``, the scores ``u``, ``c_v``) and the weights kept: a model the data
-        rejected stays rejected over a pause, as ``kf``'s bank keeps its likelihoods
-        (module docstring, **Velocity score**)."""
-        zero = np.zeros(self.robot.nv)
+        nv = self.robot.nv
+        zero = np.zeros(nv)
         m = self.model.restart_state(state.model, q)
         k = self.reference.restart_state(state.kf, q)
-        s = np.zeros((2, self.robot.nv))
-        return _State(
-            m, k, s, 0.0, state.w, q.copy(), zero, zero, 0.0, state.reseeds, state.d, state.u,
-            state.cv, (), 0.0,
-        )  # fmt: skip
+        w = np.ones(nv)
+        z = np.zeros((3, nv))  # (the scores, d)
+        return _State(m, k, z[:2], 0.0, w, q.copy(), zero, zero, 0.0, state.reseeds, z[2])
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         """Module docstring, item 1: both observers stepped, then :func:`score_loops`,
@@ -538,51 +424,35 @@ class NeverBehind(Observer[_State]):
         scored = measured and not self.reference.innovation(kf)[1]
         qm0, vm0 = self.model.output(state.model)
         qk0, vk0 = self.reference.output(state.kf)
-        # the new state's rows: s (model, kf), w, v, q (flat), the one-step errors (model, kf),
-        # d, u (model, kf), the velocity errors (model, kf)
-        out = np.empty((12, r.nv))
+        # the new state's rows: s (model, kf), w, v, q (flat), the one-step errors (model, kf), d
+        out = np.empty((8, r.nv))
         if q_meas is not None and scored and not flat and not raised:  # on Lie groups: Pinocchio
             ahead = 0.0 if state.dt_prev <= 0 else 0.5 * dt * dt / state.dt_prev
             step_a = ahead * (state.v - state.v_prev)  # ½ h² â, â = Δv̂ / h₋ (the blend's)
             out[5] = r.difference(r.integrate(qm0, dt * vm0 + step_a), q_meas)
             out[6] = r.difference(r.integrate(qk0, dt * vk0 + step_a), q_meas)
-        gains = self._gains
-        c, lost = cast(_Kernel, score_kernel.compiled)(  # one-step scores, lost tests
+        gains, period = self._gains, self._period_s  # a step off the grid: fair (docstring)
+        fair = period is not None and abs(dt - period) > UNIFORM_TOL * period
+        c, lost = cast(_Kernel, score_kernel.compiled)(  # scores, lost tests, log-odds
             flat, scored and not raised, measured, raised, q_meas if measured else q_kf,
             qm0, vm0, qk0, vk0, state.v, state.v_prev, dt, state.dt_prev, q_m, v_m, v_kf,
-            state.s, state.c, gains[0], gains[1], out,
+            state.s, state.d, fair, state.c, *gains, out,
         )  # fmt: skip
-        reseeds, clock, ring, u, d = state.reseeds, state.clock + dt, state.ring, state.u, state.d
-        cv = state.cv
-        lam = min(1.0, dt / gains[0])
-        old: tuple[Any, ...] = (0.0, 0.0, 0.0, vm0, vk0, state.v, state.v_prev, q_kf)
-        due = False
+        reseeds = state.reseeds
         if lost:  # re-seeded (module docstring) at the kf's estimate, the blend's when w = 0
             reseeds += 1
             m = self.model.initial_state(q_kf, v_kf)
             q_m, v_m = self.model.output(m)
             np.multiply(self.lost_ratio, out[1], out=out[0])  # to prove itself: w ≈ 0 until it has
-            u = np.array([self.lost_ratio * u[1], u[1]])  # (its velocity scores too)
-            d = np.full(r.nv, -EVIDENCE_CLIP / lam)  # (the most evidence a window holds:
-            cv = 1.0  # a full window's, weighed even before any prediction was)
-            ring = ()  # (the lost model's predictions)
-        elif q_meas is not None and scored and not raised:  # a prediction made, one scored
-            ring, old, due = _queued(ring, clock, dt, state, vm0, vk0, q_meas)
-        q_a, q_k = old[7], q_kf
-        if due and q_meas is not None:  # the displacement (on Lie groups: tangent at q_a)
-            q_k = q_meas if flat else r.difference(q_a, q_meas)
-        cv = cast(_Kernel, velocity_kernel.compiled)(  # velocity scores, log-odds
-            flat, due, clock - old[0], *old[1:7], q_a, q_k, lam, u, d, cv, gains[2],
-            gains[3], MODEL_PRIOR, out,
-        )  # fmt: skip
-        if cv > 0.0:
+            out[7] = (out[1] - out[0]) / min(1.0, dt / gains[0])  # (d as on the grid)
+            if c > 0.0:
+                g = (gains[0], gains[2], gains[3])
+                cast(_Kernel, log_odds_kernel.compiled)(c, dt, *g, out, fair)
+        if c > 0.0:
             np.exp(out[2], out=out[5])  # NumPy's exp (out[2] = −ℓ): the NumPy form's bits
-        cast(_Kernel, weigh_kernel.compiled)(cv > 0.0, flat, q_kf, v_kf, q_m, v_m, out)
+        cast(_Kernel, weigh_kernel.compiled)(c > 0.0, flat, q_kf, v_kf, q_m, v_m, out)
         q = out[4] if flat else r.integrate(q_kf, out[2] * r.difference(q_kf, q_m))
-        return _State(
-            m, kf, out[:2], c, out[2], q, out[3], state.v, dt, reseeds, out[7], out[8:10], cv,
-            ring, clock,
-        )  # fmt: skip
+        return _State(m, kf, out[:2], c, out[2], q, out[3], state.v, dt, reseeds, out[7])
 
     def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
         """Each observer's own, on its part of the state; the model-based observer's committed

@@ -150,6 +150,7 @@ NOT_RUN: dict[str, str] = {
     "benchmarks/real_logs_bound.py": "needs the shared real logs and minutes",
     "benchmarks/never_behind_sim.py": "minutes of simulations",
     "benchmarks/never_behind_cost.py": "a timing benchmark",
+    "benchmarks/never_behind_exact.py": "240 runs of simulations (~5 min)",
     "benchmarks/drive_gains.py": "needs the shared real logs; writes the committed "
     "benchmarks/drive_gains.{md,json} (~10 min)",
     "benchmarks/figaroh_peer.py": "needs FIGAROH and the shared real logs; writes the "

@@ -146,8 +146,11 @@ def log_options(name: str, options: Mapping[str, Any] | None) -> dict[str, Any]:
     A log is estimated offline, where the blend's cost (its family plus a ``kf`` plus about
     3 ``pin.aba`` per update, ``benchmarks/never_behind.md``) buys what no model can promise
     on a real robot: on the 17 UR10e logs of ``benchmarks/real_logs.md`` ``ekf`` alone on
-    the registry model is 1e4x ``kf``'s error and blended 1.00x; on an exact model the
-    blend keeps the family's accuracy (UR5 3.94e-5 against 3.9e-5 rad/s).  A live loop
+    the registry model is 1.1e4-4.2e4x ``kf``'s error and blended 1.00x.  On an exact model
+    the blend is never behind ``kf`` but can fall behind the family alone
+    (``benchmarks/never_behind_exact.md``, UR5 and Panda, seeds 0-9: ``ekf`` 1.00-1.04x at
+    1 kHz and 500 Hz with σ = 1e-4 rad, up to 4.1x with σ = 1e-3 and 8.1x at 100 Hz;
+    ``riemannian`` up to 10x): ``never_behind=False`` for a model one trusts.  A live loop
     (:func:`pinobs.observers.make_observer`) keeps the family alone unless asked.
     """
     opts = dict(options or {})

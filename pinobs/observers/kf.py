@@ -267,7 +267,7 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         """After a pause: afresh, but ``"auto"`` keeps its likelihoods (what it learned)."""
         fresh = self.initial_state(q, np.zeros(self.robot.nv))
         if isinstance(state, AutoState) and isinstance(fresh, AutoState):
-            return fresh._replace(jerk=state.jerk, n=state.n, A=state.A, B=state.B, w=state.w)
+            return self._auto().restart(state, fresh)
         return fresh
 
     def step(

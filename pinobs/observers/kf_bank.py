@@ -361,10 +361,8 @@ class AutoBank:
         self._shape = (len(AUTO_LAMBDAS), robot.nq, robot.nv)  # AutoState.shape
         layout = auto_layout(*self._shape)  # the state's buffer (kf_kernels.auto_layout)
         self._size = layout[-1]
-        self._mix_q, self._mix_v = (
-            slice(layout[8], layout[8] + robot.nq),
-            slice(layout[8] + robot.nq, layout[9]),
-        )
+        #: where the mixture (``q`` then ``v``) lies in an :class:`AutoState`'s buffer
+        self.mixture = slice(layout[8], layout[9])
         if self._table is not None:  # its compiled step loaded now, not at the first update
             auto_kernel.load()
 
@@ -427,15 +425,10 @@ class AutoBank:
         scale = np.maximum(state.A / state.n, 1e-300) * self.meas_std**2
         return cast(Vector, np.sqrt(np.exp(np.sum(state.w * np.log(scale), axis=0))))
 
-    def output(self, state: AutoState) -> tuple[Vector, Vector]:
-        """The mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)`` (computed by the step, :meth:`_mixture`):
-        views of the state's buffer."""
-        x = state.x
-        return x[self._mix_q], x[self._mix_v]
-
     def _mixture(self, w: Vector, b: BankState) -> tuple[Vector, Vector]:
-        """The mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)``; on Lie groups the configurations mixed
-        in the tangent space of the filter of largest total weight."""
+        """The mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)`` (the estimate; the compiled step's
+        :func:`~pinobs.observers.kf_kernels.auto_step_loops` computes it too); on Lie groups
+        the configurations mixed in the tangent space of the filter of largest total weight."""
         v = np.sum(w * b.v, axis=0)
         if self.robot.is_vector_space:
             return np.sum(w * b.q, axis=0), v

@@ -210,10 +210,10 @@ class Observer(ABC, Generic[State]):
     #: whose step is compiled only on some robots): the limit is not entered and costs
     #: nothing per update.
     uses_blas: bool = True
-    #: Whether :meth:`output` returns read-only arrays of its own, which nothing writes
-    #: afterwards (a family's, or an instance's): the estimate then keeps them as they are,
-    #: without the copies it takes otherwise (issue 39: two copies and two flags less an
-    #: update; ``kf`` with ``"auto"`` copies its estimate out of the state's buffer once).
+    #: Whether :meth:`output` returns new float64 arrays of its own at every call, no view of
+    #: the state (a family's, or an instance's): the estimate then keeps them, made
+    #: read-only, without the copies it takes otherwise (issue 39: two copies less an update;
+    #: ``kf`` with ``"auto"`` copies its estimate out of the state's buffer once).
     fresh_output: bool = False
     _init_args: tuple[tuple[Any, ...], dict[str, Any]]  # set by __new__
 
@@ -732,7 +732,7 @@ class Observer(ABC, Generic[State]):
     # -------------------------------------------------------------- helpers
     def _make_estimate(self, t: float, state: State) -> Estimate:
         """The estimate of ``state`` at ``t``: :meth:`output` copied read-only (as
-        ``read_only``; a float64 array by its own ``copy``, cheaper; as it is if the family's
+        ``read_only``; a float64 array by its own ``copy``, cheaper; not copied if the family's
         output is :attr:`fresh_output`) and :meth:`innovation`."""
         q, v = self.output(state)
         if self._own_innovation:
@@ -743,8 +743,8 @@ class Observer(ABC, Generic[State]):
         if not self.fresh_output:
             q = q.copy() if type(q) is np.ndarray and q.dtype is _F64 else np.array(q, dtype=float)
             v = v.copy() if type(v) is np.ndarray and v.dtype is _F64 else np.array(v, dtype=float)
-            q.setflags(write=False)
-            v.setflags(write=False)
+        q.setflags(write=False)
+        v.setflags(write=False)
         # Estimate(t, q, v, nis, gated) without its __init__'s call: the fields written into
         # the instance's dict, as that __init__ does (tests/observers/test_update_path.py)
         estimate = _new_object(Estimate)

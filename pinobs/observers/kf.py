@@ -216,7 +216,7 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         # the compiled bank's step (its joints compiled) makes no BLAS call: no thread limit to
         # enter per update (Observer.uses_blas); the fixed density's NumPy step does
         self.uses_blas = not (self.auto_bank is not None and self.auto_bank.compiled)
-        # output's: "auto"'s estimate copied out of the state's buffer, read-only, its own
+        # output's: "auto"'s estimate copied out of the state's buffer, its own
         self.fresh_output = self.auto_bank is not None
         self._mixture = None if self.auto_bank is None else self.auto_bank.mixture
         self._nq = robot.nq
@@ -297,11 +297,11 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
     def output(self, state: KFState | AutoState) -> tuple[Vector, Vector]:
         """With ``"auto"``: the bank's mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)`` (module docstring;
         computed by the step, in the state's buffer: :attr:`AutoBank.mixture
-        <pinobs.observers.kf_bank.AutoBank.mixture>`), copied out once, read-only
-        (:attr:`fresh_output`; here, not through the bank: a call less every update)."""
+        <pinobs.observers.kf_bank.AutoBank.mixture>`), copied out once (:attr:`fresh_output`;
+        writable, as the kernels that take it expect; here, not through the bank: a call less
+        every update)."""
         if isinstance(state, AutoState):
             mix = state.x[self._mixture].copy()
-            mix.setflags(write=False)
             return mix[: self._nq], mix[self._nq :]
         return state.q, state.v
 

@@ -236,6 +236,23 @@ def test_auto_kernel_is_loaded_when_made_and_never_compiled_in_the_loop() -> Non
     assert list(kernel.signatures) == signatures and len(signatures) == 1
 
 
+def test_a_never_behind_blend_over_the_auto_kf_compiles_nothing_in_its_updates() -> None:
+    """The ``"auto"`` kf's output (copied out of its state's buffer, ``fresh_output``) is
+    writable, as the blend's kernels take their arrays: a read-only one was a second
+    signature of ``neverbehind.score_kernel``, loaded in the first update (11 ms)."""
+    from pinobs.observers import neverbehind
+
+    robot = pinobs.load("ur5")
+    ob = pinobs.make_observer("ekf", robot, noise_std=1e-4, rate=1000.0, never_behind=True)
+    kernels = (neverbehind.score_kernel, neverbehind.log_odds_kernel)
+    before = [list(k.compiled.signatures) for k in kernels if k.compiled is not None]
+    ob.reset(0.0, robot.neutral())
+    for k in range(1, 30):
+        ob.update(k * 1e-3, None if k % 7 == 0 else robot.neutral())
+    after = [list(k.compiled.signatures) for k in kernels if k.compiled is not None]
+    assert len(after) == 2 and after == before and all(len(s) == 1 for s in after)
+
+
 def test_the_auto_state_is_one_buffer_read_through_read_only_views() -> None:
     """Issue 39: ``"auto"``'s state lies in one float64 buffer (``AutoState.x``, laid out by
     ``kf_kernels.auto_layout``); its fields are read-only views of it, a step writes a new

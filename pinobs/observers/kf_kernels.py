@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.lib.stride_tricks import as_strided
 from numpy.typing import NDArray
 
 from pinobs.model import JointBlock
@@ -580,6 +581,18 @@ def auto_layout(nf: int, nq: int, nv: int) -> tuple[int, ...]:
     return 0, o_v, o_a, o_A, o_w, o_e, o_P, o_B, o_mix, o_mix + nq + nv
 
 
+def _rows(x: Vector, start: int, rows: int, cols: int) -> Vector:
+    """``x[start : start + rows·cols]`` as a ``rows × cols`` array (a view: numba's
+    ``reshape`` of a slice cost 13 ns each, 0.2 µs a step)."""
+    return as_strided(x[start:], shape=(rows, cols), strides=(cols * x.itemsize, x.itemsize))
+
+
+def _covariances(x: Vector, start: int, nf: int) -> Vector:
+    """``x[start : start + 9 nf]`` as ``nf`` 3×3 matrices (a view, as :func:`_rows`)."""
+    k = x.itemsize
+    return as_strided(x[start:], shape=(nf, 3, 3), strides=(9 * k, 3 * k, k))
+
+
 def auto_step_loops(
     x: Vector, x1: Vector, jerk: Vector, q_meas: Vector, table: NDArray[np.int64], h: float,
     meas_var: float, measured: bool, gate_on: bool, n: float, n_new: float, forget: float,
@@ -607,13 +620,13 @@ def auto_step_loops(
     nf = jerk.size
     nv = (x.size - nq * (nf + 1) - 10 * nf) // (5 * nf + 1)
     o = auto_layout(nf, nq, nv)
-    q, q1 = x[o[0] : o[1]].reshape((nf, nq)), x1[o[0] : o[1]].reshape((nf, nq))
-    v, v1 = x[o[1] : o[2]].reshape((nf, nv)), x1[o[1] : o[2]].reshape((nf, nv))
-    a, a1 = x[o[2] : o[3]].reshape((nf, nv)), x1[o[2] : o[3]].reshape((nf, nv))
-    A, A1 = x[o[3] : o[4]].reshape((nf, nv)), x1[o[3] : o[4]].reshape((nf, nv))
-    w, w1 = x[o[4] : o[5]].reshape((nf, nv)), x1[o[4] : o[5]].reshape((nf, nv))
-    e1 = x1[o[5] : o[6]].reshape((nf, nv))
-    P, P1 = x[o[6] : o[7]].reshape((nf, 3, 3)), x1[o[6] : o[7]].reshape((nf, 3, 3))
+    q, q1 = _rows(x, o[0], nf, nq), _rows(x1, o[0], nf, nq)
+    v, v1 = _rows(x, o[1], nf, nv), _rows(x1, o[1], nf, nv)
+    a, a1 = _rows(x, o[2], nf, nv), _rows(x1, o[2], nf, nv)
+    A, A1 = _rows(x, o[3], nf, nv), _rows(x1, o[3], nf, nv)
+    w, w1 = _rows(x, o[4], nf, nv), _rows(x1, o[4], nf, nv)
+    e1 = _rows(x1, o[5], nf, nv)
+    P, P1 = _covariances(x, o[6], nf), _covariances(x1, o[6], nf)
     B, B1 = x[o[7] : o[8]], x1[o[7] : o[8]]
     mix = x1[o[8] : o[9]]
     F, Q1 = np.eye(3), np.zeros((3, 3))
@@ -670,7 +683,7 @@ auto_kernel = LazyKernel(
     *_auto_warm_args(),
     helpers=(
         *LIE_HELPERS, _transition_into, _copy_into, _predict_covariance, _predict_mean, _correct,
-        _innovations, auto_layout, _predict_covariance_ca,
+        _innovations, auto_layout, _predict_covariance_ca, _rows, _covariances,
         _outlier_gate, _weights_into, _mixture_into,
     ),
 )  # fmt: skip

@@ -216,6 +216,10 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         # the compiled bank's step (its joints compiled) makes no BLAS call: no thread limit to
         # enter per update (Observer.uses_blas); the fixed density's NumPy step does
         self.uses_blas = not (self.auto_bank is not None and self.auto_bank.compiled)
+        # output's: "auto"'s estimate copied out of the state's buffer, its own
+        self.fresh_output = self.auto_bank is not None
+        self._mixture = None if self.auto_bank is None else self.auto_bank.mixture
+        self._nq = robot.nq
 
     @property
     def options(self) -> dict[str, object]:
@@ -267,7 +271,7 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         """After a pause: afresh, but ``"auto"`` keeps its likelihoods (what it learned)."""
         fresh = self.initial_state(q, np.zeros(self.robot.nv))
         if isinstance(state, AutoState) and isinstance(fresh, AutoState):
-            return fresh._replace(jerk=state.jerk, n=state.n, A=state.A, B=state.B, w=state.w)
+            return self._auto().restart(state, fresh)
         return fresh
 
     def step(
@@ -291,8 +295,14 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         return replace(base, causes=KF_CAUSES) if base.causes else base
 
     def output(self, state: KFState | AutoState) -> tuple[Vector, Vector]:
-        if isinstance(state, AutoState):  # (not through _auto, nor cast: two calls less)
-            return self.auto_bank.output(state)  # type: ignore[union-attr]
+        """With ``"auto"``: the bank's mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)`` (module docstring;
+        computed by the step, in the state's buffer: :attr:`AutoBank.mixture
+        <pinobs.observers.kf_bank.AutoBank.mixture>`), copied out once (:attr:`fresh_output`;
+        writable, as the kernels that take it expect; here, not through the bank: a call less
+        every update)."""
+        if isinstance(state, AutoState):
+            mix = state.x[self._mixture].copy()
+            return mix[: self._nq], mix[self._nq :]
         return state.q, state.v
 
     def smoothing_filter(self) -> WhiteJerkFilter:

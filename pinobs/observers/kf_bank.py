@@ -18,7 +18,7 @@ import numpy as np
 from pinobs.errors import UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.observers.base import GateState, Vector, gate_threshold, positive
-from pinobs.observers.kf_kernels import auto_kernel, bank_kernel, joint_table
+from pinobs.observers.kf_kernels import auto_kernel, auto_layout, bank_kernel, joint_table
 
 _new_tuple = tuple.__new__  # a NamedTuple made without its __new__, a Python call (step)
 
@@ -125,16 +125,55 @@ class BankState(NamedTuple):
 
 
 class AutoState(NamedTuple):
-    """``jerk_psd="auto"``'s state: a bank of ``n_f`` filters and their likelihoods."""
+    """``jerk_psd="auto"``'s state: a bank of ``n_f`` filters and their likelihoods.
 
-    bank: BankState  # the filters' states, rows (KFBank)
+    The arrays lie in one float64 buffer ``x`` (:func:`~pinobs.observers.kf_kernels.auto_layout`:
+    the compiled step takes one array and allocates one, issue 39), read through the
+    properties below as read-only views; a step writes a new buffer, never this one."""
+
+    x: Vector  # the buffer: q, v, a, A, w, e, P, B, the mixture (kf_kernels.auto_layout)
+    shape: tuple[int, int, int]  # (n_f, nq, nv)
     jerk: Vector  # (n_f,): ρ_f σ₀² [rad²/s⁵] (empty until the period is known)
     n: float  # N: the forgotten count of measured samples
-    A: Vector  # (n_f, nv): forgotten sums of e² / S
-    B: Vector  # (n_f,): forgotten sums of log S
-    w: Vector  # (n_f, nv): the mixture's weights
     gate: GateState = GateState()
-    mix: Vector | None = None  # (nq + nv,): the estimate (q then v), if computed
+
+    def _view(self, i: int, *shape: int) -> Vector:
+        """Part ``i`` of :func:`~pinobs.observers.kf_kernels.auto_layout`, read-only."""
+        o = auto_layout(*self.shape)
+        out = self.x[o[i] : o[i + 1]].reshape(shape)
+        out.setflags(write=False)
+        return out
+
+    @property
+    def bank(self) -> BankState:
+        """The filters' states, rows (:class:`KFBank`); the innovations only after a
+        measurement the gate kept."""
+        nf, nq, nv = self.shape
+        kept = self.gate.nis is not None and not self.gate.gated
+        return BankState(
+            self._view(0, nf, nq), self._view(1, nf, nv), self._view(2, nf, nv),
+            self._view(6, nf, 3, 3), self._view(5, nf, nv) if kept else None,
+        )  # fmt: skip
+
+    @property
+    def A(self) -> Vector:
+        """``(n_f, nv)``: the forgotten sums of ``e² / S``."""
+        return self._view(3, self.shape[0], self.shape[2])
+
+    @property
+    def B(self) -> Vector:
+        """``(n_f,)``: the forgotten sums of ``log S``."""
+        return self._view(7, self.shape[0])
+
+    @property
+    def w(self) -> Vector:
+        """``(n_f, nv)``: the mixture's weights."""
+        return self._view(4, self.shape[0], self.shape[2])
+
+    @property
+    def mix(self) -> Vector:
+        """``(nq + nv,)``: the estimate, ``q`` then ``v``."""
+        return self._view(8, self.shape[1] + self.shape[2])
 
 
 def _auto_weights(n: float, A: Vector, B: Vector) -> Vector:
@@ -319,9 +358,11 @@ class AutoBank:
         self._no_sample = np.zeros(robot.nv)
         self._dof = float(robot.nv)  # the gate's level before any (outlier_gate)
         self._table = joint_table(robot.joints, robot.nq, robot.nv)  # None: the NumPy step
-        n_f, nq, nv = len(AUTO_LAMBDAS), robot.nq, robot.nv
-        #: the compiled step's new arrays: q (n_f, nq); v, a, e, A, w (n_f, nv); P; B; the mixture
-        self._out_shapes = ((n_f, nq), (n_f, nv), (n_f, 3, 3), (n_f,), (nq + nv,))
+        self._shape = (len(AUTO_LAMBDAS), robot.nq, robot.nv)  # AutoState.shape
+        layout = auto_layout(*self._shape)  # the state's buffer (kf_kernels.auto_layout)
+        self._size = layout[-1]
+        #: where the mixture (``q`` then ``v``) lies in an :class:`AutoState`'s buffer
+        self.mixture = slice(layout[8], layout[9])
         if self._table is not None:  # its compiled step loaded now, not at the first update
             auto_kernel.load()
 
@@ -341,7 +382,27 @@ class AutoBank:
             np.tile(P, (n_f, 1, 1)), None,
         )  # fmt: skip
         w = np.full((n_f, nv), 1.0 / n_f)
-        return AutoState(bank, jerk, 0.0, np.zeros((n_f, nv)), np.zeros(n_f), w)
+        return self._packed(bank, jerk, 0.0, np.zeros((n_f, nv)), np.zeros(n_f), w, GateState())
+
+    def restart(self, state: AutoState, fresh: AutoState) -> AutoState:
+        """``fresh`` (:meth:`initial`) with what ``state`` learned: its grid, count,
+        likelihood sums and weights."""
+        return self._packed(fresh.bank, state.jerk, state.n, state.A, state.B, state.w, fresh.gate)
+
+    def _packed(
+        self, bank: BankState, jerk: Vector, n: float, A: Vector, B: Vector, w: Vector,
+        gate: GateState,
+    ) -> AutoState:  # fmt: skip
+        """The :class:`AutoState` of these arrays, in a new buffer, with their mixture
+        (:meth:`_mixture`; the NumPy step's, the start's)."""
+        o = auto_layout(*self._shape)
+        x = np.empty(self._size)
+        e = np.zeros(A.shape) if bank.innovation is None else bank.innovation
+        for i, part in enumerate((bank.q, bank.v, bank.a, A, w, e, bank.P, B)):
+            x[o[i] : o[i + 1]] = part.ravel()
+        q, v = self._mixture(w, bank)
+        x[o[8] : o[9]] = np.concatenate([q, v])
+        return AutoState(x, self._shape, jerk, n, gate)
 
     def grid(self, period: float) -> Vector:
         """The bank's densities ``ρ_f σ₀² = λ_f σ₀² / T⁵`` [rad²/s⁵] (``T`` the period [s];
@@ -364,13 +425,10 @@ class AutoBank:
         scale = np.maximum(state.A / state.n, 1e-300) * self.meas_std**2
         return cast(Vector, np.sqrt(np.exp(np.sum(state.w * np.log(scale), axis=0))))
 
-    def output(self, state: AutoState) -> tuple[Vector, Vector]:
-        """The mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)``; on Lie groups the configurations mixed
-        in the tangent space of the filter of largest total weight."""
-        if state.mix is not None:  # computed by the compiled step
-            nq = state.mix.size - state.w.shape[1]
-            return state.mix[:nq], state.mix[nq:]
-        w, b = state.w, state.bank
+    def _mixture(self, w: Vector, b: BankState) -> tuple[Vector, Vector]:
+        """The mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)`` (the estimate; the compiled step's
+        :func:`~pinobs.observers.kf_kernels.auto_step_loops` computes it too); on Lie groups
+        the configurations mixed in the tangent space of the filter of largest total weight."""
         v = np.sum(w * b.v, axis=0)
         if self.robot.is_vector_space:
             return np.sum(w * b.q, axis=0), v
@@ -392,51 +450,44 @@ class AutoBank:
         equal to the NumPy ones to 1e-12) into arrays allocated here (the state before is kept
         as it was); otherwise NumPy (:meth:`_step_numpy`).
 
-        The compiled path is written for its cost (issue 39: every ``kf`` update): its new
-        arrays by ``np.empty`` of shapes computed once (``np.empty_like`` is a Python call
-        more each), its named tuples by ``tuple.__new__`` (their own ``__new__`` is one)."""
+        The compiled path is written for its cost (issue 39: every ``kf`` update): the new
+        state's arrays in one buffer (:class:`AutoState`: one ``np.empty`` and five arrays to
+        pass, against nine and nineteen), its named tuples by ``tuple.__new__`` (their own
+        ``__new__`` is a Python call)."""
         kernel, table = auto_kernel.compiled, self._table
         if kernel is None or table is None:
             return self._step_numpy(state, h, q_meas)
         jerk = state.jerk if state.jerk.size else self.grid(h)
-        b, gate, n = state.bank, state.gate, state.n
+        gate, n = state.gate, state.n
         if q_meas is not None and not q_meas.flags.writeable:  # (one kernel signature)
             q_meas = q_meas.copy()
         gate_on = n >= AUTO_GATE_SAMPLES  # the scales ĉ and weights before this sample
         n_new = self._forget * n + 1.0  # the forgotten count (:mod:`pinobs.observers.kf`)
-        fq, fv, fP, fB, mix = self._out_shapes
-        q, v, a, P = np.empty(fq), np.empty(fv), np.empty(fv), np.empty(fP)
-        e, A, B, w = np.empty(fv), np.empty(fv), np.empty(fB), np.empty(fv)
-        mix_ = np.empty(mix)
+        x = np.empty(self._size)
         nis, rejected, level = kernel(
-            b.q, b.v, b.a, b.P, state.A, state.B, state.w, jerk, h, self._var,
-            self._no_sample if q_meas is None else q_meas, q_meas is not None, gate_on,
-            n, n_new, self._forget, self.gate,
-            self._dof if gate.level is None else gate.level, gate.run, table,
-            q, v, a, P, e, A, B, w, mix_,
+            state.x, x, jerk, self._no_sample if q_meas is None else q_meas, table, h,
+            self._var, q_meas is not None, gate_on, n, n_new, self._forget, self.gate,
+            self._dof if gate.level is None else gate.level, gate.run, self._shape[1],
         )  # fmt: skip
         if q_meas is None:  # the prediction (its likelihoods unchanged): GateState.predicted
-            after, n_new, e_ = _new_tuple(GateState, (None, False, gate.run, gate.level)), n, None
+            after, n_new = _new_tuple(GateState, (None, False, gate.run, gate.level)), n
         elif not gate_on:  # too few samples for a scale: reported (with σ₀), not gated
-            after, e_ = _new_tuple(GateState, (nis, False, 0, None)), e
+            after = _new_tuple(GateState, (nis, False, 0, None))
         else:  # GateState.measured, decided in the kernel
             after = _new_tuple(GateState, (nis, rejected, gate.run + 1 if rejected else 0, level))
             if rejected:  # the prediction (its likelihoods unchanged)
-                n_new, e_ = n, None
-            else:
-                e_ = e
-        bank = _new_tuple(BankState, (q, v, a, P, e_))
-        return _new_tuple(AutoState, (bank, jerk, n_new, A, B, w, after, mix_))
+                n_new = n
+        return _new_tuple(AutoState, (x, self._shape, jerk, n_new, after))
 
     def _step_numpy(self, state: AutoState, h: float, q_meas: Vector | None) -> AutoState:
         """:meth:`step` in NumPy, the configurations filter by filter (planar joints, or
         numba absent)."""
         jerk = state.jerk if state.jerk.size else self.grid(h)
         bank = self._bank(jerk)
+        A, B, w = state.A, state.B, state.w
         if q_meas is None:
-            return state._replace(
-                bank=bank.step(state.bank, h, None), jerk=jerk, gate=state.gate.predicted()
-            )
+            new = bank.step(state.bank, h, None)
+            return self._packed(new, jerk, state.n, A, B, w, state.gate.predicted())
         new = bank.step(state.bank, h, q_meas)
         e = cast(Vector, new.innovation)  # (n_f, nv): difference(q⁻_f, q_meas)
         f0 = np.array([1.0, h, 0.5 * h * h])  # F's first row: S = (F P Fᵀ)₀₀ + j h⁵/20 + σ₀²
@@ -448,8 +499,8 @@ class AutoBank:
         else:  # too few samples for a scale: reported (with σ₀), not gated
             gate = GateState(float(np.sum(state.w * z)))
         if gate.gated:  # the prediction (its likelihoods unchanged)
-            return state._replace(bank=bank.step(state.bank, h, None), jerk=jerk, gate=gate)
+            return self._packed(bank.step(state.bank, h, None), jerk, state.n, A, B, w, gate)
         forget = self._forget  # γ (:mod:`pinobs.observers.kf`)
         n = forget * state.n + 1.0  # the forgotten sums (:mod:`pinobs.observers.kf`)
-        A, B = forget * state.A + z, forget * state.B + np.log(S)
-        return AutoState(new, jerk, n, A, B, _auto_weights(n, A, B), gate)
+        A, B = forget * A + z, forget * B + np.log(S)
+        return self._packed(new, jerk, n, A, B, _auto_weights(n, A, B), gate)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.lib.stride_tricks import as_strided
 from numpy.typing import NDArray
 
 from pinobs.model import JointBlock
@@ -28,6 +29,7 @@ __all__ = [
     "JOINT_KINDS",
     "LIE_HELPERS",
     "auto_kernel",
+    "auto_layout",
     "auto_step_loops",
     "bank_kernel",
     "bank_rows_loops",
@@ -75,6 +77,23 @@ def _predict_covariance(
             for m in range(3):
                 s += FP[i, m] * F[j, m]
             out[i, j] = s + jerk * Q1[i, j]
+
+
+def _predict_covariance_ca(
+    h: float, c: float, jerk: float, Q1: Vector, P: Vector, out: Vector
+) -> None:
+    """:func:`_predict_covariance` with ``F = [[1, h, c], [0, 1, h], [0, 0, 1]]`` written out
+    (``c = h²/2``, computed as :func:`_transition_into` does): its products by 1 and 0 and
+    its sums of 0 left out, the rest in the same order (the same finite results, to the sign
+    of an exact zero: ``0 + x`` is ``+0`` where ``x`` is ``−0``; tested equal)."""
+    for j in range(3):  # F P, row by row
+        p0, p1, p2 = P[0, j], P[1, j], P[2, j]
+        out[0, j], out[1, j], out[2, j] = (p0 + h * p1) + c * p2, p1 + h * p2, p2
+    for i in range(3):  # (F P) Fᵀ + jerk · Q₁
+        f0, f1, f2 = out[i, 0], out[i, 1], out[i, 2]
+        out[i, 0] = ((f0 + f1 * h) + f2 * c) + jerk * Q1[i, 0]
+        out[i, 1] = (f1 + f2 * h) + jerk * Q1[i, 1]
+        out[i, 2] = f2 + jerk * Q1[i, 2]
 
 
 def _correct(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
@@ -546,38 +565,75 @@ bank_kernel = LazyKernel(
 )  # fmt: skip
 
 
-def auto_step_loops(
-    q: Vector, v: Vector, a: Vector, P: Vector, A: Vector, B: Vector, w: Vector, jerk: Vector,
-    h: float, meas_var: float, q_meas: Vector, measured: bool, gate_on: bool, n: float,
-    n_new: float, forget: float, threshold: float, level: float, run: int,
-    table: NDArray[np.int64], q1: Vector, v1: Vector, a1: Vector, P1: Vector, e1: Vector,
-    A1: Vector, B1: Vector, w1: Vector, mix: Vector,
-) -> tuple[float, bool, float]:  # fmt: skip
-    """One step of ``jerk_psd="auto"`` (module docstring), in loops compiled by numba: the bank's prediction and correction (:func:`bank_rows_loops`'s arithmetic, one
-    row), the outlier gate, the forgotten likelihood sums, the weights and the mixture.
+def auto_layout(nf: int, nq: int, nv: int) -> tuple[int, ...]:
+    """Where ``jerk_psd="auto"``'s state lies in its one float64 buffer (issue 39: one array
+    to pass and allocate a step, not nine): the offsets of ``q`` (``nf × nq``), ``v``, ``a``,
+    ``A``, ``w``, ``e`` (``nf × nv`` each), ``P`` (``nf × 3 × 3``), ``B`` (``nf``), the
+    mixture (``nq + nv``: ``q`` then ``v``) and the end (the buffer's size), in that order."""
+    o_v = nf * nq
+    o_a = o_v + nf * nv
+    o_A = o_a + nf * nv
+    o_w = o_A + nf * nv
+    o_e = o_w + nf * nv
+    o_P = o_e + nf * nv
+    o_B = o_P + 9 * nf
+    o_mix = o_B + nf
+    return 0, o_v, o_a, o_A, o_w, o_e, o_P, o_B, o_mix, o_mix + nq + nv
 
-    Reads the state ``(q, v, a, P, A, B, w)`` (``n`` its count, ``n_new = γ n + 1``), writes
-    the next one into ``(q1, v1, a1, P1, A1, B1, w1)`` (all preallocated by the caller: the
-    state before is left as it was), the innovations ``e_f = difference(q⁻_f, q_meas)`` into
-    ``e1`` and the mixture (:func:`_mixture_into`) into ``mix`` (``nq + nv``; ``table``: the
-    joints, :func:`joint_table`).  With
-    ``measured``: ``S_f = P⁻_f,00 + σ₀²``, ``z_fi = e_fi² / S_f``, the gate's NIS
-    ``Σ w_fi z_fi / max(A_fi / N, 1e-300)`` (``gate_on``) or ``Σ w_fi z_fi`` (too few
-    samples: not gated), :func:`pinobs.observers.base.outlier_gate` on it (``threshold``,
-    ``level`` the gate's, ``nv`` its degrees of freedom, ``run`` its rejections in a row: in
-    loops, tested equal to :meth:`GateState.measured`); a rejected measurement leaves the
-    prediction and the sums; else the Kalman correction (Joseph form, symmetrised),
-    ``A ← γ A + z``, ``B ← γ B + log S`` and ``w_fi ∝ exp(−(L_fi − min_f L_fi) / 2)``,
-    ``L_fi = N log(max(A_fi, 1e-300) / N) + B_f`` (Mehra 1970's profile likelihood).
+
+def _rows(x: Vector, start: int, rows: int, cols: int) -> Vector:
+    """``x[start : start + rows·cols]`` as a ``rows × cols`` array (a view: numba's
+    ``reshape`` of a slice cost 13 ns each, 0.2 µs a step)."""
+    return as_strided(x[start:], shape=(rows, cols), strides=(cols * x.itemsize, x.itemsize))
+
+
+def _covariances(x: Vector, start: int, nf: int) -> Vector:
+    """``x[start : start + 9 nf]`` as ``nf`` 3×3 matrices (a view, as :func:`_rows`)."""
+    k = x.itemsize
+    return as_strided(x[start:], shape=(nf, 3, 3), strides=(9 * k, 3 * k, k))
+
+
+def auto_step_loops(
+    x: Vector, x1: Vector, jerk: Vector, q_meas: Vector, table: NDArray[np.int64], h: float,
+    meas_var: float, measured: bool, gate_on: bool, n: float, n_new: float, forget: float,
+    threshold: float, level: float, run: int, nq: int,
+) -> tuple[float, bool, float]:  # fmt: skip
+    """One step of ``jerk_psd="auto"`` (module docstring), in loops compiled by numba: the
+    bank's prediction and correction (:func:`bank_rows_loops`'s arithmetic, one row), the
+    outlier gate, the forgotten likelihood sums, the weights and the mixture.
+
+    Reads the state ``(q, v, a, P, A, B, w)`` from the buffer ``x`` (:func:`auto_layout`,
+    ``nf`` = ``jerk.size`` filters, ``nq`` given, ``nv`` from the size; ``n`` its count,
+    ``n_new = γ n + 1``), writes the next one into the buffer ``x1`` (allocated by the caller:
+    the state before is left as it was), the innovations ``e_f = difference(q⁻_f, q_meas)``
+    and the mixture (:func:`_mixture_into`) there too (``table``: the joints,
+    :func:`joint_table`).  With ``measured``: ``S_f = P⁻_f,00 + σ₀²``, ``z_fi = e_fi² / S_f``,
+    the gate's NIS ``Σ w_fi z_fi / max(A_fi / N, 1e-300)`` (``gate_on``) or ``Σ w_fi z_fi``
+    (too few samples: not gated), :func:`pinobs.observers.base.outlier_gate` on it
+    (``threshold``, ``level`` the gate's, ``nv`` its degrees of freedom, ``run`` its
+    rejections in a row: in loops, tested equal to :meth:`GateState.measured`); a rejected
+    measurement leaves the prediction and the sums; else the Kalman correction (Joseph form,
+    symmetrised), ``A ← γ A + z``, ``B ← γ B + log S`` and ``w_fi ∝ exp(−(L_fi − min_f L_fi)
+    / 2)``, ``L_fi = N log(max(A_fi, 1e-300) / N) + B_f`` (Mehra 1970's profile likelihood).
     Returns ``(nis, rejected, level after)`` (``nis`` NaN without a measurement).
     """
-    nf, nv = v.shape
+    nf = jerk.size
+    nv = (x.size - nq * (nf + 1) - 10 * nf) // (5 * nf + 1)
+    o = auto_layout(nf, nq, nv)
+    q, q1 = _rows(x, o[0], nf, nq), _rows(x1, o[0], nf, nq)
+    v, v1 = _rows(x, o[1], nf, nv), _rows(x1, o[1], nf, nv)
+    a, a1 = _rows(x, o[2], nf, nv), _rows(x1, o[2], nf, nv)
+    A, A1 = _rows(x, o[3], nf, nv), _rows(x1, o[3], nf, nv)
+    w, w1 = _rows(x, o[4], nf, nv), _rows(x1, o[4], nf, nv)
+    e1 = _rows(x1, o[5], nf, nv)
+    P, P1 = _covariances(x, o[6], nf), _covariances(x1, o[6], nf)
+    B, B1 = x[o[7] : o[8]], x1[o[7] : o[8]]
+    mix = x1[o[8] : o[9]]
     F, Q1 = np.eye(3), np.zeros((3, 3))
     _transition_into(h, F, Q1)
-    FP, d = np.empty((3, 3)), np.empty((2, nv))
-    S = np.empty(nf)
+    d, S = np.empty((2, nv)), np.empty(nf)
     for f in range(nf):  # predict: x ← F x, P⁻ = F P Fᵀ + j_f Q₁(h)
-        _predict_covariance(F, Q1, jerk[f], P[f], FP, P1[f])
+        _predict_covariance_ca(h, F[0, 2], jerk[f], Q1, P[f], P1[f])
         _predict_mean(q[f], v[f], a[f], h, table, d[0], q1[f], v1[f])
         for i in range(nv):
             a1[f, i] = a[f, i]
@@ -588,6 +644,8 @@ def auto_step_loops(
         if gate_on:  # base.outlier_gate, in loops
             reject, level = _outlier_gate(nis, threshold, level, nv, run)
         accept = not reject
+    else:  # (no innovation: the buffer's entries defined all the same)
+        e1[:] = 0.0
     if accept:
         K, C, Pn = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
         for f in range(nf):  # correct: K = P⁻[:, 0] / S, the Joseph form
@@ -608,14 +666,13 @@ def auto_step_loops(
 
 def _auto_warm_args() -> tuple[object, ...]:
     """Arguments of :data:`auto_kernel`'s one signature (float64 C arrays, as the step gives)."""
-    nf, nv = 2, 1
-    z2, P = np.zeros((nf, nv)), np.tile(np.eye(3), (nf, 1, 1))
+    nf, nq, nv = 2, 1, 1
+    size = auto_layout(nf, nq, nv)[-1]
+    x = np.zeros(size)
+    x[auto_layout(nf, nq, nv)[6] :] = 1.0  # (P = ones: S > 0)
     return (
-        z2, z2.copy(), z2.copy(), P, np.ones((nf, nv)), np.zeros(nf), np.full((nf, nv), 0.5),
-        np.ones(nf), 1e-3, 1.0, np.zeros(nv), True, True, 30.0, 30.0, 0.99, math.inf, 1.0, 0,
-        np.zeros((0, 4), dtype=np.int64), *(np.empty((nf, nv)) for _ in range(3)),
-        np.empty((nf, 3, 3)), np.empty((nf, nv)), np.empty((nf, nv)), np.empty(nf),
-        np.empty((nf, nv)), np.empty(2 * nv),
+        x, np.empty(size), np.ones(nf), np.zeros(nv), np.zeros((0, 4), dtype=np.int64), 1e-3,
+        1.0, True, True, 30.0, 30.0, 0.99, math.inf, 1.0, 0, nq,
     )  # fmt: skip
 
 
@@ -626,7 +683,7 @@ auto_kernel = LazyKernel(
     *_auto_warm_args(),
     helpers=(
         *LIE_HELPERS, _transition_into, _copy_into, _predict_covariance, _predict_mean, _correct,
-        _innovations,
+        _innovations, auto_layout, _predict_covariance_ca, _rows, _covariances,
         _outlier_gate, _weights_into, _mixture_into,
     ),
 )  # fmt: skip

@@ -234,3 +234,79 @@ def test_auto_kernel_is_loaded_when_made_and_never_compiled_in_the_loop() -> Non
     for k in range(1, 50):
         ob.update(k * 1e-3, None if k % 7 == 0 else (frozen if k % 5 == 0 else q))
     assert list(kernel.signatures) == signatures and len(signatures) == 1
+
+
+def test_a_never_behind_blend_over_the_auto_kf_compiles_nothing_in_its_updates() -> None:
+    """The ``"auto"`` kf's output (copied out of its state's buffer, ``fresh_output``) is
+    writable, as the blend's kernels take their arrays: a read-only one was a second
+    signature of ``neverbehind.score_kernel``, loaded in the first update (11 ms)."""
+    from pinobs.observers import neverbehind
+
+    robot = pinobs.load("ur5")
+    ob = pinobs.make_observer("ekf", robot, noise_std=1e-4, rate=1000.0, never_behind=True)
+    kernels = (neverbehind.score_kernel, neverbehind.log_odds_kernel)
+    before = [list(k.compiled.signatures) for k in kernels if k.compiled is not None]
+    ob.reset(0.0, robot.neutral())
+    for k in range(1, 30):
+        ob.update(k * 1e-3, None if k % 7 == 0 else robot.neutral())
+    after = [list(k.compiled.signatures) for k in kernels if k.compiled is not None]
+    assert len(after) == 2 and after == before and all(len(s) == 1 for s in after)
+
+
+def test_the_auto_state_is_one_buffer_read_through_read_only_views() -> None:
+    """Issue 39: ``"auto"``'s state lies in one float64 buffer (``AutoState.x``, laid out by
+    ``kf_kernels.auto_layout``); its fields are read-only views of it, a step writes a new
+    buffer and leaves the one it read as it was; the estimate is a copy of the mixture of
+    its own (``fresh_output``: it keeps nothing of the state's buffer alive)."""
+    robot = pinobs.load("ur5")
+    ob = pinobs.make_observer("kf", robot, noise_std=1e-4, rate=1000.0)
+    ob.reset(0.0, robot.neutral())
+    rng = np.random.default_rng(0)
+    for k in range(1, 40):
+        ob.update(k * 1e-3, robot.neutral() + 1e-4 * rng.standard_normal(robot.nv))
+    state = ob._state
+    before = state.x.copy()
+    nf, nv = len(AUTO_LAMBDAS), robot.nv
+    bank = state.bank
+    parts = (bank.q, bank.v, bank.a, bank.P, state.A, state.B, state.w, state.mix)
+    shapes = [(nf, nv), (nf, nv), (nf, nv), (nf, 3, 3), (nf, nv), (nf,), (nf, nv), (2 * nv,)]
+    assert [p.shape for p in parts] == shapes and bank.innovation is not None
+    for part in parts:
+        assert np.shares_memory(part, state.x) and not part.flags.writeable
+    assert np.allclose(state.w.sum(axis=0), 1.0)
+    e = ob.update(40e-3, robot.neutral())
+    assert ob._state.x is not state.x and np.array_equal(state.x, before)
+    assert np.array_equal(np.concatenate([e.q, e.v]), ob._state.mix)
+    assert not np.shares_memory(e.q, ob._state.x) and not e.q.flags.writeable
+    assert e.q.base is not None and e.q.base.size == 2 * nv  # (the mixture's copy only)
+    predicted = ob.step(ob._state, 1e-3, None, np.zeros(nv))
+    assert predicted.bank.innovation is None and np.array_equal(predicted.w, ob._state.w)
+
+
+def test_the_auto_kernels_covariance_prediction_is_the_general_one() -> None:
+    """``_predict_covariance_ca`` (``F`` written out: its products by 1 and 0 and its sums of
+    0 left out) gives the bits of ``_predict_covariance`` (``F P Fᵀ + j Q₁``) on covariances
+    of every scale, and zeros in them."""
+    from pinobs.observers import kf_kernels
+
+    def plain(f):  # the Python function (numba's compiled one once loaded: the same arithmetic)
+        return getattr(f, "py_func", f)
+
+    general, written = (
+        plain(kf_kernels._predict_covariance),
+        plain(kf_kernels._predict_covariance_ca),
+    )
+    rng = np.random.default_rng(1)
+    for trial in range(300):
+        h = float(10.0 ** rng.uniform(-4, -1))
+        F, Q1 = np.eye(3), np.zeros((3, 3))
+        plain(kf_kernels._transition_into)(h, F, Q1)
+        L = rng.standard_normal((3, 3)) * 10.0 ** rng.uniform(-8, 2, size=(3, 1))
+        P = L @ L.T
+        if trial % 3 == 0:
+            P[0, 1] = P[1, 0] = P[1, 2] = P[2, 1] = 0.0  # (the start's diagonal)
+        jerk = float(10.0 ** rng.uniform(-6, 6))
+        a, b = np.empty((3, 3)), np.empty((3, 3))
+        general(F, Q1, jerk, P, np.empty((3, 3)), a)
+        written(h, F[0, 2], jerk, Q1, P, b)
+        assert np.array_equal(a, b), (trial, a - b)

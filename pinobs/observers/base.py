@@ -210,10 +210,8 @@ class Observer(ABC, Generic[State]):
     #: whose step is compiled only on some robots): the limit is not entered and costs
     #: nothing per update.
     uses_blas: bool = True
-    #: Whether :meth:`output` returns new float64 arrays of its own at every call, no view of
-    #: the state (a family's, or an instance's): the estimate then keeps them, made
-    #: read-only, without the copies it takes otherwise (issue 39: two copies less an update;
-    #: ``kf`` with ``"auto"`` copies its estimate out of the state's buffer once).
+    #: Whether :meth:`output` returns new float64 arrays at every call, no view of the state:
+    #: the estimate keeps them read-only, uncopied (issue 39; ``kf`` with ``"auto"``).
     fresh_output: bool = False
     _init_args: tuple[tuple[Any, ...], dict[str, Any]]  # set by __new__
 

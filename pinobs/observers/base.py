@@ -526,7 +526,7 @@ class Observer(ABC, Generic[State]):
         self._restart_due = False
         self._pauses.append((t_new, dt))
         if t_state < t_new - TIME_EPS:  # a latency: the estimate at t_new, predicted ahead
-            self._torques = [(self._t, self._tau)]  # the torque held through the pause
+            self._torques = [(min(self._t, t_state), self._tau)]  # held through the pause
             ahead = self._advance(state, t_state, t_new, None)
         else:
             t_state, ahead = t_new, state

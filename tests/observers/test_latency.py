@@ -52,3 +52,22 @@ def test_every_observer_accepts_a_latency_and_rejects_a_negative_one(name: str) 
     assert ob.latency == 1e-3
     with pytest.raises(pinobs.GainError, match="latency"):
         make_observer(name, robot, rate=1000.0, latency=-1.0)
+
+
+@pytest.mark.parametrize("name", ["kf", "ekf"])
+def test_a_pause_whose_first_update_has_no_sample_restarts_under_a_latency(name: str) -> None:
+    """A 1 s pause under a 3 ms latency whose first update brings no sample: the next sample
+    restarts the state (at rest here: zero velocity, its position).  Before, the torque
+    held through the pause was stamped at the update without a sample, after the state's
+    time, and the lookup raised ``StopIteration`` (found by helper kfbuf)."""
+    robot = pinobs.load("ur5")
+    ob = make_observer(name, robot, noise_std=1e-4, rate=1000.0, latency=3e-3)
+    q = robot.neutral()
+    ob.reset(0.0, q, None, robot.gravity(q))
+    for k in range(1, 20):
+        ob.update(k * 1e-3, q, robot.gravity(q))
+    ob.update(19e-3 + 1.0, None, robot.gravity(q))
+    est = ob.update(20e-3 + 1.0, q, robot.gravity(q))
+    assert len(ob.pauses) == 1
+    np.testing.assert_allclose(est.v, 0.0, atol=1e-9)
+    np.testing.assert_allclose(est.q, q, atol=1e-9)

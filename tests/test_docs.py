@@ -105,6 +105,20 @@ def test_readme_cites_the_theory_page_in_the_repository() -> None:
     assert "docs/theory/math.md" in text
 
 
+def test_no_rst_role_in_the_package_spans_a_line_or_names_a_title() -> None:
+    """docs/rst_roles.py makes ``:attr:`target``` a link; a role whose target holds a line
+    break or a Sphinx ``title <target>`` gave mkdocs-autorefs a reference without an
+    identifier, and ``mkdocs build`` died on a ``KeyError`` (CI, session 22)."""
+    role = re.compile(r":(?:py:)?(?:func|class|meth|attr|mod|data|exc|obj):`([^`]+)`")
+    bad = [
+        f"{path.relative_to(ROOT)}: {m.group(0)!r}"
+        for path in sorted((ROOT / "pinobs").rglob("*.py"))
+        for m in role.finditer(path.read_text())
+        if re.search(r"\s", m.group(1))
+    ]
+    assert not bad, bad
+
+
 def test_ci_builds_the_site_strictly() -> None:
     ci = (ROOT / ".ci" / "run").read_text()
     assert 'pip install -q -e ".[docs]" && mkdocs build --strict' in ci

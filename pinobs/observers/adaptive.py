@@ -232,8 +232,8 @@ class _State(NamedTuple):
     learner: Learner  # fed by after_commit only, at the commit boundary (module docstring, 5)
 
 
-#: Consecutive rejected solves (no physical model fits the rows) after which :meth:`AdaptiveEKF.
-#: consistency` says ``"inconsistent"`` whatever the NIS: measured, exact-model and the
+#: Consecutive rejected solves (no physical model fits the rows) after which
+#: :meth:`AdaptiveEKF.consistency` says ``"inconsistent"`` whatever the NIS: measured, exact-model and the
 #: README's model-error logs (UR5, Panda, double pendulum, 12 s, seeds 0-1) reject at most one
 #: solve, the second; a UR5 whose wrist_2 torque is logged with the wrong sign rejected every
 #: one for 30 s, stayed in its warm-up (1.18× kf) and read "consistent" (the offset state

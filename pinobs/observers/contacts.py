@@ -94,8 +94,8 @@ class ContactProbability:
 
     (``Φ`` the standard normal CDF; SEROW's current ``Serow::runContactEstimator``,
         core/src/Serow.cpp at b2e0d0b, also sets the status at ``p > 0.5``).  ``v_foot`` is the
-        foot's velocity in the world as the filter predicts it (:meth:`InvariantEKF.foot_velocities
-        <pinobs.observers.inekf.InvariantEKF.foot_velocities>`): a foot still pushing down but
+        foot's velocity in the world as the filter predicts it
+        (:meth:`~pinobs.observers.inekf.InvariantEKF.foot_velocities`): a foot still pushing down but
         already moving (lift-off) or sliding is out of contact, where a force threshold keeps it.
         SEROW normalises its four probabilities by their sum (so that they share one); that
         would put four feet in stance at ¼ each, so each foot is kept on its own here.

@@ -296,8 +296,8 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
 
     def output(self, state: KFState | AutoState) -> tuple[Vector, Vector]:
         """With ``"auto"``: the bank's mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)`` (module docstring;
-        computed by the step, in the state's buffer: :attr:`AutoBank.mixture
-        <pinobs.observers.kf_bank.AutoBank.mixture>`), copied out once (:attr:`fresh_output`;
+        computed by the step, in the state's buffer:
+        :attr:`~pinobs.observers.kf_bank.AutoBank.mixture`), copied out once (:attr:`fresh_output`;
         writable, as the kernels that take it expect; here, not through the bank: a call less
         every update)."""
         if isinstance(state, AutoState):

@@ -38,6 +38,10 @@ Metrics (per run; the tables give the mean over seeds and the worst seed):
   quaternion EKF's `δv` directly.
 
 * `in ±2σ x / y / z`: the same per axis of the world frame.
+* `IMU frame: in ±2σ x / y / z`, `NEES/3`: the same for the velocity in the IMU's frame,
+  `v̂_b − v_b ≈ R̂ᵀ ξ_v` (invariant), `−R̂ᵀ δv − v̂_b^ δθ` (quaternion), where the yaw, not
+  observable, does not enter: in the world frame its prior's σ (0.1 rad) times the walking
+  speed widens the horizontal axes' σ (rows run before these columns: blank).
 * cost: seconds per update against one `pin.aba` on go1, interleaved in chunks of 20 (as
   `pinobs.evaluation.timing.measure_cost`, which takes an `Observer`), by this thread's CPU
   time and by wall time.
@@ -73,7 +77,8 @@ NIS on the MuJoCo go1 (`simulated_nis`), where the defaults were chosen, its enc
 `rolling`: go1's `--motions` and the `--long` trot with both filters given `foot_radius`
 (the URDF's foot spheres, 2 cm: each foot measured at its point that touched the ground,
 `pinobs.observers.rolling`), with `GO1_GAINS` (the contact density measured at that point,
-`density`); the section's other rows kept (`rolling_gains`: the rows with `GAINS`, before).
+`density`); the section's other rows kept (`rolling_white`: the rows with `GO1_WHITE_GAINS`,
+before, and `rolling_gains` those with `GAINS`, before that).
 
 `density`: the contact density of the feet's true motion over their stances
 (`contact_density`, no filter): go1's trot at the touch point, which gives `GO1_GAINS`, and
@@ -143,15 +148,21 @@ OLD_GAINS = dataclasses.replace(GAINS, contact=0.1, kinematics=5e-3)
 #: 0.007), the kinematics term 0 instead → 0.42 (unchanged), the encoders' J Σ_q Jᵀ 0 → 0.42.
 TALOS_GAINS = dataclasses.replace(GAINS, contact=8.8e-4)
 #: go1 with rolling feet (``foot_radius=FOOT_RADIUS``, the ``rolling`` rows; ``legged_run``'s
-#: default radius): ``GAINS`` with the contact density measured the same way on go1's truth
-#: at the point each foot touched the ground (rolling.py's (R2)), not its centre
-#: (``contact_density``; the trot, 20 s, seed 0: sqrt(Σ|Δa|² / (3 Σ τ)) = 0.0053 m/s/√Hz,
-#: per axis x / y / z 0.0050 / 0.0024 / 0.0073, 390 stances; the centre's 0.0065 on the same
-#: run, 0.0069 on its first 5 s: ``GAINS``' number).  What is left is MuJoCo's soft contact:
-#: the loaded sphere sinks ~1 mm and creeps ~2 mm sideways over a stance.  Measured on the
-#: trot's truth (the motion is the same for every seed), so the trot rows are not held out;
-#: stand and sway are.  ``kinematics`` stays 1 mm, as in ``TALOS_GAINS``.
-GO1_GAINS = dataclasses.replace(GAINS, contact=5.3e-3)
+#: default radius), before (``GO1_WHITE_GAINS``): ``GAINS`` with the contact density measured
+#: the same way on go1's truth at the point each foot touched the ground (rolling.py's (R2)),
+#: not its centre (``contact_density``; the trot, 20 s, seed 0: sqrt(Σ|Δa|² / (3 Σ τ)) =
+#: 0.0053 m/s/√Hz, 390 stances); NEES/3 0.42-0.47 on trot and stand: σ ~1.5× the errors.
+GO1_WHITE_GAINS = dataclasses.replace(GAINS, contact=5.3e-3)
+#: ``GO1_GAINS``: that displacement split at ``LANDING_TIME`` after each contact flag rises
+#: (``stance_density``'s ``landing`` / ``after``, same run): the first 20 ms move the point
+#: 0.0136 m/s/√Hz (x / y / z 0.014 / 0.0025 / 0.019; 0.18 / 0.03 / 0.25 m/s RMS in the
+#: first 10 ms: the sphere still settling into MuJoCo's soft contact, and short bounces),
+#: the rest of the stance 0.0023 (0.0021 / 0.0020 / 0.0026).  One white density spreads the
+#: landing over the whole stance; ``contact`` is now the rest's and ``landing`` the first
+#: 20 ms' excess, sqrt(0.0136² − 0.0023²) = 0.0134 (``InEKFGains.landing``, both filters).
+#: Measured on the trot's truth (the motion is the same for every seed): the trot rows are
+#: not held out; stand and sway are.  ``kinematics`` stays 1 mm.
+GO1_GAINS = dataclasses.replace(GAINS, contact=2.3e-3, landing=1.34e-2, landing_time=0.02)
 #: go1's encoders quantised as the real Go1 log's are (steps 6e-5 rad hip and thigh, 4e-5 rad
 #: calf; white 3e-5 rad under the rounding, so 44 % of a still joint's readings repeat the
 #: previous one, the log's 35-57 %): the ``real_sim`` rows' second noise.
@@ -177,10 +188,12 @@ NOTES = {
     "humanoid": "`TALOS_GAINS`: contact density measured on TALOS's stepping truth (20 s, "
     "seed 0): the step rows are not held out, stand and sway are. The stepping walks 1.30 m "
     "forward; the base's path, the drifts' denominator, is 5.87 m (side-to-side shifts)",
-    "rolling": "`GO1_GAINS`: contact density measured on the trot's truth at the touch point "
+    "rolling": "`GO1_GAINS`: contact density after the landing and landing term (a foot's first "
+    "20 ms) measured on the trot's truth at the touch point "
     "(20 s, seed 0; section `density`): the trot rows are not held out (the motion is the same "
     "for every seed), stand and sway are",
-    "rolling_gains": "`GAINS` with rolling feet, the rows before `GO1_GAINS` (not rerun)",
+    "rolling_gains": "`GAINS` with rolling feet, the rows before `GO1_WHITE_GAINS` (not rerun)",
+    "rolling_white": "`GO1_WHITE_GAINS` with rolling feet, the rows before `GO1_GAINS` (not rerun)",
     "density": "Measured on the truth alone (no filter): seed 0, the motions of `DENSITY_RUNS`; "
     "`density_diagnosis`: filters on the measuring motion, not used to choose",
     "real": "The real log held out: run once with the settings MuJoCo gave, nothing tuned on "
@@ -220,6 +233,7 @@ def run_filter(
         prior = dataclasses.replace(prior, attitude=math.radians(2 * roll), velocity=2 * speed)
     ekf.reset(t[0], q0, v0, gyro=gyro[0], acc=acc[0], contacts=contacts[0], prior=prior)
     err_v, inside, nees, yaw_err, pos_err = [], [], [], 0.0, np.zeros(2)
+    inside_b, nees_b = [], []  # the same in the IMU frame (no yaw in it)
     for k in range(1, t.size):
         est = ekf.update(t[k], q_meas[k], gyro[k], acc[k], contacts[k])
         err_v.append(est.v[:3] - base_v[k, :3])
@@ -236,6 +250,13 @@ def run_filter(
         e = v_hat - v_imu
         inside.append(np.abs(e) <= 2.0 * np.sqrt(np.diag(cov)))
         nees.append(float(e @ np.linalg.solve(cov, e)) / 3.0)
+        # in the IMU frame: v̂_b − v_b ≈ R̂ᵀ ξ_v (invariant), −R̂ᵀ δv − v̂_b^ δθ (quaternion)
+        R_hat = ekf.state.R
+        e_b = R_hat.T @ v_hat - (R_b @ ekf.imu_placement[0]).T @ v_imu
+        M = np.hstack([np.zeros((3, 3)) if name == "inekf" else skew(R_hat.T @ v_hat), R_hat.T])
+        cov_b = M @ P[0:6, 0:6] @ M.T
+        inside_b.append(np.abs(e_b) <= 2.0 * np.sqrt(np.diag(cov_b)))
+        nees_b.append(float(e_b @ np.linalg.solve(cov_b, e_b)) / 3.0)
         if k == t.size - 1:
             rel = Rotation.from_matrix(est.rotation @ R_b.T).as_euler("ZYX")
             yaw_err = abs(float(rel[0]))
@@ -250,10 +271,14 @@ def run_filter(
         "in_2sigma": float(np.mean(inside)),
         "in_2sigma_xyz": np.mean(inside, axis=0).tolist(),
         "nees": float(np.mean(nees)),
+        "in_2sigma_body_xyz": np.mean(inside_b, axis=0).tolist(),
+        "nees_body": float(np.mean(nees_b)),
         "walked_m": walked,
     }
 
 
+#: :func:`stance_density`'s split of each stance: its first ``LANDING_TIME`` [s] and the rest.
+LANDING_TIME = 0.02
 #: Frequency bands [Hz] of :func:`stance_density`'s velocity spectrum.
 PSD_BANDS = ((5.0, 20.0), (20.0, 60.0), (60.0, 250.0))
 
@@ -285,6 +310,8 @@ def stance_density(
     n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
     dt = float(t[1] - t[0])
     sq, tau, stances = np.zeros(3), 0.0, 0
+    split = np.zeros((2, 4))  # first LANDING_TIME, the rest: Σ Δa_i², Σ τ
+    m = round(LANDING_TIME / dt)
     band = np.zeros((len(PSD_BANDS), 2))  # Σ|V|², Σ τ
     for j in range(flags.shape[1]):
         edges = np.diff(np.concatenate([[0], flags[:, j].astype(int), [0]]))
@@ -294,6 +321,10 @@ def stance_density(
                 a = centres[k0 : k1 + 1, j] + rotations[k0 : k1 + 1, j] @ s
                 d = a[-1] - a[0]
                 sq, tau, stances = sq + d * d, tau + float(t[k1] - t[k0]), stances + 1
+                km = min(m, k1 - k0)
+                for i, (lo, hi) in enumerate(((0, km), (km, k1 - k0))):
+                    split[i, :3] += (a[hi] - a[lo]) ** 2
+                    split[i, 3] += (hi - lo) * dt
                 power = np.sum(np.abs(np.fft.rfft(np.diff(a, axis=0), axis=0)) ** 2, axis=1)
                 f = np.fft.rfftfreq(k1 - k0, dt)
                 for i, (lo, hi) in enumerate(PSD_BANDS):
@@ -307,6 +338,10 @@ def stance_density(
         "psd": [float(np.sqrt(p / (3.0 * w))) if w > 0 else math.nan for p, w in band],
         "stances": stances,
         "stance_s": tau,
+        "landing": float(np.sqrt(split[0, :3].sum() / (3.0 * split[0, 3]))),
+        "landing_per_axis": np.sqrt(split[0, :3] / split[0, 3]).tolist(),
+        "after": float(np.sqrt(split[1, :3].sum() / (3.0 * split[1, 3]))),
+        "after_per_axis": np.sqrt(split[1, :3] / split[1, 3]).tolist(),
     }
 
 
@@ -350,8 +385,10 @@ def density_section() -> dict[str, Any]:
 
 #: The ``density_diagnosis`` rows: ``GO1_GAINS`` and one term changed at a time.
 DIAGNOSIS_GAINS = {
-    "GO1_GAINS (contact 0.0053, kinematics 1 mm)": GO1_GAINS,
-    "contact 1e-6": dataclasses.replace(GO1_GAINS, contact=1e-6),
+    "GO1_GAINS (contact 0.0023, landing 0.0134 for 20 ms, kinematics 1 mm)": GO1_GAINS,
+    "GO1_WHITE_GAINS (contact 0.0053, no landing term: before)": GO1_WHITE_GAINS,
+    "contact 0.0023, no landing term": dataclasses.replace(GO1_GAINS, landing=0.0),
+    "contact 1e-6": dataclasses.replace(GO1_WHITE_GAINS, contact=1e-6),
     "kinematics 0.1 mm": dataclasses.replace(GO1_GAINS, kinematics=1e-4),
     "kinematics 0": dataclasses.replace(GO1_GAINS, kinematics=0.0),
 }
@@ -398,13 +435,19 @@ def _density_lines(density: dict[str, Any]) -> list[str]:
         "",
         "| run | σ_c [m/s/√Hz] | x / y / z | "
         + " | ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in PSD_BANDS)
-        + " | stances | stance time [s] |",
-        "|---|---:|---:|" + "---:|" * len(PSD_BANDS) + "---:|---:|",
+        + f" | first {LANDING_TIME * 1e3:g} ms (x / y / z) | after (x / y / z) "
+        "| stances | stance time [s] |",
+        "|---|---:|---:|" + "---:|" * len(PSD_BANDS) + "---:|---:|---:|---:|",
     ]
     for label, r in density.items():
+        split = [
+            f"{r[k]:.2g} ({' / '.join(f'{a:.2g}' for a in r[k + '_per_axis'])})" if k in r else ""
+            for k in ("landing", "after")
+        ]
         md.append(
             f"| {label} | {r['density']:.2g} | {' / '.join(f'{a:.2g}' for a in r['per_axis'])} "
-            f"| {' | '.join(f'{p:.2g}' for p in r['psd'])} | {r['stances']} | {r['stance_s']:.1f} |"
+            f"| {' | '.join(f'{p:.2g}' for p in r['psd'])} | {' | '.join(split)} "
+            f"| {r['stances']} | {r['stance_s']:.1f} |"
         )
     return [*md, ""]
 
@@ -418,8 +461,8 @@ def _verdict(nees: float) -> str:
 def _table(section: dict[str, Any]) -> list[str]:
     md = [
         "| motion, start | filter | v rms [m/s] | yaw drift | pos drift | in ±2σ | "
-        "in ±2σ x / y / z | NEES/3 | walked [m] |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        "in ±2σ x / y / z | NEES/3 | IMU frame: in ±2σ x / y / z | NEES/3 | walked [m] |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for motion, per_filter in section.items():
         unit = "/m" if any(w in motion for w in WALKS) else "/s"
@@ -429,15 +472,25 @@ def _table(section: dict[str, Any]) -> list[str]:
                 for k in ("v_rms", "yaw_drift", "pos_drift", "in_2sigma", "nees", "walked_m")
             )
             xyz = 100 * np.mean([r["in_2sigma_xyz"] for r in runs], axis=0)
+            body = _body_cells(runs)
             md.append(
                 f"| {motion} | `{name}` | {v.mean():.3g} ({v.max():.3g}) | "
                 f"{math.degrees(yaw.mean()):.3g}°{unit} ({math.degrees(yaw.max()):.3g}) | "
                 f"{100 * pos.mean():.3g} cm{unit} ({100 * pos.max():.3g}) | "
                 f"{100 * ins.mean():.1f} % ({100 * ins.min():.1f}) | "
-                f"{' / '.join(f'{a:.1f}' for a in xyz)} | {nees.mean():.3g} | "
+                f"{' / '.join(f'{a:.1f}' for a in xyz)} | {nees.mean():.3g} | {body} | "
                 f"{walked.mean():.2f} |"
             )
     return md
+
+
+def _body_cells(runs: list[dict[str, Any]]) -> str:
+    """The IMU frame's ``in ±2σ x / y / z | NEES/3`` cells (blank for rows run before them)."""
+    if not all("nees_body" in r for r in runs):
+        return " | "
+    xyz = 100 * np.mean([r["in_2sigma_body_xyz"] for r in runs], axis=0)
+    nees = np.mean([r["nees_body"] for r in runs])
+    return f"{' / '.join(f'{a:.1f}' for a in xyz)} | {nees:.3g}"
 
 
 def _targets(section: dict[str, Any]) -> list[str]:
@@ -454,8 +507,21 @@ def _targets(section: dict[str, Any]) -> list[str]:
             f"{'met' if inekf <= 0.7 * qekf else 'missed'}); in ±2σ per axis "
             f"{' / '.join(f'{100 * a:.1f}' for a in xyz)} % and NEES/3 {nees:.2g} "
             f"(≥ 95 % on every axis and consistent: {'met' if ok else 'missed'}; {_verdict(nees)})"
+            + _body_target(per_filter["inekf"])
         )
     return md
+
+
+def _body_target(runs: list[dict[str, Any]]) -> str:
+    """The IMU frame's numbers for :func:`_targets` (none for rows run before them)."""
+    if not all("nees_body" in r for r in runs):
+        return ""
+    xyz = np.mean([r["in_2sigma_body_xyz"] for r in runs], axis=0)
+    nees = float(np.mean([r["nees_body"] for r in runs]))
+    return (
+        f"; in the IMU frame {' / '.join(f'{100 * a:.1f}' for a in xyz)} % and NEES/3 "
+        f"{nees:.2g} ({_verdict(nees)})"
+    )
 
 
 def measure_cost(run: Any, robot: pinobs.Robot, chunk: int = 20, chunks: int = 100) -> dict:
@@ -543,13 +609,22 @@ def format_report(report: dict[str, Any]) -> str:
         report.get("rolling") or {},
         "`rolling`: "
         + rolling
-        + f"`GO1_GAINS` (contact {GO1_GAINS.contact:g} m/s/√Hz, measured: `density`):",
+        + f"`GO1_GAINS` (contact {GO1_GAINS.contact:g} m/s/√Hz, landing {GO1_GAINS.landing:g} "
+        f"m/s/√Hz over a foot's first {GO1_GAINS.landing_time * 1e3:g} ms of contact, both "
+        "measured: `density`):",
+    )
+    md += _section_lines(
+        report.get("rolling_white") or {},
+        "`rolling_white`: "
+        + rolling
+        + f"`GO1_WHITE_GAINS` (contact {GO1_WHITE_GAINS.contact:g} m/s/√Hz, no landing term; "
+        "the rows before `GO1_GAINS`):",
     )
     md += _section_lines(
         report.get("rolling_gains") or {},
         "`rolling_gains`: "
         + rolling
-        + f"`GAINS` (contact {GAINS.contact:g} m/s/√Hz; the rows before `GO1_GAINS`):",
+        + f"`GAINS` (contact {GAINS.contact:g} m/s/√Hz; the rows before `GO1_WHITE_GAINS`):",
     )
     md += _density_lines(report.get("density") or {})
     md += _diagnosis_lines(report.get("density_diagnosis") or {})
@@ -974,9 +1049,11 @@ def main() -> None:
 
 
 #: The report's sections (``legged_truth.json``'s keys besides ``runs``, ``gains``,
-#: ``machine`` and ``conditions``); ``rolling_gains``: the rolling rows with ``GAINS`` (kept).
+#: ``machine`` and ``conditions``); ``rolling_gains``, ``rolling_white``: the rolling rows with
+#: ``GAINS`` and ``GO1_WHITE_GAINS`` (kept).
 SECTIONS = ("motions", "long", "old_gains", "cost", "humanoid", "real", "slip", "real_sim",
-            "rolling", "rolling_gains", "density", "density_diagnosis", "gains")  # fmt: skip
+            "rolling", "rolling_white", "rolling_gains", "density", "density_diagnosis",
+            "gains")  # fmt: skip
 
 
 def _gains(**named: InEKFGains) -> dict[str, Any]:

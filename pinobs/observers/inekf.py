@@ -129,6 +129,18 @@ axis, period ``T``) adds ``2 |h_j|² σ_g²/T`` to ``E|ṗ̂_j|²`` (go1, 400 Hz
 
     |ṗ_j|² ≈ max(|ṗ̂_j|² − 2 |h_j|² σ_g²/T, 0)                                            (10)
 
+A foot still settling after its contact flag rose (a sphere sinking into a soft floor,
+short bounces) moves most in its first milliseconds; with ``InEKFGains.landing`` ``σ_l``
+and ``landing_time`` ``τ_l`` its density over that window is raised (both families;
+:func:`~pinobs.observers.legged_filter.landing_densities`), ``t_j`` the time it landed
+(was added by (6))::
+
+    Q_c,dj = (σ_c² + σ_l² · |[t, t + h] ∩ [t_j, t_j + τ_l]| / h) I                     (11)
+
+so that ``σ_c`` is the stance's own density, not one that spreads the landing over every
+stance (MuJoCo's go1 trotting: 0.0136 m/s/√Hz over the first 20 ms, 0.0023 after;
+``benchmarks/legged_truth.md``).  ``σ_l = 0`` (default) leaves the filter as it was.
+
 Prior (at ``reset``, before any foot is added).  :class:`InEKFPrior` gives independent
 errors of the attitude ``ξ_R``, of the velocity in the base frame ``v_b`` (as ``reset``
 takes it), and of the world position: ``ξ_v = R̂ (v̂_b − v_b)`` exactly, and to first
@@ -533,6 +545,7 @@ class InvariantEKF(LeggedFilter):
         qc = noise_densities(self.gains, x.shape[0] - 2)
         if self._speed is not None and state.feet:
             qc = slip_densities(qc, self._speed[list(state.feet)], dt)  # eq. (9)
+        qc = self._landing(qc, state, dt)  # eq. (11)
         kernel = propagate_kernel.compiled
         assert kernel is not None  # loaded by the constructor
         kernel(state.R, x, state.bias, imu, dt, self._gravity, qc, P, R1, x1, P1)

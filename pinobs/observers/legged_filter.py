@@ -10,6 +10,7 @@ gives only its mathematics (``_initial_covariance``, ``_propagate``, ``_update``
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -33,9 +34,33 @@ from pinobs.observers.legs import (
     replace_state,
 )
 
-__all__ = ["LeggedFilter"]
+__all__ = ["LeggedFilter", "landing_densities"]
 
 _I3 = np.eye(3)
+
+
+def landing_densities(
+    qc: Vector, gains: InEKFGains, landed: Sequence[float], start: float, h: float
+) -> Vector:
+    """``Q_c`` (:func:`~pinobs.observers.legs.noise_densities`, feet in state order) with each foot's density raised
+    by ``gains.landing²`` over the part of the step ``[start, start + h]`` that falls in its
+    first ``gains.landing_time`` of contact (``landed``: each foot's contact start [s], one per
+    foot in the state), as a fraction of the step: the variance the step adds is then that
+    of a walk of density ``landing`` over exactly that window, whatever the sampling;
+    read-only.  ``qc`` itself where no foot is in its window or ``landing`` or
+    ``landing_time`` is 0 (scalar arithmetic: a few feet, every sample)."""
+    window = gains.landing_time
+    if gains.landing == 0.0 or window == 0.0 or h <= 0.0:
+        return qc
+    shares = [min(max((t0 + window - start) / h, 0.0), 1.0) for t0 in landed]
+    if not any(shares):
+        return qc
+    out = np.array(qc, dtype=float)
+    for i, share in enumerate(shares):
+        if share:
+            out[9 + 3 * i : 12 + 3 * i] += share * gains.landing**2
+    out.setflags(write=False)
+    return out
 
 
 class LeggedFilter(ABC):
@@ -76,6 +101,8 @@ class LeggedFilter(ABC):
         self.gains, self.gravity = s.gains, s.gravity
         self.feet, self.imu_placement = s.feet, s.imu_placement
         self._state: LegState | None = None
+        #: each foot's contact start [s] (``InEKFGains.landing``; ``-inf``: not yet)
+        self._landed = [-math.inf] * len(self.feet)
         self._estimate: InEKFEstimate | None = None
         self._warned = False
 
@@ -129,6 +156,7 @@ class LeggedFilter(ABC):
         a = self.setup.reset_inputs(t, q, v, gyro, acc, contacts, prior, bias)
         P = self._initial_covariance(a)
         state = LegState(a.t, a.R, a.x, (), a.bias, P, a.imu, a.t)
+        self._landed = [-math.inf] * len(self.feet)
         h, jac = self._legs(a.q_joints, a.R, a.flags)
         self._remember(None, h)
         state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
@@ -214,6 +242,12 @@ class LeggedFilter(ABC):
         ``feet``; here none."""
         return state, ()
 
+    def _landing(self, qc: Vector, state: LegState, dt: float) -> Vector:
+        """``Q_c`` with the landing term of the feet in ``state`` over the step from
+        ``state.t`` (:func:`landing_densities`)."""
+        landed = [self._landed[j] for j in state.feet]
+        return landing_densities(qc, self.gains, landed, state.t, dt)
+
     def _remember(self, u: UpdateInputs | None, h: Vector, dt: float = 0.0) -> None:
         """What the next step needs of this one (after the commit; ``u`` ``None`` at
         ``reset``, before the feet are added); here nothing."""
@@ -258,6 +292,7 @@ class LeggedFilter(ABC):
             P = F @ P @ F.T
             P[at : at + 3, at : at + 3] += self._foot_noise(R, jac[j])
             x = np.vstack([x, x[1] + R @ h[j]])
+            self._landed[j] = state.t
         return replace_state(state, x=x, P=P, feet=state.feet + tuple(new))
 
     def _commit(

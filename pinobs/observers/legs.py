@@ -260,6 +260,11 @@ class InEKFGains:
         contact: foot velocity while in contact (slip) [m/s/√Hz].
         joint: joint encoder noise, σ per sample [rad].
         kinematics: foot position model error (foot radius, link lengths), σ per sample [m].
+        landing: foot velocity over the first ``landing_time`` of a contact, added to
+            ``contact`` (the touch-down transient: the foot still settling after its contact
+            flag rose) [m/s/√Hz]; 0 (default): none
+            (:func:`~pinobs.observers.legged_filter.landing_densities`).
+        landing_time: how long after a foot's contact began ``landing`` applies [s].
     """
 
     gyro: float = 1e-2
@@ -269,6 +274,8 @@ class InEKFGains:
     contact: float = 1e-1
     joint: float = 1e-3
     kinematics: float = 1e-3
+    landing: float = 0.0
+    landing_time: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -96,7 +96,8 @@ class QuaternionEKF(LeggedFilter):
     Takes the arguments of :class:`pinobs.observers.inekf.InvariantEKF` that both take
     (:class:`~pinobs.observers.legged_filter.LeggedFilter`: not ``foot_gate``, ``joint_std``,
     ``slip_speed``, ``slip_gyro``) and has its ``reset``/``update`` interface and
-    :class:`InEKFEstimate` output.
+    :class:`InEKFEstimate` output; ``InEKFGains.landing`` raises a foot's contact density
+    over its first ``landing_time`` of contact as the invariant EKF's eq. (11) does.
 
     Raises:
         GainError: an ``imu_hold`` that is neither ``"previous"`` nor ``"average"``.
@@ -121,7 +122,7 @@ class QuaternionEKF(LeggedFilter):
         Fh = error_dynamics(state.R, w, a, K) * dt
         Fh2 = Fh @ Fh
         Phi = np.eye(Fh.shape[0]) + Fh + 0.5 * Fh2 + Fh2 @ Fh / 6.0
-        qc = noise_densities(self.gains, K)
+        qc = self._landing(noise_densities(self.gains, K), state, dt)
         Q = (Phi * qc) @ Phi.T
         Q.flat[:: Q.shape[0] + 1] += qc
         P = Phi @ state.P @ Phi.T + 0.5 * dt * Q

@@ -35,11 +35,11 @@ imported and loaded by the constructor; compiled once per installation with
 12 × 12 operations; above, NumPy (BLAS products, a LAPACK Cholesky).  Both
 paths live in :mod:`pinobs.observers.linalg`, shared with the other filters,
 and are tested equal to the dense pre-optimisation implementation to 1e-12.
-On a vector-space robot without friction (``nv ≤ 12``) the whole step is five
+On a vector-space robot without friction (``nv ≤ 12``) the whole step is four
 compiled calls around Pinocchio's four (issue 39, :mod:`pinobs.observers.fused`:
-RK4 stages, ``Φ P Φᵀ + Q_d``, the Joseph correction; on the filter's own
-``pin.Data``): on a UR5, 23 → 14 ``pin.aba`` per update (``measure_cost``, CPU
-time), equal to the NumPy step to rounding (tested).  With Lie-group or continuous
+RK4 stages, ``Φ P Φᵀ + Q_d``, the last stage with the Joseph correction; on the filter's
+own ``pin.Data``): on a UR5, 23 → 14 ``pin.aba`` per update (``measure_cost``, CPU
+time; five calls then, 12.7 → 11.7 with four), equal to the NumPy step to rounding (tested).  With Lie-group or continuous
 joints (no friction), :class:`_LieFast`: the RKMK4 step compiled between Pinocchio's
 calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`); from ``nv = 28``
 without the offset state, the whole step by blocks (:mod:`pinobs.observers.blockstep`:
@@ -625,7 +625,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
 
 
 class _FastPath:
-    """:meth:`ExtendedKalmanFilter.step` in five compiled calls around Pinocchio's four
+    """:meth:`ExtendedKalmanFilter.step` in four compiled calls around Pinocchio's four
     (issue 39; :mod:`pinobs.observers.fused`).  For a :class:`Robot` whose configuration
     space is a vector space, without joint friction, ``nv ≤ KERNEL_MAX_NV``; the same
     equations as :meth:`~ExtendedKalmanFilter.predict` then

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from pinobs.model import Robot
-from pinobs.model.integrators import DynamicsCalls, dynamics_calls
+from pinobs.model.integrators import DynamicsCalls, dynamics_calls, integrate_call
 from pinobs.observers.base import Vector
 from pinobs.observers.linalg import LazyKernel, joseph_kernel
 from pinobs.tolerances import JACOBI_FD_STEP
@@ -276,6 +276,7 @@ class LieRK4:
 
     def __init__(self, robot: Robot, calls: DynamicsCalls) -> None:
         self.robot, self.calls = robot, calls
+        self.integrate = integrate_call(robot)  # (pin.integrate: a Python call less, four)
         self._scratch_work = np.zeros((10, robot.nv))
         self.stage = loaded(rkmk4_stage_kernel)
 
@@ -293,7 +294,7 @@ class LieRK4:
         """``(q⁺, v⁺)`` after ``h`` [s] with ``tau`` held from ``(q, v)``; ``acc0``: the first
         stage's ``v̇`` if the caller has it (read before any call)."""
         r, aba, stage, w = self.robot, self.calls.aba, self.stage, self._scratch_work
-        integrate, solve = r.integrate, r.integrate_jacobian_solve
+        integrate, solve = self.integrate, r.integrate_jacobian_solve
         xi, vs = w[8], w[9]
         w[0] = v
         stage(w, aba(q, v, tau) if acc0 is None else acc0, v, 1, h)

@@ -432,7 +432,7 @@ def transport_first_order(robot: Robot, q_hat: Vector, zeta: Vector, s: Vector) 
 
 
 # ---------------------------------------------------------------- observer
-_new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (_correct_vector_space)
+_new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (the corrections)
 
 
 class _State(NamedTuple):
@@ -736,7 +736,7 @@ class RiemannianObserver(Observer[_State]):
         jac, age = self._jacobi(state, q, v, self.gains.curvature_gain)  # (constant gains)
         acc, a_q, a_v = self._jacobians(q, delta, tau)
         k1, k2, c, P = self._correction_gains(state, q, None, v, h)
-        n = r.nv
+        n = v.shape[0]  # (r.nv asks Pinocchio: a Python call more)
         zeta, w, dv, jump = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         self._lie_correction(  # type: ignore[misc]
             v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, k1, k2, h, c * h,
@@ -744,7 +744,7 @@ class RiemannianObserver(Observer[_State]):
         )  # fmt: skip
         dv += 0.5 * r.bracket(zeta, w)  # ω(ζ, w)'s bracket (Maithripala et al. eq. (19))
         q_new = r.normalize(r.integrate(q, jump))
-        return _State(q_new, v + dv, 0.0, jac, age, P, gate)
+        return _new_tuple(_State, (q_new, v + dv, 0.0, jac, age, P, gate))
 
     def _correct_vector_space(
         self, state: _State, q: Vector, v: Vector, q_meas: Vector, tau: Vector, h: float,

@@ -41,6 +41,7 @@ __all__ = [
     "dynamics_calls",
     "dynamics_rk4",
     "friction_substeps",
+    "integrate_call",
     "lie_rk4",
     "rk4_stage_matrices",
 ]
@@ -84,6 +85,16 @@ def dynamics_calls(robot: Robot, *, gravity: bool = True, data: Any = None) -> D
     return DynamicsCalls(
         partial(pin.aba, model, data), partial(pin.computeABADerivatives, model, data), data
     )
+
+
+def integrate_call(robot: Robot) -> Callable[[Vector, Vector], Vector]:
+    """``robot.integrate`` without its Python call: ``pin.integrate`` bound to the model
+    (the float64 array :meth:`Robot.integrate` returns as it is), for a compiled step's
+    loop (:class:`pinobs.observers.fused.LieRK4`); the method itself where a subclass
+    overrides it."""
+    if type(robot).integrate is Robot.integrate:
+        return partial(pin.integrate, robot.model)
+    return robot.integrate
 
 
 def lie_rk4(robot: Robot, q: Vector, x: Vector, h: float, rhs: Rhs) -> tuple[Vector, Vector]:

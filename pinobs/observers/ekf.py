@@ -35,11 +35,11 @@ imported and loaded by the constructor; compiled once per installation with
 12 × 12 operations; above, NumPy (BLAS products, a LAPACK Cholesky).  Both
 paths live in :mod:`pinobs.observers.linalg`, shared with the other filters,
 and are tested equal to the dense pre-optimisation implementation to 1e-12.
-On a vector-space robot without friction (``nv ≤ 12``) the whole step is five
+On a vector-space robot without friction (``nv ≤ 12``) the whole step is four
 compiled calls around Pinocchio's four (issue 39, :mod:`pinobs.observers.fused`:
-RK4 stages, ``Φ P Φᵀ + Q_d``, the Joseph correction; on the filter's own
-``pin.Data``): on a UR5, 23 → 14 ``pin.aba`` per update (``measure_cost``, CPU
-time), equal to the NumPy step to rounding (tested).  With Lie-group or continuous
+RK4 stages, ``Φ P Φᵀ + Q_d``, the last stage with the Joseph correction; on the filter's
+own ``pin.Data``): on a UR5, 23 → 14 ``pin.aba`` per update (``measure_cost``, CPU
+time; five calls then, 12.7 → 11.7 with four), equal to the NumPy step to rounding (tested).  With Lie-group or continuous
 joints (no friction), :class:`_LieFast`: the RKMK4 step compiled between Pinocchio's
 calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`); from ``nv = 28``
 without the offset state, the whole step by blocks (:mod:`pinobs.observers.blockstep`:
@@ -189,7 +189,8 @@ from pinobs.observers.base import (
 from pinobs.observers.blockstep import BlockStep
 from pinobs.observers.fused import (
     LieRK4,
-    ekf_correct_kernel,
+    ekf_coast_kernel,
+    ekf_finish_kernel,
     ekf_predict_kernel,
     loaded,
     rk4_stage_kernel,
@@ -624,7 +625,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
 
 
 class _FastPath:
-    """:meth:`ExtendedKalmanFilter.step` in five compiled calls around Pinocchio's four
+    """:meth:`ExtendedKalmanFilter.step` in four compiled calls around Pinocchio's four
     (issue 39; :mod:`pinobs.observers.fused`).  For a :class:`Robot` whose configuration
     space is a vector space, without joint friction, ``nv ≤ KERNEL_MAX_NV``; the same
     equations as :meth:`~ExtendedKalmanFilter.predict` then
@@ -638,16 +639,22 @@ class _FastPath:
         robot, nv = ekf.robot, ekf.robot.nv
         n = (2 if ekf.disturbance_psd is None else 3) * nv
         self.calls = dynamics_calls(robot)
+        data = self.calls.data
+        # a, ∂a/∂q, ∂a/∂v, M⁻¹ of the derivatives call: views Pinocchio writes in place
+        self._scratch_data = (data.ddq, data.ddq_dq, data.ddq_dv, data.Minv)
         self._scratch_work = np.zeros((8, nv))  # the RK4's rows (pinobs.observers.fused)
         # the next stage's (q, v)
         self._scratch_point = (self._scratch_work[6], self._scratch_work[7])
         self._scratch_A = np.zeros((n, n))
         self._scratch_A[:nv, nv : 2 * nv] = identity(nv)
         self._scratch_Phi = np.empty((n, n))
+        self._scratch_P = np.empty((n, n))  # P⁻ (a state keeps a copy, never this)
+        self._scratch_ex = np.empty(nv + n)  # the correction's (e, dx)
+        self._shape = (n, n)
         self.no_psd = np.zeros(nv)
         self.predict = loaded(ekf_predict_kernel)
         self.stage = loaded(rk4_stage_kernel)
-        self.correct = loaded(ekf_correct_kernel)
+        self.finish, self.coast = loaded(ekf_finish_kernel), loaded(ekf_coast_kernel)
 
     @classmethod
     def build(cls, ekf: ExtendedKalmanFilter) -> _FastPath | None:
@@ -666,7 +673,9 @@ class _FastPath:
         self, ekf: ExtendedKalmanFilter, state: EKFState, dt: float, q_meas: Vector | None,
         tau: Vector,
     ) -> EKFState:  # fmt: skip
-        """:meth:`ExtendedKalmanFilter.step` (class docstring)."""
+        """:meth:`ExtendedKalmanFilter.step` (class docstring): four compiled calls around
+        Pinocchio's four, the last (:func:`~pinobs.observers.fused.ekf_finish_loops`) the RK4's
+        last stage and the correction; ``P⁻`` and ``(e, dx)`` in the scratch buffers."""
         d = state.d
         if d is None:
             tau_in = tau
@@ -675,52 +684,43 @@ class _FastPath:
                 tau_in = tau + d
         calls, w, (qs, vs) = self.calls, self._scratch_work, self._scratch_point
         calls.derivatives(state.q, state.v, tau_in)
-        data = calls.data
         psd = self.no_psd if state.d_psd is None else state.d_psd
-        P = np.empty_like(state.P)
+        P = self._scratch_P
         accel_psd = ekf.gains.accel_psd  # (read at every step: a smoother's replay sets it)
-        self.predict(w, state.q, state.v, data.ddq, data.ddq_dq, data.ddq_dv, data.Minv,
-                     state.P, dt, accel_psd, psd, self._scratch_A, self._scratch_Phi, P)  # fmt: skip
+        ddq, ddq_dq, ddq_dv, minv = self._scratch_data
+        self.predict(w, state.q, state.v, ddq, ddq_dq, ddq_dv, minv, state.P, dt, accel_psd, psd,
+                     self._scratch_A, self._scratch_Phi, P)  # fmt: skip
         aba, stage = calls.aba, self.stage
         stage(w, aba(qs, vs, tau_in), 2, dt)  # RKMK4 (dynamics_rk4), its first stage the
         stage(w, aba(qs, vs, tau_in), 3, dt)  # derivatives call's v̇
-        stage(w, aba(qs, vs, tau_in), 4, dt)
-        if q_meas is None:
-            with np.errstate(over="ignore", invalid="ignore"):
-                P = 0.5 * (P + P.T)
+        if q_meas is None:  # the fourth stage and P⁻ symmetrised, 0.5 * (P + P.T)
+            P = np.empty(self._shape)
+            self.coast(w, aba(qs, vs, tau_in), dt, self._scratch_P, P)
             gate = state.gate.predicted()
-            return state.moved(qs.copy(), vs.copy(), P, gate, state.d, state.d_psd)
-        return self.corrected(ekf, state, P, dt, q_meas)
-
-    def corrected(
-        self, ekf: ExtendedKalmanFilter, state: EKFState, P: Vector, dt: float, q_meas: Vector
-    ) -> EKFState:
-        """:meth:`ExtendedKalmanFilter.corrected` of the prediction (``P`` and the work's
-        ``(q_s, v_s)``) made by :meth:`step` from ``state``."""
-        qs, vs = self._scratch_point
-        d = state.d
-        nv = qs.shape[0]
-        e, dx, P_new = np.empty(nv), np.empty(P.shape[0]), np.empty_like(P)
-        q, v = np.empty(nv), np.empty(nv)
-        r = ekf.gains.meas_std**2
-        nis = self.correct(self._scratch_work, q_meas, P, r, e, dx, P_new, q, v)
+            return _new_tuple(EKFState, (qs.copy(), vs.copy(), P, d, state.d_psd, gate,
+                                         state.auto, state.psd_scale))  # fmt: skip
+        # the fourth stage and the correction (ExtendedKalmanFilter.corrected)
+        nv, ex, r = qs.shape[0], self._scratch_ex, ekf.gains.meas_std**2
+        q, v, P_new = np.empty(nv), np.empty(nv), np.empty(self._shape)
+        nis = self.finish(w, aba(qs, vs, tau_in), dt, q_meas, P, r, ex, P_new, q, v)
         if nis != nis:  # NaN: ekf.correct's other ways
-            pred = state.moved(qs.copy(), vs.copy(), P, state.gate, state.d, state.d_psd)
+            pred = state.moved(qs.copy(), vs.copy(), P, state.gate, d, state.d_psd)
             with np.errstate(over="ignore", invalid="ignore"):
                 return ekf.corrected(pred, q_meas, dt)
         gate = state.gate.measured(nis, ekf._gate, nv)
         if gate.gated:
             with np.errstate(over="ignore", invalid="ignore"):
                 P = 0.5 * (P + P.T)
-                return state.moved(qs.copy(), vs.copy(), P, gate, state.d, state.d_psd)
+                return state.moved(qs.copy(), vs.copy(), P, gate, d, state.d_psd)
         d_psd = state.d_psd
         if d is not None:
             with np.errstate(over="ignore", invalid="ignore"):
-                d = d + dx[2 * nv :]
+                d = d + ex[3 * nv :]  # dx[2nv:], the offset's part (dx = ex[nv:])
                 if state.auto and d_psd is not None:  # as ekf.corrected
                     s = P.diagonal()[:nv] + r  # Sᵢᵢ = P⁻_qq,ii + σ²
-                    d_psd = ekf.matched_density(state, e, s, dt)
-        return state.moved(q, v, P_new, gate, d, d_psd)
+                    d_psd = ekf.matched_density(state, ex[:nv], s, dt)
+        # state.moved's tuple, built here (a Python call less)
+        return _new_tuple(EKFState, (q, v, P_new, d, d_psd, gate, state.auto, state.psd_scale))
 
 
 class _LieFast:

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from pinobs.model import Robot
-from pinobs.model.integrators import DynamicsCalls, dynamics_calls
+from pinobs.model.integrators import DynamicsCalls, dynamics_calls, integrate_call
 from pinobs.observers.base import Vector
 from pinobs.observers.linalg import LazyKernel, joseph_kernel
 from pinobs.tolerances import JACOBI_FD_STEP
@@ -48,18 +48,24 @@ from pinobs.tolerances import JACOBI_FD_STEP
 __all__ = [
     "JacobiCalls",
     "LieRK4",
+    "RiccatiStep",
+    "ekf_coast_kernel",
     "ekf_correct_kernel",
+    "ekf_finish_kernel",
     "ekf_predict_kernel",
     "jacobi_kernel",
     "lie_correction_kernel",
     "loaded",
     "riccati_correction_kernel",
     "rk4_calls",
+    "rk4_last_kernel",
     "rk4_stage_kernel",
     "rk4_start_kernel",
     "rkmk4_stage_kernel",
     "vector_correction_kernel",
 ]
+
+_new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (RiccatiStep)
 
 # the linalg loop, under its own name (LazyKernel's helpers are found by name here)
 _joseph_loops = joseph_kernel.fn
@@ -102,17 +108,20 @@ def _times_a(A: Vector, X: Vector, nv: int, c: float, out: Vector) -> None:
     the products with its constant rows are copies (the same numbers as the full sums, whose
     other terms are exact zeros)."""
     n = A.shape[0]
-    for i in range(n):
-        for j in range(n):
-            if i < nv:
-                t = X[nv + i, j]
-            elif i < 2 * nv:
-                t = 0.0
+    row = np.empty(n)  # a row of A X, each sum in the order of k (k outside the loop over j:
+    for i in range(n):  # the row's sums independent, not one chain each; the same bits)
+        if i < nv:
+            for j in range(n):
+                row[j] = X[nv + i, j]
+        else:
+            row[:] = 0.0
+            if i < 2 * nv:
                 for k in range(n):
-                    t += A[i, k] * X[k, j]
-            else:
-                t = 0.0
-            out[i, j] = c * t + (1.0 if i == j else 0.0)
+                    a = A[i, k]
+                    for j in range(n):
+                        row[j] += a * X[k, j]
+        for j in range(n):
+            out[i, j] = c * row[j] + (1.0 if i == j else 0.0)
 
 
 def ekf_predict_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
@@ -199,6 +208,37 @@ def ekf_correct_loops(
     return nis / r
 
 
+#: :func:`rk4_stage_loops` under the name the fused kernels call it by: compiled on its own with
+#: ``contract`` when they load (``LazyKernel``'s ``contracted``), its bits those of
+#: :data:`rk4_stage_kernel`'s.
+_rk4_stage_fma = rk4_stage_loops
+
+
+def ekf_finish_loops(
+    w: Vector, acc: Vector, h: float, q_meas: Vector, P: Vector, r: float, ex: Vector,
+    P_new: Vector, q_new: Vector, v_new: Vector,
+) -> float:  # fmt: skip
+    """The RK4's fourth stage (:func:`rk4_stage_loops`, ``acc = a₄``: the predicted
+    ``(q_s, v_s)``) and the EKF's correction (:func:`ekf_correct_loops`, ``e`` and ``dx`` in
+    ``ex = (e, dx)``) in one call: each part's operations as it does them alone (the stage
+    with ``contract``, the correction without), so the same bits.  Returns the NIS (NaN: the
+    caller takes :func:`ekf_correct_loops`' other ways)."""
+    _rk4_stage_fma(w, acc, 4, h)
+    nv = q_meas.shape[0]
+    return ekf_correct_loops(w, q_meas, P, r, ex[:nv], ex[nv:], P_new, q_new, v_new)
+
+
+def ekf_coast_loops(w: Vector, acc: Vector, h: float, P: Vector, out: Vector) -> None:
+    """The RK4's fourth stage (:func:`rk4_stage_loops`, ``contract``: its bits) and, for a
+    step without a sample, ``out = ½(P + Pᵀ)`` (NumPy's ``0.5 * (P + P.T)``, entry by entry:
+    the same bits, without NumPy's overflow warning to silence) in one call."""
+    _rk4_stage_fma(w, acc, 4, h)
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = 0.5 * (P[i, j] + P[j, i])
+
+
 def rkmk4_stage_loops(w: Vector, acc: Vector, k: Vector, stage: int, h: float) -> None:
     """Stage ``stage`` (1 to 4) of the RKMK4 step on a Lie group, work rows ``w`` =
     ``(v, a₁, a₂, a₃, a₄, k₂, k₃, k₄, ξ, v_s)``: stores ``a_stage = acc`` and
@@ -236,6 +276,7 @@ class LieRK4:
 
     def __init__(self, robot: Robot, calls: DynamicsCalls) -> None:
         self.robot, self.calls = robot, calls
+        self.integrate = integrate_call(robot)  # (pin.integrate: a Python call less, four)
         self._scratch_work = np.zeros((10, robot.nv))
         self.stage = loaded(rkmk4_stage_kernel)
 
@@ -253,7 +294,7 @@ class LieRK4:
         """``(q⁺, v⁺)`` after ``h`` [s] with ``tau`` held from ``(q, v)``; ``acc0``: the first
         stage's ``v̇`` if the caller has it (read before any call)."""
         r, aba, stage, w = self.robot, self.calls.aba, self.stage, self._scratch_work
-        integrate, solve = r.integrate, r.integrate_jacobian_solve
+        integrate, solve = self.integrate, r.integrate_jacobian_solve
         xi, vs = w[8], w[9]
         w[0] = v
         stage(w, aba(q, v, tau) if acc0 is None else acc0, v, 1, h)
@@ -434,20 +475,63 @@ class JacobiCalls:
         return out
 
 
-def vector_correction_loops(
-    q: Vector,
-    v: Vector,
-    acc: Vector,
-    a_q: Vector,
-    a_v: Vector,
-    delta: Vector,
-    jac: Vector,
-    k1: float,
-    k2: float,
-    h: float,
-    ch: float,
-) -> tuple[Vector, Vector]:
-    """The correction's arithmetic on a vector space: ``(q̂⁺, v̂⁺)``, compiled (one call).
+class RiccatiStep:
+    """``riemannian``'s step with a sample, on a vector space with the Riccati schedule and a
+    :class:`Robot` (issue 39): the RK4 prediction (:func:`rk4_start_loops`, two
+    :func:`rk4_stage_loops`, then :func:`rk4_last_loops`, which also writes ``δ = q_meas −
+    q⁻``), the NIS and the outlier gate, the Jacobi operator when due, the correction's
+    derivatives call (its arrays read as views) and :func:`riccati_correction_loops` into two
+    new arrays: the operations of
+    :meth:`~pinobs.observers.riemannian.RiemannianObserver.step` in the same order, in one
+    Python call and five compiled ones around Pinocchio's five (the same bits, tested).  The
+    observer's calls, work rows and ``pin.Data``; ``_scratch_delta`` is overwritten by every
+    step.  ``state_type``: the observer's state (a NamedTuple, built by ``tuple.__new__``)."""
+
+    def __init__(self, observer: Any, state_type: type) -> None:
+        rk4 = observer._scratch_calls
+        assert rk4 is not None and observer._scratch_derivatives is not None
+        (self.aba, _, _), self.w, self.start, self.stage = rk4
+        self.point = (self.w[6], self.w[7])
+        calls = observer._scratch_derivatives
+        self.derivatives, data = calls.derivatives, calls.data
+        self.ddq, self.ddq_dq, self.ddq_dv = data.ddq, data.ddq_dq, data.ddq_dv
+        self.last, self.correction = loaded(rk4_last_kernel), loaded(riccati_correction_kernel)
+        self._scratch_delta = np.empty(observer.robot.nv)
+        self.state_type = state_type
+
+    def step(self, obs: Any, state: Any, dt: float, q_meas: Vector, tau: Vector) -> Any:
+        """:meth:`~pinobs.observers.riemannian.RiemannianObserver.step` with ``q_meas``, from a
+        ``state`` with the schedule's ``P``."""
+        aba, w, stage, delta = self.aba, self.w, self.stage, self._scratch_delta
+        q, v = self.point
+        self.start(w, state.q, state.v, aba(state.q, state.v, tau), dt)
+        stage(w, aba(q, v, tau), 2, dt)
+        stage(w, aba(q, v, tau), 3, dt)
+        self.last(w, aba(q, v, tau), dt, q_meas, delta)
+        h = state.elapsed + dt
+        p00, p01, p11 = state.P  # the schedule's innovation variance and the gate (step)
+        s_inn = p00 + h * (2.0 * p01 + h * p11 + obs.accel_psd * h * h / 3.0) + obs._sigma2
+        gate = state.gate.measured(float(delta.dot(delta)) / s_inn, obs._gate, delta.size)
+        if gate.gated:
+            return state._replace(q=q.copy(), v=v.copy(), elapsed=h, gate=gate)
+        c = obs.gains.curvature_gain
+        jac, age = state.jacobi, state.age + 1
+        if c != 0.0 and (jac is None or age >= obs.curvature_every):  # due (obs._jacobi)
+            calls = obs._scratch_jacobi
+            jac, age = obs._jacobi(state, q, v, c) if calls is None else (calls(q, v), 0)
+        self.derivatives(q, delta, tau)  # (RiemannianObserver._jacobians)
+        q_new, v_new = np.empty(delta.size), np.empty(delta.size)
+        P = self.correction(q, v, self.ddq, self.ddq_dq, self.ddq_dv, delta,
+                            obs._zero_nn if jac is None else jac, p00, p01, p11,
+                            obs.accel_psd, obs._sigma2, h, c, q_new, v_new)  # fmt: skip
+        return _new_tuple(self.state_type, (q_new, v_new, 0.0, jac, age, P, gate))
+
+
+def vector_correction_into(
+    q: Vector, v: Vector, acc: Vector, a_q: Vector, a_v: Vector, delta: Vector, jac: Vector,
+    k1: float, k2: float, h: float, ch: float, q_new: Vector, v_new: Vector,
+) -> None:  # fmt: skip
+    """The correction's arithmetic on a vector space: ``(q̂⁺, v̂⁺)`` into ``(q_new, v_new)``.
 
     With ``a, ∂a/∂q, ∂a/∂v`` the ABA derivatives at ``(q̂⁻, δ, τ)``,
     ``u = (∂a/∂v)δ = −2Γs(δ, δ)``, ``d = (∂a/∂q)δ``::
@@ -474,8 +558,6 @@ def vector_correction_loops(
         d[i] = d_i
         zeta[i] = 0.25 * u_i - delta[i]
         half_w[i] = 0.5 * (k1 * v[i] - h * (acc[i] - 0.5 * u_i + d_i))
-    q_new = np.empty(n)
-    v_new = np.empty(n)
     for i in range(n):
         transport = 0.0
         curvature = 0.0
@@ -484,6 +566,16 @@ def vector_correction_loops(
             curvature += jac[i, j] * zeta[j]
         v_new[i] = v[i] + transport - k2 * zeta[i] + h * d[i] + ch * curvature
         q_new[i] = q[i] - k1 * zeta[i]
+
+
+def vector_correction_loops(
+    q: Vector, v: Vector, acc: Vector, a_q: Vector, a_v: Vector, delta: Vector, jac: Vector,
+    k1: float, k2: float, h: float, ch: float,
+) -> tuple[Vector, Vector]:  # fmt: skip
+    """:func:`vector_correction_into`, compiled (one call), ``(q̂⁺, v̂⁺)`` new arrays."""
+    q_new = np.empty(q.shape[0])
+    v_new = np.empty(q.shape[0])
+    vector_correction_into(q, v, acc, a_q, a_v, delta, jac, k1, k2, h, ch, q_new, v_new)
     return q_new, v_new
 
 
@@ -512,13 +604,23 @@ def riccati_gains(
 def riccati_correction_loops(
     q: Vector, v: Vector, acc: Vector, a_q: Vector, a_v: Vector, delta: Vector, jac: Vector,
     p00: float, p01: float, p11: float, qa: float, r2: float, h: float, c: float,
-) -> tuple[Vector, Vector, float, float, float]:  # fmt: skip
-    """:func:`vector_correction_loops` with the gains of :func:`riccati_gains` (the Riccati
-    schedule of :meth:`pinobs.observers.riemannian.RiemannianObserver._correction_gains`);
-    returns ``(q̂⁺, v̂⁺, P⁺₀₀, P⁺₀₁, P⁺₁₁)`` (``c`` the curvature gain)."""
+    q_new: Vector, v_new: Vector,
+) -> tuple[float, float, float]:  # fmt: skip
+    """:func:`vector_correction_into` with the gains of :func:`riccati_gains` (the Riccati
+    schedule of :meth:`pinobs.observers.riemannian.RiemannianObserver._correction_gains`):
+    ``(q̂⁺, v̂⁺)`` into ``(q_new, v_new)`` (the caller's: arrays a numba kernel returns cost
+    two Python calls more to box), returns ``(P⁺₀₀, P⁺₀₁, P⁺₁₁)`` (``c`` the curvature gain)."""
     k1, k2, p00, p01, p11 = riccati_gains(p00, p01, p11, qa, r2, h)
-    q_new, v_new = vector_correction_loops(q, v, acc, a_q, a_v, delta, jac, k1, k2, h, c * h)
-    return q_new, v_new, p00, p01, p11
+    vector_correction_into(q, v, acc, a_q, a_v, delta, jac, k1, k2, h, c * h, q_new, v_new)
+    return p00, p01, p11
+
+
+def rk4_last_loops(w: Vector, acc: Vector, h: float, q_meas: Vector, delta: Vector) -> None:
+    """The RK4's fourth stage (:func:`rk4_stage_loops`, with ``contract``: its bits) and
+    ``δ = q_meas − q⁻`` (``difference`` on a vector space) in one call."""
+    _rk4_stage_fma(w, acc, 4, h)
+    for i in range(delta.shape[0]):
+        delta[i] = q_meas[i] - w[6, i]
 
 
 def _warm_predict() -> tuple[object, ...]:
@@ -547,6 +649,21 @@ ekf_correct_kernel = LazyKernel(
     helpers=(_joseph_loops,),
 )  # fmt: skip
 
+#: :func:`ekf_finish_loops` compiled.
+ekf_finish_kernel = LazyKernel(
+    ekf_finish_loops,
+    np.zeros((8, 1)), np.zeros(1), 1e-3, np.zeros(1), np.eye(2), 1.0, np.zeros(3),
+    np.zeros((2, 2)), np.zeros(1), np.zeros(1),
+    helpers=(_joseph_loops, ekf_correct_loops),
+    contracted=("_rk4_stage_fma",),
+)  # fmt: skip
+
+#: :func:`ekf_coast_loops` compiled.
+ekf_coast_kernel = LazyKernel(
+    ekf_coast_loops, np.zeros((8, 1)), np.zeros(1), 1e-3, np.eye(2), np.zeros((2, 2)),
+    contracted=("_rk4_stage_fma",),
+)  # fmt: skip
+
 
 #: :func:`rkmk4_stage_loops` compiled: ``(w, a, k, stage, h)`` (no contraction: the bits of
 #: NumPy's separate products and sums).
@@ -568,12 +685,18 @@ lie_correction_kernel = LazyKernel(
 vector_correction_kernel = LazyKernel(
     vector_correction_loops, *(np.zeros(1),) * 3, np.zeros((1, 1)), np.zeros((1, 1)),
     np.zeros(1), np.zeros((1, 1)), 0.0, 0.0, 0.0, 0.0,
+    helpers=(vector_correction_into,),
 )  # fmt: skip
 #: :func:`riccati_correction_loops` compiled.
 riccati_correction_kernel = LazyKernel(
     riccati_correction_loops, *(np.zeros(1),) * 3, np.zeros((1, 1)), np.zeros((1, 1)),
-    np.zeros(1), np.zeros((1, 1)), *(1.0,) * 7,
-    helpers=(vector_correction_loops, riccati_gains),
+    np.zeros(1), np.zeros((1, 1)), *(1.0,) * 7, np.zeros(1), np.zeros(1),
+    helpers=(vector_correction_into, riccati_gains),
+)  # fmt: skip
+#: :func:`rk4_last_loops` compiled.
+rk4_last_kernel = LazyKernel(
+    rk4_last_loops, np.zeros((8, 1)), np.zeros(1), 1e-3, np.zeros(1), np.zeros(1),
+    contracted=("_rk4_stage_fma",),
 )  # fmt: skip
 #: :func:`jacobi_first_loops` compiled.
 jacobi_first_kernel = LazyKernel(

@@ -172,19 +172,23 @@ def _joseph_loops(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bo
             for k in range(i + 1, nv):
                 t -= L[k, i] * Kt[k, c]
             Kt[i, c] = t / L[i, i]
+    # each entry's sum in the order of k as t −= …, with k outside the loop over j (the
+    # entries of a row independent: no chain of dependent subtractions, the same bits)
     C = np.empty((n, n))
     for i in range(n):
         for j in range(n):
-            t = P[i, j]
-            for k in range(nv):
-                t -= Kt[k, i] * P[k, j]
-            C[i, j] = t
+            C[i, j] = P[i, j]
+        for k in range(nv):
+            c = Kt[k, i]
+            for j in range(n):
+                C[i, j] -= c * P[k, j]
     for i in range(n):
         for j in range(n):
-            t = C[i, j]
-            for k in range(nv):
-                t -= (C[i, k] - r * Kt[k, i]) * Kt[k, j]
-            out[i, j] = t
+            out[i, j] = C[i, j]
+        for k in range(nv):
+            g = C[i, k] - r * Kt[k, i]
+            for j in range(n):
+                out[i, j] -= g * Kt[k, j]
     for i in range(n):
         for j in range(i):
             m = 0.5 * (out[i, j] + out[j, i])
@@ -209,7 +213,11 @@ class LazyKernel:
     ``fn``'s module when it compiles ``fn``).  ``contract``: ``a·b + c`` may be fused into one
     FMA instruction (numba's ``fastmath={"contract"}``, nothing else of fast-math), as
     OpenBLAS's products do: the RK4 stages of :mod:`pinobs.observers.fused` then give the
-    same bits as the stacked ``c.dot(b)`` of :func:`pinobs.model.dynamics_rk4` (tested)."""
+    same bits as the stacked ``c.dot(b)`` of :func:`pinobs.model.dynamics_rk4` (tested).
+    ``contracted``: names of functions of ``fn``'s module that ``fn`` calls and that are
+    compiled on their own with ``contract`` (not inlined by numba: their instructions keep
+    their own flags, so a kernel without ``contract`` can call an RK4 stage with it and each
+    part gives the bits it gives alone)."""
 
     def __init__(
         self,
@@ -217,9 +225,11 @@ class LazyKernel:
         *warm_args: Any,
         helpers: tuple[Callable[..., Any], ...] = (),
         contract: bool = False,
+        contracted: tuple[str, ...] = (),
     ) -> None:
         self.fn, self.warm_args, self.helpers = fn, warm_args, helpers
         self.fastmath: set[str] | bool = {"contract"} if contract else False
+        self.contracted = contracted
         self.compiled: Callable[..., Any] | None = None
 
     def load(self) -> None:
@@ -232,6 +242,10 @@ class LazyKernel:
                 if not hasattr(scope[helper.__name__], "py_func"):
                     compiled = numba.njit(cache=True, error_model="numpy", inline="always")
                     scope[helper.__name__] = compiled(helper)
+            for name in self.contracted:  # (their own flags: numba.njit, not inlined)
+                if not hasattr(scope[name], "py_func"):
+                    fma = numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
+                    scope[name] = fma(scope[name])
             kernel = numba.njit(cache=True, error_model="numpy", fastmath=self.fastmath)(self.fn)
             kernel(*self.warm_args)  # load (or compile) the float64 signature now
             self.compiled = kernel

@@ -137,17 +137,11 @@ import numpy as np
 from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.integrators import dynamics_calls
-from pinobs.observers.base import (
-    GateState,
-    Observer,
-    Vector,
-    gate_threshold,
-    positive,
-    register,
-)
+from pinobs.observers.base import GateState, Observer, Vector, gate_threshold, positive, register
 from pinobs.observers.fused import (
     JacobiCalls,
     LieRK4,
+    RiccatiStep,
     jacobi_kernel,
     lie_correction_kernel,
     loaded,
@@ -438,7 +432,7 @@ def transport_first_order(robot: Robot, q_hat: Vector, zeta: Vector, s: Vector) 
 
 
 # ---------------------------------------------------------------- observer
-_new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (_correct_vector_space)
+_new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (the corrections)
 
 
 class _State(NamedTuple):
@@ -591,6 +585,8 @@ class RiemannianObserver(Observer[_State]):
         # the Jacobi operator (the same bits), its calls on the correction's pin.Data
         self._scratch_jacobi = JacobiCalls(robot, calls.data) if compiled and calls else None
         self.uses_blas = not compiled
+        fast = riccati and compiled and self._scratch_calls is not None  # (fused.RiccatiStep)
+        self._scratch_fast = RiccatiStep(self, _State) if fast else None
 
     # ------------------------------------------------------ continuous time
     def vector_field(
@@ -634,6 +630,8 @@ class RiemannianObserver(Observer[_State]):
         return q, v, True
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+        if self._scratch_fast is not None and q_meas is not None:  # the same in one call
+            return self._scratch_fast.step(self, state, dt, q_meas, tau)
         q, v, work = self._predicted(state, dt, tau)
         elapsed = state.elapsed + dt
         if q_meas is None:
@@ -738,7 +736,7 @@ class RiemannianObserver(Observer[_State]):
         jac, age = self._jacobi(state, q, v, self.gains.curvature_gain)  # (constant gains)
         acc, a_q, a_v = self._jacobians(q, delta, tau)
         k1, k2, c, P = self._correction_gains(state, q, None, v, h)
-        n = r.nv
+        n = v.shape[0]  # (r.nv asks Pinocchio: a Python call more)
         zeta, w, dv, jump = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         self._lie_correction(  # type: ignore[misc]
             v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, k1, k2, h, c * h,
@@ -746,7 +744,7 @@ class RiemannianObserver(Observer[_State]):
         )  # fmt: skip
         dv += 0.5 * r.bracket(zeta, w)  # ω(ζ, w)'s bracket (Maithripala et al. eq. (19))
         q_new = r.normalize(r.integrate(q, jump))
-        return _State(q_new, v + dv, 0.0, jac, age, P, gate)
+        return _new_tuple(_State, (q_new, v + dv, 0.0, jac, age, P, gate))
 
     def _correct_vector_space(
         self, state: _State, q: Vector, v: Vector, q_meas: Vector, tau: Vector, h: float,
@@ -767,12 +765,13 @@ class RiemannianObserver(Observer[_State]):
         acc, a_q, a_v = self._jacobians(q, delta, tau)
         if state.P is not None and self._riccati_correction is not None:
             c = self.gains.curvature_gain
-            q_new, v_new, *P = self._riccati_correction(
+            q_new, v_new = np.empty(q.shape[0]), np.empty(q.shape[0])
+            P = self._riccati_correction(
                 q, v, acc, a_q, a_v, delta, self._zero_nn if jac is None else jac, *state.P,
-                self.accel_psd, self._sigma2, h, c,
+                self.accel_psd, self._sigma2, h, c, q_new, v_new,
             )  # fmt: skip
             # by tuple.__new__: the NamedTuple's own __new__ is a Python call more (issue 39)
-            return _new_tuple(_State, (q_new, v_new, 0.0, jac, age, tuple(P), gate))
+            return _new_tuple(_State, (q_new, v_new, 0.0, jac, age, P, gate))
         # ζ is needed before the kernel only by state-dependent gains
         zeta = 0.25 * a_v.dot(delta) - delta if self.gains.state_dependent else None
         k1, k2, c, P = self._correction_gains(state, q, zeta, v, h)

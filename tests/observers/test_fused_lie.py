@@ -30,6 +30,7 @@ _COMPILED = (
     "_riccati_correction",
     "_scratch_calls",
     "_lie_fast",
+    "_scratch_fast",
 )
 
 

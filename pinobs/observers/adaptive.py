@@ -639,17 +639,17 @@ class AdaptiveEKF(Observer["_State"]):
         v_mid = v + (0.5 * dt / state.dt_prev) * (v - state.v_prev) if state.dt_prev > 0 else v
         return tau + m.offset + m.held * m.learned.friction_torque(v_mid)
 
+    @np.errstate(over="ignore", invalid="ignore")  # (a decorator: 1 Python call, not 3)
     def _core_step(
         self, core: ExtendedKalmanFilter, ekf: EKFState, dt: float, q: Vector | None, tau: Vector
     ) -> EKFState:
-        """The model-based filter's step; a filter whose covariance overflowed to a singular
-        innovation covariance, or that its family says diverged, comes back with a NaN
-        velocity (lost: restarted by :meth:`step`).  On UR10e logs at ~95 Hz the warm-up
-        filter's velocity variance reached 6e10 before ``solve`` raised ``LinAlgError``, which
-        escaped the restart and left the re-initialisation to :func:`pinobs.estimate`."""
+        """The model-based filter's step, overflows quiet; one whose covariance overflowed to a
+        singular innovation covariance, or that its family says diverged, comes back with a NaN
+        velocity (lost: restarted by :meth:`step`).  On UR10e logs at ~95 Hz the warm-up filter's
+        velocity variance reached 6e10 before ``solve`` raised ``LinAlgError``, which escaped
+        the restart and left the re-initialisation to :func:`pinobs.estimate`."""
         try:
-            with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: handled by step
-                return core.step(ekf, dt, q, tau)
+            return core.step(ekf, dt, q, tau)
         except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
             return ekf._replace(v=np.full_like(ekf.v, np.nan))
 

@@ -27,10 +27,10 @@ from pinobs.observers.results import Estimate
 #: 39's pass: kf 27–28, ekf 22, riemannian 36 (its Jacobi operator every 10th; 23 between), fd 11;
 #: kf 9 before its state went into one buffer (its output no longer through the bank);
 #: adaptive 66 before its bank and blend became one compiled call on one buffer (58 without the
-#: sample after a dropped one, which the learner fills: 35 now; about half its model-based
+#: sample after a dropped one, which the learner fills: 33 now; about half its model-based
 #: filter's step, ekf's), learning in the background as a live loop runs it
 #: (pinobs.evaluation.live.LIVE_OPTIONS; no learner's job is out in these updates).
-MAX_CALLS = {"kf": 8, "ekf": 17, "riemannian": 31, "fd": 8, "adaptive": 43}
+MAX_CALLS = {"kf": 8, "ekf": 17, "riemannian": 31, "fd": 8, "adaptive": 41}
 OPTIONS = {"adaptive": {"learning": "background"}}
 
 

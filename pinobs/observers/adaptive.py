@@ -165,7 +165,9 @@ from pinobs.model.identification import (
 )
 from pinobs.observers.adaptive_blend import (
     JERK_PSD,
+    BankBlend,
     bank_blend_kernel,
+    blend_state,
     lost_filter,
     model_free,
     numpy_blend,
@@ -174,6 +176,7 @@ from pinobs.observers.adaptive_blend import (
 )
 from pinobs.observers.adaptive_learner import (
     Learner,
+    check_options,
     learning_worker,
     load_learning,
 )
@@ -242,15 +245,6 @@ def _blend_inputs(
     if model.restarted or model.rejected_run >= _REJECTED_RUN or not math.isfinite(level):
         blame = 1.0  # the model was lost and not replaced since, or none fits (or a NaN)
     return meas, blame
-
-
-def _check_options(**options: float) -> None:
-    """Each of :class:`AdaptiveEKF`'s ``options`` (named) > 0, and ``horizon ≥ 2 window``
-    (two identification windows at least)."""
-    for key, val in options.items():
-        positive(key, val)
-    if options["horizon"] < 2 * options["window"]:
-        positive("horizon - 2 window", options["horizon"] - 2 * options["window"])
 
 
 @register
@@ -342,7 +336,7 @@ class AdaptiveEKF(Observer["_State"]):
             disturbance_psd=disturbance_psd, d0_std=d0_std,
             outlier_probability=outlier_probability, rate=rate, noise_std=noise_std,
         )  # fmt: skip
-        _check_options(
+        check_options(
             window=window, half_window=half_window, horizon=horizon, resolve_every=resolve_every,
             accel_psd=accel_psd, blend_time=blend_time,
             learned_disturbance_psd=learned_disturbance_psd,
@@ -402,13 +396,12 @@ class AdaptiveEKF(Observer["_State"]):
         bank = KFBank(self.robot, jerks, self.core.gains.meas_std)
         if self.blend and self.robot.is_vector_space:
             bank_blend_kernel.load()
-        # where the bank and the blend are not one compiled step, they may call a BLAS
         self._vector = self.robot.is_vector_space  # (a Python property: read once)
-        fused = self._vector and bank_blend_kernel.compiled is not None
-        self._bank_blas = self.blend and not fused
-        self._shape = (bank.jerk.size, self.robot.nq, self.robot.nv)  # (_State.shape)
-        self._estimate = slice(*offsets(*self._shape)[7:10:2])  # q̂ then v̂ (output)
+        self._fused = self._vector and bank_blend_kernel.compiled is not None  # (blend_state)
+        self._bank_blas = self.blend and not self._fused  # (NumPy's bank may call a BLAS)
         self._nq = self.robot.nq
+        self._shape = (bank.jerk.size, self._nq, self.robot.nv)  # (_State.shape)
+        self._estimate = slice(*offsets(*self._shape)[7:10:2])  # q̂ then v̂ (output)
         self._no_sample = np.zeros(self.robot.nq)  # the compiled step's q_meas without one
         return bank
 
@@ -587,7 +580,7 @@ class AdaptiveEKF(Observer["_State"]):
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
         learner = self._new_learner()
-        x = packed(self._shape, kf, score, s, q0, v0)
+        x = blend_state(self._shape, kf, score, s, q0, v0, buffer=self._fused)
         state = _State(ekf, x, self._shape, 0.0, ekf.v, 0.0, model, learner)
         self._warm(state, q0)
         return state
@@ -610,7 +603,7 @@ class AdaptiveEKF(Observer["_State"]):
         model, ekf = self._set_regime(model, model.core.initial_state(q, zero), model.regime)
         kf = self._bank.initial(q, zero, model.core.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
-        x = packed(self._shape, kf, score, zero, q, zero)
+        x = blend_state(self._shape, kf, score, zero, q, zero, buffer=self._fused)
         return _State(ekf, x, self._shape, state.t, ekf.v, 0.0, model, state.learner)
 
     def _model_free(self, state: _State) -> tuple[Vector, ...]:
@@ -688,9 +681,11 @@ class AdaptiveEKF(Observer["_State"]):
         model = model._replace(restarts=model.restarts + 1, restarted=True, said=model.said + said)
         # the blend's error variance of the lost filter overflowed with it: the restarted
         # one starts with its initial velocity variance (the blend follows the kf first)
+        s = np.full(self.robot.nv, model.core.gains.v0_std**2)
+        if isinstance(state.x, BankBlend):
+            return state._replace(model=model, x=state.x._replace(s=s)), ekf
         x = state.x.copy()
-        o = offsets(*state.shape)
-        x[o[6] : o[7]] = model.core.gains.v0_std**2  # s
+        x[slice(*offsets(*state.shape)[6:8])] = s
         return state._replace(model=model, x=x), ekf
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
@@ -708,13 +703,16 @@ class AdaptiveEKF(Observer["_State"]):
             meas, blame = _blend_inputs(ekf, state.model, q_meas)
             kf = self._bank.step(state.kf, dt, meas)
             score, s, q, v = numpy_blend(self.robot, kf, state.score, state.s, ekf, lam, blame)
-            x = packed(state.shape, kf, score, s, q, v)
+            x: Vector | BankBlend = BankBlend(kf, score, s, q, v)
         else:  # one compiled call: whether the filter is lost, then the bank and the blend
-            bank, x = self._bank, np.empty(state.x.size)
+            bank = self._bank
             for check in (True, False):
+                xs = state.x  # (a BankBlend: made while the kernel was not loaded)
+                xs = packed(state.shape, *xs) if isinstance(xs, BankBlend) else xs
+                x = np.empty(xs.size)
                 meas, blame = _blend_inputs(ekf, state.model, q_meas)
                 if kernel(
-                    state.x, x, state.shape[1], dt, self._no_sample if meas is None else meas,
+                    xs, x, state.shape[1], dt, self._no_sample if meas is None else meas,
                     meas is not None, bank.jerk, bank.meas_var, ekf.q, ekf.v, ekf.P, lam, blame,
                     check, _VECTOR_TABLE,
                 ):  # fmt: skip
@@ -767,11 +765,13 @@ class AdaptiveEKF(Observer["_State"]):
         return state.ekf.gate.nis, state.ekf.gate.gated
 
     def output(self, state: _State) -> tuple[Vector, Vector]:
-        """The blended estimate ``(q̂, v̂)``, copied out of the state's buffer once
-        (:attr:`fresh_output`); without the blend, the model-based filter's (copies)."""
+        """The blended estimate ``(q̂, v̂)``, copies (:attr:`fresh_output`), or without the blend the EKF's."""
         if not self.blend:
             return state.ekf.q.copy(), state.ekf.v.copy()
-        out = state.x[self._estimate].copy()
+        x = state.x
+        if isinstance(x, BankBlend):
+            return x.q.copy(), x.v.copy()
+        out = x[self._estimate].copy()
         return out[: self._nq], out[self._nq :]
 
     def smoothing_filter(self) -> ExtendedKalmanFilter:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,9 +32,11 @@ from pinobs.observers.linalg import LazyKernel
 
 __all__ = [
     "JERK_PSD",
+    "BankBlend",
     "bank_blend_kernel",
     "bank_blend_loops",
     "blend_layout",
+    "blend_state",
     "buffer_part",
     "lost_filter",
     "model_free",
@@ -92,6 +94,29 @@ def packed(
     for i, part in enumerate((bank.q, bank.v, bank.a, bank.P, e, score, s, q, v)):
         x[o[i] : o[i + 1]] = np.ravel(part)
     return x
+
+
+class BankBlend(NamedTuple):
+    """The bank's and the blend's arrays where they are stepped in NumPy (Lie-group joints:
+    :class:`~pinobs.observers.kf_bank.KFBank`'s step and
+    :func:`~pinobs.observers.adaptive_blend.numpy_blend`, whose arrays are kept as they are)."""
+
+    kf: BankState  # one kf per white-jerk density
+    score: Vector  # (filters, nv): running mean squared innovation of each kf per coordinate
+    s: Vector  # estimated model-based velocity error variance per coordinate [rad²/s²]
+    q: Vector  # the blended estimate
+    v: Vector
+
+
+def blend_state(
+    shape: tuple[int, int, int], kf: BankState, score: Vector, s: Vector, q: Vector, v: Vector,
+    *, buffer: bool,
+) -> Vector | BankBlend:  # fmt: skip
+    """The bank's and the blend's state of these arrays: in a buffer (:func:`packed`) for the
+    compiled step (``buffer``), else a :class:`BankBlend` (``s``, ``q``, ``v`` copied)."""
+    if buffer:
+        return packed(shape, kf, score, s, q, v)
+    return BankBlend(kf, score, s.copy(), q.copy(), v.copy())
 
 
 def buffer_part(x: Vector, shape: tuple[int, int, int], i: int) -> Vector:

@@ -23,7 +23,7 @@ from pinobs.errors import IdentificationError
 from pinobs.model import Robot
 from pinobs.model.identification import MAX_FILL, MomentumRegressor, smooth_path, solve
 from pinobs.model.sanity import mass_matrix_defect
-from pinobs.observers.base import Vector
+from pinobs.observers.base import Vector, positive
 from pinobs.observers.blas import blas_libraries, one_blas_thread
 from pinobs.observers.worker import Worker
 from pinobs.tolerances import TIME_EPS
@@ -33,6 +33,7 @@ __all__ = [
     "PRELOAD",
     "REJECTED_KEPT",
     "Learner",
+    "check_options",
     "learning_worker",
     "load_learning",
     "split_samples",
@@ -574,6 +575,15 @@ def _remote(state: dict[str, Any], key: int, windows: int, job: str, *args: Any)
     if state["key"] != key:
         state["key"], state["identifier"] = key, _Identifier(state["reg"], windows)
     return getattr(state["identifier"], job)(*args)
+
+
+def check_options(**options: float) -> None:
+    """Each of ``adaptive``'s ``options`` (named) > 0, and ``horizon ≥ 2 window`` (two
+    identification windows at least)."""
+    for key, val in options.items():
+        positive(key, val)
+    if options["horizon"] < 2 * options["window"]:
+        positive("horizon - 2 window", options["horizon"] - 2 * options["window"])
 
 
 def load_learning() -> None:

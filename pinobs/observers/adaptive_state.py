@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from pinobs.model import Robot
-from pinobs.observers.adaptive_blend import buffer_part
+from pinobs.observers.adaptive_blend import BankBlend, buffer_part
 from pinobs.observers.adaptive_learner import Learner
 from pinobs.observers.base import Vector
 from pinobs.observers.ekf import EKFState, ExtendedKalmanFilter
@@ -52,12 +52,13 @@ class AdaptiveModel(NamedTuple):
 
 
 class AdaptiveState(NamedTuple):
-    """The bank's and the blend's arrays lie in one float64 buffer ``x``
-    (:func:`~pinobs.observers.adaptive_blend.blend_layout`: one array to pass and allocate a
-    step, issue 39), read through the properties below as read-only views."""
+    """On vector joints the bank's and the blend's arrays lie in one float64 buffer ``x``
+    (:func:`~pinobs.observers.adaptive_blend.blend_layout`: one array to pass to the compiled
+    step and to allocate, issue 39), read through the properties below as read-only views;
+    elsewhere ``x`` is a :class:`BankBlend` of them."""
 
     ekf: EKFState
-    x: Vector  # the bank (one kf per white-jerk density), its scores, s, q̂ and v̂ (blend_layout)
+    x: Vector | BankBlend  # the bank, its scores, s, q̂ and v̂ (blend_layout), or their arrays
     shape: tuple[int, int, int]  # (filters, nq, nv)
     t: float
     v_prev: Vector  # the EKF's v̂ at the start of the last step (held friction, _torque)
@@ -67,16 +68,21 @@ class AdaptiveState(NamedTuple):
 
     @property
     def kf(self) -> BankState:
-        """The bank's filters, rows (no innovations)."""
-        q, v, a, P = (buffer_part(self.x, self.shape, i) for i in range(4))
+        """The bank's filters, rows (no innovations in a buffer)."""
+        x = self.x
+        if isinstance(x, BankBlend):
+            return x.kf
+        q, v, a, P = (buffer_part(x, self.shape, i) for i in range(4))
         return BankState(q, v, a, P, None)
 
     @property
     def score(self) -> Vector:
         """(filters, nv): running mean squared innovation of each kf per coordinate."""
-        return buffer_part(self.x, self.shape, 5)
+        x = self.x
+        return x.score if isinstance(x, BankBlend) else buffer_part(x, self.shape, 5)
 
     @property
     def s(self) -> Vector:
         """Estimated model-based velocity error variance per coordinate [rad²/s²]."""
-        return buffer_part(self.x, self.shape, 6)
+        x = self.x
+        return x.s if isinstance(x, BankBlend) else buffer_part(x, self.shape, 6)

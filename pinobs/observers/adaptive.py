@@ -133,7 +133,7 @@ a prediction that is not kept (under a known latency) teaches nothing.
    one.  ``scipy.linalg`` is imported when the observer is made (the smoothing is NumPy's:
    the first window's update took 0.5 s importing ``scipy.signal`` for it).
 
-5. **A pure step** (issue 37).  What it learned lives in its state (``_State.model``: the
+5. **A pure step** (issue 37).  What it learned lives in its state (``AdaptiveState.model``: the
    learned model and the filter run on it, the offset, the regime, the restarts; the
    learner), never on the observer: ``step`` reads it and returns it changed (a restart) in
    a new state, so a step that is not kept (a latency's prediction, the warm-up step)
@@ -149,7 +149,7 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import replace
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
@@ -163,12 +163,26 @@ from pinobs.model import Robot
 from pinobs.model.identification import (
     ParameterSet,
 )
-from pinobs.observers.adaptive_blend import JERK_PSD, blend_kernel, lost_filter
+from pinobs.observers.adaptive_blend import (
+    JERK_PSD,
+    BankBlend,
+    bank_blend_kernel,
+    blend_state,
+    lost_filter,
+    model_free,
+    numpy_blend,
+    offsets,
+    packed,
+)
 from pinobs.observers.adaptive_learner import (
     Learner,
+    check_options,
     learning_worker,
     load_learning,
 )
+from pinobs.observers.adaptive_state import AdaptiveModel as _Model
+from pinobs.observers.adaptive_state import AdaptiveState as _State
+from pinobs.observers.adaptive_state import ModelSnapshot
 from pinobs.observers.base import (
     LIKELY_CAUSES,
     Consistency,
@@ -178,58 +192,15 @@ from pinobs.observers.base import (
     register,
 )
 from pinobs.observers.ekf import EKFState, ExtendedKalmanFilter
-from pinobs.observers.kf_bank import BankState, KFBank
+from pinobs.observers.kf_bank import KFBank
 from pinobs.observers.worker import Worker
 
 __all__ = ["AdaptiveEKF", "ModelSnapshot"]
 
 
-class ModelSnapshot(NamedTuple):
-    """The model-based filter's model as it stands (for :func:`pinobs.smooth`, which freezes it).
-
-    Attributes:
-        robot: the learned model (the nominal one before any install), a copy.
-        offset: the learned joint-torque offset added to ``tau`` [N·m or N].
-        regime: ``"warmup"``, ``"nominal"`` or ``"learned"`` (module docstring).
-        accel_psd: that regime's white-acceleration density [rad²/s³].
-        disturbance_psd: that regime's offset density per joint, ``psd · M̄ᵢᵢ²`` [N²·m²/s].
-    """
-
-    robot: Robot
-    offset: Vector
-    regime: str
-    accel_psd: float
-    disturbance_psd: Vector
-
-
-class _Model(NamedTuple):
-    """What ``adaptive`` has learned and how its filter runs on it (module docstring, 5): part
-    of its state, made anew when it changes (an install, a regime, a restart), never changed."""
-
-    core: ExtendedKalmanFilter  # the filter on this model at this regime's accel_psd
-    learned: Robot  # the learned model whole (friction included); the nominal one before
-    held: Vector | None  # 1 where the learned friction is a held input (AdaptiveEKF._install)
-    offset: Vector  # the learned torque offset b̂ [N·m or N]
-    regime: str  # "warmup", "nominal" or "learned"
-    m_bar2: Vector  # M̄ᵢᵢ² at the reset: the offset densities' per-joint scale
-    restarts: int  # times the model-based filter was lost and restarted
-    restarted: bool  # and not replaced by a solve since: the model is to blame
-    rejected_run: int  # the learner's solves rejected in a row, as of the last commit
-    said: tuple[str, ...] = ()  # what the steps since the last commit said (restarts)
-
-
-class _State(NamedTuple):
-    ekf: EKFState
-    kf: BankState  # one filter per white-jerk density of the bank
-    score: Vector  # (filters, nv): running mean squared innovation of each kf per coordinate
-    t: float
-    s: Vector  # estimated model-based velocity error variance per coordinate [rad²/s²]
-    q: Vector  # blended output
-    v: Vector
-    v_prev: Vector  # the EKF's v̂ at the start of the last step (held friction, _torque)
-    dt_prev: float  # that step [s] (0: none yet)
-    model: _Model  # what was learned, the regime, the restarts (read only by step)
-    learner: Learner  # fed by after_commit only, at the commit boundary (module docstring, 5)
+_new_tuple = tuple.__new__  # a NamedTuple made without its __new__, a Python call (step)
+#: The joints of a vector space, as the compiled bank takes them (kf_kernels.joint_table).
+_VECTOR_TABLE = np.zeros((0, 4), dtype=np.int64)
 
 
 #: Consecutive rejected solves (no physical model fits the rows) after which
@@ -260,13 +231,20 @@ _NIS_REVOKED = 10.0
 _LEARNING = ("sync", "background")
 
 
-def _check_options(**options: float) -> None:
-    """Each of :class:`AdaptiveEKF`'s ``options`` (named) > 0, and ``horizon ≥ 2 window``
-    (two identification windows at least)."""
-    for key, val in options.items():
-        positive(key, val)
-    if options["horizon"] < 2 * options["window"]:
-        positive("horizon - 2 window", options["horizon"] - 2 * options["window"])
+def _blend_inputs(
+    ekf: EKFState, model: _Model, q_meas: Vector | None
+) -> tuple[Vector | None, float]:
+    """The bank's sample and the blame on the model (module docstring, 3): ``q_meas`` unless
+    the model-based filter's gate rejected it (not a lost filter's: restarted, not replaced
+    since); the disagreement is the model's fault only when its innovations say so
+    (``NIS̄ > 2 nv``), wholly when it was lost and not replaced since, or none fits."""
+    meas = None if ekf.gate.gated and not model.restarted else q_meas
+    nv = ekf.v.size
+    level = float(nv) if ekf.gate.level is None else ekf.gate.level
+    blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
+    if model.restarted or model.rejected_run >= _REJECTED_RUN or not math.isfinite(level):
+        blame = 1.0  # the model was lost and not replaced since, or none fits (or a NaN)
+    return meas, blame
 
 
 @register
@@ -316,6 +294,7 @@ class AdaptiveEKF(Observer["_State"]):
 
     name = "adaptive"
     uses_noise_std = True
+    fresh_output = True  # (output: copied out of the state's buffer)
     #: :func:`pinobs.smooth` smooths its model-based filter, the learned model frozen per window
     smoothable = True
     learns_model = True
@@ -357,7 +336,7 @@ class AdaptiveEKF(Observer["_State"]):
             disturbance_psd=disturbance_psd, d0_std=d0_std,
             outlier_probability=outlier_probability, rate=rate, noise_std=noise_std,
         )  # fmt: skip
-        _check_options(
+        check_options(
             window=window, half_window=half_window, horizon=horizon, resolve_every=resolve_every,
             accel_psd=accel_psd, blend_time=blend_time,
             learned_disturbance_psd=learned_disturbance_psd,
@@ -416,8 +395,36 @@ class AdaptiveEKF(Observer["_State"]):
             raise GainError("jerk_psd needs at least one density")
         bank = KFBank(self.robot, jerks, self.core.gains.meas_std)
         if self.blend and self.robot.is_vector_space:
-            blend_kernel.load()
+            bank_blend_kernel.load()
+        self._vector = self.robot.is_vector_space  # (a Python property: read once)
+        self._fused = self._vector and bank_blend_kernel.compiled is not None  # (blend_state)
+        self._bank_blas = self.blend and not self._fused  # (NumPy's bank may call a BLAS)
+        self._nq = self.robot.nq
+        self._shape = (bank.jerk.size, self._nq, self.robot.nv)  # (_State.shape)
+        self._estimate = slice(*offsets(*self._shape)[7:10:2])  # q̂ then v̂ (output)
+        self._no_sample = np.zeros(self.robot.nq)  # the compiled step's q_meas without one
         return bank
+
+    #: The caller's choice (``False``: never the one-BLAS-thread limit; :attr:`uses_blas`).
+    _blas_limit = True
+
+    @property
+    def uses_blas(self) -> bool:  # type: ignore[override]
+        """Whether :meth:`update` runs on one BLAS thread (:attr:`Observer.uses_blas`): not
+        where none of its parts calls a BLAS (11–12 µs an update in a paced loop): the
+        model-based filter's compiled step (``core.uses_blas``, of the latest state's model),
+        the compiled bank and blend (vector joints) and the learner off the loop
+        (``learning="background"``: its windows and solves, QR and least squares, run in its
+        worker process).  Set ``False``: never (as on any family)."""
+        if not self._blas_limit:
+            return False
+        state = self._state
+        core = self.core if state is None else state.model.core
+        return self._worker is None or self._bank_blas or core.uses_blas
+
+    @uses_blas.setter
+    def uses_blas(self, value: bool) -> None:
+        self._blas_limit = bool(value)
 
     @property
     def options(self) -> dict[str, Any]:
@@ -573,7 +580,8 @@ class AdaptiveEKF(Observer["_State"]):
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
         s = np.zeros(self.robot.nv)  # the model is trusted until the data disagree
         learner = self._new_learner()
-        state = _State(ekf, kf, score, 0.0, s, q0.copy(), v0.copy(), ekf.v, 0.0, model, learner)
+        x = blend_state(self._shape, kf, score, s, q0, v0, buffer=self._fused)
+        state = _State(ekf, x, self._shape, 0.0, ekf.v, 0.0, model, learner)
         self._warm(state, q0)
         return state
 
@@ -595,24 +603,13 @@ class AdaptiveEKF(Observer["_State"]):
         model, ekf = self._set_regime(model, model.core.initial_state(q, zero), model.regime)
         kf = self._bank.initial(q, zero, model.core.gains.v0_std)
         score = np.zeros((self._bank.jerk.size, self.robot.nv))
-        return _State(
-            ekf, kf, score, state.t, zero.copy(), q.copy(), zero.copy(), ekf.v, 0.0, model,
-            state.learner,
-        )  # fmt: skip
+        x = blend_state(self._shape, kf, score, zero, q, zero, buffer=self._fused)
+        return _State(ekf, x, self._shape, state.t, ekf.v, 0.0, model, state.learner)
 
-    def _model_free(self, state: _State) -> tuple[Vector, Vector, Vector]:
+    def _model_free(self, state: _State) -> tuple[Vector, ...]:
         """Per coordinate, the bank's ``kf`` with the smallest running innovation:
         ``(its v, its velocity variance, its tangent offset from the EKF's q̂)``."""
-        best = np.argmin(state.score, axis=0)
-        cols = np.arange(self.robot.nv)
-        bank = state.kf
-        v = bank.v[best, cols]
-        p = bank.P[best, 1, 1]
-        if self.robot.is_vector_space:
-            dq = bank.q[best, cols] - state.ekf.q
-        else:
-            dq = np.array([self.robot.difference(state.ekf.q, x) for x in bank.q])[best, cols]
-        return v, p, dq
+        return model_free(self.robot, state.kf, state.score, state.ekf.q)
 
     def _weights(self, state: _State) -> Vector:
         if not self.blend:
@@ -624,7 +621,7 @@ class AdaptiveEKF(Observer["_State"]):
         """The torque the filter's model is given over the next step of ``dt`` [s]: ``τ + b̂``,
         plus, on the joints where it is an input (:meth:`_install`), the learned friction at
         the mid-step velocity extrapolated from the last step, ``τ_f,θ̂(v̂ + (h/2)(v̂ − v̂₋)/h₋)``
-        (``v̂₋``, ``h₋``: :attr:`_State.v_prev`, :attr:`_State.dt_prev`; no extrapolation before
+        (``v̂₋``, ``h₋``: the state's ``v_prev``, ``dt_prev``; no extrapolation before
         a first step).  Held at ``v̂`` alone, its error would be first order,
         ``h |∂τ_f/∂v| |a| h/2`` per step (7e-4 rad/s on a UR5 started on a noise-free truth);
         extrapolated, second order (tested)."""
@@ -635,17 +632,17 @@ class AdaptiveEKF(Observer["_State"]):
         v_mid = v + (0.5 * dt / state.dt_prev) * (v - state.v_prev) if state.dt_prev > 0 else v
         return tau + m.offset + m.held * m.learned.friction_torque(v_mid)
 
+    @np.errstate(over="ignore", invalid="ignore")  # (a decorator: 1 Python call, not 3)
     def _core_step(
         self, core: ExtendedKalmanFilter, ekf: EKFState, dt: float, q: Vector | None, tau: Vector
     ) -> EKFState:
-        """The model-based filter's step; a filter whose covariance overflowed to a singular
-        innovation covariance, or that its family says diverged, comes back with a NaN
-        velocity (lost: restarted by :meth:`step`).  On UR10e logs at ~95 Hz the warm-up
-        filter's velocity variance reached 6e10 before ``solve`` raised ``LinAlgError``, which
-        escaped the restart and left the re-initialisation to :func:`pinobs.estimate`."""
+        """The model-based filter's step, overflows quiet; one whose covariance overflowed to a
+        singular innovation covariance, or that its family says diverged, comes back with a NaN
+        velocity (lost: restarted by :meth:`step`).  On UR10e logs at ~95 Hz the warm-up filter's
+        velocity variance reached 6e10 before ``solve`` raised ``LinAlgError``, which escaped
+        the restart and left the re-initialisation to :func:`pinobs.estimate`."""
         try:
-            with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: handled by step
-                return core.step(ekf, dt, q, tau)
+            return core.step(ekf, dt, q, tau)
         except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
             return ekf._replace(v=np.full_like(ekf.v, np.nan))
 
@@ -685,44 +682,45 @@ class AdaptiveEKF(Observer["_State"]):
         # the blend's error variance of the lost filter overflowed with it: the restarted
         # one starts with its initial velocity variance (the blend follows the kf first)
         s = np.full(self.robot.nv, model.core.gains.v0_std**2)
-        return state._replace(model=model, s=s), ekf
+        if isinstance(state.x, BankBlend):
+            return state._replace(model=model, x=state.x._replace(s=s)), ekf
+        x = state.x.copy()
+        x[slice(*offsets(*state.shape)[6:8])] = s
+        return state._replace(model=model, x=x), ekf
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
-        ekf = self._core_step(state.model.core, state.ekf, dt, q_meas, self._torque(state, dt, tau))
+        model = state.model
+        torque = tau + model.offset if model.held is None else self._torque(state, dt, tau)
+        ekf = self._core_step(model.core, state.ekf, dt, q_meas, torque)
         t = state.t + dt
-        if self.blend and lost_filter(ekf):
-            state, ekf = self._restart(state, dt, q_meas, tau)
         if not self.blend:
-            return state._replace(ekf=ekf, t=t, q=ekf.q, v=ekf.v, v_prev=state.ekf.v, dt_prev=dt)
-        # one gate for every filter, but not a lost one's (module docstring, 3)
-        meas = None if ekf.gate.gated and not state.model.restarted else q_meas
-        kf = self._bank.step(state.kf, dt, meas)
+            return state._replace(ekf=ekf, t=t, v_prev=state.ekf.v, dt_prev=dt)
         lam = min(1.0, dt / self.blend_time)
-        # disagreement is the model's fault only when its innovations say so (NIS̄ > 2 nv)
-        nv, model = self.robot.nv, state.model
-        level = float(nv) if ekf.gate.level is None else ekf.gate.level
-        blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
-        if model.restarted or model.rejected_run >= _REJECTED_RUN or not math.isfinite(level):
-            blame = 1.0  # the model was lost and not replaced since, or none fits (or a NaN)
-        if self.robot.is_vector_space and blend_kernel.compiled is not None:
-            score, s, q, v = blend_kernel.compiled(
-                state.score, kf.v if kf.innovation is None else kf.innovation,
-                kf.innovation is not None, lam, kf.q, kf.v, kf.P, ekf.q, ekf.v, state.s, blame,
-            )  # fmt: skip
-            return _State(ekf, kf, score, t, s, q, v, state.ekf.v, dt, model, state.learner)
-        score = state.score
-        if kf.innovation is not None:
-            score = score + lam * (kf.innovation**2 - score)
-        new = _State(
-            ekf, kf, score, t, state.s, ekf.q, ekf.v, state.ekf.v, dt, model, state.learner
+        kernel = bank_blend_kernel.compiled if self._vector else None
+        if kernel is None:  # the bank's step and the blend in NumPy (Lie-group joints)
+            if lost_filter(ekf):
+                state, ekf = self._restart(state, dt, q_meas, tau)
+            meas, blame = _blend_inputs(ekf, state.model, q_meas)
+            kf = self._bank.step(state.kf, dt, meas)
+            score, s, q, v = numpy_blend(self.robot, kf, state.score, state.s, ekf, lam, blame)
+            x: Vector | BankBlend = BankBlend(kf, score, s, q, v)
+        else:  # one compiled call: whether the filter is lost, then the bank and the blend
+            bank = self._bank
+            for check in (True, False):
+                xs = state.x  # (a BankBlend: made while the kernel was not loaded)
+                xs = packed(state.shape, *xs) if isinstance(xs, BankBlend) else xs
+                x = np.empty(xs.size)
+                meas, blame = _blend_inputs(ekf, state.model, q_meas)
+                if kernel(
+                    xs, x, state.shape[1], dt, self._no_sample if meas is None else meas,
+                    meas is not None, bank.jerk, bank.meas_var, ekf.q, ekf.v, ekf.P, lam, blame,
+                    check, _VECTOR_TABLE,
+                ):  # fmt: skip
+                    break
+                state, ekf = self._restart(state, dt, q_meas, tau)  # lost (module docstring, 3)
+        return _new_tuple(
+            _State, (ekf, x, state.shape, t, state.ekf.v, dt, state.model, state.learner)
         )
-        v_kf, p_kf, dq_kf = self._model_free(new)
-        d = ekf.v - v_kf
-        s = state.s + lam * (blame * np.maximum(d * d - p_kf, 0.0) - state.s)
-        w = p_kf / (p_kf + s + 1e-300)
-        v = w * ekf.v + (1.0 - w) * v_kf
-        q = self.robot.integrate(ekf.q, (1.0 - w) * dq_kf)
-        return new._replace(s=s, q=q, v=v)
 
     def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
         """Teach the learner the committed sample (with the torque held from it on, MATH §7);
@@ -732,12 +730,13 @@ class AdaptiveEKF(Observer["_State"]):
         model, ekf, lr = state.model, state.ekf, state.learner
         if model.said:
             lr.rejected.extend(model.said)
-        level = float(self.robot.nv) if ekf.gate.level is None else ekf.gate.level
+        nv = self._shape[2]  # (Robot.nv asks Pinocchio: a call)
+        level = float(nv) if ekf.gate.level is None else ekf.gate.level
         # the first solve only ends the warm-up: the nominal model gets its chance with the
         # exact-model densities, and its innovations decide at the next solve
         # (a learned model is refined at every solve; only the nominal one is protected)
         explained = (model.regime == "warmup" and not model.restarted) or (
-            model.regime == "nominal" and level <= _NIS_TRUSTED * self.robot.nv
+            model.regime == "nominal" and level <= _NIS_TRUSTED * nv
         )
         if math.isnan(lr.next_solve):
             # the reset time; inside never_behind (which is the one reset) the first sample's
@@ -746,7 +745,7 @@ class AdaptiveEKF(Observer["_State"]):
         if lr.add(t, q, tau, explained=explained, gated=q is None and bool(ekf.gate.gated)):
             model, ekf = self._install(model, lr, ekf)
             restarted = False
-        elif model.regime == "nominal" and level > _NIS_REVOKED * self.robot.nv:
+        elif model.regime == "nominal" and level > _NIS_REVOKED * nv:
             # the nominal model stopped explaining the data between solves: do not wait
             if lr.candidate is not None:
                 lr.theta = lr.candidate
@@ -766,7 +765,14 @@ class AdaptiveEKF(Observer["_State"]):
         return state.ekf.gate.nis, state.ekf.gate.gated
 
     def output(self, state: _State) -> tuple[Vector, Vector]:
-        return state.q, state.v
+        """The blended estimate ``(q̂, v̂)``, copies (:attr:`fresh_output`), or without the blend the EKF's."""
+        if not self.blend:
+            return state.ekf.q.copy(), state.ekf.v.copy()
+        x = state.x
+        if isinstance(x, BankBlend):
+            return x.q.copy(), x.v.copy()
+        out = x[self._estimate].copy()
+        return out[: self._nq], out[self._nq :]
 
     def smoothing_filter(self) -> ExtendedKalmanFilter:
         """None: a smoother runs it causally and replays its learned models frozen

@@ -23,7 +23,7 @@ from pinobs.errors import IdentificationError
 from pinobs.model import Robot
 from pinobs.model.identification import MAX_FILL, MomentumRegressor, smooth_path, solve
 from pinobs.model.sanity import mass_matrix_defect
-from pinobs.observers.base import Vector
+from pinobs.observers.base import Vector, positive
 from pinobs.observers.blas import blas_libraries, one_blas_thread
 from pinobs.observers.worker import Worker
 from pinobs.tolerances import TIME_EPS
@@ -33,6 +33,7 @@ __all__ = [
     "PRELOAD",
     "REJECTED_KEPT",
     "Learner",
+    "check_options",
     "learning_worker",
     "load_learning",
     "split_samples",
@@ -141,25 +142,37 @@ class Learner:
         (``q`` None: no sample, nothing added); returns True when a new model was solved for.
         ``explained``: the filter's innovations say the current model explains the data
         (then a solve only validates it); ``gated``: ``q`` None because the filter's gate
-        rejected the sample (not filled: :meth:`_fill`)."""
-        self._track_interval(t)
+        rejected the sample (not filled: :meth:`_fill`).
+
+        Written for its cost (issue 39: every update of a live loop): a sample on the interval
+        (the usual one) makes one Python call here (the buffer's ``append``; its length and
+        latest time read from its fields), and :meth:`collect` is called only with jobs out."""
+        t_last, h = self._t_last, self.h
+        if t_last is not None and abs(t - t_last - h) <= _GAP_FRACTION * h and not self._off_run:
+            self._t_last = t  # on the interval: all that _track_interval would do
+        else:
+            self._track_interval(t)
+        buf = self.buf
         if q is None:
-            if self.buf:
+            if buf.end > buf.start:
                 self._lost.append((t, tau, gated))
-            return self.collect()  # a lost sample shows as a gap in the times below
+            return self.collect() if self.pending else False  # shows as a gap in the times
         # a gap (a lost sample: 2h) or a doubled sample: windows never straddle one, unless
         # it is at most MAX_FILL lost samples, which are interpolated (_fill).  Jitter is not
         # a gap: the rows integrate over the samples' own times (MATH §9); at ±0.1 h this
         # test cleared the windows at every other sample and the learner never solved,
         # silently (a sweep found it, and a 500 Hz stream without rate)
-        if self.buf and abs(t - self.buf.latest_time() - self.h) > _GAP_FRACTION * self.h:
+        h = self.h
+        if buf.end > buf.start and abs(t - float(buf.rows[buf.end - 1, 0]) - h) > _GAP_FRACTION * h:
             if not self._fill(t, q):
-                self.buf.clear()
-        self._lost = []
-        self.buf.append((t, q, tau))
-        if math.isnan(self.h):
-            return self.collect()  # one sample: no interval yet
-        self._add_windows()
+                buf.clear()
+        if self._lost:
+            self._lost = []
+        buf.append((t, q, tau))
+        if math.isnan(h):
+            return self.collect() if self.pending else False  # one sample: no interval yet
+        if buf.end - buf.start >= self._need:
+            self._add_windows()
         if (
             t >= self.next_solve - TIME_EPS  # (t₀ + kT: rounding)
             # (installs do not wait for rows that over-determine the fit, rows ≥ k·rank:
@@ -175,7 +188,7 @@ class Learner:
             qs = self.buf.configurations(max(1, len(self.buf) // 4))
             self.solving = True
             self._run((explained, current), "solve", current.tobytes(), qs.tobytes())
-        return self.collect()
+        return self.collect() if self.pending else False
 
     def _track_interval(self, t: float) -> None:
         """Follow the stream's interval from every update's time ``t`` (a gated or lost
@@ -190,14 +203,14 @@ class Learner:
                 if len(self._off_run) == _INTERVAL_CHECK:
                     self._interval(self._off_run)
                     self._off_run = []
-            else:
+            elif self._off_run:
                 self._off_run = []
         self._t_last = t
 
     def _add_windows(self) -> None:
         """Every complete window of the buffer to the identifier's rows, the buffer moved on
         by a window each."""
-        need = self.win + 2 * self.hw + 1
+        need = self._need
         while len(self.buf) >= need:
             # (the samples' rows written as they came, _Samples: built from a deque of
             # tuples here, 0.2–0.6 ms a window on a UR5 in a paced loop, caches cold)
@@ -276,6 +289,7 @@ class Learner:
         self.stride = max(1, round(0.004 / h))
         self.win = max(self.stride, round(self.window / h / self.stride) * self.stride)
         self.hw = max(2, round(self.half_window / h))
+        self._need = self.win + 2 * self.hw + 1  # samples a window takes (_add_windows)
 
     def start(self, t0: float) -> None:
         """Begin at the reset time ``t0`` [s]: the first solve comes ``resolve_every`` after it."""
@@ -561,6 +575,15 @@ def _remote(state: dict[str, Any], key: int, windows: int, job: str, *args: Any)
     if state["key"] != key:
         state["key"], state["identifier"] = key, _Identifier(state["reg"], windows)
     return getattr(state["identifier"], job)(*args)
+
+
+def check_options(**options: float) -> None:
+    """Each of ``adaptive``'s ``options`` (named) > 0, and ``horizon ≥ 2 window`` (two
+    identification windows at least)."""
+    for key, val in options.items():
+        positive(key, val)
+    if options["horizon"] < 2 * options["window"]:
+        positive("horizon - 2 window", options["horizon"] - 2 * options["window"])
 
 
 def load_learning() -> None:

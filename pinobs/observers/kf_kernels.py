@@ -33,19 +33,28 @@ __all__ = [
     "auto_step_loops",
     "bank_kernel",
     "bank_rows_loops",
+    "copy_into",
+    "covariances_view",
     "difference_joints",
+    "innovations_into",
     "integrate_joints",
     "joint_table",
+    "kalman_correct",
+    "predict_covariance",
+    "predict_mean",
+    "rows_view",
+    "transition_into",
 ]
 
 
 # The kernels' steps: small functions compiled with them and inlined into them by numba
 # (:class:`~pinobs.observers.linalg.LazyKernel`'s ``helpers``, ``inline="always"``: as fast
 # as the loops written in place, and bit-identical to them on every kf and adaptive estimate
-# of UR5, Panda and go1 runs with dropouts and outliers).
+# of UR5, Panda and go1 runs with dropouts and outliers).  Public: ``adaptive``'s compiled
+# bank and blend (:mod:`pinobs.observers.adaptive_blend`) are made of them too.
 
 
-def _transition_into(h: float, F: Vector, Q1: Vector) -> None:
+def transition_into(h: float, F: Vector, Q1: Vector) -> None:
     """``F(h)`` and ``Q₁(h)`` (``Q`` at unit density) into ``F`` (its unit diagonal and zeros
     already there) and ``Q1`` (the module docstring)."""
     F[0, 1], F[0, 2], F[1, 2] = h, 0.5 * h * h, h
@@ -54,14 +63,14 @@ def _transition_into(h: float, F: Vector, Q1: Vector) -> None:
     Q1[1, 0], Q1[2, 0], Q1[2, 1] = Q1[0, 1], Q1[0, 2], Q1[1, 2]
 
 
-def _copy_into(src: Vector, dst: Vector) -> None:
+def copy_into(src: Vector, dst: Vector) -> None:
     """``dst[:] = src`` (2-D, in loops)."""
     for i in range(src.shape[0]):
         for j in range(src.shape[1]):
             dst[i, j] = src[i, j]
 
 
-def _predict_covariance(
+def predict_covariance(
     F: Vector, Q1: Vector, jerk: float, P: Vector, FP: Vector, out: Vector
 ) -> None:
     """``out = F P Fᵀ + jerk · Q₁`` (3×3; ``FP`` receives ``F P``)."""
@@ -82,8 +91,8 @@ def _predict_covariance(
 def _predict_covariance_ca(
     h: float, c: float, jerk: float, Q1: Vector, P: Vector, out: Vector
 ) -> None:
-    """:func:`_predict_covariance` with ``F = [[1, h, c], [0, 1, h], [0, 0, 1]]`` written out
-    (``c = h²/2``, computed as :func:`_transition_into` does): its products by 1 and 0 and
+    """:func:`predict_covariance` with ``F = [[1, h, c], [0, 1, h], [0, 0, 1]]`` written out
+    (``c = h²/2``, computed as :func:`transition_into` does): its products by 1 and 0 and
     its sums of 0 left out, the rest in the same order (the same finite results, to the sign
     of an exact zero: ``0 + x`` is ``+0`` where ``x`` is ``−0``; tested equal)."""
     for j in range(3):  # F P, row by row
@@ -96,7 +105,7 @@ def _predict_covariance_ca(
         out[i, 2] = f2 + jerk * Q1[i, 2]
 
 
-def _correct(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
+def kalman_correct(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
     Pp: Vector, s: float, meas_var: float, e: Vector, q: Vector, v: Vector, a: Vector,
     K: Vector, C: Vector, Pn: Vector, out: Vector, table: NDArray[np.int64], d: Vector,
 ) -> None:  # fmt: skip
@@ -131,7 +140,7 @@ def _correct(  # noqa: C901 -- numba kernel: its branches are loops over small m
             out[i, j] = 0.5 * (Pn[i, j] + Pn[j, i])
 
 
-def _innovations_into(q_meas: Vector, q: Vector, table: NDArray[np.int64], e: Vector) -> float:
+def innovations_into(q_meas: Vector, q: Vector, table: NDArray[np.int64], e: Vector) -> float:
     """One filter's innovations ``e = difference(q⁻, q_meas)`` (``q_meas − q⁻`` on a vector
     space) into ``e``; returns ``Σ e_i²``."""
     if table.shape[0] > 0:
@@ -144,7 +153,7 @@ def _innovations_into(q_meas: Vector, q: Vector, table: NDArray[np.int64], e: Ve
     return sq
 
 
-def _predict_mean(
+def predict_mean(
     q: Vector, v: Vector, a: Vector, h: float, table: NDArray[np.int64], d: Vector,
     q1: Vector, v1: Vector,
 ) -> None:  # fmt: skip
@@ -505,22 +514,22 @@ def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over 
         if k > 0:
             h = t[k] - t[k - 1]
             if h != h_prev:
-                _transition_into(h, F, Q1)
+                transition_into(h, F, Q1)
                 h_prev = h
             for f in range(nf):
-                _predict_covariance(F, Q1, jerk[f], P[f], FP, Pp)  # P⁻ = F P Fᵀ + Q
-                _predict_mean(q[f], v[f], a[f], h, table, d, q[f], v[f])
+                predict_covariance(F, Q1, jerk[f], P[f], FP, Pp)  # P⁻ = F P Fᵀ + Q
+                predict_mean(q[f], v[f], a[f], h, table, d, q[f], v[f])
                 if not measured[k]:
-                    _copy_into(Pp, P[f])
+                    copy_into(Pp, P[f])
                     continue
                 s = Pp[0, 0] + meas_var
-                nis = _innovations_into(q_meas[k], q[f], table, e[f]) / s
+                nis = innovations_into(q_meas[k], q[f], table, e[f]) / s
                 # GateState.measured (base.outlier_gate), in loops: tested equal
                 g = gate * max(1.0, level[f] / nv)
                 if nis > g and run[f] < MAX_GATE_RUN:
                     run[f] += 1
                     ll[f] -= 0.5 * (g + nv * math.log(2.0 * math.pi * s))
-                    _copy_into(Pp, P[f])
+                    copy_into(Pp, P[f])
                     continue
                 if run[f] >= MAX_GATE_RUN:
                     level[f] = max(level[f], nis * nv / gate)
@@ -529,11 +538,11 @@ def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over 
                 if f == 0 and store:
                     used[k] = True
                 ll[f] -= 0.5 * (nis + nv * math.log(2.0 * math.pi * s))
-                _correct(Pp, s, meas_var, e[f], q[f], v[f], a[f], K, C, Pp, P[f], table, d)
+                kalman_correct(Pp, s, meas_var, e[f], q[f], v[f], a[f], K, C, Pp, P[f], table, d)
         if store:  # filter 0's state
             for i in range(nv):
                 X[k, 0, i], X[k, 1, i], X[k, 2, i] = q[0, i], v[0, i], a[0, i]
-            _copy_into(P[0], PX[k])
+            copy_into(P[0], PX[k])
 
 
 #: :func:`bank_rows_loops` compiled (loaded when a
@@ -559,8 +568,8 @@ bank_kernel = LazyKernel(
     np.zeros(2, dtype=bool),
     np.zeros((0, 4), dtype=np.int64),
     helpers=(
-        *LIE_HELPERS, _transition_into, _copy_into, _predict_covariance, _innovations_into,
-        _predict_mean, _correct,
+        *LIE_HELPERS, transition_into, copy_into, predict_covariance, innovations_into,
+        predict_mean, kalman_correct,
     ),
 )  # fmt: skip
 
@@ -581,14 +590,14 @@ def auto_layout(nf: int, nq: int, nv: int) -> tuple[int, ...]:
     return 0, o_v, o_a, o_A, o_w, o_e, o_P, o_B, o_mix, o_mix + nq + nv
 
 
-def _rows(x: Vector, start: int, rows: int, cols: int) -> Vector:
+def rows_view(x: Vector, start: int, rows: int, cols: int) -> Vector:
     """``x[start : start + rows·cols]`` as a ``rows × cols`` array (a view: numba's
     ``reshape`` of a slice cost 13 ns each, 0.2 µs a step)."""
     return as_strided(x[start:], shape=(rows, cols), strides=(cols * x.itemsize, x.itemsize))
 
 
-def _covariances(x: Vector, start: int, nf: int) -> Vector:
-    """``x[start : start + 9 nf]`` as ``nf`` 3×3 matrices (a view, as :func:`_rows`)."""
+def covariances_view(x: Vector, start: int, nf: int) -> Vector:
+    """``x[start : start + 9 nf]`` as ``nf`` 3×3 matrices (a view, as :func:`rows_view`)."""
     k = x.itemsize
     return as_strided(x[start:], shape=(nf, 3, 3), strides=(9 * k, 3 * k, k))
 
@@ -620,21 +629,21 @@ def auto_step_loops(
     nf = jerk.size
     nv = (x.size - nq * (nf + 1) - 10 * nf) // (5 * nf + 1)
     o = auto_layout(nf, nq, nv)
-    q, q1 = _rows(x, o[0], nf, nq), _rows(x1, o[0], nf, nq)
-    v, v1 = _rows(x, o[1], nf, nv), _rows(x1, o[1], nf, nv)
-    a, a1 = _rows(x, o[2], nf, nv), _rows(x1, o[2], nf, nv)
-    A, A1 = _rows(x, o[3], nf, nv), _rows(x1, o[3], nf, nv)
-    w, w1 = _rows(x, o[4], nf, nv), _rows(x1, o[4], nf, nv)
-    e1 = _rows(x1, o[5], nf, nv)
-    P, P1 = _covariances(x, o[6], nf), _covariances(x1, o[6], nf)
+    q, q1 = rows_view(x, o[0], nf, nq), rows_view(x1, o[0], nf, nq)
+    v, v1 = rows_view(x, o[1], nf, nv), rows_view(x1, o[1], nf, nv)
+    a, a1 = rows_view(x, o[2], nf, nv), rows_view(x1, o[2], nf, nv)
+    A, A1 = rows_view(x, o[3], nf, nv), rows_view(x1, o[3], nf, nv)
+    w, w1 = rows_view(x, o[4], nf, nv), rows_view(x1, o[4], nf, nv)
+    e1 = rows_view(x1, o[5], nf, nv)
+    P, P1 = covariances_view(x, o[6], nf), covariances_view(x1, o[6], nf)
     B, B1 = x[o[7] : o[8]], x1[o[7] : o[8]]
     mix = x1[o[8] : o[9]]
     F, Q1 = np.eye(3), np.zeros((3, 3))
-    _transition_into(h, F, Q1)
+    transition_into(h, F, Q1)
     d, S = np.empty((2, nv)), np.empty(nf)
     for f in range(nf):  # predict: x ← F x, P⁻ = F P Fᵀ + j_f Q₁(h)
         _predict_covariance_ca(h, F[0, 2], jerk[f], Q1, P[f], P1[f])
-        _predict_mean(q[f], v[f], a[f], h, table, d[0], q1[f], v1[f])
+        predict_mean(q[f], v[f], a[f], h, table, d[0], q1[f], v1[f])
         for i in range(nv):
             a1[f, i] = a[f, i]
         S[f] = P1[f, 0, 0] + meas_var
@@ -649,7 +658,7 @@ def auto_step_loops(
     if accept:
         K, C, Pn = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
         for f in range(nf):  # correct: K = P⁻[:, 0] / S, the Joseph form
-            _correct(
+            kalman_correct(
                 P1[f], S[f], meas_var, e1[f], q1[f], v1[f], a1[f], K, C, Pn, P1[f], table, d[0]
             )
             B1[f] = forget * B[f] + math.log(S[f])  # the forgotten sums (module docstring)
@@ -658,8 +667,8 @@ def auto_step_loops(
         _weights_into(n_new, A1, B1, w1)
     else:  # no measurement, or rejected: the sums and weights as they were
         B1[:] = B
-        _copy_into(A, A1)
-        _copy_into(w, w1)
+        copy_into(A, A1)
+        copy_into(w, w1)
     _mixture_into(w1, q1, v1, table, d, mix)
     return nis, reject, level
 
@@ -682,8 +691,8 @@ auto_kernel = LazyKernel(
     auto_step_loops,
     *_auto_warm_args(),
     helpers=(
-        *LIE_HELPERS, _transition_into, _copy_into, _predict_covariance, _predict_mean, _correct,
-        _innovations, auto_layout, _predict_covariance_ca, _rows, _covariances,
+        *LIE_HELPERS, transition_into, copy_into, predict_covariance, predict_mean, kalman_correct,
+        _innovations, auto_layout, _predict_covariance_ca, rows_view, covariances_view,
         _outlier_gate, _weights_into, _mixture_into,
     ),
 )  # fmt: skip

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import multiprocessing
 import pickle
+import select
 import sys
 import weakref
 from collections import deque
@@ -115,6 +116,12 @@ class Worker:
         jobs_out.close()
         results_in.close()
         self._send, self._recv = jobs_in, results_out
+        # whether a result is in, without waiting: one poll object for the worker's life where
+        # the OS has poll(2) (Connection.poll builds a selector at every call: 20 Python calls,
+        # at every update while a job is out; issue 39)
+        self._poller = select.poll() if hasattr(select, "poll") else None
+        if self._poller is not None:
+            self._poller.register(results_out.fileno(), select.POLLIN)
         self.capacity = _grow_pipe(jobs_in.fileno()) // _PAGE  # [pages]
         self.outbox: deque[tuple[bytes, int]] = deque()  # (message, pages) not yet written
         self._untaken: deque[int] = deque()  # pages of each job written and not yet answered
@@ -145,7 +152,9 @@ class Worker:
     def poll(self, *, wait: bool = False) -> None:
         """Take the results the worker has sent (``wait``: at least one, waiting for it),
         then write the queued jobs that fit."""
-        while self._jobs and (wait or self._recv.poll()):
+        while self._jobs and (
+            wait or (self._recv.poll() if self._poller is None else bool(self._poller.poll(0)))
+        ):
             wait = False
             self._flush()  # (a job waited for may still be in the outbox)
             ok, value = self._recv.recv()

@@ -28,10 +28,10 @@ from pinobs.observers.results import Estimate
 #: kf 9 before its state went into one buffer (its output no longer through the bank); ekf 17
 #: and riemannian 31 before their steps' last fusions (fused.ekf_finish_loops, RiccatiStep);
 #: adaptive 66 before its bank and blend became one compiled call on one buffer (58 without the
-#: sample after a dropped one, which the learner fills: 33 now; about half its model-based
-#: filter's step, ekf's), learning in the background as a live loop runs it
+#: sample after a dropped one, which the learner fills: 33 then, 28 with ekf's fused step; half its
+#: model-based filter's step), learning in the background as a live loop runs it
 #: (pinobs.evaluation.live.LIVE_OPTIONS; no learner's job is out in these updates).
-MAX_CALLS = {"kf": 8, "ekf": 12, "riemannian": 18, "fd": 8, "adaptive": 41}
+MAX_CALLS = {"kf": 8, "ekf": 12, "riemannian": 18, "fd": 8, "adaptive": 36}
 OPTIONS = {"adaptive": {"learning": "background"}}
 
 

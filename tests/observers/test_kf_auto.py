@@ -293,14 +293,14 @@ def test_the_auto_kernels_covariance_prediction_is_the_general_one() -> None:
         return getattr(f, "py_func", f)
 
     general, written = (
-        plain(kf_kernels._predict_covariance),
+        plain(kf_kernels.predict_covariance),
         plain(kf_kernels._predict_covariance_ca),
     )
     rng = np.random.default_rng(1)
     for trial in range(300):
         h = float(10.0 ** rng.uniform(-4, -1))
         F, Q1 = np.eye(3), np.zeros((3, 3))
-        plain(kf_kernels._transition_into)(h, F, Q1)
+        plain(kf_kernels.transition_into)(h, F, Q1)
         L = rng.standard_normal((3, 3)) * 10.0 ** rng.uniform(-8, 2, size=(3, 1))
         P = L @ L.T
         if trial % 3 == 0:

@@ -105,3 +105,20 @@ def test_kf_and_ekf_estimates_are_the_same_bits_with_numba_refreshed_first() -> 
     full, lean = run("full"), run("lean")
     assert full == lean  # floats through JSON's repr: the same bits
     assert len(lean["kf"]) == len(lean["ekf"]) == 100
+
+
+def test_kf_made_from_a_warm_cache_imports_neither_scipy_linalg_nor_numba_s_registries() -> None:
+    """Issue 39: ``kf``'s kernel makes no BLAS or LAPACK call, so with its kernel in the
+    cache (the first process fills it if need be) ``make_observer("kf")`` imports no
+    ``scipy.linalg`` (0.17 s of CPU) and not numba's registries (0.2 s)."""
+    code = (
+        "import sys, pinobs\n"
+        "pinobs.make_observer('kf', pinobs.load('ur5'), rate=1000.0, noise_std=1e-4)\n"
+        "heavy = ('scipy.linalg', 'numba.np.polynomial.polynomial_functions', 'numba')\n"
+        "print(sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    runs = [
+        subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+        for _ in range(2)
+    ]
+    assert runs[1].stdout.strip().splitlines()[-1] == "['numba']"

@@ -64,6 +64,19 @@ def test_a_cache_miss_compiles_and_a_cache_hit_loads_without_refreshing_numba(
     assert np.max(np.abs(np.array(loaded["out"]) - expected)) < 1e-15
 
 
+def test_a_kernel_without_a_disk_cache_compiles_as_usual() -> None:
+    """A dispatcher with no disk cache (``cache=False``) loads nothing: it compiles with
+    numba's own refresh, NumPy functions typed as usual."""
+    code = (
+        "import numba, numpy as np\n"
+        "from pinobs.observers.kernel_cache import load_signature\n"
+        "f = numba.njit(lambda a: np.linalg.norm(a) + np.sum(a))\n"
+        "print(load_signature(f, np.array([3.0, 4.0])))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "12.0"
+
+
 def test_numba_compiles_as_usual_after_a_lean_load() -> None:
     """A ``kf`` made (its kernel loaded from the cache without numba's refresh), then a new
     function compiled in the same process: numba refreshes its context for it then."""

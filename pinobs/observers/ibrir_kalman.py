@@ -111,6 +111,7 @@ from pinobs.observers.base import (
 )
 from pinobs.observers.differentiators import HighGainDifferentiator
 from pinobs.observers.ekf import ad_matrix, double_integrator_noise
+from pinobs.observers.kernel_cache import load_signature
 from pinobs.observers.linalg import (
     cholesky_solve,
     joseph_kernel,
@@ -211,7 +212,7 @@ def _fused_kernel() -> Any:
     one, eye, zero = np.eye(1), np.eye(2), np.zeros((2, 2))
     noise = np.zeros((2, 2))
     noise.flags.writeable = False  # as IbrirKalman._noise's (cached) matrices: one signature
-    kernel(one, one, 1.0, eye, noise, np.zeros(1), 1.0, np.zeros(2), zero)
+    load_signature(kernel, one, one, 1.0, eye, noise, np.zeros(1), 1.0, np.zeros(2), zero)
     return kernel
 
 

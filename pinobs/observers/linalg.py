@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from pinobs.observers.base import Vector
+from pinobs.observers.kernel_cache import load_signature
 
 __all__ = [
     "KERNEL_MAX_NV",
@@ -204,7 +205,8 @@ def _joseph_loops(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bo
 class LazyKernel:
     """A numba-compiled function, built on :meth:`load` (``import pinobs`` does not import
     numba); ``compiled`` is ``None`` until then.  ``cache=True``: compiled once per
-    installation, then loaded from numba's cache.  ``error_model="numpy"``: a division by
+    installation, then loaded from numba's cache
+    (:func:`~pinobs.observers.kernel_cache.load_signature`: without numba's full set-up).  ``error_model="numpy"``: a division by
     zero gives ``inf``/``nan`` as in the NumPy path the kernel replaces (numba's default
     raises ``ZeroDivisionError``: a ``kf`` fed a huge sample raised it from its compiled
     bank instead of reporting a diverged estimate).  ``helpers``: functions of ``fn``'s
@@ -247,7 +249,7 @@ class LazyKernel:
                     fma = numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
                     scope[name] = fma(scope[name])
             kernel = numba.njit(cache=True, error_model="numpy", fastmath=self.fastmath)(self.fn)
-            kernel(*self.warm_args)  # load (or compile) the float64 signature now
+            load_signature(kernel, *self.warm_args)  # the float64 signature, loaded now
             self.compiled = kernel
 
 

@@ -1,0 +1,49 @@
+"""Loading numba kernels from numba's on-disk cache without initialising all of numba.
+
+numba loads a cached kernel (``Cache.load_overload``) only after refreshing its CPU target
+context: that imports every one of numba's implementation modules and installs their
+registries (``numba.np.arraymath`` imports ``scipy.linalg`` with it, to check for BLAS),
+0.25–0.35 s of CPU the first time in a process (issue 39: most of an observer's
+``make_observer``).  Linking cached machine code uses none of it: it needs numba's runtime
+(NRT, which compiled code calls), the code generator and the numba modules named by the
+kernels' pickled environments (numba imports those as it unpickles them).
+
+:func:`load_signature` calls a kernel once (so that its signature is loaded, or compiled)
+with that kernel's ``Cache.load_overload`` replaced, for the call, by the same steps less the
+refresh: numba's runtime initialised, then the cached code loaded.  Nothing else is
+changed: a cache miss compiles as before (numba's compiler refreshes the context itself,
+fully), and so does any compilation later in the process.  The machine code is the same
+either way (bit-identical outputs, tested).  If numba's internals are not as expected, the
+kernel is called as it is.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["load_signature"]
+
+
+def load_signature(kernel: Any, *args: Any) -> Any:
+    """Call the numba dispatcher ``kernel`` on ``args`` (loading that signature from numba's
+    cache, or compiling it) without numba's refresh before the cache load (module
+    docstring); returns what the call returns."""
+    try:
+        from numba.core.caching import Cache
+        from numba.core.runtime import rtsys
+    except ImportError:  # (numba's internals moved: the ordinary call)
+        return kernel(*args)
+    cache = getattr(kernel, "_cache", None)
+    if not isinstance(cache, Cache) or not hasattr(cache, "_load_overload"):
+        return kernel(*args)  # (no disk cache: the ordinary call)
+
+    def load_overload(sig: Any, target_context: Any) -> Any:
+        rtsys.initialize(target_context)  # instead of target_context.refresh()
+        with cache._guard_against_spurious_io_errors():
+            return cache._load_overload(sig, target_context)
+
+    cache.load_overload = load_overload  # type: ignore[method-assign]  # (this call only)
+    try:
+        return kernel(*args)
+    finally:
+        del cache.load_overload

@@ -34,7 +34,8 @@ def load_signature(kernel: Any, *args: Any) -> Any:
     except ImportError:  # (numba's internals moved: the ordinary call)
         return kernel(*args)
     cache = getattr(kernel, "_cache", None)
-    if not isinstance(cache, Cache) or not hasattr(cache, "_load_overload"):
+    needs = ("_load_overload", "_guard_against_spurious_io_errors")
+    if not isinstance(cache, Cache) or not all(hasattr(cache, n) for n in needs):
         return kernel(*args)  # (no disk cache: the ordinary call)
 
     def load_overload(sig: Any, target_context: Any) -> Any:

@@ -380,7 +380,8 @@ class Observer(ABC, Generic[State]):
                 state = self.step(self._state, dt, q, self._tau)
             t_state = t_new
             estimate = self._make_estimate(t_new, state)
-        if not math.isfinite(sum(estimate.q.tolist()) + sum(estimate.v.tolist())):
+        s = sum(estimate.q.tolist()) + sum(estimate.v.tolist())
+        if not s - s == 0.0:  # not finite (as math.isfinite: a call less)
             self._check_finite(estimate, t_new, dt)  # entry by entry: a sum can overflow to inf
         self._diverged = False
         self._state, self._t, self._tau, self._last = state, t_new, tau_new, estimate
@@ -412,42 +413,40 @@ class Observer(ABC, Generic[State]):
     ) -> tuple[float, Vector | None, Vector]:
         """:meth:`update`'s inputs checked: ``(t, q or None, τ)``, fresh arrays.
 
-        Fast paths for the usual call (issue 39: the checks cost 3× one ``pin.aba`` an update
-        on a UR5): a ``float`` time after the previous one, float64 arrays of the right shape
-        copied whose Python sum is finite (then every entry is), a τ within ``±`` the smallest
-        joint's bound (or else each joint's own), ``q``'s unit-norm blocks checked and
-        normalised (``Robot.normalized_units``, on a :class:`Robot`); anything else goes through
-        the full checks (:meth:`_check_time`, ``Robot.check_configuration``, :meth:`_check_tau`),
-        which raise their errors or accept it as before."""
-        t_new = float(t) if type(t) in _FLOATS and self._t + TIME_EPS < t < math.inf else None
-        if t_new is None:
-            t_new = self._check_time(t, previous=self._t)
-        q = (
-            q_meas.copy()
-            if type(q_meas) is np.ndarray
-            and q_meas.dtype is _F64
-            and q_meas.shape == self._shapes[0]
-            else None
-        )
-        if q is None or not math.isfinite(sum(q.tolist())):
-            q = None if q_meas is None else self.robot.check_configuration(q_meas, what="q_meas")
-        elif self._units:  # (4 µs → 1 µs on a talos: check_configuration's last step only)
-            q = self.robot.normalized_units(q, what="q_meas")
-        tau_new = (
-            tau.copy()
-            if type(tau) is np.ndarray and tau.dtype is _F64 and tau.shape == self._shapes[1]
-            else None
-        )
-        if tau_new is None or not (
-            math.isfinite(sum(lst := tau_new.tolist()))
-            and (
-                (-self._tau_floor <= min(lst) and max(lst) <= self._tau_floor)
-                # joint by joint (a free-flyer's weight is past a wrist's bound): 2 against 7 µs
-                or bool((np.abs(tau_new) <= self.robot.absurd_torque).all())
-            )
+        One test for the usual call (issue 39: the checks cost 3× one ``pin.aba`` an update on a
+        UR5): a ``float`` time after the previous one, ``q`` and ``τ`` float64 arrays of the
+        right shapes (or ``None``) whose Python sum with the time is finite (then every entry
+        is), τ within ``±`` the smallest joint's bound (or each joint's own): copied, ``q``'s
+        unit-norm blocks normalised (``Robot.normalized_units``, on a :class:`Robot`).  Else the
+        full checks (:meth:`_check_time`, ``Robot.check_configuration``, :meth:`_check_tau`)."""
+        sq, st = self._shapes
+        if (
+            type(t) in _FLOATS
+            and (tau is None or (type(tau) is np.ndarray and tau.dtype is _F64 and tau.shape == st))
+            and (q_meas is None or (type(q_meas) is np.ndarray and q_meas.dtype is _F64))
+            and (q_meas is None or q_meas.shape == sq)
         ):
-            tau_new = self._check_tau(tau, what="tau")
-        return t_new, q, tau_new
+            x = float(t)  # (before comparing: a np.float64 compares through NumPy's scalars)
+            lst = () if tau is None else tau.tolist()
+            s = x + sum(lst) + (0.0 if q_meas is None else sum(q_meas.tolist()))
+            f = self._tau_floor
+            if (
+                s - s == 0.0  # finite
+                and self._t + TIME_EPS < x
+                and (
+                    tau is None
+                    or (-f <= min(lst) and max(lst) <= f)
+                    # joint by joint (a free-flyer's weight is past a wrist's bound): 2 against 7 µs
+                    or bool((np.abs(tau) <= self.robot.absurd_torque).all())
+                )
+            ):
+                q = None if q_meas is None else q_meas.copy()
+                if q is not None and self._units:  # (check_configuration's last step only)
+                    q = self.robot.normalized_units(q, what="q_meas")
+                return x, q, self._check_tau(None, what="tau") if tau is None else tau.copy()
+        t_new = self._check_time(t, previous=self._t)
+        q = None if q_meas is None else self.robot.check_configuration(q_meas, what="q_meas")
+        return t_new, q, self._check_tau(tau, what="tau")
 
     def _check_finite(self, estimate: Estimate, t_new: float, dt: float) -> None:
         """:class:`ObserverDiverged` if ``estimate`` (at ``t_new``, ``dt`` after the previous

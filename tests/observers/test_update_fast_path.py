@@ -130,3 +130,24 @@ def test_a_quaternion_off_unit_norm_is_normalised_or_refused_as_by_the_full_chec
     a = fast.update(ts[10], qs[10], np.zeros(robot.nv))
     b = full.update(ts[10], qs[10], np.zeros(robot.nv))
     assert a.q.tobytes() == b.q.tobytes() and a.v.tobytes() == b.v.tobytes()
+
+
+def test_finite_inputs_whose_sum_overflows_and_none_are_accepted_as_by_the_full_checks() -> None:
+    """The one test of the usual call sums the time, ``q`` and ``τ``: finite entries whose sum
+    overflows leave it for the full checks, which accept them (no ``NonFiniteError``: ``kf``
+    then diverges, as from a list); a ``None`` sample and torque take it, as lists would."""
+    robot, (ob, twin), ts, qs = _pair("kf", "ur5")
+    a = ob.update(ts[0], None, None)
+    b = twin.update(ts[0], None, np.zeros(robot.nv).tolist())
+    assert a.q.tobytes() == b.q.tobytes() and a.v.tobytes() == b.v.tobytes()
+    q = qs[1].copy()
+    q[:2] = 1e308  # each finite, their sum is not
+    outcomes: list[object] = []
+    for o, x in ((ob, q), (twin, q.tolist())):
+        try:
+            e = o.update(ts[1], x, None)
+            outcomes.append((e.q.tobytes(), e.v.tobytes(), e.gated))
+        except pinobs.ObserverDiverged as exc:
+            outcomes.append(str(exc))
+    assert outcomes[0] == outcomes[1]
+    assert isinstance(outcomes[0], str) and "diverged at t = 0.002 s" in outcomes[0]

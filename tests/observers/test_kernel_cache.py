@@ -64,6 +64,12 @@ def test_a_cache_miss_compiles_and_a_cache_hit_loads_without_refreshing_numba(
     assert np.max(np.abs(np.array(loaded["out"]) - expected)) < 1e-15
 
 
+def _last_line(code: str) -> str:
+    """The last line ``code`` prints, run in a fresh Python process."""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return out.stdout.strip().splitlines()[-1]
+
+
 def test_a_kernel_without_a_disk_cache_compiles_as_usual() -> None:
     """A dispatcher with no disk cache (``cache=False``) loads nothing: it compiles with
     numba's own refresh, NumPy functions typed as usual."""
@@ -73,8 +79,7 @@ def test_a_kernel_without_a_disk_cache_compiles_as_usual() -> None:
         "f = numba.njit(lambda a: np.linalg.norm(a) + np.sum(a))\n"
         "print(load_signature(f, np.array([3.0, 4.0])))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip().splitlines()[-1] == "12.0"
+    assert _last_line(code) == "12.0"
 
 
 def test_numba_compiles_as_usual_after_a_lean_load() -> None:
@@ -86,8 +91,7 @@ def test_numba_compiles_as_usual_after_a_lean_load() -> None:
         "f = numba.njit(lambda a: np.linalg.norm(a) + np.sum(a))\n"
         "print(f(np.array([3.0, 4.0])))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip().splitlines()[-1] == "12.0"
+    assert _last_line(code) == "12.0"
 
 
 def test_kf_and_ekf_estimates_are_the_same_bits_with_numba_refreshed_first() -> None:

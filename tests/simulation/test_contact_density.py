@@ -86,6 +86,18 @@ def test_a_landing_is_split_from_the_rest_of_its_stance() -> None:
     assert out["density"] == pytest.approx(1e-3 / np.sqrt(3 * 0.1), rel=1e-9)
 
 
+def _inekf_pair(scenario: str, seed: int, *gains: object) -> list[dict]:
+    """legged_truth's inekf rows (rolling feet, from the truth) on one 3 s go1 run, one per
+    set of ``gains``."""
+    import pinobs
+    from pinobs.simulation.legged import simulate_legged
+
+    bench = bench_module("legged_truth")
+    go1 = pinobs.load("go1")
+    run = simulate_legged(scenario, 3.0, seed=seed, noise=bench.NOISE, robot=go1)
+    return [bench.run_filter("inekf", run, go1, "truth", g, bench.FOOT_RADIUS) for g in gains]
+
+
 def test_the_landing_term_makes_a_held_out_trot_seed_consistent() -> None:
     """``GO1_GAINS`` (the contact density after the landing and the landing term, measured on
     the trot's truth, seed 0) against ``GO1_WHITE_GAINS`` (one white density), rolling feet,
@@ -93,16 +105,8 @@ def test_the_landing_term_makes_a_held_out_trot_seed_consistent() -> None:
     the truth: NEES/3 in 0.7-1.3 where it was below 0.5, and the velocity not worse than 1.1×
     (measured: NEES/3 0.35 → 0.95, 0.0080 → 0.0085 m/s, z inside ±2σ 100 → 89 %; the
     benchmark's trot, 10 s, seeds 0-2: 0.42 → 0.84, 0.0079 → 0.0076 m/s)."""
-    import pinobs
-    from pinobs.simulation.legged import simulate_legged
-
     bench = bench_module("legged_truth")
-    go1 = pinobs.load("go1")
-    run = simulate_legged("trot", 3.0, seed=1, noise=bench.NOISE, robot=go1)
-    new, old = (
-        bench.run_filter("inekf", run, go1, "truth", gains, bench.FOOT_RADIUS)
-        for gains in (bench.GO1_GAINS, bench.GO1_WHITE_GAINS)
-    )
+    new, old = _inekf_pair("trot", 1, bench.GO1_GAINS, bench.GO1_WHITE_GAINS)
     assert old["nees"] < 0.5 and 0.7 <= new["nees"] <= 1.3, (old["nees"], new["nees"])
     assert new["v_rms"] <= 1.1 * old["v_rms"], (new["v_rms"], old["v_rms"])
     assert 0.7 <= new["nees_body"] <= 1.3, new["nees_body"]  # in the IMU frame: 1.00
@@ -114,16 +118,8 @@ def test_the_measured_go1_density_makes_the_held_out_sway_more_consistent() -> N
     2, 3 s, from the truth: NEES/3 closer to 1 and the velocity no worse (measured: NEES/3
     0.79 → 0.94, 0.0114 → 0.0109 m/s, x inside ±2σ 95.2 → 94.9 %; the benchmark's sway, 10 s,
     seeds 0-2: 0.52 → 0.62, 0.0090 → 0.0087 m/s, ≥ 98.9 % on every axis)."""
-    import pinobs
-    from pinobs.simulation.legged import simulate_legged
-
     bench = bench_module("legged_truth")
-    go1 = pinobs.load("go1")
-    run = simulate_legged("sway", 3.0, seed=2, noise=bench.NOISE, robot=go1)
-    new, old = (
-        bench.run_filter("inekf", run, go1, "truth", gains, bench.FOOT_RADIUS)
-        for gains in (bench.GO1_WHITE_GAINS, bench.GAINS)
-    )
+    new, old = _inekf_pair("sway", 2, bench.GO1_WHITE_GAINS, bench.GAINS)
     assert old["nees"] < new["nees"] < 1.0, (old["nees"], new["nees"])
     assert new["v_rms"] <= old["v_rms"] * 1.01, (new["v_rms"], old["v_rms"])
     assert min(new["in_2sigma_xyz"]) >= 0.9, new["in_2sigma_xyz"]  # 3 s: 0.949 on x

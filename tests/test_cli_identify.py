@@ -288,6 +288,7 @@ def test_identify_warns_when_its_held_out_end_says_the_fit_does_not_hold(
     assert "worse than the nominal one on a (1 → 2.1)" in said
 
 
+@pytest.mark.slow  # 10-21 s on a 2-core machine: the default run stays under 10 min
 def test_identify_warns_when_no_parameters_explain_the_torques(
     planar_log, tmp_path, capsys
 ) -> None:

@@ -585,6 +585,7 @@ def test_likelihood_choice_of_accel_psd_is_the_largest_the_data_do_not_reject(ur
     assert chosen == max(ok)
 
 
+@pytest.mark.slow  # 10-21 s on a 2-core machine: the default run stays under 10 min
 def test_a_sample_the_gate_rejects_decides_neither_the_density_nor_the_latency() -> None:
     """One glitch (a joint 1 rad off, or 1e6) is rejected by the EKF's outlier gate, and the
     likelihood counts it at the gate (:func:`pinobs.smoothing.rts.forward_pass`): ``"auto"`` and the latency
@@ -1026,6 +1027,7 @@ def test_cli_estimate_smooth_over_adaptive_says_how_its_model_was_frozen(
     assert np.all(ratio >= 1.0) and np.ptp(ratio) < 1e-12  # one factor, √max(1, ρ)
 
 
+@pytest.mark.slow  # 10-21 s on a 2-core machine: the default run stays under 10 min
 def test_a_log_the_model_does_not_explain_is_said_and_auto_skips_densities_that_lose_the_filter(
     tmp_path, monkeypatch, capsys
 ) -> None:
@@ -1168,6 +1170,7 @@ def test_a_known_latency_is_smoothed_on_the_times_the_samples_were_taken() -> No
         )  # fmt: skip
 
 
+@pytest.mark.slow  # 10-21 s on a 2-core machine: the default run stays under 10 min
 def test_auto_density_does_not_hide_an_unknown_latency() -> None:
     """accel_psd='auto' over ekf explains any log (ρ about 1): on a UR5 log 2 ms late it took
     1e-2 rad²/s³ as stamped, RMS 9.45e-3 rad/s and a 62.5 % band, and said nothing.  A density

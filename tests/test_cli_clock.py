@@ -54,6 +54,7 @@ def test_estimate_repairs_the_clock_and_says_so_once(planar_recorded, tmp_path, 
     assert auto < 0.5 * stamps, (auto, stamps)
 
 
+@pytest.mark.slow  # 6-8 s on a 2-core machine: the default run stays under 10 min
 def test_identify_fits_the_samples_on_the_loop_clock(planar_recorded, tmp_path, capsys):
     log, rec, _, truth = planar_recorded
     out = tmp_path / "auto.urdf"

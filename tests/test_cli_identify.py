@@ -465,6 +465,7 @@ def test_identify_runs_on_a_csv_with_dropped_rows_as_well_as_on_the_clean_one(
     assert errors["dropped", True] <= max(placed), (errors, placed)
 
 
+@pytest.mark.slow  # 6-8 s on a 2-core machine: the default run stays under 10 min
 def test_identify_of_a_recorded_log_with_its_clock_repaired_is_as_good_as_the_clean_log(
     tmp_path, capsys
 ) -> None:

@@ -203,6 +203,7 @@ def test_kf_gates_a_glitch_causal_and_smoothed() -> None:
         assert (np.abs(b.v - a.v).max() < bound) == (p is not None)
 
 
+@pytest.mark.slow  # 6-8 s on a 2-core machine: the default run stays under 10 min
 def test_model_free_smoother_is_the_floor_where_the_model_is_wrong() -> None:
     """Under a payload the model does not have, the smoother over ``ekf`` with ``auto`` ends at
     its grid's top (warned: model-free, pointing to ``kf``); over ``kf`` with its jerk chosen

@@ -1113,6 +1113,7 @@ def _late_log(latency_steps: int, rate: float, duration: float) -> tuple[np.ndar
     return res.t[keep], res.q_meas[keep], res.tau[keep], res.v[keep]
 
 
+@pytest.mark.slow  # 6-8 s on a 2-core machine: the default run stays under 10 min
 def test_a_known_latency_is_smoothed_on_the_times_the_samples_were_taken() -> None:
     """0.5 ms latency (half a sample interval) given: the error is the exact-model
     smoother's and the band covers; not given (or wrong), ρ says the model does not explain
@@ -1348,6 +1349,7 @@ def _mismatched_log(name: str, scenario: str, duration: float, seed: int = 1) ->
     return simulate(robot, [], sensor=Sensor(1000, 1e-4), duration=duration, seed=seed, plant=plant)
 
 
+@pytest.mark.slow  # 6-8 s on a 2-core machine: the default run stays under 10 min
 @pytest.mark.filterwarnings("ignore::pinobs.errors.ConsistencyWarning")  # 1.2 s: ρ = 133
 def test_adaptive_is_smoothed_with_its_model_frozen_per_window_and_chunks_change_nothing() -> None:
     """The learning pass runs once; each window's model is the one the causal pass held at the

@@ -38,7 +38,8 @@ worse estimates).  :func:`fit_clock` reconstructs the loop's clock:
    irregular but correct stamps (intervals 0.5–1.5 ms) are smoother as they
    are and left alone; so is a log without motion to judge by.
 5. A **sample counter** (a ``tick`` column, ROS 1 ``header.seq``) gives the
-   ticks directly; a counter that wraps is unwrapped at its modulus, and one
+   ticks directly (a fresh row is usable whatever its stamp's order: the stamps
+   only fit the line); a counter that wraps is unwrapped at its modulus, and one
    that goes back otherwise is an error naming the row.
 
 The repaired time of a row is ``T0 + P·n_k``; a stale row takes the time of
@@ -48,7 +49,9 @@ the clock is fitted and chosen on the first window, then followed (the fit
 refreshed over the last window of rows, so a slowly drifting logger clock is
 tracked); a chunk's trailing repeats wait for the next chunk's fresh row, so the
 stale rows are those of the whole log (but for a run of ``WINDOW_ROWS`` repeats or
-more, judged as the log's last run to bound the memory).
+more, judged as the log's last run to bound the memory).  A sample counter keeps
+giving the ticks after the first window (unwrapped across chunks, a repeat of the
+previous chunk's last value stale), as it does for the whole log.
 """
 
 from __future__ import annotations
@@ -323,9 +326,10 @@ def _screen(t: Floats, q: Floats, tick: Floats | None) -> _Rows:
         counter = _unwrap_counter(np.asarray(tick, dtype=float))
         stale = stale | (np.r_[1.0, np.diff(counter)] == 0)
     usable = np.isfinite(t) & ~stale & np.isfinite(q).all(axis=1)
-    # stamps must increase among the usable rows (others: LogEstimator's time rules)
+    # stamps must increase among the usable rows (others: LogEstimator's time rules),
+    # unless a counter orders them (step 5: its ticks increase, the stamps fit the line)
     ui = np.flatnonzero(usable)
-    if ui.size:
+    if ui.size and counter is None:
         keep = np.r_[True, np.diff(np.maximum.accumulate(t[ui])) > 0] & (
             t[ui] >= np.maximum.accumulate(t[ui])
         )
@@ -551,6 +555,7 @@ class ClockRepair:
     # stale rule), and a trailing run of repeats not judged yet (its next fresh row decides)
     _ctx: Floats | None = None
     _carry: Log | None = None
+    _counter: _CounterTrack | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in CLOCK_MODES:
@@ -616,6 +621,8 @@ class ClockRepair:
         self._scale = None if sc is None else np.where(sc > 0, sc, 1.0)
         self._quantum = _quantum(log.q) if len(log) > 2 else np.zeros(log.q.shape[1])
         self._ctx = _context(np.vstack([np.full((2, log.q.shape[1]), np.nan), log.q[:k]]))
+        if fit.report.counter and k and log.tick is not None:
+            self._counter = _CounterTrack.after(log.tick, fit.tick, k)
         if k == 0:
             return []
         head = log if k == len(log) else replace(slice_log(log, 0, k), notes=log.notes)
@@ -687,14 +694,18 @@ class ClockRepair:
         t, q = chunk.t, chunk.q
         repq = rep_all[2:]
         stale = _stale(qq, rep_all, self._quantum)[2:]
-        if chunk.tick is not None:
-            stale |= np.r_[False, np.diff(chunk.tick) == 0]
+        counted = None
+        if self._counter is not None and chunk.tick is not None:
+            counted, repeated = self._counter.follow(chunk.tick)
+            stale |= repeated
         usable = np.isfinite(t) & ~stale & np.isfinite(q).all(axis=1)
         assert self._tail_t is not None and self._tail_n is not None
         t0, p = _line(self._tail_n, self._tail_t, p)
         n = np.full(n_rows, np.nan)
         ui = np.flatnonzero(usable)
-        if ui.size:
+        if counted is not None:  # module docstring, step 5: the counter's ticks
+            n[ui] = counted[ui]
+        elif ui.size:
             raw = np.rint((t[ui] - t0) / p)
             start = self._last_tick + 1.0 if math.isfinite(self._last_tick) else raw[0]
             nn = _monotone(np.r_[start - 1.0, np.maximum(raw, start)])[1:]
@@ -724,6 +735,34 @@ class ClockRepair:
         self._stats["corr"] = max(self._stats["corr"], float(corr.max()) if corr.size else 0.0)
         self.report = self._reported(self._stats)
         return replace(chunk, t=t_out, stale=stale_out, drops=drops)
+
+
+@dataclass
+class _CounterTrack:
+    """A sample counter followed chunk by chunk (module docstring, step 5): its last raw
+    value, that value unwrapped, and the unwrapped value of tick 0 of the fit."""
+
+    raw: float
+    unwrapped: float
+    origin: float
+
+    @classmethod
+    def after(cls, tick: Floats, fit_tick: NDArray[np.int64], k: int) -> _CounterTrack:
+        """The track after the first window's rows ``:k`` (its ticks ``fit_tick``)."""
+        c = _unwrap_counter(np.asarray(tick[:k], dtype=float))
+        placed = np.flatnonzero(np.asarray(fit_tick[:k]) >= 0)
+        j = int(placed[-1]) if placed.size else 0
+        return cls(float(tick[k - 1]), float(c[-1]), float(c[j] - max(fit_tick[j], 0)))
+
+    def follow(self, tick: Floats) -> tuple[Floats, Bool]:
+        """The ticks of a chunk's rows on the fit's scale, and which rows repeat the
+        counter's previous value (the previous chunk's last row included)."""
+        seg = np.r_[self.raw, np.asarray(tick, dtype=float)]
+        u = _unwrap_counter(seg)  # a wrap, or an error naming the row (of this chunk + 1)
+        unwrapped = u[1:] - u[0] + self.unwrapped
+        if seg.size > 1:
+            self.raw, self.unwrapped = float(seg[-1]), float(unwrapped[-1])
+        return unwrapped - self.origin, np.diff(seg) == 0
 
 
 def _context(qq: Floats) -> Floats:

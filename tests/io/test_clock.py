@@ -379,3 +379,29 @@ def test_chunked_repair_finds_stale_rows_at_chunk_ends_as_the_whole_log_does(ur5
     assert repair.report.stale == whole.report.stale == int(stale.sum())
     assert repair.report.rows == len(log)
     assert repair.report.repeated_at_rest == whole.report.repeated_at_rest
+
+
+def test_chunked_repair_takes_the_ticks_from_a_sample_counter_as_the_whole_log_does(ur5_truth):
+    """Stamps jittering over 80 % of a period (their order lost), a wrapping counter: every
+    fresh row at its counter's tick, in the whole log and chunk by chunk (chunks cut just
+    before stale rows: a counter repeating the previous chunk's last value)."""
+    _, res = ur5_truth
+    t, q, tau, rows, stale = _recorded(res, 2, jitter=8e-4)
+    counter = ((rows + 65536 - 1000) % 65536).astype(float)
+    assert np.any(np.diff(t) <= 0)  # the stamps alone cannot order these rows
+    whole = fit_clock(t, q, tick=counter)
+    k = np.flatnonzero(stale)
+    cuts = sorted({*range(500, len(t), 500), *(int(x) for x in k[k > 900][::3])})
+    repair = ClockRepair("auto", window=800)
+    out = []
+    for a, b in zip([0, *cuts], [*cuts, len(t)], strict=True):
+        part = pinobs.io.Log(t[a:b], q[a:b], tau[a:b], tick=counter[a:b])
+        out += repair.feed(part)
+    out += repair.finish()
+    joined = concat_logs(out)
+    true_drops = int((np.diff(rows[~stale]) - 1).sum())
+    for fit in (whole, joined):
+        np.testing.assert_array_equal(fit.stale, stale)
+        assert int(fit.drops.sum()) == true_drops
+        # every row but the first (NaN) at its sample's time, to the line's own error
+        assert np.max(np.abs(fit.t - res.t[rows])[1:]) < 0.2e-3

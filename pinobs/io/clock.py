@@ -66,6 +66,7 @@ from numpy.typing import NDArray
 
 from pinobs.errors import OptionError, TimestampError
 from pinobs.io.clock_report import ClockFit, ClockReport, in_ms
+from pinobs.io.counter import CounterTrack, unwrap_counter
 
 if TYPE_CHECKING:
     from pinobs.io.readers import Log
@@ -267,36 +268,6 @@ def _resolve_by_motion(n: Floats, frac: Floats, q: Floats, scale: Floats) -> Flo
     return _monotone(out)
 
 
-def _unwrap_counter(tick: Floats) -> Floats:
-    """A sample counter as a non-decreasing sequence (module docstring, step 5)."""
-    c = np.asarray(tick, dtype=float)
-    if not np.isfinite(c).all():
-        bad = int(np.flatnonzero(~np.isfinite(c))[0])
-        raise TimestampError(f"the sample counter is unreadable at row {bad}: {c[bad]!r}")
-    if np.any(c != np.rint(c)):
-        bad = int(np.flatnonzero(c != np.rint(c))[0])
-        raise TimestampError(f"the sample counter is not an integer at row {bad}: {c[bad]!r}")
-    d = np.diff(c)
-    back = np.flatnonzero(d < 0)
-    if back.size == 0:
-        return c
-    top = float(c.max())
-    modulus = 2.0 ** math.ceil(math.log2(top + 1)) if top > 0 else 1.0
-    out = c.copy()
-    shift = 0.0
-    for k in back.tolist():
-        # a wrap: from near the top of the counter's range to near its bottom
-        if c[k] > 0.9 * modulus - 1 and c[k + 1] < 0.1 * modulus:
-            shift += modulus
-            out[k + 1 :] = c[k + 1 :] + shift
-        else:
-            raise TimestampError(
-                f"the sample counter goes back from {c[k]:.0f} to {c[k + 1]:.0f} at row {k + 1} "
-                f"(not a wrap of a {modulus:.0f} counter): is it the log's sample counter?"
-            )
-    return out
-
-
 # ------------------------------------------------------------------ the fit
 @dataclass(frozen=True)
 class _Rows:
@@ -323,7 +294,7 @@ def _screen(t: Floats, q: Floats, tick: Floats | None) -> _Rows:
     stale = _stale(q, rep, quantum)
     counter = None
     if tick is not None:
-        counter = _unwrap_counter(np.asarray(tick, dtype=float))
+        counter = unwrap_counter(np.asarray(tick, dtype=float))
         stale = stale | (np.r_[1.0, np.diff(counter)] == 0)
     usable = np.isfinite(t) & ~stale & np.isfinite(q).all(axis=1)
     # stamps must increase among the usable rows (others: LogEstimator's time rules),
@@ -555,7 +526,7 @@ class ClockRepair:
     # stale rule), and a trailing run of repeats not judged yet (its next fresh row decides)
     _ctx: Floats | None = None
     _carry: Log | None = None
-    _counter: _CounterTrack | None = None
+    _counter: CounterTrack | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in CLOCK_MODES:
@@ -622,7 +593,7 @@ class ClockRepair:
         self._quantum = _quantum(log.q) if len(log) > 2 else np.zeros(log.q.shape[1])
         self._ctx = _context(np.vstack([np.full((2, log.q.shape[1]), np.nan), log.q[:k]]))
         if fit.report.counter and k and log.tick is not None:
-            self._counter = _CounterTrack.after(log.tick, fit.tick, k)
+            self._counter = CounterTrack.after(log.tick, fit.tick, k)
         if k == 0:
             return []
         head = log if k == len(log) else replace(slice_log(log, 0, k), notes=log.notes)
@@ -735,34 +706,6 @@ class ClockRepair:
         self._stats["corr"] = max(self._stats["corr"], float(corr.max()) if corr.size else 0.0)
         self.report = self._reported(self._stats)
         return replace(chunk, t=t_out, stale=stale_out, drops=drops)
-
-
-@dataclass
-class _CounterTrack:
-    """A sample counter followed chunk by chunk (module docstring, step 5): its last raw
-    value, that value unwrapped, and the unwrapped value of tick 0 of the fit."""
-
-    raw: float
-    unwrapped: float
-    origin: float
-
-    @classmethod
-    def after(cls, tick: Floats, fit_tick: NDArray[np.int64], k: int) -> _CounterTrack:
-        """The track after the first window's rows ``:k`` (its ticks ``fit_tick``)."""
-        c = _unwrap_counter(np.asarray(tick[:k], dtype=float))
-        placed = np.flatnonzero(np.asarray(fit_tick[:k]) >= 0)
-        j = int(placed[-1]) if placed.size else 0
-        return cls(float(tick[k - 1]), float(c[-1]), float(c[j] - max(fit_tick[j], 0)))
-
-    def follow(self, tick: Floats) -> tuple[Floats, Bool]:
-        """The ticks of a chunk's rows on the fit's scale, and which rows repeat the
-        counter's previous value (the previous chunk's last row included)."""
-        seg = np.r_[self.raw, np.asarray(tick, dtype=float)]
-        u = _unwrap_counter(seg)  # a wrap, or an error naming the row (of this chunk + 1)
-        unwrapped = u[1:] - u[0] + self.unwrapped
-        if seg.size > 1:
-            self.raw, self.unwrapped = float(seg[-1]), float(unwrapped[-1])
-        return unwrapped - self.origin, np.diff(seg) == 0
 
 
 def _context(qq: Floats) -> Floats:

@@ -652,6 +652,8 @@ class ClockRepair:
             qq, rep_all = qq[: 2 + k], rep_all[: 2 + k]
         if k == 0:
             return []
+        if len(qq) > 3 and not self._quantum.all():  # a coordinate still in the first window
+            self._quantum = np.where(self._quantum > 0, self._quantum, _quantum(qq[1:]))
         self._ctx = _context(qq)
         return [self._placed_chunk(chunk, qq, rep_all)]
 

@@ -405,3 +405,30 @@ def test_chunked_repair_takes_the_ticks_from_a_sample_counter_as_the_whole_log_d
         assert int(fit.drops.sum()) == true_drops
         # every row but the first (NaN) at its sample's time, to the line's own error
         assert np.max(np.abs(fit.t - res.t[rows])[1:]) < 0.2e-3
+
+
+def test_chunked_repair_learns_the_step_of_a_joint_still_in_the_first_window():
+    """A joint still through the first window, then creeping one encoder step (1e-5) every
+    7 rows while the others rest: its repeats are at rest (the whole log's verdict), not
+    stale; the chunked repair took that joint's resolvable step from the first window
+    (zero), and flagged 2571 rows stale."""
+    rng = np.random.default_rng(0)
+    n = 9000
+    k = np.arange(n)
+    t = k * 1e-3 + rng.uniform(-4e-4, 4e-4, n)
+    q = np.zeros((n, 3))
+    fade = np.exp(-np.maximum(k - 5000, 0) / 100.0)
+    q[:, 1] = np.round(0.3 * np.sin(np.pi * k * 1e-3) * fade * 1e5) / 1e5
+    q[:, 2] = np.round(0.2 * np.cos(1.4 * np.pi * k * 1e-3) * 1e5) / 1e5
+    q[6000:, 1:] = q[6000, 1:]
+    q[6000:, 0] = np.floor((k[6000:] - 6000) / 7) * 1e-5
+    whole = fit_clock(t, q)
+    repair = ClockRepair("auto")
+    out = []
+    for a in range(0, n, 1000):
+        out += repair.feed(pinobs.io.Log(t[a : a + 1000], q[a : a + 1000], np.zeros((1000, 3))))
+    out += repair.finish()
+    joined = concat_logs(out)
+    assert whole.report.repaired and whole.report.repeated_at_rest > 2000
+    np.testing.assert_array_equal(whole.stale, np.zeros(n, dtype=bool))
+    np.testing.assert_array_equal(joined.stale, whole.stale)

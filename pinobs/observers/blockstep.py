@@ -171,8 +171,10 @@ def _noise_loops(P: Vector, q00: float, q01: float, q11: float, r: float, S: Vec
 def _gain_loops(P: Vector, U: Vector, Kt: Vector) -> bool:  # noqa: C901, PLR0912 -- numba kernel: loops over rows
     """``Kᵀ = S⁻¹ P_q·`` into ``Kt`` (``nv × n``) with ``U`` holding ``S`` (upper triangle):
     ``S = Uᵀ U`` (Cholesky, right-looking, ``U`` overwritten), then ``Uᵀ Z = P_q·`` and
-    ``U Kᵀ = Z`` by rows (every inner loop runs along a row: ``axpy``).  False (``Kt``
-    undefined) when ``S`` is not positive definite."""
+    ``U Kᵀ = Z`` row by row (left-looking: row ``i`` takes its terms from the finished rows four
+    at a time, each inner loop along a row; every entry's subtractions in the order of the
+    right-looking solve's, one at a time, so its bits: 19 → 16 µs on a talos).  False
+    (``Kt`` undefined) when ``S`` is not positive definite."""
     nv, n = Kt.shape
     for j in range(nv):
         d = U[j, j]
@@ -188,22 +190,40 @@ def _gain_loops(P: Vector, U: Vector, Kt: Vector) -> bool:  # noqa: C901, PLR091
     for i in range(nv):
         for c in range(n):
             Kt[i, c] = P[i, c]
-    for j in range(nv):  # Uᵀ Z = P_q·: forward, Z in Kt
-        d = U[j, j]
-        for c in range(n):
-            Kt[j, c] /= d
-        for i in range(j + 1, nv):
-            u = U[j, i]
+    for i in range(nv):  # Uᵀ Z = P_q·: forward, Z in Kt; row i's terms j = 0 … i − 1
+        j = 0
+        while j + 4 <= i:
+            u0, u1, u2, u3 = U[j, i], U[j + 1, i], U[j + 2, i], U[j + 3, i]
             for c in range(n):
-                Kt[i, c] -= u * Kt[j, c]
-    for j in range(nv - 1, -1, -1):  # U Kᵀ = Z: backward
-        d = U[j, j]
-        for c in range(n):
-            Kt[j, c] /= d
-        for i in range(j):
-            u = U[i, j]
+                x = Kt[i, c] - u0 * Kt[j, c]
+                x -= u1 * Kt[j + 1, c]
+                x -= u2 * Kt[j + 2, c]
+                Kt[i, c] = x - u3 * Kt[j + 3, c]
+            j += 4
+        for k in range(j, i):
+            u = U[k, i]
             for c in range(n):
-                Kt[i, c] -= u * Kt[j, c]
+                Kt[i, c] -= u * Kt[k, c]
+        d = U[i, i]
+        for c in range(n):
+            Kt[i, c] /= d
+    for i in range(nv - 1, -1, -1):  # U Kᵀ = Z: backward; row i's terms j = nv − 1 … i + 1
+        j = nv - 1
+        while j - 4 >= i:
+            u0, u1, u2, u3 = U[i, j], U[i, j - 1], U[i, j - 2], U[i, j - 3]
+            for c in range(n):
+                x = Kt[i, c] - u0 * Kt[j, c]
+                x -= u1 * Kt[j - 1, c]
+                x -= u2 * Kt[j - 2, c]
+                Kt[i, c] = x - u3 * Kt[j - 3, c]
+            j -= 4
+        for k in range(j, i, -1):
+            u = U[i, k]
+            for c in range(n):
+                Kt[i, c] -= u * Kt[k, c]
+        d = U[i, i]
+        for c in range(n):
+            Kt[i, c] /= d
     return True
 
 

@@ -49,8 +49,8 @@ arithmetic between them compiled; with the update's input checks of issue 39): a
 (nv = 38) 31.4 → 22.7 ``pin.aba`` per update (``measure_cost``, CPU time, median of six
 processes each, the trees alternating, load 3.0–3.4), of which Pinocchio's four calls are
 7.2, the eight BLAS products 6.5 and the gain 1.7; a go1 (nv = 18) 32.9 → 22.1; then 44 → 33
-Python calls an update (talos, go1: 43 → 32), 6.6 µs (talos) and 5.2 µs (go1) less an update
-(in-process A/B, CPU time), the same bits; predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset
+Python calls an update (go1: 43 → 32) and a faster gain, 9.8 µs (talos) and 6.8 µs (go1) less
+an update (in-process A/B, CPU time), the same bits; predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset
 state) take ``Φ`` and the Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`).
 
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,

@@ -38,6 +38,7 @@ from pinobs.model.robot import Robot, Vector
 __all__ = [
     "RK4_STIFFNESS",
     "DynamicsCalls",
+    "difference_call",
     "dynamics_calls",
     "dynamics_rk4",
     "friction_substeps",
@@ -95,6 +96,15 @@ def integrate_call(robot: Robot) -> Callable[[Vector, Vector], Vector]:
     if type(robot).integrate is Robot.integrate:
         return partial(pin.integrate, robot.model)
     return robot.integrate
+
+
+def difference_call(robot: Robot) -> Callable[[Vector, Vector], Vector]:
+    """``robot.difference`` without its Python call: ``pin.difference`` bound to the model (the
+    float64 array :meth:`Robot.difference` returns as it is), as :func:`integrate_call`; the
+    method itself where a subclass overrides it."""
+    if type(robot).difference is Robot.difference:
+        return partial(pin.difference, robot.model)
+    return robot.difference
 
 
 def lie_rk4(robot: Robot, q: Vector, x: Vector, h: float, rhs: Rhs) -> tuple[Vector, Vector]:

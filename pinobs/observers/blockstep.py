@@ -26,7 +26,18 @@ its upper block right not computed; the diagonal blocks symmetrised).  The mean 
 :class:`~pinobs.observers.fused.LieRK4` (compiled RKMK4 between Pinocchio's calls).  The
 arithmetic between the BLAS and LAPACK calls is compiled (numba, loaded by the filter's
 constructor), so that an update makes a few dozen Python-level calls; the same equations as
-``predict`` then ``correct``, equal to them to rounding (tested).
+``predict`` then ``correct``, equal to them to rounding (tested).  The products are
+``ndarray.dot`` (``np.dot``'s C function without its Python dispatcher: eight Python calls an
+update less, the same BLAS call and bits), Pinocchio's output views are made once (about 1 µs
+an attribute) and ``difference`` is ``pin.difference`` bound to the model.
+
+Why not compiled products, without BLAS (issue 39, measured on this project's 2-core AMD EPYC
+(Zen 4), one BLAS thread, CPU time): the ``76 × 76 × 76`` product takes OpenBLAS 17–19 µs
+(23–26 G multiply-adds/s), numba's best loops here 45–55 µs (8–10 G/s; numba's loop
+vectorizer does emit 512-bit FMAs, but with its SLP vectorizer off a register tile stays
+scalar), so the eight products' 1.3–1.5 M multiply-adds (1.3 with only ``P⁻``'s upper
+triangle) would take 130–190 µs against OpenBLAS's ~70: far more than the one-thread limit
+(~7 µs a call in a paced loop) and the Python calls they would save.
 """
 
 from __future__ import annotations
@@ -38,6 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.model import Robot
+from pinobs.model.integrators import difference_call
 from pinobs.observers.base import Vector
 from pinobs.observers.blocks import bracket_rows
 from pinobs.observers.fused import LieRK4, loaded
@@ -159,8 +171,10 @@ def _noise_loops(P: Vector, q00: float, q01: float, q11: float, r: float, S: Vec
 def _gain_loops(P: Vector, U: Vector, Kt: Vector) -> bool:  # noqa: C901, PLR0912 -- numba kernel: loops over rows
     """``Kᵀ = S⁻¹ P_q·`` into ``Kt`` (``nv × n``) with ``U`` holding ``S`` (upper triangle):
     ``S = Uᵀ U`` (Cholesky, right-looking, ``U`` overwritten), then ``Uᵀ Z = P_q·`` and
-    ``U Kᵀ = Z`` by rows (every inner loop runs along a row: ``axpy``).  False (``Kt``
-    undefined) when ``S`` is not positive definite."""
+    ``U Kᵀ = Z`` row by row (left-looking: row ``i`` takes its terms from the finished rows four
+    at a time, each inner loop along a row; every entry's subtractions in the order of the
+    right-looking solve's, one at a time, so its bits: 19 → 16 µs on a talos).  False
+    (``Kt`` undefined) when ``S`` is not positive definite."""
     nv, n = Kt.shape
     for j in range(nv):
         d = U[j, j]
@@ -176,22 +190,40 @@ def _gain_loops(P: Vector, U: Vector, Kt: Vector) -> bool:  # noqa: C901, PLR091
     for i in range(nv):
         for c in range(n):
             Kt[i, c] = P[i, c]
-    for j in range(nv):  # Uᵀ Z = P_q·: forward, Z in Kt
-        d = U[j, j]
-        for c in range(n):
-            Kt[j, c] /= d
-        for i in range(j + 1, nv):
-            u = U[j, i]
+    for i in range(nv):  # Uᵀ Z = P_q·: forward, Z in Kt; row i's terms j = 0 … i − 1
+        j = 0
+        while j + 4 <= i:
+            u0, u1, u2, u3 = U[j, i], U[j + 1, i], U[j + 2, i], U[j + 3, i]
             for c in range(n):
-                Kt[i, c] -= u * Kt[j, c]
-    for j in range(nv - 1, -1, -1):  # U Kᵀ = Z: backward
-        d = U[j, j]
-        for c in range(n):
-            Kt[j, c] /= d
-        for i in range(j):
-            u = U[i, j]
+                x = Kt[i, c] - u0 * Kt[j, c]
+                x -= u1 * Kt[j + 1, c]
+                x -= u2 * Kt[j + 2, c]
+                Kt[i, c] = x - u3 * Kt[j + 3, c]
+            j += 4
+        for k in range(j, i):
+            u = U[k, i]
             for c in range(n):
-                Kt[i, c] -= u * Kt[j, c]
+                Kt[i, c] -= u * Kt[k, c]
+        d = U[i, i]
+        for c in range(n):
+            Kt[i, c] /= d
+    for i in range(nv - 1, -1, -1):  # U Kᵀ = Z: backward; row i's terms j = nv − 1 … i + 1
+        j = nv - 1
+        while j - 4 >= i:
+            u0, u1, u2, u3 = U[i, j], U[i, j - 1], U[i, j - 2], U[i, j - 3]
+            for c in range(n):
+                x = Kt[i, c] - u0 * Kt[j, c]
+                x -= u1 * Kt[j - 1, c]
+                x -= u2 * Kt[j - 2, c]
+                Kt[i, c] = x - u3 * Kt[j - 3, c]
+            j -= 4
+        for k in range(j, i, -1):
+            u = U[i, k]
+            for c in range(n):
+                Kt[i, c] -= u * Kt[k, c]
+        d = U[i, i]
+        for c in range(n):
+            Kt[i, c] /= d
     return True
 
 
@@ -285,6 +317,9 @@ class BlockStep:
         rk4 = LieRK4.build(robot)
         assert rk4 is not None  # (the caller checked the robot)
         self.robot, self.rk4, self.nv = robot, rk4, nv
+        self.difference = difference_call(robot)  # (robot.difference, bound)
+        data = rk4.calls.data  # a, ∂a/∂q, ∂a/∂v: views Pinocchio writes in place, made once
+        self._scratch_data = (data.ddq, data.ddq_dq, data.ddq_dv)  # (~1 µs an attribute)
         self.runs = np.array([[s.start, s.stop] for s in bracket_rows(robot)], dtype=np.int64)
         self.table = bracket_table(robot)
         self._scratch_D = np.zeros((nv, nv))
@@ -310,21 +345,21 @@ class BlockStep:
         """``(q⁻, v⁻, P⁻)`` after ``h`` [s] from ``(q, v, P)`` with ``tau`` held (``psd``: the
         white-acceleration density, ``r`` the measurement variance, for :meth:`correct`'s
         ``S``); ``P⁻`` is working memory."""
-        calls, nv, runs = self.rk4.calls, self.nv, self.runs
-        calls.derivatives(q, v, tau)
-        data = calls.data
+        nv, runs = self.nv, self.runs
+        self.rk4.calls.derivatives(q, v, tau)
+        acc, a_q, a_v = self._scratch_data
         G, W, mid, Phi = self._scratch_G, self._scratch_W, self._scratch_mid, self._scratch_Phi
-        a_v, D = data.ddq_dv, self._scratch_D
-        self.start(data.ddq_dq, a_v, v, self.table, G, D)
-        np.dot(a_v, G, out=W)  # A_v G
+        D = self._scratch_D
+        self.start(a_q, a_v, v, self.table, G, D)
+        a_v.dot(G, out=W)  # A_v G (ndarray.dot: np.dot less its Python dispatcher)
         self.mid(G, W, D, runs, h, mid)
-        np.dot(G, mid, out=Phi[nv:])  # G M
+        G.dot(mid, out=Phi[nv:])  # G M
         self.phi(mid, D, runs, h, Phi, self._scratch_PhiT)
         T, P_new = mid, self._scratch_P  # (M is not needed any more)
-        np.dot(Phi, P, out=T)
-        np.dot(T, self._scratch_PhiT, out=P_new)
+        Phi.dot(P, out=T)
+        T.dot(self._scratch_PhiT, out=P_new)
         self.noise(P_new, psd * h**3 / 3.0, psd * h**2 / 2.0, psd * h, r, self._scratch_S)
-        q_new, v_new = self.rk4.step(q, v, tau, h, acc0=data.ddq)
+        q_new, v_new = self.rk4.step(q, v, tau, h, acc0=acc)
         return q_new, v_new, P_new
 
     def correct(self, P: Vector, e: Vector, r: float) -> tuple[Vector, Vector, float]:
@@ -337,11 +372,11 @@ class BlockStep:
             return dx, out, float("nan")
         K = Kt.T
         KP, Y, YK = self._scratch_KP, self._scratch_Y, self._scratch_YK
-        np.dot(K, P[:nv, :nv], out=KP)
+        K.dot(P[:nv, :nv], out=KP)
         self.carry(P, KP, K, r, Y)  # KP ← C_·q
-        np.dot(Y, Kt[:, :nv], out=YK)
+        Y.dot(Kt[:, :nv], out=YK)
         Kv = K[nv:]
-        np.dot(Kv, P[:nv, nv:], out=self._scratch_KPv)
-        np.dot(Y[nv:], Kt[:, nv:], out=self._scratch_YKv)
+        Kv.dot(P[:nv, nv:], out=self._scratch_KPv)
+        Y[nv:].dot(Kt[:, nv:], out=self._scratch_YKv)
         nis = self.joseph(P, KP, YK, self._scratch_KPv, self._scratch_YKv, K, e, r, out, dx)
         return dx, out, nis

@@ -48,7 +48,9 @@ Cholesky gain, the Joseph update's lower block triangle, the compiled RKMK4, the
 arithmetic between them compiled; with the update's input checks of issue 39): a talos
 (nv = 38) 31.4 → 22.7 ``pin.aba`` per update (``measure_cost``, CPU time, median of six
 processes each, the trees alternating, load 3.0–3.4), of which Pinocchio's four calls are
-7.2, the eight BLAS products 6.5 and the gain 1.7; a go1 (nv = 18) 32.9 → 22.1; predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset
+7.2, the eight BLAS products 6.5 and the gain 1.7; a go1 (nv = 18) 32.9 → 22.1; then 44 → 33
+Python calls an update (go1: 43 → 32) and a faster gain, 9.8 µs (talos) and 6.8 µs (go1) less
+an update (in-process A/B, CPU time), the same bits; predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset
 state) take ``Φ`` and the Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`).
 
 Joint friction (Coulomb's smoothed step, :meth:`pinobs.model.Robot.friction_torque`,
@@ -766,14 +768,14 @@ class _LieFast:
         """:meth:`ExtendedKalmanFilter.step` by :class:`~pinobs.observers.blockstep.BlockStep`
         (no offset state), falling back on :meth:`~ExtendedKalmanFilter.correct` where it
         takes another way (``S`` not positive definite, ``K_q ≈ I``)."""
-        b, r, robot = self.blocks, ekf.gains.meas_std**2, ekf.robot
+        b, r = self.blocks, ekf.gains.meas_std**2
         assert b is not None  # (the caller checked)
         with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: update says so
             q, v, P = b.predict(state.q, state.v, tau, dt, state.P, ekf.gains.accel_psd, r)
             if q_meas is None:
                 gate = state.gate.predicted()
                 return state.moved(q, v, 0.5 * (P + P.T), gate, state.d, state.d_psd)
-            e = robot.difference(q, q_meas)
+            e = b.difference(q, q_meas)  # (robot.difference, bound: a Python call less)
             dx, P_new, nis = b.correct(P, e, r)
             if not nis * r >= 1e-6 * float(e @ e):  # NaN or K_q ≈ I: correct's other ways
                 pred = state.moved(q, v, P.copy(), state.gate, state.d, state.d_psd)
@@ -781,5 +783,7 @@ class _LieFast:
             gate = state.gate.measured(nis, ekf._gate, self.nv)
             if gate.gated:
                 return state.moved(q, v, 0.5 * (P + P.T), gate, state.d, state.d_psd)
-            q = robot.integrate(q, dx[: self.nv])
-            return state.moved(q, v + dx[self.nv :], P_new, gate, state.d, state.d_psd)
+            q = b.rk4.integrate(q, dx[: self.nv])  # (robot.integrate, bound)
+            # state.moved's tuple, built here (a Python call less)
+            return _new_tuple(EKFState, (q, v + dx[self.nv :], P_new, state.d, state.d_psd,
+                                         gate, state.auto, state.psd_scale))  # fmt: skip

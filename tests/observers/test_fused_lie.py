@@ -13,6 +13,7 @@ import pytest
 
 import pinobs
 from pinobs.model import AnalyticMetric, dynamics_rk4
+from pinobs.model.integrators import difference_call, integrate_call
 from pinobs.observers import blocks, make_observer
 from pinobs.observers.blockstep import bracket_table, transition_kernels
 from pinobs.observers.fused import JacobiCalls, LieRK4, jacobi_kernel, loaded
@@ -357,3 +358,30 @@ def test_the_compiled_bracket_blocks_are_the_robots(robot_name: str) -> None:
         ref = -robot.bracket_matrix(v)
         for s in blocks.bracket_rows(robot):
             np.testing.assert_array_equal(D[s, s], ref[s, s])
+
+
+def test_the_bound_difference_and_integrate_are_the_robots_to_the_bit() -> None:
+    """:func:`~pinobs.model.integrators.difference_call` and ``integrate_call`` (the block
+    step's, without the methods' Python calls) give :meth:`Robot.difference`'s and
+    :meth:`Robot.integrate`'s arrays on a talos, and are the methods themselves where a
+    subclass overrides them."""
+    robot = cached_robot("talos")
+    rng = np.random.default_rng(4)
+    q0, q1 = robot.random_configuration(rng), robot.random_configuration(rng)
+    dx = rng.standard_normal(robot.nv)
+    diff, integ = difference_call(robot), integrate_call(robot)
+    np.testing.assert_array_equal(diff(q0, q1), robot.difference(q0, q1))
+    np.testing.assert_array_equal(integ(q0, dx), robot.integrate(q0, dx))
+    assert diff(q0, q1).dtype == np.float64 and integ(q0, dx).dtype == np.float64
+
+    class Shifted(pinobs.Robot):
+        def difference(self, q0: Any, q1: Any) -> Any:
+            return super().difference(q0, q1) + 1.0
+
+        def integrate(self, q: Any, v: Any) -> Any:
+            return super().integrate(q, v)
+
+    shifted = object.__new__(Shifted)
+    shifted.__dict__.update(robot.__dict__)
+    assert difference_call(shifted) == shifted.difference
+    assert integrate_call(shifted) == shifted.integrate

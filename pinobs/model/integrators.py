@@ -38,12 +38,14 @@ from pinobs.model.robot import Robot, Vector
 __all__ = [
     "RK4_STIFFNESS",
     "DynamicsCalls",
+    "MassCoriolisCalls",
     "difference_call",
     "dynamics_calls",
     "dynamics_rk4",
     "friction_substeps",
     "integrate_call",
     "lie_rk4",
+    "mass_coriolis_calls",
     "rk4_stage_matrices",
 ]
 
@@ -85,6 +87,31 @@ def dynamics_calls(robot: Robot, *, gravity: bool = True, data: Any = None) -> D
         data = model.createData()
     return DynamicsCalls(
         partial(pin.aba, model, data), partial(pin.computeABADerivatives, model, data), data
+    )
+
+
+class MassCoriolisCalls(NamedTuple):
+    """``pin.crba`` and ``pin.computeCoriolisMatrix`` bound to a model and a ``pin.Data`` of
+    the caller's own each, with the arrays they write: ``crba(q)`` leaves ``M(q)`` in ``M``
+    (its upper triangle at least: Pinocchio < 4 fills only that), ``coriolis(q, v)`` leaves
+    ``C(q, v)`` in ``C`` (views, written in place).  No checks: for ``kalman``'s compiled step
+    (:mod:`pinobs.observers.kalman_step`)."""
+
+    crba: Callable[[Vector], object]
+    coriolis: Callable[[Vector, Vector], object]
+    M: Vector
+    C: Vector
+
+
+def mass_coriolis_calls(robot: Robot) -> MassCoriolisCalls:
+    """:class:`MassCoriolisCalls` of ``robot``'s model on two new ``pin.Data``."""
+    model = robot.model
+    data_m, data_c = model.createData(), model.createData()
+    return MassCoriolisCalls(
+        partial(pin.crba, model, data_m),
+        partial(pin.computeCoriolisMatrix, model, data_c),
+        data_m.M,
+        data_c.C,
     )
 
 

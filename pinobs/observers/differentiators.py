@@ -31,6 +31,9 @@ Once ``L(t)`` equals ``L∞`` to rounding, on robots whose configuration is
 a vector space, the step is the exact discretisation of the now LTI eq. (7)
 with that piecewise-linear ``y`` (one cached matrix exponential per step
 size), 10× cheaper than RK4 and exactly eq. 13 at the sample instants.
+On such robots both steps are one compiled call each (issue 39:
+:mod:`pinobs.observers.chain_kernels`; 8 Python calls an update, was 135 while ``L(t)``
+converges and 28 after; no BLAS call), the same bits.
 ``L(0) = L∞(γ/κ)`` with κ = ``gain_ramp``: the observer starts κ times slower
 and speeds up to γ within a few ``1/γ`` (the "nice transient" of Ibrir §5);
 ``L(t) ⪰ L∞ ≻ 0`` all along, since ``L∞(γ)`` decreases with γ.
@@ -61,7 +64,9 @@ and feeds a ±``h k_ℓ`` square wave into the derivatives (numerical
 chattering, for any step size); the implicit multiplier ``s⁺`` lands on the
 discrete sliding surface exactly and is the discrete equivalent control, so
 at 1 kHz the estimate is as smooth as the data allow.  ``discretization=
-"explicit"`` keeps the chattering version for comparison.
+"explicit"`` keeps the chattering version for comparison.  On a vector space the step is
+one compiled call (issue 39: :mod:`pinobs.observers.chain_kernels`, 7 Python calls an
+update, was 24, no BLAS call), equal to the NumPy step to rounding.
 
 Defaults from ``rate`` (1/h) and ``noise_std`` σ, for a motion with
 ``|y^{(n)}| ≤ B`` (``B`` = ``deriv_bound``, default ``0.5 πⁿ``: a 0.5 rad,
@@ -117,6 +122,9 @@ import numpy as np
 from pinobs.errors import GainError
 from pinobs.model import Robot, lie_rk4
 from pinobs.observers.base import Observer, Vector, positive, register
+from pinobs.observers.blas import one_blas_thread
+from pinobs.observers.chain_kernels import chain_rk4_kernel, hold_kernel, sliding_kernel
+from pinobs.observers.fused import loaded
 
 __all__ = [
     "DifferentiatorGains",
@@ -132,6 +140,13 @@ __all__ = [
 
 _DEFAULT_RATE = 1000.0  # [Hz] assumed for default gains when no rate is given
 _STEADY_TOL = 1e-13  # relative distance of L(t) to L∞ below which the gain is held fixed
+_new_tuple = tuple.__new__  # a state NamedTuple without its __new__ (a Python call less)
+
+
+def _compiled(robot: Robot) -> bool:
+    """Whether the compiled steps run on ``robot``: a :class:`Robot` whose configuration is a
+    vector space (:mod:`pinobs.observers.chain_kernels`)."""
+    return isinstance(robot, Robot) and robot.is_vector_space
 
 
 NDComplex = np.ndarray  # complex array (eq. 13 values)
@@ -312,6 +327,13 @@ class HighGainDifferentiator(Observer[_HGState]):
         self._foh_cache: dict[float, tuple[Vector, Vector, Vector]] = {}
         import scipy.linalg  # noqa: F401  (lazy for `import pinobs`, here for the first update)
 
+        # the steps compiled on a vector space (pinobs.observers.chain_kernels): no BLAS
+        compiled = _compiled(self.robot)
+        self._hold = loaded(hold_kernel) if compiled else None
+        self._rk4 = loaded(chain_rk4_kernel) if compiled else None
+        self._tol = _STEADY_TOL * self._L_scale
+        self.uses_blas = not compiled  # (a new interval's expm: on one thread by itself)
+
     @property
     def options(self) -> dict[str, object]:
         g = self.gains
@@ -365,8 +387,51 @@ class HighGainDifferentiator(Observer[_HGState]):
         return _HGState(q0.copy(), X, L0, None, 0.0)
 
     def step(self, state: _HGState, dt: float, q_meas: Vector | None, tau: Vector) -> _HGState:
-        n, nv = self.gains.order, self.robot.nv
         since = state.since + dt
+        rk4 = self._rk4
+        if rk4 is None:
+            return self._step(state, dt, q_meas, since)
+        # the steps of _step in one compiled call (pinobs.observers.chain_kernels)
+        y_prev, L_inf = state.y_prev, self._L_inf
+        mode = 0 if q_meas is None else (1 if y_prev is None else 2)
+        y, q, X = (
+            y_prev if mode == 2 else state.q,
+            np.empty(state.q.shape[0]),
+            np.empty(state.X.shape),
+        )
+        m = state.q if q_meas is None else q_meas
+        ratio, share = state.since / since, dt / since
+        steady = state.L is L_inf
+        if not steady:  # L(t) still converging (eq. 8), unless it is within rounding of L∞
+            L = np.empty(L_inf.shape)
+            if not rk4(state.q, state.X, state.L, L_inf, self._tol, self.gains.gamma,
+                       self._k_inf, True, mode, y, m, ratio, share, dt, q, X, L):  # fmt: skip
+                return self._committed(q, X, L, q_meas, state, since)
+        if mode == 2:  # steady, a sample after a sample: the exact first-order hold
+            assert self._hold is not None and y is not None and q_meas is not None
+            Phi, psi0, psi1 = self._first_order_hold(dt)
+            Z = np.empty((self.gains.order, y.shape[0]))
+            self._hold(state.q, state.X, y, q_meas, ratio, share, dt, Phi, psi0, psi1, Z)
+            return _new_tuple(_HGState, (Z[0], Z[1:], L_inf, m.copy(), 0.0))
+        if mode == 1:  # (the first sample, its gain steady: rare)
+            return self._step(state, dt, q_meas, since)
+        rk4(state.q, state.X, L_inf, L_inf, 0.0, self.gains.gamma, self._k_inf, False, 0, y, m,
+            ratio, share, dt, q, X, L_inf)  # fmt: skip
+        return self._committed(q, X, L_inf, q_meas, state, since)
+
+    @staticmethod
+    def _committed(
+        q: Vector, X: Vector, L: Vector, q_meas: Vector | None, state: _HGState, since: float
+    ) -> _HGState:
+        """The state after a step (``since``: the time since the last sample)."""
+        if q_meas is None:
+            return _new_tuple(_HGState, (q, X, L, state.y_prev, since))
+        return _new_tuple(_HGState, (q, X, L, q_meas.copy(), 0.0))
+
+    def _step(self, state: _HGState, dt: float, q_meas: Vector | None, since: float) -> _HGState:
+        """:meth:`step` in NumPy (``since``: the time since the last sample, this step's
+        included)."""
+        n, nv = self.gains.order, self.robot.nv
         y0: Vector | None = None  # no sample: no injection
         d = np.zeros(nv)
         if q_meas is not None and state.y_prev is None:
@@ -423,8 +488,9 @@ class HighGainDifferentiator(Observer[_HGState]):
             aug[n, n + 1] = 1.0
             from scipy.linalg import expm  # lazy (imported by the constructor already)
 
-            E = expm(aug * dt)
-            cached = (E[:n, :n], E[:n, n], E[:n, n + 1])
+            E = one_blas_thread(expm)(aug * dt)  # (update may run without the limit)
+            # contiguous copies (the same numbers): the compiled step's loaded signature
+            cached = (E[:n, :n].copy(), E[:n, n].copy(), E[:n, n + 1].copy())
             if len(self._foh_cache) >= 16:
                 self._foh_cache.clear()
             self._foh_cache[dt] = cached
@@ -486,6 +552,9 @@ class SlidingDifferentiator(Observer[_SMState]):
         n = order
         self.k = np.array([g] + [math.comb(n - 1, ell - 1) * g**ell for ell in range(2, n + 1)])
         self.beta = steady_gains(n, float(lam_v))  # type: ignore[arg-type]
+        # the step compiled on a vector space (pinobs.observers.chain_kernels): no BLAS
+        self._fast = loaded(sliding_kernel) if _compiled(self.robot) else None
+        self.uses_blas = self._fast is None
 
     @property
     def options(self) -> dict[str, object]:
@@ -513,6 +582,13 @@ class SlidingDifferentiator(Observer[_SMState]):
         return _SMState(q0.copy(), X)
 
     def step(self, state: _SMState, dt: float, q_meas: Vector | None, tau: Vector) -> _SMState:
+        fast = self._fast
+        if fast is not None:  # the steps below in one compiled call
+            q_new, X_new = np.empty(state.q.shape[0]), np.empty(state.X.shape)
+            measured = q_meas is not None
+            fast(state.q, state.X, q_meas if measured else state.q, measured, dt, self.k,
+                 self.beta, self.discretization == "implicit", q_new, X_new)  # fmt: skip
+            return _new_tuple(_SMState, (q_new, X_new))
         q, X = _taylor_transport(self.robot, state.q, state.X, dt)  # drift, exact
         if q_meas is None:
             return _SMState(q, X)

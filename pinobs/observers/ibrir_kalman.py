@@ -81,6 +81,11 @@ Outputs equal the dense pre-optimisation form to 2e-14 (tested to 1e-12).
 Measured: 27.3 → 21.1 × ``pin.aba`` per update on the UR5 (medians of six
 runs of :func:`pinobs.evaluation.measure_cost` each, in the same process,
 ranges 26.6–28.8 and 20.9–21.6, on a loaded shared 2-core machine).
+Issue 39: there, with ``velocity_source="estimate"``, ``schedule="measured"`` and no
+``viscous`` (the defaults), the whole step is six compiled calls around Pinocchio's six
+(:mod:`pinobs.observers.kalman_step`: 13 Python calls an update, was 29; no BLAS call, so
+no one-BLAS-thread limit; no cache on the sample interval), equal to the NumPy step to
+rounding (3e-16 rad/s measured, tested to 1e-12).
 
 Defaults: ``R = rate/σ²`` (so the sampled measurement variance is σ², with
 σ = ``noise_std`` or 1e-6 rad), ``accel_psd`` = 1e-8 rad²/s³ (as the EKF),
@@ -111,109 +116,25 @@ from pinobs.observers.base import (
 )
 from pinobs.observers.differentiators import HighGainDifferentiator
 from pinobs.observers.ekf import ad_matrix, double_integrator_noise
-from pinobs.observers.kernel_cache import load_signature
+from pinobs.observers.fused import loaded
+from pinobs.observers.kalman_step import KalmanStep, fused_kernel
 from pinobs.observers.linalg import (
     cholesky_solve,
-    joseph_kernel,
     joseph_update,
     stiff_transition_matrix,
-    transition_kernel,
     transition_matrix,
     warm_linear_algebra,
 )
 
 __all__ = ["IbrirKalman", "IbrirKalmanGains"]
 
-# the compiled kernels of pinobs.observers.linalg, called from _fused_loops (set by _fused_kernel)
-_transition_nb: Any = None
-_joseph_nb: Any = None
-
-
-def _fused_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
-    M: Vector,
-    CD: Vector,
-    h: float,
-    P: Vector,
-    Q: Vector,
-    e: Vector,
-    r: float,
-    dx: Vector,
-    out: Vector,
-) -> float:
-    """One covariance step of a vector-space robot in one compiled call (numba; the two ekf
-    kernels inside): ``F = [[0, I], [0, −M⁻¹ CD]]`` (Ibrir eq. 3, ``CD = C + C_f``, by
-    Cholesky), ``Φ = transition_matrix(F, h)``, ``P⁻ = Φ P Φᵀ + Q``, then
-    ``joseph_update(P⁻, e, r)`` into ``(dx, out)``.  Returns the NIS ``eᵀ S⁻¹ e``, or NaN
-    (outputs undefined) when ``M`` or ``S`` is not positive definite."""
-    nv = M.shape[0]
-    n = 2 * nv
-    L = np.zeros((nv, nv))  # M = L Lᵀ
-    for j in range(nv):
-        d = M[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            return np.nan
-        L[j, j] = np.sqrt(d)
-        for i in range(j + 1, nv):
-            t = M[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / L[j, j]
-    F = np.zeros((n, n))
-    for c in range(nv):  # column c of M⁻¹ CD: L y = CD[:, c], then Lᵀ x = y
-        x = np.empty(nv)
-        for i in range(nv):
-            t = CD[i, c]
-            for k in range(i):
-                t -= L[i, k] * x[k]
-            x[i] = t / L[i, i]
-        for i in range(nv - 1, -1, -1):
-            t = x[i]
-            for k in range(i + 1, nv):
-                t -= L[k, i] * x[k]
-            x[i] = t / L[i, i]
-        for i in range(nv):
-            F[nv + i, nv + c] = -x[i]  # Ibrir eq. (3)
-        F[c, nv + c] = 1.0
-    Phi = np.empty((n, n))
-    _transition_nb(F, h, Phi)
-    PhiP = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            t = 0.0
-            for k in range(n):
-                t += Phi[i, k] * P[k, j]
-            PhiP[i, j] = t
-    Pm = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            t = 0.0
-            for k in range(n):
-                t += PhiP[i, k] * Phi[j, k]
-            Pm[i, j] = t + Q[i, j]
-    if not _joseph_nb(Pm, e, r, dx, out):
-        return np.nan
-    nis = 0.0  # S⁻¹ e = (e − K_q e) / r (ExtendedKalmanFilter.correct)
-    for i in range(nv):
-        nis += e[i] * (e[i] - dx[i])
-    return nis / r
-
 
 @functools.cache
 def _fused_kernel() -> Any:
-    """:func:`_fused_loops` compiled (numba, ``cache=True``; loaded by the constructor)."""
-    global _transition_nb, _joseph_nb
-    import numba  # lazy: start-up time
-
+    """:func:`pinobs.observers.kalman_step.fused_loops` compiled (numba, ``cache=True``; loaded
+    by the constructor)."""
     warm_linear_algebra(1)  # both linalg kernels loaded
-    _transition_nb, _joseph_nb = transition_kernel.compiled, joseph_kernel.compiled
-    kernel = numba.njit(cache=True)(_fused_loops)
-    one, eye, zero = np.eye(1), np.eye(2), np.zeros((2, 2))
-    noise = np.zeros((2, 2))
-    noise.flags.writeable = False  # as IbrirKalman._noise's (cached) matrices: one signature
-    load_signature(kernel, one, one, 1.0, eye, noise, np.zeros(1), 1.0, np.zeros(2), zero)
-    return kernel
+    return loaded(fused_kernel)
 
 
 _DEFAULT_RATE = 1000.0  # [Hz] assumed for R when no rate is given
@@ -344,6 +265,9 @@ class IbrirKalman(Observer[_State]):
         self.differentiator = HighGainDifferentiator(
             self.robot, order=diff_order, gamma=diff_gamma, rate=rate, noise_std=noise_std
         )
+        # the whole step compiled where it applies (pinobs.observers.kalman_step): no BLAS
+        self._fast = None if self._fused is None else KalmanStep.build(self, _State)
+        self.uses_blas = self._fast is None
 
     @property
     def options(self) -> dict[str, object]:
@@ -435,7 +359,15 @@ class IbrirKalman(Observer[_State]):
         return _State(q0.copy(), v0.copy(), np.diag(std**2), diff, None)
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
-        """Prediction over ``dt`` [s] (scheduled on ``q_meas``), then the gated Kalman correction.
+        """Prediction over ``dt`` [s] (scheduled on ``q_meas``), then the gated Kalman correction
+        (:meth:`general_step`; compiled where :class:`~pinobs.observers.kalman_step.KalmanStep`
+        applies)."""
+        if self._fast is not None:
+            return self._fast.step(self, state, dt, q_meas, tau)
+        return self.general_step(state, dt, q_meas, tau)
+
+    def general_step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
+        """:meth:`step` in NumPy (and the general compiled covariance step on small robots).
 
         ``NIS = eᵀ S⁻¹ e`` with ``S = P⁻_qq + 1/(R h)`` comes free from the update
         (``S⁻¹ e = (e − K_q e) R h``, as in :meth:`ExtendedKalmanFilter.correct`).  A
@@ -456,7 +388,8 @@ class IbrirKalman(Observer[_State]):
         P = np.empty_like(state.P)
         if self._fused is not None:  # the general path below in one compiled call
             M, CD = r.mass_matrix(mid[0]), self._damped_coriolis(*mid)
-            nis = self._fused(M, CD, float(dt), state.P, self._noise(dt), e, meas_var, dx, P)
+            q3, q2, q1 = self._noise_terms(dt)
+            nis = self._fused(M, CD, float(dt), state.P, q3, q2, q1, e, meas_var, dx, P)
         if math.isnan(nis):  # (or not positive definite in the kernel: the general path copes)
             P_pred = self._covariance(self._state_matrix(*mid), dt, state.P)
             dx, P = joseph_update(P_pred, e, meas_var)
@@ -467,6 +400,12 @@ class IbrirKalman(Observer[_State]):
             return self.step(state, dt, None, tau)._replace(gate=gate)
         q = q + dq if self._vector_space else r.integrate(q, dq)
         return _State(q, v + dx[nv:], P, d1, q_meas.copy(), gate)
+
+    def _noise_terms(self, dt: float) -> tuple[float, float, float]:
+        """``Q_d``'s blocks over ``dt`` [s]: ``Q_d = [[q3 I, q2 I], [q2 I, q1 I]]`` (:meth:`_noise`)."""
+        g = self.gains
+        psd = g.accel_psd if g.form == "practical" else 0.0
+        return psd * (dt**3 / 3), psd * (dt**2 / 2), psd * dt
 
     def _noise(self, dt: float) -> Vector:
         """``Q_d`` over ``dt`` [s]: white acceleration (practical form) or none (the paper's)."""

@@ -75,8 +75,9 @@ def test_update_leaves_the_counts_as_they_were_when_it_raises(ur5_run) -> None:
 
 def test_blas_runs_on_one_thread_inside_update(ur5_run, monkeypatch) -> None:
     robot, res = ur5_run
-    # kalman may call a BLAS; ekf's and riemannian's compiled steps on a UR5 do not
-    ob = make_observer("kalman", robot, rate=1000.0, noise_std=1e-4)
+    # kalman's paper form may call a BLAS (its NumPy step); ekf's, riemannian's and the default
+    # kalman's compiled steps on a UR5 do not
+    ob = make_observer("kalman", robot, rate=1000.0, noise_std=1e-4, form="paper")
     seen: list[set[int]] = []
     step = type(ob).step
 
@@ -95,12 +96,16 @@ def test_blas_runs_on_one_thread_inside_update(ur5_run, monkeypatch) -> None:
 
 def test_a_family_without_blas_calls_updates_on_the_callers_threads(ur5_run, monkeypatch) -> None:
     """``uses_blas = False`` (``fd``): the limit is not entered, so it costs nothing per update;
-    ``ekf``'s and ``riemannian``'s compiled steps on a UR5 neither; a family that may call a
-    BLAS (``kalman``, the default) runs its step on one thread."""
+    ``ekf``'s, ``riemannian``'s, ``kalman``'s, ``highgain``'s (its gain steady: from the
+    start with ``gain_ramp=1``) and ``sliding``'s compiled steps on a UR5 neither; a family
+    that may call a BLAS (``kalman``'s paper form: its NumPy step) runs its step on one
+    thread."""
     robot, res = ur5_run
-    for name, inside in (("fd", {2}), ("ekf", {2}), ("riemannian", {2}), ("kalman", {1})):
-        ob = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
-        assert ob.uses_blas is (name == "kalman")
+    cases = [(name, {}, {2}) for name in ("fd", "ekf", "riemannian", "kalman", "sliding")]
+    cases += [("highgain", {"gain_ramp": 1.0}, {2}), ("kalman", {"form": "paper"}, {1})]
+    for name, options, inside in cases:
+        ob = make_observer(name, robot, rate=1000.0, noise_std=1e-4, **options)
+        assert ob.uses_blas is (inside == {1})
         seen: list[set[int]] = []
         step = type(ob).step
 
@@ -113,7 +118,7 @@ def test_a_family_without_blas_calls_updates_on_the_callers_threads(ur5_run, mon
             ob.reset(res.t[0], res.q[0], None, res.tau[0])
             for k in range(1, 4):
                 ob.update(res.t[k], res.q_meas[k], res.tau[k])
-        assert seen == [inside] * 3, name
+        assert seen == [inside] * 3, (name, options)
 
 
 @pytest.mark.parametrize("name", observer_names())

@@ -84,6 +84,7 @@ class LeggedFilter(ABC):
         imu_hold: str = "previous",
         imu_frame: str | None = None,
         foot_radius: float = 0.0,
+        rolling_lift: bool = False,
     ) -> None:
         #: the legs, options and conversions (:class:`pinobs.observers.legs.LeggedSetup`)
         self.setup = LeggedSetup(
@@ -95,6 +96,7 @@ class LeggedFilter(ABC):
             imu_hold=imu_hold,
             imu_frame=imu_frame,
             foot_radius=foot_radius,
+            rolling_lift=rolling_lift,
         )
         s = self.setup
         self.imu_hold, self.kinematics = s.imu_hold, s.kinematics

@@ -22,7 +22,7 @@ stays (to second order) where it landed: rolling by an angle ``φ`` about a hori
 
     a(t) − a(t₀) = r (φ − sin φ) (u × n) + r (1 − cos φ) n                       (R3)
 
-(a cycloid: 0.3 µm along, 0.1 mm up for a 0.1 rad roll, against the centre's ``r φ`` = 2 mm).
+(a cycloid: 3 µm along, 0.1 mm up for a 0.1 rad roll, against the centre's ``r φ`` = 2 mm).
 So each foot is measured at ``a`` instead of ``c``: in the IMU frame, with ``h_j(q)`` the
 foot frame's position, ``R_j(q)`` its orientation and ``J_j``, ``J_ω,j`` its linear and
 angular Jacobians (:meth:`pinobs.model.FootKinematics.placements_and_jacobians`)::
@@ -34,6 +34,22 @@ angular Jacobians (:meth:`pinobs.model.FootKinematics.placements_and_jacobians`)
 ``r φ δθ``: second order); feet not in contact are measured at their centre (``s_j = 0``),
 and a foot the foot gate re-anchors (``foot_gate``, still in contact) keeps its ``s_j``.
 ``r = 0`` leaves the filters as they were.
+
+(R3)'s second term is not second order for a walking foot: its rise ``r (1 − cos φ)`` is
+the same sign at every step (go1 trotting in MuJoCo: φ ≈ 0.13 rad, 0.18 mm a stance of
+0.18 s, a quarter of the trot's mean z velocity error; ``benchmarks/legged_truth.md``,
+``lift_diagnosis``), and the filters carry it from foot to foot as a base velocity bias.
+Rolling keeps the centre at ``r`` above the plane (R1 has no normal part), so the point
+that is still is the anchored point's projection on the plane, ``a − (nᵀ(a − c) + r) n``:
+R3 without its rise, its along-track term ``r (φ − sin φ)`` (7 µm) left.  With
+``lift`` (the filters' ``rolling_lift``), ``o_j = R_j(q) s_j`` and ``n̂ = R̂ᵀ n`` the normal
+in the IMU frame from the current estimate, ``P = I − n̂ n̂ᵀ``::
+
+    h_j ← h_j(q) + P o_j − r n̂,    J_j ← J_j − P o_j^ J_ω,j                      (R5)
+
+(the derivative of ``P o_j`` is ``P`` times R4's; ``n̂`` from ``R̂``: an attitude error
+``δθ`` tilts the removed rise by ``|o_j + r n̂| δθ ≈ r φ δθ``, second order like R4's).
+At touch-down ``o_j = −r n̂`` and (R5) is (R4).
 """
 
 from __future__ import annotations
@@ -59,6 +75,7 @@ class RollingFeet:
             :class:`pinobs.model.FootKinematics`).
         radius: the feet's sphere radius [m], > 0.
         normal: the ground's upward normal in the world (unit length after normalising).
+        lift: (R5): the anchored points' cycloid lift removed (``False``, default: R4).
 
     Raises:
         ConfigurationError: legs without ``placements_and_jacobians`` (a kinematics that
@@ -67,7 +84,12 @@ class RollingFeet:
     """
 
     def __init__(
-        self, kinematics: object, radius: float, normal: ArrayLike = (0.0, 0.0, 1.0)
+        self,
+        kinematics: object,
+        radius: float,
+        normal: ArrayLike = (0.0, 0.0, 1.0),
+        *,
+        lift: bool = False,
     ) -> None:
         if not callable(getattr(kinematics, "placements_and_jacobians", None)):
             raise ConfigurationError(
@@ -83,6 +105,8 @@ class RollingFeet:
         self.offsets = np.zeros((len(kinematics.feet), 3))  # type: ignore[attr-defined]
         rolling_kernel.load()
         self.down = np.zeros(len(self.offsets), dtype=bool)
+        #: (R5): the anchored point's cycloid lift removed (``False``: (R4) alone)
+        self.lift = bool(lift)
 
     def restart(self) -> None:
         """Forget every anchor (no foot down): the filter's ``reset``."""
@@ -113,7 +137,29 @@ class RollingFeet:
         kernel = rolling_kernel.compiled
         assert kernel is not None  # loaded by the constructor
         kernel(h, rot, jac, jac_w, self.offsets, h_out, jac_out)  # (R4)
+        if self.lift and R is not None and self.down.any():
+            self._lift(h, rot, jac, jac_w, np.asarray(R), h_out, jac_out)
         return h_out, jac_out
+
+    def _lift(
+        self,
+        h: Vector,
+        rot: Vector,
+        jac: Vector,
+        jac_w: Vector,
+        R: Vector,
+        h_out: Vector,
+        jac_out: Vector,
+    ) -> None:
+        """(R5) for the feet down, in place: ``h ← h + P o − r n̂``, ``J ← J − P o^ J_ω``
+        (``o = R_j s_j``, ``n̂ = R̂ᵀ n``, ``P = I − n̂ n̂ᵀ``)."""
+        n_hat = R.T @ self.normal
+        P = np.eye(3) - np.outer(n_hat, n_hat)
+        for j in np.flatnonzero(self.down):
+            o = rot[j] @ self.offsets[j]
+            h_out[j] = h[j] + P @ o - self.radius * n_hat
+            o_hat = np.array([[0.0, -o[2], o[1]], [o[2], 0.0, -o[0]], [-o[1], o[0], 0.0]])
+            jac_out[j] = jac[j] - P @ (o_hat @ jac_w[j])
 
 
 def _rolling_loops(h, rot, jac, jac_w, s, h_out, jac_out):  # type: ignore[no-untyped-def]

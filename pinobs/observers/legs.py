@@ -670,6 +670,12 @@ class LeggedSetup:
         h, jac = self.kinematics.positions_and_jacobians(q_joints)
         return np.asarray(h, dtype=float), np.asarray(jac, dtype=float)
 
+    def settle(self, R: Vector) -> None:
+        """The orientation the filter ended its sample with, for the rolling feet's (R5)
+        normals (:meth:`pinobs.observers.rolling.RollingFeet.settle`); nothing without them."""
+        if self.rolling is not None and self.rolling.lift:
+            self.rolling.settle(R)
+
     def warn_without_contact(self, warned: bool, t: float, flags: list[bool], last: float) -> bool:
         """Warn once when no foot has been in contact for NO_CONTACT_WARN_TIME; whether warned."""
         if any(flags) or warned or t - last < NO_CONTACT_WARN_TIME:

@@ -259,9 +259,9 @@ class LiftedGo1Legs(Go1Legs):
         self.rotations, self.k = rotations, 0
 
     def positions_and_jacobians(self, q):
-        return self.rolling.legs(
-            q, self.rotations[min(self.k, len(self.rotations) - 1)], [True] * 4
-        )
+        R = self.rotations[min(self.k, len(self.rotations) - 1)]
+        self.rolling.normals[:] = R.T @ [0.0, 0.0, 1.0]  # the true normal in the IMU frame
+        return self.rolling.legs(q, R, [True] * 4)
 
     def inverse(self, targets):
         q = super().inverse(targets)
@@ -322,3 +322,28 @@ def test_rolling_lift_off_or_without_a_radius_is_bit_for_bit_the_filter_without_
     np.testing.assert_array_equal(outs[0], outs[1])
     np.testing.assert_array_equal(outs[2], outs[3])
     assert not np.array_equal(outs[0], outs[2])
+
+
+def test_the_compiled_lift_is_r5_in_numpy() -> None:
+    """The compiled (R5) equals its NumPy form for the feet down (the others untouched):
+    ``h + P o − r n̂`` and ``J − P o^ J_ω``, ``o = R s``, ``P = I − n̂ n̂ᵀ``."""
+    from pinobs.observers.rolling import lift_kernel
+
+    rng = np.random.default_rng(0)
+    h, s = rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
+    normals = Rotation.random(4, random_state=2).apply([0.0, 0.0, 1.0])
+    rot = Rotation.random(4, random_state=1).as_matrix()
+    jac, jac_w = rng.normal(size=(4, 3, 12)), rng.normal(size=(4, 3, 12))
+    down = np.array([True, False, True, True])
+    lift_kernel.load()
+    h_out, jac_out = np.zeros_like(h), np.zeros_like(jac)
+    lift_kernel.compiled(h, rot, jac, jac_w, s, normals, down, RADIUS, h_out, jac_out)
+    for k in range(4):
+        if not down[k]:
+            assert not h_out[k].any() and not jac_out[k].any()
+            continue
+        o, n = rot[k] @ s[k], normals[k]
+        P = np.eye(3) - np.outer(n, n)
+        o_hat = np.array([[0.0, -o[2], o[1]], [o[2], 0.0, -o[0]], [-o[1], o[0], 0.0]])
+        np.testing.assert_allclose(h_out[k], h[k] + P @ o - RADIUS * n, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(jac_out[k], jac[k] - P @ o_hat @ jac_w[k], rtol=0, atol=1e-14)

@@ -50,7 +50,8 @@ Issue 38 targets: `v rms` ≤ 0.05 m/s and ≤ 0.7 × the quaternion EKF's; ≥ 
 every axis and consistent (NEES/3 0.5-2); an update ≤ 30 `pin.aba` on go1.
 
     python benchmarks/legged_truth.py [--duration 10] [--seeds 0 1 2] [--long 60]
-        [--sections go1 humanoid cost real slip rolling density] [--merge] [--quick]
+        [--sections go1 humanoid cost real slip rolling lift density] [--merge] [--quick]
+        [--starts truth perturbed large]
 
     python benchmarks/legged_truth.py --sections cost --merge    # the cost table alone
     python benchmarks/legged_truth.py --sections real --merge    # the real Go1 log alone
@@ -79,6 +80,12 @@ NIS on the MuJoCo go1 (`simulated_nis`), where the defaults were chosen, its enc
 `pinobs.observers.rolling`), with `GO1_GAINS` (the contact density measured at that point,
 `density`); the section's other rows kept (`rolling_white`: the rows with `GO1_WHITE_GAINS`,
 before, and `rolling_gains` those with `GAINS`, before that).
+
+`lift`: the `rolling` runs with both filters given `rolling_lift` too (rolling.py's R5: the
+anchored point's cycloid rise removed), `GO1_GAINS` unchanged, over `--starts`; and
+(`lift_diagnosis`) the feet's vertical motion over their stances on the truth (`stance_rise`:
+anchored point, sphere centre, cycloid) of trot 20 s (the measuring run), stand and sway
+(seed 0), with the invariant EKF's mean velocity error on the trot without and with it.
 
 `density`: the contact density of the feet's true motion over their stances
 (`contact_density`, no filter): go1's trot at the touch point, which gives `GO1_GAINS`, and
@@ -197,8 +204,12 @@ NOTES = {
     "density": "Measured on the truth alone (no filter): seed 0, the motions of `DENSITY_RUNS`; "
     "`density_diagnosis`: filters on the measuring motion, not used to choose",
     "real": "The real log held out: run once with the settings MuJoCo gave, nothing tuned on "
-    "it (`GO1_GAINS` rows: run once, after the rolling rows)",
+    "it (`GO1_GAINS` rows: run once, after the rolling rows; `+ rolling_lift` rows: once, after "
+    "the `lift` rows)",
     "slip": "`GAINS`, go1 standing (seed 0), one foot made to slide",
+    "lift": "`GO1_GAINS` as the `rolling` rows, with `rolling_lift` (derived, no parameter: "
+    "nothing chosen); `lift_diagnosis` on the truth of the measuring run (trot 20 s, seed 0) and "
+    "on stand and sway (seed 0)",
 }
 #: The foot gate's outlier probability in the cost table's ``inekf+gate`` row and the real
 #: log's rows (``InvariantEKF(foot_gate=)``).
@@ -212,9 +223,17 @@ def run_filter(
     start: str,
     gains: InEKFGains = GAINS,
     foot_radius: float = 0.0,
+    rolling_lift: bool = False,
 ) -> dict[str, float]:
     imu_frame = "imu_link" if run.feet == GO1_FEET else None  # TALOS: the IMU at the base
-    ekf = FILTERS[name](robot, run.feet, gains=gains, imu_frame=imu_frame, foot_radius=foot_radius)
+    ekf = FILTERS[name](
+        robot,
+        run.feet,
+        gains=gains,
+        imu_frame=imu_frame,
+        foot_radius=foot_radius,
+        rolling_lift=rolling_lift,
+    )
     r_bi = ekf.imu_placement[1]
     t = run.t
     q_meas = run.q_joints()
@@ -233,6 +252,7 @@ def run_filter(
         prior = dataclasses.replace(prior, attitude=math.radians(2 * roll), velocity=2 * speed)
     ekf.reset(t[0], q0, v0, gyro=gyro[0], acc=acc[0], contacts=contacts[0], prior=prior)
     err_v, inside, nees, yaw_err, pos_err = [], [], [], 0.0, np.zeros(2)
+    err_w = np.zeros(3)  # Σ of the IMU's world velocity error (its mean: the bias)
     inside_b, nees_b = [], []  # the same in the IMU frame (no yaw in it)
     for k in range(1, t.size):
         est = ekf.update(t[k], q_meas[k], gyro[k], acc[k], contacts[k])
@@ -248,6 +268,7 @@ def run_filter(
         else:
             cov = P[3:6, 3:6]
         e = v_hat - v_imu
+        err_w += e
         inside.append(np.abs(e) <= 2.0 * np.sqrt(np.diag(cov)))
         nees.append(float(e @ np.linalg.solve(cov, e)) / 3.0)
         # in the IMU frame: v̂_b − v_b ≈ R̂ᵀ ξ_v (invariant), −R̂ᵀ δv − v̂_b^ δθ (quaternion)
@@ -274,6 +295,7 @@ def run_filter(
         "in_2sigma_body_xyz": np.mean(inside_b, axis=0).tolist(),
         "nees_body": float(np.mean(nees_b)),
         "walked_m": walked,
+        "mean_error_xyz": (err_w / (t.size - 1)).tolist(),
     }
 
 
@@ -404,6 +426,84 @@ def density_diagnosis() -> dict[str, Any]:
         label: run_filter("inekf", run, robot, "truth", gains, FOOT_RADIUS)
         for label, gains in DIAGNOSIS_GAINS.items()
     }
+
+
+def stance_rise(run: Any, robot: pinobs.Robot, after: float = LANDING_TIME) -> dict[str, float]:
+    """The vertical motion of the feet over their stances of ``≥ 0.1 s`` (measured force >
+    ``CONTACT_FORCE``) after their first ``after`` [s], on the truth: of the anchored point
+    ``a`` (rolling.py's R2, anchored at ``after``), of the sphere's centre, and the cycloid
+    ``r (1 − cos φ)`` (R3's lift, ``φ`` the foot's rotation since); means [m], durations [s]."""
+    legs = FootKinematics(robot, run.feet)
+    q, base = run.q_joints(truth=True), run.base_q()
+    R_b = Rotation.from_quat(base[:, 3:]).as_matrix()
+    flags = run.forces() > CONTACT_FORCE
+    m = round(after * run.rate)
+    rows = []
+    for j in range(flags.shape[1]):
+        edges = np.diff(np.concatenate([[0], flags[:, j].astype(int), [0]]))
+        for k0, k1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True):
+            if (k1 - k0) / run.rate < 0.1:
+                continue
+            ends = []
+            for k in (k0 + m, k1):
+                h, rot, _, _ = legs.placements_and_jacobians(q[k])
+                ends.append((base[k, :3] + R_b[k] @ h[j], R_b[k] @ rot[j]))
+            (c0, f0), (c1, f1) = ends
+            s = f0.T @ np.array([0.0, 0.0, -FOOT_RADIUS])  # R2, anchored at k0 + m
+            phi = np.linalg.norm(Rotation.from_matrix(f1 @ f0.T).as_rotvec())
+            rows.append(((k1 - k0 - m) / run.rate, (c1 + f1 @ s - c0 - f0 @ s)[2], c1[2] - c0[2],
+                         FOOT_RADIUS * (1.0 - math.cos(phi))))  # fmt: skip
+    mean = np.mean(rows, axis=0)
+    keys = ("duration_s", "point_rise_m", "centre_rise_m", "cycloid_m")
+    return {"stances": len(rows), **dict(zip(keys, mean.tolist(), strict=True))}
+
+
+#: ``lift_diagnosis``'s runs: label → (motion, duration [s]); seed 0.
+LIFT_RUNS = {"trot 20 s (the measuring run)": ("trot", 20.0), "stand 10 s": ("stand", 10.0),
+             "sway 10 s": ("sway", 10.0)}  # fmt: skip
+
+
+def lift_diagnosis() -> dict[str, Any]:
+    """Where the trot's z velocity bias comes from: :func:`stance_rise` of :data:`LIFT_RUNS`'
+    truths and, on the measuring run (trot 20 s, seed 0), the invariant EKF's mean world
+    velocity error with ``GO1_GAINS`` and rolling feet, without and with ``rolling_lift``."""
+    robot = pinobs.load("go1")
+    out: dict[str, Any] = {}
+    for label, (motion, duration) in LIFT_RUNS.items():
+        run = simulate_legged(motion, duration, seed=0, noise=NOISE, robot=robot)
+        out[label] = stance_rise(run, robot)
+        if motion == "trot":
+            for lift in (False, True):
+                r = run_filter("inekf", run, robot, "truth", GO1_GAINS, FOOT_RADIUS, lift)
+                out[label][f"filter_lift_{lift}"] = r
+        print("lift", label, out[label], flush=True)
+    return out
+
+
+def _lift_lines(rows: dict[str, Any]) -> list[str]:
+    if not rows:
+        return []
+    md = [
+        "`lift_diagnosis`: the feet's vertical motion over their stances of ≥ 0.1 s after "
+        f"their first {LANDING_TIME * 1e3:g} ms (truth, seed 0, `stance_rise`): the anchored "
+        "point's rise is the sphere centre's (MuJoCo's soft contact) plus the cycloid "
+        "r (1 − cos φ) (rolling.py's R3, which `rolling_lift` removes); and the invariant "
+        "EKF's mean world velocity error on the measuring run (z: the bias):",
+        "",
+        "| run | stances | after 20 ms [s] | point rise [mm] | centre [mm] | cycloid [mm] "
+        "| inekf mean error x / y / z [mm/s] | with `rolling_lift` |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for label, r in rows.items():
+        errs = [
+            " / ".join(f"{1e3 * e:.2f}" for e in r[k]["mean_error_xyz"]) if k in r else ""
+            for k in ("filter_lift_False", "filter_lift_True")
+        ]
+        md.append(
+            f"| {label} | {r['stances']} | {r['duration_s']:.3f} | {1e3 * r['point_rise_m']:.3f} "
+            f"| {1e3 * r['centre_rise_m']:.3f} | {1e3 * r['cycloid_m']:.3f} | {' | '.join(errs)} |"
+        )
+    return [*md, ""]
 
 
 def _diagnosis_lines(rows: dict[str, Any]) -> list[str]:
@@ -626,6 +726,14 @@ def format_report(report: dict[str, Any]) -> str:
         + rolling
         + f"`GAINS` (contact {GAINS.contact:g} m/s/√Hz; the rows before `GO1_WHITE_GAINS`):",
     )
+    md += _section_lines(
+        report.get("lift") or {},
+        "`lift`: "
+        + rolling
+        + "and `rolling_lift=True` (rolling.py's R5: the anchored point's cycloid lift "
+        "r (1 − cos φ) removed), `GO1_GAINS` (unchanged, not retuned; `lift_diagnosis`):",
+    )
+    md += _lift_lines(report.get("lift_diagnosis") or {})
     md += _density_lines(report.get("density") or {})
     md += _diagnosis_lines(report.get("density_diagnosis") or {})
     md += _slip_lines(report.get("slip") or {})
@@ -738,6 +846,20 @@ def real_log_nis() -> dict[str, Any]:
     rows += [(f"white, {c}, gate {g}", GAINS, c, g, white) for c, g in modes]
     rows += [  # the contact density measured at go1's touch point (the rolling rows' gains)
         (f"white, GO1_GAINS, {c}", GO1_GAINS, c, None, white) for c in ("force", "probability")
+    ]
+    rows += [  # rolling.py's R5 (the lift section's rows), run once after them: held out
+        (f"defaults + rolling_lift, {c}", None, c, None, {"rolling_lift": True})
+        for c in ("force", "probability")
+    ]
+    rows += [
+        (
+            f"white, GO1_GAINS + rolling_lift, {c}",
+            GO1_GAINS,
+            c,
+            None,
+            {**white, "rolling_lift": True},
+        )
+        for c in ("force", "probability")
     ]
     rows += [
         (
@@ -960,7 +1082,8 @@ def _real_table(real: dict[str, Any]) -> list[str]:
         "(off by default since this table); `white`: the foot noise before (`joint_std=None, "
         "slip_speed=False`) with `GAINS`, `GO1_GAINS` or `LOG_GAINS`; every row with `legged_run`'s "
         'default `foot_radius="urdf"` (go1\'s 2 cm foot spheres: the rolling feet) but '
-        "`foot_radius 0` (the foot frames, the default before):",
+        "`foot_radius 0` (the foot frames, the default before); `+ rolling_lift`: rolling.py's "
+        "R5 (run once, after the `lift` rows):",
         "",
         "| contacts, gate | stance rows | NIS/dof mean (median) | inside | below | above "
         "| gated | in contact | NIS/dof median standing / walking "
@@ -987,12 +1110,14 @@ def _runs(
     robot: Any,
     gains: InEKFGains,
     foot_radius: float = 0.0,
+    starts: Any = tuple(STARTS),
 ) -> None:
-    for start_kind in STARTS if section != "old_gains" else ("truth", "large"):
+    lift = section == "lift"
+    for start_kind in starts if section != "old_gains" else ("truth", "large"):
         key = f"{label}, {start_kind} start"
         report[section].setdefault(key, {name: [] for name in FILTERS})
         for name in FILTERS:
-            out: dict[str, Any] = run_filter(name, run, robot, start_kind, gains, foot_radius)
+            out: dict[str, Any] = run_filter(name, run, robot, start_kind, gains, foot_radius, lift)
             out["seed"] = run.seed
             report[section][key][name].append(out)
             print(section, key, run.seed, name, out, flush=True)
@@ -1010,12 +1135,19 @@ def main() -> None:
     parser.add_argument(
         "--sections",
         nargs="+",
-        choices=["go1", "humanoid", "cost", "real", "slip", "rolling", "density"],
+        choices=["go1", "humanoid", "cost", "real", "slip", "rolling", "lift", "density"],
         default=["go1", "humanoid"],
         help="what to run (go1 includes cost; cost alone: its trot only); with --merge, "
         "the others are kept from legged_truth.json",
     )
     parser.add_argument("--merge", action="store_true", help="keep the sections not run")
+    parser.add_argument(
+        "--starts",
+        nargs="+",
+        choices=list(STARTS),
+        default=list(STARTS),
+        help="the starts of the rolling and lift sections' rows",
+    )
     parser.add_argument(
         "--humanoid-motions",
         nargs="+",
@@ -1052,8 +1184,8 @@ def main() -> None:
 #: ``machine`` and ``conditions``); ``rolling_gains``, ``rolling_white``: the rolling rows with
 #: ``GAINS`` and ``GO1_WHITE_GAINS`` (kept).
 SECTIONS = ("motions", "long", "old_gains", "cost", "humanoid", "real", "slip", "real_sim",
-            "rolling", "rolling_white", "rolling_gains", "density", "density_diagnosis",
-            "gains")  # fmt: skip
+            "rolling", "rolling_white", "rolling_gains", "lift", "lift_diagnosis", "density",
+            "density_diagnosis", "gains")  # fmt: skip
 
 
 def _gains(**named: InEKFGains) -> dict[str, Any]:
@@ -1093,6 +1225,10 @@ def _run_sections(report: dict[str, Any], args: argparse.Namespace) -> None:
     if "rolling" in args.sections:
         _rolling_section(report, args)
         gains["rolling"] = _gains(GO1_GAINS=GO1_GAINS)
+    if "lift" in args.sections:
+        _rolling_section(report, args, "lift")
+        report["lift_diagnosis"] = lift_diagnosis()
+        gains["lift"] = _gains(GO1_GAINS=GO1_GAINS)
 
 
 def _ran(args: argparse.Namespace) -> list[str]:
@@ -1102,7 +1238,7 @@ def _ran(args: argparse.Namespace) -> list[str]:
     for section in args.sections:
         if section == "humanoid" and args.humanoid_motions != list(HUMANOID_MOTIONS):
             section += " " + " ".join(args.humanoid_motions)
-        elif section in ("go1", "rolling") and (
+        elif section in ("go1", "rolling", "lift") and (
             set(args.motions) != set(LEGGED_MOTIONS) or args.long <= 0
         ):
             section += " " + " ".join(
@@ -1150,11 +1286,14 @@ def _go1_sections(report: dict[str, Any], args: argparse.Namespace) -> None:
         _runs(report, "long", f"trot {args.long:g} s", run, robot, GAINS)
 
 
-def _rolling_section(report: dict[str, Any], args: argparse.Namespace) -> None:
+def _rolling_section(
+    report: dict[str, Any], args: argparse.Namespace, name: str = "rolling"
+) -> None:
     """go1's ``--motions`` over ``--seeds`` and the ``--long`` trot over ``--long-seeds`` with
-    ``foot_radius=FOOT_RADIUS``; the section's other rows are kept (from the JSON with
-    ``--merge``), those of the motions run replaced; gains ``GO1_GAINS``."""
-    section = report.setdefault("rolling", {})
+    ``foot_radius=FOOT_RADIUS`` (section ``lift``: and ``rolling_lift``), the ``--starts``; the
+    section's other rows are kept (from the JSON with ``--merge``), those of the motions run
+    replaced; gains ``GO1_GAINS``."""
+    section = report.setdefault(name, {})
     labels = [*args.motions, *([f"trot {args.long:g} s"] if args.long > 0 else [])]
     for key in [k for k in section if k.split(",")[0] in labels]:
         del section[key]
@@ -1165,10 +1304,11 @@ def _rolling_section(report: dict[str, Any], args: argparse.Namespace) -> None:
     for motion in args.motions:
         for seed in args.seeds:
             run = simulate_legged(motion, args.duration, seed=seed, noise=NOISE, robot=robot)
-            _runs(report, "rolling", motion, run, robot, GO1_GAINS, FOOT_RADIUS)
+            _runs(report, name, motion, run, robot, GO1_GAINS, FOOT_RADIUS, args.starts)
     for seed in args.long_seeds if args.long > 0 else []:
         run = simulate_legged("trot", args.long, seed=seed, noise=NOISE, robot=robot)
-        _runs(report, "rolling", f"trot {args.long:g} s", run, robot, GO1_GAINS, FOOT_RADIUS)
+        label = f"trot {args.long:g} s"
+        _runs(report, name, label, run, robot, GO1_GAINS, FOOT_RADIUS, args.starts)
 
 
 if __name__ == "__main__":

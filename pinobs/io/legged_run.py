@@ -159,6 +159,7 @@ def estimate_legged(
     slip_speed: bool = True,
     imu_noise: str | None = None,
     foot_radius: float | str = FOOT_RADIUS_URDF,
+    rolling_lift: bool = False,
 ) -> LogRun:
     """The free-flyer estimate over a legged log (module docstring).
 
@@ -194,6 +195,7 @@ def estimate_legged(
             none.  Default the URDF's, not the filter's 0: on the MuJoCo go1 it lowers the
             trot's base velocity error 0.0123 → 0.0084 m/s and the sway's 0.0112 → 0.0090,
             the stand's unchanged (module docstring); ``0``: the foot frames, as before.
+        rolling_lift: the filter's (:mod:`pinobs.observers.rolling`'s R5); default ``False``.
 
     Raises:
         LogFormatError: no IMU columns, no contact or force columns (no force columns
@@ -220,6 +222,7 @@ def estimate_legged(
         slip_speed=slip_speed,
         imu_noise=imu_noise,
         foot_radius=foot_radius,
+        rolling_lift=rolling_lift,
     ).run
 
 
@@ -249,6 +252,7 @@ def _make_filter(
     slip_speed: bool,
     imu_noise: str | None,
     foot_radius: float | str,
+    rolling_lift: bool = False,
 ) -> tuple[InvariantEKF, list[str]]:
     """:func:`legged_run`'s filter, and what its set-up measured on the log (said once)."""
     radius, said_r = _foot_radius(robot, log.feet, foot_radius)
@@ -265,6 +269,7 @@ def _make_filter(
         slip_speed=slip_speed,
         foot_radius=radius,
         slip_gyro=gains.gyro if imu_noise == "log" else 0.0,
+        rolling_lift=rolling_lift,
     )
     return filt, [*said_q, *said_g, *said_r]
 
@@ -284,6 +289,7 @@ def legged_run(
     slip_speed: bool = True,
     imu_noise: str | None = None,
     foot_radius: float | str = FOOT_RADIUS_URDF,
+    rolling_lift: bool = False,
 ) -> LeggedDetail:
     """:func:`estimate_legged` (same arguments), with the contacts and the NIS per row."""
     if log.imu_gyro is None or log.imu_acc is None:
@@ -291,9 +297,8 @@ def legged_run(
             "inekf needs the trunk IMU: imu.gyro.x|y|z [rad/s] and imu.acc.x|y|z [m/s²] columns"
         )
     prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
-    filt, said_setup = _make_filter(
-        robot, log, imu_frame, gains, foot_gate, joint_std, slip_speed, imu_noise, foot_radius
-    )
+    feet = (joint_std, slip_speed, imu_noise, foot_radius, rolling_lift)
+    filt, said_setup = _make_filter(robot, log, imu_frame, gains, foot_gate, *feet)
     joints = _joint_velocities(robot, log)
     n = len(log)
     q_out, v_out = np.full((n, robot.nq), np.nan), np.full((n, robot.nv), np.nan)

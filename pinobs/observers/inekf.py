@@ -457,6 +457,8 @@ class InvariantEKF(LeggedFilter):
         foot_radius: the feet's sphere radius [m] (go1: 0.02): each foot measured at its point
             that touched the ground, which rolling leaves still (:mod:`pinobs.observers.rolling`,
             eq. R4); 0 (default): at its frame.
+        rolling_lift: with ``foot_radius``, that point's cycloid lift removed (rolling.py's
+            eq. R5: exact for a sphere rolling on the plane; ``False``, default: R4 alone).
 
     Raises:
         GainError: an ``imu_hold`` that is neither; a ``foot_gate`` not in (0, 0.5); a
@@ -480,6 +482,7 @@ class InvariantEKF(LeggedFilter):
         slip_speed: bool = False,
         slip_gyro: float = 0.0,
         foot_radius: float = 0.0,
+        rolling_lift: bool = False,
     ) -> None:
         super().__init__(
             robot,
@@ -489,6 +492,7 @@ class InvariantEKF(LeggedFilter):
             imu_hold=imu_hold,
             imu_frame=imu_frame,
             foot_radius=foot_radius,
+            rolling_lift=rolling_lift,
         )
         s = self.setup
         self._gravity = np.array(self.gravity, dtype=float)  # writable: the kernel's signature

@@ -84,6 +84,7 @@ class LeggedFilter(ABC):
         imu_hold: str = "previous",
         imu_frame: str | None = None,
         foot_radius: float = 0.0,
+        rolling_lift: bool = False,
     ) -> None:
         #: the legs, options and conversions (:class:`pinobs.observers.legs.LeggedSetup`)
         self.setup = LeggedSetup(
@@ -95,6 +96,7 @@ class LeggedFilter(ABC):
             imu_hold=imu_hold,
             imu_frame=imu_frame,
             foot_radius=foot_radius,
+            rolling_lift=rolling_lift,
         )
         s = self.setup
         self.imu_hold, self.kinematics = s.imu_hold, s.kinematics
@@ -161,6 +163,7 @@ class LeggedFilter(ABC):
         self._remember(None, h)
         state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
         self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None)
+        self.setup.settle(state.R)
         self._warned = False
         return self.estimate
 
@@ -205,6 +208,7 @@ class LeggedFilter(ABC):
         self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
         contact_time = u.t if any(u.flags) else None
         self._commit(new, u.q_joints, u.joint_velocities, nis, u.reading, contact_time, used, gated)
+        self.setup.settle(new.R)
         self._remember(u, h, u.t - state.t)
         return self.estimate
 

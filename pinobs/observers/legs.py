@@ -523,6 +523,7 @@ class LeggedSetup:
         imu_hold: likewise.
         imu_frame: likewise.
         foot_radius: likewise (:class:`pinobs.observers.rolling.RollingFeet`).
+        rolling_lift: likewise (``RollingFeet``'s ``lift``).
 
     Raises:
         GainError: an ``imu_hold`` that is neither ``"previous"`` nor ``"average"``, or
@@ -542,6 +543,7 @@ class LeggedSetup:
         imu_hold: str,
         imu_frame: str | None,
         foot_radius: float = 0.0,
+        rolling_lift: bool = False,
     ) -> None:
         if imu_hold not in ("previous", "average"):
             raise GainError(f"imu_hold must be 'previous' or 'average', got {imu_hold!r}")
@@ -563,7 +565,11 @@ class LeggedSetup:
             else (np.asarray(placement[0], dtype=float), np.asarray(placement[1], dtype=float))
         )
         #: the rolling feet's model (``None``: ``foot_radius`` 0, the foot frames measured)
-        self.rolling = RollingFeet(self.kinematics, foot_radius) if foot_radius != 0 else None
+        self.rolling = (
+            RollingFeet(self.kinematics, foot_radius, lift=rolling_lift)
+            if foot_radius != 0
+            else None
+        )
 
     def not_reset(self) -> NotResetError:
         """The error for a call before ``reset``."""
@@ -663,6 +669,12 @@ class LeggedSetup:
             return self.rolling.legs(q_joints, R, flags)
         h, jac = self.kinematics.positions_and_jacobians(q_joints)
         return np.asarray(h, dtype=float), np.asarray(jac, dtype=float)
+
+    def settle(self, R: Vector) -> None:
+        """The orientation the filter ended its sample with, for the rolling feet's (R5)
+        normals (:meth:`pinobs.observers.rolling.RollingFeet.settle`); nothing without them."""
+        if self.rolling is not None and self.rolling.lift:
+            self.rolling.settle(R)
 
     def warn_without_contact(self, warned: bool, t: float, flags: list[bool], last: float) -> bool:
         """Warn once when no foot has been in contact for NO_CONTACT_WARN_TIME; whether warned."""

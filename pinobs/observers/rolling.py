@@ -22,7 +22,7 @@ stays (to second order) where it landed: rolling by an angle ``φ`` about a hori
 
     a(t) − a(t₀) = r (φ − sin φ) (u × n) + r (1 − cos φ) n                       (R3)
 
-(a cycloid: 0.3 µm along, 0.1 mm up for a 0.1 rad roll, against the centre's ``r φ`` = 2 mm).
+(a cycloid: 3 µm along, 0.1 mm up for a 0.1 rad roll, against the centre's ``r φ`` = 2 mm).
 So each foot is measured at ``a`` instead of ``c``: in the IMU frame, with ``h_j(q)`` the
 foot frame's position, ``R_j(q)`` its orientation and ``J_j``, ``J_ω,j`` its linear and
 angular Jacobians (:meth:`pinobs.model.FootKinematics.placements_and_jacobians`)::
@@ -34,6 +34,27 @@ angular Jacobians (:meth:`pinobs.model.FootKinematics.placements_and_jacobians`)
 ``r φ δθ``: second order); feet not in contact are measured at their centre (``s_j = 0``),
 and a foot the foot gate re-anchors (``foot_gate``, still in contact) keeps its ``s_j``.
 ``r = 0`` leaves the filters as they were.
+
+(R3)'s second term is not second order for a walking foot: its rise ``r (1 − cos φ)`` is
+the same sign at every step (go1 trotting in MuJoCo: φ ≈ 0.13 rad, 0.18 mm a stance of
+0.18 s: the trot's mean z velocity error −4.3 → −3.2 mm/s without it; ``legged_truth.md``'s
+``lift_diagnosis``), and the filters carry it from foot to foot as a base velocity bias.
+Rolling keeps the centre at ``r`` above the plane (R1 has no normal part), so the point
+that is still is the anchored point's projection on the plane, ``a − (nᵀ(a − c) + r) n``:
+R3 without its rise, its along-track term ``r (φ − sin φ)`` (7 µm) left.  With
+``lift`` (the filters' ``rolling_lift``), ``o_j = R_j(q) s_j``, ``n̂ = n̂_j`` the normal in
+the IMU frame and ``P = I − n̂ n̂ᵀ``::
+
+    h_j ← h_j(q) + P o_j − r n̂,    J_j ← J_j − P o_j^ J_ω,j                      (R5)
+
+(the derivative of ``P o_j`` is ``P`` times R4's).  ``n̂_j = R̂₀ᵀ n`` when the foot lands,
+with ``s_j``, then carried by the filter's propagation alone, ``n̂_j ← (R̂⁺_{k−1}ᵀ R̂⁻_k)ᵀ n̂_j``
+(the gyro's rotation over the step, without the corrections): an attitude error at touch-down
+stays in ``n̂_j`` as it stays in ``s_j`` (a still foot's R5 point is then its R4 point, as
+the attitude converges), and moves the removed rise by ``≈ r φ δθ``, second order like R4's.
+With ``n̂ = R̂ᵀ n`` from the current estimate instead, the attitude's convergence from a
+30° error moved a still foot's point by up to ``r (1 − cos 30°)`` = 2.7 mm (go1 standing:
+base velocity RMS 1.11× R4's).  At touch-down ``o_j = −r n̂`` and (R5) is (R4).
 """
 
 from __future__ import annotations
@@ -41,7 +62,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import ConfigurationError
 from pinobs.observers.base import Vector
@@ -59,6 +80,7 @@ class RollingFeet:
             :class:`pinobs.model.FootKinematics`).
         radius: the feet's sphere radius [m], > 0.
         normal: the ground's upward normal in the world (unit length after normalising).
+        lift: (R5): the anchored points' cycloid lift removed (``False``, default: R4).
 
     Raises:
         ConfigurationError: legs without ``placements_and_jacobians`` (a kinematics that
@@ -67,7 +89,12 @@ class RollingFeet:
     """
 
     def __init__(
-        self, kinematics: object, radius: float, normal: ArrayLike = (0.0, 0.0, 1.0)
+        self,
+        kinematics: object,
+        radius: float,
+        normal: ArrayLike = (0.0, 0.0, 1.0),
+        *,
+        lift: bool = False,
     ) -> None:
         if not callable(getattr(kinematics, "placements_and_jacobians", None)):
             raise ConfigurationError(
@@ -82,12 +109,28 @@ class RollingFeet:
         self.normal = n / np.linalg.norm(n)
         self.offsets = np.zeros((len(kinematics.feet), 3))  # type: ignore[attr-defined]
         rolling_kernel.load()
+        if lift:
+            lift_kernel.load()
         self.down = np.zeros(len(self.offsets), dtype=bool)
+        #: (R5): the anchored point's cycloid lift removed (``False``: (R4) alone)
+        self.lift = bool(lift)
+        #: (R5): each foot's ``n̂_j`` (IMU frame; zero: not down), and the orientation the
+        #: filter settled on at its last sample (:meth:`settle`; ``None``: none since)
+        self.normals = np.zeros_like(self.offsets)
+        self._settled: Vector | None = None
 
     def restart(self) -> None:
         """Forget every anchor (no foot down): the filter's ``reset``."""
         self.offsets[:] = 0.0
         self.down[:] = False
+        self.normals[:] = 0.0
+        self._settled = None
+
+    def settle(self, R: Vector) -> None:
+        """The orientation ``R̂`` the filter ended its sample with (after its correction): the
+        next :meth:`legs` carries each ``n̂_j`` by the rotation from it to the predicted one
+        (R5's gyro-only rotation)."""
+        self._settled = np.asarray(R, dtype=float)
 
     def legs(
         self,
@@ -102,6 +145,8 @@ class RollingFeet:
         h, rot, jac, jac_w = self.kinematics.placements_and_jacobians(q_joints)  # type: ignore[attr-defined]
         if R is not None and flags is not None:
             now = np.asarray(flags, dtype=bool)
+            if self.lift:
+                self._carry(np.asarray(R, dtype=float), now)
             landed = np.flatnonzero(now & ~self.down)
             if landed.size:
                 down_local = -self.radius * (np.asarray(R).T @ self.normal)  # −r n, IMU frame
@@ -113,7 +158,30 @@ class RollingFeet:
         kernel = rolling_kernel.compiled
         assert kernel is not None  # loaded by the constructor
         kernel(h, rot, jac, jac_w, self.offsets, h_out, jac_out)  # (R4)
+        if self.lift and self.down.any():
+            self._lift(h, rot, jac, jac_w, h_out, jac_out)
         return h_out, jac_out
+
+    def _carry(self, R: Vector, now: NDArray[np.bool_]) -> None:
+        """(R5)'s ``n̂_j``: carried by ``R̂_settledᵀ R̂`` (the propagation's rotation alone, not
+        the corrections) for the feet that stay down, ``R̂ᵀ n`` for those that land, zero for
+        those that lifted off."""
+        if self._settled is not None:
+            self.normals = self.normals @ (self._settled.T @ R)  # n̂ ← (R̂_sᵀ R̂)ᵀ n̂, row-wise
+            self._settled = None
+        landed = now & ~self.down
+        self.normals[landed] = R.T @ self.normal
+        self.normals[~now] = 0.0
+
+    def _lift(
+        self, h: Vector, rot: Vector, jac: Vector, jac_w: Vector, h_out: Vector, jac_out: Vector
+    ) -> None:
+        """(R5) for the feet down, in place (compiled: :data:`lift_kernel`; ``n̂ = n̂_j``)."""
+        kernel = lift_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        kernel(
+            h, rot, jac, jac_w, self.offsets, self.normals, self.down, self.radius, h_out, jac_out
+        )
 
 
 def _rolling_loops(h, rot, jac, jac_w, s, h_out, jac_out):  # type: ignore[no-untyped-def]
@@ -139,6 +207,45 @@ rolling_kernel = LazyKernel(
     np.zeros((1, 3, 2)),
     np.zeros((1, 3, 2)),
     np.zeros((1, 3)),
+    np.empty((1, 3)),
+    np.empty((1, 3, 2)),
+)
+
+
+def _lift_loops(h, rot, jac, jac_w, s, normals, down, r, h_out, jac_out):  # type: ignore[no-untyped-def]
+    """(R5) in loops (compiled: :data:`lift_kernel`), for the feet ``down``: ``h_out = h +
+    P o − r n̂`` and ``jac_out = J − P (o^ J_ω)``, ``o = R s``, ``P = I − n̂ n̂ᵀ``."""
+    for k in range(h.shape[0]):
+        if not down[k]:
+            continue
+        n0, n1, n2 = normals[k, 0], normals[k, 1], normals[k, 2]
+        o0 = rot[k, 0, 0] * s[k, 0] + rot[k, 0, 1] * s[k, 1] + rot[k, 0, 2] * s[k, 2]
+        o1 = rot[k, 1, 0] * s[k, 0] + rot[k, 1, 1] * s[k, 1] + rot[k, 1, 2] * s[k, 2]
+        o2 = rot[k, 2, 0] * s[k, 0] + rot[k, 2, 1] * s[k, 1] + rot[k, 2, 2] * s[k, 2]
+        no = n0 * o0 + n1 * o1 + n2 * o2
+        h_out[k, 0] = h[k, 0] + (o0 - no * n0) - r * n0
+        h_out[k, 1] = h[k, 1] + (o1 - no * n1) - r * n1
+        h_out[k, 2] = h[k, 2] + (o2 - no * n2) - r * n2
+        for c in range(jac.shape[2]):
+            wx, wy, wz = jac_w[k, 0, c], jac_w[k, 1, c], jac_w[k, 2, c]
+            c0, c1, c2 = o1 * wz - o2 * wy, o2 * wx - o0 * wz, o0 * wy - o1 * wx
+            nc = n0 * c0 + n1 * c1 + n2 * c2
+            jac_out[k, 0, c] = jac[k, 0, c] - (c0 - nc * n0)
+            jac_out[k, 1, c] = jac[k, 1, c] - (c1 - nc * n1)
+            jac_out[k, 2, c] = jac[k, 2, c] - (c2 - nc * n2)
+
+
+#: :func:`_lift_loops` compiled: ``(h, R, J, J_ω, s, n̂, down, r, h_out, J_out)``.
+lift_kernel = LazyKernel(
+    _lift_loops,
+    np.zeros((1, 3)),
+    np.zeros((1, 3, 3)),
+    np.zeros((1, 3, 2)),
+    np.zeros((1, 3, 2)),
+    np.zeros((1, 3)),
+    np.zeros((1, 3)),
+    np.zeros(1, dtype=bool),
+    0.02,
     np.empty((1, 3)),
     np.empty((1, 3, 2)),
 )

@@ -360,3 +360,23 @@ def test_the_urdf_foot_radius_lowers_the_simulated_trots_error(trot) -> None:
         for r in ("urdf", 0)
     ]
     assert rms[0] < 0.9 * rms[1], rms  # measured 0.0089 and 0.0126 m/s (force contacts)
+
+
+def test_rolling_lift_reaches_the_filter(trot, monkeypatch) -> None:
+    """``rolling_lift`` (default ``False``) is the filter's, its rolling feet's ``lift``."""
+    import pinobs.io.legged_run as runner
+
+    made = []
+
+    class Recorded(runner.InvariantEKF):
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            made.append(self.setup.rolling.lift)
+
+    monkeypatch.setattr(runner, "InvariantEKF", Recorded)
+    go1 = pinobs.load("go1")
+    log = _read(_frame(trot).iloc[:100], go1)
+    default = runner.legged_run(go1, log).run
+    lifted = runner.estimate_legged(go1, log, rolling_lift=True)
+    assert made == [False, True]
+    assert not np.array_equal(default.v, lifted.v)

@@ -210,3 +210,140 @@ def test_the_compiled_points_are_r4_in_numpy() -> None:
     hat -= hat.transpose(0, 2, 1)
     np.testing.assert_allclose(h_out, h + o, rtol=0, atol=1e-15)
     np.testing.assert_allclose(jac_out, jac - hat @ jac_w, rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("phi", [0.05, 0.1, 0.5, -0.3])
+def test_with_lift_the_point_of_a_rolling_sphere_stays_on_the_plane(phi: float) -> None:
+    """(R5): R3 without its rise, ``a(φ) − a(0) = r (φ − sin φ) x̂`` (third order), with the
+    Jacobian of that; at touch-down (φ = 0) it is R4's point."""
+    r = RADIUS
+    feet = RollingFeet(RollingSphere(r), r, lift=True)
+    a0, _ = feet.legs(np.zeros(1), np.eye(3), [True])
+    np.testing.assert_allclose(a0[0], [0.0, 0.0, -0.3 - r], atol=1e-15)
+    a, jac = feet.legs(np.array([phi]), np.eye(3), [True])
+    np.testing.assert_allclose(a[0] - a0[0], [r * (phi - math.sin(phi)), 0.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(jac[0][:, 0], [r * (1 - math.cos(phi)), 0.0, 0.0], atol=1e-15)
+
+
+def test_the_lifted_points_jacobian_matches_finite_differences_on_go1(rng) -> None:
+    legs = FootKinematics(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link")
+    feet = RollingFeet(legs, RADIUS, lift=True)
+    R = Rotation.from_rotvec(rng.normal(size=3) * 0.3).as_matrix()
+    q0 = np.tile([0.0, 0.8, -1.6], 4)
+    feet.legs(q0, R, [True] * 4)
+    q = q0 + 0.2 * rng.normal(size=12)
+    h, jac = feet.legs(q, R, [True] * 4)
+    eps = 1e-6
+    for i in range(12):
+        dq = np.zeros(12)
+        dq[i] = eps
+        fd = (feet.legs(q + dq, R, [True] * 4)[0] - feet.legs(q - dq, R, [True] * 4)[0]) / (2 * eps)
+        np.testing.assert_allclose(jac[:, :, i], fd, rtol=0, atol=1e-8)
+    # the measured points sit at the spheres' lowest level: r below the centres along n
+    centre, _ = legs.positions_and_jacobians(q)
+    np.testing.assert_allclose((h - centre) @ (R.T @ [0.0, 0.0, 1.0]), -RADIUS, atol=1e-15)
+
+
+class LiftedGo1Legs(Go1Legs):
+    """go1 whose feet roll on the plane: the measured points (R5, anchored at the stance with
+    the base level) are kept still by the truth helper's inverse kinematics, which reads the
+    base's orientation of each sample from ``rotations`` (the base's motion does not depend
+    on the legs)."""
+
+    def __init__(self, rotations) -> None:
+        super().__init__("imu_link")
+        self.rolling = RollingFeet(
+            FootKinematics(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link"), RADIUS, lift=True
+        )
+        self.rolling.legs(self.stance, np.eye(3), [True] * 4)
+        self.rotations, self.k = rotations, 0
+
+    def positions_and_jacobians(self, q):
+        R = self.rotations[min(self.k, len(self.rotations) - 1)]
+        self.rolling.normals[:] = R.T @ [0.0, 0.0, 1.0]  # the true normal in the IMU frame
+        return self.rolling.legs(q, R, [True] * 4)
+
+    def inverse(self, targets):
+        q = super().inverse(targets)
+        self.k += 1
+        return q
+
+
+@pytest.mark.parametrize("cls", [InvariantEKF, QuaternionEKF])
+def test_started_on_the_truth_with_feet_rolling_on_the_plane_it_stays_there(cls) -> None:
+    """Noise-free go1 whose feet roll on the plane (the R5 points still, the R4 points rising
+    along their cycloids): with ``rolling_lift`` the filter stays on the truth; with R4 alone,
+    not."""
+    level = Go1Legs("imu_link")
+    base = truth(level, 200.0, 2.0, wobble=0.5, feet_z=None, inverse=level.inverse)
+    legs = LiftedGo1Legs([s[1] for s in base])
+    R_bi, r_bi = legs.imu_placement
+    samples = truth(legs, 200.0, 2.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
+    assert all(np.array_equal(a[1], b[1]) for a, b in zip(base, samples, strict=True))
+    worst = {}
+    for lift in (True, False):
+        ekf = cls(
+            pinobs.load("go1"),
+            GO1_FEET,
+            imu_frame="imu_link",
+            foot_radius=RADIUS,
+            rolling_lift=lift,
+        )
+        reset_through_imu(ekf, samples[0], R_bi, r_bi)
+        worst[lift] = 0.0
+        for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
+            est = ekf.update(t, q, omega, acc, contacts)
+            R_b = R_i @ R_bi.T
+            v_b = v_i - np.cross(R_i @ omega, R_b @ r_bi)
+            worst[lift] = max(worst[lift], *pose_errors(est, R_b, v_b, p_i - R_b @ r_bi))
+    assert worst[True] < 1e-9
+    assert worst[False] > 1e-4
+
+
+@pytest.mark.parametrize("cls", [InvariantEKF, QuaternionEKF])
+def test_rolling_lift_off_or_without_a_radius_is_bit_for_bit_the_filter_without_it(cls) -> None:
+    """``rolling_lift=False`` is the default's path (R4 with a radius); ``rolling_lift`` without
+    a radius measures the foot frames, as before: estimates and covariances bit for bit."""
+    legs = Go1Legs("imu_link")
+    samples = truth(legs, 200.0, 0.5, wobble=0.5, feet_z=None, inverse=legs.inverse)
+    settings = (
+        {"foot_radius": RADIUS},
+        {"foot_radius": RADIUS, "rolling_lift": False},
+        {},
+        {"rolling_lift": True},
+    )
+    outs = []
+    for kwargs in settings:
+        ekf = cls(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", **kwargs)
+        t, R, _, p, q, omega, acc, contacts = samples[0]
+        ekf.reset(t, free_flyer_q(R, p, q), gyro=omega, acc=acc, contacts=contacts)
+        est = [ekf.update(t, q, w, a, c) for t, _, _, _, q, w, a, c in samples[1:]]
+        outs.append([np.concatenate([e.q, e.v[:6], e.covariance.ravel()]) for e in est])
+    np.testing.assert_array_equal(outs[0], outs[1])
+    np.testing.assert_array_equal(outs[2], outs[3])
+    assert not np.array_equal(outs[0], outs[2])
+
+
+def test_the_compiled_lift_is_r5_in_numpy() -> None:
+    """The compiled (R5) equals its NumPy form for the feet down (the others untouched):
+    ``h + P o − r n̂`` and ``J − P o^ J_ω``, ``o = R s``, ``P = I − n̂ n̂ᵀ``."""
+    from pinobs.observers.rolling import lift_kernel
+
+    rng = np.random.default_rng(0)
+    h, s = rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
+    normals = Rotation.random(4, random_state=2).apply([0.0, 0.0, 1.0])
+    rot = Rotation.random(4, random_state=1).as_matrix()
+    jac, jac_w = rng.normal(size=(4, 3, 12)), rng.normal(size=(4, 3, 12))
+    down = np.array([True, False, True, True])
+    lift_kernel.load()
+    h_out, jac_out = np.zeros_like(h), np.zeros_like(jac)
+    lift_kernel.compiled(h, rot, jac, jac_w, s, normals, down, RADIUS, h_out, jac_out)
+    for k in range(4):
+        if not down[k]:
+            assert not h_out[k].any() and not jac_out[k].any()
+            continue
+        o, n = rot[k] @ s[k], normals[k]
+        P = np.eye(3) - np.outer(n, n)
+        o_hat = np.array([[0.0, -o[2], o[1]], [o[2], 0.0, -o[0]], [-o[1], o[0], 0.0]])
+        np.testing.assert_allclose(h_out[k], h[k] + P @ o - RADIUS * n, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(jac_out[k], jac[k] - P @ o_hat @ jac_w[k], rtol=0, atol=1e-14)

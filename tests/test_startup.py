@@ -87,3 +87,39 @@ def test_adaptive_learning_and_inekf_reset_import_no_scipy_signal_ndimage_or_spa
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_ekf_and_background_adaptive_run_without_scipy_linalg_in_the_loops_process() -> None:
+    """Issue 39: ``scipy.linalg`` costs 0.15 s of CPU at import, and loads SciPy's OpenBLAS,
+    whose worker thread then spins 0.1-0.2 s of CPU on the other core.  ``ekf`` on a UR5
+    (``nv`` ≤ 12: its compiled Joseph update) imports LAPACK only where it needs it (past
+    the kernels, or a covariance that is not positive definite); ``adaptive`` learning in
+    the background imports it in its worker process only.  Made, then 300 updates."""
+    code = (
+        "import sys, numpy as np, pinobs\n"
+        "if __name__ == '__main__':\n"
+        "    robot = pinobs.load('ur5')\n"
+        "    for opts in ({'name': 'ekf'}, {'name': 'adaptive', 'learning': 'background'}):\n"
+        "        obs = pinobs.make_observer(**opts, robot=robot, rate=1000.0, noise_std=1e-4)\n"
+        "        q0 = robot.neutral(); obs.reset(0.0, q0)\n"
+        "        for k in range(1, 300):\n"
+        "            obs.update(k * 1e-3, q0 + 0.1 * np.sin(k * 1e-2 + np.arange(robot.nv)))\n"
+        "    print('scipy.linalg' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_warm_linear_algebra_imports_lapack_only_past_the_compiled_kernels() -> None:
+    """A filter's constructor loads what its updates call: the compiled Joseph update for
+    ``nv`` ≤ :data:`~pinobs.observers.linalg.KERNEL_MAX_NV`, LAPACK's ``dposv`` above."""
+    code = (
+        "import sys\n"
+        "from pinobs.observers.linalg import KERNEL_MAX_NV, joseph_kernel, warm_linear_algebra\n"
+        "warm_linear_algebra(KERNEL_MAX_NV)\n"
+        "print(joseph_kernel.compiled is not None, 'scipy.linalg' in sys.modules)\n"
+        "warm_linear_algebra(KERNEL_MAX_NV + 1)\n"
+        "print('scipy.linalg' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["True", "False", "True"]

@@ -123,3 +123,23 @@ def test_warm_linear_algebra_imports_lapack_only_past_the_compiled_kernels() -> 
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["True", "False", "True"]
+
+
+def test_riemannian_made_a_second_time_imports_no_scipy_linalg() -> None:
+    """Issue 39: ``riemannian``'s gains from the noise solve a Riccati equation with SciPy
+    once; a later process takes the solution from the cache (:mod:`pinobs.observers.gain_cache`,
+    the same bits) and imports no ``scipy.linalg`` (made, then 300 updates on a UR5)."""
+    code = (
+        "import sys, numpy as np, pinobs\n"
+        "robot = pinobs.load('ur5')\n"
+        "obs = pinobs.make_observer('riemannian', robot, rate=1000.0, noise_std=1e-4)\n"
+        "q0 = robot.neutral(); obs.reset(0.0, q0)\n"
+        "for k in range(1, 300):\n"
+        "    obs.update(k * 1e-3, q0 + 0.1 * np.sin(k * 1e-2 + np.arange(robot.nv)))\n"
+        "print('scipy.linalg' in sys.modules)\n"
+    )
+    runs = [
+        subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+        for _ in range(2)
+    ]
+    assert runs[1].stdout.strip().splitlines()[-1] == "False"

@@ -1,4 +1,4 @@
-"""A worker process fed over two pipes, with no thread in the caller's process.
+"""A worker process fed over two pipes, with no thread in the caller's process once started.
 
 ``adaptive``'s background learning (:mod:`pinobs.observers.adaptive`) runs its
 window rows and solves here.  Not on a thread, and not through
@@ -285,9 +285,10 @@ def _ended(process: Any, cause: BaseException) -> RuntimeError:
 def _stop(send: Any, recv: Any, process: Any, starter: threading.Thread) -> None:
     """Close the pipes (the worker reads the end) and end the process now (its work is
     only ever wanted by this caller; a copy of the pipe forked into another worker would
-    keep it reading); a start under way is waited for first."""
+    keep it reading); a start under way is waited for first (for 30 s at most: a worker
+    that starts later reads the end of the closed pipe and ends)."""
     if starter is not threading.current_thread():
-        starter.join()
+        starter.join(timeout=30.0)
     send.close()
     recv.close()
     if process.pid is not None and process.is_alive():

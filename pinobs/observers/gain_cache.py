@@ -32,8 +32,12 @@ _FILE = "pinobs_gains.json"
 def cache_dirs() -> tuple[Path, ...]:
     """Where the solutions are kept, in the order tried: beside this module (as numba's
     cache), then the user's cache folder."""
-    user = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "pinobs"
-    return (Path(__file__).resolve().parent / "__pycache__", user)
+    here = Path(__file__).resolve().parent / "__pycache__"
+    try:
+        user = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "pinobs"
+    except (RuntimeError, KeyError):  # (no home folder to be found)
+        return (here,)
+    return (here, user)
 
 
 def solve_discrete_are(a: Vector, b: Vector, q: Vector, r: Vector) -> Vector:

@@ -79,3 +79,12 @@ def test_a_damaged_cache_is_solved_again_and_an_unwritable_one_skipped(
     monkeypatch.setattr(gain_cache, "cache_dirs", lambda: (blocked / "x", blocked / "y"))
     assert np.array_equal(gain_cache.solve_discrete_are(*args), expected)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "cache"]
+
+
+def test_the_cache_is_beside_the_module_then_in_the_users_cache_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    here, user = gain_cache.cache_dirs()
+    assert here == Path(gain_cache.__file__).resolve().parent / "__pycache__"
+    assert user == tmp_path / "pinobs"

@@ -143,3 +143,24 @@ def test_riemannian_made_a_second_time_imports_no_scipy_linalg() -> None:
         for _ in range(2)
     ]
     assert runs[1].stdout.strip().splitlines()[-1] == "False"
+
+
+@pytest.mark.parametrize("name", ["ekf", "riemannian", "liegroup"])
+def test_no_update_imports_a_module_on_a_lie_group_robot(name: str) -> None:
+    """Issue 39: the RK4 stages on Lie groups solve with LAPACK's ``dgesv``
+    (:meth:`~pinobs.model.Robot.integrate_jacobian_solve`), imported from ``scipy.linalg``
+    on first use: in the first or second update (0.16-0.34 s) unless the constructor loads
+    it (``LieRK4.build``, ``liegroup``).  A spherical top: made, reset, then 50 updates
+    that import nothing."""
+    code = (
+        "import sys, numpy as np, pinobs\n"
+        "robot = pinobs.load('top')\n"
+        f"obs = pinobs.make_observer({name!r}, robot, rate=1000.0, noise_std=1e-4)\n"
+        "q0 = robot.neutral(); obs.reset(0.0, q0)\n"
+        "before = set(sys.modules)\n"
+        "for k in range(1, 51):\n"
+        "    obs.update(k * 1e-3, robot.integrate(q0, 1e-3 * np.sin(k * 1e-2 + np.arange(3))))\n"
+        "print(sorted(set(sys.modules) - before))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]"

@@ -107,8 +107,8 @@ class Worker:
     (spawned where there is none), never from the caller: a fork of a process with threads
     (OpenBLAS's, the user's) can deadlock in the child, and Python 3.12 warns of it; so, as
     ``multiprocessing`` asks, a script that makes one guards its top-level code with
-    ``if __name__ == "__main__":`` (else its error is raised here, in the fork server that
-    imports the script, and in the caller by :meth:`submit` or :meth:`poll`).  ``preload``:
+    ``if __name__ == "__main__":`` (else its error is raised here, in the process that imports
+    the script to start, and in the caller by :meth:`submit` or :meth:`poll`).  ``preload``:
     modules the fork server imports once (so a worker starts in milliseconds, not the seconds
     an import of Pinocchio and SciPy takes)."""
 

@@ -87,3 +87,80 @@ def test_adaptive_learning_and_inekf_reset_import_no_scipy_signal_ndimage_or_spa
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_ekf_and_background_adaptive_run_without_scipy_linalg_in_the_loops_process() -> None:
+    """Issue 39: ``scipy.linalg`` costs 0.15 s of CPU at import, and loads SciPy's OpenBLAS,
+    whose worker thread then spins 0.1-0.2 s of CPU on the other core.  ``ekf`` on a UR5
+    (``nv`` ≤ 12: its compiled Joseph update) imports LAPACK only where it needs it (past
+    the kernels, or a covariance that is not positive definite); ``adaptive`` learning in
+    the background imports it in its worker process only.  Made, then 300 updates."""
+    code = (
+        "import sys, numpy as np, pinobs\n"
+        "if __name__ == '__main__':\n"
+        "    robot = pinobs.load('ur5')\n"
+        "    for opts in ({'name': 'ekf'}, {'name': 'adaptive', 'learning': 'background'}):\n"
+        "        obs = pinobs.make_observer(**opts, robot=robot, rate=1000.0, noise_std=1e-4)\n"
+        "        q0 = robot.neutral(); obs.reset(0.0, q0)\n"
+        "        for k in range(1, 300):\n"
+        "            obs.update(k * 1e-3, q0 + 0.1 * np.sin(k * 1e-2 + np.arange(robot.nv)))\n"
+        "    print('scipy.linalg' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_warm_linear_algebra_imports_lapack_only_past_the_compiled_kernels() -> None:
+    """A filter's constructor loads what its updates call: the compiled Joseph update for
+    ``nv`` ≤ :data:`~pinobs.observers.linalg.KERNEL_MAX_NV`, LAPACK's ``dposv`` above."""
+    code = (
+        "import sys\n"
+        "from pinobs.observers.linalg import KERNEL_MAX_NV, joseph_kernel, warm_linear_algebra\n"
+        "warm_linear_algebra(KERNEL_MAX_NV)\n"
+        "print(joseph_kernel.compiled is not None, 'scipy.linalg' in sys.modules)\n"
+        "warm_linear_algebra(KERNEL_MAX_NV + 1)\n"
+        "print('scipy.linalg' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["True", "False", "True"]
+
+
+def test_riemannian_made_a_second_time_imports_no_scipy_linalg() -> None:
+    """Issue 39: ``riemannian``'s gains from the noise solve a Riccati equation with SciPy
+    once; a later process takes the solution from the cache (:mod:`pinobs.observers.gain_cache`,
+    the same bits) and imports no ``scipy.linalg`` (made, then 300 updates on a UR5)."""
+    code = (
+        "import sys, numpy as np, pinobs\n"
+        "robot = pinobs.load('ur5')\n"
+        "obs = pinobs.make_observer('riemannian', robot, rate=1000.0, noise_std=1e-4)\n"
+        "q0 = robot.neutral(); obs.reset(0.0, q0)\n"
+        "for k in range(1, 300):\n"
+        "    obs.update(k * 1e-3, q0 + 0.1 * np.sin(k * 1e-2 + np.arange(robot.nv)))\n"
+        "print('scipy.linalg' in sys.modules)\n"
+    )
+    runs = [
+        subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+        for _ in range(2)
+    ]
+    assert runs[1].stdout.strip().splitlines()[-1] == "False"
+
+
+@pytest.mark.parametrize("name", ["ekf", "riemannian", "liegroup"])
+def test_no_update_imports_a_module_on_a_lie_group_robot(name: str) -> None:
+    """Issue 39: the RK4 stages on Lie groups solve with LAPACK's ``dgesv``
+    (:meth:`~pinobs.model.Robot.integrate_jacobian_solve`), imported from ``scipy.linalg``
+    on first use: in the first or second update (0.16-0.34 s) unless the constructor loads
+    it (``LieRK4.build``, ``liegroup``).  A spherical top: made, reset, then 50 updates
+    that import nothing."""
+    code = (
+        "import sys, numpy as np, pinobs\n"
+        "robot = pinobs.load('top')\n"
+        f"obs = pinobs.make_observer({name!r}, robot, rate=1000.0, noise_std=1e-4)\n"
+        "q0 = robot.neutral(); obs.reset(0.0, q0)\n"
+        "before = set(sys.modules)\n"
+        "for k in range(1, 51):\n"
+        "    obs.update(k * 1e-3, robot.integrate(q0, 1e-3 * np.sin(k * 1e-2 + np.arange(3))))\n"
+        "print(sorted(set(sys.modules) - before))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]"

@@ -130,8 +130,8 @@ a prediction that is not kept (under a known latency) teaches nothing.
    output equals the synchronous one (tested to 1e-12: it is bit-identical);
    fed as fast as it runs, a UR5 with a payload made the same number of
    solves or one fewer, its velocity RMS within ±10 % of the synchronous
-   one.  ``scipy.linalg`` is imported when the observer is made (the smoothing is NumPy's:
-   the first window's update took 0.5 s importing ``scipy.signal`` for it).
+   one.  ``scipy.linalg`` is imported when the observer is made, by the worker only in the
+   background (whose start ``make_observer`` does not wait for; the smoothing is NumPy's).
 
 5. **A pure step** (issue 37).  What it learned lives in its state (``AdaptiveState.model``: the
    learned model and the filter run on it, the offset, the regime, the restarts; the
@@ -364,16 +364,15 @@ class AdaptiveEKF(Observer["_State"]):
         self._idle = _Model(self.core, self._nominal, None, zero, "warmup", zero, 0, False, 0)
 
     def _start_learning(self, learning: str) -> None:
-        """The learner (its SciPy modules imported now, :func:`load_learning`) and, with
-        ``learning="background"``, its worker process (:func:`learning_worker`), started now,
-        not in the loop (it ends when the observer is dropped: its jobs hold no observer)."""
-        load_learning()
+        """The learner: its SciPy modules imported now (synchronous, :func:`load_learning`), or
+        its worker process started now, not waited for (:func:`learning_worker`; it ends when
+        the observer is dropped)."""
         self._worker: Worker | None = None
-        if learning == "background":
-            opts = self._learn_options
-            self._worker = learning_worker(
-                self._nominal, bool(opts["friction"]), bool(opts["offset"])
-            )
+        if learning == "sync":
+            load_learning()
+        else:
+            friction, offset = (bool(self._learn_options[k]) for k in ("friction", "offset"))
+            self._worker = learning_worker(self._nominal, friction, offset)
         self._learner = self._new_learner()  # read before a reset (each reset makes its own)
         if self._learner.reg.size == 0:
             name = self.robot.name

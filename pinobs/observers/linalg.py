@@ -266,12 +266,14 @@ transition_kernel = LazyKernel(_transition_loops, np.eye(2), 1.0, np.zeros((2, 2
 
 
 def warm_linear_algebra(nv: int) -> None:
-    """Import LAPACK and load the compiled :func:`joseph_update` for ``nv`` (a filter's
-    constructor calls this, so that its first update does not pay for it)."""
-    lapack_posv()
+    """Load the compiled :func:`joseph_update` for ``nv``, or import LAPACK where ``nv`` is
+    past the kernels (a filter's constructor calls this, so that its first update does not
+    pay for it)."""
     if nv <= KERNEL_MAX_NV:
         joseph_kernel.load()
         transition_kernel.load()
+    else:
+        lapack_posv()
 
 
 def joseph_update(P: Vector, e: Vector, meas_var: float) -> tuple[Vector, Vector]:

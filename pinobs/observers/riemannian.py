@@ -150,6 +150,7 @@ from pinobs.observers.fused import (
     rk4_calls,
     vector_correction_kernel,
 )
+from pinobs.observers.gain_cache import solve_discrete_are
 from pinobs.tolerances import JACOBI_FD_STEP
 
 __all__ = [
@@ -311,9 +312,7 @@ def gains_from_noise(rate: float, noise_std: float, accel_psd: float) -> tuple[f
     F = np.array([[1.0, h], [0.0, 1.0]])
     Q = accel_psd * np.array([[h**3 / 3, h**2 / 2], [h**2 / 2, h]])
     Hm = np.array([[1.0, 0.0]])
-    from scipy.linalg import solve_discrete_are  # lazy: scipy.linalg costs 0.2 s at import
-
-    P = solve_discrete_are(F.T, Hm.T, Q, np.array([[noise_std**2]]))
+    P = solve_discrete_are(F.T, Hm.T, Q, np.array([[noise_std**2]]))  # (cached: gain_cache)
     K = P[:, 0] / (P[0, 0] + noise_std**2)  # gain on the predicted error
     closed = (np.eye(2) - np.outer(K, [1.0, 0.0])) @ F
     lam = np.linalg.eigvals(closed).astype(complex)

@@ -1,4 +1,4 @@
-"""A worker process fed over two pipes, with no thread in the caller's process.
+"""A worker process fed over two pipes, with no thread in the caller's process once started.
 
 ``adaptive``'s background learning (:mod:`pinobs.observers.adaptive`) runs its
 window rows and solves here.  Not on a thread, and not through
@@ -42,6 +42,15 @@ So ``submit`` never blocks on a worker that is behind (unless nothing is
 queued and one job is larger than the pipe: then it waits for the worker to
 take it).  Jobs run in the order they were submitted; each one's result (or
 its exception) comes back in that order.
+
+The worker starts without the caller waiting for it (issue 39): the fork server's start
+(a Python that imports Pinocchio and SciPy, :data:`~pinobs.observers.adaptive_learner.PRELOAD`)
+and the worker's ``init`` took ``adaptive``'s ``make_observer`` from 0.4 to 1.0 s of wall
+time.  A starter thread does it (``Process.start`` and the wait for the worker's "ready"),
+blocked in ``read`` nearly all along (GIL released) and gone once the worker is ready; jobs
+submitted meanwhile are written to the pipe at once (the worker reads them when it runs) and
+their results read only once it is ready; a start that failed is raised by the next
+:meth:`Worker.submit` or :meth:`Worker.poll`.
 """
 
 from __future__ import annotations
@@ -50,6 +59,7 @@ import multiprocessing
 import pickle
 import select
 import sys
+import threading
 import weakref
 from collections import deque
 from collections.abc import Callable
@@ -90,19 +100,22 @@ class Worker:
     """One worker process: ``state = init(*init_args)`` there once, then each submitted
     ``fn(state, *args)`` in order (``fn`` a module-level function: it is sent by name).
 
-    The process starts (and runs ``init``) in the constructor, which waits until it is
-    ready; it ends when the worker is closed or dropped (the pipes close: it reads the
-    end), or with the caller's process (a daemon).  It is forked from multiprocessing's
-    fork server (spawned where there is none), never from the caller: a fork of a
-    process with threads (OpenBLAS's, the user's) can deadlock in the child, and
-    Python 3.12 warns of it; so, as ``multiprocessing`` asks, a script that makes one
-    guards its top-level code with ``if __name__ == "__main__":``.  ``preload``: modules
-    the fork server imports once (so a worker starts in milliseconds, not the seconds
+    The process starts (and runs ``init``) from the constructor without it waiting: a starter
+    thread starts it and reads its "ready" (module docstring); :meth:`started` waits for that.
+    It ends when the worker is closed or dropped (the pipes close: it reads the end), or with
+    the caller's process (a daemon).  It is forked from multiprocessing's fork server
+    (spawned where there is none), never from the caller: a fork of a process with threads
+    (OpenBLAS's, the user's) can deadlock in the child, and Python 3.12 warns of it; so, as
+    ``multiprocessing`` asks, a script that makes one guards its top-level code with
+    ``if __name__ == "__main__":`` (else its error is raised here, in the process that imports
+    the script to start, and in the caller by :meth:`submit` or :meth:`poll`).  ``preload``:
+    modules the fork server imports once (so a worker starts in milliseconds, not the seconds
     an import of Pinocchio and SciPy takes)."""
 
     def __init__(
         self, init: Callable[..., Any], *init_args: Any, preload: tuple[str, ...] = ()
     ) -> None:
+        _not_bootstrapping()
         ctx = _context(preload)
         jobs_out, jobs_in = ctx.Pipe(duplex=False)  # (reader, writer)
         results_out, results_in = ctx.Pipe(duplex=False)
@@ -112,9 +125,6 @@ class Worker:
             name="pinobs-worker",
             daemon=True,
         )
-        self.process.start()
-        jobs_out.close()
-        results_in.close()
         self._send, self._recv = jobs_in, results_out
         # whether a result is in, without waiting: one poll object for the worker's life where
         # the OS has poll(2) (Connection.poll builds a selector at every call: 20 Python calls,
@@ -126,22 +136,35 @@ class Worker:
         self.outbox: deque[tuple[bytes, int]] = deque()  # (message, pages) not yet written
         self._untaken: deque[int] = deque()  # pages of each job written and not yet answered
         self._jobs: deque[Job] = deque()  # submitted and not yet answered, in order
-        try:
-            ok, value = self._recv.recv()  # ready (or init failed)
-        except EOFError:  # it ended before it was ready
+        self._failed: list[BaseException] = []  # the start's error (the starter's)
+        starter = threading.Thread(
+            target=_start,
+            args=(self.process, results_out, (jobs_out, results_in), self._failed),
+            name="pinobs-worker-start",
+            daemon=True,
+        )  # (given no reference to self: a worker dropped while it starts is finalized)
+        starter.start()
+        self._starter: threading.Thread | None = starter
+        self._finalizer = weakref.finalize(self, _stop, jobs_in, results_out, self.process, starter)
+
+    def started(self, *, wait: bool = True) -> bool:
+        """Whether the worker process is ready (``wait``: waiting for it); a start that
+        failed is raised here (and the worker closed)."""
+        starter = self._starter
+        if starter is not None:
+            if starter.is_alive() and not wait:
+                return False
+            starter.join()
+            self._starter = None
+        if self._failed:
             self.close()
-            raise RuntimeError(
-                "the worker process ended before it started (exit code "
-                f"{self.process.exitcode}); multiprocessing imports the main script in it: "
-                'guard the script\'s top-level code with if __name__ == "__main__":'
-            ) from None
-        if not ok:
-            self.close()
-            raise value
-        self._finalizer = weakref.finalize(self, _stop, self._send, self._recv, self.process)
+            raise self._failed[0]
+        return True
 
     def submit(self, fn: Callable[..., Any], *args: Any) -> Job:
         """Queue ``fn(state, *args)``; returns its :class:`Job` at once."""
+        if self._failed:
+            self.started()  # (raises the start's error)
         data = pickle.dumps((fn, args), protocol=pickle.HIGHEST_PROTOCOL)
         self.outbox.append((data, -(-len(data) // _PAGE) + 2))  # + header and a partial page
         job = Job(self)
@@ -150,8 +173,12 @@ class Worker:
         return job
 
     def poll(self, *, wait: bool = False) -> None:
-        """Take the results the worker has sent (``wait``: at least one, waiting for it),
-        then write the queued jobs that fit."""
+        """Take the results the worker has sent (``wait``: at least one, waiting for it, and
+        for the worker's start), then write the queued jobs that fit.  Nothing is read
+        before the worker is ready (its "ready" is the starter's)."""
+        if self._starter is not None and not self.started(wait=wait):
+            self._flush()
+            return
         while self._jobs and (
             wait or (self._recv.poll() if self._poller is None else bool(self._poller.poll(0)))
         ):
@@ -164,8 +191,9 @@ class Worker:
         self._flush()
 
     def close(self) -> None:
-        """End the worker process (its jobs not yet done are dropped)."""
-        _stop(self._send, self._recv, self.process)
+        """End the worker process (its jobs not yet done are dropped; one that is starting
+        is waited for first)."""
+        self._finalizer()
 
     def _flush(self) -> None:
         while self.outbox:
@@ -207,15 +235,66 @@ def _grow_pipe(fd: int) -> int:
     return 1 << 16
 
 
-def _stop(send: Any, recv: Any, process: Any) -> None:
+def _not_bootstrapping() -> None:
+    """Raise multiprocessing's error in a process that is importing its parent's main
+    script to start (the fork server, or a spawned child, importing a script whose
+    top-level code makes a worker): the starter thread would raise it out of sight, and
+    the script would go on there."""
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise RuntimeError(
+            "a pinobs worker process was started while the main script was imported to start "
+            'another process: guard the script\'s top-level code with if __name__ == "__main__":'
+        )
+
+
+def _start(process: Any, recv: Any, theirs: tuple[Any, ...], failed: list[BaseException]) -> None:
+    """The starter thread (:class:`Worker`): start ``process``, close the worker's ends of the
+    pipes (``theirs``) here, and read its "ready" from ``recv`` (its init's error, or why it
+    did not start, into ``failed``)."""
+    try:
+        process.start()
+    except BaseException as exc:  # (the fork server could not import the main script)
+        failed.append(_ended(process, exc))
+        return
+    finally:
+        for conn in theirs:
+            conn.close()
+    try:
+        ok, value = recv.recv()  # ready (or init failed)
+    except EOFError as exc:  # it ended before it was ready
+        failed.append(_ended(process, exc))
+        return
+    if not ok:
+        failed.append(value)
+
+
+def _ended(process: Any, cause: BaseException) -> RuntimeError:
+    """The error of a worker process that did not start (``cause``: what the starter saw)."""
+    if process.pid is not None:
+        process.join(timeout=1.0)
+    exitcode = process.exitcode
+    err = RuntimeError(
+        f"the worker process ended before it started (exit code {exitcode}); multiprocessing "
+        "imports the main script in it: guard the script's top-level code with "
+        'if __name__ == "__main__":'
+    )
+    err.__cause__ = cause
+    return err
+
+
+def _stop(send: Any, recv: Any, process: Any, starter: threading.Thread) -> None:
     """Close the pipes (the worker reads the end) and end the process now (its work is
     only ever wanted by this caller; a copy of the pipe forked into another worker would
-    keep it reading)."""
+    keep it reading); a start under way is waited for first (for 30 s at most: a worker
+    that starts later reads the end of the closed pipe and ends)."""
+    if starter is not threading.current_thread():
+        starter.join(timeout=30.0)
     send.close()
     recv.close()
-    if process.is_alive():
+    if process.pid is not None and process.is_alive():
         process.terminate()
-    process.join(timeout=1.0)
+    if process.pid is not None:
+        process.join(timeout=1.0)
 
 
 def _main(

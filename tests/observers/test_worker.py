@@ -46,6 +46,11 @@ def _bad_start() -> None:
     raise RuntimeError("no regressor here")
 
 
+def _slow_start(seconds: float) -> dict:
+    time.sleep(seconds)
+    return {"offset": 0.0, "seen": []}
+
+
 def test_jobs_run_in_order_on_the_state_init_made() -> None:
     w = Worker(_start, 10.0)
     jobs = [w.submit(_add, float(i)) for i in range(5)]
@@ -90,6 +95,7 @@ def test_done_never_waits() -> None:
 
 def test_the_process_ends_when_the_worker_is_dropped() -> None:
     w = Worker(_start, 0.0)
+    assert w.started()
     process = w.process
     assert process.is_alive()
     del w
@@ -98,6 +104,37 @@ def test_the_process_ends_when_the_worker_is_dropped() -> None:
     assert not process.is_alive()
 
 
-def test_an_init_error_is_raised_by_the_constructor() -> None:
+def test_the_constructor_does_not_wait_for_the_start_and_jobs_wait_in_the_pipe() -> None:
+    """Issue 39: the worker starts (its init here takes 0.5 s) while the caller goes on; a
+    job submitted meanwhile is written at once and run when the worker is ready, its
+    result read only then (``done`` never waits)."""
+    Worker(_start, 0.0).close()  # (the fork server up: what is timed is the worker's start)
+    t0 = time.perf_counter()
+    w = Worker(_slow_start, 0.5)
+    job = w.submit(_add, 3.0)
+    assert time.perf_counter() - t0 < 0.25
+    assert not w.started(wait=False) and not job.done() and not w.outbox
+    assert job.result() == 3.0 and w.started()
+    assert time.perf_counter() - t0 >= 0.5
+    w.close()
+
+
+def test_a_worker_dropped_while_it_starts_ends() -> None:
+    w = Worker(_slow_start, 0.3)
+    process = w.process
+    del w
+    gc.collect()
+    process.join(timeout=5.0)
+    assert process.exitcode is not None and not process.is_alive()
+
+
+def test_an_init_error_is_raised_by_started_and_by_the_next_submit_or_result() -> None:
+    w = Worker(_bad_start)  # (not waited for: raised later)
     with pytest.raises(RuntimeError, match="no regressor here"):
-        Worker(_bad_start)
+        w.started()
+    with pytest.raises(RuntimeError, match="no regressor here"):
+        w.submit(_add, 1.0)
+    w = Worker(_bad_start)
+    job = w.submit(_add, 1.0)
+    with pytest.raises(RuntimeError, match="no regressor here"):
+        job.result()

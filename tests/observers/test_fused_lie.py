@@ -472,3 +472,31 @@ def test_the_compiled_solve_gives_nan_where_the_block_is_singular() -> None:
     jexp[0], w[9] = np.eye(6), np.arange(1.0, 9.0)  # (the stage wrote the next v_s there)
     solve_stage(w, np.zeros(8), jexp, np.array([[6, 0]], dtype=np.int64), k, 2, 1e-3)
     np.testing.assert_array_equal(k, np.arange(1.0, 9.0))
+
+
+def test_the_rkmk4_step_keeps_a_subclass_s_own_solve_and_normalize() -> None:
+    """Where a :class:`Robot` subclass overrides ``normalize`` or ``integrate_jacobian_solve``,
+    :class:`LieRK4` calls its methods (no compiled solves, no normalisation in place) and still
+    gives :func:`dynamics_rk4`'s bits."""
+    robot = cached_robot("go1")
+
+    class OwnNormalize(pinobs.Robot):
+        def normalize(self, q: Any) -> Any:
+            return super().normalize(q)
+
+    class OwnSolve(pinobs.Robot):
+        def integrate_jacobian_solve(self, q: Any, xi: Any, u: Any) -> Any:
+            return super().integrate_jacobian_solve(q, xi, u)
+
+    rng = np.random.default_rng(13)
+    for cls in (OwnNormalize, OwnSolve):
+        own = object.__new__(cls)
+        own.__dict__.update(robot.__dict__)
+        rk4 = LieRK4.build(own)
+        assert rk4 is not None and not rk4.solves and rk4.solve_stage is None
+        q, v = own.random_configuration(rng), rng.standard_normal(own.nv)
+        tau = rng.standard_normal(own.nv)
+        q_new, v_new = rk4.step(q, v, tau, 1e-3)
+        q_ref, v_ref = dynamics_rk4(own, q, v, tau, 1e-3)
+        np.testing.assert_array_equal(q_new, q_ref)
+        np.testing.assert_array_equal(v_new, v_ref)

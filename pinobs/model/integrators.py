@@ -44,9 +44,11 @@ __all__ = [
     "dynamics_rk4",
     "friction_substeps",
     "integrate_call",
+    "jexp_blocks",
     "lie_rk4",
     "mass_coriolis_calls",
     "rk4_stage_matrices",
+    "unit_slices",
 ]
 
 #: ``λ h`` kept below classical RK4's stability limit on the negative real axis, 2.785
@@ -118,7 +120,7 @@ def mass_coriolis_calls(robot: Robot) -> MassCoriolisCalls:
 def integrate_call(robot: Robot) -> Callable[[Vector, Vector], Vector]:
     """``robot.integrate`` without its Python call: ``pin.integrate`` bound to the model
     (the float64 array :meth:`Robot.integrate` returns as it is), for a compiled step's
-    loop (:class:`pinobs.observers.fused.LieRK4`); the method itself where a subclass
+    loop (:class:`pinobs.observers.fused_lie.LieRK4`); the method itself where a subclass
     overrides it."""
     if type(robot).integrate is Robot.integrate:
         return partial(pin.integrate, robot.model)
@@ -132,6 +134,33 @@ def difference_call(robot: Robot) -> Callable[[Vector, Vector], Vector]:
     if type(robot).difference is Robot.difference:
         return partial(pin.difference, robot.model)
     return robot.difference
+
+
+def jexp_blocks(robot: Robot) -> tuple[tuple[Callable[[Vector], Vector], slice], ...] | None:
+    """The blocks of :meth:`Robot.integrate_jacobian_solve`: per spherical or free-flyer joint,
+    Pinocchio's ``Jexp3`` or ``Jexp6`` and the joint's slice of ``v`` (the solve of each block
+    is the caller's: :class:`pinobs.observers.fused_lie.LieRK4`); ``None`` with a planar joint
+    (its block is ``dIntegrate``'s) or where a subclass overrides the method."""
+    if type(robot).integrate_jacobian_solve is not Robot.integrate_jacobian_solve:
+        return None
+    jexp = {"so3": pin.Jexp3, "se3": pin.Jexp6}
+    kinds = [b.kind for b in robot.joints if b.kind in ("so3", "se3", "se2")]
+    if "se2" in kinds:
+        return None
+    return tuple(
+        (jexp[b.kind], slice(b.idx_v, b.idx_v + b.nv)) for b in robot.joints if b.kind in jexp
+    )
+
+
+def unit_slices(robot: Robot) -> tuple[slice, ...] | None:
+    """The unit-norm blocks of ``q`` (quaternions, ``(cos, sin)`` pairs) that
+    :meth:`Robot.normalize` divides by their norms, for a caller that normalises
+    :func:`integrate_call`'s fresh array in place with its arithmetic (``block /=
+    √(block·block)``); ``None`` where a subclass overrides either method."""
+    cls = type(robot)
+    if cls.normalize is not Robot.normalize or cls.integrate is not Robot.integrate:
+        return None
+    return robot._unit_slices
 
 
 def lie_rk4(robot: Robot, q: Vector, x: Vector, h: float, rhs: Rhs) -> tuple[Vector, Vector]:

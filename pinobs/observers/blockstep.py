@@ -23,7 +23,7 @@ and the Joseph update with ``H = [I 0]``, ``S = P⁻_qq + R = L Lᵀ`` (LAPACK `
 
 (:func:`pinobs.observers.linalg.joseph_update`'s ``C − (C_·q − R K) Kᵀ`` with ``C = P − K H P``,
 its upper block right not computed; the diagonal blocks symmetrised).  The mean by
-:class:`~pinobs.observers.fused.LieRK4` (compiled RKMK4 between Pinocchio's calls).  The
+:class:`~pinobs.observers.fused_lie.LieRK4` (compiled RKMK4 between Pinocchio's calls).  The
 arithmetic between the BLAS and LAPACK calls is compiled (numba, loaded by the filter's
 constructor), so that an update makes a few dozen Python-level calls; the same equations as
 ``predict`` then ``correct``, equal to them to rounding (tested).  The products are
@@ -46,20 +46,16 @@ import math
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from pinobs.model import Robot
 from pinobs.model.integrators import difference_call
 from pinobs.observers.base import Vector
 from pinobs.observers.blocks import bracket_rows
-from pinobs.observers.fused import LieRK4, loaded
+from pinobs.observers.fused import bracket_table, loaded
+from pinobs.observers.fused_lie import LieRK4
 from pinobs.observers.linalg import LazyKernel
 
 __all__ = ["BlockStep", "bracket_table", "joseph_kernels", "transition_kernels"]
-
-
-#: The bracket blocks' kinds in :func:`_start_loops`' table (:attr:`pinobs.model.JointBlock.kind`).
-_KINDS = {"so3": 0, "se3": 1, "se2": 2}
 
 
 def _start_loops(a_q: Vector, a_v: Vector, v: Vector, table: Any, G: Vector, D: Vector) -> None:  # noqa: C901 -- numba kernel: one branch per joint kind
@@ -297,13 +293,6 @@ joseph_kernels = (
         np.zeros(1), 1.0, _m, np.zeros(2),
     ),
 )  # fmt: skip
-
-
-def bracket_table(robot: Robot) -> NDArray[np.int64]:
-    """The table of :func:`_start_loops`: one row ``(kind, first velocity index)`` per
-    spherical (0), free-flyer (1) and planar (2) joint of ``robot``."""
-    kinds = [(_KINDS[b.kind], b.idx_v) for b in robot.joints if b.kind in _KINDS]
-    return np.array(kinds, dtype=np.int64).reshape(-1, 2)
 
 
 class BlockStep:

@@ -41,7 +41,7 @@ RK4 stages, ``Φ P Φᵀ + Q_d``, the last stage with the Joseph correction; on 
 own ``pin.Data``): on a UR5, 23 → 14 ``pin.aba`` per update (``measure_cost``, CPU
 time; five calls then, 12.7 → 11.7 with four), equal to the NumPy step to rounding (tested).  With Lie-group or continuous
 joints (no friction), :class:`_LieFast`: the RKMK4 step compiled between Pinocchio's
-calls up to ``nv = 12`` (:class:`~pinobs.observers.fused.LieRK4`); from ``nv = 28``
+calls up to ``nv = 12`` (:class:`~pinobs.observers.fused_lie.LieRK4`); from ``nv = 28``
 without the offset state, the whole step by blocks (:mod:`pinobs.observers.blockstep`:
 ``Φ`` from ``A``'s blocks in two BLAS products, ``Φ P Φᵀ`` in two more, a compiled
 Cholesky gain, the Joseph update's lower block triangle, the compiled RKMK4, the
@@ -190,13 +190,13 @@ from pinobs.observers.base import (
 )
 from pinobs.observers.blockstep import BlockStep
 from pinobs.observers.fused import (
-    LieRK4,
     ekf_coast_kernel,
     ekf_finish_kernel,
     ekf_predict_kernel,
     loaded,
     rk4_stage_kernel,
 )
+from pinobs.observers.fused_lie import LieRK4
 from pinobs.observers.linalg import (
     KERNEL_MAX_NV,
     identity,
@@ -729,7 +729,7 @@ class _LieFast:
     """:meth:`ExtendedKalmanFilter.predict`, :meth:`~ExtendedKalmanFilter.correct` and
     :meth:`~ExtendedKalmanFilter.step` on a :class:`Robot` with Lie-group or continuous joints,
     without joint friction (issue 39).  Up to ``KERNEL_MAX_NV``: the RKMK4 step compiled
-    between Pinocchio's calls (:class:`~pinobs.observers.fused.LieRK4`, on its own
+    between Pinocchio's calls (:class:`~pinobs.observers.fused_lie.LieRK4`, on its own
     ``pin.Data``).  Above, without the offset state: :meth:`step` by
     :class:`~pinobs.observers.blockstep.BlockStep` (numba loaded by the constructor; go1,
     nv = 18: 32.9 → 22.1 ``pin.aba`` per update, module docstring).

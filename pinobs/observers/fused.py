@@ -19,13 +19,13 @@ vector space (``⊕`` is ``+``) with ``nv ≤`` :data:`~pinobs.observers.linalg.
 
 With Lie-group or continuous joints (no friction, any ``nv``; issue 39):
 
-* the RKMK4 step (:class:`LieRK4`: :func:`rkmk4_stage_loops` between the ``aba`` calls and
-  the model's ``integrate``, ``integrate_jacobian_solve`` and ``normalize``, which stay
-  Pinocchio's);
+* the RKMK4 step's stages (:func:`rkmk4_stage_loops`; the step:
+  :class:`~pinobs.observers.fused_lie.LieRK4`, with ``riemannian``'s whole step there);
 * ``riemannian``'s correction but its bracket (:func:`lie_correction_loops`), its
   vector-space correction with the Riccati schedule's gains (:func:`riccati_correction_loops`)
-  and its Jacobi operator's products (:func:`jacobi_loops`; its calls: :class:`JacobiCalls`),
-  so that its update makes no BLAS call.
+  and its Jacobi operator's products (:func:`jacobi_loops`, with ``ad`` by :func:`ad_loops`:
+  :func:`jacobi_lie_loops`; its calls: :class:`JacobiCalls`), so that its update makes no
+  BLAS call.
 
 The equations are those of :mod:`pinobs.observers.ekf` and :mod:`pinobs.model.integrators`;
 the compiled steps equal the NumPy ones to rounding (the tests compare them).
@@ -38,6 +38,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pinobs.model import Robot
 from pinobs.model.integrators import DynamicsCalls, dynamics_calls, integrate_call
@@ -47,13 +48,15 @@ from pinobs.tolerances import JACOBI_FD_STEP
 
 __all__ = [
     "JacobiCalls",
-    "LieRK4",
     "RiccatiStep",
+    "ad_kernel",
+    "bracket_table",
     "ekf_coast_kernel",
     "ekf_correct_kernel",
     "ekf_finish_kernel",
     "ekf_predict_kernel",
     "jacobi_kernel",
+    "jacobi_lie_kernel",
     "lie_correction_kernel",
     "loaded",
     "riccati_correction_kernel",
@@ -267,45 +270,6 @@ def rkmk4_stage_loops(w: Vector, acc: Vector, k: Vector, stage: int, h: float) -
             w[9, i] = v + h6 * (w[1, i] + 2.0 * w[2, i] + 2.0 * w[3, i] + acc[i])
 
 
-class LieRK4:
-    """:func:`pinobs.model.dynamics_rk4` on Lie-group joints (RKMK4, without friction), its
-    arithmetic between the calls compiled (:func:`rkmk4_stage_loops`): four ``aba`` on
-    ``calls``' own data, and the model's ``integrate`` (four), ``integrate_jacobian_solve``
-    (three) and ``normalize``, as :func:`pinobs.model.dynamics_rk4` calls them.  Equal to it
-    to the bit (tested).  ``_scratch_work`` is overwritten by every step."""
-
-    def __init__(self, robot: Robot, calls: DynamicsCalls) -> None:
-        self.robot, self.calls = robot, calls
-        self.integrate = integrate_call(robot)  # (pin.integrate: a Python call less, four)
-        self._scratch_work = np.zeros((10, robot.nv))
-        self.stage = loaded(rkmk4_stage_kernel)
-
-    @classmethod
-    def build(cls, robot: Robot) -> LieRK4 | None:
-        """The step on a new ``pin.Data`` of ``robot``'s, for a :class:`Robot` with
-        Lie-group or continuous joints and no joint friction; ``None`` elsewhere."""
-        if not isinstance(robot, Robot) or robot.is_vector_space or robot.has_friction:
-            return None
-        zero = np.zeros(robot.nv)  # the solves' LAPACK (dgesv) imported now, not in the first
-        robot.integrate_jacobian_solve(robot.neutral(), zero, zero)  # step (0.16-0.34 s; issue 39)
-        return cls(robot, dynamics_calls(robot))
-
-    def step(
-        self, q: Vector, v: Vector, tau: Vector, h: float, acc0: Vector | None = None
-    ) -> tuple[Vector, Vector]:
-        """``(q⁺, v⁺)`` after ``h`` [s] with ``tau`` held from ``(q, v)``; ``acc0``: the first
-        stage's ``v̇`` if the caller has it (read before any call)."""
-        r, aba, stage, w = self.robot, self.calls.aba, self.stage, self._scratch_work
-        integrate, solve = self.integrate, r.integrate_jacobian_solve
-        xi, vs = w[8], w[9]
-        w[0] = v
-        stage(w, aba(q, v, tau) if acc0 is None else acc0, v, 1, h)
-        for k in (2, 3, 4):
-            acc = aba(integrate(q, xi), vs, tau)
-            stage(w, acc, solve(q, xi, vs), k, h)
-        return r.normalize(integrate(q, xi)), vs.copy()
-
-
 def lie_correction_loops(
     v: Vector, acc: Vector, a_q: Vector, a_v: Vector, delta: Vector, jac: Vector, k1: float,
     k2: float, h: float, ch: float, zeta: Vector, w: Vector, dv: Vector, step: Vector,
@@ -406,6 +370,62 @@ def jacobi_points_loops(
             b_g[i, j] = ddq_dv[i, j]
 
 
+#: The bracket blocks' kinds in the tables of :func:`ad_loops`, ``fused_lie.bracket_loops`` and
+#: ``blockstep``'s ``_start_loops`` (:attr:`pinobs.model.JointBlock.kind`).
+_KINDS = {"so3": 0, "se3": 1, "se2": 2}
+
+
+def bracket_table(robot: Robot) -> NDArray[np.int64]:
+    """One row ``(kind, first velocity index)`` per spherical (0), free-flyer (1) and planar (2)
+    joint of ``robot``: the table of the compiled brackets (:func:`ad_loops`)."""
+    kinds = [(_KINDS[b.kind], b.idx_v) for b in robot.joints if b.kind in _KINDS]
+    return np.array(kinds, dtype=np.int64).reshape(-1, 2)
+
+
+def _skew_into(x: Vector, j: int, out: Vector, r: int, c: int) -> None:
+    """``out[r:r+3, c:c+3] = skew(x[j:j+3])`` (``pin.skew``: zeros and the entries, negated)."""
+    out[r, c], out[r, c + 1], out[r, c + 2] = 0.0, -x[j + 2], x[j + 1]
+    out[r + 1, c], out[r + 1, c + 1], out[r + 1, c + 2] = x[j + 2], 0.0, -x[j]
+    out[r + 2, c], out[r + 2, c + 1], out[r + 2, c + 2] = -x[j + 1], x[j], 0.0
+
+
+def ad_loops(table: Any, x: Vector, out: Vector) -> None:
+    """``ad_x`` (:meth:`~pinobs.model.Robot.bracket_matrix`) on the blocks of ``table``
+    (:func:`bracket_table`): ``skew(x)`` in a spherical joint, ``pin.Motion(x).action`` =
+    ``[[skew(ω), skew(v)], [0, skew(ω)]]`` in a free-flyer (``x = (v, ω)``), the se(2) bracket
+    in a planar joint; ``out`` elsewhere is not written (the caller's zeros).  Entries of ``x``
+    and their negations: the bits of ``bracket_matrix``."""
+    for r in range(table.shape[0]):
+        kind, i = table[r, 0], table[r, 1]
+        if kind == 0:
+            _skew_into(x, i, out, i, i)
+        elif kind == 1:
+            _skew_into(x, i + 3, out, i, i)
+            _skew_into(x, i, out, i, i + 3)
+            _skew_into(x, i + 3, out, i + 3, i + 3)
+            for a in range(3):
+                for b in range(3):
+                    out[i + 3 + a, i + b] = 0.0
+        else:  # se2, x = (vx, vy, w)
+            for a in range(3):
+                for b in range(3):
+                    out[i + a, i + b] = 0.0
+            out[i, i + 1], out[i, i + 2] = -x[i + 2], x[i + 1]
+            out[i + 1, i], out[i + 1, i + 2] = x[i + 2], -x[i]
+
+
+def jacobi_lie_loops(
+    table: Any, v: Vector, g: Vector, ad_v: Vector, ad_g: Vector, b_plus: Vector,
+    b_minus: Vector, eps: float, p_v: Vector, b_v: Vector, b_g: Vector, out: Vector,
+) -> None:  # fmt: skip
+    """:func:`jacobi_loops` (``sign = −1``) with ``ad_v`` and ``ad_g = ad_{Γs(v,v)}`` written
+    first by :func:`ad_loops` (into the caller's buffers, zero off the blocks): one call where
+    :class:`JacobiCalls` made five on a robot with Lie-group joints."""
+    ad_loops(table, v, ad_v)
+    ad_loops(table, g, ad_g)
+    jacobi_loops(b_plus, b_minus, eps, p_v, b_v, b_g, ad_v, ad_g, -1.0, out)
+
+
 class JacobiCalls:
     """:func:`pinobs.observers.riemannian.jacobi_operator` on a :class:`Robot`, cheaper
     (issue 39: it was 185 of the 200 slowest updates of ``riemannian``'s 1 kHz loop on a
@@ -417,8 +437,10 @@ class JacobiCalls:
     copies, ``Γs(v, v) = −ddq`` and ``q ± εv`` (``q ⊕ ±εv`` on a vector space: Pinocchio's
     ``integrate`` of a revolute or prismatic joint is ``q + v``) are two compiled calls
     (:func:`jacobi_first_loops`, :func:`jacobi_points_loops`) on views of ``data``'s
-    arrays, not a dozen NumPy ones; the signs are folded into :func:`jacobi_loops`
-    (``sign = −1``); ``|v|`` as ``np.linalg.norm`` computes it, ``√(v·v)``.  The same
+    arrays, not a dozen NumPy ones (elsewhere ``integrate`` bound and the copies item
+    assignments); the signs are folded into :func:`jacobi_loops` (``sign = −1``), with
+    Lie-group joints with ``ad_v``, ``ad_g`` (:func:`jacobi_lie_loops`); ``|v|`` as
+    ``np.linalg.norm`` computes it, ``√(v·v)``.  The same
     operations on the same numbers: equal to
     :func:`~pinobs.observers.riemannian.jacobi_operator` with its compiled products to the
     bit (tested).  UR5 at 1 kHz, paced, load 2.8–3.3, the variants interleaved in one loop:
@@ -432,13 +454,19 @@ class JacobiCalls:
         d = self.calls.data  # its arrays, as views (Pinocchio writes them in place)
         self._ddq, self._ddq_dq, self._ddq_dv = d.ddq, d.ddq_dq, d.ddq_dv
         n = robot.nv
-        self._vector_space, self._lie = robot.is_vector_space, robot.has_lie_group_joints
+        self._lie = robot.has_lie_group_joints
         self._zero_tau, self._zero_nn = np.zeros(n), np.zeros((n, n))
         self._scratch = tuple(np.empty((n, n)) for _ in range(4))  # −P_v, −B_v, −B_g, −B₊
         self._scratch_g = np.empty(n)  # Γs(v, v)
         self._scratch_points: tuple[Vector, Vector] = (np.empty(robot.nq), np.empty(robot.nq))
-        self.first, self.points = loaded(jacobi_first_kernel), loaded(jacobi_points_kernel)
-        self.kernel = loaded(jacobi_kernel)
+        self.first = loaded(jacobi_first_kernel)
+        self.points = loaded(jacobi_points_kernel) if robot.is_vector_space else None
+        self.integrate = integrate_call(robot)  # (pin.integrate bound: Robot.integrate's array)
+        # the products: with ad_v, ad_g written into buffers (zero off the bracket blocks)
+        self.kernel = loaded(jacobi_lie_kernel if self._lie else jacobi_kernel)
+        self.table = bracket_table(robot)
+        zero_nn = self._zero_nn  # (read only: no ad without Lie-group joints)
+        self._scratch_ad = (np.zeros((n, n)), np.zeros((n, n))) if self._lie else (zero_nn, zero_nn)
 
     @classmethod
     def build(cls, robot: Robot, data: Any = None) -> JacobiCalls | None:
@@ -459,21 +487,22 @@ class JacobiCalls:
         self.first(self._ddq, self._ddq_dq, ddq_dv, g, p_v, b_v)
         call(q, g, zero)  # −B_g
         eps = JACOBI_FD_STEP / speed
-        if self._vector_space:
+        if self.points is not None:  # (a vector space)
             q_p, q_m = self._scratch_points
             self.points(ddq_dv, b_g, q, v, eps, q_p, q_m)
-        else:
-            np.copyto(b_g, ddq_dv)
-            q_p, q_m = self.robot.integrate(q, eps * v), self.robot.integrate(q, -eps * v)
+        else:  # (a copy by item assignment: np.copyto's bytes without its Python dispatcher)
+            b_g[...] = ddq_dv
+            q_p, q_m = self.integrate(q, eps * v), self.integrate(q, -eps * v)
         call(q_p, v, zero)  # −B₊
-        np.copyto(b_p, ddq_dv)
+        b_p[...] = ddq_dv
         call(q_m, v, zero)  # −B₋, read in place
-        ad_v: Vector = self._zero_nn
-        ad_g: Vector = self._zero_nn
-        if self._lie:
-            ad_v, ad_g = self.robot.bracket_matrix(v), self.robot.bracket_matrix(g)
         out = np.empty((n, n))
-        self.kernel(b_p, ddq_dv, eps, p_v, b_v, b_g, ad_v, ad_g, -1.0, out)
+        if self._lie:
+            ad_v, ad_g = self._scratch_ad
+            self.kernel(self.table, v, g, ad_v, ad_g, b_p, ddq_dv, eps, p_v, b_v, b_g, out)
+        else:
+            zero_nn = self._zero_nn
+            self.kernel(b_p, ddq_dv, eps, p_v, b_v, b_g, zero_nn, zero_nn, -1.0, out)
         return out
 
 
@@ -712,6 +741,17 @@ jacobi_points_kernel = LazyKernel(
 jacobi_kernel = LazyKernel(
     jacobi_loops, *(np.zeros((1, 1)),) * 2, 1.0, *(np.zeros((1, 1)),) * 5, 1.0, np.zeros((1, 1))
 )
+#: :func:`ad_loops` compiled: ``(table, x, out)``.
+ad_kernel = LazyKernel(
+    ad_loops, np.zeros((0, 2), dtype=np.int64), np.zeros(1), np.zeros((1, 1)),
+    helpers=(_skew_into,),
+)  # fmt: skip
+#: :func:`jacobi_lie_loops` compiled.
+jacobi_lie_kernel = LazyKernel(
+    jacobi_lie_loops, np.zeros((0, 2), dtype=np.int64), np.zeros(1), np.zeros(1),
+    *(np.zeros((1, 1)),) * 4, 1.0, *(np.zeros((1, 1)),) * 4,
+    helpers=(jacobi_loops, ad_loops, _skew_into),
+)  # fmt: skip
 
 
 def rk4_calls(

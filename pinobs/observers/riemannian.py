@@ -83,18 +83,16 @@ needs; :func:`transport_first_order` is the exact-S version used by
 through the Jacobi operator ``R(v̂, ·)v̂`` (:func:`jacobi_operator`, four
 ABA-derivatives calls), recomputed every ``curvature_every`` samples (default
 10: it moves with ``q̂, v̂``, not with the noise in ζ) and applied as a matrix
-in between.  Around those calls, the Python work is kept small: the
-prediction is :func:`pinobs.model.dynamics_rk4` (without friction its stages
-compiled, :mod:`pinobs.observers.fused`, on the observer's own ``pin.Data``: the
-stacked RK4 on a vector space, :class:`~pinobs.observers.fused.LieRK4` with
-Lie-group or continuous joints) and, where ``q ∈ Rⁿ``, the correction's arithmetic
-is one compiled call, the Riccati schedule's gains included
-(:func:`~pinobs.observers.fused.riccati_correction_loops`), elsewhere one compiled
-call and the bracket (:func:`~pinobs.observers.fused.lie_correction_loops`; both equal
-to the general :meth:`RiemannianObserver._correct` to rounding, tested); the Jacobi
-operator's products are compiled too, its four calls on the correction call's ``pin.Data``
-(:class:`~pinobs.observers.fused.JacobiCalls`, the same bits), so with constant gains the
-update makes no BLAS call.
+in between.  Around those calls the Python work is kept small: the RK4 prediction's stages
+are compiled on the observer's own ``pin.Data`` (:mod:`pinobs.observers.fused`;
+:class:`~pinobs.observers.fused_lie.LieRK4` with Lie-group or continuous joints); with the
+Riccati schedule the whole step is one Python call around compiled ones
+(:class:`~pinobs.observers.fused.RiccatiStep` where ``q ∈ Rⁿ``, else
+:class:`~pinobs.observers.fused_lie.LieRiccatiStep`), otherwise the correction but its
+bracket is one (:func:`~pinobs.observers.fused.lie_correction_loops`); all equal the
+general :meth:`RiemannianObserver._correct` to rounding (tested).  The Jacobi operator's
+calls share the correction's ``pin.Data`` (:class:`~pinobs.observers.fused.JacobiCalls`,
+compiled products, the same bits): with constant gains the update makes no BLAS call.
 :func:`pinobs.evaluation.measure_cost` reports ``time(update) / time(pin.aba)``
 (chunks of updates, each followed by as many ``pin.aba`` calls; the Jacobi
 operator counted at its amortised share).  Measured on a UR5 at 1 kHz:
@@ -140,7 +138,6 @@ from pinobs.model.integrators import dynamics_calls
 from pinobs.observers.base import GateState, Observer, Vector, gate_threshold, positive, register
 from pinobs.observers.fused import (
     JacobiCalls,
-    LieRK4,
     RiccatiStep,
     jacobi_kernel,
     lie_correction_kernel,
@@ -150,6 +147,7 @@ from pinobs.observers.fused import (
     rk4_calls,
     vector_correction_kernel,
 )
+from pinobs.observers.fused_lie import LieRiccatiStep, LieRK4
 from pinobs.observers.gain_cache import solve_discrete_are
 from pinobs.tolerances import JACOBI_FD_STEP
 
@@ -571,7 +569,7 @@ class RiemannianObserver(Observer[_State]):
         included (:attr:`Observer.uses_blas`)."""
         robot = self.robot
         self._scratch_calls = rk4_calls(robot)  # vector space: the RK4's stages
-        self._scratch_lie = LieRK4.build(robot)  # Lie-group joints: the RKMK4's
+        self._scratch_lie = lie = LieRK4.build(robot)  # Lie-group joints: the RKMK4's
         # the correction's derivatives call (any Robot)
         calls = dynamics_calls(robot) if isinstance(robot, Robot) else None
         self._scratch_derivatives = calls
@@ -580,12 +578,17 @@ class RiemannianObserver(Observer[_State]):
         # the vector-space correction with the schedule's gains: one compiled call
         riccati = not self._lie and self.gain_schedule == "riccati"
         self._riccati_correction = loaded(riccati_correction_kernel) if riccati else None
-        self._lie_correction = loaded(lie_correction_kernel) if compiled and self._lie else None
+        # Lie-group joints: with the schedule the whole step (fused_lie.LieRiccatiStep), else
+        # the correction but its bracket in one compiled call
+        lie_fast = compiled and self.gain_schedule == "riccati" and lie is not None and lie.solves
+        lie_compiled = compiled and self._lie and not lie_fast
+        self._lie_correction = loaded(lie_correction_kernel) if lie_compiled else None
         # the Jacobi operator (the same bits), its calls on the correction's pin.Data
         self._scratch_jacobi = JacobiCalls(robot, calls.data) if compiled and calls else None
         self.uses_blas = not compiled
         fast = riccati and compiled and self._scratch_calls is not None  # (fused.RiccatiStep)
-        self._scratch_fast = RiccatiStep(self, _State) if fast else None
+        step = RiccatiStep if fast else LieRiccatiStep if lie_fast else None
+        self._scratch_fast: Any = None if step is None else step(self, _State)
 
     # ------------------------------------------------------ continuous time
     def vector_field(
@@ -629,8 +632,9 @@ class RiemannianObserver(Observer[_State]):
         return q, v, True
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
-        if self._scratch_fast is not None and q_meas is not None:  # the same in one call
-            return self._scratch_fast.step(self, state, dt, q_meas, tau)
+        fast = self._scratch_fast  # the same in one call (a vector space's: with a sample)
+        if fast is not None and (q_meas is not None or self._lie):
+            return fast.step(self, state, dt, q_meas, tau)
         q, v, work = self._predicted(state, dt, tau)
         elapsed = state.elapsed + dt
         if q_meas is None:

@@ -1,7 +1,8 @@
 """The compiled steps of ``ekf`` and ``riemannian`` on robots with Lie-group or continuous
-joints (:class:`~pinobs.observers.fused.LieRK4`, the Lie correction and Jacobi kernels,
-:mod:`pinobs.observers.blocks`; issue 39) equal the NumPy steps they replace, to rounding,
-over a few thousand updates."""
+joints (:class:`~pinobs.observers.fused_lie.LieRK4`, the Lie correction and Jacobi kernels,
+:class:`~pinobs.observers.fused_lie.LieRiccatiStep`, :mod:`pinobs.observers.blocks`; issue 39)
+equal the NumPy steps they replace, to rounding, over a few thousand updates (and the same
+operations to the bit)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,14 @@ from pinobs.model import AnalyticMetric, dynamics_rk4
 from pinobs.model.integrators import difference_call, integrate_call
 from pinobs.observers import blocks, make_observer
 from pinobs.observers.blockstep import bracket_table, transition_kernels
-from pinobs.observers.fused import JacobiCalls, LieRK4, jacobi_kernel, loaded
+from pinobs.observers.fused import (
+    JacobiCalls,
+    ad_kernel,
+    jacobi_kernel,
+    lie_correction_kernel,
+    loaded,
+)
+from pinobs.observers.fused_lie import LieRiccatiStep, LieRK4, bracket_kernel, rkmk4_solve_kernel
 from pinobs.observers.linalg import joseph_update, transition_matrix
 from pinobs.observers.riemannian import jacobi_operator
 from pinobs.simulation import Sensor
@@ -70,16 +78,18 @@ def test_the_compiled_step_equals_the_numpy_step_over_thousands_of_updates(
     _assert_close_per_signal(v_fast, v_slow, 1e-12)
 
 
-@pytest.mark.parametrize("robot_name", ["go1", "talos", "cartpole_continuous"])
+@pytest.mark.parametrize("robot_name", ["go1", "talos", "cartpole_continuous", "top", "brackets"])
 def test_the_compiled_rkmk4_step_is_dynamics_rk4_to_the_bit(robot_name: str) -> None:
     """:class:`LieRK4` runs :func:`pinobs.model.dynamics_rk4`'s operations in its order
-    (no fused multiply-adds): the same bits, with and without the first stage given."""
-    robot = cached_robot(robot_name)
+    (no fused multiply-adds; the block solves by the same LAPACK ``dgesv`` on the same
+    matrices, compiled where there is no planar joint): the same bits, with and without the
+    first stage given, at speeds up to rotations of ~2 rad in a step."""
+    robot = _floating_planar_spherical() if robot_name == "brackets" else cached_robot(robot_name)
     rk4 = LieRK4.build(robot)
-    assert rk4 is not None
+    assert rk4 is not None and rk4.solves == (robot_name != "brackets")
     rng = np.random.default_rng(3)
-    for _ in range(5):
-        q, v = robot.random_configuration(rng), rng.standard_normal(robot.nv)
+    for i in range(8):
+        q, v = robot.random_configuration(rng), rng.standard_normal(robot.nv) * 10.0 ** (i % 4)
         tau = rng.standard_normal(robot.nv)
         q_ref, v_ref = dynamics_rk4(robot, q, v, tau, 1e-3)
         for acc0 in (None, robot.forward_dynamics(q, v, tau)):
@@ -110,13 +120,15 @@ def test_the_compiled_jacobi_operator_equals_the_numpy_products(
         assert np.abs(compiled - reference).max() <= 1e-13 * scale
 
 
-@pytest.mark.parametrize("robot_name", ["ur5", "go1", "cartpole_continuous"])
+@pytest.mark.parametrize("robot_name", ["ur5", "go1", "cartpole_continuous", "top"])
 def test_the_jacobi_calls_are_jacobi_operator_to_the_bit(robot_name: str) -> None:
     """:class:`JacobiCalls` (its own ``pin.Data``, signs folded into the kernel, ``q ± εv``
     on a vector space) makes the operations of :func:`jacobi_operator` with its compiled
     products on the same numbers: the same bits, at speeds from 1e-3 to 10 and zero; and
     ``J z`` is the model's curvature ``R(v, z)v`` (:meth:`Robot.curvature`, ABA calls
-    only, no finite difference) to the finite difference's 1e-8."""
+    only, no finite difference) to the finite difference's 1e-8.  With Lie-group joints
+    (free-flyer, spherical) ``ad_v`` and ``ad_Γs(v,v)`` are compiled
+    (:func:`~pinobs.observers.fused.ad_loops`; tested alone below, with a planar joint)."""
     robot = cached_robot(robot_name)
     jacobi_kernel.load()
     calls = JacobiCalls.build(robot)
@@ -205,10 +217,13 @@ def test_the_lie_group_paths_are_taken_where_they_apply() -> None:
         assert large._lie_fast.blocks is not None
     offset = make_observer("ekf", go1, rate=1000.0, noise_std=1e-4, disturbance_psd=1.0)
     assert offset._lie_fast is None  # between the two, with the offset: the general path
-    for robot in (go1, talos):
+    for robot in (go1, talos):  # the whole step with the schedule, else the correction
         rie = make_observer("riemannian", robot, rate=1000.0, noise_std=1e-4)
-        assert rie._scratch_lie is not None and rie._lie_correction is not None
+        assert isinstance(rie._scratch_fast, LieRiccatiStep) and rie._scratch_lie.solves
         assert not rie.uses_blas
+        steady = make_observer("riemannian", robot, rate=1000.0, gain_schedule="steady")
+        assert steady._scratch_fast is None and steady._lie_correction is not None
+        assert not steady.uses_blas
     # state-dependent gains: the general correction, on one BLAS thread
     rie = make_observer("riemannian", go1, beta=100.0, gain_a=lambda s, speed: 8.0 + s)
     assert rie._lie_correction is None and rie.uses_blas
@@ -385,3 +400,103 @@ def test_the_bound_difference_and_integrate_are_the_robots_to_the_bit() -> None:
     shifted.__dict__.update(robot.__dict__)
     assert difference_call(shifted) == shifted.difference
     assert integrate_call(shifted) == shifted.integrate
+
+
+@pytest.mark.parametrize("robot_name", ["talos", "top", "brackets"])
+def test_the_compiled_bracket_and_ad_are_the_robots_to_the_bit(robot_name: str) -> None:
+    """:func:`~pinobs.observers.fused_lie.bracket_loops` (the correction's ``[ζ, w]``) gives
+    :meth:`Robot.bracket`'s arrays (``pin.Motion``'s cross product in a free-flyer, ``np.cross``
+    in a spherical joint, the se(2) expressions in a planar one) and
+    :func:`~pinobs.observers.fused.ad_loops` (the Jacobi operator's) ``bracket_matrix``'s,
+    vectors of scales 1e-6 to 1e3."""
+    robot = _floating_planar_spherical() if robot_name == "brackets" else cached_robot(robot_name)
+    bracket, ad = loaded(bracket_kernel), loaded(ad_kernel)
+    table, out, mat = bracket_table(robot), np.empty(robot.nv), np.zeros((robot.nv, robot.nv))
+    rng = np.random.default_rng(10)
+    for i in range(200):
+        x = rng.standard_normal(robot.nv) * 10.0 ** (i % 10 - 6)
+        y = rng.standard_normal(robot.nv) * 10.0 ** (i % 7 - 3)
+        bracket(table, x, y, out)
+        np.testing.assert_array_equal(out, robot.bracket(x, y))
+        ad(table, x, mat)
+        np.testing.assert_array_equal(mat, robot.bracket_matrix(x))
+
+
+def _run_with_outliers(ob: Any, res: pinobs.Result) -> tuple[np.ndarray, ...]:
+    """``ob`` over ``res`` from a start off the truth, every 7th sample missing and every 11th
+    an outlier (0.05 rad off): its estimates ``(q, v, nis)``."""
+    robot, rng = ob.robot, np.random.default_rng(12)
+    ob.reset(res.t[0], robot.integrate(res.q[0], np.full(robot.nv, 1e-3)), None, res.tau[0])
+    out: list[list[Any]] = [[], [], []]
+    for k in range(1, res.t.size):
+        q = None if k % 7 == 0 else res.q_meas[k]
+        if q is not None and k % 11 == 0:
+            q = robot.integrate(q, 0.05 * rng.standard_normal(robot.nv))
+        est = ob.update(res.t[k], q, res.tau[k])
+        for row, x in zip(out, (est.q, est.v, np.nan if est.nis is None else est.nis), strict=True):
+            row.append(x)
+    return tuple(np.array(row) for row in out)
+
+
+@pytest.mark.parametrize("robot_name", ["go1", "top", "cartpole_continuous"])
+def test_the_whole_lie_riccati_step_is_the_step_it_replaces_to_the_bit(robot_name: str) -> None:
+    """``riemannian`` by :class:`~pinobs.observers.fused_lie.LieRiccatiStep` (one Python call:
+    the compiled solves and stages, ``normalize`` in place, the schedule's gains, the
+    correction and its bracket in one kernel) against the same observer's step by methods
+    (:meth:`_predicted`, the NumPy gate, :meth:`_correct_compiled` and ``Robot.bracket``): 1000
+    updates from a start off the truth, with missing samples and outliers (some gated), the
+    Jacobi operator recomputed: the same bits."""
+    robot = cached_robot(robot_name)
+    res = pinobs.simulate(robot, [], duration=1.0, sensor=Sensor(1000.0, 1e-4), seed=11)
+    fast = make_observer("riemannian", robot, rate=1000.0, noise_std=1e-4)
+    slow = make_observer("riemannian", robot, rate=1000.0, noise_std=1e-4)
+    assert isinstance(fast._scratch_fast, LieRiccatiStep)
+    slow._scratch_fast, slow._lie_correction = None, loaded(lie_correction_kernel)
+    a, b = _run_with_outliers(fast, res), _run_with_outliers(slow, res)
+    assert np.sum(a[2] > 1e3) > 50  # the outliers' NIS (the gate's path taken)
+    if robot.has_lie_group_joints:
+        assert np.abs(fast._state.jacobi).max() > 0.0
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_the_compiled_solve_gives_nan_where_the_block_is_singular() -> None:
+    """A block ``J_r(ξ)`` that LAPACK cannot factor (a zero matrix) gives NaN in that block of
+    ``k``, as :meth:`Robot.integrate_jacobian_solve` does, and ``v_s`` elsewhere."""
+    solve_stage = loaded(rkmk4_solve_kernel)
+    w, k = np.zeros((10, 8)), np.empty(8)
+    w[9] = np.arange(1.0, 9.0)
+    jexp = np.zeros((1, 6, 6))
+    solve_stage(w, np.zeros(8), jexp, np.array([[6, 0]], dtype=np.int64), k, 2, 1e-3)
+    assert np.isnan(k[:6]).all() and np.array_equal(k[6:], [7.0, 8.0])
+    jexp[0], w[9] = np.eye(6), np.arange(1.0, 9.0)  # (the stage wrote the next v_s there)
+    solve_stage(w, np.zeros(8), jexp, np.array([[6, 0]], dtype=np.int64), k, 2, 1e-3)
+    np.testing.assert_array_equal(k, np.arange(1.0, 9.0))
+
+
+def test_the_rkmk4_step_keeps_a_subclass_s_own_solve_and_normalize() -> None:
+    """Where a :class:`Robot` subclass overrides ``normalize`` or ``integrate_jacobian_solve``,
+    :class:`LieRK4` calls its methods (no compiled solves, no normalisation in place) and still
+    gives :func:`dynamics_rk4`'s bits."""
+    robot = cached_robot("go1")
+
+    class OwnNormalize(pinobs.Robot):
+        def normalize(self, q: Any) -> Any:
+            return super().normalize(q)
+
+    class OwnSolve(pinobs.Robot):
+        def integrate_jacobian_solve(self, q: Any, xi: Any, u: Any) -> Any:
+            return super().integrate_jacobian_solve(q, xi, u)
+
+    rng = np.random.default_rng(13)
+    for cls in (OwnNormalize, OwnSolve):
+        own = object.__new__(cls)
+        own.__dict__.update(robot.__dict__)
+        rk4 = LieRK4.build(own)
+        assert rk4 is not None and not rk4.solves and rk4.solve_stage is None
+        q, v = own.random_configuration(rng), rng.standard_normal(own.nv)
+        tau = rng.standard_normal(own.nv)
+        q_new, v_new = rk4.step(q, v, tau, 1e-3)
+        q_ref, v_ref = dynamics_rk4(own, q, v, tau, 1e-3)
+        np.testing.assert_array_equal(q_new, q_ref)
+        np.testing.assert_array_equal(v_new, v_ref)

@@ -190,6 +190,7 @@ from pinobs.observers.base import (
 )
 from pinobs.observers.blockstep import BlockStep
 from pinobs.observers.fused import (
+    compiled_vector_space,
     ekf_coast_kernel,
     ekf_finish_kernel,
     ekf_predict_kernel,
@@ -661,15 +662,7 @@ class _FastPath:
     @classmethod
     def build(cls, ekf: ExtendedKalmanFilter) -> _FastPath | None:
         """The fast path of ``ekf``, or ``None`` where its robot does not qualify."""
-        r = ekf.robot
-        if not (
-            isinstance(r, Robot)
-            and r.is_vector_space
-            and not r.has_friction
-            and r.nv <= KERNEL_MAX_NV
-        ):
-            return None
-        return cls(ekf)
+        return cls(ekf) if compiled_vector_space(ekf.robot) else None
 
     def step(
         self, ekf: ExtendedKalmanFilter, state: EKFState, dt: float, q_meas: Vector | None,

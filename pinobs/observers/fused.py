@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 from pinobs.model import Robot
 from pinobs.model.integrators import DynamicsCalls, dynamics_calls, integrate_call
 from pinobs.observers.base import Vector
-from pinobs.observers.linalg import LazyKernel, joseph_kernel
+from pinobs.observers.linalg import KERNEL_MAX_NV, LazyKernel, joseph_kernel
 from pinobs.tolerances import JACOBI_FD_STEP
 
 __all__ = [
@@ -51,6 +51,7 @@ __all__ = [
     "RiccatiStep",
     "ad_kernel",
     "bracket_table",
+    "compiled_vector_space",
     "ekf_coast_kernel",
     "ekf_correct_kernel",
     "ekf_finish_kernel",
@@ -69,6 +70,19 @@ __all__ = [
 ]
 
 _new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (RiccatiStep)
+
+
+def compiled_vector_space(robot: object) -> bool:
+    """Whether a compiled vector-space step applies to ``robot``: a :class:`Robot` whose
+    configuration space is a vector space, without joint friction, ``nv ≤ KERNEL_MAX_NV``
+    (``ekf``'s and ``kalman``'s steps)."""
+    return (
+        isinstance(robot, Robot)
+        and robot.is_vector_space
+        and not robot.has_friction
+        and robot.nv <= KERNEL_MAX_NV
+    )
+
 
 # the linalg loop, under its own name (LazyKernel's helpers are found by name here)
 _joseph_loops = joseph_kernel.fn

@@ -35,12 +35,17 @@ from typing import Any
 
 import numpy as np
 
-from pinobs.model import Robot
 from pinobs.model.integrators import dynamics_calls, mass_coriolis_calls
 from pinobs.observers.base import Vector
 from pinobs.observers.blas import one_blas_thread
-from pinobs.observers.fused import loaded, rk4_stage_kernel, rk4_stage_loops, rk4_start_loops
-from pinobs.observers.linalg import KERNEL_MAX_NV, LazyKernel, joseph_kernel, transition_kernel
+from pinobs.observers.fused import (
+    compiled_vector_space,
+    loaded,
+    rk4_stage_kernel,
+    rk4_stage_loops,
+    rk4_start_loops,
+)
+from pinobs.observers.linalg import LazyKernel, joseph_kernel, transition_kernel
 
 __all__ = ["KalmanStep", "coast_kernel", "fused_kernel"]
 
@@ -250,10 +255,7 @@ class KalmanStep:
         docstring)."""
         r = observer.robot
         if not (
-            isinstance(r, Robot)
-            and r.is_vector_space
-            and not r.has_friction
-            and r.nv <= KERNEL_MAX_NV
+            compiled_vector_space(r)
             and observer.velocity_source == "estimate"
             and observer.schedule == "measured"
             and not observer._viscous

@@ -63,8 +63,9 @@ JSON's `gains` holds the gains each section ran with.
 
 `real`: SEROW's Go1 log (no truth; `benchmarks/real_data.py`) through
 `pinobs.io.legged_run.legged_run` with its defaults (`LEGGED_GAINS`, the encoders' σ from the
-log's stillest second, `slip_speed`, `foot_radius="urdf"`: chosen on MuJoCo, the log held
-out), with `foot_radius=0` (the foot frames, the default before), with σ_q from the
+log's stillest second, `slip_speed`, `foot_radius="urdf"` and `rolling_lift`: chosen on
+MuJoCo, the log held out), with `foot_radius=0` (the foot frames, the default before), with
+`rolling_lift=False` (rolling.py's R4 alone, the default before), with σ_q from the
 first second (the default before), with `imu_noise="log"`, and with the white foot noise of
 before (`GAINS`), contacts from the force threshold or SEROW's probability, with and
 without the foot gate: the feet's NIS over the stance rows
@@ -204,8 +205,8 @@ NOTES = {
     "density": "Measured on the truth alone (no filter): seed 0, the motions of `DENSITY_RUNS`; "
     "`density_diagnosis`: filters on the measuring motion, not used to choose",
     "real": "The real log held out: run once with the settings MuJoCo gave, nothing tuned on "
-    "it (`GO1_GAINS` rows: run once, after the rolling rows; `+ rolling_lift` rows: once, after "
-    "the `lift` rows)",
+    "it (`GO1_GAINS` rows: run once, after the rolling rows; `rolling_lift` rows: once, after "
+    "the `lift` rows, then rerun when it became the default)",
     "slip": "`GAINS`, go1 standing (seed 0), one foot made to slide",
     "lift": "`GO1_GAINS` as the `rolling` rows, with `rolling_lift` (derived, no parameter: "
     "nothing chosen); `lift_diagnosis` on the truth of the measuring run (trot 20 s, seed 0) and "
@@ -847,17 +848,17 @@ def real_log_nis() -> dict[str, Any]:
     rows += [  # the contact density measured at go1's touch point (the rolling rows' gains)
         (f"white, GO1_GAINS, {c}", GO1_GAINS, c, None, white) for c in ("force", "probability")
     ]
-    rows += [  # rolling.py's R5 (the lift section's rows), run once after them: held out
-        (f"defaults + rolling_lift, {c}", None, c, None, {"rolling_lift": True})
+    rows += [  # rolling.py's R4 alone (rolling_lift=False): the default before R5's
+        (f"defaults but rolling_lift=False, {c}", None, c, None, {"rolling_lift": False})
         for c in ("force", "probability")
     ]
     rows += [
         (
-            f"white, GO1_GAINS + rolling_lift, {c}",
+            f"white, GO1_GAINS but rolling_lift=False, {c}",
             GO1_GAINS,
             c,
             None,
-            {**white, "rolling_lift": True},
+            {**white, "rolling_lift": False},
         )
         for c in ("force", "probability")
     ]
@@ -914,6 +915,7 @@ def simulated_nis(duration: float = 10.0, seed: int = 0) -> dict[str, Any]:
     go1 = pinobs.load("go1")
     white = {"joint_std": None, "slip_speed": False}
     settings = {"defaults": (None, {}), "defaults but foot_radius 0": (None, {"foot_radius": 0.0}),
+                "defaults but rolling_lift=False": (None, {"rolling_lift": False}),
                 "defaults + imu_noise='log'": (None, {"imu_noise": "log"}),
                 "white, GAINS": (GAINS, white),
                 "white, GO1_GAINS": (GO1_GAINS, white),
@@ -1082,8 +1084,9 @@ def _real_table(real: dict[str, Any]) -> list[str]:
         "(off by default since this table); `white`: the foot noise before (`joint_std=None, "
         "slip_speed=False`) with `GAINS`, `GO1_GAINS` or `LOG_GAINS`; every row with `legged_run`'s "
         'default `foot_radius="urdf"` (go1\'s 2 cm foot spheres: the rolling feet) but '
-        "`foot_radius 0` (the foot frames, the default before); `+ rolling_lift`: rolling.py's "
-        "R5 (run once, after the `lift` rows):",
+        "`foot_radius 0` (the foot frames, the default before), and with `rolling_lift` "
+        "(rolling.py's R5, the default since the `lift` rows; first run once, after them) but "
+        "`rolling_lift=False` (R4 alone, the default before):",
         "",
         "| contacts, gate | stance rows | NIS/dof mean (median) | inside | below | above "
         "| gated | in contact | NIS/dof median standing / walking "

@@ -458,7 +458,8 @@ class InvariantEKF(LeggedFilter):
             that touched the ground, which rolling leaves still (:mod:`pinobs.observers.rolling`,
             eq. R4); 0 (default): at its frame.
         rolling_lift: with ``foot_radius``, that point's cycloid lift removed (rolling.py's
-            eq. R5: exact for a sphere rolling on the plane; ``False``, default: R4 alone).
+            eq. R5: exact for a sphere rolling on the plane; ``True``, default; ``False``: R4
+            alone, the default before).  Nothing without ``foot_radius``.
 
     Raises:
         GainError: an ``imu_hold`` that is neither; a ``foot_gate`` not in (0, 0.5); a
@@ -482,7 +483,7 @@ class InvariantEKF(LeggedFilter):
         slip_speed: bool = False,
         slip_gyro: float = 0.0,
         foot_radius: float = 0.0,
-        rolling_lift: bool = False,
+        rolling_lift: bool = True,
     ) -> None:
         super().__init__(
             robot,

@@ -84,7 +84,7 @@ class LeggedFilter(ABC):
         imu_hold: str = "previous",
         imu_frame: str | None = None,
         foot_radius: float = 0.0,
-        rolling_lift: bool = False,
+        rolling_lift: bool = True,
     ) -> None:
         #: the legs, options and conversions (:class:`pinobs.observers.legs.LeggedSetup`)
         self.setup = LeggedSetup(

@@ -543,7 +543,7 @@ class LeggedSetup:
         imu_hold: str,
         imu_frame: str | None,
         foot_radius: float = 0.0,
-        rolling_lift: bool = False,
+        rolling_lift: bool = True,
     ) -> None:
         if imu_hold not in ("previous", "average"):
             raise GainError(f"imu_hold must be 'previous' or 'average', got {imu_hold!r}")

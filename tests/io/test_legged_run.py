@@ -363,7 +363,7 @@ def test_the_urdf_foot_radius_lowers_the_simulated_trots_error(trot) -> None:
 
 
 def test_rolling_lift_reaches_the_filter(trot, monkeypatch) -> None:
-    """``rolling_lift`` (default ``False``) is the filter's, its rolling feet's ``lift``."""
+    """``rolling_lift`` (default ``True``) is the filter's, its rolling feet's ``lift``."""
     import pinobs.io.legged_run as runner
 
     made = []
@@ -377,6 +377,6 @@ def test_rolling_lift_reaches_the_filter(trot, monkeypatch) -> None:
     go1 = pinobs.load("go1")
     log = _read(_frame(trot).iloc[:100], go1)
     default = runner.legged_run(go1, log).run
-    lifted = runner.estimate_legged(go1, log, rolling_lift=True)
-    assert made == [False, True]
-    assert not np.array_equal(default.v, lifted.v)
+    alone = runner.estimate_legged(go1, log, rolling_lift=False)
+    assert made == [True, False]
+    assert not np.array_equal(default.v, alone.v)

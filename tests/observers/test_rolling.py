@@ -140,14 +140,22 @@ class RollingGo1Legs(Go1Legs):
 @pytest.mark.parametrize("cls", [InvariantEKF, QuaternionEKF])
 def test_started_on_the_truth_with_rolling_feet_it_stays_there(cls) -> None:
     """Noise-free go1 whose feet rotate about their still touch-down points (the centres move
-    by up to millimetres): with ``foot_radius`` the filter stays on the truth; without, not."""
+    by up to millimetres): with ``foot_radius`` and (R4) alone (``rolling_lift=False``: these
+    points, not their projections, are still; R5's truth is the test below) the filter stays
+    on the truth; without a radius, not."""
     legs = RollingGo1Legs()
     R_bi, r_bi = legs.imu_placement
     samples = truth(legs, 200.0, 2.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
     centres = np.array([legs.rolling.kinematics.positions(s[4]) for s in samples])
     worst = {}
     for radius in (RADIUS, 0.0):
-        ekf = cls(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", foot_radius=radius)
+        ekf = cls(
+            pinobs.load("go1"),
+            GO1_FEET,
+            imu_frame="imu_link",
+            foot_radius=radius,
+            rolling_lift=False,
+        )
         reset_through_imu(ekf, samples[0], R_bi, r_bi)
         worst[radius] = 0.0
         for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
@@ -301,27 +309,45 @@ def test_started_on_the_truth_with_feet_rolling_on_the_plane_it_stays_there(cls)
 
 
 @pytest.mark.parametrize("cls", [InvariantEKF, QuaternionEKF])
-def test_rolling_lift_off_or_without_a_radius_is_bit_for_bit_the_filter_without_it(cls) -> None:
-    """``rolling_lift=False`` is the default's path (R4 with a radius); ``rolling_lift`` without
-    a radius measures the foot frames, as before: estimates and covariances bit for bit."""
+def test_rolling_lift_is_the_default_and_off_is_r4_alone(cls, monkeypatch) -> None:
+    """With a radius the default is (R5) (``rolling_lift=True``, bit for bit);
+    ``rolling_lift=False`` is (R4) alone (the lift never computed) and differs; without a
+    radius ``rolling_lift`` changes nothing (the foot frames measured): estimates and
+    covariances bit for bit."""
+    from pinobs.observers.rolling import RollingFeet
+
     legs = Go1Legs("imu_link")
     samples = truth(legs, 200.0, 0.5, wobble=0.5, feet_z=None, inverse=legs.inverse)
     settings = (
         {"foot_radius": RADIUS},
+        {"foot_radius": RADIUS, "rolling_lift": True},
         {"foot_radius": RADIUS, "rolling_lift": False},
         {},
+        {"rolling_lift": False},
         {"rolling_lift": True},
     )
-    outs = []
+    outs, lifted = [], []
+    real_lift = RollingFeet._lift
+
+    def counted(self, *args):  # type: ignore[no-untyped-def]
+        lifted[-1] += 1
+        return real_lift(self, *args)
+
+    monkeypatch.setattr(RollingFeet, "_lift", counted)
     for kwargs in settings:
+        lifted.append(0)
         ekf = cls(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", **kwargs)
         t, R, _, p, q, omega, acc, contacts = samples[0]
         ekf.reset(t, free_flyer_q(R, p, q), gyro=omega, acc=acc, contacts=contacts)
         est = [ekf.update(t, q, w, a, c) for t, _, _, _, q, w, a, c in samples[1:]]
         outs.append([np.concatenate([e.q, e.v[:6], e.covariance.ravel()]) for e in est])
     np.testing.assert_array_equal(outs[0], outs[1])
-    np.testing.assert_array_equal(outs[2], outs[3])
     assert not np.array_equal(outs[0], outs[2])
+    np.testing.assert_array_equal(outs[3], outs[4])
+    np.testing.assert_array_equal(outs[3], outs[5])
+    assert not np.array_equal(outs[2], outs[3])
+    assert lifted[0] > 0 and lifted[1] == lifted[0]
+    assert lifted[2] == 0 and lifted[3:] == [0, 0, 0]
 
 
 def test_the_compiled_lift_is_r5_in_numpy() -> None:

@@ -145,6 +145,35 @@ def test_riemannian_made_a_second_time_imports_no_scipy_linalg() -> None:
     assert runs[1].stdout.strip().splitlines()[-1] == "False"
 
 
+def test_inekf_on_go1_imports_no_scipy_linalg() -> None:
+    """Issue 39: the invariant EKF's compiled kernels multiply their 3 × 3 matrices in loops,
+    not by numba's ``@`` (which calls SciPy's BLAS: ``scipy.linalg`` imported when the
+    kernels load, 0.15-0.2 s of CPU in ``make_observer``), and the rolling feet's kernels
+    get the layout of their loaded signature (another one loads with numba's full set-up,
+    which imports ``scipy.linalg``).  go1 without and with rolling feet (``rolling_lift``,
+    the foot gate): made, reset, then 50 updates, in a second process (the first may
+    compile)."""
+    code = (
+        "import sys, numpy as np, pinobs\n"
+        "from pinobs.observers.inekf import InvariantEKF\n"
+        "go1 = pinobs.load('go1')\n"
+        "feet = ('FL_foot', 'FR_foot', 'RL_foot', 'RR_foot')\n"
+        "q = np.zeros(go1.nq); q[2] = 0.3; q[6] = 1.0\n"
+        "gyro, acc = np.array([0.01, -0.02, 0.03]), np.array([0.1, 0.0, 9.81])\n"
+        "for opts in ({}, {'foot_radius': 0.02, 'rolling_lift': True, 'foot_gate': 1e-3}):\n"
+        "    ekf = InvariantEKF(go1, feet, **opts)\n"
+        "    ekf.reset(0.0, q, gyro=gyro, acc=acc, contacts=[True] * 4)\n"
+        "    for k in range(1, 51):\n"
+        "        ekf.update(k * 1e-3, q, gyro, acc, [True] * 4)\n"
+        "print('scipy.linalg' in sys.modules)\n"
+    )
+    runs = [
+        subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+        for _ in range(2)
+    ]
+    assert runs[1].stdout.strip().splitlines()[-1] == "False"
+
+
 @pytest.mark.parametrize("name", ["ekf", "riemannian", "liegroup"])
 def test_no_update_imports_a_module_on_a_lie_group_robot(name: str) -> None:
     """Issue 39: the RK4 stages on Lie groups solve with LAPACK's ``dgesv``

@@ -22,8 +22,13 @@ operations:
 * the foot gate's NIS of each foot alone, eq. (8), by the 3 × 3 adjugate.
 
 The results equal NumPy's to rounding (the products are summed in another
-order).  :func:`load_kernels` compiles them (``cache=True``: once per
-installation); ``import pinobs`` imports no numba.
+order).  The 3 × 3 matrix products (and the scaled series' 15 × 15 squares) are loops,
+:func:`_matmul` and :func:`_matvec3`, not numba's ``@``: that calls SciPy's BLAS, whose
+first call imports ``scipy.linalg`` (issue 39: 0.15–0.2 s of CPU in ``make_observer``,
+and OpenBLAS's worker thread spinning on the other core).  Their fused multiply-adds are
+in the order of OpenBLAS's ``gemm`` and ``gemv`` kernels on these sizes: the bits the
+``@`` gave (checked on stored outputs).  :func:`load_kernels` compiles them
+(``cache=True``: once per installation); ``import pinobs`` imports no numba.
 """
 
 from __future__ import annotations
@@ -69,12 +74,36 @@ def gamma_coefficients(t2: float) -> tuple[float, float, float, float, float, fl
     return s / t, b0, b0, b1, b1, (t2 + 2.0 * co - 2.0) / (2.0 * t2 * t2)
 
 
+def _fma(a: float, b: float, c: float) -> float:
+    """``a·b + c`` (compiled on its own with ``contract``: one fused multiply-add)."""
+    return a * b + c
+
+
+def _matmul(A: Vector, B: Vector, out: Vector) -> None:
+    """``out = A B`` for small matrices, each entry ``Σ_k A_ik B_kj`` by fused multiply-adds
+    in the order of ``k`` from 0: the bits of OpenBLAS's ``gemm`` on them (numba's ``@``)."""
+    for i in range(A.shape[0]):
+        for j in range(B.shape[1]):
+            t = 0.0
+            for k in range(A.shape[1]):
+                t = _fma(A[i, k], B[k, j], t)
+            out[i, j] = t
+
+
+def _matvec3(A: Vector, x: Vector, out: Vector) -> None:
+    """``out = A x`` for a 3 × 3 ``A``, each entry ``(a_1 x_1 + a_0 x_0) + a_2 x_2`` by fused
+    multiply-adds: the bits of OpenBLAS's ``gemv`` on a C-contiguous 3 × 3 (numba's ``@``)."""
+    for i in range(3):
+        out[i] = _fma(A[i, 2], x[2], _fma(A[i, 0], x[0], A[i, 1] * x[1]))
+
+
 def _gammas(phi: Vector, out: Vector) -> None:
     """``out[m] = Γ_m(φ)`` for m = 0, 1, 2 (``out`` shape (3, 3, 3))."""
     W = np.zeros((3, 3))
     W[0, 1], W[0, 2], W[1, 2] = -phi[2], phi[1], -phi[0]
     W[1, 0], W[2, 0], W[2, 1] = phi[2], -phi[1], phi[0]
-    W2 = W @ W
+    W2 = np.empty((3, 3))
+    _matmul(W, W, W2)
     a0, b0, a1, b1, a2, b2 = gamma_coefficients(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
     for i in range(3):
         for j in range(3):
@@ -136,7 +165,8 @@ def _body_core(w: Vector, a: Vector, h: float, core: Vector) -> None:  # noqa: C
             for j in range(15):
                 core[i, j] = tmp[i, j] / k + (1.0 if i == j else 0.0)
     for _ in range(s):
-        core[:] = core @ core
+        C = core.copy()
+        _matmul(C, C, core)
 
 
 def _left_adjoint(R: Vector, x: Vector, M: Vector, out: Vector, inverse: bool) -> None:
@@ -213,10 +243,15 @@ def _propagate_loops(
     a = imu[3:] - theta[3:]
     G = np.empty((3, 3, 3))
     _gammas(w * h, G)  # eq. (1)
-    Rg = R @ G[0]
-    Ra1 = R @ (G[1] @ a)
-    Ra2 = R @ (G[2] @ a)
-    R1[:] = Rg @ (1.5 * np.eye(3) - 0.5 * (Rg.T @ Rg))  # back onto SO(3) (rounding)
+    Rg, RtR = np.empty((3, 3)), np.empty((3, 3))
+    Ga, Ra1, Ra2 = np.empty(3), np.empty(3), np.empty(3)
+    _matmul(R, G[0], Rg)
+    _matvec3(G[1], a, Ga)
+    _matvec3(R, Ga, Ra1)
+    _matvec3(G[2], a, Ga)
+    _matvec3(R, Ga, Ra2)
+    _matmul(Rg.T, Rg, RtR)
+    _matmul(Rg, 1.5 * np.eye(3) - 0.5 * RtR, R1)  # back onto SO(3) (rounding)
     x1[:] = x
     for c in range(3):
         x1[0, c] = x[0, c] + Ra1[c] * h + g[c] * h
@@ -254,7 +289,10 @@ def _foot_noise(
             for q in range(jac.shape[2]):
                 t += jac[f, c, q] * jac[f, d, q]
             M[c, d] = joint_var * t + (kin_var if c == d else 0.0)
-    return R @ M @ R.T
+    RM, out = np.empty((3, 3)), np.empty((3, 3))
+    _matmul(R, M, RM)
+    _matmul(RM, R.T, out)
+    return out
 
 
 def _correct_loops(
@@ -279,9 +317,10 @@ def _correct_loops(
     N = np.empty((k, 3, 3))
     HP = np.empty((m, n + 1))  # [H P, r]
     M = np.empty((3, 3))
+    Rh = np.empty(3)
     for f in range(k):
         N[f] = _foot_noise(R, jac, f, joint_var, kin_var, M)  # eq. (4): N_j
-        Rh = R @ h[f]
+        _matvec3(R, h[f], Rh)
         for c in range(3):
             a = 3 * f + c
             HP[a, n] = Rh[c] - (x[2 + f, c] - x[1, c])  # r_j = R̂ h_j − (d̂_j − p̂)
@@ -316,10 +355,10 @@ def _foot_nis_loops(
     block of ``S``, inverted by its adjugate; ``inf`` if it is singular)."""
     S = np.empty((3, 3))
     M = np.empty((3, 3))
-    r = np.empty(3)
+    r, Rh = np.empty(3), np.empty(3)
     for f in range(x.shape[0] - 2):
         N = _foot_noise(R, jac, f, joint_var, kin_var, M)  # eq. (4): N_j
-        Rh = R @ h[f]
+        _matvec3(R, h[f], Rh)
         a = 9 + 3 * f
         for c in range(3):
             r[c] = Rh[c] - (x[2 + f, c] - x[1, c])  # eq. (4): r_j
@@ -420,9 +459,13 @@ def _update_mean(
     n = e.shape[0]
     G = np.empty((3, 3, 3))
     _gammas(e[:3], G)
-    R1[:] = G[0] @ R
+    _matmul(G[0], R, R1)
+    u, w = np.empty(3), np.empty(3)
     for i in range(x.shape[0]):
-        x1[i] = G[0] @ x[i] + G[1] @ e[3 + 3 * i : 6 + 3 * i]
+        _matvec3(G[0], x[i], u)
+        _matvec3(G[1], e[3 + 3 * i : 6 + 3 * i], w)
+        for c in range(3):
+            x1[i, c] = u[c] + w[c]
     for i in range(6):
         theta1[i] = theta[i] + e[n - 6 + i]
 
@@ -437,7 +480,7 @@ def _warm_propagate() -> tuple[object, ...]:
 
 
 #: :func:`_propagate_loops` compiled: ``(R, x, θ, imu, h, g, Q_c, P, R1, x1, P1)``.
-propagate_kernel = LazyKernel(_propagate_loops, *_warm_propagate())
+propagate_kernel = LazyKernel(_propagate_loops, *_warm_propagate(), contracted=("_fma",))
 #: :func:`_correct_loops` compiled: ``(R, x, θ, P, h, J, σ_q², σ_k², R1, x1, θ1, P1) -> nis``.
 correct_kernel = LazyKernel(
     _correct_loops,
@@ -453,6 +496,7 @@ correct_kernel = LazyKernel(
     np.empty((3, 3)),
     np.empty(6),
     np.empty((18, 18)),
+    contracted=("_fma",),
 )
 
 
@@ -467,6 +511,7 @@ foot_nis_kernel = LazyKernel(
     1.0,
     1.0,
     np.empty(1),
+    contracted=("_fma",),
 )
 
 
@@ -480,6 +525,8 @@ def load_kernels() -> None:
         from numba.extending import register_jitable  # lazy: start-up time
 
         for helper in (
+            _matmul,
+            _matvec3,
             gamma_coefficients,
             _gammas,
             expm_degree,

@@ -143,6 +143,9 @@ class RollingFeet:
         ``flags`` (contacts now), feet that land are anchored first and feet that lifted off
         forgotten; without them, the anchors stay as they are."""
         h, rot, jac, jac_w = self.kinematics.placements_and_jacobians(q_joints)  # type: ignore[attr-defined]
+        # C-contiguous, the kernels' loaded signatures (a slice's layout is another signature,
+        # loaded at the first call by numba's full set-up: 0.3 s, issue 39)
+        jac, jac_w = np.ascontiguousarray(jac), np.ascontiguousarray(jac_w)
         if R is not None and flags is not None:
             now = np.asarray(flags, dtype=bool)
             if self.lift:

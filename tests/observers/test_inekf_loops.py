@@ -5,12 +5,16 @@ docstring's equations written with dense matrices: ``P⁺ = Φ P Φᵀ + Q`` wit
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 import pytest
 from scipy.linalg import expm
 
 from pinobs.observers.inekf import GRAVITY, InEKFGains, adjoint, error_transition, sek3_exp
 from pinobs.observers.inekf_loops import (
+    _matmul,
+    _matvec3,
     correct_kernel,
     gamma_coefficients,
     load_kernels,
@@ -127,3 +131,42 @@ def test_gamma_coefficients_are_the_series_of_the_closed_forms(angle: float) -> 
 
     want = [series(1), series(2), series(2), series(3), series(3), series(4)]
     np.testing.assert_allclose(gamma_coefficients(t2), want, rtol=1e-12, atol=1e-15)
+
+
+def _fma(a: float, b: float, c: float) -> float:
+    """``a·b + c`` rounded once (exact rationals)."""
+    return float(Fraction(a) * Fraction(b) + Fraction(c))
+
+
+def test_the_kernels_products_are_fused_multiply_adds_in_blas_order(
+    rng: np.random.Generator,
+) -> None:
+    """The loops that replaced numba's ``@`` in the kernels (issue 39: it called SciPy's BLAS,
+    importing ``scipy.linalg``): ``_matmul``'s entries are ``Σ_k`` by fused multiply-adds in
+    the order of ``k`` (OpenBLAS ``gemm``'s), ``_matvec3``'s ``(a₁x₁ + a₀x₀) + a₂x₂``
+    (``gemv``'s on a 3 × 3), each rounded once; a transposed view is read as its transpose."""
+    import numba
+
+    @numba.njit
+    def products(A, B, x, AB, AtB, Ax):  # type: ignore[no-untyped-def]
+        _matmul(A, B, AB)
+        _matmul(A.T, B, AtB)
+        _matvec3(A[:3, :3], x, Ax)
+
+    for n in (3, 15):
+        A, B, x = rng.normal(size=(n, n)), rng.normal(size=(n, n)), rng.normal(size=3)
+        AB, AtB, Ax = np.empty((n, n)), np.empty((n, n)), np.empty(3)
+        products(A, B, x, AB, AtB, Ax)
+        for M, out in ((A, AB), (A.T, AtB)):
+            want = np.empty((n, n))
+            for i in range(n):
+                for j in range(n):
+                    t = 0.0
+                    for k in range(n):
+                        t = _fma(M[i, k], B[k, j], t)
+                    want[i, j] = t
+            np.testing.assert_array_equal(out, want)
+            np.testing.assert_allclose(out, M @ B, rtol=0, atol=1e-14 * n)
+        a = A[:3, :3]
+        want_x = [_fma(a[i, 2], x[2], _fma(a[i, 0], x[0], a[i, 1] * x[1])) for i in range(3)]
+        np.testing.assert_array_equal(Ax, want_x)

@@ -137,6 +137,21 @@ class RollingGo1Legs(Go1Legs):
         return self.rolling.legs(q)
 
 
+def _worst_pose_error(cls, samples, legs, **options) -> float:
+    """The largest pose error of ``cls`` (go1, its IMU frame, ``options``) started on the
+    truth through the IMU and run over the noise-free ``samples``."""
+    R_bi, r_bi = legs.imu_placement
+    ekf = cls(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", **options)
+    reset_through_imu(ekf, samples[0], R_bi, r_bi)
+    worst = 0.0
+    for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
+        est = ekf.update(t, q, omega, acc, contacts)
+        R_b = R_i @ R_bi.T
+        v_b = v_i - np.cross(R_i @ omega, R_b @ r_bi)
+        worst = max(worst, *pose_errors(est, R_b, v_b, p_i - R_b @ r_bi))
+    return worst
+
+
 @pytest.mark.parametrize("cls", [InvariantEKF, QuaternionEKF])
 def test_started_on_the_truth_with_rolling_feet_it_stays_there(cls) -> None:
     """Noise-free go1 whose feet rotate about their still touch-down points (the centres move
@@ -144,25 +159,12 @@ def test_started_on_the_truth_with_rolling_feet_it_stays_there(cls) -> None:
     points, not their projections, are still; R5's truth is the test below) the filter stays
     on the truth; without a radius, not."""
     legs = RollingGo1Legs()
-    R_bi, r_bi = legs.imu_placement
     samples = truth(legs, 200.0, 2.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
     centres = np.array([legs.rolling.kinematics.positions(s[4]) for s in samples])
-    worst = {}
-    for radius in (RADIUS, 0.0):
-        ekf = cls(
-            pinobs.load("go1"),
-            GO1_FEET,
-            imu_frame="imu_link",
-            foot_radius=radius,
-            rolling_lift=False,
-        )
-        reset_through_imu(ekf, samples[0], R_bi, r_bi)
-        worst[radius] = 0.0
-        for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
-            est = ekf.update(t, q, omega, acc, contacts)
-            R_b = R_i @ R_bi.T
-            v_b = v_i - np.cross(R_i @ omega, R_b @ r_bi)
-            worst[radius] = max(worst[radius], *pose_errors(est, R_b, v_b, p_i - R_b @ r_bi))
+    worst = {
+        radius: _worst_pose_error(cls, samples, legs, foot_radius=radius, rolling_lift=False)
+        for radius in (RADIUS, 0.0)
+    }
     world = np.array(
         [s[3] + c @ s[1].T for s, c in zip(samples, centres, strict=True)]
     )  # centres' world
@@ -285,25 +287,12 @@ def test_started_on_the_truth_with_feet_rolling_on_the_plane_it_stays_there(cls)
     level = Go1Legs("imu_link")
     base = truth(level, 200.0, 2.0, wobble=0.5, feet_z=None, inverse=level.inverse)
     legs = LiftedGo1Legs([s[1] for s in base])
-    R_bi, r_bi = legs.imu_placement
     samples = truth(legs, 200.0, 2.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
     assert all(np.array_equal(a[1], b[1]) for a, b in zip(base, samples, strict=True))
-    worst = {}
-    for lift in (True, False):
-        ekf = cls(
-            pinobs.load("go1"),
-            GO1_FEET,
-            imu_frame="imu_link",
-            foot_radius=RADIUS,
-            rolling_lift=lift,
-        )
-        reset_through_imu(ekf, samples[0], R_bi, r_bi)
-        worst[lift] = 0.0
-        for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
-            est = ekf.update(t, q, omega, acc, contacts)
-            R_b = R_i @ R_bi.T
-            v_b = v_i - np.cross(R_i @ omega, R_b @ r_bi)
-            worst[lift] = max(worst[lift], *pose_errors(est, R_b, v_b, p_i - R_b @ r_bi))
+    worst = {
+        lift: _worst_pose_error(cls, samples, legs, foot_radius=RADIUS, rolling_lift=lift)
+        for lift in (True, False)
+    }
     assert worst[True] < 1e-9
     assert worst[False] > 1e-4
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from functools import cache
 
 import numpy as np
@@ -124,3 +126,13 @@ def irregular_loop_log(
     q_meas = np.array([plant.integrate(x, noise_rng.normal(0, noise, plant.nv)) for x in qs])
     q_meas[0] = qs[0]
     return t, q_meas, np.array(taus), np.array(vs)
+
+
+def last_line(code: str, *, runs: int = 1) -> str:
+    """The last line ``code`` prints in a fresh Python process, run ``runs`` times in a row
+    (the last run's: a first run fills a cache the next one reads)."""
+    for _ in range(runs):
+        out = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True
+        )
+    return out.stdout.strip().splitlines()[-1]

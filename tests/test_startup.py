@@ -7,6 +7,8 @@ import sys
 
 import pytest
 
+from tests.conftest import last_line
+
 
 def test_import_pinobs_imports_no_numba_scipy_linalg_or_meshcat() -> None:
     code = (
@@ -85,8 +87,7 @@ def test_adaptive_learning_and_inekf_reset_import_no_scipy_signal_ndimage_or_spa
         "heavy = ('scipy.signal', 'scipy.ndimage', 'scipy.spatial', 'scipy.stats')\n"
         "print(sorted(m for m in heavy if m in sys.modules))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip().splitlines()[-1] == "[]"
+    assert last_line(code) == "[]"
 
 
 def test_ekf_and_background_adaptive_run_without_scipy_linalg_in_the_loops_process() -> None:
@@ -106,8 +107,7 @@ def test_ekf_and_background_adaptive_run_without_scipy_linalg_in_the_loops_proce
         "            obs.update(k * 1e-3, q0 + 0.1 * np.sin(k * 1e-2 + np.arange(robot.nv)))\n"
         "    print('scipy.linalg' in sys.modules)\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip().splitlines()[-1] == "False"
+    assert last_line(code) == "False"
 
 
 def test_warm_linear_algebra_imports_lapack_only_past_the_compiled_kernels() -> None:
@@ -138,11 +138,7 @@ def test_riemannian_made_a_second_time_imports_no_scipy_linalg() -> None:
         "    obs.update(k * 1e-3, q0 + 0.1 * np.sin(k * 1e-2 + np.arange(robot.nv)))\n"
         "print('scipy.linalg' in sys.modules)\n"
     )
-    runs = [
-        subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-        for _ in range(2)
-    ]
-    assert runs[1].stdout.strip().splitlines()[-1] == "False"
+    assert last_line(code, runs=2) == "False"
 
 
 def test_inekf_on_go1_imports_no_scipy_linalg() -> None:
@@ -167,11 +163,7 @@ def test_inekf_on_go1_imports_no_scipy_linalg() -> None:
         "        ekf.update(k * 1e-3, q, gyro, acc, [True] * 4)\n"
         "print('scipy.linalg' in sys.modules)\n"
     )
-    runs = [
-        subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-        for _ in range(2)
-    ]
-    assert runs[1].stdout.strip().splitlines()[-1] == "False"
+    assert last_line(code, runs=2) == "False"
 
 
 @pytest.mark.parametrize("name", ["ekf", "riemannian", "liegroup"])
@@ -191,5 +183,4 @@ def test_no_update_imports_a_module_on_a_lie_group_robot(name: str) -> None:
         "    obs.update(k * 1e-3, robot.integrate(q0, 1e-3 * np.sin(k * 1e-2 + np.arange(3))))\n"
         "print(sorted(set(sys.modules) - before))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip().splitlines()[-1] == "[]"
+    assert last_line(code) == "[]"

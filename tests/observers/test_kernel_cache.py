@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from tests.conftest import last_line
+
 #: A kernel module written to a temporary folder: its cache (``cache=True``) lands there.
 _KERNEL = """
 import numba
@@ -64,12 +66,6 @@ def test_a_cache_miss_compiles_and_a_cache_hit_loads_without_refreshing_numba(
     assert np.max(np.abs(np.array(loaded["out"]) - expected)) < 1e-15
 
 
-def _last_line(code: str) -> str:
-    """The last line ``code`` prints, run in a fresh Python process."""
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    return out.stdout.strip().splitlines()[-1]
-
-
 def test_a_kernel_without_a_disk_cache_compiles_as_usual() -> None:
     """A dispatcher with no disk cache (``cache=False``) loads nothing: it compiles with
     numba's own refresh, NumPy functions typed as usual."""
@@ -79,7 +75,7 @@ def test_a_kernel_without_a_disk_cache_compiles_as_usual() -> None:
         "f = numba.njit(lambda a: np.linalg.norm(a) + np.sum(a))\n"
         "print(load_signature(f, np.array([3.0, 4.0])))\n"
     )
-    assert _last_line(code) == "12.0"
+    assert last_line(code) == "12.0"
 
 
 def test_numba_compiles_as_usual_after_a_lean_load() -> None:
@@ -91,7 +87,7 @@ def test_numba_compiles_as_usual_after_a_lean_load() -> None:
         "f = numba.njit(lambda a: np.linalg.norm(a) + np.sum(a))\n"
         "print(f(np.array([3.0, 4.0])))\n"
     )
-    assert _last_line(code) == "12.0"
+    assert last_line(code) == "12.0"
 
 
 def test_kf_and_ekf_estimates_are_the_same_bits_with_numba_refreshed_first() -> None:
@@ -134,8 +130,4 @@ def test_kf_made_from_a_warm_cache_imports_neither_scipy_linalg_nor_numba_s_regi
         "heavy = ('scipy.linalg', 'numba.np.polynomial.polynomial_functions', 'numba')\n"
         "print(sorted(m for m in heavy if m in sys.modules))\n"
     )
-    runs = [
-        subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-        for _ in range(2)
-    ]
-    assert runs[1].stdout.strip().splitlines()[-1] == "['numba']"
+    assert last_line(code, runs=2) == "['numba']"

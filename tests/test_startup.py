@@ -141,6 +141,31 @@ def test_riemannian_made_a_second_time_imports_no_scipy_linalg() -> None:
     assert last_line(code, runs=2) == "False"
 
 
+def test_highgain_and_kalman_made_a_second_time_import_no_scipy_linalg() -> None:
+    """Issue 39: ``highgain``'s default bandwidth (a Lyapunov equation) and exact holds at its
+    regular intervals (``expm``) are computed with SciPy once; a later process takes them from
+    the cache (:mod:`pinobs.observers.gain_cache`, the same bits) and imports no
+    ``scipy.linalg``.  ``highgain`` and ``kalman`` on a UR5, made, then 1000 updates at
+    ±50 µs-jittered stamps (their intervals off the table: no ``expm``) that import no
+    module."""
+    code = (
+        "import sys, numpy as np, pinobs\n"
+        "robot = pinobs.load('ur5')\n"
+        "rng = np.random.default_rng(0)\n"
+        "for name in ('highgain', 'kalman'):\n"
+        "    obs = pinobs.make_observer(name, robot, rate=1000.0, noise_std=1e-4)\n"
+        "    q0 = robot.neutral(); obs.reset(0.0, q0)\n"
+        "    obs.update(1e-3, q0)\n"
+        "    before = set(sys.modules)\n"
+        "    for k in range(2, 1000):\n"
+        "        t = k * 1e-3 + rng.uniform(-5e-5, 5e-5)\n"
+        "        obs.update(t, q0 + 0.1 * np.sin(k * 1e-2 + np.arange(robot.nv)))\n"
+        "    assert set(sys.modules) == before, sorted(set(sys.modules) - before)\n"
+        "print('scipy.linalg' in sys.modules)\n"
+    )
+    assert last_line(code, runs=2) == "False"
+
+
 def test_inekf_on_go1_imports_no_scipy_linalg() -> None:
     """Issue 39: the invariant EKF's compiled kernels multiply their 3 × 3 matrices in loops,
     not by numba's ``@`` (which calls SciPy's BLAS: ``scipy.linalg`` imported when the

@@ -7,7 +7,10 @@ by list comprehensions at every step, the products by BLAS: the one-BLAS-thread 
 around every update).  ``highgain`` (:class:`~pinobs.observers.differentiators.HighGainDifferentiator`)
 once its gain is steady: the first-order-hold step ``Z = Φ [q; X] + ψ₀ y₀ + ψ₁ ẏ`` in one
 call (:func:`hold_loops`), ``Φ [q; X]`` with ``contract`` (OpenBLAS's ``gemm`` sums in the
-order of ``k`` with fused multiply-adds: the same bits, tested), the rest without.
+order of ``k`` with fused multiply-adds: the same bits, tested), the rest without; its
+``(Φ, ψ₀, ψ₁)`` at an interval off its table of ``expm``'s (jittered stamps) in one call too
+(:func:`hold_between_loops`: ``exp(M h)^m`` times a Taylor series, module docstring of
+:mod:`pinobs.observers.differentiators`; the products in loops, no BLAS).
 
 ``⊕`` is ``+`` and ``⊖`` is ``−`` there (Pinocchio's ``integrate`` and ``difference`` of a
 revolute or prismatic joint).  ``sliding``'s drift ``Σ_m x̂_{j+m} h^m/m!`` was NumPy's
@@ -25,7 +28,7 @@ import numpy as np
 from pinobs.observers.base import Vector
 from pinobs.observers.linalg import LazyKernel
 
-__all__ = ["chain_rk4_kernel", "hold_kernel", "sliding_kernel"]
+__all__ = ["chain_rk4_kernel", "hold_between_kernel", "hold_kernel", "sliding_kernel"]
 
 
 def _sign(x: float) -> float:
@@ -108,6 +111,60 @@ def hold_loops(
         yd = (share * d) / h
         for i in range(Z.shape[0]):
             Z[i, j] = Z[i, j] + psi0[i] * y0 + psi1[i] * yd
+
+
+def _matmul(a: Vector, b: Vector, out: Vector) -> None:
+    """``out = a b`` (square matrices; ``out`` another array)."""
+    n = a.shape[0]
+    for i in range(n):
+        for j in range(n):
+            t = 0.0
+            for k in range(n):
+                t += a[i, k] * b[k, j]
+            out[i, j] = t
+
+
+def hold_between_loops(
+    E_h: Vector, M: Vector, h: float, dt: float, rho: float, Phi: Vector, psi0: Vector,
+    psi1: Vector,
+) -> None:  # fmt: skip
+    """``highgain``'s first-order hold at an interval ``dt`` off its table
+    (:meth:`HighGainDifferentiator.hold_between`): ``exp(M dt) = exp(M h)^m exp(M r)``,
+    ``m = round(dt/h)``, ``r = dt − m h``, the second factor by its Taylor series to the first
+    term whose bound ``(ρ|r|)^{K+1}/(K+1)! e^{ρ|r|}`` is below the unit roundoff, in
+    Horner's form; ``(Φ, ψ₀, ψ₁)``: the first ``n`` rows of its last three blocks."""
+    N = M.shape[0]
+    n = N - 2
+    m = math.floor(dt / h + 0.5)
+    r = dt - m * h
+    x = abs(r) * rho
+    bound = math.exp(x)
+    K, term = 0, 1.0
+    while term * x / (K + 1) * bound > 2.0**-53:
+        K += 1
+        term *= x / K
+    T, W = np.eye(N), np.empty((N, N))
+    for j in range(K, 0, -1):  # T ← I + (M r / j) T
+        _matmul(M, T, W)
+        c = r / j
+        for a in range(N):
+            for b in range(N):
+                T[a, b] = (1.0 if a == b else 0.0) + c * W[a, b]
+    P, B = np.eye(N), E_h.copy()
+    while m > 0:  # P = exp(M h)^m by squaring
+        if m & 1:
+            _matmul(P, B, W)
+            P[:, :] = W
+        m >>= 1
+        if m > 0:
+            _matmul(B, B, W)
+            B[:, :] = W
+    _matmul(P, T, W)
+    for a in range(n):
+        for b in range(n):
+            Phi[a, b] = W[a, b]
+        psi0[a] = W[a, n]
+        psi1[a] = W[a, n + 1]
 
 
 def _fma(a: float, b: float, c: float) -> float:
@@ -294,6 +351,11 @@ sliding_kernel = LazyKernel(
 hold_kernel = LazyKernel(
     hold_loops, np.zeros(2), np.zeros((3, 2)), np.zeros(2), np.zeros(2), 0.5, 0.5, 1e-3,
     np.eye(4), np.zeros(4), np.zeros(4), np.zeros((4, 2)), contracted=("_product_fma",),
+)  # fmt: skip
+#: :func:`hold_between_loops` compiled.
+hold_between_kernel = LazyKernel(
+    hold_between_loops, np.eye(6), np.zeros((6, 6)), 1e-3, 1e-3, 1.0, np.zeros((4, 4)),
+    np.zeros(4), np.zeros(4), helpers=(_matmul,),
 )  # fmt: skip
 #: :func:`chain_rk4_loops` compiled.
 chain_rk4_kernel = LazyKernel(

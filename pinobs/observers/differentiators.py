@@ -29,11 +29,37 @@ first-order-hold discretisation of a continuous-time filter, order 4 in
 the step, and causal at the sample instants where the estimate is read.
 Once ``L(t)`` equals ``L∞`` to rounding, on robots whose configuration is
 a vector space, the step is the exact discretisation of the now LTI eq. (7)
-with that piecewise-linear ``y`` (one cached matrix exponential per step
-size), 10× cheaper than RK4 and exactly eq. 13 at the sample instants.
-On such robots both steps are one compiled call each (issue 39:
-:mod:`pinobs.observers.chain_kernels`; 8 Python calls an update, was 135 while ``L(t)``
-converges and 28 after; no BLAS call), the same bits.
+with that piecewise-linear ``y`` (the first-order hold: Franklin, Powell &
+Workman, *Digital Control of Dynamic Systems*, 3rd ed., §6.3.2)::
+
+    (x̂, y, ẏ)(t + dt) = exp(M dt) (x̂, y, ẏ)(t),   M = [[A − k C, k, 0], [0, 0, 1], [0, 0, 0]]
+
+(``k = L∞⁻¹Cᵀ``), 10× cheaper than RK4 and exactly eq. 13 at the sample instants.
+``exp(M dt)`` is SciPy's ``expm`` at every interval that regular stamps give
+(:func:`regular_intervals`: ``k·h`` or ``t += h`` in floating point differ from
+``h = 1/rate`` in their last bits, 67 intervals at 1 kHz below 48 days), computed when
+the observer is made and kept on disk (:mod:`pinobs.observers.gain_cache`: a later process
+makes it without ``scipy.linalg``).  At any other interval (a live loop's jittered stamps,
+a dropped sample), no ``expm`` (issue 39: every jittered interval was new, an ``expm`` an
+update, the median update 4–7× slower)::
+
+    exp(M dt) = exp(M h)^m · Σ_{j=0}^{K} (M r)^j / j!,   m = round(dt/h),  r = dt − m h
+
+(the exponential's semigroup property, ``exp(M h)`` from the table, ``|r| ≤ h/2``; Moler &
+Van Loan, "Nineteen dubious ways to compute the exponential of a matrix, twenty-five years
+later", SIAM Review 45 (2003), methods 1 and 3), ``K`` the first with
+``(ρ|r|)^{K+1}/(K+1)! · e^{ρ|r|} ≤ 2⁻⁵³`` (the series' remainder below the unit roundoff),
+``ρ = ‖D⁻¹ M D‖₁`` in the chain's scaling ``D = diag(1, γ, …, γ^{n−1}, 1, γ)`` where ``M``'s
+entries are ``O(γ)`` (ρ = 15γ at order 4: ``K = 7`` at ±50 µs off 1 kHz), in Horner's form;
+``exp(M h)^m`` by squaring.  Against ``expm`` (UR5; orders 2–6, γ = 20–200 /s, 200 and
+1000 Hz; entries scaled by ``γ^{i−j}``): within 1.1e-15 for ``|dt − h| ≤ h/2`` and 1.9e-14
+for ``dt`` = 1.5–10.5 ``h``; at ``dt = 400 h`` (order 6) ``expm`` itself is 2.9e-11 off a
+50-digit exponential and this 4.9e-14.  Estimates over 3 s at ±50 µs jitter (four option
+sets): at most 9.3e-16 (``q̂``) and 7.9e-14 (``v̂``) of their largest value off the
+``expm`` path.  On such robots the steps are one compiled call each (issue 39:
+:mod:`pinobs.observers.chain_kernels`; 8 Python calls an update at most, 7 for the hold at
+a regular interval and 9 at another, was 135 while ``L(t)`` converges and 28 after; no BLAS
+call), the same bits.
 ``L(0) = L∞(γ/κ)`` with κ = ``gain_ramp``: the observer starts κ times slower
 and speeds up to γ within a few ``1/γ`` (the "nice transient" of Ibrir §5);
 ``L(t) ⪰ L∞ ≻ 0`` all along, since ``L∞(γ)`` decreases with γ.
@@ -122,9 +148,14 @@ import numpy as np
 from pinobs.errors import GainError
 from pinobs.model import Robot, lie_rk4
 from pinobs.observers.base import Observer, Vector, positive, register
-from pinobs.observers.blas import one_blas_thread
-from pinobs.observers.chain_kernels import chain_rk4_kernel, hold_kernel, sliding_kernel
+from pinobs.observers.chain_kernels import (
+    chain_rk4_kernel,
+    hold_between_kernel,
+    hold_kernel,
+    sliding_kernel,
+)
 from pinobs.observers.fused import loaded
+from pinobs.observers.gain_cache import expm_at, solve_continuous_lyapunov
 
 __all__ = [
     "DifferentiatorGains",
@@ -133,6 +164,7 @@ __all__ = [
     "chain_matrix",
     "default_bandwidth",
     "gain_riccati_rhs",
+    "regular_intervals",
     "steady_gain_matrix",
     "steady_gains",
     "transfer_function",
@@ -140,6 +172,7 @@ __all__ = [
 
 _DEFAULT_RATE = 1000.0  # [Hz] assumed for default gains when no rate is given
 _STEADY_TOL = 1e-13  # relative distance of L(t) to L∞ below which the gain is held fixed
+_REGULAR_SPAN = 2.0**22  # [s] stamps up to which regular intervals have exact holds (48 days)
 _new_tuple = tuple.__new__  # a state NamedTuple without its __new__ (a Python call less)
 
 
@@ -200,10 +233,23 @@ def _velocity_noise_coefficient(n: int) -> float:
     A = chain_matrix(n)
     g = steady_gains(n, 1.0)
     F = A - np.outer(g, np.eye(n)[0])
-    from scipy.linalg import solve_continuous_lyapunov  # lazy: 0.2 s at import
-
-    X = solve_continuous_lyapunov(F, -np.outer(g, g))
+    X = solve_continuous_lyapunov(F, -np.outer(g, g))  # (SciPy's, cached: gain_cache)
     return float(X[1, 1])
+
+
+def regular_intervals(h: float, t_max: float = _REGULAR_SPAN) -> Vector:
+    """The intervals ``fl(t_k − t_{k−1})`` [s] that regular stamps ``t_k = t₀ + k·h`` below
+    ``t_max`` [s] give in floating point, sorted (``k*h``, ``t += h``, with or without an
+    offset): where ``t`` has spacing ``u`` (its binade), each stamp is a multiple of ``u``
+    within ``u`` of its exact value, so the interval is a multiple of ``u`` (of the finer
+    spacing across a binade's edge) within ``2u`` of ``h``."""
+    out = {h}
+    e = math.frexp(h)[1] - 1  # h ∈ [2^e, 2^{e+1})
+    while 2.0**e < t_max:
+        u = 2.0 ** (e - 52)  # the spacing of the floats in [2^e, 2^{e+1})
+        out.update(m * u for m in range(math.ceil(h / u - 2.0), math.floor(h / u + 2.0) + 1))
+        e += 1
+    return np.array(sorted(out))
 
 
 def default_bandwidth(
@@ -295,7 +341,9 @@ class HighGainDifferentiator(Observer[_HGState]):
         gamma: bandwidth γ [1/s]; default from ``rate``/``noise_std`` (module docstring).
         gain_ramp: κ >= 1, ``L(0) = L∞(γ/κ)`` (1: start at the steady gain).
         deriv_bound: bound B on ``|y^{(n)}|`` [rad/sⁿ] for the default γ.
-        rate: sample rate hint [Hz].
+        rate: sample rate hint [Hz]; ``1/rate`` (1 ms without it) is the nominal interval of the
+            table of exact holds (module docstring): stamps at another rate take
+            :meth:`hold_between` (within rounding of ``expm``, not its bits).
         noise_std: position noise hint [rad or m].
     """
 
@@ -324,15 +372,35 @@ class HighGainDifferentiator(Observer[_HGState]):
         self._L_inf = steady_gain_matrix(order, g)
         self._L_scale = float(np.max(np.abs(self._L_inf)))
         self._k_inf = np.linalg.solve(self._L_inf, self._c)
-        self._foh_cache: dict[float, tuple[Vector, Vector, Vector]] = {}
-        import scipy.linalg  # noqa: F401  (lazy for `import pinobs`, here for the first update)
-
+        self._build_holds(1.0 / (self.rate or _DEFAULT_RATE))
         # the steps compiled on a vector space (pinobs.observers.chain_kernels): no BLAS
         compiled = _compiled(self.robot)
         self._hold = loaded(hold_kernel) if compiled else None
         self._rk4 = loaded(chain_rk4_kernel) if compiled else None
+        self._between = loaded(hold_between_kernel) if compiled else None
         self._tol = _STEADY_TOL * self._L_scale
-        self.uses_blas = not compiled  # (a new interval's expm: on one thread by itself)
+        self.uses_blas = not compiled
+
+    def _build_holds(self, h: float) -> None:
+        """The exact holds ``exp(M·dt)`` (SciPy's ``expm``, cached on disk: gain_cache) at
+        every :func:`regular_intervals` of the nominal interval ``h`` [s], and what
+        :meth:`hold_between` needs for any other interval (module docstring)."""
+        n = self.gains.order
+        M = np.zeros((n + 2, n + 2))  # d/dt (x̂, y, ẏ) for the steady eq. (7), y linear
+        M[:n, :n] = chain_matrix(n) - np.outer(self._k_inf, self._c)
+        M[:n, n] = self._k_inf
+        M[n, n + 1] = 1.0
+        dts = regular_intervals(h)
+        E = expm_at(M, dts)  # E[i] = expm(M·dts[i]), the bits expm gives
+        # contiguous copies (the same numbers): the compiled step's loaded signature
+        self._foh_cache = {
+            float(dt): (e[:n, :n].copy(), e[:n, n].copy(), e[:n, n + 1].copy())
+            for dt, e in zip(dts, E, strict=True)
+        }
+        self._M, self._h, self._E_h = M, h, E[int(np.searchsorted(dts, h))].copy()
+        scale = self.gains.gamma ** np.r_[np.arange(n), 0.0, 1.0]  # x̂_j ~ γ^{j−1}, y ~ 1, ẏ ~ γ
+        self._rho = float(np.max(np.sum(np.abs(M * scale / scale[:, None]), axis=0)))
+        self._between_out = (np.empty((n, n)), np.empty(n), np.empty(n))
 
     @property
     def options(self) -> dict[str, object]:
@@ -409,7 +477,8 @@ class HighGainDifferentiator(Observer[_HGState]):
                 return self._committed(q, X, L, q_meas, state, since)
         if mode == 2:  # steady, a sample after a sample: the exact first-order hold
             assert self._hold is not None and y is not None and q_meas is not None
-            Phi, psi0, psi1 = self._first_order_hold(dt)
+            holds = self._foh_cache.get(dt)  # (_first_order_hold, a Python call less)
+            Phi, psi0, psi1 = self.hold_between(dt) if holds is None else holds
             Z = np.empty((self.gains.order, y.shape[0]))
             self._hold(state.q, state.X, y, q_meas, ratio, share, dt, Phi, psi0, psi1, Z)
             return _new_tuple(_HGState, (Z[0], Z[1:], L_inf, m.copy(), 0.0))
@@ -478,23 +547,37 @@ class HighGainDifferentiator(Observer[_HGState]):
         return _HGState(q, X, L, q_meas.copy(), 0.0)
 
     def _first_order_hold(self, dt: float) -> tuple[Vector, Vector, Vector]:
-        """``(Φ, ψ₀, ψ₁)`` with ``x̂(dt) = Φ x̂(0) + ψ₀ y(0) + ψ₁ ẏ`` for the steady eq. (7), y linear."""
+        """``(Φ, ψ₀, ψ₁)`` with ``x̂(dt) = Φ x̂(0) + ψ₀ y(0) + ψ₁ ẏ`` for the steady eq. (7), y linear:
+        SciPy's ``expm`` at a regular interval (the table), :meth:`hold_between` otherwise."""
         cached = self._foh_cache.get(dt)
         if cached is None:
-            n = self.gains.order
-            aug = np.zeros((n + 2, n + 2))
-            aug[:n, :n] = chain_matrix(n) - np.outer(self._k_inf, self._c)
-            aug[:n, n] = self._k_inf
-            aug[n, n + 1] = 1.0
-            from scipy.linalg import expm  # lazy (imported by the constructor already)
-
-            E = one_blas_thread(expm)(aug * dt)  # (update may run without the limit)
-            # contiguous copies (the same numbers): the compiled step's loaded signature
-            cached = (E[:n, :n].copy(), E[:n, n].copy(), E[:n, n + 1].copy())
-            if len(self._foh_cache) >= 16:
-                self._foh_cache.clear()
-            self._foh_cache[dt] = cached
+            return self.hold_between(dt)
         return cached
+
+    def hold_between(self, dt: float) -> tuple[Vector, Vector, Vector]:
+        """``(Φ, ψ₀, ψ₁)`` at any interval ``dt`` [s] without ``expm``:
+        ``exp(M dt) = exp(M h)^m exp(M r)``, ``m = round(dt/h)``, ``r = dt − m h``, the second
+        factor by its Taylor series truncated below rounding (module docstring).  The arrays
+        are this observer's buffers, overwritten by the next call."""
+        Phi, psi0, psi1 = self._between_out
+        if self._between is not None:  # (pinobs.observers.chain_kernels.hold_between_loops)
+            self._between(self._E_h, self._M, self._h, dt, self._rho, Phi, psi0, psi1)
+            return Phi, psi0, psi1
+        M, h, n = self._M, self._h, self.gains.order
+        m = math.floor(dt / h + 0.5)
+        r = dt - m * h
+        x = abs(r) * self._rho
+        K, term, bound = 0, 1.0, math.exp(x)
+        while term * x / (K + 1) * bound > 2.0**-53:  # Taylor's remainder below rounding
+            K += 1
+            term *= x / K
+        eye = np.eye(n + 2)
+        T = eye
+        for j in range(K, 0, -1):  # Horner: T ← I + (M r / j) T
+            T = eye + (r / j) * (M @ T)
+        E = np.linalg.matrix_power(self._E_h, m) @ T
+        Phi[:], psi0[:], psi1[:] = E[:n, :n], E[:n, n], E[:n, n + 1]
+        return Phi, psi0, psi1
 
     def output(self, state: _HGState) -> tuple[Vector, Vector]:
         return state.q, state.X[0]

@@ -88,3 +88,37 @@ def test_the_cache_is_beside_the_module_then_in_the_users_cache_folder(
     here, user = gain_cache.cache_dirs()
     assert here == Path(gain_cache.__file__).resolve().parent / "__pycache__"
     assert user == tmp_path / "pinobs"
+
+
+def test_lyapunov_and_expm_taken_from_the_cache_are_scipys_to_the_bit(cache, monkeypatch) -> None:
+    F = np.array([[-4.0, 1.0], [-6.0, 0.0]])
+    Q = -np.outer([4.0, 6.0], [4.0, 6.0])
+    M, times = np.array([[-3.0, 1.0, 3.0], [-2.0, 0.0, 2.0], [0.0, 0.0, 0.0]]), np.r_[1e-3, 0.1]
+    lyapunov = scipy.linalg.solve_continuous_lyapunov(F, Q)
+    expms = np.stack([scipy.linalg.expm(M * t) for t in times])
+    assert np.array_equal(gain_cache.solve_continuous_lyapunov(F, Q), lyapunov)  # solved
+    assert np.array_equal(gain_cache.expm_at(M, times), expms)
+
+    def no_scipy(*_args):
+        raise AssertionError("solved again")
+
+    monkeypatch.setattr(scipy.linalg, "solve_continuous_lyapunov", no_scipy)
+    monkeypatch.setattr(scipy.linalg, "expm", no_scipy)
+    assert np.array_equal(gain_cache.solve_continuous_lyapunov(F, Q), lyapunov)  # cached
+    hit = gain_cache.expm_at(M, times)
+    assert np.array_equal(hit, expms) and hit.shape == (2, 3, 3)
+    with pytest.raises(AssertionError, match="solved again"):
+        gain_cache.expm_at(M, times[:1])  # other inputs: not in the cache
+
+
+def test_the_file_keeps_the_newest_entries(cache, monkeypatch) -> None:
+    monkeypatch.setattr(gain_cache, "_MAX_ENTRIES", 3)
+    for k in range(5):
+        gain_cache.cached("square", np.square, np.array([float(k)]))
+    keys = list(json.loads(cache.read_text()))
+    assert len(keys) == 3 and [k.split("|")[0] for k in keys] == ["square"] * 3
+    assert [float.fromhex(json.loads(cache.read_text())[k]["data"][0]) for k in keys] == [
+        4.0,
+        9.0,
+        16.0,
+    ]

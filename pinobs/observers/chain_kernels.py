@@ -8,7 +8,7 @@ around every update).  ``highgain`` (:class:`~pinobs.observers.differentiators.H
 once its gain is steady: the first-order-hold step ``Z = Φ [q; X] + ψ₀ y₀ + ψ₁ ẏ`` in one
 call (:func:`hold_loops`), ``Φ [q; X]`` with ``contract`` (OpenBLAS's ``gemm`` sums in the
 order of ``k`` with fused multiply-adds: the same bits, tested), the rest without; its
-``(Φ, ψ₀, ψ₁)`` at an interval off its table of ``expm``'s (jittered stamps) in one call too
+``(Φ, ψ₀, ψ₁)`` at an interval other than the nominal one (jittered stamps) in one call too
 (:func:`hold_between_loops`: ``exp(M h)^m`` times a Taylor series, module docstring of
 :mod:`pinobs.observers.differentiators`; the products in loops, no BLAS).
 
@@ -128,7 +128,7 @@ def hold_between_loops(
     E_h: Vector, M: Vector, h: float, dt: float, rho: float, Phi: Vector, psi0: Vector,
     psi1: Vector,
 ) -> None:  # fmt: skip
-    """``highgain``'s first-order hold at an interval ``dt`` off its table
+    """``highgain``'s first-order hold at an interval ``dt`` other than its nominal ``h``
     (:meth:`HighGainDifferentiator.hold_between`): ``exp(M dt) = exp(M h)^m exp(M r)``,
     ``m = round(dt/h)``, ``r = dt − m h``, the second factor by its Taylor series to the first
     term whose bound ``(ρ|r|)^{K+1}/(K+1)! e^{ρ|r|}`` is below the unit roundoff, in

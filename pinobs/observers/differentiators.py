@@ -35,17 +35,16 @@ Workman, *Digital Control of Dynamic Systems*, 3rd ed., §6.3.2)::
     (x̂, y, ẏ)(t + dt) = exp(M dt) (x̂, y, ẏ)(t),   M = [[A − k C, k, 0], [0, 0, 1], [0, 0, 0]]
 
 (``k = L∞⁻¹Cᵀ``), 10× cheaper than RK4 and exactly eq. 13 at the sample instants.
-``exp(M dt)`` is SciPy's ``expm`` at every interval that regular stamps give
-(:func:`regular_intervals`: ``k·h`` or ``t += h`` in floating point differ from
-``h = 1/rate`` in their last bits, 67 intervals at 1 kHz below 48 days), computed when
-the observer is made and kept on disk (:mod:`pinobs.observers.gain_cache`: a later process
-makes it without ``scipy.linalg``).  At any other interval (a live loop's jittered stamps,
-a dropped sample), no ``expm`` (issue 39: every jittered interval was new, an ``expm`` an
+``exp(M h)`` at the nominal interval ``h = 1/rate`` is SciPy's ``expm``, computed when the
+observer is made and kept on disk (:mod:`pinobs.observers.gain_cache`: a later process makes
+it without ``scipy.linalg``).  At any other interval (``k·h`` or ``t += h`` in floating point,
+which differ from ``h`` in their last bits; a live loop's jittered stamps; a dropped sample),
+no ``expm`` (issue 39: every jittered interval was new, an ``expm`` an
 update, the median update 4–7× slower)::
 
     exp(M dt) = exp(M h)^m · Σ_{j=0}^{K} (M r)^j / j!,   m = round(dt/h),  r = dt − m h
 
-(the exponential's semigroup property, ``exp(M h)`` from the table, ``|r| ≤ h/2``; Moler &
+(the exponential's semigroup property, ``exp(M h)`` from the cache, ``|r| ≤ h/2``; Moler &
 Van Loan, "Nineteen dubious ways to compute the exponential of a matrix, twenty-five years
 later", SIAM Review 45 (2003), methods 1 and 3), ``K`` the first with
 ``(ρ|r|)^{K+1}/(K+1)! · e^{ρ|r|} ≤ 2⁻⁵³`` (the series' remainder below the unit roundoff),
@@ -58,7 +57,7 @@ for ``dt`` = 1.5–10.5 ``h``; at ``dt = 400 h`` (order 6) ``expm`` itself is 2.
 sets): at most 9.3e-16 (``q̂``) and 7.9e-14 (``v̂``) of their largest value off the
 ``expm`` path.  On such robots the steps are one compiled call each (issue 39:
 :mod:`pinobs.observers.chain_kernels`; 8 Python calls an update at most, 7 for the hold at
-a regular interval and 9 at another, was 135 while ``L(t)`` converges and 28 after; no BLAS
+the interval ``h`` and 9 at another, was 135 while ``L(t)`` converges and 28 after; no BLAS
 call), the same bits.
 ``L(0) = L∞(γ/κ)`` with κ = ``gain_ramp``: the observer starts κ times slower
 and speeds up to γ within a few ``1/γ`` (the "nice transient" of Ibrir §5);
@@ -164,7 +163,6 @@ __all__ = [
     "chain_matrix",
     "default_bandwidth",
     "gain_riccati_rhs",
-    "regular_intervals",
     "steady_gain_matrix",
     "steady_gains",
     "transfer_function",
@@ -172,7 +170,6 @@ __all__ = [
 
 _DEFAULT_RATE = 1000.0  # [Hz] assumed for default gains when no rate is given
 _STEADY_TOL = 1e-13  # relative distance of L(t) to L∞ below which the gain is held fixed
-_REGULAR_SPAN = 2.0**22  # [s] stamps up to which regular intervals have exact holds (48 days)
 _new_tuple = tuple.__new__  # a state NamedTuple without its __new__ (a Python call less)
 
 
@@ -235,21 +232,6 @@ def _velocity_noise_coefficient(n: int) -> float:
     F = A - np.outer(g, np.eye(n)[0])
     X = solve_continuous_lyapunov(F, -np.outer(g, g))  # (SciPy's, cached: gain_cache)
     return float(X[1, 1])
-
-
-def regular_intervals(h: float, t_max: float = _REGULAR_SPAN) -> Vector:
-    """The intervals ``fl(t_k − t_{k−1})`` [s] that regular stamps ``t_k = t₀ + k·h`` below
-    ``t_max`` [s] give in floating point, sorted (``k*h``, ``t += h``, with or without an
-    offset): where ``t`` has spacing ``u`` (its binade), each stamp is a multiple of ``u``
-    within ``u`` of its exact value, so the interval is a multiple of ``u`` (of the finer
-    spacing across a binade's edge) within ``2u`` of ``h``."""
-    out = {h}
-    e = math.frexp(h)[1] - 1  # h ∈ [2^e, 2^{e+1})
-    while 2.0**e < t_max:
-        u = 2.0 ** (e - 52)  # the spacing of the floats in [2^e, 2^{e+1})
-        out.update(m * u for m in range(math.ceil(h / u - 2.0), math.floor(h / u + 2.0) + 1))
-        e += 1
-    return np.array(sorted(out))
 
 
 def default_bandwidth(
@@ -341,9 +323,9 @@ class HighGainDifferentiator(Observer[_HGState]):
         gamma: bandwidth γ [1/s]; default from ``rate``/``noise_std`` (module docstring).
         gain_ramp: κ >= 1, ``L(0) = L∞(γ/κ)`` (1: start at the steady gain).
         deriv_bound: bound B on ``|y^{(n)}|`` [rad/sⁿ] for the default γ.
-        rate: sample rate hint [Hz]; ``1/rate`` (1 ms without it) is the nominal interval of the
-            table of exact holds (module docstring): stamps at another rate take
-            :meth:`hold_between` (within rounding of ``expm``, not its bits).
+        rate: sample rate hint [Hz]; ``1/rate`` (1 ms without it) is the nominal interval ``h``
+            of the exact hold (module docstring): other intervals take :meth:`hold_between`
+            (within rounding of ``expm``, not its bits).
         noise_std: position noise hint [rad or m].
     """
 
@@ -382,22 +364,18 @@ class HighGainDifferentiator(Observer[_HGState]):
         self.uses_blas = not compiled
 
     def _build_holds(self, h: float) -> None:
-        """The exact holds ``exp(M·dt)`` (SciPy's ``expm``, cached on disk: gain_cache) at
-        every :func:`regular_intervals` of the nominal interval ``h`` [s], and what
-        :meth:`hold_between` needs for any other interval (module docstring)."""
+        """The exact hold ``exp(M·h)`` at the nominal interval ``h`` [s] (SciPy's ``expm``,
+        cached on disk: gain_cache), and what :meth:`hold_between` needs for any other
+        interval (module docstring)."""
         n = self.gains.order
         M = np.zeros((n + 2, n + 2))  # d/dt (x̂, y, ẏ) for the steady eq. (7), y linear
         M[:n, :n] = chain_matrix(n) - np.outer(self._k_inf, self._c)
         M[:n, n] = self._k_inf
         M[n, n + 1] = 1.0
-        dts = regular_intervals(h)
-        E = expm_at(M, dts)  # E[i] = expm(M·dts[i]), the bits expm gives
+        E = expm_at(M, np.array([h]))[0]  # expm(M·h), the bits expm gives
         # contiguous copies (the same numbers): the compiled step's loaded signature
-        self._foh_cache = {
-            float(dt): (e[:n, :n].copy(), e[:n, n].copy(), e[:n, n + 1].copy())
-            for dt, e in zip(dts, E, strict=True)
-        }
-        self._M, self._h, self._E_h = M, h, E[int(np.searchsorted(dts, h))].copy()
+        self._foh_cache = {h: (E[:n, :n].copy(), E[:n, n].copy(), E[:n, n + 1].copy())}
+        self._M, self._h, self._E_h = M, h, E
         scale = self.gains.gamma ** np.r_[np.arange(n), 0.0, 1.0]  # x̂_j ~ γ^{j−1}, y ~ 1, ẏ ~ γ
         self._rho = float(np.max(np.sum(np.abs(M * scale / scale[:, None]), axis=0)))
         self._between_out = (np.empty((n, n)), np.empty(n), np.empty(n))
@@ -476,9 +454,13 @@ class HighGainDifferentiator(Observer[_HGState]):
                        self._k_inf, True, mode, y, m, ratio, share, dt, q, X, L):  # fmt: skip
                 return self._committed(q, X, L, q_meas, state, since)
         if mode == 2:  # steady, a sample after a sample: the exact first-order hold
-            assert self._hold is not None and y is not None and q_meas is not None
+            assert self._hold is not None and self._between is not None and y is not None
+            assert q_meas is not None
             holds = self._foh_cache.get(dt)  # (_first_order_hold, a Python call less)
-            Phi, psi0, psi1 = self.hold_between(dt) if holds is None else holds
+            if holds is None:  # (hold_between's compiled path inline, a Python call less)
+                holds = self._between_out
+                self._between(self._E_h, self._M, self._h, dt, self._rho, *holds)
+            Phi, psi0, psi1 = holds
             Z = np.empty((self.gains.order, y.shape[0]))
             self._hold(state.q, state.X, y, q_meas, ratio, share, dt, Phi, psi0, psi1, Z)
             return _new_tuple(_HGState, (Z[0], Z[1:], L_inf, m.copy(), 0.0))
@@ -548,7 +530,7 @@ class HighGainDifferentiator(Observer[_HGState]):
 
     def _first_order_hold(self, dt: float) -> tuple[Vector, Vector, Vector]:
         """``(Φ, ψ₀, ψ₁)`` with ``x̂(dt) = Φ x̂(0) + ψ₀ y(0) + ψ₁ ẏ`` for the steady eq. (7), y linear:
-        SciPy's ``expm`` at a regular interval (the table), :meth:`hold_between` otherwise."""
+        SciPy's ``expm`` at the nominal interval, :meth:`hold_between` otherwise."""
         cached = self._foh_cache.get(dt)
         if cached is None:
             return self.hold_between(dt)

@@ -6,7 +6,7 @@ it for numbers that depend on their inputs alone: ``riemannian``'s gains from th
 (:func:`~pinobs.observers.riemannian.gains_from_noise`, a 2 × 2 discrete Riccati equation:
 :func:`solve_discrete_are`), and ``highgain``'s (``kalman`` builds one) default bandwidth
 (the Lyapunov equation of its noise coefficient: :func:`solve_continuous_lyapunov`) and
-exact first-order holds at its regular sample intervals (:func:`expm_at`; module docstring of
+exact first-order hold at its nominal sample interval (:func:`expm_at`; module docstring of
 :mod:`pinobs.observers.differentiators`).  :func:`cached` serves the three: a result depends on
 the solver, its inputs and the SciPy that computed it, nothing else, so it is kept, as numba
 keeps its compiled kernels, in a JSON file in ``pinobs/observers/__pycache__`` (or, where that
@@ -33,7 +33,7 @@ from pinobs.observers.blas import one_blas_thread
 __all__ = ["cache_dirs", "cached", "expm_at", "solve_continuous_lyapunov", "solve_discrete_are"]
 
 _FILE = "pinobs_gains.json"
-#: Entries kept in the file, the newest (``highgain``'s holds: about 60 kB each).
+#: Entries kept in the file, the newest (a read stays a few milliseconds).
 _MAX_ENTRIES = 32
 
 

@@ -6,6 +6,7 @@ operations to the bit)."""
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -29,7 +30,7 @@ from pinobs.observers.linalg import joseph_update, transition_matrix
 from pinobs.observers.riemannian import jacobi_operator
 from pinobs.simulation import Sensor
 from tests.conftest import cached_robot
-from tests.observers.test_fused import _assert_close_per_signal, _run
+from tests.observers.test_fused import _run
 from tests.observers.test_purity import fingerprint
 
 # the attributes that switch the compiled paths on (None: the NumPy step)
@@ -61,21 +62,42 @@ def test_the_compiled_step_equals_the_numpy_step_over_thousands_of_updates(
     robot_name: str, name: str, duration: float
 ) -> None:
     """A run with missing samples (and the gate on), 2000–3000 updates from a start off the
-    truth: the estimates equal per signal to 1e-12 of its largest value, the compiled step
-    against the NumPy one (the same observer with its compiled paths switched off)."""
+    truth: the compiled step against the NumPy one (the same observer with its compiled paths
+    switched off), the estimates equal to rounding: per signal to 1e-12 of its largest value,
+    or, where the run itself amplifies rounding beyond that, no further apart than 4× what
+    one ulp on one sample moves the NumPy run (its own sensitivity to rounding).  Measured:
+    talos ``riemannian`` on a CPU without AVX-512 (OpenBLAS's Haswell kernels) 1.5–1.9e-12
+    of a velocity's largest value apart, and the NumPy run 1.6e-12 from itself with one ulp
+    on its first sample (within 1e-12 on an AVX-512 machine, where it was written)."""
     robot = cached_robot(robot_name)
     res = pinobs.simulate(robot, [], duration=duration, sensor=Sensor(1000.0, 1e-4), seed=4)
     fast = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
-    slow = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
     taken = [a for a in _COMPILED if getattr(fast, a, None) is not None]
     assert taken  # a compiled path is the one compared
-    for attr in taken:
-        setattr(slow, attr, None)
-    q_fast, v_fast = _run(fast, res)
-    q_slow, v_slow = _run(slow, res)
-    assert np.isfinite(v_slow).all()
-    _assert_close_per_signal(q_fast, q_slow, 1e-12)
-    _assert_close_per_signal(v_fast, v_slow, 1e-12)
+
+    def numpy_run(r: pinobs.Result) -> tuple[np.ndarray, np.ndarray]:
+        slow = make_observer(name, robot, rate=1000.0, noise_std=1e-4)
+        for attr in taken:
+            setattr(slow, attr, None)
+        return _run(slow, r)
+
+    fast_qv, slow_qv = _run(fast, res), numpy_run(res)
+    assert np.isfinite(slow_qv[1]).all()
+    apart = [_largest_relative(a, b) for a, b in zip(fast_qv, slow_qv, strict=True)]
+    limit = 1e-12
+    if max(apart) > limit:  # the run's own rounding sensitivity: one ulp on one sample
+        q_meas = res.q_meas.copy()
+        q_meas[1] = np.nextafter(q_meas[1], np.inf)
+        nudged = dataclasses.replace(res, q_meas=q_meas)
+        spread = [_largest_relative(a, b) for a, b in zip(numpy_run(nudged), slow_qv, strict=True)]
+        assert 0.0 < max(spread) < 1e-10  # (a sensitivity of rounding size, not a blow-up)
+        limit = 4.0 * max(spread)
+    assert max(apart) <= limit, (apart, limit)
+
+
+def _largest_relative(a: np.ndarray, b: np.ndarray) -> float:
+    """The largest difference of a signal (column) over its largest |value| in ``b``."""
+    return float(np.max(np.abs(a - b).max(axis=0) / np.abs(b).max(axis=0)))
 
 
 @pytest.mark.parametrize("robot_name", ["go1", "talos", "cartpole_continuous", "top", "brackets"])

@@ -17,7 +17,7 @@ import pinobs
 from pinobs.model import AnalyticMetric, dynamics_rk4
 from pinobs.model.integrators import difference_call, integrate_call
 from pinobs.observers import blocks, make_observer
-from pinobs.observers.blockstep import bracket_table, transition_kernels
+from pinobs.observers.blockstep import MOST_RATIO, bracket_table, transition_kernels
 from pinobs.observers.fused import (
     JacobiCalls,
     ad_kernel,
@@ -274,11 +274,13 @@ def test_the_lie_group_paths_keep_step_pure(robot_name: str, name: str) -> None:
             np.testing.assert_array_equal(a, b)
 
 
-def _talos_state(rng: np.random.Generator, robot: pinobs.Robot) -> tuple[Any, ...]:
+def _talos_state(
+    rng: np.random.Generator, robot: pinobs.Robot, scale: float = 1e-6
+) -> tuple[Any, ...]:
     nv = robot.nv
     q, v = robot.random_configuration(rng, scale=0.5), rng.standard_normal(nv)
     X = rng.standard_normal((2 * nv, 4 * nv))
-    P = 1e-4 * (X @ X.T) / (4 * nv) + 1e-8 * np.eye(2 * nv)  # SPD, spread as a filter's
+    P = scale * (X @ X.T) / (4 * nv) + 1e-8 * np.eye(2 * nv)  # SPD, spread as a filter's
     return q, v, P, robot.gravity(q)
 
 
@@ -288,7 +290,8 @@ def test_the_block_step_equals_predict_then_correct_on_talos() -> None:
     :meth:`predict` and :meth:`correct` on ``A`` (:func:`blocks.transition`,
     :func:`blocks.joseph_update`): ``(q⁻, v⁻)`` to the bit (both RKMK4 steps are
     :func:`dynamics_rk4`'s), ``P⁻``, ``dx``, ``P⁺`` to 1e-13 of their largest entries,
-    ``P⁺`` exactly symmetric."""
+    ``P⁺`` exactly symmetric (the block step's ``P⁻ − Zᵀ Z`` against the Joseph form, with
+    ``P⁻_qq`` up to 1e-6, 100 ``R``: below ``MOST_RATIO``)."""
     robot = cached_robot("talos")
     nv = robot.nv
     ekf = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
@@ -314,9 +317,14 @@ def test_the_block_step_equals_predict_then_correct_on_talos() -> None:
         assert nis == pytest.approx(float(e @ np.linalg.solve(S, e)), rel=1e-9)
 
 
-def test_the_block_step_takes_the_general_correction_where_s_is_not_positive_definite() -> None:
-    """A covariance whose ``S = P_qq + R`` is indefinite (a filter being lost): the block step
-    reports it (NaN NIS) and the filter's step equals the general path's."""
+@pytest.mark.parametrize("case", ["indefinite", "wide"])
+def test_the_block_step_takes_the_general_correction_where_s_is_not_positive_definite(
+    case: str,
+) -> None:
+    """A covariance whose ``S = P_qq + R`` is indefinite (a filter being lost), or whose
+    ``P_qq`` exceeds ``MOST_RATIO · R`` (a wide start, where ``P⁻ − Zᵀ Z`` would lose
+    ``P⁺_qq``'s digits): the block step reports it (NaN NIS) and the filter's step equals
+    the general path's (Joseph form)."""
     robot = cached_robot("talos")
     nv = robot.nv
     fast = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
@@ -324,7 +332,10 @@ def test_the_block_step_takes_the_general_correction_where_s_is_not_positive_def
     slow._lie_fast = None
     rng = np.random.default_rng(8)
     q, v, P, tau = _talos_state(rng, robot)
-    P[:nv, :nv] -= 2.0 * np.abs(P).max() * np.eye(nv)  # S negative definite
+    if case == "indefinite":
+        P[:nv, :nv] -= 2.0 * np.abs(P).max() * np.eye(nv)  # S negative definite
+    else:
+        P[:nv, :nv] += 2.0 * MOST_RATIO * 1e-8 * np.eye(nv)  # P_qq,ii > MOST_RATIO · R
     state = fast.initial_state(q, v)._replace(P=P)
     step = fast._lie_fast.blocks
     _, _, P_b = step.predict(q, v, tau, 1e-3, P, fast.gains.accel_psd, 1e-8)

@@ -8,14 +8,21 @@ The loop of :func:`pinobs.evaluation.live.live_loop` (σ = 1e-4 simulated sample
 observer made with ``rate=1000, noise_std=1e-4`` and its live options, paced at 1 kHz:
 sleep, then spin to the tick; the set-up frozen for the garbage collector), with, per
 update: its wall and thread CPU time; the involuntary context switches in it (``getrusage``
-read around it: the OS gave the core to another task); the garbage collections inside it
-(``gc.callbacks``: generation, duration); and, for ``adaptive`` (learning in its worker
+read around it: the OS gave the core to another task) and the minor page faults (the same
+read: memory the allocator returned to the OS and took back, which the thread's CPU clock
+counts); the garbage collections inside it (``gc.callbacks``: generation, duration); the
+CPU time of a fixed piece of work right after it, in the same tick (:func:`_fixed_work`:
+eight 6×6 products into a preallocated array and a 300-step Python loop, no allocation that
+outlives it: the same work at every tick, so its spread is the machine's); and, for ``adaptive`` (learning in its worker
 process), what its learner did in it, read from its state around the update: a window or
 a solve sent to the worker, a result taken, a model installed.  Each update after the
 first above the p99.9, and each over 1 ms, gets the causes it shows: ``preempted`` (an
-involuntary switch, or wall over twice the CPU time), ``gc<generation>``, the learner's
-events (``worker busy``: a job was out, not yet taken, when the update began), else ``cpu`` (the thread ran, nothing of the above: the work itself, or the
-machine slowing it: caches, interrupts, which the CPU clock counts).
+involuntary switch, or wall over twice the CPU time), ``fault`` (a minor page fault in it),
+``gc<generation>``, the learner's events (``worker busy``: a job was out, not yet taken,
+when the update began), ``machine`` (the fixed work in the same tick above its own p99: the
+core ran everything slower then, e.g. a virtual machine's stolen or throttled time, another
+task's cache traffic), else ``cpu`` (the thread ran, nothing of the above: the work itself,
+or the machine slowing it in a way the fixed work did not see).
 
 ``--replay``: the same update at every tick (the observer's state and its inputs at sample
 1000 put back before each call, outside the timing): identical work, so its spread is the
@@ -23,6 +30,13 @@ machine's, not the observer's.  Compare a family's p99.9/median with and without
 
     python benchmarks/live_tail.py --only ur5:kf,ur5:adaptive --seconds 20
     python benchmarks/live_tail.py --only ur5:kf --seconds 20 --replay
+    python benchmarks/live_tail.py --only ur5:kf,ur5:ekf --seconds 20 --setting mallopt
+
+``--setting``: a process setting a real-time user might apply, for an A/B against a run
+without it: ``mallopt`` (glibc's trim threshold 256 MiB, top pad 64 MiB, mmap threshold
+256 MiB: freed memory kept, not returned and faulted back), ``fifo`` (the loop's thread at
+``SCHED_FIFO`` priority 10: needs the privilege; processes it starts inherit it unless they
+set their own, as ``adaptive``'s worker does).
 
 Prints one markdown table and the tail's causes per run; quote the load average with it
 (a shared machine's other processes are in these numbers).
@@ -31,6 +45,8 @@ Prints one markdown table and the tail's causes per run; quote the load average 
 from __future__ import annotations
 
 import argparse
+import ctypes
+import ctypes.util
 import gc
 import os
 import resource
@@ -79,6 +95,33 @@ def _learner_read(observer: Any) -> tuple[int, ...] | None:
     return (len(learner.pending), learner.windows, int(learner.solving), learner.installs)
 
 
+def _apply(setting: str) -> None:
+    """Apply ``--setting`` (module docstring) to this process."""
+    if setting == "mallopt":
+        libc = ctypes.CDLL(ctypes.util.find_library("c"))
+        m_trim_threshold, m_top_pad, m_mmap_threshold = -1, -2, -3  # glibc's malloc.h
+        for option, value in ((m_trim_threshold, 256), (m_top_pad, 64), (m_mmap_threshold, 256)):
+            if libc.mallopt(option, value << 20) != 1:
+                raise OSError(f"mallopt({option}) failed")
+    elif setting == "fifo":
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+
+
+def _fixed_work() -> Any:
+    """A fixed piece of work timed after each update (module docstring): the same at every
+    tick, nothing allocated that outlives a call."""
+    m, x, y = np.eye(6), np.ones(6), np.empty(6)
+
+    def work() -> None:
+        for _ in range(8):
+            np.dot(m, x, out=y)
+        s = 0
+        for i in range(300):
+            s += i
+
+    return work
+
+
 def _setup(
     robot_name: str, observer_name: str, n: int, replay: bool
 ) -> tuple[Any, Any, list[tuple[Any, ...]], dict[str, Any]]:
@@ -114,7 +157,9 @@ def run(robot_name: str, observer_name: str, seconds: float, replay: bool) -> di
     n = round(seconds * RATE)
     observer, aba, samples, snap = _setup(robot_name, observer_name, n, replay)
     update = type(observer).update
-    wall, cpu, switches = np.empty(n), np.empty(n), np.empty(n, dtype=int)
+    wall, cpu, fixed = np.empty(n), np.empty(n), np.empty(n)
+    switches, faults = np.empty(n, dtype=int), np.empty(n, dtype=int)
+    work = _fixed_work()
     collections: list[tuple[int, int, float]] = []  # (update, generation, seconds)
     learner: list[list[str]] = [[] for _ in range(n)]
     current, started = [-1], [0.0]
@@ -139,13 +184,17 @@ def run(robot_name: str, observer_name: str, seconds: float, replay: bool) -> di
             observer.__dict__.update(snap)  # (a replay; nothing otherwise)
             before = _learner_read(observer)
             aba()  # as live_loop: one call just before the update
-            r0 = usage(resource.RUSAGE_THREAD).ru_nivcsw
+            r0 = usage(resource.RUSAGE_THREAD)
             current[0] = k
             t0, c0 = clock(), cpu_clock()
             update(observer, *samples[k])
             c1, t1 = cpu_clock(), clock()
             current[0] = -1
-            switches[k] = usage(resource.RUSAGE_THREAD).ru_nivcsw - r0
+            r1 = usage(resource.RUSAGE_THREAD)
+            c2 = cpu_clock()
+            work()
+            fixed[k] = cpu_clock() - c2
+            switches[k], faults[k] = r1.ru_nivcsw - r0.ru_nivcsw, r1.ru_minflt - r0.ru_minflt
             wall[k], cpu[k] = t1 - t0, c1 - c0
             learner[k] = _learner_events(before, _learner_read(observer))
     finally:
@@ -154,6 +203,7 @@ def run(robot_name: str, observer_name: str, seconds: float, replay: bool) -> di
     return {
         "robot": robot_name, "observer": observer_name, "replay": replay, "wall": wall * 1e6,
         "cpu": cpu * 1e6, "switches": switches, "gc": collections, "learner": learner,
+        "faults": faults, "fixed": fixed * 1e6,
         "load": os.getloadavg(),
     }  # fmt: skip
 
@@ -163,13 +213,17 @@ def causes(r: dict[str, Any], k: int) -> str:
     out = []
     if r["switches"][k] > 0 or r["wall"][k] > 2.0 * r["cpu"][k]:
         out.append("preempted")
+    if r["faults"][k] > 0:
+        out.append("fault")
     out += [f"gc{g}" for kk, g, _ in r["gc"] if kk == k]
     out += r["learner"][k]
+    if r["fixed"][k] > np.percentile(r["fixed"][1:], 99.0):
+        out.append("machine")
     return " + ".join(out) or "cpu"
 
 
 def report(r: dict[str, Any]) -> list[str]:
-    wall, cpu = r["wall"][1:], r["cpu"][1:]  # after the first update
+    wall, cpu, fixed = r["wall"][1:], r["cpu"][1:], r["fixed"][1:]  # after the first update
     q = {
         name: (np.median(x), *np.percentile(x, [99.0, 99.9]), x.max())
         for name, x in (("wall", wall), ("cpu", cpu))
@@ -180,7 +234,8 @@ def report(r: dict[str, Any]) -> list[str]:
     row = (
         f"| {label} | {q['wall'][0]:.0f} | {q['wall'][2] / q['wall'][0]:.2f} | "
         f"{q['wall'][3] / 1e3:.2f} | {q['cpu'][0]:.0f} | {q['cpu'][2] / q['cpu'][0]:.2f} | "
-        f"{q['cpu'][3] / 1e3:.2f} | {int(np.sum(wall > 1e3))} | "
+        f"{q['cpu'][3] / 1e3:.2f} | {np.percentile(fixed, 99.9) / np.median(fixed):.2f} | "
+        f"{int(np.sum(r['faults'][1:]))} | {int(np.sum(wall > 1e3))} | "
         + (", ".join(f"gen{g} {c} ({gc_us[g]:.0f} µs)" for g, c in sorted(gcs.items())) or "none")
         + f" | {r['load'][0]:.1f} |"
     )
@@ -213,10 +268,13 @@ def main() -> None:
     parser.add_argument("--only", default="ur5:kf,ur5:riemannian,ur5:adaptive")
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--replay", action="store_true", help="the same update every tick")
+    parser.add_argument("--setting", choices=("none", "mallopt", "fifo"), default="none")
     args = parser.parse_args()
+    _apply(args.setting)
     print(
         "| run | median µs | p99.9/median | max ms | CPU median µs | CPU p99.9/median "
-        "| CPU max ms | > 1 ms | GC in updates | load |\n|---|---|---|---|---|---|---|---|---|---|"
+        "| CPU max ms | fixed work CPU p99.9/median | page faults | > 1 ms | GC in updates | load |"
+        "\n|---|---|---|---|---|---|---|---|---|---|---|---|"
     )
     tails = []
     for pair in args.only.split(","):

@@ -95,6 +95,8 @@ class FootKinematics:
         self._data = model.createData()
         self._ids = tuple(ids)
         self._q = np.concatenate([_BASE_AT_IDENTITY, pin.neutral(model)[7:]])
+        #: per method, the last joint angles' bytes and its results (:meth:`_recall`)
+        self._memo: dict[str, tuple[bytes, tuple[Vector, ...]]] = {}
         self.robot_name = robot.name
         self.imu_frame = imu_frame
         self.imu_placement: tuple[Vector, Vector] = (np.eye(3), np.zeros(3))
@@ -121,6 +123,21 @@ class FootKinematics:
     def _set(self, q_joints: ArrayLike) -> None:
         self._q[7:] = q_joints
 
+    def _recall(self, name: str, q_joints: ArrayLike) -> tuple[bytes, tuple[Vector, ...] | None]:
+        """The key of ``q_joints`` and copies of ``name``'s results for it if they are the last
+        ones computed (the same angles twice in a row: a filter's sample and a caller's
+        velocities at it), else ``None``; the same bytes give the same results."""
+        key = np.asarray(q_joints, dtype=float).tobytes()
+        last = self._memo.get(name)
+        if last is None or last[0] != key:
+            return key, None
+        return key, tuple(a.copy() for a in last[1])
+
+    def _keep(self, name: str, key: bytes, out: tuple[Vector, ...]) -> tuple[Vector, ...]:
+        """``out``, with a copy kept for :meth:`_recall`."""
+        self._memo[name] = (key, tuple(a.copy() for a in out))
+        return out
+
     def positions(self, q_joints: ArrayLike) -> Vector:
         """``h_j(q)`` for every foot, shape ``(len(feet), 3)`` [m], in the base (or IMU) frame."""
         self._set(q_joints)
@@ -134,6 +151,9 @@ class FootKinematics:
     def positions_and_jacobians(self, q_joints: ArrayLike) -> tuple[Vector, Vector]:
         """``(h, J)``: foot positions ``(K, 3)`` [m] and their Jacobians ``(K, 3, nv_joints)``
         [m/rad] with respect to the joint velocities, in the base (or IMU) frame."""
+        key, last = self._recall("positions_and_jacobians", q_joints)
+        if last is not None:
+            return last[0], last[1]
         self._set(q_joints)
         model, data = self._model, self._data
         pin.computeJointJacobians(model, data, self._q)
@@ -148,12 +168,16 @@ class FootKinematics:
             R_bi, r_bi = self._to_imu
             h = (h - r_bi) @ R_bi
             jac = R_bi.T @ jac
+        self._keep("positions_and_jacobians", key, (h, jac))
         return h, jac
 
     def placements_and_jacobians(self, q_joints: ArrayLike) -> tuple[Vector, ...]:
         """``(h, R, J, J_ω)``: the feet's positions ``(K, 3)`` [m] and orientations ``(K, 3, 3)``,
         their linear ``(K, 3, nv_joints)`` [m/rad] and angular ``(K, 3, nv_joints)`` [rad/rad]
         Jacobians with respect to the joint velocities, all in the base (or IMU) frame."""
+        key, last = self._recall("placements_and_jacobians", q_joints)
+        if last is not None:
+            return last
         self._set(q_joints)
         model, data = self._model, self._data
         pin.computeJointJacobians(model, data, self._q)
@@ -169,7 +193,7 @@ class FootKinematics:
             R_bi, r_bi = self._to_imu
             h, rot = (h - r_bi) @ R_bi, R_bi.T @ rot
             lin, ang = R_bi.T @ lin, R_bi.T @ ang
-        return h, rot, lin, ang
+        return self._keep("placements_and_jacobians", key, (h, rot, lin, ang))
 
 
 def _frame_id(robot: Robot, name: str) -> int:

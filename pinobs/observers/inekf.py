@@ -514,6 +514,8 @@ class InvariantEKF(LeggedFilter):
         self.slip_speed = bool(slip_speed)
         self.slip_gyro = positive("slip_gyro", slip_gyro, allow_zero=True) or 0.0
         self._speed: Vector | None = None  # |ṗ_j| of every foot at the last sample [m/s]
+        #: the feet's positions and unscaled Jacobians of the last :meth:`_legs` call
+        self._kinematics: tuple[Vector, Vector] = (np.empty((0, 3)), np.empty((0, 3, 0)))
         load_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
 
     def error_matrix(self) -> Vector:
@@ -529,11 +531,19 @@ class InvariantEKF(LeggedFilter):
 
         (what :class:`pinobs.observers.contacts.ContactProbability` takes as the foot's speed).
         """
-        state = self.state
         h, jac = self.setup.legs(Robot.check_vector(q, self.setup.nq_joints, what="q"))
         dq = Robot.check_vector(joint_velocities, self.setup.nv_joints, what="joint_velocities")
-        w = Robot.check_vector(gyro, 3, what="gyro") - state.bias[:3]
-        local = np.cross(w, h) + jac @ dq  # in the IMU frame
+        return self._velocities(h, jac, dq, Robot.check_vector(gyro, 3, what="gyro"))
+
+    def _velocities(self, h: Vector, jac: Vector, dq: Vector, gyro: Vector) -> Vector:
+        """:meth:`foot_velocities` from the feet's positions ``h`` (K, 3) and unscaled Jacobians
+        ``jac`` (K, 3, nv_j) in the IMU frame: ``v̂ + R̂ ((ω̃ − b̂_g) × h_j + J_j q̇)``, the cross
+        product written out by columns (``np.cross``'s operations, in its order)."""
+        state = self.state
+        w0, w1, w2 = (gyro - state.bias[:3]).tolist()
+        h0, h1, h2 = h.T
+        cross = np.array([w1 * h2 - w2 * h1, w2 * h0 - w0 * h2, w0 * h1 - w1 * h0]).T
+        local = cross + jac @ dq  # in the IMU frame
         return np.asarray(state.x[0] + local @ state.R.T)
 
     # ------------------------------------------------------------- the steps
@@ -576,8 +586,9 @@ class InvariantEKF(LeggedFilter):
         (none after ``reset`` or an update without ``joint_velocities``)."""
         if u is None or u.joint_velocities is None or not self.slip_speed:
             self._speed = None
-        else:
-            velocities = self.foot_velocities(u.q_joints, u.joint_velocities, u.reading[:3])
+        else:  # the update's own legs (:meth:`_legs`, at u.q_joints): not computed again
+            h_now, jac = self._kinematics
+            velocities = self._velocities(h_now, jac, u.joint_velocities, u.reading[:3])
             self._speed = slip_speeds(velocities, h, self.slip_gyro, dt)  # eq. (10)
 
     def foot_nis(self, state: InEKFState, h: Vector, jac: Vector) -> Vector:
@@ -596,6 +607,7 @@ class InvariantEKF(LeggedFilter):
         """The feet's positions and Jacobians (:meth:`LeggedSetup.legs`), the columns scaled by
         ``joint_std`` if given (``J diag(σ_q)``: eq. (4)'s ``J Σ_q Jᵀ`` with unit variance)."""
         h, jac = self.setup.legs(q_joints, R, flags)
+        self._kinematics = (h, jac)  # unscaled, for the slip speeds (:meth:`_remember`)
         return (h, jac) if self.joint_std is None else (h, jac * self.joint_std)
 
     def _foot_noise(self, R: Vector, jac: Vector) -> Vector:

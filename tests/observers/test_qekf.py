@@ -24,11 +24,11 @@ from tests.observers.test_inekf import (
     Go1Legs,
     SyntheticLegs,
     pose_errors,
-    reset_through_imu,
     run,
     synthetic_truth,
     truth,
 )
+from tests.observers.test_rolling import _worst_pose_error
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -55,17 +55,8 @@ def test_started_on_the_truth_it_stays_there_through_contact_changes() -> None:
 def test_started_on_the_truth_it_stays_there_on_go1(imu_frame: str | None) -> None:
     """As the invariant EKF's test: the truth is the IMU's motion, the estimate the root's."""
     legs = Go1Legs(imu_frame)
-    R_bi, r_bi = legs.imu_placement
     samples = truth(legs, 200.0, 1.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
-    ekf = QuaternionEKF(pinobs.load("go1"), GO1_FEET, imu_frame=imu_frame)
-    reset_through_imu(ekf, samples[0], R_bi, r_bi)
-    worst = 0.0
-    for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
-        est = ekf.update(t, q, omega, acc, contacts)
-        R_b = R_i @ R_bi.T
-        v_b = v_i - np.cross(R_i @ omega, R_b @ r_bi)
-        worst = max(worst, *pose_errors(est, R_b, v_b, p_i - R_b @ r_bi))
-    assert worst < 1e-9
+    assert _worst_pose_error(QuaternionEKF, samples, legs, imu_frame=imu_frame) < 1e-9
 
 
 @pytest.mark.parametrize("legs", ["synthetic", "go1"])

@@ -137,11 +137,11 @@ class RollingGo1Legs(Go1Legs):
         return self.rolling.legs(q)
 
 
-def _worst_pose_error(cls, samples, legs, **options) -> float:
-    """The largest pose error of ``cls`` (go1, its IMU frame, ``options``) started on the
+def _worst_pose_error(cls, samples, legs, imu_frame="imu_link", **options) -> float:
+    """The largest pose error of ``cls`` (go1, ``imu_frame``, ``options``) started on the
     truth through the IMU and run over the noise-free ``samples``."""
     R_bi, r_bi = legs.imu_placement
-    ekf = cls(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", **options)
+    ekf = cls(pinobs.load("go1"), GO1_FEET, imu_frame=imu_frame, **options)
     reset_through_imu(ekf, samples[0], R_bi, r_bi)
     worst = 0.0
     for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:

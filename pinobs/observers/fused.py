@@ -66,6 +66,7 @@ __all__ = [
     "rk4_stage_kernel",
     "rk4_start_kernel",
     "rkmk4_stage_kernel",
+    "torque_in_kernel",
     "vector_correction_kernel",
 ]
 
@@ -233,16 +234,34 @@ _rk4_stage_fma = rk4_stage_loops
 
 def ekf_finish_loops(
     w: Vector, acc: Vector, h: float, q_meas: Vector, P: Vector, r: float, ex: Vector,
-    P_new: Vector, q_new: Vector, v_new: Vector,
+    P_new: Vector, q_new: Vector, v_new: Vector, d: Vector, d_new: Vector,
 ) -> float:  # fmt: skip
     """The RK4's fourth stage (:func:`rk4_stage_loops`, ``acc = a₄``: the predicted
     ``(q_s, v_s)``) and the EKF's correction (:func:`ekf_correct_loops`, ``e`` and ``dx`` in
     ``ex = (e, dx)``) in one call: each part's operations as it does them alone (the stage
-    with ``contract``, the correction without), so the same bits.  Returns the NIS (NaN: the
-    caller takes :func:`ekf_correct_loops`' other ways)."""
+    with ``contract``, the correction without), so the same bits.  With the offset state
+    (``d`` of ``nv`` entries; empty without), its correction ``d_new = d + dx_d`` too
+    (NumPy's ``d + dx[2nv:]``, entry by entry: the same bits, without NumPy's overflow
+    warning to silence; issue 39).  Returns the NIS (NaN: the caller takes
+    :func:`ekf_correct_loops`' other ways, ``d_new`` unwritten)."""
     _rk4_stage_fma(w, acc, 4, h)
     nv = q_meas.shape[0]
-    return ekf_correct_loops(w, q_meas, P, r, ex[:nv], ex[nv:], P_new, q_new, v_new)
+    nis = ekf_correct_loops(w, q_meas, P, r, ex[:nv], ex[nv:], P_new, q_new, v_new)
+    if nis == nis:
+        for i in range(d.shape[0]):
+            d_new[i] = d[i] + ex[3 * nv + i]
+    return nis
+
+
+def torque_in_loops(tau: Vector, offset: Vector, with_offset: bool, d: Vector, out: Vector) -> None:
+    """The torque an ``ekf`` with the offset state predicts with, ``out = τ + d``, or with a
+    torque ``offset`` added first (``with_offset``: ``adaptive``'s learned one),
+    ``out = (τ + b̂) + d`` (NumPy's ``tau + offset`` then ``+ d``, entry by entry: the same
+    bits, without NumPy's overflow warning to silence where a lost filter's ``d`` overflows;
+    issue 39)."""
+    for i in range(tau.shape[0]):
+        x = tau[i] + offset[i] if with_offset else tau[i]
+        out[i] = x + d[i]
 
 
 def ekf_coast_loops(w: Vector, acc: Vector, h: float, P: Vector, out: Vector) -> None:
@@ -698,10 +717,14 @@ ekf_correct_kernel = LazyKernel(
 ekf_finish_kernel = LazyKernel(
     ekf_finish_loops,
     np.zeros((8, 1)), np.zeros(1), 1e-3, np.zeros(1), np.eye(2), 1.0, np.zeros(3),
-    np.zeros((2, 2)), np.zeros(1), np.zeros(1),
+    np.zeros((2, 2)), np.zeros(1), np.zeros(1), np.zeros(0), np.zeros(0),
     helpers=(_joseph_loops, ekf_correct_loops),
     contracted=("_rk4_stage_fma",),
 )  # fmt: skip
+#: :func:`torque_in_loops` compiled.
+torque_in_kernel = LazyKernel(
+    torque_in_loops, np.zeros(1), np.zeros(1), True, np.zeros(1), np.zeros(1)
+)
 
 #: :func:`ekf_coast_loops` compiled.
 ekf_coast_kernel = LazyKernel(

@@ -169,10 +169,7 @@ class Learner:
         if self._lost:
             self._lost = []
         # buf.append((t, q, tau)), inline (issue 39: a Python call and a view less an update)
-        end = buf.end
-        if end == buf.rows.shape[0]:
-            buf._make_room()
-            end = buf.end
+        end = buf.end if buf.end < buf.rows.shape[0] else buf.room()
         rows = buf.rows
         rows[end, 0] = t
         rows[end, buf.q_cols] = q
@@ -417,6 +414,11 @@ class _Samples:
         row[0], row[1 : 1 + nq], row[1 + nq :] = sample
         self.end += 1
         self.last_t = float(row[0])
+
+    def room(self) -> int:
+        """Make room for a row (:meth:`_make_room`); the index it goes to."""
+        self._make_room()
+        return self.end
 
     def _make_room(self) -> None:
         n, cap = len(self), self.rows.shape[0]

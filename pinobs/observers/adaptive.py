@@ -690,15 +690,15 @@ class AdaptiveEKF(Observer["_State"]):
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         model = state.model
         core = model.core
-        if model.held is None and core.compiled_step:
-            # :meth:`_core_step` without its errstate (the compiled step raises no NumPy
-            # warning; its kernel sums τ + b̂ + d): 3 µs and 4 Python calls an update (issue 39)
+        torque = tau + model.offset if model.held is None else self._torque(state, dt, tau)
+        if core.compiled_step:
+            # _core_step without its errstate (the compiled step raises no NumPy warning:
+            # ExtendedKalmanFilter.compiled_step): 4 Python calls less an update (issue 39)
             try:
-                ekf = core.step(state.ekf, dt, q_meas, tau, model.offset)
+                ekf = core.step(state.ekf, dt, q_meas, torque)
             except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
                 ekf = state.ekf._replace(v=np.full_like(state.ekf.v, np.nan))
         else:
-            torque = tau + model.offset if model.held is None else self._torque(state, dt, tau)
             ekf = self._core_step(core, state.ekf, dt, q_meas, torque)
         t = state.t + dt
         if not self.blend:

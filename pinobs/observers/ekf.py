@@ -465,17 +465,9 @@ class ExtendedKalmanFilter(Observer[EKFState]):
             psd_scale=m_bar**2,
         )  # fmt: skip
 
-    def step(
-        self, state: EKFState, dt: float, q_meas: Vector | None, tau: Vector,
-        offset: Vector | None = None,
-    ) -> EKFState:  # fmt: skip
-        """One step (:class:`~pinobs.observers.base.Observer`); ``offset``: a torque added to
-        ``tau`` first (``adaptive``'s learned one, ``(τ + b̂) + d`` summed in the compiled
-        step's kernel, :func:`~pinobs.observers.fused.torque_in_loops`)."""
+    def step(self, state: EKFState, dt: float, q_meas: Vector | None, tau: Vector) -> EKFState:
         if self._fast is not None:
-            return self._fast.step(self, state, dt, q_meas, tau, offset)
-        if offset is not None:
-            tau = tau + offset
+            return self._fast.step(self, state, dt, q_meas, tau)
         lie = self._lie_fast
         if lie is not None and lie.blocks is not None and state.d is None:
             return lie.step(self, state, dt, q_meas, tau)
@@ -675,7 +667,7 @@ class _FastPath:
         self._shape = (n, n)
         self.no_psd = np.zeros(nv)
         self.no_d = np.zeros(0)  # the finish kernel's offset arguments without one
-        self._scratch_tau = np.empty(nv)  # τ (+ b̂) + d (torque_in)
+        self._scratch_tau = np.empty(nv)  # τ + d (torque_in)
         self.torque_in = loaded(torque_in_kernel)
         self.predict = loaded(ekf_predict_kernel)
         self.stage = loaded(rk4_stage_kernel)
@@ -688,7 +680,7 @@ class _FastPath:
 
     def step(
         self, ekf: ExtendedKalmanFilter, state: EKFState, dt: float, q_meas: Vector | None,
-        tau: Vector, offset: Vector | None = None,
+        tau: Vector,
     ) -> EKFState:  # fmt: skip
         """:meth:`ExtendedKalmanFilter.step` (class docstring): four compiled calls around
         Pinocchio's four, the last (:func:`~pinobs.observers.fused.ekf_finish_loops`) the RK4's
@@ -697,11 +689,10 @@ class _FastPath:
         NumPy arithmetic is compiled or under ``np.errstate`` (``compiled_step``)."""
         d = state.d
         if d is None:
-            tau_in = tau if offset is None else tau + offset
-        else:  # τ (+ b̂) + d, compiled: no overflow warning where a lost filter's d overflows
+            tau_in = tau
+        else:  # τ + d, compiled: no overflow warning where a lost filter's d overflows
             tau_in = self._scratch_tau
-            self.torque_in(tau, self.no_psd if offset is None else offset, offset is not None,
-                           d, tau_in)  # fmt: skip
+            self.torque_in(tau, d, tau_in)
         calls, w, (qs, vs) = self.calls, self._scratch_work, self._scratch_point
         calls.derivatives(state.q, state.v, tau_in)
         psd = self.no_psd if state.d_psd is None else state.d_psd

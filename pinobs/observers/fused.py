@@ -253,15 +253,12 @@ def ekf_finish_loops(
     return nis
 
 
-def torque_in_loops(tau: Vector, offset: Vector, with_offset: bool, d: Vector, out: Vector) -> None:
-    """The torque an ``ekf`` with the offset state predicts with, ``out = τ + d``, or with a
-    torque ``offset`` added first (``with_offset``: ``adaptive``'s learned one),
-    ``out = (τ + b̂) + d`` (NumPy's ``tau + offset`` then ``+ d``, entry by entry: the same
-    bits, without NumPy's overflow warning to silence where a lost filter's ``d`` overflows;
-    issue 39)."""
+def torque_in_loops(tau: Vector, d: Vector, out: Vector) -> None:
+    """The torque an ``ekf`` with the offset state predicts with, ``out = τ + d`` (NumPy's
+    ``tau + d``, entry by entry: the same bits, without NumPy's overflow warning to silence
+    where a lost filter's ``d`` overflows; issue 39)."""
     for i in range(tau.shape[0]):
-        x = tau[i] + offset[i] if with_offset else tau[i]
-        out[i] = x + d[i]
+        out[i] = tau[i] + d[i]
 
 
 def ekf_coast_loops(w: Vector, acc: Vector, h: float, P: Vector, out: Vector) -> None:
@@ -722,9 +719,7 @@ ekf_finish_kernel = LazyKernel(
     contracted=("_rk4_stage_fma",),
 )  # fmt: skip
 #: :func:`torque_in_loops` compiled.
-torque_in_kernel = LazyKernel(
-    torque_in_loops, np.zeros(1), np.zeros(1), True, np.zeros(1), np.zeros(1)
-)
+torque_in_kernel = LazyKernel(torque_in_loops, np.zeros(1), np.zeros(1), np.zeros(1))
 
 #: :func:`ekf_coast_loops` compiled.
 ekf_coast_kernel = LazyKernel(

@@ -172,19 +172,28 @@ def ekf_predict_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are 
     mid = np.empty((n, n))
     _times_a(A, inner, nv, 0.5 * h, mid)  # I + (Ah/2)(I + Ah/3)
     _times_a(A, mid, nv, h, Phi)
+    # Φ's rows past 2nv (the offset's) are unit rows (A's are zero): there Φ P is P's rows and
+    # (Φ P) Φᵀ (Φ P)'s columns, copied (issue 39: a third of the products at n = 3nv).  The
+    # same numbers as the full sums, whose other terms are exact zeros (for a finite P)
+    m = 2 * nv if with_d else n
     T = np.zeros((n, n))  # Φ P, row by row (each sum in the order of k: vector loops over j)
-    for i in range(n):
+    for i in range(m):
         for k in range(n):
             c = Phi[i, k]
             for j in range(n):
                 T[i, j] += c * P[k, j]
+    for i in range(m, n):
+        for j in range(n):
+            T[i, j] = P[i, j]
     Phi_t = Phi.T.copy()
     out[:, :] = 0.0  # (Φ P) Φᵀ, its upper triangle
     for i in range(n):
         for k in range(n):
             c = T[i, k]
-            for j in range(i, n):
+            for j in range(i, m):
                 out[i, j] += c * Phi_t[k, j]
+        for j in range(max(i, m), n):
+            out[i, j] = T[i, j]
         for j in range(i + 1, n):
             out[j, i] = out[i, j]
     q3, q2, q1 = psd * (h**3 / 3.0), psd * (h**2 / 2.0), psd * h

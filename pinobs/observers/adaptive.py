@@ -237,7 +237,9 @@ def _blend_inputs(
     """The bank's sample and the blame on the model (module docstring, 3): ``q_meas`` unless
     the model-based filter's gate rejected it (not a lost filter's: restarted, not replaced
     since); the disagreement is the model's fault only when its innovations say so
-    (``NIS̄ > 2 nv``), wholly when it was lost and not replaced since, or none fits."""
+    (``NIS̄ > 2 nv``), wholly when it was lost and not replaced since, or none fits.
+    Inline in :meth:`AdaptiveEKF.step`'s compiled path (the usual case: not restarted, a
+    model that fits): keep the two equal."""
     meas = None if ekf.gate.gated and not model.restarted else q_meas
     nv = ekf.v.size
     level = float(nv) if ekf.gate.level is None else ekf.gate.level

@@ -237,7 +237,9 @@ def _blend_inputs(
     """The bank's sample and the blame on the model (module docstring, 3): ``q_meas`` unless
     the model-based filter's gate rejected it (not a lost filter's: restarted, not replaced
     since); the disagreement is the model's fault only when its innovations say so
-    (``NIS̄ > 2 nv``), wholly when it was lost and not replaced since, or none fits."""
+    (``NIS̄ > 2 nv``), wholly when it was lost and not replaced since, or none fits.
+    Inline in :meth:`AdaptiveEKF.step`'s compiled path (the usual case: not restarted, a
+    model that fits): keep the two equal."""
     meas = None if ekf.gate.gated and not model.restarted else q_meas
     nv = ekf.v.size
     level = float(nv) if ekf.gate.level is None else ekf.gate.level
@@ -689,8 +691,17 @@ class AdaptiveEKF(Observer["_State"]):
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         model = state.model
+        core = model.core
         torque = tau + model.offset if model.held is None else self._torque(state, dt, tau)
-        ekf = self._core_step(model.core, state.ekf, dt, q_meas, torque)
+        if core.compiled_step:
+            # _core_step without its errstate (the compiled step raises no NumPy warning:
+            # ExtendedKalmanFilter.compiled_step): 4 Python calls less an update (issue 39)
+            try:
+                ekf = core.step(state.ekf, dt, q_meas, torque)
+            except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
+                ekf = state.ekf._replace(v=np.full_like(state.ekf.v, np.nan))
+        else:
+            ekf = self._core_step(core, state.ekf, dt, q_meas, torque)
         t = state.t + dt
         if not self.blend:
             return state._replace(ekf=ekf, t=t, v_prev=state.ekf.v, dt_prev=dt)
@@ -704,12 +715,21 @@ class AdaptiveEKF(Observer["_State"]):
             score, s, q, v = numpy_blend(self.robot, kf, state.score, state.s, ekf, lam, blame)
             x: Vector | BankBlend = BankBlend(kf, score, s, q, v)
         else:  # one compiled call: whether the filter is lost, then the bank and the blend
-            bank = self._bank
+            bank, nv = self._bank, self._shape[2]
             for check in (True, False):
                 xs = state.x  # (a BankBlend: made while the kernel was not loaded)
                 xs = packed(state.shape, *xs) if isinstance(xs, BankBlend) else xs
                 x = np.empty(xs.size)
-                meas, blame = _blend_inputs(ekf, state.model, q_meas)
+                m, gate = state.model, ekf.gate
+                if check and not m.restarted and m.rejected_run < _REJECTED_RUN:
+                    # _blend_inputs, inline (issue 39: a Python call less an update)
+                    meas = None if gate.gated else q_meas
+                    level = float(nv) if gate.level is None else gate.level
+                    blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
+                    if not math.isfinite(level):
+                        blame = 1.0
+                else:
+                    meas, blame = _blend_inputs(ekf, m, q_meas)
                 if kernel(
                     xs, x, state.shape[1], dt, self._no_sample if meas is None else meas,
                     meas is not None, bank.jerk, bank.meas_var, ekf.q, ekf.v, ekf.P, lam, blame,

@@ -145,8 +145,8 @@ class Learner:
         rejected the sample (not filled: :meth:`_fill`).
 
         Written for its cost (issue 39: every update of a live loop): a sample on the interval
-        (the usual one) makes one Python call here (the buffer's ``append``; its length and
-        latest time read from its fields), and :meth:`collect` is called only with jobs out."""
+        (the usual one) makes no Python call here (the buffer's row written inline; its length
+        and latest time read from its fields), and :meth:`collect` is called only with jobs out."""
         t_last, h = self._t_last, self.h
         if t_last is not None and abs(t - t_last - h) <= _GAP_FRACTION * h and not self._off_run:
             self._t_last = t  # on the interval: all that _track_interval would do
@@ -163,12 +163,18 @@ class Learner:
         # test cleared the windows at every other sample and the learner never solved,
         # silently (a sweep found it, and a 500 Hz stream without rate)
         h = self.h
-        if buf.end > buf.start and abs(t - float(buf.rows[buf.end - 1, 0]) - h) > _GAP_FRACTION * h:
+        if buf.end > buf.start and abs(t - buf.last_t - h) > _GAP_FRACTION * h:
             if not self._fill(t, q):
                 buf.clear()
         if self._lost:
             self._lost = []
-        buf.append((t, q, tau))
+        # buf.append((t, q, tau)), inline (issue 39: a Python call and a view less an update)
+        end = buf.end if buf.end < buf.rows.shape[0] else buf.room()
+        rows = buf.rows
+        rows[end, 0] = t
+        rows[end, buf.q_cols] = q
+        rows[end, buf.tau_cols] = tau
+        buf.end, buf.last_t = end + 1, t
         if math.isnan(h):
             return self.collect() if self.pending else False  # one sample: no interval yet
         if buf.end - buf.start >= self._need:
@@ -379,7 +385,9 @@ class _Samples:
     def __init__(self, nq: int, nv: int, capacity: int = 256) -> None:
         self.rows = np.empty((capacity, 1 + nq + nv))
         self.nq = nq
+        self.q_cols, self.tau_cols = slice(1, 1 + nq), slice(1 + nq, 1 + nq + nv)  # of a row
         self.start = self.end = 0
+        self.last_t = math.nan  # the latest sample's time [s] (its row's, as a float)
 
     def __len__(self) -> int:
         return self.end - self.start
@@ -399,11 +407,18 @@ class _Samples:
         return float(self.rows[self.end - 1, 0])
 
     def append(self, sample: tuple[float, Vector, Vector]) -> None:
+        """Add the sample ``(t, q, τ)`` (:meth:`Learner.add` does the same, inline)."""
         if self.end == self.rows.shape[0]:
             self._make_room()
         row, nq = self.rows[self.end], self.nq
         row[0], row[1 : 1 + nq], row[1 + nq :] = sample
         self.end += 1
+        self.last_t = float(row[0])
+
+    def room(self) -> int:
+        """Make room for a row (:meth:`_make_room`); the index it goes to."""
+        self._make_room()
+        return self.end
 
     def _make_room(self) -> None:
         n, cap = len(self), self.rows.shape[0]

@@ -201,6 +201,7 @@ from pinobs.observers.fused import (
     ekf_predict_kernel,
     loaded,
     rk4_stage_kernel,
+    torque_in_kernel,
 )
 from pinobs.observers.fused_lie import LieRK4
 from pinobs.observers.linalg import (
@@ -381,6 +382,10 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         # the compiled step makes no BLAS call (Observer.uses_blas; its rare ways back to
         # NumPy, ≤ 36 × 36 with nv ≤ 12, are below OpenBLAS's threading sizes)
         self.uses_blas = self._fast is None
+        #: Whether :meth:`step` is the compiled one, which raises no NumPy floating-point
+        #: warning (its arithmetic compiled or under ``np.errstate``: ``adaptive`` then
+        #: calls it without an ``errstate`` of its own; issue 39).
+        self.compiled_step = self._fast is not None
 
     @property
     def options(self) -> dict[str, object]:
@@ -620,6 +625,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self._fast = _FastPath.build(self)
         self._lie_fast = _LieFast.build(self)
         self.uses_blas = self._fast is None
+        self.compiled_step = self._fast is not None
 
     def output(self, state: EKFState) -> tuple[Vector, Vector]:
         return state.q, state.v
@@ -660,6 +666,9 @@ class _FastPath:
         self._scratch_ex = np.empty(nv + n)  # the correction's (e, dx)
         self._shape = (n, n)
         self.no_psd = np.zeros(nv)
+        self.no_d = np.zeros(0)  # the finish kernel's offset arguments without one
+        self._scratch_tau = np.empty(nv)  # τ + d (torque_in)
+        self.torque_in = loaded(torque_in_kernel)
         self.predict = loaded(ekf_predict_kernel)
         self.stage = loaded(rk4_stage_kernel)
         self.finish, self.coast = loaded(ekf_finish_kernel), loaded(ekf_coast_kernel)
@@ -675,13 +684,15 @@ class _FastPath:
     ) -> EKFState:  # fmt: skip
         """:meth:`ExtendedKalmanFilter.step` (class docstring): four compiled calls around
         Pinocchio's four, the last (:func:`~pinobs.observers.fused.ekf_finish_loops`) the RK4's
-        last stage and the correction; ``P⁻`` and ``(e, dx)`` in the scratch buffers."""
+        last stage and the correction (with the offset state's); ``P⁻`` and ``(e, dx)`` in the
+        scratch buffers.  No NumPy floating-point warning (a lost filter's overflows): its
+        NumPy arithmetic is compiled or under ``np.errstate`` (``compiled_step``)."""
         d = state.d
         if d is None:
             tau_in = tau
-        else:
-            with np.errstate(over="ignore", invalid="ignore"):  # a lost filter's offset
-                tau_in = tau + d
+        else:  # τ + d, compiled: no overflow warning where a lost filter's d overflows
+            tau_in = self._scratch_tau
+            self.torque_in(tau, d, tau_in)
         calls, w, (qs, vs) = self.calls, self._scratch_work, self._scratch_point
         calls.derivatives(state.q, state.v, tau_in)
         psd = self.no_psd if state.d_psd is None else state.d_psd
@@ -702,7 +713,9 @@ class _FastPath:
         # the fourth stage and the correction (ExtendedKalmanFilter.corrected)
         nv, ex, r = qs.shape[0], self._scratch_ex, ekf.gains.meas_std**2
         q, v, P_new = np.empty(nv), np.empty(nv), np.empty(self._shape)
-        nis = self.finish(w, aba(qs, vs, tau_in), dt, q_meas, P, r, ex, P_new, q, v)
+        d_new = self.no_d if d is None else np.empty(nv)  # (d + dx_d: the kernel's)
+        nis = self.finish(w, aba(qs, vs, tau_in), dt, q_meas, P, r, ex, P_new, q, v,
+                          self.no_d if d is None else d, d_new)  # fmt: skip
         if nis != nis:  # NaN: ekf.correct's other ways
             pred = state.moved(qs.copy(), vs.copy(), P, state.gate, d, state.d_psd)
             with np.errstate(over="ignore", invalid="ignore"):
@@ -714,9 +727,9 @@ class _FastPath:
                 return state.moved(qs.copy(), vs.copy(), P, gate, d, state.d_psd)
         d_psd = state.d_psd
         if d is not None:
-            with np.errstate(over="ignore", invalid="ignore"):
-                d = d + ex[3 * nv :]  # dx[2nv:], the offset's part (dx = ex[nv:])
-                if state.auto and d_psd is not None:  # as ekf.corrected
+            d = d_new  # d + dx[2nv:], the offset's part (dx = ex[nv:]), by the kernel
+            if state.auto and d_psd is not None:  # as ekf.corrected
+                with np.errstate(over="ignore", invalid="ignore"):
                     s = P.diagonal()[:nv] + r  # Sᵢᵢ = P⁻_qq,ii + σ²
                     d_psd = ekf.matched_density(state, ex[:nv], s, dt)
         # state.moved's tuple, built here (a Python call less)

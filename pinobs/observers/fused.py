@@ -66,6 +66,7 @@ __all__ = [
     "rk4_stage_kernel",
     "rk4_start_kernel",
     "rkmk4_stage_kernel",
+    "torque_in_kernel",
     "vector_correction_kernel",
 ]
 
@@ -171,19 +172,28 @@ def ekf_predict_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are 
     mid = np.empty((n, n))
     _times_a(A, inner, nv, 0.5 * h, mid)  # I + (Ah/2)(I + Ah/3)
     _times_a(A, mid, nv, h, Phi)
+    # Φ's rows past 2nv (the offset's) are unit rows (A's are zero): there Φ P is P's rows and
+    # (Φ P) Φᵀ (Φ P)'s columns, copied (issue 39: a third of the products at n = 3nv).  The
+    # same numbers as the full sums, whose other terms are exact zeros (for a finite P)
+    m = 2 * nv if with_d else n
     T = np.zeros((n, n))  # Φ P, row by row (each sum in the order of k: vector loops over j)
-    for i in range(n):
+    for i in range(m):
         for k in range(n):
             c = Phi[i, k]
             for j in range(n):
                 T[i, j] += c * P[k, j]
+    for i in range(m, n):
+        for j in range(n):
+            T[i, j] = P[i, j]
     Phi_t = Phi.T.copy()
     out[:, :] = 0.0  # (Φ P) Φᵀ, its upper triangle
     for i in range(n):
         for k in range(n):
             c = T[i, k]
-            for j in range(i, n):
+            for j in range(i, m):
                 out[i, j] += c * Phi_t[k, j]
+        for j in range(max(i, m), n):
+            out[i, j] = T[i, j]
         for j in range(i + 1, n):
             out[j, i] = out[i, j]
     q3, q2, q1 = psd * (h**3 / 3.0), psd * (h**2 / 2.0), psd * h
@@ -233,16 +243,31 @@ _rk4_stage_fma = rk4_stage_loops
 
 def ekf_finish_loops(
     w: Vector, acc: Vector, h: float, q_meas: Vector, P: Vector, r: float, ex: Vector,
-    P_new: Vector, q_new: Vector, v_new: Vector,
+    P_new: Vector, q_new: Vector, v_new: Vector, d: Vector, d_new: Vector,
 ) -> float:  # fmt: skip
     """The RK4's fourth stage (:func:`rk4_stage_loops`, ``acc = a₄``: the predicted
     ``(q_s, v_s)``) and the EKF's correction (:func:`ekf_correct_loops`, ``e`` and ``dx`` in
     ``ex = (e, dx)``) in one call: each part's operations as it does them alone (the stage
-    with ``contract``, the correction without), so the same bits.  Returns the NIS (NaN: the
-    caller takes :func:`ekf_correct_loops`' other ways)."""
+    with ``contract``, the correction without), so the same bits.  With the offset state
+    (``d`` of ``nv`` entries; empty without), its correction ``d_new = d + dx_d`` too
+    (NumPy's ``d + dx[2nv:]``, entry by entry: the same bits, without NumPy's overflow
+    warning to silence; issue 39).  Returns the NIS (NaN: the caller takes
+    :func:`ekf_correct_loops`' other ways, ``d_new`` unwritten)."""
     _rk4_stage_fma(w, acc, 4, h)
     nv = q_meas.shape[0]
-    return ekf_correct_loops(w, q_meas, P, r, ex[:nv], ex[nv:], P_new, q_new, v_new)
+    nis = ekf_correct_loops(w, q_meas, P, r, ex[:nv], ex[nv:], P_new, q_new, v_new)
+    if nis == nis:
+        for i in range(d.shape[0]):
+            d_new[i] = d[i] + ex[3 * nv + i]
+    return nis
+
+
+def torque_in_loops(tau: Vector, d: Vector, out: Vector) -> None:
+    """The torque an ``ekf`` with the offset state predicts with, ``out = τ + d`` (NumPy's
+    ``tau + d``, entry by entry: the same bits, without NumPy's overflow warning to silence
+    where a lost filter's ``d`` overflows; issue 39)."""
+    for i in range(tau.shape[0]):
+        out[i] = tau[i] + d[i]
 
 
 def ekf_coast_loops(w: Vector, acc: Vector, h: float, P: Vector, out: Vector) -> None:
@@ -698,10 +723,12 @@ ekf_correct_kernel = LazyKernel(
 ekf_finish_kernel = LazyKernel(
     ekf_finish_loops,
     np.zeros((8, 1)), np.zeros(1), 1e-3, np.zeros(1), np.eye(2), 1.0, np.zeros(3),
-    np.zeros((2, 2)), np.zeros(1), np.zeros(1),
+    np.zeros((2, 2)), np.zeros(1), np.zeros(1), np.zeros(0), np.zeros(0),
     helpers=(_joseph_loops, ekf_correct_loops),
     contracted=("_rk4_stage_fma",),
 )  # fmt: skip
+#: :func:`torque_in_loops` compiled.
+torque_in_kernel = LazyKernel(torque_in_loops, np.zeros(1), np.zeros(1), np.zeros(1))
 
 #: :func:`ekf_coast_loops` compiled.
 ekf_coast_kernel = LazyKernel(

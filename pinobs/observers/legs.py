@@ -47,6 +47,7 @@ from pinobs.errors import (
 from pinobs.model import FootKinematics, Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.base import Vector
+from pinobs.observers.inekf_loops import base_kernel, load_leg_kernels
 from pinobs.observers.results import Consistency
 from pinobs.observers.rolling import RollingFeet
 from pinobs.tolerances import NO_CONTACT_WARN_TIME, QUATERNION_NORM_TOL, TIME_EPS
@@ -137,11 +138,10 @@ def quaternion_to_rotation(quat: Vector) -> Vector:
     )
 
 
-def _cross(a: Vector, b: Vector) -> Vector:
-    """``a × b`` of two 3-vectors (``np.cross`` costs 10× more on 3-vectors)."""
-    return np.array(
-        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-    )
+#: the held reading of a state without one (:meth:`LeggedSetup.estimate`: ω̃ = 0)
+_NO_READING = np.zeros(6)
+#: ``ndarray.sum``'s reduction (``np.add.reduce(a, None)``: every axis, pairwise)
+_sum = np.add.reduce
 
 
 # ------------------------------------------------------------------- checks
@@ -378,8 +378,13 @@ def slip_speeds(velocities: Vector, h: Vector, gyro: float, period: float) -> Ve
     0.5 % with the raw speed, 46 % with ``imu_noise="log"`` (the IMU's densities measured
     on the log and (10)); the encoders white 5e-4 rad: 87 % and 95 %
     (``benchmarks/legged_truth.md``)."""
+    speed2 = np.sum(velocities * velocities, axis=1)
+    if gyro == 0.0 and math.isfinite(period) and period > 0.0 and np.isfinite(speed2).all():
+        # the noise term is 0 and |ṗ̂_j|² − 0 is |ṗ̂_j|² (finite speeds come from finite h;
+        # |h_j|² overflowing, |h_j| > 1e154 m, would have made it NaN)
+        return np.sqrt(np.maximum(speed2, 0.0))
     noise = 2.0 * np.sum(h * h, axis=1) * gyro**2 / period
-    return np.sqrt(np.maximum(np.sum(velocities * velocities, axis=1) - noise, 0.0))
+    return np.sqrt(np.maximum(speed2 - noise, 0.0))
 
 
 def check_joint_std(joint_std: ArrayLike, n: int) -> Vector:
@@ -428,14 +433,20 @@ class LegState:
     last_contact: float
 
 
-_STATE_FIELDS = tuple(f.name for f in fields(LegState))
+_STATE_FIELDS = frozenset(f.name for f in fields(LegState))
 
 
 def replace_state(state: LegState, **changes: Any) -> LegState:
-    """``state`` with ``changes`` (``dataclasses.replace`` without its checks)."""
-    values = {name: getattr(state, name) for name in _STATE_FIELDS}
+    """``state`` with ``changes`` (``dataclasses.replace`` without its checks): its fields
+    copied in one dictionary update (a frozen dataclass's ``__init__`` sets them one by one;
+    the filters make three states a sample)."""
+    if not changes.keys() <= _STATE_FIELDS:
+        raise TypeError(f"LegState has no field {sorted(changes.keys() - _STATE_FIELDS)}")
+    new = object.__new__(LegState)
+    values = new.__dict__
+    values.update(state.__dict__)
     values.update(changes)
-    return LegState(**values)
+    return new
 
 
 def remove_feet(state: LegState, slots: list[int]) -> LegState:
@@ -564,6 +575,19 @@ class LeggedSetup:
             if placement is None
             else (np.asarray(placement[0], dtype=float), np.asarray(placement[1], dtype=float))
         )
+        #: ``imu_placement`` as the compiled estimate takes it (writable, C-contiguous copies)
+        #: and whether ``R_bi`` is column-major (Pinocchio's: NumPy's ``R_bi @ ω`` then sums
+        #: its columns, another order of the products; :data:`~.inekf_loops.base_kernel`)
+        R_bi = self.imu_placement[0]
+        columns = bool(R_bi.flags.f_contiguous and not R_bi.flags.c_contiguous)
+        self._placement = (
+            np.ascontiguousarray(R_bi, dtype=float).copy(),
+            np.array(self.imu_placement[1], dtype=float),
+            columns,
+        )
+        load_leg_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
+        #: the feet's names of each state's ``feet`` seen (:meth:`estimate`'s ``contacts``)
+        self._names: dict[tuple[int, ...], tuple[str, ...]] = {}
         #: the rolling feet's model (``None``: ``foot_radius`` 0, the foot frames measured)
         self.rolling = (
             RollingFeet(self.kinematics, foot_radius, lift=rolling_lift)
@@ -702,36 +726,45 @@ class LeggedSetup:
     ) -> InEKFEstimate:
         """Check ``state`` is finite (else ObserverDiverged with ``last``), convert it to the
         root joint (module docstring)."""
-        # a sum is finite iff every term is (or it overflowed: diverged as well)
-        total = float(state.R.sum() + state.x.sum() + state.P.sum() + state.bias.sum())
+        R, x, P, bias = state.R, state.x, state.P, state.bias
+        # a sum is finite iff every term is (or it overflowed: diverged as well); ndarray.sum's
+        # reduction, called without its Python wrapper
+        total = float(_sum(R, None) + _sum(x, None) + _sum(P, None) + _sum(bias, None))
         if not math.isfinite(total):
             raise ObserverDiverged(
                 f"{self.name}: non-finite estimate at t = {state.t!r}",
                 t=state.t,
                 last_estimate=last,
             )
-        R, x = state.R, state.x
-        omega = (state.imu[:3] if state.imu is not None else np.zeros(3)) - state.bias[:3]
-        R_bi, r_bi = self.imu_placement
-        R_b = R @ R_bi.T  # the base's rotation, position, angular and linear velocity
-        p_b = x[1] - R_b @ r_bi
-        w_b = R_bi @ omega
-        v_b = R_b.T @ x[0] - _cross(w_b, r_bi)
-        q = np.concatenate([p_b, rotation_to_quaternion(R_b), q_joints])
-        v = np.concatenate([v_b, w_b, np.full(self.nv_joints, np.nan) if dq is None else dq])
+        # the base's rotation R_b, and the rows p_b, ω_b, v_b, R_b v_b (compiled: base_kernel)
+        R_b, base = np.empty((3, 3)), np.empty((4, 3))
+        kernel = base_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        imu = state.imu if state.imu is not None else _NO_READING
+        kernel(R, x, imu, bias, *self._placement, R_b, base)
+        q = np.concatenate([base[0], rotation_to_quaternion(R_b), q_joints])
+        v = np.concatenate(
+            [base[2], base[1], np.full(self.nv_joints, np.nan) if dq is None else dq]
+        )
+        world = base[3]
+        for fresh in (q, v, R_b, world):  # made here: read-only without a copy
+            fresh.setflags(write=False)
+        names = self._names.get(state.feet)
+        if names is None:
+            names = self._names[state.feet] = tuple(self.feet[j] for j in state.feet)
         return InEKFEstimate(
             t=state.t,
-            q=read_only(q),
-            v=read_only(v),
-            rotation=read_only(R_b),
-            velocity_world=read_only(R_b @ v_b),
-            bias=read_only(state.bias),
-            covariance=read_only(state.P),
-            contacts=tuple(self.feet[j] for j in state.feet),
+            q=q,
+            v=v,
+            rotation=R_b,
+            velocity_world=world,
+            bias=read_only(bias),
+            covariance=read_only(P),
+            contacts=names,
             foot_positions=read_only(x[2:]),
             nis=nis,
             nis_dof=nis_dof,
-            gated=tuple(self.feet[j] for j in gated),
+            gated=tuple(self.feet[j] for j in gated) if gated else (),
         )
 
 

@@ -59,7 +59,7 @@ base velocity RMS 1.11× R4's).  At touch-down ``o_j = −r n̂`` and (R5) is (R
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -103,8 +103,9 @@ class RollingFeet:
             )
         self.kinematics = kinematics
         #: the legs' placements and Jacobians, not copied where the kinematics can (read only)
-        self._placements = getattr(
-            kinematics, "shared_placements_and_jacobians", kinematics.placements_and_jacobians
+        shared = getattr(kinematics, "shared_placements_and_jacobians", None)
+        self._placements: Callable[[Vector], tuple[Vector, ...]] = (
+            shared if shared is not None else kinematics.placements_and_jacobians  # type: ignore[attr-defined]
         )
         self.radius = float(positive("foot_radius", radius) or 0.0)
         n = np.asarray(normal, dtype=float).reshape(3)

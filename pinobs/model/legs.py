@@ -195,16 +195,18 @@ class FootKinematics:
         model, data, oMf = self._model, self._data, self._oMf
         pin.computeJointJacobians(model, data, self._q)
         K = len(self._ids)
-        h, rot, jac = np.empty((K, 3)), np.empty((K, 3, 3)), np.empty((K, 6, self.nv_joints))
+        placement, jac = np.empty((K, 4, 4)), np.empty((K, 6, self.nv_joints))
         for k, fid in enumerate(self._ids):
             jac[k] = pin.getFrameJacobian(model, data, fid, _LOCAL_WORLD_ALIGNED)[:, 6:]
-            placement = oMf[fid]  # set by getFrameJacobian
-            h[k], rot[k] = placement.translation, placement.rotation
+            placement[k] = oMf[fid].homogeneous  # set by getFrameJacobian
+        h, rot = placement[:, :3, 3], placement[:, :3, :3]
         lin, ang = jac[:, :3], jac[:, 3:]
         if self._to_imu is not None:
             R_bi, r_bi = self._to_imu
             h, rot = (h - r_bi) @ R_bi, R_bi.T @ rot
             lin, ang = R_bi.T @ lin, R_bi.T @ ang
+        else:
+            h, rot = np.ascontiguousarray(h), np.ascontiguousarray(rot)
         out = (h, rot, lin, ang)
         self._memo["placements_and_jacobians"] = (key, out)
         return out

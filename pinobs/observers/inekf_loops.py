@@ -475,7 +475,7 @@ def _update_mean(
 
 def _base_loops(
     R: Vector, x: Vector, imu: Vector, bias: Vector, R_bi: Vector, r_bi: Vector,
-    columns: bool, R_b: Vector, out: Vector,
+    columns: bool, R_b: Vector, out: Vector, quat: Vector,
 ) -> None:  # fmt: skip
     """The estimate in the root joint's frame (:meth:`pinobs.observers.legs.LeggedSetup.estimate`,
     module docstring of :mod:`pinobs.observers.legs`): ``R_b = R R_biᵀ`` and the rows of
@@ -483,7 +483,8 @@ def _base_loops(
     and ``R_b v_b``.  The products' fused multiply-adds in the order of OpenBLAS's on these
     sizes, the bits of NumPy's ``@`` (checked on stored outputs): a C-contiguous matrix times a
     vector, :func:`_matvec3`; a column-major one (``R_bᵀ v``; ``R_bi ω`` with ``columns``,
-    ``R_bi`` as Pinocchio gives it), a sum over the columns from the first."""
+    ``R_bi`` as Pinocchio gives it), a sum over the columns from the first.  ``quat``:
+    ``R_b``'s quaternion before its normalisation (:func:`_shepperd`)."""
     omega, t = np.empty(3), np.empty(3)
     for i in range(3):
         omega[i] = imu[i] - bias[i]
@@ -512,6 +513,32 @@ def _base_loops(
         out[2, i] = s - c[i]
     _matvec3(R_b, out[2], t)
     out[3, 0], out[3, 1], out[3, 2] = t[0], t[1], t[2]
+    _shepperd(R_b, quat)
+
+
+def _shepperd(R: Vector, q: Vector) -> None:
+    """``q`` = the quaternion ``(x, y, z, w)`` of ``R`` before its normalisation, by
+    :func:`pinobs.observers.legs.rotation_to_quaternion`'s arithmetic (Shepperd's method)."""
+    a, b, c = R[0, 0], R[0, 1], R[0, 2]
+    d, e, f = R[1, 0], R[1, 1], R[1, 2]
+    g, h, i = R[2, 0], R[2, 1], R[2, 2]
+    tr = a + e + i
+    if tr >= a and tr >= e and tr >= i:
+        w = 0.5 * math.sqrt(max(1.0 + tr, 0.0))
+        k = 0.25 / w
+        q[0], q[1], q[2], q[3] = (h - f) * k, (c - g) * k, (d - b) * k, w
+    elif a >= e and a >= i:
+        x = 0.5 * math.sqrt(max(1.0 + a - e - i, 0.0))
+        k = 0.25 / x
+        q[0], q[1], q[2], q[3] = x, (b + d) * k, (c + g) * k, (h - f) * k
+    elif e >= i:
+        y = 0.5 * math.sqrt(max(1.0 - a + e - i, 0.0))
+        k = 0.25 / y
+        q[0], q[1], q[2], q[3] = (b + d) * k, y, (f + h) * k, (c - g) * k
+    else:
+        z = 0.5 * math.sqrt(max(1.0 - a - e + i, 0.0))
+        k = 0.25 / z
+        q[0], q[1], q[2], q[3] = (c + g) * k, (f + h) * k, z, (d - b) * k
 
 
 def _velocity_loops(
@@ -578,7 +605,7 @@ foot_nis_kernel = LazyKernel(
 )
 
 
-#: :func:`_base_loops` compiled: ``(R, x, imu, θ, R_bi, r_bi, columns, R_b, out)``.
+#: :func:`_base_loops` compiled: ``(R, x, imu, θ, R_bi, r_bi, columns, R_b, out, quat)``.
 base_kernel = LazyKernel(
     _base_loops,
     np.eye(3),
@@ -590,6 +617,7 @@ base_kernel = LazyKernel(
     False,
     np.empty((3, 3)),
     np.empty((4, 3)),
+    np.empty(4),
     contracted=("_fma",),
 )
 #: :func:`_velocity_loops` compiled: ``(ω, h, J q̇, R, v, out, speed)``.
@@ -628,6 +656,7 @@ def _register_helpers() -> None:
             _solve_innovation,
             _joseph,
             _foot_noise,
+            _shepperd,
         ):
             register_jitable(helper)
         _registered = True

@@ -737,12 +737,13 @@ class LeggedSetup:
                 last_estimate=last,
             )
         # the base's rotation R_b, and the rows p_b, ω_b, v_b, R_b v_b (compiled: base_kernel)
-        R_b, base = np.empty((3, 3)), np.empty((4, 3))
+        R_b, base, quat = np.empty((3, 3)), np.empty((4, 3)), np.empty(4)
         kernel = base_kernel.compiled
         assert kernel is not None  # loaded by the constructor
         imu = state.imu if state.imu is not None else _NO_READING
-        kernel(R, x, imu, bias, *self._placement, R_b, base)
-        q = np.concatenate([base[0], rotation_to_quaternion(R_b), q_joints])
+        kernel(R, x, imu, bias, *self._placement, R_b, base, quat)
+        quat /= math.sqrt(float(quat @ quat))  # (rotation_to_quaternion's last steps)
+        q = np.concatenate([base[0], -quat if quat[3] < 0 else quat, q_joints])
         v = np.concatenate(
             [base[2], base[1], np.full(self.nv_joints, np.nan) if dq is None else dq]
         )

@@ -317,8 +317,9 @@ def legged_run(
     previous: float | None = None
     said: list[str] = [*joints.warnings, *said_setup]
     rows = _Rows(log, joints.v)
+    times, fed = log.t.tolist(), usable.tolist()  # (Python floats and bools: per-row reads)
     for k in range(n):
-        if not usable[k] or (previous is not None and log.t[k] <= previous):
+        if not fed[k] or (previous is not None and times[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
             if prob is not None and k:
                 flags[k] = flags[k - 1]
@@ -330,7 +331,7 @@ def legged_run(
             said.append(f"inekf diverged at t = {log.t[k]:.6g} s: the rows after it are NaN")
             bad.extend((int(log.lines[j]), "after the filter diverged") for j in range(k, n))
             break
-        previous = float(log.t[k])
+        previous = times[k]
         q_out[k], v_out[k] = est.q, est.v
         v_out[k, 6:] = joints.v[k]  # (what update passes through; reset shows none)
         nis[k] = np.nan if est.nis is None else est.nis

@@ -451,10 +451,12 @@ def replace_state(state: LegState, **changes: Any) -> LegState:
 
 def remove_feet(state: LegState, slots: list[int]) -> LegState:
     """Marginalise the feet at state positions ``slots``: delete their rows and columns."""
-    n = state.P.shape[0]
-    drop = np.concatenate([np.arange(9 + 3 * s, 12 + 3 * s) for s in slots])
-    keep = np.setdiff1d(np.arange(n), drop)
-    rows = np.setdiff1d(np.arange(state.x.shape[0]), [2 + s for s in slots])
+    keep = np.ones(state.P.shape[0], dtype=bool)  # (the indices np.setdiff1d gave, by masks)
+    rows = np.ones(state.x.shape[0], dtype=bool)
+    for s in slots:
+        keep[9 + 3 * s : 12 + 3 * s] = False
+        rows[2 + s] = False
+    keep, rows = np.flatnonzero(keep), np.flatnonzero(rows)
     feet = tuple(f for s, f in enumerate(state.feet) if s not in slots)
     return replace_state(state, x=state.x[rows], P=state.P[np.ix_(keep, keep)], feet=feet)
 

@@ -518,7 +518,7 @@ def _base_loops(
 
 def _shepperd(R: Vector, q: Vector) -> None:
     """``q`` = the quaternion ``(x, y, z, w)`` of ``R`` before its normalisation, by
-    :func:`pinobs.observers.legs.rotation_to_quaternion`'s arithmetic (Shepperd's method)."""
+    :func:`pinobs.observers.rotations.rotation_to_quaternion`'s arithmetic (Shepperd's method)."""
     a, b, c = R[0, 0], R[0, 1], R[0, 2]
     d, e, f = R[1, 0], R[1, 1], R[1, 2]
     g, h, i = R[2, 0], R[2, 1], R[2, 2]

@@ -83,7 +83,7 @@ from pinobs.observers.contacts import (
     default_thresholds,
 )
 from pinobs.observers.inekf import InEKFGains, InvariantEKF, rotation_to_quaternion
-from pinobs.observers.legs import stance_consistency
+from pinobs.observers.legs import UpdateInputs, check_time, stance_consistency
 from pinobs.observers.noise import STILL_STD, joint_noise_std, still_noise_std, stillest_rows
 
 #: ``contacts=`` of :func:`estimate_legged`.
@@ -316,20 +316,22 @@ def legged_run(
     )
     previous: float | None = None
     said: list[str] = [*joints.warnings, *said_setup]
+    rows = _Rows(log, joints.v)
+    times, fed = log.t.tolist(), usable.tolist()  # (Python floats and bools: per-row reads)
     for k in range(n):
-        if not usable[k] or (previous is not None and log.t[k] <= previous):
+        if not fed[k] or (previous is not None and times[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
             if prob is not None and k:
                 flags[k] = flags[k - 1]
             continue
         if prob is not None:
             flags[k] = _probable(filt, prob, log, k, joints.v[k], flags[k - 1] if k else None)
-        est = _step(filt, robot, log, k, flags[k], joints.v[k], previous is None)
+        est = _step(filt, robot, log, k, flags[k], rows, previous is None)
         if est is None:
             said.append(f"inekf diverged at t = {log.t[k]:.6g} s: the rows after it are NaN")
             bad.extend((int(log.lines[j]), "after the filter diverged") for j in range(k, n))
             break
-        previous = float(log.t[k])
+        previous = times[k]
         q_out[k], v_out[k] = est.q, est.v
         v_out[k, 6:] = joints.v[k]  # (what update passes through; reset shows none)
         nis[k] = np.nan if est.nis is None else est.nis
@@ -396,28 +398,49 @@ def _why(log: Log, k: int, usable: bool) -> str:
     return f"time {log.t[k]!r} does not advance: not fed to inekf"
 
 
+class _Rows:
+    """The log's rows as the filter's checked inputs (:class:`UpdateInputs`), checked once for
+    the whole log: the joint angles, the readings ``(gyro, acc)`` and the joint velocities
+    (rows, not copies; C-contiguous as :meth:`Robot.check_vector` makes them), and which
+    velocity rows are finite.  The rows fed are the usable ones (finite time, IMU and
+    angles: :func:`legged_run`'s ``usable``), so each ``update``'s own checks would pass;
+    the time is checked per row (:func:`check_time`), as ``update`` does."""
+
+    def __init__(self, log: Log, dq: Vector) -> None:
+        assert log.imu_gyro is not None and log.imu_acc is not None
+        self.q = np.ascontiguousarray(log.q[:, 7:], dtype=float)
+        self.reading = np.ascontiguousarray(np.hstack([log.imu_gyro, log.imu_acc]), dtype=float)
+        self.dq = np.ascontiguousarray(dq, dtype=float)
+        self.dq_finite = np.all(np.isfinite(self.dq), axis=1).tolist()
+
+    def inputs(self, filt: InvariantEKF, t: float, k: int, flags: list[bool]) -> UpdateInputs:
+        """Row ``k`` as ``update`` would check it (its time after the filter's)."""
+        dq = self.dq[k] if self.dq_finite[k] else None
+        return UpdateInputs(check_time(t, filt.state.t), self.q[k], self.reading[k], flags, dq)
+
+
 def _step(
     filt: InvariantEKF,
     robot: Robot,
     log: Log,
     k: int,
     contacts: np.ndarray,
-    dq_row: Vector,
+    rows: _Rows,
     first: bool,
 ) -> Any:
     """The filter reset (first row) or updated with row ``k``; ``None`` if it diverged."""
     assert log.imu_gyro is not None and log.imu_acc is not None
-    gyro, acc = log.imu_gyro[k], log.imu_acc[k]
     flags = [bool(c) for c in contacts]
-    dq = dq_row if np.all(np.isfinite(dq_row)) else None
     if first:
+        gyro, acc = log.imu_gyro[k], log.imu_acc[k]
+        dq = rows.dq[k] if rows.dq_finite[k] else None
         q0 = _start_pose(log.q[k], acc, filt.imu_placement)
         v0 = np.zeros(robot.nv)
         if dq is not None:
             v0[6:] = dq
         return filt.reset(log.t[k], q0, v0, gyro=gyro, acc=acc, contacts=flags)
     try:
-        return filt.update(log.t[k], log.q[k, 7:], gyro, acc, flags, joint_velocities=dq)
+        return filt.update_checked(rows.inputs(filt, log.t[k], k, flags))
     except ObserverDiverged:
         return None
 

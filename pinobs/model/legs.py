@@ -43,6 +43,7 @@ Vector = NDArray[np.floating[Any]]
 
 #: The configuration of a free-flyer at the identity: position 0, quaternion (x, y, z, w) = (0, 0, 0, 1).
 _BASE_AT_IDENTITY = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+_LOCAL_WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 class FootKinematics:
@@ -93,6 +94,7 @@ class FootKinematics:
         self.nv_joints = int(model.nv) - 6
         self._model = model
         self._data = model.createData()
+        self._oMf = self._data.oMf  # (the frames' placements, in place: one attribute look-up)
         self._ids = tuple(ids)
         self._q = np.concatenate([_BASE_AT_IDENTITY, pin.neutral(model)[7:]])
         #: per method, the last joint angles' bytes and its results (:meth:`_recall`)
@@ -175,25 +177,39 @@ class FootKinematics:
         """``(h, R, J, J_ω)``: the feet's positions ``(K, 3)`` [m] and orientations ``(K, 3, 3)``,
         their linear ``(K, 3, nv_joints)`` [m/rad] and angular ``(K, 3, nv_joints)`` [rad/rad]
         Jacobians with respect to the joint velocities, all in the base (or IMU) frame."""
-        key, last = self._recall("placements_and_jacobians", q_joints)
-        if last is not None:
-            return last
+        return tuple(a.copy() for a in self.shared_placements_and_jacobians(q_joints))
+
+    def shared_placements_and_jacobians(self, q_joints: ArrayLike) -> tuple[Vector, ...]:
+        """:meth:`placements_and_jacobians` without the copies: the arrays are this object's, kept
+        for its next call with the same angles, and are not to be written to (the rolling feet
+        read them every sample; writable, the compiled kernels' signatures).
+
+        One ``computeJointJacobians``, then per foot ``getFrameJacobian``, which also sets the
+        foot's ``oMf`` (``oMi · placement``, what ``updateFramePlacements`` gives it): the same
+        arithmetic as before, without the placements of the frames that are not feet."""
+        key = np.asarray(q_joints, dtype=float).tobytes()
+        last = self._memo.get("placements_and_jacobians")
+        if last is not None and last[0] == key:
+            return last[1]
         self._set(q_joints)
-        model, data = self._model, self._data
+        model, data, oMf = self._model, self._data, self._oMf
         pin.computeJointJacobians(model, data, self._q)
-        pin.updateFramePlacements(model, data)
         K = len(self._ids)
-        h, rot, jac = np.empty((K, 3)), np.empty((K, 3, 3)), np.empty((K, 6, self.nv_joints))
+        placement, jac = np.empty((K, 4, 4)), np.empty((K, 6, self.nv_joints))
         for k, fid in enumerate(self._ids):
-            h[k], rot[k] = data.oMf[fid].translation, data.oMf[fid].rotation
-            full = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-            jac[k] = full[:, 6:]
+            jac[k] = pin.getFrameJacobian(model, data, fid, _LOCAL_WORLD_ALIGNED)[:, 6:]
+            placement[k] = oMf[fid].homogeneous  # set by getFrameJacobian
+        h, rot = placement[:, :3, 3], placement[:, :3, :3]
         lin, ang = jac[:, :3], jac[:, 3:]
         if self._to_imu is not None:
             R_bi, r_bi = self._to_imu
             h, rot = (h - r_bi) @ R_bi, R_bi.T @ rot
             lin, ang = R_bi.T @ lin, R_bi.T @ ang
-        return self._keep("placements_and_jacobians", key, (h, rot, lin, ang))
+        else:
+            h, rot = np.ascontiguousarray(h), np.ascontiguousarray(rot)
+        out = (h, rot, lin, ang)
+        self._memo["placements_and_jacobians"] = (key, out)
+        return out
 
 
 def _frame_id(robot: Robot, name: str) -> int:

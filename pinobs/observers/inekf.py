@@ -173,6 +173,7 @@ biases as far as the motion excites them.
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -191,6 +192,7 @@ from pinobs.observers.inekf_loops import (
     gamma_coefficients,
     load_kernels,
     propagate_kernel,
+    velocity_kernel,
 )
 from pinobs.observers.legged_filter import LeggedFilter
 from pinobs.observers.legs import (
@@ -211,7 +213,6 @@ from pinobs.observers.legs import (
     remove_feet,
     replace_state,
     rotation_to_quaternion,
-    slip_densities,
     slip_speeds,
 )
 from pinobs.observers.linalg import cholesky_solve
@@ -246,6 +247,8 @@ InEKFState = LegState
 
 
 _I3 = np.eye(3)
+#: ``ndarray.sum``'s reduction, without its Python wrapper
+_sum = np.add.reduce
 
 
 # ------------------------------------------------------------------- SO(3), SE_K(3)
@@ -428,6 +431,16 @@ def prior_covariance(prior: InEKFPrior, x: Vector) -> Vector:
     return T @ prior.covariance() @ T.T
 
 
+def _slip_densities(qc: Vector, speed: Vector, feet: tuple[int, ...], h: float) -> Vector:
+    """:func:`~pinobs.observers.legs.slip_densities` of ``speed[list(feet)]`` (eq. 9), the
+    products ``|ṗ_j|² h`` in Python floats (the same as NumPy's ``speed**2 * h``), read-only."""
+    sp = speed.tolist()
+    out = qc.copy()
+    out[9 : 9 + 3 * len(feet)] += np.repeat([sp[j] * sp[j] * h for j in feet], 3)
+    out.setflags(write=False)
+    return out
+
+
 # ---------------------------------------------------------------------- filter
 class InvariantEKF(LeggedFilter):
     """Contact-aided invariant EKF (right-invariant error, bias-augmented; module docstring).
@@ -516,6 +529,8 @@ class InvariantEKF(LeggedFilter):
         self._speed: Vector | None = None  # |ṗ_j| of every foot at the last sample [m/s]
         #: the feet's positions and unscaled Jacobians of the last :meth:`_legs` call
         self._kinematics: tuple[Vector, Vector] = (np.empty((0, 3)), np.empty((0, 3, 0)))
+        #: ``Q_c`` per number of feet, of these gains (:meth:`_noise_densities`)
+        self._densities: tuple[InEKFGains | None, dict[int, Vector]] = (None, {})
         load_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
 
     def error_matrix(self) -> Vector:
@@ -537,14 +552,20 @@ class InvariantEKF(LeggedFilter):
 
     def _velocities(self, h: Vector, jac: Vector, dq: Vector, gyro: Vector) -> Vector:
         """:meth:`foot_velocities` from the feet's positions ``h`` (K, 3) and unscaled Jacobians
-        ``jac`` (K, 3, nv_j) in the IMU frame: ``v̂ + R̂ ((ω̃ − b̂_g) × h_j + J_j q̇)``, the cross
-        product written out by columns (``np.cross``'s operations, in its order)."""
+        ``jac`` (K, 3, nv_j) in the IMU frame: ``v̂ + R̂ ((ω̃ − b̂_g) × h_j + J_j q̇)``."""
+        return self._speeds(h, jac, dq, gyro)[0]
+
+    def _speeds(self, h: Vector, jac: Vector, dq: Vector, gyro: Vector) -> tuple[Vector, Vector]:
+        """:meth:`_velocities` and their norms ``|ṗ̂_j|``: ``J_j q̇`` by NumPy's ``@``, the rest
+        compiled (:data:`pinobs.observers.inekf_loops.velocity_kernel`: the same bits as the
+        cross product written out by columns and ``local @ R̂ᵀ`` it replaces)."""
         state = self.state
-        w0, w1, w2 = (gyro - state.bias[:3]).tolist()
-        h0, h1, h2 = h.T
-        cross = np.array([w1 * h2 - w2 * h1, w2 * h0 - w0 * h2, w0 * h1 - w1 * h0]).T
-        local = cross + jac @ dq  # in the IMU frame
-        return np.asarray(state.x[0] + local @ state.R.T)
+        out, speed = np.empty((h.shape[0], 3)), np.empty(h.shape[0])
+        kernel = velocity_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        w = gyro[:3] - state.bias[:3]
+        kernel(w, np.ascontiguousarray(h), jac @ dq, state.R, state.x[0], out, speed)
+        return out, speed
 
     # ------------------------------------------------------------- the steps
     def _initial_covariance(self, a: ResetInputs) -> Vector:
@@ -557,14 +578,25 @@ class InvariantEKF(LeggedFilter):
         docstring's ``Φ P Φᵀ + Q``) in compiled loops (:mod:`pinobs.observers.inekf_loops`)."""
         x, P = state.x, state.P
         R1, x1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty_like(P)
-        qc = noise_densities(self.gains, x.shape[0] - 2)
+        qc = self._noise_densities(x.shape[0] - 2)
         if self._speed is not None and state.feet:
-            qc = slip_densities(qc, self._speed[list(state.feet)], dt)  # eq. (9)
+            qc = _slip_densities(qc, self._speed, state.feet, dt)  # eq. (9)
         qc = self._landing(qc, state, dt)  # eq. (11)
         kernel = propagate_kernel.compiled
         assert kernel is not None  # loaded by the constructor
         kernel(state.R, x, state.bias, imu, dt, self._gravity, qc, P, R1, x1, P1)
         return replace_state(state, t=t, R=R1, x=x1, P=P1)
+
+    def _noise_densities(self, n_contacts: int) -> Vector:
+        """:func:`~pinobs.observers.legs.noise_densities` of ``self.gains``, kept per number of
+        feet for as long as ``gains`` is the same object (its hash, every sample, cost more)."""
+        if self._densities[0] is not self.gains:
+            self._densities = (self.gains, {})
+        cache = self._densities[1]
+        qc = cache.get(n_contacts)
+        if qc is None:
+            qc = cache[n_contacts] = noise_densities(self.gains, n_contacts)
+        return qc
 
     def _gate(
         self, state: InEKFState, h: Vector, jac: Vector
@@ -588,8 +620,11 @@ class InvariantEKF(LeggedFilter):
             self._speed = None
         else:  # the update's own legs (:meth:`_legs`, at u.q_joints): not computed again
             h_now, jac = self._kinematics
-            velocities = self._velocities(h_now, jac, u.joint_velocities, u.reading[:3])
-            self._speed = slip_speeds(velocities, h, self.slip_gyro, dt)  # eq. (10)
+            velocities, speed = self._speeds(h_now, jac, u.joint_velocities, u.reading[:3])
+            if self.slip_gyro == 0.0 and math.isfinite(float(_sum(speed, None))):
+                self._speed = speed  # eq. (10) without its noise term: √max(|ṗ̂_j|², 0)
+            else:
+                self._speed = slip_speeds(velocities, h, self.slip_gyro, dt)  # eq. (10)
 
     def foot_nis(self, state: InEKFState, h: Vector, jac: Vector) -> Vector:
         """Eq. (8): each foot's own ``NIS_j = r_jᵀ S_jj⁻¹ r_j`` (3 dof) in the state's order,

@@ -42,12 +42,15 @@ from pinobs.observers.linalg import LazyKernel
 from pinobs.tolerances import SERIES_ANGLE
 
 __all__ = [
+    "base_kernel",
     "correct_kernel",
     "expm_degree",
     "foot_nis_kernel",
     "gamma_coefficients",
     "load_kernels",
+    "load_leg_kernels",
     "propagate_kernel",
+    "velocity_kernel",
 ]
 
 
@@ -470,6 +473,93 @@ def _update_mean(
         theta1[i] = theta[i] + e[n - 6 + i]
 
 
+def _base_loops(
+    R: Vector, x: Vector, imu: Vector, bias: Vector, R_bi: Vector, r_bi: Vector,
+    columns: bool, R_b: Vector, out: Vector, quat: Vector,
+) -> None:  # fmt: skip
+    """The estimate in the root joint's frame (:meth:`pinobs.observers.legs.LeggedSetup.estimate`,
+    module docstring of :mod:`pinobs.observers.legs`): ``R_b = R R_biᵀ`` and the rows of
+    ``out``: ``p_b = p − R_b r_bi``, ``ω_b = R_bi (ω̃ − b̂_g)``, ``v_b = R_bᵀ v − ω_b × r_bi``
+    and ``R_b v_b``.  The products' fused multiply-adds in the order of OpenBLAS's on these
+    sizes, the bits of NumPy's ``@`` (checked on stored outputs): a C-contiguous matrix times a
+    vector, :func:`_matvec3`; a column-major one (``R_bᵀ v``; ``R_bi ω`` with ``columns``,
+    ``R_bi`` as Pinocchio gives it), a sum over the columns from the first.  ``quat``:
+    ``R_b``'s quaternion before its normalisation (:func:`_shepperd`)."""
+    omega, t = np.empty(3), np.empty(3)
+    for i in range(3):
+        omega[i] = imu[i] - bias[i]
+    _matmul(R, R_bi.T, R_b)
+    _matvec3(R_b, r_bi, t)
+    for i in range(3):
+        out[0, i] = x[1, i] - t[i]
+    if columns:
+        for i in range(3):
+            s = 0.0
+            for k in range(3):
+                s = _fma(R_bi[i, k], omega[k], s)
+            t[i] = s
+    else:
+        _matvec3(R_bi, omega, t)
+    out[1, 0], out[1, 1], out[1, 2] = t[0], t[1], t[2]
+    c = (
+        t[1] * r_bi[2] - t[2] * r_bi[1],
+        t[2] * r_bi[0] - t[0] * r_bi[2],
+        t[0] * r_bi[1] - t[1] * r_bi[0],
+    )
+    for i in range(3):
+        s = 0.0
+        for k in range(3):
+            s = _fma(R_b[k, i], x[0, k], s)
+        out[2, i] = s - c[i]
+    _matvec3(R_b, out[2], t)
+    out[3, 0], out[3, 1], out[3, 2] = t[0], t[1], t[2]
+    _shepperd(R_b, quat)
+
+
+def _shepperd(R: Vector, q: Vector) -> None:
+    """``q`` = the quaternion ``(x, y, z, w)`` of ``R`` before its normalisation, by
+    :func:`pinobs.observers.rotations.rotation_to_quaternion`'s arithmetic (Shepperd's method)."""
+    a, b, c = R[0, 0], R[0, 1], R[0, 2]
+    d, e, f = R[1, 0], R[1, 1], R[1, 2]
+    g, h, i = R[2, 0], R[2, 1], R[2, 2]
+    tr = a + e + i
+    if tr >= a and tr >= e and tr >= i:
+        w = 0.5 * math.sqrt(max(1.0 + tr, 0.0))
+        k = 0.25 / w
+        q[0], q[1], q[2], q[3] = (h - f) * k, (c - g) * k, (d - b) * k, w
+    elif a >= e and a >= i:
+        x = 0.5 * math.sqrt(max(1.0 + a - e - i, 0.0))
+        k = 0.25 / x
+        q[0], q[1], q[2], q[3] = x, (b + d) * k, (c + g) * k, (h - f) * k
+    elif e >= i:
+        y = 0.5 * math.sqrt(max(1.0 - a + e - i, 0.0))
+        k = 0.25 / y
+        q[0], q[1], q[2], q[3] = (b + d) * k, y, (f + h) * k, (c - g) * k
+    else:
+        z = 0.5 * math.sqrt(max(1.0 - a - e + i, 0.0))
+        k = 0.25 / z
+        q[0], q[1], q[2], q[3] = (c + g) * k, (f + h) * k, z, (d - b) * k
+
+
+def _velocity_loops(
+    w: Vector, h: Vector, jdq: Vector, R: Vector, v: Vector, out: Vector, speed: Vector
+) -> None:
+    """The feet's velocities ``ṗ̂_j = v̂ + R̂ (ω × h_j + J_j q̇)`` (``jdq`` the rows ``J_j q̇``;
+    :meth:`pinobs.observers.inekf.InvariantEKF.foot_velocities`) and their speeds
+    ``√max(|ṗ̂_j|², 0)``, the cross product and the sums in NumPy's order and ``(ω × h_j +
+    J_j q̇) R̂ᵀ`` by fused multiply-adds in OpenBLAS's ``gemm`` order (its bits)."""
+    w0, w1, w2 = w[0], w[1], w[2]
+    for j in range(h.shape[0]):
+        h0, h1, h2 = h[j, 0], h[j, 1], h[j, 2]
+        l0 = (w1 * h2 - w2 * h1) + jdq[j, 0]
+        l1 = (w2 * h0 - w0 * h2) + jdq[j, 1]
+        l2 = (w0 * h1 - w1 * h0) + jdq[j, 2]
+        for i in range(3):
+            out[j, i] = v[i] + _fma(l2, R[i, 2], _fma(l1, R[i, 1], _fma(l0, R[i, 0], 0.0)))
+        s2 = (out[j, 0] * out[j, 0] + out[j, 1] * out[j, 1]) + out[j, 2] * out[j, 2]
+        speed[j] = math.sqrt(s2) if s2 > 0.0 else (0.0 if s2 <= 0.0 else s2)
+
+
 def _warm_propagate() -> tuple[object, ...]:
     """Arguments of :data:`propagate_kernel`'s one signature (``qc`` read-only, as cached)."""
     qc = np.ones(21)
@@ -515,13 +605,42 @@ foot_nis_kernel = LazyKernel(
 )
 
 
-def load_kernels() -> None:
-    """Compile (or load from numba's cache) the kernels; once."""
-    if (
-        propagate_kernel.compiled is None
-        or correct_kernel.compiled is None
-        or foot_nis_kernel.compiled is None
-    ):
+#: :func:`_base_loops` compiled: ``(R, x, imu, θ, R_bi, r_bi, columns, R_b, out, quat)``.
+base_kernel = LazyKernel(
+    _base_loops,
+    np.eye(3),
+    np.zeros((3, 3)),
+    np.zeros(6),
+    np.zeros(6),
+    np.eye(3),
+    np.zeros(3),
+    False,
+    np.empty((3, 3)),
+    np.empty((4, 3)),
+    np.empty(4),
+    contracted=("_fma",),
+)
+#: :func:`_velocity_loops` compiled: ``(ω, h, J q̇, R, v, out, speed)``.
+velocity_kernel = LazyKernel(
+    _velocity_loops,
+    np.zeros(3),
+    np.zeros((2, 3)),
+    np.zeros((2, 3)),
+    np.eye(3),
+    np.zeros(3),
+    np.empty((2, 3)),
+    np.empty(2),
+    contracted=("_fma",),
+)
+
+
+_registered = False
+
+
+def _register_helpers() -> None:
+    """The helpers the kernels call, made callable from compiled code (once)."""
+    global _registered
+    if not _registered:
         from numba.extending import register_jitable  # lazy: start-up time
 
         for helper in (
@@ -537,8 +656,30 @@ def load_kernels() -> None:
             _solve_innovation,
             _joseph,
             _foot_noise,
+            _shepperd,
         ):
             register_jitable(helper)
+        _registered = True
+
+
+def load_kernels() -> None:
+    """Compile (or load from numba's cache) the kernels; once."""
+    if (
+        propagate_kernel.compiled is None
+        or correct_kernel.compiled is None
+        or foot_nis_kernel.compiled is None
+    ):
+        _register_helpers()
         propagate_kernel.load()
         correct_kernel.load()
         foot_nis_kernel.load()
+    load_leg_kernels()
+
+
+def load_leg_kernels() -> None:
+    """Compile (or load) :data:`base_kernel` and :data:`velocity_kernel` (every contact-aided
+    filter's estimate; the invariant EKF's feet speeds); once."""
+    if base_kernel.compiled is None or velocity_kernel.compiled is None:
+        _register_helpers()
+        base_kernel.load()
+        velocity_kernel.load()

@@ -201,7 +201,24 @@ class LeggedFilter(ABC):
             ObserverDiverged: a non-finite estimate (the state is left as it was).
         """
         state = self.state
-        u = self.setup.update_inputs(state.t, t, q, gyro, acc, contacts, joint_velocities)
+        return self.update_checked(
+            self.setup.update_inputs(state.t, t, q, gyro, acc, contacts, joint_velocities)
+        )
+
+    def update_checked(self, u: UpdateInputs) -> InEKFEstimate:
+        """:meth:`update` with its arguments already checked, as
+        :meth:`~pinobs.observers.legs.LeggedSetup.update_inputs` returns them: for a caller
+        that has checked a whole log at once (:func:`pinobs.io.legged_run.legged_run`), which
+        then answers for what :meth:`update` checks each sample (``u.t`` after the state's by
+        more than ``TIME_EPS``, finite arrays of the right shapes, one bool per foot).  The
+        arrays are read, not copied, and must not change while the filter holds them (the
+        reading is kept until the next sample).
+
+        Raises:
+            NotResetError: before ``reset``.
+            ObserverDiverged: a non-finite estimate (the state is left as it was).
+        """
+        state = self.state
         new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
         h, jac = self._legs(u.q_joints, new.R, u.flags)
         new, nis, used, gated = self._correct(new, u.flags, h, jac)
@@ -249,6 +266,8 @@ class LeggedFilter(ABC):
     def _landing(self, qc: Vector, state: LegState, dt: float) -> Vector:
         """``Q_c`` with the landing term of the feet in ``state`` over the step from
         ``state.t`` (:func:`landing_densities`)."""
+        if self.gains.landing == 0.0 or self.gains.landing_time == 0.0:
+            return qc  # (landing_densities' own answer, without the list)
         landed = [self._landed[j] for j in state.feet]
         return landing_densities(qc, self.gains, landed, state.t, dt)
 

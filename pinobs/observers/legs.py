@@ -47,8 +47,10 @@ from pinobs.errors import (
 from pinobs.model import FootKinematics, Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.base import Vector
+from pinobs.observers.inekf_loops import base_kernel, load_leg_kernels
 from pinobs.observers.results import Consistency
 from pinobs.observers.rolling import RollingFeet
+from pinobs.observers.rotations import quaternion_to_rotation, rotation_to_quaternion
 from pinobs.tolerances import NO_CONTACT_WARN_TIME, QUATERNION_NORM_TOL, TIME_EPS
 
 __all__ = [
@@ -81,67 +83,10 @@ GRAVITY = (0.0, 0.0, -9.81)
 _I3 = np.eye(3)
 
 
-def rotation_to_quaternion(R: Vector) -> Vector:
-    """Unit quaternion ``(x, y, z, w)`` of a rotation matrix, ``w ≥ 0`` (SciPy's convention).
-
-    Shepperd's method (J. Guidance Control 1978): from the largest of ``4w² = 1 + tr R``
-    and ``4x² = 1 + 2R₀₀ − tr R`` (…), so no division by a small number; 20× cheaper
-    than SciPy's ``Rotation.from_matrix`` per call (which cost 40 % of an update)."""
-    r = R.tolist()
-    (a, b, c), (d, e, f), (g, h, i) = r
-    tr = a + e + i
-    if tr >= a and tr >= e and tr >= i:
-        w = 0.5 * math.sqrt(max(1.0 + tr, 0.0))
-        k = 0.25 / w
-        q = [(h - f) * k, (c - g) * k, (d - b) * k, w]
-    elif a >= e and a >= i:
-        x = 0.5 * math.sqrt(max(1.0 + a - e - i, 0.0))
-        k = 0.25 / x
-        q = [x, (b + d) * k, (c + g) * k, (h - f) * k]
-    elif e >= i:
-        y = 0.5 * math.sqrt(max(1.0 - a + e - i, 0.0))
-        k = 0.25 / y
-        q = [(b + d) * k, y, (f + h) * k, (c - g) * k]
-    else:
-        z = 0.5 * math.sqrt(max(1.0 - a - e + i, 0.0))
-        k = 0.25 / z
-        q = [(c + g) * k, (f + h) * k, z, (d - b) * k]
-    out = np.array(q)
-    out /= math.sqrt(float(out @ out))
-    return -out if out[3] < 0 else out
-
-
-def quaternion_to_rotation(quat: Vector) -> Vector:
-    """Rotation matrix of a quaternion ``(x, y, z, w)``, normalised first: with
-    ``x² + y² + z² + w² = 1``,
-
-        R = [[x²−y²−z²+w², 2(xy−zw), 2(xz+yw)],
-             [2(xy+zw), −x²+y²−z²+w², 2(yz−xw)],
-             [2(xz−yw), 2(yz+xw), −x²−y²+z²+w²]]
-
-    (the Hamilton convention, Pinocchio's: Solà, *Quaternion kinematics for the error-state
-    Kalman filter*, the rotation matrix of a quaternion), in the order of SciPy's
-    ``Rotation.from_quat(quat).as_matrix()``: the same bits (tested), without importing
-    ``scipy.spatial`` (0.1–0.4 s CPU: ``inekf``'s reset, issue 39)."""
-    x, y, z, w = (float(c) for c in quat)
-    n = math.sqrt(x * x + y * y + z * z + w * w)
-    x, y, z, w = x / n, y / n, z / n, w / n
-    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
-    xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
-    return np.array(
-        [
-            [x2 - y2 - z2 + w2, 2 * (xy - zw), 2 * (xz + yw)],
-            [2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw)],
-            [2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2],
-        ]
-    )
-
-
-def _cross(a: Vector, b: Vector) -> Vector:
-    """``a × b`` of two 3-vectors (``np.cross`` costs 10× more on 3-vectors)."""
-    return np.array(
-        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-    )
+#: the held reading of a state without one (:meth:`LeggedSetup.estimate`: ω̃ = 0)
+_NO_READING = np.zeros(6)
+#: ``ndarray.sum``'s reduction (``np.add.reduce(a, None)``: every axis, pairwise)
+_sum = np.add.reduce
 
 
 # ------------------------------------------------------------------- checks
@@ -378,8 +323,13 @@ def slip_speeds(velocities: Vector, h: Vector, gyro: float, period: float) -> Ve
     0.5 % with the raw speed, 46 % with ``imu_noise="log"`` (the IMU's densities measured
     on the log and (10)); the encoders white 5e-4 rad: 87 % and 95 %
     (``benchmarks/legged_truth.md``)."""
+    speed2 = np.sum(velocities * velocities, axis=1)
+    if gyro == 0.0 and math.isfinite(period) and period > 0.0 and np.isfinite(speed2).all():
+        # the noise term is 0 and |ṗ̂_j|² − 0 is |ṗ̂_j|² (finite speeds come from finite h;
+        # |h_j|² overflowing, |h_j| > 1e154 m, would have made it NaN)
+        return np.sqrt(np.maximum(speed2, 0.0))
     noise = 2.0 * np.sum(h * h, axis=1) * gyro**2 / period
-    return np.sqrt(np.maximum(np.sum(velocities * velocities, axis=1) - noise, 0.0))
+    return np.sqrt(np.maximum(speed2 - noise, 0.0))
 
 
 def check_joint_std(joint_std: ArrayLike, n: int) -> Vector:
@@ -428,22 +378,30 @@ class LegState:
     last_contact: float
 
 
-_STATE_FIELDS = tuple(f.name for f in fields(LegState))
+_STATE_FIELDS = frozenset(f.name for f in fields(LegState))
 
 
 def replace_state(state: LegState, **changes: Any) -> LegState:
-    """``state`` with ``changes`` (``dataclasses.replace`` without its checks)."""
-    values = {name: getattr(state, name) for name in _STATE_FIELDS}
+    """``state`` with ``changes`` (``dataclasses.replace`` without its checks): its fields
+    copied in one dictionary update (a frozen dataclass's ``__init__`` sets them one by one;
+    the filters make three states a sample)."""
+    if not changes.keys() <= _STATE_FIELDS:
+        raise TypeError(f"LegState has no field {sorted(changes.keys() - _STATE_FIELDS)}")
+    new = object.__new__(LegState)
+    values = new.__dict__
+    values.update(state.__dict__)
     values.update(changes)
-    return LegState(**values)
+    return new
 
 
 def remove_feet(state: LegState, slots: list[int]) -> LegState:
     """Marginalise the feet at state positions ``slots``: delete their rows and columns."""
-    n = state.P.shape[0]
-    drop = np.concatenate([np.arange(9 + 3 * s, 12 + 3 * s) for s in slots])
-    keep = np.setdiff1d(np.arange(n), drop)
-    rows = np.setdiff1d(np.arange(state.x.shape[0]), [2 + s for s in slots])
+    keep = np.ones(state.P.shape[0], dtype=bool)  # (the indices np.setdiff1d gave, by masks)
+    rows = np.ones(state.x.shape[0], dtype=bool)
+    for s in slots:
+        keep[9 + 3 * s : 12 + 3 * s] = False
+        rows[2 + s] = False
+    keep, rows = np.flatnonzero(keep), np.flatnonzero(rows)
     feet = tuple(f for s, f in enumerate(state.feet) if s not in slots)
     return replace_state(state, x=state.x[rows], P=state.P[np.ix_(keep, keep)], feet=feet)
 
@@ -564,6 +522,19 @@ class LeggedSetup:
             if placement is None
             else (np.asarray(placement[0], dtype=float), np.asarray(placement[1], dtype=float))
         )
+        #: ``imu_placement`` as the compiled estimate takes it (writable, C-contiguous copies)
+        #: and whether ``R_bi`` is column-major (Pinocchio's: NumPy's ``R_bi @ ω`` then sums
+        #: its columns, another order of the products; :data:`~.inekf_loops.base_kernel`)
+        R_bi = self.imu_placement[0]
+        columns = bool(R_bi.flags.f_contiguous and not R_bi.flags.c_contiguous)
+        self._placement = (
+            np.ascontiguousarray(R_bi, dtype=float).copy(),
+            np.array(self.imu_placement[1], dtype=float),
+            columns,
+        )
+        load_leg_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
+        #: the feet's names of each state's ``feet`` seen (:meth:`estimate`'s ``contacts``)
+        self._names: dict[tuple[int, ...], tuple[str, ...]] = {}
         #: the rolling feet's model (``None``: ``foot_radius`` 0, the foot frames measured)
         self.rolling = (
             RollingFeet(self.kinematics, foot_radius, lift=rolling_lift)
@@ -702,36 +673,46 @@ class LeggedSetup:
     ) -> InEKFEstimate:
         """Check ``state`` is finite (else ObserverDiverged with ``last``), convert it to the
         root joint (module docstring)."""
-        # a sum is finite iff every term is (or it overflowed: diverged as well)
-        total = float(state.R.sum() + state.x.sum() + state.P.sum() + state.bias.sum())
+        R, x, P, bias = state.R, state.x, state.P, state.bias
+        # a sum is finite iff every term is (or it overflowed: diverged as well); ndarray.sum's
+        # reduction, called without its Python wrapper
+        total = float(_sum(R, None) + _sum(x, None) + _sum(P, None) + _sum(bias, None))
         if not math.isfinite(total):
             raise ObserverDiverged(
                 f"{self.name}: non-finite estimate at t = {state.t!r}",
                 t=state.t,
                 last_estimate=last,
             )
-        R, x = state.R, state.x
-        omega = (state.imu[:3] if state.imu is not None else np.zeros(3)) - state.bias[:3]
-        R_bi, r_bi = self.imu_placement
-        R_b = R @ R_bi.T  # the base's rotation, position, angular and linear velocity
-        p_b = x[1] - R_b @ r_bi
-        w_b = R_bi @ omega
-        v_b = R_b.T @ x[0] - _cross(w_b, r_bi)
-        q = np.concatenate([p_b, rotation_to_quaternion(R_b), q_joints])
-        v = np.concatenate([v_b, w_b, np.full(self.nv_joints, np.nan) if dq is None else dq])
+        # the base's rotation R_b, and the rows p_b, ω_b, v_b, R_b v_b (compiled: base_kernel)
+        R_b, base, quat = np.empty((3, 3)), np.empty((4, 3)), np.empty(4)
+        kernel = base_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        imu = state.imu if state.imu is not None else _NO_READING
+        kernel(R, x, imu, bias, *self._placement, R_b, base, quat)
+        quat /= math.sqrt(float(quat @ quat))  # (rotation_to_quaternion's last steps)
+        q = np.concatenate([base[0], -quat if quat[3] < 0 else quat, q_joints])
+        v = np.concatenate(
+            [base[2], base[1], np.full(self.nv_joints, np.nan) if dq is None else dq]
+        )
+        world = base[3]
+        for fresh in (q, v, R_b, world):  # made here: read-only without a copy
+            fresh.setflags(write=False)
+        names = self._names.get(state.feet)
+        if names is None:
+            names = self._names[state.feet] = tuple(self.feet[j] for j in state.feet)
         return InEKFEstimate(
             t=state.t,
-            q=read_only(q),
-            v=read_only(v),
-            rotation=read_only(R_b),
-            velocity_world=read_only(R_b @ v_b),
-            bias=read_only(state.bias),
-            covariance=read_only(state.P),
-            contacts=tuple(self.feet[j] for j in state.feet),
+            q=q,
+            v=v,
+            rotation=R_b,
+            velocity_world=world,
+            bias=read_only(bias),
+            covariance=read_only(P),
+            contacts=names,
             foot_positions=read_only(x[2:]),
             nis=nis,
             nis_dof=nis_dof,
-            gated=tuple(self.feet[j] for j in gated),
+            gated=tuple(self.feet[j] for j in gated) if gated else (),
         )
 
 

@@ -59,10 +59,10 @@ base velocity RMS 1.11× R4's).  At touch-down ``o_j = −r n̂`` and (R5) is (R
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from pinobs.errors import ConfigurationError
 from pinobs.observers.base import Vector
@@ -102,6 +102,11 @@ class RollingFeet:
                 "has no placements_and_jacobians (give a robot or a pinobs.model.FootKinematics)"
             )
         self.kinematics = kinematics
+        #: the legs' placements and Jacobians, not copied where the kinematics can (read only)
+        shared = getattr(kinematics, "shared_placements_and_jacobians", None)
+        self._placements: Callable[[Vector], tuple[Vector, ...]] = (
+            shared if shared is not None else kinematics.placements_and_jacobians  # type: ignore[attr-defined]
+        )
         self.radius = float(positive("foot_radius", radius) or 0.0)
         n = np.asarray(normal, dtype=float).reshape(3)
         if not np.linalg.norm(n) > 0:
@@ -111,6 +116,7 @@ class RollingFeet:
         rolling_kernel.load()
         if lift:
             lift_kernel.load()
+        step_kernel.load()
         self.down = np.zeros(len(self.offsets), dtype=bool)
         #: (R5): the anchored point's cycloid lift removed (``False``: (R4) alone)
         self.lift = bool(lift)
@@ -142,39 +148,45 @@ class RollingFeet:
         ``(K, 3, nv_joints)``.  With ``R`` (the estimated IMU orientation in the world) and
         ``flags`` (contacts now), feet that land are anchored first and feet that lifted off
         forgotten; without them, the anchors stay as they are."""
-        h, rot, jac, jac_w = self.kinematics.placements_and_jacobians(q_joints)  # type: ignore[attr-defined]
+        h, rot, jac, jac_w = self._placements(q_joints)
         # C-contiguous, the kernels' loaded signatures (a slice's layout is another signature,
         # loaded at the first call by numba's full set-up: 0.3 s, issue 39)
         jac, jac_w = np.ascontiguousarray(jac), np.ascontiguousarray(jac_w)
-        if R is not None and flags is not None:
-            now = np.asarray(flags, dtype=bool)
-            if self.lift:
-                self._carry(np.asarray(R, dtype=float), now)
-            landed = np.flatnonzero(now & ~self.down)
-            if landed.size:
-                down_local = -self.radius * (np.asarray(R).T @ self.normal)  # −r n, IMU frame
-                for j in landed:
-                    self.offsets[j] = rot[j].T @ down_local  # (R4): s_j = R_j(q₀)ᵀ R̂₀ᵀ (−r n)
-            self.offsets[~now] = 0.0
-            self.down = now
         h_out, jac_out = np.empty_like(h), np.empty_like(jac)
-        kernel = rolling_kernel.compiled
-        assert kernel is not None  # loaded by the constructor
-        kernel(h, rot, jac, jac_w, self.offsets, h_out, jac_out)  # (R4)
+        if R is not None and flags is not None:
+            # the anchors (R4's s_j, R5's n̂_j), then (R4), in one compiled call
+            now = np.asarray(flags, dtype=bool)
+            settled = self._settled
+            kernel = step_kernel.compiled
+            assert kernel is not None  # loaded by the constructor
+            kernel(
+                np.asarray(R, dtype=float),
+                _EYE if settled is None else settled,
+                settled is not None,
+                self.normal,
+                self.radius,
+                now,
+                self.down,
+                self.lift,
+                self.offsets,
+                self.normals,
+                h,
+                rot,
+                jac,
+                jac_w,
+                h_out,
+                jac_out,
+            )
+            if self.lift:
+                self._settled = None
+            self.down = now
+        else:
+            kernel = rolling_kernel.compiled
+            assert kernel is not None  # loaded by the constructor
+            kernel(h, rot, jac, jac_w, self.offsets, h_out, jac_out)  # (R4)
         if self.lift and self.down.any():
             self._lift(h, rot, jac, jac_w, h_out, jac_out)
         return h_out, jac_out
-
-    def _carry(self, R: Vector, now: NDArray[np.bool_]) -> None:
-        """(R5)'s ``n̂_j``: carried by ``R̂_settledᵀ R̂`` (the propagation's rotation alone, not
-        the corrections) for the feet that stay down, ``R̂ᵀ n`` for those that land, zero for
-        those that lifted off."""
-        if self._settled is not None:
-            self.normals = self.normals @ (self._settled.T @ R)  # n̂ ← (R̂_sᵀ R̂)ᵀ n̂, row-wise
-            self._settled = None
-        landed = now & ~self.down
-        self.normals[landed] = R.T @ self.normal
-        self.normals[~now] = 0.0
 
     def _lift(
         self, h: Vector, rot: Vector, jac: Vector, jac_w: Vector, h_out: Vector, jac_out: Vector
@@ -251,4 +263,102 @@ lift_kernel = LazyKernel(
     0.02,
     np.empty((1, 3)),
     np.empty((1, 3, 2)),
+)
+
+
+def _fma(a: float, b: float, c: float) -> float:
+    """``a·b + c`` (compiled on its own with ``contract``: one fused multiply-add)."""
+    return a * b + c
+
+
+def _column_sums(A, x, out):  # type: ignore[no-untyped-def]
+    """``out = Aᵀ x`` for a 3 × 3 ``A``, each entry ``Σ_k A_ki x_k`` by fused multiply-adds
+    from ``k = 0``: the bits of NumPy's ``A.T @ x`` (OpenBLAS's ``gemv`` on a column-major
+    matrix)."""
+    for i in range(3):
+        s = 0.0
+        for k in range(3):
+            s = _fma(A[k, i], x[k], s)
+        out[i] = s
+
+
+def _carry_loops(R, settled, has_settled, up, now, down, normals):  # type: ignore[no-untyped-def]  # noqa: C901 -- numba kernel: loops over small matrices
+    """(R5)'s ``n̂_j`` in place: carried by ``settledᵀ R`` (the propagation's rotation alone)
+    row-wise if ``has_settled``, ``up = Rᵀ n`` for the feet that land, zero for those that
+    lifted off (:func:`_step_loops`; ``normals @ (settledᵀ R)`` in OpenBLAS's order)."""
+    if has_settled:
+        M = np.empty((3, 3))
+        for i in range(3):
+            for j in range(3):
+                t = 0.0
+                for k in range(3):
+                    t = _fma(settled[k, i], R[k, j], t)
+                M[i, j] = t
+        carried = np.empty_like(normals)
+        for f in range(normals.shape[0]):
+            for j in range(3):
+                t = 0.0
+                for k in range(3):
+                    t = _fma(normals[f, k], M[k, j], t)
+                carried[f, j] = t
+        normals[:, :] = carried
+    for f in range(normals.shape[0]):
+        if now[f] and not down[f]:
+            normals[f, 0], normals[f, 1], normals[f, 2] = up[0], up[1], up[2]
+        elif not now[f]:
+            normals[f, 0], normals[f, 1], normals[f, 2] = 0.0, 0.0, 0.0
+
+
+def _step_loops(  # type: ignore[no-untyped-def]
+    R, settled, has_settled, normal, r, now, down, lift, offsets, normals,
+    h, rot, jac, jac_w, h_out, jac_out,
+):  # fmt: skip
+    """:meth:`RollingFeet.legs` with the contacts ``now`` (``down`` before) and the estimated
+    orientation ``R``, compiled (:data:`step_kernel`): with ``lift``, (R5)'s normals carried
+    by ``settledᵀ R`` (``has_settled``) row-wise, ``Rᵀ n`` for the feet that land, zero for
+    those that lifted off; (R4)'s ``s_j = R_jᵀ (−r Rᵀ n)`` for the feet that land, zero for
+    those that lifted off; then (R4) (:meth:`RollingFeet.legs` adds (R5): :meth:`RollingFeet._lift`).  The products
+    by fused multiply-adds in OpenBLAS's order (the bits of the NumPy ``@`` they replace:
+    ``normals @ (settledᵀ R)``, ``Rᵀ n``, ``R_jᵀ d``)."""
+    up = np.empty(3)
+    _column_sums(R, normal, up)  # Rᵀ n, the IMU frame
+    if lift:
+        _carry_loops(R, settled, has_settled, up, now, down, normals)
+    d = np.empty(3)
+    for i in range(3):
+        d[i] = -r * up[i]  # −r n in the IMU frame
+    s = np.empty(3)
+    for f in range(h.shape[0]):
+        if now[f] and not down[f]:
+            _column_sums(rot[f], d, s)  # (R4): s_j = R_j(q₀)ᵀ R̂₀ᵀ (−r n)
+            offsets[f, 0], offsets[f, 1], offsets[f, 2] = s[0], s[1], s[2]
+        elif not now[f]:
+            offsets[f, 0], offsets[f, 1], offsets[f, 2] = 0.0, 0.0, 0.0
+    _rolling_loops(h, rot, jac, jac_w, offsets, h_out, jac_out)  # (R4)
+
+
+_EYE = np.eye(3)
+
+#: :func:`_step_loops` compiled: ``(R, settled, has_settled, n, r, now, down, lift, s, n̂, h,
+#: R_j, J, J_ω, h_out, J_out)``.
+step_kernel = LazyKernel(
+    _step_loops,
+    np.eye(3),
+    np.eye(3),
+    False,
+    np.zeros(3),
+    0.02,
+    np.zeros(1, dtype=bool),
+    np.zeros(1, dtype=bool),
+    False,
+    np.zeros((1, 3)),
+    np.zeros((1, 3)),
+    np.zeros((1, 3)),
+    np.zeros((1, 3, 3)),
+    np.zeros((1, 3, 2)),
+    np.zeros((1, 3, 2)),
+    np.empty((1, 3)),
+    np.empty((1, 3, 2)),
+    helpers=(_column_sums, _carry_loops, _rolling_loops),
+    contracted=("_fma",),
 )

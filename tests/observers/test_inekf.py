@@ -288,6 +288,36 @@ def test_started_on_the_truth_it_stays_there_on_go1(imu_frame: str | None) -> No
     assert tilt > 0.02  # the base did move
 
 
+def test_update_checked_is_update_without_its_checks() -> None:
+    """``update_checked`` (what ``legged_run`` calls on the rows it checked once) with
+    ``update_inputs``' answer is ``update``, bit for bit (go1, rolling feet, slip speeds);
+    ``update`` still checks what it is given."""
+    legs = Go1Legs("imu_link")
+    samples = truth(legs, 200.0, 0.5, wobble=0.5, feet_z=None, inverse=legs.inverse)
+    outs = []
+    for checked in (False, True):
+        ekf = InvariantEKF(
+            pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", foot_radius=0.02, slip_speed=True
+        )
+        reset_through_imu(ekf, samples[0], *legs.imu_placement)
+        rows = []
+        for t, _, _, _, q, omega, acc, contacts in samples[1:]:
+            dq = 0.1 * np.sin(np.arange(12) + t)
+            if checked:
+                u = ekf.setup.update_inputs(ekf.state.t, t, q, omega, acc, contacts, dq)
+                est = ekf.update_checked(u)
+            else:
+                est = ekf.update(t, q, omega, acc, contacts, joint_velocities=dq)
+            rows.append(np.concatenate([est.q, est.v, est.covariance.ravel()]))
+        outs.append(rows)
+    assert len(outs[0]) > 50
+    for a, b in zip(*outs, strict=True):
+        np.testing.assert_array_equal(a, b)
+    t, _, _, _, q, omega, acc, contacts = samples[-1]
+    with pytest.raises(TimestampError):
+        ekf.update(t, q, omega, acc, contacts)
+
+
 # ----------------------------------------------------- autonomous error dynamics
 def _log(R, x):
     """log of SE_K(3): ``(φ, ρ_1, …)`` with ``R = Γ_0(φ)``, ``x_i = Γ_1(φ) ρ_i``."""

@@ -20,7 +20,7 @@ from pinobs.observers.inekf_loops import (
     load_kernels,
     propagate_kernel,
 )
-from pinobs.observers.legs import foot_noise, noise_densities
+from pinobs.observers.legs import foot_noise, noise_densities, rotation_to_quaternion
 
 G = np.array(GRAVITY)
 
@@ -170,3 +170,55 @@ def test_the_kernels_products_are_fused_multiply_adds_in_blas_order(
         a = A[:3, :3]
         want_x = [_fma(a[i, 2], x[2], _fma(a[i, 0], x[0], a[i, 1] * x[1])) for i in range(3)]
         np.testing.assert_array_equal(Ax, want_x)
+
+
+@pytest.mark.parametrize("column_major", [False, True])
+def test_the_estimate_kernel_is_the_numpy_conversion_to_the_root_joint(
+    rng: np.random.Generator, column_major: bool
+) -> None:
+    """``base_kernel`` (``LeggedSetup.estimate``'s conversion, legs.py's module docstring):
+    ``R_b = R R_biᵀ``, ``p_b = p − R_b r_bi``, ``ω_b = R_bi (ω̃ − b̂_g)``, ``v_b = R_bᵀ v −
+    ω_b × r_bi`` and ``R_b v_b``, as NumPy computes them to rounding; a column-major ``R_bi``
+    (Pinocchio's) sums ``R_bi ω`` over its columns from the first, rounded once each; ``R_b``'s
+    quaternion as ``rotation_to_quaternion`` gives it, bit for bit."""
+    from pinobs.observers.inekf_loops import base_kernel, load_leg_kernels
+
+    load_leg_kernels()
+    R, x, theta, _ = _state(rng, 2)
+    R_bi = expm(np.cross(np.eye(3), rng.normal(size=3)))
+    r_bi, imu = rng.normal(size=3), rng.normal(size=6)
+    R_b, out, quat = np.empty((3, 3)), np.empty((4, 3)), np.empty(4)
+    base_kernel.compiled(R, x, imu, theta, R_bi, r_bi, column_major, R_b, out, quat)  # type: ignore[misc]
+    omega = imu[:3] - theta[:3]
+    w_b = R_bi @ omega
+    v_b = R_b.T @ x[0] - np.cross(w_b, r_bi)
+    np.testing.assert_allclose(R_b, R @ R_bi.T, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(out[0], x[1] - R_b @ r_bi, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(out[1], w_b, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(out[2], v_b, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(out[3], R_b @ out[2], rtol=0, atol=1e-14)
+    quat /= np.sqrt(quat @ quat)  # the same bits as rotation_to_quaternion's, normalised alike
+    np.testing.assert_array_equal(quat if quat[3] >= 0 else -quat, rotation_to_quaternion(R_b))
+    if column_major:
+        want = [_fma(R_bi[i, 2], omega[2], _fma(R_bi[i, 1], omega[1], R_bi[i, 0] * omega[0]))
+                for i in range(3)]  # fmt: skip
+        np.testing.assert_array_equal(out[1], want)
+
+
+def test_the_velocity_kernel_is_the_feet_velocities_and_their_norms(
+    rng: np.random.Generator,
+) -> None:
+    """``velocity_kernel``: ``ṗ̂_j = v̂ + R̂ (ω × h_j + J_j q̇)`` and ``|ṗ̂_j|`` (the speeds of
+    ``slip_speeds`` without its gyro term, bit for bit from the same velocities)."""
+    from pinobs.observers.inekf_loops import load_leg_kernels, velocity_kernel
+    from pinobs.observers.legs import slip_speeds
+
+    load_leg_kernels()
+    R, x, _, _ = _state(rng, 0)
+    w, h, jdq = rng.normal(size=3), rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
+    out, speed = np.empty((4, 3)), np.empty(4)
+    velocity_kernel.compiled(w, h, jdq, R, x[0], out, speed)  # type: ignore[misc]
+    want = x[0] + (np.cross(w, h) + jdq) @ R.T
+    np.testing.assert_allclose(out, want, rtol=0, atol=1e-14)
+    np.testing.assert_array_equal(speed, slip_speeds(out, h, 0.0, 0.002))
+    np.testing.assert_array_equal(speed, np.sqrt(np.sum(out * out, axis=1)))

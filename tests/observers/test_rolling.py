@@ -362,3 +362,19 @@ def test_the_compiled_lift_is_r5_in_numpy() -> None:
         o_hat = np.array([[0.0, -o[2], o[1]], [o[2], 0.0, -o[0]], [-o[1], o[0], 0.0]])
         np.testing.assert_allclose(h_out[k], h[k] + P @ o - RADIUS * n, rtol=0, atol=1e-15)
         np.testing.assert_allclose(jac_out[k], jac[k] - P @ o_hat @ jac_w[k], rtol=0, atol=1e-14)
+
+
+def test_shared_placements_are_the_copied_ones_and_copies_are_the_callers(rng) -> None:
+    """``shared_placements_and_jacobians`` (the rolling feet's, not copied) gives the arrays
+    ``placements_and_jacobians`` copies; writing to a copy changes no later answer."""
+    legs = FootKinematics(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link")
+    q = np.tile([0.0, 0.8, -1.6], 4) + 0.3 * rng.normal(size=12)
+    copied = legs.placements_and_jacobians(q)
+    shared = legs.shared_placements_and_jacobians(q)
+    for a, b in zip(copied, shared, strict=True):
+        np.testing.assert_array_equal(a, b)
+        assert not np.shares_memory(a, b)
+        a[...] = np.nan
+    for a, b in zip(legs.placements_and_jacobians(q), shared, strict=True):
+        np.testing.assert_array_equal(a, b)
+        assert np.isfinite(a).all()

@@ -145,9 +145,9 @@ class FrictionLaw:
     law: str = "viscous-coulomb"
 
     def __post_init__(self) -> None:
-        # checked together, one read-only (7, nv) array whose rows are the fields (120 → 25 µs
-        # a law: adaptive builds one or two to install a learned model, issue 39); one by one
-        # (below) where that fails, to say which field is wrong
+        # checked together, one read-only (7, nv) array whose rows are the fields (adaptive
+        # builds two to four to install a learned model, issue 39: FrictionLaw.zero(6)
+        # 25–30 → 9–17 pin.aba); one by one (below) where that fails, to say which is wrong
         try:
             x = np.array([getattr(self, k) for k in _ARRAYS], dtype=float)
         except (TypeError, ValueError):  # ragged, or not numbers
@@ -159,7 +159,7 @@ class FrictionLaw:
             and not (x[_NON_NEGATIVE] < 0).any()
         ):
             x.setflags(write=False)
-            for k, row in zip(_ARRAYS, x):
+            for k, row in zip(_ARRAYS, x, strict=True):
                 object.__setattr__(self, k, row)
         else:
             self._check_each()

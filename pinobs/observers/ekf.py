@@ -688,7 +688,8 @@ class _FastPath:
         :meth:`Robot.with_inertials`: ``replace_robot``): the calls bound to the new model,
         on the same ``pin.Data`` (which depends only on the model's structure: Pinocchio
         overwrites what it reads), the buffers and kernels shared (working memory: one
-        step at a time, as ``adaptive``'s copies of a filter).  UR5: 78 → 10 µs."""
+        step at a time, as ``adaptive``'s copies of a filter).  A UR5 filter copied and its
+        robot replaced: 15–18 → 3–6 ``pin.aba``."""
         fast = copy.copy(self)
         fast.calls = dynamics_calls(robot, data=self.calls.data)
         return fast

@@ -112,6 +112,13 @@ def friction_basis(term: str, v: Vector, smoothing: Vector, stribeck: Vector) ->
     raise UnknownNameError(f"unknown friction term {term!r}; known: {', '.join(FRICTION_TERMS)}")
 
 
+#: :class:`FrictionLaw`'s array fields, in order, and the rows of them that must be ``≥ 0``.
+_ARRAYS = (
+    "viscous", "coulomb_pos", "coulomb_neg", "static", "offset", "smoothing", "stribeck_velocity"
+)  # fmt: skip
+_NON_NEGATIVE = [0, 1, 2, 3, 6]
+
+
 @dataclass(frozen=True)
 class FrictionLaw:
     """Friction per velocity coordinate (module docstring); arrays of shape ``(nv,)``.
@@ -138,6 +145,36 @@ class FrictionLaw:
     law: str = "viscous-coulomb"
 
     def __post_init__(self) -> None:
+        # checked together, one read-only (7, nv) array whose rows are the fields (adaptive
+        # builds two to four to install a learned model, issue 39: FrictionLaw.zero(6)
+        # 25–30 → 9–17 pin.aba); one by one (below) where that fails, to say which is wrong
+        try:
+            x = np.array([getattr(self, k) for k in _ARRAYS], dtype=float)
+        except (TypeError, ValueError):  # ragged, or not numbers
+            x = np.zeros((0, 0))
+        if (
+            x.ndim == 2
+            and x.shape[0] == len(_ARRAYS)
+            and np.isfinite(x).all()
+            and not (x[_NON_NEGATIVE] < 0).any()
+        ):
+            x.setflags(write=False)
+            for k, row in zip(_ARRAYS, x, strict=True):
+                object.__setattr__(self, k, row)
+        else:
+            self._check_each()
+        if np.any(self.smoothing <= 0):
+            raise GainError(f"friction smoothing={self.smoothing.tolist()} [rad/s] must be > 0")
+        if np.any((self.stribeck_velocity == 0) & (self.static != 0)):
+            raise GainError(
+                "friction static level given where stribeck_velocity is 0 (no Stribeck term): "
+                f"static={self.static.tolist()}, stribeck_velocity="
+                f"{self.stribeck_velocity.tolist()}"
+            )
+
+    def _check_each(self) -> None:
+        """Each array field a 1-D float array of ``viscous``'s shape, finite, ``≥ 0`` but the
+        offset and the smoothing; stored read only (raises on the first that is not)."""
         arrays = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "law"}
         n = np.asarray(self.viscous).shape
         for name, value in arrays.items():
@@ -157,14 +194,6 @@ class FrictionLaw:
                 )
             x.setflags(write=False)
             object.__setattr__(self, name, x)
-        if np.any(self.smoothing <= 0):
-            raise GainError(f"friction smoothing={self.smoothing.tolist()} [rad/s] must be > 0")
-        if np.any((self.stribeck_velocity == 0) & (self.static != 0)):
-            raise GainError(
-                "friction static level given where stribeck_velocity is 0 (no Stribeck term): "
-                f"static={self.static.tolist()}, stribeck_velocity="
-                f"{self.stribeck_velocity.tolist()}"
-            )
 
     # ------------------------------------------------------------ construction
     @classmethod

@@ -91,6 +91,15 @@ def _joint_kind(joint: Any) -> str:
     return "vector"
 
 
+#: What :meth:`Robot.with_inertials` shares: what ``__init__`` reads of the tree alone, or
+#: was given (tested: with the rest, every attribute ``__init__`` sets).
+_TREE_ATTRIBUTES = (
+    "root_joint", "package_dirs", "mimic", "source", "_geometry_loader", "_zero_nv", "joints",
+    "_quat_slices", "_circle_slices", "_unit_slices", "_bracket_blocks", "_vector_space",
+    "_lower_mask",
+)  # fmt: skip
+
+
 class Robot:
     """A rigid multibody system: Pinocchio model, dynamics and metric geometry.
 
@@ -213,6 +222,7 @@ class Robot:
         self._vector_space = model.nq == model.nv and all(b.kind == "vector" for b in self.joints)
         # where Pinocchio may leave M and M⁻¹ unfilled
         self._lower_mask = np.tril(np.ones((model.nv, model.nv), dtype=bool), -1)
+        self._lower_mask.setflags(write=False)  # (shared by with_inertials' robots)
 
     # ---------------------------------------------------------------- geometry
     @property
@@ -254,7 +264,7 @@ class Robot:
         the geometry (meshes: a UR5's is 187 MB): it is reloaded on first access."""
         state = self.__dict__.copy()
         for k in ("_data", "_free_data"):
-            del state[k]
+            state.pop(k, None)  # (_free_data: absent until first used, with_inertials)
         if self._geometry_loader is not None:
             state["_geometry"] = None
         return state
@@ -263,8 +273,8 @@ class Robot:
         self.__dict__.update(state)
         self.__dict__.setdefault("locked", {})  # (pickled before robots kept it)
         self._data = self.model.createData()
-        self._free_data = self._free.createData()
         self._zero_nv.setflags(write=False)  # (pickle does not keep the flag)
+        self._lower_mask.setflags(write=False)
 
     # ------------------------------------------------------------------ basics
     def __repr__(self) -> str:
@@ -297,7 +307,51 @@ class Robot:
 
     def copy(self) -> Robot:
         """The same model with fresh ``pin.Data`` (for another consumer)."""
-        return self.with_model(self.model.copy())
+        robot = self.with_inertials(self.model.copy())
+        robot._free_data = robot._free.createData()  # now (not in a consumer's first update)
+        return robot
+
+    def with_inertials(
+        self,
+        model: pin.Model,
+        *,
+        name: str | None = None,
+        friction: bool | None = None,
+        friction_law: FrictionLaw | None = None,
+    ) -> Robot:
+        """:meth:`with_model` for a ``model`` that is a copy of this robot's
+        (``model.copy()``) with other inertials, armature, damping or friction tags only: the
+        same robot, built without re-reading the tree (its joint blocks and slices are this
+        robot's, shared: immutable).  Unchecked: a model of another tree gives a wrong robot.
+        What ``adaptive`` pays to install a learned model (issue 39): a UR5's
+        ``MomentumRegressor.with_parameters`` 147–162 → 79–125 ``pin.aba``."""
+        robot = Robot.__new__(Robot)
+        robot.__dict__.update({k: self.__dict__[k] for k in _TREE_ATTRIBUTES})
+        robot.model = model
+        robot.locked = dict(self.locked)
+        robot.name = self.name if name is None else name
+        loader, geometry = self._geometry_loader, self._geometry
+        if geometry is not None and geometry[0] is None and geometry[1] is None:
+            geometry = None if loader is not None else geometry  # (as with_model: reloaded)
+        robot._geometry = geometry
+        robot._data = model.createData()
+        law = self._given_law if friction_law is None else friction_law
+        robot._set_friction(model, self.friction if friction is None else friction, law)
+        return robot  # its zero-gravity copy built on first use (__getattr__)
+
+    def __getattr__(self, name: str) -> Any:
+        """``_free`` and ``_free_data`` (:meth:`__init__`'s zero-gravity copy and its data),
+        built on first use where :meth:`with_inertials` left them out (a model copy and a
+        ``pin.Data``, 12–17 ``pin.aba`` on a UR5; ``adaptive``'s filter never calls them)."""
+        if name == "_free" and "model" in self.__dict__:
+            free = self.model.copy()
+            free.gravity.setZero()
+            self._free = free
+            return free
+        if name == "_free_data" and "model" in self.__dict__:
+            self._free_data = data = self._free.createData()
+            return data
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def with_model(
         self,

@@ -562,7 +562,10 @@ class AdaptiveEKF(Observer["_State"]):
                 theta[n + nj : n + 2 * nj][cols] = 0.0
                 held_friction = held.astype(float)
         model = model._replace(learned=learned, held=held_friction, offset=lr.reg.offsets(lr.theta))
-        robot = lr.reg.with_parameters(theta, name=name)
+        # the filter's model is the learned one itself unless friction is held: shared (no
+        # one changes a Robot, and each call on its pin.Data finishes before the next;
+        # built twice, 0.5 ms each on a UR5, issue 39)
+        robot = learned if theta is lr.theta else lr.reg.with_parameters(theta, name=name)
         model, ekf = self._set_regime(model, ekf, "learned", robot)
         if ekf.d is None:
             return model, ekf

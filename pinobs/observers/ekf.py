@@ -175,6 +175,7 @@ filter with the ``kf`` (:mod:`pinobs.observers.neverbehind`).
 
 from __future__ import annotations
 
+import copy
 import functools
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -620,9 +621,13 @@ class ExtendedKalmanFilter(Observer[EKFState]):
                 f"the new model has (nq, nv) = ({robot.nq}, {robot.nv}); "
                 f"the filter's has ({self.robot.nq}, {self.robot.nv})"
             )
+        old, fast = self.robot, self._fast
         self.robot = robot
         self._scratch_A = None  # sized by the robot
-        self._fast = _FastPath.build(self)
+        if fast is not None and compiled_vector_space(robot) and robot.joints is old.joints:
+            self._fast = fast.rebound(robot)  # the same tree (Robot.with_inertials)
+        else:
+            self._fast = _FastPath.build(self)
         self._lie_fast = _LieFast.build(self)
         self.uses_blas = self._fast is None
         self.compiled_step = self._fast is not None
@@ -677,6 +682,17 @@ class _FastPath:
     def build(cls, ekf: ExtendedKalmanFilter) -> _FastPath | None:
         """The fast path of ``ekf``, or ``None`` where its robot does not qualify."""
         return cls(ekf) if compiled_vector_space(ekf.robot) else None
+
+    def rebound(self, robot: Robot) -> _FastPath:
+        """This fast path on ``robot``, a model of the same tree as its own (its
+        :meth:`Robot.with_inertials`: ``replace_robot``): the calls bound to the new model,
+        on the same ``pin.Data`` (which depends only on the model's structure: Pinocchio
+        overwrites what it reads), the buffers and kernels shared (working memory: one
+        step at a time, as ``adaptive``'s copies of a filter).  A UR5 filter copied and its
+        robot replaced: 15–18 → 3–6 ``pin.aba``."""
+        fast = copy.copy(self)
+        fast.calls = dynamics_calls(robot, data=self.calls.data)
+        return fast
 
     def step(
         self, ekf: ExtendedKalmanFilter, state: EKFState, dt: float, q_meas: Vector | None,

@@ -105,3 +105,45 @@ def test_interpolate_is_pinocchios_and_ends_on_its_endpoints(name: str, root: st
         np.testing.assert_allclose(
             robot.interpolate(q0, q1, s), pin.interpolate(robot.model, q0, q1, s), atol=1e-12
         )
+
+
+@pytest.mark.parametrize(("name", "root"), [("ur5", None), ("go1", None), ("planar_3r", "planar")])
+def test_a_robot_with_other_inertials_is_the_one_with_model_builds(
+    name: str, root: str | None
+) -> None:
+    """``with_inertials`` (the tree's attributes shared, issue 39) gives what ``with_model``
+    gives: every attribute, and the dynamics to the bit, with and without gravity."""
+    import pinocchio as pin
+
+    from pinobs.model.friction import FrictionLaw
+
+    robot = pinobs.load(name, root_joint=root)
+    model = robot.model.copy()
+    for i in range(1, model.njoints):
+        inertia = model.inertias[i]
+        model.inertias[i] = pin.Inertia(1.3 * inertia.mass, inertia.lever, inertia.inertia)
+    law = FrictionLaw.from_urdf(np.full(robot.nv, 0.2), np.full(robot.nv, 0.5))
+    fast = robot.with_inertials(model.copy(), name="x", friction=True, friction_law=law)
+    slow = robot.with_model(model.copy(), name="x", friction=True, friction_law=law)
+    q0 = pin.neutral(model)
+    fast.coriolis(q0, np.zeros(robot.nv))  # its zero-gravity copy, built on first use
+    assert set(fast.__dict__) == set(slow.__dict__)
+    assert fast.locked == slow.locked and fast.locked is not robot.locked
+    for k in ("name", "source", "root_joint", "package_dirs", "mimic", "joints", "friction"):
+        assert getattr(fast, k) == getattr(slow, k), k
+    assert fast.has_friction and fast.friction_law is law and slow.friction_law is law
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+        v, tau = rng.standard_normal(robot.nv), rng.standard_normal(robot.nv)
+        for a, b in [
+            (fast.forward_dynamics(q, v, tau), slow.forward_dynamics(q, v, tau)),
+            (fast.coriolis(q, v), slow.coriolis(q, v)),
+            *zip(fast.spray_jacobians(q, v), slow.spray_jacobians(q, v), strict=True),
+            *zip(
+                fast.forward_dynamics_with_derivatives(q, v, tau),
+                slow.forward_dynamics_with_derivatives(q, v, tau),
+                strict=True,
+            ),
+        ]:
+            np.testing.assert_array_equal(a, b)

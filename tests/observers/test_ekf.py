@@ -246,6 +246,30 @@ def test_replacing_the_robot_by_a_copy_changes_nothing_and_a_wrong_size_is_refus
         ekf.replace_robot(pinobs.load("cartpole"))  # type: ignore[attr-defined]
 
 
+def test_a_robot_of_other_inertials_swapped_in_is_the_filter_built_for_it(
+    ur5: pinobs.Robot,
+) -> None:
+    """``replace_robot`` by a robot of the same tree (``Robot.with_inertials``) rebinds the
+    compiled path to the new model on its ``pin.Data`` (issue 39): the same bits as the path
+    built afresh for a robot of the same model that is not (``with_model``)."""
+    res = simulate(ur5, [], sensor=Sensor(1000, 1e-4), inputs="pd", duration=0.05, seed=3)
+    heavier = ur5.perturbed(payload=(2.0, [0.0, 0.0, 0.1]))
+    obs = [make_observer("ekf", ur5, rate=1000, noise_std=1e-4) for _ in range(3)]
+    rebound, built = obs[:2]
+    for ob in obs:
+        ob.reset(res.t[0], res.q[0], res.v[0], res.tau[0])
+    data = [ob._fast.calls.data for ob in obs]  # type: ignore[attr-defined]
+    for k in range(1, len(res.t)):
+        if k == 20:
+            rebound.replace_robot(ur5.with_inertials(heavier.model.copy()))  # type: ignore[attr-defined]
+            built.replace_robot(ur5.with_model(heavier.model.copy()))  # type: ignore[attr-defined]
+            assert rebound._fast.calls.data is data[0]  # type: ignore[attr-defined]
+            assert built._fast.calls.data is not data[1]  # type: ignore[attr-defined]
+        v = [ob.update(res.t[k], res.q_meas[k], res.tau[k]).v for ob in obs]
+        np.testing.assert_array_equal(v[0], v[1])
+    assert not np.array_equal(v[0], v[2])  # (the payload is felt)
+
+
 # ---------------------------------------------------------------- the speed work
 # The filter as it was before the speed work (issue 18): dense NumPy (np.block, LU solve,
 # the full Joseph product, Φ with a fresh identity, no reuse of the derivatives' v̇).

@@ -356,8 +356,8 @@ class MomentumRegressor:
             armature = np.array(model.armature, dtype=float)
             armature[self.armature_coordinates] = theta[self.armature_slice]
             model.armature = armature
-        # same geometry, shared and never loaded here (with_model)
-        return self.robot.with_model(
+        # same geometry, shared and never loaded here (with_model); the same tree
+        return self.robot.with_inertials(
             model, name=name or f"{self.robot.name}*", friction=friction, friction_law=law
         )
 

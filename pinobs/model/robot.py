@@ -26,7 +26,6 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +35,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import ConfigurationError, DimensionError, NonFiniteError
 from pinobs.model.friction import FrictionLaw
+from pinobs.model.joints import JointBlock, joint_blocks
+from pinobs.model.perturbation import perturbed_model
 from pinobs.tolerances import (
     ABSURD_LIMIT_FACTOR,
     ABSURD_VALUE,
@@ -49,46 +50,6 @@ Vector = NDArray[np.floating[Any]]
 GeometryLoader = Callable[
     [pin.Model], tuple["pin.GeometryModel | None", "pin.GeometryModel | None"]
 ]
-
-
-@dataclass(frozen=True)
-class JointBlock:
-    """Where one joint sits in ``q`` and ``v``, and what group it lives on.
-
-    Attributes:
-        name: joint name in the model.
-        kind: ``"vector"`` (revolute, prismatic, and any joint whose velocity is
-            the time derivative of its coordinates), ``"circle"`` (continuous
-            joint, ``q = (cos, sin)``), ``"so3"`` (spherical, quaternion),
-            ``"se3"`` (free-flyer), ``"se2"`` (planar).
-        idx_q: first index in ``q``.
-        nq: number of entries in ``q``.
-        idx_v: first index in ``v``.
-        nv: number of entries in ``v``.
-    """
-
-    name: str
-    kind: str
-    idx_q: int
-    nq: int
-    idx_v: int
-    nv: int
-
-
-_KIND_BY_SHORTNAME = {
-    "JointModelSpherical": "so3",
-    "JointModelFreeFlyer": "se3",
-    "JointModelPlanar": "se2",
-}
-
-
-def _joint_kind(joint: Any) -> str:
-    short = joint.shortname()
-    if short in _KIND_BY_SHORTNAME:
-        return _KIND_BY_SHORTNAME[short]
-    if short.startswith("JointModelRUB"):  # continuous joint: SO(2), abelian
-        return "circle"
-    return "vector"
 
 
 #: What :meth:`Robot.with_inertials` shares: what ``__init__`` reads of the tree alone, or
@@ -196,18 +157,7 @@ class Robot:
 
     def _set_joint_blocks(self, model: pin.Model) -> None:
         """The joint blocks and the slices of ``q`` and ``v`` built from them."""
-        self.joints: tuple[JointBlock, ...] = tuple(
-            JointBlock(
-                name=model.names[i],
-                kind=_joint_kind(j),
-                idx_q=j.idx_q,
-                nq=j.nq,
-                idx_v=j.idx_v,
-                nv=j.nv,
-            )
-            for i, j in enumerate(model.joints)
-            if i > 0 and j.nv > 0
-        )
+        self.joints: tuple[JointBlock, ...] = joint_blocks(model)
         self._quat_slices = tuple(
             slice(b.idx_q + (3 if b.kind == "se3" else 0), b.idx_q + b.nq)
             for b in self.joints
@@ -404,38 +354,9 @@ class Robot:
             coulomb: Coulomb friction [N·m] per velocity coordinate, replacing
                 the model's (friction switched on).
         """
-        model = self.model.copy()
-        if inertia_scale is not None:
-            scale = np.asarray(inertia_scale, dtype=float)
-            ids = [i for i, j in enumerate(model.joints) if i > 0 and j.nv > 0]
-            if scale.shape != (len(ids),) or np.any(scale <= 0):
-                raise DimensionError(
-                    f"inertia_scale needs {len(ids)} positive factors, got {scale.tolist()}"
-                )
-            for f, i in zip(scale, ids, strict=True):
-                inertia = model.inertias[i]
-                model.inertias[i] = pin.Inertia(
-                    f * inertia.mass, inertia.lever, f * inertia.inertia
-                )
-        if payload is not None:
-            mass, offset = payload
-            # the tool: the last moving body, passing over prismatic gripper fingers
-            moving = [i for i, j in enumerate(model.joints) if i > 0 and j.nv > 0]
-            tools = [i for i in moving if not model.joints[i].shortname().startswith("JointModelP")]
-            last = (tools or moving)[-1]
-            model.inertias[last] = model.inertias[last] + pin.Inertia(
-                float(mass), np.asarray(offset, dtype=float), np.zeros((3, 3))
-            )
-        friction, law = self.friction, None
-        if damping is not None or coulomb is not None:
-            model.damping = np.asarray(
-                damping if damping is not None else np.zeros(self.nv), dtype=float
-            )
-            model.friction = np.asarray(
-                coulomb if coulomb is not None else np.zeros(self.nv), dtype=float
-            )
-            friction = True
-            law = FrictionLaw.from_urdf(model.damping, model.friction)  # replaces a given law
+        model, friction, law = perturbed_model(
+            self, inertia_scale=inertia_scale, payload=payload, damping=damping, coulomb=coulomb
+        )
         return self.with_model(
             model, name=name or f"{self.name}~", friction=friction, friction_law=law
         )

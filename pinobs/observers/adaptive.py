@@ -165,8 +165,11 @@ from pinobs.model.identification import (
 )
 from pinobs.observers.adaptive_blend import (
     JERK_PSD,
+    NIS_TRUSTED,
+    REJECTED_RUN,
     BankBlend,
     bank_blend_kernel,
+    blend_inputs,
     blend_state,
     lost_filter,
     model_free,
@@ -203,14 +206,6 @@ _new_tuple = tuple.__new__  # a NamedTuple made without its __new__, a Python ca
 _VECTOR_TABLE = np.zeros((0, 4), dtype=np.int64)
 
 
-#: Consecutive rejected solves (no physical model fits the rows) after which
-#: :meth:`AdaptiveEKF.consistency` says ``"inconsistent"`` whatever the NIS: measured, exact-model and the
-#: README's model-error logs (UR5, Panda, double pendulum, 12 s, seeds 0-1) reject at most one
-#: solve, the second; a UR5 whose wrist_2 torque is logged with the wrong sign rejected every
-#: one for 30 s, stayed in its warm-up (1.18× kf) and read "consistent" (the offset state
-#: absorbs the wrong torque below the NIS bound).
-_REJECTED_RUN = 4
-
 #: ``λ h`` up to which a learned joint friction is a held input of the filter rather than part
 #: of its model (``λ = (M⁻¹)ᵢᵢ |∂τ_f,ᵢ/∂v|``, largest over the configurations the learner
 #: checked): the friction held at the extrapolated mid-step velocity (:meth:`AdaptiveEKF._torque`)
@@ -219,34 +214,12 @@ _REJECTED_RUN = 4
 #: model (``ekf``'s stiff-friction path, which costs its substeps and ``exp(Ah)`` by squaring).
 _HELD_FRICTION_STIFFNESS = 0.1
 
-#: Mean NIS per degree of freedom up to which the model-based filter is trusted outright by the
-#: blend (twice the consistent value); the blame on the model ramps up to full at twice this.
-_NIS_TRUSTED = 2.0
-
 #: Mean NIS per degree of freedom above which the nominal model's trust is revoked at once.
 _NIS_REVOKED = 10.0
 
 
 #: Where the learner's windows and solves run (:class:`AdaptiveEKF`, ``learning``).
 _LEARNING = ("sync", "background")
-
-
-def _blend_inputs(
-    ekf: EKFState, model: _Model, q_meas: Vector | None
-) -> tuple[Vector | None, float]:
-    """The bank's sample and the blame on the model (module docstring, 3): ``q_meas`` unless
-    the model-based filter's gate rejected it (not a lost filter's: restarted, not replaced
-    since); the disagreement is the model's fault only when its innovations say so
-    (``NIS̄ > 2 nv``), wholly when it was lost and not replaced since, or none fits.
-    Inline in :meth:`AdaptiveEKF.step`'s compiled path (the usual case: not restarted, a
-    model that fits): keep the two equal."""
-    meas = None if ekf.gate.gated and not model.restarted else q_meas
-    nv = ekf.v.size
-    level = float(nv) if ekf.gate.level is None else ekf.gate.level
-    blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
-    if model.restarted or model.rejected_run >= _REJECTED_RUN or not math.isfinite(level):
-        blame = 1.0  # the model was lost and not replaced since, or none fits (or a NaN)
-    return meas, blame
 
 
 @register
@@ -500,11 +473,11 @@ class AdaptiveEKF(Observer["_State"]):
         failed re-solve keeps the last model and is listed here: the latest
         :data:`~pinobs.observers.adaptive_learner.REJECTED_KEPT`), the blend
         weights.  ``"inconsistent"`` whatever the
-        NIS after :data:`_REJECTED_RUN` rejected solves in a row (no physical model
+        NIS after :data:`~pinobs.observers.adaptive_blend.REJECTED_RUN` rejected solves in a row (no physical model
         fits the data)."""
         lr = self._learning()
         base = super().consistency()
-        if lr.rejected_run >= _REJECTED_RUN:  # no model from the data: the NIS cannot see it
+        if lr.rejected_run >= REJECTED_RUN:  # no model from the data: the NIS cannot see it
             cause = lr.rejection_cause()
             singular = cause.startswith("no rows")  # (then the usual suspects are not)
             causes = (cause,) if singular else (cause, *LIKELY_CAUSES)
@@ -713,7 +686,7 @@ class AdaptiveEKF(Observer["_State"]):
         if kernel is None:  # the bank's step and the blend in NumPy (Lie-group joints)
             if lost_filter(ekf):
                 state, ekf = self._restart(state, dt, q_meas, tau)
-            meas, blame = _blend_inputs(ekf, state.model, q_meas)
+            meas, blame = blend_inputs(ekf, state.model, q_meas)
             kf = self._bank.step(state.kf, dt, meas)
             score, s, q, v = numpy_blend(self.robot, kf, state.score, state.s, ekf, lam, blame)
             x: Vector | BankBlend = BankBlend(kf, score, s, q, v)
@@ -724,15 +697,15 @@ class AdaptiveEKF(Observer["_State"]):
                 xs = packed(state.shape, *xs) if isinstance(xs, BankBlend) else xs
                 x = np.empty(xs.size)
                 m, gate = state.model, ekf.gate
-                if check and not m.restarted and m.rejected_run < _REJECTED_RUN:
-                    # _blend_inputs, inline (issue 39: a Python call less an update)
+                if check and not m.restarted and m.rejected_run < REJECTED_RUN:
+                    # blend_inputs, inline (issue 39: a Python call less an update)
                     meas = None if gate.gated else q_meas
                     level = float(nv) if gate.level is None else gate.level
-                    blame = min(1.0, max(0.0, (level / nv - _NIS_TRUSTED) / _NIS_TRUSTED))
+                    blame = min(1.0, max(0.0, (level / nv - NIS_TRUSTED) / NIS_TRUSTED))
                     if not math.isfinite(level):
                         blame = 1.0
                 else:
-                    meas, blame = _blend_inputs(ekf, m, q_meas)
+                    meas, blame = blend_inputs(ekf, m, q_meas)
                 if kernel(
                     xs, x, state.shape[1], dt, self._no_sample if meas is None else meas,
                     meas is not None, bank.jerk, bank.meas_var, ekf.q, ekf.v, ekf.P, lam, blame,
@@ -758,7 +731,7 @@ class AdaptiveEKF(Observer["_State"]):
         # exact-model densities, and its innovations decide at the next solve
         # (a learned model is refined at every solve; only the nominal one is protected)
         explained = (model.regime == "warmup" and not model.restarted) or (
-            model.regime == "nominal" and level <= _NIS_TRUSTED * nv
+            model.regime == "nominal" and level <= NIS_TRUSTED * nv
         )
         if math.isnan(lr.next_solve):
             # the reset time; inside never_behind (which is the one reset) the first sample's

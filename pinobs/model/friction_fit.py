@@ -154,7 +154,7 @@ def search_smoothing(
     theta0, s = reg.nominal(), reg.prior_std()
     n_c = len(cands)
     grams, rhs, yy = _fold_grams(A, y, reg.robot.nv)
-    g_all, r_all = sum(grams), sum(rhs)
+    g_all, r_all = np.sum(grams, axis=0), np.sum(rhs, axis=0)
     own = [
         _nearest(cands, float(a), float(b))
         for a, b in zip(reg.smoothing, reg.stribeck_velocity, strict=True)

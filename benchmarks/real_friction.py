@@ -7,8 +7,8 @@
 ``pinobs.identify`` on ``real_logs.UR10E_FIT`` (the same join, stamps and defaults as
 ``real_logs.ur10e_identify``) once per friction law (``friction=True``: today's viscous +
 Coulomb·tanh(v/0.01); ``"offset-sigmoid"``, ``"stribeck"``, ``"asymmetric"``: their
-smoothing velocity chosen by cross-validation, and again with today's ``v_s`` = 0.01 kept:
-``@0.01``), then the inverse-dynamics prediction
+smoothing velocity chosen by cross-validation with the one-standard-error rule, and again
+with today's ``v_s`` = 0.01 kept: ``@0.01``), then the inverse-dynamics prediction
 ``M a + c + g − τ_f(v)`` (``real_logs.predict_robot``: the robot's own friction law, its
 offset included) against the measured torque, RMS per joint [N·m] pooled over the moving
 held-out logs exactly as ``real_logs.ur10e`` pools them; the published model
@@ -38,7 +38,8 @@ import real_logs as rl
 import pinobs
 
 #: (friction, smoothing): each law with its smoothing velocity searched (None), and with
-#: today's 0.01 rad/s kept (the search's choice, 1e-3 at the shoulders, predicted worse)
+#: today's 0.01 rad/s kept (the search's minimum, 1e-3 at the shoulders, predicted worse;
+#: the one-standard-error rule keeps 0.01 on every joint)
 LAWS: tuple[tuple[bool | str, float | None], ...] = (
     (True, None),
     ("offset-sigmoid", None),

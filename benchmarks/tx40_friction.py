@@ -8,7 +8,7 @@
 (decimated to 1 kHz, as ``real_logs.tx40_identify``), once per friction law of
 :data:`pinobs.model.friction.FRICTION_LAWS` (``True``: viscous + Coulomb·tanh(v/0.01),
 the default; the others with their smoothing velocity chosen by cross-validation on the
-fitted rows), then the inverse-dynamics prediction ``M a + c + g − τ_f(v)`` against the
+fitted rows, the one-standard-error rule), then the inverse-dynamics prediction ``M a + c + g − τ_f(v)`` against the
 measured torque on the held-out 20 % at 5 kHz, derivatives Savitzky–Golay 101 rows,
 order 3 (``real_logs.tx40``'s first window); RMS per joint [N·m] over every held-out row,
 the moving ones and those at rest (every joint's speed ≤ 0.01 rad/s), and issue 36's

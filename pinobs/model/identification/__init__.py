@@ -25,8 +25,8 @@ which its CRBA and ABA add to ``M``'s diagonal) and a torque offset ``<joint>.of
 :meth:`Robot.friction_torque`).  A torque fed at the wrong scale (motor
 constants) is absorbed by a common scale of ``(π, D, F_c)``.  ``identify(...,
 friction=LAW)`` replaces ``D v + F_c tanh(v/v_s)`` by a law of :mod:`pinobs.model.friction`
-(its coefficients' columns ``∫ φ(v) dt``, its ``v_s`` chosen by cross-validation:
-:mod:`pinobs.model.friction_fit`).
+(its coefficients' columns ``∫ φ(v) dt``, its ``v_s`` chosen by cross-validation with the
+one-standard-error rule: :mod:`pinobs.model.friction_fit`).
 
 **Momentum form** (no acceleration).  With ``p = (M(q) + diag(I_a)) v``,
 ``ṗ = τ + C(q, v)ᵀ v − g(q) − D v − F_c tanh(v/v_s) + b`` (the armature is constant: it

@@ -16,7 +16,8 @@ the solve checked, and the report (MATH §9; the package docstring of
   law of :data:`~pinobs.model.friction.FRICTION_LAWS` (``"offset-sigmoid"``,
   ``"stribeck"``, ``"asymmetric"``), whose coefficients are fitted linearly and whose
   smoothing velocity ``v_s`` (and Stribeck ``v_st``) per joint is chosen on a grid by
-  cross-validation over the fitted part (:func:`pinobs.model.friction_fit.search_smoothing`);
+  cross-validation over the fitted part, 0.01 rad/s kept unless another predicts better by
+  more than one standard error (:func:`pinobs.model.friction_fit.search_smoothing`);
   the law goes with the calibrated robot (and its sidecar when saved).  ``"offset-sigmoid"``
   carries its own offset ``F_0`` (part of the robot's friction; not dissipative): give
   ``offset=False`` with it.

@@ -66,7 +66,8 @@ from pinobs.model import Robot
 from pinobs.model.integrators import difference_call
 from pinobs.observers.base import Vector
 from pinobs.observers.blocks import bracket_rows
-from pinobs.observers.fused import bracket_table, loaded
+from pinobs.observers.fused import loaded
+from pinobs.observers.fused_jacobi import bracket_table
 from pinobs.observers.fused_lie import LieRK4
 from pinobs.observers.linalg import LazyKernel
 

@@ -176,9 +176,7 @@ filter with the ``kf`` (:mod:`pinobs.observers.neverbehind`).
 from __future__ import annotations
 
 import copy
-import functools
-from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
@@ -187,7 +185,6 @@ from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.integrators import dynamics_calls, friction_substeps
 from pinobs.observers import blocks
 from pinobs.observers.base import (
-    GateState,
     Observer,
     Vector,
     gate_threshold,
@@ -195,6 +192,17 @@ from pinobs.observers.base import (
     register,
 )
 from pinobs.observers.blockstep import BlockStep
+from pinobs.observers.ekf_state import (
+    AUTO_CEILING,
+    AUTO_D0_ACCEL,
+    AUTO_PSD_BOUNDS,
+    AUTO_PSD_START,
+    AUTO_WINDOW,
+    EKFGains,
+    EKFState,
+    ad_matrix,
+    double_integrator_noise,
+)
 from pinobs.observers.fused import (
     compiled_vector_space,
     ekf_coast_kernel,
@@ -216,6 +224,7 @@ from pinobs.observers.linalg import (
 )
 from pinobs.observers.neverbehind import match_density
 
+# the state, the options and the pieces shared with ibrir_kalman: defined in ekf_state
 __all__ = [
     "AUTO_CEILING",
     "AUTO_D0_ACCEL",
@@ -230,97 +239,7 @@ __all__ = [
 ]
 
 
-#: ``disturbance_psd="auto"`` (module docstring): the starting acceleration density
-#: [rad²/s⁵], its bounds, the matching window [s], the initial offset std [rad/s²].
-AUTO_PSD_START = 1e-9
-AUTO_PSD_BOUNDS = (1e-12, 1e8)
-AUTO_WINDOW = 0.1
-AUTO_D0_ACCEL = 10.0
-#: ``"auto"``: the ceiling of the density, ``ψ ≤ AUTO_CEILING · σ² / h⁵`` [rad²/s⁵] (module docstring).
-AUTO_CEILING = 1.0
-
-
-def ad_matrix(robot: Robot, v: Vector) -> Vector:
-    """The matrix of ``x ↦ ad_v x = [v, x]`` (nv × nv); zero on robots without Lie-group joints."""
-    nv = robot.nv
-    if not robot.has_lie_group_joints:
-        return np.zeros((nv, nv))
-    if isinstance(robot, Robot):
-        return robot.bracket_matrix(v)
-    eye = np.eye(nv)
-    return np.column_stack([robot.bracket(v, eye[:, j]) for j in range(nv)])
-
-
-@functools.lru_cache(maxsize=64)
-def _double_integrator_noise(nv: int, h: float, psd: float) -> Vector:
-    eye = np.eye(nv)
-    out = psd * np.block([[h**3 / 3 * eye, h**2 / 2 * eye], [h**2 / 2 * eye, h * eye]])
-    out.setflags(write=False)
-    return out
-
-
-def double_integrator_noise(nv: int, h: float, psd: float) -> Vector:
-    """``Q_d`` of white acceleration noise of density ``psd`` [rad²/s³] over ``h`` [s] (module docstring).
-
-    Read-only, cached on ``(nv, h, psd)``: sample intervals repeat (to the bit,
-    a handful of values at a fixed rate), so it is built once per value.
-    """
-    return _double_integrator_noise(nv, float(h), float(psd))
-
-
-@dataclass(frozen=True)
-class EKFGains:
-    """Validated options of :class:`ExtendedKalmanFilter`.
-
-    Attributes:
-        accel_psd: white-acceleration noise density [rad²/s³], > 0.
-        meas_std: measurement noise standard deviation [rad], > 0.
-        q0_std: initial configuration standard deviation [rad], > 0.
-        v0_std: initial velocity standard deviation [rad/s], > 0.
-    """
-
-    accel_psd: float
-    meas_std: float
-    q0_std: float
-    v0_std: float
-
-    def __post_init__(self) -> None:
-        positive("accel_psd", self.accel_psd)
-        positive("meas_std", self.meas_std)
-        positive("q0_std", self.q0_std)
-        positive("v0_std", self.v0_std)
-
-
-_new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (EKFState.moved)
-
-
-class EKFState(NamedTuple):
-    """The filter's state (``adaptive`` carries one inside its own)."""
-
-    q: Vector
-    v: Vector
-    P: Vector  # covariance of (δq, δv) or, with the disturbance, of (δq, δv, δd)
-    d: Vector | None = None  # estimated joint-torque offset [N·m or N]
-    d_psd: Vector | None = None  # its random-walk density per joint [N²·m²/s]
-    gate: GateState = GateState()  # the outlier gate's bookkeeping (NIS of the last measurement)
-    auto: bool = False  # disturbance_psd="auto": d_psd learned from the innovations
-    # "auto": M̄ᵢᵢ² at the reset configuration, the density's scale from rad²/s⁵ to N²·m²/s
-    psd_scale: Vector | None = None
-
-    def moved(
-        self, q: Vector, v: Vector, P: Vector, gate: GateState, d: Vector | None,
-        d_psd: Vector | None,
-    ) -> EKFState:  # fmt: skip
-        """``_replace(q=q, v=v, P=P, gate=gate, d=d, d_psd=d_psd)``, built directly: the state
-        after a step (issue 39).  CPython 3.11's ``_replace`` fills a temporary tuple from a
-        ``map``, which has no length: allocated for 10 items (counted by the garbage
-        collector) and freed resized to these 8 into the free list (not counted), each call
-        left the collector's generation-0 count one higher until that free list was full
-        (2000 tuples); a live loop, whose set-up's full collection empties the free lists,
-        ran 2–3 generation-0 collections (~20 µs each, nothing to collect) inside its first
-        ~2000 updates (UR5 ``ekf`` and ``adaptive``, 20 s).  By ``tuple.__new__``: the
-        NamedTuple's own ``__new__`` is a Python call more (every step)."""
-        return _new_tuple(EKFState, (q, v, P, d, d_psd, gate, self.auto, self.psd_scale))
+_new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (the fast paths' EKFState)
 
 
 @register

@@ -42,13 +42,13 @@ from pinobs.model.integrators import (
 )
 from pinobs.observers.base import Vector
 from pinobs.observers.fused import (
-    bracket_table,
     lie_correction_loops,
     loaded,
     riccati_gains,
     rkmk4_stage_kernel,
     rkmk4_stage_loops,
 )
+from pinobs.observers.fused_jacobi import bracket_table
 from pinobs.observers.linalg import LazyKernel
 
 __all__ = [
@@ -190,7 +190,7 @@ def _cross(
 
 def bracket_loops(table: Any, x: Vector, y: Vector, out: Vector) -> None:
     """``[x, y]`` (:meth:`~pinobs.model.Robot.bracket`) into ``out``: zero but on the blocks of
-    ``table`` (:func:`~pinobs.observers.fused.bracket_table`): ``x × y`` in a spherical joint
+    ``table`` (:func:`~pinobs.observers.fused_jacobi.bracket_table`): ``x × y`` in a spherical joint
     (``np.cross``), ``(ω₁ × v₂ + v₁ × ω₂, ω₁ × ω₂)`` in a free-flyer (``pin.Motion``'s
     ``cross``, ``x = (v₁, ω₁)``), the se(2) bracket in a planar joint: the same products and
     sums in the same order (the same bits, tested)."""

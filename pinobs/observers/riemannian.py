@@ -91,7 +91,7 @@ Riccati schedule the whole step is one Python call around compiled ones
 :class:`~pinobs.observers.fused_lie.LieRiccatiStep`), otherwise the correction but its
 bracket is one (:func:`~pinobs.observers.fused.lie_correction_loops`); all equal the
 general :meth:`RiemannianObserver._correct` to rounding (tested).  The Jacobi operator's
-calls share the correction's ``pin.Data`` (:class:`~pinobs.observers.fused.JacobiCalls`,
+calls share the correction's ``pin.Data`` (:class:`~pinobs.observers.fused_jacobi.JacobiCalls`,
 compiled products, the same bits): with constant gains the update makes no BLAS call.
 :func:`pinobs.evaluation.measure_cost` reports ``time(update) / time(pin.aba)``
 (chunks of updates, each followed by as many ``pin.aba`` calls; the Jacobi
@@ -137,9 +137,7 @@ from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.integrators import dynamics_calls
 from pinobs.observers.base import GateState, Observer, Vector, gate_threshold, positive, register
 from pinobs.observers.fused import (
-    JacobiCalls,
     RiccatiStep,
-    jacobi_kernel,
     lie_correction_kernel,
     loaded,
     riccati_correction_kernel,
@@ -147,6 +145,7 @@ from pinobs.observers.fused import (
     rk4_calls,
     vector_correction_kernel,
 )
+from pinobs.observers.fused_jacobi import JacobiCalls, jacobi_kernel
 from pinobs.observers.fused_lie import LieRiccatiStep, LieRK4
 from pinobs.observers.gain_cache import solve_discrete_are
 from pinobs.tolerances import JACOBI_FD_STEP
@@ -382,7 +381,7 @@ def jacobi_operator(robot: Robot, q: Vector, v: Vector) -> Vector:
     ``(q, g)`` and at ``q ⊕ ±εv`` for the central difference ``D_v B_v``
     (step ``ε|v| =`` :data:`pinobs.tolerances.JACOBI_FD_STEP`; error ~1e-9
     relative).  The observer caches it for ``curvature_every`` samples.  Once the observer
-    has loaded :data:`~pinobs.observers.fused.jacobi_kernel`, the sums run compiled
+    has loaded :data:`~pinobs.observers.fused_jacobi.jacobi_kernel`, the sums run compiled
     (no BLAS; equal to the NumPy products to rounding, tested).
     """
     n = robot.nv
@@ -397,7 +396,7 @@ def jacobi_operator(robot: Robot, q: Vector, v: Vector) -> Vector:
     lie = robot.has_lie_group_joints
     ad_v = _ad_matrix(robot, v) if lie else None
     ad_g = _ad_matrix(robot, g_vv) if lie else None
-    if jacobi_kernel.compiled is not None:  # the same sums in loops, no BLAS (fused.jacobi_loops)
+    if jacobi_kernel.compiled is not None:  # the same sums in loops, no BLAS (fused_jacobi)
         out = np.empty((n, n))
         zero = np.zeros((n, n))
         jacobi_kernel.compiled(

@@ -18,13 +18,8 @@ from pinobs.model import AnalyticMetric, dynamics_rk4
 from pinobs.model.integrators import difference_call, integrate_call
 from pinobs.observers import blocks, make_observer
 from pinobs.observers.blockstep import MOST_RATIO, bracket_table, transition_kernels
-from pinobs.observers.fused import (
-    JacobiCalls,
-    ad_kernel,
-    jacobi_kernel,
-    lie_correction_kernel,
-    loaded,
-)
+from pinobs.observers.fused import lie_correction_kernel, loaded
+from pinobs.observers.fused_jacobi import JacobiCalls, ad_kernel, jacobi_kernel
 from pinobs.observers.fused_lie import LieRiccatiStep, LieRK4, bracket_kernel, rkmk4_solve_kernel
 from pinobs.observers.linalg import joseph_update, transition_matrix
 from pinobs.observers.riemannian import jacobi_operator
@@ -124,7 +119,7 @@ def test_the_compiled_rkmk4_step_is_dynamics_rk4_to_the_bit(robot_name: str) -> 
 def test_the_compiled_jacobi_operator_equals_the_numpy_products(
     robot_name: str, monkeypatch: Any
 ) -> None:
-    """:func:`jacobi_operator` by :func:`~pinobs.observers.fused.jacobi_loops` (no BLAS)
+    """:func:`jacobi_operator` by :func:`~pinobs.observers.fused_jacobi.jacobi_loops` (no BLAS)
     equals its NumPy products to 1e-13 of its largest term (``∂_q Γs(v, v)``,
     ``(∂_v Γs(v, v))²``; the operator itself: on a cartpole, flat, the terms cancel to
     1e-12 of them)."""
@@ -150,7 +145,7 @@ def test_the_jacobi_calls_are_jacobi_operator_to_the_bit(robot_name: str) -> Non
     ``J z`` is the model's curvature ``R(v, z)v`` (:meth:`Robot.curvature`, ABA calls
     only, no finite difference) to the finite difference's 1e-8.  With Lie-group joints
     (free-flyer, spherical) ``ad_v`` and ``ad_Γs(v,v)`` are compiled
-    (:func:`~pinobs.observers.fused.ad_loops`; tested alone below, with a planar joint)."""
+    (:func:`~pinobs.observers.fused_jacobi.ad_loops`; tested alone below, with a planar joint)."""
     robot = cached_robot(robot_name)
     jacobi_kernel.load()
     calls = JacobiCalls.build(robot)
@@ -440,7 +435,7 @@ def test_the_compiled_bracket_and_ad_are_the_robots_to_the_bit(robot_name: str) 
     """:func:`~pinobs.observers.fused_lie.bracket_loops` (the correction's ``[ζ, w]``) gives
     :meth:`Robot.bracket`'s arrays (``pin.Motion``'s cross product in a free-flyer, ``np.cross``
     in a spherical joint, the se(2) expressions in a planar one) and
-    :func:`~pinobs.observers.fused.ad_loops` (the Jacobi operator's) ``bracket_matrix``'s,
+    :func:`~pinobs.observers.fused_jacobi.ad_loops` (the Jacobi operator's) ``bracket_matrix``'s,
     vectors of scales 1e-6 to 1e3."""
     robot = _floating_planar_spherical() if robot_name == "brackets" else cached_robot(robot_name)
     bracket, ad = loaded(bracket_kernel), loaded(ad_kernel)

@@ -120,6 +120,24 @@ def _nearest(cands: list[tuple[float, float]], vs: float, vst: float) -> int:
     )
 
 
+def _one_standard_error(
+    e: Vector, kept: list[int], cands: list[tuple[float, float]], own: tuple[float, float]
+) -> int:
+    """The one-standard-error rule (:func:`search_smoothing`; ESL §7.10): of the ``kept``
+    candidates (rows of ``e``, each block's ``e_k``), the nearest to ``own`` in log scale
+    whose ``CV`` is within one standard error of the best's; ties to the smaller ``CV``."""
+    cv = e.sum(axis=1)
+    best = min(kept, key=lambda c: cv[c])
+    se = math.sqrt(e.shape[1]) * float(np.std(e[best], ddof=1))  # SE of the best's sum
+    within = [c for c in kept if cv[c] <= cv[best] + se]
+
+    def distance(c: int) -> float:
+        (a, b), (a0, b0) = cands[c], own
+        return abs(math.log(a / a0)) + abs(math.log(max(b, 1e-9) / max(b0, 1e-9)))
+
+    return min(within, key=lambda c: (distance(c), cv[c]))
+
+
 def search_smoothing(
     reg: MomentumRegressor, A: Vector, y: Vector, cands: list[tuple[float, float]]
 ) -> tuple[list[int], dict[str, Any]]:
@@ -187,23 +205,14 @@ def search_smoothing(
         terms = [k for k, t in enumerate(reg.friction_terms) if t != "friction_offset"]
         return all(th[n0 + k * n + j] >= 0.0 for k in terms)
 
-    def regularity(j: int, c: int) -> float:
-        """The log distance of candidate ``c`` from joint ``j``'s own."""
-        (a, b), (a0, b0) = cands[c], cands[own[j]]
-        return abs(math.log(a / a0)) + abs(math.log(max(b, 1e-9) / max(b0, 1e-9)))
-
     choice = list(own)
     for _ in range(3):
         changed = False
         for j in range(reg.n_joint):
             trials = [[*choice[:j], c, *choice[j + 1 :]] for c in range(n_c)]
             e = np.array([folds(trial) for trial in trials])
-            cv = e.sum(axis=1)
             kept = [c for c in range(n_c) if consistent(trials[c], j)] or list(range(n_c))
-            best = min(kept, key=lambda c: cv[c])
-            se = math.sqrt(len(e[best])) * float(np.std(e[best], ddof=1))  # ESL §7.10
-            within = [c for c in kept if cv[c] <= cv[best] + se]
-            pick = min(within, key=lambda c: (regularity(j, c), cv[c]))
+            pick = _one_standard_error(e, kept, cands, cands[own[j]])
             if pick != choice[j]:
                 choice[j], changed = pick, True
         if not changed:

@@ -403,9 +403,6 @@ class _Samples:
         row, nq = self.rows[k], self.nq
         return float(row[0]), row[1 : 1 + nq].copy(), row[1 + nq :].copy()
 
-    def latest_time(self) -> float:
-        return float(self.rows[self.end - 1, 0])
-
     def append(self, sample: tuple[float, Vector, Vector]) -> None:
         """Add the sample ``(t, q, τ)`` (:meth:`Learner.add` does the same, inline)."""
         if self.end == self.rows.shape[0]:

@@ -213,6 +213,7 @@ from pinobs.observers.legs import (
     remove_feet,
     replace_state,
     rotation_to_quaternion,
+    slip_densities,
     slip_speeds,
 )
 from pinobs.observers.linalg import cholesky_solve
@@ -431,16 +432,6 @@ def prior_covariance(prior: InEKFPrior, x: Vector) -> Vector:
     return T @ prior.covariance() @ T.T
 
 
-def _slip_densities(qc: Vector, speed: Vector, feet: tuple[int, ...], h: float) -> Vector:
-    """:func:`~pinobs.observers.legs.slip_densities` of ``speed[list(feet)]`` (eq. 9), the
-    products ``|ṗ_j|² h`` in Python floats (the same as NumPy's ``speed**2 * h``), read-only."""
-    sp = speed.tolist()
-    out = qc.copy()
-    out[9 : 9 + 3 * len(feet)] += np.repeat([sp[j] * sp[j] * h for j in feet], 3)
-    out.setflags(write=False)
-    return out
-
-
 # ---------------------------------------------------------------------- filter
 class InvariantEKF(LeggedFilter):
     """Contact-aided invariant EKF (right-invariant error, bias-augmented; module docstring).
@@ -580,7 +571,7 @@ class InvariantEKF(LeggedFilter):
         R1, x1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty_like(P)
         qc = self._noise_densities(x.shape[0] - 2)
         if self._speed is not None and state.feet:
-            qc = _slip_densities(qc, self._speed, state.feet, dt)  # eq. (9)
+            qc = slip_densities(qc, self._speed, dt, state.feet)  # eq. (9)
         qc = self._landing(qc, state, dt)  # eq. (11)
         kernel = propagate_kernel.compiled
         assert kernel is not None  # loaded by the constructor

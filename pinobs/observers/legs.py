@@ -301,12 +301,18 @@ def foot_noise(gains: InEKFGains, jac: Vector, joint_var: float | None = None) -
     return var * (jac @ np.swapaxes(jac, -1, -2)) + (gains.kinematics**2) * _I3
 
 
-def slip_densities(qc: Vector, speed: Vector, h: float) -> Vector:
+def slip_densities(
+    qc: Vector, speed: Vector, h: float, feet: Sequence[int] | None = None
+) -> Vector:
     """Eq. (9) of :mod:`pinobs.observers.inekf`: ``Q_c`` (:func:`noise_densities`, feet in
     state order) with each foot's density raised by ``|ṗ_j|² h`` (``speed`` [m/s], one per
-    foot in the state; ``h`` the step [s]), read-only."""
+    foot in the state, or with ``feet`` (the state's feet, indices into ``speed``) one per
+    foot of the filter; ``h`` the step [s]), read-only.  The products in Python floats (the
+    same bits as NumPy's ``speed**2 * h``; a sample's handful, cheaper so)."""
+    sp = np.asarray(speed, dtype=float).tolist()
+    sq = [sp[j] * sp[j] * h for j in (range(len(sp)) if feet is None else feet)]
     out = np.array(qc, dtype=float)
-    out[9 : 9 + 3 * speed.size] += np.repeat(np.asarray(speed, dtype=float) ** 2 * h, 3)
+    out[9 : 9 + 3 * len(sq)] += np.repeat(sq, 3)
     out.setflags(write=False)
     return out
 

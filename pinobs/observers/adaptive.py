@@ -53,7 +53,9 @@ Three parts, each on code shared with the rest of pinobs:
    for a URDF without friction) is kept nominal: friction the data do not
    show would cost every prediction (above).  A solve is installed only if the learned masses are positive
    and ``M_θ̂(q) ≻ 0`` at configurations sampled from the buffer (otherwise
-   the last model is kept and :meth:`consistency` says so), and only if it
+   the last model is kept and :meth:`consistency` says so; unless the solve only validates
+   the current model and fits its rows exactly, rows ≤ rank: unphysical there by
+   rounding, it validates as a physical one would, ``Learner._inconclusive``), and only if it
    explains the rows better than the current model by more than fitting
    noise would: the robust (Huber) loss must drop by more than
    ``r + 3√r`` (``r`` the number of identifiable combinations; the expected
@@ -485,6 +487,7 @@ class AdaptiveEKF(Observer["_State"]):
         details = {
             "solves": lr.solves,
             "installs": lr.installs,
+            "inconclusive": lr.inconclusive,
             "last_loss_drop": lr.last_drop,
             "condition": float(lr.condition),
             "rank": lr.rank,
@@ -746,7 +749,8 @@ class AdaptiveEKF(Observer["_State"]):
                 lr.theta = lr.candidate
                 lr.installs += 1
                 model, ekf = self._install(model, lr, ekf)
-            else:
+            else:  # nothing physical solved yet (Learner._inconclusive): the next solve decides
+                lr.validated = False
                 model, ekf = self._set_regime(model, ekf, "warmup")
         elif lr.validated and model.regime == "warmup" and not model.restarted:
             # the nominal model explains the data (a learned one, after a restart)

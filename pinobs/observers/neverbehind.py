@@ -26,7 +26,20 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    (the scores are exponential means started at zero: until the window has filled,
    ``sᵢ`` is divided by the weight gathered so far, ``c = 1 − (1 − h/T)^k``, and ``N`` is
    ``c T/h``; the log-odds start from a prior ``ℓ₀ = 50`` for the model that fades as the
-   window fills, ``ℓ += (1 − c) ℓ₀``: the model is trusted until the data disagree).
+   window fills to the persistent prior ``ℓ_p``, ``ℓ += ℓ_p + (1 − c)(ℓ₀ − ℓ_p)``: the
+   model is trusted until the data disagree).
+   **Prior.**  ``ℓ_p`` (``prior_log_odds``, ``PRIOR`` = 10) is the prior log-odds of the
+   model against the ``kf``: the posterior log-odds are the prior's plus the window's
+   log-likelihood ratio (Bayes' rule; the prior probabilities ``μⱼ(0)`` of Bar-Shalom, Li &
+   Kirubarajan 2001, §11.6.2), ``w ≥ 1/(1 + e^{−ℓ_p − ℓ_data})``.  With the prior faded to
+   zero the weights were the data's alone, and on an exact model the one-step data are
+   weak: the predictions differ by ``h δv``, far below the noise (UR5, 1 kHz,
+   σ = 1e-3 rad, seed 5: 0.035 nats a sample, ~7 a window, standard deviation ~3.7;
+   ``ℓ`` wandered to −0.6, ``w`` = 0.36, where the ``kf``'s velocity is 440× worse: the
+   blend 4.0× ``ekf`` alone; per-sample increments within ±1.7 at the 99.9th percentile,
+   so censoring them changes nothing).  A wrong model gives data log-odds of hundreds
+   against it and is re-seeded: the prior does not hold it (``benchmarks/
+   never_behind_exact.md``: the mismatch runs and the real UR10e logs unchanged).
    **Irregular steps.**  The log-likelihood ratio counts each innovation once, decayed by
    its age: ``ℓ = κ Σⱼ Dⱼ (e²_kf,j − e²_m,j) / (2S)``, ``Dⱼ = Π_{i>j} (1 − hᵢ/T)``.  On a
    regular grid that is the form above (``sᵢ = Σⱼ (h/T) Dⱼ e²ᵢ,ⱼ``, so the sum is
@@ -54,7 +67,10 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    ``kf``'s, so its weight stays near zero until its predictions have beaten the
    ``kf``'s over a window) and :attr:`NeverBehind.reseeds` counts it.  It is lost too when
    its velocity jumps away from the ``kf``'s by more than ``FAR_GATE`` = 10 times the
-   ``kf``'s own RMS one-step error as a velocity, ``h |v̂_m − v̂_kf| > 10 √s_kf``: the
+   ``kf``'s own RMS one-step error as a velocity, ``h |v̂_m − v̂_kf| > 10 √s_kf``, once the
+   window has gathered half its weight (``c > ½``, as the ratio test: at the first sample
+   ``√(s_kf/c)`` is one innovation, ``|q₁ − q₀|``, near zero on a joint at rest, and the
+   gate re-seeded an exact Panda at 100 Hz, σ = 1e-3, seed 7: ``w`` ≈ 0 for ~1 s, 8.1×): the
    windowed scores lag such a jump (on a UR10e log an ``ekf+auto`` 1.7 rad/s RMS off in
    bursts kept a mean weight 0.1–0.27 and made the blend 1.2× the ``kf``).  Where ``ℓ``
    reaches its bound ``−50``, ``w = 0`` exactly: a model 1e20 rad/s off cannot leak
@@ -142,30 +158,40 @@ _LOG_ODDS = 50.0
 _TINY = 1e-300  # the smallest score the log-odds divide by
 #: A model-based velocity this many kf one-step errors (as velocities) from the kf's is lost.
 FAR_GATE = 10.0
+#: The persistent prior log-odds ``ℓ_p`` for the model (module docstring: **Prior**).
+PRIOR = 10.0
 
 
 def log_odds_loops(
-    c: float, dt: float, window: float, sharpness: float, nvar: float, out: Vector, fair: bool
+    c: float,
+    dt: float,
+    window: float,
+    sharpness: float,
+    nvar: float,
+    prior: float,
+    out: Vector,
+    fair: bool,
 ) -> None:
     """``out[2] = −ℓ`` per coordinate from the scores ``out[0:2]`` (model, kf) and the weight
     ``c`` the window has gathered (module docstring, item 1; compiled by numba):
 
-        ℓ = clip(κ (N/2)(s_kf − s_m) / max(min(s_m, s_kf), max(c σ², 10⁻³⁰⁰)) + (1 − c) ℓ₀, ±ℓ₀),
+        ℓ = clip(κ (N/2)(s_kf − s_m) / max(min(s_m, s_kf), max(c σ², 10⁻³⁰⁰)) + ℓ_p
+                 + (1 − c)(ℓ₀ − ℓ_p), ±ℓ₀),
 
     ``N = c T/h`` (the scores are sums ``c`` times their means); ``fair`` (a step off the
-    grid: **Irregular steps**) ``c d`` for ``N (s_kf − s_m)``, ``d = out[7]``; NaN kept as
-    NumPy keeps it."""
+    grid: **Irregular steps**) ``c d`` for ``N (s_kf − s_m)``, ``d = out[7]``; ``ℓ_p`` =
+    ``prior``; NaN kept as NumPy keeps it."""
     floor = c * nvar
     if _TINY > floor:
         floor = _TINY
     k = sharpness * 0.5 * (c * window / dt)
-    prior = (1.0 - c) * _LOG_ODDS
+    start = prior + (1.0 - c) * (_LOG_ODDS - prior)  # ℓ_p + (1 − c)(ℓ₀ − ℓ_p)
     for i in range(out.shape[1]):
         s_m, s_k = out[0, i], out[1, i]
         low = s_m if s_m <= s_k else (s_k if s_k < s_m else s_m + s_k)  # np.minimum (NaN: NaN)
         den = low if low >= floor else (floor if floor > low else low + floor)  # np.maximum
         # Bar-Shalom, Li & Kirubarajan 2001 §11.6.2 (each innovation counted once if fair)
-        ell = (sharpness * 0.5 * c * out[7, i] if fair else k * (s_k - s_m)) / den + prior
+        ell = (sharpness * 0.5 * c * out[7, i] if fair else k * (s_k - s_m)) / den + start
         if ell < -_LOG_ODDS:
             ell = -_LOG_ODDS
         elif ell > _LOG_ODDS:
@@ -198,6 +224,7 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
     lost_ratio2: float,
     sharpness: float,
     nvar: float,
+    prior: float,
     out: Vector,
 ) -> tuple[float, bool]:
     """:meth:`NeverBehind.step`'s arithmetic up to the weights (module docstring, item 1;
@@ -207,7 +234,7 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
     ``sᵢ ← sᵢ + λ(eᵢ² − sᵢ)`` into ``out[0:2]``, ``d ← (1 − λ) d + e²_kf − e²_m`` into
     ``out[7]`` (``d`` itself if not scored), ``c ← c + λ(1 − c)``, ``λ = min(1, h/T)``,
     lost if ``s_m > lost_ratio² s_kf`` somewhere once ``c > ½``; if ``measured``, lost if
-    ``h |v̂_m − v̂_kf| > FAR_GATE √(s_kf / c)`` somewhere; if not lost and ``c > 0``,
+    ``h |v̂_m − v̂_kf| > FAR_GATE √(s_kf / c)`` somewhere once ``c > ½``; if not lost and ``c > 0``,
     :func:`log_odds_loops`.  Returns ``(c, lost)``."""
     nv = out.shape[1]
     total_q = 0.0
@@ -237,11 +264,11 @@ def score_loops(  # noqa: C901 -- numba kernel: its branches are loops over smal
         if c > 0.5:
             for i in range(nv):
                 lost = lost or out[0, i] > lost_ratio2 * out[1, i]
-    if not lost and c > 0.0 and measured:
+    if not lost and c > 0.5 and measured:
         for i in range(nv):  # far (step's comment)
             lost = lost or dt * abs(v_m[i] - v_kf[i]) > FAR_GATE * np.sqrt(out[1, i] / c)
     if not lost and c > 0.0:
-        log_odds_loops(c, dt, window, sharpness, nvar, out, fair)
+        log_odds_loops(c, dt, window, sharpness, nvar, prior, out, fair)
     return c, lost
 
 
@@ -269,10 +296,10 @@ _ROWS = np.zeros((8, 1))
 #: a blend is made).
 score_kernel = LazyKernel(
     score_loops, True, True, True, False, *(_ONE,) * 7, 1e-3, 1e-3, *(_ONE,) * 3,
-    np.zeros((2, 1)), _ONE, False, 0.5, 0.2, 1e4, 1.0, 1e-8, _ROWS.copy(),
+    np.zeros((2, 1)), _ONE, False, 0.5, 0.2, 1e4, 1.0, 1e-8, 10.0, _ROWS.copy(),
     helpers=(log_odds_loops,),
 )  # fmt: skip
-log_odds_kernel = LazyKernel(log_odds_loops, 0.5, 1e-3, 0.2, 1.0, 1e-8, _ROWS.copy(), False)
+log_odds_kernel = LazyKernel(log_odds_loops, 0.5, 1e-3, 0.2, 1.0, 1e-8, 10.0, _ROWS.copy(), False)
 weigh_kernel = LazyKernel(weigh_loops, True, True, *(_ONE,) * 4, _ROWS.copy())
 
 
@@ -304,6 +331,8 @@ class NeverBehind(Observer[_State]):
         sharpness: ``κ``, the weight of the window's innovation count in the log-odds.
         lost_ratio: RMS prediction error ratio (model over kf) beyond which the
             model-based observer is re-seeded from the blend.
+        prior_log_odds: ``ℓ_p``, the persistent prior log-odds of the model (module
+            docstring, **Prior**), in ``[0, 50]``.
         rate: sample rate hint [Hz].
         noise_std: position noise standard deviation [rad or m].
     """
@@ -322,6 +351,7 @@ class NeverBehind(Observer[_State]):
         window: float = 0.2,
         sharpness: float = 1.0,
         lost_ratio: float = 100.0,
+        prior_log_odds: float = PRIOR,
         rate: float | None = None,
         noise_std: float | None = None,
     ) -> None:
@@ -329,6 +359,9 @@ class NeverBehind(Observer[_State]):
         self.window = float(positive("window", window) or 0.0)
         self.sharpness = float(positive("sharpness", sharpness) or 0.0)
         self.lost_ratio = float(positive("lost_ratio", lost_ratio) or 0.0)
+        self.prior = float(prior_log_odds)
+        if not 0.0 <= self.prior <= _LOG_ODDS:
+            raise GainError(f"prior_log_odds={prior_log_odds!r}: give one in [0, {_LOG_ODDS:g}]")
         if self.lost_ratio <= 1.0:
             raise GainError(f"lost_ratio={lost_ratio!r}: give a ratio above 1")
         cls = observer_class(observer)
@@ -345,12 +378,13 @@ class NeverBehind(Observer[_State]):
         given = {"rate": rate, "noise_std": noise_std}
         self.model = cls(robot, **opts, **given)
         self.reference = observer_class("kf")(robot, **dict(reference_options or {}), **given)
-        #: the kernels' gains: T, lost_ratio², κ, σ² (a σ learnt from the data rebuilds the blend)
+        #: the kernels' gains: T, lost_ratio², κ, σ², ℓ_p (a σ learnt from the data rebuilds the blend)
         self._gains = (
             self.window,
             self.lost_ratio**2,
             self.sharpness,
             (self.noise_std or 0.0) ** 2,
+            self.prior,
         )
         for kernel in (score_kernel, log_odds_kernel, weigh_kernel):
             kernel.load()  # (numba's cache: compiled once per installation)
@@ -365,6 +399,7 @@ class NeverBehind(Observer[_State]):
             "window": self.window,
             "sharpness": self.sharpness,
             "lost_ratio": self.lost_ratio,
+            "prior_log_odds": self.prior,
         }
 
     def set_latency(self, latency: float) -> None:
@@ -446,7 +481,7 @@ class NeverBehind(Observer[_State]):
             np.multiply(self.lost_ratio, out[1], out=out[0])  # to prove itself: w ≈ 0 until it has
             out[7] = (out[1] - out[0]) / min(1.0, dt / gains[0])  # (d as on the grid)
             if c > 0.0:
-                g = (gains[0], gains[2], gains[3])
+                g = (gains[0], gains[2], gains[3], gains[4])
                 cast(_Kernel, log_odds_kernel.compiled)(c, dt, *g, out, fair)
         if c > 0.0:
             np.exp(out[2], out=out[5])  # NumPy's exp (out[2] = −ℓ): the NumPy form's bits

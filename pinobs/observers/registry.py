@@ -75,7 +75,8 @@ def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
     ``latency`` [s] for every family (:meth:`Observer.set_latency`), and
     ``never_behind=True`` for a model-based family: the family blended per joint with
     the model-free ``kf`` (:class:`pinobs.observers.neverbehind.NeverBehind`; its
-    ``window``, ``sharpness``, ``lost_ratio``, ``reference_options`` then accepted too).
+    ``window``, ``sharpness``, ``lost_ratio``, ``prior_log_odds``, ``reference_options``
+    then accepted too).
 
     Raises:
         UnknownNameError: unknown ``name``.
@@ -113,4 +114,4 @@ def make_observer(name: str, robot: Robot, **options: Any) -> Observer[Any]:
 
 #: Options of :class:`pinobs.observers.neverbehind.NeverBehind` that ``make_observer`` passes
 #: to it with ``never_behind=True``.
-_BLEND_OPTIONS = ("window", "sharpness", "lost_ratio", "reference_options")
+_BLEND_OPTIONS = ("window", "sharpness", "lost_ratio", "prior_log_odds", "reference_options")

@@ -79,7 +79,6 @@ from pinobs.observers.checks import positive
 from pinobs.observers.contacts import (
     ContactProbability,
     contacts_from_forces,
-    contacts_from_probability,
     default_thresholds,
 )
 from pinobs.observers.inekf import InEKFGains, InvariantEKF, rotation_to_quaternion
@@ -316,7 +315,7 @@ def legged_run(
     )
     previous: float | None = None
     said: list[str] = [*joints.warnings, *said_setup]
-    rows = _Rows(log, joints.v)
+    rows = _Rows(log, joints.v, prob)
     times, fed = log.t.tolist(), usable.tolist()  # (Python floats and bools: per-row reads)
     for k in range(n):
         if not fed[k] or (previous is not None and times[k] <= previous):
@@ -324,9 +323,12 @@ def legged_run(
             if prob is not None and k:
                 flags[k] = flags[k - 1]
             continue
-        if prob is not None:
-            flags[k] = _probable(filt, prob, log, k, joints.v[k], flags[k - 1] if k else None)
-        est = _step(filt, robot, log, k, flags[k], rows, previous is None)
+        if prob is None:
+            now = flags[k].tolist()
+        else:
+            now = rows.probable(filt, prob, k, flags[k - 1].tolist() if k else None)
+            flags[k] = now
+        est = _step(filt, robot, log, k, now, rows, previous is None)
         if est is None:
             said.append(f"inekf diverged at t = {log.t[k]:.6g} s: the rows after it are NaN")
             bad.extend((int(log.lines[j]), "after the filter diverged") for j in range(k, n))
@@ -373,25 +375,6 @@ def _contact_setup(
     return prob, np.zeros((len(log), len(log.feet)), dtype=bool)
 
 
-def _probable(
-    filt: InvariantEKF,
-    prob: ContactProbability,
-    log: Log,
-    k: int,
-    dq_row: Vector,
-    previous: np.ndarray | None,
-) -> np.ndarray:
-    """Row ``k``'s flags from its forces and the feet's speeds the filter predicts (the
-    first row, or without joint velocities: the force alone, speed 0)."""
-    assert log.foot_force is not None and log.imu_gyro is not None
-    speed = np.zeros(len(log.feet))
-    if previous is not None and np.all(np.isfinite(dq_row)):
-        vel = filt.foot_velocities(log.q[k, 7:], dq_row, log.imu_gyro[k])
-        speed = np.linalg.norm(vel, axis=1)
-    before = np.zeros(len(log.feet), dtype=bool) if previous is None else previous
-    return contacts_from_probability(prob(log.foot_force[k], speed), before)
-
-
 def _why(log: Log, k: int, usable: bool) -> str:
     if not usable:
         return "no IMU reading or joint angle: not fed to inekf"
@@ -406,12 +389,34 @@ class _Rows:
     angles: :func:`legged_run`'s ``usable``), so each ``update``'s own checks would pass;
     the time is checked per row (:func:`check_time`), as ``update`` does."""
 
-    def __init__(self, log: Log, dq: Vector) -> None:
+    def __init__(self, log: Log, dq: Vector, prob: ContactProbability | None = None) -> None:
         assert log.imu_gyro is not None and log.imu_acc is not None
         self.q = np.ascontiguousarray(log.q[:, 7:], dtype=float)
         self.reading = np.ascontiguousarray(np.hstack([log.imu_gyro, log.imu_acc]), dtype=float)
         self.dq = np.ascontiguousarray(dq, dtype=float)
         self.dq_finite = np.all(np.isfinite(self.dq), axis=1).tolist()
+        #: with ``contacts="probability"``: each row's force factor of ``p``
+        #: (:meth:`ContactProbability.force_factor`), for the whole log at once
+        self.force_factor: list[list[float]] = []
+        if prob is not None and log.foot_force is not None:
+            self.force_factor = prob.force_factor(log.foot_force).tolist()
+
+    def probable(
+        self, filt: InvariantEKF, prob: ContactProbability, k: int, previous: list[bool] | None
+    ) -> list[bool]:
+        """Row ``k``'s flags from its forces and the feet's speeds the filter predicts (the
+        first row, or without joint velocities: the force alone, speed 0): ``p > ½``, a NaN
+        ``p`` keeping the foot's ``previous`` flag (False on the first row), as
+        :func:`~pinobs.observers.contacts.contacts_from_probability` of ``prob(force, speed)``."""
+        feet = len(self.force_factor[k])
+        if previous is not None and self.dq_finite[k]:
+            speed = filt.foot_speeds_checked(self.q[k], self.dq[k], self.reading[k])
+        else:
+            speed = np.zeros(feet)
+        before = [False] * feet if previous is None else previous
+        by_speed = prob.speed_factor(speed).tolist()
+        p = [f * s for f, s in zip(self.force_factor[k], by_speed)]
+        return [before[j] if math.isnan(p[j]) else p[j] > 0.5 for j in range(feet)]
 
     def inputs(self, filt: InvariantEKF, t: float, k: int, flags: list[bool]) -> UpdateInputs:
         """Row ``k`` as ``update`` would check it (its time after the filter's)."""
@@ -424,13 +429,13 @@ def _step(
     robot: Robot,
     log: Log,
     k: int,
-    contacts: np.ndarray,
+    flags: list[bool],
     rows: _Rows,
     first: bool,
 ) -> Any:
-    """The filter reset (first row) or updated with row ``k``; ``None`` if it diverged."""
+    """The filter reset (first row) or updated with row ``k`` (its contact ``flags``);
+    ``None`` if it diverged."""
     assert log.imu_gyro is not None and log.imu_acc is not None
-    flags = [bool(c) for c in contacts]
     if first:
         gyro, acc = log.imu_gyro[k], log.imu_acc[k]
         dq = rows.dq[k] if rows.dq_finite[k] else None

@@ -415,7 +415,7 @@ class _Rows:
             speed = np.zeros(feet)
         before = [False] * feet if previous is None else previous
         by_speed = prob.speed_factor(speed).tolist()
-        p = [f * s for f, s in zip(self.force_factor[k], by_speed)]
+        p = [f * s for f, s in zip(self.force_factor[k], by_speed, strict=True)]
         return [before[j] if math.isnan(p[j]) else p[j] > 0.5 for j in range(feet)]
 
     def inputs(self, filt: InvariantEKF, t: float, k: int, flags: list[bool]) -> UpdateInputs:

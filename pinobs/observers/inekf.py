@@ -541,7 +541,9 @@ class InvariantEKF(LeggedFilter):
         dq = Robot.check_vector(joint_velocities, self.setup.nv_joints, what="joint_velocities")
         return self._velocities(h, jac, dq, Robot.check_vector(gyro, 3, what="gyro"))
 
-    def foot_speeds_checked(self, q_joints: Vector, joint_velocities: Vector, gyro: Vector) -> Vector:
+    def foot_speeds_checked(
+        self, q_joints: Vector, joint_velocities: Vector, gyro: Vector
+    ) -> Vector:
         """``|ṗ_j|`` of :meth:`foot_velocities` (``(K,)`` [m/s]; the bits of
         ``np.linalg.norm(…, axis=1)``, ``((x² + y²) + z²)`` then ``√``) without its checks: for
         a caller that has checked its rows (:func:`pinobs.io.legged_run.legged_run`): finite

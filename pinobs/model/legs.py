@@ -118,6 +118,8 @@ class FootKinematics:
         for a in self.imu_placement:
             a.setflags(write=False)
         self._to_imu = None if imu_frame is None else self.imu_placement
+        #: the IMU's axes are the base's (``R_bi`` exactly ``I``, go1's ``imu_link``)
+        self._imu_aligned = bool(np.array_equal(self.imu_placement[0], np.eye(3)))
 
     def __repr__(self) -> str:
         return f"FootKinematics({self.robot_name!r}, feet={self.feet})"
@@ -201,7 +203,12 @@ class FootKinematics:
             placement[k] = oMf[fid].homogeneous  # set by getFrameJacobian
         h, rot = placement[:, :3, 3], placement[:, :3, :3]
         lin, ang = jac[:, :3], jac[:, 3:]
-        if self._to_imu is not None:
+        if self._to_imu is not None and self._imu_aligned:
+            # R_bi = I: R_biᵀ x is x (its products' terms x·1 + y·0 + z·0, x finite), and
+            # x + 0 its zeros' signs as the products leave them (-0 + 0 = +0)
+            h, rot = h - self._to_imu[1], rot + 0.0
+            lin, ang = lin + 0.0, ang + 0.0
+        elif self._to_imu is not None:
             R_bi, r_bi = self._to_imu
             h, rot = (h - r_bi) @ R_bi, R_bi.T @ rot
             lin, ang = R_bi.T @ lin, R_bi.T @ ang

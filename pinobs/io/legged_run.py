@@ -71,7 +71,7 @@ from pinobs.errors import (
 from pinobs.io.readers import Log
 from pinobs.io.runs import estimate_log
 from pinobs.io.stream import LogRun
-from pinobs.model import Robot, foot_sphere_radius, load
+from pinobs.model import Robot, foot_sphere_radii, load
 from pinobs.model.noise import third_difference_std
 from pinobs.model.robot import Vector
 from pinobs.observers import make_observer
@@ -506,7 +506,7 @@ def _foot_radius(
                 "spheres) or a radius [m] >= 0"
             )
         try:
-            radii = {foot: foot_sphere_radius(robot, foot) for foot in feet}
+            radii = foot_sphere_radii(robot, feet)  # (the URDF read once)
         except PinobsError as exc:  # not a URDF robot, a foot frame not a link: no sphere known
             return 0.0, [
                 f"inekf: foot_radius='urdf' but {robot.name}'s foot spheres are not known "

@@ -37,7 +37,7 @@ from pinobs.errors import ConfigurationError, UnknownNameError, UnsupportedRobot
 from pinobs.model.loading import resolve_source
 from pinobs.model.robot import Robot
 
-__all__ = ["FootKinematics", "foot_sphere_radius"]
+__all__ = ["FootKinematics", "foot_sphere_radii", "foot_sphere_radius"]
 
 Vector = NDArray[np.floating[Any]]
 
@@ -242,14 +242,34 @@ def foot_sphere_radius(robot: Robot, foot: str) -> float:
         ConfigurationError: the robot was not loaded from a URDF, or the sphere is off the
             link's origin (the frame would not be its centre).
     """
-    _frame_id(robot, foot)
-    path = resolve_source(robot.source)[0]
-    if path.suffix.lower() != ".urdf":
-        raise ConfigurationError(f"{robot.name}: foot_sphere_radius reads a URDF, got {path.name}")
-    links = {link.get("name"): link for link in ET.parse(path).getroot().iter("link")}
-    if foot not in links:
-        raise UnknownNameError(f"{robot.name}: {foot!r} is a frame but not a link of {path.name}")
-    for collision in links[foot].findall("collision"):
+    return foot_sphere_radii(robot, (foot,))[foot]
+
+
+def foot_sphere_radii(robot: Robot, feet: Sequence[str]) -> dict[str, float]:
+    """:func:`foot_sphere_radius` of each of ``feet``, the URDF read once (its errors, for the
+    first foot that has one, in the order of ``feet``)."""
+    links: dict[Any, Any] | None = None
+    out = {}
+    for foot in feet:
+        _frame_id(robot, foot)
+        if links is None:
+            path = resolve_source(robot.source)[0]
+            if path.suffix.lower() != ".urdf":
+                raise ConfigurationError(
+                    f"{robot.name}: foot_sphere_radius reads a URDF, got {path.name}"
+                )
+            links = {link.get("name"): link for link in ET.parse(path).getroot().iter("link")}
+        if foot not in links:
+            raise UnknownNameError(
+                f"{robot.name}: {foot!r} is a frame but not a link of {path.name}"
+            )
+        out[foot] = _sphere_radius(robot, foot, links[foot])
+    return out
+
+
+def _sphere_radius(robot: Robot, foot: str, link: Any) -> float:
+    """The radius of ``link``'s first collision sphere (:func:`foot_sphere_radius`)."""
+    for collision in link.findall("collision"):
         sphere = collision.find("geometry/sphere")
         if sphere is None:
             continue

@@ -312,7 +312,7 @@ def slip_densities(
     sp = np.asarray(speed, dtype=float).tolist()
     sq = [sp[j] * sp[j] * h for j in (range(len(sp)) if feet is None else feet)]
     out = np.array(qc, dtype=float)
-    out[9 : 9 + 3 * len(sq)] += np.repeat(sq, 3)
+    out[9 : 9 + 3 * len(sq)] += [d for d in sq for _ in range(3)]  # (np.repeat's values)
     out.setflags(write=False)
     return out
 

@@ -196,25 +196,27 @@ class FootKinematics:
         self._set(q_joints)
         model, data, oMf = self._model, self._data, self._oMf
         pin.computeJointJacobians(model, data, self._q)
-        K = len(self._ids)
-        placement, jac = np.empty((K, 4, 4)), np.empty((K, 6, self.nv_joints))
-        for k, fid in enumerate(self._ids):
-            jac[k] = pin.getFrameJacobian(model, data, fid, _LOCAL_WORLD_ALIGNED)[:, 6:]
-            placement[k] = oMf[fid].homogeneous  # set by getFrameJacobian
+        ids = self._ids  # each foot's Jacobian, then its oMf (set by getFrameJacobian)
+        full = np.array([pin.getFrameJacobian(model, data, f, _LOCAL_WORLD_ALIGNED) for f in ids])
+        placement = np.array([oMf[f].homogeneous for f in ids])
         h, rot = placement[:, :3, 3], placement[:, :3, :3]
-        lin, ang = jac[:, :3], jac[:, 3:]
         if self._to_imu is not None and self._imu_aligned:
             # R_bi = I: R_biᵀ x is x (its products' terms x·1 + y·0 + z·0, x finite), and
             # x + 0 its zeros' signs as the products leave them (-0 + 0 = +0)
             h, rot = h - self._to_imu[1], rot + 0.0
-            lin, ang = lin + 0.0, ang + 0.0
-        elif self._to_imu is not None:
+            return self._kept(key, (h, rot, full[:, :3, 6:] + 0.0, full[:, 3:, 6:] + 0.0))
+        jac = np.ascontiguousarray(full[:, :, 6:])
+        lin, ang = jac[:, :3], jac[:, 3:]
+        if self._to_imu is not None:
             R_bi, r_bi = self._to_imu
             h, rot = (h - r_bi) @ R_bi, R_bi.T @ rot
             lin, ang = R_bi.T @ lin, R_bi.T @ ang
         else:
             h, rot = np.ascontiguousarray(h), np.ascontiguousarray(rot)
-        out = (h, rot, lin, ang)
+        return self._kept(key, (h, rot, lin, ang))
+
+    def _kept(self, key: bytes, out: tuple[Vector, ...]) -> tuple[Vector, ...]:
+        """``out``, kept (not copied) for the next call with the same angles' bytes ``key``."""
         self._memo["placements_and_jacobians"] = (key, out)
         return out
 

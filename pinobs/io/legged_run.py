@@ -71,7 +71,7 @@ from pinobs.errors import (
 from pinobs.io.readers import Log
 from pinobs.io.runs import estimate_log
 from pinobs.io.stream import LogRun
-from pinobs.model import Robot, foot_sphere_radius, load
+from pinobs.model import Robot, foot_sphere_radii, load
 from pinobs.model.noise import third_difference_std
 from pinobs.model.robot import Vector
 from pinobs.observers import make_observer
@@ -79,7 +79,6 @@ from pinobs.observers.checks import positive
 from pinobs.observers.contacts import (
     ContactProbability,
     contacts_from_forces,
-    contacts_from_probability,
     default_thresholds,
 )
 from pinobs.observers.inekf import InEKFGains, InvariantEKF, rotation_to_quaternion
@@ -248,6 +247,7 @@ class LeggedDetail(NamedTuple):
 
 def _make_filter(
     robot: Robot,
+    locked: _LockedRoot,
     log: Log,
     imu_frame: str | None,
     gains: InEKFGains | None,
@@ -260,8 +260,8 @@ def _make_filter(
 ) -> tuple[InvariantEKF, list[str]]:
     """:func:`legged_run`'s filter, and what its set-up measured on the log (said once)."""
     radius, said_r = _foot_radius(robot, log.feet, foot_radius)
-    sigma_q, said_q = _joint_std(robot, log, joint_std)
-    gains, said_g = _imu_gains(robot, log, gains, imu_noise)
+    sigma_q, said_q = _joint_std(locked, log, joint_std)
+    gains, said_g = _imu_gains(locked, log, gains, imu_noise)
     imu_frame = IMU_FRAME if imu_frame is None and robot.model.existFrame(IMU_FRAME) else imu_frame
     filt = InvariantEKF(
         robot,
@@ -302,8 +302,9 @@ def legged_run(
         )
     prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
     feet = (joint_std, slip_speed, imu_noise, foot_radius, rolling_lift)
-    filt, said_setup = _make_filter(robot, log, imu_frame, gains, foot_gate, *feet)
-    joints = _joint_velocities(robot, log)
+    locked = _LockedRoot(robot)
+    filt, said_setup = _make_filter(robot, locked, log, imu_frame, gains, foot_gate, *feet)
+    joints = _joint_velocities(locked, log)
     n = len(log)
     q_out, v_out = np.full((n, robot.nq), np.nan), np.full((n, robot.nv), np.nan)
     nis, dof, gated = np.full(n, np.nan), np.zeros(n, dtype=int), 0
@@ -316,7 +317,7 @@ def legged_run(
     )
     previous: float | None = None
     said: list[str] = [*joints.warnings, *said_setup]
-    rows = _Rows(log, joints.v)
+    rows = _Rows(log, joints.v, prob)
     times, fed = log.t.tolist(), usable.tolist()  # (Python floats and bools: per-row reads)
     for k in range(n):
         if not fed[k] or (previous is not None and times[k] <= previous):
@@ -324,9 +325,12 @@ def legged_run(
             if prob is not None and k:
                 flags[k] = flags[k - 1]
             continue
-        if prob is not None:
-            flags[k] = _probable(filt, prob, log, k, joints.v[k], flags[k - 1] if k else None)
-        est = _step(filt, robot, log, k, flags[k], rows, previous is None)
+        if prob is None:
+            now = flags[k].tolist()
+        else:
+            now = rows.probable(filt, prob, k, flags[k - 1].tolist() if k else None)
+            flags[k] = now
+        est = _step(filt, robot, log, k, now, rows, previous is None)
         if est is None:
             said.append(f"inekf diverged at t = {log.t[k]:.6g} s: the rows after it are NaN")
             bad.extend((int(log.lines[j]), "after the filter diverged") for j in range(k, n))
@@ -373,25 +377,6 @@ def _contact_setup(
     return prob, np.zeros((len(log), len(log.feet)), dtype=bool)
 
 
-def _probable(
-    filt: InvariantEKF,
-    prob: ContactProbability,
-    log: Log,
-    k: int,
-    dq_row: Vector,
-    previous: np.ndarray | None,
-) -> np.ndarray:
-    """Row ``k``'s flags from its forces and the feet's speeds the filter predicts (the
-    first row, or without joint velocities: the force alone, speed 0)."""
-    assert log.foot_force is not None and log.imu_gyro is not None
-    speed = np.zeros(len(log.feet))
-    if previous is not None and np.all(np.isfinite(dq_row)):
-        vel = filt.foot_velocities(log.q[k, 7:], dq_row, log.imu_gyro[k])
-        speed = np.linalg.norm(vel, axis=1)
-    before = np.zeros(len(log.feet), dtype=bool) if previous is None else previous
-    return contacts_from_probability(prob(log.foot_force[k], speed), before)
-
-
 def _why(log: Log, k: int, usable: bool) -> str:
     if not usable:
         return "no IMU reading or joint angle: not fed to inekf"
@@ -406,12 +391,34 @@ class _Rows:
     angles: :func:`legged_run`'s ``usable``), so each ``update``'s own checks would pass;
     the time is checked per row (:func:`check_time`), as ``update`` does."""
 
-    def __init__(self, log: Log, dq: Vector) -> None:
+    def __init__(self, log: Log, dq: Vector, prob: ContactProbability | None = None) -> None:
         assert log.imu_gyro is not None and log.imu_acc is not None
         self.q = np.ascontiguousarray(log.q[:, 7:], dtype=float)
         self.reading = np.ascontiguousarray(np.hstack([log.imu_gyro, log.imu_acc]), dtype=float)
         self.dq = np.ascontiguousarray(dq, dtype=float)
         self.dq_finite = np.all(np.isfinite(self.dq), axis=1).tolist()
+        #: with ``contacts="probability"``: each row's force factor of ``p``
+        #: (:meth:`ContactProbability.force_factor`), for the whole log at once
+        self.force_factor: list[list[float]] = []
+        if prob is not None and log.foot_force is not None:
+            self.force_factor = prob.force_factor(log.foot_force).tolist()
+
+    def probable(
+        self, filt: InvariantEKF, prob: ContactProbability, k: int, previous: list[bool] | None
+    ) -> list[bool]:
+        """Row ``k``'s flags from its forces and the feet's speeds the filter predicts (the
+        first row, or without joint velocities: the force alone, speed 0): ``p > ½``, a NaN
+        ``p`` keeping the foot's ``previous`` flag (False on the first row), as
+        :func:`~pinobs.observers.contacts.contacts_from_probability` of ``prob(force, speed)``."""
+        feet = len(self.force_factor[k])
+        if previous is not None and self.dq_finite[k]:
+            speed = filt.foot_speeds_checked(self.q[k], self.dq[k], self.reading[k])
+        else:
+            speed = np.zeros(feet)
+        before = [False] * feet if previous is None else previous
+        by_speed = prob.speed_factor(speed).tolist()
+        p = [f * s for f, s in zip(self.force_factor[k], by_speed, strict=True)]
+        return [before[j] if math.isnan(p[j]) else p[j] > 0.5 for j in range(feet)]
 
     def inputs(self, filt: InvariantEKF, t: float, k: int, flags: list[bool]) -> UpdateInputs:
         """Row ``k`` as ``update`` would check it (its time after the filter's)."""
@@ -424,13 +431,13 @@ def _step(
     robot: Robot,
     log: Log,
     k: int,
-    contacts: np.ndarray,
+    flags: list[bool],
     rows: _Rows,
     first: bool,
 ) -> Any:
-    """The filter reset (first row) or updated with row ``k``; ``None`` if it diverged."""
+    """The filter reset (first row) or updated with row ``k`` (its contact ``flags``);
+    ``None`` if it diverged."""
     assert log.imu_gyro is not None and log.imu_acc is not None
-    flags = [bool(c) for c in contacts]
     if first:
         gyro, acc = log.imu_gyro[k], log.imu_acc[k]
         dq = rows.dq[k] if rows.dq_finite[k] else None
@@ -453,8 +460,22 @@ def _joints_robot(robot: Robot) -> Robot:
     return load(robot.model, lock=[names[1]])
 
 
+class _LockedRoot:
+    """:func:`_joints_robot` of ``robot``, built where the run first asks for it and then kept
+    (σ_q, the IMU's densities and the joints' ``kf`` each ask: 3 ms a build on go1)."""
+
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+        self._built: Robot | None = None
+
+    def __call__(self) -> Robot:
+        if self._built is None:
+            self._built = _joints_robot(self.robot)
+        return self._built
+
+
 def _joint_std(
-    robot: Robot, log: Log, joint_std: ArrayLike | str | None
+    locked: _LockedRoot, log: Log, joint_std: ArrayLike | str | None
 ) -> tuple[ArrayLike | None, list[str]]:
     """``joint_std`` for the filter and what to say of it: ``"log"`` → σ̂ per joint from the
     log's stillest second (:func:`~pinobs.observers.noise.still_noise_std`: third
@@ -468,7 +489,7 @@ def _joint_std(
             f"joint_std={joint_std!r}: give {' or '.join(map(repr, JOINT_STD_RULES))}, "
             "σ per joint [rad] or None"
         )
-    fixed = _joints_robot(robot)
+    fixed = locked()
     if joint_std == "log":
         sigma = still_noise_std(log.t, log.q[:, 7:], fixed)
         where = "its stillest second"
@@ -501,7 +522,7 @@ def _foot_radius(
                 "spheres) or a radius [m] >= 0"
             )
         try:
-            radii = {foot: foot_sphere_radius(robot, foot) for foot in feet}
+            radii = foot_sphere_radii(robot, feet)  # (the URDF read once)
         except PinobsError as exc:  # not a URDF robot, a foot frame not a link: no sphere known
             return 0.0, [
                 f"inekf: foot_radius='urdf' but {robot.name}'s foot spheres are not known "
@@ -524,7 +545,7 @@ def _foot_radius(
 
 
 def _imu_gains(
-    robot: Robot, log: Log, gains: InEKFGains | None, imu_noise: str | None
+    locked: _LockedRoot, log: Log, gains: InEKFGains | None, imu_noise: str | None
 ) -> tuple[InEKFGains, list[str]]:
     """``gains`` (default :data:`LEGGED_GAINS`), with ``imu_noise="log"`` the gyro's and
     accelerometer's white densities measured on the log's stillest second
@@ -538,7 +559,7 @@ def _imu_gains(
         return base, []
     if imu_noise != "log":
         raise OptionError(f"imu_noise={imu_noise!r}: give 'log' or None")
-    rows = stillest_rows(log.t, log.q[:, 7:], _joints_robot(robot))
+    rows = stillest_rows(log.t, log.q[:, 7:], locked())
     if rows is None:
         return base, []
     t = log.t[rows]
@@ -557,9 +578,9 @@ def _imu_gains(
     ]
 
 
-def _joint_velocities(robot: Robot, log: Log) -> LogRun:
+def _joint_velocities(locked: _LockedRoot, log: Log) -> LogRun:
     """``kf`` over the joint columns: the robot with its free-flyer root locked."""
-    fixed = _joints_robot(robot)
+    fixed = locked()
     joint_log = replace(
         log,
         q=log.q[:, 7:],

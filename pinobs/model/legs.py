@@ -37,7 +37,7 @@ from pinobs.errors import ConfigurationError, UnknownNameError, UnsupportedRobot
 from pinobs.model.loading import resolve_source
 from pinobs.model.robot import Robot
 
-__all__ = ["FootKinematics", "foot_sphere_radius"]
+__all__ = ["FootKinematics", "foot_sphere_radii", "foot_sphere_radius"]
 
 Vector = NDArray[np.floating[Any]]
 
@@ -118,6 +118,8 @@ class FootKinematics:
         for a in self.imu_placement:
             a.setflags(write=False)
         self._to_imu = None if imu_frame is None else self.imu_placement
+        #: the IMU's axes are the base's (``R_bi`` exactly ``I``, go1's ``imu_link``)
+        self._imu_aligned = bool(np.array_equal(self.imu_placement[0], np.eye(3)))
 
     def __repr__(self) -> str:
         return f"FootKinematics({self.robot_name!r}, feet={self.feet})"
@@ -194,12 +196,16 @@ class FootKinematics:
         self._set(q_joints)
         model, data, oMf = self._model, self._data, self._oMf
         pin.computeJointJacobians(model, data, self._q)
-        K = len(self._ids)
-        placement, jac = np.empty((K, 4, 4)), np.empty((K, 6, self.nv_joints))
-        for k, fid in enumerate(self._ids):
-            jac[k] = pin.getFrameJacobian(model, data, fid, _LOCAL_WORLD_ALIGNED)[:, 6:]
-            placement[k] = oMf[fid].homogeneous  # set by getFrameJacobian
+        ids = self._ids  # each foot's Jacobian, then its oMf (set by getFrameJacobian)
+        full = np.array([pin.getFrameJacobian(model, data, f, _LOCAL_WORLD_ALIGNED) for f in ids])
+        placement = np.array([oMf[f].homogeneous for f in ids])
         h, rot = placement[:, :3, 3], placement[:, :3, :3]
+        if self._to_imu is not None and self._imu_aligned:
+            # R_bi = I: R_biᵀ x is x (its products' terms x·1 + y·0 + z·0, x finite), and
+            # x + 0 its zeros' signs as the products leave them (-0 + 0 = +0)
+            h, rot = h - self._to_imu[1], rot + 0.0
+            return self._kept(key, (h, rot, full[:, :3, 6:] + 0.0, full[:, 3:, 6:] + 0.0))
+        jac = np.ascontiguousarray(full[:, :, 6:])
         lin, ang = jac[:, :3], jac[:, 3:]
         if self._to_imu is not None:
             R_bi, r_bi = self._to_imu
@@ -207,7 +213,10 @@ class FootKinematics:
             lin, ang = R_bi.T @ lin, R_bi.T @ ang
         else:
             h, rot = np.ascontiguousarray(h), np.ascontiguousarray(rot)
-        out = (h, rot, lin, ang)
+        return self._kept(key, (h, rot, lin, ang))
+
+    def _kept(self, key: bytes, out: tuple[Vector, ...]) -> tuple[Vector, ...]:
+        """``out``, kept (not copied) for the next call with the same angles' bytes ``key``."""
         self._memo["placements_and_jacobians"] = (key, out)
         return out
 
@@ -235,14 +244,34 @@ def foot_sphere_radius(robot: Robot, foot: str) -> float:
         ConfigurationError: the robot was not loaded from a URDF, or the sphere is off the
             link's origin (the frame would not be its centre).
     """
-    _frame_id(robot, foot)
-    path = resolve_source(robot.source)[0]
-    if path.suffix.lower() != ".urdf":
-        raise ConfigurationError(f"{robot.name}: foot_sphere_radius reads a URDF, got {path.name}")
-    links = {link.get("name"): link for link in ET.parse(path).getroot().iter("link")}
-    if foot not in links:
-        raise UnknownNameError(f"{robot.name}: {foot!r} is a frame but not a link of {path.name}")
-    for collision in links[foot].findall("collision"):
+    return foot_sphere_radii(robot, (foot,))[foot]
+
+
+def foot_sphere_radii(robot: Robot, feet: Sequence[str]) -> dict[str, float]:
+    """:func:`foot_sphere_radius` of each of ``feet``, the URDF read once (its errors, for the
+    first foot that has one, in the order of ``feet``)."""
+    links: dict[Any, Any] | None = None
+    out = {}
+    for foot in feet:
+        _frame_id(robot, foot)
+        if links is None:
+            path = resolve_source(robot.source)[0]
+            if path.suffix.lower() != ".urdf":
+                raise ConfigurationError(
+                    f"{robot.name}: foot_sphere_radius reads a URDF, got {path.name}"
+                )
+            links = {link.get("name"): link for link in ET.parse(path).getroot().iter("link")}
+        if foot not in links:
+            raise UnknownNameError(
+                f"{robot.name}: {foot!r} is a frame but not a link of {path.name}"
+            )
+        out[foot] = _sphere_radius(robot, foot, links[foot])
+    return out
+
+
+def _sphere_radius(robot: Robot, foot: str, link: Any) -> float:
+    """The radius of ``link``'s first collision sphere (:func:`foot_sphere_radius`)."""
+    for collision in link.findall("collision"):
         sphere = collision.find("geometry/sphere")
         if sphere is None:
             continue

@@ -74,7 +74,7 @@ from pinobs.observers.gating import (
     steady_innovation_variance,
 )
 from pinobs.observers.gaussian import GaussianFilter
-from pinobs.observers.noise import NOISE_MIN_SAMPLES, NOISE_WINDOW, estimate_noise_std
+from pinobs.observers.noise import NOISE_MIN_SAMPLES, NOISE_WINDOW, estimate_noise_std, window_times
 from pinobs.observers.registry import make_observer, observer_class, observer_names, register
 from pinobs.observers.results import CONSISTENCY_WINDOW, LIKELY_CAUSES, Consistency, Estimate
 from pinobs.tolerances import (
@@ -637,8 +637,8 @@ class Observer(ABC, Generic[State]):
         Returns whether the observer was rebuilt (its latest estimate is then the replay's)."""
         assert self._noise_samples is not None
         self._noise_samples.append((t, q, tau))
-        ts = [x[0] for x in self._noise_samples if x[1] is not None]
-        if len(ts) < NOISE_MIN_SAMPLES or ts[-1] - ts[0] < NOISE_WINDOW:
+        ts = window_times(self._noise_samples)
+        if ts is None:
             return False
         kept, self._noise_samples = self._noise_samples, None
         qs = np.array([x[1] for x in kept if x[1] is not None])

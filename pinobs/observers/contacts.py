@@ -132,11 +132,20 @@ class ContactProbability:
     def __call__(self, force: ArrayLike, foot_speed: ArrayLike) -> NDArray[np.float64]:
         """``p`` per foot (same shape as ``force``) from forces [N] and speeds [m/s]; a NaN
         force gives NaN (:func:`contacts_from_probability` keeps the previous state)."""
-        f, v = np.asarray(force, dtype=float), np.asarray(foot_speed, dtype=float)
-        z_f = (f - self.force_min) / self.force_sigma
-        z_v = (self.speed_max - v) / self.speed_sigma
         # Φ(z) = ½ erfc(−z/√2); SEROW d968c5b ContactDetectionQuad.h: p_f · p_v
-        return 0.25 * _erfc(-z_f / math.sqrt(2.0)) * _erfc(-z_v / math.sqrt(2.0))
+        return self.force_factor(force) * self.speed_factor(foot_speed)
+
+    def force_factor(self, force: ArrayLike) -> NDArray[np.float64]:
+        """``¼ erfc(−z_f/√2)``, ``z_f = (f − f_min)/σ_f``: ``p`` is this times
+        :meth:`speed_factor` (the same bits as ``__call__``, which multiplies them), so a
+        run can take it for all its rows at once (:func:`pinobs.io.legged_run.legged_run`)."""
+        z_f = (np.asarray(force, dtype=float) - self.force_min) / self.force_sigma
+        return 0.25 * _erfc(-z_f / math.sqrt(2.0))
+
+    def speed_factor(self, foot_speed: ArrayLike) -> NDArray[np.float64]:
+        """``erfc(−z_v/√2)``, ``z_v = (v_max − |v_foot|)/σ_v``, the speed's factor of ``p``."""
+        z_v = (self.speed_max - np.asarray(foot_speed, dtype=float)) / self.speed_sigma
+        return _erfc(-z_v / math.sqrt(2.0))
 
 
 def _erfc(z: NDArray[np.float64]) -> NDArray[np.float64]:

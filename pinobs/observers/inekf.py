@@ -541,6 +541,17 @@ class InvariantEKF(LeggedFilter):
         dq = Robot.check_vector(joint_velocities, self.setup.nv_joints, what="joint_velocities")
         return self._velocities(h, jac, dq, Robot.check_vector(gyro, 3, what="gyro"))
 
+    def foot_speeds_checked(
+        self, q_joints: Vector, joint_velocities: Vector, gyro: Vector
+    ) -> Vector:
+        """``|ṗ_j|`` of :meth:`foot_velocities` (``(K,)`` [m/s]; the bits of
+        ``np.linalg.norm(…, axis=1)``, ``((x² + y²) + z²)`` then ``√``) without its checks: for
+        a caller that has checked its rows (:func:`pinobs.io.legged_run.legged_run`): finite
+        C-contiguous float arrays of sizes ``nq − 7``, ``nv − 6`` and at least 3 (the gyro's
+        first)."""
+        h, jac = self.setup.legs(q_joints)
+        return self._speeds(h, jac, joint_velocities, gyro)[1]
+
     def _velocities(self, h: Vector, jac: Vector, dq: Vector, gyro: Vector) -> Vector:
         """:meth:`foot_velocities` from the feet's positions ``h`` (K, 3) and unscaled Jacobians
         ``jac`` (K, 3, nv_j) in the IMU frame: ``v̂ + R̂ ((ω̃ − b̂_g) × h_j + J_j q̇)``."""

@@ -312,7 +312,7 @@ def slip_densities(
     sp = np.asarray(speed, dtype=float).tolist()
     sq = [sp[j] * sp[j] * h for j in (range(len(sp)) if feet is None else feet)]
     out = np.array(qc, dtype=float)
-    out[9 : 9 + 3 * len(sq)] += np.repeat(sq, 3)
+    out[9 : 9 + 3 * len(sq)] += [d for d in sq for _ in range(3)]  # (np.repeat's values)
     out.setflags(write=False)
     return out
 
@@ -706,7 +706,8 @@ class LeggedSetup:
         names = self._names.get(state.feet)
         if names is None:
             names = self._names[state.feet] = tuple(self.feet[j] for j in state.feet)
-        return InEKFEstimate(
+        out = object.__new__(InEKFEstimate)  # every field set in one dictionary update (as
+        out.__dict__.update(  # replace_state: the frozen __init__ sets them one by one)
             t=state.t,
             q=q,
             v=v,
@@ -720,6 +721,7 @@ class LeggedSetup:
             nis_dof=nis_dof,
             gated=tuple(self.feet[j] for j in gated) if gated else (),
         )
+        return out
 
 
 #: What to check when the feet's innovations are not χ² (:func:`stance_consistency`).

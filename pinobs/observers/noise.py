@@ -9,7 +9,8 @@ Sroka & Jennen-Steinmetz 1986; only runs of four consecutive, evenly spaced rows
 from __future__ import annotations
 
 import math
-from typing import cast
+from collections.abc import Sequence
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,6 +30,7 @@ __all__ = [
     "quantisation_std",
     "still_noise_std",
     "stillest_rows",
+    "window_times",
 ]
 
 #: Fewest usable rows for an estimate.
@@ -43,6 +45,20 @@ NOISE_MIN_SAMPLES = 200
 #: [rad or m] A joint whose σ̂ is at most this tells nothing of the noise: its printed
 #: position never changes (its third differences are rounding, σ̂ ~ 1e-17).
 STILL_STD = 1e-12
+
+
+def window_times(kept: Sequence[tuple[float, Any, Any]]) -> list[float] | None:
+    """The times of the updates ``kept`` (``(t, q, τ)``, ``t`` increasing) that have a sample
+    ``q``, once they are :data:`NOISE_MIN_SAMPLES` or more spanning :data:`NOISE_WINDOW` s or
+    more (an observer's σ̂ window, :class:`pinobs.observers.base.Observer`); else ``None``.
+    Listed only once all of ``kept`` are as many and span as long (those with ``q`` are no
+    more and, ``t`` increasing, span no longer): an observer asks at every update."""
+    if len(kept) < NOISE_MIN_SAMPLES or kept[-1][0] - kept[0][0] < NOISE_WINDOW:
+        return None
+    ts = [x[0] for x in kept if x[1] is not None]
+    if len(ts) < NOISE_MIN_SAMPLES or ts[-1] - ts[0] < NOISE_WINDOW:
+        return None
+    return ts
 
 
 def estimate_noise_std(

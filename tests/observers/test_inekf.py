@@ -645,6 +645,23 @@ def test_a_non_finite_estimate_raises_and_keeps_the_last_state() -> None:
     assert ekf.state is before and info.value.last_estimate is ekf.estimate
 
 
+def test_the_estimate_has_every_field_its_constructor_sets() -> None:
+    """The estimate is built by one dictionary update (not ``InEKFEstimate.__init__``): it has
+    each field, and equals the estimate the constructor makes of them."""
+    import dataclasses
+
+    from pinobs.observers.legs import InEKFEstimate
+
+    samples = synthetic_truth()
+    ekf = InvariantEKF(SyntheticLegs(3), foot_gate=0.01)
+    for est, _ in run(ekf, samples[:5]):
+        values = {f.name: getattr(est, f.name) for f in dataclasses.fields(InEKFEstimate)}
+        assert set(vars(est)) == set(values)
+        assert est == InEKFEstimate(**values) and est.nis_dof > 0
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            est.t = 0.0  # type: ignore[misc]
+
+
 # ------------------------------------------------------------------ invariance
 def test_moving_the_world_origin_leaves_the_velocity_estimate_unchanged() -> None:
     """A translation of the world is a symmetry of the legged system; with the prior on the

@@ -62,6 +62,48 @@ clean logs (UR5 and double pendulum, seeds 1–3), 20–183 at 1 % torque noise,
 108–4500 at 5 %; in the hundreds, compare with ``refine=()`` on data of your
 own.
 
+**The friction law's smoothing velocity** (issue 36).  Each smoother pass runs on the law
+the pass before identified, its ``v_s`` included, and the next fit searches ``v_s``
+(:func:`pinobs.model.friction_fit.search_smoothing`) on the velocities it gave; near zero
+speed these are only as good as that ``v_s``.  Measured on logs made as
+``tests/observers/test_calibration_friction.py``'s (planar_3r, each law of
+:data:`~pinobs.model.friction.FRICTION_LAWS` with ``v_s`` = 0.0056 rad/s, Stribeck 0.0032,
+``friction=True`` 0.01; 8 s of a PD-tracked multisine stopping every 1.5 s; exact torques;
+seeds 1–3; "error": the friction coefficients' largest relative error):
+
+- where ``|v| < 3 v_s`` one smoother pass (1e-7) on the first fit with the truth's ``v_s``
+  errs by 0.11–0.39 mrad/s (median over the joints, per law), with a ``v_s`` 5.6× too
+  high or low (Stribeck 10× high, 3.2× low) by 1.6–3.9, Savitzky–Golay by 2.4–3.4; fitted
+  on the wrong one's velocities, the search chose that wrong ``v_s`` on 8 joints of 108,
+  0.01 (the one-standard-error rule's anchor) on 52: the fit does not confirm its law, but
+  its coefficients (every law) were 1.5–680 % off (with the truth's ``v_s``: 0.05–80 %);
+- σ = 3e-5 rad, 16 bits per turn: the first pass chose 0.01 on joint 1 (8 logs of 9), the
+  refinement the ``v_s`` a fit on the true velocities chose on 8 of 9; error 0.09–7.2 %
+  (Savitzky–Golay 1.5–290 %, the true velocities 0.01–16 %), but Stribeck seed 3's 62 %,
+  whose law the true velocities do not determine either (83 %); its torques predicted on a
+  fresh trajectory (true states) 0.35–130 mN·m RMS, below Savitzky–Golay's on every log
+  (5.3–230);
+- σ = 1e-4 rad: the refinement kept 0.01 where the first pass had it on asymmetric seeds
+  1, 3 and Stribeck seed 1: error 21, 39 and 25 % against Savitzky–Golay's 9.7, 37 and
+  38 %, the true velocities' 0.07, 0.02 and 0.3 %, and 4.9, 5.3 and 12 % after one pass with
+  the truth's ``v_s`` in the smoother (and on Stribeck seed 3, undetermined as above).
+  Torques predicted on a fresh trajectory (true states): worse than Savitzky–Golay's on 2
+  logs of 12, 47 against 35 mN·m RMS (asymmetric seed 1) and 130 against 88 (Stribeck seed
+  3; the true velocities' 110).  Offset-sigmoid found ``v_s``, 10–22 % (Savitzky–Golay
+  140–300 %); ``friction=True`` (``v_s`` fixed, the truth's) 0.08–0.22 %;
+- with 1 % torque noise (σ = 1e-4) the smoother's velocities near zero speed are worse
+  than Savitzky–Golay's even on the truth's ``v_s`` (3.3–4.8 against 2.6–3.4 mrad/s), and
+  the error 11–72 % (offset-sigmoid 250–810 %), Savitzky–Golay's 13–92 % (320–1200 %), the
+  true velocities' 11–120 % (310–1000 %): the torques' noise dominates ("Limitation: noisy
+  torques" above).
+
+The smoother's consistency ``ρ`` (one pass at 1e-6 on the first fit, every joint's ``v_s``
+set, σ = 1e-4) was least at the truth's for the asymmetric law: 0.83 and 1.26 (seeds 1,
+3) against 4.0 and 9.3 at 0.01, 15–49 at 0.0018 or 0.0316; not for Stribeck (116 at 0.0056
+and 0.01, 184 at the truth's 0.0032: its levels were fitted with 0.01), and flat with 1 %
+torque noise (105–125).  So no rule without the truth is used to choose the smoother's
+``v_s``.
+
 **The torque offset** is not identified by default (``offset=False``): a
 :class:`Robot` cannot carry a torque offset, so the observers run on
 ``.robot`` without it, and an offset the log does not have is confounded

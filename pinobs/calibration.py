@@ -65,44 +65,50 @@ own.
 **The friction law's smoothing velocity** (issue 36).  Each smoother pass runs on the law
 the pass before identified, its ``v_s`` included, and the next fit searches ``v_s``
 (:func:`pinobs.model.friction_fit.search_smoothing`) on the velocities it gave; near zero
-speed these are only as good as that ``v_s``.  Measured on logs made as
-``tests/observers/test_calibration_friction.py``'s (planar_3r, each law of
-:data:`~pinobs.model.friction.FRICTION_LAWS` with ``v_s`` = 0.0056 rad/s, Stribeck 0.0032,
-``friction=True`` 0.01; 8 s of a PD-tracked multisine stopping every 1.5 s; exact torques;
-seeds 1–3; "error": the friction coefficients' largest relative error):
+speed these are only as good as that ``v_s``.  So a pass that only feeds a smoother (the
+first, and every refinement but the last) takes the ``v_s`` of least cross-validated
+residual (``smoothing_minimum``); the last, whose law is returned, keeps the
+one-standard-error rule (0.01 unless another predicts better by more than one standard
+error).  Measured on logs made as ``tests/observers/test_calibration_friction.py``'s
+(planar_3r, each law of :data:`~pinobs.model.friction.FRICTION_LAWS` with ``v_s`` = 0.0056
+rad/s, Stribeck 0.0032, ``friction=True`` 0.01; 8 s of a PD-tracked multisine stopping
+every 1.5 s; exact torques; seeds 1–3; "error": the friction coefficients' largest
+relative error), with the rule in every pass (before):
 
 - where ``|v| < 3 v_s`` one smoother pass (1e-7) on the first fit with the truth's ``v_s``
   errs by 0.11–0.39 mrad/s (median over the joints, per law), with a ``v_s`` 5.6× too
   high or low (Stribeck 10× high, 3.2× low) by 1.6–3.9, Savitzky–Golay by 2.4–3.4; fitted
   on the wrong one's velocities, the search chose that wrong ``v_s`` on 8 joints of 108,
-  0.01 (the one-standard-error rule's anchor) on 52: the fit does not confirm its law, but
-  its coefficients (every law) were 1.5–680 % off (with the truth's ``v_s``: 0.05–80 %);
-- σ = 3e-5 rad, 16 bits per turn: the first pass chose 0.01 on joint 1 (8 logs of 9), the
-  refinement the ``v_s`` a fit on the true velocities chose on 8 of 9; error 0.09–7.2 %
-  (Savitzky–Golay 1.5–290 %, the true velocities 0.01–16 %), but Stribeck seed 3's 62 %,
-  whose law the true velocities do not determine either (83 %); its torques predicted on a
-  fresh trajectory (true states) 0.35–130 mN·m RMS, below Savitzky–Golay's on every log
-  (5.3–230);
-- σ = 1e-4 rad: the refinement kept 0.01 where the first pass had it on asymmetric seeds
-  1, 3 and Stribeck seed 1: error 21, 39 and 25 % against Savitzky–Golay's 9.7, 37 and
-  38 %, the true velocities' 0.07, 0.02 and 0.3 %, and 4.9, 5.3 and 12 % after one pass with
-  the truth's ``v_s`` in the smoother (and on Stribeck seed 3, undetermined as above).
-  Torques predicted on a fresh trajectory (true states): worse than Savitzky–Golay's on 2
-  logs of 12, 47 against 35 mN·m RMS (asymmetric seed 1) and 130 against 88 (Stribeck seed
-  3; the true velocities' 110).  Offset-sigmoid found ``v_s``, 10–22 % (Savitzky–Golay
-  140–300 %); ``friction=True`` (``v_s`` fixed, the truth's) 0.08–0.22 %;
+  0.01 (the rule's anchor) on 52: the fit does not confirm its own law, but its
+  coefficients (every law) were 1.5–680 % off (with the truth's ``v_s``: 0.05–80 %);
+- σ = 1e-4 rad: the refinement kept the first pass's 0.01 on asymmetric seeds 1, 3 and
+  Stribeck seed 1: error 21, 39 and 25 % against Savitzky–Golay's 9.7, 37 and 38 % and the
+  true velocities' 0.07, 0.02 and 0.3 %; its torques predicted on a fresh trajectory (true
+  states) 47 mN·m RMS on asymmetric seed 1 where Savitzky–Golay's gave 35.  Now (the CV
+  minimum found the truth's ``v_s`` from the first pass on): 1.1, 0.23 and 1.8 %, 2.2 mN·m;
+  asymmetric seed 2 21 → 11 % (true velocities 16 %); Stribeck seed 2 2.0 → 1.7 %;
+  offset-sigmoid 10–22 → 9.6–20 %; Stribeck seed 3 81 % both (the true velocities' 83 %:
+  its law not determined by this log);
+- σ = 3e-5 rad, 16 bits per turn: before, the refinement found the ``v_s`` of a fit on the
+  true velocities on 8 logs of 9, error 0.09–7.2 % (Savitzky–Golay 1.5–290 %); now
+  asymmetric 0.25, 3.3, 0.72 → 0.18, 3.0, 0.59 %, offset-sigmoid seed 1 5.2 → 6.1 %,
+  Stribeck seed 3 62 → 58 %, but **Stribeck seed 2 1.4 → 16 %** (``v_s`` 0.01 on joint 1
+  for the truth's 0.0032; torques on the fresh trajectory 6.9 → 85 mN·m RMS);
 - with 1 % torque noise (σ = 1e-4) the smoother's velocities near zero speed are worse
   than Savitzky–Golay's even on the truth's ``v_s`` (3.3–4.8 against 2.6–3.4 mrad/s), and
-  the error 11–72 % (offset-sigmoid 250–810 %), Savitzky–Golay's 13–92 % (320–1200 %), the
-  true velocities' 11–120 % (310–1000 %): the torques' noise dominates ("Limitation: noisy
-  torques" above).
+  the error was 11–72 % (offset-sigmoid 250–810 %), Savitzky–Golay's 13–92 % (320–1200 %),
+  the true velocities' 11–120 % (310–1000 %): the torques' noise dominates ("Limitation:
+  noisy torques" above); now (seed 1) asymmetric 60 → 60 %, Stribeck 17 → 15 %,
+  offset-sigmoid 250 → 258 %.
 
-The smoother's consistency ``ρ`` (one pass at 1e-6 on the first fit, every joint's ``v_s``
-set, σ = 1e-4) was least at the truth's for the asymmetric law: 0.83 and 1.26 (seeds 1,
-3) against 4.0 and 9.3 at 0.01, 15–49 at 0.0018 or 0.0316; not for Stribeck (116 at 0.0056
-and 0.01, 184 at the truth's 0.0032: its levels were fitted with 0.01), and flat with 1 %
-torque noise (105–125).  So no rule without the truth is used to choose the smoother's
-``v_s``.
+On the real UR10e (``benchmarks/real_friction.py``) every law's ``v_s`` stays 0.01 (and
+Stribeck's ``v_st`` 0.1); the held-out residuals of the four fits with a search moved by
+−0.35 to +0.95 % per joint (shoulder_pan 0.2–0.3 % lower, wrist_1's Stribeck 0.7–0.95 %
+higher), the three without one are the same to the bit.  The smoother's own consistency ``ρ``
+(every joint's ``v_s`` set) was least at the truth's for the asymmetric law (0.83, 1.26
+against 4.0, 9.3 at 0.01, σ = 1e-4) but not for Stribeck with the levels fitted at 0.01
+(116 at 0.0056 and 0.01, 184 at the truth's 0.0032), and flat with 1 % torque noise: not
+used.
 
 **The torque offset** is not identified by default (``offset=False``): a
 :class:`Robot` cannot carry a torque offset, so the observers run on
@@ -250,7 +256,8 @@ def identify(
         "payload": payload,
         "smoothing": smoothing,
     }
-    current = ident_model.identify(robot, log, **opts)
+    # a pass that only feeds the smoother: v_s at the CV minimum (module docstring)
+    current = ident_model.identify(robot, log, **opts, smoothing_minimum=bool(refine))
     if not refine:
         current.report["velocities"] = "savgol"
         current.report["smoother_consistency"] = math.nan  # nothing smoothed
@@ -275,7 +282,9 @@ def _refined(
         # a pass before the last one only feeds the next fit: its held-out end needs no smoothing
         last = i == len(refine) - 1
         rows = np.ones(t.shape, bool) if last else t <= current.report["fit_end"]
-        current, rho = _refine_pass(robot, current, (t, q, tau), rows, psd, sigma, opts)
+        current, rho = _refine_pass(
+            robot, current, (t, q, tau), rows, psd, sigma, {**opts, "smoothing_minimum": not last}
+        )
     current.report["noise_std"] = sigma
     current.report["smoother_consistency"] = rho
     # measured in benchmarks/learning.py: on a model identified this way the default ekf is

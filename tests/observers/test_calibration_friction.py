@@ -120,9 +120,9 @@ def test_the_refinement_leaves_the_first_pass_s_smoothing_velocity_for_the_truth
     sigma: float, bits: int | None, bound: float, share: float
 ) -> None:
     """Seed 1: the first pass (Savitzky–Golay, the one-standard-error rule) chose 0.01 on
-    joints 1 and 3; the refined fit the truth's 0.0056 on every joint.  Before the smoother
-    ran on the law at the cross-validation's minimum (its passes but the last), σ = 1e-4
-    kept 0.01 there through both passes, the coefficients 21 % off (0.25 % at σ = 3e-5)."""
+    joints 1 and 3; the refined fit the truth's 0.0056 on every joint.  Before the first
+    pass's law (the smoother's) took the cross-validation's minimum, σ = 1e-4 kept 0.01
+    there through both refinements, the coefficients 21 % off (0.25 % at σ = 3e-5)."""
     robot, log = _log(sigma, bits, seed=1)
     first = identify(robot, log, friction="asymmetric", refine=())
     refined = identify(robot, log, friction="asymmetric")

@@ -48,8 +48,8 @@ the solve checked, and the report (MATH §9; the package docstring of
   ``v_st`` is still searched); ``friction=True``'s is 0.01 unless given.
 - ``smoothing_minimum``: the searched ``v_s`` (and ``v_st``) at the cross-validation's
   minimum instead of the one-standard-error rule's choice: for the law a model-based
-  smoother runs on (``pinobs.identify``'s passes before its last: :mod:`pinobs.calibration`,
-  "The friction law's smoothing velocity").
+  smoother runs on (``pinobs.identify``'s first pass: :mod:`pinobs.calibration`, "The
+  friction law's smoothing velocity").
 
 The report (:class:`~pinobs.model.identification.result.Report`, read as a mapping too):
 per coordinate the weighted rows' residual before and after, on the fitted part and the

@@ -62,6 +62,52 @@ clean logs (UR5 and double pendulum, seeds 1–3), 20–183 at 1 % torque noise,
 108–4500 at 5 %; in the hundreds, compare with ``refine=()`` on data of your
 own.
 
+**The friction law's smoothing velocity** (issue 36).  Each smoother pass runs on the law
+the pass before identified, its ``v_s`` included, and the next fit searches ``v_s``
+(:func:`pinobs.model.friction_fit.search_smoothing`) on the velocities it gave; near zero
+speed these are only as good as that ``v_s``.  So the first pass (Savitzky–Golay), whose
+law only feeds the smoother, takes the ``v_s`` of least cross-validated residual
+(``smoothing_minimum``); the refinements keep the one-standard-error rule (0.01 unless
+another predicts better by more than one standard error).  Measured on logs made as
+``tests/observers/test_calibration_friction.py``'s (planar_3r, each law of
+:data:`~pinobs.model.friction.FRICTION_LAWS` with ``v_s`` = 0.0056 rad/s, Stribeck 0.0032,
+``friction=True`` 0.01; 8 s of a PD-tracked multisine stopping every 1.5 s; exact torques;
+seeds 1–3; "error": the friction coefficients' largest relative error), with the rule in
+every pass (before):
+
+- where ``|v| < 3 v_s`` one smoother pass (1e-7) on the first fit with the truth's ``v_s``
+  errs by 0.11–0.39 mrad/s (median over the joints, per law), with a ``v_s`` 5.6× too
+  high or low (Stribeck 10× high, 3.2× low) by 1.6–3.9, Savitzky–Golay by 2.4–3.4; fitted
+  on the wrong one's velocities, the search chose that wrong ``v_s`` on 8 joints of 108,
+  0.01 (the rule's anchor) on 52: the fit does not confirm its own law, but its
+  coefficients (every law) were 1.5–680 % off (with the truth's ``v_s``: 0.05–80 %);
+- σ = 1e-4 rad: the refinement kept the first pass's 0.01 on asymmetric seeds 1, 3 and
+  Stribeck seed 1: error 21, 39 and 25 % against Savitzky–Golay's 9.7, 37 and 38 % and the
+  true velocities' 0.07, 0.02 and 0.3 %; its torques predicted on a fresh trajectory (true
+  states) 47 mN·m RMS on asymmetric seed 1 where Savitzky–Golay's gave 35.  Now: 1.1, 0.23
+  and 1.8 %, 2.2 mN·m; Stribeck seed 2 2.0 → 1.7 %, offset-sigmoid 10, 18, 22 → 9.6, 18,
+  20 %, Stribeck seed 3 81 % both (the true velocities' 83 %: not determined by this log),
+  asymmetric seed 2 21 → 25 % (the true velocities' 16 %, joint 1's ``v_s`` 0.001);
+- σ = 3e-5 rad, 16 bits per turn: before, the refinement found the ``v_s`` of a fit on the
+  true velocities on 8 logs of 9, error 0.09–7.2 % (Savitzky–Golay 1.5–290 %); now
+  asymmetric 0.25, 3.3, 0.72 → 0.18, 6.0, 0.59 % (seed 2 as above: 48 → 57 mN·m),
+  Stribeck 0.94, 1.4, 62 → 1.1, 1.1, 65 %, offset-sigmoid seed 1 5.2 → 6.1 %.  (The CV
+  minimum in the refinements too, tried: Stribeck seed 2 1.4 → 16 %, its minimum on the
+  smoothed velocities joint 1's ``(v_s, v_st)`` = (0.001, 1) for (0.0032, 0.1));
+- with 1 % torque noise (σ = 1e-4, before) the smoother's velocities near zero speed are
+  worse than Savitzky–Golay's even on the truth's ``v_s`` (3.3–4.8 against 2.6–3.4
+  mrad/s), and the error was 11–72 % (offset-sigmoid 250–810 %), Savitzky–Golay's 13–92 %
+  (320–1200 %), the true velocities' 11–120 % (310–1000 %): the torques' noise dominates
+  ("Limitation: noisy torques" above).
+
+On the real UR10e (``benchmarks/real_friction.py``) every law's ``v_s`` stays 0.01 (Stribeck's
+``v_st`` 0.1); the held-out residuals of the four fits with a search moved by −0.12 to
++0.31 % per joint, the three without one and the published model's are the same to the
+bit.  The smoother's own consistency ``ρ`` (every joint's ``v_s`` set) was least at the truth's
+for the asymmetric law (0.83, 1.26 against 4.0, 9.3 at 0.01, σ = 1e-4) but not for
+Stribeck with the levels fitted at 0.01 (116 at 0.0056 and 0.01, 184 at the truth's
+0.0032), and flat with 1 % torque noise: not used.
+
 **The torque offset** is not identified by default (``offset=False``): a
 :class:`Robot` cannot carry a torque offset, so the observers run on
 ``.robot`` without it, and an offset the log does not have is confounded
@@ -208,7 +254,8 @@ def identify(
         "payload": payload,
         "smoothing": smoothing,
     }
-    current = ident_model.identify(robot, log, **opts)
+    # the Savitzky–Golay pass only feeds the smoother: v_s at the CV minimum (module docstring)
+    current = ident_model.identify(robot, log, **opts, smoothing_minimum=bool(refine))
     if not refine:
         current.report["velocities"] = "savgol"
         current.report["smoother_consistency"] = math.nan  # nothing smoothed

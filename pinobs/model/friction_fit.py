@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -138,8 +139,52 @@ def _one_standard_error(
     return min(within, key=lambda c: (distance(c), cv[c]))
 
 
+def _picker(
+    cands: list[tuple[float, float]], own: list[int], minimum: bool
+) -> Callable[[Vector, list[int], int], int]:
+    """Joint ``j``'s candidate among the ``kept`` rows of ``e`` (each block's ``e_k``): the
+    least ``CV`` with ``minimum``, else :func:`_one_standard_error` about ``own[j]``."""
+
+    def pick(e: Vector, kept: list[int], j: int) -> int:
+        if minimum:
+            return min(kept, key=lambda c: float(e[c].sum()))
+        return _one_standard_error(e, kept, cands, cands[own[j]])
+
+    return pick
+
+
+def _descend(
+    choice: list[int],
+    n_joint: int,
+    n_c: int,
+    folds: Callable[[list[int]], Vector],
+    consistent: Callable[[list[int], int], bool],
+    pick: Callable[[Vector, list[int], int], int],
+) -> list[int]:
+    """:func:`search_smoothing`'s coordinate descent from ``choice``: every joint's ``n_c``
+    candidates tried with the others held (``folds``' blocks, ``pick`` among those
+    ``consistent``), sweeps until none changes, three at most."""
+    for _ in range(3):
+        changed = False
+        for j in range(n_joint):
+            trials = [[*choice[:j], c, *choice[j + 1 :]] for c in range(n_c)]
+            e = np.array([folds(trial) for trial in trials])
+            kept = [c for c in range(n_c) if consistent(trials[c], j)] or list(range(n_c))
+            c = pick(e, kept, j)
+            if c != choice[j]:
+                choice[j], changed = c, True
+        if not changed:
+            break
+    return choice
+
+
 def search_smoothing(
-    reg: MomentumRegressor, A: Vector, y: Vector, cands: list[tuple[float, float]]
+    reg: MomentumRegressor,
+    A: Vector,
+    y: Vector,
+    cands: list[tuple[float, float]],
+    *,
+    minimum: bool = False,
 ) -> tuple[list[int], dict[str, Any]]:
     """Each joint's ``(v_s, v_st)`` among ``cands``: the one nearest ``reg``'s own whose
     columns predict the fitted rows, under cross-validation, within one standard error of
@@ -161,7 +206,8 @@ def search_smoothing(
     minimum was taken however small its lead: on the real TX40 and UR10e, 0.01's ``CV`` was
     0 to 9 % above the minimum's (one standard error: 18 to 29 %), and the minimum
     (1e-3 to 0.56 rad/s) predicted the held-out torques worse than 0.01 kept
-    (benchmarks/tx40_friction.md, benchmarks/real_friction.json).
+    (benchmarks/tx40_friction.md, benchmarks/real_friction.json).  ``minimum=True`` takes
+    the least ``CV`` instead (the law of a smoother: :mod:`pinobs.calibration`).
 
     The joints' choices interact only through the shared inertial parameters, so they are
     made one joint at a time (coordinate descent: every joint's grid, with the others held;
@@ -205,16 +251,5 @@ def search_smoothing(
         terms = [k for k, t in enumerate(reg.friction_terms) if t != "friction_offset"]
         return all(th[n0 + k * n + j] >= 0.0 for k in terms)
 
-    choice = list(own)
-    for _ in range(3):
-        changed = False
-        for j in range(reg.n_joint):
-            trials = [[*choice[:j], c, *choice[j + 1 :]] for c in range(n_c)]
-            e = np.array([folds(trial) for trial in trials])
-            kept = [c for c in range(n_c) if consistent(trials[c], j)] or list(range(n_c))
-            pick = _one_standard_error(e, kept, cands, cands[own[j]])
-            if pick != choice[j]:
-                choice[j], changed = pick, True
-        if not changed:
-            break
+    choice = _descend(list(own), reg.n_joint, n_c, folds, consistent, _picker(cands, own, minimum))
     return choice, {"cv_sum_of_squares": float(folds(choice).sum()), "candidates": n_c}

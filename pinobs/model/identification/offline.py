@@ -46,6 +46,10 @@ the solve checked, and the report (MATH §9; the package docstring of
   ``max_condition`` do not apply; a poorly excited load is said in ``warnings``).
 - ``smoothing``: the same ``v_s`` for every joint, instead of its search (a Stribeck law's
   ``v_st`` is still searched); ``friction=True``'s is 0.01 unless given.
+- ``smoothing_minimum``: the searched ``v_s`` (and ``v_st``) at the cross-validation's
+  minimum instead of the one-standard-error rule's choice: for the law a model-based
+  smoother runs on (``pinobs.identify``'s first pass: :mod:`pinobs.calibration`, "The
+  friction law's smoothing velocity").
 
 The report (:class:`~pinobs.model.identification.result.Report`, read as a mapping too):
 per coordinate the weighted rows' residual before and after, on the fitted part and the
@@ -124,6 +128,7 @@ def identify(
     payload: str | None = None,
     smoothing: float | None = None,
     weight_model: Robot | None = None,
+    smoothing_minimum: bool = False,
 ) -> Identification:
     """Identify ``robot``'s dynamic parameters from a log (options, report: module docstring).
 
@@ -144,6 +149,7 @@ def identify(
         payload: a body or frame name: identify only a load rigidly attached to it.
         smoothing: the friction law's smoothing velocity [rad/s] instead of its search.
         weight_model: the robot whose ``M⁻¹`` weights the rows (``None``: package docstring).
+        smoothing_minimum: ``v_s`` at the CV minimum, not the one-SE rule's (a smoother's law).
 
     Raises:
         IdentificationError: no torques, too short, never moves, or above ``max_condition``.
@@ -171,7 +177,9 @@ def identify(
         A, y, ends = fit_rows(rows_reg, (t, q, tau), fit, **rows)
         _check_moves(robot, t[fit], q[fit])
         check_zero_torques(robot, tau, excluded)
-        reg, A, channel, used_rows, searched, sol = _search_and_solve(reg, cands, A, y, laws)
+        reg, A, channel, used_rows, searched, sol = _search_and_solve(
+            reg, cands, A, y, laws, minimum=smoothing_minimum
+        )
         first = laws["armature"] is True  # the rotors tested on the fit with all of them
         if not _next_stage(reg, sol, laws, first=first, given=weight_model is not None):
             break
@@ -288,13 +296,20 @@ def _check_moves(robot: Robot, t: Vector, q: Vector) -> None:
 
 
 def _search_and_solve(
-    reg: MomentumRegressor, cands: list[tuple[float, float]], A: Vector, y: Vector, laws: dict
+    reg: MomentumRegressor,
+    cands: list[tuple[float, float]],
+    A: Vector,
+    y: Vector,
+    laws: dict,
+    *,
+    minimum: bool = False,
 ) -> tuple[
     MomentumRegressor, Vector, NDArray[np.intp], NDArray[np.bool_], dict[str, Any], Solution
 ]:
     """The fit of the rows ``(A, y)``: the friction law's smoothing searched among ``cands``
-    (none: not searched), then :func:`solve` on the rows of the channels not excluded, each
-    channel by its own scale with ``weighting="torque"``.  Returns the regressor, its
+    (none: not searched; at the least ``CV`` with ``minimum``:
+    :func:`~pinobs.model.friction_fit.search_smoothing`), then :func:`solve` on the rows of
+    the channels not excluded, each channel by its own scale with ``weighting="torque"``.  Returns the regressor, its
     columns of ``A``, every row's channel, the rows used, the search's report, the
     solution."""
     nv = reg.robot.nv
@@ -302,7 +317,7 @@ def _search_and_solve(
     used_rows = ~np.isin(channel, reg.excluded)
     searched: dict[str, Any] = {}
     if cands:  # (the search's own least squares, unweighted by channel)
-        reg, A, searched = _search_smoothing(reg, A, y, used_rows, cands, laws)
+        reg, A, searched = _search_smoothing(reg, A, y, used_rows, cands, laws, minimum)
     by_channel = channel[used_rows] if reg.weighting == "torque" else None
     sol = solve(reg, A[used_rows], y[used_rows], channel=by_channel)
     return reg, A, channel, used_rows, searched, sol
@@ -315,11 +330,12 @@ def _search_smoothing(
     used_rows: NDArray[np.bool_],
     cands: list[tuple[float, float]],
     laws: dict[str, Any],
+    minimum: bool = False,
 ) -> tuple[MomentumRegressor, Vector, dict[str, Any]]:
     """The friction law's smoothing velocities chosen among ``cands`` by cross-validation
     (:func:`~pinobs.model.friction_fit.search_smoothing`): the regressor with them, the rows'
     chosen columns, and what the search reports."""
-    choice, searched = search_smoothing(reg, A[used_rows], y[used_rows], cands)
+    choice, searched = search_smoothing(reg, A[used_rows], y[used_rows], cands, minimum=minimum)
     A = A[:, candidate_columns(reg, len(cands), choice)]
     reg = MomentumRegressor(
         reg.robot,

@@ -103,7 +103,9 @@ every pass (before):
 On the real UR10e (``benchmarks/real_friction.py``) every law's ``v_s`` stays 0.01 (Stribeck's
 ``v_st`` 0.1); the held-out residuals of the four fits with a search moved by −0.12 to
 +0.31 % per joint, the three without one and the published model's are the same to the
-bit.  The smoother's own consistency ``ρ`` (every joint's ``v_s`` set) was least at the truth's
+bit.  On the real TX40 (``benchmarks/tx40_friction.py``, held-out N·m) the default law is
+unchanged, offset-sigmoid and Stribeck within 2 % per joint, but the asymmetric law is
+worse: j2 7.27 → 10.4 (moving rows 15.7 → 22.8), its final ``v_s`` 0.01 as before.  The smoother's own consistency ``ρ`` (every joint's ``v_s`` set) was least at the truth's
 for the asymmetric law (0.83, 1.26 against 4.0, 9.3 at 0.01, σ = 1e-4) but not for
 Stribeck with the levels fitted at 0.01 (116 at 0.0056 and 0.01, 184 at the truth's
 0.0032), and flat with 1 % torque noise: not used.

@@ -2,7 +2,7 @@
 
 The conditions and functions of ``real_logs.py`` (its identified model as ``@id``); labels
 are ``family+option+...``: ``nb`` = ``never_behind=True``, ``auto`` =
-``disturbance_psd="auto"``, ``d=X`` / ``a=X`` fixed densities, ``onlyid`` / ``noid`` one model.
+``disturbance_psd="auto"``, ``d=X`` / ``a=X`` fixed densities, ``p=X`` the blend's ``prior_log_odds``, ``onlyid`` / ``noid`` one model.
 
     python benchmarks/never_behind_real.py tiago 1 kf,ekf+nb,riemannian+nb,kalman+nb
     python benchmarks/never_behind_real.py ur10e 17 kf,ekf+nb,riemannian+nb,kalman+nb
@@ -46,6 +46,8 @@ def run(frame, rob, ref, rows, joints, label):
             opts["accel_psd"] = float(x[2:])
         if x.startswith("j="):
             opts["jerk_psd"] = float(x[2:])
+        if x.startswith("p="):
+            opts["prior_log_odds"] = float(x[2:])
     t0 = time.perf_counter()
     try:
         with warnings.catch_warnings():

@@ -28,27 +28,28 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    ``c T/h``; the log-odds start from a prior ``ℓ₀ = 50`` for the model that fades as the
    window fills to the persistent prior ``ℓ_p``, ``ℓ += ℓ_p + (1 − c)(ℓ₀ − ℓ_p)``: the
    model is trusted until the data disagree).
-   **Prior.**  ``ℓ_p`` (``prior_log_odds``, ``PRIOR`` = 5) is the prior log-odds of the
-   model against the ``kf``: the posterior log-odds are the prior's plus the window's
+   **Prior.**  ``ℓ_p`` (``prior_log_odds``, default ``PRIOR`` = 0: the data alone decide;
+   :data:`TRUSTED_PRIOR` = 5 for a model you trust) is the prior log-odds of the model
+   against the ``kf``: the posterior log-odds are the prior's plus the window's
    log-likelihood ratio (Bayes' rule; the prior probabilities ``μⱼ(0)`` of Bar-Shalom, Li &
-   Kirubarajan 2001, §11.6.2), ``w ≥ 1/(1 + e^{−ℓ_p − ℓ_data})``.  With the prior faded to
-   zero the weights were the data's alone, and on an exact model the one-step data are
-   weak: the predictions differ by ``h δv``, far below the noise (UR5, 1 kHz,
-   σ = 1e-3 rad, seed 5: 0.035 nats a sample, ~7 a window, standard deviation ~3.7;
+   Kirubarajan 2001, §11.6.2), ``w ≥ 1/(1 + e^{−ℓ_p − ℓ_data})``.  On an exact model the
+   one-step data are weak: the predictions differ by ``h δv``, far below the noise (UR5,
+   1 kHz, σ = 1e-3 rad, seed 5: 0.035 nats a sample, ~7 a window, standard deviation ~3.7;
    ``ℓ`` wandered to −0.6, ``w`` = 0.36, where the ``kf``'s velocity is 440× worse: the
-   blend 4.0× ``ekf`` alone; per-sample increments within ±1.7 at the 99.9th percentile,
-   so censoring them changes nothing).  A wrong model gives data log-odds of hundreds
-   against it and is re-seeded: the prior does not hold it (``benchmarks/
-   never_behind_exact.md``: the mismatch runs and the real UR10e logs unchanged).  A model
-   whose positions predict nearly as well as the ``kf``'s but whose velocities are worse
-   gives data log-odds of a few nats against it, which a larger prior outweighs: ``ekf``
-   with the learned disturbance (``disturbance_psd="auto"``) blended on the identified
-   UR10e model, four logs (ptp_10_points and the three 91 Hz ``ur-19_09_27``), was
-   0.94–0.98× the ``kf`` with the prior faded to zero, 0.94–1.01× with ``ℓ_p`` = 3,
-   0.96–1.04× with 5 and 1.16–1.50× with 10; the eight worst exact-model ``ekf`` runs
-   (1.03–4.2× with the prior faded) 1.00–1.18× with 3, 1.000–1.004× with 5, 1.000× with 10.
-   So 5: chosen on those four logs and eight runs (``benchmarks/real_logs.py``'s other
-   logs held out).
+   blend 4.0× ``ekf`` alone, still far below the ``kf``; per-sample increments within ±1.7
+   at the 99.9th percentile, so censoring them changes nothing).  A prior holds the weight
+   there: the eight worst exact-model ``ekf`` runs (1.03–4.2× ``ekf`` alone without it) are
+   1.00–1.18× with ``ℓ_p`` = 3, 1.000–1.004× with 5, 1.000× with 10, and every one of
+   ``benchmarks/never_behind_exact.py``'s 120 ``ekf`` runs within 1.004× with 5.  But a
+   model whose positions predict nearly as well as the ``kf``'s while its velocities are
+   worse gives data log-odds of only a few nats against it, which the prior outweighs:
+   ``ekf`` with the learned disturbance (``disturbance_psd="auto"``) blended on the
+   identified UR10e model (``benchmarks/real_logs.py``, 17 logs) was 0.93–1.1× the ``kf``
+   without a prior, 0.98–1.24× with 5 (1.24 on ``ur-20_02_19_14harm50sec``: behind the
+   ``kf``), 1.04–1.5× with 10.  Never behind the ``kf`` is this blend's promise, so the
+   default is 0 (the start-up prior ``ℓ₀`` still fades in); a wrong model gives data
+   log-odds of hundreds against it and is re-seeded whatever the prior (mismatch runs of
+   ``never_behind_sim.py`` 1.00× the ``kf`` with 0, 5 and 10).
    **Irregular steps.**  The log-likelihood ratio counts each innovation once, decayed by
    its age: ``ℓ = κ Σⱼ Dⱼ (e²_kf,j − e²_m,j) / (2S)``, ``Dⱼ = Π_{i>j} (1 − hᵢ/T)``.  On a
    regular grid that is the form above (``sᵢ = Σⱼ (h/T) Dⱼ e²ᵢ,ⱼ``, so the sum is
@@ -167,8 +168,10 @@ _LOG_ODDS = 50.0
 _TINY = 1e-300  # the smallest score the log-odds divide by
 #: A model-based velocity this many kf one-step errors (as velocities) from the kf's is lost.
 FAR_GATE = 10.0
-#: The persistent prior log-odds ``ℓ_p`` for the model (module docstring: **Prior**).
-PRIOR = 5.0
+#: The persistent prior log-odds ``ℓ_p`` for the model by default (module docstring: **Prior**).
+PRIOR = 0.0
+#: ``ℓ_p`` for a model you trust (an exact or calibrated one; module docstring: **Prior**).
+TRUSTED_PRIOR = 5.0
 
 
 def log_odds_loops(

@@ -78,6 +78,7 @@ from pinobs.observers import make_observer
 from pinobs.observers.checks import positive
 from pinobs.observers.contacts import (
     ContactProbability,
+    contact_flags,
     contacts_from_forces,
     default_thresholds,
 )
@@ -247,7 +248,7 @@ class LeggedDetail(NamedTuple):
 
 def _make_filter(
     robot: Robot,
-    locked: _LockedRoot,
+    fixed: Robot,
     log: Log,
     imu_frame: str | None,
     gains: InEKFGains | None,
@@ -260,8 +261,8 @@ def _make_filter(
 ) -> tuple[InvariantEKF, list[str]]:
     """:func:`legged_run`'s filter, and what its set-up measured on the log (said once)."""
     radius, said_r = _foot_radius(robot, log.feet, foot_radius)
-    sigma_q, said_q = _joint_std(locked, log, joint_std)
-    gains, said_g = _imu_gains(locked, log, gains, imu_noise)
+    sigma_q, said_q = _joint_std(fixed, log, joint_std)
+    gains, said_g = _imu_gains(fixed, log, gains, imu_noise)
     imu_frame = IMU_FRAME if imu_frame is None and robot.model.existFrame(IMU_FRAME) else imu_frame
     filt = InvariantEKF(
         robot,
@@ -302,9 +303,9 @@ def legged_run(
         )
     prob, flags = _contact_setup(robot, log, contacts, probability, contact_on, contact_off)
     feet = (joint_std, slip_speed, imu_noise, foot_radius, rolling_lift)
-    locked = _LockedRoot(robot)
-    filt, said_setup = _make_filter(robot, locked, log, imu_frame, gains, foot_gate, *feet)
-    joints = _joint_velocities(locked, log)
+    fixed = _joints_robot(robot)  # (built once: σ_q, the IMU's densities and the joints' kf)
+    filt, said_setup = _make_filter(robot, fixed, log, imu_frame, gains, foot_gate, *feet)
+    joints = _joint_velocities(fixed, log)
     n = len(log)
     q_out, v_out = np.full((n, robot.nq), np.nan), np.full((n, robot.nv), np.nan)
     nis, dof, gated = np.full(n, np.nan), np.zeros(n, dtype=int), 0
@@ -408,8 +409,8 @@ class _Rows:
     ) -> list[bool]:
         """Row ``k``'s flags from its forces and the feet's speeds the filter predicts (the
         first row, or without joint velocities: the force alone, speed 0): ``p > ½``, a NaN
-        ``p`` keeping the foot's ``previous`` flag (False on the first row), as
-        :func:`~pinobs.observers.contacts.contacts_from_probability` of ``prob(force, speed)``."""
+        ``p`` keeping the foot's ``previous`` flag (False on the first row):
+        :func:`~pinobs.observers.contacts.contact_flags` of ``prob(force, speed)``."""
         feet = len(self.force_factor[k])
         if previous is not None and self.dq_finite[k]:
             speed = filt.foot_speeds_checked(self.q[k], self.dq[k], self.reading[k])
@@ -418,7 +419,7 @@ class _Rows:
         before = [False] * feet if previous is None else previous
         by_speed = prob.speed_factor(speed).tolist()
         p = [f * s for f, s in zip(self.force_factor[k], by_speed, strict=True)]
-        return [before[j] if math.isnan(p[j]) else p[j] > 0.5 for j in range(feet)]
+        return contact_flags(p, before)
 
     def inputs(self, filt: InvariantEKF, t: float, k: int, flags: list[bool]) -> UpdateInputs:
         """Row ``k`` as ``update`` would check it (its time after the filter's)."""
@@ -460,22 +461,8 @@ def _joints_robot(robot: Robot) -> Robot:
     return load(robot.model, lock=[names[1]])
 
 
-class _LockedRoot:
-    """:func:`_joints_robot` of ``robot``, built where the run first asks for it and then kept
-    (σ_q, the IMU's densities and the joints' ``kf`` each ask: 3 ms a build on go1)."""
-
-    def __init__(self, robot: Robot) -> None:
-        self.robot = robot
-        self._built: Robot | None = None
-
-    def __call__(self) -> Robot:
-        if self._built is None:
-            self._built = _joints_robot(self.robot)
-        return self._built
-
-
 def _joint_std(
-    locked: _LockedRoot, log: Log, joint_std: ArrayLike | str | None
+    fixed: Robot, log: Log, joint_std: ArrayLike | str | None
 ) -> tuple[ArrayLike | None, list[str]]:
     """``joint_std`` for the filter and what to say of it: ``"log"`` → σ̂ per joint from the
     log's stillest second (:func:`~pinobs.observers.noise.still_noise_std`: third
@@ -489,7 +476,6 @@ def _joint_std(
             f"joint_std={joint_std!r}: give {' or '.join(map(repr, JOINT_STD_RULES))}, "
             "σ per joint [rad] or None"
         )
-    fixed = locked()
     if joint_std == "log":
         sigma = still_noise_std(log.t, log.q[:, 7:], fixed)
         where = "its stillest second"
@@ -545,7 +531,7 @@ def _foot_radius(
 
 
 def _imu_gains(
-    locked: _LockedRoot, log: Log, gains: InEKFGains | None, imu_noise: str | None
+    fixed: Robot, log: Log, gains: InEKFGains | None, imu_noise: str | None
 ) -> tuple[InEKFGains, list[str]]:
     """``gains`` (default :data:`LEGGED_GAINS`), with ``imu_noise="log"`` the gyro's and
     accelerometer's white densities measured on the log's stillest second
@@ -559,7 +545,7 @@ def _imu_gains(
         return base, []
     if imu_noise != "log":
         raise OptionError(f"imu_noise={imu_noise!r}: give 'log' or None")
-    rows = stillest_rows(log.t, log.q[:, 7:], locked())
+    rows = stillest_rows(log.t, log.q[:, 7:], fixed)
     if rows is None:
         return base, []
     t = log.t[rows]
@@ -578,9 +564,8 @@ def _imu_gains(
     ]
 
 
-def _joint_velocities(locked: _LockedRoot, log: Log) -> LogRun:
+def _joint_velocities(fixed: Robot, log: Log) -> LogRun:
     """``kf`` over the joint columns: the robot with its free-flyer root locked."""
-    fixed = locked()
     joint_log = replace(
         log,
         q=log.q[:, 7:],

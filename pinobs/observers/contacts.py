@@ -154,7 +154,19 @@ def _erfc(z: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.asarray(erfc(z), dtype=float)
 
 
+#: A foot is in contact where its probability is above this (SEROW's rule).
+CONTACT_PROBABILITY = 0.5
+
+
 def contacts_from_probability(p: ArrayLike, previous: ArrayLike) -> NDArray[np.bool_]:
     """Flags ``p > ½`` per foot; a NaN probability keeps the foot's ``previous`` flag."""
     prob, prev = np.asarray(p, dtype=float), np.asarray(previous, dtype=bool)
-    return np.where(np.isnan(prob), prev, prob > 0.5)
+    return np.where(np.isnan(prob), prev, prob > CONTACT_PROBABILITY)
+
+
+def contact_flags(p: list[float], previous: list[bool]) -> list[bool]:
+    """:func:`contacts_from_probability` on a row's Python floats (a log's per-row path:
+    no NumPy call for a handful of feet)."""
+    return [
+        b if math.isnan(x) else x > CONTACT_PROBABILITY for x, b in zip(p, previous, strict=True)
+    ]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -397,9 +398,15 @@ def _estimate_legged(args: argparse.Namespace) -> int:
     check_output("--out", args.out)
     if Path(args.out).exists() and not args.force:  # (before the work, not after it)
         raise OutputExistsError(f"--out {args.out!r} exists; pass --force to overwrite it")
-    log = read_log(
-        args.log, robot, columns=column_map(args.map), topic=args.topic, drives=drives_option(args)
-    )
+    with warnings.catch_warnings(record=True) as caught:  # (shown once: the log's notes too)
+        warnings.simplefilter("always")
+        log = read_log(
+            args.log, robot, columns=column_map(args.map), topic=args.topic,
+            drives=drives_option(args),
+        )  # fmt: skip
+    for said in caught:
+        warnings.showwarning(said.message, said.category, said.filename, said.lineno)
+    warned = {str(said.message) for said in caught}
     on, off = [*(args.contact_force or []), None, None][:2]
     run = estimate_legged(
         robot,
@@ -413,7 +420,7 @@ def _estimate_legged(args: argparse.Namespace) -> int:
     )
     write_estimates(args.out, run, force=args.force)
     # (the note that the base pose is not in the log: this observer fills it)
-    notes = [n for n in log.notes if not n.startswith("the base pose")]
+    notes = [n for n in log.notes if not n.startswith("the base pose") and n not in warned]
     for w in (*notes, *run.warnings):
         print(f"warning: {w}", file=sys.stderr)
     _print_bad_rows(args, run)

@@ -68,6 +68,7 @@ from pinobs.errors import (
     OptionError,
     PinobsError,
 )
+from pinobs.io.legged_checks import contact_notes, frame_notes
 from pinobs.io.readers import Log
 from pinobs.io.runs import estimate_log
 from pinobs.io.stream import LogRun
@@ -341,6 +342,8 @@ def legged_run(
         v_out[k, 6:] = joints.v[k]  # (what update passes through; reset shows none)
         nis[k] = np.nan if est.nis is None else est.nis
         dof[k], gated = est.nis_dof, gated + len(est.gated)
+    frame = getattr(filt.kinematics, "imu_frame", None) or robot.model.names[1]
+    said += contact_notes(flags, log) + frame_notes(filt.kinematics, log, flags, frame)
     done = int(np.all(np.isfinite(q_out), axis=1).sum())
     run = LogRun(
         t=log.t.copy(),

@@ -68,6 +68,34 @@ def test_a_column_map_renames_columns_to_joints(tmp_path, ur5, data) -> None:
     assert len(pd.read_csv(out)) == N
 
 
+def test_a_csv_without_a_header_names_its_columns_by_position(tmp_path, ur5, data) -> None:
+    """A log written without a header row (the UR10e logs: 31 numbers a line): line 1 is
+    data, its columns are ``0, 1, ...``; mapped, every row is read, line numbers counted
+    from 1 (the fast reader, and the careful one from a bad cell); unmapped, the error says
+    how to name them."""
+    t, q, tau = data
+    rows = np.column_stack([t, q, np.zeros((len(t), 2)), tau])  # (two columns not used)
+    path = tmp_path / "bare.csv"
+    np.savetxt(path, rows, delimiter=",", fmt="%.17g")
+    cols = {"0": "t", **{str(1 + i): f"q{i}" for i in range(6)}}
+    cols |= {str(9 + i): f"tau{i}" for i in range(6)}
+    log = read_log(path, ur5, columns=cols)
+    np.testing.assert_array_equal(log.t, t)
+    np.testing.assert_array_equal(log.q, q)
+    np.testing.assert_array_equal(log.tau, tau)
+    assert log.lines[0] == 1 and log.lines[-1] == len(t) and not log.problems
+    assert any(n.startswith("no header row: line 1 read as data") for n in log.notes)
+    lines = path.read_text().splitlines()
+    lines[9] = "x" + lines[9]  # line 10: a cell that is not a number (the careful reader)
+    path.write_text("\n".join(lines) + "\n")
+    log = read_log(path, ur5, columns=cols)
+    assert len(log) == len(t) and [line for line, _ in log.problems] == [10]
+    assert np.isnan(log.t[9]) and log.lines[9] == 10
+    np.testing.assert_array_equal(log.q[10:], q[10:])
+    with pytest.raises(pinobs.DimensionError, match=r"no header: .* named by position, 0 to 14"):
+        read_log(path, ur5)
+
+
 def test_a_column_named_twice_or_beyond_the_robot_is_refused(tmp_path, ur5, data) -> None:
     """Found by a sweep: two ``t`` columns, or ``--map enc1=q1`` on a log that has ``q1``, read
     the first silently; positional columns beyond the robot's were ignored (another robot's

@@ -3,8 +3,10 @@
 Formats (chosen from the source):
 
 - CSV (``.csv``, ``.txt``) and TSV (``.tsv``, ``.tab``): a header row, then one
-  row per sample.  UTF-8 (a byte-order mark is accepted).  The columns are
-  found by name (any order, extra columns ignored):
+  row per sample (a file whose line 1 is all numbers has no header: its columns
+  are named by position, ``"0"``, ``"1"``, ..., for ``columns`` to map, and
+  :attr:`Log.notes` says so).  UTF-8 (a byte-order mark is accepted).  The columns
+  are found by name (any order, extra columns ignored):
 
   - ``t``: time [s];
   - positional ``q0 .. q{nq-1}`` and ``tau0 .. tau{nv-1}`` (Pinocchio's order,

@@ -22,9 +22,10 @@ _MAX_FIELD_LINES = 100
 
 
 def _careful_records(
-    path: Path, sep: str, ncols: int, skip: int
+    path: Path, sep: str, ncols: int, skip: int, head: int = 1
 ) -> Iterator[tuple[int, list[str], str | None]]:
-    """``(line, cells, problem)`` of every record after line ``1 + skip``, blank lines left out.
+    """``(line, cells, problem)`` of every record after line ``head + skip`` (``head``: the
+    header's lines), blank lines left out.
 
     Standard CSV quoting (``"a, b"``, ``""`` for a quote, a quoted field over several
     lines: its record named by its first line), as the header is read; a quote that does
@@ -34,9 +35,9 @@ def _careful_records(
     cells and said; a long one raises :class:`LogFormatError`.
     """
     with path.open(encoding="utf-8-sig", errors="strict", newline=None) as fh:
-        for _ in range(1 + skip):
+        for _ in range(head + skip):
             fh.readline()
-        number = 1 + skip
+        number = head + skip
         pending: list[str] = []  # lines read ahead while looking for a field's closing quote
         while True:
             line = pending.pop(0) if pending else fh.readline()
@@ -94,9 +95,11 @@ def careful_chunks(
     sep: str,
     start: int,
     chunk_rows: int,
+    head: int = 1,
 ) -> Iterator[Log]:
-    """The rows after the first ``start`` (one line each), read record by record (
-    :func:`_careful_records`), every cell that cannot be read reported with its line."""
+    """The rows after the first ``start`` (one line each; after the ``head`` lines of the
+    header), read record by record (:func:`_careful_records`), every cell that cannot be read
+    reported with its line."""
     pd = require_pandas()
     used = list(dict.fromkeys(layout.used))
     where = [header.index(c) for c in used]
@@ -112,7 +115,7 @@ def careful_chunks(
         return log
 
     try:
-        for number, cells, said in _careful_records(path, sep, len(header), start):
+        for number, cells, said in _careful_records(path, sep, len(header), start, head):
             rows.append([cells[i] for i in where])
             lines.append(number)
             if said is not None:

@@ -48,13 +48,13 @@ def _float_column(col: Any) -> Vector:
 
 
 def _open_arrow_csv(
-    pa: Any, pa_csv: Any, path: Path, names: list[str], used: list[str], sep: str
+    pa: Any, pa_csv: Any, path: Path, names: list[str], used: list[str], sep: str, skip: int
 ) -> Any:
     return pa_csv.open_csv(
         path,
         read_options=pa_csv.ReadOptions(
             column_names=names,
-            skip_rows=1,
+            skip_rows=skip,
             block_size=1 << 18,  # Arrow's RSS grows ~20x the block: 256 kB costs ~15 MB
             use_threads=False,
         ),
@@ -79,7 +79,13 @@ def _pyarrow() -> tuple[Any, Any]:
 
 
 def arrow_csv_chunks(
-    path: Path, header: list[str], layout: Layout, robot: Robot, sep: str, chunk_rows: int
+    path: Path,
+    header: list[str],
+    layout: Layout,
+    robot: Robot,
+    sep: str,
+    chunk_rows: int,
+    skip: int = 1,
 ) -> Iterator[Log]:
     """Clean CSV through Arrow's streaming reader (typed float columns, no pandas).
 
@@ -88,13 +94,14 @@ def arrow_csv_chunks(
     and :func:`csv_chunks` re-reads from there with :func:`careful_chunks`, which
     reports the cell or names the line.  (Quoting is off here: a quoted field with a
     separator or a line break makes a wrong cell count, so the careful reader, which
-    reads quoting and counts lines, takes over.)
+    reads quoting and counts lines, takes over.)  ``skip``: the header's lines (0: a file
+    without one, :func:`~pinobs.io.readers.csv_log.headless`).
     """
     pa, pa_csv = _pyarrow()
     used = list(dict.fromkeys(layout.used))
     names = [f"{c}\x00{i}" if c not in used else c for i, c in enumerate(header)]
     try:
-        reader = _open_arrow_csv(pa, pa_csv, path, names, used, sep)
+        reader = _open_arrow_csv(pa, pa_csv, path, names, used, sep, skip)
     except (pa.ArrowException, UnicodeDecodeError):
         raise Fallback(0) from None
     start = 0  # rows yielded
@@ -104,7 +111,7 @@ def arrow_csv_chunks(
     def flush() -> Log:
         nonlocal start, pending, rows
         arrays = {c: np.concatenate([p[c] for p in pending]) for c in used}
-        lines = np.arange(start, start + rows) + 2  # line 1 is the header
+        lines = np.arange(start, start + rows) + 1 + skip  # (lines 1..skip: the header)
         log = from_arrays(arrays, rows, layout, robot, lines, "line", [])
         start, pending, rows = start + rows, [], 0
         return log

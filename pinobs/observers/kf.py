@@ -52,8 +52,15 @@ with ``c`` maximised out).  Each joint's estimate is the likelihood-weighted mix
 a flat prior: a switch between two filters passes through equal weights, no jump);
 its density and noise are read as ``j_i = exp Σ_f w_fi log(ρ_f ĉ_fi σ₀²)`` and
 ``σ_i² = exp Σ_f w_fi log(ĉ_fi σ₀²)`` (:attr:`ConstantAccelerationKF.densities`).
-The outlier gate sees ``NIS = Σ_i Σ_f w_fi e_fi² / (ĉ_fi S_f)`` (the weights and
-scales before the sample), once :data:`AUTO_GATE_SAMPLES` samples are in.  Cost per
+The outlier gate sees ``NIS = Σ_i Σ_f w_fi e_fi² / max(ĉ_fi S_f, σ₀²)`` (the weights and
+scales before the sample), once :data:`AUTO_GATE_SAMPLES` samples are in: the scale is
+floored where the gate reads it, the innovation variance never below the sensor's σ₀².  On
+a joint at rest whose quantised readings repeat exactly, ``ĉ`` goes to 0, and the first
+step of one quantum when it starts to move read as an outlier of NIS ~1e300 (a UR10e
+validation log, ``ur-20_01_17-p1``, σ₀ from the log: 28 of its 918 samples rejected, the
+mean NIS 1e299 and "the model does not explain the data"; floored: 1 rejected, mean NIS
+4.6 for 6 joints); on white-noise simulations the velocities are unchanged to the bit
+(UR5, Panda, go1; 1 kHz to 100 Hz), only the NIS values below the floor move.  Cost per
 update ``O(n_f · nv)``.  σ₀ changes nothing but the start (``P₀``) and the scale's
 units: the noise level is learnt per joint with the density.
 

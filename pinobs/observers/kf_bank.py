@@ -494,7 +494,8 @@ class AutoBank:
         S = np.einsum("i,fij,j->f", f0, state.bank.P, f0) + jerk * h**5 / 20 + bank.meas_var
         z = e * e / S[:, None]
         if state.n >= AUTO_GATE_SAMPLES:  # the scales ĉ and weights before this sample
-            nis = float(np.sum(state.w * z / np.maximum(state.A / state.n, 1e-300)))
+            floor = bank.meas_var / S[:, None]  # ĉ S_f ≥ σ₀² (kf module docstring)
+            nis = float(np.sum(state.w * z / np.maximum(state.A / state.n, floor)))
             gate = state.gate.measured(nis, self.gate, self.robot.nv)
         else:  # too few samples for a scale: reported (with σ₀), not gated
             gate = GateState(float(np.sum(state.w * z)))

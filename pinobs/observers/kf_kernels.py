@@ -185,24 +185,26 @@ def _outlier_gate(
 
 def _innovations(
     q_meas: Vector, q1: Vector, S: Vector, w: Vector, A: Vector, n: float, gate_on: bool,
-    table: NDArray[np.int64], e1: Vector, A1: Vector,
+    table: NDArray[np.int64], e1: Vector, A1: Vector, meas_var: float,
 ) -> float:  # fmt: skip
     """:func:`auto_step_loops`'s innovations ``e_f = difference(q⁻_f, q_meas)`` (``q_meas −
     q⁻_f`` on a vector space; into ``e1``), ``z_fi = e_fi² / S_f`` (into ``A1``) and the gate's
-    NIS, ``Σ w_fi z_fi / max(A_fi / N, 1e-300)`` (``gate_on``) or ``Σ w_fi z_fi``, in order."""
+    NIS, ``Σ w_fi z_fi / max(A_fi / N, σ₀² / S_f)`` (``gate_on``; ``meas_var`` = σ₀²) or
+    ``Σ w_fi z_fi``, in order (:mod:`pinobs.observers.kf`: the scale's floor)."""
     nf, nv = e1.shape
     lie = table.shape[0] > 0
     nis = 0.0
     for f in range(nf):
         if lie:
             difference_joints(q1[f], q_meas, table, e1[f])
+        floor = meas_var / S[f]  # ĉ S_f ≥ σ₀² (kf module docstring)
         for i in range(nv):
             ei = e1[f, i] if lie else q_meas[i] - q1[f, i]
             e1[f, i] = ei
             z = ei * ei / S[f]
             A1[f, i] = z  # z for now: the sums below
             if gate_on:
-                nis += w[f, i] * z / max(A[f, i] / n, 1e-300)
+                nis += w[f, i] * z / max(A[f, i] / n, floor)
             else:
                 nis += w[f, i] * z
     return nis
@@ -617,7 +619,7 @@ def auto_step_loops(
     the state before is left as it was), the innovations ``e_f = difference(q⁻_f, q_meas)``
     and the mixture (:func:`_mixture_into`) there too (``table``: the joints,
     :func:`joint_table`).  With ``measured``: ``S_f = P⁻_f,00 + σ₀²``, ``z_fi = e_fi² / S_f``,
-    the gate's NIS ``Σ w_fi z_fi / max(A_fi / N, 1e-300)`` (``gate_on``) or ``Σ w_fi z_fi``
+    the gate's NIS ``Σ w_fi z_fi / max(A_fi / N, σ₀² / S_f)`` (``gate_on``) or ``Σ w_fi z_fi``
     (too few samples: not gated), :func:`pinobs.observers.base.outlier_gate` on it
     (``threshold``, ``level`` the gate's, ``nv`` its degrees of freedom, ``run`` its
     rejections in a row: in loops, tested equal to :meth:`GateState.measured`); a rejected
@@ -649,7 +651,7 @@ def auto_step_loops(
         S[f] = P1[f, 0, 0] + meas_var
     nis, reject, accept = math.nan, False, measured
     if measured:
-        nis = _innovations(q_meas, q1, S, w, A, n, gate_on, table, e1, A1)
+        nis = _innovations(q_meas, q1, S, w, A, n, gate_on, table, e1, A1, meas_var)
         if gate_on:  # base.outlier_gate, in loops
             reject, level = _outlier_gate(nis, threshold, level, nv, run)
         accept = not reject

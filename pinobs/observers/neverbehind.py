@@ -28,26 +28,46 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    ``c T/h``; the log-odds start from a prior ``ℓ₀ = 50`` for the model that fades as the
    window fills to the persistent prior ``ℓ_p``, ``ℓ += ℓ_p + (1 − c)(ℓ₀ − ℓ_p)``: the
    model is trusted until the data disagree).
-   **Prior.**  ``ℓ_p`` (``prior_log_odds``, default ``PRIOR`` = 0: the data alone decide;
-   :data:`TRUSTED_PRIOR` = 5 for a model you trust) is the prior log-odds of the model
-   against the ``kf``: the posterior log-odds are the prior's plus the window's
-   log-likelihood ratio (Bayes' rule; the prior probabilities ``μⱼ(0)`` of Bar-Shalom, Li &
-   Kirubarajan 2001, §11.6.2), ``w ≥ 1/(1 + e^{−ℓ_p − ℓ_data})``.  On an exact model the
-   one-step data are weak: the predictions differ by ``h δv``, far below the noise (UR5,
-   1 kHz, σ = 1e-3 rad, seed 5: 0.035 nats a sample, ~7 a window, standard deviation ~3.7;
-   ``ℓ`` wandered to −0.6, ``w`` = 0.36, where the ``kf``'s velocity is 440× worse: the
-   blend 4.0× ``ekf`` alone, still far below the ``kf``; per-sample increments within ±1.7
-   at the 99.9th percentile, so censoring them changes nothing).  A prior holds the weight
-   there: the eight worst exact-model ``ekf`` runs (1.03–4.2× ``ekf`` alone without it) are
-   1.00–1.18× with ``ℓ_p`` = 3, 1.000–1.004× with 5, 1.000× with 10, and every one of
-   ``benchmarks/never_behind_exact.py``'s 120 ``ekf`` runs within 1.004× with 5.  But a
-   model whose positions predict nearly as well as the ``kf``'s while its velocities are
-   worse gives data log-odds of only a few nats against it, which the prior outweighs:
-   ``ekf`` with the learned disturbance (``disturbance_psd="auto"``) blended on the
-   identified UR10e model (``benchmarks/real_logs.py``, 17 logs) was 0.93–1.1× the ``kf``
-   without a prior, 0.98–1.24× with 5 (1.24 on ``ur-20_02_19_14harm50sec``: behind the
-   ``kf``), 1.04–1.5× with 10.  Never behind the ``kf`` is this blend's promise, so the
-   default is 0 (the start-up prior ``ℓ₀`` still fades in); a wrong model gives data
+   **Prior.**  ``ℓ_p`` is the prior log-odds of the model against the ``kf``: the
+   posterior log-odds are the prior's plus the window's log-likelihood ratio (Bayes' rule;
+   the prior probabilities ``μⱼ(0)`` of Bar-Shalom, Li & Kirubarajan 2001, §11.6.2),
+   ``w ≥ 1/(1 + e^{−ℓ_p − ℓ_data})``.  On an exact model the one-step data are weak: the
+   predictions differ by ``h δv``, far below the noise (UR5, 1 kHz, σ = 1e-3 rad, seed 5:
+   0.035 nats a sample, ~7 a window, standard deviation ~3.7; ``ℓ`` wandered to −0.6,
+   ``w`` = 0.36, where the ``kf``'s velocity is 440× worse: the blend 4.0× ``ekf`` alone,
+   still far below the ``kf``).  A fixed prior of 5 holds the weight there (every one of
+   ``benchmarks/never_behind_exact.py``'s 120 exact ``ekf`` runs within 1.004×, against up
+   to 4.2× without), but a model whose positions predict nearly as well as the ``kf``'s
+   while its velocities are worse gives data log-odds of only a few nats against it, which
+   such a prior outweighs: ``ekf`` with the learned disturbance blended on the identified
+   UR10e model (``benchmarks/real_logs.py``) went from 0.93–1.1× the ``kf`` to 0.98–1.24×
+   (behind it).  So by default (``prior_log_odds="consistent"``) the model earns the prior
+   by its own consistency, the time-average NIS test (Bar-Shalom, Li & Kirubarajan 2001,
+   §5.4.2) over the window::
+
+       ν̄ ← ν̄ + λ (min(εₖ/m, 100) − ν̄),   ν̄₀ = 1,   λ = min(1, h/T),
+       ℓ_p = TRUSTED_PRIOR  if  χ²_n(α)/n ≤ ν̄ ≤ χ²_n(1 − α)/n  [and ψᵢ h²/20 ≤ q_a/3 ∀i],
+       ℓ_p = 0              otherwise,
+
+   ``εₖ`` the model-based observer's NIS over ``m`` = ``nv`` coordinates, ``n = m (2 − λ)/λ``
+   (an exponential mean of ``χ²_m / m`` samples has the variance of ``χ²_n / n``: the
+   window's equivalent count ``(2 − λ)/λ``), ``α`` = :data:`CONSISTENCY_ALPHA` (Wilson–Hilferty
+   quantiles, :func:`~pinobs.observers.gating.chi2_quantile`); the bracket for ``ekf``'s
+   ``disturbance_psd="auto"`` only: the learned random-walk disturbance adds less to the
+   one-step prediction variance (``ψ h⁵/20``, ``ψ`` per unit inertia) than the white
+   acceleration the filter already carries (``q_a h³/3``, ``accel_psd``): the model error it
+   learned is within the noise it assumes.  Measured (``benchmarks/never_behind_exact.md``,
+   "Common-position velocity score", helper branch ``nbvel``): an exact ``ekf``'s windowed
+   NIS/m is 1.00–1.08 (its learned density 1e-9 to 3e-6 rad²/s⁵), the identified UR10e
+   model's 1e3–1e5 (with ``auto`` its density 3–100): the 120 exact ``ekf`` runs within
+   1.004× of ``ekf`` alone, no re-seed; the mismatch rows of ``never_behind_sim.py`` and
+   every real UR10e cell of ``never_behind_real.py`` as with ``ℓ_p`` = 0 (one
+   ``ekf+auto+nb@id`` cell +3e-4 relative).  ``riemannian`` and ``kalman`` on an exact Panda
+   are not consistent (NIS/m 1.2–4.5: their ``S`` does not describe their errors) and keep
+   ``ℓ_p`` = 0 and its losses (up to 8.7× alone); on the UR5, where they are, they gain
+   (100 Hz, σ = 1e-4: 2.4 → 1.00×).  A number (``prior_log_odds=x`` in ``[0, 50]``) fixes
+   ``ℓ_p``: 0 is the data alone, as before this test (:data:`PRIOR`), and
+   :data:`TRUSTED_PRIOR` a model you trust whatever its NIS.  A wrong model gives data
    log-odds of hundreds against it and is re-seeded whatever the prior (mismatch runs of
    ``never_behind_sim.py`` 1.00× the ``kf`` with 0, 5 and 10).
    **Irregular steps.**  The log-likelihood ratio counts each innovation once, decayed by
@@ -112,6 +132,7 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any, NamedTuple, cast
 
@@ -121,9 +142,10 @@ from pinobs.errors import GainError, ObserverDiverged, OptionError
 from pinobs.model import Robot
 from pinobs.model.sampling import UNIFORM_TOL
 from pinobs.observers.base import Observer, Vector, observer_class, positive
+from pinobs.observers.gating import chi2_quantile
 from pinobs.observers.linalg import LazyKernel
 
-__all__ = ["NeverBehind", "match_density"]
+__all__ = ["CONSISTENT", "NeverBehind", "match_density"]
 
 #: The bounds of one sample's ``log(e²/S)`` in :func:`match_density` (an outlier moves ψ by at
 #: most ``e^{5h/T}``; an innovation of zero by ``e^{−8h/T}``).
@@ -168,10 +190,19 @@ _LOG_ODDS = 50.0
 _TINY = 1e-300  # the smallest score the log-odds divide by
 #: A model-based velocity this many kf one-step errors (as velocities) from the kf's is lost.
 FAR_GATE = 10.0
-#: The persistent prior log-odds ``ℓ_p`` for the model by default (module docstring: **Prior**).
+#: The persistent prior log-odds ``ℓ_p`` of a model that has not earned it: the data alone
+#: decide (module docstring: **Prior**).
 PRIOR = 0.0
-#: ``ℓ_p`` for a model you trust (an exact or calibrated one; module docstring: **Prior**).
+#: ``ℓ_p`` for a model you trust (an exact or calibrated one), and the one a consistent model
+#: earns by default (module docstring: **Prior**).
 TRUSTED_PRIOR = 5.0
+#: ``prior_log_odds``'s default: ``ℓ_p`` from the model's own NIS test (module docstring).
+CONSISTENT = "consistent"
+#: The time-average NIS test's level ``α`` on each side (module docstring: **Prior**).
+CONSISTENCY_ALPHA = 1e-3
+#: The largest ``εₖ/m`` one sample brings into ``ν̄`` (an outlier's NIS of 1e300 would hold
+#: ``ν̄`` out of the band for minutes; 100 is out of it for about a window).
+NIS_CAP = 100.0
 
 
 def log_odds_loops(
@@ -327,6 +358,7 @@ class _State(NamedTuple):
     dt_prev: float  # that step [s] (0: none yet)
     reseeds: int  # times the model-based observer was re-seeded since the reset
     d: Vector  # (nv,): Σⱼ Dⱼ (e²_kf − e²_m), each innovation once (**Irregular steps**)
+    nis: float = 1.0  # ν̄: the model's windowed NIS over nv (**Prior**)
 
 
 class NeverBehind(Observer[_State]):
@@ -344,7 +376,9 @@ class NeverBehind(Observer[_State]):
         lost_ratio: RMS prediction error ratio (model over kf) beyond which the
             model-based observer is re-seeded from the blend.
         prior_log_odds: ``ℓ_p``, the persistent prior log-odds of the model (module
-            docstring, **Prior**), in ``[0, 50]``.
+            docstring, **Prior**): ``"consistent"`` (default, :data:`CONSISTENT`):
+            :data:`TRUSTED_PRIOR` while the model's windowed NIS passes its test, else 0;
+            or a number in ``[0, 50]``, fixed.
         rate: sample rate hint [Hz].
         noise_std: position noise standard deviation [rad or m].
     """
@@ -363,7 +397,7 @@ class NeverBehind(Observer[_State]):
         window: float = 0.2,
         sharpness: float = 1.0,
         lost_ratio: float = 100.0,
-        prior_log_odds: float = PRIOR,
+        prior_log_odds: float | str = CONSISTENT,
         rate: float | None = None,
         noise_std: float | None = None,
     ) -> None:
@@ -371,9 +405,16 @@ class NeverBehind(Observer[_State]):
         self.window = float(positive("window", window) or 0.0)
         self.sharpness = float(positive("sharpness", sharpness) or 0.0)
         self.lost_ratio = float(positive("lost_ratio", lost_ratio) or 0.0)
-        self.prior = float(prior_log_odds)
-        if not 0.0 <= self.prior <= _LOG_ODDS:
+        self._self_test = isinstance(prior_log_odds, str)
+        if self._self_test and prior_log_odds != CONSISTENT:
+            raise GainError(
+                f"prior_log_odds={prior_log_odds!r}: give {CONSISTENT!r} or a number in "
+                f"[0, {_LOG_ODDS:g}]"
+            )
+        self.prior: float | str = prior_log_odds if self._self_test else float(prior_log_odds)
+        if not self._self_test and not 0.0 <= float(self.prior) <= _LOG_ODDS:
             raise GainError(f"prior_log_odds={prior_log_odds!r}: give one in [0, {_LOG_ODDS:g}]")
+        self._bands: dict[float, tuple[float, float]] = {}  # (the NIS test's, per λ)
         if self.lost_ratio <= 1.0:
             raise GainError(f"lost_ratio={lost_ratio!r}: give a ratio above 1")
         cls = observer_class(observer)
@@ -396,7 +437,7 @@ class NeverBehind(Observer[_State]):
             self.lost_ratio**2,
             self.sharpness,
             (self.noise_std or 0.0) ** 2,
-            self.prior,
+            PRIOR if self._self_test else float(self.prior),
         )
         for kernel in (score_kernel, log_odds_kernel, weigh_kernel):
             kernel.load()  # (numba's cache: compiled once per installation)
@@ -479,6 +520,10 @@ class NeverBehind(Observer[_State]):
             out[5] = r.difference(r.integrate(qm0, dt * vm0 + step_a), q_meas)
             out[6] = r.difference(r.integrate(qk0, dt * vk0 + step_a), q_meas)
         gains, period = self._gains, self._period_s  # a step off the grid: fair (docstring)
+        nis = state.nis
+        if self._self_test and not raised:  # ℓ_p earned by the model's NIS test (**Prior**)
+            nis, prior = self._earned_prior(nis, m, dt)
+            gains = (*gains[:4], prior)
         fair = period is not None and abs(dt - period) > UNIFORM_TOL * period
         c, lost = cast(_Kernel, score_kernel.compiled)(  # scores, lost tests, log-odds
             flat, scored and not raised, measured, raised, q_meas if measured else q_kf,
@@ -499,7 +544,32 @@ class NeverBehind(Observer[_State]):
             np.exp(out[2], out=out[5])  # NumPy's exp (out[2] = −ℓ): the NumPy form's bits
         cast(_Kernel, weigh_kernel.compiled)(c > 0.0, flat, q_kf, v_kf, q_m, v_m, out)
         q = out[4] if flat else r.integrate(q_kf, out[2] * r.difference(q_kf, q_m))
-        return _State(m, kf, out[:2], c, out[2], q, out[3], state.v, dt, reseeds, out[7])
+        return _State(m, kf, out[:2], c, out[2], q, out[3], state.v, dt, reseeds, out[7], nis)
+
+    def _earned_prior(self, nis: float, m: Any, dt: float) -> tuple[float, float]:
+        """``(ν̄, ℓ_p)`` after this step (module docstring, **Prior**): the model's windowed NIS
+        over ``nv`` updated with its NIS at ``m`` (kept without one), and :data:`TRUSTED_PRIOR`
+        if it is inside the test's two-sided band and (``ekf``'s ``disturbance_psd="auto"``)
+        every learned density within ``q_a``'s share, else :data:`PRIOR`."""
+        lam = min(1.0, dt / self.window)
+        eps = self.model.innovation(m)[0]
+        nv = self.robot.nv
+        if eps is not None and math.isfinite(eps):  # (one sample's share capped: NIS_CAP)
+            nis += lam * (min(eps / nv, NIS_CAP) - nis)
+        band = self._bands.get(lam)
+        if band is None:  # χ²_n(α)/n, χ²_n(1 − α)/n, n = m (2 − λ)/λ: once per step length
+            n = max(1, round(nv * (2.0 - lam) / lam))
+            alpha = CONSISTENCY_ALPHA
+            band = (chi2_quantile(n, 1.0 - alpha) / n, chi2_quantile(n, alpha) / n)
+            self._bands[lam] = band
+        if not band[0] <= nis <= band[1]:
+            return nis, PRIOR
+        psd, scale = getattr(m, "d_psd", None), getattr(m, "psd_scale", None)
+        gains = getattr(self.model, "gains", None)  # (ekf's: its accel_psd q_a)
+        if psd is not None and scale is not None and gains is not None:  # ψ h⁵/20 ≤ q_a h³/3
+            if not bool(np.all(psd / scale * (dt * dt / 20.0) <= gains.accel_psd / 3.0)):
+                return nis, PRIOR
+        return nis, TRUSTED_PRIOR
 
     def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
         """Each observer's own, on its part of the state; the model-based observer's committed

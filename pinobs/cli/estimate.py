@@ -75,7 +75,8 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
         "--rate",
         type=float,
         default=None,
-        help="sample rate [Hz] (default: from the log's median interval)",
+        help="sample rate [Hz] (default: from the log's median interval); a CSV/TSV or "
+        "Parquet log without a t column is read as sampled at it (row k at t = k/R)",
     )
     p.add_argument(
         "--noise",
@@ -349,6 +350,7 @@ def _log_playback(
             columns=column_map(args.map),
             topic=args.topic,
             drives=drives_option(args),
+            rate=args.rate,
         )
     page = write_html(
         log_result(robot, log, {label: run}), robot, args.html, truth_label="measured"

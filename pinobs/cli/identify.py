@@ -19,12 +19,12 @@ from pinobs.cli.options import (
     column_map,
     drives_option,
     load_robot,
+    rate_not_used,
 )
 from pinobs.cli.output import check_output
 from pinobs.errors import OutputExistsError
 from pinobs.io import read_log
 from pinobs.io.clock import without_stale
-from pinobs.io.readers.table import sampled_note
 from pinobs.model.friction import FRICTION_LAWS
 from pinobs.model.identification import MAX_CONDITION
 from pinobs.model.sidecar import sidecar_path
@@ -188,12 +188,9 @@ def handle(args: argparse.Namespace) -> int:
         drives=drives_option(args),
         rate=args.rate,
     )
-    if args.rate is not None and sampled_note(args.rate) not in log.notes:
-        print(
-            f"warning: --rate {args.rate:g} not used: the log has its own times (a t column, "
-            "NPZ t or bag stamps)",
-            file=sys.stderr,
-        )
+    unused = rate_not_used(args.rate, log)
+    if unused:
+        print(f"warning: {unused}", file=sys.stderr)
     log, clock = without_stale(log, mode=args.clock or "auto")
     if clock.repaired or clock.stale:  # (stale rows left out: one sample per row to fit)
         print(f"warning: {clock.message()}", file=sys.stderr)

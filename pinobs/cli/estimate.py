@@ -28,6 +28,7 @@ from pinobs.cli.options import (
     load_robot,
     lock_option,
     progress,
+    rate_not_used,
     task_progress,
 )
 from pinobs.cli.output import check_output, consistency_warnings, plural
@@ -75,7 +76,9 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
         "--rate",
         type=float,
         default=None,
-        help="sample rate [Hz] (default: from the log's median interval)",
+        help="sample rate [Hz] (default: from the log's median interval); a CSV/TSV or "
+        "Parquet log without a t column is read as sampled at it (row k at t = k/R; with "
+        "--observer inekf, only that)",
     )
     p.add_argument(
         "--noise",
@@ -349,6 +352,7 @@ def _log_playback(
             columns=column_map(args.map),
             topic=args.topic,
             drives=drives_option(args),
+            rate=args.rate,
         )
     page = write_html(
         log_result(robot, log, {label: run}), robot, args.html, truth_label="measured"
@@ -379,7 +383,6 @@ def _check_legged_options(args: argparse.Namespace) -> None:
             ("--smooth", args.smooth),
             ("--latency", args.latency is not None),
             ("--noise", args.noise is not None),
-            ("--rate", args.rate is not None),
         )
         if on
     ]
@@ -402,7 +405,7 @@ def _estimate_legged(args: argparse.Namespace) -> int:
         warnings.simplefilter("always")
         log = read_log(
             args.log, robot, columns=column_map(args.map), topic=args.topic,
-            drives=drives_option(args),
+            drives=drives_option(args), rate=args.rate,
         )  # fmt: skip
     for said in caught:
         warnings.showwarning(said.message, said.category, said.filename, said.lineno)
@@ -421,8 +424,9 @@ def _estimate_legged(args: argparse.Namespace) -> int:
     write_estimates(args.out, run, force=args.force)
     # (the note that the base pose is not in the log: this observer fills it)
     notes = [n for n in log.notes if not n.startswith("the base pose") and n not in warned]
-    for w in (*notes, *run.warnings):
-        print(f"warning: {w}", file=sys.stderr)
+    for w in (*notes, rate_not_used(args.rate, log), *run.warnings):
+        if w:
+            print(f"warning: {w}", file=sys.stderr)
     _print_bad_rows(args, run)
     c = run.consistency
     if c is not None and c.samples:

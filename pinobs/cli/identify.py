@@ -19,6 +19,7 @@ from pinobs.cli.options import (
     column_map,
     drives_option,
     load_robot,
+    rate_not_used,
 )
 from pinobs.cli.output import check_output
 from pinobs.errors import OutputExistsError
@@ -27,6 +28,7 @@ from pinobs.io.clock import without_stale
 from pinobs.model.friction import FRICTION_LAWS
 from pinobs.model.identification import MAX_CONDITION
 from pinobs.model.sidecar import sidecar_path
+from pinobs.observers.checks import positive
 
 if TYPE_CHECKING:
     from pinobs.cli.options import Subparsers
@@ -49,11 +51,19 @@ def add_parser(subparsers: Subparsers) -> argparse.ArgumentParser:
     p.add_argument(
         "--log",
         required=True,
-        help="log with t, q and tau columns (CSV, Parquet, NPZ or a ROS bag, as estimate reads)",
+        help="log with t, q and tau columns (CSV, Parquet, NPZ or a ROS bag, as estimate reads; "
+        "without t: --rate)",
     )
     add_log_columns(p)
     add_drive_options(p)
     add_clock_option(p)
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        help="sample rate [Hz] of a CSV/TSV or Parquet log without a t column: row k read at "
+        "t = k/R (a log with its own times keeps them)",
+    )
     p.add_argument("--out", required=True, help="the calibrated URDF to write")
     _add_model_options(p)
     _add_fit_options(p)
@@ -163,22 +173,25 @@ def handle(args: argparse.Namespace) -> int:
     from pinobs.calibration import REFINE_ACCEL_PSD, identify
 
     out = Path(args.out)
+    positive("rate", args.rate, allow_none=True)
     check_output("--out", out)  # before the work, as the other commands
     robot = load_robot(args)
     if out.exists() and not args.force:
         raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
     if out.resolve() == Path(args.log).resolve():
         raise OutputExistsError(f"--out {str(out)!r} is the log itself")
-    log, clock = without_stale(
-        read_log(
-            args.log,
-            robot,
-            columns=column_map(args.map),
-            topic=args.topic,
-            drives=drives_option(args),
-        ),
-        mode=args.clock or "auto",
+    log = read_log(
+        args.log,
+        robot,
+        columns=column_map(args.map),
+        topic=args.topic,
+        drives=drives_option(args),
+        rate=args.rate,
     )
+    unused = rate_not_used(args.rate, log)
+    if unused:
+        print(f"warning: {unused}", file=sys.stderr)
+    log, clock = without_stale(log, mode=args.clock or "auto")
     if clock.repaired or clock.stale:  # (stale rows left out: one sample per row to fit)
         print(f"warning: {clock.message()}", file=sys.stderr)
     ident = identify(

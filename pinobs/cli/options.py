@@ -20,6 +20,8 @@ import numpy as np
 from pinobs.errors import DimensionError, OptionError
 from pinobs.io.clock import CLOCK_MODES
 from pinobs.io.drives import Drives
+from pinobs.io.readers import Log
+from pinobs.io.readers.table import sampled_note
 from pinobs.model import Robot, load
 from pinobs.simulation import INPUT_NAMES
 
@@ -152,6 +154,15 @@ def add_log_columns(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--topic", default=None, help="JointState topic of a bag (default: the only one)"
     )
+
+
+def rate_not_used(rate: float | None, log: Log) -> str | None:
+    """What to say when ``--rate`` is only the sample rate of a log without ``t`` (``identify``,
+    ``estimate --observer inekf``: no observer takes it) and ``log`` has its own times;
+    ``None`` when it was used or not given."""
+    if rate is None or sampled_note(rate) in log.notes:
+        return None
+    return f"--rate {rate:g} not used: the log has its own times (a t column, NPZ t or bag stamps)"
 
 
 def column_map(items: Sequence[str] | None) -> dict[str, str] | None:

@@ -59,7 +59,8 @@ def process_log(
         keep: keep the estimates in the returned run (``False``: memory stays flat).
         columns: as :func:`pinobs.io.iter_log`.
         topic: as :func:`pinobs.io.iter_log`.
-        rate: sample rate [Hz] (default: from the log's median interval).
+        rate: sample rate [Hz] (default: from the log's median interval); a table log
+            without a ``t`` column is read as sampled at it (:func:`pinobs.io.iter_log`).
         noise_std: position noise σ [rad or m]; ``None`` with a name: estimated
             from the log's first second (:func:`pinobs.io.estimate_noise_std`) and reported.
         options: further observer options (with a name).
@@ -70,11 +71,7 @@ def process_log(
         drives: motor positions and currents as joint ones, torque columns scaled
             (:class:`pinobs.io.Drives`, :func:`pinobs.io.iter_log`).
     """
-    repair = ClockRepair(clock)
-    chunks = repaired_chunks(
-        iter_log(source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows, drives=drives),
-        repair,
-    )
+    repair, chunks = read_repaired(source, robot, clock, columns, topic, chunk_rows, drives, rate)
     first = next(chunks)
     period = 1.0 / rate if rate else _median_period(first.t)
     ob, noise_std, sigma_joint, warnings = _observer(
@@ -107,6 +104,31 @@ def process_log(
     if said is not None:
         run.warnings.append(said)
     return run
+
+
+def read_repaired(
+    source: LogSource,
+    robot: Robot,
+    clock: str,
+    columns: Mapping[str, str] | None,
+    topic: str | None,
+    chunk_rows: int,
+    drives: Drives | None,
+    rate: float | None,
+) -> tuple[ClockRepair, Iterator[Log]]:
+    """The log's chunks (:func:`pinobs.io.iter_log`, its arguments of the same names) through
+    the repair of its clock ``clock`` (:mod:`pinobs.io.clock`), and that repair (its report)."""
+    repair = ClockRepair(clock)
+    chunks = iter_log(
+        source,
+        robot,
+        columns=columns,
+        topic=topic,
+        chunk_rows=chunk_rows,
+        drives=drives,
+        rate=rate,
+    )
+    return repair, repaired_chunks(chunks, repair)
 
 
 def _observer(

@@ -33,9 +33,10 @@ from typing import Any, Literal
 import numpy as np
 
 from pinobs.errors import PinobsError
-from pinobs.io.clock import ClockRepair, repaired_chunks
+from pinobs.io.clock import ClockRepair
 from pinobs.io.drives import Drives
-from pinobs.io.readers import CHUNK_ROWS, LogSource, chain_chunks, iter_log
+from pinobs.io.readers import CHUNK_ROWS, LogSource, chain_chunks
+from pinobs.io.runs import read_repaired
 from pinobs.io.stream import (
     LogEstimator,
     LogRun,
@@ -210,7 +211,8 @@ def smooth_log(
             second as :func:`pinobs.smooth` does, reported in the run's ``warnings``,
             ``noise_std`` and ``noise_std_per_joint``.
         columns, topic, drives: as :func:`pinobs.io.iter_log`.
-        rate: sample rate [Hz] (default: from the log's median interval).
+        rate: sample rate [Hz] (default: from the log's median interval); a table log
+            without a ``t`` column is read as sampled at it (:func:`pinobs.io.iter_log`).
         options: further options of the filter (``filter_options`` of :func:`pinobs.smooth`).
         chunk_rows: rows read at a time (:func:`pinobs.io.iter_log`).
         stream: stream when possible (module docstring); ``False``: keep the samples and
@@ -230,12 +232,8 @@ def smooth_log(
     )
     how = _Smoothing(observer, noise_std, accel_psd, lag, chunk, options, band)
     try:
-        repair = ClockRepair(clock)
-        chunks = repaired_chunks(
-            iter_log(
-                source, robot, columns=columns, topic=topic, chunk_rows=chunk_rows, drives=drives
-            ),
-            repair,
+        repair, chunks = read_repaired(
+            source, robot, clock, columns, topic, chunk_rows, drives, rate
         )
         run, stretches = _smoothed(chunks, robot, writer, how, rate, stream and how.streams())
     except BaseException:

@@ -116,6 +116,25 @@ def test_cli_estimate_with_inekf_writes_the_free_flyer_estimate(tmp_path, trot, 
     assert "--imu-frame: options of --observer inekf" in capsys.readouterr().err
 
 
+def test_cli_inekf_reads_a_log_without_t_at_its_rate(tmp_path, trot, capsys) -> None:
+    """Issue 36: the trot's log (t = k/500 exactly) without its ``t`` column, ``--rate 500``:
+    the estimates of the log with ``t``, bit for bit; ``--rate`` on the log with ``t`` is
+    said not used (``inekf`` takes no rate)."""
+    frame = _frame(trot)
+    assert np.array_equal(frame["t"], np.arange(len(frame)) / 500.0)
+    frame.to_csv(tmp_path / "timed.csv", index=False)
+    frame.drop(columns="t").to_csv(tmp_path / "bare.csv", index=False)
+    args = ["estimate", "--robot", "go1", "--observer", "inekf", "--rate", "500"]
+    for name in ("bare", "timed"):
+        log, out = tmp_path / f"{name}.csv", tmp_path / f"{name}_v.csv"
+        assert main([*args, "--log", str(log), "--out", str(out)]) == 0
+        err = capsys.readouterr().err
+        assert ("no t column: rows taken as sampled at 500 Hz" in err) == (name == "bare")
+        assert ("--rate 500 not used: the log has its own times" in err) == (name == "timed")
+    bare, timed = (pd.read_csv(tmp_path / f"{n}_v.csv") for n in ("bare", "timed"))
+    pd.testing.assert_frame_equal(bare, timed, check_exact=True)
+
+
 @pytest.mark.slow  # 25 s of log at 400 Hz: ~25 s
 def test_the_real_go1_log_runs_as_recorded_and_stands_still_when_the_legs_do() -> None:
     """SEROW's Go1 log (25 s, 400 Hz, walking between two stands): every row estimated, no

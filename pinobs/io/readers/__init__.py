@@ -8,7 +8,11 @@ Formats (chosen from the source):
   :attr:`Log.notes` says so).  UTF-8 (a byte-order mark is accepted).  The columns
   are found by name (any order, extra columns ignored):
 
-  - ``t``: time [s];
+  - ``t``: time [s]; without one, a log whose rows were taken at a known fixed rate
+    ``R`` (``rate=R``: FIGAROH's TX40 data, MATLAB exports) has its row ``k`` (from 0,
+    across chunks; a row with an unreadable cell counts, a blank line does not) at
+    ``t = k / R`` [s], said in :attr:`Log.notes`; given a ``t`` column, ``rate`` leaves it
+    as it is;
   - positional ``q0 .. q{nq-1}`` and ``tau0 .. tau{nv-1}`` (Pinocchio's order,
     quaternions ``x, y, z, w``), or named ``q.<joint>`` / ``tau.<joint>``
     (``q.<joint>.<k>`` / ``tau.<joint>.<k>`` for a joint with several
@@ -30,12 +34,12 @@ Formats (chosen from the source):
     :attr:`Log.imu_gyro`, :attr:`Log.imu_acc`, :attr:`Log.foot_force`,
     :attr:`Log.contact` (:mod:`pinobs.io.readers.legged`; a free-flyer base the
     log does not have read as NaN).
-- Parquet (``.parquet``, ``.pq``): the same columns.
+- Parquet (``.parquet``, ``.pq``): the same columns (``t``, or ``rate``).
 - NPZ (``.npz``): arrays ``t`` (N,), ``q`` (N, nq), optionally ``tau`` (N, nv).
   A result saved by ``pinobs run --save`` (:meth:`pinobs.Result.save`) is read
   as the log its sensor recorded: its measurements ``q_meas`` (a NaN row: a
   dropped sample) are the log's ``q``, not its simulated truth ``q``.
-- A pandas ``DataFrame``: the same columns as a CSV.
+- A pandas ``DataFrame``: the same columns as a CSV (``t``, or ``rate``).
 - ROS bags (a rosbag2 directory with sqlite3 or MCAP storage, a ``.mcap`` or
   ``.db3`` file, a ROS 1 ``.bag``), read with the ``rosbags`` library:
   ``sensor_msgs/JointState`` messages on ``topic`` (default: the only

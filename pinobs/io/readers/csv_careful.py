@@ -106,10 +106,13 @@ def careful_chunks(
     rows: list[list[str]] = []
     lines: list[int] = []
     problems: list[tuple[int, str]] = []
+    done = start  # the log's rows before the next chunk (the fast reader's, then these)
 
     def flush() -> Log:
+        nonlocal done
         frame = pd.DataFrame(rows, columns=used, dtype=object)
-        log = from_frame(frame, layout, robot, np.array(lines), "line", problems)
+        log = from_frame(frame, layout, robot, np.array(lines), "line", problems, row0=done)
+        done += len(rows)
         rows.clear()
         lines.clear()
         return log

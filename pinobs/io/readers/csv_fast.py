@@ -112,7 +112,7 @@ def arrow_csv_chunks(
         nonlocal start, pending, rows
         arrays = {c: np.concatenate([p[c] for p in pending]) for c in used}
         lines = np.arange(start, start + rows) + 1 + skip  # (lines 1..skip: the header)
-        log = from_arrays(arrays, rows, layout, robot, lines, "line", [])
+        log = from_arrays(arrays, rows, layout, robot, lines, "line", [], row0=start)
         start, pending, rows = start + rows, [], 0
         return log
 

@@ -24,6 +24,7 @@ def csv_chunks(
     columns: Mapping[str, str] | None,
     chunk_rows: int,
     drives: Drives | None = None,
+    rate: float | None = None,
 ) -> Iterator[Log]:
     line, hint = undecodable_line(path) if has_binary_head(path) else (0, "")
     if line:
@@ -51,7 +52,7 @@ def csv_chunks(
         note = f"no header row: line 1 read as data ({said})"
         cells = [str(i) for i in range(len(cells))]
     header = clean_header(cells, columns)
-    layout = table_layout(header, robot, where, drives)
+    layout = table_layout(header, robot, where, drives, rate)
     if skip and not has_data_after_header(path):
         return
     chunks = _chunks(path, header, layout, robot, sep, chunk_rows, skip)

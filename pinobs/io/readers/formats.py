@@ -19,6 +19,7 @@ from pinobs.io.readers.npz import npz_log
 from pinobs.io.readers.parquet import parquet_chunks
 from pinobs.io.readers.table import frame_log
 from pinobs.model import Robot
+from pinobs.observers.checks import positive
 
 
 @dataclass(frozen=True)
@@ -27,6 +28,7 @@ class _Options:
     topic: str | None
     chunk_rows: int
     drives: Drives | None
+    rate: float | None = None  # [Hz] a table without a t column is sampled at
 
 
 @dataclass(frozen=True)
@@ -61,11 +63,11 @@ def _or_empty(chunks: Iterator[Log], robot: Robot) -> Iterator[Log]:
 
 
 def _csv(path: Path, robot: Robot, o: _Options) -> Iterator[Log]:
-    return _or_empty(csv_chunks(path, robot, o.columns, o.chunk_rows, o.drives), robot)
+    return _or_empty(csv_chunks(path, robot, o.columns, o.chunk_rows, o.drives, o.rate), robot)
 
 
 def _parquet(path: Path, robot: Robot, o: _Options) -> Iterator[Log]:
-    return _or_empty(parquet_chunks(path, robot, o.columns, o.chunk_rows, o.drives), robot)
+    return _or_empty(parquet_chunks(path, robot, o.columns, o.chunk_rows, o.drives, o.rate), robot)
 
 
 def _npz(path: Path, robot: Robot, o: _Options) -> Iterator[Log]:
@@ -115,6 +117,7 @@ def iter_log(
     topic: str | None = None,
     chunk_rows: int = CHUNK_ROWS,
     drives: Drives | None = None,
+    rate: float | None = None,
 ) -> Iterator[Log]:
     """Read a log chunk by chunk (formats and columns: module docstring).
 
@@ -128,6 +131,10 @@ def iter_log(
             ``qm.<joint>`` motor positions and ``i.<joint>`` currents read as joint
             positions and torques, ``tau.<joint>`` scaled (CSV, TSV, Parquet, DataFrame;
             NPZ and bags: ``torque_scale`` only).
+        rate: sample rate [Hz] of a table log (CSV, TSV, Parquet, DataFrame) without a ``t``
+            column: its row ``k`` (from 0, across chunks; a row with an unreadable cell
+            counts, a blank line does not) at ``t = k / rate``, said in :attr:`Log.notes`.
+            A log with a ``t`` column, an NPZ or a bag keeps its own times.
 
     Yields:
         :class:`Log` chunks, in order; the first one is yielded even when empty.
@@ -137,12 +144,14 @@ def iter_log(
         LogFormatError: the file cannot be parsed; the message names the line.
         DimensionError: the columns do not match the robot.
         OptionError: drives the log does not use, or motor columns without their drives.
+        GainError: ``rate`` is not a finite number > 0.
     """
     if chunk_rows < 1:
         raise DimensionError(f"chunk_rows={chunk_rows} must be >= 1")
+    rate = positive("rate", rate, allow_none=True)
     if type(source).__name__ == "DataFrame":
         _refuse_ignored("DataFrame", columns=None, topic=topic)
-        yield from _said(iter([frame_log(source, robot, columns, drives)]), robot)
+        yield from _said(iter([frame_log(source, robot, columns, drives, rate)]), robot)
         return
     path = Path(source)
     if not path.exists():
@@ -160,7 +169,7 @@ def iter_log(
     if path.is_dir() and not reader.folder:
         raise ModelFileError(f"log {str(path)!r} is a folder but not a rosbag2 (no metadata.yaml)")
     yield from _said(
-        reader.chunks(path, robot, _Options(columns, topic, chunk_rows, drives)), robot
+        reader.chunks(path, robot, _Options(columns, topic, chunk_rows, drives, rate)), robot
     )
 
 
@@ -228,13 +237,14 @@ def read_log(
     columns: Mapping[str, str] | None = None,
     topic: str | None = None,
     drives: Drives | None = None,
+    rate: float | None = None,
 ) -> Log:
     """Read a whole log into memory (:func:`iter_log` streams it).
 
     Args and raises as :func:`iter_log`.  Returns one :class:`Log` with every
     row, in order, and every cell that could not be read in ``problems``.
     """
-    chunks = list(iter_log(source, robot, columns=columns, topic=topic, drives=drives))
+    chunks = list(iter_log(source, robot, columns=columns, topic=topic, drives=drives, rate=rate))
     return chunks[0] if len(chunks) == 1 else concat_logs(chunks, nv=robot.nv)
 
 

@@ -20,7 +20,7 @@ from pinobs.model import Robot
 class Layout:
     """Where the robot's ``t``, ``q`` and ``tau`` are among a table's columns."""
 
-    t: str
+    t: str | None  # None: no t column, the rows sampled at ``rate``
     q: tuple[tuple[str, ...], ...]  # per q block: its columns (one angle column for a circle)
     q_angle: tuple[bool, ...]  # per q block: given as an angle
     q_slices: tuple[slice, ...]
@@ -30,10 +30,12 @@ class Layout:
     motor: tuple[str, ...] = ()  # qm.<joint> per joint: positions from the motors (drives)
     current: tuple[str, ...] = ()  # i.<joint> per joint: torques from the currents (drives)
     legged: LeggedColumns | None = None  # IMU, foot forces or contacts (readers.legged)
+    rate: float | None = None  # [Hz] with no t column: row k at t = k / rate
 
     @property
     def used(self) -> list[str]:
-        cols = [self.t, *(c for block in self.q for c in block), *self.motor, *self.current]
+        cols = [*(c for block in self.q for c in block), *self.motor, *self.current]
+        cols = ([self.t] if self.t is not None else []) + cols
         legged = self.legged.used if self.legged is not None else []
         return cols + list(self.tau or ()) + ([self.tick] if self.tick else []) + legged
 
@@ -189,12 +191,19 @@ def _refuse_beyond(header: Sequence[str], robot: Robot, where: str) -> None:
 
 
 def _refuse_missing(
-    header: Sequence[str], robot: Robot, where: str, t: str | None, q: _QColumns, motor: bool
-) -> str:
-    """``t``; refused when it or some joint's q columns are missing, saying what the robot
-    needs."""
-    if t is not None and not q.missing:
+    header: Sequence[str],
+    robot: Robot,
+    where: str,
+    t: str | None,
+    q: _QColumns,
+    motor: bool,
+    rate: float | None = None,
+) -> str | None:
+    """``t`` (``None``: no t column, the rows sampled at ``rate``); refused when some joint's
+    q columns are missing, or ``t`` without a ``rate``, saying what the robot needs."""
+    if (t is not None or rate is not None) and not q.missing:
         return t
+    lack = (["t"] if t is None and rate is None else []) + q.missing
     motor_only = [c for c in header if c.startswith("qm.")] if q.missing and not motor else []
     lock = lock_hint(q.absent) if q.absent and len(q.absent) < len(robot.joints) else ""
     if motor_only:
@@ -203,11 +212,17 @@ def _refuse_missing(
             "(drives=pinobs.io.Drives(gear_ratio=...), --gear-ratio or --transmission)"
         )
     raise DimensionError(
-        f"{where}: columns {list(header)} lack {(['t'] if t is None else []) + q.missing}; "
+        f"{where}: columns {list(header)} lack {lack}; "
         f"robot {robot.name!r} needs t, then q0..q{robot.nq - 1} (nq = {robot.nq}) or "
         f"q.<joint> for joints {list(robot.joint_names)}, and optionally "
-        f"tau0..tau{robot.nv - 1} or tau.<joint> (or map other names with columns=...)" + lock
+        f"tau0..tau{robot.nv - 1} or tau.<joint> (or map other names with columns=...)"
+        + (NO_T_HINT if "t" in lack else "")
+        + lock
     )
+
+
+#: What a table without a ``t`` column may give instead (:func:`_refuse_missing`).
+NO_T_HINT = ", or give the sample rate (rate=..., --rate R) if the rows are sampled at a fixed rate"
 
 
 def _tau_candidates(pick: _Picker, robot: Robot, current: tuple[str, ...]) -> list[str | None]:
@@ -248,9 +263,17 @@ def _tau_columns(
 
 
 def table_layout(
-    header: Sequence[str], robot: Robot, where: str, drives: Drives | None = None
+    header: Sequence[str],
+    robot: Robot,
+    where: str,
+    drives: Drives | None = None,
+    rate: float | None = None,
 ) -> Layout:
-    """Match column names to the robot (module docstring); raise naming what is missing."""
+    """Match column names to the robot (module docstring); raise naming what is missing.
+
+    ``rate`` [Hz]: a table without a ``t`` column is read as sampled at it (its row ``k`` at
+    ``t = k / rate``); a ``t`` column, when there is one, is used instead.
+    """
     motor, current = motor_layout(header, robot, where, drives)
     pick = _Picker(header, where)
     t = pick.one(["t"], "t")
@@ -259,7 +282,7 @@ def table_layout(
     q = _q_columns(pick, robot, motor, unmeasured)
     tau_cols = _tau_candidates(pick, robot, current)
     _refuse_beyond(header, robot, where)
-    t = _refuse_missing(header, robot, where, t, q, bool(motor))
+    t = _refuse_missing(header, robot, where, t, q, bool(motor), rate)
     tau = _tau_columns(tau_cols, header, robot, where, current)
     tick = pick.one(["tick"], "the sample counter")
     return Layout(
@@ -273,6 +296,7 @@ def table_layout(
         motor=motor,
         current=current,
         legged=legged if legged.used else None,
+        rate=rate if t is None else None,
     )
 
 

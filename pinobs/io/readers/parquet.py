@@ -21,6 +21,7 @@ def parquet_chunks(
     columns: Mapping[str, str] | None,
     chunk_rows: int,
     drives: Drives | None = None,
+    rate: float | None = None,
 ) -> Iterator[Log]:
     require_pandas()
     try:
@@ -34,7 +35,7 @@ def parquet_chunks(
         raise LogFormatError(f"log {str(path)!r} is not a readable Parquet file: {exc}") from None
     raw = list(pf.schema_arrow.names)
     header = clean_header(raw, columns)
-    layout = table_layout(header, robot, f"log {str(path)!r}", drives)
+    layout = table_layout(header, robot, f"log {str(path)!r}", drives, rate)
     back = dict(zip(header, raw, strict=True))
     named = dict(zip(raw, header, strict=True))
     start = 0
@@ -47,9 +48,9 @@ def parquet_chunks(
             frame.columns = [named[c] for c in batch.schema.names]
             lines = np.arange(start, start + len(frame))
             problems: list[tuple[int, str]] = []
-            if len(frame):
+            if len(frame) and layout.t is not None:
                 time_in_seconds(frame, layout.t, problems if start == 0 else [])
+            yield from_frame(frame, layout, robot, lines, "row", problems, row0=start)
             start += len(frame)
-            yield from_frame(frame, layout, robot, lines, "row", problems)
     except (ArrowException, OSError) as exc:
         raise LogFormatError(f"log {str(path)!r}: unreadable after row {start}: {exc}") from None

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from pinobs.errors import DimensionError
 from pinobs.io.drives import Drives
 from pinobs.io.readers.layout import Layout, clean_header, table_layout
 from pinobs.io.readers.legged import legged_arrays
@@ -75,12 +76,15 @@ def from_frame(
     lines: Any,
     unit: str,
     problems: list[tuple[int, str]],
+    *,
+    row0: int,
 ) -> Log:
-    """A :class:`Log` chunk from a table whose columns follow ``layout``."""
+    """A :class:`Log` chunk from a table whose columns follow ``layout``; ``row0``: the log's
+    rows before this chunk (:func:`from_arrays`)."""
     frame = frame[layout.used].copy()
     to_numeric(frame, lines, problems)
     arrays = {c: frame[c].to_numpy(dtype=float) for c in layout.used}
-    return from_arrays(arrays, len(frame), layout, robot, lines, unit, problems)
+    return from_arrays(arrays, len(frame), layout, robot, lines, unit, problems, row0=row0)
 
 
 def from_arrays(
@@ -91,8 +95,15 @@ def from_arrays(
     lines: Any,
     unit: str,
     problems: list[tuple[int, str]],
+    *,
+    row0: int,
 ) -> Log:
-    """A :class:`Log` chunk from float columns named as ``layout`` says."""
+    """A :class:`Log` chunk from float columns named as ``layout`` says.
+
+    ``row0``: the log's rows before this chunk (a row with an unreadable cell counts, a blank
+    line does not), which time its rows when the log has no ``t`` column: row ``k`` of the log
+    at ``t = k / layout.rate`` (said in the first chunk's notes).
+    """
     q = np.empty((n, robot.nq))
     drives = layout.drives
     from_motor = None
@@ -119,15 +130,31 @@ def from_arrays(
         if drives is not None:  # (4)
             tau = drives.scaled_torques(tau)
     return Log(
-        t=np.asarray(arrays[layout.t], dtype=float),
+        t=_times(arrays, n, layout, row0),
         q=q,
         tau=tau,
         problems=tuple(problems),
         lines=lines,
         unit=unit,
+        notes=(sampled_note(layout.rate),) if layout.rate is not None and row0 == 0 and n else (),
         tick=None if layout.tick is None else np.asarray(arrays[layout.tick], dtype=float),
         **vars(legged_arrays(arrays, n, layout.legged, lines, unit)),
     )
+
+
+def _times(arrays: Mapping[str, Vector], n: int, layout: Layout, row0: int) -> Vector:
+    """The chunk's ``t`` column, or with none its rows' ``k / rate`` [s] (``k`` from ``row0``)."""
+    if layout.t is not None:
+        return np.asarray(arrays[layout.t], dtype=float)
+    if layout.rate is None:  # pragma: no cover - table_layout refuses it
+        raise DimensionError("a table without a t column needs its sample rate")
+    # t_k = k / R, each the float nearest k/R (k·(1/R) would carry 1/R's rounding error)
+    return np.arange(row0, row0 + n) / layout.rate
+
+
+def sampled_note(rate: float) -> str:
+    """What :attr:`Log.notes` says of a table without a ``t`` column read at ``rate`` [Hz]."""
+    return f"no t column: rows taken as sampled at {rate:g} Hz, t = k/{rate:g}"
 
 
 def stack_columns(arrays: Mapping[str, Vector], cols: Sequence[str], n: int) -> Vector:
@@ -143,16 +170,20 @@ def require_pandas() -> Any:
 
 
 def frame_log(
-    frame: Any, robot: Robot, columns: Mapping[str, str] | None, drives: Drives | None = None
+    frame: Any,
+    robot: Robot,
+    columns: Mapping[str, str] | None,
+    drives: Drives | None = None,
+    rate: float | None = None,
 ) -> Log:
     header = clean_header([str(c) for c in frame.columns], None)
     frame = frame.set_axis(header, axis=1)
     if columns:
         header = clean_header(header, columns)
         frame = frame.set_axis(header, axis=1)
-    layout = table_layout(header, robot, "DataFrame", drives)
+    layout = table_layout(header, robot, "DataFrame", drives, rate)
     frame = frame[layout.used].copy()
     problems: list[tuple[int, str]] = []
-    if len(frame):
+    if len(frame) and layout.t is not None:
         time_in_seconds(frame, layout.t, problems)
-    return from_frame(frame, layout, robot, np.arange(len(frame)), "row", problems)
+    return from_frame(frame, layout, robot, np.arange(len(frame)), "row", problems, row0=0)

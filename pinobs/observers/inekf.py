@@ -141,6 +141,17 @@ so that ``σ_c`` is the stance's own density, not one that spreads the landing o
 stance (MuJoCo's go1 trotting: 0.0136 m/s/√Hz over the first 20 ms, 0.0023 after;
 ``benchmarks/legged_truth.md``).  ``σ_l = 0`` (default) leaves the filter as it was.
 
+With ``adapt_noise=T`` the feet's density (9)-(11) is scaled per axis of the IMU frame by ``α``
+matched to the feet's innovations online (covariance matching, Mehra 1972; Myers & Tapley
+1976; :mod:`~pinobs.observers.legged_adapt`, which says why the IMU's densities are not)::
+
+    Q_c,dj ← diag(α) Q_c,dj,   log α_a ← log α_a + (h/(T K)) f_a (clip(log(e_a²/s_a)) − m)    (12)
+
+``e = R̂ᵀ r_j``, ``s = diag(R̂ᵀ S_jj R̂)`` (8), ``f_a`` the share of ``s_a`` the foot's own
+step density makes, ``α = 1`` at ``reset``; ``None`` (default): no scale.  Off by default: on
+the MuJoCo go1 it lowers α (0.03-0.6) and costs velocity (``legged_run``'s trot 0.0082 →
+0.0094 m/s) and ±2σ coverage (``benchmarks/legged_adapt_noise.md``).
+
 Prior (at ``reset``, before any foot is added).  :class:`InEKFPrior` gives independent
 errors of the attitude ``ξ_R``, of the velocity in the base frame ``v_b`` (as ``reset``
 takes it), and of the world position: ``ξ_v = R̂ (v̂_b − v_b)`` exactly, and to first
@@ -194,6 +205,7 @@ from pinobs.observers.inekf_loops import (
     propagate_kernel,
     velocity_kernel,
 )
+from pinobs.observers.legged_adapt import match_foot_scale, scaled_densities
 from pinobs.observers.legged_filter import LeggedFilter
 from pinobs.observers.legs import (
     GRAVITY,
@@ -464,6 +476,9 @@ class InvariantEKF(LeggedFilter):
         rolling_lift: with ``foot_radius``, that point's cycloid lift removed (rolling.py's
             eq. R5: exact for a sphere rolling on the plane; ``True``, default; ``False``: R4
             alone, the default before).  Nothing without ``foot_radius``.
+        adapt_noise: eq. (12), the window ``T`` [s] of the feet's density scale ``α`` per
+            IMU axis matched to their innovations (:attr:`noise_scale`); ``None``
+            (default): off.
 
     Raises:
         GainError: an ``imu_hold`` that is neither; a ``foot_gate`` not in (0, 0.5); a
@@ -488,6 +503,7 @@ class InvariantEKF(LeggedFilter):
         slip_gyro: float = 0.0,
         foot_radius: float = 0.0,
         rolling_lift: bool = True,
+        adapt_noise: float | None = None,
     ) -> None:
         super().__init__(
             robot,
@@ -522,6 +538,11 @@ class InvariantEKF(LeggedFilter):
         self._kinematics: tuple[Vector, Vector] = (np.empty((0, 3)), np.empty((0, 3, 0)))
         #: ``Q_c`` per number of feet, of these gains (:meth:`_noise_densities`)
         self._densities: tuple[InEKFGains | None, dict[int, Vector]] = (None, {})
+        #: eq. (12): the window ``T`` [s] (``None``: off), the scale ``α`` per IMU axis, and
+        #: each state foot's density times the last step ``h`` (after the scale), (K, 3)
+        self.adapt_noise = None if adapt_noise is None else positive("adapt_noise", adapt_noise)
+        self.noise_scale: Vector = np.ones(3)
+        self._foot_q: tuple[float, Vector] = (0.0, np.empty((0, 3)))
         load_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
 
     def error_matrix(self) -> Vector:
@@ -584,6 +605,10 @@ class InvariantEKF(LeggedFilter):
         if self._speed is not None and state.feet:
             qc = slip_densities(qc, self._speed, dt, state.feet)  # eq. (9)
         qc = self._landing(qc, state, dt)  # eq. (11)
+        if self.adapt_noise is not None:  # eq. (12)'s scale
+            k = len(state.feet)
+            qc = scaled_densities(qc, self.noise_scale, k)
+            self._foot_q = (dt, qc[9 : 9 + 3 * k].reshape(k, 3) * dt)
         kernel = propagate_kernel.compiled
         assert kernel is not None  # loaded by the constructor
         kernel(state.R, x, state.bias, imu, dt, self._gravity, qc, P, R1, x1, P1)
@@ -617,7 +642,10 @@ class InvariantEKF(LeggedFilter):
 
     def _remember(self, u: UpdateInputs | None, h: Vector, dt: float = 0.0) -> None:
         """Eq. (9): with ``slip_speed``, the feet's speeds for the next step's contact noise
-        (none after ``reset`` or an update without ``joint_velocities``)."""
+        (none after ``reset`` or an update without ``joint_velocities``); at ``reset`` eq.
+        (12)'s scale back to 1."""
+        if u is None:
+            self.noise_scale = np.ones(3)
         if u is None or u.joint_velocities is None or not self.slip_speed:
             self._speed = None
         else:  # the update's own legs (:meth:`_legs`, at u.q_joints): not computed again
@@ -657,6 +685,9 @@ class InvariantEKF(LeggedFilter):
         """Eqs. (4)-(5) in compiled loops (:mod:`pinobs.observers.inekf_loops`); with NumPy
         (:meth:`_update_solve`) if ``S`` is not positive definite."""
         R, x, P = state.R, state.x, state.P
+        window = self.adapt_noise
+        if window is not None and self._foot_q[1].shape[0] == len(measured):
+            self._match_scale(state, measured, h, jac, window)  # eq. (12), before the update
         R1, x1, theta, P1 = np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P)
         kernel = correct_kernel.compiled
         assert kernel is not None  # loaded by the constructor
@@ -665,6 +696,32 @@ class InvariantEKF(LeggedFilter):
         if nis < 0.0:
             return self._update_solve(state, measured, h, jac)
         return replace_state(state, R=R1, x=x1, bias=theta, P=P1), float(nis)
+
+    def _match_scale(
+        self, state: InEKFState, measured: list[int], h: Vector, jac: Vector, window: float
+    ) -> None:
+        """Eq. (12): :attr:`noise_scale` after the measured feet's innovations
+        (:meth:`foot_innovations`), ``window`` ``T`` [s]."""
+        e, s, _ = self.foot_innovations(state, measured, h, jac)
+        dt, q_h = self._foot_q
+        self.noise_scale = match_foot_scale(self.noise_scale, e, s, q_h, dt, window)
+
+    def foot_innovations(
+        self, state: InEKFState, measured: list[int], h: Vector, jac: Vector
+    ) -> tuple[Vector, Vector, Vector]:
+        """The measured feet's innovations in the IMU frame ``R̂ᵀ r_j`` (eq. 4), their predicted
+        variances ``diag(R̂ᵀ S_jj R̂)`` (eq. 8's blocks) and those of ``N_j`` alone, each
+        ``(K, 3)``, before the update; ``h``, ``jac`` as :meth:`_update` takes them."""
+        R, x, P = state.R, state.x, state.P
+        k = len(measured)
+        e = h[measured] - (x[2:] - x[1]) @ R  # R̂ᵀ (R̂ h_j − (d̂_j − p̂)), eq. (4)
+        n_b = np.diagonal(foot_noise(self.gains, jac[measured], self._joint_var), 0, 1, 2)
+        s = np.empty((k, 3))
+        for i in range(k):
+            d = slice(9 + 3 * i, 12 + 3 * i)
+            S = P[6:9, 6:9] - P[6:9, d] - P[d, 6:9] + P[d, d]
+            s[i] = np.einsum("ij,ik,kj->j", R, S, R) + n_b[i]  # diag(R̂ᵀ S R̂)
+        return e, s, n_b
 
     def _update_solve(
         self, state: InEKFState, measured: list[int], h: Vector, jac: Vector

@@ -167,7 +167,14 @@ LOG_CHI2_MEAN = -1.241135859180433
 
 
 def match_density(
-    psd: Vector, e: Vector, s: Vector, dt: float, *, window: float, bounds: Vector
+    psd: Vector,
+    e: Vector,
+    s: Vector,
+    dt: float,
+    *,
+    window: float,
+    bounds: Vector,
+    weight: Vector | float = 1.0,
 ) -> Vector:
     """One step of module docstring item 2: the densities ``ψ`` updated.
 
@@ -178,8 +185,11 @@ def match_density(
         dt: the step [s].
         window: ``T`` [s], the time constant of ``log ψ``.
         bounds: ``(2, n)`` or ``(2,)``: ``ψ_min``, ``ψ_max``.
+        weight: per coordinate, a factor in [0, 1] on the step ``h/T`` (1, default: the
+            step above, to the bit; the invariant EKF's ``adapt_noise`` gives the share of
+            ``Sᵢᵢ`` that ``ψ`` sets: :mod:`pinobs.observers.legged_adapt`).
     """
-    lam = min(1.0, dt / window)
+    lam = min(1.0, dt / window) * weight
     with np.errstate(divide="ignore"):  # e = 0: log 0 = −∞, clipped
         step = np.clip(np.log(e * e / s), *LOG_BOUNDS) - LOG_CHI2_MEAN
     return np.clip(psd * np.exp(lam * step), bounds[0], bounds[1])  # type: ignore[no-any-return]

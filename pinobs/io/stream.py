@@ -285,24 +285,26 @@ class LogEstimator:
         observer's reset, σ learnt from the log) and those it leaves, one by one as
         :meth:`feed` does (each with the next row to look ahead to)."""
         take = getattr(self.observer, "update_rows", None)
-        if take is None or self._started or self._pending is not None or len(log) < 2:
+        period = _median_period(log.t) if self.period is None else self.period
+        plain = self._plain_rows(log, period)
+        if take is None or self._started or self._pending is not None or plain < 2:
             return self.feed(log)
         self.warnings.extend(n for n in log.notes if n not in self.warnings)
-        if self.period is None:
-            self.period = _median_period(log.t)
+        self.period = period
         if not self._unit_checked:
             self._unit_checked = True
             said = time_unit_warning(_median_period(log.t))
             if said is not None:
                 self.warnings.append(said)
-        plain, k, parts = self._plain_rows(log), 0, []
+        k, parts = 0, []
         while k < plain:
-            q, v = take(log.t[k:plain], log.q[k:plain], self._v_max) if self._started else ((),) * 2
-            if len(q):
-                parts.append((log.t[k : k + len(q)], q, v))
-                self._taken(log, k, len(q), q[-1], v[-1])
-                k += len(q)
-                continue
+            if self._started:  # the rows from k at once, as far as the observer takes them
+                q, v = take(log.t[k:plain], log.q[k:plain], self._v_max)
+                if len(q):
+                    parts.append((log.t[k : k + len(q)], q, v))
+                    self._taken(log, k, len(q), q[-1], v[-1])
+                    k += len(q)
+                    continue
             end = min(k + _ROWS_ONE_BY_ONE, plain)
             parts.append(self._run(slice_log(log, k, min(end + 1, len(log))), end - k))
             k = end
@@ -310,13 +312,13 @@ class LogEstimator:
         t, q, v = (np.concatenate(x) for x in zip(*parts, strict=True))
         return t, q, v
 
-    def _plain_rows(self, log: Log) -> int:
+    def _plain_rows(self, log: Log, period: float | None) -> int:
         """How many of the log's rows, from its first, are plain: each fed to the observer as
         it is, placed after the one before (a finite time after it by more than ``TIME_EPS``,
         within :data:`GAP_PERIODS` periods: no sub-steps), a finite position within the
         joints' warning limits, nothing reported (no problem, no stale row or dropped samples,
-        no torque column)."""
-        if log.tau is not None or log.problems or self.period is None:
+        no torque column); ``period`` the log's (none: no row is)."""
+        if log.tau is not None or log.problems or period is None or len(log) < 2:
             return 0
         t, masks = log.t, _RowMasks.of(log, self._bounds)
         ok = masks.finite_q & ~masks.absurd_q & ~masks.outside.any(axis=1) & np.isfinite(t)
@@ -324,14 +326,16 @@ class LogEstimator:
             ok &= ~log.stale
         if log.drops is not None:
             ok &= log.drops == 0
-        ok[1:] &= (t[1:] > t[:-1] + TIME_EPS) & (t[1:] - t[:-1] <= GAP_PERIODS * self.period)
+        ok[1:] &= (t[1:] > t[:-1] + TIME_EPS) & (t[1:] - t[:-1] <= GAP_PERIODS * period)
         return len(t) if ok.all() else int(np.argmin(ok))
 
     def _taken(self, log: Log, k: int, m: int, q: Vector, v: Vector) -> None:
         """The counts of :meth:`_run` after its rows ``k … k + m − 1`` of ``log``, plain rows
         the observer took at once (``q``, ``v``: the last one's estimate)."""
         self._t, self._last = float(log.t[k + m - 1]), (q.copy(), v.copy())
-        self.estimated, self.measured, self.rows = (x + m for x in (self.estimated, self.measured, self.rows))
+        self.estimated, self.measured, self.rows = (
+            x + m for x in (self.estimated, self.measured, self.rows)
+        )
         if not self._untorqued[0]:  # (no torque column: every row counted, as _torque does)
             self._untorqued[1] = int(log.lines[k])
         self._untorqued[0] += m

@@ -98,7 +98,6 @@ from pinobs.observers.base import (
     positive,
     register,
 )
-from pinobs.tolerances import TIME_EPS
 from pinobs.observers.kf_bank import AUTO_GATE_SAMPLES as AUTO_GATE_SAMPLES  # re-exported
 from pinobs.observers.kf_bank import AUTO_LAMBDAS as AUTO_LAMBDAS  # re-exported
 from pinobs.observers.kf_bank import (
@@ -112,6 +111,7 @@ from pinobs.observers.kf_bank import (
 )
 from pinobs.observers.kf_bank import BankState as BankState  # re-exported
 from pinobs.observers.kf_bank import KFBank as KFBank  # re-exported
+from pinobs.tolerances import TIME_EPS
 
 __all__ = [
     "KF_CAUSES",
@@ -319,7 +319,7 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
             dt = t - before
             plain = (t > before + TIME_EPS) & (dt < self._split) & (dt <= self._span)
             taken = t.size if plain.all() else int(np.argmin(plain))
-        if not taken:
+        if not taken or not isinstance(state, AutoState):
             return np.empty((0, nq)), np.empty((0, self.robot.nv))
         bank = self._auto()
         state, mixes, nis, gated = bank.rows(state, self._t, t[:taken], q[:taken], v_max)

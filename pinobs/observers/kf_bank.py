@@ -499,6 +499,8 @@ class AutoBank:
         if auto_kernel.compiled is None or self._table is None or not state.jerk.size:
             return state, np.empty((0, nq + nv)), np.empty(0), np.zeros(0, dtype=bool)
         rows_kernel.load()
+        t, q = np.ascontiguousarray(t, dtype=float), np.ascontiguousarray(q, dtype=float)
+        v_max = np.ascontiguousarray(np.broadcast_to(np.asarray(v_max, dtype=float), (nv,)))
         m, gate, x = t.size, state.gate, state.x.copy()
         mixes, nis, gated = np.empty((m, nq + nv)), np.empty(m), np.zeros(m, dtype=bool)
         done, n, level, known, run = rows_kernel.compiled(  # type: ignore[misc]
@@ -508,8 +510,15 @@ class AutoBank:
         )  # fmt: skip
         if not done:
             return state, mixes[:0], nis[:0], gated[:0]
-        after = GateState(float(nis[done - 1]), bool(gated[done - 1]), run, level if known else None)
-        return AutoState(x, self._shape, state.jerk, n, after), mixes[:done], nis[:done], gated[:done]
+        after = GateState(
+            float(nis[done - 1]), bool(gated[done - 1]), run, level if known else None
+        )
+        return (
+            AutoState(x, self._shape, state.jerk, n, after),
+            mixes[:done],
+            nis[:done],
+            gated[:done],
+        )
 
     def _step_numpy(self, state: AutoState, h: float, q_meas: Vector | None) -> AutoState:
         """:meth:`step` in NumPy, the configurations filter by filter (planar joints, or

@@ -755,12 +755,13 @@ auto_kernel = LazyKernel(
 
 
 def _rows_warm_args() -> tuple[object, ...]:
-    """Arguments of :data:`rows_kernel`'s one signature (float64 C arrays, as the bank gives)."""
-    x, _, jerk, q, table, h, var, _, _, n, _, forget, threshold, level, run, nq = _auto_warm_args()
-    nv, rows = 1, 1
+    """Arguments of :data:`rows_kernel`'s one signature (float64 C arrays, as the bank gives;
+    the state of :func:`_auto_warm_args`)."""
+    x, jerk, table = _auto_warm_args()[0], np.ones(2), np.zeros((0, 4), dtype=np.int64)
+    nq = nv = rows = 1
     return (
-        x, 0.0, np.full(rows, h), np.zeros((rows, nq)), jerk, table, var, forget, threshold,
-        1.0, n, level, True, run, nq, 20.0, np.full(nv, np.inf), np.empty((rows, nq + nv)),
+        x, 0.0, np.full(rows, 1e-3), np.zeros((rows, nq)), jerk, table, 1.0, 0.99, math.inf,
+        1.0, 30.0, 1.0, True, 0, nq, 20.0, np.full(nv, np.inf), np.empty((rows, nq + nv)),
         np.empty(rows), np.zeros(rows, dtype=np.bool_),
     )  # fmt: skip
 

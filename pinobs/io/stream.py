@@ -73,6 +73,10 @@ from pinobs.tolerances import (
 #: Rows :meth:`LogEstimator.feed_log` feeds one by one before it offers the observer the rest
 #: at once again (while it learns σ and its period, or past a row it left).
 _ROWS_ONE_BY_ONE = 32
+#: The most rows :meth:`LogEstimator.feed_log` offers at once (each offer checks the rows it
+#: offers: a log whose rows the observer leaves here and there is not checked to its end at
+#: every offer).
+_ROWS_AT_ONCE = 4096
 
 __all__ = ["LogEstimator", "LogRun", "ObserverLike", "noise_rows", "time_screened"]
 
@@ -299,7 +303,8 @@ class LogEstimator:
         k, parts = 0, []
         while k < plain:
             if self._started:  # the rows from k at once, as far as the observer takes them
-                q, v = take(log.t[k:plain], log.q[k:plain], self._v_max)
+                stop = min(plain, k + _ROWS_AT_ONCE)
+                q, v = take(log.t[k:stop], log.q[k:stop], self._v_max)
                 if len(q):
                     parts.append((log.t[k : k + len(q)], q, v))
                     self._taken(log, k, len(q), q[-1], v[-1])

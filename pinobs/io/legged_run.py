@@ -308,8 +308,6 @@ def legged_run(
     filt, said_setup = _make_filter(robot, fixed, log, imu_frame, gains, foot_gate, *feet)
     joints = _joint_velocities(fixed, log)
     n = len(log)
-    q_out, v_out = np.full((n, robot.nq), np.nan), np.full((n, robot.nv), np.nan)
-    nis, dof, gated = np.full(n, np.nan), np.zeros(n, dtype=int), 0
     bad: list[tuple[int, str]] = list(joints.bad_rows)
     usable = (
         np.isfinite(log.t)
@@ -319,29 +317,27 @@ def legged_run(
     )
     previous: float | None = None
     said: list[str] = [*joints.warnings, *said_setup]
-    rows = _Rows(log, joints.v, prob)
-    times, fed = log.t.tolist(), usable.tolist()  # (Python floats and bools: per-row reads)
+    rows, out = _Rows(log, joints.v, prob), _Outputs()
+    # (Python floats, bools and flag lists: per-row reads; "probability" sets the flags' rows)
+    times, fed, now = log.t.tolist(), usable.tolist(), flags.tolist()
     for k in range(n):
         if not fed[k] or (previous is not None and times[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
             if prob is not None and k:
-                flags[k] = flags[k - 1]
+                now[k] = now[k - 1]
             continue
-        if prob is None:
-            now = flags[k].tolist()
-        else:
-            now = rows.probable(filt, prob, k, flags[k - 1].tolist() if k else None)
-            flags[k] = now
-        est = _step(filt, robot, log, k, now, rows, previous is None)
+        if prob is not None:
+            now[k] = rows.probable(filt, prob, k, now[k - 1] if k else None)
+        est = _step(filt, robot, log, k, now[k], rows, previous is None)
         if est is None:
             said.append(f"inekf diverged at t = {log.t[k]:.6g} s: the rows after it are NaN")
             bad.extend((int(log.lines[j]), "after the filter diverged") for j in range(k, n))
             break
         previous = times[k]
-        q_out[k], v_out[k] = est.q, est.v
-        v_out[k, 6:] = joints.v[k]  # (what update passes through; reset shows none)
-        nis[k] = np.nan if est.nis is None else est.nis
-        dof[k], gated = est.nis_dof, gated + len(est.gated)
+        out.add(k, est)
+    if prob is not None:
+        flags[:] = now
+    q_out, v_out, nis, dof, gated = out.arrays(robot, n, joints.v)
     frame = getattr(filt.kinematics, "imu_frame", None) or robot.model.names[1]
     said += contact_notes(flags, log) + frame_notes(filt.kinematics, log, flags, frame)
     done = int(np.all(np.isfinite(q_out), axis=1).sum())
@@ -359,6 +355,41 @@ def legged_run(
         consistency=stance_consistency(nis, dof, gated),
     )
     return LeggedDetail(run, flags, nis, dof)
+
+
+class _Outputs:
+    """The estimates of the rows fed, kept per row as Python lists (their fields only: a row's
+    estimate holds the filter's covariance) and made :func:`legged_run`'s arrays at the end."""
+
+    def __init__(self) -> None:
+        self.rows: list[int] = []
+        self.q: list[Vector] = []
+        self.v: list[Vector] = []
+        self.nis: list[float] = []
+        self.dof: list[int] = []
+        self.gated = 0
+
+    def add(self, k: int, est: Any) -> None:
+        """Row ``k``'s estimate."""
+        self.rows.append(k)
+        self.q.append(est.q)
+        self.v.append(est.v)
+        self.nis.append(math.nan if est.nis is None else est.nis)
+        self.dof.append(est.nis_dof)
+        self.gated += len(est.gated)
+
+    def arrays(
+        self, robot: Robot, n: int, dq: Vector
+    ) -> tuple[Vector, Vector, Vector, np.ndarray, int]:
+        """``(q, v, nis, dof, gated)`` over the ``n`` rows: NaN (dof 0) where none was fed;
+        ``v``'s joints those of ``dq`` (what update passes through; reset shows none)."""
+        q, v = np.full((n, robot.nq), np.nan), np.full((n, robot.nv), np.nan)
+        nis, dof = np.full(n, np.nan), np.zeros(n, dtype=int)
+        if self.rows:
+            rows = np.array(self.rows)
+            q[rows], v[rows], nis[rows], dof[rows] = self.q, self.v, self.nis, self.dof
+            v[rows, 6:] = dq[rows]
+        return q, v, nis, dof, self.gated
 
 
 def _contact_setup(

@@ -259,7 +259,7 @@ def _consistency(observer: Any) -> Any:
 def estimate_log(observer: ObserverLike, log: Log, *, period: float | None = None) -> LogRun:
     """Run ``observer`` over a log held in memory (rules: module docstring)."""
     est = LogEstimator(observer, period=period)
-    a = est.feed(log)
+    a = est.feed_log(log)
     b = est.finish()
     return LogRun(
         t=np.concatenate([a[0], b[0]]),

@@ -70,6 +70,14 @@ from pinobs.tolerances import (
     TIME_EPS,
 )
 
+#: Rows :meth:`LogEstimator.feed_log` feeds one by one before it offers the observer the rest
+#: at once again (while it learns σ and its period, or past a row it left).
+_ROWS_ONE_BY_ONE = 32
+#: The most rows :meth:`LogEstimator.feed_log` offers at once (each offer checks the rows it
+#: offers: a log whose rows the observer leaves here and there is not checked to its end at
+#: every offer).
+_ROWS_AT_ONCE = 4096
+
 __all__ = ["LogEstimator", "LogRun", "ObserverLike", "noise_rows", "time_screened"]
 
 
@@ -272,6 +280,71 @@ class LogEstimator:
         n = len(log) if last else max(len(log) - 1, 0)
         self._pending = None if n == len(log) else slice_log(log, n, len(log))
         return self._run(log, n)
+
+    def feed_log(self, log: Log) -> tuple[Vector, Vector, Vector]:
+        """:meth:`feed` of a whole log at once (:func:`~pinobs.io.estimate_log`; :meth:`finish`
+        after it): the same rows, estimates and reports.  An observer that takes rows in one
+        call (``update_rows``: ``kf``'s compiled bank) is given the log's leading plain rows
+        (:meth:`_plain_rows`) so, as far as it takes them; the other rows, the first ones (the
+        observer's reset, σ learnt from the log) and those it leaves, one by one as
+        :meth:`feed` does (each with the next row to look ahead to)."""
+        take = getattr(self.observer, "update_rows", None)
+        period = _median_period(log.t) if self.period is None else self.period
+        plain = self._plain_rows(log, period)
+        if take is None or self._started or self._pending is not None or plain < 2:
+            return self.feed(log)
+        self.warnings.extend(n for n in log.notes if n not in self.warnings)
+        self.period = period
+        if not self._unit_checked:
+            self._unit_checked = True
+            said = time_unit_warning(_median_period(log.t))
+            if said is not None:
+                self.warnings.append(said)
+        k, parts = 0, []
+        while k < plain:
+            if self._started:  # the rows from k at once, as far as the observer takes them
+                stop = min(plain, k + _ROWS_AT_ONCE)
+                q, v = take(log.t[k:stop], log.q[k:stop], self._v_max)
+                if len(q):
+                    parts.append((log.t[k : k + len(q)], q, v))
+                    self._taken(log, k, len(q), q[-1], v[-1])
+                    k += len(q)
+                    continue
+            end = min(k + _ROWS_ONE_BY_ONE, plain)
+            parts.append(self._run(slice_log(log, k, min(end + 1, len(log))), end - k))
+            k = end
+        parts.append(self.feed(slice_log(log, plain, len(log))))
+        t, q, v = (np.concatenate(x) for x in zip(*parts, strict=True))
+        return t, q, v
+
+    def _plain_rows(self, log: Log, period: float | None) -> int:
+        """How many of the log's rows, from its first, are plain: each fed to the observer as
+        it is, placed after the one before (a finite time after it by more than ``TIME_EPS``,
+        within :data:`GAP_PERIODS` periods: no sub-steps), a finite position within the
+        joints' warning limits, nothing reported (no problem, no stale row or dropped samples,
+        no torque column); ``period`` the log's (none: no row is)."""
+        if log.tau is not None or log.problems or period is None or len(log) < 2:
+            return 0
+        t, masks = log.t, _RowMasks.of(log, self._bounds)
+        ok = masks.finite_q & ~masks.absurd_q & ~masks.outside.any(axis=1) & np.isfinite(t)
+        if log.stale is not None:
+            ok &= ~log.stale
+        if log.drops is not None:
+            ok &= log.drops == 0
+        ok[1:] &= (t[1:] > t[:-1] + TIME_EPS) & (t[1:] - t[:-1] <= GAP_PERIODS * period)
+        return len(t) if ok.all() else int(np.argmin(ok))
+
+    def _taken(self, log: Log, k: int, m: int, q: Vector, v: Vector) -> None:
+        """The counts of :meth:`_run` after its rows ``k … k + m − 1`` of ``log``, plain rows
+        the observer took at once (``q``, ``v``: the last one's estimate)."""
+        self._t, self._last = float(log.t[k + m - 1]), (q.copy(), v.copy())
+        self.estimated, self.measured, self.rows = (
+            x + m for x in (self.estimated, self.measured, self.rows)
+        )
+        if not self._untorqued[0]:  # (no torque column: every row counted, as _torque does)
+            self._untorqued[1] = int(log.lines[k])
+        self._untorqued[0] += m
+        self._untorqued[2] = int(log.lines[k + m - 1])
 
     def finish(self) -> tuple[Vector, Vector, Vector]:
         """The held-back row, and the limit warning (call once, after the last chunk)."""

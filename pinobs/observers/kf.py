@@ -111,6 +111,7 @@ from pinobs.observers.kf_bank import (
 )
 from pinobs.observers.kf_bank import BankState as BankState  # re-exported
 from pinobs.observers.kf_bank import KFBank as KFBank  # re-exported
+from pinobs.tolerances import TIME_EPS
 
 __all__ = [
     "KF_CAUSES",
@@ -293,6 +294,42 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
             return KFState(q, v, a, 0.5 * (P + P.T), state.gate.predicted())
         r = self.gains.meas_std**2
         return corrected(self.robot, q, v, a, P, state.gate, r, self._gate, q_meas)
+
+    def update_rows(self, t: Vector, q: Vector, v_max: Vector) -> tuple[Vector, Vector]:
+        """:meth:`update` at ``t[k]`` with ``q[k]`` for ``k = 0, 1, …`` in turn, as far as
+        each is a plain step of ``"auto"``'s compiled bank, in one compiled call
+        (:meth:`~pinobs.observers.kf_bank.AutoBank.rows`: the same bits as the updates, for a
+        caller that runs a whole log: :class:`pinobs.io.LogEstimator`).  A plain step: σ known
+        (given, or learnt and replayed), the period known, no latency, no pause due, ``t[k]``
+        after the previous time by more than ``TIME_EPS`` and before the sub-step and pause
+        limits, ``q[k]`` finite (the caller's check), an estimate finite with every
+        ``|v̂_i| ≤ v_max_i``; the rows from the first that is not are left to :meth:`update`.
+        Returns the estimates ``(q̂, v̂)`` of the rows taken (``(rows, nq)``, ``(rows, nv)``)."""
+        state, nq = self._state, self._nq
+        taken = 0
+        if (
+            isinstance(state, AutoState)
+            and self._noise_samples is None
+            and not self._intervals_due
+            and self.latency == 0.0
+            and not self._restart_due
+            and not self._units  # (update normalises unit-norm blocks: not here)
+        ):
+            before = np.concatenate([[self._t], t[:-1]])
+            dt = t - before
+            plain = (t > before + TIME_EPS) & (dt < self._split) & (dt <= self._span)
+            taken = t.size if plain.all() else int(np.argmin(plain))
+        if not taken or not isinstance(state, AutoState):
+            return np.empty((0, nq)), np.empty((0, self.robot.nv))
+        bank = self._auto()
+        state, mixes, nis, gated = bank.rows(state, self._t, t[:taken], q[:taken], v_max)
+        if mixes.shape[0]:  # the base's bookkeeping after its last update (Observer.update)
+            self._state, self._t = state, float(t[mixes.shape[0] - 1])
+            self._ts, self._diverged = self._t, False
+            self._last = self._make_estimate(self._t, state)
+            self._nis.extend(nis.tolist())
+            self._gated += int(gated.sum())
+        return mixes[:, :nq], mixes[:, nq:]
 
     def consistency(self) -> Consistency:
         """The NIS test of the base class; its causes are a model-free filter's.  With

@@ -14,11 +14,18 @@ import math
 from typing import NamedTuple, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pinobs.errors import UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.observers.base import GateState, Vector, gate_threshold, positive
-from pinobs.observers.kf_kernels import auto_kernel, auto_layout, bank_kernel, joint_table
+from pinobs.observers.kf_kernels import (
+    auto_kernel,
+    auto_layout,
+    bank_kernel,
+    joint_table,
+    rows_kernel,
+)
 
 _new_tuple = tuple.__new__  # a NamedTuple made without its __new__, a Python call (step)
 
@@ -478,6 +485,40 @@ class AutoBank:
             if rejected:  # the prediction (its likelihoods unchanged)
                 n_new = n
         return _new_tuple(AutoState, (x, self._shape, jerk, n_new, after))
+
+    def rows(
+        self, state: AutoState, t0: float, t: Vector, q: Vector, v_max: Vector
+    ) -> tuple[AutoState, Vector, Vector, NDArray[np.bool_]]:
+        """:meth:`step` measured at each row of ``t``, ``q`` in turn (``t0`` the state's time), in
+        one compiled call (:func:`~pinobs.observers.kf_kernels.auto_rows_loops`: the same
+        kernel, count and gate, the same bits), stopping before a row whose mixture is not
+        finite or has ``|v̂_i| > v_max_i``.  Returns the state after the rows taken, their
+        mixtures ``(q̂, v̂)`` (rows taken × ``nq + nv``), NIS and rejections; none taken (and
+        ``state``) where the step is not compiled or the grid not set (a first step's)."""
+        nq, nv = self._shape[1], self.robot.nv
+        if auto_kernel.compiled is None or self._table is None or not state.jerk.size:
+            return state, np.empty((0, nq + nv)), np.empty(0), np.zeros(0, dtype=bool)
+        rows_kernel.load()
+        t, q = np.ascontiguousarray(t, dtype=float), np.ascontiguousarray(q, dtype=float)
+        v_max = np.ascontiguousarray(np.broadcast_to(np.asarray(v_max, dtype=float), (nv,)))
+        m, gate, x = t.size, state.gate, state.x.copy()
+        mixes, nis, gated = np.empty((m, nq + nv)), np.empty(m), np.zeros(m, dtype=bool)
+        done, n, level, known, run = rows_kernel.compiled(  # type: ignore[misc]
+            x, t0, t, q, state.jerk, self._table, self._var, self._forget, self.gate, self._dof,
+            state.n, 0.0 if gate.level is None else gate.level, gate.level is not None,
+            gate.run, nq, AUTO_GATE_SAMPLES, v_max, mixes, nis, gated,
+        )  # fmt: skip
+        if not done:
+            return state, mixes[:0], nis[:0], gated[:0]
+        after = GateState(
+            float(nis[done - 1]), bool(gated[done - 1]), run, level if known else None
+        )
+        return (
+            AutoState(x, self._shape, state.jerk, n, after),
+            mixes[:done],
+            nis[:done],
+            gated[:done],
+        )
 
     def _step_numpy(self, state: AutoState, h: float, q_meas: Vector | None) -> AutoState:
         """:meth:`step` in NumPy, the configurations filter by filter (planar joints, or

@@ -30,6 +30,7 @@ __all__ = [
     "LIE_HELPERS",
     "auto_kernel",
     "auto_layout",
+    "auto_rows_loops",
     "auto_step_loops",
     "bank_kernel",
     "bank_rows_loops",
@@ -42,6 +43,7 @@ __all__ = [
     "kalman_correct",
     "predict_covariance",
     "predict_mean",
+    "rows_kernel",
     "rows_view",
     "transition_into",
 ]
@@ -675,6 +677,58 @@ def auto_step_loops(
     return nis, reject, level
 
 
+def auto_rows_loops(
+    x: Vector, t0: float, t: Vector, q: NDArray[np.float64], jerk: Vector,
+    table: NDArray[np.int64], meas_var: float, forget: float, threshold: float, dof: float,
+    n: float, level: float, level_known: bool, run: int, nq: int, gate_samples: float,
+    v_max: Vector, mixes: NDArray[np.float64], nis: Vector, gated: NDArray[np.bool_],
+) -> tuple[int, float, float, bool, int]:  # fmt: skip
+    """:func:`auto_step_loops` measured at each row ``k`` in turn (``q[k]`` at ``t[k]``, the step
+    ``h = t[k] − t[k−1]``, ``t[−1] = t0``) with :meth:`~pinobs.observers.kf_bank.AutoBank.step`'s
+    count and gate (``gate_on = n ≥ gate_samples``, ``n ← γ n + 1`` unless rejected, the
+    gate's ``run`` and ``level``: ``dof`` while not ``level_known``): the same calls in the
+    same order, without a Python call per row.  Row ``k``'s mixture ``(q̂, v̂)`` into
+    ``mixes[k]``, its NIS and rejection into ``nis[k]``, ``gated[k]``.  Stops before a row whose
+    mixture has a non-finite entry or a ``|v̂_i| > v_max_i`` (not taken: the state before it
+    kept, for :meth:`Observer.update` to take it and say why).  The state after the last row
+    taken is left in ``x``.  Returns ``(rows taken, n, level, level_known, run)``."""
+    size, nv = x.size, v_max.size
+    o_mix = auto_layout(jerk.size, nq, nv)[8]
+    bufs = np.empty((2, size))
+    now = x
+    done = 0
+    for k in range(t.size):
+        h = t[k] - (t0 if k == 0 else t[k - 1])
+        gate_on = n >= gate_samples
+        n_new = forget * n + 1.0
+        nxt = bufs[k % 2]
+        z, rejected, lvl = auto_step_loops(
+            now, nxt, jerk, q[k], table, h, meas_var, True, gate_on, n, n_new, forget,
+            threshold, level if level_known else dof, run, nq,
+        )  # fmt: skip
+        ok = True
+        for i in range(nq + nv):
+            m = nxt[o_mix + i]
+            if not math.isfinite(m) or (i >= nq and abs(m) > v_max[i - nq]):
+                ok = False
+        if not ok:
+            break
+        if gate_on:  # GateState.measured, decided in the kernel
+            run, level, level_known = (run + 1 if rejected else 0), lvl, True
+            if rejected:
+                n_new = n
+        else:  # too few samples for a scale: reported, not gated
+            run, level_known, rejected = 0, False, False
+        n = n_new
+        for i in range(nq + nv):
+            mixes[k, i] = nxt[o_mix + i]
+        nis[k], gated[k] = z, rejected
+        now, done = nxt, k + 1
+    if done:
+        x[:] = now
+    return done, n, level, level_known, run
+
+
 def _auto_warm_args() -> tuple[object, ...]:
     """Arguments of :data:`auto_kernel`'s one signature (float64 C arrays, as the step gives)."""
     nf, nq, nv = 2, 1, 1
@@ -698,3 +752,22 @@ auto_kernel = LazyKernel(
         _outlier_gate, _weights_into, _mixture_into,
     ),
 )  # fmt: skip
+
+
+def _rows_warm_args() -> tuple[object, ...]:
+    """Arguments of :data:`rows_kernel`'s one signature (float64 C arrays, as the bank gives;
+    the state of :func:`_auto_warm_args`)."""
+    x, jerk, table = _auto_warm_args()[0], np.ones(2), np.zeros((0, 4), dtype=np.int64)
+    nq = nv = rows = 1
+    return (
+        x, 0.0, np.full(rows, 1e-3), np.zeros((rows, nq)), jerk, table, 1.0, 0.99, math.inf,
+        1.0, 30.0, 1.0, True, 0, nq, 20.0, np.full(nv, np.inf), np.empty((rows, nq + nv)),
+        np.empty(rows), np.zeros(rows, dtype=np.bool_),
+    )  # fmt: skip
+
+
+#: :func:`auto_rows_loops` compiled (loaded by :meth:`~pinobs.observers.kf_bank.AutoBank.rows`
+#: at its first call, after :data:`auto_kernel`: its helpers compiled).
+rows_kernel = LazyKernel(
+    auto_rows_loops, *_rows_warm_args(), helpers=(*auto_kernel.helpers, auto_step_loops)
+)

@@ -125,3 +125,48 @@ def test_an_unwritable_or_non_csv_output_is_a_pinobs_error_before_the_work(
     assert main(_args(log_path, tmp_path / "x.parquet")) == 2
     assert "written as CSV text, not .parquet" in capsys.readouterr().err
     assert not (tmp_path / "x.parquet").exists()
+
+
+@pytest.mark.filterwarnings("ignore::pinobs.errors.NoiseWarning")  # σ learnt from the data
+def test_estimate_log_gives_kf_its_plain_rows_at_once_with_the_same_results(log_path) -> None:
+    """``estimate_log`` hands ``kf`` (``update_rows``) the log's leading plain rows at once
+    (``LogEstimator.feed_log``): the same estimates, reports, warnings, counts and consistency
+    as ``feed`` row by row, on the plain log, and with a NaN row, a repeated time, a gap of 5
+    and of 20 periods and an absurd position further on (the rows from there one by one)."""
+    from dataclasses import replace
+
+    from pinobs.io import LogEstimator
+
+    robot = pinobs.load("ur5")
+    res = pinobs.simulate(robot, [], duration=3.0, sensor=pinobs.Sensor(500.0, 1e-4), seed=4)
+    plain = read_log(
+        pd.DataFrame({"t": res.t, **{f"q{i}": res.q_meas[:, i] for i in range(6)}}), robot
+    )
+    logs = [plain]
+    for k, what in (
+        (900, "nan"),
+        (1000, "repeat"),
+        (1100, "gap5"),
+        (1200, "gap20"),
+        (1300, "absurd"),
+    ):
+        t, q = plain.t.copy(), plain.q.copy()
+        if what == "nan":
+            q[k, 2] = np.nan
+        elif what == "repeat":
+            t[k] = t[k - 1]
+        elif what.startswith("gap"):
+            t[k:] += int(what[3:]) * 2e-3
+        else:
+            q[k, 1] = 1e4
+        logs.append(replace(plain, t=t, q=q))
+    for log in logs:
+        new = estimate_log(pinobs.make_observer("kf", robot), log)
+        ob = pinobs.make_observer("kf", robot)
+        est = LogEstimator(ob)
+        (_, q_a, v_a), (_, q_b, v_b) = est.feed(log), est.finish()
+        np.testing.assert_array_equal(new.q, np.concatenate([q_a, q_b]))
+        np.testing.assert_array_equal(new.v, np.concatenate([v_a, v_b]))
+        assert new.bad_rows == est.bad_rows and new.warnings == est.warnings
+        assert (new.rows, new.estimated, new.measured) == (est.rows, est.estimated, est.measured)
+        assert new.consistency == ob.consistency()

@@ -367,3 +367,65 @@ def test_the_auto_kernels_covariance_prediction_is_the_general_one() -> None:
         general(F, Q1, jerk, P, np.empty((3, 3)), a)
         written(h, F[0, 2], jerk, Q1, P, b)
         assert np.array_equal(a, b), (trial, a - b)
+
+
+@pytest.mark.filterwarnings("ignore::pinobs.errors.NoiseWarning")  # σ learnt from the data
+@pytest.mark.parametrize("robot_name", ["planar_3r", "ur5"])
+def test_update_rows_gives_the_bits_of_the_updates(
+    rng: np.random.Generator, robot_name: str
+) -> None:
+    """``update_rows`` (the compiled loop over rows a whole log's run takes) after σ was learnt
+    from the first second and replayed: the same velocities, last estimate, consistency and
+    next update as ``update`` row by row, an outlier the gate rejects included."""
+    robot = pinobs.load(robot_name)
+    t, _, qm = _white_jerk_log(rng, np.full(robot.nv, 1e3), 3000, 1e-3, 1e-4)
+    qm[2000, 0] += 0.05  # rejected by the outlier gate
+    one, rows = (pinobs.make_observer("kf", robot) for _ in range(2))  # σ from the data
+    for ob in (one, rows):
+        ob.reset(t[0], qm[0])
+    v_one = np.array([one.update(t[k], qm[k]).v for k in range(1, t.size - 1)])
+    m = 1200  # after the first second: σ learnt, replayed
+    v_rows = [rows.update(t[k], qm[k]).v for k in range(1, m)]
+    q_r, v_r = rows.update_rows(t[m:-1], qm[m:-1], np.full(robot.nv, np.inf))
+    assert q_r.shape == (t.size - 1 - m, robot.nq)
+    np.testing.assert_array_equal(np.vstack([v_rows, v_r]), v_one)
+    np.testing.assert_array_equal(q_r[-1], one.estimate.q)
+    assert rows.consistency() == one.consistency() and one.consistency().gated >= 1
+    np.testing.assert_array_equal(rows.update(t[-1], qm[-1]).v, one.update(t[-1], qm[-1]).v)
+
+
+@pytest.mark.filterwarnings("ignore::pinobs.errors.NoiseWarning")  # σ learnt from the data
+def test_update_rows_stops_before_a_velocity_past_its_bound(rng: np.random.Generator) -> None:
+    """The first row whose ``|v̂_i|`` passes ``v_max`` is left (the state before it kept): its
+    ``update`` then gives the estimate the rows one by one give."""
+    robot = pinobs.load("planar_3r")
+    t, _, qm = _white_jerk_log(rng, np.full(robot.nv, 1e3), 2000, 1e-3, 1e-4)
+    one, rows = (pinobs.make_observer("kf", robot) for _ in range(2))
+    for ob in (one, rows):
+        ob.reset(t[0], qm[0])
+    v_one = np.array([one.update(t[k], qm[k]).v for k in range(1, t.size)])
+    for k in range(1, 1200):
+        rows.update(t[k], qm[k])
+    v_max = np.full(robot.nv, np.inf)
+    v_max[1] = float(np.median(np.abs(v_one[1199:, 1])))
+    first = int(np.argmax(np.abs(v_one[1199:, 1]) > v_max[1]))  # the first row past it
+    q_r, v_r = rows.update_rows(t[1200:], qm[1200:], v_max)
+    assert q_r.shape[0] == first > 0
+    np.testing.assert_array_equal(v_r, v_one[1199 : 1199 + first])
+    np.testing.assert_array_equal(
+        rows.update(t[1200 + first], qm[1200 + first]).v, v_one[1199 + first]
+    )
+
+
+def test_update_rows_takes_nothing_while_sigma_is_learnt_or_on_unit_blocks() -> None:
+    """Before σ is learnt (the updates kept for the replay), and on a free-flyer (``update``
+    normalises its quaternion), ``update_rows`` takes no row: ``update`` does."""
+    for name in ("planar_3r", "go1"):
+        robot = pinobs.load(name)
+        t, qs = _ramp(robot, np.linspace(-1.0, 1.0, robot.nv), 1500, 1e-3)
+        ob = pinobs.make_observer("kf", robot, noise_std=None if name == "planar_3r" else 1e-4)
+        ob.reset(t[0], qs[0])
+        for k in range(1, 10 if name == "planar_3r" else 1200):
+            ob.update(t[k], qs[k])
+        q_r, _ = ob.update_rows(t[1300:], np.array(qs[1300:]), np.full(robot.nv, np.inf))
+        assert q_r.shape[0] == 0

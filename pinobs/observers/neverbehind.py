@@ -132,6 +132,7 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from typing import Any, NamedTuple, cast
@@ -213,6 +214,16 @@ CONSISTENCY_ALPHA = 1e-3
 #: The largest ``εₖ/m`` one sample brings into ``ν̄`` (an outlier's NIS of 1e300 would hold
 #: ``ν̄`` out of the band for minutes; 100 is out of it for about a window).
 NIS_CAP = 100.0
+
+
+@functools.lru_cache(maxsize=64)
+def nis_band(m: int, lam: float) -> tuple[float, float]:
+    """The time-average NIS test's two-sided band for ``ν̄`` (module docstring, **Prior**):
+    ``χ²_n(α)/n``, ``χ²_n(1 − α)/n``, ``n = m (2 − λ)/λ``, ``α`` = :data:`CONSISTENCY_ALPHA`
+    (computed once per ``(m, λ)``: a step's length, not the observer's state)."""
+    n = max(1, round(m * (2.0 - lam) / lam))
+    alpha = CONSISTENCY_ALPHA
+    return chi2_quantile(n, 1.0 - alpha) / n, chi2_quantile(n, alpha) / n
 
 
 def log_odds_loops(
@@ -424,7 +435,6 @@ class NeverBehind(Observer[_State]):
         self.prior: float | str = prior_log_odds if self._self_test else float(prior_log_odds)
         if not self._self_test and not 0.0 <= float(self.prior) <= _LOG_ODDS:
             raise GainError(f"prior_log_odds={prior_log_odds!r}: give one in [0, {_LOG_ODDS:g}]")
-        self._bands: dict[float, tuple[float, float]] = {}  # (the NIS test's, per λ)
         if self.lost_ratio <= 1.0:
             raise GainError(f"lost_ratio={lost_ratio!r}: give a ratio above 1")
         cls = observer_class(observer)
@@ -566,13 +576,8 @@ class NeverBehind(Observer[_State]):
         nv = self.robot.nv
         if eps is not None and math.isfinite(eps):  # (one sample's share capped: NIS_CAP)
             nis += lam * (min(eps / nv, NIS_CAP) - nis)
-        band = self._bands.get(lam)
-        if band is None:  # χ²_n(α)/n, χ²_n(1 − α)/n, n = m (2 − λ)/λ: once per step length
-            n = max(1, round(nv * (2.0 - lam) / lam))
-            alpha = CONSISTENCY_ALPHA
-            band = (chi2_quantile(n, 1.0 - alpha) / n, chi2_quantile(n, alpha) / n)
-            self._bands[lam] = band
-        if not band[0] <= nis <= band[1]:
+        low, high = nis_band(nv, lam)
+        if not low <= nis <= high:
             return nis, PRIOR
         psd, scale = getattr(m, "d_psd", None), getattr(m, "psd_scale", None)
         gains = getattr(self.model, "gains", None)  # (ekf's: its accel_psd q_a)

@@ -137,8 +137,8 @@ class Recorder(runner.InvariantEKF):
             self.foot_velocities(u.q_joints, u.joint_velocities, u.reading[:3]) if ok else None
         )
 
-    def update(self, *args: Any, **kwargs: Any) -> Any:
-        out = super().update(*args, **kwargs)
+    def update_checked(self, *args: Any, **kwargs: Any) -> Any:  # (update calls it; the runner too)
+        out = super().update_checked(*args, **kwargs)
         s = self.state
         self.states.append((s.t, s.R, s.x[0], s.P[3:6, 3:6]))
         return out

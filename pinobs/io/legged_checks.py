@@ -64,8 +64,7 @@ def frame_notes(kinematics: object, log: Log, flags: np.ndarray, imu_frame: str)
     rows = rows[np.linspace(0, rows.size - 1, min(FRAME_ROWS, rows.size)).astype(int)]
     down = np.zeros(3)
     for k in rows:
-        h = kinematics.positions_and_jacobians(joints[k])[0]  # type: ignore[attr-defined]
-        c = h[flags[k]].mean(axis=0)
+        c = _feet(kinematics, joints[k])[flags[k]].mean(axis=0)
         down += c / max(float(np.linalg.norm(c)), 1e-12)
     up = np.mean(acc[rows], axis=0)
     theta = _angle(up, -down)
@@ -94,6 +93,15 @@ def contact_notes(flags: np.ndarray, log: Log) -> list[str]:
         "its velocity and position drift; give the threshold in the force columns' units "
         "(--contact-force ON [OFF]) or contact.<foot> flags"
     ]
+
+
+def _feet(kinematics: object, q_joints: Vector) -> Vector:
+    """The feet's positions in the IMU frame ``(K, 3)``: ``FootKinematics.positions`` (no
+    Jacobians), else the first of ``positions_and_jacobians`` (a ``ContactKinematics``)."""
+    positions = getattr(kinematics, "positions", None)
+    if positions is not None:
+        return positions(q_joints)  # type: ignore[no-any-return]
+    return kinematics.positions_and_jacobians(q_joints)[0]  # type: ignore[attr-defined,no-any-return]
 
 
 def _angle(a: Vector, b: Vector) -> float:

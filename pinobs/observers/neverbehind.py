@@ -301,9 +301,6 @@ def weigh_loops(
             out[4, i] = q_kf[i] + w * (q_m[i] - q_kf[i])
 
 
-import os as _os
-
-_DIAG: list | None = [] if _os.environ.get("PINOBS_NBDIAG") else None  # EXPERIMENT
 _Kernel = Callable[..., Any]
 _ONE = np.ones(1)
 _ROWS = np.zeros((8, 1))
@@ -330,9 +327,6 @@ class _State(NamedTuple):
     dt_prev: float  # that step [s] (0: none yet)
     reseeds: int  # times the model-based observer was re-seeded since the reset
     d: Vector  # (nv,): Σⱼ Dⱼ (e²_kf − e²_m), each innovation once (**Irregular steps**)
-    sv: Any = None  # EXPERIMENT: (2, nv) common-position scores
-    dv: Any = None  # EXPERIMENT: their d
-    nu: float = 1.0  # EXPERIMENT: windowed NIS / m of the model
 
 
 class NeverBehind(Observer[_State]):
@@ -404,18 +398,6 @@ class NeverBehind(Observer[_State]):
             (self.noise_std or 0.0) ** 2,
             self.prior,
         )
-        import os
-
-        # EXPERIMENT (reverted in the next commit; benchmarks/never_behind_exact.md, "Common-position
-        # velocity score"): PINOBS_NBVEL=kf|blend scores the weights by eᵢ = q_{k+1} ⊖ (q̂_c ⊕
-        # (h v̂ᵢ + ½h²â)), q̂_c the kf's q̂ or the blend's previous q̂ (own-position scores kept for
-        # the lost tests); PINOBS_NBPRIOR=nis|nispsd|nispsd2 sets ℓ_p = TRUSTED_PRIOR while the
-        # model's windowed NIS/m is within the χ² bound (nispsd2: both bounds; PINOBS_NBALPHA) and
-        # (nispsd*) its learned density ψ h⁵/20 ≤ q_a h³/3, else 0.
-        self._vmode = os.environ.get("PINOBS_NBVEL", "")  # EXPERIMENT: "", "kf", "blend"
-        self._pmode = os.environ.get("PINOBS_NBPRIOR", "")  # EXPERIMENT: "", "nis", "nispsd"
-        self._alpha = float(os.environ.get("PINOBS_NBALPHA", "1e-3"))
-        self._bound_cache: dict[float, float] = {}
         for kernel in (score_kernel, log_odds_kernel, weigh_kernel):
             kernel.load()  # (numba's cache: compiled once per installation)
 
@@ -497,24 +479,12 @@ class NeverBehind(Observer[_State]):
             out[5] = r.difference(r.integrate(qm0, dt * vm0 + step_a), q_meas)
             out[6] = r.difference(r.integrate(qk0, dt * vk0 + step_a), q_meas)
         gains, period = self._gains, self._period_s  # a step off the grid: fair (docstring)
-        nu = state.nu
-        if self._pmode and not raised:
-            nu, consistent = self._consistency(state.nu, m, dt)
-            gains = (*gains[:4], TRUSTED_PRIOR if consistent else 0.0)
         fair = period is not None and abs(dt - period) > UNIFORM_TOL * period
         c, lost = cast(_Kernel, score_kernel.compiled)(  # scores, lost tests, log-odds
             flat, scored and not raised, measured, raised, q_meas if measured else q_kf,
             qm0, vm0, qk0, vk0, state.v, state.v_prev, dt, state.dt_prev, q_m, v_m, v_kf,
             state.s, state.d, fair, state.c, *gains, out,
         )  # fmt: skip
-        if _DIAG is not None:  # EXPERIMENT
-            nis = self.model.innovation(m)[0] if not raised else None
-            dp = getattr(m, "d_psd", None)
-            sc = getattr(m, "psd_scale", None)
-            _DIAG.append((dt, np.nan if nis is None else nis, np.nan if dp is None or sc is None else float(np.max(dp / sc)), lost))
-        sv, dv = state.sv, state.dv
-        if self._vmode:
-            sv, dv = self._velocity_scores(state, dt, q_meas, scored and not raised, out, c, lost, fair)
         reseeds = state.reseeds
         if lost:  # re-seeded (module docstring) at the kf's estimate, the blend's when w = 0
             reseeds += 1
@@ -525,69 +495,11 @@ class NeverBehind(Observer[_State]):
             if c > 0.0:
                 g = (gains[0], gains[2], gains[3], gains[4])
                 cast(_Kernel, log_odds_kernel.compiled)(c, dt, *g, out, fair)
-            if self._vmode:
-                sv = sv.copy()
-                sv[0] = self.lost_ratio * sv[1]
-                dv = (sv[1] - sv[0]) / min(1.0, dt / gains[0])
-                if c > 0.0:
-                    tmp = np.zeros_like(out)
-                    tmp[0:2] = sv
-                    tmp[7] = dv
-                    cast(_Kernel, log_odds_kernel.compiled)(c, dt, *g, tmp, fair)
-                    out[2] = tmp[2]
         if c > 0.0:
             np.exp(out[2], out=out[5])  # NumPy's exp (out[2] = −ℓ): the NumPy form's bits
         cast(_Kernel, weigh_kernel.compiled)(c > 0.0, flat, q_kf, v_kf, q_m, v_m, out)
         q = out[4] if flat else r.integrate(q_kf, out[2] * r.difference(q_kf, q_m))
-        return _State(m, kf, out[:2], c, out[2], q, out[3], state.v, dt, reseeds, out[7], sv, dv, nu)
-
-    def _consistency(self, nu, m, dt):  # EXPERIMENT
-        from pinobs.observers.gating import chi2_quantile
-
-        nis = self.model.innovation(m)[0]
-        nv = self.robot.nv
-        lam = min(1.0, dt / self.window)
-        if nis is not None and nis == nis:
-            nu = nu + lam * (nis / nv - nu)
-        key = round(lam, 6)
-        b = self._bound_cache.get(key)
-        if b is None:
-            dof = max(1, int(round(nv * (2.0 - lam) / lam)))
-            b = (chi2_quantile(dof, 1.0 - self._alpha) / dof, chi2_quantile(dof, self._alpha) / dof)
-            self._bound_cache[key] = b
-        ok = nu <= b[1] and (nu >= b[0] or self._pmode != "nispsd2")
-        if ok and self._pmode in ("nispsd", "nispsd2"):
-            dp = getattr(m, "d_psd", None)
-            sc = getattr(m, "psd_scale", None)
-            qa = getattr(getattr(self.model, "gains", None), "accel_psd", None)
-            if dp is not None and sc is not None and qa is not None:
-                ok = bool(np.all(dp / sc * dt * dt / 20.0 <= qa / 3.0))  # ψ h⁵/20 ≤ q_a h³/3
-        return nu, ok
-
-    def _velocity_scores(self, state, dt, q_meas, scored, out, c, lost, fair):  # EXPERIMENT
-        r = self.robot
-        nv = r.nv
-        sv = np.zeros((2, nv)) if state.sv is None else state.sv
-        dv = np.zeros(nv) if state.dv is None else state.dv
-        if q_meas is not None and scored:
-            qm0, vm0 = self.model.output(state.model)
-            qk0, vk0 = self.reference.output(state.kf)
-            qc = qk0 if self._vmode == "kf" else state.q
-            ahead = 0.0 if state.dt_prev <= 0 else 0.5 * dt * dt / state.dt_prev
-            step_a = ahead * (state.v - state.v_prev)
-            e_m = r.difference(r.integrate(qc, dt * vm0 + step_a), q_meas)
-            e_k = r.difference(r.integrate(qc, dt * vk0 + step_a), q_meas)
-            lam = min(1.0, dt / self.window)
-            sv = np.stack([sv[0] + lam * (e_m**2 - sv[0]), sv[1] + lam * (e_k**2 - sv[1])])
-            dv = (1.0 - lam) * dv + (e_k**2 - e_m**2)
-        if not lost and c > 0.0:
-            tmp = np.zeros_like(out)
-            tmp[0:2] = sv
-            tmp[7] = dv
-            g = self._gains
-            cast(_Kernel, log_odds_kernel.compiled)(c, dt, g[0], g[2], g[3], g[4], tmp, fair)
-            out[2] = tmp[2]
-        return sv, dv
+        return _State(m, kf, out[:2], c, out[2], q, out[3], state.v, dt, reseeds, out[7])
 
     def after_commit(self, state: _State, t: float, q: Vector | None, tau: Vector) -> _State:
         """Each observer's own, on its part of the state; the model-based observer's committed

@@ -697,13 +697,14 @@ def auto_rows_loops(
     bufs = np.empty((2, size))
     now = x
     done = 0
+    measured = size > 0  # (True, typed bool: a literal True would compile the step again)
     for k in range(t.size):
         h = t[k] - (t0 if k == 0 else t[k - 1])
         gate_on = n >= gate_samples
         n_new = forget * n + 1.0
         nxt = bufs[k % 2]
-        z, rejected, lvl = auto_step_loops(
-            now, nxt, jerk, q[k], table, h, meas_var, True, gate_on, n, n_new, forget,
+        z, rejected, lvl = _step_kernel(
+            now, nxt, jerk, q[k], table, h, meas_var, measured, gate_on, n, n_new, forget,
             threshold, level if level_known else dof, run, nq,
         )  # fmt: skip
         ok = True
@@ -769,5 +770,11 @@ def _rows_warm_args() -> tuple[object, ...]:
 #: :func:`auto_rows_loops` compiled (loaded by :meth:`~pinobs.observers.kf_bank.AutoBank.rows`
 #: at its first call, after :data:`auto_kernel`: its helpers compiled).
 rows_kernel = LazyKernel(
-    auto_rows_loops, *_rows_warm_args(), helpers=(*auto_kernel.helpers, auto_step_loops)
+    auto_rows_loops,
+    *_rows_warm_args(),
+    helpers=auto_kernel.helpers,
+    linked=(("_step_kernel", auto_kernel),),
 )
+#: The step :func:`auto_rows_loops` calls: :data:`auto_kernel`'s compiled function once
+#: :data:`rows_kernel` is loaded (linked, not inlined: compiled once), the Python one before.
+_step_kernel = auto_step_loops

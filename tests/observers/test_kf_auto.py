@@ -152,7 +152,8 @@ def test_a_quantised_joint_at_rest_that_starts_to_move_is_not_an_outlier(
     compiled: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Encoders quantised to 1e-4 rad (as the UR10e logs), joint 1 at rest for 1 s (its
-    readings repeat exactly: the scale ``ĉ`` → 0), then moving at 0.02 rad/s: its first
+    readings repeat exactly: the scale ``ĉ`` → 0; 0.8 s on the NumPy path), then moving at
+    0.02 rad/s: its first
     steps of one quantum were 1e300-NIS outliers (a UR10e validation log: 28 of 918
     samples rejected, mean NIS 1e299; here samples 101 and 1003 were gated); with the scale
     floored at σ₀² none is gated and the NIS stays near that of a quantum (largest 13.9,
@@ -164,8 +165,9 @@ def test_a_quantised_joint_at_rest_that_starts_to_move_is_not_an_outlier(
         monkeypatch.setattr(kf_kernels.auto_kernel, "load", lambda: None)
     robot = pinobs.load("planar_3r")
     h, step = 1e-3, 1e-4
-    t = np.arange(3000) * h
-    x = np.stack([0.3 * np.sin(t), np.where(t < 1.0, 0.0, 0.02 * (t - 1.0)), 0.1 * t], axis=1)
+    rest = 1.0 if compiled else 0.8  # (the NumPy path, ~10 ms a step: a shorter log)
+    t = np.arange(1600 if compiled else 1100) * h
+    x = np.stack([0.3 * np.sin(t), np.where(t < rest, 0.0, 0.02 * (t - rest)), 0.1 * t], axis=1)
     q = np.round(x / step) * step
     ob = pinobs.make_observer("kf", robot, noise_std=step / np.sqrt(12.0), rate=1 / h)
     ob.reset(t[0], q[0])
@@ -174,7 +176,7 @@ def test_a_quantised_joint_at_rest_that_starts_to_move_is_not_an_outlier(
     nis = np.array([e.nis for e in out], dtype=float)
     assert np.max(nis) < 100.0, np.max(nis)
     v = np.array([e.v[1] for e in out])
-    assert abs(np.mean(v[-500:]) - 0.02) < 2e-3  # (the joint's speed, from its quanta)
+    assert abs(np.mean(v[-200:]) - 0.02) < 2e-3  # (the joint's speed, from its quanta)
 
 
 def test_auto_keeps_its_likelihoods_through_a_pause_and_runs_with_a_latency(

@@ -29,11 +29,12 @@ from pinobs.cli.options import (
     lock_option,
     progress,
     rate_not_used,
+    read_args_log,
     task_progress,
 )
 from pinobs.cli.output import check_output, consistency_warnings, plural
 from pinobs.errors import OptionError, OutputExistsError
-from pinobs.io import process_log, read_log
+from pinobs.io import process_log
 from pinobs.model import Robot
 from pinobs.observers import observer_class
 from pinobs.observers.base import positive
@@ -346,14 +347,7 @@ def _log_playback(
     from pinobs.visualization import log_result, write_html
 
     if log is None:
-        log = read_log(
-            args.log,
-            robot,
-            columns=column_map(args.map),
-            topic=args.topic,
-            drives=drives_option(args),
-            rate=args.rate,
-        )
+        log = read_args_log(args, robot)
     page = write_html(
         log_result(robot, log, {label: run}), robot, args.html, truth_label="measured"
     )
@@ -403,10 +397,7 @@ def _estimate_legged(args: argparse.Namespace) -> int:
         raise OutputExistsError(f"--out {args.out!r} exists; pass --force to overwrite it")
     with warnings.catch_warnings(record=True) as caught:  # (shown once: the log's notes too)
         warnings.simplefilter("always")
-        log = read_log(
-            args.log, robot, columns=column_map(args.map), topic=args.topic,
-            drives=drives_option(args), rate=args.rate,
-        )  # fmt: skip
+        log = read_args_log(args, robot)
     for said in caught:
         warnings.showwarning(said.message, said.category, said.filename, said.lineno)
     warned = {str(said.message) for said in caught}

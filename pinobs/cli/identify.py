@@ -16,14 +16,12 @@ from pinobs.cli.options import (
     add_drive_options,
     add_log_columns,
     add_robot_options,
-    column_map,
-    drives_option,
     load_robot,
     rate_not_used,
+    read_args_log,
 )
 from pinobs.cli.output import check_output
 from pinobs.errors import OutputExistsError
-from pinobs.io import read_log
 from pinobs.io.clock import without_stale
 from pinobs.model.friction import FRICTION_LAWS
 from pinobs.model.identification import MAX_CONDITION
@@ -180,14 +178,7 @@ def handle(args: argparse.Namespace) -> int:
         raise OutputExistsError(f"{str(out)!r} exists; give --force to overwrite it")
     if out.resolve() == Path(args.log).resolve():
         raise OutputExistsError(f"--out {str(out)!r} is the log itself")
-    log = read_log(
-        args.log,
-        robot,
-        columns=column_map(args.map),
-        topic=args.topic,
-        drives=drives_option(args),
-        rate=args.rate,
-    )
+    log = read_args_log(args, robot)
     unused = rate_not_used(args.rate, log)
     if unused:
         print(f"warning: {unused}", file=sys.stderr)

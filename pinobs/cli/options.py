@@ -20,7 +20,7 @@ import numpy as np
 from pinobs.errors import DimensionError, OptionError
 from pinobs.io.clock import CLOCK_MODES
 from pinobs.io.drives import Drives
-from pinobs.io.readers import Log
+from pinobs.io.readers import Log, read_log
 from pinobs.io.readers.table import sampled_note
 from pinobs.model import Robot, load
 from pinobs.simulation import INPUT_NAMES
@@ -222,6 +222,19 @@ def drives_option(args: argparse.Namespace) -> Drives | None:
         motor_constant=getattr(args, "motor_constant", None),
         torque_scale=getattr(args, "torque_scale", None),
         position_offset=getattr(args, "position_offset", None),
+    )
+
+
+def read_args_log(args: argparse.Namespace, robot: Robot) -> Log:
+    """``--log`` read as the command's options say (``--map``, ``--topic``, the drives,
+    ``--rate``): :func:`pinobs.io.read_log`."""
+    return read_log(
+        args.log,
+        robot,
+        columns=column_map(args.map),
+        topic=args.topic,
+        drives=drives_option(args),
+        rate=getattr(args, "rate", None),
     )
 
 

@@ -268,15 +268,8 @@ class LogEstimator:
         Returns ``(t, q, v)`` of the rows done, in order: over all calls, one row per input row.
         """
         self._any_tau = self._any_tau or (len(chunk) > 0 and chunk.tau is not None)
-        self.warnings.extend(n for n in chunk.notes if n not in self.warnings)
         log = chunk if self._pending is None else _concat(self._pending, chunk, self.robot.nv)
-        if self.period is None:
-            self.period = _median_period(log.t)
-        if not self._unit_checked and len(log) > 1:
-            self._unit_checked = True
-            said = time_unit_warning(_median_period(log.t))
-            if said is not None:
-                self.warnings.append(said)
+        self._said_of(chunk, log)
         n = len(log) if last else max(len(log) - 1, 0)
         self._pending = None if n == len(log) else slice_log(log, n, len(log))
         return self._run(log, n)
@@ -293,13 +286,7 @@ class LogEstimator:
         plain = self._plain_rows(log, period)
         if take is None or self._started or self._pending is not None or plain < 2:
             return self.feed(log)
-        self.warnings.extend(n for n in log.notes if n not in self.warnings)
-        self.period = period
-        if not self._unit_checked:
-            self._unit_checked = True
-            said = time_unit_warning(_median_period(log.t))
-            if said is not None:
-                self.warnings.append(said)
+        self._said_of(log, log)  # (its period: ``period``, plain ≥ 2 rows)
         k, parts = 0, []
         while k < plain:
             if self._started:  # the rows from k at once, as far as the observer takes them
@@ -316,6 +303,18 @@ class LogEstimator:
         parts.append(self.feed(slice_log(log, plain, len(log))))
         t, q, v = (np.concatenate(x) for x in zip(*parts, strict=True))
         return t, q, v
+
+    def _said_of(self, chunk: Log, log: Log) -> None:
+        """``chunk``'s notes in :attr:`warnings`, and once the period and the time unit of
+        ``log`` (``chunk`` after the row held back)."""
+        self.warnings.extend(n for n in chunk.notes if n not in self.warnings)
+        if self.period is None:
+            self.period = _median_period(log.t)
+        if not self._unit_checked and len(log) > 1:
+            self._unit_checked = True
+            said = time_unit_warning(_median_period(log.t))
+            if said is not None:
+                self.warnings.append(said)
 
     def _plain_rows(self, log: Log, period: float | None) -> int:
         """How many of the log's rows, from its first, are plain: each fed to the observer as

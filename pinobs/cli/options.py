@@ -89,7 +89,8 @@ def add_lock_option(p: argparse.ArgumentParser) -> None:
         metavar="JOINT[=VALUE]",
         help="lock a joint the log does not have (a gripper's fingers) at VALUE [rad or m; "
         "a continuous joint's angle; nq comma-separated numbers for other joints], default "
-        "its neutral value (0); the locked bodies move with their parent (repeatable)",
+        "its neutral value (0); the locked bodies move with their parent; JOINT may be a "
+        "quoted shell pattern, 'hand_*' (repeatable)",
     )
 
 

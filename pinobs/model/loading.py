@@ -59,7 +59,7 @@ from pinobs.errors import (
     PinobsError,
     UnknownNameError,
 )
-from pinobs.model.locking import LockSpec, lock_joints, lock_names
+from pinobs.model.locking import LockSpec, is_locked, lock_joints, lock_names
 from pinobs.model.mjcf import MujocoMap, cross_check
 from pinobs.model.mjcf_loading import load_mjcf
 from pinobs.model.robot import Robot
@@ -441,7 +441,8 @@ def _load_urdf(
     draws a stick figure).  Otherwise the geometry is built on first use.
     """
     facts = read_urdf(path, package_dirs)
-    free_mimics = tuple(m for m in facts.mimics if m[0] not in locked)  # a locked one is fixed
+    # a locked mimic joint is fixed
+    free_mimics = tuple(m for m in facts.mimics if not is_locked(m[0], locked))
     check_urdf(replace(facts, mimics=free_mimics), mimic=mimic, inertials=check)
     args = (joint_type(),) if joint_type is not None else ()
     model = pin.buildModelFromXML(facts.xml, *args)

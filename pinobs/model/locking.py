@@ -7,7 +7,11 @@ value (``pin.neutral``: 0 for revolute and prismatic joints); a mapping name →
 value at that value: a float for a revolute [rad], prismatic [m] or continuous
 (its angle [rad]) joint, within its position limits; for any joint also a
 sequence of its ``nq`` coordinates (Pinocchio's ``q`` of the joint, unit
-quaternions and ``(cos, sin)`` pairs), ``None`` for its neutral value.  The robot
+quaternions and ``(cos, sin)`` pairs), ``None`` for its neutral value.  A name
+with ``*``, ``?`` or ``[...]`` is a shell pattern (:func:`fnmatch.fnmatchcase`)
+over the moving joints' names: ``"hand_*"`` locks a hand's every joint (each at
+the pattern's value); a pattern that matches no joint is an error, as an unknown
+name is, and so is a joint that two entries name.  The robot
 keeps what was locked (:attr:`Robot.locked`, name → value, a float for one-dof
 joints) and :func:`~pinobs.model.urdf_writer.write_urdf` writes those joints back
 as fixed ones at their values.
@@ -16,6 +20,8 @@ as fixed ones at their values.
 from __future__ import annotations
 
 import difflib
+import fnmatch
+import re
 from collections.abc import Mapping, Sequence
 from functools import partial
 from typing import Any
@@ -32,12 +38,37 @@ from pinobs.errors import (
 )
 from pinobs.model.robot import Robot
 
-__all__ = ["LockSpec", "lock_joints", "lock_names"]
+__all__ = ["LockSpec", "is_locked", "lock_joints", "lock_names"]
 
 #: Joints to lock: names (each at its neutral value, ``pin.neutral``), or name → value: a
 #: float for a one-dof joint (revolute or prismatic [rad or m]; continuous: its angle [rad]),
 #: ``nq`` numbers (Pinocchio's ``q`` of the joint) for any joint, ``None`` for the neutral.
 LockSpec = Sequence[str] | Mapping[str, "float | Sequence[float] | None"]
+
+_PATTERN = re.compile(r"[*?\[]")  # a shell pattern's characters (fnmatch)
+
+
+def _expand(
+    values: Mapping[str, float | Sequence[float] | None], moving: Sequence[str]
+) -> tuple[dict[str, float | Sequence[float] | None], list[str]]:
+    """``values`` with each pattern replaced by the joints it matches (module docstring), and
+    the names and patterns that match no moving joint."""
+    out: dict[str, float | Sequence[float] | None] = {}
+    unknown: list[str] = []
+    for key, value in values.items():
+        name = str(key)
+        hits = (
+            [m for m in moving if fnmatch.fnmatchcase(m, name)]
+            if _PATTERN.search(name)
+            else ([name] if isinstance(key, str) and name in moving else [])
+        )
+        if not hits:
+            unknown.append(key)
+        for hit in hits:
+            if hit in out:
+                raise GainError(f"lock names joint {hit!r} more than once ({name!r}); name it once")
+            out[hit] = value
+    return out, unknown
 
 
 def _lock_values(
@@ -60,7 +91,7 @@ def _lock_values(
         twice = sorted({n for n in lock if list(lock).count(n) > 1})
         raise GainError(f"lock names {twice} more than once; name each joint once")
     moving = [model.names[i] for i in range(1, model.njoints) if model.joints[i].nv > 0]
-    unknown = [n for n in values if not isinstance(n, str) or n not in moving]
+    values, unknown = _expand(values, moving)
     if unknown:
         close = sorted({c for n in unknown for c in difflib.get_close_matches(str(n), moving, n=2)})
         hint = f"did you mean {' or '.join(map(repr, close))}? " if close else ""
@@ -192,7 +223,13 @@ def lock_joints(robot: Robot, lock: LockSpec | None) -> Robot:
 
 
 def lock_names(lock: LockSpec | None) -> frozenset[str]:
-    """The joint names of ``lock`` (checked against the model later, :func:`_lock_values`)."""
+    """The joint names and patterns of ``lock`` (checked against the model later,
+    :func:`_lock_values`; :func:`is_locked` tells whether one names a joint)."""
     if lock is None or isinstance(lock, str | bytes):
         return frozenset()
     return frozenset(str(n) for n in lock)
+
+
+def is_locked(joint: str, names: frozenset[str]) -> bool:
+    """Whether ``names`` (:func:`lock_names`) locks ``joint``: by its name or a pattern."""
+    return joint in names or any(fnmatch.fnmatchcase(joint, n) for n in names if _PATTERN.search(n))

@@ -205,3 +205,23 @@ def test_a_log_lacking_the_fingers_names_lock_as_the_fix_and_reads_with_it(tmp_p
     with pytest.raises(pinobs.DimensionError, match="lack") as e:
         read_log(bare, pinobs.load("panda"))
     assert "lock" not in str(e.value)
+
+
+def test_a_log_of_an_arm_without_its_hand_is_told_to_lock_the_hand_by_one_pattern(
+    tmp_path: Path,
+) -> None:
+    """TIAGo's arm log (torso and arm, no hand, head or wheels): the message gives one
+    pattern for the hand's 36 joints, the others by name, and reads with what it says."""
+    full = pinobs.load("tiago")
+    told = ["hand_*", "head_1_joint", "head_2_joint", "wheel_left_joint", "wheel_right_joint"]
+    arm = pinobs.load("tiago", lock=told)
+    assert list(arm.joint_names) == ["torso_lift_joint"] + [f"arm_{i}_joint" for i in range(1, 8)]
+    q = np.full((3, arm.nq), 0.1)
+    path = write_log(tmp_path / "tiago_arm.csv", np.arange(3) * 0.01, q, None, digits=12)
+    with pytest.raises(pinobs.DimensionError, match="lack") as e:
+        read_log(path, full)
+    text = str(e.value)
+    assert f"lock={told}" in text, text
+    assert "--lock 'hand_*' --lock head_1_joint --lock head_2_joint" in text
+    assert text.count("hand_thumb_joint") == 1  # named once, in what the log lacks
+    np.testing.assert_array_equal(read_log(path, arm).q, q)

@@ -298,6 +298,25 @@ def test_a_locked_model_is_the_full_models_free_block_at_the_locked_values(
     _assert_is_the_full_models_free_block(full, robot, rng)
 
 
+def test_a_lock_pattern_locks_the_joints_it_matches_as_their_names_do() -> None:
+    """``lock=["FL_*"]`` is ``lock=[FL_hip_joint, FL_thigh_joint, FL_calf_joint]``: the same
+    reduced model; a value given to a pattern goes to each joint it matches."""
+    named = pinobs.load("go1", lock=["FL_hip_joint", "FL_thigh_joint", "FL_calf_joint"])
+    patterned = pinobs.load("go1", lock=["FL_*"])
+    assert patterned.locked == named.locked and patterned.joint_names == named.joint_names
+    q = patterned.random_configuration(np.random.default_rng(0))
+    np.testing.assert_array_equal(patterned.mass_matrix(q), named.mass_matrix(q))
+    bent = pinobs.load("go1", lock={"F?_calf_joint": -1.2})
+    assert bent.locked == {"FL_calf_joint": -1.2, "FR_calf_joint": -1.2}
+
+
+def test_a_lock_pattern_that_matches_nothing_or_a_joint_named_twice_is_an_error() -> None:
+    with pytest.raises(pinobs.UnknownNameError, match=r"names \['hand_\*'\], which robot"):
+        pinobs.load("go1", lock=["hand_*"])
+    with pytest.raises(pinobs.GainError, match="'FL_calf_joint' more than once"):
+        pinobs.load("go1", lock=["FL_*", "FL_calf_joint"])
+
+
 def test_multi_dof_joints_lock_at_their_nq_coordinates(rng: np.random.Generator) -> None:
     full = pinobs.load("rigid_body", root_joint="freeflyer")
     model = full.model.copy()  # a pendulum hung under the body, to keep one joint free

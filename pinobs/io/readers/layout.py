@@ -205,7 +205,8 @@ def _refuse_missing(
         return t
     lack = (["t"] if t is None and rate is None else []) + q.missing
     motor_only = [c for c in header if c.startswith("qm.")] if q.missing and not motor else []
-    lock = lock_hint(q.absent) if q.absent and len(q.absent) < len(robot.joints) else ""
+    partial = bool(q.absent) and len(q.absent) < len(robot.joints)
+    lock = lock_hint(q.absent, robot.joint_names) if partial else ""
     if motor_only:
         lock += (
             f". Columns {motor_only} are motor positions: read them through the drives "
@@ -214,7 +215,12 @@ def _refuse_missing(
     raise DimensionError(
         f"{where}: columns {list(header)} lack {lack}; "
         f"robot {robot.name!r} needs t, then q0..q{robot.nq - 1} (nq = {robot.nq}) or "
-        f"q.<joint> for joints {list(robot.joint_names)}, and optionally "
+        + (
+            "q.<joint> for each joint"
+            if partial
+            else f"q.<joint> for joints {list(robot.joint_names)}"
+        )
+        + ", and optionally "
         f"tau0..tau{robot.nv - 1} or tau.<joint> (or map other names with columns=...)"
         + (NO_T_HINT if "t" in lack else "")
         + lock
@@ -300,14 +306,40 @@ def table_layout(
     )
 
 
-def lock_hint(absent: Sequence[str]) -> str:
-    """What to do when a log records some of the robot's joints but not ``absent``."""
-    flags = " ".join(f"--lock {n}" for n in absent)
+def lock_hint(absent: Sequence[str], joints: Sequence[str] = ()) -> str:
+    """What to do when a log records some of the robot's ``joints`` but not ``absent``: lock
+    them, three or more of a name's prefix by one pattern (``'hand_*'``) that matches none of
+    the recorded joints."""
+    items = lock_items(absent, joints)
+    flags = " ".join(f"--lock '{n}'" if "*" in n else f"--lock {n}" for n in items)
     return (
-        f". If the log does not record joints {list(absent)} (a gripper's fingers), lock them "
-        f"at a fixed value: pinobs.load(..., lock={list(absent)}) (or lock={{name: value}}), "
+        f". If the log does not record those joints (a gripper's fingers, a hand, a head), "
+        f"lock them at a fixed value: pinobs.load(..., lock={items}) (or lock={{name: value}}), "
         f"or {flags} (the pinobs command)"
     )
+
+
+def lock_items(absent: Sequence[str], joints: Sequence[str]) -> list[str]:
+    """``absent`` as names and ``prefix_*`` patterns: the shortest prefix (whole ``_``-words)
+    that matches three or more absent joints and none of the others of ``joints``."""
+    recorded = [j for j in joints if j not in set(absent)]
+    out: list[str] = []
+    covered: set[str] = set()
+    for name in absent:
+        if name in covered:
+            continue
+        words = name.split("_")
+        for k in range(1, len(words)):
+            prefix = "_".join(words[:k]) + "_"
+            hits = [a for a in absent if a.startswith(prefix)]
+            if len(hits) >= 3 and not any(j.startswith(prefix) for j in recorded):
+                out.append(prefix + "*")
+                covered.update(hits)
+                break
+        else:
+            out.append(name)
+            covered.add(name)
+    return out
 
 
 def clean_header(header: Sequence[Any], columns: Mapping[str, str] | None) -> list[str]:

@@ -57,7 +57,10 @@ def npz_log(path: Path, robot: Robot) -> Log:
             f"(N, {robot.nv})"
             + (" (q_meas is read as the log's q when present)" if q_name != "q" else "")
             + (
-                lock_hint([b.name for b in robot.joints if b.idx_q + b.nq > q.shape[1]])
+                lock_hint(
+                    [b.name for b in robot.joints if b.idx_q + b.nq > q.shape[1]],
+                    robot.joint_names,
+                )
                 if q.ndim == 2 and 0 < q.shape[1] < robot.nq
                 else ""
             )

@@ -222,8 +222,13 @@ def noise_from_log(
     said = (
         f"no noise level given: estimated σ = {sigma:.3g} (median over the joints that move"
         f"{'' if told.all() else f' ({int(told.sum())} of {told.size})'}; per joint "
-        f"{joints}) from the log's first second of finite rows ({used.size} rows, "
-        f"t = {t[used[0]]:.6g} to {t[used[-1]]:.6g} s)"
+        f"{joints}) from the log's first "
+        + (
+            "second of finite rows"
+            if t[used[-1]] <= t[used[0]] + NOISE_WINDOW
+            else f"{NOISE_MIN_SAMPLES} finite rows (its first second has fewer)"
+        )
+        + f" ({used.size} rows, t = {t[used[0]]:.6g} to {t[used[-1]]:.6g} s)"
     )
     if floored.any():
         # (real logs starting at rest: third differences of repeated printed values are

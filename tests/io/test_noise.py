@@ -73,6 +73,20 @@ def test_the_report_names_the_rows_it_used_when_the_log_starts_with_nan() -> Non
     assert "first second of finite rows (1001 rows, t = 1 to 2 s)" in said
 
 
+def test_the_report_says_it_took_more_than_the_first_second_of_a_slow_log() -> None:
+    """At 100 Hz the first second has 100 rows and the estimate takes 200 (TIAGo's log:
+    "the log's first second ... (200 rows, t = 0.0004 to 2.0004 s)"): it says so."""
+    from pinobs.observers.noise import noise_from_log
+
+    robot = pinobs.load("ur5")
+    res = pinobs.simulate(robot, [], duration=3.0, sensor=pinobs.Sensor(100.0, 1e-3), seed=4)
+    found = noise_from_log(res.t[1:], res.q_meas[1:], robot)
+    assert found is not None
+    assert "first 200 finite rows (its first second has fewer) (200 rows, t = 0.01 to 2 s)" in (
+        found[2]
+    )
+
+
 def test_too_short_a_log_gives_no_estimate() -> None:
     robot = pinobs.load("ur5")
     assert estimate_noise_std(np.arange(5) * 1e-3, np.zeros((5, 6)), robot) is None

@@ -213,6 +213,16 @@ def _coordinate_names(robot: Robot) -> list[str]:
     return names
 
 
+def _called(observer: ObserverLike) -> str:
+    """How a warning names ``observer``: its name, or the model-based observer a never-behind
+    blend runs (the blend's own name, ``never_behind``, is no observer a user chose)."""
+    from pinobs.observers.neverbehind import NeverBehind
+
+    if isinstance(observer, NeverBehind):
+        return f"{observer.model.name!r} (blended never behind kf)"
+    return repr(observer.name)
+
+
 class LogEstimator:
     """Run an observer-like object over log chunks (rules: module docstring).
 
@@ -365,13 +375,13 @@ class LogEstimator:
                 else "check the log's positions and times (the rows reported)"
             )
             self.warnings.append(
-                f"{self.observer.name!r} failed or diverged on {self.failures} rows (the first "
+                f"{_called(self.observer)} failed or diverged on {self.failures} rows (the first "
                 f"at t = {self._first_failure:.6g} s) and was re-initialised at each; {why}"
             )
         n, first, last = self._untorqued
         if self.observer.uses_torque and n and not self._any_tau:
             self.warnings.append(
-                f"the log has no torque columns: {self.observer.name!r} uses the model's dynamics "
+                f"the log has no torque columns: {_called(self.observer)} uses the model's dynamics "
                 "and now assumes zero applied torque (gravity stays modelled); its estimates carry "
                 "the effect of the missing inputs. Add tau columns (or JointState effort), or use a "
                 "model-free observer (fd, kf)."
@@ -379,7 +389,7 @@ class LogEstimator:
         elif self.observer.uses_torque and n:
             self.warnings.append(
                 f"{n} rows before the first usable torque ({self._unit} {first} to {last}) have "
-                f"none: {self.observer.name!r} assumed zero applied torque there (gravity stays "
+                f"none: {_called(self.observer)} assumed zero applied torque there (gravity stays "
                 "modelled), so its estimates on them carry the effect of the missing inputs"
             )
         if self._outside:

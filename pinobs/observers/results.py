@@ -105,7 +105,8 @@ class Consistency:
 
 #: What to check when a model-based filter's innovations are too large (Consistency.causes).
 LIKELY_CAUSES = (
-    "link masses or inertias (a payload, CAD values): try `pinobs identify` or the adaptive observer",
+    "link masses or inertias (a payload, CAD values): try `pinobs identify` (or the adaptive "
+    "observer, which learns them)",
     "joint friction not in the model (URDF <dynamics>, load(..., friction=True))",
     "torque units or scale (gear ratios, motor constants, N·m vs mN·m), or a torque offset",
     "a measurement latency (give latency= if it is known)",

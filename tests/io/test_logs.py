@@ -103,6 +103,11 @@ def test_log_without_torques_warns_model_based_observers_only(tmp_path: Path) ->
             continue
         warnings = estimate_log(ob, log).warnings
         assert warnings and "no torque columns" in warnings[0]
+    # blended never behind kf (pinobs.estimate's default on a log), the warning names the
+    # observer asked for, not the blend ("'never_behind' uses the model's dynamics" before)
+    blend = pinobs.make_observer("ekf", robot, rate=1000.0, noise_std=1e-4, never_behind=True)
+    warnings = estimate_log(blend, log).warnings
+    assert "no torque columns: 'ekf' (blended never behind kf) uses" in warnings[0]
 
 
 def test_npz_log_is_read_like_csv(tmp_path: Path) -> None:

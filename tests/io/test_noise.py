@@ -82,8 +82,9 @@ def test_the_report_says_it_took_more_than_the_first_second_of_a_slow_log() -> N
     res = pinobs.simulate(robot, [], duration=3.0, sensor=pinobs.Sensor(100.0, 1e-3), seed=4)
     found = noise_from_log(res.t[1:], res.q_meas[1:], robot)
     assert found is not None
-    assert "first 200 finite rows (its first second has fewer) (200 rows, t = 0.01 to 2 s)" in (
-        found[2]
+    assert (
+        "first 200 finite rows (its first second has fewer) (200 rows, t = 0.01 to 2 s)"
+        in (found[2])
     )
 
 

@@ -53,6 +53,25 @@ vectorizer does emit 512-bit FMAs, but with its SLP vectorizer off a register ti
 scalar), so the five products' 1.3 M multiply-adds would take 120–160 µs against
 OpenBLAS's ~60: far more than the one-thread limit (~7 µs a call in a paced loop) and the
 Python calls they would save.
+
+Where a talos update goes (issue 39; 1 kHz, σ = 1e-4, ``make_observer`` as
+``benchmarks/speed.py``, one BLAS thread, thread CPU time per section inside the update, 6000
+updates, in units of a ``pin.aba`` timed after each update; 2-core Xeon, OpenBLAS SkylakeX
+kernels, load 1.3; the same shares at load 6.7): the update 20.5, of which the derivatives call
+4.05, the RKMK4 mean 4.34 (its three ``aba`` and what lies between them), ``Φ`` 2.29 (the two
+products ``A_v G``, ``(G A)_v G`` 0.98, the three kernels 1.31), ``(Φ P) Φᵀ`` 2.55 (``Φ P``
+1.02, the second product, with ``Φᵀ`` a strided view, 1.53), ``Q_d`` 0.21, the correction 3.02
+(factor and solve 1.25, ``Zᵀ Z`` 1.05, ``P⁺`` and ``dx`` 0.56, two allocations 0.16) and the
+Python around them 4.0 (the input checks 1.3 of it). ``measure_cost`` (its ``pin.aba`` warm,
+twenty in a row) was 24–25 in the same session. Tried and not adopted (A/B against this step,
+same inputs, alternated, 800 pairs, load 5): ``Φᵀ`` written by the kernel (both products then
+OpenBLAS's fast transposition cases), ``(Φ P) Φᵀ``'s velocity rows and ``qq`` block only (its
+``qv`` block mirrored: ¾ of its multiply-adds) and ``Zᵀ Z`` by ``dsyrk``: talos 5 µs less (p10
+303 → 298 µs, 1–2 %), go1 6 µs more (p10 106 → 112), estimates off by up to 1.8e-13 of the
+largest velocity: not worth the bits. Pinocchio's four calls are the floor of this step (the
+derivatives call's ``ddq`` is the first RK4 stage already); ``aba`` with ``Convention.WORLD``
+is 15 % faster on a talos (18.3 → 15.6 µs; 8 % on a UR5) and differs from the default's ``ddq``
+by 2.6e-14 relative, so it would change every :func:`pinobs.model.dynamics_rk4` user's bits.
 """
 
 from __future__ import annotations

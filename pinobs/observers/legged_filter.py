@@ -162,7 +162,7 @@ class LeggedFilter(ABC):
         h, jac = self._legs(a.q_joints, a.R, a.flags)
         self._remember(None, h)
         state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
-        self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None)
+        self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None, rates=a.dq)
         self.setup.settle(state.R)
         self._warned = False
         return self.estimate
@@ -328,6 +328,7 @@ class LeggedFilter(ABC):
         contact_time: float | None,
         measured: int = 0,
         gated: tuple[int, ...] = (),
+        rates: Vector | None = None,
     ) -> None:
         """Store the new state with the reading to hold (and the time of a contact, if any)
         and its estimate (ObserverDiverged, the state left as it was, if not finite)."""
@@ -337,6 +338,6 @@ class LeggedFilter(ABC):
             last_contact=state.last_contact if contact_time is None else contact_time,
         )
         estimate = self.setup.estimate(
-            state, self._estimate, q_joints, dq, nis, 3 * measured, gated
+            state, self._estimate, q_joints, dq, nis, 3 * measured, gated, rates
         )
         self._state, self._estimate = state, estimate

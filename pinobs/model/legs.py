@@ -178,12 +178,20 @@ class FootKinematics:
         if self._imu_id is None:
             R_bi, r_bi = self.imu_placement
             return R_bi.copy(), r_bi.copy(), np.zeros((6, self.nv_joints))
+        _, last = self._recall("imu_motion", q_joints)  # (the feet's, at the same angles)
+        if last is not None:
+            return last[0], last[1], last[2]
         self._set(q_joints)
-        model, data = self._model, self._data
-        pin.computeJointJacobians(model, data, self._q)
-        jac = pin.getFrameJacobian(model, data, self._imu_id, _LOCAL_WORLD_ALIGNED)[:, 6:]
-        oMi = data.oMf[self._imu_id]  # (set by getFrameJacobian)
-        return np.array(oMi.rotation), np.array(oMi.translation), np.array(jac)
+        pin.computeJointJacobians(self._model, self._data, self._q)
+        return self._imu_now()
+
+    def _imu_now(self) -> tuple[Vector, Vector, Vector]:
+        """:meth:`imu_motion` after ``computeJointJacobians`` at ``self._q``, kept for
+        :meth:`_recall` (``getFrameJacobian`` sets the IMU frame's ``oMf``)."""
+        full = pin.getFrameJacobian(self._model, self._data, self._imu_id, _LOCAL_WORLD_ALIGNED)
+        oMi = self._data.oMf[self._imu_id]
+        out = (np.array(oMi.rotation), np.array(oMi.translation), full[:, 6:].copy())
+        return self._keep("imu_motion", self._q[7:].tobytes(), out)  # type: ignore[return-value]
 
     def _in_moving_imu(
         self, h: Vector, rot: Vector | None, lin: Vector, ang: Vector | None
@@ -191,14 +199,13 @@ class FootKinematics:
         """The feet's root-frame ``p_f, R_f, J_f, J_fω`` in the moving IMU frame, (K1)-(K2),
         after ``computeJointJacobians`` at the same angles (``rot``, ``ang``: ``None``, not
         computed)."""
-        full = pin.getFrameJacobian(self._model, self._data, self._imu_id, _LOCAL_WORLD_ALIGNED)
-        J_i, J_iw = full[:3, 6:], full[3:, 6:]
-        oMi = self._data.oMf[self._imu_id]
-        R_bi, r_bi = np.array(oMi.rotation), np.array(oMi.translation)
+        R_bi, r_bi, J_bi = self._imu_now()
+        J_i, J_iw = J_bi[:3], J_bi[3:]
         d = h - r_bi  # p_f − r_bi, (K, 3)
-        # (K2): (p_f − r_bi)^ J_iω, column by column: d × (J_iω's column)
-        cross = np.cross(d[:, None, :], J_iw.T[None, :, :]).transpose(0, 2, 1)
-        out = [d @ R_bi, None, R_bi.T @ (lin - J_i + cross), None]
+        skew = np.zeros((len(d), 3, 3))  # (K2)'s (p_f − r_bi)^
+        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -d[:, 2], d[:, 1], -d[:, 0]
+        skew -= skew.transpose(0, 2, 1)
+        out = [d @ R_bi, None, R_bi.T @ (lin - J_i + skew @ J_iw), None]
         if rot is not None and ang is not None:
             out[1], out[3] = R_bi.T @ rot, R_bi.T @ (ang - J_iw)
         return tuple(out)  # type: ignore[arg-type]

@@ -55,5 +55,12 @@ def root_twist(base: Vector, R_b: Vector, dq: Vector | None, r_bi: Vector, J_bi:
         return
     a, b = J_bi[3:] @ dq, J_bi[:3] @ dq
     base[1] -= a
-    base[2] += np.cross(a, r_bi) - b
+    base[2] += _cross(a, r_bi) - b
     base[3] = R_b @ base[2]
+
+
+def _cross(a: Vector, b: Vector) -> Vector:
+    """``a × b`` of two 3-vectors (``np.cross``'s checks cost more than the product)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )

@@ -189,7 +189,9 @@ class LeggedFilter(ABC):
                 shape ``(3,)``.
             contacts: each foot name → in contact (every foot named), or a sequence of
                 bools in the order of ``feet``.
-            joint_velocities: passed through to ``estimate.v[6:]`` (NaN if not given).
+            joint_velocities: passed through to ``estimate.v[6:]`` (NaN if not given); with an
+                IMU frame that moves (:mod:`~pinobs.observers.imu_link`), the root's twist
+                ``v[0:6]`` takes them too (NaN without them).
 
         Raises:
             NotResetError: before ``reset``.
@@ -331,7 +333,9 @@ class LeggedFilter(ABC):
         rates: Vector | None = None,
     ) -> None:
         """Store the new state with the reading to hold (and the time of a contact, if any)
-        and its estimate (ObserverDiverged, the state left as it was, if not finite)."""
+        and its estimate (ObserverDiverged, the state left as it was, if not finite);
+        ``rates``: the joints' velocities for a moving IMU frame's root twist (``dq`` if not
+        given; reset's ``v[6:]``)."""
         state = replace_state(
             state,
             imu=reading if reading is not None else state.imu,

@@ -146,8 +146,10 @@ def test_go1s_fixed_imu_frame_does_not_move(frame: str | None) -> None:
 def test_talos_imu_link_by_default_tracks_mujocos_root_velocity() -> None:
     """MuJoCo's TALOS swaying with its torso swaying too (±0.1 rad), its IMU on ``imu_link``,
     through ``legged_run`` with its defaults (no ``imu_frame``: ``imu_link``), against the same
-    motion with the IMU at the root (``imu_frame="base_link"``).  Measured (sway, 10 s, seeds
-    0-1): root velocity RMS 0.0099-0.0100 m/s on ``imu_link``, 0.0069-0.0074 at the root."""
+    motion with the IMU at the root (``imu_frame="base_link"``).  Measured here (3 s, seed 0):
+    root velocity RMS 0.0101 m/s on ``imu_link``, 0.0073 at the root (1.38×); over 10 s,
+    seeds 0-2, stand and sway: 0.0098-0.0100 against 0.0067-0.0078 (1.27-1.46×;
+    ``benchmarks/talos_imu_link.py``: mostly the gyro's noise across the lever arm ``r_bi``)."""
     pytest.importorskip("mujoco")
     pd = pytest.importorskip("pandas")
     from pinobs.io import read_log
@@ -168,5 +170,5 @@ def test_talos_imu_link_by_default_tracks_mujocos_root_velocity() -> None:
         e = v[250:, :3] - run.base_v()[250:, :3]  # after 0.5 s
         assert np.isfinite(e).all()
         rms[body] = float(np.sqrt(np.mean(e**2)))
-    assert rms["imu_link"] < 0.015
+    assert rms["imu_link"] < 0.012
     assert rms["imu_link"] < 1.6 * rms["base_link"]

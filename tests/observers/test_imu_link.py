@@ -14,6 +14,7 @@ import pytest
 import pinobs
 from pinobs.model import FootKinematics
 from pinobs.observers.inekf import InvariantEKF
+from pinobs.observers.qekf import QuaternionEKF
 from pinobs.simulation.humanoid import TALOS_FEET, TALOS_STANCE
 from tests.observers.test_inekf import free_flyer_q, truth
 
@@ -81,17 +82,19 @@ def test_the_feet_in_a_moving_imu_frame_are_pinocchios_relative_placements(rng) 
     assert np.linalg.norm(J[:, :, list(TORSO)], axis=1).min() > 0.1  # the torso moves the feet
 
 
-def test_started_on_the_truth_it_stays_there_with_the_imu_on_talos_torso() -> None:
+@pytest.mark.parametrize("family", [InvariantEKF, QuaternionEKF])
+def test_started_on_the_truth_it_stays_there_with_the_imu_on_talos_torso(family) -> None:
     """The truth is ``imu_link``'s motion (its exact flow under held readings), the torso
     swaying (±0.15, ±0.1 rad), the soles fixed in the world.  The estimate, of the root, is
     checked through Pinocchio's own kinematics: ``est.q`` puts ``imu_link`` at the truth's
-    pose, and ``(est.q, est.v)`` give it the truth's velocity."""
+    pose, and ``(est.q, est.v)`` give it the truth's velocity (both filters: they share the
+    legs and the conversion, :class:`~pinobs.observers.legs.LeggedSetup`)."""
     rate = 200.0
     legs = TalosLegs(rate)
     samples = truth(legs, rate, 2.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
     robot = pinobs.load("talos")
     model, data, imu = robot.model, robot.model.createData(), robot.model.getFrameId("imu_link")
-    ekf = InvariantEKF(robot, TALOS_FEET, imu_frame="imu_link")
+    ekf = family(robot, TALOS_FEET, imu_frame="imu_link")
     worst, moved = 0.0, 0.0
     for k, (t, R_i, v_i, p_i, q, omega, acc, contacts) in enumerate(samples):
         rates = np.zeros(robot.nv - 6)

@@ -525,7 +525,7 @@ class LeggedSetup:
         self.nq_joints = int(self.kinematics.nq_joints)
         self.nv_joints = int(self.kinematics.nv_joints)
         placement = getattr(self.kinematics, "imu_placement", None)
-        #: ``(R_bi, r_bi)``: the IMU's rotation and position in the base (root joint) frame.
+        #: ``(R_bi, r_bi)``: the IMU's placement in the root frame (moving: at the neutral angles).
         self.imu_placement: tuple[Vector, Vector] = (
             (np.eye(3), np.zeros(3))
             if placement is None

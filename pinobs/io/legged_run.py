@@ -41,6 +41,10 @@ angular velocity, the joints').  So the writers, the playback and the CLI
 * **Consistency**: ``run.consistency`` is the feet's NIS over the stance rows
   (:func:`~pinobs.observers.legs.stance_consistency`: mean NIS per degree of freedom and
   the fraction of rows inside their 95 % χ² interval).
+* **IMU frame** (``imu_frame``): ``imu_link`` if the model has it, else the root.  It may
+  move relative to the root (TALOS's ``imu_link``, on the torso): the filter's body is then
+  that frame, the feet are measured in it through the torso joints and the root's twist
+  takes the joints' velocities between, ``kf``'s (:mod:`pinobs.observers.imu_link`).
 * **Start**: the first row with a finite IMU reading and finite joint angles.  The base
   pose is the log's where it has one; else the base at the origin, its roll and pitch
   from the accelerometer (at rest it reads ``Rᵀ(0, 0, g)``) and yaw zero: the filter's
@@ -476,7 +480,10 @@ def _step(
     if first:
         gyro, acc = log.imu_gyro[k], log.imu_acc[k]
         dq = rows.dq[k] if rows.dq_finite[k] else None
-        q0 = _start_pose(log.q[k], acc, filt.imu_placement)
+        moves = filt.setup.imu_moves  # (the IMU's placement at the first row's angles)
+        kin: Any = filt.kinematics  # (a FootKinematics: legged_run's filter is built from a robot)
+        place = kin.imu_motion(log.q[k, 7:])[:2] if moves else filt.imu_placement
+        q0 = _start_pose(log.q[k], acc, place)
         v0 = np.zeros(robot.nv)
         if dq is not None:
             v0[6:] = dq

@@ -8,15 +8,34 @@ foot in contact through forward kinematics of the measured joint angles::
 
 The base frame is the frame of the free-flyer root joint (Pinocchio's
 ``q[0:7]``, the frame whose body velocity is ``v[0:6]``), or, with
-``imu_frame``, the IMU's frame (a frame fixed to the base: go1's
-``imu_link``, 7 cm from the root): then ``h_j`` and ``J_j`` are expressed in it,
-``R_bi (h_j − r_bi)``-wise, and :attr:`FootKinematics.imu_placement` is
-``(R_bi, r_bi)``, the IMU's rotation and position in the root joint's frame.  Both are computed
-with the base placed at the identity, so the world-aligned frame Jacobian of
-Pinocchio *is* the base-frame one: ``J_j`` is the linear rows, joint columns,
-of ``getFrameJacobian(..., LOCAL_WORLD_ALIGNED)`` at ``q = (0, 0, 0, 0, 0, 0, 1, q_joints)``.
-For revolute and prismatic joints ``J_j = ∂h_j/∂q_joints``; for continuous
+``imu_frame``, the IMU's frame.  Everything is computed with the root placed at
+the identity, so the world-aligned frame Jacobian of Pinocchio *is* the
+root-frame one: ``J_f`` (linear rows) and ``J_fω`` (angular rows) are the joint
+columns of ``getFrameJacobian(..., LOCAL_WORLD_ALIGNED)`` at
+``q = (0, 0, 0, 0, 0, 0, 1, q_joints)``, and ``p_f``, ``R_f`` the foot's placement.
+For revolute and prismatic joints ``J_f = ∂p_f/∂q_joints``; for continuous
 joints it is with respect to the joint's velocity coordinate (its angle).
+
+The IMU frame's placement in the root joint's frame is ``(R_bi, r_bi)``
+(:meth:`FootKinematics.imu_motion`).  The feet in it::
+
+    h_j = R_biᵀ (p_f − r_bi),      R_j = R_biᵀ R_f                                  (K1)
+    J_j = R_biᵀ (J_f − J_i + (p_f − r_bi)^ J_iω),   J_jω = R_biᵀ (J_fω − J_iω)       (K2)
+
+``J_i``, ``J_iω`` the IMU frame's own Jacobians (its origin's velocity and its angular
+velocity relative to the root, in the root frame, per joint velocity).  (K2) is the time
+derivative of (K1): ``ḣ_j = R_biᵀ (ṗ_f − ṙ_bi) + Ṙ_biᵀ (p_f − r_bi)`` with
+``Ṙ_bi = (J_iω q̇)^ R_bi``, and ``−ω × d = d^ ω``.
+
+* A frame fixed to the root joint (go1's ``imu_link``, 7 cm from the root): ``J_i = J_iω = 0``
+  and ``(R_bi, r_bi)`` is a constant, :attr:`FootKinematics.imu_placement`; (K1)-(K2) are
+  then ``R_biᵀ (p_f − r_bi)`` and ``R_biᵀ J_f``, computed as such (the same arithmetic as
+  before moving frames were supported, so the same bits).
+* A frame that moves with other joints (TALOS's ``imu_link``, on the torso after
+  ``torso_1_joint`` and ``torso_2_joint``): ``(R_bi, r_bi)``, ``J_i``, ``J_iω`` at each
+  ``q_joints`` (:attr:`FootKinematics.imu_moves`), and the feet's Jacobians (K2) have
+  columns for the torso joints as well as the leg's: a foot measured in the IMU's frame
+  moves when the torso turns.
 
 :func:`foot_sphere_radius` reads a foot's collision sphere from the robot's URDF (go1's
 2 cm feet), the radius the filters' ``foot_radius`` takes (:mod:`pinobs.observers.rolling`).
@@ -56,19 +75,23 @@ class FootKinematics:
         robot: a robot whose first joint is a free-flyer (``pinobs.load("go1")``;
             other URDFs: ``pinobs.load(path, root_joint="freeflyer")``).
         feet: names of the foot frames in the model (``"FL_foot"``, ...), at least one.
-        imu_frame: a frame fixed to the root joint (the IMU's) to express the feet in,
-            instead of the root joint's frame.
+        imu_frame: a frame of the model (the IMU's) to express the feet in, instead of the
+            root joint's frame: fixed to the root joint, or moving with other joints
+            (module docstring).
 
     Attributes:
         feet: the foot frame names, in the given order.
         nq_joints: number of joint coordinates after the free-flyer (``nq − 7``).
         nv_joints: number of joint velocities after the free-flyer (``nv − 6``).
         imu_placement: ``(R_bi, r_bi)``: rotation and position [m] of the frame the feet are
-            expressed in, in the root joint's frame (identity and zero without ``imu_frame``).
+            expressed in, in the root joint's frame (identity and zero without ``imu_frame``);
+            of a moving frame, at the model's neutral joint angles (:meth:`imu_motion` gives
+            it at any).
+        imu_moves: whether ``imu_frame`` moves relative to the root joint (a joint other than
+            the root lies between them).
 
     Raises:
-        UnsupportedRobotError: the robot's first joint is not a free-flyer, or the
-            ``imu_frame`` is not fixed to it.
+        UnsupportedRobotError: the robot's first joint is not a free-flyer.
         UnknownNameError: a foot name is not a frame of the model (the message
             lists the closest frame names and the model's frames).
     """
@@ -102,22 +125,26 @@ class FootKinematics:
         self.robot_name = robot.name
         self.imu_frame = imu_frame
         self.imu_placement: tuple[Vector, Vector] = (np.eye(3), np.zeros(3))
+        self.imu_moves = False
+        #: the IMU frame's index when it moves (K1-K2 at each q), else ``None``
+        self._imu_id: int | None = None
         if imu_frame is not None:
             fid = _frame_id(robot, imu_frame)
-            if model.frames[fid].parentJoint != 1:
-                raise UnsupportedRobotError(
-                    f"{robot.name}: imu_frame {imu_frame!r} moves with joint "
-                    f"{model.names[model.frames[fid].parentJoint]!r}, not with the base "
-                    f"({model.names[1]!r}): give a frame fixed to the base"
-                )
-            placement = model.frames[fid].placement  # in the root joint's frame
+            self.imu_moves = model.frames[fid].parentJoint != 1
+            if self.imu_moves:
+                self._imu_id = fid
+                data = model.createData()  # the placement at the neutral angles
+                pin.framesForwardKinematics(model, data, self._q)
+                placement = data.oMf[fid]
+            else:
+                placement = model.frames[fid].placement  # in the root joint's frame
             self.imu_placement = (
                 np.array(placement.rotation, dtype=float),
                 np.array(placement.translation, dtype=float),
             )
         for a in self.imu_placement:
             a.setflags(write=False)
-        self._to_imu = None if imu_frame is None else self.imu_placement
+        self._to_imu = None if imu_frame is None or self.imu_moves else self.imu_placement
         #: the IMU's axes are the base's (``R_bi`` exactly ``I``, go1's ``imu_link``)
         self._imu_aligned = bool(np.array_equal(self.imu_placement[0], np.eye(3)))
 
@@ -142,11 +169,55 @@ class FootKinematics:
         self._memo[name] = (key, tuple(a.copy() for a in out))
         return out
 
+    def imu_motion(self, q_joints: ArrayLike) -> tuple[Vector, Vector, Vector]:
+        """``(R_bi, r_bi, J_bi)``: the IMU frame's rotation and position [m] in the root joint's
+        frame at ``q_joints``, and its Jacobian ``(6, nv_joints)`` ``[J_i; J_iω]`` (its origin's
+        velocity [m/rad] and its angular velocity [rad/rad] relative to the root, in the root
+        frame, per joint velocity; module docstring).  A frame fixed to the root (or none):
+        :attr:`imu_placement` and zeros."""
+        if self._imu_id is None:
+            R_bi, r_bi = self.imu_placement
+            return R_bi.copy(), r_bi.copy(), np.zeros((6, self.nv_joints))
+        _, last = self._recall("imu_motion", q_joints)  # (the feet's, at the same angles)
+        if last is not None:
+            return last[0], last[1], last[2]
+        self._set(q_joints)
+        pin.computeJointJacobians(self._model, self._data, self._q)
+        return self._imu_now()
+
+    def _imu_now(self) -> tuple[Vector, Vector, Vector]:
+        """:meth:`imu_motion` after ``computeJointJacobians`` at ``self._q``, kept for
+        :meth:`_recall` (``getFrameJacobian`` sets the IMU frame's ``oMf``)."""
+        full = pin.getFrameJacobian(self._model, self._data, self._imu_id, _LOCAL_WORLD_ALIGNED)
+        oMi = self._data.oMf[self._imu_id]
+        out = (np.array(oMi.rotation), np.array(oMi.translation), full[:, 6:].copy())
+        return self._keep("imu_motion", self._q[7:].tobytes(), out)  # type: ignore[return-value]
+
+    def _in_moving_imu(
+        self, h: Vector, rot: Vector | None, lin: Vector, ang: Vector | None
+    ) -> tuple[Vector, ...]:
+        """The feet's root-frame ``p_f, R_f, J_f, J_fω`` in the moving IMU frame, (K1)-(K2),
+        after ``computeJointJacobians`` at the same angles (``rot``, ``ang``: ``None``, not
+        computed)."""
+        R_bi, r_bi, J_bi = self._imu_now()
+        J_i, J_iw = J_bi[:3], J_bi[3:]
+        d = h - r_bi  # p_f − r_bi, (K, 3)
+        skew = np.zeros((len(d), 3, 3))  # (K2)'s (p_f − r_bi)^
+        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -d[:, 2], d[:, 1], -d[:, 0]
+        skew -= skew.transpose(0, 2, 1)
+        out = [d @ R_bi, None, R_bi.T @ (lin - J_i + skew @ J_iw), None]
+        if rot is not None and ang is not None:
+            out[1], out[3] = R_bi.T @ rot, R_bi.T @ (ang - J_iw)
+        return tuple(out)  # type: ignore[arg-type]
+
     def positions(self, q_joints: ArrayLike) -> Vector:
         """``h_j(q)`` for every foot, shape ``(len(feet), 3)`` [m], in the base (or IMU) frame."""
         self._set(q_joints)
         pin.framesForwardKinematics(self._model, self._data, self._q)
         h = np.array([self._data.oMf[i].translation for i in self._ids])
+        if self._imu_id is not None:
+            oMi = self._data.oMf[self._imu_id]
+            return (h - oMi.translation) @ oMi.rotation  # (K1)
         if self._to_imu is not None:
             R_bi, r_bi = self._to_imu
             h = (h - r_bi) @ R_bi  # rows: R_biᵀ (h − r_bi)
@@ -162,13 +233,15 @@ class FootKinematics:
         model, data = self._model, self._data
         pin.computeJointJacobians(model, data, self._q)
         pin.updateFramePlacements(model, data)
-        h = np.empty((len(self._ids), 3))
-        jac = np.empty((len(self._ids), 3, self.nv_joints))
+        h: Vector = np.empty((len(self._ids), 3))
+        jac: Vector = np.empty((len(self._ids), 3, self.nv_joints))
         for k, fid in enumerate(self._ids):
             h[k] = data.oMf[fid].translation
             full = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
             jac[k] = full[:3, 6:]
-        if self._to_imu is not None:
+        if self._imu_id is not None:
+            h, _, jac, _ = self._in_moving_imu(h, None, jac, None)
+        elif self._to_imu is not None:
             R_bi, r_bi = self._to_imu
             h = (h - r_bi) @ R_bi
             jac = R_bi.T @ jac
@@ -200,6 +273,8 @@ class FootKinematics:
         full = np.array([pin.getFrameJacobian(model, data, f, _LOCAL_WORLD_ALIGNED) for f in ids])
         placement = np.array([oMf[f].homogeneous for f in ids])
         h, rot = placement[:, :3, 3], placement[:, :3, :3]
+        if self._imu_id is not None:
+            return self._kept(key, self._in_moving_imu(h, rot, full[:, :3, 6:], full[:, 3:, 6:]))
         if self._to_imu is not None and self._imu_aligned:
             # R_bi = I: R_biᵀ x is x (its products' terms x·1 + y·0 + z·0, x finite), and
             # x + 0 its zeros' signs as the products leave them (-0 + 0 = +0)

@@ -17,7 +17,9 @@ State (the paper's "contact-inertial" state on the matrix Lie group SE_{2+K}(3))
 "Base" in the filter is the IMU's frame: the free-flyer root joint's frame, or
 with ``imu_frame`` a frame fixed to it (go1's ``imu_link``, 7 cm off the root),
 whose placement ``(R_bi, r_bi)`` in the root frame converts the outputs back
-to the root joint (Pinocchio's ``q[0:7]``, ``v[0:6]``).  The biases
+to the root joint (Pinocchio's ``q[0:7]``, ``v[0:6]``), or one that moves with
+other joints (TALOS's ``imu_link``, on the torso: :mod:`pinobs.observers.imu_link`,
+the placement and the joints' velocities at each sample).  The biases
 are a Euclidean augmentation outside the group: the paper's "imperfect IEKF"
 (its section on IMU biases), whose bias columns depend on the estimate.
 
@@ -454,8 +456,9 @@ class InvariantEKF(LeggedFilter):
         feet: the foot frame names, with a robot.
         gains: noise levels (:class:`InEKFGains`).
         gravity: gravity in the world frame [m/s²].
-        imu_frame: with a robot, the frame of the IMU if it is not the root joint's (a frame
-            fixed to the base, e.g. go1's ``"imu_link"``).
+        imu_frame: with a robot, the frame of the IMU if it is not the root joint's (fixed to
+            the base, go1's ``"imu_link"``, or moving with joints, TALOS's: then the root's
+            twist needs ``update``'s ``joint_velocities``; :mod:`~pinobs.observers.imu_link`).
         imu_hold: the reading used over ``[t_k, t_{k+1}]``: ``"previous"`` (the one at
             ``t_k``, held: MATH §7's convention, exact for readings that are held) or
             ``"average"`` (the mean of the readings at ``t_k`` and ``t_{k+1}``: second

@@ -162,7 +162,7 @@ class LeggedFilter(ABC):
         h, jac = self._legs(a.q_joints, a.R, a.flags)
         self._remember(None, h)
         state = self._add_feet(state, [j for j, f in enumerate(a.flags) if f], h, jac)
-        self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None)
+        self._commit(state, a.q_joints, None, None, a.imu, a.t if state.feet else None, rates=a.dq)
         self.setup.settle(state.R)
         self._warned = False
         return self.estimate
@@ -189,7 +189,9 @@ class LeggedFilter(ABC):
                 shape ``(3,)``.
             contacts: each foot name → in contact (every foot named), or a sequence of
                 bools in the order of ``feet``.
-            joint_velocities: passed through to ``estimate.v[6:]`` (NaN if not given).
+            joint_velocities: passed through to ``estimate.v[6:]`` (NaN if not given); with an
+                IMU frame that moves (:mod:`~pinobs.observers.imu_link`), the root's twist
+                ``v[0:6]`` takes them too (NaN without them).
 
         Raises:
             NotResetError: before ``reset``.
@@ -328,15 +330,18 @@ class LeggedFilter(ABC):
         contact_time: float | None,
         measured: int = 0,
         gated: tuple[int, ...] = (),
+        rates: Vector | None = None,
     ) -> None:
         """Store the new state with the reading to hold (and the time of a contact, if any)
-        and its estimate (ObserverDiverged, the state left as it was, if not finite)."""
+        and its estimate (ObserverDiverged, the state left as it was, if not finite);
+        ``rates``: the joints' velocities for a moving IMU frame's root twist (``dq`` if not
+        given; reset's ``v[6:]``)."""
         state = replace_state(
             state,
             imu=reading if reading is not None else state.imu,
             last_contact=state.last_contact if contact_time is None else contact_time,
         )
         estimate = self.setup.estimate(
-            state, self._estimate, q_joints, dq, nis, 3 * measured, gated
+            state, self._estimate, q_joints, dq, nis, 3 * measured, gated, rates
         )
         self._state, self._estimate = state, estimate

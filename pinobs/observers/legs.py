@@ -18,6 +18,7 @@ local attitude error).  Everything else lives here, once:
   the IMU frame to the root joint (Pinocchio's ``q[0:7]``, ``v[0:6]``)::
 
       R_b = R R_biᵀ,  p_b = p − R_b r_bi,  ω_b = R_bi (ω̃ − b̂_g),  v_b = R_bᵀ v − ω_b × r_bi
+  (an IMU frame that moves relative to the root: with the joints' terms, imu_link.py's M3).
 
 Each filter holds a :class:`LeggedSetup` (composition) and keeps its mathematics.
 """
@@ -47,6 +48,7 @@ from pinobs.errors import (
 from pinobs.model import FootKinematics, Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.base import Vector
+from pinobs.observers.imu_link import imu_state, root_twist
 from pinobs.observers.inekf_loops import base_kernel, load_leg_kernels
 from pinobs.observers.results import Consistency
 from pinobs.observers.rolling import RollingFeet
@@ -463,6 +465,7 @@ class ResetInputs(NamedTuple):
     flags: list[bool]
     prior: InEKFPrior
     bias: Vector
+    dq: Vector | None = None
 
 
 class UpdateInputs(NamedTuple):
@@ -522,7 +525,7 @@ class LeggedSetup:
         self.nq_joints = int(self.kinematics.nq_joints)
         self.nv_joints = int(self.kinematics.nv_joints)
         placement = getattr(self.kinematics, "imu_placement", None)
-        #: ``(R_bi, r_bi)``: the IMU's rotation and position in the base (root joint) frame.
+        #: ``(R_bi, r_bi)``: the IMU's placement in the root frame (moving: at the neutral angles).
         self.imu_placement: tuple[Vector, Vector] = (
             (np.eye(3), np.zeros(3))
             if placement is None
@@ -538,6 +541,8 @@ class LeggedSetup:
             np.array(self.imu_placement[1], dtype=float),
             columns,
         )
+        #: the IMU frame moves relative to the root (:mod:`~pinobs.observers.imu_link`)
+        self.imu_moves = bool(getattr(self.kinematics, "imu_moves", False))
         load_leg_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
         #: the feet's names of each state's ``feet`` seen (:meth:`estimate`'s ``contacts``)
         self._names: dict[tuple[int, ...], tuple[str, ...]] = {}
@@ -593,10 +598,13 @@ class LeggedSetup:
         theta = np.zeros(6) if bias is None else Robot.check_vector(bias, 6, what="bias")
         R_bi, r_bi = self.imu_placement
         R_b = quaternion_to_rotation(q[3:7])
-        x = np.array([R_b @ (v[:3] + np.cross(v[3:6], r_bi)), q[:3] + R_b @ r_bi])
+        x: Vector = np.array([R_b @ (v[:3] + np.cross(v[3:6], r_bi)), q[:3] + R_b @ r_bi])
+        R: Vector = R_b @ R_bi
+        if self.imu_moves:  # imu_link.py's (M1)-(M2)
+            R, x = imu_state(R_b, q, v, *self.kinematics.imu_motion(q[7:]))  # type: ignore[attr-defined]
         if self.rolling is not None:
             self.rolling.restart()  # the feet down at reset land now
-        return ResetInputs(t, q[7:], R_b @ R_bi, x, imu, flags, prior, theta)
+        return ResetInputs(t, q[7:], R, x, imu, flags, prior, theta, v[6:])
 
     def update_inputs(
         self,
@@ -676,9 +684,11 @@ class LeggedSetup:
         nis: float | None,
         nis_dof: int = 0,
         gated: tuple[int, ...] = (),
+        rates: Vector | None = None,
     ) -> InEKFEstimate:
         """Check ``state`` is finite (else ObserverDiverged with ``last``), convert it to the
-        root joint (module docstring)."""
+        root joint (module docstring); an IMU frame that moves, through the joints' velocities
+        ``rates`` (``dq`` if not given)."""
         R, x, P, bias = state.R, state.x, state.P, state.bias
         # a sum is finite iff every term is (or it overflowed: diverged as well); ndarray.sum's
         # reduction, called without its Python wrapper
@@ -694,7 +704,12 @@ class LeggedSetup:
         kernel = base_kernel.compiled
         assert kernel is not None  # loaded by the constructor
         imu = state.imu if state.imu is not None else _NO_READING
-        kernel(R, x, imu, bias, *self._placement, R_b, base, quat)
+        if self.imu_moves:  # imu_link.py's (M3): the placement at q, then the joints' terms
+            R_bi, r_bi, J_bi = self.kinematics.imu_motion(q_joints)  # type: ignore[attr-defined]
+            kernel(R, x, imu, bias, np.ascontiguousarray(R_bi), r_bi, False, R_b, base, quat)
+            root_twist(base, R_b, dq if rates is None else rates, r_bi, J_bi)
+        else:
+            kernel(R, x, imu, bias, *self._placement, R_b, base, quat)
         quat /= math.sqrt(float(quat @ quat))  # (rotation_to_quaternion's last steps)
         q = np.concatenate([base[0], -quat if quat[3] < 0 else quat, q_joints])
         v = np.concatenate(

@@ -160,12 +160,14 @@ def _flat_feet(legs: FootKinematics, targets: Vector, q0: Vector) -> Vector:
     return q
 
 
-def talos_mujoco_spec() -> Any:
+def talos_mujoco_spec(imu_body: str = "base_link") -> Any:
     """TALOS (example-robot-data's ``talos_reduced.urdf``, 32 joints) compiled by MuJoCo:
     every ``<visual>``/``<collision>`` removed (meshes), a box sole (half-sizes ``SOLE``,
     friction 1) under each of :data:`TALOS_FEET`, the only geoms that touch the floor; a
     free joint on ``base_link``, an unlimited torque motor and armature 0.05 kg·m² per
-    joint, an IMU site at ``base_link``'s origin (TALOS's ``imu_link`` moves with the torso).
+    joint, an IMU site at ``imu_body``'s origin: ``base_link`` (default, the root joint's
+    frame) or ``imu_link`` (TALOS's, on the torso: it moves with ``torso_1_joint`` and
+    ``torso_2_joint``; its URDF link, kept as a body, is Pinocchio's frame of that name).
     Returns the ``mujoco.MjSpec``."""
     import mujoco
 
@@ -190,7 +192,7 @@ def talos_mujoco_spec() -> Any:
             conaffinity=0,
             condim=3,
         )
-    add_imu_and_floor(spec, "base_link")
+    add_imu_and_floor(spec, imu_body)
     for joint in spec.joints:
         if joint.type == mujoco.mjtJoint.mjJNT_HINGE:
             joint.armature = 0.05
@@ -207,6 +209,8 @@ def simulate_humanoid(
     substeps: int = 2,
     noise: LeggedNoise | None = None,
     robot: Robot | None = None,
+    imu_body: str = "base_link",
+    torso: float = 0.0,
 ) -> LeggedRun:
     """Simulate TALOS (:func:`talos_mujoco_spec`) in MuJoCo, sampled as
     :func:`~pinobs.simulation.legged.simulate_legged` samples go1 (same columns, sensors and
@@ -223,6 +227,9 @@ def simulate_humanoid(
     ``"step"`` walks forward quasi-statically (module docstring: 6 cm a step, a step every
     2.5 s, the swing foot off the floor for 1 s of it).
 
+    ``imu_body``: the IMU site's body (:func:`talos_mujoco_spec`); ``torso`` [rad]: a torso
+    sway of that amplitude added to any motion (:func:`_torso`; 0, default: none).
+
     Raises:
         UnknownNameError: an unknown motion (one of :data:`HUMANOID_MOTIONS`).
         ConfigurationError: a non-positive duration, rate or substeps.
@@ -233,7 +240,7 @@ def simulate_humanoid(
     check_arguments(motion, HUMANOID_MOTIONS, duration, rate, substeps)
     robot = robot if robot is not None else load("talos")
     legs = FootKinematics(robot, TALOS_FEET)
-    spec = talos_mujoco_spec()
+    spec = talos_mujoco_spec(imu_body)
     spec.option.timestep = 1.0 / (rate * substeps)
     mj = spec.compile()
     stance = np.array(TALOS_STANCE)
@@ -255,7 +262,7 @@ def simulate_humanoid(
             targets, shares = plan.at(t)
             q_ref = _flat_feet(legs, targets, memory["q_ref"])
             memory["q_ref"] = q_ref
-            q_ref = _level(q_ref, shares, data.qpos[3:7])
+            q_ref = _level(_torso(q_ref, t, torso) if torso else q_ref, shares, data.qpos[3:7])
             _, jac = legs.positions_and_jacobians(q_ref)
             tau_ff = robot.gravity(np.concatenate([base_at_identity, q_ref]))[6:]
             tau_ff -= weight * np.einsum("j,jki,k->i", shares, jac, (0.0, 0.0, 1.0))
@@ -263,6 +270,9 @@ def simulate_humanoid(
             q_ref = _sway(stance, t) if motion == "sway" else stance.copy()
             _, jac = legs.positions_and_jacobians(q_ref)
             tau_ff = gravity.copy()
+            if torso:
+                q_ref = _torso(q_ref, t, torso)
+                tau_ff = robot.gravity(np.concatenate([base_at_identity, q_ref]))[6:]
             tau_ff[:12] = -0.5 * weight * np.einsum("jki,k->i", jac, (0.0, 0.0, 1.0))[:12]
         dq_ref = (q_ref - memory["q_prev"]) * rate if k > first else np.zeros(stance.size)
         memory["q_prev"] = q_ref
@@ -281,6 +291,18 @@ def _level(q_ref: Vector, shares: Vector, quat_wxyz: Vector) -> Vector:
     for j, o in enumerate((0, 6)):  # ankle pitch (o + 4), ankle roll (o + 5)
         out[o + 4] += shares[j] * LEVEL_GAIN * pitch
         out[o + 5] += shares[j] * LEVEL_GAIN * roll
+    return out
+
+
+def _torso(q_ref: Vector, t: float, c: float) -> Vector:
+    """``q_ref`` with the torso's sway at ``t`` [s]: ``torso_1_joint`` (yaw) ``+ c sin(2π 0.4 t)``
+    and ``torso_2_joint`` (pitch) ``+ c sin(2π 0.25 t)`` [rad], ``c`` ramped in over 0.5 s (the
+    torso's joints follow the legs' twelve); :func:`simulate_humanoid` takes the gravity
+    feed-forward of the arms, torso and head at that reference."""
+    out = q_ref.copy()
+    s = c * min(1.0, max(t, 0.0) / 0.5)
+    out[12] += s * math.sin(2 * math.pi * 0.4 * t)
+    out[13] += s * math.sin(2 * math.pi * 0.25 * t)
     return out
 
 

@@ -68,10 +68,11 @@ def test_with_an_imu_frame_the_feet_are_in_the_imu_frame(rng) -> None:
     np.testing.assert_allclose(r_bi, [-0.01592, -0.06659, -0.00617])
     _, jac_base = FootKinematics(robot, FEET).positions_and_jacobians(q[7:])
     np.testing.assert_allclose(jac, R_bi.T @ jac_base, atol=1e-15)
-    with pytest.raises(
-        UnsupportedRobotError, match=r"'FL_calf'.* moves with joint 'FL_calf_joint'"
-    ):
-        FootKinematics(robot, FEET, imu_frame="FL_calf")
+    moving = FootKinematics(robot, FEET, imu_frame="FL_calf")  # a frame that moves: allowed
+    calf = data.oMf[model.getFrameId("FL_calf")]
+    expected = [calf.actInv(data.oMf[model.getFrameId(f)]).translation for f in FEET]
+    assert moving.imu_moves and not kin.imu_moves
+    np.testing.assert_allclose(moving.positions(q[7:]), expected, rtol=0, atol=1e-14)
 
 
 def test_foot_sphere_radius_reads_the_urdf_collision_spheres() -> None:

@@ -1,0 +1,66 @@
+"""An IMU on a link that moves relative to the root joint (TALOS's ``imu_link``, on the torso).
+
+The contact-aided filters' body is the IMU's link itself: their state ``(R, v, p)`` is that
+frame's pose and velocity, and their equations are unchanged (the gyro and accelerometer
+measure that link's motion; the feet are measured in its frame through every joint between,
+:class:`pinobs.model.FootKinematics`' (K1)-(K2)).  What changes is the conversion between
+that frame and the root joint (Pinocchio's ``q[0:7]``, ``v[0:6]`` in the root frame), which
+now goes through the joints between them.  With ``(R_bi, r_bi)`` the IMU frame's placement in
+the root frame and ``J_i``, ``J_iω`` its Jacobians (:meth:`FootKinematics.imu_motion`: its
+origin's velocity and its angular velocity relative to the root, root frame, per joint
+velocity), ``q̇`` the joints' velocities and ``ω = ω̃ − b̂_g`` the IMU's angular velocity::
+
+    R = R_b R_bi,   p = p_b + R_b r_bi                               (M1)
+    R_bi ω = ω_b + J_iω q̇,   R_bᵀ v = v_b + ω_b × r_bi + J_i q̇        (M2)
+
+(M1) is ``oM_imu = oM_root · rootM_imu(q)``; (M2) its time derivative (the root frame's
+angular and linear velocity plus the joints' contribution).  The root's pose and twist from
+the IMU's, as the filters output them::
+
+    R_b = R R_biᵀ,  p_b = p − R_b r_bi,
+    ω_b = R_bi ω − J_iω q̇,   v_b = R_bᵀ v − ω_b × r_bi − J_i q̇                  (M3)
+
+For a frame fixed to the root ``J_i = J_iω = 0``: the conversion of
+:mod:`pinobs.observers.legs` (compiled, :data:`~.inekf_loops.base_kernel`), which (M3)
+extends by the joints' terms (:func:`root_twist`, after that kernel).  Without the joints'
+velocities (``update`` without ``joint_velocities``) the root's twist is unknown: NaN.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pinobs.observers.base import Vector
+
+__all__ = ["imu_state", "root_twist"]
+
+
+def imu_state(
+    R_b: Vector, q: Vector, v: Vector, R_bi: Vector, r_bi: Vector, J_bi: Vector
+) -> tuple[Vector, Vector]:
+    """(M1)-(M2): the IMU frame's rotation ``R`` and rows ``(v, p)`` in the world from the
+    root's pose ``(R_b, q[:3])``, its twist ``v[:6]`` (root frame) and the joints' ``v[6:]``:
+    ``R_b R_bi`` and ``(R_b (v_b + ω_b × r_bi + J_i q̇), p_b + R_b r_bi)``."""
+    velocity = R_b @ (v[:3] + np.cross(v[3:6], r_bi) + J_bi[:3] @ v[6:])
+    return R_b @ R_bi, np.array([velocity, q[:3] + R_b @ r_bi])
+
+
+def root_twist(base: Vector, R_b: Vector, dq: Vector | None, r_bi: Vector, J_bi: Vector) -> None:
+    """(M3), in place: ``base``'s rows ``(p_b, ω_b, v_b, R_b v_b)`` as the fixed-frame conversion
+    leaves them (``ω_b = R_bi ω``, ``v_b = R_bᵀ v − R_bi ω × r_bi``), with the joints' terms
+    ``a = J_iω q̇``, ``b = J_i q̇`` taken out: ``ω_b − a`` and ``v_b + a × r_bi − b``; NaN
+    without ``dq``."""
+    if dq is None:
+        base[1:] = np.nan
+        return
+    a, b = J_bi[3:] @ dq, J_bi[:3] @ dq
+    base[1] -= a
+    base[2] += _cross(a, r_bi) - b
+    base[3] = R_b @ base[2]
+
+
+def _cross(a: Vector, b: Vector) -> Vector:
+    """``a × b`` of two 3-vectors (``np.cross``'s checks cost more than the product)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )

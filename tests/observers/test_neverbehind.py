@@ -160,6 +160,31 @@ def test_blend_degrades_to_kf_with_a_grossly_wrong_model(family: str) -> None:
     assert rms["nb"] <= 1.2 * rms["kf"]
 
 
+def test_a_sample_the_kf_rejects_and_the_next_are_not_scored() -> None:
+    """An outlier of 0.05 rad on joint 1 (UR5, exact model, 1 kHz, σ = 1e-4): the kf rejects
+    it and keeps its prediction, so at the next sample its one-step error is a two-step one:
+    neither sample is scored (module docstring, **Gated**), the one after is."""
+    robot = pinobs.load("ur5")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = simulate(robot, {}, duration=0.5, sensor=Sensor(1000, 1e-4), inputs="pd", seed=4)
+    t, q, tau = res.t[1:], res.q_meas[1:].copy(), res.tau[1:]
+    bad = 300
+    q[bad, 1] += 0.05
+    ob = make_observer("ekf", robot, rate=1000, noise_std=1e-4, never_behind=True)
+    assert isinstance(ob, NeverBehind)
+    ob.reset(t[0], q[0], None, tau[0])
+    scores, gated = [], []
+    for k in range(1, bad + 3):
+        ob.update(t[k], q[k], tau[k])
+        scores.append(np.array(ob._state.s))
+        gated.append(ob.reference.innovation(ob._state.kf)[1])
+    assert gated[bad - 1] and not gated[bad] and not any(gated[: bad - 1])
+    assert np.array_equal(scores[bad - 1], scores[bad - 2])  # the rejected sample
+    assert np.array_equal(scores[bad], scores[bad - 2])  # the next: the kf two steps ahead
+    assert not np.array_equal(scores[bad + 1], scores[bad])  # the one after: scored
+
+
 def test_blend_options_are_checked() -> None:
     robot = pinobs.load("ur5")
     with pytest.raises(OptionError, match="model-free"):
@@ -279,7 +304,8 @@ class NumpyBlend(NeverBehind):
         prior, nis = self.prior, state.nis
         if self._self_test and not raised:  # (the NIS test: NeverBehind's own, shared)
             nis, prior = self._earned_prior(nis, m, dt)
-        if not lost and q_meas is not None and not self.reference.innovation(kf)[1]:
+        gated = self.reference.innovation(kf)[1] or self.reference.innovation(state.kf)[1]
+        if not lost and q_meas is not None and not gated:  # (**Gated**: nor the next one)
             ahead = 0.0 if state.dt_prev <= 0 else 0.5 * dt * dt / state.dt_prev
             step_a = ahead * (state.v - state.v_prev)
             qm0, vm0 = self.model.output(state.model)

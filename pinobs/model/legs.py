@@ -44,6 +44,9 @@ Vector = NDArray[np.floating[Any]]
 #: The configuration of a free-flyer at the identity: position 0, quaternion (x, y, z, w) = (0, 0, 0, 1).
 _BASE_AT_IDENTITY = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
 _LOCAL_WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+#: ``+0.0`` as a 0-d array (read-only): ``x + _ZERO`` is ``x + 0.0``
+_ZERO = np.zeros(())
+_ZERO.setflags(write=False)
 
 
 class FootKinematics:
@@ -96,6 +99,9 @@ class FootKinematics:
         self._data = model.createData()
         self._oMf = self._data.oMf  # (the frames' placements, in place: one attribute look-up)
         self._ids = tuple(ids)
+        #: each foot's placement in ``oMf`` (a reference into this object's data, which the
+        #: Jacobians update in place: ``.homogeneous`` without indexing ``oMf`` each sample)
+        self._foot_oMf = tuple(self._oMf[f] for f in ids)
         self._q = np.concatenate([_BASE_AT_IDENTITY, pin.neutral(model)[7:]])
         #: per method, the last joint angles' bytes and its results (:meth:`_recall`)
         self._memo: dict[str, tuple[bytes, tuple[Vector, ...]]] = {}
@@ -194,17 +200,18 @@ class FootKinematics:
         if last is not None and last[0] == key:
             return last[1]
         self._set(q_joints)
-        model, data, oMf = self._model, self._data, self._oMf
+        model, data = self._model, self._data
         pin.computeJointJacobians(model, data, self._q)
         ids = self._ids  # each foot's Jacobian, then its oMf (set by getFrameJacobian)
         full = np.array([pin.getFrameJacobian(model, data, f, _LOCAL_WORLD_ALIGNED) for f in ids])
-        placement = np.array([oMf[f].homogeneous for f in ids])
+        placement = np.array([m.homogeneous for m in self._foot_oMf])
         h, rot = placement[:, :3, 3], placement[:, :3, :3]
         if self._to_imu is not None and self._imu_aligned:
             # R_bi = I: R_biᵀ x is x (its products' terms x·1 + y·0 + z·0, x finite), and
-            # x + 0 its zeros' signs as the products leave them (-0 + 0 = +0)
-            h, rot = h - self._to_imu[1], rot + 0.0
-            return self._kept(key, (h, rot, full[:, :3, 6:] + 0.0, full[:, 3:, 6:] + 0.0))
+            # x + 0 its zeros' signs as the products leave them (-0 + 0 = +0; a 0-d array's
+            # zero: the same sum, without converting a Python float each call)
+            h, rot = h - self._to_imu[1], rot + _ZERO
+            return self._kept(key, (h, rot, full[:, :3, 6:] + _ZERO, full[:, 3:, 6:] + _ZERO))
         jac = np.ascontiguousarray(full[:, :, 6:])
         lin, ang = jac[:, :3], jac[:, 3:]
         if self._to_imu is not None:

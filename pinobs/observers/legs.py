@@ -765,7 +765,8 @@ def stance_consistency(nis: ArrayLike, dof: ArrayLike, gated: int = 0) -> Consis
     z, k = z[stance], k[stance]
     r = z / k
     tail = 0.5 * (1.0 - NIS_INTERVAL)
-    lo, hi = chi2.ppf(tail, k), chi2.ppf(1.0 - tail, k)
+    dofs, at = np.unique(k, return_inverse=True)  # (a handful of dofs: each ppf once)
+    lo, hi = chi2.ppf(tail, dofs)[at], chi2.ppf(1.0 - tail, dofs)[at]
     mean = float(r.mean())
     spread = 5.0 * math.sqrt(2.0 / float(k.sum()))  # five σ of the mean of NIS/dof
     bound, lower = 1.5 * (1.0 + spread), (1.0 - spread) / 1.5

@@ -307,14 +307,20 @@ def slip_densities(
     """Eq. (9) of :mod:`pinobs.observers.inekf`: ``Q_c`` (:func:`noise_densities`, feet in
     state order) with each foot's density raised by ``|ṗ_j|² h`` (``speed`` [m/s], one per
     foot in the state, or with ``feet`` (the state's feet, indices into ``speed``) one per
-    foot of the filter; ``h`` the step [s]), read-only.  The products in Python floats (the
-    same bits as NumPy's ``speed**2 * h``; a sample's handful, cheaper so)."""
+    foot of the filter; ``h`` the step [s]), read-only.  The products and sums in Python
+    floats (the same bits as NumPy's ``qc + np.repeat(speed**2 * h, 3)``; a sample's handful,
+    cheaper so)."""
     sp = np.asarray(speed, dtype=float).tolist()
-    sq = [sp[j] * sp[j] * h for j in (range(len(sp)) if feet is None else feet)]
-    out = np.array(qc, dtype=float)
-    out[9 : 9 + 3 * len(sq)] += [d for d in sq for _ in range(3)]  # (np.repeat's values)
-    out.setflags(write=False)
-    return out
+    out = np.asarray(qc, dtype=float).tolist()
+    for s, j in enumerate(range(len(sp)) if feet is None else feet):
+        d = sp[j] * sp[j] * h
+        o = 9 + 3 * s
+        out[o] += d
+        out[o + 1] += d
+        out[o + 2] += d
+    density = np.array(out)
+    density.setflags(write=False)
+    return density
 
 
 def slip_speeds(velocities: Vector, h: Vector, gyro: float, period: float) -> Vector:

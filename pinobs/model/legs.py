@@ -242,8 +242,8 @@ class FootKinematics:
             )
             placements.extend([m.homogeneous for m in self._foot_oMf])
         m, k = rows.shape[0], len(ids)
-        full = np.array(jacobians).reshape(m, k, 6, -1)
-        placement = np.array(placements).reshape(m, k, 4, 4)
+        full = np.concatenate(jacobians).reshape(m, k, 6, -1)  # (the rows stacked: copies)
+        placement = np.concatenate(placements).reshape(m, k, 4, 4)
         if self._to_imu is not None and self._imu_aligned:
             block = self._in_imu_frame(full, placement)  # (elementwise: one call for the block)
         else:

@@ -76,7 +76,7 @@ from pinobs.io.legged_checks import contact_notes, frame_notes
 from pinobs.io.readers import Log
 from pinobs.io.runs import estimate_log
 from pinobs.io.stream import LogRun
-from pinobs.model import Robot, foot_sphere_radii, load
+from pinobs.model import FootKinematics, Robot, foot_sphere_radii, load
 from pinobs.model.noise import third_difference_std
 from pinobs.model.robot import Vector
 from pinobs.observers import make_observer
@@ -103,6 +103,9 @@ JOINT_STD_RULES = ("log", "first-second")
 #: ``foot_radius=`` rule of :func:`estimate_legged` (its default): the radius of the feet's
 #: collision spheres in the robot's URDF (module docstring, "Rolling feet").
 FOOT_RADIUS_URDF = "urdf"
+
+#: Rows whose feet's placements :func:`legged_run` computes at once (``_Rows.preload``).
+PRELOAD_ROWS = 512
 
 #: The IMU frame used when the model has one of this name and none is given.
 IMU_FRAME = "imu_link"
@@ -321,10 +324,11 @@ def legged_run(
     )
     previous: float | None = None
     said: list[str] = [*joints.warnings, *said_setup]
-    rows, out = _Rows(log, joints.v, prob), _Outputs()
+    rows, out = _Rows(log, joints.v, prob, _preloading(filt), usable), _Outputs()
     # (Python floats, bools and flag lists: per-row reads; "probability" sets the flags' rows)
     times, fed, now = log.t.tolist(), usable.tolist(), flags.tolist()
     for k in range(n):
+        rows.preload(k)
         if not fed[k] or (previous is not None and times[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
             if prob is not None and k:
@@ -416,6 +420,15 @@ def _contact_setup(
     return prob, np.zeros((len(log), len(log.feet)), dtype=bool)
 
 
+def _preloading(filt: InvariantEKF) -> FootKinematics | None:
+    """The filter's legs if its rolling feet read their shared placements (what
+    :meth:`_Rows.preload` fills), else ``None``."""
+    kinematics = filt.kinematics
+    if filt.setup.rolling is None or not isinstance(kinematics, FootKinematics):
+        return None
+    return kinematics
+
+
 def _why(log: Log, k: int, usable: bool) -> str:
     if not usable:
         return "no IMU reading or joint angle: not fed to inekf"
@@ -430,9 +443,20 @@ class _Rows:
     angles: :func:`legged_run`'s ``usable``), so each ``update``'s own checks would pass;
     the time is checked per row (:func:`check_time`), as ``update`` does."""
 
-    def __init__(self, log: Log, dq: Vector, prob: ContactProbability | None = None) -> None:
+    def __init__(
+        self,
+        log: Log,
+        dq: Vector,
+        prob: ContactProbability | None = None,
+        kinematics: FootKinematics | None = None,
+        usable: np.ndarray | None = None,
+    ) -> None:
         assert log.imu_gyro is not None and log.imu_acc is not None
         self.q = np.ascontiguousarray(log.q[:, 7:], dtype=float)
+        #: the legs whose placements :meth:`preload` computes a block at a time (``None``:
+        #: none), and the rows fed (the others' angles are not asked for)
+        self._kinematics = kinematics
+        self._usable = np.ones(len(self.q), dtype=bool) if usable is None else usable
         self.reading = np.ascontiguousarray(np.hstack([log.imu_gyro, log.imu_acc]), dtype=float)
         self.dq = np.ascontiguousarray(dq, dtype=float)
         self.dq_finite = np.all(np.isfinite(self.dq), axis=1).tolist()
@@ -441,6 +465,16 @@ class _Rows:
         self.force_factor: list[list[float]] = []
         if prob is not None and log.foot_force is not None:
             self.force_factor = prob.force_factor(log.foot_force).tolist()
+
+    def preload(self, k: int) -> None:
+        """At a block's first row ``k``: the feet's placements and Jacobians of its usable rows
+        (:data:`PRELOAD_ROWS` from ``k``) computed at once
+        (:meth:`pinobs.model.FootKinematics.preload`: the same values the filter's calls
+        then find, without a call's NumPy work each row)."""
+        if self._kinematics is None or k % PRELOAD_ROWS:
+            return
+        block = slice(k, k + PRELOAD_ROWS)
+        self._kinematics.preload(self.q[block][self._usable[block]])
 
     def probable(
         self, filt: InvariantEKF, prob: ContactProbability, k: int, previous: list[bool] | None

@@ -52,7 +52,12 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from pinobs.errors import ConfigurationError, UnknownNameError, UnsupportedRobotError
+from pinobs.errors import (
+    ConfigurationError,
+    DimensionError,
+    UnknownNameError,
+    UnsupportedRobotError,
+)
 from pinobs.model.loading import resolve_source
 from pinobs.model.robot import Robot
 
@@ -63,6 +68,9 @@ Vector = NDArray[np.floating[Any]]
 #: The configuration of a free-flyer at the identity: position 0, quaternion (x, y, z, w) = (0, 0, 0, 1).
 _BASE_AT_IDENTITY = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
 _LOCAL_WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+#: ``+0.0`` as a 0-d array (read-only): ``x + _ZERO`` is ``x + 0.0``
+_ZERO = np.zeros(())
+_ZERO.setflags(write=False)
 
 
 class FootKinematics:
@@ -119,9 +127,15 @@ class FootKinematics:
         self._data = model.createData()
         self._oMf = self._data.oMf  # (the frames' placements, in place: one attribute look-up)
         self._ids = tuple(ids)
+        #: each foot's placement in ``oMf`` (a reference into this object's data, which the
+        #: Jacobians update in place: ``.homogeneous`` without indexing ``oMf`` each sample)
+        self._foot_oMf = tuple(self._oMf[f] for f in ids)
         self._q = np.concatenate([_BASE_AT_IDENTITY, pin.neutral(model)[7:]])
         #: per method, the last joint angles' bytes and its results (:meth:`_recall`)
         self._memo: dict[str, tuple[bytes, tuple[Vector, ...]]] = {}
+        #: :meth:`preload`'s rows: each row's angles' bytes → its index into the block's arrays
+        self._preloaded: dict[bytes, int] = {}
+        self._block: tuple[Vector, ...] = ()
         self.robot_name = robot.name
         self.imu_frame = imu_frame
         self.imu_placement: tuple[Vector, Vector] = (np.eye(3), np.zeros(3))
@@ -261,25 +275,82 @@ class FootKinematics:
 
         One ``computeJointJacobians``, then per foot ``getFrameJacobian``, which also sets the
         foot's ``oMf`` (``oMi · placement``, what ``updateFramePlacements`` gives it): the same
-        arithmetic as before, without the placements of the frames that are not feet."""
+        arithmetic as before, without the placements of the frames that are not feet.  Angles
+        whose bytes are those of a row given to :meth:`preload` get that row's arrays."""
         key = np.asarray(q_joints, dtype=float).tobytes()
         last = self._memo.get("placements_and_jacobians")
         if last is not None and last[0] == key:
             return last[1]
+        row = self._preloaded.get(key)
+        if row is not None:
+            return self._kept(key, tuple(a[row] for a in self._block))
         self._set(q_joints)
-        model, data, oMf = self._model, self._data, self._oMf
+        full, placement = self._feet_at_q()
+        if self._imu_id is not None:  # a moving IMU: its Jacobians at these angles, (K1)-(K2)
+            h, rot = placement[:, :3, 3], placement[:, :3, :3]
+            return self._kept(key, self._in_moving_imu(h, rot, full[:, :3, 6:], full[:, 3:, 6:]))
+        return self._kept(key, self._in_imu_frame(full, placement))
+
+    def preload(self, q_rows: ArrayLike) -> None:
+        """:meth:`shared_placements_and_jacobians` of each row of ``q_rows`` ``(M, nq_joints)``,
+        computed now and kept (replacing the rows kept before) for the calls with the same
+        angles' bytes: the same values (the same Pinocchio calls, then the same elementwise
+        operations on the whole block at once, or per row where the IMU's axes are not the
+        base's), without a call's NumPy work each sample.  A log's runner
+        (:func:`pinobs.io.legged_run.legged_run`) preloads its rows block by block.  An IMU
+        on a moving link keeps nothing (its Jacobians are taken at each call's angles).
+
+        Raises:
+            DimensionError: ``q_rows`` not of shape ``(M, nq_joints)``.
+        """
+        rows = np.ascontiguousarray(q_rows, dtype=float)
+        if rows.ndim != 2 or rows.shape[1] != self.nq_joints:
+            raise DimensionError(
+                f"q_rows must have shape (M, {self.nq_joints}) (joint angles per row), got "
+                f"shape {rows.shape}"
+            )
+        if self._imu_id is not None:  # (a moving IMU's Jacobians: row by row, at each call)
+            return
+        model, data, ids, q = self._model, self._data, self._ids, self._q
+        jacobians: list[Vector] = []
+        placements: list[Vector] = []
+        for angles in rows:
+            q[7:] = angles  # (_set)
+            pin.computeJointJacobians(model, data, q)
+            jacobians.extend(
+                [pin.getFrameJacobian(model, data, f, _LOCAL_WORLD_ALIGNED) for f in ids]
+            )
+            placements.extend([m.homogeneous for m in self._foot_oMf])
+        m, k = rows.shape[0], len(ids)
+        full = np.concatenate(jacobians).reshape(m, k, 6, -1)  # (the rows stacked: copies)
+        placement = np.concatenate(placements).reshape(m, k, 4, 4)
+        if self._to_imu is not None and self._imu_aligned:
+            block = self._in_imu_frame(full, placement)  # (elementwise: one call for the block)
+        else:
+            per_row = [self._in_imu_frame(f, p) for f, p in zip(full, placement, strict=True)]
+            block = tuple(np.array(a) for a in zip(*per_row, strict=True))
+        self._block = tuple(np.ascontiguousarray(a) for a in block)
+        self._preloaded = {angles.tobytes(): i for i, angles in enumerate(rows)}
+
+    def _feet_at_q(self) -> tuple[Vector, Vector]:
+        """The feet's frame Jacobians ``(K, 6, nv)`` (``LOCAL_WORLD_ALIGNED``) and placements
+        ``(K, 4, 4)`` in the world (the root at the identity) at ``self._q``."""
+        model, data = self._model, self._data
         pin.computeJointJacobians(model, data, self._q)
         ids = self._ids  # each foot's Jacobian, then its oMf (set by getFrameJacobian)
         full = np.array([pin.getFrameJacobian(model, data, f, _LOCAL_WORLD_ALIGNED) for f in ids])
-        placement = np.array([oMf[f].homogeneous for f in ids])
-        h, rot = placement[:, :3, 3], placement[:, :3, :3]
-        if self._imu_id is not None:
-            return self._kept(key, self._in_moving_imu(h, rot, full[:, :3, 6:], full[:, 3:, 6:]))
+        return full, np.array([m.homogeneous for m in self._foot_oMf])
+
+    def _in_imu_frame(self, full: Vector, placement: Vector) -> tuple[Vector, ...]:
+        """``(h, R, J, J_ω)`` from :meth:`_feet_at_q`'s arrays, in the base (or a fixed IMU)
+        frame; with the IMU's axes the base's, elementwise (a block ``(M, K, …)`` too)."""
+        h, rot = placement[..., :3, 3], placement[..., :3, :3]
         if self._to_imu is not None and self._imu_aligned:
             # R_bi = I: R_biᵀ x is x (its products' terms x·1 + y·0 + z·0, x finite), and
-            # x + 0 its zeros' signs as the products leave them (-0 + 0 = +0)
-            h, rot = h - self._to_imu[1], rot + 0.0
-            return self._kept(key, (h, rot, full[:, :3, 6:] + 0.0, full[:, 3:, 6:] + 0.0))
+            # x + 0 its zeros' signs as the products leave them (-0 + 0 = +0; a 0-d array's
+            # zero: the same sum, without converting a Python float each call)
+            h, rot = h - self._to_imu[1], rot + _ZERO
+            return h, rot, full[..., :3, 6:] + _ZERO, full[..., 3:, 6:] + _ZERO
         jac = np.ascontiguousarray(full[:, :, 6:])
         lin, ang = jac[:, :3], jac[:, 3:]
         if self._to_imu is not None:
@@ -288,7 +359,7 @@ class FootKinematics:
             lin, ang = R_bi.T @ lin, R_bi.T @ ang
         else:
             h, rot = np.ascontiguousarray(h), np.ascontiguousarray(rot)
-        return self._kept(key, (h, rot, lin, ang))
+        return h, rot, lin, ang
 
     def _kept(self, key: bytes, out: tuple[Vector, ...]) -> tuple[Vector, ...]:
         """``out``, kept (not copied) for the next call with the same angles' bytes ``key``."""

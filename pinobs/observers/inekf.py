@@ -191,7 +191,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import GainError
 from pinobs.model import Robot
@@ -546,6 +546,8 @@ class InvariantEKF(LeggedFilter):
         self.adapt_noise = None if adapt_noise is None else positive("adapt_noise", adapt_noise)
         self.noise_scale: Vector = np.ones(3)
         self._foot_q: tuple[float, Vector] = (0.0, np.empty((0, 3)))
+        #: index arrays of the feet tuples seen (:meth:`_rows`)
+        self._feet_rows: dict[tuple[int, ...], NDArray[np.intp]] = {}
         load_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
 
     def error_matrix(self) -> Vector:
@@ -668,8 +670,28 @@ class InvariantEKF(LeggedFilter):
         kernel = foot_nis_kernel.compiled
         assert kernel is not None  # loaded by the constructor
         g = self.gains
-        kernel(state.R, state.x, state.P, h[feet], jac[feet], self._joint_var, g.kinematics**2, out)
+        rows = self._rows(feet)
+        kernel(
+            state.R,
+            state.x,
+            state.P,
+            h.take(rows, 0),
+            jac.take(rows, 0),
+            self._joint_var,
+            g.kinematics**2,
+            out,
+        )
         return out
+
+    def _rows(self, feet: list[int]) -> NDArray[np.intp]:
+        """``feet`` (indices into ``feet``, in state order) as an index array, kept per tuple:
+        ``h.take(rows, 0)`` gives the rows of ``h[feet]`` without converting the list each
+        sample."""
+        key = tuple(feet)
+        rows = self._feet_rows.get(key)
+        if rows is None:
+            rows = self._feet_rows[key] = np.array(key, dtype=np.intp)
+        return rows
 
     def _legs(self, q_joints: Vector, R: Any = None, flags: Any = None) -> tuple[Vector, Vector]:
         """The feet's positions and Jacobians (:meth:`LeggedSetup.legs`), the columns scaled by
@@ -694,7 +716,8 @@ class InvariantEKF(LeggedFilter):
         R1, x1, theta, P1 = np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P)
         kernel = correct_kernel.compiled
         assert kernel is not None  # loaded by the constructor
-        feet = (h[measured], jac[measured], self._joint_var, self.gains.kinematics**2)
+        rows = self._rows(measured)  # (h[measured], jac[measured]: the same rows)
+        feet = (h.take(rows, 0), jac.take(rows, 0), self._joint_var, self.gains.kinematics**2)
         nis = kernel(R, x, state.bias, P, *feet, R1, x1, theta, P1)
         if nis < 0.0:
             return self._update_solve(state, measured, h, jac)

@@ -309,14 +309,16 @@ def slip_densities(
     """Eq. (9) of :mod:`pinobs.observers.inekf`: ``Q_c`` (:func:`noise_densities`, feet in
     state order) with each foot's density raised by ``|ṗ_j|² h`` (``speed`` [m/s], one per
     foot in the state, or with ``feet`` (the state's feet, indices into ``speed``) one per
-    foot of the filter; ``h`` the step [s]), read-only.  The products in Python floats (the
-    same bits as NumPy's ``speed**2 * h``; a sample's handful, cheaper so)."""
+    foot of the filter; ``h`` the step [s]), read-only.  In Python floats (the same bits as
+    NumPy's ``qc + np.repeat(speed**2 * h, 3)``; a sample's handful, cheaper so)."""
     sp = np.asarray(speed, dtype=float).tolist()
-    sq = [sp[j] * sp[j] * h for j in (range(len(sp)) if feet is None else feet)]
-    out = np.array(qc, dtype=float)
-    out[9 : 9 + 3 * len(sq)] += [d for d in sq for _ in range(3)]  # (np.repeat's values)
-    out.setflags(write=False)
-    return out
+    out = np.asarray(qc, dtype=float).tolist()
+    for s, j in enumerate(range(len(sp)) if feet is None else feet):
+        for o in range(9 + 3 * s, 12 + 3 * s):
+            out[o] += sp[j] * sp[j] * h
+    density = np.array(out)
+    density.setflags(write=False)
+    return density
 
 
 def slip_speeds(velocities: Vector, h: Vector, gyro: float, period: float) -> Vector:
@@ -778,9 +780,9 @@ def stance_consistency(nis: ArrayLike, dof: ArrayLike, gated: int = 0) -> Consis
     if n == 0:
         return Consistency(0, math.nan, 1.0, math.nan, "unknown")
     z, k = z[stance], k[stance]
-    r = z / k
-    tail = 0.5 * (1.0 - NIS_INTERVAL)
-    lo, hi = chi2.ppf(tail, k), chi2.ppf(1.0 - tail, k)
+    r, tail = z / k, 0.5 * (1.0 - NIS_INTERVAL)
+    dofs, at = np.unique(k, return_inverse=True)  # (a handful of dofs: each ppf once)
+    lo, hi = chi2.ppf(tail, dofs)[at], chi2.ppf(1.0 - tail, dofs)[at]
     mean = float(r.mean())
     spread = 5.0 * math.sqrt(2.0 / float(k.sum()))  # five σ of the mean of NIS/dof
     bound, lower = 1.5 * (1.0 + spread), (1.0 - spread) / 1.5

@@ -118,6 +118,7 @@ class RollingFeet:
             lift_kernel.load()
         step_kernel.load()
         self.down = np.zeros(len(self.offsets), dtype=bool)
+        self._any_down = False  # down.any(), kept as the flags set it (a Python bool)
         #: (R5): the anchored point's cycloid lift removed (``False``: (R4) alone)
         self.lift = bool(lift)
         #: (R5): each foot's ``n̂_j`` (IMU frame; zero: not down), and the orientation the
@@ -129,6 +130,7 @@ class RollingFeet:
         """Forget every anchor (no foot down): the filter's ``reset``."""
         self.offsets[:] = 0.0
         self.down[:] = False
+        self._any_down = False
         self.normals[:] = 0.0
         self._settled = None
 
@@ -180,11 +182,12 @@ class RollingFeet:
             if self.lift:
                 self._settled = None
             self.down = now
+            self._any_down = any(flags)  # (now.any(), without its reduction)
         else:
             kernel = rolling_kernel.compiled
             assert kernel is not None  # loaded by the constructor
             kernel(h, rot, jac, jac_w, self.offsets, h_out, jac_out)  # (R4)
-        if self.lift and self.down.any():
+        if self.lift and self._any_down:
             self._lift(h, rot, jac, jac_w, h_out, jac_out)
         return h_out, jac_out
 

@@ -13,6 +13,7 @@ from pinobs.cli import main
 from pinobs.errors import DimensionError, GainError, LogFormatError
 from pinobs.io import read_log
 from pinobs.io.legged_run import estimate_legged
+from pinobs.model import FootKinematics
 from pinobs.observers.contacts import contacts_from_forces, default_thresholds
 from pinobs.observers.inekf import InEKFGains
 
@@ -399,3 +400,31 @@ def test_rolling_lift_reaches_the_filter(trot, monkeypatch) -> None:
     alone = runner.estimate_legged(go1, log, rolling_lift=False)
     assert made == [True, False]
     assert not np.array_equal(default.v, alone.v)
+
+
+def test_preloading_the_feet_block_by_block_changes_no_bit_of_the_run(trot, monkeypatch) -> None:
+    """The runner computes the feet's placements a block of rows at a time
+    (``FootKinematics.preload``); with blocks of 7 rows (a 2 s trot: 115 blocks) and without
+    preloading, both contact modes give the same bits."""
+    from pinobs.io import legged_run as runner
+
+    go1 = pinobs.load("go1")
+    log = _read(_frame(trot), go1)
+    monkeypatch.setattr(runner, "PRELOAD_ROWS", 7)
+    blocks: list[int] = []
+    preload = FootKinematics.preload
+    monkeypatch.setattr(
+        FootKinematics, "preload", lambda self, q: blocks.append(len(q)) or preload(self, q)
+    )
+    for mode in ("force", "probability"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            preloaded = runner.legged_run(go1, log, contacts=mode)
+            with monkeypatch.context() as m:
+                m.setattr(runner, "_preloading", lambda filt: None)
+                alone = runner.legged_run(go1, log, contacts=mode)
+        for a, b in ((preloaded.run.q, alone.run.q), (preloaded.run.v, alone.run.v)):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(preloaded.nis, alone.nis)
+        np.testing.assert_array_equal(preloaded.contacts, alone.contacts)
+    assert len(blocks) == 2 * -(-len(log) // 7) and max(blocks) == 7  # (each mode's blocks)

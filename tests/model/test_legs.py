@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 
 import pinobs
-from pinobs.errors import UnknownNameError, UnsupportedRobotError
+from pinobs.errors import DimensionError, UnknownNameError, UnsupportedRobotError
 from pinobs.model import FootKinematics, foot_sphere_radius
 
 FEET = ("FL_foot", "FR_foot", "RL_foot", "RR_foot")
@@ -85,3 +85,27 @@ def test_foot_sphere_radius_reads_the_urdf_collision_spheres() -> None:
 
 
 GO1_FEET_NAMES = ("FL_foot", "FR_foot", "RL_foot", "RR_foot")
+
+
+@pytest.mark.parametrize("imu_frame", ["imu_link", None, "camera_optical_face"])
+def test_preloaded_rows_give_the_bits_of_the_rows_computed_one_by_one(rng, imu_frame) -> None:
+    """``preload`` (a log's rows at once) then ``shared_placements_and_jacobians`` of each row,
+    in any order, equals what a fresh ``FootKinematics`` computes for that row alone."""
+    robot = pinobs.load("go1")
+    alone = FootKinematics(robot, FEET, imu_frame=imu_frame)
+    preloaded = FootKinematics(robot, FEET, imu_frame=imu_frame)
+    rows = np.tile([0.0, 0.8, -1.6], 4) + 0.3 * rng.normal(size=(7, 12))
+    preloaded.preload(rows)
+    for k in rng.permutation(len(rows)):
+        got = preloaded.shared_placements_and_jacobians(rows[k].copy())
+        want = alone.shared_placements_and_jacobians(rows[k])
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
+            assert a.flags.writeable
+            assert a.flags.c_contiguous or not b.flags.c_contiguous
+
+
+def test_preload_refuses_rows_of_the_wrong_width() -> None:
+    legs = FootKinematics(pinobs.load("go1"), ("FL_foot",), imu_frame="imu_link")
+    with pytest.raises(DimensionError, match=r"q_rows must have shape \(M, 12\)"):
+        legs.preload(np.zeros((3, 11)))

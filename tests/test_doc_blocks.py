@@ -158,6 +158,8 @@ NOT_RUN: dict[str, str] = {
     "committed benchmarks/figaroh_peer.{md,json} (~4 min)",
     "benchmarks/legged_real_innovations.py": "needs the shared Go1 log; writes the committed "
     "benchmarks/legged_real_innovations.md (~30 s)",
+    "benchmarks/talos_imu_link.py": "MuJoCo TALOS with its IMU on imu_link and on the root "
+    "through legged_run, several minutes; writes the committed benchmarks/talos_imu_link.md",
     "benchmarks/legged_adapt_noise.py": "MuJoCo go1 through legged_run and the shared Go1 log, "
     "~25 min; writes the committed benchmarks/legged_adapt_noise.md",
     "benchmarks/legged_slip_axes.py": "MuJoCo go1 through legged_run, 77 runs; writes the "

@@ -27,6 +27,7 @@ from pinobs.cli.options import (
     drives_option,
     load_robot,
     lock_option,
+    log_source,
     progress,
     rate_not_used,
     read_args_log,
@@ -288,7 +289,7 @@ def _estimate_filtered(args: argparse.Namespace) -> int:
     with progress(f"{robot.name}: {args.observer}", not args.no_progress) as step:
         try:
             run = process_log(
-                args.log,
+                log_source(args),
                 robot,
                 args.observer,
                 out=args.out,
@@ -446,7 +447,7 @@ def _estimate_smoothed(args: argparse.Namespace) -> int:
     robot = load_robot(args)
     try:
         run, stretches = smooth_log(
-            args.log,
+            log_source(args),
             robot,
             args.out,
             observer=args.observer,
@@ -543,6 +544,8 @@ def _estimate_many(args: argparse.Namespace) -> int:
 
     if args.html:
         raise OptionError("--html is for one log (--out FILE), not with --out-dir")
+    if args.join:
+        raise OptionError("--join is for one log (--out FILE), not with --out-dir")
     check_output("--out-dir", args.out_dir, folder=True)  # a file there: refused before any work
     observer_class(args.observer)  # an unknown name: UnknownNameError listing the registered ones
     load_robot(args)  # a bad robot fails here, not once per log

@@ -34,6 +34,7 @@ __all__ = [
     "add_clock_option",
     "add_cluster_options",
     "add_drive_options",
+    "add_join_option",
     "add_lock_option",
     "add_log_columns",
     "add_progress_option",
@@ -45,6 +46,7 @@ __all__ = [
     "drives_option",
     "load_robot",
     "lock_option",
+    "log_source",
     "progress",
     "task_progress",
 ]
@@ -144,7 +146,8 @@ def load_robot(args: argparse.Namespace) -> Robot:
 
 # -------------------------------------------------------------------- log
 def add_log_columns(p: argparse.ArgumentParser) -> None:
-    """``--map`` and ``--topic``: which columns, or which bag topic, a log is read from."""
+    """``--map``, ``--topic`` and ``--join``: which columns, or which bag topic, a log is read
+    from, and the tables joined to it."""
     p.add_argument(
         "--map",
         action="append",
@@ -155,6 +158,7 @@ def add_log_columns(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--topic", default=None, help="JointState topic of a bag (default: the only one)"
     )
+    add_join_option(p)
 
 
 def rate_not_used(rate: float | None, log: Log) -> str | None:
@@ -226,11 +230,34 @@ def drives_option(args: argparse.Namespace) -> Drives | None:
     )
 
 
+def add_join_option(p: argparse.ArgumentParser) -> None:
+    """``--join TABLE`` (repeatable): :func:`pinobs.io.join_tables` with ``--log``."""
+    p.add_argument(
+        "--join",
+        action="append",
+        default=None,
+        metavar="TABLE",
+        help="another CSV/TSV/Parquet table of the same samples, joined to --log's columns on "
+        "equal t (a JointState exported as position, velocity and effort tables; repeatable)",
+    )
+
+
+def log_source(args: argparse.Namespace) -> Any:
+    """What ``--log`` names: its path, or with ``--join`` the tables joined on ``t``
+    (:func:`pinobs.io.join_tables`, a DataFrame: read whole, not in chunks)."""
+    joined = getattr(args, "join", None)
+    if not joined:
+        return args.log
+    from pinobs.io.readers.join import join_tables
+
+    return join_tables([args.log, *joined])
+
+
 def read_args_log(args: argparse.Namespace, robot: Robot) -> Log:
-    """``--log`` read as the command's options say (``--map``, ``--topic``, the drives,
-    ``--rate``): :func:`pinobs.io.read_log`."""
+    """``--log`` read as the command's options say (``--join``, ``--map``, ``--topic``, the
+    drives, ``--rate``): :func:`pinobs.io.read_log`."""
     return read_log(
-        args.log,
+        log_source(args),
         robot,
         columns=column_map(args.map),
         topic=args.topic,

@@ -12,7 +12,15 @@ behind a logger's jittery stamps, stale rows and drops.
 
 from pinobs.io.clock import CLOCK_MODES, ClockFit, ClockRepair, ClockReport, fit_clock
 from pinobs.io.drives import Drives
-from pinobs.io.readers import CHUNK_ROWS, Log, concat_logs, find_logs, iter_log, read_log
+from pinobs.io.readers import (
+    CHUNK_ROWS,
+    Log,
+    concat_logs,
+    find_logs,
+    iter_log,
+    join_tables,
+    read_log,
+)
 from pinobs.io.runs import estimate, estimate_log, process_log
 from pinobs.io.stream import LogEstimator, LogRun, ObserverLike
 from pinobs.io.writers import EstimateWriter, write_estimates, write_log
@@ -37,6 +45,7 @@ __all__ = [
     "find_logs",
     "fit_clock",
     "iter_log",
+    "join_tables",
     "process_log",
     "read_log",
     "write_estimates",

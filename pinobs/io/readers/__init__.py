@@ -74,6 +74,7 @@ log; NPZ files are loaded whole.
 from __future__ import annotations
 
 from pinobs.io.readers.formats import find_logs, iter_log, read_log
+from pinobs.io.readers.join import join_tables
 from pinobs.io.readers.log import CHUNK_ROWS, Log, LogSource, chain_chunks, concat_logs, slice_log
 
 __all__ = [
@@ -84,6 +85,7 @@ __all__ = [
     "concat_logs",
     "find_logs",
     "iter_log",
+    "join_tables",
     "read_log",
     "slice_log",
 ]

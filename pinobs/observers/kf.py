@@ -22,8 +22,8 @@ Defaults: σ = ``noise_std`` (1e-6 if not given, so the filter trusts the
 encoder), ``jerk_psd`` = ``"auto"`` (below), ``outlier_probability`` = 1e-6.
 The fixed default before it, 1e3 rad²/s⁵ (:data:`SMOOTHING_JERK_PSD`), was about right
 for an arm tracking smooth references at 1 kHz and 1.6–10× over the best fixed density on
-the UR10e and TIAGo logs of ``benchmarks/real_logs.py``; ``"auto"`` is within 0.89–1.22× of
-that best on every one of them (TX40 at 1 kHz: 0.99×), 0.85–1.03× on ``pinobs bench``'s
+the UR10e and TIAGo logs of ``benchmarks/real_logs.py``; ``"auto"`` is within 0.89–1.21× of
+that best on every one of them (TX40 at 1 kHz: 0.98×), 0.85–1.03× on ``pinobs bench``'s
 simulations (1 kHz; the fixed 1e3: 1.4–2.3×) and 0.87–1.00× on ``benchmarks/learning.py``'s
 runs, at half the cost of a fixed density on a UR5 (8.5 ``pin.aba`` calls against 18: the bank
 is one compiled step, on Lie-group joints too; go1's free-flyer 7.2 against 10.5, where the
@@ -102,7 +102,7 @@ the density.  (2) A memory in seconds remembers the start: on ``pinobs bench``'s
 density's RMS and 10 s more (the low-density filters' long transient keeps their
 likelihood down), 100 samples 0.97–0.98×.  (3) One density cannot fit every joint: the
 UR5 run's joints settle from 1.2 to 44 rad²/s⁵, TIAGo's from 0 (the torso, at rest) to
-0.8.  What remains on TIAGo (1.22× its best fixed density, 1e-6, the grid's bottom) is
+0.8.  What remains on TIAGo (1.21× its best fixed density, 1e-6, the grid's bottom) is
 the reference's: its recorded velocity matches the positions' Savitzky–Golay derivative
 best 10 to 20 samples late (RMS 4.5e-3 rad/s against 6.7e-3 at no delay), so a filter
 that lags scores better against it; the likelihood sees only the positions.

@@ -324,9 +324,12 @@ def markdown(res: dict[str, Any]) -> str:
         'Velocity RMS of `pinobs.estimate("kf", ...)` (`jerk_psd="auto"`) against the '
         "UR10e's own velocity from 1 s on, as a ratio to the hard gate's; (n): samples gated. "
         "Rules: the module docstring of the script. No rule has a parameter fitted to these "
-        "logs; soft was chosen with all 17 and the glitch runs in view (the only rule that "
-        "keeps the hard gate's glitch protection and is better on every log but one, by "
-        "6e-4); the two halves (odd and even #) give the same order.",
+        "logs; soft was chosen with all 17 and the glitch runs in view: better than the hard "
+        "gate on every log but one (by 6e-4) with its glitch protection (below); huber is "
+        "better still but lets glitches through, any filter rejects no glitch under 2 rad, "
+        "joint is worse on 9 logs, agile (a hard gate on another NIS) gates up to 23 samples "
+        "a log and is worse on one.  On each half (odd and even #) soft's mean lies between "
+        "no gate's and the hard gate's.",
         "",
         "| # | log | hard [rad/s] (n) | " + " | ".join(RULES[1:]) + " |",
         "|---|---|---|" + "---|" * (len(RULES) - 1),

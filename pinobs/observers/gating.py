@@ -99,7 +99,8 @@ class GateState(NamedTuple):
 
     Attributes:
         nis: normalized innovation squared of the last measurement (``None``: none).
-        gated: that measurement was rejected as an outlier (the state is the prediction).
+        gated: that measurement was rejected as an outlier (the state is the prediction;
+            ``kf``'s ``"auto"`` bank: down-weighted, the soft gate of :mod:`pinobs.observers.kf`).
         run: measurements rejected in a row.
         level: running mean of accepted NIS (scales the gate; ``None``: none yet, ``dof``).
     """

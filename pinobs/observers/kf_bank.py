@@ -520,6 +520,21 @@ class AutoBank:
             gated[:done],
         )
 
+    def _softened(self, pred: BankState, e: Vector, s: Vector, r: float) -> BankState:
+        """The prediction ``pred`` corrected by the innovations ``e`` (``(n_f, nv)``) with the
+        innovation variances ``s`` (``(n_f,)``: the soft gate's ``α S_f``): per filter the gain
+        ``K = P⁻[:, 0] / s``, ``P`` in the Joseph form with ``R = r`` (as
+        :func:`~pinobs.observers.kf_kernels.kalman_correct`)."""
+        K = pred.P[:, :, 0] / s[:, None]  # (n_f, 3)
+        q = np.array(
+            [self.robot.integrate(x, k * y) for x, k, y in zip(pred.q, K[:, 0], e, strict=True)]
+        )
+        IKH = np.eye(3) - K[:, :, None] * np.array([1.0, 0.0, 0.0])
+        P = IKH @ pred.P @ IKH.transpose(0, 2, 1) + r * K[:, :, None] * K[:, None, :]
+        return BankState(
+            q, pred.v + K[:, 1:2] * e, pred.a + K[:, 2:3] * e, 0.5 * (P + P.transpose(0, 2, 1)), e
+        )
+
     def _step_numpy(self, state: AutoState, h: float, q_meas: Vector | None) -> AutoState:
         """:meth:`step` in NumPy, the configurations filter by filter (planar joints, or
         numba absent)."""
@@ -540,8 +555,10 @@ class AutoBank:
             gate = state.gate.measured(nis, self.gate, self.robot.nv)
         else:  # too few samples for a scale: reported (with σ₀), not gated
             gate = GateState(float(np.sum(state.w * z)))
-        if gate.gated:  # the prediction (its likelihoods unchanged)
-            return self._packed(bank.step(state.bank, h, None), jerk, state.n, A, B, w, gate)
+        if gate.gated:  # the soft gate's correction (its likelihoods unchanged)
+            alpha = nis / gate.limit(self.gate, self.robot.nv)  # α = NIS / limit (kf module)
+            soft = self._softened(bank.step(state.bank, h, None), e, alpha * S, bank.meas_var)
+            return self._packed(soft, jerk, state.n, A, B, w, gate)
         forget = self._forget  # γ (:mod:`pinobs.observers.kf`)
         n = forget * state.n + 1.0  # the forgotten sums (:mod:`pinobs.observers.kf`)
         A, B = forget * A + z, forget * B + np.log(S)

@@ -212,6 +212,20 @@ def _innovations(
     return nis
 
 
+def _corrected_into(
+    P1: Vector, S: Vector, alpha: float, meas_var: float, e1: Vector, q1: Vector, v1: Vector,
+    a1: Vector, table: NDArray[np.int64], d: Vector,
+) -> None:  # fmt: skip
+    """Each filter's Kalman correction (:func:`kalman_correct`, in place) by its innovations
+    ``e1[f]`` with the innovation variance ``α S_f``: the gain ``K / α`` (``α = 1``: the plain
+    correction, to the bit; ``α > 1``: the soft gate, Chang 2014)."""
+    K, C, Pn = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
+    for f in range(S.size):  # correct: K = P⁻[:, 0] / (α S), the Joseph form
+        kalman_correct(
+            P1[f], S[f] * alpha, meas_var, e1[f], q1[f], v1[f], a1[f], K, C, Pn, P1[f], table, d
+        )
+
+
 def _weights_into(n_new: float, A1: Vector, B1: Vector, w1: Vector) -> None:
     """The mixture's weights ``w_fi ∝ exp(−(L_fi − min_f L_fi) / 2)``, ``L_fi = N log(max(A_fi,
     1e-300) / N) + B_f`` (Mehra 1970's profile likelihood; ``N`` = ``n_new``) into ``w1``."""
@@ -624,9 +638,10 @@ def auto_step_loops(
     the gate's NIS ``Σ w_fi z_fi / max(A_fi / N, σ₀² / S_f)`` (``gate_on``) or ``Σ w_fi z_fi``
     (too few samples: not gated), :func:`pinobs.observers.base.outlier_gate` on it
     (``threshold``, ``level`` the gate's, ``nv`` its degrees of freedom, ``run`` its
-    rejections in a row: in loops, tested equal to :meth:`GateState.measured`); a rejected
-    measurement leaves the prediction and the sums; else the Kalman correction (Joseph form,
-    symmetrised), ``A ← γ A + z``, ``B ← γ B + log S`` and ``w_fi ∝ exp(−(L_fi − min_f L_fi)
+    rejections in a row: in loops, tested equal to :meth:`GateState.measured`); the Kalman
+    correction (Joseph form, symmetrised), where the gate fired with each ``S_f`` inflated by
+    ``α = NIS / limit`` (the soft gate: the gain ``K / α``) and the sums left; else
+    ``A ← γ A + z``, ``B ← γ B + log S`` and ``w_fi ∝ exp(−(L_fi − min_f L_fi)
     / 2)``, ``L_fi = N log(max(A_fi, 1e-300) / N) + B_f`` (Mehra 1970's profile likelihood).
     Returns ``(nis, rejected, level after)`` (``nis`` NaN without a measurement).
     """
@@ -651,25 +666,23 @@ def auto_step_loops(
         for i in range(nv):
             a1[f, i] = a[f, i]
         S[f] = P1[f, 0, 0] + meas_var
-    nis, reject, accept = math.nan, False, measured
+    nis, reject = math.nan, False
     if measured:
         nis = _innovations(q_meas, q1, S, w, A, n, gate_on, table, e1, A1, meas_var)
         if gate_on:  # base.outlier_gate, in loops
             reject, level = _outlier_gate(nis, threshold, level, nv, run)
-        accept = not reject
+        # the soft gate: S inflated by α = NIS / limit where it fired (kf module docstring)
+        alpha = nis / (threshold * max(1.0, level / nv)) if reject else 1.0
+        _corrected_into(P1, S, alpha, meas_var, e1, q1, v1, a1, table, d[0])
     else:  # (no innovation: the buffer's entries defined all the same)
         e1[:] = 0.0
-    if accept:
-        K, C, Pn = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
-        for f in range(nf):  # correct: K = P⁻[:, 0] / S, the Joseph form
-            kalman_correct(
-                P1[f], S[f], meas_var, e1[f], q1[f], v1[f], a1[f], K, C, Pn, P1[f], table, d[0]
-            )
-            B1[f] = forget * B[f] + math.log(S[f])  # the forgotten sums (module docstring)
+    if measured and not reject:
+        for f in range(nf):  # the forgotten sums (module docstring)
+            B1[f] = forget * B[f] + math.log(S[f])
             for i in range(nv):
                 A1[f, i] = forget * A[f, i] + A1[f, i]
         _weights_into(n_new, A1, B1, w1)
-    else:  # no measurement, or rejected: the sums and weights as they were
+    else:  # no measurement, or gated: the sums and weights as they were
         B1[:] = B
         copy_into(A, A1)
         copy_into(w, w1)
@@ -750,7 +763,7 @@ auto_kernel = LazyKernel(
     helpers=(
         *LIE_HELPERS, transition_into, copy_into, predict_covariance, predict_mean, kalman_correct,
         _innovations, auto_layout, _predict_covariance_ca, rows_view, covariances_view,
-        _outlier_gate, _weights_into, _mixture_into,
+        _outlier_gate, _corrected_into, _weights_into, _mixture_into,
     ),
 )  # fmt: skip
 

@@ -148,6 +148,38 @@ def test_auto_gates_an_outlier_once_it_has_a_noise_scale(rng: np.random.Generato
 
 
 @pytest.mark.parametrize("compiled", [True, False])
+def test_a_stop_the_gate_fires_on_keeps_part_of_its_correction(
+    compiled: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Three joints at 0.1 rad/s stop within one 10 ms sample (σ = 1e-4 rad): the gate fires
+    there (NIS 304, measured), and the soft gate moves the estimate from the prediction (the
+    sample dropped) toward the ungated filter's, part of the way (1/α of the gain)."""
+    from pinobs.observers import kf_kernels
+
+    if not compiled:
+        monkeypatch.setattr(kf_kernels.auto_kernel, "compiled", None)
+        monkeypatch.setattr(kf_kernels.auto_kernel, "load", lambda: None)
+    robot, h, sigma, stop = pinobs.load("ur5"), 1e-2, 1e-4, 200
+    t = np.arange(stop + 1) * h
+    x = np.minimum(t, t[stop - 1])[:, None] * np.array([0.1, -0.1, 0.1, 0.0, 0.0, 0.0])
+    q = x + sigma * np.random.default_rng(0).standard_normal(x.shape)
+    last = {}
+    for label, p, q_stop in (
+        ("soft", 1e-6, q[stop]),
+        ("none", None, q[stop]),
+        ("pred", None, None),
+    ):
+        ob = pinobs.make_observer("kf", robot, noise_std=sigma, rate=1 / h, outlier_probability=p)
+        ob.reset(t[0], q[0])
+        gated = [ob.update(t[k], q[k]).gated for k in range(1, stop)]
+        last[label] = ob.update(t[stop], q_stop)
+        assert not any(gated)
+    assert last["soft"].gated and not last["none"].gated
+    part = (last["soft"].v - last["pred"].v)[:3] / (last["none"].v - last["pred"].v)[:3]
+    assert np.all((part > 0.0) & (part < 1.0)), part
+
+
+@pytest.mark.parametrize("compiled", [True, False])
 def test_a_quantised_joint_at_rest_that_starts_to_move_is_not_an_outlier(
     compiled: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -365,7 +365,11 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         ``"auto"`` the NIS is scaled by each joint's learnt noise level: about ``nv`` by
         construction (the test then checks only the shape of the innovations)."""
         base = super().consistency()
-        return replace(base, causes=KF_CAUSES) if base.causes else base
+        if base.causes:
+            base = replace(base, causes=KF_CAUSES)
+        if isinstance(self._state, AutoState) and base.gated:  # (its gate soft: down-weighted)
+            base = replace(base, details={**base.details, "soft_gate": True})
+        return base
 
     def output(self, state: KFState | AutoState) -> tuple[Vector, Vector]:
         """With ``"auto"``: the bank's mixture ``(Σ_f w_f q_f, Σ_f w_f v_f)`` (module docstring;

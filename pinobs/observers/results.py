@@ -85,7 +85,12 @@ class Consistency:
                 f"{self.mean_nis:.3g} over the last {self.samples} samples, expected "
                 f"{self.expected:g}); check " + "; ".join(self.causes)
             )
-        if self.gated:
+        if self.gated and self.details.get("soft_gate"):
+            out.append(
+                f"note: {name} down-weighted {self.gated} outlier sample(s) (its soft gate: the "
+                "gain K/α, α = NIS / limit)"
+            )
+        elif self.gated:
             out.append(f"note: {name} rejected {self.gated} outlier sample(s)")
         return out
 

@@ -177,6 +177,12 @@ def test_a_stop_the_gate_fires_on_keeps_part_of_its_correction(
     assert last["soft"].gated and not last["none"].gated
     part = (last["soft"].v - last["pred"].v)[:3] / (last["none"].v - last["pred"].v)[:3]
     assert np.all((part > 0.0) & (part < 1.0)), part
+    # what it tells: down-weighted, not rejected (the fixed density's gate rejects)
+    soft = pinobs.make_observer("kf", robot, noise_std=sigma, rate=1 / h)
+    soft.reset(t[0], q[0])
+    for k in range(1, stop + 1):
+        soft.update(t[k], q[k])
+    assert "note: kf down-weighted 1 outlier sample(s)" in soft.consistency().messages("kf")[-1]
 
 
 @pytest.mark.parametrize("compiled", [True, False])

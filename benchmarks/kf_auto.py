@@ -87,29 +87,29 @@ def real(quick: bool) -> dict[str, dict[str, Any]]:
         print(f"ur10e {n}: {logs[f'ur10e {n}']}", flush=True)
     if quick:
         return logs
-    tlog = rd.tiago_log()
-    t_raw, q, tau = rl.arrays(tlog.frame)
-    clock = pinobs.io.fit_clock(t_raw, q)
-    t = np.asarray(clock.t, float)
-    keep = ~np.asarray(clock.stale) & np.isfinite(t)
-    frame = tlog.frame[keep].copy()
-    frame["t"] = t[keep]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        ident = pinobs.identify(  # (for its fit_end; as real_logs.py fits TIAGo)
-            tlog.robot,
-            (t[keep], q[keep], tau[keep]),
-            holdout=0.2,
-            exclude=rd.TIAGO_JOINTS[5:],
-            max_condition=1e8,
-        )
-    joints = [rd.TIAGO_JOINTS.index(j) for j in rl.TIAGO_TORQUE_JOINTS]
-    rows = t[keep] > ident.report["fit_end"]
-    logs["tiago (held-out 20 %)"] = _row(frame, tlog.robot, tlog.velocity[keep], rows, joints)
+    frame, robot, ref, rows, joints = tiago_held_out()
+    logs["tiago (held-out 20 %)"] = _row(frame, robot, ref, rows, joints)
     print(f"tiago: {logs['tiago (held-out 20 %)']}", flush=True)
     logs["tx40 (1 kHz)"] = tx40()
     print(f"tx40: {logs['tx40 (1 kHz)']}", flush=True)
     return logs
+
+
+def tiago_held_out() -> tuple[Any, pinobs.Robot, np.ndarray, np.ndarray, list[int]]:
+    """TIAGo as ``real_logs.py`` scores its velocities: the log on its loop's clock without
+    its stale rows (a DataFrame), the robot, the reference velocity, the held-out 20 %
+    (after ``identify``'s ``fit_end``) and the arm_1..4 and torso joints' indices."""
+    tlog, _, keep, t, q, tau = rl.tiago_rows()
+    frame = tlog.frame[keep].copy()
+    frame["t"] = t
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ident = pinobs.identify(  # (for its fit_end; as real_logs.py fits TIAGo)
+            tlog.robot, (t, q, tau), holdout=0.2, exclude=rd.TIAGO_JOINTS[5:],
+            max_condition=1e8,
+        )  # fmt: skip
+    joints = [rd.TIAGO_JOINTS.index(j) for j in rl.TIAGO_TORQUE_JOINTS]
+    return frame, tlog.robot, tlog.velocity[keep], t > ident.report["fit_end"], joints
 
 
 def tx40() -> dict[str, Any]:

@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import kf_auto as ka
 import real_data as rd
 import real_logs as rl
 
@@ -237,25 +238,10 @@ def glitches(log: rd.RealLog, robot, rows: np.ndarray, seed: int) -> dict[str, A
 
 
 def tiago() -> dict[str, Any]:
-    tlog = rd.tiago_log()
-    t_raw, q, tau = rl.arrays(tlog.frame)
-    clock = pinobs.io.fit_clock(t_raw, q)
-    t = np.asarray(clock.t, float)
-    keep = ~np.asarray(clock.stale) & np.isfinite(t)
-    frame = tlog.frame[keep].copy()
-    frame["t"] = t[keep]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        ident = pinobs.identify(  # (for its fit_end, as kf_auto.py)
-            tlog.robot, (t[keep], q[keep], tau[keep]), holdout=0.2,
-            exclude=rd.TIAGO_JOINTS[5:], max_condition=1e8,
-        )  # fmt: skip
-    joints = [rd.TIAGO_JOINTS.index(j) for j in rl.TIAGO_TORQUE_JOINTS]
-    rows = t[keep] > ident.report["fit_end"]
-    ref = tlog.velocity[keep]
+    frame, robot, ref, rows, joints = ka.tiago_held_out()
     out = {}
     for rule in ("hard", "none", "soft"):
-        v, gated = _estimate(frame, tlog.robot, rule)
+        v, gated = _estimate(frame, robot, rule)
         out[rule] = {"rms": float(rl.rms(((v - ref)[rows][:, joints]).ravel())), "gated": gated}
     return out
 

@@ -514,10 +514,10 @@ def _step(
     if first:
         gyro, acc = log.imu_gyro[k], log.imu_acc[k]
         dq = rows.dq[k] if rows.dq_finite[k] else None
-        moves = filt.setup.imu_moves  # (the IMU's placement at the first row's angles)
-        kin: Any = filt.kinematics  # (a FootKinematics: legged_run's filter is built from a robot)
-        place = kin.imu_motion(log.q[k, 7:])[:2] if moves else filt.imu_placement
-        q0 = _start_pose(log.q[k], acc, place)
+        # the IMU's placement at the first row's angles (a fixed frame's: imu_placement);
+        # a FootKinematics: legged_run's filter is built from a robot
+        kin: Any = filt.kinematics
+        q0 = _start_pose(log.q[k], acc, kin.imu_motion(log.q[k, 7:])[:2])
         v0 = np.zeros(robot.nv)
         if dq is not None:
             v0[6:] = dq

@@ -229,12 +229,13 @@ class FootKinematics:
         self._set(q_joints)
         pin.framesForwardKinematics(self._model, self._data, self._q)
         h = np.array([self._data.oMf[i].translation for i in self._ids])
-        if self._imu_id is not None:
+        to_imu = self._to_imu
+        if self._imu_id is not None:  # a moving frame: its placement at these angles
             oMi = self._data.oMf[self._imu_id]
-            return (h - oMi.translation) @ oMi.rotation  # (K1)
-        if self._to_imu is not None:
-            R_bi, r_bi = self._to_imu
-            h = (h - r_bi) @ R_bi  # rows: R_biᵀ (h − r_bi)
+            to_imu = (oMi.rotation, oMi.translation)
+        if to_imu is not None:
+            R_bi, r_bi = to_imu
+            h = (h - r_bi) @ R_bi  # (K1), rows: R_biᵀ (h − r_bi)
         return h
 
     def positions_and_jacobians(self, q_joints: ArrayLike) -> tuple[Vector, Vector]:

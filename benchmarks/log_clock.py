@@ -18,9 +18,19 @@ Cost: ``fit_clock`` on the recorded log over one ``kf`` pass over it
 (``process_log(..., clock="stamps")``), medians of ``REPEATS`` runs each, one ratio per
 log, paired in the same process.
 
+The clock's rule on loggers with known truth (UR5, 12 s at 500 Hz: a 2 ms loop; q printed
+to 4 decimals): *UR e-series*, rows every 5 or 6 ticks stamped to the ms, 5 % 1 ms late
+(the UR10e's 2020 logs); *sleep-paced*, a logger sleeping 10 ms and working 0.3–0.9 ms
+between reads of the loop's latest sample, stamped to the ms (its 2019 logs); *glitched*,
+the UR e-series log with five rows stamped ±1 s off.  Per log: the stamps' von Neumann
+ratio ``η`` about the loop found, what ``auto`` did, the RMS distance of the stamps and of
+the loop's clock (``clock="loop"``) to the samples' true times once an offset and a rate
+are fitted, and ``kf``'s RMS velocity error against the truth (from 1.2 s) with each clock.
+
 Real (``../shared/data``, skipped when absent; :mod:`real_data`): the clock report of
-every UR10e and TIAGo log, and ``kf``'s RMS difference to the robot's own recorded
-velocity with ``clock="auto"`` and ``clock="stamps"``.
+every UR10e and TIAGo log (``η`` too), and ``kf``'s RMS difference to the robot's own
+recorded velocity with ``clock="auto"`` and ``clock="stamps"``; and
+``ur-20_02_19_14harm50sec`` with five rows stamped ±1 s off (rows seeded, 0).
 
     python benchmarks/log_clock.py            # writes benchmarks/log_clock.{md,json}
     python benchmarks/log_clock.py --quick    # one seed, short runs (a smoke test)
@@ -92,9 +102,15 @@ def simulated(seeds, duration):
             fit = fit_clock(rec.t, rec.q)
             cost = _cost(recorded, rec, robot)
             for name in OBSERVERS:
-                e_clean = _rms(_quiet_estimate(name, clean, robot, "stamps"), res.v[rec.tick[fresh]], robot.nv)
-                e_rec = _rms(_quiet_estimate(name, recorded, robot, "auto"), res.v[rec.tick], robot.nv)
-                e_raw = _rms(_quiet_estimate(name, recorded, robot, "stamps"), res.v[rec.tick], robot.nv)
+                e_clean = _rms(
+                    _quiet_estimate(name, clean, robot, "stamps"), res.v[rec.tick[fresh]], robot.nv
+                )
+                e_rec = _rms(
+                    _quiet_estimate(name, recorded, robot, "auto"), res.v[rec.tick], robot.nv
+                )
+                e_raw = _rms(
+                    _quiet_estimate(name, recorded, robot, "stamps"), res.v[rec.tick], robot.nv
+                )
                 rows.append(
                     {
                         "robot": robot_name,
@@ -108,6 +124,7 @@ def simulated(seeds, duration):
                         "repaired": fit.report.repaired,
                         "stale_found": fit.report.stale,
                         "stale_true": int(rec.stale.sum()),
+                        "eta": fit.report.wander,
                         "cost_over_kf": cost,
                     }
                 )
@@ -117,6 +134,69 @@ def simulated(seeds, duration):
                     f"({e_raw / e_clean:.1f}x)",
                     flush=True,
                 )
+    return rows
+
+
+def _ur_e_series(res, rng):
+    ticks = np.cumsum(np.where(rng.random(1200) < 0.75, 5, 6))
+    ticks = ticks[ticks < res.t.size - 1]
+    late = rng.random(ticks.size) < 0.05
+    return 1e-3 * np.round(1e3 * res.t[ticks]) + 1e-3 * late, ticks
+
+
+def _sleep_paced(res, rng):
+    read = 0.05 + np.cumsum(10e-3 + rng.uniform(0.3e-3, 0.9e-3, 1300))
+    read = read[read < res.t[-1] - 0.01]
+    return 1e-3 * np.round(1e3 * read), np.floor(read / 2e-3 + 1e-9).astype(int)
+
+
+def _glitched(res, rng):
+    t, ticks = _ur_e_series(res, rng)
+    rows = np.sort(rng.choice(np.arange(10, t.size - 10), 5, replace=False))
+    t[rows] += np.array([1.0, -1.0, 1.0, -1.0, 1.0])
+    return t, ticks
+
+
+LOGGERS = {"UR e-series": _ur_e_series, "sleep-paced": _sleep_paced, "glitched": _glitched}
+
+
+def _line_error(t, truth):
+    a = np.vstack([np.ones_like(truth), truth]).T
+    coef, *_ = np.linalg.lstsq(a, t, rcond=None)
+    return float(np.sqrt(np.mean((t - a @ coef) ** 2)))
+
+
+def loggers(seeds):
+    """The clock's rule against the truth (module docstring)."""
+    robot = pinobs.load("ur5")
+    res = pinobs.simulate(robot, [], duration=12.0, sensor=Sensor(rate=500.0))
+    rows = []
+    for name, make in LOGGERS.items():
+        for seed in seeds:
+            t, ticks = make(res, np.random.default_rng(seed))
+            q = np.round(res.q[ticks], 4)
+            frame = _frame(robot, t, q, np.zeros_like(q))
+            fit = fit_clock(t, q)
+            loop = fit_clock(t, q, mode="loop")
+            row = {
+                "logger": name,
+                "seed": seed,
+                "wander": fit.report.wander,
+                "repaired": fit.report.repaired,
+                "outliers": fit.report.outliers,
+                "reason": fit.report.reason,
+                "stamps_ms": 1e3 * _line_error(t, res.t[ticks]),
+                "loop_ms": 1e3 * _line_error(loop.t, res.t[ticks]),
+            }
+            for clock in ("auto", "stamps", "loop"):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    df = pinobs.estimate("kf", frame, robot=robot, clock=clock)
+                v = df[[f"v{i}" for i in range(robot.nv)]].to_numpy()
+                ok = np.isfinite(v).all(axis=1) & (res.t[ticks] > 1.2)
+                row[f"kf_{clock}"] = float(np.sqrt(np.mean((v[ok] - res.v[ticks][ok]) ** 2)))
+            print(row, flush=True)
+            rows.append(row)
     return rows
 
 
@@ -154,6 +234,7 @@ def real():
             jitter_ms=1e3 * fit.report.jitter,
             stale=fit.report.stale,
             drops=fit.report.drops,
+            wander=fit.report.wander,
         )
         if ref is not None:
             for clock in ("auto", "stamps"):
@@ -165,16 +246,47 @@ def real():
                 row[f"kf_{clock}"] = float(np.sqrt(np.mean((v[ok] - ref[ok]) ** 2)))
         print(name, row.get("kf_auto"), row.get("kf_stamps"), row["report"], flush=True)
         out.append(row)
+        if name.endswith("ur-20_02_19_14harm50sec"):
+            out.append(_glitched_real(log, q))
     return out
 
 
-def _markdown(sim, rl):
+def _glitched_real(log, q):
+    """``log`` with five rows stamped ±1 s off (seeded rows), ``kf`` with each clock."""
+    frame, robot, ref = log.frame.copy(), log.robot, log.velocity
+    t = frame["t"].to_numpy().copy()
+    rows = np.sort(np.random.default_rng(0).choice(np.arange(200, t.size - 200), 5, replace=False))
+    t[rows] += np.array([1.0, -1.0, 1.0, -1.0, 1.0])
+    frame["t"] = t
+    fit = fit_clock(t, q)
+    row = {"log": log.name + " + 5 glitches", "rows": len(frame), "report": fit.report.message()}
+    row.update(
+        repaired=fit.report.repaired,
+        period_ms=None if fit.report.period is None else 1e3 * fit.report.period,
+        jitter_ms=1e3 * fit.report.jitter,
+        stale=fit.report.stale,
+        drops=fit.report.drops,
+        wander=fit.report.wander,
+        glitch_rows=rows.tolist(),
+    )
+    for clock in ("auto", "stamps"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            df = pinobs.estimate("kf", frame, robot=robot, clock=clock)
+        v = df[[f"v{i}" for i in range(robot.nv)]].to_numpy()
+        ok = np.isfinite(v).all(axis=1) & np.isfinite(ref).all(axis=1)
+        row[f"kf_{clock}"] = float(np.sqrt(np.mean((v[ok] - ref[ok]) ** 2)))
+    print(row["log"], row["kf_auto"], row["kf_stamps"], row["report"], flush=True)
+    return row
+
+
+def _markdown(sim, rl, lg=()):
     lines = [
         "# Logs as recorded (`benchmarks/log_clock.py`)",
         "",
         f"Simulated: 1 kHz, σ = {SIGMA:g} rad, recorded by `{LOGGER!r}`; RMS velocity "
         "error [rad/s] over the last two thirds, against the truth at every output row. "
-        "*recorded*: the log as written, `clock=\"auto\"`; *stamps*: `clock=\"stamps\"`; "
+        '*recorded*: the log as written, `clock="auto"`; *stamps*: `clock="stamps"`; '
         "*clean*: the same samples at their true times without the stale rows.",
         "",
         "| robot | seed | observer | clean | recorded | × clean | stamps | × clean |",
@@ -199,6 +311,35 @@ def _markdown(sim, rl):
             f"Cost of the clock repair over one `kf` pass on the same log (median of "
             f"{REPEATS} paired runs per log): {costs[0]:.3f}–{costs[-1]:.3f}.",
         ]
+    if sim:
+        eta = [r["eta"] for r in sim if "eta" in r]
+        if eta:
+            lines += [
+                "",
+                f"Von Neumann ratio η of the recorded logs' stamps about the loop: "
+                f"{min(eta):.2f}–{max(eta):.2f}.",
+            ]
+    if lg:
+        lines += [
+            "",
+            "## The clock's rule on loggers with known truth",
+            "",
+            "UR5, 12 s at 500 Hz (a 2 ms loop), q printed to 4 decimals. *stamps*, *loop*: "
+            'RMS distance [ms] of the stamps and of the loop\'s clock (`clock="loop"`) to '
+            "the samples' true times, an offset and a rate fitted; `kf` RMS velocity error "
+            "[rad/s] against the truth from 1.2 s with `clock=` auto, stamps, loop.",
+            "",
+            "| logger | seed | η | auto | outliers | stamps [ms] | loop [ms] | kf auto | "
+            "kf stamps | kf loop |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in lg:
+            lines.append(
+                f"| {r['logger']} | {r['seed']} | {r['wander']:.3g} | "
+                f"{'repaired' if r['repaired'] else 'stamps'} | {r['outliers']} | "
+                f"{r['stamps_ms']:.3g} | {r['loop_ms']:.3g} | {r['kf_auto']:.4g} | "
+                f"{r['kf_stamps']:.4g} | {r['kf_loop']:.4g} |"
+            )
     if rl:
         lines += [
             "",
@@ -207,15 +348,16 @@ def _markdown(sim, rl):
             "`kf` against the robot's own recorded velocity, RMS [rad/s], with the clock "
             "repair (`auto`) and with the stamps as they are.",
             "",
-            "| log | rows | repaired | loop [ms] | jitter [ms] | stale | drops | kf auto | "
+            "| log | rows | repaired | loop [ms] | jitter [ms] | η | stale | drops | kf auto | "
             "kf stamps |",
-            "|---|---|---|---|---|---|---|---|---|",
+            "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for r in rl:
             per = "–" if r["period_ms"] is None else f"{r['period_ms']:.4g}"
             lines.append(
                 f"| {r['log']} | {r['rows']} | {'yes' if r['repaired'] else 'no'} | {per} | "
-                f"{r['jitter_ms']:.3g} | {r['stale']} | {r['drops']} | "
+                f"{r['jitter_ms']:.3g} | {r.get('wander', float('nan')):.3g} | {r['stale']} | "
+                f"{r['drops']} | "
                 f"{r.get('kf_auto', float('nan')):.3g} | {r.get('kf_stamps', float('nan')):.3g} |"
             )
         lines += ["", "What the repair said of each log:", ""]
@@ -231,11 +373,14 @@ def main(argv=None):
     a = p.parse_args(argv)
     seeds = (1,) if a.quick else (1, 2, 3)
     sim = simulated(seeds, 1.5 if a.quick else a.duration)
-    Path(a.out).with_suffix(".json").write_text(json.dumps({"simulated": sim}, indent=1))
+    lg = loggers(seeds)
+    out = {"simulated": sim, "loggers": lg}
+    Path(a.out).with_suffix(".json").write_text(json.dumps(out, indent=1))
     rl = [] if a.quick else real()
-    Path(a.out).with_suffix(".json").write_text(json.dumps({"simulated": sim, "real": rl}, indent=1))
-    Path(a.out).with_suffix(".md").write_text(_markdown(sim, rl))
-    print(_markdown(sim, rl))
+    out["real"] = rl
+    Path(a.out).with_suffix(".json").write_text(json.dumps(out, indent=1))
+    Path(a.out).with_suffix(".md").write_text(_markdown(sim, rl, lg))
+    print(_markdown(sim, rl, lg))
 
 
 if __name__ == "__main__":

@@ -30,7 +30,14 @@ worse estimates).  :func:`fit_clock` reconstructs the loop's clock:
    of it.  (The first ``m`` above the noise floor was taken before: on the UR10e's
    ``14harm50sec`` log the ~10.5 ms mean interval's coherence 0.17 (floor 0.08), not
    the 2 ms loop's 0.94; as stamped, ``kf``'s gate rejected 140 of its rows, the
-   5 % stamped 1 ms off the loop.)
+   5 % stamped 1 ms off the loop.)  **Outliers**: rows whose stamps are out of order
+   with the rows around them (a glitch: a stamp far ahead or behind) are left out of
+   the fit, the fewest of them (of two successive rows out of order, the one farther
+   from its neighbours' stamps ``t_{k+o} − o·h``, ``h`` the median interval); each is
+   placed by the motion at a free tick between its neighbours' (step 3) and counted
+   in the report, or keeps its stamp when there is none.  (A row stamped 1 s ahead
+   left every row stamped before it out of the fit, and five of them refused the
+   repair of ``14harm50sec``.)
 3. **Motion decides** a stamp within ``AMBIGUOUS`` of half a period from two
    ticks: the tick whose linear interpolation between the neighbouring rows
    best predicts the row's position ("a drop shows as twice the motion").
@@ -39,9 +46,25 @@ worse estimates).  :func:`fit_clock` reconstructs the loop's clock:
    by linear interpolation in time between its neighbours; the loop's clock is
    used when its summed squared prediction error (per joint, in units of the
    joint's typical step) is below ``CLEAR_RATIO`` times the stamps' over at
-   least ``MIN_TRIPLES`` moving rows: clearly better, not by chance.  Truly
-   irregular but correct stamps (intervals 0.5–1.5 ms) are smoother as they
-   are and left alone; so is a log without motion to judge by.
+   least ``MIN_TRIPLES`` moving rows: clearly better, not by chance (the outliers left
+   out of both).  Truly irregular but correct stamps (intervals 0.5–1.5 ms) are
+   smoother as they are and left alone; so is a log without motion to judge by.
+   And the stamps must jitter about the loop, not wander: their residuals
+   ``r_k = t_k − T0 − P n_k`` have von Neumann's ratio
+
+       η = Σ (r_k − r_{k−1})² / Σ (r_k − r̄)²  ≥ WANDER = 1
+
+   (von Neumann 1941; independent delays give ``η ≈ 2``, a random walk ``η → 0``;
+   ``η = 2(1 − ρ₁)``: below 1, more of a stamp's offset is its neighbour's than its
+   own).  A logger that paces itself by sleeping (each interval's error carried into
+   the next) reads a faster loop's latest sample: its mean interval is no loop, and a
+   line through its stamps is farther from the samples' times than the stamps are.
+   (The UR10e's ``ur-19_09_27-11_28_22``: stamps 10 and 11 ms apart about a 10.6 ms
+   line, ``η = 0.088``, off it by up to 15.7 ms, while the robot's own velocity puts its
+   samples 10 and 12 ms apart on its 2 ms loop; repaired on that line, ``kf`` against
+   the robot's velocity 0.0129 rad/s, on the stamps 0.0104.  Simulated, the line's
+   error to the samples' times 1.1–2.5 ms RMS, the stamps' 0.7.  Loops under jittered
+   stamps: ``η`` 1.9–2.1.)
 5. A **sample counter** (a ``tick`` column, ROS 1 ``header.seq``) gives the
    ticks directly (a fresh row is usable whatever its stamp's order: the stamps
    only fit the line); a counter that wraps is unwrapped at its modulus, and one
@@ -70,6 +93,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.errors import OptionError, TimestampError
+from pinobs.io._clock_motion import (
+    in_order,
+    interp_error,
+    monotone,
+    place_between,
+    resolve_by_motion,
+    successive_ratio,
+)
+from pinobs.io._clock_period import fit_ticks, line
 from pinobs.io.clock_report import ClockFit, ClockReport, in_ms
 from pinobs.io.counter import CounterTrack, unwrap_counter
 
@@ -97,16 +129,15 @@ AMBIGUOUS = 0.3
 CLEAR_RATIO = 0.7
 #: Moving interior rows needed for ``auto`` to judge.
 MIN_TRIPLES = 50
-#: The period is searched within ± this fraction of the median interval (divided by m).
-PERIOD_SEARCH = 0.05
-#: Rows the period is first searched on (by phase coherence).
-COHERENCE_ROWS = 512
 #: The stamps are a loop when their phase coherence about it is at least this many
 #: times the ``1/√N`` of stamps without one.
 COHERENT_SIGMAS = 5.0
 #: A slower loop is kept over the most coherent one when its coherence is at least this
 #: fraction of that one's (stamps on the ticks: 1 at P, P/2, ... alike).
 TIED = 0.9
+#: ``auto`` keeps the stamps when their residuals about the loop's line have a von Neumann
+#: ratio below this (module docstring, step 4): they wander more than they jitter.
+WANDER = 1.0
 #: Rows of the first window the clock is chosen on, and the window its fit follows.
 WINDOW_ROWS = 4000
 
@@ -169,118 +200,6 @@ def _decided(repeated: Bool, window: int) -> int:
     return start if repeated.size - start < window else int(repeated.size)
 
 
-def _monotone(n: Floats) -> Floats:
-    """The smallest strictly increasing sequence ≥ ``n`` elementwise."""
-    k = np.arange(n.size, dtype=float)
-    return np.maximum.accumulate(n - k) + k
-
-
-def _line(n: Floats, t: Floats, period: float) -> tuple[float, float]:
-    """Least squares ``t ≈ T0 + P n``, rows off by over half a period left out once."""
-    a = np.vstack([np.ones_like(n), n]).T
-    (t0, p), *_ = np.linalg.lstsq(a, t, rcond=None)
-    res = t - (t0 + p * n)
-    ok = np.abs(res) < 0.5 * period
-    if 2 < ok.sum() < ok.size:
-        (t0, p), *_ = np.linalg.lstsq(a[ok], t[ok], rcond=None)
-    return float(t0), float(p)
-
-
-def _coherent(tu: Floats, guess: float) -> tuple[float, float, float]:
-    """The period near ``guess`` whose phase the stamps share most: ``(T0, P, coherence)``.
-
-    ``|Σ exp(2πi f t_k)| / N`` over frequencies ``f`` within ±``PERIOD_SEARCH`` of
-    ``1/guess`` (the median interval is biased by drops: 2 % on a 1 kHz log with 8 %
-    drops), on a grid fine enough that the phase turns by under a quarter of a period
-    over ``tu`` between grid points (the peak found within 3 % of its height); the grid
-    uniform in ``f``, computed in blocks of 64 points: a block is one matrix product
-    with the 64 phase steps' exponentials, the next block's terms the previous ones
-    times a fixed factor.  Uniform jitter of ±0.4 P leaves a
-    coherence of 0.23 at the true period; stamps without a loop about ``1/√N``.
-    """
-    span = float(tu[-1] - tu[0]) or guess
-    f0 = 1.0 / guess
-    count = int(min(max(2 * PERIOD_SEARCH * span * f0 / 0.25, 16), 4000))
-    df = 2 * PERIOD_SEARCH * f0 / (count - 1)
-    x = tu - tu[0]
-    w = np.exp(2j * np.pi * (f0 - PERIOD_SEARCH * f0) * x)
-    # the grid in blocks of B points: z[jB + b] = Σ_k w_k step_k^(jB) · step_k^b
-    block = min(count, 64)
-    steps = np.exp(2j * np.pi * df * np.outer(np.arange(block), x))
-    jump = np.exp(2j * np.pi * df * block * x)
-    z = np.empty(count, dtype=complex)
-    for j in range(0, count, block):
-        b = min(block, count - j)
-        z[j : j + b] = (steps[:b] * w).sum(axis=1)  # (not BLAS: its threads, on a busy machine)
-        w *= jump
-    i = int(np.argmax(np.abs(z)))
-    p = 1.0 / (f0 - PERIOD_SEARCH * f0 + i * df)
-    t0 = float(tu[0] + p * np.angle(z[i]) / (2 * np.pi))
-    return t0, p, float(np.abs(z[i]) / tu.size)
-
-
-def _fit_ticks(tu: Floats, guess: float) -> tuple[Floats, float, float, float]:
-    """Ticks of the stamps ``tu`` (strictly increasing, from 0), the line ``T0, P`` and
-    the phase coherence of the stamps about it (1: on the ticks; ~``1/√N``: no loop).
-
-    The period by phase coherence over the first ``COHERENCE_ROWS`` rows, then the
-    line refitted by least squares on a window doubled each time (its ticks by
-    rounding, then made increasing), so the period's error never turns a tick by
-    half a period.
-    """
-    size = min(tu.size, COHERENCE_ROWS)
-    t0, p, _ = _coherent(tu[:size], guess)
-    while True:
-        n = _monotone(np.rint((tu[:size] - t0) / p))
-        t0, p = _line(n, tu[:size], p)
-        if not 0.5 * guess < p < 2 * guess:
-            return n, t0, p, 0.0
-        if size == tu.size:
-            n = _monotone(np.rint((tu - t0) / p))
-            t0, p = _line(n, tu, p)
-            coherence = float(np.abs(np.exp(2j * np.pi * (tu - t0) / p).mean()))
-            return n - n[0], t0 + p * n[0], p, coherence
-        size = min(tu.size, 2 * size)
-
-
-def _interp_error(t: Floats, q: Floats, scale: Floats) -> tuple[float, int]:
-    """Σ over moving interior rows of the squared error of predicting each row by linear
-    interpolation between its neighbours, per joint in units of ``scale``; and the count."""
-    if t.size < 3:
-        return 0.0, 0
-    ta, tk, tb = t[:-2], t[1:-1], t[2:]
-    qa, qk, qb = q[:-2], q[1:-1], q[2:]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        w = ((tk - ta) / (tb - ta))[:, None]
-        e = (qk - (qa + (qb - qa) * w)) / scale
-    moving = (np.abs(qb - qa) > 4 * scale * 1e-3).any(axis=1)
-    ok = np.isfinite(e).all(axis=1) & moving & (tb > ta)
-    return float(np.sum(e[ok] ** 2)), int(ok.sum())
-
-
-def _resolve_by_motion(n: Floats, frac: Floats, q: Floats, scale: Floats) -> Floats:
-    """Ambiguous stamps (module docstring, step 3) placed by the motion: of the two ticks
-    the stamp falls between, the one where linear interpolation between the neighbouring
-    rows predicts the row's position best."""
-    k = np.flatnonzero(np.abs(frac) > AMBIGUOUS)
-    k = k[(k > 0) & (k < n.size - 1)]
-    if k.size == 0:
-        return n
-    na, nb = n[k - 1], n[k + 1]
-    low = n[k] - (frac[k] < 0)  # the two ticks the stamp falls between: low, low + 1
-    span = np.where(nb > na, nb - na, 1.0)
-    errs = []
-    for c in (low, low + 1.0):
-        pred = q[k - 1] + (q[k + 1] - q[k - 1]) * ((c - na) / span)[:, None]
-        e = np.nansum(((q[k] - pred) / scale) ** 2, axis=1)
-        errs.append(np.where((na < c) & (c < nb), e, np.inf))
-    choice = np.where(errs[1] < errs[0], low + 1.0, low)
-    ok = np.isfinite(np.minimum(errs[0], errs[1]))
-    out = n.copy()
-    out[k[ok]] = choice[ok]
-    return _monotone(out)
-
-
 # ------------------------------------------------------------------ the fit
 @dataclass(frozen=True)
 class _Rows:
@@ -290,10 +209,11 @@ class _Rows:
     q: Floats
     repeated: Bool  # equal to the previous row
     stale: Bool  # repeated while moving (or the counter repeats)
-    usable: Bool  # a new sample with a stamp after the previous usable one's
+    usable: Bool  # a new sample, its stamp in order with the other usable rows'
     ui: NDArray[np.intp]  # the usable rows
     scale: Floats  # per coordinate: the typical step between usable rows
     counter: Floats | None  # the unwrapped sample counter, or None
+    outlier: Bool  # a new sample whose stamp is out of order (placed by the motion)
 
     @property
     def size(self) -> int:
@@ -310,20 +230,21 @@ def _screen(t: Floats, q: Floats, tick: Floats | None) -> _Rows:
         counter = unwrap_counter(np.asarray(tick, dtype=float))
         stale = stale | (np.r_[1.0, np.diff(counter)] == 0)
     usable = np.isfinite(t) & ~stale & np.isfinite(q).all(axis=1)
-    # stamps must increase among the usable rows (others: LogEstimator's time rules),
-    # unless a counter orders them (step 5: its ticks increase, the stamps fit the line)
+    # stamps must increase among the usable rows: the fewest rows left out (outliers,
+    # step 2), unless a counter orders them (step 5: its ticks increase, the stamps fit
+    # the line)
     ui = np.flatnonzero(usable)
+    outlier = np.zeros(n_rows, dtype=bool)
     if ui.size and counter is None:
-        keep = np.r_[True, np.diff(np.maximum.accumulate(t[ui])) > 0] & (
-            t[ui] >= np.maximum.accumulate(t[ui])
-        )
+        keep = in_order(t[ui])
+        outlier[ui[~keep]] = True
         usable[ui[~keep]] = False
         ui = ui[keep]
     scale = np.ones(q.shape[1])
     if ui.size >= 3:
         scale = np.maximum(np.median(np.abs(np.diff(q[ui], axis=0)), axis=0), quantum)
         scale = np.where(scale > 0, scale, 1.0)
-    return _Rows(t, q, rep, stale, usable, ui, scale, counter)
+    return _Rows(t, q, rep, stale, usable, ui, scale, counter, outlier)
 
 
 def _find_loop(rows: _Rows) -> tuple[Floats, float, float] | None:
@@ -333,45 +254,53 @@ def _find_loop(rows: _Rows) -> tuple[Floats, float, float] | None:
     h = float(np.median(np.diff(tu)))
     if rows.counter is not None:
         n = rows.counter[rows.ui] - rows.counter[rows.ui][0]
-        t0, p = _line(n, tu, h)
+        t0, p = line(n, tu, h)
         return n, t0, p
     # the loop whose ticks the stamps keep most in phase; of loops within TIED of that, the
     # slowest (a loop of period P is one of period P/2 too, logged every 2 ticks)
     floor = COHERENT_SIGMAS / math.sqrt(tu.size)
-    fits = [_fit_ticks(tu, h / m) for m in range(1, MAX_SUBDIVISION + 1)]
+    fits = [fit_ticks(tu, h / m) for m in range(1, MAX_SUBDIVISION + 1)]
     found = [f for m, f in enumerate(fits, 1) if 0.5 * h / m < f[2] < 2 * h / m and f[3] > floor]
     if not found:
         return None
     best = max(f[3] for f in found)
     n, t0, p, _ = next(f for f in found if f[3] >= TIED * best)
-    n = _resolve_by_motion(n, (tu - t0) / p - n, qu, rows.scale)
-    t0, p = _line(n, tu, p)
+    n = resolve_by_motion(n, (tu - t0) / p - n, qu, rows.scale, AMBIGUOUS)
+    t0, p = line(n, tu, p)
     return n, t0, p
 
 
 def _verdict(
-    rows: _Rows, mode: str, n: Floats, t0: float, p: float, jitter_max: float
+    rows: _Rows, mode: str, n: Floats, t0: float, p: float, stats: dict[str, float]
 ) -> tuple[bool, str]:
     """Whether to use the loop's clock, and why (module docstring, step 4)."""
     t, q = rows.t, rows.q
     if rows.counter is not None:
+        jitter_max = stats["jitter_max"]
         if mode == "auto" and not rows.stale.any() and jitter_max < 0.01 * p:
             return False, f"the stamps agree with the sample counter to {in_ms(jitter_max)}"
         return True, "from its sample counter"
     if mode != "auto":
         return True, "clock='loop'"
-    # the stamps as a plain reading would use them: every row with an increasing stamp
-    si = np.flatnonzero(np.isfinite(t) & np.isfinite(q).all(axis=1))
+    # the stamps as a plain reading would use them: every row with an increasing stamp,
+    # but the outliers (left out of both clocks' errors: step 4)
+    si = np.flatnonzero(np.isfinite(t) & np.isfinite(q).all(axis=1) & ~rows.outlier)
     if si.size:
         si = si[np.r_[True, np.diff(t[si]) > 0]]
-    e_stamps, n_s = _interp_error(t[si], q[si], rows.scale)
-    e_loop, n_l = _interp_error(t0 + p * n, q[rows.ui], rows.scale)
+    e_stamps, n_s = interp_error(t[si], q[si], rows.scale)
+    e_loop, n_l = interp_error(t0 + p * n, q[rows.ui], rows.scale)
     if min(n_s, n_l) < MIN_TRIPLES:
         return False, f"too little motion to judge the stamps ({min(n_s, n_l)} moving rows)"
     ratio = e_loop / e_stamps if e_stamps > 0 else math.inf
     said = f"interpolation error {ratio:.2g}× the stamps'"
     if not ratio < CLEAR_RATIO:
         return False, f"the loop's clock does not explain the motion better: {said}"
+    eta = stats["wander"]
+    if eta < WANDER:
+        return False, (
+            f"the stamps wander about the {in_ms(p)} line (von Neumann ratio {eta:.2g}; "
+            f"a loop's independent delays give 2): a logger's pace, not a loop; {said}"
+        )
     return True, f"the motion is smoother on the loop's clock: {said}"
 
 
@@ -387,6 +316,7 @@ def _kept(
         step=float(kw.get("step", 1.0)),
         jitter=float(kw.get("jitter", 0.0)),
         jitter_max=float(kw.get("jitter_max", 0.0)),
+        wander=float(kw.get("wander", 2.0)),
         stale=int(rows.stale.sum()),
         repeated_at_rest=int((rows.repeated & ~rows.stale).sum()),
         drops=0,
@@ -407,20 +337,25 @@ def _kept(
 def _placed(
     rows: _Rows, mode: str, reason: str, n: Floats, t0: float, p: float, stats: dict[str, float]
 ) -> ClockFit:
-    """Every row on the loop's clock: usable rows at their tick, stale rows at the tick of
-    the sample they repeat; a row left out of the usable set for its time keeps its stamp
-    (LogEstimator's time rules handle it)."""
-    t, ui = rows.t, rows.ui
+    """Every row on the loop's clock: usable rows at their tick, outliers at the tick the
+    motion gives them between their neighbours', stale rows at the tick of the sample they
+    repeat; a row left out for its time otherwise (an outlier without a free tick) keeps
+    its stamp (LogEstimator's time rules handle it)."""
+    t = rows.t
     tick_u = np.full(rows.size, np.nan)
-    tick_u[ui] = n
+    tick_u[rows.ui] = n
+    if rows.outlier.any():
+        tick_u = place_between(tick_u, np.flatnonzero(rows.outlier), rows.q, rows.scale)
+    fresh = np.isfinite(tick_u)
+    fi = np.flatnonzero(fresh)
     ticks = _fill_forward(tick_u)
-    stale_out = ~rows.usable & np.isfinite(ticks) & np.isfinite(t) & rows.stale
+    stale_out = ~fresh & np.isfinite(ticks) & np.isfinite(t) & rows.stale
     t_out = t.copy()
-    placed = rows.usable | stale_out
+    placed = fresh | stale_out
     t_out[placed] = t0 + p * ticks[placed]
     drops = np.zeros(rows.size, dtype=np.int64)
     if stats["step"] <= 1.0:
-        drops[ui[1:]] = np.maximum(np.diff(n) - 1, 0).astype(np.int64)
+        drops[fi[1:]] = np.maximum(np.diff(tick_u[fi]) - 1, 0).astype(np.int64)
     corr = np.abs(t_out[placed] - t[placed])
     report = ClockReport(
         mode=mode,
@@ -429,6 +364,7 @@ def _placed(
         step=stats["step"],
         jitter=stats["jitter"],
         jitter_max=stats["jitter_max"],
+        wander=stats["wander"],
         stale=int(stale_out.sum()),
         repeated_at_rest=int((rows.repeated & ~rows.stale).sum()),
         drops=int(drops.sum()),
@@ -436,9 +372,12 @@ def _placed(
         rows=rows.size,
         counter=rows.counter is not None,
         reason=reason,
+        outliers=int((rows.outlier & fresh).sum()),
     )
     tick_int = np.where(np.isfinite(ticks) & placed, ticks, -1).astype(np.int64)
-    return ClockFit(t_out, stale_out, drops, tick_int, report, t0=t0, period=p)
+    return ClockFit(
+        t_out, stale_out, drops, tick_int, report, t0=t0, period=p, outlier=rows.outlier
+    )
 
 
 def fit_clock(
@@ -494,8 +433,9 @@ def fit_clock(
         "step": float(np.median(dn)) if dn.size else 1.0,
         "jitter": float(np.sqrt(np.mean(res**2))),
         "jitter_max": float(np.max(np.abs(res))),
+        "wander": successive_ratio(res),
     }
-    repair, reason = _verdict(rows, mode, n, t0, p, stats["jitter_max"])
+    repair, reason = _verdict(rows, mode, n, t0, p, stats)
     if not repair:
         return _kept(rows, mode, reason, p, **stats)
     return _placed(rows, mode, reason, n, t0, p, stats)
@@ -535,6 +475,7 @@ class ClockRepair:
     _tail_t: Floats | None = None
     _tail_n: Floats | None = None
     _last_tick: float = math.nan
+    _last_q: Floats | None = None  # the position of the row at _last_tick
     _scale: Floats | None = None
     _stats: dict[str, float] = field(default_factory=dict)
     # the rows before the next chunk: the last fresh row and the row before it (for the
@@ -587,21 +528,26 @@ class ClockRepair:
             "rest": fit.report.repeated_at_rest,
             "corr": fit.report.largest_correction,
             "rows": fit.report.rows,
+            "outliers": fit.report.outliers,
         }
         if not fit.report.repaired:
             return [log]
         repeated = _repeats(log.q)
-        k = len(log) if final else _decided(repeated, self.window)
-        if k < len(log):  # the trailing run waits for its next fresh row
+        # the last row (or a trailing run) waits for its next fresh row: a repeat for the
+        # stale rule, any row for the stamps' order (an outlier needs its next row)
+        k = len(log) if final else min(_decided(repeated, self.window), len(log) - 1)
+        if k < len(log):
             self._carry = slice_log(log, k, len(log))
             self._carry_out(log, fit, repeated, k)
         placed = fit.tick[:k] >= 0
         idx = np.flatnonzero(placed & ~fit.stale[:k])
-        keep = idx[-self.window :]
+        outlier = fit.outlier[:k] if fit.outlier is not None else np.zeros(k, dtype=bool)
+        keep = np.flatnonzero(placed & ~fit.stale[:k] & ~outlier)[-self.window :]
         self._tail_t = log.t[keep]
         self._tail_n = fit.tick[keep].astype(float)
         if idx.size:
             self._last_tick = float(fit.tick[idx[-1]])
+            self._last_q = log.q[idx[-1]].copy()
         q_ok = log.q[idx]
         sc = np.median(np.abs(np.diff(q_ok, axis=0)), axis=0) if idx.size > 1 else None
         self._scale = None if sc is None else np.where(sc > 0, sc, 1.0)
@@ -617,15 +563,22 @@ class ClockRepair:
     def _carry_out(self, log: Log, fit: ClockFit, repeated: Bool, k: int) -> None:
         """The report of the first window without its rows ``k:`` (carried to the next
         chunk, where they are judged and counted)."""
-        rows = _screen(np.asarray(log.t, dtype=float), log.q, log.tick)
+        if repeated[k:].any():  # (a carried repeat: which of them are at rest)
+            rows = _screen(np.asarray(log.t, dtype=float), log.q, log.tick)
+            rest = int((repeated & ~rows.stale)[:k].sum())
+        else:
+            rest = fit.report.repeated_at_rest
         placed = fit.tick[:k] >= 0
         corr = np.abs(fit.t[:k][placed] - log.t[:k][placed])
         self._stats = {
             "stale": int(fit.stale[:k].sum()),
             "drops": int(fit.drops[:k].sum()),
-            "rest": int((repeated & ~rows.stale)[:k].sum()),
+            "rest": rest,
             "corr": float(corr.max()) if corr.size else 0.0,
             "rows": k,
+            "outliers": int((fit.outlier[:k] & (fit.tick[:k] >= 0)).sum())
+            if fit.outlier is not None
+            else 0,
         }
         self.report = self._reported(self._stats)
 
@@ -638,6 +591,7 @@ class ClockRepair:
             repeated_at_rest=int(stats["rest"]),
             largest_correction=float(stats["corr"]),
             rows=int(stats["rows"]),
+            outliers=int(stats.get("outliers", 0)),
         )
 
     def _follow(self, chunk: Log, *, final: bool) -> list[Log]:
@@ -658,7 +612,7 @@ class ClockRepair:
         qq = np.vstack([self._ctx, chunk.q])
         rep_all = _repeats(qq)
         rep_all[:2] = False
-        k = len(chunk) if final else _decided(rep_all[2:], self.window)
+        k = len(chunk) if final else min(_decided(rep_all[2:], self.window), len(chunk) - 1)
         if k < len(chunk):
             from pinobs.io.readers import slice_log
 
@@ -688,34 +642,28 @@ class ClockRepair:
             stale |= repeated
         usable = np.isfinite(t) & ~stale & np.isfinite(q).all(axis=1)
         assert self._tail_t is not None and self._tail_n is not None
-        t0, p = _line(self._tail_n, self._tail_t, p)
-        n = np.full(n_rows, np.nan)
-        ui = np.flatnonzero(usable)
-        if counted is not None:  # module docstring, step 5: the counter's ticks
-            n[ui] = counted[ui]
-        elif ui.size:
-            raw = np.rint((t[ui] - t0) / p)
-            start = self._last_tick + 1.0 if math.isfinite(self._last_tick) else raw[0]
-            nn = _monotone(np.r_[start - 1.0, np.maximum(raw, start)])[1:]
-            frac = (t[ui] - t0) / p - nn
-            scale = self._scale if self._scale is not None else np.ones(q.shape[1])
-            nn = _resolve_by_motion(nn, frac, q[ui], scale)
-            n[ui] = nn
+        t0, p = line(self._tail_n, self._tail_t, p)
+        n, ui, outliers = self._chunk_ticks(t, q, usable, counted, t0, p)
+        fresh = np.isfinite(n)
+        fi = np.flatnonzero(fresh)
         prev_tick = self._last_tick
         ticks = _fill_forward(np.r_[prev_tick, n])[1:]
-        stale_out = stale & np.isfinite(ticks) & np.isfinite(t)
-        placed = usable | stale_out
+        stale_out = stale & ~fresh & np.isfinite(ticks) & np.isfinite(t)
+        placed = fresh | stale_out
         t_out = t.copy()
         t_out[placed] = t0 + p * ticks[placed]
         drops = np.zeros(n_rows, dtype=np.int64)
-        if ui.size and rep.step <= 1.0:
-            d = np.diff(np.r_[prev_tick, n[ui]])
+        if fi.size and rep.step <= 1.0:
+            d = np.diff(np.r_[prev_tick, n[fi]])
             d = np.where(np.isfinite(d), d, 1.0)
-            drops[ui] = np.maximum(d - 1, 0).astype(np.int64)
+            drops[fi] = np.maximum(d - 1, 0).astype(np.int64)
+        if fi.size:
+            self._last_tick = float(n[fi[-1]])
+            self._last_q = q[fi[-1]].copy()
         if ui.size:
-            self._last_tick = float(n[ui[-1]])
             self._tail_t = np.r_[self._tail_t, t[ui]][-self.window :]
             self._tail_n = np.r_[self._tail_n, n[ui]][-self.window :]
+        self._stats["outliers"] = self._stats.get("outliers", 0) + int(fresh[outliers].sum())
         corr = np.abs(t_out[placed] - t[placed])
         self._stats["stale"] += int(stale_out.sum())
         self._stats["drops"] += int(drops.sum())
@@ -723,6 +671,34 @@ class ClockRepair:
         self._stats["corr"] = max(self._stats["corr"], float(corr.max()) if corr.size else 0.0)
         self.report = self._reported(self._stats)
         return replace(chunk, t=t_out, stale=stale_out, drops=drops)
+
+    def _chunk_ticks(
+        self, t: Floats, q: Floats, usable: Bool, counted: Floats | None, t0: float, p: float
+    ) -> tuple[Floats, NDArray[np.intp], NDArray[np.intp]]:
+        """A chunk's ticks (NaN: unplaced), its in-order usable rows and its outliers (module
+        docstring, steps 2, 3 and 5), after the last row placed."""
+        assert self._tail_t is not None  # (internal: _decide ran)
+        n = np.full(t.size, np.nan)
+        ui = np.flatnonzero(usable)
+        outliers = ui[:0]
+        scale = self._scale if self._scale is not None else np.ones(q.shape[1])
+        if counted is not None:  # step 5: the counter's ticks
+            n[ui] = counted[ui]
+            return n, ui, outliers
+        if ui.size:  # the stamps' order (step 2) after the last row placed
+            floor = float(self._tail_t[-1]) if self._tail_t.size else -math.inf
+            keep = in_order(np.r_[floor, t[ui]])[1:] & (t[ui] > floor)
+            outliers, ui = ui[~keep], ui[keep]
+        if ui.size:
+            raw = np.rint((t[ui] - t0) / p)
+            start = self._last_tick + 1.0 if math.isfinite(self._last_tick) else raw[0]
+            nn = monotone(np.r_[start - 1.0, np.maximum(raw, start)])[1:]
+            frac = (t[ui] - t0) / p - nn
+            n[ui] = resolve_by_motion(nn, frac, q[ui], scale, AMBIGUOUS)
+        if outliers.size and self._last_q is not None:
+            q_ext = np.vstack([self._last_q, q])
+            n = place_between(np.r_[self._last_tick, n], outliers + 1, q_ext, scale)[1:]
+        return n, ui, outliers
 
 
 def _context(qq: Floats) -> Floats:

@@ -37,6 +37,11 @@ class ClockReport:
         rows: rows seen.
         counter: ticks came from a sample counter column.
         reason: why this clock (for ``auto``).
+        outliers: fresh rows stamped out of order with the rows around them (the fewest
+            for the stamps to increase), placed on the loop by the motion between their
+            neighbours (0 when not repaired: the stamps' time rules report them).
+        wander: von Neumann's ratio of the stamps' residuals about the loop (2: they
+            jitter independently; towards 0: they wander, no loop; 2 without a loop).
     """
 
     mode: str
@@ -52,6 +57,8 @@ class ClockReport:
     rows: int
     counter: bool = False
     reason: str = ""
+    outliers: int = 0
+    wander: float = 2.0
 
     def message(self) -> str:
         """One line for the run's warnings and the summary."""
@@ -80,6 +87,11 @@ class ClockReport:
             "output at that sample's time)",
             f"{self.drops} loop samples missing (propagated across)",
         ]
+        if self.outliers:
+            parts.append(
+                f"{self.outliers} rows stamped out of order (outliers: placed by the motion "
+                "between their neighbours)"
+            )
         if self.repeated_at_rest:
             parts.append(f"{self.repeated_at_rest} repeated rows at rest kept as samples")
         how = "from its sample counter" if self.counter else self.reason
@@ -113,3 +125,4 @@ class ClockFit:
     report: ClockReport
     t0: float = 0.0
     period: float = 0.0
+    outlier: Bool | None = None  # rows stamped out of order (placed by the motion or not)

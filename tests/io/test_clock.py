@@ -120,6 +120,87 @@ def test_a_fast_loop_logged_every_few_ticks_is_found_under_a_slower_spurious_one
     np.testing.assert_allclose(err - np.median(err), 0.0, atol=0.03 * 2e-3)
 
 
+@pytest.fixture(scope="module")
+def ur5_500hz():
+    robot = pinobs.load("ur5")
+    return robot, pinobs.simulate(robot, [], duration=12.0, sensor=Sensor(rate=500.0))
+
+
+def _ur_logger(res, seed):
+    """The UR e-series logger of the test above: the 2 ms loop logged every 5 or 6 ticks,
+    stamped to the ms, 5 % of the rows 1 ms late; q printed to 4 decimals."""
+    rng = np.random.default_rng(seed)
+    ticks = np.cumsum(np.where(rng.random(1200) < 0.75, 5, 6))
+    ticks = ticks[ticks < res.t.size - 1]
+    late = rng.random(ticks.size) < 0.05
+    return 1e-3 * np.round(1e3 * res.t[ticks]) + 1e-3 * late, np.round(res.q[ticks], 4), ticks
+
+
+def _line_error(t, truth):
+    """RMS of ``t`` about the truth once an offset and a rate are fitted [s]."""
+    a = np.vstack([np.ones_like(truth), truth]).T
+    coef, *_ = np.linalg.lstsq(a, t, rcond=None)
+    return float(np.sqrt(np.mean((t - a @ coef) ** 2)))
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_a_logger_pacing_itself_by_sleeping_keeps_its_stamps(ur5_500hz, seed):
+    """The UR10e's 2019 logs (``ur-19_09_27-*``): the logger sleeps 10 ms and works
+    0.3-0.9 ms between reads (each interval's error carries into the next), reads the
+    2 ms loop's latest sample and stamps the read to the ms (10 and 11 ms intervals).
+    The ~10.6 ms mean interval is no loop: the stamps wander about its line (von Neumann
+    ratio ≪ 2), which is farther from the samples' times than the stamps are.  Before, its
+    interpolation error (0.6-0.7× the stamps') repaired these logs onto it."""
+    _, res = ur5_500hz
+    rng = np.random.default_rng(seed)
+    read = 0.05 + np.cumsum(10e-3 + rng.uniform(0.3e-3, 0.9e-3, 1300))
+    read = read[read < res.t[-1] - 0.01]
+    ticks = np.floor(read / 2e-3 + 1e-9).astype(int)  # the loop's latest sample
+    t, q = 1e-3 * np.round(1e3 * read), np.round(res.q[ticks], 4)
+    loop = fit_clock(t, q, mode="loop")
+    truth = res.t[ticks]
+    assert 2 * _line_error(t, truth) < _line_error(loop.t, truth)  # (the premise)
+    fit = fit_clock(t, q)
+    assert not fit.report.repaired, fit.report.reason
+    assert "wander" in fit.report.reason
+    np.testing.assert_array_equal(fit.t, t)
+
+
+@pytest.mark.parametrize("size", [20e-3, 1.0, 1e3])
+def test_rows_stamped_far_off_are_outliers_placed_by_the_motion(ur5_500hz, size):
+    """Five rows of the UR logger above stamped ``±size`` off (a few wild stamps): their
+    order with the rows around them says so; they are left out of the fit and the clocks'
+    comparison, placed on the loop by the motion between their neighbours and counted.
+    Before, a row stamped ahead left out every row stamped before it, and the repair was
+    refused (1 s: interpolation error 1.5× the stamps'); a whole log and chunks alike."""
+    robot, res = ur5_500hz
+    t, q, ticks = _ur_logger(res, 4)
+    glitched = t.copy()
+    rows = np.array([150, 400, 401, 700, 1000])  # (two in a row; the last in a later chunk)
+    glitched[rows] += size * np.array([1, -1, -1, 1, 1])
+    fit = fit_clock(glitched, q)
+    assert fit.report.repaired, fit.report.reason
+    assert fit.report.period == pytest.approx(2e-3, rel=1e-4)
+    err = fit.t - res.t[ticks]  # every row on its tick, the glitched ones too
+    np.testing.assert_allclose(err - np.median(err), 0.0, atol=0.03 * 2e-3)
+    assert fit.report.outliers == rows.size
+    chunked = [_chunked(robot, stamps, q) for stamps in (glitched, t)]
+    assert chunked[0][1].outliers == rows.size
+    # each row on the tick the same log without the glitches gets chunk by chunk (a wrong
+    # tick is a period off; the line, fitted on five rows fewer, moves by 0.3 % of one)
+    np.testing.assert_allclose(chunked[0][0], chunked[1][0], rtol=0, atol=0.03 * 2e-3)
+
+
+def _chunked(robot, t, q):
+    """Times of a log repaired chunk by chunk (250 rows, first window 600), and the report."""
+    log = read_log(_frame(robot, t, q, np.zeros_like(q)), robot)
+    repair = ClockRepair("auto", window=600)
+    out = []
+    for a in range(0, len(log), 250):
+        out += repair.feed(pinobs.io.Log(log.t[a : a + 250], log.q[a : a + 250], None))
+    return concat_logs([*out, *repair.finish()]).t, repair.report
+
+
 def test_truly_irregular_but_exact_stamps_are_left_as_they_are(ur5_truth):
     robot, res = ur5_truth
     rng = np.random.default_rng(3)

@@ -60,7 +60,7 @@ import real_logs as rl
 import pinobs
 from pinobs.observers import kf_bank as kb
 from pinobs.observers.base import GateState, chi2_quantile
-from pinobs.observers.gating import MAX_GATE_RUN, NIS_AVERAGING
+from pinobs.observers.gating import MAX_GATE_RUN, NIS_AVERAGING, SPIKE_ALPHA
 
 HERE = Path(__file__).resolve().parent
 RULES = ("hard", "none", "soft", "huber", "joint", "agile", "any filter")
@@ -73,7 +73,8 @@ def _measured(gate: GateState, nis: float, thr: float, dof: int, over: bool | No
     """:meth:`GateState.measured` with the rule's own decision ``over`` (``None``: NIS > limit)."""
     lvl = float(dof) if gate.level is None else gate.level
     limit = thr * max(1.0, lvl / dof)
-    if (nis > limit if over is None else over(limit)) and gate.run < MAX_GATE_RUN:
+    spike = gate.run == MAX_GATE_RUN and nis > SPIKE_ALPHA * limit  # rejected once more
+    if (nis > limit if over is None else over(limit)) and (gate.run < MAX_GATE_RUN or spike):
         return GateState(nis, True, gate.run + 1, lvl), limit
     if gate.run >= MAX_GATE_RUN:
         lvl = max(lvl, nis * dof / thr)

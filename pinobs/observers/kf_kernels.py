@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from pinobs.model import JointBlock
 from pinobs.observers.base import MAX_GATE_RUN, NIS_AVERAGING, Vector
+from pinobs.observers.gating import SPIKE_ALPHA
 from pinobs.observers.linalg import LazyKernel
 
 __all__ = [
@@ -178,7 +179,8 @@ def _outlier_gate(
 ) -> tuple[bool, float]:
     """:func:`pinobs.observers.base.outlier_gate` in loops (tested equal to
     :meth:`~pinobs.observers.base.GateState.measured`): ``(rejected, the level after)``."""
-    if nis > threshold * max(1.0, level / nv) and run < MAX_GATE_RUN:
+    limit = threshold * max(1.0, level / nv)
+    if nis > limit and (run < MAX_GATE_RUN or (run == MAX_GATE_RUN and nis > SPIKE_ALPHA * limit)):
         return True, level
     if run >= MAX_GATE_RUN:
         level = max(level, nis * nv / threshold)
@@ -544,7 +546,9 @@ def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over 
                 nis = innovations_into(q_meas[k], q[f], table, e[f]) / s
                 # GateState.measured (base.outlier_gate), in loops: tested equal
                 g = gate * max(1.0, level[f] / nv)
-                if nis > g and run[f] < MAX_GATE_RUN:
+                if nis > g and (
+                    run[f] < MAX_GATE_RUN or (run[f] == MAX_GATE_RUN and nis > SPIKE_ALPHA * g)
+                ):
                     run[f] += 1
                     ll[f] -= 0.5 * (g + nv * math.log(2.0 * math.pi * s))
                     copy_into(Pp, P[f])

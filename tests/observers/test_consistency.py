@@ -17,6 +17,7 @@ from pinobs.observers.base import (
     gate_nis,
     outlier_gate,
 )
+from pinobs.observers.gating import SPIKE_ALPHA
 from pinobs.observers.kf import KF_CAUSES, KFBank
 from pinobs.simulation import Sensor
 from pinobs.simulation.mismatch import mismatched_plant
@@ -254,20 +255,49 @@ def test_gate_state_keeps_the_outlier_gates_bookkeeping() -> None:
     assert not GateState().measured(1e300, math.inf, dof).gated  # outlier_probability=None
 
 
+def test_a_spike_is_not_forced_in_and_a_forced_sample_raises_the_gate_boundedly() -> None:
+    """The sample a run would force in is rejected once more if it is a spike (NIS past
+    ``SPIKE_ALPHA`` limits; before, it was forced in: a 1e12 NIS raised the limit 2e10-fold),
+    the next one is forced in; a sample forced in after one rejection raises the limit at most
+    ``2 SPIKE_ALPHA``-fold (its NIS under ``SPIKE_ALPHA`` limits, then one step of the mean, at
+    most 2-fold).  The compiled gate (``kf_kernels._outlier_gate``) decides the same."""
+    thr, dof = chi2_quantile(6, 1e-6), 6
+    ok = GateState().measured(3.0, thr, dof)
+    limit = ok.limit(thr, dof)
+    rejected = ok.measured(10 * limit, thr, dof)  # a maneuver: gated, the run counted
+    assert rejected.gated and rejected.run == MAX_GATE_RUN
+    drift = rejected.measured(0.99 * SPIKE_ALPHA * limit, thr, dof)  # the run's drift: forced in
+    assert not drift.gated and drift.run == 0
+    assert limit < drift.limit(thr, dof) <= 2.0 * SPIKE_ALPHA * limit
+    spike = rejected.measured(1e12, thr, dof)
+    assert spike.gated and spike.run == MAX_GATE_RUN + 1 and spike.level == ok.level
+    after = spike.measured(3.0, thr, dof)  # the next sample: accepted, the level the mean's
+    assert not after.gated and after.run == 0
+    assert after.level == pytest.approx(ok.level + NIS_AVERAGING * (3.0 - ok.level))
+    for gate, nis in ((ok, 10 * limit), (rejected, 0.99 * SPIKE_ALPHA * limit),
+                      (rejected, 1e12), (spike, 1e12), (spike, 3.0)):  # fmt: skip
+        one = gate.measured(nis, thr, dof)
+        loops = kf_kernels._outlier_gate(nis, thr, float(gate.level), dof, gate.run)
+        assert loops == (one.gated, one.level)
+
+
 @pytest.mark.parametrize("robot_name", ["ur5", "cartpole"])
 def test_kf_banks_compiled_gate_is_gate_state(
     robot_name: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """:class:`KFBank`'s compiled loops mirror the gate (:meth:`GateState.measured`, which
-    its NumPy path and ``kf`` call): on a log with jumps, single and in pairs (the second
-    forced in), the same samples are gated, the same likelihoods and states."""
+    its NumPy path and ``kf`` call): on a log with jumps, single and in pairs (the second a
+    spike, rejected once more), the same samples are gated, the same likelihoods and states;
+    every jump is gated (before, a pair's second was forced in and its level let the next
+    jump through: cartpole's row 209)."""
     robot = pinobs.load(robot_name)
     res = pinobs.simulate(robot, [], duration=1.0, sensor=Sensor(1000.0, 1e-4), seed=0)
     q = np.array(res.q_meas)
     q[0] = res.q[0]
     rng = np.random.default_rng(2)
     rows = rng.choice(np.arange(10, q.shape[0] - 1), size=20, replace=False)
-    for k in [*rows, rows[0] + 1, rows[1] + 1]:
+    jumps = [*rows, rows[0] + 1, rows[1] + 1]
+    for k in jumps:
         q[k] = robot.integrate(q[k], 0.05 * rng.choice([-1.0, 1.0], size=robot.nv))
     good = np.ones(q.shape[0], dtype=bool)
     bank = KFBank(robot, (300.0, 3e3), 1e-4, 1e-6)
@@ -279,7 +309,9 @@ def test_kf_banks_compiled_gate_is_gate_state(
     ob.reset(res.t[0], q[0])
     gated = [ob.update(res.t[k], q[k]).gated for k in range(1, q.shape[0])]
     used = compiled[3]
-    assert 15 <= sum(gated) <= 22 and np.array_equal(used[1:], ~np.array(gated))
+    rows_gated = {k + 1 for k, g in enumerate(gated) if g}
+    assert rows_gated >= set(jumps) and len(rows_gated) <= len(jumps) + 1, sorted(rows_gated)
+    assert np.array_equal(used[1:], ~np.array(gated))
     assert np.array_equal(used, numpy[3])
     for a, b in zip(compiled[:3], numpy[:3], strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-10)  # (q + v h) + a h²/2, or q + (…)

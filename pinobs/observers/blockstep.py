@@ -330,8 +330,12 @@ class BlockStep:
         self._scratch_Z = np.empty((nv, n))
         self._scratch_w = np.empty(nv)
         self._scratch_ZZ = np.empty((n, n))
-        self.start, self.square, self.phi = (loaded(k) for k in transition_kernels)
-        self.noise, self.factor, self.update = (loaded(k) for k in joseph_kernels)
+        self.start, self.factor, self.update = (  # (arrays a caller passes: dispatched)
+            loaded(k) for k in (transition_kernels[0], *joseph_kernels[1:])
+        )
+        # on the step's own buffers only: without numba's dispatcher (LazyKernel.unchecked)
+        self.square, self.phi = (k.unchecked() for k in transition_kernels[1:])
+        self.noise, self._own_update = joseph_kernels[0].unchecked(), joseph_kernels[2].unchecked()
 
     def predict(
         self, q: Vector, v: Vector, tau: Vector, h: float, P: Vector, psd: float, r: float
@@ -366,5 +370,5 @@ class BlockStep:
         if nis != nis:  # NaN
             return dx, out, nis
         Z.T.dot(Z, out=ZZ)
-        self.update(P, ZZ, Z, w, out, dx)
+        (self._own_update if P is self._scratch_P else self.update)(P, ZZ, Z, w, out, dx)
         return dx, out, nis

@@ -114,7 +114,8 @@ class LieRK4:
         rows = [(s.stop - s.start, s.start) for _, s in jexp or ()]
         self.table = np.array(rows, dtype=np.int64).reshape(-1, 2)
         self._scratch_k = np.empty(robot.nv)
-        self.solve_stage = loaded(rkmk4_solve_kernel) if self.solves else None
+        # (its arguments the step's own buffers and aba's output: LazyKernel.unchecked)
+        self.solve_stage = rkmk4_solve_kernel.unchecked() if self.solves else None
 
     @classmethod
     def build(cls, robot: Robot) -> LieRK4 | None:

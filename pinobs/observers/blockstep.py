@@ -323,7 +323,7 @@ class BlockStep:
         self.robot, self.rk4, self.nv = robot, rk4, nv
         self.difference = difference_call(robot)  # (robot.difference, bound)
         data = rk4.calls.data  # a, ∂a/∂q, ∂a/∂v: views Pinocchio writes in place, made once
-        self._scratch_data = (data.ddq, data.ddq_dq, data.ddq_dv)  # (~1 µs an attribute)
+        self._scratch_data = (rk4._scratch_ddq, data.ddq_dq, data.ddq_dv)  # (~1 µs an attribute)
         self.runs = np.array([[s.start, s.stop] for s in bracket_rows(robot)], dtype=np.int64)
         self.table = bracket_table(robot)
         self._scratch_D = np.zeros((nv, nv))

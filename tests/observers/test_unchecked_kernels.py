@@ -9,7 +9,7 @@ import pytest
 import pinobs
 from pinobs.model import dynamics_rk4
 from pinobs.observers.blockstep import joseph_kernels, transition_kernels
-from pinobs.observers.fused import loaded
+from pinobs.observers.fused import loaded, rkmk4_stage_kernel
 from pinobs.observers.fused_lie import rkmk4_solve_kernel
 
 
@@ -39,7 +39,7 @@ def test_block_step_gives_the_dispatchers_bits(robot_name: str) -> None:
     b, rk = obs[1]._lie_fast.blocks, obs[1]._lie_fast.blocks.rk4
     b.square, b.phi = (loaded(k) for k in transition_kernels[1:])
     b.noise, b._own_update = loaded(joseph_kernels[0]), loaded(joseph_kernels[2])
-    rk.solve_stage = loaded(rkmk4_solve_kernel)
+    rk.solve_stage, rk._first_stage = loaded(rkmk4_solve_kernel), loaded(rkmk4_stage_kernel)
     for ob in obs:
         ob.reset(0.0, robot.integrate(q0, 1e-3 * np.ones(robot.nv)), v0, tau)
     q, v = q0, v0

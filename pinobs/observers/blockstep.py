@@ -71,11 +71,13 @@ OpenBLAS's fast transposition cases), ``(Φ P) Φᵀ``'s velocity rows and ``qq`
 largest velocity: not worth the bits. Then (issue 39, same bits: 48 stored
 ``ekf`` runs on talos, go1, UR5 and Panda ``array_equal``) the kernels whose arguments are
 all the step's own buffers (``square``, ``phi``, ``noise``, ``update``, and :class:`LieRK4`'s
-three solve stages) are called without numba's dispatcher
+four stages) are called without numba's dispatcher
 (:meth:`~pinobs.observers.linalg.LazyKernel.unchecked`: 0.6–1 µs a call less) and the
-update's torque test joint by joint in plain Python (about 1 µs less): talos 9–12 µs less an
-update (in-process A/B, old and new alternated, thread CPU, load 5.8), 26.3 → 25.8 ``pin.aba``
-at that load. Pinocchio's four calls are the floor of this step (the
+update's torque test joint by joint in plain Python (about 1 µs less): talos 18–23 µs less an
+update in paired chunks, 25.2 → 24.6, 25.8 → 24.8, 27.1 → 25.1 ``pin.aba`` (in-process A/B,
+old and new alternated, 40 rounds each, thread CPU, load 7–9.6: every time inflated). Not
+reached: issue 39's 20× (what is left beside Pinocchio's calls and the products is the kernels'
+and products' own calls, about 20 from Python). Pinocchio's four calls are the floor of this step (the
 derivatives call's ``ddq`` is the first RK4 stage already); ``aba`` with ``Convention.WORLD``
 is 15 % faster on a talos (18.3 → 15.6 µs; 8 % on a UR5) and differs from the default's ``ddq``
 by 2.6e-14 relative, so it would change every :func:`pinobs.model.dynamics_rk4` user's bits.

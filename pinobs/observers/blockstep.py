@@ -339,11 +339,11 @@ class BlockStep:
         self._scratch_Z = np.empty((nv, n))
         self._scratch_w = np.empty(nv)
         self._scratch_ZZ = np.empty((n, n))
-        self.start, self.factor, self.update = (  # (arrays a caller passes: dispatched)
-            loaded(k) for k in (transition_kernels[0], *joseph_kernels[1:])
-        )
-        # on the step's own buffers only: without numba's dispatcher (LazyKernel.unchecked)
-        self.square, self.phi = (k.unchecked() for k in transition_kernels[1:])
+        self.factor, self.update = (loaded(k) for k in joseph_kernels[1:])  # (a caller's arrays)
+        # on the step's own buffers only: without numba's dispatcher (LazyKernel.unchecked);
+        # v in LieRK4's first work row, which its step writes the same
+        self.start, self.square, self.phi = (k.unchecked() for k in transition_kernels)
+        self._scratch_v = rk4._scratch_work[0]
         self.noise, self._own_update = joseph_kernels[0].unchecked(), joseph_kernels[2].unchecked()
 
     def predict(
@@ -357,7 +357,9 @@ class BlockStep:
         acc, a_q, a_v = self._scratch_data
         G, W, GA, Phi = self._scratch_G, self._scratch_W, self._scratch_GA, self._scratch_Phi
         D, T, P_new = self._scratch_D, self._scratch_T, self._scratch_P
-        self.start(a_q, a_v, v, self.table, G, D)
+        v0 = self._scratch_v
+        v0[...] = v
+        self.start(a_q, a_v, v0, self.table, G, D)
         a_v.dot(G, out=W)  # A_v G (ndarray.dot: np.dot less its Python dispatcher)
         self.square(G, W, D, runs, GA)  # G A
         GA[:, nv:].dot(G, out=W)  # (G A)_v G

@@ -37,7 +37,7 @@ def test_block_step_gives_the_dispatchers_bits(robot_name: str) -> None:
     tau = robot.gravity(q0)
     obs = [pinobs.make_observer("ekf", robot, rate=1000.0, noise_std=1e-4) for _ in range(2)]
     b, rk = obs[1]._lie_fast.blocks, obs[1]._lie_fast.blocks.rk4
-    b.square, b.phi = (loaded(k) for k in transition_kernels[1:])
+    b.start, b.square, b.phi = (loaded(k) for k in transition_kernels)
     b.noise, b._own_update = loaded(joseph_kernels[0]), loaded(joseph_kernels[2])
     rk.solve_stage, rk._first_stage = loaded(rkmk4_solve_kernel), loaded(rkmk4_stage_kernel)
     for ob in obs:

@@ -70,12 +70,13 @@ OpenBLAS's fast transposition cases), ``(Φ P) Φᵀ``'s velocity rows and ``qq`
 303 → 298 µs, 1–2 %), go1 6 µs more (p10 106 → 112), estimates off by up to 1.8e-13 of the
 largest velocity: not worth the bits. Then (issue 39, same bits: 48 stored
 ``ekf`` runs on talos, go1, UR5 and Panda ``array_equal``) the kernels whose arguments are
-all the step's own buffers (``square``, ``phi``, ``noise``, ``update``, and :class:`LieRK4`'s
-four stages) are called without numba's dispatcher
-(:meth:`~pinobs.observers.linalg.LazyKernel.unchecked`: 0.6–1 µs a call less) and the
-update's torque test joint by joint in plain Python (about 1 µs less): talos 18–23 µs less an
-update in paired chunks, 25.2 → 24.6, 25.8 → 24.8, 27.1 → 25.1 ``pin.aba`` (in-process A/B,
-old and new alternated, 40 rounds each, thread CPU, load 7–9.6: every time inflated). Not
+all the step's own buffers (``start``, on ``v`` copied into :class:`LieRK4`'s first work row,
+``square``, ``phi``, ``noise``, ``update``, and :class:`LieRK4`'s four stages) are called
+without numba's dispatcher (:meth:`~pinobs.observers.linalg.LazyKernel.unchecked`: 0.6–1 µs
+a call less) and the update's torque test joint by joint in plain Python (about 1 µs less):
+the fastest tenth of a talos's 20-update chunks 390 → 374, 396 → 381, 394 → 373 µs, the
+medians 27.3 → 24.8, 25.7 → 26.1, 27.9 → 25.5 ``pin.aba`` (in-process A/B, old and new
+alternated, 40 rounds of 400 updates each, thread CPU, load 7–8: every time inflated). Not
 reached: issue 39's 20× (what is left beside Pinocchio's calls and the products is the kernels'
 and products' own calls, about 20 from Python). Pinocchio's four calls are the floor of this step (the
 derivatives call's ``ddq`` is the first RK4 stage already); ``aba`` with ``Convention.WORLD``

@@ -76,7 +76,8 @@ without numba's dispatcher (:meth:`~pinobs.observers.linalg.LazyKernel.unchecked
 a call less) and the update's torque test joint by joint in plain Python (about 1 µs less):
 the fastest tenth of a talos's 20-update chunks 390 → 374, 396 → 381, 394 → 373 µs, the
 medians 27.3 → 24.8, 25.7 → 26.1, 27.9 → 25.5 ``pin.aba`` (in-process A/B, old and new
-alternated, 40 rounds of 400 updates each, thread CPU, load 7–8: every time inflated). Not
+alternated, 40 rounds of 400 updates each, thread CPU, load 7–8: every time inflated; at load
+4.5: 391 → 378 and 382 → 367 µs, 14 µs less in paired chunks, go1 7.7 µs less). Not
 reached: issue 39's 20× (what is left beside Pinocchio's calls and the products is the kernels'
 and products' own calls, about 20 from Python). Pinocchio's four calls are the floor of this step (the
 derivatives call's ``ddq`` is the first RK4 stage already); ``aba`` with ``Convention.WORLD``

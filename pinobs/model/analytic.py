@@ -121,6 +121,11 @@ class AnalyticMetric:
         return np.full(self._n, ABSURD_VALUE)
 
     @property
+    def absurd_torque_list(self) -> list[float]:
+        """:attr:`absurd_torque` as a list (:attr:`Robot.absurd_torque_list`)."""
+        return [ABSURD_VALUE] * self._n
+
+    @property
     def joint_names(self) -> tuple[str, ...]:
         """``("q1", ..., "qn")``."""
         return tuple(b.name for b in self.joints)

@@ -478,6 +478,12 @@ class Robot:
         ok = np.isfinite(eff) & (eff > 0) & (eff < ABSURD_VALUE)
         return read_only(np.where(ok, ABSURD_LIMIT_FACTOR * eff, ABSURD_VALUE))
 
+    @functools.cached_property
+    def absurd_torque_list(self) -> list[float]:
+        """:attr:`absurd_torque` as a list of floats, for an update's plain-Python test of a
+        torque joint by joint (issue 39: half the time of NumPy's on a talos, the same test)."""
+        return list(self.absurd_torque.tolist())
+
     def off_unit_rows(self, qs: ArrayLike) -> NDArray[np.bool_]:
         """Which rows of ``qs`` ``(N, nq)`` have a quaternion or ``(cos, sin)`` pair off unit
         norm by more than :data:`pinobs.tolerances.QUATERNION_NORM_TOL` (what

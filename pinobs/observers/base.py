@@ -36,6 +36,7 @@ import math
 import warnings
 from abc import ABC, abstractmethod
 from collections import deque
+from operator import le as _le
 from typing import Any, ClassVar, Generic, TypeVar, final
 
 import numpy as np
@@ -414,11 +415,11 @@ class Observer(ABC, Generic[State]):
         """:meth:`update`'s inputs checked: ``(t, q or None, τ)``, fresh arrays.
 
         One test for the usual call (issue 39: the checks cost 3× one ``pin.aba`` an update on a
-        UR5): a ``float`` time after the previous one, ``q`` and ``τ`` float64 arrays of the
-        right shapes (or ``None``) whose Python sum with the time is finite (then every entry
-        is), τ within ``±`` the smallest joint's bound (or each joint's own): copied, ``q``'s
-        unit-norm blocks normalised (``Robot.normalized_units``, on a :class:`Robot`).  Else the
-        full checks (:meth:`_check_time`, ``Robot.check_configuration``, :meth:`_check_tau`)."""
+        UR5): a ``float`` time after the previous one, ``q`` and ``τ`` float64 arrays of the right
+        shapes (or ``None``) whose Python sum with the time is finite (then every entry is), τ
+        within ``±`` the smallest joint's bound (or each joint's own, in plain Python: 1 against
+        2 µs on a talos): copied, ``q``'s unit-norm blocks normalised (``Robot.normalized_units``,
+        on a :class:`Robot`).  Else :meth:`_check_time`, ``Robot.check_configuration``, :meth:`_check_tau`."""
         sq, st = self._shapes
         if (
             type(t) in _FLOATS
@@ -437,7 +438,7 @@ class Observer(ABC, Generic[State]):
                     tau is None
                     or (-f <= min(lst) and max(lst) <= f)
                     # joint by joint (a free-flyer's weight is past a wrist's bound): 2 against 7 µs
-                    or bool((np.abs(tau) <= self.robot.absurd_torque).all())
+                    or all(map(_le, map(abs, lst), self.robot.absurd_torque_list))
                 )
             ):
                 q = None if q_meas is None else q_meas.copy()

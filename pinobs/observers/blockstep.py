@@ -68,7 +68,18 @@ same inputs, alternated, 800 pairs, load 5): ``Φᵀ`` written by the kernel (bo
 OpenBLAS's fast transposition cases), ``(Φ P) Φᵀ``'s velocity rows and ``qq`` block only (its
 ``qv`` block mirrored: ¾ of its multiply-adds) and ``Zᵀ Z`` by ``dsyrk``: talos 5 µs less (p10
 303 → 298 µs, 1–2 %), go1 6 µs more (p10 106 → 112), estimates off by up to 1.8e-13 of the
-largest velocity: not worth the bits. Pinocchio's four calls are the floor of this step (the
+largest velocity: not worth the bits. Then (issue 39, same bits: 48 stored
+``ekf`` runs on talos, go1, UR5 and Panda ``array_equal``) the kernels whose arguments are
+all the step's own buffers (``start``, on ``v`` copied into :class:`LieRK4`'s first work row,
+``square``, ``phi``, ``noise``, ``update``, and :class:`LieRK4`'s four stages) are called
+without numba's dispatcher (:meth:`~pinobs.observers.linalg.LazyKernel.unchecked`: 0.6–1 µs
+a call less) and the update's torque test joint by joint in plain Python (about 1 µs less):
+the fastest tenth of a talos's 20-update chunks 390 → 374, 396 → 381, 394 → 373 µs, the
+medians 27.3 → 24.8, 25.7 → 26.1, 27.9 → 25.5 ``pin.aba`` (in-process A/B, old and new
+alternated, 40 rounds of 400 updates each, thread CPU, load 7–8: every time inflated; at load
+4.5: 391 → 378 and 382 → 367 µs, 14 µs less in paired chunks, go1 7.7 µs less). Not
+reached: issue 39's 20× (what is left beside Pinocchio's calls and the products is the kernels'
+and products' own calls, about 20 from Python). Pinocchio's four calls are the floor of this step (the
 derivatives call's ``ddq`` is the first RK4 stage already); ``aba`` with ``Convention.WORLD``
 is 15 % faster on a talos (18.3 → 15.6 µs; 8 % on a UR5) and differs from the default's ``ddq``
 by 2.6e-14 relative, so it would change every :func:`pinobs.model.dynamics_rk4` user's bits.
@@ -316,7 +327,7 @@ class BlockStep:
         self.robot, self.rk4, self.nv = robot, rk4, nv
         self.difference = difference_call(robot)  # (robot.difference, bound)
         data = rk4.calls.data  # a, ∂a/∂q, ∂a/∂v: views Pinocchio writes in place, made once
-        self._scratch_data = (data.ddq, data.ddq_dq, data.ddq_dv)  # (~1 µs an attribute)
+        self._scratch_data = (rk4._scratch_ddq, data.ddq_dq, data.ddq_dv)  # (~1 µs an attribute)
         self.runs = np.array([[s.start, s.stop] for s in bracket_rows(robot)], dtype=np.int64)
         self.table = bracket_table(robot)
         self._scratch_D = np.zeros((nv, nv))
@@ -330,8 +341,12 @@ class BlockStep:
         self._scratch_Z = np.empty((nv, n))
         self._scratch_w = np.empty(nv)
         self._scratch_ZZ = np.empty((n, n))
-        self.start, self.square, self.phi = (loaded(k) for k in transition_kernels)
-        self.noise, self.factor, self.update = (loaded(k) for k in joseph_kernels)
+        self.factor, self.update = (loaded(k) for k in joseph_kernels[1:])  # (a caller's arrays)
+        # on the step's own buffers only: without numba's dispatcher (LazyKernel.unchecked);
+        # v in LieRK4's first work row, which its step writes the same
+        self.start, self.square, self.phi = (k.unchecked() for k in transition_kernels)
+        self._scratch_v = rk4._scratch_work[0]
+        self.noise, self._own_update = joseph_kernels[0].unchecked(), joseph_kernels[2].unchecked()
 
     def predict(
         self, q: Vector, v: Vector, tau: Vector, h: float, P: Vector, psd: float, r: float
@@ -344,7 +359,9 @@ class BlockStep:
         acc, a_q, a_v = self._scratch_data
         G, W, GA, Phi = self._scratch_G, self._scratch_W, self._scratch_GA, self._scratch_Phi
         D, T, P_new = self._scratch_D, self._scratch_T, self._scratch_P
-        self.start(a_q, a_v, v, self.table, G, D)
+        v0 = self._scratch_v
+        v0[...] = v
+        self.start(a_q, a_v, v0, self.table, G, D)
         a_v.dot(G, out=W)  # A_v G (ndarray.dot: np.dot less its Python dispatcher)
         self.square(G, W, D, runs, GA)  # G A
         GA[:, nv:].dot(G, out=W)  # (G A)_v G
@@ -366,5 +383,5 @@ class BlockStep:
         if nis != nis:  # NaN
             return dx, out, nis
         Z.T.dot(Z, out=ZZ)
-        self.update(P, ZZ, Z, w, out, dx)
+        (self._own_update if P is self._scratch_P else self.update)(P, ZZ, Z, w, out, dx)
         return dx, out, nis

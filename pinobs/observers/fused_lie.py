@@ -114,7 +114,10 @@ class LieRK4:
         rows = [(s.stop - s.start, s.start) for _, s in jexp or ()]
         self.table = np.array(rows, dtype=np.int64).reshape(-1, 2)
         self._scratch_k = np.empty(robot.nv)
-        self.solve_stage = loaded(rkmk4_solve_kernel) if self.solves else None
+        # (its arguments the step's own buffers and aba's output: LazyKernel.unchecked)
+        self.solve_stage = rkmk4_solve_kernel.unchecked() if self.solves else None
+        self._first_stage = rkmk4_stage_kernel.unchecked()  # (the same, for stage 1)
+        self._scratch_ddq = calls.data.ddq  # aba's output, a view made once (BlockStep's acc0)
 
     @classmethod
     def build(cls, robot: Robot) -> LieRK4 | None:
@@ -150,7 +153,10 @@ class LieRK4:
         xi, vs = self._scratch_point
         jexp, table, k = self._scratch_jexp, self.table, self._scratch_k
         w[0] = v
-        self.stage(w, aba(q, v, tau) if acc0 is None else acc0, v, 1, h)  # (k₁ = v)
+        if acc0 is None or acc0 is self._scratch_ddq:  # own buffers (stage 1 reads no k)
+            self._first_stage(w, aba(q, v, tau) if acc0 is None else acc0, k, 1, h)
+        else:
+            self.stage(w, acc0, v, 1, h)  # (k₁ = v)
         for stage in (2, 3, 4):
             acc = aba(integrate(q, xi), vs, tau)
             for (

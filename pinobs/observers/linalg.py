@@ -260,6 +260,21 @@ class LazyKernel:
             load_signature(kernel, *self.warm_args)  # the float64 signature, loaded now
             self.compiled = kernel
 
+    def unchecked(self) -> Callable[..., Any]:
+        """The machine code of the signature :meth:`load` loads (the warm arguments' types),
+        called without numba's dispatcher, which types every argument at every call (0.6–1 µs
+        of a six-array call; issue 39).  Nothing checks the arguments: for a step's own buffers
+        only (arrays of the warm arguments' dtypes and dimensions, C-contiguous), never an
+        array a caller passed.  The dispatcher itself where numba's internals differ."""
+        self.load()
+        kernel = self.compiled
+        try:
+            sig = tuple(kernel.typeof_pyval(a) for a in self.warm_args)  # type: ignore[union-attr]
+            return kernel.overloads[sig].entry_point  # type: ignore[no-any-return,union-attr]
+        except (AttributeError, KeyError, TypeError):
+            assert kernel is not None  # (load sets it)
+            return kernel
+
 
 #: Largest ``nv`` run by the compiled kernels; above, the NumPy path (BLAS products)
 #: is faster than the loops.

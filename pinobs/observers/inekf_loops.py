@@ -45,6 +45,7 @@ __all__ = [
     "base_kernel",
     "correct_kernel",
     "expm_degree",
+    "finite_kernel",
     "foot_nis_kernel",
     "gamma_coefficients",
     "load_kernels",
@@ -541,6 +542,25 @@ def _shepperd(R: Vector, q: Vector) -> None:
         q[0], q[1], q[2], q[3] = (c + g) * k, (f + h) * k, z, (d - b) * k
 
 
+def _finite_loops(R: Vector, x: Vector, P: Vector, bias: Vector) -> bool:
+    """Whether a state is finite (:meth:`pinobs.observers.legs.LeggedSetup.finite`): the sum of
+    every entry of ``R``, ``x``, ``P`` and ``bias``, row by row, is finite iff every entry is
+    (or it overflowed: diverged as well)."""
+    s = 0.0
+    for i in range(3):
+        for j in range(3):
+            s += R[i, j]
+    for i in range(x.shape[0]):
+        for j in range(3):
+            s += x[i, j]
+    for i in range(P.shape[0]):
+        for j in range(P.shape[1]):
+            s += P[i, j]
+    for i in range(bias.shape[0]):
+        s += bias[i]
+    return math.isfinite(s)
+
+
 def _velocity_loops(
     w: Vector, h: Vector, jdq: Vector, R: Vector, v: Vector, out: Vector, speed: Vector
 ) -> None:
@@ -620,6 +640,8 @@ base_kernel = LazyKernel(
     np.empty(4),
     contracted=("_fma",),
 )
+#: :func:`_finite_loops` compiled: ``(R, x, P, bias) -> finite``.
+finite_kernel = LazyKernel(_finite_loops, np.eye(3), np.zeros((3, 3)), np.eye(15), np.zeros(6))
 #: :func:`_velocity_loops` compiled: ``(ω, h, J q̇, R, v, out, speed)``.
 velocity_kernel = LazyKernel(
     _velocity_loops,
@@ -677,9 +699,10 @@ def load_kernels() -> None:
 
 
 def load_leg_kernels() -> None:
-    """Compile (or load) :data:`base_kernel` and :data:`velocity_kernel` (every contact-aided
-    filter's estimate; the invariant EKF's feet speeds); once."""
-    if base_kernel.compiled is None or velocity_kernel.compiled is None:
+    """Compile (or load) :data:`base_kernel`, :data:`finite_kernel` and :data:`velocity_kernel`
+    (every contact-aided filter's estimate; the invariant EKF's feet speeds); once."""
+    if None in (base_kernel.compiled, velocity_kernel.compiled, finite_kernel.compiled):
         _register_helpers()
         base_kernel.load()
         velocity_kernel.load()
+        finite_kernel.load()

@@ -661,7 +661,9 @@ base_kernel = LazyKernel(
     contracted=("_fma",),
 )
 #: :func:`_slip_loops` compiled: ``(Q_c (read-only), |ṗ_j|, h, feet, out)``.
-slip_kernel = LazyKernel(_slip_loops, _readonly(np.ones(21)), np.zeros(4), 1e-3, np.zeros(2, dtype=np.intp), np.empty(21))
+slip_kernel = LazyKernel(
+    _slip_loops, _readonly(np.ones(21)), np.zeros(4), 1e-3, np.zeros(2, dtype=np.intp), np.empty(21)
+)
 #: :func:`_finite_loops` compiled: ``(R, x, P, bias) -> finite``.
 finite_kernel = LazyKernel(_finite_loops, np.eye(3), np.zeros((3, 3)), np.eye(15), np.zeros(6))
 #: :func:`_velocity_loops` compiled: ``(ω̃ (≥ 3), b̂ (≥ 3), h, J q̇, R, v, out, speed)``.

@@ -688,7 +688,7 @@ class InvariantEKF(LeggedFilter):
         )
         return out
 
-    def _rows(self, feet: list[int]) -> NDArray[np.intp]:
+    def _rows(self, feet: Sequence[int]) -> NDArray[np.intp]:
         """``feet`` (indices into ``feet``, in state order) as an index array, kept per tuple:
         ``h.take(rows, 0)`` gives the rows of ``h[feet]`` without converting the list each
         sample."""

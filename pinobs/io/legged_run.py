@@ -83,7 +83,6 @@ from pinobs.observers import make_observer
 from pinobs.observers.checks import positive
 from pinobs.observers.contacts import (
     ContactProbability,
-    contact_flags,
     contacts_from_forces,
     default_thresholds,
 )
@@ -515,9 +514,7 @@ class _Rows:
         else:
             speed = np.zeros(feet)
         before = [False] * feet if previous is None else previous
-        by_speed = prob.speed_factor(speed).tolist()
-        p = [f * s for f, s in zip(self.force_factor[k], by_speed, strict=True)]
-        return contact_flags(p, before)
+        return prob.row_flags(self.force_factor[k], speed, before)
 
     def inputs(self, filt: InvariantEKF, t: float, k: int, flags: list[bool]) -> UpdateInputs:
         """Row ``k`` as ``update`` would check it (its time after the filter's)."""

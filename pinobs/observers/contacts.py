@@ -154,6 +154,21 @@ class ContactProbability:
         z /= _SQRT2
         return _erfc(z)
 
+    def row_flags(
+        self, force_factor: list[float], speed: NDArray[np.float64], previous: list[bool]
+    ) -> list[bool]:
+        """One row's flags ``p > ½`` (a NaN ``p`` keeping the foot's ``previous`` flag) from its
+        :meth:`force_factor` (Python floats) and its feet's speeds: :func:`contact_flags` of
+        ``force_factor · speed_factor(speed)``, the same bits, with ``z`` in Python floats (a
+        row's handful of feet: one NumPy call, SciPy's ``erfc``)."""
+        v_max, sigma = self.speed_max, self.speed_sigma
+        z = [((v - v_max) / sigma) / _SQRT2 for v in speed.tolist()]
+        by_speed = _erfc_ufunc()(z).tolist()
+        return [
+            b if math.isnan(p := f * s) else p > CONTACT_PROBABILITY
+            for f, s, b in zip(force_factor, by_speed, previous, strict=True)
+        ]
+
 
 _SQRT2 = math.sqrt(2.0)
 

@@ -155,7 +155,7 @@ class ContactProbability:
         return _erfc(z)
 
     def row_flags(
-        self, force_factor: list[float], speed: NDArray[np.float64], previous: list[bool]
+        self, force_factor: list[float], speed: NDArray[np.floating[Any]], previous: list[bool]
     ) -> list[bool]:
         """One row's flags ``p > ½`` (a NaN ``p`` keeping the foot's ``previous`` flag) from its
         :meth:`force_factor` (Python floats) and its feet's speeds: :func:`contact_flags` of

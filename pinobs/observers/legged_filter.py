@@ -219,8 +219,8 @@ class LeggedFilter(ABC):
     def update_checked(self, u: UpdateInputs) -> InEKFEstimate:
         """:meth:`update` with its arguments already checked, as
         :meth:`~pinobs.observers.legs.LeggedSetup.update_inputs` returns them: for a caller
-        that has checked a whole log at once (:func:`pinobs.io.legged_run.legged_run`), which
-        then answers for what :meth:`update` checks each sample (``u.t`` after the state's by
+        that has checked a whole log at once (:func:`pinobs.io.legged_run.legged_run`, through
+        :meth:`update_rows`), which then answers for what :meth:`update` checks each sample (``u.t`` after the state's by
         more than ``TIME_EPS``, finite arrays of the right shapes, one bool per foot).  The
         arrays are read, not copied, and must not change while the filter holds them (the
         reading is kept until the next sample).
@@ -243,7 +243,8 @@ class LeggedFilter(ABC):
         ``R_b``'s unit quaternion ``xyzw`` before its sign is made ``w >= 0``
         (:meth:`LeggedSetup.base`), ``gated`` indices into ``feet``.  The estimate is made
         only if asked for (:attr:`estimate`): for a log's runner, which keeps ``q`` and ``v``
-        alone (:func:`pinobs.io.legged_run.legged_run`).
+        alone (:func:`pinobs.io.legged_run.legged_run`).  ``u``'s arrays are read, not copied,
+        and must not change until then.
 
         Raises:
             NotResetError: before ``reset``.

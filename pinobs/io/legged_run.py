@@ -83,7 +83,6 @@ from pinobs.observers import make_observer
 from pinobs.observers.checks import positive
 from pinobs.observers.contacts import (
     ContactProbability,
-    contact_flags,
     contacts_from_forces,
     default_thresholds,
 )
@@ -345,7 +344,7 @@ def legged_run(
         out.add(k, est)
     if prob is not None:
         flags[:] = now
-    q_out, v_out, nis, dof, gated = out.arrays(robot, n, joints.v)
+    q_out, v_out, nis, dof, gated = out.arrays(robot, n, joints.v, rows.q)
     frame = getattr(filt.kinematics, "imu_frame", None) or robot.model.names[1]
     said += contact_notes(flags, log) + frame_notes(filt.kinematics, log, flags, frame)
     done = int(np.all(np.isfinite(q_out), axis=1).sum())
@@ -366,36 +365,62 @@ def legged_run(
 
 
 class _Outputs:
-    """The estimates of the rows fed, kept per row as Python lists (their fields only: a row's
-    estimate holds the filter's covariance) and made :func:`legged_run`'s arrays at the end."""
+    """The estimates of the rows fed, kept per row as Python lists and made :func:`legged_run`'s
+    arrays at the end: the reset's ``q`` and ``v`` (an estimate's fields only: it holds the
+    filter's covariance), then each update's root rows and quaternion
+    (:meth:`~pinobs.observers.inekf.InvariantEKF.update_rows`: no estimate made)."""
 
     def __init__(self) -> None:
         self.rows: list[int] = []
-        self.q: list[Vector] = []
-        self.v: list[Vector] = []
         self.nis: list[float] = []
         self.dof: list[int] = []
         self.gated = 0
+        #: the rows given as estimates (the reset's), their q and v
+        self.full: list[int] = []
+        self.q: list[Vector] = []
+        self.v: list[Vector] = []
+        #: the rows given as update_rows' (base, quat)
+        self.based: list[int] = []
+        self.bases: list[Vector] = []
+        self.quats: list[Vector] = []
 
     def add(self, k: int, est: Any) -> None:
-        """Row ``k``'s estimate."""
+        """Row ``k``'s estimate (an :class:`~pinobs.observers.legs.InEKFEstimate`), or
+        ``update_rows``' tuple ``(base, quat, nis, nis_dof, gated)``."""
         self.rows.append(k)
-        self.q.append(est.q)
-        self.v.append(est.v)
-        self.nis.append(math.nan if est.nis is None else est.nis)
-        self.dof.append(est.nis_dof)
-        self.gated += len(est.gated)
+        if isinstance(est, tuple):
+            base, quat, nis, dof, gated = est
+            self.based.append(k)
+            self.bases.append(base)
+            self.quats.append(quat)
+        else:
+            nis, dof, gated = est.nis, est.nis_dof, est.gated
+            self.full.append(k)
+            self.q.append(est.q)
+            self.v.append(est.v)
+        self.nis.append(math.nan if nis is None else nis)
+        self.dof.append(dof)
+        self.gated += len(gated)
 
     def arrays(
-        self, robot: Robot, n: int, dq: Vector
+        self, robot: Robot, n: int, dq: Vector, joints: Vector
     ) -> tuple[Vector, Vector, Vector, np.ndarray, int]:
         """``(q, v, nis, dof, gated)`` over the ``n`` rows: NaN (dof 0) where none was fed;
-        ``v``'s joints those of ``dq`` (what update passes through; reset shows none)."""
+        ``v``'s joints those of ``dq`` (what update passes through; reset shows none); the
+        rows of ``update_rows`` as :meth:`~pinobs.observers.legs.LeggedSetup.estimate` makes
+        an estimate's ``q``, ``v`` (the quaternion's sign ``w >= 0``, the angles ``joints``)."""
         q, v = np.full((n, robot.nq), np.nan), np.full((n, robot.nv), np.nan)
         nis, dof = np.full(n, np.nan), np.zeros(n, dtype=int)
+        if self.full:
+            q[self.full], v[self.full] = self.q, self.v
+        if self.based:
+            rows, base, quat = np.array(self.based), np.array(self.bases), np.array(self.quats)
+            q[rows, :3], q[rows, 3:7] = base[:, 0], np.where(quat[:, 3:] < 0, -quat, quat)
+            q[rows, 7:] = joints[rows]
+            v[rows, :3], v[rows, 3:6] = base[:, 2], base[:, 1]
         if self.rows:
             rows = np.array(self.rows)
-            q[rows], v[rows], nis[rows], dof[rows] = self.q, self.v, self.nis, self.dof
+            nis[rows], dof[rows] = self.nis, self.dof
             v[rows, 6:] = dq[rows]
         return q, v, nis, dof, self.gated
 
@@ -489,9 +514,7 @@ class _Rows:
         else:
             speed = np.zeros(feet)
         before = [False] * feet if previous is None else previous
-        by_speed = prob.speed_factor(speed).tolist()
-        p = [f * s for f, s in zip(self.force_factor[k], by_speed, strict=True)]
-        return contact_flags(p, before)
+        return prob.row_flags(self.force_factor[k], speed, before)
 
     def inputs(self, filt: InvariantEKF, t: float, k: int, flags: list[bool]) -> UpdateInputs:
         """Row ``k`` as ``update`` would check it (its time after the filter's)."""
@@ -523,7 +546,7 @@ def _step(
             v0[6:] = dq
         return filt.reset(log.t[k], q0, v0, gyro=gyro, acc=acc, contacts=flags)
     try:
-        return filt.update_checked(rows.inputs(filt, log.t[k], k, flags))
+        return filt.update_rows(rows.inputs(filt, log.t[k], k, flags))
     except ObserverDiverged:
         return None
 

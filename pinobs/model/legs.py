@@ -133,9 +133,9 @@ class FootKinematics:
         self._q = np.concatenate([_BASE_AT_IDENTITY, pin.neutral(model)[7:]])
         #: per method, the last joint angles' bytes and its results (:meth:`_recall`)
         self._memo: dict[str, tuple[bytes, tuple[Vector, ...]]] = {}
-        #: :meth:`preload`'s rows: each row's angles' bytes → its index into the block's arrays
-        self._preloaded: dict[bytes, int] = {}
-        self._block: tuple[Vector, ...] = ()
+        #: :meth:`preload`'s rows: each row's ``(h, R, J, J_ω)`` (views of one block) by its
+        #: angles' bytes
+        self._preloaded: dict[bytes, tuple[Vector, ...]] = {}
         self.robot_name = robot.name
         self.imu_frame = imu_frame
         self.imu_placement: tuple[Vector, Vector] = (np.eye(3), np.zeros(3))
@@ -284,7 +284,7 @@ class FootKinematics:
             return last[1]
         row = self._preloaded.get(key)
         if row is not None:
-            return self._kept(key, tuple(a[row] for a in self._block))
+            return self._kept(key, row)
         self._set(q_joints)
         full, placement = self._feet_at_q()
         if self._imu_id is not None:  # a moving IMU: its Jacobians at these angles, (K1)-(K2)
@@ -330,8 +330,9 @@ class FootKinematics:
         else:
             per_row = [self._in_imu_frame(f, p) for f, p in zip(full, placement, strict=True)]
             block = tuple(np.array(a) for a in zip(*per_row, strict=True))
-        self._block = tuple(np.ascontiguousarray(a) for a in block)
-        self._preloaded = {angles.tobytes(): i for i, angles in enumerate(rows)}
+        # each row's views (C-contiguous, the kernels' signatures), made once for the block
+        views = zip(*(list(np.ascontiguousarray(a)) for a in block), strict=True)
+        self._preloaded = {angles.tobytes(): row for angles, row in zip(rows, views, strict=True)}
 
     def _feet_at_q(self) -> tuple[Vector, Vector]:
         """The feet's frame Jacobians ``(K, 6, nv)`` (``LOCAL_WORLD_ALIGNED``) and placements

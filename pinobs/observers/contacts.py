@@ -18,8 +18,10 @@ Go1, whose ``0.15 W`` is 18.7 N; a foot of a trotting quadruped carries about ``
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -143,15 +145,44 @@ class ContactProbability:
         return 0.25 * _erfc(-z_f / math.sqrt(2.0))
 
     def speed_factor(self, foot_speed: ArrayLike) -> NDArray[np.float64]:
-        """``erfc(−z_v/√2)``, ``z_v = (v_max − |v_foot|)/σ_v``, the speed's factor of ``p``."""
-        z_v = (self.speed_max - np.asarray(foot_speed, dtype=float)) / self.speed_sigma
-        return _erfc(-z_v / math.sqrt(2.0))
+        """``erfc(−z_v/√2)``, ``z_v = (v_max − |v_foot|)/σ_v``, the speed's factor of ``p``;
+        computed as ``erfc(((|v_foot| − v_max)/σ_v)/√2)`` in place (the same bits: ``a − b``
+        is exactly ``−(b − a)`` and a quotient's sign its dividend's; a log's rows call this
+        once each, :func:`pinobs.io.legged_run.legged_run`)."""
+        z = np.subtract(foot_speed, self.speed_max, dtype=float)
+        z /= self.speed_sigma
+        z /= _SQRT2
+        return _erfc(z)
+
+    def row_flags(
+        self, force_factor: list[float], speed: NDArray[np.floating[Any]], previous: list[bool]
+    ) -> list[bool]:
+        """One row's flags ``p > ½`` (a NaN ``p`` keeping the foot's ``previous`` flag) from its
+        :meth:`force_factor` (Python floats) and its feet's speeds: :func:`contact_flags` of
+        ``force_factor · speed_factor(speed)``, the same bits, with ``z`` in Python floats (a
+        row's handful of feet: one NumPy call, SciPy's ``erfc``)."""
+        v_max, sigma = self.speed_max, self.speed_sigma
+        z = [((v - v_max) / sigma) / _SQRT2 for v in speed.tolist()]
+        by_speed = _erfc_ufunc()(z).tolist()
+        return [
+            b if math.isnan(p := f * s) else p > CONTACT_PROBABILITY
+            for f, s, b in zip(force_factor, by_speed, previous, strict=True)
+        ]
+
+
+_SQRT2 = math.sqrt(2.0)
+
+
+@functools.cache
+def _erfc_ufunc() -> Any:
+    """SciPy's ``erfc`` (imported at the first call: ``import pinobs`` does not import SciPy)."""
+    from scipy.special import erfc
+
+    return erfc
 
 
 def _erfc(z: NDArray[np.float64]) -> NDArray[np.float64]:
-    from scipy.special import erfc
-
-    return np.asarray(erfc(z), dtype=float)
+    return np.asarray(_erfc_ufunc()(z), dtype=float)
 
 
 #: A foot is in contact where its probability is above this (SEROW's rule).

@@ -205,6 +205,7 @@ from pinobs.observers.inekf_loops import (
     gamma_coefficients,
     load_kernels,
     propagate_kernel,
+    slip_kernel,
     velocity_kernel,
 )
 from pinobs.observers.legged_adapt import match_foot_scale, scaled_densities
@@ -227,7 +228,6 @@ from pinobs.observers.legs import (
     remove_feet,
     replace_state,
     rotation_to_quaternion,
-    slip_densities,
     slip_speeds,
 )
 from pinobs.observers.linalg import cholesky_solve
@@ -591,8 +591,8 @@ class InvariantEKF(LeggedFilter):
         out, speed = np.empty((h.shape[0], 3)), np.empty(h.shape[0])
         kernel = velocity_kernel.compiled
         assert kernel is not None  # loaded by the constructor
-        w = gyro[:3] - state.bias[:3]
-        kernel(w, np.ascontiguousarray(h), jac @ dq, state.R, state.x[0], out, speed)
+        # (ω = ω̃ − b̂_g from the first three entries of each, in the kernel)
+        kernel(gyro, state.bias, np.ascontiguousarray(h), jac @ dq, state.R, state.x[0], out, speed)
         return out, speed
 
     # ------------------------------------------------------------- the steps
@@ -607,8 +607,13 @@ class InvariantEKF(LeggedFilter):
         x, P = state.x, state.P
         R1, x1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty_like(P)
         qc = self._noise_densities(x.shape[0] - 2)
-        if self._speed is not None and state.feet:
-            qc = slip_densities(qc, self._speed, dt, state.feet)  # eq. (9)
+        if self._speed is not None and state.feet:  # eq. (9): slip_densities, compiled
+            slip = np.empty(qc.shape[0])
+            kernel = slip_kernel.compiled
+            assert kernel is not None  # loaded by the constructor
+            kernel(qc, self._speed, dt, self._rows(state.feet), slip)
+            slip.setflags(write=False)  # (the propagation's signature: Q_c read-only)
+            qc = slip
         qc = self._landing(qc, state, dt)  # eq. (11)
         if self.adapt_noise is not None:  # eq. (12)'s scale
             k = len(state.feet)
@@ -655,7 +660,7 @@ class InvariantEKF(LeggedFilter):
             self._speed = None
         else:  # the update's own legs (:meth:`_legs`, at u.q_joints): not computed again
             h_now, jac = self._kinematics
-            velocities, speed = self._speeds(h_now, jac, u.joint_velocities, u.reading[:3])
+            velocities, speed = self._speeds(h_now, jac, u.joint_velocities, u.reading)
             if self.slip_gyro == 0.0 and math.isfinite(float(_sum(speed, None))):
                 self._speed = speed  # eq. (10) without its noise term: √max(|ṗ̂_j|², 0)
             else:
@@ -683,7 +688,7 @@ class InvariantEKF(LeggedFilter):
         )
         return out
 
-    def _rows(self, feet: list[int]) -> NDArray[np.intp]:
+    def _rows(self, feet: Sequence[int]) -> NDArray[np.intp]:
         """``feet`` (indices into ``feet``, in state order) as an index array, kept per tuple:
         ``h.take(rows, 0)`` gives the rows of ``h[feet]`` without converting the list each
         sample."""

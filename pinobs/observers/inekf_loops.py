@@ -45,11 +45,13 @@ __all__ = [
     "base_kernel",
     "correct_kernel",
     "expm_degree",
+    "finite_kernel",
     "foot_nis_kernel",
     "gamma_coefficients",
     "load_kernels",
     "load_leg_kernels",
     "propagate_kernel",
+    "slip_kernel",
     "velocity_kernel",
 ]
 
@@ -541,14 +543,46 @@ def _shepperd(R: Vector, q: Vector) -> None:
         q[0], q[1], q[2], q[3] = (c + g) * k, (f + h) * k, z, (d - b) * k
 
 
+def _slip_loops(qc: Vector, speed: Vector, h: float, feet: Vector, out: Vector) -> None:
+    """Eq. (9) of :mod:`pinobs.observers.inekf` into ``out``: ``qc`` with each foot's density
+    raised by ``|ṗ_j|² h``, ``speed[feet[s]]`` for the foot at state position ``s``
+    (:func:`pinobs.observers.legs.slip_densities`' arithmetic: ``q + (|ṗ_j|·|ṗ_j|)·h``)."""
+    for o in range(qc.shape[0]):
+        out[o] = qc[o]
+    for s in range(feet.shape[0]):
+        sp = speed[feet[s]]
+        for o in range(9 + 3 * s, 12 + 3 * s):
+            out[o] += sp * sp * h
+
+
+def _finite_loops(R: Vector, x: Vector, P: Vector, bias: Vector) -> bool:
+    """Whether a state is finite (:meth:`pinobs.observers.legs.LeggedSetup.finite`): the sum of
+    every entry of ``R``, ``x``, ``P`` and ``bias``, row by row, is finite iff every entry is
+    (or it overflowed: diverged as well)."""
+    s = 0.0
+    for i in range(3):
+        for j in range(3):
+            s += R[i, j]
+    for i in range(x.shape[0]):
+        for j in range(3):
+            s += x[i, j]
+    for i in range(P.shape[0]):
+        for j in range(P.shape[1]):
+            s += P[i, j]
+    for i in range(bias.shape[0]):
+        s += bias[i]
+    return math.isfinite(s)
+
+
 def _velocity_loops(
-    w: Vector, h: Vector, jdq: Vector, R: Vector, v: Vector, out: Vector, speed: Vector
-) -> None:
+    gyro: Vector, bias: Vector, h: Vector, jdq: Vector, R: Vector, v: Vector, out: Vector,
+    speed: Vector,
+) -> None:  # fmt: skip
     """The feet's velocities ``ṗ̂_j = v̂ + R̂ (ω × h_j + J_j q̇)`` (``jdq`` the rows ``J_j q̇``;
     :meth:`pinobs.observers.inekf.InvariantEKF.foot_velocities`) and their speeds
     ``√max(|ṗ̂_j|², 0)``, the cross product and the sums in NumPy's order and ``(ω × h_j +
     J_j q̇) R̂ᵀ`` by fused multiply-adds in OpenBLAS's ``gemm`` order (its bits)."""
-    w0, w1, w2 = w[0], w[1], w[2]
+    w0, w1, w2 = gyro[0] - bias[0], gyro[1] - bias[1], gyro[2] - bias[2]  # ω = ω̃ − b̂_g
     for j in range(h.shape[0]):
         h0, h1, h2 = h[j, 0], h[j, 1], h[j, 2]
         l0 = (w1 * h2 - w2 * h1) + jdq[j, 0]
@@ -558,6 +592,12 @@ def _velocity_loops(
             out[j, i] = v[i] + _fma(l2, R[i, 2], _fma(l1, R[i, 1], _fma(l0, R[i, 0], 0.0)))
         s2 = (out[j, 0] * out[j, 0] + out[j, 1] * out[j, 1]) + out[j, 2] * out[j, 2]
         speed[j] = math.sqrt(s2) if s2 > 0.0 else (0.0 if s2 <= 0.0 else s2)
+
+
+def _readonly(a: Vector) -> Vector:
+    """``a`` made read-only (a kernel's signature for an argument the filters pass so)."""
+    a.setflags(write=False)
+    return a
 
 
 def _warm_propagate() -> tuple[object, ...]:
@@ -620,10 +660,17 @@ base_kernel = LazyKernel(
     np.empty(4),
     contracted=("_fma",),
 )
-#: :func:`_velocity_loops` compiled: ``(ω, h, J q̇, R, v, out, speed)``.
+#: :func:`_slip_loops` compiled: ``(Q_c (read-only), |ṗ_j|, h, feet, out)``.
+slip_kernel = LazyKernel(
+    _slip_loops, _readonly(np.ones(21)), np.zeros(4), 1e-3, np.zeros(2, dtype=np.intp), np.empty(21)
+)
+#: :func:`_finite_loops` compiled: ``(R, x, P, bias) -> finite``.
+finite_kernel = LazyKernel(_finite_loops, np.eye(3), np.zeros((3, 3)), np.eye(15), np.zeros(6))
+#: :func:`_velocity_loops` compiled: ``(ω̃ (≥ 3), b̂ (≥ 3), h, J q̇, R, v, out, speed)``.
 velocity_kernel = LazyKernel(
     _velocity_loops,
-    np.zeros(3),
+    np.zeros(6),
+    np.zeros(6),
     np.zeros((2, 3)),
     np.zeros((2, 3)),
     np.eye(3),
@@ -668,18 +715,21 @@ def load_kernels() -> None:
         propagate_kernel.compiled is None
         or correct_kernel.compiled is None
         or foot_nis_kernel.compiled is None
+        or slip_kernel.compiled is None
     ):
         _register_helpers()
         propagate_kernel.load()
         correct_kernel.load()
         foot_nis_kernel.load()
+        slip_kernel.load()
     load_leg_kernels()
 
 
 def load_leg_kernels() -> None:
-    """Compile (or load) :data:`base_kernel` and :data:`velocity_kernel` (every contact-aided
-    filter's estimate; the invariant EKF's feet speeds); once."""
-    if base_kernel.compiled is None or velocity_kernel.compiled is None:
+    """Compile (or load) :data:`base_kernel`, :data:`finite_kernel` and :data:`velocity_kernel`
+    (every contact-aided filter's estimate; the invariant EKF's feet speeds); once."""
+    if None in (base_kernel.compiled, velocity_kernel.compiled, finite_kernel.compiled):
         _register_helpers()
         base_kernel.load()
         velocity_kernel.load()
+        finite_kernel.load()

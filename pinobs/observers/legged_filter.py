@@ -106,6 +106,8 @@ class LeggedFilter(ABC):
         #: each foot's contact start [s] (``InEKFGains.landing``; ``-inf``: not yet)
         self._landed = [-math.inf] * len(self.feet)
         self._estimate: InEKFEstimate | None = None
+        #: :meth:`setup.estimate`'s arguments for the last estimate, not made yet (:meth:`update_rows`)
+        self._pending: tuple[Any, ...] | None = None
         self._warned = False
 
     def __repr__(self) -> str:
@@ -120,10 +122,17 @@ class LeggedFilter(ABC):
 
     @property
     def estimate(self) -> InEKFEstimate:
-        """The last estimate (raises before ``reset``)."""
+        """The last estimate (raises before ``reset``; made now if :meth:`update_rows` left it)."""
         if self._estimate is None:
-            raise self.setup.not_reset()
+            if self._pending is None:
+                raise self.setup.not_reset()
+            self._estimate = self.setup.estimate(*self._pending)  # (finite: checked then)
+            self._pending = None
         return self._estimate
+
+    def _last(self) -> InEKFEstimate | None:
+        """The last estimate (:attr:`estimate`), ``None`` before ``reset``."""
+        return None if self._estimate is None and self._pending is None else self.estimate
 
     def reset(
         self,
@@ -210,8 +219,8 @@ class LeggedFilter(ABC):
     def update_checked(self, u: UpdateInputs) -> InEKFEstimate:
         """:meth:`update` with its arguments already checked, as
         :meth:`~pinobs.observers.legs.LeggedSetup.update_inputs` returns them: for a caller
-        that has checked a whole log at once (:func:`pinobs.io.legged_run.legged_run`), which
-        then answers for what :meth:`update` checks each sample (``u.t`` after the state's by
+        that has checked a whole log at once (:func:`pinobs.io.legged_run.legged_run`, through
+        :meth:`update_rows`), which then answers for what :meth:`update` checks each sample (``u.t`` after the state's by
         more than ``TIME_EPS``, finite arrays of the right shapes, one bool per foot).  The
         arrays are read, not copied, and must not change while the filter holds them (the
         reading is kept until the next sample).
@@ -221,15 +230,49 @@ class LeggedFilter(ABC):
             ObserverDiverged: a non-finite estimate (the state is left as it was).
         """
         state = self.state
-        new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
-        h, jac = self._legs(u.q_joints, new.R, u.flags)
-        new, nis, used, gated = self._correct(new, u.flags, h, jac)
-        self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
+        new, h, nis, used, gated = self._advance(state, u)
         contact_time = u.t if any(u.flags) else None
         self._commit(new, u.q_joints, u.joint_velocities, nis, u.reading, contact_time, used, gated)
         self.setup.settle(new.R)
         self._remember(u, h, u.t - state.t)
         return self.estimate
+
+    def update_rows(self, u: UpdateInputs) -> tuple[Vector, Vector, float | None, int, tuple]:
+        """:meth:`update_checked`, returning the root's rows instead of an estimate: ``(base,
+        quat, nis, nis_dof, gated)``, ``base`` the rows ``p_b, ω_b, v_b, R_b v_b`` and ``quat``
+        ``R_b``'s unit quaternion ``xyzw`` before its sign is made ``w >= 0``
+        (:meth:`LeggedSetup.base`), ``gated`` indices into ``feet``.  The estimate is made
+        only if asked for (:attr:`estimate`): for a log's runner, which keeps ``q`` and ``v``
+        alone (:func:`pinobs.io.legged_run.legged_run`).  ``u``'s arrays are read, not copied,
+        and must not change until then.
+
+        Raises:
+            NotResetError: before ``reset``.
+            ObserverDiverged: a non-finite estimate (the state is left as it was).
+        """
+        state = self.state
+        new, h, nis, used, gated = self._advance(state, u)
+        contact_time = u.t if any(u.flags) else None
+        new = self._stored(new, u.reading, contact_time)
+        if not self.setup.finite(new):
+            raise self.setup.diverged(new, self._last())
+        _, base, quat = self.setup.base(new, u.q_joints, u.joint_velocities)
+        self._state, self._estimate = new, None
+        self._pending = (new, None, u.q_joints, u.joint_velocities, nis, 3 * used, gated)
+        self.setup.settle(new.R)
+        self._remember(u, h, u.t - state.t)
+        return base, quat, nis, 3 * used, gated
+
+    def _advance(
+        self, state: LegState, u: UpdateInputs
+    ) -> tuple[LegState, Vector, float | None, int, tuple[int, ...]]:
+        """The state propagated to ``u.t`` and corrected (not stored), the feet's positions
+        ``h`` (:meth:`_legs`), the NIS, the number of feet measured and those gated."""
+        new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
+        h, jac = self._legs(u.q_joints, new.R, u.flags)
+        new, nis, used, gated = self._correct(new, u.flags, h, jac)
+        self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
+        return new, h, nis, used, gated
 
     # ------------------------------------------------------ the family's part
     @abstractmethod
@@ -336,12 +379,17 @@ class LeggedFilter(ABC):
         and its estimate (ObserverDiverged, the state left as it was, if not finite);
         ``rates``: the joints' velocities for a moving IMU frame's root twist (``dq`` if not
         given; reset's ``v[6:]``)."""
-        state = replace_state(
+        state = self._stored(state, reading, contact_time)
+        estimate = self.setup.estimate(
+            state, self._last(), q_joints, dq, nis, 3 * measured, gated, rates
+        )
+        self._state, self._estimate, self._pending = state, estimate, None
+
+    @staticmethod
+    def _stored(state: LegState, reading: Vector | None, contact_time: float | None) -> LegState:
+        """``state`` with the reading to hold and the time of a contact (if any)."""
+        return replace_state(
             state,
             imu=reading if reading is not None else state.imu,
             last_contact=state.last_contact if contact_time is None else contact_time,
         )
-        estimate = self.setup.estimate(
-            state, self._estimate, q_joints, dq, nis, 3 * measured, gated, rates
-        )
-        self._state, self._estimate = state, estimate

@@ -49,10 +49,10 @@ from pinobs.model import FootKinematics, Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.base import Vector
 from pinobs.observers.imu_link import imu_state, root_twist
-from pinobs.observers.inekf_loops import base_kernel, load_leg_kernels
-from pinobs.observers.results import Consistency
+from pinobs.observers.inekf_loops import base_kernel, finite_kernel, load_leg_kernels
 from pinobs.observers.rolling import RollingFeet
 from pinobs.observers.rotations import quaternion_to_rotation, rotation_to_quaternion
+from pinobs.observers.stance import stance_consistency
 from pinobs.tolerances import NO_CONTACT_WARN_TIME, QUATERNION_NORM_TOL, TIME_EPS
 
 __all__ = [
@@ -87,8 +87,6 @@ _I3 = np.eye(3)
 
 #: the held reading of a state without one (:meth:`LeggedSetup.estimate`: ω̃ = 0)
 _NO_READING = np.zeros(6)
-#: ``ndarray.sum``'s reduction (``np.add.reduce(a, None)``: every axis, pairwise)
-_sum = np.add.reduce
 
 
 # ------------------------------------------------------------------- checks
@@ -677,6 +675,40 @@ class LeggedSetup:
         )
         return True
 
+    def finite(self, state: LegState) -> bool:
+        """Whether ``state``'s ``R``, ``x``, ``P`` and bias are finite: their sum is iff every
+        entry is (or it overflowed: diverged as well), in one compiled pass
+        (:data:`~pinobs.observers.inekf_loops.finite_kernel`)."""
+        kernel = finite_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        return bool(kernel(state.R, state.x, state.P, state.bias))
+
+    def diverged(self, state: LegState, last: InEKFEstimate | None) -> ObserverDiverged:
+        """The error for a ``state`` that is not :meth:`finite` (``last``: the estimate before)."""
+        message = f"{self.name}: non-finite estimate at t = {state.t!r}"
+        return ObserverDiverged(message, t=state.t, last_estimate=last)
+
+    def base(
+        self, state: LegState, q_joints: Vector, dq: Vector | None, rates: Vector | None = None
+    ) -> tuple[Vector, Vector, Vector]:
+        """``state`` converted to the root joint (module docstring): ``R_b``, the rows ``p_b,
+        ω_b, v_b, R_b v_b`` (compiled: ``base_kernel``) and ``R_b``'s unit quaternion ``xyzw``
+        (its sign as computed); an IMU frame that moves, through the joints' velocities
+        ``rates`` (``dq`` if not given)."""
+        R_b, base, quat = np.empty((3, 3)), np.empty((4, 3)), np.empty(4)
+        kernel = base_kernel.compiled
+        assert kernel is not None  # loaded by the constructor
+        R, x, bias = state.R, state.x, state.bias
+        imu = state.imu if state.imu is not None else _NO_READING
+        if self.imu_moves:  # imu_link.py's (M3): the placement at q, then the joints' terms
+            R_bi, r_bi, J_bi = self.kinematics.imu_motion(q_joints)  # type: ignore[attr-defined]
+            kernel(R, x, imu, bias, np.ascontiguousarray(R_bi), r_bi, False, R_b, base, quat)
+            root_twist(base, R_b, dq if rates is None else rates, r_bi, J_bi)
+        else:
+            kernel(R, x, imu, bias, *self._placement, R_b, base, quat)
+        quat /= math.sqrt(float(quat @ quat))  # (rotation_to_quaternion's last steps)
+        return R_b, base, quat
+
     def estimate(
         self,
         state: LegState,
@@ -688,31 +720,11 @@ class LeggedSetup:
         gated: tuple[int, ...] = (),
         rates: Vector | None = None,
     ) -> InEKFEstimate:
-        """Check ``state`` is finite (else ObserverDiverged with ``last``), convert it to the
-        root joint (module docstring); an IMU frame that moves, through the joints' velocities
-        ``rates`` (``dq`` if not given)."""
-        R, x, P, bias = state.R, state.x, state.P, state.bias
-        # a sum is finite iff every term is (or it overflowed: diverged as well); ndarray.sum's
-        # reduction, called without its Python wrapper
-        total = float(_sum(R, None) + _sum(x, None) + _sum(P, None) + _sum(bias, None))
-        if not math.isfinite(total):
-            raise ObserverDiverged(
-                f"{self.name}: non-finite estimate at t = {state.t!r}",
-                t=state.t,
-                last_estimate=last,
-            )
-        # the base's rotation R_b, and the rows p_b, ω_b, v_b, R_b v_b (compiled: base_kernel)
-        R_b, base, quat = np.empty((3, 3)), np.empty((4, 3)), np.empty(4)
-        kernel = base_kernel.compiled
-        assert kernel is not None  # loaded by the constructor
-        imu = state.imu if state.imu is not None else _NO_READING
-        if self.imu_moves:  # imu_link.py's (M3): the placement at q, then the joints' terms
-            R_bi, r_bi, J_bi = self.kinematics.imu_motion(q_joints)  # type: ignore[attr-defined]
-            kernel(R, x, imu, bias, np.ascontiguousarray(R_bi), r_bi, False, R_b, base, quat)
-            root_twist(base, R_b, dq if rates is None else rates, r_bi, J_bi)
-        else:
-            kernel(R, x, imu, bias, *self._placement, R_b, base, quat)
-        quat /= math.sqrt(float(quat @ quat))  # (rotation_to_quaternion's last steps)
+        """Check ``state`` is :meth:`finite` (else ObserverDiverged with ``last``), convert it to
+        the root joint (:meth:`base`)."""
+        if not self.finite(state):
+            raise self.diverged(state, last)
+        R_b, base, quat = self.base(state, q_joints, dq, rates)
         q = np.concatenate([base[0], -quat if quat[3] < 0 else quat, q_joints])
         v = np.concatenate(
             [base[2], base[1], np.full(self.nv_joints, np.nan) if dq is None else dq]
@@ -720,6 +732,7 @@ class LeggedSetup:
         world = base[3]
         for fresh in (q, v, R_b, world):  # made here: read-only without a copy
             fresh.setflags(write=False)
+        x, P, bias = state.x, state.P, state.bias
         names = self._names.get(state.feet)
         if names is None:
             names = self._names[state.feet] = tuple(self.feet[j] for j in state.feet)
@@ -739,62 +752,3 @@ class LeggedSetup:
             gated=tuple(self.feet[j] for j in gated) if gated else (),
         )
         return out
-
-
-#: What to check when the feet's innovations are not χ² (:func:`stance_consistency`).
-LEG_CAUSES = (
-    "the foot noise levels (InEKFGains.contact, kinematics, joint): NIS/dof far below 1 "
-    "while standing says they are too large",
-    "contact detection: a foot flagged in contact while it lands or lifts (or slips) gives "
-    "large NIS near the contact changes (contacts='probability', foot_gate=)",
-    "the IMU's frame or units (--imu-frame; m/s² and rad/s)",
-)
-#: The two-sided probability of the per-row interval :func:`stance_consistency` counts.
-NIS_INTERVAL = 0.95
-
-
-def stance_consistency(nis: ArrayLike, dof: ArrayLike, gated: int = 0) -> Consistency:
-    """The feet's NIS over the stance rows of a run: a :class:`Consistency` per degree of freedom.
-
-    A row with feet measured (``dof = 3 × feet > 0``, the estimates' ``nis_dof``) has, for a
-    consistent filter, ``NIS ~ χ²(dof)`` (Bar-Shalom, Li, Kirubarajan, *Estimation with
-    Applications to Tracking and Navigation*, 2001, §5.4): so ``NIS/dof`` has mean 1, and
-    each row falls inside ``[χ²_dof(2.5 %), χ²_dof(97.5 %)]`` with probability
-    :data:`NIS_INTERVAL`.  Reported: ``mean_nis`` the mean of ``NIS/dof`` (``expected`` 1,
-    ``bound`` as :class:`Consistency` puts it for ``Σ dof`` degrees of freedom, and a
-    ``lower_bound`` likewise below 1: a mean far below 1 is a filter whose noise is too
-    large, "inconsistent" too), ``gated`` the feet rejected by the foot gate, and in
-    ``details`` the fractions of stance rows inside, below and above their interval, the
-    median ``NIS/dof`` and the interval's probability.
-
-    Raises:
-        DimensionError: ``nis`` and ``dof`` of different shapes.
-    """
-    from scipy.stats import chi2
-
-    z, k = np.asarray(nis, dtype=float), np.asarray(dof, dtype=float)
-    if z.shape != k.shape or z.ndim != 1:
-        raise DimensionError(f"nis {z.shape} and dof {k.shape} must be one row each")
-    stance = (k > 0) & np.isfinite(z)
-    n = int(stance.sum())
-    if n == 0:
-        return Consistency(0, math.nan, 1.0, math.nan, "unknown")
-    z, k = z[stance], k[stance]
-    r, tail = z / k, 0.5 * (1.0 - NIS_INTERVAL)
-    dofs, at = np.unique(k, return_inverse=True)  # (a handful of dofs: each ppf once)
-    lo, hi = chi2.ppf(tail, dofs)[at], chi2.ppf(1.0 - tail, dofs)[at]
-    mean = float(r.mean())
-    spread = 5.0 * math.sqrt(2.0 / float(k.sum()))  # five σ of the mean of NIS/dof
-    bound, lower = 1.5 * (1.0 + spread), (1.0 - spread) / 1.5
-    verdict = "unknown" if n < 50 else ("consistent" if lower <= mean <= bound else "inconsistent")
-    details = {
-        "per_dof": True,
-        "lower_bound": lower,
-        "interval": NIS_INTERVAL,
-        "inside": float(np.mean((z >= lo) & (z <= hi))),
-        "below": float(np.mean(z < lo)),
-        "above": float(np.mean(z > hi)),
-        "median_per_dof": float(np.median(r)),
-    }
-    causes = LEG_CAUSES if verdict == "inconsistent" else ()
-    return Consistency(n, mean, 1.0, bound, verdict, gated, causes, details)

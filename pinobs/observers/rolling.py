@@ -113,12 +113,9 @@ class RollingFeet:
             raise ConfigurationError(f"the ground normal must be non-zero, got {normal!r}")
         self.normal = n / np.linalg.norm(n)
         self.offsets = np.zeros((len(kinematics.feet), 3))  # type: ignore[attr-defined]
-        rolling_kernel.load()
-        if lift:
-            lift_kernel.load()
+        rolled_kernel.load()
         step_kernel.load()
         self.down = np.zeros(len(self.offsets), dtype=bool)
-        self._any_down = False  # down.any(), kept as the flags set it (a Python bool)
         #: (R5): the anchored point's cycloid lift removed (``False``: (R4) alone)
         self.lift = bool(lift)
         #: (R5): each foot's ``n̂_j`` (IMU frame; zero: not down), and the orientation the
@@ -130,7 +127,6 @@ class RollingFeet:
         """Forget every anchor (no foot down): the filter's ``reset``."""
         self.offsets[:] = 0.0
         self.down[:] = False
-        self._any_down = False
         self.normals[:] = 0.0
         self._settled = None
 
@@ -156,7 +152,7 @@ class RollingFeet:
         jac, jac_w = np.ascontiguousarray(jac), np.ascontiguousarray(jac_w)
         h_out, jac_out = np.empty_like(h), np.empty_like(jac)
         if R is not None and flags is not None:
-            # the anchors (R4's s_j, R5's n̂_j), then (R4), in one compiled call
+            # the anchors (R4's s_j, R5's n̂_j), then (R4) and (R5), in one compiled call
             now = np.asarray(flags, dtype=bool)
             settled = self._settled
             kernel = step_kernel.compiled
@@ -182,24 +178,12 @@ class RollingFeet:
             if self.lift:
                 self._settled = None
             self.down = now
-            self._any_down = any(flags)  # (now.any(), without its reduction)
-        else:
-            kernel = rolling_kernel.compiled
+        else:  # (R4), and (R5) for the feet down, in one compiled call
+            kernel = rolled_kernel.compiled
             assert kernel is not None  # loaded by the constructor
-            kernel(h, rot, jac, jac_w, self.offsets, h_out, jac_out)  # (R4)
-        if self.lift and self._any_down:
-            self._lift(h, rot, jac, jac_w, h_out, jac_out)
+            args = (self.offsets, self.normals, self.down, self.lift, self.radius)
+            kernel(h, rot, jac, jac_w, *args, h_out, jac_out)
         return h_out, jac_out
-
-    def _lift(
-        self, h: Vector, rot: Vector, jac: Vector, jac_w: Vector, h_out: Vector, jac_out: Vector
-    ) -> None:
-        """(R5) for the feet down, in place (compiled: :data:`lift_kernel`; ``n̂ = n̂_j``)."""
-        kernel = lift_kernel.compiled
-        assert kernel is not None  # loaded by the constructor
-        kernel(
-            h, rot, jac, jac_w, self.offsets, self.normals, self.down, self.radius, h_out, jac_out
-        )
 
 
 def _rolling_loops(h, rot, jac, jac_w, s, h_out, jac_out):  # type: ignore[no-untyped-def]
@@ -320,7 +304,7 @@ def _step_loops(  # type: ignore[no-untyped-def]
     orientation ``R``, compiled (:data:`step_kernel`): with ``lift``, (R5)'s normals carried
     by ``settledᵀ R`` (``has_settled``) row-wise, ``Rᵀ n`` for the feet that land, zero for
     those that lifted off; (R4)'s ``s_j = R_jᵀ (−r Rᵀ n)`` for the feet that land, zero for
-    those that lifted off; then (R4) (:meth:`RollingFeet.legs` adds (R5): :meth:`RollingFeet._lift`).  The products
+    those that lifted off; then (R4), and with ``lift`` (R5) for the feet down ``now``.  The products
     by fused multiply-adds in OpenBLAS's order (the bits of the NumPy ``@`` they replace:
     ``normals @ (settledᵀ R)``, ``Rᵀ n``, ``R_jᵀ d``)."""
     up = np.empty(3)
@@ -338,7 +322,35 @@ def _step_loops(  # type: ignore[no-untyped-def]
         elif not now[f]:
             offsets[f, 0], offsets[f, 1], offsets[f, 2] = 0.0, 0.0, 0.0
     _rolling_loops(h, rot, jac, jac_w, offsets, h_out, jac_out)  # (R4)
+    if lift:  # (R5), the feet down now
+        _lift_loops(h, rot, jac, jac_w, offsets, normals, now, r, h_out, jac_out)
 
+
+def _rolled_loops(h, rot, jac, jac_w, s, normals, down, lift, r, h_out, jac_out):  # type: ignore[no-untyped-def]
+    """:meth:`RollingFeet.legs` without contacts, compiled (:data:`rolled_kernel`): (R4)
+    (:func:`_rolling_loops`), then with ``lift`` (R5) for the feet ``down``
+    (:func:`_lift_loops`), the anchors as they are."""
+    _rolling_loops(h, rot, jac, jac_w, s, h_out, jac_out)
+    if lift:
+        _lift_loops(h, rot, jac, jac_w, s, normals, down, r, h_out, jac_out)
+
+
+#: :func:`_rolled_loops` compiled: ``(h, R, J, J_ω, s, n̂, down, lift, r, h_out, J_out)``.
+rolled_kernel = LazyKernel(
+    _rolled_loops,
+    np.zeros((1, 3)),
+    np.zeros((1, 3, 3)),
+    np.zeros((1, 3, 2)),
+    np.zeros((1, 3, 2)),
+    np.zeros((1, 3)),
+    np.zeros((1, 3)),
+    np.zeros(1, dtype=bool),
+    False,
+    0.02,
+    np.empty((1, 3)),
+    np.empty((1, 3, 2)),
+    helpers=(_rolling_loops, _lift_loops),
+)
 
 _EYE = np.eye(3)
 
@@ -362,6 +374,6 @@ step_kernel = LazyKernel(
     np.zeros((1, 3, 2)),
     np.empty((1, 3)),
     np.empty((1, 3, 2)),
-    helpers=(_column_sums, _carry_loops, _rolling_loops),
+    helpers=(_column_sums, _carry_loops, _rolling_loops, _lift_loops),
     contracted=("_fma",),
 )

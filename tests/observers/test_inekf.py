@@ -289,13 +289,15 @@ def test_started_on_the_truth_it_stays_there_on_go1(imu_frame: str | None) -> No
 
 
 def test_update_checked_is_update_without_its_checks() -> None:
-    """``update_checked`` (what ``legged_run`` calls on the rows it checked once) with
+    """``update_checked`` (what ``legged_run`` called on the rows it checked once) with
     ``update_inputs``' answer is ``update``, bit for bit (go1, rolling feet, slip speeds);
+    so is ``update_rows`` (what it calls now): its root rows and quaternion are the
+    estimate's ``q`` and ``v``, and the estimate it leaves to make is ``update``'s;
     ``update`` still checks what it is given."""
     legs = Go1Legs("imu_link")
     samples = truth(legs, 200.0, 0.5, wobble=0.5, feet_z=None, inverse=legs.inverse)
     outs = []
-    for checked in (False, True):
+    for how in ("update", "checked", "rows"):
         ekf = InvariantEKF(
             pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", foot_radius=0.02, slip_speed=True
         )
@@ -303,16 +305,24 @@ def test_update_checked_is_update_without_its_checks() -> None:
         rows = []
         for t, _, _, _, q, omega, acc, contacts in samples[1:]:
             dq = 0.1 * np.sin(np.arange(12) + t)
-            if checked:
-                u = ekf.setup.update_inputs(ekf.state.t, t, q, omega, acc, contacts, dq)
+            u = ekf.setup.update_inputs(ekf.state.t, t, q, omega, acc, contacts, dq)
+            if how == "checked":
                 est = ekf.update_checked(u)
+            elif how == "rows":
+                base, quat, nis, dof, _ = ekf.update_rows(u)
+                est = ekf.estimate  # made now, from what update_rows kept
+                quat = -quat if quat[3] < 0 else quat
+                np.testing.assert_array_equal(est.q, np.concatenate([base[0], quat, u.q_joints]))
+                np.testing.assert_array_equal(est.v, np.concatenate([base[2], base[1], dq]))
+                assert (nis, dof) == (est.nis, est.nis_dof)
             else:
                 est = ekf.update(t, q, omega, acc, contacts, joint_velocities=dq)
             rows.append(np.concatenate([est.q, est.v, est.covariance.ravel()]))
         outs.append(rows)
     assert len(outs[0]) > 50
-    for a, b in zip(*outs, strict=True):
+    for a, b, c in zip(*outs, strict=True):
         np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a, c)
     t, _, _, _, q, omega, acc, contacts = samples[-1]
     with pytest.raises(TimestampError):
         ekf.update(t, q, omega, acc, contacts)

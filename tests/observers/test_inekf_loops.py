@@ -208,17 +208,34 @@ def test_the_estimate_kernel_is_the_numpy_conversion_to_the_root_joint(
 def test_the_velocity_kernel_is_the_feet_velocities_and_their_norms(
     rng: np.random.Generator,
 ) -> None:
-    """``velocity_kernel``: ``ṗ̂_j = v̂ + R̂ (ω × h_j + J_j q̇)`` and ``|ṗ̂_j|`` (the speeds of
+    """``velocity_kernel``: ``ṗ̂_j = v̂ + R̂ (ω × h_j + J_j q̇)``, ``ω = ω̃ − b̂_g`` from the
+    reading's and the biases' first three entries, and ``|ṗ̂_j|`` (the speeds of
     ``slip_speeds`` without its gyro term, bit for bit from the same velocities)."""
     from pinobs.observers.inekf_loops import load_leg_kernels, velocity_kernel
     from pinobs.observers.legs import slip_speeds
 
     load_leg_kernels()
-    R, x, _, _ = _state(rng, 0)
-    w, h, jdq = rng.normal(size=3), rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
+    R, x, theta, _ = _state(rng, 0)
+    reading, h, jdq = rng.normal(size=6), rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
     out, speed = np.empty((4, 3)), np.empty(4)
-    velocity_kernel.compiled(w, h, jdq, R, x[0], out, speed)  # type: ignore[misc]
-    want = x[0] + (np.cross(w, h) + jdq) @ R.T
+    velocity_kernel.compiled(reading, theta, h, jdq, R, x[0], out, speed)  # type: ignore[misc]
+    want = x[0] + (np.cross(reading[:3] - theta[:3], h) + jdq) @ R.T
     np.testing.assert_allclose(out, want, rtol=0, atol=1e-14)
     np.testing.assert_array_equal(speed, slip_speeds(out, h, 0.0, 0.002))
     np.testing.assert_array_equal(speed, np.sqrt(np.sum(out * out, axis=1)))
+
+
+@pytest.mark.parametrize("feet", [(0,), (2, 0), (1, 3, 0, 2)])
+def test_the_slip_kernel_is_slip_densities(rng: np.random.Generator, feet: tuple[int, ...]) -> None:
+    """``slip_kernel``: eq. (9), the bits of :func:`~pinobs.observers.legs.slip_densities`
+    (what the filter's propagation called before), the feet in state order."""
+    from pinobs.observers.inekf_loops import slip_kernel
+    from pinobs.observers.legs import slip_densities
+
+    qc = noise_densities(InEKFGains(contact=1e-4), len(feet))
+    speed = np.abs(rng.normal(size=4))
+    out = np.empty(qc.shape[0])
+    slip_kernel.compiled(qc, speed, 0.0025, np.array(feet, dtype=np.intp), out)  # type: ignore[misc]
+    want = slip_densities(qc, speed, 0.0025, feet)
+    assert not np.array_equal(want, qc)
+    np.testing.assert_array_equal(out, want)

@@ -11,7 +11,11 @@ from scipy.stats import chi2, norm
 
 import pinobs
 from pinobs.errors import DimensionError, GainError
-from pinobs.observers.contacts import ContactProbability, contacts_from_probability
+from pinobs.observers.contacts import (
+    ContactProbability,
+    contact_flags,
+    contacts_from_probability,
+)
 from pinobs.observers.legs import quaternion_to_rotation, stance_consistency
 
 
@@ -52,6 +56,27 @@ def test_contact_probability_is_the_product_of_the_force_and_speed_normal_cdfs()
     assert math.isnan(float(p(np.nan, 0.0)))
     flags = contacts_from_probability([0.9, 0.1, np.nan, np.nan], [False, True, True, False])
     assert flags.tolist() == [True, False, True, False]
+
+
+def test_a_row_s_flags_are_contact_flags_of_the_probability_to_the_bit(rng) -> None:
+    """``row_flags`` (legged_run's row, z in Python floats) is :func:`contact_flags` of
+    ``force_factor · speed_factor`` (the arrays' NumPy), a NaN force keeping the flag; and
+    ``speed_factor`` is ``erfc(−z_v/√2)`` as written, bit for bit."""
+    from scipy.special import erfc
+
+    p = ContactProbability(20.0, 5.0)
+    force = np.r_[rng.uniform(0.0, 40.0, 4000), np.nan, p.force_min]
+    speed = np.r_[rng.uniform(0.0, 0.6, 4000), 0.1, p.speed_max]
+    z_v = (p.speed_max - speed) / p.speed_sigma
+    np.testing.assert_array_equal(p.speed_factor(speed), erfc(-z_v / math.sqrt(2.0)))
+    ff, sf = p.force_factor(force), p.speed_factor(speed)
+    previous = (rng.uniform(size=force.size) < 0.5).tolist()
+    want = contact_flags((ff * sf).tolist(), previous)
+    got: list[bool] = []
+    for i in range(0, force.size, 4):  # rows of four feet
+        got += p.row_flags(ff[i : i + 4].tolist(), speed[i : i + 4], previous[i : i + 4])
+    assert got == want
+    assert 0 < sum(got) < len(got) and got[-2] == previous[-2]  # (the NaN force kept)
 
 
 def test_contact_probability_defaults_scale_with_weight_and_bad_values_are_named() -> None:

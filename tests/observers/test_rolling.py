@@ -300,10 +300,10 @@ def test_started_on_the_truth_with_feet_rolling_on_the_plane_it_stays_there(cls)
 @pytest.mark.parametrize("cls", [InvariantEKF, QuaternionEKF])
 def test_rolling_lift_is_the_default_and_off_is_r4_alone(cls, monkeypatch) -> None:
     """With a radius the default is (R5) (``rolling_lift=True``, bit for bit);
-    ``rolling_lift=False`` is (R4) alone (the lift never computed) and differs; without a
-    radius ``rolling_lift`` changes nothing (the foot frames measured): estimates and
-    covariances bit for bit."""
-    from pinobs.observers.rolling import RollingFeet
+    ``rolling_lift=False`` is (R4) alone (the lift never computed: no compiled call with
+    ``lift`` and a foot down) and differs; without a radius ``rolling_lift`` changes nothing
+    (the foot frames measured): estimates and covariances bit for bit."""
+    from pinobs.observers import rolling
 
     legs = Go1Legs("imu_link")
     samples = truth(legs, 200.0, 0.5, wobble=0.5, feet_z=None, inverse=legs.inverse)
@@ -316,13 +316,15 @@ def test_rolling_lift_is_the_default_and_off_is_r4_alone(cls, monkeypatch) -> No
         {"rolling_lift": True},
     )
     outs, lifted = [], []
-    real_lift = RollingFeet._lift
+    for name, down in (("step_kernel", 5), ("rolled_kernel", 6)):  # (args: lift at 7)
+        kernel = getattr(rolling, name)
+        kernel.load()
 
-    def counted(self, *args):  # type: ignore[no-untyped-def]
-        lifted[-1] += 1
-        return real_lift(self, *args)
+        def counted(*args, real=kernel.compiled, down=down):  # type: ignore[no-untyped-def]
+            lifted[-1] += bool(args[7] and np.any(args[down]))  # (R5) computed for a foot
+            return real(*args)
 
-    monkeypatch.setattr(RollingFeet, "_lift", counted)
+        monkeypatch.setattr(kernel, "compiled", counted)
     for kwargs in settings:
         lifted.append(0)
         ekf = cls(pinobs.load("go1"), GO1_FEET, imu_frame="imu_link", **kwargs)

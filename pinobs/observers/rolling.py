@@ -187,7 +187,7 @@ class RollingFeet:
 
 
 def _rolling_loops(h, rot, jac, jac_w, s, h_out, jac_out):  # type: ignore[no-untyped-def]
-    """(R4) in loops (compiled: :data:`rolling_kernel`): ``h_out = h + R s`` and
+    """(R4) in loops (compiled in :data:`rolled_kernel`): ``h_out = h + R s`` and
     ``jac_out = J − (R s)^ J_ω`` per foot, the cross product written out column by column."""
     for k in range(h.shape[0]):
         o0 = rot[k, 0, 0] * s[k, 0] + rot[k, 0, 1] * s[k, 1] + rot[k, 0, 2] * s[k, 2]
@@ -201,21 +201,9 @@ def _rolling_loops(h, rot, jac, jac_w, s, h_out, jac_out):  # type: ignore[no-un
             jac_out[k, 2, c] = jac[k, 2, c] - (o0 * wy - o1 * wx)
 
 
-#: :func:`_rolling_loops` compiled: ``(h, R, J, J_ω, s, h_out, J_out)``.
-rolling_kernel = LazyKernel(
-    _rolling_loops,
-    np.zeros((1, 3)),
-    np.zeros((1, 3, 3)),
-    np.zeros((1, 3, 2)),
-    np.zeros((1, 3, 2)),
-    np.zeros((1, 3)),
-    np.empty((1, 3)),
-    np.empty((1, 3, 2)),
-)
-
 
 def _lift_loops(h, rot, jac, jac_w, s, normals, down, r, h_out, jac_out):  # type: ignore[no-untyped-def]
-    """(R5) in loops (compiled: :data:`lift_kernel`), for the feet ``down``: ``h_out = h +
+    """(R5) in loops (compiled in :data:`rolled_kernel` and the step kernel), for the feet ``down``: ``h_out = h +
     P o − r n̂`` and ``jac_out = J − P (o^ J_ω)``, ``o = R s``, ``P = I − n̂ n̂ᵀ``."""
     for k in range(h.shape[0]):
         if not down[k]:
@@ -236,21 +224,6 @@ def _lift_loops(h, rot, jac, jac_w, s, normals, down, r, h_out, jac_out):  # typ
             jac_out[k, 1, c] = jac[k, 1, c] - (c1 - nc * n1)
             jac_out[k, 2, c] = jac[k, 2, c] - (c2 - nc * n2)
 
-
-#: :func:`_lift_loops` compiled: ``(h, R, J, J_ω, s, n̂, down, r, h_out, J_out)``.
-lift_kernel = LazyKernel(
-    _lift_loops,
-    np.zeros((1, 3)),
-    np.zeros((1, 3, 3)),
-    np.zeros((1, 3, 2)),
-    np.zeros((1, 3, 2)),
-    np.zeros((1, 3)),
-    np.zeros((1, 3)),
-    np.zeros(1, dtype=bool),
-    0.02,
-    np.empty((1, 3)),
-    np.empty((1, 3, 2)),
-)
 
 
 def _fma(a: float, b: float, c: float) -> float:

@@ -205,15 +205,16 @@ def test_foot_radius_zero_is_bit_for_bit_the_filter_without_it() -> None:
 
 def test_the_compiled_points_are_r4_in_numpy() -> None:
     """The compiled (R4) equals its NumPy form: ``h + R s`` and ``J − (R s)^ J_ω``."""
-    from pinobs.observers.rolling import rolling_kernel
+    from pinobs.observers.rolling import rolled_kernel
 
     rng = np.random.default_rng(0)
     h, s = rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
     rot = Rotation.random(4, random_state=1).as_matrix()
     jac, jac_w = rng.normal(size=(4, 3, 12)), rng.normal(size=(4, 3, 12))
-    rolling_kernel.load()
+    normals, down = np.zeros((4, 3)), np.ones(4, dtype=bool)  # (R5) off: lift False
+    rolled_kernel.load()
     h_out, jac_out = np.empty_like(h), np.empty_like(jac)
-    rolling_kernel.compiled(h, rot, jac, jac_w, s, h_out, jac_out)
+    rolled_kernel.compiled(h, rot, jac, jac_w, s, normals, down, False, RADIUS, h_out, jac_out)
     o = np.einsum("kab,kb->ka", rot, s)
     hat = np.zeros((4, 3, 3))
     hat[:, 0, 1], hat[:, 0, 2], hat[:, 1, 2] = -o[:, 2], o[:, 1], -o[:, 0]
@@ -342,9 +343,9 @@ def test_rolling_lift_is_the_default_and_off_is_r4_alone(cls, monkeypatch) -> No
 
 
 def test_the_compiled_lift_is_r5_in_numpy() -> None:
-    """The compiled (R5) equals its NumPy form for the feet down (the others untouched):
+    """The compiled (R5) equals its NumPy form for the feet down (the others (R4)'s):
     ``h + P o − r n̂`` and ``J − P o^ J_ω``, ``o = R s``, ``P = I − n̂ n̂ᵀ``."""
-    from pinobs.observers.rolling import lift_kernel
+    from pinobs.observers.rolling import rolled_kernel
 
     rng = np.random.default_rng(0)
     h, s = rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
@@ -352,17 +353,15 @@ def test_the_compiled_lift_is_r5_in_numpy() -> None:
     rot = Rotation.random(4, random_state=1).as_matrix()
     jac, jac_w = rng.normal(size=(4, 3, 12)), rng.normal(size=(4, 3, 12))
     down = np.array([True, False, True, True])
-    lift_kernel.load()
+    rolled_kernel.load()
     h_out, jac_out = np.zeros_like(h), np.zeros_like(jac)
-    lift_kernel.compiled(h, rot, jac, jac_w, s, normals, down, RADIUS, h_out, jac_out)
+    rolled_kernel.compiled(h, rot, jac, jac_w, s, normals, down, True, RADIUS, h_out, jac_out)
     for k in range(4):
-        if not down[k]:
-            assert not h_out[k].any() and not jac_out[k].any()
-            continue
         o, n = rot[k] @ s[k], normals[k]
-        P = np.eye(3) - np.outer(n, n)
+        P = np.eye(3) - np.outer(n, n) if down[k] else np.eye(3)
+        r = RADIUS if down[k] else 0.0
         o_hat = np.array([[0.0, -o[2], o[1]], [o[2], 0.0, -o[0]], [-o[1], o[0], 0.0]])
-        np.testing.assert_allclose(h_out[k], h[k] + P @ o - RADIUS * n, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(h_out[k], h[k] + P @ o - r * n, rtol=0, atol=1e-15)
         np.testing.assert_allclose(jac_out[k], jac[k] - P @ o_hat @ jac_w[k], rtol=0, atol=1e-14)
 
 

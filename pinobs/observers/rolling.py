@@ -201,7 +201,6 @@ def _rolling_loops(h, rot, jac, jac_w, s, h_out, jac_out):  # type: ignore[no-un
             jac_out[k, 2, c] = jac[k, 2, c] - (o0 * wy - o1 * wx)
 
 
-
 def _lift_loops(h, rot, jac, jac_w, s, normals, down, r, h_out, jac_out):  # type: ignore[no-untyped-def]
     """(R5) in loops (compiled in :data:`rolled_kernel` and the step kernel), for the feet ``down``: ``h_out = h +
     P o − r n̂`` and ``jac_out = J − P (o^ J_ω)``, ``o = R s``, ``P = I − n̂ n̂ᵀ``."""
@@ -223,7 +222,6 @@ def _lift_loops(h, rot, jac, jac_w, s, normals, down, r, h_out, jac_out):  # typ
             jac_out[k, 0, c] = jac[k, 0, c] - (c0 - nc * n0)
             jac_out[k, 1, c] = jac[k, 1, c] - (c1 - nc * n1)
             jac_out[k, 2, c] = jac[k, 2, c] - (c2 - nc * n2)
-
 
 
 def _fma(a: float, b: float, c: float) -> float:

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from pinobs.errors import UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.observers.base import GateState, Vector, gate_threshold, positive
+from pinobs.observers.gating import SPIKE_ALPHA
 from pinobs.observers.kf_kernels import (
     auto_kernel,
     auto_layout,
@@ -93,7 +94,7 @@ def corrected(
     the Joseph form; ``P`` symmetrised."""
     s = P[0, 0] + r
     e = robot.difference(q, q_meas)
-    gate = gate.measured(float(e.dot(e)) / s, threshold, e.size)
+    gate = gate.measured(float(e.dot(e)) / s, threshold, e.size, SPIKE_ALPHA)
     if gate.gated:
         return KFState(q, v, a, 0.5 * (P + P.T), gate)
     K = P[:, 0] / s
@@ -552,7 +553,7 @@ class AutoBank:
         if state.n >= AUTO_GATE_SAMPLES:  # the scales ĉ and weights before this sample
             floor = bank.meas_var / S[:, None]  # ĉ S_f ≥ σ₀² (kf module docstring)
             nis = float(np.sum(state.w * z / np.maximum(state.A / state.n, floor)))
-            gate = state.gate.measured(nis, self.gate, self.robot.nv)
+            gate = state.gate.measured(nis, self.gate, self.robot.nv, SPIKE_ALPHA)
         else:  # too few samples for a scale: reported (with σ₀), not gated
             gate = GateState(float(np.sum(state.w * z)))
         if gate.gated:  # the soft gate's correction (its likelihoods unchanged)

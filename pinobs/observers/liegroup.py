@@ -490,9 +490,8 @@ class LieGroupObserver(Observer[_State]):
 
     # ------------------------------------------------------- sampled data
     def initial_state(self, q0: Vector, v0: Vector) -> _State:
-        # the first sample is accepted whatever its NIS (a start-up transient, not a spike:
-        # past the run that a spike may extend, GateState.measured)
-        return _State(q0.copy(), v0.copy(), 0.0, GateState(run=MAX_GATE_RUN + 1))
+        # the first sample is accepted whatever its NIS (a start-up transient, not a spike)
+        return _State(q0.copy(), v0.copy(), 0.0, GateState(run=MAX_GATE_RUN))
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         q, v = lie_rk4(

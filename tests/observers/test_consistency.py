@@ -256,29 +256,35 @@ def test_gate_state_keeps_the_outlier_gates_bookkeeping() -> None:
 
 
 def test_a_spike_is_not_forced_in_and_a_forced_sample_raises_the_gate_boundedly() -> None:
-    """The sample a run would force in is rejected once more if it is a spike (NIS past
-    ``SPIKE_ALPHA`` limits; before, it was forced in: a 1e12 NIS raised the limit 2e10-fold),
-    the next one is forced in; a sample forced in after one rejection raises the limit at most
-    ``2 SPIKE_ALPHA``-fold (its NIS under ``SPIKE_ALPHA`` limits, then one step of the mean, at
-    most 2-fold).  The compiled gate (``kf_kernels._outlier_gate``) decides the same."""
-    thr, dof = chi2_quantile(6, 1e-6), 6
-    ok = GateState().measured(3.0, thr, dof)
+    """``kf``'s gate (``spike=SPIKE_ALPHA``): the sample a run would force in is rejected once
+    more if it is a spike (NIS past ``SPIKE_ALPHA`` limits; before, it was forced in: a 1e12
+    NIS raised the limit 2e10-fold), the next one is forced in; a sample forced in after one
+    rejection raises the limit at most ``2 SPIKE_ALPHA``-fold (its NIS under ``SPIKE_ALPHA``
+    limits, then one step of the mean, at most 2-fold).  The compiled gate
+    (``kf_kernels._outlier_gate``) decides the same.  The model-based families' gate (the
+    default, ``spike=∞``) forces the spike in, as before (a model that does not explain a real
+    log: a real maneuver's next sample past ``SPIKE_ALPHA`` limits, the prediction off)."""
+    thr, dof, A = chi2_quantile(6, 1e-6), 6, SPIKE_ALPHA
+    ok = GateState().measured(3.0, thr, dof, A)
     limit = ok.limit(thr, dof)
-    rejected = ok.measured(10 * limit, thr, dof)  # a maneuver: gated, the run counted
+    rejected = ok.measured(10 * limit, thr, dof, A)  # a maneuver: gated, the run counted
     assert rejected.gated and rejected.run == MAX_GATE_RUN
-    drift = rejected.measured(0.99 * SPIKE_ALPHA * limit, thr, dof)  # the run's drift: forced in
+    drift = rejected.measured(0.99 * A * limit, thr, dof, A)  # the run's drift: forced in
     assert not drift.gated and drift.run == 0
-    assert limit < drift.limit(thr, dof) <= 2.0 * SPIKE_ALPHA * limit
-    spike = rejected.measured(1e12, thr, dof)
+    assert limit < drift.limit(thr, dof) <= 2.0 * A * limit
+    spike = rejected.measured(1e12, thr, dof, A)
     assert spike.gated and spike.run == MAX_GATE_RUN + 1 and spike.level == ok.level
-    after = spike.measured(3.0, thr, dof)  # the next sample: accepted, the level the mean's
+    after = spike.measured(3.0, thr, dof, A)  # the next sample: accepted, the level the mean's
     assert not after.gated and after.run == 0
     assert after.level == pytest.approx(ok.level + NIS_AVERAGING * (3.0 - ok.level))
-    for gate, nis in ((ok, 10 * limit), (rejected, 0.99 * SPIKE_ALPHA * limit),
+    for gate, nis in ((ok, 10 * limit), (rejected, 0.99 * A * limit),
                       (rejected, 1e12), (spike, 1e12), (spike, 3.0)):  # fmt: skip
-        one = gate.measured(nis, thr, dof)
+        one = gate.measured(nis, thr, dof, A)
         loops = kf_kernels._outlier_gate(nis, thr, float(gate.level), dof, gate.run)
         assert loops == (one.gated, one.level)
+    forced = rejected.measured(1e12, thr, dof)  # the model-based families': forced in
+    assert not forced.gated and forced.run == 0 and forced.level > 1e10 * ok.level
+    assert outlier_gate(1e12, rejected.level, rejected.run, thr, dof) == (False, forced.level)
 
 
 @pytest.mark.parametrize("robot_name", ["ur5", "cartpole"])

@@ -30,10 +30,13 @@ traded against lag by taking that term's ``ω`` low-passed, to first order with 
         = (M3)'s v_b + (R_bi (ω̃ − ω̄)) × r_bi                                        (M4)
 
 (the bias and ``J_iω q̇`` cancel in the difference; the output ``ω_b`` stays (M3)'s, the
-filter's state and covariance are unchanged).  A first-order filter passes white noise of
-one-sided density ``N`` with variance ``N²/(4τ)`` (its noise-equivalent bandwidth ``1/(4τ)``)
-and lags a signal of bandwidth ``≪ 1/(2πτ)`` by ``τ``: an error ``≈ τ ω̇_b``; their sum per
-axis ``N²/(4τ) + τ² |ω̇_b|²`` is least at ``τ³ = N²/(8 |ω̇_b|²)``.
+filter's state and covariance are unchanged).  A first-order filter passes the sampled white
+noise (variance ``N² rate``, ``α = 1 − e^{−Δt/τ}``) with variance ``N² rate α/(2 − α) ≈
+N²/(2τ)`` and lags a signal of bandwidth ``≪ 1/(2πτ)`` by ``τ``: an error ``≈ τ ω̇_b``; their
+sum per axis ``N²/(2τ) + τ² |ω̇_b|²`` is least at ``τ³ = N²/(4 |ω̇_b|²)``.
+
+(M4) is applied to a frame that moves only: one fixed to the root (go1's ``imu_link``, 7 cm
+off it) keeps the raw reading and its outputs' bits.
 
 For a frame fixed to the root ``J_i = J_iω = 0``: the conversion of
 :mod:`pinobs.observers.legs` (compiled, :data:`~.inekf_loops.base_kernel`), which (M3)
@@ -51,11 +54,12 @@ from pinobs.observers.base import Vector
 
 __all__ = ["LEVER_TAU", "imu_state", "lever_shift", "root_twist", "smoothed"]
 
-#: (M4)'s time constant τ [s] (:class:`~pinobs.observers.legs.InEKFGains`' ``lever_tau``) (cut-off ``1/(2πτ)`` ≈ 8 Hz): the least of TALOS's root velocity
-#: error in MuJoCo (stand and sway, seed 0, τ from 0 to 50 ms; ``benchmarks/talos_imu_link.md``
-#: has the held-out seeds); (M4)'s optimum with the simulation's gyro density
+#: (M4)'s time constant τ [s] (:class:`~pinobs.observers.legs.InEKFGains`' ``lever_tau``;
+#: cut-off ``1/(2πτ)`` ≈ 8 Hz): the least of TALOS's root velocity error in MuJoCo (stand and
+#: sway, seed 0, τ from 0 to 50 ms: flat from 15 to 30 ms; ``benchmarks/talos_imu_link.md``
+#: has the held-out seeds); the estimate above with the simulation's gyro density
 #: ``N = 2·10⁻³ rad/s/√Hz`` and its truth's ``|ω̇_b|`` (0.18-0.21 rad/s² RMS per axis, stand
-#: and sway, seed 0) is 22-25 ms.
+#: and sway, seed 0) gives 28-31 ms.
 LEVER_TAU = 0.02
 
 

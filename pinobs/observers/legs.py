@@ -18,7 +18,8 @@ local attitude error).  Everything else lives here, once:
   the IMU frame to the root joint (Pinocchio's ``q[0:7]``, ``v[0:6]``)::
 
       R_b = R R_biᵀ,  p_b = p − R_b r_bi,  ω_b = R_bi (ω̃ − b̂_g),  v_b = R_bᵀ v − ω_b × r_bi
-  (an IMU frame that moves relative to the root: with the joints' terms, imu_link.py's M3).
+  (an IMU frame that moves relative to the root: with the joints' terms, imu_link.py's M3,
+  and the gyro low-passed in the lever arm, its M4).
 
 Each filter holds a :class:`LeggedSetup` (composition) and keeps its mathematics.
 """
@@ -212,7 +213,8 @@ class InEKFGains:
         landing_time: how long after a foot's contact began ``landing`` applies [s].
         lever_tau: with an IMU frame that moves, the time constant of the gyro's low-pass in
             the root velocity's lever arm [s] (:mod:`~pinobs.observers.imu_link`'s (M4)); 0:
-            the raw reading (M3).  The state is unaffected.
+            the raw reading (M3), as a frame fixed to the root always takes.  The state is
+            unaffected.
     """
 
     gyro: float = 1e-2

@@ -221,9 +221,9 @@ def test_talos_imu_link_by_default_tracks_mujocos_root_velocity() -> None:
     """MuJoCo's TALOS swaying with its torso swaying too (±0.1 rad), its IMU on ``imu_link``,
     through ``legged_run`` with its defaults (no ``imu_frame``: ``imu_link``), against the same
     motion with the IMU at the root (``imu_frame="base_link"``).  Measured here (3 s, seed 0):
-    root velocity RMS 0.0101 m/s on ``imu_link``, 0.0073 at the root (1.38×); over 10 s,
-    seeds 0-2, stand and sway: 0.0098-0.0100 against 0.0067-0.0078 (1.27-1.46×;
-    ``benchmarks/talos_imu_link.py``: mostly the gyro's noise across the lever arm ``r_bi``)."""
+    root velocity RMS 0.0082 m/s on ``imu_link``, 0.0073 at the root (1.12×; 0.0101 with
+    M3's raw gyro in the lever arm ``r_bi``, before M4); over 10 s, seeds 0-2, stand and sway:
+    0.0077-0.0079 against 0.0067-0.0078 (``benchmarks/talos_imu_link.py``)."""
     pytest.importorskip("mujoco")
     pd = pytest.importorskip("pandas")
     from pinobs.io import read_log

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike
 
 from pinobs.model import Robot
 from pinobs.observers.base import Vector
+from pinobs.observers.imu_link import smoothed
 from pinobs.observers.legs import (
     GRAVITY,
     ContactKinematics,
@@ -109,6 +110,8 @@ class LeggedFilter(ABC):
         #: :meth:`setup.estimate`'s arguments for the last estimate, not made yet (:meth:`update_rows`)
         self._pending: tuple[Any, ...] | None = None
         self._warned = False
+        #: the lever arm's gyro low-passed (imu_link.py's (M4): a moving IMU frame, τ > 0)
+        self._smooths = s.imu_moves and self.gains.lever_tau > 0
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(feet={self.feet})"
@@ -166,7 +169,8 @@ class LeggedFilter(ABC):
         """
         a = self.setup.reset_inputs(t, q, v, gyro, acc, contacts, prior, bias)
         P = self._initial_covariance(a)
-        state = LegState(a.t, a.R, a.x, (), a.bias, P, a.imu, a.t)
+        lever = smoothed(None, a.imu, 0.0) if self._smooths and a.imu is not None else None
+        state = LegState(a.t, a.R, a.x, (), a.bias, P, a.imu, a.t, lever)
         self._landed = [-math.inf] * len(self.feet)
         h, jac = self._legs(a.q_joints, a.R, a.flags)
         self._remember(None, h)
@@ -271,6 +275,9 @@ class LeggedFilter(ABC):
         new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
         h, jac = self._legs(u.q_joints, new.R, u.flags)
         new, nis, used, gated = self._correct(new, u.flags, h, jac)
+        if self._smooths:  # imu_link.py's (M4)
+            lever = smoothed(state.lever, u.reading, u.t - state.t, self.gains.lever_tau)
+            new = replace_state(new, lever=lever)
         self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
         return new, h, nis, used, gated
 

@@ -18,7 +18,8 @@ local attitude error).  Everything else lives here, once:
   the IMU frame to the root joint (Pinocchio's ``q[0:7]``, ``v[0:6]``)::
 
       R_b = R R_biᵀ,  p_b = p − R_b r_bi,  ω_b = R_bi (ω̃ − b̂_g),  v_b = R_bᵀ v − ω_b × r_bi
-  (an IMU frame that moves relative to the root: with the joints' terms, imu_link.py's M3).
+  (an IMU frame that moves relative to the root: with the joints' terms, imu_link.py's M3,
+  and the gyro low-passed in the lever arm, its M4).
 
 Each filter holds a :class:`LeggedSetup` (composition) and keeps its mathematics.
 """
@@ -48,7 +49,7 @@ from pinobs.errors import (
 from pinobs.model import FootKinematics, Robot
 from pinobs.model.robot import read_only
 from pinobs.observers.base import Vector
-from pinobs.observers.imu_link import imu_state, root_twist
+from pinobs.observers.imu_link import LEVER_TAU, imu_state, lever_shift, root_twist
 from pinobs.observers.inekf_loops import base_kernel, finite_kernel, load_leg_kernels
 from pinobs.observers.rolling import RollingFeet
 from pinobs.observers.rotations import quaternion_to_rotation, rotation_to_quaternion
@@ -210,6 +211,10 @@ class InEKFGains:
             flag rose) [m/s/√Hz]; 0 (default): none
             (:func:`~pinobs.observers.legged_filter.landing_densities`).
         landing_time: how long after a foot's contact began ``landing`` applies [s].
+        lever_tau: with an IMU frame that moves, the time constant of the gyro's low-pass in
+            the root velocity's lever arm [s] (:mod:`~pinobs.observers.imu_link`'s (M4)); 0:
+            the raw reading (M3), as a frame fixed to the root always takes.  The state is
+            unaffected.
     """
 
     gyro: float = 1e-2
@@ -221,6 +226,7 @@ class InEKFGains:
     kinematics: float = 1e-3
     landing: float = 0.0
     landing_time: float = 0.0
+    lever_tau: float = LEVER_TAU
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -374,6 +380,8 @@ class LegState:
             local attitude error for the quaternion EKF).
         imu: the held reading ``(ω̃, ã)``, or ``None`` before the first one.
         last_contact: time a foot was last in contact (the reset time if none yet) [s].
+        lever: the gyro's low-passed reading ``ω̄`` for the lever arm of an IMU frame that
+            moves (:func:`~pinobs.observers.imu_link.smoothed`), ``None`` otherwise.
     """
 
     t: float
@@ -384,6 +392,7 @@ class LegState:
     P: Vector
     imu: Vector | None
     last_contact: float
+    lever: Vector | None = None
 
 
 _STATE_FIELDS = frozenset(f.name for f in fields(LegState))
@@ -703,7 +712,8 @@ class LeggedSetup:
         if self.imu_moves:  # imu_link.py's (M3): the placement at q, then the joints' terms
             R_bi, r_bi, J_bi = self.kinematics.imu_motion(q_joints)  # type: ignore[attr-defined]
             kernel(R, x, imu, bias, np.ascontiguousarray(R_bi), r_bi, False, R_b, base, quat)
-            root_twist(base, R_b, dq if rates is None else rates, r_bi, J_bi)
+            rates = dq if rates is None else rates
+            root_twist(base, R_b, rates, r_bi, J_bi, lever_shift(R_bi, state.imu, state.lever))
         else:
             kernel(R, x, imu, bias, *self._placement, R_b, base, quat)
         quat /= math.sqrt(float(quat @ quat))  # (rotation_to_quaternion's last steps)

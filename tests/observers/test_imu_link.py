@@ -13,7 +13,9 @@ import pytest
 
 import pinobs
 from pinobs.model import FootKinematics
+from pinobs.observers.imu_link import LEVER_TAU, lever_shift, root_twist, smoothed
 from pinobs.observers.inekf import InvariantEKF
+from pinobs.observers.legs import InEKFGains
 from pinobs.observers.qekf import QuaternionEKF
 from pinobs.simulation.humanoid import TALOS_FEET, TALOS_STANCE
 from tests.observers.test_inekf import free_flyer_q, truth
@@ -82,20 +84,24 @@ def test_the_feet_in_a_moving_imu_frame_are_pinocchios_relative_placements(rng) 
     assert np.linalg.norm(J[:, :, list(TORSO)], axis=1).min() > 0.1  # the torso moves the feet
 
 
+@pytest.mark.parametrize("tau", [0.0, LEVER_TAU])
 @pytest.mark.parametrize("family", [InvariantEKF, QuaternionEKF])
-def test_started_on_the_truth_it_stays_there_with_the_imu_on_talos_torso(family) -> None:
+def test_started_on_the_truth_it_stays_there_with_the_imu_on_talos_torso(family, tau) -> None:
     """The truth is ``imu_link``'s motion (its exact flow under held readings), the torso
     swaying (±0.15, ±0.1 rad), the soles fixed in the world.  The estimate, of the root, is
     checked through Pinocchio's own kinematics: ``est.q`` puts ``imu_link`` at the truth's
     pose, and ``(est.q, est.v)`` give it the truth's velocity (both filters: they share the
-    legs and the conversion, :class:`~pinobs.observers.legs.LeggedSetup`)."""
+    legs and the conversion, :class:`~pinobs.observers.legs.LeggedSetup`): exactly with the
+    raw reading in the lever arm (``lever_tau`` 0, M3); with M4's low-pass, its velocity
+    within the lag's bound ``|r_bi| τ max_k |ω_k − ω_{k−1}| / Δt`` (the recursion's
+    ``|ω̄_k − ω_k| ≤ Σ_j (1 − α)^j |Δω| = (1 − α)/α |Δω|`` and ``(1 − α)/α ≤ τ/Δt``)."""
     rate = 200.0
     legs = TalosLegs(rate)
     samples = truth(legs, rate, 2.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
     robot = pinobs.load("talos")
     model, data, imu = robot.model, robot.model.createData(), robot.model.getFrameId("imu_link")
-    ekf = family(robot, TALOS_FEET, imu_frame="imu_link")
-    worst, moved = 0.0, 0.0
+    ekf = family(robot, TALOS_FEET, imu_frame="imu_link", gains=InEKFGains(lever_tau=tau))
+    worst, moved, linear = 0.0, 0.0, 0.0
     for k, (t, R_i, v_i, p_i, q, omega, acc, contacts) in enumerate(samples):
         rates = np.zeros(robot.nv - 6)
         rates[list(TORSO)] = torso(t)[1]
@@ -113,15 +119,18 @@ def test_started_on_the_truth_it_stays_there_with_the_imu_on_talos_torso(family)
         oMi = pin.updateFramePlacement(model, data, imu)
         local = pin.getFrameVelocity(model, data, imu, pin.ReferenceFrame.LOCAL)
         world = pin.getFrameVelocity(model, data, imu, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-        errors = (
-            oMi.rotation - R_i,
-            oMi.translation - p_i,
-            local.angular - omega,
-            world.linear - v_i,
-        )
+        errors = (oMi.rotation - R_i, oMi.translation - p_i, local.angular - omega)
         worst = max(worst, *(float(np.abs(e).max()) for e in errors))
+        linear = max(linear, float(np.linalg.norm(world.linear - v_i)))
         moved = max(moved, float(np.abs(q[list(TORSO)]).max()))
     assert worst < 1e-9
+    if tau == 0.0:
+        assert linear < 1e-9
+    else:
+        omegas = np.array([sample[5] for sample in samples])
+        step = float(np.linalg.norm(np.diff(omegas, axis=0), axis=1).max())
+        lever = float(np.linalg.norm(legs.imu_placement[1]))
+        assert 1e-6 < linear <= lever * tau * step * rate + 1e-9
     assert moved > 0.09  # the torso did sway
     assert np.abs(est.v[:6]).max() > 0.01 and np.isfinite(est.v).all()
 
@@ -134,6 +143,68 @@ def test_without_joint_velocities_the_root_twist_is_unknown_with_a_moving_imu() 
     ekf.reset(t, free_flyer_q(R_i, p_i, q), gyro=omega, acc=acc, contacts=contacts)
     est = ekf.update(*samples[1][:1], samples[1][4], *samples[1][5:])
     assert np.isnan(est.v).all() and np.isfinite(est.q).all()
+
+
+def test_the_low_passed_lever_arm_leaves_the_state_and_the_angular_velocity(rng) -> None:
+    """(M4) changes the root's linear velocity alone: with a noisy gyro, the state ``(R, x,
+    P, bias)`` and the output's ``q`` and ``ω_b`` are those of (M3) (``lever_tau`` 0) bit for
+    bit; ``v_b`` differs."""
+    legs = TalosLegs(200.0)
+    samples = truth(legs, 200.0, 0.5, wobble=0.5, feet_z=None, inverse=legs.inverse)
+    robot = pinobs.load("talos")
+    filters = [
+        InvariantEKF(robot, TALOS_FEET, imu_frame="imu_link", gains=InEKFGains(lever_tau=tau))
+        for tau in (0.0, LEVER_TAU)
+    ]
+    moved = 0.0
+    for k, (t, R_i, _, p_i, q, omega, acc, contacts) in enumerate(samples):
+        gyro = omega + 0.03 * rng.normal(size=3)
+        rates = np.zeros(robot.nv - 6)
+        rates[list(TORSO)] = torso(t)[1]
+        if k == 0:
+            q0 = free_flyer_q(R_i, p_i, q)
+            raw, low = (f.reset(t, q0, gyro=gyro, acc=acc, contacts=contacts) for f in filters)
+        else:
+            raw, low = (
+                f.update(t, q, gyro, acc, contacts, joint_velocities=rates) for f in filters
+            )
+        a, b = (f.state for f in filters)
+        for x, y in ((a.R, b.R), (a.x, b.x), (a.P, b.P), (a.bias, b.bias), (raw.q, low.q)):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_array_equal(raw.v[3:], low.v[3:])
+        moved = max(moved, float(np.abs(raw.v[:3] - low.v[:3]).max()))
+    assert a.lever is None and b.lever is not None
+    assert moved > 1e-3
+
+
+def test_the_low_passed_lever_arm_cuts_the_gyros_white_noise_by_the_expected_factor(rng) -> None:
+    """A rigid rotation at constant ``ω`` (the IMU 0.16 m above the root, tilted, a root
+    moving at ``v_b``), the gyro read with white noise (σ 0.045 rad/s per sample at 500 Hz:
+    2·10⁻³ rad/s/√Hz): (M3)'s root velocity error is ``−(R_bi n_k) × r_bi``, (M4)'s
+    ``−(R_bi (ω̄_k − ω)) × r_bi``, whose variance is the first-order recursion's
+    ``α/(2 − α)`` times the reading's (``α = 1 − e^{−Δt/τ}``; ``ω`` constant: no lag)."""
+    dt, sigma, n = 1 / 500, 2e-3 * math.sqrt(500), 20000
+    R_bi, r_bi = pin.exp3(np.array([0.1, -0.2, 0.3])), np.array([0.02, 0.0, 0.16])
+    R_b, omega, v_b = pin.exp3(np.array([0.3, 0.1, -0.5])), np.array([0.1, -0.2, 0.05]), np.ones(3)
+    w_b = R_bi @ omega
+    v = R_b @ (v_b + np.cross(w_b, r_bi))  # the IMU's world velocity (M2, J_i = 0)
+    errors: dict[str, list[np.ndarray]] = {"M3": [], "M4": []}
+    lever = None
+    for k in range(n):
+        reading = np.concatenate([omega + sigma * rng.normal(size=3), np.zeros(3)])
+        lever = smoothed(lever, reading, dt)
+        for name, shift in (("M3", None), ("M4", lever_shift(R_bi, reading, lever))):
+            measured = R_bi @ reading[:3]  # the compiled conversion's rows (fixed frame)
+            base = np.array([np.zeros(3), measured, R_b.T @ v - np.cross(measured, r_bi), v])
+            root_twist(base, R_b, np.zeros(2), r_bi, np.zeros((6, 2)), shift)
+            np.testing.assert_array_equal(base[1], measured)  # the output ω_b: the reading's
+            if k >= 100:  # (after 5 τ)
+                errors[name].append(base[2] - v_b)
+    alpha = 1 - math.exp(-dt / LEVER_TAU)
+    expected = math.sqrt(alpha / (2 - alpha))  # 0.224
+    m3, m4 = (float(np.sqrt(np.mean(np.square(errors[k])))) for k in ("M3", "M4"))
+    assert m3 == pytest.approx(sigma * math.sqrt(2 / 3) * np.linalg.norm(r_bi), rel=0.05)
+    assert m4 / m3 == pytest.approx(expected, rel=0.08)
 
 
 @pytest.mark.parametrize("frame", [None, "imu_link"])
@@ -150,9 +221,9 @@ def test_talos_imu_link_by_default_tracks_mujocos_root_velocity() -> None:
     """MuJoCo's TALOS swaying with its torso swaying too (±0.1 rad), its IMU on ``imu_link``,
     through ``legged_run`` with its defaults (no ``imu_frame``: ``imu_link``), against the same
     motion with the IMU at the root (``imu_frame="base_link"``).  Measured here (3 s, seed 0):
-    root velocity RMS 0.0101 m/s on ``imu_link``, 0.0073 at the root (1.38×); over 10 s,
-    seeds 0-2, stand and sway: 0.0098-0.0100 against 0.0067-0.0078 (1.27-1.46×;
-    ``benchmarks/talos_imu_link.py``: mostly the gyro's noise across the lever arm ``r_bi``)."""
+    root velocity RMS 0.0082 m/s on ``imu_link``, 0.0073 at the root (1.12×; 0.0101 with
+    M3's raw gyro in the lever arm ``r_bi``, before M4); over 10 s, seeds 0-2, stand and sway:
+    0.0077-0.0079 against 0.0067-0.0078 (``benchmarks/talos_imu_link.py``)."""
     pytest.importorskip("mujoco")
     pd = pytest.importorskip("pandas")
     from pinobs.io import read_log

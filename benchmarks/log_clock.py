@@ -215,6 +215,35 @@ def _cost(recorded, rec, robot):
     return float(np.median(ratios))
 
 
+def _clock_row(name, frame, fit):
+    """A real log's row: its clock's report."""
+    r = fit.report
+    return {
+        "log": name,
+        "rows": len(frame),
+        "report": r.message(),
+        "repaired": r.repaired,
+        "period_ms": None if r.period is None else 1e3 * r.period,
+        "jitter_ms": 1e3 * r.jitter,
+        "stale": r.stale,
+        "drops": r.drops,
+        "wander": r.wander,
+    }
+
+
+def _kf_by_clock(frame, robot, ref):
+    """``kf``'s RMS against ``ref`` with each clock (``kf_auto``, ``kf_stamps``)."""
+    out = {}
+    for clock in ("auto", "stamps"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            df = pinobs.estimate("kf", frame, robot=robot, clock=clock)
+        v = df[[f"v{i}" for i in range(robot.nv)]].to_numpy()
+        ok = np.isfinite(v).all(axis=1) & np.isfinite(ref).all(axis=1)
+        out[f"kf_{clock}"] = float(np.sqrt(np.mean((v[ok] - ref[ok]) ** 2)))
+    return out
+
+
 def real():
     sys.path.insert(0, str(HERE))
     try:
@@ -226,24 +255,9 @@ def real():
         log = real_data.load_log(name)
         frame, robot, ref = log.frame, log.robot, log.velocity
         q = frame[[f"q.{j}" for j in robot.joint_names]].to_numpy()
-        fit = fit_clock(frame["t"].to_numpy(), q)
-        row = {"log": name, "rows": len(frame), "report": fit.report.message()}
-        row.update(
-            repaired=fit.report.repaired,
-            period_ms=None if fit.report.period is None else 1e3 * fit.report.period,
-            jitter_ms=1e3 * fit.report.jitter,
-            stale=fit.report.stale,
-            drops=fit.report.drops,
-            wander=fit.report.wander,
-        )
+        row = _clock_row(name, frame, fit_clock(frame["t"].to_numpy(), q))
         if ref is not None:
-            for clock in ("auto", "stamps"):
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    df = pinobs.estimate("kf", frame, robot=robot, clock=clock)
-                v = df[[f"v{i}" for i in range(robot.nv)]].to_numpy()
-                ok = np.isfinite(v).all(axis=1) & np.isfinite(ref).all(axis=1)
-                row[f"kf_{clock}"] = float(np.sqrt(np.mean((v[ok] - ref[ok]) ** 2)))
+            row.update(_kf_by_clock(frame, robot, ref))
         print(name, row.get("kf_auto"), row.get("kf_stamps"), row["report"], flush=True)
         out.append(row)
         if name.endswith("ur-20_02_19_14harm50sec"):
@@ -258,24 +272,8 @@ def _glitched_real(log, q):
     rows = np.sort(np.random.default_rng(0).choice(np.arange(200, t.size - 200), 5, replace=False))
     t[rows] += np.array([1.0, -1.0, 1.0, -1.0, 1.0])
     frame["t"] = t
-    fit = fit_clock(t, q)
-    row = {"log": log.name + " + 5 glitches", "rows": len(frame), "report": fit.report.message()}
-    row.update(
-        repaired=fit.report.repaired,
-        period_ms=None if fit.report.period is None else 1e3 * fit.report.period,
-        jitter_ms=1e3 * fit.report.jitter,
-        stale=fit.report.stale,
-        drops=fit.report.drops,
-        wander=fit.report.wander,
-        glitch_rows=rows.tolist(),
-    )
-    for clock in ("auto", "stamps"):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            df = pinobs.estimate("kf", frame, robot=robot, clock=clock)
-        v = df[[f"v{i}" for i in range(robot.nv)]].to_numpy()
-        ok = np.isfinite(v).all(axis=1) & np.isfinite(ref).all(axis=1)
-        row[f"kf_{clock}"] = float(np.sqrt(np.mean((v[ok] - ref[ok]) ** 2)))
+    row = _clock_row(log.name + " + 5 glitches", frame, fit_clock(t, q))
+    row.update(glitch_rows=rows.tolist(), **_kf_by_clock(frame, robot, ref))
     print(row["log"], row["kf_auto"], row["kf_stamps"], row["report"], flush=True)
     return row
 

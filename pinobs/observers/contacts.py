@@ -164,10 +164,7 @@ class ContactProbability:
         v_max, sigma = self.speed_max, self.speed_sigma
         z = [((v - v_max) / sigma) / _SQRT2 for v in speed.tolist()]
         by_speed = _erfc_ufunc()(z).tolist()
-        return [
-            b if math.isnan(p := f * s) else p > CONTACT_PROBABILITY
-            for f, s, b in zip(force_factor, by_speed, previous, strict=True)
-        ]
+        return contact_flags([f * s for f, s in zip(force_factor, by_speed, strict=True)], previous)
 
 
 _SQRT2 = math.sqrt(2.0)

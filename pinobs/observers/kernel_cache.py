@@ -44,7 +44,7 @@ def load_signature(kernel: Any, *args: Any) -> Any:
     if not isinstance(cache, Cache) or not all(hasattr(cache, n) for n in needs):
         return kernel(*args)  # (no disk cache: the ordinary call)
     if not all(hasattr(kernel, n) for n in hooks):
-        return kernel(*args)
+        return kernel(*args)  # (numba's dispatcher differs: the ordinary call)
 
     def load_overload(sig: Any, target_context: Any) -> Any:
         rtsys.initialize(target_context)  # instead of target_context.refresh()

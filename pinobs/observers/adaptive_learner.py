@@ -628,13 +628,17 @@ def check_options(**options: float) -> None:
 
 def load_learning() -> None:
     """Import what the learner imports when it first runs (SciPy's QR and least squares:
-    ``scipy.linalg``, 0.15 s CPU, loaded already by the compiled kernels of numba, which
-    imports it with its first kernel) and scan the BLAS libraries with ``scipy.linalg``
-    loaded (:func:`~pinobs.observers.blas.blas_libraries`): now, at construction, not in
-    the loop.  The smoothing no longer imports ``scipy.signal`` and ``scipy.ndimage`` (0.5 s
-    CPU; the first window's update took 494 ms on a UR5 importing them, then the observer's
-    construction did): :func:`~pinobs.model.identification.convolve_nearest` does the same
-    arithmetic in NumPy."""
+    ``scipy.linalg``, 0.15–0.28 s of process CPU by the machine's load, the largest part of
+    ``adaptive``'s construction with numba's import; numba's first kernel no longer imports
+    it, :mod:`~pinobs.observers.kernel_cache`.  Over half of it is SciPy's array-API layer,
+    which imports every NumPy submodule, ``numpy.f2py`` and ``numpy.testing`` among them;
+    about 25 ms is its OpenBLAS's worker thread spinning as it loads) and scan the BLAS
+    libraries with ``scipy.linalg`` loaded (:func:`~pinobs.observers.blas.blas_libraries`):
+    now, at construction, not in the loop (the first window's update would pay it).  The
+    smoothing no longer imports ``scipy.signal`` and ``scipy.ndimage`` (0.5 s CPU; the first
+    window's update took 494 ms on a UR5 importing them, then the observer's construction
+    did): :func:`~pinobs.model.identification.convolve_nearest` does the same arithmetic in
+    NumPy."""
     import scipy.linalg  # noqa: F401
 
     blas_libraries()

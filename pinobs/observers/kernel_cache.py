@@ -8,11 +8,15 @@ registries (``numba.np.arraymath`` imports ``scipy.linalg`` with it, to check fo
 (NRT, which compiled code calls), the code generator and the numba modules named by the
 kernels' pickled environments (numba imports those as it unpickles them).
 
-:func:`load_signature` calls a kernel once (so that its signature is loaded, or compiled)
-with that kernel's ``Cache.load_overload`` replaced, for the call, by the same steps less the
-refresh: numba's runtime initialised, then the cached code loaded.  Nothing else is
-changed: a cache miss compiles as before (numba's compiler refreshes the context itself,
-fully), and so does any compilation later in the process.  The machine code is the same
+:func:`load_signature` loads a kernel's signature (the arguments' types, as numba's call
+types them) by the dispatcher's ``compile(signature)``, with that kernel's
+``Cache.load_overload`` replaced, for the load, by the same steps less the refresh: numba's
+runtime initialised, then the cached code loaded; then calls the kernel once.  Its own call
+(``_compile_for_args``) would first initialise numba's extensions
+(``entrypoints.init_all``: it reads the entry points of every installed distribution,
+8–15 ms of CPU here with about 200 of them) though a cache hit compiles nothing: a hit
+skips it; a miss runs it, then compiles as before (numba's compiler refreshes the context
+itself, fully), as does any compilation later in the process.  The machine code is the same
 either way (bit-identical outputs, tested).  If numba's internals are not as expected, the
 kernel is called as it is.
 """
@@ -25,9 +29,10 @@ __all__ = ["load_signature"]
 
 
 def load_signature(kernel: Any, *args: Any) -> Any:
-    """Call the numba dispatcher ``kernel`` on ``args`` (loading that signature from numba's
-    cache, or compiling it) without numba's refresh before the cache load (module
-    docstring); returns what the call returns."""
+    """Call the numba dispatcher ``kernel`` on ``args``, its signature loaded first from
+    numba's cache (or compiled) without numba's refresh before the cache load and, on a hit,
+    without initialising numba's extensions (module docstring); returns what the call
+    returns."""
     try:
         from numba.core.caching import Cache
         from numba.core.runtime import rtsys
@@ -35,16 +40,23 @@ def load_signature(kernel: Any, *args: Any) -> Any:
         return kernel(*args)
     cache = getattr(kernel, "_cache", None)
     needs = ("_load_overload", "_guard_against_spurious_io_errors")
+    hooks = ("compile", "typeof_pyval", "_compilation_chain_init_hook")
     if not isinstance(cache, Cache) or not all(hasattr(cache, n) for n in needs):
         return kernel(*args)  # (no disk cache: the ordinary call)
+    if not all(hasattr(kernel, n) for n in hooks):
+        return kernel(*args)  # (numba's dispatcher differs: the ordinary call)
 
     def load_overload(sig: Any, target_context: Any) -> Any:
         rtsys.initialize(target_context)  # instead of target_context.refresh()
         with cache._guard_against_spurious_io_errors():
-            return cache._load_overload(sig, target_context)
+            loaded = cache._load_overload(sig, target_context)
+        if loaded is None:  # a miss: numba's extensions first, as its own call does
+            kernel._compilation_chain_init_hook()
+        return loaded
 
-    cache.load_overload = load_overload  # type: ignore[method-assign]  # (this call only)
-    try:
-        return kernel(*args)
+    cache.load_overload = load_overload  # type: ignore[method-assign]  # (this load only)
+    try:  # the signature numba's call would type (its typeof_pyval), loaded or compiled
+        kernel.compile(tuple(kernel.typeof_pyval(a) for a in args))
     finally:
         del cache.load_overload
+    return kernel(*args)  # (the signature's machine code, found by the dispatcher)

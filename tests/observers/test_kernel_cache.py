@@ -34,8 +34,10 @@ import tiny_kernel
 a = np.arange(5.0) / 3.0
 first = load_signature(tiny_kernel.kernel, a)
 again = tiny_kernel.kernel(a)  # (the loaded signature)
+from numba.core import entrypoints
 print(json.dumps({"out": first.tolist(), "again": again.tolist(),
                   "refreshed": "numba.np.polynomial.polynomial_functions" in sys.modules,
+                  "extensions": entrypoints._already_initialized,
                   "hits": sum(tiny_kernel.kernel.stats.cache_hits.values())}))
 """
 
@@ -53,15 +55,18 @@ def _run(code: str, tmp_path: Path) -> dict[str, object]:
 def test_a_cache_miss_compiles_and_a_cache_hit_loads_without_refreshing_numba(
     tmp_path: Path,
 ) -> None:
-    """First process: nothing cached, so the kernel compiles (numba's own refresh, every
-    registry); second: loaded from the cache with numba's registries not installed (its
-    polynomial module, imported by the refresh only, not imported); the same bits."""
+    """First process: nothing cached, so the kernel compiles (numba's extensions initialised
+    first, then its own refresh, every registry); second: loaded from the cache with
+    numba's registries not installed (its polynomial module, imported by the refresh only,
+    not imported) and its extensions' entry points not read; the same bits."""
     (tmp_path / "tiny_kernel.py").write_text(_KERNEL)
     compiled = _run(_LOAD, tmp_path)
     loaded = _run(_LOAD, tmp_path)
     expected = np.cumsum(np.arange(5.0) / 3.0) * 0.1
     assert compiled["hits"] == 0 and compiled["refreshed"] is True
+    assert compiled["extensions"] is True
     assert loaded["hits"] == 1 and loaded["refreshed"] is False
+    assert loaded["extensions"] is False
     assert compiled["out"] == loaded["out"] == loaded["again"] == compiled["again"]
     assert np.max(np.abs(np.array(loaded["out"]) - expected)) < 1e-15
 

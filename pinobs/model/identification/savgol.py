@@ -128,7 +128,7 @@ def _savgol_coeffs(length: int, order: int, deriv: int = 0, delta: float = 1.0) 
     ``length//2 … −length//2`` (reversed: convolution order), ``y = deriv!/δ^deriv · e_deriv``
     (Savitzky & Golay 1964; SciPy's ``_savitzky_golay.py``).  Here rather than SciPy's:
     ``scipy.signal`` costs 0.45 s CPU at import (issue 39: the adaptive learner's start-up)."""
-    from scipy.linalg import lstsq  # lazy: start-up time (loaded with numba's kernels)
+    from scipy.linalg import lstsq  # lazy: start-up time (adaptive: at its construction)
 
     pos = length // 2
     x = np.arange(-pos, length - pos, dtype=np.float64)[::-1]

@@ -91,7 +91,15 @@ sums of :func:`_phi_loops` along rows (each a chain of six additions before): th
 27.3 → 21.0 µs, ``Φ`` 13.4 → 10.2 µs (talos, paired on the step's buffers, load 4; go1 0.7
 and 1.4 µs less); the talos update 325.8 → 319.4 µs, 21.01 → 20.63 ``pin.aba`` (in-process
 A/B, old and new alternated, 60 rounds of 400 updates, thread CPU, load 2.7–3.0; paired
-6.3 µs less, IQR 3.5–7.8).
+6.3 µs less, IQR 3.5–7.8).  Then :func:`_phi_loops` writes ``Φᵀ`` (its entries transposed), so
+that ``Φ P`` is OpenBLAS's "TN" case and ``(Φ P) Φᵀ`` its "NN" (the "NT" of a strided ``Φᵀ``
+took 25.8 against 18.5 µs, warm; the first of the three changes tried above, alone): talos
+7.9 µs less an update (paired median, IQR 0.1–16.3; 22.07 → 21.59 ``pin.aba``, 60 rounds,
+load 4.5; 8.6 µs, IQR 2.7–13.7, at load 3.4), go1 0.8 µs (IQR −4.3–2.8: none).  Not the same
+bits (another summation order inside BLAS): over 10 s at 1 kHz (σ = 1e-4, seeds 0 and 11, 5 %
+dropped samples in the second) the estimates move by at most 1.0e-13 rad/s on a talos (3.4e-15
+of the largest velocity; 6.5e-10 of the filter's RMS error, unchanged to ten digits), 1.8e-15
+rad in ``q``; go1 1.2e-14 rad/s.
 """
 
 from __future__ import annotations
@@ -176,8 +184,10 @@ def _square_loops(G: Vector, W: Vector, D: Vector, runs: Any, GA: Vector) -> Non
 def _phi_loops(  # noqa: C901, PLR0912 -- numba kernel: loops over blocks
     G: Vector, GA: Vector, V: Vector, D: Vector, runs: Any, h: float, phi: Vector
 ) -> None:
-    """``Φ = I + hA + (h²/2)A² + (h³/6)A³`` by block rows (module docstring) from ``G``,
-    ``G A`` and ``V = (G A)_v G`` (so ``G A² = V + [(G A)_q D, (G A)_q]``)."""
+    """``Φᵀ`` into ``phi``, ``Φ = I + hA + (h²/2)A² + (h³/6)A³`` by block rows (module
+    docstring) from ``G``, ``G A`` and ``V = (G A)_v G`` (so ``G A² = V + [(G A)_q D, (G A)_q]``):
+    ``Φ``'s entries, written transposed, so that both products of ``Φ P Φᵀ`` are OpenBLAS's
+    fast cases (:meth:`BlockStep.predict`)."""
     nv, n = G.shape
     b, c = 0.5 * h * h, h * h * h / 6.0
     for i in range(nv):
@@ -185,11 +195,11 @@ def _phi_loops(  # noqa: C901, PLR0912 -- numba kernel: loops over blocks
             g2 = V[i, j]  # (G A²)ᵢⱼ, its [·, (G A)_q] part
             if j >= nv:
                 g2 += GA[i, j - nv]
-            phi[nv + i, j] = h * G[i, j] + b * GA[i, j] + c * g2
-            phi[i, j] = b * G[i, j] + c * GA[i, j]
+            phi[j, nv + i] = h * G[i, j] + b * GA[i, j] + c * g2
+            phi[j, i] = b * G[i, j] + c * GA[i, j]
         phi[nv + i, nv + i] += 1.0
         phi[i, i] += 1.0
-        phi[i, nv + i] += h
+        phi[nv + i, i] += h
     t = np.empty(n)  # the sums of a row, each in the order of a dot product (k ascending)
     for r in range(runs.shape[0]):  # (vectorised along the row, not a latency-bound chain)
         s0, s1 = runs[r, 0], runs[r, 1]
@@ -201,7 +211,7 @@ def _phi_loops(  # noqa: C901, PLR0912 -- numba kernel: loops over blocks
                 for j in range(s0, s1):
                     t[j] += g * D[k, j]
             for j in range(s0, s1):
-                phi[nv + i, j] += c * t[j]
+                phi[j, nv + i] += c * t[j]
         m = s1 - s0  # the run's rows of M₁. = [I 0] + (h/2)([D, I] + (h/3)([D², D] + G))
         M1 = np.empty((m, n))
         for k in range(m):
@@ -223,7 +233,7 @@ def _phi_loops(  # noqa: C901, PLR0912 -- numba kernel: loops over blocks
                 for j in range(n):
                     t[j] += d * M1[k, j]
             for j in range(n):
-                phi[i, j] += h * t[j]
+                phi[j, i] += h * t[j]
 
 
 def _noise_loops(P: Vector, q00: float, q01: float, q11: float, r: float, S: Vector) -> None:
@@ -356,7 +366,7 @@ class BlockStep:
         self._scratch_W = np.empty((nv, n))
         self._scratch_GA = np.empty((nv, n))
         self._scratch_T = np.empty((n, n))
-        self._scratch_Phi = np.empty((n, n))
+        self._scratch_PhiT = np.empty((n, n))  # Φᵀ
         self._scratch_P = np.empty((n, n))  # P⁻
         self._scratch_S = np.empty((nv, nv))
         self._scratch_Z = np.empty((nv, n))
@@ -378,7 +388,7 @@ class BlockStep:
         nv, runs = self.nv, self.runs
         self.rk4.calls.derivatives(q, v, tau)
         acc, a_q, a_v = self._scratch_data
-        G, W, GA, Phi = self._scratch_G, self._scratch_W, self._scratch_GA, self._scratch_Phi
+        G, W, GA, PhiT = self._scratch_G, self._scratch_W, self._scratch_GA, self._scratch_PhiT
         D, T, P_new = self._scratch_D, self._scratch_T, self._scratch_P
         v0 = self._scratch_v
         v0[...] = v
@@ -386,9 +396,9 @@ class BlockStep:
         a_v.dot(G, out=W)  # A_v G (ndarray.dot: np.dot less its Python dispatcher)
         self.square(G, W, D, runs, GA)  # G A
         GA[:, nv:].dot(G, out=W)  # (G A)_v G
-        self.phi(G, GA, W, D, runs, h, Phi)
-        Phi.dot(P, out=T)
-        T.dot(Phi.T, out=P_new)  # (Φᵀ a view: 0.8 µs more than a copy, which costs 2.8)
+        self.phi(G, GA, W, D, runs, h, PhiT)
+        PhiT.T.dot(P, out=T)  # Φ P (BLAS's "TN" case, as fast as "NN")
+        T.dot(PhiT, out=P_new)  # (Φ P) Φᵀ ("NN": 7 µs less than "NT" on a talos)
         self.noise(P_new, psd * h**3 / 3.0, psd * h**2 / 2.0, psd * h, r, self._scratch_S)
         q_new, v_new = self.rk4.step(q, v, tau, h, acc0=acc)
         return q_new, v_new, P_new

@@ -249,7 +249,9 @@ def _noise_loops(P: Vector, q00: float, q01: float, q11: float, r: float, S: Vec
         S[i, i] += r
 
 
-def _factor_loops(P: Vector, U: Vector, e: Vector, Z: Vector, w: Vector, most: float) -> float:  # noqa: C901, PLR0912 -- numba kernel: loops over rows
+def _factor_loops(  # noqa: C901, PLR0912 -- numba kernel: loops over rows
+    P: Vector, U: Vector, e: Vector, Z: Vector, w: Vector, most: float, r: float
+) -> float:
     """``Z = U⁻ᵀ P_q·`` into ``Z`` (``nv × n``) and ``w = U⁻ᵀ e`` with ``U`` holding ``S``
     (upper triangle): ``S = Uᵀ U`` (Cholesky, ``U`` overwritten) and ``Uᵀ Z = P_q·``, row by row
     in one pass, left-looking: ``[U Z w]``'s row ``i`` takes its terms from the finished rows
@@ -258,7 +260,9 @@ def _factor_loops(P: Vector, U: Vector, e: Vector, Z: Vector, w: Vector, most: f
     forward substitution (the same bits), vectorised where that Cholesky's short trailing
     updates were not.  Returns the NIS ``eᵀ S⁻¹ e = wᵀ w``, or NaN (``Z`` undefined) when
     ``S`` is not positive definite or a diagonal of ``S`` exceeds ``most`` (there
-    ``P⁺_qq ≈ R`` would lose its digits in ``P − Zᵀ Z``: Joseph's form)."""
+    ``P⁺_qq ≈ R`` would lose its digits in ``P − Zᵀ Z``: Joseph's form), or where
+    ``NIS · r < 10⁻⁶ eᵀe`` (``K_q ≈ I``, ``r`` the measurement variance: ``ekf``'s
+    ``correct`` computes that NIS directly; its test, here without ``e @ e``'s Python call)."""
     nv, n = Z.shape
     for j in range(nv):
         if not U[j, j] <= most:  # (or NaN)
@@ -300,9 +304,12 @@ def _factor_loops(P: Vector, U: Vector, e: Vector, Z: Vector, w: Vector, most: f
         for c in range(n):
             Z[i, c] /= d
         w[i] /= d
-    nis = 0.0
+    nis, ee = 0.0, 0.0
     for i in range(nv):
         nis += w[i] * w[i]
+        ee += e[i] * e[i]
+    if not nis * r >= 1e-6 * ee:  # K_q ≈ I (or NaN): e − K_q e has lost its digits
+        return math.nan
     return nis
 
 
@@ -340,7 +347,7 @@ transition_kernels = (
 #: :func:`_noise_loops`, :func:`_factor_loops` and :func:`_update_loops` compiled.
 joseph_kernels = (
     LazyKernel(_noise_loops, _m, 0.0, 0.0, 0.0, 1.0, _s),
-    LazyKernel(_factor_loops, _m, _s, np.zeros(1), _g, np.zeros(1), 1.0, contract=True),
+    LazyKernel(_factor_loops, _m, _s, np.zeros(1), _g, np.zeros(1), 1.0, 1.0, contract=True),
     LazyKernel(_update_loops, _m, _m, _g, np.zeros(1), _m, np.zeros(2)),
 )
 
@@ -405,12 +412,13 @@ class BlockStep:
 
     def correct(self, P: Vector, e: Vector, r: float) -> tuple[Vector, Vector, float]:
         """``(dx, P⁺, NIS)`` from :meth:`predict`'s ``P⁻`` and the innovation ``e`` (``r``
-        the measurement variance); NaN NIS where ``S`` is not positive definite or
-        ``P⁻_qq`` exceeds ``MOST_RATIO · r`` on its diagonal (the caller's Joseph form then)."""
+        the measurement variance); NaN NIS where ``S`` is not positive definite,
+        ``P⁻_qq`` exceeds ``MOST_RATIO · r`` on its diagonal or ``K_q ≈ I``
+        (:func:`_factor_loops`; the caller's Joseph form then)."""
         n = P.shape[0]
         dx, out = np.empty(n), np.empty((n, n))
         Z, w, ZZ = self._scratch_Z, self._scratch_w, self._scratch_ZZ
-        nis = self.factor(P, self._scratch_S, e, Z, w, MOST_RATIO * r + r)
+        nis = self.factor(P, self._scratch_S, e, Z, w, MOST_RATIO * r + r, r)
         if nis != nis:  # NaN
             return dx, out, nis
         Z.T.dot(Z, out=ZZ)

@@ -83,6 +83,23 @@ and products' own calls, about 20 from Python). Pinocchio's four calls are the f
 derivatives call's ``ddq`` is the first RK4 stage already); ``aba`` with ``Convention.WORLD``
 is 15 % faster on a talos (18.3 → 15.6 µs; 8 % on a UR5) and differs from the default's ``ddq``
 by 2.6e-14 relative, so it would change every :func:`pinobs.model.dynamics_rk4` user's bits.
+Then (issue 39, the same bits: 24 stored ``ekf`` runs on talos, go1 (10 s each), UR5 and Panda
+``array_equal``) two kernels whose time went to short dependent chains: the Cholesky of
+:func:`_factor_loops` left-looking, in the forward substitution's pass (its trailing updates
+were loops of 1–37 entries, 9.6 µs for a talos's 9 k multiply-adds) and the bracket runs'
+sums of :func:`_phi_loops` along rows (each a chain of six additions before): the factor
+27.3 → 21.0 µs, ``Φ`` 13.4 → 10.2 µs (talos, paired on the step's buffers, load 4; go1 0.7
+and 1.4 µs less); the talos update 325.8 → 319.4 µs, 21.01 → 20.63 ``pin.aba`` (in-process
+A/B, old and new alternated, 60 rounds of 400 updates, thread CPU, load 2.7–3.0; paired
+6.3 µs less, IQR 3.5–7.8).  Then :func:`_phi_loops` writes ``Φᵀ`` (its entries transposed), so
+that ``Φ P`` is OpenBLAS's "TN" case and ``(Φ P) Φᵀ`` its "NN" (the "NT" of a strided ``Φᵀ``
+took 25.8 against 18.5 µs, warm; the first of the three changes tried above, alone): talos
+7.9 µs less an update (paired median, IQR 0.1–16.3; 22.07 → 21.59 ``pin.aba``, 60 rounds,
+load 4.5; 8.6 µs, IQR 2.7–13.7, at load 3.4), go1 0.8 µs (IQR −4.3–2.8: none).  Not the same
+bits (another summation order inside BLAS): over 10 s at 1 kHz (σ = 1e-4, seeds 0 and 11, 5 %
+dropped samples in the second) the estimates move by at most 1.0e-13 rad/s on a talos (3.4e-15
+of the largest velocity; 6.5e-10 of the filter's RMS error, unchanged to ten digits), 1.8e-15
+rad in ``q``; go1 1.2e-14 rad/s.
 """
 
 from __future__ import annotations
@@ -167,8 +184,10 @@ def _square_loops(G: Vector, W: Vector, D: Vector, runs: Any, GA: Vector) -> Non
 def _phi_loops(  # noqa: C901, PLR0912 -- numba kernel: loops over blocks
     G: Vector, GA: Vector, V: Vector, D: Vector, runs: Any, h: float, phi: Vector
 ) -> None:
-    """``Φ = I + hA + (h²/2)A² + (h³/6)A³`` by block rows (module docstring) from ``G``,
-    ``G A`` and ``V = (G A)_v G`` (so ``G A² = V + [(G A)_q D, (G A)_q]``)."""
+    """``Φᵀ`` into ``phi``, ``Φ = I + hA + (h²/2)A² + (h³/6)A³`` by block rows (module
+    docstring) from ``G``, ``G A`` and ``V = (G A)_v G`` (so ``G A² = V + [(G A)_q D, (G A)_q]``):
+    ``Φ``'s entries, written transposed, so that both products of ``Φ P Φᵀ`` are OpenBLAS's
+    fast cases (:meth:`BlockStep.predict`)."""
     nv, n = G.shape
     b, c = 0.5 * h * h, h * h * h / 6.0
     for i in range(nv):
@@ -176,19 +195,23 @@ def _phi_loops(  # noqa: C901, PLR0912 -- numba kernel: loops over blocks
             g2 = V[i, j]  # (G A²)ᵢⱼ, its [·, (G A)_q] part
             if j >= nv:
                 g2 += GA[i, j - nv]
-            phi[nv + i, j] = h * G[i, j] + b * GA[i, j] + c * g2
-            phi[i, j] = b * G[i, j] + c * GA[i, j]
+            phi[j, nv + i] = h * G[i, j] + b * GA[i, j] + c * g2
+            phi[j, i] = b * G[i, j] + c * GA[i, j]
         phi[nv + i, nv + i] += 1.0
         phi[i, i] += 1.0
-        phi[i, nv + i] += h
-    for r in range(runs.shape[0]):
+        phi[nv + i, i] += h
+    t = np.empty(n)  # the sums of a row, each in the order of a dot product (k ascending)
+    for r in range(runs.shape[0]):  # (vectorised along the row, not a latency-bound chain)
         s0, s1 = runs[r, 0], runs[r, 1]
         for i in range(nv):  # G A²'s (G A)_q D on the run's columns
             for j in range(s0, s1):
-                t = 0.0
-                for k in range(s0, s1):
-                    t += GA[i, k] * D[k, j]
-                phi[nv + i, j] += c * t
+                t[j] = 0.0
+            for k in range(s0, s1):
+                g = GA[i, k]
+                for j in range(s0, s1):
+                    t[j] += g * D[k, j]
+            for j in range(s0, s1):
+                phi[j, nv + i] += c * t[j]
         m = s1 - s0  # the run's rows of M₁. = [I 0] + (h/2)([D, I] + (h/3)([D², D] + G))
         M1 = np.empty((m, n))
         for k in range(m):
@@ -197,17 +220,20 @@ def _phi_loops(  # noqa: C901, PLR0912 -- numba kernel: loops over blocks
             M1[k, s0 + k] += 1.0
             M1[k, nv + s0 + k] += 0.5 * h
             for j in range(s0, s1):
-                t = 0.0
+                u = 0.0
                 for a in range(s0, s1):
-                    t += D[s0 + k, a] * D[a, j]
-                M1[k, j] += 0.5 * h * D[s0 + k, j] + (0.5 * h * h / 3.0) * t
+                    u += D[s0 + k, a] * D[a, j]
+                M1[k, j] += 0.5 * h * D[s0 + k, j] + (0.5 * h * h / 3.0) * u
                 M1[k, nv + j] += (0.5 * h * h / 3.0) * D[s0 + k, j]
         for i in range(s0, s1):  # Φ₁. += h D M₁. on the run's rows
             for j in range(n):
-                t = 0.0
-                for k in range(m):
-                    t += D[i, s0 + k] * M1[k, j]
-                phi[i, j] += h * t
+                t[j] = 0.0
+            for k in range(m):
+                d = D[i, s0 + k]
+                for j in range(n):
+                    t[j] += d * M1[k, j]
+            for j in range(n):
+                phi[j, i] += h * t[j]
 
 
 def _noise_loops(P: Vector, q00: float, q01: float, q11: float, r: float, S: Vector) -> None:
@@ -223,36 +249,37 @@ def _noise_loops(P: Vector, q00: float, q01: float, q11: float, r: float, S: Vec
         S[i, i] += r
 
 
-def _factor_loops(P: Vector, U: Vector, e: Vector, Z: Vector, w: Vector, most: float) -> float:  # noqa: C901, PLR0912 -- numba kernel: loops over rows
+def _factor_loops(  # noqa: C901, PLR0912 -- numba kernel: loops over rows
+    P: Vector, U: Vector, e: Vector, Z: Vector, w: Vector, most: float, r: float
+) -> float:
     """``Z = U⁻ᵀ P_q·`` into ``Z`` (``nv × n``) and ``w = U⁻ᵀ e`` with ``U`` holding ``S``
-    (upper triangle): ``S = Uᵀ U`` (Cholesky, right-looking, ``U`` overwritten), then
-    ``Uᵀ Z = P_q·`` row by row (left-looking: row ``i`` takes its terms from the finished rows
-    four at a time, each inner loop along a row).  Returns the NIS ``eᵀ S⁻¹ e = wᵀ w``, or NaN
-    (``Z`` undefined) when ``S`` is not positive definite or a diagonal of ``S`` exceeds
-    ``most`` (there ``P⁺_qq ≈ R`` would lose its digits in ``P − Zᵀ Z``: Joseph's form)."""
+    (upper triangle): ``S = Uᵀ U`` (Cholesky, ``U`` overwritten) and ``Uᵀ Z = P_q·``, row by row
+    in one pass, left-looking: ``[U Z w]``'s row ``i`` takes its terms from the finished rows
+    ``j < i``, in that order, four at a time, each inner loop along a row (then the row divided
+    by ``U_ii``): each entry's operations in the order of the right-looking Cholesky and the
+    forward substitution (the same bits), vectorised where that Cholesky's short trailing
+    updates were not.  Returns the NIS ``eᵀ S⁻¹ e = wᵀ w``, or NaN (``Z`` undefined) when
+    ``S`` is not positive definite or a diagonal of ``S`` exceeds ``most`` (there
+    ``P⁺_qq ≈ R`` would lose its digits in ``P − Zᵀ Z``: Joseph's form), or where
+    ``NIS · r < 10⁻⁶ eᵀe`` (``K_q ≈ I``, ``r`` the measurement variance: ``ekf``'s
+    ``correct`` computes that NIS directly; its test, here without ``e @ e``'s Python call)."""
     nv, n = Z.shape
     for j in range(nv):
         if not U[j, j] <= most:  # (or NaN)
             return math.nan
-    for j in range(nv):
-        d = U[j, j]
-        if not d > 0.0:
-            return math.nan
-        d = math.sqrt(d)
-        for k in range(j, nv):
-            U[j, k] /= d
-        for i in range(j + 1, nv):  # the trailing block, upper triangle: S -= u uᵀ
-            u = U[j, i]
-            for k in range(i, nv):
-                U[i, k] -= u * U[j, k]
     for i in range(nv):
         for c in range(n):
             Z[i, c] = P[i, c]
         w[i] = e[i]
-    for i in range(nv):  # Uᵀ Z = P_q·: forward; row i's terms j = 0 … i − 1
+    for i in range(nv):  # row i: S_i· − Σ_j U_ji U_j· (k ≥ i), P_i· − Σ_j U_ji Z_j·, j < i
         j = 0
         while j + 4 <= i:
             u0, u1, u2, u3 = U[j, i], U[j + 1, i], U[j + 2, i], U[j + 3, i]
+            for k in range(i, nv):
+                x = U[i, k] - u0 * U[j, k]
+                x -= u1 * U[j + 1, k]
+                x -= u2 * U[j + 2, k]
+                U[i, k] = x - u3 * U[j + 3, k]
             for c in range(n):
                 x = Z[i, c] - u0 * Z[j, c]
                 x -= u1 * Z[j + 1, c]
@@ -262,16 +289,27 @@ def _factor_loops(P: Vector, U: Vector, e: Vector, Z: Vector, w: Vector, most: f
             j += 4
         for k in range(j, i):
             u = U[k, i]
+            for c in range(i, nv):
+                U[i, c] -= u * U[k, c]
             for c in range(n):
                 Z[i, c] -= u * Z[k, c]
             w[i] -= u * w[k]
         d = U[i, i]
+        if not d > 0.0:
+            return math.nan
+        d = math.sqrt(d)
+        for k in range(i, nv):
+            U[i, k] /= d
+        d = U[i, i]
         for c in range(n):
             Z[i, c] /= d
         w[i] /= d
-    nis = 0.0
+    nis, ee = 0.0, 0.0
     for i in range(nv):
         nis += w[i] * w[i]
+        ee += e[i] * e[i]
+    if not nis * r >= 1e-6 * ee:  # K_q ≈ I (or NaN): e − K_q e has lost its digits
+        return math.nan
     return nis
 
 
@@ -309,7 +347,7 @@ transition_kernels = (
 #: :func:`_noise_loops`, :func:`_factor_loops` and :func:`_update_loops` compiled.
 joseph_kernels = (
     LazyKernel(_noise_loops, _m, 0.0, 0.0, 0.0, 1.0, _s),
-    LazyKernel(_factor_loops, _m, _s, np.zeros(1), _g, np.zeros(1), 1.0, contract=True),
+    LazyKernel(_factor_loops, _m, _s, np.zeros(1), _g, np.zeros(1), 1.0, 1.0, contract=True),
     LazyKernel(_update_loops, _m, _m, _g, np.zeros(1), _m, np.zeros(2)),
 )
 
@@ -335,7 +373,7 @@ class BlockStep:
         self._scratch_W = np.empty((nv, n))
         self._scratch_GA = np.empty((nv, n))
         self._scratch_T = np.empty((n, n))
-        self._scratch_Phi = np.empty((n, n))
+        self._scratch_PhiT = np.empty((n, n))  # Φᵀ
         self._scratch_P = np.empty((n, n))  # P⁻
         self._scratch_S = np.empty((nv, nv))
         self._scratch_Z = np.empty((nv, n))
@@ -357,7 +395,7 @@ class BlockStep:
         nv, runs = self.nv, self.runs
         self.rk4.calls.derivatives(q, v, tau)
         acc, a_q, a_v = self._scratch_data
-        G, W, GA, Phi = self._scratch_G, self._scratch_W, self._scratch_GA, self._scratch_Phi
+        G, W, GA, PhiT = self._scratch_G, self._scratch_W, self._scratch_GA, self._scratch_PhiT
         D, T, P_new = self._scratch_D, self._scratch_T, self._scratch_P
         v0 = self._scratch_v
         v0[...] = v
@@ -365,21 +403,22 @@ class BlockStep:
         a_v.dot(G, out=W)  # A_v G (ndarray.dot: np.dot less its Python dispatcher)
         self.square(G, W, D, runs, GA)  # G A
         GA[:, nv:].dot(G, out=W)  # (G A)_v G
-        self.phi(G, GA, W, D, runs, h, Phi)
-        Phi.dot(P, out=T)
-        T.dot(Phi.T, out=P_new)  # (Φᵀ a view: 0.8 µs more than a copy, which costs 2.8)
+        self.phi(G, GA, W, D, runs, h, PhiT)
+        PhiT.T.dot(P, out=T)  # Φ P (BLAS's "TN" case, as fast as "NN")
+        T.dot(PhiT, out=P_new)  # (Φ P) Φᵀ ("NN": 7 µs less than "NT" on a talos)
         self.noise(P_new, psd * h**3 / 3.0, psd * h**2 / 2.0, psd * h, r, self._scratch_S)
         q_new, v_new = self.rk4.step(q, v, tau, h, acc0=acc)
         return q_new, v_new, P_new
 
     def correct(self, P: Vector, e: Vector, r: float) -> tuple[Vector, Vector, float]:
         """``(dx, P⁺, NIS)`` from :meth:`predict`'s ``P⁻`` and the innovation ``e`` (``r``
-        the measurement variance); NaN NIS where ``S`` is not positive definite or
-        ``P⁻_qq`` exceeds ``MOST_RATIO · r`` on its diagonal (the caller's Joseph form then)."""
+        the measurement variance); NaN NIS where ``S`` is not positive definite,
+        ``P⁻_qq`` exceeds ``MOST_RATIO · r`` on its diagonal or ``K_q ≈ I``
+        (:func:`_factor_loops`; the caller's Joseph form then)."""
         n = P.shape[0]
         dx, out = np.empty(n), np.empty((n, n))
         Z, w, ZZ = self._scratch_Z, self._scratch_w, self._scratch_ZZ
-        nis = self.factor(P, self._scratch_S, e, Z, w, MOST_RATIO * r + r)
+        nis = self.factor(P, self._scratch_S, e, Z, w, MOST_RATIO * r + r, r)
         if nis != nis:  # NaN
             return dx, out, nis
         Z.T.dot(Z, out=ZZ)

@@ -723,7 +723,7 @@ class _LieFast:
                 return state.moved(q, v, 0.5 * (P + P.T), gate, state.d, state.d_psd)
             e = b.difference(q, q_meas)  # (robot.difference, bound: a Python call less)
             dx, P_new, nis = b.correct(P, e, r)
-            if not nis * r >= 1e-6 * float(e @ e):  # NaN or K_q ≈ I: correct's other ways
+            if nis != nis:  # NaN (S, P⁻_qq's size, or K_q ≈ I: b.correct): correct's other ways
                 pred = state.moved(q, v, P.copy(), state.gate, state.d, state.d_psd)
                 return ekf.corrected(pred, q_meas, dt)
             gate = state.gate.measured(nis, ekf._gate, self.nv)

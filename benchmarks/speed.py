@@ -2,7 +2,7 @@
 # requires-python = ">=3.10"
 # dependencies = ["pinobs"]
 # ///
-"""Issue 18's numbers: update cost (× one ``pin.aba`` call), start-up, pickles, BLAS threads.
+"""Issue 18's numbers: update cost (× one ``pin.aba`` call), pickles, BLAS threads.
 
 Writes ``benchmarks/speed.md``.  Costs are :func:`pinobs.evaluation.measure_cost`
 ratios (chunks of updates each followed by as many ``pin.aba`` calls, same
@@ -15,9 +15,9 @@ machine the spread is wide.
     python benchmarks/speed.py --cpu       # CPU time: a loaded machine
 
 ``--cpu``: the cost chunks timed by ``time.thread_time`` (this thread's CPU time, the
-``clock`` of :func:`~pinobs.evaluation.measure_cost`) and the start-up's build and first
-update by ``time.process_time``, for a shared machine, where wall time waits for a core (at
-load 7–11 on 2 cores, go1 ``ekf`` read 178× ``pin.aba`` by wall time).
+``clock`` of :func:`~pinobs.evaluation.measure_cost`), for a shared machine, where wall
+time waits for a core (at load 7–11 on 2 cores, go1 ``ekf`` read 178× ``pin.aba`` by wall
+time).
 """
 
 from __future__ import annotations
@@ -25,8 +25,6 @@ from __future__ import annotations
 import argparse
 import os
 import pickle
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -37,23 +35,6 @@ from pinobs.evaluation import measure_cost
 
 OBSERVERS = ("ekf", "kalman", "riemannian", "kf")
 ROBOTS = ("ur5", "panda", "go1", "talos")
-
-_FIRST_UPDATE = """
-import sys, time
-c0 = time.process_time()
-import pinobs
-import_cpu = time.process_time() - c0
-import numpy as np
-clock = time.process_time if sys.argv[3] == "cpu" else time.perf_counter
-robot = pinobs.load(sys.argv[2])
-t = clock()
-ob = pinobs.make_observer(sys.argv[1], robot, rate=1000.0, noise_std=1e-4)
-make = clock() - t
-ob.reset(0.0, robot.neutral())
-t = clock()
-ob.update(1e-3, robot.neutral(), np.zeros(robot.nv))
-print(import_cpu, make, clock() - t)
-"""
 
 #: The clock of the cost chunks (``--cpu``: this thread's CPU time).
 CLOCK = {"wall": time.perf_counter, "cpu": time.thread_time}
@@ -94,26 +75,6 @@ def blas_rows(name: str, repeats: int, samples: int, clock: str) -> list[str]:
         f"one BLAS thread {np.median(one):.0f}× aba ({min(one):.0f}–{max(one):.0f}), "
         f"default threads {np.median(free):.0f}× ({min(free):.0f}–{max(free):.0f})."
     ]
-
-
-def startup_rows(robots: tuple[str, ...], clock: str) -> list[str]:
-    rows = [
-        "| observer | robot | `import pinobs` CPU [s] | build [ms] | first update [ms] |",
-        "|---|---|---|---|---|",
-    ]
-    for obs in pinobs.observer_names():
-        for name in robots:
-            out = subprocess.run(
-                [sys.executable, "-c", _FIRST_UPDATE, obs, name, clock],
-                capture_output=True,
-                text=True,
-            )
-            if out.returncode != 0:
-                continue  # an observer that does not run on this robot (ii, liegroup)
-            imp, make, first = (float(x) for x in out.stdout.split())
-            rows.append(f"| {obs} | {name} | {imp:.2f} | {1e3 * make:.0f} | {1e3 * first:.2f} |")
-            break
-    return rows
 
 
 def pickle_rows() -> list[str]:
@@ -159,11 +120,8 @@ if __name__ == "__main__":
         "",
         *blas_rows("talos", repeats, 200, clock),
         "",
-        "Start-up, in fresh processes (build: `make_observer`, which imports what the "
-        "observer needs and loads compiled code; first update: the first `update` after "
-        f"`reset`; {'process CPU time' if args.cpu else 'wall time'}):",
-        "",
-        *startup_rows(("ur5", "top", "pendulum"), clock),
+        "Start-up (`make_observer` and the first update in fresh processes, numba's cache "
+        "warm): `benchmarks/startup.py`, `benchmarks/startup.md`.",
         "",
         *pickle_rows(),
         "",

@@ -16,9 +16,11 @@ import numpy as np
 
 from pinobs.errors import GainError
 from pinobs.observers.checks import positive
+from pinobs.tolerances import MAX_GAP_PERIODS
 
 __all__ = [
     "MAX_GATE_RUN",
+    "MAX_SPIKE_RUN",
     "NIS_AVERAGING",
     "SPIKE_ALPHA",
     "GateState",
@@ -30,15 +32,23 @@ __all__ = [
 ]
 
 #: Consecutive measurements the outlier gate may reject before it accepts one whatever its NIS
-#: (but a spike: one more, :data:`SPIKE_ALPHA`).
+#: (but ``kf``'s spikes: :data:`SPIKE_ALPHA`, :data:`MAX_SPIKE_RUN`).
 MAX_GATE_RUN = 1
 
 #: Weight of each accepted NIS in the running mean that scales the gate.
 NIS_AVERAGING = 0.01
 
-#: ``kf``'s ``NIS / limit`` past which the sample a run would force in is a spike, rejected once
-#: more (its soft gate keeps ``1 / α`` of the correction: under 1 %); :func:`outlier_gate`.
+#: ``kf``'s ``NIS / limit`` past which the sample a run would force in is a spike, rejected
+#: (its soft gate keeps ``1 / α`` of the correction: under 1 %); after a spike, ``NIS`` over
+#: this many times the run's drift (:func:`outlier_gate`).
 SPIKE_ALPHA = 100.0
+
+#: ``kf``'s spikes rejected in a row after the run (:data:`MAX_GATE_RUN`) before the next sample
+#: is forced in whatever its NIS: a spike carries no information on the state (the ε part's
+#: sample), as a dropped row, and the log reader re-initialises after a gap of
+#: :data:`~pinobs.tolerances.MAX_GAP_PERIODS` periods (:mod:`pinobs.io.stream`); a jump of the
+#: signal that lasts is taken then (:func:`outlier_gate`).
+MAX_SPIKE_RUN = int(MAX_GAP_PERIODS)
 
 _new_tuple = tuple.__new__
 
@@ -89,13 +99,17 @@ def outlier_gate(
     to it.  Measured: with ten allowed rejections, a Panda whose model has
     stiff Coulomb friction lost track (prediction errors near v = 0 were
     gated while the prediction drifted); with one it does not.  ``kf`` (``spike`` =
-    :data:`SPIKE_ALPHA`) rejects the sample that would be forced in once more if it is a
-    spike, ``A`` times past the limit::
+    :data:`SPIKE_ALPHA`) rejects the sample that would be forced in if it is a spike, ``A``
+    times past the limit, and after a spike those ``A`` times past the run's drift ``d`` (the
+    NIS of the run's last rejection that was not a spike, :attr:`GateState.drift`; the limit
+    if none), up to :data:`MAX_SPIKE_RUN` (``M``) spikes::
 
         limit = threshold · max(1, NIS̄ / dof)
-        reject ⇔ NIS > limit and (run < MAX_GATE_RUN or (run = MAX_GATE_RUN and NIS > A · limit))
+        ref = limit (run ≤ MAX_GATE_RUN),  max(limit, d) (run > MAX_GATE_RUN)
+        reject ⇔ NIS > limit and (run < MAX_GATE_RUN or (run < MAX_GATE_RUN + M and NIS > A · ref))
+        d ← NIS                                         (rejected with NIS ≤ A · limit)
         NIS̄ ← max(NIS̄, NIS · dof / threshold)         (accepted with run ≥ MAX_GATE_RUN)
-        NIS̄ ← NIS̄ + λ (min(NIS, 100 NIS̄) − NIS̄)       (accepted; λ = NIS_AVERAGING)
+        NIS̄ ← NIS̄ + λ (min(NIS, 100 NIS̄) − NIS̄)       (accepted, d ← none; λ = NIS_AVERAGING)
 
     (``A`` = :data:`SPIKE_ALPHA` = 100), so the sample forced in after one rejection raises
     the limit at most ``A``-fold (then one step of the mean: at most 2-fold), which then
@@ -105,15 +119,31 @@ def outlier_gate(
     part's sample.  Before, a 1 rad glitch forced in after a gated maneuver (UR10e log
     ur-20_02_10-30sec_12harm, row 498: NIS 3e9) raised the level from 6.5 to 4e8, the gate's
     limit over 10× the clean run's for the next 1576 samples (any glitch passed); now it is
-    rejected and the next sample, the maneuver's, forced in.  Left: two spikes in a row
-    after a rejection (the second is forced in, as before).  The model-based families keep
+    rejected and the next sample, the maneuver's, forced in.  Two or three spikes in a row
+    after a rejection: the second was forced in (the UR5 stop, 1 rad glitches: velocity off by
+    69 and 153 rad/s, the limit 1e8); now each is a spike (past ``A`` limits, then ``A`` times
+    the stop's NIS, 304) and the stop's next sample, its drift grown from 304, is forced in
+    (the error the stop's own 0.1 rad/s, the limit 7.5e3).  After a spike the reference is
+    the run's drift, not the limit: a maneuver past ``A`` limits at its second sample (TIAGo,
+    NIS 228, 5.3e3, then 1.35e4 at a limit of 44) goes on growing from its opening NIS, so the
+    sample after is forced in as before; against ``A`` limits it was rejected too (17 more
+    samples gated on TIAGo).  A jump of the signal that lasts (the robot re-zeroed, a log
+    spliced) is rejected for ``M`` samples, then forced in with the level raised to it (the
+    gate off a while, as any forced sample past the limit), or, where its velocity goes past
+    the log reader's bound, re-initialised there (:mod:`pinobs.io.stream`); a 1 rad jump of
+    the UR5's joint 0 while it moves: 11 samples gated, the velocity off by 20 rad/s for 12
+    samples (before: 2 gated, 67 rad/s for 6).  A glitch between the limit and ``A`` limits
+    is not a spike: two in a row (0.01 rad on the UR5's stop) the second forced in, as
+    before (0.49 rad/s).  The model-based families keep
     ``A = ∞`` (every sample after a run forced in): where their model does not explain a real
     log the sample after a rejection is past ``A`` limits because the prediction is off, not
     the sample (UR10e ``ur-19_10_01-14_04_13``, nominal model: ``adaptive`` diverged with
     ``A`` = 100, velocity RMS 0.315 against 0.0053 rad/s; ``ekf``, ``riemannian``, ``kalman``
     re-initialised 7309–7585 times over the UR10e logs against 5581–5957).
     """
-    gate = _new_tuple(GateState, (None, False, run, level)).measured(nis, threshold, dof, spike)
+    gate = _new_tuple(GateState, (None, False, run, level, None)).measured(
+        nis, threshold, dof, spike
+    )
     return gate.gated, cast(float, gate.level)
 
 
@@ -132,12 +162,15 @@ class GateState(NamedTuple):
             ``kf``'s ``"auto"`` bank: down-weighted, the soft gate of :mod:`pinobs.observers.kf`).
         run: measurements rejected in a row.
         level: running mean of accepted NIS (scales the gate; ``None``: none yet, ``dof``).
+        drift: NIS of the run's last rejected sample that was not a spike (``None``: none;
+            ``kf``'s spike rule, :func:`outlier_gate`).
     """
 
     nis: float | None = None
     gated: bool = False
     run: int = 0
     level: float | None = None
+    drift: float | None = None
 
     def measured(
         self, nis: float, threshold: float, dof: int, spike: float = math.inf
@@ -150,22 +183,28 @@ class GateState(NamedTuple):
         :func:`outlier_gate`'s rule is written here, where every filter calls it at every
         sample (issue 39: a call less), and that function calls this; the new state by
         ``tuple.__new__`` directly (the NamedTuple's own ``__new__`` is a Python call more)."""
-        run = self.run
+        run, drift = self.run, self.drift
         lvl = float(dof) if self.level is None else self.level
         scale = lvl / dof  # gate_nis's max(1, NIS̄ / dof), inline
         limit = threshold * (scale if scale > 1.0 else 1.0)
-        if nis > limit and (  # (a spike is the ε part's: Huber 1964, not forced in)
-            run < MAX_GATE_RUN or (run == MAX_GATE_RUN and nis > spike * limit)
+        # (a spike is the ε part's: Huber 1964, not forced in; after a spike, past A times
+        # the run's drift: a maneuver's NIS grows from it, a glitch's jumps)
+        ref = limit if run <= MAX_GATE_RUN or drift is None else max(limit, drift)
+        if nis > limit and (
+            run < MAX_GATE_RUN or (run < MAX_GATE_RUN + MAX_SPIKE_RUN and nis > spike * ref)
         ):
-            return _new_tuple(GateState, (nis, True, run + 1, lvl))
+            if nis <= spike * limit:
+                drift = nis
+            return _new_tuple(GateState, (nis, True, run + 1, lvl, drift))
         if run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
             lvl = max(lvl, nis * dof / threshold)
         lvl += NIS_AVERAGING * (min(nis, 100.0 * lvl) - lvl)
-        return _new_tuple(GateState, (nis, False, 0, lvl))
+        return _new_tuple(GateState, (nis, False, 0, lvl, None))
 
     def predicted(self) -> GateState:
-        """After a step without a measurement: no NIS, not gated, the run and level kept."""
-        return _new_tuple(GateState, (None, False, self.run, self.level))
+        """After a step without a measurement: no NIS, not gated, the run, level and drift
+        kept."""
+        return _new_tuple(GateState, (None, False, self.run, self.level, self.drift))
 
     def limit(self, threshold: float, dof: int) -> float:
         """The NIS above which the gate rejects at this level (:func:`gate_nis`)."""

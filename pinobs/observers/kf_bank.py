@@ -472,17 +472,20 @@ class AutoBank:
         gate_on = n >= AUTO_GATE_SAMPLES  # the scales ĉ and weights before this sample
         n_new = self._forget * n + 1.0  # the forgotten count (:mod:`pinobs.observers.kf`)
         x = np.empty(self._size)
-        nis, rejected, level = kernel(
+        nis, rejected, level, drift = kernel(
             state.x, x, jerk, self._no_sample if q_meas is None else q_meas, table, h,
             self._var, q_meas is not None, gate_on, n, n_new, self._forget, self.gate,
-            self._dof if gate.level is None else gate.level, gate.run, self._shape[1],
+            self._dof if gate.level is None else gate.level, gate.run,
+            0.0 if gate.drift is None else gate.drift, self._shape[1],
         )  # fmt: skip
         if q_meas is None:  # the prediction (its likelihoods unchanged): GateState.predicted
-            after, n_new = _new_tuple(GateState, (None, False, gate.run, gate.level)), n
+            after = _new_tuple(GateState, (None, False, gate.run, gate.level, gate.drift))
+            n_new = n
         elif not gate_on:  # too few samples for a scale: reported (with σ₀), not gated
-            after = _new_tuple(GateState, (nis, False, 0, None))
-        else:  # GateState.measured, decided in the kernel
-            after = _new_tuple(GateState, (nis, rejected, gate.run + 1 if rejected else 0, level))
+            after = _new_tuple(GateState, (nis, False, 0, None, None))
+        else:  # GateState.measured, decided in the kernel (drift 0: None)
+            run = gate.run + 1 if rejected else 0
+            after = _new_tuple(GateState, (nis, rejected, run, level, drift or None))
             if rejected:  # the prediction (its likelihoods unchanged)
                 n_new = n
         return _new_tuple(AutoState, (x, self._shape, jerk, n_new, after))
@@ -504,16 +507,18 @@ class AutoBank:
         v_max = np.ascontiguousarray(np.broadcast_to(np.asarray(v_max, dtype=float), (nv,)))
         m, gate, x = t.size, state.gate, state.x.copy()
         mixes, nis, gated = np.empty((m, nq + nv)), np.empty(m), np.zeros(m, dtype=bool)
-        done, n, level, known, run = rows_kernel.compiled(  # type: ignore[misc]
+        done, n, level, known, run, drift = rows_kernel.compiled(  # type: ignore[misc]
             x, t0, t, q, state.jerk, self._table, self._var, self._forget, self.gate, self._dof,
             state.n, 0.0 if gate.level is None else gate.level, gate.level is not None,
-            gate.run, nq, AUTO_GATE_SAMPLES, v_max, mixes, nis, gated,
+            gate.run, 0.0 if gate.drift is None else gate.drift, nq, AUTO_GATE_SAMPLES, v_max,
+            mixes, nis, gated,
         )  # fmt: skip
         if not done:
             return state, mixes[:0], nis[:0], gated[:0]
         after = GateState(
-            float(nis[done - 1]), bool(gated[done - 1]), run, level if known else None
-        )
+            float(nis[done - 1]), bool(gated[done - 1]), run, level if known else None,
+            drift or None,
+        )  # fmt: skip
         return (
             AutoState(x, self._shape, state.jerk, n, after),
             mixes[:done],

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from pinobs.model import JointBlock
 from pinobs.observers.base import MAX_GATE_RUN, NIS_AVERAGING, Vector
-from pinobs.observers.gating import SPIKE_ALPHA
+from pinobs.observers.gating import MAX_SPIKE_RUN, SPIKE_ALPHA
 from pinobs.observers.linalg import LazyKernel
 
 __all__ = [
@@ -175,16 +175,19 @@ def predict_mean(
 
 
 def _outlier_gate(
-    nis: float, threshold: float, level: float, nv: int, run: int
-) -> tuple[bool, float]:
+    nis: float, threshold: float, level: float, nv: int, run: int, drift: float
+) -> tuple[bool, float, float]:
     """:func:`pinobs.observers.base.outlier_gate` in loops (tested equal to
-    :meth:`~pinobs.observers.base.GateState.measured`): ``(rejected, the level after)``."""
+    :meth:`~pinobs.observers.base.GateState.measured`, ``drift`` its ``drift``, 0 for
+    ``None``): ``(rejected, the level after, the drift after)``."""
     limit = threshold * max(1.0, level / nv)
-    if nis > limit and (run < MAX_GATE_RUN or (run == MAX_GATE_RUN and nis > SPIKE_ALPHA * limit)):
-        return True, level
+    ref = limit if run <= MAX_GATE_RUN else max(limit, drift)
+    spike = run < MAX_GATE_RUN + MAX_SPIKE_RUN and nis > SPIKE_ALPHA * ref  # (past the run)
+    if nis > limit and (run < MAX_GATE_RUN or spike):
+        return True, level, (nis if nis <= SPIKE_ALPHA * limit else drift)
     if run >= MAX_GATE_RUN:
         level = max(level, nis * nv / threshold)
-    return False, level + NIS_AVERAGING * (min(nis, 100.0 * level) - level)
+    return False, level + NIS_AVERAGING * (min(nis, 100.0 * level) - level), 0.0
 
 
 def _innovations(
@@ -486,7 +489,7 @@ LIE_HELPERS = (
 )  # fmt: skip
 
 
-def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over small matrices
+def bank_rows_loops(
     q: Vector,
     v: Vector,
     a: Vector,
@@ -529,6 +532,7 @@ def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over 
     F, Q1 = np.eye(3), np.zeros((3, 3))
     FP, Pp, C = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
     K, d = np.empty(3), np.empty(nv)
+    drift = np.zeros(nf)  # each filter's GateState.drift (0: none)
     h_prev = math.nan
     for k in range(t.size):
         if k > 0:
@@ -544,18 +548,15 @@ def bank_rows_loops(  # noqa: C901 -- numba kernel: its branches are loops over 
                     continue
                 s = Pp[0, 0] + meas_var
                 nis = innovations_into(q_meas[k], q[f], table, e[f]) / s
-                # GateState.measured (base.outlier_gate), in loops: tested equal
-                g = gate * max(1.0, level[f] / nv)
-                if nis > g and (
-                    run[f] < MAX_GATE_RUN or (run[f] == MAX_GATE_RUN and nis > SPIKE_ALPHA * g)
-                ):
+                g = gate * max(1.0, level[f] / nv)  # the limit before the sample
+                reject, level[f], drift[f] = _outlier_gate(
+                    nis, gate, level[f], nv, run[f], drift[f]
+                )
+                if reject:  # GateState.measured (base.outlier_gate), in loops: tested equal
                     run[f] += 1
                     ll[f] -= 0.5 * (g + nv * math.log(2.0 * math.pi * s))
                     copy_into(Pp, P[f])
                     continue
-                if run[f] >= MAX_GATE_RUN:
-                    level[f] = max(level[f], nis * nv / gate)
-                level[f] += NIS_AVERAGING * (min(nis, 100.0 * level[f]) - level[f])
                 run[f] = 0
                 if f == 0 and store:
                     used[k] = True
@@ -591,7 +592,7 @@ bank_kernel = LazyKernel(
     np.zeros((0, 4), dtype=np.int64),
     helpers=(
         *LIE_HELPERS, transition_into, copy_into, predict_covariance, innovations_into,
-        predict_mean, kalman_correct,
+        predict_mean, kalman_correct, _outlier_gate,
     ),
 )  # fmt: skip
 
@@ -627,8 +628,8 @@ def covariances_view(x: Vector, start: int, nf: int) -> Vector:
 def auto_step_loops(
     x: Vector, x1: Vector, jerk: Vector, q_meas: Vector, table: NDArray[np.int64], h: float,
     meas_var: float, measured: bool, gate_on: bool, n: float, n_new: float, forget: float,
-    threshold: float, level: float, run: int, nq: int,
-) -> tuple[float, bool, float]:  # fmt: skip
+    threshold: float, level: float, run: int, drift: float, nq: int,
+) -> tuple[float, bool, float, float]:  # fmt: skip
     """One step of ``jerk_psd="auto"`` (module docstring), in loops compiled by numba: the
     bank's prediction and correction (:func:`bank_rows_loops`'s arithmetic, one row), the
     outlier gate, the forgotten likelihood sums, the weights and the mixture.
@@ -642,12 +643,13 @@ def auto_step_loops(
     the gate's NIS ``Σ w_fi z_fi / max(A_fi / N, σ₀² / S_f)`` (``gate_on``) or ``Σ w_fi z_fi``
     (too few samples: not gated), :func:`pinobs.observers.base.outlier_gate` on it
     (``threshold``, ``level`` the gate's, ``nv`` its degrees of freedom, ``run`` its
-    rejections in a row: in loops, tested equal to :meth:`GateState.measured`); the Kalman
-    correction (Joseph form, symmetrised), where the gate fired with each ``S_f`` inflated by
-    ``α = NIS / limit`` (the soft gate: the gain ``K / α``) and the sums left; else
+    rejections in a row, ``drift`` its drift, 0 for none: in loops, tested equal to
+    :meth:`GateState.measured`); the Kalman correction (Joseph form, symmetrised), where the
+    gate fired with each ``S_f`` inflated by ``α = NIS / limit`` (the soft gate: the gain
+    ``K / α``) and the sums left; else
     ``A ← γ A + z``, ``B ← γ B + log S`` and ``w_fi ∝ exp(−(L_fi − min_f L_fi)
     / 2)``, ``L_fi = N log(max(A_fi, 1e-300) / N) + B_f`` (Mehra 1970's profile likelihood).
-    Returns ``(nis, rejected, level after)`` (``nis`` NaN without a measurement).
+    Returns ``(nis, rejected, level after, drift after)`` (``nis`` NaN without a measurement).
     """
     nf = jerk.size
     nv = (x.size - nq * (nf + 1) - 10 * nf) // (5 * nf + 1)
@@ -674,7 +676,7 @@ def auto_step_loops(
     if measured:
         nis = _innovations(q_meas, q1, S, w, A, n, gate_on, table, e1, A1, meas_var)
         if gate_on:  # base.outlier_gate, in loops
-            reject, level = _outlier_gate(nis, threshold, level, nv, run)
+            reject, level, drift = _outlier_gate(nis, threshold, level, nv, run, drift)
         # the soft gate: S inflated by α = NIS / limit where it fired (kf module docstring)
         alpha = nis / (threshold * max(1.0, level / nv)) if reject else 1.0
         _corrected_into(P1, S, alpha, meas_var, e1, q1, v1, a1, table, d[0])
@@ -691,24 +693,25 @@ def auto_step_loops(
         copy_into(A, A1)
         copy_into(w, w1)
     _mixture_into(w1, q1, v1, table, d, mix)
-    return nis, reject, level
+    return nis, reject, level, drift
 
 
 def auto_rows_loops(
     x: Vector, t0: float, t: Vector, q: NDArray[np.float64], jerk: Vector,
     table: NDArray[np.int64], meas_var: float, forget: float, threshold: float, dof: float,
-    n: float, level: float, level_known: bool, run: int, nq: int, gate_samples: float,
-    v_max: Vector, mixes: NDArray[np.float64], nis: Vector, gated: NDArray[np.bool_],
-) -> tuple[int, float, float, bool, int]:  # fmt: skip
+    n: float, level: float, level_known: bool, run: int, drift: float, nq: int,
+    gate_samples: float, v_max: Vector, mixes: NDArray[np.float64], nis: Vector,
+    gated: NDArray[np.bool_],
+) -> tuple[int, float, float, bool, int, float]:  # fmt: skip
     """:func:`auto_step_loops` measured at each row ``k`` in turn (``q[k]`` at ``t[k]``, the step
     ``h = t[k] − t[k−1]``, ``t[−1] = t0``) with :meth:`~pinobs.observers.kf_bank.AutoBank.step`'s
     count and gate (``gate_on = n ≥ gate_samples``, ``n ← γ n + 1`` unless rejected, the
-    gate's ``run`` and ``level``: ``dof`` while not ``level_known``): the same calls in the
+    gate's ``run``, ``drift`` and ``level``: ``dof`` while not ``level_known``): the same calls in the
     same order, without a Python call per row.  Row ``k``'s mixture ``(q̂, v̂)`` into
     ``mixes[k]``, its NIS and rejection into ``nis[k]``, ``gated[k]``.  Stops before a row whose
     mixture has a non-finite entry or a ``|v̂_i| > v_max_i`` (not taken: the state before it
     kept, for :meth:`Observer.update` to take it and say why).  The state after the last row
-    taken is left in ``x``.  Returns ``(rows taken, n, level, level_known, run)``."""
+    taken is left in ``x``.  Returns ``(rows taken, n, level, level_known, run, drift)``."""
     size, nv = x.size, v_max.size
     o_mix = auto_layout(jerk.size, nq, nv)[8]
     bufs = np.empty((2, size))
@@ -720,9 +723,9 @@ def auto_rows_loops(
         gate_on = n >= gate_samples
         n_new = forget * n + 1.0
         nxt = bufs[k % 2]
-        z, rejected, lvl = _step_kernel(
+        z, rejected, lvl, drift_new = _step_kernel(
             now, nxt, jerk, q[k], table, h, meas_var, measured, gate_on, n, n_new, forget,
-            threshold, level if level_known else dof, run, nq,
+            threshold, level if level_known else dof, run, drift, nq,
         )  # fmt: skip
         ok = True
         for i in range(nq + nv):
@@ -732,11 +735,11 @@ def auto_rows_loops(
         if not ok:
             break
         if gate_on:  # GateState.measured, decided in the kernel
-            run, level, level_known = (run + 1 if rejected else 0), lvl, True
+            run, level, level_known, drift = (run + 1 if rejected else 0), lvl, True, drift_new
             if rejected:
                 n_new = n
         else:  # too few samples for a scale: reported, not gated
-            run, level_known, rejected = 0, False, False
+            run, level_known, rejected, drift = 0, False, False, 0.0
         n = n_new
         for i in range(nq + nv):
             mixes[k, i] = nxt[o_mix + i]
@@ -744,7 +747,7 @@ def auto_rows_loops(
         now, done = nxt, k + 1
     if done:
         x[:] = now
-    return done, n, level, level_known, run
+    return done, n, level, level_known, run, drift
 
 
 def _auto_warm_args() -> tuple[object, ...]:
@@ -755,7 +758,7 @@ def _auto_warm_args() -> tuple[object, ...]:
     x[auto_layout(nf, nq, nv)[6] :] = 1.0  # (P = ones: S > 0)
     return (
         x, np.empty(size), np.ones(nf), np.zeros(nv), np.zeros((0, 4), dtype=np.int64), 1e-3,
-        1.0, True, True, 30.0, 30.0, 0.99, math.inf, 1.0, 0, nq,
+        1.0, True, True, 30.0, 30.0, 0.99, math.inf, 1.0, 0, 0.0, nq,
     )  # fmt: skip
 
 
@@ -779,7 +782,7 @@ def _rows_warm_args() -> tuple[object, ...]:
     nq = nv = rows = 1
     return (
         x, 0.0, np.full(rows, 1e-3), np.zeros((rows, nq)), jerk, table, 1.0, 0.99, math.inf,
-        1.0, 30.0, 1.0, True, 0, nq, 20.0, np.full(nv, np.inf), np.empty((rows, nq + nv)),
+        1.0, 30.0, 1.0, True, 0, 0.0, nq, 20.0, np.full(nv, np.inf), np.empty((rows, nq + nv)),
         np.empty(rows), np.zeros(rows, dtype=np.bool_),
     )  # fmt: skip
 

@@ -17,7 +17,7 @@ from pinobs.observers.base import (
     gate_nis,
     outlier_gate,
 )
-from pinobs.observers.gating import SPIKE_ALPHA
+from pinobs.observers.gating import MAX_SPIKE_RUN, SPIKE_ALPHA
 from pinobs.observers.kf import KF_CAUSES, KFBank
 from pinobs.simulation import Sensor
 from pinobs.simulation.mismatch import mismatched_plant
@@ -246,7 +246,7 @@ def test_gate_state_keeps_the_outlier_gates_bookkeeping() -> None:
     assert ok.level == pytest.approx(6.0 + NIS_AVERAGING * (3.0 - 6.0))
     spike = ok.measured(10 * thr, thr, dof)
     assert spike.gated and spike.run == 1 and spike.level == ok.level
-    assert spike.predicted() == GateState(None, False, 1, ok.level)
+    assert spike.predicted() == GateState(None, False, 1, ok.level, spike.drift)
     assert MAX_GATE_RUN == 1
     forced = spike.predicted().measured(10 * thr, thr, dof)  # after one rejection: accepted
     reject, level = outlier_gate(10 * thr, spike.level, spike.run, thr, dof)
@@ -256,9 +256,11 @@ def test_gate_state_keeps_the_outlier_gates_bookkeeping() -> None:
 
 
 def test_a_spike_is_not_forced_in_and_a_forced_sample_raises_the_gate_boundedly() -> None:
-    """``kf``'s gate (``spike=SPIKE_ALPHA``): the sample a run would force in is rejected once
-    more if it is a spike (NIS past ``SPIKE_ALPHA`` limits; before, it was forced in: a 1e12
-    NIS raised the limit 2e10-fold), the next one is forced in; a sample forced in after one
+    """``kf``'s gate (``spike=SPIKE_ALPHA``): the sample a run would force in is rejected if it
+    is a spike (NIS past ``SPIKE_ALPHA`` limits; before, it was forced in: a 1e12 NIS raised
+    the limit 2e10-fold), the next one that is not is forced in; spikes in a row are rejected
+    up to ``MAX_SPIKE_RUN`` of them (before, one: the second forced in), the sample after them
+    forced in whatever its NIS (a jump that lasts is taken); a sample forced in after one
     rejection raises the limit at most ``2 SPIKE_ALPHA``-fold (its NIS under ``SPIKE_ALPHA``
     limits, then one step of the mean, at most 2-fold).  The compiled gate
     (``kf_kernels._outlier_gate``) decides the same.  The model-based families' gate (the
@@ -277,11 +279,24 @@ def test_a_spike_is_not_forced_in_and_a_forced_sample_raises_the_gate_boundedly(
     after = spike.measured(3.0, thr, dof, A)  # the next sample: accepted, the level the mean's
     assert not after.gated and after.run == 0
     assert after.level == pytest.approx(ok.level + NIS_AVERAGING * (3.0 - ok.level))
-    for gate, nis in ((ok, 10 * limit), (rejected, 0.99 * A * limit),
-                      (rejected, 1e12), (spike, 1e12), (spike, 3.0)):  # fmt: skip
+    assert rejected.drift == 10 * limit and spike.drift == rejected.drift  # (not a spike's)
+    spikes = [rejected]  # spikes in a row: each rejected, up to MAX_SPIKE_RUN; then forced in
+    for _ in range(MAX_SPIKE_RUN + 1):
+        spikes.append(spikes[-1].measured(1e12, thr, dof, A))
+    assert [g.gated for g in spikes[1:]] == [True] * MAX_SPIKE_RUN + [False]
+    assert all(g.level == ok.level for g in spikes[:-1]) and spikes[-1].level > 1e10 * ok.level
+    # after a spike the run's drift is the reference: its growth is forced in, a glitch not
+    drift = spike.measured(0.99 * A * 10 * limit, thr, dof, A)
+    assert not drift.gated and drift.drift is None
+    assert spike.measured(1.01 * A * 10 * limit, thr, dof, A).gated
+    cases = ((ok, 10 * limit), (rejected, 0.99 * A * limit), (rejected, 1e12), (spike, 1e12),
+             (spike, 3.0), (spike, 0.99 * A * 10 * limit), (spike, 1.01 * A * 10 * limit),
+             *((g, 1e12) for g in spikes))  # fmt: skip
+    for gate, nis in cases:
         one = gate.measured(nis, thr, dof, A)
-        loops = kf_kernels._outlier_gate(nis, thr, float(gate.level), dof, gate.run)
-        assert loops == (one.gated, one.level)
+        d = 0.0 if gate.drift is None else gate.drift
+        loops = kf_kernels._outlier_gate(nis, thr, float(gate.level), dof, gate.run, d)
+        assert loops == (one.gated, one.level, one.drift or 0.0)
     forced = rejected.measured(1e12, thr, dof)  # the model-based families': forced in
     assert not forced.gated and forced.run == 0 and forced.level > 1e10 * ok.level
     assert outlier_gate(1e12, rejected.level, rejected.run, thr, dof) == (False, forced.level)

@@ -188,7 +188,8 @@ def test_a_stop_the_gate_fires_on_keeps_part_of_its_correction(
 def _stop_then_glitch(compiled: bool, glitches: dict[int, tuple[int, float]]) -> tuple:
     """A UR5's joints 0-2 at ±0.1 rad/s stop within one 10 ms sample (σ = 1e-4 rad; the gate
     fires there, as in the test above), ``glitches`` ``{row: (joint, size)}`` added:
-    ``(true velocities, estimates' v, rows gated)`` of the default ``kf``."""
+    ``(true velocities, estimates' v, rows gated, the gate's limit after each row)`` of the
+    default ``kf``."""
     robot, h, sigma, stop, n = pinobs.load("ur5"), 1e-2, 1e-4, 200, 400
     t = np.arange(n) * h
     speed = np.array([0.1, -0.1, 0.1, 0.0, 0.0, 0.0])
@@ -199,8 +200,12 @@ def _stop_then_glitch(compiled: bool, glitches: dict[int, tuple[int, float]]) ->
         q[row, joint] += size
     ob = pinobs.make_observer("kf", robot, noise_std=sigma, rate=1 / h)
     ob.reset(t[0], q[0])
-    out = [ob.update(t[k], q[k]) for k in range(1, n)]
-    return v[1:], np.array([e.v for e in out]), [k + 1 for k, e in enumerate(out) if e.gated]
+    out, limits = [], []
+    for k in range(1, n):
+        out.append(ob.update(t[k], q[k]))
+        limits.append(ob._state.gate.limit(ob._gate, robot.nv))  # the gate's limit after row k
+    gated = [k + 1 for k, e in enumerate(out) if e.gated]
+    return v[1:], np.array([e.v for e in out]), gated, np.array(limits)
 
 
 def test_a_glitch_right_after_a_gated_stop_is_rejected_and_the_gate_stays_on(
@@ -221,13 +226,44 @@ def test_a_glitch_right_after_a_gated_stop_is_rejected_and_the_gate_stays_on(
             monkeypatch.setattr(kf_kernels.auto_kernel, "compiled", None)
             monkeypatch.setattr(kf_kernels.auto_kernel, "load", lambda: None)
         clean = _stop_then_glitch(compiled, {})
-        truth, v, gated = runs[compiled] = _stop_then_glitch(
+        truth, v, gated, _ = runs[compiled] = _stop_then_glitch(
             compiled, {stop + 1: (0, 0.1), stop + 60: (4, -0.01)}
         )
         assert clean[2] == [stop] and gated == [stop, stop + 1, stop + 60], gated
         err = np.max(np.abs(v - truth)[stop + 1 :], axis=1)  # (row k: index k − 1)
         err_clean = np.max(np.abs(clean[1] - truth)[stop + 1 :], axis=1)
         assert np.max(err) < 1.5 * np.max(err_clean), (np.max(err), np.max(err_clean))
+    a, b = runs[True][1], runs[False][1]
+    assert np.max(np.abs(a - b)) <= 1e-12 * np.max(np.abs(b))
+
+
+@pytest.mark.parametrize("count", [2, 3])
+def test_consecutive_glitches_right_after_a_gated_stop_are_all_rejected(
+    count: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``count`` glitches of 1 rad in a row on the samples after the gated stop (rows 201…):
+    each is rejected (a spike does not end the gate's run: past ``SPIKE_ALPHA`` limits, then
+    past ``SPIKE_ALPHA`` times the NIS of the stop the run opened with), the stop's sample
+    after them forced in; the velocity error against the truth stays within the stop's own
+    0.1 rad/s (measured 0.1001) and the gate's limit within ``SPIKE_ALPHA``× the clean log's
+    largest (measured 3.7× and 5.7×).  Before, the second glitch was forced in: the error
+    69 (2 glitches) and 153 rad/s (3), the limit 1e8 (8e4× the clean log's).  The compiled
+    and the NumPy step agree (1e-12)."""
+    from pinobs.observers import kf_kernels
+    from pinobs.observers.gating import SPIKE_ALPHA
+
+    stop = 200
+    runs = {}
+    for compiled in (True, False):
+        if not compiled:
+            monkeypatch.setattr(kf_kernels.auto_kernel, "compiled", None)
+            monkeypatch.setattr(kf_kernels.auto_kernel, "load", lambda: None)
+        clean = _stop_then_glitch(compiled, {})
+        glitches = {stop + 1 + i: (0, 1.0) for i in range(count)}
+        truth, v, gated, limits = runs[compiled] = _stop_then_glitch(compiled, glitches)
+        assert gated == list(range(stop, stop + count + 1)), gated
+        assert np.max(np.abs(v - truth)[stop:]) < 1.01 * 0.1  # (row k: index k − 1)
+        assert np.max(limits) < SPIKE_ALPHA * np.max(clean[3]), np.max(limits)
     a, b = runs[True][1], runs[False][1]
     assert np.max(np.abs(a - b)) <= 1e-12 * np.max(np.abs(b))
 

@@ -480,8 +480,8 @@ class AutoBank:
             q_meas = self._no_sample
         elif not q_meas.flags.carray or q_meas.dtype is not _F64:  # (not update's own copy)
             q_meas = np.array(q_meas, dtype=np.float64)  # C-contiguous, writable
-        if q_meas.shape != self._sample_shape:  # (never from update: numba's checks)
-            kernel = auto_kernel.compiled
+        if q_meas.shape != self._sample_shape and auto_kernel.compiled is not None:
+            kernel = auto_kernel.compiled  # (never from update: numba's checks)
         gate_on = n >= AUTO_GATE_SAMPLES  # the scales ĉ and weights before this sample
         n_new = self._forget * n + 1.0  # the forgotten count (:mod:`pinobs.observers.kf`)
         x = np.empty(self._size)

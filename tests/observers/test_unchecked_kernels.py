@@ -11,6 +11,7 @@ from pinobs.model import dynamics_rk4
 from pinobs.observers.blockstep import joseph_kernels, transition_kernels
 from pinobs.observers.fused import loaded, rkmk4_stage_kernel
 from pinobs.observers.fused_lie import rkmk4_solve_kernel
+from pinobs.observers.kf_kernels import auto_kernel as kf_kernel
 
 
 def test_unchecked_is_the_loaded_signatures_code_not_the_dispatcher() -> None:
@@ -50,3 +51,25 @@ def test_block_step_gives_the_dispatchers_bits(robot_name: str) -> None:
         assert a.q.tobytes() == c.q.tobytes() and a.v.tobytes() == c.v.tobytes()
         assert a.nis == c.nis
     assert obs[0]._state.P.tobytes() == obs[1]._state.P.tobytes()
+
+
+def test_kf_auto_step_takes_any_sample_array() -> None:
+    """``kf``'s ``"auto"`` step calls its kernel without numba's dispatcher; a sample that is
+    not a writable C-contiguous float64 array (read-only, strided, float32) is copied to one
+    first: the same bits as the same values in a fresh float64 array."""
+    robot = pinobs.load("ur5")
+    obs = pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
+    assert obs.auto_bank is not None and obs.auto_bank._direct is not loaded(kf_kernel)
+    rng = np.random.default_rng(5)
+    q0 = robot.random_configuration(rng, scale=0.5)
+    obs.reset(0.0, q0)
+    state = obs._state
+    sample = q0 + 1e-3 * rng.standard_normal(robot.nv)
+    read_only = sample.copy()
+    read_only.setflags(write=False)
+    strided = np.repeat(sample, 2)[::2]
+    single = sample.astype(np.float32)
+    for q in (sample.copy(), read_only, strided, single):
+        a = obs.step(state, 1e-3, np.array(q, dtype=float), None)
+        b = obs.step(state, 1e-3, q, None)
+        assert a.x.tobytes() == b.x.tobytes() and a.gate == b.gate

@@ -110,8 +110,8 @@ class LeggedFilter(ABC):
         #: :meth:`setup.estimate`'s arguments for the last estimate, not made yet (:meth:`update_rows`)
         self._pending: tuple[Any, ...] | None = None
         self._warned = False
-        #: the lever arm's gyro low-passed (imu_link.py's (M4): a moving IMU frame, τ > 0)
-        self._smooths = s.imu_moves and self.gains.lever_tau > 0
+        #: the lever arm's gyro low-passed (imu_link.py's (M4): an IMU frame off the root, τ > 0)
+        self._smooths = s.imu_off_root and self.gains.lever_tau > 0
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(feet={self.feet})"

@@ -488,32 +488,14 @@ def _base_loops(
     vector, :func:`_matvec3`; a column-major one (``R_bᵀ v``; ``R_bi ω`` with ``columns``,
     ``R_bi`` as Pinocchio gives it), a sum over the columns from the first.  ``quat``:
     ``R_b``'s quaternion before its normalisation (:func:`_shepperd`)."""
-    omega, t = np.empty(3), np.empty(3)
-    for i in range(3):
-        omega[i] = imu[i] - bias[i]
+    t = np.empty(3)
     _matmul(R, R_bi.T, R_b)
     _matvec3(R_b, r_bi, t)
     for i in range(3):
         out[0, i] = x[1, i] - t[i]
-    if columns:
-        for i in range(3):
-            s = 0.0
-            for k in range(3):
-                s = _fma(R_bi[i, k], omega[k], s)
-            t[i] = s
-    else:
-        _matvec3(R_bi, omega, t)
+    _imu_to_root(R_bi, imu, bias, columns, t)
     out[1, 0], out[1, 1], out[1, 2] = t[0], t[1], t[2]
-    for i in range(3):  # (M4): ω̄_b in the lever arm (ω_b's bits again for arm = imu)
-        omega[i] = arm[i] - bias[i]
-    if columns:
-        for i in range(3):
-            s = 0.0
-            for k in range(3):
-                s = _fma(R_bi[i, k], omega[k], s)
-            t[i] = s
-    else:
-        _matvec3(R_bi, omega, t)
+    _imu_to_root(R_bi, arm, bias, columns, t)  # (M4): ω̄_b (ω_b's bits again for arm = imu)
     c = (
         t[1] * r_bi[2] - t[2] * r_bi[1],
         t[2] * r_bi[0] - t[0] * r_bi[2],
@@ -527,6 +509,22 @@ def _base_loops(
     _matvec3(R_b, out[2], t)
     out[3, 0], out[3, 1], out[3, 2] = t[0], t[1], t[2]
     _shepperd(R_b, quat)
+
+
+def _imu_to_root(R_bi: Vector, reading: Vector, bias: Vector, columns: bool, out: Vector) -> None:
+    """``out = R_bi (ω − b̂_g)`` from a gyro ``reading``'s first three entries: a column-major
+    ``R_bi`` (``columns``) summed over its columns from the first, else :func:`_matvec3`."""
+    omega = np.empty(3)
+    for i in range(3):
+        omega[i] = reading[i] - bias[i]
+    if columns:
+        for i in range(3):
+            s = 0.0
+            for k in range(3):
+                s = _fma(R_bi[i, k], omega[k], s)
+            out[i] = s
+    else:
+        _matvec3(R_bi, omega, out)
 
 
 def _shepperd(R: Vector, q: Vector) -> None:
@@ -715,6 +713,7 @@ def _register_helpers() -> None:
             _solve_innovation,
             _joseph,
             _foot_noise,
+            _imu_to_root,
             _shepperd,
         ):
             register_jitable(helper)

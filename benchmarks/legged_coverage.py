@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -185,7 +186,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--duration", type=float, default=10.0)
     args = parser.parse_args()
-    start, load0 = time.perf_counter(), Path("/proc/loadavg").read_text().split()[0]
+    start, load0 = time.perf_counter(), os.getloadavg()[0]
     robot = pinobs.load("go1")
     rows = {}
     for seed in args.seeds:
@@ -193,7 +194,7 @@ def main() -> None:
         for config in CONFIGS:
             rows[config, seed] = summary(trace(run, robot, config))
             print(config, seed, np.round(rows[config, seed]["inside"], 3), flush=True)
-    load = f"{load0} → {Path('/proc/loadavg').read_text().split()[0]}"
+    load = f"{load0:.1f} → {os.getloadavg()[0]:.1f}"
     md = lines(dict(sorted(rows.items())), args, time.perf_counter() - start, load)
     Path(__file__).with_suffix(".md").write_text("\n".join(md), encoding="utf-8")
 

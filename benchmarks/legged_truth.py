@@ -208,11 +208,14 @@ NOTES = {
     "`density_diagnosis`: filters on the measuring motion, not used to choose",
     "real": "The real log held out: run once with the settings MuJoCo gave, nothing tuned on "
     "it (`GO1_GAINS` rows: run once, after the rolling rows; `rolling_lift` rows: once, after "
-    "the `lift` rows, then rerun when it became the default)",
+    "the `lift` rows, then rerun when it became the default; rerun with M4 on go1's `imu_link`: "
+    "the NIS the same bits, the stands' speed moves)",
     "slip": "`GAINS`, go1 standing (seed 0), one foot made to slide",
     "lift": "`GO1_GAINS` as the `rolling` rows, with `rolling_lift` (derived, no parameter: "
     "nothing chosen); `lift_diagnosis` on the truth of the measuring run (trot 20 s, seed 0) and "
-    "on stand and sway (seed 0)",
+    "on stand and sway (seed 0). Rerun with imu_link.py's M4 on go1's fixed `imu_link` (the "
+    "root velocity's lever arm low-passed, decided on seeds 3-5: the `v rms` column moves; the "
+    "±2σ and NEES columns check the filter's state, which M4 leaves bit for bit)",
 }
 #: The foot gate's outlier probability in the cost table's ``inekf+gate`` row and the real
 #: log's rows (``InvariantEKF(foot_gate=)``).

@@ -35,8 +35,13 @@ noise (variance ``N² rate``, ``α = 1 − e^{−Δt/τ}``) with variance ``N² 
 N²/(2τ)`` and lags a signal of bandwidth ``≪ 1/(2πτ)`` by ``τ``: an error ``≈ τ ω̇_b``; their
 sum per axis ``N²/(2τ) + τ² |ω̇_b|²`` is least at ``τ³ = N²/(4 |ω̇_b|²)``.
 
-(M4) is applied to a frame that moves only: one fixed to the root (go1's ``imu_link``, 7 cm
-off it) keeps the raw reading and its outputs' bits.
+(M4) is applied to every IMU frame off the root, moving or fixed (go1's ``imu_link``, 7 cm
+off it: ``J_i = J_iω = 0``, the term ``(R_bi (ω̃ − ω̄)) × r_bi`` alone, in the compiled
+conversion, :data:`~.inekf_loops.base_kernel`).  On MuJoCo's go1 through ``legged_run``
+(10 s, seeds 3-5, held out: seeds 0-2 had been looked at) it lowers the root velocity RMS
+12.5-13.6 % standing, 2.7-3.3 % swaying and 3.6-4.7 % trotting; on the real Go1 log the
+state, ``q``, ``ω_b`` and the NIS keep their bits (CHANGELOG).  A frame at the root's origin
+(``r_bi = 0``) has no lever arm: nothing to smooth.
 
 For a frame fixed to the root ``J_i = J_iω = 0``: the conversion of
 :mod:`pinobs.observers.legs` (compiled, :data:`~.inekf_loops.base_kernel`), which (M3)

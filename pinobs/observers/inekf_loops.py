@@ -476,33 +476,26 @@ def _update_mean(
 
 
 def _base_loops(
-    R: Vector, x: Vector, imu: Vector, bias: Vector, R_bi: Vector, r_bi: Vector,
+    R: Vector, x: Vector, imu: Vector, arm: Vector, bias: Vector, R_bi: Vector, r_bi: Vector,
     columns: bool, R_b: Vector, out: Vector, quat: Vector,
 ) -> None:  # fmt: skip
     """The estimate in the root joint's frame (:meth:`pinobs.observers.legs.LeggedSetup.estimate`,
     module docstring of :mod:`pinobs.observers.legs`): ``R_b = R R_biᵀ`` and the rows of
-    ``out``: ``p_b = p − R_b r_bi``, ``ω_b = R_bi (ω̃ − b̂_g)``, ``v_b = R_bᵀ v − ω_b × r_bi``
-    and ``R_b v_b``.  The products' fused multiply-adds in the order of OpenBLAS's on these
+    ``out``: ``p_b = p − R_b r_bi``, ``ω_b = R_bi (ω̃ − b̂_g)``, ``v_b = R_bᵀ v − ω̄_b × r_bi``
+    with ``ω̄_b = R_bi (ω̄ − b̂_g)``, ``ω̄`` the gyro reading ``arm`` (:mod:`~.imu_link`'s (M4):
+    the low-passed one; ``imu`` itself for (M3), then ``ω̄_b = ω_b``), and ``R_b v_b``.  The products' fused multiply-adds in the order of OpenBLAS's on these
     sizes, the bits of NumPy's ``@`` (checked on stored outputs): a C-contiguous matrix times a
     vector, :func:`_matvec3`; a column-major one (``R_bᵀ v``; ``R_bi ω`` with ``columns``,
     ``R_bi`` as Pinocchio gives it), a sum over the columns from the first.  ``quat``:
     ``R_b``'s quaternion before its normalisation (:func:`_shepperd`)."""
-    omega, t = np.empty(3), np.empty(3)
-    for i in range(3):
-        omega[i] = imu[i] - bias[i]
+    t = np.empty(3)
     _matmul(R, R_bi.T, R_b)
     _matvec3(R_b, r_bi, t)
     for i in range(3):
         out[0, i] = x[1, i] - t[i]
-    if columns:
-        for i in range(3):
-            s = 0.0
-            for k in range(3):
-                s = _fma(R_bi[i, k], omega[k], s)
-            t[i] = s
-    else:
-        _matvec3(R_bi, omega, t)
+    _imu_to_root(R_bi, imu, bias, columns, t)
     out[1, 0], out[1, 1], out[1, 2] = t[0], t[1], t[2]
+    _imu_to_root(R_bi, arm, bias, columns, t)  # (M4): ω̄_b (ω_b's bits again for arm = imu)
     c = (
         t[1] * r_bi[2] - t[2] * r_bi[1],
         t[2] * r_bi[0] - t[0] * r_bi[2],
@@ -516,6 +509,22 @@ def _base_loops(
     _matvec3(R_b, out[2], t)
     out[3, 0], out[3, 1], out[3, 2] = t[0], t[1], t[2]
     _shepperd(R_b, quat)
+
+
+def _imu_to_root(R_bi: Vector, reading: Vector, bias: Vector, columns: bool, out: Vector) -> None:
+    """``out = R_bi (ω − b̂_g)`` from a gyro ``reading``'s first three entries: a column-major
+    ``R_bi`` (``columns``) summed over its columns from the first, else :func:`_matvec3`."""
+    omega = np.empty(3)
+    for i in range(3):
+        omega[i] = reading[i] - bias[i]
+    if columns:
+        for i in range(3):
+            s = 0.0
+            for k in range(3):
+                s = _fma(R_bi[i, k], omega[k], s)
+            out[i] = s
+    else:
+        _matvec3(R_bi, omega, out)
 
 
 def _shepperd(R: Vector, q: Vector) -> None:
@@ -645,12 +654,13 @@ foot_nis_kernel = LazyKernel(
 )
 
 
-#: :func:`_base_loops` compiled: ``(R, x, imu, θ, R_bi, r_bi, columns, R_b, out, quat)``.
+#: :func:`_base_loops` compiled: ``(R, x, imu, ω̄, θ, R_bi, r_bi, columns, R_b, out, quat)``.
 base_kernel = LazyKernel(
     _base_loops,
     np.eye(3),
     np.zeros((3, 3)),
     np.zeros(6),
+    np.zeros(3),
     np.zeros(6),
     np.eye(3),
     np.zeros(3),
@@ -703,6 +713,7 @@ def _register_helpers() -> None:
             _solve_innovation,
             _joseph,
             _foot_noise,
+            _imu_to_root,
             _shepperd,
         ):
             register_jitable(helper)

@@ -110,8 +110,8 @@ class LeggedFilter(ABC):
         #: :meth:`setup.estimate`'s arguments for the last estimate, not made yet (:meth:`update_rows`)
         self._pending: tuple[Any, ...] | None = None
         self._warned = False
-        #: the lever arm's gyro low-passed (imu_link.py's (M4): a moving IMU frame, τ > 0)
-        self._smooths = s.imu_moves and self.gains.lever_tau > 0
+        #: the lever arm's gyro low-passed (imu_link.py's (M4): an IMU frame off the root, τ > 0)
+        self._smooths = s.imu_off_root and self.gains.lever_tau > 0
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(feet={self.feet})"
@@ -234,9 +234,19 @@ class LeggedFilter(ABC):
             ObserverDiverged: a non-finite estimate (the state is left as it was).
         """
         state = self.state
-        new, h, nis, used, gated = self._advance(state, u)
+        new, h, nis, used, gated, lever = self._advance(state, u)
         contact_time = u.t if any(u.flags) else None
-        self._commit(new, u.q_joints, u.joint_velocities, nis, u.reading, contact_time, used, gated)
+        self._commit(
+            new,
+            u.q_joints,
+            u.joint_velocities,
+            nis,
+            u.reading,
+            contact_time,
+            used,
+            gated,
+            lever=lever,
+        )
         self.setup.settle(new.R)
         self._remember(u, h, u.t - state.t)
         return self.estimate
@@ -255,9 +265,9 @@ class LeggedFilter(ABC):
             ObserverDiverged: a non-finite estimate (the state is left as it was).
         """
         state = self.state
-        new, h, nis, used, gated = self._advance(state, u)
+        new, h, nis, used, gated, lever = self._advance(state, u)
         contact_time = u.t if any(u.flags) else None
-        new = self._stored(new, u.reading, contact_time)
+        new = self._stored(new, u.reading, contact_time, lever)
         if not self.setup.finite(new):
             raise self.setup.diverged(new, self._last())
         _, base, quat = self.setup.base(new, u.q_joints, u.joint_velocities)
@@ -269,17 +279,18 @@ class LeggedFilter(ABC):
 
     def _advance(
         self, state: LegState, u: UpdateInputs
-    ) -> tuple[LegState, Vector, float | None, int, tuple[int, ...]]:
+    ) -> tuple[LegState, Vector, float | None, int, tuple[int, ...], Vector | None]:
         """The state propagated to ``u.t`` and corrected (not stored), the feet's positions
-        ``h`` (:meth:`_legs`), the NIS, the number of feet measured and those gated."""
+        ``h`` (:meth:`_legs`), the NIS, the number of feet measured and those gated, and the
+        lever arm's low-passed gyro to store (imu_link.py's (M4); ``None``: none)."""
         new = self._propagate(state, self.setup.held(state, u.reading), u.t - state.t, u.t)
         h, jac = self._legs(u.q_joints, new.R, u.flags)
         new, nis, used, gated = self._correct(new, u.flags, h, jac)
+        lever = None
         if self._smooths:  # imu_link.py's (M4)
             lever = smoothed(state.lever, u.reading, u.t - state.t, self.gains.lever_tau)
-            new = replace_state(new, lever=lever)
         self._warned = self.setup.warn_without_contact(self._warned, u.t, u.flags, new.last_contact)
-        return new, h, nis, used, gated
+        return new, h, nis, used, gated, lever
 
     # ------------------------------------------------------ the family's part
     @abstractmethod
@@ -381,22 +392,31 @@ class LeggedFilter(ABC):
         measured: int = 0,
         gated: tuple[int, ...] = (),
         rates: Vector | None = None,
+        lever: Vector | None = None,
     ) -> None:
-        """Store the new state with the reading to hold (and the time of a contact, if any)
-        and its estimate (ObserverDiverged, the state left as it was, if not finite);
-        ``rates``: the joints' velocities for a moving IMU frame's root twist (``dq`` if not
-        given; reset's ``v[6:]``)."""
-        state = self._stored(state, reading, contact_time)
+        """Store the new state with the reading to hold (and the time of a contact, if any;
+        ``lever``: the lever arm's low-passed gyro, if any) and its estimate
+        (ObserverDiverged, the state left as it was, if not finite); ``rates``: the joints'
+        velocities for a moving IMU frame's root twist (``dq`` if not given; reset's
+        ``v[6:]``)."""
+        state = self._stored(state, reading, contact_time, lever)
         estimate = self.setup.estimate(
             state, self._last(), q_joints, dq, nis, 3 * measured, gated, rates
         )
         self._state, self._estimate, self._pending = state, estimate, None
 
     @staticmethod
-    def _stored(state: LegState, reading: Vector | None, contact_time: float | None) -> LegState:
-        """``state`` with the reading to hold and the time of a contact (if any)."""
+    def _stored(
+        state: LegState,
+        reading: Vector | None,
+        contact_time: float | None,
+        lever: Vector | None = None,
+    ) -> LegState:
+        """``state`` with the reading to hold, the time of a contact and the lever arm's
+        low-passed gyro (each if any: one copy of the fields)."""
         return replace_state(
             state,
             imu=reading if reading is not None else state.imu,
             last_contact=state.last_contact if contact_time is None else contact_time,
+            lever=state.lever if lever is None else lever,
         )

@@ -17,9 +17,10 @@ local attitude error).  Everything else lives here, once:
   (:func:`remove_feet`), and the output (:class:`InEKFEstimate`), converted from
   the IMU frame to the root joint (Pinocchio's ``q[0:7]``, ``v[0:6]``)::
 
-      R_b = R R_biᵀ,  p_b = p − R_b r_bi,  ω_b = R_bi (ω̃ − b̂_g),  v_b = R_bᵀ v − ω_b × r_bi
-  (an IMU frame that moves relative to the root: with the joints' terms, imu_link.py's M3,
-  and the gyro low-passed in the lever arm, its M4).
+      R_b = R R_biᵀ,  p_b = p − R_b r_bi,  ω_b = R_bi (ω̃ − b̂_g),  v_b = R_bᵀ v − ω̄_b × r_bi
+  (``ω̄_b = R_bi (ω̄ − b̂_g)``, the gyro low-passed in the lever arm: imu_link.py's M4, for
+  any IMU frame off the root; an IMU frame that moves relative to the root: with the joints'
+  terms, imu_link.py's M3).
 
 Each filter holds a :class:`LeggedSetup` (composition) and keeps its mathematics.
 """
@@ -211,10 +212,10 @@ class InEKFGains:
             flag rose) [m/s/√Hz]; 0 (default): none
             (:func:`~pinobs.observers.legged_filter.landing_densities`).
         landing_time: how long after a foot's contact began ``landing`` applies [s].
-        lever_tau: with an IMU frame that moves, the time constant of the gyro's low-pass in
-            the root velocity's lever arm [s] (:mod:`~pinobs.observers.imu_link`'s (M4)); 0:
-            the raw reading (M3), as a frame fixed to the root always takes.  The state is
-            unaffected.
+        lever_tau: with an IMU frame off the root (fixed, go1's, or moving, TALOS's), the
+            time constant of the gyro's low-pass in the root velocity's lever arm [s]
+            (:mod:`~pinobs.observers.imu_link`'s (M4)); 0: the raw reading (M3).  The state
+            is unaffected.
     """
 
     gyro: float = 1e-2
@@ -380,8 +381,8 @@ class LegState:
             local attitude error for the quaternion EKF).
         imu: the held reading ``(ω̃, ã)``, or ``None`` before the first one.
         last_contact: time a foot was last in contact (the reset time if none yet) [s].
-        lever: the gyro's low-passed reading ``ω̄`` for the lever arm of an IMU frame that
-            moves (:func:`~pinobs.observers.imu_link.smoothed`), ``None`` otherwise.
+        lever: the gyro's low-passed reading ``ω̄`` for the lever arm of an IMU frame off
+            the root (:func:`~pinobs.observers.imu_link.smoothed`), ``None`` otherwise.
     """
 
     t: float
@@ -552,6 +553,8 @@ class LeggedSetup:
         )
         #: the IMU frame moves relative to the root (:mod:`~pinobs.observers.imu_link`)
         self.imu_moves = bool(getattr(self.kinematics, "imu_moves", False))
+        #: the IMU frame is off the root's origin or moves: imu_link.py's (M4) in its lever arm
+        self.imu_off_root = self.imu_moves or bool(np.any(self.imu_placement[1]))
         load_leg_kernels()  # compiled (or loaded from numba's cache) now, not at the first update
         #: the feet's names of each state's ``feet`` seen (:meth:`estimate`'s ``contacts``)
         self._names: dict[tuple[int, ...], tuple[str, ...]] = {}
@@ -711,11 +714,12 @@ class LeggedSetup:
         imu = state.imu if state.imu is not None else _NO_READING
         if self.imu_moves:  # imu_link.py's (M3): the placement at q, then the joints' terms
             R_bi, r_bi, J_bi = self.kinematics.imu_motion(q_joints)  # type: ignore[attr-defined]
-            kernel(R, x, imu, bias, np.ascontiguousarray(R_bi), r_bi, False, R_b, base, quat)
+            kernel(R, x, imu, imu, bias, np.ascontiguousarray(R_bi), r_bi, False, R_b, base, quat)
             rates = dq if rates is None else rates
             root_twist(base, R_b, rates, r_bi, J_bi, lever_shift(R_bi, state.imu, state.lever))
         else:
-            kernel(R, x, imu, bias, *self._placement, R_b, base, quat)
+            arm = imu if state.lever is None else state.lever  # imu_link.py's (M4): ω̄
+            kernel(R, x, imu, arm, bias, *self._placement, R_b, base, quat)
         quat /= math.sqrt(float(quat @ quat))  # (rotation_to_quaternion's last steps)
         return R_b, base, quat
 

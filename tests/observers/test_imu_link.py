@@ -18,7 +18,7 @@ from pinobs.observers.inekf import InvariantEKF
 from pinobs.observers.legs import InEKFGains
 from pinobs.observers.qekf import QuaternionEKF
 from pinobs.simulation.humanoid import TALOS_FEET, TALOS_STANCE
-from tests.observers.test_inekf import free_flyer_q, truth
+from tests.observers.test_inekf import GO1_FEET, Go1Legs, free_flyer_q, reset_through_imu, truth
 
 #: torso_1 (yaw) and torso_2 (pitch): velocity indices among the joints
 TORSO = (12, 13)
@@ -175,6 +175,38 @@ def test_the_low_passed_lever_arm_leaves_the_state_and_the_angular_velocity(rng)
         moved = max(moved, float(np.abs(raw.v[:3] - low.v[:3]).max()))
     assert a.lever is None and b.lever is not None
     assert moved > 1e-3
+
+
+@pytest.mark.parametrize("family", [InvariantEKF, QuaternionEKF])
+def test_go1s_fixed_imu_frame_takes_the_low_passed_lever_arm_alone(family, rng) -> None:
+    """(M4) on a frame fixed to the root (go1's ``imu_link``, 7 cm off it, ``J_i = J_iω = 0``):
+    with a noisy gyro, the state ``(R, x, P, bias)``, ``q`` and ``ω_b`` are (M3)'s
+    (``lever_tau`` 0) bit for bit, and ``v_b`` moves by ``(R_bi (ω̃ − ω̄)) × r_bi``, ``ω̄``
+    the state's low-passed reading (:func:`smoothed` of the readings given)."""
+    legs = Go1Legs("imu_link")
+    R_bi, r_bi = legs.imu_placement
+    samples = truth(legs, 200.0, 0.5, wobble=0.5, feet_z=None, inverse=legs.inverse)
+    robot = pinobs.load("go1")
+    filters = [
+        family(robot, GO1_FEET, imu_frame="imu_link", gains=InEKFGains(lever_tau=tau))
+        for tau in (0.0, LEVER_TAU)
+    ]
+    gyros = samples[0][5] + 0.03 * rng.normal(size=(len(samples), 3))
+    for f in filters:
+        reset_through_imu(f, (*samples[0][:5], gyros[0], *samples[0][6:]), R_bi, r_bi)
+    lever, moved = gyros[0], 0.0
+    for k, (t, _, _, _, q, _, acc, contacts) in enumerate(samples[1:], start=1):
+        raw, low = (f.update(t, q, gyros[k], acc, contacts) for f in filters)
+        lever = smoothed(lever, gyros[k], t - samples[k - 1][0])
+        a, b = (f.state for f in filters)
+        for x, y in ((a.R, b.R), (a.x, b.x), (a.P, b.P), (a.bias, b.bias), (raw.q, low.q)):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_array_equal(raw.v[3:], low.v[3:])
+        np.testing.assert_allclose(b.lever, lever, rtol=0, atol=1e-15)
+        shift = np.cross(R_bi @ (gyros[k] - lever), r_bi)
+        np.testing.assert_allclose(low.v[:3] - raw.v[:3], shift, rtol=0, atol=1e-12)
+        moved = max(moved, float(np.abs(shift).max()))
+    assert a.lever is None and moved > 1e-3
 
 
 def test_the_low_passed_lever_arm_cuts_the_gyros_white_noise_by_the_expected_factor(rng) -> None:

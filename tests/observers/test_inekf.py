@@ -33,6 +33,7 @@ from pinobs.errors import (
     UnsupportedRobotError,
 )
 from pinobs.model import FootKinematics
+from pinobs.observers.imu_link import LEVER_TAU
 from pinobs.observers.inekf import (
     GRAVITY,
     InEKFGains,
@@ -265,24 +266,39 @@ def test_started_on_the_truth_it_stays_there_through_contact_changes() -> None:
     np.testing.assert_allclose(est.bias, 0.0, atol=1e-9)
 
 
+@pytest.mark.parametrize("tau", [0.0, LEVER_TAU])
 @pytest.mark.parametrize("imu_frame", [None, "imu_link"])
-def test_started_on_the_truth_it_stays_there_on_go1(imu_frame: str | None) -> None:
+def test_started_on_the_truth_it_stays_there_on_go1(imu_frame: str | None, tau: float) -> None:
     """go1's kinematics; with ``imu_frame`` the IMU is 7 cm off the root joint: the truth is
-    the IMU's motion and the estimate, of the root joint, is compared with the root's."""
+    the IMU's motion and the estimate, of the root joint, is compared with the root's:
+    exactly with the raw gyro in the lever arm (``lever_tau`` 0, imu_link.py's M3); with
+    M4's low-pass (the default) the pose exactly and the root's velocity within the lag's
+    bound ``|r_bi| τ max_k |ω_k − ω_{k−1}| / Δt`` (test_imu_link.py's TALOS test); at the
+    root (no ``imu_frame``) there is no lever arm and nothing is low-passed."""
+    rate = 200.0
     legs = Go1Legs(imu_frame)  # IK of the feet in the IMU's frame
     R_bi, r_bi = legs.imu_placement
     assert (np.linalg.norm(r_bi) > 0.05) == (imu_frame is not None)
-    samples = truth(legs, 200.0, 2.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
-    ekf = InvariantEKF(pinobs.load("go1"), GO1_FEET, imu_frame=imu_frame)
+    samples = truth(legs, rate, 2.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
+    gains = InEKFGains(lever_tau=tau)
+    ekf = InvariantEKF(pinobs.load("go1"), GO1_FEET, imu_frame=imu_frame, gains=gains)
     reset_through_imu(ekf, samples[0], R_bi, r_bi)
-    worst = 0.0
+    worst, linear = 0.0, 0.0
     for t, R_i, v_i, p_i, q, omega, acc, contacts in samples[1:]:
         est = ekf.update(t, q, omega, acc, contacts)
         R_b = R_i @ R_bi.T
         v_b = v_i - np.cross(R_i @ omega, R_b @ r_bi)  # the root's origin's world velocity
-        worst = max(worst, *pose_errors(est, R_b, v_b, p_i - R_b @ r_bi))
+        rotation, velocity, position = pose_errors(est, R_b, v_b, p_i - R_b @ r_bi)
+        worst, linear = max(worst, rotation, position), max(linear, velocity)
         np.testing.assert_allclose(est.v[3:6], R_bi @ omega, atol=1e-12)
     assert worst < 1e-9
+    assert (ekf.state.lever is not None) == (imu_frame is not None and tau > 0)
+    if ekf.state.lever is None:
+        assert linear < 1e-9
+    else:
+        omegas = np.array([sample[5] for sample in samples])
+        step = float(np.linalg.norm(np.diff(omegas, axis=0), axis=1).max())
+        assert 1e-6 < linear <= float(np.linalg.norm(r_bi)) * tau * step * rate + 1e-9
     assert est.q.shape == (19,) and est.v.shape == (18,)
     tilt = np.arccos(np.clip(samples[-1][1][2, 2], -1, 1))
     assert tilt > 0.02  # the base did move

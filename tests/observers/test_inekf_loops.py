@@ -178,9 +178,11 @@ def test_the_estimate_kernel_is_the_numpy_conversion_to_the_root_joint(
 ) -> None:
     """``base_kernel`` (``LeggedSetup.estimate``'s conversion, legs.py's module docstring):
     ``R_b = R R_biᵀ``, ``p_b = p − R_b r_bi``, ``ω_b = R_bi (ω̃ − b̂_g)``, ``v_b = R_bᵀ v −
-    ω_b × r_bi`` and ``R_b v_b``, as NumPy computes them to rounding; a column-major ``R_bi``
-    (Pinocchio's) sums ``R_bi ω`` over its columns from the first, rounded once each; ``R_b``'s
-    quaternion as ``rotation_to_quaternion`` gives it, bit for bit."""
+    ω̄_b × r_bi`` (imu_link.py's (M4): ``ω̄_b = R_bi (ω̄ − b̂_g)``, ``ω̄`` the low-passed gyro
+    given beside the reading) and ``R_b v_b``, as NumPy computes them to rounding; a
+    column-major ``R_bi`` (Pinocchio's) sums ``R_bi ω`` over its columns from the first,
+    rounded once each; ``R_b``'s quaternion as ``rotation_to_quaternion`` gives it, bit for
+    bit; with the reading itself as ``ω̄`` (M3), ``v_b = R_bᵀ v − ω_b × r_bi``."""
     from pinobs.observers.inekf_loops import base_kernel, load_leg_kernels
 
     load_leg_kernels()
@@ -188,10 +190,11 @@ def test_the_estimate_kernel_is_the_numpy_conversion_to_the_root_joint(
     R_bi = expm(np.cross(np.eye(3), rng.normal(size=3)))
     r_bi, imu = rng.normal(size=3), rng.normal(size=6)
     R_b, out, quat = np.empty((3, 3)), np.empty((4, 3)), np.empty(4)
-    base_kernel.compiled(R, x, imu, theta, R_bi, r_bi, column_major, R_b, out, quat)  # type: ignore[misc]
+    lever = rng.normal(size=3)
+    base_kernel.compiled(R, x, imu, lever, theta, R_bi, r_bi, column_major, R_b, out, quat)  # type: ignore[misc]
     omega = imu[:3] - theta[:3]
     w_b = R_bi @ omega
-    v_b = R_b.T @ x[0] - np.cross(w_b, r_bi)
+    v_b = R_b.T @ x[0] - np.cross(R_bi @ (lever - theta[:3]), r_bi)
     np.testing.assert_allclose(R_b, R @ R_bi.T, rtol=0, atol=1e-15)
     np.testing.assert_allclose(out[0], x[1] - R_b @ r_bi, rtol=0, atol=1e-14)
     np.testing.assert_allclose(out[1], w_b, rtol=0, atol=1e-14)
@@ -203,6 +206,10 @@ def test_the_estimate_kernel_is_the_numpy_conversion_to_the_root_joint(
         want = [_fma(R_bi[i, 2], omega[2], _fma(R_bi[i, 1], omega[1], R_bi[i, 0] * omega[0]))
                 for i in range(3)]  # fmt: skip
         np.testing.assert_array_equal(out[1], want)
+    raw = np.empty((4, 3))
+    base_kernel.compiled(R, x, imu, imu, theta, R_bi, r_bi, column_major, R_b, raw, quat)  # type: ignore[misc]
+    np.testing.assert_allclose(raw[2], R_b.T @ x[0] - np.cross(w_b, r_bi), rtol=0, atol=1e-14)
+    np.testing.assert_array_equal(raw[:2], out[:2])
 
 
 def test_the_velocity_kernel_is_the_feet_velocities_and_their_norms(

@@ -60,10 +60,11 @@ def test_a_landing_term_that_is_off_leaves_the_filters_bit_identical(go1_truth, 
 def test_the_landing_term_widens_the_filter_and_leaves_its_mean(go1_truth, family) -> None:
     """Feet down at ``reset`` land then: with ``landing`` 0.05 m/s/√Hz over 20 ms the
     velocity's variance is larger than without at the window's end, and the mean, started on
-    the truth with exact measurements, stays on it (the term is in Q, not in the mean)."""
+    the truth with exact measurements, stays on it (the term is in Q, not in the mean; the
+    root's velocity with the raw gyro in the lever arm, ``lever_tau`` 0: imu_link.py's M3)."""
     go1 = pinobs.load("go1")
-    base = InEKFGains(contact=1e-3)
-    landing = InEKFGains(contact=1e-3, landing=0.05, landing_time=0.02)
+    base = InEKFGains(contact=1e-3, lever_tau=0.0)
+    landing = InEKFGains(contact=1e-3, landing=0.05, landing_time=0.02, lever_tau=0.0)
     plain, _ = _run(family(go1, GO1_FEET, imu_frame="imu_link", gains=base), go1_truth)
     wide, worst = _run(family(go1, GO1_FEET, imu_frame="imu_link", gains=landing), go1_truth)
     assert worst < 1e-9

@@ -53,7 +53,8 @@ def test_started_on_the_truth_it_stays_there_through_contact_changes() -> None:
 
 @pytest.mark.parametrize("imu_frame", [None, "imu_link"])
 def test_started_on_the_truth_it_stays_there_on_go1(imu_frame: str | None) -> None:
-    """As the invariant EKF's test: the truth is the IMU's motion, the estimate the root's."""
+    """As the invariant EKF's test: the truth is the IMU's motion, the estimate the root's
+    (the raw gyro in the lever arm: ``_worst_pose_error``'s ``lever_tau`` 0)."""
     legs = Go1Legs(imu_frame)
     samples = truth(legs, 200.0, 1.0, wobble=0.5, feet_z=None, inverse=legs.inverse)
     assert _worst_pose_error(QuaternionEKF, samples, legs, imu_frame=imu_frame) < 1e-9

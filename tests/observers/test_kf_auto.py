@@ -3,6 +3,7 @@ its innovations' profile likelihood (``pinobs/observers/kf.py``, module docstrin
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -185,6 +186,16 @@ def test_a_stop_the_gate_fires_on_keeps_part_of_its_correction(
     assert "note: kf down-weighted 1 outlier sample(s)" in soft.consistency().messages("kf")[-1]
 
 
+def _compiled_then_numpy(monkeypatch: pytest.MonkeyPatch) -> Iterator[bool]:
+    """``True`` (the compiled step), then ``False`` with the kernel switched off (NumPy)."""
+    from pinobs.observers import kf_kernels
+
+    yield True
+    monkeypatch.setattr(kf_kernels.auto_kernel, "compiled", None)
+    monkeypatch.setattr(kf_kernels.auto_kernel, "load", lambda: None)
+    yield False
+
+
 def _stop_then_glitch(compiled: bool, glitches: dict[int, tuple[int, float]]) -> tuple:
     """A UR5's joints 0-2 at ±0.1 rad/s stop within one 10 ms sample (σ = 1e-4 rad; the gate
     fires there, as in the test above), ``glitches`` ``{row: (joint, size)}`` added:
@@ -217,14 +228,9 @@ def test_a_glitch_right_after_a_gated_stop_is_rejected_and_the_gate_stays_on(
     log's (the stop's own; measured 1.18×).  Before, the first was forced in (its NIS 1e6 raised the gate's level to 2e4: the
     error 4× the clean log's, 0.2 rad/s) and the second passed.  The compiled and the NumPy
     step agree (1e-12 of the largest velocity)."""
-    from pinobs.observers import kf_kernels
-
     stop = 200
     runs = {}
-    for compiled in (True, False):
-        if not compiled:
-            monkeypatch.setattr(kf_kernels.auto_kernel, "compiled", None)
-            monkeypatch.setattr(kf_kernels.auto_kernel, "load", lambda: None)
+    for compiled in _compiled_then_numpy(monkeypatch):
         clean = _stop_then_glitch(compiled, {})
         truth, v, gated, _ = runs[compiled] = _stop_then_glitch(
             compiled, {stop + 1: (0, 0.1), stop + 60: (4, -0.01)}
@@ -249,15 +255,11 @@ def test_consecutive_glitches_right_after_a_gated_stop_are_all_rejected(
     largest (measured 3.7× and 5.7×).  Before, the second glitch was forced in: the error
     69 (2 glitches) and 153 rad/s (3), the limit 1e8 (8e4× the clean log's).  The compiled
     and the NumPy step agree (1e-12)."""
-    from pinobs.observers import kf_kernels
     from pinobs.observers.gating import SPIKE_ALPHA
 
     stop = 200
     runs = {}
-    for compiled in (True, False):
-        if not compiled:
-            monkeypatch.setattr(kf_kernels.auto_kernel, "compiled", None)
-            monkeypatch.setattr(kf_kernels.auto_kernel, "load", lambda: None)
+    for compiled in _compiled_then_numpy(monkeypatch):
         clean = _stop_then_glitch(compiled, {})
         glitches = {stop + 1 + i: (0, 1.0) for i in range(count)}
         truth, v, gated, limits = runs[compiled] = _stop_then_glitch(compiled, glitches)

@@ -37,7 +37,8 @@ it holds the value of the last motion (``±1`` after a slide longer than a few `
   feature explains, fitted on those very rows (an upper bound, not a prediction; 0 where
   the feature is constant on them, as after a single stop).
 - **Scores.** RMS per joint [N·m] over the held-out rows, those moving and those at rest
-  (TX40: at 5 kHz, as ``tx40_friction.py``).  Nothing is chosen on the held-out rows.
+  (TX40: at 5 kHz, as ``tx40_friction.py``), and those at rest after a motion in their log.
+  Nothing is chosen on the held-out rows.
 
     python benchmarks/friction_hysteresis.py     # about 3 min on 2 cores; writes friction_hysteresis.md
 """
@@ -70,7 +71,9 @@ FOLDS = 5
 REST = 0.01
 #: A rest episode counts when it lasts at least this [s].
 EPISODE = 0.05
-PARTS = ("held_out", "moving", "at_rest")
+#: Scored rows: every held-out row, the moving ones, those at rest, and those at rest after a
+#: motion in their log (the UR10e's static poses p1..p10 never move: ``h = 0`` on them).
+PARTS = ("held_out", "moving", "at_rest", "at_rest_after_motion")
 
 
 def dahl(q: np.ndarray, xs: float) -> np.ndarray:
@@ -113,8 +116,10 @@ class Case:
         self.rest = np.abs(self.v).max(axis=1) <= REST
         self.last = np.concatenate([last_sign(d["v"]) for d in logs])
         self.h = {xs: np.concatenate([dahl(d["q"], xs) for d in logs]) for xs in XS_GRID}
+        moved = (self.last[:, channels] != 0).any(axis=1)
+        still = self.held & self.rest
         self.masks = dict(
-            zip(PARTS, (self.held, self.held & ~self.rest, self.held & self.rest), strict=True)
+            zip(PARTS, (self.held, self.held & ~self.rest, still, still & moved), strict=True)
         )
 
 
@@ -350,7 +355,8 @@ def markdown(res: dict[str, Any], seconds: float) -> str:
         j = JOINTS[name]
         lines += [
             f"### {name}: held-out rows {r['rows']['held_out']} ({r['rows']['moving']} moving, "
-            f"{r['rows']['at_rest']} at rest); fitted rows {r['fitted_rows']} "
+            f"{r['rows']['at_rest']} at rest, {r['rows']['at_rest_after_motion']} of them after "
+            f"a motion); fitted rows {r['fitted_rows']} "
             f"({r['fitted_at_rest']} at rest)",
             "",
             "corr² on the held-out rows at rest of *pinobs (default)*'s residual with:",

@@ -149,6 +149,8 @@ NOT_RUN: dict[str, str] = {
     "benchmarks/never_behind_real.py": "needs the shared real logs and minutes",
     "benchmarks/real_logs_bound.py": "needs the shared real logs and minutes",
     "benchmarks/tx40_friction.py": "needs the shared TX40 log; writes the committed benchmarks/tx40_friction.md (~2-6 min)",
+    "benchmarks/friction_hysteresis.py": "needs the shared real logs; writes the committed "
+    "benchmarks/friction_hysteresis.md (~2 min)",
     "benchmarks/never_behind_sim.py": "minutes of simulations",
     "benchmarks/never_behind_cost.py": "a timing benchmark",
     "benchmarks/never_behind_exact.py": "240 runs of simulations (~5 min)",

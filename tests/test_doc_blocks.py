@@ -164,6 +164,8 @@ NOT_RUN: dict[str, str] = {
     "through legged_run, several minutes; writes the committed benchmarks/talos_imu_link.md",
     "benchmarks/legged_adapt_noise.py": "MuJoCo go1 through legged_run and the shared Go1 log, "
     "~25 min; writes the committed benchmarks/legged_adapt_noise.md",
+    "benchmarks/legged_coverage.py": "MuJoCo go1 trotting through both filters, seeds 0-2, "
+    "~1 min; writes the committed benchmarks/legged_coverage.md",
     "benchmarks/legged_slip_axes.py": "MuJoCo go1 through legged_run, 77 runs; writes the "
     "committed benchmarks/legged_slip_axes.md (~20 min)",
 }

@@ -11,7 +11,7 @@ as NumPy arrays otherwise (planar joints, or numba absent).
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, cast
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -372,12 +372,24 @@ class AutoBank:
         self._size = layout[-1]
         #: where the mixture (``q`` then ``v``) lies in an :class:`AutoState`'s buffer
         self.mixture = slice(layout[8], layout[9])
-        self._direct = None  # the compiled step without numba's dispatcher (step)
-        if self._table is not None:  # its compiled step loaded now, not at the first update
-            auto_kernel.load()
-            if auto_kernel.compiled is not None:
-                self._direct = auto_kernel.unchecked()
+        self._direct = self._direct_step()
         self._sample_shape = (robot.nq,)
+
+    def _direct_step(self) -> Any:
+        """The compiled step without numba's dispatcher (:meth:`step`), loaded now, not at the
+        first update; ``None``: the NumPy step."""
+        if self._table is None:
+            return None
+        auto_kernel.load()
+        return None if auto_kernel.compiled is None else auto_kernel.unchecked()
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without the compiled step's machine code (no pickle has it): loaded again."""
+        return {**self.__dict__, "_direct": None}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._direct = self._direct_step()
 
     @property
     def compiled(self) -> bool:

@@ -151,6 +151,8 @@ NOT_RUN: dict[str, str] = {
     "benchmarks/tx40_friction.py": "needs the shared TX40 log; writes the committed benchmarks/tx40_friction.md (~2-6 min)",
     "benchmarks/friction_hysteresis.py": "needs the shared real logs; writes the committed "
     "benchmarks/friction_hysteresis.md (~2 min)",
+    "benchmarks/real_ekf_phases.py": "needs the shared UR10e logs; writes the committed "
+    "benchmarks/real_ekf_phases.{md,json} (~3 min)",
     "benchmarks/never_behind_sim.py": "minutes of simulations",
     "benchmarks/never_behind_cost.py": "a timing benchmark",
     "benchmarks/never_behind_exact.py": "240 runs of simulations (~5 min)",

@@ -7,7 +7,9 @@ stick-slip (Karnopp) prediction tried against it: a diagnosis for issue 36.
 
 **Setting** (as ``real_logs.py``'s): the UR10e model ``pinobs.identify`` fits on
 :data:`real_logs.UR10E_FIT` (two harmonic logs, nothing of the logs below), ``ekf`` with
-``never_behind=False`` on it (*ekf+id*), the default ``kf``, and ``ekf`` on the nominal
+``never_behind=False`` on it at ``accel_psd`` = 1e-8 (*ekf+id*; the model trusted as exact) and
+at its default (*ekf+id own*: the density ``pinobs.identify`` measured on the fitted rows and
+stored on the model, ``Robot.model_error_psd``), the default ``kf``, and ``ekf`` on the nominal
 URDF (*ekf nominal*: where ``real_logs.md``'s re-initialisations are), run by
 ``pinobs.estimate`` on :data:`LOGS` (the stop-and-go ``ptp_10_points`` and two harmonic
 logs, none used for the fit).  Reference: the robot's own velocity ``dq``; rows from
@@ -317,6 +319,13 @@ def findings(res: dict[str, Any]) -> list[str]:
     ]
     best = [min(r["psd_sweep"].values()) / r["observers"]["kf"]["rms"] for r in logs]
     best_psd = [float(min(r["psd_sweep"], key=r["psd_sweep"].get)) for r in logs]
+    own = (
+        f"; at the density `pinobs.identify` now stores on the model and `ekf` takes by "
+        f"default (*own*, {res['model_error_psd']:.3g} rad²/s³, measured on the fitted rows "
+        f"against its Savitzky–Golay accelerations) {span('ekf+id own')}"
+        if "ekf+id own" in res["labels"]
+        else ""
+    )
     return [
         "### Findings",
         "",
@@ -329,10 +338,10 @@ def findings(res: dict[str, Any]) -> list[str]:
         f"constant-acceleration extrapolation's (RMS per joint over all rows {accel('accel_model', 'all')} "
         f"against {accel('accel_kf', 'all')} rad/s²; moving rows {accel('accel_model', 'moving')} "
         f"against {accel('accel_kf', 'moving')}), worse at rest ({accel('accel_model', 'rest')} "
-        f"against {accel('accel_kf', 'rest')}). The loss is `ekf`'s default `accel_psd` = 1e-8, "
-        "which trusts that model as exact: matched to the fitted logs' one-step error (*ψ*, "
+        f"against {accel('accel_kf', 'rest')}). The loss is `accel_psd` = 1e-8 (`ekf`'s default on "
+        "a robot without a density of its own), which trusts that model as exact: matched to the fitted logs' one-step error (*ψ*, "
         f"nothing from these logs) `ekf+id` is {span('ekf+id ψ')} `kf` (from "
-        f"{span('ekf+id')}); the learned offset alone (*auto*) {span('ekf+id auto')}, with "
+        f"{span('ekf+id')}){own}; the learned offset alone (*auto*) {span('ekf+id auto')}, with "
         f"*ψ* {span('ekf+id auto ψ')}. The best `accel_psd` of {PSD_GRID[0]:g}–"
         f"{PSD_GRID[-1]:g} chosen on each log itself (optimistic) gives {_range(best)}× "
         f"(at {', '.join(f'{x:g}' for x in best_psd)}): with a white acceleration noise "
@@ -340,8 +349,8 @@ def findings(res: dict[str, Any]) -> list[str]:
         "- Karnopp's stick-slip (Δv = 0.01, F_s = F_c) brings the model's one-step error at "
         f"rest to {accel('accel_karnopp 0.01', 'rest')} rad/s² and `ekf+id`'s velocity RMS at "
         f"rest to {_range(rest_k)} of its value (per joint and log), but rest holds "
-        f"{share(0)} of the error: `ekf+id+K0.01` is {span('ekf+id+K0.01')} `kf` at the "
-        f"default density, and with its own matched density {span('ekf+id+K0.01 ψ')} (against "
+        f"{share(0)} of the error: `ekf+id+K0.01` is {span('ekf+id+K0.01')} `kf` at "
+        f"1e-8, and with its own matched density {span('ekf+id+K0.01 ψ')} (against "
         f"{span('ekf+id ψ')} without it). No variant here reaches issue 36's 0.7×.",
         "",
     ]
@@ -359,13 +368,19 @@ def summary(res: dict[str, Any]) -> list[str]:
         f"{res['check_zero_band']:.3g} rad/s.",
         "",
         "*ψ*: `accel_psd` matched on the fitted logs to the model's one-step acceleration "
-        "error (`matched_accel_psd`; ekf's default is 1e-8): "
+        "error (`matched_accel_psd`; ekf's default on a robot without its own is 1e-8): "
         + "; ".join(
             f"{k} {m['accel_psd']:.3g} rad²/s³ (one-step RMS per joint "
             + ", ".join(_f(x, 2) for x in m["one_step_rms"])
             + " rad/s²)"
             for k, m in res["matched"].items()
         )
+        + ". *own*: `ekf`'s default on the identified robot, the density `pinobs.identify` "
+        "measured on its fitted rows against its Savitzky–Golay accelerations "
+        f"(`Robot.model_error_psd` = {_f(res.get('model_error_psd') or math.nan)} rad²/s³; "
+        "per joint "
+        + ", ".join(_f(x, 2) for x in res.get("model_error_psd_per_joint", []))
+        + "); every other `+id` column gives `accel_psd` (1e-8 where not *ψ*)"
         + ". *K0.01*, *K0.001*: Karnopp's stick-slip with Δv = 0.01, 0.001 rad/s; *auto*: "
         '`disturbance_psd="auto"` (the learned torque offset), alone.',
         "",
@@ -449,7 +464,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     t0 = time.perf_counter()
     robot = rd.ur10e_robot()
-    ident = rl.ur10e_identify(rl.UR10E_FIT, robot)[0].robot
+    fitted = rl.ur10e_identify(rl.UR10E_FIT, robot)[0]
+    ident = fitted.robot
     first = rd.load_log(f"ur10e/{LOGS[0][0]}/{LOGS[0][1]}").frame
     res: dict[str, Any] = {
         "date": time.strftime("%Y-%m-%d", time.gmtime()),
@@ -458,21 +474,27 @@ def main(argv: list[str] | None = None) -> int:
         "fc": fc(ident).tolist(),
         "check_log": LOGS[0][1],
         "check_zero_band": check_zero_band(ident, first),
+        # the identified model's own density (pinobs.identify, on the fitted rows): ekf's
+        # default on it (Robot.model_error_psd)
+        "model_error_psd": ident.model_error_psd,
+        "model_error_psd_per_joint": fitted.report["model_error_psd_per_joint"],
     }
     karnopp = {b: KarnoppRobot.of(ident, b, fc(ident)) for b in BANDS}
     psd, err = matched_accel_psd(ident)
     res["matched"] = {"ekf+id": {"accel_psd": psd, "one_step_rms": err}}
     auto = {"disturbance_psd": "auto"}
+    exact = {"accel_psd": 1e-8}  # ekf's density on a robot without its own (the model exact)
     runs: dict[str, Any] = {
         "kf": ("kf", robot, None),
         "ekf nominal": ("ekf", robot, None),
-        "ekf+id": ("ekf", ident, None),
+        "ekf+id": ("ekf", ident, exact),
         "ekf+id ψ": ("ekf", ident, {"accel_psd": psd}),
-        "ekf+id auto": ("ekf", ident, auto),
+        "ekf+id own": ("ekf", ident, None),  # the default: ident.model_error_psd
+        "ekf+id auto": ("ekf", ident, {**auto, **exact}),
         "ekf+id auto ψ": ("ekf", ident, {**auto, "accel_psd": psd}),
     }
     for b, k in karnopp.items():
-        runs[f"ekf+id+K{b:g}"] = ("ekf", k, None)
+        runs[f"ekf+id+K{b:g}"] = ("ekf", k, exact)
         psd_k, err_k = matched_accel_psd(k)
         res["matched"][f"ekf+id+K{b:g}"] = {"accel_psd": psd_k, "one_step_rms": err_k}
         runs[f"ekf+id+K{b:g} ψ"] = ("ekf", k, {"accel_psd": psd_k})

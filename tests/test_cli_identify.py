@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 
 import numpy as np
@@ -83,8 +84,13 @@ def test_identify_writes_the_rotor_inertias_beside_the_urdf_unless_told_not_to(
     )
     assert main([*args, str(tmp_path / "without.urdf"), "--no-armature"]) == 0
     text = capsys.readouterr().out
-    assert "armature" not in text and "pinobs.json" not in text
-    assert not (tmp_path / "without.pinobs.json").exists()
+    assert "armature" not in text
+    # no rotor inertia written; the model without them keeps its own acceleration error
+    sidecar = json.loads((tmp_path / "without.pinobs.json").read_text())
+    assert sidecar["armature"] == {} and sidecar["model_error_psd"] > 0
+    without = pinobs.load(tmp_path / "without.urdf")
+    assert not np.any(without.model.armature)
+    assert without.model_error_psd == sidecar["model_error_psd"]
 
 
 def test_identify_refuses_a_log_without_torques_and_writes_nothing(tmp_path, capsys) -> None:

@@ -64,7 +64,7 @@ from pinobs.model.mjcf import MujocoMap, cross_check
 from pinobs.model.mjcf_loading import load_mjcf
 from pinobs.model.robot import Robot
 from pinobs.model.sanity import check_model, check_urdf
-from pinobs.model.sidecar import apply_sidecar, read_friction_law
+from pinobs.model.sidecar import apply_sidecar, read_friction_law, read_model_error_psd
 from pinobs.model.urdf import read_urdf
 
 __all__ = ["LockSpec", "RobotEntry", "load", "resolve_source", "robot_entries", "robot_names"]
@@ -611,11 +611,20 @@ def _load_file(
     )
     robot.mimic = mimic  # as asked (a saved run reloads its robot so: pinobs play)
     robot = lock_joints(robot, lock)
-    if friction and _is_urdf(path):  # a friction law beyond the tags (pinobs.model.sidecar)
-        law = read_friction_law(robot.model, path, locked=frozenset(robot.locked))
+    return _with_sidecar(robot, path, friction=bool(friction)) if _is_urdf(path) else robot
+
+
+def _with_sidecar(robot: Robot, urdf: Path, *, friction: bool) -> Robot:
+    """``robot`` with what the sidecar beside ``urdf`` holds beyond the armature
+    (:mod:`pinobs.model.sidecar`): a friction law beyond the tags (with ``friction``) and an
+    identified model's own acceleration error."""
+    if friction:
+        law = read_friction_law(robot.model, urdf, locked=frozenset(robot.locked))
         if law is not None:
+            mimic = robot.mimic
             robot = robot.with_model(robot.model, friction_law=law)
             robot.mimic = mimic
+    robot.model_error_psd = read_model_error_psd(urdf)
     return robot
 
 

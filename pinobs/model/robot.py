@@ -92,6 +92,11 @@ class Robot:
             in model order; empty when none.  The URDF writer writes them as fixed joints
             at these values, and ``pinobs.load(robot.source, lock=robot.locked)`` reloads
             the same model.
+        model_error_psd: the model's own acceleration error as a white-noise density
+            [rad²/s³] (mean over the joints), measured by ``pinobs.identify`` on its fitted
+            rows (:mod:`pinobs.model.identification.model_error`) or read from the URDF's
+            sidecar; ``None`` for a model not identified.  ``ekf``, ``riemannian`` and
+            ``kalman`` take it as their ``accel_psd`` when given none.
     """
 
     def __init__(
@@ -108,8 +113,10 @@ class Robot:
         package_dirs: Sequence[str | Path] = (),
         locked: Mapping[str, float | tuple[float, ...]] | None = None,
         friction_law: FrictionLaw | None = None,
+        model_error_psd: float | None = None,
     ) -> None:
         self.model = model
+        self.model_error_psd = model_error_psd
         self.locked: dict[str, float | tuple[float, ...]] = dict(locked or {})
         self.root_joint = root_joint
         self.package_dirs = tuple(Path(d).resolve() for d in package_dirs)
@@ -222,6 +229,7 @@ class Robot:
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self.__dict__.setdefault("locked", {})  # (pickled before robots kept it)
+        self.__dict__.setdefault("model_error_psd", None)  # (pickled before robots kept it)
         self._data = self.model.createData()
         self._zero_nv.setflags(write=False)  # (pickle does not keep the flag)
         self._lower_mask.setflags(write=False)
@@ -279,6 +287,7 @@ class Robot:
         robot.__dict__.update({k: self.__dict__[k] for k in _TREE_ATTRIBUTES})
         robot.model = model
         robot.locked = dict(self.locked)
+        robot.model_error_psd = self.model_error_psd
         robot.name = self.name if name is None else name
         loader, geometry = self._geometry_loader, self._geometry
         if geometry is not None and geometry[0] is None and geometry[1] is None:
@@ -325,6 +334,7 @@ class Robot:
             package_dirs=self.package_dirs,
             locked=self.locked,
             friction_law=self._given_law if friction_law is None else friction_law,
+            model_error_psd=self.model_error_psd,
             **self._geometry_kwargs(),
         )
         robot.mimic = self.mimic  # a run of it is reloaded as this one was (pinobs play)
@@ -357,9 +367,11 @@ class Robot:
         model, friction, law = perturbed_model(
             self, inertia_scale=inertia_scale, payload=payload, damping=damping, coulomb=coulomb
         )
-        return self.with_model(
+        robot = self.with_model(
             model, name=name or f"{self.name}~", friction=friction, friction_law=law
         )
+        robot.model_error_psd = None  # (another model than the one whose error it measured)
+        return robot
 
     # ------------------------------------------------------------- validation
     def check_configuration(self, q: ArrayLike, *, what: str = "q") -> Vector:

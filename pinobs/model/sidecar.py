@@ -21,7 +21,13 @@ the sidecar holds the whole law of each one-coordinate joint as well::
 
 (:meth:`~pinobs.model.friction.FrictionLaw.as_dict`), which replaces the tags when the
 robot is loaded with ``friction=True`` (the tags still hold ``F_v`` and the mean Coulomb
-level, for other readers of the URDF).
+level, for other readers of the URDF).  An identified model also keeps its own acceleration
+error as a white-noise density [rad²/s³] (:attr:`pinobs.model.Robot.model_error_psd`, what the
+model-based observers take as their ``accel_psd`` when given none)::
+
+    "model_error_psd": 0.0034
+
+read back by :func:`read_model_error_psd`.
 """
 
 from __future__ import annotations
@@ -42,6 +48,7 @@ __all__ = [
     "SIDECAR_SUFFIX",
     "apply_sidecar",
     "read_friction_law",
+    "read_model_error_psd",
     "sidecar_path",
     "write_sidecar",
 ]
@@ -61,12 +68,15 @@ def sidecar_path(urdf: str | Path) -> Path:
 
 
 def write_sidecar(
-    model: pin.Model, urdf: str | Path, friction_law: FrictionLaw | None = None
+    model: pin.Model,
+    urdf: str | Path,
+    friction_law: FrictionLaw | None = None,
+    model_error_psd: float | None = None,
 ) -> Path | None:
-    """Write ``model``'s nonzero armature, and ``friction_law`` when given and more than the
-    URDF's tags say (:attr:`~pinobs.model.friction.FrictionLaw.is_urdf`), beside ``urdf``;
-    returns the file, or ``None`` (and a stale sidecar from an earlier write removed) when
-    there is nothing to write."""
+    """Write ``model``'s nonzero armature, ``friction_law`` when given and more than the
+    URDF's tags say (:attr:`~pinobs.model.friction.FrictionLaw.is_urdf`) and
+    ``model_error_psd`` when given, beside ``urdf``; returns the file, or ``None`` (and a stale
+    sidecar from an earlier write removed) when there is nothing to write."""
     path = sidecar_path(urdf)
     laws: dict[str, Any] = {}
     if friction_law is not None and not friction_law.is_urdf:
@@ -85,12 +95,14 @@ def write_sidecar(
             entries[str(model.names[i])] = (
                 float(values[0]) if joint.nv == 1 else [float(x) for x in values]
             )
-    if not entries and not laws:
+    if not entries and not laws and model_error_psd is None:
         path.unlink(missing_ok=True)  # an earlier model's armature would be read back
         return None
     content: dict[str, Any] = {"format": SIDECAR_FORMAT, "version": 1, "armature": entries}
     if laws:
         content["friction"] = laws
+    if model_error_psd is not None:
+        content["model_error_psd"] = float(model_error_psd)
     text = json.dumps(content, indent=2)
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text + "\n", encoding="utf-8")
@@ -201,3 +213,23 @@ def read_friction_law(
         **{k: getattr(law, k) for k in law.__dataclass_fields__ if k != "law"},
         law=labels.pop() if len(labels) == 1 else "mixed",
     )
+
+
+def read_model_error_psd(urdf: str | Path) -> float | None:
+    """The ``"model_error_psd"`` [rad²/s³] of the sidecar beside ``urdf``, or ``None`` when
+    there is no sidecar or it has none.
+
+    Raises:
+        ModelFileError: the sidecar cannot be parsed, or its value is not a finite number > 0.
+    """
+    path = sidecar_path(urdf)
+    data = _read(path)
+    if data is None or "model_error_psd" not in data:
+        return None
+    x = data["model_error_psd"]
+    ok = isinstance(x, int | float) and not isinstance(x, bool)
+    if not ok or not math.isfinite(x) or x <= 0:
+        raise ModelFileError(
+            f"sidecar {str(path)!r}: model_error_psd {x!r} must be a finite number > 0 [rad²/s³]"
+        )
+    return float(x)

@@ -384,5 +384,6 @@ def write_urdf(robot: Robot, path: str | Path) -> str:
     tmp = out.with_name(out.name + ".tmp")
     tree.write(tmp, encoding="utf-8", xml_declaration=True)
     tmp.replace(out)
-    write_sidecar(robot.model, out, robot.friction_law if robot.friction else None)
+    law = robot.friction_law if robot.friction else None
+    write_sidecar(robot.model, out, law, robot.model_error_psd)
     return str(out)

@@ -23,10 +23,12 @@ from pinobs.model.sampling import MISSING_PERIODS
 from pinobs.tolerances import GAP_PERIODS, MAX_PLAUSIBLE_PERIOD, MIN_PLAUSIBLE_PERIOD
 
 __all__ = [
+    "MODEL_ACCEL_PSD",
     "gap_substeps",
     "interval_substeps",
     "lost_torque",
     "median_period",
+    "model_accel_psd",
     "positive",
     "propagate_gap",
     "time_unit_warning",
@@ -57,6 +59,26 @@ def positive(
         bound = ">= 0" if allow_zero else "> 0"
         raise GainError(f"{name}={value!r} is out of range; give a finite number {bound}")
     return x
+
+
+#: The model-based observers' white-acceleration density [rad²/s³] on a robot that carries no
+#: model error of its own (:attr:`pinobs.model.Robot.model_error_psd` ``None``): the model
+#: trusted as exact.
+MODEL_ACCEL_PSD = 1e-8
+
+
+def model_accel_psd(robot: Any, accel_psd: float | None) -> float:
+    """The ``accel_psd`` [rad²/s³] a model-based observer uses: the one given, else the robot's
+    own model error (:attr:`~pinobs.model.Robot.model_error_psd`, measured by
+    ``pinobs.identify``), else :data:`MODEL_ACCEL_PSD`; checked > 0.
+
+    Raises:
+        GainError: a given value that is not a finite number > 0.
+    """
+    if accel_psd is None:
+        own = getattr(robot, "model_error_psd", None)
+        accel_psd = MODEL_ACCEL_PSD if own is None else own
+    return positive("accel_psd", accel_psd)  # type: ignore[return-value]
 
 
 def gap_substeps(dt: float, period: float | None, *, span: float = math.inf) -> int:

@@ -88,7 +88,8 @@ no one-BLAS-thread limit; no cache on the sample interval), equal to the NumPy s
 rounding (3e-16 rad/s measured, tested to 1e-12).
 
 Defaults: ``R = rate/σ²`` (so the sampled measurement variance is σ², with
-σ = ``noise_std`` or 1e-6 rad), ``accel_psd`` = 1e-8 rad²/s³ (as the EKF),
+σ = ``noise_std`` or 1e-6 rad), ``accel_psd`` = the robot's
+model-error density when it has one, else 1e-8 rad²/s³ (as the EKF),
 ``q0_std`` = 0.1 rad, ``v0_std`` = 1 rad/s, the differentiator with
 ``highgain``'s defaults at ``diff_order`` = 4 (its lag enters ``F``; the
 paper's order 2 lags 2ÿ/γ).
@@ -114,6 +115,7 @@ from pinobs.observers.base import (
     positive,
     register,
 )
+from pinobs.observers.checks import model_accel_psd
 from pinobs.observers.differentiators import HighGainDifferentiator
 from pinobs.observers.ekf import ad_matrix, double_integrator_noise
 from pinobs.observers.fused import loaded
@@ -185,7 +187,8 @@ class IbrirKalman(Observer[_State]):
         robot: the model (``M``, ``C``, ``g`` from Pinocchio).
         form: ``"practical"`` (with process noise) or ``"paper"`` (as printed).
         output_weight: R [1/(rad²·s)]; default ``rate/σ²``.
-        accel_psd: process noise density [rad²/s³] (practical form only).
+        accel_psd: process noise density [rad²/s³] (practical form only); ``None``: the
+            robot's :attr:`~pinobs.Robot.model_error_psd`, else 1e-8 (as ``ekf``).
         viscous: viscous friction ``C_f`` [N·m·s/rad], a number or one per velocity.
         q0_std: initial configuration standard deviation [rad] (``P(0)``).
         v0_std: initial velocity standard deviation [rad/s] (``P(0)``).
@@ -214,7 +217,7 @@ class IbrirKalman(Observer[_State]):
         *,
         form: str = "practical",
         output_weight: float | None = None,
-        accel_psd: float = 1e-8,
+        accel_psd: float | None = None,
         viscous: float | Vector = 0.0,
         q0_std: float = 0.1,
         v0_std: float = 1.0,
@@ -233,7 +236,11 @@ class IbrirKalman(Observer[_State]):
         if R is None:
             R = (self.rate or _DEFAULT_RATE) / sigma**2
         self.gains = IbrirKalmanGains(
-            form=form, output_weight=R, accel_psd=accel_psd, q0_std=q0_std, v0_std=v0_std
+            form=form,
+            output_weight=R,
+            accel_psd=model_accel_psd(robot, accel_psd),
+            q0_std=q0_std,
+            v0_std=v0_std,
         )
         cf = np.broadcast_to(np.asarray(viscous, dtype=float), (self.robot.nv,)).copy()
         if not np.all(np.isfinite(cf)) or np.any(cf < 0):

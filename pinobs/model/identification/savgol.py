@@ -13,7 +13,7 @@ from pinobs.errors import IdentificationError
 from pinobs.model.robot import Robot, Vector
 from pinobs.model.sampling import is_uniform
 
-__all__ = ["convolve_nearest", "savgol_coefficients", "smooth_path"]
+__all__ = ["convolve_nearest", "local_polynomial", "savgol_coefficients", "smooth_path"]
 
 
 def smooth_path(
@@ -79,6 +79,15 @@ def _local_polynomial(
     through the rows within ``reach + slack`` [s] of the row (near the ends, of the point
     ``reach`` from the end), and its derivative: the Savitzky–Golay fit on uneven times.
     The degree is lowered to fit the window with the fewest rows."""
+    u_s, v, _ = local_polynomial(t, u, reach, order, slack)
+    return u_s, v
+
+
+def local_polynomial(
+    t: Vector, u: Vector, reach: float, order: int, slack: float
+) -> tuple[Vector, Vector, Vector]:
+    """``(û, u̇, ü)``: :func:`_local_polynomial`'s fit and its second derivative (``0`` where
+    the degree is below 2)."""
     n = t.shape[0]
     radius = reach + slack
     centre = np.clip(t, t[0] + reach, t[-1] - reach)
@@ -94,6 +103,7 @@ def _local_polynomial(
     order = min(order, fewest - 1)  # a window the drops left with few rows: a lower degree
     u_s = np.empty_like(u)
     v = np.empty_like(u)
+    acc = np.zeros_like(u)
     for a in range(0, n, 512):  # in blocks: (rows, span, order + 1) per block
         k = np.arange(a, min(a + 512, n))
         idx = lo[k, None] + np.arange(span)[None, :]
@@ -108,7 +118,9 @@ def _local_polynomial(
         rhs = design_t @ u[idx]
         fit = np.linalg.solve(gram, rhs)  # the coefficients; the first two: value and slope
         u_s[k], v[k] = fit[:, 0], fit[:, 1] / radius
-    return u_s, v
+        if order >= 2:
+            acc[k] = 2.0 * fit[:, 2] / radius**2
+    return u_s, v, acc
 
 
 @functools.lru_cache(maxsize=16)

@@ -106,10 +106,8 @@ position noise σ = ``noise_std`` (1e-6 rad if not given): the DARE gain
 ``(k₁, k₂)`` at ``H = 1/rate`` is inverted through the formulas above
 (:func:`gains_from_noise`), so the discrete observer reproduces that filter's
 gain exactly at the nominal rate.  ``accel_psd`` defaults to 1e-8 rad²/s³ (trust an exact
-model), also on a robot that carries its own model-error density
-(:attr:`pinobs.Robot.model_error_psd`, which ``ekf`` and ``kalman`` take): TIAGo's identified
-model has 28.1 rad²/s³, whose DARE gain at σ = 5.2e-6 rad and 100 Hz has real error poles
-(−6e-6, −0.268) that no ``(alpha, beta)`` reproduces (GainError; ``benchmarks/real_logs.py``); at
+model), not :attr:`pinobs.Robot.model_error_psd` (``ekf``'s): no ``(alpha, beta)`` has the
+DARE gain of TIAGo's identified 28.1 rad²/s³ at σ = 5.2e-6 rad, 100 Hz (real error poles); at
 1 kHz and σ = 1e-4 rad that gives α = 4.0 /s, β = 31.6 /s² (slow transients,
 lowest noise); raise it when the model is uncertain or transients matter
 (1e-4: α = 40, β = 3162).  Else ``alpha = 60``, ``beta = 900`` [1/s, 1/s²].
@@ -463,8 +461,7 @@ class RiemannianObserver(Observer[_State]):
         gain_b: the same for ``B`` [1/s²]; replaces ``beta``.
         gain_c: the same for ``C``; replaces ``curvature_gain``.
         accel_psd: white-acceleration density [rad²/s³] of the gain rule used
-            when ``alpha``/``beta`` are not given and ``rate`` is; ``None``: 1e-8 (module
-            docstring: not the robot's own density, as ``ekf``'s).
+            when ``alpha``/``beta`` are not given and ``rate`` is; ``None``: 1e-8.
         gain_schedule: ``"riccati"`` (time-varying Kalman gains from the rule's
             double-integrator model) or ``"steady"`` (its steady state); only
             with the rule (module docstring).
@@ -502,9 +499,8 @@ class RiemannianObserver(Observer[_State]):
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
-        accel_psd = MODEL_ACCEL_PSD if accel_psd is None else accel_psd  # (not the robot's)
-        positive("accel_psd", accel_psd)
-        self.accel_psd = float(accel_psd)
+        psd = MODEL_ACCEL_PSD if accel_psd is None else accel_psd  # (not the robot's: above)
+        self.accel_psd = float(positive("accel_psd", psd))  # type: ignore[arg-type]
         if gain_schedule not in ("riccati", "steady"):
             raise GainError(f"gain_schedule={gain_schedule!r}; give 'riccati' or 'steady'")
         positive("q0_std", q0_std)

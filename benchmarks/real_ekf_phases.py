@@ -356,6 +356,17 @@ def findings(res: dict[str, Any]) -> list[str]:
     ]
 
 
+def _log_table(res: dict[str, Any], title: str, cell: Any) -> list[str]:
+    """A table of one row per log and one column per observer label, ``cell(r, o, k)`` each
+    (``r`` the log's results, ``o`` its observers', ``k`` the label), after ``title``."""
+    rows = [
+        f"| {n} | " + " | ".join(cell(r, r["observers"], k) for k in res["labels"]) + " |"
+        for n, r in res["logs"].items()
+    ]
+    head = "| log | " + " | ".join(res["labels"]) + " |"
+    return [title, "", head, "|---|" + "---|" * len(res["labels"]), *rows, ""]
+
+
 def summary(res: dict[str, Any]) -> list[str]:
     """The first lines and the table over all joints."""
     L = [
@@ -384,29 +395,18 @@ def summary(res: dict[str, Any]) -> list[str]:
         + ". *K0.01*, *K0.001*: Karnopp's stick-slip with Δv = 0.01, 0.001 rad/s; *auto*: "
         '`disturbance_psd="auto"` (the learned torque offset), alone.',
         "",
-        "### Velocity RMS over all joints [rad/s] (over kf's, re-initialisations)",
-        "",
-        "| log | " + " | ".join(res["labels"]) + " |",
-        "|---|" + "---|" * len(res["labels"]),
+        *_log_table(
+            res,
+            "### Velocity RMS over all joints [rad/s] (over kf's, re-initialisations)",
+            lambda r, o, k: f"{_f(o[k]['rms'])} ({_f(_ratio(r, k), 2)}×, {o[k]['reinit']})",
+        ),
+        *_log_table(
+            res,
+            "Share of the squared velocity error (all joints) by phase, rest / slow / moving:",
+            lambda r, o, k: " / ".join(f"{100 * x:.0f}" for x in o[k]["pooled_share"]) + " %",
+        ),
     ]
-    for n, r in res["logs"].items():
-        o = r["observers"]
-        cells = (
-            f"{_f(o[k]['rms'])} ({_f(_ratio(r, k), 2)}×, {o[k]['reinit']})" for k in res["labels"]
-        )
-        L.append(f"| {n} | " + " | ".join(cells) + " |")
-    L += [
-        "",
-        "Share of the squared velocity error (all joints) by phase, rest / slow / moving:",
-        "",
-        "| log | " + " | ".join(res["labels"]) + " |",
-        "|---|" + "---|" * len(res["labels"]),
-    ]
-    for n, r in res["logs"].items():
-        o = r["observers"]
-        cells = (" / ".join(f"{100 * x:.0f}" for x in o[k]["pooled_share"]) for k in res["labels"])
-        L.append(f"| {n} | " + " | ".join(f"{c} %" for c in cells) + " |")
-    return [*L, ""]
+    return L
 
 
 def _joint_table(title: str, head: str, rows: list[tuple[str, str, list[str]]]) -> list[str]:

@@ -412,15 +412,7 @@ def markdown(res: dict[str, Any], seconds: float) -> str:
 
 
 def main() -> int:
-    if rd.data_root() is None:
-        print("real data absent: skipped")
-        return 0
-    t0 = time.perf_counter()
-    res = run()
-    md = markdown(res, time.perf_counter() - t0)
-    print(md)
-    Path(__file__).with_suffix(".md").write_text(md, encoding="utf-8")
-    return 0
+    return rd.report(__file__, run, markdown)
 
 
 if __name__ == "__main__":

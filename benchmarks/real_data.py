@@ -37,10 +37,13 @@ from __future__ import annotations
 
 import os
 import re
+import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -100,6 +103,19 @@ class RealLog:
     velocity: np.ndarray | None
     sources: tuple[Path, ...]
     notes: tuple[str, ...] = field(default=())
+
+
+def report(script: str, run: Callable[[], Any], markdown: Callable[[Any, float], str]) -> int:
+    """A real-data benchmark's ``main``: ``run()``, its ``markdown(result, seconds)`` printed
+    and written beside ``script`` (``.md``); nothing where the data is absent."""
+    if data_root() is None:
+        print("real data absent: skipped")
+        return 0
+    t0 = time.perf_counter()
+    md = markdown(run(), time.perf_counter() - t0)
+    print(md)
+    Path(script).with_suffix(".md").write_text(md, encoding="utf-8")
+    return 0
 
 
 def data_root() -> Path | None:

@@ -110,27 +110,6 @@ def test_ekf_and_background_adaptive_run_without_scipy_linalg_in_the_loops_proce
     assert last_line(code) == "False"
 
 
-def test_adaptive_imports_scipy_linalg_at_its_first_window_not_when_made() -> None:
-    """Issue 39: ``adaptive`` learning synchronously imports ``scipy.linalg`` (its windows'
-    and solves' least squares and QR; 0.15 s of CPU, and SciPy's OpenBLAS spinning on another
-    core) in the update that completes its first window (``t`` = 0.201 s on a UR5 at 1 kHz),
-    not in ``make_observer``, ``reset`` or the first update; the BLAS libraries are scanned
-    again then, so later updates limit SciPy's OpenBLAS too."""
-    code = (
-        "import sys, numpy as np, pinobs\n"
-        "from pinobs.observers import blas\n"
-        "robot = pinobs.load('ur5')\n"
-        "obs = pinobs.make_observer('adaptive', robot, rate=1000.0, noise_std=1e-4)\n"
-        "q0 = robot.neutral(); obs.reset(0.0, q0)\n"
-        "seen = []\n"
-        "for k in range(1, 250):\n"
-        "    obs.update(k * 1e-3, q0 + 0.1 * np.sin(k * 1e-2 + np.arange(robot.nv)))\n"
-        "    seen.append('scipy.linalg' in sys.modules)\n"
-        "print(seen.index(True) + 1, True in blas._FOUND)\n"  # (scanned with it loaded)
-    )
-    assert last_line(code).split() == ["201", "True"]
-
-
 def test_warm_linear_algebra_imports_lapack_only_past_the_compiled_kernels() -> None:
     """A filter's constructor loads what its updates call: the compiled Joseph update for
     ``nv`` ≤ :data:`~pinobs.observers.linalg.KERNEL_MAX_NV`, LAPACK's ``dposv`` above."""

@@ -132,11 +132,8 @@ a prediction that is not kept (under a known latency) teaches nothing.
    output equals the synchronous one (tested to 1e-12: it is bit-identical);
    fed as fast as it runs, a UR5 with a payload made the same number of
    solves or one fewer, its velocity RMS within ±10 % of the synchronous
-   one.  ``scipy.linalg`` (least squares, QR) is imported by the update completing the
-   first window, not by ``make_observer``: UR5 make + first update 0.59 → 0.34 s of process
-   CPU (issue 39: ≤ 0.5 s), that update (``t`` = 0.201 s) 0.12–0.20 s of CPU, not 1.5 ms
-   (fresh processes, load 8–9); in the background the worker alone imports it (its start
-   not waited for), as a live loop learns (:data:`pinobs.evaluation.live.LIVE_OPTIONS`).
+   one.  ``scipy.linalg`` is imported when the observer is made, by the worker only in the
+   background (whose start ``make_observer`` does not wait for; the smoothing is NumPy's).
 
 5. **A pure step** (issue 37).  What it learned lives in its state (``AdaptiveState.model``: the
    learned model and the filter run on it, the offset, the regime, the restarts; the
@@ -186,6 +183,7 @@ from pinobs.observers.adaptive_learner import (
     Learner,
     check_options,
     learning_worker,
+    load_learning,
 )
 from pinobs.observers.adaptive_state import AdaptiveModel as _Model
 from pinobs.observers.adaptive_state import AdaptiveState as _State
@@ -343,11 +341,13 @@ class AdaptiveEKF(Observer["_State"]):
         self._idle = _Model(self.core, self._nominal, None, zero, "warmup", zero, 0, False, 0)
 
     def _start_learning(self, learning: str) -> None:
-        """The learner; in the background its worker process started now, not waited for
-        (:func:`learning_worker`; it ends when the observer is dropped); synchronous, it
-        imports SciPy at its first window (:func:`load_learning`; module docstring, 4)."""
+        """The learner: its SciPy modules imported now (synchronous, :func:`load_learning`), or
+        its worker process started now, not waited for (:func:`learning_worker`; it ends when
+        the observer is dropped)."""
         self._worker: Worker | None = None
-        if learning != "sync":
+        if learning == "sync":
+            load_learning()
+        else:
             friction, offset = (bool(self._learn_options[k]) for k in ("friction", "offset"))
             self._worker = learning_worker(self._nominal, friction, offset)
         self._learner = self._new_learner()  # read before a reset (each reset makes its own)
@@ -568,7 +568,7 @@ class AdaptiveEKF(Observer["_State"]):
     def _warm(self, state: _State, q0: Vector) -> None:
         """One step from ``state`` to ``q0``, thrown away: the first ``update`` then runs
         on paths already taken (NumPy's and the filters' first calls, their caches: the
-        kernels are compiled or loaded when the observer is made; SciPy at the first window).
+        kernels are compiled or loaded when the observer is made, SciPy imported then too).
         UR5 in a loop paced at 1 kHz, first update 820–1065 µs without it, 295–406 µs with it
         (median update 200 µs).  ``step`` is pure: nothing to put back."""
         h = 1.0 / self.rate if self.rate else 1e-3

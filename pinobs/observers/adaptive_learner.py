@@ -231,7 +231,6 @@ class Learner:
         process (background); ``solve``: ``(explained, current model)`` of a solve, ``None``
         for a window."""
         if self.worker is None:
-            load_learning()  # (SciPy at the first window, not when the observer is made)
             self.pending.append((_Done(getattr(self.identifier, job)(*args)), solve))
         else:
             windows = self.identifier.rows.maxlen or 1
@@ -628,18 +627,17 @@ def check_options(**options: float) -> None:
 
 
 def load_learning() -> None:
-    """Import what the learner's windows and solves import (SciPy's least squares and QR:
-    ``scipy.linalg``, 0.15–0.28 s of process CPU by the machine's load; over half of it is
-    SciPy's array-API layer, which imports every NumPy submodule, ``numpy.f2py`` and
-    ``numpy.testing`` among them; its OpenBLAS's worker thread then spins about 0.1 s of CPU
-    on another core) and scan the BLAS libraries with ``scipy.linalg`` loaded
-    (:func:`~pinobs.observers.blas.blas_libraries`), so that the updates after it limit
-    SciPy's OpenBLAS too.  Called before each job of a synchronous learner (a dictionary
-    look-up once done): the first window's update pays the import, not ``make_observer``
-    (issue 39: ``adaptive``'s make + first update, 0.53 s of process CPU with it on a UR5);
-    the worker process of ``learning="background"`` calls it as it starts.  The smoothing
-    imports neither ``scipy.signal`` nor ``scipy.ndimage`` (0.5 s CPU):
-    :func:`~pinobs.model.identification.convolve_nearest` does the same arithmetic in
+    """Import what the learner imports when it first runs (SciPy's QR and least squares:
+    ``scipy.linalg``, 0.15–0.28 s of process CPU by the machine's load, the largest part of
+    ``adaptive``'s construction with numba's import; numba's first kernel no longer imports
+    it, :mod:`~pinobs.observers.kernel_cache`.  Over half of it is SciPy's array-API layer,
+    which imports every NumPy submodule, ``numpy.f2py`` and ``numpy.testing`` among them;
+    about 25 ms is its OpenBLAS's worker thread spinning as it loads) and scan the BLAS
+    libraries with ``scipy.linalg`` loaded (:func:`~pinobs.observers.blas.blas_libraries`):
+    now, at construction, not in the loop (the first window's update would pay it).  The
+    smoothing no longer imports ``scipy.signal`` and ``scipy.ndimage`` (0.5 s CPU; the first
+    window's update took 494 ms on a UR5 importing them, then the observer's construction
+    did): :func:`~pinobs.model.identification.convolve_nearest` does the same arithmetic in
     NumPy."""
     import scipy.linalg  # noqa: F401
 

@@ -17,8 +17,8 @@ processes (as a user's program starts), each timing its steps one by one:
   ``liegroup``'s second update imported ``scipy.linalg``, 0.2–0.37 s);
 * ``to 0.25 s max`` — the slowest of the updates after those, to ``t`` = 0.25 s (250 updates
   at 1 kHz): wall ms (the main thread's CPU ms) and the update (``@ k``).  ``adaptive``'s first
-  identification window completes at ``t`` = 0.201 s: learning synchronously, that update
-  imports ``scipy.linalg`` (no longer ``make_observer``);
+  identification window completes at ``t`` = 0.201 s: a stall moved out of ``make_observer``
+  into the loop (an import, a kernel load) shows here;
 * ``make + first`` — ``make + reset + first``: issue 39's target ≤ 0.5 s;
 * ``main thread`` — its CPU time on the main thread alone (``time.thread_time``): the rest
   of the process's CPU time is OpenBLAS's worker thread spinning (about 2²⁸ cycles, before

@@ -50,7 +50,8 @@ eqs. (17)–(18); Anisi–Hamberg eq. (6) with ``A = 2α``, ``B = β``)::
 Sampled data (MATH §7).  Between samples the observer follows the model:
 one RKMK4 step (:func:`pinobs.model.dynamics_rk4`) of ``q̂̇ = v̂``,
 ``v̂̇ = M⁻¹(τ − c − g)`` over the interval ``H`` since the last correction
-(4 ABA calls).  At the sample instant the correction terms act, integrated
+(4 ABA calls; under joint friction, stiff near ``v = 0``, in as many substeps as
+:func:`~pinobs.model.integrators.friction_substeps` asks, as the ``ekf``'s).  At the sample instant the correction terms act, integrated
 over ``H``; every one of them vanishes with ``ζ``, so a start on the truth
 stays on it (measured in the tests: ≤ 1e-9 rad/s).  The linear part of the
 correction is integrated exactly: with ``ζ⁻`` the predicted error,
@@ -138,7 +139,7 @@ import numpy as np
 
 from pinobs.errors import GainError, PinobsWarning
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.model.integrators import dynamics_calls
+from pinobs.model.integrators import dynamics_calls, friction_substeps
 from pinobs.observers.base import GateState, Observer, Vector, gate_threshold, positive, register
 from pinobs.observers.checks import model_accel_psd
 from pinobs.observers.fused import (
@@ -540,7 +541,7 @@ class RiemannianObserver(Observer[_State]):
         self._lie_correction = loaded(lie_correction_kernel) if lie_compiled else None
         # the Jacobi operator (the same bits), its calls on the correction's pin.Data
         self._scratch_jacobi = JacobiCalls(robot, calls.data) if compiled and calls else None
-        self.uses_blas = not compiled
+        self.uses_blas = not compiled or robot.has_friction  # (friction: dynamics_rk4's, inv)
         fast = riccati and compiled and self._scratch_calls is not None  # (fused.RiccatiStep)
         step = RiccatiStep if fast else LieRiccatiStep if lie_fast else None
         self._scratch_fast: Any = None if step is None else step(self, _State)
@@ -577,7 +578,7 @@ class RiemannianObserver(Observer[_State]):
         if self._scratch_lie is not None:  # Lie-group joints: compiled between the calls
             return (*self._scratch_lie.step(state.q, state.v, tau, dt), False)
         if self._scratch_calls is None:
-            return (*dynamics_rk4(self.robot, state.q, state.v, tau, dt), False)
+            return (*self._model_step(state.q, state.v, tau, dt), False)
         # the same RK4 step (the same bits), compiled around the four ABA calls
         (aba, _, _), w, start, stage = self._scratch_calls
         start(w, state.q, state.v, aba(state.q, state.v, tau), dt)
@@ -585,6 +586,20 @@ class RiemannianObserver(Observer[_State]):
         for k in (2, 3, 4):
             stage(w, aba(q, v, tau), k, dt)
         return q, v, True
+
+    def _model_step(self, q: Vector, v: Vector, tau: Vector, dt: float) -> tuple[Vector, Vector]:
+        """:func:`~pinobs.model.dynamics_rk4` over ``dt`` [s]; under joint friction (stiff near
+        ``v = 0``) in :func:`~pinobs.model.integrators.friction_substeps` substeps, as the
+        ``ekf``'s prediction: one RK4 step is stable only for ``λh < 2.785``."""
+        r = self.robot
+        if not (isinstance(r, Robot) and r.has_friction):
+            return dynamics_rk4(r, q, v, tau, dt)
+        acc = r.forward_dynamics(q, v, tau)  # (the first stage's, the same bits)
+        n = friction_substeps(r, v, acc, np.diag(np.linalg.inv(r.mass_matrix(q))), dt)
+        q, v = dynamics_rk4(r, q, v, tau, dt / n, acc0=acc)
+        for _ in range(n - 1):
+            q, v = dynamics_rk4(r, q, v, tau, dt / n)
+        return q, v
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         fast = self._scratch_fast  # the same in one call (a vector space's: with a sample)

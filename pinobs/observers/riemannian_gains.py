@@ -7,7 +7,8 @@ docstring, MATH §7).  The prediction maps the linearised error ``(ζ, ε)`` by
 
     k₁ = 1 − e^{−2αh},     k₂ = (1 + e^{−2αh} − tr e^{Ah}) / h
 
-(determinant ``1 − k₁ = e^{−2αh}``, trace ``2 − k₁ − k₂h = tr e^{Ah}``).
+(determinant ``1 − k₁ = e^{−2αh}``, trace ``2 − k₁ − k₂h = tr e^{Ah}``,
+``A = [[−2α, 1], [−β, 0]]`` the continuous error dynamics).
 
 **The rule** (:func:`steady_gains`).  The steady-state Kalman gain ``K`` of one double
 integrator per tangent direction, white acceleration of density ψ = ``accel_psd``

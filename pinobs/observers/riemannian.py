@@ -50,7 +50,8 @@ eqs. (17)–(18); Anisi–Hamberg eq. (6) with ``A = 2α``, ``B = β``)::
 Sampled data (MATH §7).  Between samples the observer follows the model:
 one RKMK4 step (:func:`pinobs.model.dynamics_rk4`) of ``q̂̇ = v̂``,
 ``v̂̇ = M⁻¹(τ − c − g)`` over the interval ``H`` since the last correction
-(4 ABA calls).  At the sample instant the correction terms act, integrated
+(4 ABA calls; under joint friction, stiff near ``v = 0``, in as many substeps as
+:func:`~pinobs.model.integrators.friction_substeps` asks, as the ``ekf``'s).  At the sample instant the correction terms act, integrated
 over ``H``; every one of them vanishes with ``ζ``, so a start on the truth
 stays on it (measured in the tests: ≤ 1e-9 rad/s).  The linear part of the
 correction is integrated exactly: with ``ζ⁻`` the predicted error,
@@ -98,19 +99,21 @@ compiled products, the same bits): with constant gains the update makes no BLAS 
 operator counted at its amortised share).  Measured on a UR5 at 1 kHz:
 see the benchmark's scaling table (README).
 
-Default gains (rule).  Given ``alpha`` and ``beta``: used as given.  Else,
-with ``rate`` given, the gains are those of the steady-state Kalman filter of
-the linearised error dynamics, one double integrator per tangent direction
-with white acceleration of density ``accel_psd`` [rad²/s³] (model error) and
-position noise σ = ``noise_std`` (1e-6 rad if not given): the DARE gain
-``(k₁, k₂)`` at ``H = 1/rate`` is inverted through the formulas above
-(:func:`gains_from_noise`), so the discrete observer reproduces that filter's
-gain exactly at the nominal rate.  ``accel_psd`` defaults to 1e-8 rad²/s³ (trust an exact
-model), not :attr:`pinobs.Robot.model_error_psd` (``ekf``'s): no ``(alpha, beta)`` has the
-DARE gain of TIAGo's identified 28.1 rad²/s³ at σ = 5.2e-6 rad, 100 Hz (real error poles); at
-1 kHz and σ = 1e-4 rad that gives α = 4.0 /s, β = 31.6 /s² (slow transients,
-lowest noise); raise it when the model is uncertain or transients matter
-(1e-4: α = 40, β = 3162).  Else ``alpha = 60``, ``beta = 900`` [1/s, 1/s²].
+Default gains (rule, :mod:`pinobs.observers.riemannian_gains`).  Given ``alpha`` and
+``beta``: used as given.  Else, with ``rate`` given, the gains are those of the steady-state
+Kalman filter of the linearised error dynamics, one double integrator per tangent direction
+with white acceleration of density ``accel_psd`` [rad²/s³] (model error) and position noise
+σ = ``noise_std`` (1e-6 rad if not given): the DARE gain ``(k₁, k₂)`` at ``H = 1/rate`` is
+inverted through the formulas above (:func:`steady_gains`), so the discrete observer
+reproduces that filter's gain exactly at the nominal rate.  Where the DARE's error poles are
+two negative reals (``ψH³/σ² ≫ 1``: no ``(α, β)`` has them) the rule takes the nearest gain
+the form reaches, the same ``k₁`` and ``k₂H = (1 + √(1 − k₁))²``: ``β = α² + (π/H)²``
+(``gain_rule`` ``"kalman-clipped"``; the Riccati schedule below still runs the Kalman gains
+themselves, ``"steady"`` runs the clipped ones and warns).  ``accel_psd`` defaults to the
+robot's own model error (:attr:`pinobs.Robot.model_error_psd`, measured by ``pinobs.identify``,
+as ``ekf``'s), else 1e-8 rad²/s³ (trust an exact model); at 1 kHz and σ = 1e-4 rad that gives
+α = 4.0 /s, β = 31.6 /s² (slow transients, lowest noise); raise it when the model is uncertain
+or transients matter (1e-4: α = 40, β = 3162).  Else ``alpha = 60``, ``beta = 900``.
 
 Gain schedule (``gain_schedule``, with the Kalman rule).  ``"riccati"``
 (default): the same double-integrator filter run in time, not only at its
@@ -127,17 +130,18 @@ matter.  ``"steady"``: the constant steady-state gains.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from pinobs.errors import GainError
+from pinobs.errors import GainError, PinobsWarning
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.model.integrators import dynamics_calls
+from pinobs.model.integrators import dynamics_calls, friction_substeps
 from pinobs.observers.base import GateState, Observer, Vector, gate_threshold, positive, register
-from pinobs.observers.checks import MODEL_ACCEL_PSD
+from pinobs.observers.checks import model_accel_psd
 from pinobs.observers.fused import (
     RiccatiStep,
     lie_correction_kernel,
@@ -149,7 +153,12 @@ from pinobs.observers.fused import (
 )
 from pinobs.observers.fused_jacobi import JacobiCalls, jacobi_kernel
 from pinobs.observers.fused_lie import LieRiccatiStep, LieRK4
-from pinobs.observers.gain_cache import solve_discrete_are
+from pinobs.observers.riemannian_gains import (
+    clipped_message,
+    discrete_gains,
+    gains_from_noise,
+    steady_gains,
+)
 from pinobs.tolerances import JACOBI_FD_STEP
 
 __all__ = [
@@ -161,6 +170,7 @@ __all__ = [
     "gains_from_noise",
     "jacobi_operator",
     "jacobi_term",
+    "steady_gains",
     "transport_first_order",
 ]
 
@@ -269,63 +279,6 @@ def anisi_hamberg_curvature_gain(kappa: float) -> GainFunction:
         return -2.0 * ratio  # −2κ⁻¹ · κ·ratio
 
     return gain
-
-
-def discrete_gains(alpha: float, beta: float, h: float) -> tuple[float, float]:
-    """``(k₁, k₂)``: correction gains whose discrete error poles are ``e^{s_i h}`` (module docstring).
-
-    ``alpha`` [1/s], ``beta`` [1/s²], ``h`` [s].  ``k₁`` is dimensionless,
-    ``k₂`` [1/s].
-    """
-    a = math.exp(-2.0 * alpha * h)
-    disc = alpha * alpha - beta
-    if disc >= 0.0:
-        r = math.sqrt(disc) * h
-        trace = math.exp(-alpha * h + r) + math.exp(-alpha * h - r)
-    else:
-        trace = 2.0 * math.exp(-alpha * h) * math.cos(math.sqrt(-disc) * h)
-    return 1.0 - a, (1.0 + a - trace) / h
-
-
-def gains_from_noise(rate: float, noise_std: float, accel_psd: float) -> tuple[float, float]:
-    """``(α, β)`` reproducing the steady-state Kalman gain of the error dynamics (module docstring).
-
-    Per tangent direction: ``x = (ζ, ε)``, ``x⁺ = [[1, h], [0, 1]] x + w``,
-    ``E[wwᵀ] = accel_psd·[[h³/3, h²/2], [h²/2, h]]``, measured ``ζ + n``,
-    ``E[n²] = noise_std²``, ``h = 1/rate``.  The DARE gain ``(k₁, k₂)`` is
-    converted with ``e^{−2αh} = 1 − k₁`` and the closed-loop poles
-    ``λ = e^{s h}``: ``β = s₁ s₂``.
-
-    Poles ``e^{s h}`` of ``ζ̈ = −2α ζ̇ − β ζ`` are positive or a conjugate pair: DARE
-    poles on the negative real axis (``q h³ ≫ σ²``) have no ``(α, β)`` and are refused.
-
-    Args:
-        rate: sample rate [Hz].
-        noise_std: position noise standard deviation [rad or m], > 0.
-        accel_psd: white-acceleration density [rad²/s³], > 0.
-
-    Raises:
-        GainError: the Kalman gain's error poles lie on the negative real axis.
-    """
-    h = 1.0 / rate
-    F = np.array([[1.0, h], [0.0, 1.0]])
-    Q = accel_psd * np.array([[h**3 / 3, h**2 / 2], [h**2 / 2, h]])
-    Hm = np.array([[1.0, 0.0]])
-    P = solve_discrete_are(F.T, Hm.T, Q, np.array([[noise_std**2]]))  # (cached: gain_cache)
-    K = P[:, 0] / (P[0, 0] + noise_std**2)  # gain on the predicted error
-    closed = (np.eye(2) - np.outer(K, [1.0, 0.0])) @ F
-    lam = np.linalg.eigvals(closed).astype(complex)
-    if np.any((np.abs(lam.imag) <= 1e-12 * np.abs(lam)) & (lam.real <= 0.0)):
-        raise GainError(
-            f"accel_psd={accel_psd:.3g} with noise_std={noise_std:.3g} at {rate:.4g} Hz asks for a "
-            f"Kalman gain whose error poles {np.round(lam.real, 6).tolist()} lie on the negative "
-            "real axis, which no (alpha, beta) reproduces: give the log's noise_std (the default "
-            "1e-6 assumes noise-free positions), lower accel_psd, or give alpha and beta"
-        )
-    s = np.log(lam) / h
-    alpha = -0.5 * float(np.real(s[0] + s[1]))
-    beta = float(np.real(s[0] * s[1]))
-    return alpha, beta
 
 
 # --------------------------------------------------------------- geometry
@@ -461,7 +414,8 @@ class RiemannianObserver(Observer[_State]):
         gain_b: the same for ``B`` [1/s²]; replaces ``beta``.
         gain_c: the same for ``C``; replaces ``curvature_gain``.
         accel_psd: white-acceleration density [rad²/s³] of the gain rule used
-            when ``alpha``/``beta`` are not given and ``rate`` is; ``None``: 1e-8.
+            when ``alpha``/``beta`` are not given and ``rate`` is; ``None``: the robot's
+            :attr:`~pinobs.Robot.model_error_psd`, else 1e-8.
         gain_schedule: ``"riccati"`` (time-varying Kalman gains from the rule's
             double-integrator model) or ``"steady"`` (its steady state); only
             with the rule (module docstring).
@@ -499,8 +453,7 @@ class RiemannianObserver(Observer[_State]):
     ) -> None:
         super().__init__(robot, rate=rate, noise_std=noise_std)
         self.outlier_probability, self._gate = gate_threshold(outlier_probability, robot.nv)
-        psd = MODEL_ACCEL_PSD if accel_psd is None else accel_psd  # (not the robot's: above)
-        self.accel_psd = float(positive("accel_psd", psd))  # type: ignore[arg-type]
+        self.accel_psd = model_accel_psd(robot, accel_psd)  # (as ekf's: module docstring)
         if gain_schedule not in ("riccati", "steady"):
             raise GainError(f"gain_schedule={gain_schedule!r}; give 'riccati' or 'steady'")
         positive("q0_std", q0_std)
@@ -521,9 +474,9 @@ class RiemannianObserver(Observer[_State]):
             )
         if alpha is None or beta is None:
             if self.rate is not None:
-                sigma = self.noise_std_used
-                alpha, beta = gains_from_noise(self.rate, sigma, self.accel_psd)  # type: ignore[arg-type]
-                self.gain_rule = "kalman"
+                rule = steady_gains(self.rate, self.noise_std_used, self.accel_psd)
+                alpha, beta = rule.alpha, rule.beta
+                self.gain_rule = "kalman-clipped" if rule.clipped else "kalman"
             else:
                 alpha, beta = _DEFAULT_ALPHA, _DEFAULT_BETA
                 self.gain_rule = "default"
@@ -542,9 +495,11 @@ class RiemannianObserver(Observer[_State]):
         # the Riccati schedule replaces (α, β) only when they came from the Kalman rule
         self.gain_schedule = (
             gain_schedule
-            if self.gain_rule == "kalman" and not self.gains.state_dependent
+            if self.gain_rule.startswith("kalman") and not self.gains.state_dependent
             else "steady"
         )
+        if self.gain_rule == "kalman-clipped" and self.gain_schedule == "steady":
+            warnings.warn(PinobsWarning(clipped_message(rule)), stacklevel=2)
         self._set_compiled_steps()
 
     @property
@@ -586,7 +541,7 @@ class RiemannianObserver(Observer[_State]):
         self._lie_correction = loaded(lie_correction_kernel) if lie_compiled else None
         # the Jacobi operator (the same bits), its calls on the correction's pin.Data
         self._scratch_jacobi = JacobiCalls(robot, calls.data) if compiled and calls else None
-        self.uses_blas = not compiled
+        self.uses_blas = not compiled or robot.has_friction  # (friction: dynamics_rk4's, inv)
         fast = riccati and compiled and self._scratch_calls is not None  # (fused.RiccatiStep)
         step = RiccatiStep if fast else LieRiccatiStep if lie_fast else None
         self._scratch_fast: Any = None if step is None else step(self, _State)
@@ -623,7 +578,7 @@ class RiemannianObserver(Observer[_State]):
         if self._scratch_lie is not None:  # Lie-group joints: compiled between the calls
             return (*self._scratch_lie.step(state.q, state.v, tau, dt), False)
         if self._scratch_calls is None:
-            return (*dynamics_rk4(self.robot, state.q, state.v, tau, dt), False)
+            return (*self._model_step(state.q, state.v, tau, dt), False)
         # the same RK4 step (the same bits), compiled around the four ABA calls
         (aba, _, _), w, start, stage = self._scratch_calls
         start(w, state.q, state.v, aba(state.q, state.v, tau), dt)
@@ -631,6 +586,20 @@ class RiemannianObserver(Observer[_State]):
         for k in (2, 3, 4):
             stage(w, aba(q, v, tau), k, dt)
         return q, v, True
+
+    def _model_step(self, q: Vector, v: Vector, tau: Vector, dt: float) -> tuple[Vector, Vector]:
+        """:func:`~pinobs.model.dynamics_rk4` over ``dt`` [s]; under joint friction (stiff near
+        ``v = 0``) in :func:`~pinobs.model.integrators.friction_substeps` substeps, as the
+        ``ekf``'s prediction: one RK4 step is stable only for ``λh < 2.785``."""
+        r = self.robot
+        if not (isinstance(r, Robot) and r.has_friction):
+            return dynamics_rk4(r, q, v, tau, dt)
+        acc = r.forward_dynamics(q, v, tau)  # (the first stage's, the same bits)
+        n = friction_substeps(r, v, acc, np.diag(np.linalg.inv(r.mass_matrix(q))), dt)
+        q, v = dynamics_rk4(r, q, v, tau, dt / n, acc0=acc)
+        for _ in range(n - 1):
+            q, v = dynamics_rk4(r, q, v, tau, dt / n)
+        return q, v
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         fast = self._scratch_fast  # the same in one call (a vector space's: with a sample)

@@ -1,7 +1,6 @@
 """The model-based observers' default model-error density: the robot's own
-(:attr:`pinobs.Robot.model_error_psd`, measured by ``pinobs.identify``) for ``ekf`` and
-``kalman``, else 1e-8; ``riemannian`` keeps 1e-8 (its gain map cannot take every density:
-its module docstring); an explicit ``accel_psd`` always wins."""
+(:attr:`pinobs.Robot.model_error_psd`, measured by ``pinobs.identify``) for ``ekf``,
+``kalman`` and ``riemannian``, else 1e-8; an explicit ``accel_psd`` always wins."""
 
 from __future__ import annotations
 
@@ -12,7 +11,7 @@ import pinobs
 from pinobs.observers import make_observer
 from pinobs.simulation import Sensor, simulate
 
-FAMILIES = ("ekf", "kalman")
+FAMILIES = ("ekf", "kalman", "riemannian")
 
 
 @pytest.mark.parametrize("name", FAMILIES)
@@ -26,16 +25,18 @@ def test_the_robots_own_density_is_the_default_and_an_explicit_one_wins(name: st
     assert given.options["accel_psd"] == 1e-5
 
 
-def test_riemannian_keeps_1e8_on_an_identified_robot_and_an_explicit_one_wins() -> None:
-    """TIAGo's identified density (28.1 rad²/s³ at σ 5.2e-6, 100 Hz) has no ``(alpha, beta)``:
-    the robot's own density would make ``make_observer`` raise."""
+def test_riemannian_takes_a_density_its_gain_form_cannot_reach_without_an_error() -> None:
+    """TIAGo's identified density (28.1 rad²/s³ at σ 5.2e-6, 100 Hz): the Kalman gain's
+    error poles are negative reals, out of the paper form's (alpha, beta) (it used to raise);
+    the Riccati schedule runs the Kalman gains, the reported (alpha, beta) are clipped."""
     robot = pinobs.load("ur5")
     robot.model_error_psd = 28.1
     opts = {"rate": 100.0, "noise_std": 5.24e-6}
-    assert make_observer("riemannian", robot, **opts).options["accel_psd"] == 1e-8
-    assert make_observer("riemannian", robot, accel_psd=1e-5, **opts).options["accel_psd"] == 1e-5
-    with pytest.raises(pinobs.PinobsError, match="no \\(alpha, beta\\)"):
-        make_observer("riemannian", robot, accel_psd=28.1, **opts)
+    ob = make_observer("riemannian", robot, **opts)
+    assert ob.options["accel_psd"] == 28.1 and ob.options["gain_rule"] == "kalman-clipped"
+    assert ob.options["gain_schedule"] == "riccati"
+    given = make_observer("riemannian", robot, accel_psd=1e-5, **opts)
+    assert given.options["accel_psd"] == 1e-5 and given.options["gain_rule"] == "kalman"
 
 
 def test_adaptive_keeps_its_own_densities_on_an_identified_robot() -> None:

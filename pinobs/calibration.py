@@ -233,7 +233,7 @@ def identify(
     the model and the torques explain the positions, in the hundreds under
     torque noise of a few percent, where the refinement may be worse than
     ``refine=()`` (module docstring, "Limitation: noisy torques"); ``report["observer_options"]``
-    is empty (``ekf``, ``kalman`` with their defaults take ``robot.model_error_psd``,
+    is empty (``ekf``, ``kalman``, ``riemannian`` with their defaults take ``robot.model_error_psd``,
     :func:`_with_model_error`).
 
     Raises:

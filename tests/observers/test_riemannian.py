@@ -449,6 +449,7 @@ def test_converges_from_a_perturbed_start_with_clipped_gains(name: str, schedule
     assert err[50:].max() < 1e-2 * err[0]
 
 
+@pytest.mark.slow  # (about 60 s: the truth in 40 substeps, the prediction in friction substeps)
 def test_coulomb_friction_in_the_model_keeps_the_accuracy() -> None:
     """Smoothed Coulomb friction in the model (and the truth) makes the prediction stiff near
     v = 0 (λh up to 55 on a Panda at 1 kHz): predicted in ``friction_substeps`` substeps as

@@ -67,7 +67,7 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    loss, so a model consistent only because it claims large errors earns no prior.
    Measured (``benchmarks/never_behind_weights.md``): the identified UR10e model, which
    carries its identification's error density as ``accel_psd``, passed the NIS test on
-   38–81 % of the steps of the 40–50 s logs while claiming 11–16× the ``kf``'s velocity
+   38–83 % of the steps of the 40–50 s logs while claiming 11–16× the ``kf``'s velocity
    variance; with the prior its weight flipped between ~0 and ~1 (mean 0.08–0.17,
    ``E[w²]`` 0.05–0.12), uncorrelated with which velocity was better, and ``ekf+nb+id``
    was 1.007–1.063× the ``kf`` on 15 of 19 UR10e logs; without it 0.94–1.00× on 18 (the

@@ -23,8 +23,11 @@ from pinobs.observers.neverbehind import (
     PRIOR,
     TRUSTED_PRIOR,
     NeverBehind,
+    claims_within_kf,
     clipped_log_chi2_mean,
+    kf_velocity_variance,
     match_density,
+    model_velocity_variance,
 )
 from pinobs.simulation import Sensor, simulate
 
@@ -139,6 +142,71 @@ def test_an_inconsistent_model_earns_no_prior() -> None:
             assert ob._state.nis > 10.0  # (measured: the band's top is ~1.1)
     late = t[1:] > 0.5
     np.testing.assert_array_equal(runs["default"][late], runs["data"][late])
+
+
+def _blend_after(family: str, seconds: float, **options: Any) -> NeverBehind:
+    """A blend of ``family`` fed ``seconds`` of an exact UR5 at 1 kHz, σ = 1e-4 (seed 3)."""
+    robot = pinobs.load("ur5")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = simulate(robot, {}, duration=seconds, sensor=Sensor(1000, 1e-4), seed=3)
+    t, q, tau = res.t[1:], res.q_meas[1:], res.tau[1:]
+    ob = make_observer(family, robot, rate=1000, noise_std=1e-4, never_behind=True, **options)
+    assert isinstance(ob, NeverBehind)
+    ob.reset(t[0], q[0], None, tau[0])
+    for k in range(1, t.size):
+        ob.update(t[k], q[k], tau[k])
+    return ob
+
+
+@pytest.mark.parametrize("jerk_psd", ["auto", 10.0])
+def test_kf_velocity_variance_is_its_own_covariance(jerk_psd: str | float) -> None:
+    """The kf's velocity variance read by the blend (module docstring, **Prior**): the
+    mixture's ``Σ_f w_fi (ĉ_fi P_f,vv + (v̂_fi − v̂ᵢ)²)`` of the auto bank (compiled, against
+    NumPy on the bank's views: the same to rounding), a fixed density's ``P_vv``."""
+    ob = _blend_after("ekf", 0.3, reference_options={"jerk_psd": jerk_psd})
+    kf = ob._state.kf
+    got = kf_velocity_variance(kf)
+    assert got is not None and got.shape == (ob.robot.nv,)
+    if jerk_psd == "auto":
+        b, w = kf.bank, kf.w
+        c = np.maximum(kf.A / kf.n, 1e-300)
+        mean = np.sum(w * b.v, axis=0)
+        want = np.sum(w * (c * b.P[:, 1, 1][:, None] + (b.v - mean) ** 2), axis=0)
+    else:
+        want = np.full(ob.robot.nv, kf.P[1, 1])
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=0.0)
+    assert np.all(got > 0.0)
+    p_m = model_velocity_variance(ob._state.model, ob.robot.nv)
+    assert p_m is not None
+    for scale in (1.0, 1e9):  # (an exact ekf claims ~1e-3 of the kf's; ×1e9, more)
+        m = ob._state.model._replace(P=ob._state.model.P * scale)
+        assert claims_within_kf(m, kf, ob.robot.nv) == bool(np.all(scale * p_m <= got))
+        assert claims_within_kf(m, kf, ob.robot.nv) == (scale == 1.0)
+
+
+def test_a_consistent_model_claiming_worse_velocities_than_the_kf_earns_no_prior() -> None:
+    """The prior is earned by a consistent model whose own velocity variance is at most the
+    kf's on every joint (module docstring, **Prior**): an exact ekf claims ~1e-3 of the kf's
+    (it earns it); the same state claiming 1e6 × its ``P`` does not (the identified UR10e
+    model claims 3–19× the kf's, consistent: ``benchmarks/never_behind_weights.md``); a
+    family with no covariance (riemannian) is judged by its NIS alone."""
+    ob = _blend_after("ekf", 0.3)
+    st = ob._state
+    nv = ob.robot.nv
+    p_m = model_velocity_variance(st.model, nv)
+    p_kf = kf_velocity_variance(st.kf)
+    assert p_m is not None and p_kf is not None
+    assert np.all(p_m < 0.01 * p_kf)
+    h = 1e-3
+    nis, prior = ob._earned_prior(1.0, st.model, st.kf, h)  # (ν̄ = 1: inside the band)
+    assert prior == TRUSTED_PRIOR
+    wide = st.model._replace(P=st.model.P * 1e6)
+    assert np.all(model_velocity_variance(wide, nv) > p_kf)  # type: ignore[operator]
+    assert ob._earned_prior(1.0, wide, st.kf, h) == (nis, PRIOR)
+    rm = _blend_after("riemannian", 0.05)
+    assert model_velocity_variance(rm._state.model, nv) is None
+    assert rm._earned_prior(1.0, rm._state.model, rm._state.kf, h)[1] == TRUSTED_PRIOR
 
 
 @pytest.mark.slow
@@ -303,7 +371,7 @@ class NumpyBlend(NeverBehind):
         s_m, s_k, c, d = state.s[0], state.s[1], state.c, state.d
         prior, nis = self.prior, state.nis
         if self._self_test and not raised:  # (the NIS test: NeverBehind's own, shared)
-            nis, prior = self._earned_prior(nis, m, dt)
+            nis, prior = self._earned_prior(nis, m, kf, dt)
         gated = self.reference.innovation(kf)[1] or self.reference.innovation(state.kf)[1]
         if not lost and q_meas is not None and not gated:  # (**Gated**: nor the next one)
             ahead = 0.0 if state.dt_prev <= 0 else 0.5 * dt * dt / state.dt_prev

@@ -737,6 +737,9 @@ class _LieFast:
             return transition_matrix(A, h)
         return blocks.transition(A, h, self.nv, self.rows)
 
+    # a lost filter overflows: its update says so (ObserverDiverged), numpy does not (the
+    # decorator's form: two Python calls less than a with statement's; issue 39)
+    @np.errstate(over="ignore", invalid="ignore")
     def step(
         self, ekf: ExtendedKalmanFilter, state: EKFState, dt: float, q_meas: Vector | None,
         tau: Vector,
@@ -746,20 +749,19 @@ class _LieFast:
         takes another way (``S`` not positive definite, ``K_q ≈ I``)."""
         b, r = self.blocks, ekf.gains.meas_std**2
         assert b is not None  # (the caller checked)
-        with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: update says so
-            q, v, P = b.predict(state.q, state.v, tau, dt, state.P, ekf.gains.accel_psd, r)
-            if q_meas is None:
-                gate = state.gate.predicted()
-                return state.moved(q, v, 0.5 * (P + P.T), gate, state.d, state.d_psd)
-            e = b.difference(q, q_meas)  # (robot.difference, bound: a Python call less)
-            dx, P_new, nis = b.correct(P, e, r)
-            if nis != nis:  # NaN (S, P⁻_qq's size, or K_q ≈ I: b.correct): correct's other ways
-                pred = state.moved(q, v, P.copy(), state.gate, state.d, state.d_psd)
-                return ekf.corrected(pred, q_meas, dt)
-            gate = state.gate.measured(nis, ekf._gate, self.nv)
-            if gate.gated:
-                return state.moved(q, v, 0.5 * (P + P.T), gate, state.d, state.d_psd)
-            q = b.rk4.integrate(q, dx[: self.nv])  # (robot.integrate, bound)
-            # state.moved's tuple, built here (a Python call less)
-            return _new_tuple(EKFState, (q, v + dx[self.nv :], P_new, state.d, state.d_psd,
-                                         gate, state.auto, state.psd_scale))  # fmt: skip
+        q, v, P = b.predict(state.q, state.v, tau, dt, state.P, ekf.gains.accel_psd, r)
+        if q_meas is None:  # (v and P: b's working memory, copied into the state)
+            gate = state.gate.predicted()
+            return state.moved(q, v.copy(), 0.5 * (P + P.T), gate, state.d, state.d_psd)
+        e = b.difference(q, q_meas)  # (robot.difference, bound: a Python call less)
+        dx, P_new, nis, v_new = b.correct(P, e, r, v)
+        if nis != nis:  # NaN (S, P⁻_qq's size, or K_q ≈ I: b.correct): correct's other ways
+            pred = state.moved(q, v.copy(), P.copy(), state.gate, state.d, state.d_psd)
+            return ekf.corrected(pred, q_meas, dt)
+        gate = state.gate.measured(nis, ekf._gate, self.nv)
+        if gate.gated:
+            return state.moved(q, v.copy(), 0.5 * (P + P.T), gate, state.d, state.d_psd)
+        q = b.rk4.integrate(q, dx[: self.nv])  # (robot.integrate, bound)
+        # state.moved's tuple, built here (a Python call less); v⁺ = v⁻ + dx_v by b.correct
+        return _new_tuple(EKFState, (q, v_new, P_new, state.d, state.d_psd, gate, state.auto,
+                                     state.psd_scale))  # fmt: skip

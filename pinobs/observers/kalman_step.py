@@ -25,7 +25,11 @@ false.  The same equations; the bits of the RK4 are those of the stacked ``c.dot
 products (OpenBLAS's ``gemm``, as :func:`~pinobs.model.dynamics_rk4` and ``ekf``) where the
 NumPy step took ``c[1].dot(b)`` (``gemv``, whose order of summation depends on the CPU's
 kernel), and the step without a sample takes ``F`` by the kernel's Cholesky loops where it
-took LAPACK's: equal to the NumPy step to rounding (tested to 1e-12).
+took LAPACK's: equal to the NumPy step to rounding (tested to 1e-12).  The kernels are called
+without numba's dispatcher (:meth:`~pinobs.observers.linalg.LazyKernel.unchecked`) where their
+arrays are the step's own: the stages always, the others where the state is the one the step
+returned last (its arrays, by identity) and the sample a float64 array of unit stride (the
+same bits, tested; UR5 in a paced 1 kHz loop 4.3 µs less an update, in-process A/B, load 6.4).
 """
 
 from __future__ import annotations
@@ -249,7 +253,8 @@ class KalmanStep:
         self._checked = (self.start, self.finish, self.correct, self.coast)
         # without numba's dispatcher (LazyKernel.unchecked; issue 39): the stages on the
         # work rows and aba's output, the others where the state's arrays are this step's own
-        # (_made: the (q, v, P, y_prev) it returned last, y_prev None unless a float64 copy)
+        # (_layout_cache: the (q, v, P, y_prev) it returned last, y_prev None unless a float64
+        # copy; a memo of the layout check, by identity: the bits are the dispatcher's either way)
         # and the sample a float64 array of unit stride; M and C: Pinocchio's views, checked
         self.stage = rk4_stage_kernel.unchecked()
         mc = self._scratch_mc
@@ -257,7 +262,7 @@ class KalmanStep:
         kernels = (start_kernel, finish_kernel, correct_kernel, coast_kernel)
         own = tuple(k.unchecked() for k in kernels)
         self._own = own if views else (self.start, self.finish, self.correct, self.coast)
-        self._made: tuple[Any, ...] = (None, None, None, None)
+        self._layout_cache: tuple[Any, ...] = (None, None, None, None)
         self._stride = (_F64.itemsize,)  # a contiguous sample's strides
         self.state_type = state_type
         self.general = one_blas_thread(type(observer).general_step)
@@ -283,9 +288,9 @@ class KalmanStep:
         q0, v0, P0 = state.q, state.v, state.P
         y0 = q0 if not measured or state.y_prev is None else state.y_prev
         y_end = q_meas if measured else y0
-        made = self._made  # the state's arrays and the sample as the unchecked kernels need
+        made = self._layout_cache  # the arrays the unchecked kernels may take (__init__)
         own = P0 is made[2] and q0 is made[0] and v0 is made[1] and (y0 is q0 or y0 is made[3])
-        plain = not measured or (q_meas.dtype is _F64 and q_meas.strides == self._stride)
+        plain = q_meas is None or (q_meas.dtype is _F64 and q_meas.strides == self._stride)
         start, finish, correct, coast = self._own if own and plain else self._checked
         vs = w[7]
         start(w, ys, q0, v0, aba(y0, v0, tau), dt, y0, y_end, measured)
@@ -303,7 +308,7 @@ class KalmanStep:
             if not coast(mc.M, mc.C, dt, P0, q3, q2, q1, P):
                 return self.general(kf, state, dt, q_meas, tau)
             gate, q, v = state.gate.predicted(), w[6].copy(), vs.copy()
-            self._made = (q, v, P, None)
+            self._layout_cache = (q, v, P, None)
             return _new_tuple(self.state_type, (q, v, P, None, None, gate))
         nv = ys.shape[1]
         q, v = np.empty(nv), np.empty(nv)
@@ -316,5 +321,5 @@ class KalmanStep:
             return self.step(kf, state, dt, None, tau)._replace(gate=gate)
         assert q_meas is not None  # (measured)
         y = q_meas.copy()
-        self._made = (q, v, P, y if plain else None)
+        self._layout_cache = (q, v, P, y if plain else None)
         return _new_tuple(self.state_type, (q, v, P, None, y, gate))

@@ -99,7 +99,14 @@ load 4.5; 8.6 µs, IQR 2.7–13.7, at load 3.4), go1 0.8 µs (IQR −4.3–2.8: 
 bits (another summation order inside BLAS): over 10 s at 1 kHz (σ = 1e-4, seeds 0 and 11, 5 %
 dropped samples in the second) the estimates move by at most 1.0e-13 rad/s on a talos (3.4e-15
 of the largest velocity; 6.5e-10 of the filter's RMS error, unchanged to ten digits), 1.8e-15
-rad in ``q``; go1 1.2e-14 rad/s.
+rad in ``q``; go1 1.2e-14 rad/s.  Then (issue 39, the same bits: 60 stored runs of ``ekf``,
+``kalman``, ``adaptive`` and ``ekf`` with the offset on cartpole, UR5, Panda, go1, talos
+``array_equal``) ``v⁺ = v⁻ + dx_v`` in :func:`_update_loops` (``v⁻`` left in the RKMK4's work
+row: no copy, no NumPy addition), :func:`_factor_loops` without the dispatcher on the step's
+own ``P⁻``, the views and the derivatives call made once, and the step's ``np.errstate`` a
+decorator (two Python calls less than a ``with``): talos 9.6 µs less an update (22.37 →
+21.71 ``pin.aba``), go1 6.7 µs (in-process A/B, 20-update chunks alternated, thread CPU,
+paired medians, load 6.7–7.0).
 """
 
 from __future__ import annotations
@@ -124,6 +131,7 @@ __all__ = ["MOST_RATIO", "BlockStep", "bracket_table", "joseph_kernels", "transi
 #: ``P⁺_qq ≈ R`` is computed to about ``ε · P⁻_qq,ii / R`` of itself, 2e-12 here; above (the
 #: first samples from a wide start) the filter's Joseph form.
 MOST_RATIO = 1e4
+_F64 = np.dtype(np.float64)
 
 
 def _start_loops(a_q: Vector, a_v: Vector, v: Vector, table: Any, G: Vector, D: Vector) -> None:  # noqa: C901 -- numba kernel: one branch per joint kind
@@ -313,8 +321,11 @@ def _factor_loops(  # noqa: C901, PLR0912 -- numba kernel: loops over rows
     return nis
 
 
-def _update_loops(P: Vector, ZZ: Vector, Z: Vector, w: Vector, out: Vector, dx: Vector) -> None:
-    """``P⁺ = P − Zᵀ Z`` (``ZZ = Zᵀ Z``; both symmetrised) into ``out``, ``dx = Zᵀ w``."""
+def _update_loops(
+    P: Vector, ZZ: Vector, Z: Vector, w: Vector, out: Vector, dx: Vector, v: Vector, v_new: Vector
+) -> None:
+    """``P⁺ = P − Zᵀ Z`` (``ZZ = Zᵀ Z``; both symmetrised) into ``out``, ``dx = Zᵀ w`` and
+    ``v⁺ = v + dx_v`` into ``v_new`` (NumPy's ``v + dx[nv:]``, entry by entry: the same bits)."""
     n = P.shape[0]
     for i in range(n):
         for j in range(i + 1):
@@ -328,6 +339,8 @@ def _update_loops(P: Vector, ZZ: Vector, Z: Vector, w: Vector, out: Vector, dx: 
         c = w[k]
         for i in range(n):
             dx[i] += Z[k, i] * c
+    for i in range(nv):
+        v_new[i] = v[i] + dx[nv + i]
 
 
 def _warm(nv: int) -> tuple[Any, ...]:
@@ -348,7 +361,7 @@ transition_kernels = (
 joseph_kernels = (
     LazyKernel(_noise_loops, _m, 0.0, 0.0, 0.0, 1.0, _s),
     LazyKernel(_factor_loops, _m, _s, np.zeros(1), _g, np.zeros(1), 1.0, 1.0, contract=True),
-    LazyKernel(_update_loops, _m, _m, _g, np.zeros(1), _m, np.zeros(2)),
+    LazyKernel(_update_loops, _m, _m, _g, np.zeros(1), _m, np.zeros(2), np.zeros(1), np.zeros(1)),
 )
 
 
@@ -385,15 +398,25 @@ class BlockStep:
         self.start, self.square, self.phi = (k.unchecked() for k in transition_kernels)
         self._scratch_v = rk4._scratch_work[0]
         self.noise, self._own_update = joseph_kernels[0].unchecked(), joseph_kernels[2].unchecked()
+        # the factor's too where P⁻ is predict's and e a float64 array of unit stride (correct)
+        self._own_factor, self._stride = joseph_kernels[1].unchecked(), (_F64.itemsize,)
+        # made once (issue 39): the derivatives call, the views the products take, and v⁻ (the
+        # RKMK4's work row that predict returns, where LieRK4.predict applies)
+        self.derivatives = rk4.calls.derivatives
+        self._scratch_GAv = self._scratch_GA[:, nv:]  # (G A)_v
+        self._scratch_Phi = self._scratch_PhiT.T  # Φ, a view of Φᵀ
+        self._scratch_ZT = self._scratch_Z.T
+        self._scratch_vs = rk4._scratch_point[1] if rk4.solve_stage is not None else None
 
     def predict(
         self, q: Vector, v: Vector, tau: Vector, h: float, P: Vector, psd: float, r: float
     ) -> tuple[Vector, Vector, Vector]:
         """``(q⁻, v⁻, P⁻)`` after ``h`` [s] from ``(q, v, P)`` with ``tau`` held (``psd``: the
         white-acceleration density, ``r`` the measurement variance, for :meth:`correct`'s
-        ``S``); ``P⁻`` is working memory."""
-        nv, runs = self.nv, self.runs
-        self.rk4.calls.derivatives(q, v, tau)
+        ``S``); ``v⁻`` and ``P⁻`` are working memory (the RKMK4's work row, where
+        :meth:`LieRK4.predict` applies, and a buffer): read them before the next step."""
+        runs = self.runs
+        self.derivatives(q, v, tau)
         acc, a_q, a_v = self._scratch_data
         G, W, GA, PhiT = self._scratch_G, self._scratch_W, self._scratch_GA, self._scratch_PhiT
         D, T, P_new = self._scratch_D, self._scratch_T, self._scratch_P
@@ -402,25 +425,34 @@ class BlockStep:
         self.start(a_q, a_v, v0, self.table, G, D)
         a_v.dot(G, out=W)  # A_v G (ndarray.dot: np.dot less its Python dispatcher)
         self.square(G, W, D, runs, GA)  # G A
-        GA[:, nv:].dot(G, out=W)  # (G A)_v G
+        self._scratch_GAv.dot(G, out=W)  # (G A)_v G
         self.phi(G, GA, W, D, runs, h, PhiT)
-        PhiT.T.dot(P, out=T)  # Φ P (BLAS's "TN" case, as fast as "NN")
+        self._scratch_Phi.dot(P, out=T)  # Φ P (BLAS's "TN" case, as fast as "NN")
         T.dot(PhiT, out=P_new)  # (Φ P) Φᵀ ("NN": 7 µs less than "NT" on a talos)
         self.noise(P_new, psd * h**3 / 3.0, psd * h**2 / 2.0, psd * h, r, self._scratch_S)
-        q_new, v_new = self.rk4.step(q, v, tau, h, acc0=acc)
+        if self._scratch_vs is None:
+            q_new, v_new = self.rk4.step(q, v, tau, h, acc0=acc)
+            return q_new, v_new, P_new
+        q_new, v_new = self.rk4.predict(q, v, tau, h, acc)  # (v⁻: its work row, not copied)
         return q_new, v_new, P_new
 
-    def correct(self, P: Vector, e: Vector, r: float) -> tuple[Vector, Vector, float]:
-        """``(dx, P⁺, NIS)`` from :meth:`predict`'s ``P⁻`` and the innovation ``e`` (``r``
-        the measurement variance); NaN NIS where ``S`` is not positive definite,
-        ``P⁻_qq`` exceeds ``MOST_RATIO · r`` on its diagonal or ``K_q ≈ I``
-        (:func:`_factor_loops`; the caller's Joseph form then)."""
+    def correct(
+        self, P: Vector, e: Vector, r: float, v: Vector
+    ) -> tuple[Vector, Vector, float, Vector]:
+        """``(dx, P⁺, NIS, v⁺)`` from :meth:`predict`'s ``P⁻`` and ``v⁻`` (``v``) and the
+        innovation ``e`` (``r`` the measurement variance; ``v⁺ = v⁻ + dx_v``); NaN NIS where
+        ``S`` is not positive definite, ``P⁻_qq`` exceeds ``MOST_RATIO · r`` on its diagonal
+        or ``K_q ≈ I`` (:func:`_factor_loops`; the caller's Joseph form then)."""
         n = P.shape[0]
-        dx, out = np.empty(n), np.empty((n, n))
+        dx, out, v_new = np.empty(n), np.empty((n, n)), np.empty(self.nv)
         Z, w, ZZ = self._scratch_Z, self._scratch_w, self._scratch_ZZ
-        nis = self.factor(P, self._scratch_S, e, Z, w, MOST_RATIO * r + r, r)
+        own = P is self._scratch_P  # (its arrays the step's own: no dispatcher, __init__)
+        plain = own and e.dtype is _F64 and e.strides == self._stride
+        factor = self._own_factor if plain else self.factor
+        nis = factor(P, self._scratch_S, e, Z, w, MOST_RATIO * r + r, r)
         if nis != nis:  # NaN
-            return dx, out, nis
-        Z.T.dot(Z, out=ZZ)
-        (self._own_update if P is self._scratch_P else self.update)(P, ZZ, Z, w, out, dx)
-        return dx, out, nis
+            return dx, out, nis, v_new
+        self._scratch_ZT.dot(Z, out=ZZ)
+        update = self._own_update if own and v is self._scratch_vs else self.update
+        update(P, ZZ, Z, w, out, dx, v, v_new)
+        return dx, out, nis, v_new

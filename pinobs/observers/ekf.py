@@ -55,6 +55,9 @@ an update (in-process A/B, CPU time), the same bits.  Then ``Φ`` by ``A``'s blo
 form's value for the optimal gain, Bar-Shalom, Li & Kirubarajan 2001 §5.2.3; the Joseph form
 above ``P⁻_qq,ii > 10⁴ R``): the talos's covariance algebra 11.3 → 9.0 ``pin.aba``, 43 µs less,
 estimates within 1e-14 of the Joseph step's over 60 s (:mod:`pinobs.observers.blockstep`).
+The compiled step's kernels without numba's dispatcher where the state is its own (the one it
+returned last) and the sample a float64 array of unit stride: UR5 2.7 µs less an update in a
+paced 1 kHz loop (in-process A/B, load 6.3), the same bits.
 predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset state) take
 ``Φ`` and the Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`).
 
@@ -250,6 +253,7 @@ __all__ = [
 
 
 _new_tuple = tuple.__new__  # a NamedTuple made without its __new__ (the fast paths' EKFState)
+_F64 = np.dtype(np.float64)
 
 
 @register
@@ -603,11 +607,20 @@ class _FastPath:
         self._shape = (n, n)
         self.no_psd = np.zeros(nv)
         self.no_d = np.zeros(0)  # the finish kernel's offset arguments without one
+        self._stride = (_F64.itemsize,)  # a contiguous q_meas's strides
         self._scratch_tau = np.empty(nv)  # τ + d (torque_in)
         self.torque_in = loaded(torque_in_kernel)
-        self.predict = loaded(ekf_predict_kernel)
-        self.stage = loaded(rk4_stage_kernel)
-        self.finish, self.coast = loaded(ekf_finish_kernel), loaded(ekf_coast_kernel)
+        self.predict, self.finish = loaded(ekf_predict_kernel), loaded(ekf_finish_kernel)
+        # without numba's dispatcher (LazyKernel.unchecked): the stages and the coast on the
+        # step's own buffers and aba's output; predict and finish where the state's arrays are
+        # the (q, v, P) this path returned last (_layout_cache: a memo of the layout check, by
+        # identity; the bits are the dispatcher's either way) and q_meas a float64 array of
+        # unit stride (issue 39: in a paced 1 kHz loop 1–1.5 µs less on predict alone)
+        self.stage, self.coast = rk4_stage_kernel.unchecked(), ekf_coast_kernel.unchecked()
+        views = all(x.dtype == _F64 and x.flags.c_contiguous for x in self._scratch_data)
+        self._own_predict = ekf_predict_kernel.unchecked() if views else self.predict
+        self._own_finish = ekf_finish_kernel.unchecked()
+        self._layout_cache: tuple[Vector, Vector, Vector] | None = None
 
     @classmethod
     def build(cls, ekf: ExtendedKalmanFilter) -> _FastPath | None:
@@ -641,28 +654,36 @@ class _FastPath:
             tau_in = self._scratch_tau
             self.torque_in(tau, d, tau_in)
         calls, w, (qs, vs) = self.calls, self._scratch_work, self._scratch_point
-        calls.derivatives(state.q, state.v, tau_in)
+        q0, v0, P0 = state.q, state.v, state.P
+        calls.derivatives(q0, v0, tau_in)
         psd = self.no_psd if state.d_psd is None else state.d_psd
         P = self._scratch_P
         accel_psd = ekf.gains.accel_psd  # (read at every step: a smoother's replay sets it)
         ddq, ddq_dq, ddq_dv, minv = self._scratch_data
-        self.predict(w, state.q, state.v, ddq, ddq_dq, ddq_dv, minv, state.P, dt, accel_psd, psd,
-                     self._scratch_A, self._scratch_Phi, P)  # fmt: skip
+        made = self._layout_cache  # the state's arrays this path's own (__init__)
+        own = made is not None and P0 is made[2] and q0 is made[0] and v0 is made[1]
+        own = own and psd is self.no_psd
+        predict = self._own_predict if own else self.predict
+        predict(w, q0, v0, ddq, ddq_dq, ddq_dv, minv, P0, dt, accel_psd, psd, self._scratch_A,
+                self._scratch_Phi, P)  # fmt: skip
         aba, stage = calls.aba, self.stage
         stage(w, aba(qs, vs, tau_in), 2, dt)  # RKMK4 (dynamics_rk4), its first stage the
         stage(w, aba(qs, vs, tau_in), 3, dt)  # derivatives call's v̇
         if q_meas is None:  # the fourth stage and P⁻ symmetrised, 0.5 * (P + P.T)
             P = np.empty(self._shape)
             self.coast(w, aba(qs, vs, tau_in), dt, self._scratch_P, P)
-            gate = state.gate.predicted()
-            return _new_tuple(EKFState, (qs.copy(), vs.copy(), P, d, state.d_psd, gate,
-                                         state.auto, state.psd_scale))  # fmt: skip
+            gate, q, v = state.gate.predicted(), qs.copy(), vs.copy()
+            self._layout_cache = (q, v, P)
+            return _new_tuple(EKFState, (q, v, P, d, state.d_psd, gate, state.auto,
+                                         state.psd_scale))  # fmt: skip
         # the fourth stage and the correction (ExtendedKalmanFilter.corrected)
         nv, ex, r = qs.shape[0], self._scratch_ex, ekf.gains.meas_std**2
         q, v, P_new = np.empty(nv), np.empty(nv), np.empty(self._shape)
         d_new = self.no_d if d is None else np.empty(nv)  # (d + dx_d: the kernel's)
-        nis = self.finish(w, aba(qs, vs, tau_in), dt, q_meas, P, r, ex, P_new, q, v,
-                          self.no_d if d is None else d, d_new)  # fmt: skip
+        plain = d is None and q_meas.dtype is _F64 and q_meas.strides == self._stride
+        finish = self._own_finish if plain else self.finish
+        nis = finish(w, aba(qs, vs, tau_in), dt, q_meas, P, r, ex, P_new, q, v,
+                     self.no_d if d is None else d, d_new)  # fmt: skip
         if nis != nis:  # NaN: ekf.correct's other ways
             pred = state.moved(qs.copy(), vs.copy(), P, state.gate, d, state.d_psd)
             with np.errstate(over="ignore", invalid="ignore"):
@@ -679,6 +700,7 @@ class _FastPath:
                 with np.errstate(over="ignore", invalid="ignore"):
                     s = P.diagonal()[:nv] + r  # Sᵢᵢ = P⁻_qq,ii + σ²
                     d_psd = ekf.matched_density(state, ex[:nv], s, dt)
+        self._layout_cache = (q, v, P_new)
         # state.moved's tuple, built here (a Python call less)
         return _new_tuple(EKFState, (q, v, P_new, d, d_psd, gate, state.auto, state.psd_scale))
 
@@ -719,6 +741,9 @@ class _LieFast:
             return transition_matrix(A, h)
         return blocks.transition(A, h, self.nv, self.rows)
 
+    # a lost filter overflows: its update says so (ObserverDiverged), numpy does not (the
+    # decorator's form: two Python calls less than a with statement's; issue 39)
+    @np.errstate(over="ignore", invalid="ignore")
     def step(
         self, ekf: ExtendedKalmanFilter, state: EKFState, dt: float, q_meas: Vector | None,
         tau: Vector,
@@ -728,20 +753,19 @@ class _LieFast:
         takes another way (``S`` not positive definite, ``K_q ≈ I``)."""
         b, r = self.blocks, ekf.gains.meas_std**2
         assert b is not None  # (the caller checked)
-        with np.errstate(over="ignore", invalid="ignore"):  # a lost filter: update says so
-            q, v, P = b.predict(state.q, state.v, tau, dt, state.P, ekf.gains.accel_psd, r)
-            if q_meas is None:
-                gate = state.gate.predicted()
-                return state.moved(q, v, 0.5 * (P + P.T), gate, state.d, state.d_psd)
-            e = b.difference(q, q_meas)  # (robot.difference, bound: a Python call less)
-            dx, P_new, nis = b.correct(P, e, r)
-            if nis != nis:  # NaN (S, P⁻_qq's size, or K_q ≈ I: b.correct): correct's other ways
-                pred = state.moved(q, v, P.copy(), state.gate, state.d, state.d_psd)
-                return ekf.corrected(pred, q_meas, dt)
-            gate = state.gate.measured(nis, ekf._gate, self.nv)
-            if gate.gated:
-                return state.moved(q, v, 0.5 * (P + P.T), gate, state.d, state.d_psd)
-            q = b.rk4.integrate(q, dx[: self.nv])  # (robot.integrate, bound)
-            # state.moved's tuple, built here (a Python call less)
-            return _new_tuple(EKFState, (q, v + dx[self.nv :], P_new, state.d, state.d_psd,
-                                         gate, state.auto, state.psd_scale))  # fmt: skip
+        q, v, P = b.predict(state.q, state.v, tau, dt, state.P, ekf.gains.accel_psd, r)
+        if q_meas is None:  # (v and P: b's working memory, copied into the state)
+            gate = state.gate.predicted()
+            return state.moved(q, v.copy(), 0.5 * (P + P.T), gate, state.d, state.d_psd)
+        e = b.difference(q, q_meas)  # (robot.difference, bound: a Python call less)
+        dx, P_new, nis, v_new = b.correct(P, e, r, v)
+        if nis != nis:  # NaN (S, P⁻_qq's size, or K_q ≈ I: b.correct): correct's other ways
+            pred = state.moved(q, v.copy(), P.copy(), state.gate, state.d, state.d_psd)
+            return ekf.corrected(pred, q_meas, dt)
+        gate = state.gate.measured(nis, ekf._gate, self.nv)
+        if gate.gated:
+            return state.moved(q, v.copy(), 0.5 * (P + P.T), gate, state.d, state.d_psd)
+        q = b.rk4.integrate(q, dx[: self.nv])  # (robot.integrate, bound)
+        # state.moved's tuple, built here (a Python call less); v⁺ = v⁻ + dx_v by b.correct
+        return _new_tuple(EKFState, (q, v_new, P_new, state.d, state.d_psd, gate, state.auto,
+                                     state.psd_scale))  # fmt: skip

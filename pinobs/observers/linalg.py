@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import math
+import types
 from collections.abc import Callable
 from typing import Any
 
@@ -202,6 +203,22 @@ def _joseph_loops(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bo
     return True
 
 
+def _contracted(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn`` under its own name for numba's ``fastmath={"contract"}``: numba's cache keys a
+    function's machine code by its module, qualified name, line and signature, not by its
+    flags, so one function compiled with and without ``contract`` (``fused.rk4_start_loops``:
+    a kernel of its own with it, an inlined helper of ``ekf_predict_loops`` without) shared
+    one cache entry and the first to compile decided the other's bits (``kalman``'s steps
+    moved by up to 5.3e-16 relative with numba's cache history).  A copy of ``fn`` (the same
+    code and globals) named ``<qualname>__contract`` has its own entry."""
+    clone = types.FunctionType(
+        fn.__code__, fn.__globals__, fn.__name__, fn.__defaults__, fn.__closure__
+    )
+    clone.__qualname__ = f"{fn.__qualname__}__contract"
+    clone.__doc__ = fn.__doc__
+    return clone
+
+
 class LazyKernel:
     """A numba-compiled function, built on :meth:`load` (``import pinobs`` does not import
     numba); ``compiled`` is ``None`` until then.  ``cache=True``: compiled once per
@@ -255,8 +272,9 @@ class LazyKernel:
             for name in self.contracted:  # (their own flags: numba.njit, not inlined)
                 if not hasattr(scope[name], "py_func"):
                     fma = numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
-                    scope[name] = fma(scope[name])
-            kernel = numba.njit(cache=True, error_model="numpy", fastmath=self.fastmath)(self.fn)
+                    scope[name] = fma(_contracted(scope[name]))
+            fn = _contracted(self.fn) if self.fastmath else self.fn  # (its own cache entry)
+            kernel = numba.njit(cache=True, error_model="numpy", fastmath=self.fastmath)(fn)
             load_signature(kernel, *self.warm_args)  # the float64 signature, loaded now
             self.compiled = kernel
 

@@ -212,6 +212,9 @@ class Observer(ABC, Generic[State]):
     #: Whether :meth:`output` returns new float64 arrays at every call, no view of the state:
     #: the estimate keeps them read-only, uncopied (issue 39; ``kf`` with ``"auto"``).
     fresh_output: bool = False
+    #: Whether :meth:`update` first offers the call to :meth:`_update_fused` (a family's plain
+    #: update in one compiled call: ``kf``'s ``"auto"``, issue 39); a class default.
+    _fused_path: bool = False
     _init_args: tuple[tuple[Any, ...], dict[str, Any]]  # set by __new__
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Observer[Any]:
@@ -349,11 +352,22 @@ class Observer(ABC, Generic[State]):
             ObserverDiverged: the estimate became non-finite (state kept as it was).
 
         On one BLAS thread for the call if the family :attr:`uses_blas` (the caller's
-        thread counts restored after), else straight.
+        thread counts restored after), else straight; first, where the family has one, its
+        fused path (:meth:`_update_fused`).
         """
+        if self._fused_path and (estimate := self._update_fused(t, q_meas, tau)) is not None:
+            return estimate
         if self.uses_blas:
             return self._update_on_one_thread(t, q_meas, tau)
         return self._update(t, q_meas, tau)
+
+    def _update_fused(
+        self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None
+    ) -> Estimate | None:
+        """:meth:`update` done whole by the family (where :attr:`_fused_path`), or ``None``: then
+        nothing changed and :meth:`update` goes its own way.  The family's fast path must give
+        what that way gives, to the bit, and leave to it every update it does not take."""
+        return None
 
     def _update(self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None) -> Estimate:
         """:meth:`update` (its docstring), on the caller's BLAS threads."""

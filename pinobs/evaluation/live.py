@@ -287,11 +287,12 @@ def _paced(
         while (now := clock()) < due:  # sleep, then spin the last SPIN seconds
             if due - now > SPIN:
                 time.sleep(due - now - SPIN)
+        t, q, tau = sim.t[k + 1], sim.q_meas[k + 1], sim.tau[k + 1]  # (the sample: not timed)
         t0 = clock()
         aba()
         t1 = clock()
         c1 = cpu_clock()
-        update(observer, sim.t[k + 1], sim.q_meas[k + 1], sim.tau[k + 1])
+        update(observer, t, q, tau)
         c2 = cpu_clock()
         t2 = clock()
         for _ in range(ABA_BURST):

@@ -361,8 +361,8 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         ):
             return None
         bank, state, nq, nv = self.auto_bank, self._state, self._nq, self._nv
-        if not isinstance(state, AutoState) or bank is None:  # (not reset: the base says so)
-            return None
+        if not isinstance(state, AutoState) or bank is None or bank.fused is None:
+            return None  # (not reset: the base says so; the code not loaded back: the base's)
         x, gate, n = float(t), state.gate, state.n
         gate_on = n >= AUTO_GATE_SAMPLES  # as AutoBank.step: the scales before this sample
         n_new = bank._forget * n + 1.0

@@ -341,15 +341,20 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         and estimate cost more than the step; here they are done in
         :func:`~pinobs.observers.kf_fused.auto_update_loops` as the base does them, and what
         the base commits is committed, to the bit.  Taken: ``t`` a ``float`` (or NumPy's),
-        ``q_meas`` a float64 array of shape ``(nq,)``, ``tau`` ``None`` or a float64 ``(nv,)``,
+        ``q_meas`` ``None`` or a float64 array of shape ``(nq,)``, ``tau`` ``None`` or a float64 ``(nv,)``,
         σ known, the period known, no latency, no pause due, and whatever the kernel checks
         (:func:`~pinobs.observers.kf_fused.auto_update_loops`).  The estimate's ``q̂`` and
         ``v̂`` and the held torque are views of one new read-only array (``nq + 2 nv``)."""
         if not (
             (type(t) is float or type(t) is np.float64)
-            and type(q_meas) is np.ndarray
-            and q_meas.dtype is _F64
-            and q_meas.shape == self._shapes[0]
+            and (
+                q_meas is None
+                or (
+                    type(q_meas) is np.ndarray
+                    and q_meas.dtype is _F64
+                    and q_meas.shape == self._shapes[0]
+                )
+            )
             and (
                 tau is None
                 or (type(tau) is np.ndarray and tau.dtype is _F64 and tau.shape == self._shapes[1])
@@ -363,19 +368,23 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         bank, state, nq, nv = self.auto_bank, self._state, self._nq, self._nv
         if not isinstance(state, AutoState) or bank is None or bank.fused is None:
             return None  # (not reset: the base says so; the code not loaded back: the base's)
-        x, gate, n = float(t), state.gate, state.n
+        x, gate, n, measured = float(t), state.gate, state.n, q_meas is not None
         gate_on = n >= AUTO_GATE_SAMPLES  # as AutoBank.step: the scales before this sample
         n_new = bank._forget * n + 1.0
         x1, out = np.empty(bank._size), np.empty(nq + 2 * nv)
         taken, nis, rejected, level, drift = bank.fused(
-            state.x, x1, out, state.jerk, q_meas, _NO_TAU if tau is None else tau, self._t, x,
+            state.x, x1, out, state.jerk, q_meas if measured else _NO_TAU,
+            _NO_TAU if tau is None else tau, measured, self._t, x,
             self._split, self._span, gate_on, n, n_new,
             bank._dof if gate.level is None else gate.level, gate.run,
             0.0 if gate.drift is None else gate.drift, *bank.fused_constants,
         )  # fmt: skip
         if not taken:
             return None
-        if not gate_on:  # as AutoBank.step: reported (with σ₀), not gated
+        if not measured:  # as AutoBank.step: the prediction (its likelihoods unchanged)
+            after = _new_tuple(GateState, (None, False, gate.run, gate.level, gate.drift))
+            nis, n_new = None, n
+        elif not gate_on:  # as AutoBank.step: reported (with σ₀), not gated
             after = _new_tuple(GateState, (nis, False, 0, None, None))
         else:  # GateState.measured, decided in the kernel (drift 0: None)
             run = gate.run + 1 if rejected else 0
@@ -386,7 +395,7 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         estimate = _new_object(Estimate)  # as Observer._make_estimate
         d = estimate.__dict__
         d["t"], d["q"], d["v"], d["nis"], d["gated"] = x, out[:nq], out[nq : nq + nv], nis, rejected
-        # the base's commit (Observer._update: no after_commit, a NIS, σ known)
+        # the base's commit (Observer._update: no after_commit, σ known)
         self._state = _new_tuple(AutoState, (x1, state.shape, state.jerk, n_new, after))
         self._t, self._ts, self._tau, self._last, self._diverged = (
             x,
@@ -395,8 +404,9 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
             estimate,
             False,
         )
-        self._nis.append(nis)
-        self._gated += rejected
+        if measured:  # (a NIS)
+            self._nis.append(nis)
+            self._gated += rejected
         return estimate
 
     def update_rows(self, t: Vector, q: Vector, v_max: Vector) -> tuple[Vector, Vector]:

@@ -29,12 +29,13 @@ __all__ = ["auto_update_loops", "update_kernel"]
 
 def auto_update_loops(
     x: Vector, x1: Vector, out: Vector, jerk: Vector, q_meas: Vector, tau: Vector,
-    t_prev: float, t: float, split: float, span: float, gate_on: bool, n: float, n_new: float,
+    measured: bool, t_prev: float, t: float, split: float, span: float, gate_on: bool, n: float, n_new: float,
     level: float, run: int, drift: float, bounds: Vector, table: NDArray[np.int64],
     meas_var: float, forget: float, threshold: float, nq: int,
 ) -> tuple[bool, float, bool, float, float]:  # fmt: skip
-    """A plain update at ``t`` (the state's time ``t_prev``) with the sample ``q_meas`` and the
-    torque ``tau`` (empty: none, zero), or nothing.  Plain: ``t_prev + TIME_EPS < t``, the step
+    """A plain update at ``t`` (the state's time ``t_prev``) with the sample ``q_meas`` (if
+    ``measured``; else none, a prediction) and the torque ``tau`` (empty: none, zero), or
+    nothing.  Plain: ``t_prev + TIME_EPS < t``, the step
     ``h = t − t_prev`` below ``split`` and at most ``span`` (the base's sub-step and pause
     limits), the grid set (``jerk``), every ``q_meas_i`` finite, every ``|τ_i| ≤ bounds_i``
     (finite; the base's absurd-torque test, joint by joint), and the estimate finite.  Then
@@ -47,8 +48,8 @@ def auto_update_loops(
     h = t - t_prev
     if not (t_prev + TIME_EPS < t and h < split and h <= span and jerk.size > 0):
         return False, math.nan, False, level, drift
-    q = np.empty(nq)  # (C-contiguous, as the step's one signature takes it)
-    for i in range(nq):
+    q = np.zeros(nq)  # (C-contiguous, as the step's one signature takes it; unread if none)
+    for i in range(nq if measured else 0):
         q[i] = q_meas[i]
         if not math.isfinite(q_meas[i]):
             return False, math.nan, False, level, drift
@@ -58,7 +59,7 @@ def auto_update_loops(
             return False, math.nan, False, level, drift
         out[nq + nv + i] = ti
     nis, rejected, level1, drift1 = _step_kernel(
-        x, x1, jerk, q, table, h, meas_var, True, gate_on, n, n_new, forget, threshold, level,
+        x, x1, jerk, q, table, h, meas_var, measured, gate_on, n, n_new, forget, threshold, level,
         run, drift, nq,
     )  # fmt: skip
     o_mix = x1.size - nq - nv
@@ -80,7 +81,7 @@ def _update_warm_args() -> tuple[object, ...]:
     x[o[6] :] = 1.0  # (P = ones: S > 0)
     strided = np.zeros(4)[::2]  # (two entries: one alone would be typed C-contiguous)
     return (
-        x, np.empty(o[-1]), np.empty(nq + 2 * nv), np.ones(nf), strided, strided, 0.0, 1e-3,
+        x, np.empty(o[-1]), np.empty(nq + 2 * nv), np.ones(nf), strided, strided, True, 0.0, 1e-3,
         1.0, 1.0, True, 30.0, 30.0, 1.0, 0, 0.0, np.ones(nv), np.zeros((0, 4), dtype=np.int64),
         1.0, 0.99, math.inf, nq,
     )  # fmt: skip

@@ -144,7 +144,7 @@ from pinobs.observers.kf_bank import KFBank as KFBank  # re-exported
 from pinobs.tolerances import TIME_EPS
 
 _F64 = np.dtype(np.float64)
-_NO_TAU = np.empty(0)  # (update's tau None: zero)
+_EMPTY = np.empty(0)  # (the fused update's no sample, or tau None: zero)
 _new_tuple = tuple.__new__  # (NamedTuples and the Estimate made as AutoBank.step and
 _new_object = object.__new__  # Observer._make_estimate make them)
 
@@ -341,8 +341,8 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         and estimate cost more than the step; here they are done in
         :func:`~pinobs.observers.kf_fused.auto_update_loops` as the base does them, and what
         the base commits is committed, to the bit.  Taken: ``t`` a ``float`` (or NumPy's),
-        ``q_meas`` ``None`` or a float64 array of shape ``(nq,)``, ``tau`` ``None`` or a float64 ``(nv,)``,
-        σ known, the period known, no latency, no pause due, and whatever the kernel checks
+        ``q_meas`` ``None`` or a float64 array of shape ``(nq,)``, ``tau`` ``None`` or a
+        float64 ``(nv,)``, σ known, the period known, no latency, no pause due, and whatever the kernel checks
         (:func:`~pinobs.observers.kf_fused.auto_update_loops`).  The estimate's ``q̂`` and
         ``v̂`` and the held torque are views of one new read-only array (``nq + 2 nv``)."""
         if not (
@@ -373,8 +373,8 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         n_new = bank._forget * n + 1.0
         x1, out = np.empty(bank._size), np.empty(nq + 2 * nv)
         taken, nis, rejected, level, drift = bank.fused(
-            state.x, x1, out, state.jerk, q_meas if measured else _NO_TAU,
-            _NO_TAU if tau is None else tau, measured, self._t, x,
+            state.x, x1, out, state.jerk, q_meas if measured else _EMPTY,
+            _EMPTY if tau is None else tau, measured, self._t, x,
             self._split, self._span, gate_on, n, n_new,
             bank._dof if gate.level is None else gate.level, gate.run,
             0.0 if gate.drift is None else gate.drift, *bank.fused_constants,

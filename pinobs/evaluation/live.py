@@ -8,7 +8,9 @@ the process's own BLAS and thread settings, and cares about the worst update,
 not the median.  :func:`live_loop` runs that loop: every ``1/rate`` seconds it
 waits for the tick (sleeps, then spins its last 0.2 ms), reads the next sample
 of a pre-computed simulation and calls ``observer.update(t, q, tau)``, as
-``examples/realtime_loop.py`` does.  Per tick it also times one ``pin.aba``
+``examples/realtime_loop.py`` does; only the call is timed (until issue 39's fused
+``kf`` update the three indexings of the simulation's arrays were timed with it: about
+1.5–2 ``pin.aba`` calls of a UR5 ``kf``'s paced update, load 6–7).  Per tick it also times one ``pin.aba``
 call just before the update (after the same wait: *cold*) and, after the
 update, a burst of :data:`ABA_BURST` calls (*warm*, the reference of
 :func:`~pinobs.evaluation.measure_cost`), so every ratio compares times taken
@@ -287,11 +289,12 @@ def _paced(
         while (now := clock()) < due:  # sleep, then spin the last SPIN seconds
             if due - now > SPIN:
                 time.sleep(due - now - SPIN)
+        t, q, tau = sim.t[k + 1], sim.q_meas[k + 1], sim.tau[k + 1]  # (the sample: not timed)
         t0 = clock()
         aba()
         t1 = clock()
         c1 = cpu_clock()
-        update(observer, sim.t[k + 1], sim.q_meas[k + 1], sim.tau[k + 1])
+        update(observer, t, q, tau)
         c2 = cpu_clock()
         t2 = clock()
         for _ in range(ABA_BURST):

@@ -30,10 +30,8 @@ family gives (:meth:`Observer.smoothing_filter`, a :class:`GaussianFilter`: its
 
 from __future__ import annotations
 
-import copy
 import itertools
 import math
-import warnings
 from abc import ABC, abstractmethod
 from collections import deque
 from operator import le as _le
@@ -44,7 +42,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from pinobs.errors import (
     GainError,
-    NoiseWarning,
     NonFiniteError,
     NotResetError,
     ObserverDiverged,
@@ -75,7 +72,8 @@ from pinobs.observers.gating import (
     steady_innovation_variance,
 )
 from pinobs.observers.gaussian import GaussianFilter
-from pinobs.observers.noise import NOISE_MIN_SAMPLES, NOISE_WINDOW, estimate_noise_std, window_times
+from pinobs.observers.noise import NOISE_MIN_SAMPLES, NOISE_WINDOW
+from pinobs.observers.noise_live import learn_noise
 from pinobs.observers.registry import make_observer, observer_class, observer_names, register
 from pinobs.observers.results import CONSISTENCY_WINDOW, LIKELY_CAUSES, Consistency, Estimate
 from pinobs.tolerances import (
@@ -214,11 +212,14 @@ class Observer(ABC, Generic[State]):
     #: Whether :meth:`output` returns new float64 arrays at every call, no view of the state:
     #: the estimate keeps them read-only, uncopied (issue 39; ``kf`` with ``"auto"``).
     fresh_output: bool = False
+    #: Whether :meth:`update` first offers the call to :meth:`_update_fused` (a family's plain
+    #: update in one compiled call: ``kf``'s ``"auto"``, issue 39); a class default.
+    _fused_path: bool = False
     _init_args: tuple[tuple[Any, ...], dict[str, Any]]  # set by __new__
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Observer[Any]:
         self = super().__new__(cls)
-        self._init_args = (args, kwargs)  # to rebuild with σ from the data (_learn_noise)
+        self._init_args = (args, kwargs)  # to rebuild with σ from the data (learn_noise)
         return self
 
     def __init__(
@@ -351,11 +352,22 @@ class Observer(ABC, Generic[State]):
             ObserverDiverged: the estimate became non-finite (state kept as it was).
 
         On one BLAS thread for the call if the family :attr:`uses_blas` (the caller's
-        thread counts restored after), else straight.
+        thread counts restored after), else straight; first, where the family has one, its
+        fused path (:meth:`_update_fused`).
         """
+        if self._fused_path and (estimate := self._update_fused(t, q_meas, tau)) is not None:
+            return estimate
         if self.uses_blas:
             return self._update_on_one_thread(t, q_meas, tau)
         return self._update(t, q_meas, tau)
+
+    def _update_fused(
+        self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None
+    ) -> Estimate | None:
+        """:meth:`update` done whole by the family (where :attr:`_fused_path`), or ``None``: then
+        nothing changed and :meth:`update` goes its own way.  The family's fast path must give
+        what that way gives, to the bit, and leave to it every update it does not take."""
+        return None
 
     def _update(self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None) -> Estimate:
         """:meth:`update` (its docstring), on the caller's BLAS threads."""
@@ -395,7 +407,7 @@ class Observer(ABC, Generic[State]):
         if estimate.nis is not None:
             self._nis.append(estimate.nis)
             self._gated += estimate.gated
-        if self._noise_samples is not None and self._learn_noise(t_new, q, tau_new):
+        if self._noise_samples is not None and learn_noise(self, t_new, q, tau_new, NOISE_FLOOR):
             return self.estimate  # rebuilt with σ from the data, replayed up to t_new
         return estimate
 
@@ -630,60 +642,6 @@ class Observer(ABC, Generic[State]):
     def options(self) -> dict[str, Any]:
         """The resolved options (gains chosen from ``rate``/``noise_std`` included), for reports."""
         return {"rate": self.rate, "noise_std": self.noise_std}
-
-    def _learn_noise(self, t: float, q: Vector | None, tau: Vector) -> bool:
-        """Keep the update until :data:`NOISE_WINDOW` s (and :data:`NOISE_MIN_SAMPLES`
-        samples) are in; then σ̂ from them (class docstring) and, if it is above the floor
-        and changes the gains, rebuild with it and replay the kept updates (warned once).
-        Returns whether the observer was rebuilt (its latest estimate is then the replay's)."""
-        assert self._noise_samples is not None
-        self._noise_samples.append((t, q, tau))
-        ts = window_times(self._noise_samples)
-        if ts is None:
-            return False
-        kept, self._noise_samples = self._noise_samples, None
-        qs = np.array([x[1] for x in kept if x[1] is not None])
-        sigma_joint = estimate_noise_std(np.array(ts), qs, self.robot, window=NOISE_WINDOW)
-        if sigma_joint is None or not float(np.median(sigma_joint)) > NOISE_FLOOR:
-            return False
-        sigma = float(np.median(sigma_joint))
-        fresh = self._with_noise_std(sigma)
-        if fresh is None:
-            return False  # its gains were given: σ changes nothing
-        fresh.reset(*self._reset_args)
-        fresh.set_latency(self.latency)  # after its reset: a copy (twin) has had updates
-        for tk, qk, tauk in kept:  # the same updates, as if σ̂ had been given from the start
-            fresh.update(tk, qk, tauk)
-        self.__dict__ = fresh.__dict__
-        warnings.warn(
-            NoiseWarning(
-                f"{self.name}: built without noise_std; estimated σ = {sigma:.3g} from its "
-                f"first {ts[-1] - ts[0]:.3g} s of samples (median over joints; per joint "
-                f"{np.array2string(sigma_joint, precision=3)}), rebuilt with it and replayed "
-                "them; pass noise_std to set it yourself"
-            ),
-            stacklevel=3,
-        )
-        return True
-
-    def _with_noise_std(self, sigma: float) -> Observer[Any] | None:
-        """This observer built with ``noise_std = sigma`` (not reset), or ``None`` if that
-        changes none of its options.  Families whose gains ignore σ
-        (``noise_in_gains = False``) use it only in ``_sigma2``, the measurement
-        variance of their NIS: a copy with that replaced (no costly rebuild)."""
-        if not self.noise_in_gains:
-            twin = copy.copy(self)
-            twin.noise_std = sigma
-            twin._sigma2 = twin.noise_std_used**2  # the family's NIS measurement variance
-            return twin
-        args, kwargs = self._init_args
-        fresh = type(self)(*args, **{**kwargs, "noise_std": sigma})
-        options = {k: v for k, v in fresh.options.items() if k != "noise_std"}
-        return (
-            None
-            if options == {k: v for k, v in self.options.items() if k != "noise_std"}
-            else fresh
-        )
 
     # ------------------------------------------------------ family interface
     # The protocol every family implements (module docstring): pure functions of an

@@ -114,11 +114,13 @@ from dataclasses import dataclass, replace
 from typing import Literal, NamedTuple, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pinobs.errors import GainError, NotResetError
 from pinobs.model import Robot
 from pinobs.observers.base import (
     Consistency,
+    Estimate,
     GateState,
     Observer,
     Vector,
@@ -140,6 +142,11 @@ from pinobs.observers.kf_bank import (
 from pinobs.observers.kf_bank import BankState as BankState  # re-exported
 from pinobs.observers.kf_bank import KFBank as KFBank  # re-exported
 from pinobs.tolerances import TIME_EPS
+
+_F64 = np.dtype(np.float64)
+_EMPTY = np.empty(0)  # (the fused update's no sample, or tau None: zero)
+_new_tuple = tuple.__new__  # (NamedTuples and the Estimate made as AutoBank.step and
+_new_object = object.__new__  # Observer._make_estimate make them)
 
 __all__ = [
     "KF_CAUSES",
@@ -256,7 +263,9 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         # output's: "auto"'s estimate copied out of the state's buffer, its own
         self.fresh_output = self.auto_bank is not None
         self._mixture = None if self.auto_bank is None else self.auto_bank.mixture
-        self._nq = robot.nq
+        self._nq, self._nv = robot.nq, robot.nv  # (Robot.nq/nv ask Pinocchio)
+        # "auto"'s plain update in one compiled call (Observer._update_fused; vector joints)
+        self._fused_path = self.auto_bank is not None and self.auto_bank.fused is not None
 
     @property
     def options(self) -> dict[str, object]:
@@ -323,6 +332,82 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
             return KFState(q, v, a, 0.5 * (P + P.T), state.gate.predicted())
         r = self.gains.meas_std**2
         return corrected(self.robot, q, v, a, P, state.gate, r, self._gate, q_meas)
+
+    def _update_fused(
+        self, t: float, q_meas: ArrayLike | None, tau: ArrayLike | None
+    ) -> Estimate | None:
+        """A plain update of ``"auto"`` in one compiled call, or ``None`` (nothing changed: the
+        base's own path takes it).  Issue 39: in a paced 1 kHz loop the base's checks, copies
+        and estimate cost more than the step; here they are done in
+        :func:`~pinobs.observers.kf_fused.auto_update_loops` as the base does them, and what
+        the base commits is committed, to the bit.  Taken: ``t`` a ``float`` (or NumPy's),
+        ``q_meas`` ``None`` or a float64 array of shape ``(nq,)``, ``tau`` ``None`` or a
+        float64 ``(nv,)``, σ known, the period known, no latency, no pause due, and whatever the kernel checks
+        (:func:`~pinobs.observers.kf_fused.auto_update_loops`).  The estimate's ``q̂`` and
+        ``v̂`` and the held torque are views of one new read-only array (``nq + 2 nv``)."""
+        if not (
+            (type(t) is float or type(t) is np.float64)
+            and (
+                q_meas is None
+                or (
+                    type(q_meas) is np.ndarray
+                    and q_meas.dtype is _F64
+                    and q_meas.shape == self._shapes[0]
+                )
+            )
+            and (
+                tau is None
+                or (type(tau) is np.ndarray and tau.dtype is _F64 and tau.shape == self._shapes[1])
+            )
+            and self._noise_samples is None
+            and not self._intervals_due
+            and not self._restart_due
+            and self.latency == 0.0
+        ):
+            return None
+        bank, state, nq, nv = self.auto_bank, self._state, self._nq, self._nv
+        if not isinstance(state, AutoState) or bank is None or bank.fused is None:
+            return None  # (not reset: the base says so; the code not loaded back: the base's)
+        x, gate, n, measured = float(t), state.gate, state.n, q_meas is not None
+        gate_on = n >= AUTO_GATE_SAMPLES  # as AutoBank.step: the scales before this sample
+        n_new = bank._forget * n + 1.0
+        x1, out = np.empty(bank._size), np.empty(nq + 2 * nv)
+        taken, nis, rejected, level, drift = bank.fused(
+            state.x, x1, out, state.jerk, q_meas if measured else _EMPTY,
+            _EMPTY if tau is None else tau, measured, self._t, x,
+            self._split, self._span, gate_on, n, n_new,
+            bank._dof if gate.level is None else gate.level, gate.run,
+            0.0 if gate.drift is None else gate.drift, *bank.fused_constants,
+        )  # fmt: skip
+        if not taken:
+            return None
+        if not measured:  # as AutoBank.step: the prediction (its likelihoods unchanged)
+            after = _new_tuple(GateState, (None, False, gate.run, gate.level, gate.drift))
+            nis, n_new = None, n
+        elif not gate_on:  # as AutoBank.step: reported (with σ₀), not gated
+            after = _new_tuple(GateState, (nis, False, 0, None, None))
+        else:  # GateState.measured, decided in the kernel (drift 0: None)
+            run = gate.run + 1 if rejected else 0
+            after = _new_tuple(GateState, (nis, rejected, run, level, drift or None))
+            if rejected:  # the prediction (its likelihoods unchanged)
+                n_new = n
+        out.setflags(write=False)  # (its views below read-only with it)
+        estimate = _new_object(Estimate)  # as Observer._make_estimate
+        d = estimate.__dict__
+        d["t"], d["q"], d["v"], d["nis"], d["gated"] = x, out[:nq], out[nq : nq + nv], nis, rejected
+        # the base's commit (Observer._update: no after_commit, σ known)
+        self._state = _new_tuple(AutoState, (x1, state.shape, state.jerk, n_new, after))
+        self._t, self._ts, self._tau, self._last, self._diverged = (
+            x,
+            x,
+            out[nq + nv :],
+            estimate,
+            False,
+        )
+        if measured:  # (a NIS)
+            self._nis.append(nis)
+            self._gated += rejected
+        return estimate
 
     def update_rows(self, t: Vector, q: Vector, v_max: Vector) -> tuple[Vector, Vector]:
         """:meth:`update` at ``t[k]`` with ``q[k]`` for ``k = 0, 1, …`` in turn, as far as

@@ -20,6 +20,7 @@ from pinobs.errors import UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.observers.base import GateState, Vector, gate_threshold, positive
 from pinobs.observers.gating import SPIKE_ALPHA
+from pinobs.observers.kf_fused import update_kernel
 from pinobs.observers.kf_kernels import (
     auto_kernel,
     auto_layout,
@@ -374,6 +375,15 @@ class AutoBank:
         self.mixture = slice(layout[8], layout[9])
         self._direct = self._direct_step()
         self._sample_shape = (robot.nq,)
+        #: the whole plain update in one compiled call (:mod:`pinobs.observers.kf_fused`), on
+        #: vector joints (a sample to normalise is the base's); else ``None``
+        self.fused = self._fused_update()
+        #: its last arguments: each joint's absurd-torque bound (``Robot.absurd_torque``), the
+        #: joints, σ₀², γ, the gate's threshold, ``nq``
+        self.fused_constants = (
+            np.array(robot.absurd_torque, dtype=np.float64), self._table, self._var,
+            self._forget, self.gate, robot.nq,
+        )  # fmt: skip
 
     def _direct_step(self) -> Any:
         """The compiled step without numba's dispatcher (:meth:`step`), loaded now, not at the
@@ -383,13 +393,22 @@ class AutoBank:
         auto_kernel.load()
         return None if auto_kernel.compiled is None else auto_kernel.unchecked()
 
+    def _fused_update(self) -> Any:
+        """:data:`~pinobs.observers.kf_fused.update_kernel`'s machine code (loaded now), where
+        the step is compiled and the joints are vector joints; else ``None``."""
+        if self._direct is None or self._table is None or self._table.shape[0]:
+            return None
+        update_kernel.load()
+        return update_kernel.unchecked()
+
     def __getstate__(self) -> dict[str, Any]:
-        """Pickled without the compiled step's machine code (no pickle has it): loaded again."""
-        return {**self.__dict__, "_direct": None}
+        """Pickled without the compiled code (no pickle has it): loaded again."""
+        return {**self.__dict__, "_direct": None, "fused": None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self._direct = self._direct_step()
+        self.fused = self._fused_update()
 
     @property
     def compiled(self) -> bool:

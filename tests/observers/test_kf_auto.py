@@ -439,7 +439,8 @@ def test_the_auto_state_is_one_buffer_read_through_read_only_views() -> None:
     """Issue 39: ``"auto"``'s state lies in one float64 buffer (``AutoState.x``, laid out by
     ``kf_kernels.auto_layout``); its fields are read-only views of it, a step writes a new
     buffer and leaves the one it read as it was; the estimate is a copy of the mixture of
-    its own (``fresh_output``: it keeps nothing of the state's buffer alive)."""
+    its own (``fresh_output``, and the fused update's array of ``q̂``, ``v̂`` and the held
+    torque: it keeps nothing of the state's buffer alive)."""
     robot = pinobs.load("ur5")
     ob = pinobs.make_observer("kf", robot, noise_std=1e-4, rate=1000.0)
     ob.reset(0.0, robot.neutral())
@@ -460,7 +461,8 @@ def test_the_auto_state_is_one_buffer_read_through_read_only_views() -> None:
     assert ob._state.x is not state.x and np.array_equal(state.x, before)
     assert np.array_equal(np.concatenate([e.q, e.v]), ob._state.mix)
     assert not np.shares_memory(e.q, ob._state.x) and not e.q.flags.writeable
-    assert e.q.base is not None and e.q.base.size == 2 * nv  # (the mixture's copy only)
+    # the mixture's copy and the torque held from then on (kf_fused: one read-only array)
+    assert e.q.base is not None and e.q.base.size == 3 * nv and e.v.base is e.q.base
     predicted = ob.step(ob._state, 1e-3, None, np.zeros(nv))
     assert predicted.bank.innovation is None and np.array_equal(predicted.w, ob._state.w)
 

@@ -1,0 +1,107 @@
+"""``kf``'s plain ``"auto"`` update in one compiled call (``pinobs.observers.kf_fused``, issue
+39): the same bits and the same errors as the base's own path, which it leaves every update
+it does not take."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+
+import pinobs
+from pinobs.errors import NonFiniteError, TimestampError
+
+
+def _pair(robot: pinobs.Robot) -> tuple[pinobs.Observer, pinobs.Observer]:
+    fused, base = (pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4) for _ in "ab")
+    base._fused_path = False  # the base's own path
+    assert fused._fused_path
+    return fused, base
+
+
+def _same(a: pinobs.Observer, b: pinobs.Observer) -> bool:
+    return (
+        a._state.x.tobytes() == b._state.x.tobytes()
+        and a._state.jerk.tobytes() == b._state.jerk.tobytes()
+        and (a._state.shape, a._state.n, a._state.gate)
+        == (b._state.shape, b._state.n, b._state.gate)
+        and a._tau.tobytes() == b._tau.tobytes()
+        and list(a._nis) == list(b._nis)
+        and a._gated == b._gated
+        and a._t == b._t
+    )
+
+
+def test_the_fused_update_gives_the_base_paths_bits() -> None:
+    """Over a run with dropped samples, an outlier, no torque now and then, float and NumPy
+    times, strided and read-only samples: the same estimates, state, held torque and NIS."""
+    robot = pinobs.load("ur5")
+    sim = pinobs.simulate(
+        robot, [], duration=0.6, sensor=pinobs.Sensor(rate=1000.0, noise_std=1e-4), seed=1
+    )
+    fused, base = _pair(robot)
+    for ob in (fused, base):
+        ob.reset(sim.t[0], sim.q[0], None, sim.tau[0])
+    wide = np.zeros((sim.t.size, 2 * robot.nq))
+    wide[:, ::2] = sim.q_meas
+    for k in range(1, sim.t.size):
+        q = None if k % 29 == 0 else (wide[k, ::2] if k % 3 == 0 else sim.q_meas[k].copy())
+        if q is not None and k == 300:
+            q = q + 0.3  # an outlier
+        if q is not None and k % 7 == 0:
+            q.setflags(write=False)
+        tau = None if k % 11 == 0 else sim.tau[k]
+        t = float(sim.t[k]) if k % 2 else sim.t[k]
+        a, b = fused.update(t, q, tau), base.update(t, q, tau)
+        assert a.q.tobytes() == b.q.tobytes() and a.v.tobytes() == b.v.tobytes()
+        assert (a.t, a.nis, a.gated) == (b.t, b.nis, b.gated)
+        assert not a.q.flags.writeable and not a.v.flags.writeable
+    assert _same(fused, base) and fused._gated >= 1
+
+
+@pytest.mark.parametrize(
+    ("change", "error"),
+    [
+        (lambda t, q, tau: (t, np.where(np.arange(q.size) == 2, np.nan, q), tau), NonFiniteError),
+        (lambda t, q, tau: (t, q, 1e12 * np.ones_like(tau)), NonFiniteError),
+        (lambda t, q, tau: (t - 5e-3, q, tau), TimestampError),
+        (lambda t, q, tau: (np.nan, q, tau), TimestampError),
+    ],
+)
+def test_what_the_fused_update_does_not_take_the_base_refuses_as_before(
+    change: object, error: type[Exception]
+) -> None:
+    """A non-finite sample, an absurd torque, a time not after the last: the base's error,
+    the observer as it was (then the same updates as the base's path)."""
+    robot = pinobs.load("ur5")
+    fused, base = _pair(robot)
+    q0 = robot.neutral()
+    for ob in (fused, base):
+        ob.reset(0.0, q0)
+        for k in range(1, 30):
+            ob.update(k * 1e-3, q0 + 1e-4 * np.sin(k + np.arange(robot.nq)), np.ones(robot.nv))
+    before = pickle.dumps(fused._state)
+    for ob in (fused, base):
+        with pytest.raises(error):
+            ob.update(*change(30e-3, q0.copy(), np.ones(robot.nv)))  # type: ignore[operator]
+    assert pickle.dumps(fused._state) == before and _same(fused, base)
+    a, b = fused.update(30e-3, q0, None), base.update(30e-3, q0, None)
+    assert a.v.tobytes() == b.v.tobytes() and _same(fused, base)
+
+
+def test_a_pickled_kf_resumes_with_its_fused_update() -> None:
+    """Pickled mid-run (the compiled code is not pickled: loaded again), the copy goes on as
+    the original, by the fused path."""
+    robot = pinobs.load("ur5")
+    ob = pinobs.make_observer("kf", robot, rate=1000.0, noise_std=1e-4)
+    q0 = robot.neutral()
+    ob.reset(0.0, q0)
+    for k in range(1, 30):
+        ob.update(k * 1e-3, q0 + 1e-4 * np.cos(k + np.arange(robot.nq)))
+    clone = pickle.loads(pickle.dumps(ob))
+    assert clone.auto_bank.fused is not None and clone._fused_path
+    for k in range(30, 60):
+        q = q0 + 1e-4 * np.cos(k + np.arange(robot.nq))
+        a, b = ob.update(k * 1e-3, q), clone.update(k * 1e-3, q)
+        assert a.v.tobytes() == b.v.tobytes() and a.nis == b.nis

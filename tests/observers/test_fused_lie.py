@@ -303,9 +303,10 @@ def test_the_block_step_equals_predict_then_correct_on_talos() -> None:
         np.testing.assert_array_equal(v_b, pred.v)
         assert np.abs(P_b - pred.P).max() <= 1e-13 * np.abs(pred.P).max()
         e = 1e-3 * rng.standard_normal(nv)
-        dx, P_new, nis = step.correct(P_b, e, r)
+        dx, P_new, nis, v_new = step.correct(P_b, e, r, v_b)
         dx_ref, P_ref = blocks.joseph_update(pred.P, e, r)
         assert np.abs(dx - dx_ref).max() <= 1e-13 * np.abs(dx_ref).max()
+        np.testing.assert_array_equal(v_new, v_b + dx[nv:])  # v⁺ = v⁻ + dx_v
         assert np.abs(P_new - P_ref).max() <= 1e-13 * np.abs(P_ref).max()
         np.testing.assert_array_equal(P_new, P_new.T)
         S = pred.P[:nv, :nv] + r * np.eye(nv)
@@ -333,8 +334,8 @@ def test_the_block_step_takes_the_general_correction_where_s_is_not_positive_def
         P[:nv, :nv] += 2.0 * MOST_RATIO * 1e-8 * np.eye(nv)  # P_qq,ii > MOST_RATIO · R
     state = fast.initial_state(q, v)._replace(P=P)
     step = fast._lie_fast.blocks
-    _, _, P_b = step.predict(q, v, tau, 1e-3, P, fast.gains.accel_psd, 1e-8)
-    assert np.isnan(step.correct(P_b, np.zeros(nv), 1e-8)[2])
+    _, v_b, P_b = step.predict(q, v, tau, 1e-3, P, fast.gains.accel_psd, 1e-8)
+    assert np.isnan(step.correct(P_b, np.zeros(nv), 1e-8, v_b)[2])
     q_meas = robot.integrate(q, 1e-4 * rng.standard_normal(nv))
     a = fast.step(state, 1e-3, q_meas, tau)
     b = slow.step(state, 1e-3, q_meas, tau)

@@ -154,6 +154,10 @@ NOT_RUN: dict[str, str] = {
     "benchmarks/real_ekf_phases.py": "needs the shared UR10e logs; writes the committed "
     "benchmarks/real_ekf_phases.{md,json} (~3 min)",
     "benchmarks/never_behind_sim.py": "minutes of simulations",
+    "benchmarks/never_behind_weights.py": "needs the shared UR10e logs; writes the committed "
+    "benchmarks/never_behind_weights.md (~5 min)",
+    "benchmarks/real_riemannian.py": "needs the shared real logs; writes the committed "
+    "benchmarks/real_riemannian.json (~4 min)",
     "benchmarks/never_behind_cost.py": "a timing benchmark",
     "benchmarks/never_behind_exact.py": "240 runs of simulations (~5 min)",
     "benchmarks/drive_gains.py": "needs the shared real logs; writes the committed "

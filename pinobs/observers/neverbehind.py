@@ -61,7 +61,10 @@ Two shared pieces (issue 36, item 2), used by every model-based family:
    learned is within the noise it assumes; the braces for a family that keeps an error
    covariance (``ekf``, ``kalman``): the velocity variance it claims (``P_m,vv``, the ``δv``
    block's diagonal, :func:`model_velocity_variance`) at most the ``kf``'s own
-   (:func:`kf_velocity_variance`, its mixture's).  The NIS test says the model's covariance
+   (:func:`kf_velocity_variance`, its mixture's); ``riemannian`` under its Riccati gain
+   schedule claims its schedule's ``P₁₁`` in every tangent direction (the double integrator
+   its gains come from, with its ``accel_psd`` and σ: module docstring of
+   :mod:`pinobs.observers.riemannian`), at most the ``kf``'s smallest.  The NIS test says the model's covariance
    describes its errors, not that they are small: of two estimators whose covariances
    describe their errors, the one with the smaller variance is the better under squared
    loss, so a model consistent only because it claims large errors earns no prior.
@@ -305,6 +308,9 @@ def claims_within_kf(m: Any, kf: Any, nv: int) -> bool:
     :func:`kf_velocity_variance`; true for a family that keeps no covariance and before the
     ``kf``'s first measured sample (nothing to compare: the NIS test alone)."""
     P = getattr(m, "P", None)
+    if isinstance(P, tuple) and len(P) == 3:  # riemannian's schedule (P₀₀, P₀₁, P₁₁)
+        kf_vv = kf_velocity_variance(kf)
+        return kf_vv is None or bool(P[2] <= kf_vv.min())
     if not isinstance(P, np.ndarray) or P.ndim != 2 or P.shape[0] < 2 * nv:
         return True
     if isinstance(kf, AutoState):
@@ -326,7 +332,7 @@ def kf_velocity_variance(state: Any) -> Vector | None:
         if state.n <= 0.0:
             return None
         out = np.empty(nv)
-        kf_variance_kernel.load()  # (read by tests and benchmarks, not by a step: loaded here)
+        kf_variance_kernel.load()  # (loaded by the blend's constructor; tests call it bare)
         cast(_Kernel, kf_variance_kernel.compiled)(state.x, nf, nq, nv, state.n, out)
         return out
     return np.full(state.v.shape[0], state.P[1, 1])
@@ -583,7 +589,13 @@ class NeverBehind(Observer[_State]):
             (self.noise_std or 0.0) ** 2,
             PRIOR if self._self_test else float(self.prior),
         )
-        for kernel in (score_kernel, log_odds_kernel, weigh_kernel, claim_kernel):
+        for kernel in (
+            score_kernel,
+            log_odds_kernel,
+            weigh_kernel,
+            claim_kernel,
+            kf_variance_kernel,
+        ):
             kernel.load()  # (numba's cache: compiled once per installation)
 
     @property

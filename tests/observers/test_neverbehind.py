@@ -189,8 +189,10 @@ def test_a_consistent_model_claiming_worse_velocities_than_the_kf_earns_no_prior
     """The prior is earned by a consistent model whose own velocity variance is at most the
     kf's on every joint (module docstring, **Prior**): an exact ekf claims ~1e-3 of the kf's
     (it earns it); the same state claiming 1e6 × its ``P`` does not (the identified UR10e
-    model claims 3–19× the kf's, consistent: ``benchmarks/never_behind_weights.md``); a
-    family with no covariance (riemannian) is judged by its NIS alone."""
+    model claims 3–19× the kf's, consistent: ``benchmarks/never_behind_weights.md``);
+    riemannian under its Riccati schedule claims the schedule's ``P₁₁`` in every direction
+    (the same rule, against the kf's smallest); without a schedule (constant gains) it keeps
+    no covariance and is judged by its NIS alone."""
     ob = _blend_after("ekf", 0.3)
     st = ob._state
     nv = ob.robot.nv
@@ -205,8 +207,16 @@ def test_a_consistent_model_claiming_worse_velocities_than_the_kf_earns_no_prior
     assert np.all(model_velocity_variance(wide, nv) > p_kf)  # type: ignore[operator]
     assert ob._earned_prior(1.0, wide, st.kf, h) == (nis, PRIOR)
     rm = _blend_after("riemannian", 0.05)
-    assert model_velocity_variance(rm._state.model, nv) is None
-    assert rm._earned_prior(1.0, rm._state.model, rm._state.kf, h)[1] == TRUSTED_PRIOR
+    m = rm._state.model
+    assert model_velocity_variance(m, nv) is None and m.P is not None  # (its schedule's)
+    p_kf = kf_velocity_variance(rm._state.kf)
+    assert p_kf is not None and m.P[2] < p_kf.min()  # (an exact model: ~1e-8 rad²/s³)
+    assert rm._earned_prior(1.0, m, rm._state.kf, h)[1] == TRUSTED_PRIOR
+    wide = m._replace(P=(m.P[0], m.P[1], 2.0 * float(p_kf.min())))
+    assert rm._earned_prior(1.0, wide, rm._state.kf, h)[1] == PRIOR
+    steady = _blend_after("riemannian", 0.05, alpha=60.0, beta=900.0)
+    assert steady._state.model.P is None  # (given gains: no schedule, no covariance)
+    assert steady._earned_prior(1.0, steady._state.model, steady._state.kf, h)[1] == TRUSTED_PRIOR
 
 
 @pytest.mark.slow

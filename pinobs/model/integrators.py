@@ -42,6 +42,7 @@ __all__ = [
     "difference_call",
     "dynamics_calls",
     "dynamics_rk4",
+    "friction_rk4",
     "friction_substeps",
     "integrate_call",
     "jexp_blocks",
@@ -275,6 +276,26 @@ def friction_substeps(robot: Robot, v: Vector, acc: Vector, minv_diag: Vector, d
     if not math.isfinite(lam):  # a lost filter's state: one step, its NaN reported by the caller
         return 1
     return max(1, math.ceil(lam * dt / RK4_STIFFNESS))
+
+
+def friction_rk4(
+    robot: Robot,
+    q: Vector,
+    v: Vector,
+    tau: Vector,
+    dt: float,
+    acc: Vector | None,
+    minv_diag: Vector | None,
+) -> tuple[Vector, Vector]:
+    """:func:`dynamics_rk4` over ``dt`` [s] in :func:`friction_substeps` substeps (joint
+    friction is stiff near ``v = 0``): ``acc`` [rad/s²] the acceleration at ``(q, v)``, the
+    first substep's first stage, ``minv_diag`` the diagonal of ``M⁻¹(q)``; ``acc`` ``None``:
+    one step.  The model-based observers' prediction under friction (``ekf``, ``riemannian``)."""
+    n = 1 if acc is None or minv_diag is None else friction_substeps(robot, v, acc, minv_diag, dt)
+    q, v = dynamics_rk4(robot, q, v, tau, dt / n, acc0=acc)
+    for _ in range(n - 1):
+        q, v = dynamics_rk4(robot, q, v, tau, dt / n)
+    return q, v
 
 
 def _with_friction(

@@ -194,7 +194,7 @@ import numpy as np
 
 from pinobs.errors import DimensionError, GainError
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.model.integrators import dynamics_calls, friction_substeps
+from pinobs.model.integrators import dynamics_calls, friction_rk4
 from pinobs.observers import blocks
 from pinobs.observers.base import (
     Observer,
@@ -497,10 +497,7 @@ class ExtendedKalmanFilter(Observer[EKFState]):
             q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt, acc0=acc)
         else:  # stiff near v = 0: Φ by scaling and squaring, the mean in substeps
             Phi = stiff_transition_matrix(A, dt)
-            n = 1 if acc is None else friction_substeps(self.robot, state.v, acc, np.diag(minv), dt)
-            q, v = dynamics_rk4(self.robot, state.q, state.v, tau_in, dt / n, acc0=acc)
-            for _ in range(n - 1):
-                q, v = dynamics_rk4(self.robot, q, v, tau_in, dt / n)
+            q, v = friction_rk4(self.robot, state.q, state.v, tau_in, dt, acc, np.diag(minv))
         P = Phi.dot(state.P).dot(Phi.T)
         P[: 2 * nv, : 2 * nv] += double_integrator_noise(nv, dt, self.gains.accel_psd)
         if d is not None and state.d_psd is not None:  # Q_d's offset block, diag(psd_τ h)

@@ -139,7 +139,7 @@ import numpy as np
 
 from pinobs.errors import GainError, PinobsWarning
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.model.integrators import dynamics_calls, friction_substeps
+from pinobs.model.integrators import dynamics_calls, friction_rk4
 from pinobs.observers.base import GateState, Observer, Vector, gate_threshold, positive, register
 from pinobs.observers.checks import model_accel_psd
 from pinobs.observers.fused import (
@@ -595,11 +595,7 @@ class RiemannianObserver(Observer[_State]):
         if not (isinstance(r, Robot) and r.has_friction):
             return dynamics_rk4(r, q, v, tau, dt)
         acc = r.forward_dynamics(q, v, tau)  # (the first stage's, the same bits)
-        n = friction_substeps(r, v, acc, np.diag(np.linalg.inv(r.mass_matrix(q))), dt)
-        q, v = dynamics_rk4(r, q, v, tau, dt / n, acc0=acc)
-        for _ in range(n - 1):
-            q, v = dynamics_rk4(r, q, v, tau, dt / n)
-        return q, v
+        return friction_rk4(r, q, v, tau, dt, acc, np.diag(np.linalg.inv(r.mass_matrix(q))))
 
     def step(self, state: _State, dt: float, q_meas: Vector | None, tau: Vector) -> _State:
         fast = self._scratch_fast  # the same in one call (a vector space's: with a sample)

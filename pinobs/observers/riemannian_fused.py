@@ -9,15 +9,20 @@ are about 8.  Here a plain :meth:`~pinobs.observers.base.Observer.update` with t
 schedule (``gain_schedule="riccati"``, constant gains, a :class:`~pinobs.model.Robot` without
 joint friction: where :class:`~pinobs.observers.fused.RiccatiStep` or
 :class:`~pinobs.observers.fused_lie.LieRiccatiStep` is the step) is one Python call,
-:meth:`FusedUpdate.update`, the observer's ``_update_fused`` (and the gate's
-:meth:`~pinobs.observers.gating.GateState.measured` at a sample): the base's input checks
-(:func:`inputs_loops`), the step's operations in the same order on the same buffers, its
-compiled parts called by their machine code (:meth:`~pinobs.observers.linalg.LazyKernel.unchecked`:
-the same code, so the same bits), the estimate's copy and finiteness check
-(:func:`vector_finish_loops`, :func:`estimate_loops`) and the base's commit.  Anything else (a
-bad input, a pause, a latency, σ being learnt, a non-finite estimate, a Jacobi operator
-without its compiled calls) is left to the base's own path, which then does and says what it
-always did: nothing of the observer changes before the commit (only working memory).
+:meth:`FusedUpdate.update`, the observer's ``_update_fused`` (3 with the base's ``update`` and
+the step it picks): the base's input checks and copies with the RK4's start
+(:func:`vector_start_loops`; the RKMK4's first stage: :func:`lie_start_loops`), the step's
+operations in the same order on the same buffers, its compiled parts called by their
+machine code (:meth:`~pinobs.observers.linalg.LazyKernel.unchecked`: the same code, so the
+same bits), the NIS, the outlier gate (:func:`gate_loops`, ``GateState.measured``'s rule),
+the correction and the estimate's copy and finiteness check in one kernel
+(:func:`vector_finish_loops`; :func:`lie_finish_loops` then ``integrate`` and
+:func:`estimate_loops`), and the base's commit.  The gate is decided after the derivatives
+call, so a gated sample pays for that call (and a Jacobi operator due) it does not use: the
+working memory only, the state is the prediction's as before.  Anything else (a bad input, a
+pause, a latency, σ being learnt, a non-finite estimate) is left to the base's own path,
+which then does and says what it always did: nothing of the observer changes before the
+commit (only working memory).
 """
 
 from __future__ import annotations

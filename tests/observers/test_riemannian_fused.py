@@ -191,3 +191,29 @@ def test_the_clipped_gain_warning_points_at_the_users_call() -> None:
         clipped = [w for w in seen if issubclass(w.category, PinobsWarning)]
         assert len(clipped) == 1 and "out of (alpha, beta)'s reach" in str(clipped[0].message)
         assert clipped[0].filename == __file__, clipped[0].filename
+
+
+def test_the_compiled_gate_is_gatestates_rule() -> None:
+    """``gate_loops`` (compiled once a fused observer is made) against
+    ``GateState.measured`` (the model-based families' ``spike = ∞``) over NIS around the limit,
+    runs at and past ``MAX_GATE_RUN``, levels and drifts given or ``None``: the same fields."""
+    from pinobs.observers import riemannian_fused
+    from pinobs.observers.gating import MAX_GATE_RUN, GateState
+
+    pinobs.make_observer("riemannian", pinobs.load("ur5"), rate=1000.0, noise_std=1e-4)
+    gate = riemannian_fused.gate_loops
+    assert hasattr(gate, "py_func")  # (compiled: a helper of the loaded kernels)
+    rng = np.random.default_rng(4)
+    threshold, dof = 22.46, 6
+    for _ in range(2000):
+        run = int(rng.integers(0, MAX_GATE_RUN + 3))
+        level = None if rng.random() < 0.3 else float(rng.uniform(1.0, 60.0))
+        drift = None if rng.random() < 0.5 else float(rng.uniform(1.0, 1e4))
+        nis = float(np.exp(rng.uniform(-3.0, 8.0)))
+        want = GateState(0.0, False, run, level, drift).measured(nis, threshold, dof)
+        gated, run1, level1, drift1, none = gate(
+            nis, run, 0.0 if level is None else level, level is None,
+            0.0 if drift is None else drift, drift is None, threshold, dof,
+        )  # fmt: skip
+        got = GateState(nis, gated, run1, level1, None if none else drift1)
+        assert got == want, (nis, run, level, drift)

@@ -242,6 +242,7 @@ class FusedUpdate:
             self.stage, self.last = rk4_stage_kernel.unchecked(), rk4_last_kernel.unchecked()
             self._scratch_delta = step._scratch_delta
             self.start, self.finish = (kernel.unchecked() for kernel in vector_kernels)
+        self.step = self._lie_step if self.lie else self._vector_step  # (bound once)
 
     def update(self, t: float, q_meas: Any, tau: Any) -> Estimate | None:
         """:meth:`~pinobs.observers.base.Observer.update` of the observer, or ``None`` (nothing
@@ -279,8 +280,7 @@ class FusedUpdate:
         dt = x - t_prev
         if not (t_prev + TIME_EPS < x and dt < obs._split and dt <= obs._span):
             return None
-        step = self._lie_step if self.lie else self._vector_step
-        made = step(obs, state, dt, q_meas, tau)
+        made = self.step(obs, state, dt, q_meas, tau)
         if made is None:  # a bad input or a non-finite estimate: the base's path says so
             return None
         new, est, tau_new = made  # the base's commit (Observer._update: no after_commit)

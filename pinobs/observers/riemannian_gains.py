@@ -1,4 +1,5 @@
-"""The ``riemannian`` observer's gain rule: from the noise to ``(α, β)`` and to the sampled gains.
+"""The ``riemannian`` observer's gains: the rule from the noise to ``(α, β)``, the sampled gains,
+and the validated gains (:class:`RiemannianGains`, with Anisi–Hamberg's state-dependent ones).
 
 **Sampled gains** (:func:`discrete_gains`; :mod:`pinobs.observers.riemannian`'s module
 docstring, MATH §7).  The prediction maps the linearised error ``(ζ, ε)`` by
@@ -79,13 +80,14 @@ DEFAULT_BETA = 900.0  # [1/s²]
 
 @dataclass(frozen=True)
 class RiemannianGains:
-    """Validated gains of :class:`RiemannianObserver`.
+    """Validated gains of :class:`~pinobs.observers.riemannian.RiemannianObserver`.
 
     Attributes:
         alpha: position gain α [1/s] (``A = 2α``), > 0.
         beta: velocity gain β [1/s²] (``B``), > 0.
         curvature_gain: ``C`` (dimensionless, any finite number; −1 cancels the
-            curvature in the linearised error dynamics, module docstring).
+            curvature in the linearised error dynamics, :mod:`pinobs.observers.riemannian`'s
+            module docstring).
         gain_a, gain_b, gain_c: optional Anisi–Hamberg gains ``A(S, speed)``
             [1/s], ``B(S, speed)`` [1/s²], ``C(S, speed)``; when given they
             replace ``2α``, ``β``, ``curvature_gain``.

@@ -93,7 +93,10 @@ Riccati schedule the whole step is one Python call around compiled ones
 bracket is one (:func:`~pinobs.observers.fused.lie_correction_loops`); all equal the
 general :meth:`RiemannianObserver._correct` to rounding (tested).  The Jacobi operator's
 calls share the correction's ``pin.Data`` (:class:`~pinobs.observers.fused_jacobi.JacobiCalls`,
-compiled products, the same bits): with constant gains the update makes no BLAS call.
+compiled products, the same bits): with constant gains the update makes no BLAS call.  With
+the Riccati schedule the whole plain update, the base's checks, copies and commit included, is
+one Python call around compiled ones (:class:`~pinobs.observers.riemannian_fused.FusedUpdate`,
+the observer's ``_update_fused``; the same bits as the base's path, which takes the rest).
 :func:`pinobs.evaluation.measure_cost` reports ``time(update) / time(pin.aba)``
 (chunks of updates, each followed by as many ``pin.aba`` calls; the Jacobi
 operator counted at its amortised share).  Measured on a UR5 at 1 kHz:
@@ -130,14 +133,11 @@ matter.  ``"steady"``: the constant steady-state gains.
 from __future__ import annotations
 
 import math
-import warnings
-from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from pinobs.errors import GainError, PinobsWarning
+from pinobs.errors import GainError
 from pinobs.model import Robot, dynamics_rk4
 from pinobs.model.integrators import dynamics_calls, friction_rk4
 from pinobs.observers.base import GateState, Observer, Vector, gate_threshold, positive, register
@@ -153,11 +153,19 @@ from pinobs.observers.fused import (
 )
 from pinobs.observers.fused_jacobi import JacobiCalls, jacobi_kernel
 from pinobs.observers.fused_lie import LieRiccatiStep, LieRK4
+from pinobs.observers.riemannian_fused import FusedUpdate
 from pinobs.observers.riemannian_gains import (
-    clipped_message,
+    DEFAULT_ALPHA,
+    DEFAULT_BETA,
+    GainFunction,
+    RiemannianGains,
+    anisi_hamberg_curvature_gain,
+    check_schedule,
+    checked_gain,
     discrete_gains,
     gains_from_noise,
     steady_gains,
+    warn_clipped,
 )
 from pinobs.tolerances import JACOBI_FD_STEP
 
@@ -173,112 +181,6 @@ __all__ = [
     "steady_gains",
     "transport_first_order",
 ]
-
-#: ``(S, speed) -> gain``: ``S = ½ dist(q̂, q)²`` [kg·m²·rad², the metric's units],
-#: ``speed = |v̂|_g`` [√(kg·m²)·rad/s].  Anisi–Hamberg's state-dependent gains.
-GainFunction = Callable[[float, float], float]
-
-_DEFAULT_ALPHA = 60.0  # [1/s]
-_DEFAULT_BETA = 900.0  # [1/s²]
-
-
-@dataclass(frozen=True)
-class RiemannianGains:
-    """Validated gains of :class:`RiemannianObserver`.
-
-    Attributes:
-        alpha: position gain α [1/s] (``A = 2α``), > 0.
-        beta: velocity gain β [1/s²] (``B``), > 0.
-        curvature_gain: ``C`` (dimensionless, any finite number; −1 cancels the
-            curvature in the linearised error dynamics, module docstring).
-        gain_a, gain_b, gain_c: optional Anisi–Hamberg gains ``A(S, speed)``
-            [1/s], ``B(S, speed)`` [1/s²], ``C(S, speed)``; when given they
-            replace ``2α``, ``β``, ``curvature_gain``.
-    """
-
-    alpha: float
-    beta: float
-    curvature_gain: float = -1.0
-    gain_a: GainFunction | None = None
-    gain_b: GainFunction | None = None
-    gain_c: GainFunction | None = None
-
-    def __post_init__(self) -> None:
-        positive("alpha", self.alpha)
-        positive("beta", self.beta)
-        c = self.curvature_gain
-        if not isinstance(c, (int, float)) or not math.isfinite(c):
-            raise GainError(f"curvature_gain={c!r} is not a finite number")
-        for label in ("gain_a", "gain_b", "gain_c"):
-            fn = getattr(self, label)
-            if fn is not None and not callable(fn):
-                raise GainError(
-                    f"{label}={fn!r} is not callable; give a function (S, speed) -> gain"
-                )
-
-    @property
-    def state_dependent(self) -> bool:
-        """True when some gain is a function of the state."""
-        return not (self.gain_a is None and self.gain_b is None and self.gain_c is None)
-
-    def at(self, s: float, speed: float) -> tuple[float, float, float]:
-        """``(α, β, C)`` at ``S`` and ``|v̂|_g``.
-
-        Raises:
-            GainError: a gain function returned a non-finite value, or ``A, B ≤ 0``.
-        """
-        alpha, beta, c = self.alpha, self.beta, self.curvature_gain
-        if self.gain_a is not None:
-            alpha = 0.5 * _checked("gain_a", self.gain_a(s, speed), s, speed, positive_only=True)
-        if self.gain_b is not None:
-            beta = _checked("gain_b", self.gain_b(s, speed), s, speed, positive_only=True)
-        if self.gain_c is not None:
-            c = _checked("gain_c", self.gain_c(s, speed), s, speed, positive_only=False)
-        return alpha, beta, c
-
-
-def _check_schedule(curvature_every: int, *gains: GainFunction | None) -> None:
-    """Refuse a ``curvature_every`` that is not an integer ≥ 1, or a gain function
-    (``gain_a``, ``gain_b``, ``gain_c``) that is not callable."""
-    if (
-        isinstance(curvature_every, bool)
-        or not isinstance(curvature_every, int)
-        or curvature_every < 1
-    ):
-        raise GainError(f"curvature_every={curvature_every!r}; give an integer >= 1")
-    for label, fn in zip(("gain_a", "gain_b", "gain_c"), gains, strict=True):
-        if fn is not None and not callable(fn):
-            raise GainError(f"{label}={fn!r} is not callable; give a function (S, speed) -> gain")
-
-
-def _checked(label: str, value: float, s: float, speed: float, *, positive_only: bool) -> float:
-    x = float(value)
-    if not math.isfinite(x) or (positive_only and x <= 0.0):
-        bound = "finite and > 0" if positive_only else "finite"
-        raise GainError(f"{label}(S={s:.3g}, speed={speed:.3g}) = {value!r}; it must be {bound}")
-    return x
-
-
-def anisi_hamberg_curvature_gain(kappa: float) -> GainFunction:
-    """Anisi–Hamberg §4.4: ``C(S) = −2κ⁻¹Υ(S)``, ``Υ(S) = κ tan(½√(2κS)) / √(2κS)``.
-
-    For a space of constant sectional curvature ``kappa`` (≠ 0) [1/(metric
-    units)]; ``C → −1`` as ``S → 0``; κ < 0 uses the analytic continuation
-    (``tanh``).  Valid while ``√(2κS) < π`` (the cut locus).
-    """
-    k = float(kappa)
-    if not math.isfinite(k) or k == 0.0:
-        raise GainError(f"kappa={kappa!r}: give a finite nonzero curvature")
-
-    def gain(s: float, speed: float) -> float:
-        r = math.sqrt(2.0 * abs(k) * max(s, 0.0))
-        if r < 1e-4:
-            ratio = 0.5 + (r * r / 24.0 if k > 0 else -r * r / 24.0)  # tan(r/2)/r
-        else:
-            ratio = math.tan(0.5 * r) / r if k > 0 else math.tanh(0.5 * r) / r
-        return -2.0 * ratio  # −2κ⁻¹ · κ·ratio
-
-    return gain
 
 
 # --------------------------------------------------------------- geometry
@@ -459,14 +361,14 @@ class RiemannianObserver(Observer[_State]):
         positive("q0_std", q0_std)
         positive("v0_std", v0_std)
         self._p0 = np.diag([float(q0_std) ** 2, float(v0_std) ** 2])
-        _check_schedule(curvature_every, gain_a, gain_b, gain_c)
+        check_schedule(curvature_every, gain_a, gain_b, gain_c)
         self.curvature_every = curvature_every
         # An Anisi–Hamberg gain function stands in for the constant it replaces;
         # the constant is then its value at zero error and speed (for reports).
         if alpha is None and gain_a is not None:
-            alpha = 0.5 * _checked("gain_a", gain_a(0.0, 0.0), 0.0, 0.0, positive_only=True)
+            alpha = 0.5 * checked_gain("gain_a", gain_a(0.0, 0.0), 0.0, 0.0, positive_only=True)
         if beta is None and gain_b is not None:
-            beta = _checked("gain_b", gain_b(0.0, 0.0), 0.0, 0.0, positive_only=True)
+            beta = checked_gain("gain_b", gain_b(0.0, 0.0), 0.0, 0.0, positive_only=True)
         if (alpha is None) != (beta is None):
             raise GainError(
                 f"give both alpha and beta or neither (got alpha={alpha!r}, beta={beta!r}); "
@@ -478,7 +380,7 @@ class RiemannianObserver(Observer[_State]):
                 alpha, beta = rule.alpha, rule.beta
                 self.gain_rule = "kalman-clipped" if rule.clipped else "kalman"
             else:
-                alpha, beta = _DEFAULT_ALPHA, _DEFAULT_BETA
+                alpha, beta = DEFAULT_ALPHA, DEFAULT_BETA
                 self.gain_rule = "default"
         else:
             self.gain_rule = "given"
@@ -499,7 +401,7 @@ class RiemannianObserver(Observer[_State]):
             else "steady"
         )
         if self.gain_rule == "kalman-clipped" and self.gain_schedule == "steady":
-            warnings.warn(PinobsWarning(clipped_message(rule)), stacklevel=2)
+            warn_clipped(rule)  # (at the user's call: make_observer's caller, or this one's)
         self._set_compiled_steps()
 
     @property
@@ -545,6 +447,13 @@ class RiemannianObserver(Observer[_State]):
         fast = riccati and compiled and self._scratch_calls is not None  # (fused.RiccatiStep)
         step = RiccatiStep if fast else LieRiccatiStep if lie_fast else None
         self._scratch_fast: Any = None if step is None else step(self, _State)
+        # the plain update with that step in one Python call (riemannian_fused, issue 39):
+        # Observer.update offers it to _update_fused first, an instance attribute here
+        plain = step is not None and not (self._commits or self._own_innovation)
+        fused = FusedUpdate(self, _State) if plain else None
+        self._fused_path = fused is not None
+        if fused is not None:
+            vars(self)["_update_fused"] = fused.update
 
     # ------------------------------------------------------ continuous time
     def vector_field(

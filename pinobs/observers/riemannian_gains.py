@@ -1,4 +1,5 @@
-"""The ``riemannian`` observer's gain rule: from the noise to ``(α, β)`` and to the sampled gains.
+"""The ``riemannian`` observer's gains: the rule from the noise to ``(α, β)``, the sampled gains,
+and the validated gains (:class:`RiemannianGains`, with Anisi–Hamberg's state-dependent ones).
 
 **Sampled gains** (:func:`discrete_gains`; :mod:`pinobs.observers.riemannian`'s module
 docstring, MATH §7).  The prediction maps the linearised error ``(ζ, ε)`` by
@@ -40,13 +41,143 @@ default Riccati schedule runs the Kalman gains themselves, clipped or not; the c
 from __future__ import annotations
 
 import math
+import os
+import sys
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
+from pinobs.errors import GainError, PinobsWarning
+from pinobs.observers.checks import positive
 from pinobs.observers.gain_cache import solve_discrete_are
 
-__all__ = ["SteadyGains", "clipped_message", "discrete_gains", "gains_from_noise", "steady_gains"]
+__all__ = [
+    "DEFAULT_ALPHA",
+    "DEFAULT_BETA",
+    "GainFunction",
+    "RiemannianGains",
+    "SteadyGains",
+    "anisi_hamberg_curvature_gain",
+    "check_schedule",
+    "checked_gain",
+    "clipped_message",
+    "discrete_gains",
+    "gains_from_noise",
+    "steady_gains",
+    "warn_clipped",
+]
+
+#: ``(S, speed) -> gain``: ``S = ½ dist(q̂, q)²`` [kg·m²·rad², the metric's units],
+#: ``speed = |v̂|_g`` [√(kg·m²)·rad/s].  Anisi–Hamberg's state-dependent gains.
+GainFunction = Callable[[float, float], float]
+
+DEFAULT_ALPHA = 60.0  # [1/s]
+DEFAULT_BETA = 900.0  # [1/s²]
+
+
+@dataclass(frozen=True)
+class RiemannianGains:
+    """Validated gains of :class:`~pinobs.observers.riemannian.RiemannianObserver`.
+
+    Attributes:
+        alpha: position gain α [1/s] (``A = 2α``), > 0.
+        beta: velocity gain β [1/s²] (``B``), > 0.
+        curvature_gain: ``C`` (dimensionless, any finite number; −1 cancels the
+            curvature in the linearised error dynamics, :mod:`pinobs.observers.riemannian`'s
+            module docstring).
+        gain_a, gain_b, gain_c: optional Anisi–Hamberg gains ``A(S, speed)``
+            [1/s], ``B(S, speed)`` [1/s²], ``C(S, speed)``; when given they
+            replace ``2α``, ``β``, ``curvature_gain``.
+    """
+
+    alpha: float
+    beta: float
+    curvature_gain: float = -1.0
+    gain_a: GainFunction | None = None
+    gain_b: GainFunction | None = None
+    gain_c: GainFunction | None = None
+
+    def __post_init__(self) -> None:
+        positive("alpha", self.alpha)
+        positive("beta", self.beta)
+        c = self.curvature_gain
+        if not isinstance(c, (int, float)) or not math.isfinite(c):
+            raise GainError(f"curvature_gain={c!r} is not a finite number")
+        for label in ("gain_a", "gain_b", "gain_c"):
+            fn = getattr(self, label)
+            if fn is not None and not callable(fn):
+                raise GainError(
+                    f"{label}={fn!r} is not callable; give a function (S, speed) -> gain"
+                )
+
+    @property
+    def state_dependent(self) -> bool:
+        """True when some gain is a function of the state."""
+        return not (self.gain_a is None and self.gain_b is None and self.gain_c is None)
+
+    def at(self, s: float, speed: float) -> tuple[float, float, float]:
+        """``(α, β, C)`` at ``S`` and ``|v̂|_g``.
+
+        Raises:
+            GainError: a gain function returned a non-finite value, or ``A, B ≤ 0``.
+        """
+        alpha, beta, c = self.alpha, self.beta, self.curvature_gain
+        if self.gain_a is not None:
+            alpha = 0.5 * checked_gain(
+                "gain_a", self.gain_a(s, speed), s, speed, positive_only=True
+            )
+        if self.gain_b is not None:
+            beta = checked_gain("gain_b", self.gain_b(s, speed), s, speed, positive_only=True)
+        if self.gain_c is not None:
+            c = checked_gain("gain_c", self.gain_c(s, speed), s, speed, positive_only=False)
+        return alpha, beta, c
+
+
+def check_schedule(curvature_every: int, *gains: GainFunction | None) -> None:
+    """Refuse a ``curvature_every`` that is not an integer ≥ 1, or a gain function
+    (``gain_a``, ``gain_b``, ``gain_c``) that is not callable."""
+    if (
+        isinstance(curvature_every, bool)
+        or not isinstance(curvature_every, int)
+        or curvature_every < 1
+    ):
+        raise GainError(f"curvature_every={curvature_every!r}; give an integer >= 1")
+    for label, fn in zip(("gain_a", "gain_b", "gain_c"), gains, strict=True):
+        if fn is not None and not callable(fn):
+            raise GainError(f"{label}={fn!r} is not callable; give a function (S, speed) -> gain")
+
+
+def checked_gain(label: str, value: float, s: float, speed: float, *, positive_only: bool) -> float:
+    x = float(value)
+    if not math.isfinite(x) or (positive_only and x <= 0.0):
+        bound = "finite and > 0" if positive_only else "finite"
+        raise GainError(f"{label}(S={s:.3g}, speed={speed:.3g}) = {value!r}; it must be {bound}")
+    return x
+
+
+def anisi_hamberg_curvature_gain(kappa: float) -> GainFunction:
+    """Anisi–Hamberg §4.4: ``C(S) = −2κ⁻¹Υ(S)``, ``Υ(S) = κ tan(½√(2κS)) / √(2κS)``.
+
+    For a space of constant sectional curvature ``kappa`` (≠ 0) [1/(metric
+    units)]; ``C → −1`` as ``S → 0``; κ < 0 uses the analytic continuation
+    (``tanh``).  Valid while ``√(2κS) < π`` (the cut locus).
+    """
+    k = float(kappa)
+    if not math.isfinite(k) or k == 0.0:
+        raise GainError(f"kappa={kappa!r}: give a finite nonzero curvature")
+
+    def gain(s: float, speed: float) -> float:
+        r = math.sqrt(2.0 * abs(k) * max(s, 0.0))
+        if r < 1e-4:
+            ratio = 0.5 + (r * r / 24.0 if k > 0 else -r * r / 24.0)  # tan(r/2)/r
+        else:
+            ratio = math.tan(0.5 * r) / r if k > 0 else math.tanh(0.5 * r) / r
+        return -2.0 * ratio  # −2κ⁻¹ · κ·ratio
+
+    return gain
 
 
 class SteadyGains(NamedTuple):
@@ -142,3 +273,17 @@ def clipped_message(rule: SteadyGains) -> str:
         f"nearest it reaches, the same k1 and k2={run:.6g} /s (alpha={rule.alpha:.4g}, "
         f"beta={rule.beta:.4g}); gain_schedule='riccati' (the default) runs the Kalman gains"
     )
+
+
+#: The package's directory: frames there are pinobs's own, not the user's (:func:`warn_clipped`).
+_PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
+
+
+def warn_clipped(rule: SteadyGains) -> None:
+    """Warn (:class:`~pinobs.errors.PinobsWarning`, :func:`clipped_message`) at the user's
+    call: the first frame outside the package (``make_observer``'s caller, or the caller of
+    the observer's class; the warning's ``stacklevel`` counted, not fixed)."""
+    frame, level = sys._getframe(1), 2  # (level 1: this function)
+    while frame.f_back is not None and frame.f_code.co_filename.startswith(_PACKAGE):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(PinobsWarning(clipped_message(rule)), stacklevel=level)

@@ -96,11 +96,13 @@ def test_blas_runs_on_one_thread_inside_update(ur5_run, monkeypatch) -> None:
 
 def test_a_family_without_blas_calls_updates_on_the_callers_threads(ur5_run, monkeypatch) -> None:
     """``uses_blas = False`` (``fd``): the limit is not entered, so it costs nothing per update;
-    ``ekf``'s, ``riemannian``'s, ``kalman``'s, ``highgain``'s (its gain steady: from the
-    start with ``gain_ramp=1``) and ``sliding``'s compiled steps on a UR5 neither; a family
+    ``ekf``'s, ``riemannian``'s (its fused update too), ``kalman``'s, ``highgain``'s (its gain
+    steady: from the start with ``gain_ramp=1``) and ``sliding``'s compiled steps on a UR5
+    neither; a family
     that may call a BLAS (``kalman``'s paper form: its NumPy step) runs its step on one
-    thread.  ``ekf``'s and ``kalman``'s plain updates are done whole by their fused paths
-    (``_update_fused``, before the limit; the step where it leaves an update): spied too."""
+    thread.  ``ekf``'s, ``kalman``'s and ``riemannian``'s plain updates are done whole by their
+    fused paths (``_update_fused``, before the limit; the step where it leaves an update): spied
+    too."""
     robot, res = ur5_run
     cases = [(name, {}, {2}) for name in ("fd", "ekf", "riemannian", "kalman", "sliding")]
     cases += [("highgain", {"gain_ramp": 1.0}, {2}), ("kalman", {"form": "paper"}, {1})]
@@ -119,6 +121,16 @@ def test_a_family_without_blas_calls_updates_on_the_callers_threads(ur5_run, mon
                 return original(self, *args, **kwargs)
 
             monkeypatch.setattr(type(ob), method, spy)
+        fused = vars(ob).get("_update_fused")
+        if fused is not None:  # (riemannian's plain update: its own, not through step)
+
+            def spy_fused(*args, fused=fused, seen=seen):
+                seen.append(
+                    {d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"}
+                )
+                return fused(*args)
+
+            monkeypatch.setitem(vars(ob), "_update_fused", spy_fused)
         with threadpool_limits(2, user_api="blas"):
             ob.reset(res.t[0], res.q[0], None, res.tau[0])
             for k in range(1, 4):

@@ -26,12 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.observers.base import Vector
-from pinobs.observers.kf_kernels import (
-    _auto_warm_args,
-    auto_kernel,
-    auto_layout,
-    auto_step_loops,
-)
+from pinobs.observers.kf_kernels import auto_kernel, auto_layout, auto_step_loops
 from pinobs.observers.linalg import LazyKernel
 from pinobs.tolerances import TIME_EPS
 
@@ -137,13 +132,16 @@ def fused_constants(
 
 
 def _gated_warm_args() -> tuple[object, ...]:
-    """Arguments of :data:`gated_kernel`'s one signature: those of
-    :data:`~pinobs.observers.kf_kernels.auto_kernel`'s warm step and the gate's."""
-    x, x1, jerk, q, table, h, var, _, _, n, _, forget, threshold, level, run, drift, nq = (
-        _auto_warm_args()
-    )
-    return (x, x1, jerk, q, table, h, var, forget, threshold, 1.0, 20.0, nq, True, n, level,
-            run, drift)  # fmt: skip
+    """Arguments of :data:`gated_kernel`'s one signature (float64 C arrays, as the step gives;
+    those of :data:`~pinobs.observers.kf_kernels.auto_kernel`'s warm step, then the gate's)."""
+    nf, nq, nv = 2, 1, 1
+    o = auto_layout(nf, nq, nv)
+    x = np.zeros(o[-1])
+    x[o[6] :] = 1.0  # (P = ones: S > 0)
+    return (
+        x, np.empty(o[-1]), np.ones(nf), np.zeros(nv), np.zeros((0, 4), dtype=np.int64), 1e-3,
+        1.0, 0.99, math.inf, 1.0, 20.0, nq, True, 30.0, 1.0, 0, 0.0,
+    )  # fmt: skip
 
 
 def _update_warm_args() -> tuple[object, ...]:

@@ -264,8 +264,21 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         self.fresh_output = self.auto_bank is not None
         self._mixture = None if self.auto_bank is None else self.auto_bank.mixture
         self._nq, self._nv = robot.nq, robot.nv  # (Robot.nq/nv ask Pinocchio)
-        # "auto"'s plain update in one compiled call (Observer._update_fused; vector joints)
+        # "auto"'s plain update in one compiled call (Observer._update_fused; vector joints),
+        # its constants in one array (kf_fused.fused_constants; the limits kept by _set_period)
         self._fused_path = self.auto_bank is not None and self.auto_bank.fused is not None
+        self._consts = (
+            None if self.auto_bank is None else self.auto_bank.constants(self._split, self._span)
+        )
+        nq, nv = self._nq, self._nv  # the estimate's q̂, v̂ and the held torque in one array
+        self._cuts = (slice(0, nq), slice(nq, nq + nv), slice(nq + nv, nq + 2 * nv))
+
+    def _set_period(self, period: float | None) -> None:
+        """The base's, and the fused update's copy of its sub-step and pause limits."""
+        super()._set_period(period)
+        consts = getattr(self, "_consts", None)  # (None: from the base's __init__, or no bank)
+        if consts is not None:
+            consts[0], consts[1] = self._split, self._span
 
     @property
     def options(self) -> dict[str, object]:
@@ -365,46 +378,37 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
             and self.latency == 0.0
         ):
             return None
-        bank, state, nq, nv = self.auto_bank, self._state, self._nq, self._nv
+        bank, state = self.auto_bank, self._state
         if not isinstance(state, AutoState) or bank is None or bank.fused is None:
             return None  # (not reset: the base says so; the code not loaded back: the base's)
-        x, gate, n, measured = float(t), state.gate, state.n, q_meas is not None
-        gate_on = n >= AUTO_GATE_SAMPLES  # as AutoBank.step: the scales before this sample
-        n_new = bank._forget * n + 1.0
-        x1, out = np.empty(bank._size), np.empty(nq + 2 * nv)
-        taken, nis, rejected, level, drift = bank.fused(
-            state.x, x1, out, state.jerk, q_meas if measured else _EMPTY,
-            _EMPTY if tau is None else tau, measured, self._t, x,
-            self._split, self._span, gate_on, n, n_new,
-            bank._dof if gate.level is None else gate.level, gate.run,
-            0.0 if gate.drift is None else gate.drift, *bank.fused_constants,
+        x, gate = float(t), state.gate
+        x1, out = np.empty(bank._size), np.empty(self._cuts[2].stop)
+        taken, n, after = bank.fused(
+            state.x, x1, out, state.jerk, _EMPTY if q_meas is None else q_meas,
+            _EMPTY if tau is None else tau, self._consts, self._t, x, state.n,
+            -1.0 if gate.level is None else gate.level, gate.run,
+            0.0 if gate.drift is None else gate.drift,
         )  # fmt: skip
         if not taken:
             return None
-        if not measured:  # as AutoBank.step: the prediction (its likelihoods unchanged)
-            after = _new_tuple(GateState, (None, False, gate.run, gate.level, gate.drift))
-            nis, n_new = None, n
-        elif not gate_on:  # as AutoBank.step: reported (with σ₀), not gated
-            after = _new_tuple(GateState, (nis, False, 0, None, None))
-        else:  # GateState.measured, decided in the kernel (drift 0: None)
-            run = gate.run + 1 if rejected else 0
-            after = _new_tuple(GateState, (nis, rejected, run, level, drift or None))
-            if rejected:  # the prediction (its likelihoods unchanged)
-                n_new = n
+        nis, rejected = after[0], after[1]  # (the gate decided in the kernel: kf_fused)
         out.setflags(write=False)  # (its views below read-only with it)
         estimate = _new_object(Estimate)  # as Observer._make_estimate
+        cut_q, cut_v, cut_tau = self._cuts
         d = estimate.__dict__
-        d["t"], d["q"], d["v"], d["nis"], d["gated"] = x, out[:nq], out[nq : nq + nv], nis, rejected
+        d["t"], d["q"], d["v"], d["nis"], d["gated"] = x, out[cut_q], out[cut_v], nis, rejected
         # the base's commit (Observer._update: no after_commit, σ known)
-        self._state = _new_tuple(AutoState, (x1, state.shape, state.jerk, n_new, after))
+        self._state = _new_tuple(
+            AutoState, (x1, state.shape, state.jerk, n, _new_tuple(GateState, after))
+        )
         self._t, self._ts, self._tau, self._last, self._diverged = (
             x,
             x,
-            out[nq + nv :],
+            out[cut_tau],
             estimate,
             False,
         )
-        if measured:  # (a NIS)
+        if nis is not None:  # (a measurement)
             self._nis.append(nis)
             self._gated += rejected
         return estimate

@@ -20,7 +20,7 @@ from pinobs.errors import UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.observers.base import GateState, Vector, gate_threshold, positive
 from pinobs.observers.gating import SPIKE_ALPHA
-from pinobs.observers.kf_fused import update_kernel
+from pinobs.observers.kf_fused import fused_constants, gated_kernel, update_kernel
 from pinobs.observers.kf_kernels import (
     auto_kernel,
     auto_layout,
@@ -378,20 +378,26 @@ class AutoBank:
         #: the whole plain update in one compiled call (:mod:`pinobs.observers.kf_fused`), on
         #: vector joints (a sample to normalise is the base's); else ``None``
         self.fused = self._fused_update()
-        #: its last arguments: each joint's absurd-torque bound (``Robot.absurd_torque``), the
-        #: joints, σ₀², γ, the gate's threshold, ``nq``
-        self.fused_constants = (
-            np.array(robot.absurd_torque, dtype=np.float64), self._table, self._var,
-            self._forget, self.gate, robot.nq,
+        self._bounds = np.array(robot.absurd_torque, dtype=np.float64)  # (Robot.absurd_torque)
+
+    def constants(self, split: float, span: float) -> Vector:
+        """:attr:`fused`'s constants (:func:`~pinobs.observers.kf_fused.fused_constants`) with
+        the observer's sub-step and pause limits ``split``, ``span``."""
+        return fused_constants(
+            split, span, self._var, self._forget, self.gate, self._dof, AUTO_GATE_SAMPLES,
+            self._shape[1], self._bounds,
         )  # fmt: skip
 
     def _direct_step(self) -> Any:
-        """The compiled step without numba's dispatcher (:meth:`step`), loaded now, not at the
-        first update; ``None``: the NumPy step."""
+        """The compiled step and gate (:data:`~pinobs.observers.kf_fused.gated_kernel`) without
+        numba's dispatcher (:meth:`step`), loaded now, not at the first update; ``None``: the
+        NumPy step."""
         if self._table is None:
             return None
-        auto_kernel.load()
-        return None if auto_kernel.compiled is None else auto_kernel.unchecked()
+        gated_kernel.load()
+        if auto_kernel.compiled is None or gated_kernel.compiled is None:
+            return None
+        return gated_kernel.unchecked()
 
     def _fused_update(self) -> Any:
         """:data:`~pinobs.observers.kf_fused.update_kernel`'s machine code (loaded now), where
@@ -492,7 +498,9 @@ class AutoBank:
         the forgotten likelihood sums, the mixture's weights.  Where :attr:`compiled`, one
         call (:func:`~pinobs.observers.kf_kernels.auto_step_loops`, the same equations, tested
         equal to the NumPy ones to 1e-12) into arrays allocated here (the state before is kept
-        as it was); otherwise NumPy (:meth:`_step_numpy`).
+        as it was), the count and the gate's state after it decided in the same call
+        (:func:`~pinobs.observers.kf_fused.gated_step_loops`, as the fused update decides them);
+        otherwise NumPy (:meth:`_step_numpy`).
 
         The compiled path is written for its cost (issue 39: every ``kf`` update): the new
         state's arrays in one buffer (:class:`AutoState`: one ``np.empty`` and five arrays to
@@ -506,34 +514,22 @@ class AutoBank:
         if kernel is None or table is None:
             return self._step_numpy(state, h, q_meas)
         jerk = state.jerk if state.jerk.size else self.grid(h)
-        gate, n = state.gate, state.n
+        gate = state.gate
         if q_meas is None:
             q_meas = self._no_sample
         elif not q_meas.flags.carray or q_meas.dtype is not _F64:  # (not update's own copy)
             q_meas = np.array(q_meas, dtype=np.float64)  # C-contiguous, writable
-        if q_meas.shape != self._sample_shape and auto_kernel.compiled is not None:
-            kernel = auto_kernel.compiled  # (never from update: numba's checks)
-        gate_on = n >= AUTO_GATE_SAMPLES  # the scales ĉ and weights before this sample
-        n_new = self._forget * n + 1.0  # the forgotten count (:mod:`pinobs.observers.kf`)
+        if q_meas.shape != self._sample_shape and gated_kernel.compiled is not None:
+            kernel = gated_kernel.compiled  # (never from update: numba's checks)
         x = np.empty(self._size)
-        measured = q_meas is not self._no_sample
-        nis, rejected, level, drift = kernel(
-            state.x, x, jerk, q_meas, table, h,
-            self._var, measured, gate_on, n, n_new, self._forget, self.gate,
-            self._dof if gate.level is None else gate.level, gate.run,
-            0.0 if gate.drift is None else gate.drift, self._shape[1],
+        n, after = kernel(
+            state.x, x, jerk, q_meas, table, h, self._var, self._forget, self.gate, self._dof,
+            AUTO_GATE_SAMPLES, self._shape[1], q_meas is not self._no_sample, state.n,
+            -1.0 if gate.level is None else gate.level, gate.run,
+            0.0 if gate.drift is None else gate.drift,
         )  # fmt: skip
-        if not measured:  # the prediction (its likelihoods unchanged): GateState.predicted
-            after = _new_tuple(GateState, (None, False, gate.run, gate.level, gate.drift))
-            n_new = n
-        elif not gate_on:  # too few samples for a scale: reported (with σ₀), not gated
-            after = _new_tuple(GateState, (nis, False, 0, None, None))
-        else:  # GateState.measured, decided in the kernel (drift 0: None)
-            run = gate.run + 1 if rejected else 0
-            after = _new_tuple(GateState, (nis, rejected, run, level, drift or None))
-            if rejected:  # the prediction (its likelihoods unchanged)
-                n_new = n
-        return _new_tuple(AutoState, (x, self._shape, jerk, n_new, after))
+        # the count and GateState after the step, decided with it (kf_fused.gated_step_loops)
+        return _new_tuple(AutoState, (x, self._shape, jerk, n, _new_tuple(GateState, after)))
 
     def rows(
         self, state: AutoState, t0: float, t: Vector, q: Vector, v_max: Vector

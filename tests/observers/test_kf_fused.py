@@ -105,3 +105,38 @@ def test_a_pickled_kf_resumes_with_its_fused_update() -> None:
         q = q0 + 1e-4 * np.cos(k + np.arange(robot.nq))
         a, b = ob.update(k * 1e-3, q), clone.update(k * 1e-3, q)
         assert a.v.tobytes() == b.v.tobytes() and a.nis == b.nis
+
+
+def test_the_fused_update_follows_a_period_learnt_from_the_intervals() -> None:
+    """No ``rate``: the base learns the period from the first intervals, and the fused update's
+    copy of its sub-step and pause limits follows (``ConstantAccelerationKF._set_period``);
+    over a gap of five periods and a pause of 1.5 s, with dropped samples, the base's bits,
+    and some updates taken by the fused path."""
+    robot = pinobs.load("ur5")
+    sim = pinobs.simulate(
+        robot, [], duration=1.0, sensor=pinobs.Sensor(rate=1000.0, noise_std=1e-4), seed=4
+    )
+    t = sim.t.copy()
+    t[500:] += 4e-3  # a gap: sub-steps
+    t[800:] += 1.5  # a pause: a restart
+    fused, base = (pinobs.make_observer("kf", robot, noise_std=1e-4) for _ in "ab")
+    base._fused_path = False
+    taken: list[bool] = []
+    own = fused._update_fused
+
+    def counted(*args: object) -> object:
+        estimate = own(*args)  # type: ignore[arg-type]
+        taken.append(estimate is not None)
+        return estimate
+
+    fused._update_fused = counted  # type: ignore[method-assign]
+    for ob in (fused, base):
+        ob.reset(t[0], sim.q[0])
+    for k in range(1, t.size):
+        q = None if k % 9 == 0 else sim.q_meas[k]
+        a, b = fused.update(float(t[k]), q, sim.tau[k]), base.update(float(t[k]), q, sim.tau[k])
+        assert a.v.tobytes() == b.v.tobytes() and (a.nis, a.gated) == (b.nis, b.gated)
+    assert _same(fused, base)
+    assert 0.9 * len(taken) < sum(taken) < len(taken)  # (not while the period is learnt, a gap)
+    assert (fused._consts[0], fused._consts[1]) == (fused._split, fused._span)
+    assert fused._split == pytest.approx(3e-3) and fused._span == pytest.approx(0.1)

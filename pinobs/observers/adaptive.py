@@ -132,8 +132,8 @@ a prediction that is not kept (under a known latency) teaches nothing.
    output equals the synchronous one (tested to 1e-12: it is bit-identical);
    fed as fast as it runs, a UR5 with a payload made the same number of
    solves or one fewer, its velocity RMS within ±10 % of the synchronous
-   one.  ``scipy.linalg`` is imported when the observer is made, by the worker only in the
-   background (whose start ``make_observer`` does not wait for; the smoothing is NumPy's).
+   one.  Nothing of SciPy's is imported for it (its QR and least squares are NumPy's
+   LAPACK, the smoothing NumPy's; :func:`~pinobs.observers.adaptive_learner.load_learning`).
 
 5. **A pure step** (issue 37).  What it learned lives in its state (``AdaptiveState.model``: the
    learned model and the filter run on it, the offset, the regime, the restarts; the

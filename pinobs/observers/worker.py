@@ -44,7 +44,7 @@ take it).  Jobs run in the order they were submitted; each one's result (or
 its exception) comes back in that order.
 
 The worker starts without the caller waiting for it (issue 39): the fork server's start
-(a Python that imports Pinocchio and SciPy, :data:`~pinobs.observers.adaptive_learner.PRELOAD`)
+(a Python that imports Pinocchio and ``scipy.ndimage``, :data:`~pinobs.observers.adaptive_learner.PRELOAD`)
 and the worker's ``init`` took ``adaptive``'s ``make_observer`` from 0.4 to 1.0 s of wall
 time.  A starter thread does it (``Process.start`` and the wait for the worker's "ready"),
 blocked in ``read`` nearly all along (GIL released) and gone once the worker is ready; jobs

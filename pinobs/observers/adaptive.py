@@ -388,15 +388,16 @@ class AdaptiveEKF(Observer["_State"]):
     def uses_blas(self) -> bool:  # type: ignore[override]
         """Whether :meth:`update` runs on one BLAS thread (:attr:`Observer.uses_blas`): not
         where none of its parts calls a BLAS (11–12 µs an update in a paced loop): the
-        model-based filter's compiled step (``core.uses_blas``, of the latest state's model),
-        the compiled bank and blend (vector joints) and the learner off the loop
-        (``learning="background"``: its windows and solves, QR and least squares, run in its
-        worker process).  Set ``False``: never (as on any family)."""
+        model-based filter's compiled step (``core.uses_blas``, of the latest state's model) and
+        the compiled bank and blend (vector joints).  The learner's windows and solves (QR and
+        least squares) run on one BLAS thread of their own, wherever they run: in the update
+        that asks for them (``learning="sync"``) as in the worker process (``"background"``).
+        Set ``False``: never for the rest of the update (as on any family)."""
         if not self._blas_limit:
             return False
         state = self._state
         core = self.core if state is None else state.model.core
-        return self._worker is None or self._bank_blas or core.uses_blas
+        return self._bank_blas or core.uses_blas
 
     @uses_blas.setter
     def uses_blas(self, value: bool) -> None:

@@ -389,10 +389,9 @@ class AdaptiveEKF(Observer["_State"]):
         """Whether :meth:`update` runs on one BLAS thread (:attr:`Observer.uses_blas`): not
         where none of its parts calls a BLAS (11–12 µs an update in a paced loop): the
         model-based filter's compiled step (``core.uses_blas``, of the latest state's model) and
-        the compiled bank and blend (vector joints).  The learner's windows and solves (QR and
-        least squares) run on one BLAS thread of their own, wherever they run: in the update
-        that asks for them (``learning="sync"``) as in the worker process (``"background"``).
-        Set ``False``: never for the rest of the update (as on any family)."""
+        the compiled bank and blend (vector joints).  The learner's windows and solves run on
+        one BLAS thread of their own, in the update (``learning="sync"``) as in the worker
+        process.  Set ``False``: never for the rest of the update (as on any family)."""
         if not self._blas_limit:
             return False
         state = self._state

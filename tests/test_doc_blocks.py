@@ -164,6 +164,8 @@ NOT_RUN: dict[str, str] = {
     "benchmarks/drive_gains.{md,json} (~10 min)",
     "benchmarks/figaroh_peer.py": "needs FIGAROH and the shared real logs; writes the "
     "committed benchmarks/figaroh_peer.{md,json} (~4 min)",
+    "benchmarks/figaroh_gap.py": "needs FIGAROH and the shared TIAGo log; writes the "
+    "committed benchmarks/figaroh_gap.{md,json} (~20 min)",
     "benchmarks/legged_real_innovations.py": "needs the shared Go1 log; writes the committed "
     "benchmarks/legged_real_innovations.md (~30 s)",
     "benchmarks/talos_imu_link.py": "MuJoCo TALOS with its IMU on imu_link and on the root "

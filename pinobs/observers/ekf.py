@@ -57,7 +57,11 @@ above ``P⁻_qq,ii > 10⁴ R``): the talos's covariance algebra 11.3 → 9.0 ``p
 estimates within 1e-14 of the Joseph step's over 60 s (:mod:`pinobs.observers.blockstep`).
 The compiled step's kernels without numba's dispatcher where the state is its own (the one it
 returned last) and the sample a float64 array of unit stride: UR5 2.7 µs less an update in a
-paced 1 kHz loop (in-process A/B, load 6.3), the same bits.
+paced 1 kHz loop (in-process A/B, load 6.3), the same bits.  Then a plain update without the
+offset state whole in one Python call (:mod:`pinobs.observers.ekf_fused`: the base's checks,
+the step, the estimate and the commit; 12 → 2 Python calls an update): UR5 47.7 → 40.9 µs
+(18.3 → 15.7 warm ``pin.aba``) in a paced 1 kHz loop (in-process A/B against the base's path,
+tick by tick, load 6.6), the same bits.
 predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset state) take
 ``Φ`` and the Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`).
 
@@ -187,14 +191,13 @@ filter with the ``kf`` (:mod:`pinobs.observers.neverbehind`).
 
 from __future__ import annotations
 
-import copy
 from typing import Any
 
 import numpy as np
 
 from pinobs.errors import DimensionError, GainError
 from pinobs.model import Robot, dynamics_rk4
-from pinobs.model.integrators import dynamics_calls, friction_rk4
+from pinobs.model.integrators import friction_rk4
 from pinobs.observers import blocks
 from pinobs.observers.base import (
     Observer,
@@ -205,6 +208,8 @@ from pinobs.observers.base import (
 )
 from pinobs.observers.blockstep import BlockStep
 from pinobs.observers.checks import model_accel_psd
+from pinobs.observers.ekf_fused import FastPath as _FastPath
+from pinobs.observers.ekf_fused import update_fused
 from pinobs.observers.ekf_state import (
     AUTO_CEILING,
     AUTO_D0_ACCEL,
@@ -216,15 +221,7 @@ from pinobs.observers.ekf_state import (
     ad_matrix,
     double_integrator_noise,
 )
-from pinobs.observers.fused import (
-    compiled_vector_space,
-    ekf_coast_kernel,
-    ekf_finish_kernel,
-    ekf_predict_kernel,
-    loaded,
-    rk4_stage_kernel,
-    torque_in_kernel,
-)
+from pinobs.observers.fused import compiled_vector_space
 from pinobs.observers.fused_lie import LieRK4
 from pinobs.observers.linalg import (
     KERNEL_MAX_NV,
@@ -322,6 +319,11 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         #: warning (its arithmetic compiled or under ``np.errstate``: ``adaptive`` then
         #: calls it without an ``errstate`` of its own; issue 39).
         self.compiled_step = self._fast is not None
+        # a plain update whole in one Python call (Observer._update_fused; pinobs.observers.
+        # ekf_fused): this class's own step, output, innovation and after_commit only
+        self._fused_path = self._fast is not None and type(self) is ExtendedKalmanFilter
+
+    _update_fused = update_fused  # (Observer.update's first offer: ekf_fused.update_fused)
 
     @property
     def options(self) -> dict[str, object]:
@@ -563,6 +565,9 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self._lie_fast = _LieFast.build(self)
         self.uses_blas = self._fast is None
         self.compiled_step = self._fast is not None
+        # a plain update whole in one Python call (Observer._update_fused; pinobs.observers.
+        # ekf_fused): this class's own step, output, innovation and after_commit only
+        self._fused_path = self._fast is not None and type(self) is ExtendedKalmanFilter
 
     def output(self, state: EKFState) -> tuple[Vector, Vector]:
         return state.q, state.v
@@ -573,133 +578,6 @@ class ExtendedKalmanFilter(Observer[EKFState]):
             n = (2 if self.disturbance_psd is None else 3) * self.robot.nv
             return np.full((n, n), np.nan)
         return np.array(self._state.P)
-
-
-class _FastPath:
-    """:meth:`ExtendedKalmanFilter.step` in four compiled calls around Pinocchio's four
-    (issue 39; :mod:`pinobs.observers.fused`).  For a :class:`Robot` whose configuration
-    space is a vector space, without joint friction, ``nv ≤ KERNEL_MAX_NV``; the same
-    equations as :meth:`~ExtendedKalmanFilter.predict` then
-    :meth:`~ExtendedKalmanFilter.corrected`, to rounding (tested), which it falls back on
-    where :meth:`~ExtendedKalmanFilter.correct` takes another way (a NaN NIS, see
-    :func:`~pinobs.observers.fused.ekf_correct_loops`).  It owns its ``pin.Data``; its
-    buffers are working memory (``_scratch``: overwritten by every step, never read across
-    steps)."""
-
-    def __init__(self, ekf: ExtendedKalmanFilter) -> None:
-        robot, nv = ekf.robot, ekf.robot.nv
-        n = (2 if ekf.disturbance_psd is None else 3) * nv
-        self.calls = dynamics_calls(robot)
-        data = self.calls.data
-        # a, ∂a/∂q, ∂a/∂v, M⁻¹ of the derivatives call: views Pinocchio writes in place
-        self._scratch_data = (data.ddq, data.ddq_dq, data.ddq_dv, data.Minv)
-        self._scratch_work = np.zeros((8, nv))  # the RK4's rows (pinobs.observers.fused)
-        # the next stage's (q, v)
-        self._scratch_point = (self._scratch_work[6], self._scratch_work[7])
-        self._scratch_A = np.zeros((n, n))
-        self._scratch_A[:nv, nv : 2 * nv] = identity(nv)
-        self._scratch_Phi = np.empty((n, n))
-        self._scratch_P = np.empty((n, n))  # P⁻ (a state keeps a copy, never this)
-        self._scratch_ex = np.empty(nv + n)  # the correction's (e, dx)
-        self._shape = (n, n)
-        self.no_psd = np.zeros(nv)
-        self.no_d = np.zeros(0)  # the finish kernel's offset arguments without one
-        self._stride = (_F64.itemsize,)  # a contiguous q_meas's strides
-        self._scratch_tau = np.empty(nv)  # τ + d (torque_in)
-        self.torque_in = loaded(torque_in_kernel)
-        self.predict, self.finish = loaded(ekf_predict_kernel), loaded(ekf_finish_kernel)
-        # without numba's dispatcher (LazyKernel.unchecked): the stages and the coast on the
-        # step's own buffers and aba's output; predict and finish where the state's arrays are
-        # the (q, v, P) this path returned last (_layout_cache: a memo of the layout check, by
-        # identity; the bits are the dispatcher's either way) and q_meas a float64 array of
-        # unit stride (issue 39: in a paced 1 kHz loop 1–1.5 µs less on predict alone)
-        self.stage, self.coast = rk4_stage_kernel.unchecked(), ekf_coast_kernel.unchecked()
-        views = all(x.dtype == _F64 and x.flags.c_contiguous for x in self._scratch_data)
-        self._own_predict = ekf_predict_kernel.unchecked() if views else self.predict
-        self._own_finish = ekf_finish_kernel.unchecked()
-        self._layout_cache: tuple[Vector, Vector, Vector] | None = None
-
-    @classmethod
-    def build(cls, ekf: ExtendedKalmanFilter) -> _FastPath | None:
-        """The fast path of ``ekf``, or ``None`` where its robot does not qualify."""
-        return cls(ekf) if compiled_vector_space(ekf.robot) else None
-
-    def rebound(self, robot: Robot) -> _FastPath:
-        """This fast path on ``robot``, a model of the same tree as its own (its
-        :meth:`Robot.with_inertials`: ``replace_robot``): the calls bound to the new model,
-        on the same ``pin.Data`` (which depends only on the model's structure: Pinocchio
-        overwrites what it reads), the buffers and kernels shared (working memory: one
-        step at a time, as ``adaptive``'s copies of a filter).  A UR5 filter copied and its
-        robot replaced: 15–18 → 3–6 ``pin.aba``."""
-        fast = copy.copy(self)
-        fast.calls = dynamics_calls(robot, data=self.calls.data)
-        return fast
-
-    def step(
-        self, ekf: ExtendedKalmanFilter, state: EKFState, dt: float, q_meas: Vector | None,
-        tau: Vector,
-    ) -> EKFState:  # fmt: skip
-        """:meth:`ExtendedKalmanFilter.step` (class docstring): four compiled calls around
-        Pinocchio's four, the last (:func:`~pinobs.observers.fused.ekf_finish_loops`) the RK4's
-        last stage and the correction (with the offset state's); ``P⁻`` and ``(e, dx)`` in the
-        scratch buffers.  No NumPy floating-point warning (a lost filter's overflows): its
-        NumPy arithmetic is compiled or under ``np.errstate`` (``compiled_step``)."""
-        d = state.d
-        if d is None:
-            tau_in = tau
-        else:  # τ + d, compiled: no overflow warning where a lost filter's d overflows
-            tau_in = self._scratch_tau
-            self.torque_in(tau, d, tau_in)
-        calls, w, (qs, vs) = self.calls, self._scratch_work, self._scratch_point
-        q0, v0, P0 = state.q, state.v, state.P
-        calls.derivatives(q0, v0, tau_in)
-        psd = self.no_psd if state.d_psd is None else state.d_psd
-        P = self._scratch_P
-        accel_psd = ekf.gains.accel_psd  # (read at every step: a smoother's replay sets it)
-        ddq, ddq_dq, ddq_dv, minv = self._scratch_data
-        made = self._layout_cache  # the state's arrays this path's own (__init__)
-        own = made is not None and P0 is made[2] and q0 is made[0] and v0 is made[1]
-        own = own and psd is self.no_psd
-        predict = self._own_predict if own else self.predict
-        predict(w, q0, v0, ddq, ddq_dq, ddq_dv, minv, P0, dt, accel_psd, psd, self._scratch_A,
-                self._scratch_Phi, P)  # fmt: skip
-        aba, stage = calls.aba, self.stage
-        stage(w, aba(qs, vs, tau_in), 2, dt)  # RKMK4 (dynamics_rk4), its first stage the
-        stage(w, aba(qs, vs, tau_in), 3, dt)  # derivatives call's v̇
-        if q_meas is None:  # the fourth stage and P⁻ symmetrised, 0.5 * (P + P.T)
-            P = np.empty(self._shape)
-            self.coast(w, aba(qs, vs, tau_in), dt, self._scratch_P, P)
-            gate, q, v = state.gate.predicted(), qs.copy(), vs.copy()
-            self._layout_cache = (q, v, P)
-            return _new_tuple(EKFState, (q, v, P, d, state.d_psd, gate, state.auto,
-                                         state.psd_scale))  # fmt: skip
-        # the fourth stage and the correction (ExtendedKalmanFilter.corrected)
-        nv, ex, r = qs.shape[0], self._scratch_ex, ekf.gains.meas_std**2
-        q, v, P_new = np.empty(nv), np.empty(nv), np.empty(self._shape)
-        d_new = self.no_d if d is None else np.empty(nv)  # (d + dx_d: the kernel's)
-        plain = d is None and q_meas.dtype is _F64 and q_meas.strides == self._stride
-        finish = self._own_finish if plain else self.finish
-        nis = finish(w, aba(qs, vs, tau_in), dt, q_meas, P, r, ex, P_new, q, v,
-                     self.no_d if d is None else d, d_new)  # fmt: skip
-        if nis != nis:  # NaN: ekf.correct's other ways
-            pred = state.moved(qs.copy(), vs.copy(), P, state.gate, d, state.d_psd)
-            with np.errstate(over="ignore", invalid="ignore"):
-                return ekf.corrected(pred, q_meas, dt)
-        gate = state.gate.measured(nis, ekf._gate, nv)
-        if gate.gated:
-            with np.errstate(over="ignore", invalid="ignore"):
-                P = 0.5 * (P + P.T)
-                return state.moved(qs.copy(), vs.copy(), P, gate, d, state.d_psd)
-        d_psd = state.d_psd
-        if d is not None:
-            d = d_new  # d + dx[2nv:], the offset's part (dx = ex[nv:]), by the kernel
-            if state.auto and d_psd is not None:  # as ekf.corrected
-                with np.errstate(over="ignore", invalid="ignore"):
-                    s = P.diagonal()[:nv] + r  # Sᵢᵢ = P⁻_qq,ii + σ²
-                    d_psd = ekf.matched_density(state, ex[:nv], s, dt)
-        self._layout_cache = (q, v, P_new)
-        # state.moved's tuple, built here (a Python call less)
-        return _new_tuple(EKFState, (q, v, P_new, d, d_psd, gate, state.auto, state.psd_scale))
 
 
 class _LieFast:

@@ -83,7 +83,8 @@ runs of :func:`pinobs.evaluation.measure_cost` each, in the same process,
 ranges 26.6–28.8 and 20.9–21.6, on a loaded shared 2-core machine).
 Issue 39: there, with ``velocity_source="estimate"``, ``schedule="measured"`` and no
 ``viscous`` (the defaults), the whole step is six compiled calls around Pinocchio's six
-(:mod:`pinobs.observers.kalman_step`: 13 Python calls an update, was 29; no BLAS call, so
+(:mod:`pinobs.observers.kalman_step`: 13 Python calls an update, was 29, then 2 with its plain
+update in one call, :func:`~pinobs.observers.kalman_step.update_fused`; no BLAS call, so
 no one-BLAS-thread limit; no cache on the sample interval), equal to the NumPy step to
 rounding (3e-16 rad/s measured, tested to 1e-12).
 
@@ -119,7 +120,7 @@ from pinobs.observers.checks import model_accel_psd
 from pinobs.observers.differentiators import HighGainDifferentiator
 from pinobs.observers.ekf import ad_matrix, double_integrator_noise
 from pinobs.observers.fused import loaded
-from pinobs.observers.kalman_step import KalmanStep, fused_kernel
+from pinobs.observers.kalman_step import KalmanStep, fused_kernel, update_fused
 from pinobs.observers.linalg import (
     cholesky_solve,
     joseph_update,
@@ -275,6 +276,10 @@ class IbrirKalman(Observer[_State]):
         # the whole step compiled where it applies (pinobs.observers.kalman_step): no BLAS
         self._fast = None if self._fused is None else KalmanStep.build(self, _State)
         self.uses_blas = self._fast is None
+        # a plain update whole in one Python call (Observer._update_fused; kalman_step)
+        self._fused_path = self._fast is not None and type(self) is IbrirKalman
+
+    _update_fused = update_fused  # (Observer.update's first offer: kalman_step.update_fused)
 
     @property
     def options(self) -> dict[str, object]:

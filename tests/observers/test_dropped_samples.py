@@ -110,6 +110,8 @@ def test_a_regular_log_takes_one_step_per_sample(ur5_log) -> None:
     one family step per update; with drops, one more per lost tick."""
     robot, res = ur5_log
     ob = make_observer("ekf", robot, rate=1000.0, noise_std=1e-4)
+    ob._fused_path = False  # the base's path, whose steps are counted (the fused one runs no
+    # step: it takes only the updates of one step, pinobs.observers.ekf_fused)
     calls = []
     step = ob.step
 

@@ -226,3 +226,26 @@ def test_no_update_imports_a_module_on_a_lie_group_robot(name: str) -> None:
         "print(sorted(set(sys.modules) - before))\n"
     )
     assert last_line(code) == "[]"
+
+
+def test_identification_names_resolve_on_first_use_to_their_modules_objects() -> None:
+    """Issue 39: ``pinobs.model.identification`` imports its modules when a name is first
+    asked for (PEP 562), so ``adaptive``'s learner loads the regressor, solve and smoothing
+    only; every public name is its module's object and listed by ``dir``."""
+    import importlib
+
+    from pinobs.model import identification
+
+    for name, module in identification._LAZY.items():
+        value = getattr(identification, name)
+        source = importlib.import_module(f"pinobs.model.identification.{module}")
+        assert getattr(source, name) is value
+        assert name in dir(identification)
+    assert set(identification.__all__) <= set(identification._LAZY)
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        identification.nope  # noqa: B018
+    code = (
+        "import sys, pinobs.model.identification\n"
+        "print(sorted(m for m in sys.modules if m.startswith('pinobs.model.identification.')))\n"
+    )
+    assert last_line(code) == "[]"

@@ -110,6 +110,23 @@ def test_ekf_and_background_adaptive_run_without_scipy_linalg_in_the_loops_proce
     assert last_line(code) == "False"
 
 
+def test_synchronous_adaptive_learns_without_scipy_linalg() -> None:
+    """Issue 39: ``adaptive``'s synchronous learning (made, then its first windows and
+    solves, on a UR5 at 1 kHz) imports no ``scipy.linalg`` (0.13 s of its construction's main
+    thread, and SciPy's OpenBLAS, whose thread spun 0.09 s more): its pivoted QR is LAPACK's
+    ``dgeqp3`` in NumPy's OpenBLAS, its Savitzky–Golay coefficients NumPy's ``lstsq``."""
+    code = (
+        "import sys, numpy as np, pinobs\n"
+        "robot = pinobs.load('ur5')\n"
+        "obs = pinobs.make_observer('adaptive', robot, rate=1000.0, noise_std=1e-4)\n"
+        "q0 = robot.neutral(); obs.reset(0.0, q0)\n"
+        "for k in range(1, 1100):\n"
+        "    obs.update(k * 1e-3, q0 + 0.1 * np.sin(k * 1e-2 + np.arange(robot.nv)))\n"
+        "print(obs.consistency().details['solves'] >= 2, 'scipy.linalg' in sys.modules)\n"
+    )
+    assert last_line(code) == "True False"
+
+
 def test_warm_linear_algebra_imports_lapack_only_past_the_compiled_kernels() -> None:
     """A filter's constructor loads what its updates call: the compiled Joseph update for
     ``nv`` ≤ :data:`~pinobs.observers.linalg.KERNEL_MAX_NV`, LAPACK's ``dposv`` above."""
@@ -207,5 +224,28 @@ def test_no_update_imports_a_module_on_a_lie_group_robot(name: str) -> None:
         "for k in range(1, 51):\n"
         "    obs.update(k * 1e-3, robot.integrate(q0, 1e-3 * np.sin(k * 1e-2 + np.arange(3))))\n"
         "print(sorted(set(sys.modules) - before))\n"
+    )
+    assert last_line(code) == "[]"
+
+
+def test_identification_names_resolve_on_first_use_to_their_modules_objects() -> None:
+    """Issue 39: ``pinobs.model.identification`` imports its modules when a name is first
+    asked for (PEP 562), so ``adaptive``'s learner loads the regressor, solve and smoothing
+    only; every public name is its module's object and listed by ``dir``."""
+    import importlib
+
+    from pinobs.model import identification
+
+    for name, module in identification._LAZY.items():
+        value = getattr(identification, name)
+        source = importlib.import_module(f"pinobs.model.identification.{module}")
+        assert getattr(source, name) is value
+        assert name in dir(identification)
+    assert set(identification.__all__) <= set(identification._LAZY)
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        identification.nope  # noqa: B018
+    code = (
+        "import sys, pinobs.model.identification\n"
+        "print(sorted(m for m in sys.modules if m.startswith('pinobs.model.identification.')))\n"
     )
     assert last_line(code) == "[]"

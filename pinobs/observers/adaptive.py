@@ -132,8 +132,8 @@ a prediction that is not kept (under a known latency) teaches nothing.
    output equals the synchronous one (tested to 1e-12: it is bit-identical);
    fed as fast as it runs, a UR5 with a payload made the same number of
    solves or one fewer, its velocity RMS within ±10 % of the synchronous
-   one.  ``scipy.linalg`` is imported when the observer is made, by the worker only in the
-   background (whose start ``make_observer`` does not wait for; the smoothing is NumPy's).
+   one.  Nothing of SciPy's is imported for it (its QR and least squares are NumPy's
+   LAPACK, the smoothing NumPy's; :func:`~pinobs.observers.adaptive_learner.load_learning`).
 
 5. **A pure step** (issue 37).  What it learned lives in its state (``AdaptiveState.model``: the
    learned model and the filter run on it, the offset, the regime, the restarts; the
@@ -388,15 +388,15 @@ class AdaptiveEKF(Observer["_State"]):
     def uses_blas(self) -> bool:  # type: ignore[override]
         """Whether :meth:`update` runs on one BLAS thread (:attr:`Observer.uses_blas`): not
         where none of its parts calls a BLAS (11–12 µs an update in a paced loop): the
-        model-based filter's compiled step (``core.uses_blas``, of the latest state's model),
-        the compiled bank and blend (vector joints) and the learner off the loop
-        (``learning="background"``: its windows and solves, QR and least squares, run in its
-        worker process).  Set ``False``: never (as on any family)."""
+        model-based filter's compiled step (``core.uses_blas``, of the latest state's model) and
+        the compiled bank and blend (vector joints).  The learner's windows and solves run on
+        one BLAS thread of their own, in the update (``learning="sync"``) as in the worker
+        process.  Set ``False``: never for the rest of the update (as on any family)."""
         if not self._blas_limit:
             return False
         state = self._state
         core = self.core if state is None else state.model.core
-        return self._worker is None or self._bank_blas or core.uses_blas
+        return self._bank_blas or core.uses_blas
 
     @uses_blas.setter
     def uses_blas(self, value: bool) -> None:

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from pinobs.errors import IdentificationError
 from pinobs.model import Robot
 from pinobs.model.identification import MAX_FILL, MomentumRegressor, smooth_path, solve
+from pinobs.model.identification.lapack import numpy_has_dgeqp3
 from pinobs.model.sanity import mass_matrix_defect
 from pinobs.observers.base import Vector, positive
 from pinobs.observers.blas import blas_libraries, one_blas_thread
@@ -40,7 +41,8 @@ __all__ = [
 ]
 
 #: What the worker processes' fork server imports once (:class:`~pinobs.observers.worker.Worker`).
-PRELOAD = ("pinobs.observers.adaptive_learner", "scipy.linalg", "scipy.ndimage")
+#: (``scipy.linalg`` no more: the solve's QR is NumPy's LAPACK, :func:`load_learning`.)
+PRELOAD = ("pinobs.observers.adaptive_learner", "scipy.ndimage")
 
 #: A sample interval further than this fraction of ``h`` from it is a gap for the learner
 #: (a lost sample is ``2h``): its windows restart after it.
@@ -231,7 +233,7 @@ class Learner:
         process (background); ``solve``: ``(explained, current model)`` of a solve, ``None``
         for a window."""
         if self.worker is None:
-            self.pending.append((_Done(getattr(self.identifier, job)(*args)), solve))
+            self.pending.append((_Done(_local(self.identifier, job, *args)), solve))
         else:
             windows = self.identifier.rows.maxlen or 1
             self.pending.append((self.worker.submit(_remote, self.key, windows, job, *args), solve))
@@ -608,6 +610,15 @@ def _worker_start(robot: Robot, friction: bool, offset: bool) -> dict[str, Any]:
     return {"reg": MomentumRegressor(robot, friction=friction, offset=offset), "key": None}
 
 
+@one_blas_thread  # as in the worker process (_remote): the rest of an update calls no BLAS
+def _local(identifier: _Identifier, job: str, *args: Any) -> Any:
+    """In the loop's process (synchronous learning): the identifier's ``job(*args)`` on one
+    BLAS thread, the caller's count restored after (``adaptive``'s :attr:`uses_blas` no longer
+    puts every update on one thread for the few that run a job: 56 in 5000 on a UR5 at 1 kHz,
+    ten windows and two solves a second)."""
+    return getattr(identifier, job)(*args)
+
+
 @one_blas_thread  # small matrices (and the loop is on the other core)
 def _remote(state: dict[str, Any], key: int, windows: int, job: str, *args: Any) -> Any:
     """In the worker process: the job ``job(*args)`` of the identifier of learner ``key``
@@ -627,19 +638,20 @@ def check_options(**options: float) -> None:
 
 
 def load_learning() -> None:
-    """Import what the learner imports when it first runs (SciPy's QR and least squares:
-    ``scipy.linalg``, 0.15–0.28 s of process CPU by the machine's load, the largest part of
-    ``adaptive``'s construction with numba's import; numba's first kernel no longer imports
-    it, :mod:`~pinobs.observers.kernel_cache`.  Over half of it is SciPy's array-API layer,
-    which imports every NumPy submodule, ``numpy.f2py`` and ``numpy.testing`` among them;
-    about 25 ms is its OpenBLAS's worker thread spinning as it loads) and scan the BLAS
-    libraries with ``scipy.linalg`` loaded (:func:`~pinobs.observers.blas.blas_libraries`):
-    now, at construction, not in the loop (the first window's update would pay it).  The
-    smoothing no longer imports ``scipy.signal`` and ``scipy.ndimage`` (0.5 s CPU; the first
-    window's update took 494 ms on a UR5 importing them, then the observer's construction
-    did): :func:`~pinobs.model.identification.convolve_nearest` does the same arithmetic in
-    NumPy."""
-    import scipy.linalg  # noqa: F401
+    """Load now, at construction, not in the loop (the first window's update would pay it),
+    what the learner loads when it first runs: the LAPACK of its QR, found in NumPy's
+    OpenBLAS (:func:`~pinobs.model.identification.lapack.pivoted_qr`), and the BLAS
+    libraries scanned (:func:`~pinobs.observers.blas.blas_libraries`).  ``scipy.linalg`` only
+    where NumPy carries no ``dgeqp3`` (its QR is then SciPy's): its import cost 0.13 s of the
+    main thread's CPU and about 0.09 s more of its OpenBLAS's worker thread, spinning as the
+    library loads (UR5 ``make_observer`` + first update without it: 500 → 331 ms of process
+    CPU, load 2; over half of it SciPy's array-API layer, which imports every NumPy
+    submodule, ``numpy.f2py`` and ``numpy.testing`` among them).  The smoothing no longer
+    imports ``scipy.signal`` and ``scipy.ndimage`` (0.5 s CPU; the first window's update took
+    494 ms on a UR5 importing them, then the observer's construction did):
+    :func:`~pinobs.model.identification.convolve_nearest` does the same arithmetic in NumPy."""
+    if not numpy_has_dgeqp3():
+        import scipy.linalg  # noqa: F401
 
     blas_libraries()
 

@@ -44,7 +44,7 @@ take it).  Jobs run in the order they were submitted; each one's result (or
 its exception) comes back in that order.
 
 The worker starts without the caller waiting for it (issue 39): the fork server's start
-(a Python that imports Pinocchio and SciPy, :data:`~pinobs.observers.adaptive_learner.PRELOAD`)
+(a Python that imports Pinocchio and ``scipy.ndimage``, :data:`~pinobs.observers.adaptive_learner.PRELOAD`)
 and the worker's ``init`` took ``adaptive``'s ``make_observer`` from 0.4 to 1.0 s of wall
 time.  A starter thread does it (``Process.start`` and the wait for the worker's "ready"),
 blocked in ``read`` nearly all along (GIL released) and gone once the worker is ready; jobs
@@ -55,7 +55,6 @@ their results read only once it is ready; a start that failed is raised by the n
 
 from __future__ import annotations
 
-import multiprocessing
 import pickle
 import select
 import sys
@@ -208,6 +207,8 @@ class Worker:
 def _context(preload: tuple[str, ...]) -> Any:
     """multiprocessing's forkserver context (``preload`` added to what its server imports:
     ``__main__`` by default), or spawn where there is none (Windows)."""
+    import multiprocessing  # here: synchronous learning never starts a worker (2.3 ms)
+
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
     ctx = multiprocessing.get_context("forkserver")
@@ -240,6 +241,8 @@ def _not_bootstrapping() -> None:
     script to start (the fork server, or a spawned child, importing a script whose
     top-level code makes a worker): the starter thread would raise it out of sight, and
     the script would go on there."""
+    import multiprocessing
+
     if getattr(multiprocessing.current_process(), "_inheriting", False):
         raise RuntimeError(
             "a pinobs worker process was started while the main script was imported to start "

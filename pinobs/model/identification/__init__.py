@@ -168,124 +168,199 @@ was tried first: non-convex, and Levenberg-Marquardt stalled on it.)
 
 from __future__ import annotations
 
-from pinobs.model.identification.armature import (
-    ARMATURE_SHARE as ARMATURE_SHARE,
-)
-from pinobs.model.identification.armature import (
-    ARMATURE_SIGMAS as ARMATURE_SIGMAS,
-)
-from pinobs.model.identification.armature import (
-    determined_armature as determined_armature,
-)
-from pinobs.model.identification.diagnostics import (
-    HOLDOUT_WORSE as HOLDOUT_WORSE,
-)
-from pinobs.model.identification.diagnostics import (
-    OUTLIER_SHARE as OUTLIER_SHARE,
-)
-from pinobs.model.identification.diagnostics import (
-    ROWS_PER_COMBINATION as ROWS_PER_COMBINATION,
-)
-from pinobs.model.identification.diagnostics import (
-    STILL_RANGE as STILL_RANGE,
-)
-from pinobs.model.identification.diagnostics import (
-    UNEXPLAINED_MIN as UNEXPLAINED_MIN,
-)
-from pinobs.model.identification.diagnostics import (
-    UNEXPLAINED_WARN as UNEXPLAINED_WARN,
-)
-from pinobs.model.identification.diagnostics import (
-    ZERO_TORQUE_SHARE as ZERO_TORQUE_SHARE,
-)
-from pinobs.model.identification.diagnostics import (
-    check_zero_torques,
-)
-from pinobs.model.identification.drive_gains import (
-    GAIN_NULL_TOL as GAIN_NULL_TOL,
-)
-from pinobs.model.identification.drive_gains import (
-    GAIN_RANK_TOL as GAIN_RANK_TOL,
-)
-from pinobs.model.identification.drive_gains import DriveGains, identify_drive_gains
-from pinobs.model.identification.leastsquares import (
-    CHANNEL_SIGMA_FLOOR as CHANNEL_SIGMA_FLOOR,
-)
-from pinobs.model.identification.leastsquares import (
-    MAX_CONDITION as MAX_CONDITION,
-)
-from pinobs.model.identification.leastsquares import (
-    MU_END as MU_END,
-)
-from pinobs.model.identification.leastsquares import (
-    Solution,
-    pseudo_inertia,
-    solve,
-)
-from pinobs.model.identification.offline import identify
-from pinobs.model.identification.payload import (
-    PRIOR_PAYLOAD_LENGTH as PRIOR_PAYLOAD_LENGTH,
-)
-from pinobs.model.identification.payload import (
-    PRIOR_PAYLOAD_MASS as PRIOR_PAYLOAD_MASS,
-)
-from pinobs.model.identification.payload import (
-    PayloadRegressor,
-    identify_payload,
-)
-from pinobs.model.identification.regressor import (
-    IDENTIFICATION_FD_STEP,
-    MomentumRegressor,
-    excluded_coordinates,
-)
-from pinobs.model.identification.regressor import (
-    PRIOR_ARMATURE as PRIOR_ARMATURE,
-)
-from pinobs.model.identification.regressor import (
-    PRIOR_ARMATURE_FLOOR as PRIOR_ARMATURE_FLOOR,
-)
-from pinobs.model.identification.regressor import (
-    PRIOR_COULOMB as PRIOR_COULOMB,
-)
-from pinobs.model.identification.regressor import (
-    PRIOR_DAMPING as PRIOR_DAMPING,
-)
-from pinobs.model.identification.regressor import (
-    PRIOR_INERTIA as PRIOR_INERTIA,
-)
-from pinobs.model.identification.regressor import (
-    PRIOR_OFFSET as PRIOR_OFFSET,
-)
-from pinobs.model.identification.regressor import (
-    STRIBECK_VELOCITY as STRIBECK_VELOCITY,
-)
-from pinobs.model.identification.regressor import (
-    SUFFIXES as SUFFIXES,
-)
-from pinobs.model.identification.regressor import (
-    TORQUE_SAMPLING as TORQUE_SAMPLING,
-)
-from pinobs.model.identification.regressor import (
-    WEIGHTINGS as WEIGHTINGS,
-)
-from pinobs.model.identification.result import Identification, ParameterSet, Report
-from pinobs.model.identification.rows import (
-    MAX_FILL as MAX_FILL,
-)
-from pinobs.model.identification.rows import (
-    SETTLE_WINDOWS as SETTLE_WINDOWS,
-)
-from pinobs.model.identification.rows import (
-    build_rows as build_rows,
-)
-from pinobs.model.identification.rows import (
-    fill_short_gaps as fill_short_gaps,
-)
-from pinobs.model.identification.rows import (
-    log_arrays,
-    segments,
-)
-from pinobs.model.identification.savgol import smooth_path
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from pinobs.model.identification.armature import (
+        ARMATURE_SHARE as ARMATURE_SHARE,
+    )
+    from pinobs.model.identification.armature import (
+        ARMATURE_SIGMAS as ARMATURE_SIGMAS,
+    )
+    from pinobs.model.identification.armature import (
+        determined_armature as determined_armature,
+    )
+    from pinobs.model.identification.diagnostics import (
+        HOLDOUT_WORSE as HOLDOUT_WORSE,
+    )
+    from pinobs.model.identification.diagnostics import (
+        OUTLIER_SHARE as OUTLIER_SHARE,
+    )
+    from pinobs.model.identification.diagnostics import (
+        ROWS_PER_COMBINATION as ROWS_PER_COMBINATION,
+    )
+    from pinobs.model.identification.diagnostics import (
+        STILL_RANGE as STILL_RANGE,
+    )
+    from pinobs.model.identification.diagnostics import (
+        UNEXPLAINED_MIN as UNEXPLAINED_MIN,
+    )
+    from pinobs.model.identification.diagnostics import (
+        UNEXPLAINED_WARN as UNEXPLAINED_WARN,
+    )
+    from pinobs.model.identification.diagnostics import (
+        ZERO_TORQUE_SHARE as ZERO_TORQUE_SHARE,
+    )
+    from pinobs.model.identification.diagnostics import (
+        check_zero_torques,
+    )
+    from pinobs.model.identification.drive_gains import (
+        GAIN_NULL_TOL as GAIN_NULL_TOL,
+    )
+    from pinobs.model.identification.drive_gains import (
+        GAIN_RANK_TOL as GAIN_RANK_TOL,
+    )
+    from pinobs.model.identification.drive_gains import DriveGains, identify_drive_gains
+    from pinobs.model.identification.leastsquares import (
+        CHANNEL_SIGMA_FLOOR as CHANNEL_SIGMA_FLOOR,
+    )
+    from pinobs.model.identification.leastsquares import (
+        MAX_CONDITION as MAX_CONDITION,
+    )
+    from pinobs.model.identification.leastsquares import (
+        MU_END as MU_END,
+    )
+    from pinobs.model.identification.leastsquares import (
+        Solution,
+        pseudo_inertia,
+        solve,
+    )
+    from pinobs.model.identification.offline import identify
+    from pinobs.model.identification.payload import (
+        PRIOR_PAYLOAD_LENGTH as PRIOR_PAYLOAD_LENGTH,
+    )
+    from pinobs.model.identification.payload import (
+        PRIOR_PAYLOAD_MASS as PRIOR_PAYLOAD_MASS,
+    )
+    from pinobs.model.identification.payload import (
+        PayloadRegressor,
+        identify_payload,
+    )
+    from pinobs.model.identification.regressor import (
+        IDENTIFICATION_FD_STEP,
+        MomentumRegressor,
+        excluded_coordinates,
+    )
+    from pinobs.model.identification.regressor import (
+        PRIOR_ARMATURE as PRIOR_ARMATURE,
+    )
+    from pinobs.model.identification.regressor import (
+        PRIOR_ARMATURE_FLOOR as PRIOR_ARMATURE_FLOOR,
+    )
+    from pinobs.model.identification.regressor import (
+        PRIOR_COULOMB as PRIOR_COULOMB,
+    )
+    from pinobs.model.identification.regressor import (
+        PRIOR_DAMPING as PRIOR_DAMPING,
+    )
+    from pinobs.model.identification.regressor import (
+        PRIOR_INERTIA as PRIOR_INERTIA,
+    )
+    from pinobs.model.identification.regressor import (
+        PRIOR_OFFSET as PRIOR_OFFSET,
+    )
+    from pinobs.model.identification.regressor import (
+        STRIBECK_VELOCITY as STRIBECK_VELOCITY,
+    )
+    from pinobs.model.identification.regressor import (
+        SUFFIXES as SUFFIXES,
+    )
+    from pinobs.model.identification.regressor import (
+        TORQUE_SAMPLING as TORQUE_SAMPLING,
+    )
+    from pinobs.model.identification.regressor import (
+        WEIGHTINGS as WEIGHTINGS,
+    )
+    from pinobs.model.identification.result import Identification, ParameterSet, Report
+    from pinobs.model.identification.rows import (
+        MAX_FILL as MAX_FILL,
+    )
+    from pinobs.model.identification.rows import (
+        SETTLE_WINDOWS as SETTLE_WINDOWS,
+    )
+    from pinobs.model.identification.rows import (
+        build_rows as build_rows,
+    )
+    from pinobs.model.identification.rows import (
+        fill_short_gaps as fill_short_gaps,
+    )
+    from pinobs.model.identification.rows import (
+        log_arrays,
+        segments,
+    )
+    from pinobs.model.identification.savgol import smooth_path
+
+#: Each public name -> its module in this package, imported on first use (PEP 562
+#: ``__getattr__``): ``adaptive``'s learner imports the regressor, the solve and the smoothing,
+#: not the offline identification, its diagnostics, drive gains and payload (issue 39:
+#: 8–10 ms of its ``make_observer``).
+_LAZY = {
+    "ARMATURE_SHARE": "armature",
+    "ARMATURE_SIGMAS": "armature",
+    "determined_armature": "armature",
+    "HOLDOUT_WORSE": "diagnostics",
+    "OUTLIER_SHARE": "diagnostics",
+    "ROWS_PER_COMBINATION": "diagnostics",
+    "STILL_RANGE": "diagnostics",
+    "UNEXPLAINED_MIN": "diagnostics",
+    "UNEXPLAINED_WARN": "diagnostics",
+    "ZERO_TORQUE_SHARE": "diagnostics",
+    "check_zero_torques": "diagnostics",
+    "GAIN_NULL_TOL": "drive_gains",
+    "GAIN_RANK_TOL": "drive_gains",
+    "DriveGains": "drive_gains",
+    "identify_drive_gains": "drive_gains",
+    "CHANNEL_SIGMA_FLOOR": "leastsquares",
+    "MAX_CONDITION": "leastsquares",
+    "MU_END": "leastsquares",
+    "Solution": "leastsquares",
+    "pseudo_inertia": "leastsquares",
+    "solve": "leastsquares",
+    "identify": "offline",
+    "PRIOR_PAYLOAD_LENGTH": "payload",
+    "PRIOR_PAYLOAD_MASS": "payload",
+    "PayloadRegressor": "payload",
+    "identify_payload": "payload",
+    "IDENTIFICATION_FD_STEP": "regressor",
+    "MomentumRegressor": "regressor",
+    "excluded_coordinates": "regressor",
+    "PRIOR_ARMATURE": "regressor",
+    "PRIOR_ARMATURE_FLOOR": "regressor",
+    "PRIOR_COULOMB": "regressor",
+    "PRIOR_DAMPING": "regressor",
+    "PRIOR_INERTIA": "regressor",
+    "PRIOR_OFFSET": "regressor",
+    "STRIBECK_VELOCITY": "regressor",
+    "SUFFIXES": "regressor",
+    "TORQUE_SAMPLING": "regressor",
+    "WEIGHTINGS": "regressor",
+    "Identification": "result",
+    "ParameterSet": "result",
+    "Report": "result",
+    "MAX_FILL": "rows",
+    "SETTLE_WINDOWS": "rows",
+    "build_rows": "rows",
+    "fill_short_gaps": "rows",
+    "log_arrays": "rows",
+    "segments": "rows",
+    "smooth_path": "savgol",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """A public name of :data:`_LAZY`, imported from its module on first use (then cached)."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = [
     "ARMATURE_SHARE",

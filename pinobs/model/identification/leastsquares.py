@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pinobs.errors import IdentificationError
+from pinobs.model.identification.lapack import numpy_has_dgeqp3, pivoted_qr
 from pinobs.model.robot import Vector
 
 if TYPE_CHECKING:
@@ -146,7 +147,8 @@ def solve(
 def _blas_controller() -> Any:
     """threadpoolctl's view of the loaded BLAS libraries, scanned once (a scan costs about
     2 ms, which the online learner would pay at every solve)."""
-    import scipy.linalg  # noqa: F401  (its BLAS loaded before the scan)
+    if not numpy_has_dgeqp3():  # the QR is SciPy's: its BLAS loaded before the scan
+        import scipy.linalg  # noqa: F401
     from threadpoolctl import ThreadpoolController  # lazily: import pinobs stays light
 
     return ThreadpoolController()
@@ -167,8 +169,6 @@ def _solve(
     s = reg.prior_std() if prior_std is None else prior_std
     As = A * s  # columns in prior units: u = (θ − θ₀)/s
     r0 = y - A @ theta0
-    from scipy.linalg import qr  # lazily: import pinobs stays light
-
     if not np.any(As):
         raise IdentificationError("the regressor is zero: the log never moves the robot")
     # first pass: σ from an almost unregularised fit
@@ -177,7 +177,7 @@ def _solve(
     sig = _row_sigma(As @ u - r0, channel)
     # identifiable combinations: pivoted QR of the prior-scaled rows, each over its σ (one
     # scalar without channels: the rank and condition number are those of As)
-    _, R, piv = qr(As / sig[:, None], mode="economic", pivoting=True)
+    R, piv = pivoted_qr(As / sig[:, None])  # LAPACK's dgeqp3, as scipy.linalg.qr's
     diag = np.abs(np.diag(R))
     if diag.size == 0 or diag[0] == 0.0:
         raise IdentificationError("the regressor is zero: the log never moves the robot")

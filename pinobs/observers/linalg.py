@@ -270,9 +270,14 @@ class LazyKernel:
                 other.load()
                 scope[name] = other.compiled
             for name in self.contracted:  # (their own flags: numba.njit, not inlined)
-                if not hasattr(scope[name], "py_func"):
+                # the Python function, also where the name was bound to a kernel's inlined
+                # helper compiled without `contract` (`from fused import rk4_start_loops` after
+                # an ekf kernel had put its helper in fused's scope: the bits then depended
+                # on which observer a process made first)
+                base = getattr(scope[name], "py_func", scope[name])
+                if not base.__qualname__.endswith("__contract"):
                     fma = numba.njit(cache=True, error_model="numpy", fastmath={"contract"})
-                    scope[name] = fma(_contracted(scope[name]))
+                    scope[name] = fma(_contracted(base))
             fn = _contracted(self.fn) if self.fastmath else self.fn  # (its own cache entry)
             kernel = numba.njit(cache=True, error_model="numpy", fastmath=self.fastmath)(fn)
             load_signature(kernel, *self.warm_args)  # the float64 signature, loaded now

@@ -136,3 +136,59 @@ def test_kf_made_from_a_warm_cache_imports_neither_scipy_linalg_nor_numba_s_regi
         "print(sorted(m for m in heavy if m in sys.modules))\n"
     )
     assert last_line(code, runs=2) == "['numba']"
+
+
+#: A kernel module for ``LazyKernel``'s ``contracted``: ``caller`` calls ``_axpy_fma``, which
+#: must be ``axpy`` compiled with ``contract`` whatever the name was bound to before.
+_CONTRACTED = """
+def axpy(w, x, y, h):
+    for i in range(x.shape[0]):
+        w[i] = x[i] + h * y[i]
+
+
+def caller(w, x, y, h):
+    _axpy_fma(w, x, y, h)
+
+
+_axpy_fma = axpy
+"""
+
+
+def test_a_contracted_helper_keeps_its_flag_when_its_name_is_another_kernel_s_inlined_helper(
+    tmp_path: Path, monkeypatch
+) -> None:
+    """``LazyKernel(..., contracted=(name,))``: ``name`` is compiled with ``contract`` (one FMA
+    for ``x + h·y``) also where it was bound to a helper another kernel compiled without it
+    (``riemannian_fused``'s ``_rk4_start_fma = fused.rk4_start_loops``, imported after an
+    ``ekf`` kernel had put its inlined helper in ``fused``'s scope: the fused ``riemannian``
+    then moved by an ulp on about 1 sample in 500, order-dependently).  Checked against the
+    exactly rounded ``x + h·y`` (fractions)."""
+    import importlib
+    from fractions import Fraction
+
+    import numba
+
+    from pinobs.observers.linalg import LazyKernel
+
+    (tmp_path / "tiny_contracted.py").write_text(_CONTRACTED)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    mod = importlib.import_module("tiny_contracted")
+    # what another kernel's `helpers` leaves: the name bound to an inlined, uncontracted kernel
+    mod._axpy_fma = numba.njit(error_model="numpy", inline="always")(mod.axpy)
+    n = 64
+    kernel = LazyKernel(
+        mod.caller, np.zeros(n), np.zeros(n), np.zeros(n), 1e-3, contracted=("_axpy_fma",)
+    )
+    kernel.load()
+    assert kernel.compiled is not None
+    rng = np.random.default_rng(0)
+    fused = plain = 0
+    for _ in range(50):
+        x, y, w = rng.normal(size=n), rng.normal(size=n) * 10, np.empty(n)
+        kernel.compiled(w, x, y, 5e-4)
+        exact = [
+            float(Fraction(a) + Fraction(5e-4) * Fraction(b)) for a, b in zip(x, y, strict=True)
+        ]
+        fused += int(np.array_equal(w, exact))
+        plain += int(np.array_equal(w, x + 5e-4 * y))
+    assert fused == 50 and plain < 50  # every row one FMA; rows where it differs exist

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from collections.abc import Callable, Iterator
 from functools import cache
 
 import numpy as np
@@ -136,3 +137,35 @@ def last_line(code: str, *, runs: int = 1) -> str:
             [sys.executable, "-c", code], capture_output=True, text=True, check=True
         )
     return out.stdout.strip().splitlines()[-1]
+
+
+def varied_samples(
+    sim: pinobs.Result,
+    *,
+    outlier_at: int,
+    outlier: Callable[[np.ndarray], np.ndarray],
+    missed: bool = False,
+    varied_tau: bool = False,
+) -> Iterator[tuple[int, float | np.float64, np.ndarray | None, np.ndarray | None]]:
+    """``sim``'s samples from the second on, ``(k, t, q, tau)``, as a live loop may pass them
+    (a fused update against its base path, issue 39): ``q`` ``None`` every 29th (dropped), a
+    strided view every 3rd, read-only every 7th, ``outlier(q)`` at ``outlier_at``; ``tau``
+    ``None`` every 11th (``varied_tau``: strided every 5th, read-only every 13th); ``t`` a
+    float on odd ``k``, NumPy's on even; ``missed``: the ticks ``k % 31 == 4`` skipped (the
+    next update spans two periods)."""
+    wide = np.zeros((sim.t.size, 2 * sim.q_meas.shape[1]))
+    wide[:, ::2] = sim.q_meas
+    for k in range(1, sim.t.size):
+        if missed and k % 31 == 4:
+            continue
+        q = None if k % 29 == 0 else (wide[k, ::2] if k % 3 == 0 else sim.q_meas[k].copy())
+        if q is not None and k == outlier_at:
+            q = outlier(q)
+        if q is not None and k % 7 == 0:
+            q.setflags(write=False)
+        tau = None if k % 11 == 0 else sim.tau[k].copy()
+        if varied_tau and tau is not None and k % 5 == 0:
+            tau = np.repeat(tau, 2)[::2]
+        if varied_tau and tau is not None and k % 13 == 0:
+            tau.setflags(write=False)
+        yield k, (float(sim.t[k]) if k % 2 else sim.t[k]), q, tau

@@ -16,6 +16,7 @@ from pinobs.observers.ekf import ExtendedKalmanFilter
 from pinobs.observers.ekf_fused import coast_update_kernel, finish_update_kernel
 from pinobs.observers.kalman_step import coast_update_kernel as kalman_coast
 from pinobs.observers.kalman_step import correct_update_kernel
+from tests.conftest import varied_samples
 
 NAMES = ("ekf", "kalman")
 
@@ -62,21 +63,10 @@ def test_the_fused_update_gives_the_base_paths_bits(name: str, robot_name: str) 
     fused, base = _pair(name, robot)
     for ob in (fused, base):
         ob.reset(sim.t[0], sim.q[0], None, sim.tau[0])
-    wide = np.zeros((sim.t.size, 2 * robot.nq))
-    wide[:, ::2] = sim.q_meas
     taken = 0
-    for k in range(1, sim.t.size):
-        q = None if k % 29 == 0 else (wide[k, ::2] if k % 3 == 0 else sim.q_meas[k].copy())
-        if q is not None and k == 300:
-            q = q + 0.3  # an outlier
-        if q is not None and k % 7 == 0:
-            q.setflags(write=False)
-        tau = None if k % 11 == 0 else sim.tau[k].copy()
-        if tau is not None and k % 5 == 0:
-            tau = np.repeat(tau, 2)[::2]  # strided
-        if tau is not None and k % 13 == 0:
-            tau.setflags(write=False)
-        t = float(sim.t[k]) if k % 2 else sim.t[k]
+    for k, t, q, tau in varied_samples(
+        sim, outlier_at=300, outlier=lambda q: q + 0.3, varied_tau=True
+    ):
         last = fused._last
         a, b = fused.update(t, q, tau), base.update(t, q, tau)
         assert _equal(a, b), k

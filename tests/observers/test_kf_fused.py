@@ -11,6 +11,7 @@ import pytest
 
 import pinobs
 from pinobs.errors import NonFiniteError, TimestampError
+from tests.conftest import varied_samples
 
 
 def _pair(robot: pinobs.Robot) -> tuple[pinobs.Observer, pinobs.Observer]:
@@ -43,16 +44,7 @@ def test_the_fused_update_gives_the_base_paths_bits() -> None:
     fused, base = _pair(robot)
     for ob in (fused, base):
         ob.reset(sim.t[0], sim.q[0], None, sim.tau[0])
-    wide = np.zeros((sim.t.size, 2 * robot.nq))
-    wide[:, ::2] = sim.q_meas
-    for k in range(1, sim.t.size):
-        q = None if k % 29 == 0 else (wide[k, ::2] if k % 3 == 0 else sim.q_meas[k].copy())
-        if q is not None and k == 300:
-            q = q + 0.3  # an outlier
-        if q is not None and k % 7 == 0:
-            q.setflags(write=False)
-        tau = None if k % 11 == 0 else sim.tau[k]
-        t = float(sim.t[k]) if k % 2 else sim.t[k]
+    for _, t, q, tau in varied_samples(sim, outlier_at=300, outlier=lambda q: q + 0.3):
         a, b = fused.update(t, q, tau), base.update(t, q, tau)
         assert a.q.tobytes() == b.q.tobytes() and a.v.tobytes() == b.v.tobytes()
         assert (a.t, a.nis, a.gated) == (b.t, b.nis, b.gated)

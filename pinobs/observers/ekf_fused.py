@@ -16,7 +16,7 @@ docstring).  Here, in one Python call (``update`` → ``_update_fused``: 2 in al
 its kernels without numba's dispatcher, and two kernels (:func:`finish_update_loops`,
 :func:`coast_update_loops`) that end the step as the step's own kernels do (called as they are,
 compiled: the same bits) and do the base's checks of the sample and the torque, the outlier
-gate's decision (:func:`gate_level`: :meth:`~pinobs.observers.gating.GateState.measured`'s), the
+gate's decision (:func:`~pinobs.observers.gating.gate_loops`: ``GateState.measured``'s), the
 estimate's copy and its finiteness check as the base does them.  Anything else (a bad input, a
 pause, a latency, σ being learnt, the sample rejected by the gate, a NIS the kernel leaves to
 :meth:`~pinobs.observers.ekf.ExtendedKalmanFilter.correct`, a non-finite estimate, the offset
@@ -47,7 +47,7 @@ from pinobs.observers.fused import (
     rk4_stage_kernel,
     torque_in_kernel,
 )
-from pinobs.observers.gating import MAX_GATE_RUN, NIS_AVERAGING, GateState
+from pinobs.observers.gating import GateState, gate_loops
 from pinobs.observers.linalg import LazyKernel, identity
 from pinobs.observers.results import Estimate
 from pinobs.tolerances import TIME_EPS
@@ -60,7 +60,6 @@ __all__ = [
     "coast_update_kernel",
     "estimate_out",
     "finish_update_kernel",
-    "gate_level",
     "held_torque",
     "update_fused",
 ]
@@ -83,23 +82,6 @@ def held_torque(tau: Vector, bounds: Vector, held: Vector) -> bool:
     return True
 
 
-def gate_level(nis: float, run: int, level: float, threshold: float, dof: int) -> float:
-    """The outlier gate's decision on a measurement of NIS ``nis`` (not NaN) and, if it is let
-    through, the gate's new level: :meth:`~pinobs.observers.gating.GateState.measured` with
-    ``spike = ∞`` (the model-based families'), ``run`` and ``level`` (``dof`` for ``None``) the
-    gate's, ``threshold`` the filter's.  With ``spike = ∞`` its spike clause ``NIS > ∞ · ref``
-    is false for every ``ref ≥ limit > 0``, so the sample is rejected iff ``NIS > limit`` and
-    ``run < MAX_GATE_RUN``; the level's arithmetic is that method's, in its order (the same
-    bits).  Returns the new level, NaN where the gate rejects the sample."""
-    scale = level / dof
-    limit = threshold * (scale if scale > 1.0 else 1.0)
-    if nis > limit and run < MAX_GATE_RUN:
-        return math.nan
-    if run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
-        level = max(level, nis * dof / threshold)
-    return level + NIS_AVERAGING * (min(nis, 100.0 * level) - level)
-
-
 def finish_update_loops(
     w: Vector, acc: Vector, h: float, q_meas: Vector, P: Vector, r: float, ex: Vector,
     P_new: Vector, q_new: Vector, v_new: Vector, d: Vector, d_new: Vector, tau: Vector,
@@ -107,7 +89,7 @@ def finish_update_loops(
 ) -> tuple[float, float]:  # fmt: skip
     """A plain update's end with a sample: the base's checks (every ``q_meas_i`` finite, the
     torque by :func:`held_torque`), the step's end (:func:`~pinobs.observers.fused.ekf_finish_loops`,
-    its compiled code called as it is: the same bits), the gate (:func:`gate_level`) and the
+    its compiled code called as it is: the same bits), the gate (:func:`~pinobs.observers.gating.gate_loops`) and the
     estimate ``out = (q̂, v̂)``, every entry finite (the base's check).  Returns the NIS and the
     gate's new level; NaN: not taken (a check failed, the gate rejected the sample, or the
     correction takes another way; the outputs half written)."""
@@ -119,7 +101,8 @@ def finish_update_loops(
     nis = _finish_kernel(w, acc, h, q_meas, P, r, ex, P_new, q_new, v_new, d, d_new)
     if nis != nis:
         return nis, nis
-    return nis, estimate_out(q_new, v_new, out, gate_level(nis, run, level, threshold, q_new.size))
+    gated, _, new_level, _, _ = gate_loops(nis, run, level, False, 0.0, True, threshold, q_new.size)
+    return nis, estimate_out(q_new, v_new, out, math.nan if gated else new_level)
 
 
 def estimate_out(q: Vector, v: Vector, out: Vector, level: float) -> float:
@@ -166,7 +149,7 @@ finish_update_kernel = LazyKernel(
     finish_update_loops,
     np.zeros((8, 1)), _one(), 1e-3, _one(), np.eye(2), 1.0, np.zeros(3), np.zeros((2, 2)),
     _one(), _one(), np.zeros(0), np.zeros(0), _one(), np.ones(1), np.zeros(2), _one(), 0, 1.0,
-    10.0, helpers=(held_torque, gate_level, estimate_out),
+    10.0, helpers=(held_torque, gate_loops, estimate_out),
     linked=(("_finish_kernel", ekf_finish_kernel),),
 )  # fmt: skip
 #: :func:`coast_update_loops` compiled (loaded by :class:`FastPath`).

@@ -211,6 +211,26 @@ class GateState(NamedTuple):
         return gate_nis(threshold, self.level, dof)
 
 
+def gate_loops(
+    nis: float, run: int, level: float, level_none: bool, drift: float, drift_none: bool,
+    threshold: float, dof: int,
+) -> tuple[bool, int, float, float, bool]:  # fmt: skip
+    """:meth:`GateState.measured` with ``spike = ∞`` (the model-based families'), its
+    operations in its order (for the compiled fused updates: ``riemannian_fused``,
+    ``ekf_fused``; tested against that method): ``(gated, run, level, drift,
+    drift is None)`` after a measurement of NIS ``nis`` (``level_none``, ``drift_none``: the
+    state's ``None``)."""
+    lvl = float(dof) if level_none else level
+    scale = lvl / dof
+    limit = threshold * (scale if scale > 1.0 else 1.0)
+    if nis > limit and run < MAX_GATE_RUN:  # (spike ∞: no spike past the run)
+        return True, run + 1, lvl, nis, False  # (drift = nis: nis ≤ ∞ · limit)
+    if run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
+        lvl = max(lvl, nis * dof / threshold)
+    lvl += NIS_AVERAGING * (min(nis, 100.0 * lvl) - lvl)
+    return False, 0, lvl, drift, True
+
+
 @functools.lru_cache(maxsize=64)
 def steady_innovation_variance(k1: float, k2: float, h: float, meas_var: float) -> float:
     """Innovation variance of a fixed-gain observer of a double integrator, noise-driven, at steady state.

@@ -49,7 +49,7 @@ import numpy as np
 from pinobs.model.integrators import dynamics_calls, mass_coriolis_calls
 from pinobs.observers.base import Vector
 from pinobs.observers.blas import one_blas_thread
-from pinobs.observers.ekf_fused import estimate_out, gate_level, held_torque
+from pinobs.observers.ekf_fused import estimate_out, held_torque
 from pinobs.observers.fused import (
     compiled_vector_space,
     loaded,
@@ -57,7 +57,7 @@ from pinobs.observers.fused import (
     rk4_stage_loops,
     rk4_start_loops,
 )
-from pinobs.observers.gating import GateState
+from pinobs.observers.gating import GateState, gate_loops
 from pinobs.observers.linalg import LazyKernel, joseph_kernel, transition_kernel
 from pinobs.observers.results import Estimate
 from pinobs.tolerances import TIME_EPS
@@ -263,7 +263,7 @@ def correct_update_loops(
     """A plain update's end with a sample (:func:`update_fused`): the base's checks (every
     ``q_meas_i`` finite, the torque by :func:`~pinobs.observers.ekf_fused.held_torque`), the
     step's correction (:func:`correct_loops`, its compiled code called as it is: the same bits),
-    the gate (:func:`~pinobs.observers.ekf_fused.gate_level`) and the estimate ``out = (q̂, v̂)``,
+    the gate (:func:`~pinobs.observers.gating.gate_loops`) and the estimate ``out = (q̂, v̂)``,
     every entry finite (:func:`~pinobs.observers.ekf_fused.estimate_out`).  Returns the NIS and
     the gate's new level; NaN: not taken."""
     for i in range(q_meas.shape[0]):
@@ -274,7 +274,8 @@ def correct_update_loops(
     nis = _correct_kernel(M, CD, h, P, q3, q2, q1, w, ys, r, dx, P_new, q_new, v_new)
     if nis != nis:
         return nis, nis
-    return nis, estimate_out(q_new, v_new, out, gate_level(nis, run, level, threshold, q_new.size))
+    gated, _, new_level, _, _ = gate_loops(nis, run, level, False, 0.0, True, threshold, q_new.size)
+    return nis, estimate_out(q_new, v_new, out, math.nan if gated else new_level)
 
 
 def coast_update_loops(
@@ -307,7 +308,7 @@ _TAIL = (np.zeros(2), np.zeros(2), np.ones(2), np.zeros(4), np.zeros(2))
 #: ``_COV``; a 1 × 1 array would be typed C-ordered, and the unchecked call read M transposed).
 correct_update_kernel = LazyKernel(
     correct_update_loops, *_COV, *_warm((8, 2), (4, 2)), 1.0, *_warm((4,), (4, 4), (2,), (2,)),
-    *_TAIL, 0, 1.0, 10.0, helpers=(held_torque, gate_level, estimate_out),
+    *_TAIL, 0, 1.0, 10.0, helpers=(held_torque, gate_loops, estimate_out),
     linked=(("_correct_kernel", correct_kernel),),
 )  # fmt: skip
 #: :func:`coast_update_loops` compiled.

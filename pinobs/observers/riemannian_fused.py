@@ -46,7 +46,7 @@ from pinobs.observers.fused_lie import (
     lie_riccati_correction_loops,
     rkmk4_solve_kernel,
 )
-from pinobs.observers.gating import MAX_GATE_RUN, NIS_AVERAGING
+from pinobs.observers.gating import gate_loops
 from pinobs.observers.linalg import LazyKernel
 from pinobs.observers.results import Estimate
 from pinobs.tolerances import QUATERNION_NORM_TOL, TIME_EPS
@@ -77,25 +77,6 @@ def inputs_loops(
         tau_out[i] = x
         ok = ok and abs(x) <= bounds[i]  # (NaN: not ≤)
     return ok
-
-
-def gate_loops(
-    nis: float, run: int, level: float, level_none: bool, drift: float, drift_none: bool,
-    threshold: float, dof: int,
-) -> tuple[bool, int, float, float, bool]:  # fmt: skip
-    """:meth:`~pinobs.observers.gating.GateState.measured` with ``spike = ∞`` (the
-    model-based families'), its operations in its order: ``(gated, run, level, drift,
-    drift is None)`` after a measurement of NIS ``nis`` (``level_none``, ``drift_none``: the
-    state's ``None``)."""
-    lvl = float(dof) if level_none else level
-    scale = lvl / dof
-    limit = threshold * (scale if scale > 1.0 else 1.0)
-    if nis > limit and run < MAX_GATE_RUN:  # (spike ∞: no spike past the run)
-        return True, run + 1, lvl, nis, False  # (drift = nis: nis ≤ ∞ · limit)
-    if run >= MAX_GATE_RUN:  # the prediction was off, not the sample: adapt the gate
-        lvl = max(lvl, nis * dof / threshold)
-    lvl += NIS_AVERAGING * (min(nis, 100.0 * lvl) - lvl)
-    return False, 0, lvl, drift, True
 
 
 def estimate_loops(q: Vector, v: Vector, est: Vector) -> bool:

@@ -264,8 +264,8 @@ InEKFState = LegState
 _I3 = np.eye(3)
 #: ``ndarray.sum``'s reduction, without its Python wrapper
 _sum = np.add.reduce
-#: the propagation kernel's "no slip term" (eq. 9 off): no speeds, no feet
-_NO_SPEED, _NO_FEET = np.zeros(0), np.zeros(0, dtype=np.intp)
+_NO_SPEED: Vector = np.zeros(0)  # the propagation kernel's "no eq. (9) term": no speeds,
+_NO_FEET: NDArray[np.intp] = np.zeros(0, dtype=np.intp)  # no feet
 
 
 # ------------------------------------------------------------------- SO(3), SE_K(3)

@@ -7,7 +7,9 @@ operations:
 
 * propagation, eqs. (1)-(3): the mean (1); ``Φ_ε``'s 15 × 15 Taylor series
   (scaling and squaring, the degree and scaling of :func:`expm_degree`) with its
-  bias rows ``[0, I]`` skipped; then, with ``T = diag(Ad_X̂, I₆)``,
+  bias rows ``[0, I]`` skipped and, in its Horner products, ``F_ε``'s exact zeros
+  (the sums over the other terms in the same order: the same bits); eq. (9)'s slip
+  term added to ``Q_c`` in the same call; then, with ``T = diag(Ad_X̂, I₆)``,
   ``P⁺ = Φ P Φᵀ + Q`` as ::
 
       P_ε = T(X̂)⁻¹ P T(X̂)⁻ᵀ + ½ h Q_c,   P⁺ = T(X̂⁺) (Φ_ε P_ε Φ_εᵀ + ½ h Q_c) T(X̂⁺)ᵀ

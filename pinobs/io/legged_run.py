@@ -327,7 +327,8 @@ def legged_run(
     # (Python floats, bools and flag lists: per-row reads; "probability" sets the flags' rows)
     times, fed, now = log.t.tolist(), usable.tolist(), flags.tolist()
     for k in range(n):
-        rows.preload(k)
+        if not k % PRELOAD_ROWS:  # (a block's first row)
+            rows.preload(k)
         if not fed[k] or (previous is not None and times[k] <= previous):
             bad.append((int(log.lines[k]), _why(log, k, usable[k])))
             if prob is not None and k:

@@ -81,10 +81,14 @@ def imu_state(
 def smoothed(lever: Vector | None, reading: Vector, dt: float, tau: float = LEVER_TAU) -> Vector:
     """(M4)'s ``ω̄_k`` from ``ω̄_{k−1}`` (``lever``; ``None``: none yet, the reading's
     ``ω̃_k``), the reading ``(ω̃_k, ã_k)``, the step ``dt`` [s] and the time constant ``tau``
-    [s] (0: the reading)."""
+    [s] (0: the reading).  In Python floats, axis by axis: the operations of
+    ``lever + c (ω̃ − lever)`` on arrays, without three NumPy calls each sample."""
     if lever is None or tau == 0.0:
         return np.array(reading[:3], dtype=float)
-    return lever + (1.0 - math.exp(-dt / tau)) * (reading[:3] - lever)
+    c = 1.0 - math.exp(-dt / tau)
+    l0, l1, l2 = lever.tolist()
+    r0, r1, r2 = reading[:3].tolist()
+    return np.array([l0 + c * (r0 - l0), l1 + c * (r1 - l1), l2 + c * (r2 - l2)])
 
 
 def lever_shift(R_bi: Vector, reading: Vector | None, lever: Vector | None) -> Vector | None:

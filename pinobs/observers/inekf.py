@@ -264,6 +264,8 @@ InEKFState = LegState
 _I3 = np.eye(3)
 #: ``ndarray.sum``'s reduction, without its Python wrapper
 _sum = np.add.reduce
+_NO_SPEED: Vector = np.zeros(0)  # the propagation kernel's "no eq. (9) term": no speeds,
+_NO_FEET: NDArray[np.intp] = np.zeros(0, dtype=np.intp)  # no feet
 
 
 # ------------------------------------------------------------------- SO(3), SE_K(3)
@@ -607,21 +609,26 @@ class InvariantEKF(LeggedFilter):
         x, P = state.x, state.P
         R1, x1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty_like(P)
         qc = self._noise_densities(x.shape[0] - 2)
-        if self._speed is not None and state.feet:  # eq. (9): slip_densities, compiled
-            slip = np.empty(qc.shape[0])
-            kernel = slip_kernel.compiled
-            assert kernel is not None  # loaded by the constructor
-            kernel(qc, self._speed, dt, self._rows(state.feet), slip)
-            slip.setflags(write=False)  # (the propagation's signature: Q_c read-only)
-            qc = slip
-        qc = self._landing(qc, state, dt)  # eq. (11)
-        if self.adapt_noise is not None:  # eq. (12)'s scale
-            k = len(state.feet)
-            qc = scaled_densities(qc, self.noise_scale, k)
-            self._foot_q = (dt, qc[9 : 9 + 3 * k].reshape(k, 3) * dt)
+        speed, feet = _NO_SPEED, _NO_FEET  # eq. (9) in the propagation's kernel, or none
+        if self._speed is not None and state.feet:
+            speed, feet = self._speed, self._rows(state.feet)
+        g = self.gains
+        if self.adapt_noise is not None or (g.landing != 0.0 and g.landing_time != 0.0):
+            if speed.shape[0]:  # eq. (9) first, then eqs. (11)-(12): slip_densities, compiled
+                slip = np.empty(qc.shape[0])
+                kernel = slip_kernel.compiled
+                assert kernel is not None  # loaded by the constructor
+                kernel(qc, speed, dt, feet, slip)
+                slip.setflags(write=False)  # (the propagation's signature: Q_c read-only)
+                qc, speed = slip, _NO_SPEED
+            qc = self._landing(qc, state, dt)  # eq. (11)
+            if self.adapt_noise is not None:  # eq. (12)'s scale
+                k = len(state.feet)
+                qc = scaled_densities(qc, self.noise_scale, k)
+                self._foot_q = (dt, qc[9 : 9 + 3 * k].reshape(k, 3) * dt)
         kernel = propagate_kernel.compiled
         assert kernel is not None  # loaded by the constructor
-        kernel(state.R, x, state.bias, imu, dt, self._gravity, qc, P, R1, x1, P1)
+        kernel(state.R, x, state.bias, imu, dt, self._gravity, qc, speed, feet, P, R1, x1, P1)
         return replace_state(state, t=t, R=R1, x=x1, P=P1)
 
     def _noise_densities(self, n_contacts: int) -> Vector:
@@ -721,9 +728,11 @@ class InvariantEKF(LeggedFilter):
         R1, x1, theta, P1 = np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P)
         kernel = correct_kernel.compiled
         assert kernel is not None  # loaded by the constructor
-        rows = self._rows(measured)  # (h[measured], jac[measured]: the same rows)
-        feet = (h.take(rows, 0), jac.take(rows, 0), self._joint_var, self.gains.kinematics**2)
-        nis = kernel(R, x, state.bias, P, *feet, R1, x1, theta, P1)
+        rows = self._rows(measured)  # (h[measured], jac[measured]: indexed in the kernel)
+        g = self.gains
+        nis = kernel(
+            R, x, state.bias, P, h, jac, rows, self._joint_var, g.kinematics**2, R1, x1, theta, P1
+        )
         if nis < 0.0:
             return self._update_solve(state, measured, h, jac)
         return replace_state(state, R=R1, x=x1, bias=theta, P=P1), float(nis)

@@ -7,7 +7,9 @@ operations:
 
 * propagation, eqs. (1)-(3): the mean (1); ``Φ_ε``'s 15 × 15 Taylor series
   (scaling and squaring, the degree and scaling of :func:`expm_degree`) with its
-  bias rows ``[0, I]`` skipped; then, with ``T = diag(Ad_X̂, I₆)``,
+  bias rows ``[0, I]`` skipped and, in its Horner products, ``F_ε``'s exact zeros
+  (the sums over the other terms in the same order: the same bits); eq. (9)'s slip
+  term added to ``Q_c`` in the same call; then, with ``T = diag(Ad_X̂, I₆)``,
   ``P⁺ = Φ P Φᵀ + Q`` as ::
 
       P_ε = T(X̂)⁻¹ P T(X̂)⁻ᵀ + ½ h Q_c,   P⁺ = T(X̂⁺) (Φ_ε P_ε Φ_εᵀ + ½ h Q_c) T(X̂⁺)ᵀ
@@ -132,7 +134,12 @@ def expm_degree(norm: float) -> tuple[int, int]:
 
 def _body_core(w: Vector, a: Vector, h: float, core: Vector) -> None:  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     """``core = expm(F_ε h)`` (15 × 15: ε_R, ε_v, ε_p, ζ_g, ζ_a), the Horner form of the series
-    on the 9 rows that move (the bias rows of ``F_ε`` are zero, of ``core`` ``[0, I]``)."""
+    on the 9 rows that move (the bias rows of ``F_ε`` are zero, of ``core`` ``[0, I]``).
+
+    Each Horner product ``Σ_m F_im core_mj`` is summed over ``m`` in order, skipping the
+    products whose factor is an exact 0 (``F_ε``'s zero entries: at most 5 of 15 on a row
+    are not) or 1 (``core``'s bias rows ``[0, I]``: ``F_im`` itself at ``j = m``), the
+    inner loop along ``j``: the bits of the dense sum, in a third of its operations."""
     F = np.zeros((15, 15))
     for i in range(3):
         F[i, 9 + i] = -h
@@ -152,6 +159,13 @@ def _body_core(w: Vector, a: Vector, h: float, core: Vector) -> None:  # noqa: C
         norm = max(norm, t)
     s, degree = expm_degree(norm)
     F /= 2.0**s
+    nz = np.empty((9, 15), dtype=np.int64)  # each row's columns m < 9 with F_im ≠ 0, in order
+    count = np.zeros(9, dtype=np.int64)
+    for i in range(9):
+        for m in range(9):
+            if F[i, m] != 0.0:
+                nz[i, count[i]] = m
+                count[i] += 1
     core[:] = 0.0
     for i in range(15):
         core[i, i] = 1.0
@@ -162,13 +176,19 @@ def _body_core(w: Vector, a: Vector, h: float, core: Vector) -> None:  # noqa: C
     for k in range(degree - 1, 0, -1):
         for i in range(9):
             for j in range(15):
-                t = 0.0
-                for m in range(15):
-                    t += F[i, m] * core[m, j]
-                tmp[i, j] = t
+                tmp[i, j] = 0.0
+            for e in range(count[i]):  # Σ_m F_im core_mj over the rows m < 9 that move
+                m = nz[i, e]
+                f = F[i, m]
+                for j in range(15):
+                    tmp[i, j] += f * core[m, j]
+            for m in range(9, 15):  # the bias rows: core_mj = δ_mj
+                if F[i, m] != 0.0:
+                    tmp[i, m] += F[i, m]
         for i in range(9):
             for j in range(15):
-                core[i, j] = tmp[i, j] / k + (1.0 if i == j else 0.0)
+                v = tmp[i, j]  # (0/k is v itself: the division skipped on exact zeros)
+                core[i, j] = (v / k if v != 0.0 else v) + (1.0 if i == j else 0.0)
     for _ in range(s):
         C = core.copy()
         _matmul(C, C, core)
@@ -205,9 +225,10 @@ def _left_adjoint(R: Vector, x: Vector, M: Vector, out: Vector, inverse: bool) -
             out[r, j] = M[r, j]
 
 
-def _left_body(core: Vector, n_feet: int, M: Vector, out: Vector) -> None:
-    """``out = Φ_ε M``: the core's 9 × 15 on rows ε_R, ε_v, ε_p (columns ε and ζ), its
-    ``exp(−ω^ h)`` block on each foot, the bias rows copied (``M`` C-contiguous)."""
+def _left_body(core: Vector, n_feet: int, M: Vector, out: Vector) -> None:  # noqa: C901 -- numba kernel: its branches are loops over small matrices
+    """``out = Φ_ε M``: the core's 9 × 15 on rows ε_R, ε_v, ε_p (columns ε and ζ; its exact
+    zeros skipped), its ``exp(−ω^ h)`` block on each foot, the bias rows copied (``M``
+    C-contiguous)."""
     n, n_col = M.shape[0], M.shape[1]
     b = n - 6
     for i in range(9):
@@ -215,6 +236,8 @@ def _left_body(core: Vector, n_feet: int, M: Vector, out: Vector) -> None:
             out[i, j] = 0.0
         for k in range(15):
             coef = core[i, k]
+            if coef == 0.0:  # (core's zero blocks: ε_R on ε_v, ε_p, ζ_a; ε_v on ε_p)
+                continue
             row = k if k < 9 else b + k - 9
             for j in range(n_col):
                 out[i, j] += coef * M[row, j]
@@ -237,13 +260,21 @@ def _propagate_loops(
     h: float,
     g: Vector,
     qc: Vector,
+    speed: Vector,
+    feet: Vector,
     P: Vector,
     R1: Vector,
     x1: Vector,
     P1: Vector,
 ) -> None:
     """Eqs. (1)-(3) over ``h`` with the reading ``imu`` held: ``R1``, ``x1``, ``P1`` (module
-    docstring; :meth:`pinobs.observers.inekf.InvariantEKF._propagate`'s arithmetic)."""
+    docstring; :meth:`pinobs.observers.inekf.InvariantEKF._propagate`'s arithmetic), ``Q_c``
+    with eq. (9)'s slip term (:func:`_slip_loops`) if ``speed`` is not empty (the feet's
+    speeds, ``feet`` their indices in state order)."""
+    if speed.shape[0]:  # eq. (9), into a copy
+        slipped = np.empty(qc.shape[0])
+        _slip_loops(qc, speed, h, feet, slipped)
+        qc = slipped
     w = imu[:3] - theta[:3]
     a = imu[3:] - theta[3:]
     G = np.empty((3, 3, 3))
@@ -256,7 +287,10 @@ def _propagate_loops(
     _matvec3(G[2], a, Ga)
     _matvec3(R, Ga, Ra2)
     _matmul(Rg.T, Rg, RtR)
-    _matmul(Rg, 1.5 * np.eye(3) - 0.5 * RtR, R1)  # back onto SO(3) (rounding)
+    for i in range(3):  # 1.5 I − ½ RᵀR, entry by entry (NumPy's arithmetic)
+        for j in range(3):
+            RtR[i, j] = (1.5 if i == j else 0.0) - 0.5 * RtR[i, j]
+    _matmul(Rg, RtR, R1)  # back onto SO(3) (rounding)
     x1[:] = x
     for c in range(3):
         x1[0, c] = x[0, c] + Ra1[c] * h + g[c] * h
@@ -307,6 +341,7 @@ def _correct_loops(
     P: Vector,
     h: Vector,
     jac: Vector,
+    rows: Vector,
     joint_var: float,
     kin_var: float,
     R1: Vector,
@@ -314,9 +349,10 @@ def _correct_loops(
     theta1: Vector,
     P1: Vector,
 ) -> float:
-    """Eqs. (4)-(5) for every foot in the state (rows ``h`` of its measured position, ``jac``
-    its Jacobian, ``σ_q²``, ``σ_k²``): ``R1``, ``x1``, ``theta1``, ``P1``; returns the NIS,
-    or −1 (outputs undefined) when ``S`` is not positive definite."""
+    """Eqs. (4)-(5) for every foot in the state (``h[rows[f]]`` the measured position of
+    the foot at state position ``f``, ``jac[rows[f]]`` its Jacobian, ``σ_q²``, ``σ_k²``):
+    ``R1``, ``x1``, ``theta1``, ``P1``; returns the NIS, or −1 (outputs undefined) when ``S``
+    is not positive definite."""
     n, k = P.shape[0], x.shape[0] - 2
     m = 3 * k
     N = np.empty((k, 3, 3))
@@ -324,8 +360,8 @@ def _correct_loops(
     M = np.empty((3, 3))
     Rh = np.empty(3)
     for f in range(k):
-        N[f] = _foot_noise(R, jac, f, joint_var, kin_var, M)  # eq. (4): N_j
-        _matvec3(R, h[f], Rh)
+        N[f] = _foot_noise(R, jac, rows[f], joint_var, kin_var, M)  # eq. (4): N_j
+        _matvec3(R, h[rows[f]], Rh)
         for c in range(3):
             a = 3 * f + c
             HP[a, n] = Rh[c] - (x[2 + f, c] - x[1, c])  # r_j = R̂ h_j − (d̂_j − p̂)
@@ -444,15 +480,14 @@ def _joseph(P: Vector, HP: Vector, sol: Vector, N: Vector, P1: Vector) -> None: 
             for e in range(3):
                 s -= sol[3 * f + e, i] * N[f, e, c]
             Y[i, a] = s
-    D = C.copy()  # C − Y Kᵀ, then symmetrised
-    for i in range(n):
+    for i in range(n):  # C − Y Kᵀ in place (C's entries are not read again), then symmetrised
         for a in range(m):
             y = Y[i, a]
             for j in range(n):
-                D[i, j] -= y * sol[a, j]
+                C[i, j] -= y * sol[a, j]
     for i in range(n):
         for j in range(i + 1):
-            P1[i, j] = 0.5 * (D[i, j] + D[j, i])
+            P1[i, j] = 0.5 * (C[i, j] + C[j, i])
             P1[j, i] = P1[i, j]
 
 
@@ -615,12 +650,14 @@ def _warm_propagate() -> tuple[object, ...]:
     qc.setflags(write=False)
     n = 21
     return (np.eye(3), np.zeros((4, 3)), np.zeros(6), np.zeros(6), 1e-3, np.zeros(3), qc,
-            np.eye(n), np.empty((3, 3)), np.empty((4, 3)), np.empty((n, n)))  # fmt: skip
+            np.zeros(4), np.zeros(2, dtype=np.intp), np.eye(n), np.empty((3, 3)),
+            np.empty((4, 3)), np.empty((n, n)))  # fmt: skip
 
 
-#: :func:`_propagate_loops` compiled: ``(R, x, θ, imu, h, g, Q_c, P, R1, x1, P1)``.
+#: :func:`_propagate_loops` compiled: ``(R, x, θ, imu, h, g, Q_c, |ṗ_j|, feet, P, R1, x1, P1)``.
 propagate_kernel = LazyKernel(_propagate_loops, *_warm_propagate(), contracted=("_fma",))
-#: :func:`_correct_loops` compiled: ``(R, x, θ, P, h, J, σ_q², σ_k², R1, x1, θ1, P1) -> nis``.
+#: :func:`_correct_loops` compiled: ``(R, x, θ, P, h, J, rows, σ_q², σ_k², R1, x1, θ1, P1)
+#: -> nis``.
 correct_kernel = LazyKernel(
     _correct_loops,
     np.eye(3),
@@ -629,6 +666,7 @@ correct_kernel = LazyKernel(
     np.eye(18),
     np.zeros((1, 3)),
     np.zeros((1, 3, 2)),
+    np.zeros(1, dtype=np.intp),
     1.0,
     1.0,
     np.empty((3, 3)),
@@ -703,6 +741,7 @@ def _register_helpers() -> None:
         for helper in (
             _matmul,
             _matvec3,
+            _slip_loops,
             gamma_coefficients,
             _gammas,
             expm_degree,

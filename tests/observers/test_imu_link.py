@@ -278,3 +278,14 @@ def test_talos_imu_link_by_default_tracks_mujocos_root_velocity() -> None:
         rms[body] = float(np.sqrt(np.mean(e**2)))
     assert rms["imu_link"] < 0.012
     assert rms["imu_link"] < 1.6 * rms["base_link"]
+
+
+def test_the_smoothed_gyro_has_the_bits_of_the_array_expression() -> None:
+    """(M4)'s ``ω̄_k = ω̄_{k−1} + (1 − e^{−dt/τ}) (ω̃_k − ω̄_{k−1})``, written axis by axis in
+    Python floats: the bits of the same operations on arrays."""
+    rng = np.random.default_rng(4)
+    for _ in range(2000):
+        lever, reading = rng.normal(size=3), rng.normal(size=6)
+        dt, tau = rng.uniform(1e-4, 0.01), rng.uniform(1e-3, 0.2)
+        want = lever + (1.0 - math.exp(-dt / tau)) * (reading[:3] - lever)  # (as it was)
+        np.testing.assert_array_equal(smoothed(lever, reading, dt, tau), want)

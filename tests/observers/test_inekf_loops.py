@@ -42,6 +42,15 @@ def _state(rng: np.random.Generator, n_feet: int) -> tuple[np.ndarray, ...]:
     return R, x, theta, P
 
 
+#: the propagation kernel's arguments without eq. (9)'s slip term
+_NO_SLIP = (np.zeros(0), np.zeros(0, dtype=np.intp))
+
+
+def _rows(k: int) -> np.ndarray:
+    """The correction kernel's ``rows``: every foot, in order."""
+    return np.arange(k, dtype=np.intp)
+
+
 def _frame(R: np.ndarray, x: np.ndarray) -> np.ndarray:
     n = 9 + 3 * (x.shape[0] - 2)
     T = np.eye(n + 6)
@@ -62,7 +71,7 @@ def test_compiled_propagation_is_phi_p_phi_t_plus_q(n_feet: int, rate: float) ->
     qc = noise_densities(gains, n_feet)
     R1, x1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty_like(P)
     assert propagate_kernel.compiled is not None
-    propagate_kernel.compiled(R, x, theta, imu, h, G.copy(), qc, P, R1, x1, P1)
+    propagate_kernel.compiled(R, x, theta, imu, h, G.copy(), qc, *_NO_SLIP, P, R1, x1, P1)
     w, a = imu[:3] - theta[:3], imu[3:] - theta[3:]
     Phi = error_transition(R, x, w, a, h)
     T0, T1 = _frame(R, x), _frame(R1, x1)
@@ -85,7 +94,7 @@ def test_compiled_correction_is_the_kalman_update_with_h_written_out(n_feet: int
     R1, x1, th1, P1 = np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P)
     assert correct_kernel.compiled is not None
     nis = correct_kernel.compiled(
-        R, x, theta, P, hm, jac, gains.joint**2, gains.kinematics**2, R1, x1, th1, P1
+        R, x, theta, P, hm, jac, _rows(n_feet), gains.joint**2, gains.kinematics**2, R1, x1, th1, P1
     )
     n, m = P.shape[0], 3 * n_feet
     H = np.zeros((m, n))
@@ -115,7 +124,11 @@ def test_the_correction_reports_an_innovation_covariance_that_is_not_positive_de
     jac = np.zeros((1, 3, 12))
     out = (np.empty((3, 3)), np.empty_like(x), np.empty(6), np.empty_like(P))
     assert correct_kernel.compiled is not None  # S = H P Hᵀ − 1000 I
-    assert correct_kernel.compiled(R, x, theta, P, np.zeros((1, 3)), jac, 1.0, -1e3, *out) == -1.0
+    rows = _rows(1)
+    assert (
+        correct_kernel.compiled(R, x, theta, P, np.zeros((1, 3)), jac, rows, 1.0, -1e3, *out)
+        == -1.0
+    )
 
 
 @pytest.mark.parametrize("angle", [0.0, 1e-9, 1e-4, 0.3, 3.0])
@@ -246,3 +259,72 @@ def test_the_slip_kernel_is_slip_densities(rng: np.random.Generator, feet: tuple
     want = slip_densities(qc, speed, 0.0025, feet)
     assert not np.array_equal(want, qc)
     np.testing.assert_array_equal(out, want)
+
+
+@pytest.mark.parametrize("feet", [(0,), (2, 0), (1, 3, 0, 2)])
+def test_the_propagation_with_speeds_is_the_slip_kernel_then_the_propagation(
+    rng: np.random.Generator, feet: tuple[int, ...]
+) -> None:
+    """Eq. (9) inside the propagation's kernel (its ``speed``, ``feet`` arguments): the bits of
+    ``slip_kernel``'s ``Q_c`` propagated without them (the filter's two calls before)."""
+    from pinobs.observers.inekf_loops import slip_kernel
+
+    R, x, theta, P = _state(rng, len(feet))
+    imu = np.concatenate([rng.normal(size=3), rng.normal(size=3) + np.array([0.0, 0.0, 9.81])])
+    qc = noise_densities(InEKFGains(contact=1e-4), len(feet))
+    speed, rows = np.abs(rng.normal(size=4)), np.array(feet, dtype=np.intp)
+    slipped = np.empty(qc.shape[0])
+    slip_kernel.compiled(qc, speed, 0.0025, rows, slipped)  # type: ignore[misc]
+    slipped.setflags(write=False)
+    outs = [(np.empty((3, 3)), np.empty_like(x), np.empty_like(P)) for _ in range(2)]
+    assert propagate_kernel.compiled is not None
+    propagate_kernel.compiled(R, x, theta, imu, 0.0025, G.copy(), slipped, *_NO_SLIP, P, *outs[0])
+    propagate_kernel.compiled(R, x, theta, imu, 0.0025, G.copy(), qc, speed, rows, P, *outs[1])
+    for a, b in zip(*outs, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(slipped, qc)
+
+
+def _dense_core(w: np.ndarray, a: np.ndarray, h: float) -> np.ndarray:
+    """``expm(F_ε h)`` by the dense Horner series (every product of the 15-term sums, in
+    order): what ``_body_core`` computed before it skipped exact zeros and ones."""
+    from pinobs.observers.inekf_loops import expm_degree
+
+    F = np.zeros((15, 15))
+    for i in range(3):
+        F[i, 9 + i], F[3 + i, 12 + i], F[6 + i, 3 + i] = -h, -h, h
+    for o in (0, 3, 6):
+        F[o, o + 1], F[o, o + 2], F[o + 1, o + 2] = w[2] * h, -w[1] * h, w[0] * h
+        F[o + 1, o], F[o + 2, o], F[o + 2, o + 1] = -w[2] * h, w[1] * h, -w[0] * h
+    F[3, 1], F[3, 2], F[4, 2] = a[2] * h, -a[1] * h, a[0] * h
+    F[4, 0], F[5, 0], F[5, 1] = -a[2] * h, a[1] * h, -a[0] * h
+    s, degree = expm_degree(float(np.abs(F[:9]).sum(axis=1).max()))
+    F /= 2.0**s
+    core = np.eye(15)
+    core[:9] += F[:9] / degree
+    for k in range(degree - 1, 0, -1):
+        tmp = np.empty((9, 15))
+        for i in range(9):
+            for j in range(15):
+                t = 0.0
+                for m in range(15):
+                    t += float(F[i, m]) * float(core[m, j])
+                tmp[i, j] = t
+        core[:9] = tmp / k + np.eye(15)[:9]
+    assert s == 0  # (the squarings are _matmul's, unchanged)
+    return core
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_sparse_series_of_the_body_transition_has_the_dense_series_bits(seed: int) -> None:
+    """``_body_core`` skips the Horner products with ``F_ε``'s exact zeros and ``core``'s bias
+    rows ``[0, I]`` and the divisions of exact zeros: the same bits as every product summed."""
+    from pinobs.observers.inekf_loops import _body_core
+
+    rng = np.random.default_rng(seed)
+    w, a = rng.normal(size=3), rng.normal(size=3) + np.array([0.0, 0.0, 9.81])
+    if seed == 3:
+        w[1] = 0.0  # an exact zero in ω: more products skipped
+    core = np.empty((15, 15))
+    _body_core(w, a, 0.0025, core)  # (its Python: float64 products and sums, as compiled)
+    np.testing.assert_array_equal(core, _dense_core(w, a, 0.0025))

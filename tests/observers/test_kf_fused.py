@@ -11,6 +11,7 @@ import pytest
 
 import pinobs
 from pinobs.errors import NonFiniteError, TimestampError
+from pinobs.observers.kf_fused import _SPAN, _SPLIT
 from tests.conftest import varied_samples
 
 
@@ -130,5 +131,5 @@ def test_the_fused_update_follows_a_period_learnt_from_the_intervals() -> None:
         assert a.v.tobytes() == b.v.tobytes() and (a.nis, a.gated) == (b.nis, b.gated)
     assert _same(fused, base)
     assert 0.9 * len(taken) < sum(taken) < len(taken)  # (not while the period is learnt, a gap)
-    assert (fused._consts[0], fused._consts[1]) == (fused._split, fused._span)
+    assert (fused._work[_SPLIT], fused._work[_SPAN]) == (fused._split, fused._span)
     assert fused._split == pytest.approx(3e-3) and fused._span == pytest.approx(0.1)

@@ -436,13 +436,12 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         out.setflags(write=False)  # (its views below read-only with it)
         estimate = _new_object(Estimate)  # as Observer._make_estimate
         d, nq = estimate.__dict__, self._nq
-        d["t"], d["q"], d["v"], d["gated"] = x, out[:nq], out[nq:], rejected
         if q_meas is None:  # the prediction: no NIS (GateState.predicted)
-            d["nis"] = None
+            nis = None
         else:
-            d["nis"] = nis
             self._nis.append(nis)
             self._gated += rejected
+        d["t"], d["q"], d["v"], d["nis"], d["gated"] = x, out[:nq], out[nq:], nis, rejected
         # the base's commit (Observer._update: no after_commit, σ known; the state in _work)
         self._t = self._ts = x
         self._last, self._diverged, self._stale = estimate, False, True

@@ -111,7 +111,7 @@ that lags scores better against it; the likelihood sees only the positions.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Literal, NamedTuple, cast
+from typing import Any, Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -141,6 +141,7 @@ from pinobs.observers.kf_bank import (
 )
 from pinobs.observers.kf_bank import BankState as BankState  # re-exported
 from pinobs.observers.kf_bank import KFBank as KFBank  # re-exported
+from pinobs.observers.kf_fused import held_torque, load_work, set_limits, work_state
 from pinobs.tolerances import TIME_EPS
 
 _F64 = np.dtype(np.float64)
@@ -264,21 +265,66 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         self.fresh_output = self.auto_bank is not None
         self._mixture = None if self.auto_bank is None else self.auto_bank.mixture
         self._nq, self._nv = robot.nq, robot.nv  # (Robot.nq/nv ask Pinocchio)
-        # "auto"'s plain update in one compiled call (Observer._update_fused; vector joints),
-        # its constants in one array (kf_fused.fused_constants; the limits kept by _set_period)
+        # "auto"'s plain update in one compiled call (Observer._update_fused; vector joints) on
+        # an array of its own: the state, its time, count, gate and torque held, updated in
+        # place (kf_fused.fused_work; the limits kept by _set_period; the state put in it by
+        # _load_work, read back by the _state property)
         self._fused_path = self.auto_bank is not None and self.auto_bank.fused is not None
-        self._consts = (
-            None if self.auto_bank is None else self.auto_bank.constants(self._split, self._span)
+        self._work = (
+            None if self.auto_bank is None else self.auto_bank.work(self._split, self._span)
         )
-        nq, nv = self._nq, self._nv  # the estimate's q̂, v̂ and the held torque in one array
-        self._cuts = (slice(0, nq), slice(nq, nq + nv), slice(nq + nv, nq + 2 * nv))
+        self._est_size = self._nq + self._nv  # (the estimate's array)
+        self._fused: Any = None  # (the bank's compiled update, set by _load_work)
+
+    # The committed state: ``_held``, or where the fused updates have run since it was set
+    # (``_stale``) the one in ``_work``, an AutoState built from it when asked for (once).  Set
+    # by the base (an update of its own, a reset), ``_work`` no longer has it (``_live``).
+    _held: KFState | AutoState | None
+    _stale: bool
+    _live: bool
+
+    @property  # type: ignore[override]
+    def _state(self) -> KFState | AutoState | None:
+        if self._stale:
+            held = cast(AutoState, self._held)
+            x, n, gate = work_state(cast(Vector, self._work))
+            self._held = _new_tuple(
+                AutoState, (x, held.shape, held.jerk, n, _new_tuple(GateState, gate))
+            )
+            self._stale = False
+        return self._held
+
+    @_state.setter
+    def _state(self, state: KFState | AutoState | None) -> None:
+        self._held, self._stale, self._live = state, False, False
+
+    def __getstate__(self) -> dict[str, object]:
+        """Pickled with its state built (:attr:`_state`) and ``_work`` to be loaded again (a
+        view of it, the torque held, is pickled as a copy; the compiled code is not)."""
+        state = self._state
+        return {**self.__dict__, "_held": state, "_stale": False, "_live": False, "_fused": None}
+
+    def _load_work(self) -> bool:
+        """The committed state (and time, torque held) into ``_work`` for the fused update
+        (``_tau`` then a view of it), and the compiled update for it; ``False`` if the state
+        is not the compiled bank's."""
+        state, work, bank = self._held, self._work, self.auto_bank
+        if not isinstance(state, AutoState) or work is None or bank is None or bank.fused is None:
+            return False  # (not reset: the base says so)
+        gate = state.gate
+        load_work(
+            work, state.x, state.jerk, self._t, state.n, gate.level, gate.run, gate.drift,
+            self._tau,
+        )  # fmt: skip
+        self._tau, self._live, self._fused = held_torque(work), True, bank.fused
+        return True
 
     def _set_period(self, period: float | None) -> None:
         """The base's, and the fused update's copy of its sub-step and pause limits."""
         super()._set_period(period)
-        consts = getattr(self, "_consts", None)  # (None: from the base's __init__, or no bank)
-        if consts is not None:
-            consts[0], consts[1] = self._split, self._span
+        work = getattr(self, "_work", None)  # (None: from the base's __init__, or no bank)
+        if work is not None:
+            set_limits(work, self._split, self._span)
 
     @property
     def options(self) -> dict[str, object]:
@@ -353,11 +399,13 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
         base's own path takes it).  Issue 39: in a paced 1 kHz loop the base's checks, copies
         and estimate cost more than the step; here they are done in
         :func:`~pinobs.observers.kf_fused.auto_update_loops` as the base does them, and what
-        the base commits is committed, to the bit.  Taken: ``t`` a ``float`` (or NumPy's),
-        ``q_meas`` ``None`` or a float64 array of shape ``(nq,)``, ``tau`` ``None`` or a
-        float64 ``(nv,)``, σ known, the period known, no latency, no pause due, and whatever the kernel checks
-        (:func:`~pinobs.observers.kf_fused.auto_update_loops`).  The estimate's ``q̂`` and
-        ``v̂`` and the held torque are views of one new read-only array (``nq + 2 nv``)."""
+        the base commits is committed, to the bit: the state, its count and gate, and the
+        torque held in place in the filter's array (``_work``; the state built from it only
+        when read, :attr:`_state`), the time, the estimate, the NIS here.  Taken: ``t`` a
+        ``float`` (or NumPy's), ``q_meas`` ``None`` or a float64 array of shape ``(nq,)``,
+        ``tau`` ``None`` or a float64 ``(nv,)``, σ known, the period known, no latency, no
+        pause due, and whatever the kernel checks.  The estimate's ``q̂`` and ``v̂`` are views
+        of one new read-only array (``nq + nv``), not written again."""
         if not (
             (type(t) is float or type(t) is np.float64)
             and (
@@ -376,41 +424,27 @@ class ConstantAccelerationKF(Observer["KFState | AutoState"]):
             and not self._intervals_due
             and not self._restart_due
             and self.latency == 0.0
+            and (self._live or self._load_work())
         ):
             return None
-        bank, state = self.auto_bank, self._state
-        if not isinstance(state, AutoState) or bank is None or bank.fused is None:
-            return None  # (not reset: the base says so; the code not loaded back: the base's)
-        x, gate = float(t), state.gate
-        x1, out = np.empty(bank._size), np.empty(self._cuts[2].stop)
-        taken, n, after = bank.fused(
-            state.x, x1, out, state.jerk, _EMPTY if q_meas is None else q_meas,
-            _EMPTY if tau is None else tau, self._consts, self._t, x, state.n,
-            -1.0 if gate.level is None else gate.level, gate.run,
-            0.0 if gate.drift is None else gate.drift,
-        )  # fmt: skip
+        x, out = float(t), np.empty(self._est_size)
+        taken, nis, rejected = self._fused(
+            self._work, out, _EMPTY if q_meas is None else q_meas, _EMPTY if tau is None else tau, x
+        )
         if not taken:
-            return None
-        nis, rejected = after[0], after[1]  # (the gate decided in the kernel: kf_fused)
+            return None  # (a bad input or a non-finite estimate: the base's path says so)
         out.setflags(write=False)  # (its views below read-only with it)
         estimate = _new_object(Estimate)  # as Observer._make_estimate
-        cut_q, cut_v, cut_tau = self._cuts
-        d = estimate.__dict__
-        d["t"], d["q"], d["v"], d["nis"], d["gated"] = x, out[cut_q], out[cut_v], nis, rejected
-        # the base's commit (Observer._update: no after_commit, σ known)
-        self._state = _new_tuple(
-            AutoState, (x1, state.shape, state.jerk, n, _new_tuple(GateState, after))
-        )
-        self._t, self._ts, self._tau, self._last, self._diverged = (
-            x,
-            x,
-            out[cut_tau],
-            estimate,
-            False,
-        )
-        if nis is not None:  # (a measurement)
+        d, nq = estimate.__dict__, self._nq
+        if q_meas is None:  # the prediction: no NIS (GateState.predicted)
+            nis = None
+        else:
             self._nis.append(nis)
             self._gated += rejected
+        d["t"], d["q"], d["v"], d["nis"], d["gated"] = x, out[:nq], out[nq:], nis, rejected
+        # the base's commit (Observer._update: no after_commit, σ known; the state in _work)
+        self._t = self._ts = x
+        self._last, self._diverged, self._stale = estimate, False, True
         return estimate
 
     def update_rows(self, t: Vector, q: Vector, v_max: Vector) -> tuple[Vector, Vector]:

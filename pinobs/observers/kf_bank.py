@@ -20,7 +20,7 @@ from pinobs.errors import UnsupportedRobotError
 from pinobs.model import Robot
 from pinobs.observers.base import GateState, Vector, gate_threshold, positive
 from pinobs.observers.gating import SPIKE_ALPHA
-from pinobs.observers.kf_fused import fused_constants, gated_kernel, update_kernel
+from pinobs.observers.kf_fused import fused_work, gated_kernel, update_kernel
 from pinobs.observers.kf_kernels import (
     auto_kernel,
     auto_layout,
@@ -380,12 +380,12 @@ class AutoBank:
         self.fused = self._fused_update()
         self._bounds = np.array(robot.absurd_torque, dtype=np.float64)  # (Robot.absurd_torque)
 
-    def constants(self, split: float, span: float) -> Vector:
-        """:attr:`fused`'s constants (:func:`~pinobs.observers.kf_fused.fused_constants`) with
-        the observer's sub-step and pause limits ``split``, ``span``."""
-        return fused_constants(
+    def work(self, split: float, span: float) -> Vector:
+        """:attr:`fused`'s array (:func:`~pinobs.observers.kf_fused.fused_work`, no state in it
+        yet) with the observer's sub-step and pause limits ``split``, ``span``."""
+        return fused_work(
             split, span, self._var, self._forget, self.gate, self._dof, AUTO_GATE_SAMPLES,
-            self._shape[1], self._bounds,
+            self._shape[1], self._bounds, self._shape[0], self._size,
         )  # fmt: skip
 
     def _direct_step(self) -> Any:

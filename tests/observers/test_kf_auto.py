@@ -461,8 +461,8 @@ def test_the_auto_state_is_one_buffer_read_through_read_only_views() -> None:
     assert ob._state.x is not state.x and np.array_equal(state.x, before)
     assert np.array_equal(np.concatenate([e.q, e.v]), ob._state.mix)
     assert not np.shares_memory(e.q, ob._state.x) and not e.q.flags.writeable
-    # the mixture's copy and the torque held from then on (kf_fused: one read-only array)
-    assert e.q.base is not None and e.q.base.size == 3 * nv and e.v.base is e.q.base
+    # the mixture's copy (kf_fused: one new read-only array; the torque held in the filter's)
+    assert e.q.base is not None and e.q.base.size == robot.nq + nv and e.v.base is e.q.base
     predicted = ob.step(ob._state, 1e-3, None, np.zeros(nv))
     assert predicted.bank.innovation is None and np.array_equal(predicted.w, ob._state.w)
 

@@ -11,6 +11,7 @@ import pytest
 
 import pinobs
 from pinobs.errors import NonFiniteError, TimestampError
+from pinobs.observers.kf_fused import _SPAN, _SPLIT
 from tests.conftest import varied_samples
 
 
@@ -130,5 +131,36 @@ def test_the_fused_update_follows_a_period_learnt_from_the_intervals() -> None:
         assert a.v.tobytes() == b.v.tobytes() and (a.nis, a.gated) == (b.nis, b.gated)
     assert _same(fused, base)
     assert 0.9 * len(taken) < sum(taken) < len(taken)  # (not while the period is learnt, a gap)
-    assert (fused._consts[0], fused._consts[1]) == (fused._split, fused._span)
+    assert (fused._work[_SPLIT], fused._work[_SPAN]) == (fused._split, fused._span)
     assert fused._split == pytest.approx(3e-3) and fused._span == pytest.approx(0.1)
+
+
+def test_the_fused_update_works_in_place_and_its_estimates_and_states_stay_as_given() -> None:
+    """The fused update writes the state, count, gate and torque held into the filter's own
+    array (no AutoState built per update: one only when the state is read); an estimate or a
+    state read between updates is not written by the updates after it."""
+    robot = pinobs.load("ur5")
+    sim = pinobs.simulate(
+        robot, [], duration=0.2, sensor=pinobs.Sensor(rate=1000.0, noise_std=1e-4), seed=2
+    )
+    fused, base = _pair(robot)
+    for ob in (fused, base):
+        ob.reset(sim.t[0], sim.q[0], None, sim.tau[0])
+    kept: list[tuple[pinobs.Estimate, bytes, bytes]] = []
+    states = []
+    work = fused._work
+    for k in range(1, sim.t.size):
+        q = None if k % 17 == 0 else sim.q_meas[k]
+        a, b = fused.update(sim.t[k], q, sim.tau[k]), base.update(sim.t[k], q, sim.tau[k])
+        assert fused._work is work and fused._live and fused._stale  # (the state in _work)
+        assert a.v.tobytes() == b.v.tobytes() and a.nis == b.nis
+        kept.append((a, a.q.tobytes(), a.v.tobytes()))
+        if k % 50 == 0:  # read: built once, then kept as it is
+            state = fused._state
+            assert fused._state is state and not fused._stale
+            states.append((state, state.x.tobytes(), state.n, state.gate))
+    assert all(e.q.tobytes() == q and e.v.tobytes() == v for e, q, v in kept)
+    assert all(not e.q.flags.writeable and not e.v.flags.writeable for e, _, _ in kept)
+    assert len({id(e.q.base) for e, _, _ in kept}) == len(kept)  # (a new array each)
+    assert all(s.x.tobytes() == x and (s.n, s.gate) == (n, g) for s, x, n, g in states)
+    assert _same(fused, base)

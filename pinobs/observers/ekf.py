@@ -321,7 +321,10 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self.compiled_step = self._fast is not None
         # a plain update whole in one Python call (Observer._update_fused; pinobs.observers.
         # ekf_fused): this class's own step, output, innovation and after_commit only
-        self._fused_path = self._fast is not None and type(self) is ExtendedKalmanFilter
+        self._fused_path = type(self) is ExtendedKalmanFilter and (
+            self._fast is not None
+            or (self._lie_fast is not None and self._lie_fast.blocks is not None)
+        )
 
     _update_fused = update_fused  # (Observer.update's first offer: ekf_fused.update_fused)
 
@@ -567,7 +570,10 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self.compiled_step = self._fast is not None
         # a plain update whole in one Python call (Observer._update_fused; pinobs.observers.
         # ekf_fused): this class's own step, output, innovation and after_commit only
-        self._fused_path = self._fast is not None and type(self) is ExtendedKalmanFilter
+        self._fused_path = type(self) is ExtendedKalmanFilter and (
+            self._fast is not None
+            or (self._lie_fast is not None and self._lie_fast.blocks is not None)
+        )
 
     def output(self, state: EKFState) -> tuple[Vector, Vector]:
         return state.q, state.v

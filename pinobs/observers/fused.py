@@ -113,27 +113,6 @@ def rk4_stage_loops(w: Vector, acc: Vector, stage: int, h: float) -> None:
             )
 
 
-def _times_a(A: Vector, X: Vector, nv: int, c: float, out: Vector) -> None:
-    """``out = I + c A X`` for the EKF's ``A`` (rows ``[0 I 0]``, ``[∂a/∂q ∂a/∂v M⁻¹]``, ``0``):
-    the products with its constant rows are copies (the same numbers as the full sums, whose
-    other terms are exact zeros)."""
-    n = A.shape[0]
-    row = np.empty(n)  # a row of A X, each sum in the order of k (k outside the loop over j:
-    for i in range(n):  # the row's sums independent, not one chain each; the same bits)
-        if i < nv:
-            for j in range(n):
-                row[j] = X[nv + i, j]
-        else:
-            row[:] = 0.0
-            if i < 2 * nv:
-                for k in range(n):
-                    a = A[i, k]
-                    for j in range(n):
-                        row[j] += a * X[k, j]
-        for j in range(n):
-            out[i, j] = c * row[j] + (1.0 if i == j else 0.0)
-
-
 def ekf_predict_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
     w: Vector, q: Vector, v: Vector, acc: Vector, dq: Vector, dv: Vector, minv: Vector,
     P: Vector, h: float, psd: float, d_psd: Vector, A: Vector, Phi: Vector, out: Vector,
@@ -147,45 +126,102 @@ def ekf_predict_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are 
     ``Q_d = psd [[h³/3 I, h²/2 I], [h²/2 I, h I]]`` and ``diag(d_psd h)`` on the offset
     (:mod:`pinobs.observers.ekf`, module docstring; ``out`` made symmetric: its upper
     triangle is computed), and the RK4's start (``acc = a₁``).
+
+    Each product is the full sum over ``k`` in ascending order (``t += a · x``, an FMA with
+    ``contract``), less the terms whose ``x`` is an exact 0 of ``A``'s constant blocks (issue
+    39): ``I + Ah/3``'s position rows are ``[I, (h/3) I, 0]`` and its offset rows ``[0, 0, I]``,
+    ``I + (Ah/2)(…)``'s offset rows ``[0, 0, I]``, so those terms are ``a`` (× 1) or ``a · h/3``
+    on a sum still at ``+0`` (the first nonzero term of its entry), else nothing.  Adding
+    ``a · 0`` to a sum leaves it as it is (a sum that starts at ``+0`` and adds products is
+    never ``−0`` in round-to-nearest; ``a`` finite), so the bits are the full sums' (tested
+    against the full loops, ``tests/observers/test_fused.py``).  ``(Φ P) Φᵀ`` by whole rows
+    (the upper triangle's entries as before; the lower, overwritten by the mirror, make the
+    loops whole vectors: faster than the triangle's ragged rows), the scratch in one array.
     """
     rk4_start_loops(w, q, v, acc, h)
     nv, n = q.shape[0], P.shape[0]
     with_d = n == 3 * nv
+    m = 2 * nv if with_d else n  # Φ's rows past 2nv (the offset's) are unit rows (A's are 0)
     for i in range(nv):
         for j in range(nv):
             A[nv + i, j] = dq[i, j]
             A[nv + i, nv + j] = dv[i, j]
             if with_d:
                 A[nv + i, 2 * nv + j] = minv[i, j] if i <= j else minv[j, i]
-    inner = np.empty((n, n))  # I + Ah/3
-    for i in range(n):
+    work = np.empty((4, n, n))  # I + (Ah/2)(I + Ah/3), Φᵀ, Φ P, and I + Ah/3's velocity rows
+    mid, Phi_t, T, inner = work[0], work[1], work[2], work[3]
+    row = work[3, nv]  # (a row after inner's: n ≥ 2nv)
+    for i in range(nv):
         for j in range(n):
-            inner[i, j] = A[i, j] * h / 3.0 + (1.0 if i == j else 0.0)
-    mid = np.empty((n, n))
-    _times_a(A, inner, nv, 0.5 * h, mid)  # I + (Ah/2)(I + Ah/3)
-    _times_a(A, mid, nv, h, Phi)
-    # Φ's rows past 2nv (the offset's) are unit rows (A's are zero): there Φ P is P's rows and
-    # (Φ P) Φᵀ (Φ P)'s columns, copied (issue 39: a third of the products at n = 3nv).  The
-    # same numbers as the full sums, whose other terms are exact zeros (for a finite P)
-    m = 2 * nv if with_d else n
-    T = np.zeros((n, n))  # Φ P, row by row (each sum in the order of k: vector loops over j)
-    for i in range(m):
-        for k in range(n):
-            c = Phi[i, k]
+            inner[i, j] = A[nv + i, j] * h / 3.0 + (1.0 if nv + i == j else 0.0)
+    h3 = 1.0 * h / 3.0 + 0.0  # I + Ah/3 at (k, nv + k), k < nv (A's 1 there)
+    c = 0.5 * h
+    for i in range(nv):  # mid's position rows: (h/2) (I + Ah/3)'s velocity rows + I
+        for j in range(n):
+            mid[i, j] = c * inner[i, j] + (1.0 if i == j else 0.0)
+    for i in range(nv, 2 * nv):  # its velocity rows: A's times I + Ah/3
+        for j in range(n):
+            row[j] = 0.0
+        for k in range(nv):  # the position rows [I, (h/3) I, 0]: two terms each
+            a = A[i, k]
+            row[k] += a
+            row[nv + k] += a * h3
+        for k in range(nv, 2 * nv):
+            a = A[i, k]
             for j in range(n):
-                T[i, j] += c * P[k, j]
+                row[j] += a * inner[k - nv, j]
+        for k in range(2 * nv, n):  # the offset rows [0, 0, I]
+            row[k] += A[i, k]
+        for j in range(n):
+            mid[i, j] = c * row[j] + (1.0 if i == j else 0.0)
+    for i in range(2 * nv, n):  # its offset rows: I's (A's are zero)
+        for j in range(n):
+            mid[i, j] = c * 0.0 + (1.0 if i == j else 0.0)
+    for i in range(nv):  # Φ = I + h A mid: position rows, h mid's velocity rows + I
+        for j in range(n):
+            Phi[i, j] = h * mid[nv + i, j] + (1.0 if i == j else 0.0)
+    for i in range(nv, 2 * nv):
+        for j in range(n):
+            row[j] = 0.0
+        for k in range(2 * nv):
+            a = A[i, k]
+            for j in range(n):
+                row[j] += a * mid[k, j]
+        for k in range(2 * nv, n):  # mid's offset rows [0, 0, I]
+            row[k] += A[i, k]
+        for j in range(n):
+            Phi[i, j] = h * row[j] + (1.0 if i == j else 0.0)
+    for i in range(2 * nv, n):
+        for j in range(n):
+            Phi[i, j] = h * 0.0 + (1.0 if i == j else 0.0)
+    # Φ P, row by row (each sum in the order of k: vector loops over j); the offset's rows are
+    # P's (issue 39: a third of the products at n = 3nv; the same numbers as the full sums)
+    for i in range(m):
+        for j in range(n):
+            T[i, j] = 0.0
+        for k in range(n):
+            a = Phi[i, k]
+            for j in range(n):
+                T[i, j] += a * P[k, j]
     for i in range(m, n):
         for j in range(n):
             T[i, j] = P[i, j]
-    Phi_t = Phi.T.copy()
-    out[:, :] = 0.0  # (Φ P) Φᵀ, its upper triangle
-    for i in range(n):
+    for k in range(n):
+        for j in range(n):
+            Phi_t[k, j] = Phi[j, k]
+    for i in range(m):  # (Φ P) Φᵀ by whole rows; then the upper triangle mirrored
+        for j in range(m):
+            out[i, j] = 0.0
         for k in range(n):
-            c = T[i, k]
-            for j in range(i, m):
-                out[i, j] += c * Phi_t[k, j]
-        for j in range(max(i, m), n):
+            a = T[i, k]
+            for j in range(m):
+                out[i, j] += a * Phi_t[k, j]
+        for j in range(m, n):  # (Φ's offset rows: (Φ P)'s columns)
             out[i, j] = T[i, j]
+    for i in range(m, n):
+        for j in range(i, n):
+            out[i, j] = T[i, j]
+    for i in range(n):
         for j in range(i + 1, n):
             out[j, i] = out[i, j]
     q3, q2, q1 = psd * (h**3 / 3.0), psd * (h**2 / 2.0), psd * h
@@ -501,7 +537,7 @@ rk4_stage_kernel = LazyKernel(
 )
 #: :func:`ekf_predict_loops` compiled.
 ekf_predict_kernel = LazyKernel(
-    ekf_predict_loops, *_warm_predict(), helpers=(rk4_start_loops, _times_a), contract=True
+    ekf_predict_loops, *_warm_predict(), helpers=(rk4_start_loops,), contract=True
 )
 #: :func:`ekf_correct_loops` compiled: returns the NIS (NaN: take the NumPy way).
 ekf_correct_kernel = LazyKernel(

@@ -188,6 +188,39 @@ def test_the_ekf_prediction_kernel_gives_the_full_sums_bits() -> None:
                 assert outs[0] == outs[1], (nv, with_d, trial)
 
 
+def test_the_ekf_correction_solves_by_rows_give_the_column_loops_bits() -> None:
+    """``fused._joseph_rows`` (``Kᵀ``'s triangular solves by rows) against ``linalg``'s
+    ``joseph_update`` loops (column by column): ``dx`` and ``P⁺`` to the bit wherever ``S`` is
+    positive definite (the same answer where it is not), with and without the offset state,
+    covariances from 1e-12 to 1e2 and measurement variances from 1e-10 to 1e-4."""
+    from pinobs.observers import fused
+    from pinobs.observers.linalg import joseph_kernel
+
+    rows = loaded(
+        LazyKernel(
+            getattr(fused._joseph_rows, "py_func", fused._joseph_rows),  # (a kernel's helper)
+            *(np.eye(2), np.zeros(1), 1.0, np.zeros(2), np.zeros((2, 2))),
+        )
+    )
+    columns = loaded(joseph_kernel)
+    rng = np.random.default_rng(7)
+    taken = 0
+    for nv in (1, 2, 6, 7, 12):
+        for n in (2 * nv, 3 * nv):
+            for _ in range(60):
+                X = rng.standard_normal((n, n))
+                P = X @ X.T * 10.0 ** rng.uniform(-12, 2)
+                e, r = 1e-4 * rng.standard_normal(nv), 10.0 ** rng.uniform(-10, -4)
+                outs = []
+                for f in (columns, rows):
+                    dx, out = np.zeros(n), np.zeros((n, n))
+                    ok = f(P, e, r, dx, out)
+                    outs.append((ok, dx.tobytes(), out.tobytes()) if ok else (ok,))
+                assert outs[0] == outs[1], (nv, n)
+                taken += outs[0][0]
+    assert taken >= 500
+
+
 def _full_times_a(A: Vector, X: Vector, nv: int, c: float, out: Vector) -> None:
     """``out = I + c A X``, the products with ``A``'s constant rows copies, the others full."""
     n = A.shape[0]

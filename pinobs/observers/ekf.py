@@ -64,9 +64,12 @@ the step, the estimate and the commit; 12 → 2 Python calls an update): UR5 47.
 tick by tick, load 6.6), the same bits.  Then (issue 39, the same bits) the prediction
 kernel skips the exact zeros of ``A``'s constant blocks and takes ``(Φ P) Φᵀ`` by whole rows
 (:func:`~pinobs.observers.fused.ekf_predict_loops`: 3.04 → 2.47 µs warm on a UR5; the update
-10.85 → 10.60 ``pin.aba``, 0.66 µs less, Panda 11.58 → 11.18, in-process A/B, load 2.5), and a
-large robot's plain update with a sample is one offer too
-(:func:`~pinobs.observers.ekf_fused.update_blocks`; talos 22.04 → 21.16 ``pin.aba``).
+10.85 → 10.60 ``pin.aba``, 0.66 µs less, Panda 11.58 → 11.18, in-process A/B, load 2.5), the
+correction's triangular solves run by rows (``fused._joseph_rows``: the finish kernel 3.47 →
+2.85 µs warm), and a large robot's plain update with a sample is one offer too
+(:func:`~pinobs.observers.ekf_fused.update_blocks`; talos 22.04 → 21.16 ``pin.aba``).  With
+all three, ``measure_cost`` (thread CPU, 8 fresh processes alternated with the code before,
+load 3–4): UR5 11.53 → 10.99, Panda 12.13 → 11.16, talos 23.31 → 22.74 (medians).
 predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset state) take
 ``Φ`` and the Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`).
 

@@ -60,7 +60,7 @@ import sys
 from collections.abc import Callable
 from typing import Any, NamedTuple, ParamSpec, TypeVar
 
-__all__ = ["BlasLibraries", "OpenBLASPool", "blas_libraries", "one_blas_thread"]
+__all__ = ["BlasLibraries", "OpenBLASPool", "blas_libraries", "found_libraries", "one_blas_thread"]
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -123,6 +123,12 @@ def _scan() -> BlasLibraries:
 
 
 _FOUND: dict[bool, BlasLibraries] = {}  # a cache of _scan, by whether scipy.linalg is loaded
+
+
+#: ``found_libraries("scipy.linalg" in sys.modules)``: :func:`blas_libraries`' result where it
+#: was found already, else ``None`` (a C call, not a Python one: ``ekf``'s plain update on a
+#: large robot limits the threads inline, :func:`pinobs.observers.ekf_fused.update_blocks`).
+found_libraries = _FOUND.get
 
 
 def blas_libraries() -> BlasLibraries:

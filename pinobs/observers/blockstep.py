@@ -120,6 +120,7 @@ from pinobs.model import Robot
 from pinobs.model.integrators import difference_call
 from pinobs.observers.base import Vector
 from pinobs.observers.blocks import bracket_rows
+from pinobs.observers.ekf_fused import copy_out_kernel, inputs_kernel
 from pinobs.observers.fused import loaded
 from pinobs.observers.fused_jacobi import bracket_table
 from pinobs.observers.fused_lie import LieRK4
@@ -417,6 +418,12 @@ class BlockStep:
             self._scratch_T, self._scratch_P, self._scratch_S, self._scratch_v, self.runs,
             self.table,
         )  # fmt: skip
+        # ekf_fused.update_blocks': its checks' kernels and what they take
+        # (the inputs' on arrays it made or checked: float64, unit stride; the estimate's
+        # through numba's dispatcher: arrays of the step's fallbacks too)
+        self.inputs, self.copy_out = inputs_kernel.unchecked(), loaded(copy_out_kernel)
+        self.bounds = np.array(robot.absurd_torque, dtype=float)
+        self.shapes, self.stride = ((robot.nq,), (nv,)), (_F64.itemsize,)
         self._scratch_correct = (
             self._scratch_Z, self._scratch_w, self._scratch_ZZ, self._scratch_ZT, self._scratch_S,
             self._scratch_P, self._scratch_dx, self._scratch_vs,

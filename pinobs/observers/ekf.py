@@ -61,7 +61,15 @@ paced 1 kHz loop (in-process A/B, load 6.3), the same bits.  Then a plain update
 offset state whole in one Python call (:mod:`pinobs.observers.ekf_fused`: the base's checks,
 the step, the estimate and the commit; 12 → 2 Python calls an update): UR5 47.7 → 40.9 µs
 (18.3 → 15.7 warm ``pin.aba``) in a paced 1 kHz loop (in-process A/B against the base's path,
-tick by tick, load 6.6), the same bits.
+tick by tick, load 6.6), the same bits.  Then (issue 39, the same bits) the prediction
+kernel skips the exact zeros of ``A``'s constant blocks and takes ``(Φ P) Φᵀ`` by whole rows
+(:func:`~pinobs.observers.fused.ekf_predict_loops`: 3.04 → 2.47 µs warm on a UR5; the update
+10.85 → 10.60 ``pin.aba``, 0.66 µs less, Panda 11.58 → 11.18, in-process A/B, load 2.5), the
+correction's triangular solves run by rows (``fused._joseph_rows``: the finish kernel 3.47 →
+2.85 µs warm), and a large robot's plain update with a sample is one offer too
+(:func:`~pinobs.observers.ekf_fused.update_blocks`; talos 22.04 → 21.16 ``pin.aba``).  With
+all three, ``measure_cost`` (thread CPU, 8 fresh processes alternated with the code before,
+load 3–4): UR5 11.53 → 10.99, Panda 12.13 → 11.16, talos 23.31 → 22.74 (medians).
 predict and correct (:meth:`predict`, :meth:`correct`: smoothers, the offset state) take
 ``Φ`` and the Joseph update on ``A``'s blocks (:mod:`pinobs.observers.blocks`).
 
@@ -320,8 +328,12 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         #: calls it without an ``errstate`` of its own; issue 39).
         self.compiled_step = self._fast is not None
         # a plain update whole in one Python call (Observer._update_fused; pinobs.observers.
-        # ekf_fused): this class's own step, output, innovation and after_commit only
-        self._fused_path = self._fast is not None and type(self) is ExtendedKalmanFilter
+        # ekf_fused; by blocks on a large robot, update_blocks): this class's own step,
+        # output, innovation and after_commit only
+        self._fused_path = type(self) is ExtendedKalmanFilter and (
+            self._fast is not None
+            or (self._lie_fast is not None and self._lie_fast.blocks is not None)
+        )
 
     _update_fused = update_fused  # (Observer.update's first offer: ekf_fused.update_fused)
 
@@ -566,8 +578,12 @@ class ExtendedKalmanFilter(Observer[EKFState]):
         self.uses_blas = self._fast is None
         self.compiled_step = self._fast is not None
         # a plain update whole in one Python call (Observer._update_fused; pinobs.observers.
-        # ekf_fused): this class's own step, output, innovation and after_commit only
-        self._fused_path = self._fast is not None and type(self) is ExtendedKalmanFilter
+        # ekf_fused; by blocks on a large robot, update_blocks): this class's own step,
+        # output, innovation and after_commit only
+        self._fused_path = type(self) is ExtendedKalmanFilter and (
+            self._fast is not None
+            or (self._lie_fast is not None and self._lie_fast.blocks is not None)
+        )
 
     def output(self, state: EKFState) -> tuple[Vector, Vector]:
         return state.q, state.v

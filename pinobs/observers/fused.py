@@ -41,7 +41,7 @@ import numpy as np
 from pinobs.model import Robot
 from pinobs.model.integrators import DynamicsCalls, dynamics_calls
 from pinobs.observers.base import Vector
-from pinobs.observers.linalg import KERNEL_MAX_NV, LazyKernel, joseph_kernel
+from pinobs.observers.linalg import KERNEL_MAX_NV, LazyKernel
 
 __all__ = [
     "RiccatiStep",
@@ -77,10 +77,6 @@ def compiled_vector_space(robot: object) -> bool:
     )
 
 
-# the linalg loop, under its own name (LazyKernel's helpers are found by name here)
-_joseph_loops = joseph_kernel.fn
-
-
 def rk4_start_loops(w: Vector, q: Vector, v: Vector, acc: Vector, h: float) -> None:
     """The RK4 step's start: ``w[0:3] = (q, v, a₁)``, ``(q_s, v_s) = (q + h/2 v, v + h/2 a₁)``."""
     hh = 0.5 * h
@@ -113,28 +109,96 @@ def rk4_stage_loops(w: Vector, acc: Vector, stage: int, h: float) -> None:
             )
 
 
-def _times_a(A: Vector, X: Vector, nv: int, c: float, out: Vector) -> None:
-    """``out = I + c A X`` for the EKF's ``A`` (rows ``[0 I 0]``, ``[∂a/∂q ∂a/∂v M⁻¹]``, ``0``):
-    the products with its constant rows are copies (the same numbers as the full sums, whose
-    other terms are exact zeros)."""
+def _transition_into(A: Vector, h: float, nv: int, work: Vector, Phi: Vector) -> None:  # noqa: C901, PLR0912 -- numba kernel: loops over blocks
+    """``Φ = I + Ah(I + Ah/2 (I + Ah/3))`` into ``Phi`` (:func:`ekf_predict_loops`, its
+    docstring's exact zeros skipped), ``work[0]`` and ``work[3]`` its scratch."""
     n = A.shape[0]
-    row = np.empty(n)  # a row of A X, each sum in the order of k (k outside the loop over j:
-    for i in range(n):  # the row's sums independent, not one chain each; the same bits)
-        if i < nv:
-            for j in range(n):
-                row[j] = X[nv + i, j]
-        else:
-            row[:] = 0.0
-            if i < 2 * nv:
-                for k in range(n):
-                    a = A[i, k]
-                    for j in range(n):
-                        row[j] += a * X[k, j]
+    mid, inner = work[0], work[3]
+    row = work[3, nv]  # (a row after inner's: n ≥ 2nv)
+    for i in range(nv):  # I + Ah/3's velocity rows
         for j in range(n):
-            out[i, j] = c * row[j] + (1.0 if i == j else 0.0)
+            inner[i, j] = A[nv + i, j] * h / 3.0 + (1.0 if nv + i == j else 0.0)
+    h3 = 1.0 * h / 3.0 + 0.0  # I + Ah/3 at (k, nv + k), k < nv (A's 1 there)
+    c = 0.5 * h
+    for i in range(nv):  # mid's position rows: (h/2) (I + Ah/3)'s velocity rows + I
+        for j in range(n):
+            mid[i, j] = c * inner[i, j] + (1.0 if i == j else 0.0)
+    for i in range(nv, 2 * nv):  # its velocity rows: A's times I + Ah/3
+        for j in range(n):
+            row[j] = 0.0
+        for k in range(nv):  # the position rows [I, (h/3) I, 0]: two terms each
+            a = A[i, k]
+            row[k] += a
+            row[nv + k] += a * h3
+        for k in range(nv, 2 * nv):
+            a = A[i, k]
+            for j in range(n):
+                row[j] += a * inner[k - nv, j]
+        for k in range(2 * nv, n):  # the offset rows [0, 0, I]
+            row[k] += A[i, k]
+        for j in range(n):
+            mid[i, j] = c * row[j] + (1.0 if i == j else 0.0)
+    for i in range(2 * nv, n):  # its offset rows: I's (A's are zero)
+        for j in range(n):
+            mid[i, j] = c * 0.0 + (1.0 if i == j else 0.0)
+    for i in range(nv):  # Φ = I + h A mid: position rows, h mid's velocity rows + I
+        for j in range(n):
+            Phi[i, j] = h * mid[nv + i, j] + (1.0 if i == j else 0.0)
+    for i in range(nv, 2 * nv):
+        for j in range(n):
+            row[j] = 0.0
+        for k in range(2 * nv):
+            a = A[i, k]
+            for j in range(n):
+                row[j] += a * mid[k, j]
+        for k in range(2 * nv, n):  # mid's offset rows [0, 0, I]
+            row[k] += A[i, k]
+        for j in range(n):
+            Phi[i, j] = h * row[j] + (1.0 if i == j else 0.0)
+    for i in range(2 * nv, n):
+        for j in range(n):
+            Phi[i, j] = h * 0.0 + (1.0 if i == j else 0.0)
 
 
-def ekf_predict_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
+def _sandwich_into(Phi: Vector, P: Vector, m: int, work: Vector, out: Vector) -> None:  # noqa: C901, PLR0912 -- numba kernel: loops over blocks
+    """``out = (Φ P) Φᵀ`` (:func:`ekf_predict_loops`; ``Φ``'s rows from ``m`` unit rows),
+    ``work[1]`` and ``work[2]`` its scratch: ``Φ P`` row by row (each sum in the order of k:
+    vector loops over j; the offset's rows are P's, issue 39: a third of the products at
+    n = 3nv, the same numbers as the full sums), then ``(Φ P) Φᵀ`` by whole rows and its
+    upper triangle mirrored."""
+    n = P.shape[0]
+    Phi_t, T = work[1], work[2]
+    for i in range(m):
+        for j in range(n):
+            T[i, j] = 0.0
+        for k in range(n):
+            a = Phi[i, k]
+            for j in range(n):
+                T[i, j] += a * P[k, j]
+    for i in range(m, n):
+        for j in range(n):
+            T[i, j] = P[i, j]
+    for k in range(n):
+        for j in range(n):
+            Phi_t[k, j] = Phi[j, k]
+    for i in range(m):
+        for j in range(m):
+            out[i, j] = 0.0
+        for k in range(n):
+            a = T[i, k]
+            for j in range(m):
+                out[i, j] += a * Phi_t[k, j]
+        for j in range(m, n):  # (Φ's offset rows: (Φ P)'s columns)
+            out[i, j] = T[i, j]
+    for i in range(m, n):
+        for j in range(i, n):
+            out[i, j] = T[i, j]
+    for i in range(n):
+        for j in range(i + 1, n):
+            out[j, i] = out[i, j]
+
+
+def ekf_predict_loops(
     w: Vector, q: Vector, v: Vector, acc: Vector, dq: Vector, dv: Vector, minv: Vector,
     P: Vector, h: float, psd: float, d_psd: Vector, A: Vector, Phi: Vector, out: Vector,
 ) -> None:  # fmt: skip
@@ -147,6 +211,17 @@ def ekf_predict_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are 
     ``Q_d = psd [[h³/3 I, h²/2 I], [h²/2 I, h I]]`` and ``diag(d_psd h)`` on the offset
     (:mod:`pinobs.observers.ekf`, module docstring; ``out`` made symmetric: its upper
     triangle is computed), and the RK4's start (``acc = a₁``).
+
+    Each product is the full sum over ``k`` in ascending order (``t += a · x``, an FMA with
+    ``contract``), less the terms whose ``x`` is an exact 0 of ``A``'s constant blocks (issue
+    39): ``I + Ah/3``'s position rows are ``[I, (h/3) I, 0]`` and its offset rows ``[0, 0, I]``,
+    ``I + (Ah/2)(…)``'s offset rows ``[0, 0, I]``, so those terms are ``a`` (× 1) or ``a · h/3``
+    on a sum still at ``+0`` (the first nonzero term of its entry), else nothing.  Adding
+    ``a · 0`` to a sum leaves it as it is (a sum that starts at ``+0`` and adds products is
+    never ``−0`` in round-to-nearest; ``a`` finite), so the bits are the full sums' (tested
+    against the full loops, ``tests/observers/test_fused.py``).  ``(Φ P) Φᵀ`` by whole rows
+    (the upper triangle's entries as before; the lower, overwritten by the mirror, make the
+    loops whole vectors: faster than the triangle's ragged rows), the scratch in one array.
     """
     rk4_start_loops(w, q, v, acc, h)
     nv, n = q.shape[0], P.shape[0]
@@ -157,37 +232,10 @@ def ekf_predict_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are 
             A[nv + i, nv + j] = dv[i, j]
             if with_d:
                 A[nv + i, 2 * nv + j] = minv[i, j] if i <= j else minv[j, i]
-    inner = np.empty((n, n))  # I + Ah/3
-    for i in range(n):
-        for j in range(n):
-            inner[i, j] = A[i, j] * h / 3.0 + (1.0 if i == j else 0.0)
-    mid = np.empty((n, n))
-    _times_a(A, inner, nv, 0.5 * h, mid)  # I + (Ah/2)(I + Ah/3)
-    _times_a(A, mid, nv, h, Phi)
-    # Φ's rows past 2nv (the offset's) are unit rows (A's are zero): there Φ P is P's rows and
-    # (Φ P) Φᵀ (Φ P)'s columns, copied (issue 39: a third of the products at n = 3nv).  The
-    # same numbers as the full sums, whose other terms are exact zeros (for a finite P)
-    m = 2 * nv if with_d else n
-    T = np.zeros((n, n))  # Φ P, row by row (each sum in the order of k: vector loops over j)
-    for i in range(m):
-        for k in range(n):
-            c = Phi[i, k]
-            for j in range(n):
-                T[i, j] += c * P[k, j]
-    for i in range(m, n):
-        for j in range(n):
-            T[i, j] = P[i, j]
-    Phi_t = Phi.T.copy()
-    out[:, :] = 0.0  # (Φ P) Φᵀ, its upper triangle
-    for i in range(n):
-        for k in range(n):
-            c = T[i, k]
-            for j in range(i, m):
-                out[i, j] += c * Phi_t[k, j]
-        for j in range(max(i, m), n):
-            out[i, j] = T[i, j]
-        for j in range(i + 1, n):
-            out[j, i] = out[i, j]
+    work = np.empty((4, n, n))  # the scratch of both: one allocation
+    _transition_into(A, h, nv, work, Phi)
+    # Φ's rows past 2nv (the offset's) are unit rows (A's are zero)
+    _sandwich_into(Phi, P, 2 * nv if with_d else n, work, out)
     q3, q2, q1 = psd * (h**3 / 3.0), psd * (h**2 / 2.0), psd * h
     for i in range(nv):
         out[i, i] += q3
@@ -196,6 +244,73 @@ def ekf_predict_loops(  # noqa: C901, PLR0912 -- numba kernel: its branches are 
         out[nv + i, nv + i] += q1
         if with_d:
             out[2 * nv + i, 2 * nv + i] += d_psd[i] * h
+
+
+def _joseph_rows(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bool:  # noqa: C901, PLR0912 -- numba kernel: loops over small matrices
+    """:func:`~pinobs.observers.linalg.joseph_update`'s loops (``linalg._joseph_loops``) with
+    ``Kᵀ = S⁻¹ P_q·``'s two triangular solves by rows, every column at once (a vector loop
+    along the row; before, column by column, a chain of dependent subtractions each): each
+    entry's operations in the same order (``t −= L_ik Kᵀ_kc`` over ``k``, then ``/ L_ii``;
+    compiled without ``contract``), so the same bits (tested); the UR5's
+    :func:`ekf_finish_loops` 3.47 → 2.85 µs warm (issue 39, load 2.2).  Returns False (outputs undefined) when ``S`` is not positive definite."""
+    n, nv = P.shape[0], e.shape[0]
+    L = np.zeros((nv, nv))
+    for j in range(nv):
+        d = P[j, j] + r
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return False
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, nv):
+            t = P[i, j]
+            for k in range(j):
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t / L[j, j]
+    Kt = np.empty((nv, n))
+    for i in range(nv):
+        for c in range(n):
+            Kt[i, c] = P[i, c]
+        for k in range(i):
+            a = L[i, k]
+            for c in range(n):
+                Kt[i, c] -= a * Kt[k, c]
+        d = L[i, i]
+        for c in range(n):
+            Kt[i, c] = Kt[i, c] / d
+    for i in range(nv - 1, -1, -1):
+        for k in range(i + 1, nv):
+            a = L[k, i]
+            for c in range(n):
+                Kt[i, c] -= a * Kt[k, c]
+        d = L[i, i]
+        for c in range(n):
+            Kt[i, c] = Kt[i, c] / d
+    C = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            C[i, j] = P[i, j]
+        for k in range(nv):
+            c = Kt[k, i]
+            for j in range(n):
+                C[i, j] -= c * P[k, j]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = C[i, j]
+        for k in range(nv):
+            g = C[i, k] - r * Kt[k, i]
+            for j in range(n):
+                out[i, j] -= g * Kt[k, j]
+    for i in range(n):
+        for j in range(i):
+            m = 0.5 * (out[i, j] + out[j, i])
+            out[i, j] = m
+            out[j, i] = m
+        t = 0.0
+        for k in range(nv):
+            t += Kt[k, i] * e[k]
+        dx[i] = t
+    return True
 
 
 def ekf_correct_loops(
@@ -213,7 +328,7 @@ def ekf_correct_loops(
     nv = q_meas.shape[0]
     for i in range(nv):
         e[i] = q_meas[i] - w[6, i]
-    if not _joseph_loops(P, e, r, dx, P_new):
+    if not _joseph_rows(P, e, r, dx, P_new):
         return math.nan
     ee, nis = 0.0, 0.0
     for i in range(nv):
@@ -501,14 +616,17 @@ rk4_stage_kernel = LazyKernel(
 )
 #: :func:`ekf_predict_loops` compiled.
 ekf_predict_kernel = LazyKernel(
-    ekf_predict_loops, *_warm_predict(), helpers=(rk4_start_loops, _times_a), contract=True
+    ekf_predict_loops,
+    *_warm_predict(),
+    helpers=(rk4_start_loops, _transition_into, _sandwich_into),
+    contract=True,
 )
 #: :func:`ekf_correct_loops` compiled: returns the NIS (NaN: take the NumPy way).
 ekf_correct_kernel = LazyKernel(
     ekf_correct_loops,
     np.zeros((8, 1)), np.zeros(1), np.eye(2), 1.0, np.zeros(1), np.zeros(2), np.zeros((2, 2)),
     np.zeros(1), np.zeros(1),
-    helpers=(_joseph_loops,),
+    helpers=(_joseph_rows,),
 )  # fmt: skip
 
 #: :func:`ekf_finish_loops` compiled.
@@ -516,7 +634,7 @@ ekf_finish_kernel = LazyKernel(
     ekf_finish_loops,
     np.zeros((8, 1)), np.zeros(1), 1e-3, np.zeros(1), np.eye(2), 1.0, np.zeros(3),
     np.zeros((2, 2)), np.zeros(1), np.zeros(1), np.zeros(0), np.zeros(0),
-    helpers=(_joseph_loops, ekf_correct_loops),
+    helpers=(_joseph_rows, ekf_correct_loops),
     contracted=("_rk4_stage_fma",),
 )  # fmt: skip
 #: :func:`torque_in_loops` compiled.

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import pinobs
-from pinobs.errors import DimensionError, NonFiniteError, TimestampError
+from pinobs.errors import ConfigurationError, DimensionError, NonFiniteError, TimestampError
 from pinobs.observers.ekf import ExtendedKalmanFilter
 from pinobs.observers.ekf_fused import coast_update_kernel, finish_update_kernel
 from pinobs.observers.kalman_step import coast_update_kernel as kalman_coast
@@ -180,3 +180,72 @@ def test_the_update_kernels_are_loaded_when_the_observer_is_made() -> None:
         pinobs.make_observer(name, robot, rate=1000.0, noise_std=1e-4)
     kernels = (finish_update_kernel, coast_update_kernel, correct_update_kernel, kalman_coast)
     assert all(k.compiled is not None for k in kernels)
+
+
+@pytest.mark.parametrize(("robot_name", "sigma"), [("go1", 1e-3), ("talos", 1e-4)])
+def test_the_block_update_gives_the_base_paths_bits(robot_name: str, sigma: float) -> None:
+    """A large robot's ``ekf`` (the block step, ``ekf_fused.update_blocks``), over a run with
+    dropped samples, an outlier, no torque now and then, float and NumPy times, strided and
+    read-only samples and torques: the same estimates, state, held torque and NIS as the
+    base's path; the fused path took every plain update with a sample."""
+    robot = pinobs.load(robot_name)
+    sim = pinobs.simulate(
+        robot, [], duration=0.25, sensor=pinobs.Sensor(rate=1000.0, noise_std=sigma), seed=2
+    )
+    fused, base = (pinobs.make_observer("ekf", robot, rate=1000.0, noise_std=sigma) for _ in "ab")
+    base._fused_path = False
+    assert fused._fused_path and fused._fast is None
+
+    def joints_off(q: np.ndarray) -> np.ndarray:  # (the outlier: the joints', not the base's)
+        return np.concatenate([q[:7], q[7:] + 0.3])
+
+    for ob in (fused, base):
+        ob.reset(sim.t[0], sim.q[0], None, sim.tau[0])
+    taken = 0
+    for k, t, q, tau in varied_samples(
+        sim, outlier_at=120, outlier=joints_off, missed=True, varied_tau=True
+    ):
+        a, b = fused.update(t, q, tau), base.update(t, q, tau)
+        assert _equal(a, b), k
+        assert not a.q.flags.writeable and not a.v.flags.writeable
+        taken += a.q.base is not None and a.q.base is a.v.base  # (one array: the fused path's)
+    assert _same(fused, base) and fused._gated >= 1
+    dropped = sum(1 for k in range(1, sim.t.size) if k % 29 == 0 or k % 31 == 4)
+    assert taken >= sim.t.size - dropped - 10  # (the first, wide: Joseph's form; the pauses')
+
+
+@pytest.mark.parametrize(
+    ("change", "error"),
+    [
+        (lambda t, q, tau: (t, np.where(np.arange(q.size) == 2, np.nan, q), tau), NonFiniteError),
+        (lambda t, q, tau: (t, q, 1e12 * np.ones_like(tau)), NonFiniteError),
+        (lambda t, q, tau: (t, q, np.where(np.arange(tau.size) == 1, np.inf, tau)), NonFiniteError),
+        (lambda t, q, tau: (t, np.where(np.arange(q.size) == 3, 2.0, q), tau), ConfigurationError),
+        (lambda t, q, tau: (t, q[:-1], tau), DimensionError),
+        (lambda t, q, tau: (t - 5e-3, q, tau), TimestampError),
+        (lambda t, q, tau: (np.nan, q, tau), TimestampError),
+    ],
+)
+def test_what_the_block_update_does_not_take_the_base_refuses_as_before(
+    change: Any, error: type[Exception]
+) -> None:
+    """A talos's ``ekf``: a non-finite sample, an absurd or infinite torque, a quaternion far
+    from unit norm, a sample of the wrong size, a time not after the last: the base's error,
+    the observer as it was (then the same updates as the base's path)."""
+    robot = pinobs.load("talos")
+    fused, base = (pinobs.make_observer("ekf", robot, rate=1000.0, noise_std=1e-4) for _ in "ab")
+    base._fused_path = False
+    q0 = robot.neutral()
+    tau = robot.gravity(q0)
+    for ob in (fused, base):
+        ob.reset(0.0, q0, None, tau)
+        for k in range(1, 30):
+            ob.update(k * 1e-3, robot.integrate(q0, 1e-4 * np.sin(k + np.arange(robot.nv))), tau)
+    before = pickle.dumps(fused._state)
+    for ob in (fused, base):
+        with pytest.raises(error):
+            ob.update(*change(30e-3, q0.copy(), tau.copy()))
+    assert pickle.dumps(fused._state) == before and _same(fused, base)
+    for k in (30, 31):
+        a, b = fused.update(k * 1e-3, q0, tau), base.update(k * 1e-3, q0, tau)
+        assert _equal(a, b) and _same(fused, base)

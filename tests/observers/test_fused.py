@@ -12,8 +12,17 @@ import pytest
 import pinobs
 from pinobs.model import dynamics_rk4
 from pinobs.observers import make_observer
+from pinobs.observers.base import Vector
 from pinobs.observers.ekf import ExtendedKalmanFilter
-from pinobs.observers.fused import loaded, rk4_stage_kernel, rk4_start_kernel
+from pinobs.observers.fused import (
+    _warm_predict,
+    ekf_predict_kernel,
+    loaded,
+    rk4_stage_kernel,
+    rk4_start_kernel,
+    rk4_start_loops,
+)
+from pinobs.observers.linalg import LazyKernel
 from pinobs.observers.riemannian import RiemannianObserver
 from pinobs.simulation import Sensor
 from tests.conftest import cached_robot
@@ -139,3 +148,146 @@ def test_the_compiled_ekf_step_reads_the_gains_a_caller_sets_after_construction(
     for a, b in zip(out[0], out[1], strict=True):
         _assert_close_per_signal(a, b, 1e-12)
     assert np.abs(out[0][1] - default[1]).max() > 1e-6  # the new gains made a difference
+
+
+def test_the_ekf_prediction_kernel_gives_the_full_sums_bits() -> None:
+    """``ekf_predict_loops`` (the exact zeros of ``A``'s constant blocks skipped, ``(Φ P) Φᵀ``
+    by whole rows) against the full sums (:func:`_full_predict_loops`, compiled with
+    the same ``contract``): ``w``, ``A``, ``Φ`` and ``P⁻`` to the bit, with and without the
+    offset state, over scales from 1e-3 to 1e3, signed zeros in ``∂a/∂q`` and ``∂a/∂v``."""
+    full = loaded(
+        LazyKernel(
+            _full_predict_loops,
+            *_warm_predict(),
+            helpers=(rk4_start_loops, _full_times_a),
+            contract=True,
+        )
+    )
+    kernel = loaded(ekf_predict_kernel)
+    rng = np.random.default_rng(5)
+    for nv in (1, 2, 6, 7, 12):
+        for with_d in (False, True):
+            n = (3 if with_d else 2) * nv
+            for trial in range(40):
+                scale = 10.0 ** rng.uniform(-3, 3)
+                dq, dv = (scale * rng.standard_normal((nv, nv)) for _ in "ab")
+                dq[trial % nv, (trial + 1) % nv], dv[0, trial % nv] = -0.0, 0.0
+                minv = rng.standard_normal((nv, nv))
+                X = rng.standard_normal((n, n))
+                P = X @ X.T * 10.0 ** rng.uniform(-12, 0)
+                q, v, acc = (rng.standard_normal(nv) for _ in "abc")
+                h = (1e-3, 2e-3, 1e-2, 3.7e-4)[trial % 4]
+                d_psd = rng.random(nv) if with_d else np.zeros(nv)
+                outs = []
+                for f in (full, kernel):
+                    w, A = np.zeros((8, nv)), np.zeros((n, n))
+                    A[:nv, nv : 2 * nv] = np.eye(nv)
+                    Phi, out = np.empty((n, n)), np.empty((n, n))
+                    f(w, q, v, acc, dq, dv, minv, P, h, 1e-8, d_psd, A, Phi, out)
+                    outs.append([x.tobytes() for x in (w, A, Phi, out)])
+                assert outs[0] == outs[1], (nv, with_d, trial)
+
+
+def test_the_ekf_correction_solves_by_rows_give_the_column_loops_bits() -> None:
+    """``fused._joseph_rows`` (``Kᵀ``'s triangular solves by rows) against ``linalg``'s
+    ``joseph_update`` loops (column by column): ``dx`` and ``P⁺`` to the bit wherever ``S`` is
+    positive definite (the same answer where it is not), with and without the offset state,
+    covariances from 1e-12 to 1e2 and measurement variances from 1e-10 to 1e-4."""
+    from pinobs.observers import fused
+    from pinobs.observers.linalg import joseph_kernel
+
+    rows = loaded(
+        LazyKernel(
+            getattr(fused._joseph_rows, "py_func", fused._joseph_rows),  # (a kernel's helper)
+            *(np.eye(2), np.zeros(1), 1.0, np.zeros(2), np.zeros((2, 2))),
+        )
+    )
+    columns = loaded(joseph_kernel)
+    rng = np.random.default_rng(7)
+    taken = 0
+    for nv in (1, 2, 6, 7, 12):
+        for n in (2 * nv, 3 * nv):
+            for _ in range(60):
+                X = rng.standard_normal((n, n))
+                P = X @ X.T * 10.0 ** rng.uniform(-12, 2)
+                e, r = 1e-4 * rng.standard_normal(nv), 10.0 ** rng.uniform(-10, -4)
+                outs = []
+                for f in (columns, rows):
+                    dx, out = np.zeros(n), np.zeros((n, n))
+                    ok = f(P, e, r, dx, out)
+                    outs.append((ok, dx.tobytes(), out.tobytes()) if ok else (ok,))
+                assert outs[0] == outs[1], (nv, n)
+                taken += outs[0][0]
+    assert taken >= 500
+
+
+def _full_times_a(A: Vector, X: Vector, nv: int, c: float, out: Vector) -> None:
+    """``out = I + c A X``, the products with ``A``'s constant rows copies, the others full."""
+    n = A.shape[0]
+    row = np.empty(n)
+    for i in range(n):
+        if i < nv:
+            for j in range(n):
+                row[j] = X[nv + i, j]
+        else:
+            row[:] = 0.0
+            if i < 2 * nv:
+                for k in range(n):
+                    a = A[i, k]
+                    for j in range(n):
+                        row[j] += a * X[k, j]
+        for j in range(n):
+            out[i, j] = c * row[j] + (1.0 if i == j else 0.0)
+
+
+def _full_predict_loops(  # noqa: C901, PLR0912 -- numba kernel: loops
+    w: Vector, q: Vector, v: Vector, acc: Vector, dq: Vector, dv: Vector, minv: Vector,
+    P: Vector, h: float, psd: float, d_psd: Vector, A: Vector, Phi: Vector, out: Vector,
+) -> None:  # fmt: skip
+    """``fused.ekf_predict_loops`` before issue 39's structure: every product's full sum, the
+    triangle of ``(Φ P) Φᵀ`` (the reference of its bits)."""
+    rk4_start_loops(w, q, v, acc, h)
+    nv, n = q.shape[0], P.shape[0]
+    with_d = n == 3 * nv
+    for i in range(nv):
+        for j in range(nv):
+            A[nv + i, j] = dq[i, j]
+            A[nv + i, nv + j] = dv[i, j]
+            if with_d:
+                A[nv + i, 2 * nv + j] = minv[i, j] if i <= j else minv[j, i]
+    inner = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            inner[i, j] = A[i, j] * h / 3.0 + (1.0 if i == j else 0.0)
+    mid = np.empty((n, n))
+    _full_times_a(A, inner, nv, 0.5 * h, mid)
+    _full_times_a(A, mid, nv, h, Phi)
+    m = 2 * nv if with_d else n
+    T = np.zeros((n, n))
+    for i in range(m):
+        for k in range(n):
+            c = Phi[i, k]
+            for j in range(n):
+                T[i, j] += c * P[k, j]
+    for i in range(m, n):
+        for j in range(n):
+            T[i, j] = P[i, j]
+    Phi_t = Phi.T.copy()
+    out[:, :] = 0.0
+    for i in range(n):
+        for k in range(n):
+            c = T[i, k]
+            for j in range(i, m):
+                out[i, j] += c * Phi_t[k, j]
+        for j in range(max(i, m), n):
+            out[i, j] = T[i, j]
+        for j in range(i + 1, n):
+            out[j, i] = out[i, j]
+    q3, q2, q1 = psd * (h**3 / 3.0), psd * (h**2 / 2.0), psd * h
+    for i in range(nv):
+        out[i, i] += q3
+        out[i, nv + i] += q2
+        out[nv + i, i] += q2
+        out[nv + i, nv + i] += q1
+        if with_d:
+            out[2 * nv + i, 2 * nv + i] += d_psd[i] * h

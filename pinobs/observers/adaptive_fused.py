@@ -38,7 +38,6 @@ import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from pinobs.errors import ObserverDiverged
 from pinobs.observers.adaptive_blend import (
@@ -112,29 +111,36 @@ def blame_of(level: float, nv: int, full: bool) -> float:
 
 
 def adaptive_finish_loops(
-    w: Vector, acc: Vector, h: float, q_meas: Vector, P: Vector, r: float, ex: Vector,
-    P_new: Vector, q_new: Vector, v_new: Vector, d: Vector, d_new: Vector, tau: Vector,
-    bounds: Vector, out: Vector, held: Vector, run: int, level: float, threshold: float,
-    x: Vector, x1: Vector, nq: int, jerk: Vector, meas_var: float, lam: float, full: bool,
-    table: NDArray[np.int64], o_est: int, est: Vector, rows: Vector, row: int, t: float,
+    w: Vector, acc: Vector, h: float, q_meas: Vector, P: Vector, r: float, P_new: Vector,
+    q_new: Vector, v_new: Vector, d: Vector, d_new: Vector, tau: Vector, held: Vector, run: int,
+    level: float, threshold: float, x: Vector, x1: Vector, lam: float, full: bool, est: Vector,
+    rows: Vector, row: int, t: float, c: Vector, torque: Vector,
 ) -> tuple[float, float]:  # fmt: skip
     """A plain update's end with a sample (module docstring, 2): the filter's
     (:data:`~pinobs.observers.ekf_fused.finish_update_kernel`: its checks, the RK4's last stage,
-    the correction with the offset state, the gate; ``out`` its scratch), then, the sample let
-    through, the bank and the blend (:data:`~pinobs.observers.adaptive_blend.bank_blend_kernel`
-    on the buffer ``x`` into ``x1``, the filter checked not lost first, the blame
-    :func:`blame_of` the gate's new level), the estimate ``est = x1[o_est : o_est + nq + nv]``
-    (``(q̂, v̂)``) every entry finite, and the row ``[t, q_meas, held]`` written at ``rows[row]``
-    (if inside: the learner's buffer's next row, kept only if the learner takes it).  Returns
-    the NIS and the gate's new level; a NaN level: not taken (the outputs half written)."""
+    the correction with the offset state, the gate), then, the sample let through, the bank and
+    the blend (:data:`~pinobs.observers.adaptive_blend.bank_blend_kernel` on the buffer ``x``
+    into ``x1``, the filter checked not lost first, the blame :func:`blame_of` the gate's new
+    level), the estimate ``est = (q̂, v̂)`` every entry finite, the row ``[t, q_meas, held]``
+    written at ``rows[row]`` (if inside: the learner's buffer's next row, kept only if the
+    learner takes it), and the next step's torque ``torque[nv:] = (held + b̂) + d_new``
+    (:func:`torque_sum_loops`; ``b̂ = torque[:nv]``).  The constants ``c``
+    (:meth:`FusedParts.constants`): the bank's ``σ²``, ``nq``, where ``(q̂, v̂)`` lies in ``x``,
+    the bank's size ``nf``, its densities, the torque's bounds.  Returns the NIS and the gate's
+    new level; a NaN level: not taken (the outputs half written)."""
+    nq, nf, nv = int(c[1]), int(c[3]), v_new.shape[0]
+    jerk, bounds = c[4 : 4 + nf], c[4 + nf : 4 + nf + nv]
+    out, ex = np.empty(2 * nv), np.empty(nv + P.shape[0])  # (the filter's: scratch)
     nis, lvl = _finish_update(w, acc, h, q_meas, P, r, ex, P_new, q_new, v_new, d, d_new, tau,
                               bounds, out, held, run, level, threshold)  # fmt: skip
     if lvl != lvl:
         return nis, lvl
-    blame = blame_of(lvl, v_new.shape[0], full)
-    if not _bank_blend(x, x1, nq, h, q_meas, True, jerk, meas_var, q_new, v_new, P_new, lam,
-                       blame, True, table):  # fmt: skip
+    blame = blame_of(lvl, nv, full)
+    table = np.zeros((0, 4), dtype=np.int64)  # (vector joints)
+    if not _bank_blend(x, x1, nq, h, q_meas, True, jerk, c[0], q_new, v_new, P_new, lam, blame,
+                       True, table):  # fmt: skip
         return nis, math.nan  # lost: the base's path restarts it
+    o_est = int(c[2])
     for i in range(est.shape[0]):
         e = x1[o_est + i]
         if not math.isfinite(e):
@@ -144,8 +150,10 @@ def adaptive_finish_loops(
         rows[row, 0] = t
         for i in range(nq):
             rows[row, 1 + i] = q_meas[i]
-        for i in range(held.shape[0]):
+        for i in range(nv):
             rows[row, 1 + nq + i] = held[i]
+    for i in range(nv):
+        torque[nv + i] = (held[i] + torque[i]) + d_new[i]
     return nis, lvl
 
 
@@ -159,11 +167,11 @@ def _warm_args() -> tuple[object, ...]:
     o = blend_layout(2, 1, 1)
     x = np.zeros(o[-1])
     x[o[3] : o[4]] = 1.0  # (the bank's P = ones: S > 0)
+    c = np.array([1.0, 1.0, o[7], 2.0, 1.0, 1.0, 1.0])  # (FusedParts.constants)
     return (
-        np.zeros((8, 1)), _one(), 1e-3, _one(), np.eye(2), 1.0, np.zeros(3), np.zeros((2, 2)),
-        _one(), _one(), np.zeros(0), np.zeros(0), _one(), np.ones(1), np.zeros(2), _one(), 0,
-        1.0, 10.0, x, np.empty(x.size), 1, np.ones(2), 1.0, 0.5, False, VECTOR_TABLE, o[7],
-        np.zeros(2), np.zeros((2, 3)), 0, 0.0,
+        np.zeros((8, 1)), _one(), 1e-3, _one(), np.eye(2), 1.0, np.zeros((2, 2)), _one(),
+        _one(), np.zeros(0), np.zeros(0), _one(), _one(), 0, 1.0, 10.0, x, np.empty(x.size),
+        0.5, False, np.zeros(2), np.zeros((2, 3)), 0, 0.0, c, np.zeros(2),
     )  # fmt: skip
 
 
@@ -188,15 +196,33 @@ class FusedParts:
     the state's arrays the last fused update made or checked (by identity: a memo of the
     layout check)."""
 
-    __slots__ = ("est_size", "est_start", "finish", "made", "out", "torque_in", "torque_sum")
+    __slots__ = (
+        "c", "est_size", "est_start", "fast", "finish", "made", "offset", "torque", "torque_in", "torque_next",
+        "torque_sum",
+    )  # fmt: skip
 
     def __init__(self, est: slice, nv: int) -> None:
         self.finish = adaptive_finish_kernel.unchecked()
         self.torque_sum = torque_sum_kernel.unchecked()
         self.torque_in = torque_in_kernel.unchecked()
         self.est_start, self.est_size = est.start, est.stop - est.start
-        self.out = np.empty(2 * nv)  # the filter's own estimate: scratch (overwritten)
+        self.c = np.zeros(0)  # the kernel's constants (constants), of the FastPath `fast`
+        self.fast: Any = None
+        #: ``[b̂, τ + b̂ + d]``: the offset of the model stepped last, and the torque the next
+        #: step predicts with, written by the kernel (valid where ``made`` says so)
+        self.torque = np.zeros(2 * nv)
+        self.offset, self.torque_next = self.torque[:nv], self.torque[nv:]
         self.made: tuple[Any, ...] | None = None
+
+    def constants(self, fast: Any, bank: Any, nq: int) -> Vector:
+        """:func:`adaptive_finish_loops`' constants: the ``bank``'s ``σ²``, ``nq``, where
+        ``(q̂, v̂)`` lies in its buffer, its size, its densities, then ``fast``'s torque
+        bounds (kept until ``fast``, the filter's ``FastPath``, changes)."""
+        if fast is not self.fast:
+            head = [bank.meas_var, nq, self.est_start, bank.jerk.size]
+            self.c = np.concatenate([head, bank.jerk, fast.bounds]).astype(float)
+            self.fast = fast
+        return self.c
 
     @classmethod
     def build(cls, est: slice, nv: int, *, blend: bool) -> FusedParts | None:
@@ -307,19 +333,22 @@ def fused_step(
         return None
     q0, v0, P0, d_psd, tau_prev, offset = ekf.q, ekf.v, ekf.P, ekf.d_psd, obs._tau, model.offset
     made = parts.made  # what the last step here made or checked (by identity: a memo)
-    if not (made is not None and ekf is made[0] and tau_prev is made[1] and offset is made[2]):
+    hit = made is not None and ekf is made[0] and tau_prev is made[1] and offset is made[2]
+    if not hit:
         if not _contiguous(q0, v0, P0, d, d_psd, tau_prev, offset):
             return None
+        parts.offset[:] = offset
     # AdaptiveEKF.step's torque, then FastPath.step with the offset state: the same calls
-    calls, w, (qs, vs) = fast.calls, fast._scratch_work, fast._scratch_point
-    tau_in = fast._scratch_tau
-    if model.held is None:
-        parts.torque_sum(tau_prev, offset, d, tau_in)
-    else:  # a learned friction held as an input (AdaptiveEKF._torque)
+    tau_in = parts.torque_next  # (τ + b̂) + d: the last kernel's where it made the state
+    if model.held is not None:  # a learned friction held as an input (AdaptiveEKF._torque)
         parts.torque_in(obs._torque(state, dt, tau_prev), d, tau_in)
+    elif not hit:
+        parts.torque_sum(tau_prev, offset, d, tau_in)
+    calls, w, (qs, vs) = fast.calls, fast._scratch_work, fast._scratch_point
     nv, gate, buf = fast.nv, ekf.gate, state.learner.buf
     q, v, P_new, d_new = np.empty(nv), np.empty(nv), np.empty(fast._shape), np.empty(nv)
     held, est, x1 = np.empty(nv), np.empty(parts.est_size), np.empty(xs.size)
+    c = parts.c if fast is parts.fast else parts.constants(fast, obs._bank, q0.shape[0])
     try:
         calls.derivatives(q0, v0, tau_in)
         P = fast._scratch_P
@@ -330,12 +359,11 @@ def fused_step(
         stage(w, aba(qs, vs, tau_in), 2, dt)
         stage(w, aba(qs, vs, tau_in), 3, dt)
         nis, lvl = parts.finish(
-            w, aba(qs, vs, tau_in), dt, q_meas, P, core.gains.meas_std**2, fast._scratch_ex,
-            P_new, q, v, d, d_new, tau, fast.bounds, parts.out, held, gate.run,
-            float(nv) if gate.level is None else gate.level, core._gate,
-            xs, x1, q0.shape[0], obs._bank.jerk, obs._bank.meas_var,
-            min(1.0, dt / obs.blend_time), model.restarted or model.rejected_run >= REJECTED_RUN,
-            VECTOR_TABLE, parts.est_start, est, buf.rows, buf.end, t,
+            w, aba(qs, vs, tau_in), dt, q_meas, P, core.gains.meas_std**2, P_new, q, v, d,
+            d_new, tau, held, gate.run, float(nv) if gate.level is None else gate.level,
+            core._gate, xs, x1, min(1.0, dt / obs.blend_time),
+            model.restarted or model.rejected_run >= REJECTED_RUN, est, buf.rows, buf.end, t, c,
+            parts.torque,
         )  # fmt: skip
     except (ObserverDiverged, np.linalg.LinAlgError, ArithmeticError):
         return None  # (AdaptiveEKF.step catches them: its way)

@@ -144,6 +144,9 @@ a prediction that is not kept (under a known latency) teaches nothing.
    takes the sample, and a background job's result done by then (the sample boundary), and
    a new model or regime goes into the committed state.  Read from the latest state:
    :attr:`~AdaptiveEKF.regime`, :attr:`~AdaptiveEKF.restarts`, :meth:`~AdaptiveEKF.snapshot`.
+
+6. **One call** (issue 39): a plain update with a sample is :mod:`pinobs.observers.adaptive_fused`'s,
+   the step, the blend, the estimate and the learner's row in compiled calls (the same bits).
 """
 
 from __future__ import annotations

@@ -22,9 +22,11 @@ blend, the filter's compiled step, a sample the gate lets through) done whole:
    compiled call, :func:`adaptive_finish_loops` (each part the compiled code it is alone: the
    same bits);
 3. the base's commit, and the learner's bookkeeping of a sample on the interval that
-   completes no window and asks for no solve (``Learner.add``'s usual case: its row already
-   written; then nothing else of ``after_commit`` applies), else
-   :meth:`~pinobs.observers.adaptive.AdaptiveEKF.after_commit` itself.
+   completes no window and asks for no solve, with no background job's result to take
+   (``Learner.add``'s usual case: its row already written; then nothing else of
+   ``after_commit`` applies), else :meth:`~pinobs.observers.adaptive.AdaptiveEKF.after_commit`
+   itself.  (Before that last condition, a live loop learning in the background took
+   ``after_commit`` at 1747 of 5000 updates, a window's job out; 132 with it.)
 
 Anything else (a bad input, a pause, a latency, σ being learnt, no sample, the sample gated,
 the filter lost, a NIS its compiled correction leaves to NumPy, a non-finite estimate, a
@@ -46,6 +48,7 @@ from pinobs.observers.adaptive_blend import (
     bank_blend_kernel,
     blend_layout,
 )
+from pinobs.observers.adaptive_learner import GAP_FRACTION
 from pinobs.observers.adaptive_state import AdaptiveState
 from pinobs.observers.base import Vector
 from pinobs.observers.ekf_fused import finish_update_kernel
@@ -83,10 +86,6 @@ VECTOR_TABLE = np.zeros((0, 4), dtype=np.int64)
 #: Mean NIS per degree of freedom above which the nominal model's trust is revoked at once
 #: (:meth:`~pinobs.observers.adaptive.AdaptiveEKF.after_commit`).
 NIS_REVOKED = 10.0
-
-#: The learner's gap rule: a sample further than this fraction of ``h`` from the interval
-#: is a gap (``adaptive_learner``'s ``_GAP_FRACTION``, the same number).
-_GAP = 0.5
 
 
 def torque_sum_loops(tau: Vector, offset: Vector, d: Vector, out: Vector) -> None:
@@ -294,18 +293,19 @@ def update_fused(  # noqa: C901 -- one Python call: the base's tests inline
     h, t_last, end = lr.h, lr._t_last, buf.end
     if (
         t_last is not None
-        and abs(x - t_last - h) <= _GAP * h  # (h NaN: False)
+        and abs(x - t_last - h) <= GAP_FRACTION * h  # (h NaN: False)
         and not lr._off_run
         and not lr._lost
-        and not lr.pending
         and lr.rejected_run == model.rejected_run
-        and (end == buf.start or abs(x - buf.last_t - h) <= _GAP * h)
+        and (end == buf.start or abs(x - buf.last_t - h) <= GAP_FRACTION * h)
         and end < buf.rows.shape[0]
         and end + 1 - buf.start < lr._need
         and not (x >= lr.next_solve - TIME_EPS and lr.windows >= 2 and not lr.solving)
         and lr.next_solve == lr.next_solve  # (NaN: not started)
         and not (regime == "nominal" and lvl > NIS_REVOKED * held.shape[0])
         and not (lr.validated and regime == "warmup" and not model.restarted)
+        # no job out, or the first not done (Learner.collect then takes none: the same poll)
+        and (not lr.pending or not (lr.join or lr.pending[0][0].done()))
     ):  # Learner.add: on the interval, no gap, its row written (fused_step), nothing else to do
         lr._t_last = x
         buf.end, buf.last_t = end + 1, x

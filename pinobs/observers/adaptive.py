@@ -144,6 +144,9 @@ a prediction that is not kept (under a known latency) teaches nothing.
    takes the sample, and a background job's result done by then (the sample boundary), and
    a new model or regime goes into the committed state.  Read from the latest state:
    :attr:`~AdaptiveEKF.regime`, :attr:`~AdaptiveEKF.restarts`, :meth:`~AdaptiveEKF.snapshot`.
+
+6. **One call** (issue 39): a plain update with a sample is :mod:`pinobs.observers.adaptive_fused`'s,
+   the step, the blend, the estimate and the learner's row in compiled calls (the same bits).
 """
 
 from __future__ import annotations
@@ -179,6 +182,7 @@ from pinobs.observers.adaptive_blend import (
     offsets,
     packed,
 )
+from pinobs.observers.adaptive_fused import NIS_REVOKED, VECTOR_TABLE, FusedParts, update_fused
 from pinobs.observers.adaptive_learner import (
     Learner,
     check_options,
@@ -204,8 +208,6 @@ __all__ = ["AdaptiveEKF", "ModelSnapshot"]
 
 
 _new_tuple = tuple.__new__  # a NamedTuple made without its __new__, a Python call (step)
-#: The joints of a vector space, as the compiled bank takes them (kf_kernels.joint_table).
-_VECTOR_TABLE = np.zeros((0, 4), dtype=np.int64)
 
 
 #: ``λ h`` up to which a learned joint friction is a held input of the filter rather than part
@@ -215,9 +217,6 @@ _VECTOR_TABLE = np.zeros((0, 4), dtype=np.int64)
 #: margin covers configurations the check did not sample.  Stiffer friction stays in the
 #: model (``ekf``'s stiff-friction path, which costs its substeps and ``exp(Ah)`` by squaring).
 _HELD_FRICTION_STIFFNESS = 0.1
-
-#: Mean NIS per degree of freedom above which the nominal model's trust is revoked at once.
-_NIS_REVOKED = 10.0
 
 
 #: Where the learner's windows and solves run (:class:`AdaptiveEKF`, ``learning``).
@@ -378,8 +377,16 @@ class AdaptiveEKF(Observer["_State"]):
         self._nq = self.robot.nq
         self._shape = (bank.jerk.size, self._nq, self.robot.nv)  # (_State.shape)
         self._estimate = slice(*offsets(*self._shape)[7:10:2])  # q̂ then v̂ (output)
+        # a plain update whole in one Python call (Observer._update_fused; adaptive_fused)
+        fused = self._fused and type(self) is AdaptiveEKF
+        self._fused_parts = (
+            FusedParts.build(self._estimate, self.robot.nv, blend=self.blend) if fused else None
+        )
+        self._fused_path = self._fused_parts is not None
         self._no_sample = np.zeros(self.robot.nq)  # the compiled step's q_meas without one
         return bank
+
+    _update_fused = update_fused  # (Observer.update's first offer: adaptive_fused.update_fused)
 
     #: The caller's choice (``False``: never the one-BLAS-thread limit; :attr:`uses_blas`).
     _blas_limit = True
@@ -694,25 +701,16 @@ class AdaptiveEKF(Observer["_State"]):
             score, s, q, v = numpy_blend(self.robot, kf, state.score, state.s, ekf, lam, blame)
             x: Vector | BankBlend = BankBlend(kf, score, s, q, v)
         else:  # one compiled call: whether the filter is lost, then the bank and the blend
-            bank, nv = self._bank, self._shape[2]
+            bank = self._bank
             for check in (True, False):
                 xs = state.x  # (a BankBlend: made while the kernel was not loaded)
                 xs = packed(state.shape, *xs) if isinstance(xs, BankBlend) else xs
                 x = np.empty(xs.size)
-                m, gate = state.model, ekf.gate
-                if check and not m.restarted and m.rejected_run < REJECTED_RUN:
-                    # blend_inputs, inline (issue 39: a Python call less an update)
-                    meas = None if gate.gated else q_meas
-                    level = float(nv) if gate.level is None else gate.level
-                    blame = min(1.0, max(0.0, (level / nv - NIS_TRUSTED) / NIS_TRUSTED))
-                    if not math.isfinite(level):
-                        blame = 1.0
-                else:
-                    meas, blame = blend_inputs(ekf, m, q_meas)
+                meas, blame = blend_inputs(ekf, state.model, q_meas)
                 if kernel(
                     xs, x, state.shape[1], dt, self._no_sample if meas is None else meas,
                     meas is not None, bank.jerk, bank.meas_var, ekf.q, ekf.v, ekf.P, lam, blame,
-                    check, _VECTOR_TABLE,
+                    check, VECTOR_TABLE,
                 ):  # fmt: skip
                     break
                 state, ekf = self._restart(state, dt, q_meas, tau)  # lost (module docstring, 3)
@@ -743,7 +741,7 @@ class AdaptiveEKF(Observer["_State"]):
         if lr.add(t, q, tau, explained=explained, gated=q is None and bool(ekf.gate.gated)):
             model, ekf = self._install(model, lr, ekf)
             restarted = False
-        elif model.regime == "nominal" and level > _NIS_REVOKED * nv:
+        elif model.regime == "nominal" and level > NIS_REVOKED * nv:
             # the nominal model stopped explaining the data between solves: do not wait
             if lr.candidate is not None:
                 lr.theta = lr.candidate

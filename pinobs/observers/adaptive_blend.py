@@ -89,8 +89,8 @@ def blend_inputs(
     the model-based filter's gate rejected it (not a lost filter's: restarted, not replaced
     since); the disagreement is the model's fault only when its innovations say so
     (``NIS̄ > 2 nv``), wholly when it was lost and not replaced since, or none fits.
-    Inline in :meth:`~pinobs.observers.adaptive.AdaptiveEKF.step`'s compiled path (the usual
-    case: not restarted, a model that fits): keep the two equal."""
+    The fused update computes the blame in its kernel
+    (:func:`~pinobs.observers.adaptive_fused.blame_of`): keep the two equal."""
     meas = None if ekf.gate.gated and not model.restarted else q_meas
     nv = ekf.v.size
     level = float(nv) if ekf.gate.level is None else ekf.gate.level

@@ -30,6 +30,7 @@ from pinobs.observers.worker import Worker
 from pinobs.tolerances import TIME_EPS
 
 __all__ = [
+    "GAP_FRACTION",
     "NO_ROWS",
     "PRELOAD",
     "REJECTED_KEPT",
@@ -46,7 +47,7 @@ PRELOAD = ("pinobs.observers.adaptive_learner", "scipy.ndimage")
 
 #: A sample interval further than this fraction of ``h`` from it is a gap for the learner
 #: (a lost sample is ``2h``): its windows restart after it.
-_GAP_FRACTION = 0.5
+GAP_FRACTION = 0.5
 
 #: A solve's failure when every window was left out (:meth:`Learner.rejection_cause`).
 NO_ROWS = "no rows: every window was left out"
@@ -151,7 +152,7 @@ class Learner:
         (the usual one) makes no Python call here (the buffer's row written inline; its length
         and latest time read from its fields), and :meth:`collect` is called only with jobs out."""
         t_last, h = self._t_last, self.h
-        if t_last is not None and abs(t - t_last - h) <= _GAP_FRACTION * h and not self._off_run:
+        if t_last is not None and abs(t - t_last - h) <= GAP_FRACTION * h and not self._off_run:
             self._t_last = t  # on the interval: all that _track_interval would do
         else:
             self._track_interval(t)
@@ -166,7 +167,7 @@ class Learner:
         # test cleared the windows at every other sample and the learner never solved,
         # silently (a sweep found it, and a 500 Hz stream without rate)
         h = self.h
-        if buf.end > buf.start and abs(t - buf.last_t - h) > _GAP_FRACTION * h:
+        if buf.end > buf.start and abs(t - buf.last_t - h) > GAP_FRACTION * h:
             if not self._fill(t, q):
                 buf.clear()
         if self._lost:
@@ -207,7 +208,7 @@ class Learner:
             dt = t - self._t_last
             if math.isnan(self.h):
                 self._counts(dt)  # no rate given: the stream's own interval
-            elif abs(dt - self.h) > _GAP_FRACTION * self.h:
+            elif abs(dt - self.h) > GAP_FRACTION * self.h:
                 self._off_run.append(dt)
                 if len(self._off_run) == _INTERVAL_CHECK:
                     self._interval(self._off_run)
@@ -278,7 +279,7 @@ class Learner:
         error, ``(k h)² |q̈| / 8``, is 2e-6 |q̈| rad at 1 kHz over 3 lost samples."""
         t0, q0, tau0 = self.buf[-1]
         k = round((t - t0) / self.h)
-        if not 2 <= k <= MAX_FILL + 1 or abs(t - t0 - k * self.h) > _GAP_FRACTION * self.h:
+        if not 2 <= k <= MAX_FILL + 1 or abs(t - t0 - k * self.h) > GAP_FRACTION * self.h:
             return False
         if any(g for *_, g in self._lost):  # gated, not lost: the model was not explaining the
             return False  # data there (filled, z1 with a payload went 7.4e-4 -> 1.22e-3 rad/s)
@@ -287,7 +288,7 @@ class Learner:
             ti = t0 + i * (t - t0) / k
             held = tau0
             for t_lost, tau_lost, _ in self._lost:  # the torque applied from the lost update on
-                if t_lost <= ti + _GAP_FRACTION * self.h:
+                if t_lost <= ti + GAP_FRACTION * self.h:
                     held = tau_lost
             self.buf.append((ti, robot.interpolate(q0, q, i / k), held))
         return True
@@ -310,7 +311,7 @@ class Learner:
         becomes ``h``, said in ``rejected``.  A 500 Hz stream taken for 1 kHz (the default
         without ``rate``) never solved, silently."""
         h = float(np.median(run))
-        if all(abs(d - h) <= _GAP_FRACTION * h for d in run):
+        if all(abs(d - h) <= GAP_FRACTION * h for d in run):
             given = f"rate = {self.rate_given:g} Hz" if self.rate_given else "its first interval"
             self.rejected.append(
                 f"the samples come every {h:.6g} s, not {self.h:.6g} s ({given}): the "

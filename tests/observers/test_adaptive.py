@@ -193,6 +193,7 @@ def test_a_filter_step_that_raises_is_a_lost_filter_restarted(monkeypatch) -> No
         return step(self, *args)
 
     monkeypatch.setattr(ExtendedKalmanFilter, "step", raising_once)
+    ob._fused_path = False  # (the patched step: the fused update never calls it)
     est = ob.update(5e-3, q0, tau)
     assert calls["n"] == 2  # the raising step, then the restarted filter's
     assert ob.restarts == 1 and np.all(np.isfinite(est.v))
@@ -266,6 +267,7 @@ def test_a_filter_whose_velocity_squared_overflows_is_lost(monkeypatch) -> None:
         return new._replace(v=np.full_like(new.v, 1e200)) if calls["n"] == 1 else new
 
     monkeypatch.setattr(ExtendedKalmanFilter, "step", overflowing_once)
+    ob._fused_path = False  # (the patched step: the fused update never calls it)
     est = ob.update(5e-3, q0, tau)
     assert ob.restarts == 1 and np.all(np.isfinite(est.v))
     assert np.abs(est.v).max() < 1e-2  # at rest: the restart is on the bank's estimate
@@ -556,6 +558,7 @@ def test_a_learned_model_lost_again_at_its_restart_falls_back_to_the_nominal_one
         return new._replace(v=np.full_like(new.v, np.nan)) if lost else new
 
     monkeypatch.setattr(ExtendedKalmanFilter, "step", broken)
+    ob._fused_path = False  # (the patched step: the fused update never calls it)
     out = []
     for k in range(1, t.size):
         clock["t"] = t[k - 1] - t[0]  # the state's time, since the reset

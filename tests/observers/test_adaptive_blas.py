@@ -7,7 +7,7 @@ import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
 import pinobs
-from pinobs.observers import adaptive_learner, make_observer
+from pinobs.observers import adaptive_fused, adaptive_learner, make_observer
 from pinobs.simulation import Sensor
 from tests.conftest import cached_robot
 
@@ -33,14 +33,18 @@ def test_synchronous_learning_runs_its_jobs_on_one_blas_thread_and_the_update_on
             return original(self, *args)
 
         monkeypatch.setattr(identifier, job, spy)
-    step = type(ob).step
 
-    def step_spy(self, *args):
-        if len(seen["step"]) < 3:  # (threadpool_info scans the libraries: a few suffice)
-            seen["step"].append(_threads())
-        return step(self, *args)
+    def spied(step):  # type: ignore[no-untyped-def]
+        def spy(*args):  # type: ignore[no-untyped-def]
+            if len(seen["step"]) < 3:  # (threadpool_info scans the libraries: a few suffice)
+                seen["step"].append(_threads())
+            return step(*args)
 
-    monkeypatch.setattr(type(ob), "step", step_spy)
+        return spy
+
+    monkeypatch.setattr(type(ob), "step", spied(type(ob).step))
+    # (a plain update's step: the fused update's, pinobs.observers.adaptive_fused)
+    monkeypatch.setattr(adaptive_fused, "fused_step", spied(adaptive_fused.fused_step))
     with threadpool_limits(2, user_api="blas"):
         ob.reset(res.t[0], res.q[0], None, res.tau[0])
         seen["step"].clear()  # (reset's own step, thrown away, runs under reset's limit)

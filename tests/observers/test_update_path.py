@@ -42,12 +42,15 @@ from pinobs.observers.results import Estimate
 #: were one Python call each (pinobs.observers.ekf_fused, kalman_step.update_fused).
 #: riemannian 17 (13 between its Jacobi operators) before its plain update was one Python call
 #: around compiled ones (pinobs.observers.riemannian_fused: 7, 3 between, with a sample or none).
+#: adaptive 27 (17 with a sample) before its plain update with a sample was one Python call
+#: around compiled ones and its step (pinobs.observers.adaptive_fused: 3 with a sample; 18
+#: without one, 22 at the sample after it, the learner's full bookkeeping then).
 MAX_CALLS = {
     "kf": 2,
     "ekf": 2,
     "riemannian": 7,
     "fd": 8,
-    "adaptive": 27,
+    "adaptive": 22,
     "kalman": 2,
     "highgain": 8,
     "sliding": 7,

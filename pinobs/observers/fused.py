@@ -41,7 +41,7 @@ import numpy as np
 from pinobs.model import Robot
 from pinobs.model.integrators import DynamicsCalls, dynamics_calls
 from pinobs.observers.base import Vector
-from pinobs.observers.linalg import KERNEL_MAX_NV, LazyKernel
+from pinobs.observers.linalg import KERNEL_MAX_NV, LazyKernel, joseph_kernel
 
 __all__ = [
     "RiccatiStep",
@@ -75,6 +75,10 @@ def compiled_vector_space(robot: object) -> bool:
         and not robot.has_friction
         and robot.nv <= KERNEL_MAX_NV
     )
+
+
+# the linalg loop, under its own name (LazyKernel's helpers are found by name here)
+_joseph_loops = joseph_kernel.fn
 
 
 def rk4_start_loops(w: Vector, q: Vector, v: Vector, acc: Vector, h: float) -> None:
@@ -246,73 +250,6 @@ def ekf_predict_loops(
             out[2 * nv + i, 2 * nv + i] += d_psd[i] * h
 
 
-def _joseph_rows(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bool:  # noqa: C901, PLR0912 -- numba kernel: loops over small matrices
-    """:func:`~pinobs.observers.linalg.joseph_update`'s loops (``linalg._joseph_loops``) with
-    ``Kᵀ = S⁻¹ P_q·``'s two triangular solves by rows, every column at once (a vector loop
-    along the row; before, column by column, a chain of dependent subtractions each): each
-    entry's operations in the same order (``t −= L_ik Kᵀ_kc`` over ``k``, then ``/ L_ii``;
-    compiled without ``contract``), so the same bits (tested); the UR5's
-    :func:`ekf_finish_loops` 3.47 → 2.85 µs warm (issue 39, load 2.2).  Returns False (outputs undefined) when ``S`` is not positive definite."""
-    n, nv = P.shape[0], e.shape[0]
-    L = np.zeros((nv, nv))
-    for j in range(nv):
-        d = P[j, j] + r
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            return False
-        L[j, j] = math.sqrt(d)
-        for i in range(j + 1, nv):
-            t = P[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / L[j, j]
-    Kt = np.empty((nv, n))
-    for i in range(nv):
-        for c in range(n):
-            Kt[i, c] = P[i, c]
-        for k in range(i):
-            a = L[i, k]
-            for c in range(n):
-                Kt[i, c] -= a * Kt[k, c]
-        d = L[i, i]
-        for c in range(n):
-            Kt[i, c] = Kt[i, c] / d
-    for i in range(nv - 1, -1, -1):
-        for k in range(i + 1, nv):
-            a = L[k, i]
-            for c in range(n):
-                Kt[i, c] -= a * Kt[k, c]
-        d = L[i, i]
-        for c in range(n):
-            Kt[i, c] = Kt[i, c] / d
-    C = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            C[i, j] = P[i, j]
-        for k in range(nv):
-            c = Kt[k, i]
-            for j in range(n):
-                C[i, j] -= c * P[k, j]
-    for i in range(n):
-        for j in range(n):
-            out[i, j] = C[i, j]
-        for k in range(nv):
-            g = C[i, k] - r * Kt[k, i]
-            for j in range(n):
-                out[i, j] -= g * Kt[k, j]
-    for i in range(n):
-        for j in range(i):
-            m = 0.5 * (out[i, j] + out[j, i])
-            out[i, j] = m
-            out[j, i] = m
-        t = 0.0
-        for k in range(nv):
-            t += Kt[k, i] * e[k]
-        dx[i] = t
-    return True
-
-
 def ekf_correct_loops(
     w: Vector, q_meas: Vector, P: Vector, r: float, e: Vector, dx: Vector, P_new: Vector,
     q_new: Vector, v_new: Vector,
@@ -328,7 +265,7 @@ def ekf_correct_loops(
     nv = q_meas.shape[0]
     for i in range(nv):
         e[i] = q_meas[i] - w[6, i]
-    if not _joseph_rows(P, e, r, dx, P_new):
+    if not _joseph_loops(P, e, r, dx, P_new):
         return math.nan
     ee, nis = 0.0, 0.0
     for i in range(nv):
@@ -626,7 +563,7 @@ ekf_correct_kernel = LazyKernel(
     ekf_correct_loops,
     np.zeros((8, 1)), np.zeros(1), np.eye(2), 1.0, np.zeros(1), np.zeros(2), np.zeros((2, 2)),
     np.zeros(1), np.zeros(1),
-    helpers=(_joseph_rows,),
+    helpers=(_joseph_loops,),
 )  # fmt: skip
 
 #: :func:`ekf_finish_loops` compiled.
@@ -634,7 +571,7 @@ ekf_finish_kernel = LazyKernel(
     ekf_finish_loops,
     np.zeros((8, 1)), np.zeros(1), 1e-3, np.zeros(1), np.eye(2), 1.0, np.zeros(3),
     np.zeros((2, 2)), np.zeros(1), np.zeros(1), np.zeros(0), np.zeros(0),
-    helpers=(_joseph_rows, ekf_correct_loops),
+    helpers=(_joseph_loops, ekf_correct_loops),
     contracted=("_rk4_stage_fma",),
 )  # fmt: skip
 #: :func:`torque_in_loops` compiled.

@@ -147,6 +147,12 @@ def _joseph_loops(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bo
     ``Kᵀ = S⁻¹ P_q·`` by two triangular solves, then ``C = P − K P_q·``,
     ``P⁺ = sym(C − (C_·q − r K) Kᵀ)`` and ``dx = K e`` into ``dx`` and ``out``.
     Returns False (outputs undefined) when ``S`` is not positive definite.
+
+    The solves run by rows, every column at once (a vector loop along the row), each entry's
+    operations in the order of the column-by-column solve (``t −= L_ik Kᵀ_kc`` over ``k``,
+    then ``/ L_ii``; compiled without ``contract``): the same bits (tested), the UR5's
+    ``ekf`` correction 3.47 → 2.85 µs warm (issue 39).  ``ekf``'s and ``kalman``'s fused
+    kernels inline it.
     """
     n, nv = P.shape[0], e.shape[0]
     L = np.zeros((nv, nv))
@@ -163,17 +169,24 @@ def _joseph_loops(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bo
                 t -= L[i, k] * L[j, k]
             L[i, j] = t / L[j, j]
     Kt = np.empty((nv, n))
-    for c in range(n):  # L y = B[:, c], then Lᵀ x = y
-        for i in range(nv):
-            t = P[i, c]
-            for k in range(i):
-                t -= L[i, k] * Kt[k, c]
-            Kt[i, c] = t / L[i, i]
-        for i in range(nv - 1, -1, -1):
-            t = Kt[i, c]
-            for k in range(i + 1, nv):
-                t -= L[k, i] * Kt[k, c]
-            Kt[i, c] = t / L[i, i]
+    for i in range(nv):
+        for c in range(n):
+            Kt[i, c] = P[i, c]
+        for k in range(i):
+            a = L[i, k]
+            for c in range(n):
+                Kt[i, c] -= a * Kt[k, c]
+        d = L[i, i]
+        for c in range(n):
+            Kt[i, c] = Kt[i, c] / d
+    for i in range(nv - 1, -1, -1):
+        for k in range(i + 1, nv):
+            a = L[k, i]
+            for c in range(n):
+                Kt[i, c] -= a * Kt[k, c]
+        d = L[i, i]
+        for c in range(n):
+            Kt[i, c] = Kt[i, c] / d
     # each entry's sum in the order of k as t −= …, with k outside the loop over j (the
     # entries of a row independent: no chain of dependent subtractions, the same bits)
     C = np.empty((n, n))

@@ -3,6 +3,7 @@ equal the NumPy steps they replace, to rounding, and are taken where they apply.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from typing import Any
 
@@ -188,21 +189,75 @@ def test_the_ekf_prediction_kernel_gives_the_full_sums_bits() -> None:
                 assert outs[0] == outs[1], (nv, with_d, trial)
 
 
+def _joseph_columns(P: Vector, e: Vector, r: float, dx: Vector, out: Vector) -> bool:  # noqa: C901, PLR0912 -- numba kernel: its branches are loops over small matrices
+    """``linalg._joseph_loops`` as it was before issue 39: ``Kᵀ``'s triangular solves
+    column by column (the reference its solves by rows must give the bits of)."""
+    n, nv = P.shape[0], e.shape[0]
+    L = np.zeros((nv, nv))
+    for j in range(nv):
+        d = P[j, j] + r
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return False
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, nv):
+            t = P[i, j]
+            for k in range(j):
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t / L[j, j]
+    Kt = np.empty((nv, n))
+    for c in range(n):  # L y = B[:, c], then Lᵀ x = y
+        for i in range(nv):
+            t = P[i, c]
+            for k in range(i):
+                t -= L[i, k] * Kt[k, c]
+            Kt[i, c] = t / L[i, i]
+        for i in range(nv - 1, -1, -1):
+            t = Kt[i, c]
+            for k in range(i + 1, nv):
+                t -= L[k, i] * Kt[k, c]
+            Kt[i, c] = t / L[i, i]
+    # each entry's sum in the order of k as t −= …, with k outside the loop over j (the
+    # entries of a row independent: no chain of dependent subtractions, the same bits)
+    C = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            C[i, j] = P[i, j]
+        for k in range(nv):
+            c = Kt[k, i]
+            for j in range(n):
+                C[i, j] -= c * P[k, j]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = C[i, j]
+        for k in range(nv):
+            g = C[i, k] - r * Kt[k, i]
+            for j in range(n):
+                out[i, j] -= g * Kt[k, j]
+    for i in range(n):
+        for j in range(i):
+            m = 0.5 * (out[i, j] + out[j, i])
+            out[i, j] = m
+            out[j, i] = m
+        t = 0.0
+        for k in range(nv):
+            t += Kt[k, i] * e[k]
+        dx[i] = t
+    return True
+
+
 def test_the_ekf_correction_solves_by_rows_give_the_column_loops_bits() -> None:
-    """``fused._joseph_rows`` (``Kᵀ``'s triangular solves by rows) against ``linalg``'s
-    ``joseph_update`` loops (column by column): ``dx`` and ``P⁺`` to the bit wherever ``S`` is
+    """``linalg._joseph_loops`` (``Kᵀ``'s triangular solves by rows; ``ekf``'s and ``kalman``'s
+    fused kernels inline it) against the column-by-column loops it replaced: ``dx`` and ``P⁺`` to the bit wherever ``S`` is
     positive definite (the same answer where it is not), with and without the offset state,
     covariances from 1e-12 to 1e2 and measurement variances from 1e-10 to 1e-4."""
-    from pinobs.observers import fused
     from pinobs.observers.linalg import joseph_kernel
 
-    rows = loaded(
-        LazyKernel(
-            getattr(fused._joseph_rows, "py_func", fused._joseph_rows),  # (a kernel's helper)
-            *(np.eye(2), np.zeros(1), 1.0, np.zeros(2), np.zeros((2, 2))),
-        )
+    rows = loaded(joseph_kernel)
+    columns = loaded(
+        LazyKernel(_joseph_columns, np.eye(2), np.zeros(1), 1.0, np.zeros(2), np.zeros((2, 2)))
     )
-    columns = loaded(joseph_kernel)
     rng = np.random.default_rng(7)
     taken = 0
     for nv in (1, 2, 6, 7, 12):
